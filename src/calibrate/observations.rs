@@ -1,0 +1,1 @@
+//! Observation files (the measured-data contract of `shared/formats/observations.md`).

@@ -1,0 +1,1 @@
+//! compensate (in progress).

@@ -1,0 +1,1 @@
+//! Diagnosis of disagreement between simulation and measurement.

@@ -1,0 +1,120 @@
+//! Typed errors of the library. `main` prints one error chain and maps the
+//! variant to the process exit code (2 = bad input or usage, 1 = findings).
+
+use std::fmt;
+use std::path::PathBuf;
+
+/// A problem located in an input text: `file:line:column: message`.
+///
+/// Lines and columns are 1-based; the column counts bytes of the line.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Located {
+    /// File name as the user gave it (`-` for standard input).
+    pub file: String,
+    /// 1-based line number.
+    pub line: usize,
+    /// 1-based byte column.
+    pub column: usize,
+    /// What is wrong, including the offending text where there is one.
+    pub message: String,
+}
+
+impl Located {
+    /// Builds a located message.
+    pub fn new(
+        file: impl Into<String>,
+        line: usize,
+        column: usize,
+        message: impl Into<String>,
+    ) -> Self {
+        Located {
+            file: file.into(),
+            line,
+            column,
+            message: message.into(),
+        }
+    }
+}
+
+impl fmt::Display for Located {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(
+            f,
+            "{}:{}:{}: {}",
+            self.file, self.line, self.column, self.message
+        )
+    }
+}
+
+impl std::error::Error for Located {}
+
+/// A validation failure found while turning a raw (deserialized) model into a
+/// validated one. `path` is the YAML key path such as `axes[1].travel_mm`.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Invalid {
+    /// Key path of the offending value, dotted with `[i]` indices.
+    pub path: String,
+    /// What is wrong with it.
+    pub message: String,
+}
+
+impl Invalid {
+    /// Builds a validation failure for a key path.
+    pub fn new(path: impl Into<String>, message: impl Into<String>) -> Self {
+        Invalid {
+            path: path.into(),
+            message: message.into(),
+        }
+    }
+}
+
+impl fmt::Display for Invalid {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{}: {}", self.path, self.message)
+    }
+}
+
+impl std::error::Error for Invalid {}
+
+/// Every error the library reports.
+#[derive(Debug, thiserror::Error)]
+pub enum Error {
+    /// Malformed or unsupported input at a known place.
+    #[error("{0}")]
+    Input(#[from] Located),
+    /// Bad command-line usage or an inconsistent request.
+    #[error("{0}")]
+    Usage(String),
+    /// A file could not be read or written.
+    #[error("{path}: {source}")]
+    Io {
+        /// The file concerned.
+        path: PathBuf,
+        /// The underlying I/O error.
+        #[source]
+        source: std::io::Error,
+    },
+    /// The engine could not do what the input asks (a target out of travel,
+    /// a solve that did not converge). It names the block or target.
+    #[error("{0}")]
+    Unachievable(Located),
+}
+
+impl Error {
+    /// The process exit code this error maps to: 2 for every error (bad
+    /// input, usage, unreadable files, unachievable targets).
+    pub fn exit_code(&self) -> i32 {
+        2
+    }
+
+    /// Wraps an I/O error with the path it concerns.
+    pub fn io(path: impl Into<PathBuf>, source: std::io::Error) -> Self {
+        Error::Io {
+            path: path.into(),
+            source,
+        }
+    }
+}
+
+/// Result type of the library.
+pub type Result<T, E = Error> = std::result::Result<T, E>;

@@ -1,0 +1,21 @@
+//! The `postproc` binary: parses flags, runs the command, prints the error
+//! chain once and maps it to the exit code (0 ok, 1 findings, 2 bad input).
+
+use clap::Parser;
+
+fn main() {
+    let cli = postproc::cli::Cli::parse();
+    match postproc::cli::run(cli) {
+        Ok(code) => std::process::exit(code),
+        Err(err) => {
+            let mut msg = format!("error: {err}");
+            let mut src = std::error::Error::source(&err);
+            while let Some(s) = src {
+                msg.push_str(&format!(": {s}"));
+                src = s.source();
+            }
+            eprintln!("{msg}");
+            std::process::exit(err.exit_code());
+        }
+    }
+}

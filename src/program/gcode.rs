@@ -1,0 +1,1 @@
+//! gcode (in progress).

@@ -1,0 +1,1 @@
+//! rapid (in progress).

@@ -1,0 +1,4 @@
+//! The one integration-test binary: CLI tests through the real executable,
+//! goldens, property tests and regressions.
+
+mod common;
