@@ -2,3 +2,7 @@
 //! goldens, property tests and regressions.
 
 mod common;
+mod machine_tool;
+mod observations;
+mod rapid;
+mod robot;
