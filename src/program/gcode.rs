@@ -1,1 +1,331 @@
-//! gcode (in progress).
+//! G-code syntax: one line (block) at a time into words with byte spans.
+//!
+//! This pass knows nothing of modal state: it splits a line into an optional
+//! block-delete slash, words (a letter and a number, spaces allowed between
+//! them), comments in parentheses or after `;`, and the `%` tape marks. Every
+//! word keeps the byte range of its text and the number of decimals it was
+//! written with, so the emitter can rewrite a coordinate at the program's own
+//! precision and leave every other byte alone. Numbers are parsed to `f64`
+//! from their original text. The accepted dialect is documented in
+//! `grammar/gcode.md`.
+
+use nom::IResult;
+use nom::branch::alt;
+use nom::bytes::complete::take_while1;
+use nom::character::complete::{char, digit0, digit1, one_of};
+use nom::combinator::{opt, recognize};
+use nom::sequence::{pair, tuple};
+
+use crate::error::Located;
+
+/// One word: a letter and its number, e.g. `X-12.5`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Word {
+    /// Upper-case letter.
+    pub letter: u8,
+    /// The value parsed from the original text.
+    pub value: f64,
+    /// Byte offset of the letter within the line.
+    pub start: u32,
+    /// Byte offset of the first byte of the number (sign included).
+    pub num_start: u32,
+    /// Byte offset one past the last byte of the number.
+    pub end: u32,
+    /// Digits written after the decimal point; `None` when there is no point.
+    pub decimals: Option<u8>,
+}
+
+impl Word {
+    /// The number's original text within `line`.
+    pub fn number_text<'a>(&self, line: &'a [u8]) -> &'a [u8] {
+        line.get(self.num_start as usize..self.end as usize).unwrap_or(b"")
+    }
+
+    /// G and M codes compare as integers times ten (`G90.1` → 901), so
+    /// decimal sub-codes are exact.
+    pub fn code10(&self) -> i64 {
+        (self.value * 10.0).round() as i64
+    }
+}
+
+/// Where a comment sits in the line and how it is written.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Comment {
+    /// Byte offset of `(` or `;`.
+    pub start: u32,
+    /// Byte offset one past the comment (after `)`, or the end of the text).
+    pub end: u32,
+    /// True for `;` comments, false for `( )`.
+    pub semicolon: bool,
+}
+
+/// The syntax of one line. Reused between lines to avoid allocation.
+#[derive(Debug, Default, Clone)]
+pub struct Block {
+    /// 1-based line number.
+    pub line_no: usize,
+    /// Words in order of appearance.
+    pub words: Vec<Word>,
+    /// Comments in order of appearance.
+    pub comments: Vec<Comment>,
+    /// The line starts with the block-delete slash `/`.
+    pub block_delete: bool,
+    /// The line is a `%` tape mark.
+    pub percent: bool,
+    /// Length of the line's text without its end-of-line bytes.
+    pub text_len: u32,
+    /// Letters were written in lower case.
+    pub lower_case: bool,
+    /// Words are separated by spaces.
+    pub spaced: bool,
+}
+
+impl Block {
+    /// Clears the block for reuse.
+    pub fn clear(&mut self) {
+        self.line_no = 0;
+        self.words.clear();
+        self.comments.clear();
+        self.block_delete = false;
+        self.percent = false;
+        self.text_len = 0;
+        self.lower_case = false;
+        self.spaced = false;
+    }
+
+    /// The first word with this (upper-case) letter.
+    pub fn word(&self, letter: u8) -> Option<&Word> {
+        self.words.iter().find(|w| w.letter == letter)
+    }
+
+    /// True when the block has no words (blank, comment-only or `%`).
+    pub fn is_empty(&self) -> bool {
+        self.words.is_empty()
+    }
+}
+
+/// Letters this dialect accepts as word addresses.
+pub const LETTERS: &[u8] = b"ABCDFGHIJKLMNOPQRSTXYZ";
+
+/// Strips the end-of-line bytes (`\n`, `\r\n`, or a lone `\r`) from a line.
+pub fn strip_eol(line: &[u8]) -> &[u8] {
+    let mut end = line.len();
+    if end > 0 && line[end - 1] == b'\n' {
+        end -= 1;
+    }
+    if end > 0 && line[end - 1] == b'\r' {
+        end -= 1;
+    }
+    &line[..end]
+}
+
+fn number(input: &[u8]) -> IResult<&[u8], &[u8]> {
+    recognize(tuple((
+        opt(one_of("+-")),
+        alt((recognize(pair(digit1, opt(pair(char('.'), digit0)))), recognize(pair(char('.'), digit1)))),
+    )))(input)
+}
+
+fn spaces(input: &[u8]) -> IResult<&[u8], &[u8]> {
+    take_while1(|b| b == b' ' || b == b'\t')(input)
+}
+
+fn show(bytes: &[u8]) -> String {
+    let s = String::from_utf8_lossy(bytes);
+    let s: String = s.chars().take(40).collect();
+    s.trim_end().to_string()
+}
+
+/// Parses one line (without or with its end-of-line bytes) into `out`.
+///
+/// Errors are located at `file:line:column` and quote the offending text.
+pub fn parse_line(line: &[u8], line_no: usize, file: &str, out: &mut Block) -> Result<(), Located> {
+    out.clear();
+    out.line_no = line_no;
+    let text = strip_eol(line);
+    out.text_len = text.len() as u32;
+    let err = |pos: usize, msg: String| Located::new(file, line_no, pos + 1, msg);
+
+    let mut pos = skip_ws(text, 0);
+    if text.get(pos) == Some(&b'%') {
+        out.percent = true;
+        // Anything after `%` on the same line is ignored by controllers; keep it verbatim.
+        return Ok(());
+    }
+    if text.get(pos) == Some(&b'/') {
+        out.block_delete = true;
+        pos = skip_ws(text, pos + 1);
+    }
+    let mut saw_space = false;
+    let mut lower = 0usize;
+    let mut upper = 0usize;
+    while pos < text.len() {
+        let b = text[pos];
+        match b {
+            b' ' | b'\t' => {
+                saw_space = true;
+                pos += 1;
+            }
+            b'(' => {
+                let close = text[pos..].iter().position(|&c| c == b')');
+                match close {
+                    Some(off) => {
+                        out.comments.push(Comment { start: pos as u32, end: (pos + off + 1) as u32, semicolon: false });
+                        pos += off + 1;
+                    }
+                    None => return Err(err(pos, format!("unterminated comment, no `)` before the end of the line: `{}`", show(&text[pos..])))),
+                }
+            }
+            b';' => {
+                out.comments.push(Comment { start: pos as u32, end: text.len() as u32, semicolon: true });
+                pos = text.len();
+            }
+            b'#' => return Err(err(pos, format!("`#` parameters cannot be compensated offline (expand them in CAM): `{}`", show(&text[pos..])))),
+            b'[' | b']' => return Err(err(pos, format!("`[ ]` expressions cannot be compensated offline (expand them in CAM): `{}`", show(&text[pos..])))),
+            b'=' => return Err(err(pos, format!("assignments cannot be compensated offline: `{}`", show(&text[pos..])))),
+            _ if b.is_ascii_alphabetic() => {
+                let letter = b.to_ascii_uppercase();
+                if b.is_ascii_lowercase() {
+                    lower += 1;
+                } else {
+                    upper += 1;
+                }
+                let after_letter = skip_ws(text, pos + 1);
+                if !LETTERS.contains(&letter) {
+                    return Err(err(pos, format!("unknown word letter `{}`: `{}`", b as char, show(&text[pos..]))));
+                }
+                let rest = &text[after_letter..];
+                match number(rest) {
+                    Ok((_, num)) => {
+                        let num_start = after_letter;
+                        let num_end = after_letter + num.len();
+                        let num_str = std::str::from_utf8(num).unwrap_or("");
+                        let value: f64 = match num_str.parse() {
+                            Ok(v) => v,
+                            Err(_) => return Err(err(num_start, format!("malformed number `{num_str}`"))),
+                        };
+                        if !value.is_finite() || value.abs() > 1e9 {
+                            return Err(err(num_start, format!("absurd number `{num_str}`")));
+                        }
+                        let decimals = num.iter().position(|&c| c == b'.').map(|d| (num.len() - d - 1).min(255) as u8);
+                        // A second number glued to this one (`X1.2.3`, `X1-2`).
+                        if let Some(&next) = text.get(num_end) {
+                            if next == b'.' || next.is_ascii_digit() || next == b'-' || next == b'+' {
+                                return Err(err(num_end, format!("two numbers in one word: `{}`", show(&text[pos..]))));
+                            }
+                        }
+                        if letter == b'O' && out.words.is_empty() {
+                            // `O100 sub`, `o100 while …`: subroutines and loops.
+                            let tail = skip_ws(text, num_end);
+                            if text.get(tail).is_some_and(|c| c.is_ascii_alphabetic()) {
+                                let kw: Vec<u8> = text[tail..].iter().take_while(|c| c.is_ascii_alphabetic()).copied().collect();
+                                let kw = String::from_utf8_lossy(&kw).to_ascii_lowercase();
+                                if matches!(kw.as_str(), "sub" | "endsub" | "call" | "while" | "endwhile" | "do" | "if" | "else" | "elseif" | "endif" | "repeat" | "endrepeat" | "return" | "break" | "continue") {
+                                    return Err(err(pos, format!("O-word subroutines and loops cannot be compensated offline: `{}`", show(text))));
+                                }
+                            }
+                        }
+                        out.words.push(Word { letter, value, start: pos as u32, num_start: num_start as u32, end: num_end as u32, decimals });
+                        pos = num_end;
+                    }
+                    Err(_) => {
+                        match rest.first() {
+                            Some(b'#') => return Err(err(after_letter, format!("`#` parameters cannot be compensated offline (expand them in CAM): `{}`", show(&text[pos..])))),
+                            Some(b'[') => return Err(err(after_letter, format!("`[ ]` expressions cannot be compensated offline (expand them in CAM): `{}`", show(&text[pos..])))),
+                            _ => {}
+                        }
+                        if after_letter >= text.len() {
+                            return Err(err(pos, format!("truncated word: letter `{}` with no number at the end of the line", b as char)));
+                        }
+                        return Err(err(pos, format!("letter `{}` without a number: `{}`", b as char, show(&text[pos..]))));
+                    }
+                }
+            }
+            _ if b.is_ascii_digit() || b == b'.' || b == b'-' || b == b'+' => {
+                return Err(err(pos, format!("number without a letter: `{}`", show(&text[pos..]))));
+            }
+            _ => {
+                let shown = if b.is_ascii_graphic() { format!("`{}`", b as char) } else { format!("byte 0x{b:02X}") };
+                return Err(err(pos, format!("unexpected character {shown} outside a comment")));
+            }
+        }
+    }
+    out.lower_case = lower > upper;
+    out.spaced = saw_space && out.words.len() > 1;
+    Ok(())
+}
+
+fn skip_ws(text: &[u8], mut pos: usize) -> usize {
+    while let Ok((rest, _)) = spaces(&text[pos.min(text.len())..]) {
+        pos = text.len() - rest.len();
+    }
+    pos
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn parse(s: &str) -> Result<Block, Located> {
+        let mut b = Block::default();
+        parse_line(s.as_bytes(), 7, "t.nc", &mut b).map(|_| b)
+    }
+
+    #[test]
+    fn words_keep_spans_and_decimals() {
+        let line = "N10 G01 X-12.500 y3. Z.5 (cut) ; tail";
+        let b = parse(line).unwrap();
+        let letters: Vec<u8> = b.words.iter().map(|w| w.letter).collect();
+        assert_eq!(letters, b"NGXYZ");
+        let x = b.word(b'X').unwrap();
+        assert_eq!(x.number_text(line.as_bytes()), b"-12.500");
+        assert_eq!(x.value, -12.5);
+        assert_eq!(x.decimals, Some(3));
+        assert_eq!(b.word(b'Y').unwrap().decimals, Some(0));
+        assert_eq!(b.word(b'Z').unwrap().value, 0.5);
+        assert_eq!(b.word(b'G').unwrap().decimals, None);
+        assert_eq!(b.comments.len(), 2);
+        assert!(b.comments[1].semicolon);
+        assert!(b.spaced);
+    }
+
+    #[test]
+    fn space_between_letter_and_number() {
+        let b = parse("G 1 X 10.0").unwrap();
+        assert_eq!(b.word(b'X').unwrap().value, 10.0);
+        assert_eq!(b.word(b'G').unwrap().code10(), 10);
+    }
+
+    #[test]
+    fn block_delete_percent_and_crlf() {
+        let b = parse("/G0X1\r\n").unwrap();
+        assert!(b.block_delete);
+        assert_eq!(b.text_len, 5);
+        assert!(parse("%").unwrap().percent);
+        assert_eq!(parse("G90.1").unwrap().word(b'G').unwrap().code10(), 901);
+    }
+
+    #[test]
+    fn errors_are_located() {
+        let e = parse("G1 X").unwrap_err();
+        assert_eq!((e.line, e.column), (7, 4));
+        assert!(e.message.contains("truncated"), "{}", e.message);
+        let e = parse("G1 X Y2").unwrap_err();
+        assert!(e.message.contains("without a number"), "{}", e.message);
+        let e = parse("G1 X1.2.3").unwrap_err();
+        assert_eq!(e.column, 8);
+        assert!(e.message.contains("two numbers"));
+        let e = parse("G1 U5").unwrap_err();
+        assert!(e.message.contains("unknown word letter"));
+        let e = parse("G1 X#1").unwrap_err();
+        assert!(e.message.contains("parameters"));
+        let e = parse("o100 sub").unwrap_err();
+        assert!(e.message.contains("subroutines"));
+        let e = parse("G1 X[1+2]").unwrap_err();
+        assert!(e.message.contains("expressions"));
+        let e = parse("G1 (open").unwrap_err();
+        assert!(e.message.contains("unterminated"));
+        let e = parse("G1 12").unwrap_err();
+        assert!(e.message.contains("without a letter"));
+    }
+}
