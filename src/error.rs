@@ -80,7 +80,7 @@ impl std::error::Error for Invalid {}
 #[derive(Debug, thiserror::Error)]
 pub enum Error {
     /// Malformed or unsupported input at a known place.
-    #[error("{0}")]
+    #[error(transparent)]
     Input(#[from] Located),
     /// Bad command-line usage or an inconsistent request.
     #[error("{0}")]

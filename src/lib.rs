@@ -13,6 +13,7 @@ pub mod compensate;
 pub mod diagnose;
 pub mod emit;
 pub mod error;
+pub mod job;
 pub mod machine;
 pub mod predict;
 pub mod program;

@@ -1,14 +1,178 @@
 //! Command line: raw flags → validated run configuration → engine calls.
 //! Nothing else in the crate parses flags.
 
-use clap::Parser;
+mod gcode;
+
+use std::path::PathBuf;
+
+use clap::{Args, Parser, Subcommand, ValueEnum};
+
+use crate::error::{Error, Result};
+
+/// Exit codes, also listed in `--help`.
+pub const EXIT_HELP: &str = "Exit codes: 0 success; 1 completed, but blocks are out of tolerance or limits; 2 bad input or usage.";
 
 /// postproc — offline compensation post-processor for CNC machine tools and robots.
 #[derive(Debug, Parser)]
-#[command(name = "postproc", version)]
-pub struct Cli {}
+#[command(name = "postproc", version, about, after_help = EXIT_HELP)]
+pub struct Cli {
+    /// Only errors on stderr.
+    #[arg(short, long, global = true)]
+    pub quiet: bool,
+    /// More log output on stderr (-v info, -vv debug).
+    #[arg(short, long, global = true, action = clap::ArgAction::Count)]
+    pub verbose: u8,
+    /// The command.
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+/// The commands.
+#[derive(Debug, Subcommand)]
+pub enum Command {
+    /// Parse and interpret a program only; print a summary.
+    #[command(after_help = EXIT_HELP)]
+    Check(CheckArgs),
+    /// Write a compensated program whose targets land on the programmed ones.
+    #[command(after_help = EXIT_HELP)]
+    Compensate(CompensateArgs),
+    /// Dry run: predicted deviation per block and summary, nothing written.
+    #[command(after_help = EXIT_HELP)]
+    Report(ReportArgs),
+}
+
+/// Options shared by the commands that read a G-code program.
+#[derive(Debug, Args, Clone)]
+pub struct ProgramArgs {
+    /// The program (`-` reads standard input).
+    pub file: PathBuf,
+    /// Machine file, or the name of a bundled one (machines/NAME.yaml).
+    #[arg(short, long)]
+    pub machine: Option<String>,
+    /// Tool length for an H number, overriding the machine file: H1=123.4 (mm).
+    #[arg(long = "tool", value_name = "H=LENGTH")]
+    pub tools: Vec<String>,
+    /// Work offset overriding the machine file: G54=X,Y,Z (mm, machine coordinates).
+    #[arg(long = "work-offset", value_name = "GXX=X,Y,Z")]
+    pub work_offsets: Vec<String>,
+}
+
+/// `postproc check`.
+#[derive(Debug, Args)]
+pub struct CheckArgs {
+    /// The program and machine.
+    #[command(flatten)]
+    pub program: ProgramArgs,
+}
+
+/// Where annotations go.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum Annotate {
+    /// Append a comment with the predicted deviation to compensated blocks.
+    Comment,
+    /// No annotation.
+    None,
+}
+
+/// Options of a prediction (effects and gains).
+#[derive(Debug, Args, Clone)]
+pub struct EffectArgs {
+    /// Effects to predict and compensate: all, none, or a list (geometric).
+    #[arg(long, default_value = "all")]
+    pub effects: String,
+    /// Scale an effect: --gain geometric=0.5.
+    #[arg(long = "gain", value_name = "EFFECT=GAIN")]
+    pub gains: Vec<String>,
+    /// Worker threads (default: all cores). Output is the same for any count.
+    #[arg(long)]
+    pub threads: Option<usize>,
+}
+
+/// `postproc compensate`.
+#[derive(Debug, Args)]
+pub struct CompensateArgs {
+    /// The program and machine.
+    #[command(flatten)]
+    pub program: ProgramArgs,
+    /// Effects.
+    #[command(flatten)]
+    pub effects: EffectArgs,
+    /// Output path (default `<stem>.comp.<ext>` beside the input; `-` = stdout).
+    #[arg(short, long)]
+    pub output: Option<PathBuf>,
+    /// Largest gap between attained and programmed path along a move, mm.
+    #[arg(long, default_value_t = 0.001)]
+    pub tolerance: f64,
+    /// Annotate compensated blocks with their predicted deviation.
+    #[arg(long, value_enum, default_value_t = Annotate::Comment)]
+    pub annotate: Annotate,
+    /// Decimals of rewritten mm coordinates (default: the machine file's, else the program's, at least 3).
+    #[arg(long)]
+    pub decimals: Option<usize>,
+    /// Also write the deviation report (CSV) to this path.
+    #[arg(long)]
+    pub report: Option<PathBuf>,
+}
+
+/// Report formats.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum Format {
+    /// Aligned text table.
+    Table,
+    /// Comma-separated values.
+    Csv,
+    /// JSON document.
+    Json,
+}
+
+/// `postproc report`.
+#[derive(Debug, Args)]
+pub struct ReportArgs {
+    /// The program and machine.
+    #[command(flatten)]
+    pub program: ProgramArgs,
+    /// Effects.
+    #[command(flatten)]
+    pub effects: EffectArgs,
+    /// Output format.
+    #[arg(long, value_enum, default_value_t = Format::Table)]
+    pub format: Format,
+    /// Write to this file instead of standard output.
+    #[arg(short, long)]
+    pub output: Option<PathBuf>,
+}
+
+/// Sets up logging on stderr from `-q`/`-v` (or `RUST_LOG`).
+pub fn init_logging(quiet: bool, verbose: u8) {
+    let level = if quiet {
+        "error"
+    } else {
+        match verbose {
+            0 => "warn",
+            1 => "info",
+            _ => "debug",
+        }
+    };
+    let filter = tracing_subscriber::EnvFilter::try_from_default_env()
+        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new(level));
+    let _ = tracing_subscriber::fmt()
+        .with_env_filter(filter)
+        .with_writer(std::io::stderr)
+        .with_target(false)
+        .without_time()
+        .try_init();
+}
 
 /// Runs a parsed command line; returns the process exit code.
-pub fn run(_cli: Cli) -> crate::Result<i32> {
-    Ok(0)
+pub fn run(cli: Cli) -> Result<i32> {
+    init_logging(cli.quiet, cli.verbose);
+    match cli.command {
+        Command::Check(a) => gcode::check(&a),
+        Command::Compensate(a) => gcode::compensate(&a),
+        Command::Report(a) => gcode::report(&a),
+    }
+}
+
+pub(crate) fn usage(msg: impl Into<String>) -> Error {
+    Error::Usage(msg.into())
 }

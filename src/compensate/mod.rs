@@ -1,1 +1,394 @@
-//! compensate (in progress).
+//! Inverse solve and segmentation: for each programmed target find the
+//! command whose predicted attained pose equals it, and split moves whose
+//! compensated straight line (or arc) would leave the exact compensation by
+//! more than the tolerance.
+
+use nalgebra::{SMatrix, SVector, Vector3};
+
+use crate::machine::{AxisVec, DirVec, TipPose};
+use crate::predict::{Breakdown, ToolPredictor};
+use crate::program::interp::{Motion, Move, Plan, PlanKind};
+
+/// Convergence of the inverse solve on the tool-tip position, mm.
+pub const SOLVE_TOL_MM: f64 = 1e-7;
+/// Convergence of the inverse solve on the tool direction, rad.
+pub const SOLVE_TOL_RAD: f64 = 1e-8;
+/// Largest number of solver iterations before a block is reported.
+pub const MAX_ITER: usize = 50;
+/// Deepest bisection of one move (2^16 segments).
+pub const MAX_SPLIT_DEPTH: u32 = 16;
+/// Lever arm that weighs direction errors against position errors in the
+/// five-axis solve, mm per rad.
+const DIR_WEIGHT_MM: f64 = 100.0;
+
+/// Why a target could not be compensated.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Failure {
+    /// The solve did not reach the tolerance.
+    NotConverged {
+        /// Remaining error, mm.
+        residual_mm: f64,
+    },
+    /// The compensated position leaves the travel of an axis.
+    OutOfTravel {
+        /// Axis letter.
+        axis: char,
+        /// Compensated value, mm or deg.
+        value: f64,
+        /// Travel limits.
+        limits: (f64, f64),
+    },
+    /// The move needs more segments than allowed.
+    TooManySegments,
+}
+
+impl std::fmt::Display for Failure {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Failure::NotConverged { residual_mm } => write!(
+                f,
+                "compensation did not converge (residual {residual_mm:.6} mm)"
+            ),
+            Failure::OutOfTravel {
+                axis,
+                value,
+                limits,
+            } => {
+                write!(
+                    f,
+                    "compensated {axis} = {value:.4} is outside the travel [{}, {}]",
+                    limits.0, limits.1
+                )
+            }
+            Failure::TooManySegments => write!(
+                f,
+                "the move would need more than {} segments to stay within the tolerance",
+                1u32 << MAX_SPLIT_DEPTH
+            ),
+        }
+    }
+}
+
+/// Settings of one compensation run.
+#[derive(Debug, Clone, Copy)]
+pub struct Settings {
+    /// Largest allowed gap between the attained path and the programmed
+    /// path along a move, mm.
+    pub tolerance_mm: f64,
+}
+
+impl Default for Settings {
+    fn default() -> Self {
+        Settings {
+            tolerance_mm: 0.001,
+        }
+    }
+}
+
+/// The compensation of one block.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct BlockResult {
+    /// Compensated end point (cycles: the hole bottom), machine coordinates.
+    pub end: AxisVec,
+    /// Cycles: compensated machine Z of the R level.
+    pub r_level: f64,
+    /// Arcs kept as arcs: compensated centre.
+    pub center: Option<Vector3<f64>>,
+    /// Intermediate compensated points before `end` when the move is split.
+    pub segments: Vec<AxisVec>,
+    /// The arc is replaced by straight segments.
+    pub arc_replaced: bool,
+    /// Predicted deviation of the uncompensated target, with its breakdown.
+    pub deviation: Breakdown,
+    /// Predicted position error left at the compensated end point, mm.
+    pub residual_mm: f64,
+}
+
+/// Solves for the command whose predicted attained pose equals the nominal
+/// pose of `target` (programmed command). Rotary axes take part when the
+/// machine has them; a three-axis machine matches the position only.
+pub fn solve(
+    pred: &ToolPredictor,
+    target: &AxisVec,
+    dirs: &DirVec,
+    tool_mm: f64,
+) -> Result<(AxisVec, f64), Failure> {
+    let goal = pred.nominal(target, tool_mm);
+    let m = pred.machine;
+    let rotary = (3..6).any(|s| m.has_axis(s));
+    let mut c = *target;
+    if !rotary {
+        for _ in 0..MAX_ITER {
+            let got = pred.attained(&c, dirs, tool_mm);
+            let r = got.pos - goal.pos;
+            if r.norm() < SOLVE_TOL_MM {
+                return Ok((c, r.norm()));
+            }
+            for i in 0..3 {
+                c[i] -= r[i];
+            }
+        }
+        let r = (pred.attained(&c, dirs, tool_mm).pos - goal.pos).norm();
+        return Err(Failure::NotConverged { residual_mm: r });
+    }
+    // Gauss–Newton on the machine's axes with a finite-difference Jacobian.
+    let slots: Vec<usize> = (0..6).filter(|&s| m.has_axis(s)).collect();
+    let resid = |c: &AxisVec| -> SVector<f64, 6> {
+        let got = pred.attained(c, dirs, tool_mm);
+        residual(&got, &goal)
+    };
+    for _ in 0..MAX_ITER {
+        let r = resid(&c);
+        let pos_err = Vector3::new(r[0], r[1], r[2]).norm();
+        let dir_err = Vector3::new(r[3], r[4], r[5]).norm() / DIR_WEIGHT_MM;
+        if pos_err < SOLVE_TOL_MM && dir_err < SOLVE_TOL_RAD {
+            return Ok((c, pos_err));
+        }
+        let mut jac = SMatrix::<f64, 6, 6>::zeros();
+        for (k, &s) in slots.iter().enumerate() {
+            let h = if s < 3 { 1e-4 } else { 1e-5 };
+            let mut cp = c;
+            let mut cm = c;
+            cp[s] += h;
+            cm[s] -= h;
+            let col = (resid(&cp) - resid(&cm)) / (2.0 * h);
+            jac.set_column(k, &col);
+        }
+        let n = slots.len();
+        let jtj = jac.transpose() * jac;
+        let jtr = jac.transpose() * r;
+        // Only the first n columns are used; pad the rest with identity.
+        let mut a = jtj;
+        for k in n..6 {
+            a[(k, k)] = 1.0;
+        }
+        let Some(step) = a.lu().solve(&jtr) else {
+            break;
+        };
+        for (k, &s) in slots.iter().enumerate() {
+            c[s] -= step[k];
+        }
+    }
+    let r = resid(&c);
+    Err(Failure::NotConverged {
+        residual_mm: Vector3::new(r[0], r[1], r[2]).norm(),
+    })
+}
+
+fn residual(got: &TipPose, goal: &TipPose) -> SVector<f64, 6> {
+    let dp = got.pos - goal.pos;
+    let dd = (got.dir - goal.dir) * DIR_WEIGHT_MM;
+    SVector::<f64, 6>::new(dp[0], dp[1], dp[2], dd[0], dd[1], dd[2])
+}
+
+fn lerp(a: &AxisVec, b: &AxisVec, t: f64) -> AxisVec {
+    let mut o = [0.0; 6];
+    for i in 0..6 {
+        o[i] = a[i] + (b[i] - a[i]) * t;
+    }
+    o
+}
+
+fn check_travel(pred: &ToolPredictor, c: &AxisVec) -> Result<(), Failure> {
+    for (s, &letter) in crate::machine::AXIS_LETTERS.iter().enumerate() {
+        if let Some((lo, hi)) = pred.machine.travel(s) {
+            if c[s] < lo - 1e-9 || c[s] > hi + 1e-9 {
+                return Err(Failure::OutOfTravel {
+                    axis: letter as char,
+                    value: c[s],
+                    limits: (lo, hi),
+                });
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Splits the straight move `p0 → p1` (programmed commands) into compensated
+/// points so that, between consecutive points, the attained path stays
+/// within `tol` of the programmed one. Pushes the points after `c0`,
+/// including the final one.
+#[allow(clippy::too_many_arguments)]
+fn split_line(
+    pred: &ToolPredictor,
+    p0: &AxisVec,
+    p1: &AxisVec,
+    c0: &AxisVec,
+    c1: &AxisVec,
+    dirs: &DirVec,
+    tool: f64,
+    tol: f64,
+    depth: u32,
+    out: &mut Vec<AxisVec>,
+) -> Result<(), Failure> {
+    let mut worst = 0.0f64;
+    for t in [0.25, 0.5, 0.75] {
+        let got = pred.attained(&lerp(c0, c1, t), dirs, tool).pos;
+        let want = pred.nominal(&lerp(p0, p1, t), tool).pos;
+        worst = worst.max((got - want).norm());
+    }
+    if worst <= tol {
+        out.push(*c1);
+        return Ok(());
+    }
+    if depth >= MAX_SPLIT_DEPTH {
+        return Err(Failure::TooManySegments);
+    }
+    let pm = lerp(p0, p1, 0.5);
+    let (cm, _) = solve(pred, &pm, dirs, tool)?;
+    split_line(pred, p0, &pm, c0, &cm, dirs, tool, tol, depth + 1, out)?;
+    split_line(pred, &pm, p1, &cm, c1, dirs, tool, tol, depth + 1, out)
+}
+
+fn dirs_of(t: &Vector3<f64>, base: &DirVec) -> DirVec {
+    let mut d = *base;
+    for i in 0..3 {
+        if t[i].abs() > 1e-9 {
+            d[i] = if t[i] > 0.0 { 1 } else { -1 };
+        }
+    }
+    d
+}
+
+fn with_xyz(base: &AxisVec, p: &Vector3<f64>) -> AxisVec {
+    let mut o = *base;
+    o[0] = p[0];
+    o[1] = p[1];
+    o[2] = p[2];
+    o
+}
+
+/// Compensates one interpreted block.
+pub fn block(
+    pred: &ToolPredictor,
+    plan: &Plan,
+    settings: &Settings,
+) -> Result<BlockResult, Failure> {
+    let Some(mv) = plan.mv else {
+        return Ok(BlockResult::default());
+    };
+    let mut res = BlockResult::default();
+    let tool = mv.tool_len_mm;
+    let tol = settings.tolerance_mm;
+    match plan.kind {
+        PlanKind::Pass => return Ok(res),
+        PlanKind::Fixed => {
+            res.end = mv.end;
+            res.deviation = pred.breakdown(&mv.end, &mv.dirs, tool);
+            res.residual_mm = res.deviation.total().norm();
+            return Ok(res);
+        }
+        PlanKind::Cycle { r_level, .. } => {
+            res.deviation = pred.breakdown(&mv.end, &mv.dirs, tool);
+            let (c, r) = solve(pred, &mv.end, &mv.dirs, tool)?;
+            check_travel(pred, &c)?;
+            res.end = c;
+            res.residual_mm = r;
+            let mut at_r = mv.end;
+            at_r[2] = r_level;
+            let (cr, _) = solve(pred, &at_r, &mv.dirs, tool)?;
+            check_travel(pred, &cr)?;
+            res.r_level = cr[2];
+            return Ok(res);
+        }
+        PlanKind::Motion => {}
+    }
+    res.deviation = pred.breakdown(&mv.end, &mv.dirs, tool);
+    let (c1, r1) = solve(pred, &mv.end, &mv.dirs, tool)?;
+    check_travel(pred, &c1)?;
+    res.end = c1;
+    res.residual_mm = r1;
+    match (mv.motion, mv.arc) {
+        (Motion::Rapid, _) => {}
+        (Motion::Linear, _) => {
+            let (c0, _) = solve(pred, &mv.start, &mv.dirs, tool)?;
+            let mut pts = Vec::new();
+            split_line(
+                pred, &mv.start, &mv.end, &c0, &c1, &mv.dirs, tool, tol, 0, &mut pts,
+            )?;
+            pts.pop();
+            for p in &pts {
+                check_travel(pred, p)?;
+            }
+            res.segments = pts;
+        }
+        (_, Some(arc)) => arc_block(pred, &mv, &arc, tool, tol, &mut res)?,
+        (_, None) => {}
+    }
+    Ok(res)
+}
+
+fn arc_block(
+    pred: &ToolPredictor,
+    mv: &Move,
+    arc: &crate::program::interp::ArcGeom,
+    tool: f64,
+    tol: f64,
+    res: &mut BlockResult,
+) -> Result<(), Failure> {
+    let s3 = mv.start3();
+    let e3 = mv.end3();
+    // Sample the correction along the arc with the local direction of motion.
+    let n = ((arc.sweep.abs() / (5f64).to_radians()).ceil() as usize).clamp(4, 72);
+    let mut corr_min = Vector3::repeat(f64::INFINITY);
+    let mut corr_max = Vector3::repeat(f64::NEG_INFINITY);
+    let mut first = Vector3::zeros();
+    for k in 0..=n {
+        let s = k as f64 / n as f64;
+        let p = arc.point(&s3, &e3, s);
+        let d = dirs_of(&arc.tangent(&s3, &e3, s), &mv.dirs);
+        let target = with_xyz(&lerp(&mv.start, &mv.end, s), &p);
+        let (c, _) = solve(pred, &target, &d, tool)?;
+        let corr = Vector3::new(c[0] - p[0], c[1] - p[1], c[2] - p[2]);
+        if k == 0 {
+            first = corr;
+        }
+        corr_min = corr_min.inf(&corr);
+        corr_max = corr_max.sup(&corr);
+    }
+    let spread = (corr_max - corr_min).norm();
+    if spread <= tol {
+        let last = Vector3::new(res.end[0] - e3[0], res.end[1] - e3[1], res.end[2] - e3[2]);
+        res.center = Some(arc.center + (first + last) / 2.0);
+        return Ok(());
+    }
+    // Replace by chords: sagitta within a quarter of the tolerance, then each
+    // chord split like a straight move with the rest of the budget.
+    res.arc_replaced = true;
+    let sag = tol / 4.0;
+    let r = arc.radius.max(1e-9);
+    let max_step = 2.0 * (1.0 - sag / r).clamp(-1.0, 1.0).acos();
+    let chords = ((arc.sweep.abs() / max_step.max(1e-6)).ceil() as usize).clamp(1, 1 << 16);
+    let mut prev_p = mv.start;
+    let d0 = dirs_of(&arc.tangent(&s3, &e3, 0.0), &mv.dirs);
+    let (mut prev_c, _) = solve(pred, &mv.start, &d0, tool)?;
+    let mut pts = Vec::new();
+    for k in 1..=chords {
+        let s = k as f64 / chords as f64;
+        let p = with_xyz(&lerp(&mv.start, &mv.end, s), &arc.point(&s3, &e3, s));
+        let chord_dir = Vector3::new(p[0] - prev_p[0], p[1] - prev_p[1], p[2] - prev_p[2]);
+        let d = dirs_of(&chord_dir, &mv.dirs);
+        let (c, _) = solve(pred, &p, &d, tool)?;
+        split_line(
+            pred,
+            &prev_p,
+            &p,
+            &prev_c,
+            &c,
+            &d,
+            tool,
+            tol - sag,
+            0,
+            &mut pts,
+        )?;
+        prev_p = p;
+        prev_c = c;
+    }
+    // The last point is the end point, recomputed with the end direction.
+    pts.pop();
+    for p in &pts {
+        check_travel(pred, p)?;
+    }
+    res.segments = pts;
+    Ok(())
+}

@@ -1,1 +1,4 @@
-//! emit (in progress).
+//! Writers: byte-faithful program emitters and deviation reports.
+
+pub mod gcode;
+pub mod report;

@@ -38,7 +38,8 @@ pub struct Word {
 impl Word {
     /// The number's original text within `line`.
     pub fn number_text<'a>(&self, line: &'a [u8]) -> &'a [u8] {
-        line.get(self.num_start as usize..self.end as usize).unwrap_or(b"")
+        line.get(self.num_start as usize..self.end as usize)
+            .unwrap_or(b"")
     }
 
     /// G and M codes compare as integers times ten (`G90.1` → 901), so
@@ -122,7 +123,10 @@ pub fn strip_eol(line: &[u8]) -> &[u8] {
 fn number(input: &[u8]) -> IResult<&[u8], &[u8]> {
     recognize(tuple((
         opt(one_of("+-")),
-        alt((recognize(pair(digit1, opt(pair(char('.'), digit0)))), recognize(pair(char('.'), digit1)))),
+        alt((
+            recognize(pair(digit1, opt(pair(char('.'), digit0)))),
+            recognize(pair(char('.'), digit1)),
+        )),
     )))(input)
 }
 
@@ -170,19 +174,59 @@ pub fn parse_line(line: &[u8], line_no: usize, file: &str, out: &mut Block) -> R
                 let close = text[pos..].iter().position(|&c| c == b')');
                 match close {
                     Some(off) => {
-                        out.comments.push(Comment { start: pos as u32, end: (pos + off + 1) as u32, semicolon: false });
+                        out.comments.push(Comment {
+                            start: pos as u32,
+                            end: (pos + off + 1) as u32,
+                            semicolon: false,
+                        });
                         pos += off + 1;
                     }
-                    None => return Err(err(pos, format!("unterminated comment, no `)` before the end of the line: `{}`", show(&text[pos..])))),
+                    None => {
+                        return Err(err(
+                            pos,
+                            format!(
+                                "unterminated comment, no `)` before the end of the line: `{}`",
+                                show(&text[pos..])
+                            ),
+                        ));
+                    }
                 }
             }
             b';' => {
-                out.comments.push(Comment { start: pos as u32, end: text.len() as u32, semicolon: true });
+                out.comments.push(Comment {
+                    start: pos as u32,
+                    end: text.len() as u32,
+                    semicolon: true,
+                });
                 pos = text.len();
             }
-            b'#' => return Err(err(pos, format!("`#` parameters cannot be compensated offline (expand them in CAM): `{}`", show(&text[pos..])))),
-            b'[' | b']' => return Err(err(pos, format!("`[ ]` expressions cannot be compensated offline (expand them in CAM): `{}`", show(&text[pos..])))),
-            b'=' => return Err(err(pos, format!("assignments cannot be compensated offline: `{}`", show(&text[pos..])))),
+            b'#' => {
+                return Err(err(
+                    pos,
+                    format!(
+                        "`#` parameters cannot be compensated offline (expand them in CAM): `{}`",
+                        show(&text[pos..])
+                    ),
+                ));
+            }
+            b'[' | b']' => {
+                return Err(err(
+                    pos,
+                    format!(
+                        "`[ ]` expressions cannot be compensated offline (expand them in CAM): `{}`",
+                        show(&text[pos..])
+                    ),
+                ));
+            }
+            b'=' => {
+                return Err(err(
+                    pos,
+                    format!(
+                        "assignments cannot be compensated offline: `{}`",
+                        show(&text[pos..])
+                    ),
+                ));
+            }
             _ if b.is_ascii_alphabetic() => {
                 let letter = b.to_ascii_uppercase();
                 if b.is_ascii_lowercase() {
@@ -192,7 +236,14 @@ pub fn parse_line(line: &[u8], line_no: usize, file: &str, out: &mut Block) -> R
                 }
                 let after_letter = skip_ws(text, pos + 1);
                 if !LETTERS.contains(&letter) {
-                    return Err(err(pos, format!("unknown word letter `{}`: `{}`", b as char, show(&text[pos..]))));
+                    return Err(err(
+                        pos,
+                        format!(
+                            "unknown word letter `{}`: `{}`",
+                            b as char,
+                            show(&text[pos..])
+                        ),
+                    ));
                 }
                 let rest = &text[after_letter..];
                 match number(rest) {
@@ -202,51 +253,136 @@ pub fn parse_line(line: &[u8], line_no: usize, file: &str, out: &mut Block) -> R
                         let num_str = std::str::from_utf8(num).unwrap_or("");
                         let value: f64 = match num_str.parse() {
                             Ok(v) => v,
-                            Err(_) => return Err(err(num_start, format!("malformed number `{num_str}`"))),
+                            Err(_) => {
+                                return Err(err(
+                                    num_start,
+                                    format!("malformed number `{num_str}`"),
+                                ));
+                            }
                         };
                         if !value.is_finite() || value.abs() > 1e9 {
                             return Err(err(num_start, format!("absurd number `{num_str}`")));
                         }
-                        let decimals = num.iter().position(|&c| c == b'.').map(|d| (num.len() - d - 1).min(255) as u8);
+                        let decimals = num
+                            .iter()
+                            .position(|&c| c == b'.')
+                            .map(|d| (num.len() - d - 1).min(255) as u8);
                         // A second number glued to this one (`X1.2.3`, `X1-2`).
                         if let Some(&next) = text.get(num_end) {
-                            if next == b'.' || next.is_ascii_digit() || next == b'-' || next == b'+' {
-                                return Err(err(num_end, format!("two numbers in one word: `{}`", show(&text[pos..]))));
+                            if next == b'.' || next.is_ascii_digit() || next == b'-' || next == b'+'
+                            {
+                                return Err(err(
+                                    num_end,
+                                    format!("two numbers in one word: `{}`", show(&text[pos..])),
+                                ));
                             }
                         }
                         if letter == b'O' && out.words.is_empty() {
                             // `O100 sub`, `o100 while …`: subroutines and loops.
                             let tail = skip_ws(text, num_end);
                             if text.get(tail).is_some_and(|c| c.is_ascii_alphabetic()) {
-                                let kw: Vec<u8> = text[tail..].iter().take_while(|c| c.is_ascii_alphabetic()).copied().collect();
+                                let kw: Vec<u8> = text[tail..]
+                                    .iter()
+                                    .take_while(|c| c.is_ascii_alphabetic())
+                                    .copied()
+                                    .collect();
                                 let kw = String::from_utf8_lossy(&kw).to_ascii_lowercase();
-                                if matches!(kw.as_str(), "sub" | "endsub" | "call" | "while" | "endwhile" | "do" | "if" | "else" | "elseif" | "endif" | "repeat" | "endrepeat" | "return" | "break" | "continue") {
-                                    return Err(err(pos, format!("O-word subroutines and loops cannot be compensated offline: `{}`", show(text))));
+                                if matches!(
+                                    kw.as_str(),
+                                    "sub"
+                                        | "endsub"
+                                        | "call"
+                                        | "while"
+                                        | "endwhile"
+                                        | "do"
+                                        | "if"
+                                        | "else"
+                                        | "elseif"
+                                        | "endif"
+                                        | "repeat"
+                                        | "endrepeat"
+                                        | "return"
+                                        | "break"
+                                        | "continue"
+                                ) {
+                                    return Err(err(
+                                        pos,
+                                        format!(
+                                            "O-word subroutines and loops cannot be compensated offline: `{}`",
+                                            show(text)
+                                        ),
+                                    ));
                                 }
                             }
                         }
-                        out.words.push(Word { letter, value, start: pos as u32, num_start: num_start as u32, end: num_end as u32, decimals });
+                        out.words.push(Word {
+                            letter,
+                            value,
+                            start: pos as u32,
+                            num_start: num_start as u32,
+                            end: num_end as u32,
+                            decimals,
+                        });
                         pos = num_end;
                     }
                     Err(_) => {
                         match rest.first() {
-                            Some(b'#') => return Err(err(after_letter, format!("`#` parameters cannot be compensated offline (expand them in CAM): `{}`", show(&text[pos..])))),
-                            Some(b'[') => return Err(err(after_letter, format!("`[ ]` expressions cannot be compensated offline (expand them in CAM): `{}`", show(&text[pos..])))),
+                            Some(b'#') => {
+                                return Err(err(
+                                    after_letter,
+                                    format!(
+                                        "`#` parameters cannot be compensated offline (expand them in CAM): `{}`",
+                                        show(&text[pos..])
+                                    ),
+                                ));
+                            }
+                            Some(b'[') => {
+                                return Err(err(
+                                    after_letter,
+                                    format!(
+                                        "`[ ]` expressions cannot be compensated offline (expand them in CAM): `{}`",
+                                        show(&text[pos..])
+                                    ),
+                                ));
+                            }
                             _ => {}
                         }
                         if after_letter >= text.len() {
-                            return Err(err(pos, format!("truncated word: letter `{}` with no number at the end of the line", b as char)));
+                            return Err(err(
+                                pos,
+                                format!(
+                                    "truncated word: letter `{}` with no number at the end of the line",
+                                    b as char
+                                ),
+                            ));
                         }
-                        return Err(err(pos, format!("letter `{}` without a number: `{}`", b as char, show(&text[pos..]))));
+                        return Err(err(
+                            pos,
+                            format!(
+                                "letter `{}` without a number: `{}`",
+                                b as char,
+                                show(&text[pos..])
+                            ),
+                        ));
                     }
                 }
             }
             _ if b.is_ascii_digit() || b == b'.' || b == b'-' || b == b'+' => {
-                return Err(err(pos, format!("number without a letter: `{}`", show(&text[pos..]))));
+                return Err(err(
+                    pos,
+                    format!("number without a letter: `{}`", show(&text[pos..])),
+                ));
             }
             _ => {
-                let shown = if b.is_ascii_graphic() { format!("`{}`", b as char) } else { format!("byte 0x{b:02X}") };
-                return Err(err(pos, format!("unexpected character {shown} outside a comment")));
+                let shown = if b.is_ascii_graphic() {
+                    format!("`{}`", b as char)
+                } else {
+                    format!("byte 0x{b:02X}")
+                };
+                return Err(err(
+                    pos,
+                    format!("unexpected character {shown} outside a comment"),
+                ));
             }
         }
     }

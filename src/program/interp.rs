@@ -313,7 +313,11 @@ impl Interpreter {
             w.count += 1;
         } else if self.warnings.len() < MAX_WARNINGS {
             tracing::warn!("{}:{}: {}", self.file, line, message);
-            self.warnings.push(Warning { line, message, count: 1 });
+            self.warnings.push(Warning {
+                line,
+                message,
+                count: 1,
+            });
         }
     }
 
@@ -333,11 +337,20 @@ impl Interpreter {
     /// Interprets one parsed block. `text` is the line (for messages).
     pub fn step(&mut self, block: &Block, text: &[u8]) -> Result<Plan, Located> {
         let line = block.line_no;
-        let mut plan = Plan { scale: self.scale(), absolute: self.absolute, arc_absolute: self.arc_absolute, offset: self.offset(), ..Plan::default() };
+        let mut plan = Plan {
+            scale: self.scale(),
+            absolute: self.absolute,
+            arc_absolute: self.arc_absolute,
+            offset: self.offset(),
+            ..Plan::default()
+        };
         if block.is_empty() || block.block_delete && block.words.is_empty() {
             return Ok(plan);
         }
-        let quote = |w: &Word| String::from_utf8_lossy(text.get(w.start as usize..w.end as usize).unwrap_or(b"")).to_string();
+        let quote = |w: &Word| {
+            String::from_utf8_lossy(text.get(w.start as usize..w.end as usize).unwrap_or(b""))
+                .to_string()
+        };
 
         // Gather the block's words.
         let mut axis: [Option<&Word>; 6] = [None; 6];
@@ -352,10 +365,22 @@ impl Interpreter {
                 b'X' | b'Y' | b'Z' | b'A' | b'B' | b'C' => {
                     let slot = axis_slot(w.letter).unwrap_or(0);
                     if axis[slot].is_some() {
-                        return Err(self.err(line, Some(w), format!("axis word `{}` given twice in one block", quote(w))));
+                        return Err(self.err(
+                            line,
+                            Some(w),
+                            format!("axis word `{}` given twice in one block", quote(w)),
+                        ));
                     }
                     if !self.setup.axes[slot] {
-                        return Err(self.err(line, Some(w), format!("the machine has no {} axis: `{}`", w.letter as char, quote(w))));
+                        return Err(self.err(
+                            line,
+                            Some(w),
+                            format!(
+                                "the machine has no {} axis: `{}`",
+                                w.letter as char,
+                                quote(w)
+                            ),
+                        ));
                     }
                     axis[slot] = Some(w);
                 }
@@ -365,13 +390,21 @@ impl Interpreter {
                 b'P' => p_word = Some(w),
                 b'F' => {
                     if w.value < 0.0 {
-                        return Err(self.err(line, Some(w), format!("negative feed `{}`", quote(w))));
+                        return Err(self.err(
+                            line,
+                            Some(w),
+                            format!("negative feed `{}`", quote(w)),
+                        ));
                     }
                     self.feed = w.value;
                 }
                 b'S' => {
                     if w.value < 0.0 {
-                        return Err(self.err(line, Some(w), format!("negative spindle speed `{}`", quote(w))));
+                        return Err(self.err(
+                            line,
+                            Some(w),
+                            format!("negative spindle speed `{}`", quote(w)),
+                        ));
                     }
                     self.spindle = w.value;
                 }
@@ -391,7 +424,11 @@ impl Interpreter {
                     match code {
                         0 | 10 | 20 | 30 => {
                             if motion_g.is_some() {
-                                return Err(self.err(line, Some(w), format!("two motion codes in one block: `{}`", quote(w))));
+                                return Err(self.err(
+                                    line,
+                                    Some(w),
+                                    format!("two motion codes in one block: `{}`", quote(w)),
+                                ));
                             }
                             motion_g = Some(w);
                         }
@@ -435,7 +472,7 @@ impl Interpreter {
                         950 => self.per_rev = true,
                         // Harmless modes: exact stop, path control, AI contour,
                         // polar/rotation/scaling cancel, spindle speed modes.
-                        610 | 640 | 51 | 150 | 690 | 500 | 501 | 960 | 970 | 150_0 => {}
+                        610 | 640 | 51 | 150 | 690 | 500 | 501 | 960 | 970 => {}
                         _ => {
                             let what = match code {
                                 100 => "G10 (programmable data input)",
@@ -448,7 +485,11 @@ impl Interpreter {
                                 434 | 435 => "G43.4/G43.5 (tool centre point control)",
                                 _ => "this G code",
                             };
-                            return Err(self.err(line, Some(w), format!("{what} cannot be compensated offline: `{}`", quote(w))));
+                            return Err(self.err(
+                                line,
+                                Some(w),
+                                format!("{what} cannot be compensated offline: `{}`", quote(w)),
+                            ));
                         }
                     }
                 }
@@ -456,7 +497,11 @@ impl Interpreter {
             }
         }
         // G43 tool length.
-        if block.words.iter().any(|w| w.letter == b'G' && w.code10() == 430) {
+        if block
+            .words
+            .iter()
+            .any(|w| w.letter == b'G' && w.code10() == 430)
+        {
             let h = match h_word {
                 Some(hw) if hw.letter == b'H' => hw.value.max(0.0) as u32,
                 _ => self.tool_active.max(self.tool_selected),
@@ -517,7 +562,14 @@ impl Interpreter {
                 }
                 code => {
                     if self.plane != Plane::XY {
-                        return Err(self.err(line, Some(g), format!("canned cycles are supported in the G17 plane only: `{}`", quote(g))));
+                        return Err(self.err(
+                            line,
+                            Some(g),
+                            format!(
+                                "canned cycles are supported in the G17 plane only: `{}`",
+                                quote(g)
+                            ),
+                        ));
                     }
                     if self.cycle.is_none() {
                         self.cycle_initial = self.pos[2];
@@ -554,19 +606,29 @@ impl Interpreter {
             Some(m) => m,
             None => {
                 let first = axis.iter().flatten().next().copied();
-                return Err(self.err(line, first, "axis words before any motion mode (G0/G1/G2/G3) was set".into()));
+                return Err(self.err(
+                    line,
+                    first,
+                    "axis words before any motion mode (G0/G1/G2/G3) was set".into(),
+                ));
             }
         };
         let end = self.target(&axis, plan.scale, &plan.offset);
         let start = self.pos;
         let arc = match motion {
-            Motion::ArcCw | Motion::ArcCcw => Some(self.arc(block, &start, &end, &center, r_word, p_word, motion, line, text)?),
+            Motion::ArcCw | Motion::ArcCcw => Some(self.arc(
+                block, &start, &end, &center, r_word, p_word, motion, line, text,
+            )?),
             _ => None,
         };
         for (slot, a) in axis.iter().enumerate() {
             if let Some(w) = a {
                 if !end[slot].is_finite() {
-                    return Err(self.err(line, Some(w), format!("coordinate out of range: `{}`", quote(w))));
+                    return Err(self.err(
+                        line,
+                        Some(w),
+                        format!("coordinate out of range: `{}`", quote(w)),
+                    ));
                 }
             }
         }
@@ -581,7 +643,13 @@ impl Interpreter {
         if self.per_rev { f * self.spindle } else { f }
     }
 
-    fn make_move(&mut self, motion: Motion, start: AxisVec, end: AxisVec, arc: Option<ArcGeom>) -> Move {
+    fn make_move(
+        &mut self,
+        motion: Motion,
+        start: AxisVec,
+        end: AxisVec,
+        arc: Option<ArcGeom>,
+    ) -> Move {
         let prev_dirs = self.dirs;
         let mut dirs = self.dirs;
         match &arc {
@@ -619,7 +687,11 @@ impl Interpreter {
             arc,
             dirs,
             prev_dirs,
-            feed_mm_min: if motion == Motion::Rapid { 0.0 } else { self.feed_mm_min() },
+            feed_mm_min: if motion == Motion::Rapid {
+                0.0
+            } else {
+                self.feed_mm_min()
+            },
             spindle_rpm: self.spindle,
             tool: self.tool_active,
             tool_len_mm: self.tool_len_mm,
@@ -632,7 +704,11 @@ impl Interpreter {
         for (slot, a) in axis.iter().enumerate() {
             if let Some(w) = a {
                 let s = if slot < 3 { scale } else { 1.0 };
-                end[slot] = if self.absolute { w.value * s + offset[slot] } else { self.pos[slot] + w.value * s };
+                end[slot] = if self.absolute {
+                    w.value * s + offset[slot]
+                } else {
+                    self.pos[slot] + w.value * s
+                };
             }
         }
         end
@@ -655,7 +731,11 @@ impl Interpreter {
         let (a, b, n) = plane.axes();
         let (la, lb) = plane.center_letters();
         let idx = |l: u8| (l - b'I') as usize;
-        let first_word = block.words.iter().find(|w| w.letter == b'G' && matches!(w.code10(), 20 | 30)).or(block.words.first());
+        let first_word = block
+            .words
+            .iter()
+            .find(|w| w.letter == b'G' && matches!(w.code10(), 20 | 30))
+            .or(block.words.first());
         let s3 = Vector3::new(start[0], start[1], start[2]);
         let e3 = Vector3::new(end[0], end[1], end[2]);
         let scale = self.scale();
@@ -664,7 +744,14 @@ impl Interpreter {
         let normal_letter = [b'I', b'J', b'K'][n];
         if let Some(w) = center[idx(normal_letter)] {
             if w.value.abs() > MOTION_EPS {
-                return Err(self.err(line, Some(w), format!("centre offset along the plane normal is not allowed in this plane: `{}`", String::from_utf8_lossy(&text[w.start as usize..w.end as usize]))));
+                return Err(self.err(
+                    line,
+                    Some(w),
+                    format!(
+                        "centre offset along the plane normal is not allowed in this plane: `{}`",
+                        String::from_utf8_lossy(&text[w.start as usize..w.end as usize])
+                    ),
+                ));
             }
         }
         let (ca, cb) = match (center[idx(la)], center[idx(lb)], r_word) {
@@ -674,10 +761,22 @@ impl Interpreter {
                 let chord = da.hypot(db);
                 let rad = r.value.abs() * scale;
                 if chord < MOTION_EPS {
-                    return Err(self.err(line, Some(r), "an R arc cannot be a full circle; use I/J/K".into()));
+                    return Err(self.err(
+                        line,
+                        Some(r),
+                        "an R arc cannot be a full circle; use I/J/K".into(),
+                    ));
                 }
                 if chord > 2.0 * rad + ARC_RADIUS_TOL_MM {
-                    return Err(self.err(line, Some(r), format!("arc radius {} is smaller than half the chord {:.4}", r.value, chord / 2.0 / scale)));
+                    return Err(self.err(
+                        line,
+                        Some(r),
+                        format!(
+                            "arc radius {} is smaller than half the chord {:.4}",
+                            r.value,
+                            chord / 2.0 / scale
+                        ),
+                    ));
                 }
                 let h = (rad * rad - chord * chord / 4.0).max(0.0).sqrt();
                 let (ma, mb) = (s3[a] + da / 2.0, s3[b] + db / 2.0);
@@ -700,7 +799,11 @@ impl Interpreter {
                 (off(ia, a), off(ib, b))
             }
             (_, _, Some(r)) => {
-                return Err(self.err(line, Some(r), "an arc has both R and a centre offset".into()));
+                return Err(self.err(
+                    line,
+                    Some(r),
+                    "an arc has both R and a centre offset".into(),
+                ));
             }
         };
         let r0 = (s3[a] - ca).hypot(s3[b] - cb);
@@ -737,25 +840,62 @@ impl Interpreter {
         if let Some(p) = p_word {
             let turns = p.value.round();
             if turns >= 2.0 {
-                return Err(self.err(line, Some(p), "multi-turn arcs (P ≥ 2) cannot be compensated offline".into()));
+                return Err(self.err(
+                    line,
+                    Some(p),
+                    "multi-turn arcs (P ≥ 2) cannot be compensated offline".into(),
+                ));
             }
         }
         let mut center3 = s3;
         center3[a] = ca;
         center3[b] = cb;
-        Ok(ArcGeom { plane, center: center3, sweep, radius: (r0 + r1) / 2.0 })
+        Ok(ArcGeom {
+            plane,
+            center: center3,
+            sweep,
+            radius: (r0 + r1) / 2.0,
+        })
     }
 
-    fn cycle_hole(&mut self, block: &Block, axis: &[Option<&Word>; 6], mut plan: Plan, line: usize, text: &[u8]) -> Result<Plan, Located> {
+    fn cycle_hole(
+        &mut self,
+        block: &Block,
+        axis: &[Option<&Word>; 6],
+        mut plan: Plan,
+        line: usize,
+        text: &[u8],
+    ) -> Result<Plan, Located> {
         let scale = plan.scale;
         let off = plan.offset;
         let first = axis.iter().flatten().next().copied();
         let (Some(r), Some(z)) = (self.cycle_r, self.cycle_z) else {
-            return Err(self.err(line, first, format!("canned cycle without {} : `{}`", if self.cycle_r.is_none() { "an R level" } else { "a Z depth" }, String::from_utf8_lossy(crate::program::gcode::strip_eol(text)))));
+            return Err(self.err(
+                line,
+                first,
+                format!(
+                    "canned cycle without {} : `{}`",
+                    if self.cycle_r.is_none() {
+                        "an R level"
+                    } else {
+                        "a Z depth"
+                    },
+                    String::from_utf8_lossy(crate::program::gcode::strip_eol(text))
+                ),
+            ));
         };
-        if block.words.iter().any(|w| w.letter == b'K' && w.value != 1.0) && self.cycle.is_some() {
+        if block
+            .words
+            .iter()
+            .any(|w| w.letter == b'K' && w.value != 1.0)
+            && self.cycle.is_some()
+        {
             let k = block.words.iter().find(|w| w.letter == b'K');
-            return Err(self.err(line, k, "repeat counts cannot be compensated offline (expand them in CAM)".into()));
+            return Err(self.err(
+                line,
+                k,
+                "repeat counts cannot be compensated offline (expand them in CAM)".into(),
+            ));
         }
         let initial = self.cycle_initial;
         // Hole XY position.
@@ -763,7 +903,11 @@ impl Interpreter {
         for slot in [0usize, 1, 3, 4, 5] {
             if let Some(w) = axis[slot] {
                 let s = if slot < 3 { scale } else { 1.0 };
-                xy[slot] = if self.absolute { w.value * s + off[slot] } else { self.pos[slot] + w.value * s };
+                xy[slot] = if self.absolute {
+                    w.value * s + off[slot]
+                } else {
+                    self.pos[slot] + w.value * s
+                };
             }
         }
         let (r_level, bottom) = if self.absolute {
@@ -773,9 +917,21 @@ impl Interpreter {
             let rl = initial + r * scale;
             (rl, rl + z * scale)
         };
-        let retract = if self.retract_initial { initial.max(r_level) } else { r_level };
+        let retract = if self.retract_initial {
+            initial.max(r_level)
+        } else {
+            r_level
+        };
         if bottom > r_level + MOTION_EPS {
-            return Err(self.err(line, axis[2].or(first), format!("hole bottom Z is above the R level ({:.4} > {:.4})", bottom / scale, r_level / scale)));
+            return Err(self.err(
+                line,
+                axis[2].or(first),
+                format!(
+                    "hole bottom Z is above the R level ({:.4} > {:.4})",
+                    bottom / scale,
+                    r_level / scale
+                ),
+            ));
         }
         // Positioning at the current height, then to R, feed to the bottom, retract.
         let mut above = xy;
@@ -790,12 +946,22 @@ impl Interpreter {
         let mut up = xy;
         up[2] = retract;
         self.make_move(Motion::Rapid, at_bottom, up, None);
-        plan.kind = PlanKind::Cycle { r_level, bottom, retract };
+        plan.kind = PlanKind::Cycle {
+            r_level,
+            bottom,
+            retract,
+        };
         plan.mv = Some(feed);
         Ok(plan)
     }
 
-    fn reference_return(&mut self, _block: &Block, axis: &[Option<&Word>; 6], mut plan: Plan, _line: usize) -> Result<Plan, Located> {
+    fn reference_return(
+        &mut self,
+        _block: &Block,
+        axis: &[Option<&Word>; 6],
+        mut plan: Plan,
+        _line: usize,
+    ) -> Result<Plan, Located> {
         // Through the intermediate point to the reference position (machine zero).
         let mid = self.target(axis, plan.scale, &plan.offset);
         let start = self.pos;
@@ -812,7 +978,14 @@ impl Interpreter {
         Ok(plan)
     }
 
-    fn machine_move(&mut self, _block: &Block, axis: &[Option<&Word>; 6], mut plan: Plan, motion_g: Option<&Word>, line: usize) -> Result<Plan, Located> {
+    fn machine_move(
+        &mut self,
+        _block: &Block,
+        axis: &[Option<&Word>; 6],
+        mut plan: Plan,
+        motion_g: Option<&Word>,
+        line: usize,
+    ) -> Result<Plan, Located> {
         if let Some(g) = motion_g {
             if !matches!(g.code10(), 0 | 10) {
                 return Err(self.err(line, Some(g), "G53 moves only with G0 or G1".into()));
@@ -841,7 +1014,10 @@ mod tests {
     const TOL: f64 = 1e-9;
 
     fn run(lines: &[&str]) -> Result<Vec<Plan>, Located> {
-        let mut setup = Setup { axes: [true, true, true, false, false, true], ..Setup::default() };
+        let mut setup = Setup {
+            axes: [true, true, true, false, false, true],
+            ..Setup::default()
+        };
         setup.tools.insert(1, 100.0);
         setup.work_offsets[0] = Some([100.0, 50.0, -200.0]);
         let mut it = Interpreter::new(setup, "t.nc");
@@ -891,9 +1067,19 @@ mod tests {
 
     #[test]
     fn drilling_cycle_points() {
-        let p = run(&["G90 G0 X0 Y0 Z50", "G99 G81 X10 Y5 Z-3 R2 F80", "X20", "G80"]).unwrap();
+        let p = run(&[
+            "G90 G0 X0 Y0 Z50",
+            "G99 G81 X10 Y5 Z-3 R2 F80",
+            "X20",
+            "G80",
+        ])
+        .unwrap();
         match p[1].kind {
-            PlanKind::Cycle { r_level, bottom, retract } => {
+            PlanKind::Cycle {
+                r_level,
+                bottom,
+                retract,
+            } => {
                 // G54 puts program Z0 at machine Z −200.
                 assert_eq!((r_level, bottom, retract), (-198.0, -203.0, -198.0));
             }
@@ -909,9 +1095,24 @@ mod tests {
         assert_eq!(p[1].mv.unwrap().tool_len_mm, 100.0);
         assert!(run(&["G43 H7 Z1"]).unwrap_err().message.contains("H7"));
         assert!(run(&["G92 X0"]).unwrap_err().message.contains("G92"));
-        assert!(run(&["M98 P100"]).unwrap_err().message.contains("subprogram"));
-        assert!(run(&["G68 X0 Y0 R45"]).unwrap_err().message.contains("rotation"));
-        assert!(run(&["G0 X0 Y0", "G2 X5 Y0 I1 J0"]).unwrap_err().message.contains("not on the circle"));
+        assert!(
+            run(&["M98 P100"])
+                .unwrap_err()
+                .message
+                .contains("subprogram")
+        );
+        assert!(
+            run(&["G68 X0 Y0 R45"])
+                .unwrap_err()
+                .message
+                .contains("rotation")
+        );
+        assert!(
+            run(&["G0 X0 Y0", "G2 X5 Y0 I1 J0"])
+                .unwrap_err()
+                .message
+                .contains("not on the circle")
+        );
         assert!(run(&["G0 B10"]).unwrap_err().message.contains("no B axis"));
     }
 

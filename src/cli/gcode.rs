@@ -1,0 +1,432 @@
+//! The G-code commands: `check`, `compensate` and `report`.
+
+use std::fs::File;
+use std::io::{BufRead, BufReader, BufWriter, Read, Write};
+use std::path::{Path, PathBuf};
+
+use super::{
+    Annotate, CheckArgs, CompensateArgs, EffectArgs, Format, ProgramArgs, ReportArgs, usage,
+};
+use crate::compensate::Settings;
+use crate::emit::gcode::EmitOptions;
+use crate::emit::report::ReportWriter;
+use crate::error::{Error, Result};
+use crate::job::{Job, Summary};
+use crate::machine::Machine;
+use crate::machine::tool::MachineTool;
+use crate::predict::{EffectSet, ToolPredictor};
+use crate::program::interp::Setup;
+
+/// Largest tool number looked up in the machine file's tool table.
+const MAX_TOOL_NUMBER: u32 = 999;
+
+fn load_machine(name: &str) -> Result<MachineTool> {
+    let path = Machine::resolve(name)?;
+    match Machine::load(&path)? {
+        Machine::Tool(m) => Ok(m),
+        Machine::Robot(_) => Err(usage(format!(
+            "{}: is a robot; G-code programs need a machine tool",
+            path.display()
+        ))),
+    }
+}
+
+fn parse_setup(args: &ProgramArgs, machine: Option<&MachineTool>) -> Result<Setup> {
+    let mut setup = Setup::default();
+    match machine {
+        Some(m) => {
+            for (slot, has) in setup.axes.iter_mut().enumerate() {
+                *has = m.has_axis(slot);
+            }
+            for h in 0..=MAX_TOOL_NUMBER {
+                if let Some(len) = m.tool_length_mm(h) {
+                    setup.tools.insert(h, len);
+                }
+            }
+            for (i, wo) in setup.work_offsets.iter_mut().enumerate() {
+                *wo = m.work_offset_mm(&format!("G{}", 54 + i));
+            }
+        }
+        None => setup.axes = [true; 6],
+    }
+    for t in &args.tools {
+        let (h, len) = t
+            .split_once('=')
+            .ok_or_else(|| usage(format!("--tool expects H<n>=LENGTH, got `{t}`")))?;
+        let h = h.trim().trim_start_matches(['H', 'h']);
+        let h: u32 = h
+            .parse()
+            .map_err(|_| usage(format!("--tool: `{t}`: bad H number")))?;
+        let len: f64 = len
+            .trim()
+            .parse()
+            .map_err(|_| usage(format!("--tool: `{t}`: bad length")))?;
+        if !len.is_finite() || !(0.0..=2000.0).contains(&len) {
+            return Err(usage(format!(
+                "--tool: `{t}`: length must be within 0..2000 mm"
+            )));
+        }
+        setup.tools.insert(h, len);
+    }
+    for w in &args.work_offsets {
+        let (code, xyz) = w
+            .split_once('=')
+            .ok_or_else(|| usage(format!("--work-offset expects G54=X,Y,Z, got `{w}`")))?;
+        let code = code.trim().to_ascii_uppercase();
+        let idx = match code.as_str() {
+            "G54" => 0,
+            "G55" => 1,
+            "G56" => 2,
+            "G57" => 3,
+            "G58" => 4,
+            "G59" => 5,
+            _ => return Err(usage(format!("--work-offset: `{code}` is not G54..G59"))),
+        };
+        let v: Vec<f64> = xyz
+            .split(',')
+            .map(|s| s.trim().parse::<f64>())
+            .collect::<std::result::Result<_, _>>()
+            .map_err(|_| usage(format!("--work-offset: `{w}`: expected three numbers")))?;
+        if v.len() != 3 || v.iter().any(|x| !x.is_finite() || x.abs() > 1e6) {
+            return Err(usage(format!(
+                "--work-offset: `{w}`: expected three finite numbers"
+            )));
+        }
+        setup.work_offsets[idx] = Some([v[0], v[1], v[2]]);
+    }
+    Ok(setup)
+}
+
+fn open_input(path: &Path) -> Result<(Box<dyn BufRead>, String)> {
+    if path == Path::new("-") {
+        let stdin: Box<dyn Read> = Box::new(std::io::stdin());
+        return Ok((
+            Box::new(BufReader::with_capacity(1 << 16, stdin)),
+            "-".into(),
+        ));
+    }
+    let f = File::open(path).map_err(|e| Error::io(path, e))?;
+    Ok((
+        Box::new(BufReader::with_capacity(1 << 16, f)),
+        path.display().to_string(),
+    ))
+}
+
+fn effects(args: &EffectArgs) -> Result<EffectSet> {
+    let mut set = EffectSet::parse(&args.effects)?;
+    for g in &args.gains {
+        set.set_gain(g)?;
+    }
+    Ok(set)
+}
+
+fn thread_pool(threads: Option<usize>) -> Result<rayon::ThreadPool> {
+    let mut b = rayon::ThreadPoolBuilder::new();
+    if let Some(n) = threads {
+        if n == 0 {
+            return Err(usage("--threads must be at least 1"));
+        }
+        b = b.num_threads(n);
+    }
+    b.build()
+        .map_err(|e| usage(format!("cannot start worker threads: {e}")))
+}
+
+fn fmt_axes(v: &[f64; 6], setup: &Setup) -> String {
+    let mut s = String::new();
+    for (slot, &l) in crate::machine::AXIS_LETTERS.iter().enumerate() {
+        if setup.axes[slot] {
+            if !s.is_empty() {
+                s.push(' ');
+            }
+            s.push_str(&format!("{}{:.3}", l as char, v[slot]));
+        }
+    }
+    s
+}
+
+/// `postproc check`.
+pub fn check(a: &CheckArgs) -> Result<i32> {
+    let machine = a.program.machine.as_deref().map(load_machine).transpose()?;
+    let setup = parse_setup(&a.program, machine.as_ref())?;
+    let (input, name) = open_input(&a.program.file)?;
+    let job = Job {
+        predictor: None,
+        setup: setup.clone(),
+        settings: Settings::default(),
+        emit: EmitOptions {
+            decimals_mm: None,
+            annotate: false,
+        },
+        pool: None,
+    };
+    let s = job.run(input, &name, None, None)?;
+    let mut out = std::io::stdout().lock();
+    let w = |out: &mut dyn Write, t: String| {
+        out.write_all(t.as_bytes())
+            .map_err(|e| Error::io("stdout", e))
+    };
+    w(
+        &mut out,
+        format!(
+            "{name}: {} lines, {} blocks, {} moves ({} rapid, {} feed, {} arc, {} cycle holes)\n",
+            s.lines, s.blocks, s.moves, s.rapids, s.feeds, s.arcs, s.holes
+        ),
+    )?;
+    w(
+        &mut out,
+        format!("units: {}\n", if s.inch { "inch" } else { "mm" }),
+    )?;
+    if let Some((lo, hi)) = s.extents {
+        w(
+            &mut out,
+            format!(
+                "extents (machine): min {}\n                   max {}\n",
+                fmt_axes(&lo, &setup),
+                fmt_axes(&hi, &setup)
+            ),
+        )?;
+    }
+    let tools: Vec<String> = s.tools.iter().map(|t| format!("T{t}")).collect();
+    w(
+        &mut out,
+        format!(
+            "tools: {}\n",
+            if tools.is_empty() {
+                "none".into()
+            } else {
+                tools.join(" ")
+            }
+        ),
+    )?;
+    w(&mut out, format!("warnings: {}\n", s.warnings.len()))?;
+    for warn in &s.warnings {
+        w(
+            &mut out,
+            format!(
+                "  line {}: {} ({} block{})\n",
+                warn.line,
+                warn.message,
+                warn.count,
+                if warn.count == 1 { "" } else { "s" }
+            ),
+        )?;
+    }
+    Ok(0)
+}
+
+/// Default output path: `<stem>.comp.<ext>` beside the input.
+pub fn default_output(input: &Path) -> PathBuf {
+    let stem = input
+        .file_stem()
+        .map(|s| s.to_string_lossy().to_string())
+        .unwrap_or_else(|| "program".into());
+    let name = match input.extension() {
+        Some(ext) => format!("{stem}.comp.{}", ext.to_string_lossy()),
+        None => format!("{stem}.comp"),
+    };
+    input.with_file_name(name)
+}
+
+fn same_file(a: &Path, b: &Path) -> bool {
+    match (a.canonicalize(), b.canonicalize()) {
+        (Ok(x), Ok(y)) => x == y,
+        _ => false,
+    }
+}
+
+/// Writes through a temporary file in the target directory and renames it
+/// into place only when `f` succeeds; on failure nothing is left behind.
+pub fn write_atomically<T>(path: &Path, f: impl FnOnce(&mut dyn Write) -> Result<T>) -> Result<T> {
+    let dir = match path.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
+        _ => PathBuf::from("."),
+    };
+    let tmp = tempfile::Builder::new()
+        .prefix(".postproc-")
+        .tempfile_in(&dir)
+        .map_err(|e| Error::io(&dir, e))?;
+    let (file, tmp_path) = tmp.into_parts();
+    let mut w = BufWriter::with_capacity(1 << 20, file);
+    let value = f(&mut w)?;
+    let file = w
+        .into_inner()
+        .map_err(|e| Error::io(path, e.into_error()))?;
+    file.sync_all().map_err(|e| Error::io(path, e))?;
+    tmp_path
+        .persist(path)
+        .map_err(|e| Error::io(path, e.error))?;
+    Ok(value)
+}
+
+fn build_job<'m>(
+    machine: &'m MachineTool,
+    pool: &'m rayon::ThreadPool,
+    setup: Setup,
+    effects: EffectSet,
+    tolerance: f64,
+    decimals: Option<usize>,
+    annotate: bool,
+) -> Result<Job<'m>> {
+    if !tolerance.is_finite() || tolerance <= 0.0 || tolerance > 1.0 {
+        return Err(usage(format!(
+            "--tolerance {tolerance}: must be within (0, 1] mm"
+        )));
+    }
+    if let Some(d) = decimals {
+        if d > 6 {
+            return Err(usage("--decimals: at most 6"));
+        }
+    }
+    Ok(Job {
+        predictor: Some(ToolPredictor::new(machine, effects)),
+        setup,
+        settings: Settings {
+            tolerance_mm: tolerance,
+        },
+        emit: EmitOptions {
+            decimals_mm: decimals.or(machine.output_decimals()),
+            annotate,
+        },
+        pool: Some(pool),
+    })
+}
+
+/// `postproc compensate`.
+pub fn compensate(a: &CompensateArgs) -> Result<i32> {
+    let name = a
+        .program
+        .machine
+        .as_deref()
+        .ok_or_else(|| usage("compensate needs --machine"))?;
+    let machine = load_machine(name)?;
+    let setup = parse_setup(&a.program, Some(&machine))?;
+    let pool = thread_pool(a.effects.threads)?;
+    let job = build_job(
+        &machine,
+        &pool,
+        setup.clone(),
+        effects(&a.effects)?,
+        a.tolerance,
+        a.decimals,
+        a.annotate == Annotate::Comment,
+    )?;
+    let input_path = &a.program.file;
+    let out_path = match &a.output {
+        Some(p) => p.clone(),
+        None if input_path == Path::new("-") => PathBuf::from("-"),
+        None => default_output(input_path),
+    };
+    if out_path != Path::new("-")
+        && input_path != Path::new("-")
+        && (out_path == *input_path || same_file(input_path, &out_path))
+    {
+        return Err(usage(format!(
+            "{}: the output would overwrite the input",
+            out_path.display()
+        )));
+    }
+    let (input, file) = open_input(input_path)?;
+    let run = |out: &mut dyn Write, rows: Option<&mut dyn FnMut(crate::job::Row)>| {
+        job.run(input, &file, Some(out), rows)
+    };
+    let summary: Summary = match &a.report {
+        Some(report_path) => write_atomically(report_path, |rep| {
+            let mut rw = ReportWriter::new(rep, &setup, Format::Csv, &file)?;
+            let mut err = None;
+            let mut on_row = |r: crate::job::Row| {
+                if err.is_none() {
+                    if let Err(e) = rw.row(&r) {
+                        err = Some(e);
+                    }
+                }
+            };
+            let s = if out_path == Path::new("-") {
+                let mut stdout = std::io::stdout().lock();
+                run(&mut stdout, Some(&mut on_row))?
+            } else {
+                write_atomically(&out_path, |w| run(w, Some(&mut on_row)))?
+            };
+            if let Some(e) = err {
+                return Err(e);
+            }
+            rw.finish(&s)?;
+            Ok(s)
+        })?,
+        None => {
+            if out_path == Path::new("-") {
+                let mut stdout = std::io::stdout().lock();
+                run(&mut stdout, None)?
+            } else {
+                write_atomically(&out_path, |w| run(w, None))?
+            }
+        }
+    };
+    tracing::info!(
+        "{}: {} blocks changed, {} added; predicted deviation mean {:.4} max {:.4} mm (line {})",
+        out_path.display(),
+        summary.changed,
+        summary.added,
+        summary.deviation.mean(),
+        summary.deviation.max,
+        summary.deviation.max_line
+    );
+    Ok(if summary.max_residual_mm > a.tolerance {
+        1
+    } else {
+        0
+    })
+}
+
+/// `postproc report` (dry run).
+pub fn report(a: &ReportArgs) -> Result<i32> {
+    let name = a
+        .program
+        .machine
+        .as_deref()
+        .ok_or_else(|| usage("report needs --machine"))?;
+    let machine = load_machine(name)?;
+    let setup = parse_setup(&a.program, Some(&machine))?;
+    let pool = thread_pool(a.effects.threads)?;
+    let job = build_job(
+        &machine,
+        &pool,
+        setup.clone(),
+        effects(&a.effects)?,
+        0.001,
+        None,
+        false,
+    )?;
+    let (input, file) = open_input(&a.program.file)?;
+    let write = |w: &mut dyn Write| -> Result<()> {
+        let mut rw = ReportWriter::new(w, &setup, a.format, &file)?;
+        let mut err = None;
+        let s = {
+            job.run(
+                input,
+                &file,
+                None,
+                Some(&mut |r| {
+                    if err.is_none() {
+                        if let Err(e) = rw.row(&r) {
+                            err = Some(e);
+                        }
+                    }
+                }),
+            )
+        }?;
+        if let Some(e) = err {
+            return Err(e);
+        }
+        rw.finish(&s)
+    };
+    match &a.output {
+        Some(p) => write_atomically(p, write)?,
+        None => {
+            let mut stdout = BufWriter::new(std::io::stdout().lock());
+            write(&mut stdout)?;
+            stdout.flush().map_err(|e| Error::io("stdout", e))?;
+        }
+    }
+    Ok(0)
+}

@@ -1,0 +1,642 @@
+//! Byte-faithful G-code writer.
+//!
+//! Unchanged blocks are copied byte for byte. A compensated block gets only
+//! its coordinate words rewritten (same decimals as the program, or the
+//! machine file's setting, never exponent notation); missing axis words are
+//! inserted after the block's last axis word when the compensation moves that
+//! axis; added blocks (segments of a split move) copy the block's style
+//! (case, spacing, line ending). An annotation comment with the predicted
+//! deviation is appended in the program's comment style.
+
+use crate::compensate::BlockResult;
+use crate::machine::{AXIS_LETTERS, AxisVec};
+use crate::predict::Effect;
+use crate::program::gcode::{Block, Word, strip_eol};
+use crate::program::interp::{Motion, Plan, PlanKind};
+
+/// Output options.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct EmitOptions {
+    /// Decimals of rewritten mm coordinates (inch: one more); `None` keeps
+    /// the program's own, with at least 3 (mm) or 4 (inch).
+    pub decimals_mm: Option<usize>,
+    /// Append `(dev … mm geo …)` comments to compensated blocks.
+    pub annotate: bool,
+}
+
+/// Default decimals of rewritten mm words when the program has fewer.
+pub const DEFAULT_DECIMALS_MM: usize = 3;
+
+/// Streaming emitter state (what the controller will have been told so far).
+#[derive(Debug, Clone)]
+pub struct Emitter {
+    opts: EmitOptions,
+    /// Machine coordinates the emitted program has commanded so far.
+    emitted: AxisVec,
+    /// Output motion mode differs from the program's after a replaced arc.
+    motion_pending: Option<Motion>,
+    /// Emitted canned-cycle Z and R (program units), modal.
+    cycle_z: Option<f64>,
+    cycle_r: Option<f64>,
+    /// The program writes `;` comments rather than `( )`.
+    semicolon_comments: Option<bool>,
+    /// Changed blocks so far.
+    changed: usize,
+    /// Blocks added by segmentation.
+    added: usize,
+}
+
+/// Formats `v` with `d` decimals, never in exponent notation and never as
+/// negative zero; `trim` drops trailing zeros (keeping the point).
+pub fn format_number(v: f64, d: usize, trim: bool) -> String {
+    let mut s = format!("{v:.d$}");
+    if s.starts_with('-') && s[1..].bytes().all(|b| b == b'0' || b == b'.') {
+        s.remove(0);
+    }
+    if trim && s.contains('.') {
+        while s.ends_with('0') {
+            s.pop();
+        }
+    }
+    if !s.contains('.') {
+        s.push('.');
+    }
+    s
+}
+
+fn round_to(v: f64, d: usize) -> f64 {
+    let f = 10f64.powi(d as i32);
+    (v * f).round() / f
+}
+
+struct Edit {
+    start: usize,
+    end: usize,
+    text: String,
+}
+
+impl Emitter {
+    /// A new emitter; the controller starts at machine zero.
+    pub fn new(opts: EmitOptions) -> Self {
+        Emitter {
+            opts,
+            emitted: [0.0; 6],
+            motion_pending: None,
+            cycle_z: None,
+            cycle_r: None,
+            semicolon_comments: None,
+            changed: 0,
+            added: 0,
+        }
+    }
+
+    /// Number of blocks whose text changed.
+    pub fn changed_blocks(&self) -> usize {
+        self.changed
+    }
+
+    /// Number of blocks added by segmentation.
+    pub fn added_blocks(&self) -> usize {
+        self.added
+    }
+
+    fn decimals(&self, w: Option<&Word>, scale: f64, rotary: bool) -> usize {
+        let own = w.and_then(|w| w.decimals).unwrap_or(0) as usize;
+        let base = if rotary {
+            DEFAULT_DECIMALS_MM
+        } else {
+            let d = self.opts.decimals_mm.unwrap_or(DEFAULT_DECIMALS_MM);
+            if scale != 1.0 { d + 1 } else { d }
+        };
+        if self.opts.decimals_mm.is_some() && !rotary {
+            base.max(own)
+        } else {
+            own.max(base)
+        }
+    }
+
+    /// Writes one line (`line` includes its end-of-line bytes).
+    pub fn write(
+        &mut self,
+        line: &[u8],
+        block: &Block,
+        plan: &Plan,
+        res: Option<&BlockResult>,
+        out: &mut Vec<u8>,
+    ) {
+        if self.semicolon_comments.is_none() {
+            if let Some(c) = block.comments.first() {
+                self.semicolon_comments = Some(c.semicolon);
+            }
+        }
+        let text = strip_eol(line);
+        let eol = &line[text.len()..];
+        let (Some(mv), Some(res)) = (plan.mv, res) else {
+            out.extend_from_slice(line);
+            self.track_unchanged(block, plan);
+            return;
+        };
+        if plan.kind == PlanKind::Pass {
+            out.extend_from_slice(line);
+            return;
+        }
+        if plan.kind == PlanKind::Fixed {
+            out.extend_from_slice(line);
+            self.emitted = mv.end;
+            return;
+        }
+        let mut edits: Vec<Edit> = Vec::new();
+        let scale = plan.scale;
+        let lower = block.lower_case;
+        let sep = if block.spaced { " " } else { "" };
+        let is_cycle = matches!(plan.kind, PlanKind::Cycle { .. });
+        let first_target = if let Some(first) = res.segments.first() {
+            *first
+        } else {
+            res.end
+        };
+
+        // Motion word handling for replaced arcs and pending modal motion.
+        let motion_word = block
+            .words
+            .iter()
+            .find(|w| w.letter == b'G' && matches!(w.code10(), 0 | 10 | 20 | 30));
+        if res.arc_replaced {
+            match motion_word {
+                Some(w) => {
+                    let old = &text[w.num_start as usize..w.end as usize];
+                    let new = if old.len() >= 2 && old[0] == b'0' {
+                        "01"
+                    } else {
+                        "1"
+                    };
+                    edits.push(Edit {
+                        start: w.num_start as usize,
+                        end: w.end as usize,
+                        text: new.into(),
+                    });
+                }
+                None => {
+                    let at = insert_point_for_motion(block);
+                    let g = if lower { "g1" } else { "G1" };
+                    edits.push(Edit {
+                        start: at,
+                        end: at,
+                        text: format!("{g}{}", if block.spaced || at > 0 { " " } else { "" }),
+                    });
+                }
+            }
+            for w in block
+                .words
+                .iter()
+                .filter(|w| matches!(w.letter, b'I' | b'J' | b'K' | b'R'))
+            {
+                let mut end = w.end as usize;
+                if text.get(end) == Some(&b' ') {
+                    end += 1;
+                }
+                edits.push(Edit {
+                    start: w.start as usize,
+                    end,
+                    text: String::new(),
+                });
+            }
+        } else if let Some(m) = self.motion_pending {
+            if motion_word.is_none() && !is_cycle {
+                let at = insert_point_for_motion(block);
+                let code = match m {
+                    Motion::ArcCw => "2",
+                    Motion::ArcCcw => "3",
+                    Motion::Linear => "1",
+                    Motion::Rapid => "0",
+                };
+                let g = if lower { "g" } else { "G" };
+                edits.push(Edit {
+                    start: at,
+                    end: at,
+                    text: format!("{g}{code} "),
+                });
+            }
+        }
+        if motion_word.is_some() || !res.arc_replaced {
+            self.motion_pending = None;
+        }
+        if res.arc_replaced {
+            self.motion_pending = Some(mv.motion);
+        }
+
+        // Axis words.
+        let start_emitted = self.emitted;
+        let mut last_axis_end: Option<usize> = None;
+        let mut new_emitted = self.emitted;
+        for slot in 0..6 {
+            let w = block.words.iter().find(|w| w.letter == AXIS_LETTERS[slot]);
+            if let Some(w) = w {
+                last_axis_end =
+                    Some(last_axis_end.map_or(w.end as usize, |e: usize| e.max(w.end as usize)));
+            }
+            let rotary = slot >= 3;
+            let s = if rotary { 1.0 } else { scale };
+            let target = first_target[slot];
+            let moved_axis = is_cycle && slot == 2;
+            let d = self.decimals(w, scale, rotary);
+            if moved_axis {
+                continue;
+            }
+            let prog_value = if plan.absolute {
+                (target - plan.offset[slot]) / s
+            } else {
+                (target - self.emitted[slot]) / s
+            };
+            let rounded = round_to(prog_value, d);
+            match w {
+                Some(w) => {
+                    let orig = round_to(w.value, d);
+                    if rounded != orig || w.decimals.unwrap_or(0) as usize > d {
+                        let trim =
+                            w.decimals.is_some_and(|od| (od as usize) < d) || w.decimals.is_none();
+                        edits.push(Edit {
+                            start: w.num_start as usize,
+                            end: w.end as usize,
+                            text: format_number(rounded, d, trim),
+                        });
+                        new_emitted[slot] = if plan.absolute {
+                            rounded * s + plan.offset[slot]
+                        } else {
+                            self.emitted[slot] + rounded * s
+                        };
+                    } else {
+                        new_emitted[slot] = if plan.absolute {
+                            w.value * s + plan.offset[slot]
+                        } else {
+                            self.emitted[slot] + w.value * s
+                        };
+                    }
+                }
+                None => {
+                    let now = if plan.absolute {
+                        round_to((self.emitted[slot] - plan.offset[slot]) / s, d)
+                    } else {
+                        0.0
+                    };
+                    let want = rounded;
+                    if want != now && (slot < 3 || self.has_axis_word_or_moved(slot, target)) {
+                        let at = last_axis_end.unwrap_or_else(|| insert_point_for_axes(block));
+                        let letter = if lower {
+                            AXIS_LETTERS[slot].to_ascii_lowercase()
+                        } else {
+                            AXIS_LETTERS[slot]
+                        } as char;
+                        edits.push(Edit {
+                            start: at,
+                            end: at,
+                            text: format!("{sep}{letter}{}", format_number(want, d, true)),
+                        });
+                        new_emitted[slot] = if plan.absolute {
+                            want * s + plan.offset[slot]
+                        } else {
+                            self.emitted[slot] + want * s
+                        };
+                    }
+                }
+            }
+        }
+        if let PlanKind::Cycle { .. } = plan.kind {
+            self.cycle_words(
+                block,
+                plan,
+                res,
+                text,
+                &mut edits,
+                &mut new_emitted,
+                last_axis_end,
+                sep,
+                lower,
+            );
+        }
+        // Arc centre words.
+        if let (Some(center), Some(arc)) = (res.center, mv.arc) {
+            let (a, b, _) = arc.plane.axes();
+            let (la, lb) = arc.plane.center_letters();
+            let r_word = block.word(b'R');
+            if let Some(r) = r_word {
+                let e = Vector3f::from(first_target);
+                let st = Vector3f::from(start_emitted);
+                let ra = ((st.0[a] - center[a]).hypot(st.0[b] - center[b])
+                    + (e.0[a] - center[a]).hypot(e.0[b] - center[b]))
+                    / 2.0;
+                let d = self.decimals(Some(r), scale, false);
+                let v = round_to(ra / scale * r.value.signum(), d);
+                if v != round_to(r.value, d) {
+                    edits.push(Edit {
+                        start: r.num_start as usize,
+                        end: r.end as usize,
+                        text: format_number(v, d, r.decimals.is_none_or(|od| (od as usize) < d)),
+                    });
+                }
+            } else {
+                for (slot, letter) in [(a, la), (b, lb)] {
+                    let w = block.word(letter);
+                    let d = self.decimals(w, scale, false);
+                    let v = if plan.arc_absolute {
+                        (center[slot] - plan.offset[slot]) / scale
+                    } else {
+                        (center[slot] - start_emitted[slot]) / scale
+                    };
+                    let v = round_to(v, d);
+                    match w {
+                        Some(w) => {
+                            if v != round_to(w.value, d) {
+                                edits.push(Edit {
+                                    start: w.num_start as usize,
+                                    end: w.end as usize,
+                                    text: format_number(
+                                        v,
+                                        d,
+                                        w.decimals.is_none_or(|od| (od as usize) < d),
+                                    ),
+                                });
+                            }
+                        }
+                        None => {
+                            let implicit = if plan.arc_absolute {
+                                round_to((0.0 - plan.offset[slot]) / scale, d)
+                            } else {
+                                0.0
+                            };
+                            let _ = implicit;
+                            if v != 0.0 || plan.arc_absolute {
+                                let at = block
+                                    .words
+                                    .iter()
+                                    .filter(|w| matches!(w.letter, b'I' | b'J' | b'K'))
+                                    .map(|w| w.end as usize)
+                                    .max()
+                                    .or(last_axis_end)
+                                    .unwrap_or(text.len());
+                                let l = if lower {
+                                    letter.to_ascii_lowercase()
+                                } else {
+                                    letter
+                                } as char;
+                                edits.push(Edit {
+                                    start: at,
+                                    end: at,
+                                    text: format!("{sep}{l}{}", format_number(v, d, true)),
+                                });
+                            }
+                        }
+                    }
+                }
+            }
+        }
+        if self.opts.annotate {
+            let dev = res.deviation.total().norm() / scale;
+            let unit = if scale != 1.0 { "in" } else { "mm" };
+            let dd = if scale != 1.0 { 5 } else { 4 };
+            let mut body = format!("dev {} {unit}", format_number(dev, dd, false));
+            for e in Effect::ALL {
+                let part = res.deviation.parts[e as usize].norm() / scale;
+                body.push_str(&format!(
+                    " {} {}",
+                    e.short(),
+                    format_number(part, dd, false)
+                ));
+            }
+            let c = if self.semicolon_comments == Some(true) {
+                format!(" ; {body}")
+            } else {
+                format!(" ({body})")
+            };
+            // Before a trailing `;` comment, parentheses would be swallowed by it.
+            let at = match block.comments.last() {
+                Some(cm) if cm.semicolon && self.semicolon_comments != Some(true) => {
+                    cm.start as usize
+                }
+                _ => text.len(),
+            };
+            let c = if at < text.len() {
+                format!("{} ", c.trim_start())
+            } else {
+                c
+            };
+            edits.push(Edit {
+                start: at,
+                end: at,
+                text: c,
+            });
+        }
+        if edits.is_empty() {
+            out.extend_from_slice(line);
+        } else {
+            self.changed += 1;
+            edits.sort_by_key(|e| (e.start, e.end));
+            let mut pos = 0;
+            for e in &edits {
+                if e.start < pos {
+                    continue;
+                }
+                out.extend_from_slice(&text[pos..e.start]);
+                out.extend_from_slice(e.text.as_bytes());
+                pos = e.end;
+            }
+            out.extend_from_slice(&text[pos..]);
+            out.extend_from_slice(eol);
+        }
+        self.emitted = new_emitted;
+        // Added segment blocks.
+        if !res.segments.is_empty() {
+            let eol: &[u8] = if eol.is_empty() { b"\n" } else { eol };
+            let mut points: Vec<AxisVec> = res.segments[1..].to_vec();
+            points.push(res.end);
+            for p in points {
+                let mut parts: Vec<String> = Vec::new();
+                for slot in 0..6 {
+                    let rotary = slot >= 3;
+                    let s = if rotary { 1.0 } else { scale };
+                    let w = block.words.iter().find(|w| w.letter == AXIS_LETTERS[slot]);
+                    let d = self.decimals(w, scale, rotary);
+                    let now = self.emitted[slot];
+                    let v = if plan.absolute {
+                        round_to((p[slot] - plan.offset[slot]) / s, d)
+                    } else {
+                        round_to((p[slot] - now) / s, d)
+                    };
+                    let cur = if plan.absolute {
+                        round_to((now - plan.offset[slot]) / s, d)
+                    } else {
+                        0.0
+                    };
+                    if v != cur {
+                        let letter = if lower {
+                            AXIS_LETTERS[slot].to_ascii_lowercase()
+                        } else {
+                            AXIS_LETTERS[slot]
+                        } as char;
+                        parts.push(format!("{letter}{}", format_number(v, d, true)));
+                        self.emitted[slot] = if plan.absolute {
+                            v * s + plan.offset[slot]
+                        } else {
+                            now + v * s
+                        };
+                    }
+                }
+                if parts.is_empty() {
+                    continue;
+                }
+                out.extend_from_slice(
+                    parts
+                        .join(if block.spaced || parts.len() == 1 {
+                            " "
+                        } else {
+                            ""
+                        })
+                        .as_bytes(),
+                );
+                out.extend_from_slice(eol);
+                self.added += 1;
+            }
+        }
+    }
+
+    fn has_axis_word_or_moved(&self, slot: usize, target: f64) -> bool {
+        (self.emitted[slot] - target).abs() > 1e-9
+    }
+
+    #[allow(clippy::too_many_arguments)]
+    fn cycle_words(
+        &mut self,
+        block: &Block,
+        plan: &Plan,
+        res: &BlockResult,
+        text: &[u8],
+        edits: &mut Vec<Edit>,
+        new_emitted: &mut AxisVec,
+        last_axis_end: Option<usize>,
+        sep: &str,
+        lower: bool,
+    ) {
+        let _ = text;
+        let scale = plan.scale;
+        if !plan.absolute {
+            // Incremental cycles: only the hole position is rewritten.
+            return;
+        }
+        let at_end = last_axis_end.unwrap_or_else(|| insert_point_for_axes(block));
+        for (letter, value) in [(b'Z', res.end[2]), (b'R', res.r_level)] {
+            let w = block.word(letter);
+            let d = self.decimals(w, scale, false);
+            let v = round_to((value - plan.offset[2]) / scale, d);
+            let modal = if letter == b'Z' {
+                &mut self.cycle_z
+            } else {
+                &mut self.cycle_r
+            };
+            match w {
+                Some(w) => {
+                    if v != round_to(w.value, d) {
+                        edits.push(Edit {
+                            start: w.num_start as usize,
+                            end: w.end as usize,
+                            text: format_number(
+                                v,
+                                d,
+                                w.decimals.is_none_or(|od| (od as usize) < d),
+                            ),
+                        });
+                        *modal = Some(v);
+                    } else {
+                        *modal = Some(w.value);
+                    }
+                }
+                None => {
+                    let cur = modal.map(|m| round_to(m, d));
+                    if cur != Some(v) {
+                        let l = if lower {
+                            letter.to_ascii_lowercase()
+                        } else {
+                            letter
+                        } as char;
+                        edits.push(Edit {
+                            start: at_end,
+                            end: at_end,
+                            text: format!("{sep}{l}{}", format_number(v, d, true)),
+                        });
+                        *modal = Some(v);
+                    }
+                }
+            }
+        }
+        let _ = new_emitted;
+    }
+
+    /// Keeps the emitted position in step for blocks written unchanged.
+    fn track_unchanged(&mut self, block: &Block, plan: &Plan) {
+        if let Some(mv) = plan.mv {
+            self.emitted = mv.end;
+            if block
+                .words
+                .iter()
+                .any(|w| w.letter == b'G' && matches!(w.code10(), 0 | 10 | 20 | 30))
+            {
+                self.motion_pending = None;
+            }
+        }
+        if let Some(z) = block.word(b'Z') {
+            if matches!(plan.kind, PlanKind::Cycle { .. }) {
+                self.cycle_z = Some(z.value);
+            }
+        }
+        if let Some(r) = block.word(b'R') {
+            if matches!(plan.kind, PlanKind::Cycle { .. }) {
+                self.cycle_r = Some(r.value);
+            }
+        }
+    }
+}
+
+struct Vector3f([f64; 3]);
+
+impl From<AxisVec> for Vector3f {
+    fn from(v: AxisVec) -> Self {
+        Vector3f([v[0], v[1], v[2]])
+    }
+}
+
+/// Where to insert a motion G word: after a leading N word, else at the
+/// first word.
+fn insert_point_for_motion(block: &Block) -> usize {
+    match block.words.first() {
+        Some(w) if w.letter == b'N' => block
+            .words
+            .get(1)
+            .map_or(w.end as usize + 1, |n| n.start as usize),
+        Some(w) => w.start as usize,
+        None => 0,
+    }
+}
+
+/// Where to insert an axis word in a block that has none.
+fn insert_point_for_axes(block: &Block) -> usize {
+    block
+        .words
+        .iter()
+        .filter(|w| matches!(w.letter, b'N' | b'G'))
+        .map(|w| w.end as usize)
+        .max()
+        .unwrap_or_else(|| block.words.last().map_or(0, |w| w.end as usize))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn numbers_are_fixed_point() {
+        assert_eq!(format_number(1e-7, 4, false), "0.0000");
+        assert_eq!(format_number(-0.00001, 3, false), "0.000");
+        assert_eq!(format_number(12.5, 4, true), "12.5");
+        assert_eq!(format_number(12.0, 3, true), "12.");
+        assert_eq!(format_number(123456789.125, 3, false), "123456789.125");
+    }
+}
