@@ -6,3 +6,5 @@ mod machine_tool;
 mod observations;
 mod rapid;
 mod robot;
+mod gcode_cli;
+mod gcode_grammar;

@@ -1,0 +1,1 @@
+//! Integration tests: the G-code commands through the real binary.

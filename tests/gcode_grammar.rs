@@ -1,0 +1,1 @@
+//! Integration tests: every example of grammar/gcode.md parses as documented.
