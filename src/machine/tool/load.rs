@@ -7,7 +7,9 @@ use std::collections::BTreeMap;
 use nalgebra::Vector3;
 
 use super::component::ComponentErrors;
-use super::location::{component_key, location_key, spindle_key, LocationErrors, LocationKey, SpindleErrors};
+use super::location::{
+    LocationErrors, LocationKey, SpindleErrors, component_key, location_key, spindle_key,
+};
 use super::raw::{RawAxis, RawAxisType, RawMachineTool, RawSide, RawTable};
 use super::table::ErrorTable;
 use super::{Axis, AxisKind, MachineTool, Side};
@@ -54,19 +56,28 @@ fn finite(path: &str, v: f64) -> V<f64> {
     if v.is_finite() {
         Ok(v)
     } else {
-        Err(Invalid::new(path, format!("value `{v}` is not a finite number")))
+        Err(Invalid::new(
+            path,
+            format!("value `{v}` is not a finite number"),
+        ))
     }
 }
 
 fn validate(raw: RawMachineTool) -> V<MachineTool> {
     if raw.kind != "machine_tool" {
-        return Err(Invalid::new("kind", format!("expected `machine_tool`, found `{}`", raw.kind)));
+        return Err(Invalid::new(
+            "kind",
+            format!("expected `machine_tool`, found `{}`", raw.kind),
+        ));
     }
     if raw.name.trim().is_empty() {
         return Err(Invalid::new("name", "the machine name is empty"));
     }
     if raw.axes.is_empty() {
-        return Err(Invalid::new("axes", "a machine tool needs at least one axis"));
+        return Err(Invalid::new(
+            "axes",
+            "a machine tool needs at least one axis",
+        ));
     }
     let mut axes: Vec<Axis> = Vec::with_capacity(raw.axes.len());
     let mut slot_index = [None; 6];
@@ -78,7 +89,10 @@ fn validate(raw: RawMachineTool) -> V<MachineTool> {
             return Err(Invalid::new(format!("{p}.name"), "axis slot out of range"));
         };
         if entry.is_some() {
-            return Err(Invalid::new(format!("{p}.name"), format!("duplicate axis `{}`", ra.name)));
+            return Err(Invalid::new(
+                format!("{p}.name"),
+                format!("duplicate axis `{}`", ra.name),
+            ));
         }
         *entry = Some(i);
         match axis.side {
@@ -123,7 +137,10 @@ fn validate(raw: RawMachineTool) -> V<MachineTool> {
     for (code, xyz) in &raw.work_offsets_mm {
         let path = format!("work_offsets_mm.{code}");
         if !matches!(code.as_str(), "G54" | "G55" | "G56" | "G57" | "G58" | "G59") {
-            return Err(Invalid::new(path, format!("unknown work offset `{code}` (expected G54 … G59)")));
+            return Err(Invalid::new(
+                path,
+                format!("unknown work offset `{code}` (expected G54 … G59)"),
+            ));
         }
         for v in xyz {
             finite(&path, *v)?;
@@ -134,11 +151,17 @@ fn validate(raw: RawMachineTool) -> V<MachineTool> {
     let decimals = raw.output.as_ref().and_then(|o| o.decimals_mm);
     if let Some(d) = decimals {
         if d > MAX_DECIMALS {
-            return Err(Invalid::new("output.decimals_mm", format!("`{d}` decimals is more than {MAX_DECIMALS}")));
+            return Err(Invalid::new(
+                "output.decimals_mm",
+                format!("`{d}` decimals is more than {MAX_DECIMALS}"),
+            ));
         }
     }
 
-    let error_free = spindle.is_zero() && axes.iter().all(|a| a.location.is_zero() && a.components.is_zero());
+    let error_free = spindle.is_zero()
+        && axes
+            .iter()
+            .all(|a| a.location.is_zero() && a.components.is_zero());
     Ok(MachineTool {
         name: raw.name,
         axes,
@@ -156,7 +179,9 @@ fn check_mm(path: &str, v: f64) -> V<f64> {
     if v.abs() > MAX_ERROR_MM {
         return Err(Invalid::new(
             path,
-            format!("{v} mm exceeds the 1 mm limit of a geometric error (small-deviation model; check the unit)"),
+            format!(
+                "{v} mm exceeds the 1 mm limit of a geometric error (small-deviation model; check the unit)"
+            ),
         ));
     }
     Ok(v)
@@ -180,16 +205,29 @@ fn validate_axis(p: &str, ra: &RawAxis) -> V<Axis> {
         [b] => axis_slot(*b),
         _ => None,
     }
-    .ok_or_else(|| Invalid::new(format!("{p}.name"), format!("unknown axis `{}` (expected X, Y, Z, A, B or C)", ra.name)))?;
+    .ok_or_else(|| {
+        Invalid::new(
+            format!("{p}.name"),
+            format!("unknown axis `{}` (expected X, Y, Z, A, B or C)", ra.name),
+        )
+    })?;
     let kind = match ra.axis_type {
         RawAxisType::Linear => AxisKind::Linear,
         RawAxisType::Rotary => AxisKind::Rotary,
     };
-    let expected = if slot < 3 { AxisKind::Linear } else { AxisKind::Rotary };
+    let expected = if slot < 3 {
+        AxisKind::Linear
+    } else {
+        AxisKind::Rotary
+    };
     if kind != expected {
         return Err(Invalid::new(
             format!("{p}.type"),
-            format!("axis `{}` must be {}", ra.name, if slot < 3 { "linear" } else { "rotary" }),
+            format!(
+                "axis `{}` must be {}",
+                ra.name,
+                if slot < 3 { "linear" } else { "rotary" }
+            ),
         ));
     }
     let side = match ra.side {
@@ -208,7 +246,11 @@ fn validate_axis(p: &str, ra: &RawAxis) -> V<Axis> {
     } else {
         ("deg", "travel_deg", "rapid_deg_per_min", "positions_deg")
     };
-    let (travel, wrong_travel) = if linear { (ra.travel_mm, ra.travel_deg) } else { (ra.travel_deg, ra.travel_mm) };
+    let (travel, wrong_travel) = if linear {
+        (ra.travel_mm, ra.travel_deg)
+    } else {
+        (ra.travel_deg, ra.travel_mm)
+    };
     let (rapid, wrong_rapid) = if linear {
         (ra.rapid_mm_per_min, ra.rapid_deg_per_min)
     } else {
@@ -222,28 +264,47 @@ fn validate_axis(p: &str, ra: &RawAxis) -> V<Axis> {
         } else {
             "rapid_mm_per_min"
         };
-        return Err(Invalid::new(format!("{p}.{k}"), format!("a {} axis takes values in {unit}", if linear { "linear" } else { "rotary" })));
+        return Err(Invalid::new(
+            format!("{p}.{k}"),
+            format!(
+                "a {} axis takes values in {unit}",
+                if linear { "linear" } else { "rotary" }
+            ),
+        ));
     }
     let tpath = format!("{p}.{travel_key}");
     let [lo, hi] = travel.ok_or_else(|| Invalid::new(p, format!("missing `{travel_key}`")))?;
     let lo = finite(&tpath, lo)?;
     let hi = finite(&tpath, hi)?;
     if lo >= hi {
-        return Err(Invalid::new(tpath, format!("minimum {lo} must be below maximum {hi}")));
+        return Err(Invalid::new(
+            tpath,
+            format!("minimum {lo} must be below maximum {hi}"),
+        ));
     }
     let rpath = format!("{p}.{rapid_key}");
     let rapid = rapid.ok_or_else(|| Invalid::new(p, format!("missing `{rapid_key}`")))?;
     let rapid = finite(&rpath, rapid)?;
     if rapid <= 0.0 {
-        return Err(Invalid::new(rpath, format!("rapid rate `{rapid}` must be positive")));
+        return Err(Invalid::new(
+            rpath,
+            format!("rapid rate `{rapid}` must be positive"),
+        ));
     }
     let pivot_mm = match (ra.pivot_mm, linear) {
         (Some(_), true) => {
-            return Err(Invalid::new(format!("{p}.pivot_mm"), "`pivot_mm` is only for rotary axes"));
+            return Err(Invalid::new(
+                format!("{p}.pivot_mm"),
+                "`pivot_mm` is only for rotary axes",
+            ));
         }
         (Some(v), false) => {
             let path = format!("{p}.pivot_mm");
-            Vector3::new(finite(&path, v[0])?, finite(&path, v[1])?, finite(&path, v[2])?)
+            Vector3::new(
+                finite(&path, v[0])?,
+                finite(&path, v[1])?,
+                finite(&path, v[2])?,
+            )
         }
         (None, _) => Vector3::zeros(),
     };
@@ -282,18 +343,33 @@ fn validate_axis(p: &str, ra: &RawAxis) -> V<Axis> {
     })
 }
 
-fn validate_table(path: &str, pos_key: &str, linear: bool, translation: bool, t: &RawTable) -> V<ErrorTable> {
+fn validate_table(
+    path: &str,
+    pos_key: &str,
+    linear: bool,
+    translation: bool,
+    t: &RawTable,
+) -> V<ErrorTable> {
     let (positions, wrong) = if linear {
         (&t.positions_mm, &t.positions_deg)
     } else {
         (&t.positions_deg, &t.positions_mm)
     };
     if wrong.is_some() {
-        let k = if linear { "positions_deg" } else { "positions_mm" };
-        return Err(Invalid::new(format!("{path}.{k}"), format!("this axis' tables take `{pos_key}`")));
+        let k = if linear {
+            "positions_deg"
+        } else {
+            "positions_mm"
+        };
+        return Err(Invalid::new(
+            format!("{path}.{k}"),
+            format!("this axis' tables take `{pos_key}`"),
+        ));
     }
     let ppath = format!("{path}.{pos_key}");
-    let positions = positions.as_ref().ok_or_else(|| Invalid::new(path, format!("missing `{pos_key}`")))?;
+    let positions = positions
+        .as_ref()
+        .ok_or_else(|| Invalid::new(path, format!("missing `{pos_key}`")))?;
     if positions.is_empty() {
         return Err(Invalid::new(ppath, "the table has no positions"));
     }
@@ -310,7 +386,11 @@ fn validate_table(path: &str, pos_key: &str, linear: bool, translation: bool, t:
             }
         }
     }
-    let (scale, check): (f64, fn(&str, f64) -> V<f64>) = if translation { (1e-3, check_mm) } else { (1e-6, check_rad) };
+    let (scale, check): (f64, fn(&str, f64) -> V<f64>) = if translation {
+        (1e-3, check_mm)
+    } else {
+        (1e-6, check_rad)
+    };
     let column = |name: &str, col: &[f64]| -> V<Vec<f64>> {
         let cpath = format!("{path}.{name}");
         if col.len() != positions.len() {
@@ -319,7 +399,9 @@ fn validate_table(path: &str, pos_key: &str, linear: bool, translation: bool, t:
                 format!("{} values for {} positions", col.len(), positions.len()),
             ));
         }
-        col.iter().map(|v| check(&cpath, finite(&cpath, *v)? * scale)).collect()
+        col.iter()
+            .map(|v| check(&cpath, finite(&cpath, *v)? * scale))
+            .collect()
     };
     let forward = column("forward", &t.forward)?;
     let reverse = match &t.reverse {

@@ -26,7 +26,9 @@ pub struct LocationErrors {
 impl LocationErrors {
     /// True when all location errors are zero.
     pub fn is_zero(&self) -> bool {
-        self.offset_mm == Vector3::zeros() && self.angles_rad == Vector3::zeros() && self.zero_rad == 0.0
+        self.offset_mm == Vector3::zeros()
+            && self.angles_rad == Vector3::zeros()
+            && self.zero_rad == 0.0
     }
 
     /// The orientation-error HTM (rotation only).
@@ -76,7 +78,10 @@ pub(crate) fn location_key(slot: usize, key: &str) -> Result<LocationKey, String
     if slot < 3 {
         for r in 0..3 {
             if r != slot {
-                allowed.push((format!("E{}0{axis}_urad", LETTERS[r + 3]), LocationKey::Angle(r)));
+                allowed.push((
+                    format!("E{}0{axis}_urad", LETTERS[r + 3]),
+                    LocationKey::Angle(r),
+                ));
             }
         }
     } else {
@@ -89,7 +94,10 @@ pub(crate) fn location_key(slot: usize, key: &str) -> Result<LocationKey, String
         }
         for r in 0..3 {
             if r != own {
-                allowed.push((format!("E{}0{axis}_urad", LETTERS[r + 3]), LocationKey::Angle(r)));
+                allowed.push((
+                    format!("E{}0{axis}_urad", LETTERS[r + 3]),
+                    LocationKey::Angle(r),
+                ));
             }
         }
     }
@@ -97,7 +105,11 @@ pub(crate) fn location_key(slot: usize, key: &str) -> Result<LocationKey, String
         Some((_, k)) => Ok(*k),
         None => Err(format!(
             "unknown location error `{key}` for the {axis} axis (allowed: {})",
-            allowed.iter().map(|(n, _)| n.as_str()).collect::<Vec<_>>().join(", ")
+            allowed
+                .iter()
+                .map(|(n, _)| n.as_str())
+                .collect::<Vec<_>>()
+                .join(", ")
         )),
     }
 }

@@ -240,7 +240,14 @@ impl MachineTool {
 
     /// Builds the chain factors for one command; `errors` includes the
     /// geometric errors, `derivs` also fills the axis derivatives.
-    fn chain(&self, cmd: &AxisVec, dirs: &DirVec, tool_mm: f64, errors: bool, derivs: bool) -> Chain {
+    fn chain(
+        &self,
+        cmd: &AxisVec,
+        dirs: &DirVec,
+        tool_mm: f64,
+        errors: bool,
+        derivs: bool,
+    ) -> Chain {
         let mut c = Chain {
             m: [Matrix4::identity(); MAX_FACTORS],
             n: 0,
@@ -254,7 +261,10 @@ impl MachineTool {
         };
         for (i, a) in self.axes.iter().enumerate() {
             if i == self.n_workpiece {
-                push(&mut c, geometry::translation(&Vector3::new(0.0, 0.0, tool_mm)));
+                push(
+                    &mut c,
+                    geometry::translation(&Vector3::new(0.0, 0.0, tool_mm)),
+                );
             }
             let q = cmd.get(a.slot).copied().unwrap_or(0.0);
             let dir = dirs.get(a.slot).copied().unwrap_or(1);
@@ -267,12 +277,18 @@ impl MachineTool {
             push(&mut c, m);
         }
         if self.n_workpiece == self.axes.len() {
-            push(&mut c, geometry::translation(&Vector3::new(0.0, 0.0, tool_mm)));
+            push(
+                &mut c,
+                geometry::translation(&Vector3::new(0.0, 0.0, tool_mm)),
+            );
         }
         if errors {
             push(&mut c, self.spindle.htm());
         }
-        push(&mut c, geometry::translation(&Vector3::new(0.0, 0.0, -tool_mm)));
+        push(
+            &mut c,
+            geometry::translation(&Vector3::new(0.0, 0.0, -tool_mm)),
+        );
         c
     }
 }
