@@ -1,78 +1,353 @@
-//! Machine-tool model (placeholder with the final API; the geometric model
-//! replaces the bodies).
+//! Machine-tool model: a validated machine file (axes, travel, rapid rates,
+//! tool table, work offsets) and its geometric error model — a chain of
+//! homogeneous transformations from the workpiece to the tool tip with
+//! location and bidirectional component errors per axis (ISO 230-1,
+//! MODELS.md §1.1). The file format and every sign convention are documented
+//! in `machines/README.md`.
+//!
+//! Chain (product from left to right, in the order of `axes` in the file):
+//!
+//! ```text
+//! W_T_tip = E_1 · … · E_k · G(L) · E_k+1 · … · E_n · S · T(−L)
+//! ```
+//!
+//! `E_1 … E_k` are the workpiece-side axes (nearest the workpiece first),
+//! `E_k+1 … E_n` the tool-side axes (from the base to the spindle),
+//! `G(L) = Trans(0, 0, L)` moves to the spindle gauge line, `S` is the
+//! spindle location error and `T(−L)` goes down the tool to its tip. Every
+//! `E_i` describes the motion of the tool relative to the workpiece caused by
+//! axis `i` (for a workpiece-side axis this is the inverse of the table's
+//! own motion):
+//!
+//! * linear axis: `E = LOC · Trans(q·ê) · COM(q)`
+//! * rotary axis with pivot `P` and offset `d`:
+//!   `E = Trans(P + d) · LOC · Rot(ê, θ + ε0) · COM(θ) · Trans(−(P + d))`
+
+mod component;
+mod geometry;
+mod load;
+mod location;
+mod raw;
+mod table;
+
+pub use component::{ComponentErrors, ComponentValue};
+pub use location::{LocationErrors, SpindleErrors};
+pub use table::{ErrorTable, Lookup};
+
+use std::collections::BTreeMap;
+
+use nalgebra::{Matrix3, Matrix4, Matrix6, Vector3};
 
 use crate::error::Result;
 use crate::machine::{AxisVec, DirVec, TipPose};
-use nalgebra::Vector3;
 
-/// A validated machine tool.
+/// Kind of motion of an axis.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum AxisKind {
+    /// Translation along x, y or z (mm).
+    Linear,
+    /// Rotation about x, y or z (degrees in commands).
+    Rotary,
+}
+
+/// Which side of the machine structure carries an axis.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Side {
+    /// The axis moves the workpiece (table side).
+    Workpiece,
+    /// The axis moves the spindle (column side).
+    Tool,
+}
+
+/// One validated axis of the kinematic chain.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Axis {
+    /// Slot 0..6 (X Y Z A B C); also the direction of motion (slot mod 3).
+    pub slot: usize,
+    /// Linear or rotary.
+    pub kind: AxisKind,
+    /// Workpiece or tool side.
+    pub side: Side,
+    /// Travel limits (mm or degrees).
+    pub travel: (f64, f64),
+    /// Rapid traverse rate (mm/min or deg/min).
+    pub rapid_per_min: f64,
+    /// A point on the nominal line of a rotary axis, machine coordinates
+    /// with all axes at zero, mm (zero for linear axes).
+    pub pivot_mm: Vector3<f64>,
+    /// Location errors.
+    pub location: LocationErrors,
+    /// Component errors.
+    pub components: ComponentErrors,
+}
+
+/// A validated machine tool (immutable; `Send + Sync`).
 #[derive(Debug, Clone)]
-pub struct MachineTool {}
+pub struct MachineTool {
+    name: String,
+    /// Axes in chain order (workpiece side first, then tool side).
+    axes: Vec<Axis>,
+    /// Number of workpiece-side axes (they come first in `axes`).
+    n_workpiece: usize,
+    /// Index into `axes` per slot.
+    slot_index: [Option<usize>; 6],
+    spindle: SpindleErrors,
+    tools: BTreeMap<u32, f64>,
+    work_offsets: BTreeMap<String, [f64; 3]>,
+    decimals: Option<usize>,
+    error_free: bool,
+}
+
+/// Maximum number of factors in the chain: 6 axes, gauge line, spindle, tool.
+const MAX_FACTORS: usize = 9;
+
+/// The factors of the chain for one command.
+struct Chain {
+    m: [Matrix4<f64>; MAX_FACTORS],
+    n: usize,
+    /// Factor index and derivative (per mm / per degree) of each axis, by slot.
+    deriv: [Option<(usize, Matrix4<f64>)>; 6],
+}
 
 impl MachineTool {
     /// Parses and validates machine-tool YAML; `file` names it in errors.
-    pub fn from_yaml_str(_text: &str, _file: &str) -> Result<Self> {
-        Ok(MachineTool {})
+    pub fn from_yaml_str(text: &str, file: &str) -> Result<Self> {
+        load::load(text, file)
     }
 
     /// Display name of the machine.
     pub fn name(&self) -> &str {
-        "placeholder"
+        &self.name
     }
 
     /// Whether the machine has the axis in `slot` (0..6 = X Y Z A B C).
     pub fn has_axis(&self, slot: usize) -> bool {
-        slot < 3
+        self.axis(slot).is_some()
+    }
+
+    /// The validated axis in `slot`, if the machine has it.
+    pub fn axis(&self, slot: usize) -> Option<&Axis> {
+        let i = (*self.slot_index.get(slot)?)?;
+        self.axes.get(i)
+    }
+
+    /// All axes in chain order (workpiece side from the workpiece out, then
+    /// tool side from the base to the spindle).
+    pub fn axes(&self) -> &[Axis] {
+        &self.axes
+    }
+
+    /// Spindle location errors.
+    pub fn spindle_errors(&self) -> &SpindleErrors {
+        &self.spindle
     }
 
     /// Travel limits of the axis in `slot` (mm or deg), `None` if absent.
     pub fn travel(&self, slot: usize) -> Option<(f64, f64)> {
-        self.has_axis(slot).then_some((-1e9, 1e9))
+        self.axis(slot).map(|a| a.travel)
     }
 
-    /// Rapid traverse rate of the axis in `slot` (mm/min or deg/min).
-    pub fn rapid_per_min(&self, _slot: usize) -> f64 {
-        10_000.0
+    /// Rapid traverse rate of the axis in `slot` (mm/min or deg/min);
+    /// `f64::INFINITY` for an axis the machine does not have (it costs no time).
+    pub fn rapid_per_min(&self, slot: usize) -> f64 {
+        self.axis(slot).map_or(f64::INFINITY, |a| a.rapid_per_min)
     }
 
     /// Tool length for offset number `h` from the tool table, mm.
-    pub fn tool_length_mm(&self, _h: u32) -> Option<f64> {
-        None
+    pub fn tool_length_mm(&self, h: u32) -> Option<f64> {
+        self.tools.get(&h).copied()
     }
 
     /// Work offset `G54`…`G59` (machine coordinates of the work zero), mm.
-    pub fn work_offset_mm(&self, _code: &str) -> Option<[f64; 3]> {
-        None
+    pub fn work_offset_mm(&self, code: &str) -> Option<[f64; 3]> {
+        self.work_offsets.get(code).copied()
     }
 
     /// Output decimals for mm programs, if the machine file fixes them.
     pub fn output_decimals(&self) -> Option<usize> {
-        None
+        self.decimals
     }
 
     /// True when every geometric error is zero.
     pub fn is_error_free(&self) -> bool {
-        true
+        self.error_free
     }
 
     /// Nominal tool tip pose in the workpiece frame for commanded axis values
     /// (machine coordinates) and tool length.
-    pub fn nominal(&self, cmd: &AxisVec, _tool_mm: f64) -> TipPose {
-        TipPose {
-            pos: Vector3::new(cmd[0], cmd[1], cmd[2]),
-            dir: Vector3::z(),
-        }
+    pub fn nominal(&self, cmd: &AxisVec, tool_mm: f64) -> TipPose {
+        let c = self.chain(cmd, &[1; 6], tool_mm, false, false);
+        pose(&product(&c.m[..c.n]))
     }
 
     /// Predicted (attained) tool tip pose including the geometric errors,
     /// with component errors looked up for the given direction of motion.
-    pub fn geometric(&self, cmd: &AxisVec, _dirs: &DirVec, tool_mm: f64) -> TipPose {
-        self.nominal(cmd, tool_mm)
+    pub fn geometric(&self, cmd: &AxisVec, dirs: &DirVec, tool_mm: f64) -> TipPose {
+        let c = self.chain(cmd, dirs, tool_mm, true, false);
+        pose(&product(&c.m[..c.n]))
+    }
+
+    /// Attained minus nominal tool tip position, mm.
+    pub fn tip_error_mm(&self, cmd: &AxisVec, dirs: &DirVec, tool_mm: f64) -> Vector3<f64> {
+        self.geometric(cmd, dirs, tool_mm).pos - self.nominal(cmd, tool_mm).pos
+    }
+
+    /// Analytic Jacobian of [`Self::geometric`] with respect to the commanded
+    /// axis values. Rows 0..3: tip position (mm), rows 3..6: unit tool
+    /// direction; column `slot` per mm (linear) or per degree (rotary); zero
+    /// columns for absent axes. Table slopes are those of the segment the
+    /// command lies in (zero outside the tables).
+    pub fn jacobian(&self, cmd: &AxisVec, dirs: &DirVec, tool_mm: f64) -> Matrix6<f64> {
+        let c = self.chain(cmd, dirs, tool_mm, true, true);
+        let factors = &c.m[..c.n];
+        let full = product(factors);
+        let v: Vector3<f64> = full.fixed_view::<3, 1>(0, 2).into_owned();
+        let norm = v.norm();
+        let u = if norm > 0.0 { v / norm } else { Vector3::z() };
+        let proj = if norm > 0.0 {
+            (Matrix3::identity() - u * u.transpose()) / norm
+        } else {
+            Matrix3::zeros()
+        };
+        let mut j = Matrix6::zeros();
+        for (slot, d) in c.deriv.iter().enumerate() {
+            let Some((k, dm)) = d else { continue };
+            let left = product(factors.get(..*k).unwrap_or(&[]));
+            let right = product(factors.get(k + 1..).unwrap_or(&[]));
+            let dt = left * dm * right;
+            let dpos: Vector3<f64> = dt.fixed_view::<3, 1>(0, 3).into_owned();
+            let ddir = proj * dt.fixed_view::<3, 1>(0, 2).into_owned();
+            for r in 0..3 {
+                j[(r, slot)] = dpos[r];
+                j[(r + 3, slot)] = ddir[r];
+            }
+        }
+        j
     }
 
     /// Bit `i` set when axis slot `i` of `cmd` lies outside its component
     /// error tables (the lookup is clamped at the table ends).
-    pub fn clamped_axes(&self, _cmd: &AxisVec) -> u8 {
-        0
+    pub fn clamped_axes(&self, cmd: &AxisVec) -> u8 {
+        let mut bits = 0u8;
+        for a in &self.axes {
+            let q = cmd.get(a.slot).copied().unwrap_or(0.0);
+            if a.components.is_clamped(q) {
+                bits |= 1 << a.slot;
+            }
+        }
+        bits
     }
+
+    /// Builds the chain factors for one command; `errors` includes the
+    /// geometric errors, `derivs` also fills the axis derivatives.
+    fn chain(
+        &self,
+        cmd: &AxisVec,
+        dirs: &DirVec,
+        tool_mm: f64,
+        errors: bool,
+        derivs: bool,
+    ) -> Chain {
+        let mut c = Chain {
+            m: [Matrix4::identity(); MAX_FACTORS],
+            n: 0,
+            deriv: [None; 6],
+        };
+        let push = |c: &mut Chain, m: Matrix4<f64>| {
+            if let Some(slot) = c.m.get_mut(c.n) {
+                *slot = m;
+                c.n += 1;
+            }
+        };
+        for (i, a) in self.axes.iter().enumerate() {
+            if i == self.n_workpiece {
+                push(
+                    &mut c,
+                    geometry::translation(&Vector3::new(0.0, 0.0, tool_mm)),
+                );
+            }
+            let q = cmd.get(a.slot).copied().unwrap_or(0.0);
+            let dir = dirs.get(a.slot).copied().unwrap_or(1);
+            let (m, dm) = axis_htm(a, q, dir, errors, derivs);
+            if derivs {
+                if let Some(d) = c.deriv.get_mut(a.slot) {
+                    *d = Some((c.n, dm));
+                }
+            }
+            push(&mut c, m);
+        }
+        if self.n_workpiece == self.axes.len() {
+            push(
+                &mut c,
+                geometry::translation(&Vector3::new(0.0, 0.0, tool_mm)),
+            );
+        }
+        if errors {
+            push(&mut c, self.spindle.htm());
+        }
+        push(
+            &mut c,
+            geometry::translation(&Vector3::new(0.0, 0.0, -tool_mm)),
+        );
+        c
+    }
+}
+
+/// HTM of one axis at command `q` (mm or degrees) and its derivative with
+/// respect to `q` (zero matrix unless `derivs`).
+fn axis_htm(a: &Axis, q: f64, dir: i8, errors: bool, derivs: bool) -> (Matrix4<f64>, Matrix4<f64>) {
+    let com = if errors {
+        a.components.eval(q, dir)
+    } else {
+        ComponentErrors::default().eval(q, dir)
+    };
+    let loc = if errors {
+        a.location
+    } else {
+        LocationErrors::default()
+    };
+    let r = a.slot % 3;
+    let orient = loc.orientation_htm();
+    let mut dm = Matrix4::zeros();
+    match a.kind {
+        AxisKind::Linear => {
+            let mut e = Vector3::zeros();
+            e[r] = 1.0;
+            let mot = geometry::translation(&(e * q));
+            let m = orient * mot * com.htm();
+            if derivs {
+                let mut dmot = Matrix4::zeros();
+                dmot[(r, 3)] = 1.0;
+                dm = orient * (dmot * com.htm() + mot * com.d_htm());
+            }
+            (m, dm)
+        }
+        AxisKind::Rotary => {
+            let c = a.pivot_mm + loc.offset_mm;
+            let to = geometry::translation(&c);
+            let back = geometry::translation(&-c);
+            let theta = q.to_radians() + loc.zero_rad;
+            let rot = geometry::rotation(r, theta);
+            let m = to * orient * rot * com.htm() * back;
+            if derivs {
+                let drot = geometry::d_rotation(r, theta) * (std::f64::consts::PI / 180.0);
+                dm = to * orient * (drot * com.htm() + rot * com.d_htm()) * back;
+            }
+            (m, dm)
+        }
+    }
+}
+
+/// Product of HTMs in order.
+fn product(ms: &[Matrix4<f64>]) -> Matrix4<f64> {
+    ms.iter().fold(Matrix4::identity(), |acc, m| acc * m)
+}
+
+/// Tip pose of a chain HTM: translation column and normalized z column.
+fn pose(t: &Matrix4<f64>) -> TipPose {
+    let pos = Vector3::new(t[(0, 3)], t[(1, 3)], t[(2, 3)]);
+    let d = Vector3::new(t[(0, 2)], t[(1, 2)], t[(2, 2)]);
+    let n = d.norm();
+    let dir = if n > 0.0 { d / n } else { Vector3::z() };
+    TipPose { pos, dir }
 }

@@ -1,0 +1,412 @@
+//! Validation of a raw machine-tool file into a [`MachineTool`]: every value
+//! is checked (finite, ordered, plausible magnitude, allowed name) and a
+//! failure names the YAML key path and line.
+
+use std::collections::BTreeMap;
+
+use nalgebra::Vector3;
+
+use super::component::ComponentErrors;
+use super::location::{
+    LocationErrors, LocationKey, SpindleErrors, component_key, location_key, spindle_key,
+};
+use super::raw::{RawAxis, RawAxisType, RawMachineTool, RawSide, RawTable};
+use super::table::ErrorTable;
+use super::{Axis, AxisKind, MachineTool, Side};
+use crate::error::{Invalid, Result};
+use crate::machine::{axis_slot, yaml};
+
+/// Largest accepted translational error, mm.
+const MAX_ERROR_MM: f64 = 1.0;
+/// Largest accepted angular error, rad.
+const MAX_ERROR_RAD: f64 = 0.01;
+/// Largest accepted `output.decimals_mm`.
+const MAX_DECIMALS: usize = 9;
+
+type V<T> = std::result::Result<T, Invalid>;
+
+/// Parses and validates machine-tool YAML.
+pub(crate) fn load(text: &str, file: &str) -> Result<MachineTool> {
+    let raw: RawMachineTool = yaml::deserialize(text, file)?;
+    validate(raw).map_err(|inv| locate_invalid(text, file, inv))
+}
+
+/// Like [`yaml::invalid`], but when the full key path cannot be found in the
+/// text (a value inside a flow mapping such as `{ length_mm: -5 }`), points
+/// at the deepest enclosing key that can be found.
+fn locate_invalid(text: &str, file: &str, inv: Invalid) -> crate::error::Error {
+    let mut prefix: &str = &inv.path;
+    loop {
+        if let Some((line, column)) = yaml::locate(text, prefix) {
+            return crate::error::Error::Input(crate::error::Located::new(
+                file,
+                line,
+                column,
+                format!("{}: {}", inv.path, inv.message),
+            ));
+        }
+        match prefix.rfind(['.', '[']) {
+            Some(cut) if cut > 0 => prefix = &prefix[..cut],
+            _ => return yaml::invalid(text, file, inv),
+        }
+    }
+}
+
+fn finite(path: &str, v: f64) -> V<f64> {
+    if v.is_finite() {
+        Ok(v)
+    } else {
+        Err(Invalid::new(
+            path,
+            format!("value `{v}` is not a finite number"),
+        ))
+    }
+}
+
+fn validate(raw: RawMachineTool) -> V<MachineTool> {
+    if raw.kind != "machine_tool" {
+        return Err(Invalid::new(
+            "kind",
+            format!("expected `machine_tool`, found `{}`", raw.kind),
+        ));
+    }
+    if raw.name.trim().is_empty() {
+        return Err(Invalid::new("name", "the machine name is empty"));
+    }
+    if raw.axes.is_empty() {
+        return Err(Invalid::new(
+            "axes",
+            "a machine tool needs at least one axis",
+        ));
+    }
+    let mut axes: Vec<Axis> = Vec::with_capacity(raw.axes.len());
+    let mut slot_index = [None; 6];
+    let mut seen_tool_side = false;
+    for (i, ra) in raw.axes.iter().enumerate() {
+        let p = format!("axes[{i}]");
+        let axis = validate_axis(&p, ra)?;
+        let Some(entry) = slot_index.get_mut(axis.slot) else {
+            return Err(Invalid::new(format!("{p}.name"), "axis slot out of range"));
+        };
+        if entry.is_some() {
+            return Err(Invalid::new(
+                format!("{p}.name"),
+                format!("duplicate axis `{}`", ra.name),
+            ));
+        }
+        *entry = Some(i);
+        match axis.side {
+            Side::Tool => seen_tool_side = true,
+            Side::Workpiece if seen_tool_side => {
+                return Err(Invalid::new(
+                    format!("{p}.side"),
+                    "workpiece-side axes must all come before the tool-side axes (chain order: from the workpiece out to the base, then from the base to the spindle)",
+                ));
+            }
+            Side::Workpiece => {}
+        }
+        axes.push(axis);
+    }
+    let n_workpiece = axes.iter().filter(|a| a.side == Side::Workpiece).count();
+
+    let mut spindle = SpindleErrors::default();
+    if let Some(s) = &raw.spindle {
+        for (k, v) in &s.location_errors {
+            let path = format!("spindle.location_errors.{k}");
+            let key = spindle_key(k).map_err(|m| Invalid::new(&path, m))?;
+            let v = finite(&path, *v)?;
+            match key {
+                LocationKey::Offset(t) => spindle.offset_mm[t] = check_mm(&path, v)?,
+                LocationKey::Angle(r) => spindle.angles_rad[r] = check_rad(&path, v * 1e-6)?,
+                LocationKey::Zero => {}
+            }
+        }
+    }
+
+    let mut tools = BTreeMap::new();
+    for (h, t) in &raw.tools {
+        let path = format!("tools.{h}.length_mm");
+        let l = finite(&path, t.length_mm)?;
+        if l < 0.0 {
+            return Err(Invalid::new(path, format!("tool length `{l}` is negative")));
+        }
+        tools.insert(*h, l);
+    }
+
+    let mut work_offsets = BTreeMap::new();
+    for (code, xyz) in &raw.work_offsets_mm {
+        let path = format!("work_offsets_mm.{code}");
+        if !matches!(code.as_str(), "G54" | "G55" | "G56" | "G57" | "G58" | "G59") {
+            return Err(Invalid::new(
+                path,
+                format!("unknown work offset `{code}` (expected G54 … G59)"),
+            ));
+        }
+        for v in xyz {
+            finite(&path, *v)?;
+        }
+        work_offsets.insert(code.clone(), *xyz);
+    }
+
+    let decimals = raw.output.as_ref().and_then(|o| o.decimals_mm);
+    if let Some(d) = decimals {
+        if d > MAX_DECIMALS {
+            return Err(Invalid::new(
+                "output.decimals_mm",
+                format!("`{d}` decimals is more than {MAX_DECIMALS}"),
+            ));
+        }
+    }
+
+    let error_free = spindle.is_zero()
+        && axes
+            .iter()
+            .all(|a| a.location.is_zero() && a.components.is_zero());
+    Ok(MachineTool {
+        name: raw.name,
+        axes,
+        n_workpiece,
+        slot_index,
+        spindle,
+        tools,
+        work_offsets,
+        decimals,
+        error_free,
+    })
+}
+
+fn check_mm(path: &str, v: f64) -> V<f64> {
+    if v.abs() > MAX_ERROR_MM {
+        return Err(Invalid::new(
+            path,
+            format!(
+                "{v} mm exceeds the 1 mm limit of a geometric error (small-deviation model; check the unit)"
+            ),
+        ));
+    }
+    Ok(v)
+}
+
+fn check_rad(path: &str, v: f64) -> V<f64> {
+    if v.abs() > MAX_ERROR_RAD {
+        return Err(Invalid::new(
+            path,
+            format!(
+                "{} µrad exceeds the 10000 µrad (0.01 rad) limit of the small-angle error model (check the unit)",
+                v * 1e6
+            ),
+        ));
+    }
+    Ok(v)
+}
+
+fn validate_axis(p: &str, ra: &RawAxis) -> V<Axis> {
+    let slot = match ra.name.as_bytes() {
+        [b] => axis_slot(*b),
+        _ => None,
+    }
+    .ok_or_else(|| {
+        Invalid::new(
+            format!("{p}.name"),
+            format!("unknown axis `{}` (expected X, Y, Z, A, B or C)", ra.name),
+        )
+    })?;
+    let kind = match ra.axis_type {
+        RawAxisType::Linear => AxisKind::Linear,
+        RawAxisType::Rotary => AxisKind::Rotary,
+    };
+    let expected = if slot < 3 {
+        AxisKind::Linear
+    } else {
+        AxisKind::Rotary
+    };
+    if kind != expected {
+        return Err(Invalid::new(
+            format!("{p}.type"),
+            format!(
+                "axis `{}` must be {}",
+                ra.name,
+                if slot < 3 { "linear" } else { "rotary" }
+            ),
+        ));
+    }
+    let side = match ra.side {
+        RawSide::Workpiece => Side::Workpiece,
+        RawSide::Tool => Side::Tool,
+    };
+    if kind == AxisKind::Rotary && side == Side::Tool {
+        return Err(Invalid::new(
+            format!("{p}.side"),
+            "rotary axes on the tool side (swivel heads) are not supported; rotary axes must be on the workpiece side",
+        ));
+    }
+    let linear = kind == AxisKind::Linear;
+    let (unit, travel_key, rapid_key, pos_key) = if linear {
+        ("mm", "travel_mm", "rapid_mm_per_min", "positions_mm")
+    } else {
+        ("deg", "travel_deg", "rapid_deg_per_min", "positions_deg")
+    };
+    let (travel, wrong_travel) = if linear {
+        (ra.travel_mm, ra.travel_deg)
+    } else {
+        (ra.travel_deg, ra.travel_mm)
+    };
+    let (rapid, wrong_rapid) = if linear {
+        (ra.rapid_mm_per_min, ra.rapid_deg_per_min)
+    } else {
+        (ra.rapid_deg_per_min, ra.rapid_mm_per_min)
+    };
+    if wrong_travel.is_some() || wrong_rapid.is_some() {
+        let k = if wrong_travel.is_some() {
+            if linear { "travel_deg" } else { "travel_mm" }
+        } else if linear {
+            "rapid_deg_per_min"
+        } else {
+            "rapid_mm_per_min"
+        };
+        return Err(Invalid::new(
+            format!("{p}.{k}"),
+            format!(
+                "a {} axis takes values in {unit}",
+                if linear { "linear" } else { "rotary" }
+            ),
+        ));
+    }
+    let tpath = format!("{p}.{travel_key}");
+    let [lo, hi] = travel.ok_or_else(|| Invalid::new(p, format!("missing `{travel_key}`")))?;
+    let lo = finite(&tpath, lo)?;
+    let hi = finite(&tpath, hi)?;
+    if lo >= hi {
+        return Err(Invalid::new(
+            tpath,
+            format!("minimum {lo} must be below maximum {hi}"),
+        ));
+    }
+    let rpath = format!("{p}.{rapid_key}");
+    let rapid = rapid.ok_or_else(|| Invalid::new(p, format!("missing `{rapid_key}`")))?;
+    let rapid = finite(&rpath, rapid)?;
+    if rapid <= 0.0 {
+        return Err(Invalid::new(
+            rpath,
+            format!("rapid rate `{rapid}` must be positive"),
+        ));
+    }
+    let pivot_mm = match (ra.pivot_mm, linear) {
+        (Some(_), true) => {
+            return Err(Invalid::new(
+                format!("{p}.pivot_mm"),
+                "`pivot_mm` is only for rotary axes",
+            ));
+        }
+        (Some(v), false) => {
+            let path = format!("{p}.pivot_mm");
+            Vector3::new(
+                finite(&path, v[0])?,
+                finite(&path, v[1])?,
+                finite(&path, v[2])?,
+            )
+        }
+        (None, _) => Vector3::zeros(),
+    };
+
+    let mut location = LocationErrors::default();
+    for (k, v) in &ra.location_errors {
+        let path = format!("{p}.location_errors.{k}");
+        let key = location_key(slot, k).map_err(|m| Invalid::new(&path, m))?;
+        let v = finite(&path, *v)?;
+        match key {
+            LocationKey::Offset(t) => location.offset_mm[t] = check_mm(&path, v)?,
+            LocationKey::Angle(r) => location.angles_rad[r] = check_rad(&path, v * 1e-6)?,
+            LocationKey::Zero => location.zero_rad = check_rad(&path, v * 1e-6)?,
+        }
+    }
+
+    let mut components = ComponentErrors::default();
+    for (k, t) in &ra.component_errors {
+        let path = format!("{p}.component_errors.{k}");
+        let dir = component_key(slot, k).map_err(|m| Invalid::new(&path, m))?;
+        let table = validate_table(&path, pos_key, linear, dir < 3, t)?;
+        if let Some(s) = components.tables.get_mut(dir) {
+            *s = Some(table);
+        }
+    }
+
+    Ok(Axis {
+        slot,
+        kind,
+        side,
+        travel: (lo, hi),
+        rapid_per_min: rapid,
+        pivot_mm,
+        location,
+        components,
+    })
+}
+
+fn validate_table(
+    path: &str,
+    pos_key: &str,
+    linear: bool,
+    translation: bool,
+    t: &RawTable,
+) -> V<ErrorTable> {
+    let (positions, wrong) = if linear {
+        (&t.positions_mm, &t.positions_deg)
+    } else {
+        (&t.positions_deg, &t.positions_mm)
+    };
+    if wrong.is_some() {
+        let k = if linear {
+            "positions_deg"
+        } else {
+            "positions_mm"
+        };
+        return Err(Invalid::new(
+            format!("{path}.{k}"),
+            format!("this axis' tables take `{pos_key}`"),
+        ));
+    }
+    let ppath = format!("{path}.{pos_key}");
+    let positions = positions
+        .as_ref()
+        .ok_or_else(|| Invalid::new(path, format!("missing `{pos_key}`")))?;
+    if positions.is_empty() {
+        return Err(Invalid::new(ppath, "the table has no positions"));
+    }
+    for v in positions {
+        finite(&ppath, *v)?;
+    }
+    for w in positions.windows(2) {
+        if let [a, b] = w {
+            if a >= b {
+                return Err(Invalid::new(
+                    ppath,
+                    format!("positions must be strictly increasing (`{a}` is followed by `{b}`)"),
+                ));
+            }
+        }
+    }
+    let (scale, check): (f64, fn(&str, f64) -> V<f64>) = if translation {
+        (1e-3, check_mm)
+    } else {
+        (1e-6, check_rad)
+    };
+    let column = |name: &str, col: &[f64]| -> V<Vec<f64>> {
+        let cpath = format!("{path}.{name}");
+        if col.len() != positions.len() {
+            return Err(Invalid::new(
+                cpath,
+                format!("{} values for {} positions", col.len(), positions.len()),
+            ));
+        }
+        col.iter()
+            .map(|v| check(&cpath, finite(&cpath, *v)? * scale))
+            .collect()
+    };
+    let forward = column("forward", &t.forward)?;
+    let reverse = match &t.reverse {
+        Some(r) => column("reverse", r)?,
+        None => forward.clone(),
+    };
+    Ok(ErrorTable::new(positions.clone(), forward, reverse))
+}
