@@ -281,7 +281,9 @@ impl<'m> Job<'m> {
                     if plan.kind != PlanKind::Pass {
                         let dev = r.deviation.total().norm();
                         summary.deviation.add(dev, blocks[i].line_no);
-                        summary.max_residual_mm = summary.max_residual_mm.max(r.residual_mm);
+                        if mv.motion != Motion::Rapid {
+                            summary.max_residual_mm = summary.max_residual_mm.max(r.residual_mm);
+                        }
                         if let Some(rows) = rows.as_deref_mut() {
                             rows(Row {
                                 line: blocks[i].line_no,

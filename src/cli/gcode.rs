@@ -46,6 +46,7 @@ fn parse_setup(args: &ProgramArgs, machine: Option<&MachineTool>) -> Result<Setu
             for (i, wo) in setup.work_offsets.iter_mut().enumerate() {
                 *wo = m.work_offset_mm(&format!("G{}", 54 + i));
             }
+            setup.home = home_position(m);
         }
         None => setup.axes = [true; 6],
     }
@@ -143,6 +144,19 @@ fn fmt_axes(v: &[f64; 6], setup: &Setup) -> String {
         }
     }
     s
+}
+
+/// The reference position the interpreter starts from and G28 returns to:
+/// machine zero clamped into each axis' travel, with Z at its upper limit
+/// (spindle retracted).
+pub fn home_position(m: &MachineTool) -> [f64; 6] {
+    let mut home = [0.0; 6];
+    for (slot, h) in home.iter_mut().enumerate() {
+        if let Some((lo, hi)) = m.travel(slot) {
+            *h = if slot == 2 { hi } else { 0.0f64.clamp(lo, hi) };
+        }
+    }
+    home
 }
 
 /// `postproc check`.

@@ -295,11 +295,19 @@ pub fn block(
     }
     res.deviation = pred.breakdown(&mv.end, &mv.dirs, tool);
     let (c1, r1) = solve(pred, &mv.end, &mv.dirs, tool)?;
-    check_travel(pred, &c1)?;
     res.end = c1;
     res.residual_mm = r1;
     match (mv.motion, mv.arc) {
-        (Motion::Rapid, _) => {}
+        (Motion::Rapid, _) => {
+            // Positioning: only the axes the block programs are corrected;
+            // the others stay where they are.
+            for s in 0..6 {
+                if plan.programmed & (1 << s) == 0 {
+                    res.end[s] = mv.end[s];
+                }
+            }
+            res.residual_mm = (pred.attained(&res.end, &mv.dirs, tool).pos - pred.nominal(&mv.end, tool).pos).norm();
+        }
         (Motion::Linear, _) => {
             let (c0, _) = solve(pred, &mv.start, &mv.dirs, tool)?;
             let mut pts = Vec::new();
@@ -315,6 +323,7 @@ pub fn block(
         (_, Some(arc)) => arc_block(pred, &mv, &arc, tool, tol, &mut res)?,
         (_, None) => {}
     }
+    check_travel(pred, &res.end)?;
     Ok(res)
 }
 
@@ -330,15 +339,19 @@ fn arc_block(
     let e3 = mv.end3();
     // Sample the correction along the arc with the local direction of motion.
     let n = ((arc.sweep.abs() / (5f64).to_radians()).ceil() as usize).clamp(4, 72);
+    let start_dirs = dirs_of(&arc.tangent(&s3, &e3, 0.0), &mv.dirs);
     let mut corr_min = Vector3::repeat(f64::INFINITY);
     let mut corr_max = Vector3::repeat(f64::NEG_INFINITY);
     let mut first = Vector3::zeros();
     for k in 0..=n {
         let s = k as f64 / n as f64;
         let p = arc.point(&s3, &e3, s);
-        let d = dirs_of(&arc.tangent(&s3, &e3, s), &mv.dirs);
+        // Reversal errors inside an arc cannot be removed by shifting it;
+        // uniformity is judged with the direction of motion at the start.
+        let d = start_dirs;
         let target = with_xyz(&lerp(&mv.start, &mv.end, s), &p);
         let (c, _) = solve(pred, &target, &d, tool)?;
+        let c = if k == n { res.end } else { c };
         let corr = Vector3::new(c[0] - p[0], c[1] - p[1], c[2] - p[2]);
         if k == 0 {
             first = corr;
@@ -352,37 +365,26 @@ fn arc_block(
         res.center = Some(arc.center + (first + last) / 2.0);
         return Ok(());
     }
-    // Replace by chords: sagitta within a quarter of the tolerance, then each
+    // Replace by chords: sagitta within half the tolerance, then each
     // chord split like a straight move with the rest of the budget.
     res.arc_replaced = true;
-    let sag = tol / 4.0;
+    let sag = tol / 2.0;
     let r = arc.radius.max(1e-9);
     let max_step = 2.0 * (1.0 - sag / r).clamp(-1.0, 1.0).acos();
     let chords = ((arc.sweep.abs() / max_step.max(1e-6)).ceil() as usize).clamp(1, 1 << 16);
     let mut prev_p = mv.start;
-    let d0 = dirs_of(&arc.tangent(&s3, &e3, 0.0), &mv.dirs);
-    let (mut prev_c, _) = solve(pred, &mv.start, &d0, tool)?;
     let mut pts = Vec::new();
     for k in 1..=chords {
         let s = k as f64 / chords as f64;
         let p = with_xyz(&lerp(&mv.start, &mv.end, s), &arc.point(&s3, &e3, s));
         let chord_dir = Vector3::new(p[0] - prev_p[0], p[1] - prev_p[1], p[2] - prev_p[2]);
         let d = dirs_of(&chord_dir, &mv.dirs);
+        // Both ends with this chord's direction of motion: a reversal at the
+        // junction is the machine's, not something subdivision can remove.
+        let (c0, _) = solve(pred, &prev_p, &d, tool)?;
         let (c, _) = solve(pred, &p, &d, tool)?;
-        split_line(
-            pred,
-            &prev_p,
-            &p,
-            &prev_c,
-            &c,
-            &d,
-            tool,
-            tol - sag,
-            0,
-            &mut pts,
-        )?;
+        split_line(pred, &prev_p, &p, &c0, &c, &d, tool, tol - sag, 0, &mut pts)?;
         prev_p = p;
-        prev_c = c;
     }
     // The last point is the end point, recomputed with the end direction.
     pts.pop();

@@ -205,6 +205,8 @@ pub struct Plan {
     pub arc_absolute: bool,
     /// Dwell time of the block, s.
     pub dwell_s: f64,
+    /// Bit `i` set when the block programs axis slot `i` (X Y Z A B C).
+    pub programmed: u8,
 }
 
 /// Tool table and work offsets the interpreter uses.
@@ -216,6 +218,9 @@ pub struct Setup {
     pub work_offsets: [Option<[f64; 3]>; 6],
     /// Which axis slots the machine has (X Y Z A B C).
     pub axes: [bool; 6],
+    /// Reference position (power-on position and G28 target), machine
+    /// coordinates.
+    pub home: AxisVec,
 }
 
 /// A warning about the program (not an error), with its first line.
@@ -263,8 +268,10 @@ const MAX_WARNINGS: usize = 64;
 
 impl Interpreter {
     /// A controller in its power-on state: G0 G17 G90 G91.1 G21 G54 G49 G98,
-    /// tool tip at machine zero, every axis last moved in the + direction.
+    /// tool tip at the reference position, every axis last moved in the +
+    /// direction.
     pub fn new(setup: Setup, file: &str) -> Self {
+        let home = setup.home;
         Interpreter {
             setup,
             file: file.to_string(),
@@ -286,7 +293,7 @@ impl Interpreter {
             spindle: 0.0,
             tool_selected: 0,
             tool_active: 0,
-            pos: [0.0; 6],
+            pos: home,
             dirs: [1; 6],
             warnings: Vec::new(),
             comp_warned: false,
@@ -579,6 +586,7 @@ impl Interpreter {
             }
         }
         let any_axis = axis.iter().any(|a| a.is_some());
+        plan.programmed = axis.iter().enumerate().filter(|(_, a)| a.is_some()).fold(0u8, |m, (i, _)| m | (1 << i));
         if self.cycle.is_some() {
             if let Some(r) = r_word {
                 self.cycle_r = Some(r.value);
@@ -969,7 +977,7 @@ impl Interpreter {
         let mut home = mid;
         for (slot, a) in axis.iter().enumerate() {
             if a.is_some() {
-                home[slot] = 0.0;
+                home[slot] = self.setup.home[slot];
             }
         }
         let mv = self.make_move(Motion::Rapid, mid, home, None);
