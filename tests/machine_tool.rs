@@ -12,7 +12,11 @@ use approx::assert_abs_diff_eq;
 use postproc::machine::tool::MachineTool;
 use postproc::machine::{AxisVec, DirVec, Machine};
 
-use crate::common::repo;
+/// Path of a file in the repository (kept local so this file also builds
+/// as a stand-alone test target).
+fn repo(rel: &str) -> std::path::PathBuf {
+    std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join(rel)
+}
 
 /// Position tolerance for exact (closed-form) goldens, mm.
 const POS_TOL_MM: f64 = 1e-12;

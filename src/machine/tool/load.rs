@@ -25,6 +25,9 @@ const MAX_DECIMALS: usize = 9;
 
 type V<T> = std::result::Result<T, Invalid>;
 
+/// A magnitude check of one value in internal units.
+type Check = fn(&str, f64) -> V<f64>;
+
 /// Parses and validates machine-tool YAML.
 pub(crate) fn load(text: &str, file: &str) -> Result<MachineTool> {
     let raw: RawMachineTool = yaml::deserialize(text, file)?;
@@ -94,7 +97,7 @@ fn validate(raw: RawMachineTool) -> V<MachineTool> {
                 format!("duplicate axis `{}`", ra.name),
             ));
         }
-        *entry = Some(i);
+        *entry = u8::try_from(i).ok();
         match axis.side {
             Side::Tool => seen_tool_side = true,
             Side::Workpiece if seen_tool_side => {
@@ -386,7 +389,7 @@ fn validate_table(
             }
         }
     }
-    let (scale, check): (f64, fn(&str, f64) -> V<f64>) = if translation {
+    let (scale, check): (f64, Check) = if translation {
         (1e-3, check_mm)
     } else {
         (1e-6, check_rad)

@@ -87,9 +87,9 @@ pub(crate) fn location_key(slot: usize, key: &str) -> Result<LocationKey, String
     } else {
         let own = slot - 3;
         allowed.push((format!("E{axis}0{axis}_urad"), LocationKey::Zero));
-        for t in 0..3 {
+        for (t, letter) in LETTERS.iter().take(3).enumerate() {
             if t != own {
-                allowed.push((format!("E{}0{axis}_mm", LETTERS[t]), LocationKey::Offset(t)));
+                allowed.push((format!("E{letter}0{axis}_mm"), LocationKey::Offset(t)));
             }
         }
         for r in 0..3 {

@@ -90,7 +90,7 @@ pub struct MachineTool {
     /// Number of workpiece-side axes (they come first in `axes`).
     n_workpiece: usize,
     /// Index into `axes` per slot.
-    slot_index: [Option<usize>; 6],
+    slot_index: [Option<u8>; 6],
     spindle: SpindleErrors,
     tools: BTreeMap<u32, f64>,
     work_offsets: BTreeMap<String, [f64; 3]>,
@@ -128,7 +128,7 @@ impl MachineTool {
     /// The validated axis in `slot`, if the machine has it.
     pub fn axis(&self, slot: usize) -> Option<&Axis> {
         let i = (*self.slot_index.get(slot)?)?;
-        self.axes.get(i)
+        self.axes.get(usize::from(i))
     }
 
     /// All axes in chain order (workpiece side from the workpiece out, then
