@@ -405,8 +405,8 @@ fn bundled_machine_files_load() {
     assert_eq!(afm.travel(0), Some((0.0, 1000.0)));
     assert_eq!(afm.tool_length_mm(1), Some(62.5));
     assert_eq!(afm.tool_length_mm(10), Some(180.0));
-    assert_eq!(afm.work_offset_mm("G54"), Some([250.0, 150.0, -50.0]));
-    assert_eq!(afm.output_decimals(), Some(3));
+    assert_eq!(afm.work_offset_mm("G54"), Some([250.0, 150.0, 150.0]));
+    assert_eq!(afm.output_decimals(), Some(4));
     assert_eq!(afm.rapid_per_min(3), f64::INFINITY);
     // Predicted errors stay within tens of µm over the work zone.
     let d = afm.tip_error_mm(&[1000.0, 500.0, 500.0, 0.0, 0.0, 0.0], &FWD, 180.0);
