@@ -2,9 +2,10 @@
 //! goldens, property tests and regressions.
 
 mod common;
+mod gcode_cli;
+mod gcode_grammar;
+mod golden;
 mod machine_tool;
 mod observations;
 mod rapid;
 mod robot;
-mod gcode_cli;
-mod gcode_grammar;

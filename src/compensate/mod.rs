@@ -306,7 +306,9 @@ pub fn block(
                     res.end[s] = mv.end[s];
                 }
             }
-            res.residual_mm = (pred.attained(&res.end, &mv.dirs, tool).pos - pred.nominal(&mv.end, tool).pos).norm();
+            res.residual_mm = (pred.attained(&res.end, &mv.dirs, tool).pos
+                - pred.nominal(&mv.end, tool).pos)
+                .norm();
         }
         (Motion::Linear, _) => {
             let (c0, _) = solve(pred, &mv.start, &mv.dirs, tool)?;

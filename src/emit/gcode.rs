@@ -281,8 +281,12 @@ impl Emitter {
                     };
                     let want = rounded;
                     // Rapids position only the axes they program.
-                    let positioning = mv.motion == Motion::Rapid && plan.programmed & (1 << slot) == 0;
-                    if want != now && !positioning && (slot < 3 || self.has_axis_word_or_moved(slot, target)) {
+                    let positioning =
+                        mv.motion == Motion::Rapid && plan.programmed & (1 << slot) == 0;
+                    if want != now
+                        && !positioning
+                        && (slot < 3 || self.has_axis_word_or_moved(slot, target))
+                    {
                         let at = last_axis_end.unwrap_or_else(|| insert_point_for_axes(block));
                         let letter = if lower {
                             AXIS_LETTERS[slot].to_ascii_lowercase()

@@ -586,7 +586,11 @@ impl Interpreter {
             }
         }
         let any_axis = axis.iter().any(|a| a.is_some());
-        plan.programmed = axis.iter().enumerate().filter(|(_, a)| a.is_some()).fold(0u8, |m, (i, _)| m | (1 << i));
+        plan.programmed = axis
+            .iter()
+            .enumerate()
+            .filter(|(_, a)| a.is_some())
+            .fold(0u8, |m, (i, _)| m | (1 << i));
         if self.cycle.is_some() {
             if let Some(r) = r_word {
                 self.cycle_r = Some(r.value);

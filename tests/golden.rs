@@ -1,0 +1,279 @@
+//! Hand-derived goldens for machine-tool compensation, through the real
+//! binary: a single geometric error at a time, the exact output expected by
+//! a derivation written beside each test; then the accuracy of compensated
+//! programs checked by re-interpreting the output against the model.
+
+use approx::assert_abs_diff_eq;
+use nalgebra::Vector3;
+use postproc::machine::Machine;
+use postproc::machine::tool::MachineTool;
+use postproc::program::gcode::{Block, parse_line};
+use postproc::program::interp::{Interpreter, Motion, Setup};
+
+use crate::common::{postproc, repo};
+
+/// Resolution of a 4-decimal output word, mm.
+const WORD_TOL_MM: f64 = 0.00005;
+/// Requirement on every emitted point: attained within 0.1 µm of the program.
+const POINT_TOL_MM: f64 = 0.0001;
+
+/// A three-axis machine (X on Y on the table, Z on the column) with one
+/// error block inserted into the axis named by `axis`.
+fn machine_yaml(x_extra: &str, y_extra: &str, z_extra: &str) -> String {
+    format!(
+        "kind: machine_tool
+name: golden
+axes:
+  - name: X
+    type: linear
+    side: workpiece
+    travel_mm: [-10, 1010]
+    rapid_mm_per_min: 20000
+{x_extra}
+  - name: Y
+    type: linear
+    side: workpiece
+    travel_mm: [-10, 510]
+    rapid_mm_per_min: 20000
+{y_extra}
+  - name: Z
+    type: linear
+    side: tool
+    travel_mm: [-10, 510]
+    rapid_mm_per_min: 20000
+{z_extra}
+tools:
+  1: {{ length_mm: 100.0 }}
+work_offsets_mm:
+  G54: [0.0, 0.0, 0.0]
+output:
+  decimals_mm: 4
+"
+    )
+}
+
+fn compensate(dir: &std::path::Path, machine: &str, program: &str) -> String {
+    let m = dir.join("m.yaml");
+    std::fs::write(&m, machine).unwrap();
+    let p = dir.join("p.nc");
+    std::fs::write(&p, program).unwrap();
+    let out = postproc()
+        .args(["compensate", "--annotate", "none", "-o", "-", "--machine"])
+        .arg(&m)
+        .arg(&p)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.code() == Some(0),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8(out.stdout).unwrap()
+}
+
+fn word(line: &str, letter: char) -> Option<f64> {
+    let mut b = Block::default();
+    parse_line(line.as_bytes(), 1, "t", &mut b).unwrap();
+    b.word(letter as u8).map(|w| w.value)
+}
+
+#[test]
+fn positioning_error_shifts_x_by_minus_exx() {
+    // EXX(x) = 20 µm per 1000 mm, linear from 0: EXX(500) = 0.010 mm.
+    // Attained x = c + EXX(c); we need c + 2e-5·c = 500 → c = 500/1.00002
+    // = 499.99000 (to 0.1 µm): X shifted by −EXX(x).
+    let dir = tempfile::tempdir().unwrap();
+    let m = machine_yaml(
+        "    component_errors:\n      EXX_um: { positions_mm: [0, 1000], forward: [0, 20] }",
+        "",
+        "",
+    );
+    let out = compensate(dir.path(), &m, "G0 X0 Y0 Z50\nG1 X500 F1000\n");
+    let line = out.lines().nth(1).unwrap();
+    assert_abs_diff_eq!(word(line, 'X').unwrap(), 499.99, epsilon = WORD_TOL_MM);
+    // Y and Z carry no error: the block keeps its only word.
+    assert_eq!(word(line, 'Y'), None);
+}
+
+#[test]
+fn squareness_ec0y_shifts_x_by_angle_times_y() {
+    // EC0Y = ε = 50 µrad tilts the Y axis about z: moving Y by y takes the
+    // tool to x = −ε·y (a small rotation of (0, y, 0) about z gives
+    // (−ε·y, y, 0)). The compensation adds ε·y to X: at y = 400,
+    // 400 · 50e-6 = 0.0200 mm, so X100 → X100.02; Y changes only by
+    // y·(1 − cos ε) ≈ 5e-7 mm, below a 4-decimal word.
+    let dir = tempfile::tempdir().unwrap();
+    let m = machine_yaml("", "    location_errors:\n      EC0Y_urad: 50", "");
+    let out = compensate(dir.path(), &m, "G0 X0 Y0 Z50\nG1 X100 Y400 F1000\n");
+    let line = out.lines().nth(1).unwrap();
+    assert_abs_diff_eq!(word(line, 'X').unwrap(), 100.02, epsilon = WORD_TOL_MM);
+    assert_abs_diff_eq!(word(line, 'Y').unwrap(), 400.0, epsilon = WORD_TOL_MM);
+}
+
+#[test]
+fn z_pitch_with_tool_length_gives_abbe_shift() {
+    // EBZ = ε = 100 µrad (pitch of the tool-side Z carriage) turns the
+    // spindle about the gauge line; the tip sits L = 100 mm below it, so the
+    // tip moves by ε × (0, 0, −L) = (−L·ε, 0, 0) = −0.0100 mm in x (the
+    // Abbe error). The compensation commands X + L·ε: X200 → X200.01.
+    // Without tool length compensation (G49, L = 0) there is no shift.
+    let dir = tempfile::tempdir().unwrap();
+    let m = machine_yaml(
+        "",
+        "",
+        "    component_errors:\n      EBZ_urad: { positions_mm: [0, 500], forward: [100, 100] }",
+    );
+    let out = compensate(
+        dir.path(),
+        &m,
+        "G0 X0 Y0 Z50\nG43 H1 Z40\nG1 X200 Y100 F1000\nG49 G0 Z60\nG1 X300\n",
+    );
+    let lines: Vec<&str> = out.lines().collect();
+    assert_abs_diff_eq!(word(lines[2], 'X').unwrap(), 200.01, epsilon = WORD_TOL_MM);
+    assert_abs_diff_eq!(word(lines[4], 'X').unwrap(), 300.0, epsilon = WORD_TOL_MM);
+}
+
+#[test]
+fn error_free_machine_changes_nothing() {
+    // With every error zero the predicted pose is the nominal one, so the
+    // compensated program is byte-identical (annotations off).
+    let dir = tempfile::tempdir().unwrap();
+    let m = machine_yaml("", "", "").replace("G54: [0.0, 0.0, 0.0]", "G54: [100.0, 100.0, 100.0]");
+    let prog = std::fs::read_to_string(repo("samples/part.nc")).unwrap();
+    let prog = prog.replace("H2", "H1").replace("H3", "H1");
+    let out = compensate(dir.path(), &m, &prog);
+    assert_eq!(out, prog);
+}
+
+/// Interprets a program and returns its moves (end point, dirs, motion, line).
+fn moves(machine: &MachineTool, text: &str) -> Vec<(postproc::program::interp::Move, usize)> {
+    let mut setup = Setup::default();
+    for (s, a) in setup.axes.iter_mut().enumerate() {
+        *a = machine.has_axis(s);
+    }
+    setup
+        .tools
+        .insert(1, machine.tool_length_mm(1).unwrap_or(0.0));
+    for (i, wo) in setup.work_offsets.iter_mut().enumerate() {
+        *wo = machine.work_offset_mm(&format!("G{}", 54 + i));
+    }
+    let mut it = Interpreter::new(setup, "t");
+    let mut b = Block::default();
+    let mut out = vec![];
+    for (i, l) in text.lines().enumerate() {
+        parse_line(l.as_bytes(), i + 1, "t", &mut b).unwrap();
+        let plan = it.step(&b, l.as_bytes()).unwrap();
+        if let Some(mv) = plan.mv {
+            out.push((mv, i + 1));
+        }
+    }
+    out
+}
+
+fn dist_to_segment(p: &Vector3<f64>, a: &Vector3<f64>, b: &Vector3<f64>) -> f64 {
+    let ab = b - a;
+    let t = ((p - a).dot(&ab) / ab.norm_squared()).clamp(0.0, 1.0);
+    (a + ab * t - p).norm()
+}
+
+#[test]
+fn compensated_long_moves_stay_within_tolerance() {
+    // The bundled AFM R-1000 example calibration; a long diagonal feed and a
+    // long X feed that need splitting at 1 µm.
+    let text = std::fs::read_to_string(repo("machines/afm-r1000.yaml")).unwrap();
+    let Machine::Tool(machine) = Machine::from_yaml_str(&text, "afm").unwrap() else {
+        panic!("not a machine tool")
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let program = "G90 G54 G0 X-200 Y-100 Z20\nG43 H1 Z5\nG1 X500 Y300 Z-10 F2000\nX-240\n";
+    let out = compensate(dir.path(), &text, program);
+    let programmed: Vec<Vector3<f64>> = moves(&machine, program)
+        .iter()
+        .map(|(m, _)| m.end3())
+        .collect();
+    let compensated = moves(&machine, &out);
+    assert!(
+        compensated.len() > programmed.len() + 2,
+        "the long moves must be split:\n{out}"
+    );
+    let tool = machine.tool_length_mm(1).unwrap();
+    let tolerance = 0.001;
+    // Programmed moves: G0, G43 Z5, the diagonal feed and the X feed; the
+    // feed paths run from move 1's end to move 2's and on to move 3's.
+    let paths = [
+        (programmed[1], programmed[2]),
+        (programmed[2], programmed[3]),
+    ];
+    // Directions of motion are those of the programmed move a segment
+    // belongs to (an axis the program does not move keeps its direction:
+    // corrections of a few µm stay inside the reversal play).
+    let prog_moves = moves(&machine, program);
+    let dirs = [prog_moves[2].0.dirs, prog_moves[3].0.dirs];
+    let dist = |c: &[f64; 6], tl: f64| -> f64 {
+        (0..2)
+            .map(|k| {
+                let p = machine.geometric(c, &dirs[k], tl).pos;
+                dist_to_segment(&p, &paths[k].0, &paths[k].1)
+            })
+            .fold(f64::INFINITY, f64::min)
+    };
+    let mut checked = 0;
+    for (mv, _) in compensated
+        .iter()
+        .filter(|(m, _)| m.motion == Motion::Linear)
+    {
+        let tl = if mv.tool_len_mm > 0.0 {
+            mv.tool_len_mm
+        } else {
+            tool
+        };
+        let d_end = dist(&mv.end, tl);
+        assert!(
+            d_end <= POINT_TOL_MM,
+            "emitted point off the programmed path by {d_end} mm"
+        );
+        // Sample the straight command between consecutive emitted points.
+        for k in 1..10 {
+            let t = k as f64 / 10.0;
+            let mut c = mv.start;
+            for i in 0..6 {
+                c[i] += (mv.end[i] - mv.start[i]) * t;
+            }
+            let d = dist(&c, tl);
+            assert!(
+                d <= tolerance + POINT_TOL_MM,
+                "gap {d} mm along a split move"
+            );
+        }
+        checked += 1;
+    }
+    assert!(checked >= 4);
+    // The final point of each programmed move is reached exactly.
+    let last = compensated.last().unwrap().0;
+    let got = machine.geometric(&last.end, &dirs[1], tool).pos;
+    assert!((got - programmed[3]).norm() <= POINT_TOL_MM);
+}
+
+#[test]
+fn out_of_travel_is_an_error_naming_the_block_and_writes_nothing() {
+    // A target at the travel limit whose compensation leaves the travel.
+    let dir = tempfile::tempdir().unwrap();
+    let m = machine_yaml(
+        "    component_errors:\n      EXX_um: { positions_mm: [0, 1010], forward: [-50, -50] }",
+        "",
+        "",
+    );
+    std::fs::write(dir.path().join("m.yaml"), m).unwrap();
+    std::fs::write(dir.path().join("p.nc"), "G0 X0 Y0 Z50\nG1 X1010 F100\n").unwrap();
+    let out_path = dir.path().join("p.comp.nc");
+    postproc()
+        .args(["compensate", "--machine"])
+        .arg(dir.path().join("m.yaml"))
+        .arg(dir.path().join("p.nc"))
+        .assert()
+        .code(2)
+        .stderr(predicates::str::contains(
+            "p.nc:2:1: compensated X = 1010.0500 is outside the travel",
+        ));
+    assert!(!out_path.exists());
+}
