@@ -1028,6 +1028,8 @@ mod tests {
 
     #[test]
     fn cells_and_columns() {
+        // Bytes (0-based): 1 'a'; 5..=11 the quoted cell "b,""c"; 12 blank;
+        // 13 and 14 commas → empty cell at byte 14 (column 15); 'd' at 15 (column 16).
         let c = split_cells(b" a , \"b,\"\"c\" ,,d").unwrap_or_default();
         let got: Vec<(usize, &[u8])> = c.iter().map(|c| (c.col, c.text.as_slice())).collect();
         assert_eq!(
@@ -1035,8 +1037,8 @@ mod tests {
             vec![
                 (2, b"a".as_slice()),
                 (6, b"b,\"c".as_slice()),
-                (14, b"".as_slice()),
-                (15, b"d".as_slice())
+                (15, b"".as_slice()),
+                (16, b"d".as_slice())
             ]
         );
         assert_eq!(split_cells(b"a,").map(|c| c.len()).ok(), Some(2));
