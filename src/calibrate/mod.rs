@@ -1,4 +1,6 @@
 //! Calibration: reading measured observations and identifying model
 //! parameters from them.
 
+pub mod lsq;
 pub mod observations;
+pub mod stats;
