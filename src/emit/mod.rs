@@ -1,1 +1,3 @@
 //! emit (in progress).
+
+pub mod rapid;
