@@ -1,1 +1,523 @@
-//! Integration tests: rapid.
+//! Integration tests: the RAPID front end (grammar examples, spans, errors)
+//! and the byte-faithful rewriter.
+
+use approx::assert_abs_diff_eq;
+use postproc::emit::rapid::{
+    Edit, Format, annotate, apply_edits, decl_copy, format_fixed, format_quaternion,
+    insert_after_decl, line_ending, robtarget_edits, robtarget_literal,
+};
+use postproc::program::rapid::{
+    DataType, DataValue, Module, MoveKind, RobTarget, Scope, Stmt, Storage, Target, parse_module,
+    parse_module_bytes,
+};
+use proptest::prelude::*;
+
+/// Path of a file in the repository. (Not `common::repo`: Cargo also builds
+/// this file as its own test target, where `crate::common` does not exist.)
+fn repo(rel: &str) -> std::path::PathBuf {
+    std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join(rel)
+}
+
+/// Tolerance on values read back from literals (they are parsed exactly).
+const VALUE_TOL: f64 = 1e-12;
+
+fn grammar() -> String {
+    std::fs::read_to_string(repo("grammar/rapid.md")).expect("grammar/rapid.md readable")
+}
+
+fn sample() -> String {
+    std::fs::read_to_string(repo("samples/drilling.mod")).expect("samples/drilling.mod readable")
+}
+
+/// The fenced blocks of `md` whose info string is exactly `lang`.
+fn blocks(md: &str, lang: &str) -> Vec<String> {
+    let mut out = Vec::new();
+    let mut cur: Option<String> = None;
+    for line in md.lines() {
+        match &mut cur {
+            None => {
+                if line.trim_end() == format!("```{lang}") {
+                    cur = Some(String::new());
+                }
+            }
+            Some(b) => {
+                if line.trim_end() == "```" {
+                    out.push(std::mem::take(b));
+                    cur = None;
+                } else {
+                    b.push_str(line);
+                    b.push('\n');
+                }
+            }
+        }
+    }
+    out
+}
+
+fn parse(src: &str) -> Module {
+    match parse_module(src, "t.mod") {
+        Ok(m) => m,
+        Err(e) => panic!("parse failed: {e}\n{src}"),
+    }
+}
+
+fn parse_err(src: &str) -> String {
+    match parse_module(src, "t.mod") {
+        Ok(_) => panic!("expected a parse error for:\n{src}"),
+        Err(e) => e.to_string(),
+    }
+}
+
+fn robtarget<'m>(m: &'m Module, name: &str) -> &'m RobTarget {
+    match m.decl(name).and_then(|d| d.value.as_ref()) {
+        Some(DataValue::RobTarget(r)) => r,
+        other => panic!("{name} is not a robtarget: {other:?}"),
+    }
+}
+
+/// Every number of a robtarget slices back to text that parses to its value.
+fn check_spans(src: &str, rt: &RobTarget) {
+    let all = rt
+        .trans
+        .iter()
+        .chain(&rt.rot)
+        .chain(&rt.robconf)
+        .chain(&rt.extax);
+    for n in all {
+        let text = &src[n.span.clone()];
+        let v: f64 = text.parse().expect("span is a number");
+        assert_abs_diff_eq!(v, n.value, epsilon = VALUE_TOL);
+    }
+    assert!(src[rt.span.clone()].starts_with("[["));
+    assert!(src[rt.span.clone()].ends_with("]]"));
+}
+
+fn all_robtargets(m: &Module) -> Vec<&RobTarget> {
+    fn walk<'a>(v: &'a DataValue, out: &mut Vec<&'a RobTarget>) {
+        match v {
+            DataValue::RobTarget(r) => out.push(r),
+            DataValue::Array { items, .. } => items.iter().for_each(|i| walk(i, out)),
+            _ => {}
+        }
+    }
+    let mut out = Vec::new();
+    for d in &m.decls {
+        if let Some(v) = &d.value {
+            walk(v, &mut out);
+        }
+    }
+    for mv in m.moves() {
+        if let Target::Inline(r) = &mv.target {
+            out.push(r);
+        }
+    }
+    out
+}
+
+#[test]
+fn grammar_examples_parse_and_rejects_fail() {
+    let md = grammar();
+    let good = blocks(&md, "rapid");
+    let bad = blocks(&md, "rapid-reject");
+    assert!(good.len() >= 3, "grammar has {} rapid examples", good.len());
+    assert!(bad.len() >= 3, "grammar has {} reject examples", bad.len());
+    for src in &good {
+        let m = parse(src);
+        for rt in all_robtargets(&m) {
+            check_spans(src, rt);
+        }
+        assert_eq!(apply_edits(src, &[]).expect("no edits"), *src);
+    }
+    for src in &bad {
+        let e = parse_err(src);
+        assert!(e.starts_with("t.mod:"), "{e}");
+    }
+}
+
+#[test]
+fn sample_module_structure() {
+    let src = sample();
+    let m = parse_module(&src, "samples/drilling.mod").expect("sample parses");
+    assert_eq!(m.name, "Drilling");
+    assert!(m.header.is_some());
+    assert_eq!(m.decls.len(), 11);
+    assert_eq!(m.procs.len(), 1);
+    // 2 MoveAbsJ + 2 MoveJ pClear + 12 holes × 4 moves.
+    assert_eq!(m.moves().count(), 52);
+    let holes = m.decl("HOLES").expect("case-insensitive lookup");
+    assert_eq!(holes.dims, vec![12]);
+    assert_eq!(holes.data_type, DataType::RobTarget);
+    let Some(DataValue::Array { items, .. }) = &holes.value else {
+        panic!("holes is an array");
+    };
+    assert_eq!(items.len(), 12);
+    // Hole 6 is row 2 (x = 175), column 2 (y = 150), written [[175,150,0],…].
+    let DataValue::RobTarget(h6) = &items[5] else {
+        panic!("robtarget element");
+    };
+    assert_eq!(&src[h6.trans[0].span.clone()], "175");
+    assert_eq!(&src[h6.trans[1].span.clone()], "150");
+    assert_abs_diff_eq!(h6.rot[2].value, 1.0, epsilon = VALUE_TOL);
+    assert!(h6.extax.iter().all(|n| n.is_unused_axis()));
+    for rt in all_robtargets(&m) {
+        check_spans(&src, rt);
+    }
+    // The tool: 2.4 kg, centre of gravity 85 mm along z, TCP at z 182.5.
+    let Some(DataValue::ToolData(t)) = &m.decl("tDrill").and_then(|d| d.value.clone()) else {
+        panic!("tooldata");
+    };
+    assert!(t.robhold);
+    assert_abs_diff_eq!(t.mass.value, 2.4, epsilon = VALUE_TOL);
+    assert_abs_diff_eq!(t.cog[2].value, 85.0, epsilon = VALUE_TOL);
+    assert_abs_diff_eq!(t.tframe.trans[2].value, 182.5, epsilon = VALUE_TOL);
+    let Some(DataValue::WobjData(w)) = &m.decl("wPlate").and_then(|d| d.value.clone()) else {
+        panic!("wobjdata");
+    };
+    assert!(w.ufprog && !w.robhold);
+    assert_abs_diff_eq!(w.uframe.trans[0].value, 600.0, epsilon = VALUE_TOL);
+    let pclear = robtarget(&m, "pClear");
+    assert_eq!(&src[pclear.extax[0].span.clone()], "9E+09");
+    assert_eq!(m.decl("depth").map(|d| d.storage), Some(Storage::Const));
+    // The drilling move of hole 1: MoveL Offs(holes{1},0,0,-12), vDrill, fine, tDrill\WObj:=wPlate;
+    let drill = m.moves().nth(4).expect("fifth move");
+    assert_eq!(drill.kind, MoveKind::MoveL);
+    assert_eq!(drill.speed.text, "vDrill");
+    assert_eq!(drill.zone.text, "fine");
+    assert_eq!(drill.tool.text, "tDrill");
+    assert_eq!(drill.wobj.as_ref().map(|a| a.text.as_str()), Some("wPlate"));
+    let Target::Offs { base, offsets, .. } = &drill.target else {
+        panic!("Offs target: {:?}", drill.target);
+    };
+    let Target::Named { name, index, .. } = base.as_ref() else {
+        panic!("named base");
+    };
+    assert_eq!(name, "holes");
+    assert_eq!(index.as_ref().and_then(|i| i.value), Some(1));
+    assert_eq!(offsets[2].value, Some(-12.0));
+    assert_eq!(&src[offsets[2].span.clone()], "-12");
+    assert_eq!(
+        &src[drill.span.clone()],
+        "MoveL Offs(holes{1},0,0,-12), vDrill, fine, tDrill\\WObj:=wPlate;"
+    );
+    let line = src.lines().nth(drill.line - 1).expect("line exists");
+    assert!(line.contains("holes{1},0,0,-12"), "{line}");
+    assert_eq!(apply_edits(&src, &[]).expect("no edits"), src);
+}
+
+#[test]
+fn keywords_are_case_insensitive() {
+    let upper = "MODULE M\nCONST ROBTARGET P := [[1,2,3],[1,0,0,0],[0,0,0,0],[9E9,9E9,9E9,9E9,9E9,9E9]];\nPROC MAIN()\nMOVEL P, V100, Z10, TOOL0\\WOBJ:=W;\nENDPROC\nENDMODULE\n";
+    let lower = upper.to_lowercase();
+    for src in [upper.to_string(), lower] {
+        let m = parse(&src);
+        assert_eq!(m.decls[0].data_type, DataType::RobTarget);
+        assert_eq!(m.decls[0].scope, Scope::Global);
+        let mv = m.moves().next().expect("one move");
+        assert_eq!(mv.kind, MoveKind::MoveL);
+        assert_eq!(
+            mv.wobj.as_ref().map(|a| a.text.to_lowercase()),
+            Some("w".to_string())
+        );
+    }
+}
+
+#[test]
+fn optional_arguments_with_and_without_comma() {
+    let src = "MODULE M\nPROC main()\n  MoveL p1, v100\\V:=150, z10, tool1\\WObj:=wobj1\\TLoad:=load1;\n  MoveL p1, v100, \\V:=150, z10, tool1, \\WObj:=wobj1, \\TLoad:=load1;\n  MoveJ \\Conc, p1, v100, z10, tool1;\n  MoveJ\\Conc,p1,v100,z10,tool1;\nENDPROC\nENDMODULE\n";
+    let m = parse(src);
+    let moves: Vec<_> = m.moves().collect();
+    assert_eq!(moves.len(), 4);
+    for mv in &moves[..2] {
+        assert_eq!(mv.speed.text, "v100");
+        assert_eq!(mv.zone.text, "z10");
+        assert_eq!(mv.tool.text, "tool1");
+        assert_eq!(mv.wobj.as_ref().map(|a| a.text.as_str()), Some("wobj1"));
+        assert_eq!(mv.tload.as_ref().map(|a| a.text.as_str()), Some("load1"));
+        let v = mv
+            .opt("v")
+            .and_then(|o| o.value.as_ref())
+            .expect("\\V given");
+        assert_eq!(v.text, "150");
+        assert!(!mv.conc);
+    }
+    for mv in &moves[2..] {
+        assert!(mv.conc);
+        assert!(matches!(&mv.target, Target::Named { name, .. } if name == "p1"));
+        assert_eq!(mv.tool.text, "tool1");
+    }
+}
+
+#[test]
+fn reltool_movec_inline_and_numbers() {
+    let src = "MODULE M\nPROC main()\n  MoveJ RelTool(p10,0,0,-50\\Rz:=45), v500, z20, tool0;\n  MoveC p1, p2, v100, z1, tool0;\n  MoveL [[800,-0.5,4.5e+2],[-1.5e-3,0,1,0],[0,0,-1,1],[9E9,9E9,9E9,9E9,9E9,9E9]], v100, fine, tool0;\nENDPROC\nENDMODULE\n";
+    let m = parse(src);
+    let mv: Vec<_> = m.moves().collect();
+    let Target::RelTool {
+        offsets, rz, rx, ..
+    } = &mv[0].target
+    else {
+        panic!("RelTool");
+    };
+    assert_eq!(offsets[2].value, Some(-50.0));
+    assert_eq!(rz.as_ref().and_then(|s| s.value), Some(45.0));
+    assert!(rx.is_none());
+    assert_eq!(mv[1].kind, MoveKind::MoveC);
+    assert!(matches!(&mv[1].via, Some(Target::Named { name, .. }) if name == "p1"));
+    assert!(matches!(&mv[1].target, Target::Named { name, .. } if name == "p2"));
+    let Target::Inline(rt) = &mv[2].target else {
+        panic!("inline");
+    };
+    // 4.5e+2 = 450; -1.5e-3 = -0.0015.
+    assert_eq!(&src[rt.trans[2].span.clone()], "4.5e+2");
+    assert_abs_diff_eq!(rt.trans[2].value, 450.0, epsilon = VALUE_TOL);
+    assert_eq!(&src[rt.rot[0].span.clone()], "-1.5e-3");
+    assert_abs_diff_eq!(rt.rot[0].value, -0.0015, epsilon = VALUE_TOL);
+    assert_eq!(mv[2].line, 5);
+}
+
+#[test]
+fn control_and_opaque_statements_keep_spans() {
+    let src = "MODULE M\nPROC main()\n  IF a > 1 THEN\n    TPWrite \"x;y\";\n  ENDIF\n  FOR i FROM 1 TO 3 DO\n    MoveL p{i}, v10, z1, tool0;\n  ENDFOR\nENDPROC\nENDMODULE\n";
+    let m = parse(src);
+    let body = &m.procs[0].body;
+    assert_eq!(body.len(), 6);
+    assert!(matches!(&body[0], Stmt::Control { keyword, .. } if keyword == "IF"));
+    assert_eq!(&src[body[1].span()], "TPWrite \"x;y\";");
+    let Stmt::Move(mv) = &body[4] else {
+        panic!("move in loop");
+    };
+    let Target::Named { index, .. } = &mv.target else {
+        panic!("named");
+    };
+    let index = index.as_ref().expect("index");
+    assert_eq!(index.text, "i");
+    assert_eq!(index.value, None);
+}
+
+#[test]
+fn crlf_input() {
+    let lf = sample();
+    let crlf = lf.replace('\n', "\r\n");
+    let a = parse(&lf);
+    let b = parse(&crlf);
+    assert_eq!(a.moves().count(), b.moves().count());
+    for (x, y) in a.moves().zip(b.moves()) {
+        assert_eq!(x.line, y.line);
+    }
+    for rt in all_robtargets(&b) {
+        check_spans(&crlf, rt);
+    }
+    assert_eq!(apply_edits(&crlf, &[]).expect("no edits"), crlf);
+    assert_eq!(line_ending(&crlf), "\r\n");
+    assert_eq!(line_ending(&lf), "\n");
+    // A malformed CRLF file reports the same line and column as with LF.
+    let bad = "MODULE Bad\r\n  PROC main()\r\n    MoveL p10, v100, z10, tool0\r\n    MoveL p20, v100, z10, tool0;\r\n  ENDPROC\r\nENDMODULE\r\n";
+    assert!(
+        parse_err(bad).starts_with("t.mod:3:32:"),
+        "{}",
+        parse_err(bad)
+    );
+}
+
+#[test]
+fn malformed_inputs_are_located() {
+    // Unterminated MODULE: reported at the MODULE keyword.
+    let e = parse_err("MODULE Bad\n  PROC main()\n  ENDPROC\n");
+    assert!(e.starts_with("t.mod:1:1: unterminated MODULE Bad"), "{e}");
+    // Rotation with 3 numbers; in `  CONST robtarget p := [[750,0,500],[0,1,0],…` the
+    // second inner `[` is at byte column 37 (2 + 5 + 1 + 9 + 1 + 1 + 1 + 2 + 1 = 23
+    // characters before the outer `[` at 24, then `[750,0,500],` is 12 more → 37).
+    let e = parse_err(
+        "MODULE Bad\n  CONST robtarget p := [[750,0,500],[0,1,0],[0,0,0,0],[9E9,9E9,9E9,9E9,9E9,9E9]];\nENDMODULE\n",
+    );
+    assert!(e.starts_with("t.mod:2:37: robtarget must be"), "{e}");
+    assert!(e.contains("has 3 values, expected 4"), "{e}");
+    assert!(e.contains("`[0,1,0]"), "{e}");
+    // Missing `;`: right after `    MoveL p10, v100, z10, tool0` (31 bytes) → column 32.
+    let e = parse_err(
+        "MODULE Bad\n  PROC main()\n    MoveL p10, v100, z10, tool0\n    MoveL p20, v100, z10, tool0;\n  ENDPROC\nENDMODULE\n",
+    );
+    assert!(e.starts_with("t.mod:3:32: missing `;`"), "{e}");
+    assert!(e.contains("tool0`"), "{e}");
+    // Missing `;` after a declaration: `  VAR num n := 3` is 16 bytes → column 17.
+    let e = parse_err("MODULE Bad\n  VAR num n := 3\n  VAR num m := 4;\nENDMODULE\n");
+    assert!(e.starts_with("t.mod:2:17:"), "{e}");
+    // Garbage at module level and inside a routine.
+    let e = parse_err("MODULE M\n  @@@ junk\nENDMODULE\n");
+    assert!(e.starts_with("t.mod:2:3: expected a declaration"), "{e}");
+    assert!(e.contains("`@@@ junk`"), "{e}");
+    let e = parse_err(
+        "MODULE M\nPROC main()\n  MoveL p1, v100, z10, tool0;\n  )))\nENDPROC\nENDMODULE\n",
+    );
+    assert!(e.starts_with("t.mod:4:3:"), "{e}");
+    // Wrong argument count.
+    let e = parse_err("MODULE M\nPROC main()\n  MoveL p1, v100, tool0;\nENDPROC\nENDMODULE\n");
+    assert!(e.starts_with("t.mod:3:3: MoveL takes 4 arguments"), "{e}");
+    // Missing ENDPROC.
+    let e = parse_err("MODULE M\nPROC main()\n  WaitTime 1;\nENDMODULE\n");
+    assert!(e.starts_with("t.mod:4:1: expected ENDPROC"), "{e}");
+    // Text after ENDMODULE, empty input.
+    let e = parse_err("MODULE M\nENDMODULE\nxyz\n");
+    assert!(e.starts_with("t.mod:3:1:"), "{e}");
+    let e = parse_err("");
+    assert!(e.starts_with("t.mod:1:1:"), "{e}");
+    // Array size mismatch.
+    let e = parse_err("MODULE M\nCONST num a{3} := [1,2];\nENDMODULE\n");
+    assert!(
+        e.starts_with("t.mod:2:19: array declared with 3 elements has 2"),
+        "{e}"
+    );
+}
+
+#[test]
+fn deep_nesting_is_an_error_not_a_crash() {
+    let deep = format!(
+        "MODULE M\nCONST num a := {}1{};\nENDMODULE\n",
+        "[".repeat(100_000),
+        "]".repeat(100_000)
+    );
+    assert!(parse_err(&deep).contains("nested too deeply"));
+    let offs = format!(
+        "MODULE M\nPROC main()\nMoveL {}p{}, v1, z1, t;\nENDPROC\nENDMODULE\n",
+        "Offs(".repeat(100_000),
+        ",0,0,0)".repeat(100_000)
+    );
+    assert!(parse_err(&offs).contains("nested too deeply"));
+}
+
+#[test]
+fn invalid_utf8_is_located() {
+    // `  ! caf` is 7 bytes, so the bad byte is at column 8 of line 2.
+    let e = parse_module_bytes(b"MODULE M\n  ! caf\xff\nENDMODULE\n", "b.mod").unwrap_err();
+    assert_eq!((e.line, e.column), (2, 8));
+    assert!(e.to_string().starts_with("b.mod:2:8: invalid UTF-8"), "{e}");
+    let ok = parse_module_bytes(sample().as_bytes(), "s.mod").expect("valid");
+    assert_eq!(ok.name, "Drilling");
+}
+
+#[test]
+fn rewrite_robtarget_numbers() {
+    let src = "MODULE M\r\n  CONST robtarget p10 := [[750,0,500],[0,0,1,0],[0,0,0,0],[9E9,9E9,9E9,9E9,9E9,9E9]];\r\n  PROC main()\r\n    MoveL p10, v100, z10, tool0;\r\n  ENDPROC\r\nENDMODULE\r\n";
+    let m = parse(src);
+    let rt = robtarget(&m, "p10");
+    let fmt = Format::default();
+    // Position: 750.1234 → 750.123; -0.0001 → "-0.000" → "0.000"; 499.9996 → 500.000.
+    // Quaternion [0, 0.001, -1, 0] has norm sqrt(1 + 1e-6); normalised it is
+    // [0, 0.0009999995, -0.9999995, 0]; its dot with the input [0,0,1,0] is
+    // negative, so it is negated: [0, -0.001000, 1.000000, 0] at 6 decimals.
+    let edits = robtarget_edits(
+        rt,
+        &[750.1234, -0.0001, 499.9996],
+        Some(&[0.0, 0.001, -1.0, 0.0]),
+        &fmt,
+    )
+    .expect("finite");
+    assert_eq!(edits.len(), 7);
+    let out = apply_edits(src, &edits).expect("apply");
+    let expected = src.replace(
+        "[[750,0,500],[0,0,1,0],",
+        "[[750.123,0.000,500.000],[0.000000,-0.001000,1.000000,0.000000],",
+    );
+    assert_eq!(out, expected);
+    // A materialised copy inserted after p10, indented and CRLF-terminated,
+    // and an annotation at the end of the move's line.
+    let lit = robtarget_literal(src, rt, &[751.0, 0.0, 500.0], None, &fmt).expect("literal");
+    assert_eq!(
+        lit,
+        "[[751.000,0.000,500.000],[0,0,1,0],[0,0,0,0],[9E9,9E9,9E9,9E9,9E9,9E9]]"
+    );
+    let decl = m.decl("p10").expect("p10");
+    let copy = decl_copy(src, decl, "p10_c1", &lit).expect("copy");
+    assert_eq!(copy, format!("CONST robtarget p10_c1 := {lit};"));
+    let mv = m.moves().next().expect("move");
+    let edits = [
+        insert_after_decl(src, &decl.span, &copy),
+        annotate(src, &mv.span, "compensated: p10_c1"),
+        Edit::replace(mv.target.span(), "p10_c1"),
+    ];
+    let out = apply_edits(src, &edits).expect("apply");
+    let expected = format!(
+        "MODULE M\r\n  CONST robtarget p10 := [[750,0,500],[0,0,1,0],[0,0,0,0],[9E9,9E9,9E9,9E9,9E9,9E9]];\r\n  {copy}\r\n  PROC main()\r\n    MoveL p10_c1, v100, z10, tool0; ! compensated: p10_c1\r\n  ENDPROC\r\nENDMODULE\r\n"
+    );
+    assert_eq!(out, expected);
+    // The output parses again.
+    parse(&out);
+}
+
+#[test]
+fn rewriter_rejects_bad_edits() {
+    let src = "abcdef";
+    let overlap = [Edit::replace(1..3, "x"), Edit::replace(2..4, "y")];
+    assert!(apply_edits(src, &overlap).is_err());
+    assert!(apply_edits(src, &[Edit::replace(4..9, "x")]).is_err());
+    assert!(apply_edits("é", &[Edit::replace(1..2, "x")]).is_err());
+    // Order of the list does not matter; insertions at one point keep their order.
+    let edits = [
+        Edit::replace(4..5, "E"),
+        Edit::insert(0, "<"),
+        Edit::insert(0, "["),
+        Edit::replace(0..1, "A"),
+    ];
+    assert_eq!(apply_edits(src, &edits).expect("ok"), "<[AbcdEf");
+}
+
+#[test]
+fn number_formatting() {
+    assert_eq!(format_fixed(1e-7, 3).as_deref(), Some("0.000"));
+    assert_eq!(format_fixed(-1e-7, 3).as_deref(), Some("0.000"));
+    assert_eq!(format_fixed(-2.5, 3).as_deref(), Some("-2.500"));
+    assert_eq!(
+        format_fixed(1e20, 1).as_deref(),
+        Some("100000000000000000000.0")
+    );
+    assert_eq!(format_fixed(0.12345, 4).as_deref(), Some("0.1235"));
+    assert_eq!(format_fixed(f64::NAN, 3), None);
+    // No reference: q1 ≥ 0. [-2,0,0,0] normalises to [-1,0,0,0], negated to [1,0,0,0].
+    let q = format_quaternion(&[-2.0, 0.0, 0.0, 0.0], None, &Format::default()).expect("ok");
+    assert_eq!(q, ["1.000000", "0.000000", "0.000000", "0.000000"]);
+    // [1,1,1,1]/2 = 0.5 each.
+    let q = format_quaternion(&[1.0, 1.0, 1.0, 1.0], None, &Format::default()).expect("ok");
+    assert_eq!(q, ["0.500000", "0.500000", "0.500000", "0.500000"]);
+    assert!(format_quaternion(&[0.0; 4], None, &Format::default()).is_err());
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 300, ..ProptestConfig::default() })]
+
+    #[test]
+    fn arbitrary_text_never_panics(s in "\\PC{0,200}") {
+        let _ = parse_module(&s, "p.mod");
+        let wrapped = format!("MODULE M\nPROC main()\n{s}\nENDPROC\nENDMODULE\n");
+        let _ = parse_module(&wrapped, "p.mod");
+    }
+
+    #[test]
+    fn rapid_like_text_never_panics(s in "[A-Za-z0-9 \\[\\]{}(),;:=\\\\!\"%.+\\-\n\r]{0,300}") {
+        let _ = parse_module(&s, "p.mod");
+        let wrapped = format!("MODULE M\nPROC main()\nMoveL {s}\nENDPROC\nENDMODULE\n");
+        let _ = parse_module(&wrapped, "p.mod");
+    }
+
+    #[test]
+    fn mutated_sample_never_panics(edits in proptest::collection::vec((any::<usize>(), any::<u8>(), 0u8..3), 1..8)) {
+        let mut bytes = sample().into_bytes();
+        for (pos, byte, op) in edits {
+            let len = bytes.len();
+            if len == 0 { break; }
+            let p = pos % len;
+            match op {
+                0 => bytes[p] = byte,
+                1 => { bytes.remove(p); }
+                _ => bytes.insert(p, byte),
+            }
+        }
+        if let Ok(m) = parse_module_bytes(&bytes, "m.mod") {
+            let text = std::str::from_utf8(&bytes).unwrap_or_default();
+            let same = apply_edits(text, &[]).ok();
+            prop_assert_eq!(same.as_deref(), Some(text));
+            for rt in all_robtargets(&m) {
+                prop_assert!(text.get(rt.span.clone()).is_some());
+            }
+        }
+    }
+}

@@ -1,4 +1,5 @@
 //! Writers: byte-faithful program emitters and deviation reports.
 
 pub mod gcode;
+pub mod rapid;
 pub mod report;

@@ -1,1 +1,588 @@
-//! rapid (in progress).
+//! ABB RAPID front end (syntax only).
+//!
+//! Parses one RAPID module (`MODULE … ENDMODULE`, optionally preceded by a
+//! `%%% … %%%` header) into a syntax tree that keeps byte spans into the
+//! source, so that [`crate::emit::rapid`] can rewrite exactly the numbers of a
+//! robtarget and leave every other byte untouched.
+//!
+//! What is understood: data declarations (robtarget, jointtarget, tooldata,
+//! wobjdata, speeddata, zonedata, num, bool, arrays of them), routines
+//! (`PROC`, `FUNC`, `TRAP`) and the motion instructions `MoveL`, `MoveJ`,
+//! `MoveC`, `MoveAbsJ` with their targets (named, array element, inline
+//! literal, `Offs`, `RelTool`). Every other statement is kept as an opaque
+//! statement with its span. The accepted subset is documented in
+//! `grammar/rapid.md`. Keywords are case-insensitive, as in RAPID.
+
+mod parser;
+mod typed;
+
+use std::ops::Range;
+
+use crate::error::Located;
+
+/// A byte range into the parsed source text.
+pub type Span = Range<usize>;
+
+/// A numeric literal: its value and the byte span of its text (sign included).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Number {
+    /// The value of the literal.
+    pub value: f64,
+    /// Where its text is in the source (`&src[span]` is e.g. `-1.5e-3`).
+    pub span: Span,
+}
+
+/// Value of RAPID's "unused external axis" marker (`9E9`, `9E+09`).
+pub const UNUSED_AXIS: f64 = 9e9;
+
+impl Number {
+    /// True when this is the `9E9` marker of an unused external axis.
+    pub fn is_unused_axis(&self) -> bool {
+        self.value >= UNUSED_AXIS * 0.999_999
+    }
+}
+
+/// A `robtarget`: `[[x,y,z],[q1,q2,q3,q4],[cf1,cf4,cf6,cfx],[ea,eb,ec,ed,ee,ef]]`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RobTarget {
+    /// Span of the whole literal, brackets included.
+    pub span: Span,
+    /// Position x, y, z in mm.
+    pub trans: [Number; 3],
+    /// Orientation quaternion q1 (scalar part), q2, q3, q4.
+    pub rot: [Number; 4],
+    /// Axis configuration cf1, cf4, cf6, cfx.
+    pub robconf: [Number; 4],
+    /// External axes a..f (`9E9` when unused).
+    pub extax: [Number; 6],
+}
+
+/// A `jointtarget`: `[[rax_1..rax_6],[eax_a..eax_f]]` (degrees or mm).
+#[derive(Debug, Clone, PartialEq)]
+pub struct JointTarget {
+    /// Span of the whole literal.
+    pub span: Span,
+    /// Robot axes 1..6.
+    pub robax: [Number; 6],
+    /// External axes a..f.
+    pub extax: [Number; 6],
+}
+
+/// A `pose`: `[[x,y,z],[q1,q2,q3,q4]]`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Pose {
+    /// Span of the whole literal.
+    pub span: Span,
+    /// Translation in mm.
+    pub trans: [Number; 3],
+    /// Orientation quaternion, q1 the scalar part.
+    pub rot: [Number; 4],
+}
+
+/// A `tooldata`: `[robhold, [[x,y,z],[q]], [mass, [cx,cy,cz], [aom q], ix, iy, iz]]`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ToolData {
+    /// Span of the whole literal.
+    pub span: Span,
+    /// TRUE when the robot holds the tool.
+    pub robhold: bool,
+    /// Tool frame (TCP) relative to the wrist flange.
+    pub tframe: Pose,
+    /// Mass in kg.
+    pub mass: Number,
+    /// Centre of gravity in mm (tool frame of the flange).
+    pub cog: [Number; 3],
+    /// Orientation of the principal axes of inertia.
+    pub aom: [Number; 4],
+    /// Moments of inertia ix, iy, iz in kg·m².
+    pub inertia: [Number; 3],
+}
+
+/// A `wobjdata`: `[robhold, ufprog, "ufmec", uframe, oframe]`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct WobjData {
+    /// Span of the whole literal.
+    pub span: Span,
+    /// TRUE when the robot holds the work object.
+    pub robhold: bool,
+    /// TRUE for a fixed user frame.
+    pub ufprog: bool,
+    /// Mechanical unit moving the user frame (string contents, quotes removed).
+    pub ufmec: String,
+    /// User frame.
+    pub uframe: Pose,
+    /// Object frame (relative to the user frame).
+    pub oframe: Pose,
+}
+
+/// A `speeddata`: `[v_tcp, v_ori, v_leax, v_reax]`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SpeedData {
+    /// Span of the whole literal.
+    pub span: Span,
+    /// TCP speed (mm/s), reorientation (deg/s), linear and rotating external axes.
+    pub values: [Number; 4],
+}
+
+/// A `zonedata`: `[finep, pzone_tcp, pzone_ori, pzone_eax, zone_ori, zone_leax, zone_reax]`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ZoneData {
+    /// Span of the whole literal.
+    pub span: Span,
+    /// TRUE for a stop point.
+    pub finep: bool,
+    /// The six zone sizes.
+    pub values: [Number; 6],
+}
+
+/// The initial value of a declaration.
+#[derive(Debug, Clone, PartialEq)]
+pub enum DataValue {
+    /// A robtarget literal.
+    RobTarget(RobTarget),
+    /// A jointtarget literal.
+    JointTarget(JointTarget),
+    /// A tooldata literal.
+    ToolData(ToolData),
+    /// A wobjdata literal.
+    WobjData(WobjData),
+    /// A speeddata literal.
+    SpeedData(SpeedData),
+    /// A zonedata literal.
+    ZoneData(ZoneData),
+    /// A num literal.
+    Num(Number),
+    /// A bool literal (`TRUE` / `FALSE`).
+    Bool {
+        /// The value.
+        value: bool,
+        /// Span of the keyword.
+        span: Span,
+    },
+    /// An array value `[v1, v2, …]` of a declaration with `{n}`.
+    Array {
+        /// Span of the whole aggregate.
+        span: Span,
+        /// The elements, in order.
+        items: Vec<DataValue>,
+    },
+    /// Anything else (another data type, an expression, a name): passed through.
+    Other {
+        /// Span of the value text.
+        span: Span,
+    },
+}
+
+impl DataValue {
+    /// Span of the value text.
+    pub fn span(&self) -> Span {
+        match self {
+            DataValue::RobTarget(v) => v.span.clone(),
+            DataValue::JointTarget(v) => v.span.clone(),
+            DataValue::ToolData(v) => v.span.clone(),
+            DataValue::WobjData(v) => v.span.clone(),
+            DataValue::SpeedData(v) => v.span.clone(),
+            DataValue::ZoneData(v) => v.span.clone(),
+            DataValue::Num(v) => v.span.clone(),
+            DataValue::Bool { span, .. }
+            | DataValue::Array { span, .. }
+            | DataValue::Other { span } => span.clone(),
+        }
+    }
+}
+
+/// The data types the parser understands; every other type is `Other`.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum DataType {
+    /// `robtarget`.
+    RobTarget,
+    /// `jointtarget`.
+    JointTarget,
+    /// `tooldata`.
+    ToolData,
+    /// `wobjdata`.
+    WobjData,
+    /// `speeddata`.
+    SpeedData,
+    /// `zonedata`.
+    ZoneData,
+    /// `num`.
+    Num,
+    /// `bool`.
+    Bool,
+    /// Any other type name, as written.
+    Other(String),
+}
+
+impl DataType {
+    /// Classifies a type name (case-insensitive).
+    pub fn from_name(name: &str) -> DataType {
+        match name.to_ascii_lowercase().as_str() {
+            "robtarget" => DataType::RobTarget,
+            "jointtarget" => DataType::JointTarget,
+            "tooldata" => DataType::ToolData,
+            "wobjdata" => DataType::WobjData,
+            "speeddata" => DataType::SpeedData,
+            "zonedata" => DataType::ZoneData,
+            "num" => DataType::Num,
+            "bool" => DataType::Bool,
+            _ => DataType::Other(name.to_string()),
+        }
+    }
+}
+
+/// Scope prefix of a declaration or routine.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Scope {
+    /// No prefix: visible in the whole task.
+    Global,
+    /// `LOCAL`.
+    Local,
+    /// `TASK`.
+    Task,
+}
+
+/// Storage class of a declaration.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Storage {
+    /// `CONST`.
+    Const,
+    /// `PERS`.
+    Pers,
+    /// `VAR`.
+    Var,
+}
+
+/// `[LOCAL|TASK] CONST|PERS|VAR type name[{n}] [:= value];`
+#[derive(Debug, Clone, PartialEq)]
+pub struct Decl {
+    /// Scope prefix.
+    pub scope: Scope,
+    /// Storage class.
+    pub storage: Storage,
+    /// Classified type.
+    pub data_type: DataType,
+    /// The type name as written.
+    pub type_name: String,
+    /// The data name as written.
+    pub name: String,
+    /// Span of the data name.
+    pub name_span: Span,
+    /// Array dimensions (`{12}` gives `[12]`); empty for a scalar.
+    pub dims: Vec<usize>,
+    /// The initial value, if any.
+    pub value: Option<DataValue>,
+    /// From the first keyword to the `;` included.
+    pub span: Span,
+    /// 1-based line of the first keyword.
+    pub line: usize,
+}
+
+/// An argument passed as written: its trimmed text and span.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Arg {
+    /// The text (e.g. `v100`, `tool1`, `[500,500,5000,1000]`).
+    pub text: String,
+    /// Where it is.
+    pub span: Span,
+}
+
+/// An optional argument `\Name` or `\Name:=value`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct OptArg {
+    /// Its name without the backslash, as written (`WObj`).
+    pub name: String,
+    /// The value after `:=`, absent for a switch (`\Conc`).
+    pub value: Option<Arg>,
+    /// From the backslash to the end of the value.
+    pub span: Span,
+}
+
+/// A scalar argument of `Offs`/`RelTool`: its text and, when it is a plain
+/// numeric literal, its value.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Scalar {
+    /// The trimmed text.
+    pub text: String,
+    /// Where it is.
+    pub span: Span,
+    /// The value when the text is a numeric literal.
+    pub value: Option<f64>,
+}
+
+/// An array index `{…}`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Index {
+    /// The text between the braces, trimmed (`2`, `i`, `i+1`).
+    pub text: String,
+    /// Span of that text.
+    pub span: Span,
+    /// The value when it is an integer literal (1-based, as in RAPID).
+    pub value: Option<usize>,
+}
+
+/// The target expression of a move.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Target {
+    /// A data name, optionally indexed: `p10`, `holes{3}`.
+    Named {
+        /// The name as written.
+        name: String,
+        /// The index, for an array element.
+        index: Option<Index>,
+        /// The whole expression.
+        span: Span,
+    },
+    /// An inline robtarget literal.
+    Inline(RobTarget),
+    /// An inline jointtarget literal (MoveAbsJ).
+    InlineJoint(JointTarget),
+    /// `Offs(base, dx, dy, dz)`: displacement in the work-object frame.
+    Offs {
+        /// The displaced target.
+        base: Box<Target>,
+        /// dx, dy, dz in mm.
+        offsets: [Scalar; 3],
+        /// The whole call.
+        span: Span,
+    },
+    /// `RelTool(base, dx, dy, dz [\Rx:=a] [\Ry:=b] [\Rz:=c])`: displacement
+    /// and rotation (degrees) in the tool frame.
+    RelTool {
+        /// The displaced target.
+        base: Box<Target>,
+        /// dx, dy, dz in mm.
+        offsets: [Scalar; 3],
+        /// Rotation about the tool x axis.
+        rx: Option<Scalar>,
+        /// Rotation about the tool y axis.
+        ry: Option<Scalar>,
+        /// Rotation about the tool z axis.
+        rz: Option<Scalar>,
+        /// The whole call.
+        span: Span,
+    },
+    /// Any other expression (a function call such as `CRobT()`): passed through.
+    Other {
+        /// The trimmed text.
+        text: String,
+        /// Where it is.
+        span: Span,
+    },
+}
+
+impl Target {
+    /// Span of the whole target expression.
+    pub fn span(&self) -> Span {
+        match self {
+            Target::Inline(r) => r.span.clone(),
+            Target::InlineJoint(j) => j.span.clone(),
+            Target::Named { span, .. }
+            | Target::Offs { span, .. }
+            | Target::RelTool { span, .. }
+            | Target::Other { span, .. } => span.clone(),
+        }
+    }
+}
+
+/// Which motion instruction.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum MoveKind {
+    /// `MoveL`: linear.
+    MoveL,
+    /// `MoveJ`: joint interpolated to a robtarget.
+    MoveJ,
+    /// `MoveC`: circular through a via point.
+    MoveC,
+    /// `MoveAbsJ`: joint interpolated to a jointtarget.
+    MoveAbsJ,
+}
+
+impl MoveKind {
+    /// The instruction name in its canonical spelling.
+    pub fn name(self) -> &'static str {
+        match self {
+            MoveKind::MoveL => "MoveL",
+            MoveKind::MoveJ => "MoveJ",
+            MoveKind::MoveC => "MoveC",
+            MoveKind::MoveAbsJ => "MoveAbsJ",
+        }
+    }
+}
+
+/// A motion instruction with its arguments.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Move {
+    /// Which instruction.
+    pub kind: MoveKind,
+    /// The circle point of a `MoveC`.
+    pub via: Option<Target>,
+    /// The target (`ToPoint`, or `ToJointPos` for `MoveAbsJ`).
+    pub target: Target,
+    /// Speed argument (`v100`).
+    pub speed: Arg,
+    /// Zone argument (`z10`, `fine`).
+    pub zone: Arg,
+    /// Tool argument.
+    pub tool: Arg,
+    /// Value of `\WObj:=`.
+    pub wobj: Option<Arg>,
+    /// Value of `\TLoad:=`.
+    pub tload: Option<Arg>,
+    /// True when `\Conc` is given.
+    pub conc: bool,
+    /// Every optional argument in source order (`\V`, `\Z`, `\ID`, …).
+    pub optional: Vec<OptArg>,
+    /// From the instruction name to the `;` included.
+    pub span: Span,
+    /// 1-based line of the instruction name.
+    pub line: usize,
+}
+
+impl Move {
+    /// The optional argument `name` (case-insensitive), if given.
+    pub fn opt(&self, name: &str) -> Option<&OptArg> {
+        self.optional
+            .iter()
+            .find(|o| o.name.eq_ignore_ascii_case(name))
+    }
+}
+
+/// One statement of a routine body.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Stmt {
+    /// A motion instruction (boxed: it is much larger than the other variants).
+    Move(Box<Move>),
+    /// A routine-local data declaration (boxed, as `Move`).
+    Decl(Box<Decl>),
+    /// A control-flow line (`IF … THEN`, `ELSE`, `ENDIF`, `FOR … DO`,
+    /// `ENDFOR`, `WHILE … DO`, `TEST …`, `CASE …:`, labels, `ERROR`). The
+    /// bodies are not nested: the statements between stay in the flat list.
+    Control {
+        /// The leading keyword in upper case (`IF`, `ENDFOR`, or `LABEL`).
+        keyword: String,
+        /// The line's span.
+        span: Span,
+        /// 1-based line.
+        line: usize,
+    },
+    /// Any other statement, up to and including its `;`, passed through.
+    Opaque {
+        /// Its span.
+        span: Span,
+        /// 1-based line of its first byte.
+        line: usize,
+    },
+}
+
+impl Stmt {
+    /// The statement's span.
+    pub fn span(&self) -> Span {
+        match self {
+            Stmt::Move(m) => m.span.clone(),
+            Stmt::Decl(d) => d.span.clone(),
+            Stmt::Control { span, .. } | Stmt::Opaque { span, .. } => span.clone(),
+        }
+    }
+}
+
+/// Routine kind.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum RoutineKind {
+    /// `PROC … ENDPROC`.
+    Proc,
+    /// `FUNC type … ENDFUNC`.
+    Func,
+    /// `TRAP … ENDTRAP`.
+    Trap,
+}
+
+/// A routine (`PROC`, `FUNC` or `TRAP`) and its flat list of statements.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Proc {
+    /// Routine kind.
+    pub kind: RoutineKind,
+    /// Scope prefix.
+    pub scope: Scope,
+    /// Routine name.
+    pub name: String,
+    /// Text between the parentheses (parameters), not parsed.
+    pub params: Option<Span>,
+    /// The statements, in order.
+    pub body: Vec<Stmt>,
+    /// From the first keyword to the end keyword included.
+    pub span: Span,
+    /// 1-based line of the routine keyword.
+    pub line: usize,
+}
+
+/// A parsed RAPID module.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Module {
+    /// Module name.
+    pub name: String,
+    /// From `MODULE` to `ENDMODULE` included.
+    pub span: Span,
+    /// The `%%% … %%%` header, if any.
+    pub header: Option<Span>,
+    /// Text between the parentheses after the name (`SYSMODULE, NOSTEPIN`).
+    pub attributes: Option<Span>,
+    /// Module-level declarations, in order.
+    pub decls: Vec<Decl>,
+    /// Routines, in order.
+    pub procs: Vec<Proc>,
+}
+
+impl Module {
+    /// The module-level declaration named `name` (case-insensitive, as RAPID).
+    pub fn decl(&self, name: &str) -> Option<&Decl> {
+        self.decls
+            .iter()
+            .find(|d| d.name.eq_ignore_ascii_case(name))
+    }
+
+    /// The routine named `name` (case-insensitive).
+    pub fn proc(&self, name: &str) -> Option<&Proc> {
+        self.procs
+            .iter()
+            .find(|p| p.name.eq_ignore_ascii_case(name))
+    }
+
+    /// Every motion instruction of every routine, in source order.
+    pub fn moves(&self) -> impl Iterator<Item = &Move> {
+        self.procs.iter().flat_map(|p| {
+            p.body.iter().filter_map(|s| match s {
+                Stmt::Move(m) => Some(m.as_ref()),
+                _ => None,
+            })
+        })
+    }
+}
+
+/// Parses a RAPID module from text. `file` is used in error messages only.
+///
+/// Errors read `file:line:column: what, found `text``; no input panics.
+pub fn parse_module(src: &str, file: &str) -> Result<Module, Located> {
+    parser::Parser::new(src, file).parse()
+}
+
+/// Parses a RAPID module from bytes, rejecting invalid UTF-8 with the line
+/// and column of the first bad byte.
+pub fn parse_module_bytes(src: &[u8], file: &str) -> Result<Module, Located> {
+    match std::str::from_utf8(src) {
+        Ok(text) => parse_module(text, file),
+        Err(e) => {
+            let good = src.get(..e.valid_up_to()).unwrap_or_default();
+            let line = 1 + good.iter().filter(|&&b| b == b'\n').count();
+            let line_start = good.iter().rposition(|&b| b == b'\n').map_or(0, |p| p + 1);
+            let column = good.len() - line_start + 1;
+            let byte = src.get(e.valid_up_to()).copied().unwrap_or(0);
+            Err(Located::new(
+                file,
+                line,
+                column,
+                format!("invalid UTF-8: byte 0x{byte:02X} is not valid text"),
+            ))
+        }
+    }
+}

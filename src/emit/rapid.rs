@@ -1,0 +1,296 @@
+//! Byte-faithful RAPID rewriting.
+//!
+//! The rewriter applies a list of [`Edit`]s (a byte span of the source and
+//! its replacement text) and copies every other byte unchanged, so a program
+//! with no edits comes out identical. Helpers format compensated robtarget
+//! numbers (fixed decimals, never exponent notation, never `-0.000`), append
+//! a `!` annotation at the end of a statement's line and insert new
+//! declarations after an existing one with its indentation and line ending.
+
+use std::ops::Range;
+
+use crate::error::Error;
+use crate::program::rapid::{Decl, RobTarget};
+
+/// One edit: replace `span` of the source with `text` (an empty span inserts).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Edit {
+    /// Byte range of the source to replace.
+    pub span: Range<usize>,
+    /// Replacement text.
+    pub text: String,
+}
+
+impl Edit {
+    /// Replaces `span` with `text`.
+    pub fn replace(span: Range<usize>, text: impl Into<String>) -> Self {
+        Edit {
+            span,
+            text: text.into(),
+        }
+    }
+
+    /// Inserts `text` at byte offset `at`.
+    pub fn insert(at: usize, text: impl Into<String>) -> Self {
+        Edit {
+            span: at..at,
+            text: text.into(),
+        }
+    }
+}
+
+/// Number formatting of rewritten robtargets.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Format {
+    /// Decimals of positions in mm (default 3).
+    pub position_decimals: usize,
+    /// Decimals of quaternion components (default 6).
+    pub quaternion_decimals: usize,
+}
+
+impl Default for Format {
+    fn default() -> Self {
+        Format {
+            position_decimals: 3,
+            quaternion_decimals: 6,
+        }
+    }
+}
+
+/// Applies `edits` (non-overlapping, in any order) to `src`. Insertions at
+/// the same offset keep their order in `edits`. Fails, without panicking, on
+/// an edit outside the source, inside a UTF-8 character, or overlapping
+/// another one.
+pub fn apply_edits(src: &str, edits: &[Edit]) -> Result<String, Error> {
+    let mut order: Vec<&Edit> = edits.iter().collect();
+    order.sort_by_key(|e| (e.span.start, e.span.end));
+    let extra: usize = edits.iter().map(|e| e.text.len()).sum();
+    let mut out = String::with_capacity(src.len() + extra);
+    let mut at = 0;
+    for e in order {
+        let Range { start, end } = e.span;
+        if start > end || end > src.len() {
+            return Err(Error::Usage(format!(
+                "edit {start}..{end} is outside the program ({} bytes)",
+                src.len()
+            )));
+        }
+        if start < at {
+            return Err(Error::Usage(format!(
+                "edit {start}..{end} overlaps a previous edit ending at {at}"
+            )));
+        }
+        let (Some(keep), Some(_)) = (src.get(at..start), src.get(start..end)) else {
+            return Err(Error::Usage(format!(
+                "edit {start}..{end} does not fall on character boundaries"
+            )));
+        };
+        out.push_str(keep);
+        out.push_str(&e.text);
+        at = end;
+    }
+    out.push_str(src.get(at..).unwrap_or(""));
+    Ok(out)
+}
+
+/// Formats `v` with exactly `decimals` decimals, never in exponent notation
+/// and never as a negative zero. `None` for NaN or infinity.
+pub fn format_fixed(v: f64, decimals: usize) -> Option<String> {
+    if !v.is_finite() {
+        return None;
+    }
+    let s = format!("{v:.decimals$}");
+    match s.strip_prefix('-') {
+        Some(abs) if abs.bytes().all(|b| b == b'0' || b == b'.') => Some(abs.to_string()),
+        _ => Some(s),
+    }
+}
+
+/// Formats a position (mm) with `fmt.position_decimals` decimals.
+pub fn format_position(p: &[f64; 3], fmt: &Format) -> Result<[String; 3], Error> {
+    let f = |v: f64| {
+        format_fixed(v, fmt.position_decimals)
+            .ok_or_else(|| Error::Usage(format!("position component {v} is not a finite number")))
+    };
+    Ok([f(p[0])?, f(p[1])?, f(p[2])?])
+}
+
+/// Normalises a quaternion `[q1 (scalar), q2, q3, q4]` and chooses its sign:
+/// the one closest to `reference` (the input's quaternion, so that a tool
+/// pointing down keeps the sign style it was written with), or when there is
+/// no usable reference the one with q1 ≥ 0 (first non-zero component
+/// positive when q1 is zero). `None` for a zero or non-finite quaternion.
+pub fn normalise_quaternion(q: &[f64; 4], reference: Option<&[f64; 4]>) -> Option<[f64; 4]> {
+    let norm = q.iter().map(|c| c * c).sum::<f64>().sqrt();
+    if !norm.is_finite() || norm <= f64::EPSILON {
+        return None;
+    }
+    let mut n = q.map(|c| c / norm);
+    let dot = reference.map_or(0.0, |r| n.iter().zip(r).map(|(a, b)| a * b).sum::<f64>());
+    /// Below this |dot| the reference cannot tell the two signs apart.
+    const SIGN_DOT_MIN: f64 = 1e-9;
+    let flip = if dot.abs() > SIGN_DOT_MIN {
+        dot < 0.0
+    } else {
+        n.iter()
+            .find(|c| c.abs() > SIGN_DOT_MIN)
+            .is_some_and(|&c| c < 0.0)
+    };
+    if flip {
+        n = n.map(|c| -c);
+    }
+    Some(n)
+}
+
+/// Normalises (see [`normalise_quaternion`]) and formats a quaternion with
+/// `fmt.quaternion_decimals` decimals.
+pub fn format_quaternion(
+    q: &[f64; 4],
+    reference: Option<&[f64; 4]>,
+    fmt: &Format,
+) -> Result<[String; 4], Error> {
+    let n = normalise_quaternion(q, reference)
+        .ok_or_else(|| Error::Usage(format!("quaternion {q:?} cannot be normalised")))?;
+    let f = |v: f64| format_fixed(v, fmt.quaternion_decimals).unwrap_or_else(|| "0".to_string());
+    Ok([f(n[0]), f(n[1]), f(n[2]), f(n[3])])
+}
+
+/// Edits replacing exactly the position numbers of `rt` with `pos` and, when
+/// given, its quaternion numbers with `quat` (normalised, sign kept close to
+/// the original quaternion). Configuration and external axes are untouched.
+pub fn robtarget_edits(
+    rt: &RobTarget,
+    pos: &[f64; 3],
+    quat: Option<&[f64; 4]>,
+    fmt: &Format,
+) -> Result<Vec<Edit>, Error> {
+    let mut edits = Vec::with_capacity(7);
+    for (n, text) in rt.trans.iter().zip(format_position(pos, fmt)?) {
+        edits.push(Edit::replace(n.span.clone(), text));
+    }
+    if let Some(q) = quat {
+        let reference = rt.rot.each_ref().map(|n| n.value);
+        for (n, text) in rt
+            .rot
+            .iter()
+            .zip(format_quaternion(q, Some(&reference), fmt)?)
+        {
+            edits.push(Edit::replace(n.span.clone(), text));
+        }
+    }
+    Ok(edits)
+}
+
+/// The text of `rt`'s literal in `src` with its position (and quaternion)
+/// replaced, every other character as written: for a materialised copy.
+pub fn robtarget_literal(
+    src: &str,
+    rt: &RobTarget,
+    pos: &[f64; 3],
+    quat: Option<&[f64; 4]>,
+    fmt: &Format,
+) -> Result<String, Error> {
+    let base = rt.span.start;
+    let literal = src.get(rt.span.clone()).ok_or_else(|| {
+        Error::Usage(format!(
+            "robtarget span {:?} is outside the program",
+            rt.span
+        ))
+    })?;
+    let edits = robtarget_edits(rt, pos, quat, fmt)?
+        .into_iter()
+        .map(|e| Edit {
+            span: e.span.start.saturating_sub(base)..e.span.end.saturating_sub(base),
+            text: e.text,
+        })
+        .collect::<Vec<_>>();
+    apply_edits(literal, &edits)
+}
+
+/// The line ending the file uses: `"\r\n"` when its first line break is
+/// CRLF, otherwise `"\n"`.
+pub fn line_ending(src: &str) -> &'static str {
+    match src.find('\n') {
+        Some(p) if p > 0 && src.as_bytes().get(p - 1) == Some(&b'\r') => "\r\n",
+        _ => "\n",
+    }
+}
+
+/// Offset of the end of the line holding byte `pos` (before its `\r\n` or `\n`).
+fn line_end(src: &str, pos: usize) -> usize {
+    let nl = src
+        .get(pos..)
+        .and_then(|s| s.find('\n'))
+        .map_or(src.len(), |k| pos + k);
+    if nl > 0 && nl < src.len() && src.as_bytes().get(nl - 1) == Some(&b'\r') {
+        nl - 1
+    } else {
+        nl
+    }
+}
+
+/// Offset of the start of the line holding byte `pos`.
+fn line_start(src: &str, pos: usize) -> usize {
+    src.get(..pos)
+        .and_then(|s| s.rfind('\n'))
+        .map_or(0, |k| k + 1)
+}
+
+/// An insertion of ` ! comment` at the end of the line where the statement
+/// `stmt` ends (before the line break). Line breaks in `comment` become spaces.
+pub fn annotate(src: &str, stmt: &Range<usize>, comment: &str) -> Edit {
+    let last = stmt.end.saturating_sub(1).max(stmt.start);
+    let at = line_end(src, last);
+    let one_line: String = comment
+        .chars()
+        .map(|c| if c == '\r' || c == '\n' { ' ' } else { c })
+        .collect();
+    Edit::insert(at, format!(" ! {one_line}"))
+}
+
+/// An insertion of `text` (one or more lines, without a final line break) on
+/// new lines just after the line where the declaration `decl` ends, each line
+/// indented like the declaration and ended with the file's line ending.
+pub fn insert_after_decl(src: &str, decl: &Range<usize>, text: &str) -> Edit {
+    let ls = line_start(src, decl.start);
+    let indent: String = src
+        .get(ls..decl.start)
+        .unwrap_or("")
+        .chars()
+        .take_while(|c| *c == ' ' || *c == '\t')
+        .collect();
+    let eol = line_ending(src);
+    let end = line_end(src, decl.end.saturating_sub(1).max(decl.start));
+    let mut block = String::new();
+    for line in text.lines() {
+        block.push_str(&indent);
+        block.push_str(line);
+        block.push_str(eol);
+    }
+    // After the existing line break, or a new one when the file ends here.
+    match src.get(end..) {
+        Some(rest) if rest.starts_with("\r\n") => Edit::insert(end + 2, block),
+        Some(rest) if rest.starts_with('\n') => Edit::insert(end + 1, block),
+        _ => {
+            let trimmed = block.strip_suffix(eol).unwrap_or(&block);
+            Edit::insert(end, format!("{eol}{trimmed}"))
+        }
+    }
+}
+
+/// The text of `decl` as written in `src` with its name replaced by
+/// `new_name` and its value by `value` (e.g. a materialised compensated
+/// copy `CONST robtarget p10_c1 := [...];`). `None` when `decl` has no value.
+pub fn decl_copy(src: &str, decl: &Decl, new_name: &str, value: &str) -> Option<String> {
+    let v = decl.value.as_ref()?.span();
+    let base = decl.span.start;
+    let text = src.get(decl.span.clone())?;
+    let edits = [
+        Edit::replace(
+            decl.name_span.start.checked_sub(base)?..decl.name_span.end.checked_sub(base)?,
+            new_name,
+        ),
+        Edit::replace(v.start.checked_sub(base)?..v.end.checked_sub(base)?, value),
+    ];
+    apply_edits(text, &edits).ok()
+}

@@ -1,0 +1,1183 @@
+//! The RAPID parser proper: nom combinators for the lexical pieces (numbers,
+//! identifiers, keywords) and a small recursive-descent driver for modules,
+//! declarations, routines and motion instructions. Positions are byte offsets
+//! into the source, computed from the remaining input.
+
+use nom::IResult;
+use nom::branch::alt;
+use nom::bytes::complete::take_while;
+use nom::character::complete::{char, digit0, digit1, one_of, satisfy};
+use nom::combinator::{opt, recognize};
+use nom::error::{ErrorKind, ParseError};
+use nom::sequence::{pair, tuple};
+
+use super::{
+    Arg, DataType, Decl, Index, Module, Move, MoveKind, Number, OptArg, Proc, RoutineKind, Scalar,
+    Scope, Span, Stmt, Storage, Target,
+};
+use crate::error::Located;
+
+/// A parse failure: where (the remaining input) and what.
+#[derive(Debug)]
+pub(super) struct PErr<'a> {
+    pub(super) at: &'a str,
+    pub(super) msg: String,
+}
+
+impl<'a> ParseError<&'a str> for PErr<'a> {
+    fn from_error_kind(input: &'a str, kind: ErrorKind) -> Self {
+        PErr {
+            at: input,
+            msg: format!("unexpected text ({kind:?})"),
+        }
+    }
+    fn append(_: &'a str, _: ErrorKind, other: Self) -> Self {
+        other
+    }
+}
+
+pub(super) type PResult<'a, T> = IResult<&'a str, T, PErr<'a>>;
+
+/// Generic syntax of a data value, before it is checked against its type.
+#[derive(Debug)]
+pub(super) enum Val {
+    /// `[a, b, …]`.
+    List { span: Span, items: Vec<Val> },
+    /// A numeric literal.
+    Num(Number),
+    /// A string literal; `text` is the contents with `""` undoubled.
+    Str { span: Span, text: String },
+    /// A bare identifier (`TRUE`, `p10`).
+    Word { span: Span, text: String },
+    /// Any other expression.
+    Expr { span: Span },
+}
+
+impl Val {
+    pub(super) fn span(&self) -> Span {
+        match self {
+            Val::Num(n) => n.span.clone(),
+            Val::List { span, .. }
+            | Val::Str { span, .. }
+            | Val::Word { span, .. }
+            | Val::Expr { span } => span.clone(),
+        }
+    }
+}
+
+/// Words that start a statement; a line starting with one of them cannot be
+/// the continuation of the previous statement (used to report a missing `;`).
+const STATEMENT_WORDS: &[&str] = &[
+    "MoveL",
+    "MoveJ",
+    "MoveC",
+    "MoveAbsJ",
+    "ENDPROC",
+    "ENDFUNC",
+    "ENDTRAP",
+    "ENDMODULE",
+    "ENDIF",
+    "ENDFOR",
+    "ENDWHILE",
+    "ENDTEST",
+    "ELSE",
+    "ELSEIF",
+    "IF",
+    "FOR",
+    "WHILE",
+    "TEST",
+    "PROC",
+    "FUNC",
+    "TRAP",
+    "CONST",
+    "VAR",
+    "PERS",
+    "LOCAL",
+    "RETURN",
+];
+
+fn is_ident_byte(b: u8) -> bool {
+    b.is_ascii_alphanumeric() || b == b'_'
+}
+
+/// Matches `word` case-insensitively at the start of `i`, as a whole word.
+pub(super) fn kw<'a>(i: &'a str, word: &str) -> Option<&'a str> {
+    let head = i.get(..word.len())?;
+    if !head.eq_ignore_ascii_case(word) {
+        return None;
+    }
+    let rest = i.get(word.len()..)?;
+    if rest.bytes().next().is_some_and(is_ident_byte) {
+        return None;
+    }
+    Some(rest)
+}
+
+/// Skips whitespace and `!` comments.
+pub(super) fn ws(mut i: &str) -> &str {
+    loop {
+        let t = i.trim_start_matches([' ', '\t', '\r', '\n', '\u{feff}']);
+        if let Some(c) = t.strip_prefix('!') {
+            i = c.find('\n').map_or("", |p| &c[p..]);
+        } else {
+            return t;
+        }
+    }
+}
+
+/// An identifier: a letter followed by letters, digits and underscores.
+pub(super) fn ident(i: &str) -> PResult<'_, &str> {
+    recognize(pair(
+        satisfy(|c| c.is_ascii_alphabetic()),
+        take_while(|c: char| c.is_ascii_alphanumeric() || c == '_'),
+    ))(i)
+}
+
+/// The text of a numeric literal: optional sign, digits with an optional
+/// fraction (or a fraction alone) and an optional exponent.
+pub(super) fn number_text(i: &str) -> PResult<'_, &str> {
+    recognize(tuple((
+        opt(one_of("+-")),
+        alt((
+            recognize(pair(digit1, opt(pair(char('.'), digit0)))),
+            recognize(pair(char('.'), digit1)),
+        )),
+        opt(tuple((one_of("eE"), opt(one_of("+-")), digit1))),
+    )))(i)
+}
+
+/// Parses a whole string as a numeric literal.
+pub(super) fn parse_number(text: &str) -> Option<f64> {
+    match number_text(text) {
+        Ok(("", t)) => t.parse::<f64>().ok().filter(|v| v.is_finite()),
+        _ => None,
+    }
+}
+
+/// The parser state: the source, for positions and messages.
+pub(super) struct Parser<'a> {
+    src: &'a str,
+    file: &'a str,
+    line_starts: Vec<usize>,
+    /// Current nesting of aggregates and `Offs`/`RelTool` calls.
+    depth: std::cell::Cell<usize>,
+}
+
+/// Deepest nesting of aggregates / target functions accepted (a robtarget
+/// array needs 3); deeper input is rejected instead of exhausting the stack.
+const MAX_NESTING: usize = 16;
+
+/// How a body statement ends (for the statement scanner).
+struct Scan {
+    /// Offset (within the scanned text) of the stop.
+    stop: usize,
+    /// Offset just after the last significant (non-blank, non-comment) byte.
+    last: usize,
+}
+
+impl<'a> Parser<'a> {
+    pub(super) fn new(src: &'a str, file: &'a str) -> Self {
+        let mut line_starts = vec![0];
+        line_starts.extend(
+            src.bytes()
+                .enumerate()
+                .filter(|&(_, b)| b == b'\n')
+                .map(|(k, _)| k + 1),
+        );
+        Parser {
+            src,
+            file,
+            line_starts,
+            depth: std::cell::Cell::new(0),
+        }
+    }
+
+    pub(super) fn parse(&self) -> Result<Module, Located> {
+        match self.module(self.src) {
+            Ok((_, m)) => Ok(m),
+            Err(nom::Err::Error(e)) | Err(nom::Err::Failure(e)) => Err(self.located(&e)),
+            Err(nom::Err::Incomplete(_)) => Err(Located::new(
+                self.file,
+                1,
+                1,
+                "incomplete input".to_string(),
+            )),
+        }
+    }
+
+    // ----- positions and messages -------------------------------------
+
+    pub(super) fn pos(&self, rest: &str) -> usize {
+        self.src.len().saturating_sub(rest.len())
+    }
+
+    pub(super) fn at(&self, pos: usize) -> &'a str {
+        self.src.get(pos..).unwrap_or("")
+    }
+
+    pub(super) fn line_of(&self, pos: usize) -> usize {
+        self.line_starts.partition_point(|&s| s <= pos).max(1)
+    }
+
+    fn located(&self, e: &PErr) -> Located {
+        let pos = self.pos(e.at);
+        let line = self.line_of(pos);
+        let start = self.line_starts.get(line - 1).copied().unwrap_or(0);
+        Located::new(self.file, line, pos - start + 1, e.msg.clone())
+    }
+
+    /// The error "what, found `text at pos`".
+    pub(super) fn err_found(&self, pos: usize, what: &str) -> nom::Err<PErr<'a>> {
+        let rest = self.at(pos);
+        let line = rest.split(['\r', '\n']).next().unwrap_or("");
+        let msg = if rest.is_empty() {
+            format!("{what}, found end of file")
+        } else if line.trim().is_empty() {
+            format!("{what}, found end of line")
+        } else {
+            format!("{what}, found `{}`", clip(line, 40))
+        };
+        nom::Err::Failure(PErr { at: rest, msg })
+    }
+
+    /// The error "what after `text before pos`" located at `pos`.
+    pub(super) fn err_after(&self, pos: usize, what: &str) -> nom::Err<PErr<'a>> {
+        let line_start = self
+            .line_starts
+            .get(self.line_of(pos) - 1)
+            .copied()
+            .unwrap_or(0);
+        let before = self.src.get(line_start..pos).unwrap_or("").trim();
+        let msg = format!("{what} after `{}`", clip_end(before, 40));
+        nom::Err::Failure(PErr {
+            at: self.at(pos),
+            msg,
+        })
+    }
+
+    /// A failure at `pos`: "what, found `text at pos`".
+    pub(super) fn fail_found<T>(&self, pos: usize, what: &str) -> PResult<'a, T> {
+        Err(self.err_found(pos, what))
+    }
+
+    /// A failure at `pos`, quoting the text of the line before it.
+    pub(super) fn fail_after<T>(&self, pos: usize, what: &str) -> PResult<'a, T> {
+        Err(self.err_after(pos, what))
+    }
+
+    // ----- module ----------------------------------------------------------
+
+    fn module(&self, i: &'a str) -> PResult<'a, Module> {
+        let mut i = ws(i);
+        let mut header = None;
+        if let Some(body) = i.strip_prefix("%%%") {
+            let start = self.pos(i);
+            match body.find("%%%") {
+                Some(k) => {
+                    i = &body[k + 3..];
+                    header = Some(start..self.pos(i));
+                }
+                None => return self.fail_found(start, "unterminated `%%%` header"),
+            }
+            i = ws(i);
+        }
+        let start = self.pos(i);
+        let Some(r) = kw(i, "MODULE") else {
+            return self.fail_found(start, "expected `MODULE name`");
+        };
+        let r = ws(r);
+        let Ok((r, name)) = ident(r) else {
+            return self.fail_found(self.pos(r), "expected a module name after MODULE");
+        };
+        let mut i = ws(r);
+        let mut attributes = None;
+        if let Some(a) = i.strip_prefix('(') {
+            let Some(k) = a.find(')') else {
+                return self.fail_found(self.pos(i), "unterminated module attribute list");
+            };
+            let a0 = self.pos(a);
+            attributes = Some(a0..a0 + k);
+            i = &a[k + 1..];
+        }
+        let mut decls = Vec::new();
+        let mut procs = Vec::new();
+        loop {
+            i = ws(i);
+            if i.is_empty() {
+                return self.fail_found(
+                    start,
+                    &format!("unterminated MODULE {name}: end of file reached without ENDMODULE"),
+                );
+            }
+            if let Some(r) = kw(i, "ENDMODULE") {
+                i = r;
+                break;
+            }
+            let (scope, r) = scope_prefix(i);
+            let r = ws(r);
+            if storage_kw(r).is_some() {
+                let (rest, d) = self.decl(i)?;
+                decls.push(d);
+                i = rest;
+            } else if routine_kw(r).is_some() {
+                let (rest, p) = self.routine(i, scope)?;
+                procs.push(p);
+                i = rest;
+            } else {
+                return self.fail_found(
+                    self.pos(i),
+                    "expected a declaration (CONST, PERS, VAR), a routine (PROC, FUNC, TRAP) or ENDMODULE",
+                );
+            }
+        }
+        let span = start..self.pos(i);
+        let rest = ws(i);
+        if !rest.is_empty() {
+            return self.fail_found(self.pos(rest), "unexpected text after ENDMODULE");
+        }
+        Ok((
+            rest,
+            Module {
+                name: name.to_string(),
+                span,
+                header,
+                attributes,
+                decls,
+                procs,
+            },
+        ))
+    }
+
+    // ----- declarations ------------------------------------------------
+
+    /// `[LOCAL|TASK] CONST|PERS|VAR type name[{n}] [:= value];` starting at `i`.
+    pub(super) fn decl(&self, i: &'a str) -> PResult<'a, Decl> {
+        let start = self.pos(i);
+        let (scope, r) = scope_prefix(i);
+        let r = ws(r);
+        let Some((storage, r)) = storage_kw(r) else {
+            return self.fail_found(self.pos(r), "expected CONST, PERS or VAR");
+        };
+        let r = ws(r);
+        let Ok((r, type_name)) = ident(r) else {
+            return self.fail_found(self.pos(r), "expected a data type name");
+        };
+        let r = ws(r);
+        let Ok((r, name)) = ident(r) else {
+            return self.fail_found(self.pos(r), "expected a data name");
+        };
+        let name_span = self.pos(r) - name.len()..self.pos(r);
+        let mut last = self.pos(r);
+        let mut r = ws(r);
+        let mut dims = Vec::new();
+        if let Some(d) = r.strip_prefix('{') {
+            let mut d = d;
+            loop {
+                let d1 = ws(d);
+                let Ok((d2, digits)) = digit1::<_, PErr>(d1) else {
+                    return self
+                        .fail_found(self.pos(d1), "expected an integer array size inside `{…}`");
+                };
+                let Some(n) = digits.parse::<usize>().ok().filter(|&n| n > 0) else {
+                    return self.fail_found(self.pos(d1), "array size must be at least 1");
+                };
+                dims.push(n);
+                let d3 = ws(d2);
+                if let Some(d4) = d3.strip_prefix(',') {
+                    d = d4;
+                } else if let Some(d4) = d3.strip_prefix('}') {
+                    r = d4;
+                    last = self.pos(r);
+                    break;
+                } else {
+                    return self.fail_found(self.pos(d3), "expected `,` or `}` in array size");
+                }
+            }
+            r = ws(r);
+        }
+        let data_type = DataType::from_name(type_name);
+        let mut value = None;
+        if let Some(v) = r.strip_prefix(":=") {
+            let (v, val) = self.val(v, b",;")?;
+            last = self.pos(v);
+            value = Some(self.typed_value(&data_type, &dims, &val)?);
+            r = ws(v);
+        }
+        let Some(r) = r.strip_prefix(';') else {
+            return self.fail_after(
+                last,
+                &format!("expected `;` to end the declaration of {name}"),
+            );
+        };
+        Ok((
+            r,
+            Decl {
+                scope,
+                storage,
+                data_type,
+                type_name: type_name.to_string(),
+                name: name.to_string(),
+                name_span,
+                dims,
+                value,
+                span: start..self.pos(r),
+                line: self.line_of(start),
+            },
+        ))
+    }
+
+    /// A generic value; `stops` are the bytes that end an expression at depth 0.
+    pub(super) fn val(&self, i: &'a str, stops: &[u8]) -> PResult<'a, Val> {
+        self.nested(i, |p| p.val_inner(i, stops))
+    }
+
+    /// Runs `f` one nesting level deeper, failing past [`MAX_NESTING`].
+    fn nested<T>(&self, i: &'a str, f: impl FnOnce(&Self) -> PResult<'a, T>) -> PResult<'a, T> {
+        let d = self.depth.get();
+        if d >= MAX_NESTING {
+            return self.fail_found(self.pos(ws(i)), "nested too deeply");
+        }
+        self.depth.set(d + 1);
+        let out = f(self);
+        self.depth.set(d);
+        out
+    }
+
+    fn val_inner(&self, i: &'a str, stops: &[u8]) -> PResult<'a, Val> {
+        let i = ws(i);
+        let start = self.pos(i);
+        if let Some(mut r) = i.strip_prefix('[') {
+            let mut items = Vec::new();
+            loop {
+                let (r1, item) = self.val(r, b",]")?;
+                items.push(item);
+                let r2 = ws(r1);
+                if let Some(r3) = r2.strip_prefix(',') {
+                    r = r3;
+                } else if let Some(r3) = r2.strip_prefix(']') {
+                    return Ok((
+                        r3,
+                        Val::List {
+                            span: start..self.pos(r3),
+                            items,
+                        },
+                    ));
+                } else {
+                    return self.fail_found(self.pos(r2), "expected `,` or `]` in aggregate value");
+                }
+            }
+        }
+        if i.starts_with('"') {
+            let (r, text) = self.string(i)?;
+            return Ok((
+                r,
+                Val::Str {
+                    span: start..self.pos(r),
+                    text,
+                },
+            ));
+        }
+        let ends_here = |r: &str| {
+            let r = ws(r);
+            r.is_empty() || r.bytes().next().is_some_and(|b| stops.contains(&b))
+        };
+        if let Ok((r, t)) = number_text(i) {
+            if ends_here(r) {
+                if let Some(value) = t.parse::<f64>().ok().filter(|v| v.is_finite()) {
+                    return Ok((
+                        r,
+                        Val::Num(Number {
+                            value,
+                            span: start..self.pos(r),
+                        }),
+                    ));
+                }
+            }
+        }
+        if let Ok((r, t)) = ident(i) {
+            if ends_here(r) {
+                return Ok((
+                    r,
+                    Val::Word {
+                        span: start..self.pos(r),
+                        text: t.to_string(),
+                    },
+                ));
+            }
+        }
+        let (r, span) = self.expr(i, stops)?;
+        Ok((r, Val::Expr { span }))
+    }
+
+    /// A string literal starting at `"`; `""` stands for one quote.
+    fn string(&self, i: &'a str) -> PResult<'a, String> {
+        let start = self.pos(i);
+        let body = i.get(1..).unwrap_or("");
+        let mut text = String::new();
+        let mut rest = body;
+        loop {
+            match rest.find('"') {
+                None => return self.fail_found(start, "unterminated string"),
+                Some(k) => {
+                    text.push_str(&rest[..k]);
+                    let after = &rest[k + 1..];
+                    if let Some(a) = after.strip_prefix('"') {
+                        text.push('"');
+                        rest = a;
+                    } else {
+                        return Ok((after, text));
+                    }
+                }
+            }
+        }
+    }
+
+    /// An expression up to (not including) a depth-0 byte in `stops`;
+    /// returns its trimmed span. Fails when it is empty.
+    pub(super) fn expr(&self, i: &'a str, stops: &[u8]) -> PResult<'a, Span> {
+        let i = ws(i);
+        let start = self.pos(i);
+        let scan = self.scan(i, stops, &[], false)?;
+        if scan.last == 0 {
+            return self.fail_found(start, "expected a value");
+        }
+        let rest = i.get(scan.stop..).unwrap_or("");
+        Ok((rest, start..start + scan.last))
+    }
+
+    /// Walks `i` skipping strings, comments and bracketed groups, and stops
+    /// at the first depth-0 byte in `stops`, word in `words`, `:` (not `:=`)
+    /// when `colon`, an unbalanced closing bracket, or the end of input. A
+    /// new line that starts with a statement keyword means the statement
+    /// lacks its `;`: that is reported after the last significant byte.
+    fn scan(
+        &self,
+        i: &'a str,
+        stops: &[u8],
+        words: &[&str],
+        colon: bool,
+    ) -> Result<Scan, nom::Err<PErr<'a>>> {
+        let b = i.as_bytes();
+        let mut k = 0;
+        let mut depth = 0usize;
+        let mut last = 0;
+        while let Some(&c) = b.get(k) {
+            if depth == 0 && stops.contains(&c) {
+                return Ok(Scan { stop: k, last });
+            }
+            match c {
+                b'"' => {
+                    let sub = i.get(k..).unwrap_or("");
+                    let (r, _) = self.string(sub)?;
+                    k = i.len() - r.len();
+                    last = k;
+                }
+                b'!' => {
+                    k = i
+                        .get(k..)
+                        .and_then(|s| s.find('\n'))
+                        .map_or(i.len(), |p| k + p);
+                }
+                b'(' | b'[' | b'{' => {
+                    depth += 1;
+                    k += 1;
+                    last = k;
+                }
+                b')' | b']' | b'}' => {
+                    if depth == 0 {
+                        return Ok(Scan { stop: k, last });
+                    }
+                    depth -= 1;
+                    k += 1;
+                    last = k;
+                }
+                b':' if depth == 0 && colon && b.get(k + 1) != Some(&b'=') => {
+                    return Ok(Scan { stop: k, last });
+                }
+                b'\n' => {
+                    let next = ws_inline(i.get(k + 1..).unwrap_or(""));
+                    if STATEMENT_WORDS.iter().any(|w| kw(next, w).is_some()) {
+                        let pos = self.pos(i) + last;
+                        return Err(self.err_after(pos, "missing `;` at the end of the statement"));
+                    }
+                    k += 1;
+                }
+                c if c.is_ascii_alphabetic() && (k == 0 || !is_ident_byte(b[k - 1])) => {
+                    let sub = i.get(k..).unwrap_or("");
+                    if depth == 0 && words.iter().any(|w| kw(sub, w).is_some()) {
+                        return Ok(Scan { stop: k, last });
+                    }
+                    let n = sub.bytes().take_while(|&c| is_ident_byte(c)).count();
+                    k += n.max(1);
+                    last = k;
+                }
+                c if c.is_ascii_whitespace() => k += 1,
+                _ => {
+                    k += 1;
+                    // Keep `last` on a char boundary for multi-byte characters.
+                    while k < b.len() && !i.is_char_boundary(k) {
+                        k += 1;
+                    }
+                    last = k;
+                }
+            }
+        }
+        Ok(Scan {
+            stop: i.len(),
+            last,
+        })
+    }
+
+    // ----- routines ------------------------------------------------------
+
+    fn routine(&self, i: &'a str, scope: Scope) -> PResult<'a, Proc> {
+        let start = self.pos(i);
+        let (_, r) = scope_prefix(i);
+        let r = ws(r);
+        let Some((kind, r)) = routine_kw(r) else {
+            return self.fail_found(self.pos(r), "expected PROC, FUNC or TRAP");
+        };
+        let (word, end_word) = match kind {
+            RoutineKind::Proc => ("PROC", "ENDPROC"),
+            RoutineKind::Func => ("FUNC", "ENDFUNC"),
+            RoutineKind::Trap => ("TRAP", "ENDTRAP"),
+        };
+        let mut r = ws(r);
+        if kind == RoutineKind::Func {
+            let Ok((r1, _)) = ident(r) else {
+                return self.fail_found(self.pos(r), "expected the return type after FUNC");
+            };
+            r = ws(r1);
+        }
+        let Ok((r1, name)) = ident(r) else {
+            return self.fail_found(
+                self.pos(r),
+                &format!("expected a routine name after {word}"),
+            );
+        };
+        let mut r = ws(r1);
+        let mut params = None;
+        if let Some(p) = r.strip_prefix('(') {
+            let scan = self.scan(p, b")", &[], false)?;
+            let p0 = self.pos(p);
+            let rest = p.get(scan.stop..).unwrap_or("");
+            let Some(rest) = rest.strip_prefix(')') else {
+                return self.fail_found(self.pos(r), "unterminated parameter list");
+            };
+            params = Some(p0..p0 + scan.stop);
+            r = rest;
+        } else if kind != RoutineKind::Trap {
+            return self.fail_found(self.pos(r), &format!("expected `(` after {word} {name}"));
+        }
+        let mut body = Vec::new();
+        loop {
+            r = ws(r);
+            let here = self.pos(r);
+            if r.is_empty() {
+                return self.fail_found(
+                    start,
+                    &format!("unterminated {word} {name}: end of file reached without {end_word}"),
+                );
+            }
+            if let Some(rest) = kw(r, end_word) {
+                return Ok((
+                    rest,
+                    Proc {
+                        kind,
+                        scope,
+                        name: name.to_string(),
+                        params,
+                        body,
+                        span: start..self.pos(rest),
+                        line: self.line_of(start),
+                    },
+                ));
+            }
+            let (_, after_scope) = scope_prefix(r);
+            let ends_routine = ["ENDMODULE", "ENDPROC", "ENDFUNC", "ENDTRAP"]
+                .iter()
+                .any(|w| kw(r, w).is_some())
+                || routine_kw(ws(after_scope)).is_some();
+            if ends_routine {
+                return self.fail_found(
+                    here,
+                    &format!(
+                        "expected {end_word} to close {word} {name} (line {})",
+                        self.line_of(start)
+                    ),
+                );
+            }
+            let (rest, stmt) = self.stmt(r)?;
+            body.push(stmt);
+            r = rest;
+        }
+    }
+
+    /// One statement of a routine body.
+    fn stmt(&self, i: &'a str) -> PResult<'a, Stmt> {
+        let start = self.pos(i);
+        let line = self.line_of(start);
+        let (_, r) = scope_prefix(i);
+        if storage_kw(ws(r)).is_some() {
+            let (r, d) = self.decl(i)?;
+            return Ok((r, Stmt::Decl(Box::new(d))));
+        }
+        for (word, kind) in [
+            ("MoveL", MoveKind::MoveL),
+            ("MoveJ", MoveKind::MoveJ),
+            ("MoveC", MoveKind::MoveC),
+            ("MoveAbsJ", MoveKind::MoveAbsJ),
+        ] {
+            if let Some(r) = kw(i, word) {
+                let (r, m) = self.move_stmt(i, r, kind)?;
+                return Ok((r, Stmt::Move(Box::new(m))));
+            }
+        }
+        let control = |r: &'a str, keyword: &str| -> PResult<'a, Stmt> {
+            Ok((
+                r,
+                Stmt::Control {
+                    keyword: keyword.to_string(),
+                    span: start..self.pos(r),
+                    line,
+                },
+            ))
+        };
+        for word in [
+            "ELSE", "ENDIF", "ENDFOR", "ENDWHILE", "ENDTEST", "ERROR", "BACKWARD", "UNDO",
+        ] {
+            if let Some(r) = kw(i, word) {
+                return control(r, word);
+            }
+        }
+        // Headers that end at a keyword: `IF … THEN`, `ELSEIF … THEN`, `FOR … DO`, `WHILE … DO`.
+        for (word, until) in [
+            ("IF", "THEN"),
+            ("ELSEIF", "THEN"),
+            ("FOR", "DO"),
+            ("WHILE", "DO"),
+        ] {
+            if let Some(r) = kw(i, word) {
+                let scan = self.scan(r, b";", &[until], false)?;
+                let rest = r.get(scan.stop..).unwrap_or("");
+                if let Some(after) = kw(rest, until) {
+                    return control(after, word);
+                }
+                if let Some(after) = rest.strip_prefix(';') {
+                    // A compact `IF cond stmt;`.
+                    return Ok((
+                        after,
+                        Stmt::Opaque {
+                            span: start..self.pos(after),
+                            line,
+                        },
+                    ));
+                }
+                let end = self.pos(r) + scan.last;
+                return self.fail_after(end, &format!("expected {until} or `;` to end {word}"));
+            }
+        }
+        if let Some(r) = kw(i, "TEST") {
+            let n = r.find('\n').unwrap_or(r.len());
+            let head = r.get(..n).unwrap_or("");
+            let head = head.split('!').next().unwrap_or("").trim_end();
+            return control(r.get(head.len()..).unwrap_or(""), "TEST");
+        }
+        for word in ["CASE", "DEFAULT"] {
+            if let Some(r) = kw(i, word) {
+                let scan = self.scan(r, b";", &[], true)?;
+                let rest = r.get(scan.stop..).unwrap_or("");
+                let Some(after) = rest.strip_prefix(':') else {
+                    let end = self.pos(r) + scan.last;
+                    return self.fail_after(end, &format!("expected `:` after {word}"));
+                };
+                return control(after, word);
+            }
+        }
+        // A label `name:`.
+        if let Ok((r, _)) = ident(i) {
+            let r1 = inline_ws(r);
+            if r1.starts_with(':') && !r1.starts_with(":=") {
+                return control(&r1[1..], "LABEL");
+            }
+        }
+        // Anything else: up to its `;`.
+        let scan = self.scan(i, b";", &[], false)?;
+        let rest = i.get(scan.stop..).unwrap_or("");
+        match rest.strip_prefix(';') {
+            Some(after) => Ok((
+                after,
+                Stmt::Opaque {
+                    span: start..self.pos(after),
+                    line,
+                },
+            )),
+            None if scan.last == 0 => self.fail_found(start, "unexpected text"),
+            None => self.fail_after(start + scan.last, "missing `;` at the end of the statement"),
+        }
+    }
+
+    // ----- motion instructions -------------------------------------------
+
+    /// A motion instruction; `i` starts at its name, `r` just after it.
+    fn move_stmt(&self, i: &'a str, mut r: &'a str, kind: MoveKind) -> PResult<'a, Move> {
+        let start = self.pos(i);
+        let name = kind.name();
+        let mut targets: Vec<Target> = Vec::new();
+        let mut plain: Vec<Arg> = Vec::new();
+        let mut optional = Vec::new();
+        let n_targets = if kind == MoveKind::MoveC { 2 } else { 1 };
+        loop {
+            r = ws(r);
+            if let Some(o) = r.strip_prefix('\\') {
+                let (o, arg) = self.opt_arg(r, o, b",;\\")?;
+                optional.push(arg);
+                r = o;
+            } else if r.starts_with([';', ',']) || r.is_empty() {
+                return self.fail_found(self.pos(r), &format!("expected an argument of {name}"));
+            } else if targets.len() < n_targets {
+                let (o, t) = self.target(r, kind == MoveKind::MoveAbsJ)?;
+                targets.push(t);
+                r = o;
+            } else {
+                let (o, span) = self.expr(r, b",;\\")?;
+                plain.push(Arg {
+                    text: self.src.get(span.clone()).unwrap_or("").to_string(),
+                    span,
+                });
+                r = o;
+            }
+            let last = self.pos(r);
+            let r1 = ws(r);
+            if let Some(r2) = r1.strip_prefix(',') {
+                r = r2;
+            } else if r1.starts_with('\\') {
+                r = r1;
+            } else if let Some(r2) = r1.strip_prefix(';') {
+                r = r2;
+                break;
+            } else {
+                return self.fail_after(
+                    last,
+                    &format!("expected `,` or `;` after an argument of {name}"),
+                );
+            }
+        }
+        let wanted = if kind == MoveKind::MoveC {
+            "CirPoint, ToPoint, Speed, Zone, Tool"
+        } else if kind == MoveKind::MoveAbsJ {
+            "ToJointPos, Speed, Zone, Tool"
+        } else {
+            "ToPoint, Speed, Zone, Tool"
+        };
+        let found = targets.len() + plain.len();
+        if targets.len() < n_targets || plain.len() != 3 {
+            return self.fail_found(
+                start,
+                &format!(
+                    "{name} takes {} arguments ({wanted}), {found} given",
+                    n_targets + 3
+                ),
+            );
+        }
+        let mut plain = plain.into_iter();
+        let (Some(speed), Some(zone), Some(tool)) = (plain.next(), plain.next(), plain.next())
+        else {
+            return self.fail_found(start, &format!("{name}: missing arguments"));
+        };
+        let mut targets = targets.into_iter();
+        let via = if kind == MoveKind::MoveC {
+            targets.next()
+        } else {
+            None
+        };
+        let Some(target) = targets.next() else {
+            return self.fail_found(start, &format!("{name}: missing target"));
+        };
+        let value_of = |n: &str| -> Option<Arg> {
+            optional
+                .iter()
+                .find(|o: &&OptArg| o.name.eq_ignore_ascii_case(n))
+                .and_then(|o| o.value.clone())
+        };
+        let wobj = value_of("WObj");
+        let tload = value_of("TLoad");
+        let conc = optional.iter().any(|o| o.name.eq_ignore_ascii_case("Conc"));
+        Ok((
+            r,
+            Move {
+                kind,
+                via,
+                target,
+                speed,
+                zone,
+                tool,
+                wobj,
+                tload,
+                conc,
+                optional,
+                span: start..self.pos(r),
+                line: self.line_of(start),
+            },
+        ))
+    }
+
+    /// `\Name[:=value]`; `i` starts at the backslash, `o` after it.
+    fn opt_arg(&self, i: &'a str, o: &'a str, stops: &[u8]) -> PResult<'a, OptArg> {
+        let start = self.pos(i);
+        let Ok((o, name)) = ident(o) else {
+            return self.fail_found(self.pos(o), "expected an optional argument name after `\\`");
+        };
+        let mut end = self.pos(o);
+        let mut value = None;
+        let o1 = ws(o);
+        let o = if let Some(v) = o1.strip_prefix(":=") {
+            let (v, span) = self.expr(v, stops)?;
+            end = span.end;
+            value = Some(Arg {
+                text: self.src.get(span.clone()).unwrap_or("").to_string(),
+                span,
+            });
+            v
+        } else {
+            o
+        };
+        Ok((
+            o,
+            OptArg {
+                name: name.to_string(),
+                value,
+                span: start..end,
+            },
+        ))
+    }
+
+    /// A move target: inline literal, `Offs(…)`, `RelTool(…)`, a name with
+    /// an optional `{index}`, or any other expression.
+    fn target(&self, i: &'a str, joint: bool) -> PResult<'a, Target> {
+        self.nested(i, |p| p.target_inner(i, joint))
+    }
+
+    fn target_inner(&self, i: &'a str, joint: bool) -> PResult<'a, Target> {
+        let i = ws(i);
+        let start = self.pos(i);
+        let terminated = |r: &str| {
+            let r = ws(r);
+            r.is_empty() || r.starts_with([',', ';', '\\', ')'])
+        };
+        if i.starts_with('[') {
+            let (r, v) = self.val(i, b",]")?;
+            let t = if joint {
+                Target::InlineJoint(self.joint_target(&v)?)
+            } else {
+                Target::Inline(self.rob_target(&v)?)
+            };
+            return Ok((r, t));
+        }
+        for (word, rel) in [("Offs", false), ("RelTool", true)] {
+            if let Some(r) = kw(i, word) {
+                let r = ws(r);
+                if let Some(r) = r.strip_prefix('(') {
+                    return self.offs(start, r, word, rel, joint);
+                }
+            }
+        }
+        if let Ok((r, name)) = ident(i) {
+            let mut end = self.pos(r);
+            let mut index = None;
+            let mut rest = r;
+            let r1 = ws(r);
+            if let Some(x) = r1.strip_prefix('{') {
+                let scan = self.scan(x, b"}", &[], false)?;
+                let after = x.get(scan.stop..).unwrap_or("");
+                if let Some(after) = after.strip_prefix('}') {
+                    let x0 = self.pos(ws(x));
+                    let x_end = self.pos(x) + scan.last;
+                    let text = self.src.get(x0..x_end.max(x0)).unwrap_or("").to_string();
+                    index = Some(Index {
+                        value: text.parse::<usize>().ok(),
+                        text,
+                        span: x0..x_end.max(x0),
+                    });
+                    rest = after;
+                    end = self.pos(after);
+                }
+            }
+            if terminated(rest) {
+                return Ok((
+                    rest,
+                    Target::Named {
+                        name: name.to_string(),
+                        index,
+                        span: start..end,
+                    },
+                ));
+            }
+        }
+        let (r, span) = self.expr(i, b",;\\")?;
+        Ok((
+            r,
+            Target::Other {
+                text: self.src.get(span.clone()).unwrap_or("").to_string(),
+                span,
+            },
+        ))
+    }
+
+    /// The arguments of `Offs(` / `RelTool(`; `r` is just after the `(`.
+    fn offs(
+        &self,
+        start: usize,
+        r: &'a str,
+        word: &str,
+        rel: bool,
+        joint: bool,
+    ) -> PResult<'a, Target> {
+        let (r, base) = self.target(r, joint)?;
+        let mut r = r;
+        let mut scalars = Vec::new();
+        for _ in 0..3 {
+            let r1 = ws(r);
+            let Some(r2) = r1.strip_prefix(',') else {
+                return self.fail_found(
+                    self.pos(r1),
+                    &format!("{word} takes a point and three offsets dx, dy, dz: expected `,`"),
+                );
+            };
+            let (r3, s) = self.scalar(r2, b",)\\")?;
+            scalars.push(s);
+            r = r3;
+        }
+        let (mut rx, mut ry, mut rz) = (None, None, None);
+        loop {
+            let r1 = ws(r);
+            let r1 = if rel {
+                r1.strip_prefix(',').map(ws).unwrap_or(r1)
+            } else {
+                r1
+            };
+            if let Some(a) = r1.strip_prefix(')') {
+                r = a;
+                break;
+            }
+            if rel {
+                if let Some(o) = r1.strip_prefix('\\') {
+                    let Ok((o, name)) = ident(o) else {
+                        return self.fail_found(self.pos(o), "expected Rx, Ry or Rz after `\\`");
+                    };
+                    let o = ws(o);
+                    let Some(o) = o.strip_prefix(":=") else {
+                        return self
+                            .fail_found(self.pos(o), &format!("expected `:=` after \\{name}"));
+                    };
+                    let (o, s) = self.scalar(o, b",)\\")?;
+                    let slot = match name.to_ascii_lowercase().as_str() {
+                        "rx" => &mut rx,
+                        "ry" => &mut ry,
+                        "rz" => &mut rz,
+                        _ => {
+                            return self.fail_found(
+                                self.pos(r1),
+                                "RelTool accepts only the optional arguments \\Rx, \\Ry, \\Rz",
+                            );
+                        }
+                    };
+                    *slot = Some(s);
+                    r = o;
+                    continue;
+                }
+            }
+            return self.fail_found(self.pos(r1), &format!("expected `)` to close {word}"));
+        }
+        let [dx, dy, dz]: [Scalar; 3] = match scalars.try_into() {
+            Ok(a) => a,
+            Err(_) => return self.fail_found(start, &format!("{word}: three offsets expected")),
+        };
+        let span = start..self.pos(r);
+        let offsets = [dx, dy, dz];
+        let base = Box::new(base);
+        let t = if rel {
+            Target::RelTool {
+                base,
+                offsets,
+                rx,
+                ry,
+                rz,
+                span,
+            }
+        } else {
+            Target::Offs {
+                base,
+                offsets,
+                span,
+            }
+        };
+        Ok((r, t))
+    }
+
+    fn scalar(&self, i: &'a str, stops: &[u8]) -> PResult<'a, Scalar> {
+        let (r, span) = self.expr(i, stops)?;
+        let text = self.src.get(span.clone()).unwrap_or("").to_string();
+        Ok((
+            r,
+            Scalar {
+                value: parse_number(&text),
+                text,
+                span,
+            },
+        ))
+    }
+}
+
+/// Skips spaces and tabs only.
+fn inline_ws(i: &str) -> &str {
+    i.trim_start_matches([' ', '\t'])
+}
+
+/// Skips blank characters (not comments) at the start of a line.
+fn ws_inline(i: &str) -> &str {
+    i.trim_start_matches([' ', '\t', '\r'])
+}
+
+fn scope_prefix(i: &str) -> (Scope, &str) {
+    if let Some(r) = kw(i, "LOCAL") {
+        (Scope::Local, r)
+    } else if let Some(r) = kw(i, "TASK") {
+        (Scope::Task, r)
+    } else {
+        (Scope::Global, i)
+    }
+}
+
+fn storage_kw(i: &str) -> Option<(Storage, &str)> {
+    kw(i, "CONST")
+        .map(|r| (Storage::Const, r))
+        .or_else(|| kw(i, "PERS").map(|r| (Storage::Pers, r)))
+        .or_else(|| kw(i, "VAR").map(|r| (Storage::Var, r)))
+}
+
+fn routine_kw(i: &str) -> Option<(RoutineKind, &str)> {
+    kw(i, "PROC")
+        .map(|r| (RoutineKind::Proc, r))
+        .or_else(|| kw(i, "FUNC").map(|r| (RoutineKind::Func, r)))
+        .or_else(|| kw(i, "TRAP").map(|r| (RoutineKind::Trap, r)))
+}
+
+/// The first `n` characters of `s`, with `…` when cut.
+fn clip(s: &str, n: usize) -> String {
+    let mut out: String = s.chars().take(n).collect();
+    if s.chars().count() > n {
+        out.push('…');
+    }
+    out
+}
+
+/// The last `n` characters of `s`, with `…` when cut.
+fn clip_end(s: &str, n: usize) -> String {
+    let count = s.chars().count();
+    if count <= n {
+        return s.to_string();
+    }
+    let tail: String = s.chars().skip(count - n).collect();
+    format!("…{tail}")
+}
