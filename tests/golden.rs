@@ -236,8 +236,8 @@ fn compensated_long_moves_stay_within_tolerance() {
         for k in 1..10 {
             let t = k as f64 / 10.0;
             let mut c = mv.start;
-            for i in 0..6 {
-                c[i] += (mv.end[i] - mv.start[i]) * t;
+            for (ci, (s, e)) in c.iter_mut().zip(mv.start.iter().zip(mv.end.iter())) {
+                *ci = s + (e - s) * t;
             }
             let d = dist(&c, tl);
             assert!(
