@@ -58,7 +58,10 @@ impl MachineTool {
     /// Nominal tool tip pose in the workpiece frame for commanded axis values
     /// (machine coordinates) and tool length.
     pub fn nominal(&self, cmd: &AxisVec, _tool_mm: f64) -> TipPose {
-        TipPose { pos: Vector3::new(cmd[0], cmd[1], cmd[2]), dir: Vector3::z() }
+        TipPose {
+            pos: Vector3::new(cmd[0], cmd[1], cmd[2]),
+            dir: Vector3::z(),
+        }
     }
 
     /// Predicted (attained) tool tip pose including the geometric errors,
