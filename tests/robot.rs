@@ -10,7 +10,11 @@ use postproc::machine::robot::{
     ConfData, Effects, IkSelect, Model, Robot, RobotError, pose::pose_error,
 };
 
-use crate::common::repo;
+/// Path of a file in the repository (local so this file also builds as a
+/// stand-alone test target).
+fn repo(rel: &str) -> std::path::PathBuf {
+    std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join(rel)
+}
 
 /// Position tolerance of exact geometry, mm.
 const POS_TOL_MM: f64 = 1e-9;

@@ -129,6 +129,12 @@ pub struct ProcessWrench {
 /// A validated 6R robot (immutable, `Send + Sync`).
 #[derive(Debug, Clone)]
 pub struct Robot {
+    d: Box<RobotData>,
+}
+
+/// The validated content of a robot file (boxed: it is about 1 kB).
+#[derive(Debug, Clone)]
+struct RobotData {
     name: String,
     nominal: DhParams,
     actual: DhParams,
@@ -358,72 +364,74 @@ impl Robot {
         };
         let closed_form = ik::ClosedForm::new(&nominal);
         Ok(Robot {
-            name: raw.name.unwrap_or_else(|| "robot".to_string()),
-            nominal,
-            actual,
-            closed_form,
-            limits_rad,
-            speed_rad_per_s,
-            tool,
-            base,
-            gravity_m_per_s2: Vector3::from(raw.gravity_m_per_s2),
-            links,
-            tool_load,
-            k_nmm_per_rad,
-            process_wrench,
+            d: Box::new(RobotData {
+                name: raw.name.unwrap_or_else(|| "robot".to_string()),
+                nominal,
+                actual,
+                closed_form,
+                limits_rad,
+                speed_rad_per_s,
+                tool,
+                base,
+                gravity_m_per_s2: Vector3::from(raw.gravity_m_per_s2),
+                links,
+                tool_load,
+                k_nmm_per_rad,
+                process_wrench,
+            }),
         })
     }
 
     /// Display name.
     pub fn name(&self) -> &str {
-        &self.name
+        &self.d.name
     }
     /// Parameter set of a model.
     pub fn params(&self, model: Model) -> &DhParams {
         match model {
-            Model::Nominal => &self.nominal,
-            Model::Actual => &self.actual,
+            Model::Nominal => &self.d.nominal,
+            Model::Actual => &self.d.actual,
         }
     }
     /// Whether the nominal model has the ABB-style closed-form inverse.
     pub fn has_closed_form(&self) -> bool {
-        self.closed_form.is_some()
+        self.d.closed_form.is_some()
     }
     /// Joint limits `[min, max]`, rad.
     pub fn joint_limits_rad(&self) -> &[[f64; 2]; 6] {
-        &self.limits_rad
+        &self.d.limits_rad
     }
     /// Maximum joint speeds, rad/s.
     pub fn joint_speed_rad_per_s(&self) -> &[f64; 6] {
-        &self.speed_rad_per_s
+        &self.d.speed_rad_per_s
     }
     /// Default TCP: flange → tool.
     pub fn flange_to_tool(&self) -> &Isometry3<f64> {
-        &self.tool
+        &self.d.tool
     }
     /// Robot base frame in the world frame.
     pub fn base(&self) -> &Isometry3<f64> {
-        &self.base
+        &self.d.base
     }
     /// Gravity vector in the world frame, m/s².
     pub fn gravity_m_per_s2(&self) -> &Vector3<f64> {
-        &self.gravity_m_per_s2
+        &self.d.gravity_m_per_s2
     }
     /// Link masses and centres of mass (link DH frames).
     pub fn links(&self) -> &[PointMass; 6] {
-        &self.links
+        &self.d.links
     }
     /// Tool load (flange frame), if any.
     pub fn tool_load(&self) -> Option<&PointMass> {
-        self.tool_load.as_ref()
+        self.d.tool_load.as_ref()
     }
     /// Joint stiffness, N·mm/rad (the file gives N·m/rad).
     pub fn k_nmm_per_rad(&self) -> &[f64; 6] {
-        &self.k_nmm_per_rad
+        &self.d.k_nmm_per_rad
     }
     /// Process wrench for prediction, if any.
     pub fn process_wrench(&self) -> Option<&ProcessWrench> {
-        self.process_wrench.as_ref()
+        self.d.process_wrench.as_ref()
     }
 
     /// All joint frames of a model in the robot base frame.
@@ -436,21 +444,21 @@ impl Robot {
     }
     /// TCP pose in the world frame: `base · flange(q) · flange_to_tool`.
     pub fn tcp_pose(&self, model: Model, q: &[f64; 6]) -> Isometry3<f64> {
-        self.base * self.flange_pose(model, q) * self.tool
+        self.d.base * self.flange_pose(model, q) * self.d.tool
     }
     /// Flange pose (robot base frame) that puts the TCP at `tcp_world`.
     pub fn flange_for_tcp(&self, tcp_world: &Isometry3<f64>) -> Isometry3<f64> {
-        self.base.inverse() * tcp_world * self.tool.inverse()
+        self.d.base.inverse() * tcp_world * self.d.tool.inverse()
     }
     /// ABB confdata of a joint vector (nominal model).
     pub fn confdata(&self, q: &[f64; 6]) -> ConfData {
-        ik::confdata(&self.nominal, q)
+        ik::confdata(&self.d.nominal, q)
     }
 
     /// Checks every joint against its limits.
     pub fn check_limits(&self, q: &[f64; 6]) -> std::result::Result<(), RobotError> {
         const LIMIT_TOL_RAD: f64 = 1e-9;
-        for (i, (v, l)) in q.iter().zip(self.limits_rad.iter()).enumerate() {
+        for (i, (v, l)) in q.iter().zip(self.d.limits_rad.iter()).enumerate() {
             if *v < l[0] - LIMIT_TOL_RAD || *v > l[1] + LIMIT_TOL_RAD || !v.is_finite() {
                 return Err(RobotError::JointLimit {
                     joint: i + 1,
@@ -470,8 +478,12 @@ impl Robot {
         &self,
         tcp_world: &Isometry3<f64>,
     ) -> std::result::Result<[Option<[f64; 6]>; 8], RobotError> {
-        let cf = self.closed_form.as_ref().ok_or(RobotError::NoClosedForm)?;
-        let sols = cf.solve(&self.nominal, &self.flange_for_tcp(tcp_world), 0.0);
+        let cf = self
+            .d
+            .closed_form
+            .as_ref()
+            .ok_or(RobotError::NoClosedForm)?;
+        let sols = cf.solve(&self.d.nominal, &self.flange_for_tcp(tcp_world), 0.0);
         if sols.iter().all(Option::is_none) {
             return Err(RobotError::Unreachable(
                 "the wrist centre is farther from (or closer to) the shoulder than the arm can reach".into(),
@@ -513,9 +525,13 @@ impl Robot {
         conf: ConfData,
         turn_ref: Option<&[f64; 6]>,
     ) -> std::result::Result<[f64; 6], RobotError> {
-        let cf = self.closed_form.as_ref().ok_or(RobotError::NoClosedForm)?;
+        let cf = self
+            .d
+            .closed_form
+            .as_ref()
+            .ok_or(RobotError::NoClosedForm)?;
         let wrist_ref = turn_ref.map_or(0.0, |r| r[3]);
-        let sols = cf.solve(&self.nominal, &self.flange_for_tcp(tcp_world), wrist_ref);
+        let sols = cf.solve(&self.d.nominal, &self.flange_for_tcp(tcp_world), wrist_ref);
         if sols.iter().all(Option::is_none) {
             return Err(RobotError::Unreachable(
                 "the wrist centre is farther from (or closer to) the shoulder than the arm can reach".into(),
@@ -523,7 +539,7 @@ impl Robot {
         }
         let mut found = None;
         for q in sols.iter().flatten() {
-            if ik::confdata(&self.nominal, q).cfx == conf.cfx {
+            if ik::confdata(&self.d.nominal, q).cfx == conf.cfx {
                 found = Some(*q);
                 break;
             }
@@ -533,7 +549,7 @@ impl Robot {
             available: sols
                 .iter()
                 .flatten()
-                .map(|q| ik::confdata(&self.nominal, q).to_string())
+                .map(|q| ik::confdata(&self.d.nominal, q).to_string())
                 .collect::<Vec<_>>()
                 .join(" "),
         };
@@ -551,7 +567,7 @@ impl Robot {
                 // Joints 2, 3, 5 carry no quadrant: take the turn that lies
                 // inside the limits (e.g. q3 = −217° rather than 143°).
                 for i in [1, 2, 4] {
-                    let [lo, hi] = self.limits_rad[i];
+                    let [lo, hi] = self.d.limits_rad[i];
                     for t in [0.0, -2.0 * std::f64::consts::PI, 2.0 * std::f64::consts::PI] {
                         if (lo..=hi).contains(&(q[i] + t)) {
                             q[i] += t;
