@@ -299,3 +299,28 @@ pub fn solve_numeric(
         rot_rad: last.1,
     })
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use approx::assert_abs_diff_eq;
+
+    const TOL: f64 = 1e-12;
+
+    #[test]
+    fn quadrants_follow_abb() {
+        // floor(q/90°): 45° → 0, 135° → 1, −1° → −1, −135° → −2, 370° → 4.
+        for (deg, cf) in [(45.0, 0), (135.0, 1), (-1.0, -1), (-135.0, -2), (370.0, 4)] {
+            assert_eq!(quadrant(f64::to_radians(deg)), cf);
+        }
+        // 50° moved into quadrant 4 is 410°; into quadrant 1 impossible.
+        assert_abs_diff_eq!(
+            into_quadrant(50f64.to_radians(), 4).unwrap_or(0.0),
+            410f64.to_radians(),
+            epsilon = TOL
+        );
+        assert!(into_quadrant(50f64.to_radians(), 1).is_none());
+        assert_abs_diff_eq!(wrap(3.0 * PI), PI, epsilon = TOL);
+        assert_abs_diff_eq!(nearest_turn(0.1, 2.0 * PI), 0.1 + 2.0 * PI, epsilon = TOL);
+    }
+}
