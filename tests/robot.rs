@@ -352,17 +352,18 @@ fn paper_c_wrench_deflection_is_of_the_measured_order() {
     let dir = Vector3::new(181.0, 153.9, 233.2).normalize();
     let mut w = Vector6::zeros();
     w.fixed_rows_mut::<3>(0).copy_from(&(dir * 335.0));
-    // Computed WP deflections with the Table 6 stiffness range from about
-    // 0.3 mm to 2.5 mm over the 19 configurations, mean ≈ 1 mm; the paper
-    // measured ≈ 1.1 mm end-effector deflections for 310–360 N. Joint-2
-    // torques (Table 5: 236–274 N·m) are checked to be of the same order.
+    // With the Table 6 stiffness the WP deflection comes out between
+    // 1.03 mm and 1.68 mm over the 19 configurations (mean ≈ 1.25 mm) and
+    // |τ2| between 62 and 219 N·m; the paper measured ≈ 1.1 mm end-effector
+    // deflections for 310–360 N and τ2 of 236–274 N·m (Table 5, with its own
+    // force directions). The asserts keep a generous band around that order.
     let mut sum = 0.0;
     for c in CONFIGS {
         let q = c.map(f64::to_radians);
         let tau = r.wrench_torques(Model::Nominal, &q, &wp, &w);
         let d = r.point_deflection(Model::Nominal, &q, &wp, &tau);
         let dx = d.fixed_rows::<3>(0).norm();
-        assert!((0.05..4.0).contains(&dx), "deflection {dx} mm at {c:?}");
+        assert!((0.5..2.5).contains(&dx), "deflection {dx} mm at {c:?}");
         assert!(
             tau[1].abs() / 1000.0 < 600.0,
             "τ2 {} N·m at {c:?}",
@@ -375,7 +376,7 @@ fn paper_c_wrench_deflection_is_of_the_measured_order() {
         sum += dx;
     }
     let mean = sum / CONFIGS.len() as f64;
-    assert!((0.4..2.0).contains(&mean), "mean deflection {mean} mm");
+    assert!((0.8..1.6).contains(&mean), "mean deflection {mean} mm");
 }
 
 #[test]
