@@ -1,14 +1,629 @@
-//! Robot model (in progress).
+//! 6R industrial robot model: machine-file loading and validation, DH
+//! kinematics (nominal = controller, actual = calibrated), inverse kinematics
+//! with ABB confdata, joint-stiffness statics and compensation of targets.
+//!
+//! Conventions (internal): mm, rad, N, N·mm, kg. Poses are `Isometry3<f64>`.
+//! - Robot base frame: frame 0 of the DH chain. World frame: the frame the
+//!   optional `base` is given in (`world_T_base`). TCP poses passed to and
+//!   returned by [`Robot`] are in the world frame: `world_T_tcp =
+//!   base · flange(q) · flange_to_tool`.
+//! - Gravity is given in the world frame; process wrenches act at the TCP.
+//! - Joint torques are those the external load exerts on the joints
+//!   (`τ = Jᵀ W`); the joints yield by `Δθ = Kθ⁻¹ τ`.
 
-use crate::error::Result;
+mod compensate;
+pub mod dh;
+pub mod ik;
+pub mod kinematics;
+pub mod pose;
+mod raw;
+mod statics;
 
-/// A validated 6R robot.
+pub use compensate::{Compensation, Deviation, Effects, PoseDelta};
+pub use dh::{Convention, DhJoint, DhParams};
+pub use ik::ConfData;
+pub use kinematics::Frames;
+
+use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
+
+use crate::error::{Error, Invalid, Located, Result};
+use crate::machine::yaml;
+use raw::{RawConvention, RawFrame, RawJoint, RawRobot, RawWrenchFrame};
+
+/// Why a target could not be turned into joint values (or compensated).
+/// The pipeline turns it into [`Error::Unachievable`] with [`RobotError::at`].
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum RobotError {
+    /// The wrist centre is out of reach of the arm.
+    #[error("target out of reach: {0}")]
+    Unreachable(String),
+    /// No inverse-kinematics solution has the requested confdata.
+    #[error("no joint solution with confdata {conf} (reachable configurations: {available})")]
+    ConfMismatch {
+        /// The requested confdata.
+        conf: ConfData,
+        /// The confdata of the solutions that exist.
+        available: String,
+    },
+    /// A joint value is outside its limits.
+    #[error("joint {joint} at {value_deg:.4}° is outside its limits [{min_deg}°, {max_deg}°]")]
+    JointLimit {
+        /// Joint number 1..=6.
+        joint: usize,
+        /// The offending value, degrees.
+        value_deg: f64,
+        /// Lower limit, degrees.
+        min_deg: f64,
+        /// Upper limit, degrees.
+        max_deg: f64,
+    },
+    /// An iterative solve stopped without reaching its tolerance.
+    #[error(
+        "{what} did not converge in {iterations} iterations (residual {pos_mm:.3e} mm, {rot_rad:.3e} rad)"
+    )]
+    NoConvergence {
+        /// Which solve.
+        what: &'static str,
+        /// Iterations done.
+        iterations: usize,
+        /// Remaining position error, mm.
+        pos_mm: f64,
+        /// Remaining orientation error, rad.
+        rot_rad: f64,
+    },
+    /// The nominal model has no closed-form inverse (not an ABB-style arm):
+    /// select solutions with a seed joint vector instead of confdata.
+    #[error(
+        "this robot has no closed-form inverse kinematics; give a seed joint vector instead of confdata"
+    )]
+    NoClosedForm,
+}
+
+impl RobotError {
+    /// Turns the failure into an located "unachievable" error of a target.
+    pub fn at(self, file: &str, line: usize, column: usize) -> Error {
+        Error::Unachievable(Located::new(file, line, column, self.to_string()))
+    }
+}
+
+/// Which parameter set to evaluate.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Model {
+    /// The controller's parameters.
+    Nominal,
+    /// The calibrated parameters.
+    Actual,
+}
+
+/// How to pick one inverse-kinematics solution.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum IkSelect {
+    /// ABB confdata (needs the closed form).
+    Conf(ConfData),
+    /// The solution the numeric solver reaches from this joint vector (rad).
+    Near([f64; 6]),
+}
+
+/// Mass and centre of mass of a link (in the link's DH frame) or of the tool
+/// load (in the flange frame).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PointMass {
+    /// Mass, kg.
+    pub mass_kg: f64,
+    /// Centre of mass, mm.
+    pub com_mm: Vector3<f64>,
+}
+
+/// A constant process wrench acting at the TCP.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ProcessWrench {
+    /// Force, N.
+    pub force_n: Vector3<f64>,
+    /// Moment, N·mm.
+    pub moment_nmm: Vector3<f64>,
+    /// True when force and moment are given in the tool (TCP) frame, false
+    /// for the robot base frame.
+    pub in_tool_frame: bool,
+}
+
+/// A validated 6R robot (immutable, `Send + Sync`).
 #[derive(Debug, Clone)]
-pub struct Robot {}
+pub struct Robot {
+    d: Box<RobotData>,
+}
+
+/// The validated content of a robot file (boxed: it is about 1 kB).
+#[derive(Debug, Clone)]
+struct RobotData {
+    name: String,
+    nominal: DhParams,
+    actual: DhParams,
+    closed_form: Option<ik::ClosedForm>,
+    limits_rad: [[f64; 2]; 6],
+    speed_rad_per_s: [f64; 6],
+    tool: Isometry3<f64>,
+    base: Isometry3<f64>,
+    gravity_m_per_s2: Vector3<f64>,
+    links: [PointMass; 6],
+    tool_load: Option<PointMass>,
+    k_nmm_per_rad: [f64; 6],
+    process_wrench: Option<ProcessWrench>,
+}
+
+fn finite(path: &str, v: &[f64]) -> std::result::Result<(), Invalid> {
+    match v.iter().find(|x| !x.is_finite()) {
+        Some(x) => Err(Invalid::new(
+            path,
+            format!("value `{x}` is not a finite number"),
+        )),
+        None => Ok(()),
+    }
+}
+
+fn six<T: Copy>(path: &str, v: &[T]) -> std::result::Result<[T; 6], Invalid> {
+    <[T; 6]>::try_from(v).map_err(|_| {
+        Invalid::new(
+            path,
+            format!("expected 6 entries (one per joint), found {}", v.len()),
+        )
+    })
+}
+
+fn joints(
+    path: &str,
+    conv: Convention,
+    rows: &[RawJoint],
+) -> std::result::Result<DhParams, Invalid> {
+    let rows = six(path, rows.iter().collect::<Vec<_>>().as_slice())?;
+    let mut out = [DhJoint {
+        a_mm: 0.0,
+        alpha_rad: 0.0,
+        d_mm: 0.0,
+        theta_offset_rad: 0.0,
+    }; 6];
+    for (i, r) in rows.iter().enumerate() {
+        finite(
+            &format!("{path}[{i}]"),
+            &[r.a_mm, r.alpha_deg, r.d_mm, r.theta_offset_deg],
+        )?;
+        out[i] = DhJoint {
+            a_mm: r.a_mm,
+            alpha_rad: r.alpha_deg.to_radians(),
+            d_mm: r.d_mm,
+            theta_offset_rad: r.theta_offset_deg.to_radians(),
+        };
+    }
+    Ok(DhParams {
+        convention: conv,
+        joints: out,
+    })
+}
+
+fn frame(path: &str, f: &RawFrame) -> std::result::Result<Isometry3<f64>, Invalid> {
+    finite(path, &[f.x_mm, f.y_mm, f.z_mm])?;
+    let rot = match (f.quaternion, f.rpy_deg) {
+        (Some(_), Some(_)) => {
+            return Err(Invalid::new(
+                path,
+                "give either `quaternion` or `rpy_deg`, not both",
+            ));
+        }
+        (Some(q), None) => {
+            let p = format!("{path}.quaternion");
+            finite(&p, &q)?;
+            let n = (q.iter().map(|x| x * x).sum::<f64>()).sqrt();
+            if (n - 1.0).abs() > 1e-3 {
+                return Err(Invalid::new(
+                    p,
+                    format!("quaternion {q:?} is not unit length (norm {n:.6})"),
+                ));
+            }
+            pose::rotation_from_abb(q).ok_or_else(|| Invalid::new(p, "zero quaternion"))?
+        }
+        (None, Some(r)) => {
+            finite(&format!("{path}.rpy_deg"), &r)?;
+            pose::rotation_from_rpy(r[0].to_radians(), r[1].to_radians(), r[2].to_radians())
+        }
+        (None, None) => UnitQuaternion::identity(),
+    };
+    Ok(Isometry3::from_parts(
+        Translation3::new(f.x_mm, f.y_mm, f.z_mm),
+        rot,
+    ))
+}
+
+/// Like [`yaml::invalid`], but when the full key path cannot be found in
+/// the text (indices into flow sequences such as `k_nm_per_rad[2]`), points
+/// at the deepest enclosing key that can be found.
+fn locate_invalid(text: &str, file: &str, inv: Invalid) -> Error {
+    let mut probe = inv.path.as_str();
+    loop {
+        if let Some((line, column)) = yaml::locate(text, probe) {
+            return Error::Input(Located::new(file, line, column, inv.to_string()));
+        }
+        match probe.rfind(['.', '[']) {
+            Some(cut) if cut > 0 => probe = &probe[..cut],
+            _ => return yaml::invalid(text, file, inv),
+        }
+    }
+}
 
 impl Robot {
-    /// Parses and validates robot YAML.
-    pub fn from_yaml_str(_text: &str, _file: &str) -> Result<Self> {
-        Ok(Robot {})
+    /// Parses and validates robot YAML; `file` names it in errors.
+    pub fn from_yaml_str(text: &str, file: &str) -> Result<Self> {
+        let raw: RawRobot = yaml::deserialize(text, file)?;
+        Self::validate(raw).map_err(|inv| locate_invalid(text, file, inv))
+    }
+
+    fn validate(raw: RawRobot) -> std::result::Result<Self, Invalid> {
+        if raw.kind != "robot" {
+            return Err(Invalid::new(
+                "kind",
+                format!("expected `robot`, found `{}`", raw.kind),
+            ));
+        }
+        let conv = match raw.convention {
+            RawConvention::Dh => Convention::Dh,
+            RawConvention::ModifiedDh => Convention::ModifiedDh,
+        };
+        let nominal = joints("nominal", conv, &raw.nominal)?;
+        let actual = match &raw.actual {
+            Some(a) => joints("actual", conv, a)?,
+            None => nominal,
+        };
+        let lim = six("joint_limits_deg", &raw.joint_limits_deg)?;
+        let mut limits_rad = [[0.0; 2]; 6];
+        for (i, l) in lim.iter().enumerate() {
+            let p = format!("joint_limits_deg[{i}]");
+            finite(&p, l)?;
+            if l[0] >= l[1] {
+                return Err(Invalid::new(
+                    p,
+                    format!("minimum {} must be below maximum {}", l[0], l[1]),
+                ));
+            }
+            limits_rad[i] = [l[0].to_radians(), l[1].to_radians()];
+        }
+        let sp = six("joint_speed_deg_per_s", &raw.joint_speed_deg_per_s)?;
+        let mut speed_rad_per_s = [0.0; 6];
+        for (i, s) in sp.iter().enumerate() {
+            let p = format!("joint_speed_deg_per_s[{i}]");
+            finite(&p, &[*s])?;
+            if *s <= 0.0 {
+                return Err(Invalid::new(p, format!("speed {s} must be positive")));
+            }
+            speed_rad_per_s[i] = s.to_radians();
+        }
+        let tool = match &raw.flange_to_tool {
+            Some(f) => frame("flange_to_tool", f)?,
+            None => Isometry3::identity(),
+        };
+        let base = match &raw.base {
+            Some(f) => frame("base", f)?,
+            None => Isometry3::identity(),
+        };
+        finite("gravity_m_per_s2", &raw.gravity_m_per_s2)?;
+        let links_raw = six("links", raw.links.iter().collect::<Vec<_>>().as_slice())?;
+        let mut links = [PointMass {
+            mass_kg: 0.0,
+            com_mm: Vector3::zeros(),
+        }; 6];
+        for (i, l) in links_raw.iter().enumerate() {
+            let p = format!("links[{i}]");
+            finite(&format!("{p}.mass_kg"), &[l.mass_kg])?;
+            finite(&format!("{p}.com_mm"), &l.com_mm)?;
+            if l.mass_kg <= 0.0 {
+                return Err(Invalid::new(
+                    format!("{p}.mass_kg"),
+                    format!("mass {} must be positive", l.mass_kg),
+                ));
+            }
+            links[i] = PointMass {
+                mass_kg: l.mass_kg,
+                com_mm: Vector3::from(l.com_mm),
+            };
+        }
+        let tool_load = match &raw.tool_load {
+            Some(l) => {
+                finite("tool_load.mass_kg", &[l.mass_kg])?;
+                finite("tool_load.cog_mm", &l.cog_mm)?;
+                if l.mass_kg <= 0.0 {
+                    return Err(Invalid::new(
+                        "tool_load.mass_kg",
+                        format!("mass {} must be positive", l.mass_kg),
+                    ));
+                }
+                Some(PointMass {
+                    mass_kg: l.mass_kg,
+                    com_mm: Vector3::from(l.cog_mm),
+                })
+            }
+            None => None,
+        };
+        let k = six("k_nm_per_rad", &raw.k_nm_per_rad)?;
+        let mut k_nmm_per_rad = [0.0; 6];
+        for (i, v) in k.iter().enumerate() {
+            let p = format!("k_nm_per_rad[{i}]");
+            finite(&p, &[*v])?;
+            if *v <= 0.0 {
+                return Err(Invalid::new(p, format!("stiffness {v} must be positive")));
+            }
+            k_nmm_per_rad[i] = v * 1000.0;
+        }
+        let process_wrench = match &raw.process_wrench {
+            Some(w) => {
+                finite("process_wrench.force_n", &w.force_n)?;
+                finite("process_wrench.moment_nm", &w.moment_nm)?;
+                Some(ProcessWrench {
+                    force_n: Vector3::from(w.force_n),
+                    moment_nmm: Vector3::from(w.moment_nm) * 1000.0,
+                    in_tool_frame: w.frame == RawWrenchFrame::Tool,
+                })
+            }
+            None => None,
+        };
+        let closed_form = ik::ClosedForm::new(&nominal);
+        Ok(Robot {
+            d: Box::new(RobotData {
+                name: raw.name.unwrap_or_else(|| "robot".to_string()),
+                nominal,
+                actual,
+                closed_form,
+                limits_rad,
+                speed_rad_per_s,
+                tool,
+                base,
+                gravity_m_per_s2: Vector3::from(raw.gravity_m_per_s2),
+                links,
+                tool_load,
+                k_nmm_per_rad,
+                process_wrench,
+            }),
+        })
+    }
+
+    /// Display name.
+    pub fn name(&self) -> &str {
+        &self.d.name
+    }
+    /// Parameter set of a model.
+    pub fn params(&self, model: Model) -> &DhParams {
+        match model {
+            Model::Nominal => &self.d.nominal,
+            Model::Actual => &self.d.actual,
+        }
+    }
+    /// Whether the nominal model has the ABB-style closed-form inverse.
+    pub fn has_closed_form(&self) -> bool {
+        self.d.closed_form.is_some()
+    }
+    /// Joint limits `[min, max]`, rad.
+    pub fn joint_limits_rad(&self) -> &[[f64; 2]; 6] {
+        &self.d.limits_rad
+    }
+    /// Maximum joint speeds, rad/s.
+    pub fn joint_speed_rad_per_s(&self) -> &[f64; 6] {
+        &self.d.speed_rad_per_s
+    }
+    /// Default TCP: flange → tool.
+    pub fn flange_to_tool(&self) -> &Isometry3<f64> {
+        &self.d.tool
+    }
+    /// Robot base frame in the world frame.
+    pub fn base(&self) -> &Isometry3<f64> {
+        &self.d.base
+    }
+    /// Gravity vector in the world frame, m/s².
+    pub fn gravity_m_per_s2(&self) -> &Vector3<f64> {
+        &self.d.gravity_m_per_s2
+    }
+    /// Link masses and centres of mass (link DH frames).
+    pub fn links(&self) -> &[PointMass; 6] {
+        &self.d.links
+    }
+    /// Tool load (flange frame), if any.
+    pub fn tool_load(&self) -> Option<&PointMass> {
+        self.d.tool_load.as_ref()
+    }
+    /// Joint stiffness, N·mm/rad (the file gives N·m/rad).
+    pub fn k_nmm_per_rad(&self) -> &[f64; 6] {
+        &self.d.k_nmm_per_rad
+    }
+    /// Process wrench for prediction, if any.
+    pub fn process_wrench(&self) -> Option<&ProcessWrench> {
+        self.d.process_wrench.as_ref()
+    }
+
+    /// All joint frames of a model in the robot base frame.
+    pub fn frames(&self, model: Model, q: &[f64; 6]) -> Frames {
+        kinematics::frames(self.params(model), q)
+    }
+    /// Flange pose in the robot base frame.
+    pub fn flange_pose(&self, model: Model, q: &[f64; 6]) -> Isometry3<f64> {
+        kinematics::flange(self.params(model), q)
+    }
+    /// TCP pose in the world frame: `base · flange(q) · flange_to_tool`.
+    pub fn tcp_pose(&self, model: Model, q: &[f64; 6]) -> Isometry3<f64> {
+        self.d.base * self.flange_pose(model, q) * self.d.tool
+    }
+    /// Flange pose (robot base frame) that puts the TCP at `tcp_world`.
+    pub fn flange_for_tcp(&self, tcp_world: &Isometry3<f64>) -> Isometry3<f64> {
+        self.d.base.inverse() * tcp_world * self.d.tool.inverse()
+    }
+    /// ABB confdata of a joint vector (nominal model).
+    pub fn confdata(&self, q: &[f64; 6]) -> ConfData {
+        ik::confdata(&self.d.nominal, q)
+    }
+
+    /// Checks every joint against its limits.
+    pub fn check_limits(&self, q: &[f64; 6]) -> std::result::Result<(), RobotError> {
+        const LIMIT_TOL_RAD: f64 = 1e-9;
+        for (i, (v, l)) in q.iter().zip(self.d.limits_rad.iter()).enumerate() {
+            if *v < l[0] - LIMIT_TOL_RAD || *v > l[1] + LIMIT_TOL_RAD || !v.is_finite() {
+                return Err(RobotError::JointLimit {
+                    joint: i + 1,
+                    value_deg: v.to_degrees(),
+                    min_deg: l[0].to_degrees(),
+                    max_deg: l[1].to_degrees(),
+                });
+            }
+        }
+        Ok(())
+    }
+
+    /// All eight closed-form solutions of the nominal model for a TCP pose
+    /// (world frame), joints in (−π, π], no limit check. Index bits: 4 =
+    /// second shoulder branch, 2 = second elbow branch, 1 = flipped wrist.
+    pub fn ik_all(
+        &self,
+        tcp_world: &Isometry3<f64>,
+    ) -> std::result::Result<[Option<[f64; 6]>; 8], RobotError> {
+        let cf = self
+            .d
+            .closed_form
+            .as_ref()
+            .ok_or(RobotError::NoClosedForm)?;
+        let sols = cf.solve(&self.d.nominal, &self.flange_for_tcp(tcp_world), 0.0);
+        if sols.iter().all(Option::is_none) {
+            return Err(RobotError::Unreachable(
+                "the wrist centre is farther from (or closer to) the shoulder than the arm can reach".into(),
+            ));
+        }
+        Ok(sols)
+    }
+
+    /// Nominal (controller) inverse kinematics selecting the solution by ABB
+    /// confdata; joints 1, 4, 6 get the turns their quadrants demand. Checks
+    /// joint limits.
+    pub fn ik_conf(
+        &self,
+        tcp_world: &Isometry3<f64>,
+        conf: ConfData,
+    ) -> std::result::Result<[f64; 6], RobotError> {
+        let q = self.ik_conf_turns(tcp_world, conf, None)?;
+        self.check_limits(&q)?;
+        Ok(q)
+    }
+
+    /// Closed-form solution with confdata `conf`, turns of joints 1, 4, 6
+    /// nearest to `reference` (no limit check).
+    pub(crate) fn ik_conf_near(
+        &self,
+        tcp_world: &Isometry3<f64>,
+        conf: ConfData,
+        reference: &[f64; 6],
+    ) -> std::result::Result<[f64; 6], RobotError> {
+        self.ik_conf_turns(tcp_world, conf, Some(reference))
+    }
+
+    /// Like [`Robot::ik_conf`] without the limit check; with `turn_ref`, the
+    /// turns of joints 1, 4, 6 are the ones nearest to it instead of the
+    /// confdata quadrants (used while iterating on a target).
+    fn ik_conf_turns(
+        &self,
+        tcp_world: &Isometry3<f64>,
+        conf: ConfData,
+        turn_ref: Option<&[f64; 6]>,
+    ) -> std::result::Result<[f64; 6], RobotError> {
+        let cf = self
+            .d
+            .closed_form
+            .as_ref()
+            .ok_or(RobotError::NoClosedForm)?;
+        let wrist_ref = turn_ref.map_or(0.0, |r| r[3]);
+        let sols = cf.solve(&self.d.nominal, &self.flange_for_tcp(tcp_world), wrist_ref);
+        if sols.iter().all(Option::is_none) {
+            return Err(RobotError::Unreachable(
+                "the wrist centre is farther from (or closer to) the shoulder than the arm can reach".into(),
+            ));
+        }
+        let mut found = None;
+        for q in sols.iter().flatten() {
+            if ik::confdata(&self.d.nominal, q).cfx == conf.cfx {
+                found = Some(*q);
+                break;
+            }
+        }
+        let mismatch = || RobotError::ConfMismatch {
+            conf,
+            available: sols
+                .iter()
+                .flatten()
+                .map(|q| ik::confdata(&self.d.nominal, q).to_string())
+                .collect::<Vec<_>>()
+                .join(" "),
+        };
+        let mut q = found.ok_or_else(mismatch)?;
+        match turn_ref {
+            Some(r) => {
+                for i in 0..6 {
+                    q[i] = ik::nearest_turn(q[i], r[i]);
+                }
+            }
+            None => {
+                for (i, c) in [(0, conf.cf1), (3, conf.cf4), (5, conf.cf6)] {
+                    q[i] = ik::into_quadrant(q[i], c).ok_or_else(mismatch)?;
+                }
+                // Joints 2, 3, 5 carry no quadrant: take the turn that lies
+                // inside the limits (e.g. q3 = −217° rather than 143°).
+                for i in [1, 2, 4] {
+                    let [lo, hi] = self.d.limits_rad[i];
+                    for t in [0.0, -2.0 * std::f64::consts::PI, 2.0 * std::f64::consts::PI] {
+                        if (lo..=hi).contains(&(q[i] + t)) {
+                            q[i] += t;
+                            break;
+                        }
+                    }
+                }
+            }
+        }
+        Ok(q)
+    }
+
+    /// Numeric inverse kinematics of a model from a seed joint vector (rad);
+    /// checks joint limits.
+    pub fn ik_numeric(
+        &self,
+        model: Model,
+        tcp_world: &Isometry3<f64>,
+        seed: &[f64; 6],
+    ) -> std::result::Result<[f64; 6], RobotError> {
+        let q = ik::solve_numeric(self.params(model), &self.flange_for_tcp(tcp_world), seed)?;
+        self.check_limits(&q)?;
+        Ok(q)
+    }
+
+    /// Inverse kinematics of the actual (calibrated) model: the nominal
+    /// closed-form solution with this confdata refined numerically.
+    pub fn ik_actual_conf(
+        &self,
+        tcp_world: &Isometry3<f64>,
+        conf: ConfData,
+    ) -> std::result::Result<[f64; 6], RobotError> {
+        let seed = self.ik_conf_turns(tcp_world, conf, None)?;
+        self.ik_numeric(Model::Actual, tcp_world, &seed)
+    }
+
+    /// Nominal (controller) joint values of a TCP pose by either selection.
+    pub fn ik_nominal(
+        &self,
+        tcp_world: &Isometry3<f64>,
+        sel: &IkSelect,
+    ) -> std::result::Result<[f64; 6], RobotError> {
+        match sel {
+            IkSelect::Conf(c) => self.ik_conf(tcp_world, *c),
+            IkSelect::Near(seed) => self.ik_numeric(Model::Nominal, tcp_world, seed),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn robot_is_send_sync() {
+        fn check<T: Send + Sync>() {}
+        check::<Robot>();
     }
 }

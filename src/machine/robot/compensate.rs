@@ -1,0 +1,257 @@
+//! Prediction and compensation of one robot target.
+//!
+//! The controller turns a programmed TCP pose into joints with its NOMINAL
+//! model (closed-form IK with confdata, or numeric IK from a seed). The real
+//! arm then reaches
+//! `base · FK_actual(q + Kθ⁻¹ (τ_gravity(q) + τ_process(q))) · tool`.
+//! Small-deflection form: the torques are evaluated at the commanded joints
+//! `q` of the actual model, not at the deflected ones (second-order effect).
+//!
+//! Compensation searches the commanded pose `C` whose predicted attained pose
+//! equals the programmed pose `P`, by the fixed-point iteration
+//! `C ← C + (P − attained(C))` (position added, rotation vector applied on
+//! the left). It converges quickly because the deviation changes little over
+//! the size of the correction.
+
+use nalgebra::{Isometry3, Matrix6, Translation3, UnitQuaternion, Vector3, Vector6};
+
+use super::pose::pose_error;
+use super::{IkSelect, Model, Robot, RobotError};
+
+/// Position tolerance of the compensation iteration, mm (0.1 nm).
+pub const COMP_POS_TOL_MM: f64 = 1e-7;
+/// Orientation tolerance of the compensation iteration, rad.
+pub const COMP_ROT_TOL_RAD: f64 = 1e-10;
+/// Iteration limit of the compensation.
+pub const COMP_MAX_ITER: usize = 50;
+
+/// Which effects the prediction includes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Effects {
+    /// Actual (calibrated) instead of nominal DH parameters.
+    pub kinematic: bool,
+    /// Joint deflection from gravity (links and tool load).
+    pub gravity: bool,
+    /// Joint deflection from the process wrench.
+    pub process: bool,
+}
+
+impl Effects {
+    /// Every effect on.
+    pub const ALL: Effects = Effects {
+        kinematic: true,
+        gravity: true,
+        process: true,
+    };
+    /// Every effect off (prediction = controller's nominal model).
+    pub const NONE: Effects = Effects {
+        kinematic: false,
+        gravity: false,
+        process: false,
+    };
+}
+
+/// A small pose difference: attained − reference.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct PoseDelta {
+    /// Position difference, mm (world frame).
+    pub pos_mm: Vector3<f64>,
+    /// Rotation vector of `R_attained · R_referenceᵀ`, rad (world frame).
+    pub rot_rad: Vector3<f64>,
+}
+
+impl PoseDelta {
+    fn between(attained: &Isometry3<f64>, reference: &Isometry3<f64>) -> Self {
+        let (p, r) = pose_error(attained, reference);
+        PoseDelta {
+            pos_mm: p,
+            rot_rad: r,
+        }
+    }
+}
+
+/// Predicted deviation of an uncompensated target, split by cause. The
+/// parts are successive differences, so their positions sum to `total`.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Deviation {
+    /// Actual vs nominal parameters at the commanded joints.
+    pub kinematic: PoseDelta,
+    /// Added by gravity deflection.
+    pub gravity: PoseDelta,
+    /// Added by the process wrench deflection.
+    pub process: PoseDelta,
+    /// Attained − programmed.
+    pub total: PoseDelta,
+}
+
+/// Result of compensating one target.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Compensation {
+    /// The pose to program instead (world frame).
+    pub pose: Isometry3<f64>,
+    /// Controller joints of the programmed (uncompensated) pose, rad.
+    pub q_programmed: [f64; 6],
+    /// Controller joints of the compensated pose, rad.
+    pub q_compensated: [f64; 6],
+    /// Confdata of `q_compensated`, to be written with the compensated
+    /// target: it differs from the programmed one when a joint crosses a
+    /// quadrant boundary (cf1/cf4/cf6) during compensation.
+    pub conf: super::ConfData,
+    /// Predicted deviation of the uncompensated target.
+    pub deviation: Deviation,
+    /// Remaining predicted error of the compensated target.
+    pub residual: PoseDelta,
+    /// Iterations used.
+    pub iterations: usize,
+}
+
+/// Weight of rotation against position in the progress test, mm/rad.
+const ROT_SCALE_MM: f64 = 1000.0;
+
+/// Moves a pose by `[Δp (mm); Δφ (rad)]`, rotation applied on the left.
+fn perturb(c: &Isometry3<f64>, d: &Vector6<f64>) -> Isometry3<f64> {
+    Isometry3::from_parts(
+        Translation3::from(c.translation.vector + d.fixed_rows::<3>(0)),
+        UnitQuaternion::from_scaled_axis(d.fixed_rows::<3>(3).into_owned()) * c.rotation,
+    )
+}
+
+impl Robot {
+    /// Controller joints of a commanded pose, continuing from `q`.
+    fn controller_joints(
+        &self,
+        cmd: &Isometry3<f64>,
+        q: &[f64; 6],
+        sel: &IkSelect,
+    ) -> Result<[f64; 6], RobotError> {
+        match sel {
+            IkSelect::Conf(c) => self.ik_conf_near(cmd, *c, q),
+            IkSelect::Near(_) => {
+                super::ik::solve_numeric(self.params(Model::Nominal), &self.flange_for_tcp(cmd), q)
+            }
+        }
+    }
+
+    /// Finite-difference Jacobian of the attained pose with respect to the
+    /// commanded pose (both as `[Δp; Δφ]`).
+    fn deviation_jacobian(
+        &self,
+        cmd: &Isometry3<f64>,
+        q: &[f64; 6],
+        attained: &Isometry3<f64>,
+        sel: &IkSelect,
+        effects: Effects,
+    ) -> Result<Matrix6<f64>, RobotError> {
+        const H: [f64; 2] = [1e-4, 1e-7];
+        let mut m = Matrix6::zeros();
+        for k in 0..6 {
+            let h = H[k / 3];
+            let mut d = Vector6::zeros();
+            d[k] = h;
+            let qk = self.controller_joints(&perturb(cmd, &d), q, sel)?;
+            let (dp, dr) = pose_error(&self.predict(&qk, effects), attained);
+            for r in 0..3 {
+                m[(r, k)] = dp[r] / h;
+                m[(r + 3, k)] = dr[r] / h;
+            }
+        }
+        Ok(m)
+    }
+
+    /// Predicted attained TCP pose (world frame) for controller joints `q`,
+    /// with the intermediate poses `[nominal, +kinematic, +gravity,
+    /// +process]` in that order (the last is the attained pose).
+    pub fn predict_stages(&self, q: &[f64; 6], effects: Effects) -> [Isometry3<f64>; 4] {
+        let model = if effects.kinematic {
+            Model::Actual
+        } else {
+            Model::Nominal
+        };
+        let p0 = self.tcp_pose(Model::Nominal, q);
+        let p1 = self.tcp_pose(model, q);
+        let tau_g = if effects.gravity {
+            self.gravity_torques(model, q)
+        } else {
+            Vector6::zeros()
+        };
+        let tau_w = if effects.process {
+            self.process_torques(model, q)
+        } else {
+            Vector6::zeros()
+        };
+        let p2 = self.base() * self.deflected_flange(model, q, &tau_g) * self.flange_to_tool();
+        let p3 =
+            self.base() * self.deflected_flange(model, q, &(tau_g + tau_w)) * self.flange_to_tool();
+        [p0, p1, p2, p3]
+    }
+
+    /// Predicted attained TCP pose (world frame) for controller joints `q`.
+    pub fn predict(&self, q: &[f64; 6], effects: Effects) -> Isometry3<f64> {
+        self.predict_stages(q, effects)[3]
+    }
+
+    /// Compensates one programmed TCP pose (world frame): returns the pose to
+    /// program so that the predicted attained pose equals `programmed`
+    /// within [`COMP_POS_TOL_MM`] / [`COMP_ROT_TOL_RAD`].
+    pub fn compensate(
+        &self,
+        programmed: &Isometry3<f64>,
+        sel: &IkSelect,
+        effects: Effects,
+    ) -> Result<Compensation, RobotError> {
+        let q0 = self.ik_nominal(programmed, sel)?;
+        let st = self.predict_stages(&q0, effects);
+        let deviation = Deviation {
+            kinematic: PoseDelta::between(&st[1], &st[0]),
+            gravity: PoseDelta::between(&st[2], &st[1]),
+            process: PoseDelta::between(&st[3], &st[2]),
+            total: PoseDelta::between(&st[3], programmed),
+        };
+        let mut cmd = *programmed;
+        let mut q = q0;
+        let mut attained = st[3];
+        let mut last = (f64::INFINITY, f64::INFINITY);
+        let mut newton = false;
+        for it in 0..COMP_MAX_ITER {
+            let (dp, dr) = pose_error(programmed, &attained);
+            let prev = last.0 + ROT_SCALE_MM * last.1;
+            last = (dp.norm(), dr.norm());
+            if last.0 < COMP_POS_TOL_MM && last.1 < COMP_ROT_TOL_RAD {
+                self.check_limits(&q)?;
+                return Ok(Compensation {
+                    pose: cmd,
+                    q_programmed: q0,
+                    q_compensated: q,
+                    conf: self.confdata(&q),
+                    deviation,
+                    residual: PoseDelta::between(&attained, programmed),
+                    iterations: it,
+                });
+            }
+            // The plain fixed-point step contracts unless the deviation
+            // changes fast with the pose (near the wrist singularity); then
+            // switch to Newton steps with a finite-difference Jacobian.
+            if last.0 + ROT_SCALE_MM * last.1 > 0.5 * prev {
+                newton = true;
+            }
+            let mut e = Vector6::zeros();
+            e.fixed_rows_mut::<3>(0).copy_from(&dp);
+            e.fixed_rows_mut::<3>(3).copy_from(&dr);
+            let step = if newton {
+                let m = self.deviation_jacobian(&cmd, &q, &attained, sel, effects)?;
+                m.lu().solve(&e).unwrap_or(e)
+            } else {
+                e
+            };
+            cmd = perturb(&cmd, &step);
+            q = self.controller_joints(&cmd, &q, sel)?;
+            attained = self.predict(&q, effects);
+        }
+        Err(RobotError::NoConvergence {
+            what: "target compensation",
+            iterations: COMP_MAX_ITER,
+            pos_mm: last.0,
+            rot_rad: last.1,
+        })
+    }
+}

@@ -1,0 +1,326 @@
+//! Inverse kinematics.
+//!
+//! - Closed form for the nominal model of ABB-style arms (modified DH, joint 1
+//!   vertical, shoulder offset `a1`, parallel axes 2 and 3, optional elbow
+//!   offset `a3`, spherical wrist): all eight solutions.
+//! - ABB confdata `[cf1, cf4, cf6, cfx]` selects one of them and the turns of
+//!   joints 1, 4 and 6.
+//! - Damped least squares (Newton with a small damping) seeded from a joint
+//!   vector, for the actual (non-spherical) model or robots without a closed
+//!   form.
+//!
+//! ## cfx (ABB definition, as implemented)
+//! `cfx = 4·b1 + 2·b2 + b3` with
+//! - `b1 = 1` when the wrist centre is *behind* axis 1: its component along
+//!   the x axis of frame 1 (the direction the shoulder offset points to),
+//!   measured from axis 1, is negative;
+//! - `b2 = 1` when the wrist centre is *behind* the lower arm: with `u` from
+//!   axis 2 to axis 3 and `w` from axis 2 to the wrist centre,
+//!   `(u × w) · z2 < 0` (at all joints zero the wrist is in front);
+//! - `b3 = 1` when joint 5 is negative (`q5 < 0`; `q5 = 0` counts as positive).
+//!
+//! `cf1`, `cf4`, `cf6` are the quadrants `floor(q / 90°)` of joints 1, 4, 6
+//! (`[0°, 90°) → 0`, `[90°, 180°) → 1`, `[−90°, 0°) → −1`, …).
+
+use std::f64::consts::{FRAC_PI_2, PI};
+use std::fmt;
+
+use nalgebra::{Isometry3, Matrix6, UnitQuaternion, Vector3, Vector6};
+
+use super::RobotError;
+use super::dh::{Convention, DhParams};
+use super::kinematics::{frames, jacobian};
+use super::pose::pose_error;
+
+/// ABB robot configuration data `[cf1, cf4, cf6, cfx]`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub struct ConfData {
+    /// Quadrant of joint 1.
+    pub cf1: i32,
+    /// Quadrant of joint 4.
+    pub cf4: i32,
+    /// Quadrant of joint 6.
+    pub cf6: i32,
+    /// Configuration number 0..=7 (see the module documentation).
+    pub cfx: i32,
+}
+
+impl fmt::Display for ConfData {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "[{},{},{},{}]", self.cf1, self.cf4, self.cf6, self.cfx)
+    }
+}
+
+/// Quadrant `floor(q / 90°)` of a joint value in radians.
+pub fn quadrant(q: f64) -> i32 {
+    (q / FRAC_PI_2).floor() as i32
+}
+
+/// Tolerance on the quadrant boundary when matching cf1/cf4/cf6, rad.
+const QUADRANT_TOL_RAD: f64 = 1e-6;
+/// Tolerance on structural parameters for the closed form.
+const STRUCT_TOL: f64 = 1e-9;
+/// Position convergence of the numeric solver, mm.
+pub const IK_POS_TOL_MM: f64 = 1e-9;
+/// Orientation convergence of the numeric solver, rad.
+pub const IK_ROT_TOL_RAD: f64 = 1e-12;
+/// Iteration limit of the numeric solver.
+pub const IK_MAX_ITER: usize = 100;
+
+/// Closed-form geometry extracted from a nominal parameter set.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ClosedForm {
+    d1: f64,
+    a1: f64,
+    a2: f64,
+    a3: f64,
+    d4: f64,
+    d6: f64,
+    s4: f64,
+    alpha3: f64,
+    off: [f64; 6],
+}
+
+fn near(a: f64, b: f64) -> bool {
+    (a - b).abs() <= STRUCT_TOL
+}
+
+impl ClosedForm {
+    /// Recognises the ABB-style structure; `None` for any other robot.
+    pub fn new(p: &DhParams) -> Option<Self> {
+        let j = &p.joints;
+        let ok = p.convention == Convention::ModifiedDh
+            && near(j[0].a_mm, 0.0)
+            && near(j[0].alpha_rad, 0.0)
+            && near(j[1].alpha_rad, -FRAC_PI_2)
+            && near(j[1].d_mm, 0.0)
+            && near(j[2].alpha_rad, 0.0)
+            && near(j[2].d_mm, 0.0)
+            && near(j[3].alpha_rad, -FRAC_PI_2)
+            && near(j[4].a_mm, 0.0)
+            && near(j[4].alpha_rad.abs(), FRAC_PI_2)
+            && near(j[4].d_mm, 0.0)
+            && near(j[5].a_mm, 0.0)
+            && near(j[5].alpha_rad, -j[4].alpha_rad)
+            && j[2].a_mm > 0.0;
+        ok.then(|| ClosedForm {
+            d1: j[0].d_mm,
+            a1: j[1].a_mm,
+            a2: j[2].a_mm,
+            a3: j[3].a_mm,
+            d4: j[3].d_mm,
+            d6: j[5].d_mm,
+            s4: j[4].alpha_rad.signum(),
+            alpha3: j[3].alpha_rad,
+            off: [
+                j[0].theta_offset_rad,
+                j[1].theta_offset_rad,
+                j[2].theta_offset_rad,
+                j[3].theta_offset_rad,
+                j[4].theta_offset_rad,
+                j[5].theta_offset_rad,
+            ],
+        })
+    }
+
+    /// All eight solutions for a flange pose in the robot base frame, each in
+    /// (−π, π]; `None` where that shoulder/elbow branch cannot reach. Index
+    /// bits: 4 = second shoulder branch, 2 = second elbow branch, 1 = wrist
+    /// flipped (these are not cfx; use [`confdata`] to classify).
+    pub fn solve(
+        &self,
+        p: &DhParams,
+        flange: &Isometry3<f64>,
+        wrist_ref: f64,
+    ) -> [Option<[f64; 6]>; 8] {
+        let mut out = [None; 8];
+        let z6 = flange.rotation * Vector3::z();
+        let pw = flange.translation.vector - self.d6 * z6;
+        let rho = (self.a3 * self.a3 + self.d4 * self.d4).sqrt();
+        let gamma = self.d4.atan2(self.a3);
+        let base_t1 = if pw.x.hypot(pw.y) < 1e-9 {
+            0.0
+        } else {
+            pw.y.atan2(pw.x)
+        };
+        for sh in 0..2 {
+            let t1 = base_t1 + if sh == 1 { PI } else { 0.0 };
+            let r = t1.cos() * pw.x + t1.sin() * pw.y;
+            let dr = r - self.a1;
+            let dz = pw.z - self.d1;
+            let l2 = dr * dr + dz * dz;
+            let c = (l2 - self.a2 * self.a2 - rho * rho) / (2.0 * self.a2 * rho);
+            if !c.is_finite() || c.abs() > 1.0 + 1e-12 {
+                continue;
+            }
+            let ac = c.clamp(-1.0, 1.0).acos();
+            for el in 0..2 {
+                let t3 = if el == 0 { ac } else { -ac } - gamma;
+                let k1 = self.a2 + self.a3 * t3.cos() - self.d4 * t3.sin();
+                let k2 = self.a3 * t3.sin() + self.d4 * t3.cos();
+                let phi = dr.atan2(dz) - k2.atan2(k1);
+                let t2 = phi - FRAC_PI_2;
+                let q123 = [t1 - self.off[0], t2 - self.off[1], t3 - self.off[2]];
+                // Rotation of frame 3 from the nominal joint transforms.
+                let mut r03 = UnitQuaternion::identity();
+                for (i, q) in q123.iter().enumerate() {
+                    r03 *= p.joints[i].transform(p.convention, *q).rotation;
+                }
+                let rx3 = UnitQuaternion::from_axis_angle(&Vector3::x_axis(), self.alpha3);
+                let n = (rx3.inverse() * r03.inverse() * flange.rotation).to_rotation_matrix();
+                let n = n.matrix();
+                let sb = n[(0, 2)].hypot(n[(1, 2)]);
+                let (beta, t4, t6) = if sb < 1e-10 {
+                    let beta = sb.atan2(n[(2, 2)]);
+                    let t4 = wrist_ref + self.off[3];
+                    let ry = UnitQuaternion::from_axis_angle(&Vector3::y_axis(), beta);
+                    let rz4 = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), t4);
+                    let m = (ry.inverse() * rz4.inverse()).to_rotation_matrix().matrix() * n;
+                    (beta, t4, m[(1, 0)].atan2(m[(0, 0)]))
+                } else {
+                    (
+                        sb.atan2(n[(2, 2)]),
+                        n[(1, 2)].atan2(n[(0, 2)]),
+                        n[(2, 1)].atan2(-n[(2, 0)]),
+                    )
+                };
+                for fl in 0..2 {
+                    let (b, a4, a6) = if fl == 0 {
+                        (beta, t4, t6)
+                    } else {
+                        (-beta, t4 + PI, t6 + PI)
+                    };
+                    let t5 = -self.s4 * b;
+                    let q = [
+                        q123[0],
+                        q123[1],
+                        q123[2],
+                        a4 - self.off[3],
+                        t5 - self.off[4],
+                        a6 - self.off[5],
+                    ];
+                    out[sh * 4 + el * 2 + fl] = Some(q.map(wrap));
+                }
+            }
+        }
+        out
+    }
+}
+
+/// Wraps an angle into (−π, π].
+pub fn wrap(a: f64) -> f64 {
+    let mut x = a % (2.0 * PI);
+    if x > PI {
+        x -= 2.0 * PI;
+    } else if x <= -PI {
+        x += 2.0 * PI;
+    }
+    x
+}
+
+/// Confdata of a joint vector for a parameter set (normally the nominal one).
+pub fn confdata(p: &DhParams, q: &[f64; 6]) -> ConfData {
+    let f = frames(p, q);
+    // Wrist centre: origin of frame 5 (joints 4–6 intersect there for a
+    // spherical wrist).
+    let wc = f.link[4].translation.vector;
+    let x1 = f.link[0].rotation * Vector3::x();
+    let behind1 = (wc - f.axis_origin[0]).dot(&x1) < 0.0;
+    let u = f.axis_origin[2] - f.axis_origin[1];
+    let w = wc - f.axis_origin[1];
+    let behind_arm = u.cross(&w).dot(&f.axis_dir[1]) < 0.0;
+    let neg5 = q[4] < 0.0;
+    ConfData {
+        cf1: quadrant(q[0]),
+        cf4: quadrant(q[3]),
+        cf6: quadrant(q[5]),
+        cfx: 4 * behind1 as i32 + 2 * behind_arm as i32 + neg5 as i32,
+    }
+}
+
+/// Moves `q` by whole turns into quadrant `cf`; `None` when impossible.
+pub fn into_quadrant(q: f64, cf: i32) -> Option<f64> {
+    let lo = cf as f64 * FRAC_PI_2;
+    let k = ((lo + FRAC_PI_2 / 2.0 - q) / (2.0 * PI)).round();
+    let v = q + 2.0 * PI * k;
+    (v >= lo - QUADRANT_TOL_RAD && v < lo + FRAC_PI_2 + QUADRANT_TOL_RAD).then_some(v)
+}
+
+/// Moves `q` by whole turns as close as possible to `reference`.
+pub fn nearest_turn(q: f64, reference: f64) -> f64 {
+    q + 2.0 * PI * ((reference - q) / (2.0 * PI)).round()
+}
+
+/// Damped least-squares IK of the flange pose (robot base frame) for any
+/// parameter set, seeded from `seed`. Rotation rows are weighted by 1000 mm.
+pub fn solve_numeric(
+    p: &DhParams,
+    flange: &Isometry3<f64>,
+    seed: &[f64; 6],
+) -> Result<[f64; 6], RobotError> {
+    const ROT_WEIGHT_MM: f64 = 1000.0;
+    const DAMPING_MM2: f64 = 1e-6;
+    const MAX_STEP_RAD: f64 = 0.2;
+    let mut q = *seed;
+    let mut last = (f64::INFINITY, f64::INFINITY);
+    for _ in 0..IK_MAX_ITER {
+        let f = frames(p, &q);
+        let (dp, dr) = pose_error(flange, &f.flange());
+        last = (dp.norm(), dr.norm());
+        if last.0 < IK_POS_TOL_MM && last.1 < IK_ROT_TOL_RAD {
+            return Ok(q);
+        }
+        let mut j = jacobian(&f, &Vector3::zeros());
+        let mut e = Vector6::zeros();
+        e.fixed_rows_mut::<3>(0).copy_from(&dp);
+        e.fixed_rows_mut::<3>(3).copy_from(&(dr * ROT_WEIGHT_MM));
+        for c in 0..6 {
+            for r in 3..6 {
+                j[(r, c)] *= ROT_WEIGHT_MM;
+            }
+        }
+        let a: Matrix6<f64> = j * j.transpose() + Matrix6::identity() * DAMPING_MM2;
+        let Some(y) = a.lu().solve(&e) else {
+            break;
+        };
+        let mut dq = j.transpose() * y;
+        let m = dq.amax();
+        if m > MAX_STEP_RAD {
+            dq *= MAX_STEP_RAD / m;
+        }
+        for i in 0..6 {
+            q[i] += dq[i];
+        }
+    }
+    Err(RobotError::NoConvergence {
+        what: "numeric inverse kinematics",
+        iterations: IK_MAX_ITER,
+        pos_mm: last.0,
+        rot_rad: last.1,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use approx::assert_abs_diff_eq;
+
+    const TOL: f64 = 1e-12;
+
+    #[test]
+    fn quadrants_follow_abb() {
+        // floor(q/90°): 45° → 0, 135° → 1, −1° → −1, −135° → −2, 370° → 4.
+        for (deg, cf) in [(45.0, 0), (135.0, 1), (-1.0, -1), (-135.0, -2), (370.0, 4)] {
+            assert_eq!(quadrant(f64::to_radians(deg)), cf);
+        }
+        // 50° moved into quadrant 4 is 410°; into quadrant 1 impossible.
+        assert_abs_diff_eq!(
+            into_quadrant(50f64.to_radians(), 4).unwrap_or(0.0),
+            410f64.to_radians(),
+            epsilon = TOL
+        );
+        assert!(into_quadrant(50f64.to_radians(), 1).is_none());
+        assert_abs_diff_eq!(wrap(3.0 * PI), PI, epsilon = TOL);
+        assert_abs_diff_eq!(nearest_turn(0.1, 2.0 * PI), 0.1 + 2.0 * PI, epsilon = TOL);
+    }
+}

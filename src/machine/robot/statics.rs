@@ -1,0 +1,108 @@
+//! Joint-stiffness statics: joint torques of a wrench at a point
+//! (`τ = J_Pᵀ W`), gravity torques of the links and the tool load, joint
+//! deflection `Δθ = Kθ⁻¹ τ` and the small-deflection displacement of any
+//! flange point `Δx = J_P Kθ⁻¹ τ`. Units: N, N·mm, mm, rad, kg, m/s².
+//! All vectors are in the robot base frame unless stated.
+
+use nalgebra::{Isometry3, Vector3, Vector6};
+
+use super::kinematics::{jacobian, jacobian_link};
+use super::{Model, Robot};
+
+impl Robot {
+    /// Joint torques (N·mm) of a wrench `[F (N); M (N·mm)]`, robot base
+    /// frame, acting at a point given in the flange frame: `τ = J_Pᵀ W`.
+    pub fn wrench_torques(
+        &self,
+        model: Model,
+        q: &[f64; 6],
+        point_in_flange: &Vector3<f64>,
+        wrench: &Vector6<f64>,
+    ) -> Vector6<f64> {
+        let f = self.frames(model, q);
+        jacobian(&f, point_in_flange).transpose() * wrench
+    }
+
+    /// Gravity in the robot base frame, m/s².
+    fn gravity_base(&self) -> Vector3<f64> {
+        self.base().rotation.inverse() * self.gravity_m_per_s2()
+    }
+
+    /// Joint torques (N·mm) from the weight of the links and of the tool load.
+    pub fn gravity_torques(&self, model: Model, q: &[f64; 6]) -> Vector6<f64> {
+        let f = self.frames(model, q);
+        let g = self.gravity_base();
+        let mut tau = Vector6::zeros();
+        for (i, l) in self.links().iter().enumerate() {
+            let w = force_wrench(g * l.mass_kg);
+            tau += jacobian_link(&f, i, &l.com_mm).transpose() * w;
+        }
+        if let Some(l) = self.tool_load() {
+            tau += jacobian(&f, &l.com_mm).transpose() * force_wrench(g * l.mass_kg);
+        }
+        tau
+    }
+
+    /// Process wrench at the TCP in the robot base frame, `[F (N); M (N·mm)]`;
+    /// zero when the file has none.
+    pub fn process_wrench_base(&self, model: Model, q: &[f64; 6]) -> Vector6<f64> {
+        let Some(w) = self.process_wrench() else {
+            return Vector6::zeros();
+        };
+        let (f, m) = if w.in_tool_frame {
+            let r = (self.flange_pose(model, q) * self.flange_to_tool()).rotation;
+            (r * w.force_n, r * w.moment_nmm)
+        } else {
+            (w.force_n, w.moment_nmm)
+        };
+        let mut out = Vector6::zeros();
+        out.fixed_rows_mut::<3>(0).copy_from(&f);
+        out.fixed_rows_mut::<3>(3).copy_from(&m);
+        out
+    }
+
+    /// Joint torques (N·mm) of the process wrench acting at the TCP.
+    pub fn process_torques(&self, model: Model, q: &[f64; 6]) -> Vector6<f64> {
+        let w = self.process_wrench_base(model, q);
+        self.wrench_torques(model, q, &self.flange_to_tool().translation.vector, &w)
+    }
+
+    /// Joint deflection `Δθ = Kθ⁻¹ τ` (rad) for torques in N·mm.
+    pub fn joint_deflection(&self, tau: &Vector6<f64>) -> [f64; 6] {
+        let k = self.k_nmm_per_rad();
+        std::array::from_fn(|i| tau[i] / k[i])
+    }
+
+    /// Small-deflection displacement of a point fixed to the flange (given in
+    /// the flange frame): `[Δp (mm); Δφ (rad)] = J_P Kθ⁻¹ τ`, robot base frame.
+    pub fn point_deflection(
+        &self,
+        model: Model,
+        q: &[f64; 6],
+        point_in_flange: &Vector3<f64>,
+        tau: &Vector6<f64>,
+    ) -> Vector6<f64> {
+        let f = self.frames(model, q);
+        let dq = Vector6::from(self.joint_deflection(tau));
+        jacobian(&f, point_in_flange) * dq
+    }
+
+    /// Flange pose (robot base frame) after the joints yield under `tau`:
+    /// `FK(q + Kθ⁻¹ τ)`.
+    pub fn deflected_flange(
+        &self,
+        model: Model,
+        q: &[f64; 6],
+        tau: &Vector6<f64>,
+    ) -> Isometry3<f64> {
+        let dq = self.joint_deflection(tau);
+        let qd: [f64; 6] = std::array::from_fn(|i| q[i] + dq[i]);
+        self.flange_pose(model, &qd)
+    }
+}
+
+fn force_wrench(f: Vector3<f64>) -> Vector6<f64> {
+    let mut w = Vector6::zeros();
+    w.fixed_rows_mut::<3>(0).copy_from(&f);
+    w
+}
