@@ -7,7 +7,7 @@ use nalgebra::{SMatrix, SVector, Vector3};
 
 use crate::machine::{AxisVec, DirVec, TipPose};
 use crate::predict::{Breakdown, ToolPredictor};
-use crate::program::interp::{Motion, Move, Plan, PlanKind};
+use crate::program::interp::{END_INSIDE, Motion, Move, Plan, PlanKind};
 
 /// Convergence of the inverse solve on the tool-tip position, mm.
 pub const SOLVE_TOL_MM: f64 = 1e-7;
@@ -341,7 +341,7 @@ fn arc_block(
     let e3 = mv.end3();
     // Sample the correction along the arc with the local direction of motion.
     let n = ((arc.sweep.abs() / (5f64).to_radians()).ceil() as usize).clamp(4, 72);
-    let start_dirs = dirs_of(&arc.tangent(&s3, &e3, 0.0), &mv.dirs);
+    let start_dirs = dirs_of(&arc.tangent(&s3, &e3, 1.0 - END_INSIDE), &mv.dirs);
     let mut corr_min = Vector3::repeat(f64::INFINITY);
     let mut corr_max = Vector3::repeat(f64::NEG_INFINITY);
     let mut first = Vector3::zeros();

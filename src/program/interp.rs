@@ -23,6 +23,9 @@ pub const MM_PER_INCH: f64 = 25.4;
 /// (absolute part; a relative part of 0.1 % of the radius is added).
 pub const ARC_RADIUS_TOL_MM: f64 = 0.01;
 
+/// Arc parameter just inside the ends, where tangent directions are read.
+pub const END_INSIDE: f64 = 1.0 - 1e-6;
+
 /// Below this an axis is considered not to move, mm or deg.
 pub const MOTION_EPS: f64 = 1e-9;
 
@@ -668,7 +671,10 @@ impl Interpreter {
             Some(g) => {
                 let s3 = Vector3::new(start[0], start[1], start[2]);
                 let e3 = Vector3::new(end[0], end[1], end[2]);
-                let t = g.tangent(&s3, &e3, 1.0);
+                // Just before the end: at a quadrant point one component of
+                // the tangent vanishes, and the axis still moved the way it
+                // was going.
+                let t = g.tangent(&s3, &e3, END_INSIDE);
                 for i in 0..3 {
                     if t[i].abs() > 1e-12 {
                         dirs[i] = if t[i] > 0.0 { 1 } else { -1 };
