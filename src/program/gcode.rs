@@ -345,6 +345,16 @@ pub fn parse_line(line: &[u8], line_no: usize, file: &str, out: &mut Block) -> R
                                     ),
                                 ));
                             }
+                            Some(b'=') => {
+                                // `X=10.`, `R1=5` (Siemens-style assignments).
+                                return Err(err(
+                                    after_letter,
+                                    format!(
+                                        "assignments cannot be compensated offline: `{}`",
+                                        show(&text[pos..])
+                                    ),
+                                ));
+                            }
                             _ => {}
                         }
                         if after_letter >= text.len() {

@@ -546,7 +546,13 @@ impl Interpreter {
                     return Ok(plan);
                 }
                 90 => {}
-                280 => return self.reference_return(block, &axis, plan, line),
+                280 => {
+                    // A motion code written with G28 stays modal (`G0 G28 G91 Z0.`).
+                    if let Some(g) = motion_g {
+                        self.set_motion_mode(g);
+                    }
+                    return self.reference_return(block, &axis, plan, line);
+                }
                 530 => return self.machine_move(block, &axis, plan, motion_g, line),
                 _ => {}
             }
@@ -651,6 +657,20 @@ impl Interpreter {
         plan.kind = PlanKind::Motion;
         plan.mv = Some(mv);
         Ok(plan)
+    }
+
+    /// Makes a G0/G1/G2/G3 word the modal motion (cancelling a canned cycle);
+    /// other codes are left alone.
+    fn set_motion_mode(&mut self, g: &Word) {
+        let motion = match g.code10() {
+            0 => Motion::Rapid,
+            10 => Motion::Linear,
+            20 => Motion::ArcCw,
+            30 => Motion::ArcCcw,
+            _ => return,
+        };
+        self.motion = Some(motion);
+        self.cycle = None;
     }
 
     fn feed_mm_min(&self) -> f64 {
@@ -767,7 +787,9 @@ impl Interpreter {
                     Some(w),
                     format!(
                         "centre offset along the plane normal is not allowed in this plane: `{}`",
-                        String::from_utf8_lossy(&text[w.start as usize..w.end as usize])
+                        String::from_utf8_lossy(
+                            text.get(w.start as usize..w.end as usize).unwrap_or(b"")
+                        )
                     ),
                 ));
             }
@@ -1008,6 +1030,8 @@ impl Interpreter {
             if !matches!(g.code10(), 0 | 10) {
                 return Err(self.err(line, Some(g), "G53 moves only with G0 or G1".into()));
             }
+            // G53 is one-shot, but the G0/G1 written with it stays modal.
+            self.set_motion_mode(g);
         }
         let mut end = self.pos;
         for (slot, a) in axis.iter().enumerate() {
