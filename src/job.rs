@@ -240,21 +240,23 @@ impl<'m> Job<'m> {
                 }
                 continue;
             };
-            let results: Vec<std::result::Result<BlockResult, Failure>> = if pred.effects.is_none()
-            {
-                Vec::new()
-            } else {
-                let work = || {
-                    plans
-                        .par_iter()
-                        .map(|p| compensate::block(pred, p, &self.settings))
-                        .collect()
+            // With every effect off the output is the input; a report still
+            // wants its rows (of zero deviation).
+            let results: Vec<std::result::Result<BlockResult, Failure>> =
+                if pred.effects.is_none() && rows.is_none() {
+                    Vec::new()
+                } else {
+                    let work = || {
+                        plans
+                            .par_iter()
+                            .map(|p| compensate::block(pred, p, &self.settings))
+                            .collect()
+                    };
+                    match self.pool {
+                        Some(pool) => pool.install(work),
+                        None => work(),
+                    }
                 };
-                match self.pool {
-                    Some(pool) => pool.install(work),
-                    None => work(),
-                }
-            };
             out_buf.clear();
             for (i, &(s, e)) in ranges.iter().enumerate() {
                 let plan = &plans[i];

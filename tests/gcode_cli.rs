@@ -10,7 +10,12 @@ use crate::common::{postproc, repo};
 /// A minimal machine file: today's loader needs only the kind.
 fn machine(dir: &Path) -> PathBuf {
     let path = dir.join("machine.yaml");
-    fs::write(&path, "kind: machine_tool\n").expect("write machine file");
+    // An error-free three-axis machine with travel wide enough for every sample.
+    let mut text = String::from("kind: machine_tool\nname: test mill\naxes:\n");
+    for (axis, side) in [("X", "workpiece"), ("Y", "workpiece"), ("Z", "tool")] {
+        text.push_str(&format!("  - name: {axis}\n    type: linear\n    side: {side}\n    travel_mm: [-3000, 3000]\n    rapid_mm_per_min: 20000\n"));
+    }
+    fs::write(&path, text).expect("write machine file");
     path
 }
 
