@@ -17,6 +17,10 @@ pub const SOLVE_TOL_RAD: f64 = 1e-8;
 pub const MAX_ITER: usize = 50;
 /// Deepest bisection of one move (2^16 segments).
 pub const MAX_SPLIT_DEPTH: u32 = 16;
+/// Step size below which the five-axis solve has stalled, mm or deg.
+const STALL_STEP: f64 = 1e-10;
+/// Relative Levenberg damping of the five-axis solve.
+const DAMPING: f64 = 1e-9;
 /// Lever arm that weighs direction errors against position errors in the
 /// five-axis solve, mm per rad.
 const DIR_WEIGHT_MM: f64 = 100.0;
@@ -158,7 +162,14 @@ pub fn solve(
         let jtj = jac.transpose() * jac;
         let jtr = jac.transpose() * r;
         // Only the first n columns are used; pad the rest with identity.
+        // Damped (Levenberg) step: near a singular configuration (C on its
+        // own axis, A at zero) one axis barely changes the pose and the
+        // plain normal equations are singular.
         let mut a = jtj;
+        let scale = (0..n).map(|k| a[(k, k)]).fold(0.0, f64::max).max(1e-12);
+        for k in 0..n {
+            a[(k, k)] += DAMPING * scale;
+        }
         for k in n..6 {
             a[(k, k)] = 1.0;
         }
@@ -167,6 +178,22 @@ pub fn solve(
         };
         for (k, &s) in slots.iter().enumerate() {
             c[s] -= step[k];
+        }
+        // The direction cannot always be reached (an AC table at A = 0 cannot
+        // tilt the tool about Y): once the position is met and the step has
+        // stalled, the rest is a tool-orientation error to report.
+        if step.amax() < STALL_STEP {
+            break;
+        }
+    }
+    // The position comes first: finish it with the linear axes alone.
+    for _ in 0..MAX_ITER {
+        let r = pred.attained(&c, dirs, tool_mm).pos - goal.pos;
+        if r.norm() < SOLVE_TOL_MM {
+            return Ok((c, r.norm()));
+        }
+        for i in 0..3 {
+            c[i] -= r[i];
         }
     }
     let r = resid(&c);

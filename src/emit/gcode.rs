@@ -191,13 +191,14 @@ impl Emitter {
                 .iter()
                 .filter(|w| matches!(w.letter, b'I' | b'J' | b'K' | b'R'))
             {
-                let mut end = w.end as usize;
-                if text.get(end) == Some(&b' ') {
-                    end += 1;
+                // Take the separating space before the word with it.
+                let mut start = w.start as usize;
+                if start > 0 && text.get(start - 1) == Some(&b' ') {
+                    start -= 1;
                 }
                 edits.push(Edit {
-                    start: w.start as usize,
-                    end,
+                    start,
+                    end: w.end as usize,
                     text: String::new(),
                 });
             }
