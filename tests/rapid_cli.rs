@@ -21,7 +21,7 @@ const POS_TOL_MM: f64 = 1e-3;
 /// changes the rotation by at most 2·|δq| = 2·(5e-7·√4) = 2e-6 rad. So the
 /// brief's 1 µrad cannot be guaranteed by a 6-decimal quaternion; the bound
 /// is 2 µrad.
-const ROT_TOL_RAD: f64 = 1e-6;
+const ROT_TOL_RAD: f64 = 2e-6;
 /// Position agreement of a MoveAbsJ target written with 4-decimal degrees,
 /// mm. Derivation: each joint moves by ≤ 0.00005° = 8.7e-7 rad; the lever
 /// arm from any joint axis to the TCP is < 1.6 m for this arm + tool
