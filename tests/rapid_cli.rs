@@ -273,3 +273,41 @@ fn rapid_target_under_two_tools_is_split() {
     assert_eq!(lines[6], "    MoveL p10_c2, v100, fine, tLong;");
     assert_eq!(lines[7], "    MoveL p10, v100, fine, tool0;");
 }
+
+#[test]
+fn rapid_confdata_without_solution_exits_2() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let input = dir.path().join("conf.mod");
+    let src = std::fs::read_to_string(repo("samples/drilling.mod")).expect("sample");
+    // Hole 1 lies at world y = -200 + 50 = -150 mm, so joint 1 is negative
+    // (cf1 = -1); confdata [0,0,0,0] has no solution there.
+    let bad = src.replacen(
+        "[[100,50,0],[0,0,1,0],[-1,0,-1,0]",
+        "[[100,50,0],[0,0,1,0],[0,0,0,0]",
+        1,
+    );
+    assert_ne!(bad, src);
+    std::fs::write(&input, bad).expect("write");
+    let output = dir.path().join("conf.out.mod");
+    let out = postproc()
+        .arg("compensate")
+        .arg(&input)
+        .args([
+            "--machine",
+            repo("machines/abb-irb1600.yaml").to_str().expect("utf8"),
+        ])
+        .arg("-o")
+        .arg(&output)
+        .output()
+        .expect("run");
+    assert_eq!(out.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&out.stderr);
+    // First use: line 51 `    MoveJ Offs(holes{1},0,0,40), …`; the Offs
+    // expression starts after 4 spaces and "MoveJ " (column 11).
+    assert!(err.contains("conf.mod:51:11:"), "{err}");
+    assert!(
+        err.contains("no joint solution with confdata [0,0,0,0]"),
+        "{err}"
+    );
+    assert!(!output.exists(), "no output on error");
+}

@@ -620,12 +620,11 @@ impl Rewriter<'_> {
                     .or_insert_with(|| key.clone())
                     .clone();
                 if owner == *key {
-                    if !self
+                    if self
                         .made
-                        .contains_key(&(origin, String::new(), key.clone()))
+                        .insert((origin, String::new(), key.clone()), String::new())
+                        .is_none()
                     {
-                        self.made
-                            .insert((origin, String::new(), key.clone()), String::new());
                         let e = robtarget_in_place(u.rt, &new_obj, u.conf, comp.conf, &fmt)?;
                         self.edits.extend(e);
                     }
@@ -762,12 +761,11 @@ impl Rewriter<'_> {
                     .or_insert_with(|| key.clone())
                     .clone();
                 if owner == *key {
-                    if !self
+                    if self
                         .made
-                        .contains_key(&(origin, String::new(), key.clone()))
+                        .insert((origin, String::new(), key.clone()), String::new())
+                        .is_none()
                     {
-                        self.made
-                            .insert((origin, String::new(), key.clone()), String::new());
                         for (n, v) in jt.robax.iter().zip(new_deg) {
                             let t = format_fixed(v, JOINT_DECIMALS).unwrap_or_else(|| "0".into());
                             self.edits.push(Edit::replace(n.span.clone(), t));
