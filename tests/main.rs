@@ -8,4 +8,5 @@ mod golden;
 mod machine_tool;
 mod observations;
 mod rapid;
+mod rapid_cli;
 mod robot;

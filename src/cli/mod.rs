@@ -2,6 +2,7 @@
 //! Nothing else in the crate parses flags.
 
 mod gcode;
+mod rapid;
 
 use std::path::PathBuf;
 
@@ -168,7 +169,9 @@ pub fn init_logging(quiet: bool, verbose: u8) {
 pub fn run(cli: Cli) -> Result<i32> {
     init_logging(cli.quiet, cli.verbose);
     match cli.command {
+        Command::Check(a) if rapid::wants(&a.program) => rapid::check(&a),
         Command::Check(a) => gcode::check(&a),
+        Command::Compensate(a) if rapid::wants(&a.program) => rapid::compensate(&a),
         Command::Compensate(a) => gcode::compensate(&a),
         Command::Report(a) => gcode::report(&a),
     }

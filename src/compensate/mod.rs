@@ -3,6 +3,8 @@
 //! compensated straight line (or arc) would leave the exact compensation by
 //! more than the tolerance.
 
+pub mod rapid;
+
 use nalgebra::{SMatrix, SVector, Vector3};
 
 use crate::machine::{AxisVec, DirVec, TipPose};

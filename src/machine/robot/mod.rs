@@ -18,6 +18,7 @@ pub mod kinematics;
 pub mod pose;
 mod raw;
 mod statics;
+mod with_tool;
 
 pub use compensate::{Compensation, Deviation, Effects, PoseDelta};
 pub use dh::{Convention, DhJoint, DhParams};

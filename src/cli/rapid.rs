@@ -1,0 +1,180 @@
+//! The RAPID commands: `check` and `compensate` of an ABB RAPID module
+//! against a robot machine file.
+
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+use super::gcode::{default_output, write_atomically};
+use super::{Annotate, CheckArgs, CompensateArgs, ProgramArgs, usage};
+use crate::compensate::rapid::{RapidOptions, compensate_module};
+use crate::emit::rapid::Format;
+use crate::error::{Error, Result};
+use crate::machine::Machine;
+use crate::machine::robot::{Effects, Robot};
+use crate::program::rapid::parse_module_bytes;
+
+/// True when the program should take the RAPID path: its extension is
+/// `.mod`, `.modx` or `.prg`, or the machine file is a robot.
+pub fn wants(program: &ProgramArgs) -> bool {
+    let ext = program
+        .file
+        .extension()
+        .map(|e| e.to_string_lossy().to_ascii_lowercase());
+    if matches!(ext.as_deref(), Some("mod" | "modx" | "prg")) {
+        return true;
+    }
+    match program.machine.as_deref() {
+        Some(name) => matches!(
+            Machine::resolve(name).and_then(|p| Machine::load(&p)),
+            Ok(Machine::Robot(_))
+        ),
+        None => false,
+    }
+}
+
+fn load_robot(name: &str) -> Result<Robot> {
+    let path = Machine::resolve(name)?;
+    match Machine::load(&path)? {
+        Machine::Robot(r) => Ok(r),
+        Machine::Tool(_) => Err(usage(format!(
+            "{}: is a machine tool; RAPID programs need a robot",
+            path.display()
+        ))),
+    }
+}
+
+/// Parses `--effects` for a robot: `all`, `none`, or a comma list of
+/// `kinematic` (alias `geometric`), `gravity`, `process` (alias `load`).
+pub fn robot_effects(text: &str) -> Result<Effects> {
+    match text.trim().to_ascii_lowercase().as_str() {
+        "all" => return Ok(Effects::ALL),
+        "none" => return Ok(Effects::NONE),
+        _ => {}
+    }
+    let mut e = Effects::NONE;
+    for part in text.split(',') {
+        match part.trim().to_ascii_lowercase().as_str() {
+            "kinematic" | "geometric" => e.kinematic = true,
+            "gravity" => e.gravity = true,
+            "process" | "load" => e.process = true,
+            other => {
+                return Err(usage(format!(
+                    "--effects: unknown robot effect `{other}` (all, none, kinematic, gravity, process)"
+                )));
+            }
+        }
+    }
+    Ok(e)
+}
+
+fn read_program(path: &Path) -> Result<(String, String)> {
+    let name = path.display().to_string();
+    let bytes = if path == Path::new("-") {
+        let mut b = Vec::new();
+        std::io::Read::read_to_end(&mut std::io::stdin(), &mut b).map_err(|e| Error::io("-", e))?;
+        b
+    } else {
+        std::fs::read(path).map_err(|e| Error::io(path, e))?
+    };
+    // Validate UTF-8 with a located error, then keep the text.
+    parse_module_bytes(&bytes, &name)?;
+    let text = String::from_utf8(bytes).map_err(|e| usage(format!("{name}: {e}")))?;
+    Ok((text, name))
+}
+
+/// `postproc check` of a RAPID module: parse, resolve and (with a robot)
+/// check that every target is reachable with its confdata.
+pub fn check(a: &CheckArgs) -> Result<i32> {
+    let (src, name) = read_program(&a.program.file)?;
+    let module = crate::program::rapid::parse_module(&src, &name)?;
+    if let Some(m) = a.program.machine.as_deref() {
+        let robot = load_robot(m)?;
+        let opts = RapidOptions {
+            effects: Effects::NONE,
+            annotate: false,
+            format: Format::default(),
+        };
+        compensate_module(&src, &name, &robot, &opts)?;
+    }
+    let moves = module.moves().count();
+    let mut out = std::io::stdout().lock();
+    writeln!(
+        out,
+        "{name}: module {}, {} declarations, {} routines, {} moves",
+        module.name,
+        module.decls.len(),
+        module.procs.len(),
+        moves
+    )
+    .map_err(|e| Error::io("stdout", e))?;
+    Ok(0)
+}
+
+/// `postproc compensate` of a RAPID module.
+pub fn compensate(a: &CompensateArgs) -> Result<i32> {
+    let machine = a
+        .program
+        .machine
+        .as_deref()
+        .ok_or_else(|| usage("compensate needs --machine"))?;
+    let robot = load_robot(machine)?;
+    if a.report.is_some() {
+        return Err(usage("--report is not supported for RAPID programs yet"));
+    }
+    if !a.program.tools.is_empty() || !a.program.work_offsets.is_empty() {
+        return Err(usage(
+            "--tool and --work-offset are G-code options; RAPID takes tooldata and wobjdata from the module",
+        ));
+    }
+    let mut format = Format::default();
+    if let Some(d) = a.decimals {
+        if d > 6 {
+            return Err(usage("--decimals: at most 6"));
+        }
+        format.position_decimals = d.max(3);
+    }
+    let opts = RapidOptions {
+        effects: robot_effects(&a.effects.effects)?,
+        annotate: a.annotate == Annotate::Comment,
+        format,
+    };
+    let input = &a.program.file;
+    let out_path = match &a.output {
+        Some(p) => p.clone(),
+        None if input == Path::new("-") => PathBuf::from("-"),
+        None => default_output(input),
+    };
+    if out_path != Path::new("-")
+        && input != Path::new("-")
+        && (out_path == *input
+            || matches!((input.canonicalize(), out_path.canonicalize()), (Ok(x), Ok(y)) if x == y))
+    {
+        return Err(usage(format!(
+            "{}: the output would overwrite the input",
+            out_path.display()
+        )));
+    }
+    let (src, name) = read_program(input)?;
+    let outcome = compensate_module(&src, &name, &robot, &opts)?;
+    if out_path == Path::new("-") {
+        let mut stdout = std::io::stdout().lock();
+        stdout
+            .write_all(outcome.text.as_bytes())
+            .and_then(|()| stdout.flush())
+            .map_err(|e| Error::io("stdout", e))?;
+    } else {
+        write_atomically(&out_path, |w| {
+            w.write_all(outcome.text.as_bytes())
+                .map_err(|e| Error::io(&out_path, e))
+        })?;
+    }
+    tracing::info!(
+        "{}: {} moves compensated, {} targets added; largest predicted deviation {:.4} mm (line {})",
+        out_path.display(),
+        outcome.moves,
+        outcome.added,
+        outcome.max_deviation_mm,
+        outcome.max_deviation_line
+    );
+    Ok(0)
+}

@@ -1,0 +1,875 @@
+//! Compensation of an ABB RAPID module against a robot model.
+//!
+//! Every motion instruction is resolved to a programmed TCP pose in the world
+//! frame (target · tooldata · wobjdata), compensated with
+//! [`Robot::compensate`] for the tool and process phase of that move, and
+//! written back in the target's own frame by byte-faithful edits
+//! ([`crate::emit::rapid`]). The rewriting rules (in-place edits, `_cN`
+//! copies of named targets used under different loads, `_oN` materialised
+//! `Offs`/`RelTool` targets, joint-space `MoveAbsJ`) are documented in
+//! `grammar/rapid.md`, section "Compensation rewriting".
+
+use std::collections::HashMap;
+
+use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
+
+use crate::emit::rapid::{
+    Edit, Format, annotate, apply_edits, format_fixed, format_position, format_quaternion,
+    insert_after_decl,
+};
+use crate::error::{Error, Located, Result};
+use crate::machine::robot::pose::pose_from_abb;
+use crate::machine::robot::{ConfData, Effects, IkSelect, Model, PointMass, Robot};
+use crate::program::rapid::{
+    DataValue, Decl, JointTarget, Module, Move, MoveKind, Number, Pose, RobTarget, Scalar, Target,
+    parse_module,
+};
+
+/// Decimals of rewritten jointtarget axis values (degrees).
+pub const JOINT_DECIMALS: usize = 4;
+
+/// Options of a RAPID compensation run.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RapidOptions {
+    /// Effects to predict and compensate.
+    pub effects: Effects,
+    /// Append a `! dev …` comment to every compensated move.
+    pub annotate: bool,
+    /// Number formatting of rewritten robtargets.
+    pub format: Format,
+}
+
+/// Result of compensating a module.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RapidOutcome {
+    /// The rewritten module text.
+    pub text: String,
+    /// Motion instructions compensated.
+    pub moves: usize,
+    /// Declarations added (`_cN` copies and `_oN` materialised targets).
+    pub added: usize,
+    /// Largest predicted deviation of an uncompensated target, mm.
+    pub max_deviation_mm: f64,
+    /// 1-based line of the move with the largest deviation.
+    pub max_deviation_line: usize,
+}
+
+/// 1-based line and byte column of a byte offset.
+fn line_col(src: &str, at: usize) -> (usize, usize) {
+    let before = src.get(..at).unwrap_or(src);
+    let line = 1 + before.bytes().filter(|&b| b == b'\n').count();
+    let col = before
+        .rfind('\n')
+        .map_or(before.len(), |k| before.len() - k - 1)
+        + 1;
+    (line, col)
+}
+
+fn input_err(src: &str, file: &str, at: usize, msg: impl Into<String>) -> Error {
+    let (l, c) = line_col(src, at);
+    Error::Input(Located::new(file, l, c, msg))
+}
+
+fn pose_of(p: &Pose) -> Option<Isometry3<f64>> {
+    pose_from_abb(
+        p.trans.each_ref().map(|n| n.value),
+        p.rot.each_ref().map(|n| n.value),
+    )
+}
+
+fn robtarget_pose(rt: &RobTarget) -> Option<Isometry3<f64>> {
+    pose_from_abb(
+        rt.trans.each_ref().map(|n| n.value),
+        rt.rot.each_ref().map(|n| n.value),
+    )
+}
+
+fn conf_of(rt: &RobTarget) -> Option<ConfData> {
+    let v = rt.robconf.each_ref().map(|n| n.value);
+    if v.iter()
+        .any(|x| !x.is_finite() || x.fract() != 0.0 || x.abs() > 1e6)
+    {
+        return None;
+    }
+    Some(ConfData {
+        cf1: v[0] as i32,
+        cf4: v[1] as i32,
+        cf6: v[2] as i32,
+        cfx: v[3] as i32,
+    })
+}
+
+/// Tool and work object of one move, and whether its process wrench acts.
+#[derive(Debug, Clone, PartialEq, Eq, Hash)]
+struct LoadKey {
+    tool: String,
+    wobj: String,
+    process: bool,
+}
+
+/// A resolved tool: TCP in the flange frame and load (flange frame).
+#[derive(Debug, Clone, Copy)]
+struct ToolView {
+    tframe: Isometry3<f64>,
+    load: Option<PointMass>,
+}
+
+/// Where a robtarget's numbers are and how a compensated one is written.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+enum Origin {
+    /// Module declaration `decl`, element `elem` (0-based) of an array.
+    Decl { decl: usize, elem: Option<usize> },
+    /// An inline literal in a move (edited in place).
+    Inline,
+}
+
+fn lookup<'m>(module: &'m Module, name: &str) -> Option<(usize, &'m Decl)> {
+    module
+        .decls
+        .iter()
+        .enumerate()
+        .find(|(_, d)| d.name.eq_ignore_ascii_case(name))
+}
+
+/// The value of a named target (`p`, `holes{3}`), with its origin.
+fn named_value<'m>(
+    module: &'m Module,
+    src: &str,
+    file: &str,
+    target: &Target,
+) -> Result<(&'m DataValue, Origin, String)> {
+    let Target::Named { name, index, span } = target else {
+        return Err(input_err(src, file, target.span().start, "expected a name"));
+    };
+    let (di, decl) = lookup(module, name).ok_or_else(|| {
+        input_err(
+            src,
+            file,
+            span.start,
+            format!("`{name}` is not declared in this module"),
+        )
+    })?;
+    let value = decl.value.as_ref().ok_or_else(|| {
+        input_err(
+            src,
+            file,
+            span.start,
+            format!("`{name}` has no initial value"),
+        )
+    })?;
+    match (index, value) {
+        (None, DataValue::Array { .. }) => Err(input_err(
+            src,
+            file,
+            span.start,
+            format!("`{name}` is an array; index it"),
+        )),
+        (None, v) => Ok((
+            v,
+            Origin::Decl {
+                decl: di,
+                elem: None,
+            },
+            decl.name.clone(),
+        )),
+        (Some(ix), DataValue::Array { items, .. }) => {
+            let k = ix.value.ok_or_else(|| {
+                input_err(
+                    src,
+                    file,
+                    ix.span.start,
+                    format!(
+                        "index `{}` is not an integer literal; it cannot be resolved offline",
+                        ix.text
+                    ),
+                )
+            })?;
+            let item = k.checked_sub(1).and_then(|i| items.get(i)).ok_or_else(|| {
+                input_err(
+                    src,
+                    file,
+                    ix.span.start,
+                    format!("index {k} is outside `{name}` (1..={})", items.len()),
+                )
+            })?;
+            Ok((
+                item,
+                Origin::Decl {
+                    decl: di,
+                    elem: Some(k - 1),
+                },
+                format!("{}{k}", decl.name),
+            ))
+        }
+        (Some(_), _) => Err(input_err(
+            src,
+            file,
+            span.start,
+            format!("`{name}` is not an array"),
+        )),
+    }
+}
+
+fn literal(src: &str, file: &str, s: &Scalar) -> Result<f64> {
+    s.value.ok_or_else(|| {
+        input_err(
+            src,
+            file,
+            s.span.start,
+            format!(
+                "`{}` is not a numeric literal; it cannot be resolved offline",
+                s.text
+            ),
+        )
+    })
+}
+
+/// A robtarget use resolved to its pose in the object frame.
+struct CartUse<'m> {
+    /// The literal whose numbers (conf, extax) are the template.
+    rt: &'m RobTarget,
+    origin: Origin,
+    /// Name stem for new declarations (`p10`, `holes3`).
+    stem: String,
+    /// True for `Offs`/`RelTool`: the result is materialised.
+    derived: bool,
+    /// Identity of a derived target (offsets and rotations as written).
+    derived_key: String,
+    pose_obj: Isometry3<f64>,
+    conf: ConfData,
+}
+
+fn resolve_cart<'m>(
+    module: &'m Module,
+    src: &str,
+    file: &str,
+    target: &'m Target,
+) -> Result<CartUse<'m>> {
+    let at = target.span().start;
+    let bad_rt = |what: &str| input_err(src, file, at, what.to_string());
+    match target {
+        Target::Inline(rt) => Ok(CartUse {
+            rt,
+            origin: Origin::Inline,
+            stem: String::new(),
+            derived: false,
+            derived_key: String::new(),
+            pose_obj: robtarget_pose(rt).ok_or_else(|| bad_rt("zero quaternion"))?,
+            conf: conf_of(rt).ok_or_else(|| bad_rt("confdata must be integers"))?,
+        }),
+        Target::Named { .. } => {
+            let (v, origin, stem) = named_value(module, src, file, target)?;
+            let DataValue::RobTarget(rt) = v else {
+                return Err(bad_rt("this move needs a robtarget"));
+            };
+            Ok(CartUse {
+                rt,
+                origin,
+                stem,
+                derived: false,
+                derived_key: String::new(),
+                pose_obj: robtarget_pose(rt).ok_or_else(|| bad_rt("zero quaternion"))?,
+                conf: conf_of(rt).ok_or_else(|| bad_rt("confdata must be integers"))?,
+            })
+        }
+        Target::Offs { base, offsets, .. } => {
+            let b = resolve_cart(module, src, file, base)?;
+            if b.derived {
+                return Err(bad_rt("nested Offs/RelTool is not supported"));
+            }
+            let d = [
+                literal(src, file, &offsets[0])?,
+                literal(src, file, &offsets[1])?,
+                literal(src, file, &offsets[2])?,
+            ];
+            // Offs: translation along the object frame axes.
+            let pose_obj = Isometry3::from_parts(
+                Translation3::from(b.pose_obj.translation.vector + Vector3::from(d)),
+                b.pose_obj.rotation,
+            );
+            Ok(CartUse {
+                derived: true,
+                derived_key: format!("offs {d:?}"),
+                pose_obj,
+                ..b
+            })
+        }
+        Target::RelTool {
+            base,
+            offsets,
+            rx,
+            ry,
+            rz,
+            ..
+        } => {
+            let b = resolve_cart(module, src, file, base)?;
+            if b.derived {
+                return Err(bad_rt("nested Offs/RelTool is not supported"));
+            }
+            let d = [
+                literal(src, file, &offsets[0])?,
+                literal(src, file, &offsets[1])?,
+                literal(src, file, &offsets[2])?,
+            ];
+            let angle = |s: &Option<Scalar>| -> Result<f64> {
+                match s {
+                    Some(s) => Ok(literal(src, file, s)?.to_radians()),
+                    None => Ok(0.0),
+                }
+            };
+            let (ax, ay, az) = (angle(rx)?, angle(ry)?, angle(rz)?);
+            // RelTool: translate along the tool axes, then rotate about the
+            // tool x, the new y and the new z axis (intrinsic x-y-z).
+            let rot = UnitQuaternion::from_axis_angle(&Vector3::x_axis(), ax)
+                * UnitQuaternion::from_axis_angle(&Vector3::y_axis(), ay)
+                * UnitQuaternion::from_axis_angle(&Vector3::z_axis(), az);
+            let pose_obj =
+                b.pose_obj * Isometry3::from_parts(Translation3::new(d[0], d[1], d[2]), rot);
+            Ok(CartUse {
+                derived: true,
+                derived_key: format!("reltool {d:?} {ax} {ay} {az}"),
+                pose_obj,
+                ..b
+            })
+        }
+        Target::InlineJoint(_) => Err(bad_rt("a jointtarget needs MoveAbsJ")),
+        Target::Other { text, .. } => Err(bad_rt(&format!(
+            "target `{text}` is computed at run time; it cannot be compensated offline"
+        ))),
+    }
+}
+
+fn resolve_tool(module: &Module, src: &str, file: &str, mv: &Move) -> Result<ToolView> {
+    let name = mv.tool.text.as_str();
+    if name.eq_ignore_ascii_case("tool0") {
+        return Ok(ToolView {
+            tframe: Isometry3::identity(),
+            load: None,
+        });
+    }
+    let at = mv.tool.span.start;
+    let Some((_, decl)) = lookup(module, name) else {
+        return Err(input_err(
+            src,
+            file,
+            at,
+            format!("tool `{name}` is not declared in this module"),
+        ));
+    };
+    let Some(DataValue::ToolData(t)) = &decl.value else {
+        return Err(input_err(
+            src,
+            file,
+            at,
+            format!("`{name}` is not a tooldata literal"),
+        ));
+    };
+    if !t.robhold {
+        return Err(input_err(
+            src,
+            file,
+            at,
+            format!("tool `{name}` is stationary (robhold FALSE): not supported"),
+        ));
+    }
+    let tframe = pose_of(&t.tframe)
+        .ok_or_else(|| input_err(src, file, at, format!("tool `{name}`: zero quaternion")))?;
+    let mass = t.mass.value;
+    if !mass.is_finite() || mass < 0.0 {
+        return Err(input_err(
+            src,
+            file,
+            t.mass.span.start,
+            format!("tool `{name}`: mass {mass} must be a non-negative number"),
+        ));
+    }
+    let load = (mass > 0.0).then(|| PointMass {
+        mass_kg: mass,
+        com_mm: Vector3::from(t.cog.each_ref().map(|n: &Number| n.value)),
+    });
+    Ok(ToolView { tframe, load })
+}
+
+fn resolve_wobj(module: &Module, src: &str, file: &str, mv: &Move) -> Result<Isometry3<f64>> {
+    let Some(arg) = &mv.wobj else {
+        return Ok(Isometry3::identity());
+    };
+    let name = arg.text.as_str();
+    if name.eq_ignore_ascii_case("wobj0") {
+        return Ok(Isometry3::identity());
+    }
+    let at = arg.span.start;
+    let Some((_, decl)) = lookup(module, name) else {
+        return Err(input_err(
+            src,
+            file,
+            at,
+            format!("work object `{name}` is not declared in this module"),
+        ));
+    };
+    let Some(DataValue::WobjData(w)) = &decl.value else {
+        return Err(input_err(
+            src,
+            file,
+            at,
+            format!("`{name}` is not a wobjdata literal"),
+        ));
+    };
+    if w.robhold || !w.ufprog {
+        return Err(input_err(
+            src,
+            file,
+            at,
+            format!(
+                "work object `{name}` is robot-held or moved by a mechanical unit: not supported"
+            ),
+        ));
+    }
+    match (pose_of(&w.uframe), pose_of(&w.oframe)) {
+        (Some(u), Some(o)) => Ok(u * o),
+        _ => Err(input_err(
+            src,
+            file,
+            at,
+            format!("work object `{name}`: zero quaternion"),
+        )),
+    }
+}
+
+/// The comment appended to a compensated move.
+fn dev_comment(d: &crate::machine::robot::Deviation) -> String {
+    format!(
+        "dev {:.3} mm (kin {:.3} grav {:.3} load {:.3})",
+        d.total.pos_mm.norm(),
+        d.kinematic.pos_mm.norm(),
+        d.gravity.pos_mm.norm(),
+        d.process.pos_mm.norm()
+    )
+}
+
+/// The text of a robtarget literal with new position, quaternion and
+/// confdata; the external axes as written.
+fn robtarget_text(
+    src: &str,
+    rt: &RobTarget,
+    pose: &Isometry3<f64>,
+    conf: ConfData,
+    fmt: &Format,
+) -> Result<String> {
+    let p = format_position(&pose.translation.vector.into(), fmt)?;
+    let q = pose.rotation.quaternion();
+    let reference = rt.rot.each_ref().map(|n| n.value);
+    let q = format_quaternion(&[q.w, q.i, q.j, q.k], Some(&reference), fmt)?;
+    let (Some(first), Some(last)) = (rt.extax.first(), rt.extax.last()) else {
+        return Err(Error::Usage("robtarget without external axes".into()));
+    };
+    let extax = src
+        .get(first.span.start..last.span.end)
+        .ok_or_else(|| Error::Usage("robtarget span outside the program".into()))?;
+    Ok(format!(
+        "[[{},{},{}],[{},{},{},{}],[{},{},{},{}],[{extax}]]",
+        p[0], p[1], p[2], q[0], q[1], q[2], q[3], conf.cf1, conf.cf4, conf.cf6, conf.cfx
+    ))
+}
+
+/// In-place edits of a robtarget literal.
+fn robtarget_in_place(
+    rt: &RobTarget,
+    pose: &Isometry3<f64>,
+    old_conf: ConfData,
+    conf: ConfData,
+    fmt: &Format,
+) -> Result<Vec<Edit>> {
+    let q = pose.rotation.quaternion();
+    let mut edits = crate::emit::rapid::robtarget_edits(
+        rt,
+        &pose.translation.vector.into(),
+        Some(&[q.w, q.i, q.j, q.k]),
+        fmt,
+    )?;
+    if conf != old_conf {
+        for (n, v) in rt
+            .robconf
+            .iter()
+            .zip([conf.cf1, conf.cf4, conf.cf6, conf.cfx])
+        {
+            edits.push(Edit::replace(n.span.clone(), v.to_string()));
+        }
+    }
+    Ok(edits)
+}
+
+fn joint_text(src: &str, jt: &JointTarget, q_deg: &[f64; 6]) -> Result<String> {
+    let f = |v: f64| format_fixed(v, JOINT_DECIMALS).unwrap_or_else(|| "0".into());
+    let (Some(first), Some(last)) = (jt.extax.first(), jt.extax.last()) else {
+        return Err(Error::Usage("jointtarget without external axes".into()));
+    };
+    let extax = src
+        .get(first.span.start..last.span.end)
+        .ok_or_else(|| Error::Usage("jointtarget span outside the program".into()))?;
+    Ok(format!("[[{}],[{extax}]]", q_deg.map(f).join(",")))
+}
+
+/// A name not yet declared in the module nor already created.
+fn fresh_name(
+    module: &Module,
+    taken: &mut Vec<String>,
+    stem: &str,
+    tag: &str,
+    from: usize,
+) -> String {
+    let mut n = from;
+    loop {
+        let name = format!("{stem}_{tag}{n}");
+        if lookup(module, &name).is_none() && !taken.iter().any(|t| t.eq_ignore_ascii_case(&name)) {
+            taken.push(name.clone());
+            return name;
+        }
+        n += 1;
+    }
+}
+
+/// Mutable state of one run: edits, new declarations, caches.
+struct Rewriter<'m> {
+    module: &'m Module,
+    src: &'m str,
+    file: &'m str,
+    robot: &'m Robot,
+    opts: RapidOptions,
+    edits: Vec<Edit>,
+    /// New declaration lines per module declaration index.
+    inserts: Vec<(usize, String)>,
+    taken: Vec<String>,
+    /// Robot views per load key.
+    views: HashMap<LoadKey, Robot>,
+    /// Load key that owns the in-place value of a target origin.
+    owner: HashMap<Origin, LoadKey>,
+    /// Names of copies / materialised targets already made.
+    made: HashMap<(Origin, String, LoadKey), String>,
+    /// Counter of `_oN` names per origin.
+    derived_count: HashMap<Origin, usize>,
+    added: usize,
+}
+
+impl Rewriter<'_> {
+    fn active(&self) -> bool {
+        self.opts.effects != Effects::NONE
+    }
+
+    fn view(&mut self, key: &LoadKey, tool: &ToolView) -> Robot {
+        self.views
+            .entry(key.clone())
+            .or_insert_with(|| self.robot.with_tool(tool.tframe, tool.load, key.process))
+            .clone()
+    }
+
+    fn locate(&self, at: usize, e: crate::machine::robot::RobotError, what: &str) -> Error {
+        let (l, c) = line_col(self.src, at);
+        Error::Unachievable(Located::new(self.file, l, c, format!("{what}: {e}")))
+    }
+
+    fn decl_text(&self, name: &str, kind: &str, value: &str) -> String {
+        format!("CONST {kind} {name} := {value};")
+    }
+
+    /// Compensates one robtarget use; returns the comment source.
+    fn cart(
+        &mut self,
+        mv: &Move,
+        target: &Target,
+        key: &LoadKey,
+        tool: &ToolView,
+        wobj: &Isometry3<f64>,
+    ) -> Result<crate::machine::robot::Deviation> {
+        let u = resolve_cart(self.module, self.src, self.file, target)?;
+        let view = self.view(key, tool);
+        let programmed = wobj * u.pose_obj;
+        // Errors point at the literal's declaration for a plain named target
+        // (where the numbers to fix are), else at the move's expression.
+        let at = match (&u.origin, u.derived) {
+            (Origin::Decl { .. }, false) => u.rt.span.start,
+            _ => target.span().start,
+        };
+        let (ml, _) = line_col(self.src, mv.span.start);
+        let what = format!(
+            "target `{}` of {} at line {ml}",
+            self.src.get(target.span()).unwrap_or("?"),
+            mv.kind.name()
+        );
+        let comp = view
+            .compensate(&programmed, &IkSelect::Conf(u.conf), self.opts.effects)
+            .map_err(|e| self.locate(at, e, &what))?;
+        if !self.active() {
+            return Ok(comp.deviation);
+        }
+        let new_obj = wobj.inverse() * comp.pose;
+        let fmt = self.opts.format;
+        match (u.origin, u.derived) {
+            (Origin::Inline, false) => {
+                let e = robtarget_in_place(u.rt, &new_obj, u.conf, comp.conf, &fmt)?;
+                self.edits.extend(e);
+            }
+            (Origin::Inline, true) => {
+                let text = robtarget_text(self.src, u.rt, &new_obj, comp.conf, &fmt)?;
+                self.edits.push(Edit::replace(target.span(), text));
+            }
+            (origin @ Origin::Decl { decl, .. }, false) => {
+                let owner = self
+                    .owner
+                    .entry(origin)
+                    .or_insert_with(|| key.clone())
+                    .clone();
+                if owner == *key {
+                    if self
+                        .made
+                        .insert((origin, String::new(), key.clone()), String::new())
+                        .is_none()
+                    {
+                        let e = robtarget_in_place(u.rt, &new_obj, u.conf, comp.conf, &fmt)?;
+                        self.edits.extend(e);
+                    }
+                } else {
+                    let text = robtarget_text(self.src, u.rt, &new_obj, comp.conf, &fmt)?;
+                    let name = self.copy_name(
+                        origin,
+                        decl,
+                        String::new(),
+                        key,
+                        &u.stem,
+                        "c",
+                        2,
+                        text,
+                        "robtarget",
+                    )?;
+                    self.edits.push(Edit::replace(target.span(), name));
+                }
+            }
+            (origin @ Origin::Decl { decl, .. }, true) => {
+                let n = self.derived_count.get(&origin).copied().unwrap_or(0) + 1;
+                let text = robtarget_text(self.src, u.rt, &new_obj, comp.conf, &fmt)?;
+                let name = self.copy_name(
+                    origin,
+                    decl,
+                    u.derived_key.clone(),
+                    key,
+                    &u.stem,
+                    "o",
+                    n,
+                    text,
+                    "robtarget",
+                )?;
+                self.edits.push(Edit::replace(target.span(), name));
+            }
+        }
+        Ok(comp.deviation)
+    }
+
+    /// The name of the copy of `origin` for (`ident`, `key`), declaring it
+    /// (after declaration `decl`) when it is new.
+    #[allow(clippy::too_many_arguments)]
+    fn copy_name(
+        &mut self,
+        origin: Origin,
+        decl: usize,
+        ident: String,
+        key: &LoadKey,
+        stem: &str,
+        tag: &str,
+        from: usize,
+        value: String,
+        kind: &str,
+    ) -> Result<String> {
+        let k = (origin, ident, key.clone());
+        if let Some(n) = self.made.get(&k) {
+            return Ok(n.clone());
+        }
+        let name = fresh_name(self.module, &mut self.taken, stem, tag, from);
+        if tag == "o" {
+            *self.derived_count.entry(origin).or_insert(0) += 1;
+        }
+        let line = self.decl_text(&name, kind, &value);
+        self.inserts.push((decl, line));
+        self.added += 1;
+        self.made.insert(k, name.clone());
+        Ok(name)
+    }
+
+    /// Compensates a MoveAbsJ in joint space.
+    fn joint(
+        &mut self,
+        mv: &Move,
+        key: &LoadKey,
+        tool: &ToolView,
+    ) -> Result<crate::machine::robot::Deviation> {
+        let target = &mv.target;
+        let (jt, origin, stem) = match target {
+            Target::InlineJoint(jt) => (jt, Origin::Inline, String::new()),
+            Target::Named { .. } => {
+                let (v, origin, stem) = named_value(self.module, self.src, self.file, target)?;
+                let DataValue::JointTarget(jt) = v else {
+                    return Err(input_err(
+                        self.src,
+                        self.file,
+                        target.span().start,
+                        "MoveAbsJ needs a jointtarget",
+                    ));
+                };
+                (jt, origin, stem)
+            }
+            _ => {
+                return Err(input_err(
+                    self.src,
+                    self.file,
+                    target.span().start,
+                    "MoveAbsJ target must be a jointtarget name or literal",
+                ));
+            }
+        };
+        let q_deg = jt.robax.each_ref().map(|n| n.value);
+        let q = q_deg.map(f64::to_radians);
+        let view = self.view(key, tool);
+        let at = match origin {
+            Origin::Decl { .. } => jt.span.start,
+            Origin::Inline => target.span().start,
+        };
+        let (ml, _) = line_col(self.src, mv.span.start);
+        let what = format!(
+            "jointtarget `{}` of MoveAbsJ at line {ml}",
+            self.src.get(target.span()).unwrap_or("?")
+        );
+        view.check_limits(&q)
+            .map_err(|e| self.locate(at, e, &what))?;
+        let goal = view.tcp_pose(Model::Nominal, &q);
+        let comp = view
+            .compensate(&goal, &IkSelect::Near(q), self.opts.effects)
+            .map_err(|e| self.locate(at, e, &what))?;
+        if !self.active() {
+            return Ok(comp.deviation);
+        }
+        let new_deg = comp.q_compensated.map(f64::to_degrees);
+        match origin {
+            Origin::Inline => {
+                for (n, v) in jt.robax.iter().zip(new_deg) {
+                    let t = format_fixed(v, JOINT_DECIMALS).unwrap_or_else(|| "0".into());
+                    self.edits.push(Edit::replace(n.span.clone(), t));
+                }
+            }
+            Origin::Decl { decl, .. } => {
+                let owner = self
+                    .owner
+                    .entry(origin)
+                    .or_insert_with(|| key.clone())
+                    .clone();
+                if owner == *key {
+                    if self
+                        .made
+                        .insert((origin, String::new(), key.clone()), String::new())
+                        .is_none()
+                    {
+                        for (n, v) in jt.robax.iter().zip(new_deg) {
+                            let t = format_fixed(v, JOINT_DECIMALS).unwrap_or_else(|| "0".into());
+                            self.edits.push(Edit::replace(n.span.clone(), t));
+                        }
+                    }
+                } else {
+                    let text = joint_text(self.src, jt, &new_deg)?;
+                    let name = self.copy_name(
+                        origin,
+                        decl,
+                        String::new(),
+                        key,
+                        &stem,
+                        "c",
+                        2,
+                        text,
+                        "jointtarget",
+                    )?;
+                    self.edits.push(Edit::replace(target.span(), name));
+                }
+            }
+        }
+        Ok(comp.deviation)
+    }
+}
+
+/// Parses and compensates a RAPID module. Moves are processed in source
+/// order, routine by routine. Errors: [`Error::Input`] for what cannot be
+/// resolved offline, [`Error::Unachievable`] (`file:line:col` of the target)
+/// for unreachable targets, confdata without solution and joint limits.
+pub fn compensate_module(
+    src: &str,
+    file: &str,
+    robot: &Robot,
+    opts: &RapidOptions,
+) -> Result<RapidOutcome> {
+    let module = parse_module(src, file)?;
+    let mut rw = Rewriter {
+        module: &module,
+        src,
+        file,
+        robot,
+        opts: *opts,
+        edits: Vec::new(),
+        inserts: Vec::new(),
+        taken: Vec::new(),
+        views: HashMap::new(),
+        owner: HashMap::new(),
+        made: HashMap::new(),
+        derived_count: HashMap::new(),
+        added: 0,
+    };
+    let mut outcome = RapidOutcome {
+        text: String::new(),
+        moves: 0,
+        added: 0,
+        max_deviation_mm: 0.0,
+        max_deviation_line: 0,
+    };
+    let has_process = robot.process_wrench().is_some();
+    for mv in module.moves() {
+        let tool = resolve_tool(&module, src, file, mv)?;
+        let wobj = resolve_wobj(&module, src, file, mv)?;
+        let key = LoadKey {
+            tool: mv.tool.text.to_ascii_lowercase(),
+            wobj: mv
+                .wobj
+                .as_ref()
+                .map_or_else(|| "wobj0".into(), |w| w.text.to_ascii_lowercase()),
+            process: has_process && matches!(mv.kind, MoveKind::MoveL | MoveKind::MoveC),
+        };
+        let dev = if mv.kind == MoveKind::MoveAbsJ {
+            rw.joint(mv, &key, &tool)?
+        } else {
+            if let Some(via) = &mv.via {
+                rw.cart(mv, via, &key, &tool, &wobj)?;
+            }
+            rw.cart(mv, &mv.target, &key, &tool, &wobj)?
+        };
+        outcome.moves += 1;
+        let d = dev.total.pos_mm.norm();
+        if d > outcome.max_deviation_mm {
+            outcome.max_deviation_mm = d;
+            outcome.max_deviation_line = mv.line;
+        }
+        if opts.annotate {
+            rw.edits.push(annotate(src, &mv.span, &dev_comment(&dev)));
+        }
+    }
+    // New declarations: one insertion per original declaration, in order.
+    let mut by_decl: Vec<(usize, Vec<String>)> = Vec::new();
+    for (d, line) in std::mem::take(&mut rw.inserts) {
+        match by_decl.iter_mut().find(|(k, _)| *k == d) {
+            Some((_, v)) => v.push(line),
+            None => by_decl.push((d, vec![line])),
+        }
+    }
+    for (d, lines) in by_decl {
+        if let Some(decl) = module.decls.get(d) {
+            rw.edits
+                .push(insert_after_decl(src, &decl.span, &lines.join("\n")));
+        }
+    }
+    outcome.added = rw.added;
+    outcome.text = apply_edits(src, &rw.edits)?;
+    Ok(outcome)
+}

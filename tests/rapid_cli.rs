@@ -1,0 +1,313 @@
+//! Integration tests: `postproc compensate` of RAPID modules through the real
+//! binary, checked against the robot library.
+
+use approx::assert_abs_diff_eq;
+use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
+use postproc::machine::robot::pose::pose_error;
+use postproc::machine::robot::{ConfData, Effects, Model, PointMass, Robot};
+use postproc::program::rapid::{DataValue, Module, RobTarget, Target, parse_module};
+
+use crate::common::{postproc, repo};
+
+/// Position agreement of the predicted attained TCP with the programmed one,
+/// mm. Derivation: the compensation itself converges to 1e-7 mm; writing
+/// the position with 3 decimals moves the commanded TCP by at most
+/// 0.0005 mm per axis, |δ| ≤ 0.0005·√3 = 0.00087 mm, and the attained pose
+/// follows the commanded one 1:1 to first order (deflection changes by
+/// ~1e-3 of that). So 1 µm holds.
+const POS_TOL_MM: f64 = 1e-3;
+/// Orientation agreement, rad. Derivation: the quaternion is written with
+/// 6 decimals: each component moves by ≤ 5e-7; a quaternion change δq
+/// changes the rotation by at most 2·|δq| = 2·(5e-7·√4) = 2e-6 rad. So the
+/// brief's 1 µrad cannot be guaranteed by a 6-decimal quaternion; the bound
+/// is 2 µrad.
+const ROT_TOL_RAD: f64 = 2e-6;
+/// Position agreement of a MoveAbsJ target written with 4-decimal degrees,
+/// mm. Derivation: each joint moves by ≤ 0.00005° = 8.7e-7 rad; the lever
+/// arm from any joint axis to the TCP is < 1.6 m for this arm + tool
+/// (0.7 + 0.6 + 0.065 + 0.1825 m), so |δp| ≤ 6 · 8.7e-7 · 1600 mm = 0.0084 mm.
+const JOINT_POS_TOL_MM: f64 = 0.01;
+/// Orientation agreement for the MoveAbsJ target: Σ|δq| ≤ 6 · 8.7e-7 rad.
+const JOINT_ROT_TOL_RAD: f64 = 6e-6;
+
+fn robot_with_drill() -> Robot {
+    let text = std::fs::read_to_string(repo("machines/abb-irb1600.yaml")).expect("machine file");
+    let r = Robot::from_yaml_str(&text, "abb-irb1600.yaml").expect("valid robot");
+    // tDrill of samples/drilling.mod: TCP 182.5 mm along the flange z axis,
+    // 2.4 kg at 85 mm; the machine file has no process wrench.
+    r.with_tool(
+        Isometry3::translation(0.0, 0.0, 182.5),
+        Some(PointMass {
+            mass_kg: 2.4,
+            com_mm: Vector3::new(0.0, 0.0, 85.0),
+        }),
+        false,
+    )
+}
+
+/// Pose of a robtarget literal (position, quaternion q1 = scalar).
+fn pose(rt: &RobTarget) -> Isometry3<f64> {
+    let q = rt.rot.each_ref().map(|n| n.value);
+    Isometry3::from_parts(
+        Translation3::new(rt.trans[0].value, rt.trans[1].value, rt.trans[2].value),
+        UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(q[0], q[1], q[2], q[3])),
+    )
+}
+
+fn conf(rt: &RobTarget) -> ConfData {
+    let v = rt.robconf.each_ref().map(|n| n.value as i32);
+    ConfData {
+        cf1: v[0],
+        cf4: v[1],
+        cf6: v[2],
+        cfx: v[3],
+    }
+}
+
+fn robtarget<'a>(m: &'a Module, name: &str, index: Option<usize>) -> &'a RobTarget {
+    let d = m.decl(name).expect("declared");
+    match (&d.value, index) {
+        (Some(DataValue::RobTarget(rt)), None) => rt,
+        (Some(DataValue::Array { items, .. }), Some(i)) => match &items[i - 1] {
+            DataValue::RobTarget(rt) => rt,
+            v => panic!("not a robtarget: {v:?}"),
+        },
+        v => panic!("not a robtarget: {v:?}"),
+    }
+}
+
+/// wPlate of the sample: uframe translation (600, -200, 350), no rotation.
+fn w_plate() -> Isometry3<f64> {
+    Isometry3::translation(600.0, -200.0, 350.0)
+}
+
+fn run_sample(dir: &std::path::Path, extra: &[&str]) -> (std::path::PathBuf, std::path::PathBuf) {
+    let input = dir.join("drilling.mod");
+    std::fs::copy(repo("samples/drilling.mod"), &input).expect("copy sample");
+    let output = dir.join("out.mod");
+    let mut cmd = postproc();
+    cmd.arg("compensate")
+        .arg(&input)
+        .args([
+            "--machine",
+            repo("machines/abb-irb1600.yaml").to_str().expect("utf8"),
+        ])
+        .arg("-o")
+        .arg(&output)
+        .args(extra);
+    cmd.assert().success();
+    (input, output)
+}
+
+#[test]
+fn rapid_none_is_byte_identical() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let (input, output) = run_sample(dir.path(), &["--effects", "none", "--annotate", "none"]);
+    let a = std::fs::read(&input).expect("input");
+    let b = std::fs::read(&output).expect("output");
+    assert!(a == b, "output differs from the input");
+}
+
+#[test]
+fn rapid_compensated_targets_land_on_programmed_poses() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let (input, output) = run_sample(dir.path(), &[]);
+    let src_in = std::fs::read_to_string(&input).expect("input");
+    let src_out = std::fs::read_to_string(&output).expect("output");
+    let m_in = parse_module(&src_in, "in").expect("input parses");
+    let m_out = parse_module(&src_out, "out").expect("output re-parses");
+    let robot = robot_with_drill();
+    let moves_in: Vec<_> = m_in.moves().collect();
+    let moves_out: Vec<_> = m_out.moves().collect();
+    assert_eq!(moves_in.len(), moves_out.len());
+    let mut checked = 0;
+    for (a, b) in moves_in.iter().zip(&moves_out) {
+        let line = src_out.lines().nth(b.line - 1).expect("line");
+        assert!(line.contains("! dev "), "annotated: {line}");
+        match &a.target {
+            Target::Named {
+                name, index: None, ..
+            } if name == "jHome" => {
+                // Programmed joints [0,-10,20,0,80,0]°: the goal is their
+                // nominal TCP pose.
+                let q_prog = [0.0f64, -10.0, 20.0, 0.0, 80.0, 0.0].map(f64::to_radians);
+                let goal = robot.tcp_pose(Model::Nominal, &q_prog);
+                let Some(DataValue::JointTarget(jt)) = &m_out.decl("jHome").expect("jHome").value
+                else {
+                    panic!("jointtarget")
+                };
+                let q = jt.robax.each_ref().map(|n| n.value.to_radians());
+                let (dp, dr) = pose_error(&robot.predict(&q, Effects::ALL), &goal);
+                assert_abs_diff_eq!(dp.norm(), 0.0, epsilon = JOINT_POS_TOL_MM);
+                assert_abs_diff_eq!(dr.norm(), 0.0, epsilon = JOINT_ROT_TOL_RAD);
+            }
+            Target::Named {
+                name, index: None, ..
+            } => {
+                // pClear, no work object.
+                let programmed = pose(robtarget(&m_in, name, None));
+                let Target::Named { name: n2, .. } = &b.target else {
+                    panic!("named")
+                };
+                let rt = robtarget(&m_out, n2, None);
+                let q = robot.ik_conf(&pose(rt), conf(rt)).expect("controller IK");
+                let (dp, dr) = pose_error(&robot.predict(&q, Effects::ALL), &programmed);
+                assert_abs_diff_eq!(dp.norm(), 0.0, epsilon = POS_TOL_MM);
+                assert_abs_diff_eq!(dr.norm(), 0.0, epsilon = ROT_TOL_RAD);
+            }
+            Target::Offs { base, offsets, .. } => {
+                let Target::Named {
+                    name,
+                    index: Some(ix),
+                    ..
+                } = base.as_ref()
+                else {
+                    panic!("Offs of an array element")
+                };
+                let i = ix.value.expect("literal index");
+                // Offs(holes{i},dx,dy,dz): the hole translated in wPlate.
+                let d = Vector3::new(
+                    offsets[0].value.expect("dx"),
+                    offsets[1].value.expect("dy"),
+                    offsets[2].value.expect("dz"),
+                );
+                let hole = pose(robtarget(&m_in, name, Some(i)));
+                let programmed = w_plate()
+                    * Isometry3::from_parts(
+                        Translation3::from(hole.translation.vector + d),
+                        hole.rotation,
+                    );
+                let Target::Named { name: n2, .. } = &b.target else {
+                    panic!("materialised: {:?}", b.target)
+                };
+                assert!(n2.starts_with(&format!("holes{i}_o")), "{n2}");
+                let rt = robtarget(&m_out, n2, None);
+                let q = robot
+                    .ik_conf(&(w_plate() * pose(rt)), conf(rt))
+                    .expect("controller IK");
+                let (dp, dr) = pose_error(&robot.predict(&q, Effects::ALL), &programmed);
+                assert_abs_diff_eq!(dp.norm(), 0.0, epsilon = POS_TOL_MM);
+                assert_abs_diff_eq!(dr.norm(), 0.0, epsilon = ROT_TOL_RAD);
+            }
+            t => panic!("unexpected target {t:?}"),
+        }
+        checked += 1;
+    }
+    // 2 MoveAbsJ + 2 pClear + 12 holes × 4 moves.
+    assert_eq!(checked, 52);
+}
+
+#[test]
+fn rapid_offs_target_is_materialised() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let (_, output) = run_sample(dir.path(), &["--annotate", "none"]);
+    let out = std::fs::read_to_string(&output).expect("output");
+    assert!(!out.contains("Offs("), "every Offs is replaced");
+    // Hole 3: approach (dz 40) and retract share holes3_o1; dz 2 → _o2,
+    // dz -12 → _o3; declared after the holes array.
+    assert!(out.contains("  CONST robtarget holes3_o1 := [["));
+    assert!(out.contains("    MoveJ holes3_o1, v500, zApproach, tDrill\\WObj:=wPlate;\n"));
+    assert!(out.contains("    MoveL holes3_o3, vDrill, fine, tDrill\\WObj:=wPlate;\n"));
+    assert!(out.contains("    MoveL holes3_o1, vRetract, z10, tDrill\\WObj:=wPlate;\n"));
+    let holes_end = out.find("[9E9,9E9,9E9,9E9,9E9,9E9]]];").expect("array end");
+    let decl = out.find("CONST robtarget holes1_o1").expect("decl");
+    assert!(decl > holes_end);
+    assert!(!out.contains("holes3_o4"));
+}
+
+#[test]
+fn rapid_unreachable_target_exits_2_naming_its_line() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let input = dir.path().join("far.mod");
+    let src = std::fs::read_to_string(repo("samples/drilling.mod")).expect("sample");
+    let far = src.replace("pClear := [[750,0,650]", "pClear := [[5000,0,650]");
+    assert_ne!(far, src);
+    std::fs::write(&input, far).expect("write");
+    let output = dir.path().join("far.out.mod");
+    let out = postproc()
+        .arg("compensate")
+        .arg(&input)
+        .args([
+            "--machine",
+            repo("machines/abb-irb1600.yaml").to_str().expect("utf8"),
+        ])
+        .arg("-o")
+        .arg(&output)
+        .output()
+        .expect("run");
+    assert_eq!(out.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&out.stderr);
+    // pClear is declared on line 27; its literal starts at column 29
+    // ("  CONST robtarget pClear := " is 28 bytes).
+    assert!(err.contains("far.mod:27:29:"), "{err}");
+    assert!(err.contains("out of reach"), "{err}");
+    assert!(!output.exists(), "no output on error");
+}
+
+#[test]
+fn rapid_target_under_two_tools_is_split() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let input = dir.path().join("split.mod");
+    let src = "MODULE Split\n  PERS tooldata tLong := [TRUE,[[0,0,250],[1,0,0,0]],[4,[0,0,120],[1,0,0,0],0,0,0]];\n  CONST robtarget p10 := [[800,100,600],[0,0,1,0],[0,0,0,0],[9E9,9E9,9E9,9E9,9E9,9E9]];\n  PROC main()\n    MoveL p10, v100, fine, tool0;\n    MoveL p10, v100, fine, tLong;\n    MoveL p10, v100, fine, tool0;\n  ENDPROC\nENDMODULE\n";
+    std::fs::write(&input, src).expect("write");
+    let output = dir.path().join("split.out.mod");
+    postproc()
+        .arg("compensate")
+        .arg(&input)
+        .args([
+            "--machine",
+            repo("machines/abb-irb1600.yaml").to_str().expect("utf8"),
+        ])
+        .args(["--annotate", "none", "-o"])
+        .arg(&output)
+        .assert()
+        .success();
+    let out = std::fs::read_to_string(&output).expect("output");
+    let lines: Vec<&str> = out.lines().collect();
+    assert!(lines[2].starts_with("  CONST robtarget p10 := [["), "{out}");
+    assert!(
+        lines[3].starts_with("  CONST robtarget p10_c2 := [["),
+        "{out}"
+    );
+    assert_eq!(lines[5], "    MoveL p10, v100, fine, tool0;");
+    assert_eq!(lines[6], "    MoveL p10_c2, v100, fine, tLong;");
+    assert_eq!(lines[7], "    MoveL p10, v100, fine, tool0;");
+}
+
+#[test]
+fn rapid_confdata_without_solution_exits_2() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let input = dir.path().join("conf.mod");
+    let src = std::fs::read_to_string(repo("samples/drilling.mod")).expect("sample");
+    // Hole 1 lies at world y = -200 + 50 = -150 mm, so joint 1 is negative
+    // (cf1 = -1); confdata [0,0,0,0] has no solution there.
+    let bad = src.replacen(
+        "[[100,50,0],[0,0,1,0],[-1,0,-1,0]",
+        "[[100,50,0],[0,0,1,0],[0,0,0,0]",
+        1,
+    );
+    assert_ne!(bad, src);
+    std::fs::write(&input, bad).expect("write");
+    let output = dir.path().join("conf.out.mod");
+    let out = postproc()
+        .arg("compensate")
+        .arg(&input)
+        .args([
+            "--machine",
+            repo("machines/abb-irb1600.yaml").to_str().expect("utf8"),
+        ])
+        .arg("-o")
+        .arg(&output)
+        .output()
+        .expect("run");
+    assert_eq!(out.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&out.stderr);
+    // First use: line 51 `    MoveJ Offs(holes{1},0,0,40), …`; the Offs
+    // expression starts after 4 spaces and "MoveJ " (column 11).
+    assert!(err.contains("conf.mod:51:11:"), "{err}");
+    assert!(
+        err.contains("no joint solution with confdata [0,0,0,0]"),
+        "{err}"
+    );
+    assert!(!output.exists(), "no output on error");
+}
