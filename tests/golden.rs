@@ -277,3 +277,41 @@ fn out_of_travel_is_an_error_naming_the_block_and_writes_nothing() {
         ));
     assert!(!out_path.exists());
 }
+
+#[test]
+fn tool_orientation_error_is_reported() {
+    // A Z pitch EBZ = 100 µrad tilts the spindle, and with it the tool axis,
+    // by 100 µrad; a three-axis machine cannot correct that, so the report
+    // lists it (orient_urad) beside the corrected position.
+    let dir = tempfile::tempdir().unwrap();
+    let m = machine_yaml(
+        "",
+        "",
+        "    component_errors:\n      EBZ_urad: { positions_mm: [0, 500], forward: [100, 100] }",
+    );
+    std::fs::write(dir.path().join("m.yaml"), m).unwrap();
+    std::fs::write(
+        dir.path().join("p.nc"),
+        "G0 X0 Y0 Z50\nG43 H1 Z40\nG1 X200 Y100 F1000\n",
+    )
+    .unwrap();
+    let out = postproc()
+        .args(["report", "--format", "csv", "--machine"])
+        .arg(dir.path().join("m.yaml"))
+        .arg(dir.path().join("p.nc"))
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(0));
+    let text = String::from_utf8(out.stdout).unwrap();
+    let header: Vec<&str> = text.lines().next().unwrap().split(',').collect();
+    let col = header
+        .iter()
+        .position(|h| *h == "orient_urad")
+        .expect("orient_urad column");
+    let feed = text
+        .lines()
+        .find(|l| l.starts_with("3,"))
+        .expect("row of line 3");
+    let value: f64 = feed.split(',').nth(col).unwrap().parse().unwrap();
+    assert_abs_diff_eq!(value, 100.0, epsilon = 0.01);
+}

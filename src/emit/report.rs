@@ -59,6 +59,7 @@ impl<'w> ReportWriter<'w> {
             cols.push(format!("{}_mm", e.name()));
         }
         cols.push("residual_mm".into());
+        cols.push("orient_urad".into());
         match format {
             Format::Csv => writeln!(w.out, "{}", cols.join(",")).map_err(io)?,
             Format::Table => {
@@ -96,6 +97,8 @@ impl<'w> ReportWriter<'w> {
             vals.push(num(r.result.deviation.parts[e as usize].norm(), 5));
         }
         vals.push(num(r.result.residual_mm, 6));
+        // Tool-axis direction error: a three-axis machine cannot correct it.
+        vals.push(num(r.result.deviation.orientation.norm() * 1e6, 2));
         match self.format {
             Format::Csv => writeln!(self.out, "{}", vals.join(",")).map_err(io)?,
             Format::Table => {
@@ -144,8 +147,9 @@ impl<'w> ReportWriter<'w> {
                     .collect();
                 o.push_str(&parts.join(","));
                 o.push_str(&format!(
-                    "}},\"residual_mm\":{}}}",
-                    num(r.result.residual_mm, 6)
+                    "}},\"residual_mm\":{},\"orient_urad\":{}}}",
+                    num(r.result.residual_mm, 6),
+                    num(r.result.deviation.orientation.norm() * 1e6, 2)
                 ));
                 self.out.write_all(o.as_bytes()).map_err(io)?;
             }
