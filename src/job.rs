@@ -189,6 +189,8 @@ impl<'m> Job<'m> {
         let mut out_buf: Vec<u8> = Vec::with_capacity(1 << 20);
         let mut line_no = 0usize;
         let mut tools: std::collections::BTreeSet<u32> = Default::default();
+        let mut clamped = 0u8;
+        let mut clamp_warnings: Vec<Warning> = Vec::new();
         let mut eof = false;
         while !eof {
             buf.clear();
@@ -229,6 +231,25 @@ impl<'m> Job<'m> {
                     }
                     if mv.tool != 0 {
                         tools.insert(mv.tool);
+                    }
+                    // Component-error tables are clamped at their ends: say so
+                    // once per axis.
+                    if let Some(pred) = &self.predictor {
+                        let fresh = pred.machine.clamped_axes(&mv.end) & !clamped;
+                        for slot in (0..6).filter(|s| fresh & (1 << s) != 0) {
+                            let message = format!(
+                                "{} axis position {:.3} lies outside its component-error tables; the table end values are used",
+                                crate::machine::AXIS_LETTERS[slot] as char,
+                                mv.end[slot]
+                            );
+                            tracing::warn!("{file}:{}: {message}", blocks[i].line_no);
+                            clamp_warnings.push(Warning {
+                                line: blocks[i].line_no,
+                                message,
+                                count: 1,
+                            });
+                        }
+                        clamped |= fresh;
                     }
                 }
                 plans.push(plan);
@@ -318,6 +339,7 @@ impl<'m> Job<'m> {
         }
         summary.inch = interp.inch();
         summary.warnings = interp.warnings().to_vec();
+        summary.warnings.extend(clamp_warnings);
         summary.tools = tools.into_iter().collect();
         summary.changed = emitter.changed_blocks();
         summary.added = emitter.added_blocks();

@@ -315,3 +315,96 @@ fn tool_orientation_error_is_reported() {
     let value: f64 = feed.split(',').nth(col).unwrap().parse().unwrap();
     assert_abs_diff_eq!(value, 100.0, epsilon = 0.01);
 }
+
+#[test]
+fn five_axis_sample_is_compensated_to_its_word_resolution() {
+    // The AC trunnion example: every feed end point of the compensated
+    // program, re-interpreted, reaches the programmed tool tip within the
+    // resolution of its words: 3 decimals on X Y Z (≤ 0.87 µm) and on A/C
+    // (0.0005° at a lever arm of at most ~300 mm ≈ 2.6 µm per axis), so
+    // 0.006 mm bounds the total.
+    const FIVE_AXIS_TOL_MM: f64 = 0.006;
+    let text = std::fs::read_to_string(repo("machines/five-axis-ac.yaml")).unwrap();
+    let Machine::Tool(machine) = Machine::from_yaml_str(&text, "ac").unwrap() else {
+        panic!("not a machine tool")
+    };
+    let program = std::fs::read_to_string(repo("samples/five-axis.nc")).unwrap();
+    let out = postproc()
+        .args(["compensate", "--annotate", "none", "-o", "-", "--machine"])
+        .arg(repo("machines/five-axis-ac.yaml"))
+        .arg(repo("samples/five-axis.nc"))
+        .output()
+        .unwrap();
+    assert_eq!(
+        out.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let compensated = String::from_utf8(out.stdout).unwrap();
+    let tool = machine.tool_length_mm(1).unwrap();
+    let before = moves(&machine, &program);
+    let after = moves(&machine, &compensated);
+    // Original blocks keep their lines; added segment lines have no N word
+    // and shift the numbering, so match programmed feed ends by position on
+    // the path: each programmed feed end must be attained by some emitted end.
+    let mut checked = 0;
+    for (mv, _) in before.iter().filter(|(m, _)| m.motion == Motion::Linear) {
+        let want = machine.nominal(&mv.end, tool).pos;
+        let best = after
+            .iter()
+            .filter(|(m, _)| m.motion == Motion::Linear)
+            .map(|(m, _)| (machine.geometric(&m.end, &mv.dirs, tool).pos - want).norm())
+            .fold(f64::INFINITY, f64::min);
+        assert!(
+            best <= FIVE_AXIS_TOL_MM,
+            "programmed point {:?} missed by {best} mm",
+            mv.end
+        );
+        checked += 1;
+    }
+    assert!(checked >= 5);
+}
+
+#[test]
+fn clamped_component_table_is_warned_once() {
+    // EXX is tabulated over 0..1000 mm; X1005 lies beyond it, so the end
+    // value (20 µm) is used and the user is told once, not per block.
+    let dir = tempfile::tempdir().unwrap();
+    let m = machine_yaml(
+        "    component_errors:\n      EXX_um: { positions_mm: [0, 1000], forward: [0, 20] }",
+        "",
+        "",
+    );
+    std::fs::write(dir.path().join("m.yaml"), m).unwrap();
+    std::fs::write(
+        dir.path().join("p.nc"),
+        "G0 X0 Y0 Z50\nG1 X1005 F100\nX1006\nX500\n",
+    )
+    .unwrap();
+    let out = postproc()
+        .args(["compensate", "--annotate", "none", "-o", "-", "--machine"])
+        .arg(dir.path().join("m.yaml"))
+        .arg(dir.path().join("p.nc"))
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(0));
+    let stderr = String::from_utf8(out.stderr).unwrap();
+    assert_eq!(
+        stderr.matches("outside its component-error tables").count(),
+        1,
+        "{stderr}"
+    );
+    assert!(
+        stderr.contains("p.nc:2: X axis position 1005.000"),
+        "{stderr}"
+    );
+    // Clamped at 20 µm: X1005 is commanded as 1004.98.
+    let line = String::from_utf8(out.stdout)
+        .unwrap()
+        .lines()
+        .nth(1)
+        .unwrap()
+        .to_string();
+    assert_abs_diff_eq!(word(&line, 'X').unwrap(), 1004.98, epsilon = WORD_TOL_MM);
+}

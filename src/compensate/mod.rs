@@ -19,6 +19,9 @@ pub const SOLVE_TOL_RAD: f64 = 1e-8;
 pub const MAX_ITER: usize = 50;
 /// Deepest bisection of one move (2^16 segments).
 pub const MAX_SPLIT_DEPTH: u32 = 16;
+/// Weight (mm² per deg²) pulling rotary axes toward their programmed
+/// values in the five-axis solve: a 0.01° change costs like 1 µm.
+const ROTARY_WEIGHT: f64 = 1e-2;
 /// Step size below which the five-axis solve has stalled, mm or deg.
 const STALL_STEP: f64 = 1e-10;
 /// Relative Levenberg damping of the five-axis solve.
@@ -162,7 +165,7 @@ pub fn solve(
         }
         let n = slots.len();
         let jtj = jac.transpose() * jac;
-        let jtr = jac.transpose() * r;
+        let mut jtr = jac.transpose() * r;
         // Only the first n columns are used; pad the rest with identity.
         // Damped (Levenberg) step: near a singular configuration (C on its
         // own axis, A at zero) one axis barely changes the pose and the
@@ -171,6 +174,15 @@ pub fn solve(
         let scale = (0..n).map(|k| a[(k, k)]).fold(0.0, f64::max).max(1e-12);
         for k in 0..n {
             a[(k, k)] += DAMPING * scale;
+        }
+        // Tikhonov pull of the rotary axes toward their programmed values, so
+        // that neighbouring targets get neighbouring solutions where the
+        // direction leaves a rotary axis undetermined (C at A = 0).
+        for (k, &s) in slots.iter().enumerate() {
+            if s >= 3 {
+                a[(k, k)] += ROTARY_WEIGHT;
+                jtr[k] += ROTARY_WEIGHT * (c[s] - target[s]);
+            }
         }
         for k in n..6 {
             a[(k, k)] = 1.0;
