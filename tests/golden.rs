@@ -408,3 +408,14 @@ fn clamped_component_table_is_warned_once() {
         .to_string();
     assert_abs_diff_eq!(word(&line, 'X').unwrap(), 1004.98, epsilon = WORD_TOL_MM);
 }
+
+#[test]
+fn regression_g99_cycle_leaves_the_tool_at_the_r_level() {
+    // After a G99 hole the controller is at the R level. The emitter once
+    // kept the Z from before the cycle, so on an error-free machine the next
+    // feed block without a Z word got a spurious `Z3.` inserted.
+    let dir = tempfile::tempdir().unwrap();
+    let m = machine_yaml("", "", "").replace("G54: [0.0, 0.0, 0.0]", "G54: [100.0, 100.0, 100.0]");
+    let prog = "G90 G54 G0 X0 Y0 Z25\nG43 H1 Z20\nG99 G81 X10 Y10 Z-5 R3 F100\nX20\nG80\nG1 X30 F200\n";
+    assert_eq!(compensate(dir.path(), &m, prog), prog);
+}

@@ -237,49 +237,28 @@ impl Emitter {
                     Some(last_axis_end.map_or(w.end as usize, |e: usize| e.max(w.end as usize)));
             }
             let rotary = slot >= 3;
-            let s = if rotary { 1.0 } else { scale };
             let target = first_target[slot];
             let moved_axis = is_cycle && slot == 2;
             let d = self.decimals(w, scale, rotary);
             if moved_axis {
                 continue;
             }
-            let prog_value = if plan.absolute {
-                (target - plan.offset[slot]) / s
-            } else {
-                (target - self.emitted[slot]) / s
-            };
-            let rounded = round_to(prog_value, d);
+            let rounded = round_to(to_program(plan, slot, target, self.emitted[slot]), d);
             match w {
                 Some(w) => {
                     let orig = round_to(w.value, d);
                     if rounded != orig || w.decimals.unwrap_or(0) as usize > d {
-                        let trim =
-                            w.decimals.is_some_and(|od| (od as usize) < d) || w.decimals.is_none();
-                        edits.push(Edit {
-                            start: w.num_start as usize,
-                            end: w.end as usize,
-                            text: format_number(rounded, d, trim),
-                        });
-                        new_emitted[slot] = if plan.absolute {
-                            rounded * s + plan.offset[slot]
-                        } else {
-                            self.emitted[slot] + rounded * s
-                        };
+                        edits.push(number_edit(w, rounded, d));
+                        new_emitted[slot] = to_machine(plan, slot, rounded, self.emitted[slot]);
                     } else {
-                        new_emitted[slot] = if plan.absolute {
-                            w.value * s + plan.offset[slot]
-                        } else {
-                            self.emitted[slot] + w.value * s
-                        };
+                        new_emitted[slot] = to_machine(plan, slot, w.value, self.emitted[slot]);
                     }
                 }
                 None => {
-                    let now = if plan.absolute {
-                        round_to((self.emitted[slot] - plan.offset[slot]) / s, d)
-                    } else {
-                        0.0
-                    };
+                    let now = round_to(
+                        to_program(plan, slot, self.emitted[slot], self.emitted[slot]),
+                        d,
+                    );
                     let want = rounded;
                     // Rapids position only the axes they program.
                     let positioning =
@@ -289,37 +268,29 @@ impl Emitter {
                         && (slot < 3 || self.has_axis_word_or_moved(slot, target))
                     {
                         let at = last_axis_end.unwrap_or_else(|| insert_point_for_axes(block));
-                        let letter = if lower {
-                            AXIS_LETTERS[slot].to_ascii_lowercase()
-                        } else {
-                            AXIS_LETTERS[slot]
-                        } as char;
+                        let letter = letter_case(AXIS_LETTERS[slot], lower);
                         edits.push(Edit {
                             start: at,
                             end: at,
                             text: format!("{sep}{letter}{}", format_number(want, d, true)),
                         });
-                        new_emitted[slot] = if plan.absolute {
-                            want * s + plan.offset[slot]
-                        } else {
-                            self.emitted[slot] + want * s
-                        };
+                        new_emitted[slot] = to_machine(plan, slot, want, self.emitted[slot]);
                     }
                 }
             }
         }
         if let PlanKind::Cycle { .. } = plan.kind {
-            self.cycle_words(
-                block,
-                plan,
-                res,
-                text,
-                &mut edits,
-                &mut new_emitted,
-                last_axis_end,
-                sep,
-                lower,
-            );
+            self.cycle_words(block, plan, res, &mut edits, last_axis_end, sep, lower);
+            // G99 leaves the tool at the (compensated) R level; G98 returns
+            // it to the initial level it came from.
+            if let PlanKind::Cycle {
+                r_level, retract, ..
+            } = plan.kind
+            {
+                if retract == r_level && plan.absolute {
+                    new_emitted[2] = res.r_level;
+                }
+            }
         }
         // Arc centre words.
         if let (Some(center), Some(arc)) = (res.center, mv.arc) {
@@ -327,19 +298,14 @@ impl Emitter {
             let (la, lb) = arc.plane.center_letters();
             let r_word = block.word(b'R');
             if let Some(r) = r_word {
-                let e = Vector3f::from(first_target);
-                let st = Vector3f::from(start_emitted);
-                let ra = ((st.0[a] - center[a]).hypot(st.0[b] - center[b])
-                    + (e.0[a] - center[a]).hypot(e.0[b] - center[b]))
+                let (e, st) = (first_target, start_emitted);
+                let ra = ((st[a] - center[a]).hypot(st[b] - center[b])
+                    + (e[a] - center[a]).hypot(e[b] - center[b]))
                     / 2.0;
                 let d = self.decimals(Some(r), scale, false);
                 let v = round_to(ra / scale * r.value.signum(), d);
                 if v != round_to(r.value, d) {
-                    edits.push(Edit {
-                        start: r.num_start as usize,
-                        end: r.end as usize,
-                        text: format_number(v, d, r.decimals.is_none_or(|od| (od as usize) < d)),
-                    });
+                    edits.push(number_edit(r, v, d));
                 }
             } else {
                 for (slot, letter) in [(a, la), (b, lb)] {
@@ -354,24 +320,10 @@ impl Emitter {
                     match w {
                         Some(w) => {
                             if v != round_to(w.value, d) {
-                                edits.push(Edit {
-                                    start: w.num_start as usize,
-                                    end: w.end as usize,
-                                    text: format_number(
-                                        v,
-                                        d,
-                                        w.decimals.is_none_or(|od| (od as usize) < d),
-                                    ),
-                                });
+                                edits.push(number_edit(w, v, d));
                             }
                         }
                         None => {
-                            let implicit = if plan.arc_absolute {
-                                round_to((0.0 - plan.offset[slot]) / scale, d)
-                            } else {
-                                0.0
-                            };
-                            let _ = implicit;
                             if v != 0.0 || plan.arc_absolute {
                                 let at = block
                                     .words
@@ -381,11 +333,7 @@ impl Emitter {
                                     .max()
                                     .or(last_axis_end)
                                     .unwrap_or(text.len());
-                                let l = if lower {
-                                    letter.to_ascii_lowercase()
-                                } else {
-                                    letter
-                                } as char;
+                                let l = letter_case(letter, lower);
                                 edits.push(Edit {
                                     start: at,
                                     end: at,
@@ -459,33 +407,15 @@ impl Emitter {
             for p in points {
                 let mut parts: Vec<String> = Vec::new();
                 for slot in 0..6 {
-                    let rotary = slot >= 3;
-                    let s = if rotary { 1.0 } else { scale };
                     let w = block.words.iter().find(|w| w.letter == AXIS_LETTERS[slot]);
-                    let d = self.decimals(w, scale, rotary);
+                    let d = self.decimals(w, scale, slot >= 3);
                     let now = self.emitted[slot];
-                    let v = if plan.absolute {
-                        round_to((p[slot] - plan.offset[slot]) / s, d)
-                    } else {
-                        round_to((p[slot] - now) / s, d)
-                    };
-                    let cur = if plan.absolute {
-                        round_to((now - plan.offset[slot]) / s, d)
-                    } else {
-                        0.0
-                    };
+                    let v = round_to(to_program(plan, slot, p[slot], now), d);
+                    let cur = round_to(to_program(plan, slot, now, now), d);
                     if v != cur {
-                        let letter = if lower {
-                            AXIS_LETTERS[slot].to_ascii_lowercase()
-                        } else {
-                            AXIS_LETTERS[slot]
-                        } as char;
+                        let letter = letter_case(AXIS_LETTERS[slot], lower);
                         parts.push(format!("{letter}{}", format_number(v, d, true)));
-                        self.emitted[slot] = if plan.absolute {
-                            v * s + plan.offset[slot]
-                        } else {
-                            now + v * s
-                        };
+                        self.emitted[slot] = to_machine(plan, slot, v, now);
                     }
                 }
                 if parts.is_empty() {
@@ -516,14 +446,11 @@ impl Emitter {
         block: &Block,
         plan: &Plan,
         res: &BlockResult,
-        text: &[u8],
         edits: &mut Vec<Edit>,
-        new_emitted: &mut AxisVec,
         last_axis_end: Option<usize>,
         sep: &str,
         lower: bool,
     ) {
-        let _ = text;
         let scale = plan.scale;
         if !plan.absolute {
             // Incremental cycles: only the hole position is rewritten.
@@ -542,15 +469,7 @@ impl Emitter {
             match w {
                 Some(w) => {
                     if v != round_to(w.value, d) {
-                        edits.push(Edit {
-                            start: w.num_start as usize,
-                            end: w.end as usize,
-                            text: format_number(
-                                v,
-                                d,
-                                w.decimals.is_none_or(|od| (od as usize) < d),
-                            ),
-                        });
+                        edits.push(number_edit(w, v, d));
                         *modal = Some(v);
                     } else {
                         *modal = Some(w.value);
@@ -559,11 +478,7 @@ impl Emitter {
                 None => {
                     let cur = modal.map(|m| round_to(m, d));
                     if cur != Some(v) {
-                        let l = if lower {
-                            letter.to_ascii_lowercase()
-                        } else {
-                            letter
-                        } as char;
+                        let l = letter_case(letter, lower);
                         edits.push(Edit {
                             start: at_end,
                             end: at_end,
@@ -574,7 +489,6 @@ impl Emitter {
                 }
             }
         }
-        let _ = new_emitted;
     }
 
     /// Keeps the emitted position in step for blocks written unchanged.
@@ -602,11 +516,42 @@ impl Emitter {
     }
 }
 
-struct Vector3f([f64; 3]);
+/// Program value of a machine coordinate: absolute words are offset and
+/// scaled, incremental ones are relative to what was emitted before.
+fn to_program(plan: &Plan, slot: usize, machine: f64, emitted: f64) -> f64 {
+    let s = if slot >= 3 { 1.0 } else { plan.scale };
+    if plan.absolute {
+        (machine - plan.offset[slot]) / s
+    } else {
+        (machine - emitted) / s
+    }
+}
 
-impl From<AxisVec> for Vector3f {
-    fn from(v: AxisVec) -> Self {
-        Vector3f([v[0], v[1], v[2]])
+/// Machine coordinate a program value commands (inverse of [`to_program`]).
+fn to_machine(plan: &Plan, slot: usize, program: f64, emitted: f64) -> f64 {
+    let s = if slot >= 3 { 1.0 } else { plan.scale };
+    if plan.absolute {
+        program * s + plan.offset[slot]
+    } else {
+        emitted + program * s
+    }
+}
+
+/// Replaces a word's number, trimming trailing zeros when the program wrote
+/// fewer decimals than `d`.
+fn number_edit(w: &Word, v: f64, d: usize) -> Edit {
+    Edit {
+        start: w.num_start as usize,
+        end: w.end as usize,
+        text: format_number(v, d, w.decimals.is_none_or(|od| (od as usize) < d)),
+    }
+}
+
+fn letter_case(letter: u8, lower: bool) -> char {
+    if lower {
+        letter.to_ascii_lowercase() as char
+    } else {
+        letter as char
     }
 }
 
