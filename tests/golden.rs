@@ -416,6 +416,132 @@ fn regression_g99_cycle_leaves_the_tool_at_the_r_level() {
     // feed block without a Z word got a spurious `Z3.` inserted.
     let dir = tempfile::tempdir().unwrap();
     let m = machine_yaml("", "", "").replace("G54: [0.0, 0.0, 0.0]", "G54: [100.0, 100.0, 100.0]");
-    let prog = "G90 G54 G0 X0 Y0 Z25\nG43 H1 Z20\nG99 G81 X10 Y10 Z-5 R3 F100\nX20\nG80\nG1 X30 F200\n";
+    let prog =
+        "G90 G54 G0 X0 Y0 Z25\nG43 H1 Z20\nG99 G81 X10 Y10 Z-5 R3 F100\nX20\nG80\nG1 X30 F200\n";
     assert_eq!(compensate(dir.path(), &m, prog), prog);
+}
+
+fn run_ok(args: &[&str]) -> Vec<u8> {
+    let out = postproc().args(args).output().unwrap();
+    assert_eq!(
+        out.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    out.stdout
+}
+
+#[test]
+fn output_is_the_same_for_one_and_two_threads() {
+    let part = repo("samples/part.nc");
+    let part = part.to_str().unwrap();
+    let one = run_ok(&[
+        "compensate",
+        part,
+        "--machine",
+        "afm-r1000",
+        "-o",
+        "-",
+        "--threads",
+        "1",
+    ]);
+    let two = run_ok(&[
+        "compensate",
+        part,
+        "--machine",
+        "afm-r1000",
+        "-o",
+        "-",
+        "--threads",
+        "2",
+    ]);
+    assert!(one.len() > 1000);
+    assert_eq!(one, two);
+}
+
+#[test]
+fn gain_scales_the_correction_linearly() {
+    // EXX = 20 µm/m: at X500 the full correction is −0.0100 mm; with
+    // --gain geometric=0.5 the predicted error halves and so does the shift
+    // (c = 500/1.00001 = 499.9950).
+    let dir = tempfile::tempdir().unwrap();
+    let m = machine_yaml(
+        "    component_errors:\n      EXX_um: { positions_mm: [0, 1000], forward: [0, 20] }",
+        "",
+        "",
+    );
+    std::fs::write(dir.path().join("m.yaml"), m).unwrap();
+    std::fs::write(dir.path().join("p.nc"), "G0 X0 Y0 Z50\nG1 X500 F1000\n").unwrap();
+    let (m, p) = (dir.path().join("m.yaml"), dir.path().join("p.nc"));
+    let out = run_ok(&[
+        "compensate",
+        p.to_str().unwrap(),
+        "--machine",
+        m.to_str().unwrap(),
+        "-o",
+        "-",
+        "--gain",
+        "geometric=0.5",
+    ]);
+    let text = String::from_utf8(out).unwrap();
+    let line = text.lines().nth(1).unwrap();
+    assert_abs_diff_eq!(word(line, 'X').unwrap(), 499.995, epsilon = WORD_TOL_MM);
+    assert!(line.ends_with("(dev 0.0050 mm geo 0.0050)"), "{line}");
+}
+
+#[test]
+fn report_option_writes_a_csv_beside_the_program() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("part.comp.nc");
+    let rep = dir.path().join("part.csv");
+    let part = repo("samples/part.nc");
+    run_ok(&[
+        "compensate",
+        part.to_str().unwrap(),
+        "--machine",
+        "afm-r1000",
+        "-o",
+        out.to_str().unwrap(),
+        "--report",
+        rep.to_str().unwrap(),
+    ]);
+    let csv = std::fs::read_to_string(rep).unwrap();
+    // One header, 54 motion rows (as `check` counts them), one summary line.
+    assert_eq!(csv.lines().count(), 1 + 54 + 1);
+    assert!(csv.starts_with("line,motion,X_mm,Y_mm,Z_mm,dx_mm"));
+    assert!(out.exists());
+}
+
+#[test]
+fn work_offset_and_decimals_options_apply() {
+    // An error-free machine: --work-offset moves machine coordinates only, so
+    // the program text is unchanged; EXX makes X500 → 499.99 and --decimals 2
+    // writes it with two decimals.
+    let dir = tempfile::tempdir().unwrap();
+    let m = machine_yaml(
+        "    component_errors:\n      EXX_um: { positions_mm: [0, 1000], forward: [0, 20] }",
+        "",
+        "",
+    );
+    std::fs::write(dir.path().join("m.yaml"), m).unwrap();
+    std::fs::write(dir.path().join("p.nc"), "G0 X0 Y0 Z50\nG1 X400 F1000\n").unwrap();
+    let (m, p) = (dir.path().join("m.yaml"), dir.path().join("p.nc"));
+    // With G54 X = 100 the target is machine X500: EXX(500) = 0.010 mm.
+    let out = run_ok(&[
+        "compensate",
+        p.to_str().unwrap(),
+        "--machine",
+        m.to_str().unwrap(),
+        "-o",
+        "-",
+        "--annotate",
+        "none",
+        "--work-offset",
+        "G54=100,0,0",
+        "--decimals",
+        "2",
+    ]);
+    let text = String::from_utf8(out).unwrap();
+    assert_eq!(text.lines().nth(1).unwrap(), "G1 X399.99 F1000");
 }

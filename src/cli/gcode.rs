@@ -17,9 +17,6 @@ use crate::machine::tool::MachineTool;
 use crate::predict::{EffectSet, ToolPredictor};
 use crate::program::interp::Setup;
 
-/// Largest tool number looked up in the machine file's tool table.
-const MAX_TOOL_NUMBER: u32 = 999;
-
 fn load_machine(name: &str) -> Result<MachineTool> {
     let path = Machine::resolve(name)?;
     match Machine::load(&path)? {
@@ -38,11 +35,7 @@ fn parse_setup(args: &ProgramArgs, machine: Option<&MachineTool>) -> Result<Setu
             for (slot, has) in setup.axes.iter_mut().enumerate() {
                 *has = m.has_axis(slot);
             }
-            for h in 0..=MAX_TOOL_NUMBER {
-                if let Some(len) = m.tool_length_mm(h) {
-                    setup.tools.insert(h, len);
-                }
-            }
+            setup.tools.extend(m.tools());
             for (i, wo) in setup.work_offsets.iter_mut().enumerate() {
                 *wo = m.work_offset_mm(&format!("G{}", 54 + i));
             }
@@ -306,15 +299,61 @@ fn build_job<'m>(
     })
 }
 
-/// `postproc compensate`.
-pub fn compensate(a: &CompensateArgs) -> Result<i32> {
-    let name = a
-        .program
+/// Loads the `--machine` file with the program's tool table and work offsets.
+fn machine_setup(program: &ProgramArgs, command: &str) -> Result<(MachineTool, Setup)> {
+    let name = program
         .machine
         .as_deref()
-        .ok_or_else(|| usage("compensate needs --machine"))?;
+        .ok_or_else(|| usage(format!("{command} needs --machine")))?;
     let machine = load_machine(name)?;
-    let setup = parse_setup(&a.program, Some(&machine))?;
+    let setup = parse_setup(program, Some(&machine))?;
+    Ok((machine, setup))
+}
+
+/// Writes to `path` atomically, or to standard output for `-`.
+fn emit_to<T>(path: &Path, f: impl FnOnce(&mut dyn Write) -> Result<T>) -> Result<T> {
+    if path == Path::new("-") {
+        let mut stdout = BufWriter::new(std::io::stdout().lock());
+        let value = f(&mut stdout)?;
+        stdout.flush().map_err(|e| Error::io("stdout", e))?;
+        Ok(value)
+    } else {
+        write_atomically(path, f)
+    }
+}
+
+/// Runs the job, streaming a row per motion block into a report.
+fn run_reporting(
+    job: &Job,
+    input: Box<dyn BufRead>,
+    file: &str,
+    out: Option<&mut dyn Write>,
+    report: &mut dyn Write,
+    setup: &Setup,
+    format: Format,
+) -> Result<Summary> {
+    let mut rw = ReportWriter::new(report, setup, format, file)?;
+    let mut err = None;
+    let summary = job.run(
+        input,
+        file,
+        out,
+        Some(&mut |r| {
+            if err.is_none() {
+                err = rw.row(&r).err();
+            }
+        }),
+    )?;
+    if let Some(e) = err {
+        return Err(e);
+    }
+    rw.finish(&summary)?;
+    Ok(summary)
+}
+
+/// `postproc compensate`.
+pub fn compensate(a: &CompensateArgs) -> Result<i32> {
+    let (machine, setup) = machine_setup(&a.program, "compensate")?;
     let pool = thread_pool(a.effects.threads)?;
     let job = build_job(
         &machine,
@@ -341,40 +380,13 @@ pub fn compensate(a: &CompensateArgs) -> Result<i32> {
         )));
     }
     let (input, file) = open_input(input_path)?;
-    let run = |out: &mut dyn Write, rows: Option<&mut dyn FnMut(crate::job::Row)>| {
-        job.run(input, &file, Some(out), rows)
-    };
     let summary: Summary = match &a.report {
         Some(report_path) => write_atomically(report_path, |rep| {
-            let mut rw = ReportWriter::new(rep, &setup, Format::Csv, &file)?;
-            let mut err = None;
-            let mut on_row = |r: crate::job::Row| {
-                if err.is_none() {
-                    if let Err(e) = rw.row(&r) {
-                        err = Some(e);
-                    }
-                }
-            };
-            let s = if out_path == Path::new("-") {
-                let mut stdout = std::io::stdout().lock();
-                run(&mut stdout, Some(&mut on_row))?
-            } else {
-                write_atomically(&out_path, |w| run(w, Some(&mut on_row)))?
-            };
-            if let Some(e) = err {
-                return Err(e);
-            }
-            rw.finish(&s)?;
-            Ok(s)
+            emit_to(&out_path, |w| {
+                run_reporting(&job, input, &file, Some(w), rep, &setup, Format::Csv)
+            })
         })?,
-        None => {
-            if out_path == Path::new("-") {
-                let mut stdout = std::io::stdout().lock();
-                run(&mut stdout, None)?
-            } else {
-                write_atomically(&out_path, |w| run(w, None))?
-            }
-        }
+        None => emit_to(&out_path, |w| job.run(input, &file, Some(w), None))?,
     };
     tracing::info!(
         "{}: {} blocks changed, {} added; predicted deviation mean {:.4} max {:.4} mm (line {})",
@@ -394,13 +406,7 @@ pub fn compensate(a: &CompensateArgs) -> Result<i32> {
 
 /// `postproc report` (dry run).
 pub fn report(a: &ReportArgs) -> Result<i32> {
-    let name = a
-        .program
-        .machine
-        .as_deref()
-        .ok_or_else(|| usage("report needs --machine"))?;
-    let machine = load_machine(name)?;
-    let setup = parse_setup(&a.program, Some(&machine))?;
+    let (machine, setup) = machine_setup(&a.program, "report")?;
     let pool = thread_pool(a.effects.threads)?;
     let job = build_job(
         &machine,
@@ -412,35 +418,9 @@ pub fn report(a: &ReportArgs) -> Result<i32> {
         false,
     )?;
     let (input, file) = open_input(&a.program.file)?;
-    let write = |w: &mut dyn Write| -> Result<()> {
-        let mut rw = ReportWriter::new(w, &setup, a.format, &file)?;
-        let mut err = None;
-        let s = {
-            job.run(
-                input,
-                &file,
-                None,
-                Some(&mut |r| {
-                    if err.is_none() {
-                        if let Err(e) = rw.row(&r) {
-                            err = Some(e);
-                        }
-                    }
-                }),
-            )
-        }?;
-        if let Some(e) = err {
-            return Err(e);
-        }
-        rw.finish(&s)
-    };
-    match &a.output {
-        Some(p) => write_atomically(p, write)?,
-        None => {
-            let mut stdout = BufWriter::new(std::io::stdout().lock());
-            write(&mut stdout)?;
-            stdout.flush().map_err(|e| Error::io("stdout", e))?;
-        }
-    }
+    let out = a.output.clone().unwrap_or_else(|| PathBuf::from("-"));
+    emit_to(&out, |w| {
+        run_reporting(&job, input, &file, None, w, &setup, a.format)
+    })?;
     Ok(0)
 }

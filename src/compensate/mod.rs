@@ -141,7 +141,14 @@ pub fn solve(
         return Err(Failure::NotConverged { residual_mm: r });
     }
     // Gauss–Newton on the machine's axes with a finite-difference Jacobian.
-    let slots: Vec<usize> = (0..6).filter(|&s| m.has_axis(s)).collect();
+    // The machine's axis slots, without allocating on the per-block path.
+    let mut slot_buf = [0usize; 6];
+    let mut n_slots = 0;
+    for s in (0..6).filter(|&s| m.has_axis(s)) {
+        slot_buf[n_slots] = s;
+        n_slots += 1;
+    }
+    let slots = &slot_buf[..n_slots];
     let resid = |c: &AxisVec| -> SVector<f64, 6> {
         let got = pred.attained(c, dirs, tool_mm);
         residual(&got, &goal)

@@ -29,6 +29,22 @@ fn num(v: f64, d: usize) -> String {
         .to_string()
 }
 
+/// One aligned table line: the motion column left-aligned, numbers right.
+fn table_line(cells: &[String]) -> String {
+    let cells: Vec<String> = cells
+        .iter()
+        .enumerate()
+        .map(|(i, c)| {
+            if i == 1 {
+                format!("{c:<7}")
+            } else {
+                format!("{c:>12}")
+            }
+        })
+        .collect();
+    cells.join(" ")
+}
+
 fn json_str(s: &str) -> String {
     serde_json::to_string(s).unwrap_or_else(|_| "\"\"".into())
 }
@@ -62,20 +78,7 @@ impl<'w> ReportWriter<'w> {
         cols.push("orient_urad".into());
         match format {
             Format::Csv => writeln!(w.out, "{}", cols.join(",")).map_err(io)?,
-            Format::Table => {
-                let line: Vec<String> = cols
-                    .iter()
-                    .enumerate()
-                    .map(|(i, c)| {
-                        if i == 1 {
-                            format!("{c:<7}")
-                        } else {
-                            format!("{c:>12}")
-                        }
-                    })
-                    .collect();
-                writeln!(w.out, "{}", line.join(" ")).map_err(io)?;
-            }
+            Format::Table => writeln!(w.out, "{}", table_line(&cols)).map_err(io)?,
             Format::Json => {
                 write!(w.out, "{{\"file\":{},\"rows\":[", json_str(&w.file)).map_err(io)?
             }
@@ -101,20 +104,7 @@ impl<'w> ReportWriter<'w> {
         vals.push(num(r.result.deviation.orientation.norm() * 1e6, 2));
         match self.format {
             Format::Csv => writeln!(self.out, "{}", vals.join(",")).map_err(io)?,
-            Format::Table => {
-                let line: Vec<String> = vals
-                    .iter()
-                    .enumerate()
-                    .map(|(i, c)| {
-                        if i == 1 {
-                            format!("{c:<7}")
-                        } else {
-                            format!("{c:>12}")
-                        }
-                    })
-                    .collect();
-                writeln!(self.out, "{}", line.join(" ")).map_err(io)?;
-            }
+            Format::Table => writeln!(self.out, "{}", table_line(&vals)).map_err(io)?,
             Format::Json => {
                 let mut o = format!(
                     "{}{{\"line\":{},\"motion\":{},\"commanded\":{{",

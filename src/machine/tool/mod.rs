@@ -158,6 +158,11 @@ impl MachineTool {
         self.tools.get(&h).copied()
     }
 
+    /// The whole tool table: (H number, length in mm), by H number.
+    pub fn tools(&self) -> impl Iterator<Item = (u32, f64)> + '_ {
+        self.tools.iter().map(|(&h, &l)| (h, l))
+    }
+
     /// Work offset `G54`…`G59` (machine coordinates of the work zero), mm.
     pub fn work_offset_mm(&self, code: &str) -> Option<[f64; 3]> {
         self.work_offsets.get(code).copied()
