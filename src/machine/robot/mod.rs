@@ -11,6 +11,7 @@
 //! - Joint torques are those the external load exerts on the joints
 //!   (`τ = Jᵀ W`); the joints yield by `Δθ = Kθ⁻¹ τ`.
 
+mod calib;
 mod compensate;
 pub mod dh;
 pub mod ik;

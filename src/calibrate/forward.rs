@@ -1,0 +1,263 @@
+//! Forward model of one observation row: where a machine file says the
+//! measured point is for the row's commanded pose, load and state.
+//!
+//! This is the single definition of "simulated" shared by `simulate` (which
+//! writes it, plus noise, into the measured columns), `calibrate` (which fits
+//! parameters so it matches the measurements) and `diagnose` (which studies
+//! measured − simulated).
+//!
+//! Frames and conventions:
+//! - Robot rows: positions in the robot base frame. The joints are the
+//!   controller's `q1…q6`; the real arm has the actual DH parameters and its
+//!   joints yield under the gravity torques of the links and the tool load and
+//!   under the row's external wrench (`fx_n…`, `mx_nm…`) applied at the wrench
+//!   point: `Δθ = Kθ⁻¹ (τ_g + J_WPᵀ W)`. The measured point (`mp_*`, default
+//!   the tool centre point) is then carried by the deflected flange. The
+//!   commanded position is the measured point on the nominal model without
+//!   any load.
+//! - Machine-tool rows: positions in the machine's workpiece frame as the
+//!   kinematic chain returns them (equal to the commanded axis position when
+//!   the machine is error-free). The attained position is the tool tip of the
+//!   geometric model for the row's axes, last-motion signs and tool length
+//!   (default: the lowest-numbered tool of the machine file's tool table, or
+//!   the gauge line when the table is empty).
+
+use nalgebra::{Point3, Vector3, Vector6};
+
+use crate::error::{Error, Located, Result};
+use crate::machine::Machine;
+use crate::machine::robot::{Model, Robot};
+use crate::machine::tool::MachineTool;
+
+use super::observations::{
+    MeasuredKind, ObsKind, Observation, Observations, Pose, RobotPose, ToolPose,
+};
+
+/// Commanded and predicted attained position of the measured point of a row.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Predicted {
+    /// Where the controller believes the measured point is, mm.
+    pub commanded_mm: Vector3<f64>,
+    /// Where the model says the measured point really is, mm.
+    pub attained_mm: Vector3<f64>,
+}
+
+impl Predicted {
+    /// Attained − commanded, mm.
+    pub fn deviation_mm(&self) -> Vector3<f64> {
+        self.attained_mm - self.commanded_mm
+    }
+
+    /// The triple a file with `kind` stores for this row.
+    pub fn measured(&self, kind: MeasuredKind) -> Vector3<f64> {
+        match kind {
+            MeasuredKind::Position => self.attained_mm,
+            MeasuredKind::Deviation => self.deviation_mm(),
+        }
+    }
+}
+
+/// Checks that the observations were taken on the kind of machine given.
+pub fn check_kind(machine: &Machine, obs: &Observations, file: &str) -> Result<()> {
+    let ok = matches!(
+        (machine, obs.kind),
+        (Machine::Robot(_), ObsKind::Robot) | (Machine::Tool(_), ObsKind::MachineTool)
+    );
+    if ok {
+        Ok(())
+    } else {
+        let (m, o) = match obs.kind {
+            ObsKind::Robot => ("a machine tool", "robot joint columns (q1_deg…)"),
+            ObsKind::MachineTool => ("a robot", "machine-tool axis columns (X_mm…)"),
+        };
+        Err(Error::Usage(format!(
+            "{file}: the observations have {o} but the machine file describes {m}"
+        )))
+    }
+}
+
+/// Predicts one row. `file` names the observation file in errors.
+pub fn predict(machine: &Machine, row: &Observation, file: &str) -> Result<Predicted> {
+    let p = match (machine, &row.pose) {
+        (Machine::Robot(r), Pose::Robot(rp)) => predict_robot(r, row, rp),
+        (Machine::Tool(t), Pose::Tool(tp)) => predict_tool(t, tp),
+        _ => {
+            return Err(Error::Usage(format!(
+                "{file}: row `{}` does not match the kind of machine file",
+                row.id
+            )));
+        }
+    };
+    if p.attained_mm
+        .iter()
+        .chain(p.commanded_mm.iter())
+        .all(|v| v.is_finite())
+    {
+        Ok(p)
+    } else {
+        Err(Error::Input(Located {
+            file: file.to_string(),
+            line: row.line,
+            column: 1,
+            message: format!("row `{}`: the model gives a non-finite position", row.id),
+        }))
+    }
+}
+
+/// The measured point of a robot row in the flange frame.
+pub fn measured_point(robot: &Robot, rp: &RobotPose) -> Vector3<f64> {
+    rp.mp_mm
+        .unwrap_or_else(|| robot.flange_to_tool().translation.vector)
+}
+
+/// The wrench point of a robot row in the flange frame.
+pub fn wrench_point(robot: &Robot, rp: &RobotPose) -> Vector3<f64> {
+    rp.wp_mm
+        .unwrap_or_else(|| robot.flange_to_tool().translation.vector)
+}
+
+/// Joint angles of a robot row, rad.
+pub fn joints_rad(rp: &RobotPose) -> [f64; 6] {
+    rp.q_deg.map(f64::to_radians)
+}
+
+/// External wrench of a row, robot base frame, `[F (N); M (N·mm)]`.
+pub fn row_wrench(row: &Observation) -> Vector6<f64> {
+    let mut w = Vector6::zeros();
+    w.fixed_rows_mut::<3>(0).copy_from(&row.force_n);
+    w.fixed_rows_mut::<3>(3)
+        .copy_from(&(row.moment_nm * 1000.0));
+    w
+}
+
+fn predict_robot(robot: &Robot, row: &Observation, rp: &RobotPose) -> Predicted {
+    let q = joints_rad(rp);
+    let mp = Point3::from(measured_point(robot, rp));
+    let wp = wrench_point(robot, rp);
+    let tau = robot.gravity_torques(Model::Actual, &q)
+        + robot.wrench_torques(Model::Actual, &q, &wp, &row_wrench(row));
+    let attained = robot.deflected_flange(Model::Actual, &q, &tau) * mp;
+    let commanded = robot.flange_pose(Model::Nominal, &q) * mp;
+    Predicted {
+        commanded_mm: commanded.coords,
+        attained_mm: attained.coords,
+    }
+}
+
+/// Tool length of a machine-tool row, mm.
+pub fn tool_length(tool: &MachineTool, tp: &ToolPose) -> f64 {
+    tp.tool_mm
+        .or_else(|| tool.tools().next().map(|(_, l)| l))
+        .unwrap_or(0.0)
+}
+
+fn predict_tool(tool: &MachineTool, tp: &ToolPose) -> Predicted {
+    let cmd = tp.axes();
+    let len = tool_length(tool, tp);
+    Predicted {
+        commanded_mm: tool.nominal(&cmd, len).pos,
+        attained_mm: tool.geometric(&cmd, &tp.dirs(), len).pos,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use approx::assert_abs_diff_eq;
+
+    const POS_TOL_MM: f64 = 1e-9;
+
+    fn irb1600() -> Machine {
+        let path = concat!(env!("CARGO_MANIFEST_DIR"), "/machines/abb-irb1600.yaml");
+        Machine::load(std::path::Path::new(path)).expect("machine file loads")
+    }
+
+    fn robot_row(q_deg: [f64; 6], force_n: Vector3<f64>) -> Observation {
+        Observation {
+            line: 0,
+            id: "r".into(),
+            t_s: None,
+            measured_mm: Vector3::zeros(),
+            force_n,
+            moment_nm: Vector3::zeros(),
+            ambient_c: None,
+            pose: Pose::Robot(RobotPose {
+                q_deg,
+                mp_mm: Some(Vector3::zeros()),
+                wp_mm: Some(Vector3::zeros()),
+                p_w: [None; 6],
+                dir: [None; 6],
+            }),
+        }
+    }
+
+    /// At all joints zero the nominal IRB 1600 flange is at (815, 0, 1186.5)
+    /// mm (MODELS.md §1.2: 150 + 600 + 65 in front, 486.5 + 700 above).
+    #[test]
+    fn robot_commanded_is_nominal_flange() {
+        let m = irb1600();
+        let p = predict(&m, &robot_row([0.0; 6], Vector3::zeros()), "t").unwrap();
+        assert_abs_diff_eq!(
+            p.commanded_mm,
+            Vector3::new(815.0, 0.0, 1186.5),
+            epsilon = 1e-6
+        );
+    }
+
+    /// A force changes the attained position by J_MP Kθ⁻¹ J_WPᵀ W to first
+    /// order (the statics module's small-deflection formula, an independent
+    /// path from the deflected forward kinematics used here).
+    #[test]
+    fn robot_force_deflection_is_linear_statics() {
+        let Machine::Robot(r) = irb1600() else {
+            panic!("robot file")
+        };
+        let m = Machine::Robot(r.clone());
+        let q_deg = [10.0, 20.0, -15.0, 30.0, 40.0, 50.0];
+        let f = Vector3::new(0.0, 0.0, -335.0);
+        let a0 = predict(&m, &robot_row(q_deg, Vector3::zeros()), "t").unwrap();
+        let a1 = predict(&m, &robot_row(q_deg, f), "t").unwrap();
+        let q = q_deg.map(f64::to_radians);
+        let mut w = Vector6::zeros();
+        w.fixed_rows_mut::<3>(0).copy_from(&f);
+        let tau = r.wrench_torques(Model::Actual, &q, &Vector3::zeros(), &w);
+        let lin = r.point_deflection(Model::Actual, &q, &Vector3::zeros(), &tau);
+        let got = a1.attained_mm - a0.attained_mm;
+        // Second-order terms of a ≈1 mm deflection over a ≈1 m arm are ≈1 µm.
+        assert_abs_diff_eq!(got, lin.fixed_rows::<3>(0).into_owned(), epsilon = 5e-3);
+        assert!(got.norm() > 0.1, "a 335 N load deflects the arm noticeably");
+        assert_abs_diff_eq!(a1.commanded_mm, a0.commanded_mm, epsilon = POS_TOL_MM);
+    }
+
+    /// An error-free machine tool attains its commanded position.
+    #[test]
+    fn error_free_tool_attains_command() {
+        let mut yaml = String::from("kind: machine_tool\nname: t\naxes:\n");
+        for (axis, side) in [("X", "workpiece"), ("Y", "workpiece"), ("Z", "tool")] {
+            yaml.push_str(&format!(
+                "  - name: {axis}\n    type: linear\n    side: {side}\n    travel_mm: [-500, 500]\n    rapid_mm_per_min: 20000\n"
+            ));
+        }
+        let m = Machine::from_yaml_str(&yaml, "t.yaml").expect("machine file");
+        let row = Observation {
+            line: 0,
+            id: "p".into(),
+            t_s: None,
+            measured_mm: Vector3::zeros(),
+            force_n: Vector3::zeros(),
+            moment_nm: Vector3::zeros(),
+            ambient_c: None,
+            pose: Pose::Tool(ToolPose {
+                xyz_mm: Vector3::new(10.0, 20.0, 30.0),
+                abc_deg: [None; 3],
+                dir: [None; 6],
+                tool_mm: Some(100.0),
+                spindle_rpm: None,
+                spindle_w: None,
+                p_w: [None; 6],
+            }),
+        };
+        let p = predict(&m, &row, "t").unwrap();
+        assert_abs_diff_eq!(p.deviation_mm(), Vector3::zeros(), epsilon = POS_TOL_MM);
+    }
+}
