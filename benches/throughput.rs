@@ -66,6 +66,7 @@ fn main() {
     setup.home = [0.0, 0.0, 500.0, 0.0, 0.0, 0.0];
     let emit = EmitOptions {
         decimals_mm: Some(4),
+        decimals_deg: None,
         annotate: false,
     };
     println!(

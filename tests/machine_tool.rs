@@ -602,3 +602,16 @@ fn garbage_never_panics() {
         "{e}"
     );
 }
+
+#[test]
+fn output_decimals_are_read_and_bounded() {
+    let base = BASE3.replace("{X}", "").replace("{Y}", "").replace("{Z}", "");
+    let ok = format!("{base}output:\n  decimals_mm: 4\n  decimals_deg: 6\n");
+    let m = MachineTool::from_yaml_str(&ok, "f.yaml").expect("valid output block");
+    assert_eq!(m.output_decimals(), Some(4));
+    assert_eq!(m.output_decimals_deg(), Some(6));
+    let bad = format!("{base}output:\n  decimals_deg: 12\n");
+    let e = err_of(&bad);
+    assert!(e.contains("output.decimals_deg"), "{e}");
+    assert!(e.contains("12"), "{e}");
+}

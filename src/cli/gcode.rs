@@ -163,6 +163,7 @@ pub fn check(a: &CheckArgs) -> Result<i32> {
         settings: Settings::default(),
         emit: EmitOptions {
             decimals_mm: None,
+            decimals_deg: None,
             annotate: false,
         },
         pool: None,
@@ -293,6 +294,7 @@ fn build_job<'m>(
         },
         emit: EmitOptions {
             decimals_mm: decimals.or(machine.output_decimals()),
+            decimals_deg: machine.output_decimals_deg(),
             annotate,
         },
         pool: Some(pool),

@@ -20,6 +20,9 @@ pub struct EmitOptions {
     /// Decimals of rewritten mm coordinates (inch: one more); `None` keeps
     /// the program's own, with at least 3 (mm) or 4 (inch).
     pub decimals_mm: Option<usize>,
+    /// Decimals of rewritten rotary-axis words (degrees); `None` keeps the
+    /// program's own, with at least 3.
+    pub decimals_deg: Option<usize>,
     /// Append `(dev … mm geo …)` comments to compensated blocks.
     pub annotate: bool,
 }
@@ -103,16 +106,12 @@ impl Emitter {
     fn decimals(&self, w: Option<&Word>, scale: f64, rotary: bool) -> usize {
         let own = w.and_then(|w| w.decimals).unwrap_or(0) as usize;
         let base = if rotary {
-            DEFAULT_DECIMALS_MM
+            self.opts.decimals_deg.unwrap_or(DEFAULT_DECIMALS_MM)
         } else {
             let d = self.opts.decimals_mm.unwrap_or(DEFAULT_DECIMALS_MM);
             if scale != 1.0 { d + 1 } else { d }
         };
-        if self.opts.decimals_mm.is_some() && !rotary {
-            base.max(own)
-        } else {
-            own.max(base)
-        }
+        own.max(base)
     }
 
     /// Writes one line (`line` includes its end-of-line bytes).

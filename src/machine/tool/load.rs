@@ -152,12 +152,18 @@ fn validate(raw: RawMachineTool) -> V<MachineTool> {
     }
 
     let decimals = raw.output.as_ref().and_then(|o| o.decimals_mm);
-    if let Some(d) = decimals {
-        if d > MAX_DECIMALS {
-            return Err(Invalid::new(
-                "output.decimals_mm",
-                format!("`{d}` decimals is more than {MAX_DECIMALS}"),
-            ));
+    let decimals_deg = raw.output.as_ref().and_then(|o| o.decimals_deg);
+    for (key, value) in [
+        ("output.decimals_mm", decimals),
+        ("output.decimals_deg", decimals_deg),
+    ] {
+        if let Some(d) = value {
+            if d > MAX_DECIMALS {
+                return Err(Invalid::new(
+                    key,
+                    format!("`{d}` decimals is more than {MAX_DECIMALS}"),
+                ));
+            }
         }
     }
 
@@ -174,6 +180,7 @@ fn validate(raw: RawMachineTool) -> V<MachineTool> {
         tools,
         work_offsets,
         decimals,
+        decimals_deg,
         error_free,
     })
 }

@@ -95,6 +95,7 @@ pub struct MachineTool {
     tools: BTreeMap<u32, f64>,
     work_offsets: BTreeMap<String, [f64; 3]>,
     decimals: Option<usize>,
+    decimals_deg: Option<usize>,
     error_free: bool,
 }
 
@@ -171,6 +172,12 @@ impl MachineTool {
     /// Output decimals for mm programs, if the machine file fixes them.
     pub fn output_decimals(&self) -> Option<usize> {
         self.decimals
+    }
+
+    /// Output decimals for rotary-axis words (degrees), if the machine file
+    /// fixes them.
+    pub fn output_decimals_deg(&self) -> Option<usize> {
+        self.decimals_deg
     }
 
     /// True when every geometric error is zero.

@@ -96,4 +96,6 @@ pub(crate) struct RawTool {
 pub(crate) struct RawOutput {
     #[serde(default)]
     pub decimals_mm: Option<usize>,
+    #[serde(default)]
+    pub decimals_deg: Option<usize>,
 }
