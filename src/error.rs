@@ -85,14 +85,14 @@ pub enum Error {
     /// Bad command-line usage or an inconsistent request.
     #[error("{0}")]
     Usage(String),
-    /// A file could not be read or written.
-    #[error("{path}: {source}")]
+    /// A file could not be read or written. The message includes the
+    /// cause, so it is not repeated as an error source.
+    #[error("{}: {}", path.display(), cause)]
     Io {
         /// The file concerned.
         path: PathBuf,
         /// The underlying I/O error.
-        #[source]
-        source: std::io::Error,
+        cause: std::io::Error,
     },
     /// The engine could not do what the input asks (a target out of travel,
     /// a solve that did not converge). It names the block or target.
@@ -111,8 +111,31 @@ impl Error {
     pub fn io(path: impl Into<PathBuf>, source: std::io::Error) -> Self {
         Error::Io {
             path: path.into(),
-            source,
+            cause: source,
         }
+    }
+}
+
+/// A number for an error message: plain when of ordinary size, in exponent
+/// notation when huge or tiny, so an absurd input cannot flood the message.
+pub fn show_number(v: f64) -> String {
+    if v == 0.0 || !v.is_finite() || (1e-4..1e9).contains(&v.abs()) {
+        format!("{v}")
+    } else {
+        format!("{v:e}")
+    }
+}
+
+/// Longest quoted cell or number in a message, characters.
+pub const QUOTE_MAX: usize = 24;
+
+/// A piece of input text for a message, shortened with `…` beyond
+/// [`QUOTE_MAX`] characters.
+pub fn clip(text: &str) -> String {
+    if text.chars().count() <= QUOTE_MAX {
+        text.to_string()
+    } else {
+        format!("{}…", text.chars().take(QUOTE_MAX).collect::<String>())
     }
 }
 

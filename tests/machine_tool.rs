@@ -605,7 +605,10 @@ fn garbage_never_panics() {
 
 #[test]
 fn output_decimals_are_read_and_bounded() {
-    let base = BASE3.replace("{X}", "").replace("{Y}", "").replace("{Z}", "");
+    let base = BASE3
+        .replace("{X}", "")
+        .replace("{Y}", "")
+        .replace("{Z}", "");
     let ok = format!("{base}output:\n  decimals_mm: 4\n  decimals_deg: 6\n");
     let m = MachineTool::from_yaml_str(&ok, "f.yaml").expect("valid output block");
     assert_eq!(m.output_decimals(), Some(4));

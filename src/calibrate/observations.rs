@@ -286,6 +286,14 @@ struct Cell {
     text: Vec<u8>,
 }
 
+/// Largest accepted magnitude of a cell other than `t_s` (mm, deg, N, N·m,
+/// W, 1/min, °C): 10 km in mm, far beyond any machine, so only corrupt data
+/// is refused.
+pub const MAX_MAGNITUDE: f64 = 1e7;
+
+/// Largest accepted `t_s`: about 30 years in seconds.
+pub const MAX_TIME_S: f64 = 1e9;
+
 fn is_blank(b: u8) -> bool {
     b == b' ' || b == b'\t'
 }
@@ -611,6 +619,23 @@ fn parse_row(
                 format!(
                     "column \"{}\": cell \"{text}\" is not a finite number",
                     c.name()
+                ),
+            ));
+        }
+        let limit = if c.name() == "t_s" {
+            MAX_TIME_S
+        } else {
+            MAX_MAGNITUDE
+        };
+        if v.abs() > limit {
+            return Err(ctx.err(
+                line,
+                cell.col,
+                format!(
+                    "column \"{}\": cell \"{}\" is absurdly large (limit {})",
+                    c.name(),
+                    crate::error::clip(text),
+                    crate::error::show_number(limit)
                 ),
             ));
         }

@@ -24,6 +24,13 @@ pub fn deserialize<T: DeserializeOwned>(text: &str, file: &str) -> Result<T, Err
             if let Some(pos) = msg.find(" at line ") {
                 msg.truncate(pos);
             }
+            // serde_yaml sometimes prefixes the path of the enclosing key
+            // (`axes[0]: unknown field …`); the key path below says it.
+            if let Some((head, rest)) = msg.split_once(": ") {
+                if !head.is_empty() && !head.contains(' ') && path.starts_with(head) {
+                    msg = rest.to_string();
+                }
+            }
             let message = if path.is_empty() || path == "." {
                 msg
             } else {

@@ -256,12 +256,15 @@ pub fn parse_line(line: &[u8], line_no: usize, file: &str, out: &mut Block) -> R
                             Err(_) => {
                                 return Err(err(
                                     num_start,
-                                    format!("malformed number `{num_str}`"),
+                                    format!("malformed number `{}`", crate::error::clip(num_str)),
                                 ));
                             }
                         };
                         if !value.is_finite() || value.abs() > 1e9 {
-                            return Err(err(num_start, format!("absurd number `{num_str}`")));
+                            return Err(err(
+                                num_start,
+                                format!("absurd number `{}`", crate::error::clip(num_str)),
+                            ));
                         }
                         let decimals = num
                             .iter()

@@ -26,6 +26,27 @@ pub const ARC_RADIUS_TOL_MM: f64 = 0.01;
 /// Arc parameter just inside the ends, where tangent directions are read.
 pub const END_INSIDE: f64 = 1.0 - 1e-6;
 
+/// Number of modal groups checked by [`modal_group`].
+const MODAL_GROUPS: usize = 8;
+
+/// The modal group of a G code (code × 10) whose members exclude each other
+/// within one block, other than the motion group (checked on its own): plane,
+/// distance mode, arc distance mode, units, work offset, cutter compensation,
+/// tool length offset, canned-cycle return level.
+fn modal_group(code: i64) -> Option<usize> {
+    Some(match code {
+        170 | 180 | 190 => 0,
+        900 | 910 => 1,
+        901 | 911 => 2,
+        200 | 210 => 3,
+        540 | 550 | 560 | 570 | 580 | 590 => 4,
+        400 | 410 | 420 => 5,
+        430 | 490 => 6,
+        980 | 990 => 7,
+        _ => return None,
+    })
+}
+
 /// Below this an axis is considered not to move, mm or deg.
 pub const MOTION_EPS: f64 = 1e-9;
 
@@ -370,6 +391,7 @@ impl Interpreter {
         let mut non_modal: Option<&Word> = None;
         let mut h_word = None;
         let mut p_word = None;
+        let mut groups: [Option<&Word>; MODAL_GROUPS] = [None; MODAL_GROUPS];
         for w in &block.words {
             match w.letter {
                 b'X' | b'Y' | b'Z' | b'A' | b'B' | b'C' => {
@@ -418,7 +440,16 @@ impl Interpreter {
                     }
                     self.spindle = w.value;
                 }
-                b'T' => self.tool_selected = w.value.max(0.0) as u32,
+                b'T' => {
+                    if w.value < 0.0 || w.value.fract() != 0.0 {
+                        return Err(self.err(
+                            line,
+                            Some(w),
+                            format!("tool number must be a whole number ≥ 0: `{}`", quote(w)),
+                        ));
+                    }
+                    self.tool_selected = w.value as u32;
+                }
                 b'L' if w.value != 1.0 => {
                     return Err(self.err(line, Some(w), format!("repeat counts cannot be compensated offline (expand them in CAM): `{}`", quote(w))));
                 }
@@ -431,6 +462,20 @@ impl Interpreter {
                 },
                 b'G' => {
                     let code = w.code10();
+                    if let Some(g) = modal_group(code) {
+                        if let Some(first) = groups[g] {
+                            return Err(self.err(
+                                line,
+                                Some(w),
+                                format!(
+                                    "`{}` and `{}` belong to the same modal group and cannot share a block",
+                                    quote(first),
+                                    quote(w)
+                                ),
+                            ));
+                        }
+                        groups[g] = Some(w);
+                    }
                     match code {
                         0 | 10 | 20 | 30 => {
                             if motion_g.is_some() {
@@ -537,12 +582,23 @@ impl Interpreter {
             match w.code10() {
                 40 => {
                     // Dwell: P in ms (integer) / s (with point), or X in s.
-                    plan.dwell_s = match (p_word, axis[0]) {
-                        (Some(p), _) if p.decimals.is_none() => p.value / 1000.0,
-                        (Some(p), _) => p.value,
-                        (None, Some(x)) => x.value,
-                        _ => 0.0,
+                    let (word, dwell_s) = match (p_word, axis[0]) {
+                        (Some(p), _) if p.decimals.is_none() => (Some(p), p.value / 1000.0),
+                        (Some(p), _) => (Some(p), p.value),
+                        (None, Some(x)) => (Some(x), x.value),
+                        _ => (None, 0.0),
                     };
+                    if dwell_s < 0.0 {
+                        return Err(self.err(
+                            line,
+                            word,
+                            format!(
+                                "negative dwell time: `{}`",
+                                word.map(&quote).unwrap_or_default()
+                            ),
+                        ));
+                    }
+                    plan.dwell_s = dwell_s;
                     return Ok(plan);
                 }
                 90 => {}

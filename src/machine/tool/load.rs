@@ -190,7 +190,8 @@ fn check_mm(path: &str, v: f64) -> V<f64> {
         return Err(Invalid::new(
             path,
             format!(
-                "{v} mm exceeds the 1 mm limit of a geometric error (small-deviation model; check the unit)"
+                "{} mm exceeds the 1 mm limit of a geometric error (small-deviation model; check the unit)",
+                crate::error::show_number(v)
             ),
         ));
     }
@@ -203,7 +204,7 @@ fn check_rad(path: &str, v: f64) -> V<f64> {
             path,
             format!(
                 "{} µrad exceeds the 10000 µrad (0.01 rad) limit of the small-angle error model (check the unit)",
-                v * 1e6
+                crate::error::show_number(v * 1e6)
             ),
         ));
     }

@@ -1,0 +1,3 @@
+MODULE m
+CONST robtarget p := [[1,2],[1,0,0,0],[0,0,0,0],[9E9,9E9,9E9,9E9,9E9,9E9]];
+ENDMODULE

@@ -1,0 +1,2 @@
+G1 X1 F100
+(unclosed comment
