@@ -165,11 +165,7 @@ pub fn compensate(a: &CompensateArgs) -> Result<i32> {
             "--tool and --work-offset are G-code options; RAPID takes tooldata and wobjdata from the module",
         ));
     }
-    let out = robot.output_decimals();
-    let mut format = Format {
-        position_decimals: out.mm,
-        quaternion_decimals: out.quaternion,
-    };
+    let mut format = RapidOptions::for_robot(&robot).format;
     if let Some(d) = a.decimals {
         if d > 6 {
             return Err(usage("--decimals: at most 6"));

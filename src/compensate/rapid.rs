@@ -58,6 +58,22 @@ impl Default for RapidOptions {
     }
 }
 
+impl RapidOptions {
+    /// The defaults with the number formatting of the robot file's
+    /// `output:` section (quaternions with 7 decimals unless it says
+    /// otherwise).
+    pub fn for_robot(robot: &Robot) -> Self {
+        let d = robot.output_decimals();
+        RapidOptions {
+            format: Format {
+                position_decimals: d.mm,
+                quaternion_decimals: d.quaternion,
+            },
+            ..RapidOptions::default()
+        }
+    }
+}
+
 /// What the pipeline predicted for one motion instruction.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct MoveRecord {
