@@ -211,8 +211,8 @@ pub fn effective_power(segments: &[Segment], tau_s: f64, start: ThermalStart) ->
         segments
             .iter()
             .map(|s| {
-                for j in 0..6 {
-                    x[j] = first_order(x[j], s.power_w[j], s.duration_s, tau_s);
+                for (xj, pj) in x.iter_mut().zip(&s.power_w) {
+                    *xj = first_order(*xj, *pj, s.duration_s, tau_s);
                 }
                 x
             })
