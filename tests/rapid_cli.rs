@@ -489,6 +489,20 @@ fn rapid_effects_flags_and_resonance_warning() {
         .current_dir(repo(""))
         .assert()
         .code(2);
+    postproc()
+        .args([
+            "compensate",
+            "samples/drilling.mod",
+            "--machine",
+            "machines/abb-irb1600.yaml",
+            "--thermal-start",
+            "lukewarm",
+            "-o",
+            "-",
+        ])
+        .current_dir(repo(""))
+        .assert()
+        .code(2);
     // Spindle at 255 rpm with 2 flutes excites 255·2/60 = 8.5 Hz, the x
     // mode: warned, with the suggested 6.375 Hz · 60 / 2 = 191 rpm. The
     // drilling feed limit is raised so that 4 mm/s (0.94 mm/rev) still drills.
@@ -511,4 +525,73 @@ fn rapid_effects_flags_and_resonance_warning() {
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("natural frequency 8.50 Hz"), "{err}");
     assert!(err.contains("191 rpm"), "{err}");
+}
+
+#[test]
+fn random_written_targets_meet_one_micrometre_and_microradian() {
+    // 40 reachable inline targets (nominal TCP poses of random joints away
+    // from the singularities, tool0, no work object), each a MoveL with a
+    // fixed speed, compensated with every effect and a warm start. Each
+    // WRITTEN literal, read back, must land within 1 µm / 1 µrad.
+    let text = std::fs::read_to_string(repo("machines/abb-irb1600.yaml")).expect("machine");
+    let robot = Robot::from_yaml_str(&text, "abb-irb1600.yaml").expect("valid");
+    // tool0: the flange, no load (the file's default TCP is not used).
+    let tool0 = robot.with_tool(Isometry3::identity(), None, false);
+    let lim = robot.joint_limits_rad();
+    let mut seed = 0x2545_f491_4f6c_dd1d_u64;
+    let mut unit = || {
+        seed ^= seed << 13;
+        seed ^= seed >> 7;
+        seed ^= seed << 17;
+        (seed >> 11) as f64 / (1u64 << 53) as f64
+    };
+    let mut body = String::new();
+    let mut goals = Vec::new();
+    while goals.len() < 40 {
+        let q: [f64; 6] = std::array::from_fn(|i| {
+            let (lo, hi) = (lim[i][0] + 0.3, lim[i][1] - 0.3);
+            lo + (hi - lo) * unit()
+        });
+        let wc = robot.frames(Model::Nominal, &q).link[4].translation.vector;
+        if q[4].abs() < 0.1
+            || wc.xy().norm() < 150.0
+            || (q[2] + std::f64::consts::FRAC_PI_2).abs() < 0.1
+        {
+            continue;
+        }
+        let p = tool0.tcp_pose(Model::Nominal, &q);
+        let c = robot.confdata(&q);
+        let r = p.rotation.quaternion();
+        let t = p.translation.vector;
+        body.push_str(&format!(
+            "    MoveL [[{:.3},{:.3},{:.3}],[{:.9},{:.9},{:.9},{:.9}],[{},{},{},{}],[9E9,9E9,9E9,9E9,9E9,9E9]], v200, fine, tool0;\n",
+            t.x, t.y, t.z, r.w, r.i, r.j, r.k, c.cf1, c.cf4, c.cf6, c.cfx
+        ));
+        goals.push(());
+    }
+    let src = format!("MODULE Rand\n  PROC main()\n{body}  ENDPROC\nENDMODULE\n");
+    let opts = RapidOptions {
+        thermal_start: ThermalStart::WarmUpMin(45.0),
+        ..RapidOptions::for_robot(&robot)
+    };
+    let out = compensate_module(&src, "rand.mod", &robot, &opts).expect("compensates");
+    let m_in = parse_module(&src, "in").expect("parses");
+    let m_out = parse_module(&out.text, "out").expect("re-parses");
+    let mut checked = 0;
+    for ((a, b), rec) in m_in.moves().zip(m_out.moves()).zip(&out.records) {
+        let (Target::Inline(rin), Target::Inline(rout)) = (&a.target, &b.target) else {
+            panic!("inline targets")
+        };
+        // No constant process force and no plunges: no load.
+        assert!(rec.wrench.is_none());
+        let view = tool0.with_thermal_power(&rec.thermal_power_w);
+        let q = view
+            .ik_conf(&pose(rout), conf(rout))
+            .expect("controller IK");
+        let (dp, dr) = pose_error(&view.predict(&q, Effects::ALL), &pose(rin));
+        assert_abs_diff_eq!(dp.norm(), 0.0, epsilon = POS_TOL_MM);
+        assert_abs_diff_eq!(dr.norm(), 0.0, epsilon = ROT_TOL_RAD);
+        checked += 1;
+    }
+    assert_eq!(checked, 40);
 }
