@@ -595,3 +595,49 @@ fn random_written_targets_meet_one_micrometre_and_microradian() {
     }
     assert_eq!(checked, 40);
 }
+
+/// Duration tolerance, s (plain arithmetic on literals).
+const TIME_TOL_S: f64 = 1e-9;
+
+#[test]
+fn time_line_durations_and_workpiece_force_are_hand_derived() {
+    // A constant force of 100 N along x of a work object turned 90° about z
+    // (quaternion [cos45°, 0, 0, sin45°]) is 100 N along base +y, on MoveL
+    // only. Durations: p1 → p2 is 100 mm along y.
+    //  - MoveL at v100: 100 / 100 = 1 s.
+    //  - MoveL back with \V:=50: 100 / 50 = 2 s.
+    //  - MoveL at vSlow ([25, ...]): 100 / 25 = 4 s.
+    //  - MoveAbsJ [0,0,0,0,30,0] then [30,0,0,0,30,0] at v5000: only joint
+    //    1 moves, 30° at 150°/s = 0.2 s; the TCP (≤ 1 m from axis 1) moves
+    //    along a chord ≤ 2·1000·sin 15° = 518 mm, 0.1 s at 5000 mm/s.
+    //  - The first move takes 0 s.
+    let text = std::fs::read_to_string(repo("machines/abb-irb1600.yaml")).expect("machine");
+    let text = text.replace(
+        "process_force:\n  model: drilling\n  thrust_coefficient_n_per_mm2: 450.0\n  drill_diameter_mm: 6.8\n  spindle_rpm: 3000.0\n  flutes: 2\n  max_feed_mm_per_rev: 0.5\n",
+        "process_force: { model: constant, force_n: [100.0, 0.0, 0.0], frame: workpiece }\n",
+    );
+    assert!(text.contains("model: constant"));
+    let robot = Robot::from_yaml_str(&text, "abb.yaml").expect("valid");
+    let h = std::f64::consts::FRAC_1_SQRT_2;
+    let src = format!(
+        "MODULE T\n  CONST speeddata vSlow := [25,500,5000,1000];\n  PERS wobjdata wTurn := [FALSE,TRUE,\"\",[[0,0,0],[{h},0,0,{h}]],[[0,0,0],[1,0,0,0]]];\n  CONST robtarget p1 := [[0,-800,500],[0,1,0,0],[0,0,0,0],[9E9,9E9,9E9,9E9,9E9,9E9]];\n  CONST robtarget p2 := [[0,-700,500],[0,1,0,0],[0,0,0,0],[9E9,9E9,9E9,9E9,9E9,9E9]];\n  PROC main()\n    MoveJ p1, v1000, fine, tool0\\WObj:=wTurn;\n    MoveL p2, v100, fine, tool0\\WObj:=wTurn;\n    MoveL p1, v100\\V:=50, fine, tool0\\WObj:=wTurn;\n    MoveL p2, vSlow, fine, tool0\\WObj:=wTurn;\n    MoveAbsJ [[0,0,0,0,30,0],[9E9,9E9,9E9,9E9,9E9,9E9]], v5000, fine, tool0;\n    MoveAbsJ [[30,0,0,0,30,0],[9E9,9E9,9E9,9E9,9E9,9E9]], v5000, fine, tool0;\n  ENDPROC\nENDMODULE\n"
+    );
+    let opts = RapidOptions::for_robot(&robot);
+    let out = compensate_module(&src, "t.mod", &robot, &opts).expect("compensates");
+    let d: Vec<f64> = out.records.iter().map(|r| r.duration_s).collect();
+    assert_abs_diff_eq!(d[0], 0.0, epsilon = TIME_TOL_S);
+    assert_abs_diff_eq!(d[1], 1.0, epsilon = TIME_TOL_S);
+    assert_abs_diff_eq!(d[2], 2.0, epsilon = TIME_TOL_S);
+    assert_abs_diff_eq!(d[3], 4.0, epsilon = TIME_TOL_S);
+    assert_abs_diff_eq!(d[5], 0.2, epsilon = TIME_TOL_S);
+    for (i, r) in out.records.iter().enumerate() {
+        match (i, &r.wrench) {
+            (1..=3, Some(w)) => {
+                assert!(!w.in_tool_frame);
+                assert_abs_diff_eq!(w.force_n, Vector3::new(0.0, 100.0, 0.0), epsilon = 1e-12);
+            }
+            (0 | 4 | 5, None) => {}
+            (i, w) => panic!("move {i}: {w:?}"),
+        }
+    }
+}
