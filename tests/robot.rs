@@ -893,6 +893,13 @@ fn new_sections_are_validated_with_their_key_path() {
             "{key}: {err}"
         );
     }
+    // A key of the other force model: refused with its path.
+    let stray = text.replacen("  flutes: 2\n", "  flutes: 2\n  frame: tool\n", 1);
+    assert_ne!(stray, text);
+    let err = Robot::from_yaml_str(&stray, "bad.yaml")
+        .expect_err("stray")
+        .to_string();
+    assert!(err.contains("process_force.frame"), "{err}");
     // Both the legacy wrench and a process force: refused.
     let both = format!("{text}\nprocess_wrench: {{ force_n: [0, 0, 1], frame: tool }}\n");
     assert!(Robot::from_yaml_str(&both, "x.yaml").is_err());

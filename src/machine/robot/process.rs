@@ -121,6 +121,33 @@ impl ProcessForce {
         if flutes == 0 {
             return Err(Invalid::new(format!("{p}.flutes"), "must be at least 1"));
         }
+        // Keys of the other model are mistakes, not options.
+        let stray: &[(&str, bool)] = match r.model {
+            RawForceModel::Constant => &[
+                (
+                    "thrust_coefficient_n_per_mm2",
+                    r.thrust_coefficient_n_per_mm2.is_some(),
+                ),
+                ("drill_diameter_mm", r.drill_diameter_mm.is_some()),
+                ("max_feed_mm_per_rev", r.max_feed_mm_per_rev.is_some()),
+                ("axis_tolerance_deg", r.axis_tolerance_deg.is_some()),
+            ],
+            RawForceModel::Drilling => &[
+                ("force_n", r.force_n.is_some()),
+                ("moment_nm", r.moment_nm.is_some()),
+                ("frame", r.frame.is_some()),
+            ],
+        };
+        if let Some((k, _)) = stray.iter().find(|(_, given)| *given) {
+            let model = match r.model {
+                RawForceModel::Constant => "constant",
+                RawForceModel::Drilling => "drilling",
+            };
+            return Err(Invalid::new(
+                format!("{p}.{k}"),
+                format!("`{k}` does not apply to model `{model}`"),
+            ));
+        }
         let model = match r.model {
             RawForceModel::Constant => {
                 let f = r.force_n.ok_or_else(|| {
