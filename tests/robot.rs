@@ -904,3 +904,34 @@ fn new_sections_are_validated_with_their_key_path() {
     let both = format!("{text}\nprocess_wrench: {{ force_n: [0, 0, 1], frame: tool }}\n");
     assert!(Robot::from_yaml_str(&both, "x.yaml").is_err());
 }
+
+#[test]
+fn plunge_and_retract_are_told_apart() {
+    use postproc::machine::robot::process::plunge_direction;
+    let z = Vector3::z();
+    let tol = 3f64.to_radians();
+    assert_eq!(
+        plunge_direction(&Vector3::new(0.0, 0.0, 14.0), &z, tol),
+        Some(true)
+    );
+    assert_eq!(
+        plunge_direction(&Vector3::new(0.0, 0.0, -52.0), &z, tol),
+        Some(false)
+    );
+    // 2° off the axis: still a plunge; 5° off: not along the axis.
+    let a2 = 2f64.to_radians();
+    let a5 = 5f64.to_radians();
+    assert_eq!(
+        plunge_direction(&Vector3::new(a2.sin(), 0.0, a2.cos()), &z, tol),
+        Some(true)
+    );
+    assert_eq!(
+        plunge_direction(&Vector3::new(a5.sin(), 0.0, a5.cos()), &z, tol),
+        None
+    );
+    // Shorter than 1 µm: no direction.
+    assert_eq!(
+        plunge_direction(&Vector3::new(0.0, 0.0, 1e-4), &z, tol),
+        None
+    );
+}
