@@ -15,7 +15,7 @@ MODULE Drilling
   PERS tooldata tDrill := [TRUE,[[0,0,182.5],[1,0,0,0]],[2.4,[0,0,85],[1,0,0,0],0.012,0.012,0.004]];
   PERS wobjdata wPlate := [FALSE,TRUE,"",[[600,-200,350],[1,0,0,0]],[[0,0,0],[1,0,0,0]]];
 
-  ! Feeds: drilling 4 mm/s, retract 100 mm/s.
+  ! Feeds: drilling 4 mm/s (thrust: machine file process_force), retract 100 mm/s.
   CONST speeddata vDrill := [4,20,5000,1000];
   CONST speeddata vRetract := [100,200,5000,1000];
   CONST zonedata zApproach := [FALSE,5,8,8,0.8,8,0.8];

@@ -521,3 +521,49 @@ proptest! {
         }
     }
 }
+
+/// Angle (rad) between the rotation of a written quaternion (parsed back and
+/// normalised, as the controller does) and the exact unit quaternion `n`.
+fn written_angle(text: &[String; 4], n: &[f64; 4]) -> f64 {
+    let c: Vec<f64> = text
+        .iter()
+        .map(|t| t.parse::<f64>().expect("number"))
+        .collect();
+    let norm = c.iter().map(|x| x * x).sum::<f64>().sqrt();
+    let dot: f64 = c.iter().zip(n).map(|(a, b)| a * b).sum();
+    let s = if dot < 0.0 { -1.0 } else { 1.0 };
+    // Unit quaternions a rotation φ apart are a chord 2·sin(φ/4) apart in
+    // R⁴: φ = 4·asin(chord/2), stable near zero.
+    let chord = c
+        .iter()
+        .zip(n)
+        .map(|(a, b)| (s * a / norm - b).powi(2))
+        .sum::<f64>()
+        .sqrt();
+    4.0 * (chord / 2.0).asin()
+}
+
+/// Written-orientation bound at 7 decimals, rad: each component off by
+/// ≤ 5e-8, |δq| ≤ 1e-7, rotation ≤ 2·|δq| = 2e-7 rad (< 1 µrad).
+const Q7_ROT_TOL_RAD: f64 = 2e-7;
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 2000, ..ProptestConfig::default() })]
+    #[test]
+    fn written_quaternions_meet_one_microradian(
+        w in -1.0f64..1.0, x in -1.0f64..1.0, y in -1.0f64..1.0, z in -1.0f64..1.0
+    ) {
+        let norm = (w * w + x * x + y * y + z * z).sqrt();
+        prop_assume!(norm > 0.1);
+        let n = [w / norm, x / norm, y / norm, z / norm];
+        let f7 = Format { position_decimals: 3, quaternion_decimals: 7 };
+        let t7 = format_quaternion(&n, Some(&n), &f7).expect("ok");
+        prop_assert!(written_angle(&t7, &n) <= Q7_ROT_TOL_RAD, "{t7:?}");
+        // At 6 decimals the best of the 16 roundings is never worse than
+        // rounding each component to nearest.
+        let f6 = Format::default();
+        let t6 = format_quaternion(&n, Some(&n), &f6).expect("ok");
+        let plain: [String; 4] = n.map(|c| format_fixed(c, 6).expect("finite"));
+        prop_assert!(written_angle(&t6, &n) <= written_angle(&plain, &n) + 1e-15);
+    }
+}

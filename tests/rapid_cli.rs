@@ -3,8 +3,9 @@
 
 use approx::assert_abs_diff_eq;
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
+use postproc::compensate::rapid::{RapidOptions, compensate_module};
 use postproc::machine::robot::pose::pose_error;
-use postproc::machine::robot::{ConfData, Effects, Model, PointMass, Robot};
+use postproc::machine::robot::{ConfData, Effects, Model, PointMass, Robot, ThermalStart};
 use postproc::program::rapid::{DataValue, Module, RobTarget, Target, parse_module};
 
 use crate::common::{postproc, repo};
@@ -16,12 +17,11 @@ use crate::common::{postproc, repo};
 /// follows the commanded one 1:1 to first order (deflection changes by
 /// ~1e-3 of that). So 1 µm holds.
 const POS_TOL_MM: f64 = 1e-3;
-/// Orientation agreement, rad. Derivation: the quaternion is written with
-/// 6 decimals: each component moves by ≤ 5e-7; a quaternion change δq
-/// changes the rotation by at most 2·|δq| = 2·(5e-7·√4) = 2e-6 rad. So the
-/// brief's 1 µrad cannot be guaranteed by a 6-decimal quaternion; the bound
-/// is 2 µrad.
-const ROT_TOL_RAD: f64 = 2e-6;
+/// Orientation agreement, rad (1 µrad). Derivation: the IRB 1600 file
+/// writes quaternions with 7 decimals: each component moves by ≤ 5e-8, so
+/// |δq| ≤ 5e-8·√4 = 1e-7 and the rotation by at most 2·|δq| = 2e-7 rad
+/// (the best of the 16 roundings is never worse than plain rounding).
+const ROT_TOL_RAD: f64 = 1e-6;
 /// Position agreement of a MoveAbsJ target written with 4-decimal degrees,
 /// mm. Derivation: each joint moves by ≤ 0.00005° = 8.7e-7 rad; the lever
 /// arm from any joint axis to the TCP is < 1.6 m for this arm + tool
@@ -34,7 +34,8 @@ fn robot_with_drill() -> Robot {
     let text = std::fs::read_to_string(repo("machines/abb-irb1600.yaml")).expect("machine file");
     let r = Robot::from_yaml_str(&text, "abb-irb1600.yaml").expect("valid robot");
     // tDrill of samples/drilling.mod: TCP 182.5 mm along the flange z axis,
-    // 2.4 kg at 85 mm; the machine file has no process wrench.
+    // 2.4 kg at 85 mm; no process load (the tests that use this view run
+    // with --effects kinematic,gravity or set the load per move).
     r.with_tool(
         Isometry3::translation(0.0, 0.0, 182.5),
         Some(PointMass {
@@ -111,7 +112,7 @@ fn rapid_none_is_byte_identical() {
 #[test]
 fn rapid_compensated_targets_land_on_programmed_poses() {
     let dir = tempfile::tempdir().expect("tempdir");
-    let (input, output) = run_sample(dir.path(), &[]);
+    let (input, output) = run_sample(dir.path(), &["--effects", "kinematic,gravity"]);
     let src_in = std::fs::read_to_string(&input).expect("input");
     let src_out = std::fs::read_to_string(&output).expect("output");
     let m_in = parse_module(&src_in, "in").expect("input parses");
@@ -200,7 +201,17 @@ fn rapid_compensated_targets_land_on_programmed_poses() {
 #[test]
 fn rapid_offs_target_is_materialised() {
     let dir = tempfile::tempdir().expect("tempdir");
-    let (_, output) = run_sample(dir.path(), &["--annotate", "none"]);
+    // Without thermal drift approach and retract have the same load state
+    // (no thrust) and share one copy; with it every move has its own state.
+    let (_, output) = run_sample(
+        dir.path(),
+        &[
+            "--annotate",
+            "none",
+            "--effects",
+            "kinematic,gravity,process",
+        ],
+    );
     let out = std::fs::read_to_string(&output).expect("output");
     assert!(!out.contains("Offs("), "every Offs is replaced");
     // Hole 3: approach (dz 40) and retract share holes3_o1; dz 2 → _o2,
@@ -310,4 +321,323 @@ fn rapid_confdata_without_solution_exits_2() {
         "{err}"
     );
     assert!(!output.exists(), "no output on error");
+}
+
+/// Thrust of the IRB 1600 file's drilling model at vDrill (4 mm/s), N:
+/// K·(D/2)·f_rev = 450 · 3.4 · (4·60/3000 = 0.08 mm/rev) = 122.4 N.
+const DRILL_THRUST_N: f64 = 122.4;
+
+#[test]
+fn drilling_sample_thrust_only_on_the_twelve_plunges_and_targets_land() {
+    let src = std::fs::read_to_string(repo("samples/drilling.mod")).expect("sample");
+    let text = std::fs::read_to_string(repo("machines/abb-irb1600.yaml")).expect("machine");
+    let robot = Robot::from_yaml_str(&text, "abb-irb1600.yaml").expect("valid");
+    let opts = RapidOptions {
+        thermal_start: ThermalStart::Steady,
+        ..RapidOptions::for_robot(&robot)
+    };
+    let out = compensate_module(&src, "drilling.mod", &robot, &opts).expect("compensates");
+    let m_in = parse_module(&src, "in").expect("parses");
+    let m_out = parse_module(&out.text, "out").expect("output re-parses");
+    let moves_in: Vec<_> = m_in.moves().collect();
+    let moves_out: Vec<_> = m_out.moves().collect();
+    assert_eq!(out.records.len(), moves_in.len());
+    // Thrust exactly on the twelve `vDrill` moves (the plunges), along −z of
+    // the tool; none on approach (v50: 1 mm/rev is positioning in air), on
+    // retract or on joint moves.
+    let mut drilled = 0;
+    for (rec, mv) in out.records.iter().zip(&moves_in) {
+        assert_eq!(rec.line, mv.line);
+        match (&rec.wrench, mv.speed.text.as_str()) {
+            (Some(w), "vDrill") => {
+                assert!(w.in_tool_frame);
+                assert_abs_diff_eq!(
+                    w.force_n,
+                    Vector3::new(0.0, 0.0, -DRILL_THRUST_N),
+                    epsilon = 1e-9
+                );
+                drilled += 1;
+            }
+            (None, s) => assert_ne!(s, "vDrill", "line {}", mv.line),
+            (w, s) => panic!("line {}: {s} with {w:?}", mv.line),
+        }
+        // The thermal state is warm (steady), so the thermal share shows.
+        // (Joint 1 turns about the vertical: gravity and the vertical thrust
+        // give it no torque, so its modelled power is zero.)
+        assert!(
+            rec.thermal_power_w[1] > 0.0 && rec.deviation.thermal.pos_mm.norm() > 0.0,
+            "line {}: {:?} {:?}",
+            mv.line,
+            rec.thermal_power_w,
+            rec.deviation.thermal
+        );
+    }
+    assert_eq!(drilled, 12);
+    // Every WRITTEN Cartesian target, read back, lands within 1 µm / 1 µrad
+    // once the controller's IK and the full prediction (with the move's
+    // load and thermal state) are applied.
+    let base = robot_with_drill();
+    let mut checked = 0;
+    for ((a, b), rec) in moves_in.iter().zip(&moves_out).zip(&out.records) {
+        let view = base
+            .with_process_wrench(rec.wrench)
+            .with_thermal_power(&rec.thermal_power_w);
+        let (programmed, wobj) = match &a.target {
+            Target::Named {
+                name, index: None, ..
+            } if name == "pClear" => (pose(robtarget(&m_in, name, None)), Isometry3::identity()),
+            Target::Offs { base, offsets, .. } => {
+                let Target::Named {
+                    name,
+                    index: Some(ix),
+                    ..
+                } = base.as_ref()
+                else {
+                    panic!("Offs of an array element")
+                };
+                let hole = pose(robtarget(&m_in, name, Some(ix.value.expect("index"))));
+                let d = Vector3::new(
+                    offsets[0].value.expect("dx"),
+                    offsets[1].value.expect("dy"),
+                    offsets[2].value.expect("dz"),
+                );
+                let p = Isometry3::from_parts(
+                    Translation3::from(hole.translation.vector + d),
+                    hole.rotation,
+                );
+                (w_plate() * p, w_plate())
+            }
+            _ => continue,
+        };
+        let Target::Named { name: n2, .. } = &b.target else {
+            panic!("named output target")
+        };
+        let rt = robtarget(&m_out, n2, None);
+        let q = view
+            .ik_conf(&(wobj * pose(rt)), conf(rt))
+            .expect("controller IK");
+        let (dp, dr) = pose_error(&view.predict(&q, Effects::ALL), &programmed);
+        assert_abs_diff_eq!(dp.norm(), 0.0, epsilon = POS_TOL_MM);
+        assert_abs_diff_eq!(dr.norm(), 0.0, epsilon = ROT_TOL_RAD);
+        checked += 1;
+    }
+    assert_eq!(checked, 50);
+}
+
+#[test]
+fn rapid_joint_limit_violation_exits_2_naming_target_and_line() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let input = dir.path().join("limit.mod");
+    // Joint 1 at 200° is beyond the IRB 1600 limit of ±180°.
+    let src = "MODULE Limit\n  CONST jointtarget jFar := [[200,0,0,0,30,0],[9E9,9E9,9E9,9E9,9E9,9E9]];\n  PROC main()\n    MoveAbsJ jFar, v100, fine, tool0;\n  ENDPROC\nENDMODULE\n";
+    std::fs::write(&input, src).expect("write");
+    let output = dir.path().join("limit.out.mod");
+    let out = postproc()
+        .arg("compensate")
+        .arg(&input)
+        .args([
+            "--machine",
+            repo("machines/abb-irb1600.yaml").to_str().expect("utf8"),
+        ])
+        .arg("-o")
+        .arg(&output)
+        .output()
+        .expect("run");
+    assert_eq!(out.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&out.stderr);
+    // The literal of jFar starts on line 2 at column 29
+    // ("  CONST jointtarget jFar := " is 28 bytes).
+    assert!(err.contains("limit.mod:2:29:"), "{err}");
+    assert!(err.contains("jFar") && err.contains("line 4"), "{err}");
+    assert!(err.contains("joint 1 at 200"), "{err}");
+    assert!(!output.exists(), "no output on error");
+}
+
+#[test]
+fn rapid_effects_flags_and_resonance_warning() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    // Without thermal: every annotation shows a zero thermal share.
+    let (_, output) = run_sample(
+        dir.path(),
+        &[
+            "--effects",
+            "kinematic,gravity,process,dynamic",
+            "--gain",
+            "gravity=0.5",
+        ],
+    );
+    let out = std::fs::read_to_string(&output).expect("output");
+    let notes: Vec<&str> = out.lines().filter(|l| l.contains("! dev ")).collect();
+    assert_eq!(notes.len(), 52);
+    assert!(
+        notes.iter().all(|l| l.contains(" therm 0.000 ")),
+        "{notes:?}"
+    );
+    assert!(notes.iter().any(|l| !l.contains(" proc 0.000 ")));
+    // Unknown effects are usage errors.
+    postproc()
+        .args([
+            "compensate",
+            "samples/drilling.mod",
+            "--machine",
+            "machines/abb-irb1600.yaml",
+            "--effects",
+            "magic",
+            "-o",
+            "-",
+        ])
+        .current_dir(repo(""))
+        .assert()
+        .code(2);
+    postproc()
+        .args([
+            "compensate",
+            "samples/drilling.mod",
+            "--machine",
+            "machines/abb-irb1600.yaml",
+            "--thermal-start",
+            "lukewarm",
+            "-o",
+            "-",
+        ])
+        .current_dir(repo(""))
+        .assert()
+        .code(2);
+    // Spindle at 255 rpm with 2 flutes excites 255·2/60 = 8.5 Hz, the x
+    // mode: warned, with the suggested 6.375 Hz · 60 / 2 = 191 rpm. The
+    // drilling feed limit is raised so that 4 mm/s (0.94 mm/rev) still drills.
+    let text = std::fs::read_to_string(repo("machines/abb-irb1600.yaml")).expect("machine");
+    let res = text
+        .replace("spindle_rpm: 3000.0", "spindle_rpm: 255.0")
+        .replace("max_feed_mm_per_rev: 0.5", "max_feed_mm_per_rev: 2.0");
+    assert_ne!(res, text);
+    let machine = dir.path().join("resonant.yaml");
+    std::fs::write(&machine, res).expect("write");
+    let out = postproc()
+        .arg("compensate")
+        .arg(repo("samples/drilling.mod"))
+        .arg("--machine")
+        .arg(&machine)
+        .args(["-o", "-"])
+        .output()
+        .expect("run");
+    assert_eq!(out.status.code(), Some(0));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("natural frequency 8.50 Hz"), "{err}");
+    assert!(err.contains("191 rpm"), "{err}");
+}
+
+#[test]
+fn random_written_targets_meet_one_micrometre_and_microradian() {
+    // 40 reachable inline targets (nominal TCP poses of random joints away
+    // from the singularities, tool0, no work object), each a MoveL with a
+    // fixed speed, compensated with every effect and a warm start. Each
+    // WRITTEN literal, read back, must land within 1 µm / 1 µrad.
+    let text = std::fs::read_to_string(repo("machines/abb-irb1600.yaml")).expect("machine");
+    let robot = Robot::from_yaml_str(&text, "abb-irb1600.yaml").expect("valid");
+    // tool0: the flange, no load (the file's default TCP is not used).
+    let tool0 = robot.with_tool(Isometry3::identity(), None, false);
+    let lim = robot.joint_limits_rad();
+    let mut seed = 0x2545_f491_4f6c_dd1d_u64;
+    let mut unit = || {
+        seed ^= seed << 13;
+        seed ^= seed >> 7;
+        seed ^= seed << 17;
+        (seed >> 11) as f64 / (1u64 << 53) as f64
+    };
+    let mut body = String::new();
+    let mut goals = Vec::new();
+    while goals.len() < 40 {
+        let q: [f64; 6] = std::array::from_fn(|i| {
+            let (lo, hi) = (lim[i][0] + 0.3, lim[i][1] - 0.3);
+            lo + (hi - lo) * unit()
+        });
+        let wc = robot.frames(Model::Nominal, &q).link[4].translation.vector;
+        if q[4].abs() < 0.1
+            || wc.xy().norm() < 150.0
+            || (q[2] + std::f64::consts::FRAC_PI_2).abs() < 0.1
+        {
+            continue;
+        }
+        let p = tool0.tcp_pose(Model::Nominal, &q);
+        let c = robot.confdata(&q);
+        let r = p.rotation.quaternion();
+        let t = p.translation.vector;
+        body.push_str(&format!(
+            "    MoveL [[{:.3},{:.3},{:.3}],[{:.9},{:.9},{:.9},{:.9}],[{},{},{},{}],[9E9,9E9,9E9,9E9,9E9,9E9]], v200, fine, tool0;\n",
+            t.x, t.y, t.z, r.w, r.i, r.j, r.k, c.cf1, c.cf4, c.cf6, c.cfx
+        ));
+        goals.push(());
+    }
+    let src = format!("MODULE Rand\n  PROC main()\n{body}  ENDPROC\nENDMODULE\n");
+    let opts = RapidOptions {
+        thermal_start: ThermalStart::WarmUpMin(45.0),
+        ..RapidOptions::for_robot(&robot)
+    };
+    let out = compensate_module(&src, "rand.mod", &robot, &opts).expect("compensates");
+    let m_in = parse_module(&src, "in").expect("parses");
+    let m_out = parse_module(&out.text, "out").expect("re-parses");
+    let mut checked = 0;
+    for ((a, b), rec) in m_in.moves().zip(m_out.moves()).zip(&out.records) {
+        let (Target::Inline(rin), Target::Inline(rout)) = (&a.target, &b.target) else {
+            panic!("inline targets")
+        };
+        // No constant process force and no plunges: no load.
+        assert!(rec.wrench.is_none());
+        let view = tool0.with_thermal_power(&rec.thermal_power_w);
+        let q = view
+            .ik_conf(&pose(rout), conf(rout))
+            .expect("controller IK");
+        let (dp, dr) = pose_error(&view.predict(&q, Effects::ALL), &pose(rin));
+        assert_abs_diff_eq!(dp.norm(), 0.0, epsilon = POS_TOL_MM);
+        assert_abs_diff_eq!(dr.norm(), 0.0, epsilon = ROT_TOL_RAD);
+        checked += 1;
+    }
+    assert_eq!(checked, 40);
+}
+
+/// Duration tolerance, s (plain arithmetic on literals).
+const TIME_TOL_S: f64 = 1e-9;
+
+#[test]
+fn time_line_durations_and_workpiece_force_are_hand_derived() {
+    // A constant force of 100 N along x of a work object turned 90° about z
+    // (quaternion [cos45°, 0, 0, sin45°]) is 100 N along base +y, on MoveL
+    // only. Durations: p1 → p2 is 100 mm along y.
+    //  - MoveL at v100: 100 / 100 = 1 s.
+    //  - MoveL back with \V:=50: 100 / 50 = 2 s.
+    //  - MoveL at vSlow ([25, ...]): 100 / 25 = 4 s.
+    //  - MoveAbsJ [0,0,0,0,30,0] then [30,0,0,0,30,0] at v5000: only joint
+    //    1 moves, 30° at 150°/s = 0.2 s; the TCP (≤ 1 m from axis 1) moves
+    //    along a chord ≤ 2·1000·sin 15° = 518 mm, 0.1 s at 5000 mm/s.
+    //  - The first move takes 0 s.
+    let text = std::fs::read_to_string(repo("machines/abb-irb1600.yaml")).expect("machine");
+    let text = text.replace(
+        "process_force:\n  model: drilling\n  thrust_coefficient_n_per_mm2: 450.0\n  drill_diameter_mm: 6.8\n  spindle_rpm: 3000.0\n  flutes: 2\n  max_feed_mm_per_rev: 0.5\n",
+        "process_force: { model: constant, force_n: [100.0, 0.0, 0.0], frame: workpiece }\n",
+    );
+    assert!(text.contains("model: constant"));
+    let robot = Robot::from_yaml_str(&text, "abb.yaml").expect("valid");
+    let h = std::f64::consts::FRAC_1_SQRT_2;
+    let src = format!(
+        "MODULE T\n  CONST speeddata vSlow := [25,500,5000,1000];\n  PERS wobjdata wTurn := [FALSE,TRUE,\"\",[[0,0,0],[{h},0,0,{h}]],[[0,0,0],[1,0,0,0]]];\n  CONST robtarget p1 := [[0,-800,500],[0,1,0,0],[0,0,0,0],[9E9,9E9,9E9,9E9,9E9,9E9]];\n  CONST robtarget p2 := [[0,-700,500],[0,1,0,0],[0,0,0,0],[9E9,9E9,9E9,9E9,9E9,9E9]];\n  PROC main()\n    MoveJ p1, v1000, fine, tool0\\WObj:=wTurn;\n    MoveL p2, v100, fine, tool0\\WObj:=wTurn;\n    MoveL p1, v100\\V:=50, fine, tool0\\WObj:=wTurn;\n    MoveL p2, vSlow, fine, tool0\\WObj:=wTurn;\n    MoveAbsJ [[0,0,0,0,30,0],[9E9,9E9,9E9,9E9,9E9,9E9]], v5000, fine, tool0;\n    MoveAbsJ [[30,0,0,0,30,0],[9E9,9E9,9E9,9E9,9E9,9E9]], v5000, fine, tool0;\n  ENDPROC\nENDMODULE\n"
+    );
+    let opts = RapidOptions::for_robot(&robot);
+    let out = compensate_module(&src, "t.mod", &robot, &opts).expect("compensates");
+    let d: Vec<f64> = out.records.iter().map(|r| r.duration_s).collect();
+    assert_abs_diff_eq!(d[0], 0.0, epsilon = TIME_TOL_S);
+    assert_abs_diff_eq!(d[1], 1.0, epsilon = TIME_TOL_S);
+    assert_abs_diff_eq!(d[2], 2.0, epsilon = TIME_TOL_S);
+    assert_abs_diff_eq!(d[3], 4.0, epsilon = TIME_TOL_S);
+    assert_abs_diff_eq!(d[5], 0.2, epsilon = TIME_TOL_S);
+    for (i, r) in out.records.iter().enumerate() {
+        match (i, &r.wrench) {
+            (1..=3, Some(w)) => {
+                assert!(!w.in_tool_frame);
+                assert_abs_diff_eq!(w.force_n, Vector3::new(0.0, 100.0, 0.0), epsilon = 1e-12);
+            }
+            (0 | 4 | 5, None) => {}
+            (i, w) => panic!("move {i}: {w:?}"),
+        }
+    }
 }

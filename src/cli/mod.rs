@@ -84,6 +84,9 @@ pub struct EffectArgs {
     /// Scale an effect: --gain geometric=0.5.
     #[arg(long = "gain", value_name = "EFFECT=GAIN")]
     pub gains: Vec<String>,
+    /// Initial thermal state: cold, steady (the program as a repeated task) or minutes of warm-up.
+    #[arg(long, default_value = "cold", value_name = "cold|steady|MINUTES")]
+    pub thermal_start: String,
     /// Worker threads (default: all cores). Output is the same for any count.
     #[arg(long)]
     pub threads: Option<usize>,

@@ -10,7 +10,7 @@ use crate::compensate::rapid::{RapidOptions, compensate_module};
 use crate::emit::rapid::Format;
 use crate::error::{Error, Result};
 use crate::machine::Machine;
-use crate::machine::robot::{Effects, Robot};
+use crate::machine::robot::{Effects, Robot, ThermalStart};
 use crate::program::rapid::parse_module_bytes;
 
 /// True when the program should take the RAPID path: its extension is
@@ -44,7 +44,8 @@ fn load_robot(name: &str) -> Result<Robot> {
 }
 
 /// Parses `--effects` for a robot: `all`, `none`, or a comma list of
-/// `kinematic` (alias `geometric`), `gravity`, `process` (alias `load`).
+/// `kinematic` (alias `geometric`), `gravity`, `process` (alias `load`),
+/// `thermal`, `dynamic` (alias `vibration`).
 pub fn robot_effects(text: &str) -> Result<Effects> {
     match text.trim().to_ascii_lowercase().as_str() {
         "all" => return Ok(Effects::ALL),
@@ -53,15 +54,52 @@ pub fn robot_effects(text: &str) -> Result<Effects> {
     }
     let mut e = Effects::NONE;
     for part in text.split(',') {
-        match part.trim().to_ascii_lowercase().as_str() {
-            "kinematic" | "geometric" => e.kinematic = true,
-            "gravity" => e.gravity = true,
-            "process" | "load" => e.process = true,
-            other => {
-                return Err(usage(format!(
-                    "--effects: unknown robot effect `{other}` (all, none, kinematic, gravity, process)"
-                )));
-            }
+        *robot_effect(&mut e, part.trim()).ok_or_else(|| {
+            usage(format!(
+                "--effects: unknown robot effect `{}` (all, none, {ROBOT_EFFECTS})",
+                part.trim()
+            ))
+        })? = 1.0;
+    }
+    Ok(e)
+}
+
+const ROBOT_EFFECTS: &str = "kinematic, gravity, process, thermal, dynamic";
+
+/// The gain field of the robot effect `name` (with its aliases).
+fn robot_effect<'e>(e: &'e mut Effects, name: &str) -> Option<&'e mut f64> {
+    match name.to_ascii_lowercase().as_str() {
+        "kinematic" | "geometric" => Some(&mut e.kinematic),
+        "gravity" => Some(&mut e.gravity),
+        "process" | "load" => Some(&mut e.process),
+        "thermal" => Some(&mut e.thermal),
+        "dynamic" | "vibration" => Some(&mut e.dynamic),
+        _ => None,
+    }
+}
+
+/// Applies `--gain EFFECT=GAIN` (0..10) to the effects that are on; an
+/// effect switched off by `--effects` stays off.
+pub fn robot_gains(mut e: Effects, gains: &[String]) -> Result<Effects> {
+    for spec in gains {
+        let (name, value) = spec
+            .split_once('=')
+            .ok_or_else(|| usage(format!("--gain expects EFFECT=GAIN, got `{spec}`")))?;
+        let v: f64 = value
+            .trim()
+            .parse()
+            .map_err(|_| usage(format!("--gain {name}: `{value}` is not a number")))?;
+        if !v.is_finite() || !(0.0..=10.0).contains(&v) {
+            return Err(usage(format!("--gain {name}: {v} is outside 0..10")));
+        }
+        let g = robot_effect(&mut e, name.trim()).ok_or_else(|| {
+            usage(format!(
+                "--gain: unknown robot effect `{}` ({ROBOT_EFFECTS})",
+                name.trim()
+            ))
+        })?;
+        if *g != 0.0 {
+            *g = v;
         }
     }
     Ok(e)
@@ -93,6 +131,7 @@ pub fn check(a: &CheckArgs) -> Result<i32> {
             effects: Effects::NONE,
             annotate: false,
             format: Format::default(),
+            thermal_start: ThermalStart::Cold,
         };
         compensate_module(&src, &name, &robot, &opts)?;
     }
@@ -126,17 +165,23 @@ pub fn compensate(a: &CompensateArgs) -> Result<i32> {
             "--tool and --work-offset are G-code options; RAPID takes tooldata and wobjdata from the module",
         ));
     }
-    let mut format = Format::default();
+    let mut format = RapidOptions::for_robot(&robot).format;
     if let Some(d) = a.decimals {
         if d > 6 {
             return Err(usage("--decimals: at most 6"));
         }
         format.position_decimals = d.max(3);
     }
+    let thermal_start: ThermalStart = a
+        .effects
+        .thermal_start
+        .parse()
+        .map_err(|e| usage(format!("--thermal-start: {e}")))?;
     let opts = RapidOptions {
-        effects: robot_effects(&a.effects.effects)?,
+        effects: robot_gains(robot_effects(&a.effects.effects)?, &a.effects.gains)?,
         annotate: a.annotate == Annotate::Comment,
         format,
+        thermal_start,
     };
     let input = &a.program.file;
     let out_path = match &a.output {

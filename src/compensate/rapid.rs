@@ -19,7 +19,12 @@ use crate::emit::rapid::{
 };
 use crate::error::{Error, Located, Result};
 use crate::machine::robot::pose::pose_from_abb;
-use crate::machine::robot::{ConfData, Effects, IkSelect, Model, PointMass, Robot};
+use crate::machine::robot::process::plunge_direction;
+use crate::machine::robot::thermal::{Segment, effective_power};
+use crate::machine::robot::{
+    ConfData, Deviation, Effects, ForceFrame, ForceModel, IkSelect, Model, PointMass,
+    ProcessWrench, Robot, ThermalStart,
+};
 use crate::program::rapid::{
     DataValue, Decl, JointTarget, Module, Move, MoveKind, Number, Pose, RobTarget, Scalar, Target,
     parse_module,
@@ -37,6 +42,53 @@ pub struct RapidOptions {
     pub annotate: bool,
     /// Number formatting of rewritten robtargets.
     pub format: Format,
+    /// Initial thermal state of the program's time line.
+    pub thermal_start: ThermalStart,
+}
+
+impl Default for RapidOptions {
+    /// All effects, annotated, default formatting, cold start.
+    fn default() -> Self {
+        RapidOptions {
+            effects: Effects::ALL,
+            annotate: true,
+            format: Format::default(),
+            thermal_start: ThermalStart::Cold,
+        }
+    }
+}
+
+impl RapidOptions {
+    /// The defaults with the number formatting of the robot file's
+    /// `output:` section (quaternions with 7 decimals unless it says
+    /// otherwise).
+    pub fn for_robot(robot: &Robot) -> Self {
+        let d = robot.output_decimals();
+        RapidOptions {
+            format: Format {
+                position_decimals: d.mm,
+                quaternion_decimals: d.quaternion,
+            },
+            ..RapidOptions::default()
+        }
+    }
+}
+
+/// What the pipeline predicted for one motion instruction.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct MoveRecord {
+    /// 1-based line of the instruction.
+    pub line: usize,
+    /// Predicted deviation of the uncompensated target, by effect.
+    pub deviation: Deviation,
+    /// Process wrench acting during the move, if any.
+    pub wrench: Option<ProcessWrench>,
+    /// Estimated duration of the move, s (0 when unknown).
+    pub duration_s: f64,
+    /// Mean motor power per joint during the move, W.
+    pub power_w: [f64; 6],
+    /// Effective (thermal) power per joint at the end of the move, W.
+    pub thermal_power_w: [f64; 6],
 }
 
 /// Result of compensating a module.
@@ -52,6 +104,8 @@ pub struct RapidOutcome {
     pub max_deviation_mm: f64,
     /// 1-based line of the move with the largest deviation.
     pub max_deviation_line: usize,
+    /// One record per motion instruction, in source order.
+    pub records: Vec<MoveRecord>,
 }
 
 /// 1-based line and byte column of a byte offset.
@@ -99,12 +153,15 @@ fn conf_of(rt: &RobTarget) -> Option<ConfData> {
     })
 }
 
-/// Tool and work object of one move, and whether its process wrench acts.
+/// Tool and work object of one move, its process wrench and its thermal
+/// state (as bit patterns): moves with equal keys share a robot view and a
+/// compensated target.
 #[derive(Debug, Clone, PartialEq, Eq, Hash)]
 struct LoadKey {
     tool: String,
     wobj: String,
-    process: bool,
+    wrench: Option<([u64; 6], bool)>,
+    power: Option<[u64; 6]>,
 }
 
 /// A resolved tool: TCP in the flange frame and load (flange frame).
@@ -436,14 +493,18 @@ fn resolve_wobj(module: &Module, src: &str, file: &str, mv: &Move) -> Result<Iso
     }
 }
 
-/// The comment appended to a compensated move.
-fn dev_comment(d: &crate::machine::robot::Deviation) -> String {
+/// The comment appended to a compensated move: the predicted deviation of
+/// the uncompensated target and its parts (mm), and the vibration amplitude
+/// (mm, reported only).
+fn dev_comment(d: &Deviation) -> String {
     format!(
-        "dev {:.3} mm (kin {:.3} grav {:.3} load {:.3})",
+        "dev {:.3} mm (kin {:.3} therm {:.3} grav {:.3} proc {:.3} vib {:.4})",
         d.total.pos_mm.norm(),
         d.kinematic.pos_mm.norm(),
+        d.thermal.pos_mm.norm(),
         d.gravity.pos_mm.norm(),
-        d.process.pos_mm.norm()
+        d.process.pos_mm.norm(),
+        d.vibration_mm.norm()
     )
 }
 
@@ -549,17 +610,36 @@ struct Rewriter<'m> {
     /// Counter of `_oN` names per origin.
     derived_count: HashMap<Origin, usize>,
     added: usize,
+    /// Process wrench and thermal power of the move being rewritten.
+    state: MoveState,
+}
+
+/// Per-move load state applied to the robot view.
+#[derive(Debug, Clone, Copy, Default)]
+struct MoveState {
+    wrench: Option<ProcessWrench>,
+    power: Option<[f64; 6]>,
 }
 
 impl Rewriter<'_> {
     fn active(&self) -> bool {
-        self.opts.effects != Effects::NONE
+        self.opts.effects.compensates()
     }
 
     fn view(&mut self, key: &LoadKey, tool: &ToolView) -> Robot {
+        let state = self.state;
         self.views
             .entry(key.clone())
-            .or_insert_with(|| self.robot.with_tool(tool.tframe, tool.load, key.process))
+            .or_insert_with(|| {
+                let mut r = self
+                    .robot
+                    .with_tool(tool.tframe, tool.load, false)
+                    .with_process_wrench(state.wrench);
+                if let Some(p) = state.power {
+                    r = r.with_thermal_power(&p);
+                }
+                r
+            })
             .clone()
     }
 
@@ -580,7 +660,7 @@ impl Rewriter<'_> {
         key: &LoadKey,
         tool: &ToolView,
         wobj: &Isometry3<f64>,
-    ) -> Result<crate::machine::robot::Deviation> {
+    ) -> Result<Deviation> {
         let u = resolve_cart(self.module, self.src, self.file, target)?;
         let view = self.view(key, tool);
         let programmed = wobj * u.pose_obj;
@@ -695,12 +775,7 @@ impl Rewriter<'_> {
     }
 
     /// Compensates a MoveAbsJ in joint space.
-    fn joint(
-        &mut self,
-        mv: &Move,
-        key: &LoadKey,
-        tool: &ToolView,
-    ) -> Result<crate::machine::robot::Deviation> {
+    fn joint(&mut self, mv: &Move, key: &LoadKey, tool: &ToolView) -> Result<Deviation> {
         let target = &mv.target;
         let (jt, origin, stem) = match target {
             Target::InlineJoint(jt) => (jt, Origin::Inline, String::new()),
@@ -792,6 +867,242 @@ impl Rewriter<'_> {
     }
 }
 
+/// Predefined ABB speeddata `vN` (TCP speed N mm/s); `vmax` is taken as
+/// v7000.
+const PREDEFINED_SPEEDS: [u32; 25] = [
+    5, 10, 20, 30, 40, 50, 60, 80, 100, 150, 200, 300, 400, 500, 600, 800, 1000, 1500, 2000, 2500,
+    3000, 4000, 5000, 6000, 7000,
+];
+
+/// TCP speed of a move, mm/s: `\V:=` if given as a number, else a
+/// speeddata literal declared in the module, else a predefined `vN`.
+fn tcp_speed(module: &Module, mv: &Move) -> Option<f64> {
+    if let Some(v) = mv
+        .opt("V")
+        .and_then(|o| o.value.as_ref())
+        .and_then(|a| a.text.trim().parse::<f64>().ok())
+    {
+        return (v.is_finite() && v > 0.0).then_some(v);
+    }
+    let name = mv.speed.text.trim();
+    if let Some((_, decl)) = lookup(module, name) {
+        return match &decl.value {
+            Some(DataValue::SpeedData(sd)) => {
+                let v = sd.values[0].value;
+                (v.is_finite() && v > 0.0).then_some(v)
+            }
+            _ => None,
+        };
+    }
+    let lower = name.to_ascii_lowercase();
+    if lower == "vmax" {
+        return Some(7000.0);
+    }
+    let n: u32 = lower.strip_prefix('v')?.parse().ok()?;
+    PREDEFINED_SPEEDS.contains(&n).then_some(f64::from(n))
+}
+
+/// What the time line and the process model need of one move.
+struct Planned {
+    tool: ToolView,
+    wobj: Isometry3<f64>,
+    /// Programmed TCP pose (world frame).
+    pose: Isometry3<f64>,
+    /// Programmed circle point of a MoveC (world frame).
+    via: Option<Isometry3<f64>>,
+    /// Controller joints, when the target is reachable.
+    q: Option<[f64; 6]>,
+    /// TCP speed, mm/s, when it can be resolved.
+    v_tcp: Option<f64>,
+}
+
+fn plan_move(module: &Module, src: &str, file: &str, robot: &Robot, mv: &Move) -> Result<Planned> {
+    let tool = resolve_tool(module, src, file, mv)?;
+    let wobj = resolve_wobj(module, src, file, mv)?;
+    let view = robot.with_tool(tool.tframe, tool.load, false);
+    let (pose, q) = if mv.kind == MoveKind::MoveAbsJ {
+        let jt = match &mv.target {
+            Target::InlineJoint(jt) => Some(jt),
+            t @ Target::Named { .. } => match named_value(module, src, file, t)?.0 {
+                DataValue::JointTarget(jt) => Some(jt),
+                _ => None,
+            },
+            _ => None,
+        };
+        let Some(jt) = jt else {
+            return Err(input_err(
+                src,
+                file,
+                mv.target.span().start,
+                "MoveAbsJ target must be a jointtarget name or literal",
+            ));
+        };
+        let q = jt.robax.each_ref().map(|n| n.value.to_radians());
+        (view.tcp_pose(Model::Nominal, &q), Some(q))
+    } else {
+        let u = resolve_cart(module, src, file, &mv.target)?;
+        let pose = wobj * u.pose_obj;
+        (pose, view.ik_conf(&pose, u.conf).ok())
+    };
+    let via = match &mv.via {
+        Some(v) => Some(wobj * resolve_cart(module, src, file, v)?.pose_obj),
+        None => None,
+    };
+    Ok(Planned {
+        tool,
+        wobj,
+        pose,
+        via,
+        q,
+        v_tcp: tcp_speed(module, mv),
+    })
+}
+
+/// The process wrench of move `i` (see `grammar/rapid.md`, "Process
+/// force"): a constant force on MoveL/MoveC; a drilling thrust on MoveL
+/// plunges (along +tool z) at a drilling feed; none otherwise.
+fn move_wrench(
+    robot: &Robot,
+    plans: &[Planned],
+    i: usize,
+    mv: &Move,
+    src: &str,
+    file: &str,
+    need_speed: bool,
+) -> Result<Option<ProcessWrench>> {
+    let (Some(pf), Some(cur)) = (robot.process_force(), plans.get(i)) else {
+        return Ok(None);
+    };
+    match pf.model {
+        ForceModel::Constant {
+            force_n,
+            moment_nmm,
+            frame,
+        } => {
+            if !matches!(mv.kind, MoveKind::MoveL | MoveKind::MoveC) {
+                return Ok(None);
+            }
+            Ok(Some(match frame {
+                ForceFrame::Tool | ForceFrame::Base => ProcessWrench {
+                    force_n,
+                    moment_nmm,
+                    in_tool_frame: frame == ForceFrame::Tool,
+                },
+                ForceFrame::Workpiece => {
+                    let r = robot.base().rotation.inverse() * cur.wobj.rotation;
+                    ProcessWrench {
+                        force_n: r * force_n,
+                        moment_nmm: r * moment_nmm,
+                        in_tool_frame: false,
+                    }
+                }
+            }))
+        }
+        ForceModel::Drilling { .. } => {
+            let Some(prev) = i.checked_sub(1).and_then(|k| plans.get(k)) else {
+                return Ok(None);
+            };
+            if mv.kind != MoveKind::MoveL {
+                return Ok(None);
+            }
+            let d = cur.pose.translation.vector - prev.pose.translation.vector;
+            let z = cur.pose.rotation * Vector3::z();
+            if plunge_direction(&d, &z, pf.axis_tolerance_rad) != Some(true) {
+                return Ok(None);
+            }
+            match cur.v_tcp {
+                Some(v) => Ok(pf.drilling_wrench(v)),
+                None if need_speed => Err(input_err(
+                    src,
+                    file,
+                    mv.speed.span.start,
+                    format!(
+                        "speed `{}` cannot be resolved offline; the drilling thrust needs the TCP speed",
+                        mv.speed.text
+                    ),
+                )),
+                None => Ok(None),
+            }
+        }
+    }
+}
+
+/// Estimated duration of move `i`, s: straight moves at their TCP speed
+/// (MoveC along the two chords through the circle point); joint moves
+/// (MoveJ, MoveAbsJ) at the larger of the TCP-speed time and the time the
+/// slowest joint needs at its maximum speed. The first move (no known start)
+/// takes 0 s.
+fn move_duration(robot: &Robot, plans: &[Planned], i: usize, mv: &Move) -> Option<f64> {
+    let (Some(prev), Some(cur)) = (i.checked_sub(1).and_then(|k| plans.get(k)), plans.get(i))
+    else {
+        return Some(0.0);
+    };
+    let p0 = prev.pose.translation.vector;
+    let p1 = cur.pose.translation.vector;
+    let dist = match &cur.via {
+        Some(v) => (v.translation.vector - p0).norm() + (p1 - v.translation.vector).norm(),
+        None => (p1 - p0).norm(),
+    };
+    let t_tcp = cur.v_tcp.map(|v| dist / v);
+    match mv.kind {
+        MoveKind::MoveL | MoveKind::MoveC => t_tcp,
+        MoveKind::MoveJ | MoveKind::MoveAbsJ => {
+            let t_joint = match (prev.q, cur.q) {
+                (Some(a), Some(b)) => (0..6)
+                    .map(|j| (b[j] - a[j]).abs() / robot.joint_speed_rad_per_s()[j])
+                    .fold(0.0, f64::max),
+                _ => 0.0,
+            };
+            Some(t_tcp.unwrap_or(0.0).max(t_joint))
+        }
+    }
+}
+
+/// Mean motor power per joint during move `i`, W: `|τ·q̇|` with `τ` the
+/// gravity and process torques averaged over the move's two ends (N·m) and
+/// `q̇` the joint change over the duration.
+fn move_power(
+    robot: &Robot,
+    plans: &[Planned],
+    i: usize,
+    wrench: Option<ProcessWrench>,
+    duration_s: f64,
+) -> [f64; 6] {
+    let (Some(prev), Some(cur)) = (i.checked_sub(1).and_then(|k| plans.get(k)), plans.get(i))
+    else {
+        return [0.0; 6];
+    };
+    let (Some(qa), Some(qb)) = (prev.q, cur.q) else {
+        return [0.0; 6];
+    };
+    if duration_s <= 0.0 {
+        return [0.0; 6];
+    }
+    let view = robot
+        .with_tool(cur.tool.tframe, cur.tool.load, false)
+        .with_process_wrench(wrench);
+    let tau = |q: &[f64; 6]| {
+        view.gravity_torques(Model::Nominal, q) + view.process_torques(Model::Nominal, q)
+    };
+    let t = (tau(&qa) + tau(&qb)) * 0.5e-3;
+    std::array::from_fn(|j| (t[j] * (qb[j] - qa[j]) / duration_s).abs())
+}
+
+fn wrench_bits(w: &ProcessWrench) -> ([u64; 6], bool) {
+    (
+        [
+            w.force_n.x,
+            w.force_n.y,
+            w.force_n.z,
+            w.moment_nmm.x,
+            w.moment_nmm.y,
+            w.moment_nmm.z,
+        ]
+        .map(f64::to_bits),
+        w.in_tool_frame,
+    )
+}
+
 /// Parses and compensates a RAPID module. Moves are processed in source
 /// order, routine by routine. Errors: [`Error::Input`] for what cannot be
 /// resolved offline, [`Error::Unachievable`] (`file:line:col` of the target)
@@ -803,6 +1114,50 @@ pub fn compensate_module(
     opts: &RapidOptions,
 ) -> Result<RapidOutcome> {
     let module = parse_module(src, file)?;
+    let moves: Vec<&Move> = module.moves().collect();
+    let plans = moves
+        .iter()
+        .map(|mv| plan_move(&module, src, file, robot, mv))
+        .collect::<Result<Vec<_>>>()?;
+    let fx = opts.effects;
+    let thermal = robot.thermal().filter(|_| fx.thermal != 0.0);
+    let mut wrenches = Vec::with_capacity(moves.len());
+    for (i, mv) in moves.iter().enumerate() {
+        wrenches.push(move_wrench(
+            robot,
+            &plans,
+            i,
+            mv,
+            src,
+            file,
+            fx.process != 0.0 || thermal.is_some(),
+        )?);
+    }
+    let mut segments = Vec::with_capacity(moves.len());
+    for (i, mv) in moves.iter().enumerate() {
+        let duration_s = match move_duration(robot, &plans, i, mv) {
+            Some(t) => t,
+            None if thermal.is_some() => {
+                return Err(input_err(
+                    src,
+                    file,
+                    mv.speed.span.start,
+                    format!(
+                        "speed `{}` cannot be resolved offline; the thermal time line needs the TCP speed",
+                        mv.speed.text
+                    ),
+                ));
+            }
+            None => 0.0,
+        };
+        let power_w = move_power(robot, &plans, i, wrenches[i], duration_s);
+        segments.push(Segment {
+            duration_s,
+            power_w,
+        });
+    }
+    let thermal_power =
+        thermal.map(|t| effective_power(&segments, t.time_constant_s, opts.thermal_start));
     let mut rw = Rewriter {
         module: &module,
         src,
@@ -817,6 +1172,7 @@ pub fn compensate_module(
         made: HashMap::new(),
         derived_count: HashMap::new(),
         added: 0,
+        state: MoveState::default(),
     };
     let mut outcome = RapidOutcome {
         text: String::new(),
@@ -824,26 +1180,32 @@ pub fn compensate_module(
         added: 0,
         max_deviation_mm: 0.0,
         max_deviation_line: 0,
+        records: Vec::with_capacity(moves.len()),
     };
-    let has_process = robot.process_wrench().is_some();
-    for mv in module.moves() {
-        let tool = resolve_tool(&module, src, file, mv)?;
-        let wobj = resolve_wobj(&module, src, file, mv)?;
+    let mut max_vib = (0.0, 0);
+    for (i, mv) in moves.iter().enumerate() {
+        let (Some(plan), Some(seg)) = (plans.get(i), segments.get(i)) else {
+            continue;
+        };
+        let power = thermal_power.as_ref().and_then(|p| p.get(i).copied());
+        let wrench = wrenches.get(i).copied().flatten();
+        rw.state = MoveState { wrench, power };
         let key = LoadKey {
             tool: mv.tool.text.to_ascii_lowercase(),
             wobj: mv
                 .wobj
                 .as_ref()
                 .map_or_else(|| "wobj0".into(), |w| w.text.to_ascii_lowercase()),
-            process: has_process && matches!(mv.kind, MoveKind::MoveL | MoveKind::MoveC),
+            wrench: wrench.as_ref().map(wrench_bits),
+            power: power.map(|p| p.map(f64::to_bits)),
         };
         let dev = if mv.kind == MoveKind::MoveAbsJ {
-            rw.joint(mv, &key, &tool)?
+            rw.joint(mv, &key, &plan.tool)?
         } else {
             if let Some(via) = &mv.via {
-                rw.cart(mv, via, &key, &tool, &wobj)?;
+                rw.cart(mv, via, &key, &plan.tool, &plan.wobj)?;
             }
-            rw.cart(mv, &mv.target, &key, &tool, &wobj)?
+            rw.cart(mv, &mv.target, &key, &plan.tool, &plan.wobj)?
         };
         outcome.moves += 1;
         let d = dev.total.pos_mm.norm();
@@ -851,10 +1213,23 @@ pub fn compensate_module(
             outcome.max_deviation_mm = d;
             outcome.max_deviation_line = mv.line;
         }
+        let v = dev.vibration_mm.norm();
+        if v > max_vib.0 {
+            max_vib = (v, mv.line);
+        }
         if opts.annotate {
             rw.edits.push(annotate(src, &mv.span, &dev_comment(&dev)));
         }
+        outcome.records.push(MoveRecord {
+            line: mv.line,
+            deviation: dev,
+            wrench,
+            duration_s: seg.duration_s,
+            power_w: seg.power_w,
+            thermal_power_w: power.unwrap_or([0.0; 6]),
+        });
     }
+    warn_resonance(robot, fx, max_vib);
     // New declarations: one insertion per original declaration, in order.
     let mut by_decl: Vec<(usize, Vec<String>)> = Vec::new();
     for (d, line) in std::mem::take(&mut rw.inserts) {
@@ -872,4 +1247,29 @@ pub fn compensate_module(
     outcome.added = rw.added;
     outcome.text = apply_edits(src, &rw.edits)?;
     Ok(outcome)
+}
+
+/// Warns once when the spindle's tooth-passing frequency lies within 10 %
+/// of a natural frequency of the modal model and some move is loaded.
+fn warn_resonance(robot: &Robot, fx: Effects, (amp_mm, line): (f64, usize)) {
+    if fx.dynamic == 0.0 || amp_mm <= 0.0 {
+        return;
+    }
+    let (Some(pf), Some(modal)) = (robot.process_force(), robot.modal()) else {
+        return;
+    };
+    let Some(f) = pf.excitation_hz() else {
+        return;
+    };
+    if let Some(r) = modal.resonance(f) {
+        let rpm = r.suggested_hz * 60.0 / f64::from(pf.flutes);
+        tracing::warn!(
+            "spindle excitation {:.2} Hz (rpm x flutes / 60) is within 10 % of the {} natural frequency {:.2} Hz: vibration up to {:.4} mm (line {line}); a spindle speed of about {rpm:.0} rpm ({:.2} Hz) avoids the resonance",
+            r.excitation_hz,
+            r.direction,
+            r.natural_hz,
+            amp_mm,
+            r.suggested_hz
+        );
+    }
 }

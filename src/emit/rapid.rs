@@ -143,7 +143,11 @@ pub fn normalise_quaternion(q: &[f64; 4], reference: Option<&[f64; 4]>) -> Optio
 }
 
 /// Normalises (see [`normalise_quaternion`]) and formats a quaternion with
-/// `fmt.quaternion_decimals` decimals.
+/// `fmt.quaternion_decimals` decimals. Of the 16 roundings of the four
+/// components (each rounded down or up), the one whose rotation after
+/// normalisation is closest to the exact one is written: the written
+/// quaternion is then never worse than plain rounding, and usually several
+/// times better (the reader normalises it anyway).
 pub fn format_quaternion(
     q: &[f64; 4],
     reference: Option<&[f64; 4]>,
@@ -151,8 +155,24 @@ pub fn format_quaternion(
 ) -> Result<[String; 4], Error> {
     let n = normalise_quaternion(q, reference)
         .ok_or_else(|| Error::Usage(format!("quaternion {q:?} cannot be normalised")))?;
+    let scale = 10f64.powi(i32::try_from(fmt.quaternion_decimals).unwrap_or(9).min(15));
+    let lo = n.map(|c| (c * scale).floor());
+    let mut best = (f64::INFINITY, n);
+    for mask in 0..16u32 {
+        let c: [f64; 4] = std::array::from_fn(|k| (lo[k] + f64::from((mask >> k) & 1)) / scale);
+        let norm = c.iter().map(|x| x * x).sum::<f64>().sqrt();
+        if norm <= f64::EPSILON {
+            continue;
+        }
+        // Chord distance between unit quaternions: monotonic in the angle.
+        let err: f64 = c.iter().zip(&n).map(|(a, b)| (a / norm - b).powi(2)).sum();
+        if err < best.0 {
+            best = (err, c);
+        }
+    }
     let f = |v: f64| format_fixed(v, fmt.quaternion_decimals).unwrap_or_else(|| "0".to_string());
-    Ok([f(n[0]), f(n[1]), f(n[2]), f(n[3])])
+    let c = best.1;
+    Ok([f(c[0]), f(c[1]), f(c[2]), f(c[3])])
 }
 
 /// Edits replacing exactly the position numbers of `rt` with `pos` and, when

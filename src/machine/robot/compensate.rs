@@ -15,8 +15,34 @@
 
 use nalgebra::{Isometry3, Matrix6, Translation3, UnitQuaternion, Vector3, Vector6};
 
+use super::dh::DhParams;
+use super::kinematics::flange;
 use super::pose::pose_error;
+use super::thermal::grown;
 use super::{IkSelect, Model, Robot, RobotError};
+
+/// Parameters `gain` of the way from `nominal` to `actual` (exactly one of
+/// them for a gain of 0 or 1).
+fn blend(nominal: &DhParams, actual: &DhParams, gain: f64) -> DhParams {
+    if gain == 0.0 {
+        return *nominal;
+    }
+    if gain == 1.0 {
+        return *actual;
+    }
+    let mut out = *nominal;
+    for (o, (n, a)) in out
+        .joints
+        .iter_mut()
+        .zip(nominal.joints.iter().zip(&actual.joints))
+    {
+        o.a_mm = n.a_mm + gain * (a.a_mm - n.a_mm);
+        o.alpha_rad = n.alpha_rad + gain * (a.alpha_rad - n.alpha_rad);
+        o.d_mm = n.d_mm + gain * (a.d_mm - n.d_mm);
+        o.theta_offset_rad = n.theta_offset_rad + gain * (a.theta_offset_rad - n.theta_offset_rad);
+    }
+    out
+}
 
 /// Position tolerance of the compensation iteration, mm (0.1 nm).
 pub const COMP_POS_TOL_MM: f64 = 1e-7;
@@ -25,30 +51,46 @@ pub const COMP_ROT_TOL_RAD: f64 = 1e-10;
 /// Iteration limit of the compensation.
 pub const COMP_MAX_ITER: usize = 50;
 
-/// Which effects the prediction includes.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+/// Which effects the prediction includes, as gains: 0 = off, 1 = as
+/// modelled; other values scale the effect linearly (kinematic: the DH
+/// parameters move `gain` of the way from nominal to actual; thermal: the DH
+/// growth times `gain`; gravity and process: the torques times `gain`;
+/// dynamic: the reported amplitude times `gain`).
+#[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Effects {
     /// Actual (calibrated) instead of nominal DH parameters.
-    pub kinematic: bool,
+    pub kinematic: f64,
     /// Joint deflection from gravity (links and tool load).
-    pub gravity: bool,
+    pub gravity: f64,
     /// Joint deflection from the process wrench.
-    pub process: bool,
+    pub process: f64,
+    /// Thermal growth of the DH lengths (Paper B).
+    pub thermal: f64,
+    /// Vibration amplitude (reported, never compensated).
+    pub dynamic: f64,
 }
 
 impl Effects {
     /// Every effect on.
     pub const ALL: Effects = Effects {
-        kinematic: true,
-        gravity: true,
-        process: true,
+        kinematic: 1.0,
+        gravity: 1.0,
+        process: 1.0,
+        thermal: 1.0,
+        dynamic: 1.0,
     };
     /// Every effect off (prediction = controller's nominal model).
     pub const NONE: Effects = Effects {
-        kinematic: false,
-        gravity: false,
-        process: false,
+        kinematic: 0.0,
+        gravity: 0.0,
+        process: 0.0,
+        thermal: 0.0,
+        dynamic: 0.0,
     };
+    /// True when some quasi-static effect (one that changes targets) is on.
+    pub fn compensates(&self) -> bool {
+        self.kinematic != 0.0 || self.gravity != 0.0 || self.process != 0.0 || self.thermal != 0.0
+    }
 }
 
 /// A small pose difference: attained − reference.
@@ -76,12 +118,17 @@ impl PoseDelta {
 pub struct Deviation {
     /// Actual vs nominal parameters at the commanded joints.
     pub kinematic: PoseDelta,
+    /// Added by the thermal growth of the DH lengths.
+    pub thermal: PoseDelta,
     /// Added by gravity deflection.
     pub gravity: PoseDelta,
     /// Added by the process wrench deflection.
     pub process: PoseDelta,
     /// Attained − programmed.
     pub total: PoseDelta,
+    /// Predicted vibration amplitude per direction of the robot base frame,
+    /// mm (reported, not part of `total`).
+    pub vibration_mm: Vector3<f64>,
 }
 
 /// Result of compensating one target.
@@ -159,35 +206,70 @@ impl Robot {
     }
 
     /// Predicted attained TCP pose (world frame) for controller joints `q`,
-    /// with the intermediate poses `[nominal, +kinematic, +gravity,
-    /// +process]` in that order (the last is the attained pose).
-    pub fn predict_stages(&self, q: &[f64; 6], effects: Effects) -> [Isometry3<f64>; 4] {
-        let model = if effects.kinematic {
-            Model::Actual
+    /// with the intermediate poses `[nominal, +kinematic, +thermal,
+    /// +gravity, +process]` in that order (the last is the attained pose).
+    pub fn predict_stages(&self, q: &[f64; 6], effects: Effects) -> [Isometry3<f64>; 5] {
+        let nominal = self.params(Model::Nominal);
+        let kin = blend(nominal, self.params(Model::Actual), effects.kinematic);
+        let model = if effects.thermal != 0.0 {
+            grown(&kin, self.current_thermal_growth_mm(), effects.thermal)
         } else {
-            Model::Nominal
+            kin
         };
-        let p0 = self.tcp_pose(Model::Nominal, q);
-        let p1 = self.tcp_pose(model, q);
-        let tau_g = if effects.gravity {
-            self.gravity_torques(model, q)
+        let tcp = |p: &DhParams, q: &[f64; 6]| self.base() * flange(p, q) * self.flange_to_tool();
+        let p0 = tcp(nominal, q);
+        let p1 = tcp(&kin, q);
+        let p2 = tcp(&model, q);
+        let tau_g = if effects.gravity != 0.0 {
+            self.gravity_torques_of(&model, q) * effects.gravity
         } else {
             Vector6::zeros()
         };
-        let tau_w = if effects.process {
-            self.process_torques(model, q)
+        let tau_w = if effects.process != 0.0 {
+            self.process_torques_of(&model, q) * effects.process
         } else {
             Vector6::zeros()
         };
-        let p2 = self.base() * self.deflected_flange(model, q, &tau_g) * self.flange_to_tool();
-        let p3 =
-            self.base() * self.deflected_flange(model, q, &(tau_g + tau_w)) * self.flange_to_tool();
-        [p0, p1, p2, p3]
+        let deflected = |tau: &Vector6<f64>| {
+            let dq = self.joint_deflection(tau);
+            let qd: [f64; 6] = std::array::from_fn(|i| q[i] + dq[i]);
+            tcp(&model, &qd)
+        };
+        let p3 = if effects.gravity != 0.0 {
+            deflected(&tau_g)
+        } else {
+            p2
+        };
+        let p4 = if effects.process != 0.0 {
+            deflected(&(tau_g + tau_w))
+        } else {
+            p3
+        };
+        [p0, p1, p2, p3, p4]
+    }
+
+    /// Predicted vibration amplitude per direction (robot base frame, mm)
+    /// at controller joints `q`: the process force taken as a harmonic
+    /// force at the tooth-passing frequency, through the modal model.
+    /// Zero without a modal model, a spindle speed or a process wrench.
+    pub fn vibration_mm(&self, q: &[f64; 6], effects: Effects) -> Vector3<f64> {
+        let (Some(modal), Some(f_hz)) = (
+            self.modal(),
+            self.process_force().and_then(|p| p.excitation_hz()),
+        ) else {
+            return Vector3::zeros();
+        };
+        if effects.dynamic == 0.0 || self.process_wrench().is_none() {
+            return Vector3::zeros();
+        }
+        let w = self.process_wrench_base(Model::Nominal, q);
+        let f_base = Vector3::new(w[0], w[1], w[2]);
+        modal.amplitude_mm(&f_base, f_hz) * effects.dynamic
     }
 
     /// Predicted attained TCP pose (world frame) for controller joints `q`.
     pub fn predict(&self, q: &[f64; 6], effects: Effects) -> Isometry3<f64> {
-        self.predict_stages(q, effects)[3]
+        self.predict_stages(q, effects)[4]
     }
 
     /// Compensates one programmed TCP pose (world frame): returns the pose to
@@ -203,13 +285,15 @@ impl Robot {
         let st = self.predict_stages(&q0, effects);
         let deviation = Deviation {
             kinematic: PoseDelta::between(&st[1], &st[0]),
-            gravity: PoseDelta::between(&st[2], &st[1]),
-            process: PoseDelta::between(&st[3], &st[2]),
-            total: PoseDelta::between(&st[3], programmed),
+            thermal: PoseDelta::between(&st[2], &st[1]),
+            gravity: PoseDelta::between(&st[3], &st[2]),
+            process: PoseDelta::between(&st[4], &st[3]),
+            total: PoseDelta::between(&st[4], programmed),
+            vibration_mm: self.vibration_mm(&q0, effects),
         };
         let mut cmd = *programmed;
         let mut q = q0;
-        let mut attained = st[3];
+        let mut attained = st[4];
         let mut last = (f64::INFINITY, f64::INFINITY);
         let mut newton = false;
         for it in 0..COMP_MAX_ITER {

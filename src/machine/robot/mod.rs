@@ -14,23 +14,29 @@
 mod calib;
 mod compensate;
 pub mod dh;
+pub mod dynamics;
 pub mod ik;
 pub mod kinematics;
 pub mod pose;
+pub mod process;
 mod raw;
 mod statics;
+pub mod thermal;
 mod with_tool;
 
 pub use compensate::{Compensation, Deviation, Effects, PoseDelta};
 pub use dh::{Convention, DhJoint, DhParams};
+pub use dynamics::{Modal, Mode, Resonance};
 pub use ik::ConfData;
 pub use kinematics::Frames;
+pub use process::{ForceFrame, ForceModel, ProcessForce};
+pub use thermal::{DhGrowth, Thermal, ThermalStart, ThermalTerm};
 
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 
 use crate::error::{Error, Invalid, Located, Result};
 use crate::machine::yaml;
-use raw::{RawConvention, RawFrame, RawJoint, RawRobot, RawWrenchFrame};
+use raw::{RawConvention, RawFrame, RawJoint, RawRobot};
 
 /// Why a target could not be turned into joint values (or compensated).
 /// The pipeline turns it into [`Error::Unachievable`] with [`RobotError::at`].
@@ -150,6 +156,28 @@ struct RobotData {
     tool_load: Option<PointMass>,
     k_nmm_per_rad: [f64; 6],
     process_wrench: Option<ProcessWrench>,
+    process_force: Option<ProcessForce>,
+    thermal: Option<Thermal>,
+    /// DH growth of the thermal prediction stage (cold unless set).
+    thermal_growth: DhGrowth,
+    modal: Option<Modal>,
+    output: OutputDecimals,
+}
+
+/// Default decimals of written quaternion components: 7 keeps the written
+/// orientation within 2·(5e-8·2) = 2e-7 rad of the computed one, below the
+/// 1 µrad target (6 decimals give only 2 µrad in the worst case).
+pub const DEFAULT_QUATERNION_DECIMALS: usize = 7;
+/// Default decimals of written positions, mm.
+pub const DEFAULT_POSITION_DECIMALS: usize = 3;
+
+/// Decimals of rewritten targets (`output:` section).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct OutputDecimals {
+    /// Position decimals, mm.
+    pub mm: usize,
+    /// Quaternion component decimals.
+    pub quaternion: usize,
 }
 
 fn finite(path: &str, v: &[f64]) -> std::result::Result<(), Invalid> {
@@ -352,18 +380,60 @@ impl Robot {
             }
             k_nmm_per_rad[i] = v * 1000.0;
         }
-        let process_wrench = match &raw.process_wrench {
-            Some(w) => {
-                finite("process_wrench.force_n", &w.force_n)?;
-                finite("process_wrench.moment_nm", &w.moment_nm)?;
-                Some(ProcessWrench {
-                    force_n: Vector3::from(w.force_n),
-                    moment_nmm: Vector3::from(w.moment_nm) * 1000.0,
-                    in_tool_frame: w.frame == RawWrenchFrame::Tool,
-                })
+        let process_force = match (&raw.process_wrench, &raw.process_force) {
+            (Some(_), Some(_)) => {
+                return Err(Invalid::new(
+                    "process_wrench",
+                    "give either `process_wrench` or `process_force`, not both",
+                ));
             }
-            None => None,
+            (Some(w), None) => Some(ProcessForce::from_wrench(w)?),
+            (None, Some(f)) => Some(ProcessForce::from_raw(f)?),
+            (None, None) => None,
         };
+        // The wrench the process stage applies by default: a constant force
+        // in the tool or base frame (the RAPID pipeline sets it per move).
+        let process_wrench = match process_force.map(|f| f.model) {
+            Some(ForceModel::Constant {
+                force_n,
+                moment_nmm,
+                frame: frame @ (ForceFrame::Tool | ForceFrame::Base),
+            }) => Some(ProcessWrench {
+                force_n,
+                moment_nmm,
+                in_tool_frame: frame == ForceFrame::Tool,
+            }),
+            _ => None,
+        };
+        let thermal = raw.thermal.as_ref().map(Thermal::from_raw).transpose()?;
+        let modal = raw.modal.as_deref().map(Modal::from_raw).transpose()?;
+        let mut output = OutputDecimals {
+            mm: DEFAULT_POSITION_DECIMALS,
+            quaternion: DEFAULT_QUATERNION_DECIMALS,
+        };
+        if let Some(o) = &raw.output {
+            if let Some(d) = o.decimals_mm {
+                if !(1..=6).contains(&d) {
+                    return Err(Invalid::new(
+                        "output.decimals_mm",
+                        format!("{d} must be 1..6"),
+                    ));
+                }
+                output.mm = d;
+            }
+            if let Some(d) = o.decimals_quaternion {
+                if !(4..=9).contains(&d) {
+                    return Err(Invalid::new(
+                        "output.decimals_quaternion",
+                        format!("{d} must be 4..9"),
+                    ));
+                }
+                output.quaternion = d;
+            }
+        }
+        let thermal_growth = thermal
+            .as_ref()
+            .map_or([[0.0; 2]; 6], |t| t.growth_mm(&[0.0; 6]));
         let closed_form = ik::ClosedForm::new(&nominal);
         Ok(Robot {
             d: Box::new(RobotData {
@@ -380,6 +450,11 @@ impl Robot {
                 tool_load,
                 k_nmm_per_rad,
                 process_wrench,
+                process_force,
+                thermal,
+                thermal_growth,
+                modal,
+                output,
             }),
         })
     }
@@ -430,6 +505,11 @@ impl Robot {
     /// Joint stiffness, N·mm/rad (the file gives N·m/rad).
     pub fn k_nmm_per_rad(&self) -> &[f64; 6] {
         &self.d.k_nmm_per_rad
+    }
+    /// Decimals of rewritten targets (`output:`; defaults
+    /// [`DEFAULT_POSITION_DECIMALS`], [`DEFAULT_QUATERNION_DECIMALS`]).
+    pub fn output_decimals(&self) -> OutputDecimals {
+        self.d.output
     }
     /// Process wrench for prediction, if any.
     pub fn process_wrench(&self) -> Option<&ProcessWrench> {

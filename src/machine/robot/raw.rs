@@ -28,6 +28,95 @@ pub(crate) struct RawRobot {
     pub k_nm_per_rad: Vec<f64>,
     #[serde(default)]
     pub process_wrench: Option<RawWrench>,
+    #[serde(default)]
+    pub process_force: Option<RawProcessForce>,
+    #[serde(default)]
+    pub thermal: Option<RawThermal>,
+    #[serde(default)]
+    pub modal: Option<Vec<RawMode>>,
+    #[serde(default)]
+    pub output: Option<RawOutput>,
+}
+
+/// `process_force:` — the predicted process force at the TCP.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct RawProcessForce {
+    pub model: RawForceModel,
+    #[serde(default)]
+    pub force_n: Option<[f64; 3]>,
+    #[serde(default)]
+    pub moment_nm: Option<[f64; 3]>,
+    #[serde(default)]
+    pub frame: Option<RawForceFrame>,
+    #[serde(default)]
+    pub thrust_coefficient_n_per_mm2: Option<f64>,
+    #[serde(default)]
+    pub drill_diameter_mm: Option<f64>,
+    #[serde(default)]
+    pub spindle_rpm: Option<f64>,
+    #[serde(default)]
+    pub flutes: Option<u32>,
+    #[serde(default)]
+    pub max_feed_mm_per_rev: Option<f64>,
+    #[serde(default)]
+    pub axis_tolerance_deg: Option<f64>,
+}
+
+/// `process_force.model`.
+#[derive(Debug, Deserialize, Clone, Copy, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub(crate) enum RawForceModel {
+    Constant,
+    Drilling,
+}
+
+/// `process_force.frame`.
+#[derive(Debug, Deserialize, Clone, Copy, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub(crate) enum RawForceFrame {
+    Tool,
+    Workpiece,
+    Base,
+}
+
+/// `thermal:` — Paper B power-dependent DH lengths.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct RawThermal {
+    pub time_constant_min: f64,
+    pub terms: Vec<RawThermalTerm>,
+}
+
+/// One coupling term of `thermal.terms`.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct RawThermalTerm {
+    pub parameter: String,
+    pub joint: usize,
+    pub lb_mm: f64,
+    pub ub_mm: f64,
+    pub ts_per_w: f64,
+}
+
+/// One entry of `modal:`.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct RawMode {
+    pub direction: String,
+    pub frequency_hz: f64,
+    pub damping_ratio: f64,
+    pub stiffness_n_per_um: f64,
+}
+
+/// `output:` — number formatting of rewritten targets.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct RawOutput {
+    #[serde(default)]
+    pub decimals_mm: Option<usize>,
+    #[serde(default)]
+    pub decimals_quaternion: Option<usize>,
 }
 
 /// `convention: dh | modified_dh`.

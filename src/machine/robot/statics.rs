@@ -6,7 +6,8 @@
 
 use nalgebra::{Isometry3, Vector3, Vector6};
 
-use super::kinematics::{jacobian, jacobian_link};
+use super::dh::DhParams;
+use super::kinematics::{flange, frames, jacobian, jacobian_link};
 use super::{Model, Robot};
 
 impl Robot {
@@ -30,7 +31,12 @@ impl Robot {
 
     /// Joint torques (N·mm) from the weight of the links and of the tool load.
     pub fn gravity_torques(&self, model: Model, q: &[f64; 6]) -> Vector6<f64> {
-        let f = self.frames(model, q);
+        self.gravity_torques_of(self.params(model), q)
+    }
+
+    /// [`Robot::gravity_torques`] for any parameter set.
+    pub fn gravity_torques_of(&self, params: &DhParams, q: &[f64; 6]) -> Vector6<f64> {
+        let f = frames(params, q);
         let g = self.gravity_base();
         let mut tau = Vector6::zeros();
         for (i, l) in self.links().iter().enumerate() {
@@ -46,11 +52,16 @@ impl Robot {
     /// Process wrench at the TCP in the robot base frame, `[F (N); M (N·mm)]`;
     /// zero when the file has none.
     pub fn process_wrench_base(&self, model: Model, q: &[f64; 6]) -> Vector6<f64> {
+        self.process_wrench_base_of(self.params(model), q)
+    }
+
+    /// [`Robot::process_wrench_base`] for any parameter set.
+    pub fn process_wrench_base_of(&self, params: &DhParams, q: &[f64; 6]) -> Vector6<f64> {
         let Some(w) = self.process_wrench() else {
             return Vector6::zeros();
         };
         let (f, m) = if w.in_tool_frame {
-            let r = (self.flange_pose(model, q) * self.flange_to_tool()).rotation;
+            let r = (flange(params, q) * self.flange_to_tool()).rotation;
             (r * w.force_n, r * w.moment_nmm)
         } else {
             (w.force_n, w.moment_nmm)
@@ -63,8 +74,14 @@ impl Robot {
 
     /// Joint torques (N·mm) of the process wrench acting at the TCP.
     pub fn process_torques(&self, model: Model, q: &[f64; 6]) -> Vector6<f64> {
-        let w = self.process_wrench_base(model, q);
-        self.wrench_torques(model, q, &self.flange_to_tool().translation.vector, &w)
+        self.process_torques_of(self.params(model), q)
+    }
+
+    /// [`Robot::process_torques`] for any parameter set.
+    pub fn process_torques_of(&self, params: &DhParams, q: &[f64; 6]) -> Vector6<f64> {
+        let w = self.process_wrench_base_of(params, q);
+        let f = frames(params, q);
+        jacobian(&f, &self.flange_to_tool().translation.vector).transpose() * w
     }
 
     /// Joint deflection `Δθ = Kθ⁻¹ τ` (rad) for torques in N·mm.

@@ -1,0 +1,277 @@
+//! Thermal drift of a robot arm (the thesis' Paper B model): DH lengths grow
+//! with the mean power of neighbouring joint motors,
+//! `Δp = ub − lb · exp(−ts · P_joint)` (mm, P in W), and the effective
+//! (thermal) power follows the motor power through a first-order filter in
+//! time. Parameter names `a1..a6` / `d1..d6` are the `a_mm` / `d_mm` of row
+//! 1..6 of the machine file's DH table (whatever convention it uses).
+
+use super::raw::RawThermal;
+use super::{DhParams, Robot};
+use crate::error::Invalid;
+
+/// Which DH length a thermal term changes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum DhLength {
+    /// `a_mm` of a row.
+    A,
+    /// `d_mm` of a row.
+    D,
+}
+
+/// One Paper B coupling term: parameter ← power of one joint.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ThermalTerm {
+    /// Which length.
+    pub length: DhLength,
+    /// Row of the DH table, 0-based (`a2` → 1).
+    pub row: usize,
+    /// Joint whose motor power drives it, 0-based (`joint: 1` → 0).
+    pub joint: usize,
+    /// Lower-bound coefficient `lb`, mm.
+    pub lb_mm: f64,
+    /// Upper bound `ub`, mm (the growth at infinite power).
+    pub ub_mm: f64,
+    /// Thermal stability `ts`, 1/W.
+    pub ts_per_w: f64,
+}
+
+impl ThermalTerm {
+    /// The growth of this term at joint power `p_w` (W): `ub − lb·e^(−ts·P)`.
+    pub fn growth_mm(&self, p_w: f64) -> f64 {
+        self.ub_mm - self.lb_mm * (-self.ts_per_w * p_w).exp()
+    }
+}
+
+/// The `thermal:` section of a robot file.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Thermal {
+    /// Time constant of the first-order heat-up, s.
+    pub time_constant_s: f64,
+    /// Coupling terms.
+    pub terms: Vec<ThermalTerm>,
+}
+
+/// Growth of the DH lengths, mm: `[Δa, Δd]` per row.
+pub type DhGrowth = [[f64; 2]; 6];
+
+impl Thermal {
+    /// Sum of the terms' growth per row for the joint powers `p_w` (W).
+    pub fn growth_mm(&self, p_w: &[f64; 6]) -> DhGrowth {
+        let mut g = [[0.0; 2]; 6];
+        for t in &self.terms {
+            let p = p_w.get(t.joint).copied().unwrap_or(0.0);
+            if let Some(row) = g.get_mut(t.row) {
+                row[t.length as usize] += t.growth_mm(p);
+            }
+        }
+        g
+    }
+
+    pub(crate) fn from_raw(raw: &RawThermal) -> Result<Self, Invalid> {
+        let p = "thermal.time_constant_min";
+        if !raw.time_constant_min.is_finite() || raw.time_constant_min <= 0.0 {
+            return Err(Invalid::new(
+                p,
+                format!(
+                    "time constant {} must be a positive number of minutes",
+                    raw.time_constant_min
+                ),
+            ));
+        }
+        let mut terms = Vec::with_capacity(raw.terms.len());
+        for (i, t) in raw.terms.iter().enumerate() {
+            let path = format!("thermal.terms[{i}]");
+            let name = t.parameter.trim().to_ascii_lowercase();
+            let (length, row) = match (name.get(..1), name.get(1..).map(str::parse::<usize>)) {
+                (Some("a"), Some(Ok(r @ 1..=6))) => (DhLength::A, r - 1),
+                (Some("d"), Some(Ok(r @ 1..=6))) => (DhLength::D, r - 1),
+                _ => {
+                    return Err(Invalid::new(
+                        format!("{path}.parameter"),
+                        format!(
+                            "`{}` is not a DH length (a1..a6 or d1..d6, row of the DH table)",
+                            t.parameter
+                        ),
+                    ));
+                }
+            };
+            if !(1..=6).contains(&t.joint) {
+                return Err(Invalid::new(
+                    format!("{path}.joint"),
+                    format!("joint {} must be 1..6", t.joint),
+                ));
+            }
+            for (k, v) in [
+                ("lb_mm", t.lb_mm),
+                ("ub_mm", t.ub_mm),
+                ("ts_per_w", t.ts_per_w),
+            ] {
+                if !v.is_finite() {
+                    return Err(Invalid::new(
+                        format!("{path}.{k}"),
+                        format!("value `{v}` is not a finite number"),
+                    ));
+                }
+            }
+            if t.ts_per_w < 0.0 {
+                return Err(Invalid::new(
+                    format!("{path}.ts_per_w"),
+                    format!("thermal stability {} must not be negative", t.ts_per_w),
+                ));
+            }
+            terms.push(ThermalTerm {
+                length,
+                row,
+                joint: t.joint - 1,
+                lb_mm: t.lb_mm,
+                ub_mm: t.ub_mm,
+                ts_per_w: t.ts_per_w,
+            });
+        }
+        Ok(Thermal {
+            time_constant_s: raw.time_constant_min * 60.0,
+            terms,
+        })
+    }
+}
+
+/// Adds a growth to the lengths of a parameter set.
+pub(crate) fn grown(p: &DhParams, g: &DhGrowth, gain: f64) -> DhParams {
+    let mut out = *p;
+    for (j, d) in out.joints.iter_mut().zip(g) {
+        j.a_mm += gain * d[0];
+        j.d_mm += gain * d[1];
+    }
+    out
+}
+
+/// Initial thermal state of a program run (`--thermal-start`).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub enum ThermalStart {
+    /// Motors at ambient temperature: effective power 0.
+    #[default]
+    Cold,
+    /// The periodic steady state of the program run as a repeated task.
+    Steady,
+    /// After this many minutes of the program's mean power from cold.
+    WarmUpMin(f64),
+}
+
+impl std::str::FromStr for ThermalStart {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s.trim().to_ascii_lowercase().as_str() {
+            "cold" => Ok(ThermalStart::Cold),
+            "steady" => Ok(ThermalStart::Steady),
+            t => match t.parse::<f64>() {
+                Ok(m) if m.is_finite() && m >= 0.0 => Ok(ThermalStart::WarmUpMin(m)),
+                _ => Err(format!(
+                    "`{s}` is not `cold`, `steady` or a non-negative number of minutes"
+                )),
+            },
+        }
+    }
+}
+
+/// One piece of the program's time line: a move of `duration_s` with
+/// constant joint motor powers `power_w` (W).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Segment {
+    /// Duration, s.
+    pub duration_s: f64,
+    /// Mean motor power per joint during the move, W.
+    pub power_w: [f64; 6],
+}
+
+/// One first-order step: state `x` relaxes toward `input` for `dt_s`.
+pub fn first_order(x: f64, input: f64, dt_s: f64, tau_s: f64) -> f64 {
+    input + (x - input) * (-dt_s / tau_s).exp()
+}
+
+/// Time-weighted mean power of a time line, W (zero for an empty one).
+pub fn mean_power(segments: &[Segment]) -> [f64; 6] {
+    let t: f64 = segments.iter().map(|s| s.duration_s).sum();
+    if t <= 0.0 {
+        return [0.0; 6];
+    }
+    std::array::from_fn(|j| {
+        segments
+            .iter()
+            .map(|s| s.duration_s * s.power_w[j])
+            .sum::<f64>()
+            / t
+    })
+}
+
+/// Effective (thermal) power per joint at the END of every segment, W,
+/// filtered with time constant `tau_s` from the initial state `start`.
+pub fn effective_power(segments: &[Segment], tau_s: f64, start: ThermalStart) -> Vec<[f64; 6]> {
+    let run = |x0: [f64; 6]| -> Vec<[f64; 6]> {
+        let mut x = x0;
+        segments
+            .iter()
+            .map(|s| {
+                for (xj, pj) in x.iter_mut().zip(&s.power_w) {
+                    *xj = first_order(*xj, *pj, s.duration_s, tau_s);
+                }
+                x
+            })
+            .collect()
+    };
+    let x0 = match start {
+        ThermalStart::Cold => [0.0; 6],
+        ThermalStart::WarmUpMin(m) => {
+            let f = 1.0 - (-m * 60.0 / tau_s).exp();
+            mean_power(segments).map(|p| p * f)
+        }
+        ThermalStart::Steady => {
+            // Linear filter: end(x0) = x0·e^(−T/τ) + end(0); the periodic
+            // state has end(x0) = x0.
+            let total: f64 = segments.iter().map(|s| s.duration_s).sum();
+            let decay = (-total / tau_s).exp();
+            let end0 = run([0.0; 6]).last().copied().unwrap_or([0.0; 6]);
+            if decay < 1.0 {
+                end0.map(|e| e / (1.0 - decay))
+            } else {
+                [0.0; 6]
+            }
+        }
+    };
+    run(x0)
+}
+
+impl Robot {
+    /// The thermal model, if the file has one.
+    pub fn thermal(&self) -> Option<&Thermal> {
+        self.d.thermal.as_ref()
+    }
+
+    /// Growth of the DH lengths at joint powers `p_w` (W); zero without a
+    /// thermal model.
+    pub fn thermal_growth_mm(&self, p_w: &[f64; 6]) -> DhGrowth {
+        self.thermal().map_or([[0.0; 2]; 6], |t| t.growth_mm(p_w))
+    }
+
+    /// The robot whose ACTUAL DH lengths have grown for the mean joint motor
+    /// powers `p_w` (W): for calibration and diagnosis rows with measured
+    /// powers. The thermal stage of the prediction is left as it was.
+    pub fn at_joint_power(&self, p_w: &[f64; 6]) -> Robot {
+        let mut r = self.clone();
+        r.d.actual = grown(&self.d.actual, &self.thermal_growth_mm(p_w), 1.0);
+        r
+    }
+
+    /// The robot whose thermal prediction stage (effect `thermal`) uses the
+    /// effective joint powers `p_w` (W). A freshly loaded robot is cold
+    /// (powers zero).
+    pub fn with_thermal_power(&self, p_w: &[f64; 6]) -> Robot {
+        let mut r = self.clone();
+        r.d.thermal_growth = self.thermal_growth_mm(p_w);
+        r
+    }
+
+    /// The DH growth used by the thermal prediction stage, mm.
+    pub fn current_thermal_growth_mm(&self) -> &DhGrowth {
+        &self.d.thermal_growth
+    }
+}
