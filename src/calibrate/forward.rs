@@ -14,7 +14,10 @@
 //!   point: `Δθ = Kθ⁻¹ (τ_g + J_WPᵀ W)`. The measured point (`mp_*`, default
 //!   the tool centre point) is then carried by the deflected flange. The
 //!   commanded position is the measured point on the nominal model without
-//!   any load.
+//!   any load. A row with joint motor powers (`p1_w…p6_w`, missing ones 0 W)
+//!   has the actual DH lengths grown by the machine file's `thermal` terms
+//!   at those powers (Paper B, thermal steady state); a row without powers
+//!   uses the actual DH lengths as they are.
 //! - Machine-tool rows: positions in the machine's workpiece frame as the
 //!   kinematic chain returns them (equal to the commanded axis position when
 //!   the machine is error-free). The attained position is the tool tip of the
@@ -131,6 +134,14 @@ pub fn row_wrench(row: &Observation) -> Vector6<f64> {
 }
 
 fn predict_robot(robot: &Robot, row: &Observation, rp: &RobotPose) -> Predicted {
+    if rp.p_w.iter().any(Option::is_some) && robot.thermal().is_some() {
+        let hot = robot.at_joint_power(&rp.p_w.map(|p| p.unwrap_or(0.0)));
+        return predict_robot_at(&hot, row, rp);
+    }
+    predict_robot_at(robot, row, rp)
+}
+
+fn predict_robot_at(robot: &Robot, row: &Observation, rp: &RobotPose) -> Predicted {
     let q = joints_rad(rp);
     let mp = Point3::from(measured_point(robot, rp));
     let wp = wrench_point(robot, rp);
@@ -227,6 +238,46 @@ mod tests {
         assert_abs_diff_eq!(got, lin.fixed_rows::<3>(0).into_owned(), epsilon = 5e-3);
         assert!(got.norm() > 0.1, "a 335 N load deflects the arm noticeably");
         assert_abs_diff_eq!(a1.commanded_mm, a0.commanded_mm, epsilon = POS_TOL_MM);
+    }
+
+    /// Measured joint powers grow the DH lengths (Paper B). At all joints
+    /// zero the IRB 1600 flange sits at x = a2 + d4 + d6, z = d1 + a3
+    /// (mDH, MODELS.md §1.2), so the attained point moves by
+    /// (Δa2 + Δd4, 0, Δa3) between a row at 0 W and a row at the Paper B
+    /// top powers; the gravity sag barely changes for a 0.1 mm longer arm.
+    /// The example calibration's joint-angle and twist errors (about a
+    /// milliradian) tilt the growth directions: ≈ 0.3 mm × 1 mrad = 0.3 µm,
+    /// hence the 1 µm tolerance.
+    #[test]
+    fn robot_powers_grow_the_arm() {
+        let Machine::Robot(r) = irb1600() else {
+            panic!("robot file")
+        };
+        let m = Machine::Robot(r.clone());
+        let with_power = |p: [f64; 6]| {
+            let mut row = robot_row([0.0; 6], Vector3::zeros());
+            if let Pose::Robot(rp) = &mut row.pose {
+                rp.p_w = p.map(Some);
+            }
+            predict(&m, &row, "t").unwrap()
+        };
+        let p_hot = [126.0, 112.0, 38.0, 0.0, 0.0, 0.0];
+        let cold = with_power([0.0; 6]);
+        let hot = with_power(p_hot);
+        let g0 = r.thermal_growth_mm(&[0.0; 6]);
+        let g1 = r.thermal_growth_mm(&p_hot);
+        // DhGrowth rows are joints 1..6, columns [Δa, Δd].
+        let da2 = g1[1][0] - g0[1][0];
+        let da3 = g1[2][0] - g0[2][0];
+        let dd4 = g1[3][1] - g0[3][1];
+        assert!(da2.abs() > 1e-3, "the file has an a2 term");
+        let moved = hot.attained_mm - cold.attained_mm;
+        const GROWTH_TOL_MM: f64 = 1e-3;
+        assert_abs_diff_eq!(
+            moved,
+            Vector3::new(da2 + dd4, 0.0, da3),
+            epsilon = GROWTH_TOL_MM
+        );
     }
 
     /// An error-free machine tool attains its commanded position.
