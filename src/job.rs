@@ -14,10 +14,15 @@ use rayon::prelude::*;
 use crate::compensate::{self, BlockResult, Failure, Settings};
 use crate::emit::gcode::{EmitOptions, Emitter};
 use crate::error::{Error, Located, Result};
+use nalgebra::Vector3;
+
 use crate::machine::AxisVec;
-use crate::predict::ToolPredictor;
+use crate::machine::tool::thermal::Powers;
+use crate::machine::tool::{MachineTool, Modal, Thermal, ThermalState};
+use crate::predict::{BlockContext, Effect, ThermalStart, ToolPredictor};
+use crate::process::{CutState, ForceModel, MillingCache};
 use crate::program::gcode::{Block, parse_line};
-use crate::program::interp::{Interpreter, Motion, Plan, PlanKind, Setup, Warning};
+use crate::program::interp::{END_INSIDE, Interpreter, Motion, Plan, PlanKind, Setup, Warning};
 
 /// Lines processed per chunk.
 pub const CHUNK_LINES: usize = 4096;
@@ -126,6 +131,11 @@ pub struct Summary {
     pub max_residual_mm: f64,
     /// The program is in inches.
     pub inch: bool,
+    /// Duration of the program on its time line, s (0 when no process
+    /// effect is active).
+    pub duration_s: f64,
+    /// Mean power of the heat sources (spindle, X, Y, Z drives), W.
+    pub mean_power_w: Powers,
 }
 
 /// One per-block row for reports.
@@ -155,6 +165,253 @@ pub struct Job<'m> {
     pub emit: EmitOptions,
     /// Worker threads for the per-block prediction (rayon's global pool when `None`).
     pub pool: Option<&'m rayon::ThreadPool>,
+}
+
+/// The in-order pass of the process effects: puts the program on a time
+/// line, predicts the process force, integrates the thermal state and the
+/// vibration amplitude, and hands each block its [`BlockContext`].
+struct Tracker<'a> {
+    machine: &'a MachineTool,
+    force: Option<&'a ForceModel>,
+    thermal: Option<&'a Thermal>,
+    modal: Option<&'a Modal>,
+    depth_mm: Option<f64>,
+    width_mm: Option<f64>,
+    cache: MillingCache,
+    state: ThermalState,
+    time_s: f64,
+    energy_j: Powers,
+    pos: Option<AxisVec>,
+    rpm: f64,
+    warned_rpm: Vec<f64>,
+    active: bool,
+}
+
+/// Rapid-traverse time between two commands (each axis at its own rate), s.
+fn rapid_time_s(m: &MachineTool, a: &AxisVec, b: &AxisVec) -> f64 {
+    (0..6)
+        .map(|s| (b[s] - a[s]).abs() / m.rapid_per_min(s) * 60.0)
+        .fold(0.0, f64::max)
+}
+
+fn axis_speed(a: &AxisVec, b: &AxisVec, dt_s: f64) -> Vector3<f64> {
+    if dt_s <= 0.0 {
+        return Vector3::zeros();
+    }
+    Vector3::new(b[0] - a[0], b[1] - a[1], b[2] - a[2]) * (60.0 / dt_s)
+}
+
+impl<'a> Tracker<'a> {
+    fn new(pred: &ToolPredictor<'a>, cold: bool) -> Self {
+        let m = pred.machine;
+        let force = match pred.process {
+            Some(p) => p.force.as_ref(),
+            None => m.process_force(),
+        };
+        let e = pred.effects;
+        let thermal = m.thermal();
+        let mut state = ThermalState::default();
+        if let (Some(t), Some(p), false) = (thermal, pred.process, cold) {
+            let mean = p.mean_power_w.unwrap_or([0.0; 4]);
+            state = match p.thermal_start {
+                ThermalStart::Cold => state,
+                ThermalStart::Steady => t.warm_up(&mean, f64::INFINITY),
+                ThermalStart::Minutes(min) => t.warm_up(&mean, min),
+            };
+        }
+        let active = (force.is_some()
+            && (e.gain(Effect::Static) != 0.0
+                || e.gain(Effect::Dynamic) != 0.0
+                || e.gain(Effect::Thermal) != 0.0))
+            || (thermal.is_some() && e.gain(Effect::Thermal) != 0.0);
+        Tracker {
+            machine: m,
+            force,
+            thermal,
+            modal: m.modal(),
+            depth_mm: pred.process.and_then(|p| p.milling_depth_mm),
+            width_mm: pred.process.and_then(|p| p.milling_width_mm),
+            cache: MillingCache::default(),
+            state,
+            time_s: 0.0,
+            energy_j: [0.0; 4],
+            pos: None,
+            rpm: 0.0,
+            warned_rpm: Vec::new(),
+            active,
+        }
+    }
+
+    /// Lets `dt_s` pass with the given process load and axis speeds.
+    fn phase(&mut self, dt_s: f64, force: &Vector3<f64>, cut_w: f64, speed: &Vector3<f64>) {
+        if dt_s <= 0.0 || !dt_s.is_finite() {
+            return;
+        }
+        self.time_s += dt_s;
+        if let Some(t) = self.thermal {
+            let p = t.powers(self.rpm, cut_w, force, speed);
+            for (e, p) in self.energy_j.iter_mut().zip(p) {
+                *e += p * dt_s;
+            }
+            self.state = t.step(&self.state, &p, dt_s);
+        }
+    }
+
+    /// Mean power of each heat source so far, W.
+    fn mean_power(&self) -> Powers {
+        if self.time_s <= 0.0 {
+            return [0.0; 4];
+        }
+        self.energy_j.map(|e| e / self.time_s)
+    }
+
+    fn context(&self) -> BlockContext {
+        BlockContext {
+            time_s: self.time_s,
+            thermal: self.state,
+            spindle_rpm: self.rpm,
+            ..BlockContext::default()
+        }
+    }
+
+    /// Advances over one block and returns its context.
+    fn advance(&mut self, plan: &Plan, line: usize, file: &str, warnings: &mut Vec<Warning>) -> BlockContext {
+        if !self.active {
+            return BlockContext::default();
+        }
+        let Some(mv) = plan.mv else {
+            if plan.dwell_s > 0.0 {
+                self.phase(plan.dwell_s, &Vector3::zeros(), 0.0, &Vector3::zeros());
+            }
+            return self.context();
+        };
+        self.rpm = mv.spindle_rpm;
+        let m = self.machine;
+        let prev = self.pos.unwrap_or(mv.start);
+        // Positioning before a canned-cycle hole: over the hole at the
+        // current height, then down to the R level.
+        if let PlanKind::Cycle { .. } = plan.kind {
+            let mut above = mv.start;
+            above[2] = prev[2];
+            for (a, b) in [(prev, above), (above, mv.start)] {
+                let dt = rapid_time_s(m, &a, &b);
+                self.phase(dt, &Vector3::zeros(), 0.0, &axis_speed(&a, &b, dt));
+            }
+        }
+        let cutting = mv.motion != Motion::Rapid && plan.kind != PlanKind::Fixed;
+        let mut ctx_force = Vector3::zeros();
+        let mut tooth_hz = 0.0;
+        let mut vibration = Vector3::zeros();
+        if cutting {
+            let s3 = mv.start3();
+            let e3 = mv.end3();
+            let feed_dir = match &mv.arc {
+                Some(arc) => arc.tangent(&s3, &e3, END_INSIDE),
+                None => (e3 - s3).try_normalize(1e-12).unwrap_or_else(Vector3::zeros),
+            };
+            let mut load = crate::process::ProcessLoad::default();
+            if let Some(f) = self.force {
+                let tool_axis = m.nominal(&mv.end, mv.tool_len_mm).dir;
+                let drilling = matches!(plan.kind, PlanKind::Cycle { .. })
+                    || (mv.arc.is_none() && feed_dir.dot(&tool_axis) < -(1.0 - 1e-6));
+                let state = CutState {
+                    line,
+                    cutting,
+                    drilling,
+                    feed_dir,
+                    tool_axis,
+                    feed_mm_min: mv.feed_mm_min,
+                    spindle_rpm: mv.spindle_rpm,
+                    depth_mm: plan.milling_mm[0].or(self.depth_mm),
+                    width_mm: plan.milling_mm[1].or(self.width_mm),
+                };
+                load = f.load(&state, &mut self.cache);
+            }
+            let len = mv.length_mm();
+            let len = if len > 1e-9 {
+                len
+            } else {
+                (3..6).map(|s| (mv.end[s] - mv.start[s]).abs()).fold(0.0, f64::max)
+            };
+            let dt = if mv.feed_mm_min > 0.0 {
+                len / mv.feed_mm_min * 60.0
+            } else {
+                0.0
+            };
+            self.phase(
+                dt,
+                &load.force_n,
+                load.cutting_power_w,
+                &axis_speed(&mv.start, &mv.end, dt),
+            );
+            ctx_force = load.force_n;
+            tooth_hz = load.tooth_hz;
+            if let (Some(modal), true) = (self.modal, tooth_hz > 0.0) {
+                vibration = modal.amplitude_mm(&load.harmonic_n, tooth_hz);
+                self.check_resonance(modal, tooth_hz, &vibration, line, file, warnings);
+            }
+        } else {
+            let dt = rapid_time_s(m, &mv.start, &mv.end);
+            self.phase(dt, &Vector3::zeros(), 0.0, &axis_speed(&mv.start, &mv.end, dt));
+        }
+        let mut end = mv.end;
+        if let PlanKind::Cycle { retract, .. } = plan.kind {
+            let mut up = mv.end;
+            up[2] = retract;
+            let dt = rapid_time_s(m, &mv.end, &up);
+            self.phase(dt, &Vector3::zeros(), 0.0, &axis_speed(&mv.end, &up, dt));
+            end = up;
+        }
+        self.pos = Some(end);
+        if plan.dwell_s > 0.0 {
+            self.phase(plan.dwell_s, &Vector3::zeros(), 0.0, &Vector3::zeros());
+        }
+        BlockContext {
+            force_n: ctx_force,
+            tooth_hz,
+            vibration_mm: vibration,
+            ..self.context()
+        }
+    }
+
+    /// Warns once per spindle speed when the tooth-passing frequency is
+    /// within 10 % of a natural frequency, with a suggested speed.
+    fn check_resonance(
+        &mut self,
+        modal: &Modal,
+        tooth_hz: f64,
+        vibration: &Vector3<f64>,
+        line: usize,
+        file: &str,
+        warnings: &mut Vec<Warning>,
+    ) {
+        let Some((dir, mode)) = modal.resonance(tooth_hz) else {
+            return;
+        };
+        if self.warned_rpm.contains(&self.rpm) {
+            return;
+        }
+        self.warned_rpm.push(self.rpm);
+        let flutes = match self.force {
+            Some(ForceModel::Milling(mi)) => mi.flutes,
+            _ => 1,
+        };
+        let suggest = modal.suggest_rpm(&mode, flutes, self.rpm);
+        let message = format!(
+            "tooth-passing frequency {tooth_hz:.1} Hz (S{} x {flutes} flutes) is within 10 % of the {} natural frequency {:.1} Hz: predicted vibration {:.4} mm; suggested spindle speed S{suggest:.0} (tooth passing at {:.1} x the natural frequency)",
+            self.rpm,
+            ["X", "Y", "Z"].get(dir).copied().unwrap_or("?"),
+            mode.natural_frequency_hz,
+            vibration.norm(),
+            suggest * f64::from(flutes) / 60.0 / mode.natural_frequency_hz,
+        );
+        tracing::warn!("{file}:{line}: {message}");
+        warnings.push(Warning {
+            line,
+            message,
+            count: 1,
+        });
+    }
 }
 
 fn motion_label(plan: &Plan) -> &'static str {
@@ -191,11 +448,14 @@ impl<'m> Job<'m> {
         let mut tools: std::collections::BTreeSet<u32> = Default::default();
         let mut clamped = 0u8;
         let mut clamp_warnings: Vec<Warning> = Vec::new();
+        let mut tracker = self.predictor.as_ref().map(|p| Tracker::new(p, false));
+        let mut contexts: Vec<BlockContext> = Vec::with_capacity(CHUNK_LINES);
         let mut eof = false;
         while !eof {
             buf.clear();
             ranges.clear();
             plans.clear();
+            contexts.clear();
             while ranges.len() < CHUNK_LINES {
                 let start = buf.len();
                 let n = input
@@ -252,6 +512,9 @@ impl<'m> Job<'m> {
                         clamped |= fresh;
                     }
                 }
+                if let Some(t) = tracker.as_mut() {
+                    contexts.push(t.advance(&plan, blocks[i].line_no, file, &mut clamp_warnings));
+                }
                 plans.push(plan);
             }
             summary.lines = line_no;
@@ -270,7 +533,10 @@ impl<'m> Job<'m> {
                     let work = || {
                         plans
                             .par_iter()
-                            .map(|p| compensate::block(pred, p, &self.settings))
+                            .zip(contexts.par_iter())
+                            .map(|(p, c)| {
+                                compensate::block(&pred.with_context(*c), p, &self.settings)
+                            })
                             .collect()
                     };
                     match self.pool {
@@ -343,6 +609,40 @@ impl<'m> Job<'m> {
         summary.tools = tools.into_iter().collect();
         summary.changed = emitter.changed_blocks();
         summary.added = emitter.added_blocks();
+        if let Some(t) = &tracker {
+            summary.duration_s = t.time_s;
+            summary.mean_power_w = t.mean_power();
+        }
         Ok(summary)
+    }
+
+    /// A first pass over the program for the thermal start: the mean power
+    /// of each heat source (spindle, X, Y, Z drives), W, over the program's
+    /// time line from a cold start. Parses and interprets only.
+    pub fn mean_power<R: BufRead>(&self, mut input: R, file: &str) -> Result<Powers> {
+        let Some(pred) = &self.predictor else {
+            return Ok([0.0; 4]);
+        };
+        let mut tracker = Tracker::new(pred, true);
+        tracker.modal = None;
+        let mut interp = Interpreter::new(self.setup.clone(), file);
+        let mut block = Block::default();
+        let mut buf = Vec::with_capacity(256);
+        let mut sink = Vec::new();
+        let mut line_no = 0;
+        loop {
+            buf.clear();
+            let n = input
+                .read_until(b'\n', &mut buf)
+                .map_err(|e| Error::io(file, e))?;
+            if n == 0 {
+                break;
+            }
+            line_no += 1;
+            parse_line(&buf, line_no, file, &mut block)?;
+            let plan = interp.step(&block, &buf)?;
+            tracker.advance(&plan, line_no, file, &mut sink);
+        }
+        Ok(tracker.mean_power())
     }
 }

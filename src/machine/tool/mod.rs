@@ -24,15 +24,21 @@
 //!   `E = Trans(P + d) · LOC · Rot(ê, θ + ε0) · COM(θ) · Trans(−(P + d))`
 
 mod component;
+pub mod dynamics;
 mod geometry;
 mod load;
 mod location;
 mod raw;
+pub mod stiffness;
 mod table;
+pub mod thermal;
 
 pub use component::{ComponentErrors, ComponentValue};
 pub use location::{LocationErrors, SpindleErrors};
+pub use dynamics::{Modal, Mode};
+pub use stiffness::Stiffness;
 pub use table::{ErrorTable, Lookup};
+pub use thermal::{Thermal, ThermalState};
 
 use std::collections::BTreeMap;
 
@@ -96,6 +102,10 @@ pub struct MachineTool {
     work_offsets: BTreeMap<String, [f64; 3]>,
     decimals: Option<usize>,
     error_free: bool,
+    process_force: Option<crate::process::ForceModel>,
+    stiffness: Option<Stiffness>,
+    thermal: Option<Thermal>,
+    modal: Option<Modal>,
 }
 
 /// Maximum number of factors in the chain: 6 axes, gauge line, spindle, tool.
@@ -171,6 +181,26 @@ impl MachineTool {
     /// Output decimals for mm programs, if the machine file fixes them.
     pub fn output_decimals(&self) -> Option<usize> {
         self.decimals
+    }
+
+    /// The process-force model of the machine file (`process_force:`).
+    pub fn process_force(&self) -> Option<&crate::process::ForceModel> {
+        self.process_force.as_ref()
+    }
+
+    /// The static stiffness map (`stiffness:`).
+    pub fn stiffness(&self) -> Option<&Stiffness> {
+        self.stiffness.as_ref()
+    }
+
+    /// The thermal model (`thermal:`).
+    pub fn thermal(&self) -> Option<&Thermal> {
+        self.thermal.as_ref()
+    }
+
+    /// The dominant modes (`modal:`).
+    pub fn modal(&self) -> Option<&Modal> {
+        self.modal.as_ref()
     }
 
     /// True when every geometric error is zero.
