@@ -275,10 +275,18 @@ impl<'a> Tracker<'a> {
     }
 
     /// Advances over one block and returns its context.
-    fn advance(&mut self, plan: &Plan, line: usize, file: &str, warnings: &mut Vec<Warning>) -> BlockContext {
+    fn advance(
+        &mut self,
+        plan: &Plan,
+        spindle_rpm: f64,
+        line: usize,
+        file: &str,
+        warnings: &mut Vec<Warning>,
+    ) -> BlockContext {
         if !self.active {
             return BlockContext::default();
         }
+        self.rpm = spindle_rpm;
         let Some(mv) = plan.mv else {
             if plan.dwell_s > 0.0 {
                 self.phase(plan.dwell_s, &Vector3::zeros(), 0.0, &Vector3::zeros());
@@ -513,7 +521,7 @@ impl<'m> Job<'m> {
                     }
                 }
                 if let Some(t) = tracker.as_mut() {
-                    contexts.push(t.advance(&plan, blocks[i].line_no, file, &mut clamp_warnings));
+                    contexts.push(t.advance(&plan, interp.spindle_rpm(), blocks[i].line_no, file, &mut clamp_warnings));
                 }
                 plans.push(plan);
             }
@@ -641,7 +649,7 @@ impl<'m> Job<'m> {
             line_no += 1;
             parse_line(&buf, line_no, file, &mut block)?;
             let plan = interp.step(&block, &buf)?;
-            tracker.advance(&plan, line_no, file, &mut sink);
+            tracker.advance(&plan, interp.spindle_rpm(), line_no, file, &mut sink);
         }
         Ok(tracker.mean_power())
     }

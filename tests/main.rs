@@ -2,6 +2,7 @@
 //! goldens, property tests and regressions.
 
 mod common;
+mod effects;
 mod gcode_cli;
 mod gcode_grammar;
 mod golden;

@@ -321,6 +321,11 @@ impl Interpreter {
         self.pos
     }
 
+    /// Effective spindle speed after the last block, 1/min (0 while stopped).
+    pub fn spindle_rpm(&self) -> f64 {
+        if self.spindle_on { self.spindle } else { 0.0 }
+    }
+
     /// Whether the program is in inches (G20).
     pub fn inch(&self) -> bool {
         self.inch
@@ -684,23 +689,16 @@ impl Interpreter {
             let body = String::from_utf8_lossy(raw);
             let body = body.trim_start_matches(['(', ';']).trim_end_matches(')');
             let mut tokens = body.split_whitespace();
-            match tokens.next() {
-                Some(t) if t.eq_ignore_ascii_case("POSTPROC") => {}
+            // Only `POSTPROC MILLING …` is a directive; any other comment
+            // (including other text after POSTPROC) is left alone.
+            match (tokens.next(), tokens.next()) {
+                (Some(a), Some(b))
+                    if a.eq_ignore_ascii_case("POSTPROC") && b.eq_ignore_ascii_case("MILLING") => {}
                 _ => continue,
             }
             let at = |msg: String| {
                 Located::new(&self.file, block.line_no, c.start as usize + 1, msg)
             };
-            match tokens.next() {
-                Some(t) if t.eq_ignore_ascii_case("MILLING") => {}
-                other => {
-                    return Err(at(format!(
-                        "unknown directive `{}` in `{}` (expected POSTPROC MILLING DEPTH=… WIDTH=…)",
-                        other.unwrap_or(""),
-                        body.trim()
-                    )));
-                }
-            }
             let mut any = false;
             for t in tokens {
                 let (k, v) = t.split_once('=').ok_or_else(|| {
