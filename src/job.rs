@@ -315,7 +315,9 @@ impl<'a> Tracker<'a> {
             let e3 = mv.end3();
             let feed_dir = match &mv.arc {
                 Some(arc) => arc.tangent(&s3, &e3, END_INSIDE),
-                None => (e3 - s3).try_normalize(1e-12).unwrap_or_else(Vector3::zeros),
+                None => (e3 - s3)
+                    .try_normalize(1e-12)
+                    .unwrap_or_else(Vector3::zeros),
             };
             let mut load = crate::process::ProcessLoad::default();
             if let Some(f) = self.force {
@@ -339,7 +341,9 @@ impl<'a> Tracker<'a> {
             let len = if len > 1e-9 {
                 len
             } else {
-                (3..6).map(|s| (mv.end[s] - mv.start[s]).abs()).fold(0.0, f64::max)
+                (3..6)
+                    .map(|s| (mv.end[s] - mv.start[s]).abs())
+                    .fold(0.0, f64::max)
             };
             let dt = if mv.feed_mm_min > 0.0 {
                 len / mv.feed_mm_min * 60.0
@@ -360,7 +364,12 @@ impl<'a> Tracker<'a> {
             }
         } else {
             let dt = rapid_time_s(m, &mv.start, &mv.end);
-            self.phase(dt, &Vector3::zeros(), 0.0, &axis_speed(&mv.start, &mv.end, dt));
+            self.phase(
+                dt,
+                &Vector3::zeros(),
+                0.0,
+                &axis_speed(&mv.start, &mv.end, dt),
+            );
         }
         let mut end = mv.end;
         if let PlanKind::Cycle { retract, .. } = plan.kind {
@@ -521,7 +530,13 @@ impl<'m> Job<'m> {
                     }
                 }
                 if let Some(t) = tracker.as_mut() {
-                    contexts.push(t.advance(&plan, interp.spindle_rpm(), blocks[i].line_no, file, &mut clamp_warnings));
+                    contexts.push(t.advance(
+                        &plan,
+                        interp.spindle_rpm(),
+                        blocks[i].line_no,
+                        file,
+                        &mut clamp_warnings,
+                    ));
                 }
                 plans.push(plan);
             }
@@ -534,24 +549,23 @@ impl<'m> Job<'m> {
             };
             // With every effect off the output is the input; a report still
             // wants its rows (of zero deviation).
-            let results: Vec<std::result::Result<BlockResult, Failure>> =
-                if pred.effects.is_none() && rows.is_none() {
-                    Vec::new()
-                } else {
-                    let work = || {
-                        plans
-                            .par_iter()
-                            .zip(contexts.par_iter())
-                            .map(|(p, c)| {
-                                compensate::block(&pred.with_context(*c), p, &self.settings)
-                            })
-                            .collect()
-                    };
-                    match self.pool {
-                        Some(pool) => pool.install(work),
-                        None => work(),
-                    }
+            let results: Vec<std::result::Result<BlockResult, Failure>> = if pred.effects.is_none()
+                && rows.is_none()
+            {
+                Vec::new()
+            } else {
+                let work = || {
+                    plans
+                        .par_iter()
+                        .zip(contexts.par_iter())
+                        .map(|(p, c)| compensate::block(&pred.with_context(*c), p, &self.settings))
+                        .collect()
                 };
+                match self.pool {
+                    Some(pool) => pool.install(work),
+                    None => work(),
+                }
+            };
             out_buf.clear();
             for (i, &(s, e)) in ranges.iter().enumerate() {
                 let plan = &plans[i];

@@ -116,7 +116,10 @@ fn constant_200_n_against_20_n_per_um_gives_a_10_um_correction() {
     // moved down by 10 µm. Rapids carry no process force.
     let out = compensate(&m, &p, &[]);
     assert_abs_diff_eq!(word(&out, 2, 'Z'), -0.010, epsilon = POS_TOL_MM);
-    assert!(out.lines().nth(1).unwrap_or("").contains("stat 0.0100"), "{out}");
+    assert!(
+        out.lines().nth(1).unwrap_or("").contains("stat 0.0100"),
+        "{out}"
+    );
     assert!(!out.lines().next().unwrap_or("").contains("stat"), "{out}");
     // Load sign: −200 N meets k_z− = 40 N/µm: −5 µm, corrected by +5 µm.
     // Given on the command line in the tool frame (tool along +Z).
@@ -156,11 +159,7 @@ fn milling_forces_from_the_directive_deflect_the_tool() {
     assert_abs_diff_eq!(word(&out, 4, 'Y'), -0.020, epsilon = POS_TOL_MM);
     // Without the directive the command line sets the engagement.
     let p2 = write(dir.path(), "p2.nc", "G0 X0 Y0 Z0\nS1000 M3\nG1 X10 F400\n");
-    let out = compensate(
-        &m,
-        &p2,
-        &["--milling-depth", "2", "--milling-width", "10"],
-    );
+    let out = compensate(&m, &p2, &["--milling-depth", "2", "--milling-width", "10"]);
     assert_abs_diff_eq!(word(&out, 3, 'Y'), -0.020, epsilon = POS_TOL_MM);
     // Spindle stopped (no M3): no cutting force.
     let p3 = write(dir.path(), "p3.nc", "G0 X0 Y0 Z0\nS1000\nG1 X10 F400\n");
@@ -346,13 +345,26 @@ fn tooth_passing_at_the_natural_frequency_warns_with_a_suggested_speed() {
         .expect("run");
     assert!(out.status.success());
     let err = String::from_utf8_lossy(&out.stderr);
-    assert!(err.contains("p.nc:3: tooth-passing frequency 60.0 Hz"), "{err}");
+    assert!(
+        err.contains("p.nc:3: tooth-passing frequency 60.0 Hz"),
+        "{err}"
+    );
     assert!(err.contains("suggested spindle speed S1260"), "{err}");
-    assert_eq!(err.matches("tooth-passing").count(), 1, "once per speed: {err}");
+    assert_eq!(
+        err.matches("tooth-passing").count(),
+        1,
+        "once per speed: {err}"
+    );
     // The vibration is reported, not compensated: the program is unchanged
     // apart from the annotation.
     let text = String::from_utf8_lossy(&out.stdout);
-    assert!(text.lines().nth(2).unwrap_or("").starts_with("G1 X60 F360 (dev 0.0000 mm vib "), "{text}");
+    assert!(
+        text.lines()
+            .nth(2)
+            .unwrap_or("")
+            .starts_with("G1 X60 F360 (dev 0.0000 mm vib "),
+        "{text}"
+    );
     // 3000 rpm → 100 Hz, far from 60 Hz: no warning.
     let p = write(dir.path(), "q.nc", "G0 X0 Y0 Z0\nS3000 M3\nG1 X60 F600\n");
     let out = postproc()
@@ -416,7 +428,10 @@ fn toggling_an_effect_removes_exactly_its_share_and_gains_scale_it() {
             assert!(col(&h, r, part) > 1e-4, "{part} is active: {r:?}");
         }
     }
-    for (i, off) in ["geometric", "static", "thermal", "dynamic"].iter().enumerate() {
+    for (i, off) in ["geometric", "static", "thermal", "dynamic"]
+        .iter()
+        .enumerate()
+    {
         let on: Vec<&str> = ["geometric", "static", "thermal", "dynamic"]
             .into_iter()
             .filter(|e| e != off)

@@ -199,7 +199,10 @@ impl Breakdown {
 
     /// The part of one effect, mm.
     pub fn part(&self, e: Effect) -> Vector3<f64> {
-        self.parts.get(e as usize).copied().unwrap_or_else(Vector3::zeros)
+        self.parts
+            .get(e as usize)
+            .copied()
+            .unwrap_or_else(Vector3::zeros)
     }
 }
 

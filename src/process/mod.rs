@@ -128,7 +128,11 @@ impl Milling {
             let ft = self.kt_n_per_mm2 * a * h + self.kte_n_per_mm * a;
             let fr = self.kr_n_per_mm2 * a * h + self.kre_n_per_mm * a;
             let fa = self.ka_n_per_mm2 * a * h + self.kae_n_per_mm * a;
-            f += Vector3::new(-ft * p.cos() - fr * p.sin(), ft * p.sin() - fr * p.cos(), fa);
+            f += Vector3::new(
+                -ft * p.cos() - fr * p.sin(),
+                ft * p.sin() - fr * p.cos(),
+                fa,
+            );
         }
         f
     }
@@ -542,8 +546,8 @@ mod tests {
         // = 2·2·2000/4 = 2000 N/mm.
         let m = mill(2);
         let h = 1e-6;
-        let fd = (m.forces(0.1 + h, 2.0, 10.0).mean_n - m.forces(0.1 - h, 2.0, 10.0).mean_n)
-            / (2.0 * h);
+        let fd =
+            (m.forces(0.1 + h, 2.0, 10.0).mean_n - m.forces(0.1 - h, 2.0, 10.0).mean_n) / (2.0 * h);
         assert_abs_diff_eq!(fd[1], 2000.0, epsilon = 1e-3);
         assert_abs_diff_eq!(fd[0], -2.0 * 2.0 * 800.0 / 4.0, epsilon = 1e-3);
     }

@@ -73,7 +73,10 @@ impl ForceTable {
             if record.len() != 4 {
                 return Err(err(
                     0,
-                    format!("expected 4 fields (line,fx_n,fy_n,fz_n), found {}", record.len()),
+                    format!(
+                        "expected 4 fields (line,fx_n,fy_n,fz_n), found {}",
+                        record.len()
+                    ),
                 ));
             }
             let field = |i: usize| record.get(i).unwrap_or("");
@@ -109,7 +112,10 @@ impl ForceTable {
                 file,
                 1,
                 1,
-                format!("empty force table (expected the header `{}`)", TABLE_HEADER.join(",")),
+                format!(
+                    "empty force table (expected the header `{}`)",
+                    TABLE_HEADER.join(",")
+                ),
             )));
         }
         Ok(ForceTable { rows })
@@ -143,8 +149,11 @@ mod tests {
 
     #[test]
     fn reads_rows_and_locates_errors() {
-        let t = ForceTable::from_csv_str("line,fx_n,fy_n,fz_n\n3, 1, -2.5, 300\n# note\n9,0,0,1\n", "f.csv")
-            .unwrap();
+        let t = ForceTable::from_csv_str(
+            "line,fx_n,fy_n,fz_n\n3, 1, -2.5, 300\n# note\n9,0,0,1\n",
+            "f.csv",
+        )
+        .unwrap();
         assert_eq!(t.get(3), Some(Vector3::new(1.0, -2.5, 300.0)));
         assert_eq!(t.get(4), None);
         assert_eq!(t.len(), 2);
@@ -152,7 +161,9 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(e.starts_with("f.csv:2:5: fy_n: `x2`"), "{e}");
-        let e = ForceTable::from_csv_str("line,fx,fy,fz\n", "f.csv").unwrap_err().to_string();
+        let e = ForceTable::from_csv_str("line,fx,fy,fz\n", "f.csv")
+            .unwrap_err()
+            .to_string();
         assert!(e.starts_with("f.csv:1:1: expected the header"), "{e}");
         let e = ForceTable::from_csv_str("line,fx_n,fy_n,fz_n\n3,1,2\n", "f.csv")
             .unwrap_err()

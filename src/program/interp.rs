@@ -696,13 +696,15 @@ impl Interpreter {
                     if a.eq_ignore_ascii_case("POSTPROC") && b.eq_ignore_ascii_case("MILLING") => {}
                 _ => continue,
             }
-            let at = |msg: String| {
-                Located::new(&self.file, block.line_no, c.start as usize + 1, msg)
-            };
+            let at =
+                |msg: String| Located::new(&self.file, block.line_no, c.start as usize + 1, msg);
             let mut any = false;
             for t in tokens {
                 let (k, v) = t.split_once('=').ok_or_else(|| {
-                    at(format!("expected KEY=VALUE, found `{t}` in `{}`", body.trim()))
+                    at(format!(
+                        "expected KEY=VALUE, found `{t}` in `{}`",
+                        body.trim()
+                    ))
                 })?;
                 let slot = if k.eq_ignore_ascii_case("DEPTH") {
                     0
@@ -718,9 +720,7 @@ impl Interpreter {
                     .parse()
                     .ok()
                     .filter(|x: &f64| x.is_finite() && *x >= 0.0 && *x <= 1e4)
-                    .ok_or_else(|| {
-                        at(format!("`{t}`: the value must be a length of 0 or more"))
-                    })?;
+                    .ok_or_else(|| at(format!("`{t}`: the value must be a length of 0 or more")))?;
                 let scale = self.scale();
                 if let Some(m) = self.milling_mm.get_mut(slot) {
                     *m = Some(x * scale);

@@ -148,7 +148,11 @@ mod tests {
         // r = 0: 1 (static); r = 1: 1/(2ζ) = 10; r = 2: 1/sqrt(9 + 0.04).
         assert_abs_diff_eq!(m.amplification(0.0), 1.0, epsilon = AMP_TOL);
         assert_abs_diff_eq!(m.amplification(60.0), 10.0, epsilon = AMP_TOL);
-        assert_abs_diff_eq!(m.amplification(120.0), 1.0 / 9.04f64.sqrt(), epsilon = AMP_TOL);
+        assert_abs_diff_eq!(
+            m.amplification(120.0),
+            1.0 / 9.04f64.sqrt(),
+            epsilon = AMP_TOL
+        );
         // 100 N at resonance on 20 N/µm: 5 µm static × 10 = 0.05 mm.
         assert_abs_diff_eq!(m.amplitude_mm(100.0, 60.0), 0.05, epsilon = AMP_TOL);
     }
@@ -178,6 +182,10 @@ mod tests {
         assert!(modal.resonance(66.1).is_none());
         // 2 flutes at 1750 rpm = 58.3 Hz: 0.7·60·60/2 = 1260, 1.3·60·60/2 =
         // 2340; 1260 is nearer (490 against 590 rpm).
-        assert_abs_diff_eq!(modal.suggest_rpm(&mode60(), 2, 1750.0), 1260.0, epsilon = AMP_TOL);
+        assert_abs_diff_eq!(
+            modal.suggest_rpm(&mode60(), 2, 1750.0),
+            1260.0,
+            epsilon = AMP_TOL
+        );
     }
 }

@@ -193,10 +193,18 @@ fn validate(raw: RawMachineTool) -> V<MachineTool> {
         work_offsets,
         decimals,
         error_free,
-        process_force,
-        stiffness,
-        thermal,
-        modal,
+        process: (process_force.is_some()
+            || stiffness.is_some()
+            || thermal.is_some()
+            || modal.is_some())
+        .then(|| {
+            Box::new(super::ProcessSections {
+                force: process_force,
+                stiffness,
+                thermal,
+                modal,
+            })
+        }),
     })
 }
 
@@ -217,7 +225,10 @@ fn validate_force(r: &RawProcessForce) -> V<ForceModel> {
         ("flutes", r.flutes.is_some()),
         ("axial_depth_mm", r.axial_depth_mm.is_some()),
         ("radial_width_mm", r.radial_width_mm.is_some()),
-        ("thrust_coefficient_n_per_mm2", r.thrust_coefficient_n_per_mm2.is_some()),
+        (
+            "thrust_coefficient_n_per_mm2",
+            r.thrust_coefficient_n_per_mm2.is_some(),
+        ),
         ("drill_diameter_mm", r.drill_diameter_mm.is_some()),
     ];
     let allowed: &[&str] = match r.model.as_str() {
@@ -279,7 +290,10 @@ fn validate_force(r: &RawProcessForce) -> V<ForceModel> {
             let path = format!("{P}.force_n");
             for v in f {
                 if !v.is_finite() || v.abs() > 1e6 {
-                    return Err(Invalid::new(&path, format!("`{v}` is not a force within ±1e6 N")));
+                    return Err(Invalid::new(
+                        &path,
+                        format!("`{v}` is not a force within ±1e6 N"),
+                    ));
                 }
             }
             let frame = match &r.frame {

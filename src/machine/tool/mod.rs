@@ -34,8 +34,8 @@ mod table;
 pub mod thermal;
 
 pub use component::{ComponentErrors, ComponentValue};
-pub use location::{LocationErrors, SpindleErrors};
 pub use dynamics::{Modal, Mode};
+pub use location::{LocationErrors, SpindleErrors};
 pub use stiffness::Stiffness;
 pub use table::{ErrorTable, Lookup};
 pub use thermal::{Thermal, ThermalState};
@@ -102,7 +102,14 @@ pub struct MachineTool {
     work_offsets: BTreeMap<String, [f64; 3]>,
     decimals: Option<usize>,
     error_free: bool,
-    process_force: Option<crate::process::ForceModel>,
+    /// The optional process sections, boxed to keep `Machine` small.
+    process: Option<Box<ProcessSections>>,
+}
+
+/// The optional process sections of a machine file.
+#[derive(Debug, Clone, Default)]
+struct ProcessSections {
+    force: Option<crate::process::ForceModel>,
     stiffness: Option<Stiffness>,
     thermal: Option<Thermal>,
     modal: Option<Modal>,
@@ -185,22 +192,22 @@ impl MachineTool {
 
     /// The process-force model of the machine file (`process_force:`).
     pub fn process_force(&self) -> Option<&crate::process::ForceModel> {
-        self.process_force.as_ref()
+        self.process.as_ref().and_then(|p| p.force.as_ref())
     }
 
     /// The static stiffness map (`stiffness:`).
     pub fn stiffness(&self) -> Option<&Stiffness> {
-        self.stiffness.as_ref()
+        self.process.as_ref().and_then(|p| p.stiffness.as_ref())
     }
 
     /// The thermal model (`thermal:`).
     pub fn thermal(&self) -> Option<&Thermal> {
-        self.thermal.as_ref()
+        self.process.as_ref().and_then(|p| p.thermal.as_ref())
     }
 
     /// The dominant modes (`modal:`).
     pub fn modal(&self) -> Option<&Modal> {
-        self.modal.as_ref()
+        self.process.as_ref().and_then(|p| p.modal.as_ref())
     }
 
     /// True when every geometric error is zero.

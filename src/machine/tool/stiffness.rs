@@ -41,8 +41,14 @@ fn locate(pts: &[f64], q: f64) -> (usize, f64) {
     if q >= last {
         return (n - 2, 1.0);
     }
-    let i = pts.partition_point(|&p| p <= q).saturating_sub(1).min(n - 2);
-    let (a, b) = (pts.get(i).copied().unwrap_or(0.0), pts.get(i + 1).copied().unwrap_or(1.0));
+    let i = pts
+        .partition_point(|&p| p <= q)
+        .saturating_sub(1)
+        .min(n - 2);
+    let (a, b) = (
+        pts.get(i).copied().unwrap_or(0.0),
+        pts.get(i + 1).copied().unwrap_or(1.0),
+    );
     (i, if b > a { (q - a) / (b - a) } else { 0.0 })
 }
 
@@ -78,7 +84,9 @@ impl Stiffness {
             let i = i.min(nx.saturating_sub(1));
             let j = j.min(ny.saturating_sub(1));
             let k = k.min(gz.len().saturating_sub(1));
-            vals.get(i + nx * (j + ny * k)).copied().unwrap_or(f64::INFINITY)
+            vals.get(i + nx * (j + ny * k))
+                .copied()
+                .unwrap_or(f64::INFINITY)
         };
         let lerp = |a: f64, b: f64, t: f64| a + (b - a) * t;
         let c00 = lerp(at(ix, iy, iz), at(ix + 1, iy, iz), tx);
@@ -120,7 +128,9 @@ impl Stiffness {
                     if a >= b {
                         return Err(Invalid::new(
                             path,
-                            format!("positions must be strictly increasing (`{a}` is followed by `{b}`)"),
+                            format!(
+                                "positions must be strictly increasing (`{a}` is followed by `{b}`)"
+                            ),
                         ));
                     }
                 }
@@ -145,7 +155,9 @@ impl Stiffness {
                 } else {
                     Err(Invalid::new(
                         &path,
-                        format!("stiffness `{x}` N/µm is outside {MIN_K}..{MAX_K} (check the unit)"),
+                        format!(
+                            "stiffness `{x}` N/µm is outside {MIN_K}..{MAX_K} (check the unit)"
+                        ),
                     ))
                 }
             };
@@ -164,7 +176,9 @@ impl Stiffness {
                         } else {
                             Err(Invalid::new(
                                 &path,
-                                format!("{got} {what} for {want} grid positions (values are indexed [z][y][x])"),
+                                format!(
+                                    "{got} {what} for {want} grid positions (values are indexed [z][y][x])"
+                                ),
                             ))
                         }
                     };
@@ -214,10 +228,26 @@ mod tests {
     #[test]
     fn interpolates_and_clamps() {
         let s = map();
-        assert_abs_diff_eq!(s.k_n_per_um(&Vector3::new(25.0, 7.0, 3.0), 0, true), 15.0, epsilon = K_TOL);
-        assert_abs_diff_eq!(s.k_n_per_um(&Vector3::new(-5.0, 0.0, 0.0), 0, true), 10.0, epsilon = K_TOL);
-        assert_abs_diff_eq!(s.k_n_per_um(&Vector3::new(500.0, 0.0, 0.0), 0, true), 30.0, epsilon = K_TOL);
-        assert_abs_diff_eq!(s.k_n_per_um(&Vector3::new(50.0, 0.0, 0.0), 0, false), 25.0, epsilon = K_TOL);
+        assert_abs_diff_eq!(
+            s.k_n_per_um(&Vector3::new(25.0, 7.0, 3.0), 0, true),
+            15.0,
+            epsilon = K_TOL
+        );
+        assert_abs_diff_eq!(
+            s.k_n_per_um(&Vector3::new(-5.0, 0.0, 0.0), 0, true),
+            10.0,
+            epsilon = K_TOL
+        );
+        assert_abs_diff_eq!(
+            s.k_n_per_um(&Vector3::new(500.0, 0.0, 0.0), 0, true),
+            30.0,
+            epsilon = K_TOL
+        );
+        assert_abs_diff_eq!(
+            s.k_n_per_um(&Vector3::new(50.0, 0.0, 0.0), 0, false),
+            25.0,
+            epsilon = K_TOL
+        );
     }
 
     #[test]
@@ -251,7 +281,11 @@ mod tests {
         for v in s.k.iter_mut() {
             *v = vals.clone();
         }
-        assert_abs_diff_eq!(s.k_n_per_um(&Vector3::new(30.0, 40.0, 50.0), 1, false), 16.0, epsilon = K_TOL);
+        assert_abs_diff_eq!(
+            s.k_n_per_um(&Vector3::new(30.0, 40.0, 50.0), 1, false),
+            16.0,
+            epsilon = K_TOL
+        );
     }
 
     #[test]

@@ -146,7 +146,10 @@ impl Thermal {
     }
 
     /// Validates the `thermal:` block.
-    pub(crate) fn from_raw(raw: &RawThermal, has_axis: impl Fn(usize) -> bool) -> Result<Self, Invalid> {
+    pub(crate) fn from_raw(
+        raw: &RawThermal,
+        has_axis: impl Fn(usize) -> bool,
+    ) -> Result<Self, Invalid> {
         let tau = |path: &str, v: f64| {
             if v.is_finite() && v > 0.0 && v <= 1e5 {
                 Ok(v * 60.0)
@@ -170,7 +173,11 @@ impl Thermal {
         let mut t = Thermal::default();
         if let Some(s) = &raw.spindle {
             t.spindle = Some(Source {
-                gain_per_kw: gain("thermal.spindle.growth_um_per_kw", s.growth_um_per_kw, 1000.0)?,
+                gain_per_kw: gain(
+                    "thermal.spindle.growth_um_per_kw",
+                    s.growth_um_per_kw,
+                    1000.0,
+                )?,
                 time_constant_s: tau("thermal.spindle.time_constant_min", s.time_constant_min)?,
             });
             let idle = s.idle_w_per_rpm;
@@ -248,7 +255,11 @@ mod tests {
         let p = t.powers(10_000.0, 0.0, &Vector3::zeros(), &Vector3::zeros());
         assert_abs_diff_eq!(p[0], 1000.0, epsilon = UM_TOL);
         let s = t.step(&ThermalState::default(), &p, 600.0);
-        assert_abs_diff_eq!(s.growth_um, 10.0 * (1.0 - (-1.0f64).exp()), epsilon = UM_TOL);
+        assert_abs_diff_eq!(
+            s.growth_um,
+            10.0 * (1.0 - (-1.0f64).exp()),
+            epsilon = UM_TOL
+        );
         // Two half-τ steps equal one τ step (exact integration).
         let h = t.step(&t.step(&ThermalState::default(), &p, 300.0), &p, 300.0);
         assert_abs_diff_eq!(h.growth_um, s.growth_um, epsilon = UM_TOL);
@@ -257,7 +268,11 @@ mod tests {
         assert_abs_diff_eq!(c.growth_um, s.growth_um * (-1.0f64).exp(), epsilon = UM_TOL);
         // Warm-up and steady state.
         assert_abs_diff_eq!(t.warm_up(&p, 10.0).growth_um, s.growth_um, epsilon = UM_TOL);
-        assert_abs_diff_eq!(t.warm_up(&p, f64::INFINITY).growth_um, 10.0, epsilon = UM_TOL);
+        assert_abs_diff_eq!(
+            t.warm_up(&p, f64::INFINITY).growth_um,
+            10.0,
+            epsilon = UM_TOL
+        );
     }
 
     #[test]
@@ -265,7 +280,12 @@ mod tests {
         let t = model();
         // X at 6000 mm/min = 0.1 m/s with 400 N process force + 100 N
         // friction: 50 W.
-        let p = t.powers(0.0, 0.0, &Vector3::new(-400.0, 0.0, 0.0), &Vector3::new(6000.0, 0.0, 0.0));
+        let p = t.powers(
+            0.0,
+            0.0,
+            &Vector3::new(-400.0, 0.0, 0.0),
+            &Vector3::new(6000.0, 0.0, 0.0),
+        );
         assert_abs_diff_eq!(p[1], 50.0, epsilon = UM_TOL);
         assert_abs_diff_eq!(p[0], 0.0, epsilon = UM_TOL);
         // 20 ppm at X = 500 mm: +10 µm; growth 5 µm with the tool along +Z:
