@@ -668,3 +668,69 @@ impl<'m> Job<'m> {
         Ok(tracker.mean_power())
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::compensate::Settings;
+    use crate::emit::gcode::EmitOptions;
+    use crate::predict::EffectSet;
+    use approx::assert_abs_diff_eq;
+
+    const TIME_TOL_S: f64 = 1e-9;
+    const POWER_TOL_W: f64 = 1e-6;
+
+    #[test]
+    fn time_line_of_rapids_cycles_and_dwells() {
+        let text = "kind: machine_tool
+name: t
+axes:
+  - { name: X, type: linear, side: workpiece, travel_mm: [-500, 500], rapid_mm_per_min: 60000 }
+  - { name: Y, type: linear, side: workpiece, travel_mm: [-500, 500], rapid_mm_per_min: 60000 }
+  - { name: Z, type: linear, side: tool, travel_mm: [-500, 500], rapid_mm_per_min: 60000 }
+thermal:
+  spindle: { idle_w_per_rpm: 1.0, growth_um_per_kw: 10, time_constant_min: 10 }
+";
+        let m = match MachineTool::from_yaml_str(text, "t.yaml") {
+            Ok(m) => m,
+            Err(e) => panic!("{e}"),
+        };
+        let mut setup = Setup {
+            axes: [true, true, true, false, false, false],
+            ..Setup::default()
+        };
+        setup.home = [0.0, 0.0, 500.0, 0.0, 0.0, 0.0];
+        let job = Job {
+            predictor: Some(ToolPredictor::new(&m, EffectSet::default())),
+            setup,
+            settings: Settings::default(),
+            emit: EmitOptions {
+                decimals_mm: None,
+                annotate: false,
+            },
+            pool: None,
+        };
+        let program = "G0 X0 Y0 Z10\nS1000 M3\nG81 X30 Y40 Z-10 R2 F120\nG80\nG4 P1.5\n";
+        let s = match job.run(program.as_bytes(), "p.nc", None, None) {
+            Ok(s) => s,
+            Err(e) => panic!("{e}"),
+        };
+        // Rapid Z 500 → 10: 490 mm at 60000 mm/min = 0.49 s.
+        // Cycle: over the hole at Z10 (40 mm in Y, the longest) 0.04 s, down
+        // to R2 (8 mm) 0.008 s, feed 12 mm at 120 mm/min = 6 s, back to the
+        // initial Z10 (G98, 20 mm) 0.02 s. Dwell P1.5 (with a point: s) 1.5 s.
+        let spun = 0.04 + 0.008 + 6.0 + 0.02 + 1.5;
+        assert_abs_diff_eq!(s.duration_s, 0.49 + spun, epsilon = TIME_TOL_S);
+        // The spindle (1 W/rpm · 1000 rpm) runs from the M3 on.
+        assert_abs_diff_eq!(
+            s.mean_power_w[0],
+            1000.0 * spun / (0.49 + spun),
+            epsilon = POWER_TOL_W
+        );
+        let mean = match job.mean_power(program.as_bytes(), "p.nc") {
+            Ok(p) => p,
+            Err(e) => panic!("{e}"),
+        };
+        assert_abs_diff_eq!(mean[0], s.mean_power_w[0], epsilon = POWER_TOL_W);
+    }
+}

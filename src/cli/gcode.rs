@@ -497,6 +497,16 @@ pub fn compensate(a: &CompensateArgs) -> Result<i32> {
         summary.deviation.max,
         summary.deviation.max_line
     );
+    if summary.duration_s > 0.0 {
+        tracing::info!(
+            "time line {:.1} min; mean power spindle {:.0} W, drives X {:.0} Y {:.0} Z {:.0} W",
+            summary.duration_s / 60.0,
+            summary.mean_power_w[0],
+            summary.mean_power_w[1],
+            summary.mean_power_w[2],
+            summary.mean_power_w[3]
+        );
+    }
     Ok(if summary.max_residual_mm > a.tolerance {
         1
     } else {

@@ -405,3 +405,126 @@ impl<'m> ToolPredictor<'m> {
         b
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use approx::assert_abs_diff_eq;
+
+    const POS_TOL_MM: f64 = 1e-12;
+
+    /// Error-free XYZ mill with uniform stiffness (x 20, y 10, z 40/50 N/µm)
+    /// and a thermal model.
+    fn machine() -> MachineTool {
+        let text = "kind: machine_tool
+name: t
+axes:
+  - { name: X, type: linear, side: workpiece, travel_mm: [-500, 500], rapid_mm_per_min: 60000 }
+  - { name: Y, type: linear, side: workpiece, travel_mm: [-500, 500], rapid_mm_per_min: 60000 }
+  - { name: Z, type: linear, side: tool, travel_mm: [-500, 500], rapid_mm_per_min: 60000 }
+stiffness:
+  k_n_per_um: { x_pos: 20, x_neg: 20, y_pos: 10, y_neg: 10, z_pos: 40, z_neg: 50 }
+thermal:
+  spindle: { growth_um_per_kw: 10, time_constant_min: 1 }
+  axes:
+    X: { scale_ppm_per_kw: 50, time_constant_min: 1 }
+";
+        match MachineTool::from_yaml_str(text, "t.yaml") {
+            Ok(m) => m,
+            Err(e) => panic!("{e}"),
+        }
+    }
+
+    fn ctx() -> BlockContext {
+        BlockContext {
+            force_n: Vector3::new(100.0, -50.0, 200.0),
+            thermal: ThermalState {
+                growth_um: 4.0,
+                scale_ppm: [10.0, 0.0, 0.0],
+            },
+            vibration_mm: Vector3::new(0.002, 0.0, 0.0),
+            ..BlockContext::default()
+        }
+    }
+
+    #[test]
+    fn parts_are_hand_derived_and_dynamic_is_not_compensated() {
+        let m = machine();
+        let p = ToolPredictor::new(&m, EffectSet::default()).with_context(ctx());
+        let cmd = [200.0, 0.0, 0.0, 0.0, 0.0, 0.0];
+        let b = p.breakdown(&cmd, &[1; 6], 0.0);
+        // Static: (100/20, −50/10, 200/40) µm = (5, −5, 5) µm.
+        assert_abs_diff_eq!(
+            b.part(Effect::Static),
+            Vector3::new(0.005, -0.005, 0.005),
+            epsilon = POS_TOL_MM
+        );
+        // Thermal: 10 ppm · 200 mm = 2 µm in X; growth 4 µm: −4 µm in Z.
+        assert_abs_diff_eq!(
+            b.part(Effect::Thermal),
+            Vector3::new(0.002, 0.0, -0.004),
+            epsilon = POS_TOL_MM
+        );
+        assert_abs_diff_eq!(
+            b.part(Effect::Dynamic),
+            Vector3::new(0.002, 0.0, 0.0),
+            epsilon = POS_TOL_MM
+        );
+        // The total and the attained pose hold static + thermal only.
+        let want = Vector3::new(0.007, -0.005, 0.001);
+        assert_abs_diff_eq!(b.total(), want, epsilon = POS_TOL_MM);
+        let got = p.attained(&cmd, &[1; 6], 0.0).pos - p.nominal(&cmd, 0.0).pos;
+        assert_abs_diff_eq!(got, want, epsilon = POS_TOL_MM);
+    }
+
+    #[test]
+    fn switches_and_gains_act_on_their_part_only() {
+        let m = machine();
+        let cmd = [200.0, 0.0, 0.0, 0.0, 0.0, 0.0];
+        let full = ToolPredictor::new(&m, EffectSet::default())
+            .with_context(ctx())
+            .breakdown(&cmd, &[1; 6], 0.0);
+        for e in Effect::ALL {
+            let on: Vec<&str> = Effect::ALL
+                .iter()
+                .filter(|&&x| x != e)
+                .map(|x| x.name())
+                .collect();
+            let set = EffectSet::parse(&on.join(",")).unwrap_or_default();
+            let b = ToolPredictor::new(&m, set)
+                .with_context(ctx())
+                .breakdown(&cmd, &[1; 6], 0.0);
+            let mut set = EffectSet::default();
+            assert!(set.set_gain(&format!("{}=0.25", e.name())).is_ok());
+            let g = ToolPredictor::new(&m, set)
+                .with_context(ctx())
+                .breakdown(&cmd, &[1; 6], 0.0);
+            for x in Effect::ALL {
+                let want = if x == e {
+                    Vector3::zeros()
+                } else {
+                    full.part(x)
+                };
+                assert_abs_diff_eq!(b.part(x), want, epsilon = POS_TOL_MM);
+                let scale = if x == e { 0.25 } else { 1.0 };
+                assert_abs_diff_eq!(g.part(x), full.part(x) * scale, epsilon = POS_TOL_MM);
+            }
+        }
+    }
+
+    #[test]
+    fn thermal_start_parses() {
+        assert_eq!(ThermalStart::parse("cold").ok(), Some(ThermalStart::Cold));
+        assert_eq!(
+            ThermalStart::parse("steady").ok(),
+            Some(ThermalStart::Steady)
+        );
+        assert_eq!(
+            ThermalStart::parse("30").ok(),
+            Some(ThermalStart::Minutes(30.0))
+        );
+        assert!(ThermalStart::parse("warm").is_err());
+        assert!(ThermalStart::parse("-5").is_err());
+        assert!(!ThermalStart::Minutes(0.0).needs_mean_power());
+    }
+}
