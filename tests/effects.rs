@@ -547,3 +547,42 @@ fn machine_file_sections_are_validated_with_key_paths() {
         assert!(err.contains("bad.yaml:") && err.contains(needle), "{err}");
     }
 }
+
+#[test]
+fn bad_process_flags_are_usage_errors() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let m = thermal_machine(dir.path());
+    let p = write(dir.path(), "p.nc", "G0 X0 Y0 Z0\n");
+    for (args, needle) in [
+        (vec!["--force", "constant:1,2"], "--force: `constant:1,2`"),
+        (
+            vec!["--force", "constant:1,2,3@wrist"],
+            "--force: `constant:1,2,3@wrist`",
+        ),
+        (vec!["--thermal-start", "warm"], "--thermal-start: `warm`"),
+        (vec!["--milling-depth=-1"], "--milling-depth -1"),
+        (vec!["--gain", "vibration=2"], "unknown effect `vibration`"),
+    ] {
+        let out = postproc()
+            .arg("report")
+            .arg(&p)
+            .arg("-m")
+            .arg(&m)
+            .args(&args)
+            .output()
+            .expect("run");
+        assert_eq!(out.status.code(), Some(2), "{args:?}");
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(err.contains(needle), "{args:?}: {err}");
+    }
+    // A warm start reads the program twice: not from standard input.
+    let out = postproc()
+        .args(["report", "-", "-m"])
+        .arg(&m)
+        .args(["--thermal-start", "steady"])
+        .write_stdin("G0 X0 Y0 Z0\n")
+        .output()
+        .expect("run");
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("not standard input"));
+}
