@@ -375,8 +375,11 @@ impl<'m> ToolPredictor<'m> {
             pose.pos += self.static_part(cmd) * gs;
         }
         if self.thermal_active() {
-            let n = nom.unwrap_or_else(|| self.machine.nominal(cmd, tool_mm));
-            pose.pos += self.thermal_part(cmd, &n.dir) * self.effects.gain(Effect::Thermal);
+            // The growth acts along the tool axis; the attained axis differs
+            // from the nominal one by µrad, which changes a µm growth by
+            // 1e-12 mm, so the chain is not evaluated a second time.
+            let dir = nom.map_or(pose.dir, |n| n.dir);
+            pose.pos += self.thermal_part(cmd, &dir) * self.effects.gain(Effect::Thermal);
         }
         pose
     }
