@@ -464,7 +464,8 @@ impl<'m> Job<'m> {
         let mut line_no = 0usize;
         let mut tools: std::collections::BTreeSet<u32> = Default::default();
         let mut clamped = 0u8;
-        let mut clamp_warnings: Vec<Warning> = Vec::new();
+        // Warnings found by the job itself: clamped tables, resonance.
+        let mut extra_warnings: Vec<Warning> = Vec::new();
         let mut tracker = self.predictor.as_ref().map(|p| Tracker::new(p, false));
         let mut contexts: Vec<BlockContext> = Vec::with_capacity(CHUNK_LINES);
         let mut eof = false;
@@ -520,7 +521,7 @@ impl<'m> Job<'m> {
                                 mv.end[slot]
                             );
                             tracing::warn!("{file}:{}: {message}", blocks[i].line_no);
-                            clamp_warnings.push(Warning {
+                            extra_warnings.push(Warning {
                                 line: blocks[i].line_no,
                                 message,
                                 count: 1,
@@ -535,7 +536,7 @@ impl<'m> Job<'m> {
                         interp.spindle_rpm(),
                         blocks[i].line_no,
                         file,
-                        &mut clamp_warnings,
+                        &mut extra_warnings,
                     ));
                 }
                 plans.push(plan);
@@ -627,7 +628,7 @@ impl<'m> Job<'m> {
         }
         summary.inch = interp.inch();
         summary.warnings = interp.warnings().to_vec();
-        summary.warnings.extend(clamp_warnings);
+        summary.warnings.extend(extra_warnings);
         summary.tools = tools.into_iter().collect();
         summary.changed = emitter.changed_blocks();
         summary.added = emitter.added_blocks();
