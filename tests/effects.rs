@@ -586,3 +586,57 @@ fn bad_process_flags_are_usage_errors() {
     assert_eq!(out.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&out.stderr).contains("not standard input"));
 }
+
+#[test]
+fn feed_drive_heat_scales_the_axis_and_the_stiffness_map_is_position_dependent() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let m = write(
+        dir.path(),
+        "m.yaml",
+        &format!(
+            "{AXES}thermal:\n  axes:\n    X: {{ scale_ppm_per_kw: 1000, time_constant_min: 1, friction_n: 1000 }}\n"
+        ),
+    );
+    let p = write(dir.path(), "p.nc", "G0 X0 Y0 Z0\nG1 X100 F6000\n");
+    // X drive: 1000 N friction × 0.1 m/s = 100 W during the 1 s feed; the
+    // 0.5 s rapid from Z500 does not move X. Mean X power 100 · 1/1.5 W.
+    //   steady start y0 = 1000 ppm/kW · 0.0666… kW = 66.67 ppm
+    //   after the rapid  y1 = y0 · e^(−0.5/60)
+    //   after the feed   y2 = 100 + (y1 − 100) · e^(−1/60)   (steady 100 ppm)
+    // The axis reaches c (1 + y2·10⁻⁶), so the command for X100 is
+    // 100 / (1 + y2·10⁻⁶).
+    let y0 = 1000.0 * (100.0 / 1.5) / 1000.0;
+    let y1 = y0 * (-0.5f64 / 60.0).exp();
+    let y2 = 100.0 + (y1 - 100.0) * (-1.0f64 / 60.0).exp();
+    let out = compensate(&m, &p, &["--thermal-start", "steady"]);
+    assert_abs_diff_eq!(
+        word(&out, 2, 'X'),
+        100.0 / (1.0 + y2 * 1e-6),
+        epsilon = POS_TOL_MM
+    );
+
+    // Stiffness along X from 10 N/µm at X0 to 30 N/µm at X100 (uniform in
+    // Y and Z): at X50, k = 20 N/µm, so 300 N along +X gives 15 µm. The
+    // solve evaluates k where the corrected command lies (X49.985, k =
+    // 19.997 N/µm): the command is 50 − 300/k(c) µm, solved by
+    // c = 50 − 0.3/(10 + 0.2 c), c ≈ 49.984998.
+    let m = write(
+        dir.path(),
+        "k.yaml",
+        &format!(
+            "{AXES}stiffness:\n  grid_mm: {{ x: [0, 100], y: [0], z: [0] }}\n  k_n_per_um:\n    x_pos: [[[10, 30]]]\n    x_neg: 20\n    y_pos: 20\n    y_neg: 20\n    z_pos: 20\n    z_neg: 20\n"
+        ),
+    );
+    let p = write(dir.path(), "k.nc", "G0 X0 Y0 Z0\nG1 X50 F100\n");
+    // The deflection changes along the move (30 µm at X0), so the move is
+    // split; its end point is the last line.
+    let out = compensate(&m, &p, &["--force", "constant:300,0,0"]);
+    let last = out.lines().count();
+    assert!(last > 2, "{out}");
+    let mut c: f64 = 50.0;
+    for _ in 0..50 {
+        c = 50.0 - 0.3 / (10.0 + 0.2 * c);
+    }
+    assert_abs_diff_eq!(word(&out, last, 'X'), c, epsilon = POS_TOL_MM);
+    assert_abs_diff_eq!(c, 49.985, epsilon = 1e-5);
+}
