@@ -14,10 +14,15 @@ use rayon::prelude::*;
 use crate::compensate::{self, BlockResult, Failure, Settings};
 use crate::emit::gcode::{EmitOptions, Emitter};
 use crate::error::{Error, Located, Result};
+use nalgebra::Vector3;
+
 use crate::machine::AxisVec;
-use crate::predict::ToolPredictor;
+use crate::machine::tool::thermal::Powers;
+use crate::machine::tool::{MachineTool, Modal, Thermal, ThermalState};
+use crate::predict::{BlockContext, Effect, ThermalStart, ToolPredictor};
+use crate::process::{CutState, ForceModel, MillingCache};
 use crate::program::gcode::{Block, parse_line};
-use crate::program::interp::{Interpreter, Motion, Plan, PlanKind, Setup, Warning};
+use crate::program::interp::{END_INSIDE, Interpreter, Motion, Plan, PlanKind, Setup, Warning};
 
 /// Lines processed per chunk.
 pub const CHUNK_LINES: usize = 4096;
@@ -126,6 +131,11 @@ pub struct Summary {
     pub max_residual_mm: f64,
     /// The program is in inches.
     pub inch: bool,
+    /// Duration of the program on its time line, s (0 when no process
+    /// effect is active).
+    pub duration_s: f64,
+    /// Mean power of the heat sources (spindle, X, Y, Z drives), W.
+    pub mean_power_w: Powers,
 }
 
 /// One per-block row for reports.
@@ -155,6 +165,270 @@ pub struct Job<'m> {
     pub emit: EmitOptions,
     /// Worker threads for the per-block prediction (rayon's global pool when `None`).
     pub pool: Option<&'m rayon::ThreadPool>,
+}
+
+/// The in-order pass of the process effects: puts the program on a time
+/// line, predicts the process force, integrates the thermal state and the
+/// vibration amplitude, and hands each block its [`BlockContext`].
+struct Tracker<'a> {
+    machine: &'a MachineTool,
+    force: Option<&'a ForceModel>,
+    thermal: Option<&'a Thermal>,
+    modal: Option<&'a Modal>,
+    depth_mm: Option<f64>,
+    width_mm: Option<f64>,
+    cache: MillingCache,
+    state: ThermalState,
+    time_s: f64,
+    energy_j: Powers,
+    pos: Option<AxisVec>,
+    rpm: f64,
+    warned_rpm: Vec<f64>,
+    active: bool,
+}
+
+/// Rapid-traverse time between two commands (each axis at its own rate), s.
+fn rapid_time_s(m: &MachineTool, a: &AxisVec, b: &AxisVec) -> f64 {
+    (0..6)
+        .map(|s| (b[s] - a[s]).abs() / m.rapid_per_min(s) * 60.0)
+        .fold(0.0, f64::max)
+}
+
+fn axis_speed(a: &AxisVec, b: &AxisVec, dt_s: f64) -> Vector3<f64> {
+    if dt_s <= 0.0 {
+        return Vector3::zeros();
+    }
+    Vector3::new(b[0] - a[0], b[1] - a[1], b[2] - a[2]) * (60.0 / dt_s)
+}
+
+impl<'a> Tracker<'a> {
+    fn new(pred: &ToolPredictor<'a>, cold: bool) -> Self {
+        let m = pred.machine;
+        let force = match pred.process {
+            Some(p) => p.force.as_ref(),
+            None => m.process_force(),
+        };
+        let e = pred.effects;
+        let thermal = m.thermal();
+        let mut state = ThermalState::default();
+        if let (Some(t), Some(p), false) = (thermal, pred.process, cold) {
+            let mean = p.mean_power_w.unwrap_or([0.0; 4]);
+            state = match p.thermal_start {
+                ThermalStart::Cold => state,
+                ThermalStart::Steady => t.warm_up(&mean, f64::INFINITY),
+                ThermalStart::Minutes(min) => t.warm_up(&mean, min),
+            };
+        }
+        let active = (force.is_some()
+            && (e.gain(Effect::Static) != 0.0
+                || e.gain(Effect::Dynamic) != 0.0
+                || e.gain(Effect::Thermal) != 0.0))
+            || (thermal.is_some() && e.gain(Effect::Thermal) != 0.0);
+        Tracker {
+            machine: m,
+            force,
+            thermal,
+            modal: m.modal(),
+            depth_mm: pred.process.and_then(|p| p.milling_depth_mm),
+            width_mm: pred.process.and_then(|p| p.milling_width_mm),
+            cache: MillingCache::default(),
+            state,
+            time_s: 0.0,
+            energy_j: [0.0; 4],
+            pos: None,
+            rpm: 0.0,
+            warned_rpm: Vec::new(),
+            active,
+        }
+    }
+
+    /// Lets `dt_s` pass with the given process load and axis speeds.
+    fn phase(&mut self, dt_s: f64, force: &Vector3<f64>, cut_w: f64, speed: &Vector3<f64>) {
+        if dt_s <= 0.0 || !dt_s.is_finite() {
+            return;
+        }
+        self.time_s += dt_s;
+        if let Some(t) = self.thermal {
+            let p = t.powers(self.rpm, cut_w, force, speed);
+            for (e, p) in self.energy_j.iter_mut().zip(p) {
+                *e += p * dt_s;
+            }
+            self.state = t.step(&self.state, &p, dt_s);
+        }
+    }
+
+    /// Mean power of each heat source so far, W.
+    fn mean_power(&self) -> Powers {
+        if self.time_s <= 0.0 {
+            return [0.0; 4];
+        }
+        self.energy_j.map(|e| e / self.time_s)
+    }
+
+    fn context(&self) -> BlockContext {
+        BlockContext {
+            time_s: self.time_s,
+            thermal: self.state,
+            spindle_rpm: self.rpm,
+            ..BlockContext::default()
+        }
+    }
+
+    /// Advances over one block and returns its context.
+    fn advance(
+        &mut self,
+        plan: &Plan,
+        spindle_rpm: f64,
+        line: usize,
+        file: &str,
+        warnings: &mut Vec<Warning>,
+    ) -> BlockContext {
+        if !self.active {
+            return BlockContext::default();
+        }
+        self.rpm = spindle_rpm;
+        let Some(mv) = plan.mv else {
+            if plan.dwell_s > 0.0 {
+                self.phase(plan.dwell_s, &Vector3::zeros(), 0.0, &Vector3::zeros());
+            }
+            return self.context();
+        };
+        self.rpm = mv.spindle_rpm;
+        let m = self.machine;
+        let prev = self.pos.unwrap_or(mv.start);
+        // Positioning before a canned-cycle hole: over the hole at the
+        // current height, then down to the R level.
+        if let PlanKind::Cycle { .. } = plan.kind {
+            let mut above = mv.start;
+            above[2] = prev[2];
+            for (a, b) in [(prev, above), (above, mv.start)] {
+                let dt = rapid_time_s(m, &a, &b);
+                self.phase(dt, &Vector3::zeros(), 0.0, &axis_speed(&a, &b, dt));
+            }
+        }
+        let cutting = mv.motion != Motion::Rapid && plan.kind != PlanKind::Fixed;
+        let mut ctx_force = Vector3::zeros();
+        let mut tooth_hz = 0.0;
+        let mut vibration = Vector3::zeros();
+        if cutting {
+            let s3 = mv.start3();
+            let e3 = mv.end3();
+            let feed_dir = match &mv.arc {
+                Some(arc) => arc.tangent(&s3, &e3, END_INSIDE),
+                None => (e3 - s3)
+                    .try_normalize(1e-12)
+                    .unwrap_or_else(Vector3::zeros),
+            };
+            let mut load = crate::process::ProcessLoad::default();
+            if let Some(f) = self.force {
+                let tool_axis = m.nominal(&mv.end, mv.tool_len_mm).dir;
+                let drilling = matches!(plan.kind, PlanKind::Cycle { .. })
+                    || (mv.arc.is_none() && feed_dir.dot(&tool_axis) < -(1.0 - 1e-6));
+                let state = CutState {
+                    line,
+                    cutting,
+                    drilling,
+                    feed_dir,
+                    tool_axis,
+                    feed_mm_min: mv.feed_mm_min,
+                    spindle_rpm: mv.spindle_rpm,
+                    depth_mm: plan.milling_mm[0].or(self.depth_mm),
+                    width_mm: plan.milling_mm[1].or(self.width_mm),
+                };
+                load = f.load(&state, &mut self.cache);
+            }
+            let len = mv.length_mm();
+            let len = if len > 1e-9 {
+                len
+            } else {
+                (3..6)
+                    .map(|s| (mv.end[s] - mv.start[s]).abs())
+                    .fold(0.0, f64::max)
+            };
+            let dt = if mv.feed_mm_min > 0.0 {
+                len / mv.feed_mm_min * 60.0
+            } else {
+                0.0
+            };
+            self.phase(
+                dt,
+                &load.force_n,
+                load.cutting_power_w,
+                &axis_speed(&mv.start, &mv.end, dt),
+            );
+            ctx_force = load.force_n;
+            tooth_hz = load.tooth_hz;
+            if let (Some(modal), true) = (self.modal, tooth_hz > 0.0) {
+                vibration = modal.amplitude_mm(&load.harmonic_n, tooth_hz);
+                self.check_resonance(modal, tooth_hz, &vibration, line, file, warnings);
+            }
+        } else {
+            let dt = rapid_time_s(m, &mv.start, &mv.end);
+            self.phase(
+                dt,
+                &Vector3::zeros(),
+                0.0,
+                &axis_speed(&mv.start, &mv.end, dt),
+            );
+        }
+        let mut end = mv.end;
+        if let PlanKind::Cycle { retract, .. } = plan.kind {
+            let mut up = mv.end;
+            up[2] = retract;
+            let dt = rapid_time_s(m, &mv.end, &up);
+            self.phase(dt, &Vector3::zeros(), 0.0, &axis_speed(&mv.end, &up, dt));
+            end = up;
+        }
+        self.pos = Some(end);
+        if plan.dwell_s > 0.0 {
+            self.phase(plan.dwell_s, &Vector3::zeros(), 0.0, &Vector3::zeros());
+        }
+        BlockContext {
+            force_n: ctx_force,
+            tooth_hz,
+            vibration_mm: vibration,
+            ..self.context()
+        }
+    }
+
+    /// Warns once per spindle speed when the tooth-passing frequency is
+    /// within 10 % of a natural frequency, with a suggested speed.
+    fn check_resonance(
+        &mut self,
+        modal: &Modal,
+        tooth_hz: f64,
+        vibration: &Vector3<f64>,
+        line: usize,
+        file: &str,
+        warnings: &mut Vec<Warning>,
+    ) {
+        let Some((dir, mode)) = modal.resonance(tooth_hz) else {
+            return;
+        };
+        if self.warned_rpm.contains(&self.rpm) {
+            return;
+        }
+        self.warned_rpm.push(self.rpm);
+        let flutes = match self.force {
+            Some(ForceModel::Milling(mi)) => mi.flutes,
+            _ => 1,
+        };
+        let suggest = modal.suggest_rpm(&mode, flutes, self.rpm);
+        let message = format!(
+            "tooth-passing frequency {tooth_hz:.1} Hz (S{} x {flutes} flutes) is within 10 % of the {} natural frequency {:.1} Hz: predicted vibration {:.4} mm; suggested spindle speed S{suggest:.0} (tooth passing at {:.1} x the natural frequency)",
+            self.rpm,
+            ["X", "Y", "Z"].get(dir).copied().unwrap_or("?"),
+            mode.natural_frequency_hz,
+            vibration.norm(),
+            suggest * f64::from(flutes) / 60.0 / mode.natural_frequency_hz,
+        );
+        tracing::warn!("{file}:{line}: {message}");
+        warnings.push(Warning {
+            line,
+            message,
+            count: 1,
+        });
+    }
 }
 
 fn motion_label(plan: &Plan) -> &'static str {
@@ -190,12 +464,16 @@ impl<'m> Job<'m> {
         let mut line_no = 0usize;
         let mut tools: std::collections::BTreeSet<u32> = Default::default();
         let mut clamped = 0u8;
-        let mut clamp_warnings: Vec<Warning> = Vec::new();
+        // Warnings found by the job itself: clamped tables, resonance.
+        let mut extra_warnings: Vec<Warning> = Vec::new();
+        let mut tracker = self.predictor.as_ref().map(|p| Tracker::new(p, false));
+        let mut contexts: Vec<BlockContext> = Vec::with_capacity(CHUNK_LINES);
         let mut eof = false;
         while !eof {
             buf.clear();
             ranges.clear();
             plans.clear();
+            contexts.clear();
             while ranges.len() < CHUNK_LINES {
                 let start = buf.len();
                 let n = input
@@ -243,7 +521,7 @@ impl<'m> Job<'m> {
                                 mv.end[slot]
                             );
                             tracing::warn!("{file}:{}: {message}", blocks[i].line_no);
-                            clamp_warnings.push(Warning {
+                            extra_warnings.push(Warning {
                                 line: blocks[i].line_no,
                                 message,
                                 count: 1,
@@ -251,6 +529,15 @@ impl<'m> Job<'m> {
                         }
                         clamped |= fresh;
                     }
+                }
+                if let Some(t) = tracker.as_mut() {
+                    contexts.push(t.advance(
+                        &plan,
+                        interp.spindle_rpm(),
+                        blocks[i].line_no,
+                        file,
+                        &mut extra_warnings,
+                    ));
                 }
                 plans.push(plan);
             }
@@ -263,21 +550,23 @@ impl<'m> Job<'m> {
             };
             // With every effect off the output is the input; a report still
             // wants its rows (of zero deviation).
-            let results: Vec<std::result::Result<BlockResult, Failure>> =
-                if pred.effects.is_none() && rows.is_none() {
-                    Vec::new()
-                } else {
-                    let work = || {
-                        plans
-                            .par_iter()
-                            .map(|p| compensate::block(pred, p, &self.settings))
-                            .collect()
-                    };
-                    match self.pool {
-                        Some(pool) => pool.install(work),
-                        None => work(),
-                    }
+            let results: Vec<std::result::Result<BlockResult, Failure>> = if pred.effects.is_none()
+                && rows.is_none()
+            {
+                Vec::new()
+            } else {
+                let work = || {
+                    plans
+                        .par_iter()
+                        .zip(contexts.par_iter())
+                        .map(|(p, c)| compensate::block(&pred.with_context(*c), p, &self.settings))
+                        .collect()
                 };
+                match self.pool {
+                    Some(pool) => pool.install(work),
+                    None => work(),
+                }
+            };
             out_buf.clear();
             for (i, &(s, e)) in ranges.iter().enumerate() {
                 let plan = &plans[i];
@@ -339,10 +628,111 @@ impl<'m> Job<'m> {
         }
         summary.inch = interp.inch();
         summary.warnings = interp.warnings().to_vec();
-        summary.warnings.extend(clamp_warnings);
+        summary.warnings.extend(extra_warnings);
         summary.tools = tools.into_iter().collect();
         summary.changed = emitter.changed_blocks();
         summary.added = emitter.added_blocks();
+        if let Some(t) = &tracker {
+            summary.duration_s = t.time_s;
+            summary.mean_power_w = t.mean_power();
+        }
         Ok(summary)
+    }
+
+    /// A first pass over the program for the thermal start: the mean power
+    /// of each heat source (spindle, X, Y, Z drives), W, over the program's
+    /// time line from a cold start. Parses and interprets only.
+    pub fn mean_power<R: BufRead>(&self, mut input: R, file: &str) -> Result<Powers> {
+        let Some(pred) = &self.predictor else {
+            return Ok([0.0; 4]);
+        };
+        let mut tracker = Tracker::new(pred, true);
+        tracker.modal = None;
+        let mut interp = Interpreter::new(self.setup.clone(), file);
+        let mut block = Block::default();
+        let mut buf = Vec::with_capacity(256);
+        let mut sink = Vec::new();
+        let mut line_no = 0;
+        loop {
+            buf.clear();
+            let n = input
+                .read_until(b'\n', &mut buf)
+                .map_err(|e| Error::io(file, e))?;
+            if n == 0 {
+                break;
+            }
+            line_no += 1;
+            parse_line(&buf, line_no, file, &mut block)?;
+            let plan = interp.step(&block, &buf)?;
+            tracker.advance(&plan, interp.spindle_rpm(), line_no, file, &mut sink);
+        }
+        Ok(tracker.mean_power())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::compensate::Settings;
+    use crate::emit::gcode::EmitOptions;
+    use crate::predict::EffectSet;
+    use approx::assert_abs_diff_eq;
+
+    const TIME_TOL_S: f64 = 1e-9;
+    const POWER_TOL_W: f64 = 1e-6;
+
+    #[test]
+    fn time_line_of_rapids_cycles_and_dwells() {
+        let text = "kind: machine_tool
+name: t
+axes:
+  - { name: X, type: linear, side: workpiece, travel_mm: [-500, 500], rapid_mm_per_min: 60000 }
+  - { name: Y, type: linear, side: workpiece, travel_mm: [-500, 500], rapid_mm_per_min: 60000 }
+  - { name: Z, type: linear, side: tool, travel_mm: [-500, 500], rapid_mm_per_min: 60000 }
+thermal:
+  spindle: { idle_w_per_rpm: 1.0, growth_um_per_kw: 10, time_constant_min: 10 }
+";
+        let m = match MachineTool::from_yaml_str(text, "t.yaml") {
+            Ok(m) => m,
+            Err(e) => panic!("{e}"),
+        };
+        let mut setup = Setup {
+            axes: [true, true, true, false, false, false],
+            ..Setup::default()
+        };
+        setup.home = [0.0, 0.0, 500.0, 0.0, 0.0, 0.0];
+        let job = Job {
+            predictor: Some(ToolPredictor::new(&m, EffectSet::default())),
+            setup,
+            settings: Settings::default(),
+            emit: EmitOptions {
+                decimals_mm: None,
+                decimals_deg: None,
+                annotate: false,
+            },
+            pool: None,
+        };
+        let program = "G0 X0 Y0 Z10\nS1000 M3\nG81 X30 Y40 Z-10 R2 F120\nG80\nG4 P1.5\n";
+        let s = match job.run(program.as_bytes(), "p.nc", None, None) {
+            Ok(s) => s,
+            Err(e) => panic!("{e}"),
+        };
+        // Rapid Z 500 → 10: 490 mm at 60000 mm/min = 0.49 s.
+        // Cycle: over the hole at Z10 (40 mm in Y, the longest) 0.04 s, down
+        // to R2 (8 mm) 0.008 s, feed 12 mm at 120 mm/min = 6 s, back to the
+        // initial Z10 (G98, 20 mm) 0.02 s. Dwell P1.5 (with a point: s) 1.5 s.
+        let spun = 0.04 + 0.008 + 6.0 + 0.02 + 1.5;
+        assert_abs_diff_eq!(s.duration_s, 0.49 + spun, epsilon = TIME_TOL_S);
+        // The spindle (1 W/rpm · 1000 rpm) runs from the M3 on.
+        assert_abs_diff_eq!(
+            s.mean_power_w[0],
+            1000.0 * spun / (0.49 + spun),
+            epsilon = POWER_TOL_W
+        );
+        let mean = match job.mean_power(program.as_bytes(), "p.nc") {
+            Ok(p) => p,
+            Err(e) => panic!("{e}"),
+        };
+        assert_abs_diff_eq!(mean[0], s.mean_power_w[0], epsilon = POWER_TOL_W);
     }
 }

@@ -16,6 +16,7 @@ pub mod error;
 pub mod job;
 pub mod machine;
 pub mod predict;
+pub mod process;
 pub mod program;
 
 pub use error::{Error, Result};

@@ -3,6 +3,7 @@
 
 mod bad_corpus;
 mod common;
+mod effects;
 mod gcode_cli;
 mod gcode_grammar;
 mod golden;

@@ -14,7 +14,8 @@ use crate::error::{Error, Result};
 use crate::job::{Job, Summary};
 use crate::machine::Machine;
 use crate::machine::tool::MachineTool;
-use crate::predict::{EffectSet, ToolPredictor};
+use crate::predict::{EffectSet, ProcessSetup, ThermalStart, ToolPredictor};
+use crate::process::{ForceModel, ForceTable, Frame};
 use crate::program::interp::Setup;
 
 fn load_machine(name: &str) -> Result<MachineTool> {
@@ -112,6 +113,100 @@ fn effects(args: &EffectArgs) -> Result<EffectSet> {
         set.set_gain(g)?;
     }
     Ok(set)
+}
+
+/// Parses `--force`: `none` or `constant:FX,FY,FZ[@frame]`.
+fn parse_force(spec: &str) -> Result<Option<ForceModel>> {
+    let spec = spec.trim();
+    if spec == "none" {
+        return Ok(None);
+    }
+    let bad = || {
+        usage(format!(
+            "--force: `{spec}`: expected none or constant:FX,FY,FZ[@workpiece|tool|feed] (N)"
+        ))
+    };
+    let body = spec.strip_prefix("constant:").ok_or_else(bad)?;
+    let (vals, frame) = match body.split_once('@') {
+        Some((v, f)) => (v, Frame::parse(f).ok_or_else(bad)?),
+        None => (body, Frame::Workpiece),
+    };
+    let v: Vec<f64> = vals
+        .split(',')
+        .map(|x| x.trim().parse::<f64>())
+        .collect::<std::result::Result<_, _>>()
+        .map_err(|_| bad())?;
+    match v.as_slice() {
+        [x, y, z] if v.iter().all(|c| c.is_finite() && c.abs() <= 1e6) => {
+            Ok(Some(ForceModel::Constant {
+                force_n: nalgebra::Vector3::new(*x, *y, *z),
+                frame,
+            }))
+        }
+        _ => Err(bad()),
+    }
+}
+
+/// The job's process settings from the machine file and the flags.
+fn process_setup(args: &EffectArgs, machine: &MachineTool) -> Result<ProcessSetup> {
+    let mut p = ProcessSetup::for_machine(machine);
+    if let Some(spec) = &args.force {
+        p.force = parse_force(spec)?;
+    }
+    if let Some(path) = &args.force_table {
+        p.force = Some(ForceModel::Table(ForceTable::load(path)?));
+    }
+    for (flag, v) in [
+        ("--milling-depth", args.milling_depth),
+        ("--milling-width", args.milling_width),
+    ] {
+        if let Some(v) = v {
+            if !v.is_finite() || !(0.0..=1e4).contains(&v) {
+                return Err(usage(format!("{flag} {v}: must be within 0..10000 mm")));
+            }
+        }
+    }
+    p.milling_depth_mm = args.milling_depth;
+    p.milling_width_mm = args.milling_width;
+    p.thermal_start = ThermalStart::parse(&args.thermal_start)?;
+    Ok(p)
+}
+
+/// For a `steady` or warm-up thermal start: the program's mean power from a
+/// first pass over the file.
+fn add_mean_power(
+    process: &mut ProcessSetup,
+    machine: &MachineTool,
+    setup: &Setup,
+    effects: EffectSet,
+    input: &Path,
+) -> Result<()> {
+    if !process.thermal_start.needs_mean_power() || machine.thermal().is_none() {
+        return Ok(());
+    }
+    if input == Path::new("-") {
+        return Err(usage(
+            "--thermal-start steady or MINUTES reads the program twice; give a file, not standard input",
+        ));
+    }
+    let mean = {
+        let job = Job {
+            predictor: Some(ToolPredictor::new(machine, effects).with_process(process)),
+            setup: setup.clone(),
+            settings: Settings::default(),
+            emit: EmitOptions {
+                decimals_mm: None,
+                decimals_deg: None,
+                annotate: false,
+            },
+            pool: None,
+        };
+        let (input, name) = open_input(input)?;
+        job.mean_power(input, &name)?
+    };
+    tracing::debug!("mean power over the program (spindle, X, Y, Z): {mean:?} W");
+    process.mean_power_w = Some(mean);
+    Ok(())
 }
 
 fn thread_pool(threads: Option<usize>) -> Result<rayon::ThreadPool> {
@@ -267,8 +362,10 @@ pub fn write_atomically<T>(path: &Path, f: impl FnOnce(&mut dyn Write) -> Result
     Ok(value)
 }
 
+#[allow(clippy::too_many_arguments)]
 fn build_job<'m>(
     machine: &'m MachineTool,
+    process: &'m ProcessSetup,
     pool: &'m rayon::ThreadPool,
     setup: Setup,
     effects: EffectSet,
@@ -287,7 +384,7 @@ fn build_job<'m>(
         }
     }
     Ok(Job {
-        predictor: Some(ToolPredictor::new(machine, effects)),
+        predictor: Some(ToolPredictor::new(machine, effects).with_process(process)),
         setup,
         settings: Settings {
             tolerance_mm: tolerance,
@@ -357,11 +454,15 @@ fn run_reporting(
 pub fn compensate(a: &CompensateArgs) -> Result<i32> {
     let (machine, setup) = machine_setup(&a.program, "compensate")?;
     let pool = thread_pool(a.effects.threads)?;
+    let effect_set = effects(&a.effects)?;
+    let mut process = process_setup(&a.effects, &machine)?;
+    add_mean_power(&mut process, &machine, &setup, effect_set, &a.program.file)?;
     let job = build_job(
         &machine,
+        &process,
         &pool,
         setup.clone(),
-        effects(&a.effects)?,
+        effect_set,
         a.tolerance,
         a.decimals,
         a.annotate == Annotate::Comment,
@@ -399,6 +500,16 @@ pub fn compensate(a: &CompensateArgs) -> Result<i32> {
         summary.deviation.max,
         summary.deviation.max_line
     );
+    if summary.duration_s > 0.0 {
+        tracing::info!(
+            "time line {:.1} min; mean power spindle {:.0} W, drives X {:.0} Y {:.0} Z {:.0} W",
+            summary.duration_s / 60.0,
+            summary.mean_power_w[0],
+            summary.mean_power_w[1],
+            summary.mean_power_w[2],
+            summary.mean_power_w[3]
+        );
+    }
     Ok(if summary.max_residual_mm > a.tolerance {
         1
     } else {
@@ -410,11 +521,15 @@ pub fn compensate(a: &CompensateArgs) -> Result<i32> {
 pub fn report(a: &ReportArgs) -> Result<i32> {
     let (machine, setup) = machine_setup(&a.program, "report")?;
     let pool = thread_pool(a.effects.threads)?;
+    let effect_set = effects(&a.effects)?;
+    let mut process = process_setup(&a.effects, &machine)?;
+    add_mean_power(&mut process, &machine, &setup, effect_set, &a.program.file)?;
     let job = build_job(
         &machine,
+        &process,
         &pool,
         setup.clone(),
-        effects(&a.effects)?,
+        effect_set,
         0.001,
         None,
         false,

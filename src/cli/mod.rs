@@ -78,14 +78,26 @@ pub enum Annotate {
 /// Options of a prediction (effects and gains).
 #[derive(Debug, Args, Clone)]
 pub struct EffectArgs {
-    /// Effects to predict and compensate: all, none, or a list (geometric).
+    /// Effects to predict: all, none, or a list of geometric, static, thermal, dynamic (dynamic is reported, not compensated).
     #[arg(long, default_value = "all")]
     pub effects: String,
-    /// Scale an effect: --gain geometric=0.5.
+    /// Scale an effect: --gain geometric=0.5, --gain thermal=0.8.
     #[arg(long = "gain", value_name = "EFFECT=GAIN")]
     pub gains: Vec<String>,
-    /// Initial thermal state: cold, steady (the program as a repeated task) or minutes of warm-up.
-    #[arg(long, default_value = "cold", value_name = "cold|steady|MINUTES")]
+    /// Process force instead of the machine file's `process_force`: none, or constant:FX,FY,FZ[@workpiece|tool|feed] (N, force on the tool).
+    #[arg(long, value_name = "SPEC")]
+    pub force: Option<String>,
+    /// Per-line process forces from a CSV file (line,fx_n,fy_n,fz_n; workpiece frame, N).
+    #[arg(long, value_name = "FILE", conflicts_with = "force")]
+    pub force_table: Option<PathBuf>,
+    /// Milling axial depth of cut until a program directive sets one, mm.
+    #[arg(long, value_name = "MM")]
+    pub milling_depth: Option<f64>,
+    /// Milling radial width of cut until a program directive sets one, mm.
+    #[arg(long, value_name = "MM")]
+    pub milling_width: Option<f64>,
+    /// Thermal state at the program start: cold, steady (the steady state of the program's mean power) or MINUTES of warm-up at that power.
+    #[arg(long, value_name = "START", default_value = "cold")]
     pub thermal_start: String,
     /// Worker threads (default: all cores). Output is the same for any count.
     #[arg(long)]

@@ -334,7 +334,12 @@ pub fn block(
             res.residual_mm = r;
             let mut at_r = mv.end;
             at_r[2] = r_level;
-            let (cr, _) = solve(pred, &at_r, &mv.dirs, tool)?;
+            // No process force at the R level: the drill is not cutting yet.
+            let free = pred.with_context(crate::predict::BlockContext {
+                force_n: Vector3::zeros(),
+                ..pred.ctx
+            });
+            let (cr, _) = solve(&free, &at_r, &mv.dirs, tool)?;
             check_travel(pred, &cr)?;
             res.r_level = cr[2];
             return Ok(res);

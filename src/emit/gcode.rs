@@ -349,8 +349,14 @@ impl Emitter {
             let unit = if scale != 1.0 { "in" } else { "mm" };
             let dd = if scale != 1.0 { 5 } else { 4 };
             let mut body = format!("dev {} {unit}", format_number(dev, dd, false));
+            // Every part that is non-zero at the printed precision; the
+            // dynamic one is a vibration amplitude (not in `dev`, not
+            // compensated).
             for e in Effect::ALL {
-                let part = res.deviation.parts[e as usize].norm() / scale;
+                let part = res.deviation.part(e).norm() / scale;
+                if round_to(part, dd) == 0.0 {
+                    continue;
+                }
                 body.push_str(&format!(
                     " {} {}",
                     e.short(),

@@ -1,11 +1,20 @@
 //! Per-point prediction: where the machine really puts the tool tip for a
 //! commanded axis position, with each physical effect switched and scaled
 //! separately (the thesis' VMSS idea), and the per-effect breakdown.
+//!
+//! Geometric, static and thermal effects are quasi-static: they shift the
+//! attained tool tip and are compensated. The dynamic effect (vibration at
+//! the tooth-passing frequency) is an amplitude, reported in the breakdown
+//! but never part of the attained pose nor of [`Breakdown::total`].
+//!
+//! What the non-geometric effects need about the block (process force, time
+//! and thermal state, spindle speed, vibration) is computed once per block in
+//! program order by the job and handed over as a [`BlockContext`].
 
 use nalgebra::Vector3;
 
 use crate::error::{Error, Result};
-use crate::machine::tool::MachineTool;
+use crate::machine::tool::{MachineTool, ThermalState};
 use crate::machine::{AxisVec, DirVec, TipPose};
 
 /// The physical effects a prediction can include.
@@ -13,16 +22,30 @@ use crate::machine::{AxisVec, DirVec, TipPose};
 pub enum Effect {
     /// Geometric errors of the axes (location and component errors).
     Geometric,
+    /// Static deflection under the process force (stiffness map).
+    Static,
+    /// Thermal drift (spindle growth, axis scale) over the program's time line.
+    Thermal,
+    /// Vibration amplitude at the tooth-passing frequency (reported only).
+    Dynamic,
 }
 
 impl Effect {
     /// Every effect, in breakdown order.
-    pub const ALL: [Effect; 1] = [Effect::Geometric];
+    pub const ALL: [Effect; 4] = [
+        Effect::Geometric,
+        Effect::Static,
+        Effect::Thermal,
+        Effect::Dynamic,
+    ];
 
     /// Name used on the command line and in reports.
     pub fn name(self) -> &'static str {
         match self {
             Effect::Geometric => "geometric",
+            Effect::Static => "static",
+            Effect::Thermal => "thermal",
+            Effect::Dynamic => "dynamic",
         }
     }
 
@@ -30,8 +53,34 @@ impl Effect {
     pub fn short(self) -> &'static str {
         match self {
             Effect::Geometric => "geo",
+            Effect::Static => "stat",
+            Effect::Thermal => "therm",
+            Effect::Dynamic => "vib",
         }
     }
+
+    /// True for the effects that shift the tool tip and are compensated.
+    pub fn compensated(self) -> bool {
+        self != Effect::Dynamic
+    }
+}
+
+/// What the non-geometric effects need to know about one block, computed in
+/// program order (small and `Copy`; no allocation per block).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct BlockContext {
+    /// Process force on the tool from the workpiece, workpiece frame, N.
+    pub force_n: Vector3<f64>,
+    /// Time at the end of the block since the program start, s.
+    pub time_s: f64,
+    /// Thermal error parameters at the end of the block.
+    pub thermal: ThermalState,
+    /// Spindle speed, 1/min (0 when stopped).
+    pub spindle_rpm: f64,
+    /// Tooth-passing frequency, Hz (0 without milling).
+    pub tooth_hz: f64,
+    /// Predicted vibration amplitude per direction, mm.
+    pub vibration_mm: Vector3<f64>,
 }
 
 /// Which effects are on and their gains.
@@ -138,26 +187,127 @@ pub struct Breakdown {
 }
 
 impl Breakdown {
-    /// Total deviation vector.
+    /// Total deviation vector of the compensated (quasi-static) effects;
+    /// the dynamic part is an amplitude and is not added.
     pub fn total(&self) -> Vector3<f64> {
-        self.parts.iter().fold(Vector3::zeros(), |a, b| a + b)
+        Effect::ALL
+            .iter()
+            .zip(&self.parts)
+            .filter(|(e, _)| e.compensated())
+            .fold(Vector3::zeros(), |a, (_, b)| a + b)
+    }
+
+    /// The part of one effect, mm.
+    pub fn part(&self, e: Effect) -> Vector3<f64> {
+        self.parts
+            .get(e as usize)
+            .copied()
+            .unwrap_or_else(Vector3::zeros)
     }
 }
 
-/// A machine tool with the effects chosen for one run. Immutable, shared by
-/// the worker threads.
-#[derive(Debug, Clone)]
+/// A machine tool with the effects chosen for one run and the context of
+/// one block. Immutable and `Copy`, shared by the worker threads; the job
+/// makes a per-block copy with [`ToolPredictor::with_context`].
+#[derive(Debug, Clone, Copy)]
 pub struct ToolPredictor<'m> {
     /// The machine model.
     pub machine: &'m MachineTool,
     /// Effects and gains.
     pub effects: EffectSet,
+    /// The block's context (zero: no force, cold, no vibration).
+    pub ctx: BlockContext,
+    /// Job-level process settings (`None`: the machine file's force model,
+    /// cold start).
+    pub process: Option<&'m ProcessSetup>,
+}
+
+/// How the thermal state of the machine starts.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub enum ThermalStart {
+    /// Cold machine: every thermal error parameter zero.
+    #[default]
+    Cold,
+    /// Steady state at the program's mean power (a repeated task).
+    Steady,
+    /// Warm-up from cold at the program's mean power for this many minutes.
+    Minutes(f64),
+}
+
+impl ThermalStart {
+    /// Parses `cold`, `steady` or a number of minutes.
+    pub fn parse(s: &str) -> Result<Self> {
+        match s.trim() {
+            "cold" => Ok(ThermalStart::Cold),
+            "steady" => Ok(ThermalStart::Steady),
+            m => match m.parse::<f64>() {
+                Ok(v) if v.is_finite() && (0.0..=1e5).contains(&v) => Ok(ThermalStart::Minutes(v)),
+                _ => Err(Error::Usage(format!(
+                    "--thermal-start: `{s}` is not cold, steady or a number of minutes (0..100000)"
+                ))),
+            },
+        }
+    }
+
+    /// True when the start needs the program's mean power.
+    pub fn needs_mean_power(self) -> bool {
+        match self {
+            ThermalStart::Cold => false,
+            ThermalStart::Steady => true,
+            ThermalStart::Minutes(m) => m > 0.0,
+        }
+    }
+}
+
+/// Job-level settings of the process effects (force model, milling
+/// engagement, thermal start), shared by every block of a job.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct ProcessSetup {
+    /// The process-force model of the job (`None`: no force).
+    pub force: Option<crate::process::ForceModel>,
+    /// Axial depth of cut for milling until a program directive sets one, mm.
+    pub milling_depth_mm: Option<f64>,
+    /// Radial width of cut for milling until a program directive sets one, mm.
+    pub milling_width_mm: Option<f64>,
+    /// Initial thermal state.
+    pub thermal_start: ThermalStart,
+    /// Mean power of each heat source over the program (spindle, X, Y, Z),
+    /// W, for the `steady` and warm-up starts.
+    pub mean_power_w: Option<crate::machine::tool::thermal::Powers>,
+}
+
+impl ProcessSetup {
+    /// The machine file's force model, cold start.
+    pub fn for_machine(machine: &MachineTool) -> Self {
+        ProcessSetup {
+            force: machine.process_force().cloned(),
+            ..Self::default()
+        }
+    }
 }
 
 impl<'m> ToolPredictor<'m> {
-    /// Builds a predictor.
+    /// Builds a predictor (empty context).
     pub fn new(machine: &'m MachineTool, effects: EffectSet) -> Self {
-        ToolPredictor { machine, effects }
+        ToolPredictor {
+            machine,
+            effects,
+            ctx: BlockContext::default(),
+            process: None,
+        }
+    }
+
+    /// The same predictor with job-level process settings.
+    pub fn with_process(self, process: &'m ProcessSetup) -> Self {
+        ToolPredictor {
+            process: Some(process),
+            ..self
+        }
+    }
+
+    /// The same predictor for a block with context `ctx`.
+    pub fn with_context(&self, ctx: BlockContext) -> Self {
+        ToolPredictor { ctx, ..*self }
     }
 
     /// Nominal tool tip pose for commanded axes.
@@ -165,25 +315,77 @@ impl<'m> ToolPredictor<'m> {
         self.machine.nominal(cmd, tool_mm)
     }
 
-    /// Predicted attained tool tip pose for commanded axes.
-    pub fn attained(&self, cmd: &AxisVec, dirs: &DirVec, tool_mm: f64) -> TipPose {
-        let g = self.effects.gain(Effect::Geometric);
-        if g == 0.0 {
-            return self.machine.nominal(cmd, tool_mm);
-        }
-        let geo = self.machine.geometric(cmd, dirs, tool_mm);
-        if g == 1.0 {
-            return geo;
-        }
-        let nom = self.machine.nominal(cmd, tool_mm);
-        let dir = nom.dir + (geo.dir - nom.dir) * g;
-        TipPose {
-            pos: nom.pos + (geo.pos - nom.pos) * g,
-            dir: dir.normalize(),
+    /// Static deflection (mm, unscaled) at the command; zero without a
+    /// stiffness map or force.
+    fn static_part(&self, cmd: &AxisVec) -> Vector3<f64> {
+        match self.machine.stiffness() {
+            Some(k) if self.ctx.force_n != Vector3::zeros() => {
+                k.deflection_mm(&Vector3::new(cmd[0], cmd[1], cmd[2]), &self.ctx.force_n)
+            }
+            _ => Vector3::zeros(),
         }
     }
 
-    /// Predicted deviation (attained − nominal) with its breakdown.
+    /// Thermal deviation (mm, unscaled) at the command with the nominal tool
+    /// axis `dir`.
+    fn thermal_part(&self, cmd: &AxisVec, dir: &Vector3<f64>) -> Vector3<f64> {
+        match self.machine.thermal() {
+            Some(t) if self.ctx.thermal != ThermalState::default() => t.deviation_mm(
+                &self.ctx.thermal,
+                &Vector3::new(cmd[0], cmd[1], cmd[2]),
+                dir,
+            ),
+            _ => Vector3::zeros(),
+        }
+    }
+
+    /// True when the thermal part may be non-zero (so the nominal tool axis
+    /// is needed).
+    fn thermal_active(&self) -> bool {
+        self.effects.gain(Effect::Thermal) != 0.0
+            && self.machine.thermal().is_some()
+            && self.ctx.thermal != ThermalState::default()
+    }
+
+    /// Predicted attained tool tip pose for commanded axes (the compensated
+    /// effects only).
+    pub fn attained(&self, cmd: &AxisVec, dirs: &DirVec, tool_mm: f64) -> TipPose {
+        let g = self.effects.gain(Effect::Geometric);
+        let gs = self.effects.gain(Effect::Static);
+        let mut pose;
+        let mut nom: Option<TipPose> = None;
+        if g == 0.0 {
+            pose = self.machine.nominal(cmd, tool_mm);
+            nom = Some(pose);
+        } else {
+            let geo = self.machine.geometric(cmd, dirs, tool_mm);
+            if g == 1.0 {
+                pose = geo;
+            } else {
+                let n = self.machine.nominal(cmd, tool_mm);
+                let dir = n.dir + (geo.dir - n.dir) * g;
+                pose = TipPose {
+                    pos: n.pos + (geo.pos - n.pos) * g,
+                    dir: dir.normalize(),
+                };
+                nom = Some(n);
+            }
+        }
+        if gs != 0.0 {
+            pose.pos += self.static_part(cmd) * gs;
+        }
+        if self.thermal_active() {
+            // The growth acts along the tool axis; the attained axis differs
+            // from the nominal one by µrad, which changes a µm growth by
+            // 1e-12 mm, so the chain is not evaluated a second time.
+            let dir = nom.map_or(pose.dir, |n| n.dir);
+            pose.pos += self.thermal_part(cmd, &dir) * self.effects.gain(Effect::Thermal);
+        }
+        pose
+    }
+
+    /// Predicted deviation (attained − nominal) with its breakdown; the
+    /// dynamic part is the vibration amplitude of the block.
     pub fn breakdown(&self, cmd: &AxisVec, dirs: &DirVec, tool_mm: f64) -> Breakdown {
         let nom = self.machine.nominal(cmd, tool_mm);
         let mut b = Breakdown::default();
@@ -193,6 +395,139 @@ impl<'m> ToolPredictor<'m> {
             b.parts[Effect::Geometric as usize] = (geo.pos - nom.pos) * g;
             b.orientation = nom.dir.cross(&geo.dir) * g;
         }
+        let gs = self.effects.gain(Effect::Static);
+        if gs != 0.0 {
+            b.parts[Effect::Static as usize] = self.static_part(cmd) * gs;
+        }
+        if self.thermal_active() {
+            b.parts[Effect::Thermal as usize] =
+                self.thermal_part(cmd, &nom.dir) * self.effects.gain(Effect::Thermal);
+        }
+        b.parts[Effect::Dynamic as usize] =
+            self.ctx.vibration_mm * self.effects.gain(Effect::Dynamic);
         b
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use approx::assert_abs_diff_eq;
+
+    const POS_TOL_MM: f64 = 1e-12;
+
+    /// Error-free XYZ mill with uniform stiffness (x 20, y 10, z 40/50 N/µm)
+    /// and a thermal model.
+    fn machine() -> MachineTool {
+        let text = "kind: machine_tool
+name: t
+axes:
+  - { name: X, type: linear, side: workpiece, travel_mm: [-500, 500], rapid_mm_per_min: 60000 }
+  - { name: Y, type: linear, side: workpiece, travel_mm: [-500, 500], rapid_mm_per_min: 60000 }
+  - { name: Z, type: linear, side: tool, travel_mm: [-500, 500], rapid_mm_per_min: 60000 }
+stiffness:
+  k_n_per_um: { x_pos: 20, x_neg: 20, y_pos: 10, y_neg: 10, z_pos: 40, z_neg: 50 }
+thermal:
+  spindle: { growth_um_per_kw: 10, time_constant_min: 1 }
+  axes:
+    X: { scale_ppm_per_kw: 50, time_constant_min: 1 }
+";
+        match MachineTool::from_yaml_str(text, "t.yaml") {
+            Ok(m) => m,
+            Err(e) => panic!("{e}"),
+        }
+    }
+
+    fn ctx() -> BlockContext {
+        BlockContext {
+            force_n: Vector3::new(100.0, -50.0, 200.0),
+            thermal: ThermalState {
+                growth_um: 4.0,
+                scale_ppm: [10.0, 0.0, 0.0],
+            },
+            vibration_mm: Vector3::new(0.002, 0.0, 0.0),
+            ..BlockContext::default()
+        }
+    }
+
+    #[test]
+    fn parts_are_hand_derived_and_dynamic_is_not_compensated() {
+        let m = machine();
+        let p = ToolPredictor::new(&m, EffectSet::default()).with_context(ctx());
+        let cmd = [200.0, 0.0, 0.0, 0.0, 0.0, 0.0];
+        let b = p.breakdown(&cmd, &[1; 6], 0.0);
+        // Static: (100/20, −50/10, 200/40) µm = (5, −5, 5) µm.
+        assert_abs_diff_eq!(
+            b.part(Effect::Static),
+            Vector3::new(0.005, -0.005, 0.005),
+            epsilon = POS_TOL_MM
+        );
+        // Thermal: 10 ppm · 200 mm = 2 µm in X; growth 4 µm: −4 µm in Z.
+        assert_abs_diff_eq!(
+            b.part(Effect::Thermal),
+            Vector3::new(0.002, 0.0, -0.004),
+            epsilon = POS_TOL_MM
+        );
+        assert_abs_diff_eq!(
+            b.part(Effect::Dynamic),
+            Vector3::new(0.002, 0.0, 0.0),
+            epsilon = POS_TOL_MM
+        );
+        // The total and the attained pose hold static + thermal only.
+        let want = Vector3::new(0.007, -0.005, 0.001);
+        assert_abs_diff_eq!(b.total(), want, epsilon = POS_TOL_MM);
+        let got = p.attained(&cmd, &[1; 6], 0.0).pos - p.nominal(&cmd, 0.0).pos;
+        assert_abs_diff_eq!(got, want, epsilon = POS_TOL_MM);
+    }
+
+    #[test]
+    fn switches_and_gains_act_on_their_part_only() {
+        let m = machine();
+        let cmd = [200.0, 0.0, 0.0, 0.0, 0.0, 0.0];
+        let full = ToolPredictor::new(&m, EffectSet::default())
+            .with_context(ctx())
+            .breakdown(&cmd, &[1; 6], 0.0);
+        for e in Effect::ALL {
+            let on: Vec<&str> = Effect::ALL
+                .iter()
+                .filter(|&&x| x != e)
+                .map(|x| x.name())
+                .collect();
+            let set = EffectSet::parse(&on.join(",")).unwrap_or_default();
+            let b = ToolPredictor::new(&m, set)
+                .with_context(ctx())
+                .breakdown(&cmd, &[1; 6], 0.0);
+            let mut set = EffectSet::default();
+            assert!(set.set_gain(&format!("{}=0.25", e.name())).is_ok());
+            let g = ToolPredictor::new(&m, set)
+                .with_context(ctx())
+                .breakdown(&cmd, &[1; 6], 0.0);
+            for x in Effect::ALL {
+                let want = if x == e {
+                    Vector3::zeros()
+                } else {
+                    full.part(x)
+                };
+                assert_abs_diff_eq!(b.part(x), want, epsilon = POS_TOL_MM);
+                let scale = if x == e { 0.25 } else { 1.0 };
+                assert_abs_diff_eq!(g.part(x), full.part(x) * scale, epsilon = POS_TOL_MM);
+            }
+        }
+    }
+
+    #[test]
+    fn thermal_start_parses() {
+        assert_eq!(ThermalStart::parse("cold").ok(), Some(ThermalStart::Cold));
+        assert_eq!(
+            ThermalStart::parse("steady").ok(),
+            Some(ThermalStart::Steady)
+        );
+        assert_eq!(
+            ThermalStart::parse("30").ok(),
+            Some(ThermalStart::Minutes(30.0))
+        );
+        assert!(ThermalStart::parse("warm").is_err());
+        assert!(ThermalStart::parse("-5").is_err());
+        assert!(!ThermalStart::Minutes(0.0).needs_mean_power());
     }
 }

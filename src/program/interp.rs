@@ -163,7 +163,8 @@ pub struct Move {
     pub prev_dirs: DirVec,
     /// Feed rate, mm/min (rapids: 0, the machine's rapid rate applies).
     pub feed_mm_min: f64,
-    /// Spindle speed, 1/min.
+    /// Spindle speed, 1/min; 0 while the spindle is stopped (before M3/M4,
+    /// after M5, M2 or M30).
     pub spindle_rpm: f64,
     /// Active tool number.
     pub tool: u32,
@@ -231,6 +232,9 @@ pub struct Plan {
     pub dwell_s: f64,
     /// Bit `i` set when the block programs axis slot `i` (X Y Z A B C).
     pub programmed: u8,
+    /// Milling engagement set by `(POSTPROC MILLING DEPTH=… WIDTH=…)`
+    /// directives so far: axial depth and radial width, mm.
+    pub milling_mm: [Option<f64>; 2],
 }
 
 /// Tool table and work offsets the interpreter uses.
@@ -279,6 +283,8 @@ pub struct Interpreter {
     feed: f64,
     per_rev: bool,
     spindle: f64,
+    spindle_on: bool,
+    milling_mm: [Option<f64>; 2],
     tool_selected: u32,
     tool_active: u32,
     /// Programmed position of the nominal tool tip, machine coordinates.
@@ -315,6 +321,8 @@ impl Interpreter {
             feed: 0.0,
             per_rev: false,
             spindle: 0.0,
+            spindle_on: false,
+            milling_mm: [None; 2],
             tool_selected: 0,
             tool_active: 0,
             pos: home,
@@ -332,6 +340,11 @@ impl Interpreter {
     /// Current programmed tool-tip position, machine coordinates.
     pub fn position(&self) -> AxisVec {
         self.pos
+    }
+
+    /// Effective spindle speed after the last block, 1/min (0 while stopped).
+    pub fn spindle_rpm(&self) -> f64 {
+        if self.spindle_on { self.spindle } else { 0.0 }
     }
 
     /// Whether the program is in inches (G20).
@@ -373,9 +386,14 @@ impl Interpreter {
             absolute: self.absolute,
             arc_absolute: self.arc_absolute,
             offset: self.offset(),
+            milling_mm: self.milling_mm,
             ..Plan::default()
         };
         if block.is_empty() || block.block_delete && block.words.is_empty() {
+            if !block.block_delete {
+                self.directives(block, text)?;
+                plan.milling_mm = self.milling_mm;
+            }
             return Ok(plan);
         }
         let quote = |w: &Word| {
@@ -455,6 +473,8 @@ impl Interpreter {
                 }
                 b'M' => match w.code10() {
                     60 => self.tool_active = self.tool_selected,
+                    30 | 40 => self.spindle_on = true,
+                    50 | 20 | 300 => self.spindle_on = false,
                     980 | 990 | 970 | 1980 => {
                         return Err(self.err(line, Some(w), format!("subprogram calls cannot be compensated offline (expand them in CAM): `{}`", quote(w))));
                     }
@@ -573,6 +593,8 @@ impl Interpreter {
             }
         }
         plan.scale = self.scale();
+        self.directives(block, text)?;
+        plan.milling_mm = self.milling_mm;
         plan.absolute = self.absolute;
         plan.arc_absolute = self.arc_absolute;
         plan.offset = self.offset();
@@ -715,6 +737,62 @@ impl Interpreter {
         Ok(plan)
     }
 
+    /// Reads `(POSTPROC MILLING DEPTH=d WIDTH=w)` directive comments (values
+    /// in program units, either key optional; modal until the next one).
+    fn directives(&mut self, block: &Block, text: &[u8]) -> Result<(), Located> {
+        for c in &block.comments {
+            let raw = text.get(c.start as usize..c.end as usize).unwrap_or(b"");
+            let body = String::from_utf8_lossy(raw);
+            let body = body.trim_start_matches(['(', ';']).trim_end_matches(')');
+            let mut tokens = body.split_whitespace();
+            // Only `POSTPROC MILLING …` is a directive; any other comment
+            // (including other text after POSTPROC) is left alone.
+            match (tokens.next(), tokens.next()) {
+                (Some(a), Some(b))
+                    if a.eq_ignore_ascii_case("POSTPROC") && b.eq_ignore_ascii_case("MILLING") => {}
+                _ => continue,
+            }
+            let at =
+                |msg: String| Located::new(&self.file, block.line_no, c.start as usize + 1, msg);
+            let mut any = false;
+            for t in tokens {
+                let (k, v) = t.split_once('=').ok_or_else(|| {
+                    at(format!(
+                        "expected KEY=VALUE, found `{t}` in `{}`",
+                        body.trim()
+                    ))
+                })?;
+                let slot = if k.eq_ignore_ascii_case("DEPTH") {
+                    0
+                } else if k.eq_ignore_ascii_case("WIDTH") {
+                    1
+                } else {
+                    return Err(at(format!(
+                        "unknown key `{k}` in `{}` (expected DEPTH or WIDTH)",
+                        body.trim()
+                    )));
+                };
+                let x: f64 = v
+                    .parse()
+                    .ok()
+                    .filter(|x: &f64| x.is_finite() && *x >= 0.0 && *x <= 1e4)
+                    .ok_or_else(|| at(format!("`{t}`: the value must be a length of 0 or more")))?;
+                let scale = self.scale();
+                if let Some(m) = self.milling_mm.get_mut(slot) {
+                    *m = Some(x * scale);
+                }
+                any = true;
+            }
+            if !any {
+                return Err(at(format!(
+                    "`{}` sets nothing (expected DEPTH=… and/or WIDTH=…)",
+                    body.trim()
+                )));
+            }
+        }
+        Ok(())
+    }
+
     /// Makes a G0/G1/G2/G3 word the modal motion (cancelling a canned cycle);
     /// other codes are left alone.
     fn set_motion_mode(&mut self, g: &Word) {
@@ -786,7 +864,7 @@ impl Interpreter {
             } else {
                 self.feed_mm_min()
             },
-            spindle_rpm: self.spindle,
+            spindle_rpm: if self.spindle_on { self.spindle } else { 0.0 },
             tool: self.tool_active,
             tool_len_mm: self.tool_len_mm,
         }

@@ -10,11 +10,12 @@ use super::component::ComponentErrors;
 use super::location::{
     LocationErrors, LocationKey, SpindleErrors, component_key, location_key, spindle_key,
 };
-use super::raw::{RawAxis, RawAxisType, RawMachineTool, RawSide, RawTable};
+use super::raw::{RawAxis, RawAxisType, RawMachineTool, RawProcessForce, RawSide, RawTable};
 use super::table::ErrorTable;
 use super::{Axis, AxisKind, MachineTool, Side};
 use crate::error::{Invalid, Result};
 use crate::machine::{axis_slot, yaml};
+use crate::process::{Drilling, ForceModel, Frame, Milling};
 
 /// Largest accepted translational error, mm.
 const MAX_ERROR_MM: f64 = 1.0;
@@ -167,6 +168,23 @@ fn validate(raw: RawMachineTool) -> V<MachineTool> {
         }
     }
 
+    let process_force = raw.process_force.as_ref().map(validate_force).transpose()?;
+    let stiffness = raw
+        .stiffness
+        .as_ref()
+        .map(super::stiffness::Stiffness::from_raw)
+        .transpose()?;
+    let thermal = raw
+        .thermal
+        .as_ref()
+        .map(|t| super::thermal::Thermal::from_raw(t, |s| slot_index[s].is_some()))
+        .transpose()?;
+    let modal = raw
+        .modal
+        .as_ref()
+        .map(super::dynamics::Modal::from_raw)
+        .transpose()?;
+
     let error_free = spindle.is_zero()
         && axes
             .iter()
@@ -182,6 +200,156 @@ fn validate(raw: RawMachineTool) -> V<MachineTool> {
         decimals,
         decimals_deg,
         error_free,
+        process: (process_force.is_some()
+            || stiffness.is_some()
+            || thermal.is_some()
+            || modal.is_some())
+        .then(|| {
+            Box::new(super::ProcessSections {
+                force: process_force,
+                stiffness,
+                thermal,
+                modal,
+            })
+        }),
+    })
+}
+
+/// Validates `process_force:`: the keys the model needs must be there, the
+/// keys it does not use must not.
+fn validate_force(r: &RawProcessForce) -> V<ForceModel> {
+    const P: &str = "process_force";
+    let given: [(&str, bool); 14] = [
+        ("force_n", r.force_n.is_some()),
+        ("frame", r.frame.is_some()),
+        ("kt_n_per_mm2", r.kt_n_per_mm2.is_some()),
+        ("kr_n_per_mm2", r.kr_n_per_mm2.is_some()),
+        ("ka_n_per_mm2", r.ka_n_per_mm2.is_some()),
+        ("kte_n_per_mm", r.kte_n_per_mm.is_some()),
+        ("kre_n_per_mm", r.kre_n_per_mm.is_some()),
+        ("kae_n_per_mm", r.kae_n_per_mm.is_some()),
+        ("tool_diameter_mm", r.tool_diameter_mm.is_some()),
+        ("flutes", r.flutes.is_some()),
+        ("axial_depth_mm", r.axial_depth_mm.is_some()),
+        ("radial_width_mm", r.radial_width_mm.is_some()),
+        (
+            "thrust_coefficient_n_per_mm2",
+            r.thrust_coefficient_n_per_mm2.is_some(),
+        ),
+        ("drill_diameter_mm", r.drill_diameter_mm.is_some()),
+    ];
+    let allowed: &[&str] = match r.model.as_str() {
+        "constant" => &["force_n", "frame"],
+        "milling" => &[
+            "kt_n_per_mm2",
+            "kr_n_per_mm2",
+            "ka_n_per_mm2",
+            "kte_n_per_mm",
+            "kre_n_per_mm",
+            "kae_n_per_mm",
+            "tool_diameter_mm",
+            "flutes",
+            "axial_depth_mm",
+            "radial_width_mm",
+        ],
+        "drilling" => &["thrust_coefficient_n_per_mm2", "drill_diameter_mm"],
+        "table" => {
+            return Err(Invalid::new(
+                format!("{P}.model"),
+                "a force table is given per job with --force-table FILE",
+            ));
+        }
+        other => {
+            return Err(Invalid::new(
+                format!("{P}.model"),
+                format!("unknown model `{other}` (expected constant, milling or drilling)"),
+            ));
+        }
+    };
+    for (k, present) in given {
+        if present && !allowed.contains(&k) {
+            return Err(Invalid::new(
+                format!("{P}.{k}"),
+                format!("`{k}` is not used by the `{}` model", r.model),
+            ));
+        }
+    }
+    let need = |k: &str, v: Option<f64>, lo: f64, hi: f64| -> V<f64> {
+        let path = format!("{P}.{k}");
+        let v = v.ok_or_else(|| Invalid::new(P, format!("the `{}` model needs `{k}`", r.model)))?;
+        let v = finite(&path, v)?;
+        if v < lo || v > hi {
+            return Err(Invalid::new(path, format!("`{v}` is outside {lo}..{hi}")));
+        }
+        Ok(v)
+    };
+    let opt = |k: &str, v: Option<f64>| -> V<f64> {
+        match v {
+            Some(_) => need(k, v, 0.0, 1e6),
+            None => Ok(0.0),
+        }
+    };
+    Ok(match r.model.as_str() {
+        "constant" => {
+            let f = r
+                .force_n
+                .ok_or_else(|| Invalid::new(P, "the `constant` model needs `force_n`"))?;
+            let path = format!("{P}.force_n");
+            for v in f {
+                if !v.is_finite() || v.abs() > 1e6 {
+                    return Err(Invalid::new(
+                        &path,
+                        format!("`{v}` is not a force within ±1e6 N"),
+                    ));
+                }
+            }
+            let frame = match &r.frame {
+                None => Frame::Workpiece,
+                Some(s) => Frame::parse(s).ok_or_else(|| {
+                    Invalid::new(
+                        format!("{P}.frame"),
+                        format!("unknown frame `{s}` (expected workpiece, tool or feed)"),
+                    )
+                })?,
+            };
+            ForceModel::Constant {
+                force_n: Vector3::new(f[0], f[1], f[2]),
+                frame,
+            }
+        }
+        "milling" => {
+            let d = need("tool_diameter_mm", r.tool_diameter_mm, 0.01, 1000.0)?;
+            let flutes = r
+                .flutes
+                .ok_or_else(|| Invalid::new(P, "the `milling` model needs `flutes`"))?;
+            if !(1..=64).contains(&flutes) {
+                return Err(Invalid::new(
+                    format!("{P}.flutes"),
+                    format!("`{flutes}` flutes is outside 1..64"),
+                ));
+            }
+            ForceModel::Milling(Milling {
+                kt_n_per_mm2: need("kt_n_per_mm2", r.kt_n_per_mm2, 0.0, 1e5)?,
+                kr_n_per_mm2: need("kr_n_per_mm2", r.kr_n_per_mm2, 0.0, 1e5)?,
+                ka_n_per_mm2: opt("ka_n_per_mm2", r.ka_n_per_mm2)?,
+                kte_n_per_mm: opt("kte_n_per_mm", r.kte_n_per_mm)?,
+                kre_n_per_mm: opt("kre_n_per_mm", r.kre_n_per_mm)?,
+                kae_n_per_mm: opt("kae_n_per_mm", r.kae_n_per_mm)?,
+                tool_diameter_mm: d,
+                flutes,
+                axial_depth_mm: need("axial_depth_mm", r.axial_depth_mm, 0.0, 1000.0)?,
+                radial_width_mm: need("radial_width_mm", r.radial_width_mm, 0.0, d)?,
+            })
+        }
+        _ => ForceModel::Drilling(Drilling {
+            thrust_coefficient_n_per_mm2: need(
+                "thrust_coefficient_n_per_mm2",
+                r.thrust_coefficient_n_per_mm2,
+                0.0,
+                1e5,
+            )?,
+            drill_diameter_mm: need("drill_diameter_mm", r.drill_diameter_mm, 0.01, 1000.0)?,
+        }),
     })
 }
 

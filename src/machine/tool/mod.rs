@@ -24,15 +24,21 @@
 //!   `E = Trans(P + d) · LOC · Rot(ê, θ + ε0) · COM(θ) · Trans(−(P + d))`
 
 mod component;
+pub mod dynamics;
 mod geometry;
 mod load;
 mod location;
 mod raw;
+pub mod stiffness;
 mod table;
+pub mod thermal;
 
 pub use component::{ComponentErrors, ComponentValue};
+pub use dynamics::{Modal, Mode};
 pub use location::{LocationErrors, SpindleErrors};
+pub use stiffness::Stiffness;
 pub use table::{ErrorTable, Lookup};
+pub use thermal::{Thermal, ThermalState};
 
 use std::collections::BTreeMap;
 
@@ -97,6 +103,17 @@ pub struct MachineTool {
     decimals: Option<usize>,
     decimals_deg: Option<usize>,
     error_free: bool,
+    /// The optional process sections, boxed to keep `Machine` small.
+    process: Option<Box<ProcessSections>>,
+}
+
+/// The optional process sections of a machine file.
+#[derive(Debug, Clone, Default)]
+struct ProcessSections {
+    force: Option<crate::process::ForceModel>,
+    stiffness: Option<Stiffness>,
+    thermal: Option<Thermal>,
+    modal: Option<Modal>,
 }
 
 /// Maximum number of factors in the chain: 6 axes, gauge line, spindle, tool.
@@ -178,6 +195,26 @@ impl MachineTool {
     /// fixes them.
     pub fn output_decimals_deg(&self) -> Option<usize> {
         self.decimals_deg
+    }
+
+    /// The process-force model of the machine file (`process_force:`).
+    pub fn process_force(&self) -> Option<&crate::process::ForceModel> {
+        self.process.as_ref().and_then(|p| p.force.as_ref())
+    }
+
+    /// The static stiffness map (`stiffness:`).
+    pub fn stiffness(&self) -> Option<&Stiffness> {
+        self.process.as_ref().and_then(|p| p.stiffness.as_ref())
+    }
+
+    /// The thermal model (`thermal:`).
+    pub fn thermal(&self) -> Option<&Thermal> {
+        self.process.as_ref().and_then(|p| p.thermal.as_ref())
+    }
+
+    /// The dominant modes (`modal:`).
+    pub fn modal(&self) -> Option<&Modal> {
+        self.process.as_ref().and_then(|p| p.modal.as_ref())
     }
 
     /// True when every geometric error is zero.

@@ -20,6 +20,14 @@ pub(crate) struct RawMachineTool {
     pub work_offsets_mm: BTreeMap<String, [f64; 3]>,
     #[serde(default)]
     pub output: Option<RawOutput>,
+    #[serde(default)]
+    pub process_force: Option<RawProcessForce>,
+    #[serde(default)]
+    pub stiffness: Option<RawStiffness>,
+    #[serde(default)]
+    pub thermal: Option<RawThermal>,
+    #[serde(default)]
+    pub modal: Option<RawModal>,
 }
 
 /// Linear or rotary axis.
@@ -98,4 +106,129 @@ pub(crate) struct RawOutput {
     pub decimals_mm: Option<usize>,
     #[serde(default)]
     pub decimals_deg: Option<usize>,
+}
+
+/// `process_force:` block.
+#[derive(Debug, Deserialize, Default)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct RawProcessForce {
+    pub model: String,
+    #[serde(default)]
+    pub force_n: Option<[f64; 3]>,
+    #[serde(default)]
+    pub frame: Option<String>,
+    #[serde(default)]
+    pub kt_n_per_mm2: Option<f64>,
+    #[serde(default)]
+    pub kr_n_per_mm2: Option<f64>,
+    #[serde(default)]
+    pub ka_n_per_mm2: Option<f64>,
+    #[serde(default)]
+    pub kte_n_per_mm: Option<f64>,
+    #[serde(default)]
+    pub kre_n_per_mm: Option<f64>,
+    #[serde(default)]
+    pub kae_n_per_mm: Option<f64>,
+    #[serde(default)]
+    pub tool_diameter_mm: Option<f64>,
+    #[serde(default)]
+    pub flutes: Option<u32>,
+    #[serde(default)]
+    pub axial_depth_mm: Option<f64>,
+    #[serde(default)]
+    pub radial_width_mm: Option<f64>,
+    #[serde(default)]
+    pub thrust_coefficient_n_per_mm2: Option<f64>,
+    #[serde(default)]
+    pub drill_diameter_mm: Option<f64>,
+}
+
+/// A stiffness value: one number for the whole workspace, or a grid
+/// `[iz][iy][ix]` over `stiffness.grid_mm`.
+#[derive(Debug, Deserialize)]
+#[serde(untagged)]
+pub(crate) enum RawGridValues {
+    Uniform(f64),
+    Grid(Vec<Vec<Vec<f64>>>),
+}
+
+/// `stiffness.grid_mm`.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct RawGrid {
+    pub x: Vec<f64>,
+    pub y: Vec<f64>,
+    pub z: Vec<f64>,
+}
+
+/// `stiffness.k_n_per_um`: per direction and load sign.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct RawStiffnessValues {
+    pub x_pos: RawGridValues,
+    pub x_neg: RawGridValues,
+    pub y_pos: RawGridValues,
+    pub y_neg: RawGridValues,
+    pub z_pos: RawGridValues,
+    pub z_neg: RawGridValues,
+}
+
+/// `stiffness:` block.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct RawStiffness {
+    #[serde(default)]
+    pub grid_mm: Option<RawGrid>,
+    pub k_n_per_um: RawStiffnessValues,
+}
+
+/// `thermal.spindle`.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct RawSpindleThermal {
+    #[serde(default)]
+    pub idle_w_per_rpm: f64,
+    pub growth_um_per_kw: f64,
+    pub time_constant_min: f64,
+}
+
+/// One entry of `thermal.axes`.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct RawAxisThermal {
+    pub scale_ppm_per_kw: f64,
+    pub time_constant_min: f64,
+    #[serde(default)]
+    pub friction_n: f64,
+}
+
+/// `thermal:` block.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct RawThermal {
+    #[serde(default)]
+    pub spindle: Option<RawSpindleThermal>,
+    #[serde(default)]
+    pub axes: BTreeMap<String, RawAxisThermal>,
+}
+
+/// One mode of `modal:`.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct RawMode {
+    pub natural_frequency_hz: f64,
+    pub damping_ratio: f64,
+    pub stiffness_n_per_um: f64,
+}
+
+/// `modal:` block: the dominant mode per direction.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct RawModal {
+    #[serde(default)]
+    pub x: Option<RawMode>,
+    #[serde(default)]
+    pub y: Option<RawMode>,
+    #[serde(default)]
+    pub z: Option<RawMode>,
 }

@@ -1,0 +1,302 @@
+//! Static stiffness of a machine tool at the tool tip (MODELS.md §2): a
+//! diagonal translational stiffness per axis direction and per load sign,
+//! each a function of the position in the workspace given on a grid and
+//! interpolated trilinearly (clamped at the grid ends). The deflection of
+//! the tool tip under a force `F` on the tool from the workpiece is
+//! `F_i / k_i(p, sign F_i)` per axis: the tool gives way in the direction of
+//! the force, so attained = programmed + F/k.
+
+use nalgebra::Vector3;
+
+use super::raw::{RawGridValues, RawStiffness};
+use crate::error::Invalid;
+
+/// Lowest accepted stiffness, N/µm.
+const MIN_K: f64 = 0.01;
+/// Highest accepted stiffness, N/µm.
+const MAX_K: f64 = 1e5;
+
+/// Validated stiffness map.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Stiffness {
+    /// Grid positions per axis (machine coordinates, mm), strictly
+    /// increasing; a single position for a uniform value.
+    grid: [Vec<f64>; 3],
+    /// Values, N/µm, indexed `[direction * 2 + (0 positive | 1 negative)]`,
+    /// each flattened `ix + nx·(iy + ny·iz)`.
+    k: [Vec<f64>; 6],
+}
+
+/// Lower index and weight of `q` in the sorted `pts` (clamped).
+fn locate(pts: &[f64], q: f64) -> (usize, f64) {
+    let n = pts.len();
+    if n < 2 {
+        return (0, 0.0);
+    }
+    let first = pts.first().copied().unwrap_or(0.0);
+    let last = pts.last().copied().unwrap_or(0.0);
+    if q <= first {
+        return (0, 0.0);
+    }
+    if q >= last {
+        return (n - 2, 1.0);
+    }
+    let i = pts
+        .partition_point(|&p| p <= q)
+        .saturating_sub(1)
+        .min(n - 2);
+    let (a, b) = (
+        pts.get(i).copied().unwrap_or(0.0),
+        pts.get(i + 1).copied().unwrap_or(1.0),
+    );
+    (i, if b > a { (q - a) / (b - a) } else { 0.0 })
+}
+
+impl Stiffness {
+    /// A uniform stiffness map: `k[dir][0 = positive load, 1 = negative]`, N/µm.
+    pub fn uniform(k: [[f64; 2]; 3]) -> Self {
+        let mut vals: [Vec<f64>; 6] = Default::default();
+        for (d, pair) in k.iter().enumerate() {
+            for (s, &v) in pair.iter().enumerate() {
+                if let Some(slot) = vals.get_mut(d * 2 + s) {
+                    *slot = vec![v];
+                }
+            }
+        }
+        Stiffness {
+            grid: [vec![0.0], vec![0.0], vec![0.0]],
+            k: vals,
+        }
+    }
+
+    /// Stiffness in direction `dir` (0..3) at position `p` (mm) for a load
+    /// of the given sign, N/µm.
+    pub fn k_n_per_um(&self, p: &Vector3<f64>, dir: usize, positive: bool) -> f64 {
+        let Some(vals) = self.k.get(dir * 2 + usize::from(!positive)) else {
+            return f64::INFINITY;
+        };
+        let [gx, gy, gz] = &self.grid;
+        let (nx, ny) = (gx.len(), gy.len());
+        let (ix, tx) = locate(gx, p[0]);
+        let (iy, ty) = locate(gy, p[1]);
+        let (iz, tz) = locate(gz, p[2]);
+        let at = |i: usize, j: usize, k: usize| -> f64 {
+            let i = i.min(nx.saturating_sub(1));
+            let j = j.min(ny.saturating_sub(1));
+            let k = k.min(gz.len().saturating_sub(1));
+            vals.get(i + nx * (j + ny * k))
+                .copied()
+                .unwrap_or(f64::INFINITY)
+        };
+        let lerp = |a: f64, b: f64, t: f64| a + (b - a) * t;
+        let c00 = lerp(at(ix, iy, iz), at(ix + 1, iy, iz), tx);
+        let c10 = lerp(at(ix, iy + 1, iz), at(ix + 1, iy + 1, iz), tx);
+        let c01 = lerp(at(ix, iy, iz + 1), at(ix + 1, iy, iz + 1), tx);
+        let c11 = lerp(at(ix, iy + 1, iz + 1), at(ix + 1, iy + 1, iz + 1), tx);
+        lerp(lerp(c00, c10, ty), lerp(c01, c11, ty), tz)
+    }
+
+    /// Deflection of the tool tip (mm) at position `p` (mm) under the force
+    /// `f` (N) on the tool from the workpiece: `F_i / k_i` per axis.
+    pub fn deflection_mm(&self, p: &Vector3<f64>, f: &Vector3<f64>) -> Vector3<f64> {
+        let mut d = Vector3::zeros();
+        for i in 0..3 {
+            if f[i] != 0.0 {
+                d[i] = f[i] / self.k_n_per_um(p, i, f[i] > 0.0) * 1e-3;
+            }
+        }
+        d
+    }
+
+    /// Validates the `stiffness:` block.
+    pub(crate) fn from_raw(raw: &RawStiffness) -> Result<Self, Invalid> {
+        let grid_given = raw.grid_mm.is_some();
+        let grid: [Vec<f64>; 3] = match &raw.grid_mm {
+            Some(g) => [g.x.clone(), g.y.clone(), g.z.clone()],
+            None => [vec![0.0], vec![0.0], vec![0.0]],
+        };
+        for (name, pts) in ["x", "y", "z"].iter().zip(&grid) {
+            let path = format!("stiffness.grid_mm.{name}");
+            if pts.is_empty() {
+                return Err(Invalid::new(path, "the grid has no positions"));
+            }
+            if pts.iter().any(|v| !v.is_finite()) {
+                return Err(Invalid::new(path, "positions must be finite numbers"));
+            }
+            for w in pts.windows(2) {
+                if let [a, b] = w {
+                    if a >= b {
+                        return Err(Invalid::new(
+                            path,
+                            format!(
+                                "positions must be strictly increasing (`{a}` is followed by `{b}`)"
+                            ),
+                        ));
+                    }
+                }
+            }
+        }
+        let (nx, ny, nz) = (grid[0].len(), grid[1].len(), grid[2].len());
+        let v = &raw.k_n_per_um;
+        let entries = [
+            ("x_pos", &v.x_pos),
+            ("x_neg", &v.x_neg),
+            ("y_pos", &v.y_pos),
+            ("y_neg", &v.y_neg),
+            ("z_pos", &v.z_pos),
+            ("z_neg", &v.z_neg),
+        ];
+        let mut k: [Vec<f64>; 6] = Default::default();
+        for (slot, (name, values)) in k.iter_mut().zip(entries) {
+            let path = format!("stiffness.k_n_per_um.{name}");
+            let check = |x: f64| -> Result<f64, Invalid> {
+                if x.is_finite() && (MIN_K..=MAX_K).contains(&x) {
+                    Ok(x)
+                } else {
+                    Err(Invalid::new(
+                        &path,
+                        format!(
+                            "stiffness `{x}` N/µm is outside {MIN_K}..{MAX_K} (check the unit)"
+                        ),
+                    ))
+                }
+            };
+            *slot = match values {
+                RawGridValues::Uniform(x) => vec![check(*x)?; nx * ny * nz],
+                RawGridValues::Grid(g) => {
+                    if !grid_given {
+                        return Err(Invalid::new(
+                            &path,
+                            "a grid of values needs `stiffness.grid_mm`",
+                        ));
+                    }
+                    let shape = |got: usize, want: usize, what: &str| {
+                        if got == want {
+                            Ok(())
+                        } else {
+                            Err(Invalid::new(
+                                &path,
+                                format!(
+                                    "{got} {what} for {want} grid positions (values are indexed [z][y][x])"
+                                ),
+                            ))
+                        }
+                    };
+                    shape(g.len(), nz, "z layers")?;
+                    let mut flat = Vec::with_capacity(nx * ny * nz);
+                    for layer in g {
+                        shape(layer.len(), ny, "y rows")?;
+                        for row in layer {
+                            shape(row.len(), nx, "x values")?;
+                            for &x in row {
+                                flat.push(check(x)?);
+                            }
+                        }
+                    }
+                    flat
+                }
+            };
+        }
+        Ok(Stiffness { grid, k })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use approx::assert_abs_diff_eq;
+
+    const K_TOL: f64 = 1e-12;
+    const POS_TOL_MM: f64 = 1e-12;
+
+    fn map() -> Stiffness {
+        // k_x+ varies along X: 10 at X=0, 30 at X=100 (uniform in Y, Z); the
+        // rest uniform.
+        let mut s = Stiffness::uniform([[20.0, 25.0], [15.0, 16.0], [40.0, 50.0]]);
+        s.grid = [vec![0.0, 100.0], vec![0.0], vec![0.0]];
+        s.k = [
+            vec![10.0, 30.0],
+            vec![25.0, 25.0],
+            vec![15.0, 15.0],
+            vec![16.0, 16.0],
+            vec![40.0, 40.0],
+            vec![50.0, 50.0],
+        ];
+        s
+    }
+
+    #[test]
+    fn interpolates_and_clamps() {
+        let s = map();
+        assert_abs_diff_eq!(
+            s.k_n_per_um(&Vector3::new(25.0, 7.0, 3.0), 0, true),
+            15.0,
+            epsilon = K_TOL
+        );
+        assert_abs_diff_eq!(
+            s.k_n_per_um(&Vector3::new(-5.0, 0.0, 0.0), 0, true),
+            10.0,
+            epsilon = K_TOL
+        );
+        assert_abs_diff_eq!(
+            s.k_n_per_um(&Vector3::new(500.0, 0.0, 0.0), 0, true),
+            30.0,
+            epsilon = K_TOL
+        );
+        assert_abs_diff_eq!(
+            s.k_n_per_um(&Vector3::new(50.0, 0.0, 0.0), 0, false),
+            25.0,
+            epsilon = K_TOL
+        );
+    }
+
+    #[test]
+    fn deflection_follows_the_force_sign() {
+        // 200 N along +Z at 40 N/µm: +5 µm; −200 N at 50 N/µm: −4 µm;
+        // +300 N along X at X = 50 (k = 20): +15 µm.
+        let s = map();
+        let p = Vector3::new(50.0, 0.0, 0.0);
+        let d = s.deflection_mm(&p, &Vector3::new(300.0, 0.0, 200.0));
+        assert_abs_diff_eq!(d, Vector3::new(0.015, 0.0, 0.005), epsilon = POS_TOL_MM);
+        let d = s.deflection_mm(&p, &Vector3::new(0.0, 0.0, -200.0));
+        assert_abs_diff_eq!(d[2], -0.004, epsilon = POS_TOL_MM);
+    }
+
+    #[test]
+    fn trilinear_on_a_full_grid() {
+        // k = 10 + x/10 + y/20 + z/50 on a 2×2×2 grid is trilinear, so the
+        // interpolation is exact inside: at (30, 40, 50): 10 + 3 + 2 + 1 = 16.
+        let g = [0.0, 100.0];
+        let f = |x: f64, y: f64, z: f64| 10.0 + x / 10.0 + y / 20.0 + z / 50.0;
+        let mut vals = Vec::new();
+        for &z in &g {
+            for &y in &g {
+                for &x in &g {
+                    vals.push(f(x, y, z));
+                }
+            }
+        }
+        let mut s = Stiffness::uniform([[1.0; 2]; 3]);
+        s.grid = [g.to_vec(), g.to_vec(), g.to_vec()];
+        for v in s.k.iter_mut() {
+            *v = vals.clone();
+        }
+        assert_abs_diff_eq!(
+            s.k_n_per_um(&Vector3::new(30.0, 40.0, 50.0), 1, false),
+            16.0,
+            epsilon = K_TOL
+        );
+    }
+
+    #[test]
+    fn deflection_sensitivity_to_position_matches_the_analytic_slope() {
+        // d(F/k)/dx with k = 10 + 0.2 x (the map's k_x+): −F·0.2/k² µm/mm.
+        // At x = 50 (k = 20), F = 300 N: −300·0.2/400 = −0.15 µm/mm.
+        let s = map();
+        let f = Vector3::new(300.0, 0.0, 0.0);
+        let h = 1e-4;
+        let dp = s.deflection_mm(&Vector3::new(50.0 + h, 0.0, 0.0), &f);
+        let dm = s.deflection_mm(&Vector3::new(50.0 - h, 0.0, 0.0), &f);
+        assert_abs_diff_eq!((dp[0] - dm[0]) / (2.0 * h), -0.15e-3, epsilon = 1e-9);
+    }
+}
