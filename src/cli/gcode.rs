@@ -28,7 +28,7 @@ fn load_machine(name: &str) -> Result<MachineTool> {
     }
 }
 
-fn parse_setup(args: &ProgramArgs, machine: Option<&MachineTool>) -> Result<Setup> {
+pub(super) fn parse_setup(args: &ProgramArgs, machine: Option<&MachineTool>) -> Result<Setup> {
     let mut setup = Setup::default();
     match machine {
         Some(m) => {
@@ -106,7 +106,7 @@ fn open_input(path: &Path) -> Result<(Box<dyn BufRead>, String)> {
     ))
 }
 
-fn effects(args: &EffectArgs) -> Result<EffectSet> {
+pub(super) fn effects(args: &EffectArgs) -> Result<EffectSet> {
     let mut set = EffectSet::parse(&args.effects)?;
     for g in &args.gains {
         set.set_gain(g)?;
@@ -114,7 +114,7 @@ fn effects(args: &EffectArgs) -> Result<EffectSet> {
     Ok(set)
 }
 
-fn thread_pool(threads: Option<usize>) -> Result<rayon::ThreadPool> {
+pub(super) fn thread_pool(threads: Option<usize>) -> Result<rayon::ThreadPool> {
     let mut b = rayon::ThreadPoolBuilder::new();
     if let Some(n) = threads {
         if n == 0 {
@@ -235,7 +235,7 @@ pub fn default_output(input: &Path) -> PathBuf {
     input.with_file_name(name)
 }
 
-fn same_file(a: &Path, b: &Path) -> bool {
+pub(super) fn same_file(a: &Path, b: &Path) -> bool {
     match (a.canonicalize(), b.canonicalize()) {
         (Ok(x), Ok(y)) => x == y,
         _ => false,
@@ -266,7 +266,7 @@ pub fn write_atomically<T>(path: &Path, f: impl FnOnce(&mut dyn Write) -> Result
     Ok(value)
 }
 
-fn build_job<'m>(
+pub(super) fn build_job<'m>(
     machine: &'m MachineTool,
     pool: &'m rayon::ThreadPool,
     setup: Setup,
@@ -311,7 +311,7 @@ fn machine_setup(program: &ProgramArgs, command: &str) -> Result<(MachineTool, S
 }
 
 /// Writes to `path` atomically, or to standard output for `-`.
-fn emit_to<T>(path: &Path, f: impl FnOnce(&mut dyn Write) -> Result<T>) -> Result<T> {
+pub(super) fn emit_to<T>(path: &Path, f: impl FnOnce(&mut dyn Write) -> Result<T>) -> Result<T> {
     if path == Path::new("-") {
         let mut stdout = BufWriter::new(std::io::stdout().lock());
         let value = f(&mut stdout)?;
@@ -347,7 +347,10 @@ fn run_reporting(
     if let Some(e) = err {
         return Err(e);
     }
-    rw.finish(&summary)?;
+    rw.finish(crate::emit::report::Totals {
+        blocks: summary.blocks,
+        moves: summary.moves,
+    })?;
     Ok(summary)
 }
 
@@ -381,11 +384,16 @@ pub fn compensate(a: &CompensateArgs) -> Result<i32> {
     }
     let (input, file) = open_input(input_path)?;
     let summary: Summary = match &a.report {
-        Some(report_path) => write_atomically(report_path, |rep| {
-            emit_to(&out_path, |w| {
-                run_reporting(&job, input, &file, Some(w), rep, &setup, Format::Csv)
-            })
-        })?,
+        Some(report_path) => {
+            let format = a
+                .report_format
+                .unwrap_or_else(|| Format::from_path(report_path));
+            write_atomically(report_path, |rep| {
+                emit_to(&out_path, |w| {
+                    run_reporting(&job, input, &file, Some(w), rep, &setup, format)
+                })
+            })?
+        }
         None => emit_to(&out_path, |w| job.run(input, &file, Some(w), None))?,
     };
     tracing::info!(

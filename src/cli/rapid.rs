@@ -5,8 +5,8 @@ use std::io::Write;
 use std::path::{Path, PathBuf};
 
 use super::gcode::{default_output, write_atomically};
-use super::{Annotate, CheckArgs, CompensateArgs, ProgramArgs, usage};
-use crate::compensate::rapid::{RapidOptions, compensate_module};
+use super::{Annotate, CheckArgs, CompensateArgs, ProgramArgs, ReportArgs, usage};
+use crate::compensate::rapid::{RapidOptions, RapidOutcome, compensate_module};
 use crate::emit::rapid::Format;
 use crate::error::{Error, Result};
 use crate::machine::Machine;
@@ -32,7 +32,7 @@ pub fn wants(program: &ProgramArgs) -> bool {
     }
 }
 
-fn load_robot(name: &str) -> Result<Robot> {
+pub(super) fn load_robot(name: &str) -> Result<Robot> {
     let path = Machine::resolve(name)?;
     match Machine::load(&path)? {
         Machine::Robot(r) => Ok(r),
@@ -67,7 +67,7 @@ pub fn robot_effects(text: &str) -> Result<Effects> {
     Ok(e)
 }
 
-fn read_program(path: &Path) -> Result<(String, String)> {
+pub(super) fn read_program(path: &Path) -> Result<(String, String)> {
     let name = path.display().to_string();
     let bytes = if path == Path::new("-") {
         let mut b = Vec::new();
@@ -118,9 +118,6 @@ pub fn compensate(a: &CompensateArgs) -> Result<i32> {
         .as_deref()
         .ok_or_else(|| usage("compensate needs --machine"))?;
     let robot = load_robot(machine)?;
-    if a.report.is_some() {
-        return Err(usage("--report is not supported for RAPID programs yet"));
-    }
     if !a.program.tools.is_empty() || !a.program.work_offsets.is_empty() {
         return Err(usage(
             "--tool and --work-offset are G-code options; RAPID takes tooldata and wobjdata from the module",
@@ -168,6 +165,12 @@ pub fn compensate(a: &CompensateArgs) -> Result<i32> {
                 .map_err(|e| Error::io(&out_path, e))
         })?;
     }
+    if let Some(path) = &a.report {
+        let format = a
+            .report_format
+            .unwrap_or_else(|| super::Format::from_path(path));
+        write_atomically(path, |w| write_report(w, &outcome, &name, format))?;
+    }
     tracing::info!(
         "{}: {} moves compensated, {} targets added; largest predicted deviation {:.4} mm (line {})",
         out_path.display(),
@@ -176,5 +179,69 @@ pub fn compensate(a: &CompensateArgs) -> Result<i32> {
         outcome.max_deviation_mm,
         outcome.max_deviation_line
     );
+    Ok(0)
+}
+
+/// Writes the deviation report of a compensated (or dry-run) RAPID module:
+/// a row per motion instruction with the kinematic, gravity and process
+/// parts of its predicted deviation.
+pub(super) fn write_report(
+    out: &mut dyn Write,
+    outcome: &RapidOutcome,
+    name: &str,
+    format: super::Format,
+) -> Result<()> {
+    use crate::emit::report::{Entry, Layout, ReportWriter, Totals};
+    let mut rw = ReportWriter::with_layout(out, Layout::rapid(), format, name)?;
+    for t in &outcome.targets {
+        let d = &t.deviation;
+        rw.entry(&Entry {
+            line: t.line,
+            motion: t.kind,
+            axes: &t.programmed_mm,
+            position_mm: t.programmed_mm,
+            deviation_mm: d.total.pos_mm.into(),
+            effects_mm: &[
+                d.kinematic.pos_mm.norm(),
+                d.gravity.pos_mm.norm(),
+                d.process.pos_mm.norm(),
+            ],
+            residual_mm: None,
+            orient_urad: d.total.rot_rad.norm() * 1e6,
+        })?;
+    }
+    rw.finish(Totals {
+        blocks: outcome.moves,
+        moves: outcome.moves,
+    })
+}
+
+/// `postproc report` of a RAPID module (dry run against a robot).
+pub fn report(a: &ReportArgs) -> Result<i32> {
+    let machine = a
+        .program
+        .machine
+        .as_deref()
+        .ok_or_else(|| usage("report needs --machine"))?;
+    let robot = load_robot(machine)?;
+    if !a.program.tools.is_empty() || !a.program.work_offsets.is_empty() {
+        return Err(usage(
+            "--tool and --work-offset are G-code options; RAPID takes tooldata and wobjdata from the module",
+        ));
+    }
+    if !a.effects.gains.is_empty() {
+        return Err(usage(
+            "--gain is a machine-tool option; robots take --effects only",
+        ));
+    }
+    let opts = RapidOptions {
+        effects: robot_effects(&a.effects.effects)?,
+        annotate: false,
+        format: Format::default(),
+    };
+    let (src, name) = read_program(&a.program.file)?;
+    let outcome = compensate_module(&src, &name, &robot, &opts)?;
+    let out = a.output.clone().unwrap_or_else(|| PathBuf::from("-"));
+    super::gcode::emit_to(&out, |w| write_report(w, &outcome, &name, a.format))?;
     Ok(0)
 }

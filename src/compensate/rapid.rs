@@ -52,6 +52,21 @@ pub struct RapidOutcome {
     pub max_deviation_mm: f64,
     /// 1-based line of the move with the largest deviation.
     pub max_deviation_line: usize,
+    /// Per motion instruction, in source order: its predicted deviation (reports).
+    pub targets: Vec<MoveDeviation>,
+}
+
+/// Predicted deviation of one motion instruction, for reports.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct MoveDeviation {
+    /// 1-based line of the instruction.
+    pub line: usize,
+    /// Instruction name (`MoveL`, `MoveJ`, `MoveC`, `MoveAbsJ`).
+    pub kind: &'static str,
+    /// Programmed TCP position, world frame, mm.
+    pub programmed_mm: [f64; 3],
+    /// Predicted deviation of the uncompensated target, with its breakdown.
+    pub deviation: crate::machine::robot::Deviation,
 }
 
 /// 1-based line and byte column of a byte offset.
@@ -549,6 +564,8 @@ struct Rewriter<'m> {
     /// Counter of `_oN` names per origin.
     derived_count: HashMap<Origin, usize>,
     added: usize,
+    /// Programmed TCP position (world, mm) of the last target compensated.
+    last_tcp: [f64; 3],
 }
 
 impl Rewriter<'_> {
@@ -584,6 +601,7 @@ impl Rewriter<'_> {
         let u = resolve_cart(self.module, self.src, self.file, target)?;
         let view = self.view(key, tool);
         let programmed = wobj * u.pose_obj;
+        self.last_tcp = programmed.translation.vector.into();
         // Errors point at the literal's declaration for a plain named target
         // (where the numbers to fix are), else at the move's expression.
         let at = match (&u.origin, u.derived) {
@@ -740,6 +758,7 @@ impl Rewriter<'_> {
         view.check_limits(&q)
             .map_err(|e| self.locate(at, e, &what))?;
         let goal = view.tcp_pose(Model::Nominal, &q);
+        self.last_tcp = goal.translation.vector.into();
         let comp = view
             .compensate(&goal, &IkSelect::Near(q), self.opts.effects)
             .map_err(|e| self.locate(at, e, &what))?;
@@ -817,6 +836,7 @@ pub fn compensate_module(
         made: HashMap::new(),
         derived_count: HashMap::new(),
         added: 0,
+        last_tcp: [0.0; 3],
     };
     let mut outcome = RapidOutcome {
         text: String::new(),
@@ -824,6 +844,7 @@ pub fn compensate_module(
         added: 0,
         max_deviation_mm: 0.0,
         max_deviation_line: 0,
+        targets: Vec::new(),
     };
     let has_process = robot.process_wrench().is_some();
     for mv in module.moves() {
@@ -846,6 +867,12 @@ pub fn compensate_module(
             rw.cart(mv, &mv.target, &key, &tool, &wobj)?
         };
         outcome.moves += 1;
+        outcome.targets.push(MoveDeviation {
+            line: mv.line,
+            kind: mv.kind.name(),
+            programmed_mm: rw.last_tcp,
+            deviation: dev,
+        });
         let d = dev.total.pos_mm.norm();
         if d > outcome.max_deviation_mm {
             outcome.max_deviation_mm = d;

@@ -1,0 +1,409 @@
+//! `postproc batch`: compensates many programs (G-code and RAPID, given as
+//! files or folders) into an output folder, in parallel, carrying on past a
+//! bad file, and writes `batch-summary.json`.
+//!
+//! Determinism: the programs are sorted by input path, each is compensated
+//! by the same deterministic pipeline as `compensate`, and the summary holds
+//! no times, so every byte written is the same for any `--threads`.
+//! Every output is written atomically (temporary file, then rename).
+
+use std::collections::BTreeMap;
+use std::io::{BufReader, IsTerminal, Write};
+use std::path::{Path, PathBuf};
+
+use rayon::prelude::*;
+use serde::Serialize;
+
+use super::gcode::{build_job, effects, parse_setup, same_file, thread_pool, write_atomically};
+use super::rapid::{load_robot, read_program, robot_effects};
+use super::{Annotate, BatchArgs, ProgramArgs, usage};
+use crate::compensate::rapid::{RapidOptions, compensate_module};
+use crate::error::{Error, Result};
+use crate::machine::Machine;
+
+/// Extensions of G-code programs picked up from folders.
+pub const GCODE_EXTENSIONS: [&str; 5] = ["nc", "ngc", "tap", "gcode", "cnc"];
+/// Extensions of RAPID modules picked up from folders.
+pub const RAPID_EXTENSIONS: [&str; 3] = ["mod", "modx", "prg"];
+/// Name of the summary written into the output folder.
+pub const SUMMARY_FILE: &str = "batch-summary.json";
+
+fn extension(path: &Path) -> Option<String> {
+    path.extension()
+        .map(|e| e.to_string_lossy().to_ascii_lowercase())
+}
+
+fn is_program(path: &Path) -> bool {
+    extension(path).is_some_and(|e| {
+        GCODE_EXTENSIONS.contains(&e.as_str()) || RAPID_EXTENSIONS.contains(&e.as_str())
+    })
+}
+
+fn is_rapid(path: &Path) -> bool {
+    extension(path).is_some_and(|e| RAPID_EXTENSIONS.contains(&e.as_str()))
+}
+
+/// One program to compensate: where it is, where its output goes (relative
+/// to the output folder), or why it cannot be taken.
+#[derive(Debug, Clone)]
+struct Item {
+    input: PathBuf,
+    rel: PathBuf,
+    problem: Option<String>,
+}
+
+/// Programs under a folder, recursively, in name order; hidden entries and
+/// the output folder are skipped.
+fn walk(root: &Path, dir: &Path, skip: Option<&Path>, items: &mut Vec<Item>) -> Result<()> {
+    let mut entries: Vec<PathBuf> = std::fs::read_dir(dir)
+        .map_err(|e| Error::io(dir, e))?
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .collect();
+    entries.sort();
+    for path in entries {
+        let hidden = path
+            .file_name()
+            .is_some_and(|n| n.to_string_lossy().starts_with('.'));
+        if hidden {
+            continue;
+        }
+        if path.is_dir() {
+            if skip.is_some_and(|s| path.canonicalize().is_ok_and(|p| p == s)) {
+                continue;
+            }
+            walk(root, &path, skip, items)?;
+        } else if is_program(&path) {
+            let rel = path.strip_prefix(root).unwrap_or(&path).to_path_buf();
+            items.push(Item {
+                input: path,
+                rel,
+                problem: None,
+            });
+        }
+    }
+    Ok(())
+}
+
+/// Expands the inputs into programs, sorted by input path; an input that
+/// does not exist, or two programs with one output name, become failures.
+fn collect(inputs: &[PathBuf], out_dir: &Path) -> Result<Vec<Item>> {
+    let skip = out_dir.canonicalize().ok();
+    let mut items = Vec::new();
+    for input in inputs {
+        if input.is_dir() {
+            walk(input, input, skip.as_deref(), &mut items)?;
+        } else {
+            let rel = input
+                .file_name()
+                .map(PathBuf::from)
+                .unwrap_or_else(|| PathBuf::from("program"));
+            let problem = (!input.is_file()).then(|| format!("{}: no such file", input.display()));
+            items.push(Item {
+                input: input.clone(),
+                rel,
+                problem,
+            });
+        }
+    }
+    items.sort_by(|a, b| a.input.cmp(&b.input));
+    items.dedup_by(|a, b| a.input == b.input);
+    let mut owner: BTreeMap<PathBuf, PathBuf> = BTreeMap::new();
+    for item in &mut items {
+        if item.problem.is_some() {
+            continue;
+        }
+        match owner.get(&item.rel) {
+            Some(first) => {
+                item.problem = Some(format!(
+                    "{}: its output name {} is already taken by {}",
+                    item.input.display(),
+                    item.rel.display(),
+                    first.display()
+                ));
+            }
+            None => {
+                owner.insert(item.rel.clone(), item.input.clone());
+            }
+        }
+    }
+    Ok(items)
+}
+
+/// Result of one program, as written to `batch-summary.json`.
+#[derive(Debug, Clone, Serialize)]
+struct FileResult {
+    input: String,
+    output: Option<String>,
+    /// `ok`, `findings` (out of tolerance) or `failed`.
+    status: &'static str,
+    error: Option<String>,
+    blocks: usize,
+    moves: usize,
+    max_deviation_mm: f64,
+    max_deviation_line: usize,
+    max_residual_mm: Option<f64>,
+}
+
+/// The summary file.
+#[derive(Debug, Serialize)]
+struct BatchSummary {
+    machine: String,
+    tolerance_mm: f64,
+    programs: usize,
+    ok: usize,
+    findings: usize,
+    failed: usize,
+    exit_code: i32,
+    results: Vec<FileResult>,
+}
+
+/// Rounds to 6 decimals (1 nm) for the summary.
+fn round6(v: f64) -> f64 {
+    (v * 1e6).round() / 1e6
+}
+
+/// An error with its source chain, as the binary prints it.
+fn message(e: &Error) -> String {
+    let mut msg = e.to_string();
+    let mut src = std::error::Error::source(e);
+    while let Some(s) = src {
+        msg.push_str(&format!(": {s}"));
+        src = s.source();
+    }
+    msg
+}
+
+/// What one compensation gave.
+struct Done {
+    blocks: usize,
+    moves: usize,
+    max_dev: f64,
+    max_line: usize,
+    residual: Option<f64>,
+}
+
+/// The configured engine for the batch's machine.
+enum Engine<'m> {
+    Tool(crate::job::Job<'m>),
+    Robot(crate::machine::robot::Robot, RapidOptions),
+}
+
+fn compensate_one(engine: &Engine, input: &Path, output: &Path) -> Result<Done> {
+    if same_file(input, output) {
+        return Err(usage(format!(
+            "{}: the output would overwrite the input",
+            output.display()
+        )));
+    }
+    if let Some(dir) = output.parent() {
+        std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
+    }
+    let name = input.display().to_string();
+    match engine {
+        Engine::Tool(job) => {
+            if is_rapid(input) {
+                return Err(usage(format!(
+                    "{name}: a RAPID module needs a robot machine file"
+                )));
+            }
+            let f = std::fs::File::open(input).map_err(|e| Error::io(input, e))?;
+            let s = write_atomically(output, |w| {
+                job.run(BufReader::with_capacity(1 << 16, f), &name, Some(w), None)
+            })?;
+            Ok(Done {
+                blocks: s.blocks,
+                moves: s.moves,
+                max_dev: s.deviation.max,
+                max_line: s.deviation.max_line,
+                residual: Some(s.max_residual_mm),
+            })
+        }
+        Engine::Robot(robot, opts) => {
+            if !is_rapid(input) {
+                return Err(usage(format!(
+                    "{name}: a G-code program needs a machine-tool machine file"
+                )));
+            }
+            let (src, name) = read_program(input)?;
+            let outcome = compensate_module(&src, &name, robot, opts)?;
+            write_atomically(output, |w| {
+                w.write_all(outcome.text.as_bytes())
+                    .map_err(|e| Error::io(output, e))
+            })?;
+            Ok(Done {
+                blocks: outcome.moves,
+                moves: outcome.moves,
+                max_dev: outcome.max_deviation_mm,
+                max_line: outcome.max_deviation_line,
+                residual: None,
+            })
+        }
+    }
+}
+
+/// `postproc batch`; `quiet` hides the progress bar.
+pub fn run(a: &BatchArgs, quiet: bool) -> Result<i32> {
+    let pool = thread_pool(a.effects.threads)?;
+    let machine_path = Machine::resolve(&a.machine)?;
+    let machine = Machine::load(&machine_path)?;
+    std::fs::create_dir_all(&a.out_dir).map_err(|e| Error::io(&a.out_dir, e))?;
+    let items = collect(&a.inputs, &a.out_dir)?;
+    if items.is_empty() {
+        return Err(usage(format!(
+            "no programs found (extensions: {}, {})",
+            GCODE_EXTENSIONS.join(" "),
+            RAPID_EXTENSIONS.join(" ")
+        )));
+    }
+    let annotate = a.annotate == Annotate::Comment;
+    let tool;
+    let engine = match machine {
+        Machine::Tool(m) => {
+            tool = m;
+            let program = ProgramArgs {
+                file: PathBuf::new(),
+                machine: None,
+                tools: Vec::new(),
+                work_offsets: Vec::new(),
+            };
+            let setup = parse_setup(&program, Some(&tool))?;
+            let mut job = build_job(
+                &tool,
+                &pool,
+                setup,
+                effects(&a.effects)?,
+                a.tolerance,
+                None,
+                annotate,
+            )?;
+            // The programs already run on the pool's threads.
+            job.pool = None;
+            Engine::Tool(job)
+        }
+        Machine::Robot(_) => {
+            if !a.effects.gains.is_empty() {
+                return Err(usage(
+                    "--gain is a machine-tool option; robots take --effects only",
+                ));
+            }
+            let robot = load_robot(&a.machine)?;
+            let opts = RapidOptions {
+                effects: robot_effects(&a.effects.effects)?,
+                annotate,
+                format: crate::emit::rapid::Format::default(),
+            };
+            Engine::Robot(robot, opts)
+        }
+    };
+    let bar = if quiet || !std::io::stderr().is_terminal() {
+        indicatif::ProgressBar::hidden()
+    } else {
+        let b = indicatif::ProgressBar::new(items.len() as u64);
+        if let Ok(style) = indicatif::ProgressStyle::with_template(
+            "{bar:40} {pos}/{len} programs {elapsed_precise} {wide_msg}",
+        ) {
+            b.set_style(style);
+        }
+        b
+    };
+    let results: Vec<FileResult> = pool.install(|| {
+        items
+            .par_iter()
+            .map(|item| {
+                let output = a.out_dir.join(&item.rel);
+                let done = match &item.problem {
+                    Some(p) => Err(usage(p.clone())),
+                    None => compensate_one(&engine, &item.input, &output),
+                };
+                bar.inc(1);
+                let input = item.input.display().to_string();
+                match done {
+                    Ok(d) => {
+                        let findings = d.residual.is_some_and(|r| r > a.tolerance);
+                        FileResult {
+                            input,
+                            output: Some(output.display().to_string()),
+                            status: if findings { "findings" } else { "ok" },
+                            error: None,
+                            blocks: d.blocks,
+                            moves: d.moves,
+                            max_deviation_mm: round6(d.max_dev),
+                            max_deviation_line: d.max_line,
+                            max_residual_mm: d.residual.map(round6),
+                        }
+                    }
+                    Err(e) => {
+                        tracing::warn!("{}", message(&e));
+                        FileResult {
+                            input,
+                            output: None,
+                            status: "failed",
+                            error: Some(message(&e)),
+                            blocks: 0,
+                            moves: 0,
+                            max_deviation_mm: 0.0,
+                            max_deviation_line: 0,
+                            max_residual_mm: None,
+                        }
+                    }
+                }
+            })
+            .collect()
+    });
+    bar.finish_and_clear();
+    let count = |s: &str| results.iter().filter(|r| r.status == s).count();
+    let (ok, findings, failed) = (count("ok"), count("findings"), count("failed"));
+    let exit_code = if failed > 0 {
+        2
+    } else if findings > 0 {
+        1
+    } else {
+        0
+    };
+    let summary = BatchSummary {
+        machine: a.machine.clone(),
+        tolerance_mm: a.tolerance,
+        programs: results.len(),
+        ok,
+        findings,
+        failed,
+        exit_code,
+        results,
+    };
+    let summary_path = a.out_dir.join(SUMMARY_FILE);
+    write_atomically(&summary_path, |w| {
+        serde_json::to_writer_pretty(&mut *w, &summary)
+            .map_err(|e| Error::io(&summary_path, std::io::Error::other(e)))?;
+        w.write_all(b"\n").map_err(|e| Error::io(&summary_path, e))
+    })?;
+    let mut out = std::io::stdout().lock();
+    let mut say = |t: String| {
+        out.write_all(t.as_bytes())
+            .map_err(|e| Error::io("stdout", e))
+    };
+    for r in &summary.results {
+        match r.status {
+            "failed" => say(format!(
+                "failed    {}: {}\n",
+                r.input,
+                r.error.as_deref().unwrap_or("")
+            ))?,
+            "findings" => say(format!(
+                "findings  {}: residual {} mm > tolerance {} mm\n",
+                r.input,
+                r.max_residual_mm.unwrap_or(0.0),
+                a.tolerance
+            ))?,
+            _ => {}
+        }
+    }
+    say(format!(
+        "batch: {} programs: {} compensated ({} with findings), {} failed; summary in {}\n",
+        summary.programs,
+        ok + findings,
+        findings,
+        failed,
+        summary_path.display()
+    ))?;
+    Ok(exit_code)
+}
