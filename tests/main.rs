@@ -1,6 +1,7 @@
 //! The one integration-test binary: CLI tests through the real executable,
 //! goldens, property tests and regressions.
 
+mod batch_cli;
 mod common;
 mod gcode_cli;
 mod gcode_grammar;
@@ -9,4 +10,5 @@ mod machine_tool;
 mod observations;
 mod rapid;
 mod rapid_cli;
+mod report_cli;
 mod robot;

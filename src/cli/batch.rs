@@ -184,7 +184,7 @@ struct Done {
 
 /// The configured engine for the batch's machine.
 enum Engine<'m> {
-    Tool(crate::job::Job<'m>),
+    Tool(Box<crate::job::Job<'m>>),
     Robot(crate::machine::robot::Robot, RapidOptions),
 }
 
@@ -278,7 +278,7 @@ pub fn run(a: &BatchArgs, quiet: bool) -> Result<i32> {
             )?;
             // The programs already run on the pool's threads.
             job.pool = None;
-            Engine::Tool(job)
+            Engine::Tool(Box::new(job))
         }
         Machine::Robot(_) => {
             if !a.effects.gains.is_empty() {
@@ -333,7 +333,7 @@ pub fn run(a: &BatchArgs, quiet: bool) -> Result<i32> {
                         }
                     }
                     Err(e) => {
-                        tracing::warn!("{}", message(&e));
+                        tracing::debug!("{}", message(&e));
                         FileResult {
                             input,
                             output: None,

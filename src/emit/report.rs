@@ -259,7 +259,7 @@ fn json_str(s: &str) -> String {
 }
 
 /// Label of statistic `i` (0 total, then the effects).
-fn stat_name<'a>(layout: &'a Layout, i: usize) -> &'a str {
+fn stat_name(layout: &Layout, i: usize) -> &str {
     if i == 0 {
         "total"
     } else {
