@@ -260,6 +260,13 @@ pub fn write_atomically<T>(path: &Path, f: impl FnOnce(&mut dyn Write) -> Result
         .into_inner()
         .map_err(|e| Error::io(path, e.into_error()))?;
     file.sync_all().map_err(|e| Error::io(path, e))?;
+    // Temporary files are private (0600); the result is an ordinary file.
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::PermissionsExt;
+        file.set_permissions(std::fs::Permissions::from_mode(0o644))
+            .map_err(|e| Error::io(path, e))?;
+    }
     tmp_path
         .persist(path)
         .map_err(|e| Error::io(path, e.error))?;

@@ -212,7 +212,9 @@ pub struct ReportWriter<'w> {
     /// Index 0: total; then one per effect.
     stats: Vec<Stat>,
     plot: Option<Decimator>,
+    /// Largest deviation of all moves, and of the cutting moves.
     worst_point: Option<PlotWorst>,
+    worst_cut: Option<PlotWorst>,
 }
 
 fn io(e: std::io::Error) -> Error {
@@ -293,6 +295,7 @@ impl<'w> ReportWriter<'w> {
             stats,
             plot: (format == Format::Svg).then(|| Decimator::new(PLOT_POINTS)),
             worst_point: None,
+            worst_cut: None,
         };
         let mut cols: Vec<String> = vec!["line".into(), "motion".into()];
         for (a, unit) in &w.layout.axes {
@@ -372,21 +375,27 @@ impl<'w> ReportWriter<'w> {
         }
         match self.format {
             Format::Svg => {
+                let rapid = matches!(r.motion, "rapid" | "fixed" | "MoveJ" | "MoveAbsJ");
                 let p = PlotPoint {
                     line: r.line,
                     pos: r.position_mm,
                     dev,
-                    rapid: matches!(r.motion, "rapid" | "fixed" | "MoveJ" | "MoveAbsJ"),
+                    rapid,
                 };
                 if let Some(plot) = self.plot.as_mut() {
                     plot.push(p);
                 }
+                let mark = PlotWorst {
+                    line: r.line,
+                    pos: r.position_mm,
+                    dev,
+                    cut: !rapid,
+                };
                 if self.worst_point.is_none_or(|w| dev > w.dev) {
-                    self.worst_point = Some(PlotWorst {
-                        line: r.line,
-                        pos: r.position_mm,
-                        dev,
-                    });
+                    self.worst_point = Some(mark);
+                }
+                if !rapid && self.worst_cut.is_none_or(|w| dev > w.dev) {
+                    self.worst_cut = Some(mark);
                 }
             }
             Format::Csv | Format::Table => {
@@ -571,7 +580,15 @@ impl<'w> ReportWriter<'w> {
                     total.2,
                     num(p95_total, 4)
                 );
-                let svg = crate::emit::svg::render(&points, self.worst_point, &title)?;
+                // The overall maximum, and the cutting maximum when it is
+                // another block.
+                let mut marks: Vec<PlotWorst> = self.worst_point.into_iter().collect();
+                if let Some(c) = self.worst_cut {
+                    if self.worst_point.is_none_or(|w| w.line != c.line) {
+                        marks.push(c);
+                    }
+                }
+                let svg = crate::emit::svg::render(&points, &marks, &title)?;
                 self.out.write_all(svg.as_bytes()).map_err(io)?;
             }
         }

@@ -33,7 +33,8 @@ pub struct PlotPoint {
     pub rapid: bool,
 }
 
-/// The block with the largest deviation, marked in the picture.
+/// A block marked in the picture: the largest deviation of all moves, and
+/// the largest of the cutting moves (where it lands on the part).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Worst {
     /// 1-based source line.
@@ -42,6 +43,19 @@ pub struct Worst {
     pub pos: [f64; 3],
     /// Predicted |deviation|, mm.
     pub dev: f64,
+    /// A cutting move (feed, arc, cycle, MoveL/MoveC): labelled "cut".
+    pub cut: bool,
+}
+
+const MARK_ALL: RGBColor = RGBColor(220, 30, 30);
+const MARK_CUT: RGBColor = RGBColor(230, 110, 0);
+
+fn mark_style(w: &Worst) -> (RGBColor, &'static str) {
+    if w.cut {
+        (MARK_CUT, "max cutting")
+    } else {
+        (MARK_ALL, "max")
+    }
 }
 
 /// Keeps at most about `2 × cap` points of a stream of any length: the stream
@@ -133,8 +147,48 @@ pub fn colour(t: f64) -> RGBColor {
     RGBColor(mix(a.0, b.0), mix(a.1, b.1), mix(a.2, b.2))
 }
 
-fn level(dev: f64, dmax: f64) -> usize {
-    ((dev / dmax * LEVELS as f64) as usize).min(LEVELS - 1)
+/// The colour scale, mm: `lo` and below darkest, `hi` and above brightest.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Scale {
+    lo: f64,
+    hi: f64,
+}
+
+impl Scale {
+    /// The range of the cutting moves' deviations (the part), so that its
+    /// variation uses every colour; rapids beyond it saturate. Without
+    /// cutting moves, 0 … the largest deviation.
+    fn of(points: &[PlotPoint], marks: &[Worst]) -> Scale {
+        let range = |it: &mut dyn Iterator<Item = f64>| {
+            it.filter(|d| d.is_finite())
+                .fold((f64::INFINITY, 0.0f64), |(lo, hi), d| {
+                    (lo.min(d), hi.max(d))
+                })
+        };
+        let (lo, hi) = range(&mut points.iter().filter(|p| !p.rapid).map(|p| p.dev));
+        if hi > 0.0 && hi - lo > 1e-6 {
+            return Scale { lo, hi };
+        }
+        let (_, hi) = range(
+            &mut points
+                .iter()
+                .map(|p| p.dev)
+                .chain(marks.iter().map(|w| w.dev)),
+        );
+        Scale {
+            lo: 0.0,
+            hi: if hi > 0.0 { hi } else { 1e-3 },
+        }
+    }
+}
+
+fn level(dev: f64, s: &Scale) -> usize {
+    let t = (dev - s.lo) / (s.hi - s.lo);
+    if t.is_finite() {
+        ((t.max(0.0) * LEVELS as f64) as usize).min(LEVELS - 1)
+    } else {
+        0
+    }
 }
 
 fn level_colour(l: usize) -> RGBColor {
@@ -161,11 +215,11 @@ fn equal_ranges(
 fn view(
     area: &DrawingArea<SVGBackend, Shift>,
     points: &[PlotPoint],
-    worst: Option<Worst>,
+    marks: &[Worst],
     (a, b): (usize, usize),
     caption: &str,
     (xdesc, ydesc): (&str, &str),
-    dmax: f64,
+    scale: &Scale,
 ) -> Result<()> {
     let bounds = |k: usize| {
         points
@@ -211,10 +265,10 @@ fn view(
     // Runs of segments with the same colour level and kind: one polyline each.
     let mut i = 1;
     while i < points.len() {
-        let key = (level(points[i].dev, dmax), points[i].rapid);
+        let key = (level(points[i].dev, scale), points[i].rapid);
         let mut run = vec![at(&points[i - 1]), at(&points[i])];
         let mut j = i + 1;
-        while j < points.len() && (level(points[j].dev, dmax), points[j].rapid) == key {
+        while j < points.len() && (level(points[j].dev, scale), points[j].rapid) == key {
             run.push(at(&points[j]));
             j += 1;
         }
@@ -224,38 +278,36 @@ fn view(
             .map_err(plot_err)?;
         i = j;
     }
-    if let Some(wp) = worst {
+    for wp in marks {
+        let (colour, label) = mark_style(wp);
         let c = (
             wp.pos.get(a).copied().unwrap_or(0.0),
             wp.pos.get(b).copied().unwrap_or(0.0),
         );
         chart
-            .draw_series(std::iter::once(Circle::new(
-                c,
-                9,
-                RGBColor(220, 30, 30).stroke_width(3),
-            )))
-            .map_err(plot_err)?;
-        chart
-            .draw_series(std::iter::once(Text::new(
-                format!("max, line {}", wp.line),
-                c,
-                ("sans-serif", 14).into_font().color(&RGBColor(200, 20, 20)),
-            )))
+            .draw_series(std::iter::once(
+                EmptyElement::at(c)
+                    + Circle::new((0, 0), 9, colour.stroke_width(3))
+                    + Text::new(
+                        format!("{label}, line {}", wp.line),
+                        if wp.cut { (-60, 14) } else { (12, -18) },
+                        ("sans-serif", 14).into_font().color(&colour),
+                    ),
+            ))
             .map_err(plot_err)?;
     }
     Ok(())
 }
 
-/// The colour bar: |deviation| 0 … `dmax` mm.
-fn colour_bar(area: &DrawingArea<SVGBackend, Shift>, dmax: f64) -> Result<()> {
+/// The colour bar over the scale's range, mm.
+fn colour_bar(area: &DrawingArea<SVGBackend, Shift>, scale: &Scale) -> Result<()> {
     let mut chart = ChartBuilder::on(area)
-        .caption("|dev|", ("sans-serif", 16))
+        .caption("|dev| (mm)", ("sans-serif", 15))
         .margin_top(15)
         .margin_bottom(60)
         .margin_right(20)
         .y_label_area_size(80)
-        .build_cartesian_2d(0.0..1.0, 0.0..dmax)
+        .build_cartesian_2d(0.0..1.0, scale.lo..scale.hi)
         .map_err(plot_err)?;
     chart
         .configure_mesh()
@@ -263,7 +315,7 @@ fn colour_bar(area: &DrawingArea<SVGBackend, Shift>, dmax: f64) -> Result<()> {
         .disable_y_mesh()
         .x_labels(0)
         .y_labels(8)
-        .y_desc("predicted |deviation| (mm)")
+        .y_desc("cutting moves' range; beyond it saturates")
         .label_style(("sans-serif", 13))
         .axis_desc_style(("sans-serif", 14))
         .y_label_formatter(&|v| format!("{v:.4}"))
@@ -271,8 +323,9 @@ fn colour_bar(area: &DrawingArea<SVGBackend, Shift>, dmax: f64) -> Result<()> {
         .map_err(plot_err)?;
     chart
         .draw_series((0..LEVELS).map(|l| {
-            let lo = dmax * l as f64 / LEVELS as f64;
-            let hi = dmax * (l + 1) as f64 / LEVELS as f64;
+            let step = (scale.hi - scale.lo) / LEVELS as f64;
+            let lo = scale.lo + step * l as f64;
+            let hi = lo + step;
             Rectangle::new([(0.0, lo), (1.0, hi)], level_colour(l).filled())
         }))
         .map_err(plot_err)?;
@@ -283,8 +336,9 @@ fn colour_bar(area: &DrawingArea<SVGBackend, Shift>, dmax: f64) -> Result<()> {
 fn along(
     area: &DrawingArea<SVGBackend, Shift>,
     points: &[PlotPoint],
-    worst: Option<Worst>,
+    marks: &[Worst],
     dmax: f64,
+    scale: &Scale,
 ) -> Result<()> {
     let first = points.first().map_or(0, |p| p.line) as f64;
     let last = points.last().map_or(1, |p| p.line) as f64;
@@ -322,39 +376,39 @@ fn along(
             Circle::new(
                 (p.line as f64, p.dev),
                 2,
-                level_colour(level(p.dev, dmax)).filled(),
+                level_colour(level(p.dev, scale)).filled(),
             )
         }))
         .map_err(plot_err)?;
-    if let Some(wp) = worst {
+    for wp in marks {
+        let (colour, label) = mark_style(wp);
         let c = (wp.line as f64, wp.dev);
         chart
-            .draw_series(std::iter::once(Circle::new(
-                c,
-                7,
-                RGBColor(220, 30, 30).stroke_width(2),
-            )))
-            .map_err(plot_err)?;
-        chart
-            .draw_series(std::iter::once(Text::new(
-                format!("  max {:.4} mm, line {}", wp.dev, wp.line),
-                c,
-                ("sans-serif", 14).into_font().color(&RGBColor(200, 20, 20)),
-            )))
+            .draw_series(std::iter::once(
+                EmptyElement::at(c)
+                    + Circle::new((0, 0), 7, colour.stroke_width(2))
+                    + Text::new(
+                        format!("{label} {:.4} mm, line {}", wp.dev, wp.line),
+                        (10, -18),
+                        ("sans-serif", 14).into_font().color(&colour),
+                    ),
+            ))
             .map_err(plot_err)?;
     }
     Ok(())
 }
 
-/// Renders the picture as an SVG document.
-pub fn render(points: &[PlotPoint], worst: Option<Worst>, title: &str) -> Result<String> {
+/// Renders the picture as an SVG document, with `marks` circled and
+/// labelled in every view.
+pub fn render(points: &[PlotPoint], marks: &[Worst], title: &str) -> Result<String> {
     let top = points
         .iter()
         .map(|p| p.dev)
-        .chain(worst.map(|w| w.dev))
+        .chain(marks.iter().map(|w| w.dev))
         .filter(|d| d.is_finite())
         .fold(0.0, f64::max);
     let dmax = if top > 0.0 { top } else { 1e-3 };
+    let scale = Scale::of(points, marks);
     let mut buf = String::new();
     {
         let root = SVGBackend::with_string(&mut buf, SIZE).into_drawing_area();
@@ -372,24 +426,24 @@ pub fn render(points: &[PlotPoint], worst: Option<Worst>, title: &str) -> Result
         view(
             &plan,
             points,
-            worst,
+            marks,
             (0, 1),
             "Plan view (XY)",
             ("X (mm)", "Y (mm)"),
-            dmax,
+            &scale,
         )?;
         view(
             &side,
             points,
-            worst,
+            marks,
             (0, 2),
             "Side view (XZ)",
             ("X (mm)", "Z (mm)"),
-            dmax,
+            &scale,
         )?;
-        colour_bar(&bar, dmax)?;
+        colour_bar(&bar, &scale)?;
         let (program, _) = bottom_row.split_horizontally(SIZE.0 - BAR_W);
-        along(&program, points, worst, dmax)?;
+        along(&program, points, marks, dmax, &scale)?;
         root.present().map_err(plot_err)?;
     }
     Ok(buf)
