@@ -263,8 +263,8 @@ pub fn run(a: &BatchArgs, quiet: bool) -> Result<i32> {
             let program = ProgramArgs {
                 file: PathBuf::new(),
                 machine: None,
-                tools: Vec::new(),
-                work_offsets: Vec::new(),
+                tools: a.tools.clone(),
+                work_offsets: a.work_offsets.clone(),
             };
             let setup = parse_setup(&program, Some(&tool))?;
             let mut job = build_job(
@@ -281,6 +281,11 @@ pub fn run(a: &BatchArgs, quiet: bool) -> Result<i32> {
             Engine::Tool(Box::new(job))
         }
         Machine::Robot(_) => {
+            if !a.tools.is_empty() || !a.work_offsets.is_empty() {
+                return Err(usage(
+                    "--tool and --work-offset are G-code options; RAPID takes tooldata and wobjdata from the module",
+                ));
+            }
             if !a.effects.gains.is_empty() {
                 return Err(usage(
                     "--gain is a machine-tool option; robots take --effects only",

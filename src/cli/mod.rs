@@ -64,6 +64,12 @@ pub struct BatchArgs {
     /// their sub-folders) and batch-summary.json.
     #[arg(long)]
     pub out_dir: PathBuf,
+    /// G-code: tool length for an H number, overriding the machine file: H1=123.4 (mm).
+    #[arg(long = "tool", value_name = "H=LENGTH")]
+    pub tools: Vec<String>,
+    /// G-code: work offset overriding the machine file: G54=X,Y,Z (mm, machine coordinates).
+    #[arg(long = "work-offset", value_name = "GXX=X,Y,Z")]
+    pub work_offsets: Vec<String>,
     /// Effects.
     #[command(flatten)]
     pub effects: EffectArgs,

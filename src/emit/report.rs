@@ -559,16 +559,15 @@ impl<'w> ReportWriter<'w> {
                         .iter()
                         .map(|(v, line, _)| format!("{line} ({})", num(*v, 5)))
                         .collect();
-                    writeln!(
-                        self.out,
+                    let line = format!(
                         "{:<10} {:>10} {:>10} {:>10}   {}",
                         stat_name(&self.layout, i),
                         num(s.mean(), 5),
                         num(p95.get(i).copied().unwrap_or(0.0), 5),
                         num(s.max(), 5),
                         worst.join(", ")
-                    )
-                    .map_err(io)?;
+                    );
+                    writeln!(self.out, "{}", line.trim_end()).map_err(io)?;
                 }
             }
             Format::Svg => {
