@@ -69,6 +69,12 @@ fn batch(input: &Path, out: &Path, threads: &str) -> (i32, String) {
         .arg(input)
         .output()
         .expect("run batch");
+    // stderr is a pipe here: no progress bar (no carriage returns, no bar).
+    let stderr = String::from_utf8_lossy(&a.stderr);
+    assert!(
+        !stderr.contains('\r') && !stderr.contains("programs "),
+        "{stderr}"
+    );
     (
         a.status.code().unwrap_or(-1),
         String::from_utf8_lossy(&a.stdout).to_string(),
@@ -94,6 +100,24 @@ fn tree(dir: &Path) -> Vec<(PathBuf, Vec<u8>)> {
     out
 }
 
+/// Validates a summary against schemas/batch-summary.schema.json.
+fn validate(summary: &serde_json::Value) {
+    let schema: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(repo("schemas/batch-summary.schema.json")).expect("schema"),
+    )
+    .expect("schema is JSON");
+    let mut schemas = boon::Schemas::new();
+    let mut compiler = boon::Compiler::new();
+    let url = "https://postproc.example/schemas/batch-summary.schema.json";
+    compiler.add_resource(url, schema).expect("schema resource");
+    let idx = compiler
+        .compile(url, &mut schemas)
+        .expect("schema compiles");
+    if let Err(e) = schemas.validate(summary, idx) {
+        panic!("summary does not match the schema: {e:#}");
+    }
+}
+
 #[test]
 fn batch_of_fifty_reports_exactly_the_broken_ones_and_is_thread_independent() {
     let tmp = tempfile::tempdir().expect("temp dir");
@@ -110,6 +134,8 @@ fn batch_of_fifty_reports_exactly_the_broken_ones_and_is_thread_independent() {
         &std::fs::read(out1.join("batch-summary.json")).expect("summary written"),
     )
     .expect("summary is JSON");
+    validate(&summary);
+    assert_eq!(summary["exit_code"], 2);
     assert_eq!(summary["programs"], PROGRAMS);
     assert_eq!(summary["failed"], BROKEN.len());
     assert_eq!(summary["ok"], PROGRAMS - BROKEN.len());

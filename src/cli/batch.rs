@@ -53,12 +53,21 @@ struct Item {
 }
 
 /// Programs under a folder, recursively, in name order; hidden entries and
-/// the output folder are skipped.
-fn walk(root: &Path, dir: &Path, skip: Option<&Path>, items: &mut Vec<Item>) -> Result<()> {
-    let mut entries: Vec<PathBuf> = std::fs::read_dir(dir)
-        .map_err(|e| Error::io(dir, e))?
-        .filter_map(|e| e.ok().map(|e| e.path()))
-        .collect();
+/// the output folder are skipped. A folder that cannot be read becomes a
+/// failed entry.
+fn walk(root: &Path, dir: &Path, skip: Option<&Path>, items: &mut Vec<Item>) {
+    let read = match std::fs::read_dir(dir) {
+        Ok(r) => r,
+        Err(e) => {
+            items.push(Item {
+                input: dir.to_path_buf(),
+                rel: dir.to_path_buf(),
+                problem: Some(format!("{}: {e}", dir.display())),
+            });
+            return;
+        }
+    };
+    let mut entries: Vec<PathBuf> = read.filter_map(|e| e.ok().map(|e| e.path())).collect();
     entries.sort();
     for path in entries {
         let hidden = path
@@ -71,7 +80,7 @@ fn walk(root: &Path, dir: &Path, skip: Option<&Path>, items: &mut Vec<Item>) -> 
             if skip.is_some_and(|s| path.canonicalize().is_ok_and(|p| p == s)) {
                 continue;
             }
-            walk(root, &path, skip, items)?;
+            walk(root, &path, skip, items);
         } else if is_program(&path) {
             let rel = path.strip_prefix(root).unwrap_or(&path).to_path_buf();
             items.push(Item {
@@ -81,17 +90,16 @@ fn walk(root: &Path, dir: &Path, skip: Option<&Path>, items: &mut Vec<Item>) -> 
             });
         }
     }
-    Ok(())
 }
 
 /// Expands the inputs into programs, sorted by input path; an input that
 /// does not exist, or two programs with one output name, become failures.
-fn collect(inputs: &[PathBuf], out_dir: &Path) -> Result<Vec<Item>> {
+fn collect(inputs: &[PathBuf], out_dir: &Path) -> Vec<Item> {
     let skip = out_dir.canonicalize().ok();
     let mut items = Vec::new();
     for input in inputs {
         if input.is_dir() {
-            walk(input, input, skip.as_deref(), &mut items)?;
+            walk(input, input, skip.as_deref(), &mut items);
         } else {
             let rel = input
                 .file_name()
@@ -126,7 +134,7 @@ fn collect(inputs: &[PathBuf], out_dir: &Path) -> Result<Vec<Item>> {
             }
         }
     }
-    Ok(items)
+    items
 }
 
 /// Result of one program, as written to `batch-summary.json`.
@@ -247,7 +255,7 @@ pub fn run(a: &BatchArgs, quiet: bool) -> Result<i32> {
     let machine_path = Machine::resolve(&a.machine)?;
     let machine = Machine::load(&machine_path)?;
     std::fs::create_dir_all(&a.out_dir).map_err(|e| Error::io(&a.out_dir, e))?;
-    let items = collect(&a.inputs, &a.out_dir)?;
+    let items = collect(&a.inputs, &a.out_dir);
     if items.is_empty() {
         return Err(usage(format!(
             "no programs found (extensions: {}, {})",
