@@ -389,3 +389,25 @@ fn rapid_report_rejects_gcode_options() {
         .assert()
         .code(2);
 }
+
+#[test]
+fn compensate_refuses_a_report_path_that_would_replace_a_program() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let input = dir.path().join("p.nc");
+    std::fs::copy(repo("samples/part.nc"), &input).expect("copy sample");
+    let before = std::fs::read(&input).expect("read");
+    let out = dir.path().join("p.comp.nc");
+    for report in [&input, &out] {
+        postproc()
+            .arg("compensate")
+            .arg(&input)
+            .args(["--machine", "afm-r1000", "-o"])
+            .arg(&out)
+            .arg("--report")
+            .arg(report)
+            .assert()
+            .code(2);
+    }
+    assert_eq!(std::fs::read(&input).expect("read"), before);
+    assert!(!out.exists());
+}

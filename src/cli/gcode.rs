@@ -317,6 +317,25 @@ fn machine_setup(program: &ProgramArgs, command: &str) -> Result<(MachineTool, S
     Ok((machine, setup))
 }
 
+/// Refuses a `--report` path that would replace the input or the output.
+pub(super) fn check_report_path(report: Option<&Path>, input: &Path, output: &Path) -> Result<()> {
+    let Some(report) = report else {
+        return Ok(());
+    };
+    if report == Path::new("-") {
+        return Err(usage("--report needs a file path (the program goes to -o)"));
+    }
+    for (other, what) in [(input, "input"), (output, "output")] {
+        if other != Path::new("-") && (report == other || same_file(report, other)) {
+            return Err(usage(format!(
+                "{}: the report would overwrite the {what}",
+                report.display()
+            )));
+        }
+    }
+    Ok(())
+}
+
 /// Writes to `path` atomically, or to standard output for `-`.
 pub(super) fn emit_to<T>(path: &Path, f: impl FnOnce(&mut dyn Write) -> Result<T>) -> Result<T> {
     if path == Path::new("-") {
@@ -389,6 +408,7 @@ pub fn compensate(a: &CompensateArgs) -> Result<i32> {
             out_path.display()
         )));
     }
+    check_report_path(a.report.as_deref(), input_path, &out_path)?;
     let (input, file) = open_input(input_path)?;
     let summary: Summary = match &a.report {
         Some(report_path) => {

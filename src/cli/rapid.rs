@@ -151,6 +151,7 @@ pub fn compensate(a: &CompensateArgs) -> Result<i32> {
             out_path.display()
         )));
     }
+    super::gcode::check_report_path(a.report.as_deref(), input, &out_path)?;
     let (src, name) = read_program(input)?;
     let outcome = compensate_module(&src, &name, &robot, &opts)?;
     if out_path == Path::new("-") {
