@@ -142,6 +142,8 @@ fn gcode_json_report_validates_and_summarises_per_effect() {
     assert_eq!(worst.len(), 5);
     assert!(worst.windows(2).all(|w| w[0] >= w[1]));
     assert_eq!(effects[0]["worst"][0]["line"], 29);
+    // Line 29 of samples/part.nc, quoted.
+    assert_eq!(effects[0]["worst"][0]["source"], "N210 G54 G0 X80. Y55.");
 }
 
 #[test]
@@ -197,6 +199,12 @@ fn table_and_csv_reports_for_gcode_and_rapid() {
         .expect("per-effect total line");
     assert!(total.contains("29 (0.03178)"), "{total}");
     assert!(table.lines().any(|l| l.starts_with("geometric ")));
+    assert!(
+        table
+            .lines()
+            .any(|l| l.starts_with("  line 29 ") && l.ends_with("rapid     N210 G54 G0 X80. Y55.")),
+        "{table}"
+    );
     // Aligned: every row line has the header's length.
     let header_len = table.lines().next().map_or(0, str::len);
     assert!(

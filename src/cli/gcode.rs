@@ -358,7 +358,7 @@ fn run_reporting(
     setup: &Setup,
     format: Format,
 ) -> Result<Summary> {
-    let mut rw = ReportWriter::new(report, setup, format, file)?;
+    let mut rw = ReportWriter::new(report, setup, format, file)?.with_source(Path::new(file));
     let mut err = None;
     let summary = job.run(
         input,

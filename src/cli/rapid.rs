@@ -193,7 +193,8 @@ pub(super) fn write_report(
     format: super::Format,
 ) -> Result<()> {
     use crate::emit::report::{Entry, Layout, ReportWriter, Totals};
-    let mut rw = ReportWriter::with_layout(out, Layout::rapid(), format, name)?;
+    let mut rw =
+        ReportWriter::with_layout(out, Layout::rapid(), format, name)?.with_source(Path::new(name));
     for t in &outcome.targets {
         let d = &t.deviation;
         rw.entry(&Entry {

@@ -215,6 +215,49 @@ pub struct ReportWriter<'w> {
     /// Largest deviation of all moves, and of the cutting moves.
     worst_point: Option<PlotWorst>,
     worst_cut: Option<PlotWorst>,
+    /// The program file, re-read at the end for the text of the worst blocks.
+    source: Option<std::path::PathBuf>,
+}
+
+/// Longest source text quoted for a worst block, characters.
+const SOURCE_CHARS: usize = 72;
+
+/// The text of the given 1-based lines of a file (trimmed, shortened); lines
+/// that cannot be read are left out.
+fn source_lines(
+    path: &std::path::Path,
+    wanted: &std::collections::BTreeSet<usize>,
+) -> std::collections::BTreeMap<usize, String> {
+    use std::io::BufRead;
+    let mut found = std::collections::BTreeMap::new();
+    let Some(&last) = wanted.last() else {
+        return found;
+    };
+    let Ok(f) = std::fs::File::open(path) else {
+        tracing::debug!("{}: cannot re-read for the worst blocks", path.display());
+        return found;
+    };
+    let mut r = std::io::BufReader::new(f);
+    let mut buf = Vec::new();
+    for line in 1..=last {
+        buf.clear();
+        match r.read_until(b'\n', &mut buf) {
+            Ok(0) | Err(_) => break,
+            Ok(_) => {}
+        }
+        if wanted.contains(&line) {
+            let text = String::from_utf8_lossy(&buf);
+            let text = text.trim();
+            let short: String = text.chars().take(SOURCE_CHARS).collect();
+            let short = if short.len() < text.len() {
+                format!("{short}…")
+            } else {
+                short
+            };
+            found.insert(line, short);
+        }
+    }
+    found
 }
 
 fn io(e: std::io::Error) -> Error {
@@ -296,6 +339,7 @@ impl<'w> ReportWriter<'w> {
             plot: (format == Format::Svg).then(|| Decimator::new(PLOT_POINTS)),
             worst_point: None,
             worst_cut: None,
+            source: None,
         };
         let mut cols: Vec<String> = vec!["line".into(), "motion".into()];
         for (a, unit) in &w.layout.axes {
@@ -335,6 +379,15 @@ impl<'w> ReportWriter<'w> {
             Format::Svg => {}
         }
         Ok(w)
+    }
+
+    /// Quotes the source text of the worst blocks from this file (re-read at
+    /// the end; not for standard input).
+    pub fn with_source(mut self, path: &std::path::Path) -> Self {
+        if path != std::path::Path::new("-") {
+            self.source = Some(path.to_path_buf());
+        }
+        self
     }
 
     /// Writes the row of a G-code motion block.
@@ -471,6 +524,17 @@ impl<'w> ReportWriter<'w> {
             .first()
             .map_or((0.0, 0.0, 0), |s| (s.mean(), s.max(), s.max_line()));
         let p95_total = p95.first().copied().unwrap_or(0.0);
+        let texts = match (&self.source, self.format) {
+            (Some(path), Format::Json | Format::Table) => {
+                let wanted = self
+                    .stats
+                    .iter()
+                    .flat_map(|s| s.worst.iter().map(|w| w.1))
+                    .collect();
+                source_lines(path, &wanted)
+            }
+            _ => Default::default(),
+        };
         match self.format {
             Format::Json => {
                 let mut effects = Vec::new();
@@ -479,8 +543,12 @@ impl<'w> ReportWriter<'w> {
                         .worst
                         .iter()
                         .map(|(v, line, motion)| {
+                            let source = texts
+                                .get(line)
+                                .map(|t| format!(",\"source\":{}", json_str(t)))
+                                .unwrap_or_default();
                             format!(
-                                "{{\"line\":{line},\"motion\":{},\"dev_mm\":{}}}",
+                                "{{\"line\":{line},\"motion\":{},\"dev_mm\":{}{source}}}",
                                 json_str(motion),
                                 jnum(*v, 5)
                             )
@@ -568,6 +636,15 @@ impl<'w> ReportWriter<'w> {
                         worst.join(", ")
                     );
                     writeln!(self.out, "{}", line.trim_end()).map_err(io)?;
+                }
+                if let Some(s) = self.stats.first().filter(|s| !s.worst.is_empty()) {
+                    writeln!(self.out, "worst blocks:").map_err(io)?;
+                    for (v, line, motion) in &s.worst {
+                        let text = texts.get(line).map_or("", String::as_str);
+                        let row =
+                            format!("  line {line:<6} {:>10} mm  {motion:<9} {text}", num(*v, 5));
+                        writeln!(self.out, "{}", row.trim_end()).map_err(io)?;
+                    }
                 }
             }
             Format::Svg => {
