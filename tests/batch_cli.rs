@@ -212,6 +212,35 @@ fn batch_exit_codes_success_and_usage() {
         .expect("run batch");
     assert_eq!(a.status.code(), Some(0));
     assert!(rout.join("drilling.mod").exists());
+    // --report-format: a report beside each output, named in the summary.
+    let gout = tmp.path().join("gout");
+    postproc()
+        .args([
+            "batch",
+            "--machine",
+            "afm-r1000",
+            "--report-format",
+            "json",
+            "--out-dir",
+        ])
+        .arg(&gout)
+        .arg(&input)
+        .assert()
+        .code(0);
+    let report = gout.join("ok.nc.report.json");
+    let v: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(&report).expect("report written")).expect("JSON");
+    // program(1) has 8 motion blocks: G0 X Y Z50., G43 H1 Z10., G1 Z, the
+    // four sides X, Y, X, Y, and G0 Z50.
+    assert_eq!(v["rows"].as_array().map(Vec::len), Some(8));
+    let summary: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(gout.join("batch-summary.json")).expect("summary"))
+            .expect("JSON");
+    validate(&summary);
+    assert_eq!(
+        summary["results"][0]["report"],
+        report.display().to_string()
+    );
     // Usage: no inputs, unknown machine.
     postproc()
         .args(["batch", "--machine", "afm-r1000", "--out-dir"])

@@ -14,9 +14,11 @@ use std::path::{Path, PathBuf};
 use rayon::prelude::*;
 use serde::Serialize;
 
-use super::gcode::{build_job, effects, parse_setup, same_file, thread_pool, write_atomically};
-use super::rapid::{load_robot, read_program, robot_effects};
-use super::{Annotate, BatchArgs, ProgramArgs, usage};
+use super::gcode::{
+    build_job, effects, parse_setup, run_reporting, same_file, thread_pool, write_atomically,
+};
+use super::rapid::{load_robot, read_program, robot_effects, write_report};
+use super::{Annotate, BatchArgs, Format, ProgramArgs, usage};
 use crate::compensate::rapid::{RapidOptions, compensate_module};
 use crate::error::{Error, Result};
 use crate::machine::Machine;
@@ -142,6 +144,7 @@ fn collect(inputs: &[PathBuf], out_dir: &Path) -> Vec<Item> {
 struct FileResult {
     input: String,
     output: Option<String>,
+    report: Option<String>,
     /// `ok`, `findings` (out of tolerance) or `failed`.
     status: &'static str,
     error: Option<String>,
@@ -196,7 +199,25 @@ enum Engine<'m> {
     Robot(crate::machine::robot::Robot, RapidOptions),
 }
 
-fn compensate_one(engine: &Engine, input: &Path, output: &Path) -> Result<Done> {
+/// Path of a program's report beside its output: `<output>.report.<ext>`.
+fn report_path(output: &Path, format: Format) -> PathBuf {
+    let ext = match format {
+        Format::Table => "txt",
+        Format::Csv => "csv",
+        Format::Json => "json",
+        Format::Svg => "svg",
+    };
+    let mut name = output.as_os_str().to_owned();
+    name.push(format!(".report.{ext}"));
+    PathBuf::from(name)
+}
+
+fn compensate_one(
+    engine: &Engine,
+    input: &Path,
+    output: &Path,
+    report: Option<Format>,
+) -> Result<Done> {
     if same_file(input, output) {
         return Err(usage(format!(
             "{}: the output would overwrite the input",
@@ -215,9 +236,23 @@ fn compensate_one(engine: &Engine, input: &Path, output: &Path) -> Result<Done> 
                 )));
             }
             let f = std::fs::File::open(input).map_err(|e| Error::io(input, e))?;
-            let s = write_atomically(output, |w| {
-                job.run(BufReader::with_capacity(1 << 16, f), &name, Some(w), None)
-            })?;
+            let reader = BufReader::with_capacity(1 << 16, f);
+            let s = match report {
+                Some(format) => write_atomically(&report_path(output, format), |rep| {
+                    write_atomically(output, |w| {
+                        run_reporting(
+                            job,
+                            Box::new(reader),
+                            &name,
+                            Some(w),
+                            rep,
+                            &job.setup,
+                            format,
+                        )
+                    })
+                })?,
+                None => write_atomically(output, |w| job.run(reader, &name, Some(w), None))?,
+            };
             Ok(Done {
                 blocks: s.blocks,
                 moves: s.moves,
@@ -238,6 +273,11 @@ fn compensate_one(engine: &Engine, input: &Path, output: &Path) -> Result<Done> 
                 w.write_all(outcome.text.as_bytes())
                     .map_err(|e| Error::io(output, e))
             })?;
+            if let Some(format) = report {
+                write_atomically(&report_path(output, format), |w| {
+                    write_report(w, &outcome, &name, format)
+                })?;
+            }
             Ok(Done {
                 blocks: outcome.moves,
                 moves: outcome.moves,
@@ -326,7 +366,7 @@ pub fn run(a: &BatchArgs, quiet: bool) -> Result<i32> {
                 let output = a.out_dir.join(&item.rel);
                 let done = match &item.problem {
                     Some(p) => Err(usage(p.clone())),
-                    None => compensate_one(&engine, &item.input, &output),
+                    None => compensate_one(&engine, &item.input, &output, a.report_format),
                 };
                 bar.inc(1);
                 let input = item.input.display().to_string();
@@ -336,6 +376,9 @@ pub fn run(a: &BatchArgs, quiet: bool) -> Result<i32> {
                         FileResult {
                             input,
                             output: Some(output.display().to_string()),
+                            report: a
+                                .report_format
+                                .map(|f| report_path(&output, f).display().to_string()),
                             status: if findings { "findings" } else { "ok" },
                             error: None,
                             blocks: d.blocks,
@@ -350,6 +393,7 @@ pub fn run(a: &BatchArgs, quiet: bool) -> Result<i32> {
                         FileResult {
                             input,
                             output: None,
+                            report: None,
                             status: "failed",
                             error: Some(message(&e)),
                             blocks: 0,

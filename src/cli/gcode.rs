@@ -349,7 +349,7 @@ pub(super) fn emit_to<T>(path: &Path, f: impl FnOnce(&mut dyn Write) -> Result<T
 }
 
 /// Runs the job, streaming a row per motion block into a report.
-fn run_reporting(
+pub(super) fn run_reporting(
     job: &Job,
     input: Box<dyn BufRead>,
     file: &str,

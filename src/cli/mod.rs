@@ -79,6 +79,10 @@ pub struct BatchArgs {
     /// Annotate compensated blocks with their predicted deviation.
     #[arg(long, value_enum, default_value_t = Annotate::Comment)]
     pub annotate: Annotate,
+    /// Also write each program's deviation report beside its output, as
+    /// `<output>.report.<txt|csv|json|svg>`.
+    #[arg(long, value_enum)]
+    pub report_format: Option<Format>,
 }
 
 /// Options shared by the commands that read a G-code program.
