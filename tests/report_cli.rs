@@ -284,6 +284,25 @@ fn svg_report_is_xml_with_the_toolpath_and_is_deterministic() {
     ] {
         assert!(text.contains(label), "{label} missing in {text}");
     }
+    // The worst cutting block (not a rapid or G28 move) is circled and
+    // named: found independently from the JSON rows.
+    let v: serde_json::Value = serde_json::from_str(&part_report("json")).expect("JSON");
+    let cut = v["rows"]
+        .as_array()
+        .expect("rows")
+        .iter()
+        .filter(|r| !matches!(r["motion"].as_str(), Some("rapid" | "fixed")))
+        .map(|r| {
+            (
+                r["line"].as_u64().unwrap_or(0),
+                r["dev_mm"].as_f64().unwrap_or(0.0),
+            )
+        })
+        .fold((0, 0.0), |a, b| if b.1 > a.1 { b } else { a });
+    assert!(
+        text.contains(&format!("max cutting, line {}", cut.0)),
+        "{text}"
+    );
     // Same bytes on a second run.
     assert_eq!(svg, part_report("svg"));
 

@@ -249,3 +249,25 @@ pub fn run(cli: Cli) -> Result<i32> {
 pub(crate) fn usage(msg: impl Into<String>) -> Error {
     Error::Usage(msg.into())
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::path::Path;
+
+    #[test]
+    fn report_format_from_extension() {
+        assert_eq!(Format::from_path(Path::new("a/r.JSON")), Format::Json);
+        assert_eq!(Format::from_path(Path::new("r.svg")), Format::Svg);
+        assert_eq!(Format::from_path(Path::new("r.txt")), Format::Table);
+        assert_eq!(Format::from_path(Path::new("r.csv")), Format::Csv);
+        // Anything else stays CSV, as before formats existed.
+        assert_eq!(Format::from_path(Path::new("report")), Format::Csv);
+    }
+
+    #[test]
+    fn cli_definition_is_consistent() {
+        use clap::CommandFactory;
+        Cli::command().debug_assert();
+    }
+}
