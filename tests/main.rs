@@ -2,6 +2,7 @@
 //! goldens, property tests and regressions.
 
 mod bad_corpus;
+mod batch_cli;
 mod common;
 mod effects;
 mod gcode_cli;
@@ -11,4 +12,5 @@ mod machine_tool;
 mod observations;
 mod rapid;
 mod rapid_cli;
+mod report_cli;
 mod robot;

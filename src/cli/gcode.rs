@@ -29,7 +29,7 @@ fn load_machine(name: &str) -> Result<MachineTool> {
     }
 }
 
-fn parse_setup(args: &ProgramArgs, machine: Option<&MachineTool>) -> Result<Setup> {
+pub(super) fn parse_setup(args: &ProgramArgs, machine: Option<&MachineTool>) -> Result<Setup> {
     let mut setup = Setup::default();
     match machine {
         Some(m) => {
@@ -107,7 +107,7 @@ fn open_input(path: &Path) -> Result<(Box<dyn BufRead>, String)> {
     ))
 }
 
-fn effects(args: &EffectArgs) -> Result<EffectSet> {
+pub(super) fn effects(args: &EffectArgs) -> Result<EffectSet> {
     let mut set = EffectSet::parse(&args.effects)?;
     for g in &args.gains {
         set.set_gain(g)?;
@@ -148,7 +148,7 @@ fn parse_force(spec: &str) -> Result<Option<ForceModel>> {
 }
 
 /// The job's process settings from the machine file and the flags.
-fn process_setup(args: &EffectArgs, machine: &MachineTool) -> Result<ProcessSetup> {
+pub(super) fn process_setup(args: &EffectArgs, machine: &MachineTool) -> Result<ProcessSetup> {
     let mut p = ProcessSetup::for_machine(machine);
     if let Some(spec) = &args.force {
         p.force = parse_force(spec)?;
@@ -209,7 +209,7 @@ fn add_mean_power(
     Ok(())
 }
 
-fn thread_pool(threads: Option<usize>) -> Result<rayon::ThreadPool> {
+pub(super) fn thread_pool(threads: Option<usize>) -> Result<rayon::ThreadPool> {
     let mut b = rayon::ThreadPoolBuilder::new();
     if let Some(n) = threads {
         if n == 0 {
@@ -331,7 +331,7 @@ pub fn default_output(input: &Path) -> PathBuf {
     input.with_file_name(name)
 }
 
-fn same_file(a: &Path, b: &Path) -> bool {
+pub(super) fn same_file(a: &Path, b: &Path) -> bool {
     match (a.canonicalize(), b.canonicalize()) {
         (Ok(x), Ok(y)) => x == y,
         _ => false,
@@ -356,6 +356,13 @@ pub fn write_atomically<T>(path: &Path, f: impl FnOnce(&mut dyn Write) -> Result
         .into_inner()
         .map_err(|e| Error::io(path, e.into_error()))?;
     file.sync_all().map_err(|e| Error::io(path, e))?;
+    // Temporary files are private (0600); the result is an ordinary file.
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::PermissionsExt;
+        file.set_permissions(std::fs::Permissions::from_mode(0o644))
+            .map_err(|e| Error::io(path, e))?;
+    }
     tmp_path
         .persist(path)
         .map_err(|e| Error::io(path, e.error))?;
@@ -363,7 +370,7 @@ pub fn write_atomically<T>(path: &Path, f: impl FnOnce(&mut dyn Write) -> Result
 }
 
 #[allow(clippy::too_many_arguments)]
-fn build_job<'m>(
+pub(super) fn build_job<'m>(
     machine: &'m MachineTool,
     process: &'m ProcessSetup,
     pool: &'m rayon::ThreadPool,
@@ -409,8 +416,27 @@ fn machine_setup(program: &ProgramArgs, command: &str) -> Result<(MachineTool, S
     Ok((machine, setup))
 }
 
+/// Refuses a `--report` path that would replace the input or the output.
+pub(super) fn check_report_path(report: Option<&Path>, input: &Path, output: &Path) -> Result<()> {
+    let Some(report) = report else {
+        return Ok(());
+    };
+    if report == Path::new("-") {
+        return Err(usage("--report needs a file path (the program goes to -o)"));
+    }
+    for (other, what) in [(input, "input"), (output, "output")] {
+        if other != Path::new("-") && (report == other || same_file(report, other)) {
+            return Err(usage(format!(
+                "{}: the report would overwrite the {what}",
+                report.display()
+            )));
+        }
+    }
+    Ok(())
+}
+
 /// Writes to `path` atomically, or to standard output for `-`.
-fn emit_to<T>(path: &Path, f: impl FnOnce(&mut dyn Write) -> Result<T>) -> Result<T> {
+pub(super) fn emit_to<T>(path: &Path, f: impl FnOnce(&mut dyn Write) -> Result<T>) -> Result<T> {
     if path == Path::new("-") {
         let mut stdout = BufWriter::new(std::io::stdout().lock());
         let value = f(&mut stdout)?;
@@ -422,7 +448,7 @@ fn emit_to<T>(path: &Path, f: impl FnOnce(&mut dyn Write) -> Result<T>) -> Resul
 }
 
 /// Runs the job, streaming a row per motion block into a report.
-fn run_reporting(
+pub(super) fn run_reporting(
     job: &Job,
     input: Box<dyn BufRead>,
     file: &str,
@@ -431,7 +457,7 @@ fn run_reporting(
     setup: &Setup,
     format: Format,
 ) -> Result<Summary> {
-    let mut rw = ReportWriter::new(report, setup, format, file)?;
+    let mut rw = ReportWriter::new(report, setup, format, file)?.with_source(Path::new(file));
     let mut err = None;
     let summary = job.run(
         input,
@@ -446,7 +472,10 @@ fn run_reporting(
     if let Some(e) = err {
         return Err(e);
     }
-    rw.finish(&summary)?;
+    rw.finish(crate::emit::report::Totals {
+        blocks: summary.blocks,
+        moves: summary.moves,
+    })?;
     Ok(summary)
 }
 
@@ -482,13 +511,19 @@ pub fn compensate(a: &CompensateArgs) -> Result<i32> {
             out_path.display()
         )));
     }
+    check_report_path(a.report.as_deref(), input_path, &out_path)?;
     let (input, file) = open_input(input_path)?;
     let summary: Summary = match &a.report {
-        Some(report_path) => write_atomically(report_path, |rep| {
-            emit_to(&out_path, |w| {
-                run_reporting(&job, input, &file, Some(w), rep, &setup, Format::Csv)
-            })
-        })?,
+        Some(report_path) => {
+            let format = a
+                .report_format
+                .unwrap_or_else(|| Format::from_path(report_path));
+            write_atomically(report_path, |rep| {
+                emit_to(&out_path, |w| {
+                    run_reporting(&job, input, &file, Some(w), rep, &setup, format)
+                })
+            })?
+        }
         None => emit_to(&out_path, |w| job.run(input, &file, Some(w), None))?,
     };
     tracing::info!(

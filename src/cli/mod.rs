@@ -1,6 +1,7 @@
 //! Command line: raw flags → validated run configuration → engine calls.
 //! Nothing else in the crate parses flags.
 
+mod batch;
 mod gcode;
 mod rapid;
 
@@ -37,9 +38,51 @@ pub enum Command {
     /// Write a compensated program whose targets land on the programmed ones.
     #[command(after_help = EXIT_HELP)]
     Compensate(CompensateArgs),
-    /// Dry run: predicted deviation per block and summary, nothing written.
+    /// Dry run: predicted deviation per block and summary per effect, as a
+    /// table, CSV, JSON or SVG picture; nothing else is written.
     #[command(after_help = EXIT_HELP)]
     Report(ReportArgs),
+    /// Compensate many programs (files or folders) in parallel into a folder.
+    #[command(after_help = BATCH_EXIT_HELP)]
+    Batch(BatchArgs),
+}
+
+/// Exit codes of `batch`, also listed in its `--help`.
+pub const BATCH_EXIT_HELP: &str = "Exit codes: 0 every program compensated; 1 every program compensated, but some have blocks out of tolerance or limits; 2 a program failed (bad input; the others are still written) or bad usage.";
+
+/// `postproc batch`.
+#[derive(Debug, Args)]
+pub struct BatchArgs {
+    /// Programs or folders (searched recursively for .nc .ngc .tap .gcode
+    /// .cnc and RAPID .mod .modx .prg).
+    #[arg(required = true)]
+    pub inputs: Vec<PathBuf>,
+    /// Machine file, or the name of a bundled one (machines/NAME.yaml).
+    #[arg(short, long)]
+    pub machine: String,
+    /// Folder for the compensated programs (same names; folder inputs keep
+    /// their sub-folders) and batch-summary.json.
+    #[arg(long)]
+    pub out_dir: PathBuf,
+    /// G-code: tool length for an H number, overriding the machine file: H1=123.4 (mm).
+    #[arg(long = "tool", value_name = "H=LENGTH")]
+    pub tools: Vec<String>,
+    /// G-code: work offset overriding the machine file: G54=X,Y,Z (mm, machine coordinates).
+    #[arg(long = "work-offset", value_name = "GXX=X,Y,Z")]
+    pub work_offsets: Vec<String>,
+    /// Effects.
+    #[command(flatten)]
+    pub effects: EffectArgs,
+    /// Largest gap between attained and programmed path along a move, mm.
+    #[arg(long, default_value_t = 0.001)]
+    pub tolerance: f64,
+    /// Annotate compensated blocks with their predicted deviation.
+    #[arg(long, value_enum, default_value_t = Annotate::Comment)]
+    pub annotate: Annotate,
+    /// Also write each program's deviation report beside its output, as
+    /// `<output>.report.<txt|csv|json|svg>`.
+    #[arg(long, value_enum)]
+    pub report_format: Option<Format>,
 }
 
 /// Options shared by the commands that read a G-code program.
@@ -125,9 +168,13 @@ pub struct CompensateArgs {
     /// Decimals of rewritten mm coordinates (default: the machine file's, else the program's, at least 3).
     #[arg(long)]
     pub decimals: Option<usize>,
-    /// Also write the deviation report (CSV) to this path.
+    /// Also write the deviation report to this path (format from the
+    /// extension: .csv, .json, .svg, .txt; else CSV).
     #[arg(long)]
     pub report: Option<PathBuf>,
+    /// Format of the --report file, overriding its extension.
+    #[arg(long, value_enum, requires = "report")]
+    pub report_format: Option<Format>,
 }
 
 /// Report formats.
@@ -137,8 +184,27 @@ pub enum Format {
     Table,
     /// Comma-separated values.
     Csv,
-    /// JSON document.
+    /// JSON document (schema: schemas/report.schema.json).
     Json,
+    /// SVG picture: toolpath in plan and side view coloured by deviation,
+    /// deviation along the program.
+    Svg,
+}
+
+impl Format {
+    /// The format a report path asks for by its extension (`.csv`, `.json`,
+    /// `.svg`, `.txt`); CSV for any other.
+    pub fn from_path(path: &std::path::Path) -> Format {
+        let ext = path
+            .extension()
+            .map(|e| e.to_string_lossy().to_ascii_lowercase());
+        match ext.as_deref() {
+            Some("json") => Format::Json,
+            Some("svg") => Format::Svg,
+            Some("txt" | "text" | "table") => Format::Table,
+            _ => Format::Csv,
+        }
+    }
 }
 
 /// `postproc report`.
@@ -183,15 +249,40 @@ pub fn init_logging(quiet: bool, verbose: u8) {
 /// Runs a parsed command line; returns the process exit code.
 pub fn run(cli: Cli) -> Result<i32> {
     init_logging(cli.quiet, cli.verbose);
+    let quiet = cli.quiet;
     match cli.command {
         Command::Check(a) if rapid::wants(&a.program) => rapid::check(&a),
         Command::Check(a) => gcode::check(&a),
         Command::Compensate(a) if rapid::wants(&a.program) => rapid::compensate(&a),
         Command::Compensate(a) => gcode::compensate(&a),
+        Command::Report(a) if rapid::wants(&a.program) => rapid::report(&a),
         Command::Report(a) => gcode::report(&a),
+        Command::Batch(a) => batch::run(&a, quiet),
     }
 }
 
 pub(crate) fn usage(msg: impl Into<String>) -> Error {
     Error::Usage(msg.into())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::path::Path;
+
+    #[test]
+    fn report_format_from_extension() {
+        assert_eq!(Format::from_path(Path::new("a/r.JSON")), Format::Json);
+        assert_eq!(Format::from_path(Path::new("r.svg")), Format::Svg);
+        assert_eq!(Format::from_path(Path::new("r.txt")), Format::Table);
+        assert_eq!(Format::from_path(Path::new("r.csv")), Format::Csv);
+        // Anything else stays CSV, as before formats existed.
+        assert_eq!(Format::from_path(Path::new("report")), Format::Csv);
+    }
+
+    #[test]
+    fn cli_definition_is_consistent() {
+        use clap::CommandFactory;
+        Cli::command().debug_assert();
+    }
 }

@@ -5,8 +5,8 @@ use std::io::Write;
 use std::path::{Path, PathBuf};
 
 use super::gcode::{default_output, write_atomically};
-use super::{Annotate, CheckArgs, CompensateArgs, ProgramArgs, usage};
-use crate::compensate::rapid::{RapidOptions, compensate_module};
+use super::{Annotate, CheckArgs, CompensateArgs, EffectArgs, ProgramArgs, ReportArgs, usage};
+use crate::compensate::rapid::{RapidOptions, RapidOutcome, compensate_module};
 use crate::emit::rapid::Format;
 use crate::error::{Error, Result};
 use crate::machine::Machine;
@@ -32,7 +32,7 @@ pub fn wants(program: &ProgramArgs) -> bool {
     }
 }
 
-fn load_robot(name: &str) -> Result<Robot> {
+pub(super) fn load_robot(name: &str) -> Result<Robot> {
     let path = Machine::resolve(name)?;
     match Machine::load(&path)? {
         Machine::Robot(r) => Ok(r),
@@ -105,7 +105,7 @@ pub fn robot_gains(mut e: Effects, gains: &[String]) -> Result<Effects> {
     Ok(e)
 }
 
-fn read_program(path: &Path) -> Result<(String, String)> {
+pub(super) fn read_program(path: &Path) -> Result<(String, String)> {
     let name = path.display().to_string();
     let bytes = if path == Path::new("-") {
         let mut b = Vec::new();
@@ -149,6 +149,34 @@ pub fn check(a: &CheckArgs) -> Result<i32> {
     Ok(0)
 }
 
+/// The RAPID options of a run from the effect flags (`--effects`, `--gain`,
+/// `--thermal-start`), the annotation switch and `--decimals`; output
+/// precision from the robot file.
+pub(super) fn rapid_options(
+    robot: &Robot,
+    effects: &EffectArgs,
+    annotate: bool,
+    decimals: Option<usize>,
+) -> Result<RapidOptions> {
+    let mut format = RapidOptions::for_robot(robot).format;
+    if let Some(d) = decimals {
+        if d > 6 {
+            return Err(usage("--decimals: at most 6"));
+        }
+        format.position_decimals = d.max(3);
+    }
+    let thermal_start: ThermalStart = effects
+        .thermal_start
+        .parse()
+        .map_err(|e| usage(format!("--thermal-start: {e}")))?;
+    Ok(RapidOptions {
+        effects: robot_gains(robot_effects(&effects.effects)?, &effects.gains)?,
+        annotate,
+        format,
+        thermal_start,
+    })
+}
+
 /// `postproc compensate` of a RAPID module.
 pub fn compensate(a: &CompensateArgs) -> Result<i32> {
     let machine = a
@@ -157,32 +185,17 @@ pub fn compensate(a: &CompensateArgs) -> Result<i32> {
         .as_deref()
         .ok_or_else(|| usage("compensate needs --machine"))?;
     let robot = load_robot(machine)?;
-    if a.report.is_some() {
-        return Err(usage("--report is not supported for RAPID programs yet"));
-    }
     if !a.program.tools.is_empty() || !a.program.work_offsets.is_empty() {
         return Err(usage(
             "--tool and --work-offset are G-code options; RAPID takes tooldata and wobjdata from the module",
         ));
     }
-    let mut format = RapidOptions::for_robot(&robot).format;
-    if let Some(d) = a.decimals {
-        if d > 6 {
-            return Err(usage("--decimals: at most 6"));
-        }
-        format.position_decimals = d.max(3);
-    }
-    let thermal_start: ThermalStart = a
-        .effects
-        .thermal_start
-        .parse()
-        .map_err(|e| usage(format!("--thermal-start: {e}")))?;
-    let opts = RapidOptions {
-        effects: robot_gains(robot_effects(&a.effects.effects)?, &a.effects.gains)?,
-        annotate: a.annotate == Annotate::Comment,
-        format,
-        thermal_start,
-    };
+    let opts = rapid_options(
+        &robot,
+        &a.effects,
+        a.annotate == Annotate::Comment,
+        a.decimals,
+    )?;
     let input = &a.program.file;
     let out_path = match &a.output {
         Some(p) => p.clone(),
@@ -199,6 +212,7 @@ pub fn compensate(a: &CompensateArgs) -> Result<i32> {
             out_path.display()
         )));
     }
+    super::gcode::check_report_path(a.report.as_deref(), input, &out_path)?;
     let (src, name) = read_program(input)?;
     let outcome = compensate_module(&src, &name, &robot, &opts)?;
     if out_path == Path::new("-") {
@@ -213,6 +227,12 @@ pub fn compensate(a: &CompensateArgs) -> Result<i32> {
                 .map_err(|e| Error::io(&out_path, e))
         })?;
     }
+    if let Some(path) = &a.report {
+        let format = a
+            .report_format
+            .unwrap_or_else(|| super::Format::from_path(path));
+        write_atomically(path, |w| write_report(w, &outcome, &name, format))?;
+    }
     tracing::info!(
         "{}: {} moves compensated, {} targets added; largest predicted deviation {:.4} mm (line {})",
         out_path.display(),
@@ -221,5 +241,63 @@ pub fn compensate(a: &CompensateArgs) -> Result<i32> {
         outcome.max_deviation_mm,
         outcome.max_deviation_line
     );
+    Ok(0)
+}
+
+/// Writes the deviation report of a compensated (or dry-run) RAPID module:
+/// a row per motion instruction with the kinematic, thermal, gravity, process and dynamic (vibration)
+/// parts of its predicted deviation.
+pub(super) fn write_report(
+    out: &mut dyn Write,
+    outcome: &RapidOutcome,
+    name: &str,
+    format: super::Format,
+) -> Result<()> {
+    use crate::emit::report::{Entry, Layout, ReportWriter, Totals};
+    let mut rw =
+        ReportWriter::with_layout(out, Layout::rapid(), format, name)?.with_source(Path::new(name));
+    for t in &outcome.records {
+        let d = &t.deviation;
+        rw.entry(&Entry {
+            line: t.line,
+            motion: t.kind,
+            axes: &t.programmed_mm,
+            position_mm: t.programmed_mm,
+            deviation_mm: d.total.pos_mm.into(),
+            effects_mm: &[
+                d.kinematic.pos_mm.norm(),
+                d.thermal.pos_mm.norm(),
+                d.gravity.pos_mm.norm(),
+                d.process.pos_mm.norm(),
+                d.vibration_mm.norm(),
+            ],
+            residual_mm: None,
+            orient_urad: d.total.rot_rad.norm() * 1e6,
+        })?;
+    }
+    rw.finish(Totals {
+        blocks: outcome.moves,
+        moves: outcome.moves,
+    })
+}
+
+/// `postproc report` of a RAPID module (dry run against a robot).
+pub fn report(a: &ReportArgs) -> Result<i32> {
+    let machine = a
+        .program
+        .machine
+        .as_deref()
+        .ok_or_else(|| usage("report needs --machine"))?;
+    let robot = load_robot(machine)?;
+    if !a.program.tools.is_empty() || !a.program.work_offsets.is_empty() {
+        return Err(usage(
+            "--tool and --work-offset are G-code options; RAPID takes tooldata and wobjdata from the module",
+        ));
+    }
+    let opts = rapid_options(&robot, &a.effects, false, None)?;
+    let (src, name) = read_program(&a.program.file)?;
+    let outcome = compensate_module(&src, &name, &robot, &opts)?;
+    let out = a.output.clone().unwrap_or_else(|| PathBuf::from("-"));
+    super::gcode::emit_to(&out, |w| write_report(w, &outcome, &name, a.format))?;
     Ok(0)
 }

@@ -79,6 +79,10 @@ impl RapidOptions {
 pub struct MoveRecord {
     /// 1-based line of the instruction.
     pub line: usize,
+    /// Instruction name (`MoveL`, `MoveJ`, `MoveC`, `MoveAbsJ`).
+    pub kind: &'static str,
+    /// Programmed TCP position, world frame, mm.
+    pub programmed_mm: [f64; 3],
     /// Predicted deviation of the uncompensated target, by effect.
     pub deviation: Deviation,
     /// Process wrench acting during the move, if any.
@@ -612,6 +616,8 @@ struct Rewriter<'m> {
     added: usize,
     /// Process wrench and thermal power of the move being rewritten.
     state: MoveState,
+    /// Programmed TCP position (world, mm) of the last target compensated.
+    last_tcp: [f64; 3],
 }
 
 /// Per-move load state applied to the robot view.
@@ -664,6 +670,7 @@ impl Rewriter<'_> {
         let u = resolve_cart(self.module, self.src, self.file, target)?;
         let view = self.view(key, tool);
         let programmed = wobj * u.pose_obj;
+        self.last_tcp = programmed.translation.vector.into();
         // Errors point at the literal's declaration for a plain named target
         // (where the numbers to fix are), else at the move's expression.
         let at = match (&u.origin, u.derived) {
@@ -815,6 +822,7 @@ impl Rewriter<'_> {
         view.check_limits(&q)
             .map_err(|e| self.locate(at, e, &what))?;
         let goal = view.tcp_pose(Model::Nominal, &q);
+        self.last_tcp = goal.translation.vector.into();
         let comp = view
             .compensate(&goal, &IkSelect::Near(q), self.opts.effects)
             .map_err(|e| self.locate(at, e, &what))?;
@@ -1173,6 +1181,7 @@ pub fn compensate_module(
         derived_count: HashMap::new(),
         added: 0,
         state: MoveState::default(),
+        last_tcp: [0.0; 3],
     };
     let mut outcome = RapidOutcome {
         text: String::new(),
@@ -1222,6 +1231,8 @@ pub fn compensate_module(
         }
         outcome.records.push(MoveRecord {
             line: mv.line,
+            kind: mv.kind.name(),
+            programmed_mm: rw.last_tcp,
             deviation: dev,
             wrench,
             duration_s: seg.duration_s,

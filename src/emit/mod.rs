@@ -3,3 +3,4 @@
 pub mod gcode;
 pub mod rapid;
 pub mod report;
+pub mod svg;

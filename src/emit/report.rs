@@ -1,32 +1,286 @@
-//! Deviation reports (dry run and `--report`): a row per motion block and a
-//! summary, as an aligned table, CSV or JSON, streamed row by row.
+//! Deviation reports (`postproc report`, `compensate --report`): a row per
+//! motion block or robot move with its per-effect breakdown, and a summary
+//! per effect (mean, 95th percentile, maximum, worst blocks with their source
+//! line), as an aligned table, CSV, JSON (schema: `schemas/report.schema.json`)
+//! or an SVG picture.
+//!
+//! Rows are streamed: the text formats write each row as it comes, the
+//! statistics use a fixed-size histogram, and the picture keeps a bounded,
+//! deterministically decimated set of points ([`crate::emit::svg::Decimator`]).
+//! G-code and RAPID reports share the writer through [`Layout`] and [`Entry`].
 
 use std::io::Write;
 
 use crate::cli::Format;
+use crate::emit::svg::{Decimator, PlotPoint, Worst as PlotWorst};
 use crate::error::{Error, Result};
-use crate::job::{Row, Summary};
+use crate::job::Row;
 use crate::machine::AXIS_LETTERS;
 use crate::predict::Effect;
 use crate::program::interp::Setup;
+
+/// Worst blocks listed per effect in the summary.
+pub const WORST_BLOCKS: usize = 5;
+
+/// What the columns of a report are.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Layout {
+    /// Program kind: `gcode` or `rapid`.
+    pub kind: &'static str,
+    /// Position columns: name and unit (`("X", "mm")`).
+    pub axes: Vec<(String, &'static str)>,
+    /// Effect names in breakdown order.
+    pub effects: Vec<&'static str>,
+    /// Rows carry the position error left after compensation.
+    pub residual: bool,
+    /// G-code: axis slot (0..6) of each position column.
+    slots: Vec<usize>,
+}
+
+impl Layout {
+    /// A G-code report: the machine's axes and [`Effect::ALL`].
+    pub fn gcode(setup: &Setup) -> Self {
+        Layout {
+            kind: "gcode",
+            axes: (0..6)
+                .filter(|&s| setup.axes.get(s).copied().unwrap_or(false))
+                .map(|s| {
+                    (
+                        (AXIS_LETTERS[s] as char).to_string(),
+                        if s < 3 { "mm" } else { "deg" },
+                    )
+                })
+                .collect(),
+            effects: Effect::ALL.iter().map(|e| e.name()).collect(),
+            residual: true,
+            slots: (0..6)
+                .filter(|&s| setup.axes.get(s).copied().unwrap_or(false))
+                .collect(),
+        }
+    }
+
+    /// A RAPID report: programmed TCP position in the world frame and the
+    /// robot effects (kinematic, gravity, process).
+    pub fn rapid() -> Self {
+        Layout {
+            kind: "rapid",
+            axes: ["X", "Y", "Z"]
+                .iter()
+                .map(|a| (a.to_string(), "mm"))
+                .collect(),
+            effects: vec!["kinematic", "thermal", "gravity", "process", "dynamic"],
+            residual: false,
+            slots: vec![0, 1, 2],
+        }
+    }
+}
+
+/// One report row, whatever the program kind.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Entry<'a> {
+    /// 1-based source line.
+    pub line: usize,
+    /// Motion label (`feed`, `rapid`, `MoveL`, …).
+    pub motion: &'a str,
+    /// Values of the [`Layout::axes`] columns.
+    pub axes: &'a [f64],
+    /// Programmed tool-tip position for the picture (X, Y, Z), mm.
+    pub position_mm: [f64; 3],
+    /// Predicted deviation vector (attained − programmed), mm.
+    pub deviation_mm: [f64; 3],
+    /// Length of each effect's deviation, in [`Layout::effects`] order, mm.
+    pub effects_mm: &'a [f64],
+    /// Position error left after compensation, mm (when the layout has it).
+    pub residual_mm: Option<f64>,
+    /// Tool-axis direction error, µrad.
+    pub orient_urad: f64,
+}
+
+/// Counts for the summary.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct Totals {
+    /// Blocks (G-code) or motion instructions (RAPID).
+    pub blocks: usize,
+    /// Moves.
+    pub moves: usize,
+}
+
+/// Histogram resolution, mm (the printed resolution of deviations).
+const BIN_MM: f64 = 1e-5;
+/// Histogram range: values up to 2 mm are binned, larger ones kept exactly.
+const BINS: usize = 200_000;
+
+/// Statistics of |deviation| of one effect (or the total): mean, maximum,
+/// percentiles to [`BIN_MM`] and the worst blocks.
+#[derive(Debug, Clone)]
+struct Stat {
+    count: u64,
+    sum: f64,
+    bins: Vec<u64>,
+    /// Values beyond the histogram, kept exactly (rare on machine tools,
+    /// bounded by the module size on robots).
+    large: Vec<f64>,
+    /// Worst blocks, largest first: (value, line, motion).
+    worst: Vec<(f64, usize, String)>,
+}
+
+impl Stat {
+    fn new() -> Self {
+        Stat {
+            count: 0,
+            sum: 0.0,
+            bins: vec![0; BINS],
+            large: Vec::new(),
+            worst: Vec::with_capacity(WORST_BLOCKS + 1),
+        }
+    }
+
+    fn add(&mut self, v: f64, line: usize, motion: &str) {
+        let v = if v.is_finite() { v.abs() } else { 0.0 };
+        self.count += 1;
+        self.sum += v;
+        let bin = (v / BIN_MM) as usize;
+        match self.bins.get_mut(bin) {
+            Some(b) => *b += 1,
+            None => self.large.push(v),
+        }
+        // Ties keep the earlier block; blocks without deviation are not listed.
+        if v <= 0.0 {
+            return;
+        }
+        let at = self.worst.iter().position(|w| v > w.0);
+        match at {
+            Some(i) => {
+                self.worst.insert(i, (v, line, motion.to_string()));
+                self.worst.truncate(WORST_BLOCKS);
+            }
+            None if self.worst.len() < WORST_BLOCKS => {
+                self.worst.push((v, line, motion.to_string()));
+            }
+            None => {}
+        }
+    }
+
+    fn mean(&self) -> f64 {
+        if self.count == 0 {
+            0.0
+        } else {
+            self.sum / self.count as f64
+        }
+    }
+
+    fn max(&self) -> f64 {
+        self.worst.first().map_or(0.0, |w| w.0)
+    }
+
+    fn max_line(&self) -> usize {
+        self.worst.first().map_or(0, |w| w.1)
+    }
+
+    /// Percentile `p` in (0, 100]: the upper edge of the histogram bin that
+    /// holds the value (capped at the maximum), or the exact value beyond
+    /// the histogram.
+    fn percentile(&mut self, p: f64) -> f64 {
+        if self.count == 0 {
+            return 0.0;
+        }
+        let want = ((p / 100.0) * self.count as f64).ceil().max(1.0) as u64;
+        let mut acc = 0;
+        for (i, &n) in self.bins.iter().enumerate() {
+            acc += n;
+            if acc >= want {
+                return ((i + 1) as f64 * BIN_MM).min(self.max());
+            }
+        }
+        self.large.sort_by(f64::total_cmp);
+        let k = (want - acc).saturating_sub(1) as usize;
+        self.large
+            .get(k)
+            .or(self.large.last())
+            .copied()
+            .unwrap_or(0.0)
+    }
+}
 
 /// Streams report rows to a writer.
 pub struct ReportWriter<'w> {
     out: &'w mut dyn Write,
     format: Format,
-    axes: Vec<usize>,
+    layout: Layout,
     rows: usize,
     file: String,
+    /// Index 0: total; then one per effect.
+    stats: Vec<Stat>,
+    plot: Option<Decimator>,
+    /// Largest deviation of all moves, and of the cutting moves.
+    worst_point: Option<PlotWorst>,
+    worst_cut: Option<PlotWorst>,
+    /// The program file, re-read at the end for the text of the worst blocks.
+    source: Option<std::path::PathBuf>,
+}
+
+/// Longest source text quoted for a worst block, characters.
+const SOURCE_CHARS: usize = 72;
+
+/// The text of the given 1-based lines of a file (trimmed, shortened); lines
+/// that cannot be read are left out.
+fn source_lines(
+    path: &std::path::Path,
+    wanted: &std::collections::BTreeSet<usize>,
+) -> std::collections::BTreeMap<usize, String> {
+    use std::io::BufRead;
+    let mut found = std::collections::BTreeMap::new();
+    let Some(&last) = wanted.last() else {
+        return found;
+    };
+    let Ok(f) = std::fs::File::open(path) else {
+        tracing::debug!("{}: cannot re-read for the worst blocks", path.display());
+        return found;
+    };
+    let mut r = std::io::BufReader::new(f);
+    let mut buf = Vec::new();
+    for line in 1..=last {
+        buf.clear();
+        match r.read_until(b'\n', &mut buf) {
+            Ok(0) | Err(_) => break,
+            Ok(_) => {}
+        }
+        if wanted.contains(&line) {
+            let text = String::from_utf8_lossy(&buf);
+            let text = text.trim();
+            let short: String = text.chars().take(SOURCE_CHARS).collect();
+            let short = if short.len() < text.len() {
+                format!("{short}…")
+            } else {
+                short
+            };
+            found.insert(line, short);
+        }
+    }
+    found
 }
 
 fn io(e: std::io::Error) -> Error {
     Error::io("report", e)
 }
 
+/// A number with `d` decimals, no exponent, no `-0`.
 fn num(v: f64, d: usize) -> String {
+    if !v.is_finite() {
+        return "nan".into();
+    }
     crate::emit::gcode::format_number(v, d, false)
         .trim_end_matches('.')
         .to_string()
+}
+
+/// A JSON number with `d` decimals (`null` when not finite).
+fn jnum(v: f64, d: usize) -> String {
+    if v.is_finite() {
+        num(v, d)
+    } else {
+        "null".into()
+    }
 }
 
 /// One aligned table line: the motion column left-aligned, numbers right.
@@ -36,7 +290,7 @@ fn table_line(cells: &[String]) -> String {
         .enumerate()
         .map(|(i, c)| {
             if i == 1 {
-                format!("{c:<7}")
+                format!("{c:<8}")
             } else {
                 format!("{c:>12}")
             }
@@ -49,62 +303,176 @@ fn json_str(s: &str) -> String {
     serde_json::to_string(s).unwrap_or_else(|_| "\"\"".into())
 }
 
+/// Label of statistic `i` (0 total, then the effects).
+fn stat_name(layout: &Layout, i: usize) -> &str {
+    if i == 0 {
+        "total"
+    } else {
+        layout.effects.get(i - 1).copied().unwrap_or("?")
+    }
+}
+
+/// Points kept for the picture, whatever the program length.
+pub const PLOT_POINTS: usize = 4000;
+
 impl<'w> ReportWriter<'w> {
-    /// Starts a report (writes the header).
+    /// Starts a report for a G-code program (writes the header).
     pub fn new(out: &'w mut dyn Write, setup: &Setup, format: Format, file: &str) -> Result<Self> {
-        let axes: Vec<usize> = (0..6).filter(|&s| setup.axes[s]).collect();
+        Self::with_layout(out, Layout::gcode(setup), format, file)
+    }
+
+    /// Starts a report with the given columns (writes the header).
+    pub fn with_layout(
+        out: &'w mut dyn Write,
+        layout: Layout,
+        format: Format,
+        file: &str,
+    ) -> Result<Self> {
+        let stats = (0..=layout.effects.len()).map(|_| Stat::new()).collect();
         let w = ReportWriter {
             out,
             format,
-            axes,
+            layout,
             rows: 0,
             file: file.to_string(),
+            stats,
+            plot: (format == Format::Svg).then(|| Decimator::new(PLOT_POINTS)),
+            worst_point: None,
+            worst_cut: None,
+            source: None,
         };
         let mut cols: Vec<String> = vec!["line".into(), "motion".into()];
-        for &s in &w.axes {
-            cols.push(format!(
-                "{}_{}",
-                AXIS_LETTERS[s] as char,
-                if s < 3 { "mm" } else { "deg" }
-            ));
+        for (a, unit) in &w.layout.axes {
+            cols.push(format!("{a}_{unit}"));
         }
         for c in ["dx_mm", "dy_mm", "dz_mm", "dev_mm"] {
             cols.push(c.into());
         }
-        for e in Effect::ALL {
-            cols.push(format!("{}_mm", e.name()));
+        for e in &w.layout.effects {
+            cols.push(format!("{e}_mm"));
         }
-        cols.push("residual_mm".into());
+        if w.layout.residual {
+            cols.push("residual_mm".into());
+        }
         cols.push("orient_urad".into());
         match format {
             Format::Csv => writeln!(w.out, "{}", cols.join(",")).map_err(io)?,
             Format::Table => writeln!(w.out, "{}", table_line(&cols)).map_err(io)?,
             Format::Json => {
-                write!(w.out, "{{\"file\":{},\"rows\":[", json_str(&w.file)).map_err(io)?
+                let effects: Vec<String> = w.layout.effects.iter().map(|e| json_str(e)).collect();
+                let axes: Vec<String> = w
+                    .layout
+                    .axes
+                    .iter()
+                    .map(|(a, u)| format!("{{\"name\":{},\"unit\":{}}}", json_str(a), json_str(u)))
+                    .collect();
+                write!(
+                    w.out,
+                    "{{\"file\":{},\"kind\":{},\"axes\":[{}],\"effects\":[{}],\"rows\":[",
+                    json_str(&w.file),
+                    json_str(w.layout.kind),
+                    axes.join(","),
+                    effects.join(",")
+                )
+                .map_err(io)?
             }
+            Format::Svg => {}
         }
         Ok(w)
     }
 
-    /// Writes one row.
+    /// Quotes the source text of the worst blocks from this file (re-read at
+    /// the end; not for standard input).
+    pub fn with_source(mut self, path: &std::path::Path) -> Self {
+        if path != std::path::Path::new("-") {
+            self.source = Some(path.to_path_buf());
+        }
+        self
+    }
+
+    /// Writes the row of a G-code motion block.
     pub fn row(&mut self, r: &Row) -> Result<()> {
+        let mut axes = [0.0; 6];
+        let mut n = 0;
+        for (x, &slot) in axes.iter_mut().zip(&self.layout.slots) {
+            *x = r.commanded.get(slot).copied().unwrap_or(0.0);
+            n += 1;
+        }
+        let mut effects = [0.0; Effect::ALL.len()];
+        for (e, v) in Effect::ALL.iter().zip(effects.iter_mut()) {
+            *v = r.result.deviation.parts[*e as usize].norm();
+        }
         let dev = r.result.deviation.total();
-        let mut vals: Vec<String> = vec![r.line.to_string(), r.motion.to_string()];
-        for &s in &self.axes {
-            vals.push(num(r.commanded[s], 4));
+        self.entry(&Entry {
+            line: r.line,
+            motion: r.motion,
+            axes: &axes[..n],
+            position_mm: [r.commanded[0], r.commanded[1], r.commanded[2]],
+            deviation_mm: [dev[0], dev[1], dev[2]],
+            effects_mm: &effects,
+            residual_mm: Some(r.result.residual_mm),
+            // Tool-axis direction error: a three-axis machine cannot correct it.
+            orient_urad: r.result.deviation.orientation.norm() * 1e6,
+        })
+    }
+
+    /// Writes one row.
+    pub fn entry(&mut self, r: &Entry) -> Result<()> {
+        let [dx, dy, dz] = r.deviation_mm;
+        let dev = (dx * dx + dy * dy + dz * dz).sqrt();
+        if let Some(s) = self.stats.first_mut() {
+            s.add(dev, r.line, r.motion);
         }
-        for v in [dev[0], dev[1], dev[2], dev.norm()] {
-            vals.push(num(v, 5));
+        for (s, &v) in self.stats.iter_mut().skip(1).zip(r.effects_mm) {
+            s.add(v, r.line, r.motion);
         }
-        for e in Effect::ALL {
-            vals.push(num(r.result.deviation.parts[e as usize].norm(), 5));
-        }
-        vals.push(num(r.result.residual_mm, 6));
-        // Tool-axis direction error: a three-axis machine cannot correct it.
-        vals.push(num(r.result.deviation.orientation.norm() * 1e6, 2));
         match self.format {
-            Format::Csv => writeln!(self.out, "{}", vals.join(",")).map_err(io)?,
-            Format::Table => writeln!(self.out, "{}", table_line(&vals)).map_err(io)?,
+            Format::Svg => {
+                let rapid = matches!(r.motion, "rapid" | "fixed" | "MoveJ" | "MoveAbsJ");
+                let p = PlotPoint {
+                    line: r.line,
+                    pos: r.position_mm,
+                    dev,
+                    rapid,
+                };
+                if let Some(plot) = self.plot.as_mut() {
+                    plot.push(p);
+                }
+                let mark = PlotWorst {
+                    line: r.line,
+                    pos: r.position_mm,
+                    dev,
+                    cut: !rapid,
+                };
+                if self.worst_point.is_none_or(|w| dev > w.dev) {
+                    self.worst_point = Some(mark);
+                }
+                if !rapid && self.worst_cut.is_none_or(|w| dev > w.dev) {
+                    self.worst_cut = Some(mark);
+                }
+            }
+            Format::Csv | Format::Table => {
+                let mut vals: Vec<String> = vec![r.line.to_string(), r.motion.to_string()];
+                for &v in r.axes {
+                    vals.push(num(v, 4));
+                }
+                for v in [dx, dy, dz, dev] {
+                    vals.push(num(v, 5));
+                }
+                for &v in r.effects_mm {
+                    vals.push(num(v, 5));
+                }
+                if let Some(res) = r.residual_mm {
+                    vals.push(num(res, 6));
+                }
+                vals.push(num(r.orient_urad, 2));
+                let text = if self.format == Format::Csv {
+                    vals.join(",")
+                } else {
+                    table_line(&vals)
+                };
+                writeln!(self.out, "{text}").map_err(io)?;
+            }
             Format::Json => {
                 let mut o = format!(
                     "{}{{\"line\":{},\"motion\":{},\"commanded\":{{",
@@ -113,34 +481,33 @@ impl<'w> ReportWriter<'w> {
                     json_str(r.motion)
                 );
                 let parts: Vec<String> = self
+                    .layout
                     .axes
                     .iter()
-                    .map(|&s| format!("\"{}\":{}", AXIS_LETTERS[s] as char, num(r.commanded[s], 4)))
+                    .zip(r.axes)
+                    .map(|((a, _), &v)| format!("{}:{}", json_str(a), jnum(v, 4)))
                     .collect();
                 o.push_str(&parts.join(","));
                 o.push_str(&format!(
                     "}},\"deviation_mm\":[{},{},{}],\"dev_mm\":{},\"effects_mm\":{{",
-                    num(dev[0], 5),
-                    num(dev[1], 5),
-                    num(dev[2], 5),
-                    num(dev.norm(), 5)
+                    jnum(dx, 5),
+                    jnum(dy, 5),
+                    jnum(dz, 5),
+                    jnum(dev, 5)
                 ));
-                let parts: Vec<String> = Effect::ALL
+                let parts: Vec<String> = self
+                    .layout
+                    .effects
                     .iter()
-                    .map(|&e| {
-                        format!(
-                            "\"{}\":{}",
-                            e.name(),
-                            num(r.result.deviation.parts[e as usize].norm(), 5)
-                        )
-                    })
+                    .zip(r.effects_mm)
+                    .map(|(e, &v)| format!("{}:{}", json_str(e), jnum(v, 5)))
                     .collect();
                 o.push_str(&parts.join(","));
-                o.push_str(&format!(
-                    "}},\"residual_mm\":{},\"orient_urad\":{}}}",
-                    num(r.result.residual_mm, 6),
-                    num(r.result.deviation.orientation.norm() * 1e6, 2)
-                ));
+                o.push('}');
+                if let Some(res) = r.residual_mm {
+                    o.push_str(&format!(",\"residual_mm\":{}", jnum(res, 6)));
+                }
+                o.push_str(&format!(",\"orient_urad\":{}}}", jnum(r.orient_urad, 2)));
                 self.out.write_all(o.as_bytes()).map_err(io)?;
             }
         }
@@ -148,38 +515,203 @@ impl<'w> ReportWriter<'w> {
         Ok(())
     }
 
-    /// Writes the summary and ends the report.
-    pub fn finish(self, s: &Summary) -> Result<()> {
-        let d = &s.deviation;
+    /// Writes the summary (and, for SVG, the picture) and ends the report.
+    pub fn finish(mut self, totals: Totals) -> Result<()> {
+        let p95: Vec<f64> = self.stats.iter_mut().map(|s| s.percentile(95.0)).collect();
+        let rows = self.rows;
+        let total = self
+            .stats
+            .first()
+            .map_or((0.0, 0.0, 0), |s| (s.mean(), s.max(), s.max_line()));
+        let p95_total = p95.first().copied().unwrap_or(0.0);
+        let texts = match (&self.source, self.format) {
+            (Some(path), Format::Json | Format::Table) => {
+                let wanted = self
+                    .stats
+                    .iter()
+                    .flat_map(|s| s.worst.iter().map(|w| w.1))
+                    .collect();
+                source_lines(path, &wanted)
+            }
+            _ => Default::default(),
+        };
         match self.format {
             Format::Json => {
+                let mut effects = Vec::new();
+                for (i, s) in self.stats.iter().enumerate() {
+                    let worst: Vec<String> = s
+                        .worst
+                        .iter()
+                        .map(|(v, line, motion)| {
+                            let source = texts
+                                .get(line)
+                                .map(|t| format!(",\"source\":{}", json_str(t)))
+                                .unwrap_or_default();
+                            format!(
+                                "{{\"line\":{line},\"motion\":{},\"dev_mm\":{}{source}}}",
+                                json_str(motion),
+                                jnum(*v, 5)
+                            )
+                        })
+                        .collect();
+                    effects.push(format!(
+                        "{{\"name\":{},\"mean_mm\":{},\"p95_mm\":{},\"max_mm\":{},\"max_line\":{},\"worst\":[{}]}}",
+                        json_str(stat_name(&self.layout, i)),
+                        jnum(s.mean(), 5),
+                        jnum(p95.get(i).copied().unwrap_or(0.0), 5),
+                        jnum(s.max(), 5),
+                        s.max_line(),
+                        worst.join(",")
+                    ));
+                }
                 writeln!(
                     self.out,
-                    "],\"summary\":{{\"blocks\":{},\"moves\":{},\"rows\":{},\"mean_mm\":{},\"max_mm\":{},\"max_line\":{},\"p95_mm\":{}}}}}",
-                    s.blocks,
-                    s.moves,
-                    self.rows,
-                    num(d.mean(), 5),
-                    num(d.max, 5),
-                    d.max_line,
-                    num(d.percentile(95.0), 5)
+                    "],\"summary\":{{\"blocks\":{},\"moves\":{},\"rows\":{},\"mean_mm\":{},\"max_mm\":{},\"max_line\":{},\"p95_mm\":{},\"effects\":[{}]}}}}",
+                    totals.blocks,
+                    totals.moves,
+                    rows,
+                    jnum(total.0, 5),
+                    jnum(total.1, 5),
+                    total.2,
+                    jnum(p95_total, 5),
+                    effects.join(",")
                 )
                 .map_err(io)?;
             }
-            Format::Csv | Format::Table => {
-                let prefix = if self.format == Format::Csv { "# " } else { "" };
+            Format::Csv => {
+                // One comment line, so the file stays a plain CSV table.
+                let mut line = format!(
+                    "# summary: {rows} rows; |dev| mean {} mm, max {} mm (line {}), p95 {} mm",
+                    num(total.0, 5),
+                    num(total.1, 5),
+                    total.2,
+                    num(p95_total, 5)
+                );
+                for (i, s) in self.stats.iter().enumerate().skip(1) {
+                    line.push_str(&format!(
+                        "; {} mean {} p95 {} max {} mm (line {})",
+                        stat_name(&self.layout, i),
+                        num(s.mean(), 5),
+                        num(p95.get(i).copied().unwrap_or(0.0), 5),
+                        num(s.max(), 5),
+                        s.max_line()
+                    ));
+                }
+                let worst: Vec<String> = self
+                    .stats
+                    .first()
+                    .map(|s| s.worst.iter().map(|w| w.1.to_string()).collect())
+                    .unwrap_or_default();
+                line.push_str(&format!("; worst lines {}", worst.join(" ")));
+                writeln!(self.out, "{line}").map_err(io)?;
+            }
+            Format::Table => {
                 writeln!(
                     self.out,
-                    "{prefix}summary: {} rows; |dev| mean {} mm, max {} mm (line {}), p95 {} mm",
-                    self.rows,
-                    num(d.mean(), 5),
-                    num(d.max, 5),
-                    d.max_line,
-                    num(d.percentile(95.0), 5)
+                    "summary: {rows} rows; |dev| mean {} mm, max {} mm (line {}), p95 {} mm",
+                    num(total.0, 5),
+                    num(total.1, 5),
+                    total.2,
+                    num(p95_total, 5)
                 )
                 .map_err(io)?;
+                writeln!(
+                    self.out,
+                    "{:<10} {:>10} {:>10} {:>10}   worst blocks: line (mm)",
+                    "effect", "mean_mm", "p95_mm", "max_mm"
+                )
+                .map_err(io)?;
+                for (i, s) in self.stats.iter().enumerate() {
+                    let worst: Vec<String> = s
+                        .worst
+                        .iter()
+                        .map(|(v, line, _)| format!("{line} ({})", num(*v, 5)))
+                        .collect();
+                    let line = format!(
+                        "{:<10} {:>10} {:>10} {:>10}   {}",
+                        stat_name(&self.layout, i),
+                        num(s.mean(), 5),
+                        num(p95.get(i).copied().unwrap_or(0.0), 5),
+                        num(s.max(), 5),
+                        worst.join(", ")
+                    );
+                    writeln!(self.out, "{}", line.trim_end()).map_err(io)?;
+                }
+                if let Some(s) = self.stats.first().filter(|s| !s.worst.is_empty()) {
+                    writeln!(self.out, "worst blocks:").map_err(io)?;
+                    for (v, line, motion) in &s.worst {
+                        let text = texts.get(line).map_or("", String::as_str);
+                        let row =
+                            format!("  line {line:<6} {:>10} mm  {motion:<9} {text}", num(*v, 5));
+                        writeln!(self.out, "{}", row.trim_end()).map_err(io)?;
+                    }
+                }
+            }
+            Format::Svg => {
+                let points = self.plot.take().map(Decimator::finish).unwrap_or_default();
+                let title = format!(
+                    "{}: predicted |deviation|, {rows} moves; max {} mm at line {}, p95 {} mm",
+                    self.file,
+                    num(total.1, 4),
+                    total.2,
+                    num(p95_total, 4)
+                );
+                // The overall maximum, and the cutting maximum when it is
+                // another block.
+                let mut marks: Vec<PlotWorst> = self.worst_point.into_iter().collect();
+                if let Some(c) = self.worst_cut {
+                    if self.worst_point.is_none_or(|w| w.line != c.line) {
+                        marks.push(c);
+                    }
+                }
+                let svg = crate::emit::svg::render(&points, &marks, &title)?;
+                self.out.write_all(svg.as_bytes()).map_err(io)?;
             }
         }
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use approx::assert_abs_diff_eq;
+
+    const TOL_MM: f64 = 1e-12;
+
+    #[test]
+    fn stat_percentile_mean_and_worst() {
+        // Values 0.001 .. 0.100 mm (100 values): mean 0.0505, p95 is the
+        // 95th value 0.095 (upper bin edge 0.09501 capped by nothing), the
+        // worst five are 0.100 .. 0.096 at lines 100 .. 96.
+        let mut s = Stat::new();
+        for i in 1..=100 {
+            s.add(i as f64 * 0.001, i, "feed");
+        }
+        assert_abs_diff_eq!(s.mean(), 0.0505, epsilon = TOL_MM);
+        assert_abs_diff_eq!(s.percentile(95.0), 0.095, epsilon = BIN_MM + TOL_MM);
+        let lines: Vec<usize> = s.worst.iter().map(|w| w.1).collect();
+        assert_eq!(lines, [100, 99, 98, 97, 96]);
+        assert_eq!(s.max_line(), 100);
+    }
+
+    #[test]
+    fn stat_percentile_beyond_the_histogram_is_exact() {
+        // 3, 4, 5 mm: all beyond 2 mm; p50 = 2nd value = 4 mm.
+        let mut s = Stat::new();
+        for (i, v) in [5.0, 3.0, 4.0].into_iter().enumerate() {
+            s.add(v, i + 1, "MoveL");
+        }
+        assert_abs_diff_eq!(s.percentile(50.0), 4.0, epsilon = TOL_MM);
+        assert_abs_diff_eq!(s.percentile(100.0), 5.0, epsilon = TOL_MM);
+        assert_eq!(s.max_line(), 1);
+    }
+
+    #[test]
+    fn ties_keep_the_earlier_block() {
+        let mut s = Stat::new();
+        s.add(0.5, 7, "feed");
+        s.add(0.5, 9, "feed");
+        assert_eq!(s.max_line(), 7);
     }
 }

@@ -1,0 +1,466 @@
+//! `postproc batch`: compensates many programs (G-code and RAPID, given as
+//! files or folders) into an output folder, in parallel, carrying on past a
+//! bad file, and writes `batch-summary.json`.
+//!
+//! Determinism: the programs are sorted by input path, each is compensated
+//! by the same deterministic pipeline as `compensate`, and the summary holds
+//! no times, so every byte written is the same for any `--threads`.
+//! Every output is written atomically (temporary file, then rename).
+
+use std::collections::BTreeMap;
+use std::io::{BufReader, IsTerminal, Write};
+use std::path::{Path, PathBuf};
+
+use rayon::prelude::*;
+use serde::Serialize;
+
+use super::gcode::{
+    build_job, effects, parse_setup, process_setup, run_reporting, same_file, thread_pool,
+    write_atomically,
+};
+use super::rapid::{load_robot, read_program, write_report};
+use super::{Annotate, BatchArgs, Format, ProgramArgs, usage};
+use crate::compensate::rapid::{RapidOptions, compensate_module};
+use crate::error::{Error, Result};
+use crate::machine::Machine;
+
+/// Extensions of G-code programs picked up from folders.
+pub const GCODE_EXTENSIONS: [&str; 5] = ["nc", "ngc", "tap", "gcode", "cnc"];
+/// Extensions of RAPID modules picked up from folders.
+pub const RAPID_EXTENSIONS: [&str; 3] = ["mod", "modx", "prg"];
+/// Name of the summary written into the output folder.
+pub const SUMMARY_FILE: &str = "batch-summary.json";
+
+fn extension(path: &Path) -> Option<String> {
+    path.extension()
+        .map(|e| e.to_string_lossy().to_ascii_lowercase())
+}
+
+fn is_program(path: &Path) -> bool {
+    extension(path).is_some_and(|e| {
+        GCODE_EXTENSIONS.contains(&e.as_str()) || RAPID_EXTENSIONS.contains(&e.as_str())
+    })
+}
+
+fn is_rapid(path: &Path) -> bool {
+    extension(path).is_some_and(|e| RAPID_EXTENSIONS.contains(&e.as_str()))
+}
+
+/// One program to compensate: where it is, where its output goes (relative
+/// to the output folder), or why it cannot be taken.
+#[derive(Debug, Clone)]
+struct Item {
+    input: PathBuf,
+    rel: PathBuf,
+    problem: Option<String>,
+}
+
+/// Programs under a folder, recursively, in name order; hidden entries and
+/// the output folder are skipped. A folder that cannot be read becomes a
+/// failed entry.
+fn walk(root: &Path, dir: &Path, skip: Option<&Path>, items: &mut Vec<Item>) {
+    let read = match std::fs::read_dir(dir) {
+        Ok(r) => r,
+        Err(e) => {
+            items.push(Item {
+                input: dir.to_path_buf(),
+                rel: dir.to_path_buf(),
+                problem: Some(format!("{}: {e}", dir.display())),
+            });
+            return;
+        }
+    };
+    let mut entries: Vec<PathBuf> = read.filter_map(|e| e.ok().map(|e| e.path())).collect();
+    entries.sort();
+    for path in entries {
+        let hidden = path
+            .file_name()
+            .is_some_and(|n| n.to_string_lossy().starts_with('.'));
+        if hidden {
+            continue;
+        }
+        if path.is_dir() {
+            if skip.is_some_and(|s| path.canonicalize().is_ok_and(|p| p == s)) {
+                continue;
+            }
+            walk(root, &path, skip, items);
+        } else if is_program(&path) {
+            let rel = path.strip_prefix(root).unwrap_or(&path).to_path_buf();
+            items.push(Item {
+                input: path,
+                rel,
+                problem: None,
+            });
+        }
+    }
+}
+
+/// Expands the inputs into programs, sorted by input path; an input that
+/// does not exist, or two programs with one output name, become failures.
+fn collect(inputs: &[PathBuf], out_dir: &Path) -> Vec<Item> {
+    let skip = out_dir.canonicalize().ok();
+    let mut items = Vec::new();
+    for input in inputs {
+        if input.is_dir() {
+            walk(input, input, skip.as_deref(), &mut items);
+        } else {
+            let rel = input
+                .file_name()
+                .map(PathBuf::from)
+                .unwrap_or_else(|| PathBuf::from("program"));
+            let problem = (!input.is_file()).then(|| format!("{}: no such file", input.display()));
+            items.push(Item {
+                input: input.clone(),
+                rel,
+                problem,
+            });
+        }
+    }
+    items.sort_by(|a, b| a.input.cmp(&b.input));
+    items.dedup_by(|a, b| a.input == b.input);
+    let mut owner: BTreeMap<PathBuf, PathBuf> = BTreeMap::new();
+    for item in &mut items {
+        if item.problem.is_some() {
+            continue;
+        }
+        match owner.get(&item.rel) {
+            Some(first) => {
+                item.problem = Some(format!(
+                    "{}: its output name {} is already taken by {}",
+                    item.input.display(),
+                    item.rel.display(),
+                    first.display()
+                ));
+            }
+            None => {
+                owner.insert(item.rel.clone(), item.input.clone());
+            }
+        }
+    }
+    items
+}
+
+/// Result of one program, as written to `batch-summary.json`.
+#[derive(Debug, Clone, Serialize)]
+struct FileResult {
+    input: String,
+    output: Option<String>,
+    report: Option<String>,
+    /// `ok`, `findings` (out of tolerance) or `failed`.
+    status: &'static str,
+    error: Option<String>,
+    blocks: usize,
+    moves: usize,
+    max_deviation_mm: f64,
+    max_deviation_line: usize,
+    max_residual_mm: Option<f64>,
+}
+
+/// The summary file.
+#[derive(Debug, Serialize)]
+struct BatchSummary {
+    machine: String,
+    tolerance_mm: f64,
+    programs: usize,
+    ok: usize,
+    findings: usize,
+    failed: usize,
+    exit_code: i32,
+    results: Vec<FileResult>,
+}
+
+/// Rounds to 6 decimals (1 nm) for the summary.
+fn round6(v: f64) -> f64 {
+    (v * 1e6).round() / 1e6
+}
+
+/// An error with its source chain, as the binary prints it.
+fn message(e: &Error) -> String {
+    let mut msg = e.to_string();
+    let mut src = std::error::Error::source(e);
+    while let Some(s) = src {
+        msg.push_str(&format!(": {s}"));
+        src = s.source();
+    }
+    msg
+}
+
+/// What one compensation gave.
+struct Done {
+    blocks: usize,
+    moves: usize,
+    max_dev: f64,
+    max_line: usize,
+    residual: Option<f64>,
+}
+
+/// The configured engine for the batch's machine.
+enum Engine<'m> {
+    Tool(Box<crate::job::Job<'m>>),
+    Robot(crate::machine::robot::Robot, RapidOptions),
+}
+
+/// Path of a program's report beside its output: `<output>.report.<ext>`.
+fn report_path(output: &Path, format: Format) -> PathBuf {
+    let ext = match format {
+        Format::Table => "txt",
+        Format::Csv => "csv",
+        Format::Json => "json",
+        Format::Svg => "svg",
+    };
+    let mut name = output.as_os_str().to_owned();
+    name.push(format!(".report.{ext}"));
+    PathBuf::from(name)
+}
+
+fn compensate_one(
+    engine: &Engine,
+    input: &Path,
+    output: &Path,
+    report: Option<Format>,
+) -> Result<Done> {
+    if same_file(input, output) {
+        return Err(usage(format!(
+            "{}: the output would overwrite the input",
+            output.display()
+        )));
+    }
+    if let Some(dir) = output.parent() {
+        std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
+    }
+    let name = input.display().to_string();
+    match engine {
+        Engine::Tool(job) => {
+            if is_rapid(input) {
+                return Err(usage(format!(
+                    "{name}: a RAPID module needs a robot machine file"
+                )));
+            }
+            let f = std::fs::File::open(input).map_err(|e| Error::io(input, e))?;
+            let reader = BufReader::with_capacity(1 << 16, f);
+            let s = match report {
+                Some(format) => write_atomically(&report_path(output, format), |rep| {
+                    write_atomically(output, |w| {
+                        run_reporting(
+                            job,
+                            Box::new(reader),
+                            &name,
+                            Some(w),
+                            rep,
+                            &job.setup,
+                            format,
+                        )
+                    })
+                })?,
+                None => write_atomically(output, |w| job.run(reader, &name, Some(w), None))?,
+            };
+            Ok(Done {
+                blocks: s.blocks,
+                moves: s.moves,
+                max_dev: s.deviation.max,
+                max_line: s.deviation.max_line,
+                residual: Some(s.max_residual_mm),
+            })
+        }
+        Engine::Robot(robot, opts) => {
+            if !is_rapid(input) {
+                return Err(usage(format!(
+                    "{name}: a G-code program needs a machine-tool machine file"
+                )));
+            }
+            let (src, name) = read_program(input)?;
+            let outcome = compensate_module(&src, &name, robot, opts)?;
+            write_atomically(output, |w| {
+                w.write_all(outcome.text.as_bytes())
+                    .map_err(|e| Error::io(output, e))
+            })?;
+            if let Some(format) = report {
+                write_atomically(&report_path(output, format), |w| {
+                    write_report(w, &outcome, &name, format)
+                })?;
+            }
+            Ok(Done {
+                blocks: outcome.moves,
+                moves: outcome.moves,
+                max_dev: outcome.max_deviation_mm,
+                max_line: outcome.max_deviation_line,
+                residual: None,
+            })
+        }
+    }
+}
+
+/// `postproc batch`; `quiet` hides the progress bar.
+pub fn run(a: &BatchArgs, quiet: bool) -> Result<i32> {
+    let pool = thread_pool(a.effects.threads)?;
+    let machine_path = Machine::resolve(&a.machine)?;
+    let machine = Machine::load(&machine_path)?;
+    std::fs::create_dir_all(&a.out_dir).map_err(|e| Error::io(&a.out_dir, e))?;
+    let items = collect(&a.inputs, &a.out_dir);
+    if items.is_empty() {
+        return Err(usage(format!(
+            "no programs found (extensions: {}, {})",
+            GCODE_EXTENSIONS.join(" "),
+            RAPID_EXTENSIONS.join(" ")
+        )));
+    }
+    let annotate = a.annotate == Annotate::Comment;
+    let tool;
+    let process;
+    let engine = match machine {
+        Machine::Tool(m) => {
+            tool = m;
+            let program = ProgramArgs {
+                file: PathBuf::new(),
+                machine: None,
+                tools: a.tools.clone(),
+                work_offsets: a.work_offsets.clone(),
+            };
+            let setup = parse_setup(&program, Some(&tool))?;
+            process = process_setup(&a.effects, &tool)?;
+            if process.thermal_start.needs_mean_power() && tool.thermal().is_some() {
+                return Err(usage(
+                    "batch starts every program cold (--thermal-start cold); a steady or warm-up start needs each program's mean power, so compensate those one by one",
+                ));
+            }
+            let mut job = build_job(
+                &tool,
+                &process,
+                &pool,
+                setup,
+                effects(&a.effects)?,
+                a.tolerance,
+                None,
+                annotate,
+            )?;
+            // The programs already run on the pool's threads.
+            job.pool = None;
+            Engine::Tool(Box::new(job))
+        }
+        Machine::Robot(_) => {
+            if !a.tools.is_empty() || !a.work_offsets.is_empty() {
+                return Err(usage(
+                    "--tool and --work-offset are G-code options; RAPID takes tooldata and wobjdata from the module",
+                ));
+            }
+            let robot = load_robot(&a.machine)?;
+            let opts = super::rapid::rapid_options(&robot, &a.effects, annotate, None)?;
+            Engine::Robot(robot, opts)
+        }
+    };
+    let bar = if quiet || !std::io::stderr().is_terminal() {
+        indicatif::ProgressBar::hidden()
+    } else {
+        let b = indicatif::ProgressBar::new(items.len() as u64);
+        if let Ok(style) = indicatif::ProgressStyle::with_template(
+            "{bar:40} {pos}/{len} programs {elapsed_precise} {wide_msg}",
+        ) {
+            b.set_style(style);
+        }
+        b
+    };
+    let results: Vec<FileResult> = pool.install(|| {
+        items
+            .par_iter()
+            .map(|item| {
+                let output = a.out_dir.join(&item.rel);
+                let done = match &item.problem {
+                    Some(p) => Err(usage(p.clone())),
+                    None => compensate_one(&engine, &item.input, &output, a.report_format),
+                };
+                bar.inc(1);
+                let input = item.input.display().to_string();
+                match done {
+                    Ok(d) => {
+                        let findings = d.residual.is_some_and(|r| r > a.tolerance);
+                        FileResult {
+                            input,
+                            output: Some(output.display().to_string()),
+                            report: a
+                                .report_format
+                                .map(|f| report_path(&output, f).display().to_string()),
+                            status: if findings { "findings" } else { "ok" },
+                            error: None,
+                            blocks: d.blocks,
+                            moves: d.moves,
+                            max_deviation_mm: round6(d.max_dev),
+                            max_deviation_line: d.max_line,
+                            max_residual_mm: d.residual.map(round6),
+                        }
+                    }
+                    Err(e) => {
+                        tracing::debug!("{}", message(&e));
+                        FileResult {
+                            input,
+                            output: None,
+                            report: None,
+                            status: "failed",
+                            error: Some(message(&e)),
+                            blocks: 0,
+                            moves: 0,
+                            max_deviation_mm: 0.0,
+                            max_deviation_line: 0,
+                            max_residual_mm: None,
+                        }
+                    }
+                }
+            })
+            .collect()
+    });
+    bar.finish_and_clear();
+    let count = |s: &str| results.iter().filter(|r| r.status == s).count();
+    let (ok, findings, failed) = (count("ok"), count("findings"), count("failed"));
+    let exit_code = if failed > 0 {
+        2
+    } else if findings > 0 {
+        1
+    } else {
+        0
+    };
+    let summary = BatchSummary {
+        machine: a.machine.clone(),
+        tolerance_mm: a.tolerance,
+        programs: results.len(),
+        ok,
+        findings,
+        failed,
+        exit_code,
+        results,
+    };
+    let summary_path = a.out_dir.join(SUMMARY_FILE);
+    write_atomically(&summary_path, |w| {
+        serde_json::to_writer_pretty(&mut *w, &summary)
+            .map_err(|e| Error::io(&summary_path, std::io::Error::other(e)))?;
+        w.write_all(b"\n").map_err(|e| Error::io(&summary_path, e))
+    })?;
+    let mut out = std::io::stdout().lock();
+    let mut say = |t: String| {
+        out.write_all(t.as_bytes())
+            .map_err(|e| Error::io("stdout", e))
+    };
+    for r in &summary.results {
+        match r.status {
+            "failed" => say(format!(
+                "failed    {}: {}\n",
+                r.input,
+                r.error.as_deref().unwrap_or("")
+            ))?,
+            "findings" => say(format!(
+                "findings  {}: residual {} mm > tolerance {} mm\n",
+                r.input,
+                r.max_residual_mm.unwrap_or(0.0),
+                a.tolerance
+            ))?,
+            _ => {}
+        }
+    }
+    say(format!(
+        "batch: {} programs: {} compensated ({} with findings), {} failed; summary in {}\n",
+        summary.programs,
+        ok + findings,
+        findings,
+        failed,
+        summary_path.display()
+    ))?;
+    Ok(exit_code)
+}

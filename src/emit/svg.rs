@@ -1,0 +1,494 @@
+//! The deviation picture of `report --format svg`: the toolpath in plan (XY)
+//! and side (XZ) view coloured by the predicted |deviation|, the deviation
+//! along the program, a colour bar, and the worst block marked — drawn with
+//! `plotters` (SVG backend, no system fonts).
+//!
+//! Long programs are decimated into a bounded number of points by
+//! [`Decimator`]: contiguous buckets of blocks, each represented by its block
+//! of largest deviation, so peaks survive and the output is the same bytes
+//! on every run.
+
+use plotters::coord::Shift;
+use plotters::prelude::*;
+
+use crate::error::{Error, Result};
+
+/// Canvas size, pixels.
+const SIZE: (u32, u32) = (1200, 900);
+/// Width of the colour-bar column, pixels.
+const BAR_W: u32 = 130;
+/// Colour levels of the toolpath (runs of one level become one polyline).
+const LEVELS: usize = 32;
+
+/// One programmed point of the picture.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PlotPoint {
+    /// 1-based source line.
+    pub line: usize,
+    /// Programmed tool-tip position, mm.
+    pub pos: [f64; 3],
+    /// Predicted |deviation|, mm.
+    pub dev: f64,
+    /// A positioning move (rapid, joint move), drawn thin.
+    pub rapid: bool,
+}
+
+/// A block marked in the picture: the largest deviation of all moves, and
+/// the largest of the cutting moves (where it lands on the part).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Worst {
+    /// 1-based source line.
+    pub line: usize,
+    /// Programmed tool-tip position, mm.
+    pub pos: [f64; 3],
+    /// Predicted |deviation|, mm.
+    pub dev: f64,
+    /// A cutting move (feed, arc, cycle, MoveL/MoveC): labelled "cut".
+    pub cut: bool,
+}
+
+const MARK_ALL: RGBColor = RGBColor(220, 30, 30);
+const MARK_CUT: RGBColor = RGBColor(230, 110, 0);
+
+fn mark_style(w: &Worst) -> (RGBColor, &'static str) {
+    if w.cut {
+        (MARK_CUT, "max cutting")
+    } else {
+        (MARK_ALL, "max")
+    }
+}
+
+/// Keeps at most about `2 × cap` points of a stream of any length: the stream
+/// is cut into buckets of `stride` consecutive points, each kept as its point
+/// of largest deviation (the earlier one on ties); when the buffer is full,
+/// neighbouring buckets merge and the stride doubles. Deterministic.
+#[derive(Debug, Clone)]
+pub struct Decimator {
+    cap: usize,
+    stride: usize,
+    in_bucket: usize,
+    bucket: Option<PlotPoint>,
+    points: Vec<PlotPoint>,
+}
+
+fn larger(a: PlotPoint, b: PlotPoint) -> PlotPoint {
+    if b.dev > a.dev { b } else { a }
+}
+
+impl Decimator {
+    /// A decimator keeping between `cap` and `2 × cap` points (cap ≥ 2).
+    pub fn new(cap: usize) -> Self {
+        let cap = cap.max(2);
+        Decimator {
+            cap,
+            stride: 1,
+            in_bucket: 0,
+            bucket: None,
+            points: Vec::with_capacity(2 * cap),
+        }
+    }
+
+    /// Adds the next point.
+    pub fn push(&mut self, p: PlotPoint) {
+        self.bucket = Some(match self.bucket {
+            Some(b) => larger(b, p),
+            None => p,
+        });
+        self.in_bucket += 1;
+        if self.in_bucket >= self.stride {
+            if let Some(b) = self.bucket.take() {
+                self.points.push(b);
+            }
+            self.in_bucket = 0;
+            if self.points.len() >= 2 * self.cap {
+                let merged: Vec<PlotPoint> = self
+                    .points
+                    .chunks(2)
+                    .map(|c| c.iter().copied().reduce(larger).unwrap_or(c[0]))
+                    .collect();
+                self.points = merged;
+                self.stride *= 2;
+            }
+        }
+    }
+
+    /// The points kept, in program order.
+    pub fn finish(mut self) -> Vec<PlotPoint> {
+        if let Some(b) = self.bucket.take() {
+            self.points.push(b);
+        }
+        self.points
+    }
+}
+
+fn plot_err<E: std::error::Error + Send + Sync>(e: DrawingAreaErrorKind<E>) -> Error {
+    Error::io("svg", std::io::Error::other(e.to_string()))
+}
+
+/// Viridis-like colour of `t` in [0, 1] (dark blue → green → yellow).
+pub fn colour(t: f64) -> RGBColor {
+    const STOPS: [(f64, f64, f64); 5] = [
+        (68.0, 1.0, 84.0),
+        (59.0, 82.0, 139.0),
+        (33.0, 145.0, 140.0),
+        (94.0, 201.0, 98.0),
+        (253.0, 231.0, 37.0),
+    ];
+    let t = if t.is_finite() {
+        t.clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    let x = t * (STOPS.len() - 1) as f64;
+    let i = (x.floor() as usize).min(STOPS.len() - 2);
+    let f = x - i as f64;
+    let (a, b) = (STOPS[i], STOPS[i + 1]);
+    let mix = |p: f64, q: f64| (p + (q - p) * f).round().clamp(0.0, 255.0) as u8;
+    RGBColor(mix(a.0, b.0), mix(a.1, b.1), mix(a.2, b.2))
+}
+
+/// The colour scale, mm: `lo` and below darkest, `hi` and above brightest.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Scale {
+    lo: f64,
+    hi: f64,
+}
+
+impl Scale {
+    /// The range of the cutting moves' deviations (the part), so that its
+    /// variation uses every colour; rapids beyond it saturate. Without
+    /// cutting moves, 0 … the largest deviation.
+    fn of(points: &[PlotPoint], marks: &[Worst]) -> Scale {
+        let range = |it: &mut dyn Iterator<Item = f64>| {
+            it.filter(|d| d.is_finite())
+                .fold((f64::INFINITY, 0.0f64), |(lo, hi), d| {
+                    (lo.min(d), hi.max(d))
+                })
+        };
+        let (lo, hi) = range(&mut points.iter().filter(|p| !p.rapid).map(|p| p.dev));
+        if hi > 0.0 && hi - lo > 1e-6 {
+            return Scale { lo, hi };
+        }
+        let (_, hi) = range(
+            &mut points
+                .iter()
+                .map(|p| p.dev)
+                .chain(marks.iter().map(|w| w.dev)),
+        );
+        Scale {
+            lo: 0.0,
+            hi: if hi > 0.0 { hi } else { 1e-3 },
+        }
+    }
+}
+
+fn level(dev: f64, s: &Scale) -> usize {
+    let t = (dev - s.lo) / (s.hi - s.lo);
+    if t.is_finite() {
+        ((t.max(0.0) * LEVELS as f64) as usize).min(LEVELS - 1)
+    } else {
+        0
+    }
+}
+
+fn level_colour(l: usize) -> RGBColor {
+    colour((l as f64 + 0.5) / LEVELS as f64)
+}
+
+/// Axis ranges with equal mm per pixel on both axes for a plot area of
+/// `px` × `py` pixels.
+fn equal_ranges(
+    xs: (f64, f64),
+    ys: (f64, f64),
+    px: f64,
+    py: f64,
+) -> (std::ops::Range<f64>, std::ops::Range<f64>) {
+    let span = |r: (f64, f64)| (r.1 - r.0).max(1.0) * 1.08;
+    let scale = (span(xs) / px).max(span(ys) / py);
+    let (cx, cy) = ((xs.0 + xs.1) / 2.0, (ys.0 + ys.1) / 2.0);
+    let (hx, hy) = (scale * px / 2.0, scale * py / 2.0);
+    (cx - hx..cx + hx, cy - hy..cy + hy)
+}
+
+/// One projection of the toolpath (axes `a`, `b` of the position).
+#[allow(clippy::too_many_arguments)]
+fn view(
+    area: &DrawingArea<SVGBackend, Shift>,
+    points: &[PlotPoint],
+    marks: &[Worst],
+    (a, b): (usize, usize),
+    caption: &str,
+    (xdesc, ydesc): (&str, &str),
+    scale: &Scale,
+) -> Result<()> {
+    let bounds = |k: usize| {
+        points
+            .iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |r, p| {
+                let v = p.pos.get(k).copied().unwrap_or(0.0);
+                (r.0.min(v), r.1.max(v))
+            })
+    };
+    let (mut xs, mut ys) = (bounds(a), bounds(b));
+    if !(xs.0.is_finite() && xs.1.is_finite() && ys.0.is_finite() && ys.1.is_finite()) {
+        (xs, ys) = ((0.0, 1.0), (0.0, 1.0));
+    }
+    let (w, h) = area.dim_in_pixel();
+    // Plot area: minus label areas (70 left, 45 bottom), margins and caption.
+    let (px, py) = (w as f64 - 70.0 - 30.0, h as f64 - 45.0 - 60.0);
+    let (xr, yr) = equal_ranges(xs, ys, px.max(10.0), py.max(10.0));
+    let mut chart = ChartBuilder::on(area)
+        .caption(caption, ("sans-serif", 18))
+        .margin(15)
+        .x_label_area_size(45)
+        .y_label_area_size(70)
+        .build_cartesian_2d(xr, yr)
+        .map_err(plot_err)?;
+    chart
+        .configure_mesh()
+        .x_desc(xdesc)
+        .y_desc(ydesc)
+        .x_label_formatter(&|v| format!("{v:.0}"))
+        .y_label_formatter(&|v| format!("{v:.0}"))
+        .label_style(("sans-serif", 13))
+        .axis_desc_style(("sans-serif", 14))
+        .light_line_style(RGBColor(235, 235, 235))
+        .bold_line_style(RGBColor(215, 215, 215))
+        .draw()
+        .map_err(plot_err)?;
+    let at = |p: &PlotPoint| {
+        (
+            p.pos.get(a).copied().unwrap_or(0.0),
+            p.pos.get(b).copied().unwrap_or(0.0),
+        )
+    };
+    // Runs of segments with the same colour level and kind: one polyline each.
+    let mut i = 1;
+    while i < points.len() {
+        let key = (level(points[i].dev, scale), points[i].rapid);
+        let mut run = vec![at(&points[i - 1]), at(&points[i])];
+        let mut j = i + 1;
+        while j < points.len() && (level(points[j].dev, scale), points[j].rapid) == key {
+            run.push(at(&points[j]));
+            j += 1;
+        }
+        let style = level_colour(key.0).stroke_width(if key.1 { 1 } else { 3 });
+        chart
+            .draw_series(std::iter::once(PathElement::new(run, style)))
+            .map_err(plot_err)?;
+        i = j;
+    }
+    for wp in marks {
+        let (colour, label) = mark_style(wp);
+        let c = (
+            wp.pos.get(a).copied().unwrap_or(0.0),
+            wp.pos.get(b).copied().unwrap_or(0.0),
+        );
+        chart
+            .draw_series(std::iter::once(
+                EmptyElement::at(c)
+                    + Circle::new((0, 0), 9, colour.stroke_width(3))
+                    + Text::new(
+                        format!("{label}, line {}", wp.line),
+                        if wp.cut { (-60, 14) } else { (12, -18) },
+                        ("sans-serif", 14).into_font().color(&colour),
+                    ),
+            ))
+            .map_err(plot_err)?;
+    }
+    Ok(())
+}
+
+/// The colour bar over the scale's range, mm.
+fn colour_bar(area: &DrawingArea<SVGBackend, Shift>, scale: &Scale) -> Result<()> {
+    let mut chart = ChartBuilder::on(area)
+        .caption("|dev| (mm)", ("sans-serif", 15))
+        .margin_top(15)
+        .margin_bottom(60)
+        .margin_right(20)
+        .y_label_area_size(80)
+        .build_cartesian_2d(0.0..1.0, scale.lo..scale.hi)
+        .map_err(plot_err)?;
+    chart
+        .configure_mesh()
+        .disable_x_mesh()
+        .disable_y_mesh()
+        .x_labels(0)
+        .y_labels(8)
+        .y_desc("cutting moves' range; beyond it saturates")
+        .label_style(("sans-serif", 13))
+        .axis_desc_style(("sans-serif", 14))
+        .y_label_formatter(&|v| format!("{v:.4}"))
+        .draw()
+        .map_err(plot_err)?;
+    chart
+        .draw_series((0..LEVELS).map(|l| {
+            let step = (scale.hi - scale.lo) / LEVELS as f64;
+            let lo = scale.lo + step * l as f64;
+            let hi = lo + step;
+            Rectangle::new([(0.0, lo), (1.0, hi)], level_colour(l).filled())
+        }))
+        .map_err(plot_err)?;
+    Ok(())
+}
+
+/// |deviation| against the source line.
+fn along(
+    area: &DrawingArea<SVGBackend, Shift>,
+    points: &[PlotPoint],
+    marks: &[Worst],
+    dmax: f64,
+    scale: &Scale,
+) -> Result<()> {
+    let first = points.first().map_or(0, |p| p.line) as f64;
+    let last = points.last().map_or(1, |p| p.line) as f64;
+    let last = if last > first { last } else { first + 1.0 };
+    let mut chart = ChartBuilder::on(area)
+        .caption(
+            "Predicted |deviation| along the program",
+            ("sans-serif", 18),
+        )
+        .margin(15)
+        .x_label_area_size(45)
+        .y_label_area_size(70)
+        .build_cartesian_2d(first..last, 0.0..dmax * 1.1)
+        .map_err(plot_err)?;
+    chart
+        .configure_mesh()
+        .x_desc("source line")
+        .y_desc("|deviation| (mm)")
+        .x_label_formatter(&|v| format!("{v:.0}"))
+        .label_style(("sans-serif", 13))
+        .axis_desc_style(("sans-serif", 14))
+        .y_label_formatter(&|v| format!("{v:.4}"))
+        .light_line_style(RGBColor(235, 235, 235))
+        .bold_line_style(RGBColor(215, 215, 215))
+        .draw()
+        .map_err(plot_err)?;
+    chart
+        .draw_series(LineSeries::new(
+            points.iter().map(|p| (p.line as f64, p.dev)),
+            RGBColor(59, 82, 139).stroke_width(1),
+        ))
+        .map_err(plot_err)?;
+    chart
+        .draw_series(points.iter().map(|p| {
+            Circle::new(
+                (p.line as f64, p.dev),
+                2,
+                level_colour(level(p.dev, scale)).filled(),
+            )
+        }))
+        .map_err(plot_err)?;
+    for wp in marks {
+        let (colour, label) = mark_style(wp);
+        let c = (wp.line as f64, wp.dev);
+        chart
+            .draw_series(std::iter::once(
+                EmptyElement::at(c)
+                    + Circle::new((0, 0), 7, colour.stroke_width(2))
+                    + Text::new(
+                        format!("{label} {:.4} mm, line {}", wp.dev, wp.line),
+                        (10, -18),
+                        ("sans-serif", 14).into_font().color(&colour),
+                    ),
+            ))
+            .map_err(plot_err)?;
+    }
+    Ok(())
+}
+
+/// Renders the picture as an SVG document, with `marks` circled and
+/// labelled in every view.
+pub fn render(points: &[PlotPoint], marks: &[Worst], title: &str) -> Result<String> {
+    let top = points
+        .iter()
+        .map(|p| p.dev)
+        .chain(marks.iter().map(|w| w.dev))
+        .filter(|d| d.is_finite())
+        .fold(0.0, f64::max);
+    let dmax = if top > 0.0 { top } else { 1e-3 };
+    let scale = Scale::of(points, marks);
+    let mut buf = String::new();
+    {
+        let root = SVGBackend::with_string(&mut buf, SIZE).into_drawing_area();
+        root.fill(&WHITE).map_err(plot_err)?;
+        let (head, body) = root.split_vertically(40);
+        head.draw(&Text::new(
+            title.to_string(),
+            (15, 12),
+            ("sans-serif", 17).into_font(),
+        ))
+        .map_err(plot_err)?;
+        let (top_row, bottom_row) = body.split_vertically(500);
+        let (views, bar) = top_row.split_horizontally(SIZE.0 - BAR_W);
+        let (plan, side) = views.split_horizontally((SIZE.0 - BAR_W) / 2);
+        view(
+            &plan,
+            points,
+            marks,
+            (0, 1),
+            "Plan view (XY)",
+            ("X (mm)", "Y (mm)"),
+            &scale,
+        )?;
+        view(
+            &side,
+            points,
+            marks,
+            (0, 2),
+            "Side view (XZ)",
+            ("X (mm)", "Z (mm)"),
+            &scale,
+        )?;
+        colour_bar(&bar, &scale)?;
+        let (program, _) = bottom_row.split_horizontally(SIZE.0 - BAR_W);
+        along(&program, points, marks, dmax, &scale)?;
+        root.present().map_err(plot_err)?;
+    }
+    Ok(buf)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn pt(line: usize, dev: f64) -> PlotPoint {
+        PlotPoint {
+            line,
+            pos: [line as f64, 0.0, 0.0],
+            dev,
+            rapid: false,
+        }
+    }
+
+    #[test]
+    fn decimator_is_bounded_and_keeps_the_peak() {
+        // 100 000 points, one peak at line 54 321: at most 2 × 100 kept, in
+        // order, and the peak among them.
+        let mut d = Decimator::new(100);
+        for i in 1..=100_000 {
+            d.push(pt(i, if i == 54_321 { 1.0 } else { 0.001 }));
+        }
+        let kept = d.finish();
+        assert!(kept.len() <= 201 && kept.len() >= 100, "{}", kept.len());
+        assert!(kept.windows(2).all(|w| w[0].line < w[1].line));
+        assert!(kept.iter().any(|p| p.line == 54_321));
+    }
+
+    #[test]
+    fn short_streams_are_kept_whole() {
+        let mut d = Decimator::new(100);
+        for i in 1..=10 {
+            d.push(pt(i, 0.0));
+        }
+        assert_eq!(d.finish().len(), 10);
+    }
+
+    #[test]
+    fn colour_map_ends() {
+        assert_eq!(colour(0.0), RGBColor(68, 1, 84));
+        assert_eq!(colour(1.0), RGBColor(253, 231, 37));
+        assert_eq!(colour(f64::NAN), RGBColor(68, 1, 84));
+    }
+}

@@ -1,0 +1,259 @@
+//! `postproc batch` through the binary: many generated programs with a few
+//! broken ones, exit codes, the summary file, and identical bytes for any
+//! thread count.
+
+use std::path::{Path, PathBuf};
+
+use crate::common::{postproc, repo};
+
+/// Programs generated; these indices are broken (one parse error, one
+/// `#` parameter, one arc without a centre).
+const PROGRAMS: usize = 50;
+const BROKEN: [usize; 3] = [7, 23, 41];
+
+/// A small, valid three-axis program: a square pocket pass at a depth that
+/// varies with `i`.
+fn program(i: usize) -> String {
+    let z = 2.0 + (i % 5) as f64;
+    let x0 = 20.0 + i as f64;
+    format!(
+        "%\nO{:04}\nG21 G90 G17\nG54 G0 X{x0} Y20. Z50.\nG43 H1 Z10.\nG1 Z{z} F300.\nX{} Y20.\nY80.\nX{x0}\nY20.\nG0 Z50.\nM30\n%\n",
+        1000 + i,
+        x0 + 60.0
+    )
+}
+
+fn broken(i: usize) -> String {
+    match i {
+        7 => "G0 X10 Y10 Z50\nG1 X@5 F100\n".to_string(),
+        23 => "G0 X10 Y10 Z50\nG1 X#1 F100\n".to_string(),
+        _ => "G0 X10 Y10 Z50\nG2 X20 Y20 F100\n".to_string(),
+    }
+}
+
+fn name(i: usize) -> String {
+    // Mixed extensions, one sub-folder.
+    let ext = ["nc", "ngc", "tap", "gcode", "cnc"][i % 5];
+    if i % 10 == 9 {
+        format!("sub/p{i:02}.{ext}")
+    } else {
+        format!("p{i:02}.{ext}")
+    }
+}
+
+fn make_inputs(dir: &Path) {
+    std::fs::create_dir_all(dir.join("sub")).expect("mkdir");
+    for i in 0..PROGRAMS {
+        let text = if BROKEN.contains(&i) {
+            broken(i)
+        } else {
+            program(i)
+        };
+        std::fs::write(dir.join(name(i)), text).expect("write program");
+    }
+    // Not a program: ignored.
+    std::fs::write(dir.join("notes.txt"), "not a program\n").expect("write notes");
+}
+
+fn batch(input: &Path, out: &Path, threads: &str) -> (i32, String) {
+    let a = postproc()
+        .args([
+            "batch",
+            "--machine",
+            "afm-r1000",
+            "--threads",
+            threads,
+            "--out-dir",
+        ])
+        .arg(out)
+        .arg(input)
+        .output()
+        .expect("run batch");
+    // stderr is a pipe here: no progress bar (no carriage returns, no bar).
+    let stderr = String::from_utf8_lossy(&a.stderr);
+    assert!(
+        !stderr.contains('\r') && !stderr.contains("programs "),
+        "{stderr}"
+    );
+    (
+        a.status.code().unwrap_or(-1),
+        String::from_utf8_lossy(&a.stdout).to_string(),
+    )
+}
+
+/// Every file below `dir`, relative, with its bytes, sorted.
+fn tree(dir: &Path) -> Vec<(PathBuf, Vec<u8>)> {
+    fn walk(root: &Path, dir: &Path, out: &mut Vec<(PathBuf, Vec<u8>)>) {
+        for e in std::fs::read_dir(dir).expect("read dir") {
+            let p = e.expect("entry").path();
+            if p.is_dir() {
+                walk(root, &p, out);
+            } else {
+                let rel = p.strip_prefix(root).expect("below root").to_path_buf();
+                out.push((rel, std::fs::read(&p).expect("read file")));
+            }
+        }
+    }
+    let mut out = Vec::new();
+    walk(dir, dir, &mut out);
+    out.sort();
+    out
+}
+
+/// Validates a summary against schemas/batch-summary.schema.json.
+fn validate(summary: &serde_json::Value) {
+    let schema: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(repo("schemas/batch-summary.schema.json")).expect("schema"),
+    )
+    .expect("schema is JSON");
+    let mut schemas = boon::Schemas::new();
+    let mut compiler = boon::Compiler::new();
+    let url = "https://postproc.example/schemas/batch-summary.schema.json";
+    compiler.add_resource(url, schema).expect("schema resource");
+    let idx = compiler
+        .compile(url, &mut schemas)
+        .expect("schema compiles");
+    if let Err(e) = schemas.validate(summary, idx) {
+        panic!("summary does not match the schema: {e:#}");
+    }
+}
+
+#[test]
+fn batch_of_fifty_reports_exactly_the_broken_ones_and_is_thread_independent() {
+    let tmp = tempfile::tempdir().expect("temp dir");
+    let input = tmp.path().join("in");
+    make_inputs(&input);
+    let (out1, out2) = (tmp.path().join("out1"), tmp.path().join("out2"));
+    let (code1, stdout1) = batch(&input, &out1, "1");
+    let (code2, _) = batch(&input, &out2, "2");
+    // A failed program makes the exit code 2; the others are still written.
+    assert_eq!(code1, 2, "{stdout1}");
+    assert_eq!(code2, 2);
+
+    let summary: serde_json::Value = serde_json::from_slice(
+        &std::fs::read(out1.join("batch-summary.json")).expect("summary written"),
+    )
+    .expect("summary is JSON");
+    validate(&summary);
+    assert_eq!(summary["exit_code"], 2);
+    assert_eq!(summary["programs"], PROGRAMS);
+    assert_eq!(summary["failed"], BROKEN.len());
+    assert_eq!(summary["ok"], PROGRAMS - BROKEN.len());
+    let results = summary["results"].as_array().expect("results");
+    assert_eq!(results.len(), PROGRAMS);
+    let mut failed: Vec<String> = results
+        .iter()
+        .filter(|r| r["status"] == "failed")
+        .map(|r| {
+            assert!(r["output"].is_null());
+            assert!(r["error"].as_str().is_some_and(|e| !e.is_empty()));
+            r["input"].as_str().unwrap_or("").to_string()
+        })
+        .collect();
+    failed.sort();
+    let mut expected: Vec<String> = BROKEN
+        .iter()
+        .map(|&i| input.join(name(i)).display().to_string())
+        .collect();
+    expected.sort();
+    assert_eq!(failed, expected);
+    // Sorted by input path.
+    let inputs: Vec<&str> = results.iter().filter_map(|r| r["input"].as_str()).collect();
+    let mut sorted = inputs.clone();
+    sorted.sort();
+    assert_eq!(inputs, sorted);
+    // The stdout summary names the broken files and counts.
+    for f in &expected {
+        assert!(stdout1.contains(f.as_str()), "{stdout1}");
+    }
+    assert!(stdout1.contains("batch: 50 programs: 47 compensated (0 with findings), 3 failed"));
+
+    // 47 compensated programs (same relative names) + the summary; no
+    // partial or temporary files for the broken ones.
+    let files = tree(&out1);
+    assert_eq!(files.len(), PROGRAMS - BROKEN.len() + 1);
+    for i in (0..PROGRAMS).filter(|i| !BROKEN.contains(i)) {
+        let out = std::fs::read_to_string(out1.join(name(i))).expect("compensated program");
+        // Compensated: the annotation comment is on the cutting moves.
+        assert!(out.contains("(dev "), "{}", name(i));
+    }
+    // Identical bytes whatever the thread count (summary paths differ only
+    // by the output folder name).
+    let files2 = tree(&out2);
+    assert_eq!(files.len(), files2.len());
+    for ((p1, b1), (p2, b2)) in files.iter().zip(&files2) {
+        assert_eq!(p1, p2);
+        if p1 == Path::new("batch-summary.json") {
+            let s1 = String::from_utf8_lossy(b1).replace("out1", "outN");
+            let s2 = String::from_utf8_lossy(b2).replace("out2", "outN");
+            assert_eq!(s1, s2);
+        } else {
+            assert_eq!(b1, b2, "{}", p1.display());
+        }
+    }
+}
+
+#[test]
+fn batch_exit_codes_success_and_usage() {
+    let tmp = tempfile::tempdir().expect("temp dir");
+    let input = tmp.path().join("ok.nc");
+    std::fs::write(&input, program(1)).expect("write");
+    let out = tmp.path().join("out");
+    let (code, stdout) = batch(&input, &out, "2");
+    assert_eq!(code, 0, "{stdout}");
+    assert!(out.join("ok.nc").exists());
+    // RAPID modules with a robot.
+    let rout = tmp.path().join("rout");
+    let a = postproc()
+        .args(["batch", "--machine", "abb-irb1600", "--out-dir"])
+        .arg(&rout)
+        .arg(repo("samples/drilling.mod"))
+        .output()
+        .expect("run batch");
+    assert_eq!(a.status.code(), Some(0));
+    assert!(rout.join("drilling.mod").exists());
+    // --report-format: a report beside each output, named in the summary.
+    let gout = tmp.path().join("gout");
+    postproc()
+        .args([
+            "batch",
+            "--machine",
+            "afm-r1000",
+            "--report-format",
+            "json",
+            "--out-dir",
+        ])
+        .arg(&gout)
+        .arg(&input)
+        .assert()
+        .code(0);
+    let report = gout.join("ok.nc.report.json");
+    let v: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(&report).expect("report written")).expect("JSON");
+    // program(1) has 8 motion blocks: G0 X Y Z50., G43 H1 Z10., G1 Z, the
+    // four sides X, Y, X, Y, and G0 Z50.
+    assert_eq!(v["rows"].as_array().map(Vec::len), Some(8));
+    let summary: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(gout.join("batch-summary.json")).expect("summary"))
+            .expect("JSON");
+    validate(&summary);
+    assert_eq!(
+        summary["results"][0]["report"],
+        report.display().to_string()
+    );
+    // Usage: no inputs, unknown machine.
+    postproc()
+        .args(["batch", "--machine", "afm-r1000", "--out-dir"])
+        .arg(&out)
+        .assert()
+        .code(2);
+    postproc()
+        .args(["batch", "--machine", "no-such-machine", "--out-dir"])
+        .arg(&out)
+        .arg(&input)
+        .assert()
+        .code(2);
+    // --help lists the exit codes.
+    let help = postproc().args(["batch", "--help"]).output().expect("help");
+    assert!(String::from_utf8_lossy(&help.stdout).contains("Exit codes: 0"));
+}

@@ -1,0 +1,491 @@
+//! `postproc report` through the binary, for G-code and RAPID: every format,
+//! the JSON against the committed schema, the SVG as XML with the toolpath,
+//! and `compensate --report` in the format of its extension.
+
+use approx::assert_abs_diff_eq;
+
+use crate::common::{postproc, repo};
+
+/// Deviations are printed with 5 decimals.
+const DEV_TOL_MM: f64 = 0.5e-5;
+/// One row per motion block of samples/part.nc (see gcode_cli.rs).
+const PART_ROWS: usize = 54;
+/// Motion instructions of samples/drilling.mod, counted independently of
+/// the tool: the lines of the module text that start with `Move`.
+fn drilling_moves() -> usize {
+    let text = std::fs::read_to_string(repo("samples/drilling.mod")).expect("sample");
+    text.lines()
+        .map(str::trim_start)
+        .filter(|l| l.starts_with("Move"))
+        .count()
+}
+
+fn run(args: &[&str]) -> String {
+    let a = postproc().args(args).assert().success();
+    String::from_utf8_lossy(&a.get_output().stdout).to_string()
+}
+
+fn part_report(format: &str) -> String {
+    let part = repo("samples/part.nc");
+    run(&[
+        "report",
+        part.to_str().expect("utf-8 path"),
+        "--machine",
+        "afm-r1000",
+        "--format",
+        format,
+    ])
+}
+
+fn drilling_report(format: &str) -> String {
+    let m = repo("samples/drilling.mod");
+    run(&[
+        "report",
+        m.to_str().expect("utf-8 path"),
+        "--machine",
+        "abb-irb1600",
+        "--format",
+        format,
+    ])
+}
+
+/// Validates a report against schemas/report.schema.json with `boon`.
+fn validate(report: &str) -> serde_json::Value {
+    let schema: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(repo("schemas/report.schema.json")).expect("schema file"),
+    )
+    .expect("schema is JSON");
+    let instance: serde_json::Value = serde_json::from_str(report).expect("report is JSON");
+    let mut schemas = boon::Schemas::new();
+    let mut compiler = boon::Compiler::new();
+    let url = "https://postproc.example/schemas/report.schema.json";
+    compiler.add_resource(url, schema).expect("schema resource");
+    let idx = compiler
+        .compile(url, &mut schemas)
+        .expect("schema compiles");
+    if let Err(e) = schemas.validate(&instance, idx) {
+        panic!("report does not match the schema: {e:#}");
+    }
+    // The schema is not vacuous: a report without its summary, or with an
+    // unknown row key, is rejected.
+    let mut bad = instance.clone();
+    if let Some(o) = bad.as_object_mut() {
+        o.remove("summary");
+    }
+    assert!(schemas.validate(&bad, idx).is_err());
+    let mut bad = instance.clone();
+    bad["rows"][0]["surprise"] = serde_json::json!(1);
+    assert!(schemas.validate(&bad, idx).is_err());
+    instance
+}
+
+#[test]
+fn gcode_json_report_validates_and_summarises_per_effect() {
+    let v = validate(&part_report("json"));
+    assert_eq!(v["kind"], "gcode");
+    assert_eq!(v["rows"].as_array().map(Vec::len), Some(PART_ROWS));
+    let s = &v["summary"];
+    // The same maximum as the table's summary line in README (line 29,
+    // 0.03178 mm) and as the rows: the worst block is the largest dev_mm.
+    let rows = v["rows"].as_array().expect("rows");
+    let (max_line, max_dev) = rows
+        .iter()
+        .map(|r| {
+            (
+                r["line"].as_u64().unwrap_or(0),
+                r["dev_mm"].as_f64().unwrap_or(0.0),
+            )
+        })
+        .fold((0, 0.0), |a, b| if b.1 > a.1 { b } else { a });
+    assert_eq!(s["max_line"].as_u64(), Some(max_line));
+    assert_eq!(max_line, 29);
+    assert_abs_diff_eq!(
+        s["max_mm"].as_f64().unwrap_or(0.0),
+        max_dev,
+        epsilon = DEV_TOL_MM
+    );
+    // Mean recomputed from the rows (rounded to 5 decimals each).
+    let mean = rows
+        .iter()
+        .map(|r| r["dev_mm"].as_f64().unwrap_or(0.0))
+        .sum::<f64>()
+        / rows.len() as f64;
+    assert_abs_diff_eq!(
+        s["mean_mm"].as_f64().unwrap_or(0.0),
+        mean,
+        epsilon = DEV_TOL_MM
+    );
+    // p95 of 54 values: the ceil(0.95·54) = 52nd smallest, to the 1e-5 bin.
+    let mut devs: Vec<f64> = rows
+        .iter()
+        .map(|r| r["dev_mm"].as_f64().unwrap_or(0.0))
+        .collect();
+    devs.sort_by(f64::total_cmp);
+    assert_abs_diff_eq!(
+        s["p95_mm"].as_f64().unwrap_or(0.0),
+        devs[51],
+        epsilon = 2.0 * DEV_TOL_MM
+    );
+    // Total first, then one entry per effect; worst blocks largest first.
+    let effects = s["effects"].as_array().expect("effects");
+    assert_eq!(effects[0]["name"], "total");
+    assert_eq!(
+        effects.len(),
+        1 + v["effects"].as_array().map_or(0, Vec::len)
+    );
+    let worst: Vec<f64> = effects[0]["worst"]
+        .as_array()
+        .expect("worst")
+        .iter()
+        .map(|w| w["dev_mm"].as_f64().unwrap_or(0.0))
+        .collect();
+    assert_eq!(worst.len(), 5);
+    assert!(worst.windows(2).all(|w| w[0] >= w[1]));
+    assert_eq!(effects[0]["worst"][0]["line"], 29);
+    // Line 29 of samples/part.nc, quoted.
+    assert_eq!(effects[0]["worst"][0]["source"], "N210 G54 G0 X80. Y55.");
+}
+
+#[test]
+fn rapid_json_report_validates_with_the_robot_effects() {
+    let v = validate(&drilling_report("json"));
+    assert_eq!(v["kind"], "rapid");
+    assert_eq!(
+        v["effects"],
+        serde_json::json!(["kinematic", "thermal", "gravity", "process", "dynamic"])
+    );
+    let rows = v["rows"].as_array().expect("rows");
+    assert_eq!(rows.len(), drilling_moves());
+    // Line 45 is `MoveAbsJ jHome…`, the first move. Its breakdown must match
+    // what `compensate` annotates on that instruction (an independent
+    // formatter of the same prediction, 3 decimals).
+    let first = &rows[0];
+    assert_eq!(first["line"], 45);
+    assert_eq!(first["motion"], "MoveAbsJ");
+    let compensated = run(&[
+        "compensate",
+        "--machine",
+        "abb-irb1600",
+        "-o",
+        "-",
+        repo("samples/drilling.mod").to_str().unwrap(),
+    ]);
+    let note = compensated
+        .lines()
+        .find(|l| l.trim_start().starts_with("MoveAbsJ jHome"))
+        .and_then(|l| l.split_once("! dev "))
+        .map(|(_, n)| n.to_string())
+        .expect("annotated first move");
+    let value_after = |key: &str| -> f64 {
+        note.split(key)
+            .nth(1)
+            .and_then(|r| r.split_whitespace().next())
+            .and_then(|v| v.trim_end_matches(')').parse().ok())
+            .unwrap_or_else(|| panic!("`{key}` in `{note}`"))
+    };
+    const ANNOTATION_TOL_MM: f64 = 0.0005;
+    assert_abs_diff_eq!(
+        first["dev_mm"].as_f64().unwrap_or(0.0),
+        note.split_whitespace()
+            .next()
+            .and_then(|v| v.parse::<f64>().ok())
+            .expect("dev value"),
+        epsilon = ANNOTATION_TOL_MM
+    );
+    assert_abs_diff_eq!(
+        first["effects_mm"]["kinematic"].as_f64().unwrap_or(0.0),
+        value_after("kin "),
+        epsilon = ANNOTATION_TOL_MM
+    );
+    assert_abs_diff_eq!(
+        first["effects_mm"]["gravity"].as_f64().unwrap_or(0.0),
+        value_after("grav "),
+        epsilon = ANNOTATION_TOL_MM
+    );
+    assert!(first["effects_mm"]["gravity"].as_f64().unwrap_or(0.0) > 0.1);
+    assert!(first.get("residual_mm").is_none());
+}
+
+#[test]
+fn table_and_csv_reports_for_gcode_and_rapid() {
+    let table = part_report("table");
+    let rows = table
+        .lines()
+        .filter(|l| {
+            l.split_whitespace()
+                .next()
+                .is_some_and(|w| w.parse::<usize>().is_ok())
+        })
+        .count();
+    assert_eq!(rows, PART_ROWS);
+    assert!(table.contains("summary: 54 rows"), "{table}");
+    let total = table
+        .lines()
+        .find(|l| l.starts_with("total "))
+        .expect("per-effect total line");
+    // The total line's worst block is the row with the largest dev_mm,
+    // read back from the rows themselves.
+    let header: Vec<&str> = table
+        .lines()
+        .next()
+        .unwrap_or("")
+        .split_whitespace()
+        .collect();
+    let dev_col = header
+        .iter()
+        .position(|h| *h == "dev_mm")
+        .expect("dev_mm column");
+    let (worst_line, worst_dev) = table
+        .lines()
+        .skip(1)
+        .take(PART_ROWS)
+        .filter_map(|l| {
+            let cells: Vec<&str> = l.split_whitespace().collect();
+            Some((
+                cells.first()?.parse::<usize>().ok()?,
+                cells.get(dev_col)?.parse::<f64>().ok()?,
+            ))
+        })
+        .fold((0, f64::MIN), |a, b| if b.1 > a.1 { b } else { a });
+    assert_eq!(worst_line, 29, "{table}");
+    assert!(total.contains(&format!("29 ({worst_dev:.5})")), "{total}");
+    assert!(table.lines().any(|l| l.starts_with("geometric ")));
+    assert!(
+        table
+            .lines()
+            .any(|l| l.starts_with("  line 29 ") && l.ends_with("rapid     N210 G54 G0 X80. Y55.")),
+        "{table}"
+    );
+    // Aligned: every row line has the header's length.
+    let header_len = table.lines().next().map_or(0, str::len);
+    assert!(
+        table
+            .lines()
+            .skip(1)
+            .take(PART_ROWS)
+            .all(|l| l.len() == header_len)
+    );
+
+    let csv = drilling_report("csv");
+    let mut lines = csv.lines();
+    let header = lines.next().expect("header");
+    assert_eq!(
+        header,
+        "line,motion,X_mm,Y_mm,Z_mm,dx_mm,dy_mm,dz_mm,dev_mm,kinematic_mm,thermal_mm,gravity_mm,process_mm,dynamic_mm,orient_urad"
+    );
+    let data: Vec<&str> = csv
+        .lines()
+        .skip(1)
+        .filter(|l| !l.starts_with('#'))
+        .collect();
+    assert_eq!(data.len(), drilling_moves());
+    for row in &data {
+        assert_eq!(row.split(',').count(), 15, "{row}");
+    }
+    assert!(
+        csv.lines()
+            .last()
+            .is_some_and(|l| l.starts_with("# summary:"))
+    );
+
+    let rapid_table = drilling_report("table");
+    for effect in ["total", "kinematic", "gravity", "process"] {
+        assert!(
+            rapid_table
+                .lines()
+                .any(|l| l.starts_with(&format!("{effect} "))),
+            "{effect}: {rapid_table}"
+        );
+    }
+}
+
+/// Points of the `points` attribute of a polyline.
+fn polyline_points(n: &roxmltree::Node) -> usize {
+    n.attribute("points")
+        .map_or(0, |p| p.split_whitespace().count())
+}
+
+#[test]
+fn svg_report_is_xml_with_the_toolpath_and_is_deterministic() {
+    let svg = part_report("svg");
+    let doc = roxmltree::Document::parse(&svg).expect("SVG parses as XML");
+    assert_eq!(doc.root_element().tag_name().name(), "svg");
+    let polylines: Vec<roxmltree::Node> = doc
+        .descendants()
+        .filter(|n| n.tag_name().name() == "polyline")
+        .collect();
+    assert!(!polylines.is_empty());
+    // The toolpath is drawn twice (plan and side view) from the 54 rows:
+    // 53 segments each, plus the 54-point deviation curve.
+    let points: usize = polylines.iter().map(polyline_points).sum();
+    assert!(points >= 2 * 54 + 54, "{points} polyline points");
+    let text: String = doc
+        .descendants()
+        .filter(|n| n.tag_name().name() == "text")
+        .filter_map(|n| n.text())
+        .collect::<Vec<_>>()
+        .join("|");
+    for label in [
+        "Plan view (XY)",
+        "Side view (XZ)",
+        "X (mm)",
+        "Z (mm)",
+        "source line",
+        "max, line 29",
+    ] {
+        assert!(text.contains(label), "{label} missing in {text}");
+    }
+    // The worst cutting block (not a rapid or G28 move) is circled and
+    // named: found independently from the JSON rows.
+    let v: serde_json::Value = serde_json::from_str(&part_report("json")).expect("JSON");
+    let cut = v["rows"]
+        .as_array()
+        .expect("rows")
+        .iter()
+        .filter(|r| !matches!(r["motion"].as_str(), Some("rapid" | "fixed")))
+        .map(|r| {
+            (
+                r["line"].as_u64().unwrap_or(0),
+                r["dev_mm"].as_f64().unwrap_or(0.0),
+            )
+        })
+        .fold((0, 0.0), |a, b| if b.1 > a.1 { b } else { a });
+    assert!(
+        text.contains(&format!("max cutting, line {}", cut.0)),
+        "{text}"
+    );
+    // Same bytes on a second run.
+    assert_eq!(svg, part_report("svg"));
+
+    // RAPID too, written with -o.
+    let dir = tempfile::tempdir().expect("temp dir");
+    let out = dir.path().join("drilling.svg");
+    let m = repo("samples/drilling.mod");
+    run(&[
+        "report",
+        m.to_str().expect("utf-8 path"),
+        "--machine",
+        "abb-irb1600",
+        "--format",
+        "svg",
+        "-o",
+        out.to_str().expect("utf-8 path"),
+    ]);
+    let svg = std::fs::read_to_string(&out).expect("svg written");
+    let doc = roxmltree::Document::parse(&svg).expect("SVG parses as XML");
+    assert!(doc.descendants().any(|n| n.tag_name().name() == "polyline"));
+}
+
+#[test]
+fn svg_of_a_long_program_is_decimated() {
+    // 20 000 feed moves: the picture keeps at most 2 × 4000 points per view,
+    // so the SVG stays far below one polyline point per block × 3 views.
+    let dir = tempfile::tempdir().expect("temp dir");
+    let p = dir.path().join("long.nc");
+    let mut text = String::from("G90 G54 G0 X10 Y10 Z150\nG1 F1000\n");
+    for i in 0..20_000 {
+        let x = 10.0 + (i % 200) as f64;
+        let y = 10.0 + (i / 200) as f64;
+        text.push_str(&format!("X{x} Y{y}\n"));
+    }
+    std::fs::write(&p, text).expect("write program");
+    let svg = run(&[
+        "report",
+        p.to_str().expect("utf-8 path"),
+        "--machine",
+        "afm-r1000",
+        "--format",
+        "svg",
+        "--effects",
+        "none",
+    ]);
+    let doc = roxmltree::Document::parse(&svg).expect("SVG parses as XML");
+    let points: usize = doc
+        .descendants()
+        .filter(|n| n.tag_name().name() == "polyline")
+        .map(|n| polyline_points(&n))
+        .sum();
+    assert!(points > 1000, "{points}");
+    assert!(points <= 3 * 2 * 4001 + 200, "{points}");
+}
+
+#[test]
+fn compensate_report_format_follows_the_extension() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let d = |n: &str| dir.path().join(n).to_str().expect("utf-8 path").to_string();
+    let part = repo("samples/part.nc");
+    run(&[
+        "compensate",
+        part.to_str().expect("utf-8 path"),
+        "--machine",
+        "afm-r1000",
+        "-o",
+        &d("part.comp.nc"),
+        "--report",
+        &d("part.json"),
+    ]);
+    validate(&std::fs::read_to_string(dir.path().join("part.json")).expect("json report"));
+    // --report-format overrides the extension.
+    run(&[
+        "compensate",
+        part.to_str().expect("utf-8 path"),
+        "--machine",
+        "afm-r1000",
+        "-o",
+        &d("part2.comp.nc"),
+        "--report",
+        &d("part.rep"),
+        "--report-format",
+        "table",
+    ]);
+    let table = std::fs::read_to_string(dir.path().join("part.rep")).expect("table report");
+    assert!(table.contains("summary: 54 rows"));
+    // RAPID: the report is written beside the compensated module.
+    let m = repo("samples/drilling.mod");
+    run(&[
+        "compensate",
+        m.to_str().expect("utf-8 path"),
+        "--machine",
+        "abb-irb1600",
+        "-o",
+        &d("drilling.comp.mod"),
+        "--report",
+        &d("drilling.svg"),
+    ]);
+    assert!(dir.path().join("drilling.comp.mod").exists());
+    let svg = std::fs::read_to_string(dir.path().join("drilling.svg")).expect("svg report");
+    roxmltree::Document::parse(&svg).expect("SVG parses as XML");
+}
+
+#[test]
+fn rapid_report_rejects_gcode_options() {
+    let m = repo("samples/drilling.mod");
+    postproc()
+        .args(["report"])
+        .arg(m)
+        .args(["--machine", "abb-irb1600", "--tool", "H1=100"])
+        .assert()
+        .code(2);
+}
+
+#[test]
+fn compensate_refuses_a_report_path_that_would_replace_a_program() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let input = dir.path().join("p.nc");
+    std::fs::copy(repo("samples/part.nc"), &input).expect("copy sample");
+    let before = std::fs::read(&input).expect("read");
+    let out = dir.path().join("p.comp.nc");
+    for report in [&input, &out] {
+        postproc()
+            .arg("compensate")
+            .arg(&input)
+            .args(["--machine", "afm-r1000", "-o"])
+            .arg(&out)
+            .arg("--report")
+            .arg(report)
+            .assert()
+            .code(2);
+    }
+    assert_eq!(std::fs::read(&input).expect("read"), before);
+    assert!(!out.exists());
+}
