@@ -1,6 +1,7 @@
 //! Command line: raw flags → validated run configuration → engine calls.
 //! Nothing else in the crate parses flags.
 
+mod calibrate;
 mod gcode;
 mod rapid;
 
@@ -40,6 +41,12 @@ pub enum Command {
     /// Dry run: predicted deviation per block and summary, nothing written.
     #[command(after_help = EXIT_HELP)]
     Report(ReportArgs),
+    /// Fill the measured columns of a poses file from a machine file plus noise.
+    #[command(after_help = EXIT_HELP)]
+    Simulate(calibrate::SimulateArgs),
+    /// Identify model parameters from measurements; write a calibrated machine file.
+    #[command(after_help = EXIT_HELP)]
+    Calibrate(calibrate::CalibrateArgs),
 }
 
 /// Options shared by the commands that read a G-code program.
@@ -174,6 +181,8 @@ pub fn run(cli: Cli) -> Result<i32> {
         Command::Compensate(a) if rapid::wants(&a.program) => rapid::compensate(&a),
         Command::Compensate(a) => gcode::compensate(&a),
         Command::Report(a) => gcode::report(&a),
+        Command::Simulate(a) => calibrate::run_simulate(&a),
+        Command::Calibrate(a) => calibrate::run_calibrate(&a),
     }
 }
 
