@@ -238,6 +238,171 @@ pub fn set_actual_dh(text: &str, file: &str, rows: &[DhRow; 6]) -> Result<String
     Ok(join(lines, text))
 }
 
+fn indent_of(l: &str) -> usize {
+    l.len() - l.trim_start().len()
+}
+
+fn is_content(l: &str) -> bool {
+    let t = l.trim_start();
+    !t.is_empty() && !t.starts_with('#')
+}
+
+/// Line range `[start, end)` of the entry `- name: AXIS` of the top-level
+/// `axes:` list, and the indentation of its keys.
+fn axis_entry(lines: &[String], file: &str, axis: &str) -> Result<(usize, usize, usize)> {
+    let axes =
+        top_level_line(lines, "axes").ok_or_else(|| edit_err(file, "no top-level key `axes`"))?;
+    let mut k = axes + 1;
+    while k < lines.len() {
+        let l = &lines[k];
+        if is_content(l) && indent_of(l) == 0 {
+            break;
+        }
+        let t = l.trim_start();
+        if let Some(rest) = t.strip_prefix("- name:") {
+            if rest.trim() == axis {
+                let dash = indent_of(l);
+                let mut end = k + 1;
+                while end < lines.len() {
+                    let m = &lines[end];
+                    if is_content(m) && indent_of(m) <= dash {
+                        break;
+                    }
+                    end += 1;
+                }
+                // Trailing blank/comment lines belong to what follows.
+                while end > k + 1 && !is_content(&lines[end - 1]) {
+                    end -= 1;
+                }
+                return Ok((k, end, dash + 2));
+            }
+        }
+        k += 1;
+    }
+    Err(edit_err(
+        file,
+        format!("no axis entry `- name: {axis}` (block style) under `axes`"),
+    ))
+}
+
+/// Line index of `key:` at indentation `indent` within `[start, end)`.
+fn key_line(lines: &[String], start: usize, end: usize, indent: usize, key: &str) -> Option<usize> {
+    let pat = format!("{key}:");
+    (start..end).find(|&i| {
+        lines
+            .get(i)
+            .is_some_and(|l| indent_of(l) == indent && l.trim_start().starts_with(&pat))
+    })
+}
+
+/// End (exclusive) of the block of children of line `at` (deeper indentation).
+fn block_end(lines: &[String], at: usize, end: usize) -> usize {
+    let base = lines.get(at).map_or(0, |l| indent_of(l));
+    let mut k = at + 1;
+    while k < end {
+        let l = &lines[k];
+        if is_content(l) && indent_of(l) <= base {
+            break;
+        }
+        k += 1;
+    }
+    while k > at + 1 && !is_content(&lines[k - 1]) {
+        k -= 1;
+    }
+    k
+}
+
+/// Makes sure the axis entry has the mapping key `section:`; returns its
+/// line index (inserted at the end of the entry when absent).
+fn ensure_section(lines: &mut Vec<String>, file: &str, axis: &str, section: &str) -> Result<usize> {
+    let (start, end, ki) = axis_entry(lines, file, axis)?;
+    if let Some(i) = key_line(lines, start + 1, end, ki, section) {
+        if lines[i].contains('{') {
+            return Err(edit_err(
+                file,
+                format!("`{section}` of axis {axis} is a flow map; write it in block style"),
+            ));
+        }
+        return Ok(i);
+    }
+    lines.insert(end, format!("{}{section}:", " ".repeat(ki)));
+    Ok(end)
+}
+
+/// Writes a bidirectional component-error table `key` (e.g. `EXX_um`) of a
+/// machine-tool axis: replaces the table when present, adds it (and the
+/// `component_errors:` section) when not. Values in the file's units.
+pub fn set_component_table(
+    text: &str,
+    file: &str,
+    axis: &str,
+    key: &str,
+    positions_mm: &[f64],
+    forward: &[f64],
+    reverse: &[f64],
+) -> Result<String> {
+    let mut lines: Vec<String> = text.lines().map(str::to_string).collect();
+    let sec = ensure_section(&mut lines, file, axis, "component_errors")?;
+    let sec_end = block_end(&lines, sec, lines.len());
+    let child_indent = (sec + 1..sec_end)
+        .find(|&i| is_content(&lines[i]))
+        .map_or(indent_of(&lines[sec]) + 2, |i| indent_of(&lines[i]));
+    let list = |v: &[f64], d: usize| -> String {
+        v.iter()
+            .map(|x| fmt_value(*x, d))
+            .collect::<Vec<_>>()
+            .join(", ")
+    };
+    let pad = " ".repeat(child_indent);
+    let new = vec![
+        format!("{pad}{key}:"),
+        format!("{pad}  positions_mm: [{}]", list(positions_mm, 3)),
+        format!("{pad}  forward: [{}]", list(forward, 2)),
+        format!("{pad}  reverse: [{}]", list(reverse, 2)),
+    ];
+    match key_line(&lines, sec + 1, sec_end, child_indent, key) {
+        Some(i) => {
+            let e = block_end(&lines, i, sec_end);
+            lines.splice(i..e, new);
+        }
+        None => {
+            lines.splice(sec + 1..sec + 1, new);
+        }
+    }
+    Ok(join(lines, text))
+}
+
+/// Writes a location error `key: value` (e.g. `EC0Y_urad`) of a
+/// machine-tool axis, adding the key (and `location_errors:`) when absent.
+pub fn set_location_error(
+    text: &str,
+    file: &str,
+    axis: &str,
+    key: &str,
+    value: f64,
+) -> Result<String> {
+    let mut lines: Vec<String> = text.lines().map(str::to_string).collect();
+    let sec = ensure_section(&mut lines, file, axis, "location_errors")?;
+    let sec_end = block_end(&lines, sec, lines.len());
+    let child_indent = (sec + 1..sec_end)
+        .find(|&i| is_content(&lines[i]))
+        .map_or(indent_of(&lines[sec]) + 2, |i| indent_of(&lines[i]));
+    let v = fmt_value(value, 2);
+    match key_line(&lines, sec + 1, sec_end, child_indent, key) {
+        Some(i) => {
+            let (_, comment) = split_comment(&lines[i]);
+            let comment = if comment.is_empty() {
+                String::new()
+            } else {
+                format!("  {comment}")
+            };
+            lines[i] = format!("{}{key}: {v}{comment}", " ".repeat(child_indent));
+        }
+        None => lines.insert(sec + 1, format!("{}{key}: {v}", " ".repeat(child_indent))),
+    }
+    Ok(join(lines, text))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -259,5 +424,26 @@ mod tests {
         assert_eq!(fmt_value(2.0, 3), "2.0");
         assert_eq!(fmt_value(-0.00001, 3), "0.0");
         assert_eq!(fmt_value(1.23456, 3), "1.235");
+    }
+
+    #[test]
+    fn machine_tool_tables_and_location_errors() {
+        let text = "kind: machine_tool\naxes:\n  - name: X\n    type: linear\n    component_errors:\n      EBX_urad:\n        forward: [1.0]\n  - name: Y\n    type: linear\n    location_errors:\n      EC0Y_urad: 35.0  # sq\n# end\ntools: {}\n";
+        let t = set_component_table(
+            text,
+            "f",
+            "X",
+            "EXX_um",
+            &[0.0, 100.0],
+            &[0.0, 2.5],
+            &[1.0, 3.0],
+        )
+        .unwrap();
+        let t = set_component_table(&t, "f", "Y", "EYY_um", &[0.0], &[0.0], &[0.5]).unwrap();
+        let t = set_location_error(&t, "f", "Y", "EC0Y_urad", -12.5).unwrap();
+        let t = set_location_error(&t, "f", "X", "EB0X_urad", 3.0).unwrap();
+        let want = "kind: machine_tool\naxes:\n  - name: X\n    type: linear\n    component_errors:\n      EXX_um:\n        positions_mm: [0.0, 100.0]\n        forward: [0.0, 2.5]\n        reverse: [1.0, 3.0]\n      EBX_urad:\n        forward: [1.0]\n    location_errors:\n      EB0X_urad: 3.0\n  - name: Y\n    type: linear\n    location_errors:\n      EC0Y_urad: -12.5  # sq\n    component_errors:\n      EYY_um:\n        positions_mm: [0.0]\n        forward: [0.0]\n        reverse: [0.5]\n# end\ntools: {}\n";
+        assert_eq!(t, want);
+        assert!(set_component_table(text, "f", "Q", "EQQ_um", &[], &[], &[]).is_err());
     }
 }
