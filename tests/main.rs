@@ -1,6 +1,7 @@
 //! The one integration-test binary: CLI tests through the real executable,
 //! goldens, property tests and regressions.
 
+mod calibrate_cli;
 mod common;
 mod gcode_cli;
 mod gcode_grammar;

@@ -1,27 +1,34 @@
 //! Robot joint-stiffness identification (Paper C eq. 6–8, MODELS.md §2).
 //!
-//! Data: *load pairs*. Rows are grouped by identical joint angles and
-//! measured point; in every group the row without force and moment is the
-//! unloaded reference and every loaded row forms a pair with it. The measured
-//! deflection of a pair is loaded − unloaded (positions or deviations alike),
-//! which cancels the kinematic errors of the arm, the gravity sag and the
-//! registration of the measuring frame — as with the loaded double ball bar
-//! (LDBB) of Paper C, where each configuration is measured with and without
-//! the load. A loaded row without an unloaded partner is an error.
+//! Data: *load groups*. Rows are grouped by identical joint angles and
+//! measured point (one configuration of the arm, one measured point); a
+//! group holds the unloaded reference row and the rows under one or more
+//! loads — as with the loaded double ball bar (LDBB) of Paper C, where each
+//! configuration is measured with and without the load. The unknown
+//! position of the point without load is a nuisance parameter of every
+//! group; it is eliminated by centring each group (least squares with one
+//! free offset per group, Frisch–Waugh), so the kinematic errors of the arm,
+//! the gravity sag and the registration of the measuring frame cancel. The
+//! degrees of freedom lose 3 per group, and the uncertainties are computed
+//! with that (sharing one reference row between two loads correlates their
+//! loaded − unloaded differences; the centred form accounts for it). A
+//! loaded row alone in its group is an error.
 //!
-//! Model: with the compliances `c_i = 1/kθi` every pair's deflection is
-//! linear in c: `Δx = Σ_i c_i · J_MP[:3, i] · (J_WPᵀ W)_i` (actual kinematics
-//! at the commanded joints). The unknowns are `c_i` in µrad/(N·m); they are
-//! found by linear least squares ([`solve_linear`]), then two fixed-point
-//! corrections remove the second-order part (the deflected Jacobian, the
-//! gravity-loaded pose) by evaluating the exact forward model
-//! ([`super::forward::predict`]) at the estimate: `b ← b − (Δx_model(c) − A c)`.
+//! Model: with the compliances `c_i = 1/kθi` the deflection of a loaded row
+//! from its unloaded state is linear in c:
+//! `Δx = Σ_i c_i · J_MP[:3, i] · (J_WPᵀ W)_i` (actual kinematics at the
+//! commanded joints). The unknowns are `c_i` in µrad/(N·m); they are found by
+//! linear least squares ([`solve_linear`]), then two fixed-point corrections
+//! remove the second-order part (the deflected Jacobian, the gravity-loaded
+//! pose) by evaluating the exact forward model
+//! ([`super::forward::predict`]) at the estimate:
+//! `y ← y − (Δx_model(c) − A c)`.
 //! Uncertainties: `u(c)` from the residual variance; `u(k) = u(c) / c²`
 //! (first-order propagation). A non-positive compliance is refused.
 
 use std::collections::HashMap;
 
-use nalgebra::{DMatrix, DVector, Vector3};
+use nalgebra::{DMatrix, DVector, SMatrix, Vector3, Vector6};
 
 use crate::calibrate::lsq::{LsqOptions, Solution, solve_linear};
 use crate::error::{Error, Result};
@@ -30,7 +37,7 @@ use crate::machine::robot::kinematics::jacobian;
 use crate::machine::robot::{Model, Robot};
 
 use super::forward::{check_kind, joints_rad, measured_point, predict, row_wrench, wrench_point};
-use super::observations::{Observations, Pose, holdout_split};
+use super::observations::{Observation, Observations, Pose, holdout_split};
 use super::report::{CONDITION_LIMIT, Calibration, Estimate, Validation};
 use super::yaml_edit::{fmt_value, set_top_level_list};
 
@@ -55,15 +62,6 @@ impl Default for Options {
     }
 }
 
-/// A loaded row and its unloaded reference (row indices).
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct LoadPair {
-    /// The row with a force or moment.
-    pub loaded: usize,
-    /// The row at the same joints and measured point without a load.
-    pub unloaded: usize,
-}
-
 fn key(obs: &Observations, i: usize) -> Option<Vec<u64>> {
     let row = obs.rows.get(i)?;
     let Pose::Robot(rp) = &row.pose else {
@@ -77,94 +75,112 @@ fn key(obs: &Observations, i: usize) -> Option<Vec<u64>> {
     Some(k)
 }
 
-/// Pairs every loaded row with the unloaded row of the same joints and
-/// measured point. `file` names the observation file in errors.
-pub fn load_pairs(obs: &Observations, file: &str) -> Result<Vec<LoadPair>> {
-    let mut reference: HashMap<Vec<u64>, usize> = HashMap::new();
-    for (i, r) in obs.rows.iter().enumerate() {
-        if r.force_n == Vector3::zeros() && r.moment_nm == Vector3::zeros() {
-            if let Some(k) = key(obs, i) {
-                reference.entry(k).or_insert(i);
+fn loaded(r: &Observation) -> bool {
+    r.force_n != Vector3::zeros() || r.moment_nm != Vector3::zeros()
+}
+
+/// Groups the rows by joint angles and measured point (row indices, in
+/// file order). Groups without a loaded row carry no stiffness information
+/// and are dropped; a loaded row alone in its group is an error. `file`
+/// names the observation file in errors.
+pub fn load_groups(obs: &Observations, file: &str) -> Result<Vec<Vec<usize>>> {
+    let mut index: HashMap<Vec<u64>, usize> = HashMap::new();
+    let mut groups: Vec<Vec<usize>> = Vec::new();
+    for i in 0..obs.rows.len() {
+        let Some(k) = key(obs, i) else { continue };
+        let g = *index.entry(k).or_insert_with(|| {
+            groups.push(Vec::new());
+            groups.len() - 1
+        });
+        if let Some(v) = groups.get_mut(g) {
+            v.push(i);
+        }
+    }
+    let mut orphans = Vec::new();
+    groups.retain(|g| {
+        let n_loaded = g
+            .iter()
+            .filter(|&&i| obs.rows.get(i).is_some_and(loaded))
+            .count();
+        if n_loaded > 0 && g.len() == 1 {
+            if let Some(r) = g.first().and_then(|&i| obs.rows.get(i)) {
+                orphans.push(format!("{} (line {})", r.id, r.line));
             }
         }
-    }
-    let mut pairs = Vec::new();
-    let mut orphans = Vec::new();
-    for (i, r) in obs.rows.iter().enumerate() {
-        if r.force_n == Vector3::zeros() && r.moment_nm == Vector3::zeros() {
-            continue;
-        }
-        match key(obs, i).and_then(|k| reference.get(&k)) {
-            Some(&u) => pairs.push(LoadPair {
-                loaded: i,
-                unloaded: u,
-            }),
-            None => orphans.push(format!("{} (line {})", r.id, r.line)),
-        }
-    }
+        n_loaded > 0 && g.len() > 1
+    });
     if !orphans.is_empty() {
         let shown: Vec<&str> = orphans.iter().take(5).map(String::as_str).collect();
         return Err(Error::Usage(format!(
-            "{file}: {} loaded row(s) have no unloaded row at the same joint angles and \
-             measured point: {}{}; the stiffness is identified from loaded − unloaded \
-             differences (measure every configuration also without the load)",
+            "{file}: {} loaded row(s) have no other row at the same joint angles and \
+             measured point: {}{}; the stiffness is identified from the differences between \
+             the load states of one configuration (measure every configuration also \
+             without the load)",
             orphans.len(),
             shown.join(", "),
             if orphans.len() > 5 { ", …" } else { "" }
         )));
     }
-    if pairs.is_empty() {
+    if groups.is_empty() {
         return Err(Error::Usage(format!(
             "{file}: no row has a force or moment (fx_n … mz_nm): nothing deflects the \
              joints, the stiffness cannot be identified"
         )));
     }
-    Ok(pairs)
+    Ok(groups)
 }
 
-/// Design block (3 × 6) of one pair: `A[r, i] = J_MP[r, i] · τ_i · C_UNIT`.
-fn design_block(
-    robot: &Robot,
-    obs: &Observations,
-    p: LoadPair,
-) -> Option<nalgebra::SMatrix<f64, 3, 6>> {
-    let row = obs.rows.get(p.loaded)?;
+/// Design block (3 × 6) of one row: `A[r, i] = J_MP[r, i] · τ_i · C_UNIT`
+/// with `τ = J_WPᵀ W` (zero for an unloaded row).
+fn design_block(robot: &Robot, row: &Observation) -> SMatrix<f64, 3, 6> {
+    let mut a = SMatrix::<f64, 3, 6>::zeros();
     let Pose::Robot(rp) = &row.pose else {
-        return None;
+        return a;
     };
     let q = joints_rad(rp);
     let f = robot.frames(Model::Actual, &q);
     let jmp = jacobian(&f, &measured_point(robot, rp));
     let jwp = jacobian(&f, &wrench_point(robot, rp));
     let tau = jwp.transpose() * row_wrench(row);
-    let mut a = nalgebra::SMatrix::<f64, 3, 6>::zeros();
     for i in 0..6 {
         for r in 0..3 {
             a[(r, i)] = jmp[(r, i)] * tau[i] * C_UNIT;
         }
     }
-    Some(a)
+    a
 }
 
-/// Measured deflection of a pair, mm.
-fn measured_deflection(obs: &Observations, p: LoadPair) -> Vector3<f64> {
-    match (obs.rows.get(p.loaded), obs.rows.get(p.unloaded)) {
-        (Some(l), Some(u)) => l.measured_mm - u.measured_mm,
-        _ => Vector3::zeros(),
-    }
-}
-
-/// Model deflection of a pair (exact forward model), mm.
-fn model_deflection(
-    m: &Machine,
-    obs: &Observations,
-    p: LoadPair,
-    file: &str,
-) -> Result<Vector3<f64>> {
-    let (Some(l), Some(u)) = (obs.rows.get(p.loaded), obs.rows.get(p.unloaded)) else {
+/// Exact model deflection of a row from its unloaded state, mm.
+fn model_deflection(m: &Machine, row: &Observation, file: &str) -> Result<Vector3<f64>> {
+    if !loaded(row) {
         return Ok(Vector3::zeros());
-    };
-    Ok(predict(m, l, file)?.attained_mm - predict(m, u, file)?.attained_mm)
+    }
+    let mut free = row.clone();
+    free.force_n = Vector3::zeros();
+    free.moment_nm = Vector3::zeros();
+    Ok(predict(m, row, file)?.attained_mm - predict(m, &free, file)?.attained_mm)
+}
+
+/// Subtracts the mean of rows `[start, end)` (3-vectors) from the design
+/// and the observations.
+fn center(a: &mut DMatrix<f64>, y: &mut DVector<f64>, start: usize, end: usize) {
+    if end <= start {
+        return;
+    }
+    let n = (end - start) as f64;
+    for r in 0..3 {
+        let idx: Vec<usize> = (start..end).map(|k| 3 * k + r).collect();
+        let ym = idx.iter().map(|&i| y[i]).sum::<f64>() / n;
+        for &i in &idx {
+            y[i] -= ym;
+        }
+        for c in 0..6 {
+            let am = idx.iter().map(|&i| a[(i, c)]).sum::<f64>() / n;
+            for &i in &idx {
+                a[(i, c)] -= am;
+            }
+        }
+    }
 }
 
 fn stiffness_from(c: &DVector<f64>) -> [f64; 6] {
@@ -187,43 +203,53 @@ pub fn calibrate_stiffness(
             "{machine_file}: stiffness calibration needs a robot machine file"
         )));
     };
-    let pairs = load_pairs(obs, obs_file)?;
-    let (fit_idx, hold_idx) = holdout_split(pairs.len(), opts.holdout, opts.seed);
-    let fit: Vec<LoadPair> = fit_idx
+    let groups = load_groups(obs, obs_file)?;
+    let (fit_idx, hold_idx) = holdout_split(groups.len(), opts.holdout, opts.seed);
+    let pick = |idx: &[usize]| -> Vec<Vec<usize>> {
+        idx.iter().filter_map(|&i| groups.get(i).cloned()).collect()
+    };
+    let fit = pick(&fit_idx);
+    let hold = pick(&hold_idx);
+    let fit_rows: Vec<usize> = fit.iter().flatten().copied().collect();
+    let n_loaded = fit_rows
         .iter()
-        .filter_map(|&i| pairs.get(i).copied())
-        .collect();
-    let hold: Vec<LoadPair> = hold_idx
-        .iter()
-        .filter_map(|&i| pairs.get(i).copied())
-        .collect();
-    if fit.len() < 3 {
+        .filter(|&&i| obs.rows.get(i).is_some_and(loaded))
+        .count();
+    let m = 3 * fit_rows.len();
+    let dof_lost = 3 * fit.len();
+    if m < dof_lost + 18 {
         return Err(Error::Usage(format!(
-            "{obs_file}: {} load pair(s) left for the fit; 6 stiffnesses need at least 3 \
-             pairs (18 equations), better tens",
+            "{obs_file}: {n_loaded} loaded row(s) in {} group(s) left for the fit; 6 \
+             stiffnesses need at least 18 equations beyond the unloaded references, \
+             better tens of loaded rows",
             fit.len()
         )));
     }
     tracing::info!(
-        "stiffness: {} pairs for the fit, {} held out",
+        "stiffness: {} groups ({n_loaded} loaded rows) for the fit, {} held out",
         fit.len(),
         hold.len()
     );
-    let m = 3 * fit.len();
+    // Rows in group order; the design of every group is centred.
     let mut a = DMatrix::zeros(m, 6);
-    let mut b0 = DVector::zeros(m);
-    for (k, &p) in fit.iter().enumerate() {
-        let blk = design_block(robot, obs, p)
-            .ok_or_else(|| Error::Usage(format!("{obs_file}: not a robot row in a load pair")))?;
-        a.view_mut((3 * k, 0), (3, 6)).copy_from(&blk);
-        b0.rows_mut(3 * k, 3)
-            .copy_from(&measured_deflection(obs, p));
+    let mut y = DVector::zeros(m);
+    let mut k = 0;
+    for g in &fit {
+        let start = k;
+        for &i in g {
+            let Some(row) = obs.rows.get(i) else { continue };
+            a.view_mut((3 * k, 0), (3, 6))
+                .copy_from(&design_block(robot, row));
+            y.rows_mut(3 * k, 3).copy_from(&row.measured_mm);
+            k += 1;
+        }
+        center(&mut a, &mut y, start, k);
     }
     let lsq = LsqOptions::default();
     let solve = |b: &DVector<f64>| -> Result<Solution> {
         solve_linear(&a, b, &lsq).map_err(|e| Error::Usage(format!("{obs_file}: {e}")))
     };
-    let mut sol = solve(&b0)?;
+    let mut sol = solve(&y)?;
     let id = sol.identifiability.clone();
     if !id.unidentifiable.is_empty() {
         let names: Vec<String> = id
@@ -254,18 +280,37 @@ pub fn calibrate_stiffness(
             break;
         }
         let trial = Machine::Robot(robot.with_stiffness(stiffness_from(&sol.params)));
-        let lin = &a * &sol.params;
-        let mut b = b0.clone();
-        for (k, &p) in fit.iter().enumerate() {
-            let d = model_deflection(&trial, obs, p, obs_file)?;
-            for r in 0..3 {
-                b[3 * k + r] -= d[r] - lin[3 * k + r];
+        let mut yc = DVector::zeros(m);
+        let mut lin = DMatrix::zeros(m, 6);
+        let mut k = 0;
+        for g in &fit {
+            let start = k;
+            for &i in g {
+                let Some(row) = obs.rows.get(i) else { continue };
+                let blk = design_block(robot, row);
+                let second = model_deflection(&trial, row, obs_file)?
+                    - blk * Vector6::from_column_slice(sol.params.as_slice());
+                yc.rows_mut(3 * k, 3).copy_from(&(row.measured_mm - second));
+                lin.view_mut((3 * k, 0), (3, 6)).copy_from(&blk);
+                k += 1;
             }
+            center(&mut lin, &mut yc, start, k);
         }
-        sol = solve(&b)?;
+        sol = solve(&yc)?;
     }
+    // The centring used 3 degrees of freedom per group.
+    let dof_true = m.saturating_sub(dof_lost + 6);
+    if dof_true == 0 {
+        return Err(Error::Usage(format!(
+            "{obs_file}: no redundancy left for the uncertainty (equations = unknowns)"
+        )));
+    }
+    let dof_factor = (sol.dof as f64 / dof_true as f64).sqrt();
     if let Some(i) = sol.params.iter().position(|&c| c <= 0.0) {
-        let u = sol.std_uncertainty().map(|u| u[i]).unwrap_or(f64::NAN);
+        let u = sol
+            .std_uncertainty()
+            .map(|u| u[i] * dof_factor)
+            .unwrap_or(f64::NAN);
         return Err(Error::Usage(format!(
             "{obs_file}: the compliance of joint {} came out non-positive ({:.4} ± {:.4} \
              µrad/(N·m)), i.e. a non-positive stiffness, which no real joint has. This \
@@ -280,7 +325,7 @@ pub fn calibrate_stiffness(
     }
     let c = sol.params.clone();
     let k_nmm = stiffness_from(&c);
-    let uc = sol.std_uncertainty();
+    let uc = sol.std_uncertainty().map(|u| u * dof_factor);
     let mut params = Vec::with_capacity(6);
     let mut notes = Vec::new();
     for i in 0..6 {
@@ -307,23 +352,34 @@ pub fn calibrate_stiffness(
         });
     }
     let calibrated = Machine::Robot(robot.with_stiffness(k_nmm));
-    let mut before = Vec::with_capacity(hold.len());
-    let mut after = Vec::with_capacity(hold.len());
-    for &p in &hold {
-        let meas = measured_deflection(obs, p);
-        before.push((meas - model_deflection(&machine, obs, p, obs_file)?).norm());
-        after.push((meas - model_deflection(&calibrated, obs, p, obs_file)?).norm());
+    let mut before = Vec::new();
+    let mut after = Vec::new();
+    for g in &hold {
+        let reference = g
+            .iter()
+            .filter_map(|&i| obs.rows.get(i))
+            .find(|r| !loaded(r));
+        let Some(u0) = reference else { continue };
+        for row in g
+            .iter()
+            .filter_map(|&i| obs.rows.get(i))
+            .filter(|r| loaded(r))
+        {
+            let meas = row.measured_mm - u0.measured_mm;
+            before.push((meas - model_deflection(&machine, row, obs_file)?).norm());
+            after.push((meas - model_deflection(&calibrated, row, obs_file)?).norm());
+        }
     }
     let values: Vec<String> = params.iter().map(|p| fmt_value(p.value, 1)).collect();
     let yaml = set_top_level_list(text, machine_file, "k_nm_per_rad", &values)?;
     Machine::from_yaml_str(&yaml, machine_file)?;
     let mut cal = Calibration {
         kind: "stiffness",
-        n_fit: fit.len(),
+        n_fit: n_loaded,
         n_equations: m,
         observability_o1: 0.0,
         condition_number: 0.0,
-        rms_fit_mm: (sol.rss / m as f64).sqrt(),
+        rms_fit_mm: (sol.rss / dof_true as f64).sqrt(),
         params,
         validation: Validation::from_norms(&before, &after),
         notes,
