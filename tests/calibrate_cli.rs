@@ -235,7 +235,9 @@ fn kinematics_reports_fixed_joint_one_as_unidentifiable() {
         fixed.contains(&"j2.a_mm") && fixed.contains(&"j2.alpha_deg"),
         "{fixed:?}"
     );
-    assert!(cal.to_string().contains("not identifiable from these data"));
+    let report = cal.to_string();
+    assert!(report.contains("not identifiable from these data"), "{report}");
+    assert!(report.contains("every row has joint 1 at the same angle"), "{report}");
 }
 
 /// Geometry on the AFM R-1000 grid data (1 µm noise): every identified

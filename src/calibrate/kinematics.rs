@@ -346,6 +346,22 @@ pub fn calibrate_kinematics(
             fixed.len()
         ));
     }
+    for j in 0..6 {
+        let mut qs = obs.rows.iter().filter_map(|r| match &r.pose {
+            Pose::Robot(rp) => rp.q_deg.get(j).copied(),
+            Pose::Tool(_) => None,
+        });
+        let first = qs.next();
+        if first.is_some() && qs.all(|q| Some(q) == first) {
+            notes.push(format!(
+                "every row has joint {} at the same angle: the parameters of the links \
+                 before it cannot be told from a shift or tilt of the measuring frame \
+                 (badly conditioned for those parameters); move joint {} as well",
+                j + 1,
+                j + 1
+            ));
+        }
+    }
     notes.push("the base frame is the frame of the observations and is not identified".into());
     let mut cal = Calibration {
         kind: "kinematics",

@@ -388,3 +388,87 @@ pub fn calibrate_stiffness(
     cal.set_identifiability(&id);
     Ok(cal)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::calibrate::observations::RobotPose;
+    use approx::assert_abs_diff_eq;
+
+    /// Finite-difference agreement of the linear design, mm per µrad/(N·m).
+    const FD_TOL: f64 = 1e-6;
+
+    fn robot() -> Robot {
+        let path = concat!(env!("CARGO_MANIFEST_DIR"), "/machines/abb-irb1600.yaml");
+        match Machine::load(std::path::Path::new(path)) {
+            Ok(Machine::Robot(r)) => r,
+            _ => panic!("robot file"),
+        }
+    }
+
+    fn row(force: Vector3<f64>) -> Observation {
+        Observation {
+            line: 2,
+            id: "r".into(),
+            t_s: None,
+            measured_mm: Vector3::zeros(),
+            force_n: force,
+            moment_nm: Vector3::new(0.0, 5.0, 0.0),
+            ambient_c: None,
+            pose: Pose::Robot(RobotPose {
+                q_deg: [-20.0, 15.0, 10.0, 40.0, 50.0, -30.0],
+                mp_mm: Some(Vector3::new(20.0, 20.0, 35.0)),
+                wp_mm: Some(Vector3::new(-14.0, -14.0, 35.0)),
+                p_w: [None; 6],
+                dir: [None; 6],
+            }),
+        }
+    }
+
+    /// Column i of the design is ∂Δx/∂c_i at c = 0: compare with a central
+    /// difference of the exact forward model's loaded − unloaded deflection
+    /// over the compliance of joint i, on a weightless arm (no gravity sag)
+    /// at a tiny compliance (c = 1e-4 µrad/(N·m), Δc = ±1e-5), where the
+    /// deflected-pose terms the solver corrects for separately vanish.
+    #[test]
+    fn design_matches_finite_differences_of_the_forward_model() {
+        let r0 = robot();
+        let weightless = std::array::from_fn(|_| crate::machine::robot::PointMass {
+            mass_kg: 0.0,
+            com_mm: Vector3::zeros(),
+        });
+        let r = r0
+            .with_links(weightless)
+            .with_tool(*r0.flange_to_tool(), None, true);
+        let obs_row = row(Vector3::new(120.0, -200.0, -250.0));
+        let a = design_block(&r, &obs_row);
+        let c0 = [1e-4; 6];
+        let h = 1e-5;
+        for i in 0..6 {
+            let at = |dc: f64| {
+                let mut c = c0;
+                c[i] += dc;
+                let k: [f64; 6] = std::array::from_fn(|j| 1.0 / (c[j] * C_UNIT));
+                let m = Machine::Robot(r.with_stiffness(k));
+                model_deflection(&m, &obs_row, "t").unwrap()
+            };
+            let fd = (at(h) - at(-h)) / (2.0 * h);
+            assert_abs_diff_eq!(fd, a.column(i).into_owned(), epsilon = FD_TOL);
+        }
+    }
+
+    /// Centring: a group of rows with observations y and design rows A loses
+    /// its mean; for two rows (0, a) → (−a/2, a/2).
+    #[test]
+    fn centring_removes_the_group_mean() {
+        let mut a = DMatrix::zeros(6, 6);
+        let mut y = DVector::zeros(6);
+        a[(3, 0)] = 2.0;
+        y[4] = 4.0;
+        center(&mut a, &mut y, 0, 2);
+        assert_abs_diff_eq!(a[(0, 0)], -1.0, epsilon = 1e-15);
+        assert_abs_diff_eq!(a[(3, 0)], 1.0, epsilon = 1e-15);
+        assert_abs_diff_eq!(y[1], -2.0, epsilon = 1e-15);
+        assert_abs_diff_eq!(y[4], 2.0, epsilon = 1e-15);
+    }
+}
