@@ -236,8 +236,14 @@ fn kinematics_reports_fixed_joint_one_as_unidentifiable() {
         "{fixed:?}"
     );
     let report = cal.to_string();
-    assert!(report.contains("not identifiable from these data"), "{report}");
-    assert!(report.contains("every row has joint 1 at the same angle"), "{report}");
+    assert!(
+        report.contains("not identifiable from these data"),
+        "{report}"
+    );
+    assert!(
+        report.contains("every row has joint 1 at the same angle"),
+        "{report}"
+    );
 }
 
 /// Geometry on the AFM R-1000 grid data (1 µm noise): every identified
@@ -554,4 +560,48 @@ fn simulate_noise_has_requested_sd() {
     let mean = d.iter().sum::<f64>() / n;
     let sd_um = 1000.0 * (d.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1.0)).sqrt();
     assert!((sd_um - 15.0).abs() < 0.15 * 15.0, "sample sd {sd_um} µm");
+}
+
+/// A poses file with deviation columns left empty: simulate fills the
+/// deviations; kinematics on deviations leaves the TCP translation out (a
+/// deviation of one point barely depends on where the point is) and still
+/// identifies the arm (j2.a within 3u of the truth, 150.42 mm).
+#[test]
+fn binary_deviation_files() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let poses = text("samples/observations/irb1600-kinematic-poses.csv");
+    let mut body = String::from("id,q1_deg,q2_deg,q3_deg,q4_deg,q5_deg,q6_deg,dx_mm,dy_mm,dz_mm\n");
+    for l in poses.lines().filter(|l| l.starts_with('K')) {
+        body.push_str(&format!("{l},,,\n"));
+    }
+    let p = write(dir.path(), "p.csv", &body);
+    let meas = dir.path().join("m.csv");
+    postproc()
+        .args(["simulate", "--noise-um", "15", "--seed", "8", "--machine"])
+        .arg(repo(TRUTH_ROBOT))
+        .arg("--observations")
+        .arg(&p)
+        .arg("-o")
+        .arg(&meas)
+        .assert()
+        .success();
+    let obs = load_observations(&meas).expect("deviation file");
+    assert_eq!(
+        obs.measured,
+        postproc::calibrate::observations::MeasuredKind::Deviation
+    );
+    let cal = calibrate_kinematics(
+        &text(START_ROBOT),
+        START_ROBOT,
+        &obs,
+        "m.csv",
+        &Options {
+            holdout: 0.0,
+            seed: 1,
+        },
+    )
+    .expect("identified");
+    assert!(cal.params.iter().all(|p| !p.name.starts_with("tool.")));
+    assert!(cal.validation.is_none());
+    assert_recovered(&cal, "j2.a_mm", 150.42);
 }

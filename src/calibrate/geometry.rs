@@ -97,7 +97,7 @@ impl Problem {
         let mut t = text.to_string();
         for &a in &self.axes {
             let n = self.grids[a].len();
-            for e in 0..3 {
+            for (e, letter) in LETTERS.iter().enumerate() {
                 let mut fwd = vec![0.0; n];
                 let mut rev = vec![0.0; n];
                 for (p, v) in self.params.iter().zip(x) {
@@ -116,7 +116,7 @@ impl Problem {
                         }
                     }
                 }
-                let key = format!("E{}{}_um", LETTERS[e], LETTERS[a]);
+                let key = format!("E{letter}{}_um", LETTERS[a]);
                 t = set_component_table(
                     &t,
                     file,

@@ -7,7 +7,9 @@
 //! Parameters are corrections to the file's `actual` model (mm and mrad inside, reported in mm and degrees),
 //! named after the file's row: `j2.a_mm` is `a_mm` of the second row (for
 //! modified DH that row holds `a₁`). The TCP translation (`tool.x_mm` …) is
-//! included only when no row gives its own measured point (`mp_*`).
+//! included only when no row gives its own measured point (`mp_*`) and the
+//! file holds positions: a deviation (attained − commanded of the same
+//! point) barely depends on where that point is.
 //!
 //! Identifiability: the Jacobian at the start is analysed by a rank-revealing
 //! pivoted QR and an SVD ([`solve_linear`]); parameters it cannot separate
@@ -33,7 +35,7 @@ use crate::machine::Machine;
 use crate::machine::robot::{DhParams, Model, Robot};
 
 use super::forward::{check_kind, predict};
-use super::observations::{Observations, Pose, holdout_split};
+use super::observations::{MeasuredKind, Observations, Pose, holdout_split};
 use super::report::{CONDITION_LIMIT, Calibration, Estimate, Validation};
 use super::stiffness::Options;
 use super::yaml_edit::{DhRow, set_actual_dh, set_frame_translation};
@@ -183,10 +185,13 @@ pub fn calibrate_kinematics(
             "{machine_file}: kinematic calibration needs a robot machine file"
         )));
     };
-    let tool = obs
-        .rows
-        .iter()
-        .all(|r| matches!(&r.pose, Pose::Robot(rp) if rp.mp_mm.is_none()));
+    // Deviations (attained − commanded of the same point) hardly see where
+    // the point is: the TCP translation is identified from positions only.
+    let tool = obs.measured == MeasuredKind::Position
+        && obs
+            .rows
+            .iter()
+            .all(|r| matches!(&r.pose, Pose::Robot(rp) if rp.mp_mm.is_none()));
     let layout = Layout {
         base: robot.clone(),
         dh: *robot.params(Model::Actual),

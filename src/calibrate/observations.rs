@@ -398,6 +398,8 @@ struct Header {
     byte_cols: Vec<usize>,
     kind: ObsKind,
     measured: MeasuredKind,
+    /// A poses file: the measured cells may be empty.
+    poses_only: bool,
 }
 
 impl Header {
@@ -489,6 +491,7 @@ fn parse_header(ctx: &Ctx, line: usize, cells: &[Cell], poses_only: bool) -> Res
         byte_cols,
         kind,
         measured: MeasuredKind::Position,
+        poses_only,
     };
     let required: std::ops::Range<usize> = match kind {
         ObsKind::Robot => Q..Q + 6,
@@ -670,8 +673,13 @@ fn parse_row(
     let dirs = |start: usize| -> [Option<i8>; 6] {
         std::array::from_fn(|k| vals[start + k].map(|v| if v > 0.0 { 1 } else { -1 }))
     };
+    let start = match h.measured {
+        MeasuredKind::Position => POS,
+        MeasuredKind::Deviation => DEV,
+    };
+    let all_empty = (start..start + 3).all(|i| vals[i].is_none());
     let measured_mm = match h.measured {
-        MeasuredKind::Position if !h.has(POS) => Vector3::zeros(),
+        _ if h.poses_only && all_empty => Vector3::zeros(),
         MeasuredKind::Position => triple(POS)?,
         MeasuredKind::Deviation => triple(DEV)?,
     };
@@ -719,7 +727,8 @@ pub fn read_observations<R: BufRead>(reader: R, file: &str) -> Result<Observatio
 
 /// Reads a *poses* file: like [`read_observations`], but the measured triple
 /// may be absent (then every row's `measured_mm` is zero and the kind is
-/// [`MeasuredKind::Position`]). This is the input of `postproc simulate`.
+/// [`MeasuredKind::Position`]) and a row may leave all three measured cells
+/// empty (zero). This is the input of `postproc simulate`.
 pub fn read_poses<R: BufRead>(reader: R, file: &str) -> Result<Observations> {
     read_rows(reader, file, true)
 }
