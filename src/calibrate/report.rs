@@ -107,15 +107,21 @@ impl Calibration {
     }
 }
 
+/// About seven significant digits, fixed point where that reads well.
 fn g(v: f64) -> String {
+    let a = v.abs();
     if v == 0.0 {
         "0".into()
-    } else if v.abs() >= 1e3 {
+    } else if a >= 1e3 {
         format!("{v:.1}")
-    } else if v.abs() < 1e-3 {
-        format!("{v:.3e}")
-    } else {
+    } else if a >= 100.0 {
+        format!("{v:.4}")
+    } else if a >= 10.0 {
+        format!("{v:.5}")
+    } else if a >= 1e-3 {
         format!("{v:.6}")
+    } else {
+        format!("{v:.3e}")
     }
 }
 
