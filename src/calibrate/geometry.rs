@@ -10,13 +10,15 @@
 //!   [`MAX_TARGETS`]); the measurements must be taken on such a grid.
 //!   Forward values come from rows approached in `+` direction (`dir… = 1`),
 //!   reverse values from `−` rows; a row without a sign counts as `+`.
-//! - Datum: every table's forward value at the first target is 0 (a common
-//!   offset of all tables is the choice of the measuring frame's origin).
-//! - Straightness tables use the end-point reference line: the forward
-//!   values at the first and the last target are 0. Their slopes are the
-//!   squareness errors (`EXY`↔`EC0Y`, `EYZ`↔`EA0Z`, `EXZ`↔`EB0Z`) or the
-//!   orientation of the measuring frame (`EYX`, `EZX`, `EZY`: X defines the x
-//!   direction, X and Y the xy plane).
+//! - Datum: every straightness table's forward value at the first target is
+//!   0; the constant offset of each direction is in the positioning table
+//!   (`EXX` for x, …), since only the sum of the three is observable.
+//! - The straightness tables whose slope is a squareness error use the
+//!   end-point reference line (forward values 0 at the first and the last
+//!   target): `EXY`↔`EC0Y`, `EYZ`↔`EA0Z`, `EXZ`↔`EB0Z` (X is the reference
+//!   axis). The slopes of `EYX`, `EZX`, `EZY` are identified as they are:
+//!   the observations are in the machine's own workpiece frame, whose
+//!   orientation is not a free parameter.
 //! - Angular errors (`EAX` … `ECZ`) and rotary axes are *not* identified:
 //!   tip positions at one tool length cannot separate an angular error from
 //!   the straightness it causes at the tip. They keep the file's values (and
@@ -208,6 +210,28 @@ pub fn calibrate_geometry(
     let axes: Vec<usize> = (0..3)
         .filter(|&s| tool.axis(s).is_some_and(|a| a.kind == AxisKind::Linear))
         .collect();
+    for slot in 3..6 {
+        let mut values: Vec<f64> = obs
+            .rows
+            .iter()
+            .filter_map(|r| match &r.pose {
+                Pose::Tool(tp) => tp.abc_deg.get(slot - 3).copied().flatten(),
+                Pose::Robot(_) => None,
+            })
+            .collect();
+        values.sort_by(f64::total_cmp);
+        values.dedup();
+        if values.len() > 1 {
+            return Err(Error::Usage(format!(
+                "{obs_file}: the {} axis takes {} different positions; geometric calibration \
+                 identifies the linear-axis errors with every rotary axis at one fixed position \
+                 (with moving rotary axes the table datums and squareness conventions do not \
+                 hold); measure the linear axes at one rotary position",
+                ["A", "B", "C"][slot - 3],
+                values.len()
+            )));
+        }
+    }
     let mut grids: [Vec<f64>; 3] = Default::default();
     for &a in &axes {
         let mut g: Vec<f64> = obs
@@ -237,7 +261,13 @@ pub fn calibrate_geometry(
         let n = grids[a].len();
         for e in 0..3 {
             for node in 0..n {
-                let constrained = node == 0 || (e != a && node + 1 == n);
+                // Datum: straightness forward value 0 at the first target
+                // (the constant of each direction is in the positioning
+                // table). End-point reference line for the straightness
+                // tables whose slope is a squareness error (EXY↔EC0Y,
+                // EXZ↔EB0Z, EYZ↔EA0Z).
+                let paired = square && matches!((e, a), (0, 1) | (0, 2) | (1, 2));
+                let constrained = e != a && (node == 0 || (paired && node + 1 == n));
                 if !constrained {
                     params.push(Param::Table {
                         axis: a,
@@ -375,8 +405,9 @@ pub fn calibrate_geometry(
         "angular errors (EA*, EB*, EC*) and rotary axes are not identified from tip positions \
          at one tool length; they keep the file's values"
             .to_string(),
-        "straightness tables use the end-point reference line and every table is zero at the \
-         first target (forward): the slopes are in the squareness errors and the frame"
+        "straightness tables are zero at the first target (forward; the offsets are in the \
+         positioning tables); EXY, EXZ, EYZ use the end-point reference line, their slopes \
+         are in EC0Y, EB0Z, EA0Z"
             .to_string(),
     ];
     if !prob.square {
@@ -395,5 +426,6 @@ pub fn calibrate_geometry(
         yaml,
     };
     cal.set_identifiability(id);
+    cal.check_validation();
     Ok(cal)
 }

@@ -381,5 +381,6 @@ pub fn calibrate_kinematics(
         yaml,
     };
     cal.set_identifiability(id);
+    cal.check_validation();
     Ok(cal)
 }

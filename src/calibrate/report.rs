@@ -97,6 +97,27 @@ impl Calibration {
         self.condition_number = id.condition_number_identified;
     }
 
+    /// Adds a loud note (and a warning) when the calibrated file predicts
+    /// the held-out items worse than the original *and* not at the noise
+    /// level of the fit (mean norm above 1.5 × 1.6 × the fit RMS per
+    /// coordinate; 1.6 σ is the mean norm of 3-D noise): the model or its
+    /// conventions do not fit the data, the result must not be used. (When
+    /// the original file is already right, the calibrated one is slightly
+    /// worse by its estimation noise; that is not flagged.)
+    pub fn check_validation(&mut self) {
+        if let Some(v) = self.validation {
+            if v.after_mean_mm > v.before_mean_mm && v.after_mean_mm > 2.4 * self.rms_fit_mm {
+                let msg = format!(
+                    "WORSE after calibration on the held-out items (mean {:.4} → {:.4} mm): \
+                     the model does not fit these data; do not use the calibrated file",
+                    v.before_mean_mm, v.after_mean_mm
+                );
+                tracing::warn!("{msg}");
+                self.notes.push(msg);
+            }
+        }
+    }
+
     /// Names of the fixed (unidentifiable) parameters.
     pub fn fixed(&self) -> Vec<&str> {
         self.params

@@ -386,6 +386,7 @@ pub fn calibrate_stiffness(
         yaml,
     };
     cal.set_identifiability(&id);
+    cal.check_validation();
     Ok(cal)
 }
 
