@@ -374,7 +374,7 @@ pub fn calibrate_kinematics(
         n_equations: m,
         observability_o1: 0.0,
         condition_number: 0.0,
-        rms_fit_mm: (sol.rss / m as f64).sqrt(),
+        rms_fit_mm: sol.sigma2.map_or((sol.rss / m as f64).sqrt(), f64::sqrt),
         params,
         validation: Validation::from_norms(&before, &after),
         notes,

@@ -78,7 +78,7 @@ pub struct Calibration {
     /// Condition number of the column-scaled Jacobian over the identified
     /// parameters.
     pub condition_number: f64,
-    /// RMS of the fit residuals (per coordinate), mm.
+    /// RMS of the fit residuals per coordinate, `√(RSS / degrees of freedom)`, mm.
     pub rms_fit_mm: f64,
     /// Parameters, in report order.
     pub params: Vec<Estimate>,
