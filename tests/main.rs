@@ -3,6 +3,7 @@
 
 mod bad_corpus;
 mod batch_cli;
+mod calibrate_cli;
 mod common;
 mod effects;
 mod gcode_cli;

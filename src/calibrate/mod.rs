@@ -2,6 +2,12 @@
 //! parameters from them.
 
 pub mod forward;
+pub mod geometry;
+pub mod kinematics;
 pub mod lsq;
 pub mod observations;
+pub mod report;
+pub mod simulate;
 pub mod stats;
+pub mod stiffness;
+pub mod yaml_edit;

@@ -406,6 +406,8 @@ struct Header {
     byte_cols: Vec<usize>,
     kind: ObsKind,
     measured: MeasuredKind,
+    /// A poses file: the measured cells may be empty.
+    poses_only: bool,
 }
 
 impl Header {
@@ -431,7 +433,7 @@ impl Ctx<'_> {
     }
 }
 
-fn parse_header(ctx: &Ctx, line: usize, cells: &[Cell]) -> Result<Header> {
+fn parse_header(ctx: &Ctx, line: usize, cells: &[Cell], poses_only: bool) -> Result<Header> {
     let mut cols = Vec::with_capacity(cells.len());
     let mut byte_cols = Vec::with_capacity(cells.len());
     for cell in cells {
@@ -497,6 +499,7 @@ fn parse_header(ctx: &Ctx, line: usize, cells: &[Cell]) -> Result<Header> {
         byte_cols,
         kind,
         measured: MeasuredKind::Position,
+        poses_only,
     };
     let required: std::ops::Range<usize> = match kind {
         ObsKind::Robot => Q..Q + 6,
@@ -544,6 +547,7 @@ fn parse_header(ctx: &Ctx, line: usize, cells: &[Cell]) -> Result<Header> {
         }
         (true, false) => MeasuredKind::Position,
         (false, true) => MeasuredKind::Deviation,
+        (false, false) if poses_only => MeasuredKind::Position,
         (false, false) => {
             return Err(ctx.err(
                 line,
@@ -694,7 +698,13 @@ fn parse_row(
     let dirs = |start: usize| -> [Option<i8>; 6] {
         std::array::from_fn(|k| vals[start + k].map(|v| if v > 0.0 { 1 } else { -1 }))
     };
+    let start = match h.measured {
+        MeasuredKind::Position => POS,
+        MeasuredKind::Deviation => DEV,
+    };
+    let all_empty = (start..start + 3).all(|i| vals[i].is_none());
     let measured_mm = match h.measured {
+        _ if h.poses_only && all_empty => Vector3::zeros(),
         MeasuredKind::Position => triple(POS)?,
         MeasuredKind::Deviation => triple(DEV)?,
     };
@@ -736,7 +746,25 @@ fn parse_row(
 
 /// Reads an observation file from a buffered reader, line by line. `file` is
 /// the name used in error messages. Never panics, whatever the bytes.
-pub fn read_observations<R: BufRead>(mut reader: R, file: &str) -> Result<Observations> {
+pub fn read_observations<R: BufRead>(reader: R, file: &str) -> Result<Observations> {
+    read_rows(reader, file, false)
+}
+
+/// Reads a *poses* file: like [`read_observations`], but the measured triple
+/// may be absent (then every row's `measured_mm` is zero and the kind is
+/// [`MeasuredKind::Position`]) and a row may leave all three measured cells
+/// empty (zero). This is the input of `postproc simulate`.
+pub fn read_poses<R: BufRead>(reader: R, file: &str) -> Result<Observations> {
+    read_rows(reader, file, true)
+}
+
+/// Reads a poses file from disk, see [`read_poses`].
+pub fn load_poses(path: &Path) -> Result<Observations> {
+    let f = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
+    read_poses(std::io::BufReader::new(f), &path.display().to_string())
+}
+
+fn read_rows<R: BufRead>(mut reader: R, file: &str, poses_only: bool) -> Result<Observations> {
     let ctx = Ctx { file };
     let mut buf = Vec::new();
     let mut line_no = 0usize;
@@ -768,7 +796,7 @@ pub fn read_observations<R: BufRead>(mut reader: R, file: &str) -> Result<Observ
         }
         let cells = split_cells(bytes).map_err(|(col, msg)| ctx.err(line_no, col, msg))?;
         match &header {
-            None => header = Some(parse_header(&ctx, line_no, &cells)?),
+            None => header = Some(parse_header(&ctx, line_no, &cells, poses_only)?),
             Some(h) => {
                 let row = parse_row(&ctx, h, line_no, bytes.len(), rows.len() + 1, &cells)?;
                 rows.push(row);

@@ -2,6 +2,7 @@
 //! Nothing else in the crate parses flags.
 
 mod batch;
+mod calibrate;
 mod gcode;
 mod rapid;
 
@@ -45,6 +46,12 @@ pub enum Command {
     /// Compensate many programs (files or folders) in parallel into a folder.
     #[command(after_help = BATCH_EXIT_HELP)]
     Batch(BatchArgs),
+    /// Fill the measured columns of a poses file from a machine file plus noise.
+    #[command(after_help = EXIT_HELP)]
+    Simulate(calibrate::SimulateArgs),
+    /// Identify model parameters from measurements; write a calibrated machine file.
+    #[command(after_help = EXIT_HELP)]
+    Calibrate(calibrate::CalibrateArgs),
 }
 
 /// Exit codes of `batch`, also listed in its `--help`.
@@ -258,6 +265,8 @@ pub fn run(cli: Cli) -> Result<i32> {
         Command::Report(a) if rapid::wants(&a.program) => rapid::report(&a),
         Command::Report(a) => gcode::report(&a),
         Command::Batch(a) => batch::run(&a, quiet),
+        Command::Simulate(a) => calibrate::run_simulate(&a),
+        Command::Calibrate(a) => calibrate::run_calibrate(&a),
     }
 }
 

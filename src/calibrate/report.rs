@@ -1,0 +1,212 @@
+//! The result of a calibration run: identified parameters with standard and
+//! expanded uncertainties, identifiability figures, the held-out validation
+//! and the calibrated machine file text; printed as a plain-text table.
+
+use std::fmt;
+
+use super::lsq::{COVERAGE_K, Identifiability};
+
+/// A scaled condition number (unit-norm columns) above this makes the data
+/// set *badly conditioned*: a relative error of 10⁻⁴ in the data (a few µm
+/// on a deflection of some tenths of a mm, or on a 1 m robot) could change a
+/// parameter by 100 %. Such a run is refused (exit 2) instead of returning
+/// confident nonsense.
+pub const CONDITION_LIMIT: f64 = 1e4;
+
+/// One identified (or fixed) parameter.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Estimate {
+    /// Name as listed in the report, e.g. `a2` or `k3`.
+    pub name: String,
+    /// Unit of `start`, `value` and `u`.
+    pub unit: &'static str,
+    /// Value in the machine file before the calibration.
+    pub start: f64,
+    /// Identified value (the start value when fixed).
+    pub value: f64,
+    /// Standard uncertainty (k = 1); `None` when fixed or when the residual
+    /// variance is unknown (no redundancy).
+    pub u: Option<f64>,
+    /// True when the data cannot identify it: kept at the start value.
+    pub fixed: bool,
+}
+
+/// Mean and maximum residual norm over the held-out rows (or pairs), mm.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Validation {
+    /// Number of held-out items.
+    pub n: usize,
+    /// Mean residual norm with the original machine file, mm.
+    pub before_mean_mm: f64,
+    /// Max residual norm with the original machine file, mm.
+    pub before_max_mm: f64,
+    /// Mean residual norm with the calibrated machine file, mm.
+    pub after_mean_mm: f64,
+    /// Max residual norm with the calibrated machine file, mm.
+    pub after_max_mm: f64,
+}
+
+impl Validation {
+    /// Builds the summary from per-item residual norms (mm).
+    pub fn from_norms(before: &[f64], after: &[f64]) -> Option<Validation> {
+        if before.is_empty() || before.len() != after.len() {
+            return None;
+        }
+        let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len() as f64;
+        let max = |v: &[f64]| v.iter().copied().fold(0.0, f64::max);
+        Some(Validation {
+            n: before.len(),
+            before_mean_mm: mean(before),
+            before_max_mm: max(before),
+            after_mean_mm: mean(after),
+            after_max_mm: max(after),
+        })
+    }
+}
+
+/// Everything a calibration run found.
+#[derive(Debug, Clone)]
+pub struct Calibration {
+    /// `stiffness`, `kinematics` or `geometry`.
+    pub kind: &'static str,
+    /// Items (rows or load pairs) used for the fit.
+    pub n_fit: usize,
+    /// Residual equations of the fit (3 per item).
+    pub n_equations: usize,
+    /// Observability index O1 of the identification Jacobian (unscaled).
+    pub observability_o1: f64,
+    /// Condition number of the column-scaled Jacobian over the identified
+    /// parameters.
+    pub condition_number: f64,
+    /// RMS of the fit residuals per coordinate, `√(RSS / degrees of freedom)`, mm.
+    pub rms_fit_mm: f64,
+    /// Parameters, in report order.
+    pub params: Vec<Estimate>,
+    /// Held-out validation; `None` when nothing was held out.
+    pub validation: Option<Validation>,
+    /// Things the data does not support, said in words.
+    pub notes: Vec<String>,
+    /// The calibrated machine file (original text with edited values).
+    pub yaml: String,
+}
+
+impl Calibration {
+    /// Fills O1 and the condition number from an identifiability report.
+    pub fn set_identifiability(&mut self, id: &Identifiability) {
+        self.observability_o1 = id.observability_o1;
+        self.condition_number = id.condition_number_identified;
+    }
+
+    /// Adds a loud note (and a warning) when the calibrated file predicts
+    /// the held-out items worse than the original *and* not at the noise
+    /// level of the fit (mean norm above 1.5 × 1.6 × the fit RMS per
+    /// coordinate; 1.6 σ is the mean norm of 3-D noise): the model or its
+    /// conventions do not fit the data, the result must not be used. (When
+    /// the original file is already right, the calibrated one is slightly
+    /// worse by its estimation noise; that is not flagged.)
+    pub fn check_validation(&mut self) {
+        if let Some(v) = self.validation {
+            if v.after_mean_mm > v.before_mean_mm && v.after_mean_mm > 2.4 * self.rms_fit_mm {
+                let msg = format!(
+                    "WORSE after calibration on the held-out items (mean {:.4} → {:.4} mm): \
+                     the model does not fit these data; do not use the calibrated file",
+                    v.before_mean_mm, v.after_mean_mm
+                );
+                tracing::warn!("{msg}");
+                self.notes.push(msg);
+            }
+        }
+    }
+
+    /// Names of the fixed (unidentifiable) parameters.
+    pub fn fixed(&self) -> Vec<&str> {
+        self.params
+            .iter()
+            .filter(|p| p.fixed)
+            .map(|p| p.name.as_str())
+            .collect()
+    }
+}
+
+/// About seven significant digits, fixed point where that reads well.
+fn g(v: f64) -> String {
+    let a = v.abs();
+    if v == 0.0 {
+        "0".into()
+    } else if a >= 1e3 {
+        format!("{v:.1}")
+    } else if a >= 100.0 {
+        format!("{v:.4}")
+    } else if a >= 10.0 {
+        format!("{v:.5}")
+    } else if a >= 1e-3 {
+        format!("{v:.6}")
+    } else {
+        format!("{v:.3e}")
+    }
+}
+
+impl fmt::Display for Calibration {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        writeln!(
+            f,
+            "calibrate {}: {} items ({} equations), O1 = {}, condition number = {:.1}, fit RMS = {:.4} mm",
+            self.kind,
+            self.n_fit,
+            self.n_equations,
+            g(self.observability_o1),
+            self.condition_number,
+            self.rms_fit_mm
+        )?;
+        writeln!(
+            f,
+            "{:<18} {:>14} {:>14} {:>12} {:>12} {:>8}  unit",
+            "parameter", "start", "identified", "u (k=1)", "U (k=2)", "U/|v| %"
+        )?;
+        for p in &self.params {
+            let (u, uu, rel) = match (p.fixed, p.u) {
+                (true, _) => ("fixed".to_string(), "-".to_string(), "-".to_string()),
+                (false, Some(u)) => {
+                    let rel = if p.value != 0.0 {
+                        format!("{:.2}", 100.0 * COVERAGE_K * u / p.value.abs())
+                    } else {
+                        "-".into()
+                    };
+                    (g(u), g(COVERAGE_K * u), rel)
+                }
+                (false, None) => ("?".into(), "?".into(), "-".into()),
+            };
+            writeln!(
+                f,
+                "{:<18} {:>14} {:>14} {:>12} {:>12} {:>8}  {}",
+                p.name,
+                g(p.start),
+                g(p.value),
+                u,
+                uu,
+                rel,
+                p.unit
+            )?;
+        }
+        let fixed = self.fixed();
+        if !fixed.is_empty() {
+            writeln!(
+                f,
+                "not identifiable from these data (kept at the file's value): {}",
+                fixed.join(", ")
+            )?;
+        }
+        match &self.validation {
+            Some(v) => writeln!(
+                f,
+                "held-out validation ({} items): mean {:.4} mm, max {:.4} mm before; mean {:.4} mm, max {:.4} mm after",
+                v.n, v.before_mean_mm, v.before_max_mm, v.after_mean_mm, v.after_max_mm
+            )?,
+            None => writeln!(f, "held-out validation: none (--holdout 0)")?,
+        }
+        for n in &self.notes {
+            writeln!(f, "note: {n}")?;
+        }
+        Ok(())
+    }
+}

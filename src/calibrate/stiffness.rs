@@ -1,0 +1,475 @@
+//! Robot joint-stiffness identification (Paper C eq. 6–8, MODELS.md §2).
+//!
+//! Data: *load groups*. Rows are grouped by identical joint angles and
+//! measured point (one configuration of the arm, one measured point); a
+//! group holds the unloaded reference row and the rows under one or more
+//! loads — as with the loaded double ball bar (LDBB) of Paper C, where each
+//! configuration is measured with and without the load. The unknown
+//! position of the point without load is a nuisance parameter of every
+//! group; it is eliminated by centring each group (least squares with one
+//! free offset per group, Frisch–Waugh), so the kinematic errors of the arm,
+//! the gravity sag and the registration of the measuring frame cancel. The
+//! degrees of freedom lose 3 per group, and the uncertainties are computed
+//! with that (sharing one reference row between two loads correlates their
+//! loaded − unloaded differences; the centred form accounts for it). A
+//! loaded row alone in its group is an error.
+//!
+//! Model: with the compliances `c_i = 1/kθi` the deflection of a loaded row
+//! from its unloaded state is linear in c:
+//! `Δx = Σ_i c_i · J_MP[:3, i] · (J_WPᵀ W)_i` (actual kinematics at the
+//! commanded joints). The unknowns are `c_i` in µrad/(N·m); they are found by
+//! linear least squares ([`solve_linear`]), then two fixed-point corrections
+//! remove the second-order part (the deflected Jacobian, the gravity-loaded
+//! pose) by evaluating the exact forward model
+//! ([`super::forward::predict`]) at the estimate:
+//! `y ← y − (Δx_model(c) − A c)`.
+//! Uncertainties: `u(c)` from the residual variance; `u(k) = u(c) / c²`
+//! (first-order propagation). A non-positive compliance is refused.
+
+use std::collections::HashMap;
+
+use nalgebra::{DMatrix, DVector, SMatrix, Vector3, Vector6};
+
+use crate::calibrate::lsq::{LsqOptions, Solution, solve_linear};
+use crate::error::{Error, Result};
+use crate::machine::Machine;
+use crate::machine::robot::kinematics::jacobian;
+use crate::machine::robot::{Model, Robot};
+
+use super::forward::{check_kind, joints_rad, measured_point, predict, row_wrench, wrench_point};
+use super::observations::{Observation, Observations, Pose, holdout_split};
+use super::report::{CONDITION_LIMIT, Calibration, Estimate, Validation};
+use super::yaml_edit::{fmt_value, set_top_level_list};
+
+/// µrad/(N·m) expressed in rad/(N·mm).
+const C_UNIT: f64 = 1e-9;
+
+/// Options of a calibration run.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Options {
+    /// Fraction of the items held out for validation (0 ≤ f < 1).
+    pub holdout: f64,
+    /// Seed of the reproducible split.
+    pub seed: u64,
+}
+
+impl Default for Options {
+    fn default() -> Self {
+        Options {
+            holdout: 0.3,
+            seed: 1,
+        }
+    }
+}
+
+fn key(obs: &Observations, i: usize) -> Option<Vec<u64>> {
+    let row = obs.rows.get(i)?;
+    let Pose::Robot(rp) = &row.pose else {
+        return None;
+    };
+    let mut k: Vec<u64> = rp.q_deg.iter().map(|v| v.to_bits()).collect();
+    match rp.mp_mm {
+        Some(p) => k.extend(p.iter().map(|v| v.to_bits())),
+        None => k.push(u64::MAX),
+    }
+    Some(k)
+}
+
+fn loaded(r: &Observation) -> bool {
+    r.force_n != Vector3::zeros() || r.moment_nm != Vector3::zeros()
+}
+
+/// Groups the rows by joint angles and measured point (row indices, in
+/// file order). Groups without a loaded row carry no stiffness information
+/// and are dropped; a loaded row alone in its group is an error. `file`
+/// names the observation file in errors.
+pub fn load_groups(obs: &Observations, file: &str) -> Result<Vec<Vec<usize>>> {
+    let mut index: HashMap<Vec<u64>, usize> = HashMap::new();
+    let mut groups: Vec<Vec<usize>> = Vec::new();
+    for i in 0..obs.rows.len() {
+        let Some(k) = key(obs, i) else { continue };
+        let g = *index.entry(k).or_insert_with(|| {
+            groups.push(Vec::new());
+            groups.len() - 1
+        });
+        if let Some(v) = groups.get_mut(g) {
+            v.push(i);
+        }
+    }
+    let mut orphans = Vec::new();
+    groups.retain(|g| {
+        let n_loaded = g
+            .iter()
+            .filter(|&&i| obs.rows.get(i).is_some_and(loaded))
+            .count();
+        if n_loaded > 0 && g.len() == 1 {
+            if let Some(r) = g.first().and_then(|&i| obs.rows.get(i)) {
+                orphans.push(format!("{} (line {})", r.id, r.line));
+            }
+        }
+        n_loaded > 0 && g.len() > 1
+    });
+    if !orphans.is_empty() {
+        let shown: Vec<&str> = orphans.iter().take(5).map(String::as_str).collect();
+        return Err(Error::Usage(format!(
+            "{file}: {} loaded row(s) have no other row at the same joint angles and \
+             measured point: {}{}; the stiffness is identified from the differences between \
+             the load states of one configuration (measure every configuration also \
+             without the load)",
+            orphans.len(),
+            shown.join(", "),
+            if orphans.len() > 5 { ", …" } else { "" }
+        )));
+    }
+    if groups.is_empty() {
+        return Err(Error::Usage(format!(
+            "{file}: no row has a force or moment (fx_n … mz_nm): nothing deflects the \
+             joints, the stiffness cannot be identified"
+        )));
+    }
+    Ok(groups)
+}
+
+/// Design block (3 × 6) of one row: `A[r, i] = J_MP[r, i] · τ_i · C_UNIT`
+/// with `τ = J_WPᵀ W` (zero for an unloaded row).
+fn design_block(robot: &Robot, row: &Observation) -> SMatrix<f64, 3, 6> {
+    let mut a = SMatrix::<f64, 3, 6>::zeros();
+    let Pose::Robot(rp) = &row.pose else {
+        return a;
+    };
+    let q = joints_rad(rp);
+    let f = robot.frames(Model::Actual, &q);
+    let jmp = jacobian(&f, &measured_point(robot, rp));
+    let jwp = jacobian(&f, &wrench_point(robot, rp));
+    let tau = jwp.transpose() * row_wrench(row);
+    for i in 0..6 {
+        for r in 0..3 {
+            a[(r, i)] = jmp[(r, i)] * tau[i] * C_UNIT;
+        }
+    }
+    a
+}
+
+/// Exact model deflection of a row from its unloaded state, mm.
+fn model_deflection(m: &Machine, row: &Observation, file: &str) -> Result<Vector3<f64>> {
+    if !loaded(row) {
+        return Ok(Vector3::zeros());
+    }
+    let mut free = row.clone();
+    free.force_n = Vector3::zeros();
+    free.moment_nm = Vector3::zeros();
+    Ok(predict(m, row, file)?.attained_mm - predict(m, &free, file)?.attained_mm)
+}
+
+/// Subtracts the mean of rows `[start, end)` (3-vectors) from the design
+/// and the observations.
+fn center(a: &mut DMatrix<f64>, y: &mut DVector<f64>, start: usize, end: usize) {
+    if end <= start {
+        return;
+    }
+    let n = (end - start) as f64;
+    for r in 0..3 {
+        let idx: Vec<usize> = (start..end).map(|k| 3 * k + r).collect();
+        let ym = idx.iter().map(|&i| y[i]).sum::<f64>() / n;
+        for &i in &idx {
+            y[i] -= ym;
+        }
+        for c in 0..6 {
+            let am = idx.iter().map(|&i| a[(i, c)]).sum::<f64>() / n;
+            for &i in &idx {
+                a[(i, c)] -= am;
+            }
+        }
+    }
+}
+
+fn stiffness_from(c: &DVector<f64>) -> [f64; 6] {
+    std::array::from_fn(|i| 1.0 / (c[i] * C_UNIT))
+}
+
+/// Identifies the joint stiffnesses from the load pairs of `obs`.
+/// `text`/`machine_file`: the machine file (edited into the result).
+pub fn calibrate_stiffness(
+    text: &str,
+    machine_file: &str,
+    obs: &Observations,
+    obs_file: &str,
+    opts: &Options,
+) -> Result<Calibration> {
+    let machine = Machine::from_yaml_str(text, machine_file)?;
+    check_kind(&machine, obs, obs_file)?;
+    let Machine::Robot(robot) = &machine else {
+        return Err(Error::Usage(format!(
+            "{machine_file}: stiffness calibration needs a robot machine file"
+        )));
+    };
+    let groups = load_groups(obs, obs_file)?;
+    let (fit_idx, hold_idx) = holdout_split(groups.len(), opts.holdout, opts.seed);
+    let pick = |idx: &[usize]| -> Vec<Vec<usize>> {
+        idx.iter().filter_map(|&i| groups.get(i).cloned()).collect()
+    };
+    let fit = pick(&fit_idx);
+    let hold = pick(&hold_idx);
+    let fit_rows: Vec<usize> = fit.iter().flatten().copied().collect();
+    let n_loaded = fit_rows
+        .iter()
+        .filter(|&&i| obs.rows.get(i).is_some_and(loaded))
+        .count();
+    let m = 3 * fit_rows.len();
+    let dof_lost = 3 * fit.len();
+    if m < dof_lost + 18 {
+        return Err(Error::Usage(format!(
+            "{obs_file}: {n_loaded} loaded row(s) in {} group(s) left for the fit; 6 \
+             stiffnesses need at least 18 equations beyond the unloaded references, \
+             better tens of loaded rows",
+            fit.len()
+        )));
+    }
+    tracing::info!(
+        "stiffness: {} groups ({n_loaded} loaded rows) for the fit, {} held out",
+        fit.len(),
+        hold.len()
+    );
+    // Rows in group order; the design of every group is centred.
+    let mut a = DMatrix::zeros(m, 6);
+    let mut y = DVector::zeros(m);
+    let mut k = 0;
+    for g in &fit {
+        let start = k;
+        for &i in g {
+            let Some(row) = obs.rows.get(i) else { continue };
+            a.view_mut((3 * k, 0), (3, 6))
+                .copy_from(&design_block(robot, row));
+            y.rows_mut(3 * k, 3).copy_from(&row.measured_mm);
+            k += 1;
+        }
+        center(&mut a, &mut y, start, k);
+    }
+    let lsq = LsqOptions::default();
+    let solve = |b: &DVector<f64>| -> Result<Solution> {
+        solve_linear(&a, b, &lsq).map_err(|e| Error::Usage(format!("{obs_file}: {e}")))
+    };
+    let mut sol = solve(&y)?;
+    let id = sol.identifiability.clone();
+    if !id.unidentifiable.is_empty() {
+        let names: Vec<String> = id
+            .unidentifiable
+            .iter()
+            .map(|i| format!("k{}", i + 1))
+            .collect();
+        return Err(Error::Usage(format!(
+            "{obs_file}: badly conditioned data set: the stiffness of {} cannot be identified \
+             (the loads do not twist these joints independently of the others; O1 = {:.3e}). \
+             Load the arm in more directions and configurations",
+            names.join(", "),
+            id.observability_o1
+        )));
+    }
+    if id.condition_number_identified > CONDITION_LIMIT {
+        return Err(Error::Usage(format!(
+            "{obs_file}: badly conditioned data set: condition number {:.3e} > {:.0e} \
+             (O1 = {:.3e}); the joint compliances are nearly linearly dependent in these \
+             data (e.g. all loads in one direction). Vary the load direction and the \
+             configuration",
+            id.condition_number_identified, CONDITION_LIMIT, id.observability_o1
+        )));
+    }
+    // Second-order correction with the exact forward model.
+    for _ in 0..2 {
+        if sol.params.iter().any(|&c| c <= 0.0) {
+            break;
+        }
+        let trial = Machine::Robot(robot.with_stiffness(stiffness_from(&sol.params)));
+        let mut yc = DVector::zeros(m);
+        let mut lin = DMatrix::zeros(m, 6);
+        let mut k = 0;
+        for g in &fit {
+            let start = k;
+            for &i in g {
+                let Some(row) = obs.rows.get(i) else { continue };
+                let blk = design_block(robot, row);
+                let second = model_deflection(&trial, row, obs_file)?
+                    - blk * Vector6::from_column_slice(sol.params.as_slice());
+                yc.rows_mut(3 * k, 3).copy_from(&(row.measured_mm - second));
+                lin.view_mut((3 * k, 0), (3, 6)).copy_from(&blk);
+                k += 1;
+            }
+            center(&mut lin, &mut yc, start, k);
+        }
+        sol = solve(&yc)?;
+    }
+    // The centring used 3 degrees of freedom per group.
+    let dof_true = m.saturating_sub(dof_lost + 6);
+    if dof_true == 0 {
+        return Err(Error::Usage(format!(
+            "{obs_file}: no redundancy left for the uncertainty (equations = unknowns)"
+        )));
+    }
+    let dof_factor = (sol.dof as f64 / dof_true as f64).sqrt();
+    if let Some(i) = sol.params.iter().position(|&c| c <= 0.0) {
+        let u = sol
+            .std_uncertainty()
+            .map(|u| u[i] * dof_factor)
+            .unwrap_or(f64::NAN);
+        return Err(Error::Usage(format!(
+            "{obs_file}: the compliance of joint {} came out non-positive ({:.4} ± {:.4} \
+             µrad/(N·m)), i.e. a non-positive stiffness, which no real joint has. This \
+             usually means a sign or frame error in the data (the force acting ON the \
+             robot is expected, in the robot base frame; the wrench point in the flange \
+             frame; joint angles in the controller convention), or a joint the loads hardly \
+             twist, so its compliance is zero within the noise",
+            i + 1,
+            sol.params[i],
+            u
+        )));
+    }
+    let c = sol.params.clone();
+    let k_nmm = stiffness_from(&c);
+    let uc = sol.std_uncertainty().map(|u| u * dof_factor);
+    let mut params = Vec::with_capacity(6);
+    let mut notes = Vec::new();
+    for i in 0..6 {
+        let k = k_nmm[i] / 1000.0;
+        let u = uc.as_ref().map(|u| u[i] / (c[i] * c[i] * C_UNIT) / 1000.0);
+        if let Some(u) = u {
+            if 2.0 * u > 0.1 * k {
+                notes.push(format!(
+                    "k{} is poorly determined (U(k=2) = {:.0} % of the value): the loads twist \
+                     joint {} little, its deflection is near the noise",
+                    i + 1,
+                    200.0 * u / k,
+                    i + 1
+                ));
+            }
+        }
+        params.push(Estimate {
+            name: format!("k{}", i + 1),
+            unit: "N·m/rad",
+            start: robot.k_nmm_per_rad()[i] / 1000.0,
+            value: k,
+            u,
+            fixed: false,
+        });
+    }
+    let calibrated = Machine::Robot(robot.with_stiffness(k_nmm));
+    let mut before = Vec::new();
+    let mut after = Vec::new();
+    for g in &hold {
+        let reference = g
+            .iter()
+            .filter_map(|&i| obs.rows.get(i))
+            .find(|r| !loaded(r));
+        let Some(u0) = reference else { continue };
+        for row in g
+            .iter()
+            .filter_map(|&i| obs.rows.get(i))
+            .filter(|r| loaded(r))
+        {
+            let meas = row.measured_mm - u0.measured_mm;
+            before.push((meas - model_deflection(&machine, row, obs_file)?).norm());
+            after.push((meas - model_deflection(&calibrated, row, obs_file)?).norm());
+        }
+    }
+    let values: Vec<String> = params.iter().map(|p| fmt_value(p.value, 1)).collect();
+    let yaml = set_top_level_list(text, machine_file, "k_nm_per_rad", &values)?;
+    Machine::from_yaml_str(&yaml, machine_file)?;
+    let mut cal = Calibration {
+        kind: "stiffness",
+        n_fit: n_loaded,
+        n_equations: m,
+        observability_o1: 0.0,
+        condition_number: 0.0,
+        rms_fit_mm: (sol.rss / dof_true as f64).sqrt(),
+        params,
+        validation: Validation::from_norms(&before, &after),
+        notes,
+        yaml,
+    };
+    cal.set_identifiability(&id);
+    cal.check_validation();
+    Ok(cal)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::calibrate::observations::RobotPose;
+    use approx::assert_abs_diff_eq;
+
+    /// Finite-difference agreement of the linear design, mm per µrad/(N·m).
+    const FD_TOL: f64 = 1e-6;
+
+    fn robot() -> Robot {
+        let path = concat!(env!("CARGO_MANIFEST_DIR"), "/machines/abb-irb1600.yaml");
+        match Machine::load(std::path::Path::new(path)) {
+            Ok(Machine::Robot(r)) => r,
+            _ => panic!("robot file"),
+        }
+    }
+
+    fn row(force: Vector3<f64>) -> Observation {
+        Observation {
+            line: 2,
+            id: "r".into(),
+            t_s: None,
+            measured_mm: Vector3::zeros(),
+            force_n: force,
+            moment_nm: Vector3::new(0.0, 5.0, 0.0),
+            ambient_c: None,
+            pose: Pose::Robot(RobotPose {
+                q_deg: [-20.0, 15.0, 10.0, 40.0, 50.0, -30.0],
+                mp_mm: Some(Vector3::new(20.0, 20.0, 35.0)),
+                wp_mm: Some(Vector3::new(-14.0, -14.0, 35.0)),
+                p_w: [None; 6],
+                dir: [None; 6],
+            }),
+        }
+    }
+
+    /// Column i of the design is ∂Δx/∂c_i at c = 0: compare with a central
+    /// difference of the exact forward model's loaded − unloaded deflection
+    /// over the compliance of joint i, on a weightless arm (no gravity sag)
+    /// at a tiny compliance (c = 1e-4 µrad/(N·m), Δc = ±1e-5), where the
+    /// deflected-pose terms the solver corrects for separately vanish.
+    #[test]
+    fn design_matches_finite_differences_of_the_forward_model() {
+        let r0 = robot();
+        let weightless = std::array::from_fn(|_| crate::machine::robot::PointMass {
+            mass_kg: 0.0,
+            com_mm: Vector3::zeros(),
+        });
+        let r = r0
+            .with_links(weightless)
+            .with_tool(*r0.flange_to_tool(), None, true);
+        let obs_row = row(Vector3::new(120.0, -200.0, -250.0));
+        let a = design_block(&r, &obs_row);
+        let c0 = [1e-4; 6];
+        let h = 1e-5;
+        for i in 0..6 {
+            let at = |dc: f64| {
+                let mut c = c0;
+                c[i] += dc;
+                let k: [f64; 6] = std::array::from_fn(|j| 1.0 / (c[j] * C_UNIT));
+                let m = Machine::Robot(r.with_stiffness(k));
+                model_deflection(&m, &obs_row, "t").unwrap()
+            };
+            let fd = (at(h) - at(-h)) / (2.0 * h);
+            assert_abs_diff_eq!(fd, a.column(i).into_owned(), epsilon = FD_TOL);
+        }
+    }
+
+    /// Centring: a group of rows with observations y and design rows A loses
+    /// its mean; for two rows (0, a) → (−a/2, a/2).
+    #[test]
+    fn centring_removes_the_group_mean() {
+        let mut a = DMatrix::zeros(6, 6);
+        let mut y = DVector::zeros(6);
+        a[(3, 0)] = 2.0;
+        y[4] = 4.0;
+        center(&mut a, &mut y, 0, 2);
+        assert_abs_diff_eq!(a[(0, 0)], -1.0, epsilon = 1e-15);
+        assert_abs_diff_eq!(a[(3, 0)], 1.0, epsilon = 1e-15);
+        assert_abs_diff_eq!(y[1], -2.0, epsilon = 1e-15);
+        assert_abs_diff_eq!(y[4], 2.0, epsilon = 1e-15);
+    }
+}

@@ -1,0 +1,449 @@
+//! Writing identified values into a machine file *as text*: the values of
+//! the keys that were identified are replaced in place, every comment, key
+//! order and layout of the original file is kept. Supported layouts are the
+//! ones of the bundled machine files: top-level flow lists
+//! (`k_nm_per_rad: [1, 2, 3]`), top-level flow maps on one line
+//! (`flange_to_tool: { x_mm: 0, … }`), DH sections written as a block list of
+//! one-line flow maps (`actual:` followed by `  - { a_mm: …, … }` rows), and
+//! machine-tool component tables (`EXX_um:` with `positions_mm`, `forward`,
+//! `reverse` flow lists). Anything else is a clear error; the caller re-loads
+//! the result with `Machine::from_yaml_str` to prove it is valid.
+
+use crate::error::{Error, Result};
+
+/// Formats a value with at most `decimals` decimals, trailing zeros removed
+/// (one decimal is kept so the value reads as a float).
+pub fn fmt_value(v: f64, decimals: usize) -> String {
+    let v = if v == 0.0 { 0.0 } else { v };
+    let s = format!("{v:.decimals$}");
+    if !s.contains('.') {
+        return format!("{s}.0");
+    }
+    let t = s.trim_end_matches('0');
+    let t = if t.ends_with('.') {
+        format!("{t}0")
+    } else {
+        t.to_string()
+    };
+    if t == "-0.0" { "0.0".into() } else { t }
+}
+
+fn edit_err(file: &str, msg: impl Into<String>) -> Error {
+    Error::Usage(format!(
+        "{file}: cannot write the calibrated values: {}",
+        msg.into()
+    ))
+}
+
+/// Index of the top-level line `key:` (no indentation).
+fn top_level_line(lines: &[String], key: &str) -> Option<usize> {
+    let prefix = format!("{key}:");
+    lines.iter().position(|l| l.starts_with(&prefix))
+}
+
+/// Splits a line into (content, comment) at the first `#` outside brackets
+/// that follows a blank.
+fn split_comment(line: &str) -> (&str, &str) {
+    let b = line.as_bytes();
+    for i in 0..b.len() {
+        if b[i] == b'#' && (i == 0 || b[i - 1] == b' ' || b[i - 1] == b'\t') {
+            return line.split_at(i);
+        }
+    }
+    (line, "")
+}
+
+/// Replaces the flow list `[ … ]` on a line with `values`.
+fn replace_list_in_line(line: &str, values: &[String]) -> Option<String> {
+    let (content, comment) = split_comment(line);
+    let open = content.find('[')?;
+    let close = content.rfind(']')?;
+    if close < open {
+        return None;
+    }
+    let mut out = String::with_capacity(line.len() + 16);
+    out.push_str(&content[..open]);
+    out.push('[');
+    out.push_str(&values.join(", "));
+    out.push(']');
+    out.push_str(&content[close + 1..]);
+    out.push_str(comment);
+    Some(out)
+}
+
+/// Replaces the top-level flow list `key: [ … ]` by `values`.
+pub fn set_top_level_list(text: &str, file: &str, key: &str, values: &[String]) -> Result<String> {
+    let mut lines: Vec<String> = text.lines().map(str::to_string).collect();
+    let i = top_level_line(&lines, key)
+        .ok_or_else(|| edit_err(file, format!("no top-level key `{key}`")))?;
+    let new = replace_list_in_line(&lines[i], values)
+        .ok_or_else(|| edit_err(file, format!("`{key}` is not a one-line flow list `[…]`")))?;
+    lines[i] = new;
+    Ok(join(lines, text))
+}
+
+fn join(lines: Vec<String>, original: &str) -> String {
+    let mut s = lines.join("\n");
+    if original.ends_with('\n') {
+        s.push('\n');
+    }
+    s
+}
+
+/// Replaces the values of `key: value` pairs inside a one-line flow map.
+/// Every key must be present.
+fn replace_map_values(line: &str, pairs: &[(&str, String)]) -> Option<String> {
+    let (content, comment) = split_comment(line);
+    let mut out = content.to_string();
+    for (key, val) in pairs {
+        let pat = format!("{key}:");
+        let mut search = 0;
+        let start = loop {
+            let at = out[search..].find(&pat)? + search;
+            let before = out[..at].chars().last();
+            if matches!(before, Some('{') | Some(' ') | Some(',')) {
+                break at + pat.len();
+            }
+            search = at + pat.len();
+        };
+        let rest = &out[start..];
+        let end = rest.find([',', '}']).map(|e| start + e)?;
+        let lead = if out[start..end].starts_with(' ') {
+            " "
+        } else {
+            ""
+        };
+        let trail_len = out[start..end].len() - out[start..end].trim_end().len();
+        let trail = " ".repeat(trail_len);
+        out.replace_range(start..end, &format!("{lead}{val}{trail}"));
+    }
+    out.push_str(comment);
+    Some(out)
+}
+
+/// Replaces `x_mm`, `y_mm`, `z_mm` of a top-level one-line frame map
+/// (`flange_to_tool`, `base`).
+pub fn set_frame_translation(
+    text: &str,
+    file: &str,
+    key: &str,
+    xyz_mm: [f64; 3],
+) -> Result<String> {
+    let mut lines: Vec<String> = text.lines().map(str::to_string).collect();
+    let i = top_level_line(&lines, key)
+        .ok_or_else(|| edit_err(file, format!("no top-level key `{key}`")))?;
+    let pairs = [
+        ("x_mm", fmt_value(xyz_mm[0], 4)),
+        ("y_mm", fmt_value(xyz_mm[1], 4)),
+        ("z_mm", fmt_value(xyz_mm[2], 4)),
+    ];
+    lines[i] = replace_map_values(&lines[i], &pairs).ok_or_else(|| {
+        edit_err(
+            file,
+            format!("`{key}` is not a one-line flow map with x_mm, y_mm, z_mm"),
+        )
+    })?;
+    Ok(join(lines, text))
+}
+
+/// One DH row as written in a machine file (lengths mm, angles degrees).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct DhRow {
+    /// `a_mm`.
+    pub a_mm: f64,
+    /// `alpha_deg`.
+    pub alpha_deg: f64,
+    /// `d_mm`.
+    pub d_mm: f64,
+    /// `theta_offset_deg`.
+    pub theta_offset_deg: f64,
+}
+
+impl DhRow {
+    fn pairs(&self) -> [(&'static str, String); 4] {
+        [
+            ("a_mm", fmt_value(self.a_mm, 4)),
+            ("alpha_deg", fmt_value(self.alpha_deg, 5)),
+            ("d_mm", fmt_value(self.d_mm, 4)),
+            ("theta_offset_deg", fmt_value(self.theta_offset_deg, 5)),
+        ]
+    }
+    fn flow(&self) -> String {
+        let p = self.pairs();
+        format!(
+            "  - {{ a_mm: {}, alpha_deg: {}, d_mm: {}, theta_offset_deg: {} }}",
+            p[0].1, p[1].1, p[2].1, p[3].1
+        )
+    }
+}
+
+/// Indices of the six `  - { … }` rows following the top-level line `key:`.
+fn dh_row_lines(lines: &[String], key: &str) -> Option<Vec<usize>> {
+    let i = top_level_line(lines, key)?;
+    let mut rows = Vec::with_capacity(6);
+    for (k, l) in lines.iter().enumerate().skip(i + 1) {
+        let t = l.trim_start();
+        if t.is_empty() || t.starts_with('#') {
+            continue;
+        }
+        if t.starts_with("- {") && l.starts_with(' ') {
+            rows.push(k);
+            if rows.len() == 6 {
+                return Some(rows);
+            }
+        } else {
+            break;
+        }
+    }
+    None
+}
+
+/// Writes the actual DH rows: edits the values of an existing `actual:`
+/// section in place, or inserts a new section after the `nominal:` rows.
+pub fn set_actual_dh(text: &str, file: &str, rows: &[DhRow; 6]) -> Result<String> {
+    let mut lines: Vec<String> = text.lines().map(str::to_string).collect();
+    if top_level_line(&lines, "actual").is_some() {
+        let idx = dh_row_lines(&lines, "actual").ok_or_else(|| {
+            edit_err(
+                file,
+                "`actual` is not a list of six one-line flow maps `- { a_mm: … }`",
+            )
+        })?;
+        for (k, &li) in idx.iter().enumerate() {
+            lines[li] = replace_map_values(&lines[li], &rows[k].pairs()).ok_or_else(|| {
+                edit_err(
+                    file,
+                    format!(
+                        "`actual` row {} lacks a_mm/alpha_deg/d_mm/theta_offset_deg",
+                        k + 1
+                    ),
+                )
+            })?;
+        }
+    } else {
+        let idx = dh_row_lines(&lines, "nominal").ok_or_else(|| {
+            edit_err(
+                file,
+                "`nominal` is not a list of six one-line flow maps `- { a_mm: … }`",
+            )
+        })?;
+        let after = idx.last().copied().unwrap_or(0) + 1;
+        let mut block = vec![
+            "# Identified by `postproc calibrate kinematics`.".to_string(),
+            "actual:".to_string(),
+        ];
+        block.extend(rows.iter().map(DhRow::flow));
+        lines.splice(after..after, block);
+    }
+    Ok(join(lines, text))
+}
+
+fn indent_of(l: &str) -> usize {
+    l.len() - l.trim_start().len()
+}
+
+fn is_content(l: &str) -> bool {
+    let t = l.trim_start();
+    !t.is_empty() && !t.starts_with('#')
+}
+
+/// Line range `[start, end)` of the entry `- name: AXIS` of the top-level
+/// `axes:` list, and the indentation of its keys.
+fn axis_entry(lines: &[String], file: &str, axis: &str) -> Result<(usize, usize, usize)> {
+    let axes =
+        top_level_line(lines, "axes").ok_or_else(|| edit_err(file, "no top-level key `axes`"))?;
+    let mut k = axes + 1;
+    while k < lines.len() {
+        let l = &lines[k];
+        if is_content(l) && indent_of(l) == 0 {
+            break;
+        }
+        let t = l.trim_start();
+        if let Some(rest) = t.strip_prefix("- name:") {
+            if rest.trim() == axis {
+                let dash = indent_of(l);
+                let mut end = k + 1;
+                while end < lines.len() {
+                    let m = &lines[end];
+                    if is_content(m) && indent_of(m) <= dash {
+                        break;
+                    }
+                    end += 1;
+                }
+                // Trailing blank/comment lines belong to what follows.
+                while end > k + 1 && !is_content(&lines[end - 1]) {
+                    end -= 1;
+                }
+                return Ok((k, end, dash + 2));
+            }
+        }
+        k += 1;
+    }
+    Err(edit_err(
+        file,
+        format!("no axis entry `- name: {axis}` (block style) under `axes`"),
+    ))
+}
+
+/// Line index of `key:` at indentation `indent` within `[start, end)`.
+fn key_line(lines: &[String], start: usize, end: usize, indent: usize, key: &str) -> Option<usize> {
+    let pat = format!("{key}:");
+    (start..end).find(|&i| {
+        lines
+            .get(i)
+            .is_some_and(|l| indent_of(l) == indent && l.trim_start().starts_with(&pat))
+    })
+}
+
+/// End (exclusive) of the block of children of line `at` (deeper indentation).
+fn block_end(lines: &[String], at: usize, end: usize) -> usize {
+    let base = lines.get(at).map_or(0, |l| indent_of(l));
+    let mut k = at + 1;
+    while k < end {
+        let l = &lines[k];
+        if is_content(l) && indent_of(l) <= base {
+            break;
+        }
+        k += 1;
+    }
+    while k > at + 1 && !is_content(&lines[k - 1]) {
+        k -= 1;
+    }
+    k
+}
+
+/// Makes sure the axis entry has the mapping key `section:`; returns its
+/// line index (inserted at the end of the entry when absent).
+fn ensure_section(lines: &mut Vec<String>, file: &str, axis: &str, section: &str) -> Result<usize> {
+    let (start, end, ki) = axis_entry(lines, file, axis)?;
+    if let Some(i) = key_line(lines, start + 1, end, ki, section) {
+        if lines[i].contains('{') {
+            return Err(edit_err(
+                file,
+                format!("`{section}` of axis {axis} is a flow map; write it in block style"),
+            ));
+        }
+        return Ok(i);
+    }
+    lines.insert(end, format!("{}{section}:", " ".repeat(ki)));
+    Ok(end)
+}
+
+/// Writes a bidirectional component-error table `key` (e.g. `EXX_um`) of a
+/// machine-tool axis: replaces the table when present, adds it (and the
+/// `component_errors:` section) when not. Values in the file's units.
+pub fn set_component_table(
+    text: &str,
+    file: &str,
+    axis: &str,
+    key: &str,
+    positions_mm: &[f64],
+    forward: &[f64],
+    reverse: &[f64],
+) -> Result<String> {
+    let mut lines: Vec<String> = text.lines().map(str::to_string).collect();
+    let sec = ensure_section(&mut lines, file, axis, "component_errors")?;
+    let sec_end = block_end(&lines, sec, lines.len());
+    let child_indent = (sec + 1..sec_end)
+        .find(|&i| is_content(&lines[i]))
+        .map_or(indent_of(&lines[sec]) + 2, |i| indent_of(&lines[i]));
+    let list = |v: &[f64], d: usize| -> String {
+        v.iter()
+            .map(|x| fmt_value(*x, d))
+            .collect::<Vec<_>>()
+            .join(", ")
+    };
+    let pad = " ".repeat(child_indent);
+    let new = vec![
+        format!("{pad}{key}:"),
+        format!("{pad}  positions_mm: [{}]", list(positions_mm, 3)),
+        format!("{pad}  forward: [{}]", list(forward, 2)),
+        format!("{pad}  reverse: [{}]", list(reverse, 2)),
+    ];
+    match key_line(&lines, sec + 1, sec_end, child_indent, key) {
+        Some(i) => {
+            let e = block_end(&lines, i, sec_end);
+            lines.splice(i..e, new);
+        }
+        None => {
+            lines.splice(sec + 1..sec + 1, new);
+        }
+    }
+    Ok(join(lines, text))
+}
+
+/// Writes a location error `key: value` (e.g. `EC0Y_urad`) of a
+/// machine-tool axis, adding the key (and `location_errors:`) when absent.
+pub fn set_location_error(
+    text: &str,
+    file: &str,
+    axis: &str,
+    key: &str,
+    value: f64,
+) -> Result<String> {
+    let mut lines: Vec<String> = text.lines().map(str::to_string).collect();
+    let sec = ensure_section(&mut lines, file, axis, "location_errors")?;
+    let sec_end = block_end(&lines, sec, lines.len());
+    let child_indent = (sec + 1..sec_end)
+        .find(|&i| is_content(&lines[i]))
+        .map_or(indent_of(&lines[sec]) + 2, |i| indent_of(&lines[i]));
+    let v = fmt_value(value, 2);
+    match key_line(&lines, sec + 1, sec_end, child_indent, key) {
+        Some(i) => {
+            let (_, comment) = split_comment(&lines[i]);
+            let comment = if comment.is_empty() {
+                String::new()
+            } else {
+                format!("  {comment}")
+            };
+            lines[i] = format!("{}{key}: {v}{comment}", " ".repeat(child_indent));
+        }
+        None => lines.insert(sec + 1, format!("{}{key}: {v}", " ".repeat(child_indent))),
+    }
+    Ok(join(lines, text))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn lists_maps_and_rows_are_edited_in_place() {
+        let text = "# c\nk_nm_per_rad: [1.0, 2.0]  # keep\nflange_to_tool: { x_mm: 0.0, y_mm: 0.0, z_mm: 150.0, quaternion: [1.0, 0.0, 0.0, 0.0] }\n";
+        let t =
+            set_top_level_list(text, "f", "k_nm_per_rad", &["3.5".into(), "4.0".into()]).unwrap();
+        assert_eq!(t.lines().nth(1), Some("k_nm_per_rad: [3.5, 4.0]  # keep"));
+        let t = set_frame_translation(&t, "f", "flange_to_tool", [0.1, -0.2, 150.25]).unwrap();
+        assert_eq!(
+            t.lines().nth(2),
+            Some(
+                "flange_to_tool: { x_mm: 0.1, y_mm: -0.2, z_mm: 150.25, quaternion: [1.0, 0.0, 0.0, 0.0] }"
+            )
+        );
+        assert!(set_top_level_list(text, "f", "missing", &[]).is_err());
+        assert_eq!(fmt_value(2.0, 3), "2.0");
+        assert_eq!(fmt_value(-0.00001, 3), "0.0");
+        assert_eq!(fmt_value(1.23456, 3), "1.235");
+    }
+
+    #[test]
+    fn machine_tool_tables_and_location_errors() {
+        let text = "kind: machine_tool\naxes:\n  - name: X\n    type: linear\n    component_errors:\n      EBX_urad:\n        forward: [1.0]\n  - name: Y\n    type: linear\n    location_errors:\n      EC0Y_urad: 35.0  # sq\n# end\ntools: {}\n";
+        let t = set_component_table(
+            text,
+            "f",
+            "X",
+            "EXX_um",
+            &[0.0, 100.0],
+            &[0.0, 2.5],
+            &[1.0, 3.0],
+        )
+        .unwrap();
+        let t = set_component_table(&t, "f", "Y", "EYY_um", &[0.0], &[0.0], &[0.5]).unwrap();
+        let t = set_location_error(&t, "f", "Y", "EC0Y_urad", -12.5).unwrap();
+        let t = set_location_error(&t, "f", "X", "EB0X_urad", 3.0).unwrap();
+        let want = "kind: machine_tool\naxes:\n  - name: X\n    type: linear\n    component_errors:\n      EXX_um:\n        positions_mm: [0.0, 100.0]\n        forward: [0.0, 2.5]\n        reverse: [1.0, 3.0]\n      EBX_urad:\n        forward: [1.0]\n    location_errors:\n      EB0X_urad: 3.0\n  - name: Y\n    type: linear\n    location_errors:\n      EC0Y_urad: -12.5  # sq\n    component_errors:\n      EYY_um:\n        positions_mm: [0.0]\n        forward: [0.0]\n        reverse: [0.5]\n# end\ntools: {}\n";
+        assert_eq!(t, want);
+        assert!(set_component_table(text, "f", "Q", "EQQ_um", &[], &[], &[]).is_err());
+    }
+}
