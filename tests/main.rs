@@ -4,6 +4,7 @@
 mod common;
 mod gcode_cli;
 mod gcode_grammar;
+mod diagnose;
 mod golden;
 mod machine_tool;
 mod observations;

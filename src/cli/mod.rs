@@ -1,6 +1,7 @@
 //! Command line: raw flags → validated run configuration → engine calls.
 //! Nothing else in the crate parses flags.
 
+mod diagnose;
 mod gcode;
 mod rapid;
 
@@ -9,6 +10,8 @@ use std::path::PathBuf;
 use clap::{Args, Parser, Subcommand, ValueEnum};
 
 use crate::error::{Error, Result};
+
+pub use diagnose::{DiagnoseArgs, DiagnoseFormat};
 
 /// Exit codes, also listed in `--help`.
 pub const EXIT_HELP: &str = "Exit codes: 0 success; 1 completed, but blocks are out of tolerance or limits; 2 bad input or usage.";
@@ -40,6 +43,8 @@ pub enum Command {
     /// Dry run: predicted deviation per block and summary, nothing written.
     #[command(after_help = EXIT_HELP)]
     Report(ReportArgs),
+    /// Find where model and measurements disagree, name the missing effect, add it.
+    Diagnose(DiagnoseArgs),
 }
 
 /// Options shared by the commands that read a G-code program.
@@ -174,6 +179,7 @@ pub fn run(cli: Cli) -> Result<i32> {
         Command::Compensate(a) if rapid::wants(&a.program) => rapid::compensate(&a),
         Command::Compensate(a) => gcode::compensate(&a),
         Command::Report(a) => gcode::report(&a),
+        Command::Diagnose(a) => diagnose::run(&a),
     }
 }
 
