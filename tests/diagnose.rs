@@ -130,9 +130,15 @@ fn measure_with_noise(
     let mut sum2 = 0.0;
     let n = rows.len().max(1) as f64;
     for r in &mut rows {
-        let p = forward::predict(truth, r, "truth").expect("prediction").attained_mm;
+        let p = forward::predict(truth, r, "truth")
+            .expect("prediction")
+            .attained_mm;
         let sd = noise_sd_mm(&p, level);
-        let e = Vector3::new(rng.gaussian(0.0, sd), rng.gaussian(0.0, sd), rng.gaussian(0.0, sd));
+        let e = Vector3::new(
+            rng.gaussian(0.0, sd),
+            rng.gaussian(0.0, sd),
+            rng.gaussian(0.0, sd),
+        );
         sum2 += (e * 1000.0).norm_squared();
         r.measured_mm = p + e;
     }
@@ -144,7 +150,10 @@ fn measure_with_noise(
                 "dir1", "dir2", "dir3", "dir4", "dir5", "dir6",
             ]),
         ),
-        Machine::Tool(_) => (ObsKind::MachineTool, columns(&["t_s", "dirX", "dirY", "dirZ"])),
+        Machine::Tool(_) => (
+            ObsKind::MachineTool,
+            columns(&["t_s", "dirX", "dirY", "dirZ"]),
+        ),
     };
     let obs = Observations {
         kind,
@@ -292,7 +301,8 @@ fn robot_confounded_joint1_zero_vs_base_rotation() {
     assert!(
         d.screen
             .iter()
-            .any(|c| (c.a == "joint1_zero" && c.b == "base_rz") || (c.a == "base_rz" && c.b == "joint1_zero")),
+            .any(|c| (c.a == "joint1_zero" && c.b == "base_rz")
+                || (c.a == "base_rz" && c.b == "joint1_zero")),
         "the identifiability screen lists the pair"
     );
 }

@@ -2,9 +2,9 @@
 //! goldens, property tests and regressions.
 
 mod common;
+mod diagnose;
 mod gcode_cli;
 mod gcode_grammar;
-mod diagnose;
 mod golden;
 mod machine_tool;
 mod observations;

@@ -119,27 +119,60 @@ pub struct Effect {
 
 /// Families of the library, for `--list-effects` without a machine.
 pub const FAMILIES: &[(&str, &str)] = &[
-    ("robot", "jointN_compliance — compliance of joint N, µrad/(N·m)"),
+    (
+        "robot",
+        "jointN_compliance — compliance of joint N, µrad/(N·m)",
+    ),
     ("robot", "jointN_zero — zero offset of joint N, µrad"),
-    ("robot", "jointN_a / jointN_d / jointN_alpha — DH length, offset, twist error, µm or µrad"),
-    ("robot", "tcp_offset — tool-centre-point offset in the flange frame, 3 × µm"),
-    ("robot", "base_x/y/z, base_rx/ry/rz — measurement (base) frame translation µm / rotation µrad"),
+    (
+        "robot",
+        "jointN_a / jointN_d / jointN_alpha — DH length, offset, twist error, µm or µrad",
+    ),
+    (
+        "robot",
+        "tcp_offset — tool-centre-point offset in the flange frame, 3 × µm",
+    ),
+    (
+        "robot",
+        "base_x/y/z, base_rx/ry/rz — measurement (base) frame translation µm / rotation µrad",
+    ),
     ("robot", "payload_mass — payload mass error, kg"),
-    ("robot", "thermal_jointN_a|d_pJ — Paper B growth of a DH length with joint J power, µm/W"),
-    ("robot", "jointN_backlash — backlash of joint N from dirN, µrad"),
-    ("machine tool", "EXXX_lin / EXXX_quad — component error linear / quadratic in position (21 geometric errors with the location errors)"),
-    ("machine tool", "E?0?_urad / _mm — location (squareness, rotary axis, spindle) errors"),
-    ("machine tool", "X_backlash … — reversal (backlash) per axis from dirX…"),
-    ("machine tool", "X_stiffness … — compliance per linear axis against the force column, µm/N"),
-    ("machine tool", "spindle_growth_time / spindle_growth_power — spindle thermal growth, µm/h, µm/kW"),
+    (
+        "robot",
+        "thermal_jointN_a|d_pJ — Paper B growth of a DH length with joint J power, µm/W",
+    ),
+    (
+        "robot",
+        "jointN_backlash — backlash of joint N from dirN, µrad",
+    ),
+    (
+        "machine tool",
+        "EXXX_lin / EXXX_quad — component error linear / quadratic in position (21 geometric errors with the location errors)",
+    ),
+    (
+        "machine tool",
+        "E?0?_urad / _mm — location (squareness, rotary axis, spindle) errors",
+    ),
+    (
+        "machine tool",
+        "X_backlash … — reversal (backlash) per axis from dirX…",
+    ),
+    (
+        "machine tool",
+        "X_stiffness … — compliance per linear axis against the force column, µm/N",
+    ),
+    (
+        "machine tool",
+        "spindle_growth_time / spindle_growth_power — spindle thermal growth, µm/h, µm/kW",
+    ),
     ("machine tool", "tool_length — tool length error, µm"),
 ];
 
 const NOT_THERMAL: &str = "the machine-file format has no thermal section yet: the fitted growth is reported, not written";
 const NOT_FRAME: &str = "observations are in the robot base frame: a frame offset is a registration error of the measurement set-up, not a machine parameter; not written";
 const NOT_ROBOT_BACKLASH: &str = "the robot file has no joint backlash key; not written";
-const NOT_STIFFNESS: &str =
-    "the machine-tool file has no axis stiffness key yet; not written";
+const NOT_TOOL_LENGTH: &str = "the tool table holds the length the controller compensates, so editing it changes nothing in the model: re-measure the tool (its offset) instead; not written";
+const NOT_STIFFNESS: &str = "the machine-tool file has no axis stiffness key yet; not written";
 
 /// Builds the candidate library for a machine and the columns its rows carry.
 pub fn library(machine: &Machine, rows: &[Observation]) -> Vec<Effect> {
@@ -270,7 +303,11 @@ fn robot_library(rows: &[Observation]) -> Vec<Effect> {
         if has_dir(i) {
             let mut e = eff(
                 format!("joint{}_backlash", i + 1),
-                format!("backlash of joint {} (last-motion sign dir{})", i + 1, i + 1),
+                format!(
+                    "backlash of joint {} (last-motion sign dir{})",
+                    i + 1,
+                    i + 1
+                ),
                 vec![format!("b{} [µrad]", i + 1)],
                 Action::RobotBacklash(i),
             );
@@ -324,17 +361,16 @@ fn tool_library(t: &crate::machine::tool::MachineTool, rows: &[Observation]) -> 
             };
             let unit = if key.ends_with("_mm") { "µm" } else { "µrad" };
             out.push(eff(
-                key.trim_end_matches("_urad").trim_end_matches("_mm").to_string(),
+                key.trim_end_matches("_urad")
+                    .trim_end_matches("_mm")
+                    .to_string(),
                 format!("{kind} error {key} of axis {a}"),
                 vec![format!("{key} [{unit}]")],
-                Action::Location {
-                    axis: Some(a),
-                    key,
-                },
+                Action::Location { axis: Some(a), key },
             ));
         }
-        for d in 0..6 {
-            let key = format!("E{}{a}_{}", LETTERS[d], if d < 3 { "um" } else { "urad" });
+        for (d, dl) in LETTERS.iter().enumerate() {
+            let key = format!("E{dl}{a}_{}", if d < 3 { "um" } else { "urad" });
             let unit = if d < 3 { "µm" } else { "µrad" };
             let what = match (d == ax.slot, d < 3) {
                 (true, _) => "positioning",
@@ -363,7 +399,11 @@ fn tool_library(t: &crate::machine::tool::MachineTool, rows: &[Observation]) -> 
         }
         let own = format!(
             "E{a}{a}_{}",
-            if ax.kind == AxisKind::Linear { "um" } else { "urad" }
+            if ax.kind == AxisKind::Linear {
+                "um"
+            } else {
+                "urad"
+            }
         );
         let has_dir = tool_rows().any(|(_, tp)| tp.dir.get(ax.slot).copied().flatten().is_some());
         if has_dir {
@@ -372,7 +412,11 @@ fn tool_library(t: &crate::machine::tool::MachineTool, rows: &[Observation]) -> 
                 format!("backlash (reversal error) of axis {a}"),
                 vec![format!(
                     "b{a} [{}]",
-                    if ax.kind == AxisKind::Linear { "µm" } else { "µrad" }
+                    if ax.kind == AxisKind::Linear {
+                        "µm"
+                    } else {
+                        "µrad"
+                    }
                 )],
                 Action::AxisBacklash { axis: a, key: own },
             ));
@@ -391,7 +435,9 @@ fn tool_library(t: &crate::machine::tool::MachineTool, rows: &[Observation]) -> 
     for key in ["EX0S_mm", "EY0S_mm", "EA0S_urad", "EB0S_urad"] {
         let unit = if key.ends_with("_mm") { "µm" } else { "µrad" };
         out.push(eff(
-            key.trim_end_matches("_urad").trim_end_matches("_mm").to_string(),
+            key.trim_end_matches("_urad")
+                .trim_end_matches("_mm")
+                .to_string(),
             format!("spindle location error {key}"),
             vec![format!("{key} [{unit}]")],
             Action::Location {
@@ -426,12 +472,7 @@ fn tool_library(t: &crate::machine::tool::MachineTool, rows: &[Observation]) -> 
         vec!["dL [µm]".into()],
         Action::ToolLength,
     );
-    if tool_rows().any(|(_, tp)| tp.tool_mm.is_some()) {
-        e.not_writable =
-            Some("the rows give their own tool_mm: correct the tool length at the source".into());
-    } else if t.tools().next().is_none() {
-        e.not_writable = Some("the machine file has no tool table".into());
-    }
+    e.not_writable = Some(NOT_TOOL_LENGTH.into());
     out.push(e);
     out
 }
@@ -487,7 +528,7 @@ fn diff_column(
 }
 
 fn robot_dh(r: &Robot, joint: usize, f: DhField, v: f64) -> Machine {
-    let mut p = r.params(Model::Actual).clone();
+    let mut p = *r.params(Model::Actual);
     if let Some(j) = p.joints.get_mut(joint) {
         match f {
             DhField::Theta => j.theta_offset_rad += v * 1e-6,
@@ -511,8 +552,10 @@ pub fn robot_compliance(r: &Robot, joint: usize, dc: f64) -> Robot {
 
 /// Robot with the TCP moved by `d` µm in the flange frame.
 pub fn robot_tcp(r: &Robot, d: Vector3<f64>) -> Robot {
-    let tool = Isometry3::from_parts(Translation3::from(d * 1e-3), nalgebra::UnitQuaternion::identity())
-        * r.flange_to_tool();
+    let tool = Isometry3::from_parts(
+        Translation3::from(d * 1e-3),
+        nalgebra::UnitQuaternion::identity(),
+    ) * r.flange_to_tool();
     r.with_tool(tool, r.tool_load().copied(), true)
 }
 
@@ -531,7 +574,10 @@ pub fn robot_payload(r: &Robot, dm: f64) -> Robot {
     r.with_tool(*r.flange_to_tool(), Some(load), true)
 }
 
-fn robot_row_value(row: &Observation, f: impl Fn(&crate::calibrate::observations::RobotPose) -> Option<f64>) -> f64 {
+fn robot_row_value(
+    row: &Observation,
+    f: impl Fn(&crate::calibrate::observations::RobotPose) -> Option<f64>,
+) -> f64 {
     match &row.pose {
         Pose::Robot(rp) => f(rp).unwrap_or(0.0),
         Pose::Tool(_) => 0.0,
@@ -545,7 +591,15 @@ pub fn sensitivity(effect: &Effect, ctx: &Context, rows: &[Observation]) -> Resu
     let mut s = DMatrix::zeros(3 * n, k);
     match (&effect.action, ctx.machine) {
         (Action::Dh(j, f), Machine::Robot(r)) => {
-            diff_column(&robot_dh(r, *j, *f, STEP), &robot_dh(r, *j, *f, -STEP), 2.0 * STEP, rows, ctx, &mut s, 0)?;
+            diff_column(
+                &robot_dh(r, *j, *f, STEP),
+                &robot_dh(r, *j, *f, -STEP),
+                2.0 * STEP,
+                rows,
+                ctx,
+                &mut s,
+                0,
+            )?;
         }
         (Action::Compliance(j), Machine::Robot(r)) => {
             let plus = Machine::Robot(robot_compliance(r, *j, COMPLIANCE_STEP));
@@ -584,7 +638,14 @@ pub fn sensitivity(effect: &Effect, ctx: &Context, rows: &[Observation]) -> Resu
                 }
             }
         }
-        (Action::Thermal { joint, field, power }, Machine::Robot(r)) => {
+        (
+            Action::Thermal {
+                joint,
+                field,
+                power,
+            },
+            Machine::Robot(r),
+        ) => {
             diff_column(
                 &robot_dh(r, *joint, *field, STEP),
                 &robot_dh(r, *joint, *field, -STEP),
@@ -603,7 +664,15 @@ pub fn sensitivity(effect: &Effect, ctx: &Context, rows: &[Observation]) -> Resu
         }
         (Action::RobotBacklash(j), Machine::Robot(r)) => {
             let t = DhField::Theta;
-            diff_column(&robot_dh(r, *j, t, STEP), &robot_dh(r, *j, t, -STEP), 2.0 * STEP, rows, ctx, &mut s, 0)?;
+            diff_column(
+                &robot_dh(r, *j, t, STEP),
+                &robot_dh(r, *j, t, -STEP),
+                2.0 * STEP,
+                rows,
+                ctx,
+                &mut s,
+                0,
+            )?;
             for (i, row) in rows.iter().enumerate() {
                 let d = robot_row_value(row, |rp| rp.dir.get(*j).copied().flatten().map(f64::from));
                 for c in 0..3 {
@@ -611,7 +680,10 @@ pub fn sensitivity(effect: &Effect, ctx: &Context, rows: &[Observation]) -> Resu
                 }
             }
         }
-        (Action::Location { .. } | Action::Component { .. } | Action::AxisBacklash { .. }, Machine::Tool(_)) => {
+        (
+            Action::Location { .. } | Action::Component { .. } | Action::AxisBacklash { .. },
+            Machine::Tool(_),
+        ) => {
             let plus = tool_variant(ctx.yaml, &effect.action, STEP, ctx.machine)?;
             diff_column(&plus, ctx.machine, STEP, rows, ctx, &mut s, 0)?;
         }
@@ -625,10 +697,10 @@ pub fn sensitivity(effect: &Effect, ctx: &Context, rows: &[Observation]) -> Resu
                 let Pose::Tool(tp) = &row.pose else { continue };
                 let cmd = tp.axes();
                 let len = tool_length(t, tp);
-                let h = STEP * 1e-3;
-                let dp = (t.geometric(&cmd, &tp.dirs(), len + h).pos
-                    - t.geometric(&cmd, &tp.dirs(), len - h).pos)
-                    / (2.0 * STEP);
+                // The controller compensates the length it knows (`len`); a
+                // real tool (or spindle) longer by ΔL puts the tip ΔL further
+                // along −(tool direction): ∂tip/∂ΔL = −dir, 1e-3 mm per µm.
+                let dp = -t.geometric(&cmd, &tp.dirs(), len).dir * 1e-3;
                 let scale = match effect.action {
                     Action::SpindleTime => row.t_s.unwrap_or(0.0) / 3600.0,
                     Action::SpindlePower => tp.spindle_w.unwrap_or(0.0) / 1000.0,
@@ -661,7 +733,7 @@ fn as_f64(v: &Value) -> Option<f64> {
     v.as_f64().or_else(|| v.as_i64().map(|i| i as f64))
 }
 
-fn axis_map<'a>(doc: &'a mut Value, axis: char) -> Result<&'a mut Mapping> {
+fn axis_map(doc: &mut Value, axis: char) -> Result<&mut Mapping> {
     let axes = doc
         .get_mut("axes")
         .and_then(Value::as_sequence_mut)
@@ -703,8 +775,15 @@ fn interp(pos: &[f64], val: &[f64], q: f64) -> f64 {
     for w in 0..pos.len().saturating_sub(1) {
         let (p0, p1) = (pos[w], pos[w + 1]);
         if q >= p0 && q <= p1 {
-            let (v0, v1) = (val.get(w).copied().unwrap_or(0.0), val.get(w + 1).copied().unwrap_or(0.0));
-            return if p1 > p0 { v0 + (q - p0) / (p1 - p0) * (v1 - v0) } else { v0 };
+            let (v0, v1) = (
+                val.get(w).copied().unwrap_or(0.0),
+                val.get(w + 1).copied().unwrap_or(0.0),
+            );
+            return if p1 > p0 {
+                v0 + (q - p0) / (p1 - p0) * (v1 - v0)
+            } else {
+                v0
+            };
         }
     }
     0.0
@@ -722,7 +801,11 @@ fn add_to_table(
     rotary: bool,
     f: impl Fn(f64) -> (f64, f64),
 ) -> Result<()> {
-    let pos_key = if rotary { "positions_deg" } else { "positions_mm" };
+    let pos_key = if rotary {
+        "positions_deg"
+    } else {
+        "positions_mm"
+    };
     let comp = sub_map(ax, "component_errors")?;
     let (old_pos, old_f, old_r) = match comp.get(name).and_then(Value::as_mapping) {
         Some(t) => {
@@ -786,11 +869,19 @@ pub fn apply_to_yaml(doc: &mut Value, action: &Action, value: f64, m: &Machine) 
                     sub_map(sub_map(root, "spindle")?, "location_errors")?
                 }
             };
-            let add = if k.ends_with("_mm") { value * 1e-3 } else { value };
+            let add = if k.ends_with("_mm") {
+                value * 1e-3
+            } else {
+                value
+            };
             let old = map.get(k.as_str()).and_then(as_f64).unwrap_or(0.0);
             map.insert(key(k), Value::from(round9(old + add)));
         }
-        Action::Component { axis, key: k, power } => {
+        Action::Component {
+            axis,
+            key: k,
+            power,
+        } => {
             let (lo, hi, rot) = travel(*axis);
             let mid = 0.5 * (lo + hi);
             let half = (0.5 * (hi - lo)).max(1e-9);
@@ -803,20 +894,6 @@ pub fn apply_to_yaml(doc: &mut Value, action: &Action, value: f64, m: &Machine) 
         Action::AxisBacklash { axis, key: k } => {
             let (lo, hi, rot) = travel(*axis);
             add_to_table(axis_map(doc, *axis)?, k, (lo, hi), rot, |_| (0.0, value))?;
-        }
-        Action::ToolLength => {
-            let tools = doc
-                .get_mut("tools")
-                .and_then(Value::as_mapping_mut)
-                .ok_or_else(|| Error::Usage("machine file has no tool table".into()))?;
-            let first = tools
-                .iter_mut()
-                .filter_map(|(h, v)| Some((as_f64(h)?, v)))
-                .min_by(|a, b| a.0.total_cmp(&b.0))
-                .and_then(|(_, v)| v.as_mapping_mut())
-                .ok_or_else(|| Error::Usage("machine file has an empty tool table".into()))?;
-            let old = first.get("length_mm").and_then(as_f64).unwrap_or(0.0);
-            first.insert(key("length_mm"), Value::from(round9(old + value * 1e-3)));
         }
         _ => {
             return Err(Error::Usage(
@@ -834,4 +911,212 @@ pub fn tool_variant(doc: &Value, action: &Action, value: f64, m: &Machine) -> Re
     let text = serde_yaml::to_string(&d)
         .map_err(|e| Error::Usage(format!("cannot write the machine document: {e}")))?;
     Machine::from_yaml_str(&text, "(diagnose variant)")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::calibrate::observations::{RobotPose, ToolPose};
+    use approx::assert_abs_diff_eq;
+    use nalgebra::Vector6;
+
+    /// Sensitivity tolerance for exact (table/linear) effects, mm per unit.
+    const EXACT_TOL: f64 = 1e-9;
+    /// Tolerance where the model's own small angles (≤ 100 µrad) enter, mm per unit.
+    const SMALL_ANGLE_TOL: f64 = 2e-7;
+
+    fn load(rel: &str) -> (Machine, String, Value) {
+        let path = format!("{}/{rel}", env!("CARGO_MANIFEST_DIR"));
+        let text = std::fs::read_to_string(&path).expect("machine file");
+        let m = Machine::from_yaml_str(&text, &path).expect("valid");
+        let v: Value = serde_yaml::from_str(&text).expect("yaml");
+        (m, text, v)
+    }
+
+    fn robot_row(q_deg: [f64; 6], f: Vector3<f64>, dir: i8) -> Observation {
+        Observation {
+            line: 0,
+            id: "r".into(),
+            t_s: None,
+            measured_mm: Vector3::zeros(),
+            force_n: f,
+            moment_nm: Vector3::zeros(),
+            ambient_c: None,
+            pose: Pose::Robot(RobotPose {
+                q_deg,
+                mp_mm: None,
+                wp_mm: None,
+                p_w: [Some(100.0); 6],
+                dir: [Some(dir); 6],
+            }),
+        }
+    }
+
+    fn tool_row(xyz: [f64; 3], dir: i8, t_s: f64) -> Observation {
+        Observation {
+            line: 0,
+            id: "t".into(),
+            t_s: Some(t_s),
+            measured_mm: Vector3::zeros(),
+            force_n: Vector3::new(100.0, 0.0, 0.0),
+            moment_nm: Vector3::zeros(),
+            ambient_c: None,
+            pose: Pose::Tool(ToolPose {
+                xyz_mm: Vector3::from(xyz),
+                abc_deg: [None; 3],
+                dir: [Some(dir), Some(dir), Some(dir), None, None, None],
+                tool_mm: None,
+                spindle_rpm: None,
+                spindle_w: Some(2000.0),
+                p_w: [None; 6],
+            }),
+        }
+    }
+
+    fn find<'a>(lib: &'a [Effect], name: &str) -> &'a Effect {
+        lib.iter()
+            .find(|e| e.name == name)
+            .expect("effect in library")
+    }
+
+    /// Compliance column = J_MP[:, j] · τ_j · 1e-9 (mm per µrad/(N·m)):
+    /// the joint yields by Δθ_j = dc·τ_j; the statics module's linear
+    /// point deflection with a torque vector e_j·k_j·τ_j·1e-9 gives exactly
+    /// J_MP e_j τ_j 1e-9. The deflected-FK difference agrees to first order
+    /// (≈0.1 % from the ≈1 mrad deflection already present).
+    #[test]
+    fn robot_compliance_column_matches_statics() {
+        let (m, _, v) = load("machines/abb-irb1600.yaml");
+        let Machine::Robot(r) = &m else {
+            panic!("robot")
+        };
+        let row = robot_row(
+            [10.0, 20.0, -15.0, 30.0, 40.0, 50.0],
+            Vector3::new(0.0, 0.0, -200.0),
+            1,
+        );
+        let ctx = Context {
+            machine: &m,
+            yaml: &v,
+            kind: MeasuredKind::Position,
+            file: "t",
+        };
+        let lib = library(&m, std::slice::from_ref(&row));
+        for j in 0..6 {
+            let s = sensitivity(
+                find(&lib, &format!("joint{}_compliance", j + 1)),
+                &ctx,
+                std::slice::from_ref(&row),
+            )
+            .unwrap();
+            let Pose::Robot(rp) = &row.pose else { panic!() };
+            let q = forward::joints_rad(rp);
+            let tcp = r.flange_to_tool().translation.vector;
+            let tau = r.gravity_torques(Model::Actual, &q)
+                + r.wrench_torques(Model::Actual, &q, &tcp, &forward::row_wrench(&row));
+            let k = r.k_nmm_per_rad()[j];
+            let mut t = Vector6::zeros();
+            t[j] = k * tau[j] * 1e-9;
+            let want = r.point_deflection(Model::Actual, &q, &tcp, &t);
+            let tol = 1e-2 * want.fixed_rows::<3>(0).norm() + 1e-12;
+            for c in 0..3 {
+                assert_abs_diff_eq!(s[(c, 0)], want[c], epsilon = tol);
+            }
+        }
+    }
+
+    /// Rotation of the frame about z by 1 µrad moves p by (−p_y, p_x, 0)·1e-6;
+    /// a translation of 1 µm along x moves it by (1e-3, 0, 0) mm.
+    #[test]
+    fn robot_frame_columns_by_hand() {
+        let (m, _, v) = load("machines/abb-irb1600.yaml");
+        let row = robot_row([30.0, 10.0, 0.0, 0.0, 20.0, 0.0], Vector3::zeros(), 1);
+        let rows = std::slice::from_ref(&row);
+        let ctx = Context {
+            machine: &m,
+            yaml: &v,
+            kind: MeasuredKind::Position,
+            file: "t",
+        };
+        let lib = library(&m, rows);
+        let p = forward::predict(&m, &row, "t").unwrap().attained_mm;
+        let s = sensitivity(find(&lib, "base_rz"), &ctx, rows).unwrap();
+        assert_abs_diff_eq!(s[(0, 0)], -p.y * 1e-6, epsilon = EXACT_TOL);
+        assert_abs_diff_eq!(s[(1, 0)], p.x * 1e-6, epsilon = EXACT_TOL);
+        assert_abs_diff_eq!(s[(2, 0)], 0.0, epsilon = EXACT_TOL);
+        let s = sensitivity(find(&lib, "base_x"), &ctx, rows).unwrap();
+        assert_abs_diff_eq!(s[(0, 0)], 1e-3, epsilon = EXACT_TOL);
+    }
+
+    /// The joint-1 zero offset rotates the arm about the base z axis (the
+    /// joint-1 axis of the modified-DH IRB 1600 is base z through the
+    /// origin): its column equals the base_rz column to first order.
+    #[test]
+    fn joint1_zero_equals_base_rz() {
+        let (m, _, v) = load("machines/abb-irb1600.yaml");
+        let row = robot_row([30.0, 10.0, 5.0, 20.0, 20.0, 10.0], Vector3::zeros(), 1);
+        let rows = std::slice::from_ref(&row);
+        let ctx = Context {
+            machine: &m,
+            yaml: &v,
+            kind: MeasuredKind::Position,
+            file: "t",
+        };
+        let lib = library(&m, rows);
+        let a = sensitivity(find(&lib, "joint1_zero"), &ctx, rows).unwrap();
+        let b = sensitivity(find(&lib, "base_rz"), &ctx, rows).unwrap();
+        for c in 0..3 {
+            assert_abs_diff_eq!(a[(c, 0)], b[(c, 0)], epsilon = 1e-9);
+        }
+    }
+
+    /// Machine-tool columns by hand (machines/README.md sign conventions):
+    /// - X backlash (reverse column of EXX + b): (1e-3, 0, 0) mm/µm for a
+    ///   row moving in −x, zero for +x (X is first in the chain, untilted);
+    /// - squareness EC0Y: x error −ε·y → −y·1e-6 mm/µrad;
+    /// - EXX quadratic: p·u², u = (x − 500)/500: at x = 750, 0.25e-3 mm/µm;
+    /// - tool length: the tip moves along −z (tool direction) 1e-3 mm/µm;
+    ///   spindle growth with time = that × t/3600, with power × P/1000;
+    /// - X stiffness: F_x · 1e-3 mm per µm/N.
+    #[test]
+    fn tool_columns_by_hand() {
+        let (m, _, v) = load("machines/afm-r1000.yaml");
+        let rows = [
+            tool_row([750.0, 300.0, 200.0], -1, 7200.0),
+            tool_row([750.0, 300.0, 200.0], 1, 7200.0),
+        ];
+        let ctx = Context {
+            machine: &m,
+            yaml: &v,
+            kind: MeasuredKind::Position,
+            file: "t",
+        };
+        let lib = library(&m, &rows);
+        let s = sensitivity(find(&lib, "X_backlash"), &ctx, &rows).unwrap();
+        assert_abs_diff_eq!(s[(0, 0)], 1e-3, epsilon = EXACT_TOL);
+        assert_abs_diff_eq!(s[(1, 0)], 0.0, epsilon = EXACT_TOL);
+        assert_abs_diff_eq!(s[(3, 0)], 0.0, epsilon = EXACT_TOL);
+        let s = sensitivity(find(&lib, "EC0Y"), &ctx, &rows).unwrap();
+        assert_abs_diff_eq!(s[(0, 0)], -300.0e-6, epsilon = SMALL_ANGLE_TOL);
+        let s = sensitivity(find(&lib, "EXX_quad"), &ctx, &rows).unwrap();
+        assert_abs_diff_eq!(s[(0, 0)], 0.25e-3, epsilon = EXACT_TOL);
+        let s = sensitivity(find(&lib, "tool_length"), &ctx, &rows).unwrap();
+        assert_abs_diff_eq!(s[(2, 0)], -1e-3, epsilon = SMALL_ANGLE_TOL);
+        let st = sensitivity(find(&lib, "spindle_growth_time"), &ctx, &rows).unwrap();
+        assert_abs_diff_eq!(st[(2, 0)], 2.0 * s[(2, 0)], epsilon = EXACT_TOL);
+        let sp = sensitivity(find(&lib, "spindle_growth_power"), &ctx, &rows).unwrap();
+        assert_abs_diff_eq!(sp[(2, 0)], 2.0 * s[(2, 0)], epsilon = EXACT_TOL);
+        let sk = sensitivity(find(&lib, "X_stiffness"), &ctx, &rows).unwrap();
+        assert_abs_diff_eq!(sk[(0, 0)], 0.1, epsilon = EXACT_TOL);
+    }
+
+    /// Linear straightness is not offered (it is squareness by definition).
+    #[test]
+    fn no_linear_straightness() {
+        let (m, _, _) = load("machines/afm-r1000.yaml");
+        let lib = library(&m, &[tool_row([0.0; 3], 1, 0.0)]);
+        assert!(lib.iter().all(|e| e.name != "EYX_lin"));
+        assert!(lib.iter().any(|e| e.name == "EYX_quad"));
+        assert!(lib.iter().any(|e| e.name == "EXX_lin"));
+    }
 }

@@ -11,7 +11,11 @@ use crate::diagnose::effects::{Effect, FAMILIES};
 const TRENDS_SHOWN: usize = 8;
 
 fn pct(x: f64) -> String {
-    if x < 1e-99 { "<1e-99".into() } else { format!("{x:.1e}") }
+    if x < 1e-99 {
+        "<1e-99".into()
+    } else {
+        format!("{x:.1e}")
+    }
 }
 
 fn metrics_row(out: &mut String, label: &str, m: &Metrics) {
@@ -58,9 +62,15 @@ pub fn render_table(d: &Diagnosis) -> String {
     }
     let _ = writeln!(o, "  {}", d.where_.sentence);
 
-    let _ = writeln!(o, "\nWHAT  forward selection (F test Holm-corrected, ΔBIC, margin, held-out)");
+    let _ = writeln!(
+        o,
+        "\nWHAT  forward selection (F test Holm-corrected, ΔBIC, margin, held-out)"
+    );
     if d.screen.is_empty() {
-        let _ = writeln!(o, "  identifiability screen: every candidate pair is separable in these rows");
+        let _ = writeln!(
+            o,
+            "  identifiability screen: every candidate pair is separable in these rows"
+        );
     } else {
         let pairs: Vec<String> = d
             .screen
@@ -74,7 +84,12 @@ pub fn render_table(d: &Diagnosis) -> String {
         );
     }
     for (i, s) in d.steps.iter().enumerate() {
-        let _ = writeln!(o, "  step {}: training RSS {:.0} µm²", i + 1, s.rss_before_um2);
+        let _ = writeln!(
+            o,
+            "  step {}: training RSS {:.0} µm²",
+            i + 1,
+            s.rss_before_um2
+        );
         let _ = writeln!(
             o,
             "    {:<24} {:>12} {:>9} {:>9} {:>9} {:>6}",
@@ -150,15 +165,28 @@ pub fn render_library(lib: Option<&[Effect]>) -> String {
     let mut o = String::new();
     match lib {
         None => {
-            let _ = writeln!(o, "candidate effects (give --machine and --observations for the instances):");
+            let _ = writeln!(
+                o,
+                "candidate effects (give --machine and --observations for the instances):"
+            );
             for (kind, text) in FAMILIES {
                 let _ = writeln!(o, "  {kind:<13} {text}");
             }
         }
         Some(lib) => {
             for e in lib {
-                let w = if e.not_writable.is_some() { "  (not written to the machine file)" } else { "" };
-                let _ = writeln!(o, "  {:<26} {} — {}{w}", e.name, e.params.join(", "), e.description);
+                let w = if e.not_writable.is_some() {
+                    "  (not written to the machine file)"
+                } else {
+                    ""
+                };
+                let _ = writeln!(
+                    o,
+                    "  {:<26} {} — {}{w}",
+                    e.name,
+                    e.params.join(", "),
+                    e.description
+                );
             }
         }
     }

@@ -86,7 +86,10 @@ pub fn covariates(row: &Observation) -> Vec<(String, f64)> {
                     out.push((names[i].to_string(), ax[i]));
                 }
                 if let Some(d) = tp.dir[i] {
-                    out.push((format!("dir{}", names[i].chars().next().unwrap_or('X')), f64::from(d)));
+                    out.push((
+                        format!("dir{}", names[i].chars().next().unwrap_or('X')),
+                        f64::from(d),
+                    ));
                 }
                 if let Some(p) = tp.p_w[i] {
                     out.push((format!("p{}_w", names[i].chars().next().unwrap_or('X')), p));

@@ -200,7 +200,10 @@ fn score(
     accepted: &[usize],
 ) -> (f64, Vec<Scored>, Vec<usize>) {
     let n = r.len();
-    let p0: usize = accepted.iter().map(|&c| s.get(c).map_or(0, |m| m.ncols())).sum();
+    let p0: usize = accepted
+        .iter()
+        .map(|&c| s.get(c).map_or(0, |m| m.ncols()))
+        .sum();
     let rss0 = if accepted.is_empty() {
         r.norm_squared()
     } else {
@@ -321,15 +324,11 @@ pub fn select(pb: &Problem) -> Selection {
             .skip(1)
             .map(|s| (s.index, (s.rss - best.rss) / sigma2))
             .collect();
-        let margin = margins
-            .iter()
-            .map(|m| m.1)
-            .fold(f64::INFINITY, f64::min);
+        let margin = margins.iter().map(|m| m.1).fold(f64::INFINITY, f64::min);
         let mut with_set = accepted.clone();
         with_set.push(best.index);
         let holdout_rms_um = (hold_rms(&accepted), hold_rms(&with_set));
-        let significant =
-            p_holm.first().is_some_and(|p| *p < ALPHA) && best.dbic < -BIC_MIN;
+        let significant = p_holm.first().is_some_and(|p| *p < ALPHA) && best.dbic < -BIC_MIN;
         let outcome = if !significant {
             Outcome::NothingDetectable
         } else if margin < MARGIN_CHI2 {

@@ -192,3 +192,71 @@ pub fn write_model(machine: &Machine, machine_text: &str, found: &[Found]) -> Re
         not_written,
     })
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::diagnose::effects::library;
+    use crate::diagnose::{Found, Param};
+    use approx::assert_abs_diff_eq;
+
+    /// Written stiffness tolerance, N·m/rad (the file keeps 3 decimals).
+    const K_TOL: f64 = 1e-3;
+
+    fn found(m: &Machine, name: &str, values: &[f64]) -> Found {
+        let lib = library(m, &[]);
+        let e = lib.into_iter().find(|e| e.name == name).expect("effect");
+        Found {
+            params: values
+                .iter()
+                .map(|v| Param {
+                    name: "p".into(),
+                    value: *v,
+                    u: 0.0,
+                })
+                .collect(),
+            effect: e,
+            bootstrap: 1.0,
+        }
+    }
+
+    /// Joint 3 compliance +1 µrad/(N·m): k = 1/(1/140940 + 1e-6)
+    /// = 1/(7.09522e-6 + 1e-6) = 123529.721 N·m/rad. TCP +0.4 mm in x.
+    #[test]
+    fn robot_keys_written() {
+        let path = concat!(env!("CARGO_MANIFEST_DIR"), "/machines/abb-irb1600.yaml");
+        let text = std::fs::read_to_string(path).unwrap();
+        let m = Machine::from_yaml_str(&text, "m").unwrap();
+        let w = write_model(
+            &m,
+            &text,
+            &[
+                found(&m, "joint3_compliance", &[1.0]),
+                found(&m, "tcp_offset", &[400.0, 0.0, 0.0]),
+            ],
+        )
+        .unwrap();
+        assert!(w.text.starts_with("# ABB IRB 1600"));
+        let Machine::Robot(r) = Machine::from_yaml_str(&w.text, "w").unwrap() else {
+            panic!("robot")
+        };
+        assert_abs_diff_eq!(r.k_nmm_per_rad()[2] / 1000.0, 123529.721, epsilon = K_TOL);
+        assert_abs_diff_eq!(r.flange_to_tool().translation.vector.x, 0.4, epsilon = 1e-9);
+        assert_eq!(w.written, vec!["joint3_compliance", "tcp_offset"]);
+    }
+
+    /// Squareness EC0Y 35 + 40 = 75 µrad; robot-only effects are refused
+    /// for a machine tool and thermal ones are listed as not written.
+    #[test]
+    fn tool_location_written() {
+        let path = concat!(env!("CARGO_MANIFEST_DIR"), "/machines/afm-r1000.yaml");
+        let text = std::fs::read_to_string(path).unwrap();
+        let m = Machine::from_yaml_str(&text, "m").unwrap();
+        let w = write_model(&m, &text, &[found(&m, "EC0Y", &[40.0])]).unwrap();
+        let Machine::Tool(t) = Machine::from_yaml_str(&w.text, "w").unwrap() else {
+            panic!("tool")
+        };
+        let y = t.axis(1).expect("Y axis");
+        assert_abs_diff_eq!(y.location.angles_rad.z, 75e-6, epsilon = 1e-12);
+    }
+}
