@@ -211,6 +211,7 @@ fn assert_rerun_clean(model_text: &str, d: &Diagnosis, obs: &Observations, seed:
     let m = machine(model_text);
     let w = write::write_model(&m, model_text, &d.found).expect("model written");
     assert_eq!(w.written.len(), d.found.len(), "all effects written");
+    assert!(w.in_place, "values edited in place, comments kept");
     let again = run(&w.text, obs, seed);
     assert!(again.found.is_empty(), "again: {}", again.verdict);
     assert_eq!(again.verdict, "no detectable missing effect");

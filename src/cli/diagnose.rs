@@ -107,8 +107,13 @@ pub fn run(a: &DiagnoseArgs) -> Result<i32> {
         std::fs::write(path, &w.text).map_err(|e| Error::io(path, e))?;
         if a.format == DiagnoseFormat::Table {
             out.push_str(&format!(
-                "\nwrote {}: {}\n",
+                "\nwrote {} ({}): {}\n",
                 path.display(),
+                if w.in_place {
+                    "values edited in place, comments kept"
+                } else {
+                    "document rewritten, inner comments not kept"
+                },
                 if w.written.is_empty() {
                     "no effect added (the model is unchanged)".to_string()
                 } else {

@@ -8,8 +8,12 @@
 //! tool table. The others (thermal growth, robot joint backlash, axis
 //! stiffness, measurement-frame registration) are listed as not written.
 //!
-//! The document is rewritten from its parsed form: the file's leading
-//! comment block is kept, comments inside the document are not.
+//! The file's text is edited in place: every value that changed is
+//! rewritten on its own line (scalars and one-line flow sequences/mappings),
+//! so comments and layout are kept. When a change cannot be made that way
+//! (a key the file does not have yet, a multi-line value), the document is
+//! rewritten from its parsed form instead, keeping only the leading comment
+//! block; [`Written::in_place`] says which happened.
 
 use serde_yaml::{Mapping, Value};
 
@@ -27,6 +31,8 @@ pub struct Written {
     pub written: Vec<String>,
     /// Effects not written, with the reason.
     pub not_written: Vec<(String, String)>,
+    /// True when the text was edited in place (comments kept).
+    pub in_place: bool,
 }
 
 fn key(s: &str) -> Value {
@@ -155,17 +161,7 @@ pub fn write_model(machine: &Machine, machine_text: &str, found: &[Found]) -> Re
         }
         written.push(f.effect.name.clone());
     }
-    let body = serde_yaml::to_string(&doc)
-        .map_err(|e| Error::Usage(format!("cannot write the machine file: {e}")))?;
-    let mut text = String::new();
-    for line in machine_text.lines() {
-        if line.starts_with('#') || line.trim().is_empty() {
-            text.push_str(line);
-            text.push('\n');
-        } else {
-            break;
-        }
-    }
+    let mut header = String::new();
     for f in found {
         let vals: Vec<String> = f
             .params
@@ -177,19 +173,181 @@ pub fn write_model(machine: &Machine, machine_text: &str, found: &[Found]) -> Re
         } else {
             "NOT written (no key in the file format)"
         };
-        text.push_str(&format!(
+        header.push_str(&format!(
             "# postproc diagnose: {} {state}: {}\n",
             f.effect.name,
             vals.join(", ")
         ));
     }
-    text.push_str(&body);
+    let old: Value = serde_yaml::from_str(machine_text)
+        .map_err(|e| Error::Usage(format!("machine file: {e}")))?;
+    let mut lines: Vec<String> = machine_text.lines().map(str::to_string).collect();
+    let edited = edit(&mut lines, "", &old, &doc).is_some() && {
+        let t = lines.join("\n");
+        serde_yaml::from_str::<Value>(&t).is_ok_and(|v| v == doc)
+    };
+    let mut text = String::new();
+    let split = machine_text
+        .lines()
+        .take_while(|l| l.starts_with('#') || l.trim().is_empty())
+        .count();
+    if edited {
+        for l in lines.iter().take(split) {
+            text.push_str(l);
+            text.push('\n');
+        }
+        text.push_str(&header);
+        for l in lines.iter().skip(split) {
+            text.push_str(l);
+            text.push('\n');
+        }
+    } else {
+        let body = serde_yaml::to_string(&doc)
+            .map_err(|e| Error::Usage(format!("cannot write the machine file: {e}")))?;
+        for l in machine_text.lines().take(split) {
+            text.push_str(l);
+            text.push('\n');
+        }
+        text.push_str(&header);
+        text.push_str(
+            "# (rewritten by postproc diagnose: comments inside the document were not kept)\n",
+        );
+        text.push_str(&body);
+    }
     // The written file must load.
     Machine::from_yaml_str(&text, "(written model)")?;
     Ok(Written {
         text,
         written,
         not_written,
+        in_place: edited,
+    })
+}
+
+/// Makes `lines` carry `new` where it differs from `old` at `path`;
+/// `None` when some change cannot be made line-locally.
+fn edit(lines: &mut [String], path: &str, old: &Value, new: &Value) -> Option<()> {
+    if old == new {
+        return Some(());
+    }
+    if !path.is_empty() && replace_value(lines, path, new).is_some() {
+        return Some(());
+    }
+    match (old, new) {
+        (Value::Mapping(a), Value::Mapping(b)) if a.len() == b.len() => {
+            for (k, vb) in b {
+                let va = a.get(k)?;
+                let ks = match k {
+                    Value::String(s) => s.clone(),
+                    Value::Number(n) => n.to_string(),
+                    _ => return None,
+                };
+                let p = if path.is_empty() {
+                    ks
+                } else {
+                    format!("{path}.{ks}")
+                };
+                edit(lines, &p, va, vb)?;
+            }
+            Some(())
+        }
+        (Value::Sequence(a), Value::Sequence(b)) if a.len() == b.len() && !path.is_empty() => {
+            for (i, (va, vb)) in a.iter().zip(b).enumerate() {
+                edit(lines, &format!("{path}[{i}]"), va, vb)?;
+            }
+            Some(())
+        }
+        _ => None,
+    }
+}
+
+/// Replaces the one-line value at `path` by the flow rendering of `v`.
+fn replace_value(lines: &mut [String], path: &str, v: &Value) -> Option<()> {
+    let (line_no, col) = crate::machine::yaml::locate(&lines.join("\n"), path)?;
+    let line = lines.get(line_no.checked_sub(1)?)?.clone();
+    let start_key = col.checked_sub(1)?;
+    let is_item = path.ends_with(']');
+    let rest_from = if is_item {
+        // `col` points at the item's dash.
+        start_key + line.get(start_key..)?.find('-')? + 1
+    } else {
+        let after = line.get(start_key..)?;
+        start_key + after.find(':')? + 1
+    };
+    let rest = line.get(rest_from..)?;
+    let start = rest_from + (rest.len() - rest.trim_start().len());
+    let body = line.get(start..)?;
+    let end = match body.chars().next()? {
+        '{' | '[' => {
+            let mut depth = 0i32;
+            let mut end = None;
+            for (i, c) in body.char_indices() {
+                match c {
+                    '{' | '[' => depth += 1,
+                    '}' | ']' => {
+                        depth -= 1;
+                        if depth == 0 {
+                            end = Some(i + 1);
+                            break;
+                        }
+                    }
+                    '#' | '"' | '\'' => return None,
+                    _ => {}
+                }
+            }
+            start + end?
+        }
+        '#' | '|' | '>' | '&' | '*' | '!' => return None,
+        _ => {
+            if !matches!(v, Value::Number(_)) {
+                return None;
+            }
+            start
+                + body
+                    .find(" #")
+                    .unwrap_or(body.len())
+                    .min(body.trim_end().len())
+        }
+    };
+    let new_line = format!("{}{}{}", line.get(..start)?, flow(v)?, line.get(end..)?);
+    *lines.get_mut(line_no - 1)? = new_line;
+    Some(())
+}
+
+/// One-line flow rendering of numbers, plain strings, sequences and mappings.
+fn flow(v: &Value) -> Option<String> {
+    Some(match v {
+        Value::Number(n) => match n.as_f64() {
+            Some(f) if n.is_f64() => {
+                let s = format!("{f}");
+                if s.contains(['.', 'e', 'E', 'N', 'i']) {
+                    s
+                } else {
+                    format!("{s}.0")
+                }
+            }
+            _ => n.to_string(),
+        },
+        Value::Bool(b) => b.to_string(),
+        Value::String(s)
+            if !s.is_empty()
+                && s.chars()
+                    .all(|c| c.is_ascii_alphanumeric() || "_-. ".contains(c)) =>
+        {
+            s.clone()
+        }
+        Value::Sequence(items) => {
+            let parts: Option<Vec<String>> = items.iter().map(flow).collect();
+            format!("[{}]", parts?.join(", "))
+        }
+        Value::Mapping(m) => {
+            let mut parts = Vec::new();
+            for (k, v) in m {
+                parts.push(format!("{}: {}", flow(k)?, flow(v)?));
+            }
+            format!("{{ {} }}", parts.join(", "))
+        }
+        _ => return None,
     })
 }
 
@@ -243,6 +401,12 @@ mod tests {
         assert_abs_diff_eq!(r.k_nmm_per_rad()[2] / 1000.0, 123529.721, epsilon = K_TOL);
         assert_abs_diff_eq!(r.flange_to_tool().translation.vector.x, 0.4, epsilon = 1e-9);
         assert_eq!(w.written, vec!["joint3_compliance", "tcp_offset"]);
+        assert!(w.in_place);
+        assert!(w.text.contains("# Paper C Table 6"), "comments kept");
+        assert!(
+            w.text
+                .contains("k_nm_per_rad: [270990.0, 430040.0, 123529.721,")
+        );
     }
 
     /// Squareness EC0Y 35 + 40 = 75 µrad; robot-only effects are refused
@@ -258,5 +422,18 @@ mod tests {
         };
         let y = t.axis(1).expect("Y axis");
         assert_abs_diff_eq!(y.location.angles_rad.z, 75e-6, epsilon = 1e-12);
+        assert!(w.in_place);
+        assert!(w.text.contains("      EC0Y_urad: 75.0\n"));
+        assert!(w.text.contains("# Structure: X is carried by Y"));
+        // A backlash edits the X positioning table's columns in place.
+        let mut f = found(&m, "EC0Y", &[8.0]);
+        f.effect.name = "X_backlash".into();
+        f.effect.action = crate::diagnose::effects::Action::AxisBacklash {
+            axis: 'X',
+            key: "EXX_um".into(),
+        };
+        let w = write_model(&m, &text, &[f]).unwrap();
+        assert!(w.in_place, "{}", w.text);
+        assert!(w.text.contains("reverse: [11.0, "), "{}", w.text);
     }
 }
