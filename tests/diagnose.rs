@@ -356,6 +356,100 @@ fn tool_nothing_hidden() {
     assert!(d.found.is_empty(), "{}", diagnose::report::render_table(&d));
 }
 
+/// Paper B thermal growth, linearised: the upper-arm length a3 (700 mm,
+/// modified-DH row 3) grows by 0.3 µm per watt of joint-2 motor power.
+/// Truth: for every row a robot whose actual a3 is 0.3e-3 mm · P2 longer
+/// (`Robot::with_actual`, independent of the candidate's sensitivity code).
+#[test]
+fn robot_paper_b_thermal_growth() {
+    let model = text("machines/abb-irb1600.yaml");
+    let Machine::Robot(r) = machine(&model) else {
+        panic!("robot file")
+    };
+    const G_UM_PER_W: f64 = 0.3;
+    for (seed, level) in [(31, 1.0), (32, 0.5)] {
+        let mut rows = robot_rows(100, seed);
+        let mut rng = SplitMix64::new(seed ^ 0x5eed);
+        let mut sum2 = 0.0;
+        for row in &mut rows {
+            let Pose::Robot(rp) = &row.pose else { panic!() };
+            let p2 = rp.p_w[1].expect("power");
+            let mut dh = *r.params(postproc::machine::robot::Model::Actual);
+            dh.joints[2].a_mm += G_UM_PER_W * 1e-3 * p2;
+            let truth = Machine::Robot(r.with_actual(dh));
+            let p = forward::predict(&truth, row, "truth")
+                .expect("prediction")
+                .attained_mm;
+            let sd = noise_sd_mm(&p, level);
+            let e = Vector3::new(
+                rng.gaussian(0.0, sd),
+                rng.gaussian(0.0, sd),
+                rng.gaussian(0.0, sd),
+            );
+            sum2 += (e * 1000.0).norm_squared();
+            row.measured_mm = p + e;
+        }
+        let noise = (sum2 / rows.len() as f64).sqrt();
+        let mut obs = measure(&machine(&model), Vec::new(), 0.0, 0);
+        obs.rows = rows;
+        let d = run(&model, &obs, seed);
+        assert_found(&d, "thermal_joint3_a_p2", 0, G_UM_PER_W, noise);
+        assert!(
+            d.found[0].effect.not_writable.is_some(),
+            "thermal is reported, not written"
+        );
+    }
+}
+
+/// Spindle thermal growth with time, 40 µm/h: the tip moves down (−z) by
+/// 40·t/3600 µm. Truth per row: the Z positioning table EZZ shifted by
+/// −40·t/3600 µm (a tool-side Z error of +δ moves the tip +δ in z).
+#[test]
+fn tool_spindle_growth_time() {
+    let model = text("machines/afm-r1000.yaml");
+    let fwd = "forward: [0.0, -0.2, -0.7, -1.6, -2.9, -4.5, -6.1, -7.4, -8.3, -8.8, -9.0]";
+    let rev = "reverse: [-2.0, -2.2, -2.7, -3.7, -5.1, -6.7, -8.3, -9.7, -10.7, -11.2, -11.4]";
+    let shifted = |line: &str, add: f64| -> String {
+        let (head, list) = line.split_once('[').expect("list");
+        let nums: Vec<String> = list
+            .trim_end_matches(']')
+            .split(',')
+            .map(|v| format!("{}", v.trim().parse::<f64>().expect("number") + add))
+            .collect();
+        format!("{head}[{}]", nums.join(", "))
+    };
+    const G_UM_PER_H: f64 = 40.0;
+    for (seed, level) in [(33, 1.0), (34, 0.3)] {
+        let mut rows = tool_rows(150, seed);
+        let mut rng = SplitMix64::new(seed ^ 0x5eed);
+        let mut sum2 = 0.0;
+        for row in &mut rows {
+            let growth = G_UM_PER_H * row.t_s.expect("time") / 3600.0;
+            let t = model
+                .replace(fwd, &shifted(fwd, -growth))
+                .replace(rev, &shifted(rev, -growth));
+            assert_ne!(t, model);
+            let truth = machine(&t);
+            let p = forward::predict(&truth, row, "truth")
+                .expect("prediction")
+                .attained_mm;
+            let sd = noise_sd_mm(&p, level);
+            let e = Vector3::new(
+                rng.gaussian(0.0, sd),
+                rng.gaussian(0.0, sd),
+                rng.gaussian(0.0, sd),
+            );
+            sum2 += (e * 1000.0).norm_squared();
+            row.measured_mm = p + e;
+        }
+        let noise = (sum2 / rows.len() as f64).sqrt();
+        let mut obs = measure(&machine(&model), Vec::new(), 0.0, 0);
+        obs.rows = rows;
+        let d = run(&model, &obs, seed);
+        assert_found(&d, "spindle_growth_time", 0, G_UM_PER_H, noise);
+    }
+}
+
 /// The sample's measured file is what its true machine file gives
 /// (regenerate with `DIAGNOSE_WRITE_SAMPLE=1 cargo test --test integration sample`).
 #[test]
