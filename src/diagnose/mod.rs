@@ -107,6 +107,12 @@ pub struct Gap {
     pub after: Metrics,
     /// Percentage of the RMS gap closed.
     pub closed_pct: f64,
+    /// Estimated measurement-noise floor of the 3D RMS, µm: √3 × the
+    /// per-coordinate standard deviation of the training residual after the
+    /// fit (no model can go below it).
+    pub noise_floor_um: f64,
+    /// Percentage of the closable gap (before − noise floor) closed.
+    pub closed_of_closable_pct: f64,
 }
 
 /// The whole diagnosis.
@@ -266,12 +272,25 @@ pub fn diagnose(
     };
     let mb = metrics(&before);
     let ma = metrics(&after);
+    let (rss_t, k_t) = match &sel.fit {
+        Some(f) => (f.rss, f.params.len()),
+        None => (sel.steps.first().map_or(0.0, |s| s.rss_before_um2), 0),
+    };
+    let dof = (3 * train.len()).saturating_sub(k_t).max(1) as f64;
+    let noise_floor_um = (3.0 * rss_t / dof).sqrt();
+    let closable = mb.rms_um - noise_floor_um;
     let gap = Gap {
         rows: hold.len(),
         before: mb,
         after: ma,
         closed_pct: if mb.rms_um > 0.0 {
             100.0 * (1.0 - ma.rms_um / mb.rms_um)
+        } else {
+            0.0
+        },
+        noise_floor_um,
+        closed_of_closable_pct: if closable > 0.0 {
+            (100.0 * (mb.rms_um - ma.rms_um) / closable).min(100.0)
         } else {
             0.0
         },
