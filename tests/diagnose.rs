@@ -450,6 +450,85 @@ fn tool_spindle_growth_time() {
     }
 }
 
+/// Five-axis AC trunnion: the library covers the rotary axes (location and
+/// component candidates in µrad/µm, tables over degrees); nothing hidden →
+/// nothing found; a hidden A-axis line offset is named; a hidden C zero
+/// angle is confounded with the A orientation about z.
+#[test]
+fn five_axis_rotary() {
+    let model = text("machines/five-axis-ac.yaml");
+    let m = machine(&model);
+    let mut rows = tool_rows(120, 41);
+    let mut rng = SplitMix64::new(41);
+    for r in &mut rows {
+        if let Pose::Tool(tp) = &mut r.pose {
+            tp.xyz_mm = Vector3::new(
+                -300.0 + 600.0 * rng.next_f64(),
+                -200.0 + 400.0 * rng.next_f64(),
+                -200.0 + 400.0 * rng.next_f64(),
+            );
+            tp.abc_deg = [
+                Some(-90.0 + 180.0 * rng.next_f64()),
+                None,
+                Some(-180.0 + 360.0 * rng.next_f64()),
+            ];
+        }
+    }
+    let lib = diagnose::library(&m, &rows);
+    assert!(lib.iter().any(|e| e.name == "EC0C"));
+    assert!(lib.iter().any(|e| e.name == "EX0C"));
+    assert!(lib.iter().any(|e| e.name == "EAA_lin"));
+    let obs = measure(&m, rows.clone(), 0.3, 41);
+    let d = run(&model, &obs, 41);
+    assert!(d.found.is_empty(), "{}", diagnose::report::render_table(&d));
+    assert_eq!(d.candidates, lib.len(), "every candidate has a sensitivity");
+    // A-axis line 40 µm off in y (EY0A 0.012 → 0.052 mm): error (I − R(θ))·d.
+    let truth_text = model.replace("EY0A_mm: 0.012", "EY0A_mm: 0.052");
+    assert_ne!(truth_text, model);
+    let (obs, noise) = measure_with_noise(&machine(&truth_text), rows.clone(), 0.3, 42);
+    let d = run(&model, &obs, 42);
+    assert_found(&d, "EY0A", 0, 40.0, noise);
+    assert_rerun_clean(&model, &d, &obs, 42);
+    // The C table's zero angle turns the workpiece about z exactly as an
+    // orientation error of the A axis about z does (C is nearest the
+    // workpiece): a hidden EC0C is reported confounded with EC0A.
+    let truth_text = model.replace("EC0C_urad: 30.0", "EC0C_urad: 180.0");
+    let obs = measure(&machine(&truth_text), rows, 0.3, 43);
+    let d = run(&model, &obs, 43);
+    assert!(d.found.is_empty(), "{}", diagnose::report::render_table(&d));
+    match d.steps.last().map(|s| &s.outcome) {
+        Some(Outcome::Confounded { name, with }) => {
+            let mut all = with.clone();
+            all.push(name.clone());
+            assert!(all.contains(&"EC0C".to_string()) && all.contains(&"EC0A".to_string()));
+        }
+        other => panic!("expected confounded, got {other:?}"),
+    }
+}
+
+/// Observations of the wrong kind of machine are a usage error (exit 2).
+#[test]
+fn cli_kind_mismatch() {
+    postproc()
+        .args(["diagnose", "--machine", "afm-r1000", "--observations"])
+        .arg(repo("samples/diagnose/measured.csv"))
+        .assert()
+        .code(2)
+        .stderr(predicates::str::contains("robot joint columns"));
+    postproc()
+        .args([
+            "diagnose",
+            "--machine",
+            "abb-irb1600",
+            "--holdout",
+            "1.5",
+            "--observations",
+        ])
+        .arg(repo("samples/diagnose/measured.csv"))
+        .assert()
+        .code(2);
+}
+
 /// The sample's measured file is what its true machine file gives
 /// (regenerate with `DIAGNOSE_WRITE_SAMPLE=1 cargo test --test integration sample`).
 #[test]
