@@ -82,9 +82,9 @@ pub fn run(a: &DiagnoseArgs) -> Result<i32> {
             "diagnose needs --machine and --observations (or --list-effects)".into(),
         ));
     };
-    if !(0.0..1.0).contains(&a.holdout) {
+    if !(a.holdout > 0.0 && a.holdout < 1.0) {
         return Err(Error::Usage(format!(
-            "--holdout {} must be at least 0 and below 1",
+            "--holdout {} must be above 0 and below 1 (an effect is accepted only when held-out rows confirm it)",
             a.holdout
         )));
     }

@@ -74,7 +74,7 @@ pub enum Outcome {
         with: Vec<String>,
     },
     /// The best candidate is significant on the training rows but does not
-    /// improve the held-out rows.
+    /// improve the held-out rows (or there are no held-out rows).
     NotConfirmed {
         /// Its name.
         name: String,
@@ -340,7 +340,7 @@ pub fn select(pb: &Problem) -> Selection {
                     .map(|m| name(m.0))
                     .collect(),
             }
-        } else if !r_hold.is_empty() && holdout_rms_um.1 > holdout_rms_um.0 * (1.0 - HOLDOUT_GAIN) {
+        } else if r_hold.is_empty() || holdout_rms_um.1 > holdout_rms_um.0 * (1.0 - HOLDOUT_GAIN) {
             Outcome::NotConfirmed {
                 name: name(best.index),
             }
