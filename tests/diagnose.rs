@@ -408,6 +408,56 @@ fn robot_paper_b_thermal_growth() {
     }
 }
 
+/// Payload 3 kg heavier than the file's 5 kg tool load (same centre of
+/// gravity; truth built with `Robot::with_tool`). Written to
+/// `tool_load.mass_kg`, after which nothing more is found.
+#[test]
+fn robot_payload_error() {
+    let model = text("machines/abb-irb1600.yaml");
+    let truth_text = model.replace("tool_load: { mass_kg: 5.0,", "tool_load: { mass_kg: 8.0,");
+    assert_ne!(truth_text, model);
+    let (obs, noise) = measure_with_noise(&machine(&truth_text), robot_rows(100, 51), 0.5, 51);
+    let d = run(&model, &obs, 51);
+    assert_found(&d, "payload_mass", 0, 3.0, noise);
+    assert_rerun_clean(&model, &d, &obs, 51);
+}
+
+/// Backlash of joint 2, 200 µrad: the joint stops b/2 short on the side it
+/// came from, θ2 + dir2·100 µrad (truth per row through `Robot::with_actual`).
+#[test]
+fn robot_joint_backlash() {
+    let model = text("machines/abb-irb1600.yaml");
+    let Machine::Robot(r) = machine(&model) else {
+        panic!("robot file")
+    };
+    let mut rows = robot_rows(100, 52);
+    let mut rng = SplitMix64::new(52);
+    let mut sum2 = 0.0;
+    for row in &mut rows {
+        let Pose::Robot(rp) = &row.pose else { panic!() };
+        let dir = f64::from(rp.dir[1].expect("dir2"));
+        let mut dh = *r.params(postproc::machine::robot::Model::Actual);
+        dh.joints[1].theta_offset_rad += dir * 100e-6;
+        let truth = Machine::Robot(r.with_actual(dh));
+        let p = forward::predict(&truth, row, "truth")
+            .expect("row")
+            .attained_mm;
+        let sd = noise_sd_mm(&p, 1.0);
+        let e = Vector3::new(
+            rng.gaussian(0.0, sd),
+            rng.gaussian(0.0, sd),
+            rng.gaussian(0.0, sd),
+        );
+        sum2 += (e * 1000.0).norm_squared();
+        row.measured_mm = p + e;
+    }
+    let noise = (sum2 / rows.len() as f64).sqrt();
+    let mut obs = measure(&machine(&model), Vec::new(), 0.0, 0);
+    obs.rows = rows;
+    let d = run(&model, &obs, 52);
+    assert_found(&d, "joint2_backlash", 0, 200.0, noise);
+}
+
 /// Spindle thermal growth with time, 40 µm/h: the tip moves down (−z) by
 /// 40·t/3600 µm. Truth per row: the Z positioning table EZZ shifted by
 /// −40·t/3600 µm (a tool-side Z error of +δ moves the tip +δ in z).
