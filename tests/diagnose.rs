@@ -212,6 +212,20 @@ fn assert_rerun_clean(model_text: &str, d: &Diagnosis, obs: &Observations, seed:
     let w = write::write_model(&m, model_text, &d.found).expect("model written");
     assert_eq!(w.written.len(), d.found.len(), "all effects written");
     assert!(w.in_place, "values edited in place, comments kept");
+    // The written model, through the full forward model, closes the gap as
+    // the linearised fit said (within 5 % of its held-out RMS).
+    let opts = Options {
+        holdout: 0.3,
+        seed,
+        bootstrap: 10,
+    };
+    let m = diagnose::holdout_metrics(&machine(&w.text), obs, "obs.csv", &opts).expect("metrics");
+    assert!(
+        (m.rms_um - d.gap.after.rms_um).abs() <= 0.05 * d.gap.after.rms_um,
+        "written model {:.2} µm vs linearised {:.2} µm",
+        m.rms_um,
+        d.gap.after.rms_um
+    );
     let again = run(&w.text, obs, seed);
     assert!(again.found.is_empty(), "again: {}", again.verdict);
     assert_eq!(again.verdict, "no detectable missing effect");

@@ -120,6 +120,14 @@ pub fn run(a: &DiagnoseArgs) -> Result<i32> {
                     format!("added {}", w.written.join(", "))
                 }
             ));
+            if !w.written.is_empty() {
+                let written = Machine::from_yaml_str(&w.text, &path.display().to_string())?;
+                let m = diagnose::holdout_metrics(&written, &obs, &o.display().to_string(), &opts)?;
+                out.push_str(&format!(
+                    "written model on the {} held-out rows (full forward model): RMS {:.1} µm, max {:.1} µm, 95th {:.1} µm\n",
+                    d.gap.rows, m.rms_um, m.max_um, m.p95_um
+                ));
+            }
             for (name, why) in &w.not_written {
                 out.push_str(&format!("not written: {name}: {why}\n"));
             }

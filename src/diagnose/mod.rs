@@ -379,6 +379,26 @@ fn screen(sens: &[DMatrix<f64>], names: &[String]) -> Vec<Confusable> {
     out
 }
 
+/// Error statistics of `machine` (e.g. a written model) on the held-out rows
+/// of the split `opts` selects — the check of a written model with the full
+/// (not linearised) forward model.
+pub fn holdout_metrics(
+    machine: &Machine,
+    obs: &Observations,
+    obs_file: &str,
+    opts: &Options,
+) -> Result<Metrics> {
+    forward::check_kind(machine, obs, obs_file)?;
+    let (_, hold) = holdout_split(obs.rows.len(), opts.holdout, opts.seed);
+    let mut e = Vec::with_capacity(hold.len());
+    for &i in &hold {
+        let Some(row) = obs.rows.get(i) else { continue };
+        let p = forward::predict(machine, row, obs_file)?;
+        e.push(row.measured_mm - p.measured(obs.measured));
+    }
+    Ok(metrics(&e))
+}
+
 /// RMS, max, 95th percentile and per-axis RMS of 3D errors (mm in, µm out).
 pub fn metrics(e: &[Vector3<f64>]) -> Metrics {
     let norms: Vec<f64> = e.iter().map(|v| v.norm() * 1000.0).collect();
