@@ -360,6 +360,10 @@ mod tests {
 
     /// Written stiffness tolerance, N·m/rad (the file keeps 3 decimals).
     const K_TOL: f64 = 1e-3;
+    /// Written length tolerance, mm (values are rounded to 1e-9).
+    const LEN_TOL: f64 = 1e-9;
+    /// Written angle tolerance, rad.
+    const ANGLE_TOL: f64 = 1e-12;
 
     fn found(m: &Machine, name: &str, values: &[f64]) -> Found {
         let lib = library(m, &[]);
@@ -399,7 +403,11 @@ mod tests {
             panic!("robot")
         };
         assert_abs_diff_eq!(r.k_nmm_per_rad()[2] / 1000.0, 123529.721, epsilon = K_TOL);
-        assert_abs_diff_eq!(r.flange_to_tool().translation.vector.x, 0.4, epsilon = 1e-9);
+        assert_abs_diff_eq!(
+            r.flange_to_tool().translation.vector.x,
+            0.4,
+            epsilon = LEN_TOL
+        );
         assert_eq!(w.written, vec!["joint3_compliance", "tcp_offset"]);
         assert!(w.in_place);
         assert!(w.text.contains("# Paper C Table 6"), "comments kept");
@@ -421,7 +429,7 @@ mod tests {
             panic!("tool")
         };
         let y = t.axis(1).expect("Y axis");
-        assert_abs_diff_eq!(y.location.angles_rad.z, 75e-6, epsilon = 1e-12);
+        assert_abs_diff_eq!(y.location.angles_rad.z, 75e-6, epsilon = ANGLE_TOL);
         assert!(w.in_place);
         assert!(w.text.contains("      EC0Y_urad: 75.0\n"));
         assert!(w.text.contains("# Structure: X is carried by Y"));
