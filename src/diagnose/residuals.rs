@@ -221,3 +221,55 @@ fn binned(x: &[f64], e: &[f64]) -> Vec<(f64, f64)> {
     }
     out
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::calibrate::observations::ToolPose;
+    use approx::assert_abs_diff_eq;
+
+    /// Correlation tolerance.
+    const RHO_TOL: f64 = 1e-12;
+
+    fn row(x: f64) -> Observation {
+        Observation {
+            line: 0,
+            id: "r".into(),
+            t_s: None,
+            measured_mm: Vector3::zeros(),
+            force_n: Vector3::zeros(),
+            moment_nm: Vector3::zeros(),
+            ambient_c: None,
+            pose: Pose::Tool(ToolPose {
+                xyz_mm: Vector3::new(x, 10.0, 20.0),
+                abc_deg: [None; 3],
+                dir: [None; 6],
+                tool_mm: None,
+                spindle_rpm: None,
+                spindle_w: None,
+                p_w: [None; 6],
+            }),
+        }
+    }
+
+    /// A y residual that grows monotonically with X (1 µm per 10 mm) has
+    /// Spearman ρ = 1 against X_mm, is the strongest trend, and the sentence
+    /// names it; the bins of 20 rows (X 0…190, 200…390, …) have means
+    /// 9.5, 29.5, 49.5, 69.5, 89.5 µm.
+    #[test]
+    fn monotonic_trend_is_found() {
+        let rows: Vec<Observation> = (0..100).map(|i| row(f64::from(i) * 10.0)).collect();
+        let res: Vec<Vector3<f64>> = (0..100)
+            .map(|i| Vector3::new(0.0, f64::from(i) * 1e-3, 0.0))
+            .collect();
+        let w = analyse(&rows, &res);
+        let t = w.trends.first().expect("a trend");
+        assert_eq!((t.covariate.as_str(), t.component), ("X_mm", 'y'));
+        assert_abs_diff_eq!(t.rho, 1.0, epsilon = RHO_TOL);
+        let means: Vec<f64> = t.bins.iter().map(|b| b.1).collect();
+        for (m, want) in means.iter().zip([9.5, 29.5, 49.5, 69.5, 89.5]) {
+            assert_abs_diff_eq!(*m, want, epsilon = RHO_TOL * 1e3);
+        }
+        assert!(w.sentence.contains("in y against X_mm"), "{}", w.sentence);
+    }
+}

@@ -374,3 +374,90 @@ pub fn select(pb: &Problem) -> Selection {
         fit: fit_final,
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use approx::assert_abs_diff_eq;
+
+    /// Fitted-parameter tolerance (the residual is exactly 2·a plus a
+    /// pattern orthogonal to every column, so the fit is exact).
+    const PARAM_TOL: f64 = 1e-9;
+
+    /// Columns over 40 rows (120 values): `a` a ramp on the x slots, `b` a
+    /// pattern on the y slots; the residual is 2·a plus ±0.5 on the z slots.
+    fn data() -> (DVector<f64>, DMatrix<f64>, DMatrix<f64>) {
+        let n = 120;
+        let a = DMatrix::from_fn(n, 1, |i, _| if i % 3 == 0 { i as f64 / 3.0 } else { 0.0 });
+        let b = DMatrix::from_fn(n, 1, |i, _| {
+            (i % 3 == 1) as u8 as f64 * ((i / 3) % 5) as f64
+        });
+        // ±0.5 on the z slots only: orthogonal to `a` (x slots) and `b` (y slots).
+        let noise = DVector::from_fn(n, |i, _| match (i % 3, (i / 3) % 2) {
+            (2, 0) => 0.5,
+            (2, _) => -0.5,
+            _ => 0.0,
+        });
+        let r = a.column(0) * 2.0 + noise;
+        (r, a, b)
+    }
+
+    fn problem<'a>(
+        r: &'a DVector<f64>,
+        s: &'a [DMatrix<f64>],
+        names: &'a [String],
+        train: &'a [usize],
+        hold: &'a [usize],
+    ) -> Problem<'a> {
+        Problem {
+            r,
+            s,
+            names,
+            train,
+            holdout: hold,
+            bootstrap: 5,
+            seed: 1,
+        }
+    }
+
+    /// `a` is accepted with parameter 2 (exact: the rest of the residual is
+    /// orthogonal to it), then nothing more.
+    #[test]
+    fn accepts_the_true_column() {
+        let (r, a, b) = data();
+        let s = vec![a, b];
+        let names = vec!["a".to_string(), "b".to_string()];
+        let train: Vec<usize> = (0..40).filter(|i| i % 4 != 0).collect();
+        let hold: Vec<usize> = (0..40).filter(|i| i % 4 == 0).collect();
+        let sel = select(&problem(&r, &s, &names, &train, &hold));
+        assert_eq!(sel.accepted, vec![0]);
+        let fit = sel.fit.expect("fit");
+        assert_abs_diff_eq!(fit.params[0], 2.0, epsilon = PARAM_TOL);
+        assert!(matches!(
+            sel.steps.last().map(|s| &s.outcome),
+            Some(Outcome::NothingDetectable)
+        ));
+    }
+
+    /// A copy of `a` under another name explains the residual identically:
+    /// confounded, nothing accepted.
+    #[test]
+    fn duplicate_columns_are_confounded() {
+        let (r, a, b) = data();
+        let s = vec![a.clone(), b, a * -3.0];
+        let names = vec!["a".to_string(), "b".to_string(), "a_copy".to_string()];
+        let train: Vec<usize> = (0..40).filter(|i| i % 4 != 0).collect();
+        let hold: Vec<usize> = (0..40).filter(|i| i % 4 == 0).collect();
+        let sel = select(&problem(&r, &s, &names, &train, &hold));
+        assert!(sel.accepted.is_empty());
+        match sel.steps.last().map(|s| &s.outcome) {
+            Some(Outcome::Confounded { name, with }) => {
+                let mut all = with.clone();
+                all.push(name.clone());
+                all.sort();
+                assert_eq!(all, vec!["a", "a_copy"]);
+            }
+            other => panic!("expected confounded, got {other:?}"),
+        }
+    }
+}
