@@ -44,7 +44,7 @@ pub struct DiagnoseArgs {
     /// Output format.
     #[arg(long, value_enum, default_value_t = DiagnoseFormat::Table)]
     pub format: DiagnoseFormat,
-    /// List the candidate effects (for the machine and rows, when given) and exit.
+    /// List the candidate effects (instances for --machine and --observations, when given) and exit.
     #[arg(long)]
     pub list_effects: bool,
 }
@@ -71,6 +71,12 @@ pub fn run(a: &DiagnoseArgs) -> Result<i32> {
                 let (machine, _) = load(m)?;
                 let obs = load_observations(o)?;
                 report::render_library(Some(&diagnose::library(&machine, &obs.rows)))
+            }
+            (Some(m), None) => {
+                let (machine, _) = load(m)?;
+                let mut t = report::render_library(Some(&diagnose::library(&machine, &[])));
+                t.push_str("(effects that need row columns — thermal, backlash, stiffness — appear when --observations is given)\n");
+                t
             }
             _ => report::render_library(None),
         };

@@ -147,7 +147,7 @@ pub const FAMILIES: &[(&str, &str)] = &[
     ),
     (
         "machine tool",
-        "EXXX_lin / EXXX_quad — component error linear / quadratic in position (21 geometric errors with the location errors)",
+        "E??_lin / E??_quad — component error p·u or p·u², u = (q − mid)/half-travel, p at the + end (with the location errors: the 21 geometric errors)",
     ),
     (
         "machine tool",
@@ -388,7 +388,7 @@ fn tool_library(t: &crate::machine::tool::MachineTool, rows: &[Observation]) -> 
                 out.push(eff(
                     format!("{stem}_{}", if power == 1 { "lin" } else { "quad" }),
                     format!("{what} error {stem} of axis {a}, {shape} in position"),
-                    vec![format!("{stem} at travel end [{unit}]")],
+                    vec![format!("{stem} at + end of travel [{unit}]")],
                     Action::Component {
                         axis: a,
                         key: key.clone(),
