@@ -5,6 +5,7 @@ mod bad_corpus;
 mod batch_cli;
 mod calibrate_cli;
 mod common;
+mod diagnose;
 mod effects;
 mod gcode_cli;
 mod gcode_grammar;

@@ -3,6 +3,7 @@
 
 mod batch;
 mod calibrate;
+mod diagnose;
 mod gcode;
 mod rapid;
 
@@ -11,6 +12,8 @@ use std::path::PathBuf;
 use clap::{Args, Parser, Subcommand, ValueEnum};
 
 use crate::error::{Error, Result};
+
+pub use diagnose::{DiagnoseArgs, DiagnoseFormat};
 
 /// Exit codes, also listed in `--help`.
 pub const EXIT_HELP: &str = "Exit codes: 0 success; 1 completed, but blocks are out of tolerance or limits; 2 bad input or usage.";
@@ -52,6 +55,8 @@ pub enum Command {
     /// Identify model parameters from measurements; write a calibrated machine file.
     #[command(after_help = EXIT_HELP)]
     Calibrate(calibrate::CalibrateArgs),
+    /// Find where model and measurements disagree, name the missing effect, add it.
+    Diagnose(DiagnoseArgs),
 }
 
 /// Exit codes of `batch`, also listed in its `--help`.
@@ -267,6 +272,7 @@ pub fn run(cli: Cli) -> Result<i32> {
         Command::Batch(a) => batch::run(&a, quiet),
         Command::Simulate(a) => calibrate::run_simulate(&a),
         Command::Calibrate(a) => calibrate::run_calibrate(&a),
+        Command::Diagnose(a) => diagnose::run(&a),
     }
 }
 

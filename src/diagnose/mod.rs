@@ -1,1 +1,415 @@
-//! Diagnosis of disagreement between simulation and measurement.
+//! Diagnosis of disagreement between simulation and measurement: where the
+//! model and the measured observations disagree ([`residuals`]), which named
+//! effect is missing ([`effects`], [`select`]), the model with that effect
+//! added ([`write`]) and the gap before and after on held-out rows
+//! ([`report`]).
+//!
+//! Simulated = [`crate::calibrate::forward::predict`] of the current model;
+//! residual = measured − simulated. Everything is linearised about the
+//! current model: each candidate is a parametric addition whose sensitivity
+//! is computed once, and a fit is linear least squares on those columns.
+
+pub mod effects;
+pub mod report;
+pub mod residuals;
+pub mod select;
+pub mod write;
+
+use nalgebra::{DMatrix, DVector, Vector3};
+use serde::Serialize;
+use tracing::warn;
+
+use crate::calibrate::forward;
+use crate::calibrate::observations::{Observations, holdout_split};
+use crate::calibrate::stats;
+use crate::error::{Error, Result};
+use crate::machine::Machine;
+
+pub use effects::{Effect, library};
+pub use residuals::Where;
+pub use select::{Outcome, Step};
+
+/// Options of a diagnosis.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Options {
+    /// Fraction of rows held out of every fit (0..1).
+    pub holdout: f64,
+    /// Seed of the hold-out split and the bootstrap.
+    pub seed: u64,
+    /// Bootstrap resamples.
+    pub bootstrap: usize,
+}
+
+impl Default for Options {
+    fn default() -> Self {
+        Options {
+            holdout: 0.3,
+            seed: 1,
+            bootstrap: 30,
+        }
+    }
+}
+
+/// Two candidates whose sensitivities the rows cannot tell apart.
+#[derive(Debug, Clone, Serialize)]
+pub struct Confusable {
+    /// First candidate.
+    pub a: String,
+    /// Second candidate.
+    pub b: String,
+    /// |cos| of the angle between their sensitivity columns.
+    pub cos: f64,
+}
+
+/// A fitted parameter.
+#[derive(Debug, Clone, Serialize)]
+pub struct Param {
+    /// Name with unit.
+    pub name: String,
+    /// Fitted value (display unit).
+    pub value: f64,
+    /// Standard uncertainty (1σ).
+    pub u: f64,
+}
+
+/// An accepted effect with its fitted parameters.
+#[derive(Debug, Clone, Serialize)]
+pub struct Found {
+    /// The effect.
+    pub effect: Effect,
+    /// Fitted parameters.
+    pub params: Vec<Param>,
+    /// Bootstrap inclusion frequency when it was accepted (0..1).
+    pub bootstrap: f64,
+}
+
+/// Error statistics of a set of rows, µm.
+#[derive(Debug, Clone, Copy, Serialize)]
+pub struct Metrics {
+    /// RMS of the 3D error.
+    pub rms_um: f64,
+    /// Largest 3D error.
+    pub max_um: f64,
+    /// 95th percentile of the 3D error.
+    pub p95_um: f64,
+    /// RMS per axis x, y, z.
+    pub axis_rms_um: [f64; 3],
+}
+
+/// Held-out gap before and after adding the accepted effects.
+#[derive(Debug, Clone, Copy, Serialize)]
+pub struct Gap {
+    /// Held-out rows.
+    pub rows: usize,
+    /// Current model.
+    pub before: Metrics,
+    /// With the accepted effects.
+    pub after: Metrics,
+    /// Percentage of the RMS gap closed.
+    pub closed_pct: f64,
+    /// Estimated measurement-noise floor of the 3D RMS, µm: √3 × the
+    /// per-coordinate standard deviation of the training residual after the
+    /// fit (no model can go below it).
+    pub noise_floor_um: f64,
+    /// Percentage of the closable gap (before − noise floor) closed.
+    pub closed_of_closable_pct: f64,
+}
+
+/// The whole diagnosis.
+#[derive(Debug, Clone, Serialize)]
+pub struct Diagnosis {
+    /// `robot` or `machine_tool`.
+    pub machine_kind: String,
+    /// Rows in the file.
+    pub rows: usize,
+    /// Training rows.
+    pub train_rows: usize,
+    /// Held-out rows.
+    pub holdout_rows: usize,
+    /// Candidates in the library.
+    pub candidates: usize,
+    /// Where the model and the measurements disagree.
+    #[serde(rename = "where")]
+    pub where_: Where,
+    /// Identifiability screen: candidate pairs the rows cannot separate.
+    pub screen: Vec<Confusable>,
+    /// Forward-selection steps.
+    pub steps: Vec<Step>,
+    /// Accepted effects with fitted parameters.
+    pub found: Vec<Found>,
+    /// Held-out gap.
+    pub gap: Gap,
+    /// One-sentence verdict.
+    pub verdict: String,
+}
+
+/// |cos| above which two single-column candidates count as inseparable.
+pub const SCREEN_COS: f64 = 0.9995;
+
+/// Runs the diagnosis. `machine_text` is the YAML of `machine`; `obs_file`
+/// names the observation file in errors.
+pub fn diagnose(
+    machine: &Machine,
+    machine_text: &str,
+    obs: &Observations,
+    obs_file: &str,
+    opts: &Options,
+) -> Result<Diagnosis> {
+    forward::check_kind(machine, obs, obs_file)?;
+    let yaml: serde_yaml::Value = serde_yaml::from_str(machine_text)
+        .map_err(|e| Error::Usage(format!("machine file: {e}")))?;
+    let ctx = effects::Context {
+        machine,
+        yaml: &yaml,
+        kind: obs.measured,
+        file: obs_file,
+    };
+    let rows = &obs.rows;
+    if rows.len() < 4 {
+        return Err(Error::Usage(format!(
+            "{obs_file}: {} rows; diagnose needs at least 4",
+            rows.len()
+        )));
+    }
+    let sim = effects::simulate(&ctx, rows)?;
+    let res: Vec<Vector3<f64>> = rows
+        .iter()
+        .zip(&sim)
+        .map(|(r, s)| r.measured_mm - s)
+        .collect();
+    let where_ = residuals::analyse(rows, &res);
+
+    let lib = library(machine, rows);
+    let mut kept = Vec::new();
+    let mut sens = Vec::new();
+    for e in lib {
+        match effects::sensitivity(&e, &ctx, rows) {
+            Ok(s) if s.iter().all(|v| v.is_finite()) && s.iter().any(|v| *v != 0.0) => {
+                sens.push(s * 1000.0);
+                kept.push(e);
+            }
+            Ok(_) => {}
+            Err(err) => warn!("candidate {}: {err}", e.name),
+        }
+    }
+    let names: Vec<String> = kept.iter().map(|e| e.name.clone()).collect();
+    let screen = screen(&sens, &names);
+
+    let (train, hold) = holdout_split(rows.len(), opts.holdout, opts.seed);
+    let mut r = DVector::zeros(3 * rows.len());
+    for (i, v) in res.iter().enumerate() {
+        for c in 0..3 {
+            r[3 * i + c] = v[c] * 1000.0;
+        }
+    }
+    let sel = select::select(&select::Problem {
+        r: &r,
+        s: &sens,
+        names: &names,
+        train: &train,
+        holdout: &hold,
+        bootstrap: opts.bootstrap,
+        seed: opts.seed,
+    });
+
+    let mut found = Vec::new();
+    let mut beta = DVector::zeros(0);
+    if let Some(fit) = &sel.fit {
+        let u = fit
+            .std_uncertainty()
+            .unwrap_or_else(|| DVector::from_element(fit.params.len(), f64::NAN));
+        let mut col = 0;
+        for (step, &c) in sel.accepted.iter().enumerate() {
+            let Some(e) = kept.get(c) else { continue };
+            let params = e
+                .params
+                .iter()
+                .map(|p| {
+                    let v = Param {
+                        name: p.clone(),
+                        value: fit.params.get(col).copied().unwrap_or(0.0),
+                        u: u.get(col).copied().unwrap_or(f64::NAN),
+                    };
+                    col += 1;
+                    v
+                })
+                .collect();
+            let bootstrap = sel
+                .steps
+                .get(step)
+                .and_then(|s| s.candidates.iter().find(|x| x.index == c))
+                .map_or(0.0, |x| x.bootstrap);
+            found.push(Found {
+                effect: e.clone(),
+                params,
+                bootstrap,
+            });
+        }
+        beta = fit.params.clone();
+    }
+
+    // Held-out gap with the accepted effects (fitted on the training rows).
+    let before: Vec<Vector3<f64>> = hold.iter().filter_map(|&i| res.get(i).copied()).collect();
+    let after: Vec<Vector3<f64>> = if sel.accepted.is_empty() {
+        before.clone()
+    } else {
+        let x = select::design(&sens, &sel.accepted, 3 * rows.len());
+        let corr: DVector<f64> = if x.ncols() == beta.len() {
+            &x * &beta
+        } else {
+            DVector::zeros(3 * rows.len())
+        };
+        hold.iter()
+            .filter_map(|&i| {
+                let v = res.get(i)?;
+                Some(Vector3::new(
+                    v.x - corr[3 * i] * 1e-3,
+                    v.y - corr[3 * i + 1] * 1e-3,
+                    v.z - corr[3 * i + 2] * 1e-3,
+                ))
+            })
+            .collect()
+    };
+    let mb = metrics(&before);
+    let ma = metrics(&after);
+    let (rss_t, k_t) = match &sel.fit {
+        Some(f) => (f.rss, f.params.len()),
+        None => (sel.steps.first().map_or(0.0, |s| s.rss_before_um2), 0),
+    };
+    let dof = (3 * train.len()).saturating_sub(k_t).max(1) as f64;
+    let noise_floor_um = (3.0 * rss_t / dof).sqrt();
+    let closable = mb.rms_um - noise_floor_um;
+    let gap = Gap {
+        rows: hold.len(),
+        before: mb,
+        after: ma,
+        closed_pct: if mb.rms_um > 0.0 {
+            100.0 * (1.0 - ma.rms_um / mb.rms_um)
+        } else {
+            0.0
+        },
+        noise_floor_um,
+        closed_of_closable_pct: if closable > 0.0 {
+            (100.0 * (mb.rms_um - ma.rms_um) / closable).min(100.0)
+        } else {
+            0.0
+        },
+    };
+    let verdict = verdict(&sel.steps, &found);
+    Ok(Diagnosis {
+        machine_kind: match machine {
+            Machine::Robot(_) => "robot".into(),
+            Machine::Tool(_) => "machine_tool".into(),
+        },
+        rows: rows.len(),
+        train_rows: train.len(),
+        holdout_rows: hold.len(),
+        candidates: kept.len(),
+        where_,
+        screen,
+        steps: sel.steps,
+        found,
+        gap,
+        verdict,
+    })
+}
+
+fn verdict(steps: &[Step], found: &[Found]) -> String {
+    let mut parts: Vec<String> = found
+        .iter()
+        .map(|f| {
+            format!(
+                "missing effect: {} ({})",
+                f.effect.name, f.effect.description
+            )
+        })
+        .collect();
+    match steps.last().map(|s| &s.outcome) {
+        Some(Outcome::Confounded { name, with }) => parts.push(format!(
+            "{name} is confounded with {}: the data cannot tell them apart, nothing claimed",
+            with.join(", ")
+        )),
+        Some(Outcome::NotConfirmed { name }) => parts.push(format!(
+            "{name} fits the training rows but does not improve the held-out rows: not claimed"
+        )),
+        _ => {}
+    }
+    if parts.is_empty() {
+        "no detectable missing effect".into()
+    } else {
+        if !matches!(
+            steps.last().map(|s| &s.outcome),
+            Some(Outcome::Confounded { .. } | Outcome::NotConfirmed { .. })
+        ) {
+            parts.push("nothing more detectable".into());
+        }
+        parts.join("; ")
+    }
+}
+
+/// Pairs of single-parameter candidates with near-collinear sensitivities.
+fn screen(sens: &[DMatrix<f64>], names: &[String]) -> Vec<Confusable> {
+    let cols: Vec<Option<DVector<f64>>> = sens
+        .iter()
+        .map(|s| {
+            if s.ncols() == 1 {
+                let c = s.column(0).into_owned();
+                let n = c.norm();
+                (n > 0.0).then(|| c / n)
+            } else {
+                None
+            }
+        })
+        .collect();
+    let mut out = Vec::new();
+    for i in 0..cols.len() {
+        for j in i + 1..cols.len() {
+            if let (Some(Some(a)), Some(Some(b))) = (cols.get(i), cols.get(j)) {
+                let cos = a.dot(b).abs();
+                if cos > SCREEN_COS {
+                    out.push(Confusable {
+                        a: names.get(i).cloned().unwrap_or_default(),
+                        b: names.get(j).cloned().unwrap_or_default(),
+                        cos,
+                    });
+                }
+            }
+        }
+    }
+    out
+}
+
+/// Error statistics of `machine` (e.g. a written model) on the held-out rows
+/// of the split `opts` selects — the check of a written model with the full
+/// (not linearised) forward model.
+pub fn holdout_metrics(
+    machine: &Machine,
+    obs: &Observations,
+    obs_file: &str,
+    opts: &Options,
+) -> Result<Metrics> {
+    forward::check_kind(machine, obs, obs_file)?;
+    let (_, hold) = holdout_split(obs.rows.len(), opts.holdout, opts.seed);
+    let mut e = Vec::with_capacity(hold.len());
+    for &i in &hold {
+        let Some(row) = obs.rows.get(i) else { continue };
+        let p = forward::predict(machine, row, obs_file)?;
+        e.push(row.measured_mm - p.measured(obs.measured));
+    }
+    Ok(metrics(&e))
+}
+
+/// RMS, max, 95th percentile and per-axis RMS of 3D errors (mm in, µm out).
+pub fn metrics(e: &[Vector3<f64>]) -> Metrics {
+    let norms: Vec<f64> = e.iter().map(|v| v.norm() * 1000.0).collect();
+    let axis = |c: usize| {
+        let v: Vec<f64> = e.iter().map(|x| x[c] * 1000.0).collect();
+        stats::rms(&v).unwrap_or(0.0)
+    };
+    Metrics {
+        rms_um: stats::rms(&norms).unwrap_or(0.0),
+        max_um: stats::max(&norms).unwrap_or(0.0),
+        p95_um: stats::percentile(&norms, 95.0).unwrap_or(0.0),
+        axis_rms_um: [axis(0), axis(1), axis(2)],
+    }
+}

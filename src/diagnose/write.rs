@@ -1,0 +1,447 @@
+//! Writing the machine file with the accepted effects added.
+//!
+//! Effects the machine-file format has a key for are added to the values of
+//! that key: robot actual DH (`actual`, created from `nominal` when absent),
+//! joint stiffness (`k_nm_per_rad`), TCP (`flange_to_tool`), payload
+//! (`tool_load`); machine-tool location errors, component tables
+//! (linear/quadratic terms; backlash = offset of the reverse column) and the
+//! tool table. The others (thermal growth, robot joint backlash, axis
+//! stiffness, measurement-frame registration) are listed as not written.
+//!
+//! The file's text is edited in place: every value that changed is
+//! rewritten on its own line (scalars and one-line flow sequences/mappings),
+//! so comments and layout are kept. When a change cannot be made that way
+//! (a key the file does not have yet, a multi-line value), the document is
+//! rewritten from its parsed form instead, keeping only the leading comment
+//! block; [`Written::in_place`] says which happened.
+
+use serde_yaml::{Mapping, Value};
+
+use super::Found;
+use super::effects::{Action, DhField, apply_to_yaml, round9};
+use crate::error::{Error, Result};
+use crate::machine::Machine;
+
+/// The new machine file and what went into it.
+#[derive(Debug, Clone)]
+pub struct Written {
+    /// YAML text.
+    pub text: String,
+    /// Names of the effects written.
+    pub written: Vec<String>,
+    /// Effects not written, with the reason.
+    pub not_written: Vec<(String, String)>,
+    /// True when the text was edited in place (comments kept).
+    pub in_place: bool,
+}
+
+fn key(s: &str) -> Value {
+    Value::String(s.to_string())
+}
+
+fn as_f64(v: &Value) -> Option<f64> {
+    v.as_f64().or_else(|| v.as_i64().map(|i| i as f64))
+}
+
+fn root(doc: &mut Value) -> Result<&mut Mapping> {
+    doc.as_mapping_mut()
+        .ok_or_else(|| Error::Usage("machine file is not a mapping".into()))
+}
+
+fn add_num(m: &mut Mapping, k: &str, add: f64) {
+    let old = m.get(k).and_then(as_f64).unwrap_or(0.0);
+    m.insert(key(k), Value::from(round9(old + add)));
+}
+
+fn robot_edit(doc: &mut Value, action: &Action, p: &[f64], m: &Machine) -> Result<()> {
+    let r = root(doc)?;
+    let v0 = p.first().copied().unwrap_or(0.0);
+    match action {
+        Action::Dh(j, f) => {
+            if !r.get("actual").is_some_and(Value::is_sequence) {
+                let nominal = r
+                    .get("nominal")
+                    .cloned()
+                    .ok_or_else(|| Error::Usage("robot file has no `nominal`".into()))?;
+                r.insert(key("actual"), nominal);
+            }
+            let joint = r
+                .get_mut("actual")
+                .and_then(Value::as_sequence_mut)
+                .and_then(|s| s.get_mut(*j))
+                .and_then(Value::as_mapping_mut)
+                .ok_or_else(|| Error::Usage(format!("robot file: no actual[{j}]")))?;
+            match f {
+                DhField::Theta => add_num(joint, "theta_offset_deg", (v0 * 1e-6).to_degrees()),
+                DhField::Alpha => add_num(joint, "alpha_deg", (v0 * 1e-6).to_degrees()),
+                DhField::A => add_num(joint, "a_mm", v0 * 1e-3),
+                DhField::D => add_num(joint, "d_mm", v0 * 1e-3),
+            }
+        }
+        Action::Compliance(j) => {
+            let k = r
+                .get_mut("k_nm_per_rad")
+                .and_then(Value::as_sequence_mut)
+                .and_then(|s| s.get_mut(*j))
+                .ok_or_else(|| Error::Usage(format!("robot file: no k_nm_per_rad[{j}]")))?;
+            let old = as_f64(k).unwrap_or(f64::INFINITY);
+            // Compliance in rad/(N·m) is 1/k; the fitted addition is µrad/(N·m).
+            let new = 1.0 / (1.0 / old + v0 * 1e-6);
+            if !(new.is_finite() && new > 0.0) {
+                return Err(Error::Usage(format!(
+                    "joint {} compliance {v0} µrad/(N·m) gives a non-positive stiffness",
+                    j + 1
+                )));
+            }
+            *k = Value::from((new * 1000.0).round() / 1000.0);
+        }
+        Action::Tcp => {
+            if !r.get("flange_to_tool").is_some_and(Value::is_mapping) {
+                let mut t = Mapping::new();
+                for c in ["x_mm", "y_mm", "z_mm"] {
+                    t.insert(key(c), Value::from(0.0));
+                }
+                r.insert(key("flange_to_tool"), Value::Mapping(t));
+            }
+            let t = r
+                .get_mut("flange_to_tool")
+                .and_then(Value::as_mapping_mut)
+                .ok_or_else(|| Error::Usage("robot file: bad flange_to_tool".into()))?;
+            for (c, v) in ["x_mm", "y_mm", "z_mm"].iter().zip(p) {
+                add_num(t, c, v * 1e-3);
+            }
+        }
+        Action::Payload => {
+            if !r.get("tool_load").is_some_and(Value::is_mapping) {
+                let tcp = match m {
+                    Machine::Robot(rb) => rb.flange_to_tool().translation.vector,
+                    Machine::Tool(_) => nalgebra::Vector3::zeros(),
+                };
+                let mut t = Mapping::new();
+                t.insert(key("mass_kg"), Value::from(0.0));
+                t.insert(
+                    key("cog_mm"),
+                    Value::Sequence(tcp.iter().map(|v| Value::from(*v)).collect()),
+                );
+                r.insert(key("tool_load"), Value::Mapping(t));
+            }
+            if let Some(t) = r.get_mut("tool_load").and_then(Value::as_mapping_mut) {
+                add_num(t, "mass_kg", v0);
+            }
+        }
+        _ => {
+            return Err(Error::Usage(
+                "this effect has no key in the robot file".into(),
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// Writes `found` into the machine file text.
+pub fn write_model(machine: &Machine, machine_text: &str, found: &[Found]) -> Result<Written> {
+    let mut doc: Value = serde_yaml::from_str(machine_text)
+        .map_err(|e| Error::Usage(format!("machine file: {e}")))?;
+    let mut written = Vec::new();
+    let mut not_written = Vec::new();
+    for f in found {
+        if let Some(why) = &f.effect.not_writable {
+            not_written.push((f.effect.name.clone(), why.clone()));
+            continue;
+        }
+        let values: Vec<f64> = f.params.iter().map(|p| p.value).collect();
+        match machine {
+            Machine::Robot(_) => robot_edit(&mut doc, &f.effect.action, &values, machine)?,
+            Machine::Tool(_) => apply_to_yaml(
+                &mut doc,
+                &f.effect.action,
+                values.first().copied().unwrap_or(0.0),
+                machine,
+            )?,
+        }
+        written.push(f.effect.name.clone());
+    }
+    let mut header = String::new();
+    for f in found {
+        let vals: Vec<String> = f
+            .params
+            .iter()
+            .map(|p| format!("{} = {:.4} ± {:.4}", p.name, p.value, p.u))
+            .collect();
+        let state = if written.contains(&f.effect.name) {
+            "added"
+        } else {
+            "NOT written (no key in the file format)"
+        };
+        header.push_str(&format!(
+            "# postproc diagnose: {} {state}: {}\n",
+            f.effect.name,
+            vals.join(", ")
+        ));
+    }
+    let old: Value = serde_yaml::from_str(machine_text)
+        .map_err(|e| Error::Usage(format!("machine file: {e}")))?;
+    let mut lines: Vec<String> = machine_text.lines().map(str::to_string).collect();
+    let edited = edit(&mut lines, "", &old, &doc).is_some() && {
+        let t = lines.join("\n");
+        serde_yaml::from_str::<Value>(&t).is_ok_and(|v| v == doc)
+    };
+    let mut text = String::new();
+    let split = machine_text
+        .lines()
+        .take_while(|l| l.starts_with('#') || l.trim().is_empty())
+        .count();
+    if edited {
+        for l in lines.iter().take(split) {
+            text.push_str(l);
+            text.push('\n');
+        }
+        text.push_str(&header);
+        for l in lines.iter().skip(split) {
+            text.push_str(l);
+            text.push('\n');
+        }
+    } else {
+        let body = serde_yaml::to_string(&doc)
+            .map_err(|e| Error::Usage(format!("cannot write the machine file: {e}")))?;
+        for l in machine_text.lines().take(split) {
+            text.push_str(l);
+            text.push('\n');
+        }
+        text.push_str(&header);
+        text.push_str(
+            "# (rewritten by postproc diagnose: comments inside the document were not kept)\n",
+        );
+        text.push_str(&body);
+    }
+    // The written file must load.
+    Machine::from_yaml_str(&text, "(written model)")?;
+    Ok(Written {
+        text,
+        written,
+        not_written,
+        in_place: edited,
+    })
+}
+
+/// Makes `lines` carry `new` where it differs from `old` at `path`;
+/// `None` when some change cannot be made line-locally.
+fn edit(lines: &mut [String], path: &str, old: &Value, new: &Value) -> Option<()> {
+    if old == new {
+        return Some(());
+    }
+    if !path.is_empty() && replace_value(lines, path, new).is_some() {
+        return Some(());
+    }
+    match (old, new) {
+        (Value::Mapping(a), Value::Mapping(b)) if a.len() == b.len() => {
+            for (k, vb) in b {
+                let va = a.get(k)?;
+                let ks = match k {
+                    Value::String(s) => s.clone(),
+                    Value::Number(n) => n.to_string(),
+                    _ => return None,
+                };
+                let p = if path.is_empty() {
+                    ks
+                } else {
+                    format!("{path}.{ks}")
+                };
+                edit(lines, &p, va, vb)?;
+            }
+            Some(())
+        }
+        (Value::Sequence(a), Value::Sequence(b)) if a.len() == b.len() && !path.is_empty() => {
+            for (i, (va, vb)) in a.iter().zip(b).enumerate() {
+                edit(lines, &format!("{path}[{i}]"), va, vb)?;
+            }
+            Some(())
+        }
+        _ => None,
+    }
+}
+
+/// Replaces the one-line value at `path` by the flow rendering of `v`.
+fn replace_value(lines: &mut [String], path: &str, v: &Value) -> Option<()> {
+    let (line_no, col) = crate::machine::yaml::locate(&lines.join("\n"), path)?;
+    let line = lines.get(line_no.checked_sub(1)?)?.clone();
+    let start_key = col.checked_sub(1)?;
+    let is_item = path.ends_with(']');
+    let rest_from = if is_item {
+        // `col` points at the item's dash.
+        start_key + line.get(start_key..)?.find('-')? + 1
+    } else {
+        let after = line.get(start_key..)?;
+        start_key + after.find(':')? + 1
+    };
+    let rest = line.get(rest_from..)?;
+    let start = rest_from + (rest.len() - rest.trim_start().len());
+    let body = line.get(start..)?;
+    let end = match body.chars().next()? {
+        '{' | '[' => {
+            let mut depth = 0i32;
+            let mut end = None;
+            for (i, c) in body.char_indices() {
+                match c {
+                    '{' | '[' => depth += 1,
+                    '}' | ']' => {
+                        depth -= 1;
+                        if depth == 0 {
+                            end = Some(i + 1);
+                            break;
+                        }
+                    }
+                    '#' | '"' | '\'' => return None,
+                    _ => {}
+                }
+            }
+            start + end?
+        }
+        '#' | '|' | '>' | '&' | '*' | '!' => return None,
+        _ => {
+            if !matches!(v, Value::Number(_)) {
+                return None;
+            }
+            start
+                + body
+                    .find(" #")
+                    .unwrap_or(body.len())
+                    .min(body.trim_end().len())
+        }
+    };
+    let new_line = format!("{}{}{}", line.get(..start)?, flow(v)?, line.get(end..)?);
+    *lines.get_mut(line_no - 1)? = new_line;
+    Some(())
+}
+
+/// One-line flow rendering of numbers, plain strings, sequences and mappings.
+fn flow(v: &Value) -> Option<String> {
+    Some(match v {
+        Value::Number(n) => match n.as_f64() {
+            Some(f) if n.is_f64() => {
+                let s = format!("{f}");
+                if s.contains(['.', 'e', 'E', 'N', 'i']) {
+                    s
+                } else {
+                    format!("{s}.0")
+                }
+            }
+            _ => n.to_string(),
+        },
+        Value::Bool(b) => b.to_string(),
+        Value::String(s)
+            if !s.is_empty()
+                && s.chars()
+                    .all(|c| c.is_ascii_alphanumeric() || "_-. ".contains(c)) =>
+        {
+            s.clone()
+        }
+        Value::Sequence(items) => {
+            let parts: Option<Vec<String>> = items.iter().map(flow).collect();
+            format!("[{}]", parts?.join(", "))
+        }
+        Value::Mapping(m) => {
+            let mut parts = Vec::new();
+            for (k, v) in m {
+                parts.push(format!("{}: {}", flow(k)?, flow(v)?));
+            }
+            format!("{{ {} }}", parts.join(", "))
+        }
+        _ => return None,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::diagnose::effects::library;
+    use crate::diagnose::{Found, Param};
+    use approx::assert_abs_diff_eq;
+
+    /// Written stiffness tolerance, N·m/rad (the file keeps 3 decimals).
+    const K_TOL: f64 = 1e-3;
+    /// Written length tolerance, mm (values are rounded to 1e-9).
+    const LEN_TOL: f64 = 1e-9;
+    /// Written angle tolerance, rad.
+    const ANGLE_TOL: f64 = 1e-12;
+
+    fn found(m: &Machine, name: &str, values: &[f64]) -> Found {
+        let lib = library(m, &[]);
+        let e = lib.into_iter().find(|e| e.name == name).expect("effect");
+        Found {
+            params: values
+                .iter()
+                .map(|v| Param {
+                    name: "p".into(),
+                    value: *v,
+                    u: 0.0,
+                })
+                .collect(),
+            effect: e,
+            bootstrap: 1.0,
+        }
+    }
+
+    /// Joint 3 compliance +1 µrad/(N·m): k = 1/(1/140940 + 1e-6)
+    /// = 1/(7.09522e-6 + 1e-6) = 123529.721 N·m/rad. TCP +0.4 mm in x.
+    #[test]
+    fn robot_keys_written() {
+        let path = concat!(env!("CARGO_MANIFEST_DIR"), "/machines/abb-irb1600.yaml");
+        let text = std::fs::read_to_string(path).unwrap();
+        let m = Machine::from_yaml_str(&text, "m").unwrap();
+        let w = write_model(
+            &m,
+            &text,
+            &[
+                found(&m, "joint3_compliance", &[1.0]),
+                found(&m, "tcp_offset", &[400.0, 0.0, 0.0]),
+            ],
+        )
+        .unwrap();
+        assert!(w.text.starts_with("# ABB IRB 1600"));
+        let Machine::Robot(r) = Machine::from_yaml_str(&w.text, "w").unwrap() else {
+            panic!("robot")
+        };
+        assert_abs_diff_eq!(r.k_nmm_per_rad()[2] / 1000.0, 123529.721, epsilon = K_TOL);
+        assert_abs_diff_eq!(
+            r.flange_to_tool().translation.vector.x,
+            0.4,
+            epsilon = LEN_TOL
+        );
+        assert_eq!(w.written, vec!["joint3_compliance", "tcp_offset"]);
+        assert!(w.in_place);
+        assert!(w.text.contains("# Paper C Table 6"), "comments kept");
+        assert!(
+            w.text
+                .contains("k_nm_per_rad: [270990.0, 430040.0, 123529.721,")
+        );
+    }
+
+    /// Squareness EC0Y 35 + 40 = 75 µrad; robot-only effects are refused
+    /// for a machine tool and thermal ones are listed as not written.
+    #[test]
+    fn tool_location_written() {
+        let path = concat!(env!("CARGO_MANIFEST_DIR"), "/machines/afm-r1000.yaml");
+        let text = std::fs::read_to_string(path).unwrap();
+        let m = Machine::from_yaml_str(&text, "m").unwrap();
+        let w = write_model(&m, &text, &[found(&m, "EC0Y", &[40.0])]).unwrap();
+        let Machine::Tool(t) = Machine::from_yaml_str(&w.text, "w").unwrap() else {
+            panic!("tool")
+        };
+        let y = t.axis(1).expect("Y axis");
+        assert_abs_diff_eq!(y.location.angles_rad.z, 75e-6, epsilon = ANGLE_TOL);
+        assert!(w.in_place);
+        assert!(w.text.contains("      EC0Y_urad: 75.0\n"));
+        assert!(w.text.contains("# Structure: X is carried by Y"));
+        // A backlash edits the X positioning table's columns in place.
+        let mut f = found(&m, "EC0Y", &[8.0]);
+        f.effect.name = "X_backlash".into();
+        f.effect.action = crate::diagnose::effects::Action::AxisBacklash {
+            axis: 'X',
+            key: "EXX_um".into(),
+        };
+        let w = write_model(&m, &text, &[f]).unwrap();
+        assert!(w.in_place, "{}", w.text);
+        assert!(w.text.contains("reverse: [11.0, "), "{}", w.text);
+    }
+}
