@@ -278,6 +278,8 @@ fn view(
             .map_err(plot_err)?;
         i = j;
     }
+    // Circles on the marks; their meaning in a boxed legend in the upper
+    // left corner, so labels never cover each other or the toolpath's ends.
     for wp in marks {
         let (colour, label) = mark_style(wp);
         let c = (
@@ -286,14 +288,20 @@ fn view(
         );
         chart
             .draw_series(std::iter::once(
-                EmptyElement::at(c)
-                    + Circle::new((0, 0), 9, colour.stroke_width(3))
-                    + Text::new(
-                        format!("{label}, line {}", wp.line),
-                        if wp.cut { (-60, 14) } else { (12, -18) },
-                        ("sans-serif", 14).into_font().color(&colour),
-                    ),
+                EmptyElement::at(c) + Circle::new((0, 0), 9, colour.stroke_width(3)),
             ))
+            .map_err(plot_err)?
+            .label(format!("{label}, line {} ({:.4} mm)", wp.line, wp.dev))
+            .legend(move |(x, y)| Circle::new((x + 8, y), 6, colour.stroke_width(3)));
+    }
+    if !marks.is_empty() {
+        chart
+            .configure_series_labels()
+            .position(SeriesLabelPosition::UpperLeft)
+            .background_style(WHITE.mix(0.85))
+            .border_style(BLACK.mix(0.4))
+            .label_font(("sans-serif", 13))
+            .draw()
             .map_err(plot_err)?;
     }
     Ok(())
