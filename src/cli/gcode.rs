@@ -479,23 +479,52 @@ pub(super) fn run_reporting(
     Ok(summary)
 }
 
+/// What `compensate` and `report` set up before running a job: the machine
+/// and setup, the worker pool, the effects and the process settings (with
+/// the program's mean power for a warm thermal start).
+struct Prepared {
+    machine: MachineTool,
+    setup: Setup,
+    pool: rayon::ThreadPool,
+    effects: EffectSet,
+    process: ProcessSetup,
+}
+
+impl Prepared {
+    fn new(program: &ProgramArgs, args: &EffectArgs, command: &str) -> Result<Self> {
+        let (machine, setup) = machine_setup(program, command)?;
+        let pool = thread_pool(args.threads)?;
+        let effects = effects(args)?;
+        let mut process = process_setup(args, &machine)?;
+        add_mean_power(&mut process, &machine, &setup, effects, &program.file)?;
+        Ok(Prepared {
+            machine,
+            setup,
+            pool,
+            effects,
+            process,
+        })
+    }
+
+    fn job(&self, tolerance: f64, decimals: Option<usize>, annotate: bool) -> Result<Job<'_>> {
+        build_job(
+            &self.machine,
+            &self.process,
+            &self.pool,
+            self.setup.clone(),
+            self.effects,
+            tolerance,
+            decimals,
+            annotate,
+        )
+    }
+}
+
 /// `postproc compensate`.
 pub fn compensate(a: &CompensateArgs) -> Result<i32> {
-    let (machine, setup) = machine_setup(&a.program, "compensate")?;
-    let pool = thread_pool(a.effects.threads)?;
-    let effect_set = effects(&a.effects)?;
-    let mut process = process_setup(&a.effects, &machine)?;
-    add_mean_power(&mut process, &machine, &setup, effect_set, &a.program.file)?;
-    let job = build_job(
-        &machine,
-        &process,
-        &pool,
-        setup.clone(),
-        effect_set,
-        a.tolerance,
-        a.decimals,
-        a.annotate == Annotate::Comment,
-    )?;
+    let run = Prepared::new(&a.program, &a.effects, "compensate")?;
+    let setup = &run.setup;
+    let job = run.job(a.tolerance, a.decimals, a.annotate == Annotate::Comment)?;
     let input_path = &a.program.file;
     let out_path = match &a.output {
         Some(p) => p.clone(),
@@ -520,7 +549,7 @@ pub fn compensate(a: &CompensateArgs) -> Result<i32> {
                 .unwrap_or_else(|| Format::from_path(report_path));
             write_atomically(report_path, |rep| {
                 emit_to(&out_path, |w| {
-                    run_reporting(&job, input, &file, Some(w), rep, &setup, format)
+                    run_reporting(&job, input, &file, Some(w), rep, setup, format)
                 })
             })?
         }
@@ -554,25 +583,12 @@ pub fn compensate(a: &CompensateArgs) -> Result<i32> {
 
 /// `postproc report` (dry run).
 pub fn report(a: &ReportArgs) -> Result<i32> {
-    let (machine, setup) = machine_setup(&a.program, "report")?;
-    let pool = thread_pool(a.effects.threads)?;
-    let effect_set = effects(&a.effects)?;
-    let mut process = process_setup(&a.effects, &machine)?;
-    add_mean_power(&mut process, &machine, &setup, effect_set, &a.program.file)?;
-    let job = build_job(
-        &machine,
-        &process,
-        &pool,
-        setup.clone(),
-        effect_set,
-        0.001,
-        None,
-        false,
-    )?;
+    let run = Prepared::new(&a.program, &a.effects, "report")?;
+    let job = run.job(0.001, None, false)?;
     let (input, file) = open_input(&a.program.file)?;
     let out = a.output.clone().unwrap_or_else(|| PathBuf::from("-"));
     emit_to(&out, |w| {
-        run_reporting(&job, input, &file, None, w, &setup, a.format)
+        run_reporting(&job, input, &file, None, w, &run.setup, a.format)
     })?;
     Ok(0)
 }
