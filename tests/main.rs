@@ -14,5 +14,6 @@ mod machine_tool;
 mod observations;
 mod rapid;
 mod rapid_cli;
+mod regression;
 mod report_cli;
 mod robot;

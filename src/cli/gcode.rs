@@ -331,6 +331,24 @@ pub fn default_output(input: &Path) -> PathBuf {
     input.with_file_name(name)
 }
 
+/// Refuses an output path that is one of the command's input files (stdout
+/// `-` and stdin are never the same file). Every command that writes a file
+/// calls this before writing.
+pub fn refuse_overwrite(out: &Path, inputs: &[&Path]) -> Result<()> {
+    if out == Path::new("-") {
+        return Ok(());
+    }
+    for input in inputs {
+        if *input != Path::new("-") && (out == *input || same_file(input, out)) {
+            return Err(usage(format!(
+                "{}: the output would overwrite the input",
+                out.display()
+            )));
+        }
+    }
+    Ok(())
+}
+
 pub(super) fn same_file(a: &Path, b: &Path) -> bool {
     match (a.canonicalize(), b.canonicalize()) {
         (Ok(x), Ok(y)) => x == y,
@@ -345,10 +363,20 @@ pub fn write_atomically<T>(path: &Path, f: impl FnOnce(&mut dyn Write) -> Result
         Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
         _ => PathBuf::from("."),
     };
+    // The temporary file's random name means nothing to the user: name the
+    // output and its folder only.
     let tmp = tempfile::Builder::new()
         .prefix(".postproc-")
         .tempfile_in(&dir)
-        .map_err(|e| Error::io(&dir, e))?;
+        .map_err(|e| {
+            Error::io(
+                path,
+                std::io::Error::new(
+                    e.kind(),
+                    format!("cannot create a file in {}: {}", dir.display(), e.kind()),
+                ),
+            )
+        })?;
     let (file, tmp_path) = tmp.into_parts();
     let mut w = BufWriter::with_capacity(1 << 20, file);
     let value = f(&mut w)?;
@@ -531,15 +559,7 @@ pub fn compensate(a: &CompensateArgs) -> Result<i32> {
         None if input_path == Path::new("-") => PathBuf::from("-"),
         None => default_output(input_path),
     };
-    if out_path != Path::new("-")
-        && input_path != Path::new("-")
-        && (out_path == *input_path || same_file(input_path, &out_path))
-    {
-        return Err(usage(format!(
-            "{}: the output would overwrite the input",
-            out_path.display()
-        )));
-    }
+    refuse_overwrite(&out_path, &[input_path])?;
     check_report_path(a.report.as_deref(), input_path, &out_path)?;
     let (input, file) = open_input(input_path)?;
     let summary: Summary = match &a.report {
@@ -587,6 +607,7 @@ pub fn report(a: &ReportArgs) -> Result<i32> {
     let job = run.job(0.001, None, false)?;
     let (input, file) = open_input(&a.program.file)?;
     let out = a.output.clone().unwrap_or_else(|| PathBuf::from("-"));
+    refuse_overwrite(&out, &[&a.program.file])?;
     emit_to(&out, |w| {
         run_reporting(&job, input, &file, None, w, &run.setup, a.format)
     })?;

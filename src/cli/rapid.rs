@@ -202,16 +202,7 @@ pub fn compensate(a: &CompensateArgs) -> Result<i32> {
         None if input == Path::new("-") => PathBuf::from("-"),
         None => default_output(input),
     };
-    if out_path != Path::new("-")
-        && input != Path::new("-")
-        && (out_path == *input
-            || matches!((input.canonicalize(), out_path.canonicalize()), (Ok(x), Ok(y)) if x == y))
-    {
-        return Err(usage(format!(
-            "{}: the output would overwrite the input",
-            out_path.display()
-        )));
-    }
+    super::gcode::refuse_overwrite(&out_path, &[input])?;
     super::gcode::check_report_path(a.report.as_deref(), input, &out_path)?;
     let (src, name) = read_program(input)?;
     let outcome = compensate_module(&src, &name, &robot, &opts)?;
@@ -298,6 +289,7 @@ pub fn report(a: &ReportArgs) -> Result<i32> {
     let (src, name) = read_program(&a.program.file)?;
     let outcome = compensate_module(&src, &name, &robot, &opts)?;
     let out = a.output.clone().unwrap_or_else(|| PathBuf::from("-"));
+    super::gcode::refuse_overwrite(&out, &[&a.program.file])?;
     super::gcode::emit_to(&out, |w| write_report(w, &outcome, &name, a.format))?;
     Ok(0)
 }
