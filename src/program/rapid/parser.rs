@@ -146,10 +146,15 @@ pub(super) fn number_text(i: &str) -> PResult<'_, &str> {
     )))(i)
 }
 
-/// Parses a whole string as a numeric literal.
+/// Largest magnitude of a literal: above the `9E9` that marks an unused
+/// external axis, far below anything a robot program means.
+pub(super) const MAX_NUMBER: f64 = 1e10;
+
+/// Parses a whole string as a numeric literal (`None` beyond
+/// [`MAX_NUMBER`]).
 pub(super) fn parse_number(text: &str) -> Option<f64> {
     match number_text(text) {
-        Ok(("", t)) => t.parse::<f64>().ok().filter(|v| v.is_finite()),
+        Ok(("", t)) => t.parse::<f64>().ok().filter(|v| v.abs() <= MAX_NUMBER),
         _ => None,
     }
 }
@@ -483,6 +488,15 @@ impl<'a> Parser<'a> {
         };
         if let Ok((r, t)) = number_text(i) {
             if ends_here(r) {
+                if t.parse::<f64>().is_ok_and(|v| !(v.abs() <= MAX_NUMBER)) {
+                    return self.fail_found(
+                        start,
+                        &format!(
+                            "absurd number `{}` (|value| above 1e10; 9E9 marks an unused external axis)",
+                            crate::error::clip(t)
+                        ),
+                    );
+                }
                 if let Some(value) = t.parse::<f64>().ok().filter(|v| v.is_finite()) {
                     return Ok((
                         r,
