@@ -19,6 +19,10 @@ use crate::machine::AXIS_LETTERS;
 use crate::predict::Effect;
 use crate::program::interp::Setup;
 
+/// Smallest deviation listed among the worst blocks, mm: half the last
+/// printed digit (values below print as 0.00000).
+pub const LISTED_MIN_MM: f64 = 0.5e-5;
+
 /// Worst blocks listed per effect in the summary.
 pub const WORST_BLOCKS: usize = 5;
 
@@ -144,8 +148,9 @@ impl Stat {
             Some(b) => *b += 1,
             None => self.large.push(v),
         }
-        // Ties keep the earlier block; blocks without deviation are not listed.
-        if v <= 0.0 {
+        // Ties keep the earlier block; blocks whose deviation prints as zero
+        // (below half the last printed digit) are not listed.
+        if v < LISTED_MIN_MM {
             return;
         }
         let at = self.worst.iter().position(|w| v > w.0);
@@ -589,13 +594,15 @@ impl<'w> ReportWriter<'w> {
                 );
                 for (i, s) in self.stats.iter().enumerate().skip(1) {
                     line.push_str(&format!(
-                        "; {} mean {} p95 {} max {} mm (line {})",
+                        "; {} mean {} p95 {} max {} mm",
                         stat_name(&self.layout, i),
                         num(s.mean(), 5),
                         num(p95.get(i).copied().unwrap_or(0.0), 5),
                         num(s.max(), 5),
-                        s.max_line()
                     ));
+                    if s.max_line() > 0 {
+                        line.push_str(&format!(" (line {})", s.max_line()));
+                    }
                 }
                 let worst: Vec<String> = self
                     .stats
