@@ -12,6 +12,7 @@ mod gcode_grammar;
 mod golden;
 mod machine_tool;
 mod observations;
+mod paper_b;
 mod rapid;
 mod rapid_cli;
 mod regression;

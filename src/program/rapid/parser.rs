@@ -488,7 +488,9 @@ impl<'a> Parser<'a> {
         };
         if let Ok((r, t)) = number_text(i) {
             if ends_here(r) {
-                if t.parse::<f64>().is_ok_and(|v| v.is_nan() || v.abs() > MAX_NUMBER) {
+                if t.parse::<f64>()
+                    .is_ok_and(|v| v.is_nan() || v.abs() > MAX_NUMBER)
+                {
                     return self.fail_found(
                         start,
                         &format!(
