@@ -132,10 +132,16 @@ pub const QUOTE_MAX: usize = 24;
 /// A piece of input text for a message, shortened with `…` beyond
 /// [`QUOTE_MAX`] characters.
 pub fn clip(text: &str) -> String {
-    if text.chars().count() <= QUOTE_MAX {
+    clip_to(text, QUOTE_MAX)
+}
+
+/// A piece of input text for a message, shortened with `…` beyond `max`
+/// characters.
+pub fn clip_to(text: &str, max: usize) -> String {
+    if text.chars().count() <= max {
         text.to_string()
     } else {
-        format!("{}…", text.chars().take(QUOTE_MAX).collect::<String>())
+        format!("{}…", text.chars().take(max).collect::<String>())
     }
 }
 

@@ -26,6 +26,13 @@ pub const ARC_RADIUS_TOL_MM: f64 = 0.01;
 /// Arc parameter just inside the ends, where tangent directions are read.
 pub const END_INSIDE: f64 = 1.0 - 1e-6;
 
+/// Largest accepted spindle speed, 1/min (the fastest machining spindles
+/// run at about 100 000).
+const MAX_SPINDLE_RPM: f64 = 200_000.0;
+
+/// Longest block text quoted in a message, characters.
+const LINE_QUOTE_MAX: usize = 60;
+
 /// Number of modal groups checked by [`modal_group`].
 const MODAL_GROUPS: usize = 8;
 
@@ -378,8 +385,26 @@ impl Interpreter {
         if self.inch { MM_PER_INCH } else { 1.0 }
     }
 
-    /// Interprets one parsed block. `text` is the line (for messages).
+    /// Interprets one parsed block. `text` is the line (for messages): an
+    /// error that does not quote its word quotes the block.
     pub fn step(&mut self, block: &Block, text: &[u8]) -> Result<Plan, Located> {
+        self.step_block(block, text).map_err(|mut e| {
+            if !e.message.contains('`') {
+                let line = String::from_utf8_lossy(text);
+                let line = line.trim();
+                if !line.is_empty() {
+                    e.message = format!(
+                        "{}: `{}`",
+                        e.message,
+                        crate::error::clip_to(line, LINE_QUOTE_MAX)
+                    );
+                }
+            }
+            e
+        })
+    }
+
+    fn step_block(&mut self, block: &Block, text: &[u8]) -> Result<Plan, Located> {
         let line = block.line_no;
         let mut plan = Plan {
             scale: self.scale(),
@@ -410,6 +435,7 @@ impl Interpreter {
         let mut h_word = None;
         let mut p_word = None;
         let mut groups: [Option<&Word>; MODAL_GROUPS] = [None; MODAL_GROUPS];
+        let mut spindle_m: Option<&Word> = None;
         for w in &block.words {
             match w.letter {
                 b'X' | b'Y' | b'Z' | b'A' | b'B' | b'C' => {
@@ -456,6 +482,16 @@ impl Interpreter {
                             format!("negative spindle speed `{}`", quote(w)),
                         ));
                     }
+                    if w.value > MAX_SPINDLE_RPM {
+                        return Err(self.err(
+                            line,
+                            Some(w),
+                            format!(
+                                "spindle speed above {MAX_SPINDLE_RPM} 1/min: `{}`",
+                                quote(w)
+                            ),
+                        ));
+                    }
                     self.spindle = w.value;
                 }
                 b'T' => {
@@ -473,8 +509,26 @@ impl Interpreter {
                 }
                 b'M' => match w.code10() {
                     60 => self.tool_active = self.tool_selected,
-                    30 | 40 => self.spindle_on = true,
-                    50 | 20 | 300 => self.spindle_on = false,
+                    30 | 40 | 50 if spindle_m.is_some() => {
+                        return Err(self.err(
+                            line,
+                            Some(w),
+                            format!(
+                                "`{}` and `{}` both set the spindle in one block",
+                                spindle_m.map(&quote).unwrap_or_default(),
+                                quote(w)
+                            ),
+                        ));
+                    }
+                    30 | 40 => {
+                        spindle_m = Some(w);
+                        self.spindle_on = true;
+                    }
+                    50 => {
+                        spindle_m = Some(w);
+                        self.spindle_on = false;
+                    }
+                    20 | 300 => self.spindle_on = false,
                     980 | 990 | 970 | 1980 => {
                         return Err(self.err(line, Some(w), format!("subprogram calls cannot be compensated offline (expand them in CAM): `{}`", quote(w))));
                     }
@@ -731,6 +785,9 @@ impl Interpreter {
                 }
             }
         }
+        if motion != Motion::Rapid && end != start {
+            self.require_feed(line, block.words.iter().find(|w| w.letter == b'F'))?;
+        }
         let mv = self.make_move(motion, start, end, arc);
         plan.kind = PlanKind::Motion;
         plan.mv = Some(mv);
@@ -810,6 +867,22 @@ impl Interpreter {
     fn feed_mm_min(&self) -> f64 {
         let f = self.feed * self.scale();
         if self.per_rev { f * self.spindle } else { f }
+    }
+
+    /// A feed move needs a feed rate: F0, or no F yet, would never finish
+    /// on the controller (an alarm), and gives the move no duration.
+    fn require_feed(&self, line: usize, f_word: Option<&Word>) -> Result<(), Located> {
+        if self.feed > 0.0 && (!self.per_rev || self.spindle > 0.0) {
+            return Ok(());
+        }
+        let what = if self.per_rev && self.feed > 0.0 {
+            "feed per revolution (G95) with the spindle speed S at 0"
+        } else if f_word.is_some() {
+            "feed move with F0"
+        } else {
+            "feed move before any feed rate F was programmed"
+        };
+        Err(self.err(line, f_word, what.to_string()))
     }
 
     fn make_move(
@@ -1116,6 +1189,7 @@ impl Interpreter {
         self.make_move(Motion::Rapid, above, at_r, None);
         let mut at_bottom = xy;
         at_bottom[2] = bottom;
+        self.require_feed(line, block.words.iter().find(|w| w.letter == b'F'))?;
         let feed = self.make_move(Motion::Linear, at_r, at_bottom, None);
         let mut up = xy;
         up[2] = retract;
