@@ -16,3 +16,4 @@ mod rapid;
 mod rapid_cli;
 mod report_cli;
 mod robot;
+mod robot_process;
