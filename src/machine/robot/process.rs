@@ -502,10 +502,12 @@ impl Directives {
                 any = true;
             }
             if !any {
-                return Err(err(
-                    0,
-                    "POSTPROC MILLING directive without a key (DEPTH, WIDTH, RPM)".into(),
-                ));
+                return Err(Error::Input(Located::new(
+                    file,
+                    k + 1,
+                    bang + 1,
+                    "POSTPROC MILLING directive without a key (DEPTH, WIDTH, RPM)",
+                )));
             }
             at.push((k + 1, cur));
         }
