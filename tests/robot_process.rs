@@ -145,11 +145,7 @@ fn milling_slot_force_and_deflection_are_hand_derived() {
         Vector3::new(750.0, 0.0, 939.0),
         epsilon = GEOM_TOL_MM
     );
-    assert_abs_diff_eq!(
-        p1.rotation * Vector3::z(),
-        -Vector3::z(),
-        epsilon = 1e-12
-    );
+    assert_abs_diff_eq!(p1.rotation * Vector3::z(), -Vector3::z(), epsilon = 1e-12);
 
     // Mean force (the numbers of tests/effects.rs at a = 0.2 mm): slot,
     // N = 2, c = v·60/(rpm·N) = 40·60/12000 = 0.2 mm:
@@ -297,11 +293,26 @@ fn directives_are_parsed_and_bad_ones_located() {
     assert_eq!(d.at(9).width_mm, Some(6.0));
     assert_eq!(d.at(9).depth_mm, Some(2.0));
     for (bad, msg) in [
-        ("! POSTPROC MILLING DEPTH=2 SPEED=4", "m.mod:1:28: unknown key `SPEED`"),
-        ("! POSTPROC MILLING", "m.mod:1:1: POSTPROC MILLING directive without a key"),
-        ("! POSTPROC MILLING DEPTH=-1", "m.mod:1:20: `DEPTH=-1`: must be a length"),
-        ("! POSTPROC MILLING RPM=0", "m.mod:1:20: `RPM=0`: must be a spindle speed"),
-        ("! POSTPROC MILLING WIDTH=x", "m.mod:1:20: `WIDTH=x`: `x` is not a number"),
+        (
+            "! POSTPROC MILLING DEPTH=2 SPEED=4",
+            "m.mod:1:28: unknown key `SPEED`",
+        ),
+        (
+            "! POSTPROC MILLING",
+            "m.mod:1:1: POSTPROC MILLING directive without a key",
+        ),
+        (
+            "! POSTPROC MILLING DEPTH=-1",
+            "m.mod:1:20: `DEPTH=-1`: must be a length",
+        ),
+        (
+            "! POSTPROC MILLING RPM=0",
+            "m.mod:1:20: `RPM=0`: must be a spindle speed",
+        ),
+        (
+            "! POSTPROC MILLING WIDTH=x",
+            "m.mod:1:20: `WIDTH=x`: `x` is not a number",
+        ),
     ] {
         let e = Directives::parse(bad, "m.mod").unwrap_err().to_string();
         assert!(e.starts_with(msg), "{e}");
@@ -321,4 +332,116 @@ fn arc_end_tangent_is_hand_derived() {
     // Straight: the chord.
     let t = travel_direction(&Vector3::zeros(), None, &Vector3::new(0.0, 3.0, 0.0));
     assert_abs_diff_eq!(t, Vector3::new(0.0, 3.0, 0.0), epsilon = 1e-12);
+}
+
+#[test]
+fn a_feed_frame_constant_force_equals_the_same_milling_force() {
+    // Travel +X with the tool pointing down: feed frame x = +X, axial z =
+    // +Z (tip → flange), normal y = Z × X = +Y. The constant (−16, 40, 0)
+    // in the feed frame is the world force (−16, 40, 0) of the milling test,
+    // so the deflection is the same hand-derived vector; in the work-object
+    // frame (wobj0 = world) too.
+    let r = Robot::from_yaml_str(&irb1600_with(MILLING), "m.yaml").expect("valid");
+    let dir = tempfile::tempdir().expect("tempdir");
+    let m = write(dir.path(), "m.yaml", &irb1600_with(MILLING));
+    let p = write(dir.path(), "slot.mod", &slot_program(&r, ""));
+    let expected = Vector3::new(-0.1172005, 0.3002496, -0.0067569);
+    for spec in ["constant:-16,40,0@feed", "constant:-16,40,0@workpiece"] {
+        let rows = report_rows(&m, &p, &["--force", spec]);
+        let d = rows[1].1;
+        assert_abs_diff_eq!(
+            Vector3::new(d[0], d[1], d[2]),
+            expected,
+            epsilon = DEFLECTION_TOL_MM
+        );
+    }
+    // `--force none`: no process deviation anywhere.
+    let rows = report_rows(&m, &p, &["--force", "none"]);
+    assert!(rows.iter().all(|(_, d)| d[3] == 0.0), "{rows:?}");
+}
+
+#[test]
+fn milling_sample_loads_only_the_side_moves_and_warns_at_a_mode() {
+    let sample = repo("samples/milling.mod");
+    let machine = repo("samples/irb1600-milling.yaml");
+    let rows = report_rows(&machine, &sample, &[]);
+    // Side moves (MoveL across the tool axis): lines 45-48 and 52-55.
+    // Plunges (44, 51), the retract (56) and the air moves carry no force.
+    for (line, d) in &rows {
+        let side = (45..=48).contains(line) || (52..=55).contains(line);
+        assert_eq!(d[3] > 0.0, side, "line {line}: {d:?}");
+    }
+    // At 18000 rpm the tooth passes at 600 Hz, far above the modes (7.5-9.5
+    // Hz): no warning. At 255 rpm, 255·2/60 = 8.5 Hz = the x mode: the
+    // roughing lap (no RPM directive) triggers the warning.
+    let run = |m: &Path| {
+        postproc()
+            .args(["report", "--format", "csv", "--effects", "dynamic"])
+            .arg(&sample)
+            .arg("-m")
+            .arg(m)
+            .output()
+            .expect("run")
+    };
+    let out = run(&machine);
+    assert!(out.status.success());
+    assert!(!String::from_utf8_lossy(&out.stderr).contains("natural frequency"));
+    let dir = tempfile::tempdir().expect("tempdir");
+    let text = std::fs::read_to_string(&machine).expect("machine");
+    assert!(text.contains("spindle_rpm: 18000.0"));
+    let slow = write(
+        dir.path(),
+        "slow.yaml",
+        &text.replace("spindle_rpm: 18000.0", "spindle_rpm: 255.0"),
+    );
+    let out = run(&slow);
+    assert!(out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("spindle excitation 8.50 Hz") && err.contains("x natural frequency 8.50 Hz"),
+        "{err}"
+    );
+    // The finishing lap runs at its directive's 20000 rpm (667 Hz): the
+    // largest vibration is on a roughing side move.
+    assert!(err.contains("(line 4"), "{err}");
+}
+
+#[test]
+fn milling_yaml_is_validated_with_key_paths() {
+    for (block, msg) in [
+        (
+            MILLING.replace("  spindle_rpm: 6000\n", ""),
+            "model `milling` needs `spindle_rpm`",
+        ),
+        (
+            MILLING.replace("  flutes: 2\n", ""),
+            "model `milling` needs `flutes`",
+        ),
+        (
+            MILLING.replace("  kt_n_per_mm2: 2000\n", ""),
+            "model `milling` needs `kt_n_per_mm2`",
+        ),
+        (
+            MILLING.replace("radial_width_mm: 10", "radial_width_mm: 11"),
+            "process_force.radial_width_mm: `11` is outside 0..10",
+        ),
+        (
+            format!("{MILLING}  drill_diameter_mm: 6\n"),
+            "process_force.drill_diameter_mm: `drill_diameter_mm` does not apply to model `milling`",
+        ),
+        (
+            "process_force: { model: drilling, thrust_coefficient_n_per_mm2: 450, drill_diameter_mm: 6.8, spindle_rpm: 3000, kt_n_per_mm2: 1 }\n".to_string(),
+            "process_force.kt_n_per_mm2: `kt_n_per_mm2` does not apply to model `drilling`",
+        ),
+        (
+            "process_force: { model: table }\n".to_string(),
+            "process_force.model",
+        ),
+    ] {
+        let e = Robot::from_yaml_str(&irb1600_with(&block), "m.yaml")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains(msg), "{msg}: {e}");
+        assert!(e.starts_with("m.yaml:"), "{e}");
+    }
 }

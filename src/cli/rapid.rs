@@ -203,9 +203,8 @@ pub(super) fn robot_with_process(robot: Robot, e: &EffectArgs) -> Result<Robot> 
                         },
                     },
                     spindle_rpm: old.and_then(|p| p.spindle_rpm),
-                    flutes: old.map_or(crate::machine::robot::process::DEFAULT_FLUTES, |p| {
-                        p.flutes
-                    }),
+                    flutes: old
+                        .map_or(crate::machine::robot::process::DEFAULT_FLUTES, |p| p.flutes),
                     axis_tolerance_rad: crate::machine::robot::process::DEFAULT_AXIS_TOLERANCE_DEG
                         .to_radians(),
                 })

@@ -199,16 +199,13 @@ impl ProcessForce {
                 .ok_or_else(|| Invalid::new(p, format!("model `{model_name}` needs `{k}`")))
         };
         // A milling value within lo..=hi; `None` → `default` (or an error).
-        let within = |k: &str, v: Option<f64>, lo: f64, hi: f64, default: Option<f64>| {
-            match v {
-                Some(x) if !x.is_finite() || x < lo || x > hi => Err(Invalid::new(
-                    format!("{p}.{k}"),
-                    format!("`{x}` is outside {lo}..{hi}"),
-                )),
-                Some(x) => Ok(x),
-                None => default
-                    .ok_or_else(|| Invalid::new(p, format!("model `milling` needs `{k}`"))),
-            }
+        let within = |k: &str, v: Option<f64>, lo: f64, hi: f64, default: Option<f64>| match v {
+            Some(x) if !x.is_finite() || x < lo || x > hi => Err(Invalid::new(
+                format!("{p}.{k}"),
+                format!("`{x}` is outside {lo}..{hi}"),
+            )),
+            Some(x) => Ok(x),
+            None => default.ok_or_else(|| Invalid::new(p, format!("model `milling` needs `{k}`"))),
         };
         let spindle_rpm = positive("spindle_rpm", r.spindle_rpm)?;
         let tol_deg = positive("axis_tolerance_deg", r.axis_tolerance_deg)?
@@ -469,7 +466,10 @@ impl Directives {
             let mut any = false;
             for (off, word) in words {
                 let (key, value) = word.split_once('=').ok_or_else(|| {
-                    err(off, format!("`{word}`: expected KEY=VALUE (DEPTH, WIDTH, RPM)"))
+                    err(
+                        off,
+                        format!("`{word}`: expected KEY=VALUE (DEPTH, WIDTH, RPM)"),
+                    )
                 })?;
                 let v: f64 = value
                     .parse()
