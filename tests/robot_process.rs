@@ -445,3 +445,31 @@ fn milling_yaml_is_validated_with_key_paths() {
         assert!(e.starts_with("m.yaml:"), "{e}");
     }
 }
+
+#[test]
+fn the_grammar_directive_example_runs() {
+    let doc = std::fs::read_to_string(repo("grammar/rapid.md")).expect("grammar");
+    let start = doc.find("```rapid\nMODULE Wall").expect("example") + "```rapid\n".len();
+    let end = start + doc[start..].find("```").expect("closed");
+    let example = &doc[start..end];
+    // Lines: 5 the directive, 6 `MoveL a`, 7 `MoveL b` with its own
+    // directive at the end of the line.
+    let d = Directives::parse(example, "wall.mod").expect("valid");
+    assert_eq!(
+        d.at(6),
+        CutSettings {
+            depth_mm: Some(5.0),
+            width_mm: Some(2.0),
+            spindle_rpm: None
+        }
+    );
+    assert_eq!(d.at(7).spindle_rpm, Some(20000.0));
+    assert_eq!(d.at(7).depth_mm, Some(5.0));
+    // Through the binary: the second move (travel +X, tool down) is cut.
+    let dir = tempfile::tempdir().expect("tempdir");
+    let p = write(dir.path(), "wall.mod", example);
+    let rows = report_rows(&repo("samples/irb1600-milling.yaml"), &p, &[]);
+    assert_eq!(rows.len(), 2);
+    assert_eq!(rows[0].1[3], 0.0);
+    assert!(rows[1].1[3] > 0.01, "{rows:?}");
+}
