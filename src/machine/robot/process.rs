@@ -631,3 +631,136 @@ impl Robot {
         r
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use approx::assert_abs_diff_eq;
+
+    const FORCE_TOL_N: f64 = 1e-9;
+
+    fn milling() -> ProcessForce {
+        ProcessForce {
+            model: ForceModel::Milling(Milling {
+                kt_n_per_mm2: 2000.0,
+                kr_n_per_mm2: 800.0,
+                ka_n_per_mm2: 0.0,
+                kte_n_per_mm: 0.0,
+                kre_n_per_mm: 0.0,
+                kae_n_per_mm: 0.0,
+                tool_diameter_mm: 10.0,
+                flutes: 2,
+                axial_depth_mm: 2.0,
+                radial_width_mm: 10.0,
+            }),
+            spindle_rpm: Some(1000.0),
+            flutes: 2,
+            axis_tolerance_rad: DEFAULT_AXIS_TOLERANCE_DEG.to_radians(),
+        }
+    }
+
+    #[test]
+    fn milling_force_is_the_machine_tool_slot() {
+        // tests/effects.rs: slot, a = 2 mm, N = 2, c = 400/(1000·2) = 0.2 mm
+        // (v_tcp = 400/60 mm/s): tangential −160 N, normal 400 N. Travel +X,
+        // TCP z = −Z (tool down): axial = +Z, normal = Z × X = +Y.
+        let pf = milling();
+        let mut cache = MillingCache::default();
+        let set = CutSettings::default();
+        let l = pf
+            .milling_force(
+                &Vector3::x(),
+                &-Vector3::z(),
+                400.0 / 60.0,
+                &set,
+                &mut cache,
+            )
+            .expect("cuts");
+        assert_abs_diff_eq!(
+            l.force_n,
+            Vector3::new(-160.0, 400.0, 0.0),
+            epsilon = FORCE_TOL_N
+        );
+        // Tooth passing 1000·2/60 Hz, as `excitation_hz`.
+        assert_abs_diff_eq!(
+            l.tooth_hz,
+            pf.excitation_hz().expect("rpm"),
+            epsilon = FORCE_TOL_N
+        );
+        // A directive doubling the speed halves c: −80, 200 N.
+        let fast = CutSettings {
+            spindle_rpm: Some(2000.0),
+            ..set
+        };
+        let l = pf
+            .milling_force(
+                &Vector3::x(),
+                &-Vector3::z(),
+                400.0 / 60.0,
+                &fast,
+                &mut cache,
+            )
+            .expect("cuts");
+        assert_abs_diff_eq!(
+            l.force_n,
+            Vector3::new(-80.0, 200.0, 0.0),
+            epsilon = FORCE_TOL_N
+        );
+        // Along the tool axis (plunge) and without travel nothing is cut.
+        let z = -Vector3::z();
+        assert!(pf.milling_force(&z, &z, 5.0, &set, &mut cache).is_none());
+        assert!(
+            pf.milling_force(&Vector3::zeros(), &z, 5.0, &set, &mut cache)
+                .is_none()
+        );
+        // Other models have no milling force.
+        let drill = ProcessForce {
+            model: ForceModel::Table,
+            ..pf
+        };
+        assert!(
+            drill
+                .milling_force(&Vector3::x(), &z, 5.0, &set, &mut cache)
+                .is_none()
+        );
+    }
+
+    #[test]
+    fn feed_frame_vector_turns_with_travel_and_tool() {
+        // Travel +Y, TCP z = −Z: x = +Y, z = +Z, y = Z × Y = −X:
+        // (1, 2, 3) → (−2, 1, 3).
+        let v = feed_frame_vector(&Vector3::new(1.0, 2.0, 3.0), &Vector3::y(), &-Vector3::z());
+        assert_abs_diff_eq!(v, Vector3::new(-2.0, 1.0, 3.0), epsilon = FORCE_TOL_N);
+    }
+
+    #[test]
+    fn drilling_thrust_is_the_process_model() {
+        // K·(D/2)·f_rev = 450·3.4·(4·60/3000) = 122.4 N, as
+        // process::Drilling::thrust_n; a directive RPM of 6000 halves it.
+        let pf = ProcessForce {
+            model: ForceModel::Drilling {
+                drill: Drilling {
+                    thrust_coefficient_n_per_mm2: 450.0,
+                    drill_diameter_mm: 6.8,
+                },
+                max_feed_mm_per_rev: DEFAULT_MAX_FEED_MM_PER_REV,
+            },
+            spindle_rpm: Some(3000.0),
+            flutes: 2,
+            axis_tolerance_rad: DEFAULT_AXIS_TOLERANCE_DEG.to_radians(),
+        };
+        assert_abs_diff_eq!(
+            pf.drilling_thrust_n(4.0).expect("drills"),
+            122.4,
+            epsilon = FORCE_TOL_N
+        );
+        assert_abs_diff_eq!(
+            pf.with_rpm(Some(6000.0))
+                .drilling_thrust_n(4.0)
+                .expect("drills"),
+            61.2,
+            epsilon = FORCE_TOL_N
+        );
+        assert_eq!(pf.with_rpm(None), pf);
+    }
+}
