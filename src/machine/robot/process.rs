@@ -622,13 +622,12 @@ impl Robot {
 
     /// The same robot with spindle speed `rpm` (a program directive) for
     /// the process force and its excitation frequency; unchanged for `None`
-    /// or without a process force.
-    pub fn with_spindle_rpm(&self, rpm: Option<f64>) -> Robot {
-        let mut r = self.clone();
-        if let (Some(pf), Some(_)) = (r.d.process_force.as_mut(), rpm) {
+    /// or without a process force. Takes the robot by value (no copy).
+    pub fn with_spindle_rpm(mut self, rpm: Option<f64>) -> Robot {
+        if let (Some(pf), Some(_)) = (self.d.process_force.as_mut(), rpm) {
             *pf = pf.with_rpm(rpm);
         }
-        r
+        self
     }
 }
 
