@@ -435,7 +435,7 @@ fn milling_yaml_is_validated_with_key_paths() {
         ),
         (
             "process_force: { model: table }\n".to_string(),
-            "process_force.model",
+            "process_force.model: a force table is given per run with --force-table FILE",
         ),
     ] {
         let e = Robot::from_yaml_str(&irb1600_with(&block), "m.yaml")

@@ -184,6 +184,12 @@ impl ProcessForce {
             RawForceModel::Constant => "constant",
             RawForceModel::Milling => "milling",
             RawForceModel::Drilling => "drilling",
+            RawForceModel::Table => {
+                return Err(Invalid::new(
+                    format!("{p}.model"),
+                    "a force table is given per run with --force-table FILE",
+                ));
+            }
         };
         let positive = |k: &str, v: Option<f64>| -> Result<Option<f64>, Invalid> {
             match v {
@@ -247,6 +253,7 @@ impl ProcessForce {
                 "max_feed_mm_per_rev",
                 "axis_tolerance_deg",
             ],
+            RawForceModel::Table => &[],
             RawForceModel::Milling => &[
                 "kt_n_per_mm2",
                 "kr_n_per_mm2",
@@ -310,7 +317,8 @@ impl ProcessForce {
                     radial_width_mm: within("radial_width_mm", r.radial_width_mm, 0.0, d, None)?,
                 })
             }
-            RawForceModel::Drilling => {
+            // (`table` was refused above.)
+            RawForceModel::Drilling | RawForceModel::Table => {
                 need("spindle_rpm", r.spindle_rpm)?;
                 ForceModel::Drilling {
                     drill: Drilling {

@@ -88,6 +88,7 @@ pub(crate) enum RawForceModel {
     Constant,
     Milling,
     Drilling,
+    Table,
 }
 
 /// `process_force.frame`.
