@@ -18,3 +18,4 @@ mod rapid_cli;
 mod regression;
 mod report_cli;
 mod robot;
+mod robot_process;

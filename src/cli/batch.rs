@@ -343,7 +343,7 @@ pub fn run(a: &BatchArgs, quiet: bool) -> Result<i32> {
                     "--tool and --work-offset are G-code options; RAPID takes tooldata and wobjdata from the module",
                 ));
             }
-            let robot = load_robot(&a.machine)?;
+            let robot = super::rapid::robot_with_process(load_robot(&a.machine)?, &a.effects)?;
             let opts = super::rapid::rapid_options(&robot, &a.effects, annotate, None)?;
             Engine::Robot(robot, opts)
         }

@@ -116,7 +116,7 @@ pub(super) fn effects(args: &EffectArgs) -> Result<EffectSet> {
 }
 
 /// Parses `--force`: `none` or `constant:FX,FY,FZ[@frame]`.
-fn parse_force(spec: &str) -> Result<Option<ForceModel>> {
+pub(super) fn parse_force(spec: &str) -> Result<Option<ForceModel>> {
     let spec = spec.trim();
     if spec == "none" {
         return Ok(None);

@@ -177,6 +177,73 @@ pub(super) fn rapid_options(
     })
 }
 
+/// The robot with the process-force flags of a run applied: `--force none`
+/// removes the process force, `--force constant:FX,FY,FZ[@frame]` sets a
+/// constant force (frames: `workpiece` = the move's work object, the
+/// default; `tool` = the TCP frame; `feed` = tangential, normal, axial),
+/// `--force-table FILE` per-move forces by line (work-object frame), and
+/// `--milling-depth`/`--milling-width` replace the defaults of a `milling`
+/// model (the program's `! POSTPROC MILLING` directives still override
+/// them). Milling flags without a milling model are refused.
+pub(super) fn robot_with_process(robot: Robot, e: &EffectArgs) -> Result<Robot> {
+    use crate::machine::robot::{ForceFrame, ForceModel, ProcessForce};
+    let mut robot = robot;
+    if let Some(spec) = &e.force {
+        let pf = match super::gcode::parse_force(spec)? {
+            Some(crate::process::ForceModel::Constant { force_n, frame }) => {
+                let old = robot.process_force();
+                Some(ProcessForce {
+                    model: ForceModel::Constant {
+                        force_n,
+                        moment_nmm: nalgebra::Vector3::zeros(),
+                        frame: match frame {
+                            crate::process::Frame::Workpiece => ForceFrame::Workpiece,
+                            crate::process::Frame::Tool => ForceFrame::Tool,
+                            crate::process::Frame::Feed => ForceFrame::Feed,
+                        },
+                    },
+                    spindle_rpm: old.and_then(|p| p.spindle_rpm),
+                    flutes: old
+                        .map_or(crate::machine::robot::process::DEFAULT_FLUTES, |p| p.flutes),
+                    axis_tolerance_rad: crate::machine::robot::process::DEFAULT_AXIS_TOLERANCE_DEG
+                        .to_radians(),
+                })
+            }
+            _ => None,
+        };
+        robot = robot.with_process_force(pf);
+    }
+    if let Some(path) = &e.force_table {
+        robot = robot.with_force_table(crate::process::ForceTable::load(path)?);
+    }
+    if e.milling_depth.is_none() && e.milling_width.is_none() {
+        return Ok(robot);
+    }
+    let Some(mut pf) = robot.process_force().copied() else {
+        return Err(usage(
+            "--milling-depth/--milling-width: the robot has no process force; they need `process_force: {model: milling}`",
+        ));
+    };
+    let ForceModel::Milling(mut m) = pf.model else {
+        return Err(usage(
+            "--milling-depth/--milling-width: the robot's process force is not `milling`",
+        ));
+    };
+    for (flag, v, slot) in [
+        ("--milling-depth", e.milling_depth, &mut m.axial_depth_mm),
+        ("--milling-width", e.milling_width, &mut m.radial_width_mm),
+    ] {
+        if let Some(v) = v {
+            if !v.is_finite() || !(0.0..=1e4).contains(&v) {
+                return Err(usage(format!("{flag} {v}: must be within 0..10000 mm")));
+            }
+            *slot = v;
+        }
+    }
+    pf.model = ForceModel::Milling(m);
+    Ok(robot.with_process_force(Some(pf)))
+}
+
 /// `postproc compensate` of a RAPID module.
 pub fn compensate(a: &CompensateArgs) -> Result<i32> {
     let machine = a
@@ -184,7 +251,7 @@ pub fn compensate(a: &CompensateArgs) -> Result<i32> {
         .machine
         .as_deref()
         .ok_or_else(|| usage("compensate needs --machine"))?;
-    let robot = load_robot(machine)?;
+    let robot = robot_with_process(load_robot(machine)?, &a.effects)?;
     if !a.program.tools.is_empty() || !a.program.work_offsets.is_empty() {
         return Err(usage(
             "--tool and --work-offset are G-code options; RAPID takes tooldata and wobjdata from the module",
@@ -279,7 +346,7 @@ pub fn report(a: &ReportArgs) -> Result<i32> {
         .machine
         .as_deref()
         .ok_or_else(|| usage("report needs --machine"))?;
-    let robot = load_robot(machine)?;
+    let robot = robot_with_process(load_robot(machine)?, &a.effects)?;
     if !a.program.tools.is_empty() || !a.program.work_offsets.is_empty() {
         return Err(usage(
             "--tool and --work-offset are G-code options; RAPID takes tooldata and wobjdata from the module",

@@ -19,12 +19,15 @@ use crate::emit::rapid::{
 };
 use crate::error::{Error, Located, Result};
 use crate::machine::robot::pose::pose_from_abb;
-use crate::machine::robot::process::plunge_direction;
+use crate::machine::robot::process::{
+    CutSettings, Directives, feed_frame_vector, plunge_direction, travel_direction,
+};
 use crate::machine::robot::thermal::{Segment, effective_power};
 use crate::machine::robot::{
     ConfData, Deviation, Effects, ForceFrame, ForceModel, IkSelect, Model, PointMass,
     ProcessWrench, Robot, ThermalStart,
 };
+use crate::process::MillingCache;
 use crate::program::rapid::{
     DataValue, Decl, JointTarget, Module, Move, MoveKind, Number, Pose, RobTarget, Scalar, Target,
     parse_module,
@@ -166,6 +169,7 @@ struct LoadKey {
     wobj: String,
     wrench: Option<([u64; 6], bool)>,
     power: Option<[u64; 6]>,
+    rpm: Option<u64>,
 }
 
 /// A resolved tool: TCP in the flange frame and load (flange frame).
@@ -625,6 +629,8 @@ struct Rewriter<'m> {
 struct MoveState {
     wrench: Option<ProcessWrench>,
     power: Option<[f64; 6]>,
+    /// Spindle speed of a `! POSTPROC MILLING RPM=` directive, 1/min.
+    rpm: Option<f64>,
 }
 
 impl Rewriter<'_> {
@@ -640,7 +646,8 @@ impl Rewriter<'_> {
                 let mut r = self
                     .robot
                     .with_tool(tool.tframe, tool.load, false)
-                    .with_process_wrench(state.wrench);
+                    .with_process_wrench(state.wrench)
+                    .with_spindle_rpm(state.rpm);
                 if let Some(p) = state.power {
                     r = r.with_thermal_power(&p);
                 }
@@ -967,8 +974,11 @@ fn plan_move(module: &Module, src: &str, file: &str, robot: &Robot, mv: &Move) -
 }
 
 /// The process wrench of move `i` (see `grammar/rapid.md`, "Process
-/// force"): a constant force on MoveL/MoveC; a drilling thrust on MoveL
-/// plunges (along +tool z) at a drilling feed; none otherwise.
+/// force"): a constant force or a milling force on MoveL/MoveC; a drilling
+/// thrust on MoveL plunges (along +tool z) at a drilling feed; a table force
+/// on the moves whose line has a row; none otherwise. `set`: the program's
+/// `! POSTPROC MILLING` settings in force at the move.
+#[allow(clippy::too_many_arguments)]
 fn move_wrench(
     robot: &Robot,
     plans: &[Planned],
@@ -977,9 +987,47 @@ fn move_wrench(
     src: &str,
     file: &str,
     need_speed: bool,
+    set: &CutSettings,
+    cache: &mut MillingCache,
 ) -> Result<Option<ProcessWrench>> {
     let (Some(pf), Some(cur)) = (robot.process_force(), plans.get(i)) else {
         return Ok(None);
+    };
+    let pf = pf.with_rpm(set.spindle_rpm);
+    let prev = i.checked_sub(1).and_then(|k| plans.get(k));
+    let feed_move = matches!(mv.kind, MoveKind::MoveL | MoveKind::MoveC);
+    let z = cur.pose.rotation * Vector3::z();
+    // Direction of travel at the target (world frame); zero for the first
+    // move.
+    let travel = || {
+        prev.map_or_else(Vector3::zeros, |p| {
+            travel_direction(
+                &p.pose.translation.vector,
+                cur.via.as_ref().map(|v| &v.translation.vector),
+                &cur.pose.translation.vector,
+            )
+        })
+    };
+    let to_base = robot.base().rotation.inverse();
+    let in_base = |force_n: Vector3<f64>, moment_nmm: Vector3<f64>| ProcessWrench {
+        force_n: to_base * force_n,
+        moment_nmm: to_base * moment_nmm,
+        in_tool_frame: false,
+    };
+    let speed = |what: &str| -> Result<Option<f64>> {
+        match cur.v_tcp {
+            Some(v) => Ok(Some(v)),
+            None if need_speed => Err(input_err(
+                src,
+                file,
+                mv.speed.span.start,
+                format!(
+                    "speed `{}` cannot be resolved offline; the {what} needs the TCP speed",
+                    mv.speed.text
+                ),
+            )),
+            None => Ok(None),
+        }
     };
     match pf.model {
         ForceModel::Constant {
@@ -987,7 +1035,7 @@ fn move_wrench(
             moment_nmm,
             frame,
         } => {
-            if !matches!(mv.kind, MoveKind::MoveL | MoveKind::MoveC) {
+            if !feed_move {
                 return Ok(None);
             }
             Ok(Some(match frame {
@@ -1004,34 +1052,43 @@ fn move_wrench(
                         in_tool_frame: false,
                     }
                 }
+                ForceFrame::Feed => {
+                    let t = travel();
+                    in_base(
+                        feed_frame_vector(&force_n, &t, &z),
+                        feed_frame_vector(&moment_nmm, &t, &z),
+                    )
+                }
             }))
         }
+        ForceModel::Milling(_) => {
+            if !feed_move || prev.is_none() {
+                return Ok(None);
+            }
+            let Some(v) = speed("milling force")? else {
+                return Ok(None);
+            };
+            Ok(pf
+                .milling_force(&travel(), &z, v, set, cache)
+                .map(|l| in_base(l.force_n, Vector3::zeros())))
+        }
         ForceModel::Drilling { .. } => {
-            let Some(prev) = i.checked_sub(1).and_then(|k| plans.get(k)) else {
+            let Some(prev) = prev else {
                 return Ok(None);
             };
             if mv.kind != MoveKind::MoveL {
                 return Ok(None);
             }
             let d = cur.pose.translation.vector - prev.pose.translation.vector;
-            let z = cur.pose.rotation * Vector3::z();
             if plunge_direction(&d, &z, pf.axis_tolerance_rad) != Some(true) {
                 return Ok(None);
             }
-            match cur.v_tcp {
-                Some(v) => Ok(pf.drilling_wrench(v)),
-                None if need_speed => Err(input_err(
-                    src,
-                    file,
-                    mv.speed.span.start,
-                    format!(
-                        "speed `{}` cannot be resolved offline; the drilling thrust needs the TCP speed",
-                        mv.speed.text
-                    ),
-                )),
-                None => Ok(None),
-            }
+            Ok(speed("drilling thrust")?.and_then(|v| pf.drilling_wrench(v)))
         }
+        ForceModel::Table => Ok(robot
+            .force_table()
+            .and_then(|t| t.get(mv.line))
+            .map(|f| in_base(cur.wobj.rotation * f, Vector3::zeros()))),
     }
 }
 
@@ -1129,6 +1186,8 @@ pub fn compensate_module(
         .collect::<Result<Vec<_>>>()?;
     let fx = opts.effects;
     let thermal = robot.thermal().filter(|_| fx.thermal != 0.0);
+    let directives = Directives::parse(src, file)?;
+    let mut cache = MillingCache::default();
     let mut wrenches = Vec::with_capacity(moves.len());
     for (i, mv) in moves.iter().enumerate() {
         wrenches.push(move_wrench(
@@ -1139,6 +1198,8 @@ pub fn compensate_module(
             src,
             file,
             fx.process != 0.0 || thermal.is_some(),
+            &directives.at(mv.line),
+            &mut cache,
         )?);
     }
     let mut segments = Vec::with_capacity(moves.len());
@@ -1191,14 +1252,15 @@ pub fn compensate_module(
         max_deviation_line: 0,
         records: Vec::with_capacity(moves.len()),
     };
-    let mut max_vib = (0.0, 0);
+    let mut max_vib = (0.0, 0, None);
     for (i, mv) in moves.iter().enumerate() {
         let (Some(plan), Some(seg)) = (plans.get(i), segments.get(i)) else {
             continue;
         };
         let power = thermal_power.as_ref().and_then(|p| p.get(i).copied());
         let wrench = wrenches.get(i).copied().flatten();
-        rw.state = MoveState { wrench, power };
+        let rpm = directives.at(mv.line).spindle_rpm;
+        rw.state = MoveState { wrench, power, rpm };
         let key = LoadKey {
             tool: mv.tool.text.to_ascii_lowercase(),
             wobj: mv
@@ -1207,6 +1269,7 @@ pub fn compensate_module(
                 .map_or_else(|| "wobj0".into(), |w| w.text.to_ascii_lowercase()),
             wrench: wrench.as_ref().map(wrench_bits),
             power: power.map(|p| p.map(f64::to_bits)),
+            rpm: rpm.map(f64::to_bits),
         };
         let dev = if mv.kind == MoveKind::MoveAbsJ {
             rw.joint(mv, &key, &plan.tool)?
@@ -1224,7 +1287,7 @@ pub fn compensate_module(
         }
         let v = dev.vibration_mm.norm();
         if v > max_vib.0 {
-            max_vib = (v, mv.line);
+            max_vib = (v, mv.line, rpm);
         }
         if opts.annotate {
             rw.edits.push(annotate(src, &mv.span, &dev_comment(&dev)));
@@ -1260,15 +1323,17 @@ pub fn compensate_module(
     Ok(outcome)
 }
 
-/// Warns once when the spindle's tooth-passing frequency lies within 10 %
-/// of a natural frequency of the modal model and some move is loaded.
-fn warn_resonance(robot: &Robot, fx: Effects, (amp_mm, line): (f64, usize)) {
+/// Warns once when the spindle's tooth-passing frequency (at the speed of
+/// the move with the largest vibration, `rpm` from a directive) lies within
+/// 10 % of a natural frequency of the modal model and some move is loaded.
+fn warn_resonance(robot: &Robot, fx: Effects, (amp_mm, line, rpm): (f64, usize, Option<f64>)) {
     if fx.dynamic == 0.0 || amp_mm <= 0.0 {
         return;
     }
     let (Some(pf), Some(modal)) = (robot.process_force(), robot.modal()) else {
         return;
     };
+    let pf = pf.with_rpm(rpm);
     let Some(f) = pf.excitation_hz() else {
         return;
     };

@@ -157,6 +157,8 @@ struct RobotData {
     k_nmm_per_rad: [f64; 6],
     process_wrench: Option<ProcessWrench>,
     process_force: Option<ProcessForce>,
+    /// Per-line forces of a `table` process force (set per job).
+    force_table: Option<std::sync::Arc<crate::process::ForceTable>>,
     thermal: Option<Thermal>,
     /// DH growth of the thermal prediction stage (cold unless set).
     thermal_growth: DhGrowth,
@@ -393,18 +395,7 @@ impl Robot {
         };
         // The wrench the process stage applies by default: a constant force
         // in the tool or base frame (the RAPID pipeline sets it per move).
-        let process_wrench = match process_force.map(|f| f.model) {
-            Some(ForceModel::Constant {
-                force_n,
-                moment_nmm,
-                frame: frame @ (ForceFrame::Tool | ForceFrame::Base),
-            }) => Some(ProcessWrench {
-                force_n,
-                moment_nmm,
-                in_tool_frame: frame == ForceFrame::Tool,
-            }),
-            _ => None,
-        };
+        let process_wrench = process::default_wrench(process_force.as_ref());
         let thermal = raw.thermal.as_ref().map(Thermal::from_raw).transpose()?;
         let modal = raw.modal.as_deref().map(Modal::from_raw).transpose()?;
         let mut output = OutputDecimals {
@@ -451,6 +442,7 @@ impl Robot {
                 k_nmm_per_rad,
                 process_wrench,
                 process_force,
+                force_table: None,
                 thermal,
                 thermal_growth,
                 modal,

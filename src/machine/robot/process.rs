@@ -1,14 +1,29 @@
-//! Predicted process force of a robot (`process_force:` section): a constant
-//! wrench on feed moves, or a drilling thrust along the tool axis from the
-//! feed per revolution, `F = K · (D/2) · f_rev` with `f_rev = v_tcp · 60 /
-//! rpm`. Which moves drill is decided by the RAPID pipeline with
-//! [`plunge_direction`] and [`ProcessForce::drilling_wrench`].
+//! Predicted process force of a robot (`process_force:` section), using the
+//! machine-independent force models of [`crate::process`] as the force part
+//! of a wrench at the tool centre point:
+//!
+//! * `constant` — a fixed wrench on feed moves (tool, work-object, base or
+//!   feed frame);
+//! * `milling` — the mechanistic mean forces of [`crate::process::Milling`],
+//!   feed per tooth from the move's TCP speed and the spindle speed;
+//! * `drilling` — the thrust of [`crate::process::Drilling`] along the tool
+//!   axis from the feed per revolution `f_rev = v_tcp · 60 / rpm`;
+//! * `table` — per-move forces from a CSV keyed by line
+//!   ([`crate::process::ForceTable`], set per job).
+//!
+//! Which moves cut or drill is decided by the RAPID pipeline with
+//! [`plunge_direction`], [`travel_direction`] and the methods of
+//! [`ProcessForce`]; depth, width and spindle speed can be set per program
+//! by a `! POSTPROC MILLING …` directive ([`Directives`]).
+
+use std::sync::Arc;
 
 use nalgebra::Vector3;
 
 use super::raw::{RawForceFrame, RawForceModel, RawProcessForce, RawWrench, RawWrenchFrame};
 use super::{ProcessWrench, Robot};
-use crate::error::Invalid;
+use crate::error::{Error, Invalid, Located, Result};
+use crate::process::{self, CutState, Drilling, ForceTable, Frame, Milling, MillingCache};
 
 /// Default largest feed per revolution still taken as drilling, mm/rev: a
 /// faster move along the tool axis is positioning in air.
@@ -18,6 +33,10 @@ pub const DEFAULT_MAX_FEED_MM_PER_REV: f64 = 0.5;
 pub const DEFAULT_AXIS_TOLERANCE_DEG: f64 = 3.0;
 /// Default number of flutes (a twist drill has two).
 pub const DEFAULT_FLUTES: u32 = 2;
+/// Largest accepted depth or width of cut in a directive, mm.
+const MAX_CUT_MM: f64 = 1e4;
+/// Largest accepted spindle speed, 1/min.
+const MAX_RPM: f64 = 1e6;
 
 /// Frame a constant force is given in.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -28,6 +47,10 @@ pub enum ForceFrame {
     Workpiece,
     /// The robot base frame.
     Base,
+    /// The feed frame of [`crate::process`]: x tangential (direction of
+    /// travel), z axial (the tool axis from the tip towards the flange, i.e.
+    /// −z of the TCP frame), y = z × x.
+    Feed,
 }
 
 /// Which force model.
@@ -42,15 +65,18 @@ pub enum ForceModel {
         /// Frame of force and moment.
         frame: ForceFrame,
     },
+    /// Mechanistic milling forces on feed moves (MoveL, MoveC).
+    Milling(Milling),
     /// Drilling thrust along the tool axis on plunge moves.
     Drilling {
-        /// Specific thrust `K`, N/mm².
-        thrust_coefficient_n_per_mm2: f64,
-        /// Drill diameter `D`, mm.
-        drill_diameter_mm: f64,
+        /// Thrust model `F = K · (D/2) · f_rev`.
+        drill: Drilling,
         /// Largest feed per revolution taken as drilling, mm/rev.
         max_feed_mm_per_rev: f64,
     },
+    /// Per-move forces from the robot's force table
+    /// ([`Robot::force_table`], work-object frame).
+    Table,
 }
 
 /// The validated `process_force:` section.
@@ -58,7 +84,7 @@ pub enum ForceModel {
 pub struct ProcessForce {
     /// The model.
     pub model: ForceModel,
-    /// Spindle speed, rev/min (required for drilling).
+    /// Spindle speed, rev/min (required for drilling and milling).
     pub spindle_rpm: Option<f64>,
     /// Cutting edges of the tool (tooth-passing frequency = rpm·flutes/60).
     pub flutes: u32,
@@ -66,14 +92,33 @@ pub struct ProcessForce {
     pub axis_tolerance_rad: f64,
 }
 
+/// Cutting settings of a program position (from [`Directives`]); `None`
+/// keeps the machine file's (or the command line's) value.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct CutSettings {
+    /// Axial depth of cut, mm.
+    pub depth_mm: Option<f64>,
+    /// Radial width of cut, mm.
+    pub width_mm: Option<f64>,
+    /// Spindle speed, 1/min.
+    pub spindle_rpm: Option<f64>,
+}
+
 impl ProcessForce {
+    /// The same model with spindle speed `rpm` when given.
+    pub fn with_rpm(&self, rpm: Option<f64>) -> ProcessForce {
+        ProcessForce {
+            spindle_rpm: rpm.or(self.spindle_rpm),
+            ..*self
+        }
+    }
+
     /// Drilling thrust (N) at TCP speed `v_tcp_mm_per_s`, or `None` when the
     /// model is not drilling or the feed per revolution is above the
     /// drilling limit (positioning in air).
     pub fn drilling_thrust_n(&self, v_tcp_mm_per_s: f64) -> Option<f64> {
         let ForceModel::Drilling {
-            thrust_coefficient_n_per_mm2: k,
-            drill_diameter_mm: d,
+            drill,
             max_feed_mm_per_rev,
         } = self.model
         else {
@@ -81,7 +126,7 @@ impl ProcessForce {
         };
         let rpm = self.spindle_rpm?;
         let f_rev = v_tcp_mm_per_s * 60.0 / rpm;
-        (f_rev > 0.0 && f_rev <= max_feed_mm_per_rev).then(|| k * d / 2.0 * f_rev)
+        (f_rev > 0.0 && f_rev <= max_feed_mm_per_rev).then(|| drill.thrust_n(f_rev))
     }
 
     /// The wrench on the robot of a drilling plunge at `v_tcp_mm_per_s`: the
@@ -95,6 +140,39 @@ impl ProcessForce {
             })
     }
 
+    /// Mean milling force on the tool (N, in the frame of `travel` and
+    /// `z_tool`) of a feed move travelling along `travel` with the TCP
+    /// frame's z axis `z_tool` (pointing out of the tool, into the work) at
+    /// `v_tcp_mm_per_s`, with the depth, width and spindle speed of `set`
+    /// over the model's. The feed frame is the one of [`crate::process`]:
+    /// axial = −`z_tool`. `None` when the model is not milling or nothing is
+    /// cut (no spindle speed, no travel, travel along the tool axis).
+    pub fn milling_force(
+        &self,
+        travel: &Vector3<f64>,
+        z_tool: &Vector3<f64>,
+        v_tcp_mm_per_s: f64,
+        set: &CutSettings,
+        cache: &mut MillingCache,
+    ) -> Option<process::ProcessLoad> {
+        let ForceModel::Milling(m) = self.model else {
+            return None;
+        };
+        let state = CutState {
+            line: 0,
+            cutting: true,
+            drilling: false,
+            feed_dir: travel.try_normalize(1e-9)?,
+            tool_axis: -z_tool,
+            feed_mm_min: v_tcp_mm_per_s * 60.0,
+            spindle_rpm: set.spindle_rpm.or(self.spindle_rpm)?,
+            depth_mm: set.depth_mm,
+            width_mm: set.width_mm,
+        };
+        let load = process::ForceModel::Milling(m).load(&state, cache);
+        (load.tooth_hz > 0.0).then_some(load)
+    }
+
     /// Tooth-passing frequency, Hz, when a spindle speed is given.
     pub fn excitation_hz(&self) -> Option<f64> {
         self.spindle_rpm.map(|r| r * f64::from(self.flutes) / 60.0)
@@ -102,6 +180,17 @@ impl ProcessForce {
 
     pub(crate) fn from_raw(r: &RawProcessForce) -> Result<Self, Invalid> {
         let p = "process_force";
+        let model_name = match r.model {
+            RawForceModel::Constant => "constant",
+            RawForceModel::Milling => "milling",
+            RawForceModel::Drilling => "drilling",
+            RawForceModel::Table => {
+                return Err(Invalid::new(
+                    format!("{p}.model"),
+                    "a force table is given per run with --force-table FILE",
+                ));
+            }
+        };
         let positive = |k: &str, v: Option<f64>| -> Result<Option<f64>, Invalid> {
             match v {
                 Some(x) if !x.is_finite() || x <= 0.0 => Err(Invalid::new(
@@ -112,40 +201,78 @@ impl ProcessForce {
             }
         };
         let need = |k: &str, v: Option<f64>| -> Result<f64, Invalid> {
-            positive(k, v)?.ok_or_else(|| Invalid::new(p, format!("model `drilling` needs `{k}`")))
+            positive(k, v)?
+                .ok_or_else(|| Invalid::new(p, format!("model `{model_name}` needs `{k}`")))
+        };
+        // A milling value within lo..=hi; `None` → `default` (or an error).
+        let within = |k: &str, v: Option<f64>, lo: f64, hi: f64, default: Option<f64>| match v {
+            Some(x) if !x.is_finite() || x < lo || x > hi => Err(Invalid::new(
+                format!("{p}.{k}"),
+                format!("`{x}` is outside {lo}..{hi}"),
+            )),
+            Some(x) => Ok(x),
+            None => default.ok_or_else(|| Invalid::new(p, format!("model `milling` needs `{k}`"))),
         };
         let spindle_rpm = positive("spindle_rpm", r.spindle_rpm)?;
         let tol_deg = positive("axis_tolerance_deg", r.axis_tolerance_deg)?
             .unwrap_or(DEFAULT_AXIS_TOLERANCE_DEG);
         let flutes = r.flutes.unwrap_or(DEFAULT_FLUTES);
-        if flutes == 0 {
-            return Err(Invalid::new(format!("{p}.flutes"), "must be at least 1"));
+        if flutes == 0 || flutes > 64 {
+            return Err(Invalid::new(
+                format!("{p}.flutes"),
+                format!("`{flutes}` flutes is outside 1..64"),
+            ));
         }
-        // Keys of the other model are mistakes, not options.
-        let stray: &[(&str, bool)] = match r.model {
-            RawForceModel::Constant => &[
-                (
-                    "thrust_coefficient_n_per_mm2",
-                    r.thrust_coefficient_n_per_mm2.is_some(),
-                ),
-                ("drill_diameter_mm", r.drill_diameter_mm.is_some()),
-                ("max_feed_mm_per_rev", r.max_feed_mm_per_rev.is_some()),
-                ("axis_tolerance_deg", r.axis_tolerance_deg.is_some()),
-            ],
+        // Keys of another model are mistakes, not options.
+        let given: [(&str, bool); 16] = [
+            ("force_n", r.force_n.is_some()),
+            ("moment_nm", r.moment_nm.is_some()),
+            ("frame", r.frame.is_some()),
+            (
+                "thrust_coefficient_n_per_mm2",
+                r.thrust_coefficient_n_per_mm2.is_some(),
+            ),
+            ("drill_diameter_mm", r.drill_diameter_mm.is_some()),
+            ("max_feed_mm_per_rev", r.max_feed_mm_per_rev.is_some()),
+            ("axis_tolerance_deg", r.axis_tolerance_deg.is_some()),
+            ("kt_n_per_mm2", r.kt_n_per_mm2.is_some()),
+            ("kr_n_per_mm2", r.kr_n_per_mm2.is_some()),
+            ("ka_n_per_mm2", r.ka_n_per_mm2.is_some()),
+            ("kte_n_per_mm", r.kte_n_per_mm.is_some()),
+            ("kre_n_per_mm", r.kre_n_per_mm.is_some()),
+            ("kae_n_per_mm", r.kae_n_per_mm.is_some()),
+            ("tool_diameter_mm", r.tool_diameter_mm.is_some()),
+            ("axial_depth_mm", r.axial_depth_mm.is_some()),
+            ("radial_width_mm", r.radial_width_mm.is_some()),
+        ];
+        let allowed: &[&str] = match r.model {
+            RawForceModel::Constant => &["force_n", "moment_nm", "frame"],
             RawForceModel::Drilling => &[
-                ("force_n", r.force_n.is_some()),
-                ("moment_nm", r.moment_nm.is_some()),
-                ("frame", r.frame.is_some()),
+                "thrust_coefficient_n_per_mm2",
+                "drill_diameter_mm",
+                "max_feed_mm_per_rev",
+                "axis_tolerance_deg",
+            ],
+            RawForceModel::Table => &[],
+            RawForceModel::Milling => &[
+                "kt_n_per_mm2",
+                "kr_n_per_mm2",
+                "ka_n_per_mm2",
+                "kte_n_per_mm",
+                "kre_n_per_mm",
+                "kae_n_per_mm",
+                "tool_diameter_mm",
+                "axial_depth_mm",
+                "radial_width_mm",
             ],
         };
-        if let Some((k, _)) = stray.iter().find(|(_, given)| *given) {
-            let model = match r.model {
-                RawForceModel::Constant => "constant",
-                RawForceModel::Drilling => "drilling",
-            };
+        if let Some((k, _)) = given
+            .iter()
+            .find(|(k, present)| *present && !allowed.contains(k))
+        {
             return Err(Invalid::new(
                 format!("{p}.{k}"),
-                format!("`{k}` does not apply to model `{model}`"),
+                format!("`{k}` does not apply to model `{model_name}`"),
             ));
         }
         let model = match r.model {
@@ -167,17 +294,40 @@ impl ProcessForce {
                         RawForceFrame::Tool => ForceFrame::Tool,
                         RawForceFrame::Workpiece => ForceFrame::Workpiece,
                         RawForceFrame::Base => ForceFrame::Base,
+                        RawForceFrame::Feed => ForceFrame::Feed,
                     },
                 }
             }
-            RawForceModel::Drilling => {
+            RawForceModel::Milling => {
+                need("spindle_rpm", r.spindle_rpm)?;
+                if r.flutes.is_none() {
+                    return Err(Invalid::new(p, "model `milling` needs `flutes`"));
+                }
+                let d = within("tool_diameter_mm", r.tool_diameter_mm, 0.01, 1000.0, None)?;
+                ForceModel::Milling(Milling {
+                    kt_n_per_mm2: within("kt_n_per_mm2", r.kt_n_per_mm2, 0.0, 1e5, None)?,
+                    kr_n_per_mm2: within("kr_n_per_mm2", r.kr_n_per_mm2, 0.0, 1e5, None)?,
+                    ka_n_per_mm2: within("ka_n_per_mm2", r.ka_n_per_mm2, 0.0, 1e5, Some(0.0))?,
+                    kte_n_per_mm: within("kte_n_per_mm", r.kte_n_per_mm, 0.0, 1e6, Some(0.0))?,
+                    kre_n_per_mm: within("kre_n_per_mm", r.kre_n_per_mm, 0.0, 1e6, Some(0.0))?,
+                    kae_n_per_mm: within("kae_n_per_mm", r.kae_n_per_mm, 0.0, 1e6, Some(0.0))?,
+                    tool_diameter_mm: d,
+                    flutes,
+                    axial_depth_mm: within("axial_depth_mm", r.axial_depth_mm, 0.0, 1000.0, None)?,
+                    radial_width_mm: within("radial_width_mm", r.radial_width_mm, 0.0, d, None)?,
+                })
+            }
+            // (`table` was refused above.)
+            RawForceModel::Drilling | RawForceModel::Table => {
                 need("spindle_rpm", r.spindle_rpm)?;
                 ForceModel::Drilling {
-                    thrust_coefficient_n_per_mm2: need(
-                        "thrust_coefficient_n_per_mm2",
-                        r.thrust_coefficient_n_per_mm2,
-                    )?,
-                    drill_diameter_mm: need("drill_diameter_mm", r.drill_diameter_mm)?,
+                    drill: Drilling {
+                        thrust_coefficient_n_per_mm2: need(
+                            "thrust_coefficient_n_per_mm2",
+                            r.thrust_coefficient_n_per_mm2,
+                        )?,
+                        drill_diameter_mm: need("drill_diameter_mm", r.drill_diameter_mm)?,
+                    },
                     max_feed_mm_per_rev: positive("max_feed_mm_per_rev", r.max_feed_mm_per_rev)?
                         .unwrap_or(DEFAULT_MAX_FEED_MM_PER_REV),
                 }
@@ -213,6 +363,200 @@ impl ProcessForce {
             axis_tolerance_rad: DEFAULT_AXIS_TOLERANCE_DEG.to_radians(),
         })
     }
+}
+
+/// The wrench the process stage applies without a per-move one: a constant
+/// force in the tool or base frame; none for the other models and frames.
+pub(crate) fn default_wrench(pf: Option<&ProcessForce>) -> Option<ProcessWrench> {
+    match pf.map(|f| f.model) {
+        Some(ForceModel::Constant {
+            force_n,
+            moment_nmm,
+            frame: frame @ (ForceFrame::Tool | ForceFrame::Base),
+        }) => Some(ProcessWrench {
+            force_n,
+            moment_nmm,
+            in_tool_frame: frame == ForceFrame::Tool,
+        }),
+        _ => None,
+    }
+}
+
+/// A constant force (or moment) `v` given in the feed frame, turned into the
+/// frame of `travel` and `z_tool` (see [`ForceFrame::Feed`]); one definition
+/// with the machine-tool side ([`crate::process::ForceModel::Constant`]).
+pub fn feed_frame_vector(
+    v: &Vector3<f64>,
+    travel: &Vector3<f64>,
+    z_tool: &Vector3<f64>,
+) -> Vector3<f64> {
+    let state = CutState {
+        line: 0,
+        cutting: true,
+        drilling: false,
+        feed_dir: *travel,
+        tool_axis: -z_tool,
+        feed_mm_min: 0.0,
+        spindle_rpm: 0.0,
+        depth_mm: None,
+        width_mm: None,
+    };
+    process::ForceModel::Constant {
+        force_n: *v,
+        frame: Frame::Feed,
+    }
+    .load(&state, &mut MillingCache::default())
+    .force_n
+}
+
+/// Direction of travel at the end `p1` of a move from `p0`: along the line
+/// for a straight move, the tangent of the circle through `p0`, `via`, `p1`
+/// at `p1` for a circular one (the chord when the three points are on a
+/// line). Not normalised; zero for a move shorter than 1 µm.
+pub fn travel_direction(
+    p0: &Vector3<f64>,
+    via: Option<&Vector3<f64>>,
+    p1: &Vector3<f64>,
+) -> Vector3<f64> {
+    const MIN_MOVE_MM: f64 = 1e-3;
+    let chord = p1 - p0;
+    if chord.norm() < MIN_MOVE_MM {
+        return Vector3::zeros();
+    }
+    let Some(b) = via else {
+        return chord;
+    };
+    let u = b - p0;
+    let v = p1 - p0;
+    let w = u.cross(&v);
+    let w2 = w.norm_squared();
+    if w2 < 1e-12 * u.norm_squared() * v.norm_squared() || w2 == 0.0 {
+        return chord;
+    }
+    // Circumcentre of the three points.
+    let c = p0 + (v.cross(&w) * u.norm_squared() + w.cross(&u) * v.norm_squared()) / (2.0 * w2);
+    w.cross(&(p1 - c))
+}
+
+/// `! POSTPROC MILLING KEY=VALUE …` directive comments of a RAPID module, in
+/// line order: each sets the axial depth (`DEPTH`, mm), radial width
+/// (`WIDTH`, mm) and spindle speed (`RPM`, 1/min) that the process-force
+/// models use from its line on, over the machine file's values.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct Directives {
+    /// Settings in force from each directive's line on (cumulative).
+    at: Vec<(usize, CutSettings)>,
+}
+
+impl Directives {
+    /// Finds the directives of a module's text. Errors (`file:line:col`)
+    /// for an unknown key, a bad value or a directive without keys.
+    pub fn parse(src: &str, file: &str) -> Result<Directives> {
+        let mut at = Vec::new();
+        let mut cur = CutSettings::default();
+        for (k, line) in src.lines().enumerate() {
+            let Some(bang) = comment_start(line) else {
+                continue;
+            };
+            let body = line.get(bang + 1..).unwrap_or("");
+            let mut words = word_spans(body);
+            let is_directive = matches!(
+                (words.next(), words.next()),
+                (Some((_, a)), Some((_, b)))
+                    if a.eq_ignore_ascii_case("POSTPROC") && b.eq_ignore_ascii_case("MILLING")
+            );
+            if !is_directive {
+                continue;
+            }
+            let err = |off: usize, msg: String| {
+                Error::Input(Located::new(file, k + 1, bang + 1 + off + 1, msg))
+            };
+            let mut any = false;
+            for (off, word) in words {
+                let (key, value) = word.split_once('=').ok_or_else(|| {
+                    err(
+                        off,
+                        format!("`{word}`: expected KEY=VALUE (DEPTH, WIDTH, RPM)"),
+                    )
+                })?;
+                let v: f64 = value
+                    .parse()
+                    .ok()
+                    .filter(|v: &f64| v.is_finite())
+                    .ok_or_else(|| err(off, format!("`{word}`: `{value}` is not a number")))?;
+                match key.to_ascii_uppercase().as_str() {
+                    "DEPTH" | "WIDTH" if !(0.0..=MAX_CUT_MM).contains(&v) => {
+                        return Err(err(
+                            off,
+                            format!("`{word}`: must be a length within 0..{MAX_CUT_MM} mm"),
+                        ));
+                    }
+                    "DEPTH" => cur.depth_mm = Some(v),
+                    "WIDTH" => cur.width_mm = Some(v),
+                    "RPM" if v <= 0.0 || v > MAX_RPM => {
+                        return Err(err(
+                            off,
+                            format!("`{word}`: must be a spindle speed in (0, {MAX_RPM}] 1/min"),
+                        ));
+                    }
+                    "RPM" => cur.spindle_rpm = Some(v),
+                    _ => {
+                        return Err(err(
+                            off,
+                            format!("unknown key `{key}` (expected DEPTH, WIDTH or RPM)"),
+                        ));
+                    }
+                }
+                any = true;
+            }
+            if !any {
+                return Err(Error::Input(Located::new(
+                    file,
+                    k + 1,
+                    bang + 1,
+                    "POSTPROC MILLING directive without a key (DEPTH, WIDTH, RPM)",
+                )));
+            }
+            at.push((k + 1, cur));
+        }
+        Ok(Directives { at })
+    }
+
+    /// The settings in force on 1-based `line` (a directive on the same
+    /// line counts).
+    pub fn at(&self, line: usize) -> CutSettings {
+        let n = self.at.partition_point(|(l, _)| *l <= line);
+        n.checked_sub(1)
+            .and_then(|i| self.at.get(i))
+            .map_or_else(CutSettings::default, |(_, s)| *s)
+    }
+
+    /// True without directives.
+    pub fn is_empty(&self) -> bool {
+        self.at.is_empty()
+    }
+}
+
+/// Byte offset of the `!` that starts a RAPID comment on `line` (outside
+/// string literals).
+fn comment_start(line: &str) -> Option<usize> {
+    let mut in_string = false;
+    for (i, b) in line.bytes().enumerate() {
+        match b {
+            b'"' => in_string = !in_string,
+            b'!' if !in_string => return Some(i),
+            _ => {}
+        }
+    }
+    None
+}
+
+/// Whitespace-separated words of `s` with their byte offsets.
+fn word_spans(s: &str) -> impl Iterator<Item = (usize, &str)> {
+    s.split_ascii_whitespace().map(move |w| {
+        let off = w.as_ptr() as usize - s.as_ptr() as usize;
+        (off, w)
+    })
 }
 
 /// Direction of a straight move relative to the tool axis `z_tool` (unit):
@@ -251,5 +595,179 @@ impl Robot {
         let mut r = self.clone();
         r.d.process_wrench = wrench;
         r
+    }
+
+    /// The same robot with another process-force model (`None`: no process
+    /// force), as the command line's `--force` sets it; drops a force table.
+    pub fn with_process_force(&self, pf: Option<ProcessForce>) -> Robot {
+        let mut r = self.clone();
+        r.d.process_wrench = default_wrench(pf.as_ref());
+        r.d.process_force = pf;
+        r.d.force_table = None;
+        r
+    }
+
+    /// The same robot with per-move forces from `table` (model `table`,
+    /// work-object frame), keeping the file's spindle speed and flutes for
+    /// the vibration report.
+    pub fn with_force_table(&self, table: ForceTable) -> Robot {
+        let old = self.process_force();
+        let pf = ProcessForce {
+            model: ForceModel::Table,
+            spindle_rpm: old.and_then(|p| p.spindle_rpm),
+            flutes: old.map_or(DEFAULT_FLUTES, |p| p.flutes),
+            axis_tolerance_rad: DEFAULT_AXIS_TOLERANCE_DEG.to_radians(),
+        };
+        let mut r = self.with_process_force(Some(pf));
+        r.d.force_table = Some(Arc::new(table));
+        r
+    }
+
+    /// The force table of a `table` process force.
+    pub fn force_table(&self) -> Option<&ForceTable> {
+        self.d.force_table.as_deref()
+    }
+
+    /// The same robot with spindle speed `rpm` (a program directive) for
+    /// the process force and its excitation frequency; unchanged for `None`
+    /// or without a process force. Takes the robot by value (no copy).
+    pub fn with_spindle_rpm(mut self, rpm: Option<f64>) -> Robot {
+        if let (Some(pf), Some(_)) = (self.d.process_force.as_mut(), rpm) {
+            *pf = pf.with_rpm(rpm);
+        }
+        self
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use approx::assert_abs_diff_eq;
+
+    const FORCE_TOL_N: f64 = 1e-9;
+
+    fn milling() -> ProcessForce {
+        ProcessForce {
+            model: ForceModel::Milling(Milling {
+                kt_n_per_mm2: 2000.0,
+                kr_n_per_mm2: 800.0,
+                ka_n_per_mm2: 0.0,
+                kte_n_per_mm: 0.0,
+                kre_n_per_mm: 0.0,
+                kae_n_per_mm: 0.0,
+                tool_diameter_mm: 10.0,
+                flutes: 2,
+                axial_depth_mm: 2.0,
+                radial_width_mm: 10.0,
+            }),
+            spindle_rpm: Some(1000.0),
+            flutes: 2,
+            axis_tolerance_rad: DEFAULT_AXIS_TOLERANCE_DEG.to_radians(),
+        }
+    }
+
+    #[test]
+    fn milling_force_is_the_machine_tool_slot() {
+        // tests/effects.rs: slot, a = 2 mm, N = 2, c = 400/(1000·2) = 0.2 mm
+        // (v_tcp = 400/60 mm/s): tangential −160 N, normal 400 N. Travel +X,
+        // TCP z = −Z (tool down): axial = +Z, normal = Z × X = +Y.
+        let pf = milling();
+        let mut cache = MillingCache::default();
+        let set = CutSettings::default();
+        let l = pf
+            .milling_force(
+                &Vector3::x(),
+                &-Vector3::z(),
+                400.0 / 60.0,
+                &set,
+                &mut cache,
+            )
+            .expect("cuts");
+        assert_abs_diff_eq!(
+            l.force_n,
+            Vector3::new(-160.0, 400.0, 0.0),
+            epsilon = FORCE_TOL_N
+        );
+        // Tooth passing 1000·2/60 Hz, as `excitation_hz`.
+        assert_abs_diff_eq!(
+            l.tooth_hz,
+            pf.excitation_hz().expect("rpm"),
+            epsilon = FORCE_TOL_N
+        );
+        // A directive doubling the speed halves c: −80, 200 N.
+        let fast = CutSettings {
+            spindle_rpm: Some(2000.0),
+            ..set
+        };
+        let l = pf
+            .milling_force(
+                &Vector3::x(),
+                &-Vector3::z(),
+                400.0 / 60.0,
+                &fast,
+                &mut cache,
+            )
+            .expect("cuts");
+        assert_abs_diff_eq!(
+            l.force_n,
+            Vector3::new(-80.0, 200.0, 0.0),
+            epsilon = FORCE_TOL_N
+        );
+        // Along the tool axis (plunge) and without travel nothing is cut.
+        let z = -Vector3::z();
+        assert!(pf.milling_force(&z, &z, 5.0, &set, &mut cache).is_none());
+        assert!(
+            pf.milling_force(&Vector3::zeros(), &z, 5.0, &set, &mut cache)
+                .is_none()
+        );
+        // Other models have no milling force.
+        let drill = ProcessForce {
+            model: ForceModel::Table,
+            ..pf
+        };
+        assert!(
+            drill
+                .milling_force(&Vector3::x(), &z, 5.0, &set, &mut cache)
+                .is_none()
+        );
+    }
+
+    #[test]
+    fn feed_frame_vector_turns_with_travel_and_tool() {
+        // Travel +Y, TCP z = −Z: x = +Y, z = +Z, y = Z × Y = −X:
+        // (1, 2, 3) → (−2, 1, 3).
+        let v = feed_frame_vector(&Vector3::new(1.0, 2.0, 3.0), &Vector3::y(), &-Vector3::z());
+        assert_abs_diff_eq!(v, Vector3::new(-2.0, 1.0, 3.0), epsilon = FORCE_TOL_N);
+    }
+
+    #[test]
+    fn drilling_thrust_is_the_process_model() {
+        // K·(D/2)·f_rev = 450·3.4·(4·60/3000) = 122.4 N, as
+        // process::Drilling::thrust_n; a directive RPM of 6000 halves it.
+        let pf = ProcessForce {
+            model: ForceModel::Drilling {
+                drill: Drilling {
+                    thrust_coefficient_n_per_mm2: 450.0,
+                    drill_diameter_mm: 6.8,
+                },
+                max_feed_mm_per_rev: DEFAULT_MAX_FEED_MM_PER_REV,
+            },
+            spindle_rpm: Some(3000.0),
+            flutes: 2,
+            axis_tolerance_rad: DEFAULT_AXIS_TOLERANCE_DEG.to_radians(),
+        };
+        assert_abs_diff_eq!(
+            pf.drilling_thrust_n(4.0).expect("drills"),
+            122.4,
+            epsilon = FORCE_TOL_N
+        );
+        assert_abs_diff_eq!(
+            pf.with_rpm(Some(6000.0))
+                .drilling_thrust_n(4.0)
+                .expect("drills"),
+            61.2,
+            epsilon = FORCE_TOL_N
+        );
+        assert_eq!(pf.with_rpm(None), pf);
     }
 }

@@ -61,6 +61,24 @@ pub(crate) struct RawProcessForce {
     pub max_feed_mm_per_rev: Option<f64>,
     #[serde(default)]
     pub axis_tolerance_deg: Option<f64>,
+    #[serde(default)]
+    pub kt_n_per_mm2: Option<f64>,
+    #[serde(default)]
+    pub kr_n_per_mm2: Option<f64>,
+    #[serde(default)]
+    pub ka_n_per_mm2: Option<f64>,
+    #[serde(default)]
+    pub kte_n_per_mm: Option<f64>,
+    #[serde(default)]
+    pub kre_n_per_mm: Option<f64>,
+    #[serde(default)]
+    pub kae_n_per_mm: Option<f64>,
+    #[serde(default)]
+    pub tool_diameter_mm: Option<f64>,
+    #[serde(default)]
+    pub axial_depth_mm: Option<f64>,
+    #[serde(default)]
+    pub radial_width_mm: Option<f64>,
 }
 
 /// `process_force.model`.
@@ -68,7 +86,9 @@ pub(crate) struct RawProcessForce {
 #[serde(rename_all = "snake_case")]
 pub(crate) enum RawForceModel {
     Constant,
+    Milling,
     Drilling,
+    Table,
 }
 
 /// `process_force.frame`.
@@ -78,6 +98,7 @@ pub(crate) enum RawForceFrame {
     Tool,
     Workpiece,
     Base,
+    Feed,
 }
 
 /// `thermal:` — Paper B power-dependent DH lengths.
