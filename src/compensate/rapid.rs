@@ -670,15 +670,19 @@ impl Rewriter<'_> {
             (Origin::Decl { .. }, false) => u.rt.span.start,
             _ => target.span().start,
         };
-        let (ml, _) = line_col(self.src, mv.span.start);
-        let what = format!(
-            "target `{}` of {} at line {ml}",
-            self.src.get(target.span()).unwrap_or("?"),
-            mv.kind.name()
-        );
+        // The message (and its line, a scan of the source) is built only on
+        // failure: scanning per move would make a run quadratic.
+        let what = || {
+            let (ml, _) = line_col(self.src, mv.span.start);
+            format!(
+                "target `{}` of {} at line {ml}",
+                self.src.get(target.span()).unwrap_or("?"),
+                mv.kind.name()
+            )
+        };
         let comp = view
             .compensate(&programmed, &IkSelect::Conf(u.conf), self.opts.effects)
-            .map_err(|e| self.locate(at, e, &what))?;
+            .map_err(|e| self.locate(at, e, &what()))?;
         if !self.active() {
             return Ok(comp.deviation);
         }
@@ -807,17 +811,19 @@ impl Rewriter<'_> {
             Origin::Decl { .. } => jt.span.start,
             Origin::Inline => target.span().start,
         };
-        let (ml, _) = line_col(self.src, mv.span.start);
-        let what = format!(
-            "jointtarget `{}` of MoveAbsJ at line {ml}",
-            self.src.get(target.span()).unwrap_or("?")
-        );
+        let what = || {
+            let (ml, _) = line_col(self.src, mv.span.start);
+            format!(
+                "jointtarget `{}` of MoveAbsJ at line {ml}",
+                self.src.get(target.span()).unwrap_or("?")
+            )
+        };
         view.check_limits(&q)
-            .map_err(|e| self.locate(at, e, &what))?;
+            .map_err(|e| self.locate(at, e, &what()))?;
         let goal = view.tcp_pose(Model::Nominal, &q);
         let comp = view
             .compensate(&goal, &IkSelect::Near(q), self.opts.effects)
-            .map_err(|e| self.locate(at, e, &what))?;
+            .map_err(|e| self.locate(at, e, &what()))?;
         if !self.active() {
             return Ok(comp.deviation);
         }
