@@ -11,6 +11,8 @@
 
 use std::collections::HashMap;
 
+use rayon::prelude::*;
+
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 
 use crate::emit::rapid::{
@@ -22,8 +24,8 @@ use crate::machine::robot::pose::pose_from_abb;
 use crate::machine::robot::process::plunge_direction;
 use crate::machine::robot::thermal::{Segment, effective_power};
 use crate::machine::robot::{
-    ConfData, Deviation, Effects, ForceFrame, ForceModel, IkSelect, Model, PointMass,
-    ProcessWrench, Robot, ThermalStart,
+    Compensation, ConfData, Deviation, Effects, ForceFrame, ForceModel, IkSelect, Model,
+    PointMass, ProcessWrench, Robot, RobotError, ThermalStart,
 };
 use crate::program::rapid::{
     DataValue, Decl, JointTarget, Module, Move, MoveKind, Number, Pose, RobTarget, Scalar, Target,
@@ -601,8 +603,11 @@ struct Rewriter<'m> {
     /// New declaration lines per module declaration index.
     inserts: Vec<(usize, String)>,
     taken: Vec<String>,
-    /// Robot views per load key.
-    views: HashMap<LoadKey, Robot>,
+    /// Robot views (one per load key) and the index of each key's view.
+    views: Vec<Robot>,
+    view_of: HashMap<LoadKey, usize>,
+    /// Collecting the compensation jobs, or applying their results.
+    phase: Phase,
     /// Load key that owns the in-place value of a target origin.
     owner: HashMap<Origin, LoadKey>,
     /// Names of copies / materialised targets already made.
@@ -612,6 +617,22 @@ struct Rewriter<'m> {
     added: usize,
     /// Process wrench and thermal power of the move being rewritten.
     state: MoveState,
+}
+
+/// One target to compensate: robot view, programmed TCP pose (world frame)
+/// and the inverse-kinematics selection.
+struct Job {
+    view: usize,
+    pose: Isometry3<f64>,
+    sel: IkSelect,
+}
+
+/// The two walks over the moves: the first collects every compensation as
+/// a [`Job`] (solved in parallel in between, independent of each other and
+/// of the thread count); the second writes the results back in source order.
+enum Phase {
+    Collect(Vec<Job>),
+    Apply(std::vec::IntoIter<std::result::Result<Compensation, RobotError>>),
 }
 
 /// Per-move load state applied to the robot view.
@@ -626,21 +647,46 @@ impl Rewriter<'_> {
         self.opts.effects.compensates()
     }
 
-    fn view(&mut self, key: &LoadKey, tool: &ToolView) -> Robot {
-        let state = self.state;
-        self.views
-            .entry(key.clone())
-            .or_insert_with(|| {
-                let mut r = self
-                    .robot
-                    .with_tool(tool.tframe, tool.load, false)
-                    .with_process_wrench(state.wrench);
-                if let Some(p) = state.power {
-                    r = r.with_thermal_power(&p);
+    /// Index of the robot view of a load key (made on first use).
+    fn view(&mut self, key: &LoadKey, tool: &ToolView) -> usize {
+        if let Some(&i) = self.view_of.get(key) {
+            return i;
+        }
+        let mut r = self
+            .robot
+            .with_tool(tool.tframe, tool.load, false)
+            .with_process_wrench(self.state.wrench);
+        if let Some(p) = self.state.power {
+            r = r.with_thermal_power(&p);
+        }
+        self.views.push(r);
+        let i = self.views.len() - 1;
+        self.view_of.insert(key.clone(), i);
+        i
+    }
+
+    /// The compensation of one target: recorded as a job while collecting
+    /// (`None`), the next solved result while applying.
+    fn solve(
+        &mut self,
+        view: usize,
+        pose: Isometry3<f64>,
+        sel: IkSelect,
+    ) -> Option<std::result::Result<Compensation, RobotError>> {
+        match &mut self.phase {
+            Phase::Collect(jobs) => {
+                jobs.push(Job { view, pose, sel });
+                None
+            }
+            // The results run out only after a collection that stopped at
+            // an error, which this walk meets first; solve directly anyway.
+            Phase::Apply(results) => Some(results.next().unwrap_or_else(|| {
+                match self.views.get(view) {
+                    Some(r) => r.compensate(&pose, &sel, self.opts.effects),
+                    None => Err(RobotError::Unreachable("no robot view".into())),
                 }
-                r
-            })
-            .clone()
+            })),
+        }
     }
 
     fn locate(&self, at: usize, e: crate::machine::robot::RobotError, what: &str) -> Error {
@@ -660,7 +706,7 @@ impl Rewriter<'_> {
         key: &LoadKey,
         tool: &ToolView,
         wobj: &Isometry3<f64>,
-    ) -> Result<Deviation> {
+    ) -> Result<Option<Deviation>> {
         let u = resolve_cart(self.module, self.src, self.file, target)?;
         let view = self.view(key, tool);
         let programmed = wobj * u.pose_obj;
@@ -680,11 +726,12 @@ impl Rewriter<'_> {
                 mv.kind.name()
             )
         };
-        let comp = view
-            .compensate(&programmed, &IkSelect::Conf(u.conf), self.opts.effects)
-            .map_err(|e| self.locate(at, e, &what()))?;
+        let Some(comp) = self.solve(view, programmed, IkSelect::Conf(u.conf)) else {
+            return Ok(None);
+        };
+        let comp = comp.map_err(|e| self.locate(at, e, &what()))?;
         if !self.active() {
-            return Ok(comp.deviation);
+            return Ok(Some(comp.deviation));
         }
         let new_obj = wobj.inverse() * comp.pose;
         let fmt = self.opts.format;
@@ -745,7 +792,7 @@ impl Rewriter<'_> {
                 self.edits.push(Edit::replace(target.span(), name));
             }
         }
-        Ok(comp.deviation)
+        Ok(Some(comp.deviation))
     }
 
     /// The name of the copy of `origin` for (`ident`, `key`), declaring it
@@ -779,7 +826,7 @@ impl Rewriter<'_> {
     }
 
     /// Compensates a MoveAbsJ in joint space.
-    fn joint(&mut self, mv: &Move, key: &LoadKey, tool: &ToolView) -> Result<Deviation> {
+    fn joint(&mut self, mv: &Move, key: &LoadKey, tool: &ToolView) -> Result<Option<Deviation>> {
         let target = &mv.target;
         let (jt, origin, stem) = match target {
             Target::InlineJoint(jt) => (jt, Origin::Inline, String::new()),
@@ -818,14 +865,18 @@ impl Rewriter<'_> {
                 self.src.get(target.span()).unwrap_or("?")
             )
         };
-        view.check_limits(&q)
+        let Some(r) = self.views.get(view) else {
+            return Err(Error::Usage("robot view missing".into()));
+        };
+        r.check_limits(&q)
             .map_err(|e| self.locate(at, e, &what()))?;
-        let goal = view.tcp_pose(Model::Nominal, &q);
-        let comp = view
-            .compensate(&goal, &IkSelect::Near(q), self.opts.effects)
-            .map_err(|e| self.locate(at, e, &what()))?;
+        let goal = r.tcp_pose(Model::Nominal, &q);
+        let Some(comp) = self.solve(view, goal, IkSelect::Near(q)) else {
+            return Ok(None);
+        };
+        let comp = comp.map_err(|e| self.locate(at, e, &what()))?;
         if !self.active() {
-            return Ok(comp.deviation);
+            return Ok(Some(comp.deviation));
         }
         let new_deg = comp.q_compensated.map(f64::to_degrees);
         match origin {
@@ -869,7 +920,7 @@ impl Rewriter<'_> {
                 }
             }
         }
-        Ok(comp.deviation)
+        Ok(Some(comp.deviation))
     }
 }
 
@@ -1173,7 +1224,9 @@ pub fn compensate_module(
         edits: Vec::new(),
         inserts: Vec::new(),
         taken: Vec::new(),
-        views: HashMap::new(),
+        views: Vec::new(),
+        view_of: HashMap::new(),
+        phase: Phase::Collect(Vec::new()),
         owner: HashMap::new(),
         made: HashMap::new(),
         derived_count: HashMap::new(),
@@ -1188,14 +1241,14 @@ pub fn compensate_module(
         max_deviation_line: 0,
         records: Vec::with_capacity(moves.len()),
     };
-    let mut max_vib = (0.0, 0);
+    // Load key and state of every move.
+    let mut keyed = Vec::with_capacity(moves.len());
     for (i, mv) in moves.iter().enumerate() {
         let (Some(plan), Some(seg)) = (plans.get(i), segments.get(i)) else {
             continue;
         };
         let power = thermal_power.as_ref().and_then(|p| p.get(i).copied());
         let wrench = wrenches.get(i).copied().flatten();
-        rw.state = MoveState { wrench, power };
         let key = LoadKey {
             tool: mv.tool.text.to_ascii_lowercase(),
             wobj: mv
@@ -1205,13 +1258,40 @@ pub fn compensate_module(
             wrench: wrench.as_ref().map(wrench_bits),
             power: power.map(|p| p.map(f64::to_bits)),
         };
-        let dev = if mv.kind == MoveKind::MoveAbsJ {
-            rw.joint(mv, &key, &plan.tool)?
-        } else {
-            if let Some(via) = &mv.via {
-                rw.cart(mv, via, &key, &plan.tool, &plan.wobj)?;
-            }
-            rw.cart(mv, &mv.target, &key, &plan.tool, &plan.wobj)?
+        keyed.push((*mv, plan, seg, MoveState { wrench, power }, key));
+    }
+    // Walk 1: collect the compensation jobs. It stops at the first error;
+    // walk 2 meets the same error at the same move, after reporting any
+    // failure of an earlier target, as a single walk would.
+    for (mv, plan, _, state, key) in &keyed {
+        rw.state = *state;
+        if rw.walk(mv, key, plan).is_err() {
+            break;
+        }
+    }
+    let Phase::Collect(jobs) = std::mem::replace(&mut rw.phase, Phase::Collect(Vec::new())) else {
+        return Err(Error::Usage("compensation jobs already applied".into()));
+    };
+    // Solve in parallel (rayon keeps the input order in `collect`; every
+    // job is independent, so the results do not depend on the threads).
+    let views = &rw.views;
+    let results: Vec<std::result::Result<Compensation, RobotError>> = jobs
+        .par_iter()
+        .map(|j| match views.get(j.view) {
+            Some(r) => r.compensate(&j.pose, &j.sel, fx),
+            None => Err(RobotError::Unreachable("no robot view".into())),
+        })
+        .collect();
+    rw.phase = Phase::Apply(results.into_iter());
+    // Walk 2: write the results back in source order.
+    let mut max_vib = (0.0, 0);
+    for (mv, plan, seg, state, key) in &keyed {
+        let (mv, seg) = (*mv, *seg);
+        rw.state = *state;
+        let wrench = state.wrench;
+        let power = state.power;
+        let Some(dev) = rw.walk(mv, key, plan)? else {
+            continue;
         };
         outcome.moves += 1;
         let d = dev.total.pos_mm.norm();
@@ -1253,6 +1333,21 @@ pub fn compensate_module(
     outcome.added = rw.added;
     outcome.text = apply_edits(src, &rw.edits)?;
     Ok(outcome)
+}
+
+impl Rewriter<'_> {
+    /// Compensates (or collects the jobs of) one move: the circle point of
+    /// a MoveC, then its target. The deviation is that of the target.
+    fn walk(&mut self, mv: &Move, key: &LoadKey, plan: &Planned) -> Result<Option<Deviation>> {
+        if mv.kind == MoveKind::MoveAbsJ {
+            self.joint(mv, key, &plan.tool)
+        } else {
+            if let Some(via) = &mv.via {
+                self.cart(mv, via, key, &plan.tool, &plan.wobj)?;
+            }
+            self.cart(mv, &mv.target, key, &plan.tool, &plan.wobj)
+        }
+    }
 }
 
 /// Warns once when the spindle's tooth-passing frequency lies within 10 %
