@@ -24,8 +24,8 @@ use crate::machine::robot::pose::pose_from_abb;
 use crate::machine::robot::process::plunge_direction;
 use crate::machine::robot::thermal::{Segment, effective_power};
 use crate::machine::robot::{
-    Compensation, ConfData, Deviation, Effects, ForceFrame, ForceModel, IkSelect, Model,
-    PointMass, ProcessWrench, Robot, RobotError, ThermalStart,
+    Compensation, ConfData, Deviation, Effects, ForceFrame, ForceModel, IkSelect, Model, PointMass,
+    ProcessWrench, Robot, RobotError, ThermalStart,
 };
 use crate::program::rapid::{
     DataValue, Decl, JointTarget, Module, Move, MoveKind, Number, Pose, RobTarget, Scalar, Target,
@@ -680,12 +680,16 @@ impl Rewriter<'_> {
             }
             // The results run out only after a collection that stopped at
             // an error, which this walk meets first; solve directly anyway.
-            Phase::Apply(results) => Some(results.next().unwrap_or_else(|| {
-                match self.views.get(view) {
-                    Some(r) => r.compensate(&pose, &sel, self.opts.effects),
-                    None => Err(RobotError::Unreachable("no robot view".into())),
-                }
-            })),
+            Phase::Apply(results) => {
+                Some(
+                    results
+                        .next()
+                        .unwrap_or_else(|| match self.views.get(view) {
+                            Some(r) => r.compensate(&pose, &sel, self.opts.effects),
+                            None => Err(RobotError::Unreachable("no robot view".into())),
+                        }),
+                )
+            }
         }
     }
 
@@ -973,10 +977,38 @@ struct Planned {
     v_tcp: Option<f64>,
 }
 
-fn plan_move(module: &Module, src: &str, file: &str, robot: &Robot, mv: &Move) -> Result<Planned> {
+/// Robot views with a tool mounted, made once per distinct key (a view is a
+/// copy of the robot: one per move would cost a copy per target).
+struct ViewCache<K> {
+    views: HashMap<K, Robot>,
+}
+
+impl<K: std::hash::Hash + Eq> ViewCache<K> {
+    fn new() -> Self {
+        ViewCache {
+            views: HashMap::new(),
+        }
+    }
+
+    fn get(&mut self, key: K, make: impl FnOnce() -> Robot) -> &Robot {
+        self.views.entry(key).or_insert_with(make)
+    }
+}
+
+fn plan_move<'m>(
+    module: &Module,
+    src: &str,
+    file: &str,
+    robot: &Robot,
+    cache: &mut ViewCache<&'m str>,
+    mv: &'m Move,
+) -> Result<Planned> {
     let tool = resolve_tool(module, src, file, mv)?;
     let wobj = resolve_wobj(module, src, file, mv)?;
-    let view = robot.with_tool(tool.tframe, tool.load, false);
+    // The tool is resolved from its name alone: equal names, equal views.
+    let view = cache.get(mv.tool.text.as_str(), || {
+        robot.with_tool(tool.tframe, tool.load, false)
+    });
     let (pose, q) = if mv.kind == MoveKind::MoveAbsJ {
         let jt = match &mv.target {
             Target::InlineJoint(jt) => Some(jt),
@@ -1118,11 +1150,13 @@ fn move_duration(robot: &Robot, plans: &[Planned], i: usize, mv: &Move) -> Optio
 /// Mean motor power per joint during move `i`, W: `|τ·q̇|` with `τ` the
 /// gravity and process torques averaged over the move's two ends (N·m) and
 /// `q̇` the joint change over the duration.
-fn move_power(
+fn move_power<'m>(
     robot: &Robot,
+    cache: &mut ViewCache<(&'m str, Option<([u64; 6], bool)>)>,
     plans: &[Planned],
     i: usize,
     wrench: Option<ProcessWrench>,
+    tool: &'m str,
     duration_s: f64,
 ) -> [f64; 6] {
     let (Some(prev), Some(cur)) = (i.checked_sub(1).and_then(|k| plans.get(k)), plans.get(i))
@@ -1135,9 +1169,11 @@ fn move_power(
     if duration_s <= 0.0 {
         return [0.0; 6];
     }
-    let view = robot
-        .with_tool(cur.tool.tframe, cur.tool.load, false)
-        .with_process_wrench(wrench);
+    let view = cache.get((tool, wrench.as_ref().map(wrench_bits)), || {
+        robot
+            .with_tool(cur.tool.tframe, cur.tool.load, false)
+            .with_process_wrench(wrench)
+    });
     let tau = |q: &[f64; 6]| {
         view.gravity_torques(Model::Nominal, q) + view.process_torques(Model::Nominal, q)
     };
@@ -1172,9 +1208,10 @@ pub fn compensate_module(
 ) -> Result<RapidOutcome> {
     let module = parse_module(src, file)?;
     let moves: Vec<&Move> = module.moves().collect();
+    let mut tool_views = ViewCache::new();
     let plans = moves
         .iter()
-        .map(|mv| plan_move(&module, src, file, robot, mv))
+        .map(|mv| plan_move(&module, src, file, robot, &mut tool_views, mv))
         .collect::<Result<Vec<_>>>()?;
     let fx = opts.effects;
     let thermal = robot.thermal().filter(|_| fx.thermal != 0.0);
@@ -1191,6 +1228,7 @@ pub fn compensate_module(
         )?);
     }
     let mut segments = Vec::with_capacity(moves.len());
+    let mut power_views = ViewCache::new();
     for (i, mv) in moves.iter().enumerate() {
         let duration_s = match move_duration(robot, &plans, i, mv) {
             Some(t) => t,
@@ -1207,7 +1245,15 @@ pub fn compensate_module(
             }
             None => 0.0,
         };
-        let power_w = move_power(robot, &plans, i, wrenches[i], duration_s);
+        let power_w = move_power(
+            robot,
+            &mut power_views,
+            &plans,
+            i,
+            wrenches[i],
+            &mv.tool.text,
+            duration_s,
+        );
         segments.push(Segment {
             duration_s,
             power_w,
