@@ -606,6 +606,8 @@ struct Rewriter<'m> {
     /// Robot views (one per load key) and the index of each key's view.
     views: Vec<Robot>,
     view_of: HashMap<LoadKey, usize>,
+    /// The view used last, with its key.
+    last_view: Option<(LoadKey, usize)>,
     /// Collecting the compensation jobs, or applying their results.
     phase: Phase,
     /// Load key that owns the in-place value of a target origin.
@@ -649,7 +651,14 @@ impl Rewriter<'_> {
 
     /// Index of the robot view of a load key (made on first use).
     fn view(&mut self, key: &LoadKey, tool: &ToolView) -> usize {
+        // Consecutive moves mostly share their load: compare before hashing.
+        if let Some((k, i)) = &self.last_view {
+            if k == key {
+                return *i;
+            }
+        }
         if let Some(&i) = self.view_of.get(key) {
+            self.last_view = Some((key.clone(), i));
             return i;
         }
         let mut r = self
@@ -662,6 +671,7 @@ impl Rewriter<'_> {
         self.views.push(r);
         let i = self.views.len() - 1;
         self.view_of.insert(key.clone(), i);
+        self.last_view = Some((key.clone(), i));
         i
     }
 
@@ -1272,6 +1282,7 @@ pub fn compensate_module(
         taken: Vec::new(),
         views: Vec::new(),
         view_of: HashMap::new(),
+        last_view: None,
         phase: Phase::Collect(Vec::new()),
         owner: HashMap::new(),
         made: HashMap::new(),
