@@ -24,8 +24,8 @@ use crate::machine::robot::pose::pose_from_abb;
 use crate::machine::robot::process::plunge_direction;
 use crate::machine::robot::thermal::{Segment, effective_power};
 use crate::machine::robot::{
-    Compensation, ConfData, Deviation, Effects, ForceFrame, ForceModel, IkSelect, Model, PointMass,
-    ProcessWrench, Robot, RobotError, ThermalStart,
+    Compensation, ConfData, Deviation, DhGrowth, Effects, ForceFrame, ForceModel, IkSelect, Model,
+    PointMass, ProcessWrench, Robot, RobotError, ThermalStart,
 };
 use crate::program::rapid::{
     DataValue, Decl, JointTarget, Module, Move, MoveKind, Number, Pose, RobTarget, Scalar, Target,
@@ -164,6 +164,15 @@ struct LoadKey {
     wobj: String,
     wrench: Option<([u64; 6], bool)>,
     power: Option<[u64; 6]>,
+}
+
+/// Tool, work object and process wrench of a move: moves with equal keys
+/// share a robot view.
+#[derive(Debug, Clone, PartialEq, Eq, Hash)]
+struct ViewKey {
+    tool: String,
+    wobj: String,
+    wrench: Option<([u64; 6], bool)>,
 }
 
 /// A resolved tool: TCP in the flange frame and load (flange frame).
@@ -603,11 +612,12 @@ struct Rewriter<'m> {
     /// New declaration lines per module declaration index.
     inserts: Vec<(usize, String)>,
     taken: Vec<String>,
-    /// Robot views (one per load key) and the index of each key's view.
+    /// Robot views (one per tool, work object and process wrench; the
+    /// thermal state of a move goes with its job) and the index of each.
     views: Vec<Robot>,
-    view_of: HashMap<LoadKey, usize>,
+    view_of: HashMap<ViewKey, usize>,
     /// The view used last, with its key.
-    last_view: Option<(LoadKey, usize)>,
+    last_view: Option<(ViewKey, usize)>,
     /// Collecting the compensation jobs, or applying their results.
     phase: Phase,
     /// Load key that owns the in-place value of a target origin.
@@ -627,6 +637,8 @@ struct Job {
     view: usize,
     pose: Isometry3<f64>,
     sel: IkSelect,
+    /// DH growth of the thermal stage at this move, mm.
+    growth: DhGrowth,
 }
 
 /// The two walks over the moves: the first collects every compensation as
@@ -653,26 +665,39 @@ impl Rewriter<'_> {
     fn view(&mut self, key: &LoadKey, tool: &ToolView) -> usize {
         // Consecutive moves mostly share their load: compare before hashing.
         if let Some((k, i)) = &self.last_view {
-            if k == key {
+            if k.tool == key.tool && k.wobj == key.wobj && k.wrench == key.wrench {
                 return *i;
             }
         }
-        if let Some(&i) = self.view_of.get(key) {
-            self.last_view = Some((key.clone(), i));
-            return i;
-        }
-        let mut r = self
-            .robot
-            .with_tool(tool.tframe, tool.load, false)
-            .with_process_wrench(self.state.wrench);
-        if let Some(p) = self.state.power {
-            r = r.with_thermal_power(&p);
-        }
-        self.views.push(r);
-        let i = self.views.len() - 1;
-        self.view_of.insert(key.clone(), i);
-        self.last_view = Some((key.clone(), i));
+        let vk = ViewKey {
+            tool: key.tool.clone(),
+            wobj: key.wobj.clone(),
+            wrench: key.wrench,
+        };
+        let i = match self.view_of.get(&vk) {
+            Some(&i) => i,
+            None => {
+                let r = self
+                    .robot
+                    .with_tool(tool.tframe, tool.load, false)
+                    .with_process_wrench(self.state.wrench);
+                self.views.push(r);
+                let i = self.views.len() - 1;
+                self.view_of.insert(vk.clone(), i);
+                i
+            }
+        };
+        self.last_view = Some((vk, i));
         i
+    }
+
+    /// DH growth of the thermal stage for the move being rewritten: that of
+    /// its effective joint powers, else the robot's current one.
+    fn growth(&self) -> DhGrowth {
+        match self.state.power {
+            Some(p) => self.robot.thermal_growth_mm(&p),
+            None => *self.robot.current_thermal_growth_mm(),
+        }
     }
 
     /// The compensation of one target: recorded as a job while collecting
@@ -683,9 +708,15 @@ impl Rewriter<'_> {
         pose: Isometry3<f64>,
         sel: IkSelect,
     ) -> Option<std::result::Result<Compensation, RobotError>> {
+        let growth = self.growth();
         match &mut self.phase {
             Phase::Collect(jobs) => {
-                jobs.push(Job { view, pose, sel });
+                jobs.push(Job {
+                    view,
+                    pose,
+                    sel,
+                    growth,
+                });
                 None
             }
             // The results run out only after a collection that stopped at
@@ -695,7 +726,9 @@ impl Rewriter<'_> {
                     results
                         .next()
                         .unwrap_or_else(|| match self.views.get(view) {
-                            Some(r) => r.compensate(&pose, &sel, self.opts.effects),
+                            Some(r) => {
+                                r.compensate_with_growth(&pose, &sel, self.opts.effects, &growth)
+                            }
                             None => Err(RobotError::Unreachable("no robot view".into())),
                         }),
                 )
@@ -1283,7 +1316,7 @@ pub fn compensate_module(
         views: Vec::new(),
         view_of: HashMap::new(),
         last_view: None,
-        phase: Phase::Collect(Vec::new()),
+        phase: Phase::Collect(Vec::with_capacity(moves.len())),
         owner: HashMap::new(),
         made: HashMap::new(),
         derived_count: HashMap::new(),
@@ -1335,7 +1368,7 @@ pub fn compensate_module(
     let results: Vec<std::result::Result<Compensation, RobotError>> = jobs
         .par_iter()
         .map(|j| match views.get(j.view) {
-            Some(r) => r.compensate(&j.pose, &j.sel, fx),
+            Some(r) => r.compensate_with_growth(&j.pose, &j.sel, fx, &j.growth),
             None => Err(RobotError::Unreachable("no robot view".into())),
         })
         .collect();

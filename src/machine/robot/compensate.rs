@@ -18,7 +18,7 @@ use nalgebra::{Isometry3, Matrix6, Translation3, UnitQuaternion, Vector3, Vector
 use super::dh::DhParams;
 use super::kinematics::{Frames, flange, frames};
 use super::pose::pose_error;
-use super::thermal::grown;
+use super::thermal::{DhGrowth, grown};
 use super::{IkSelect, Model, Robot, RobotError};
 
 /// Parameters `gain` of the way from `nominal` to `actual` (exactly one of
@@ -209,14 +209,14 @@ impl Robot {
     /// The kinematic (calibrated, blended) and the full (kinematic plus
     /// thermal growth) parameter sets of a prediction. Resolved once per
     /// target: every iteration reuses them.
-    fn prediction_params(&self, effects: Effects) -> (DhParams, DhParams) {
+    fn prediction_params(&self, effects: Effects, growth: &DhGrowth) -> (DhParams, DhParams) {
         let kin = blend(
             self.params(Model::Nominal),
             self.params(Model::Actual),
             effects.kinematic,
         );
         let model = if effects.thermal != 0.0 {
-            grown(&kin, self.current_thermal_growth_mm(), effects.thermal)
+            grown(&kin, growth, effects.thermal)
         } else {
             kin
         };
@@ -271,7 +271,7 @@ impl Robot {
     /// with the intermediate poses `[nominal, +kinematic, +thermal,
     /// +gravity, +process]` in that order (the last is the attained pose).
     pub fn predict_stages(&self, q: &[f64; 6], effects: Effects) -> [Isometry3<f64>; 5] {
-        let (kin, model) = self.prediction_params(effects);
+        let (kin, model) = self.prediction_params(effects, self.current_thermal_growth_mm());
         self.stages_with(&kin, &model, q, effects)
     }
 
@@ -322,7 +322,7 @@ impl Robot {
 
     /// Predicted attained TCP pose (world frame) for controller joints `q`.
     pub fn predict(&self, q: &[f64; 6], effects: Effects) -> Isometry3<f64> {
-        let (_, model) = self.prediction_params(effects);
+        let (_, model) = self.prediction_params(effects, self.current_thermal_growth_mm());
         self.predict_with(&model, q, effects)
     }
 
@@ -335,8 +335,22 @@ impl Robot {
         sel: &IkSelect,
         effects: Effects,
     ) -> Result<Compensation, RobotError> {
+        self.compensate_with_growth(programmed, sel, effects, self.current_thermal_growth_mm())
+    }
+
+    /// [`Robot::compensate`] with the thermal prediction stage using the DH
+    /// growth `growth` (mm) instead of the robot's current one: the same
+    /// result as `with_thermal_power(p).compensate(…)` for the growth of the
+    /// powers `p`, without a copy of the robot per target.
+    pub fn compensate_with_growth(
+        &self,
+        programmed: &Isometry3<f64>,
+        sel: &IkSelect,
+        effects: Effects,
+        growth: &DhGrowth,
+    ) -> Result<Compensation, RobotError> {
         let q0 = self.ik_nominal(programmed, sel)?;
-        let (kin, model) = self.prediction_params(effects);
+        let (kin, model) = self.prediction_params(effects, growth);
         let st = self.stages_with(&kin, &model, &q0, effects);
         let deviation = Deviation {
             kinematic: PoseDelta::between(&st[1], &st[0]),
