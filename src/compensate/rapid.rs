@@ -162,7 +162,7 @@ fn conf_of(rt: &RobTarget) -> Option<ConfData> {
 struct LoadKey {
     tool: String,
     wobj: String,
-    wrench: Option<([u64; 6], bool)>,
+    wrench: Option<WrenchBits>,
     power: Option<[u64; 6]>,
 }
 
@@ -172,7 +172,7 @@ struct LoadKey {
 struct ViewKey {
     tool: String,
     wobj: String,
-    wrench: Option<([u64; 6], bool)>,
+    wrench: Option<WrenchBits>,
 }
 
 /// A resolved tool: TCP in the flange frame and load (flange frame).
@@ -1195,7 +1195,7 @@ fn move_duration(robot: &Robot, plans: &[Planned], i: usize, mv: &Move) -> Optio
 /// `q̇` the joint change over the duration.
 fn move_power<'m>(
     robot: &Robot,
-    cache: &mut ViewCache<(&'m str, Option<([u64; 6], bool)>)>,
+    cache: &mut ViewCache<(&'m str, Option<WrenchBits>)>,
     plans: &[Planned],
     i: usize,
     wrench: Option<ProcessWrench>,
@@ -1224,7 +1224,10 @@ fn move_power<'m>(
     std::array::from_fn(|j| (t[j] * (qb[j] - qa[j]) / duration_s).abs())
 }
 
-fn wrench_bits(w: &ProcessWrench) -> ([u64; 6], bool) {
+/// A process wrench as bit patterns (a hashable key).
+type WrenchBits = ([u64; 6], bool);
+
+fn wrench_bits(w: &ProcessWrench) -> WrenchBits {
     (
         [
             w.force_n.x,
