@@ -639,6 +639,8 @@ struct Job {
     sel: IkSelect,
     /// DH growth of the thermal stage at this move, mm.
     growth: DhGrowth,
+    /// Controller joints of the programmed pose, when planning found them.
+    q0: Option<[f64; 6]>,
 }
 
 /// The two walks over the moves: the first collects every compensation as
@@ -707,6 +709,7 @@ impl Rewriter<'_> {
         view: usize,
         pose: Isometry3<f64>,
         sel: IkSelect,
+        q0: Option<[f64; 6]>,
     ) -> Option<std::result::Result<Compensation, RobotError>> {
         let growth = self.growth();
         match &mut self.phase {
@@ -716,6 +719,7 @@ impl Rewriter<'_> {
                     pose,
                     sel,
                     growth,
+                    q0,
                 });
                 None
             }
@@ -727,7 +731,7 @@ impl Rewriter<'_> {
                         .next()
                         .unwrap_or_else(|| match self.views.get(view) {
                             Some(r) => {
-                                r.compensate_with_growth(&pose, &sel, self.opts.effects, &growth)
+                                r.compensate_seeded(&pose, &sel, self.opts.effects, &growth, q0)
                             }
                             None => Err(RobotError::Unreachable("no robot view".into())),
                         }),
@@ -753,6 +757,7 @@ impl Rewriter<'_> {
         key: &LoadKey,
         tool: &ToolView,
         wobj: &Isometry3<f64>,
+        q0: Option<[f64; 6]>,
     ) -> Result<Option<Deviation>> {
         let u = resolve_cart(self.module, self.src, self.file, target)?;
         let view = self.view(key, tool);
@@ -773,7 +778,7 @@ impl Rewriter<'_> {
                 mv.kind.name()
             )
         };
-        let Some(comp) = self.solve(view, programmed, IkSelect::Conf(u.conf)) else {
+        let Some(comp) = self.solve(view, programmed, IkSelect::Conf(u.conf), q0) else {
             return Ok(None);
         };
         let comp = comp.map_err(|e| self.locate(at, e, &what()))?;
@@ -918,7 +923,7 @@ impl Rewriter<'_> {
         r.check_limits(&q)
             .map_err(|e| self.locate(at, e, &what()))?;
         let goal = r.tcp_pose(Model::Nominal, &q);
-        let Some(comp) = self.solve(view, goal, IkSelect::Near(q)) else {
+        let Some(comp) = self.solve(view, goal, IkSelect::Near(q), None) else {
             return Ok(None);
         };
         let comp = comp.map_err(|e| self.locate(at, e, &what()))?;
@@ -1371,7 +1376,7 @@ pub fn compensate_module(
     let results: Vec<std::result::Result<Compensation, RobotError>> = jobs
         .par_iter()
         .map(|j| match views.get(j.view) {
-            Some(r) => r.compensate_with_growth(&j.pose, &j.sel, fx, &j.growth),
+            Some(r) => r.compensate_seeded(&j.pose, &j.sel, fx, &j.growth, j.q0),
             None => Err(RobotError::Unreachable("no robot view".into())),
         })
         .collect();
@@ -1436,9 +1441,11 @@ impl Rewriter<'_> {
             self.joint(mv, key, &plan.tool)
         } else {
             if let Some(via) = &mv.via {
-                self.cart(mv, via, key, &plan.tool, &plan.wobj)?;
+                self.cart(mv, via, key, &plan.tool, &plan.wobj, None)?;
             }
-            self.cart(mv, &mv.target, key, &plan.tool, &plan.wobj)
+            // Planning solved the target's joints with the same pose,
+            // confdata and TCP (`ik_conf`, limits checked).
+            self.cart(mv, &mv.target, key, &plan.tool, &plan.wobj, plan.q)
         }
     }
 }

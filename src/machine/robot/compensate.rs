@@ -349,7 +349,24 @@ impl Robot {
         effects: Effects,
         growth: &DhGrowth,
     ) -> Result<Compensation, RobotError> {
-        let q0 = self.ik_nominal(programmed, sel)?;
+        self.compensate_seeded(programmed, sel, effects, growth, None)
+    }
+
+    /// [`Robot::compensate_with_growth`] with the controller joints of the
+    /// programmed pose already known (`ik_nominal(programmed, sel)`, limits
+    /// checked), e.g. from planning the move: saves one inverse kinematics.
+    pub(crate) fn compensate_seeded(
+        &self,
+        programmed: &Isometry3<f64>,
+        sel: &IkSelect,
+        effects: Effects,
+        growth: &DhGrowth,
+        q_programmed: Option<[f64; 6]>,
+    ) -> Result<Compensation, RobotError> {
+        let q0 = match q_programmed {
+            Some(q) => q,
+            None => self.ik_nominal(programmed, sel)?,
+        };
         let (kin, model) = self.prediction_params(effects, growth);
         let st = self.stages_with(&kin, &model, &q0, effects);
         let deviation = Deviation {
