@@ -425,3 +425,54 @@ impl Robot {
         })
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::machine::Machine;
+    use crate::machine::robot::ConfData;
+    use approx::assert_abs_diff_eq;
+
+    /// Both paths run the same arithmetic: equal to the last bit.
+    const SAME: f64 = 0.0;
+
+    #[test]
+    fn growth_override_equals_a_robot_at_that_power() {
+        let text = include_str!("../../../machines/abb-irb1600.yaml");
+        let Ok(Machine::Robot(r)) = Machine::from_yaml_str(text, "abb-irb1600.yaml") else {
+            panic!("abb-irb1600.yaml is a robot file")
+        };
+        // Warm joints 2 and 3 (W): the thermal section grows row 2's a.
+        let p = [0.0, 150.0, 80.0, 0.0, 0.0, 0.0];
+        let warm = r.with_thermal_power(&p);
+        let growth = r.thermal_growth_mm(&p);
+        assert!(growth.iter().flatten().any(|g| *g != 0.0));
+        let pose = Isometry3::from_parts(
+            Translation3::new(750.0, 150.0, 400.0),
+            UnitQuaternion::from_axis_angle(&Vector3::y_axis(), std::f64::consts::PI),
+        );
+        let sel = IkSelect::Conf(ConfData {
+            cf1: 0,
+            cf4: 0,
+            cf6: 0,
+            cfx: 0,
+        });
+        let a = warm
+            .compensate(&pose, &sel, Effects::ALL)
+            .expect("reachable");
+        let b = r
+            .compensate_with_growth(&pose, &sel, Effects::ALL, &growth)
+            .expect("reachable");
+        assert_abs_diff_eq!(
+            a.pose.translation.vector,
+            b.pose.translation.vector,
+            epsilon = SAME
+        );
+        assert_abs_diff_eq!(
+            a.deviation.thermal.pos_mm,
+            b.deviation.thermal.pos_mm,
+            epsilon = SAME
+        );
+        assert!(a.deviation.thermal.pos_mm.norm() > 0.0);
+    }
+}
