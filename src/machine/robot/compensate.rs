@@ -16,7 +16,7 @@
 use nalgebra::{Isometry3, Matrix6, Translation3, UnitQuaternion, Vector3, Vector6};
 
 use super::dh::DhParams;
-use super::kinematics::{Frames, flange, frames};
+use super::kinematics::{Frames, Prepared, flange, frames_prepared};
 use super::pose::pose_error;
 use super::thermal::{DhGrowth, grown};
 use super::{IkSelect, Model, Robot, RobotError};
@@ -187,7 +187,7 @@ impl Robot {
         q: &[f64; 6],
         attained: &Isometry3<f64>,
         sel: &IkSelect,
-        model: &DhParams,
+        model: &Prepared,
         effects: Effects,
     ) -> Result<Matrix6<f64>, RobotError> {
         const H: [f64; 2] = [1e-4, 1e-7];
@@ -245,18 +245,18 @@ impl Robot {
     }
 
     /// TCP pose (world frame) of the full model at `q` deflected by `tau`.
-    fn deflected_tcp(&self, model: &DhParams, q: &[f64; 6], tau: &Vector6<f64>) -> Isometry3<f64> {
+    fn deflected_tcp(&self, model: &Prepared, q: &[f64; 6], tau: &Vector6<f64>) -> Isometry3<f64> {
         let dq = self.joint_deflection(tau);
         let qd: [f64; 6] = std::array::from_fn(|i| q[i] + dq[i]);
-        self.tcp_of(&flange(model, &qd))
+        self.tcp_of(&frames_prepared(model, &qd, 6).flange())
     }
 
     /// Attained TCP pose with the parameter set `model` of
     /// [`Robot::prediction_params`]: one set of joint frames feeds the
     /// gravity and the process torques, one more forward kinematics gives
     /// the deflected pose (the hot path of the compensation iteration).
-    fn predict_with(&self, model: &DhParams, q: &[f64; 6], effects: Effects) -> Isometry3<f64> {
-        let f = frames(model, q);
+    fn predict_with(&self, model: &Prepared, q: &[f64; 6], effects: Effects) -> Isometry3<f64> {
+        let f = frames_prepared(model, q, 6);
         let (tau_g, tau_w) = self.load_torques(&f, effects);
         if effects.process != 0.0 {
             self.deflected_tcp(model, q, &(tau_g + tau_w))
@@ -272,20 +272,20 @@ impl Robot {
     /// +gravity, +process]` in that order (the last is the attained pose).
     pub fn predict_stages(&self, q: &[f64; 6], effects: Effects) -> [Isometry3<f64>; 5] {
         let (kin, model) = self.prediction_params(effects, self.current_thermal_growth_mm());
-        self.stages_with(&kin, &model, q, effects)
+        self.stages_with(&kin, &Prepared::new(&model), q, effects)
     }
 
     /// [`Robot::predict_stages`] with the parameter sets resolved.
     fn stages_with(
         &self,
         kin: &DhParams,
-        model: &DhParams,
+        model: &Prepared,
         q: &[f64; 6],
         effects: Effects,
     ) -> [Isometry3<f64>; 5] {
         let p0 = self.tcp_of(&flange(self.params(Model::Nominal), q));
         let p1 = self.tcp_of(&flange(kin, q));
-        let f = frames(model, q);
+        let f = frames_prepared(model, q, 6);
         let p2 = self.tcp_of(&f.flange());
         let (tau_g, tau_w) = self.load_torques(&f, effects);
         let p3 = if effects.gravity != 0.0 {
@@ -323,7 +323,7 @@ impl Robot {
     /// Predicted attained TCP pose (world frame) for controller joints `q`.
     pub fn predict(&self, q: &[f64; 6], effects: Effects) -> Isometry3<f64> {
         let (_, model) = self.prediction_params(effects, self.current_thermal_growth_mm());
-        self.predict_with(&model, q, effects)
+        self.predict_with(&Prepared::new(&model), q, effects)
     }
 
     /// Compensates one programmed TCP pose (world frame): returns the pose to
@@ -368,6 +368,7 @@ impl Robot {
             None => self.ik_nominal(programmed, sel)?,
         };
         let (kin, model) = self.prediction_params(effects, growth);
+        let model = Prepared::new(&model);
         let st = self.stages_with(&kin, &model, &q0, effects);
         let deviation = Deviation {
             kinematic: PoseDelta::between(&st[1], &st[0]),

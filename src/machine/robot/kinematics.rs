@@ -31,9 +31,55 @@ impl Frames {
 /// `Rz(θ)·(a, 0, d)`) and `qx·qz = (cx·cz, sx·cz, −sx·sz, cx·sz)` (modified,
 /// translation `(a, 0, 0) + Rx(α)·(0, 0, d)`).
 pub(crate) fn joint_transform(j: &DhJoint, convention: Convention, q: f64) -> Isometry3<f64> {
+    prepared_transform(&PreparedJoint::new(j), convention, q)
+}
+
+/// A DH row with the half-angle sine and cosine of its twist precomputed
+/// (constant for a parameter set: the iterations reuse them).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) struct PreparedJoint {
+    a_mm: f64,
+    d_mm: f64,
+    theta_offset_rad: f64,
+    sx: f64,
+    cx: f64,
+}
+
+impl PreparedJoint {
+    fn new(j: &DhJoint) -> Self {
+        let (sx, cx) = (0.5 * j.alpha_rad).sin_cos();
+        PreparedJoint {
+            a_mm: j.a_mm,
+            d_mm: j.d_mm,
+            theta_offset_rad: j.theta_offset_rad,
+            sx,
+            cx,
+        }
+    }
+}
+
+/// A parameter set with every row prepared ([`PreparedJoint`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) struct Prepared {
+    convention: Convention,
+    joints: [PreparedJoint; 6],
+}
+
+impl Prepared {
+    /// Prepares every row of `p`.
+    pub(crate) fn new(p: &DhParams) -> Self {
+        Prepared {
+            convention: p.convention,
+            joints: p.joints.each_ref().map(PreparedJoint::new),
+        }
+    }
+}
+
+/// [`joint_transform`] of a prepared row.
+fn prepared_transform(j: &PreparedJoint, convention: Convention, q: f64) -> Isometry3<f64> {
     let theta = q + j.theta_offset_rad;
     let (sz, cz) = (0.5 * theta).sin_cos();
-    let (sx, cx) = (0.5 * j.alpha_rad).sin_cos();
+    let (sx, cx) = (j.sx, j.cx);
     let (t, r) = match convention {
         Convention::Dh => {
             let (s, c) = (2.0 * sz * cz, cz * cz - sz * sz);
@@ -61,12 +107,17 @@ pub fn frames(p: &DhParams, q: &[f64; 6]) -> Frames {
 /// [`frames`] of the first `n` links only (the others stay at the
 /// identity): the confdata test needs the frames up to the wrist centre.
 pub(crate) fn frames_upto(p: &DhParams, q: &[f64; 6], n: usize) -> Frames {
+    frames_prepared(&Prepared::new(p), q, n)
+}
+
+/// [`frames_upto`] of a prepared parameter set.
+pub(crate) fn frames_prepared(p: &Prepared, q: &[f64; 6], n: usize) -> Frames {
     let mut link = [Isometry3::identity(); 6];
     let mut axis_origin = [Vector3::zeros(); 6];
     let mut axis_dir = [Vector3::z(); 6];
     let mut prev = Isometry3::identity();
-    for i in 0..n.min(6) {
-        let t = prev * joint_transform(&p.joints[i], p.convention, q[i]);
+    for (i, (j, qi)) in p.joints.iter().zip(q).enumerate().take(n.min(6)) {
+        let t = prev * prepared_transform(j, p.convention, *qi);
         match p.convention {
             // Classic: joint i turns about z of frame i-1.
             Convention::Dh => {
