@@ -613,7 +613,23 @@ fn sample_is_made_from_the_true_file() {
     if std::env::var_os("DIAGNOSE_WRITE_SAMPLE").is_some() {
         std::fs::write(&path, &csv).expect("sample written");
     }
-    assert_eq!(std::fs::read_to_string(&path).expect("sample"), csv);
+    // Same rows and columns; values equal to floating-point noise (a
+    // refactoring of the kinematics may change the last bits).
+    const SAMPLE_TOL: f64 = 1e-9;
+    let committed = std::fs::read_to_string(&path).expect("sample");
+    let (a, b): (Vec<&str>, Vec<&str>) = (committed.lines().collect(), csv.lines().collect());
+    assert_eq!(a.len(), b.len());
+    assert_eq!(a.first(), b.first(), "header");
+    for (la, lb) in a.iter().zip(&b).skip(1) {
+        let (ca, cb): (Vec<&str>, Vec<&str>) = (la.split(',').collect(), lb.split(',').collect());
+        assert_eq!(ca.len(), cb.len());
+        for (x, y) in ca.iter().zip(&cb) {
+            match (x.parse::<f64>(), y.parse::<f64>()) {
+                (Ok(x), Ok(y)) => assert!((x - y).abs() <= SAMPLE_TOL, "{x} vs {y}"),
+                _ => assert_eq!(x, y),
+            }
+        }
+    }
 }
 
 /// The command line: list, table, JSON and --write-model on the sample.

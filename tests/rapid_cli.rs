@@ -641,3 +641,47 @@ fn time_line_durations_and_workpiece_force_are_hand_derived() {
         }
     }
 }
+
+/// Compensates `module` (a file in `dir`) with `--threads n`; returns the
+/// written bytes.
+fn compensate_threads(dir: &std::path::Path, module: &std::path::Path, n: usize) -> Vec<u8> {
+    let output = dir.join(format!("out{n}.mod"));
+    postproc()
+        .arg("compensate")
+        .arg(module)
+        .args(["--machine", "abb-irb1600", "--effects", "all", "--threads"])
+        .arg(n.to_string())
+        .arg("-o")
+        .arg(&output)
+        .assert()
+        .success();
+    std::fs::read(&output).expect("output")
+}
+
+#[test]
+fn rapid_output_is_the_same_for_one_and_two_threads() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    // The drilling sample (named targets, copies, Offs, MoveAbsJ) and a
+    // grid of 400 inline targets, enough to be split between threads.
+    let sample = dir.path().join("drilling.mod");
+    std::fs::copy(repo("samples/drilling.mod"), &sample).expect("copy sample");
+    let mut grid = String::from(
+        "MODULE Grid\n  PERS tooldata tSpindle := [TRUE,[[0,0,150],[1,0,0,0]],[2,[0,0,70],[1,0,0,0],0.01,0.01,0.004]];\n  PROC main()\n",
+    );
+    for i in 0..400 {
+        let (x, y, z) = (650 + (i % 20) * 10, 50 + (i / 20) * 10, 300 + (i % 7) * 20);
+        grid.push_str(&format!(
+            "    MoveL [[{x},{y},{z}],[0,0,1,0],[0,0,0,0],[9E9,9E9,9E9,9E9,9E9,9E9]],v200,z1,tSpindle;\n"
+        ));
+    }
+    grid.push_str("  ENDPROC\nENDMODULE\n");
+    let grid_path = dir.path().join("grid.mod");
+    std::fs::write(&grid_path, &grid).expect("write grid");
+    for module in [&sample, &grid_path] {
+        let input = std::fs::read(module).expect("input");
+        let one = compensate_threads(dir.path(), module, 1);
+        let two = compensate_threads(dir.path(), module, 2);
+        assert!(one != input, "nothing was compensated in {module:?}");
+        assert!(one == two, "1 and 2 threads differ for {module:?}");
+    }
+}

@@ -114,9 +114,15 @@ pub(super) fn read_program(path: &Path) -> Result<(String, String)> {
     } else {
         std::fs::read(path).map_err(|e| Error::io(path, e))?
     };
-    // Validate UTF-8 with a located error, then keep the text.
-    parse_module_bytes(&bytes, &name)?;
-    let text = String::from_utf8(bytes).map_err(|e| usage(format!("{name}: {e}")))?;
+    // Keep the text; invalid UTF-8 gets a located error (the module itself
+    // is parsed once, by the caller).
+    let text = match String::from_utf8(bytes) {
+        Ok(t) => t,
+        Err(e) => {
+            parse_module_bytes(e.as_bytes(), &name)?;
+            return Err(usage(format!("{name}: {}", e.utf8_error())));
+        }
+    };
     Ok((text, name))
 }
 
@@ -272,7 +278,17 @@ pub fn compensate(a: &CompensateArgs) -> Result<i32> {
     super::gcode::refuse_overwrite(&out_path, &[input])?;
     super::gcode::check_report_path(a.report.as_deref(), input, &out_path)?;
     let (src, name) = read_program(input)?;
-    let outcome = compensate_module(&src, &name, &robot, &opts)?;
+    let mut pool = rayon::ThreadPoolBuilder::new();
+    if let Some(n) = a.effects.threads {
+        if n == 0 {
+            return Err(usage("--threads must be at least 1"));
+        }
+        pool = pool.num_threads(n);
+    }
+    let pool = pool
+        .build()
+        .map_err(|e| usage(format!("cannot start worker threads: {e}")))?;
+    let outcome = pool.install(|| compensate_module(&src, &name, &robot, &opts))?;
     if out_path == Path::new("-") {
         let mut stdout = std::io::stdout().lock();
         stdout

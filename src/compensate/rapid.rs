@@ -11,6 +11,8 @@
 
 use std::collections::HashMap;
 
+use rayon::prelude::*;
+
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 
 use crate::emit::rapid::{
@@ -24,8 +26,8 @@ use crate::machine::robot::process::{
 };
 use crate::machine::robot::thermal::{Segment, effective_power};
 use crate::machine::robot::{
-    ConfData, Deviation, Effects, ForceFrame, ForceModel, IkSelect, Model, PointMass,
-    ProcessWrench, Robot, ThermalStart,
+    Compensation, ConfData, Deviation, DhGrowth, Effects, ForceFrame, ForceModel, IkSelect, Model,
+    PointMass, ProcessWrench, Robot, RobotError, ThermalStart,
 };
 use crate::process::MillingCache;
 use crate::program::rapid::{
@@ -167,8 +169,18 @@ fn conf_of(rt: &RobTarget) -> Option<ConfData> {
 struct LoadKey {
     tool: String,
     wobj: String,
-    wrench: Option<([u64; 6], bool)>,
+    wrench: Option<WrenchBits>,
     power: Option<[u64; 6]>,
+    rpm: Option<u64>,
+}
+
+/// Tool, work object and process wrench of a move: moves with equal keys
+/// share a robot view.
+#[derive(Debug, Clone, PartialEq, Eq, Hash)]
+struct ViewKey {
+    tool: String,
+    wobj: String,
+    wrench: Option<WrenchBits>,
     rpm: Option<u64>,
 }
 
@@ -609,8 +621,14 @@ struct Rewriter<'m> {
     /// New declaration lines per module declaration index.
     inserts: Vec<(usize, String)>,
     taken: Vec<String>,
-    /// Robot views per load key.
-    views: HashMap<LoadKey, Robot>,
+    /// Robot views (one per tool, work object and process wrench; the
+    /// thermal state of a move goes with its job) and the index of each.
+    views: Vec<Robot>,
+    view_of: HashMap<ViewKey, usize>,
+    /// The view used last, with its key.
+    last_view: Option<(ViewKey, usize)>,
+    /// Collecting the compensation jobs, or applying their results.
+    phase: Phase,
     /// Load key that owns the in-place value of a target origin.
     owner: HashMap<Origin, LoadKey>,
     /// Names of copies / materialised targets already made.
@@ -622,6 +640,26 @@ struct Rewriter<'m> {
     state: MoveState,
     /// Programmed TCP position (world, mm) of the last target compensated.
     last_tcp: [f64; 3],
+}
+
+/// One target to compensate: robot view, programmed TCP pose (world frame)
+/// and the inverse-kinematics selection.
+struct Job {
+    view: usize,
+    pose: Isometry3<f64>,
+    sel: IkSelect,
+    /// DH growth of the thermal stage at this move, mm.
+    growth: DhGrowth,
+    /// Controller joints of the programmed pose, when planning found them.
+    q0: Option<[f64; 6]>,
+}
+
+/// The two walks over the moves: the first collects every compensation as
+/// a [`Job`] (solved in parallel in between, independent of each other and
+/// of the thread count); the second writes the results back in source order.
+enum Phase {
+    Collect(Vec<Job>),
+    Apply(std::vec::IntoIter<std::result::Result<Compensation, RobotError>>),
 }
 
 /// Per-move load state applied to the robot view.
@@ -638,22 +676,87 @@ impl Rewriter<'_> {
         self.opts.effects.compensates()
     }
 
-    fn view(&mut self, key: &LoadKey, tool: &ToolView) -> Robot {
-        let state = self.state;
-        self.views
-            .entry(key.clone())
-            .or_insert_with(|| {
-                let mut r = self
+    /// Index of the robot view of a load key (made on first use).
+    fn view(&mut self, key: &LoadKey, tool: &ToolView) -> usize {
+        // Consecutive moves mostly share their load: compare before hashing.
+        if let Some((k, i)) = &self.last_view {
+            if k.tool == key.tool
+                && k.wobj == key.wobj
+                && k.wrench == key.wrench
+                && k.rpm == key.rpm
+            {
+                return *i;
+            }
+        }
+        let vk = ViewKey {
+            tool: key.tool.clone(),
+            wobj: key.wobj.clone(),
+            wrench: key.wrench,
+            rpm: key.rpm,
+        };
+        let i = match self.view_of.get(&vk) {
+            Some(&i) => i,
+            None => {
+                let r = self
                     .robot
                     .with_tool(tool.tframe, tool.load, false)
-                    .with_process_wrench(state.wrench)
-                    .with_spindle_rpm(state.rpm);
-                if let Some(p) = state.power {
-                    r = r.with_thermal_power(&p);
-                }
-                r
-            })
-            .clone()
+                    .with_process_wrench(self.state.wrench)
+                    .with_spindle_rpm(self.state.rpm);
+                self.views.push(r);
+                let i = self.views.len() - 1;
+                self.view_of.insert(vk.clone(), i);
+                i
+            }
+        };
+        self.last_view = Some((vk, i));
+        i
+    }
+
+    /// DH growth of the thermal stage for the move being rewritten: that of
+    /// its effective joint powers, else the robot's current one.
+    fn growth(&self) -> DhGrowth {
+        match self.state.power {
+            Some(p) => self.robot.thermal_growth_mm(&p),
+            None => *self.robot.current_thermal_growth_mm(),
+        }
+    }
+
+    /// The compensation of one target: recorded as a job while collecting
+    /// (`None`), the next solved result while applying.
+    fn solve(
+        &mut self,
+        view: usize,
+        pose: Isometry3<f64>,
+        sel: IkSelect,
+        q0: Option<[f64; 6]>,
+    ) -> Option<std::result::Result<Compensation, RobotError>> {
+        let growth = self.growth();
+        match &mut self.phase {
+            Phase::Collect(jobs) => {
+                jobs.push(Job {
+                    view,
+                    pose,
+                    sel,
+                    growth,
+                    q0,
+                });
+                None
+            }
+            // The results run out only after a collection that stopped at
+            // an error, which this walk meets first; solve directly anyway.
+            Phase::Apply(results) => {
+                Some(
+                    results
+                        .next()
+                        .unwrap_or_else(|| match self.views.get(view) {
+                            Some(r) => {
+                                r.compensate_seeded(&pose, &sel, self.opts.effects, &growth, q0)
+                            }
+                            None => Err(RobotError::Unreachable("no robot view".into())),
+                        }),
+                )
+            }
+        }
     }
 
     fn locate(&self, at: usize, e: crate::machine::robot::RobotError, what: &str) -> Error {
@@ -673,7 +776,8 @@ impl Rewriter<'_> {
         key: &LoadKey,
         tool: &ToolView,
         wobj: &Isometry3<f64>,
-    ) -> Result<Deviation> {
+        q0: Option<[f64; 6]>,
+    ) -> Result<Option<Deviation>> {
         let u = resolve_cart(self.module, self.src, self.file, target)?;
         let view = self.view(key, tool);
         let programmed = wobj * u.pose_obj;
@@ -684,17 +788,22 @@ impl Rewriter<'_> {
             (Origin::Decl { .. }, false) => u.rt.span.start,
             _ => target.span().start,
         };
-        let (ml, _) = line_col(self.src, mv.span.start);
-        let what = format!(
-            "target `{}` of {} at line {ml}",
-            self.src.get(target.span()).unwrap_or("?"),
-            mv.kind.name()
-        );
-        let comp = view
-            .compensate(&programmed, &IkSelect::Conf(u.conf), self.opts.effects)
-            .map_err(|e| self.locate(at, e, &what))?;
+        // The message (and its line, a scan of the source) is built only on
+        // failure: scanning per move would make a run quadratic.
+        let what = || {
+            let (ml, _) = line_col(self.src, mv.span.start);
+            format!(
+                "target `{}` of {} at line {ml}",
+                self.src.get(target.span()).unwrap_or("?"),
+                mv.kind.name()
+            )
+        };
+        let Some(comp) = self.solve(view, programmed, IkSelect::Conf(u.conf), q0) else {
+            return Ok(None);
+        };
+        let comp = comp.map_err(|e| self.locate(at, e, &what()))?;
         if !self.active() {
-            return Ok(comp.deviation);
+            return Ok(Some(comp.deviation));
         }
         let new_obj = wobj.inverse() * comp.pose;
         let fmt = self.opts.format;
@@ -755,7 +864,7 @@ impl Rewriter<'_> {
                 self.edits.push(Edit::replace(target.span(), name));
             }
         }
-        Ok(comp.deviation)
+        Ok(Some(comp.deviation))
     }
 
     /// The name of the copy of `origin` for (`ident`, `key`), declaring it
@@ -789,7 +898,7 @@ impl Rewriter<'_> {
     }
 
     /// Compensates a MoveAbsJ in joint space.
-    fn joint(&mut self, mv: &Move, key: &LoadKey, tool: &ToolView) -> Result<Deviation> {
+    fn joint(&mut self, mv: &Move, key: &LoadKey, tool: &ToolView) -> Result<Option<Deviation>> {
         let target = &mv.target;
         let (jt, origin, stem) = match target {
             Target::InlineJoint(jt) => (jt, Origin::Inline, String::new()),
@@ -821,20 +930,26 @@ impl Rewriter<'_> {
             Origin::Decl { .. } => jt.span.start,
             Origin::Inline => target.span().start,
         };
-        let (ml, _) = line_col(self.src, mv.span.start);
-        let what = format!(
-            "jointtarget `{}` of MoveAbsJ at line {ml}",
-            self.src.get(target.span()).unwrap_or("?")
-        );
-        view.check_limits(&q)
-            .map_err(|e| self.locate(at, e, &what))?;
-        let goal = view.tcp_pose(Model::Nominal, &q);
+        let what = || {
+            let (ml, _) = line_col(self.src, mv.span.start);
+            format!(
+                "jointtarget `{}` of MoveAbsJ at line {ml}",
+                self.src.get(target.span()).unwrap_or("?")
+            )
+        };
+        let Some(r) = self.views.get(view) else {
+            return Err(Error::Usage("robot view missing".into()));
+        };
+        r.check_limits(&q)
+            .map_err(|e| self.locate(at, e, &what()))?;
+        let goal = r.tcp_pose(Model::Nominal, &q);
         self.last_tcp = goal.translation.vector.into();
-        let comp = view
-            .compensate(&goal, &IkSelect::Near(q), self.opts.effects)
-            .map_err(|e| self.locate(at, e, &what))?;
+        let Some(comp) = self.solve(view, goal, IkSelect::Near(q), None) else {
+            return Ok(None);
+        };
+        let comp = comp.map_err(|e| self.locate(at, e, &what()))?;
         if !self.active() {
-            return Ok(comp.deviation);
+            return Ok(Some(comp.deviation));
         }
         let new_deg = comp.q_compensated.map(f64::to_degrees);
         match origin {
@@ -878,7 +993,7 @@ impl Rewriter<'_> {
                 }
             }
         }
-        Ok(comp.deviation)
+        Ok(Some(comp.deviation))
     }
 }
 
@@ -931,10 +1046,38 @@ struct Planned {
     v_tcp: Option<f64>,
 }
 
-fn plan_move(module: &Module, src: &str, file: &str, robot: &Robot, mv: &Move) -> Result<Planned> {
+/// Robot views with a tool mounted, made once per distinct key (a view is a
+/// copy of the robot: one per move would cost a copy per target).
+struct ViewCache<K> {
+    views: HashMap<K, Robot>,
+}
+
+impl<K: std::hash::Hash + Eq> ViewCache<K> {
+    fn new() -> Self {
+        ViewCache {
+            views: HashMap::new(),
+        }
+    }
+
+    fn get(&mut self, key: K, make: impl FnOnce() -> Robot) -> &Robot {
+        self.views.entry(key).or_insert_with(make)
+    }
+}
+
+fn plan_move<'m>(
+    module: &Module,
+    src: &str,
+    file: &str,
+    robot: &Robot,
+    cache: &mut ViewCache<&'m str>,
+    mv: &'m Move,
+) -> Result<Planned> {
     let tool = resolve_tool(module, src, file, mv)?;
     let wobj = resolve_wobj(module, src, file, mv)?;
-    let view = robot.with_tool(tool.tframe, tool.load, false);
+    // The tool is resolved from its name alone: equal names, equal views.
+    let view = cache.get(mv.tool.text.as_str(), || {
+        robot.with_tool(tool.tframe, tool.load, false)
+    });
     let (pose, q) = if mv.kind == MoveKind::MoveAbsJ {
         let jt = match &mv.target {
             Target::InlineJoint(jt) => Some(jt),
@@ -1126,11 +1269,13 @@ fn move_duration(robot: &Robot, plans: &[Planned], i: usize, mv: &Move) -> Optio
 /// Mean motor power per joint during move `i`, W: `|τ·q̇|` with `τ` the
 /// gravity and process torques averaged over the move's two ends (N·m) and
 /// `q̇` the joint change over the duration.
-fn move_power(
+fn move_power<'m>(
     robot: &Robot,
+    cache: &mut ViewCache<(&'m str, Option<WrenchBits>)>,
     plans: &[Planned],
     i: usize,
     wrench: Option<ProcessWrench>,
+    tool: &'m str,
     duration_s: f64,
 ) -> [f64; 6] {
     let (Some(prev), Some(cur)) = (i.checked_sub(1).and_then(|k| plans.get(k)), plans.get(i))
@@ -1143,9 +1288,11 @@ fn move_power(
     if duration_s <= 0.0 {
         return [0.0; 6];
     }
-    let view = robot
-        .with_tool(cur.tool.tframe, cur.tool.load, false)
-        .with_process_wrench(wrench);
+    let view = cache.get((tool, wrench.as_ref().map(wrench_bits)), || {
+        robot
+            .with_tool(cur.tool.tframe, cur.tool.load, false)
+            .with_process_wrench(wrench)
+    });
     let tau = |q: &[f64; 6]| {
         view.gravity_torques(Model::Nominal, q) + view.process_torques(Model::Nominal, q)
     };
@@ -1153,7 +1300,10 @@ fn move_power(
     std::array::from_fn(|j| (t[j] * (qb[j] - qa[j]) / duration_s).abs())
 }
 
-fn wrench_bits(w: &ProcessWrench) -> ([u64; 6], bool) {
+/// A process wrench as bit patterns (a hashable key).
+type WrenchBits = ([u64; 6], bool);
+
+fn wrench_bits(w: &ProcessWrench) -> WrenchBits {
     (
         [
             w.force_n.x,
@@ -1180,9 +1330,10 @@ pub fn compensate_module(
 ) -> Result<RapidOutcome> {
     let module = parse_module(src, file)?;
     let moves: Vec<&Move> = module.moves().collect();
+    let mut tool_views = ViewCache::new();
     let plans = moves
         .iter()
-        .map(|mv| plan_move(&module, src, file, robot, mv))
+        .map(|mv| plan_move(&module, src, file, robot, &mut tool_views, mv))
         .collect::<Result<Vec<_>>>()?;
     let fx = opts.effects;
     let thermal = robot.thermal().filter(|_| fx.thermal != 0.0);
@@ -1203,6 +1354,7 @@ pub fn compensate_module(
         )?);
     }
     let mut segments = Vec::with_capacity(moves.len());
+    let mut power_views = ViewCache::new();
     for (i, mv) in moves.iter().enumerate() {
         let duration_s = match move_duration(robot, &plans, i, mv) {
             Some(t) => t,
@@ -1219,7 +1371,15 @@ pub fn compensate_module(
             }
             None => 0.0,
         };
-        let power_w = move_power(robot, &plans, i, wrenches[i], duration_s);
+        let power_w = move_power(
+            robot,
+            &mut power_views,
+            &plans,
+            i,
+            wrenches[i],
+            &mv.tool.text,
+            duration_s,
+        );
         segments.push(Segment {
             duration_s,
             power_w,
@@ -1236,7 +1396,10 @@ pub fn compensate_module(
         edits: Vec::new(),
         inserts: Vec::new(),
         taken: Vec::new(),
-        views: HashMap::new(),
+        views: Vec::new(),
+        view_of: HashMap::new(),
+        last_view: None,
+        phase: Phase::Collect(Vec::with_capacity(moves.len())),
         owner: HashMap::new(),
         made: HashMap::new(),
         derived_count: HashMap::new(),
@@ -1252,7 +1415,8 @@ pub fn compensate_module(
         max_deviation_line: 0,
         records: Vec::with_capacity(moves.len()),
     };
-    let mut max_vib = (0.0, 0, None);
+    // Load key and state of every move.
+    let mut keyed = Vec::with_capacity(moves.len());
     for (i, mv) in moves.iter().enumerate() {
         let (Some(plan), Some(seg)) = (plans.get(i), segments.get(i)) else {
             continue;
@@ -1260,7 +1424,6 @@ pub fn compensate_module(
         let power = thermal_power.as_ref().and_then(|p| p.get(i).copied());
         let wrench = wrenches.get(i).copied().flatten();
         let rpm = directives.at(mv.line).spindle_rpm;
-        rw.state = MoveState { wrench, power, rpm };
         let key = LoadKey {
             tool: mv.tool.text.to_ascii_lowercase(),
             wobj: mv
@@ -1271,13 +1434,40 @@ pub fn compensate_module(
             power: power.map(|p| p.map(f64::to_bits)),
             rpm: rpm.map(f64::to_bits),
         };
-        let dev = if mv.kind == MoveKind::MoveAbsJ {
-            rw.joint(mv, &key, &plan.tool)?
-        } else {
-            if let Some(via) = &mv.via {
-                rw.cart(mv, via, &key, &plan.tool, &plan.wobj)?;
-            }
-            rw.cart(mv, &mv.target, &key, &plan.tool, &plan.wobj)?
+        keyed.push((*mv, plan, seg, MoveState { wrench, power, rpm }, key));
+    }
+    // Walk 1: collect the compensation jobs. It stops at the first error;
+    // walk 2 meets the same error at the same move, after reporting any
+    // failure of an earlier target, as a single walk would.
+    for (mv, plan, _, state, key) in &keyed {
+        rw.state = *state;
+        if rw.walk(mv, key, plan).is_err() {
+            break;
+        }
+    }
+    let Phase::Collect(jobs) = std::mem::replace(&mut rw.phase, Phase::Collect(Vec::new())) else {
+        return Err(Error::Usage("compensation jobs already applied".into()));
+    };
+    // Solve in parallel (rayon keeps the input order in `collect`; every
+    // job is independent, so the results do not depend on the threads).
+    let views = &rw.views;
+    let results: Vec<std::result::Result<Compensation, RobotError>> = jobs
+        .par_iter()
+        .map(|j| match views.get(j.view) {
+            Some(r) => r.compensate_seeded(&j.pose, &j.sel, fx, &j.growth, j.q0),
+            None => Err(RobotError::Unreachable("no robot view".into())),
+        })
+        .collect();
+    rw.phase = Phase::Apply(results.into_iter());
+    // Walk 2: write the results back in source order.
+    let mut max_vib = (0.0, 0, None);
+    for (mv, plan, seg, state, key) in &keyed {
+        let (mv, seg) = (*mv, *seg);
+        rw.state = *state;
+        let wrench = state.wrench;
+        let power = state.power;
+        let Some(dev) = rw.walk(mv, key, plan)? else {
+            continue;
         };
         outcome.moves += 1;
         let d = dev.total.pos_mm.norm();
@@ -1287,7 +1477,7 @@ pub fn compensate_module(
         }
         let v = dev.vibration_mm.norm();
         if v > max_vib.0 {
-            max_vib = (v, mv.line, rpm);
+            max_vib = (v, mv.line, state.rpm);
         }
         if opts.annotate {
             rw.edits.push(annotate(src, &mv.span, &dev_comment(&dev)));
@@ -1321,6 +1511,23 @@ pub fn compensate_module(
     outcome.added = rw.added;
     outcome.text = apply_edits(src, &rw.edits)?;
     Ok(outcome)
+}
+
+impl Rewriter<'_> {
+    /// Compensates (or collects the jobs of) one move: the circle point of
+    /// a MoveC, then its target. The deviation is that of the target.
+    fn walk(&mut self, mv: &Move, key: &LoadKey, plan: &Planned) -> Result<Option<Deviation>> {
+        if mv.kind == MoveKind::MoveAbsJ {
+            self.joint(mv, key, &plan.tool)
+        } else {
+            if let Some(via) = &mv.via {
+                self.cart(mv, via, key, &plan.tool, &plan.wobj, None)?;
+            }
+            // Planning solved the target's joints with the same pose,
+            // confdata and TCP (`ik_conf`, limits checked).
+            self.cart(mv, &mv.target, key, &plan.tool, &plan.wobj, plan.q)
+        }
+    }
 }
 
 /// Warns once when the spindle's tooth-passing frequency (at the speed of

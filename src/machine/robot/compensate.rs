@@ -16,9 +16,9 @@
 use nalgebra::{Isometry3, Matrix6, Translation3, UnitQuaternion, Vector3, Vector6};
 
 use super::dh::DhParams;
-use super::kinematics::flange;
+use super::kinematics::{Frames, Prepared, flange, frames_prepared};
 use super::pose::pose_error;
-use super::thermal::grown;
+use super::thermal::{DhGrowth, grown};
 use super::{IkSelect, Model, Robot, RobotError};
 
 /// Parameters `gain` of the way from `nominal` to `actual` (exactly one of
@@ -187,6 +187,7 @@ impl Robot {
         q: &[f64; 6],
         attained: &Isometry3<f64>,
         sel: &IkSelect,
+        model: &Prepared,
         effects: Effects,
     ) -> Result<Matrix6<f64>, RobotError> {
         const H: [f64; 2] = [1e-4, 1e-7];
@@ -196,7 +197,7 @@ impl Robot {
             let mut d = Vector6::zeros();
             d[k] = h;
             let qk = self.controller_joints(&perturb(cmd, &d), q, sel)?;
-            let (dp, dr) = pose_error(&self.predict(&qk, effects), attained);
+            let (dp, dr) = pose_error(&self.predict_with(model, &qk, effects), attained);
             for r in 0..3 {
                 m[(r, k)] = dp[r] / h;
                 m[(r + 3, k)] = dr[r] / h;
@@ -205,43 +206,95 @@ impl Robot {
         Ok(m)
     }
 
-    /// Predicted attained TCP pose (world frame) for controller joints `q`,
-    /// with the intermediate poses `[nominal, +kinematic, +thermal,
-    /// +gravity, +process]` in that order (the last is the attained pose).
-    pub fn predict_stages(&self, q: &[f64; 6], effects: Effects) -> [Isometry3<f64>; 5] {
-        let nominal = self.params(Model::Nominal);
-        let kin = blend(nominal, self.params(Model::Actual), effects.kinematic);
+    /// The kinematic (calibrated, blended) and the full (kinematic plus
+    /// thermal growth) parameter sets of a prediction. Resolved once per
+    /// target: every iteration reuses them.
+    fn prediction_params(&self, effects: Effects, growth: &DhGrowth) -> (DhParams, DhParams) {
+        let kin = blend(
+            self.params(Model::Nominal),
+            self.params(Model::Actual),
+            effects.kinematic,
+        );
         let model = if effects.thermal != 0.0 {
-            grown(&kin, self.current_thermal_growth_mm(), effects.thermal)
+            grown(&kin, growth, effects.thermal)
         } else {
             kin
         };
-        let tcp = |p: &DhParams, q: &[f64; 6]| self.base() * flange(p, q) * self.flange_to_tool();
-        let p0 = tcp(nominal, q);
-        let p1 = tcp(&kin, q);
-        let p2 = tcp(&model, q);
+        (kin, model)
+    }
+
+    /// TCP pose (world frame) of a flange pose.
+    fn tcp_of(&self, flange: &Isometry3<f64>) -> Isometry3<f64> {
+        self.base() * flange * self.flange_to_tool()
+    }
+
+    /// Gravity and process torques (each scaled by its gain, zero when off)
+    /// from the joint frames of the full model.
+    fn load_torques(&self, f: &Frames, effects: Effects) -> (Vector6<f64>, Vector6<f64>) {
         let tau_g = if effects.gravity != 0.0 {
-            self.gravity_torques_of(&model, q) * effects.gravity
+            self.gravity_torques_at(f) * effects.gravity
         } else {
             Vector6::zeros()
         };
         let tau_w = if effects.process != 0.0 {
-            self.process_torques_of(&model, q) * effects.process
+            self.process_torques_at(f) * effects.process
         } else {
             Vector6::zeros()
         };
-        let deflected = |tau: &Vector6<f64>| {
-            let dq = self.joint_deflection(tau);
-            let qd: [f64; 6] = std::array::from_fn(|i| q[i] + dq[i]);
-            tcp(&model, &qd)
-        };
+        (tau_g, tau_w)
+    }
+
+    /// TCP pose (world frame) of the full model at `q` deflected by `tau`.
+    fn deflected_tcp(&self, model: &Prepared, q: &[f64; 6], tau: &Vector6<f64>) -> Isometry3<f64> {
+        let dq = self.joint_deflection(tau);
+        let qd: [f64; 6] = std::array::from_fn(|i| q[i] + dq[i]);
+        self.tcp_of(&frames_prepared(model, &qd, 6).flange())
+    }
+
+    /// Attained TCP pose with the parameter set `model` of
+    /// [`Robot::prediction_params`]: one set of joint frames feeds the
+    /// gravity and the process torques, one more forward kinematics gives
+    /// the deflected pose (the hot path of the compensation iteration).
+    fn predict_with(&self, model: &Prepared, q: &[f64; 6], effects: Effects) -> Isometry3<f64> {
+        let f = frames_prepared(model, q, 6);
+        let (tau_g, tau_w) = self.load_torques(&f, effects);
+        if effects.process != 0.0 {
+            self.deflected_tcp(model, q, &(tau_g + tau_w))
+        } else if effects.gravity != 0.0 {
+            self.deflected_tcp(model, q, &tau_g)
+        } else {
+            self.tcp_of(&f.flange())
+        }
+    }
+
+    /// Predicted attained TCP pose (world frame) for controller joints `q`,
+    /// with the intermediate poses `[nominal, +kinematic, +thermal,
+    /// +gravity, +process]` in that order (the last is the attained pose).
+    pub fn predict_stages(&self, q: &[f64; 6], effects: Effects) -> [Isometry3<f64>; 5] {
+        let (kin, model) = self.prediction_params(effects, self.current_thermal_growth_mm());
+        self.stages_with(&kin, &Prepared::new(&model), q, effects)
+    }
+
+    /// [`Robot::predict_stages`] with the parameter sets resolved.
+    fn stages_with(
+        &self,
+        kin: &DhParams,
+        model: &Prepared,
+        q: &[f64; 6],
+        effects: Effects,
+    ) -> [Isometry3<f64>; 5] {
+        let p0 = self.tcp_of(&flange(self.params(Model::Nominal), q));
+        let p1 = self.tcp_of(&flange(kin, q));
+        let f = frames_prepared(model, q, 6);
+        let p2 = self.tcp_of(&f.flange());
+        let (tau_g, tau_w) = self.load_torques(&f, effects);
         let p3 = if effects.gravity != 0.0 {
-            deflected(&tau_g)
+            self.deflected_tcp(model, q, &tau_g)
         } else {
             p2
         };
         let p4 = if effects.process != 0.0 {
-            deflected(&(tau_g + tau_w))
+            self.deflected_tcp(model, q, &(tau_g + tau_w))
         } else {
             p3
         };
@@ -269,7 +322,8 @@ impl Robot {
 
     /// Predicted attained TCP pose (world frame) for controller joints `q`.
     pub fn predict(&self, q: &[f64; 6], effects: Effects) -> Isometry3<f64> {
-        self.predict_stages(q, effects)[4]
+        let (_, model) = self.prediction_params(effects, self.current_thermal_growth_mm());
+        self.predict_with(&Prepared::new(&model), q, effects)
     }
 
     /// Compensates one programmed TCP pose (world frame): returns the pose to
@@ -281,8 +335,41 @@ impl Robot {
         sel: &IkSelect,
         effects: Effects,
     ) -> Result<Compensation, RobotError> {
-        let q0 = self.ik_nominal(programmed, sel)?;
-        let st = self.predict_stages(&q0, effects);
+        self.compensate_with_growth(programmed, sel, effects, self.current_thermal_growth_mm())
+    }
+
+    /// [`Robot::compensate`] with the thermal prediction stage using the DH
+    /// growth `growth` (mm) instead of the robot's current one: the same
+    /// result as `with_thermal_power(p).compensate(…)` for the growth of the
+    /// powers `p`, without a copy of the robot per target.
+    pub fn compensate_with_growth(
+        &self,
+        programmed: &Isometry3<f64>,
+        sel: &IkSelect,
+        effects: Effects,
+        growth: &DhGrowth,
+    ) -> Result<Compensation, RobotError> {
+        self.compensate_seeded(programmed, sel, effects, growth, None)
+    }
+
+    /// [`Robot::compensate_with_growth`] with the controller joints of the
+    /// programmed pose already known (`ik_nominal(programmed, sel)`, limits
+    /// checked), e.g. from planning the move: saves one inverse kinematics.
+    pub(crate) fn compensate_seeded(
+        &self,
+        programmed: &Isometry3<f64>,
+        sel: &IkSelect,
+        effects: Effects,
+        growth: &DhGrowth,
+        q_programmed: Option<[f64; 6]>,
+    ) -> Result<Compensation, RobotError> {
+        let q0 = match q_programmed {
+            Some(q) => q,
+            None => self.ik_nominal(programmed, sel)?,
+        };
+        let (kin, model) = self.prediction_params(effects, growth);
+        let model = Prepared::new(&model);
+        let st = self.stages_with(&kin, &model, &q0, effects);
         let deviation = Deviation {
             kinematic: PoseDelta::between(&st[1], &st[0]),
             thermal: PoseDelta::between(&st[2], &st[1]),
@@ -322,14 +409,14 @@ impl Robot {
             e.fixed_rows_mut::<3>(0).copy_from(&dp);
             e.fixed_rows_mut::<3>(3).copy_from(&dr);
             let step = if newton {
-                let m = self.deviation_jacobian(&cmd, &q, &attained, sel, effects)?;
+                let m = self.deviation_jacobian(&cmd, &q, &attained, sel, &model, effects)?;
                 m.lu().solve(&e).unwrap_or(e)
             } else {
                 e
             };
             cmd = perturb(&cmd, &step);
             q = self.controller_joints(&cmd, &q, sel)?;
-            attained = self.predict(&q, effects);
+            attained = self.predict_with(&model, &q, effects);
         }
         Err(RobotError::NoConvergence {
             what: "target compensation",
@@ -337,5 +424,56 @@ impl Robot {
             pos_mm: last.0,
             rot_rad: last.1,
         })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::machine::Machine;
+    use crate::machine::robot::ConfData;
+    use approx::assert_abs_diff_eq;
+
+    /// Both paths run the same arithmetic: equal to the last bit.
+    const SAME: f64 = 0.0;
+
+    #[test]
+    fn growth_override_equals_a_robot_at_that_power() {
+        let text = include_str!("../../../machines/abb-irb1600.yaml");
+        let Ok(Machine::Robot(r)) = Machine::from_yaml_str(text, "abb-irb1600.yaml") else {
+            panic!("abb-irb1600.yaml is a robot file")
+        };
+        // Warm joints 2 and 3 (W): the thermal section grows row 2's a.
+        let p = [0.0, 150.0, 80.0, 0.0, 0.0, 0.0];
+        let warm = r.with_thermal_power(&p);
+        let growth = r.thermal_growth_mm(&p);
+        assert!(growth.iter().flatten().any(|g| *g != 0.0));
+        let pose = Isometry3::from_parts(
+            Translation3::new(750.0, 150.0, 400.0),
+            UnitQuaternion::from_axis_angle(&Vector3::y_axis(), std::f64::consts::PI),
+        );
+        let sel = IkSelect::Conf(ConfData {
+            cf1: 0,
+            cf4: 0,
+            cf6: 0,
+            cfx: 0,
+        });
+        let a = warm
+            .compensate(&pose, &sel, Effects::ALL)
+            .expect("reachable");
+        let b = r
+            .compensate_with_growth(&pose, &sel, Effects::ALL, &growth)
+            .expect("reachable");
+        assert_abs_diff_eq!(
+            a.pose.translation.vector,
+            b.pose.translation.vector,
+            epsilon = SAME
+        );
+        assert_abs_diff_eq!(
+            a.deviation.thermal.pos_mm,
+            b.deviation.thermal.pos_mm,
+            epsilon = SAME
+        );
+        assert!(a.deviation.thermal.pos_mm.norm() > 0.0);
     }
 }

@@ -29,7 +29,7 @@ use nalgebra::{Isometry3, Matrix6, UnitQuaternion, Vector3, Vector6};
 
 use super::RobotError;
 use super::dh::{Convention, DhParams};
-use super::kinematics::{frames, jacobian};
+use super::kinematics::{frames, frames_upto, jacobian, joint_transform};
 use super::pose::pose_error;
 
 /// ABB robot configuration data `[cf1, cf4, cf6, cfx]`.
@@ -79,6 +79,8 @@ pub struct ClosedForm {
     s4: f64,
     alpha3: f64,
     off: [f64; 6],
+    /// `Rx(α3)⁻¹`, constant.
+    rx3_inv: UnitQuaternion<f64>,
 }
 
 fn near(a: f64, b: f64) -> bool {
@@ -112,6 +114,7 @@ impl ClosedForm {
             d6: j[5].d_mm,
             s4: j[4].alpha_rad.signum(),
             alpha3: j[3].alpha_rad,
+            rx3_inv: UnitQuaternion::from_axis_angle(&Vector3::x_axis(), j[3].alpha_rad).inverse(),
             off: [
                 j[0].theta_offset_rad,
                 j[1].theta_offset_rad,
@@ -145,7 +148,8 @@ impl ClosedForm {
         };
         for sh in 0..2 {
             let t1 = base_t1 + if sh == 1 { PI } else { 0.0 };
-            let r = t1.cos() * pw.x + t1.sin() * pw.y;
+            let (s1, c1) = t1.sin_cos();
+            let r = c1 * pw.x + s1 * pw.y;
             let dr = r - self.a1;
             let dz = pw.z - self.d1;
             let l2 = dr * dr + dz * dz;
@@ -156,18 +160,20 @@ impl ClosedForm {
             let ac = c.clamp(-1.0, 1.0).acos();
             for el in 0..2 {
                 let t3 = if el == 0 { ac } else { -ac } - gamma;
-                let k1 = self.a2 + self.a3 * t3.cos() - self.d4 * t3.sin();
-                let k2 = self.a3 * t3.sin() + self.d4 * t3.cos();
+                let (s3, c3) = t3.sin_cos();
+                let k1 = self.a2 + self.a3 * c3 - self.d4 * s3;
+                let k2 = self.a3 * s3 + self.d4 * c3;
                 let phi = dr.atan2(dz) - k2.atan2(k1);
                 let t2 = phi - FRAC_PI_2;
                 let q123 = [t1 - self.off[0], t2 - self.off[1], t3 - self.off[2]];
                 // Rotation of frame 3 from the nominal joint transforms.
                 let mut r03 = UnitQuaternion::identity();
                 for (i, q) in q123.iter().enumerate() {
-                    r03 *= p.joints[i].transform(p.convention, *q).rotation;
+                    if let Some(j) = p.joints.get(i) {
+                        r03 *= joint_transform(j, p.convention, *q).rotation;
+                    }
                 }
-                let rx3 = UnitQuaternion::from_axis_angle(&Vector3::x_axis(), self.alpha3);
-                let n = (rx3.inverse() * r03.inverse() * flange.rotation).to_rotation_matrix();
+                let n = (self.rx3_inv * r03.inverse() * flange.rotation).to_rotation_matrix();
                 let n = n.matrix();
                 let sb = n[(0, 2)].hypot(n[(1, 2)]);
                 let (beta, t4, t6) = if sb < 1e-10 {
@@ -220,7 +226,8 @@ pub fn wrap(a: f64) -> f64 {
 
 /// Confdata of a joint vector for a parameter set (normally the nominal one).
 pub fn confdata(p: &DhParams, q: &[f64; 6]) -> ConfData {
-    let f = frames(p, q);
+    // Frames up to link 5 (index 4): the wrist centre and the axes 1–3.
+    let f = frames_upto(p, q, 5);
     // Wrist centre: origin of frame 5 (joints 4–6 intersect there for a
     // spherical wrist).
     let wc = f.link[4].translation.vector;

@@ -2,9 +2,9 @@
 //! Jacobian of any point fixed to a link, in the robot base frame.
 //! Units: mm, rad. Fixed-size nalgebra types, no heap.
 
-use nalgebra::{Isometry3, Matrix6, Vector3};
+use nalgebra::{Isometry3, Matrix6, Quaternion, Translation3, UnitQuaternion, Vector3};
 
-use super::dh::{Convention, DhParams};
+use super::dh::{Convention, DhJoint, DhParams};
 
 /// All frames of one configuration, expressed in the robot base frame.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -24,14 +24,100 @@ impl Frames {
     }
 }
 
+/// [`DhJoint::transform`] as one closed-form product (two sine/cosine pairs,
+/// no intermediate isometries): with the half-angle quaternions
+/// `qz = (cz, 0, 0, sz)` of θ and `qx = (cx, sx, 0, 0)` of α,
+/// `qz·qx = (cz·cx, cz·sx, sz·sx, sz·cx)` (classic, translation
+/// `Rz(θ)·(a, 0, d)`) and `qx·qz = (cx·cz, sx·cz, −sx·sz, cx·sz)` (modified,
+/// translation `(a, 0, 0) + Rx(α)·(0, 0, d)`).
+pub(crate) fn joint_transform(j: &DhJoint, convention: Convention, q: f64) -> Isometry3<f64> {
+    prepared_transform(&PreparedJoint::new(j), convention, q)
+}
+
+/// A DH row with the half-angle sine and cosine of its twist precomputed
+/// (constant for a parameter set: the iterations reuse them).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) struct PreparedJoint {
+    a_mm: f64,
+    d_mm: f64,
+    theta_offset_rad: f64,
+    sx: f64,
+    cx: f64,
+}
+
+impl PreparedJoint {
+    fn new(j: &DhJoint) -> Self {
+        let (sx, cx) = (0.5 * j.alpha_rad).sin_cos();
+        PreparedJoint {
+            a_mm: j.a_mm,
+            d_mm: j.d_mm,
+            theta_offset_rad: j.theta_offset_rad,
+            sx,
+            cx,
+        }
+    }
+}
+
+/// A parameter set with every row prepared ([`PreparedJoint`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) struct Prepared {
+    convention: Convention,
+    joints: [PreparedJoint; 6],
+}
+
+impl Prepared {
+    /// Prepares every row of `p`.
+    pub(crate) fn new(p: &DhParams) -> Self {
+        Prepared {
+            convention: p.convention,
+            joints: p.joints.each_ref().map(PreparedJoint::new),
+        }
+    }
+}
+
+/// [`joint_transform`] of a prepared row.
+fn prepared_transform(j: &PreparedJoint, convention: Convention, q: f64) -> Isometry3<f64> {
+    let theta = q + j.theta_offset_rad;
+    let (sz, cz) = (0.5 * theta).sin_cos();
+    let (sx, cx) = (j.sx, j.cx);
+    let (t, r) = match convention {
+        Convention::Dh => {
+            let (s, c) = (2.0 * sz * cz, cz * cz - sz * sz);
+            (
+                Translation3::new(j.a_mm * c, j.a_mm * s, j.d_mm),
+                Quaternion::new(cz * cx, cz * sx, sz * sx, sz * cx),
+            )
+        }
+        Convention::ModifiedDh => {
+            let (s, c) = (2.0 * sx * cx, cx * cx - sx * sx);
+            (
+                Translation3::new(j.a_mm, -j.d_mm * s, j.d_mm * c),
+                Quaternion::new(cx * cz, sx * cz, -sx * sz, cx * sz),
+            )
+        }
+    };
+    Isometry3::from_parts(t, UnitQuaternion::new_unchecked(r))
+}
+
 /// Computes every joint frame for joint values `q` (rad).
 pub fn frames(p: &DhParams, q: &[f64; 6]) -> Frames {
+    frames_upto(p, q, 6)
+}
+
+/// [`frames`] of the first `n` links only (the others stay at the
+/// identity): the confdata test needs the frames up to the wrist centre.
+pub(crate) fn frames_upto(p: &DhParams, q: &[f64; 6], n: usize) -> Frames {
+    frames_prepared(&Prepared::new(p), q, n)
+}
+
+/// [`frames_upto`] of a prepared parameter set.
+pub(crate) fn frames_prepared(p: &Prepared, q: &[f64; 6], n: usize) -> Frames {
     let mut link = [Isometry3::identity(); 6];
     let mut axis_origin = [Vector3::zeros(); 6];
     let mut axis_dir = [Vector3::z(); 6];
     let mut prev = Isometry3::identity();
-    for i in 0..6 {
-        let t = prev * p.joints[i].transform(p.convention, q[i]);
+    for (i, (j, qi)) in p.joints.iter().zip(q).enumerate().take(n.min(6)) {
+        let t = prev * prepared_transform(j, p.convention, *qi);
         match p.convention {
             // Classic: joint i turns about z of frame i-1.
             Convention::Dh => {
@@ -79,4 +165,49 @@ pub fn jacobian_link(f: &Frames, link: usize, point_in_link: &Vector3<f64>) -> M
 /// frame): `[ṗ; ω] = J q̇`, in the robot base frame.
 pub fn jacobian(f: &Frames, point_in_flange: &Vector3<f64>) -> Matrix6<f64> {
     jacobian_link(f, 5, point_in_flange)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use approx::assert_abs_diff_eq;
+
+    /// Agreement of the closed-form joint transform with the product of
+    /// elementary transforms ([`DhJoint::transform`]): rounding only, for
+    /// rotation-matrix entries and for positions of links up to 600 mm.
+    const ROT_TOL: f64 = 1e-12;
+    const POS_TOL_MM: f64 = 1e-9;
+
+    #[test]
+    fn closed_form_joint_transform_matches_elementary_product() {
+        let rows = [
+            (150.0, -1.2, 486.5, 0.3),
+            (0.0, std::f64::consts::FRAC_PI_2, 0.0, -0.7),
+            (-25.0, 2.9, -600.0, 3.0),
+        ];
+        for (a, alpha, d, off) in rows {
+            let j = DhJoint {
+                a_mm: a,
+                alpha_rad: alpha,
+                d_mm: d,
+                theta_offset_rad: off,
+            };
+            for conv in [Convention::Dh, Convention::ModifiedDh] {
+                for q in [-3.0, -0.4, 0.0, 1.1, 2.5] {
+                    let fast = joint_transform(&j, conv, q);
+                    let slow = j.transform(conv, q);
+                    assert_abs_diff_eq!(
+                        fast.translation.vector,
+                        slow.translation.vector,
+                        epsilon = POS_TOL_MM
+                    );
+                    assert_abs_diff_eq!(
+                        fast.rotation.to_rotation_matrix().into_inner(),
+                        slow.rotation.to_rotation_matrix().into_inner(),
+                        epsilon = ROT_TOL
+                    );
+                }
+            }
+        }
+    }
 }

@@ -7,7 +7,7 @@
 use nalgebra::{Isometry3, Vector3, Vector6};
 
 use super::dh::DhParams;
-use super::kinematics::{flange, frames, jacobian, jacobian_link};
+use super::kinematics::{Frames, flange, frames, jacobian, jacobian_link};
 use super::{Model, Robot};
 
 impl Robot {
@@ -36,15 +36,20 @@ impl Robot {
 
     /// [`Robot::gravity_torques`] for any parameter set.
     pub fn gravity_torques_of(&self, params: &DhParams, q: &[f64; 6]) -> Vector6<f64> {
-        let f = frames(params, q);
+        self.gravity_torques_at(&frames(params, q))
+    }
+
+    /// [`Robot::gravity_torques`] from joint frames already computed (the
+    /// prediction shares one set of frames between gravity and process).
+    pub(crate) fn gravity_torques_at(&self, f: &Frames) -> Vector6<f64> {
         let g = self.gravity_base();
         let mut tau = Vector6::zeros();
         for (i, l) in self.links().iter().enumerate() {
             let w = force_wrench(g * l.mass_kg);
-            tau += jacobian_link(&f, i, &l.com_mm).transpose() * w;
+            tau += jacobian_link(f, i, &l.com_mm).transpose() * w;
         }
         if let Some(l) = self.tool_load() {
-            tau += jacobian(&f, &l.com_mm).transpose() * force_wrench(g * l.mass_kg);
+            tau += jacobian(f, &l.com_mm).transpose() * force_wrench(g * l.mass_kg);
         }
         tau
     }
@@ -57,11 +62,19 @@ impl Robot {
 
     /// [`Robot::process_wrench_base`] for any parameter set.
     pub fn process_wrench_base_of(&self, params: &DhParams, q: &[f64; 6]) -> Vector6<f64> {
+        if self.process_wrench().is_none() {
+            return Vector6::zeros();
+        }
+        self.process_wrench_base_at(&flange(params, q))
+    }
+
+    /// [`Robot::process_wrench_base`] for a flange pose already computed.
+    fn process_wrench_base_at(&self, flange: &Isometry3<f64>) -> Vector6<f64> {
         let Some(w) = self.process_wrench() else {
             return Vector6::zeros();
         };
         let (f, m) = if w.in_tool_frame {
-            let r = (flange(params, q) * self.flange_to_tool()).rotation;
+            let r = (flange * self.flange_to_tool()).rotation;
             (r * w.force_n, r * w.moment_nmm)
         } else {
             (w.force_n, w.moment_nmm)
@@ -79,9 +92,13 @@ impl Robot {
 
     /// [`Robot::process_torques`] for any parameter set.
     pub fn process_torques_of(&self, params: &DhParams, q: &[f64; 6]) -> Vector6<f64> {
-        let w = self.process_wrench_base_of(params, q);
-        let f = frames(params, q);
-        jacobian(&f, &self.flange_to_tool().translation.vector).transpose() * w
+        self.process_torques_at(&frames(params, q))
+    }
+
+    /// [`Robot::process_torques`] from joint frames already computed.
+    pub(crate) fn process_torques_at(&self, f: &Frames) -> Vector6<f64> {
+        let w = self.process_wrench_base_at(&f.flange());
+        jacobian(f, &self.flange_to_tool().translation.vector).transpose() * w
     }
 
     /// Joint deflection `Δθ = Kθ⁻¹ τ` (rad) for torques in N·mm.

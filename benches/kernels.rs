@@ -1,0 +1,112 @@
+//! Criterion benchmarks of the hot kernels: the machine-tool prediction per
+//! block (AFM R-1000, attained pose and per-effect breakdown), the robot
+//! inverse kinematics per target and the robot compensation per target
+//! (ABB IRB 1600 with a 2 kg spindle, every effect on), and the module-level
+//! RAPID compensation of 1 000 targets.
+//! Run with `cargo bench --bench kernels`.
+
+use std::hint::black_box;
+
+use criterion::{Criterion, Throughput, criterion_group, criterion_main};
+use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
+use postproc::compensate::rapid::{RapidOptions, compensate_module};
+use postproc::machine::Machine;
+use postproc::machine::robot::{ConfData, Effects, IkSelect, PointMass, Robot};
+use postproc::predict::{EffectSet, ToolPredictor};
+
+fn machine(name: &str) -> Machine {
+    let path = format!("{}/machines/{name}.yaml", env!("CARGO_MANIFEST_DIR"));
+    let text = std::fs::read_to_string(&path).expect("machine file");
+    Machine::from_yaml_str(&text, &path).expect("valid machine file")
+}
+
+fn robot() -> Robot {
+    let Machine::Robot(r) = machine("abb-irb1600") else {
+        panic!("abb-irb1600 is not a robot")
+    };
+    // The spindle of `examples/bench_inputs.rs`: TCP 150 mm along z, 2 kg
+    // with its centre of gravity 70 mm along z.
+    r.with_tool(
+        Isometry3::translation(0.0, 0.0, 150.0),
+        Some(PointMass {
+            mass_kg: 2.0,
+            com_mm: Vector3::new(0.0, 0.0, 70.0),
+        }),
+        true,
+    )
+}
+
+/// The RAPID module of `examples/bench_inputs.rs` with `n` targets.
+fn module(n: usize) -> String {
+    let mut m = String::from(
+        "MODULE Bench\n  PERS tooldata tSpindle := [TRUE,[[0,0,150],[1,0,0,0]],[2,[0,0,70],[1,0,0,0],0.01,0.01,0.004]];\n  PROC main()\n",
+    );
+    for i in 0..n {
+        let x = 650.0 + (i % 41) as f64 * 5.0;
+        let y = 50.0 + ((i / 41) % 41) as f64 * 5.0;
+        let z = 300.0 + ((i / 1681) % 41) as f64 * 5.0;
+        m.push_str(&format!(
+            "    MoveL [[{x:.1},{y:.1},{z:.1}],[0,0,1,0],[0,0,0,0],[9E9,9E9,9E9,9E9,9E9,9E9]],v200,z1,tSpindle;\n"
+        ));
+    }
+    m.push_str("  ENDPROC\nENDMODULE\n");
+    m
+}
+
+fn tool_prediction(c: &mut Criterion) {
+    let Machine::Tool(m) = machine("afm-r1000") else {
+        panic!("afm-r1000 is not a machine tool")
+    };
+    let p = ToolPredictor::new(&m, EffectSet::default());
+    let cmd = [250.0, 120.0, -80.0, 0.0, 0.0, 0.0];
+    let dirs = [1, -1, 0, 0, 0, 0];
+    let mut g = c.benchmark_group("machine tool");
+    g.throughput(Throughput::Elements(1));
+    g.bench_function("attained per block (afm-r1000)", |b| {
+        b.iter(|| p.attained(black_box(&cmd), black_box(&dirs), black_box(100.0)))
+    });
+    g.bench_function("breakdown per block (afm-r1000)", |b| {
+        b.iter(|| p.breakdown(black_box(&cmd), black_box(&dirs), black_box(100.0)))
+    });
+    g.finish();
+}
+
+fn robot_kernels(c: &mut Criterion) {
+    let r = robot();
+    // Tool pointing down (ABB quaternion [0,0,1,0]) in the bench grid.
+    let pose = Isometry3::from_parts(
+        Translation3::new(750.0, 150.0, 400.0),
+        UnitQuaternion::from_axis_angle(&Vector3::y_axis(), std::f64::consts::PI),
+    );
+    let conf = ConfData {
+        cf1: 0,
+        cf4: 0,
+        cf6: 0,
+        cfx: 0,
+    };
+    let sel = IkSelect::Conf(conf);
+    let mut g = c.benchmark_group("robot");
+    g.throughput(Throughput::Elements(1));
+    g.bench_function("ik per target (irb1600, confdata)", |b| {
+        b.iter(|| r.ik_conf(black_box(&pose), black_box(conf)))
+    });
+    g.bench_function("compensate per target (irb1600, all effects)", |b| {
+        b.iter(|| r.compensate(black_box(&pose), black_box(&sel), Effects::ALL))
+    });
+    g.finish();
+    let Machine::Robot(plain) = machine("abb-irb1600") else {
+        panic!("abb-irb1600 is not a robot")
+    };
+    let src = module(1000);
+    let opts = RapidOptions::for_robot(&plain);
+    let mut g = c.benchmark_group("rapid");
+    g.throughput(Throughput::Elements(1000));
+    g.sample_size(10);
+    g.bench_function("compensate_module 1000 targets (all effects)", |b| {
+        b.iter(|| compensate_module(black_box(&src), "bench.mod", &plain, &opts))
+    });
+    g.finish();
+}
+
+criterion_group!(benches, tool_prediction, robot_kernels);
+criterion_main!(benches);
