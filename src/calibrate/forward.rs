@@ -41,7 +41,7 @@ use nalgebra::{Point3, Vector3, Vector6};
 
 use crate::error::{Error, Located, Result};
 use crate::machine::Machine;
-use crate::machine::robot::{Model, Robot};
+use crate::machine::robot::{DhGrowth, Model, Robot};
 use crate::machine::tool::MachineTool;
 use crate::machine::tool::thermal::Powers;
 
@@ -152,6 +152,46 @@ fn predict_robot(robot: &Robot, row: &Observation, rp: &RobotPose) -> Predicted 
         return predict_robot_at(&hot, row, rp);
     }
     predict_robot_at(robot, row, rp)
+}
+
+/// Predicts a robot row with the actual DH lengths grown by `growth` (mm,
+/// `[Δa, Δd]` per row) INSTEAD of the machine file's thermal terms: the
+/// forward model of a thermal calibration, whose trial terms give the
+/// growth. `file` names the observation file in errors.
+pub fn predict_robot_with_growth(
+    robot: &Robot,
+    row: &Observation,
+    growth: &DhGrowth,
+    file: &str,
+) -> Result<Predicted> {
+    let Pose::Robot(rp) = &row.pose else {
+        return Err(Error::Usage(format!(
+            "{file}: row `{}` is not a robot row",
+            row.id
+        )));
+    };
+    let mut p = *robot.params(Model::Actual);
+    for (j, g) in p.joints.iter_mut().zip(growth) {
+        j.a_mm += g[0];
+        j.d_mm += g[1];
+    }
+    let grown = robot.with_actual(p);
+    let out = predict_robot_at(&grown, row, rp);
+    if out
+        .attained_mm
+        .iter()
+        .chain(out.commanded_mm.iter())
+        .all(|v| v.is_finite())
+    {
+        Ok(out)
+    } else {
+        Err(Error::Input(Located {
+            file: file.to_string(),
+            line: row.line,
+            column: 1,
+            message: format!("row `{}`: the model gives a non-finite position", row.id),
+        }))
+    }
 }
 
 fn predict_robot_at(robot: &Robot, row: &Observation, rp: &RobotPose) -> Predicted {
