@@ -670,3 +670,108 @@ fn geometry_on_a_five_axis_machine() {
             .contains("the A axis takes 2 different positions")
     );
 }
+
+/// Thermal (Paper B): the three terms of `irb1600-thermal-truth.yaml`
+/// (a2 ← P1: lb = ub = 0.08 mm, ts = 0.022 1/W; a3 ← P2: 0.07, 0.07, 0.015;
+/// d4 ← P3: 0.04, 0.04, 0.04) are recovered from the start file (all
+/// 0.1/0.1/0.02) on the sample poses (40 poses × 3 steady states at the
+/// Paper B power levels, joints varied independently), two seeds, 5 µm noise;
+/// the held-out mean residual falls to the noise level (Maxwell mean ×
+/// 1.25 for the fit uncertainty and sampling). The calibrated file carries
+/// the identified values in the `thermal.terms` lines.
+#[test]
+fn thermal_recovers_paper_b_terms() {
+    let truth = [
+        ("a2←P1", 0.08, 0.08, 0.022),
+        ("a3←P2", 0.07, 0.07, 0.015),
+        ("d4←P3", 0.04, 0.04, 0.040),
+    ];
+    const NOISE_MM: f64 = 0.005;
+    for seed in [11, 13] {
+        let obs = simulated(
+            "samples/observations/irb1600-thermal-truth.yaml",
+            "samples/observations/irb1600-thermal-poses.csv",
+            Noise {
+                um: NOISE_MM * 1000.0,
+                um_per_m: 0.0,
+                seed,
+            },
+        );
+        let start = text("samples/observations/irb1600-thermal-start.yaml");
+        let cal = postproc::calibrate::thermal::calibrate_thermal(
+            &start,
+            "start.yaml",
+            &obs,
+            "obs.csv",
+            &Options { holdout: 0.3, seed },
+        )
+        .expect("thermal calibration");
+        assert!(cal.fixed().is_empty(), "{cal}");
+        for (name, lb, ub, ts) in truth {
+            assert_recovered(&cal, &format!("{name}.lb"), lb);
+            assert_recovered(&cal, &format!("{name}.ub"), ub);
+            assert_recovered(&cal, &format!("{name}.ts"), ts);
+        }
+        let v = cal.validation.expect("held-out rows");
+        assert!(
+            v.after_mean_mm <= 1.25 * MAXWELL_MEAN * NOISE_MM,
+            "held-out mean {} mm after\n{cal}",
+            v.after_mean_mm
+        );
+        assert!(v.after_mean_mm < v.before_mean_mm, "{cal}");
+        assert!(cal.observability_o1 > 0.0 && cal.condition_number < 1e4);
+        let m = Machine::from_yaml_str(&cal.yaml, "cal.yaml").expect("calibrated file loads");
+        let Machine::Robot(r) = m else {
+            panic!("robot")
+        };
+        let t = r.thermal().expect("thermal section");
+        let a2 = param(&cal, "a2←P1.ts").value;
+        assert!((t.terms[0].ts_per_w - a2).abs() <= 1e-6 * a2.abs().max(1.0));
+        assert!(cal.yaml.contains("# THERMAL TRUTH") || cal.yaml.contains("# START file"));
+    }
+}
+
+/// A term whose joint power never varies in the data is fixed and listed;
+/// a file without thermal terms is refused with an explanation.
+#[test]
+fn thermal_constant_power_term_is_fixed() {
+    let mut obs = simulated(
+        "samples/observations/irb1600-thermal-truth.yaml",
+        "samples/observations/irb1600-thermal-poses.csv",
+        Noise {
+            um: 5.0,
+            um_per_m: 0.0,
+            seed: 3,
+        },
+    );
+    // Joint 3 always at 20 W: d4 ← P3 cannot be identified.
+    for r in &mut obs.rows {
+        if let postproc::calibrate::observations::Pose::Robot(rp) = &mut r.pose {
+            rp.p_w[2] = Some(20.0);
+        }
+    }
+    let start = text("samples/observations/irb1600-thermal-start.yaml");
+    let opts = Options {
+        holdout: 0.3,
+        seed: 3,
+    };
+    let cal = postproc::calibrate::thermal::calibrate_thermal(&start, "s", &obs, "o", &opts)
+        .expect("calibration runs");
+    for k in ["lb", "ub", "ts"] {
+        assert!(param(&cal, &format!("d4←P3.{k}")).fixed, "{cal}");
+    }
+    assert!(
+        cal.notes
+            .iter()
+            .any(|n| n.contains("d4←P3") && n.contains("never varies")),
+        "{cal}"
+    );
+    let err = postproc::calibrate::thermal::calibrate_thermal(
+        &text("machines/staubli-tx200.yaml"),
+        "tx200",
+        &obs,
+        "o",
+        &opts,
+    );
+    assert!(err.is_err());
+}

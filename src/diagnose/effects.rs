@@ -168,11 +168,11 @@ pub const FAMILIES: &[(&str, &str)] = &[
     ("machine tool", "tool_length — tool length error, µm"),
 ];
 
-const NOT_THERMAL: &str = "the machine-file format has no thermal section yet: the fitted growth is reported, not written";
+const NOT_THERMAL_TIME: &str = "the thermal section is driven by power (rows at the steady state of spindle_w / pX_w); a growth with time alone has no key: measure the spindle power, or calibrate the time constant; not written";
 const NOT_FRAME: &str = "observations are in the robot base frame: a frame offset is a registration error of the measurement set-up, not a machine parameter; not written";
 const NOT_ROBOT_BACKLASH: &str = "the robot file has no joint backlash key; not written";
 const NOT_TOOL_LENGTH: &str = "the tool table holds the length the controller compensates, so editing it changes nothing in the model: re-measure the tool (its offset) instead; not written";
-const NOT_STIFFNESS: &str = "the machine-tool file has no axis stiffness key yet; not written";
+const NOT_STIFFNESS: &str = "a uniform compliance along one axis does not map cleanly onto the per-sign, per-position `stiffness:` grid (and a file without that section would need all six directions); not written";
 
 /// Builds the candidate library for a machine and the columns its rows carry.
 pub fn library(machine: &Machine, rows: &[Observation]) -> Vec<Effect> {
@@ -280,7 +280,7 @@ fn robot_library(rows: &[Observation]) -> Vec<Effect> {
                 if !has_power(p) {
                     continue;
                 }
-                let mut e = eff(
+                let e = eff(
                     format!("thermal_joint{}_{s}_p{}", i + 1, p + 1),
                     format!(
                         "thermal growth of DH {s}{} with the power of joint {} (Paper B, linearised)",
@@ -294,7 +294,6 @@ fn robot_library(rows: &[Observation]) -> Vec<Effect> {
                         power: p,
                     },
                 );
-                e.not_writable = Some(NOT_THERMAL.into());
                 out.push(e);
             }
         }
@@ -453,18 +452,16 @@ fn tool_library(t: &crate::machine::tool::MachineTool, rows: &[Observation]) -> 
             vec!["g [µm/h]".into()],
             Action::SpindleTime,
         );
-        e.not_writable = Some(NOT_THERMAL.into());
+        e.not_writable = Some(NOT_THERMAL_TIME.into());
         out.push(e);
     }
     if tool_rows().any(|(_, tp)| tp.spindle_w.is_some()) {
-        let mut e = eff(
+        out.push(eff(
             "spindle_growth_power".into(),
-            "spindle thermal growth along the tool with spindle power (linearised)".into(),
+            "spindle thermal growth along the tool with spindle power (steady state)".into(),
             vec!["g [µm/kW]".into()],
             Action::SpindlePower,
-        );
-        e.not_writable = Some(NOT_THERMAL.into());
-        out.push(e);
+        ));
     }
     let mut e = eff(
         "tool_length".into(),
