@@ -377,48 +377,37 @@ fn tool_nothing_hidden() {
     assert!(d.found.is_empty(), "{}", diagnose::report::render_table(&d));
 }
 
-/// Paper B thermal growth, linearised: the upper-arm length a3 (700 mm,
-/// modified-DH row 3) grows by 0.3 µm per watt of joint-2 motor power.
-/// Truth: for every row a robot whose actual a3 is 0.3e-3 mm · P2 longer
-/// (`Robot::with_actual`, independent of the candidate's sensitivity code).
+/// Paper B thermal growth: the true machine FILE has one more `thermal`
+/// term than the model, a3 (row 3, the 700 mm upper arm) ← joint-2 power
+/// with lb = ub = 30 mm and ts = 1e-5 1/W: 30·(1 − e^(−1e-5·P)) mm, slope
+/// 30·1e-5 = 0.3e-3 mm/W = 0.3 µm/W at 0 W and within 1e-5·P/2 = 0.3 % of
+/// that straight line up to the rows' 600 W. The data are simulated through
+/// `forward::predict` of that file; diagnose names the linearised growth,
+/// writes it as a Paper B term into `thermal.terms` and the rerun on the
+/// written model finds nothing more.
 #[test]
 fn robot_paper_b_thermal_growth() {
     let model = text("machines/abb-irb1600.yaml");
-    let Machine::Robot(r) = machine(&model) else {
-        panic!("robot file")
-    };
+    let anchor = "    - { parameter: a2, joint: 2, lb_mm: 0.12, ub_mm: 0.12, ts_per_w: 0.020 }\n";
+    let truth_text = model.replacen(
+        anchor,
+        &format!(
+            "{anchor}    - {{ parameter: a3, joint: 2, lb_mm: 30.0, ub_mm: 30.0, ts_per_w: 0.00001 }}\n"
+        ),
+        1,
+    );
+    assert_ne!(truth_text, model);
     const G_UM_PER_W: f64 = 0.3;
     for (seed, level) in [(31, 1.0), (32, 0.5)] {
-        let mut rows = robot_rows(100, seed);
-        let mut rng = SplitMix64::new(seed ^ 0x5eed);
-        let mut sum2 = 0.0;
-        for row in &mut rows {
-            let Pose::Robot(rp) = &row.pose else { panic!() };
-            let p2 = rp.p_w[1].expect("power");
-            let mut dh = *r.params(postproc::machine::robot::Model::Actual);
-            dh.joints[2].a_mm += G_UM_PER_W * 1e-3 * p2;
-            let truth = Machine::Robot(r.with_actual(dh));
-            let p = forward::predict(&truth, row, "truth")
-                .expect("prediction")
-                .attained_mm;
-            let sd = noise_sd_mm(&p, level);
-            let e = Vector3::new(
-                rng.gaussian(0.0, sd),
-                rng.gaussian(0.0, sd),
-                rng.gaussian(0.0, sd),
-            );
-            sum2 += (e * 1000.0).norm_squared();
-            row.measured_mm = p + e;
-        }
-        let noise = (sum2 / rows.len() as f64).sqrt();
-        let mut obs = measure(&machine(&model), Vec::new(), 0.0, 0);
-        obs.rows = rows;
+        let (obs, noise) =
+            measure_with_noise(&machine(&truth_text), robot_rows(100, seed), level, seed);
         let d = run(&model, &obs, seed);
         assert_found(&d, "thermal_joint3_a_p2", 0, G_UM_PER_W, noise);
         assert!(
-            d.found[0].effect.not_writable.is_some(),
-            "thermal is reported, not written"
+            d.found[0].effect.not_writable.is_none(),
+            "thermal is written"
         );
+        assert_rerun_clean(&model, &d, &obs, seed);
     }
 }
 
@@ -518,6 +507,49 @@ fn tool_spindle_growth_time() {
         obs.rows = rows;
         let d = run(&model, &obs, seed);
         assert_found(&d, "spindle_growth_time", 0, G_UM_PER_H, noise);
+    }
+}
+
+/// Spindle thermal growth with power: the true machine FILE's
+/// `thermal.spindle.growth_um_per_kw` is 11 instead of the model's 3, rows at
+/// the steady state of a spindle power of 0…8 kW (`spindle_w`): 8 µm/kW
+/// more growth, the tip moving against the tool axis (−z) by 8·P/1000 µm.
+/// Simulated through `forward::predict`; written into the spindle's
+/// `growth_um_per_kw` (3 + 8 = 11), after which nothing more is found.
+#[test]
+fn tool_spindle_growth_power() {
+    let model = text("machines/afm-r1000.yaml");
+    let truth_text = model.replacen("growth_um_per_kw: 3.0", "growth_um_per_kw: 11.0", 1);
+    assert_ne!(truth_text, model);
+    for (seed, level) in [(35, 1.0), (36, 0.3)] {
+        let mut rows = tool_rows(150, seed);
+        let mut rng = SplitMix64::new(seed ^ 0x57);
+        for r in &mut rows {
+            if let Pose::Tool(tp) = &mut r.pose {
+                tp.spindle_w = Some(8000.0 * rng.next_f64());
+            }
+        }
+        let (mut obs, noise) = measure_with_noise(&machine(&truth_text), rows, level, seed);
+        obs.columns.extend(columns(&["spindle_w"]));
+        let d = run(&model, &obs, seed);
+        assert_found(&d, "spindle_growth_power", 0, 8.0, noise);
+        assert_rerun_clean(&model, &d, &obs, seed);
+        let m = machine(
+            &write::write_model(&machine(&model), &model, &d.found)
+                .expect("written")
+                .text,
+        );
+        let Machine::Tool(t) = m else { panic!("tool") };
+        let g = t
+            .thermal()
+            .and_then(|th| th.spindle)
+            .map_or(0.0, |s| s.gain_per_kw);
+        let p = &d.found[0].params[0];
+        assert!(
+            (g - 3.0 - p.value).abs() < 1e-6,
+            "written {g}, fitted 3 + {}",
+            p.value
+        );
     }
 }
 

@@ -555,7 +555,7 @@ pub fn set_spindle_growth(
     comment: &str,
 ) -> Result<String> {
     let mut lines: Vec<String> = text.lines().map(str::to_string).collect();
-    let g = fmt_value(growth_um_per_kw, 4);
+    let g = fmt_value(growth_um_per_kw, 6);
     let new_map = format!(
         "{{ idle_w_per_rpm: 0.0, growth_um_per_kw: {g}, time_constant_min: {} }}",
         fmt_value(time_constant_min, 3)
