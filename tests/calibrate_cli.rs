@@ -775,3 +775,70 @@ fn thermal_constant_power_term_is_fixed() {
     );
     assert!(err.is_err());
 }
+
+/// Machine-tool thermal gains at steady state: the truth is
+/// `machines/afm-r1000.yaml` with spindle growth 11 instead of 3 µm/kW and
+/// X scale 90 instead of 60 ppm/kW; the grid poses get a spindle power of
+/// 0…8 kW and an X drive power of 0…400 W per row (simulated, 1 µm noise).
+/// Both gains are recovered within 3u and written into the `thermal:` lines;
+/// Y and Z (no power columns) are left alone.
+#[test]
+fn thermal_machine_tool_gains() {
+    let model = text("machines/afm-r1000.yaml");
+    let truth = model
+        .replacen("growth_um_per_kw: 3.0", "growth_um_per_kw: 11.0", 1)
+        .replacen(
+            "X: { scale_ppm_per_kw: 60.0,",
+            "X: { scale_ppm_per_kw: 90.0,",
+            1,
+        );
+    assert_ne!(truth, model);
+    let mut poses =
+        load_poses(&repo("samples/observations/afm-r1000-grid-poses.csv")).expect("poses");
+    let mut rng = postproc::calibrate::stats::SplitMix64::new(7);
+    for r in &mut poses.rows {
+        if let postproc::calibrate::observations::Pose::Tool(tp) = &mut r.pose {
+            tp.spindle_w = Some(8000.0 * rng.next_f64());
+            tp.p_w[0] = Some(400.0 * rng.next_f64());
+        }
+    }
+    let truth_m = Machine::from_yaml_str(&truth, "truth").expect("truth");
+    const NOISE_MM: f64 = 0.001;
+    let obs = simulate(
+        &truth_m,
+        &poses,
+        "poses",
+        &Noise {
+            um: 1.0,
+            um_per_m: 0.0,
+            seed: 8,
+        },
+    )
+    .expect("simulate");
+    let cal = postproc::calibrate::thermal::calibrate_thermal(
+        &model,
+        "afm.yaml",
+        &obs,
+        "obs.csv",
+        &Options {
+            holdout: 0.3,
+            seed: 8,
+        },
+    )
+    .expect("calibration");
+    assert_recovered(&cal, "spindle.growth", 11.0);
+    assert_recovered(&cal, "X.scale", 90.0);
+    assert_eq!(cal.params.len(), 2, "{cal}");
+    let v = cal.validation.expect("held out");
+    assert!(v.after_mean_mm <= 1.25 * MAXWELL_MEAN * NOISE_MM, "{cal}");
+    let Machine::Tool(t) = Machine::from_yaml_str(&cal.yaml, "cal").expect("loads") else {
+        panic!("tool")
+    };
+    let th = t.thermal().expect("thermal");
+    let g = th.spindle.map_or(0.0, |s| s.gain_per_kw);
+    assert!((g - param(&cal, "spindle.growth").value).abs() < 1e-5);
+    assert!(
+        cal.yaml.contains("# Dominant mode per direction"),
+        "comments kept"
+    );
+}

@@ -19,6 +19,14 @@
 //! direction, so one `ub` is fixed; with fewer than three power levels `ts`
 //! cannot be told from `lb`). The time constant is not identified: rows at
 //! the steady state carry no time information.
+//!
+//! Machine tools ([`calibrate_tool_thermal`]): the steady-state gains of the
+//! file's `thermal:` section from rows with powers — the spindle growth
+//! `growth_um_per_kw` from `spindle_w` (added to the file when absent) and
+//! the positioning scale `scale_ppm_per_kw` of each axis with a
+//! `thermal.axes` entry from its `pX_w`. The forward model is linear in
+//! them, so it is one linear least-squares step on the residuals of the
+//! file's model ([`solve_linear`], same identifiability analysis).
 
 use nalgebra::DVector;
 
@@ -157,11 +165,11 @@ pub fn calibrate_thermal(
 ) -> Result<Calibration> {
     let machine = Machine::from_yaml_str(text, machine_file)?;
     check_kind(&machine, obs, obs_file)?;
-    let Machine::Robot(robot) = &machine else {
-        return Err(Error::Usage(format!(
-            "{machine_file}: thermal calibration of a machine tool is not implemented; \
-             it needs a robot machine file (Paper B terms)"
-        )));
+    let robot = match &machine {
+        Machine::Robot(r) => r,
+        Machine::Tool(_) => {
+            return calibrate_tool_thermal(text, machine_file, &machine, obs, obs_file, opts);
+        }
     };
     let base: Vec<ThermalTerm> = robot.thermal().map(|t| t.terms.clone()).unwrap_or_default();
     if base.is_empty() {
@@ -365,6 +373,191 @@ pub fn calibrate_thermal(
         yaml = set_thermal_term(&yaml, machine_file, k, t.lb_mm, t.ub_mm, t.ts_per_w)?;
     }
     Machine::from_yaml_str(&yaml, machine_file)?;
+    let mut cal = Calibration {
+        kind: "thermal",
+        n_fit: fit.len(),
+        n_equations: m,
+        observability_o1: 0.0,
+        condition_number: 0.0,
+        rms_fit_mm: sol.sigma2.map_or((sol.rss / m as f64).sqrt(), f64::sqrt),
+        params,
+        validation: Validation::from_norms(&before, &after),
+        notes,
+        yaml,
+    };
+    cal.set_identifiability(id);
+    cal.check_validation();
+    Ok(cal)
+}
+
+/// Residual norms of the rows `rows` for a machine, mm.
+fn machine_norms(m: &Machine, obs: &Observations, rows: &[usize], file: &str) -> Result<Vec<f64>> {
+    let mut v = Vec::with_capacity(rows.len());
+    for &i in rows {
+        if let Some(row) = obs.rows.get(i) {
+            let p = forward::predict(m, row, file)?;
+            v.push((row.measured_mm - p.measured(obs.measured)).norm());
+        }
+    }
+    Ok(v)
+}
+
+/// Identifies the steady-state thermal gains of a machine-tool file: spindle
+/// `growth_um_per_kw` (rows with `spindle_w`) and `scale_ppm_per_kw` of the
+/// axes that have a `thermal.axes` entry (rows with `pX_w` …).
+pub fn calibrate_tool_thermal(
+    text: &str,
+    machine_file: &str,
+    machine: &Machine,
+    obs: &Observations,
+    obs_file: &str,
+    opts: &Options,
+) -> Result<Calibration> {
+    let Machine::Tool(tool) = machine else {
+        return Err(Error::Usage(format!(
+            "{machine_file}: not a machine-tool file"
+        )));
+    };
+    let thermal = tool.thermal().copied().unwrap_or_default();
+    let powers = |i: usize| -> Vec<f64> {
+        obs.rows
+            .iter()
+            .filter_map(|r| match &r.pose {
+                Pose::Tool(tp) => forward::tool_powers(tp),
+                Pose::Robot(_) => None,
+            })
+            .filter_map(|p| p.get(i).copied())
+            .collect()
+    };
+    let varies = |v: &[f64]| {
+        let lo = v.iter().copied().fold(f64::INFINITY, f64::min);
+        let hi = v.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        hi - lo > 1e-9
+    };
+    let mut notes = Vec::new();
+    // Unknowns: 0 = spindle (µm/kW), 1..4 = X, Y, Z scale (ppm/kW).
+    let mut unknowns: Vec<usize> = Vec::new();
+    if varies(&powers(0)) {
+        unknowns.push(0);
+    } else {
+        notes.push("spindle_w does not vary in the rows: spindle growth not identified".into());
+    }
+    for a in 0..3 {
+        let name = ["X", "Y", "Z"][a];
+        if !varies(&powers(a + 1)) {
+            continue;
+        }
+        if thermal.axes[a].is_some() {
+            unknowns.push(a + 1);
+        } else {
+            notes.push(format!(
+                "p{name}_w varies but the file has no thermal.axes.{name} entry (time constant, \
+                 friction) to write a scale into: not identified"
+            ));
+        }
+    }
+    if unknowns.is_empty() {
+        return Err(Error::Usage(format!(
+            "{obs_file}: no thermal gain can be identified: the rows need spindle_w (or pX_w \
+             for an axis with a thermal.axes entry) at several power levels"
+        )));
+    }
+    let (fit, hold) = holdout_split(obs.rows.len(), opts.holdout, opts.seed);
+    let m = 3 * fit.len();
+    if m < 2 * unknowns.len() {
+        return Err(Error::Usage(format!(
+            "{obs_file}: {} rows left for the fit; too few",
+            fit.len()
+        )));
+    }
+    let mut a = nalgebra::DMatrix::zeros(m, unknowns.len());
+    let mut b = DVector::zeros(m);
+    for (k, &i) in fit.iter().enumerate() {
+        let Some(row) = obs.rows.get(i) else { continue };
+        let Pose::Tool(tp) = &row.pose else { continue };
+        let p = forward::predict(machine, row, obs_file)?;
+        let d = row.measured_mm - p.measured(obs.measured);
+        let pw = forward::tool_powers(tp).unwrap_or([0.0; 4]);
+        let cmd = tp.axes();
+        let dir = tool.nominal(&cmd, forward::tool_length(tool, tp)).dir;
+        for r in 0..3 {
+            b[3 * k + r] = d[r];
+        }
+        for (c, &u) in unknowns.iter().enumerate() {
+            if u == 0 {
+                // g µm/kW × P/1000 kW, tip moves against the tool axis, mm.
+                for r in 0..3 {
+                    a[(3 * k + r, c)] = -dir[r] * pw[0] * 1e-6;
+                }
+            } else {
+                // s ppm/kW × P/1000 kW × q mm × 1e-6, along the axis.
+                let ax = u - 1;
+                a[(3 * k + ax, c)] = cmd[ax] * pw[u] * 1e-9;
+            }
+        }
+    }
+    let sol = solve_linear(&a, &b, &LsqOptions::default())
+        .map_err(|e| Error::Usage(format!("{obs_file}: {e}")))?;
+    let id = &sol.identifiability;
+    if id.condition_number_identified > CONDITION_LIMIT {
+        return Err(Error::Usage(format!(
+            "{obs_file}: badly conditioned data set: condition number {:.3e} > {:.0e}",
+            id.condition_number_identified, CONDITION_LIMIT
+        )));
+    }
+    let u = sol.std_uncertainty();
+    let mut params = Vec::new();
+    let mut yaml = text.to_string();
+    for (c, &k) in unknowns.iter().enumerate() {
+        let fixed = id.unidentifiable.contains(&c);
+        let delta = sol.params.get(c).copied().unwrap_or(0.0);
+        let uc = if fixed {
+            None
+        } else {
+            u.as_ref().and_then(|u| u.get(c).copied())
+        };
+        if k == 0 {
+            let start = thermal.spindle.map_or(0.0, |s| s.gain_per_kw);
+            params.push(Estimate {
+                name: "spindle.growth".into(),
+                unit: "µm/kW",
+                start,
+                value: start + delta,
+                u: uc,
+                fixed,
+            });
+            if !fixed {
+                yaml = super::yaml_edit::set_spindle_growth(
+                    &yaml,
+                    machine_file,
+                    start + delta,
+                    30.0,
+                    "postproc calibrate thermal: time_constant_min is ASSUMED (steady-state rows carry no time information)",
+                )?;
+            }
+        } else {
+            let name = ["X", "Y", "Z"][k - 1];
+            let start = thermal.axes[k - 1].map_or(0.0, |s| s.gain_per_kw);
+            params.push(Estimate {
+                name: format!("{name}.scale"),
+                unit: "ppm/kW",
+                start,
+                value: start + delta,
+                u: uc,
+                fixed,
+            });
+            if !fixed {
+                yaml = super::yaml_edit::set_axis_scale(&yaml, machine_file, name, start + delta)?;
+            }
+        }
+    }
+    notes.push(
+        "rows are at the thermal steady state of their powers: time constants are not identified"
+            .into(),
+    );
+    let calibrated = Machine::from_yaml_str(&yaml, machine_file)?;
+    let before = machine_norms(machine, obs, &hold, obs_file)?;
+    let after = machine_norms(&calibrated, obs, &hold, obs_file)?;
     let mut cal = Calibration {
         kind: "thermal",
         n_fit: fit.len(),

@@ -542,6 +542,28 @@ pub fn add_thermal_term(
     Ok(s)
 }
 
+/// Sets `scale_ppm_per_kw` of the one-line flow map `thermal.axes.<axis>`.
+pub fn set_axis_scale(text: &str, file: &str, axis: &str, scale_ppm_per_kw: f64) -> Result<String> {
+    let mut lines: Vec<String> = text.lines().map(str::to_string).collect();
+    let path = format!("thermal.axes.{axis}");
+    let bad = || {
+        edit_err(
+            file,
+            format!("`{path}` is not a one-line flow map with scale_ppm_per_kw"),
+        )
+    };
+    let (line, _) = crate::machine::yaml::locate(text, &path).ok_or_else(bad)?;
+    let i = line.checked_sub(1).ok_or_else(bad)?;
+    let l = lines.get(i).ok_or_else(bad)?;
+    if !(l.trim_start().starts_with(&format!("{axis}:")) && l.contains("scale_ppm_per_kw:")) {
+        return Err(bad());
+    }
+    let new = replace_map_values(l, &[("scale_ppm_per_kw", fmt_value(scale_ppm_per_kw, 6))])
+        .ok_or_else(bad)?;
+    lines[i] = new;
+    Ok(join(lines, text))
+}
+
 /// Sets `thermal.spindle.growth_um_per_kw` of a machine-tool file: in the
 /// one-line flow map `spindle: { … }` when present, else adds `spindle:`
 /// (to the `thermal:` section, or a new section at the end) with
