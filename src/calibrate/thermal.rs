@@ -207,7 +207,8 @@ pub fn calibrate_thermal(
             .collect();
         let lo = ps.iter().copied().fold(f64::INFINITY, f64::min);
         let hi = ps.iter().copied().fold(f64::NEG_INFINITY, f64::max);
-        if !(hi - lo > 1e-9) {
+        let spread = hi - lo;
+        if spread.is_nan() || spread <= 1e-9 {
             varies[k] = false;
             notes.push(format!(
                 "term {}: the power of joint {} never varies in the fitted rows; \

@@ -504,8 +504,7 @@ pub fn add_thermal_term(
             // Items: deeper lines, or `- ` lines at the key's indentation.
             let mut last = k;
             let mut item_indent = base + 2;
-            for i in k + 1..lines.len() {
-                let l = &lines[i];
+            for (i, l) in lines.iter().enumerate().skip(k + 1) {
                 if !is_content(l) {
                     continue;
                 }
