@@ -842,3 +842,55 @@ fn thermal_machine_tool_gains() {
         "comments kept"
     );
 }
+
+/// The committed thermal sample through the binary: the sample's
+/// measured file is exactly what `simulate` makes from the truth file with
+/// the recorded command, and `calibrate thermal` on it prints the table and
+/// writes a loadable file with the identified terms.
+#[test]
+fn binary_calibrate_thermal_sample() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let meas = dir.path().join("m.csv");
+    postproc()
+        .args(["simulate", "--machine"])
+        .arg(repo("samples/observations/irb1600-thermal-truth.yaml"))
+        .arg("--observations")
+        .arg(repo("samples/observations/irb1600-thermal-poses.csv"))
+        .args([
+            "--noise-um",
+            "15",
+            "--noise-um-per-m",
+            "6",
+            "--seed",
+            "5",
+            "-o",
+        ])
+        .arg(&meas)
+        .assert()
+        .success();
+    assert_eq!(
+        std::fs::read_to_string(&meas).expect("simulated"),
+        text("samples/observations/irb1600-thermal-measured.csv"),
+        "the sample is made by the recorded command"
+    );
+    let out = dir.path().join("cal.yaml");
+    let a = postproc()
+        .args(["calibrate", "thermal", "--machine"])
+        .arg(repo("samples/observations/irb1600-thermal-start.yaml"))
+        .arg("--observations")
+        .arg(repo("samples/observations/irb1600-thermal-measured.csv"))
+        .arg("-o")
+        .arg(&out)
+        .assert()
+        .success();
+    let stdout = String::from_utf8_lossy(&a.get_output().stdout).to_string();
+    assert!(
+        stdout.starts_with("calibrate thermal: 84 items"),
+        "{stdout}"
+    );
+    assert!(stdout.contains("a2←P1.ts"), "{stdout}");
+    let written = std::fs::read_to_string(&out).expect("written");
+    let m = Machine::from_yaml_str(&written, "cal.yaml").expect("loads");
+    assert!(matches!(m, Machine::Robot(_)));
+    assert!(written.contains("# START file"), "comments kept");
+}
