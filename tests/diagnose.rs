@@ -553,6 +553,70 @@ fn tool_spindle_growth_power() {
     }
 }
 
+/// Axis stiffness: the true machine FILE's Y stiffness map (both load
+/// signs, every grid node) is softer by a compliance of 0.02 µm/N,
+/// k' = 1/(1/k + 0.02) (e.g. 15 → 1/(0.066667 + 0.02) = 11.538 N/µm); rows
+/// carry forces of ±1000 N per axis, simulated through `forward::predict`
+/// (deflection F/k). Diagnose names `Y_stiffness` with c ≈ 0.02 µm/N,
+/// writes it into `stiffness.k_n_per_um.y_pos/y_neg` and the rerun finds
+/// nothing more.
+#[test]
+fn tool_axis_stiffness() {
+    let model = text("machines/afm-r1000.yaml");
+    const C_UM_PER_N: f64 = 0.02;
+    let mut in_y = false;
+    let truth_text: String = model
+        .lines()
+        .map(|l| {
+            let t = l.trim_start();
+            if t.starts_with("y_pos:") || t.starts_with("y_neg:") {
+                in_y = true;
+            } else if t.starts_with("z_pos:") || !t.starts_with("- [[") {
+                in_y = in_y && t.starts_with("- [[");
+            }
+            if in_y && t.starts_with("- [[") {
+                let nums: String = t
+                    .trim_start_matches("- ")
+                    .split(|c| c == '[' || c == ']' || c == ',')
+                    .filter(|x| !x.trim().is_empty())
+                    .map(|x| {
+                        let k: f64 = x.trim().parse().expect("number");
+                        format!("{}", 1.0 / (1.0 / k + C_UM_PER_N))
+                    })
+                    .collect::<Vec<_>>()
+                    .chunks(3)
+                    .map(|c| format!("[{}]", c.join(", ")))
+                    .collect::<Vec<_>>()
+                    .join(", ");
+                format!("      - [{nums}]\n")
+            } else {
+                format!("{l}\n")
+            }
+        })
+        .collect();
+    assert_ne!(truth_text, model);
+    assert!(
+        truth_text.contains("11.538461538461538"),
+        "15 N/µm softened"
+    );
+    for (seed, level) in [(37, 0.3), (38, 0.2)] {
+        let mut rows = tool_rows(150, seed);
+        let mut rng = SplitMix64::new(seed ^ 0xf0);
+        for r in &mut rows {
+            r.force_n = Vector3::new(
+                2000.0 * rng.next_f64() - 1000.0,
+                2000.0 * rng.next_f64() - 1000.0,
+                2000.0 * rng.next_f64() - 1000.0,
+            );
+        }
+        let (mut obs, noise) = measure_with_noise(&machine(&truth_text), rows, level, seed);
+        obs.columns.extend(columns(&["fx_n", "fy_n", "fz_n"]));
+        let d = run(&model, &obs, seed);
+        assert_found(&d, "Y_stiffness", 0, C_UM_PER_N, noise);
+        assert_rerun_clean(&model, &d, &obs, seed);
+    }
+}
+
 /// Five-axis AC trunnion: the library covers the rotary axes (location and
 /// component candidates in µrad/µm, tables over degrees); nothing hidden →
 /// nothing found; a hidden A-axis line offset is named; a hidden C zero

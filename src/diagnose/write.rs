@@ -5,9 +5,12 @@
 //! joint stiffness (`k_nm_per_rad`), TCP (`flange_to_tool`), payload
 //! (`tool_load`), Paper B thermal growth (`thermal.terms`, see below);
 //! machine-tool location errors, component tables (linear/quadratic terms;
-//! backlash = offset of the reverse column) and spindle thermal growth with
-//! power (`thermal.spindle.growth_um_per_kw`). The others (spindle growth
-//! with time alone, robot joint backlash, axis stiffness, measurement-frame
+//! backlash = offset of the reverse column), axis compliance (every value
+//! of the direction's `stiffness.k_n_per_um` map, both load signs,
+//! `k' = 1/(1/k + c)`; only when the file has that section) and spindle
+//! thermal growth with power (`thermal.spindle.growth_um_per_kw`). The
+//! others (spindle growth with time alone, robot joint backlash, axis
+//! stiffness without a `stiffness:` section, measurement-frame
 //! registration) are listed as not written.
 //!
 //! Thermal growth is written as text (comments kept), adding the section or
