@@ -577,7 +577,7 @@ fn tool_axis_stiffness() {
             if in_y && t.starts_with("- [[") {
                 let nums: String = t
                     .trim_start_matches("- ")
-                    .split(|c| c == '[' || c == ']' || c == ',')
+                    .split(['[', ']', ','])
                     .filter(|x| !x.trim().is_empty())
                     .map(|x| {
                         let k: f64 = x.trim().parse().expect("number");
