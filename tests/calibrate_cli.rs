@@ -670,3 +670,227 @@ fn geometry_on_a_five_axis_machine() {
             .contains("the A axis takes 2 different positions")
     );
 }
+
+/// Thermal (Paper B): the three terms of `irb1600-thermal-truth.yaml`
+/// (a2 ← P1: lb = ub = 0.08 mm, ts = 0.022 1/W; a3 ← P2: 0.07, 0.07, 0.015;
+/// d4 ← P3: 0.04, 0.04, 0.04) are recovered from the start file (all
+/// 0.1/0.1/0.02) on the sample poses (40 poses × 3 steady states at the
+/// Paper B power levels, joints varied independently), two seeds, 5 µm noise;
+/// the held-out mean residual falls to the noise level (Maxwell mean ×
+/// 1.25 for the fit uncertainty and sampling). The calibrated file carries
+/// the identified values in the `thermal.terms` lines.
+#[test]
+fn thermal_recovers_paper_b_terms() {
+    let truth = [
+        ("a2←P1", 0.08, 0.08, 0.022),
+        ("a3←P2", 0.07, 0.07, 0.015),
+        ("d4←P3", 0.04, 0.04, 0.040),
+    ];
+    const NOISE_MM: f64 = 0.005;
+    for seed in [11, 13] {
+        let obs = simulated(
+            "samples/observations/irb1600-thermal-truth.yaml",
+            "samples/observations/irb1600-thermal-poses.csv",
+            Noise {
+                um: NOISE_MM * 1000.0,
+                um_per_m: 0.0,
+                seed,
+            },
+        );
+        let start = text("samples/observations/irb1600-thermal-start.yaml");
+        let cal = postproc::calibrate::thermal::calibrate_thermal(
+            &start,
+            "start.yaml",
+            &obs,
+            "obs.csv",
+            &Options { holdout: 0.3, seed },
+        )
+        .expect("thermal calibration");
+        assert!(cal.fixed().is_empty(), "{cal}");
+        for (name, lb, ub, ts) in truth {
+            assert_recovered(&cal, &format!("{name}.lb"), lb);
+            assert_recovered(&cal, &format!("{name}.ub"), ub);
+            assert_recovered(&cal, &format!("{name}.ts"), ts);
+        }
+        let v = cal.validation.expect("held-out rows");
+        assert!(
+            v.after_mean_mm <= 1.25 * MAXWELL_MEAN * NOISE_MM,
+            "held-out mean {} mm after\n{cal}",
+            v.after_mean_mm
+        );
+        assert!(v.after_mean_mm < v.before_mean_mm, "{cal}");
+        assert!(cal.observability_o1 > 0.0 && cal.condition_number < 1e4);
+        let m = Machine::from_yaml_str(&cal.yaml, "cal.yaml").expect("calibrated file loads");
+        let Machine::Robot(r) = m else {
+            panic!("robot")
+        };
+        let t = r.thermal().expect("thermal section");
+        let a2 = param(&cal, "a2←P1.ts").value;
+        assert!((t.terms[0].ts_per_w - a2).abs() <= 1e-6 * a2.abs().max(1.0));
+        assert!(cal.yaml.contains("# THERMAL TRUTH") || cal.yaml.contains("# START file"));
+    }
+}
+
+/// A term whose joint power never varies in the data is fixed and listed;
+/// a file without thermal terms is refused with an explanation.
+#[test]
+fn thermal_constant_power_term_is_fixed() {
+    let mut obs = simulated(
+        "samples/observations/irb1600-thermal-truth.yaml",
+        "samples/observations/irb1600-thermal-poses.csv",
+        Noise {
+            um: 5.0,
+            um_per_m: 0.0,
+            seed: 3,
+        },
+    );
+    // Joint 3 always at 20 W: d4 ← P3 cannot be identified.
+    for r in &mut obs.rows {
+        if let postproc::calibrate::observations::Pose::Robot(rp) = &mut r.pose {
+            rp.p_w[2] = Some(20.0);
+        }
+    }
+    let start = text("samples/observations/irb1600-thermal-start.yaml");
+    let opts = Options {
+        holdout: 0.3,
+        seed: 3,
+    };
+    let cal = postproc::calibrate::thermal::calibrate_thermal(&start, "s", &obs, "o", &opts)
+        .expect("calibration runs");
+    for k in ["lb", "ub", "ts"] {
+        assert!(param(&cal, &format!("d4←P3.{k}")).fixed, "{cal}");
+    }
+    assert!(
+        cal.notes
+            .iter()
+            .any(|n| n.contains("d4←P3") && n.contains("never varies")),
+        "{cal}"
+    );
+    let err = postproc::calibrate::thermal::calibrate_thermal(
+        &text("machines/staubli-tx200.yaml"),
+        "tx200",
+        &obs,
+        "o",
+        &opts,
+    );
+    assert!(err.is_err());
+}
+
+/// Machine-tool thermal gains at steady state: the truth is
+/// `machines/afm-r1000.yaml` with spindle growth 11 instead of 3 µm/kW and
+/// X scale 90 instead of 60 ppm/kW; the grid poses get a spindle power of
+/// 0…8 kW and an X drive power of 0…400 W per row (simulated, 1 µm noise).
+/// Both gains are recovered within 3u and written into the `thermal:` lines;
+/// Y and Z (no power columns) are left alone.
+#[test]
+fn thermal_machine_tool_gains() {
+    let model = text("machines/afm-r1000.yaml");
+    let truth = model
+        .replacen("growth_um_per_kw: 3.0", "growth_um_per_kw: 11.0", 1)
+        .replacen(
+            "X: { scale_ppm_per_kw: 60.0,",
+            "X: { scale_ppm_per_kw: 90.0,",
+            1,
+        );
+    assert_ne!(truth, model);
+    let mut poses =
+        load_poses(&repo("samples/observations/afm-r1000-grid-poses.csv")).expect("poses");
+    let mut rng = postproc::calibrate::stats::SplitMix64::new(7);
+    for r in &mut poses.rows {
+        if let postproc::calibrate::observations::Pose::Tool(tp) = &mut r.pose {
+            tp.spindle_w = Some(8000.0 * rng.next_f64());
+            tp.p_w[0] = Some(400.0 * rng.next_f64());
+        }
+    }
+    let truth_m = Machine::from_yaml_str(&truth, "truth").expect("truth");
+    const NOISE_MM: f64 = 0.001;
+    let obs = simulate(
+        &truth_m,
+        &poses,
+        "poses",
+        &Noise {
+            um: 1.0,
+            um_per_m: 0.0,
+            seed: 8,
+        },
+    )
+    .expect("simulate");
+    let cal = postproc::calibrate::thermal::calibrate_thermal(
+        &model,
+        "afm.yaml",
+        &obs,
+        "obs.csv",
+        &Options {
+            holdout: 0.3,
+            seed: 8,
+        },
+    )
+    .expect("calibration");
+    assert_recovered(&cal, "spindle.growth", 11.0);
+    assert_recovered(&cal, "X.scale", 90.0);
+    assert_eq!(cal.params.len(), 2, "{cal}");
+    let v = cal.validation.expect("held out");
+    assert!(v.after_mean_mm <= 1.25 * MAXWELL_MEAN * NOISE_MM, "{cal}");
+    let Machine::Tool(t) = Machine::from_yaml_str(&cal.yaml, "cal").expect("loads") else {
+        panic!("tool")
+    };
+    let th = t.thermal().expect("thermal");
+    let g = th.spindle.map_or(0.0, |s| s.gain_per_kw);
+    assert!((g - param(&cal, "spindle.growth").value).abs() < 1e-5);
+    assert!(
+        cal.yaml.contains("# Dominant mode per direction"),
+        "comments kept"
+    );
+}
+
+/// The committed thermal sample through the binary: the sample's
+/// measured file is exactly what `simulate` makes from the truth file with
+/// the recorded command, and `calibrate thermal` on it prints the table and
+/// writes a loadable file with the identified terms.
+#[test]
+fn binary_calibrate_thermal_sample() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let meas = dir.path().join("m.csv");
+    postproc()
+        .args(["simulate", "--machine"])
+        .arg(repo("samples/observations/irb1600-thermal-truth.yaml"))
+        .arg("--observations")
+        .arg(repo("samples/observations/irb1600-thermal-poses.csv"))
+        .args([
+            "--noise-um",
+            "15",
+            "--noise-um-per-m",
+            "6",
+            "--seed",
+            "5",
+            "-o",
+        ])
+        .arg(&meas)
+        .assert()
+        .success();
+    crate::common::assert_csv_close(
+        &std::fs::read_to_string(&meas).expect("simulated"),
+        &text("samples/observations/irb1600-thermal-measured.csv"),
+        "the sample is made by the recorded command",
+    );
+    let out = dir.path().join("cal.yaml");
+    let a = postproc()
+        .args(["calibrate", "thermal", "--machine"])
+        .arg(repo("samples/observations/irb1600-thermal-start.yaml"))
+        .arg("--observations")
+        .arg(repo("samples/observations/irb1600-thermal-measured.csv"))
+        .arg("-o")
+        .arg(&out)
+        .assert()
+        .success();
+    let stdout = String::from_utf8_lossy(&a.get_output().stdout).to_string();
+    assert!(
+        stdout.starts_with("calibrate thermal: 84 items"),
+        "{stdout}"
+    );
+    assert!(stdout.contains("a2←P1.ts"), "{stdout}");
+    let written = std::fs::read_to_string(&out).expect("written");
+    let m = Machine::from_yaml_str(&written, "cal.yaml").expect("loads");
+    assert!(matches!(m, Machine::Robot(_)));
+    assert!(written.contains("# START file"), "comments kept");
+}

@@ -377,48 +377,37 @@ fn tool_nothing_hidden() {
     assert!(d.found.is_empty(), "{}", diagnose::report::render_table(&d));
 }
 
-/// Paper B thermal growth, linearised: the upper-arm length a3 (700 mm,
-/// modified-DH row 3) grows by 0.3 µm per watt of joint-2 motor power.
-/// Truth: for every row a robot whose actual a3 is 0.3e-3 mm · P2 longer
-/// (`Robot::with_actual`, independent of the candidate's sensitivity code).
+/// Paper B thermal growth: the true machine FILE has one more `thermal`
+/// term than the model, a3 (row 3, the 700 mm upper arm) ← joint-2 power
+/// with lb = ub = 30 mm and ts = 1e-5 1/W: 30·(1 − e^(−1e-5·P)) mm, slope
+/// 30·1e-5 = 0.3e-3 mm/W = 0.3 µm/W at 0 W and within 1e-5·P/2 = 0.3 % of
+/// that straight line up to the rows' 600 W. The data are simulated through
+/// `forward::predict` of that file; diagnose names the linearised growth,
+/// writes it as a Paper B term into `thermal.terms` and the rerun on the
+/// written model finds nothing more.
 #[test]
 fn robot_paper_b_thermal_growth() {
     let model = text("machines/abb-irb1600.yaml");
-    let Machine::Robot(r) = machine(&model) else {
-        panic!("robot file")
-    };
+    let anchor = "    - { parameter: a2, joint: 2, lb_mm: 0.12, ub_mm: 0.12, ts_per_w: 0.020 }\n";
+    let truth_text = model.replacen(
+        anchor,
+        &format!(
+            "{anchor}    - {{ parameter: a3, joint: 2, lb_mm: 30.0, ub_mm: 30.0, ts_per_w: 0.00001 }}\n"
+        ),
+        1,
+    );
+    assert_ne!(truth_text, model);
     const G_UM_PER_W: f64 = 0.3;
     for (seed, level) in [(31, 1.0), (32, 0.5)] {
-        let mut rows = robot_rows(100, seed);
-        let mut rng = SplitMix64::new(seed ^ 0x5eed);
-        let mut sum2 = 0.0;
-        for row in &mut rows {
-            let Pose::Robot(rp) = &row.pose else { panic!() };
-            let p2 = rp.p_w[1].expect("power");
-            let mut dh = *r.params(postproc::machine::robot::Model::Actual);
-            dh.joints[2].a_mm += G_UM_PER_W * 1e-3 * p2;
-            let truth = Machine::Robot(r.with_actual(dh));
-            let p = forward::predict(&truth, row, "truth")
-                .expect("prediction")
-                .attained_mm;
-            let sd = noise_sd_mm(&p, level);
-            let e = Vector3::new(
-                rng.gaussian(0.0, sd),
-                rng.gaussian(0.0, sd),
-                rng.gaussian(0.0, sd),
-            );
-            sum2 += (e * 1000.0).norm_squared();
-            row.measured_mm = p + e;
-        }
-        let noise = (sum2 / rows.len() as f64).sqrt();
-        let mut obs = measure(&machine(&model), Vec::new(), 0.0, 0);
-        obs.rows = rows;
+        let (obs, noise) =
+            measure_with_noise(&machine(&truth_text), robot_rows(100, seed), level, seed);
         let d = run(&model, &obs, seed);
         assert_found(&d, "thermal_joint3_a_p2", 0, G_UM_PER_W, noise);
         assert!(
-            d.found[0].effect.not_writable.is_some(),
-            "thermal is reported, not written"
+            d.found[0].effect.not_writable.is_none(),
+            "thermal is written"
         );
+        assert_rerun_clean(&model, &d, &obs, seed);
     }
 }
 
@@ -521,6 +510,113 @@ fn tool_spindle_growth_time() {
     }
 }
 
+/// Spindle thermal growth with power: the true machine FILE's
+/// `thermal.spindle.growth_um_per_kw` is 11 instead of the model's 3, rows at
+/// the steady state of a spindle power of 0…8 kW (`spindle_w`): 8 µm/kW
+/// more growth, the tip moving against the tool axis (−z) by 8·P/1000 µm.
+/// Simulated through `forward::predict`; written into the spindle's
+/// `growth_um_per_kw` (3 + 8 = 11), after which nothing more is found.
+#[test]
+fn tool_spindle_growth_power() {
+    let model = text("machines/afm-r1000.yaml");
+    let truth_text = model.replacen("growth_um_per_kw: 3.0", "growth_um_per_kw: 11.0", 1);
+    assert_ne!(truth_text, model);
+    for (seed, level) in [(35, 1.0), (36, 0.3)] {
+        let mut rows = tool_rows(150, seed);
+        let mut rng = SplitMix64::new(seed ^ 0x57);
+        for r in &mut rows {
+            if let Pose::Tool(tp) = &mut r.pose {
+                tp.spindle_w = Some(8000.0 * rng.next_f64());
+            }
+        }
+        let (mut obs, noise) = measure_with_noise(&machine(&truth_text), rows, level, seed);
+        obs.columns.extend(columns(&["spindle_w"]));
+        let d = run(&model, &obs, seed);
+        assert_found(&d, "spindle_growth_power", 0, 8.0, noise);
+        assert_rerun_clean(&model, &d, &obs, seed);
+        let m = machine(
+            &write::write_model(&machine(&model), &model, &d.found)
+                .expect("written")
+                .text,
+        );
+        let Machine::Tool(t) = m else { panic!("tool") };
+        let g = t
+            .thermal()
+            .and_then(|th| th.spindle)
+            .map_or(0.0, |s| s.gain_per_kw);
+        let p = &d.found[0].params[0];
+        assert!(
+            (g - 3.0 - p.value).abs() < 1e-6,
+            "written {g}, fitted 3 + {}",
+            p.value
+        );
+    }
+}
+
+/// Axis stiffness: the true machine FILE's Y stiffness map (both load
+/// signs, every grid node) is softer by a compliance of 0.02 µm/N,
+/// k' = 1/(1/k + 0.02) (e.g. 15 → 1/(0.066667 + 0.02) = 11.538 N/µm); rows
+/// carry forces of ±1000 N per axis, simulated through `forward::predict`
+/// (deflection F/k). Diagnose names `Y_stiffness` with c ≈ 0.02 µm/N,
+/// writes it into `stiffness.k_n_per_um.y_pos/y_neg` and the rerun finds
+/// nothing more.
+#[test]
+fn tool_axis_stiffness() {
+    let model = text("machines/afm-r1000.yaml");
+    const C_UM_PER_N: f64 = 0.02;
+    let mut in_y = false;
+    let truth_text: String = model
+        .lines()
+        .map(|l| {
+            let t = l.trim_start();
+            if t.starts_with("y_pos:") || t.starts_with("y_neg:") {
+                in_y = true;
+            } else if t.starts_with("z_pos:") || !t.starts_with("- [[") {
+                in_y = in_y && t.starts_with("- [[");
+            }
+            if in_y && t.starts_with("- [[") {
+                let nums: String = t
+                    .trim_start_matches("- ")
+                    .split(['[', ']', ','])
+                    .filter(|x| !x.trim().is_empty())
+                    .map(|x| {
+                        let k: f64 = x.trim().parse().expect("number");
+                        format!("{}", 1.0 / (1.0 / k + C_UM_PER_N))
+                    })
+                    .collect::<Vec<_>>()
+                    .chunks(3)
+                    .map(|c| format!("[{}]", c.join(", ")))
+                    .collect::<Vec<_>>()
+                    .join(", ");
+                format!("      - [{nums}]\n")
+            } else {
+                format!("{l}\n")
+            }
+        })
+        .collect();
+    assert_ne!(truth_text, model);
+    assert!(
+        truth_text.contains("11.538461538461538"),
+        "15 N/µm softened"
+    );
+    for (seed, level) in [(37, 0.3), (38, 0.2)] {
+        let mut rows = tool_rows(150, seed);
+        let mut rng = SplitMix64::new(seed ^ 0xf0);
+        for r in &mut rows {
+            r.force_n = Vector3::new(
+                2000.0 * rng.next_f64() - 1000.0,
+                2000.0 * rng.next_f64() - 1000.0,
+                2000.0 * rng.next_f64() - 1000.0,
+            );
+        }
+        let (mut obs, noise) = measure_with_noise(&machine(&truth_text), rows, level, seed);
+        obs.columns.extend(columns(&["fx_n", "fy_n", "fz_n"]));
+        let d = run(&model, &obs, seed);
+        assert_found(&d, "Y_stiffness", 0, C_UM_PER_N, noise);
+        assert_rerun_clean(&model, &d, &obs, seed);
+    }
+}
+
 /// Five-axis AC trunnion: the library covers the rotary axes (location and
 /// component candidates in µrad/µm, tables over degrees); nothing hidden →
 /// nothing found; a hidden A-axis line offset is named; a hidden C zero
@@ -615,21 +711,8 @@ fn sample_is_made_from_the_true_file() {
     }
     // Same rows and columns; values equal to floating-point noise (a
     // refactoring of the kinematics may change the last bits).
-    const SAMPLE_TOL: f64 = 1e-9;
     let committed = std::fs::read_to_string(&path).expect("sample");
-    let (a, b): (Vec<&str>, Vec<&str>) = (committed.lines().collect(), csv.lines().collect());
-    assert_eq!(a.len(), b.len());
-    assert_eq!(a.first(), b.first(), "header");
-    for (la, lb) in a.iter().zip(&b).skip(1) {
-        let (ca, cb): (Vec<&str>, Vec<&str>) = (la.split(',').collect(), lb.split(',').collect());
-        assert_eq!(ca.len(), cb.len());
-        for (x, y) in ca.iter().zip(&cb) {
-            match (x.parse::<f64>(), y.parse::<f64>()) {
-                (Ok(x), Ok(y)) => assert!((x - y).abs() <= SAMPLE_TOL, "{x} vs {y}"),
-                _ => assert_eq!(x, y),
-            }
-        }
-    }
+    crate::common::assert_csv_close(&committed, &csv, "samples/diagnose/measured.csv");
 }
 
 /// The command line: list, table, JSON and --write-model on the sample.

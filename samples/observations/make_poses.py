@@ -72,10 +72,32 @@ def geometry_poses(n=160, seed=230):
     return out
 
 
+# Paper B measured mean motor powers of the IRB 1600 (W) at TCP speeds
+# 300/750/1200/1350 mm/s, plus 0 W (cold).
+P_J1 = [0, 22, 60, 115, 126]
+P_J2 = [0, 18, 52, 94, 112]
+P_J3 = [0, 9, 20, 35, 38]
+
+
+def thermal_poses(n=40, states=3, seed=1860):
+    """Each pose measured after warming up at `states` power combinations,
+    each joint's level drawn independently from the Paper B levels."""
+    rng = random.Random(seed)
+    out = ["# IRB 1600 thermal: poses at the steady state of Paper B power levels",
+           "id,q1_deg,q2_deg,q3_deg,q4_deg,q5_deg,q6_deg,p1_w,p2_w,p3_w"]
+    for i in range(1, n + 1):
+        q = [round(rng.uniform(lo, hi), 3) for lo, hi in LIMITS]
+        for s in range(states):
+            p = [rng.choice(P_J1), rng.choice(P_J2), rng.choice(P_J3)]
+            out.append(f"T{i}.{s + 1}," + ",".join(str(x) for x in q + p))
+    return out
+
+
 if __name__ == "__main__":
     for name, lines in [("irb1600-ldbb-poses.csv", stiffness_poses()),
                         ("irb1600-kinematic-poses.csv", kinematic_poses()),
                         ("irb1600-q1fixed-poses.csv", kinematic_poses(40, 72, q1=0.0)),
-                        ("afm-r1000-grid-poses.csv", geometry_poses())]:
+                        ("afm-r1000-grid-poses.csv", geometry_poses()),
+                        ("irb1600-thermal-poses.csv", thermal_poses())]:
         with open(name, "w") as f:
             f.write("\n".join(lines) + "\n")

@@ -23,14 +23,27 @@
 //!   the machine is error-free). The attained position is the tool tip of the
 //!   geometric model for the row's axes, last-motion signs and tool length
 //!   (default: the lowest-numbered tool of the machine file's tool table, or
-//!   the gauge line when the table is empty).
+//!   the gauge line when the table is empty). Then, as in the G-code
+//!   prediction (machines/README.md, *Process effects*):
+//!   - a row force (`fx_n…`, the force on the tool from the workpiece, N)
+//!     deflects the tip through the machine file's `stiffness:` map at the
+//!     commanded X, Y, Z: attained += F/k per axis;
+//!   - a row with spindle or feed-drive powers (`spindle_w`, `pX_w`, `pY_w`,
+//!     `pZ_w`; missing ones 0 W) is at the thermal STEADY STATE of those
+//!     mean powers: the machine file's `thermal:` section grows the spindle
+//!     by `growth_um_per_kw · P_s` (the tip moves that far against the
+//!     nominal tool axis) and scales each axis by `scale_ppm_per_kw · P_i`.
+//!     The measured `spindle_w` is the whole spindle power (no
+//!     `idle_w_per_rpm · spindle_rpm` is added), and `t_s` alone does not
+//!     drive the thermal model (a row without powers is cold).
 
 use nalgebra::{Point3, Vector3, Vector6};
 
 use crate::error::{Error, Located, Result};
 use crate::machine::Machine;
-use crate::machine::robot::{Model, Robot};
+use crate::machine::robot::{DhGrowth, Model, Robot};
 use crate::machine::tool::MachineTool;
+use crate::machine::tool::thermal::Powers;
 
 use super::observations::{
     MeasuredKind, ObsKind, Observation, Observations, Pose, RobotPose, ToolPose,
@@ -83,7 +96,7 @@ pub fn check_kind(machine: &Machine, obs: &Observations, file: &str) -> Result<(
 pub fn predict(machine: &Machine, row: &Observation, file: &str) -> Result<Predicted> {
     let p = match (machine, &row.pose) {
         (Machine::Robot(r), Pose::Robot(rp)) => predict_robot(r, row, rp),
-        (Machine::Tool(t), Pose::Tool(tp)) => predict_tool(t, tp),
+        (Machine::Tool(t), Pose::Tool(tp)) => predict_tool(t, row, tp),
         _ => {
             return Err(Error::Usage(format!(
                 "{file}: row `{}` does not match the kind of machine file",
@@ -141,6 +154,46 @@ fn predict_robot(robot: &Robot, row: &Observation, rp: &RobotPose) -> Predicted 
     predict_robot_at(robot, row, rp)
 }
 
+/// Predicts a robot row with the actual DH lengths grown by `growth` (mm,
+/// `[Δa, Δd]` per row) INSTEAD of the machine file's thermal terms: the
+/// forward model of a thermal calibration, whose trial terms give the
+/// growth. `file` names the observation file in errors.
+pub fn predict_robot_with_growth(
+    robot: &Robot,
+    row: &Observation,
+    growth: &DhGrowth,
+    file: &str,
+) -> Result<Predicted> {
+    let Pose::Robot(rp) = &row.pose else {
+        return Err(Error::Usage(format!(
+            "{file}: row `{}` is not a robot row",
+            row.id
+        )));
+    };
+    let mut p = *robot.params(Model::Actual);
+    for (j, g) in p.joints.iter_mut().zip(growth) {
+        j.a_mm += g[0];
+        j.d_mm += g[1];
+    }
+    let grown = robot.with_actual(p);
+    let out = predict_robot_at(&grown, row, rp);
+    if out
+        .attained_mm
+        .iter()
+        .chain(out.commanded_mm.iter())
+        .all(|v| v.is_finite())
+    {
+        Ok(out)
+    } else {
+        Err(Error::Input(Located {
+            file: file.to_string(),
+            line: row.line,
+            column: 1,
+            message: format!("row `{}`: the model gives a non-finite position", row.id),
+        }))
+    }
+}
+
 fn predict_robot_at(robot: &Robot, row: &Observation, rp: &RobotPose) -> Predicted {
     let q = joints_rad(rp);
     let mp = Point3::from(measured_point(robot, rp));
@@ -162,12 +215,34 @@ pub fn tool_length(tool: &MachineTool, tp: &ToolPose) -> f64 {
         .unwrap_or(0.0)
 }
 
-fn predict_tool(tool: &MachineTool, tp: &ToolPose) -> Predicted {
+/// Mean heat-source powers of a machine-tool row (spindle, X, Y, Z drives),
+/// W; `None` when the row gives none of them (a cold row).
+pub fn tool_powers(tp: &ToolPose) -> Option<Powers> {
+    let given = tp.spindle_w.is_some() || tp.p_w.iter().take(3).any(Option::is_some);
+    given.then(|| {
+        let p = |i: usize| tp.p_w.get(i).copied().flatten().unwrap_or(0.0);
+        [tp.spindle_w.unwrap_or(0.0), p(0), p(1), p(2)]
+    })
+}
+
+fn predict_tool(tool: &MachineTool, row: &Observation, tp: &ToolPose) -> Predicted {
     let cmd = tp.axes();
     let len = tool_length(tool, tp);
+    let nominal = tool.nominal(&cmd, len);
+    let mut attained = tool.geometric(&cmd, &tp.dirs(), len).pos;
+    let q = Vector3::new(cmd[0], cmd[1], cmd[2]);
+    if let Some(k) = tool.stiffness() {
+        if row.force_n != Vector3::zeros() {
+            attained += k.deflection_mm(&q, &row.force_n);
+        }
+    }
+    if let (Some(t), Some(p)) = (tool.thermal(), tool_powers(tp)) {
+        let state = t.warm_up(&p, f64::INFINITY);
+        attained += t.deviation_mm(&state, &q, &nominal.dir);
+    }
     Predicted {
-        commanded_mm: tool.nominal(&cmd, len).pos,
-        attained_mm: tool.geometric(&cmd, &tp.dirs(), len).pos,
+        commanded_mm: nominal.pos,
+        attained_mm: attained,
     }
 }
 
@@ -280,16 +355,101 @@ mod tests {
         );
     }
 
-    /// An error-free machine tool attains its commanded position.
-    #[test]
-    fn error_free_tool_attains_command() {
+    fn error_free_yaml() -> String {
         let mut yaml = String::from("kind: machine_tool\nname: t\naxes:\n");
         for (axis, side) in [("X", "workpiece"), ("Y", "workpiece"), ("Z", "tool")] {
             yaml.push_str(&format!(
                 "  - name: {axis}\n    type: linear\n    side: {side}\n    travel_mm: [-500, 500]\n    rapid_mm_per_min: 20000\n"
             ));
         }
+        yaml
+    }
+
+    fn tool_row(
+        xyz: [f64; 3],
+        force_n: Vector3<f64>,
+        spindle_w: Option<f64>,
+        px_w: Option<f64>,
+    ) -> Observation {
+        Observation {
+            line: 0,
+            id: "p".into(),
+            t_s: Some(3600.0),
+            measured_mm: Vector3::zeros(),
+            force_n,
+            moment_nm: Vector3::zeros(),
+            ambient_c: None,
+            pose: Pose::Tool(ToolPose {
+                xyz_mm: Vector3::from(xyz),
+                abc_deg: [None; 3],
+                dir: [None; 6],
+                tool_mm: Some(100.0),
+                spindle_rpm: Some(8000.0),
+                spindle_w,
+                p_w: [px_w, None, None, None, None, None],
+            }),
+        }
+    }
+
+    /// Stiffness and steady-state thermal growth on an otherwise error-free
+    /// three-axis machine (tool axis +Z, tip → spindle):
+    /// - force (200, 0, −120) N against k_x+ = 20 and k_z− = 24 N/µm:
+    ///   +10 µm in x, −5 µm in z (attained = programmed + F/k);
+    /// - spindle 2000 W at 3 µm/kW: 6 µm growth, the tip moves 6 µm along −z;
+    /// - X drive 500 W at 60 ppm/kW: 30 ppm of X = 400 mm = +12 µm in x.
+    ///
+    /// Together (22, 0, −11) µm; each alone as listed; `t_s` and
+    /// `spindle_rpm` alone change nothing (a row without powers is cold).
+    #[test]
+    fn tool_force_and_thermal_steady_state() {
+        let mut yaml = error_free_yaml();
+        yaml.push_str(
+            "stiffness:\n  k_n_per_um: { x_pos: 20.0, x_neg: 21.0, y_pos: 15.0, y_neg: 16.0, z_pos: 28.0, z_neg: 24.0 }\n\
+             thermal:\n  spindle: { idle_w_per_rpm: 0.2, growth_um_per_kw: 3.0, time_constant_min: 25.0 }\n\
+             \x20 axes:\n    X: { scale_ppm_per_kw: 60.0, time_constant_min: 40.0, friction_n: 300.0 }\n",
+        );
         let m = Machine::from_yaml_str(&yaml, "t.yaml").expect("machine file");
+        let f = Vector3::new(200.0, 0.0, -120.0);
+        let dev = |row: Observation| predict(&m, &row, "t").unwrap().deviation_mm();
+        let xyz = [400.0, 50.0, -30.0];
+        assert_abs_diff_eq!(
+            dev(tool_row(xyz, f, None, None)),
+            Vector3::new(0.010, 0.0, -0.005),
+            epsilon = POS_TOL_MM
+        );
+        assert_abs_diff_eq!(
+            dev(tool_row(xyz, Vector3::zeros(), Some(2000.0), None)),
+            Vector3::new(0.0, 0.0, -0.006),
+            epsilon = POS_TOL_MM
+        );
+        assert_abs_diff_eq!(
+            dev(tool_row(xyz, Vector3::zeros(), None, Some(500.0))),
+            Vector3::new(0.012, 0.0, 0.0),
+            epsilon = POS_TOL_MM
+        );
+        assert_abs_diff_eq!(
+            dev(tool_row(xyz, f, Some(2000.0), Some(500.0))),
+            Vector3::new(0.022, 0.0, -0.011),
+            epsilon = POS_TOL_MM
+        );
+        assert_abs_diff_eq!(
+            dev(tool_row(xyz, Vector3::zeros(), None, None)),
+            Vector3::zeros(),
+            epsilon = POS_TOL_MM
+        );
+        // The commanded point is the nominal tip, whatever the loads.
+        let p = predict(&m, &tool_row(xyz, f, Some(2000.0), Some(500.0)), "t").unwrap();
+        assert_abs_diff_eq!(
+            p.commanded_mm,
+            Vector3::new(400.0, 50.0, -30.0),
+            epsilon = POS_TOL_MM
+        );
+    }
+
+    /// An error-free machine tool attains its commanded position.
+    #[test]
+    fn error_free_tool_attains_command() {
+        let m = Machine::from_yaml_str(&error_free_yaml(), "t.yaml").expect("machine file");
         let row = Observation {
             line: 0,
             id: "p".into(),

@@ -10,4 +10,5 @@ pub mod report;
 pub mod simulate;
 pub mod stats;
 pub mod stiffness;
+pub mod thermal;
 pub mod yaml_edit;

@@ -67,7 +67,7 @@ impl Validation {
 /// Everything a calibration run found.
 #[derive(Debug, Clone)]
 pub struct Calibration {
-    /// `stiffness`, `kinematics` or `geometry`.
+    /// `stiffness`, `kinematics`, `geometry` or `thermal`.
     pub kind: &'static str,
     /// Items (rows or load pairs) used for the fit.
     pub n_fit: usize,

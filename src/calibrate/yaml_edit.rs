@@ -403,6 +403,231 @@ pub fn set_location_error(
     Ok(join(lines, text))
 }
 
+/// One Paper B thermal term as written in a robot file.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ThermalTermText {
+    /// DH length, `a1..a6` / `d1..d6`.
+    pub parameter: String,
+    /// Joint whose power drives it, 1..6.
+    pub joint: usize,
+    /// `lb_mm`.
+    pub lb_mm: f64,
+    /// `ub_mm`.
+    pub ub_mm: f64,
+    /// `ts_per_w`.
+    pub ts_per_w: f64,
+}
+
+fn term_flow(t: &ThermalTermText) -> String {
+    format!(
+        "{{ parameter: {}, joint: {}, lb_mm: {}, ub_mm: {}, ts_per_w: {} }}",
+        t.parameter,
+        t.joint,
+        fmt_value(t.lb_mm, 6),
+        fmt_value(t.ub_mm, 6),
+        fmt_sig(t.ts_per_w)
+    )
+}
+
+/// A small positive or negative number with six significant digits
+/// (`ts_per_w` can be 1e-6).
+fn fmt_sig(v: f64) -> String {
+    if v == 0.0 || !v.is_finite() {
+        return "0.0".into();
+    }
+    let digits = (5 - v.abs().log10().floor() as i64).clamp(1, 15) as usize;
+    fmt_value(v, digits)
+}
+
+/// Replaces `lb_mm`, `ub_mm`, `ts_per_w` of the robot thermal term
+/// `thermal.terms[index]` (a one-line flow map).
+pub fn set_thermal_term(
+    text: &str,
+    file: &str,
+    index: usize,
+    lb_mm: f64,
+    ub_mm: f64,
+    ts_per_w: f64,
+) -> Result<String> {
+    let mut lines: Vec<String> = text.lines().map(str::to_string).collect();
+    let path = format!("thermal.terms[{index}]");
+    let bad = || {
+        edit_err(
+            file,
+            format!(
+                "`{path}` is not a one-line flow map `- {{ parameter: …, lb_mm: …, ub_mm: …, ts_per_w: … }}`"
+            ),
+        )
+    };
+    let (line, _) = crate::machine::yaml::locate(text, &path).ok_or_else(bad)?;
+    let i = line.checked_sub(1).ok_or_else(bad)?;
+    let l = lines.get(i).ok_or_else(bad)?;
+    if !(l.trim_start().starts_with("- {") && l.contains("parameter:")) {
+        return Err(bad());
+    }
+    let pairs = [
+        ("lb_mm", fmt_value(lb_mm, 6)),
+        ("ub_mm", fmt_value(ub_mm, 6)),
+        ("ts_per_w", fmt_sig(ts_per_w)),
+    ];
+    let new = replace_map_values(l, &pairs).ok_or_else(bad)?;
+    lines[i] = new;
+    Ok(join(lines, text))
+}
+
+/// Adds a robot thermal term: to the block list `thermal.terms` when the
+/// file has a `thermal:` section, else a new section at the end of the file
+/// with `time_constant_min` (which steady-state rows cannot identify; the
+/// caller says where it comes from in `comment`).
+pub fn add_thermal_term(
+    text: &str,
+    file: &str,
+    term: &ThermalTermText,
+    time_constant_min: f64,
+    comment: &str,
+) -> Result<String> {
+    let mut lines: Vec<String> = text.lines().map(str::to_string).collect();
+    let item = term_flow(term);
+    match top_level_line(&lines, "thermal") {
+        Some(t) => {
+            let end = block_end(&lines, t, lines.len());
+            let k = (t + 1..end)
+                .find(|&i| lines[i].trim_start().starts_with("terms:"))
+                .ok_or_else(|| edit_err(file, "`thermal` has no `terms:` key"))?;
+            if lines[k].contains('[') {
+                return Err(edit_err(
+                    file,
+                    "`thermal.terms` is a flow list; write it as a block list to add a term",
+                ));
+            }
+            let base = indent_of(&lines[k]);
+            // Items: deeper lines, or `- ` lines at the key's indentation.
+            let mut last = k;
+            let mut item_indent = base + 2;
+            for (i, l) in lines.iter().enumerate().skip(k + 1) {
+                if !is_content(l) {
+                    continue;
+                }
+                let ind = indent_of(l);
+                if ind > base || (ind == base && l.trim_start().starts_with("- ")) {
+                    if l.trim_start().starts_with("- ") {
+                        item_indent = ind;
+                    }
+                    last = i;
+                } else {
+                    break;
+                }
+            }
+            lines.insert(last + 1, format!("{}- {item}", " ".repeat(item_indent)));
+        }
+        None => {
+            while lines.last().is_some_and(|l| l.trim().is_empty()) {
+                lines.pop();
+            }
+            if !comment.is_empty() {
+                lines.push(format!("# {comment}"));
+            }
+            lines.push("thermal:".into());
+            lines.push(format!(
+                "  time_constant_min: {}",
+                fmt_value(time_constant_min, 3)
+            ));
+            lines.push("  terms:".into());
+            lines.push(format!("    - {item}"));
+        }
+    }
+    let mut s = lines.join("\n");
+    s.push('\n');
+    Ok(s)
+}
+
+/// Sets `scale_ppm_per_kw` of the one-line flow map `thermal.axes.<axis>`.
+pub fn set_axis_scale(text: &str, file: &str, axis: &str, scale_ppm_per_kw: f64) -> Result<String> {
+    let mut lines: Vec<String> = text.lines().map(str::to_string).collect();
+    let path = format!("thermal.axes.{axis}");
+    let bad = || {
+        edit_err(
+            file,
+            format!("`{path}` is not a one-line flow map with scale_ppm_per_kw"),
+        )
+    };
+    let (line, _) = crate::machine::yaml::locate(text, &path).ok_or_else(bad)?;
+    let i = line.checked_sub(1).ok_or_else(bad)?;
+    let l = lines.get(i).ok_or_else(bad)?;
+    if !(l.trim_start().starts_with(&format!("{axis}:")) && l.contains("scale_ppm_per_kw:")) {
+        return Err(bad());
+    }
+    let new = replace_map_values(l, &[("scale_ppm_per_kw", fmt_value(scale_ppm_per_kw, 6))])
+        .ok_or_else(bad)?;
+    lines[i] = new;
+    Ok(join(lines, text))
+}
+
+/// Sets `thermal.spindle.growth_um_per_kw` of a machine-tool file: in the
+/// one-line flow map `spindle: { … }` when present, else adds `spindle:`
+/// (to the `thermal:` section, or a new section at the end) with
+/// `idle_w_per_rpm: 0.0` and `time_constant_min` (not identified from
+/// steady-state rows; the caller explains it in `comment`).
+pub fn set_spindle_growth(
+    text: &str,
+    file: &str,
+    growth_um_per_kw: f64,
+    time_constant_min: f64,
+    comment: &str,
+) -> Result<String> {
+    let mut lines: Vec<String> = text.lines().map(str::to_string).collect();
+    let g = fmt_value(growth_um_per_kw, 6);
+    let new_map = format!(
+        "{{ idle_w_per_rpm: 0.0, growth_um_per_kw: {g}, time_constant_min: {} }}",
+        fmt_value(time_constant_min, 3)
+    );
+    match top_level_line(&lines, "thermal") {
+        Some(t) => {
+            let end = block_end(&lines, t, lines.len());
+            match (t + 1..end).find(|&i| lines[i].trim_start().starts_with("spindle:")) {
+                Some(k) => {
+                    let l = &lines[k];
+                    if !(l.contains('{') && l.contains("growth_um_per_kw:")) {
+                        return Err(edit_err(
+                            file,
+                            "`thermal.spindle` is not a one-line flow map with growth_um_per_kw",
+                        ));
+                    }
+                    let new =
+                        replace_map_values(l, &[("growth_um_per_kw", g)]).ok_or_else(|| {
+                            edit_err(file, "cannot edit `thermal.spindle.growth_um_per_kw`")
+                        })?;
+                    lines[k] = new;
+                }
+                None => {
+                    let ind = (t + 1..end)
+                        .find(|&i| is_content(&lines[i]))
+                        .map_or(2, |i| indent_of(&lines[i]));
+                    let mut at = t + 1;
+                    if !comment.is_empty() {
+                        lines.insert(at, format!("{}# {comment}", " ".repeat(ind)));
+                        at += 1;
+                    }
+                    lines.insert(at, format!("{}spindle: {new_map}", " ".repeat(ind)));
+                }
+            }
+        }
+        None => {
+            while lines.last().is_some_and(|l| l.trim().is_empty()) {
+                lines.pop();
+            }
+            if !comment.is_empty() {
+                lines.push(format!("# {comment}"));
+            }
+            lines.push("thermal:".into());
+            lines.push(format!("  spindle: {new_map}"));
+        }
+    }
+    let mut s = lines.join("\n");
+    s.push('\n');
+    Ok(s)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -424,6 +649,69 @@ mod tests {
         assert_eq!(fmt_value(2.0, 3), "2.0");
         assert_eq!(fmt_value(-0.00001, 3), "0.0");
         assert_eq!(fmt_value(1.23456, 3), "1.235");
+    }
+
+    #[test]
+    fn thermal_terms_set_and_added() {
+        let text = "kind: robot\nthermal:\n  time_constant_min: 30  # c\n  terms:\n    - { parameter: a2, joint: 1, lb_mm: 0.10, ub_mm: 0.10, ts_per_w: 0.015 }  # J1\n    - { parameter: a2, joint: 2, lb_mm: 0.12, ub_mm: 0.12, ts_per_w: 0.020 }\nmodal: []\n";
+        let t = set_thermal_term(text, "f", 1, 0.25, 0.2, 0.0123456789).unwrap();
+        assert_eq!(
+            t.lines().nth(5),
+            Some("    - { parameter: a2, joint: 2, lb_mm: 0.25, ub_mm: 0.2, ts_per_w: 0.0123457 }")
+        );
+        assert!(t.contains("ts_per_w: 0.015 }  # J1"));
+        assert!(set_thermal_term(text, "f", 2, 0.0, 0.0, 0.0).is_err());
+        let term = ThermalTermText {
+            parameter: "a3".into(),
+            joint: 2,
+            lb_mm: 300.0,
+            ub_mm: 300.0,
+            ts_per_w: 1e-6,
+        };
+        let t = add_thermal_term(text, "f", &term, 30.0, "").unwrap();
+        assert_eq!(
+            t.lines().nth(6),
+            Some(
+                "    - { parameter: a3, joint: 2, lb_mm: 300.0, ub_mm: 300.0, ts_per_w: 0.000001 }"
+            )
+        );
+        assert_eq!(t.lines().nth(7), Some("modal: []"));
+        let t = add_thermal_term("kind: robot\n", "f", &term, 30.0, "assumed").unwrap();
+        assert_eq!(
+            t,
+            "kind: robot\n# assumed\nthermal:\n  time_constant_min: 30.0\n  terms:\n    - { parameter: a3, joint: 2, lb_mm: 300.0, ub_mm: 300.0, ts_per_w: 0.000001 }\n"
+        );
+    }
+
+    #[test]
+    fn spindle_growth_set_and_added() {
+        let text = "kind: machine_tool\nthermal:\n  spindle: { idle_w_per_rpm: 0.2, growth_um_per_kw: 3.0, time_constant_min: 25.0 }\n";
+        let t = set_spindle_growth(text, "f", 7.25, 30.0, "").unwrap();
+        assert_eq!(
+            t.lines().nth(2),
+            Some(
+                "  spindle: { idle_w_per_rpm: 0.2, growth_um_per_kw: 7.25, time_constant_min: 25.0 }"
+            )
+        );
+        let t = set_spindle_growth("kind: machine_tool\n", "f", 5.0, 30.0, "").unwrap();
+        assert_eq!(
+            t,
+            "kind: machine_tool\nthermal:\n  spindle: { idle_w_per_rpm: 0.0, growth_um_per_kw: 5.0, time_constant_min: 30.0 }\n"
+        );
+        let t = set_spindle_growth(
+            "kind: machine_tool\nthermal:\n  axes:\n    X: { scale_ppm_per_kw: 1.0, time_constant_min: 9.0, friction_n: 1.0 }\n",
+            "f",
+            5.0,
+            30.0,
+            "",
+        )
+        .unwrap();
+        assert_eq!(
+            t.lines().nth(2),
+            Some(
+                "  spindle: { idle_w_per_rpm: 0.0, growth_um_per_kw: 5.0, time_constant_min: 30.0 }"
+            )
+        );
     }
 
     #[test]

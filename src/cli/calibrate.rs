@@ -12,6 +12,7 @@ use crate::calibrate::kinematics::calibrate_kinematics;
 use crate::calibrate::observations::{load_observations, load_poses, write_observations};
 use crate::calibrate::simulate::{Noise, simulate};
 use crate::calibrate::stiffness::{Options, calibrate_stiffness};
+use crate::calibrate::thermal::calibrate_thermal;
 use crate::error::{Error, Result};
 use crate::machine::Machine;
 
@@ -50,6 +51,8 @@ pub enum CalibrationKind {
     Kinematics,
     /// Machine-tool component error tables and squareness.
     Geometry,
+    /// Robot Paper B thermal terms (lb, ub, ts) from rows at several joint powers.
+    Thermal,
 }
 
 /// `postproc calibrate`.
@@ -142,6 +145,7 @@ pub fn run_calibrate(a: &CalibrateArgs) -> Result<i32> {
         CalibrationKind::Stiffness => calibrate_stiffness(&text, &file, &obs, &obs_file, &opts)?,
         CalibrationKind::Kinematics => calibrate_kinematics(&text, &file, &obs, &obs_file, &opts)?,
         CalibrationKind::Geometry => calibrate_geometry(&text, &file, &obs, &obs_file, &opts)?,
+        CalibrationKind::Thermal => calibrate_thermal(&text, &file, &obs, &obs_file, &opts)?,
     };
     let yaml = cal.yaml.clone();
     write_atomically(&a.output, |w| {

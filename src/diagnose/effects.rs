@@ -168,11 +168,11 @@ pub const FAMILIES: &[(&str, &str)] = &[
     ("machine tool", "tool_length — tool length error, µm"),
 ];
 
-const NOT_THERMAL: &str = "the machine-file format has no thermal section yet: the fitted growth is reported, not written";
+const NOT_THERMAL_TIME: &str = "the thermal section is driven by power (rows at the steady state of spindle_w / pX_w); a growth with time alone has no key: measure the spindle power, or calibrate the time constant; not written";
 const NOT_FRAME: &str = "observations are in the robot base frame: a frame offset is a registration error of the measurement set-up, not a machine parameter; not written";
 const NOT_ROBOT_BACKLASH: &str = "the robot file has no joint backlash key; not written";
 const NOT_TOOL_LENGTH: &str = "the tool table holds the length the controller compensates, so editing it changes nothing in the model: re-measure the tool (its offset) instead; not written";
-const NOT_STIFFNESS: &str = "the machine-tool file has no axis stiffness key yet; not written";
+const NOT_STIFFNESS: &str = "the file has no `stiffness:` section (a new one would need all six directions and load signs, which one compliance does not give); not written";
 
 /// Builds the candidate library for a machine and the columns its rows carry.
 pub fn library(machine: &Machine, rows: &[Observation]) -> Vec<Effect> {
@@ -280,7 +280,7 @@ fn robot_library(rows: &[Observation]) -> Vec<Effect> {
                 if !has_power(p) {
                     continue;
                 }
-                let mut e = eff(
+                let e = eff(
                     format!("thermal_joint{}_{s}_p{}", i + 1, p + 1),
                     format!(
                         "thermal growth of DH {s}{} with the power of joint {} (Paper B, linearised)",
@@ -294,7 +294,6 @@ fn robot_library(rows: &[Observation]) -> Vec<Effect> {
                         power: p,
                     },
                 );
-                e.not_writable = Some(NOT_THERMAL.into());
                 out.push(e);
             }
         }
@@ -428,7 +427,9 @@ fn tool_library(t: &crate::machine::tool::MachineTool, rows: &[Observation]) -> 
                 vec![format!("c{a} [µm/N]")],
                 Action::AxisStiffness(ax.slot),
             );
-            e.not_writable = Some(NOT_STIFFNESS.into());
+            if t.stiffness().is_none() {
+                e.not_writable = Some(NOT_STIFFNESS.into());
+            }
             out.push(e);
         }
     }
@@ -453,18 +454,16 @@ fn tool_library(t: &crate::machine::tool::MachineTool, rows: &[Observation]) -> 
             vec!["g [µm/h]".into()],
             Action::SpindleTime,
         );
-        e.not_writable = Some(NOT_THERMAL.into());
+        e.not_writable = Some(NOT_THERMAL_TIME.into());
         out.push(e);
     }
     if tool_rows().any(|(_, tp)| tp.spindle_w.is_some()) {
-        let mut e = eff(
+        out.push(eff(
             "spindle_growth_power".into(),
-            "spindle thermal growth along the tool with spindle power (linearised)".into(),
+            "spindle thermal growth along the tool with spindle power (steady state)".into(),
             vec!["g [µm/kW]".into()],
             Action::SpindlePower,
-        );
-        e.not_writable = Some(NOT_THERMAL.into());
-        out.push(e);
+        ));
     }
     let mut e = eff(
         "tool_length".into(),
@@ -848,6 +847,25 @@ fn add_to_table(
     Ok(())
 }
 
+/// Adds the compliance `c` µm/N to every stiffness number (N/µm) in `v`.
+fn add_compliance(v: &mut Value, c: f64) -> Result<()> {
+    match v {
+        Value::Sequence(items) => items.iter_mut().try_for_each(|x| add_compliance(x, c)),
+        other => {
+            let k = as_f64(other)
+                .ok_or_else(|| Error::Usage("a stiffness value is not a number".into()))?;
+            let new = 1.0 / (1.0 / k + c);
+            if !(new.is_finite() && new > 0.0) {
+                return Err(Error::Usage(format!(
+                    "compliance {c} µm/N makes the stiffness {k} N/µm non-positive"
+                )));
+            }
+            *other = Value::from(round9(new));
+            Ok(())
+        }
+    }
+}
+
 /// Rounds to 9 significant decimals so written files stay readable.
 pub fn round9(x: f64) -> f64 {
     (x * 1e9).round() / 1e9
@@ -902,6 +920,26 @@ pub fn apply_to_yaml(doc: &mut Value, action: &Action, value: f64, m: &Machine) 
         Action::AxisBacklash { axis, key: k } => {
             let (lo, hi, rot) = travel(*axis);
             add_to_table(axis_map(doc, *axis)?, k, (lo, hi), rot, |_| (0.0, value))?;
+        }
+        Action::AxisStiffness(slot) => {
+            // A compliance c µm/N added to every value of the direction's
+            // map, both load signs: k' = 1/(1/k + c) at every grid node.
+            let dir = ["x", "y", "z"]
+                .get(*slot)
+                .ok_or_else(|| Error::Usage("stiffness of a rotary axis".into()))?;
+            let k = doc
+                .as_mapping_mut()
+                .and_then(|r| r.get_mut("stiffness"))
+                .and_then(Value::as_mapping_mut)
+                .and_then(|st| st.get_mut("k_n_per_um"))
+                .and_then(Value::as_mapping_mut)
+                .ok_or_else(|| Error::Usage("the file has no `stiffness.k_n_per_um`".into()))?;
+            for sign in ["pos", "neg"] {
+                let v = k
+                    .get_mut(format!("{dir}_{sign}").as_str())
+                    .ok_or_else(|| Error::Usage(format!("no stiffness.k_n_per_um.{dir}_{sign}")))?;
+                add_compliance(v, value)?;
+            }
         }
         _ => {
             return Err(Error::Usage(

@@ -3,10 +3,28 @@
 //! Effects the machine-file format has a key for are added to the values of
 //! that key: robot actual DH (`actual`, created from `nominal` when absent),
 //! joint stiffness (`k_nm_per_rad`), TCP (`flange_to_tool`), payload
-//! (`tool_load`); machine-tool location errors, component tables
-//! (linear/quadratic terms; backlash = offset of the reverse column) and the
-//! tool table. The others (thermal growth, robot joint backlash, axis
-//! stiffness, measurement-frame registration) are listed as not written.
+//! (`tool_load`), Paper B thermal growth (`thermal.terms`, see below);
+//! machine-tool location errors, component tables (linear/quadratic terms;
+//! backlash = offset of the reverse column), axis compliance (every value
+//! of the direction's `stiffness.k_n_per_um` map, both load signs,
+//! `k' = 1/(1/k + c)`; only when the file has that section) and spindle
+//! thermal growth with power (`thermal.spindle.growth_um_per_kw`). The
+//! others (spindle growth with time alone, robot joint backlash, axis
+//! stiffness without a `stiffness:` section, measurement-frame
+//! registration) are listed as not written.
+//!
+//! Thermal growth is written as text (comments kept), adding the section or
+//! the term when absent:
+//! - robot: the linearised growth `g` µm/W of a DH length with a joint's
+//!   power becomes the Paper B term `ub − lb·e^(−ts·P)` with
+//!   `ts` = [`LINEAR_TS_PER_W`] and `lb = ub = g·10⁻³/ts` mm: its slope at
+//!   0 W is `g` and it stays within `ts·P/2` (0.05 % at 1 kW) of the straight
+//!   line; `calibrate thermal` refines lb, ub and ts from rows at several
+//!   power levels. A new section gets `time_constant_min: 30` (assumed:
+//!   steady-state rows carry no time information);
+//! - machine tool: the fitted `g` µm/kW is added to
+//!   `thermal.spindle.growth_um_per_kw` (a new `spindle:` gets
+//!   `idle_w_per_rpm: 0` and an assumed `time_constant_min: 30`).
 //!
 //! The file's text is edited in place: every value that changed is
 //! rewritten on its own line (scalars and one-line flow sequences/mappings),
@@ -19,8 +37,71 @@ use serde_yaml::{Mapping, Value};
 
 use super::Found;
 use super::effects::{Action, DhField, apply_to_yaml, round9};
+use crate::calibrate::yaml_edit::{ThermalTermText, add_thermal_term, set_spindle_growth};
 use crate::error::{Error, Result};
 use crate::machine::Machine;
+
+/// `ts_per_w` of a Paper B term written for a linear growth, 1/W.
+pub const LINEAR_TS_PER_W: f64 = 1e-6;
+
+/// Time constant written into a new thermal section, min (assumed).
+pub const ASSUMED_TIME_CONSTANT_MIN: f64 = 30.0;
+
+const ASSUMED_TAU: &str = "postproc diagnose: time_constant_min is ASSUMED (rows at the thermal steady state carry no time information)";
+
+/// Applies a thermal effect to the file text.
+fn thermal_edit(text: &str, action: &Action, v0: f64, m: &Machine) -> Result<String> {
+    match (action, m) {
+        (
+            Action::Thermal {
+                joint,
+                field,
+                power,
+            },
+            Machine::Robot(_),
+        ) => {
+            let l = match field {
+                DhField::A => 'a',
+                _ => 'd',
+            };
+            let amp = round9(v0 * 1e-3 / LINEAR_TS_PER_W);
+            let term = ThermalTermText {
+                parameter: format!("{l}{}", joint + 1),
+                joint: power + 1,
+                lb_mm: amp,
+                ub_mm: amp,
+                ts_per_w: LINEAR_TS_PER_W,
+            };
+            add_thermal_term(
+                text,
+                "(machine file)",
+                &term,
+                ASSUMED_TIME_CONSTANT_MIN,
+                ASSUMED_TAU,
+            )
+        }
+        (Action::SpindlePower, Machine::Tool(t)) => {
+            let old = t
+                .thermal()
+                .and_then(|th| th.spindle)
+                .map_or(0.0, |s| s.gain_per_kw);
+            set_spindle_growth(
+                text,
+                "(machine file)",
+                round9(old + v0),
+                ASSUMED_TIME_CONSTANT_MIN,
+                ASSUMED_TAU,
+            )
+        }
+        _ => Err(Error::Usage(
+            "this effect is not written into the thermal section".into(),
+        )),
+    }
+}
+
+fn is_thermal(action: &Action) -> bool {
+    matches!(action, Action::Thermal { .. } | Action::SpindlePower)
+}
 
 /// The new machine file and what went into it.
 #[derive(Debug, Clone)]
@@ -150,6 +231,11 @@ pub fn write_model(machine: &Machine, machine_text: &str, found: &[Found]) -> Re
             continue;
         }
         let values: Vec<f64> = f.params.iter().map(|p| p.value).collect();
+        if is_thermal(&f.effect.action) {
+            // Written as text below.
+            written.push(f.effect.name.clone());
+            continue;
+        }
         match machine {
             Machine::Robot(_) => robot_edit(&mut doc, &f.effect.action, &values, machine)?,
             Machine::Tool(_) => apply_to_yaml(
@@ -213,6 +299,12 @@ pub fn write_model(machine: &Machine, machine_text: &str, found: &[Found]) -> Re
             "# (rewritten by postproc diagnose: comments inside the document were not kept)\n",
         );
         text.push_str(&body);
+    }
+    for f in found {
+        if f.effect.not_writable.is_none() && is_thermal(&f.effect.action) {
+            let v0 = f.params.first().map_or(0.0, |p| p.value);
+            text = thermal_edit(&text, &f.effect.action, v0, machine)?;
+        }
     }
     // The written file must load.
     Machine::from_yaml_str(&text, "(written model)")?;
@@ -415,6 +507,80 @@ mod tests {
             w.text
                 .contains("k_nm_per_rad: [270990.0, 430040.0, 123529.721,")
         );
+    }
+
+    fn effect(m: &Machine, name: &str, action: Action, value: f64) -> Found {
+        let mut f = found(
+            m,
+            if matches!(m, Machine::Robot(_)) {
+                "joint3_compliance"
+            } else {
+                "EC0Y"
+            },
+            &[value],
+        );
+        f.effect.name = name.into();
+        f.effect.action = action;
+        f
+    }
+
+    /// Robot thermal growth a3 ← P2, 0.3 µm/W: the Paper B term with
+    /// ts = 1e-6/W and lb = ub = 0.3e-3/1e-6 = 300 mm. At P2 = 100 W it grows
+    /// a3 by 300·(1 − e^(−1e-4)) = 300·(1e-4 − 5e-9) = 0.0299985 mm (≈ 0.3 ×
+    /// 100 µm). Machine-tool spindle growth +8 µm/kW: 3.0 → 11.0 in the
+    /// one-line `spindle:` map.
+    #[test]
+    fn thermal_written_into_the_section() {
+        let path = concat!(env!("CARGO_MANIFEST_DIR"), "/machines/abb-irb1600.yaml");
+        let text = std::fs::read_to_string(path).unwrap();
+        let m = Machine::from_yaml_str(&text, "m").unwrap();
+        let a = Action::Thermal {
+            joint: 2,
+            field: DhField::A,
+            power: 1,
+        };
+        let w = write_model(&m, &text, &[effect(&m, "thermal_joint3_a_p2", a, 0.3)]).unwrap();
+        assert!(w.in_place);
+        assert_eq!(w.written, vec!["thermal_joint3_a_p2"]);
+        assert!(
+            w.text.contains(
+                "    - { parameter: a3, joint: 2, lb_mm: 300.0, ub_mm: 300.0, ts_per_w: 0.000001 }\n"
+            ),
+            "{}",
+            w.text
+        );
+        let Machine::Robot(r) = Machine::from_yaml_str(&w.text, "w").unwrap() else {
+            panic!("robot")
+        };
+        let g = r.thermal_growth_mm(&[0.0, 100.0, 0.0, 0.0, 0.0, 0.0]);
+        let Machine::Robot(r0) = &m else {
+            panic!("robot")
+        };
+        let g0 = r0.thermal_growth_mm(&[0.0, 100.0, 0.0, 0.0, 0.0, 0.0]);
+        assert_abs_diff_eq!(g[2][0] - g0[2][0], 0.0299985, epsilon = 1e-9);
+
+        let path = concat!(env!("CARGO_MANIFEST_DIR"), "/machines/afm-r1000.yaml");
+        let text = std::fs::read_to_string(path).unwrap();
+        let m = Machine::from_yaml_str(&text, "m").unwrap();
+        let w = write_model(
+            &m,
+            &text,
+            &[effect(
+                &m,
+                "spindle_growth_power",
+                Action::SpindlePower,
+                8.0,
+            )],
+        )
+        .unwrap();
+        assert!(w.text.contains(
+            "  spindle: { idle_w_per_rpm: 0.2, growth_um_per_kw: 11.0, time_constant_min: 25.0 }"
+        ));
+        let Machine::Tool(t) = Machine::from_yaml_str(&w.text, "w").unwrap() else {
+            panic!("tool")
+        };
+        let gain = t.thermal().and_then(|th| th.spindle).map(|s| s.gain_per_kw);
+        assert_eq!(gain, Some(11.0));
     }
 
     /// Squareness EC0Y 35 + 40 = 75 µrad; robot-only effects are refused

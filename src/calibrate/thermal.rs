@@ -1,0 +1,632 @@
+//! Thermal calibration of a robot: the Paper B terms of the machine file's
+//! `thermal:` section, `Δp = ub − lb · exp(−ts · P)` (mm) per DH length and
+//! driving joint power, identified by Levenberg–Marquardt from rows measured
+//! at the thermal steady state of several mean joint powers (`p1_w…p6_w`).
+//!
+//! Only the terms the file declares are fitted (the coupling is a modelling
+//! choice, Paper B Table 2); each has three unknowns `lb` (mm), `ub` (mm) and
+//! `ts` (1/W, handled internally per kW so the unknowns have comparable
+//! sizes). The forward model is [`forward::predict_robot_with_growth`]: the
+//! actual DH lengths grown by the trial terms, with gravity sag and the row
+//! loads as in every other calibration. Rows without any power column keep
+//! the file's lengths (as in [`forward::predict`]) and only anchor the cold
+//! geometry.
+//!
+//! Identifiability: a term whose joint power takes a single value in the
+//! fitted rows is fixed (all three unknowns) and listed; the remaining
+//! columns go through the rank-revealing analysis of [`solve_linear`] at the
+//! start point (e.g. two terms on the same length share the constant `ub`
+//! direction, so one `ub` is fixed; with fewer than three power levels `ts`
+//! cannot be told from `lb`). The time constant is not identified: rows at
+//! the steady state carry no time information.
+//!
+//! Machine tools ([`calibrate_tool_thermal`]): the steady-state gains of the
+//! file's `thermal:` section from rows with powers — the spindle growth
+//! `growth_um_per_kw` from `spindle_w` (added to the file when absent) and
+//! the positioning scale `scale_ppm_per_kw` of each axis with a
+//! `thermal.axes` entry from its `pX_w`. The forward model is linear in
+//! them, so it is one linear least-squares step on the residuals of the
+//! file's model ([`solve_linear`], same identifiability analysis).
+
+use nalgebra::DVector;
+
+use crate::calibrate::lsq::{
+    LmOptions, LsqOptions, levenberg_marquardt, numeric_jacobian, solve_linear,
+};
+use crate::error::{Error, Result};
+use crate::machine::Machine;
+use crate::machine::robot::thermal::DhLength;
+use crate::machine::robot::{DhGrowth, Robot, ThermalTerm};
+
+use super::forward::{self, check_kind};
+use super::observations::{Observations, Pose, holdout_split};
+use super::report::{CONDITION_LIMIT, Calibration, Estimate, Validation};
+use super::stiffness::Options;
+use super::yaml_edit::set_thermal_term;
+
+/// Internal unit of `ts`: per kW (1/W × 1000).
+const TS_SCALE: f64 = 1000.0;
+
+/// Relative rank threshold (unit-norm columns): an unknown whose effect,
+/// beyond what the others explain, is below 10⁻³ of the strongest one is
+/// practically unidentifiable and fixed (as in the kinematic calibration).
+pub const THERMAL_RANK_RTOL: f64 = 1e-3;
+
+/// Iteration limit of Levenberg–Marquardt.
+const MAX_ITERATIONS: usize = 60;
+
+/// Forward-difference step (mm for lb/ub, per kW for ts).
+const FD_STEP: f64 = 1e-6;
+
+/// Largest accepted `ts`, 1/W (e^−(ts·1 W) would already be 0 at 1 W).
+const TS_MAX: f64 = 10.0;
+
+/// The joint powers of a robot row, W, or `None` when it gives none.
+pub fn row_powers(row: &crate::calibrate::observations::Observation) -> Option<[f64; 6]> {
+    match &row.pose {
+        Pose::Robot(rp) if rp.p_w.iter().any(Option::is_some) => {
+            Some(rp.p_w.map(|p| p.unwrap_or(0.0)))
+        }
+        _ => None,
+    }
+}
+
+/// Sum of the growth of `terms` at the powers `p_w`, mm.
+pub fn growth(terms: &[ThermalTerm], p_w: &[f64; 6]) -> DhGrowth {
+    let mut g = [[0.0; 2]; 6];
+    for t in terms {
+        let p = p_w.get(t.joint).copied().unwrap_or(0.0);
+        if let Some(row) = g.get_mut(t.row) {
+            row[t.length as usize] += t.growth_mm(p);
+        }
+    }
+    g
+}
+
+fn term_name(t: &ThermalTerm) -> String {
+    let l = match t.length {
+        DhLength::A => 'a',
+        DhLength::D => 'd',
+    };
+    format!("{l}{}←P{}", t.row + 1, t.joint + 1)
+}
+
+/// The terms for the correction vector `x` (3 per term: Δlb mm, Δub mm,
+/// Δts per kW).
+fn terms_with(base: &[ThermalTerm], x: &[f64]) -> Vec<ThermalTerm> {
+    base.iter()
+        .enumerate()
+        .map(|(k, t)| {
+            let v = |o: usize| x.get(3 * k + o).copied().unwrap_or(0.0);
+            ThermalTerm {
+                lb_mm: t.lb_mm + v(0),
+                ub_mm: t.ub_mm + v(1),
+                ts_per_w: t.ts_per_w + v(2) / TS_SCALE,
+                ..*t
+            }
+        })
+        .collect()
+}
+
+fn residuals(
+    robot: &Robot,
+    base: &[ThermalTerm],
+    obs: &Observations,
+    rows: &[usize],
+    x: &[f64],
+    out: &mut DVector<f64>,
+    file: &str,
+) {
+    let terms = terms_with(base, x);
+    for (k, &i) in rows.iter().enumerate() {
+        let Some(row) = obs.rows.get(i) else { continue };
+        let g = row_powers(row).map_or([[0.0; 2]; 6], |p| growth(&terms, &p));
+        match forward::predict_robot_with_growth(robot, row, &g, file) {
+            Ok(p) => {
+                let d = row.measured_mm - p.measured(obs.measured);
+                for r in 0..3 {
+                    out[3 * k + r] = d[r];
+                }
+            }
+            Err(_) => {
+                for r in 0..3 {
+                    out[3 * k + r] = f64::NAN;
+                }
+            }
+        }
+    }
+}
+
+fn norms(
+    robot: &Robot,
+    terms: &[ThermalTerm],
+    obs: &Observations,
+    rows: &[usize],
+    file: &str,
+) -> Result<Vec<f64>> {
+    let mut v = Vec::with_capacity(rows.len());
+    for &i in rows {
+        if let Some(row) = obs.rows.get(i) {
+            let g = row_powers(row).map_or([[0.0; 2]; 6], |p| growth(terms, &p));
+            let p = forward::predict_robot_with_growth(robot, row, &g, file)?;
+            v.push((row.measured_mm - p.measured(obs.measured)).norm());
+        }
+    }
+    Ok(v)
+}
+
+/// Identifies the Paper B terms of the robot file `text` from `obs`.
+pub fn calibrate_thermal(
+    text: &str,
+    machine_file: &str,
+    obs: &Observations,
+    obs_file: &str,
+    opts: &Options,
+) -> Result<Calibration> {
+    let machine = Machine::from_yaml_str(text, machine_file)?;
+    check_kind(&machine, obs, obs_file)?;
+    let robot = match &machine {
+        Machine::Robot(r) => r,
+        Machine::Tool(_) => {
+            return calibrate_tool_thermal(text, machine_file, &machine, obs, obs_file, opts);
+        }
+    };
+    let base: Vec<ThermalTerm> = robot.thermal().map(|t| t.terms.clone()).unwrap_or_default();
+    if base.is_empty() {
+        return Err(Error::Usage(format!(
+            "{machine_file}: no thermal terms to identify; add a `thermal:` section with \
+             `time_constant_min` and the `terms` (DH length ← joint power, Paper B Table 2: \
+             a2 ← P1, P2; d4 ← P1, P2, P3; a3 ← P2, P3) with start values"
+        )));
+    }
+    if !obs.rows.iter().any(|r| row_powers(r).is_some()) {
+        return Err(Error::Usage(format!(
+            "{obs_file}: no row gives joint powers (p1_w…p6_w); thermal calibration needs \
+             rows measured at the steady state of several power levels"
+        )));
+    }
+    let n = 3 * base.len();
+    let (fit, hold) = holdout_split(obs.rows.len(), opts.holdout, opts.seed);
+    let m = 3 * fit.len();
+    if m < 2 * n {
+        return Err(Error::Usage(format!(
+            "{obs_file}: {} rows left for the fit ({m} equations) for {n} parameters; \
+             thermal calibration needs at least {} rows, better several times more",
+            fit.len(),
+            (2 * n).div_ceil(3)
+        )));
+    }
+    // Terms whose power never varies in the fitted rows are fixed.
+    let mut notes = Vec::new();
+    let mut varies = vec![true; base.len()];
+    for (k, t) in base.iter().enumerate() {
+        let ps: Vec<f64> = fit
+            .iter()
+            .filter_map(|&i| obs.rows.get(i).and_then(row_powers))
+            .filter_map(|p| p.get(t.joint).copied())
+            .collect();
+        let lo = ps.iter().copied().fold(f64::INFINITY, f64::min);
+        let hi = ps.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        let spread = hi - lo;
+        if spread.is_nan() || spread <= 1e-9 {
+            varies[k] = false;
+            notes.push(format!(
+                "term {}: the power of joint {} never varies in the fitted rows; \
+                 its lb, ub and ts are fixed at the file's values",
+                term_name(t),
+                t.joint + 1
+            ));
+        }
+    }
+    let candidates: Vec<usize> = (0..n).filter(|&k| varies[k / 3]).collect();
+    let zero = DVector::zeros(n);
+    let mut r0 = DVector::zeros(m);
+    residuals(robot, &base, obs, &fit, zero.as_slice(), &mut r0, obs_file);
+    if r0.iter().any(|v| !v.is_finite()) {
+        return Err(Error::Usage(format!(
+            "{obs_file}: the model cannot be evaluated for some rows"
+        )));
+    }
+    let lm_opts = LmOptions {
+        max_iterations: MAX_ITERATIONS,
+        lsq: LsqOptions {
+            rank_rtol: THERMAL_RANK_RTOL,
+            scale_columns: true,
+        },
+        ..LmOptions::default()
+    };
+    let expand_from = |sel: &[usize], xr: &[f64]| -> Vec<f64> {
+        let mut full = vec![0.0; n];
+        for (a, &k) in sel.iter().enumerate() {
+            if let (Some(f), Some(v)) = (full.get_mut(k), xr.get(a)) {
+                *f = *v;
+            }
+        }
+        full
+    };
+    // Identifiability at the start point, over the varying terms.
+    let free: Vec<usize> = if candidates.is_empty() {
+        Vec::new()
+    } else {
+        let x0 = DVector::zeros(candidates.len());
+        let j0 = numeric_jacobian(
+            |x, r| {
+                let full = expand_from(&candidates, x.as_slice());
+                residuals(robot, &base, obs, &fit, &full, r, obs_file);
+            },
+            &x0,
+            m,
+            lm_opts.fd_relative_step,
+        );
+        let pre = solve_linear(&j0, &r0, &lm_opts.lsq)
+            .map_err(|e| Error::Usage(format!("{obs_file}: {e}")))?;
+        pre.identifiability
+            .identifiable
+            .iter()
+            .filter_map(|&a| candidates.get(a).copied())
+            .collect()
+    };
+    if free.is_empty() {
+        return Err(Error::Usage(format!(
+            "{obs_file}: no thermal parameter can be identified from these rows: \
+             measure at several power levels of the joints the terms name"
+        )));
+    }
+    let fit_result = levenberg_marquardt(
+        |xr, r, jac| {
+            let full = expand_from(&free, xr.as_slice());
+            residuals(robot, &base, obs, &fit, &full, r, obs_file);
+            let Some(jac) = jac else { return false };
+            // Forward differences (half the cost of central ones); the
+            // growth is smooth on the scale of FD_STEP (1e-6 mm, 1e-6/kW).
+            let mut xp = full.clone();
+            let mut rp = DVector::zeros(m);
+            for (a, &k) in free.iter().enumerate() {
+                if let Some(v) = xp.get_mut(k) {
+                    *v += FD_STEP;
+                }
+                residuals(robot, &base, obs, &fit, &xp, &mut rp, obs_file);
+                if let Some(v) = xp.get_mut(k) {
+                    *v -= FD_STEP;
+                }
+                jac.set_column(a, &((&rp - &*r) / FD_STEP));
+            }
+            true
+        },
+        &DVector::zeros(free.len()),
+        m,
+        &lm_opts,
+    )
+    .map_err(|e| Error::Usage(format!("{obs_file}: {e}")))?;
+    let sol = &fit_result.solution;
+    if !fit_result.termination.converged() {
+        tracing::warn!(
+            "Levenberg–Marquardt stopped after {} iterations without converging",
+            fit_result.iterations
+        );
+    }
+    let id = &sol.identifiability;
+    if id.condition_number_identified > CONDITION_LIMIT {
+        return Err(Error::Usage(format!(
+            "{obs_file}: badly conditioned data set: condition number {:.3e} > {:.0e} \
+             (O1 = {:.3e}); the power levels do not excite the thermal terms independently. \
+             Measure at more power levels, varying the joints' powers independently",
+            id.condition_number_identified, CONDITION_LIMIT, id.observability_o1
+        )));
+    }
+    let full = expand_from(&free, sol.params.as_slice());
+    let terms = terms_with(&base, &full);
+    for t in &terms {
+        if !(t.ts_per_w.is_finite() && (0.0..=TS_MAX).contains(&t.ts_per_w)) {
+            return Err(Error::Usage(format!(
+                "{obs_file}: term {}: the fit gives ts = {} 1/W, outside 0..{TS_MAX}; \
+                 the data do not support this term's exponential form (too few power \
+                 levels, or the coupling is not in the data)",
+                term_name(t),
+                t.ts_per_w
+            )));
+        }
+    }
+    let u_red = sol.std_uncertainty();
+    let mut params = Vec::with_capacity(n);
+    let mut any_fixed_by_rank = false;
+    for (k, t) in base.iter().enumerate() {
+        let name = term_name(t);
+        for (o, (key, unit, start, scale)) in [
+            ("lb", "mm", t.lb_mm, 1.0),
+            ("ub", "mm", t.ub_mm, 1.0),
+            ("ts", "1/W", t.ts_per_w, 1.0 / TS_SCALE),
+        ]
+        .into_iter()
+        .enumerate()
+        {
+            let j = 3 * k + o;
+            let pos = free.iter().position(|&f| f == j);
+            if pos.is_none() && varies[k] {
+                any_fixed_by_rank = true;
+            }
+            params.push(Estimate {
+                name: format!("{name}.{key}"),
+                unit,
+                start,
+                value: start + scale * full.get(j).copied().unwrap_or(0.0),
+                u: pos.and_then(|a| u_red.as_ref().map(|u| scale * u[a])),
+                fixed: pos.is_none(),
+            });
+        }
+    }
+    if any_fixed_by_rank {
+        notes.push(
+            "some unknowns move the measured points like a combination of the others \
+             (e.g. the ub of two terms on the same length, or ts with too few power levels); \
+             they keep the file's value"
+                .into(),
+        );
+    }
+    notes.push(
+        "rows are at the thermal steady state of their powers: time_constant_min is not identified"
+            .into(),
+    );
+    let before = norms(robot, &base, obs, &hold, obs_file)?;
+    let after = norms(robot, &terms, obs, &hold, obs_file)?;
+    let mut yaml = text.to_string();
+    for (k, t) in terms.iter().enumerate() {
+        yaml = set_thermal_term(&yaml, machine_file, k, t.lb_mm, t.ub_mm, t.ts_per_w)?;
+    }
+    Machine::from_yaml_str(&yaml, machine_file)?;
+    let mut cal = Calibration {
+        kind: "thermal",
+        n_fit: fit.len(),
+        n_equations: m,
+        observability_o1: 0.0,
+        condition_number: 0.0,
+        rms_fit_mm: sol.sigma2.map_or((sol.rss / m as f64).sqrt(), f64::sqrt),
+        params,
+        validation: Validation::from_norms(&before, &after),
+        notes,
+        yaml,
+    };
+    cal.set_identifiability(id);
+    cal.check_validation();
+    Ok(cal)
+}
+
+/// Residual norms of the rows `rows` for a machine, mm.
+fn machine_norms(m: &Machine, obs: &Observations, rows: &[usize], file: &str) -> Result<Vec<f64>> {
+    let mut v = Vec::with_capacity(rows.len());
+    for &i in rows {
+        if let Some(row) = obs.rows.get(i) {
+            let p = forward::predict(m, row, file)?;
+            v.push((row.measured_mm - p.measured(obs.measured)).norm());
+        }
+    }
+    Ok(v)
+}
+
+/// Identifies the steady-state thermal gains of a machine-tool file: spindle
+/// `growth_um_per_kw` (rows with `spindle_w`) and `scale_ppm_per_kw` of the
+/// axes that have a `thermal.axes` entry (rows with `pX_w` …).
+pub fn calibrate_tool_thermal(
+    text: &str,
+    machine_file: &str,
+    machine: &Machine,
+    obs: &Observations,
+    obs_file: &str,
+    opts: &Options,
+) -> Result<Calibration> {
+    let Machine::Tool(tool) = machine else {
+        return Err(Error::Usage(format!(
+            "{machine_file}: not a machine-tool file"
+        )));
+    };
+    let thermal = tool.thermal().copied().unwrap_or_default();
+    let powers = |i: usize| -> Vec<f64> {
+        obs.rows
+            .iter()
+            .filter_map(|r| match &r.pose {
+                Pose::Tool(tp) => forward::tool_powers(tp),
+                Pose::Robot(_) => None,
+            })
+            .filter_map(|p| p.get(i).copied())
+            .collect()
+    };
+    let varies = |v: &[f64]| {
+        let lo = v.iter().copied().fold(f64::INFINITY, f64::min);
+        let hi = v.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        hi - lo > 1e-9
+    };
+    let mut notes = Vec::new();
+    // Unknowns: 0 = spindle (µm/kW), 1..4 = X, Y, Z scale (ppm/kW).
+    let mut unknowns: Vec<usize> = Vec::new();
+    if varies(&powers(0)) {
+        unknowns.push(0);
+    } else {
+        notes.push("spindle_w does not vary in the rows: spindle growth not identified".into());
+    }
+    for a in 0..3 {
+        let name = ["X", "Y", "Z"][a];
+        if !varies(&powers(a + 1)) {
+            continue;
+        }
+        if thermal.axes[a].is_some() {
+            unknowns.push(a + 1);
+        } else {
+            notes.push(format!(
+                "p{name}_w varies but the file has no thermal.axes.{name} entry (time constant, \
+                 friction) to write a scale into: not identified"
+            ));
+        }
+    }
+    if unknowns.is_empty() {
+        return Err(Error::Usage(format!(
+            "{obs_file}: no thermal gain can be identified: the rows need spindle_w (or pX_w \
+             for an axis with a thermal.axes entry) at several power levels"
+        )));
+    }
+    let (fit, hold) = holdout_split(obs.rows.len(), opts.holdout, opts.seed);
+    let m = 3 * fit.len();
+    if m < 2 * unknowns.len() {
+        return Err(Error::Usage(format!(
+            "{obs_file}: {} rows left for the fit; too few",
+            fit.len()
+        )));
+    }
+    let mut a = nalgebra::DMatrix::zeros(m, unknowns.len());
+    let mut b = DVector::zeros(m);
+    for (k, &i) in fit.iter().enumerate() {
+        let Some(row) = obs.rows.get(i) else { continue };
+        let Pose::Tool(tp) = &row.pose else { continue };
+        let p = forward::predict(machine, row, obs_file)?;
+        let d = row.measured_mm - p.measured(obs.measured);
+        let pw = forward::tool_powers(tp).unwrap_or([0.0; 4]);
+        let cmd = tp.axes();
+        let dir = tool.nominal(&cmd, forward::tool_length(tool, tp)).dir;
+        for r in 0..3 {
+            b[3 * k + r] = d[r];
+        }
+        for (c, &u) in unknowns.iter().enumerate() {
+            if u == 0 {
+                // g µm/kW × P/1000 kW, tip moves against the tool axis, mm.
+                for r in 0..3 {
+                    a[(3 * k + r, c)] = -dir[r] * pw[0] * 1e-6;
+                }
+            } else {
+                // s ppm/kW × P/1000 kW × q mm × 1e-6, along the axis.
+                let ax = u - 1;
+                a[(3 * k + ax, c)] = cmd[ax] * pw[u] * 1e-9;
+            }
+        }
+    }
+    let sol = solve_linear(&a, &b, &LsqOptions::default())
+        .map_err(|e| Error::Usage(format!("{obs_file}: {e}")))?;
+    let id = &sol.identifiability;
+    if id.condition_number_identified > CONDITION_LIMIT {
+        return Err(Error::Usage(format!(
+            "{obs_file}: badly conditioned data set: condition number {:.3e} > {:.0e}",
+            id.condition_number_identified, CONDITION_LIMIT
+        )));
+    }
+    let u = sol.std_uncertainty();
+    let mut params = Vec::new();
+    let mut yaml = text.to_string();
+    for (c, &k) in unknowns.iter().enumerate() {
+        let fixed = id.unidentifiable.contains(&c);
+        let delta = sol.params.get(c).copied().unwrap_or(0.0);
+        let uc = if fixed {
+            None
+        } else {
+            u.as_ref().and_then(|u| u.get(c).copied())
+        };
+        if k == 0 {
+            let start = thermal.spindle.map_or(0.0, |s| s.gain_per_kw);
+            params.push(Estimate {
+                name: "spindle.growth".into(),
+                unit: "µm/kW",
+                start,
+                value: start + delta,
+                u: uc,
+                fixed,
+            });
+            if !fixed {
+                yaml = super::yaml_edit::set_spindle_growth(
+                    &yaml,
+                    machine_file,
+                    start + delta,
+                    30.0,
+                    "postproc calibrate thermal: time_constant_min is ASSUMED (steady-state rows carry no time information)",
+                )?;
+            }
+        } else {
+            let name = ["X", "Y", "Z"][k - 1];
+            let start = thermal.axes[k - 1].map_or(0.0, |s| s.gain_per_kw);
+            params.push(Estimate {
+                name: format!("{name}.scale"),
+                unit: "ppm/kW",
+                start,
+                value: start + delta,
+                u: uc,
+                fixed,
+            });
+            if !fixed {
+                yaml = super::yaml_edit::set_axis_scale(&yaml, machine_file, name, start + delta)?;
+            }
+        }
+    }
+    notes.push(
+        "rows are at the thermal steady state of their powers: time constants are not identified"
+            .into(),
+    );
+    let calibrated = Machine::from_yaml_str(&yaml, machine_file)?;
+    let before = machine_norms(machine, obs, &hold, obs_file)?;
+    let after = machine_norms(&calibrated, obs, &hold, obs_file)?;
+    let mut cal = Calibration {
+        kind: "thermal",
+        n_fit: fit.len(),
+        n_equations: m,
+        observability_o1: 0.0,
+        condition_number: 0.0,
+        rms_fit_mm: sol.sigma2.map_or((sol.rss / m as f64).sqrt(), f64::sqrt),
+        params,
+        validation: Validation::from_norms(&before, &after),
+        notes,
+        yaml,
+    };
+    cal.set_identifiability(id);
+    cal.check_validation();
+    Ok(cal)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use approx::assert_abs_diff_eq;
+
+    const LEN_TOL_MM: f64 = 1e-12;
+
+    /// Paper B form by hand: ub − lb·e^(−ts·P); a2 ← P1 with lb = ub = 0.1,
+    /// ts = 0.015 at P1 = 126 W: 0.1·(1 − e^(−1.89)) = 0.1·(1 − 0.151072)
+    /// = 0.0848928 mm; a second term on a2 ← P2 (0.12, 0.12, 0.02) at
+    /// 112 W adds 0.12·(1 − e^(−2.24)) = 0.12·(1 − 0.106459) = 0.1072249.
+    #[test]
+    fn growth_sums_terms_by_hand() {
+        let t = |joint, lb, ts| ThermalTerm {
+            length: DhLength::A,
+            row: 1,
+            joint,
+            lb_mm: lb,
+            ub_mm: lb,
+            ts_per_w: ts,
+        };
+        let terms = [t(0, 0.10, 0.015), t(1, 0.12, 0.020)];
+        let g = growth(&terms, &[126.0, 112.0, 0.0, 0.0, 0.0, 0.0]);
+        let want = 0.1 * (1.0 - (-1.89f64).exp()) + 0.12 * (1.0 - (-2.24f64).exp());
+        assert_abs_diff_eq!(g[1][0], want, epsilon = LEN_TOL_MM);
+        assert_abs_diff_eq!(g[1][0], 0.0848928 + 0.1072249, epsilon = 1e-6);
+        assert_abs_diff_eq!(g[2][0], 0.0, epsilon = LEN_TOL_MM);
+        // The correction vector moves lb, ub (mm) and ts (per kW).
+        let moved = terms_with(&terms, &[0.01, 0.02, 5.0]);
+        assert_abs_diff_eq!(moved[0].lb_mm, 0.11, epsilon = LEN_TOL_MM);
+        assert_abs_diff_eq!(moved[0].ub_mm, 0.12, epsilon = LEN_TOL_MM);
+        assert_abs_diff_eq!(moved[0].ts_per_w, 0.020, epsilon = LEN_TOL_MM);
+    }
+
+    /// ∂growth/∂ts = lb·P·e^(−ts·P) against a central difference.
+    #[test]
+    fn ts_sensitivity_matches_finite_difference() {
+        let t = ThermalTerm {
+            length: DhLength::D,
+            row: 3,
+            joint: 2,
+            lb_mm: 0.08,
+            ub_mm: 0.07,
+            ts_per_w: 0.03,
+        };
+        let p = [0.0, 0.0, 35.0, 0.0, 0.0, 0.0];
+        let h = 1e-3; // per kW
+        let gp = growth(&terms_with(&[t], &[0.0, 0.0, h]), &p)[3][1];
+        let gm = growth(&terms_with(&[t], &[0.0, 0.0, -h]), &p)[3][1];
+        let fd = (gp - gm) / (2.0 * h) * TS_SCALE;
+        let analytic = 0.08 * 35.0 * (-0.03f64 * 35.0).exp();
+        assert_abs_diff_eq!(fd, analytic, epsilon = 1e-8);
+    }
+}
