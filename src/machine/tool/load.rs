@@ -189,6 +189,7 @@ fn validate(raw: RawMachineTool) -> V<MachineTool> {
         && axes
             .iter()
             .all(|a| a.location.is_zero() && a.components.is_zero());
+    let breakpoints = super::breakpoints(&axes, stiffness.as_ref());
     Ok(MachineTool {
         name: raw.name,
         axes,
@@ -200,6 +201,7 @@ fn validate(raw: RawMachineTool) -> V<MachineTool> {
         decimals,
         decimals_deg,
         error_free,
+        breakpoints,
         process: (process_force.is_some()
             || stiffness.is_some()
             || thermal.is_some()

@@ -103,6 +103,9 @@ pub struct MachineTool {
     decimals: Option<usize>,
     decimals_deg: Option<usize>,
     error_free: bool,
+    /// Per axis slot, the sorted positions where the error model changes
+    /// slope (table positions, stiffness grid lines).
+    breakpoints: [Vec<f64>; 6],
     /// The optional process sections, boxed to keep `Machine` small.
     process: Option<Box<ProcessSections>>,
 }
@@ -215,6 +218,14 @@ impl MachineTool {
     /// The dominant modes (`modal:`).
     pub fn modal(&self) -> Option<&Modal> {
         self.process.as_ref().and_then(|p| p.modal.as_ref())
+    }
+
+    /// Sorted, distinct positions of axis `slot` (mm or degrees) where the
+    /// error model is not smooth: the positions of its component-error tables
+    /// and, for X, Y and Z, the stiffness grid. Between two of them every
+    /// table and the stiffness map are linear in the axis position.
+    pub fn breakpoints(&self, slot: usize) -> &[f64] {
+        self.breakpoints.get(slot).map_or(&[], |v| v.as_slice())
     }
 
     /// True when every geometric error is zero.
@@ -340,6 +351,32 @@ impl MachineTool {
         );
         c
     }
+}
+
+/// The breakpoints of every axis slot (see [`MachineTool::breakpoints`]).
+fn breakpoints(axes: &[Axis], stiffness: Option<&Stiffness>) -> [Vec<f64>; 6] {
+    let mut out: [Vec<f64>; 6] = Default::default();
+    for a in axes {
+        if let Some(v) = out.get_mut(a.slot) {
+            for t in a.components.tables.iter().flatten() {
+                v.extend_from_slice(t.positions());
+            }
+        }
+    }
+    if let Some(k) = stiffness {
+        for (v, g) in out.iter_mut().zip(k.grid_mm()) {
+            // A single grid position is a uniform map: no break.
+            if g.len() > 1 {
+                v.extend_from_slice(g);
+            }
+        }
+    }
+    for v in &mut out {
+        v.retain(|x| x.is_finite());
+        v.sort_by(f64::total_cmp);
+        v.dedup();
+    }
+    out
 }
 
 /// HTM of one axis at command `q` (mm or degrees) and its derivative with
