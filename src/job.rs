@@ -27,6 +27,9 @@ use crate::program::interp::{END_INSIDE, Interpreter, Motion, Plan, PlanKind, Se
 /// Lines processed per chunk.
 pub const CHUNK_LINES: usize = 4096;
 
+/// Blocks compensated in order on one thread, within a chunk.
+pub const GROUP_BLOCKS: usize = 64;
+
 /// Deviation statistics over many blocks with a fixed-size histogram, so the
 /// percentile needs no per-block storage.
 #[derive(Debug, Clone)]
@@ -550,23 +553,36 @@ impl<'m> Job<'m> {
             };
             // With every effect off the output is the input; a report still
             // wants its rows (of zero deviation).
-            let results: Vec<std::result::Result<BlockResult, Failure>> = if pred.effects.is_none()
-                && rows.is_none()
-            {
-                Vec::new()
-            } else {
-                let work = || {
-                    plans
-                        .par_iter()
-                        .zip(contexts.par_iter())
-                        .map(|(p, c)| compensate::block(&pred.with_context(*c), p, &self.settings))
-                        .collect()
+            let results: Vec<std::result::Result<BlockResult, Failure>> =
+                if pred.effects.is_none() && rows.is_none() {
+                    Vec::new()
+                } else {
+                    // Runs of GROUP_BLOCKS blocks in order on one thread (a
+                    // straight move reuses the previous end's solution for its
+                    // start); the runs start at fixed blocks, so the output does
+                    // not depend on the number of threads.
+                    let work = || {
+                        plans
+                            .par_chunks(GROUP_BLOCKS)
+                            .zip(contexts.par_chunks(GROUP_BLOCKS))
+                            .flat_map_iter(|(ps, cs)| {
+                                let mut carry = None;
+                                ps.iter().zip(cs).map(move |(p, c)| {
+                                    compensate::block_after(
+                                        &pred.with_context(*c),
+                                        p,
+                                        &self.settings,
+                                        &mut carry,
+                                    )
+                                })
+                            })
+                            .collect()
+                    };
+                    match self.pool {
+                        Some(pool) => pool.install(work),
+                        None => work(),
+                    }
                 };
-                match self.pool {
-                    Some(pool) => pool.install(work),
-                    None => work(),
-                }
-            };
             out_buf.clear();
             for (i, &(s, e)) in ranges.iter().enumerate() {
                 let plan = &plans[i];

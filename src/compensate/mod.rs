@@ -8,7 +8,7 @@ pub mod rapid;
 use nalgebra::{SMatrix, SVector, Vector3};
 
 use crate::machine::{AxisVec, DirVec, TipPose};
-use crate::predict::{Breakdown, ToolPredictor};
+use crate::predict::{BlockContext, Breakdown, ToolPredictor};
 use crate::program::interp::{END_INSIDE, Motion, Move, Plan, PlanKind};
 
 /// Convergence of the inverse solve on the tool-tip position, mm.
@@ -300,8 +300,9 @@ const BREAK_MARGIN: f64 = 1e-6;
 
 /// Splits the straight move `p0 → p1` (programmed commands) into compensated
 /// points so that, between consecutive points, the attained path stays
-/// within `tol` of the programmed one. Pushes the points after `c0`,
-/// including the final one.
+/// within `tol` of the programmed one. Pushes the points after `c0`, the
+/// final one `c1` only with `keep_end` (so that a move that needs no split
+/// pushes nothing and allocates nothing).
 ///
 /// The error model is piecewise linear in each axis position (component
 /// tables, stiffness grid), so the exact compensation of a straight move
@@ -319,6 +320,7 @@ fn split_line(
     dirs: &DirVec,
     tool: f64,
     tol: f64,
+    keep_end: bool,
     out: &mut Vec<AxisVec>,
 ) -> Result<(), Failure> {
     let mut ts = [0.0f64; MAX_BREAKS];
@@ -337,6 +339,7 @@ fn split_line(
         dirs,
         tool,
         tol,
+        keep_end,
     };
     piece.split(0.0, 1.0, c0, c1, 0, out)
 }
@@ -384,6 +387,7 @@ struct Piece<'a, 'p> {
     dirs: &'a DirVec,
     tool: f64,
     tol: f64,
+    keep_end: bool,
 }
 
 impl Piece<'_, '_> {
@@ -419,7 +423,10 @@ impl Piece<'_, '_> {
             }
         }
         if worst <= self.tol {
-            out.push(*cb);
+            // `tb` is exactly 1 only for the last piece of the move.
+            if tb < 1.0 || self.keep_end {
+                out.push(*cb);
+            }
             return Ok(());
         }
         if depth >= MAX_SPLIT_DEPTH {
@@ -467,9 +474,48 @@ pub fn block(
     plan: &Plan,
     settings: &Settings,
 ) -> Result<BlockResult, Failure> {
+    block_after(pred, plan, settings, &mut None)
+}
+
+/// The compensated end of a block, handed to the next block of a run of
+/// blocks compensated in order (see [`block_after`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Carry {
+    /// Programmed end point, machine coordinates.
+    target: AxisVec,
+    /// Directions of motion it was solved with.
+    dirs: DirVec,
+    /// Tool length, mm.
+    tool: f64,
+    /// Block context it was solved with.
+    ctx: BlockContext,
+    /// The compensated command.
+    c: AxisVec,
+}
+
+impl Carry {
+    fn matches(&self, target: &AxisVec, dirs: &DirVec, tool: f64, ctx: &BlockContext) -> bool {
+        self.target == *target && self.dirs == *dirs && self.tool == tool && self.ctx == *ctx
+    }
+}
+
+/// [`block`] for the next block of a run compensated in order: `carry`
+/// holds the previous block's compensated end (`None` at the start of the
+/// run) and is updated. A straight move that starts where the previous one
+/// ended, with the same directions of motion, tool and context, reuses that
+/// solution for its start point instead of solving it again. The result
+/// depends on where runs begin, so callers cut runs at fixed places.
+pub fn block_after(
+    pred: &ToolPredictor,
+    plan: &Plan,
+    settings: &Settings,
+    carry: &mut Option<Carry>,
+) -> Result<BlockResult, Failure> {
     let Some(mv) = plan.mv else {
         return Ok(BlockResult::default());
     };
+    let prev = carry.take();
+    let carry_in = prev.as_ref();
     let mut res = BlockResult::default();
     let tool = mv.tool_len_mm;
     let tol = settings.tolerance_mm;
@@ -514,6 +560,13 @@ pub fn block(
     )?;
     res.end = c1;
     res.residual_mm = r1;
+    let carry_out = Carry {
+        target: mv.end,
+        dirs: mv.dirs,
+        tool,
+        ctx: pred.ctx,
+        c: c1,
+    };
     match (mv.motion, mv.arc) {
         (Motion::Rapid, _) => {
             // Positioning: only the axes the block programs are corrected;
@@ -526,12 +579,19 @@ pub fn block(
             res.residual_mm = (pred.attained(&res.end, &mv.dirs, tool).pos - nom_end.pos).norm();
         }
         (Motion::Linear, _) => {
-            let (c0, _) = solve_near(pred, &mv.start, &c1, &mv.end, &mv.dirs, tool)?;
+            // The start is the previous block's end: its compensation is
+            // that block's when the directions, tool and context agree.
+            let c0 = match carry_in {
+                Some(k) if k.matches(&mv.start, &mv.dirs, tool, &pred.ctx) => k.c,
+                Some(k) if k.target == mv.start => {
+                    solve_near(pred, &mv.start, &k.c, &k.target, &mv.dirs, tool)?.0
+                }
+                _ => solve_near(pred, &mv.start, &c1, &mv.end, &mv.dirs, tool)?.0,
+            };
             let mut pts = Vec::new();
             split_line(
-                pred, &mv.start, &mv.end, &c0, &c1, &mv.dirs, tool, tol, &mut pts,
+                pred, &mv.start, &mv.end, &c0, &c1, &mv.dirs, tool, tol, false, &mut pts,
             )?;
-            pts.pop();
             for p in &pts {
                 check_travel(pred, p)?;
             }
@@ -541,6 +601,7 @@ pub fn block(
         (_, None) => {}
     }
     check_travel(pred, &res.end)?;
+    *carry = Some(carry_out);
     Ok(res)
 }
 
@@ -600,7 +661,18 @@ fn arc_block(
         // junction is the machine's, not something subdivision can remove.
         let (c0, _) = solve(pred, &prev_p, &d, tool)?;
         let (c, _) = solve(pred, &p, &d, tool)?;
-        split_line(pred, &prev_p, &p, &c0, &c, &d, tool, tol - sag, &mut pts)?;
+        split_line(
+            pred,
+            &prev_p,
+            &p,
+            &c0,
+            &c,
+            &d,
+            tool,
+            tol - sag,
+            true,
+            &mut pts,
+        )?;
         prev_p = p;
     }
     // The last point is the end point, recomputed with the end direction.
