@@ -3,8 +3,10 @@
 //!
 //! Lines are read in chunks of [`CHUNK_LINES`]; parsing and the modal
 //! interpretation run in program order, the per-block prediction and inverse
-//! solve run in parallel with rayon (order kept), and the emitter writes the
-//! chunk before the next one is read. Memory is bounded by the chunk size,
+//! solve run in parallel with rayon (order kept; runs of [`GROUP_BLOCKS`]
+//! blocks in order per task, cut at fixed blocks so that the output is the
+//! same for any thread count), and the emitter writes the chunk before the
+//! next one is read. Memory is bounded by the chunk size,
 //! whatever the length of the program.
 
 use std::io::{BufRead, Write};

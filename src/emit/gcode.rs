@@ -76,7 +76,7 @@ fn fixed(v: f64, d: usize) -> Option<String> {
     let scale = *POW10.get(d)?;
     let scaled = v * scale;
     let r = scaled.round();
-    if !(r.abs() < 1e15) || (scaled - r).abs() > 0.25 {
+    if !r.is_finite() || r.abs() >= 1e15 || (scaled - r).abs() > 0.25 {
         return None;
     }
     let n = r as i64;

@@ -189,7 +189,7 @@ fn validate(raw: RawMachineTool) -> V<MachineTool> {
         && axes
             .iter()
             .all(|a| a.location.is_zero() && a.components.is_zero());
-    let breakpoints = super::breakpoints(&axes, stiffness.as_ref());
+    super::set_breakpoints(&mut axes, stiffness.as_ref());
     Ok(MachineTool {
         name: raw.name,
         axes,
@@ -201,7 +201,6 @@ fn validate(raw: RawMachineTool) -> V<MachineTool> {
         decimals,
         decimals_deg,
         error_free,
-        breakpoints,
         process: (process_force.is_some()
             || stiffness.is_some()
             || thermal.is_some()
@@ -521,6 +520,7 @@ fn validate_axis(p: &str, ra: &RawAxis) -> V<Axis> {
         pivot_mm,
         location,
         components,
+        breakpoints: Vec::new(),
     })
 }
 

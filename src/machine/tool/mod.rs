@@ -85,6 +85,9 @@ pub struct Axis {
     pub location: LocationErrors,
     /// Component errors.
     pub components: ComponentErrors,
+    /// Sorted, distinct positions (mm or degrees) where the error model
+    /// changes slope along this axis (see [`MachineTool::breakpoints`]).
+    pub breakpoints: Vec<f64>,
 }
 
 /// A validated machine tool (immutable; `Send + Sync`).
@@ -103,9 +106,6 @@ pub struct MachineTool {
     decimals: Option<usize>,
     decimals_deg: Option<usize>,
     error_free: bool,
-    /// Per axis slot, the sorted positions where the error model changes
-    /// slope (table positions, stiffness grid lines).
-    breakpoints: [Vec<f64>; 6],
     /// The optional process sections, boxed to keep `Machine` small.
     process: Option<Box<ProcessSections>>,
 }
@@ -225,7 +225,7 @@ impl MachineTool {
     /// and, for X, Y and Z, the stiffness grid. Between two of them every
     /// table and the stiffness map are linear in the axis position.
     pub fn breakpoints(&self, slot: usize) -> &[f64] {
-        self.breakpoints.get(slot).map_or(&[], |v| v.as_slice())
+        self.axis(slot).map_or(&[], |a| a.breakpoints.as_slice())
     }
 
     /// True when every geometric error is zero.
@@ -397,30 +397,25 @@ impl MachineTool {
     }
 }
 
-/// The breakpoints of every axis slot (see [`MachineTool::breakpoints`]).
-fn breakpoints(axes: &[Axis], stiffness: Option<&Stiffness>) -> [Vec<f64>; 6] {
-    let mut out: [Vec<f64>; 6] = Default::default();
+/// Fills the breakpoints of every axis (see [`MachineTool::breakpoints`]).
+fn set_breakpoints(axes: &mut [Axis], stiffness: Option<&Stiffness>) {
     for a in axes {
-        if let Some(v) = out.get_mut(a.slot) {
-            for t in a.components.tables.iter().flatten() {
-                v.extend_from_slice(t.positions());
-            }
+        let mut v: Vec<f64> = Vec::new();
+        for t in a.components.tables.iter().flatten() {
+            v.extend_from_slice(t.positions());
         }
-    }
-    if let Some(k) = stiffness {
-        for (v, g) in out.iter_mut().zip(k.grid_mm()) {
+        if let (Some(k), true) = (stiffness, a.kind == AxisKind::Linear && a.slot < 3) {
+            let g = k.grid_mm()[a.slot];
             // A single grid position is a uniform map: no break.
             if g.len() > 1 {
                 v.extend_from_slice(g);
             }
         }
-    }
-    for v in &mut out {
         v.retain(|x| x.is_finite());
         v.sort_by(f64::total_cmp);
         v.dedup();
+        a.breakpoints = v;
     }
-    out
 }
 
 /// HTM of one axis at command `q` (mm or degrees) and its derivative with
