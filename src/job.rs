@@ -3,8 +3,10 @@
 //!
 //! Lines are read in chunks of [`CHUNK_LINES`]; parsing and the modal
 //! interpretation run in program order, the per-block prediction and inverse
-//! solve run in parallel with rayon (order kept), and the emitter writes the
-//! chunk before the next one is read. Memory is bounded by the chunk size,
+//! solve run in parallel with rayon (order kept; runs of [`GROUP_BLOCKS`]
+//! blocks in order per task, cut at fixed blocks so that the output is the
+//! same for any thread count), and the emitter writes the chunk before the
+//! next one is read. Memory is bounded by the chunk size,
 //! whatever the length of the program.
 
 use std::io::{BufRead, Write};
@@ -26,6 +28,9 @@ use crate::program::interp::{END_INSIDE, Interpreter, Motion, Plan, PlanKind, Se
 
 /// Lines processed per chunk.
 pub const CHUNK_LINES: usize = 4096;
+
+/// Blocks compensated in order on one thread, within a chunk.
+pub const GROUP_BLOCKS: usize = 64;
 
 /// Deviation statistics over many blocks with a fixed-size histogram, so the
 /// percentile needs no per-block storage.
@@ -550,23 +555,36 @@ impl<'m> Job<'m> {
             };
             // With every effect off the output is the input; a report still
             // wants its rows (of zero deviation).
-            let results: Vec<std::result::Result<BlockResult, Failure>> = if pred.effects.is_none()
-                && rows.is_none()
-            {
-                Vec::new()
-            } else {
-                let work = || {
-                    plans
-                        .par_iter()
-                        .zip(contexts.par_iter())
-                        .map(|(p, c)| compensate::block(&pred.with_context(*c), p, &self.settings))
-                        .collect()
+            let results: Vec<std::result::Result<BlockResult, Failure>> =
+                if pred.effects.is_none() && rows.is_none() {
+                    Vec::new()
+                } else {
+                    // Runs of GROUP_BLOCKS blocks in order on one thread (a
+                    // straight move reuses the previous end's solution for its
+                    // start); the runs start at fixed blocks, so the output does
+                    // not depend on the number of threads.
+                    let work = || {
+                        plans
+                            .par_chunks(GROUP_BLOCKS)
+                            .zip(contexts.par_chunks(GROUP_BLOCKS))
+                            .flat_map_iter(|(ps, cs)| {
+                                let mut carry = None;
+                                ps.iter().zip(cs).map(move |(p, c)| {
+                                    compensate::block_after(
+                                        &pred.with_context(*c),
+                                        p,
+                                        &self.settings,
+                                        &mut carry,
+                                    )
+                                })
+                            })
+                            .collect()
+                    };
+                    match self.pool {
+                        Some(pool) => pool.install(work),
+                        None => work(),
+                    }
                 };
-                match self.pool {
-                    Some(pool) => pool.install(work),
-                    None => work(),
-                }
-            };
             out_buf.clear();
             for (i, &(s, e)) in ranges.iter().enumerate() {
                 let plan = &plans[i];

@@ -10,6 +10,7 @@ mod effects;
 mod gcode_cli;
 mod gcode_grammar;
 mod golden;
+mod gperf;
 mod machine_tool;
 mod observations;
 mod paper_b;

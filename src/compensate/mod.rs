@@ -8,7 +8,7 @@ pub mod rapid;
 use nalgebra::{SMatrix, SVector, Vector3};
 
 use crate::machine::{AxisVec, DirVec, TipPose};
-use crate::predict::{Breakdown, ToolPredictor};
+use crate::predict::{BlockContext, Breakdown, ToolPredictor};
 use crate::program::interp::{END_INSIDE, Motion, Move, Plan, PlanKind};
 
 /// Convergence of the inverse solve on the tool-tip position, mm.
@@ -123,12 +123,51 @@ pub fn solve(
     tool_mm: f64,
 ) -> Result<(AxisVec, f64), Failure> {
     let goal = pred.nominal(target, tool_mm);
+    solve_from(pred, target, &goal, target, None, dirs, tool_mm)
+}
+
+/// [`solve`] started from the correction found at a nearby point: the
+/// command `near_c` compensates the programmed `near_p`.
+fn solve_near(
+    pred: &ToolPredictor,
+    target: &AxisVec,
+    near_c: &AxisVec,
+    near_p: &AxisVec,
+    dirs: &DirVec,
+    tool_mm: f64,
+) -> Result<(AxisVec, f64), Failure> {
+    let mut start = *target;
+    for s in 0..6 {
+        let corr = near_c[s] - near_p[s];
+        if corr.is_finite() {
+            start[s] += corr;
+        }
+    }
+    let goal = pred.nominal(target, tool_mm);
+    solve_from(pred, target, &goal, &start, None, dirs, tool_mm)
+}
+
+/// [`solve`] with the nominal pose `goal` of `target`, the iteration started
+/// at the command `start`, and, when known, the attained pose at `start`.
+fn solve_from(
+    pred: &ToolPredictor,
+    target: &AxisVec,
+    goal: &TipPose,
+    start: &AxisVec,
+    mut first: Option<TipPose>,
+    dirs: &DirVec,
+    tool_mm: f64,
+) -> Result<(AxisVec, f64), Failure> {
+    let goal = *goal;
     let m = pred.machine;
     let rotary = (3..6).any(|s| m.has_axis(s));
-    let mut c = *target;
+    let mut c = *start;
     if !rotary {
         for _ in 0..MAX_ITER {
-            let got = pred.attained(&c, dirs, tool_mm);
+            let got = match first.take() {
+                Some(p) => p,
+                None => pred.attained(&c, dirs, tool_mm),
+            };
             let r = got.pos - goal.pos;
             if r.norm() < SOLVE_TOL_MM {
                 return Ok((c, r.norm()));
@@ -252,10 +291,25 @@ fn check_travel(pred: &ToolPredictor, c: &AxisVec) -> Result<(), Failure> {
     Ok(())
 }
 
+/// Largest number of model breakpoints considered inside one move; a move
+/// crossing more is bisected at its midpoints.
+const MAX_BREAKS: usize = 64;
+/// Crossings closer than this to a piece's end (as a fraction of the piece)
+/// are not used as split points.
+const BREAK_MARGIN: f64 = 1e-6;
+
 /// Splits the straight move `p0 → p1` (programmed commands) into compensated
 /// points so that, between consecutive points, the attained path stays
-/// within `tol` of the programmed one. Pushes the points after `c0`,
-/// including the final one.
+/// within `tol` of the programmed one. Pushes the points after `c0`, the
+/// final one `c1` only with `keep_end` (so that a move that needs no split
+/// pushes nothing and allocates nothing).
+///
+/// The error model is piecewise linear in each axis position (component
+/// tables, stiffness grid), so the exact compensation of a straight move
+/// has its kinks where a moving axis crosses a breakpoint of the model.
+/// A piece that fails the tolerance check is cut at the crossing nearest
+/// its middle (at its middle when it crosses none): the pieces follow the
+/// kinks instead of halving across them.
 #[allow(clippy::too_many_arguments)]
 fn split_line(
     pred: &ToolPredictor,
@@ -266,26 +320,134 @@ fn split_line(
     dirs: &DirVec,
     tool: f64,
     tol: f64,
-    depth: u32,
+    keep_end: bool,
     out: &mut Vec<AxisVec>,
 ) -> Result<(), Failure> {
-    let mut worst = 0.0f64;
-    for t in [0.25, 0.5, 0.75] {
-        let got = pred.attained(&lerp(c0, c1, t), dirs, tool).pos;
-        let want = pred.nominal(&lerp(p0, p1, t), tool).pos;
-        worst = worst.max((got - want).norm());
+    let mut ts = [0.0f64; MAX_BREAKS];
+    let n = crossings(pred, p0, p1, &mut ts);
+    let ts = ts.get(..n).unwrap_or(&[]);
+    // Without rotary axes the nominal chain is a translation, affine in the
+    // command: the nominal point of a blend is the blend of the nominal points.
+    let affine = !(3..6).any(|s| pred.machine.has_axis(s));
+    let ends = affine.then(|| (pred.nominal(p0, tool).pos, pred.nominal(p1, tool).pos));
+    let piece = Piece {
+        pred,
+        p0,
+        p1,
+        ends,
+        ts,
+        dirs,
+        tool,
+        tol,
+        keep_end,
+    };
+    piece.split(0.0, 1.0, c0, c1, 0, out)
+}
+
+/// Parameters in (0, 1), sorted, where the straight move `p0 → p1` crosses
+/// a breakpoint of the error model; 0 when there are more than `ts` holds.
+fn crossings(pred: &ToolPredictor, p0: &AxisVec, p1: &AxisVec, ts: &mut [f64]) -> usize {
+    let mut n = 0;
+    for s in 0..6 {
+        let (a, b) = (p0[s], p1[s]);
+        let d = b - a;
+        if d == 0.0 || !d.is_finite() {
+            continue;
+        }
+        let bp = pred.machine.breakpoints(s);
+        let (lo, hi) = if a < b { (a, b) } else { (b, a) };
+        // Breakpoints strictly inside (lo, hi).
+        let i0 = bp.partition_point(|&x| x <= lo);
+        let i1 = bp.partition_point(|&x| x < hi);
+        let inner = bp.get(i0..i1).unwrap_or(&[]);
+        if n + inner.len() > ts.len() {
+            return 0;
+        }
+        for &x in inner {
+            if let Some(slot) = ts.get_mut(n) {
+                *slot = (x - a) / d;
+                n += 1;
+            }
+        }
     }
-    if worst <= tol {
-        out.push(*c1);
-        return Ok(());
+    if let Some(t) = ts.get_mut(..n) {
+        t.sort_unstable_by(f64::total_cmp);
     }
-    if depth >= MAX_SPLIT_DEPTH {
-        return Err(Failure::TooManySegments);
+    n
+}
+
+/// One straight move being split: its programmed ends, the nominal tip at
+/// both ends (machines without rotary axes) and its breakpoint crossings.
+struct Piece<'a, 'p> {
+    pred: &'a ToolPredictor<'p>,
+    p0: &'a AxisVec,
+    p1: &'a AxisVec,
+    ends: Option<(Vector3<f64>, Vector3<f64>)>,
+    ts: &'a [f64],
+    dirs: &'a DirVec,
+    tool: f64,
+    tol: f64,
+    keep_end: bool,
+}
+
+impl Piece<'_, '_> {
+    /// Nominal tip at parameter `t` of the move.
+    fn nominal(&self, t: f64) -> Vector3<f64> {
+        match &self.ends {
+            Some((a, b)) => a + (b - a) * t,
+            None => self.pred.nominal(&lerp(self.p0, self.p1, t), self.tool).pos,
+        }
     }
-    let pm = lerp(p0, p1, 0.5);
-    let (cm, _) = solve(pred, &pm, dirs, tool)?;
-    split_line(pred, p0, &pm, c0, &cm, dirs, tool, tol, depth + 1, out)?;
-    split_line(pred, &pm, p1, &cm, c1, dirs, tool, tol, depth + 1, out)
+
+    /// Splits the part `ta..tb` of the move (compensated ends `ca`, `cb`).
+    #[allow(clippy::too_many_arguments)]
+    fn split(
+        &self,
+        ta: f64,
+        tb: f64,
+        ca: &AxisVec,
+        cb: &AxisVec,
+        depth: u32,
+        out: &mut Vec<AxisVec>,
+    ) -> Result<(), Failure> {
+        let mut worst = 0.0f64;
+        for f in [0.25, 0.5, 0.75] {
+            let got = self
+                .pred
+                .attained(&lerp(ca, cb, f), self.dirs, self.tool)
+                .pos;
+            let want = self.nominal(ta + (tb - ta) * f);
+            worst = worst.max((got - want).norm());
+            if worst > self.tol {
+                break;
+            }
+        }
+        if worst <= self.tol {
+            // `tb` is exactly 1 only for the last piece of the move.
+            if tb < 1.0 || self.keep_end {
+                out.push(*cb);
+            }
+            return Ok(());
+        }
+        if depth >= MAX_SPLIT_DEPTH {
+            return Err(Failure::TooManySegments);
+        }
+        // The crossing nearest the middle of the part, or the middle.
+        let mid = (ta + tb) / 2.0;
+        let margin = (tb - ta) * BREAK_MARGIN;
+        let tm = self
+            .ts
+            .iter()
+            .copied()
+            .filter(|&t| t > ta + margin && t < tb - margin)
+            .min_by(|x, y| (x - mid).abs().total_cmp(&(y - mid).abs()))
+            .unwrap_or(mid);
+        let pa = lerp(self.p0, self.p1, ta);
+        let pm = lerp(self.p0, self.p1, tm);
+        let (cm, _) = solve_near(self.pred, &pm, ca, &pa, self.dirs, self.tool)?;
+        self.split(ta, tm, ca, &cm, depth + 1, out)?;
+        self.split(tm, tb, &cm, cb, depth + 1, out)
+    }
 }
 
 fn dirs_of(t: &Vector3<f64>, base: &DirVec) -> DirVec {
@@ -312,9 +474,48 @@ pub fn block(
     plan: &Plan,
     settings: &Settings,
 ) -> Result<BlockResult, Failure> {
+    block_after(pred, plan, settings, &mut None)
+}
+
+/// The compensated end of a block, handed to the next block of a run of
+/// blocks compensated in order (see [`block_after`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Carry {
+    /// Programmed end point, machine coordinates.
+    target: AxisVec,
+    /// Directions of motion it was solved with.
+    dirs: DirVec,
+    /// Tool length, mm.
+    tool: f64,
+    /// Block context it was solved with.
+    ctx: BlockContext,
+    /// The compensated command.
+    c: AxisVec,
+}
+
+impl Carry {
+    fn matches(&self, target: &AxisVec, dirs: &DirVec, tool: f64, ctx: &BlockContext) -> bool {
+        self.target == *target && self.dirs == *dirs && self.tool == tool && self.ctx == *ctx
+    }
+}
+
+/// [`block`] for the next block of a run compensated in order: `carry`
+/// holds the previous block's compensated end (`None` at the start of the
+/// run) and is updated. A straight move that starts where the previous one
+/// ended, with the same directions of motion, tool and context, reuses that
+/// solution for its start point instead of solving it again. The result
+/// depends on where runs begin, so callers cut runs at fixed places.
+pub fn block_after(
+    pred: &ToolPredictor,
+    plan: &Plan,
+    settings: &Settings,
+    carry: &mut Option<Carry>,
+) -> Result<BlockResult, Failure> {
     let Some(mv) = plan.mv else {
         return Ok(BlockResult::default());
     };
+    let prev = carry.take();
+    let carry_in = prev.as_ref();
     let mut res = BlockResult::default();
     let tool = mv.tool_len_mm;
     let tol = settings.tolerance_mm;
@@ -346,10 +547,26 @@ pub fn block(
         }
         PlanKind::Motion => {}
     }
-    res.deviation = pred.breakdown(&mv.end, &mv.dirs, tool);
-    let (c1, r1) = solve(pred, &mv.end, &mv.dirs, tool)?;
+    let (dev, at_end, nom_end) = pred.evaluate(&mv.end, &mv.dirs, tool);
+    res.deviation = dev;
+    let (c1, r1) = solve_from(
+        pred,
+        &mv.end,
+        &nom_end,
+        &mv.end,
+        Some(at_end),
+        &mv.dirs,
+        tool,
+    )?;
     res.end = c1;
     res.residual_mm = r1;
+    let carry_out = Carry {
+        target: mv.end,
+        dirs: mv.dirs,
+        tool,
+        ctx: pred.ctx,
+        c: c1,
+    };
     match (mv.motion, mv.arc) {
         (Motion::Rapid, _) => {
             // Positioning: only the axes the block programs are corrected;
@@ -359,17 +576,22 @@ pub fn block(
                     res.end[s] = mv.end[s];
                 }
             }
-            res.residual_mm = (pred.attained(&res.end, &mv.dirs, tool).pos
-                - pred.nominal(&mv.end, tool).pos)
-                .norm();
+            res.residual_mm = (pred.attained(&res.end, &mv.dirs, tool).pos - nom_end.pos).norm();
         }
         (Motion::Linear, _) => {
-            let (c0, _) = solve(pred, &mv.start, &mv.dirs, tool)?;
+            // The start is the previous block's end: its compensation is
+            // that block's when the directions, tool and context agree.
+            let c0 = match carry_in {
+                Some(k) if k.matches(&mv.start, &mv.dirs, tool, &pred.ctx) => k.c,
+                Some(k) if k.target == mv.start => {
+                    solve_near(pred, &mv.start, &k.c, &k.target, &mv.dirs, tool)?.0
+                }
+                _ => solve_near(pred, &mv.start, &c1, &mv.end, &mv.dirs, tool)?.0,
+            };
             let mut pts = Vec::new();
             split_line(
-                pred, &mv.start, &mv.end, &c0, &c1, &mv.dirs, tool, tol, 0, &mut pts,
+                pred, &mv.start, &mv.end, &c0, &c1, &mv.dirs, tool, tol, false, &mut pts,
             )?;
-            pts.pop();
             for p in &pts {
                 check_travel(pred, p)?;
             }
@@ -379,6 +601,7 @@ pub fn block(
         (_, None) => {}
     }
     check_travel(pred, &res.end)?;
+    *carry = Some(carry_out);
     Ok(res)
 }
 
@@ -438,7 +661,18 @@ fn arc_block(
         // junction is the machine's, not something subdivision can remove.
         let (c0, _) = solve(pred, &prev_p, &d, tool)?;
         let (c, _) = solve(pred, &p, &d, tool)?;
-        split_line(pred, &prev_p, &p, &c0, &c, &d, tool, tol - sag, 0, &mut pts)?;
+        split_line(
+            pred,
+            &prev_p,
+            &p,
+            &c0,
+            &c,
+            &d,
+            tool,
+            tol - sag,
+            true,
+            &mut pts,
+        )?;
         prev_p = p;
     }
     // The last point is the end point, recomputed with the end direction.

@@ -52,7 +52,7 @@ pub struct Emitter {
 /// Formats `v` with `d` decimals, never in exponent notation and never as
 /// negative zero; `trim` drops trailing zeros (keeping the point).
 pub fn format_number(v: f64, d: usize, trim: bool) -> String {
-    let mut s = format!("{v:.d$}");
+    let mut s = fixed(v, d).unwrap_or_else(|| format!("{v:.d$}"));
     if s.starts_with('-') && s[1..].bytes().all(|b| b == b'0' || b == b'.') {
         s.remove(0);
     }
@@ -65,6 +65,42 @@ pub fn format_number(v: f64, d: usize, trim: bool) -> String {
         s.push('.');
     }
     s
+}
+
+/// `format!("{v:.d$}")` without the exact (big-number) float formatting,
+/// when `v · 10^d` lies clearly away from a rounding tie so that the
+/// floating-point product rounds to the same integer as the exact decimal
+/// value; `None` otherwise (the caller formats exactly).
+fn fixed(v: f64, d: usize) -> Option<String> {
+    const POW10: [f64; 10] = [1e0, 1e1, 1e2, 1e3, 1e4, 1e5, 1e6, 1e7, 1e8, 1e9];
+    let scale = *POW10.get(d)?;
+    let scaled = v * scale;
+    let r = scaled.round();
+    if !r.is_finite() || r.abs() >= 1e15 || (scaled - r).abs() > 0.25 {
+        return None;
+    }
+    let n = r as i64;
+    let digits = n.unsigned_abs().to_string();
+    let mut s = String::with_capacity(digits.len() + 3);
+    if n < 0 || (r == 0.0 && v.is_sign_negative() && v != 0.0) {
+        s.push('-');
+    }
+    if d == 0 {
+        s.push_str(&digits);
+        return Some(s);
+    }
+    let (int, frac) = if digits.len() > d {
+        digits.split_at(digits.len() - d)
+    } else {
+        ("0", digits.as_str())
+    };
+    s.push_str(int);
+    s.push('.');
+    for _ in frac.len()..d {
+        s.push('0');
+    }
+    s.push_str(frac);
+    Some(s)
 }
 
 fn round_to(v: f64, d: usize) -> f64 {
@@ -595,5 +631,31 @@ mod tests {
         assert_eq!(format_number(12.5, 4, true), "12.5");
         assert_eq!(format_number(12.0, 3, true), "12.");
         assert_eq!(format_number(123456789.125, 3, false), "123456789.125");
+    }
+
+    #[test]
+    fn fast_formatting_agrees_with_the_exact_one() {
+        // The exact decimal formatting of the standard library is the
+        // reference; ties (x.xxx5 exactly) fall back to it.
+        let mut v = -1234.56789f64;
+        for _ in 0..20_000 {
+            for d in 0..8 {
+                if let Some(fast) = fixed(v, d) {
+                    assert_eq!(fast, format!("{v:.d$}"), "{v} with {d} decimals");
+                }
+            }
+            v += 0.12345678901;
+        }
+        for (v, d) in [(0.5, 0), (2.5, 0), (0.125, 2), (-0.0004, 3), (1e20, 3)] {
+            assert_eq!(format_number(v, d, false), {
+                let s = format!("{v:.d$}");
+                let s = if s.starts_with('-') && s[1..].bytes().all(|b| b == b'0' || b == b'.') {
+                    s[1..].to_string()
+                } else {
+                    s
+                };
+                if s.contains('.') { s } else { format!("{s}.") }
+            });
+        }
     }
 }

@@ -387,25 +387,57 @@ impl<'m> ToolPredictor<'m> {
     /// Predicted deviation (attained − nominal) with its breakdown; the
     /// dynamic part is the vibration amplitude of the block.
     pub fn breakdown(&self, cmd: &AxisVec, dirs: &DirVec, tool_mm: f64) -> Breakdown {
+        self.evaluate(cmd, dirs, tool_mm).0
+    }
+
+    /// The breakdown at `cmd` together with the attained pose (as
+    /// [`Self::attained`] gives it) and the nominal pose, from one
+    /// evaluation of each chain.
+    pub fn evaluate(
+        &self,
+        cmd: &AxisVec,
+        dirs: &DirVec,
+        tool_mm: f64,
+    ) -> (Breakdown, TipPose, TipPose) {
         let nom = self.machine.nominal(cmd, tool_mm);
         let mut b = Breakdown::default();
         let g = self.effects.gain(Effect::Geometric);
+        let mut pose = nom;
         if g != 0.0 {
             let geo = self.machine.geometric(cmd, dirs, tool_mm);
             b.parts[Effect::Geometric as usize] = (geo.pos - nom.pos) * g;
             b.orientation = nom.dir.cross(&geo.dir) * g;
+            pose = if g == 1.0 {
+                geo
+            } else {
+                let dir = nom.dir + (geo.dir - nom.dir) * g;
+                TipPose {
+                    pos: nom.pos + (geo.pos - nom.pos) * g,
+                    dir: dir.normalize(),
+                }
+            };
         }
         let gs = self.effects.gain(Effect::Static);
         if gs != 0.0 {
-            b.parts[Effect::Static as usize] = self.static_part(cmd) * gs;
+            let part = self.static_part(cmd) * gs;
+            b.parts[Effect::Static as usize] = part;
+            pose.pos += part;
         }
         if self.thermal_active() {
-            b.parts[Effect::Thermal as usize] =
-                self.thermal_part(cmd, &nom.dir) * self.effects.gain(Effect::Thermal);
+            let gt = self.effects.gain(Effect::Thermal);
+            let part = self.thermal_part(cmd, &nom.dir) * gt;
+            b.parts[Effect::Thermal as usize] = part;
+            // `attained` takes the attained tool axis when the geometric
+            // gain is one (see there); the same here.
+            pose.pos += if g == 1.0 {
+                self.thermal_part(cmd, &pose.dir) * gt
+            } else {
+                part
+            };
         }
         b.parts[Effect::Dynamic as usize] =
             self.ctx.vibration_mm * self.effects.gain(Effect::Dynamic);
-        b
+        (b, pose, nom)
     }
 }
 

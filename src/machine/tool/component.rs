@@ -41,9 +41,10 @@ impl ComponentErrors {
             de: Vector3::zeros(),
             clamped: false,
         };
+        let mut hint = 0;
         for (i, t) in self.tables.iter().enumerate() {
             let Some(t) = t else { continue };
-            let l = t.lookup(q, dir);
+            let l = t.lookup_hinted(q, dir, &mut hint);
             out.clamped |= l.clamped;
             if i < 3 {
                 out.d[i] = l.value;

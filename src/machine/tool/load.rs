@@ -189,6 +189,7 @@ fn validate(raw: RawMachineTool) -> V<MachineTool> {
         && axes
             .iter()
             .all(|a| a.location.is_zero() && a.components.is_zero());
+    super::set_breakpoints(&mut axes, stiffness.as_ref());
     Ok(MachineTool {
         name: raw.name,
         axes,
@@ -519,6 +520,7 @@ fn validate_axis(p: &str, ra: &RawAxis) -> V<Axis> {
         pivot_mm,
         location,
         components,
+        breakpoints: Vec::new(),
     })
 }
 

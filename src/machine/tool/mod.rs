@@ -85,6 +85,9 @@ pub struct Axis {
     pub location: LocationErrors,
     /// Component errors.
     pub components: ComponentErrors,
+    /// Sorted, distinct positions (mm or degrees) where the error model
+    /// changes slope along this axis (see [`MachineTool::breakpoints`]).
+    pub breakpoints: Vec<f64>,
 }
 
 /// A validated machine tool (immutable; `Send + Sync`).
@@ -217,6 +220,14 @@ impl MachineTool {
         self.process.as_ref().and_then(|p| p.modal.as_ref())
     }
 
+    /// Sorted, distinct positions of axis `slot` (mm or degrees) where the
+    /// error model is not smooth: the positions of its component-error tables
+    /// and, for X, Y and Z, the stiffness grid. Between two of them every
+    /// table and the stiffness map are linear in the axis position.
+    pub fn breakpoints(&self, slot: usize) -> &[f64] {
+        self.axis(slot).map_or(&[], |a| a.breakpoints.as_slice())
+    }
+
     /// True when every geometric error is zero.
     pub fn is_error_free(&self) -> bool {
         self.error_free
@@ -225,15 +236,59 @@ impl MachineTool {
     /// Nominal tool tip pose in the workpiece frame for commanded axis values
     /// (machine coordinates) and tool length.
     pub fn nominal(&self, cmd: &AxisVec, tool_mm: f64) -> TipPose {
-        let c = self.chain(cmd, &[1; 6], tool_mm, false, false);
-        pose(&product(&c.m[..c.n]))
+        pose(&self.tip_htm(cmd, &[1; 6], tool_mm, false))
     }
 
     /// Predicted (attained) tool tip pose including the geometric errors,
     /// with component errors looked up for the given direction of motion.
     pub fn geometric(&self, cmd: &AxisVec, dirs: &DirVec, tool_mm: f64) -> TipPose {
-        let c = self.chain(cmd, dirs, tool_mm, true, false);
-        pose(&product(&c.m[..c.n]))
+        pose(&self.tip_htm(cmd, dirs, tool_mm, true))
+    }
+
+    /// The chain product `W_T_tip` for one command, accumulated factor by
+    /// factor without storing the factors (the per-point hot path; the
+    /// Jacobian uses [`Self::chain`]). Translations are applied as column
+    /// updates rather than full products.
+    fn tip_htm(&self, cmd: &AxisVec, dirs: &DirVec, tool_mm: f64, errors: bool) -> Matrix4<f64> {
+        let mut acc = Matrix4::identity();
+        for (i, a) in self.axes.iter().enumerate() {
+            if i == self.n_workpiece {
+                translate_z(&mut acc, tool_mm);
+            }
+            let q = cmd.get(a.slot).copied().unwrap_or(0.0);
+            let dir = dirs.get(a.slot).copied().unwrap_or(1);
+            let r = a.slot % 3;
+            match (a.kind, errors) {
+                (AxisKind::Linear, false) => {
+                    // acc · Trans(q·ê): column 3 gains q times column r.
+                    for row in 0..4 {
+                        acc[(row, 3)] += acc[(row, r)] * q;
+                    }
+                }
+                (AxisKind::Linear, true) => {
+                    // LOC · Trans(q·ê) · COM(q): the translation only adds
+                    // q to row r of COM's last column.
+                    let mut m = a.components.eval(q, dir).htm();
+                    m[(r, 3)] += q;
+                    if a.location.angles_rad != Vector3::zeros() {
+                        m = a.location.orientation_htm() * m;
+                    }
+                    acc *= m;
+                }
+                (AxisKind::Rotary, _) => {
+                    let (m, _) = axis_htm(a, q, dir, errors, false);
+                    acc *= m;
+                }
+            }
+        }
+        if self.n_workpiece == self.axes.len() {
+            translate_z(&mut acc, tool_mm);
+        }
+        if errors && !self.spindle.is_zero() {
+            acc *= self.spindle.htm();
+        }
+        translate_z(&mut acc, -tool_mm);
+        acc
     }
 
     /// Attained minus nominal tool tip position, mm.
@@ -342,6 +397,27 @@ impl MachineTool {
     }
 }
 
+/// Fills the breakpoints of every axis (see [`MachineTool::breakpoints`]).
+fn set_breakpoints(axes: &mut [Axis], stiffness: Option<&Stiffness>) {
+    for a in axes {
+        let mut v: Vec<f64> = Vec::new();
+        for t in a.components.tables.iter().flatten() {
+            v.extend_from_slice(t.positions());
+        }
+        if let (Some(k), true) = (stiffness, a.kind == AxisKind::Linear && a.slot < 3) {
+            let g = k.grid_mm()[a.slot];
+            // A single grid position is a uniform map: no break.
+            if g.len() > 1 {
+                v.extend_from_slice(g);
+            }
+        }
+        v.retain(|x| x.is_finite());
+        v.sort_by(f64::total_cmp);
+        v.dedup();
+        a.breakpoints = v;
+    }
+}
+
 /// HTM of one axis at command `q` (mm or degrees) and its derivative with
 /// respect to `q` (zero matrix unless `derivs`).
 fn axis_htm(a: &Axis, q: f64, dir: i8, errors: bool, derivs: bool) -> (Matrix4<f64>, Matrix4<f64>) {
@@ -384,6 +460,13 @@ fn axis_htm(a: &Axis, q: f64, dir: i8, errors: bool, derivs: bool) -> (Matrix4<f
             }
             (m, dm)
         }
+    }
+}
+
+/// `acc · Trans(0, 0, l)`: column 3 gains `l` times column 2.
+fn translate_z(acc: &mut Matrix4<f64>, l: f64) {
+    for row in 0..4 {
+        acc[(row, 3)] += acc[(row, 2)] * l;
     }
 }
 

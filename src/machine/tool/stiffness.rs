@@ -69,6 +69,12 @@ impl Stiffness {
         }
     }
 
+    /// Grid positions along x, y and z (machine coordinates, mm): the map is
+    /// trilinear between them.
+    pub fn grid_mm(&self) -> [&[f64]; 3] {
+        [&self.grid[0], &self.grid[1], &self.grid[2]]
+    }
+
     /// Stiffness in direction `dir` (0..3) at position `p` (mm) for a load
     /// of the given sign, N/µm.
     pub fn k_n_per_um(&self, p: &Vector3<f64>, dir: usize, positive: bool) -> f64 {

@@ -62,6 +62,16 @@ impl ErrorTable {
     /// Value at position `q` for the direction of motion `dir` (`> 0` uses
     /// the forward column, anything else the reverse column).
     pub fn lookup(&self, q: f64, dir: i8) -> Lookup {
+        let mut hint = 0;
+        self.lookup_hinted(q, dir, &mut hint)
+    }
+
+    /// [`Self::lookup`] that first tries the segment `hint` (the index of
+    /// the segment's upper position, as left by a previous call): tables of
+    /// one axis usually share their positions, so the search runs once per
+    /// axis rather than once per table. The result is the same as
+    /// [`Self::lookup`]'s.
+    pub fn lookup_hinted(&self, q: f64, dir: i8, hint: &mut usize) -> Lookup {
         let col = if dir > 0 {
             &self.forward
         } else {
@@ -91,7 +101,12 @@ impl ErrorTable {
             return end(n - 1, q > last);
         }
         // first < q < last, so 1 <= k <= n-1.
-        let k = p[..n].partition_point(|&x| x <= q);
+        let h = *hint;
+        let k = match (h.checked_sub(1).and_then(|i| p.get(i)), p.get(h)) {
+            (Some(&a), Some(&b)) if h < n && a <= q && q < b => h,
+            _ => p[..n].partition_point(|&x| x <= q),
+        };
+        *hint = k;
         match (p.get(k - 1), p.get(k), col.get(k - 1), col.get(k)) {
             (Some(&p0), Some(&p1), Some(&v0), Some(&v1)) => {
                 let slope = (v1 - v0) / (p1 - p0);
@@ -150,6 +165,25 @@ mod tests {
         assert_abs_diff_eq!(l.value, 6.0, epsilon = TOL);
         assert!(!t.lookup(200.0, 1).clamped);
         assert!(t.lookup(f64::NAN, 1).clamped);
+    }
+
+    #[test]
+    fn hinted_lookup_equals_the_plain_one_whatever_the_hint() {
+        let t = table();
+        for q in [-5.0, 0.0, 25.0, 99.9, 100.0, 150.0, 200.0, 250.0] {
+            for start in [0, 1, 2, 3, 7] {
+                let mut hint = start;
+                let got = t.lookup_hinted(q, 1, &mut hint);
+                let want = t.lookup(q, 1);
+                assert_abs_diff_eq!(got.value, want.value, epsilon = TOL);
+                assert_abs_diff_eq!(got.slope, want.slope, epsilon = TOL);
+                assert_eq!(got.clamped, want.clamped);
+            }
+        }
+        // 150 lies in the segment 100..200: the hint ends at its upper index 2.
+        let mut hint = 0;
+        t.lookup_hinted(150.0, 1, &mut hint);
+        assert_eq!(hint, 2);
     }
 
     #[test]
