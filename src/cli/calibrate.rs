@@ -118,6 +118,10 @@ pub fn run_simulate(a: &SimulateArgs) -> Result<i32> {
         seed: a.seed,
     };
     let out = simulate(&machine, &poses, &obs_file, &noise)?;
+    super::gcode::refuse_overwrite(
+        &a.output,
+        &[&a.observations, &Machine::resolve(&a.machine)?],
+    )?;
     let out_name = a.output.display().to_string();
     emit(&a.output, |w| {
         write_observations(w, &out).map_err(|e| Error::io(&out_name, e))
@@ -148,6 +152,10 @@ pub fn run_calibrate(a: &CalibrateArgs) -> Result<i32> {
         CalibrationKind::Thermal => calibrate_thermal(&text, &file, &obs, &obs_file, &opts)?,
     };
     let yaml = cal.yaml.clone();
+    super::gcode::refuse_overwrite(
+        &a.output,
+        &[&a.observations, &Machine::resolve(&a.machine)?],
+    )?;
     write_atomically(&a.output, |w| {
         w.write_all(yaml.as_bytes())
             .map_err(|e| Error::io(&a.output, e))

@@ -110,7 +110,11 @@ pub fn run(a: &DiagnoseArgs) -> Result<i32> {
     };
     if let Some(path) = &a.write_model {
         let w = write::write_model(&machine, &text, &d.found)?;
-        std::fs::write(path, &w.text).map_err(|e| Error::io(path, e))?;
+        super::gcode::refuse_overwrite(path, &[&Machine::resolve(m)?, o])?;
+        super::gcode::write_atomically(path, |out| {
+            out.write_all(w.text.as_bytes())
+                .map_err(|e| Error::io(path, e))
+        })?;
         if a.format == DiagnoseFormat::Table {
             out.push_str(&format!(
                 "\nwrote {} ({}): {}\n",
