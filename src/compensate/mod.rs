@@ -47,6 +47,15 @@ pub enum Failure {
         /// Travel limits.
         limits: (f64, f64),
     },
+    /// The programmed position itself leaves the travel of an axis.
+    ProgrammedOutOfTravel {
+        /// Axis letter.
+        axis: char,
+        /// Programmed value, mm or deg.
+        value: f64,
+        /// Travel limits.
+        limits: (f64, f64),
+    },
     /// The move needs more segments than allowed.
     TooManySegments,
 }
@@ -66,6 +75,17 @@ impl std::fmt::Display for Failure {
                 write!(
                     f,
                     "compensated {axis} = {value:.4} is outside the travel [{}, {}]",
+                    limits.0, limits.1
+                )
+            }
+            Failure::ProgrammedOutOfTravel {
+                axis,
+                value,
+                limits,
+            } => {
+                write!(
+                    f,
+                    "programmed {axis} = {value:.4} is outside the travel [{}, {}]",
                     limits.0, limits.1
                 )
             }
@@ -274,6 +294,24 @@ fn lerp(a: &AxisVec, b: &AxisVec, t: f64) -> AxisVec {
         o[i] = a[i] + (b[i] - a[i]) * t;
     }
     o
+}
+
+/// The programmed end of a move must lie in the travel before anything is
+/// solved or split (a wild target would otherwise surface as a segment or
+/// convergence failure).
+fn check_programmed_travel(pred: &ToolPredictor, p: &AxisVec) -> Result<(), Failure> {
+    match check_travel(pred, p) {
+        Err(Failure::OutOfTravel {
+            axis,
+            value,
+            limits,
+        }) => Err(Failure::ProgrammedOutOfTravel {
+            axis,
+            value,
+            limits,
+        }),
+        other => other,
+    }
 }
 
 fn check_travel(pred: &ToolPredictor, c: &AxisVec) -> Result<(), Failure> {
@@ -514,6 +552,9 @@ pub fn block_after(
     let Some(mv) = plan.mv else {
         return Ok(BlockResult::default());
     };
+    if plan.kind != PlanKind::Pass {
+        check_programmed_travel(pred, &mv.end)?;
+    }
     let prev = carry.take();
     let carry_in = prev.as_ref();
     let mut res = BlockResult::default();
