@@ -131,6 +131,72 @@ impl Layout {
     }
 }
 
+/// Joints (1-based) at the same angle in every row.
+fn constant_joints(obs: &Observations) -> Vec<usize> {
+    (0..6)
+        .filter(|&j| {
+            let mut qs = obs.rows.iter().filter_map(|r| match &r.pose {
+                Pose::Robot(rp) => rp.q_deg.get(j).copied(),
+                Pose::Tool(_) => None,
+            });
+            let first = qs.next();
+            first.is_some() && qs.all(|q| Some(q) == first)
+        })
+        .map(|j| j + 1)
+        .collect()
+}
+
+/// Poses of the structural identifiability check.
+const REFERENCE_POSES: usize = 60;
+
+/// The parameters that no pose set identifies: the identifiability of the
+/// same parameters and measured points at [`REFERENCE_POSES`] joint vectors
+/// spread over the joint ranges (deterministic).
+fn structurally_unidentifiable(
+    layout: &Layout,
+    obs: &Observations,
+    fit: &[usize],
+    file: &str,
+    lm_opts: &LmOptions,
+) -> Result<Vec<usize>> {
+    let limits = *layout.base.joint_limits_rad();
+    let mut rng = crate::calibrate::stats::SplitMix64::new(0x5EED_CA1B);
+    let mut reference = obs.clone();
+    reference.rows.clear();
+    for k in 0..REFERENCE_POSES {
+        let Some(template) = fit.get(k % fit.len().max(1)).and_then(|&i| obs.rows.get(i)) else {
+            break;
+        };
+        let mut row = template.clone();
+        if let Pose::Robot(rp) = &mut row.pose {
+            for (q, [lo, hi]) in rp.q_deg.iter_mut().zip(limits) {
+                // The inner 80 % of each range, clear of the singular ends.
+                let (lo, hi) = (lo.max(-std::f64::consts::PI), hi.min(std::f64::consts::PI));
+                let t = 0.1 + 0.8 * rng.next_f64();
+                *q = (lo + t * (hi - lo)).to_degrees();
+            }
+        }
+        reference.rows.push(row);
+    }
+    let rows: Vec<usize> = (0..reference.rows.len()).collect();
+    let n = layout.n();
+    let zero = DVector::zeros(n);
+    let mut r0 = DVector::zeros(3 * rows.len());
+    residuals(layout, &reference, &rows, zero.as_slice(), &mut r0, file);
+    if r0.iter().any(|v| !v.is_finite()) {
+        return Ok(Vec::new());
+    }
+    let j = numeric_jacobian(
+        |x, r| residuals(layout, &reference, &rows, x.as_slice(), r, file),
+        &zero,
+        3 * rows.len(),
+        lm_opts.fd_relative_step,
+    );
+    let sol =
+        solve_linear(&j, &r0, &lm_opts.lsq).map_err(|e| Error::Usage(format!("{file}: {e}")))?;
+    Ok(sol.identifiability.unidentifiable)
+}
+
 /// Residuals `measured − model` of `rows` for the full correction vector.
 fn residuals(
     layout: &Layout,
@@ -239,6 +305,34 @@ pub fn calibrate_kinematics(
         .map_err(|e| Error::Usage(format!("{obs_file}: {e}")))?;
     let free = pre.identifiability.identifiable.clone();
     let fixed = pre.identifiability.unidentifiable.clone();
+    // Parameters no pose set identifies (redundant with others in the
+    // model) are fixed quietly; parameters only THESE poses cannot identify
+    // mean a badly conditioned data set: fitting the rest would push their
+    // errors into neighbouring parameters with confident uncertainties.
+    let structural = structurally_unidentifiable(&layout, obs, &fit, obs_file, &lm_opts)?;
+    let data_caused: Vec<usize> = fixed
+        .iter()
+        .copied()
+        .filter(|k| !structural.contains(k))
+        .collect();
+    if !data_caused.is_empty() {
+        let names: Vec<String> = data_caused.iter().map(|&k| layout.name(k).0).collect();
+        let mut why = constant_joints(obs)
+            .iter()
+            .map(|j| format!("every row has joint {j} at the same angle"))
+            .collect::<Vec<_>>()
+            .join("; ");
+        if why.is_empty() {
+            why = "the poses do not vary the joints enough".into();
+        }
+        return Err(Error::Usage(format!(
+            "{obs_file}: badly conditioned data set: these poses cannot identify {} \
+             (varied poses do) — {why}. Their errors would be absorbed by the other \
+             parameters with misleadingly small uncertainties; measure poses that move \
+             every joint over its range",
+            names.join(", ")
+        )));
+    }
     if !fixed.is_empty() {
         let names: Vec<String> = fixed.iter().map(|&k| layout.name(k).0).collect();
         tracing::warn!(
@@ -351,21 +445,12 @@ pub fn calibrate_kinematics(
             fixed.len()
         ));
     }
-    for j in 0..6 {
-        let mut qs = obs.rows.iter().filter_map(|r| match &r.pose {
-            Pose::Robot(rp) => rp.q_deg.get(j).copied(),
-            Pose::Tool(_) => None,
-        });
-        let first = qs.next();
-        if first.is_some() && qs.all(|q| Some(q) == first) {
-            notes.push(format!(
-                "every row has joint {} at the same angle: the parameters of the links \
-                 before it cannot be told from a shift or tilt of the measuring frame \
-                 (badly conditioned for those parameters); move joint {} as well",
-                j + 1,
-                j + 1
-            ));
-        }
+    for j in constant_joints(obs) {
+        notes.push(format!(
+            "every row has joint {j} at the same angle: the parameters of the links \
+             before it cannot be told from a shift or tilt of the measuring frame \
+             (badly conditioned for those parameters); move joint {j} as well"
+        ));
     }
     notes.push("the base frame is the frame of the observations and is not identified".into());
     let mut cal = Calibration {
