@@ -307,26 +307,28 @@ fn robot_confounded_joint1_zero_vs_base_rotation() {
     );
     assert_ne!(truth_text, model);
     let truth = machine(&truth_text);
-    let obs = measure(&truth, robot_rows(80, 8), 1.0, 8);
-    let d = run(&model, &obs, 8);
-    assert!(d.found.is_empty(), "{}", diagnose::report::render_table(&d));
-    match d.steps.last().map(|s| &s.outcome) {
-        Some(Outcome::Confounded { name, with }) => {
-            let mut pair = vec![name.clone()];
-            pair.extend(with.iter().cloned());
-            assert!(pair.contains(&"joint1_zero".to_string()), "{pair:?}");
-            assert!(pair.contains(&"base_rz".to_string()), "{pair:?}");
+    for (seed, level) in [(8, 1.0), (9, 0.5), (10, 1.0)] {
+        let obs = measure(&truth, robot_rows(80, seed), level, seed);
+        let d = run(&model, &obs, seed);
+        assert!(d.found.is_empty(), "{}", diagnose::report::render_table(&d));
+        match d.steps.last().map(|s| &s.outcome) {
+            Some(Outcome::Confounded { name, with }) => {
+                let mut pair = vec![name.clone()];
+                pair.extend(with.iter().cloned());
+                assert!(pair.contains(&"joint1_zero".to_string()), "{pair:?}");
+                assert!(pair.contains(&"base_rz".to_string()), "{pair:?}");
+            }
+            other => panic!("seed {seed}: expected confounded, got {other:?}"),
         }
-        other => panic!("expected confounded, got {other:?}"),
+        assert!(d.verdict.contains("confounded"));
+        assert!(
+            d.screen
+                .iter()
+                .any(|c| (c.a == "joint1_zero" && c.b == "base_rz")
+                    || (c.a == "base_rz" && c.b == "joint1_zero")),
+            "the identifiability screen lists the pair"
+        );
     }
-    assert!(d.verdict.contains("confounded"));
-    assert!(
-        d.screen
-            .iter()
-            .any(|c| (c.a == "joint1_zero" && c.b == "base_rz")
-                || (c.a == "base_rz" && c.b == "joint1_zero")),
-        "the identifiability screen lists the pair"
-    );
 }
 
 /// X–Y squareness EC0Y 35 → 135 µrad (hidden +100 µrad: x error
@@ -372,9 +374,15 @@ fn tool_axis_backlash() {
 fn tool_nothing_hidden() {
     let model = text("machines/afm-r1000.yaml");
     let truth = machine(&model);
-    let obs = measure(&truth, tool_rows(90, 15), 1.0, 15);
-    let d = run(&model, &obs, 15);
-    assert!(d.found.is_empty(), "{}", diagnose::report::render_table(&d));
+    for (seed, level) in [(15, 1.0), (17, 0.3), (18, 0.6)] {
+        let obs = measure(&truth, tool_rows(90, seed), level, seed);
+        let d = run(&model, &obs, seed);
+        assert!(
+            d.found.is_empty(),
+            "seed {seed}: {}",
+            diagnose::report::render_table(&d)
+        );
+    }
 }
 
 /// Paper B thermal growth: the true machine FILE has one more `thermal`
@@ -419,10 +427,15 @@ fn robot_payload_error() {
     let model = text("machines/abb-irb1600.yaml");
     let truth_text = model.replace("tool_load: { mass_kg: 5.0,", "tool_load: { mass_kg: 8.0,");
     assert_ne!(truth_text, model);
-    let (obs, noise) = measure_with_noise(&machine(&truth_text), robot_rows(100, 51), 0.5, 51);
-    let d = run(&model, &obs, 51);
-    assert_found(&d, "payload_mass", 0, 3.0, noise);
-    assert_rerun_clean(&model, &d, &obs, 51);
+    for (seed, level) in [(51, 0.5), (53, 1.0)] {
+        let (obs, noise) =
+            measure_with_noise(&machine(&truth_text), robot_rows(100, seed), level, seed);
+        let d = run(&model, &obs, seed);
+        assert_found(&d, "payload_mass", 0, 3.0, noise);
+        if seed == 51 {
+            assert_rerun_clean(&model, &d, &obs, seed);
+        }
+    }
 }
 
 /// Backlash of joint 2, 200 µrad: the joint stops b/2 short on the side it
@@ -433,32 +446,34 @@ fn robot_joint_backlash() {
     let Machine::Robot(r) = machine(&model) else {
         panic!("robot file")
     };
-    let mut rows = robot_rows(100, 52);
-    let mut rng = SplitMix64::new(52);
-    let mut sum2 = 0.0;
-    for row in &mut rows {
-        let Pose::Robot(rp) = &row.pose else { panic!() };
-        let dir = f64::from(rp.dir[1].expect("dir2"));
-        let mut dh = *r.params(postproc::machine::robot::Model::Actual);
-        dh.joints[1].theta_offset_rad += dir * 100e-6;
-        let truth = Machine::Robot(r.with_actual(dh));
-        let p = forward::predict(&truth, row, "truth")
-            .expect("row")
-            .attained_mm;
-        let sd = noise_sd_mm(&p, 1.0);
-        let e = Vector3::new(
-            rng.gaussian(0.0, sd),
-            rng.gaussian(0.0, sd),
-            rng.gaussian(0.0, sd),
-        );
-        sum2 += (e * 1000.0).norm_squared();
-        row.measured_mm = p + e;
+    for (seed, level) in [(52, 1.0), (54, 0.5)] {
+        let mut rows = robot_rows(100, seed);
+        let mut rng = SplitMix64::new(seed);
+        let mut sum2 = 0.0;
+        for row in &mut rows {
+            let Pose::Robot(rp) = &row.pose else { panic!() };
+            let dir = f64::from(rp.dir[1].expect("dir2"));
+            let mut dh = *r.params(postproc::machine::robot::Model::Actual);
+            dh.joints[1].theta_offset_rad += dir * 100e-6;
+            let truth = Machine::Robot(r.with_actual(dh));
+            let p = forward::predict(&truth, row, "truth")
+                .expect("row")
+                .attained_mm;
+            let sd = noise_sd_mm(&p, level);
+            let e = Vector3::new(
+                rng.gaussian(0.0, sd),
+                rng.gaussian(0.0, sd),
+                rng.gaussian(0.0, sd),
+            );
+            sum2 += (e * 1000.0).norm_squared();
+            row.measured_mm = p + e;
+        }
+        let noise = (sum2 / rows.len() as f64).sqrt();
+        let mut obs = measure(&machine(&model), Vec::new(), 0.0, 0);
+        obs.rows = rows;
+        let d = run(&model, &obs, seed);
+        assert_found(&d, "joint2_backlash", 0, 200.0, noise);
     }
-    let noise = (sum2 / rows.len() as f64).sqrt();
-    let mut obs = measure(&machine(&model), Vec::new(), 0.0, 0);
-    obs.rows = rows;
-    let d = run(&model, &obs, 52);
-    assert_found(&d, "joint2_backlash", 0, 200.0, noise);
 }
 
 /// Spindle thermal growth with time, 40 µm/h: the tip moves down (−z) by
