@@ -33,7 +33,8 @@ pub const CHUNK_LINES: usize = 4096;
 pub const GROUP_BLOCKS: usize = 64;
 
 /// Deviation statistics over many blocks with a fixed-size histogram, so the
-/// percentile needs no per-block storage.
+/// percentile needs no per-block storage for values up to 2 mm; the rare
+/// larger values are kept exactly. Used by the job summary and the reports.
 #[derive(Debug, Clone)]
 pub struct DevStats {
     /// Number of values.
@@ -45,6 +46,9 @@ pub struct DevStats {
     /// Line of the largest value.
     pub max_line: usize,
     bins: Vec<u64>,
+    /// Values beyond the histogram, kept exactly (rare on machine tools,
+    /// bounded by the module size on robots).
+    large: Vec<f64>,
 }
 
 /// Histogram resolution of [`DevStats`], mm.
@@ -58,7 +62,8 @@ impl Default for DevStats {
             sum: 0.0,
             max: 0.0,
             max_line: 0,
-            bins: vec![0; DEV_BINS + 1],
+            bins: vec![0; DEV_BINS],
+            large: Vec::new(),
         }
     }
 }
@@ -72,8 +77,10 @@ impl DevStats {
             self.max = v;
             self.max_line = line;
         }
-        let bin = ((v / DEV_BIN_MM) as usize).min(DEV_BINS);
-        self.bins[bin] += 1;
+        match self.bins.get_mut((v / DEV_BIN_MM) as usize) {
+            Some(b) => *b += 1,
+            None => self.large.push(v),
+        }
     }
 
     /// Mean value, mm.
@@ -85,8 +92,9 @@ impl DevStats {
         }
     }
 
-    /// Percentile `p` in (0, 100] to the histogram resolution (upper bin edge,
-    /// capped at the maximum), mm.
+    /// Percentile `p` in (0, 100], mm: the upper edge of the histogram bin
+    /// that holds it (capped at the maximum), or the exact value beyond the
+    /// histogram.
     pub fn percentile(&self, p: f64) -> f64 {
         if self.count == 0 {
             return 0.0;
@@ -99,7 +107,10 @@ impl DevStats {
                 return ((i + 1) as f64 * DEV_BIN_MM).min(self.max);
             }
         }
-        self.max
+        let mut large = self.large.clone();
+        large.sort_by(f64::total_cmp);
+        let k = (want - acc).saturating_sub(1) as usize;
+        large.get(k).or(large.last()).copied().unwrap_or(self.max)
     }
 }
 

@@ -14,7 +14,7 @@ use std::io::Write;
 use crate::cli::Format;
 use crate::emit::svg::{Decimator, PlotPoint, Worst as PlotWorst};
 use crate::error::{Error, Result};
-use crate::job::Row;
+use crate::job::{DevStats, Row};
 use crate::machine::AXIS_LETTERS;
 use crate::predict::Effect;
 use crate::program::interp::Setup;
@@ -109,21 +109,11 @@ pub struct Totals {
     pub moves: usize,
 }
 
-/// Histogram resolution, mm (the printed resolution of deviations).
-const BIN_MM: f64 = 1e-5;
-/// Histogram range: values up to 2 mm are binned, larger ones kept exactly.
-const BINS: usize = 200_000;
-
-/// Statistics of |deviation| of one effect (or the total): mean, maximum,
-/// percentiles to [`BIN_MM`] and the worst blocks.
+/// Statistics of |deviation| of one effect (or the total): the histogram
+/// statistics of [`DevStats`] (mean, percentiles) and the worst blocks.
 #[derive(Debug, Clone)]
 struct Stat {
-    count: u64,
-    sum: f64,
-    bins: Vec<u64>,
-    /// Values beyond the histogram, kept exactly (rare on machine tools,
-    /// bounded by the module size on robots).
-    large: Vec<f64>,
+    hist: DevStats,
     /// Worst blocks, largest first: (value, line, motion).
     worst: Vec<(f64, usize, String)>,
 }
@@ -131,23 +121,14 @@ struct Stat {
 impl Stat {
     fn new() -> Self {
         Stat {
-            count: 0,
-            sum: 0.0,
-            bins: vec![0; BINS],
-            large: Vec::new(),
+            hist: DevStats::default(),
             worst: Vec::with_capacity(WORST_BLOCKS + 1),
         }
     }
 
     fn add(&mut self, v: f64, line: usize, motion: &str) {
         let v = if v.is_finite() { v.abs() } else { 0.0 };
-        self.count += 1;
-        self.sum += v;
-        let bin = (v / BIN_MM) as usize;
-        match self.bins.get_mut(bin) {
-            Some(b) => *b += 1,
-            None => self.large.push(v),
-        }
+        self.hist.add(v, line);
         // Ties keep the earlier block; blocks whose deviation prints as zero
         // (below half the last printed digit) are not listed.
         if v < LISTED_MIN_MM {
@@ -167,11 +148,7 @@ impl Stat {
     }
 
     fn mean(&self) -> f64 {
-        if self.count == 0 {
-            0.0
-        } else {
-            self.sum / self.count as f64
-        }
+        self.hist.mean()
     }
 
     fn max(&self) -> f64 {
@@ -182,28 +159,8 @@ impl Stat {
         self.worst.first().map_or(0, |w| w.1)
     }
 
-    /// Percentile `p` in (0, 100]: the upper edge of the histogram bin that
-    /// holds the value (capped at the maximum), or the exact value beyond
-    /// the histogram.
-    fn percentile(&mut self, p: f64) -> f64 {
-        if self.count == 0 {
-            return 0.0;
-        }
-        let want = ((p / 100.0) * self.count as f64).ceil().max(1.0) as u64;
-        let mut acc = 0;
-        for (i, &n) in self.bins.iter().enumerate() {
-            acc += n;
-            if acc >= want {
-                return ((i + 1) as f64 * BIN_MM).min(self.max());
-            }
-        }
-        self.large.sort_by(f64::total_cmp);
-        let k = (want - acc).saturating_sub(1) as usize;
-        self.large
-            .get(k)
-            .or(self.large.last())
-            .copied()
-            .unwrap_or(0.0)
+    fn percentile(&self, p: f64) -> f64 {
+        self.hist.percentile(p)
     }
 }
 
@@ -522,7 +479,7 @@ impl<'w> ReportWriter<'w> {
 
     /// Writes the summary (and, for SVG, the picture) and ends the report.
     pub fn finish(mut self, totals: Totals) -> Result<()> {
-        let p95: Vec<f64> = self.stats.iter_mut().map(|s| s.percentile(95.0)).collect();
+        let p95: Vec<f64> = self.stats.iter().map(|s| s.percentile(95.0)).collect();
         let rows = self.rows;
         let total = self
             .stats
@@ -696,7 +653,11 @@ mod tests {
             s.add(i as f64 * 0.001, i, "feed");
         }
         assert_abs_diff_eq!(s.mean(), 0.0505, epsilon = TOL_MM);
-        assert_abs_diff_eq!(s.percentile(95.0), 0.095, epsilon = BIN_MM + TOL_MM);
+        assert_abs_diff_eq!(
+            s.percentile(95.0),
+            0.095,
+            epsilon = crate::job::DEV_BIN_MM + TOL_MM
+        );
         let lines: Vec<usize> = s.worst.iter().map(|w| w.1).collect();
         assert_eq!(lines, [100, 99, 98, 97, 96]);
         assert_eq!(s.max_line(), 100);
