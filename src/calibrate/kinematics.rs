@@ -28,7 +28,8 @@
 use nalgebra::{DVector, Isometry3, Translation3};
 
 use crate::calibrate::lsq::{
-    LmOptions, LsqOptions, levenberg_marquardt, numeric_jacobian, solve_linear,
+    LmOptions, LsqOptions, forward_jacobian_free, levenberg_marquardt, numeric_jacobian,
+    solve_linear,
 };
 use crate::error::{Error, Result};
 use crate::machine::Machine;
@@ -358,18 +359,14 @@ pub fn calibrate_kinematics(
             // Forward differences (half the cost of central ones): the
             // model is smooth on the scale of FD_STEP, the truncation error
             // is ≈ FD_STEP · 1 mm/mrad² ≈ 1e-7 mm per unit.
-            let mut xp = full.clone();
-            let mut rp = DVector::zeros(m);
-            for (a, &k) in free.iter().enumerate() {
-                if let Some(v) = xp.get_mut(k) {
-                    *v += FD_STEP;
-                }
-                residuals(&layout, obs, &fit, &xp, &mut rp, obs_file);
-                if let Some(v) = xp.get_mut(k) {
-                    *v -= FD_STEP;
-                }
-                jac.set_column(a, &((&rp - &*r) / FD_STEP));
-            }
+            forward_jacobian_free(
+                |x, out| residuals(&layout, obs, &fit, x, out, obs_file),
+                &full,
+                &free,
+                r,
+                FD_STEP,
+                jac,
+            );
             true
         },
         &DVector::zeros(free.len()),

@@ -31,7 +31,8 @@
 use nalgebra::DVector;
 
 use crate::calibrate::lsq::{
-    LmOptions, LsqOptions, levenberg_marquardt, numeric_jacobian, solve_linear,
+    LmOptions, LsqOptions, forward_jacobian_free, levenberg_marquardt, numeric_jacobian,
+    solve_linear,
 };
 use crate::error::{Error, Result};
 use crate::machine::Machine;
@@ -279,18 +280,14 @@ pub fn calibrate_thermal(
             let Some(jac) = jac else { return false };
             // Forward differences (half the cost of central ones); the
             // growth is smooth on the scale of FD_STEP (1e-6 mm, 1e-6/kW).
-            let mut xp = full.clone();
-            let mut rp = DVector::zeros(m);
-            for (a, &k) in free.iter().enumerate() {
-                if let Some(v) = xp.get_mut(k) {
-                    *v += FD_STEP;
-                }
-                residuals(robot, &base, obs, &fit, &xp, &mut rp, obs_file);
-                if let Some(v) = xp.get_mut(k) {
-                    *v -= FD_STEP;
-                }
-                jac.set_column(a, &((&rp - &*r) / FD_STEP));
-            }
+            forward_jacobian_free(
+                |x, out| residuals(robot, &base, obs, &fit, x, out, obs_file),
+                &full,
+                &free,
+                r,
+                FD_STEP,
+                jac,
+            );
             true
         },
         &DVector::zeros(free.len()),
