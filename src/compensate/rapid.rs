@@ -224,6 +224,31 @@ fn lookup<'m>(module: &'m Module, name: &str) -> Option<(usize, &'m Decl)> {
         .find(|(_, d)| d.name.eq_ignore_ascii_case(name))
 }
 
+/// [`lookup`], or an error at `at`: "`what` `name` is not declared in this
+/// module" (`what` empty: just the name).
+fn lookup_or_err<'m>(
+    module: &'m Module,
+    src: &str,
+    file: &str,
+    at: usize,
+    name: &str,
+    what: &str,
+) -> Result<(usize, &'m Decl)> {
+    lookup(module, name).ok_or_else(|| {
+        let subject = if what.is_empty() {
+            format!("`{name}`")
+        } else {
+            format!("{what} `{name}`")
+        };
+        input_err(
+            src,
+            file,
+            at,
+            format!("{subject} is not declared in this module"),
+        )
+    })
+}
+
 /// The value of a named target (`p`, `holes{3}`), with its origin.
 fn named_value<'m>(
     module: &'m Module,
@@ -234,14 +259,7 @@ fn named_value<'m>(
     let Target::Named { name, index, span } = target else {
         return Err(input_err(src, file, target.span().start, "expected a name"));
     };
-    let (di, decl) = lookup(module, name).ok_or_else(|| {
-        input_err(
-            src,
-            file,
-            span.start,
-            format!("`{name}` is not declared in this module"),
-        )
-    })?;
+    let (di, decl) = lookup_or_err(module, src, file, span.start, name, "")?;
     let value = decl.value.as_ref().ok_or_else(|| {
         input_err(
             src,
@@ -441,14 +459,7 @@ fn resolve_tool(module: &Module, src: &str, file: &str, mv: &Move) -> Result<Too
         });
     }
     let at = mv.tool.span.start;
-    let Some((_, decl)) = lookup(module, name) else {
-        return Err(input_err(
-            src,
-            file,
-            at,
-            format!("tool `{name}` is not declared in this module"),
-        ));
-    };
+    let (_, decl) = lookup_or_err(module, src, file, at, name, "tool")?;
     let Some(DataValue::ToolData(t)) = &decl.value else {
         return Err(input_err(
             src,
@@ -492,14 +503,7 @@ fn resolve_wobj(module: &Module, src: &str, file: &str, mv: &Move) -> Result<Iso
         return Ok(Isometry3::identity());
     }
     let at = arg.span.start;
-    let Some((_, decl)) = lookup(module, name) else {
-        return Err(input_err(
-            src,
-            file,
-            at,
-            format!("work object `{name}` is not declared in this module"),
-        ));
-    };
+    let (_, decl) = lookup_or_err(module, src, file, at, name, "work object")?;
     let Some(DataValue::WobjData(w)) = &decl.value else {
         return Err(input_err(
             src,
