@@ -110,3 +110,78 @@ fn regression_calibration_commands_never_overwrite_their_inputs() {
         assert_eq!(std::fs::read(victim).unwrap(), before, "{args:?}");
     }
 }
+
+/// `-o /dev/null` (or any existing device or named pipe) was renamed over:
+/// run as root, the write replaced the device with an ordinary file — the
+/// very fault that broke cargo on the CI machine. Special files are now
+/// written to directly and stay what they were.
+#[cfg(unix)]
+#[test]
+fn regression_output_to_a_named_pipe_keeps_the_pipe() {
+    use std::os::unix::fs::FileTypeExt;
+    let dir = tempfile::tempdir().unwrap();
+    let fifo = dir.path().join("out.fifo");
+    let made = std::process::Command::new("mkfifo")
+        .arg(&fifo)
+        .status()
+        .expect("mkfifo runs");
+    assert!(made.success());
+    let reader = {
+        let fifo = fifo.clone();
+        std::thread::spawn(move || std::fs::read(fifo).unwrap())
+    };
+    let out = postproc()
+        .args(["compensate", "--machine", "afm-r1000", "-o"])
+        .arg(&fifo)
+        .arg(repo("samples/part.nc"))
+        .output()
+        .unwrap();
+    assert_eq!(
+        out.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let through_pipe = reader.join().unwrap();
+    assert!(
+        std::fs::symlink_metadata(&fifo)
+            .unwrap()
+            .file_type()
+            .is_fifo(),
+        "the named pipe was replaced"
+    );
+    let plain = dir.path().join("plain.nc");
+    postproc()
+        .args(["compensate", "--machine", "afm-r1000", "-o"])
+        .arg(&plain)
+        .arg(repo("samples/part.nc"))
+        .assert()
+        .success();
+    assert_eq!(through_pipe, std::fs::read(&plain).unwrap());
+}
+
+/// An output given as a symbolic link replaced the link with a file; the
+/// file it points at must be replaced and the link kept.
+#[cfg(unix)]
+#[test]
+fn regression_output_through_a_symlink_keeps_the_link() {
+    let dir = tempfile::tempdir().unwrap();
+    let real = dir.path().join("real.nc");
+    std::fs::write(&real, "old\n").unwrap();
+    let link = dir.path().join("link.nc");
+    std::os::unix::fs::symlink(&real, &link).unwrap();
+    postproc()
+        .args(["compensate", "--machine", "afm-r1000", "-o"])
+        .arg(&link)
+        .arg(repo("samples/part.nc"))
+        .assert()
+        .success();
+    assert!(
+        std::fs::symlink_metadata(&link)
+            .unwrap()
+            .file_type()
+            .is_symlink()
+    );
+    let text = std::fs::read_to_string(&real).unwrap();
+    assert!(text.contains("G1"), "{text}");
+}

@@ -358,7 +358,45 @@ pub(super) fn same_file(a: &Path, b: &Path) -> bool {
 
 /// Writes through a temporary file in the target directory and renames it
 /// into place only when `f` succeeds; on failure nothing is left behind.
+///
+/// An output that already exists and is not an ordinary file (`/dev/null`,
+/// `/dev/stdout`, a named pipe) is written to directly: renaming over it
+/// would replace the device or pipe with a file. A symbolic link is followed,
+/// so the file it points at is replaced and the link stays.
 pub fn write_atomically<T>(path: &Path, f: impl FnOnce(&mut dyn Write) -> Result<T>) -> Result<T> {
+    let is_link = std::fs::symlink_metadata(path)
+        .map(|m| m.file_type().is_symlink())
+        .unwrap_or(false);
+    match std::fs::metadata(path) {
+        Ok(m) if !m.is_file() && !m.is_dir() => return write_through(path, f),
+        Ok(m) if m.is_file() && is_link => {
+            let target = path.canonicalize().map_err(|e| Error::io(path, e))?;
+            return replace_file(&target, path, f);
+        }
+        _ => {}
+    }
+    replace_file(path, path, f)
+}
+
+/// Writes straight into an existing special file (device, pipe).
+fn write_through<T>(path: &Path, f: impl FnOnce(&mut dyn Write) -> Result<T>) -> Result<T> {
+    let file = std::fs::OpenOptions::new()
+        .write(true)
+        .open(path)
+        .map_err(|e| Error::io(path, e))?;
+    let mut w = BufWriter::with_capacity(1 << 16, file);
+    let value = f(&mut w)?;
+    w.flush().map_err(|e| Error::io(path, e))?;
+    Ok(value)
+}
+
+/// The temporary-file-and-rename write of `write_atomically`; `shown` is the
+/// path named in errors (the one the user gave).
+fn replace_file<T>(
+    path: &Path,
+    shown: &Path,
+    f: impl FnOnce(&mut dyn Write) -> Result<T>,
+) -> Result<T> {
     let dir = match path.parent() {
         Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
         _ => PathBuf::from("."),
@@ -370,7 +408,7 @@ pub fn write_atomically<T>(path: &Path, f: impl FnOnce(&mut dyn Write) -> Result
         .tempfile_in(&dir)
         .map_err(|e| {
             Error::io(
-                path,
+                shown,
                 std::io::Error::new(
                     e.kind(),
                     format!("cannot create a file in {}: {}", dir.display(), e.kind()),
@@ -382,18 +420,18 @@ pub fn write_atomically<T>(path: &Path, f: impl FnOnce(&mut dyn Write) -> Result
     let value = f(&mut w)?;
     let file = w
         .into_inner()
-        .map_err(|e| Error::io(path, e.into_error()))?;
-    file.sync_all().map_err(|e| Error::io(path, e))?;
+        .map_err(|e| Error::io(shown, e.into_error()))?;
+    file.sync_all().map_err(|e| Error::io(shown, e))?;
     // Temporary files are private (0600); the result is an ordinary file.
     #[cfg(unix)]
     {
         use std::os::unix::fs::PermissionsExt;
         file.set_permissions(std::fs::Permissions::from_mode(0o644))
-            .map_err(|e| Error::io(path, e))?;
+            .map_err(|e| Error::io(shown, e))?;
     }
     tmp_path
         .persist(path)
-        .map_err(|e| Error::io(path, e.error))?;
+        .map_err(|e| Error::io(shown, e.error))?;
     Ok(value)
 }
 
