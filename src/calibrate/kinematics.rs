@@ -28,8 +28,7 @@
 use nalgebra::{DVector, Isometry3, Translation3};
 
 use crate::calibrate::lsq::{
-    LmOptions, LsqOptions, forward_jacobian_free, levenberg_marquardt, numeric_jacobian,
-    solve_linear,
+    LmOptions, LsqOptions, expand_free, fit_free, numeric_jacobian, solve_linear,
 };
 use crate::error::{Error, Result};
 use crate::machine::Machine;
@@ -342,50 +341,19 @@ pub fn calibrate_kinematics(
             names.join(", ")
         );
     }
-    let expand = |xr: &DVector<f64>| -> Vec<f64> {
-        let mut full = vec![0.0; n];
-        for (a, &k) in free.iter().enumerate() {
-            if let (Some(f), Some(v)) = (full.get_mut(k), xr.get(a)) {
-                *f = *v;
-            }
-        }
-        full
-    };
-    let fit_result = levenberg_marquardt(
-        |xr, r, jac| {
-            let full = expand(xr);
-            residuals(&layout, obs, &fit, &full, r, obs_file);
-            let Some(jac) = jac else { return false };
-            // Forward differences (half the cost of central ones): the
-            // model is smooth on the scale of FD_STEP, the truncation error
-            // is ≈ FD_STEP · 1 mm/mrad² ≈ 1e-7 mm per unit.
-            forward_jacobian_free(
-                |x, out| residuals(&layout, obs, &fit, x, out, obs_file),
-                &full,
-                &free,
-                r,
-                FD_STEP,
-                jac,
-            );
-            true
-        },
-        &DVector::zeros(free.len()),
+    // Forward differences (half the cost of central ones): the model is
+    // smooth on the scale of FD_STEP, the truncation error is
+    // ≈ FD_STEP · 1 mm/mrad² ≈ 1e-7 mm per unit.
+    let fit_result = fit_free(
+        |x, out| residuals(&layout, obs, &fit, x, out, obs_file),
+        n,
+        &free,
         m,
+        FD_STEP,
         &lm_opts,
     )
     .map_err(|e| Error::Usage(format!("{obs_file}: {e}")))?;
     let sol = &fit_result.solution;
-    tracing::info!(
-        "Levenberg–Marquardt: {} iterations, {:?}",
-        fit_result.iterations,
-        fit_result.termination
-    );
-    if !fit_result.termination.converged() {
-        tracing::warn!(
-            "Levenberg–Marquardt stopped after {} iterations without converging",
-            fit_result.iterations
-        );
-    }
     let id = &sol.identifiability;
     if id.condition_number_identified > CONDITION_LIMIT {
         return Err(Error::Usage(format!(
@@ -399,7 +367,7 @@ pub fn calibrate_kinematics(
             fixed.len()
         )));
     }
-    let full = expand(&sol.params);
+    let full = expand_free(n, &free, sol.params.as_slice());
     let u_red = sol.std_uncertainty();
     let mut params = Vec::with_capacity(n);
     for k in 0..n {

@@ -453,6 +453,60 @@ pub fn forward_jacobian_free<F>(
     }
 }
 
+/// The full parameter vector of `n` entries with the values `x` of the free
+/// parameters `free` in place and zeros (the file's values) elsewhere.
+pub fn expand_free(n: usize, free: &[usize], x: &[f64]) -> Vec<f64> {
+    let mut full = vec![0.0; n];
+    for (&k, &v) in free.iter().zip(x) {
+        if let Some(f) = full.get_mut(k) {
+            *f = v;
+        }
+    }
+    full
+}
+
+/// Levenberg–Marquardt over the parameters `free` of a model of `n`
+/// parameters (the others stay zero), from zero, with `m` residuals written
+/// by `residuals(full, r)` and forward-difference Jacobian columns of step
+/// `step` ([`forward_jacobian_free`]). Logs the iteration count and warns
+/// when the iteration stopped without converging.
+pub fn fit_free<F>(
+    mut residuals: F,
+    n: usize,
+    free: &[usize],
+    m: usize,
+    step: f64,
+    opts: &LmOptions,
+) -> Result<LmFit, LsqError>
+where
+    F: FnMut(&[f64], &mut DVector<f64>),
+{
+    let fit = levenberg_marquardt(
+        |xr, r, jac| {
+            let full = expand_free(n, free, xr.as_slice());
+            residuals(&full, r);
+            let Some(jac) = jac else { return false };
+            forward_jacobian_free(&mut residuals, &full, free, r, step, jac);
+            true
+        },
+        &DVector::zeros(free.len()),
+        m,
+        opts,
+    )?;
+    tracing::info!(
+        "Levenberg–Marquardt: {} iterations, {:?}",
+        fit.iterations,
+        fit.termination
+    );
+    if !fit.termination.converged() {
+        tracing::warn!(
+            "Levenberg–Marquardt stopped after {} iterations without converging",
+            fit.iterations
+        );
+    }
+    Ok(fit)
+}
+
 /// `h_j = rel_step · max(|x_j|, 1)`: `J[:, j] = (f(x + h e_j) − f(x − h e_j)) / 2h`.
 pub fn numeric_jacobian<F>(mut f: F, x: &DVector<f64>, m: usize, rel_step: f64) -> DMatrix<f64>
 where

@@ -31,8 +31,7 @@
 use nalgebra::DVector;
 
 use crate::calibrate::lsq::{
-    LmOptions, LsqOptions, forward_jacobian_free, levenberg_marquardt, numeric_jacobian,
-    solve_linear,
+    LmOptions, LsqOptions, expand_free, fit_free, numeric_jacobian, solve_linear,
 };
 use crate::error::{Error, Result};
 use crate::machine::Machine;
@@ -236,15 +235,6 @@ pub fn calibrate_thermal(
         },
         ..LmOptions::default()
     };
-    let expand_from = |sel: &[usize], xr: &[f64]| -> Vec<f64> {
-        let mut full = vec![0.0; n];
-        for (a, &k) in sel.iter().enumerate() {
-            if let (Some(f), Some(v)) = (full.get_mut(k), xr.get(a)) {
-                *f = *v;
-            }
-        }
-        full
-    };
     // Identifiability at the start point, over the varying terms.
     let free: Vec<usize> = if candidates.is_empty() {
         Vec::new()
@@ -252,7 +242,7 @@ pub fn calibrate_thermal(
         let x0 = DVector::zeros(candidates.len());
         let j0 = numeric_jacobian(
             |x, r| {
-                let full = expand_from(&candidates, x.as_slice());
+                let full = expand_free(n, &candidates, x.as_slice());
                 residuals(robot, &base, obs, &fit, &full, r, obs_file);
             },
             &x0,
@@ -273,35 +263,18 @@ pub fn calibrate_thermal(
              measure at several power levels of the joints the terms name"
         )));
     }
-    let fit_result = levenberg_marquardt(
-        |xr, r, jac| {
-            let full = expand_from(&free, xr.as_slice());
-            residuals(robot, &base, obs, &fit, &full, r, obs_file);
-            let Some(jac) = jac else { return false };
-            // Forward differences (half the cost of central ones); the
-            // growth is smooth on the scale of FD_STEP (1e-6 mm, 1e-6/kW).
-            forward_jacobian_free(
-                |x, out| residuals(robot, &base, obs, &fit, x, out, obs_file),
-                &full,
-                &free,
-                r,
-                FD_STEP,
-                jac,
-            );
-            true
-        },
-        &DVector::zeros(free.len()),
+    // Forward differences (half the cost of central ones); the growth is
+    // smooth on the scale of FD_STEP (1e-6 mm, 1e-6/kW).
+    let fit_result = fit_free(
+        |x, out| residuals(robot, &base, obs, &fit, x, out, obs_file),
+        n,
+        &free,
         m,
+        FD_STEP,
         &lm_opts,
     )
     .map_err(|e| Error::Usage(format!("{obs_file}: {e}")))?;
     let sol = &fit_result.solution;
-    if !fit_result.termination.converged() {
-        tracing::warn!(
-            "Levenberg–Marquardt stopped after {} iterations without converging",
-            fit_result.iterations
-        );
-    }
     let id = &sol.identifiability;
     if id.condition_number_identified > CONDITION_LIMIT {
         return Err(Error::Usage(format!(
@@ -311,7 +284,7 @@ pub fn calibrate_thermal(
             id.condition_number_identified, CONDITION_LIMIT, id.observability_o1
         )));
     }
-    let full = expand_from(&free, sol.params.as_slice());
+    let full = expand_free(n, &free, sol.params.as_slice());
     let terms = terms_with(&base, &full);
     for t in &terms {
         if !(t.ts_per_w.is_finite() && (0.0..=TS_MAX).contains(&t.ts_per_w)) {
