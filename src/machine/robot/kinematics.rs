@@ -75,6 +75,20 @@ impl Prepared {
         }
     }
 
+    /// These rows with the lengths and joint offsets of `p`, keeping the
+    /// precomputed twists: for a parameter set whose twists equal these
+    /// (a thermal growth changes lengths only), the same as
+    /// `Prepared::new(p)` without its sines and cosines.
+    pub(crate) fn with_lengths_of(&self, p: &DhParams) -> Self {
+        let mut out = *self;
+        for (o, j) in out.joints.iter_mut().zip(&p.joints) {
+            o.a_mm = j.a_mm;
+            o.d_mm = j.d_mm;
+            o.theta_offset_rad = j.theta_offset_rad;
+        }
+        out
+    }
+
     /// The convention of the rows.
     pub(crate) fn convention(&self) -> Convention {
         self.convention

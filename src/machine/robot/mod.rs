@@ -527,6 +527,11 @@ impl Robot {
     pub fn flange_for_tcp(&self, tcp_world: &Isometry3<f64>) -> Isometry3<f64> {
         self.d.base.inverse() * tcp_world * self.d.tool.inverse()
     }
+    /// The nominal parameter set with its twists precomputed.
+    pub(crate) fn nominal_prepared(&self) -> &kinematics::Prepared {
+        &self.d.nominal_prep
+    }
+
     /// ABB confdata of a joint vector (nominal model).
     pub fn confdata(&self, q: &[f64; 6]) -> ConfData {
         ik::confdata_prepared(&self.d.nominal_prep, q)
