@@ -101,7 +101,11 @@ impl Prepared {
 }
 
 /// [`joint_transform`] of a prepared row.
-pub(crate) fn prepared_transform(j: &PreparedJoint, convention: Convention, q: f64) -> Isometry3<f64> {
+pub(crate) fn prepared_transform(
+    j: &PreparedJoint,
+    convention: Convention,
+    q: f64,
+) -> Isometry3<f64> {
     let theta = q + j.theta_offset_rad;
     let (sz, cz) = (0.5 * theta).sin_cos();
     let (sx, cx) = (j.sx, j.cx);

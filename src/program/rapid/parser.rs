@@ -126,11 +126,7 @@ pub(super) fn ident(i: &str) -> PResult<'_, &str> {
     if !b.first().is_some_and(u8::is_ascii_alphabetic) {
         return Err(no_match(i));
     }
-    let n = 1 + b
-        .iter()
-        .skip(1)
-        .take_while(|&&c| is_ident_byte(c))
-        .count();
+    let n = 1 + b.iter().skip(1).take_while(|&&c| is_ident_byte(c)).count();
     // ASCII bytes only: both ends are char boundaries.
     match (i.get(n..), i.get(..n)) {
         (Some(rest), Some(word)) => Ok((rest, word)),
