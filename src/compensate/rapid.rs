@@ -1481,6 +1481,8 @@ pub fn compensate_module(
             None => Err(RobotError::Unreachable("no robot view".into())),
         })
         .collect();
+    // The jobs are solved: free them before the write-back walk.
+    drop(jobs);
     rw.phase = Phase::Apply(results.into_iter());
     // Walk 2: write the results back in source order.
     let mut max_vib = (0.0, 0, None);

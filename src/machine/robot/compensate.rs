@@ -16,7 +16,7 @@
 use nalgebra::{Isometry3, Matrix6, Translation3, UnitQuaternion, Vector3, Vector6};
 
 use super::dh::DhParams;
-use super::kinematics::{Frames, Prepared, flange, frames_prepared};
+use super::kinematics::{Frames, Prepared, frames_prepared};
 use super::pose::pose_error;
 use super::thermal::{DhGrowth, grown};
 use super::{IkSelect, Model, Robot, RobotError};
@@ -223,6 +223,20 @@ impl Robot {
         (kin, model)
     }
 
+    /// [`Robot::prediction_params`] prepared: the kinematic set (the
+    /// robot's prepared nominal rows at a kinematic gain of 0) and the full
+    /// set, which differs from it by lengths only and shares its twists.
+    fn prediction_prepared(&self, effects: Effects, growth: &DhGrowth) -> (Prepared, Prepared) {
+        let (kin, model) = self.prediction_params(effects, growth);
+        let kin = if effects.kinematic == 0.0 {
+            *self.nominal_prepared()
+        } else {
+            Prepared::new(&kin)
+        };
+        let model = kin.with_lengths_of(&model);
+        (kin, model)
+    }
+
     /// TCP pose (world frame) of a flange pose.
     fn tcp_of(&self, flange: &Isometry3<f64>) -> Isometry3<f64> {
         self.base() * flange * self.flange_to_tool()
@@ -271,20 +285,20 @@ impl Robot {
     /// with the intermediate poses `[nominal, +kinematic, +thermal,
     /// +gravity, +process]` in that order (the last is the attained pose).
     pub fn predict_stages(&self, q: &[f64; 6], effects: Effects) -> [Isometry3<f64>; 5] {
-        let (kin, model) = self.prediction_params(effects, self.current_thermal_growth_mm());
-        self.stages_with(&kin, &Prepared::new(&model), q, effects)
+        let (kin, model) = self.prediction_prepared(effects, self.current_thermal_growth_mm());
+        self.stages_with(&kin, &model, q, effects)
     }
 
     /// [`Robot::predict_stages`] with the parameter sets resolved.
     fn stages_with(
         &self,
-        kin: &DhParams,
+        kin: &Prepared,
         model: &Prepared,
         q: &[f64; 6],
         effects: Effects,
     ) -> [Isometry3<f64>; 5] {
-        let p0 = self.tcp_of(&flange(self.params(Model::Nominal), q));
-        let p1 = self.tcp_of(&flange(kin, q));
+        let p0 = self.tcp_of(&frames_prepared(self.nominal_prepared(), q, 6).flange());
+        let p1 = self.tcp_of(&frames_prepared(kin, q, 6).flange());
         let f = frames_prepared(model, q, 6);
         let p2 = self.tcp_of(&f.flange());
         let (tau_g, tau_w) = self.load_torques(&f, effects);
@@ -322,8 +336,8 @@ impl Robot {
 
     /// Predicted attained TCP pose (world frame) for controller joints `q`.
     pub fn predict(&self, q: &[f64; 6], effects: Effects) -> Isometry3<f64> {
-        let (_, model) = self.prediction_params(effects, self.current_thermal_growth_mm());
-        self.predict_with(&Prepared::new(&model), q, effects)
+        let (_, model) = self.prediction_prepared(effects, self.current_thermal_growth_mm());
+        self.predict_with(&model, q, effects)
     }
 
     /// Compensates one programmed TCP pose (world frame): returns the pose to
@@ -367,8 +381,7 @@ impl Robot {
             Some(q) => q,
             None => self.ik_nominal(programmed, sel)?,
         };
-        let (kin, model) = self.prediction_params(effects, growth);
-        let model = Prepared::new(&model);
+        let (kin, model) = self.prediction_prepared(effects, growth);
         let st = self.stages_with(&kin, &model, &q0, effects);
         let deviation = Deviation {
             kinematic: PoseDelta::between(&st[1], &st[0]),

@@ -29,7 +29,7 @@ use nalgebra::{Isometry3, Matrix6, UnitQuaternion, Vector3, Vector6};
 
 use super::RobotError;
 use super::dh::{Convention, DhParams};
-use super::kinematics::{frames, frames_upto, jacobian, joint_transform};
+use super::kinematics::{Prepared, frames, frames_prepared, jacobian, prepared_transform};
 use super::pose::pose_error;
 
 /// ABB robot configuration data `[cf1, cf4, cf6, cfx]`.
@@ -81,6 +81,9 @@ pub struct ClosedForm {
     off: [f64; 6],
     /// `Rx(α3)⁻¹`, constant.
     rx3_inv: UnitQuaternion<f64>,
+    /// The nominal rows with their twist sines and cosines precomputed
+    /// (the rotation of frame 3 of every branch reuses them).
+    prep: Prepared,
 }
 
 fn near(a: f64, b: f64) -> bool {
@@ -115,6 +118,7 @@ impl ClosedForm {
             s4: j[4].alpha_rad.signum(),
             alpha3: j[3].alpha_rad,
             rx3_inv: UnitQuaternion::from_axis_angle(&Vector3::x_axis(), j[3].alpha_rad).inverse(),
+            prep: Prepared::new(p),
             off: [
                 j[0].theta_offset_rad,
                 j[1].theta_offset_rad,
@@ -130,13 +134,26 @@ impl ClosedForm {
     /// (−π, π]; `None` where that shoulder/elbow branch cannot reach. Index
     /// bits: 4 = second shoulder branch, 2 = second elbow branch, 1 = wrist
     /// flipped (these are not cfx; use [`confdata`] to classify).
-    pub fn solve(
+    pub fn solve(&self, flange: &Isometry3<f64>, wrist_ref: f64) -> [Option<[f64; 6]>; 8] {
+        let mut out = [None; 8];
+        self.solve_until(flange, wrist_ref, |k, q| {
+            if let Some(o) = out.get_mut(k) {
+                *o = Some(q);
+            }
+            false
+        });
+        out
+    }
+
+    /// The solutions of [`ClosedForm::solve`] in index order, each passed to
+    /// `visit` with its index, until `visit` returns true (the branches
+    /// after it are not computed). Returns whether it did.
+    pub fn solve_until(
         &self,
-        p: &DhParams,
         flange: &Isometry3<f64>,
         wrist_ref: f64,
-    ) -> [Option<[f64; 6]>; 8] {
-        let mut out = [None; 8];
+        mut visit: impl FnMut(usize, [f64; 6]) -> bool,
+    ) -> bool {
         let z6 = flange.rotation * Vector3::z();
         let pw = flange.translation.vector - self.d6 * z6;
         let rho = (self.a3 * self.a3 + self.d4 * self.d4).sqrt();
@@ -168,10 +185,8 @@ impl ClosedForm {
                 let q123 = [t1 - self.off[0], t2 - self.off[1], t3 - self.off[2]];
                 // Rotation of frame 3 from the nominal joint transforms.
                 let mut r03 = UnitQuaternion::identity();
-                for (i, q) in q123.iter().enumerate() {
-                    if let Some(j) = p.joints.get(i) {
-                        r03 *= joint_transform(j, p.convention, *q).rotation;
-                    }
+                for (j, q) in self.prep.joints().iter().zip(&q123) {
+                    r03 *= prepared_transform(j, self.prep.convention(), *q).rotation;
                 }
                 let n = (self.rx3_inv * r03.inverse() * flange.rotation).to_rotation_matrix();
                 let n = n.matrix();
@@ -205,11 +220,13 @@ impl ClosedForm {
                         t5 - self.off[4],
                         a6 - self.off[5],
                     ];
-                    out[sh * 4 + el * 2 + fl] = Some(q.map(wrap));
+                    if visit(sh * 4 + el * 2 + fl, q.map(wrap)) {
+                        return true;
+                    }
                 }
             }
         }
-        out
+        false
     }
 }
 
@@ -226,8 +243,13 @@ pub fn wrap(a: f64) -> f64 {
 
 /// Confdata of a joint vector for a parameter set (normally the nominal one).
 pub fn confdata(p: &DhParams, q: &[f64; 6]) -> ConfData {
+    confdata_prepared(&Prepared::new(p), q)
+}
+
+/// [`confdata`] of a prepared parameter set.
+pub(crate) fn confdata_prepared(p: &Prepared, q: &[f64; 6]) -> ConfData {
     // Frames up to link 5 (index 4): the wrist centre and the axes 1–3.
-    let f = frames_upto(p, q, 5);
+    let f = frames_prepared(p, q, 5);
     // Wrist centre: origin of frame 5 (joints 4–6 intersect there for a
     // spherical wrist).
     let wc = f.link[4].translation.vector;

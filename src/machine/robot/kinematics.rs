@@ -30,6 +30,7 @@ impl Frames {
 /// `qz·qx = (cz·cx, cz·sx, sz·sx, sz·cx)` (classic, translation
 /// `Rz(θ)·(a, 0, d)`) and `qx·qz = (cx·cz, sx·cz, −sx·sz, cx·sz)` (modified,
 /// translation `(a, 0, 0) + Rx(α)·(0, 0, d)`).
+#[cfg(test)]
 pub(crate) fn joint_transform(j: &DhJoint, convention: Convention, q: f64) -> Isometry3<f64> {
     prepared_transform(&PreparedJoint::new(j), convention, q)
 }
@@ -73,10 +74,38 @@ impl Prepared {
             joints: p.joints.each_ref().map(PreparedJoint::new),
         }
     }
+
+    /// These rows with the lengths and joint offsets of `p`, keeping the
+    /// precomputed twists: for a parameter set whose twists equal these
+    /// (a thermal growth changes lengths only), the same as
+    /// `Prepared::new(p)` without its sines and cosines.
+    pub(crate) fn with_lengths_of(&self, p: &DhParams) -> Self {
+        let mut out = *self;
+        for (o, j) in out.joints.iter_mut().zip(&p.joints) {
+            o.a_mm = j.a_mm;
+            o.d_mm = j.d_mm;
+            o.theta_offset_rad = j.theta_offset_rad;
+        }
+        out
+    }
+
+    /// The convention of the rows.
+    pub(crate) fn convention(&self) -> Convention {
+        self.convention
+    }
+
+    /// The prepared rows.
+    pub(crate) fn joints(&self) -> &[PreparedJoint; 6] {
+        &self.joints
+    }
 }
 
 /// [`joint_transform`] of a prepared row.
-fn prepared_transform(j: &PreparedJoint, convention: Convention, q: f64) -> Isometry3<f64> {
+pub(crate) fn prepared_transform(
+    j: &PreparedJoint,
+    convention: Convention,
+    q: f64,
+) -> Isometry3<f64> {
     let theta = q + j.theta_offset_rad;
     let (sz, cz) = (0.5 * theta).sin_cos();
     let (sx, cx) = (j.sx, j.cx);

@@ -145,6 +145,8 @@ pub struct Robot {
 struct RobotData {
     name: String,
     nominal: DhParams,
+    /// `nominal` with the twist sines and cosines precomputed (confdata).
+    nominal_prep: kinematics::Prepared,
     actual: DhParams,
     closed_form: Option<ik::ClosedForm>,
     limits_rad: [[f64; 2]; 6],
@@ -429,6 +431,7 @@ impl Robot {
         Ok(Robot {
             d: Box::new(RobotData {
                 name: raw.name.unwrap_or_else(|| "robot".to_string()),
+                nominal_prep: kinematics::Prepared::new(&nominal),
                 nominal,
                 actual,
                 closed_form,
@@ -524,9 +527,14 @@ impl Robot {
     pub fn flange_for_tcp(&self, tcp_world: &Isometry3<f64>) -> Isometry3<f64> {
         self.d.base.inverse() * tcp_world * self.d.tool.inverse()
     }
+    /// The nominal parameter set with its twists precomputed.
+    pub(crate) fn nominal_prepared(&self) -> &kinematics::Prepared {
+        &self.d.nominal_prep
+    }
+
     /// ABB confdata of a joint vector (nominal model).
     pub fn confdata(&self, q: &[f64; 6]) -> ConfData {
-        ik::confdata(&self.d.nominal, q)
+        ik::confdata_prepared(&self.d.nominal_prep, q)
     }
 
     /// Checks every joint against its limits.
@@ -557,7 +565,7 @@ impl Robot {
             .closed_form
             .as_ref()
             .ok_or(RobotError::NoClosedForm)?;
-        let sols = cf.solve(&self.d.nominal, &self.flange_for_tcp(tcp_world), 0.0);
+        let sols = cf.solve(&self.flange_for_tcp(tcp_world), 0.0);
         if sols.iter().all(Option::is_none) {
             return Err(RobotError::Unreachable(
                 "the wrist centre is farther from (or closer to) the shoulder than the arm can reach".into(),
@@ -605,27 +613,33 @@ impl Robot {
             .as_ref()
             .ok_or(RobotError::NoClosedForm)?;
         let wrist_ref = turn_ref.map_or(0.0, |r| r[3]);
-        let sols = cf.solve(&self.d.nominal, &self.flange_for_tcp(tcp_world), wrist_ref);
-        if sols.iter().all(Option::is_none) {
-            return Err(RobotError::Unreachable(
-                "the wrist centre is farther from (or closer to) the shoulder than the arm can reach".into(),
-            ));
-        }
+        let flange = self.flange_for_tcp(tcp_world);
+        // The first solution (in index order) with the asked cfx; the later
+        // branches are not computed.
         let mut found = None;
-        for q in sols.iter().flatten() {
-            if ik::confdata(&self.d.nominal, q).cfx == conf.cfx {
-                found = Some(*q);
-                break;
+        cf.solve_until(&flange, wrist_ref, |_, q| {
+            let hit = ik::confdata_prepared(&self.d.nominal_prep, &q).cfx == conf.cfx;
+            if hit {
+                found = Some(q);
             }
-        }
-        let mismatch = || RobotError::ConfMismatch {
-            conf,
-            available: sols
-                .iter()
-                .flatten()
-                .map(|q| ik::confdata(&self.d.nominal, q).to_string())
-                .collect::<Vec<_>>()
-                .join(" "),
+            hit
+        });
+        let mismatch = || {
+            let sols = cf.solve(&flange, wrist_ref);
+            if sols.iter().all(Option::is_none) {
+                return RobotError::Unreachable(
+                    "the wrist centre is farther from (or closer to) the shoulder than the arm can reach".into(),
+                );
+            }
+            RobotError::ConfMismatch {
+                conf,
+                available: sols
+                    .iter()
+                    .flatten()
+                    .map(|q| ik::confdata_prepared(&self.d.nominal_prep, q).to_string())
+                    .collect::<Vec<_>>()
+                    .join(" "),
+            }
         };
         let mut q = found.ok_or_else(mismatch)?;
         match turn_ref {

@@ -4,12 +4,7 @@
 //! into the source, computed from the remaining input.
 
 use nom::IResult;
-use nom::branch::alt;
-use nom::bytes::complete::take_while;
-use nom::character::complete::{char, digit0, digit1, one_of, satisfy};
-use nom::combinator::{opt, recognize};
 use nom::error::{ErrorKind, ParseError};
-use nom::sequence::{pair, tuple};
 
 use super::{
     Arg, DataType, Decl, Index, Module, Move, MoveKind, Number, OptArg, Proc, RoutineKind, Scalar,
@@ -127,23 +122,64 @@ pub(super) fn ws(mut i: &str) -> &str {
 
 /// An identifier: a letter followed by letters, digits and underscores.
 pub(super) fn ident(i: &str) -> PResult<'_, &str> {
-    recognize(pair(
-        satisfy(|c| c.is_ascii_alphabetic()),
-        take_while(|c: char| c.is_ascii_alphanumeric() || c == '_'),
-    ))(i)
+    let b = i.as_bytes();
+    if !b.first().is_some_and(u8::is_ascii_alphabetic) {
+        return Err(no_match(i));
+    }
+    let n = 1 + b.iter().skip(1).take_while(|&&c| is_ident_byte(c)).count();
+    // ASCII bytes only: both ends are char boundaries.
+    match (i.get(n..), i.get(..n)) {
+        (Some(rest), Some(word)) => Ok((rest, word)),
+        _ => Err(no_match(i)),
+    }
+}
+
+/// The failure of a lexical piece (never shown: callers try the next form).
+fn no_match(i: &str) -> nom::Err<PErr<'_>> {
+    nom::Err::Error(PErr {
+        at: i,
+        msg: String::new(),
+    })
+}
+
+/// Number of ASCII digits at the start of `b`.
+fn digits(b: &[u8]) -> usize {
+    b.iter().take_while(|c| c.is_ascii_digit()).count()
 }
 
 /// The text of a numeric literal: optional sign, digits with an optional
 /// fraction (or a fraction alone) and an optional exponent.
 pub(super) fn number_text(i: &str) -> PResult<'_, &str> {
-    recognize(tuple((
-        opt(one_of("+-")),
-        alt((
-            recognize(pair(digit1, opt(pair(char('.'), digit0)))),
-            recognize(pair(char('.'), digit1)),
-        )),
-        opt(tuple((one_of("eE"), opt(one_of("+-")), digit1))),
-    )))(i)
+    let b = i.as_bytes();
+    let mut k = usize::from(matches!(b.first(), Some(b'+' | b'-')));
+    let int = digits(b.get(k..).unwrap_or_default());
+    if int > 0 {
+        k += int;
+        if b.get(k) == Some(&b'.') {
+            k += 1 + digits(b.get(k + 1..).unwrap_or_default());
+        }
+    } else if b.get(k) == Some(&b'.') {
+        let frac = digits(b.get(k + 1..).unwrap_or_default());
+        if frac == 0 {
+            return Err(no_match(i));
+        }
+        k += 1 + frac;
+    } else {
+        return Err(no_match(i));
+    }
+    // An exponent only when complete (`1e` is the number `1`, then `e`).
+    if matches!(b.get(k), Some(b'e' | b'E')) {
+        let sign = usize::from(matches!(b.get(k + 1), Some(b'+' | b'-')));
+        let exp = digits(b.get(k + 1 + sign..).unwrap_or_default());
+        if exp > 0 {
+            k += 1 + sign + exp;
+        }
+    }
+    // ASCII bytes only: both ends are char boundaries.
+    match (i.get(k..), i.get(..k)) {
+        (Some(rest), Some(text)) => Ok((rest, text)),
+        _ => Err(no_match(i)),
+    }
 }
 
 /// Largest magnitude of a literal: above the `9E9` that marks an unused
@@ -379,7 +415,9 @@ impl<'a> Parser<'a> {
             let mut d = d;
             loop {
                 let d1 = ws(d);
-                let Ok((d2, digits)) = digit1::<_, PErr>(d1) else {
+                let nd = digits(d1.as_bytes());
+                let (Some(d2), Some(digits)) = (d1.get(nd..), d1.get(..nd).filter(|_| nd > 0))
+                else {
                     return self
                         .fail_found(self.pos(d1), "expected an integer array size inside `{…}`");
                 };
@@ -488,7 +526,9 @@ impl<'a> Parser<'a> {
         };
         if let Ok((r, t)) = number_text(i) {
             if ends_here(r) {
-                if t.parse::<f64>()
+                let parsed = t.parse::<f64>();
+                if parsed
+                    .as_ref()
                     .is_ok_and(|v| v.is_nan() || v.abs() > MAX_NUMBER)
                 {
                     return self.fail_found(
@@ -499,7 +539,7 @@ impl<'a> Parser<'a> {
                         ),
                     );
                 }
-                if let Some(value) = t.parse::<f64>().ok().filter(|v| v.is_finite()) {
+                if let Some(value) = parsed.ok().filter(|v| v.is_finite()) {
                     return Ok((
                         r,
                         Val::Num(Number {
