@@ -190,7 +190,11 @@ fn validate(raw: RawMachineTool) -> V<MachineTool> {
             .iter()
             .all(|a| a.location.is_zero() && a.components.is_zero());
     super::set_breakpoints(&mut axes, stiffness.as_ref());
+    let fast = axes.iter().map(super::fast::AxisFast::new).collect();
+    let spindle_htm = super::fast::spindle(&spindle);
     Ok(MachineTool {
+        fast,
+        spindle_htm,
         name: raw.name,
         axes,
         n_workpiece,

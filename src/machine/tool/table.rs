@@ -39,6 +39,11 @@ impl ErrorTable {
         &self.positions
     }
 
+    /// Positions, forward and reverse columns.
+    pub(crate) fn columns(&self) -> (&[f64], &[f64], &[f64]) {
+        (&self.positions, &self.forward, &self.reverse)
+    }
+
     /// First and last table position.
     pub fn range(&self) -> (f64, f64) {
         let lo = self.positions.first().copied().unwrap_or(0.0);
