@@ -252,9 +252,29 @@ impl AxisFast {
     }
 }
 
-/// The spindle location HTM.
-pub(crate) fn spindle(s: &SpindleErrors) -> Option<Aff> {
-    (!s.is_zero()).then(|| from_m4(&s.htm()))
+/// Everything position-independent of a machine's chain.
+#[derive(Debug, Clone, PartialEq)]
+pub(crate) struct Precomputed {
+    /// Per axis, in chain order.
+    pub(crate) axes: Vec<AxisFast>,
+    /// The spindle location HTM (`None` when it is the identity).
+    pub(crate) spindle: Option<Aff>,
+    /// Lipschitz bounds (machines without rotary axes).
+    pub(crate) lip: Option<LipGeo>,
+    /// The spindle location errors.
+    pub(crate) spindle_errors: SpindleErrors,
+}
+
+impl Precomputed {
+    /// Precomputes the chain of `axes` (chain order) and `spindle`.
+    pub(crate) fn new(axes: &[Axis], spindle: SpindleErrors) -> Self {
+        Precomputed {
+            axes: axes.iter().map(AxisFast::new).collect(),
+            spindle: (!spindle.is_zero()).then(|| from_m4(&spindle.htm())),
+            lip: LipGeo::new(axes, &spindle),
+            spindle_errors: spindle,
+        }
+    }
 }
 
 /// `acc · E(q)` for axis `a` (see the chain in the module docs of
@@ -292,5 +312,111 @@ pub(crate) fn apply_axis(acc: &mut Aff, a: &Axis, f: &AxisFast, q: f64, dir: i8,
             let m = mul(&mul(&mul(to, &rot), &com), back);
             *acc = mul(acc, &m);
         }
+    }
+}
+
+/// Bounds of how fast the geometric error of a machine without rotary axes
+/// changes with the command, for skipping evaluations whose outcome is
+/// certain (see [`super::MachineTool::lipschitz_geo`]).
+///
+/// With `p(c)` the attained tip and `c` the command, the error
+/// `G(c) = p(c) − nominal(c)` has, between table knots, the column
+/// `∂G/∂q_k = (R_k − I)·ê + R_k·(δ'_k + ε'_k × w_k)`: `R_k` the rotation
+/// part of the factors up to axis `k` (small-angle factors, so
+/// `‖R_k‖ ≤ e^E` and `‖R_k − I‖ ≤ e^E − 1` with `E` the sum of every
+/// largest angular error), `δ'`, `ε'` the table slopes and `w_k` the tip
+/// seen from axis `k` (`|w_k| ≤ e^2E · Σ |translations|`). `G` is
+/// continuous, so these bound its Lipschitz constant over a box of commands.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) struct LipGeo {
+    /// Box of commands (by slot 0..3) where the bounds hold.
+    lo: [f64; 3],
+    hi: [f64; 3],
+    /// `L_geo(tool) = pos0 + pos1 · |tool|`.
+    pos0: f64,
+    pos1: f64,
+    /// Bound of the change of the unit tool axis per mm of command.
+    dir: f64,
+}
+
+impl LipGeo {
+    /// The bounds of a machine whose axes are all linear (`None` otherwise).
+    pub(crate) fn new(axes: &[Axis], spindle: &SpindleErrors) -> Option<Self> {
+        if axes
+            .iter()
+            .any(|a| a.kind != AxisKind::Linear || a.slot >= 3)
+        {
+            return None;
+        }
+        let max_abs = |a: &Axis, range: std::ops::Range<usize>| -> f64 {
+            a.components
+                .tables
+                .get(range)
+                .unwrap_or(&[])
+                .iter()
+                .flatten()
+                .map(super::table::ErrorTable::max_abs)
+                .sum()
+        };
+        let max_slope = |a: &Axis, range: std::ops::Range<usize>| -> f64 {
+            a.components
+                .tables
+                .get(range)
+                .unwrap_or(&[])
+                .iter()
+                .flatten()
+                .map(super::table::ErrorTable::max_abs_slope)
+                .sum()
+        };
+        let abs_sum = |v: &Vector3<f64>| v.iter().map(|x| x.abs()).sum::<f64>();
+        let mut lo = [f64::NEG_INFINITY; 3];
+        let mut hi = [f64::INFINITY; 3];
+        let mut angles = abs_sum(&spindle.angles_rad);
+        let mut translations = abs_sum(&spindle.offset_mm);
+        let mut slopes_d = 0.0;
+        let mut slopes_e = 0.0;
+        for a in axes {
+            let (t0, t1) = a.travel;
+            let margin = 0.1 * (t1 - t0).abs() + 10.0;
+            let (b0, b1) = (t0 - margin, t1 + margin);
+            if let (Some(l), Some(h)) = (lo.get_mut(a.slot), hi.get_mut(a.slot)) {
+                *l = b0;
+                *h = b1;
+            }
+            angles += max_abs(a, 3..6) + abs_sum(&a.location.angles_rad);
+            translations += max_abs(a, 0..3) + b0.abs().max(b1.abs());
+            slopes_d += max_slope(a, 0..3);
+            slopes_e += max_slope(a, 3..6);
+        }
+        let n = axes.len() as f64;
+        let grow = angles.exp();
+        let grow2 = grow * grow;
+        let pos0 = n * (grow - 1.0) + grow * slopes_d + grow * slopes_e * grow2 * translations;
+        // Gauge line and tool: two translations of |tool|.
+        let pos1 = grow * slopes_e * grow2 * 2.0;
+        // The z column moves by at most e^2E · Σ ε' per mm; the unit axis by
+        // at most twice that (its norm stays above 1/2).
+        let dir = 2.0 * grow2 * slopes_e;
+        let all = [pos0, pos1, dir, angles];
+        (all.iter().all(|v| v.is_finite()) && angles < 0.1).then_some(LipGeo {
+            lo,
+            hi,
+            pos0,
+            pos1,
+            dir,
+        })
+    }
+
+    /// True when every linear slot of `c` lies in the box of the bounds.
+    #[inline]
+    pub(crate) fn contains(&self, c: &[f64; 6]) -> bool {
+        (0..3).all(|s| c[s] >= self.lo[s] && c[s] <= self.hi[s])
+    }
+
+    /// Lipschitz bound of the geometric error for tool length `tool_mm`,
+    /// and the bound of the tool-axis change (per mm).
+    #[inline]
+    pub(crate) fn bounds(&self, tool_mm: f64) -> (f64, f64) {
+        (self.pos0 + self.pos1 * tool_mm.abs(), self.dir)
     }
 }

@@ -190,16 +190,13 @@ fn validate(raw: RawMachineTool) -> V<MachineTool> {
             .iter()
             .all(|a| a.location.is_zero() && a.components.is_zero());
     super::set_breakpoints(&mut axes, stiffness.as_ref());
-    let fast = axes.iter().map(super::fast::AxisFast::new).collect();
-    let spindle_htm = super::fast::spindle(&spindle);
+    let pre = Box::new(super::fast::Precomputed::new(&axes, spindle));
     Ok(MachineTool {
-        fast,
-        spindle_htm,
+        pre,
         name: raw.name,
         axes,
         n_workpiece,
         slot_index,
-        spindle,
         tools,
         work_offsets,
         decimals,

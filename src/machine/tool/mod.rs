@@ -101,7 +101,6 @@ pub struct MachineTool {
     n_workpiece: usize,
     /// Index into `axes` per slot.
     slot_index: [Option<u8>; 6],
-    spindle: SpindleErrors,
     tools: BTreeMap<u32, f64>,
     work_offsets: BTreeMap<String, [f64; 3]>,
     decimals: Option<usize>,
@@ -109,11 +108,9 @@ pub struct MachineTool {
     error_free: bool,
     /// The optional process sections, boxed to keep `Machine` small.
     process: Option<Box<ProcessSections>>,
-    /// Position-independent parts of each axis' chain factor, by chain
-    /// position (see [`fast`]).
-    fast: Vec<fast::AxisFast>,
-    /// The spindle location HTM (`None` when it is the identity).
-    spindle_htm: Option<fast::Aff>,
+    /// Position-independent parts of the chain (see [`fast`]), boxed to
+    /// keep `Machine` small.
+    pre: Box<fast::Precomputed>,
 }
 
 /// The optional process sections of a machine file.
@@ -166,7 +163,7 @@ impl MachineTool {
 
     /// Spindle location errors.
     pub fn spindle_errors(&self) -> &SpindleErrors {
-        &self.spindle
+        &self.pre.spindle_errors
     }
 
     /// Travel limits of the axis in `slot` (mm or deg), `None` if absent.
@@ -257,7 +254,7 @@ impl MachineTool {
     /// are applied as column updates rather than full products.
     fn tip_htm(&self, cmd: &AxisVec, dirs: &DirVec, tool_mm: f64, errors: bool) -> fast::Aff {
         let mut acc = fast::IDENTITY;
-        for (i, (a, f)) in self.axes.iter().zip(&self.fast).enumerate() {
+        for (i, (a, f)) in self.axes.iter().zip(&self.pre.axes).enumerate() {
             if i == self.n_workpiece {
                 fast::translate_z(&mut acc, tool_mm);
             }
@@ -268,11 +265,22 @@ impl MachineTool {
         if self.n_workpiece == self.axes.len() {
             fast::translate_z(&mut acc, tool_mm);
         }
-        if let (true, Some(s)) = (errors, &self.spindle_htm) {
+        if let (true, Some(s)) = (errors, &self.pre.spindle) {
             acc = fast::mul(&acc, s);
         }
         fast::translate_z(&mut acc, -tool_mm);
         acc
+    }
+
+    /// For a machine without rotary axes and a command in a box around the
+    /// travel: an upper bound of the Lipschitz constant (Euclidean norms) of
+    /// the geometric error `geometric(c).pos − nominal(c).pos` in the
+    /// command (for tool length `tool_mm`, any directions of motion) and one
+    /// of the attained tool axis `geometric(c).dir`. `None` outside the box
+    /// or for machines with rotary axes.
+    pub fn lipschitz_geo(&self, c: &AxisVec, tool_mm: f64) -> Option<(f64, f64)> {
+        let l = self.pre.lip.as_ref()?;
+        l.contains(c).then(|| l.bounds(tool_mm))
     }
 
     /// Attained minus nominal tool tip position, mm.
@@ -371,7 +379,7 @@ impl MachineTool {
             );
         }
         if errors {
-            push(&mut c, self.spindle.htm());
+            push(&mut c, self.pre.spindle_errors.htm());
         }
         push(
             &mut c,
@@ -517,8 +525,8 @@ mod tests {
         if m.n_workpiece == m.axes.len() {
             translate_z(&mut acc, tool_mm);
         }
-        if errors && !m.spindle.is_zero() {
-            acc *= m.spindle.htm();
+        if errors && !m.pre.spindle_errors.is_zero() {
+            acc *= m.pre.spindle_errors.htm();
         }
         translate_z(&mut acc, -tool_mm);
         acc

@@ -56,6 +56,20 @@ impl ErrorTable {
         self.forward.iter().chain(&self.reverse).all(|v| *v == 0.0)
     }
 
+    /// Largest absolute slope between consecutive positions, both columns
+    /// (per mm or per degree).
+    pub fn max_abs_slope(&self) -> f64 {
+        let mut m = 0.0f64;
+        for col in [&self.forward, &self.reverse] {
+            for (p, v) in self.positions.windows(2).zip(col.windows(2)) {
+                if let ([p0, p1], [v0, v1]) = (p, v) {
+                    m = m.max(((v1 - v0) / (p1 - p0)).abs());
+                }
+            }
+        }
+        m
+    }
+
     /// Largest absolute value of both columns.
     pub fn max_abs(&self) -> f64 {
         self.forward
