@@ -1,5 +1,7 @@
 //! Criterion benchmarks of the hot kernels: the machine-tool prediction per
-//! block (AFM R-1000, attained pose and per-effect breakdown), the robot
+//! block (AFM R-1000, attained pose and per-effect breakdown), the
+//! machine-tool compensation per block (a 400 mm raster line and a 0.01 mm
+//! step of `examples/bench_inputs.rs`, every effect on), the robot
 //! inverse kinematics per target and the robot compensation per target
 //! (ABB IRB 1600 with a 2 kg spindle, every effect on), and the module-level
 //! RAPID compensation of 1 000 targets.
@@ -10,9 +12,11 @@ use std::hint::black_box;
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 use postproc::compensate::rapid::{RapidOptions, compensate_module};
+use postproc::compensate::{Settings, block_after};
 use postproc::machine::Machine;
 use postproc::machine::robot::{ConfData, Effects, IkSelect, PointMass, Robot};
 use postproc::predict::{EffectSet, ToolPredictor};
+use postproc::program::interp::{Motion, Move, Plan, PlanKind};
 
 fn machine(name: &str) -> Machine {
     let path = format!("{}/machines/{name}.yaml", env!("CARGO_MANIFEST_DIR"));
@@ -67,6 +71,46 @@ fn tool_prediction(c: &mut Criterion) {
     });
     g.bench_function("breakdown per block (afm-r1000)", |b| {
         b.iter(|| p.breakdown(black_box(&cmd), black_box(&dirs), black_box(100.0)))
+    });
+    // The raster of `examples/bench_inputs.rs` with G54 and tool H1: a
+    // 400 mm line in X (split at a table knot) and a 0.01 mm step in Y.
+    let plan = |start: [f64; 3], end: [f64; 3], dirs: [i8; 6]| Plan {
+        kind: PlanKind::Motion,
+        mv: Some(Move {
+            motion: Motion::Linear,
+            start: [start[0], start[1], start[2], 0.0, 0.0, 0.0],
+            end: [end[0], end[1], end[2], 0.0, 0.0, 0.0],
+            arc: None,
+            dirs,
+            prev_dirs: dirs,
+            feed_mm_min: 2000.0,
+            spindle_rpm: 0.0,
+            tool: 1,
+            tool_len_mm: 62.5,
+        }),
+        programmed: 0b11,
+        ..Plan::default()
+    };
+    let line = plan(
+        [250.0, 150.5, 150.0],
+        [650.0, 150.5, 150.0],
+        [1, 1, 1, 1, 1, 1],
+    );
+    let step = plan(
+        [650.0, 150.5, 150.0],
+        [650.0, 150.51, 150.0],
+        [1, 1, 1, 1, 1, 1],
+    );
+    let settings = Settings::default();
+    g.bench_function("compensate 400 mm line (afm-r1000, all effects)", |b| {
+        b.iter(|| block_after(&p, black_box(&line), &settings, &mut None))
+    });
+    g.bench_function("compensate 0.01 mm step after a line (afm-r1000)", |b| {
+        b.iter(|| {
+            let mut carry = None;
+            let _ = block_after(&p, &line, &settings, &mut carry);
+            block_after(&p, black_box(&step), &settings, &mut carry)
+        })
     });
     g.finish();
 }

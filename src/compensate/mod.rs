@@ -30,6 +30,10 @@ const DAMPING: f64 = 1e-9;
 /// five-axis solve, mm per rad.
 const DIR_WEIGHT_MM: f64 = 100.0;
 
+/// Allowance for rounding (mm) when a Lipschitz bound decides the outcome
+/// of an evaluation without doing it.
+const SKIP_MARGIN_MM: f64 = 1e-10;
+
 /// Why a target could not be compensated.
 #[derive(Debug, Clone, PartialEq)]
 pub enum Failure {
@@ -183,17 +187,32 @@ fn solve_from(
     let rotary = (3..6).any(|s| m.has_axis(s));
     let mut c = *start;
     if !rotary {
-        for _ in 0..MAX_ITER {
+        for it in 0..MAX_ITER {
             let got = match first.take() {
                 Some(p) => p,
                 None => pred.attained(&c, dirs, tool_mm),
             };
             let r = got.pos - goal.pos;
-            if r.norm() < SOLVE_TOL_MM {
-                return Ok((c, r.norm()));
+            let rn = r.norm();
+            if rn < SOLVE_TOL_MM {
+                return Ok((c, rn));
             }
+            let prev = c;
             for i in 0..3 {
                 c[i] -= r[i];
+            }
+            // The step moved the command by exactly the residual, so the
+            // next residual is the change of the error over the step: at
+            // most L·|r|. When that is certainly below the tolerance, the
+            // next evaluation would only confirm convergence; the bound is
+            // reported as the residual.
+            if it + 1 < MAX_ITER {
+                if let Some(l) = pred.lipschitz(&prev, &c, tool_mm) {
+                    let bound = l * rn + SKIP_MARGIN_MM;
+                    if bound < SOLVE_TOL_MM / 2.0 {
+                        return Ok((c, bound));
+                    }
+                }
             }
         }
         let r = (pred.attained(&c, dirs, tool_mm).pos - goal.pos).norm();
@@ -342,6 +361,9 @@ const BREAK_MARGIN: f64 = 1e-6;
 /// final one `c1` only with `keep_end` (so that a move that needs no split
 /// pushes nothing and allocates nothing).
 ///
+/// `c0` and `c1` must be solutions of `p0` and `p1` (residual below
+/// [`SOLVE_TOL_MM`] with `dirs`, `tool` and the predictor's context).
+///
 /// The error model is piecewise linear in each axis position (component
 /// tables, stiffness grid), so the exact compensation of a straight move
 /// has its kinks where a moving axis crosses a breakpoint of the model.
@@ -448,6 +470,22 @@ impl Piece<'_, '_> {
         depth: u32,
         out: &mut Vec<AxisVec>,
     ) -> Result<(), Failure> {
+        // Both ends are solved (residual below SOLVE_TOL_MM) and the
+        // nominal chain is affine, so the gap at any point of the piece is
+        // at most that residual plus L·|cb − ca| (the error's departure
+        // from its chord): when that meets the tolerance, the check below
+        // would pass.
+        if self.ends.is_some() {
+            if let Some(l) = self.pred.lipschitz(ca, cb, self.tool) {
+                let dc = (0..3).map(|s| (cb[s] - ca[s]).powi(2)).sum::<f64>().sqrt();
+                if SOLVE_TOL_MM + l * dc + SKIP_MARGIN_MM <= self.tol {
+                    if tb < 1.0 || self.keep_end {
+                        out.push(*cb);
+                    }
+                    return Ok(());
+                }
+            }
+        }
         let mut worst = 0.0f64;
         for f in [0.25, 0.5, 0.75] {
             let got = self

@@ -347,6 +347,30 @@ impl<'m> ToolPredictor<'m> {
             && self.ctx.thermal != ThermalState::default()
     }
 
+    /// An upper bound of the Lipschitz constant (Euclidean norms) of
+    /// `attained(c).pos − nominal(c).pos` on the segment of commands
+    /// `a → b` (machines without rotary axes, commands near the travel;
+    /// `None` otherwise): the geometric bound of the machine plus those of
+    /// the static deflection under the block's force and of the thermal
+    /// drift, each times its gain. Used to skip evaluations whose outcome
+    /// it decides (see `compensate`).
+    pub fn lipschitz(&self, a: &AxisVec, b: &AxisVec, tool_mm: f64) -> Option<f64> {
+        let (geo, dir) = self.machine.lipschitz_geo(a, tool_mm)?;
+        self.machine.lipschitz_geo(b, tool_mm)?;
+        let mut l = self.effects.gain(Effect::Geometric).abs() * geo;
+        let gs = self.effects.gain(Effect::Static);
+        if let (true, Some(k)) = (gs != 0.0, self.machine.stiffness()) {
+            l += gs.abs() * k.lipschitz_mm(&self.ctx.force_n);
+        }
+        let gt = self.effects.gain(Effect::Thermal);
+        if let (true, Some(_)) = (gt != 0.0, self.machine.thermal()) {
+            let th = &self.ctx.thermal;
+            let scale = th.scale_ppm.iter().fold(0.0f64, |m, v| m.max(v.abs())) * 1e-6;
+            l += gt.abs() * (scale + th.growth_um.abs() * 1e-3 * dir);
+        }
+        l.is_finite().then_some(l)
+    }
+
     /// Predicted attained tool tip pose for commanded axes (the compensated
     /// effects only).
     pub fn attained(&self, cmd: &AxisVec, dirs: &DirVec, tool_mm: f64) -> TipPose {
@@ -545,6 +569,67 @@ thermal:
                 assert_abs_diff_eq!(g.part(x), full.part(x) * scale, epsilon = POS_TOL_MM);
             }
         }
+    }
+
+    #[test]
+    fn lipschitz_bound_holds_on_the_afm_r1000() {
+        let path = concat!(env!("CARGO_MANIFEST_DIR"), "/machines/afm-r1000.yaml");
+        let text = std::fs::read_to_string(path).unwrap_or_default();
+        let m = match MachineTool::from_yaml_str(&text, path) {
+            Ok(m) => m,
+            Err(e) => panic!("{e}"),
+        };
+        let hot = BlockContext {
+            force_n: Vector3::new(300.0, -200.0, 150.0),
+            thermal: ThermalState {
+                growth_um: 25.0,
+                scale_ppm: [12.0, -8.0, 5.0],
+            },
+            ..BlockContext::default()
+        };
+        let mut s = 11u64;
+        let mut rng = || {
+            s = s
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (s >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let mut worst_ratio = 0.0f64;
+        for ctx in [BlockContext::default(), hot] {
+            let p = ToolPredictor::new(&m, EffectSet::default()).with_context(ctx);
+            for k in 0..20000 {
+                let mut a = [0.0; 6];
+                for (slot, v) in a.iter_mut().enumerate().take(3) {
+                    let (lo, hi) = m.travel(slot).unwrap_or((0.0, 0.0));
+                    *v = lo - 20.0 + (hi - lo + 40.0) * rng();
+                }
+                // Near pairs (the solver's steps, short moves) and far ones.
+                let scale = [1e-3, 1.0, 100.0, 1000.0][k % 4];
+                let mut b = a;
+                for v in b.iter_mut().take(3) {
+                    *v += scale * (rng() - 0.5);
+                }
+                let dirs = [if rng() < 0.5 { 1 } else { -1 }, 1, -1, 0, 0, 0];
+                let tool = 200.0 * rng();
+                let Some(l) = p.lipschitz(&a, &b, tool) else {
+                    continue;
+                };
+                let g = |c: &AxisVec| p.attained(c, &dirs, tool).pos - p.nominal(c, tool).pos;
+                let dc = (Vector3::new(b[0], b[1], b[2]) - Vector3::new(a[0], a[1], a[2])).norm();
+                let dg = (g(&b) - g(&a)).norm();
+                // Rounding of the two evaluations, mm.
+                const ROUND_MM: f64 = 1e-12;
+                assert!(
+                    dg <= l * dc + ROUND_MM,
+                    "{a:?} {b:?}: {dg:e} > {l:e}·{dc:e}"
+                );
+                if dc > 1.0 {
+                    worst_ratio = worst_ratio.max(dg / dc / l);
+                }
+            }
+        }
+        // The bound is not vacuous: within a factor 100 of what is seen.
+        assert!(worst_ratio > 0.01, "bound too loose: {worst_ratio}");
     }
 
     #[test]

@@ -190,12 +190,13 @@ fn validate(raw: RawMachineTool) -> V<MachineTool> {
             .iter()
             .all(|a| a.location.is_zero() && a.components.is_zero());
     super::set_breakpoints(&mut axes, stiffness.as_ref());
+    let pre = Box::new(super::fast::Precomputed::new(&axes, spindle));
     Ok(MachineTool {
+        pre,
         name: raw.name,
         axes,
         n_workpiece,
         slot_index,
-        spindle,
         tools,
         work_offsets,
         decimals,

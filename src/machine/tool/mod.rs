@@ -25,6 +25,7 @@
 
 mod component;
 pub mod dynamics;
+mod fast;
 mod geometry;
 mod load;
 mod location;
@@ -100,7 +101,6 @@ pub struct MachineTool {
     n_workpiece: usize,
     /// Index into `axes` per slot.
     slot_index: [Option<u8>; 6],
-    spindle: SpindleErrors,
     tools: BTreeMap<u32, f64>,
     work_offsets: BTreeMap<String, [f64; 3]>,
     decimals: Option<usize>,
@@ -108,6 +108,9 @@ pub struct MachineTool {
     error_free: bool,
     /// The optional process sections, boxed to keep `Machine` small.
     process: Option<Box<ProcessSections>>,
+    /// Position-independent parts of the chain (see [`fast`]), boxed to
+    /// keep `Machine` small.
+    pre: Box<fast::Precomputed>,
 }
 
 /// The optional process sections of a machine file.
@@ -160,7 +163,7 @@ impl MachineTool {
 
     /// Spindle location errors.
     pub fn spindle_errors(&self) -> &SpindleErrors {
-        &self.spindle
+        &self.pre.spindle_errors
     }
 
     /// Travel limits of the axis in `slot` (mm or deg), `None` if absent.
@@ -236,59 +239,48 @@ impl MachineTool {
     /// Nominal tool tip pose in the workpiece frame for commanded axis values
     /// (machine coordinates) and tool length.
     pub fn nominal(&self, cmd: &AxisVec, tool_mm: f64) -> TipPose {
-        pose(&self.tip_htm(cmd, &[1; 6], tool_mm, false))
+        pose_aff(&self.tip_htm(cmd, &[1; 6], tool_mm, false))
     }
 
     /// Predicted (attained) tool tip pose including the geometric errors,
     /// with component errors looked up for the given direction of motion.
     pub fn geometric(&self, cmd: &AxisVec, dirs: &DirVec, tool_mm: f64) -> TipPose {
-        pose(&self.tip_htm(cmd, dirs, tool_mm, true))
+        pose_aff(&self.tip_htm(cmd, dirs, tool_mm, true))
     }
 
-    /// The chain product `W_T_tip` for one command, accumulated factor by
-    /// factor without storing the factors (the per-point hot path; the
-    /// Jacobian uses [`Self::chain`]). Translations are applied as column
-    /// updates rather than full products.
-    fn tip_htm(&self, cmd: &AxisVec, dirs: &DirVec, tool_mm: f64, errors: bool) -> Matrix4<f64> {
-        let mut acc = Matrix4::identity();
-        for (i, a) in self.axes.iter().enumerate() {
+    /// The chain product `W_T_tip` (its top three rows) for one command,
+    /// accumulated factor by factor without storing the factors (the
+    /// per-point hot path; the Jacobian uses [`Self::chain`]). Translations
+    /// are applied as column updates rather than full products.
+    fn tip_htm(&self, cmd: &AxisVec, dirs: &DirVec, tool_mm: f64, errors: bool) -> fast::Aff {
+        let mut acc = fast::IDENTITY;
+        for (i, (a, f)) in self.axes.iter().zip(&self.pre.axes).enumerate() {
             if i == self.n_workpiece {
-                translate_z(&mut acc, tool_mm);
+                fast::translate_z(&mut acc, tool_mm);
             }
             let q = cmd.get(a.slot).copied().unwrap_or(0.0);
             let dir = dirs.get(a.slot).copied().unwrap_or(1);
-            let r = a.slot % 3;
-            match (a.kind, errors) {
-                (AxisKind::Linear, false) => {
-                    // acc · Trans(q·ê): column 3 gains q times column r.
-                    for row in 0..4 {
-                        acc[(row, 3)] += acc[(row, r)] * q;
-                    }
-                }
-                (AxisKind::Linear, true) => {
-                    // LOC · Trans(q·ê) · COM(q): the translation only adds
-                    // q to row r of COM's last column.
-                    let mut m = a.components.eval(q, dir).htm();
-                    m[(r, 3)] += q;
-                    if a.location.angles_rad != Vector3::zeros() {
-                        m = a.location.orientation_htm() * m;
-                    }
-                    acc *= m;
-                }
-                (AxisKind::Rotary, _) => {
-                    let (m, _) = axis_htm(a, q, dir, errors, false);
-                    acc *= m;
-                }
-            }
+            fast::apply_axis(&mut acc, a, f, q, dir, errors);
         }
         if self.n_workpiece == self.axes.len() {
-            translate_z(&mut acc, tool_mm);
+            fast::translate_z(&mut acc, tool_mm);
         }
-        if errors && !self.spindle.is_zero() {
-            acc *= self.spindle.htm();
+        if let (true, Some(s)) = (errors, &self.pre.spindle) {
+            acc = fast::mul(&acc, s);
         }
-        translate_z(&mut acc, -tool_mm);
+        fast::translate_z(&mut acc, -tool_mm);
         acc
+    }
+
+    /// For a machine without rotary axes and a command in a box around the
+    /// travel: an upper bound of the Lipschitz constant (Euclidean norms) of
+    /// the geometric error `geometric(c).pos − nominal(c).pos` in the
+    /// command (for tool length `tool_mm`, any directions of motion) and one
+    /// of the attained tool axis `geometric(c).dir`. `None` outside the box
+    /// or for machines with rotary axes.
+    pub fn lipschitz_geo(&self, c: &AxisVec, tool_mm: f64) -> Option<(f64, f64)> {
+        let l = self.pre.lip.as_ref()?;
+        l.contains(c).then(|| l.bounds(tool_mm))
     }
 
     /// Attained minus nominal tool tip position, mm.
@@ -387,7 +379,7 @@ impl MachineTool {
             );
         }
         if errors {
-            push(&mut c, self.spindle.htm());
+            push(&mut c, self.pre.spindle_errors.htm());
         }
         push(
             &mut c,
@@ -463,23 +455,168 @@ fn axis_htm(a: &Axis, q: f64, dir: i8, errors: bool, derivs: bool) -> (Matrix4<f
     }
 }
 
-/// `acc · Trans(0, 0, l)`: column 3 gains `l` times column 2.
-fn translate_z(acc: &mut Matrix4<f64>, l: f64) {
-    for row in 0..4 {
-        acc[(row, 3)] += acc[(row, 2)] * l;
-    }
-}
-
 /// Product of HTMs in order.
 fn product(ms: &[Matrix4<f64>]) -> Matrix4<f64> {
     ms.iter().fold(Matrix4::identity(), |acc, m| acc * m)
 }
 
-/// Tip pose of a chain HTM: translation column and normalized z column.
-fn pose(t: &Matrix4<f64>) -> TipPose {
-    let pos = Vector3::new(t[(0, 3)], t[(1, 3)], t[(2, 3)]);
-    let d = Vector3::new(t[(0, 2)], t[(1, 2)], t[(2, 2)]);
+/// Tip pose of (the top three rows of) a chain HTM: translation column
+/// and normalized z column.
+fn pose_aff(t: &fast::Aff) -> TipPose {
+    let [r0, r1, r2] = t;
+    let pos = Vector3::new(r0[3], r1[3], r2[3]);
+    let d = Vector3::new(r0[2], r1[2], r2[2]);
     let n = d.norm();
     let dir = if n > 0.0 { d / n } else { Vector3::z() };
     TipPose { pos, dir }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// `acc · Trans(0, 0, l)`: column 3 gains `l` times column 2.
+    fn translate_z(acc: &mut Matrix4<f64>, l: f64) {
+        for row in 0..4 {
+            acc[(row, 3)] += acc[(row, 2)] * l;
+        }
+    }
+
+    /// The 4×4 chain product as it was computed before the top-three-rows
+    /// path (the reference for bit-identical results).
+    fn tip_htm_reference(
+        m: &MachineTool,
+        cmd: &AxisVec,
+        dirs: &DirVec,
+        tool_mm: f64,
+        errors: bool,
+    ) -> Matrix4<f64> {
+        let mut acc = Matrix4::identity();
+        for (i, a) in m.axes.iter().enumerate() {
+            if i == m.n_workpiece {
+                translate_z(&mut acc, tool_mm);
+            }
+            let q = cmd.get(a.slot).copied().unwrap_or(0.0);
+            let dir = dirs.get(a.slot).copied().unwrap_or(1);
+            let r = a.slot % 3;
+            match (a.kind, errors) {
+                (AxisKind::Linear, false) => {
+                    // acc · Trans(q·ê): column 3 gains q times column r.
+                    for row in 0..4 {
+                        acc[(row, 3)] += acc[(row, r)] * q;
+                    }
+                }
+                (AxisKind::Linear, true) => {
+                    // LOC · Trans(q·ê) · COM(q): the translation only adds
+                    // q to row r of COM's last column.
+                    let mut m = a.components.eval(q, dir).htm();
+                    m[(r, 3)] += q;
+                    if a.location.angles_rad != Vector3::zeros() {
+                        m = a.location.orientation_htm() * m;
+                    }
+                    acc *= m;
+                }
+                (AxisKind::Rotary, _) => {
+                    let (m, _) = axis_htm(a, q, dir, errors, false);
+                    acc *= m;
+                }
+            }
+        }
+        if m.n_workpiece == m.axes.len() {
+            translate_z(&mut acc, tool_mm);
+        }
+        if errors && !m.pre.spindle_errors.is_zero() {
+            acc *= m.pre.spindle_errors.htm();
+        }
+        translate_z(&mut acc, -tool_mm);
+        acc
+    }
+
+    fn bundled() -> Vec<MachineTool> {
+        let dir = concat!(env!("CARGO_MANIFEST_DIR"), "/machines");
+        let mut out = Vec::new();
+        let Ok(entries) = std::fs::read_dir(dir) else {
+            return out;
+        };
+        let mut paths: Vec<_> = entries.flatten().map(|e| e.path()).collect();
+        paths.sort();
+        for p in paths {
+            if p.extension().is_none_or(|e| e != "yaml") {
+                continue;
+            }
+            let text = std::fs::read_to_string(&p).unwrap_or_default();
+            if !text.contains("kind: machine_tool") {
+                continue;
+            }
+            match MachineTool::from_yaml_str(&text, &p.to_string_lossy()) {
+                Ok(m) => out.push(m),
+                Err(e) => panic!("{e}"),
+            }
+        }
+        out
+    }
+
+    /// Deterministic pseudo-random numbers in [0, 1).
+    fn rng(state: &mut u64) -> f64 {
+        *state = state
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        (*state >> 11) as f64 / (1u64 << 53) as f64
+    }
+
+    #[test]
+    fn fast_chain_is_bit_identical_to_the_4x4_product() {
+        let machines = bundled();
+        assert!(machines.len() >= 2);
+        let mut s = 7u64;
+        for m in &machines {
+            // Commands inside and beyond the travel, on table knots and at
+            // special values.
+            let mut cmds: Vec<AxisVec> = Vec::new();
+            for _ in 0..4000 {
+                let mut c = [0.0; 6];
+                for (slot, v) in c.iter_mut().enumerate() {
+                    let (lo, hi) = m.travel(slot).unwrap_or((-100.0, 100.0));
+                    let span = hi - lo;
+                    *v = lo - 0.1 * span + 1.2 * span * rng(&mut s);
+                    if rng(&mut s) < 0.1 {
+                        let bp = m.breakpoints(slot);
+                        if !bp.is_empty() {
+                            let i = ((rng(&mut s) * bp.len() as f64) as usize).min(bp.len() - 1);
+                            *v = bp[i];
+                        }
+                    }
+                }
+                cmds.push(c);
+            }
+            cmds.push([0.0; 6]);
+            cmds.push([-0.0; 6]);
+            cmds.push([f64::NAN, 1.0, 2.0, f64::NAN, 0.0, 3.0]);
+            cmds.push([f64::INFINITY, -1e9, 2.0, 1e9, 0.0, f64::NEG_INFINITY]);
+            for (k, c) in cmds.iter().enumerate() {
+                let mut dirs = [0i8; 6];
+                for d in dirs.iter_mut() {
+                    *d = (k % 3) as i8 - 1;
+                    if rng(&mut s) < 0.5 {
+                        *d = -*d;
+                    }
+                }
+                let tool = [0.0, 62.5, 140.0][k % 3];
+                for errors in [false, true] {
+                    let want = tip_htm_reference(m, c, &dirs, tool, errors);
+                    let got = m.tip_htm(c, &dirs, tool, errors);
+                    for i in 0..3 {
+                        for j in 0..4 {
+                            let (a, b) = (got[i][j], want[(i, j)]);
+                            assert!(
+                                a.to_bits() == b.to_bits() || (a.is_nan() && b.is_nan()),
+                                "{} {c:?} {dirs:?} errors {errors}: ({i},{j}) {a:e} != {b:e}",
+                                m.name()
+                            );
+                        }
+                    }
+                }
+            }
+        }
+    }
 }

@@ -114,6 +114,50 @@ impl Stiffness {
         d
     }
 
+    /// Upper bound of the Lipschitz constant (Euclidean norms) of
+    /// [`Self::deflection_mm`] in the position under the force `f`: the
+    /// deflection `F_i / k_i · 1e-3` changes by at most
+    /// `|F_i| · 1e-3 / k_min² · |∇k_i|`, and the gradient of a trilinear
+    /// interpolation is bounded by the grid's largest difference quotients.
+    pub fn lipschitz_mm(&self, f: &Vector3<f64>) -> f64 {
+        let mut l = 0.0;
+        for i in 0..3 {
+            if f[i] == 0.0 {
+                continue;
+            }
+            let mut worst = 0.0f64;
+            for s in 0..2 {
+                let Some(vals) = self.k.get(i * 2 + s) else {
+                    continue;
+                };
+                let kmin = vals.iter().fold(f64::INFINITY, |m, &v| m.min(v));
+                let (nx, ny) = (self.grid[0].len(), self.grid[1].len());
+                let mut grad = 0.0;
+                for (d, pts) in self.grid.iter().enumerate() {
+                    let stride = match d {
+                        0 => 1,
+                        1 => nx,
+                        _ => nx * ny,
+                    };
+                    let mut m = 0.0f64;
+                    for (idx, &v) in vals.iter().enumerate() {
+                        let along = (idx / stride) % pts.len().max(1);
+                        let (Some(&a), Some(&b), Some(&w)) =
+                            (pts.get(along), pts.get(along + 1), vals.get(idx + stride))
+                        else {
+                            continue;
+                        };
+                        m = m.max(((w - v) / (b - a)).abs());
+                    }
+                    grad += m;
+                }
+                worst = worst.max(grad / (kmin * kmin));
+            }
+            l += f[i].abs() * 1e-3 * worst;
+        }
+        l
+    }
+
     /// Validates the `stiffness:` block.
     pub(crate) fn from_raw(raw: &RawStiffness) -> Result<Self, Invalid> {
         let grid_given = raw.grid_mm.is_some();

@@ -39,6 +39,11 @@ impl ErrorTable {
         &self.positions
     }
 
+    /// Positions, forward and reverse columns.
+    pub(crate) fn columns(&self) -> (&[f64], &[f64], &[f64]) {
+        (&self.positions, &self.forward, &self.reverse)
+    }
+
     /// First and last table position.
     pub fn range(&self) -> (f64, f64) {
         let lo = self.positions.first().copied().unwrap_or(0.0);
@@ -49,6 +54,20 @@ impl ErrorTable {
     /// True when every value of both columns is zero.
     pub fn is_zero(&self) -> bool {
         self.forward.iter().chain(&self.reverse).all(|v| *v == 0.0)
+    }
+
+    /// Largest absolute slope between consecutive positions, both columns
+    /// (per mm or per degree).
+    pub fn max_abs_slope(&self) -> f64 {
+        let mut m = 0.0f64;
+        for col in [&self.forward, &self.reverse] {
+            for (p, v) in self.positions.windows(2).zip(col.windows(2)) {
+                if let ([p0, p1], [v0, v1]) = (p, v) {
+                    m = m.max(((v1 - v0) / (p1 - p0)).abs());
+                }
+            }
+        }
+        m
     }
 
     /// Largest absolute value of both columns.
