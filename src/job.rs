@@ -629,12 +629,11 @@ impl<'m> Job<'m> {
                 plans.resize(n, Plan::default());
             }
             contexts.clear();
-            for i in 0..n {
+            for (i, plan) in plans[..n].iter_mut().enumerate() {
                 chunk.block(i)?;
                 let (s, e) = chunk.ranges[i];
                 let line = &chunk.buf[s..e];
                 let block = &chunk.blocks[i];
-                let plan = &mut plans[i];
                 interp.step_into(block, line, plan)?;
                 let plan = &*plan;
                 if !block.is_empty() {
@@ -679,7 +678,7 @@ impl<'m> Job<'m> {
                 }
                 if let Some(t) = tracker.as_mut() {
                     contexts.push(t.advance(
-                        &plan,
+                        plan,
                         interp.spindle_rpm(),
                         block.line_no,
                         file,
@@ -812,7 +811,6 @@ impl<'m> Job<'m> {
             }
             std::mem::swap(&mut cur, &mut next);
         }
-        drop(process);
         summary.inch = interp.inch();
         summary.warnings = interp.warnings().to_vec();
         summary.warnings.extend(extra_warnings);

@@ -134,7 +134,11 @@ fn write_fixed(out: &mut Vec<u8>, v: f64, d: usize) -> bool {
 }
 
 fn round_to(v: f64, d: usize) -> f64 {
-    let f = 10f64.powi(d as i32);
+    // The table holds exactly what `powi` gives for these (exact) powers.
+    let f = POW10
+        .get(d)
+        .copied()
+        .unwrap_or_else(|| 10f64.powi(d as i32));
     (v * f).round() / f
 }
 
@@ -688,6 +692,13 @@ fn insert_point_for_axes(block: &Block) -> usize {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn power_table_is_powi() {
+        for (d, p) in POW10.iter().enumerate() {
+            assert_eq!(p.to_bits(), 10f64.powi(d as i32).to_bits());
+        }
+    }
 
     #[test]
     fn numbers_are_fixed_point() {
