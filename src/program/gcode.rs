@@ -113,6 +113,50 @@ pub fn strip_eol(line: &[u8]) -> &[u8] {
     &line[..end]
 }
 
+/// Scans the number at the start of `input` in one pass: its length (as
+/// [`number_len`]) and its value when the exact fast path of
+/// [`fast_decimal`] applies (`None`: parse the text in full).
+#[inline]
+fn scan_number(input: &[u8]) -> Option<(usize, Option<f64>)> {
+    let neg = input.first() == Some(&b'-');
+    let mut i = usize::from(matches!(input.first(), Some(b'+' | b'-')));
+    // Wraps beyond 19 digits, where it is not used.
+    let mut mant: u64 = 0;
+    let int_start = i;
+    while let Some(&c) = input.get(i) {
+        if !c.is_ascii_digit() {
+            break;
+        }
+        mant = mant.wrapping_mul(10).wrapping_add(u64::from(c - b'0'));
+        i += 1;
+    }
+    let int_digits = i - int_start;
+    let mut frac_digits = 0;
+    if input.get(i) == Some(&b'.') && (int_digits > 0 || digits_len(input, i + 1) > 0) {
+        i += 1;
+        let frac_start = i;
+        while let Some(&c) = input.get(i) {
+            if !c.is_ascii_digit() {
+                break;
+            }
+            mant = mant.wrapping_mul(10).wrapping_add(u64::from(c - b'0'));
+            i += 1;
+        }
+        frac_digits = i - frac_start;
+    } else if int_digits == 0 {
+        return None;
+    }
+    let fast = (int_digits + frac_digits <= 19 && mant <= (1u64 << 53))
+        .then(|| POW10.get(frac_digits))
+        .flatten()
+        .map(|p| {
+            let v = mant as f64 / p;
+            if neg { -v } else { v }
+        });
+    Some((i, fast))
+}
+
+#[cfg(test)]
 /// Length of the number at the start of `input`: an optional sign, then
 /// digits with an optional point and more digits, or a point and digits
 /// (`12`, `-1.`, `+.5`, `3.25`); `None` when there is none.
@@ -313,13 +357,13 @@ pub fn parse_line(line: &[u8], line_no: usize, file: &str, out: &mut Block) -> R
                     ));
                 }
                 let rest = text.get(after_letter..).unwrap_or(b"");
-                match number_len(rest) {
-                    Some(len) => {
+                match scan_number(rest) {
+                    Some((len, fast)) => {
                         let num = &rest[..len];
                         let num_start = after_letter;
                         let num_end = after_letter + len;
                         let num_str = || String::from_utf8_lossy(num);
-                        let value: f64 = match decimal(num) {
+                        let value: f64 = match fast.or_else(|| decimal(num)) {
                             Some(v) => v,
                             None => {
                                 return Err(err(
@@ -581,6 +625,17 @@ mod tests {
                 let got = decimal(num).unwrap_or(f64::NAN);
                 prop_assert_eq!(got.to_bits(), want.to_bits(), "{}", text);
             }
+        }
+    }
+
+    proptest! {
+        #[test]
+        fn one_pass_scan_is_length_and_fast_value(text in number_text(), tail in "[ X.0-9]{0,2}") {
+            let t = format!("{text}{tail}");
+            let b = t.as_bytes();
+            let want = number_len(b).map(|n| (n, fast_decimal(&b[..n]).map(f64::to_bits)));
+            let got = scan_number(b).map(|(n, v)| (n, v.map(f64::to_bits)));
+            prop_assert_eq!(got, want, "{}", t);
         }
     }
 
