@@ -459,9 +459,141 @@ fn motion_label(plan: &Plan) -> &'static str {
     }
 }
 
+/// Lines parsed in order by one task when a chunk is parsed in parallel.
+const PARSE_LINES: usize = 512;
+
+/// One chunk of whole lines (at most [`CHUNK_LINES`]) and their syntax.
+#[derive(Default)]
+struct Chunk {
+    /// The lines' bytes, end-of-line bytes included.
+    buf: Vec<u8>,
+    /// Byte range of each line in `buf`.
+    ranges: Vec<(usize, usize)>,
+    /// The parsed lines (the first `parsed` are valid; kept between chunks
+    /// so that their word lists are reused).
+    blocks: Vec<Block>,
+    /// Line number of the chunk's first line, minus one.
+    first_line: usize,
+    /// Lines parsed without error from the start of the chunk.
+    parsed: usize,
+    /// The syntax error of line `parsed`, when there is one.
+    error: Option<Located>,
+    /// The input ended with this chunk.
+    eof: bool,
+}
+
+impl Chunk {
+    fn line(&self, i: usize) -> &[u8] {
+        let (s, e) = self.ranges[i];
+        &self.buf[s..e]
+    }
+
+    /// Reads the next lines (up to [`CHUNK_LINES`]) from `input`, with large
+    /// reads and no copy other than into the chunk's buffer.
+    fn read<R: BufRead>(&mut self, input: &mut R, file: &str, first_line: usize) -> Result<()> {
+        self.buf.clear();
+        self.ranges.clear();
+        self.parsed = 0;
+        self.error = None;
+        self.first_line = first_line;
+        let mut start = 0;
+        while self.ranges.len() < CHUNK_LINES {
+            let avail = match input.fill_buf() {
+                Ok(a) => a,
+                Err(e) if e.kind() == std::io::ErrorKind::Interrupted => continue,
+                Err(e) => return Err(Error::io(file, e)),
+            };
+            if avail.is_empty() {
+                if self.buf.len() > start {
+                    self.ranges.push((start, self.buf.len()));
+                }
+                self.eof = true;
+                return Ok(());
+            }
+            let base = self.buf.len();
+            let mut taken = avail.len();
+            for nl in memchr::memchr_iter(b'\n', avail) {
+                let end = base + nl + 1;
+                self.ranges.push((start, end));
+                start = end;
+                if self.ranges.len() == CHUNK_LINES {
+                    taken = nl + 1;
+                    break;
+                }
+            }
+            self.buf.extend_from_slice(&avail[..taken]);
+            input.consume(taken);
+        }
+        self.eof = false;
+        Ok(())
+    }
+
+    /// Parses every line of the chunk, in parallel runs of [`PARSE_LINES`]
+    /// lines (the syntax is per line); stops at the first error in line order.
+    fn parse(&mut self, file: &str) {
+        let n = self.ranges.len();
+        if self.blocks.len() < n {
+            self.blocks.resize_with(n, Block::default);
+        }
+        let buf = &self.buf;
+        let first = self.first_line;
+        let error = self.blocks[..n]
+            .par_chunks_mut(PARSE_LINES)
+            .zip(self.ranges.par_chunks(PARSE_LINES))
+            .enumerate()
+            .filter_map(|(k, (blocks, ranges))| {
+                for (j, (block, &(s, e))) in blocks.iter_mut().zip(ranges).enumerate() {
+                    let i = k * PARSE_LINES + j;
+                    if let Err(err) = parse_line(&buf[s..e], first + i + 1, file, block) {
+                        return Some((i, err));
+                    }
+                }
+                None
+            })
+            .min_by_key(|(i, _)| *i);
+        match error {
+            Some((i, e)) => {
+                self.parsed = i;
+                self.error = Some(e);
+            }
+            None => self.parsed = n,
+        }
+    }
+
+    /// The parsed block of line `i`, or its syntax error.
+    fn block(&mut self, i: usize) -> Result<&Block> {
+        if i >= self.parsed {
+            if let Some(e) = self.error.take() {
+                return Err(e.into());
+            }
+        }
+        Ok(&self.blocks[i])
+    }
+}
+
+/// Runs `op` in a fork-join scope of the job's pool (rayon's global pool
+/// when `None`), on the calling thread.
+fn in_scope<'s, R>(pool: Option<&rayon::ThreadPool>, op: impl FnOnce(&rayon::Scope<'s>) -> R) -> R {
+    match pool {
+        Some(p) => p.in_place_scope(op),
+        None => rayon::in_place_scope(op),
+    }
+}
+
 impl<'m> Job<'m> {
+    fn install<R: Send>(&self, op: impl FnOnce() -> R + Send) -> R {
+        match self.pool {
+            Some(pool) => pool.install(op),
+            None => op(),
+        }
+    }
+
     /// Runs the job over `input`. With `out`, the (compensated) program is
     /// written; with `rows`, a row per motion block is handed over in order.
+    ///
+    /// The program streams through in chunks of [`CHUNK_LINES`] lines; the
+    /// next chunk is read and parsed (in parallel) while the current one is
+    /// interpreted, compensated and written.
     pub fn run<R: BufRead>(
         &self,
         mut input: R,
@@ -472,41 +604,38 @@ impl<'m> Job<'m> {
         let mut interp = Interpreter::new(self.setup.clone(), file);
         let mut emitter = Emitter::new(self.emit);
         let mut summary = Summary::default();
-        let mut buf: Vec<u8> = Vec::with_capacity(1 << 20);
-        let mut ranges: Vec<(usize, usize)> = Vec::with_capacity(CHUNK_LINES);
-        let mut blocks: Vec<Block> = (0..CHUNK_LINES).map(|_| Block::default()).collect();
         let mut plans: Vec<Plan> = Vec::with_capacity(CHUNK_LINES);
+        type Solved = Option<std::result::Result<BlockResult, Failure>>;
+        let mut results: Vec<Solved> = Vec::with_capacity(CHUNK_LINES);
         let mut out_buf: Vec<u8> = Vec::with_capacity(1 << 20);
-        let mut line_no = 0usize;
         let mut tools: std::collections::BTreeSet<u32> = Default::default();
+        let mut last_tool = 0u32;
         let mut clamped = 0u8;
         // Warnings found by the job itself: clamped tables, resonance.
         let mut extra_warnings: Vec<Warning> = Vec::new();
         let mut tracker = self.predictor.as_ref().map(|p| Tracker::new(p, false));
         let mut contexts: Vec<BlockContext> = Vec::with_capacity(CHUNK_LINES);
-        let mut eof = false;
-        while !eof {
-            buf.clear();
-            ranges.clear();
-            plans.clear();
-            contexts.clear();
-            while ranges.len() < CHUNK_LINES {
-                let start = buf.len();
-                let n = input
-                    .read_until(b'\n', &mut buf)
-                    .map_err(|e| Error::io(file, e))?;
-                if n == 0 {
-                    eof = true;
-                    break;
-                }
-                ranges.push((start, buf.len()));
+        // With every effect off the output is the input; a report still
+        // wants its rows (of zero deviation).
+        let solving = self
+            .predictor
+            .as_ref()
+            .is_some_and(|p| !p.effects.is_none() || rows.is_some());
+
+        // Interprets, compensates and writes one parsed chunk.
+        let mut process = |chunk: &mut Chunk| -> Result<()> {
+            let n = chunk.ranges.len();
+            if plans.len() < n {
+                plans.resize(n, Plan::default());
             }
-            for (i, &(s, e)) in ranges.iter().enumerate() {
-                line_no += 1;
-                let line = &buf[s..e];
-                let block = &mut blocks[i];
-                parse_line(line, line_no, file, block)?;
-                let plan = interp.step(block, line)?;
+            contexts.clear();
+            for (i, plan) in plans[..n].iter_mut().enumerate() {
+                chunk.block(i)?;
+                let (s, e) = chunk.ranges[i];
+                let line = &chunk.buf[s..e];
+                let block = &chunk.blocks[i];
+                interp.step_into(block, line, plan)?;
+                let plan = &*plan;
                 if !block.is_empty() {
                     summary.blocks += 1;
                 }
@@ -523,8 +652,9 @@ impl<'m> Job<'m> {
                         lo[k] = lo[k].min(mv.end[k]);
                         hi[k] = hi[k].max(mv.end[k]);
                     }
-                    if mv.tool != 0 {
+                    if mv.tool != 0 && mv.tool != last_tool {
                         tools.insert(mv.tool);
+                        last_tool = mv.tool;
                     }
                     // Component-error tables are clamped at their ends: say so
                     // once per axis.
@@ -536,9 +666,9 @@ impl<'m> Job<'m> {
                                 crate::machine::AXIS_LETTERS[slot] as char,
                                 mv.end[slot]
                             );
-                            tracing::warn!("{file}:{}: {message}", blocks[i].line_no);
+                            tracing::warn!("{file}:{}: {message}", block.line_no);
                             extra_warnings.push(Warning {
-                                line: blocks[i].line_no,
+                                line: block.line_no,
                                 message,
                                 count: 1,
                             });
@@ -548,86 +678,87 @@ impl<'m> Job<'m> {
                 }
                 if let Some(t) = tracker.as_mut() {
                     contexts.push(t.advance(
-                        &plan,
+                        plan,
                         interp.spindle_rpm(),
-                        blocks[i].line_no,
+                        block.line_no,
                         file,
                         &mut extra_warnings,
                     ));
                 }
-                plans.push(plan);
             }
-            summary.lines = line_no;
+            let plans = &plans[..n];
+            summary.lines = chunk.first_line + chunk.ranges.len();
             let Some(pred) = &self.predictor else {
                 if let Some(out) = out.as_deref_mut() {
-                    out.write_all(&buf).map_err(|e| Error::io("output", e))?;
+                    out.write_all(&chunk.buf)
+                        .map_err(|e| Error::io("output", e))?;
                 }
-                continue;
+                return Ok(());
             };
-            // With every effect off the output is the input; a report still
-            // wants its rows (of zero deviation).
-            let results: Vec<std::result::Result<BlockResult, Failure>> =
-                if pred.effects.is_none() && rows.is_none() {
-                    Vec::new()
-                } else {
-                    // Runs of GROUP_BLOCKS blocks in order on one thread (a
-                    // straight move reuses the previous end's solution for its
-                    // start); the runs start at fixed blocks, so the output does
-                    // not depend on the number of threads.
-                    let work = || {
-                        plans
-                            .par_chunks(GROUP_BLOCKS)
-                            .zip(contexts.par_chunks(GROUP_BLOCKS))
-                            .flat_map_iter(|(ps, cs)| {
-                                let mut carry = None;
-                                ps.iter().zip(cs).map(move |(p, c)| {
-                                    compensate::block_after(
-                                        &pred.with_context(*c),
-                                        p,
-                                        &self.settings,
-                                        &mut carry,
-                                    )
-                                })
-                            })
-                            .collect()
-                    };
-                    match self.pool {
-                        Some(pool) => pool.install(work),
-                        None => work(),
-                    }
-                };
+            results.clear();
+            if solving {
+                results.resize_with(plans.len(), || None);
+                // Runs of GROUP_BLOCKS blocks in order on one thread (a
+                // straight move reuses the previous end's solution for its
+                // start); the runs start at fixed blocks, so the output does
+                // not depend on the number of threads.
+                let (contexts, results) = (&contexts, &mut results);
+                self.install(|| {
+                    results
+                        .par_chunks_mut(GROUP_BLOCKS)
+                        .zip(plans.par_chunks(GROUP_BLOCKS))
+                        .zip(contexts.par_chunks(GROUP_BLOCKS))
+                        .for_each(|((rs, ps), cs)| {
+                            let mut carry = None;
+                            for ((r, p), c) in rs.iter_mut().zip(ps).zip(cs) {
+                                *r = Some(compensate::block_after(
+                                    &pred.with_context(*c),
+                                    p,
+                                    &self.settings,
+                                    &mut carry,
+                                ));
+                            }
+                        })
+                });
+            } else if rows.is_none() {
+                // Nothing is solved: every line is written as it is.
+                if let Some(out) = out.as_deref_mut() {
+                    out.write_all(&chunk.buf)
+                        .map_err(|e| Error::io("output", e))?;
+                }
+                return Ok(());
+            }
             out_buf.clear();
-            for (i, &(s, e)) in ranges.iter().enumerate() {
-                let plan = &plans[i];
+            for (i, plan) in plans.iter().enumerate() {
+                let block = &chunk.blocks[i];
                 let res = match results.get(i) {
-                    Some(Ok(r)) => Some(r),
-                    Some(Err(f)) => {
-                        let ln = blocks[i].line_no;
+                    Some(Some(Ok(r))) => Some(r),
+                    Some(Some(Err(f))) => {
                         return Err(Error::Unachievable(Located::new(
                             file,
-                            ln,
+                            block.line_no,
                             1,
                             format!(
                                 "{f}: `{}`",
                                 String::from_utf8_lossy(crate::program::gcode::strip_eol(
-                                    &buf[s..e]
+                                    chunk.line(i)
                                 ))
                                 .trim()
                             ),
                         )));
                     }
-                    None => None,
+                    _ => None,
                 };
                 if let (Some(r), Some(mv)) = (res, plan.mv) {
                     if plan.kind != PlanKind::Pass {
                         let dev = r.deviation.total().norm();
-                        summary.deviation.add(dev, blocks[i].line_no);
+                        summary.deviation.add(dev, block.line_no);
                         if mv.motion != Motion::Rapid {
                             summary.max_residual_mm = summary.max_residual_mm.max(r.residual_mm);
                         }
                         if let Some(rows) = rows.as_deref_mut() {
                             rows(Row {
-                                line: blocks[i].line_no,
+                                line: block.line_no,
                                 motion: motion_label(plan),
                                 commanded: mv.end,
                                 compensated: r.end,
@@ -638,8 +769,8 @@ impl<'m> Job<'m> {
                 }
                 if out.is_some() {
                     emitter.write(
-                        &buf[s..e],
-                        &blocks[i],
+                        chunk.line(i),
+                        block,
                         plan,
                         if plan.kind == PlanKind::Fixed {
                             None
@@ -654,6 +785,31 @@ impl<'m> Job<'m> {
                 out.write_all(&out_buf)
                     .map_err(|e| Error::io("output", e))?;
             }
+            Ok(())
+        };
+
+        let mut cur = Chunk::default();
+        let mut next = Chunk::default();
+        cur.read(&mut input, file, 0)?;
+        self.install(|| cur.parse(file));
+        loop {
+            let more = !cur.eof;
+            if more {
+                next.read(&mut input, file, cur.first_line + cur.ranges.len())?;
+            }
+            // The next chunk is parsed on the pool while this one goes
+            // through the in-order passes here.
+            let next_ref = &mut next;
+            in_scope(self.pool, |s| {
+                if more {
+                    s.spawn(move |_| next_ref.parse(file));
+                }
+                process(&mut cur)
+            })?;
+            if !more {
+                break;
+            }
+            std::mem::swap(&mut cur, &mut next);
         }
         summary.inch = interp.inch();
         summary.warnings = interp.warnings().to_vec();
@@ -678,22 +834,22 @@ impl<'m> Job<'m> {
         let mut tracker = Tracker::new(pred, true);
         tracker.modal = None;
         let mut interp = Interpreter::new(self.setup.clone(), file);
-        let mut block = Block::default();
-        let mut buf = Vec::with_capacity(256);
         let mut sink = Vec::new();
-        let mut line_no = 0;
+        let mut chunk = Chunk::default();
+        let mut first_line = 0;
         loop {
-            buf.clear();
-            let n = input
-                .read_until(b'\n', &mut buf)
-                .map_err(|e| Error::io(file, e))?;
-            if n == 0 {
+            chunk.read(&mut input, file, first_line)?;
+            self.install(|| chunk.parse(file));
+            for i in 0..chunk.ranges.len() {
+                chunk.block(i)?;
+                let block = &chunk.blocks[i];
+                let plan = interp.step(block, chunk.line(i))?;
+                tracker.advance(&plan, interp.spindle_rpm(), block.line_no, file, &mut sink);
+            }
+            first_line += chunk.ranges.len();
+            if chunk.eof {
                 break;
             }
-            line_no += 1;
-            parse_line(&buf, line_no, file, &mut block)?;
-            let plan = interp.step(&block, &buf)?;
-            tracker.advance(&plan, interp.spindle_rpm(), line_no, file, &mut sink);
         }
         Ok(tracker.mean_power())
     }

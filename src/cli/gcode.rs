@@ -96,13 +96,13 @@ fn open_input(path: &Path) -> Result<(Box<dyn BufRead>, String)> {
     if path == Path::new("-") {
         let stdin: Box<dyn Read> = Box::new(std::io::stdin());
         return Ok((
-            Box::new(BufReader::with_capacity(1 << 16, stdin)),
+            Box::new(BufReader::with_capacity(1 << 18, stdin)),
             "-".into(),
         ));
     }
     let f = File::open(path).map_err(|e| Error::io(path, e))?;
     Ok((
-        Box::new(BufReader::with_capacity(1 << 16, f)),
+        Box::new(BufReader::with_capacity(1 << 18, f)),
         path.display().to_string(),
     ))
 }

@@ -47,71 +47,171 @@ pub struct Emitter {
     changed: usize,
     /// Blocks added by segmentation.
     added: usize,
+    /// Edits of the block being written (kept for their buffers).
+    edits: Edits,
 }
 
 /// Formats `v` with `d` decimals, never in exponent notation and never as
 /// negative zero; `trim` drops trailing zeros (keeping the point).
 pub fn format_number(v: f64, d: usize, trim: bool) -> String {
-    let mut s = fixed(v, d).unwrap_or_else(|| format!("{v:.d$}"));
-    if s.starts_with('-') && s[1..].bytes().all(|b| b == b'0' || b == b'.') {
-        s.remove(0);
-    }
-    if trim && s.contains('.') {
-        while s.ends_with('0') {
-            s.pop();
-        }
-    }
-    if !s.contains('.') {
-        s.push('.');
-    }
-    s
+    let mut out = Vec::with_capacity(24);
+    write_number(&mut out, v, d, trim);
+    String::from_utf8(out).unwrap_or_default()
 }
 
-/// `format!("{v:.d$}")` without the exact (big-number) float formatting,
-/// when `v · 10^d` lies clearly away from a rounding tie so that the
-/// floating-point product rounds to the same integer as the exact decimal
-/// value; `None` otherwise (the caller formats exactly).
-fn fixed(v: f64, d: usize) -> Option<String> {
-    const POW10: [f64; 10] = [1e0, 1e1, 1e2, 1e3, 1e4, 1e5, 1e6, 1e7, 1e8, 1e9];
-    let scale = *POW10.get(d)?;
+/// [`format_number`] appended to `out`, without an intermediate string.
+pub fn write_number(out: &mut Vec<u8>, v: f64, d: usize, trim: bool) {
+    let start = out.len();
+    if !write_fixed(out, v, d) {
+        use std::io::Write;
+        // Writing into a `Vec` cannot fail.
+        let _ = write!(out, "{v:.d$}");
+    }
+    let s = &out[start..];
+    if s.first() == Some(&b'-') && s[1..].iter().all(|&b| b == b'0' || b == b'.') {
+        out.remove(start);
+    }
+    let has_point = out[start..].contains(&b'.');
+    if trim && has_point {
+        while out.last() == Some(&b'0') {
+            out.pop();
+        }
+    }
+    if !has_point {
+        out.push(b'.');
+    }
+}
+
+/// Powers of ten of the fast formatting path.
+const POW10: [f64; 10] = [1e0, 1e1, 1e2, 1e3, 1e4, 1e5, 1e6, 1e7, 1e8, 1e9];
+
+/// Appends `format!("{v:.d$}")` to `out` without the exact (big-number)
+/// float formatting when that is safe, and says whether it did. `v · 10^d`
+/// is computed with one rounding (10^d is exact), so it lies within
+/// `|v · 10^d| · ε` of the exact decimal product; when the product is closer
+/// to its nearest integer `r` than half a unit minus twice that bound, the
+/// exact value rounds to `r` too, whatever the tie rule, and the digits of
+/// `r` are those of the exact formatting. Near a tie, `false` (the caller
+/// formats exactly).
+fn write_fixed(out: &mut Vec<u8>, v: f64, d: usize) -> bool {
+    let Some(&scale) = POW10.get(d) else {
+        return false;
+    };
     let scaled = v * scale;
     let r = scaled.round();
-    if !r.is_finite() || r.abs() >= 1e15 || (scaled - r).abs() > 0.25 {
-        return None;
+    if !r.is_finite()
+        || r.abs() >= 1e15
+        || (scaled - r).abs() >= 0.5 - 2.0 * f64::EPSILON * scaled.abs().max(1.0)
+    {
+        return false;
     }
     let n = r as i64;
-    let digits = n.unsigned_abs().to_string();
-    let mut s = String::with_capacity(digits.len() + 3);
-    if n < 0 || (r == 0.0 && v.is_sign_negative() && v != 0.0) {
-        s.push('-');
+    if n < 0 || (n == 0 && v.is_sign_negative()) {
+        out.push(b'-');
     }
-    if d == 0 {
-        s.push_str(&digits);
-        return Some(s);
+    // Decimal digits of |n|, least significant first.
+    let mut digits = [0u8; 20];
+    let mut len = 0;
+    let mut m = n.unsigned_abs();
+    loop {
+        digits[len] = b'0' + (m % 10) as u8;
+        len += 1;
+        m /= 10;
+        if m == 0 {
+            break;
+        }
     }
-    let (int, frac) = if digits.len() > d {
-        digits.split_at(digits.len() - d)
-    } else {
-        ("0", digits.as_str())
-    };
-    s.push_str(int);
-    s.push('.');
-    for _ in frac.len()..d {
-        s.push('0');
+    // At least one integer digit.
+    let total = len.max(d + 1);
+    for i in (0..total).rev() {
+        out.push(if i < len { digits[i] } else { b'0' });
+        // The point comes after the units digit (position `d`).
+        if i == d && d > 0 {
+            out.push(b'.');
+        }
     }
-    s.push_str(frac);
-    Some(s)
+    true
 }
 
 fn round_to(v: f64, d: usize) -> f64 {
-    let f = 10f64.powi(d as i32);
+    // The table holds exactly what `powi` gives for these (exact) powers.
+    let f = POW10
+        .get(d)
+        .copied()
+        .unwrap_or_else(|| 10f64.powi(d as i32));
     (v * f).round() / f
 }
 
+/// A replacement of `start..end` of the line by `text` (a range of
+/// [`Edits::text`]).
+#[derive(Debug, Clone)]
 struct Edit {
     start: usize,
     end: usize,
-    text: String,
+    text: std::ops::Range<usize>,
+}
+
+/// The edits of one block, their texts in one buffer; reused between blocks
+/// so that rewriting a block allocates nothing.
+#[derive(Debug, Clone, Default)]
+struct Edits {
+    list: Vec<Edit>,
+    text: Vec<u8>,
+}
+
+impl Edits {
+    fn clear(&mut self) {
+        self.list.clear();
+        self.text.clear();
+    }
+
+    fn is_empty(&self) -> bool {
+        self.list.is_empty()
+    }
+
+    /// An edit whose text `write` appends to the buffer.
+    fn push(&mut self, start: usize, end: usize, write: impl FnOnce(&mut Vec<u8>)) {
+        let from = self.text.len();
+        write(&mut self.text);
+        self.list.push(Edit {
+            start,
+            end,
+            text: from..self.text.len(),
+        });
+    }
+
+    /// Inserts ` X1.234` (with `sep` before the letter) at `at`.
+    fn insert_word(&mut self, at: usize, sep: &str, letter: u8, v: f64, d: usize) {
+        self.push(at, at, |t| {
+            t.extend_from_slice(sep.as_bytes());
+            t.push(letter);
+            write_number(t, v, d, true);
+        });
+    }
+
+    /// Replaces a word's number, trimming trailing zeros when the program
+    /// wrote fewer decimals than `d`.
+    fn number(&mut self, w: &Word, v: f64, d: usize) {
+        self.push(w.num_start as usize, w.end as usize, |t| {
+            write_number(t, v, d, w.decimals.is_none_or(|od| (od as usize) < d))
+        });
+    }
+
+    /// Writes `text` with the edits applied (in order of position; edits at
+    /// the same place in the order they were made) into `out`.
+    fn apply(&mut self, text: &[u8], out: &mut Vec<u8>) {
+        self.list.sort_by_key(|e| (e.start, e.end));
+        let mut pos = 0;
+        for e in &self.list {
+            if e.start < pos {
+                continue;
+            }
+            out.extend_from_slice(&text[pos..e.start]);
+            out.extend_from_slice(&self.text[e.text.clone()]);
+            pos = e.end;
+        }
+        out.extend_from_slice(&text[pos..]);
+    }
 }
 
 impl Emitter {
@@ -126,6 +226,7 @@ impl Emitter {
             semicolon_comments: None,
             changed: 0,
             added: 0,
+            edits: Edits::default(),
         }
     }
 
@@ -164,8 +265,6 @@ impl Emitter {
                 self.semicolon_comments = Some(c.semicolon);
             }
         }
-        let text = strip_eol(line);
-        let eol = &line[text.len()..];
         let (Some(mv), Some(res)) = (plan.mv, res) else {
             out.extend_from_slice(line);
             self.track_unchanged(block, plan);
@@ -180,7 +279,26 @@ impl Emitter {
             self.emitted = mv.end;
             return;
         }
-        let mut edits: Vec<Edit> = Vec::new();
+        let mut edits = std::mem::take(&mut self.edits);
+        edits.clear();
+        self.write_edited(line, block, plan, mv, res, &mut edits, out);
+        self.edits = edits;
+    }
+
+    /// [`Emitter::write`] of a compensated block, with `edits` as workspace.
+    #[allow(clippy::too_many_arguments)]
+    fn write_edited(
+        &mut self,
+        line: &[u8],
+        block: &Block,
+        plan: &Plan,
+        mv: crate::program::interp::Move,
+        res: &BlockResult,
+        edits: &mut Edits,
+        out: &mut Vec<u8>,
+    ) {
+        let text = strip_eol(line);
+        let eol = &line[text.len()..];
         let scale = plan.scale;
         let lower = block.lower_case;
         let sep = if block.spaced { " " } else { "" };
@@ -200,24 +318,23 @@ impl Emitter {
             match motion_word {
                 Some(w) => {
                     let old = &text[w.num_start as usize..w.end as usize];
-                    let new = if old.len() >= 2 && old[0] == b'0' {
-                        "01"
+                    let new: &[u8] = if old.len() >= 2 && old[0] == b'0' {
+                        b"01"
                     } else {
-                        "1"
+                        b"1"
                     };
-                    edits.push(Edit {
-                        start: w.num_start as usize,
-                        end: w.end as usize,
-                        text: new.into(),
+                    edits.push(w.num_start as usize, w.end as usize, |t| {
+                        t.extend_from_slice(new)
                     });
                 }
                 None => {
                     let at = insert_point_for_motion(block);
-                    let g = if lower { "g1" } else { "G1" };
-                    edits.push(Edit {
-                        start: at,
-                        end: at,
-                        text: format!("{g}{}", if block.spaced || at > 0 { " " } else { "" }),
+                    let g: &[u8] = if lower { b"g1" } else { b"G1" };
+                    edits.push(at, at, |t| {
+                        t.extend_from_slice(g);
+                        if block.spaced || at > 0 {
+                            t.push(b' ');
+                        }
                     });
                 }
             }
@@ -231,27 +348,19 @@ impl Emitter {
                 if start > 0 && text.get(start - 1) == Some(&b' ') {
                     start -= 1;
                 }
-                edits.push(Edit {
-                    start,
-                    end: w.end as usize,
-                    text: String::new(),
-                });
+                edits.push(start, w.end as usize, |_| {});
             }
         } else if let Some(m) = self.motion_pending {
             if motion_word.is_none() && !is_cycle {
                 let at = insert_point_for_motion(block);
                 let code = match m {
-                    Motion::ArcCw => "2",
-                    Motion::ArcCcw => "3",
-                    Motion::Linear => "1",
-                    Motion::Rapid => "0",
+                    Motion::ArcCw => b'2',
+                    Motion::ArcCcw => b'3',
+                    Motion::Linear => b'1',
+                    Motion::Rapid => b'0',
                 };
-                let g = if lower { "g" } else { "G" };
-                edits.push(Edit {
-                    start: at,
-                    end: at,
-                    text: format!("{g}{code} "),
-                });
+                let g = if lower { b'g' } else { b'G' };
+                edits.push(at, at, |t| t.extend_from_slice(&[g, code, b' ']));
             }
         }
         if motion_word.is_some() || !res.arc_replaced {
@@ -283,7 +392,7 @@ impl Emitter {
                 Some(w) => {
                     let orig = round_to(w.value, d);
                     if rounded != orig || w.decimals.unwrap_or(0) as usize > d {
-                        edits.push(number_edit(w, rounded, d));
+                        edits.number(w, rounded, d);
                         new_emitted[slot] = to_machine(plan, slot, rounded, self.emitted[slot]);
                     } else {
                         new_emitted[slot] = to_machine(plan, slot, w.value, self.emitted[slot]);
@@ -304,18 +413,14 @@ impl Emitter {
                     {
                         let at = last_axis_end.unwrap_or_else(|| insert_point_for_axes(block));
                         let letter = letter_case(AXIS_LETTERS[slot], lower);
-                        edits.push(Edit {
-                            start: at,
-                            end: at,
-                            text: format!("{sep}{letter}{}", format_number(want, d, true)),
-                        });
+                        edits.insert_word(at, sep, letter, want, d);
                         new_emitted[slot] = to_machine(plan, slot, want, self.emitted[slot]);
                     }
                 }
             }
         }
         if let PlanKind::Cycle { .. } = plan.kind {
-            self.cycle_words(block, plan, res, &mut edits, last_axis_end, sep, lower);
+            self.cycle_words(block, plan, res, edits, last_axis_end, sep, lower);
             // G99 leaves the tool at the (compensated) R level; G98 returns
             // it to the initial level it came from.
             if let PlanKind::Cycle {
@@ -340,7 +445,7 @@ impl Emitter {
                 let d = self.decimals(Some(r), scale, false);
                 let v = round_to(ra / scale * r.value.signum(), d);
                 if v != round_to(r.value, d) {
-                    edits.push(number_edit(r, v, d));
+                    edits.number(r, v, d);
                 }
             } else {
                 for (slot, letter) in [(a, la), (b, lb)] {
@@ -355,7 +460,7 @@ impl Emitter {
                     match w {
                         Some(w) => {
                             if v != round_to(w.value, d) {
-                                edits.push(number_edit(w, v, d));
+                                edits.number(w, v, d);
                             }
                         }
                         None => {
@@ -369,11 +474,7 @@ impl Emitter {
                                     .or(last_axis_end)
                                     .unwrap_or(text.len());
                                 let l = letter_case(letter, lower);
-                                edits.push(Edit {
-                                    start: at,
-                                    end: at,
-                                    text: format!("{sep}{l}{}", format_number(v, d, true)),
-                                });
+                                edits.insert_word(at, sep, l, v, d);
                             }
                         }
                     }
@@ -382,71 +483,59 @@ impl Emitter {
         }
         if self.opts.annotate {
             let dev = res.deviation.total().norm() / scale;
-            let unit = if scale != 1.0 { "in" } else { "mm" };
+            let unit: &[u8] = if scale != 1.0 { b"in" } else { b"mm" };
             let dd = if scale != 1.0 { 5 } else { 4 };
-            let mut body = format!("dev {} {unit}", format_number(dev, dd, false));
-            // Every part that is non-zero at the printed precision; the
-            // dynamic one is a vibration amplitude (not in `dev`, not
-            // compensated).
-            for e in Effect::ALL {
-                let part = res.deviation.part(e).norm() / scale;
-                if round_to(part, dd) == 0.0 {
-                    continue;
-                }
-                body.push_str(&format!(
-                    " {} {}",
-                    e.short(),
-                    format_number(part, dd, false)
-                ));
-            }
-            let c = if self.semicolon_comments == Some(true) {
-                format!(" ; {body}")
-            } else {
-                format!(" ({body})")
-            };
+            let semicolon = self.semicolon_comments == Some(true);
             // Before a trailing `;` comment, parentheses would be swallowed by it.
             let at = match block.comments.last() {
-                Some(cm) if cm.semicolon && self.semicolon_comments != Some(true) => {
-                    cm.start as usize
-                }
+                Some(cm) if cm.semicolon && !semicolon => cm.start as usize,
                 _ => text.len(),
             };
-            let c = if at < text.len() {
-                format!("{} ", c.trim_start())
-            } else {
-                c
-            };
-            edits.push(Edit {
-                start: at,
-                end: at,
-                text: c,
+            let inside = at < text.len();
+            edits.push(at, at, |t| {
+                // ` (dev … mm geo …)` at the end, `(dev … mm geo …) ` inside.
+                if !inside {
+                    t.push(b' ');
+                }
+                t.extend_from_slice(if semicolon { b"; dev " } else { b"(dev " });
+                write_number(t, dev, dd, false);
+                t.push(b' ');
+                t.extend_from_slice(unit);
+                // Every part that is non-zero at the printed precision; the
+                // dynamic one is a vibration amplitude (not in `dev`, not
+                // compensated).
+                for e in Effect::ALL {
+                    let part = res.deviation.part(e).norm() / scale;
+                    if round_to(part, dd) == 0.0 {
+                        continue;
+                    }
+                    t.push(b' ');
+                    t.extend_from_slice(e.short().as_bytes());
+                    t.push(b' ');
+                    write_number(t, part, dd, false);
+                }
+                if !semicolon {
+                    t.push(b')');
+                }
+                if inside {
+                    t.push(b' ');
+                }
             });
         }
         if edits.is_empty() {
             out.extend_from_slice(line);
         } else {
             self.changed += 1;
-            edits.sort_by_key(|e| (e.start, e.end));
-            let mut pos = 0;
-            for e in &edits {
-                if e.start < pos {
-                    continue;
-                }
-                out.extend_from_slice(&text[pos..e.start]);
-                out.extend_from_slice(e.text.as_bytes());
-                pos = e.end;
-            }
-            out.extend_from_slice(&text[pos..]);
+            edits.apply(text, out);
             out.extend_from_slice(eol);
         }
         self.emitted = new_emitted;
         // Added segment blocks.
         if !res.segments.is_empty() {
             let eol: &[u8] = if eol.is_empty() { b"\n" } else { eol };
-            let mut points: Vec<AxisVec> = res.segments[1..].to_vec();
-            points.push(res.end);
+            let points = res.segments[1..].iter().chain(std::iter::once(&res.end));
             for p in points {
-                let mut parts: Vec<String> = Vec::new();
+                let mark = out.len();
                 for slot in 0..6 {
                     let w = block.words.iter().find(|w| w.letter == AXIS_LETTERS[slot]);
                     let d = self.decimals(w, scale, slot >= 3);
@@ -454,23 +543,17 @@ impl Emitter {
                     let v = round_to(to_program(plan, slot, p[slot], now), d);
                     let cur = round_to(to_program(plan, slot, now, now), d);
                     if v != cur {
-                        let letter = letter_case(AXIS_LETTERS[slot], lower);
-                        parts.push(format!("{letter}{}", format_number(v, d, true)));
+                        if out.len() > mark && block.spaced {
+                            out.push(b' ');
+                        }
+                        out.push(letter_case(AXIS_LETTERS[slot], lower));
+                        write_number(out, v, d, true);
                         self.emitted[slot] = to_machine(plan, slot, v, now);
                     }
                 }
-                if parts.is_empty() {
+                if out.len() == mark {
                     continue;
                 }
-                out.extend_from_slice(
-                    parts
-                        .join(if block.spaced || parts.len() == 1 {
-                            " "
-                        } else {
-                            ""
-                        })
-                        .as_bytes(),
-                );
                 out.extend_from_slice(eol);
                 self.added += 1;
             }
@@ -487,7 +570,7 @@ impl Emitter {
         block: &Block,
         plan: &Plan,
         res: &BlockResult,
-        edits: &mut Vec<Edit>,
+        edits: &mut Edits,
         last_axis_end: Option<usize>,
         sep: &str,
         lower: bool,
@@ -510,7 +593,7 @@ impl Emitter {
             match w {
                 Some(w) => {
                     if v != round_to(w.value, d) {
-                        edits.push(number_edit(w, v, d));
+                        edits.number(w, v, d);
                         *modal = Some(v);
                     } else {
                         *modal = Some(w.value);
@@ -520,11 +603,7 @@ impl Emitter {
                     let cur = modal.map(|m| round_to(m, d));
                     if cur != Some(v) {
                         let l = letter_case(letter, lower);
-                        edits.push(Edit {
-                            start: at_end,
-                            end: at_end,
-                            text: format!("{sep}{l}{}", format_number(v, d, true)),
-                        });
+                        edits.insert_word(at_end, sep, l, v, d);
                         *modal = Some(v);
                     }
                 }
@@ -578,21 +657,11 @@ fn to_machine(plan: &Plan, slot: usize, program: f64, emitted: f64) -> f64 {
     }
 }
 
-/// Replaces a word's number, trimming trailing zeros when the program wrote
-/// fewer decimals than `d`.
-fn number_edit(w: &Word, v: f64, d: usize) -> Edit {
-    Edit {
-        start: w.num_start as usize,
-        end: w.end as usize,
-        text: format_number(v, d, w.decimals.is_none_or(|od| (od as usize) < d)),
-    }
-}
-
-fn letter_case(letter: u8, lower: bool) -> char {
+fn letter_case(letter: u8, lower: bool) -> u8 {
     if lower {
-        letter.to_ascii_lowercase() as char
+        letter.to_ascii_lowercase()
     } else {
-        letter as char
+        letter
     }
 }
 
@@ -625,6 +694,13 @@ mod tests {
     use super::*;
 
     #[test]
+    fn power_table_is_powi() {
+        for (d, p) in POW10.iter().enumerate() {
+            assert_eq!(p.to_bits(), 10f64.powi(d as i32).to_bits());
+        }
+    }
+
+    #[test]
     fn numbers_are_fixed_point() {
         assert_eq!(format_number(1e-7, 4, false), "0.0000");
         assert_eq!(format_number(-0.00001, 3, false), "0.000");
@@ -640,13 +716,27 @@ mod tests {
         let mut v = -1234.56789f64;
         for _ in 0..20_000 {
             for d in 0..8 {
-                if let Some(fast) = fixed(v, d) {
-                    assert_eq!(fast, format!("{v:.d$}"), "{v} with {d} decimals");
+                let mut fast = Vec::new();
+                if write_fixed(&mut fast, v, d) {
+                    assert_eq!(fast, format!("{v:.d$}").as_bytes(), "{v} with {d} decimals");
                 }
             }
             v += 0.12345678901;
         }
-        for (v, d) in [(0.5, 0), (2.5, 0), (0.125, 2), (-0.0004, 3), (1e20, 3)] {
+        for (v, d) in [
+            (0.5, 0),
+            (2.5, 0),
+            (0.125, 2),
+            (-0.0004, 3),
+            (1e20, 3),
+            (-0.0, 3),
+            (0.0, 0),
+            (f64::NAN, 3),
+            (f64::INFINITY, 2),
+            (1.0005, 3),
+            (-2.675, 2),
+            (999999.99995, 4),
+        ] {
             assert_eq!(format_number(v, d, false), {
                 let s = format!("{v:.d$}");
                 let s = if s.starts_with('-') && s[1..].bytes().all(|b| b == b'0' || b == b'.') {
@@ -656,6 +746,56 @@ mod tests {
                 };
                 if s.contains('.') { s } else { format!("{s}.") }
             });
+        }
+    }
+
+    /// The reference: the exact formatting of the standard library with the
+    /// same clean-up rules as [`format_number`].
+    fn exact(v: f64, d: usize, trim: bool) -> String {
+        let mut s = format!("{v:.d$}");
+        if s.starts_with('-') && s[1..].bytes().all(|b| b == b'0' || b == b'.') {
+            s.remove(0);
+        }
+        if trim && s.contains('.') {
+            while s.ends_with('0') {
+                s.pop();
+            }
+        }
+        if !s.contains('.') {
+            s.push('.');
+        }
+        s
+    }
+
+    proptest::proptest! {
+        #![proptest_config(proptest::prelude::ProptestConfig::with_cases(20_000))]
+
+        #[test]
+        fn written_numbers_are_the_exact_ones(
+            v in proptest::prelude::any::<f64>(),
+            d in 0usize..12,
+            trim in proptest::prelude::any::<bool>(),
+        ) {
+            let mut out = b"X".to_vec();
+            write_number(&mut out, v, d, trim);
+            let want = exact(v, d, trim);
+            proptest::prop_assert_eq!(&out[1..], want.as_bytes());
+        }
+
+        #[test]
+        fn written_coordinates_are_the_exact_ones(
+            // Coordinates at the program's precision, and near rounding ties.
+            units in -2_000_000_000i64..2_000_000_000,
+            from in 0u32..7,
+            nudge in -3i32..=3,
+            d in 0usize..8,
+            trim in proptest::prelude::any::<bool>(),
+        ) {
+            let base = units as f64 / 10f64.powi(from as i32) + 0.5 / 10f64.powi(d as i32);
+            let v = f64::from_bits((base.to_bits() as i64 + i64::from(nudge)) as u64);
+            let mut out = Vec::new();
+            write_number(&mut out, v, d, trim);
+            proptest::prop_assert_eq!(out, exact(v, d, trim).into_bytes());
         }
     }
 }

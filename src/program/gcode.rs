@@ -9,13 +9,6 @@
 //! from their original text. The accepted dialect is documented in
 //! `grammar/gcode.md`.
 
-use nom::IResult;
-use nom::branch::alt;
-use nom::bytes::complete::take_while1;
-use nom::character::complete::{char, digit0, digit1, one_of};
-use nom::combinator::{opt, recognize};
-use nom::sequence::{pair, tuple};
-
 use crate::error::Located;
 
 /// One word: a letter and its number, e.g. `X-12.5`.
@@ -120,19 +113,137 @@ pub fn strip_eol(line: &[u8]) -> &[u8] {
     &line[..end]
 }
 
-fn number(input: &[u8]) -> IResult<&[u8], &[u8]> {
-    recognize(tuple((
-        opt(one_of("+-")),
-        alt((
-            recognize(pair(digit1, opt(pair(char('.'), digit0)))),
-            recognize(pair(char('.'), digit1)),
-        )),
-    )))(input)
+/// Scans the number at the start of `input` in one pass: its length (as
+/// [`number_len`]) and its value when the exact fast path of
+/// [`fast_decimal`] applies (`None`: parse the text in full).
+#[inline]
+fn scan_number(input: &[u8]) -> Option<(usize, Option<f64>)> {
+    let neg = input.first() == Some(&b'-');
+    let mut i = usize::from(matches!(input.first(), Some(b'+' | b'-')));
+    // Wraps beyond 19 digits, where it is not used.
+    let mut mant: u64 = 0;
+    let int_start = i;
+    while let Some(&c) = input.get(i) {
+        if !c.is_ascii_digit() {
+            break;
+        }
+        mant = mant.wrapping_mul(10).wrapping_add(u64::from(c - b'0'));
+        i += 1;
+    }
+    let int_digits = i - int_start;
+    let mut frac_digits = 0;
+    if input.get(i) == Some(&b'.') && (int_digits > 0 || digits_len(input, i + 1) > 0) {
+        i += 1;
+        let frac_start = i;
+        while let Some(&c) = input.get(i) {
+            if !c.is_ascii_digit() {
+                break;
+            }
+            mant = mant.wrapping_mul(10).wrapping_add(u64::from(c - b'0'));
+            i += 1;
+        }
+        frac_digits = i - frac_start;
+    } else if int_digits == 0 {
+        return None;
+    }
+    let fast = (int_digits + frac_digits <= 19 && mant <= (1u64 << 53))
+        .then(|| POW10.get(frac_digits))
+        .flatten()
+        .map(|p| {
+            let v = mant as f64 / p;
+            if neg { -v } else { v }
+        });
+    Some((i, fast))
 }
 
-fn spaces(input: &[u8]) -> IResult<&[u8], &[u8]> {
-    take_while1(|b| b == b' ' || b == b'\t')(input)
+#[cfg(test)]
+/// Length of the number at the start of `input`: an optional sign, then
+/// digits with an optional point and more digits, or a point and digits
+/// (`12`, `-1.`, `+.5`, `3.25`); `None` when there is none.
+fn number_len(input: &[u8]) -> Option<usize> {
+    let mut i = usize::from(matches!(input.first(), Some(b'+' | b'-')));
+    let int = digits_len(input, i);
+    if int > 0 {
+        i += int;
+        if input.get(i) == Some(&b'.') {
+            i += 1;
+            i += digits_len(input, i);
+        }
+        Some(i)
+    } else if input.get(i) == Some(&b'.') && digits_len(input, i + 1) > 0 {
+        Some(i + 1 + digits_len(input, i + 1))
+    } else {
+        None
+    }
 }
+
+/// Number of ASCII digits from `at` on.
+fn digits_len(input: &[u8], at: usize) -> usize {
+    input
+        .get(at..)
+        .map_or(0, |s| s.iter().take_while(|c| c.is_ascii_digit()).count())
+}
+
+/// Exact powers of ten of the fast decimal path.
+const POW10: [f64; 23] = [
+    1e0, 1e1, 1e2, 1e3, 1e4, 1e5, 1e6, 1e7, 1e8, 1e9, 1e10, 1e11, 1e12, 1e13, 1e14, 1e15, 1e16,
+    1e17, 1e18, 1e19, 1e20, 1e21, 1e22,
+];
+
+/// The value of a number recognised by [`number_len`], exactly as
+/// `str::parse::<f64>` gives it, without going through `str`: when the
+/// digits form an integer of at most 2^53 and there are at most 22 decimals,
+/// both the integer and the power of ten are exact `f64`s and their
+/// (correctly rounded) quotient is the correctly rounded value of the
+/// decimal. `None` for longer numbers (the caller parses them in full).
+pub fn fast_decimal(num: &[u8]) -> Option<f64> {
+    let (neg, body) = match num.split_first() {
+        Some((b'-', rest)) => (true, rest),
+        Some((b'+', rest)) => (false, rest),
+        _ => (false, num),
+    };
+    let mut mant: u64 = 0;
+    let mut digits = 0usize;
+    let mut frac: Option<usize> = None;
+    for &c in body {
+        if c == b'.' {
+            if frac.is_some() {
+                return None;
+            }
+            frac = Some(0);
+            continue;
+        }
+        if !c.is_ascii_digit() || digits >= 19 {
+            return None;
+        }
+        mant = mant * 10 + u64::from(c - b'0');
+        digits += 1;
+        if let Some(f) = frac.as_mut() {
+            *f += 1;
+        }
+    }
+    if digits == 0 || mant > (1u64 << 53) {
+        return None;
+    }
+    let v = mant as f64 / *POW10.get(frac.unwrap_or(0))?;
+    Some(if neg { -v } else { v })
+}
+
+/// The value of a recognised number: the fast path, else `str::parse`.
+fn decimal(num: &[u8]) -> Option<f64> {
+    fast_decimal(num).or_else(|| std::str::from_utf8(num).ok()?.parse().ok())
+}
+
+/// Word letters as a table: `IS_LETTER[b]` for upper-case `b` in [`LETTERS`].
+const IS_LETTER: [bool; 256] = {
+    let mut t = [false; 256];
+    let mut i = 0;
+    while i < LETTERS.len() {
+        t[LETTERS[i] as usize] = true;
+        i += 1;
+    }
+    t
+};
 
 fn show(bytes: &[u8]) -> String {
     let s = String::from_utf8_lossy(bytes);
@@ -235,7 +346,7 @@ pub fn parse_line(line: &[u8], line_no: usize, file: &str, out: &mut Block) -> R
                     upper += 1;
                 }
                 let after_letter = skip_ws(text, pos + 1);
-                if !LETTERS.contains(&letter) {
+                if !IS_LETTER[letter as usize] {
                     return Err(err(
                         pos,
                         format!(
@@ -245,25 +356,29 @@ pub fn parse_line(line: &[u8], line_no: usize, file: &str, out: &mut Block) -> R
                         ),
                     ));
                 }
-                let rest = &text[after_letter..];
-                match number(rest) {
-                    Ok((_, num)) => {
+                let rest = text.get(after_letter..).unwrap_or(b"");
+                match scan_number(rest) {
+                    Some((len, fast)) => {
+                        let num = &rest[..len];
                         let num_start = after_letter;
-                        let num_end = after_letter + num.len();
-                        let num_str = std::str::from_utf8(num).unwrap_or("");
-                        let value: f64 = match num_str.parse() {
-                            Ok(v) => v,
-                            Err(_) => {
+                        let num_end = after_letter + len;
+                        let num_str = || String::from_utf8_lossy(num);
+                        let value: f64 = match fast.or_else(|| decimal(num)) {
+                            Some(v) => v,
+                            None => {
                                 return Err(err(
                                     num_start,
-                                    format!("malformed number `{}`", crate::error::clip(num_str)),
+                                    format!(
+                                        "malformed number `{}`",
+                                        crate::error::clip(&num_str())
+                                    ),
                                 ));
                             }
                         };
                         if !value.is_finite() || value.abs() > 1e9 {
                             return Err(err(
                                 num_start,
-                                format!("absurd number `{}`", crate::error::clip(num_str)),
+                                format!("absurd number `{}`", crate::error::clip(&num_str())),
                             ));
                         }
                         let decimals = num
@@ -328,7 +443,7 @@ pub fn parse_line(line: &[u8], line_no: usize, file: &str, out: &mut Block) -> R
                         });
                         pos = num_end;
                     }
-                    Err(_) => {
+                    None => {
                         match rest.first() {
                             Some(b'#') => {
                                 return Err(err(
@@ -405,15 +520,159 @@ pub fn parse_line(line: &[u8], line_no: usize, file: &str, out: &mut Block) -> R
 }
 
 fn skip_ws(text: &[u8], mut pos: usize) -> usize {
-    while let Ok((rest, _)) = spaces(&text[pos.min(text.len())..]) {
-        pos = text.len() - rest.len();
+    while matches!(text.get(pos), Some(b' ' | b'\t')) {
+        pos += 1;
     }
     pos
 }
 
 #[cfg(test)]
+mod reference;
+
+#[cfg(test)]
 mod tests {
     use super::*;
+    use proptest::prelude::*;
+
+    /// Both parsers on one line: the same block, or the same error.
+    fn same_as_reference(line: &[u8]) -> std::result::Result<(), TestCaseError> {
+        let mut fast = Block::default();
+        let mut slow = Block::default();
+        let a = parse_line(line, 3, "p.nc", &mut fast);
+        let b = reference::parse_line(line, 3, "p.nc", &mut slow);
+        prop_assert_eq!(&a, &b, "line {:?}", String::from_utf8_lossy(line));
+        if a.is_ok() {
+            prop_assert_eq!(&fast.words, &slow.words);
+            prop_assert_eq!(&fast.comments, &slow.comments);
+            prop_assert_eq!(
+                (
+                    fast.block_delete,
+                    fast.percent,
+                    fast.text_len,
+                    fast.lower_case,
+                    fast.spaced
+                ),
+                (
+                    slow.block_delete,
+                    slow.percent,
+                    slow.text_len,
+                    slow.lower_case,
+                    slow.spaced
+                )
+            );
+            for (w, v) in fast.words.iter().zip(&slow.words) {
+                // `==` takes -0 for 0: compare the bits.
+                prop_assert_eq!(w.value.to_bits(), v.value.to_bits());
+            }
+        }
+        Ok(())
+    }
+
+    /// A number as CAM systems and people write it, with the odd long one.
+    fn number_text() -> impl Strategy<Value = String> {
+        (
+            prop_oneof![Just(""), Just("-"), Just("+")],
+            "[0-9]{0,22}",
+            prop_oneof![Just(""), Just(".")],
+            "[0-9]{0,24}",
+        )
+            .prop_map(|(s, i, p, f)| format!("{s}{i}{p}{f}"))
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(4000))]
+
+        #[test]
+        fn scanner_agrees_with_the_reference_on_words(
+            words in prop::collection::vec(
+                ("[A-Za-z]", prop_oneof![Just(""), Just(" "), Just("\t")], number_text(),
+                 prop_oneof![Just(""), Just(" "), Just("  ")]),
+                0..6,
+            ),
+            head in prop_oneof![Just(""), Just("/"), Just(" "), Just("%"), Just("N10 ")],
+            tail in prop_oneof![Just(""), Just("\n"), Just("\r\n"), Just(" (c)"), Just(";x"),
+                                Just("(open"), Just("#1"), Just("=2"), Just("[1]"), Just(" sub")],
+        ) {
+            let mut line = String::from(head);
+            for (l, gap, n, sep) in &words {
+                line.push_str(l);
+                line.push_str(gap);
+                line.push_str(n);
+                line.push_str(sep);
+            }
+            line.push_str(tail);
+            same_as_reference(line.as_bytes())?;
+        }
+
+        #[test]
+        fn scanner_agrees_with_the_reference_on_any_bytes(
+            line in prop::collection::vec(
+                prop_oneof![
+                    4 => prop::sample::select(b"GXYZFIJKRNOMST0123456789.-+ ".to_vec()),
+                    1 => any::<u8>(),
+                ],
+                0..40,
+            )
+        ) {
+            same_as_reference(&line)?;
+        }
+
+        #[test]
+        fn fast_decimals_are_those_of_str_parse(text in number_text()) {
+            if let Some(len) = number_len(text.as_bytes()) {
+                let num = &text.as_bytes()[..len];
+                let want: f64 = std::str::from_utf8(num).unwrap_or("").parse().unwrap_or(f64::NAN);
+                let got = decimal(num).unwrap_or(f64::NAN);
+                prop_assert_eq!(got.to_bits(), want.to_bits(), "{}", text);
+            }
+        }
+    }
+
+    proptest! {
+        #[test]
+        fn one_pass_scan_is_length_and_fast_value(text in number_text(), tail in "[ X.0-9]{0,2}") {
+            let t = format!("{text}{tail}");
+            let b = t.as_bytes();
+            let want = number_len(b).map(|n| (n, fast_decimal(&b[..n]).map(f64::to_bits)));
+            let got = scan_number(b).map(|(n, v)| (n, v.map(f64::to_bits)));
+            prop_assert_eq!(got, want, "{}", t);
+        }
+    }
+
+    #[test]
+    fn fast_decimals_on_edge_cases() {
+        for t in [
+            "0",
+            "-0",
+            "-0.000",
+            "+0.",
+            ".5",
+            "-.5",
+            "9007199254740992",
+            "9007199254740993",
+            "0.1",
+            "0.3",
+            "123456.789012",
+            "1.0000000000000000000001",
+            "4503599627370497.5",
+            "99999999999999999999",
+            "0.0000000000000000000001",
+            "0.00000000000000000000001",
+            "1e5",
+        ] {
+            let want: Option<f64> = t.parse().ok();
+            if let Some(f) = fast_decimal(t.as_bytes()) {
+                assert_eq!(Some(f.to_bits()), want.map(f64::to_bits), "{t}");
+            }
+            if number_len(t.as_bytes()) == Some(t.len()) {
+                assert_eq!(
+                    decimal(t.as_bytes()).map(f64::to_bits),
+                    want.map(f64::to_bits),
+                    "{t}"
+                );
+            }
+        }
+    }
 
     fn parse(s: &str) -> Result<Block, Located> {
         let mut b = Block::default();

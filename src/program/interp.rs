@@ -388,7 +388,21 @@ impl Interpreter {
     /// Interprets one parsed block. `text` is the line (for messages): an
     /// error that does not quote its word quotes the block.
     pub fn step(&mut self, block: &Block, text: &[u8]) -> Result<Plan, Located> {
-        self.step_block(block, text).map_err(|mut e| {
+        let mut plan = Plan::default();
+        self.step_into(block, text, &mut plan)?;
+        Ok(plan)
+    }
+
+    /// [`Interpreter::step`] writing the plan into `plan` (no copy of the
+    /// plan on the way back; `plan`'s previous content is overwritten).
+    #[inline]
+    pub fn step_into(
+        &mut self,
+        block: &Block,
+        text: &[u8],
+        plan: &mut Plan,
+    ) -> Result<(), Located> {
+        self.step_block(block, text, plan).map_err(|mut e| {
             if !e.message.contains('`') {
                 let line = String::from_utf8_lossy(text);
                 let line = line.trim();
@@ -404,9 +418,9 @@ impl Interpreter {
         })
     }
 
-    fn step_block(&mut self, block: &Block, text: &[u8]) -> Result<Plan, Located> {
+    fn step_block(&mut self, block: &Block, text: &[u8], plan: &mut Plan) -> Result<(), Located> {
         let line = block.line_no;
-        let mut plan = Plan {
+        *plan = Plan {
             scale: self.scale(),
             absolute: self.absolute,
             arc_absolute: self.arc_absolute,
@@ -419,7 +433,7 @@ impl Interpreter {
                 self.directives(block, text)?;
                 plan.milling_mm = self.milling_mm;
             }
-            return Ok(plan);
+            return Ok(());
         }
         let quote = |w: &Word| {
             String::from_utf8_lossy(text.get(w.start as usize..w.end as usize).unwrap_or(b""))
@@ -675,7 +689,7 @@ impl Interpreter {
                         ));
                     }
                     plan.dwell_s = dwell_s;
-                    return Ok(plan);
+                    return Ok(());
                 }
                 90 => {}
                 280 => {
@@ -742,17 +756,17 @@ impl Interpreter {
             if any_axis {
                 return self.cycle_hole(block, &axis, plan, line, text);
             }
-            return Ok(plan);
+            return Ok(());
         }
         if !any_axis {
             if let Some(g) = motion_g {
                 if matches!(g.code10(), 20 | 30) && center.iter().any(|c| c.is_some()) {
                     // A full circle written without end coordinates.
                 } else {
-                    return Ok(plan);
+                    return Ok(());
                 }
             } else {
-                return Ok(plan);
+                return Ok(());
             }
         }
         let motion = match self.motion {
@@ -791,7 +805,7 @@ impl Interpreter {
         let mv = self.make_move(motion, start, end, arc);
         plan.kind = PlanKind::Motion;
         plan.mv = Some(mv);
-        Ok(plan)
+        Ok(())
     }
 
     /// Reads `(POSTPROC MILLING DEPTH=d WIDTH=w)` directive comments (values
@@ -1109,10 +1123,10 @@ impl Interpreter {
         &mut self,
         block: &Block,
         axis: &[Option<&Word>; 6],
-        mut plan: Plan,
+        plan: &mut Plan,
         line: usize,
         text: &[u8],
-    ) -> Result<Plan, Located> {
+    ) -> Result<(), Located> {
         let scale = plan.scale;
         let off = plan.offset;
         let first = axis.iter().flatten().next().copied();
@@ -1200,16 +1214,16 @@ impl Interpreter {
             retract,
         };
         plan.mv = Some(feed);
-        Ok(plan)
+        Ok(())
     }
 
     fn reference_return(
         &mut self,
         _block: &Block,
         axis: &[Option<&Word>; 6],
-        mut plan: Plan,
+        plan: &mut Plan,
         _line: usize,
-    ) -> Result<Plan, Located> {
+    ) -> Result<(), Located> {
         // Through the intermediate point to the reference position (machine zero).
         let mid = self.target(axis, plan.scale, &plan.offset);
         let start = self.pos;
@@ -1223,17 +1237,17 @@ impl Interpreter {
         let mv = self.make_move(Motion::Rapid, mid, home, None);
         plan.kind = PlanKind::Fixed;
         plan.mv = Some(mv);
-        Ok(plan)
+        Ok(())
     }
 
     fn machine_move(
         &mut self,
         _block: &Block,
         axis: &[Option<&Word>; 6],
-        mut plan: Plan,
+        plan: &mut Plan,
         motion_g: Option<&Word>,
         line: usize,
-    ) -> Result<Plan, Located> {
+    ) -> Result<(), Located> {
         if let Some(g) = motion_g {
             if !matches!(g.code10(), 0 | 10) {
                 return Err(self.err(line, Some(g), "G53 moves only with G0 or G1".into()));
@@ -1251,7 +1265,7 @@ impl Interpreter {
         let mv = self.make_move(Motion::Rapid, self.pos, end, None);
         plan.kind = PlanKind::Fixed;
         plan.mv = Some(mv);
-        Ok(plan)
+        Ok(())
     }
 }
 
