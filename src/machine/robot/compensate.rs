@@ -152,6 +152,13 @@ pub struct Compensation {
     pub iterations: usize,
 }
 
+/// The closed-form branch of a target's inverse kinematics, kept over the
+/// compensation iteration when `fixed`.
+struct BranchMemo {
+    fixed: bool,
+    k: Option<usize>,
+}
+
 /// Weight of rotation against position in the progress test, mm/rad.
 const ROT_SCALE_MM: f64 = 1000.0;
 
@@ -165,14 +172,28 @@ fn perturb(c: &Isometry3<f64>, d: &Vector6<f64>) -> Isometry3<f64> {
 
 impl Robot {
     /// Controller joints of a commanded pose, continuing from `q`.
+    /// With a branch in `branch` (the closed-form branch index of the
+    /// target, once known), only that branch is solved
+    /// ([`Robot::ik_conf_near_branch`]); otherwise every branch is
+    /// searched, and the one found is kept when `branch.fixed`.
     fn controller_joints(
         &self,
         cmd: &Isometry3<f64>,
         q: &[f64; 6],
         sel: &IkSelect,
+        branch: &mut BranchMemo,
     ) -> Result<[f64; 6], RobotError> {
         match sel {
-            IkSelect::Conf(c) => self.ik_conf_near(cmd, *c, q),
+            IkSelect::Conf(c) => match branch.k {
+                Some(k) => self.ik_conf_near_branch(cmd, *c, q, k),
+                None => {
+                    let (q, k) = self.ik_conf_branch(cmd, *c, Some(q))?;
+                    if branch.fixed {
+                        branch.k = Some(k);
+                    }
+                    Ok(q)
+                }
+            },
             IkSelect::Near(_) => {
                 super::ik::solve_numeric(self.params(Model::Nominal), &self.flange_for_tcp(cmd), q)
             }
@@ -189,6 +210,7 @@ impl Robot {
         sel: &IkSelect,
         model: &Prepared,
         effects: Effects,
+        branch: &mut BranchMemo,
     ) -> Result<Matrix6<f64>, RobotError> {
         const H: [f64; 2] = [1e-4, 1e-7];
         let mut m = Matrix6::zeros();
@@ -196,7 +218,7 @@ impl Robot {
             let h = H[k / 3];
             let mut d = Vector6::zeros();
             d[k] = h;
-            let qk = self.controller_joints(&perturb(cmd, &d), q, sel)?;
+            let qk = self.controller_joints(&perturb(cmd, &d), q, sel, branch)?;
             let (dp, dr) = pose_error(&self.predict_with(model, &qk, effects), attained);
             for r in 0..3 {
                 m[(r, k)] = dp[r] / h;
@@ -230,6 +252,8 @@ impl Robot {
         let (kin, model) = self.prediction_params(effects, growth);
         let kin = if effects.kinematic == 0.0 {
             *self.nominal_prepared()
+        } else if effects.kinematic == 1.0 {
+            *self.actual_prepared()
         } else {
             Prepared::new(&kin)
         };
@@ -377,6 +401,39 @@ impl Robot {
         growth: &DhGrowth,
         q_programmed: Option<[f64; 6]>,
     ) -> Result<Compensation, RobotError> {
+        // Fast path: the closed-form branch found by the first inverse
+        // kinematics of the iteration is the only one solved afterwards.
+        // Its result stands when the final joints still have the asked
+        // cfx (the branch cannot change over sub-millimetre corrections);
+        // otherwise, and on any error, the search over every branch at
+        // every step decides (the same result and the same error as
+        // before the fast path).
+        if let IkSelect::Conf(c) = sel {
+            if let Ok(r) = self.compensate_branch(programmed, sel, effects, growth, q_programmed, true) {
+                if r.conf.cfx == c.cfx {
+                    return Ok(r);
+                }
+            }
+        }
+        self.compensate_branch(programmed, sel, effects, growth, q_programmed, false)
+    }
+
+    /// [`Robot::compensate_seeded`], with `fixed_branch` the inverse
+    /// kinematics of the iteration solving only the branch of its first
+    /// solution.
+    fn compensate_branch(
+        &self,
+        programmed: &Isometry3<f64>,
+        sel: &IkSelect,
+        effects: Effects,
+        growth: &DhGrowth,
+        q_programmed: Option<[f64; 6]>,
+        fixed_branch: bool,
+    ) -> Result<Compensation, RobotError> {
+        let mut branch = BranchMemo {
+            fixed: fixed_branch,
+            k: None,
+        };
         let q0 = match q_programmed {
             Some(q) => q,
             None => self.ik_nominal(programmed, sel)?,
@@ -422,13 +479,21 @@ impl Robot {
             e.fixed_rows_mut::<3>(0).copy_from(&dp);
             e.fixed_rows_mut::<3>(3).copy_from(&dr);
             let step = if newton {
-                let m = self.deviation_jacobian(&cmd, &q, &attained, sel, &model, effects)?;
+                let m = self.deviation_jacobian(
+                    &cmd,
+                    &q,
+                    &attained,
+                    sel,
+                    &model,
+                    effects,
+                    &mut branch,
+                )?;
                 m.lu().solve(&e).unwrap_or(e)
             } else {
                 e
             };
             cmd = perturb(&cmd, &step);
-            q = self.controller_joints(&cmd, &q, sel)?;
+            q = self.controller_joints(&cmd, &q, sel, &mut branch)?;
             attained = self.predict_with(&model, &q, effects);
         }
         Err(RobotError::NoConvergence {

@@ -7,7 +7,7 @@
 use nalgebra::{Isometry3, Vector3, Vector6};
 
 use super::dh::DhParams;
-use super::kinematics::{Frames, flange, frames, jacobian, jacobian_link};
+use super::kinematics::{Frames, flange, frames, jacobian};
 use super::{Model, Robot};
 
 impl Robot {
@@ -76,6 +76,7 @@ impl Robot {
     /// (one Jacobian per link): the reference of the recursion's test.
     #[cfg(test)]
     pub(crate) fn gravity_torques_jacobian(&self, f: &Frames) -> Vector6<f64> {
+        use super::kinematics::jacobian_link;
         let g = self.gravity_base();
         let mut tau = Vector6::zeros();
         for (i, l) in self.links().iter().enumerate() {
@@ -169,6 +170,7 @@ impl Robot {
     }
 }
 
+#[cfg(test)]
 fn force_wrench(f: Vector3<f64>) -> Vector6<f64> {
     let mut w = Vector6::zeros();
     w.fixed_rows_mut::<3>(0).copy_from(&f);
