@@ -574,20 +574,26 @@ fn robtarget_text(
 }
 
 /// In-place edits of a robtarget literal.
+/// In-place edits of a robtarget literal, pushed onto `edits`: one edit
+/// for the position and quaternion numbers, one per confdata number when
+/// the confdata changes.
 fn robtarget_in_place(
+    edits: &mut Vec<Edit>,
+    src: &str,
     rt: &RobTarget,
     pose: &Isometry3<f64>,
     old_conf: ConfData,
     conf: ConfData,
     fmt: &Format,
-) -> Result<Vec<Edit>> {
+) -> Result<()> {
     let q = pose.rotation.quaternion();
-    let mut edits = crate::emit::rapid::robtarget_edits(
+    edits.push(crate::emit::rapid::robtarget_edit(
+        src,
         rt,
         &pose.translation.vector.into(),
         Some(&[q.w, q.i, q.j, q.k]),
         fmt,
-    )?;
+    )?);
     if conf != old_conf {
         for (n, v) in rt
             .robconf
@@ -597,7 +603,7 @@ fn robtarget_in_place(
             edits.push(Edit::replace(n.span.clone(), v.to_string()));
         }
     }
-    Ok(edits)
+    Ok(())
 }
 
 fn joint_text(src: &str, file: &str, jt: &JointTarget, q_deg: &[f64; 6]) -> Result<String> {
@@ -832,8 +838,15 @@ impl Rewriter<'_> {
         let fmt = self.opts.format;
         match (u.origin, u.derived) {
             (Origin::Inline, false) => {
-                let e = robtarget_in_place(u.rt, &new_obj, u.conf, comp.conf, &fmt)?;
-                self.edits.extend(e);
+                robtarget_in_place(
+                    &mut self.edits,
+                    self.src,
+                    u.rt,
+                    &new_obj,
+                    u.conf,
+                    comp.conf,
+                    &fmt,
+                )?;
             }
             (Origin::Inline, true) => {
                 let text = robtarget_text(self.src, u.rt, &new_obj, comp.conf, &fmt)?;
@@ -851,8 +864,15 @@ impl Rewriter<'_> {
                         .insert((origin, String::new(), key.clone()), String::new())
                         .is_none()
                     {
-                        let e = robtarget_in_place(u.rt, &new_obj, u.conf, comp.conf, &fmt)?;
-                        self.edits.extend(e);
+                        robtarget_in_place(
+                            &mut self.edits,
+                            self.src,
+                            u.rt,
+                            &new_obj,
+                            u.conf,
+                            comp.conf,
+                            &fmt,
+                        )?;
                     }
                 } else {
                     let text = robtarget_text(self.src, u.rt, &new_obj, comp.conf, &fmt)?;

@@ -202,6 +202,7 @@ impl Robot {
 
     /// Finite-difference Jacobian of the attained pose with respect to the
     /// commanded pose (both as `[Δp; Δφ]`).
+    #[allow(clippy::too_many_arguments)]
     fn deviation_jacobian(
         &self,
         cmd: &Isometry3<f64>,
@@ -409,7 +410,9 @@ impl Robot {
         // every step decides (the same result and the same error as
         // before the fast path).
         if let IkSelect::Conf(c) = sel {
-            if let Ok(r) = self.compensate_branch(programmed, sel, effects, growth, q_programmed, true) {
+            if let Ok(r) =
+                self.compensate_branch(programmed, sel, effects, growth, q_programmed, true)
+            {
                 if r.conf.cfx == c.cfx {
                     return Ok(r);
                 }
