@@ -681,6 +681,8 @@ struct Job {
     growth: DhGrowth,
     /// Controller joints of the programmed pose, when planning found them.
     q0: Option<[f64; 6]>,
+    /// Closed-form branch of `q0`, when known.
+    branch: Option<usize>,
 }
 
 /// The two walks over the moves: the first collects every compensation as
@@ -757,7 +759,7 @@ impl Rewriter<'_> {
         view: usize,
         pose: Isometry3<f64>,
         sel: IkSelect,
-        q0: Option<[f64; 6]>,
+        (q0, branch): (Option<[f64; 6]>, Option<usize>),
     ) -> Option<std::result::Result<Compensation, RobotError>> {
         let growth = self.growth();
         match &mut self.phase {
@@ -768,6 +770,7 @@ impl Rewriter<'_> {
                     sel,
                     growth,
                     q0,
+                    branch,
                 });
                 None
             }
@@ -778,9 +781,14 @@ impl Rewriter<'_> {
                     results
                         .next()
                         .unwrap_or_else(|| match self.views.get(view) {
-                            Some(r) => {
-                                r.compensate_seeded(&pose, &sel, self.opts.effects, &growth, q0)
-                            }
+                            Some(r) => r.compensate_seeded(
+                                &pose,
+                                &sel,
+                                self.opts.effects,
+                                &growth,
+                                q0,
+                                branch,
+                            ),
                             None => Err(RobotError::Unreachable("no robot view".into())),
                         }),
                 )
@@ -805,7 +813,7 @@ impl Rewriter<'_> {
         key: &LoadKey,
         tool: &ToolView,
         wobj: &Isometry3<f64>,
-        q0: Option<[f64; 6]>,
+        q0: (Option<[f64; 6]>, Option<usize>),
     ) -> Result<Option<Deviation>> {
         let u = resolve_cart(self.module, self.src, self.file, target)?;
         let view = self.view(key, tool);
@@ -987,7 +995,7 @@ impl Rewriter<'_> {
             .map_err(|e| self.locate(at, e, &what()))?;
         let goal = r.tcp_pose(Model::Nominal, &q);
         self.last_tcp = goal.translation.vector.into();
-        let Some(comp) = self.solve(view, goal, IkSelect::Near(q), None) else {
+        let Some(comp) = self.solve(view, goal, IkSelect::Near(q), (None, None)) else {
             return Ok(None);
         };
         let comp = comp.map_err(|e| self.locate(at, e, &what()))?;
@@ -1085,6 +1093,8 @@ struct Planned {
     via: Option<Isometry3<f64>>,
     /// Controller joints, when the target is reachable.
     q: Option<[f64; 6]>,
+    /// Closed-form branch of `q` (a Cartesian target's).
+    branch: Option<usize>,
     /// TCP speed, mm/s, when it can be resolved.
     v_tcp: Option<f64>,
 }
@@ -1121,7 +1131,7 @@ fn plan_move<'m>(
     let view = cache.get(mv.tool.text.as_str(), || {
         robot.with_tool(tool.tframe, tool.load, false)
     });
-    let (pose, q) = if mv.kind == MoveKind::MoveAbsJ {
+    let (pose, q, branch) = if mv.kind == MoveKind::MoveAbsJ {
         let jt = match &mv.target {
             Target::InlineJoint(jt) => Some(jt),
             t @ Target::Named { .. } => match named_value(module, src, file, t)?.0 {
@@ -1139,11 +1149,14 @@ fn plan_move<'m>(
             ));
         };
         let q = jt.robax.each_ref().map(|n| n.value.to_radians());
-        (view.tcp_pose(Model::Nominal, &q), Some(q))
+        (view.tcp_pose(Model::Nominal, &q), Some(q), None)
     } else {
         let u = resolve_cart(module, src, file, &mv.target)?;
         let pose = wobj * u.pose_obj;
-        (pose, view.ik_conf(&pose, u.conf).ok())
+        match view.ik_conf_indexed(&pose, u.conf) {
+            Ok((q, k)) => (pose, Some(q), Some(k)),
+            Err(_) => (pose, None, None),
+        }
     };
     let via = match &mv.via {
         Some(v) => Some(wobj * resolve_cart(module, src, file, v)?.pose_obj),
@@ -1155,6 +1168,7 @@ fn plan_move<'m>(
         pose,
         via,
         q,
+        branch,
         v_tcp: tcp_speed(module, mv),
     })
 }
@@ -1336,9 +1350,7 @@ fn move_power<'m>(
             .with_tool(cur.tool.tframe, cur.tool.load, false)
             .with_process_wrench(wrench)
     });
-    let tau = |q: &[f64; 6]| {
-        view.gravity_torques(Model::Nominal, q) + view.process_torques(Model::Nominal, q)
-    };
+    let tau = |q: &[f64; 6]| view.nominal_load_torques(q);
     let t = (tau(&qa) + tau(&qb)) * 0.5e-3;
     std::array::from_fn(|j| (t[j] * (qb[j] - qa[j]) / duration_s).abs())
 }
@@ -1497,7 +1509,7 @@ pub fn compensate_module(
     let results: Vec<std::result::Result<Compensation, RobotError>> = jobs
         .par_iter()
         .map(|j| match views.get(j.view) {
-            Some(r) => r.compensate_seeded(&j.pose, &j.sel, fx, &j.growth, j.q0),
+            Some(r) => r.compensate_seeded(&j.pose, &j.sel, fx, &j.growth, j.q0, j.branch),
             None => Err(RobotError::Unreachable("no robot view".into())),
         })
         .collect();
@@ -1566,11 +1578,18 @@ impl Rewriter<'_> {
             self.joint(mv, key, &plan.tool)
         } else {
             if let Some(via) = &mv.via {
-                self.cart(mv, via, key, &plan.tool, &plan.wobj, None)?;
+                self.cart(mv, via, key, &plan.tool, &plan.wobj, (None, None))?;
             }
             // Planning solved the target's joints with the same pose,
             // confdata and TCP (`ik_conf`, limits checked).
-            self.cart(mv, &mv.target, key, &plan.tool, &plan.wobj, plan.q)
+            self.cart(
+                mv,
+                &mv.target,
+                key,
+                &plan.tool,
+                &plan.wobj,
+                (plan.q, plan.branch),
+            )
         }
     }
 }

@@ -16,7 +16,7 @@
 use nalgebra::{Isometry3, Matrix6, Translation3, UnitQuaternion, Vector3, Vector6};
 
 use super::dh::DhParams;
-use super::kinematics::{Frames, Prepared, frames_prepared};
+use super::kinematics::{Frames, Prepared, flange_prepared, frames_prepared};
 use super::pose::pose_error;
 use super::thermal::{DhGrowth, grown};
 use super::{IkSelect, Model, Robot, RobotError};
@@ -287,7 +287,7 @@ impl Robot {
     fn deflected_tcp(&self, model: &Prepared, q: &[f64; 6], tau: &Vector6<f64>) -> Isometry3<f64> {
         let dq = self.joint_deflection(tau);
         let qd: [f64; 6] = std::array::from_fn(|i| q[i] + dq[i]);
-        self.tcp_of(&frames_prepared(model, &qd, 6).flange())
+        self.tcp_of(&flange_prepared(model, &qd))
     }
 
     /// Attained TCP pose with the parameter set `model` of
@@ -322,8 +322,8 @@ impl Robot {
         q: &[f64; 6],
         effects: Effects,
     ) -> [Isometry3<f64>; 5] {
-        let p0 = self.tcp_of(&frames_prepared(self.nominal_prepared(), q, 6).flange());
-        let p1 = self.tcp_of(&frames_prepared(kin, q, 6).flange());
+        let p0 = self.tcp_of(&flange_prepared(self.nominal_prepared(), q));
+        let p1 = self.tcp_of(&flange_prepared(kin, q));
         let f = frames_prepared(model, q, 6);
         let p2 = self.tcp_of(&f.flange());
         let (tau_g, tau_w) = self.load_torques(&f, effects);
@@ -388,12 +388,14 @@ impl Robot {
         effects: Effects,
         growth: &DhGrowth,
     ) -> Result<Compensation, RobotError> {
-        self.compensate_seeded(programmed, sel, effects, growth, None)
+        self.compensate_seeded(programmed, sel, effects, growth, None, None)
     }
 
     /// [`Robot::compensate_with_growth`] with the controller joints of the
     /// programmed pose already known (`ik_nominal(programmed, sel)`, limits
     /// checked), e.g. from planning the move: saves one inverse kinematics.
+    /// `branch`: the closed-form branch of those joints
+    /// ([`Robot::ik_conf_indexed`]), when known.
     pub(crate) fn compensate_seeded(
         &self,
         programmed: &Isometry3<f64>,
@@ -401,6 +403,7 @@ impl Robot {
         effects: Effects,
         growth: &DhGrowth,
         q_programmed: Option<[f64; 6]>,
+        branch: Option<usize>,
     ) -> Result<Compensation, RobotError> {
         // Fast path: the closed-form branch found by the first inverse
         // kinematics of the iteration is the only one solved afterwards.
@@ -410,20 +413,21 @@ impl Robot {
         // every step decides (the same result and the same error as
         // before the fast path).
         if let IkSelect::Conf(c) = sel {
+            let seed = q_programmed.and(branch);
             if let Ok(r) =
-                self.compensate_branch(programmed, sel, effects, growth, q_programmed, true)
+                self.compensate_branch(programmed, sel, effects, growth, q_programmed, Some(seed))
             {
                 if r.conf.cfx == c.cfx {
                     return Ok(r);
                 }
             }
         }
-        self.compensate_branch(programmed, sel, effects, growth, q_programmed, false)
+        self.compensate_branch(programmed, sel, effects, growth, q_programmed, None)
     }
 
-    /// [`Robot::compensate_seeded`], with `fixed_branch` the inverse
-    /// kinematics of the iteration solving only the branch of its first
-    /// solution.
+    /// [`Robot::compensate_seeded`]; with `fixed_branch`, the inverse
+    /// kinematics of the iteration solves only one branch: the given one,
+    /// else the branch of its first solution.
     fn compensate_branch(
         &self,
         programmed: &Isometry3<f64>,
@@ -431,11 +435,11 @@ impl Robot {
         effects: Effects,
         growth: &DhGrowth,
         q_programmed: Option<[f64; 6]>,
-        fixed_branch: bool,
+        fixed_branch: Option<Option<usize>>,
     ) -> Result<Compensation, RobotError> {
         let mut branch = BranchMemo {
-            fixed: fixed_branch,
-            k: None,
+            fixed: fixed_branch.is_some(),
+            k: fixed_branch.flatten(),
         };
         let q0 = match q_programmed {
             Some(q) => q,

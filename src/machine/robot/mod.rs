@@ -601,6 +601,18 @@ impl Robot {
         Ok(q)
     }
 
+    /// [`Robot::ik_conf`] with the index of the closed-form branch of the
+    /// solution (a seed of [`Robot::ik_conf_near_branch`]).
+    pub(crate) fn ik_conf_indexed(
+        &self,
+        tcp_world: &Isometry3<f64>,
+        conf: ConfData,
+    ) -> std::result::Result<([f64; 6], usize), RobotError> {
+        let (q, k) = self.ik_conf_branch(tcp_world, conf, None)?;
+        self.check_limits(&q)?;
+        Ok((q, k))
+    }
+
     /// Closed-form solution with confdata `conf`, turns of joints 1, 4, 6
     /// nearest to `reference` (no limit check).
     pub(crate) fn ik_conf_near(

@@ -136,6 +136,13 @@ impl Robot {
         jacobian(f, &self.flange_to_tool().translation.vector).transpose() * w
     }
 
+    /// [`Robot::gravity_torques`] plus [`Robot::process_torques`] of the
+    /// nominal model, from one set of joint frames.
+    pub(crate) fn nominal_load_torques(&self, q: &[f64; 6]) -> Vector6<f64> {
+        let f = super::kinematics::frames_prepared(self.nominal_prepared(), q, 6);
+        self.gravity_torques_at(&f) + self.process_torques_at(&f)
+    }
+
     /// Joint deflection `Δθ = Kθ⁻¹ τ` (rad) for torques in N·mm.
     pub fn joint_deflection(&self, tau: &Vector6<f64>) -> [f64; 6] {
         let k = self.k_nmm_per_rad();
