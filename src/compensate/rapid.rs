@@ -952,7 +952,7 @@ impl Rewriter<'_> {
     fn joint(&mut self, mv: &Move, key: &LoadKey, tool: &ToolView) -> Result<Option<Deviation>> {
         let target = &mv.target;
         let (jt, origin, stem) = match target {
-            Target::InlineJoint(jt) => (jt, Origin::Inline, String::new()),
+            Target::InlineJoint(jt) => (&**jt, Origin::Inline, String::new()),
             Target::Named { .. } => {
                 let (v, origin, stem) = named_value(self.module, self.src, self.file, target)?;
                 let DataValue::JointTarget(jt) = v else {
@@ -1133,7 +1133,7 @@ fn plan_move<'m>(
     });
     let (pose, q, branch) = if mv.kind == MoveKind::MoveAbsJ {
         let jt = match &mv.target {
-            Target::InlineJoint(jt) => Some(jt),
+            Target::InlineJoint(jt) => Some(&**jt),
             t @ Target::Named { .. } => match named_value(module, src, file, t)?.0 {
                 DataValue::JointTarget(jt) => Some(jt),
                 _ => None,
@@ -1386,10 +1386,10 @@ pub fn compensate_module(
     let module = parse_module(src, file)?;
     let moves: Vec<&Move> = module.moves().collect();
     let mut tool_views = ViewCache::new();
-    let plans = moves
-        .iter()
-        .map(|mv| plan_move(&module, src, file, robot, &mut tool_views, mv))
-        .collect::<Result<Vec<_>>>()?;
+    let mut plans = Vec::with_capacity(moves.len());
+    for mv in &moves {
+        plans.push(plan_move(&module, src, file, robot, &mut tool_views, mv)?);
+    }
     let fx = opts.effects;
     let thermal = robot.thermal().filter(|_| fx.thermal != 0.0);
     let directives = Directives::parse(src, file)?;
@@ -1566,7 +1566,14 @@ pub fn compensate_module(
         }
     }
     outcome.added = rw.added;
-    outcome.text = apply_edits(src, &rw.edits)?;
+    // Free the per-move data before the output text is built (the peak).
+    let edits = std::mem::take(&mut rw.edits);
+    drop(rw);
+    drop(keyed);
+    drop(plans);
+    drop(moves);
+    drop(module);
+    outcome.text = apply_edits(src, &edits)?;
     Ok(outcome)
 }
 

@@ -1024,9 +1024,9 @@ impl<'a> Parser<'a> {
         if i.starts_with('[') {
             let (r, v) = self.val(i, b",]")?;
             let t = if joint {
-                Target::InlineJoint(self.joint_target(&v)?)
+                Target::InlineJoint(Box::new(self.joint_target(&v)?))
             } else {
-                Target::Inline(self.rob_target(&v)?)
+                Target::Inline(Box::new(self.rob_target(&v)?))
             };
             return Ok((r, t));
         }
