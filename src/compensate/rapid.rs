@@ -16,7 +16,7 @@ use rayon::prelude::*;
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 
 use crate::emit::rapid::{
-    Edit, Format, annotate, apply_edits, format_fixed, format_position, format_quaternion,
+    Edit, Format, annotate_with, apply_edits, format_fixed, format_position, format_quaternion,
     insert_after_decl,
 };
 use crate::error::{Error, Located, Result};
@@ -536,6 +536,31 @@ fn resolve_wobj(module: &Module, src: &str, file: &str, mv: &Move) -> Result<Iso
 /// The comment appended to a compensated move: the predicted deviation of
 /// the uncompensated target and its parts (mm), and the vibration amplitude
 /// (mm, reported only).
+/// Writes [`dev_comment`] into `out` (fast fixed-decimal numbers, the
+/// same text).
+fn write_dev_comment(out: &mut String, d: &Deviation) {
+    let num = |out: &mut String, v: f64, decimals: usize| {
+        if !crate::emit::rapid::push_fixed(out, v, decimals) {
+            use std::fmt::Write;
+            let _ = write!(out, "{v:.decimals$}");
+        }
+    };
+    out.push_str("dev ");
+    num(out, d.total.pos_mm.norm(), 3);
+    out.push_str(" mm (kin ");
+    num(out, d.kinematic.pos_mm.norm(), 3);
+    out.push_str(" therm ");
+    num(out, d.thermal.pos_mm.norm(), 3);
+    out.push_str(" grav ");
+    num(out, d.gravity.pos_mm.norm(), 3);
+    out.push_str(" proc ");
+    num(out, d.process.pos_mm.norm(), 3);
+    out.push_str(" vib ");
+    num(out, d.vibration_mm.norm(), 4);
+    out.push(')');
+}
+
+#[cfg(test)]
 fn dev_comment(d: &Deviation) -> String {
     format!(
         "dev {:.3} mm (kin {:.3} therm {:.3} grav {:.3} proc {:.3} vib {:.4})",
@@ -1537,7 +1562,9 @@ pub fn compensate_module(
             max_vib = (v, mv.line, state.rpm);
         }
         if opts.annotate {
-            rw.edits.push(annotate(src, &mv.span, &dev_comment(&dev)));
+            rw.edits.push(annotate_with(src, &mv.span, |out| {
+                write_dev_comment(out, &dev)
+            }));
         }
         outcome.records.push(MoveRecord {
             line: mv.line,
@@ -1625,5 +1652,60 @@ fn warn_resonance(robot: &Robot, fx: Effects, (amp_mm, line, rpm): (f64, usize, 
             amp_mm,
             r.suggested_hz
         );
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::machine::robot::PoseDelta;
+
+    #[test]
+    fn fast_deviation_comment_equals_the_formatted_one() {
+        let mut state = 0x9e37_79b9_7f4a_7c15u64;
+        let mut next = || {
+            state = state
+                .wrapping_mul(6_364_136_223_846_793_005)
+                .wrapping_add(1_442_695_040_888_963_407);
+            let u = (state >> 11) as f64 / (1u64 << 53) as f64 - 0.5;
+            // Magnitudes from 1e-6 mm to 1e3 mm, both signs.
+            u * 10f64.powf((state % 10) as f64 - 6.0)
+        };
+        let mut delta = |k: f64| PoseDelta {
+            pos_mm: Vector3::new(next(), next(), next()) * k,
+            rot_rad: Vector3::zeros(),
+        };
+        let mut cases = vec![Deviation::default()];
+        for k in [1.0, 0.5, 1e-3, 2.0] {
+            let (a, b, c, d, e) = (delta(k), delta(k), delta(k), delta(k), delta(k));
+            cases.push(Deviation {
+                kinematic: a,
+                thermal: b,
+                gravity: c,
+                process: d,
+                total: e,
+                vibration_mm: Vector3::new(0.00005, 0.0, 0.0) * k,
+            });
+        }
+        let mut odd = Deviation::default();
+        odd.total.pos_mm = Vector3::new(f64::NAN, 0.0, 0.0);
+        odd.process.pos_mm = Vector3::new(f64::INFINITY, 0.0, 0.0);
+        cases.push(odd);
+        for _ in 0..2000 {
+            let (a, b, c, d, e) = (delta(1.0), delta(1.0), delta(1.0), delta(1.0), delta(1.0));
+            cases.push(Deviation {
+                kinematic: a,
+                thermal: b,
+                gravity: c,
+                process: d,
+                total: e,
+                vibration_mm: a.pos_mm,
+            });
+        }
+        for d in &cases {
+            let mut fast = String::new();
+            write_dev_comment(&mut fast, d);
+            assert_eq!(fast, dev_comment(d));
+        }
     }
 }

@@ -405,6 +405,17 @@ pub fn annotate(src: &str, stmt: &Range<usize>, comment: &str) -> Edit {
     Edit::insert(at, format!(" ! {one_line}"))
 }
 
+/// [`annotate`] with the comment written by `write` (which must not write
+/// a line break) straight after the ` ! `: one string, no copy.
+pub fn annotate_with(src: &str, stmt: &Range<usize>, write: impl FnOnce(&mut String)) -> Edit {
+    let last = stmt.end.saturating_sub(1).max(stmt.start);
+    let at = line_end(src, last);
+    let mut text = String::with_capacity(80);
+    text.push_str(" ! ");
+    write(&mut text);
+    Edit::insert(at, text)
+}
+
 /// An insertion of `text` (one or more lines, without a final line break) on
 /// new lines just after the line where the declaration `decl` ends, each line
 /// indented like the declaration and ended with the file's line ending.

@@ -174,7 +174,7 @@ pub(crate) fn frames_prepared(p: &Prepared, q: &[f64; 6], n: usize) -> Frames {
 pub(crate) fn flange_prepared(p: &Prepared, q: &[f64; 6]) -> Isometry3<f64> {
     let mut prev = Isometry3::identity();
     for (j, qi) in p.joints.iter().zip(q) {
-        prev = prev * prepared_transform(j, p.convention, *qi);
+        prev *= prepared_transform(j, p.convention, *qi);
     }
     prev
 }
