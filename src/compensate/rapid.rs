@@ -977,7 +977,7 @@ impl Rewriter<'_> {
     fn joint(&mut self, mv: &Move, key: &LoadKey, tool: &ToolView) -> Result<Option<Deviation>> {
         let target = &mv.target;
         let (jt, origin, stem) = match target {
-            Target::InlineJoint(jt) => (&**jt, Origin::Inline, String::new()),
+            Target::InlineJoint(jt) => (jt, Origin::Inline, String::new()),
             Target::Named { .. } => {
                 let (v, origin, stem) = named_value(self.module, self.src, self.file, target)?;
                 let DataValue::JointTarget(jt) = v else {
@@ -1158,7 +1158,7 @@ fn plan_move<'m>(
     });
     let (pose, q, branch) = if mv.kind == MoveKind::MoveAbsJ {
         let jt = match &mv.target {
-            Target::InlineJoint(jt) => Some(&**jt),
+            Target::InlineJoint(jt) => Some(jt),
             t @ Target::Named { .. } => match named_value(module, src, file, t)?.0 {
                 DataValue::JointTarget(jt) => Some(jt),
                 _ => None,

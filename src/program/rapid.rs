@@ -333,11 +333,10 @@ pub enum Target {
         /// The whole expression.
         span: Span,
     },
-    /// An inline robtarget literal (boxed: a `Move` carries two targets,
-    /// and most moves have no circle point).
-    Inline(Box<RobTarget>),
-    /// An inline jointtarget literal (MoveAbsJ; boxed like `Inline`).
-    InlineJoint(Box<JointTarget>),
+    /// An inline robtarget literal.
+    Inline(RobTarget),
+    /// An inline jointtarget literal (MoveAbsJ).
+    InlineJoint(JointTarget),
     /// `Offs(base, dx, dy, dz)`: displacement in the work-object frame.
     Offs {
         /// The displaced target.

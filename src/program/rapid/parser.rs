@@ -1086,14 +1086,14 @@ impl<'a> Parser<'a> {
         if i.starts_with('[') {
             if !joint {
                 if let Some((r, rt)) = self.scan_rob_target(i) {
-                    return Ok((r, Target::Inline(Box::new(rt))));
+                    return Ok((r, Target::Inline(rt)));
                 }
             }
             let (r, v) = self.val(i, b",]")?;
             let t = if joint {
-                Target::InlineJoint(Box::new(self.joint_target(&v)?))
+                Target::InlineJoint(self.joint_target(&v)?)
             } else {
-                Target::Inline(Box::new(self.rob_target(&v)?))
+                Target::Inline(self.rob_target(&v)?)
             };
             return Ok((r, t));
         }
