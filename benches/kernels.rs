@@ -4,7 +4,8 @@
 //! step of `examples/bench_inputs.rs`, every effect on), the robot
 //! inverse kinematics per target and the robot compensation per target
 //! (ABB IRB 1600 with a 2 kg spindle, every effect on), and the module-level
-//! RAPID compensation of 1 000 targets.
+//! RAPID compensation of 1 000 targets; the RAPID parser, the fixed-decimal
+//! formatter and the gravity torques ("rapid kernels").
 //! Run with `cargo bench --bench kernels`.
 
 use std::hint::black_box;
@@ -152,5 +153,46 @@ fn robot_kernels(c: &mut Criterion) {
     g.finish();
 }
 
-criterion_group!(benches, tool_prediction, robot_kernels);
+/// The RAPID pieces around the solve: parsing a 1 000-target module, the
+/// fixed-decimal formatting of one target's seven numbers and the gravity
+/// torques of one configuration.
+fn rapid_kernels(c: &mut Criterion) {
+    let src = module(1000);
+    let r = robot();
+    let q = [0.2, -0.3, 0.4, 0.1, 1.2, -0.5];
+    let numbers = [
+        751.234_567_8,
+        -149.987_654_3,
+        400.000_4,
+        0.000_123_4,
+        -0.707_106_9,
+        0.999_999_9,
+        -0.000_000_04,
+    ];
+    let mut g = c.benchmark_group("rapid kernels");
+    g.throughput(Throughput::Elements(1000));
+    g.sample_size(20);
+    g.bench_function("parse_module 1000 targets", |b| {
+        b.iter(|| postproc::program::rapid::parse_module(black_box(&src), "bench.mod"))
+    });
+    g.finish();
+    let mut g = c.benchmark_group("rapid kernels");
+    g.throughput(Throughput::Elements(1));
+    g.bench_function("format one target (3 mm + 4 quaternion numbers)", |b| {
+        b.iter(|| {
+            let mut s = String::with_capacity(96);
+            for (k, v) in black_box(&numbers).iter().enumerate() {
+                let d = if k < 3 { 3 } else { 7 };
+                postproc::emit::rapid::push_fixed(&mut s, *v, d);
+            }
+            s
+        })
+    });
+    g.bench_function("gravity torques (irb1600 with spindle)", |b| {
+        b.iter(|| r.gravity_torques(postproc::machine::robot::Model::Nominal, black_box(&q)))
+    });
+    g.finish();
+}
+
+criterion_group!(benches, tool_prediction, robot_kernels, rapid_kernels);
 criterion_main!(benches);

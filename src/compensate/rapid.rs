@@ -16,7 +16,7 @@ use rayon::prelude::*;
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 
 use crate::emit::rapid::{
-    Edit, Format, annotate, apply_edits, format_fixed, format_position, format_quaternion,
+    Edit, Format, annotate_with, apply_edits, format_fixed, format_position, format_quaternion,
     insert_after_decl,
 };
 use crate::error::{Error, Located, Result};
@@ -536,6 +536,31 @@ fn resolve_wobj(module: &Module, src: &str, file: &str, mv: &Move) -> Result<Iso
 /// The comment appended to a compensated move: the predicted deviation of
 /// the uncompensated target and its parts (mm), and the vibration amplitude
 /// (mm, reported only).
+/// Writes [`dev_comment`] into `out` (fast fixed-decimal numbers, the
+/// same text).
+fn write_dev_comment(out: &mut String, d: &Deviation) {
+    let num = |out: &mut String, v: f64, decimals: usize| {
+        if !crate::emit::rapid::push_fixed(out, v, decimals) {
+            use std::fmt::Write;
+            let _ = write!(out, "{v:.decimals$}");
+        }
+    };
+    out.push_str("dev ");
+    num(out, d.total.pos_mm.norm(), 3);
+    out.push_str(" mm (kin ");
+    num(out, d.kinematic.pos_mm.norm(), 3);
+    out.push_str(" therm ");
+    num(out, d.thermal.pos_mm.norm(), 3);
+    out.push_str(" grav ");
+    num(out, d.gravity.pos_mm.norm(), 3);
+    out.push_str(" proc ");
+    num(out, d.process.pos_mm.norm(), 3);
+    out.push_str(" vib ");
+    num(out, d.vibration_mm.norm(), 4);
+    out.push(')');
+}
+
+#[cfg(test)]
 fn dev_comment(d: &Deviation) -> String {
     format!(
         "dev {:.3} mm (kin {:.3} therm {:.3} grav {:.3} proc {:.3} vib {:.4})",
@@ -574,20 +599,26 @@ fn robtarget_text(
 }
 
 /// In-place edits of a robtarget literal.
+/// In-place edits of a robtarget literal, pushed onto `edits`: one edit
+/// for the position and quaternion numbers, one per confdata number when
+/// the confdata changes.
 fn robtarget_in_place(
+    edits: &mut Vec<Edit>,
+    src: &str,
     rt: &RobTarget,
     pose: &Isometry3<f64>,
     old_conf: ConfData,
     conf: ConfData,
     fmt: &Format,
-) -> Result<Vec<Edit>> {
+) -> Result<()> {
     let q = pose.rotation.quaternion();
-    let mut edits = crate::emit::rapid::robtarget_edits(
+    edits.push(crate::emit::rapid::robtarget_edit(
+        src,
         rt,
         &pose.translation.vector.into(),
         Some(&[q.w, q.i, q.j, q.k]),
         fmt,
-    )?;
+    )?);
     if conf != old_conf {
         for (n, v) in rt
             .robconf
@@ -597,7 +628,7 @@ fn robtarget_in_place(
             edits.push(Edit::replace(n.span.clone(), v.to_string()));
         }
     }
-    Ok(edits)
+    Ok(())
 }
 
 fn joint_text(src: &str, file: &str, jt: &JointTarget, q_deg: &[f64; 6]) -> Result<String> {
@@ -675,6 +706,8 @@ struct Job {
     growth: DhGrowth,
     /// Controller joints of the programmed pose, when planning found them.
     q0: Option<[f64; 6]>,
+    /// Closed-form branch of `q0`, when known.
+    branch: Option<usize>,
 }
 
 /// The two walks over the moves: the first collects every compensation as
@@ -751,7 +784,7 @@ impl Rewriter<'_> {
         view: usize,
         pose: Isometry3<f64>,
         sel: IkSelect,
-        q0: Option<[f64; 6]>,
+        (q0, branch): (Option<[f64; 6]>, Option<usize>),
     ) -> Option<std::result::Result<Compensation, RobotError>> {
         let growth = self.growth();
         match &mut self.phase {
@@ -762,6 +795,7 @@ impl Rewriter<'_> {
                     sel,
                     growth,
                     q0,
+                    branch,
                 });
                 None
             }
@@ -772,9 +806,14 @@ impl Rewriter<'_> {
                     results
                         .next()
                         .unwrap_or_else(|| match self.views.get(view) {
-                            Some(r) => {
-                                r.compensate_seeded(&pose, &sel, self.opts.effects, &growth, q0)
-                            }
+                            Some(r) => r.compensate_seeded(
+                                &pose,
+                                &sel,
+                                self.opts.effects,
+                                &growth,
+                                q0,
+                                branch,
+                            ),
                             None => Err(RobotError::Unreachable("no robot view".into())),
                         }),
                 )
@@ -799,7 +838,7 @@ impl Rewriter<'_> {
         key: &LoadKey,
         tool: &ToolView,
         wobj: &Isometry3<f64>,
-        q0: Option<[f64; 6]>,
+        q0: (Option<[f64; 6]>, Option<usize>),
     ) -> Result<Option<Deviation>> {
         let u = resolve_cart(self.module, self.src, self.file, target)?;
         let view = self.view(key, tool);
@@ -832,8 +871,15 @@ impl Rewriter<'_> {
         let fmt = self.opts.format;
         match (u.origin, u.derived) {
             (Origin::Inline, false) => {
-                let e = robtarget_in_place(u.rt, &new_obj, u.conf, comp.conf, &fmt)?;
-                self.edits.extend(e);
+                robtarget_in_place(
+                    &mut self.edits,
+                    self.src,
+                    u.rt,
+                    &new_obj,
+                    u.conf,
+                    comp.conf,
+                    &fmt,
+                )?;
             }
             (Origin::Inline, true) => {
                 let text = robtarget_text(self.src, u.rt, &new_obj, comp.conf, &fmt)?;
@@ -851,8 +897,15 @@ impl Rewriter<'_> {
                         .insert((origin, String::new(), key.clone()), String::new())
                         .is_none()
                     {
-                        let e = robtarget_in_place(u.rt, &new_obj, u.conf, comp.conf, &fmt)?;
-                        self.edits.extend(e);
+                        robtarget_in_place(
+                            &mut self.edits,
+                            self.src,
+                            u.rt,
+                            &new_obj,
+                            u.conf,
+                            comp.conf,
+                            &fmt,
+                        )?;
                     }
                 } else {
                     let text = robtarget_text(self.src, u.rt, &new_obj, comp.conf, &fmt)?;
@@ -967,7 +1020,7 @@ impl Rewriter<'_> {
             .map_err(|e| self.locate(at, e, &what()))?;
         let goal = r.tcp_pose(Model::Nominal, &q);
         self.last_tcp = goal.translation.vector.into();
-        let Some(comp) = self.solve(view, goal, IkSelect::Near(q), None) else {
+        let Some(comp) = self.solve(view, goal, IkSelect::Near(q), (None, None)) else {
             return Ok(None);
         };
         let comp = comp.map_err(|e| self.locate(at, e, &what()))?;
@@ -1065,6 +1118,8 @@ struct Planned {
     via: Option<Isometry3<f64>>,
     /// Controller joints, when the target is reachable.
     q: Option<[f64; 6]>,
+    /// Closed-form branch of `q` (a Cartesian target's).
+    branch: Option<usize>,
     /// TCP speed, mm/s, when it can be resolved.
     v_tcp: Option<f64>,
 }
@@ -1101,7 +1156,7 @@ fn plan_move<'m>(
     let view = cache.get(mv.tool.text.as_str(), || {
         robot.with_tool(tool.tframe, tool.load, false)
     });
-    let (pose, q) = if mv.kind == MoveKind::MoveAbsJ {
+    let (pose, q, branch) = if mv.kind == MoveKind::MoveAbsJ {
         let jt = match &mv.target {
             Target::InlineJoint(jt) => Some(jt),
             t @ Target::Named { .. } => match named_value(module, src, file, t)?.0 {
@@ -1119,11 +1174,14 @@ fn plan_move<'m>(
             ));
         };
         let q = jt.robax.each_ref().map(|n| n.value.to_radians());
-        (view.tcp_pose(Model::Nominal, &q), Some(q))
+        (view.tcp_pose(Model::Nominal, &q), Some(q), None)
     } else {
         let u = resolve_cart(module, src, file, &mv.target)?;
         let pose = wobj * u.pose_obj;
-        (pose, view.ik_conf(&pose, u.conf).ok())
+        match view.ik_conf_indexed(&pose, u.conf) {
+            Ok((q, k)) => (pose, Some(q), Some(k)),
+            Err(_) => (pose, None, None),
+        }
     };
     let via = match &mv.via {
         Some(v) => Some(wobj * resolve_cart(module, src, file, v)?.pose_obj),
@@ -1135,6 +1193,7 @@ fn plan_move<'m>(
         pose,
         via,
         q,
+        branch,
         v_tcp: tcp_speed(module, mv),
     })
 }
@@ -1316,9 +1375,7 @@ fn move_power<'m>(
             .with_tool(cur.tool.tframe, cur.tool.load, false)
             .with_process_wrench(wrench)
     });
-    let tau = |q: &[f64; 6]| {
-        view.gravity_torques(Model::Nominal, q) + view.process_torques(Model::Nominal, q)
-    };
+    let tau = |q: &[f64; 6]| view.nominal_load_torques(q);
     let t = (tau(&qa) + tau(&qb)) * 0.5e-3;
     std::array::from_fn(|j| (t[j] * (qb[j] - qa[j]) / duration_s).abs())
 }
@@ -1354,10 +1411,10 @@ pub fn compensate_module(
     let module = parse_module(src, file)?;
     let moves: Vec<&Move> = module.moves().collect();
     let mut tool_views = ViewCache::new();
-    let plans = moves
-        .iter()
-        .map(|mv| plan_move(&module, src, file, robot, &mut tool_views, mv))
-        .collect::<Result<Vec<_>>>()?;
+    let mut plans = Vec::with_capacity(moves.len());
+    for mv in &moves {
+        plans.push(plan_move(&module, src, file, robot, &mut tool_views, mv)?);
+    }
     let fx = opts.effects;
     let thermal = robot.thermal().filter(|_| fx.thermal != 0.0);
     let directives = Directives::parse(src, file)?;
@@ -1477,7 +1534,7 @@ pub fn compensate_module(
     let results: Vec<std::result::Result<Compensation, RobotError>> = jobs
         .par_iter()
         .map(|j| match views.get(j.view) {
-            Some(r) => r.compensate_seeded(&j.pose, &j.sel, fx, &j.growth, j.q0),
+            Some(r) => r.compensate_seeded(&j.pose, &j.sel, fx, &j.growth, j.q0, j.branch),
             None => Err(RobotError::Unreachable("no robot view".into())),
         })
         .collect();
@@ -1505,7 +1562,9 @@ pub fn compensate_module(
             max_vib = (v, mv.line, state.rpm);
         }
         if opts.annotate {
-            rw.edits.push(annotate(src, &mv.span, &dev_comment(&dev)));
+            rw.edits.push(annotate_with(src, &mv.span, |out| {
+                write_dev_comment(out, &dev)
+            }));
         }
         outcome.records.push(MoveRecord {
             line: mv.line,
@@ -1534,7 +1593,14 @@ pub fn compensate_module(
         }
     }
     outcome.added = rw.added;
-    outcome.text = apply_edits(src, &rw.edits)?;
+    // Free the per-move data before the output text is built (the peak).
+    let edits = std::mem::take(&mut rw.edits);
+    drop(rw);
+    drop(keyed);
+    drop(plans);
+    drop(moves);
+    drop(module);
+    outcome.text = apply_edits(src, &edits)?;
     Ok(outcome)
 }
 
@@ -1546,11 +1612,18 @@ impl Rewriter<'_> {
             self.joint(mv, key, &plan.tool)
         } else {
             if let Some(via) = &mv.via {
-                self.cart(mv, via, key, &plan.tool, &plan.wobj, None)?;
+                self.cart(mv, via, key, &plan.tool, &plan.wobj, (None, None))?;
             }
             // Planning solved the target's joints with the same pose,
             // confdata and TCP (`ik_conf`, limits checked).
-            self.cart(mv, &mv.target, key, &plan.tool, &plan.wobj, plan.q)
+            self.cart(
+                mv,
+                &mv.target,
+                key,
+                &plan.tool,
+                &plan.wobj,
+                (plan.q, plan.branch),
+            )
         }
     }
 }
@@ -1579,5 +1652,60 @@ fn warn_resonance(robot: &Robot, fx: Effects, (amp_mm, line, rpm): (f64, usize, 
             amp_mm,
             r.suggested_hz
         );
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::machine::robot::PoseDelta;
+
+    #[test]
+    fn fast_deviation_comment_equals_the_formatted_one() {
+        let mut state = 0x9e37_79b9_7f4a_7c15u64;
+        let mut next = || {
+            state = state
+                .wrapping_mul(6_364_136_223_846_793_005)
+                .wrapping_add(1_442_695_040_888_963_407);
+            let u = (state >> 11) as f64 / (1u64 << 53) as f64 - 0.5;
+            // Magnitudes from 1e-6 mm to 1e3 mm, both signs.
+            u * 10f64.powf((state % 10) as f64 - 6.0)
+        };
+        let mut delta = |k: f64| PoseDelta {
+            pos_mm: Vector3::new(next(), next(), next()) * k,
+            rot_rad: Vector3::zeros(),
+        };
+        let mut cases = vec![Deviation::default()];
+        for k in [1.0, 0.5, 1e-3, 2.0] {
+            let (a, b, c, d, e) = (delta(k), delta(k), delta(k), delta(k), delta(k));
+            cases.push(Deviation {
+                kinematic: a,
+                thermal: b,
+                gravity: c,
+                process: d,
+                total: e,
+                vibration_mm: Vector3::new(0.00005, 0.0, 0.0) * k,
+            });
+        }
+        let mut odd = Deviation::default();
+        odd.total.pos_mm = Vector3::new(f64::NAN, 0.0, 0.0);
+        odd.process.pos_mm = Vector3::new(f64::INFINITY, 0.0, 0.0);
+        cases.push(odd);
+        for _ in 0..2000 {
+            let (a, b, c, d, e) = (delta(1.0), delta(1.0), delta(1.0), delta(1.0), delta(1.0));
+            cases.push(Deviation {
+                kinematic: a,
+                thermal: b,
+                gravity: c,
+                process: d,
+                total: e,
+                vibration_mm: a.pos_mm,
+            });
+        }
+        for d in &cases {
+            let mut fast = String::new();
+            write_dev_comment(&mut fast, d);
+            assert_eq!(fast, dev_comment(d));
+        }
     }
 }

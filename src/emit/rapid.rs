@@ -96,14 +96,96 @@ pub fn apply_edits(src: &str, edits: &[Edit]) -> Result<String, Error> {
 /// Formats `v` with exactly `decimals` decimals, never in exponent notation
 /// and never as a negative zero. `None` for NaN or infinity.
 pub fn format_fixed(v: f64, decimals: usize) -> Option<String> {
+    let mut s = String::with_capacity(24);
+    push_fixed(&mut s, v, decimals).then_some(s)
+}
+
+/// [`format_fixed`] through `format!` (the reference of the fast path).
+fn push_fixed_slow(out: &mut String, v: f64, decimals: usize) {
+    use std::fmt::Write;
+    let start = out.len();
+    let _ = write!(out, "{v:.decimals$}");
+    let all_zero = out
+        .get(start + 1..)
+        .is_some_and(|abs| abs.bytes().all(|b| b == b'0' || b == b'.'));
+    if out.as_bytes().get(start) == Some(&b'-') && all_zero {
+        out.remove(start);
+    }
+}
+
+/// Largest scaled magnitude `|v|·10^decimals` of the fast path: below
+/// 2^40 the product's rounding error is under 2^-12, far inside
+/// [`FIXED_TIE_GUARD`].
+const FIXED_FAST_MAX: f64 = (1u64 << 40) as f64;
+/// Distance of the scaled fraction from one half below which the fast path
+/// defers to `format!` (which rounds the exact binary value).
+const FIXED_TIE_GUARD: f64 = 1e-3;
+
+/// Appends [`format_fixed`]`(v, decimals)` to `out` without an allocation
+/// of its own; false (nothing appended) for NaN or infinity. Byte-identical
+/// to the `format!` path: the rounding is decided on `|v|·10^decimals` in
+/// f64 unless that product lies within [`FIXED_TIE_GUARD`] of a half (then
+/// `format!` decides).
+pub fn push_fixed(out: &mut String, v: f64, decimals: usize) -> bool {
     if !v.is_finite() {
-        return None;
+        return false;
     }
-    let s = format!("{v:.decimals$}");
-    match s.strip_prefix('-') {
-        Some(abs) if abs.bytes().all(|b| b == b'0' || b == b'.') => Some(abs.to_string()),
-        _ => Some(s),
+    const POW10: [u64; 10] = [
+        1,
+        10,
+        100,
+        1_000,
+        10_000,
+        100_000,
+        1_000_000,
+        10_000_000,
+        100_000_000,
+        1_000_000_000,
+    ];
+    let Some(&scale) = POW10.get(decimals) else {
+        push_fixed_slow(out, v, decimals);
+        return true;
+    };
+    let t = v.abs() * scale as f64;
+    if t >= FIXED_FAST_MAX {
+        push_fixed_slow(out, v, decimals);
+        return true;
     }
+    let n = t.floor();
+    let frac = t - n;
+    if (frac - 0.5).abs() < FIXED_TIE_GUARD {
+        push_fixed_slow(out, v, decimals);
+        return true;
+    }
+    // `t < 2^40`: exact in u64.
+    let m = n as u64 + u64::from(frac > 0.5);
+    if v.is_sign_negative() && m != 0 {
+        out.push('-');
+    }
+    let (int, fr) = (m / scale, m % scale);
+    let mut buf = [0u8; 20];
+    let mut i = buf.len();
+    let mut x = int;
+    loop {
+        i -= 1;
+        buf[i] = b'0' + (x % 10) as u8;
+        x /= 10;
+        if x == 0 {
+            break;
+        }
+    }
+    out.push_str(std::str::from_utf8(&buf[i..]).unwrap_or("0"));
+    if decimals > 0 {
+        out.push('.');
+        let mut d = [b'0'; 9];
+        let mut x = fr;
+        for k in (0..decimals).rev() {
+            d[k] = b'0' + (x % 10) as u8;
+            x /= 10;
+        }
+        out.push_str(std::str::from_utf8(&d[..decimals]).unwrap_or(""));
+    }
+    true
 }
 
 /// Formats a position (mm) with `fmt.position_decimals` decimals.
@@ -153,6 +235,17 @@ pub fn format_quaternion(
     reference: Option<&[f64; 4]>,
     fmt: &Format,
 ) -> Result<[String; 4], Error> {
+    let c = quaternion_components(q, reference, fmt)?;
+    let f = |v: f64| format_fixed(v, fmt.quaternion_decimals).unwrap_or_else(|| "0".to_string());
+    Ok([f(c[0]), f(c[1]), f(c[2]), f(c[3])])
+}
+
+/// The components [`format_quaternion`] writes (before formatting).
+pub fn quaternion_components(
+    q: &[f64; 4],
+    reference: Option<&[f64; 4]>,
+    fmt: &Format,
+) -> Result<[f64; 4], Error> {
     let n = normalise_quaternion(q, reference)
         .ok_or_else(|| Error::Usage(format!("quaternion {q:?} cannot be normalised")))?;
     let scale = 10f64.powi(i32::try_from(fmt.quaternion_decimals).unwrap_or(9).min(15));
@@ -170,9 +263,53 @@ pub fn format_quaternion(
             best = (err, c);
         }
     }
-    let f = |v: f64| format_fixed(v, fmt.quaternion_decimals).unwrap_or_else(|| "0".to_string());
-    let c = best.1;
-    Ok([f(c[0]), f(c[1]), f(c[2]), f(c[3])])
+    Ok(best.1)
+}
+
+/// [`robtarget_edits`] as ONE edit, from the first position number to the
+/// last quaternion number (or the last position number without `quat`),
+/// the text between the numbers copied from `src`: the same output bytes
+/// (and the same errors) with one string instead of seven.
+pub fn robtarget_edit(
+    src: &str,
+    rt: &RobTarget,
+    pos: &[f64; 3],
+    quat: Option<&[f64; 4]>,
+    fmt: &Format,
+) -> Result<Edit, Error> {
+    let start = rt.trans[0].span.start;
+    let mut text = String::with_capacity(96);
+    let mut at = start;
+    let mut gap = |text: &mut String, n: &crate::program::rapid::Number| {
+        let between = src.get(at..n.span.start).ok_or_else(|| {
+            Error::Usage(format!(
+                "robtarget number span {:?} is outside the program",
+                n.span
+            ))
+        })?;
+        text.push_str(between);
+        at = n.span.end;
+        Ok::<(), Error>(())
+    };
+    for (n, &v) in rt.trans.iter().zip(pos) {
+        gap(&mut text, n)?;
+        if !push_fixed(&mut text, v, fmt.position_decimals) {
+            return Err(Error::Usage(format!(
+                "position component {v} is not a finite number"
+            )));
+        }
+    }
+    if let Some(q) = quat {
+        let reference = rt.rot.each_ref().map(|n| n.value);
+        let c = quaternion_components(q, Some(&reference), fmt)?;
+        for (n, &v) in rt.rot.iter().zip(&c) {
+            gap(&mut text, n)?;
+            if !push_fixed(&mut text, v, fmt.quaternion_decimals) {
+                text.push('0');
+            }
+        }
+    }
+    Ok(Edit::replace(start..at, text))
 }
 
 /// Edits replacing exactly the position numbers of `rt` with `pos` and, when
@@ -268,6 +405,17 @@ pub fn annotate(src: &str, stmt: &Range<usize>, comment: &str) -> Edit {
     Edit::insert(at, format!(" ! {one_line}"))
 }
 
+/// [`annotate`] with the comment written by `write` (which must not write
+/// a line break) straight after the ` ! `: one string, no copy.
+pub fn annotate_with(src: &str, stmt: &Range<usize>, write: impl FnOnce(&mut String)) -> Edit {
+    let last = stmt.end.saturating_sub(1).max(stmt.start);
+    let at = line_end(src, last);
+    let mut text = String::with_capacity(80);
+    text.push_str(" ! ");
+    write(&mut text);
+    Edit::insert(at, text)
+}
+
 /// An insertion of `text` (one or more lines, without a final line break) on
 /// new lines just after the line where the declaration `decl` ends, each line
 /// indented like the declaration and ended with the file's line ending.
@@ -313,4 +461,84 @@ pub fn decl_copy(src: &str, decl: &Decl, new_name: &str, value: &str) -> Option<
         Edit::replace(v.start.checked_sub(base)?..v.end.checked_sub(base)?, value),
     ];
     apply_edits(text, &edits).ok()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    fn slow(v: f64, decimals: usize) -> Option<String> {
+        if !v.is_finite() {
+            return None;
+        }
+        let mut s = String::new();
+        push_fixed_slow(&mut s, v, decimals);
+        Some(s)
+    }
+
+    #[test]
+    fn fixed_format_edge_cases_match_format() {
+        let values = [
+            0.0,
+            -0.0,
+            0.5,
+            -0.5,
+            1.5,
+            2.5,
+            -0.0004,
+            -0.0005,
+            0.0005,
+            f64::from_bits(0.0005f64.to_bits() - 1),
+            1e-300,
+            -1e-300,
+            123.4565,
+            -123.4565,
+            std::f64::consts::FRAC_1_SQRT_2,
+            -std::f64::consts::FRAC_1_SQRT_2,
+            999.9995,
+            9.9999999995,
+            1e9,
+            -4.5e12,
+            1e20,
+            f64::MAX,
+            f64::MIN_POSITIVE,
+            f64::NAN,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+        ];
+        for v in values {
+            for d in 0..=12 {
+                assert_eq!(format_fixed(v, d), slow(v, d), "{v} with {d} decimals");
+            }
+        }
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig { cases: 20_000, ..ProptestConfig::default() })]
+        #[test]
+        fn fixed_format_matches_format(v in any::<f64>(), d in 0usize..12) {
+            prop_assert_eq!(format_fixed(v, d), slow(v, d));
+        }
+
+        #[test]
+        fn fixed_format_matches_format_on_robot_ranges(
+            v in -3000.0f64..3000.0,
+            d in 0usize..10,
+        ) {
+            prop_assert_eq!(format_fixed(v, d), slow(v, d));
+        }
+
+        #[test]
+        fn fixed_format_matches_format_near_ties(
+            k in -2_000_000_000i64..2_000_000_000,
+            d in 0usize..10,
+            ulps in -3i64..=3,
+        ) {
+            // (k + ½)·10^-d and its neighbours a few ulps away.
+            let v = (k as f64 + 0.5) / 10f64.powi(d as i32);
+            let v = f64::from_bits((v.to_bits() as i64 + ulps) as u64);
+            prop_assert_eq!(format_fixed(v, d), slow(v, d));
+        }
+    }
 }

@@ -12,7 +12,7 @@ impl Robot {
     /// convention must be the robot's own; the nominal model is unchanged.
     pub fn with_actual(&self, actual: DhParams) -> Robot {
         let mut r = self.clone();
-        r.d.actual = actual;
+        r.set_actual(actual);
         r
     }
 

@@ -16,7 +16,7 @@
 use nalgebra::{Isometry3, Matrix6, Translation3, UnitQuaternion, Vector3, Vector6};
 
 use super::dh::DhParams;
-use super::kinematics::{Frames, Prepared, frames_prepared};
+use super::kinematics::{Frames, Prepared, flange_prepared, frames_prepared};
 use super::pose::pose_error;
 use super::thermal::{DhGrowth, grown};
 use super::{IkSelect, Model, Robot, RobotError};
@@ -152,6 +152,13 @@ pub struct Compensation {
     pub iterations: usize,
 }
 
+/// The closed-form branch of a target's inverse kinematics, kept over the
+/// compensation iteration when `fixed`.
+struct BranchMemo {
+    fixed: bool,
+    k: Option<usize>,
+}
+
 /// Weight of rotation against position in the progress test, mm/rad.
 const ROT_SCALE_MM: f64 = 1000.0;
 
@@ -165,14 +172,28 @@ fn perturb(c: &Isometry3<f64>, d: &Vector6<f64>) -> Isometry3<f64> {
 
 impl Robot {
     /// Controller joints of a commanded pose, continuing from `q`.
+    /// With a branch in `branch` (the closed-form branch index of the
+    /// target, once known), only that branch is solved
+    /// ([`Robot::ik_conf_near_branch`]); otherwise every branch is
+    /// searched, and the one found is kept when `branch.fixed`.
     fn controller_joints(
         &self,
         cmd: &Isometry3<f64>,
         q: &[f64; 6],
         sel: &IkSelect,
+        branch: &mut BranchMemo,
     ) -> Result<[f64; 6], RobotError> {
         match sel {
-            IkSelect::Conf(c) => self.ik_conf_near(cmd, *c, q),
+            IkSelect::Conf(c) => match branch.k {
+                Some(k) => self.ik_conf_near_branch(cmd, *c, q, k),
+                None => {
+                    let (q, k) = self.ik_conf_branch(cmd, *c, Some(q))?;
+                    if branch.fixed {
+                        branch.k = Some(k);
+                    }
+                    Ok(q)
+                }
+            },
             IkSelect::Near(_) => {
                 super::ik::solve_numeric(self.params(Model::Nominal), &self.flange_for_tcp(cmd), q)
             }
@@ -181,6 +202,7 @@ impl Robot {
 
     /// Finite-difference Jacobian of the attained pose with respect to the
     /// commanded pose (both as `[Δp; Δφ]`).
+    #[allow(clippy::too_many_arguments)]
     fn deviation_jacobian(
         &self,
         cmd: &Isometry3<f64>,
@@ -189,6 +211,7 @@ impl Robot {
         sel: &IkSelect,
         model: &Prepared,
         effects: Effects,
+        branch: &mut BranchMemo,
     ) -> Result<Matrix6<f64>, RobotError> {
         const H: [f64; 2] = [1e-4, 1e-7];
         let mut m = Matrix6::zeros();
@@ -196,7 +219,7 @@ impl Robot {
             let h = H[k / 3];
             let mut d = Vector6::zeros();
             d[k] = h;
-            let qk = self.controller_joints(&perturb(cmd, &d), q, sel)?;
+            let qk = self.controller_joints(&perturb(cmd, &d), q, sel, branch)?;
             let (dp, dr) = pose_error(&self.predict_with(model, &qk, effects), attained);
             for r in 0..3 {
                 m[(r, k)] = dp[r] / h;
@@ -230,6 +253,8 @@ impl Robot {
         let (kin, model) = self.prediction_params(effects, growth);
         let kin = if effects.kinematic == 0.0 {
             *self.nominal_prepared()
+        } else if effects.kinematic == 1.0 {
+            *self.actual_prepared()
         } else {
             Prepared::new(&kin)
         };
@@ -262,7 +287,7 @@ impl Robot {
     fn deflected_tcp(&self, model: &Prepared, q: &[f64; 6], tau: &Vector6<f64>) -> Isometry3<f64> {
         let dq = self.joint_deflection(tau);
         let qd: [f64; 6] = std::array::from_fn(|i| q[i] + dq[i]);
-        self.tcp_of(&frames_prepared(model, &qd, 6).flange())
+        self.tcp_of(&flange_prepared(model, &qd))
     }
 
     /// Attained TCP pose with the parameter set `model` of
@@ -297,8 +322,8 @@ impl Robot {
         q: &[f64; 6],
         effects: Effects,
     ) -> [Isometry3<f64>; 5] {
-        let p0 = self.tcp_of(&frames_prepared(self.nominal_prepared(), q, 6).flange());
-        let p1 = self.tcp_of(&frames_prepared(kin, q, 6).flange());
+        let p0 = self.tcp_of(&flange_prepared(self.nominal_prepared(), q));
+        let p1 = self.tcp_of(&flange_prepared(kin, q));
         let f = frames_prepared(model, q, 6);
         let p2 = self.tcp_of(&f.flange());
         let (tau_g, tau_w) = self.load_torques(&f, effects);
@@ -363,12 +388,14 @@ impl Robot {
         effects: Effects,
         growth: &DhGrowth,
     ) -> Result<Compensation, RobotError> {
-        self.compensate_seeded(programmed, sel, effects, growth, None)
+        self.compensate_seeded(programmed, sel, effects, growth, None, None)
     }
 
     /// [`Robot::compensate_with_growth`] with the controller joints of the
     /// programmed pose already known (`ik_nominal(programmed, sel)`, limits
     /// checked), e.g. from planning the move: saves one inverse kinematics.
+    /// `branch`: the closed-form branch of those joints
+    /// ([`Robot::ik_conf_indexed`]), when known.
     pub(crate) fn compensate_seeded(
         &self,
         programmed: &Isometry3<f64>,
@@ -376,7 +403,44 @@ impl Robot {
         effects: Effects,
         growth: &DhGrowth,
         q_programmed: Option<[f64; 6]>,
+        branch: Option<usize>,
     ) -> Result<Compensation, RobotError> {
+        // Fast path: the closed-form branch found by the first inverse
+        // kinematics of the iteration is the only one solved afterwards.
+        // Its result stands when the final joints still have the asked
+        // cfx (the branch cannot change over sub-millimetre corrections);
+        // otherwise, and on any error, the search over every branch at
+        // every step decides (the same result and the same error as
+        // before the fast path).
+        if let IkSelect::Conf(c) = sel {
+            let seed = q_programmed.and(branch);
+            if let Ok(r) =
+                self.compensate_branch(programmed, sel, effects, growth, q_programmed, Some(seed))
+            {
+                if r.conf.cfx == c.cfx {
+                    return Ok(r);
+                }
+            }
+        }
+        self.compensate_branch(programmed, sel, effects, growth, q_programmed, None)
+    }
+
+    /// [`Robot::compensate_seeded`]; with `fixed_branch`, the inverse
+    /// kinematics of the iteration solves only one branch: the given one,
+    /// else the branch of its first solution.
+    fn compensate_branch(
+        &self,
+        programmed: &Isometry3<f64>,
+        sel: &IkSelect,
+        effects: Effects,
+        growth: &DhGrowth,
+        q_programmed: Option<[f64; 6]>,
+        fixed_branch: Option<Option<usize>>,
+    ) -> Result<Compensation, RobotError> {
+        let mut branch = BranchMemo {
+            fixed: fixed_branch.is_some(),
+            k: fixed_branch.flatten(),
+        };
         let q0 = match q_programmed {
             Some(q) => q,
             None => self.ik_nominal(programmed, sel)?,
@@ -422,13 +486,21 @@ impl Robot {
             e.fixed_rows_mut::<3>(0).copy_from(&dp);
             e.fixed_rows_mut::<3>(3).copy_from(&dr);
             let step = if newton {
-                let m = self.deviation_jacobian(&cmd, &q, &attained, sel, &model, effects)?;
+                let m = self.deviation_jacobian(
+                    &cmd,
+                    &q,
+                    &attained,
+                    sel,
+                    &model,
+                    effects,
+                    &mut branch,
+                )?;
                 m.lu().solve(&e).unwrap_or(e)
             } else {
                 e
             };
             cmd = perturb(&cmd, &step);
-            q = self.controller_joints(&cmd, &q, sel)?;
+            q = self.controller_joints(&cmd, &q, sel, &mut branch)?;
             attained = self.predict_with(&model, &q, effects);
         }
         Err(RobotError::NoConvergence {

@@ -154,6 +154,42 @@ impl ClosedForm {
         wrist_ref: f64,
         mut visit: impl FnMut(usize, [f64; 6]) -> bool,
     ) -> bool {
+        let pre = self.wrist_centre(flange);
+        for sh in 0..2 {
+            let Some(arm) = self.shoulder(&pre, sh) else {
+                continue;
+            };
+            for el in 0..2 {
+                let (q123, w) = self.elbow(flange, &arm, el, wrist_ref);
+                for fl in 0..2 {
+                    if visit(sh * 4 + el * 2 + fl, self.wrist(&q123, w, fl)) {
+                        return true;
+                    }
+                }
+            }
+        }
+        false
+    }
+
+    /// Solution `k` of [`ClosedForm::solve`] alone (the same arithmetic,
+    /// the other branches not computed); `None` where it cannot reach.
+    pub fn solve_branch(
+        &self,
+        flange: &Isometry3<f64>,
+        wrist_ref: f64,
+        k: usize,
+    ) -> Option<[f64; 6]> {
+        if k >= 8 {
+            return None;
+        }
+        let pre = self.wrist_centre(flange);
+        let arm = self.shoulder(&pre, k / 4)?;
+        let (q123, w) = self.elbow(flange, &arm, (k / 2) % 2, wrist_ref);
+        Some(self.wrist(&q123, w, k % 2))
+    }
+
+    /// Wrist centre, `ρ`, `γ` and the base angle of joint 1.
+    fn wrist_centre(&self, flange: &Isometry3<f64>) -> WristCentre {
         let z6 = flange.rotation * Vector3::z();
         let pw = flange.translation.vector - self.d6 * z6;
         let rho = (self.a3 * self.a3 + self.d4 * self.d4).sqrt();
@@ -163,71 +199,123 @@ impl ClosedForm {
         } else {
             pw.y.atan2(pw.x)
         };
-        for sh in 0..2 {
-            let t1 = base_t1 + if sh == 1 { PI } else { 0.0 };
-            let (s1, c1) = t1.sin_cos();
-            let r = c1 * pw.x + s1 * pw.y;
-            let dr = r - self.a1;
-            let dz = pw.z - self.d1;
-            let l2 = dr * dr + dz * dz;
-            let c = (l2 - self.a2 * self.a2 - rho * rho) / (2.0 * self.a2 * rho);
-            if !c.is_finite() || c.abs() > 1.0 + 1e-12 {
-                continue;
-            }
-            let ac = c.clamp(-1.0, 1.0).acos();
-            for el in 0..2 {
-                let t3 = if el == 0 { ac } else { -ac } - gamma;
-                let (s3, c3) = t3.sin_cos();
-                let k1 = self.a2 + self.a3 * c3 - self.d4 * s3;
-                let k2 = self.a3 * s3 + self.d4 * c3;
-                let phi = dr.atan2(dz) - k2.atan2(k1);
-                let t2 = phi - FRAC_PI_2;
-                let q123 = [t1 - self.off[0], t2 - self.off[1], t3 - self.off[2]];
-                // Rotation of frame 3 from the nominal joint transforms.
-                let mut r03 = UnitQuaternion::identity();
-                for (j, q) in self.prep.joints().iter().zip(&q123) {
-                    r03 *= prepared_transform(j, self.prep.convention(), *q).rotation;
-                }
-                let n = (self.rx3_inv * r03.inverse() * flange.rotation).to_rotation_matrix();
-                let n = n.matrix();
-                let sb = n[(0, 2)].hypot(n[(1, 2)]);
-                let (beta, t4, t6) = if sb < 1e-10 {
-                    let beta = sb.atan2(n[(2, 2)]);
-                    let t4 = wrist_ref + self.off[3];
-                    let ry = UnitQuaternion::from_axis_angle(&Vector3::y_axis(), beta);
-                    let rz4 = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), t4);
-                    let m = (ry.inverse() * rz4.inverse()).to_rotation_matrix().matrix() * n;
-                    (beta, t4, m[(1, 0)].atan2(m[(0, 0)]))
-                } else {
-                    (
-                        sb.atan2(n[(2, 2)]),
-                        n[(1, 2)].atan2(n[(0, 2)]),
-                        n[(2, 1)].atan2(-n[(2, 0)]),
-                    )
-                };
-                for fl in 0..2 {
-                    let (b, a4, a6) = if fl == 0 {
-                        (beta, t4, t6)
-                    } else {
-                        (-beta, t4 + PI, t6 + PI)
-                    };
-                    let t5 = -self.s4 * b;
-                    let q = [
-                        q123[0],
-                        q123[1],
-                        q123[2],
-                        a4 - self.off[3],
-                        t5 - self.off[4],
-                        a6 - self.off[5],
-                    ];
-                    if visit(sh * 4 + el * 2 + fl, q.map(wrap)) {
-                        return true;
-                    }
-                }
-            }
+        WristCentre {
+            pw,
+            rho,
+            gamma,
+            base_t1,
         }
-        false
     }
+
+    /// Joint 1 of shoulder branch `sh` and the planar arm problem; `None`
+    /// when the wrist centre is out of reach.
+    fn shoulder(&self, pre: &WristCentre, sh: usize) -> Option<Arm> {
+        let pw = &pre.pw;
+        let rho = pre.rho;
+        let t1 = pre.base_t1 + if sh == 1 { PI } else { 0.0 };
+        let (s1, c1) = t1.sin_cos();
+        let r = c1 * pw.x + s1 * pw.y;
+        let dr = r - self.a1;
+        let dz = pw.z - self.d1;
+        let l2 = dr * dr + dz * dz;
+        let c = (l2 - self.a2 * self.a2 - rho * rho) / (2.0 * self.a2 * rho);
+        if !c.is_finite() || c.abs() > 1.0 + 1e-12 {
+            return None;
+        }
+        let ac = c.clamp(-1.0, 1.0).acos();
+        Some(Arm {
+            t1,
+            dr,
+            dz,
+            ac,
+            gamma: pre.gamma,
+        })
+    }
+
+    /// Joints 1–3 of elbow branch `el` and the wrist angles `(β, θ4, θ6)`
+    /// of the unflipped wrist.
+    fn elbow(
+        &self,
+        flange: &Isometry3<f64>,
+        arm: &Arm,
+        el: usize,
+        wrist_ref: f64,
+    ) -> ([f64; 3], (f64, f64, f64)) {
+        let Arm {
+            t1,
+            dr,
+            dz,
+            ac,
+            gamma,
+        } = *arm;
+        let t3 = if el == 0 { ac } else { -ac } - gamma;
+        let (s3, c3) = t3.sin_cos();
+        let k1 = self.a2 + self.a3 * c3 - self.d4 * s3;
+        let k2 = self.a3 * s3 + self.d4 * c3;
+        let phi = dr.atan2(dz) - k2.atan2(k1);
+        let t2 = phi - FRAC_PI_2;
+        let q123 = [t1 - self.off[0], t2 - self.off[1], t3 - self.off[2]];
+        // Rotation of frame 3 from the nominal joint transforms.
+        let mut r03 = UnitQuaternion::identity();
+        for (j, q) in self.prep.joints().iter().zip(&q123) {
+            r03 *= prepared_transform(j, self.prep.convention(), *q).rotation;
+        }
+        let n = (self.rx3_inv * r03.inverse() * flange.rotation).to_rotation_matrix();
+        let n = n.matrix();
+        let sb = n[(0, 2)].hypot(n[(1, 2)]);
+        let w = if sb < 1e-10 {
+            let beta = sb.atan2(n[(2, 2)]);
+            let t4 = wrist_ref + self.off[3];
+            let ry = UnitQuaternion::from_axis_angle(&Vector3::y_axis(), beta);
+            let rz4 = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), t4);
+            let m = (ry.inverse() * rz4.inverse()).to_rotation_matrix().matrix() * n;
+            (beta, t4, m[(1, 0)].atan2(m[(0, 0)]))
+        } else {
+            (
+                sb.atan2(n[(2, 2)]),
+                n[(1, 2)].atan2(n[(0, 2)]),
+                n[(2, 1)].atan2(-n[(2, 0)]),
+            )
+        };
+        (q123, w)
+    }
+
+    /// The joint vector of wrist branch `fl` (1 = flipped), wrapped.
+    fn wrist(&self, q123: &[f64; 3], (beta, t4, t6): (f64, f64, f64), fl: usize) -> [f64; 6] {
+        let (b, a4, a6) = if fl == 0 {
+            (beta, t4, t6)
+        } else {
+            (-beta, t4 + PI, t6 + PI)
+        };
+        let t5 = -self.s4 * b;
+        let q = [
+            q123[0],
+            q123[1],
+            q123[2],
+            a4 - self.off[3],
+            t5 - self.off[4],
+            a6 - self.off[5],
+        ];
+        q.map(wrap)
+    }
+}
+
+/// The pose-dependent constants of [`ClosedForm::solve_until`].
+struct WristCentre {
+    pw: Vector3<f64>,
+    rho: f64,
+    gamma: f64,
+    base_t1: f64,
+}
+
+/// One shoulder branch of [`ClosedForm::solve_until`].
+#[derive(Clone, Copy)]
+struct Arm {
+    t1: f64,
+    dr: f64,
+    dz: f64,
+    ac: f64,
+    gamma: f64,
 }
 
 /// Wraps an angle into (−π, π].

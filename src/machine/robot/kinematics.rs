@@ -169,6 +169,16 @@ pub(crate) fn frames_prepared(p: &Prepared, q: &[f64; 6], n: usize) -> Frames {
     }
 }
 
+/// The flange of [`frames_prepared`] alone (the same products, no axes
+/// and no stored link frames): for poses whose torques are not needed.
+pub(crate) fn flange_prepared(p: &Prepared, q: &[f64; 6]) -> Isometry3<f64> {
+    let mut prev = Isometry3::identity();
+    for (j, qi) in p.joints.iter().zip(q) {
+        prev *= prepared_transform(j, p.convention, *qi);
+    }
+    prev
+}
+
 /// Flange pose in the robot base frame.
 pub fn flange(p: &DhParams, q: &[f64; 6]) -> Isometry3<f64> {
     frames(p, q).flange()

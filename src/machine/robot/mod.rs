@@ -148,6 +148,8 @@ struct RobotData {
     /// `nominal` with the twist sines and cosines precomputed (confdata).
     nominal_prep: kinematics::Prepared,
     actual: DhParams,
+    /// `actual` prepared (the kinematic stage at gain 1); set with it.
+    actual_prep: kinematics::Prepared,
     closed_form: Option<ik::ClosedForm>,
     limits_rad: [[f64; 2]; 6],
     speed_rad_per_s: [f64; 6],
@@ -433,6 +435,7 @@ impl Robot {
                 name: raw.name.unwrap_or_else(|| "robot".to_string()),
                 nominal_prep: kinematics::Prepared::new(&nominal),
                 nominal,
+                actual_prep: kinematics::Prepared::new(&actual),
                 actual,
                 closed_form,
                 limits_rad,
@@ -532,6 +535,17 @@ impl Robot {
         &self.d.nominal_prep
     }
 
+    /// The actual parameter set with its twists precomputed.
+    pub(crate) fn actual_prepared(&self) -> &kinematics::Prepared {
+        &self.d.actual_prep
+    }
+
+    /// Replaces the actual parameter set (and its prepared rows).
+    pub(crate) fn set_actual(&mut self, actual: DhParams) {
+        self.d.actual_prep = kinematics::Prepared::new(&actual);
+        self.d.actual = actual;
+    }
+
     /// ABB confdata of a joint vector (nominal model).
     pub fn confdata(&self, q: &[f64; 6]) -> ConfData {
         ik::confdata_prepared(&self.d.nominal_prep, q)
@@ -587,6 +601,18 @@ impl Robot {
         Ok(q)
     }
 
+    /// [`Robot::ik_conf`] with the index of the closed-form branch of the
+    /// solution (a seed of [`Robot::ik_conf_near_branch`]).
+    pub(crate) fn ik_conf_indexed(
+        &self,
+        tcp_world: &Isometry3<f64>,
+        conf: ConfData,
+    ) -> std::result::Result<([f64; 6], usize), RobotError> {
+        let (q, k) = self.ik_conf_branch(tcp_world, conf, None)?;
+        self.check_limits(&q)?;
+        Ok((q, k))
+    }
+
     /// Closed-form solution with confdata `conf`, turns of joints 1, 4, 6
     /// nearest to `reference` (no limit check).
     pub(crate) fn ik_conf_near(
@@ -607,6 +633,49 @@ impl Robot {
         conf: ConfData,
         turn_ref: Option<&[f64; 6]>,
     ) -> std::result::Result<[f64; 6], RobotError> {
+        self.ik_conf_branch(tcp_world, conf, turn_ref)
+            .map(|(q, _)| q)
+    }
+
+    /// [`Robot::ik_conf_near`] restricted to the closed-form branch `k` (an
+    /// index of [`ik::ClosedForm::solve`], as returned by
+    /// [`Robot::ik_conf_branch`]): no other branch and no confdata is
+    /// computed. The caller checks the confdata of the final joints (the
+    /// branch of a target does not change over sub-millimetre
+    /// corrections). Falls back to the full search when branch `k` cannot
+    /// reach.
+    pub(crate) fn ik_conf_near_branch(
+        &self,
+        tcp_world: &Isometry3<f64>,
+        conf: ConfData,
+        reference: &[f64; 6],
+        k: usize,
+    ) -> std::result::Result<[f64; 6], RobotError> {
+        let cf = self
+            .d
+            .closed_form
+            .as_ref()
+            .ok_or(RobotError::NoClosedForm)?;
+        let flange = self.flange_for_tcp(tcp_world);
+        match cf.solve_branch(&flange, reference[3], k) {
+            Some(mut q) => {
+                for i in 0..6 {
+                    q[i] = ik::nearest_turn(q[i], reference[i]);
+                }
+                Ok(q)
+            }
+            None => self.ik_conf_near(tcp_world, conf, reference),
+        }
+    }
+
+    /// [`Robot::ik_conf_turns`] with the index of the closed-form branch
+    /// that gave the solution.
+    pub(crate) fn ik_conf_branch(
+        &self,
+        tcp_world: &Isometry3<f64>,
+        conf: ConfData,
+        turn_ref: Option<&[f64; 6]>,
+    ) -> std::result::Result<([f64; 6], usize), RobotError> {
         let cf = self
             .d
             .closed_form
@@ -617,10 +686,10 @@ impl Robot {
         // The first solution (in index order) with the asked cfx; the later
         // branches are not computed.
         let mut found = None;
-        cf.solve_until(&flange, wrist_ref, |_, q| {
+        cf.solve_until(&flange, wrist_ref, |k, q| {
             let hit = ik::confdata_prepared(&self.d.nominal_prep, &q).cfx == conf.cfx;
             if hit {
-                found = Some(q);
+                found = Some((q, k));
             }
             hit
         });
@@ -641,7 +710,7 @@ impl Robot {
                     .join(" "),
             }
         };
-        let mut q = found.ok_or_else(mismatch)?;
+        let (mut q, k) = found.ok_or_else(mismatch)?;
         match turn_ref {
             Some(r) => {
                 for i in 0..6 {
@@ -665,7 +734,7 @@ impl Robot {
                 }
             }
         }
-        Ok(q)
+        Ok((q, k))
     }
 
     /// Numeric inverse kinematics of a model from a seed joint vector (rad);

@@ -7,7 +7,7 @@
 use nalgebra::{Isometry3, Vector3, Vector6};
 
 use super::dh::DhParams;
-use super::kinematics::{Frames, flange, frames, jacobian, jacobian_link};
+use super::kinematics::{Frames, flange, frames, jacobian};
 use super::{Model, Robot};
 
 impl Robot {
@@ -41,7 +41,42 @@ impl Robot {
 
     /// [`Robot::gravity_torques`] from joint frames already computed (the
     /// prediction shares one set of frames between gravity and process).
+    ///
+    /// One backward recursion over the links (O(n), no Jacobian):
+    /// `τ_i = z_i · Σ_{j≥i} (c_j − o_i) × m_j g = z_i · (M_i − o_i × F_i)`
+    /// with `F_i = Σ_{j≥i} m_j g` and `M_i = Σ_{j≥i} c_j × m_j g`
+    /// (`c_j`: centre of mass of link `j`, the tool load counted with the
+    /// flange; `o_i`, `z_i`: a point on and the direction of axis `i`).
     pub(crate) fn gravity_torques_at(&self, f: &Frames) -> Vector6<f64> {
+        let g = self.gravity_base();
+        let mut force = Vector3::zeros();
+        let mut moment = Vector3::zeros();
+        let mut tau = Vector6::zeros();
+        let links = self.links();
+        for i in (0..6).rev() {
+            if i == 5 {
+                if let Some(l) = self.tool_load() {
+                    let c = f.link[5] * nalgebra::Point3::from(l.com_mm);
+                    let w = g * l.mass_kg;
+                    force += w;
+                    moment += c.coords.cross(&w);
+                }
+            }
+            let l = &links[i];
+            let c = f.link[i] * nalgebra::Point3::from(l.com_mm);
+            let w = g * l.mass_kg;
+            force += w;
+            moment += c.coords.cross(&w);
+            tau[i] = f.axis_dir[i].dot(&(moment - f.axis_origin[i].cross(&force)));
+        }
+        tau
+    }
+
+    /// [`Robot::gravity_torques_at`] as the sum of `J_cᵀ W` over the links
+    /// (one Jacobian per link): the reference of the recursion's test.
+    #[cfg(test)]
+    pub(crate) fn gravity_torques_jacobian(&self, f: &Frames) -> Vector6<f64> {
+        use super::kinematics::jacobian_link;
         let g = self.gravity_base();
         let mut tau = Vector6::zeros();
         for (i, l) in self.links().iter().enumerate() {
@@ -101,6 +136,13 @@ impl Robot {
         jacobian(f, &self.flange_to_tool().translation.vector).transpose() * w
     }
 
+    /// [`Robot::gravity_torques`] plus [`Robot::process_torques`] of the
+    /// nominal model, from one set of joint frames.
+    pub(crate) fn nominal_load_torques(&self, q: &[f64; 6]) -> Vector6<f64> {
+        let f = super::kinematics::frames_prepared(self.nominal_prepared(), q, 6);
+        self.gravity_torques_at(&f) + self.process_torques_at(&f)
+    }
+
     /// Joint deflection `Δθ = Kθ⁻¹ τ` (rad) for torques in N·mm.
     pub fn joint_deflection(&self, tau: &Vector6<f64>) -> [f64; 6] {
         let k = self.k_nmm_per_rad();
@@ -135,8 +177,72 @@ impl Robot {
     }
 }
 
+#[cfg(test)]
 fn force_wrench(f: Vector3<f64>) -> Vector6<f64> {
     let mut w = Vector6::zeros();
     w.fixed_rows_mut::<3>(0).copy_from(&f);
     w
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::machine::Machine;
+    use crate::machine::robot::PointMass;
+    use approx::assert_abs_diff_eq;
+
+    /// Recursion against the per-link Jacobian sum: the same terms summed
+    /// in another order, so rounding only (torques are up to about 1e6 N·mm).
+    const TORQUE_ROUNDING_NMM: f64 = 1e-7;
+
+    fn robot(text: &str, file: &str) -> Robot {
+        let Ok(Machine::Robot(r)) = Machine::from_yaml_str(text, file) else {
+            panic!("{file} is a robot file")
+        };
+        r
+    }
+
+    #[test]
+    fn recursive_gravity_torques_equal_the_jacobian_sum() {
+        let robots = [
+            robot(
+                include_str!("../../../machines/abb-irb1600.yaml"),
+                "abb-irb1600.yaml",
+            ),
+            robot(
+                include_str!("../../../machines/staubli-tx200.yaml"),
+                "staubli-tx200.yaml",
+            ),
+        ];
+        let load = PointMass {
+            mass_kg: 7.5,
+            com_mm: Vector3::new(12.0, -30.0, 95.0),
+        };
+        // A fixed linear congruential sequence: random joints in ±π.
+        let mut state = 0x2545_f491_4f6c_dd1du64;
+        let mut next = || {
+            state = state
+                .wrapping_mul(6_364_136_223_846_793_005)
+                .wrapping_add(1_442_695_040_888_963_407);
+            ((state >> 11) as f64 / (1u64 << 53) as f64 - 0.5) * 2.0 * std::f64::consts::PI
+        };
+        for r in &robots {
+            for view in [
+                r.clone(),
+                r.with_tool(*r.flange_to_tool(), Some(load), false),
+            ] {
+                for _ in 0..200 {
+                    let q: [f64; 6] = std::array::from_fn(|_| next());
+                    for model in [Model::Nominal, Model::Actual] {
+                        let f = view.frames(model, &q);
+                        assert_abs_diff_eq!(
+                            view.gravity_torques_at(&f),
+                            view.gravity_torques_jacobian(&f),
+                            epsilon = TORQUE_ROUNDING_NMM
+                        );
+                    }
+                }
+            }
+        }
+    }
 }

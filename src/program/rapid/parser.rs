@@ -7,8 +7,8 @@ use nom::IResult;
 use nom::error::{ErrorKind, ParseError};
 
 use super::{
-    Arg, DataType, Decl, Index, Module, Move, MoveKind, Number, OptArg, Proc, RoutineKind, Scalar,
-    Scope, Span, Stmt, Storage, Target,
+    Arg, DataType, Decl, Index, Module, Move, MoveKind, Number, OptArg, Proc, RobTarget,
+    RoutineKind, Scalar, Scope, Span, Stmt, Storage, Target,
 };
 use crate::error::Located;
 
@@ -472,6 +472,68 @@ impl<'a> Parser<'a> {
     /// A generic value; `stops` are the bytes that end an expression at depth 0.
     pub(super) fn val(&self, i: &'a str, stops: &[u8]) -> PResult<'a, Val> {
         self.nested(i, |p| p.val_inner(i, stops))
+    }
+
+    /// The common robtarget literal `[[x,y,z],[q1,q2,q3,q4],[cf1,cf4,cf6,cfx],
+    /// [e1,…,e6]]` (numbers only, whitespace and comments anywhere) scanned
+    /// directly, without the generic value tree: the same `RobTarget` and
+    /// rest as [`Parser::val`] then `rob_target`. `None` for anything else
+    /// (another shape, a name, an absurd number, a nesting limit in reach):
+    /// the general path then parses it, or reports its error.
+    fn scan_rob_target(&self, i: &'a str) -> Option<(&'a str, RobTarget)> {
+        // `val` nests three levels for a robtarget's numbers.
+        if self.depth.get() + 3 > MAX_NESTING {
+            return None;
+        }
+        let i = ws(i);
+        let start = self.pos(i);
+        let mut r = i.strip_prefix('[')?;
+        let group = |r: &mut &'a str, out: &mut [Number]| -> Option<()> {
+            let mut at = ws(r).strip_prefix('[')?;
+            let n = out.len();
+            for (k, slot) in out.iter_mut().enumerate() {
+                let i = ws(at);
+                let (rest, t) = number_text(i).ok()?;
+                let after = ws(rest);
+                let value = t.parse::<f64>().ok()?;
+                if !value.is_finite() || value.abs() > MAX_NUMBER {
+                    return None;
+                }
+                *slot = Number {
+                    value,
+                    span: self.pos(i)..self.pos(rest),
+                };
+                at = after.strip_prefix(if k + 1 < n { ',' } else { ']' })?;
+            }
+            *r = at;
+            Some(())
+        };
+        let zero = || Number {
+            value: 0.0,
+            span: 0..0,
+        };
+        let mut trans: [Number; 3] = std::array::from_fn(|_| zero());
+        let mut rot: [Number; 4] = std::array::from_fn(|_| zero());
+        let mut robconf: [Number; 4] = std::array::from_fn(|_| zero());
+        let mut extax: [Number; 6] = std::array::from_fn(|_| zero());
+        group(&mut r, &mut trans)?;
+        r = ws(r).strip_prefix(',')?;
+        group(&mut r, &mut rot)?;
+        r = ws(r).strip_prefix(',')?;
+        group(&mut r, &mut robconf)?;
+        r = ws(r).strip_prefix(',')?;
+        group(&mut r, &mut extax)?;
+        r = ws(r).strip_prefix(']')?;
+        Some((
+            r,
+            RobTarget {
+                span: start..self.pos(r),
+                trans,
+                rot,
+                robconf,
+                extax,
+            },
+        ))
     }
 
     /// Runs `f` one nesting level deeper, failing past [`MAX_NESTING`].
@@ -1022,6 +1084,11 @@ impl<'a> Parser<'a> {
             r.is_empty() || r.starts_with([',', ';', '\\', ')'])
         };
         if i.starts_with('[') {
+            if !joint {
+                if let Some((r, rt)) = self.scan_rob_target(i) {
+                    return Ok((r, Target::Inline(rt)));
+                }
+            }
             let (r, v) = self.val(i, b",]")?;
             let t = if joint {
                 Target::InlineJoint(self.joint_target(&v)?)
@@ -1236,4 +1303,49 @@ fn clip_end(s: &str, n: usize) -> String {
     }
     let tail: String = s.chars().skip(count - n).collect();
     format!("…{tail}")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The direct robtarget scanner against the generic value tree: the same
+    /// literal and rest wherever it accepts, and it declines every other
+    /// shape (which the general path then parses or reports).
+    #[test]
+    fn robtarget_scanner_equals_the_value_tree() {
+        let accepted = [
+            "[[650.0,50.0,300.0],[0,0,1,0],[0,0,0,0],[9E9,9E9,9E9,9E9,9E9,9E9]],v200",
+            "[ [ -1.5e-3 , +2 , .5 ] ,[1,0,0,0],[-1,0,-2,5],[9E+09,9e9,0,0,0,0]] ;",
+            "[[1,2,3],[1,0,0,0],[0,0,0,0],[9E9,9E9,9E9,9E9,9E9,9E9] ! comment\n ]\n,v1",
+            "[[1,2,3],\r\n  [0.7071068,0,0.7071068,0],[0,0,0,1],[1,2,3,4,5,6]]",
+            "[[0,0,0],[1,0,0,0],[0,0,0,0],[1e10,-1e10,0,0,0,0]]",
+        ];
+        let declined = [
+            "[[1,2],[1,0,0,0],[0,0,0,0],[9E9,9E9,9E9,9E9,9E9,9E9]]",
+            "[[1,2,3],[1,0,0,0],[0,0,0,0],[9E9,9E9,9E9,9E9,9E9]]",
+            "[[1,2,3],[1,0,0,0],[0,0,0,0],[9E9,9E9,9E9,9E9,9E9,9E9],[1]]",
+            "[[x,2,3],[1,0,0,0],[0,0,0,0],[9E9,9E9,9E9,9E9,9E9,9E9]]",
+            "[[1+1,2,3],[1,0,0,0],[0,0,0,0],[9E9,9E9,9E9,9E9,9E9,9E9]]",
+            "[[1,2,3],[1,0,0,0],[0,0,0,0],[9E99,9E9,9E9,9E9,9E9,9E9]]",
+            "[[1,2,3],[1,0,0,0],[0,0,0,0],[1e400,9E9,9E9,9E9,9E9,9E9]]",
+            "[[1,2,3],[1,0,0,0],[0,0,0,0],[9E9,9E9,9E9,9E9,9E9,9E9]",
+            "[[1,2,3][1,0,0,0],[0,0,0,0],[9E9,9E9,9E9,9E9,9E9,9E9]]",
+            "[p1,[1,0,0,0],[0,0,0,0],[9E9,9E9,9E9,9E9,9E9,9E9]]",
+        ];
+        for text in accepted.iter().chain(&declined) {
+            let p = Parser::new(text, "t.mod");
+            let fast = p.scan_rob_target(text);
+            let slow = p
+                .val(text, b",]")
+                .ok()
+                .and_then(|(r, v)| p.rob_target(&v).ok().map(|rt| (r, rt)));
+            if accepted.contains(text) {
+                assert!(fast.is_some(), "scanner declined {text}");
+                assert_eq!(fast, slow, "{text}");
+            } else {
+                assert!(fast.is_none(), "scanner accepted {text}");
+            }
+        }
+    }
 }
