@@ -8,7 +8,7 @@ pub mod rapid;
 use nalgebra::{SMatrix, SVector, Vector3};
 
 use crate::machine::{AxisVec, DirVec, TipPose};
-use crate::predict::{BlockContext, Breakdown, ToolPredictor};
+use crate::predict::{BlockContext, Breakdown, LipschitzBound, ToolPredictor};
 use crate::program::interp::{END_INSIDE, Motion, Move, Plan, PlanKind};
 
 /// Convergence of the inverse solve on the tool-tip position, mm.
@@ -33,6 +33,37 @@ const DIR_WEIGHT_MM: f64 = 100.0;
 /// Allowance for rounding (mm) when a Lipschitz bound decides the outcome
 /// of an evaluation without doing it.
 const SKIP_MARGIN_MM: f64 = 1e-10;
+
+/// The block's Lipschitz bound ([`ToolPredictor::lipschitz_bound`]),
+/// computed on first use and then shared by every solve and piece of the
+/// block (same predictor and tool length).
+struct Lip<'m> {
+    tool_mm: f64,
+    v: std::cell::Cell<Option<Option<LipschitzBound<'m>>>>,
+}
+
+impl<'m> Lip<'m> {
+    fn new(tool_mm: f64) -> Self {
+        Lip {
+            tool_mm,
+            v: std::cell::Cell::new(None),
+        }
+    }
+
+    /// The bound on the segment `a → b`, as [`ToolPredictor::lipschitz`]
+    /// gives it.
+    fn on(&self, pred: &ToolPredictor<'m>, a: &AxisVec, b: &AxisVec) -> Option<f64> {
+        let bound = match self.v.get() {
+            Some(v) => v,
+            None => {
+                let v = pred.lipschitz_bound(self.tool_mm);
+                self.v.set(Some(v));
+                v
+            }
+        };
+        bound?.on(a, b)
+    }
+}
 
 /// Why a target could not be compensated.
 #[derive(Debug, Clone, PartialEq)]
@@ -147,19 +178,21 @@ pub fn solve(
     tool_mm: f64,
 ) -> Result<(AxisVec, f64), Failure> {
     let goal = pred.nominal(target, tool_mm);
-    solve_from(pred, target, &goal, target, None, dirs, tool_mm)
+    let lip = Lip::new(tool_mm);
+    solve_from(pred, target, &goal, target, None, dirs, &lip)
 }
 
 /// [`solve`] started from the correction found at a nearby point: the
 /// command `near_c` compensates the programmed `near_p`.
-fn solve_near(
-    pred: &ToolPredictor,
+fn solve_near<'m>(
+    pred: &ToolPredictor<'m>,
     target: &AxisVec,
     near_c: &AxisVec,
     near_p: &AxisVec,
     dirs: &DirVec,
-    tool_mm: f64,
+    lip: &Lip<'m>,
 ) -> Result<(AxisVec, f64), Failure> {
+    let tool_mm = lip.tool_mm;
     let mut start = *target;
     for s in 0..6 {
         let corr = near_c[s] - near_p[s];
@@ -168,20 +201,22 @@ fn solve_near(
         }
     }
     let goal = pred.nominal(target, tool_mm);
-    solve_from(pred, target, &goal, &start, None, dirs, tool_mm)
+    solve_from(pred, target, &goal, &start, None, dirs, lip)
 }
 
 /// [`solve`] with the nominal pose `goal` of `target`, the iteration started
 /// at the command `start`, and, when known, the attained pose at `start`.
-fn solve_from(
-    pred: &ToolPredictor,
+/// `lip` holds the tool length and the block's Lipschitz bound.
+fn solve_from<'m>(
+    pred: &ToolPredictor<'m>,
     target: &AxisVec,
     goal: &TipPose,
     start: &AxisVec,
     mut first: Option<TipPose>,
     dirs: &DirVec,
-    tool_mm: f64,
+    lip: &Lip<'m>,
 ) -> Result<(AxisVec, f64), Failure> {
+    let tool_mm = lip.tool_mm;
     let goal = *goal;
     let m = pred.machine;
     let rotary = (3..6).any(|s| m.has_axis(s));
@@ -207,7 +242,7 @@ fn solve_from(
             // next evaluation would only confirm convergence; the bound is
             // reported as the residual.
             if it + 1 < MAX_ITER {
-                if let Some(l) = pred.lipschitz(&prev, &c, tool_mm) {
+                if let Some(l) = lip.on(pred, &prev, &c) {
                     let bound = l * rn + SKIP_MARGIN_MM;
                     if bound < SOLVE_TOL_MM / 2.0 {
                         return Ok((c, bound));
@@ -371,14 +406,14 @@ const BREAK_MARGIN: f64 = 1e-6;
 /// its middle (at its middle when it crosses none): the pieces follow the
 /// kinks instead of halving across them.
 #[allow(clippy::too_many_arguments)]
-fn split_line(
-    pred: &ToolPredictor,
+fn split_line<'m>(
+    pred: &ToolPredictor<'m>,
     p0: &AxisVec,
     p1: &AxisVec,
     c0: &AxisVec,
     c1: &AxisVec,
     dirs: &DirVec,
-    tool: f64,
+    lip: &Lip<'m>,
     tol: f64,
     keep_end: bool,
     out: &mut Vec<AxisVec>,
@@ -386,6 +421,7 @@ fn split_line(
     let mut ts = [0.0f64; MAX_BREAKS];
     let n = crossings(pred, p0, p1, &mut ts);
     let ts = ts.get(..n).unwrap_or(&[]);
+    let tool = lip.tool_mm;
     // Without rotary axes the nominal chain is a translation, affine in the
     // command: the nominal point of a blend is the blend of the nominal points.
     let affine = !(3..6).any(|s| pred.machine.has_axis(s));
@@ -397,7 +433,7 @@ fn split_line(
         ends,
         ts,
         dirs,
-        tool,
+        lip,
         tol,
         keep_end,
     };
@@ -440,12 +476,12 @@ fn crossings(pred: &ToolPredictor, p0: &AxisVec, p1: &AxisVec, ts: &mut [f64]) -
 /// both ends (machines without rotary axes) and its breakpoint crossings.
 struct Piece<'a, 'p> {
     pred: &'a ToolPredictor<'p>,
+    lip: &'a Lip<'p>,
     p0: &'a AxisVec,
     p1: &'a AxisVec,
     ends: Option<(Vector3<f64>, Vector3<f64>)>,
     ts: &'a [f64],
     dirs: &'a DirVec,
-    tool: f64,
     tol: f64,
     keep_end: bool,
 }
@@ -455,7 +491,11 @@ impl Piece<'_, '_> {
     fn nominal(&self, t: f64) -> Vector3<f64> {
         match &self.ends {
             Some((a, b)) => a + (b - a) * t,
-            None => self.pred.nominal(&lerp(self.p0, self.p1, t), self.tool).pos,
+            None => {
+                self.pred
+                    .nominal(&lerp(self.p0, self.p1, t), self.lip.tool_mm)
+                    .pos
+            }
         }
     }
 
@@ -476,7 +516,7 @@ impl Piece<'_, '_> {
         // from its chord): when that meets the tolerance, the check below
         // would pass.
         if self.ends.is_some() {
-            if let Some(l) = self.pred.lipschitz(ca, cb, self.tool) {
+            if let Some(l) = self.lip.on(self.pred, ca, cb) {
                 let dc = (0..3).map(|s| (cb[s] - ca[s]).powi(2)).sum::<f64>().sqrt();
                 if SOLVE_TOL_MM + l * dc + SKIP_MARGIN_MM <= self.tol {
                     if tb < 1.0 || self.keep_end {
@@ -490,7 +530,7 @@ impl Piece<'_, '_> {
         for f in [0.25, 0.5, 0.75] {
             let got = self
                 .pred
-                .attained(&lerp(ca, cb, f), self.dirs, self.tool)
+                .attained(&lerp(ca, cb, f), self.dirs, self.lip.tool_mm)
                 .pos;
             let want = self.nominal(ta + (tb - ta) * f);
             worst = worst.max((got - want).norm());
@@ -520,7 +560,7 @@ impl Piece<'_, '_> {
             .unwrap_or(mid);
         let pa = lerp(self.p0, self.p1, ta);
         let pm = lerp(self.p0, self.p1, tm);
-        let (cm, _) = solve_near(self.pred, &pm, ca, &pa, self.dirs, self.tool)?;
+        let (cm, _) = solve_near(self.pred, &pm, ca, &pa, self.dirs, self.lip)?;
         self.split(ta, tm, ca, &cm, depth + 1, out)?;
         self.split(tm, tb, &cm, cb, depth + 1, out)
     }
@@ -628,6 +668,7 @@ pub fn block_after(
     }
     let (dev, at_end, nom_end) = pred.evaluate(&mv.end, &mv.dirs, tool);
     res.deviation = dev;
+    let lip = Lip::new(tool);
     let (c1, r1) = solve_from(
         pred,
         &mv.end,
@@ -635,7 +676,7 @@ pub fn block_after(
         &mv.end,
         Some(at_end),
         &mv.dirs,
-        tool,
+        &lip,
     )?;
     res.end = c1;
     res.residual_mm = r1;
@@ -663,13 +704,13 @@ pub fn block_after(
             let c0 = match carry_in {
                 Some(k) if k.matches(&mv.start, &mv.dirs, tool, &pred.ctx) => k.c,
                 Some(k) if k.target == mv.start => {
-                    solve_near(pred, &mv.start, &k.c, &k.target, &mv.dirs, tool)?.0
+                    solve_near(pred, &mv.start, &k.c, &k.target, &mv.dirs, &lip)?.0
                 }
-                _ => solve_near(pred, &mv.start, &c1, &mv.end, &mv.dirs, tool)?.0,
+                _ => solve_near(pred, &mv.start, &c1, &mv.end, &mv.dirs, &lip)?.0,
             };
             let mut pts = Vec::new();
             split_line(
-                pred, &mv.start, &mv.end, &c0, &c1, &mv.dirs, tool, tol, false, &mut pts,
+                pred, &mv.start, &mv.end, &c0, &c1, &mv.dirs, &lip, tol, false, &mut pts,
             )?;
             for p in &pts {
                 check_travel(pred, p)?;
@@ -731,6 +772,7 @@ fn arc_block(
     let chords = ((arc.sweep.abs() / max_step.max(1e-6)).ceil() as usize).clamp(1, 1 << 16);
     let mut prev_p = mv.start;
     let mut pts = Vec::new();
+    let lip = Lip::new(tool);
     for k in 1..=chords {
         let s = k as f64 / chords as f64;
         let p = with_xyz(&lerp(&mv.start, &mv.end, s), &arc.point(&s3, &e3, s));
@@ -747,7 +789,7 @@ fn arc_block(
             &c0,
             &c,
             &d,
-            tool,
+            &lip,
             tol - sag,
             true,
             &mut pts,

@@ -206,6 +206,24 @@ impl Breakdown {
     }
 }
 
+/// The Lipschitz bound of [`ToolPredictor::lipschitz`] for one block and
+/// tool length, valid on segments whose ends lie in the machine's box.
+#[derive(Debug, Clone, Copy)]
+pub struct LipschitzBound<'m> {
+    machine: &'m MachineTool,
+    l: f64,
+}
+
+impl LipschitzBound<'_> {
+    /// The bound on the segment of commands `a → b` (`None` when an end
+    /// leaves the box where it holds): the value of
+    /// [`ToolPredictor::lipschitz`].
+    #[inline]
+    pub fn on(&self, a: &AxisVec, b: &AxisVec) -> Option<f64> {
+        (self.machine.in_lipschitz_box(a) && self.machine.in_lipschitz_box(b)).then_some(self.l)
+    }
+}
+
 /// A machine tool with the effects chosen for one run and the context of
 /// one block. Immutable and `Copy`, shared by the worker threads; the job
 /// makes a per-block copy with [`ToolPredictor::with_context`].
@@ -355,8 +373,15 @@ impl<'m> ToolPredictor<'m> {
     /// drift, each times its gain. Used to skip evaluations whose outcome
     /// it decides (see `compensate`).
     pub fn lipschitz(&self, a: &AxisVec, b: &AxisVec, tool_mm: f64) -> Option<f64> {
-        let (geo, dir) = self.machine.lipschitz_geo(a, tool_mm)?;
-        self.machine.lipschitz_geo(b, tool_mm)?;
+        self.lipschitz_bound(tool_mm)?.on(a, b)
+    }
+
+    /// The part of [`Self::lipschitz`] that does not depend on the segment
+    /// (computed once per block; `None` for machines with rotary axes or a
+    /// non-finite bound). [`LipschitzBound::on`] then gives the same value
+    /// as [`Self::lipschitz`] for any segment.
+    pub fn lipschitz_bound(&self, tool_mm: f64) -> Option<LipschitzBound<'m>> {
+        let (geo, dir) = self.machine.lipschitz_geo_any(tool_mm)?;
         let mut l = self.effects.gain(Effect::Geometric).abs() * geo;
         let gs = self.effects.gain(Effect::Static);
         if let (true, Some(k)) = (gs != 0.0, self.machine.stiffness()) {
@@ -368,7 +393,10 @@ impl<'m> ToolPredictor<'m> {
             let scale = th.scale_ppm.iter().fold(0.0f64, |m, v| m.max(v.abs())) * 1e-6;
             l += gt.abs() * (scale + th.growth_um.abs() * 1e-3 * dir);
         }
-        l.is_finite().then_some(l)
+        l.is_finite().then_some(LipschitzBound {
+            machine: self.machine,
+            l,
+        })
     }
 
     /// Predicted attained tool tip pose for commanded axes (the compensated

@@ -36,15 +36,20 @@ pub(crate) const IDENTITY: Aff = [
 /// Top three rows of `a · b` for HTMs with last row `[0, 0, 0, 1]`, with
 /// the same operations in the same order as nalgebra's 4×4 product (each
 /// entry summed over k = 0..4 from the left), hence the same bits.
+///
+/// Written as one expression per row over the four columns (the last row
+/// of `b` is `[0, 0, 0, 1]`, and `x · 1 = x` exactly), so that the compiler
+/// can compute two or four columns per instruction; every entry keeps its
+/// own operations in the same order (no fused multiply-add in Rust).
 #[inline(always)]
 pub(crate) fn mul(a: &Aff, b: &Aff) -> Aff {
+    const LAST: [f64; 4] = [0.0, 0.0, 0.0, 1.0];
     let row = |ai: &[f64; 4]| {
-        [
-            ai[0] * b[0][0] + ai[1] * b[1][0] + ai[2] * b[2][0] + ai[3] * 0.0,
-            ai[0] * b[0][1] + ai[1] * b[1][1] + ai[2] * b[2][1] + ai[3] * 0.0,
-            ai[0] * b[0][2] + ai[1] * b[1][2] + ai[2] * b[2][2] + ai[3] * 0.0,
-            ai[0] * b[0][3] + ai[1] * b[1][3] + ai[2] * b[2][3] + ai[3],
-        ]
+        let mut o = [0.0; 4];
+        for (j, v) in o.iter_mut().enumerate() {
+            *v = ai[0] * b[0][j] + ai[1] * b[1][j] + ai[2] * b[2][j] + ai[3] * LAST[j];
+        }
+        o
     };
     [row(&a[0]), row(&a[1]), row(&a[2])]
 }

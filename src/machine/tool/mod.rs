@@ -283,6 +283,19 @@ impl MachineTool {
         l.contains(c).then(|| l.bounds(tool_mm))
     }
 
+    /// [`Self::lipschitz_geo`] without the box test (see
+    /// [`Self::in_lipschitz_box`]).
+    pub fn lipschitz_geo_any(&self, tool_mm: f64) -> Option<(f64, f64)> {
+        self.pre.lip.as_ref().map(|l| l.bounds(tool_mm))
+    }
+
+    /// True when `c` lies in the box of commands where
+    /// [`Self::lipschitz_geo`] holds (false for machines with rotary axes).
+    #[inline]
+    pub fn in_lipschitz_box(&self, c: &AxisVec) -> bool {
+        self.pre.lip.as_ref().is_some_and(|l| l.contains(c))
+    }
+
     /// Attained minus nominal tool tip position, mm.
     pub fn tip_error_mm(&self, cmd: &AxisVec, dirs: &DirVec, tool_mm: f64) -> Vector3<f64> {
         self.geometric(cmd, dirs, tool_mm).pos - self.nominal(cmd, tool_mm).pos
