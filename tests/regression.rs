@@ -185,3 +185,44 @@ fn regression_output_through_a_symlink_keeps_the_link() {
     let text = std::fs::read_to_string(&real).unwrap();
     assert!(text.contains("G1"), "{text}");
 }
+
+/// A robtarget literal spread over two lines, after another move on the
+/// same line: its position-and-quaternion edit spanned the line end where
+/// the first move's annotation goes, and the run failed with "edit …
+/// overlaps a previous edit" (exit 2) on a valid module.
+#[test]
+fn regression_multi_line_robtarget_after_a_move_on_its_line() {
+    let dir = tempfile::tempdir().unwrap();
+    let module = dir.path().join("t.mod");
+    std::fs::write(
+        &module,
+        "MODULE T\n\
+  PERS tooldata tMill := [TRUE,[[0,0,182.5],[1,0,0,0]],[2.4,[0,0,85],[1,0,0,0],0.012,0.012,0.004]];\n\
+  PROC main()\n\
+    MoveL [[800,0,600],[0,0,1,0],[0,0,0,0],[9E9,9E9,9E9,9E9,9E9,9E9]], v100, fine, tMill; MoveL [[800,50,600],\n\
+      [0,0,1,0],[0,0,0,0],[9E9,9E9,9E9,9E9,9E9,9E9]], v100, fine, tMill;\n\
+  ENDPROC\n\
+ENDMODULE\n",
+    )
+    .unwrap();
+    let out = postproc()
+        .args(["compensate", "--machine", "abb-irb1600", "-o", "-"])
+        .arg(&module)
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(0), "{stderr}");
+    let text = String::from_utf8(out.stdout).unwrap();
+    // Both targets rewritten (no literal keeps its programmed integers),
+    // the line break inside the second literal kept.
+    assert!(!text.contains("[[800,0,600]"), "{text}");
+    assert!(!text.contains("[[800,50,600]"), "{text}");
+    // The second literal still starts on the first move's line and ends on
+    // the next one (its quaternion opens that line).
+    let first = text.lines().position(|l| l.contains("tMill; MoveL [["));
+    let next = first.and_then(|k| text.lines().nth(k + 1)).unwrap_or("");
+    assert!(
+        next.trim_start().starts_with('[') && next.contains("tMill;"),
+        "the second literal's line break is gone:\n{text}"
+    );
+}

@@ -612,13 +612,30 @@ fn robtarget_in_place(
     fmt: &Format,
 ) -> Result<()> {
     let q = pose.rotation.quaternion();
-    edits.push(crate::emit::rapid::robtarget_edit(
-        src,
-        rt,
-        &pose.translation.vector.into(),
-        Some(&[q.w, q.i, q.j, q.k]),
-        fmt,
-    )?);
+    let pos: [f64; 3] = pose.translation.vector.into();
+    let quat = [q.w, q.i, q.j, q.k];
+    // One edit over the whole position-and-quaternion text is cheaper, but
+    // only while it stays on one line: an annotation inserted at the end of
+    // an earlier statement's line would fall inside a multi-line span.
+    let one_line = src
+        .get(rt.trans[0].span.start..rt.rot[3].span.end)
+        .is_some_and(|t| !t.contains('\n'));
+    if one_line {
+        edits.push(crate::emit::rapid::robtarget_edit(
+            src,
+            rt,
+            &pos,
+            Some(&quat),
+            fmt,
+        )?);
+    } else {
+        edits.extend(crate::emit::rapid::robtarget_edits(
+            rt,
+            &pos,
+            Some(&quat),
+            fmt,
+        )?);
+    }
     if conf != old_conf {
         for (n, v) in rt
             .robconf
