@@ -794,18 +794,24 @@ impl<'m> Job<'m> {
         self.install(|| cur.parse(file));
         loop {
             let more = !cur.eof;
-            if more {
-                next.read(&mut input, file, cur.first_line + cur.ranges.len())?;
-            }
+            // A read error of the next chunk is raised only after this
+            // chunk's own (earlier) errors: the first error in line order.
+            let read = if more {
+                next.read(&mut input, file, cur.first_line + cur.ranges.len())
+            } else {
+                Ok(())
+            };
+            let parse_next = more && read.is_ok();
             // The next chunk is parsed on the pool while this one goes
             // through the in-order passes here.
             let next_ref = &mut next;
             in_scope(self.pool, |s| {
-                if more {
+                if parse_next {
                     s.spawn(move |_| next_ref.parse(file));
                 }
                 process(&mut cur)
             })?;
+            read?;
             if !more {
                 break;
             }
@@ -865,6 +871,76 @@ mod tests {
 
     const TIME_TOL_S: f64 = 1e-9;
     const POWER_TOL_W: f64 = 1e-6;
+
+    /// A reader that yields `data`, then fails.
+    struct FailingAfter<'a> {
+        data: &'a [u8],
+    }
+
+    impl std::io::Read for FailingAfter<'_> {
+        fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
+            if self.data.is_empty() {
+                return Err(std::io::Error::other("disk gone"));
+            }
+            let n = buf.len().min(self.data.len());
+            buf[..n].copy_from_slice(&self.data[..n]);
+            self.data = &self.data[n..];
+            Ok(n)
+        }
+    }
+
+    /// Regression: the next chunk was read before the current one was
+    /// processed, so a read error there hid a located error earlier in the
+    /// program. The first error in line order is the one reported.
+    #[test]
+    fn an_error_in_a_chunk_comes_before_a_read_error_after_it() {
+        let text = "kind: machine_tool
+name: t
+axes:
+  - { name: X, type: linear, side: workpiece, travel_mm: [-500, 500], rapid_mm_per_min: 60000 }
+  - { name: Y, type: linear, side: workpiece, travel_mm: [-500, 500], rapid_mm_per_min: 60000 }
+  - { name: Z, type: linear, side: tool, travel_mm: [-500, 500], rapid_mm_per_min: 60000 }
+";
+        let m = match MachineTool::from_yaml_str(text, "t.yaml") {
+            Ok(m) => m,
+            Err(e) => panic!("{e}"),
+        };
+        let job = Job {
+            predictor: Some(ToolPredictor::new(&m, EffectSet::default())),
+            setup: Setup {
+                axes: [true, true, true, false, false, false],
+                ..Setup::default()
+            },
+            settings: Settings::default(),
+            emit: EmitOptions {
+                decimals_mm: None,
+                decimals_deg: None,
+                annotate: false,
+            },
+            pool: None,
+        };
+        // Line 10 is bad; the program is longer than one chunk, and the
+        // reader fails where the second chunk would start.
+        let mut program = String::new();
+        for k in 1..=CHUNK_LINES {
+            if k == 10 {
+                program.push_str("G1 X1 Q\n");
+            } else {
+                program.push_str("G0 X1\n");
+            }
+        }
+        let reader = std::io::BufReader::with_capacity(
+            64,
+            FailingAfter {
+                data: program.as_bytes(),
+            },
+        );
+        let err = match job.run(reader, "p.nc", None, None) {
+            Ok(_) => panic!("a bad line and a failing read must be an error"),
+            Err(e) => e.to_string(),
+        };
+        assert!(err.starts_with("p.nc:10:"), "{err}");
+    }
 
     #[test]
     fn time_line_of_rapids_cycles_and_dwells() {
