@@ -599,11 +599,14 @@ thermal:
         }
     }
 
-    #[test]
-    fn lipschitz_bound_holds_on_the_afm_r1000() {
-        let path = concat!(env!("CARGO_MANIFEST_DIR"), "/machines/afm-r1000.yaml");
-        let text = std::fs::read_to_string(path).unwrap_or_default();
-        let m = match MachineTool::from_yaml_str(&text, path) {
+    /// Checks `|G(b) − G(a)| ≤ L·|b − a|` (G = attained − nominal) on
+    /// random pairs of commands of the machine file `name` with `effects`;
+    /// returns the largest ratio seen over far pairs (0 when the bound does
+    /// not apply to this machine).
+    fn lipschitz_worst_ratio(name: &str, effects: EffectSet) -> f64 {
+        let path = format!("{}/machines/{name}", env!("CARGO_MANIFEST_DIR"));
+        let text = std::fs::read_to_string(&path).unwrap_or_default();
+        let m = match MachineTool::from_yaml_str(&text, &path) {
             Ok(m) => m,
             Err(e) => panic!("{e}"),
         };
@@ -624,7 +627,7 @@ thermal:
         };
         let mut worst_ratio = 0.0f64;
         for ctx in [BlockContext::default(), hot] {
-            let p = ToolPredictor::new(&m, EffectSet::default()).with_context(ctx);
+            let p = ToolPredictor::new(&m, effects).with_context(ctx);
             for k in 0..20000 {
                 let mut a = [0.0; 6];
                 for (slot, v) in a.iter_mut().enumerate().take(3) {
@@ -656,8 +659,57 @@ thermal:
                 }
             }
         }
+        worst_ratio
+    }
+
+    #[test]
+    fn lipschitz_bound_holds_on_the_afm_r1000() {
+        let worst = lipschitz_worst_ratio("afm-r1000.yaml", EffectSet::default());
         // The bound is not vacuous: within a factor 100 of what is seen.
-        assert!(worst_ratio > 0.01, "bound too loose: {worst_ratio}");
+        assert!(worst > 0.01, "bound too loose: {worst}");
+    }
+
+    /// The bound holds for every bundled machine tool, each effect alone,
+    /// and gains other than 1 (the skip it drives must never be wrong).
+    #[test]
+    fn lipschitz_bound_holds_for_every_machine_effect_and_gain() {
+        let mut specs: Vec<EffectSet> = Vec::new();
+        for spec in ["geometric", "static", "thermal", "all"] {
+            match EffectSet::parse(spec) {
+                Ok(e) => specs.push(e),
+                Err(e) => panic!("{spec}: {e}"),
+            }
+        }
+        for gain in ["thermal=0.5", "static=2", "geometric=0.25"] {
+            let mut e = EffectSet::default();
+            if let Err(err) = e.set_gain(gain) {
+                panic!("{gain}: {err}");
+            }
+            specs.push(e);
+        }
+        let dir = concat!(env!("CARGO_MANIFEST_DIR"), "/machines");
+        let mut names: Vec<String> = std::fs::read_dir(dir)
+            .map(|d| {
+                d.filter_map(|e| e.ok())
+                    .map(|e| e.file_name().to_string_lossy().into_owned())
+                    .filter(|n| n.ends_with(".yaml"))
+                    .collect()
+            })
+            .unwrap_or_default();
+        names.sort();
+        let mut tools = 0;
+        for name in &names {
+            let path = format!("{dir}/{name}");
+            let text = std::fs::read_to_string(&path).unwrap_or_default();
+            if MachineTool::from_yaml_str(&text, &path).is_err() {
+                continue; // a robot
+            }
+            tools += 1;
+            for e in &specs {
+                lipschitz_worst_ratio(name, *e);
+            }
+        }
+        assert!(tools >= 2, "machine tools found: {tools}");
     }
 
     #[test]
