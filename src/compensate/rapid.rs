@@ -732,8 +732,18 @@ struct Job {
 /// of the thread count); the second writes the results back in source order.
 enum Phase {
     Collect(Vec<Job>),
-    Apply(std::vec::IntoIter<std::result::Result<Compensation, RobotError>>),
+    /// The results in chunks of [`RESULT_CHUNK`]: each chunk is freed as
+    /// soon as the write-back has used it up.
+    Apply(std::iter::Flatten<std::vec::IntoIter<Vec<Solved>>>),
 }
+
+/// The solved compensation of one job.
+type Solved = std::result::Result<Compensation, RobotError>;
+
+/// Jobs solved per chunk (in parallel within a chunk): the write-back frees
+/// the results chunk by chunk while the move records grow, so the results
+/// of all moves and all the records never live at once.
+const RESULT_CHUNK: usize = 4096;
 
 /// Per-move load state applied to the robot view.
 #[derive(Debug, Clone, Copy, Default)]
@@ -802,7 +812,7 @@ impl Rewriter<'_> {
         pose: Isometry3<f64>,
         sel: IkSelect,
         (q0, branch): (Option<[f64; 6]>, Option<usize>),
-    ) -> Option<std::result::Result<Compensation, RobotError>> {
+    ) -> Option<Solved> {
         let growth = self.growth();
         match &mut self.phase {
             Phase::Collect(jobs) => {
@@ -1548,16 +1558,21 @@ pub fn compensate_module(
     // Solve in parallel (rayon keeps the input order in `collect`; every
     // job is independent, so the results do not depend on the threads).
     let views = &rw.views;
-    let results: Vec<std::result::Result<Compensation, RobotError>> = jobs
-        .par_iter()
-        .map(|j| match views.get(j.view) {
-            Some(r) => r.compensate_seeded(&j.pose, &j.sel, fx, &j.growth, j.q0, j.branch),
-            None => Err(RobotError::Unreachable("no robot view".into())),
+    let results: Vec<Vec<Solved>> = jobs
+        .chunks(RESULT_CHUNK)
+        .map(|chunk| {
+            chunk
+                .par_iter()
+                .map(|j| match views.get(j.view) {
+                    Some(r) => r.compensate_seeded(&j.pose, &j.sel, fx, &j.growth, j.q0, j.branch),
+                    None => Err(RobotError::Unreachable("no robot view".into())),
+                })
+                .collect()
         })
         .collect();
     // The jobs are solved: free them before the write-back walk.
     drop(jobs);
-    rw.phase = Phase::Apply(results.into_iter());
+    rw.phase = Phase::Apply(results.into_iter().flatten());
     // Walk 2: write the results back in source order.
     let mut max_vib = (0.0, 0, None);
     for (mv, plan, seg, state, key) in &keyed {
