@@ -10,6 +10,7 @@
 //! `grammar/rapid.md`, section "Compensation rewriting".
 
 use std::collections::HashMap;
+use std::rc::Rc;
 
 use rayon::prelude::*;
 
@@ -183,8 +184,10 @@ fn conf_of(rt: &RobTarget) -> Option<ConfData> {
 /// compensated target.
 #[derive(Debug, Clone, PartialEq, Eq, Hash)]
 struct LoadKey {
-    tool: String,
-    wobj: String,
+    /// Tool name in lower case (shared by the moves with the same tool).
+    tool: Rc<str>,
+    /// Work object name in lower case (shared, as `tool`).
+    wobj: Rc<str>,
     wrench: Option<WrenchBits>,
     power: Option<[u64; 6]>,
     rpm: Option<u64>,
@@ -194,8 +197,8 @@ struct LoadKey {
 /// share a robot view.
 #[derive(Debug, Clone, PartialEq, Eq, Hash)]
 struct ViewKey {
-    tool: String,
-    wobj: String,
+    tool: Rc<str>,
+    wobj: Rc<str>,
     wrench: Option<WrenchBits>,
     rpm: Option<u64>,
 }
@@ -1524,6 +1527,7 @@ pub fn compensate_module(
     };
     // Load key and state of every move.
     let mut keyed = Vec::with_capacity(moves.len());
+    let mut names: Option<(Rc<str>, Rc<str>)> = None;
     for (i, mv) in moves.iter().enumerate() {
         let (Some(plan), Some(seg)) = (plans.get(i), segments.get(i)) else {
             continue;
@@ -1531,12 +1535,24 @@ pub fn compensate_module(
         let power = thermal_power.as_ref().and_then(|p| p.get(i).copied());
         let wrench = wrenches.get(i).copied().flatten();
         let rpm = directives.at(mv.line).spindle_rpm;
+        // Consecutive moves mostly share their tool and work object: share
+        // the lower-case names instead of allocating them per move.
+        let wobj_text = mv.wobj.as_ref().map_or("wobj0", |w| w.text.as_str());
+        let (tool, wobj) = match &names {
+            Some((t, w))
+                if t.eq_ignore_ascii_case(&mv.tool.text) && w.eq_ignore_ascii_case(wobj_text) =>
+            {
+                (Rc::clone(t), Rc::clone(w))
+            }
+            _ => (
+                Rc::from(mv.tool.text.to_ascii_lowercase()),
+                Rc::from(wobj_text.to_ascii_lowercase()),
+            ),
+        };
+        names = Some((Rc::clone(&tool), Rc::clone(&wobj)));
         let key = LoadKey {
-            tool: mv.tool.text.to_ascii_lowercase(),
-            wobj: mv
-                .wobj
-                .as_ref()
-                .map_or_else(|| "wobj0".into(), |w| w.text.to_ascii_lowercase()),
+            tool,
+            wobj,
             wrench: wrench.as_ref().map(wrench_bits),
             power: power.map(|p| p.map(f64::to_bits)),
             rpm: rpm.map(f64::to_bits),
