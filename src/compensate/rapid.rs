@@ -731,22 +731,39 @@ struct Job {
 }
 
 /// The two walks over the moves: the first collects every compensation as
-/// a [`Job`] (solved in parallel in between, independent of each other and
-/// of the thread count); the second writes the results back in source order.
+/// a [`Job`]; the second solves them (in parallel, a chunk at a time; each
+/// job is independent of the others and of the thread count) and writes the
+/// results back in source order.
 enum Phase {
-    Collect(Vec<Job>),
-    /// The results in chunks of [`RESULT_CHUNK`]: each chunk is freed as
-    /// soon as the write-back has used it up.
-    Apply(std::iter::Flatten<std::vec::IntoIter<Vec<Solved>>>),
+    /// The jobs in chunks of [`JOB_CHUNK`].
+    Collect(Vec<Vec<Job>>),
+    /// The chunks of jobs still to solve, and the results of the chunk
+    /// being written back: each chunk is freed once used up.
+    Apply {
+        jobs: std::vec::IntoIter<Vec<Job>>,
+        results: std::vec::IntoIter<Solved>,
+    },
 }
 
 /// The solved compensation of one job.
 type Solved = std::result::Result<Compensation, RobotError>;
 
-/// Jobs solved per chunk (in parallel within a chunk): the write-back frees
-/// the results chunk by chunk while the move records grow, so the results
-/// of all moves and all the records never live at once.
-const RESULT_CHUNK: usize = 4096;
+/// Jobs per chunk, solved in parallel within the chunk: the jobs and results
+/// of one chunk at a time live while the move records grow, never those of
+/// all the moves.
+const JOB_CHUNK: usize = 4096;
+
+/// Solves one chunk of jobs in parallel (rayon keeps the input order in
+/// `collect`; every job is independent, so the results do not depend on
+/// the threads).
+fn solve_chunk(views: &[Robot], jobs: &[Job], fx: Effects) -> Vec<Solved> {
+    jobs.par_iter()
+        .map(|j| match views.get(j.view) {
+            Some(r) => r.compensate_seeded(&j.pose, &j.sel, fx, &j.growth, j.q0, j.branch),
+            None => Err(RobotError::Unreachable("no robot view".into())),
+        })
+        .collect()
+}
 
 /// Per-move load state applied to the robot view.
 #[derive(Debug, Clone, Copy, Default)]
@@ -818,20 +835,33 @@ impl Rewriter<'_> {
     ) -> Option<Solved> {
         let growth = self.growth();
         match &mut self.phase {
-            Phase::Collect(jobs) => {
-                jobs.push(Job {
+            Phase::Collect(chunks) => {
+                let job = Job {
                     view,
                     pose,
                     sel,
                     growth,
                     q0,
                     branch,
-                });
+                };
+                match chunks.last_mut() {
+                    Some(c) if c.len() < JOB_CHUNK => c.push(job),
+                    _ => {
+                        let mut c = Vec::with_capacity(JOB_CHUNK);
+                        c.push(job);
+                        chunks.push(c);
+                    }
+                }
                 None
             }
             // The results run out only after a collection that stopped at
             // an error, which this walk meets first; solve directly anyway.
-            Phase::Apply(results) => {
+            Phase::Apply { jobs, results } => {
+                if results.len() == 0 {
+                    if let Some(chunk) = jobs.next() {
+                        *results = solve_chunk(&self.views, &chunk, self.opts.effects).into_iter();
+                    }
+                }
                 Some(
                     results
                         .next()
@@ -1509,7 +1539,7 @@ pub fn compensate_module(
         views: Vec::new(),
         view_of: HashMap::new(),
         last_view: None,
-        phase: Phase::Collect(Vec::with_capacity(moves.len())),
+        phase: Phase::Collect(Vec::new()),
         owner: HashMap::new(),
         made: HashMap::new(),
         derived_count: HashMap::new(),
@@ -1571,24 +1601,10 @@ pub fn compensate_module(
     let Phase::Collect(jobs) = std::mem::replace(&mut rw.phase, Phase::Collect(Vec::new())) else {
         return Err(Error::Usage("compensation jobs already applied".into()));
     };
-    // Solve in parallel (rayon keeps the input order in `collect`; every
-    // job is independent, so the results do not depend on the threads).
-    let views = &rw.views;
-    let results: Vec<Vec<Solved>> = jobs
-        .chunks(RESULT_CHUNK)
-        .map(|chunk| {
-            chunk
-                .par_iter()
-                .map(|j| match views.get(j.view) {
-                    Some(r) => r.compensate_seeded(&j.pose, &j.sel, fx, &j.growth, j.q0, j.branch),
-                    None => Err(RobotError::Unreachable("no robot view".into())),
-                })
-                .collect()
-        })
-        .collect();
-    // The jobs are solved: free them before the write-back walk.
-    drop(jobs);
-    rw.phase = Phase::Apply(results.into_iter().flatten());
+    rw.phase = Phase::Apply {
+        jobs: jobs.into_iter(),
+        results: Vec::new().into_iter(),
+    };
     // Walk 2: write the results back in source order.
     let mut max_vib = (0.0, 0, None);
     for (mv, plan, seg, state, key) in &keyed {
