@@ -858,6 +858,8 @@ impl Rewriter<'_> {
             // an error, which this walk meets first; solve directly anyway.
             Phase::Apply { jobs, results } => {
                 if results.len() == 0 {
+                    // Free the used-up chunk before solving the next one.
+                    *results = Vec::new().into_iter();
                     if let Some(chunk) = jobs.next() {
                         *results = solve_chunk(&self.views, &chunk, self.opts.effects).into_iter();
                     }
