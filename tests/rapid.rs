@@ -262,7 +262,7 @@ fn reltool_movec_inline_and_numbers() {
     assert_eq!(rz.as_ref().and_then(|s| s.value), Some(45.0));
     assert!(rx.is_none());
     assert_eq!(mv[1].kind, MoveKind::MoveC);
-    assert!(matches!(&mv[1].via, Some(Target::Named { name, .. }) if name == "p1"));
+    assert!(matches!(mv[1].via.as_deref(), Some(Target::Named { name, .. }) if name == "p1"));
     assert!(matches!(&mv[1].target, Target::Named { name, .. } if name == "p2"));
     let Target::Inline(rt) = &mv[2].target else {
         panic!("inline");

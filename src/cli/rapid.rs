@@ -131,6 +131,16 @@ pub(super) fn read_program(path: &Path) -> Result<(String, String)> {
 pub fn check(a: &CheckArgs) -> Result<i32> {
     let (src, name) = read_program(&a.program.file)?;
     let module = crate::program::rapid::parse_module(&src, &name)?;
+    // Keep only the summary: the compensation below parses its own copy,
+    // and two parsed modules at once would double the peak memory.
+    let summary = (
+        module.name.clone(),
+        module.decls.len(),
+        module.procs.len(),
+        module.moves().count(),
+    );
+    drop(module);
+    let (module_name, decls, procs, moves) = summary;
     if let Some(m) = a.program.machine.as_deref() {
         let robot = load_robot(m)?;
         let opts = RapidOptions {
@@ -141,15 +151,10 @@ pub fn check(a: &CheckArgs) -> Result<i32> {
         };
         compensate_module(&src, &name, &robot, &opts)?;
     }
-    let moves = module.moves().count();
     let mut out = std::io::stdout().lock();
     writeln!(
         out,
-        "{name}: module {}, {} declarations, {} routines, {} moves",
-        module.name,
-        module.decls.len(),
-        module.procs.len(),
-        moves
+        "{name}: module {module_name}, {decls} declarations, {procs} routines, {moves} moves"
     )
     .map_err(|e| Error::io("stdout", e))?;
     Ok(0)

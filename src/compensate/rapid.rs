@@ -10,6 +10,7 @@
 //! `grammar/rapid.md`, section "Compensation rewriting".
 
 use std::collections::HashMap;
+use std::rc::Rc;
 
 use rayon::prelude::*;
 
@@ -183,8 +184,10 @@ fn conf_of(rt: &RobTarget) -> Option<ConfData> {
 /// compensated target.
 #[derive(Debug, Clone, PartialEq, Eq, Hash)]
 struct LoadKey {
-    tool: String,
-    wobj: String,
+    /// Tool name in lower case (shared by the moves with the same tool).
+    tool: Rc<str>,
+    /// Work object name in lower case (shared, as `tool`).
+    wobj: Rc<str>,
     wrench: Option<WrenchBits>,
     power: Option<[u64; 6]>,
     rpm: Option<u64>,
@@ -194,8 +197,8 @@ struct LoadKey {
 /// share a robot view.
 #[derive(Debug, Clone, PartialEq, Eq, Hash)]
 struct ViewKey {
-    tool: String,
-    wobj: String,
+    tool: Rc<str>,
+    wobj: Rc<str>,
     wrench: Option<WrenchBits>,
     rpm: Option<u64>,
 }
@@ -728,11 +731,38 @@ struct Job {
 }
 
 /// The two walks over the moves: the first collects every compensation as
-/// a [`Job`] (solved in parallel in between, independent of each other and
-/// of the thread count); the second writes the results back in source order.
+/// a [`Job`]; the second solves them (in parallel, a chunk at a time; each
+/// job is independent of the others and of the thread count) and writes the
+/// results back in source order.
 enum Phase {
-    Collect(Vec<Job>),
-    Apply(std::vec::IntoIter<std::result::Result<Compensation, RobotError>>),
+    /// The jobs in chunks of [`JOB_CHUNK`].
+    Collect(Vec<Vec<Job>>),
+    /// The chunks of jobs still to solve, and the results of the chunk
+    /// being written back: each chunk is freed once used up.
+    Apply {
+        jobs: std::vec::IntoIter<Vec<Job>>,
+        results: std::vec::IntoIter<Solved>,
+    },
+}
+
+/// The solved compensation of one job.
+type Solved = std::result::Result<Compensation, RobotError>;
+
+/// Jobs per chunk, solved in parallel within the chunk: the jobs and results
+/// of one chunk at a time live while the move records grow, never those of
+/// all the moves.
+const JOB_CHUNK: usize = 4096;
+
+/// Solves one chunk of jobs in parallel (rayon keeps the input order in
+/// `collect`; every job is independent, so the results do not depend on
+/// the threads).
+fn solve_chunk(views: &[Robot], jobs: &[Job], fx: Effects) -> Vec<Solved> {
+    jobs.par_iter()
+        .map(|j| match views.get(j.view) {
+            Some(r) => r.compensate_seeded(&j.pose, &j.sel, fx, &j.growth, j.q0, j.branch),
+            None => Err(RobotError::Unreachable("no robot view".into())),
+        })
+        .collect()
 }
 
 /// Per-move load state applied to the robot view.
@@ -802,23 +832,38 @@ impl Rewriter<'_> {
         pose: Isometry3<f64>,
         sel: IkSelect,
         (q0, branch): (Option<[f64; 6]>, Option<usize>),
-    ) -> Option<std::result::Result<Compensation, RobotError>> {
+    ) -> Option<Solved> {
         let growth = self.growth();
         match &mut self.phase {
-            Phase::Collect(jobs) => {
-                jobs.push(Job {
+            Phase::Collect(chunks) => {
+                let job = Job {
                     view,
                     pose,
                     sel,
                     growth,
                     q0,
                     branch,
-                });
+                };
+                match chunks.last_mut() {
+                    Some(c) if c.len() < JOB_CHUNK => c.push(job),
+                    _ => {
+                        let mut c = Vec::with_capacity(JOB_CHUNK);
+                        c.push(job);
+                        chunks.push(c);
+                    }
+                }
                 None
             }
             // The results run out only after a collection that stopped at
             // an error, which this walk meets first; solve directly anyway.
-            Phase::Apply(results) => {
+            Phase::Apply { jobs, results } => {
+                if results.len() == 0 {
+                    // Free the used-up chunk before solving the next one.
+                    *results = Vec::new().into_iter();
+                    if let Some(chunk) = jobs.next() {
+                        *results = solve_chunk(&self.views, &chunk, self.opts.effects).into_iter();
+                    }
+                }
                 Some(
                     results
                         .next()
@@ -1496,7 +1541,7 @@ pub fn compensate_module(
         views: Vec::new(),
         view_of: HashMap::new(),
         last_view: None,
-        phase: Phase::Collect(Vec::with_capacity(moves.len())),
+        phase: Phase::Collect(Vec::new()),
         owner: HashMap::new(),
         made: HashMap::new(),
         derived_count: HashMap::new(),
@@ -1514,6 +1559,7 @@ pub fn compensate_module(
     };
     // Load key and state of every move.
     let mut keyed = Vec::with_capacity(moves.len());
+    let mut names: Option<(Rc<str>, Rc<str>)> = None;
     for (i, mv) in moves.iter().enumerate() {
         let (Some(plan), Some(seg)) = (plans.get(i), segments.get(i)) else {
             continue;
@@ -1521,12 +1567,24 @@ pub fn compensate_module(
         let power = thermal_power.as_ref().and_then(|p| p.get(i).copied());
         let wrench = wrenches.get(i).copied().flatten();
         let rpm = directives.at(mv.line).spindle_rpm;
+        // Consecutive moves mostly share their tool and work object: share
+        // the lower-case names instead of allocating them per move.
+        let wobj_text = mv.wobj.as_ref().map_or("wobj0", |w| w.text.as_str());
+        let (tool, wobj) = match &names {
+            Some((t, w))
+                if t.eq_ignore_ascii_case(&mv.tool.text) && w.eq_ignore_ascii_case(wobj_text) =>
+            {
+                (Rc::clone(t), Rc::clone(w))
+            }
+            _ => (
+                Rc::from(mv.tool.text.to_ascii_lowercase()),
+                Rc::from(wobj_text.to_ascii_lowercase()),
+            ),
+        };
+        names = Some((Rc::clone(&tool), Rc::clone(&wobj)));
         let key = LoadKey {
-            tool: mv.tool.text.to_ascii_lowercase(),
-            wobj: mv
-                .wobj
-                .as_ref()
-                .map_or_else(|| "wobj0".into(), |w| w.text.to_ascii_lowercase()),
+            tool,
+            wobj,
             wrench: wrench.as_ref().map(wrench_bits),
             power: power.map(|p| p.map(f64::to_bits)),
             rpm: rpm.map(f64::to_bits),
@@ -1545,19 +1603,10 @@ pub fn compensate_module(
     let Phase::Collect(jobs) = std::mem::replace(&mut rw.phase, Phase::Collect(Vec::new())) else {
         return Err(Error::Usage("compensation jobs already applied".into()));
     };
-    // Solve in parallel (rayon keeps the input order in `collect`; every
-    // job is independent, so the results do not depend on the threads).
-    let views = &rw.views;
-    let results: Vec<std::result::Result<Compensation, RobotError>> = jobs
-        .par_iter()
-        .map(|j| match views.get(j.view) {
-            Some(r) => r.compensate_seeded(&j.pose, &j.sel, fx, &j.growth, j.q0, j.branch),
-            None => Err(RobotError::Unreachable("no robot view".into())),
-        })
-        .collect();
-    // The jobs are solved: free them before the write-back walk.
-    drop(jobs);
-    rw.phase = Phase::Apply(results.into_iter());
+    rw.phase = Phase::Apply {
+        jobs: jobs.into_iter(),
+        results: Vec::new().into_iter(),
+    };
     // Walk 2: write the results back in source order.
     let mut max_vib = (0.0, 0, None);
     for (mv, plan, seg, state, key) in &keyed {

@@ -415,8 +415,9 @@ impl MoveKind {
 pub struct Move {
     /// Which instruction.
     pub kind: MoveKind,
-    /// The circle point of a `MoveC`.
-    pub via: Option<Target>,
+    /// The circle point of a `MoveC` (boxed: only `MoveC` has one, and a
+    /// `Target` is as large as an inline robtarget).
+    pub via: Option<Box<Target>>,
     /// The target (`ToPoint`, or `ToJointPos` for `MoveAbsJ`).
     pub target: Target,
     /// Speed argument (`v100`).

@@ -1005,7 +1005,7 @@ impl<'a> Parser<'a> {
         };
         let mut targets = targets.into_iter();
         let via = if kind == MoveKind::MoveC {
-            targets.next()
+            targets.next().map(Box::new)
         } else {
             None
         };
