@@ -872,6 +872,47 @@ mod tests {
     const TIME_TOL_S: f64 = 1e-9;
     const POWER_TOL_W: f64 = 1e-6;
 
+    /// An error-free XYZ machine (travel ±500 mm).
+    const XYZ_YAML: &str = "kind: machine_tool
+name: t
+axes:
+  - { name: X, type: linear, side: workpiece, travel_mm: [-500, 500], rapid_mm_per_min: 60000 }
+  - { name: Y, type: linear, side: workpiece, travel_mm: [-500, 500], rapid_mm_per_min: 60000 }
+  - { name: Z, type: linear, side: tool, travel_mm: [-500, 500], rapid_mm_per_min: 60000 }
+";
+
+    /// [`XYZ_YAML`] with `extra` YAML sections.
+    fn xyz_machine(extra: &str) -> MachineTool {
+        let text = format!("{XYZ_YAML}{extra}");
+        match MachineTool::from_yaml_str(&text, "t.yaml") {
+            Ok(m) => m,
+            Err(e) => panic!("{e}"),
+        }
+    }
+
+    /// X, Y and Z on, everything else default.
+    fn xyz_setup() -> Setup {
+        Setup {
+            axes: [true, true, true, false, false, false],
+            ..Setup::default()
+        }
+    }
+
+    /// Every effect, default settings, no annotation, the global pool.
+    fn plain_job(m: &MachineTool, setup: Setup) -> Job<'_> {
+        Job {
+            predictor: Some(ToolPredictor::new(m, EffectSet::default())),
+            setup,
+            settings: Settings::default(),
+            emit: EmitOptions {
+                decimals_mm: None,
+                decimals_deg: None,
+                annotate: false,
+            },
+            pool: None,
+        }
+    }
+
     /// A reader that yields `data`, then fails.
     struct FailingAfter<'a> {
         data: &'a [u8],
@@ -894,31 +935,8 @@ mod tests {
     /// program. The first error in line order is the one reported.
     #[test]
     fn an_error_in_a_chunk_comes_before_a_read_error_after_it() {
-        let text = "kind: machine_tool
-name: t
-axes:
-  - { name: X, type: linear, side: workpiece, travel_mm: [-500, 500], rapid_mm_per_min: 60000 }
-  - { name: Y, type: linear, side: workpiece, travel_mm: [-500, 500], rapid_mm_per_min: 60000 }
-  - { name: Z, type: linear, side: tool, travel_mm: [-500, 500], rapid_mm_per_min: 60000 }
-";
-        let m = match MachineTool::from_yaml_str(text, "t.yaml") {
-            Ok(m) => m,
-            Err(e) => panic!("{e}"),
-        };
-        let job = Job {
-            predictor: Some(ToolPredictor::new(&m, EffectSet::default())),
-            setup: Setup {
-                axes: [true, true, true, false, false, false],
-                ..Setup::default()
-            },
-            settings: Settings::default(),
-            emit: EmitOptions {
-                decimals_mm: None,
-                decimals_deg: None,
-                annotate: false,
-            },
-            pool: None,
-        };
+        let m = xyz_machine("");
+        let job = plain_job(&m, xyz_setup());
         // Line 10 is bad; the program is longer than one chunk, and the
         // reader fails where the second chunk would start.
         let mut program = String::new();
@@ -944,35 +962,14 @@ axes:
 
     #[test]
     fn time_line_of_rapids_cycles_and_dwells() {
-        let text = "kind: machine_tool
-name: t
-axes:
-  - { name: X, type: linear, side: workpiece, travel_mm: [-500, 500], rapid_mm_per_min: 60000 }
-  - { name: Y, type: linear, side: workpiece, travel_mm: [-500, 500], rapid_mm_per_min: 60000 }
-  - { name: Z, type: linear, side: tool, travel_mm: [-500, 500], rapid_mm_per_min: 60000 }
-thermal:
+        let m = xyz_machine(
+            "thermal:
   spindle: { idle_w_per_rpm: 1.0, growth_um_per_kw: 10, time_constant_min: 10 }
-";
-        let m = match MachineTool::from_yaml_str(text, "t.yaml") {
-            Ok(m) => m,
-            Err(e) => panic!("{e}"),
-        };
-        let mut setup = Setup {
-            axes: [true, true, true, false, false, false],
-            ..Setup::default()
-        };
+",
+        );
+        let mut setup = xyz_setup();
         setup.home = [0.0, 0.0, 500.0, 0.0, 0.0, 0.0];
-        let job = Job {
-            predictor: Some(ToolPredictor::new(&m, EffectSet::default())),
-            setup,
-            settings: Settings::default(),
-            emit: EmitOptions {
-                decimals_mm: None,
-                decimals_deg: None,
-                annotate: false,
-            },
-            pool: None,
-        };
+        let job = plain_job(&m, setup);
         let program = "G0 X0 Y0 Z10\nS1000 M3\nG81 X30 Y40 Z-10 R2 F120\nG80\nG4 P1.5\n";
         let s = match job.run(program.as_bytes(), "p.nc", None, None) {
             Ok(s) => s,
