@@ -73,9 +73,23 @@ pub(crate) fn translate_z(acc: &mut Aff, l: f64) {
     }
 }
 
+/// Top three rows of `a · b` where the last row of `b` is zero (the
+/// derivative of an HTM): the same as [`mul`] without the translation of `a`.
+#[inline(always)]
+pub(crate) fn mul0(a: &Aff, b: &Aff) -> Aff {
+    let row = |ai: &[f64; 4]| {
+        let mut o = [0.0; 4];
+        for (j, v) in o.iter_mut().enumerate() {
+            *v = ai[0] * b[0][j] + ai[1] * b[1][j] + ai[2] * b[2][j];
+        }
+        o
+    };
+    [row(&a[0]), row(&a[1]), row(&a[2])]
+}
+
 /// The small-angle error HTM of [`geometry::small_angle`].
 #[inline(always)]
-fn small_angle(d: &[f64; 3], e: &[f64; 3]) -> Aff {
+pub(crate) fn small_angle(d: &[f64; 3], e: &[f64; 3]) -> Aff {
     [
         [1.0, -e[2], e[1], d[0]],
         [e[2], 1.0, -e[0], d[1]],
@@ -179,6 +193,40 @@ impl MergedTables {
     }
 }
 
+impl MergedTables {
+    /// The region of `q` (see [`Self::segs`]): `knots[k−1] ≤ q < knots[k]`.
+    #[inline(always)]
+    pub(crate) fn region(&self, q: f64) -> usize {
+        self.knots.partition_point(|&x| x <= q)
+    }
+
+    /// Bounds of region `k` (infinite at the open ends) and a fixed point
+    /// of it: its lower knot, else its upper knot, else zero.
+    pub(crate) fn region_bounds(&self, k: usize) -> (f64, f64, f64) {
+        let lo = k.checked_sub(1).and_then(|i| self.knots.get(i)).copied();
+        let hi = self.knots.get(k).copied();
+        let origin = lo.or(hi).unwrap_or(0.0);
+        (
+            lo.unwrap_or(f64::NEG_INFINITY),
+            hi.unwrap_or(f64::INFINITY),
+            origin,
+        )
+    }
+
+    /// Value at `q` and slope of the six errors (translations, then
+    /// rotations) on region `k` for the direction of motion `dir`.
+    pub(crate) fn affine(&self, k: usize, dir: i8, q: f64) -> Option<([f64; 6], [f64; 6])> {
+        let s = self.segs.get(2 * k + usize::from(dir <= 0))?;
+        let mut v = [0.0; 6];
+        let mut d = [0.0; 6];
+        for ((l, v), d) in s.iter().zip(&mut v).zip(&mut d) {
+            *v = l.at(q);
+            *d = if l.constant { 0.0 } else { l.slope };
+        }
+        Some((v, d))
+    }
+}
+
 /// The table `p`, `col` on the region starting at `lo` (`None`: below every
 /// knot), as [`super::table::ErrorTable::lookup_hinted`] evaluates it.
 fn segment(p: &[f64], col: &[f64], lo: Option<f64>) -> Lin {
@@ -218,14 +266,17 @@ fn segment(p: &[f64], col: &[f64], lo: Option<f64>) -> Lin {
 #[derive(Debug, Clone, PartialEq)]
 pub(crate) struct AxisFast {
     /// Merged component tables (`None`: use [`ComponentErrors::eval`]).
-    merged: Option<MergedTables>,
+    pub(crate) merged: Option<MergedTables>,
     /// Location orientation HTM, if not the identity.
-    orient: Option<Aff>,
+    pub(crate) orient: Option<Aff>,
     /// Rotary axis with errors: `Trans(P + d) · LOC`, `Trans(−(P + d))`
     /// and the zero-angle error.
     rot_err: (Aff, Aff, f64),
     /// Rotary axis without errors: the same.
     rot_nom: (Aff, Aff, f64),
+    /// The positions where no table of the axis is clamped: from the
+    /// largest first position to the smallest last one (`None`: no table).
+    unclamped: Option<(f64, f64)>,
 }
 
 impl AxisFast {
@@ -243,7 +294,22 @@ impl AxisFast {
                 .then(|| from_m4(&a.location.orientation_htm())),
             rot_err: rotary(&a.location),
             rot_nom: rotary(&LocationErrors::default()),
+            unclamped: a
+                .components
+                .tables
+                .iter()
+                .flatten()
+                .map(super::table::ErrorTable::range)
+                .reduce(|(l0, h0), (l1, h1)| (l0.max(l1), h0.min(h1))),
         }
+    }
+
+    /// True when a table of the axis is clamped at `q` (or `q` is NaN), as
+    /// [`ComponentErrors::is_clamped`] says.
+    #[inline]
+    pub(crate) fn is_clamped(&self, q: f64) -> bool {
+        self.unclamped
+            .is_some_and(|(lo, hi)| q.is_nan() || q < lo || q > hi)
     }
 
     /// Component errors at `q` (translations, rotations).
@@ -268,13 +334,22 @@ pub(crate) struct Precomputed {
     pub(crate) lip: Option<LipGeo>,
     /// The spindle location errors.
     pub(crate) spindle_errors: SpindleErrors,
+    /// Identity of this chain for the cell caches of [`super::cells`]
+    /// (`None` when the chain has no multi-affine cells: a rotary axis, an
+    /// axis beyond X Y Z or tables that could not be merged).
+    pub(crate) cells_id: Option<u64>,
+    /// Bit `s` set when slot `s` has an axis.
+    pub(crate) cells_slots: u8,
 }
 
 impl Precomputed {
     /// Precomputes the chain of `axes` (chain order) and `spindle`.
     pub(crate) fn new(axes: &[Axis], spindle: SpindleErrors) -> Self {
+        let fast: Vec<AxisFast> = axes.iter().map(AxisFast::new).collect();
         Precomputed {
-            axes: axes.iter().map(AxisFast::new).collect(),
+            cells_id: super::cells::chain_id(axes, &fast),
+            cells_slots: axes.iter().fold(0u8, |m, a| m | (1u8 << (a.slot % 8))),
+            axes: fast,
             spindle: (!spindle.is_zero()).then(|| from_m4(&spindle.htm())),
             lip: LipGeo::new(axes, &spindle),
             spindle_errors: spindle,

@@ -23,6 +23,7 @@
 //! * rotary axis with pivot `P` and offset `d`:
 //!   `E = Trans(P + d) · LOC · Rot(ê, θ + ε0) · COM(θ) · Trans(−(P + d))`
 
+mod cells;
 mod component;
 pub mod dynamics;
 mod fast;
@@ -238,13 +239,53 @@ impl MachineTool {
 
     /// Nominal tool tip pose in the workpiece frame for commanded axis values
     /// (machine coordinates) and tool length.
+    ///
+    /// On a machine whose axes are all linear the nominal chain is a
+    /// translation: the tip is accumulated by its column alone, with the
+    /// same additions in the same order as the chain product (same bits).
     pub fn nominal(&self, cmd: &AxisVec, tool_mm: f64) -> TipPose {
+        let finite = tool_mm.is_finite() && cmd.iter().all(|v| v.is_finite());
+        if self.pre.cells_id.is_some() && finite {
+            let mut p = [0.0f64; 3];
+            for (i, a) in self.axes.iter().enumerate() {
+                if i == self.n_workpiece {
+                    p[2] += tool_mm;
+                }
+                let r = a.slot % 3;
+                let q = cmd.get(a.slot).copied().unwrap_or(0.0);
+                // The rotation part stays the identity: column `r` is the
+                // unit vector `r`, so only row `r` changes (the other rows
+                // add a zero, which leaves them as they are).
+                p[r] += q;
+            }
+            if self.n_workpiece == self.axes.len() {
+                p[2] += tool_mm;
+            }
+            p[2] += -tool_mm;
+            return TipPose {
+                pos: Vector3::new(p[0], p[1], p[2]),
+                dir: Vector3::z(),
+            };
+        }
         pose_aff(&self.tip_htm(cmd, &[1; 6], tool_mm, false))
     }
 
     /// Predicted (attained) tool tip pose including the geometric errors,
     /// with component errors looked up for the given direction of motion.
+    ///
+    /// Machines whose axes are all linear evaluate the chain from its
+    /// multi-affine form in the command's cell (see [`cells`]), which
+    /// agrees with the chain product to rounding.
     pub fn geometric(&self, cmd: &AxisVec, dirs: &DirVec, tool_mm: f64) -> TipPose {
+        if let Some((d, p)) = cells::geometric(self, cmd, dirs, tool_mm) {
+            return pose_cols(&d, &p);
+        }
+        pose_aff(&self.tip_htm(cmd, dirs, tool_mm, true))
+    }
+
+    /// [`Self::geometric`] by the chain product alone (the reference of the
+    /// cell form).
+    pub fn geometric_chain(&self, cmd: &AxisVec, dirs: &DirVec, tool_mm: f64) -> TipPose {
         pose_aff(&self.tip_htm(cmd, dirs, tool_mm, true))
     }
 
@@ -338,9 +379,9 @@ impl MachineTool {
     /// error tables (the lookup is clamped at the table ends).
     pub fn clamped_axes(&self, cmd: &AxisVec) -> u8 {
         let mut bits = 0u8;
-        for a in &self.axes {
+        for (a, f) in self.axes.iter().zip(&self.pre.axes) {
             let q = cmd.get(a.slot).copied().unwrap_or(0.0);
-            if a.components.is_clamped(q) {
+            if f.is_clamped(q) {
                 bits |= 1 << a.slot;
             }
         }
@@ -475,6 +516,16 @@ fn product(ms: &[Matrix4<f64>]) -> Matrix4<f64> {
 
 /// Tip pose of (the top three rows of) a chain HTM: translation column
 /// and normalized z column.
+/// The pose of columns 2 (tool axis) and 3 (tip) of an HTM, as
+/// [`pose_aff`] takes them.
+fn pose_cols(d: &[f64; 3], p: &[f64; 3]) -> TipPose {
+    let pos = Vector3::new(p[0], p[1], p[2]);
+    let d = Vector3::new(d[0], d[1], d[2]);
+    let n = d.norm();
+    let dir = if n > 0.0 { d / n } else { Vector3::z() };
+    TipPose { pos, dir }
+}
+
 fn pose_aff(t: &fast::Aff) -> TipPose {
     let [r0, r1, r2] = t;
     let pos = Vector3::new(r0[3], r1[3], r2[3]);
@@ -627,6 +678,165 @@ mod tests {
                                 m.name()
                             );
                         }
+                    }
+                }
+            }
+        }
+    }
+
+    /// The AFM R-1000 and variants of it that move the tool-length and
+    /// spindle factors around the chain: every axis on the tool side,
+    /// every axis on the workpiece side, and a spindle with offsets and
+    /// tilts.
+    fn linear_machines() -> Vec<MachineTool> {
+        let path = concat!(env!("CARGO_MANIFEST_DIR"), "/machines/afm-r1000.yaml");
+        let text = std::fs::read_to_string(path).unwrap_or_default();
+        let spindle = "spindle:\n  location_errors: { EX0S_mm: 0.004, EY0S_mm: -0.003, EA0S_urad: 10.0, EB0S_urad: -12.0 }\n";
+        let variants = [
+            text.clone(),
+            text.replace("side: workpiece", "side: tool"),
+            text.replace("side: tool", "side: workpiece"),
+            text.replacen("tools:\n", &format!("{spindle}tools:\n"), 1),
+        ];
+        variants
+            .iter()
+            .map(|t| match MachineTool::from_yaml_str(t, "afm.yaml") {
+                Ok(m) => m,
+                Err(e) => panic!("{e}"),
+            })
+            .collect()
+    }
+
+    /// Agreement of the cell form with the chain product: positions in mm
+    /// (the chain's own rounding at 1 000 mm is about 1e-13 mm), unit tool
+    /// axis.
+    const CELL_POS_TOL_MM: f64 = 1e-9;
+    const CELL_DIR_TOL: f64 = 1e-12;
+
+    /// Random commands over and beyond the travel, a tenth of them on a knot.
+    fn commands(m: &MachineTool, s: &mut u64, n: usize) -> Vec<AxisVec> {
+        let mut cmds = Vec::new();
+        for _ in 0..n {
+            let mut c = [0.0; 6];
+            for (slot, v) in c.iter_mut().enumerate().take(3) {
+                let (lo, hi) = m.travel(slot).unwrap_or((-100.0, 100.0));
+                let span = hi - lo;
+                *v = lo - 0.1 * span + 1.2 * span * rng(s);
+                if rng(s) < 0.1 {
+                    let bp = m.breakpoints(slot);
+                    if !bp.is_empty() {
+                        let i = ((rng(s) * bp.len() as f64) as usize).min(bp.len() - 1);
+                        *v = bp[i];
+                    }
+                }
+            }
+            cmds.push(c);
+        }
+        cmds
+    }
+
+    #[test]
+    fn cell_form_agrees_with_the_chain_product() {
+        use approx::assert_abs_diff_eq;
+        let machines = linear_machines();
+        assert_eq!(machines.len(), 4);
+        let mut s = 11u64;
+        for m in &machines {
+            assert!(m.pre.cells_id.is_some(), "{}", m.name());
+            for (k, c) in commands(m, &mut s, 3000).iter().enumerate() {
+                let mut dirs = [1i8; 6];
+                for d in dirs.iter_mut() {
+                    if rng(&mut s) < 0.5 {
+                        *d = -1;
+                    }
+                }
+                let tool = [0.0, 62.5, 140.0, -20.0][k % 4];
+                let got = m.geometric(c, &dirs, tool);
+                let want = m.geometric_chain(c, &dirs, tool);
+                assert_abs_diff_eq!(got.pos, want.pos, epsilon = CELL_POS_TOL_MM);
+                assert_abs_diff_eq!(got.dir, want.dir, epsilon = CELL_DIR_TOL);
+                // The error itself (µm) is not lost in the rounding.
+                let err = (want.pos - m.nominal(c, tool).pos).norm();
+                assert!(err > 1e-4, "{c:?}: error {err}");
+            }
+        }
+    }
+
+    #[test]
+    fn cell_form_does_not_depend_on_the_order_of_evaluation() {
+        let m = &linear_machines()[0];
+        let mut s = 5u64;
+        let cmds = commands(m, &mut s, 2000);
+        let dirs = [1, -1, 1, 1, 1, 1];
+        let run = |order: Vec<usize>| {
+            let cmds = cmds.clone();
+            let m = m.clone();
+            // A fresh thread: a fresh cache, filled in this order.
+            std::thread::spawn(move || {
+                let mut out = vec![[0u64; 6]; cmds.len()];
+                for i in order {
+                    let p = m.geometric(&cmds[i], &dirs, 62.5);
+                    for r in 0..3 {
+                        out[i][r] = p.pos[r].to_bits();
+                        out[i][r + 3] = p.dir[r].to_bits();
+                    }
+                }
+                out
+            })
+            .join()
+            .unwrap_or_default()
+        };
+        let forward = run((0..cmds.len()).collect());
+        let backward = run((0..cmds.len()).rev().collect());
+        assert_eq!(forward.len(), cmds.len());
+        assert!(forward == backward);
+    }
+
+    #[test]
+    fn fast_nominal_is_bit_identical_to_the_chain() {
+        let mut s = 3u64;
+        for m in &linear_machines() {
+            let mut cmds = commands(m, &mut s, 2000);
+            cmds.push([0.0; 6]);
+            cmds.push([-0.0; 6]);
+            cmds.push([f64::NAN, 1.0, 2.0, 0.0, 0.0, 0.0]);
+            cmds.push([f64::INFINITY, -1e9, 2.0, 0.0, 0.0, 0.0]);
+            for (k, c) in cmds.iter().enumerate() {
+                let tool = [0.0, 62.5, 140.3, -20.0][k % 4];
+                let got = m.nominal(c, tool);
+                let want = pose_aff(&m.tip_htm(c, &[1; 6], tool, false));
+                for r in 0..3 {
+                    for (a, b) in [(got.pos[r], want.pos[r]), (got.dir[r], want.dir[r])] {
+                        assert!(
+                            a.to_bits() == b.to_bits() || (a.is_nan() && b.is_nan()),
+                            "{c:?} tool {tool}: {a:e} != {b:e}"
+                        );
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn machines_with_rotary_axes_have_no_cells() {
+        for m in bundled() {
+            let rotary = m.axes.iter().any(|a| a.kind == AxisKind::Rotary);
+            assert_eq!(m.pre.cells_id.is_none(), rotary, "{}", m.name());
+        }
+    }
+
+    #[test]
+    fn precomputed_clamp_test_agrees_with_the_tables() {
+        let mut s = 9u64;
+        for m in bundled().iter().chain(&linear_machines()) {
+            let mut cmds = commands(m, &mut s, 500);
+            cmds.push([f64::NAN; 6]);
+            for c in &cmds {
+                for (a, f) in m.axes.iter().zip(&m.pre.axes) {
+                    let mut qs = vec![c[a.slot % 3]];
+                    qs.extend_from_slice(m.breakpoints(a.slot));
+                    for q in qs {
+                        assert_eq!(f.is_clamped(q), a.components.is_clamped(q), "{q}");
                     }
                 }
             }
