@@ -61,8 +61,25 @@ pub fn format_number(v: f64, d: usize, trim: bool) -> String {
 
 /// [`format_number`] appended to `out`, without an intermediate string.
 pub fn write_number(out: &mut Vec<u8>, v: f64, d: usize, trim: bool) {
+    let mut buf = [0u8; FIXED_MAX];
+    if let Some(len) = fixed_digits(&mut buf, v, d) {
+        // `fixed_digits` writes no sign for a zero, the point when there are
+        // decimals: what is left of the clean-up is the trimming, and the
+        // point of a whole number.
+        let mut s = buf.get(..len).unwrap_or(&[]);
+        if d > 0 && trim {
+            while let Some((&b'0', rest)) = s.split_last() {
+                s = rest;
+            }
+        }
+        out.extend_from_slice(s);
+        if d == 0 {
+            out.push(b'.');
+        }
+        return;
+    }
     let start = out.len();
-    if !write_fixed(out, v, d) {
+    {
         use std::io::Write;
         // Writing into a `Vec` cannot fail.
         let _ = write!(out, "{v:.d$}");
@@ -85,52 +102,107 @@ pub fn write_number(out: &mut Vec<u8>, v: f64, d: usize, trim: bool) {
 /// Powers of ten of the fast formatting path.
 const POW10: [f64; 10] = [1e0, 1e1, 1e2, 1e3, 1e4, 1e5, 1e6, 1e7, 1e8, 1e9];
 
-/// Appends `format!("{v:.d$}")` to `out` without the exact (big-number)
-/// float formatting when that is safe, and says whether it did. `v · 10^d`
-/// is computed with one rounding (10^d is exact), so it lies within
-/// `|v · 10^d| · ε` of the exact decimal product; when the product is closer
-/// to its nearest integer `r` than half a unit minus twice that bound, the
-/// exact value rounds to `r` too, whatever the tie rule, and the digits of
-/// `r` are those of the exact formatting. Near a tie, `false` (the caller
-/// formats exactly).
-fn write_fixed(out: &mut Vec<u8>, v: f64, d: usize) -> bool {
-    let Some(&scale) = POW10.get(d) else {
-        return false;
-    };
+/// Longest text of the fast path: sign, 16 digits, point, leading zeros of
+/// the fraction.
+const FIXED_MAX: usize = 32;
+
+/// `x.round()` (half away from zero) for `|x| < 2^52`, without the library
+/// call: the conversion truncates exactly and `x − trunc(x)` is exact there.
+#[inline(always)]
+fn round_half_away(x: f64) -> f64 {
+    if x.abs() < 4_503_599_627_370_496.0 {
+        let t = x as i64;
+        let frac = x - t as f64;
+        let n = if frac >= 0.5 {
+            t + 1
+        } else if frac <= -0.5 {
+            t - 1
+        } else {
+            t
+        };
+        let r = n as f64;
+        // Keep the sign of a zero as `round` does (−0.4 → −0).
+        if r == 0.0 { 0.0f64.copysign(x) } else { r }
+    } else {
+        x.round()
+    }
+}
+
+/// `format!("{v:.d$}")` into `buf` without the exact (big-number) float
+/// formatting when that is safe, with the sign of a zero dropped; the
+/// length, or `None` near a rounding tie (the caller formats exactly).
+///
+/// `v · 10^d` is computed with one rounding (10^d is exact), so it lies
+/// within `|v · 10^d| · ε` of the exact decimal product; when the product is
+/// closer to its nearest integer `r` than half a unit minus twice that
+/// bound, the exact value rounds to `r` too, whatever the tie rule, and the
+/// digits of `r` are those of the exact formatting.
+#[inline]
+fn fixed_digits(buf: &mut [u8; FIXED_MAX], v: f64, d: usize) -> Option<usize> {
+    let scale = *POW10.get(d)?;
     let scaled = v * scale;
-    let r = scaled.round();
+    let r = round_half_away(scaled);
     if !r.is_finite()
         || r.abs() >= 1e15
         || (scaled - r).abs() >= 0.5 - 2.0 * f64::EPSILON * scaled.abs().max(1.0)
     {
-        return false;
+        return None;
     }
     let n = r as i64;
-    if n < 0 || (n == 0 && v.is_sign_negative()) {
-        out.push(b'-');
-    }
-    // Decimal digits of |n|, least significant first.
-    let mut digits = [0u8; 20];
-    let mut len = 0;
     let mut m = n.unsigned_abs();
+    // Decimal digits of |n| from the end of a scratch buffer.
+    let mut digits = [b'0'; 20];
+    let mut first = digits.len();
     loop {
-        digits[len] = b'0' + (m % 10) as u8;
-        len += 1;
+        first -= 1;
+        *digits.get_mut(first)? = b'0' + (m % 10) as u8;
         m /= 10;
         if m == 0 {
             break;
         }
     }
-    // At least one integer digit.
+    let len = digits.len() - first;
+    // At least one integer digit: `total` digits, zero-padded in front.
     let total = len.max(d + 1);
-    for i in (0..total).rev() {
-        out.push(if i < len { digits[i] } else { b'0' });
-        // The point comes after the units digit (position `d`).
-        if i == d && d > 0 {
-            out.push(b'.');
-        }
+    let mut at = 0;
+    if n < 0 {
+        *buf.get_mut(at)? = b'-';
+        at += 1;
     }
-    true
+    let int_digits = total - d;
+    for i in 0..total {
+        // Digit `i` of `total` (most significant first).
+        let k = total - 1 - i;
+        let c = if k < len {
+            *digits.get(digits.len() - 1 - k)?
+        } else {
+            b'0'
+        };
+        if i == int_digits {
+            *buf.get_mut(at)? = b'.';
+            at += 1;
+        }
+        *buf.get_mut(at)? = c;
+        at += 1;
+    }
+    Some(at)
+}
+
+/// [`fixed_digits`] with the sign of a zero kept (exactly `format!`'s text),
+/// appended to `out`; whether it was safe.
+#[cfg(test)]
+fn write_fixed(out: &mut Vec<u8>, v: f64, d: usize) -> bool {
+    let mut buf = [0u8; FIXED_MAX];
+    match fixed_digits(&mut buf, v, d) {
+        Some(len) => {
+            if buf.first() != Some(&b'-') && v.is_sign_negative() {
+                out.push(b'-');
+            }
+            out.extend_from_slice(buf.get(..len).unwrap_or(&[]));
+            true
+        }
+        None => false,
+    }
 }
 
 fn round_to(v: f64, d: usize) -> f64 {
@@ -139,7 +211,7 @@ fn round_to(v: f64, d: usize) -> f64 {
         .get(d)
         .copied()
         .unwrap_or_else(|| 10f64.powi(d as i32));
-    (v * f).round() / f
+    round_half_away(v * f) / f
 }
 
 /// A replacement of `start..end` of the line by `text` (a range of
@@ -701,6 +773,32 @@ mod tests {
     }
 
     #[test]
+    fn rounding_edge_cases_are_the_library_ones() {
+        for x in [
+            0.5,
+            -0.5,
+            1.5,
+            2.5,
+            -2.5,
+            0.49999999999999994,
+            -0.49999999999999994,
+            -0.0,
+            0.0,
+            -0.4,
+            4503599627370495.5,
+            -4503599627370495.5,
+            4503599627370496.0,
+            1e300,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            f64::MIN_POSITIVE,
+        ] {
+            assert_eq!(round_half_away(x).to_bits(), x.round().to_bits(), "{x:e}");
+        }
+        assert!(round_half_away(f64::NAN).is_nan());
+    }
+
+    #[test]
     fn numbers_are_fixed_point() {
         assert_eq!(format_number(1e-7, 4, false), "0.0000");
         assert_eq!(format_number(-0.00001, 3, false), "0.000");
@@ -769,6 +867,20 @@ mod tests {
 
     proptest::proptest! {
         #![proptest_config(proptest::prelude::ProptestConfig::with_cases(20_000))]
+
+        #[test]
+        fn rounding_is_the_library_one(
+            v in proptest::prelude::any::<f64>(),
+            k in -60i32..60,
+            half in proptest::prelude::any::<bool>(),
+        ) {
+            // Any value, and values at and next to halves of every size.
+            let h = (k as f64 + if half { 0.5 } else { 0.0 }) * 2f64.powi(k.rem_euclid(53));
+            for x in [v, h, -h, f64::from_bits(h.to_bits() + 1), f64::from_bits(h.to_bits().wrapping_sub(1))] {
+                let (a, b) = (round_half_away(x), x.round());
+                proptest::prop_assert!(a.to_bits() == b.to_bits() || (a.is_nan() && b.is_nan()), "{x:e}: {a:e} != {b:e}");
+            }
+        }
 
         #[test]
         fn written_numbers_are_the_exact_ones(
