@@ -459,6 +459,24 @@ fn motion_label(plan: &Plan) -> &'static str {
     }
 }
 
+/// The compensation of a block: `None` for blocks not solved.
+type Solved = Option<std::result::Result<BlockResult, Failure>>;
+
+/// One chunk in flight through [`Job::run`] with what the stages made of it.
+#[derive(Default)]
+struct Stage {
+    chunk: Chunk,
+    /// Number of lines of the chunk interpreted into `plans`.
+    n: usize,
+    /// The plans of the chunk's lines (the first `n` are valid; kept between
+    /// chunks so that they are reused).
+    plans: Vec<Plan>,
+    /// The block context of each line (with process effects).
+    contexts: Vec<BlockContext>,
+    /// The compensation of each line.
+    results: Vec<Solved>,
+}
+
 /// Lines parsed in order by one task when a chunk is parsed in parallel.
 const PARSE_LINES: usize = 512;
 
@@ -588,12 +606,47 @@ impl<'m> Job<'m> {
         }
     }
 
+    /// Compensates the blocks of a prepared stage (on the job's pool: the
+    /// caller runs this inside a task of it). Runs of [`GROUP_BLOCKS`]
+    /// blocks go in order on one thread (a straight move reuses the
+    /// previous end's solution for its start); the runs start at fixed
+    /// blocks, so the output does not depend on the number of threads.
+    fn compensate_stage(&self, st: &mut Stage, solving: bool) {
+        st.results.clear();
+        let Some(pred) = &self.predictor else {
+            return;
+        };
+        if !solving {
+            return;
+        }
+        let n = st.n;
+        st.results.resize_with(n, || None);
+        let plans = &st.plans[..n];
+        st.results
+            .par_chunks_mut(GROUP_BLOCKS)
+            .zip(plans.par_chunks(GROUP_BLOCKS))
+            .zip(st.contexts.par_chunks(GROUP_BLOCKS))
+            .for_each(|((rs, ps), cs)| {
+                let mut carry = None;
+                for ((r, p), c) in rs.iter_mut().zip(ps).zip(cs) {
+                    *r = Some(compensate::block_after(
+                        &pred.with_context(*c),
+                        p,
+                        &self.settings,
+                        &mut carry,
+                    ));
+                }
+            });
+    }
+
     /// Runs the job over `input`. With `out`, the (compensated) program is
     /// written; with `rows`, a row per motion block is handed over in order.
     ///
-    /// The program streams through in chunks of [`CHUNK_LINES`] lines; the
-    /// next chunk is read and parsed (in parallel) while the current one is
-    /// interpreted, compensated and written.
+    /// The program streams through in chunks of [`CHUNK_LINES`] lines, four
+    /// chunks in flight: while the pool compensates one chunk and parses
+    /// the chunk after next, the calling thread writes the chunk before and
+    /// interprets the next one. Errors are raised in line order: an error
+    /// found in a later chunk waits until the earlier chunks are written.
     pub fn run<R: BufRead>(
         &self,
         mut input: R,
@@ -604,9 +657,6 @@ impl<'m> Job<'m> {
         let mut interp = Interpreter::new(self.setup.clone(), file);
         let mut emitter = Emitter::new(self.emit);
         let mut summary = Summary::default();
-        let mut plans: Vec<Plan> = Vec::with_capacity(CHUNK_LINES);
-        type Solved = Option<std::result::Result<BlockResult, Failure>>;
-        let mut results: Vec<Solved> = Vec::with_capacity(CHUNK_LINES);
         let mut out_buf: Vec<u8> = Vec::with_capacity(1 << 20);
         let mut tools: std::collections::BTreeSet<u32> = Default::default();
         let mut last_tool = 0u32;
@@ -614,7 +664,6 @@ impl<'m> Job<'m> {
         // Warnings found by the job itself: clamped tables, resonance.
         let mut extra_warnings: Vec<Warning> = Vec::new();
         let mut tracker = self.predictor.as_ref().map(|p| Tracker::new(p, false));
-        let mut contexts: Vec<BlockContext> = Vec::with_capacity(CHUNK_LINES);
         // With every effect off the output is the input; a report still
         // wants its rows (of zero deviation).
         let solving = self
@@ -622,14 +671,16 @@ impl<'m> Job<'m> {
             .as_ref()
             .is_some_and(|p| !p.effects.is_none() || rows.is_some());
 
-        // Interprets, compensates and writes one parsed chunk.
-        let mut process = |chunk: &mut Chunk| -> Result<()> {
+        // Interprets one parsed chunk: its plans and block contexts.
+        let mut prepare = |st: &mut Stage, summary: &mut Summary| -> Result<()> {
+            let chunk = &mut st.chunk;
             let n = chunk.ranges.len();
-            if plans.len() < n {
-                plans.resize(n, Plan::default());
+            st.n = n;
+            if st.plans.len() < n {
+                st.plans.resize(n, Plan::default());
             }
-            contexts.clear();
-            for (i, plan) in plans[..n].iter_mut().enumerate() {
+            st.contexts.clear();
+            for (i, plan) in st.plans[..n].iter_mut().enumerate() {
                 chunk.block(i)?;
                 let (s, e) = chunk.ranges[i];
                 let line = &chunk.buf[s..e];
@@ -677,7 +728,7 @@ impl<'m> Job<'m> {
                     }
                 }
                 if let Some(t) = tracker.as_mut() {
-                    contexts.push(t.advance(
+                    st.contexts.push(t.advance(
                         plan,
                         interp.spindle_rpm(),
                         block.line_no,
@@ -686,41 +737,15 @@ impl<'m> Job<'m> {
                     ));
                 }
             }
-            let plans = &plans[..n];
             summary.lines = chunk.first_line + chunk.ranges.len();
-            let Some(pred) = &self.predictor else {
-                if let Some(out) = out.as_deref_mut() {
-                    out.write_all(&chunk.buf)
-                        .map_err(|e| Error::io("output", e))?;
-                }
-                return Ok(());
-            };
-            results.clear();
-            if solving {
-                results.resize_with(plans.len(), || None);
-                // Runs of GROUP_BLOCKS blocks in order on one thread (a
-                // straight move reuses the previous end's solution for its
-                // start); the runs start at fixed blocks, so the output does
-                // not depend on the number of threads.
-                let (contexts, results) = (&contexts, &mut results);
-                self.install(|| {
-                    results
-                        .par_chunks_mut(GROUP_BLOCKS)
-                        .zip(plans.par_chunks(GROUP_BLOCKS))
-                        .zip(contexts.par_chunks(GROUP_BLOCKS))
-                        .for_each(|((rs, ps), cs)| {
-                            let mut carry = None;
-                            for ((r, p), c) in rs.iter_mut().zip(ps).zip(cs) {
-                                *r = Some(compensate::block_after(
-                                    &pred.with_context(*c),
-                                    p,
-                                    &self.settings,
-                                    &mut carry,
-                                ));
-                            }
-                        })
-                });
-            } else if rows.is_none() {
+            Ok(())
+        };
+
+        // Writes one compensated chunk (and hands over its rows).
+        let mut finish = |st: &mut Stage, summary: &mut Summary| -> Result<()> {
+            let chunk = &st.chunk;
+            let plans = &st.plans[..st.n];
+            if self.predictor.is_none() || (!solving && rows.is_none()) {
                 // Nothing is solved: every line is written as it is.
                 if let Some(out) = out.as_deref_mut() {
                     out.write_all(&chunk.buf)
@@ -731,7 +756,7 @@ impl<'m> Job<'m> {
             out_buf.clear();
             for (i, plan) in plans.iter().enumerate() {
                 let block = &chunk.blocks[i];
-                let res = match results.get(i) {
+                let res = match st.results.get(i) {
                     Some(Some(Ok(r))) => Some(r),
                     Some(Some(Err(f))) => {
                         return Err(Error::Unachievable(Located::new(
@@ -788,34 +813,75 @@ impl<'m> Job<'m> {
             Ok(())
         };
 
-        let mut cur = Chunk::default();
-        let mut next = Chunk::default();
-        cur.read(&mut input, file, 0)?;
-        self.install(|| cur.parse(file));
-        loop {
-            let more = !cur.eof;
-            // A read error of the next chunk is raised only after this
-            // chunk's own (earlier) errors: the first error in line order.
-            let read = if more {
-                next.read(&mut input, file, cur.first_line + cur.ranges.len())
-            } else {
-                Ok(())
-            };
-            let parse_next = more && read.is_ok();
-            // The next chunk is parsed on the pool while this one goes
-            // through the in-order passes here.
-            let next_ref = &mut next;
-            in_scope(self.pool, |s| {
-                if parse_next {
-                    s.spawn(move |_| next_ref.parse(file));
+        // The four chunks in flight, oldest first: `done` is compensated
+        // (to be written), `solve` is interpreted (to be compensated),
+        // `parsed` is parsed (to be interpreted), `read` is being read.
+        let mut done = Stage::default();
+        let mut solve = Stage::default();
+        let mut parsed = Stage::default();
+        let mut read = Stage::default();
+        let (mut has_done, mut has_solve) = (false, false);
+        parsed.chunk.read(&mut input, file, 0)?;
+        self.install(|| parsed.chunk.parse(file));
+        let mut has_parsed = true;
+        let mut next_line = parsed.chunk.ranges.len();
+        let mut input_done = parsed.chunk.eof;
+        // An error of a later chunk, raised once the earlier ones are written.
+        let mut pending: Option<Error> = None;
+        while has_done || has_solve || has_parsed {
+            let mut has_read = false;
+            let mut read_error = None;
+            if !input_done && pending.is_none() {
+                match read.chunk.read(&mut input, file, next_line) {
+                    Ok(()) => {
+                        has_read = true;
+                        next_line += read.chunk.ranges.len();
+                        input_done = read.chunk.eof;
+                    }
+                    Err(e) => {
+                        read_error = Some(e);
+                        input_done = true;
+                    }
                 }
-                process(&mut cur)
-            })?;
-            read?;
-            if !more {
-                break;
             }
-            std::mem::swap(&mut cur, &mut next);
+            let mut written = Ok(());
+            let mut interpreted = Ok(());
+            let (solve_ref, read_ref) = (&mut solve, &mut read.chunk);
+            in_scope(self.pool, |s| {
+                if has_solve {
+                    s.spawn(move |_| self.compensate_stage(solve_ref, solving));
+                }
+                if has_read {
+                    s.spawn(move |_| read_ref.parse(file));
+                }
+                if has_done {
+                    written = finish(&mut done, &mut summary);
+                }
+                if has_parsed && written.is_ok() {
+                    interpreted = prepare(&mut parsed, &mut summary);
+                }
+            });
+            written?;
+            if let Err(e) = interpreted {
+                pending = Some(e);
+            } else if let (None, Some(e)) = (&pending, read_error) {
+                pending = Some(e);
+            }
+            // Shift the stages: each chunk moves one stage on.
+            std::mem::swap(&mut done, &mut solve);
+            has_done = has_solve;
+            std::mem::swap(&mut solve, &mut parsed);
+            has_solve = has_parsed && pending.is_none();
+            std::mem::swap(&mut parsed, &mut read);
+            has_parsed = has_read && pending.is_none();
+            if !has_done {
+                if let Some(e) = pending.take() {
+                    return Err(e);
+                }
+            }
+        }
+        if let Some(e) = pending {
+            return Err(e);
         }
         summary.inch = interp.inch();
         summary.warnings = interp.warnings().to_vec();
@@ -958,6 +1024,100 @@ axes:
             Err(e) => e.to_string(),
         };
         assert!(err.starts_with("p.nc:10:"), "{err}");
+    }
+
+    /// A program of `lines` feed moves with the given lines replaced.
+    fn program_with(lines: usize, replace: &[(usize, &str)]) -> String {
+        let mut program = String::from("G0 X0 Y0 Z10\n");
+        for k in 2..=lines {
+            match replace.iter().find(|(at, _)| *at == k) {
+                Some((_, text)) => program.push_str(text),
+                None => program.push_str(&format!("G1 X{} Y{} F1000", k % 300, k % 7)),
+            }
+            program.push('\n');
+        }
+        program
+    }
+
+    fn run_error(job: &Job, program: &str) -> String {
+        let mut out = Vec::new();
+        match job.run(program.as_bytes(), "p.nc", Some(&mut out), None) {
+            Ok(_) => panic!("the program must fail"),
+            Err(e) => e.to_string(),
+        }
+    }
+
+    /// The pipeline interprets a chunk while the one before is compensated
+    /// and the one before that is written: an error found in a later chunk
+    /// must still wait for the earlier chunks' own errors.
+    #[test]
+    fn errors_are_raised_in_line_order_across_the_pipeline() {
+        let m = xyz_machine("");
+        let job = plain_job(&m, xyz_setup());
+        let c = CHUNK_LINES;
+        // A target beyond the travel (found by the compensation) in the
+        // first chunk, a syntax error in the second and an interpretation
+        // error (arc without centre) in the third.
+        let bad_travel = "G1 X900 F1000";
+        let cases: [(&[(usize, &str)], usize); 5] = [
+            (
+                &[(5, bad_travel), (c + 5, "G1 X1 Q"), (2 * c + 5, "G2 X5 Y5")],
+                5,
+            ),
+            (&[(c + 5, "G1 X1 Q"), (2 * c + 5, bad_travel)], c + 5),
+            (&[(c + 7, bad_travel), (2 * c + 3, "G1 X1 Q")], c + 7),
+            (
+                &[(2 * c + 3, bad_travel), (2 * c + 9, "G2 X5 Y5")],
+                2 * c + 9,
+            ),
+            (&[(3 * c + 1, bad_travel)], 3 * c + 1),
+        ];
+        for (replace, line) in cases {
+            let program = program_with(4 * c + 100, replace);
+            let err = run_error(&job, &program);
+            assert!(
+                err.starts_with(&format!("p.nc:{line}:")),
+                "{replace:?}: {err}"
+            );
+        }
+    }
+
+    /// The same bytes and summary for one and two worker threads over a
+    /// program of several chunks.
+    #[test]
+    fn pipelined_output_does_not_depend_on_the_threads() {
+        let m = match MachineTool::from_yaml_str(
+            &std::fs::read_to_string(concat!(
+                env!("CARGO_MANIFEST_DIR"),
+                "/machines/afm-r1000.yaml"
+            ))
+            .unwrap_or_default(),
+            "afm.yaml",
+        ) {
+            Ok(m) => m,
+            Err(e) => panic!("{e}"),
+        };
+        let mut setup = xyz_setup();
+        setup.work_offsets[0] = Some([250.0, 150.0, 150.0]);
+        let program = program_with(3 * CHUNK_LINES + 517, &[(40, "G2 X59 Y4 I10 J0")]);
+        let mut outs = Vec::new();
+        for threads in [1, 2] {
+            let pool = match rayon::ThreadPoolBuilder::new().num_threads(threads).build() {
+                Ok(p) => p,
+                Err(e) => panic!("{e}"),
+            };
+            let mut job = plain_job(&m, setup.clone());
+            job.pool = Some(&pool);
+            let mut out = Vec::new();
+            let summary = match job.run(program.as_bytes(), "p.nc", Some(&mut out), None) {
+                Ok(s) => s,
+                Err(e) => panic!("{e}"),
+            };
+            assert_eq!(summary.lines, 3 * CHUNK_LINES + 517);
+            assert!(summary.changed > 3 * CHUNK_LINES);
+            outs.push((out, summary.changed, summary.added));
+        }
+        assert!(outs[0] == outs[1]);
     }
 
     #[test]

@@ -81,31 +81,33 @@ impl Cell {
         (0..3).all(|s| q[s] >= self.lo[s] && q[s] < self.hi[s])
     }
 
-    /// Columns 2 (tool axis, not normalised) and 3 (tip) of the chain at `q`.
+    /// The monomials `Π_{i ∈ S} (q_i − o_i)` at `q`, by subset mask `S`.
     #[inline(always)]
-    fn eval(&self, q: &[f64; 3]) -> ([f64; 3], [f64; 3]) {
+    fn weights(&self, q: &[f64; 3]) -> [f64; 8] {
         let ux = q[0] - self.origin[0];
         let uy = q[1] - self.origin[1];
         let uz = q[2] - self.origin[2];
         let uxy = ux * uy;
-        let w = [1.0, ux, uy, uxy, uz, ux * uz, uy * uz, uxy * uz];
-        let mut d = [0.0; 3];
+        [1.0, ux, uy, uxy, uz, ux * uz, uy * uz, uxy * uz]
+    }
+
+    /// One column of the chain from its coefficients `t` (`dir`: column 2,
+    /// the tool axis, not normalised; `pos`: column 3, the tip) and the
+    /// monomials `w` of the point.
+    #[inline(always)]
+    fn col(t: &[[f64; 3]; 8], w: &[f64; 8]) -> [f64; 3] {
         let mut p = [0.0; 3];
-        for r in 0..3 {
-            let c = |t: &[[f64; 3]; 8]| {
-                t[0][r]
-                    + t[1][r] * w[1]
-                    + t[2][r] * w[2]
-                    + t[3][r] * w[3]
-                    + t[4][r] * w[4]
-                    + t[5][r] * w[5]
-                    + t[6][r] * w[6]
-                    + t[7][r] * w[7]
-            };
-            d[r] = c(&self.dir);
-            p[r] = c(&self.pos);
+        for (r, v) in p.iter_mut().enumerate() {
+            *v = t[0][r]
+                + t[1][r] * w[1]
+                + t[2][r] * w[2]
+                + t[3][r] * w[3]
+                + t[4][r] * w[4]
+                + t[5][r] * w[5]
+                + t[6][r] * w[6]
+                + t[7][r] * w[7];
         }
-        (d, p)
+        p
     }
 }
 
@@ -259,6 +261,22 @@ pub(crate) fn geometric(
     dirs: &[i8; 6],
     tool_mm: f64,
 ) -> Option<([f64; 3], [f64; 3])> {
+    with_cell(m, cmd, dirs, tool_mm, |c, q| {
+        let w = c.weights(q);
+        (Cell::col(&c.dir, &w), Cell::col(&c.pos, &w))
+    })
+}
+
+/// `f` applied to the cell of `cmd` (from the thread's cache, built when
+/// missing) and the command's X Y Z.
+#[inline]
+fn with_cell<T>(
+    m: &MachineTool,
+    cmd: &[f64; 6],
+    dirs: &[i8; 6],
+    tool_mm: f64,
+    f: impl Fn(&Cell, &[f64; 3]) -> T,
+) -> Option<T> {
     let chain = m.pre.cells_id?;
     let q = [cmd[0], cmd[1], cmd[2]];
     if !(q.iter().all(|v| v.is_finite()) && tool_mm.is_finite()) {
@@ -280,7 +298,7 @@ pub(crate) fn geometric(
                     && c.key.reverse == reverse
                     && c.contains(&q)
                 {
-                    let v = c.eval(&q);
+                    let v = f(c, &q);
                     cache.touch(h);
                     return Some(v);
                 }
@@ -308,7 +326,7 @@ pub(crate) fn geometric(
             None => *slot = Some(Box::new(build(m, key, &d3)?)),
         }
         cache.touch(h);
-        cache.cells.get(h)?.as_deref().map(|c| c.eval(&q))
+        cache.cells.get(h)?.as_deref().map(|c| f(c, &q))
     })
 }
 
