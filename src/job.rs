@@ -459,6 +459,11 @@ fn motion_label(plan: &Plan) -> &'static str {
     }
 }
 
+/// Largest split-point storage (points) kept for reuse by a later block:
+/// a move split into very many pieces gives its storage back, so that the
+/// chunks in flight do not hold on to it.
+const REUSE_SEGMENTS: usize = 64;
+
 /// The compensation of a block: `None` for blocks not solved.
 type Solved = Option<std::result::Result<BlockResult, Failure>>;
 
@@ -612,14 +617,18 @@ impl<'m> Job<'m> {
     /// previous end's solution for its start); the runs start at fixed
     /// blocks, so the output does not depend on the number of threads.
     fn compensate_stage(&self, st: &mut Stage, solving: bool) {
-        st.results.clear();
         let Some(pred) = &self.predictor else {
+            st.results.clear();
             return;
         };
         if !solving {
+            st.results.clear();
             return;
         }
         let n = st.n;
+        // The results of the chunk this stage held before are overwritten
+        // in place: their split-point storage is reused.
+        st.results.truncate(n);
         st.results.resize_with(n, || None);
         let plans = &st.plans[..n];
         st.results
@@ -629,11 +638,16 @@ impl<'m> Job<'m> {
             .for_each(|((rs, ps), cs)| {
                 let mut carry = None;
                 for ((r, p), c) in rs.iter_mut().zip(ps).zip(cs) {
-                    *r = Some(compensate::block_after(
+                    let segments = match r.take() {
+                        Some(Ok(old)) if old.segments.capacity() <= REUSE_SEGMENTS => old.segments,
+                        _ => Vec::new(),
+                    };
+                    *r = Some(compensate::block_reusing(
                         &pred.with_context(*c),
                         p,
                         &self.settings,
                         &mut carry,
+                        segments,
                     ));
                 }
             });

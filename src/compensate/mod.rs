@@ -627,15 +627,35 @@ pub fn block_after(
     settings: &Settings,
     carry: &mut Option<Carry>,
 ) -> Result<BlockResult, Failure> {
+    block_reusing(pred, plan, settings, carry, Vec::new())
+}
+
+/// [`block_after`] with `segments` (cleared first) as the storage of the
+/// result's split points, so that a caller that recycles the results of
+/// earlier blocks allocates nothing for split moves once warmed up.
+pub fn block_reusing(
+    pred: &ToolPredictor,
+    plan: &Plan,
+    settings: &Settings,
+    carry: &mut Option<Carry>,
+    mut segments: Vec<AxisVec>,
+) -> Result<BlockResult, Failure> {
+    segments.clear();
     let Some(mv) = plan.mv else {
-        return Ok(BlockResult::default());
+        return Ok(BlockResult {
+            segments,
+            ..BlockResult::default()
+        });
     };
     if plan.kind != PlanKind::Pass {
         check_programmed_travel(pred, &mv.end)?;
     }
     let prev = carry.take();
     let carry_in = prev.as_ref();
-    let mut res = BlockResult::default();
+    let mut res = BlockResult {
+        segments,
+        ..BlockResult::default()
+    };
     let tool = mv.tool_len_mm;
     let tol = settings.tolerance_mm;
     match plan.kind {
@@ -708,7 +728,7 @@ pub fn block_after(
                 }
                 _ => solve_near(pred, &mv.start, &c1, &mv.end, &mv.dirs, &lip)?.0,
             };
-            let mut pts = Vec::new();
+            let mut pts = std::mem::take(&mut res.segments);
             split_line(
                 pred, &mv.start, &mv.end, &c0, &c1, &mv.dirs, &lip, tol, false, &mut pts,
             )?;
@@ -771,7 +791,8 @@ fn arc_block(
     let max_step = 2.0 * (1.0 - sag / r).clamp(-1.0, 1.0).acos();
     let chords = ((arc.sweep.abs() / max_step.max(1e-6)).ceil() as usize).clamp(1, 1 << 16);
     let mut prev_p = mv.start;
-    let mut pts = Vec::new();
+    let mut pts = std::mem::take(&mut res.segments);
+    pts.clear();
     let lip = Lip::new(tool);
     for k in 1..=chords {
         let s = k as f64 / chords as f64;
@@ -803,4 +824,67 @@ fn arc_block(
     }
     res.segments = pts;
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::machine::tool::MachineTool;
+    use crate::predict::EffectSet;
+    use crate::program::interp::{Interpreter, Setup};
+
+    /// A recycled split-point storage, whatever it held, gives the result
+    /// of a fresh one, and keeps its allocation.
+    #[test]
+    fn reused_segment_storage_gives_the_same_result() {
+        let path = concat!(env!("CARGO_MANIFEST_DIR"), "/machines/afm-r1000.yaml");
+        let text = std::fs::read_to_string(path).unwrap_or_default();
+        let m = match MachineTool::from_yaml_str(&text, path) {
+            Ok(m) => m,
+            Err(e) => panic!("{e}"),
+        };
+        let pred = ToolPredictor::new(&m, EffectSet::default());
+        let setup = Setup {
+            axes: [true, true, true, false, false, false],
+            ..Setup::default()
+        };
+        let mut interp = Interpreter::new(setup, "p.nc");
+        let program = [
+            "G0 X0 Y0 Z10",
+            "G1 X900 Y20 F1000",
+            "G2 X910 Y30 I0 J10",
+            "G1 Y20",
+        ];
+        let mut plans = Vec::new();
+        for (k, line) in program.iter().enumerate() {
+            let mut block = crate::program::gcode::Block::default();
+            if let Err(e) =
+                crate::program::gcode::parse_line(line.as_bytes(), k + 1, "p.nc", &mut block)
+            {
+                panic!("{e}");
+            }
+            match interp.step(&block, line.as_bytes()) {
+                Ok(p) => plans.push(p),
+                Err(e) => panic!("{e}"),
+            }
+        }
+        let settings = Settings::default();
+        let (mut fresh_carry, mut reuse_carry) = (None, None);
+        let mut split = false;
+        for plan in &plans {
+            let fresh = block_after(&pred, plan, &settings, &mut fresh_carry);
+            let mut junk = vec![[7.0; 6]; 40];
+            junk.reserve(100_000);
+            let ptr = junk.as_ptr();
+            let reused = block_reusing(&pred, plan, &settings, &mut reuse_carry, junk);
+            assert_eq!(fresh, reused);
+            if let Ok(r) = &reused {
+                split |= !r.segments.is_empty();
+                if !r.segments.is_empty() {
+                    assert_eq!(r.segments.as_ptr(), ptr, "the storage is kept");
+                }
+            }
+        }
+        assert!(split, "the long move is split");
+    }
 }
