@@ -697,7 +697,23 @@ mod tests {
             text.replace("side: workpiece", "side: tool"),
             text.replace("side: tool", "side: workpiece"),
             text.replacen("tools:\n", &format!("{spindle}tools:\n"), 1),
+            // Tables of one axis on different knots: merged regions shorter
+            // than any table's segments, and a table reaching past the travel.
+            text.replacen(
+                "positions_mm: [0.0, 100.0, 200.0, 300.0, 400.0, 500.0, 600.0, 700.0, 800.0, 900.0, 1000.0]",
+                "positions_mm: [-20.0, 75.0, 210.0, 333.0, 400.0, 480.0, 600.0, 690.0, 800.0, 930.0, 1010.0]",
+                1,
+            )
+            .replacen(
+                "positions_mm: [0.0, 50.0, 100.0, 150.0, 200.0, 250.0, 300.0, 350.0, 400.0, 450.0, 500.0]",
+                "positions_mm: [10.0, 40.0, 90.0, 160.0, 200.0, 260.0, 300.0, 340.0, 420.0, 450.0, 490.0]",
+                1,
+            ),
         ];
+        assert!(
+            variants.iter().skip(1).all(|v| *v != text),
+            "every variant differs"
+        );
         variants
             .iter()
             .map(|t| match MachineTool::from_yaml_str(t, "afm.yaml") {
@@ -739,7 +755,7 @@ mod tests {
     fn cell_form_agrees_with_the_chain_product() {
         use approx::assert_abs_diff_eq;
         let machines = linear_machines();
-        assert_eq!(machines.len(), 4);
+        assert_eq!(machines.len(), 5);
         let mut s = 11u64;
         for m in &machines {
             assert!(m.pre.cells_id.is_some(), "{}", m.name());
