@@ -659,8 +659,10 @@ impl<'m> Job<'m> {
     /// The program streams through in chunks of [`CHUNK_LINES`] lines, four
     /// chunks in flight: while the pool compensates one chunk and parses
     /// the chunk after next, the calling thread writes the chunk before and
-    /// interprets the next one. Errors are raised in line order: an error
-    /// found in a later chunk waits until the earlier chunks are written.
+    /// interprets the next one. Errors of the input (syntax, interpretation,
+    /// reading) come before compensation failures wherever they are in the
+    /// program, each kind in line order: after a compensation failure the
+    /// rest of the program is still read and interpreted.
     pub fn run<R: BufRead>(
         &self,
         mut input: R,
@@ -689,7 +691,8 @@ impl<'m> Job<'m> {
         let mut prepare = |st: &mut Stage, summary: &mut Summary| -> Result<()> {
             let chunk = &mut st.chunk;
             let n = chunk.ranges.len();
-            st.n = n;
+            // Lines interpreted so far (all of them unless there is an error).
+            st.n = 0;
             if st.plans.len() < n {
                 st.plans.resize(n, Plan::default());
             }
@@ -750,6 +753,7 @@ impl<'m> Job<'m> {
                         &mut extra_warnings,
                     ));
                 }
+                st.n = i + 1;
             }
             summary.lines = chunk.first_line + chunk.ranges.len();
             Ok(())
@@ -760,9 +764,11 @@ impl<'m> Job<'m> {
             let chunk = &st.chunk;
             let plans = &st.plans[..st.n];
             if self.predictor.is_none() || (!solving && rows.is_none()) {
-                // Nothing is solved: every line is written as it is.
+                // Nothing is solved: every (interpreted) line is written as
+                // it is.
+                let end = chunk.ranges.get(st.n).map_or(chunk.buf.len(), |r| r.0);
                 if let Some(out) = out.as_deref_mut() {
-                    out.write_all(&chunk.buf)
+                    out.write_all(&chunk.buf[..end])
                         .map_err(|e| Error::io("output", e))?;
                 }
                 return Ok(());
@@ -824,6 +830,13 @@ impl<'m> Job<'m> {
                 out.write_all(&out_buf)
                     .map_err(|e| Error::io("output", e))?;
             }
+            // The stage waits for its next chunk: large split-point storage
+            // is given back now rather than when it is compensated again.
+            for r in st.results.iter_mut().flatten().flatten() {
+                if r.segments.capacity() > REUSE_SEGMENTS {
+                    r.segments = Vec::new();
+                }
+            }
             Ok(())
         };
 
@@ -840,12 +853,15 @@ impl<'m> Job<'m> {
         let mut has_parsed = true;
         let mut next_line = parsed.chunk.ranges.len();
         let mut input_done = parsed.chunk.eof;
-        // An error of a later chunk, raised once the earlier ones are written.
-        let mut pending: Option<Error> = None;
+        // The first compensation failure. Errors of the input (syntax,
+        // interpretation, reading) come first wherever they are, so after a
+        // failure the rest of the program is still read and interpreted
+        // (nothing more is compensated or written).
+        let mut failure: Option<Error> = None;
         while has_done || has_solve || has_parsed {
             let mut has_read = false;
             let mut read_error = None;
-            if !input_done && pending.is_none() {
+            if !input_done {
                 match read.chunk.read(&mut input, file, next_line) {
                     Ok(()) => {
                         has_read = true;
@@ -860,41 +876,41 @@ impl<'m> Job<'m> {
             }
             let mut written = Ok(());
             let mut interpreted = Ok(());
+            let scanning = failure.is_some();
             let (solve_ref, read_ref) = (&mut solve, &mut read.chunk);
             in_scope(self.pool, |s| {
-                if has_solve {
+                if has_solve && !scanning {
                     s.spawn(move |_| self.compensate_stage(solve_ref, solving));
                 }
                 if has_read {
                     s.spawn(move |_| read_ref.parse(file));
                 }
-                if has_done {
+                if has_done && !scanning {
                     written = finish(&mut done, &mut summary);
                 }
-                if has_parsed && written.is_ok() {
+                if has_parsed {
                     interpreted = prepare(&mut parsed, &mut summary);
                 }
             });
-            written?;
-            if let Err(e) = interpreted {
-                pending = Some(e);
-            } else if let (None, Some(e)) = (&pending, read_error) {
-                pending = Some(e);
+            // Input errors in line order (this chunk's lines come before
+            // the chunk being read), then a failed write.
+            interpreted?;
+            if let Some(e) = read_error {
+                return Err(e);
+            }
+            match written {
+                Err(e @ Error::Unachievable(_)) => failure = Some(e),
+                other => other?,
             }
             // Shift the stages: each chunk moves one stage on.
             std::mem::swap(&mut done, &mut solve);
             has_done = has_solve;
             std::mem::swap(&mut solve, &mut parsed);
-            has_solve = has_parsed && pending.is_none();
+            has_solve = has_parsed;
             std::mem::swap(&mut parsed, &mut read);
-            has_parsed = has_read && pending.is_none();
-            if !has_done {
-                if let Some(e) = pending.take() {
-                    return Err(e);
-                }
-            }
+            has_parsed = has_read;
         }
-        if let Some(e) = pending {
+        if let Some(e) = failure {
             return Err(e);
         }
         summary.inch = interp.inch();
@@ -1062,29 +1078,28 @@ axes:
     }
 
     /// The pipeline interprets a chunk while the one before is compensated
-    /// and the one before that is written: an error found in a later chunk
-    /// must still wait for the earlier chunks' own errors.
+    /// and the one before that is written. Errors of the input (syntax,
+    /// interpretation, reading) come before compensation failures wherever
+    /// they are, each kind in line order, whatever chunks they fall in.
     #[test]
-    fn errors_are_raised_in_line_order_across_the_pipeline() {
+    fn input_errors_come_before_compensation_failures_each_in_line_order() {
         let m = xyz_machine("");
         let job = plain_job(&m, xyz_setup());
         let c = CHUNK_LINES;
-        // A target beyond the travel (found by the compensation) in the
-        // first chunk, a syntax error in the second and an interpretation
-        // error (arc without centre) in the third.
-        let bad_travel = "G1 X900 F1000";
-        let cases: [(&[(usize, &str)], usize); 5] = [
-            (
-                &[(5, bad_travel), (c + 5, "G1 X1 Q"), (2 * c + 5, "G2 X5 Y5")],
-                5,
-            ),
-            (&[(c + 5, "G1 X1 Q"), (2 * c + 5, bad_travel)], c + 5),
-            (&[(c + 7, bad_travel), (2 * c + 3, "G1 X1 Q")], c + 7),
-            (
-                &[(2 * c + 3, bad_travel), (2 * c + 9, "G2 X5 Y5")],
-                2 * c + 9,
-            ),
-            (&[(3 * c + 1, bad_travel)], 3 * c + 1),
+        // A target beyond the travel (found by the compensation), syntax
+        // errors and interpretation errors (an arc without centre).
+        let travel = "G1 X900 F1000";
+        let (syntax, interp) = ("G1 X1 Q", "G2 X5 Y5");
+        let cases: [(&[(usize, &str)], usize); 9] = [
+            (&[(5, travel), (c + 5, syntax), (2 * c + 5, interp)], c + 5),
+            (&[(c + 5, syntax), (2 * c + 5, travel)], c + 5),
+            (&[(c + 7, travel), (2 * c + 3, syntax)], 2 * c + 3),
+            (&[(2 * c + 3, travel), (2 * c + 9, interp)], 2 * c + 9),
+            (&[(10, travel), (3000, syntax)], 3000),
+            (&[(c + 1, syntax), (c + 2, travel)], c + 1),
+            (&[(20, interp), (c + 2, syntax)], 20),
+            (&[(5, travel), (c + 9, travel)], 5),
+            (&[(3 * c + 1, travel)], 3 * c + 1),
         ];
         for (replace, line) in cases {
             let program = program_with(4 * c + 100, replace);
@@ -1093,6 +1108,37 @@ axes:
                 err.starts_with(&format!("p.nc:{line}:")),
                 "{replace:?}: {err}"
             );
+        }
+    }
+
+    /// A read error is an error of the input: it comes after the syntax and
+    /// interpretation errors of the lines read before it, and before any
+    /// compensation failure.
+    #[test]
+    fn a_read_error_comes_after_the_input_errors_before_it() {
+        let m = xyz_machine("");
+        let job = plain_job(&m, xyz_setup());
+        let c = CHUNK_LINES;
+        let failing_run = |program: &str| {
+            let reader = std::io::BufReader::with_capacity(
+                64,
+                FailingAfter {
+                    data: program.as_bytes(),
+                },
+            );
+            match job.run(reader, "p.nc", None, None) {
+                Ok(_) => panic!("a failing read must be an error"),
+                Err(e) => e.to_string(),
+            }
+        };
+        for (lines, at) in [(c, 5), (2 * c, c + 5), (3 * c, 2 * c + 17), (3 * c, 3 * c)] {
+            let err = failing_run(&program_with(lines, &[(at, "G2 X5 Y5")]));
+            assert!(
+                err.starts_with(&format!("p.nc:{at}:")),
+                "{lines} lines: {err}"
+            );
+            let err = failing_run(&program_with(lines, &[(at, "G1 X900 F1000")]));
+            assert!(err.contains("disk gone"), "{lines} lines: {err}");
         }
     }
 

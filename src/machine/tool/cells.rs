@@ -116,6 +116,10 @@ impl Cell {
 /// three-axis machine with reversals touches about a hundred cells.
 const SLOTS: usize = 1024;
 
+/// Largest command (and tool length) magnitude evaluated from cells, mm:
+/// the product of three monomials stays far below overflow.
+const CELL_RANGE_MM: f64 = 1e9;
+
 /// Number of recently used cells tried before a table search.
 const RECENT: usize = 8;
 
@@ -279,7 +283,9 @@ fn with_cell<T>(
 ) -> Option<T> {
     let chain = m.pre.cells_id?;
     let q = [cmd[0], cmd[1], cmd[2]];
-    if !(q.iter().all(|v| v.is_finite()) && tool_mm.is_finite()) {
+    // Far beyond any travel the monomials could overflow (and a zero
+    // coefficient times an infinite monomial is NaN): the chain instead.
+    if !(q.iter().all(|v| v.abs() <= CELL_RANGE_MM) && tool_mm.abs() <= CELL_RANGE_MM) {
         return None;
     }
     let d3 = [dirs[0], dirs[1], dirs[2]];

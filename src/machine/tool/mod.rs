@@ -778,6 +778,28 @@ mod tests {
         }
     }
 
+    /// Found by review: far beyond the tables a zero coefficient times an
+    /// overflowing monomial gave NaN where the chain is finite.
+    #[test]
+    fn cell_form_far_beyond_the_travel_is_the_chain() {
+        use approx::assert_relative_eq;
+        let m = &linear_machines()[0];
+        for v in [1e8, -3e8, 1e103, -1e200, f64::MAX] {
+            let c = [v, -v / 2.0, v / 3.0, 0.0, 0.0, 0.0];
+            for tool in [0.0, 62.5, 1e150] {
+                let got = m.geometric(&c, &[1; 6], tool);
+                let want = m.geometric_chain(&c, &[1; 6], tool);
+                for r in 0..3 {
+                    assert!(got.pos[r].is_nan() == want.pos[r].is_nan(), "{c:?} {tool}");
+                    if want.pos[r].is_finite() {
+                        assert_relative_eq!(got.pos[r], want.pos[r], max_relative = 1e-12);
+                    }
+                }
+                assert_relative_eq!(got.dir, want.dir, max_relative = 1e-12);
+            }
+        }
+    }
+
     #[test]
     fn cell_form_does_not_depend_on_the_order_of_evaluation() {
         let m = &linear_machines()[0];
