@@ -1413,9 +1413,11 @@ fn move_duration(robot: &Robot, plans: &[Planned], i: usize, mv: &Move) -> Optio
 /// Mean motor power per joint during move `i`, W: `|τ·q̇|` with `τ` the
 /// gravity and process torques averaged over the move's two ends (N·m) and
 /// `q̇` the joint change over the duration.
+#[allow(clippy::too_many_arguments)]
 fn move_power<'m>(
     robot: &Robot,
     cache: &mut ViewCache<(&'m str, Option<WrenchBits>)>,
+    last: &mut EndTorques<'m>,
     plans: &[Planned],
     i: usize,
     wrench: Option<ProcessWrench>,
@@ -1432,15 +1434,33 @@ fn move_power<'m>(
     if duration_s <= 0.0 {
         return [0.0; 6];
     }
-    let view = cache.get((tool, wrench.as_ref().map(wrench_bits)), || {
+    let key = (tool, wrench.as_ref().map(wrench_bits));
+    let view = cache.get(key, || {
         robot
             .with_tool(cur.tool.tframe, cur.tool.load, false)
             .with_process_wrench(wrench)
     });
     let tau = |q: &[f64; 6]| view.nominal_load_torques(q);
-    let t = (tau(&qa) + tau(&qb)) * 0.5e-3;
+    // A move starts where the previous one ended: with the same view, the
+    // torques there are those computed for the previous move's end.
+    let qa_bits = qa.map(f64::to_bits);
+    let tau_a = match last {
+        Some((k, q, t)) if *k == key && *q == qa_bits => *t,
+        _ => tau(&qa),
+    };
+    let tau_b = tau(&qb);
+    *last = Some((key, qb.map(f64::to_bits), tau_b));
+    let t = (tau_a + tau_b) * 0.5e-3;
     std::array::from_fn(|j| (t[j] * (qb[j] - qa[j]) / duration_s).abs())
 }
+
+/// The view key, joints (bits) and nominal load torques of the end of the
+/// last move whose power was computed ([`move_power`]).
+type EndTorques<'m> = Option<(
+    (&'m str, Option<WrenchBits>),
+    [u64; 6],
+    nalgebra::Vector6<f64>,
+)>;
 
 /// A process wrench as bit patterns (a hashable key).
 type WrenchBits = ([u64; 6], bool);
@@ -1497,6 +1517,7 @@ pub fn compensate_module(
     }
     let mut segments = Vec::with_capacity(moves.len());
     let mut power_views = ViewCache::new();
+    let mut end_torques = None;
     for (i, mv) in moves.iter().enumerate() {
         let duration_s = match move_duration(robot, &plans, i, mv) {
             Some(t) => t,
@@ -1516,6 +1537,7 @@ pub fn compensate_module(
         let power_w = move_power(
             robot,
             &mut power_views,
+            &mut end_torques,
             &plans,
             i,
             wrenches[i],

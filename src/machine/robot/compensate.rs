@@ -16,7 +16,9 @@
 use nalgebra::{Isometry3, Matrix6, Translation3, UnitQuaternion, Vector3, Vector6};
 
 use super::dh::DhParams;
-use super::kinematics::{Frames, Prepared, flange_prepared, frames_prepared};
+use super::kinematics::{
+    Frames, Prepared, flange_prepared, frames_and_twin_flange, frames_prepared,
+};
 use super::pose::pose_error;
 use super::thermal::{DhGrowth, grown};
 use super::{IkSelect, Model, Robot, RobotError};
@@ -157,6 +159,14 @@ pub struct Compensation {
 struct BranchMemo {
     fixed: bool,
     k: Option<usize>,
+}
+
+/// True when two vectors are equal bit for bit (a computation from them
+/// gives the same bits).
+fn same_bits(a: &Vector6<f64>, b: &Vector6<f64>) -> bool {
+    a.iter()
+        .zip(b.iter())
+        .all(|(x, y)| x.to_bits() == y.to_bits())
 }
 
 /// Weight of rotation against position in the progress test, mm/rad.
@@ -323,8 +333,16 @@ impl Robot {
         effects: Effects,
     ) -> [Isometry3<f64>; 5] {
         let p0 = self.tcp_of(&flange_prepared(self.nominal_prepared(), q));
-        let p1 = self.tcp_of(&flange_prepared(kin, q));
-        let f = frames_prepared(model, q, 6);
+        // The full set differs from the kinematic one by lengths only: one
+        // chain of half angles and rotations serves both.
+        let (f, kin_flange) = match frames_and_twin_flange(model, kin, q) {
+            Some(shared) => shared,
+            None => {
+                let kin_flange = flange_prepared(kin, q);
+                (frames_prepared(model, q, 6), kin_flange)
+            }
+        };
+        let p1 = self.tcp_of(&kin_flange);
         let p2 = self.tcp_of(&f.flange());
         let (tau_g, tau_w) = self.load_torques(&f, effects);
         let p3 = if effects.gravity != 0.0 {
@@ -333,7 +351,14 @@ impl Robot {
             p2
         };
         let p4 = if effects.process != 0.0 {
-            self.deflected_tcp(model, q, &(tau_g + tau_w))
+            let tau = tau_g + tau_w;
+            // Without a process load (zero torques) the sum is the gravity
+            // torques to the bit, and so is its deflected pose.
+            if effects.gravity != 0.0 && same_bits(&tau, &tau_g) {
+                p3
+            } else {
+                self.deflected_tcp(model, q, &tau)
+            }
         } else {
             p3
         };
@@ -521,6 +546,55 @@ mod tests {
 
     /// Both paths run the same arithmetic: equal to the last bit.
     const SAME: f64 = 0.0;
+
+    /// [`Robot::stages_with`] without its shortcuts (shared kinematic and
+    /// full chains, the process stage reused without process torques):
+    /// every stage from its own forward kinematics.
+    fn stages_reference(r: &Robot, q: &[f64; 6], effects: Effects) -> [Isometry3<f64>; 5] {
+        let (kin, model) = r.prediction_prepared(effects, r.current_thermal_growth_mm());
+        let p0 = r.tcp_of(&flange_prepared(r.nominal_prepared(), q));
+        let p1 = r.tcp_of(&flange_prepared(&kin, q));
+        let f = frames_prepared(&model, q, 6);
+        let p2 = r.tcp_of(&f.flange());
+        let (tau_g, tau_w) = r.load_torques(&f, effects);
+        let p3 = r.deflected_tcp(&model, q, &tau_g);
+        let p4 = r.deflected_tcp(&model, q, &(tau_g + tau_w));
+        [p0, p1, p2, p3, p4]
+    }
+
+    #[test]
+    fn stages_equal_the_stage_by_stage_reference() {
+        use crate::machine::robot::ProcessWrench;
+        let text = include_str!("../../../machines/abb-irb1600.yaml");
+        let Ok(Machine::Robot(r)) = Machine::from_yaml_str(text, "abb-irb1600.yaml") else {
+            panic!("abb-irb1600.yaml is a robot file")
+        };
+        let warm = r.with_thermal_power(&[20.0, 150.0, 80.0, 0.0, 0.0, 0.0]);
+        let loaded = warm.with_process_wrench(Some(ProcessWrench {
+            force_n: Vector3::new(10.0, -40.0, -120.0),
+            moment_nmm: Vector3::new(0.0, 500.0, 0.0),
+            in_tool_frame: true,
+        }));
+        let unloaded = warm.with_process_wrench(None);
+        let mut state = 0x2545_f491_4f6c_dd1du64;
+        let mut next = || {
+            state = state
+                .wrapping_mul(6_364_136_223_846_793_005)
+                .wrapping_add(1_442_695_040_888_963_407);
+            ((state >> 11) as f64 / (1u64 << 53) as f64 - 0.5) * 2.0
+        };
+        for view in [&r, &loaded, &unloaded] {
+            for _ in 0..100 {
+                let q: [f64; 6] = std::array::from_fn(|_| next());
+                let fast = view.predict_stages(&q, Effects::ALL);
+                let slow = stages_reference(view, &q, Effects::ALL);
+                for (a, b) in fast.iter().zip(&slow) {
+                    assert_abs_diff_eq!(a.translation.vector, b.translation.vector, epsilon = SAME);
+                    assert_abs_diff_eq!(a.rotation.coords, b.rotation.coords, epsilon = SAME);
+                }
+            }
+        }
+    }
 
     #[test]
     fn growth_override_equals_a_robot_at_that_power() {

@@ -29,7 +29,7 @@ use nalgebra::{Isometry3, Matrix6, UnitQuaternion, Vector3, Vector6};
 
 use super::RobotError;
 use super::dh::{Convention, DhParams};
-use super::kinematics::{Prepared, frames, frames_prepared, jacobian, prepared_transform};
+use super::kinematics::{Prepared, frames, jacobian, prepared_transform, wrist_frames};
 use super::pose::pose_error;
 
 /// ABB robot configuration data `[cf1, cf4, cf6, cfx]`.
@@ -337,15 +337,15 @@ pub fn confdata(p: &DhParams, q: &[f64; 6]) -> ConfData {
 /// [`confdata`] of a prepared parameter set.
 pub(crate) fn confdata_prepared(p: &Prepared, q: &[f64; 6]) -> ConfData {
     // Frames up to link 5 (index 4): the wrist centre and the axes 1–3.
-    let f = frames_prepared(p, q, 5);
+    let f = wrist_frames(p, q);
     // Wrist centre: origin of frame 5 (joints 4–6 intersect there for a
     // spherical wrist).
-    let wc = f.link[4].translation.vector;
-    let x1 = f.link[0].rotation * Vector3::x();
+    let wc = f.wrist_centre;
+    let x1 = f.x1;
     let behind1 = (wc - f.axis_origin[0]).dot(&x1) < 0.0;
     let u = f.axis_origin[2] - f.axis_origin[1];
     let w = wc - f.axis_origin[1];
-    let behind_arm = u.cross(&w).dot(&f.axis_dir[1]) < 0.0;
+    let behind_arm = u.cross(&w).dot(&f.axis_dir_2) < 0.0;
     let neg5 = q[4] < 0.0;
     ConfData {
         cf1: quadrant(q[0]),

@@ -106,8 +106,25 @@ pub(crate) fn prepared_transform(
     convention: Convention,
     q: f64,
 ) -> Isometry3<f64> {
+    let (sz, cz) = half_angle(j, q);
+    transform_of_half_angle(j, convention, sz, cz)
+}
+
+/// The half-angle sine and cosine `(sin θ/2, cos θ/2)` of a row's joint
+/// angle `θ = q + offset` (the only transcendental part of a transform).
+fn half_angle(j: &PreparedJoint, q: f64) -> (f64, f64) {
     let theta = q + j.theta_offset_rad;
-    let (sz, cz) = (0.5 * theta).sin_cos();
+    (0.5 * theta).sin_cos()
+}
+
+/// [`prepared_transform`] from the half-angle sine and cosine of its joint
+/// angle ([`half_angle`]): the same arithmetic, so the same bits.
+fn transform_of_half_angle(
+    j: &PreparedJoint,
+    convention: Convention,
+    sz: f64,
+    cz: f64,
+) -> Isometry3<f64> {
     let (sx, cx) = (j.sx, j.cx);
     let (t, r) = match convention {
         Convention::Dh => {
@@ -179,6 +196,108 @@ pub(crate) fn flange_prepared(p: &Prepared, q: &[f64; 6]) -> Isometry3<f64> {
     prev
 }
 
+/// [`frames_prepared`] of all six links of `p` together with
+/// [`flange_prepared`] of `twin`, a parameter set with the same twists and
+/// joint offsets as `p` (e.g. `p` with the thermal growth of its lengths,
+/// [`Prepared::with_lengths_of`]): the two chains share their half angles
+/// and their rotations, and only the translations are accumulated twice.
+/// The same arithmetic as the two separate calls, so the same bits; `None`
+/// when the twists or joint offsets differ (bit for bit) or the
+/// conventions do.
+pub(crate) fn frames_and_twin_flange(
+    p: &Prepared,
+    twin: &Prepared,
+    q: &[f64; 6],
+) -> Option<(Frames, Isometry3<f64>)> {
+    let same = p.convention == twin.convention
+        && p.joints.iter().zip(&twin.joints).all(|(a, b)| {
+            a.theta_offset_rad.to_bits() == b.theta_offset_rad.to_bits()
+                && a.sx.to_bits() == b.sx.to_bits()
+                && a.cx.to_bits() == b.cx.to_bits()
+        });
+    if !same {
+        return None;
+    }
+    let mut link = [Isometry3::identity(); 6];
+    let mut axis_origin = [Vector3::zeros(); 6];
+    let mut axis_dir = [Vector3::z(); 6];
+    let mut prev = Isometry3::identity();
+    let mut other = Isometry3::identity();
+    for (i, ((j, jt), qi)) in p.joints.iter().zip(&twin.joints).zip(q).enumerate() {
+        let (sz, cz) = half_angle(j, *qi);
+        let t = prev * transform_of_half_angle(j, p.convention, sz, cz);
+        other *= transform_of_half_angle(jt, p.convention, sz, cz);
+        match p.convention {
+            Convention::Dh => {
+                axis_origin[i] = prev.translation.vector;
+                axis_dir[i] = prev.rotation * Vector3::z();
+            }
+            Convention::ModifiedDh => {
+                axis_origin[i] = t.translation.vector;
+                axis_dir[i] = t.rotation * Vector3::z();
+            }
+        }
+        link[i] = t;
+        prev = t;
+    }
+    Some((
+        Frames {
+            link,
+            axis_origin,
+            axis_dir,
+        },
+        other,
+    ))
+}
+
+/// What the confdata test needs of a configuration (frames up to the
+/// wrist centre), as [`frames_prepared`] with `n = 5` computes it, without
+/// the other axes and links.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) struct WristFrames {
+    /// Origin of frame 5 (the wrist centre of a spherical wrist).
+    pub wrist_centre: Vector3<f64>,
+    /// x axis of frame 1.
+    pub x1: Vector3<f64>,
+    /// Points on the axes of joints 1, 2 and 3 (`axis_origin[0..3]`).
+    pub axis_origin: [Vector3<f64>; 3],
+    /// Direction of the axis of joint 2 (`axis_dir[1]`).
+    pub axis_dir_2: Vector3<f64>,
+}
+
+/// [`WristFrames`] of joint values `q`: the products of
+/// [`frames_prepared`] (same bits) over the first five links only, no
+/// frames stored.
+pub(crate) fn wrist_frames(p: &Prepared, q: &[f64; 6]) -> WristFrames {
+    let mut prev = Isometry3::identity();
+    let mut axis_origin = [Vector3::zeros(); 3];
+    let mut axis_dir_2 = Vector3::z();
+    let mut x1 = Vector3::x();
+    for (i, (j, qi)) in p.joints.iter().zip(q).enumerate().take(5) {
+        let t = prev * prepared_transform(j, p.convention, *qi);
+        let axis = match p.convention {
+            Convention::Dh => &prev,
+            Convention::ModifiedDh => &t,
+        };
+        if i < 3 {
+            axis_origin[i] = axis.translation.vector;
+        }
+        if i == 1 {
+            axis_dir_2 = axis.rotation * Vector3::z();
+        }
+        if i == 0 {
+            x1 = t.rotation * Vector3::x();
+        }
+        prev = t;
+    }
+    WristFrames {
+        wrist_centre: prev.translation.vector,
+        x1,
+        axis_origin,
+        axis_dir_2,
+    }
+}
+
 /// Flange pose in the robot base frame.
 pub fn flange(p: &DhParams, q: &[f64; 6]) -> Isometry3<f64> {
     frames(p, q).flange()
@@ -216,6 +335,107 @@ mod tests {
     /// rotation-matrix entries and for positions of links up to 600 mm.
     const ROT_TOL: f64 = 1e-12;
     const POS_TOL_MM: f64 = 1e-9;
+
+    /// The shared and lean chains run the same arithmetic as the
+    /// reference ones: equal to the last bit.
+    const SAME: f64 = 0.0;
+
+    /// The parameter sets of the bundled robot files, in both conventions
+    /// (the same rows read as classic DH too), nominal and actual.
+    fn parameter_sets() -> Vec<DhParams> {
+        use crate::machine::Machine;
+        use crate::machine::robot::Model;
+        let files = [
+            (
+                include_str!("../../../machines/abb-irb1600.yaml"),
+                "abb-irb1600.yaml",
+            ),
+            (
+                include_str!("../../../machines/staubli-tx200.yaml"),
+                "staubli-tx200.yaml",
+            ),
+        ];
+        let mut out = Vec::new();
+        for (text, file) in files {
+            let Ok(Machine::Robot(r)) = Machine::from_yaml_str(text, file) else {
+                panic!("{file} is a robot file")
+            };
+            for model in [Model::Nominal, Model::Actual] {
+                let p = *r.params(model);
+                out.push(p);
+                out.push(DhParams {
+                    convention: Convention::Dh,
+                    ..p
+                });
+            }
+        }
+        out
+    }
+
+    /// Random joint vectors in ±π (a fixed linear congruential sequence).
+    fn random_joints(n: usize) -> Vec<[f64; 6]> {
+        let mut state = 0x9e37_79b9_7f4a_7c15u64;
+        let mut next = || {
+            state = state
+                .wrapping_mul(6_364_136_223_846_793_005)
+                .wrapping_add(1_442_695_040_888_963_407);
+            ((state >> 11) as f64 / (1u64 << 53) as f64 - 0.5) * 2.0 * std::f64::consts::PI
+        };
+        (0..n).map(|_| std::array::from_fn(|_| next())).collect()
+    }
+
+    fn assert_same_pose(a: &Isometry3<f64>, b: &Isometry3<f64>) {
+        assert_abs_diff_eq!(a.translation.vector, b.translation.vector, epsilon = SAME);
+        assert_abs_diff_eq!(a.rotation.coords, b.rotation.coords, epsilon = SAME);
+    }
+
+    #[test]
+    fn twin_flange_equals_the_separate_chains() {
+        for p in parameter_sets() {
+            let prep = Prepared::new(&p);
+            // A thermal growth: other lengths, the same twists and offsets.
+            let mut g = p;
+            for (k, j) in g.joints.iter_mut().enumerate() {
+                j.a_mm += 0.013 * k as f64;
+                j.d_mm -= 0.007 * k as f64;
+            }
+            let twin = prep.with_lengths_of(&g);
+            for q in random_joints(100) {
+                let Some((f, other)) = frames_and_twin_flange(&twin, &prep, &q) else {
+                    panic!("a length change keeps the twists and offsets")
+                };
+                let f_ref = frames_prepared(&twin, &q, 6);
+                for i in 0..6 {
+                    assert_same_pose(&f.link[i], &f_ref.link[i]);
+                    assert_abs_diff_eq!(f.axis_origin[i], f_ref.axis_origin[i], epsilon = SAME);
+                    assert_abs_diff_eq!(f.axis_dir[i], f_ref.axis_dir[i], epsilon = SAME);
+                }
+                assert_same_pose(&other, &flange_prepared(&prep, &q));
+            }
+            // Another joint offset: no shared chain.
+            let mut moved = p;
+            moved.joints[2].theta_offset_rad += 1e-3;
+            let moved = prep.with_lengths_of(&moved);
+            assert!(frames_and_twin_flange(&moved, &prep, &[0.1; 6]).is_none());
+        }
+    }
+
+    #[test]
+    fn wrist_frames_equal_the_full_frames() {
+        for p in parameter_sets() {
+            let prep = Prepared::new(&p);
+            for q in random_joints(100) {
+                let w = wrist_frames(&prep, &q);
+                let f = frames_prepared(&prep, &q, 5);
+                assert_abs_diff_eq!(w.wrist_centre, f.link[4].translation.vector, epsilon = SAME);
+                assert_abs_diff_eq!(w.x1, f.link[0].rotation * Vector3::x(), epsilon = SAME);
+                for i in 0..3 {
+                    assert_abs_diff_eq!(w.axis_origin[i], f.axis_origin[i], epsilon = SAME);
+                }
+                assert_abs_diff_eq!(w.axis_dir_2, f.axis_dir[1], epsilon = SAME);
+            }
+        }
+    }
 
     #[test]
     fn closed_form_joint_transform_matches_elementary_product() {
