@@ -174,7 +174,8 @@ pub fn push_fixed(out: &mut String, v: f64, decimals: usize) -> bool {
             break;
         }
     }
-    out.push_str(std::str::from_utf8(&buf[i..]).unwrap_or("0"));
+    // ASCII digits: pushed as chars (no UTF-8 validation of the buffer).
+    out.extend(buf[i..].iter().map(|&b| char::from(b)));
     if decimals > 0 {
         out.push('.');
         let mut d = [b'0'; 9];
@@ -183,7 +184,7 @@ pub fn push_fixed(out: &mut String, v: f64, decimals: usize) -> bool {
             d[k] = b'0' + (x % 10) as u8;
             x /= 10;
         }
-        out.push_str(std::str::from_utf8(&d[..decimals]).unwrap_or(""));
+        out.extend(d[..decimals].iter().map(|&b| char::from(b)));
     }
     true
 }

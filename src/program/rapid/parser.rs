@@ -111,6 +111,27 @@ pub(super) fn kw<'a>(i: &'a str, word: &str) -> Option<&'a str> {
 /// Skips whitespace and `!` comments.
 pub(super) fn ws(mut i: &str) -> &str {
     loop {
+        // Byte scan of the ASCII blanks (the common case: a few spaces or
+        // none), then the byte-order mark, which may come between them.
+        let n = i
+            .bytes()
+            .take_while(|b| matches!(b, b' ' | b'\t' | b'\r' | b'\n'))
+            .count();
+        let t = i.get(n..).unwrap_or_default();
+        if let Some(r) = t.strip_prefix('\u{feff}') {
+            i = r;
+        } else if let Some(c) = t.strip_prefix('!') {
+            i = c.find('\n').map_or("", |p| &c[p..]);
+        } else {
+            return t;
+        }
+    }
+}
+
+/// [`ws`] by `trim_start_matches` (the reference of its byte scan).
+#[cfg(test)]
+fn ws_reference(mut i: &str) -> &str {
+    loop {
         let t = i.trim_start_matches([' ', '\t', '\r', '\n', '\u{feff}']);
         if let Some(c) = t.strip_prefix('!') {
             i = c.find('\n').map_or("", |p| &c[p..]);
@@ -1308,6 +1329,23 @@ fn clip_end(s: &str, n: usize) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    proptest::proptest! {
+        /// The byte scan of [`ws`] against `trim_start_matches`: the same
+        /// rest for any mix of blanks, byte-order marks, comments and text.
+        #[test]
+        fn ws_equals_the_trim_reference(
+            parts in proptest::collection::vec(
+                proptest::sample::select(vec![
+                    " ", "\t", "\r", "\n", "\u{feff}", "! note", "!", "x", "[1,", "é", "\u{a0}",
+                ]),
+                0..12,
+            )
+        ) {
+            let text: String = parts.concat();
+            proptest::prop_assert_eq!(ws(&text), ws_reference(&text));
+        }
+    }
 
     /// The direct robtarget scanner against the generic value tree: the same
     /// literal and rest wherever it accepts, and it declines every other
