@@ -601,10 +601,10 @@ fn robtarget_text(
     ))
 }
 
-/// In-place edits of a robtarget literal.
 /// In-place edits of a robtarget literal, pushed onto `edits`: one edit
-/// for the position and quaternion numbers, one per confdata number when
-/// the confdata changes.
+/// for the position and quaternion numbers (and the confdata numbers when
+/// the confdata changes) while they lie on one line; otherwise one edit per
+/// number.
 fn robtarget_in_place(
     edits: &mut Vec<Edit>,
     src: &str,
@@ -617,11 +617,19 @@ fn robtarget_in_place(
     let q = pose.rotation.quaternion();
     let pos: [f64; 3] = pose.translation.vector.into();
     let quat = [q.w, q.i, q.j, q.k];
-    // One edit over the whole position-and-quaternion text is cheaper, but
-    // only while it stays on one line: an annotation inserted at the end of
-    // an earlier statement's line would fall inside a multi-line span.
+    // One edit over the whole position-and-quaternion text (and the
+    // confdata when it changes) is cheaper, but only while it stays on one
+    // line: an annotation inserted at the end of an earlier statement's
+    // line would fall inside a multi-line span.
+    let new_conf = [conf.cf1, conf.cf4, conf.cf6, conf.cfx];
+    let changed = conf != old_conf;
+    let end = if changed {
+        rt.robconf[3].span.end
+    } else {
+        rt.rot[3].span.end
+    };
     let one_line = src
-        .get(rt.trans[0].span.start..rt.rot[3].span.end)
+        .get(rt.trans[0].span.start..end)
         .is_some_and(|t| !t.contains('\n'));
     if one_line {
         edits.push(crate::emit::rapid::robtarget_edit(
@@ -629,6 +637,7 @@ fn robtarget_in_place(
             rt,
             &pos,
             Some(&quat),
+            changed.then_some(&new_conf),
             fmt,
         )?);
     } else {
@@ -638,14 +647,10 @@ fn robtarget_in_place(
             Some(&quat),
             fmt,
         )?);
-    }
-    if conf != old_conf {
-        for (n, v) in rt
-            .robconf
-            .iter()
-            .zip([conf.cf1, conf.cf4, conf.cf6, conf.cfx])
-        {
-            edits.push(Edit::replace(n.span.clone(), v.to_string()));
+        if changed {
+            for (n, v) in rt.robconf.iter().zip(new_conf) {
+                edits.push(Edit::replace(n.span.clone(), v.to_string()));
+            }
         }
     }
     Ok(())
@@ -1747,6 +1752,72 @@ fn warn_resonance(robot: &Robot, fx: Effects, (amp_mm, line, rpm): (f64, usize, 
 mod tests {
     use super::*;
     use crate::machine::robot::PoseDelta;
+
+    /// The single edit of [`robtarget_in_place`] (position, quaternion and
+    /// confdata) against one edit per number: the same output text, for
+    /// literals on one line and spread over lines, with and without a
+    /// confdata change.
+    #[test]
+    fn one_robtarget_edit_equals_the_per_number_edits() {
+        let src = "MODULE M\n  PROC main()\n    MoveL [[650.0,50.0,300.0],[0,0,1,0],[0,0,0,0],[9E9,9E9,9E9,9E9,9E9,9E9]],v200,z1,t1;\n    MoveL [ [ 1 , 2,3 ],[1,0 ,0,0] , [-1, 0,-2 ,5],[9E9,9E9,9E9,9E9,9E9,9E9]],v200,z1,t1;\n    MoveL [[1,2,3],[1,0,0,0],\n      [0,0,0,0],[9E9,9E9,9E9,9E9,9E9,9E9]],v200,z1,t1;\n  ENDPROC\nENDMODULE\n";
+        let module = crate::program::rapid::parse_module(src, "t.mod").expect("valid module");
+        let fmt = Format {
+            position_decimals: 3,
+            quaternion_decimals: 7,
+        };
+        let pose = Isometry3::from_parts(
+            nalgebra::Translation3::new(650.97234, -49.2148, 300.92649),
+            nalgebra::UnitQuaternion::from_euler_angles(0.0008, -0.0003, 3.1),
+        );
+        let confs = [
+            ConfData {
+                cf1: 0,
+                cf4: 0,
+                cf6: 0,
+                cfx: 0,
+            },
+            ConfData {
+                cf1: -1,
+                cf4: 2,
+                cf6: -3,
+                cfx: 7,
+            },
+        ];
+        let mut seen = 0;
+        for mv in module.moves() {
+            let Target::Inline(rt) = &mv.target else {
+                panic!("inline targets")
+            };
+            let old = conf_of(rt).expect("integer confdata");
+            for conf in confs {
+                let mut one = Vec::new();
+                robtarget_in_place(&mut one, src, rt, &pose, old, conf, &fmt).expect("edits");
+                let q = pose.rotation.quaternion();
+                let mut each = crate::emit::rapid::robtarget_edits(
+                    rt,
+                    &pose.translation.vector.into(),
+                    Some(&[q.w, q.i, q.j, q.k]),
+                    &fmt,
+                )
+                .expect("edits");
+                if conf != old {
+                    for (n, v) in rt
+                        .robconf
+                        .iter()
+                        .zip([conf.cf1, conf.cf4, conf.cf6, conf.cfx])
+                    {
+                        each.push(Edit::replace(n.span.clone(), v.to_string()));
+                    }
+                }
+                assert_eq!(
+                    apply_edits(src, &one).expect("applies"),
+                    apply_edits(src, &each).expect("applies")
+                );
+                seen += 1;
+            }
+        }
+        assert_eq!(seen, 6);
+    }
 
     #[test]
     fn fast_deviation_comment_equals_the_formatted_one() {

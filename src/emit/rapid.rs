@@ -270,12 +270,16 @@ pub fn quaternion_components(
 /// [`robtarget_edits`] as ONE edit, from the first position number to the
 /// last quaternion number (or the last position number without `quat`),
 /// the text between the numbers copied from `src`: the same output bytes
-/// (and the same errors) with one string instead of seven.
+/// (and the same errors) with one string instead of seven. With `conf`
+/// (and `quat`), the edit goes on to the last confdata number and writes
+/// `conf` there too (as one edit per confdata number with `to_string`
+/// would).
 pub fn robtarget_edit(
     src: &str,
     rt: &RobTarget,
     pos: &[f64; 3],
     quat: Option<&[f64; 4]>,
+    conf: Option<&[i32; 4]>,
     fmt: &Format,
 ) -> Result<Edit, Error> {
     let start = rt.trans[0].span.start;
@@ -307,6 +311,13 @@ pub fn robtarget_edit(
             gap(&mut text, n)?;
             if !push_fixed(&mut text, v, fmt.quaternion_decimals) {
                 text.push('0');
+            }
+        }
+        if let Some(conf) = conf {
+            use std::fmt::Write;
+            for (n, v) in rt.robconf.iter().zip(conf) {
+                gap(&mut text, n)?;
+                let _ = write!(text, "{v}");
             }
         }
     }

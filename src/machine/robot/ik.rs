@@ -78,6 +78,10 @@ pub struct ClosedForm {
     d6: f64,
     s4: f64,
     alpha3: f64,
+    /// `√(a3² + d4²)` and `atan2(d4, a3)`: constants of the elbow triangle
+    /// (computed once, the same bits as per solve).
+    rho: f64,
+    gamma: f64,
     off: [f64; 6],
     /// `Rx(α3)⁻¹`, constant.
     rx3_inv: UnitQuaternion<f64>,
@@ -117,6 +121,8 @@ impl ClosedForm {
             d6: j[5].d_mm,
             s4: j[4].alpha_rad.signum(),
             alpha3: j[3].alpha_rad,
+            rho: (j[3].a_mm * j[3].a_mm + j[3].d_mm * j[3].d_mm).sqrt(),
+            gamma: j[3].d_mm.atan2(j[3].a_mm),
             rx3_inv: UnitQuaternion::from_axis_angle(&Vector3::x_axis(), j[3].alpha_rad).inverse(),
             prep: Prepared::new(p),
             off: [
@@ -192,8 +198,7 @@ impl ClosedForm {
     fn wrist_centre(&self, flange: &Isometry3<f64>) -> WristCentre {
         let z6 = flange.rotation * Vector3::z();
         let pw = flange.translation.vector - self.d6 * z6;
-        let rho = (self.a3 * self.a3 + self.d4 * self.d4).sqrt();
-        let gamma = self.d4.atan2(self.a3);
+        let (rho, gamma) = (self.rho, self.gamma);
         let base_t1 = if pw.x.hypot(pw.y) < 1e-9 {
             0.0
         } else {

@@ -109,7 +109,21 @@ pub(super) fn kw<'a>(i: &'a str, word: &str) -> Option<&'a str> {
 }
 
 /// Skips whitespace and `!` comments.
-pub(super) fn ws(mut i: &str) -> &str {
+#[inline]
+pub(super) fn ws(i: &str) -> &str {
+    // Most calls start at a token: nothing to skip.
+    if matches!(
+        i.as_bytes().first(),
+        Some(b' ' | b'\t' | b'\r' | b'\n' | b'!' | 0xef)
+    ) {
+        ws_skip(i)
+    } else {
+        i
+    }
+}
+
+/// [`ws`] when there is something to skip.
+fn ws_skip(mut i: &str) -> &str {
     loop {
         // Byte scan of the ASCII blanks (the common case: a few spaces or
         // none), then the byte-order mark, which may come between them.
@@ -962,8 +976,12 @@ impl<'a> Parser<'a> {
     fn move_stmt(&self, i: &'a str, mut r: &'a str, kind: MoveKind) -> PResult<'a, Move> {
         let start = self.pos(i);
         let name = kind.name();
-        let mut targets: Vec<Target> = Vec::new();
-        let mut plain: Vec<Arg> = Vec::new();
+        // At most two targets and three plain arguments are kept (more
+        // plain ones are only counted, for the error): no vectors.
+        let mut targets: [Option<Target>; 2] = [None, None];
+        let mut n_found_targets = 0;
+        let mut plain: [Option<Arg>; 3] = [None, None, None];
+        let mut n_plain = 0;
         let mut optional = Vec::new();
         let n_targets = if kind == MoveKind::MoveC { 2 } else { 1 };
         loop {
@@ -974,16 +992,22 @@ impl<'a> Parser<'a> {
                 r = o;
             } else if r.starts_with([';', ',']) || r.is_empty() {
                 return self.fail_found(self.pos(r), &format!("expected an argument of {name}"));
-            } else if targets.len() < n_targets {
+            } else if n_found_targets < n_targets {
                 let (o, t) = self.target(r, kind == MoveKind::MoveAbsJ)?;
-                targets.push(t);
+                if let Some(slot) = targets.get_mut(n_found_targets) {
+                    *slot = Some(t);
+                }
+                n_found_targets += 1;
                 r = o;
             } else {
                 let (o, span) = self.expr(r, b",;\\")?;
-                plain.push(Arg {
-                    text: self.src.get(span.clone()).unwrap_or("").to_string(),
-                    span,
-                });
+                if let Some(slot) = plain.get_mut(n_plain) {
+                    *slot = Some(Arg {
+                        text: self.src.get(span.clone()).unwrap_or("").to_string(),
+                        span,
+                    });
+                }
+                n_plain += 1;
                 r = o;
             }
             let last = self.pos(r);
@@ -1009,8 +1033,8 @@ impl<'a> Parser<'a> {
         } else {
             "ToPoint, Speed, Zone, Tool"
         };
-        let found = targets.len() + plain.len();
-        if targets.len() < n_targets || plain.len() != 3 {
+        let found = n_found_targets + n_plain;
+        if n_found_targets < n_targets || n_plain != 3 {
             return self.fail_found(
                 start,
                 &format!(
@@ -1019,18 +1043,17 @@ impl<'a> Parser<'a> {
                 ),
             );
         }
-        let mut plain = plain.into_iter();
-        let (Some(speed), Some(zone), Some(tool)) = (plain.next(), plain.next(), plain.next())
-        else {
+        let [speed, zone, tool] = plain;
+        let (Some(speed), Some(zone), Some(tool)) = (speed, zone, tool) else {
             return self.fail_found(start, &format!("{name}: missing arguments"));
         };
-        let mut targets = targets.into_iter();
-        let via = if kind == MoveKind::MoveC {
-            targets.next().map(Box::new)
+        let [first, second] = targets;
+        let (via, target) = if kind == MoveKind::MoveC {
+            (first.map(Box::new), second)
         } else {
-            None
+            (None, first)
         };
-        let Some(target) = targets.next() else {
+        let Some(target) = target else {
             return self.fail_found(start, &format!("{name}: missing target"));
         };
         let value_of = |n: &str| -> Option<Arg> {
