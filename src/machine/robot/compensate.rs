@@ -277,20 +277,26 @@ impl Robot {
         self.base() * flange * self.flange_to_tool()
     }
 
-    /// Gravity and process torques (each scaled by its gain, zero when off)
-    /// from the joint frames of the full model.
+    /// Gravity torques and gravity plus process torques (each scaled by
+    /// its gain, zero when off) from the joint frames of the full model.
+    /// The process torques are not computed where they cannot change the
+    /// sum ([`Robot::process_torques_vanish`]).
     fn load_torques(&self, f: &Frames, effects: Effects) -> (Vector6<f64>, Vector6<f64>) {
         let tau_g = if effects.gravity != 0.0 {
             self.gravity_torques_at(f) * effects.gravity
         } else {
             Vector6::zeros()
         };
-        let tau_w = if effects.process != 0.0 {
-            self.process_torques_at(f) * effects.process
+        let tau = if effects.process != 0.0 {
+            if self.process_torques_vanish(&tau_g, effects.process) {
+                tau_g
+            } else {
+                tau_g + self.process_torques_at(f) * effects.process
+            }
         } else {
-            Vector6::zeros()
+            tau_g
         };
-        (tau_g, tau_w)
+        (tau_g, tau)
     }
 
     /// TCP pose (world frame) of the full model at `q` deflected by `tau`.
@@ -306,9 +312,9 @@ impl Robot {
     /// the deflected pose (the hot path of the compensation iteration).
     fn predict_with(&self, model: &Prepared, q: &[f64; 6], effects: Effects) -> Isometry3<f64> {
         let f = frames_prepared(model, q, 6);
-        let (tau_g, tau_w) = self.load_torques(&f, effects);
+        let (tau_g, tau) = self.load_torques(&f, effects);
         if effects.process != 0.0 {
-            self.deflected_tcp(model, q, &(tau_g + tau_w))
+            self.deflected_tcp(model, q, &tau)
         } else if effects.gravity != 0.0 {
             self.deflected_tcp(model, q, &tau_g)
         } else {
@@ -344,14 +350,13 @@ impl Robot {
         };
         let p1 = self.tcp_of(&kin_flange);
         let p2 = self.tcp_of(&f.flange());
-        let (tau_g, tau_w) = self.load_torques(&f, effects);
+        let (tau_g, tau) = self.load_torques(&f, effects);
         let p3 = if effects.gravity != 0.0 {
             self.deflected_tcp(model, q, &tau_g)
         } else {
             p2
         };
         let p4 = if effects.process != 0.0 {
-            let tau = tau_g + tau_w;
             // Without a process load (zero torques) the sum is the gravity
             // torques to the bit, and so is its deflected pose.
             if effects.gravity != 0.0 && same_bits(&tau, &tau_g) {
@@ -548,22 +553,24 @@ mod tests {
     const SAME: f64 = 0.0;
 
     /// [`Robot::stages_with`] without its shortcuts (shared kinematic and
-    /// full chains, the process stage reused without process torques):
-    /// every stage from its own forward kinematics.
+    /// full chains, the process stage reused without process torques,
+    /// process torques skipped without a process wrench): every stage from
+    /// its own forward kinematics and the full load torques.
     fn stages_reference(r: &Robot, q: &[f64; 6], effects: Effects) -> [Isometry3<f64>; 5] {
         let (kin, model) = r.prediction_prepared(effects, r.current_thermal_growth_mm());
         let p0 = r.tcp_of(&flange_prepared(r.nominal_prepared(), q));
         let p1 = r.tcp_of(&flange_prepared(&kin, q));
         let f = frames_prepared(&model, q, 6);
         let p2 = r.tcp_of(&f.flange());
-        let (tau_g, tau_w) = r.load_torques(&f, effects);
+        let tau_g = r.gravity_torques_at(&f) * effects.gravity;
+        let tau_w = r.process_torques_at(&f) * effects.process;
         let p3 = r.deflected_tcp(&model, q, &tau_g);
         let p4 = r.deflected_tcp(&model, q, &(tau_g + tau_w));
         [p0, p1, p2, p3, p4]
     }
 
     #[test]
-    fn stages_equal_the_stage_by_stage_reference() {
+    fn stages_and_prediction_equal_the_stage_by_stage_reference() {
         use crate::machine::robot::ProcessWrench;
         let text = include_str!("../../../machines/abb-irb1600.yaml");
         let Ok(Machine::Robot(r)) = Machine::from_yaml_str(text, "abb-irb1600.yaml") else {
@@ -588,6 +595,23 @@ mod tests {
                 let q: [f64; 6] = std::array::from_fn(|_| next());
                 let fast = view.predict_stages(&q, Effects::ALL);
                 let slow = stages_reference(view, &q, Effects::ALL);
+                let attained = view.predict(&q, Effects::ALL);
+                assert_abs_diff_eq!(
+                    attained.translation.vector,
+                    slow[4].translation.vector,
+                    epsilon = SAME
+                );
+                assert_abs_diff_eq!(
+                    attained.rotation.coords,
+                    slow[4].rotation.coords,
+                    epsilon = SAME
+                );
+                let f = frames_prepared(view.nominal_prepared(), &q, 6);
+                assert_abs_diff_eq!(
+                    view.nominal_load_torques(&q),
+                    view.gravity_torques_at(&f) + view.process_torques_at(&f),
+                    epsilon = SAME
+                );
                 for (a, b) in fast.iter().zip(&slow) {
                     assert_abs_diff_eq!(a.translation.vector, b.translation.vector, epsilon = SAME);
                     assert_abs_diff_eq!(a.rotation.coords, b.rotation.coords, epsilon = SAME);
