@@ -225,9 +225,76 @@ pub(super) const MAX_NUMBER: f64 = 1e10;
 /// [`MAX_NUMBER`]).
 pub(super) fn parse_number(text: &str) -> Option<f64> {
     match number_text(text) {
-        Ok(("", t)) => t.parse::<f64>().ok().filter(|v| v.abs() <= MAX_NUMBER),
+        Ok(("", t)) => number_value(t).filter(|v| v.abs() <= MAX_NUMBER),
         _ => None,
     }
+}
+
+/// `t.parse::<f64>().ok()` for the text of a numeric literal
+/// ([`number_text`]), with the exact fast path for short literals: at most
+/// 15 significant digits `m` (below 2^53, exact in f64) and a decimal
+/// exponent `k` with `|k| ≤ 22` (`10^|k|` exact in f64) give the correctly
+/// rounded value by one IEEE multiplication or division `m · 10^k`, which
+/// is what the full parser returns (it rounds correctly too). Anything
+/// else goes to the full parser.
+fn number_value(t: &str) -> Option<f64> {
+    const POW10: [f64; 23] = [
+        1e0, 1e1, 1e2, 1e3, 1e4, 1e5, 1e6, 1e7, 1e8, 1e9, 1e10, 1e11, 1e12, 1e13, 1e14, 1e15, 1e16,
+        1e17, 1e18, 1e19, 1e20, 1e21, 1e22,
+    ];
+    let b = t.as_bytes();
+    let neg = b.first() == Some(&b'-');
+    let mut k = usize::from(matches!(b.first(), Some(b'+' | b'-')));
+    let mut m: u64 = 0;
+    let mut digits = 0usize;
+    let mut frac = 0i64;
+    let mut seen_dot = false;
+    while let Some(&c) = b.get(k) {
+        match c {
+            b'0'..=b'9' => {
+                if m != 0 || c != b'0' {
+                    digits += 1;
+                }
+                m = m.wrapping_mul(10).wrapping_add(u64::from(c - b'0'));
+                if seen_dot {
+                    frac += 1;
+                }
+            }
+            b'.' if !seen_dot => seen_dot = true,
+            _ => break,
+        }
+        k += 1;
+    }
+    let mut exp = 0i64;
+    if matches!(b.get(k), Some(b'e' | b'E')) {
+        k += 1;
+        let eneg = b.get(k) == Some(&b'-');
+        k += usize::from(matches!(b.get(k), Some(b'+' | b'-')));
+        let mut n = 0usize;
+        while let Some(&c) = b.get(k) {
+            if !c.is_ascii_digit() || n >= 4 {
+                break;
+            }
+            exp = exp * 10 + i64::from(c - b'0');
+            n += 1;
+            k += 1;
+        }
+        if eneg {
+            exp = -exp;
+        }
+    }
+    // Leading zeros do not count; 15 digits stay below 2^53 (no wrap).
+    let e10 = exp - frac;
+    if k == b.len() && digits <= 15 && (-22..=22).contains(&e10) {
+        let m = m as f64;
+        let v = match POW10.get(e10.unsigned_abs() as usize) {
+            Some(p) if e10 >= 0 => m * p,
+            Some(p) => m / p,
+            None => return t.parse::<f64>().ok(),
+        };
+        return Some(if neg { -v } else { v });
+    }
+    t.parse::<f64>().ok()
 }
 
 /// The parser state: the source, for positions and messages.
@@ -530,7 +597,7 @@ impl<'a> Parser<'a> {
                 let i = ws(at);
                 let (rest, t) = number_text(i).ok()?;
                 let after = ws(rest);
-                let value = t.parse::<f64>().ok()?;
+                let value = number_value(t)?;
                 if !value.is_finite() || value.abs() > MAX_NUMBER {
                     return None;
                 }
@@ -623,10 +690,10 @@ impl<'a> Parser<'a> {
         };
         if let Ok((r, t)) = number_text(i) {
             if ends_here(r) {
-                let parsed = t.parse::<f64>();
+                let parsed = number_value(t);
                 if parsed
                     .as_ref()
-                    .is_ok_and(|v| v.is_nan() || v.abs() > MAX_NUMBER)
+                    .is_some_and(|v| v.is_nan() || v.abs() > MAX_NUMBER)
                 {
                     return self.fail_found(
                         start,
@@ -636,7 +703,7 @@ impl<'a> Parser<'a> {
                         ),
                     );
                 }
-                if let Some(value) = parsed.ok().filter(|v| v.is_finite()) {
+                if let Some(value) = parsed.filter(|v| v.is_finite()) {
                     return Ok((
                         r,
                         Val::Num(Number {
@@ -1354,6 +1421,34 @@ mod tests {
     use super::*;
 
     proptest::proptest! {
+        /// The fast path of [`number_value`] against `str::parse`: the same
+        /// f64 bits (or the same failure) for literals of every shape the
+        /// lexer accepts, short and long, with and without exponents.
+        #[test]
+        fn number_value_equals_str_parse(
+            sign in proptest::sample::select(vec!["", "+", "-"]),
+            int in "[0-9]{0,20}",
+            frac in proptest::option::of("[0-9]{0,20}"),
+            exp in proptest::option::of((proptest::sample::select(vec!["e", "E"]),
+                proptest::sample::select(vec!["", "+", "-"]), "[0-9]{1,4}")),
+        ) {
+            let mut t = format!("{sign}{int}");
+            if let Some(f) = &frac {
+                t.push('.');
+                t.push_str(f);
+            }
+            if let Some((e, s, d)) = &exp {
+                t.push_str(e);
+                t.push_str(s);
+                t.push_str(d);
+            }
+            if let Ok(("", lexed)) = number_text(&t) {
+                let fast = number_value(lexed).map(f64::to_bits);
+                let slow = lexed.parse::<f64>().ok().map(f64::to_bits);
+                proptest::prop_assert_eq!(fast, slow, "{}", lexed);
+            }
+        }
+
         /// The byte scan of [`ws`] against `trim_start_matches`: the same
         /// rest for any mix of blanks, byte-order marks, comments and text.
         #[test]
