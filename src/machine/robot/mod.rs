@@ -687,7 +687,10 @@ impl Robot {
         // branches are not computed.
         let mut found = None;
         cf.solve_until(&flange, wrist_ref, |k, q| {
-            let hit = ik::confdata_prepared(&self.d.nominal_prep, &q).cfx == conf.cfx;
+            // The last bit of cfx is `q5 < 0`: a branch whose wrist sign
+            // differs cannot match, and needs no frames.
+            let hit = (q[4] < 0.0) == (conf.cfx & 1 == 1)
+                && ik::confdata_prepared(&self.d.nominal_prep, &q).cfx == conf.cfx;
             if hit {
                 found = Some((q, k));
             }
@@ -777,6 +780,46 @@ impl Robot {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The wrist-sign pre-check of [`Robot::ik_conf_branch`] against the
+    /// full search: the first branch (in index order) whose confdata has
+    /// the asked cfx, or none, for random poses and every cfx.
+    #[test]
+    fn conf_branch_equals_the_first_matching_branch() {
+        use crate::machine::Machine;
+        let text = include_str!("../../../machines/abb-irb1600.yaml");
+        let Ok(Machine::Robot(r)) = Machine::from_yaml_str(text, "abb-irb1600.yaml") else {
+            panic!("abb-irb1600.yaml is a robot file")
+        };
+        let Some(cf) = r.d.closed_form.as_ref() else {
+            panic!("the IRB 1600 has a closed form")
+        };
+        let mut state = 0x2545_f491_4f6c_dd1du64;
+        let mut next = || {
+            state = state
+                .wrapping_mul(6_364_136_223_846_793_005)
+                .wrapping_add(1_442_695_040_888_963_407);
+            ((state >> 11) as f64 / (1u64 << 53) as f64 - 0.5) * 2.0
+        };
+        let mut matched = 0;
+        for _ in 0..300 {
+            let q: [f64; 6] = std::array::from_fn(|_| next());
+            let tcp = r.tcp_pose(Model::Nominal, &q);
+            let base = r.confdata(&q);
+            let sols = cf.solve(&r.flange_for_tcp(&tcp), 0.0);
+            for cfx in -1..9 {
+                let conf = ConfData { cfx, ..base };
+                let expected = sols
+                    .iter()
+                    .enumerate()
+                    .find_map(|(k, s)| s.filter(|s| r.confdata(s).cfx == cfx).map(|_| k));
+                let got = r.ik_conf_branch(&tcp, conf, Some(&q)).ok().map(|(_, k)| k);
+                assert_eq!(got, expected, "cfx {cfx}");
+                matched += usize::from(got.is_some());
+            }
+        }
+        assert!(matched > 300);
+    }
 
     #[test]
     fn robot_is_send_sync() {
