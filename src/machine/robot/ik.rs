@@ -325,7 +325,12 @@ struct Arm {
 
 /// Wraps an angle into (−π, π].
 pub fn wrap(a: f64) -> f64 {
-    let mut x = a % (2.0 * PI);
+    // `a % 2π` is `a` itself (exactly) below one turn: no division then.
+    let mut x = if a.abs() < 2.0 * PI {
+        a
+    } else {
+        a % (2.0 * PI)
+    };
     if x > PI {
         x -= 2.0 * PI;
     } else if x <= -PI {
@@ -428,6 +433,32 @@ mod tests {
     use approx::assert_abs_diff_eq;
 
     const TOL: f64 = 1e-12;
+
+    /// The shortcut of [`wrap`] below one turn against the remainder it
+    /// skips: the same bits, signed zeros and both sides of ±π and ±2π.
+    #[test]
+    fn wrap_equals_the_remainder_form() {
+        let reference = |a: f64| {
+            let mut x = a % (2.0 * PI);
+            if x > PI {
+                x -= 2.0 * PI;
+            } else if x <= -PI {
+                x += 2.0 * PI;
+            }
+            x
+        };
+        let mut cases = vec![0.0, -0.0, PI, -PI, 2.0 * PI, -2.0 * PI, 1e-300, f64::NAN];
+        for base in [PI, 2.0 * PI, 3.0 * PI] {
+            for s in [1.0, -1.0] {
+                let v = s * base;
+                cases.extend([v, v.next_up(), v.next_down()]);
+            }
+        }
+        cases.extend((0..2000).map(|k| (f64::from(k) - 1000.0) * 0.0137));
+        for a in cases {
+            assert_eq!(wrap(a).to_bits(), reference(a).to_bits(), "{a}");
+        }
+    }
 
     #[test]
     fn quadrants_follow_abb() {
