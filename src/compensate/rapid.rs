@@ -28,7 +28,7 @@ use crate::machine::robot::process::{
 use crate::machine::robot::thermal::{Segment, effective_power};
 use crate::machine::robot::{
     Compensation, ConfData, Deviation, DhGrowth, Effects, ForceFrame, ForceModel, IkSelect, Model,
-    PointMass, ProcessWrench, Robot, RobotError, ThermalStart,
+    PointMass, ProcessWrench, Robot, RobotError, Seed, ThermalStart,
 };
 use crate::process::MillingCache;
 use crate::program::rapid::{
@@ -729,10 +729,9 @@ struct Job {
     sel: IkSelect,
     /// DH growth of the thermal stage at this move, mm.
     growth: DhGrowth,
-    /// Controller joints of the programmed pose, when planning found them.
-    q0: Option<[f64; 6]>,
-    /// Closed-form branch of `q0`, when known.
-    branch: Option<usize>,
+    /// What planning found about the programmed pose (its controller
+    /// joints, their branch and nominal flange), when it did.
+    seed: Seed,
 }
 
 /// The two walks over the moves: the first collects every compensation as
@@ -764,7 +763,7 @@ const JOB_CHUNK: usize = 4096;
 fn solve_chunk(views: &[Robot], jobs: &[Job], fx: Effects) -> Vec<Solved> {
     jobs.par_iter()
         .map(|j| match views.get(j.view) {
-            Some(r) => r.compensate_seeded(&j.pose, &j.sel, fx, &j.growth, j.q0, j.branch),
+            Some(r) => r.compensate_seeded(&j.pose, &j.sel, fx, &j.growth, &j.seed),
             None => Err(RobotError::Unreachable("no robot view".into())),
         })
         .collect()
@@ -836,7 +835,7 @@ impl Rewriter<'_> {
         view: usize,
         pose: Isometry3<f64>,
         sel: IkSelect,
-        (q0, branch): (Option<[f64; 6]>, Option<usize>),
+        seed: Seed,
     ) -> Option<Solved> {
         let growth = self.growth();
         match &mut self.phase {
@@ -846,8 +845,7 @@ impl Rewriter<'_> {
                     pose,
                     sel,
                     growth,
-                    q0,
-                    branch,
+                    seed,
                 };
                 match chunks.last_mut() {
                     Some(c) if c.len() < JOB_CHUNK => c.push(job),
@@ -873,14 +871,9 @@ impl Rewriter<'_> {
                     results
                         .next()
                         .unwrap_or_else(|| match self.views.get(view) {
-                            Some(r) => r.compensate_seeded(
-                                &pose,
-                                &sel,
-                                self.opts.effects,
-                                &growth,
-                                q0,
-                                branch,
-                            ),
+                            Some(r) => {
+                                r.compensate_seeded(&pose, &sel, self.opts.effects, &growth, &seed)
+                            }
                             None => Err(RobotError::Unreachable("no robot view".into())),
                         }),
                 )
@@ -905,7 +898,7 @@ impl Rewriter<'_> {
         key: &LoadKey,
         tool: &ToolView,
         wobj: &Isometry3<f64>,
-        q0: (Option<[f64; 6]>, Option<usize>),
+        seed: Seed,
     ) -> Result<Option<Deviation>> {
         let u = resolve_cart(self.module, self.src, self.file, target)?;
         let view = self.view(key, tool);
@@ -927,7 +920,7 @@ impl Rewriter<'_> {
                 mv.kind.name()
             )
         };
-        let Some(comp) = self.solve(view, programmed, IkSelect::Conf(u.conf), q0) else {
+        let Some(comp) = self.solve(view, programmed, IkSelect::Conf(u.conf), seed) else {
             return Ok(None);
         };
         let comp = comp.map_err(|e| self.locate(at, e, &what()))?;
@@ -1087,7 +1080,7 @@ impl Rewriter<'_> {
             .map_err(|e| self.locate(at, e, &what()))?;
         let goal = r.tcp_pose(Model::Nominal, &q);
         self.last_tcp = goal.translation.vector.into();
-        let Some(comp) = self.solve(view, goal, IkSelect::Near(q), (None, None)) else {
+        let Some(comp) = self.solve(view, goal, IkSelect::Near(q), Seed::default()) else {
             return Ok(None);
         };
         let comp = comp.map_err(|e| self.locate(at, e, &what()))?;
@@ -1187,6 +1180,9 @@ struct Planned {
     q: Option<[f64; 6]>,
     /// Closed-form branch of `q` (a Cartesian target's).
     branch: Option<usize>,
+    /// Nominal flange pose at `q` (robot base frame), when the thermal
+    /// power of the move computed it.
+    nominal_flange: Option<Isometry3<f64>>,
     /// TCP speed, mm/s, when it can be resolved.
     v_tcp: Option<f64>,
 }
@@ -1261,6 +1257,7 @@ fn plan_move<'m>(
         via,
         q,
         branch,
+        nominal_flange: None,
         v_tcp: tcp_speed(module, mv),
     })
 }
@@ -1428,16 +1425,16 @@ fn move_power<'m>(
     wrench: Option<ProcessWrench>,
     tool: &'m str,
     duration_s: f64,
-) -> [f64; 6] {
+) -> ([f64; 6], Option<Isometry3<f64>>) {
     let (Some(prev), Some(cur)) = (i.checked_sub(1).and_then(|k| plans.get(k)), plans.get(i))
     else {
-        return [0.0; 6];
+        return ([0.0; 6], None);
     };
     let (Some(qa), Some(qb)) = (prev.q, cur.q) else {
-        return [0.0; 6];
+        return ([0.0; 6], None);
     };
     if duration_s <= 0.0 {
-        return [0.0; 6];
+        return ([0.0; 6], None);
     }
     let key = (tool, wrench.as_ref().map(wrench_bits));
     let view = cache.get(key, || {
@@ -1445,18 +1442,22 @@ fn move_power<'m>(
             .with_tool(cur.tool.tframe, cur.tool.load, false)
             .with_process_wrench(wrench)
     });
-    let tau = |q: &[f64; 6]| view.nominal_load_torques(q);
     // A move starts where the previous one ended: with the same view, the
     // torques there are those computed for the previous move's end.
     let qa_bits = qa.map(f64::to_bits);
     let tau_a = match last {
         Some((k, q, t)) if *k == key && *q == qa_bits => *t,
-        _ => tau(&qa),
+        _ => view.nominal_load_torques(&qa),
     };
-    let tau_b = tau(&qb);
+    // The nominal flange at the move's programmed joints also gives the
+    // first stage of its deviation breakdown (the seed of its compensation).
+    let (tau_b, flange_b) = view.nominal_load_torques_and_flange(&qb);
     *last = Some((key, qb.map(f64::to_bits), tau_b));
     let t = (tau_a + tau_b) * 0.5e-3;
-    std::array::from_fn(|j| (t[j] * (qb[j] - qa[j]) / duration_s).abs())
+    (
+        std::array::from_fn(|j| (t[j] * (qb[j] - qa[j]) / duration_s).abs()),
+        Some(flange_b),
+    )
 }
 
 /// The view key, joints (bits) and nominal load torques of the end of the
@@ -1539,7 +1540,7 @@ pub fn compensate_module(
             }
             None => 0.0,
         };
-        let power_w = move_power(
+        let (power_w, flange) = move_power(
             robot,
             &mut power_views,
             &mut end_torques,
@@ -1549,6 +1550,9 @@ pub fn compensate_module(
             &mv.tool.text,
             duration_s,
         );
+        if let Some(p) = plans.get_mut(i) {
+            p.nominal_flange = flange;
+        }
         segments.push(Segment {
             duration_s,
             power_w,
@@ -1705,18 +1709,17 @@ impl Rewriter<'_> {
             self.joint(mv, key, &plan.tool)
         } else {
             if let Some(via) = &mv.via {
-                self.cart(mv, via, key, &plan.tool, &plan.wobj, (None, None))?;
+                self.cart(mv, via, key, &plan.tool, &plan.wobj, Seed::default())?;
             }
             // Planning solved the target's joints with the same pose,
-            // confdata and TCP (`ik_conf`, limits checked).
-            self.cart(
-                mv,
-                &mv.target,
-                key,
-                &plan.tool,
-                &plan.wobj,
-                (plan.q, plan.branch),
-            )
+            // confdata and TCP (`ik_conf`, limits checked), and the nominal
+            // flange at them (for the thermal power).
+            let seed = Seed {
+                q: plan.q,
+                branch: plan.branch,
+                nominal_flange: plan.nominal_flange,
+            };
+            self.cart(mv, &mv.target, key, &plan.tool, &plan.wobj, seed)
         }
     }
 }

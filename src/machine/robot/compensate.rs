@@ -154,6 +154,20 @@ pub struct Compensation {
     pub iterations: usize,
 }
 
+/// What planning a move found about its programmed pose, to start its
+/// compensation from ([`Robot::compensate_seeded`]).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub(crate) struct Seed {
+    /// Controller joints of the programmed pose (`ik_nominal(programmed,
+    /// sel)`, limits checked).
+    pub q: Option<[f64; 6]>,
+    /// Closed-form branch of `q` ([`Robot::ik_conf_indexed`]).
+    pub branch: Option<usize>,
+    /// Nominal flange pose (robot base frame) at `q`, computed as the last
+    /// frame of `frames_prepared(nominal, q, 6)` (ignored without `q`).
+    pub nominal_flange: Option<Isometry3<f64>>,
+}
+
 /// The closed-form branch of a target's inverse kinematics, kept over the
 /// compensation iteration when `fixed`.
 struct BranchMemo {
@@ -338,7 +352,23 @@ impl Robot {
         q: &[f64; 6],
         effects: Effects,
     ) -> [Isometry3<f64>; 5] {
-        let p0 = self.tcp_of(&flange_prepared(self.nominal_prepared(), q));
+        self.stages_from(kin, model, q, effects, None)
+    }
+
+    /// [`Robot::stages_with`] with the nominal flange pose at `q`, when
+    /// already known (the flange of `frames_prepared(nominal, q, 6)`, the
+    /// same bits as [`flange_prepared`]).
+    fn stages_from(
+        &self,
+        kin: &Prepared,
+        model: &Prepared,
+        q: &[f64; 6],
+        effects: Effects,
+        nominal_flange: Option<Isometry3<f64>>,
+    ) -> [Isometry3<f64>; 5] {
+        let nominal_flange =
+            nominal_flange.unwrap_or_else(|| flange_prepared(self.nominal_prepared(), q));
+        let p0 = self.tcp_of(&nominal_flange);
         // The full set differs from the kinematic one by lengths only: one
         // chain of half angles and rotations serves both.
         let (f, kin_flange) = match frames_and_twin_flange(model, kin, q) {
@@ -418,23 +448,27 @@ impl Robot {
         effects: Effects,
         growth: &DhGrowth,
     ) -> Result<Compensation, RobotError> {
-        self.compensate_seeded(programmed, sel, effects, growth, None, None)
+        self.compensate_seeded(programmed, sel, effects, growth, &Seed::default())
     }
 
-    /// [`Robot::compensate_with_growth`] with the controller joints of the
-    /// programmed pose already known (`ik_nominal(programmed, sel)`, limits
-    /// checked), e.g. from planning the move: saves one inverse kinematics.
-    /// `branch`: the closed-form branch of those joints
-    /// ([`Robot::ik_conf_indexed`]), when known.
+    /// [`Robot::compensate_with_growth`] with what planning the move already
+    /// found ([`Seed`]): saves one inverse kinematics (and the nominal
+    /// forward kinematics of the deviation breakdown, when given).
     pub(crate) fn compensate_seeded(
         &self,
         programmed: &Isometry3<f64>,
         sel: &IkSelect,
         effects: Effects,
         growth: &DhGrowth,
-        q_programmed: Option<[f64; 6]>,
-        branch: Option<usize>,
+        seed: &Seed,
     ) -> Result<Compensation, RobotError> {
+        let Seed {
+            q: q_programmed,
+            branch,
+            nominal_flange,
+        } = *seed;
+        // The flange is that of the given joints only.
+        let nominal_flange = nominal_flange.filter(|_| q_programmed.is_some());
         // Fast path: the closed-form branch found by the first inverse
         // kinematics of the iteration is the only one solved afterwards.
         // Its result stands when the final joints still have the asked
@@ -444,15 +478,27 @@ impl Robot {
         // before the fast path).
         if let IkSelect::Conf(c) = sel {
             let seed = q_programmed.and(branch);
-            if let Ok(r) =
-                self.compensate_branch(programmed, sel, effects, growth, q_programmed, Some(seed))
-            {
+            if let Ok(r) = self.compensate_branch(
+                programmed,
+                sel,
+                effects,
+                growth,
+                (q_programmed, nominal_flange),
+                Some(seed),
+            ) {
                 if r.conf.cfx == c.cfx {
                     return Ok(r);
                 }
             }
         }
-        self.compensate_branch(programmed, sel, effects, growth, q_programmed, None)
+        self.compensate_branch(
+            programmed,
+            sel,
+            effects,
+            growth,
+            (q_programmed, nominal_flange),
+            None,
+        )
     }
 
     /// [`Robot::compensate_seeded`]; with `fixed_branch`, the inverse
@@ -464,7 +510,7 @@ impl Robot {
         sel: &IkSelect,
         effects: Effects,
         growth: &DhGrowth,
-        q_programmed: Option<[f64; 6]>,
+        (q_programmed, nominal_flange): (Option<[f64; 6]>, Option<Isometry3<f64>>),
         fixed_branch: Option<Option<usize>>,
     ) -> Result<Compensation, RobotError> {
         let mut branch = BranchMemo {
@@ -476,7 +522,7 @@ impl Robot {
             None => self.ik_nominal(programmed, sel)?,
         };
         let (kin, model) = self.prediction_prepared(effects, growth);
-        let st = self.stages_with(&kin, &model, &q0, effects);
+        let st = self.stages_from(&kin, &model, &q0, effects, nominal_flange);
         let deviation = Deviation {
             kinematic: PoseDelta::between(&st[1], &st[0]),
             thermal: PoseDelta::between(&st[2], &st[1]),
@@ -618,6 +664,53 @@ mod tests {
                 }
             }
         }
+    }
+
+    /// A seed with the nominal flange taken from the planning's frames
+    /// gives the compensation computed without it, bit for bit.
+    #[test]
+    fn nominal_flange_seed_equals_the_unseeded_compensation() {
+        let text = include_str!("../../../machines/abb-irb1600.yaml");
+        let Ok(Machine::Robot(r)) = Machine::from_yaml_str(text, "abb-irb1600.yaml") else {
+            panic!("abb-irb1600.yaml is a robot file")
+        };
+        let growth = r.thermal_growth_mm(&[30.0, 90.0, 40.0, 0.0, 0.0, 0.0]);
+        let mut checked = 0;
+        for (x, y, z) in [
+            (650.0, 50.0, 300.0),
+            (900.0, -200.0, 700.0),
+            (500.0, 400.0, 150.0),
+        ] {
+            let pose = Isometry3::from_parts(
+                Translation3::new(x, y, z),
+                UnitQuaternion::from_axis_angle(&Vector3::y_axis(), 3.0),
+            );
+            let Ok(sols) = r.ik_all(&pose) else {
+                continue;
+            };
+            for s in sols.iter().flatten() {
+                let conf = r.confdata(s);
+                let Ok((q, branch)) = r.ik_conf_indexed(&pose, conf) else {
+                    continue;
+                };
+                let sel = IkSelect::Conf(conf);
+                let (_, flange) = r.nominal_load_torques_and_flange(&q);
+                let plain = Seed {
+                    q: Some(q),
+                    branch: Some(branch),
+                    nominal_flange: None,
+                };
+                let seeded = Seed {
+                    nominal_flange: Some(flange),
+                    ..plain
+                };
+                let a = r.compensate_seeded(&pose, &sel, Effects::ALL, &growth, &plain);
+                let b = r.compensate_seeded(&pose, &sel, Effects::ALL, &growth, &seeded);
+                assert_eq!(a, b);
+                checked += 1;
+            }
+        }
+        assert!(checked >= 3);
     }
 
     #[test]

@@ -24,6 +24,7 @@ mod statics;
 pub mod thermal;
 mod with_tool;
 
+pub(crate) use compensate::Seed;
 pub use compensate::{Compensation, Deviation, Effects, PoseDelta};
 pub use dh::{Convention, DhJoint, DhParams};
 pub use dynamics::{Modal, Mode, Resonance};

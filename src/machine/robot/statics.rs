@@ -139,13 +139,23 @@ impl Robot {
     /// [`Robot::gravity_torques`] plus [`Robot::process_torques`] of the
     /// nominal model, from one set of joint frames.
     pub(crate) fn nominal_load_torques(&self, q: &[f64; 6]) -> Vector6<f64> {
+        self.nominal_load_torques_and_flange(q).0
+    }
+
+    /// [`Robot::nominal_load_torques`] and the nominal flange pose at `q`
+    /// (the last of the frames they come from).
+    pub(crate) fn nominal_load_torques_and_flange(
+        &self,
+        q: &[f64; 6],
+    ) -> (Vector6<f64>, Isometry3<f64>) {
         let f = super::kinematics::frames_prepared(self.nominal_prepared(), q, 6);
         let tau_g = self.gravity_torques_at(&f);
-        if self.process_torques_vanish(&tau_g, 1.0) {
+        let tau = if self.process_torques_vanish(&tau_g, 1.0) {
             tau_g
         } else {
             tau_g + self.process_torques_at(&f)
-        }
+        };
+        (tau, f.flange())
     }
 
     /// True when adding the process torques (times `gain`) to `tau_g`
