@@ -251,10 +251,18 @@ pub fn quaternion_components(
         .ok_or_else(|| Error::Usage(format!("quaternion {q:?} cannot be normalised")))?;
     let scale = 10f64.powi(i32::try_from(fmt.quaternion_decimals).unwrap_or(9).min(15));
     let lo = n.map(|c| (c * scale).floor());
+    // The two candidate values of each component and their squares,
+    // computed once for the 16 combinations (the same values as per
+    // combination).
+    let cand: [[f64; 2]; 4] =
+        std::array::from_fn(|k| [0u32, 1].map(|b| (lo[k] + f64::from(b)) / scale));
+    let sq = cand.map(|c| c.map(|x| x * x));
     let mut best = (f64::INFINITY, n);
     for mask in 0..16u32 {
-        let c: [f64; 4] = std::array::from_fn(|k| (lo[k] + f64::from((mask >> k) & 1)) / scale);
-        let norm = c.iter().map(|x| x * x).sum::<f64>().sqrt();
+        let bit = |k: usize| ((mask >> k) & 1) as usize;
+        let c: [f64; 4] = std::array::from_fn(|k| cand[k][bit(k)]);
+        let c2: [f64; 4] = std::array::from_fn(|k| sq[k][bit(k)]);
+        let norm = c2.iter().sum::<f64>().sqrt();
         if norm <= f64::EPSILON {
             continue;
         }
@@ -531,6 +539,39 @@ mod tests {
         #[test]
         fn fixed_format_matches_format(v in any::<f64>(), d in 0usize..12) {
             prop_assert_eq!(format_fixed(v, d), slow(v, d));
+        }
+
+        /// The shared candidates of [`quaternion_components`] against the
+        /// candidates computed per combination: the same components, bit
+        /// for bit (signed zeros included).
+        #[test]
+        fn quaternion_candidates_match_per_combination(
+            q in proptest::array::uniform4(-1.0f64..1.0),
+            zero in proptest::array::uniform4(any::<bool>()),
+            d in 0usize..10,
+        ) {
+            let q: [f64; 4] = std::array::from_fn(|k| if zero[k] { -0.0 } else { q[k] });
+            let fmt = Format { position_decimals: 3, quaternion_decimals: d };
+            let fast = quaternion_components(&q, None, &fmt).ok().map(|c| c.map(f64::to_bits));
+            let slow = normalise_quaternion(&q, None).map(|n| {
+                let scale = 10f64.powi(i32::try_from(d).unwrap_or(9).min(15));
+                let lo = n.map(|c| (c * scale).floor());
+                let mut best = (f64::INFINITY, n);
+                for mask in 0..16u32 {
+                    let c: [f64; 4] =
+                        std::array::from_fn(|k| (lo[k] + f64::from((mask >> k) & 1)) / scale);
+                    let norm = c.iter().map(|x| x * x).sum::<f64>().sqrt();
+                    if norm <= f64::EPSILON {
+                        continue;
+                    }
+                    let err: f64 = c.iter().zip(&n).map(|(a, b)| (a / norm - b).powi(2)).sum();
+                    if err < best.0 {
+                        best = (err, c);
+                    }
+                }
+                best.1.map(f64::to_bits)
+            });
+            prop_assert_eq!(fast, slow);
         }
 
         #[test]

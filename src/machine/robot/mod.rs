@@ -156,6 +156,10 @@ struct RobotData {
     speed_rad_per_s: [f64; 6],
     tool: Isometry3<f64>,
     base: Isometry3<f64>,
+    /// `tool.inverse()` and `base.inverse()`, set with them (every inverse
+    /// kinematics uses both).
+    tool_inv: Isometry3<f64>,
+    base_inv: Isometry3<f64>,
     gravity_m_per_s2: Vector3<f64>,
     links: [PointMass; 6],
     tool_load: Option<PointMass>,
@@ -441,6 +445,8 @@ impl Robot {
                 closed_form,
                 limits_rad,
                 speed_rad_per_s,
+                tool_inv: tool.inverse(),
+                base_inv: base.inverse(),
                 tool,
                 base,
                 gravity_m_per_s2: Vector3::from(raw.gravity_m_per_s2),
@@ -529,7 +535,7 @@ impl Robot {
     }
     /// Flange pose (robot base frame) that puts the TCP at `tcp_world`.
     pub fn flange_for_tcp(&self, tcp_world: &Isometry3<f64>) -> Isometry3<f64> {
-        self.d.base.inverse() * tcp_world * self.d.tool.inverse()
+        self.d.base_inv * tcp_world * self.d.tool_inv
     }
     /// The nominal parameter set with its twists precomputed.
     pub(crate) fn nominal_prepared(&self) -> &kinematics::Prepared {
@@ -820,6 +826,37 @@ mod tests {
             }
         }
         assert!(matched > 300);
+    }
+
+    /// The stored inverses of the tool and base frames follow their
+    /// setters: `flange_for_tcp` equals the product with fresh inverses.
+    #[test]
+    fn flange_for_tcp_uses_current_inverses() {
+        use crate::machine::Machine;
+        let text = include_str!("../../../machines/abb-irb1600.yaml");
+        let Ok(Machine::Robot(r)) = Machine::from_yaml_str(text, "abb-irb1600.yaml") else {
+            panic!("abb-irb1600.yaml is a robot file")
+        };
+        let frame = |x: f64, a: f64| {
+            Isometry3::from_parts(
+                nalgebra::Translation3::new(x, -2.0 * x, 0.5 * x),
+                nalgebra::UnitQuaternion::from_euler_angles(a, -0.5 * a, 0.25 * a),
+            )
+        };
+        let tcp = frame(700.0, 2.9);
+        let views = [
+            r.clone(),
+            r.with_tool(frame(12.0, 0.3), None, false),
+            r.with_base(frame(-150.0, 0.1)),
+            r.with_tool(frame(3.0, -1.2), None, true)
+                .with_base(frame(40.0, 2.0)),
+        ];
+        for v in &views {
+            let fresh = v.base().inverse() * tcp * v.flange_to_tool().inverse();
+            let got = v.flange_for_tcp(&tcp);
+            assert_eq!(got.translation.vector, fresh.translation.vector);
+            assert_eq!(got.rotation.coords, fresh.rotation.coords);
+        }
     }
 
     #[test]
