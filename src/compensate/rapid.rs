@@ -1180,9 +1180,6 @@ struct Planned {
     q: Option<[f64; 6]>,
     /// Closed-form branch of `q` (a Cartesian target's).
     branch: Option<usize>,
-    /// Nominal flange pose at `q` (robot base frame), when the thermal
-    /// power of the move computed it.
-    nominal_flange: Option<Isometry3<f64>>,
     /// TCP speed, mm/s, when it can be resolved.
     v_tcp: Option<f64>,
 }
@@ -1257,7 +1254,6 @@ fn plan_move<'m>(
         via,
         q,
         branch,
-        nominal_flange: None,
         v_tcp: tcp_speed(module, mv),
     })
 }
@@ -1524,6 +1520,7 @@ pub fn compensate_module(
     let mut segments = Vec::with_capacity(moves.len());
     let mut power_views = ViewCache::new();
     let mut end_torques = None;
+    let mut nominal_flanges: Vec<Option<Isometry3<f64>>> = Vec::new();
     for (i, mv) in moves.iter().enumerate() {
         let duration_s = match move_duration(robot, &plans, i, mv) {
             Some(t) => t,
@@ -1550,8 +1547,10 @@ pub fn compensate_module(
             &mv.tool.text,
             duration_s,
         );
-        if let Some(p) = plans.get_mut(i) {
-            p.nominal_flange = flange;
+        // Kept only for a compensation (where the deviation breakdown uses
+        // it), one per move.
+        if fx.compensates() {
+            nominal_flanges.push(flange);
         }
         segments.push(Segment {
             duration_s,
@@ -1620,14 +1619,21 @@ pub fn compensate_module(
             power: power.map(|p| p.map(f64::to_bits)),
             rpm: rpm.map(f64::to_bits),
         };
-        keyed.push((*mv, plan, seg, MoveState { wrench, power, rpm }, key));
+        let flange = nominal_flanges.get(i).and_then(Option::as_ref);
+        keyed.push((
+            *mv,
+            (plan, flange),
+            seg,
+            MoveState { wrench, power, rpm },
+            key,
+        ));
     }
     // Walk 1: collect the compensation jobs. It stops at the first error;
     // walk 2 meets the same error at the same move, after reporting any
     // failure of an earlier target, as a single walk would.
     for (mv, plan, _, state, key) in &keyed {
         rw.state = *state;
-        if rw.walk(mv, key, plan).is_err() {
+        if rw.walk(mv, key, *plan).is_err() {
             break;
         }
     }
@@ -1645,7 +1651,7 @@ pub fn compensate_module(
         rw.state = *state;
         let wrench = state.wrench;
         let power = state.power;
-        let Some(dev) = rw.walk(mv, key, plan)? else {
+        let Some(dev) = rw.walk(mv, key, *plan)? else {
             continue;
         };
         outcome.moves += 1;
@@ -1694,6 +1700,7 @@ pub fn compensate_module(
     let edits = std::mem::take(&mut rw.edits);
     drop(rw);
     drop(keyed);
+    drop(nominal_flanges);
     drop(plans);
     drop(moves);
     drop(module);
@@ -1704,7 +1711,12 @@ pub fn compensate_module(
 impl Rewriter<'_> {
     /// Compensates (or collects the jobs of) one move: the circle point of
     /// a MoveC, then its target. The deviation is that of the target.
-    fn walk(&mut self, mv: &Move, key: &LoadKey, plan: &Planned) -> Result<Option<Deviation>> {
+    fn walk(
+        &mut self,
+        mv: &Move,
+        key: &LoadKey,
+        (plan, nominal_flange): (&Planned, Option<&Isometry3<f64>>),
+    ) -> Result<Option<Deviation>> {
         if mv.kind == MoveKind::MoveAbsJ {
             self.joint(mv, key, &plan.tool)
         } else {
@@ -1717,7 +1729,7 @@ impl Rewriter<'_> {
             let seed = Seed {
                 q: plan.q,
                 branch: plan.branch,
-                nominal_flange: plan.nominal_flange,
+                nominal_flange: nominal_flange.copied(),
             };
             self.cart(mv, &mv.target, key, &plan.tool, &plan.wobj, seed)
         }
