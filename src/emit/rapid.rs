@@ -189,6 +189,33 @@ pub fn push_fixed(out: &mut String, v: f64, decimals: usize) -> bool {
     true
 }
 
+/// Appends `v.to_string()` to `out` without the formatting machinery (the
+/// confdata numbers of a rewritten robtarget).
+pub fn push_int(out: &mut String, v: i32) {
+    if v < 0 {
+        out.push('-');
+    }
+    let mut x = v.unsigned_abs();
+    let mut buf = [b'0'; 10];
+    let mut i = buf.len();
+    loop {
+        i -= 1;
+        if let Some(slot) = buf.get_mut(i) {
+            *slot = b'0' + (x % 10) as u8;
+        }
+        x /= 10;
+        if x == 0 || i == 0 {
+            break;
+        }
+    }
+    out.extend(
+        buf.get(i..)
+            .unwrap_or_default()
+            .iter()
+            .map(|&b| char::from(b)),
+    );
+}
+
 /// Formats a position (mm) with `fmt.position_decimals` decimals.
 pub fn format_position(p: &[f64; 3], fmt: &Format) -> Result<[String; 3], Error> {
     let f = |v: f64| {
@@ -322,10 +349,9 @@ pub fn robtarget_edit(
             }
         }
         if let Some(conf) = conf {
-            use std::fmt::Write;
             for (n, v) in rt.robconf.iter().zip(conf) {
                 gap(&mut text, n)?;
-                let _ = write!(text, "{v}");
+                push_int(&mut text, *v);
             }
         }
     }
@@ -539,6 +565,16 @@ mod tests {
         #[test]
         fn fixed_format_matches_format(v in any::<f64>(), d in 0usize..12) {
             prop_assert_eq!(format_fixed(v, d), slow(v, d));
+        }
+
+        /// [`push_int`] against `to_string` (random and extreme values).
+        #[test]
+        fn int_push_matches_to_string(v in any::<i32>()) {
+            for v in [v, 0, -1, 9, -10, i32::MAX, i32::MIN] {
+                let mut s = String::from("x");
+                push_int(&mut s, v);
+                prop_assert_eq!(s, format!("x{v}"));
+            }
         }
 
         /// The shared candidates of [`quaternion_components`] against the
