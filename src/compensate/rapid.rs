@@ -28,7 +28,7 @@ use crate::machine::robot::process::{
 use crate::machine::robot::thermal::{Segment, effective_power};
 use crate::machine::robot::{
     Compensation, ConfData, Deviation, DhGrowth, Effects, ForceFrame, ForceModel, IkSelect, Model,
-    PointMass, ProcessWrench, Robot, RobotError, ThermalStart,
+    PointMass, ProcessWrench, Robot, RobotError, Seed, ThermalStart,
 };
 use crate::process::MillingCache;
 use crate::program::rapid::{
@@ -601,10 +601,10 @@ fn robtarget_text(
     ))
 }
 
-/// In-place edits of a robtarget literal.
 /// In-place edits of a robtarget literal, pushed onto `edits`: one edit
-/// for the position and quaternion numbers, one per confdata number when
-/// the confdata changes.
+/// for the position and quaternion numbers (and the confdata numbers when
+/// the confdata changes) while they lie on one line; otherwise one edit per
+/// number.
 fn robtarget_in_place(
     edits: &mut Vec<Edit>,
     src: &str,
@@ -617,11 +617,19 @@ fn robtarget_in_place(
     let q = pose.rotation.quaternion();
     let pos: [f64; 3] = pose.translation.vector.into();
     let quat = [q.w, q.i, q.j, q.k];
-    // One edit over the whole position-and-quaternion text is cheaper, but
-    // only while it stays on one line: an annotation inserted at the end of
-    // an earlier statement's line would fall inside a multi-line span.
+    // One edit over the whole position-and-quaternion text (and the
+    // confdata when it changes) is cheaper, but only while it stays on one
+    // line: an annotation inserted at the end of an earlier statement's
+    // line would fall inside a multi-line span.
+    let new_conf = [conf.cf1, conf.cf4, conf.cf6, conf.cfx];
+    let changed = conf != old_conf;
+    let end = if changed {
+        rt.robconf[3].span.end
+    } else {
+        rt.rot[3].span.end
+    };
     let one_line = src
-        .get(rt.trans[0].span.start..rt.rot[3].span.end)
+        .get(rt.trans[0].span.start..end)
         .is_some_and(|t| !t.contains('\n'));
     if one_line {
         edits.push(crate::emit::rapid::robtarget_edit(
@@ -629,6 +637,7 @@ fn robtarget_in_place(
             rt,
             &pos,
             Some(&quat),
+            changed.then_some(&new_conf),
             fmt,
         )?);
     } else {
@@ -638,14 +647,10 @@ fn robtarget_in_place(
             Some(&quat),
             fmt,
         )?);
-    }
-    if conf != old_conf {
-        for (n, v) in rt
-            .robconf
-            .iter()
-            .zip([conf.cf1, conf.cf4, conf.cf6, conf.cfx])
-        {
-            edits.push(Edit::replace(n.span.clone(), v.to_string()));
+        if changed {
+            for (n, v) in rt.robconf.iter().zip(new_conf) {
+                edits.push(Edit::replace(n.span.clone(), v.to_string()));
+            }
         }
     }
     Ok(())
@@ -724,10 +729,9 @@ struct Job {
     sel: IkSelect,
     /// DH growth of the thermal stage at this move, mm.
     growth: DhGrowth,
-    /// Controller joints of the programmed pose, when planning found them.
-    q0: Option<[f64; 6]>,
-    /// Closed-form branch of `q0`, when known.
-    branch: Option<usize>,
+    /// What planning found about the programmed pose (its controller
+    /// joints, their branch and nominal flange), when it did.
+    seed: Seed,
 }
 
 /// The two walks over the moves: the first collects every compensation as
@@ -759,7 +763,7 @@ const JOB_CHUNK: usize = 4096;
 fn solve_chunk(views: &[Robot], jobs: &[Job], fx: Effects) -> Vec<Solved> {
     jobs.par_iter()
         .map(|j| match views.get(j.view) {
-            Some(r) => r.compensate_seeded(&j.pose, &j.sel, fx, &j.growth, j.q0, j.branch),
+            Some(r) => r.compensate_seeded(&j.pose, &j.sel, fx, &j.growth, &j.seed),
             None => Err(RobotError::Unreachable("no robot view".into())),
         })
         .collect()
@@ -831,7 +835,7 @@ impl Rewriter<'_> {
         view: usize,
         pose: Isometry3<f64>,
         sel: IkSelect,
-        (q0, branch): (Option<[f64; 6]>, Option<usize>),
+        seed: Seed,
     ) -> Option<Solved> {
         let growth = self.growth();
         match &mut self.phase {
@@ -841,8 +845,7 @@ impl Rewriter<'_> {
                     pose,
                     sel,
                     growth,
-                    q0,
-                    branch,
+                    seed,
                 };
                 match chunks.last_mut() {
                     Some(c) if c.len() < JOB_CHUNK => c.push(job),
@@ -868,14 +871,9 @@ impl Rewriter<'_> {
                     results
                         .next()
                         .unwrap_or_else(|| match self.views.get(view) {
-                            Some(r) => r.compensate_seeded(
-                                &pose,
-                                &sel,
-                                self.opts.effects,
-                                &growth,
-                                q0,
-                                branch,
-                            ),
+                            Some(r) => {
+                                r.compensate_seeded(&pose, &sel, self.opts.effects, &growth, &seed)
+                            }
                             None => Err(RobotError::Unreachable("no robot view".into())),
                         }),
                 )
@@ -900,7 +898,7 @@ impl Rewriter<'_> {
         key: &LoadKey,
         tool: &ToolView,
         wobj: &Isometry3<f64>,
-        q0: (Option<[f64; 6]>, Option<usize>),
+        seed: Seed,
     ) -> Result<Option<Deviation>> {
         let u = resolve_cart(self.module, self.src, self.file, target)?;
         let view = self.view(key, tool);
@@ -922,7 +920,7 @@ impl Rewriter<'_> {
                 mv.kind.name()
             )
         };
-        let Some(comp) = self.solve(view, programmed, IkSelect::Conf(u.conf), q0) else {
+        let Some(comp) = self.solve(view, programmed, IkSelect::Conf(u.conf), seed) else {
             return Ok(None);
         };
         let comp = comp.map_err(|e| self.locate(at, e, &what()))?;
@@ -1082,7 +1080,7 @@ impl Rewriter<'_> {
             .map_err(|e| self.locate(at, e, &what()))?;
         let goal = r.tcp_pose(Model::Nominal, &q);
         self.last_tcp = goal.translation.vector.into();
-        let Some(comp) = self.solve(view, goal, IkSelect::Near(q), (None, None)) else {
+        let Some(comp) = self.solve(view, goal, IkSelect::Near(q), Seed::default()) else {
             return Ok(None);
         };
         let comp = comp.map_err(|e| self.locate(at, e, &what()))?;
@@ -1413,34 +1411,58 @@ fn move_duration(robot: &Robot, plans: &[Planned], i: usize, mv: &Move) -> Optio
 /// Mean motor power per joint during move `i`, W: `|τ·q̇|` with `τ` the
 /// gravity and process torques averaged over the move's two ends (N·m) and
 /// `q̇` the joint change over the duration.
+#[allow(clippy::too_many_arguments)]
 fn move_power<'m>(
     robot: &Robot,
     cache: &mut ViewCache<(&'m str, Option<WrenchBits>)>,
+    last: &mut EndTorques<'m>,
     plans: &[Planned],
     i: usize,
     wrench: Option<ProcessWrench>,
     tool: &'m str,
     duration_s: f64,
-) -> [f64; 6] {
+) -> ([f64; 6], Option<Isometry3<f64>>) {
     let (Some(prev), Some(cur)) = (i.checked_sub(1).and_then(|k| plans.get(k)), plans.get(i))
     else {
-        return [0.0; 6];
+        return ([0.0; 6], None);
     };
     let (Some(qa), Some(qb)) = (prev.q, cur.q) else {
-        return [0.0; 6];
+        return ([0.0; 6], None);
     };
     if duration_s <= 0.0 {
-        return [0.0; 6];
+        return ([0.0; 6], None);
     }
-    let view = cache.get((tool, wrench.as_ref().map(wrench_bits)), || {
+    let key = (tool, wrench.as_ref().map(wrench_bits));
+    let view = cache.get(key, || {
         robot
             .with_tool(cur.tool.tframe, cur.tool.load, false)
             .with_process_wrench(wrench)
     });
-    let tau = |q: &[f64; 6]| view.nominal_load_torques(q);
-    let t = (tau(&qa) + tau(&qb)) * 0.5e-3;
-    std::array::from_fn(|j| (t[j] * (qb[j] - qa[j]) / duration_s).abs())
+    // A move starts where the previous one ended: with the same view, the
+    // torques there are those computed for the previous move's end.
+    let qa_bits = qa.map(f64::to_bits);
+    let tau_a = match last {
+        Some((k, q, t)) if *k == key && *q == qa_bits => *t,
+        _ => view.nominal_load_torques(&qa),
+    };
+    // The nominal flange at the move's programmed joints also gives the
+    // first stage of its deviation breakdown (the seed of its compensation).
+    let (tau_b, flange_b) = view.nominal_load_torques_and_flange(&qb);
+    *last = Some((key, qb.map(f64::to_bits), tau_b));
+    let t = (tau_a + tau_b) * 0.5e-3;
+    (
+        std::array::from_fn(|j| (t[j] * (qb[j] - qa[j]) / duration_s).abs()),
+        Some(flange_b),
+    )
 }
+
+/// The view key, joints (bits) and nominal load torques of the end of the
+/// last move whose power was computed ([`move_power`]).
+type EndTorques<'m> = Option<(
+    (&'m str, Option<WrenchBits>),
+    [u64; 6],
+    nalgebra::Vector6<f64>,
+)>;
 
 /// A process wrench as bit patterns (a hashable key).
 type WrenchBits = ([u64; 6], bool);
@@ -1497,6 +1519,8 @@ pub fn compensate_module(
     }
     let mut segments = Vec::with_capacity(moves.len());
     let mut power_views = ViewCache::new();
+    let mut end_torques = None;
+    let mut nominal_flanges: Vec<Option<Isometry3<f64>>> = Vec::new();
     for (i, mv) in moves.iter().enumerate() {
         let duration_s = match move_duration(robot, &plans, i, mv) {
             Some(t) => t,
@@ -1513,15 +1537,21 @@ pub fn compensate_module(
             }
             None => 0.0,
         };
-        let power_w = move_power(
+        let (power_w, flange) = move_power(
             robot,
             &mut power_views,
+            &mut end_torques,
             &plans,
             i,
             wrenches[i],
             &mv.tool.text,
             duration_s,
         );
+        // Kept only for a compensation (where the deviation breakdown uses
+        // it), one per move.
+        if fx.compensates() {
+            nominal_flanges.push(flange);
+        }
         segments.push(Segment {
             duration_s,
             power_w,
@@ -1589,14 +1619,21 @@ pub fn compensate_module(
             power: power.map(|p| p.map(f64::to_bits)),
             rpm: rpm.map(f64::to_bits),
         };
-        keyed.push((*mv, plan, seg, MoveState { wrench, power, rpm }, key));
+        let flange = nominal_flanges.get(i).and_then(Option::as_ref);
+        keyed.push((
+            *mv,
+            (plan, flange),
+            seg,
+            MoveState { wrench, power, rpm },
+            key,
+        ));
     }
     // Walk 1: collect the compensation jobs. It stops at the first error;
     // walk 2 meets the same error at the same move, after reporting any
     // failure of an earlier target, as a single walk would.
     for (mv, plan, _, state, key) in &keyed {
         rw.state = *state;
-        if rw.walk(mv, key, plan).is_err() {
+        if rw.walk(mv, key, *plan).is_err() {
             break;
         }
     }
@@ -1614,7 +1651,7 @@ pub fn compensate_module(
         rw.state = *state;
         let wrench = state.wrench;
         let power = state.power;
-        let Some(dev) = rw.walk(mv, key, plan)? else {
+        let Some(dev) = rw.walk(mv, key, *plan)? else {
             continue;
         };
         outcome.moves += 1;
@@ -1663,6 +1700,7 @@ pub fn compensate_module(
     let edits = std::mem::take(&mut rw.edits);
     drop(rw);
     drop(keyed);
+    drop(nominal_flanges);
     drop(plans);
     drop(moves);
     drop(module);
@@ -1673,23 +1711,27 @@ pub fn compensate_module(
 impl Rewriter<'_> {
     /// Compensates (or collects the jobs of) one move: the circle point of
     /// a MoveC, then its target. The deviation is that of the target.
-    fn walk(&mut self, mv: &Move, key: &LoadKey, plan: &Planned) -> Result<Option<Deviation>> {
+    fn walk(
+        &mut self,
+        mv: &Move,
+        key: &LoadKey,
+        (plan, nominal_flange): (&Planned, Option<&Isometry3<f64>>),
+    ) -> Result<Option<Deviation>> {
         if mv.kind == MoveKind::MoveAbsJ {
             self.joint(mv, key, &plan.tool)
         } else {
             if let Some(via) = &mv.via {
-                self.cart(mv, via, key, &plan.tool, &plan.wobj, (None, None))?;
+                self.cart(mv, via, key, &plan.tool, &plan.wobj, Seed::default())?;
             }
             // Planning solved the target's joints with the same pose,
-            // confdata and TCP (`ik_conf`, limits checked).
-            self.cart(
-                mv,
-                &mv.target,
-                key,
-                &plan.tool,
-                &plan.wobj,
-                (plan.q, plan.branch),
-            )
+            // confdata and TCP (`ik_conf`, limits checked), and the nominal
+            // flange at them (for the thermal power).
+            let seed = Seed {
+                q: plan.q,
+                branch: plan.branch,
+                nominal_flange: nominal_flange.copied(),
+            };
+            self.cart(mv, &mv.target, key, &plan.tool, &plan.wobj, seed)
         }
     }
 }
@@ -1725,6 +1767,72 @@ fn warn_resonance(robot: &Robot, fx: Effects, (amp_mm, line, rpm): (f64, usize, 
 mod tests {
     use super::*;
     use crate::machine::robot::PoseDelta;
+
+    /// The single edit of [`robtarget_in_place`] (position, quaternion and
+    /// confdata) against one edit per number: the same output text, for
+    /// literals on one line and spread over lines, with and without a
+    /// confdata change.
+    #[test]
+    fn one_robtarget_edit_equals_the_per_number_edits() {
+        let src = "MODULE M\n  PROC main()\n    MoveL [[650.0,50.0,300.0],[0,0,1,0],[0,0,0,0],[9E9,9E9,9E9,9E9,9E9,9E9]],v200,z1,t1;\n    MoveL [ [ 1 , 2,3 ],[1,0 ,0,0] , [-1, 0,-2 ,5],[9E9,9E9,9E9,9E9,9E9,9E9]],v200,z1,t1;\n    MoveL [[1,2,3],[1,0,0,0],\n      [0,0,0,0],[9E9,9E9,9E9,9E9,9E9,9E9]],v200,z1,t1;\n  ENDPROC\nENDMODULE\n";
+        let module = crate::program::rapid::parse_module(src, "t.mod").expect("valid module");
+        let fmt = Format {
+            position_decimals: 3,
+            quaternion_decimals: 7,
+        };
+        let pose = Isometry3::from_parts(
+            nalgebra::Translation3::new(650.97234, -49.2148, 300.92649),
+            nalgebra::UnitQuaternion::from_euler_angles(0.0008, -0.0003, 3.1),
+        );
+        let confs = [
+            ConfData {
+                cf1: 0,
+                cf4: 0,
+                cf6: 0,
+                cfx: 0,
+            },
+            ConfData {
+                cf1: -1,
+                cf4: 2,
+                cf6: -3,
+                cfx: 7,
+            },
+        ];
+        let mut seen = 0;
+        for mv in module.moves() {
+            let Target::Inline(rt) = &mv.target else {
+                panic!("inline targets")
+            };
+            let old = conf_of(rt).expect("integer confdata");
+            for conf in confs {
+                let mut one = Vec::new();
+                robtarget_in_place(&mut one, src, rt, &pose, old, conf, &fmt).expect("edits");
+                let q = pose.rotation.quaternion();
+                let mut each = crate::emit::rapid::robtarget_edits(
+                    rt,
+                    &pose.translation.vector.into(),
+                    Some(&[q.w, q.i, q.j, q.k]),
+                    &fmt,
+                )
+                .expect("edits");
+                if conf != old {
+                    for (n, v) in rt
+                        .robconf
+                        .iter()
+                        .zip([conf.cf1, conf.cf4, conf.cf6, conf.cfx])
+                    {
+                        each.push(Edit::replace(n.span.clone(), v.to_string()));
+                    }
+                }
+                assert_eq!(
+                    apply_edits(src, &one).expect("applies"),
+                    apply_edits(src, &each).expect("applies")
+                );
+                seen += 1;
+            }
+        }
+        assert_eq!(seen, 6);
+    }
 
     #[test]
     fn fast_deviation_comment_equals_the_formatted_one() {

@@ -174,7 +174,8 @@ pub fn push_fixed(out: &mut String, v: f64, decimals: usize) -> bool {
             break;
         }
     }
-    out.push_str(std::str::from_utf8(&buf[i..]).unwrap_or("0"));
+    // ASCII digits: pushed as chars (no UTF-8 validation of the buffer).
+    out.extend(buf[i..].iter().map(|&b| char::from(b)));
     if decimals > 0 {
         out.push('.');
         let mut d = [b'0'; 9];
@@ -183,9 +184,36 @@ pub fn push_fixed(out: &mut String, v: f64, decimals: usize) -> bool {
             d[k] = b'0' + (x % 10) as u8;
             x /= 10;
         }
-        out.push_str(std::str::from_utf8(&d[..decimals]).unwrap_or(""));
+        out.extend(d[..decimals].iter().map(|&b| char::from(b)));
     }
     true
+}
+
+/// Appends `v.to_string()` to `out` without the formatting machinery (the
+/// confdata numbers of a rewritten robtarget).
+pub fn push_int(out: &mut String, v: i32) {
+    if v < 0 {
+        out.push('-');
+    }
+    let mut x = v.unsigned_abs();
+    let mut buf = [b'0'; 10];
+    let mut i = buf.len();
+    loop {
+        i -= 1;
+        if let Some(slot) = buf.get_mut(i) {
+            *slot = b'0' + (x % 10) as u8;
+        }
+        x /= 10;
+        if x == 0 || i == 0 {
+            break;
+        }
+    }
+    out.extend(
+        buf.get(i..)
+            .unwrap_or_default()
+            .iter()
+            .map(|&b| char::from(b)),
+    );
 }
 
 /// Formats a position (mm) with `fmt.position_decimals` decimals.
@@ -250,10 +278,18 @@ pub fn quaternion_components(
         .ok_or_else(|| Error::Usage(format!("quaternion {q:?} cannot be normalised")))?;
     let scale = 10f64.powi(i32::try_from(fmt.quaternion_decimals).unwrap_or(9).min(15));
     let lo = n.map(|c| (c * scale).floor());
+    // The two candidate values of each component and their squares,
+    // computed once for the 16 combinations (the same values as per
+    // combination).
+    let cand: [[f64; 2]; 4] =
+        std::array::from_fn(|k| [0u32, 1].map(|b| (lo[k] + f64::from(b)) / scale));
+    let sq = cand.map(|c| c.map(|x| x * x));
     let mut best = (f64::INFINITY, n);
     for mask in 0..16u32 {
-        let c: [f64; 4] = std::array::from_fn(|k| (lo[k] + f64::from((mask >> k) & 1)) / scale);
-        let norm = c.iter().map(|x| x * x).sum::<f64>().sqrt();
+        let bit = |k: usize| ((mask >> k) & 1) as usize;
+        let c: [f64; 4] = std::array::from_fn(|k| cand[k][bit(k)]);
+        let c2: [f64; 4] = std::array::from_fn(|k| sq[k][bit(k)]);
+        let norm = c2.iter().sum::<f64>().sqrt();
         if norm <= f64::EPSILON {
             continue;
         }
@@ -269,12 +305,16 @@ pub fn quaternion_components(
 /// [`robtarget_edits`] as ONE edit, from the first position number to the
 /// last quaternion number (or the last position number without `quat`),
 /// the text between the numbers copied from `src`: the same output bytes
-/// (and the same errors) with one string instead of seven.
+/// (and the same errors) with one string instead of seven. With `conf`
+/// (and `quat`), the edit goes on to the last confdata number and writes
+/// `conf` there too (as one edit per confdata number with `to_string`
+/// would).
 pub fn robtarget_edit(
     src: &str,
     rt: &RobTarget,
     pos: &[f64; 3],
     quat: Option<&[f64; 4]>,
+    conf: Option<&[i32; 4]>,
     fmt: &Format,
 ) -> Result<Edit, Error> {
     let start = rt.trans[0].span.start;
@@ -306,6 +346,12 @@ pub fn robtarget_edit(
             gap(&mut text, n)?;
             if !push_fixed(&mut text, v, fmt.quaternion_decimals) {
                 text.push('0');
+            }
+        }
+        if let Some(conf) = conf {
+            for (n, v) in rt.robconf.iter().zip(conf) {
+                gap(&mut text, n)?;
+                push_int(&mut text, *v);
             }
         }
     }
@@ -519,6 +565,49 @@ mod tests {
         #[test]
         fn fixed_format_matches_format(v in any::<f64>(), d in 0usize..12) {
             prop_assert_eq!(format_fixed(v, d), slow(v, d));
+        }
+
+        /// [`push_int`] against `to_string` (random and extreme values).
+        #[test]
+        fn int_push_matches_to_string(v in any::<i32>()) {
+            for v in [v, 0, -1, 9, -10, i32::MAX, i32::MIN] {
+                let mut s = String::from("x");
+                push_int(&mut s, v);
+                prop_assert_eq!(s, format!("x{v}"));
+            }
+        }
+
+        /// The shared candidates of [`quaternion_components`] against the
+        /// candidates computed per combination: the same components, bit
+        /// for bit (signed zeros included).
+        #[test]
+        fn quaternion_candidates_match_per_combination(
+            q in proptest::array::uniform4(-1.0f64..1.0),
+            zero in proptest::array::uniform4(any::<bool>()),
+            d in 0usize..10,
+        ) {
+            let q: [f64; 4] = std::array::from_fn(|k| if zero[k] { -0.0 } else { q[k] });
+            let fmt = Format { position_decimals: 3, quaternion_decimals: d };
+            let fast = quaternion_components(&q, None, &fmt).ok().map(|c| c.map(f64::to_bits));
+            let slow = normalise_quaternion(&q, None).map(|n| {
+                let scale = 10f64.powi(i32::try_from(d).unwrap_or(9).min(15));
+                let lo = n.map(|c| (c * scale).floor());
+                let mut best = (f64::INFINITY, n);
+                for mask in 0..16u32 {
+                    let c: [f64; 4] =
+                        std::array::from_fn(|k| (lo[k] + f64::from((mask >> k) & 1)) / scale);
+                    let norm = c.iter().map(|x| x * x).sum::<f64>().sqrt();
+                    if norm <= f64::EPSILON {
+                        continue;
+                    }
+                    let err: f64 = c.iter().zip(&n).map(|(a, b)| (a / norm - b).powi(2)).sum();
+                    if err < best.0 {
+                        best = (err, c);
+                    }
+                }
+                best.1.map(f64::to_bits)
+            });
+            prop_assert_eq!(fast, slow);
         }
 
         #[test]

@@ -27,6 +27,7 @@ impl Robot {
     pub fn with_base(&self, base: Isometry3<f64>) -> Robot {
         let mut r = self.clone();
         r.d.base = base;
+        r.d.base_inv = base.inverse();
         r
     }
 

@@ -16,7 +16,10 @@
 use nalgebra::{Isometry3, Matrix6, Translation3, UnitQuaternion, Vector3, Vector6};
 
 use super::dh::DhParams;
-use super::kinematics::{Frames, Prepared, flange_prepared, frames_prepared};
+use super::kinematics::{
+    Frames, HalfAngles, Prepared, flange_deflected, flange_prepared, frames_and_twin_flange,
+    frames_with_half_angles,
+};
 use super::pose::pose_error;
 use super::thermal::{DhGrowth, grown};
 use super::{IkSelect, Model, Robot, RobotError};
@@ -152,11 +155,33 @@ pub struct Compensation {
     pub iterations: usize,
 }
 
+/// What planning a move found about its programmed pose, to start its
+/// compensation from ([`Robot::compensate_seeded`]).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub(crate) struct Seed {
+    /// Controller joints of the programmed pose (`ik_nominal(programmed,
+    /// sel)`, limits checked).
+    pub q: Option<[f64; 6]>,
+    /// Closed-form branch of `q` ([`Robot::ik_conf_indexed`]).
+    pub branch: Option<usize>,
+    /// Nominal flange pose (robot base frame) at `q`, computed as the last
+    /// frame of `frames_prepared(nominal, q, 6)` (ignored without `q`).
+    pub nominal_flange: Option<Isometry3<f64>>,
+}
+
 /// The closed-form branch of a target's inverse kinematics, kept over the
 /// compensation iteration when `fixed`.
 struct BranchMemo {
     fixed: bool,
     k: Option<usize>,
+}
+
+/// True when two vectors are equal bit for bit (a computation from them
+/// gives the same bits).
+fn same_bits(a: &Vector6<f64>, b: &Vector6<f64>) -> bool {
+    a.iter()
+        .zip(b.iter())
+        .all(|(x, y)| x.to_bits() == y.to_bits())
 }
 
 /// Weight of rotation against position in the progress test, mm/rad.
@@ -267,27 +292,39 @@ impl Robot {
         self.base() * flange * self.flange_to_tool()
     }
 
-    /// Gravity and process torques (each scaled by its gain, zero when off)
-    /// from the joint frames of the full model.
+    /// Gravity torques and gravity plus process torques (each scaled by
+    /// its gain, zero when off) from the joint frames of the full model.
+    /// The process torques are not computed where they cannot change the
+    /// sum ([`Robot::process_torques_vanish`]).
     fn load_torques(&self, f: &Frames, effects: Effects) -> (Vector6<f64>, Vector6<f64>) {
         let tau_g = if effects.gravity != 0.0 {
             self.gravity_torques_at(f) * effects.gravity
         } else {
             Vector6::zeros()
         };
-        let tau_w = if effects.process != 0.0 {
-            self.process_torques_at(f) * effects.process
+        let tau = if effects.process != 0.0 {
+            if self.process_torques_vanish(&tau_g, effects.process) {
+                tau_g
+            } else {
+                tau_g + self.process_torques_at(f) * effects.process
+            }
         } else {
-            Vector6::zeros()
+            tau_g
         };
-        (tau_g, tau_w)
+        (tau_g, tau)
     }
 
-    /// TCP pose (world frame) of the full model at `q` deflected by `tau`.
-    fn deflected_tcp(&self, model: &Prepared, q: &[f64; 6], tau: &Vector6<f64>) -> Isometry3<f64> {
+    /// TCP pose (world frame) of the full model at `q` deflected by `tau`,
+    /// from the half angles of `q` ([`flange_deflected`]).
+    fn deflected_tcp(
+        &self,
+        model: &Prepared,
+        q: &[f64; 6],
+        half: &HalfAngles,
+        tau: &Vector6<f64>,
+    ) -> Isometry3<f64> {
         let dq = self.joint_deflection(tau);
-        let qd: [f64; 6] = std::array::from_fn(|i| q[i] + dq[i]);
-        self.tcp_of(&flange_prepared(model, &qd))
+        self.tcp_of(&flange_deflected(model, q, half, &dq))
     }
 
     /// Attained TCP pose with the parameter set `model` of
@@ -295,12 +332,12 @@ impl Robot {
     /// gravity and the process torques, one more forward kinematics gives
     /// the deflected pose (the hot path of the compensation iteration).
     fn predict_with(&self, model: &Prepared, q: &[f64; 6], effects: Effects) -> Isometry3<f64> {
-        let f = frames_prepared(model, q, 6);
-        let (tau_g, tau_w) = self.load_torques(&f, effects);
+        let (f, half) = frames_with_half_angles(model, q);
+        let (tau_g, tau) = self.load_torques(&f, effects);
         if effects.process != 0.0 {
-            self.deflected_tcp(model, q, &(tau_g + tau_w))
+            self.deflected_tcp(model, q, &half, &tau)
         } else if effects.gravity != 0.0 {
-            self.deflected_tcp(model, q, &tau_g)
+            self.deflected_tcp(model, q, &half, &tau_g)
         } else {
             self.tcp_of(&f.flange())
         }
@@ -322,18 +359,49 @@ impl Robot {
         q: &[f64; 6],
         effects: Effects,
     ) -> [Isometry3<f64>; 5] {
-        let p0 = self.tcp_of(&flange_prepared(self.nominal_prepared(), q));
-        let p1 = self.tcp_of(&flange_prepared(kin, q));
-        let f = frames_prepared(model, q, 6);
+        self.stages_from(kin, model, q, effects, None)
+    }
+
+    /// [`Robot::stages_with`] with the nominal flange pose at `q`, when
+    /// already known (the flange of `frames_prepared(nominal, q, 6)`, the
+    /// same bits as [`flange_prepared`]).
+    fn stages_from(
+        &self,
+        kin: &Prepared,
+        model: &Prepared,
+        q: &[f64; 6],
+        effects: Effects,
+        nominal_flange: Option<Isometry3<f64>>,
+    ) -> [Isometry3<f64>; 5] {
+        let nominal_flange =
+            nominal_flange.unwrap_or_else(|| flange_prepared(self.nominal_prepared(), q));
+        let p0 = self.tcp_of(&nominal_flange);
+        // The full set differs from the kinematic one by lengths only: one
+        // chain of half angles and rotations serves both.
+        let (f, kin_flange, half) = match frames_and_twin_flange(model, kin, q) {
+            Some(shared) => shared,
+            None => {
+                let kin_flange = flange_prepared(kin, q);
+                let (f, half) = frames_with_half_angles(model, q);
+                (f, kin_flange, half)
+            }
+        };
+        let p1 = self.tcp_of(&kin_flange);
         let p2 = self.tcp_of(&f.flange());
-        let (tau_g, tau_w) = self.load_torques(&f, effects);
+        let (tau_g, tau) = self.load_torques(&f, effects);
         let p3 = if effects.gravity != 0.0 {
-            self.deflected_tcp(model, q, &tau_g)
+            self.deflected_tcp(model, q, &half, &tau_g)
         } else {
             p2
         };
         let p4 = if effects.process != 0.0 {
-            self.deflected_tcp(model, q, &(tau_g + tau_w))
+            // Without a process load (zero torques) the sum is the gravity
+            // torques to the bit, and so is its deflected pose.
+            if effects.gravity != 0.0 && same_bits(&tau, &tau_g) {
+                p3
+            } else {
+                self.deflected_tcp(model, q, &half, &tau)
+            }
         } else {
             p3
         };
@@ -388,23 +456,27 @@ impl Robot {
         effects: Effects,
         growth: &DhGrowth,
     ) -> Result<Compensation, RobotError> {
-        self.compensate_seeded(programmed, sel, effects, growth, None, None)
+        self.compensate_seeded(programmed, sel, effects, growth, &Seed::default())
     }
 
-    /// [`Robot::compensate_with_growth`] with the controller joints of the
-    /// programmed pose already known (`ik_nominal(programmed, sel)`, limits
-    /// checked), e.g. from planning the move: saves one inverse kinematics.
-    /// `branch`: the closed-form branch of those joints
-    /// ([`Robot::ik_conf_indexed`]), when known.
+    /// [`Robot::compensate_with_growth`] with what planning the move already
+    /// found ([`Seed`]): saves one inverse kinematics (and the nominal
+    /// forward kinematics of the deviation breakdown, when given).
     pub(crate) fn compensate_seeded(
         &self,
         programmed: &Isometry3<f64>,
         sel: &IkSelect,
         effects: Effects,
         growth: &DhGrowth,
-        q_programmed: Option<[f64; 6]>,
-        branch: Option<usize>,
+        seed: &Seed,
     ) -> Result<Compensation, RobotError> {
+        let Seed {
+            q: q_programmed,
+            branch,
+            nominal_flange,
+        } = *seed;
+        // The flange is that of the given joints only.
+        let nominal_flange = nominal_flange.filter(|_| q_programmed.is_some());
         // Fast path: the closed-form branch found by the first inverse
         // kinematics of the iteration is the only one solved afterwards.
         // Its result stands when the final joints still have the asked
@@ -414,15 +486,27 @@ impl Robot {
         // before the fast path).
         if let IkSelect::Conf(c) = sel {
             let seed = q_programmed.and(branch);
-            if let Ok(r) =
-                self.compensate_branch(programmed, sel, effects, growth, q_programmed, Some(seed))
-            {
+            if let Ok(r) = self.compensate_branch(
+                programmed,
+                sel,
+                effects,
+                growth,
+                (q_programmed, nominal_flange),
+                Some(seed),
+            ) {
                 if r.conf.cfx == c.cfx {
                     return Ok(r);
                 }
             }
         }
-        self.compensate_branch(programmed, sel, effects, growth, q_programmed, None)
+        self.compensate_branch(
+            programmed,
+            sel,
+            effects,
+            growth,
+            (q_programmed, nominal_flange),
+            None,
+        )
     }
 
     /// [`Robot::compensate_seeded`]; with `fixed_branch`, the inverse
@@ -434,7 +518,7 @@ impl Robot {
         sel: &IkSelect,
         effects: Effects,
         growth: &DhGrowth,
-        q_programmed: Option<[f64; 6]>,
+        (q_programmed, nominal_flange): (Option<[f64; 6]>, Option<Isometry3<f64>>),
         fixed_branch: Option<Option<usize>>,
     ) -> Result<Compensation, RobotError> {
         let mut branch = BranchMemo {
@@ -446,7 +530,7 @@ impl Robot {
             None => self.ik_nominal(programmed, sel)?,
         };
         let (kin, model) = self.prediction_prepared(effects, growth);
-        let st = self.stages_with(&kin, &model, &q0, effects);
+        let st = self.stages_from(&kin, &model, &q0, effects, nominal_flange);
         let deviation = Deviation {
             kinematic: PoseDelta::between(&st[1], &st[0]),
             thermal: PoseDelta::between(&st[2], &st[1]),
@@ -514,6 +598,7 @@ impl Robot {
 
 #[cfg(test)]
 mod tests {
+    use super::super::kinematics::frames_prepared;
     use super::*;
     use crate::machine::Machine;
     use crate::machine::robot::ConfData;
@@ -521,6 +606,142 @@ mod tests {
 
     /// Both paths run the same arithmetic: equal to the last bit.
     const SAME: f64 = 0.0;
+
+    /// [`Robot::stages_with`] without its shortcuts (shared kinematic and
+    /// full chains, the process stage reused without process torques,
+    /// process torques skipped without a process wrench): every stage from
+    /// its own forward kinematics and the full load torques.
+    fn stages_reference(r: &Robot, q: &[f64; 6], effects: Effects) -> [Isometry3<f64>; 5] {
+        let (kin, model) = r.prediction_prepared(effects, r.current_thermal_growth_mm());
+        let p0 = r.tcp_of(&flange_prepared(r.nominal_prepared(), q));
+        let p1 = r.tcp_of(&flange_prepared(&kin, q));
+        let f = frames_prepared(&model, q, 6);
+        let p2 = r.tcp_of(&f.flange());
+        let tau_g = r.gravity_torques_at(&f) * effects.gravity;
+        let tau_w = r.process_torques_at(&f) * effects.process;
+        let deflected = |tau: &Vector6<f64>| {
+            let dq = r.joint_deflection(tau);
+            let qd: [f64; 6] = std::array::from_fn(|i| q[i] + dq[i]);
+            r.tcp_of(&flange_prepared(&model, &qd))
+        };
+        let p3 = deflected(&tau_g);
+        let p4 = deflected(&(tau_g + tau_w));
+        [p0, p1, p2, p3, p4]
+    }
+
+    /// The deflected stages turn the half angles by the small deflection
+    /// instead of calling `sin_cos` again: rounding only (a few ulp of each
+    /// half angle, over an arm of about 1.5 m).
+    const DEFLECTED_POS_MM: f64 = 1e-11;
+    const DEFLECTED_QUAT: f64 = 1e-14;
+
+    #[test]
+    fn stages_and_prediction_equal_the_stage_by_stage_reference() {
+        use crate::machine::robot::ProcessWrench;
+        let text = include_str!("../../../machines/abb-irb1600.yaml");
+        let Ok(Machine::Robot(r)) = Machine::from_yaml_str(text, "abb-irb1600.yaml") else {
+            panic!("abb-irb1600.yaml is a robot file")
+        };
+        let warm = r.with_thermal_power(&[20.0, 150.0, 80.0, 0.0, 0.0, 0.0]);
+        let loaded = warm.with_process_wrench(Some(ProcessWrench {
+            force_n: Vector3::new(10.0, -40.0, -120.0),
+            moment_nmm: Vector3::new(0.0, 500.0, 0.0),
+            in_tool_frame: true,
+        }));
+        let unloaded = warm.with_process_wrench(None);
+        let mut state = 0x2545_f491_4f6c_dd1du64;
+        let mut next = || {
+            state = state
+                .wrapping_mul(6_364_136_223_846_793_005)
+                .wrapping_add(1_442_695_040_888_963_407);
+            ((state >> 11) as f64 / (1u64 << 53) as f64 - 0.5) * 2.0
+        };
+        for view in [&r, &loaded, &unloaded] {
+            for _ in 0..100 {
+                let q: [f64; 6] = std::array::from_fn(|_| next());
+                let fast = view.predict_stages(&q, Effects::ALL);
+                let slow = stages_reference(view, &q, Effects::ALL);
+                let attained = view.predict(&q, Effects::ALL);
+                assert_abs_diff_eq!(
+                    attained.translation.vector,
+                    fast[4].translation.vector,
+                    epsilon = SAME
+                );
+                assert_abs_diff_eq!(
+                    attained.rotation.coords,
+                    fast[4].rotation.coords,
+                    epsilon = SAME
+                );
+                let f = frames_prepared(view.nominal_prepared(), &q, 6);
+                assert_abs_diff_eq!(
+                    view.nominal_load_torques(&q),
+                    view.gravity_torques_at(&f) + view.process_torques_at(&f),
+                    epsilon = SAME
+                );
+                for (k, (a, b)) in fast.iter().zip(&slow).enumerate() {
+                    let (pos, rot) = if k < 3 {
+                        (SAME, SAME)
+                    } else {
+                        (DEFLECTED_POS_MM, DEFLECTED_QUAT)
+                    };
+                    assert_abs_diff_eq!(a.translation.vector, b.translation.vector, epsilon = pos);
+                    assert_abs_diff_eq!(a.rotation.coords, b.rotation.coords, epsilon = rot);
+                }
+                // Without process torques the process stage is the gravity
+                // stage itself.
+                if view.process_wrench().is_none() {
+                    assert_eq!(fast[4], fast[3]);
+                }
+            }
+        }
+    }
+
+    /// A seed with the nominal flange taken from the planning's frames
+    /// gives the compensation computed without it, bit for bit.
+    #[test]
+    fn nominal_flange_seed_equals_the_unseeded_compensation() {
+        let text = include_str!("../../../machines/abb-irb1600.yaml");
+        let Ok(Machine::Robot(r)) = Machine::from_yaml_str(text, "abb-irb1600.yaml") else {
+            panic!("abb-irb1600.yaml is a robot file")
+        };
+        let growth = r.thermal_growth_mm(&[30.0, 90.0, 40.0, 0.0, 0.0, 0.0]);
+        let mut checked = 0;
+        for (x, y, z) in [
+            (650.0, 50.0, 300.0),
+            (900.0, -200.0, 700.0),
+            (500.0, 400.0, 150.0),
+        ] {
+            let pose = Isometry3::from_parts(
+                Translation3::new(x, y, z),
+                UnitQuaternion::from_axis_angle(&Vector3::y_axis(), 3.0),
+            );
+            let Ok(sols) = r.ik_all(&pose) else {
+                continue;
+            };
+            for s in sols.iter().flatten() {
+                let conf = r.confdata(s);
+                let Ok((q, branch)) = r.ik_conf_indexed(&pose, conf) else {
+                    continue;
+                };
+                let sel = IkSelect::Conf(conf);
+                let (_, flange) = r.nominal_load_torques_and_flange(&q);
+                let plain = Seed {
+                    q: Some(q),
+                    branch: Some(branch),
+                    nominal_flange: None,
+                };
+                let seeded = Seed {
+                    nominal_flange: Some(flange),
+                    ..plain
+                };
+                let a = r.compensate_seeded(&pose, &sel, Effects::ALL, &growth, &plain);
+                let b = r.compensate_seeded(&pose, &sel, Effects::ALL, &growth, &seeded);
+                assert_eq!(a, b);
+                checked += 1;
+            }
+        }
+        assert!(checked >= 3);
+    }
 
     #[test]
     fn growth_override_equals_a_robot_at_that_power() {

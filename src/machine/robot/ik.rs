@@ -29,7 +29,7 @@ use nalgebra::{Isometry3, Matrix6, UnitQuaternion, Vector3, Vector6};
 
 use super::RobotError;
 use super::dh::{Convention, DhParams};
-use super::kinematics::{Prepared, frames, frames_prepared, jacobian, prepared_transform};
+use super::kinematics::{Prepared, frames, jacobian, prepared_transform, wrist_frames};
 use super::pose::pose_error;
 
 /// ABB robot configuration data `[cf1, cf4, cf6, cfx]`.
@@ -78,6 +78,10 @@ pub struct ClosedForm {
     d6: f64,
     s4: f64,
     alpha3: f64,
+    /// `√(a3² + d4²)` and `atan2(d4, a3)`: constants of the elbow triangle
+    /// (computed once, the same bits as per solve).
+    rho: f64,
+    gamma: f64,
     off: [f64; 6],
     /// `Rx(α3)⁻¹`, constant.
     rx3_inv: UnitQuaternion<f64>,
@@ -117,6 +121,8 @@ impl ClosedForm {
             d6: j[5].d_mm,
             s4: j[4].alpha_rad.signum(),
             alpha3: j[3].alpha_rad,
+            rho: (j[3].a_mm * j[3].a_mm + j[3].d_mm * j[3].d_mm).sqrt(),
+            gamma: j[3].d_mm.atan2(j[3].a_mm),
             rx3_inv: UnitQuaternion::from_axis_angle(&Vector3::x_axis(), j[3].alpha_rad).inverse(),
             prep: Prepared::new(p),
             off: [
@@ -192,8 +198,7 @@ impl ClosedForm {
     fn wrist_centre(&self, flange: &Isometry3<f64>) -> WristCentre {
         let z6 = flange.rotation * Vector3::z();
         let pw = flange.translation.vector - self.d6 * z6;
-        let rho = (self.a3 * self.a3 + self.d4 * self.d4).sqrt();
-        let gamma = self.d4.atan2(self.a3);
+        let (rho, gamma) = (self.rho, self.gamma);
         let base_t1 = if pw.x.hypot(pw.y) < 1e-9 {
             0.0
         } else {
@@ -320,7 +325,12 @@ struct Arm {
 
 /// Wraps an angle into (−π, π].
 pub fn wrap(a: f64) -> f64 {
-    let mut x = a % (2.0 * PI);
+    // `a % 2π` is `a` itself (exactly) below one turn: no division then.
+    let mut x = if a.abs() < 2.0 * PI {
+        a
+    } else {
+        a % (2.0 * PI)
+    };
     if x > PI {
         x -= 2.0 * PI;
     } else if x <= -PI {
@@ -337,15 +347,15 @@ pub fn confdata(p: &DhParams, q: &[f64; 6]) -> ConfData {
 /// [`confdata`] of a prepared parameter set.
 pub(crate) fn confdata_prepared(p: &Prepared, q: &[f64; 6]) -> ConfData {
     // Frames up to link 5 (index 4): the wrist centre and the axes 1–3.
-    let f = frames_prepared(p, q, 5);
+    let f = wrist_frames(p, q);
     // Wrist centre: origin of frame 5 (joints 4–6 intersect there for a
     // spherical wrist).
-    let wc = f.link[4].translation.vector;
-    let x1 = f.link[0].rotation * Vector3::x();
+    let wc = f.wrist_centre;
+    let x1 = f.x1;
     let behind1 = (wc - f.axis_origin[0]).dot(&x1) < 0.0;
     let u = f.axis_origin[2] - f.axis_origin[1];
     let w = wc - f.axis_origin[1];
-    let behind_arm = u.cross(&w).dot(&f.axis_dir[1]) < 0.0;
+    let behind_arm = u.cross(&w).dot(&f.axis_dir_2) < 0.0;
     let neg5 = q[4] < 0.0;
     ConfData {
         cf1: quadrant(q[0]),
@@ -423,6 +433,32 @@ mod tests {
     use approx::assert_abs_diff_eq;
 
     const TOL: f64 = 1e-12;
+
+    /// The shortcut of [`wrap`] below one turn against the remainder it
+    /// skips: the same bits, signed zeros and both sides of ±π and ±2π.
+    #[test]
+    fn wrap_equals_the_remainder_form() {
+        let reference = |a: f64| {
+            let mut x = a % (2.0 * PI);
+            if x > PI {
+                x -= 2.0 * PI;
+            } else if x <= -PI {
+                x += 2.0 * PI;
+            }
+            x
+        };
+        let mut cases = vec![0.0, -0.0, PI, -PI, 2.0 * PI, -2.0 * PI, 1e-300, f64::NAN];
+        for base in [PI, 2.0 * PI, 3.0 * PI] {
+            for s in [1.0, -1.0] {
+                let v = s * base;
+                cases.extend([v, v.next_up(), v.next_down()]);
+            }
+        }
+        cases.extend((0..2000).map(|k| (f64::from(k) - 1000.0) * 0.0137));
+        for a in cases {
+            assert_eq!(wrap(a).to_bits(), reference(a).to_bits(), "{a}");
+        }
+    }
 
     #[test]
     fn quadrants_follow_abb() {

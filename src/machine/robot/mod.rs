@@ -24,6 +24,7 @@ mod statics;
 pub mod thermal;
 mod with_tool;
 
+pub(crate) use compensate::Seed;
 pub use compensate::{Compensation, Deviation, Effects, PoseDelta};
 pub use dh::{Convention, DhJoint, DhParams};
 pub use dynamics::{Modal, Mode, Resonance};
@@ -155,6 +156,10 @@ struct RobotData {
     speed_rad_per_s: [f64; 6],
     tool: Isometry3<f64>,
     base: Isometry3<f64>,
+    /// `tool.inverse()` and `base.inverse()`, set with them (every inverse
+    /// kinematics uses both).
+    tool_inv: Isometry3<f64>,
+    base_inv: Isometry3<f64>,
     gravity_m_per_s2: Vector3<f64>,
     links: [PointMass; 6],
     tool_load: Option<PointMass>,
@@ -440,6 +445,8 @@ impl Robot {
                 closed_form,
                 limits_rad,
                 speed_rad_per_s,
+                tool_inv: tool.inverse(),
+                base_inv: base.inverse(),
                 tool,
                 base,
                 gravity_m_per_s2: Vector3::from(raw.gravity_m_per_s2),
@@ -528,7 +535,7 @@ impl Robot {
     }
     /// Flange pose (robot base frame) that puts the TCP at `tcp_world`.
     pub fn flange_for_tcp(&self, tcp_world: &Isometry3<f64>) -> Isometry3<f64> {
-        self.d.base.inverse() * tcp_world * self.d.tool.inverse()
+        self.d.base_inv * tcp_world * self.d.tool_inv
     }
     /// The nominal parameter set with its twists precomputed.
     pub(crate) fn nominal_prepared(&self) -> &kinematics::Prepared {
@@ -687,7 +694,10 @@ impl Robot {
         // branches are not computed.
         let mut found = None;
         cf.solve_until(&flange, wrist_ref, |k, q| {
-            let hit = ik::confdata_prepared(&self.d.nominal_prep, &q).cfx == conf.cfx;
+            // The last bit of cfx is `q5 < 0`: a branch whose wrist sign
+            // differs cannot match, and needs no frames.
+            let hit = (q[4] < 0.0) == (conf.cfx & 1 == 1)
+                && ik::confdata_prepared(&self.d.nominal_prep, &q).cfx == conf.cfx;
             if hit {
                 found = Some((q, k));
             }
@@ -777,6 +787,77 @@ impl Robot {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The wrist-sign pre-check of [`Robot::ik_conf_branch`] against the
+    /// full search: the first branch (in index order) whose confdata has
+    /// the asked cfx, or none, for random poses and every cfx.
+    #[test]
+    fn conf_branch_equals_the_first_matching_branch() {
+        use crate::machine::Machine;
+        let text = include_str!("../../../machines/abb-irb1600.yaml");
+        let Ok(Machine::Robot(r)) = Machine::from_yaml_str(text, "abb-irb1600.yaml") else {
+            panic!("abb-irb1600.yaml is a robot file")
+        };
+        let Some(cf) = r.d.closed_form.as_ref() else {
+            panic!("the IRB 1600 has a closed form")
+        };
+        let mut state = 0x2545_f491_4f6c_dd1du64;
+        let mut next = || {
+            state = state
+                .wrapping_mul(6_364_136_223_846_793_005)
+                .wrapping_add(1_442_695_040_888_963_407);
+            ((state >> 11) as f64 / (1u64 << 53) as f64 - 0.5) * 2.0
+        };
+        let mut matched = 0;
+        for _ in 0..300 {
+            let q: [f64; 6] = std::array::from_fn(|_| next());
+            let tcp = r.tcp_pose(Model::Nominal, &q);
+            let base = r.confdata(&q);
+            let sols = cf.solve(&r.flange_for_tcp(&tcp), 0.0);
+            for cfx in -1..9 {
+                let conf = ConfData { cfx, ..base };
+                let expected = sols
+                    .iter()
+                    .enumerate()
+                    .find_map(|(k, s)| s.filter(|s| r.confdata(s).cfx == cfx).map(|_| k));
+                let got = r.ik_conf_branch(&tcp, conf, Some(&q)).ok().map(|(_, k)| k);
+                assert_eq!(got, expected, "cfx {cfx}");
+                matched += usize::from(got.is_some());
+            }
+        }
+        assert!(matched > 300);
+    }
+
+    /// The stored inverses of the tool and base frames follow their
+    /// setters: `flange_for_tcp` equals the product with fresh inverses.
+    #[test]
+    fn flange_for_tcp_uses_current_inverses() {
+        use crate::machine::Machine;
+        let text = include_str!("../../../machines/abb-irb1600.yaml");
+        let Ok(Machine::Robot(r)) = Machine::from_yaml_str(text, "abb-irb1600.yaml") else {
+            panic!("abb-irb1600.yaml is a robot file")
+        };
+        let frame = |x: f64, a: f64| {
+            Isometry3::from_parts(
+                nalgebra::Translation3::new(x, -2.0 * x, 0.5 * x),
+                nalgebra::UnitQuaternion::from_euler_angles(a, -0.5 * a, 0.25 * a),
+            )
+        };
+        let tcp = frame(700.0, 2.9);
+        let views = [
+            r.clone(),
+            r.with_tool(frame(12.0, 0.3), None, false),
+            r.with_base(frame(-150.0, 0.1)),
+            r.with_tool(frame(3.0, -1.2), None, true)
+                .with_base(frame(40.0, 2.0)),
+        ];
+        for v in &views {
+            let fresh = v.base().inverse() * tcp * v.flange_to_tool().inverse();
+            let got = v.flange_for_tcp(&tcp);
+            assert_eq!(got.translation.vector, fresh.translation.vector);
+            assert_eq!(got.rotation.coords, fresh.rotation.coords);
+        }
+    }
 
     #[test]
     fn robot_is_send_sync() {

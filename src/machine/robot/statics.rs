@@ -139,8 +139,38 @@ impl Robot {
     /// [`Robot::gravity_torques`] plus [`Robot::process_torques`] of the
     /// nominal model, from one set of joint frames.
     pub(crate) fn nominal_load_torques(&self, q: &[f64; 6]) -> Vector6<f64> {
+        self.nominal_load_torques_and_flange(q).0
+    }
+
+    /// [`Robot::nominal_load_torques`] and the nominal flange pose at `q`
+    /// (the last of the frames they come from).
+    pub(crate) fn nominal_load_torques_and_flange(
+        &self,
+        q: &[f64; 6],
+    ) -> (Vector6<f64>, Isometry3<f64>) {
         let f = super::kinematics::frames_prepared(self.nominal_prepared(), q, 6);
-        self.gravity_torques_at(&f) + self.process_torques_at(&f)
+        let tau_g = self.gravity_torques_at(&f);
+        let tau = if self.process_torques_vanish(&tau_g, 1.0) {
+            tau_g
+        } else {
+            tau_g + self.process_torques_at(&f)
+        };
+        (tau, f.flange())
+    }
+
+    /// True when adding the process torques (times `gain`) to `tau_g`
+    /// gives `tau_g` to the bit, so that they need not be computed: without
+    /// a process wrench they are `Jᵀ·0`, signed zeros (the Jacobian is
+    /// finite where the gravity torques are: both come from the same
+    /// frames), times a finite gain still signed zeros, and a signed zero
+    /// added to a finite non-zero number or to `+0` leaves it unchanged
+    /// (only `−0 + +0 = +0` would change a bit).
+    pub(crate) fn process_torques_vanish(&self, tau_g: &Vector6<f64>, gain: f64) -> bool {
+        self.process_wrench().is_none()
+            && gain.is_finite()
+            && tau_g
+                .iter()
+                .all(|t| t.is_finite() && (*t != 0.0 || t.is_sign_positive()))
     }
 
     /// Joint deflection `Δθ = Kθ⁻¹ τ` (rad) for torques in N·mm.

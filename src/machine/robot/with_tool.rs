@@ -20,6 +20,7 @@ impl Robot {
     ) -> Robot {
         let mut r = self.clone();
         r.d.tool = flange_to_tool;
+        r.d.tool_inv = flange_to_tool.inverse();
         r.d.tool_load = load;
         if !process {
             r.d.process_wrench = None;

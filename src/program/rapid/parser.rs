@@ -109,7 +109,42 @@ pub(super) fn kw<'a>(i: &'a str, word: &str) -> Option<&'a str> {
 }
 
 /// Skips whitespace and `!` comments.
-pub(super) fn ws(mut i: &str) -> &str {
+#[inline]
+pub(super) fn ws(i: &str) -> &str {
+    // Most calls start at a token: nothing to skip.
+    if matches!(
+        i.as_bytes().first(),
+        Some(b' ' | b'\t' | b'\r' | b'\n' | b'!' | 0xef)
+    ) {
+        ws_skip(i)
+    } else {
+        i
+    }
+}
+
+/// [`ws`] when there is something to skip.
+fn ws_skip(mut i: &str) -> &str {
+    loop {
+        // Byte scan of the ASCII blanks (the common case: a few spaces or
+        // none), then the byte-order mark, which may come between them.
+        let n = i
+            .bytes()
+            .take_while(|b| matches!(b, b' ' | b'\t' | b'\r' | b'\n'))
+            .count();
+        let t = i.get(n..).unwrap_or_default();
+        if let Some(r) = t.strip_prefix('\u{feff}') {
+            i = r;
+        } else if let Some(c) = t.strip_prefix('!') {
+            i = c.find('\n').map_or("", |p| &c[p..]);
+        } else {
+            return t;
+        }
+    }
+}
+
+/// [`ws`] by `trim_start_matches` (the reference of its byte scan).
+#[cfg(test)]
+fn ws_reference(mut i: &str) -> &str {
     loop {
         let t = i.trim_start_matches([' ', '\t', '\r', '\n', '\u{feff}']);
         if let Some(c) = t.strip_prefix('!') {
@@ -190,9 +225,76 @@ pub(super) const MAX_NUMBER: f64 = 1e10;
 /// [`MAX_NUMBER`]).
 pub(super) fn parse_number(text: &str) -> Option<f64> {
     match number_text(text) {
-        Ok(("", t)) => t.parse::<f64>().ok().filter(|v| v.abs() <= MAX_NUMBER),
+        Ok(("", t)) => number_value(t).filter(|v| v.abs() <= MAX_NUMBER),
         _ => None,
     }
+}
+
+/// `t.parse::<f64>().ok()` for the text of a numeric literal
+/// ([`number_text`]), with the exact fast path for short literals: at most
+/// 15 significant digits `m` (below 2^53, exact in f64) and a decimal
+/// exponent `k` with `|k| ≤ 22` (`10^|k|` exact in f64) give the correctly
+/// rounded value by one IEEE multiplication or division `m · 10^k`, which
+/// is what the full parser returns (it rounds correctly too). Anything
+/// else goes to the full parser.
+fn number_value(t: &str) -> Option<f64> {
+    const POW10: [f64; 23] = [
+        1e0, 1e1, 1e2, 1e3, 1e4, 1e5, 1e6, 1e7, 1e8, 1e9, 1e10, 1e11, 1e12, 1e13, 1e14, 1e15, 1e16,
+        1e17, 1e18, 1e19, 1e20, 1e21, 1e22,
+    ];
+    let b = t.as_bytes();
+    let neg = b.first() == Some(&b'-');
+    let mut k = usize::from(matches!(b.first(), Some(b'+' | b'-')));
+    let mut m: u64 = 0;
+    let mut digits = 0usize;
+    let mut frac = 0i64;
+    let mut seen_dot = false;
+    while let Some(&c) = b.get(k) {
+        match c {
+            b'0'..=b'9' => {
+                if m != 0 || c != b'0' {
+                    digits += 1;
+                }
+                m = m.wrapping_mul(10).wrapping_add(u64::from(c - b'0'));
+                if seen_dot {
+                    frac += 1;
+                }
+            }
+            b'.' if !seen_dot => seen_dot = true,
+            _ => break,
+        }
+        k += 1;
+    }
+    let mut exp = 0i64;
+    if matches!(b.get(k), Some(b'e' | b'E')) {
+        k += 1;
+        let eneg = b.get(k) == Some(&b'-');
+        k += usize::from(matches!(b.get(k), Some(b'+' | b'-')));
+        let mut n = 0usize;
+        while let Some(&c) = b.get(k) {
+            if !c.is_ascii_digit() || n >= 4 {
+                break;
+            }
+            exp = exp * 10 + i64::from(c - b'0');
+            n += 1;
+            k += 1;
+        }
+        if eneg {
+            exp = -exp;
+        }
+    }
+    // Leading zeros do not count; 15 digits stay below 2^53 (no wrap).
+    let e10 = exp - frac;
+    if k == b.len() && digits <= 15 && (-22..=22).contains(&e10) {
+        let m = m as f64;
+        let v = match POW10.get(e10.unsigned_abs() as usize) {
+            Some(p) if e10 >= 0 => m * p,
+            Some(p) => m / p,
+            None => return t.parse::<f64>().ok(),
+        };
+        return Some(if neg { -v } else { v });
+    }
+    t.parse::<f64>().ok()
 }
 
 /// The parser state: the source, for positions and messages.
@@ -495,7 +597,7 @@ impl<'a> Parser<'a> {
                 let i = ws(at);
                 let (rest, t) = number_text(i).ok()?;
                 let after = ws(rest);
-                let value = t.parse::<f64>().ok()?;
+                let value = number_value(t)?;
                 if !value.is_finite() || value.abs() > MAX_NUMBER {
                     return None;
                 }
@@ -588,10 +690,10 @@ impl<'a> Parser<'a> {
         };
         if let Ok((r, t)) = number_text(i) {
             if ends_here(r) {
-                let parsed = t.parse::<f64>();
+                let parsed = number_value(t);
                 if parsed
                     .as_ref()
-                    .is_ok_and(|v| v.is_nan() || v.abs() > MAX_NUMBER)
+                    .is_some_and(|v| v.is_nan() || v.abs() > MAX_NUMBER)
                 {
                     return self.fail_found(
                         start,
@@ -601,7 +703,7 @@ impl<'a> Parser<'a> {
                         ),
                     );
                 }
-                if let Some(value) = parsed.ok().filter(|v| v.is_finite()) {
+                if let Some(value) = parsed.filter(|v| v.is_finite()) {
                     return Ok((
                         r,
                         Val::Num(Number {
@@ -941,8 +1043,12 @@ impl<'a> Parser<'a> {
     fn move_stmt(&self, i: &'a str, mut r: &'a str, kind: MoveKind) -> PResult<'a, Move> {
         let start = self.pos(i);
         let name = kind.name();
-        let mut targets: Vec<Target> = Vec::new();
-        let mut plain: Vec<Arg> = Vec::new();
+        // At most two targets and three plain arguments are kept (more
+        // plain ones are only counted, for the error): no vectors.
+        let mut targets: [Option<Target>; 2] = [None, None];
+        let mut n_found_targets = 0;
+        let mut plain: [Option<Arg>; 3] = [None, None, None];
+        let mut n_plain = 0;
         let mut optional = Vec::new();
         let n_targets = if kind == MoveKind::MoveC { 2 } else { 1 };
         loop {
@@ -953,16 +1059,22 @@ impl<'a> Parser<'a> {
                 r = o;
             } else if r.starts_with([';', ',']) || r.is_empty() {
                 return self.fail_found(self.pos(r), &format!("expected an argument of {name}"));
-            } else if targets.len() < n_targets {
+            } else if n_found_targets < n_targets {
                 let (o, t) = self.target(r, kind == MoveKind::MoveAbsJ)?;
-                targets.push(t);
+                if let Some(slot) = targets.get_mut(n_found_targets) {
+                    *slot = Some(t);
+                }
+                n_found_targets += 1;
                 r = o;
             } else {
                 let (o, span) = self.expr(r, b",;\\")?;
-                plain.push(Arg {
-                    text: self.src.get(span.clone()).unwrap_or("").to_string(),
-                    span,
-                });
+                if let Some(slot) = plain.get_mut(n_plain) {
+                    *slot = Some(Arg {
+                        text: self.src.get(span.clone()).unwrap_or("").to_string(),
+                        span,
+                    });
+                }
+                n_plain += 1;
                 r = o;
             }
             let last = self.pos(r);
@@ -988,8 +1100,8 @@ impl<'a> Parser<'a> {
         } else {
             "ToPoint, Speed, Zone, Tool"
         };
-        let found = targets.len() + plain.len();
-        if targets.len() < n_targets || plain.len() != 3 {
+        let found = n_found_targets + n_plain;
+        if n_found_targets < n_targets || n_plain != 3 {
             return self.fail_found(
                 start,
                 &format!(
@@ -998,18 +1110,17 @@ impl<'a> Parser<'a> {
                 ),
             );
         }
-        let mut plain = plain.into_iter();
-        let (Some(speed), Some(zone), Some(tool)) = (plain.next(), plain.next(), plain.next())
-        else {
+        let [speed, zone, tool] = plain;
+        let (Some(speed), Some(zone), Some(tool)) = (speed, zone, tool) else {
             return self.fail_found(start, &format!("{name}: missing arguments"));
         };
-        let mut targets = targets.into_iter();
-        let via = if kind == MoveKind::MoveC {
-            targets.next().map(Box::new)
+        let [first, second] = targets;
+        let (via, target) = if kind == MoveKind::MoveC {
+            (first.map(Box::new), second)
         } else {
-            None
+            (None, first)
         };
-        let Some(target) = targets.next() else {
+        let Some(target) = target else {
             return self.fail_found(start, &format!("{name}: missing target"));
         };
         let value_of = |n: &str| -> Option<Arg> {
@@ -1308,6 +1419,51 @@ fn clip_end(s: &str, n: usize) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    proptest::proptest! {
+        /// The fast path of [`number_value`] against `str::parse`: the same
+        /// f64 bits (or the same failure) for literals of every shape the
+        /// lexer accepts, short and long, with and without exponents.
+        #[test]
+        fn number_value_equals_str_parse(
+            sign in proptest::sample::select(vec!["", "+", "-"]),
+            int in "[0-9]{0,20}",
+            frac in proptest::option::of("[0-9]{0,20}"),
+            exp in proptest::option::of((proptest::sample::select(vec!["e", "E"]),
+                proptest::sample::select(vec!["", "+", "-"]), "[0-9]{1,4}")),
+        ) {
+            let mut t = format!("{sign}{int}");
+            if let Some(f) = &frac {
+                t.push('.');
+                t.push_str(f);
+            }
+            if let Some((e, s, d)) = &exp {
+                t.push_str(e);
+                t.push_str(s);
+                t.push_str(d);
+            }
+            if let Ok(("", lexed)) = number_text(&t) {
+                let fast = number_value(lexed).map(f64::to_bits);
+                let slow = lexed.parse::<f64>().ok().map(f64::to_bits);
+                proptest::prop_assert_eq!(fast, slow, "{}", lexed);
+            }
+        }
+
+        /// The byte scan of [`ws`] against `trim_start_matches`: the same
+        /// rest for any mix of blanks, byte-order marks, comments and text.
+        #[test]
+        fn ws_equals_the_trim_reference(
+            parts in proptest::collection::vec(
+                proptest::sample::select(vec![
+                    " ", "\t", "\r", "\n", "\u{feff}", "! note", "!", "x", "[1,", "é", "\u{a0}",
+                ]),
+                0..12,
+            )
+        ) {
+            let text: String = parts.concat();
+            proptest::prop_assert_eq!(ws(&text), ws_reference(&text));
+        }
+    }
 
     /// The direct robtarget scanner against the generic value tree: the same
     /// literal and rest wherever it accepts, and it declines every other
