@@ -139,7 +139,7 @@ pub struct EffectArgs {
     /// Scale an effect: --gain geometric=0.5, --gain thermal=0.8.
     #[arg(long = "gain", value_name = "EFFECT=GAIN")]
     pub gains: Vec<String>,
-    /// Process force instead of the machine file's `process_force`: none, or constant:FX,FY,FZ[@workpiece|tool|feed] (N, force on the tool).
+    /// Process force instead of the machine file's `process_force`: none, or `constant:FX,FY,FZ[@workpiece|tool|feed]` (N, force on the tool).
     #[arg(long, value_name = "SPEC")]
     pub force: Option<String>,
     /// Per-line process forces from a CSV file (line,fx_n,fy_n,fz_n; workpiece frame, N).

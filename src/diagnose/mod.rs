@@ -1,7 +1,7 @@
 //! Diagnosis of disagreement between simulation and measurement: where the
 //! model and the measured observations disagree ([`residuals`]), which named
 //! effect is missing ([`effects`], [`select`]), the model with that effect
-//! added ([`write`]) and the gap before and after on held-out rows
+//! added ([`mod@write`]) and the gap before and after on held-out rows
 //! ([`report`]).
 //!
 //! Simulated = [`crate::calibrate::forward::predict`] of the current model;

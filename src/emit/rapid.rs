@@ -124,7 +124,7 @@ const FIXED_TIE_GUARD: f64 = 1e-3;
 /// Appends [`format_fixed`]`(v, decimals)` to `out` without an allocation
 /// of its own; false (nothing appended) for NaN or infinity. Byte-identical
 /// to the `format!` path: the rounding is decided on `|v|·10^decimals` in
-/// f64 unless that product lies within [`FIXED_TIE_GUARD`] of a half (then
+/// f64 unless that product lies within `FIXED_TIE_GUARD` of a half (then
 /// `format!` decides).
 pub fn push_fixed(out: &mut String, v: f64, decimals: usize) -> bool {
     if !v.is_finite() {

@@ -190,7 +190,7 @@ const POW10: [f64; 23] = [
     1e17, 1e18, 1e19, 1e20, 1e21, 1e22,
 ];
 
-/// The value of a number recognised by [`number_len`], exactly as
+/// The value of a number recognised by `number_len`, exactly as
 /// `str::parse::<f64>` gives it, without going through `str`: when the
 /// digits form an integer of at most 2^53 and there are at most 22 decimals,
 /// both the integer and the power of ten are exact `f64`s and their

@@ -435,7 +435,7 @@ impl Robot {
 
     /// Compensates one programmed TCP pose (world frame): returns the pose to
     /// program so that the predicted attained pose equals `programmed`
-    /// within [`COMP_POS_TOL_MM`] / [`COMP_ROT_TOL_RAD`].
+    /// within `COMP_POS_TOL_MM` / `COMP_ROT_TOL_RAD`.
     pub fn compensate(
         &self,
         programmed: &Isometry3<f64>,

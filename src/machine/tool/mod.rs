@@ -274,7 +274,7 @@ impl MachineTool {
     /// with component errors looked up for the given direction of motion.
     ///
     /// Machines whose axes are all linear evaluate the chain from its
-    /// multi-affine form in the command's cell (see [`cells`]), which
+    /// multi-affine form in the command's cell (see `cells.rs`), which
     /// agrees with the chain product to rounding.
     pub fn geometric(&self, cmd: &AxisVec, dirs: &DirVec, tool_mm: f64) -> TipPose {
         if let Some((d, p)) = cells::geometric(self, cmd, dirs, tool_mm) {
