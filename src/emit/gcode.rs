@@ -205,6 +205,17 @@ fn write_fixed(out: &mut Vec<u8>, v: f64, d: usize) -> bool {
     }
 }
 
+/// `round_to(v, d) == 0.0` without the division: the rounded product is
+/// zero exactly when it is below one half in magnitude (false for NaN).
+#[inline]
+fn rounds_to_zero(v: f64, d: usize) -> bool {
+    let f = POW10
+        .get(d)
+        .copied()
+        .unwrap_or_else(|| 10f64.powi(d as i32));
+    (v * f).abs() < 0.5
+}
+
 fn round_to(v: f64, d: usize) -> f64 {
     // The table holds exactly what `powi` gives for these (exact) powers.
     let f = POW10
@@ -459,9 +470,9 @@ impl Emitter {
             if moved_axis {
                 continue;
             }
-            let rounded = round_to(to_program(plan, slot, target, self.emitted[slot]), d);
             match w {
                 Some(w) => {
+                    let rounded = round_to(to_program(plan, slot, target, self.emitted[slot]), d);
                     let orig = round_to(w.value, d);
                     if rounded != orig || w.decimals.unwrap_or(0) as usize > d {
                         edits.number(w, rounded, d);
@@ -471,11 +482,16 @@ impl Emitter {
                     }
                 }
                 None => {
+                    // An axis that stays where it is needs no word (the
+                    // rounded values below would be equal).
+                    if target == self.emitted[slot] {
+                        continue;
+                    }
                     let now = round_to(
                         to_program(plan, slot, self.emitted[slot], self.emitted[slot]),
                         d,
                     );
-                    let want = rounded;
+                    let want = round_to(to_program(plan, slot, target, self.emitted[slot]), d);
                     // Rapids position only the axes they program.
                     let positioning =
                         mv.motion == Motion::Rapid && plan.programmed & (1 << slot) == 0;
@@ -578,7 +594,7 @@ impl Emitter {
                 // compensated).
                 for e in Effect::ALL {
                     let part = res.deviation.part(e).norm() / scale;
-                    if round_to(part, dd) == 0.0 {
+                    if rounds_to_zero(part, dd) {
                         continue;
                     }
                     t.push(b' ');
@@ -609,9 +625,13 @@ impl Emitter {
             for p in points {
                 let mark = out.len();
                 for slot in 0..6 {
+                    let now = self.emitted[slot];
+                    // An axis that stays where it is needs no word.
+                    if p[slot] == now {
+                        continue;
+                    }
                     let w = block.words.iter().find(|w| w.letter == AXIS_LETTERS[slot]);
                     let d = self.decimals(w, scale, slot >= 3);
-                    let now = self.emitted[slot];
                     let v = round_to(to_program(plan, slot, p[slot], now), d);
                     let cur = round_to(to_program(plan, slot, now, now), d);
                     if v != cur {
@@ -867,6 +887,19 @@ mod tests {
 
     proptest::proptest! {
         #![proptest_config(proptest::prelude::ProptestConfig::with_cases(20_000))]
+
+        #[test]
+        fn zero_test_is_the_rounded_value_s(
+            v in proptest::prelude::any::<f64>(),
+            m in -1.0f64..1.0,
+            d in 0usize..12,
+        ) {
+            // Any value, and values near a half unit of the last digit.
+            let near = m * 1e-3 / 10f64.powi(d as i32) + 0.5 / 10f64.powi(d as i32);
+            for x in [v, m, near, -near, f64::from_bits(near.to_bits() + 1), f64::from_bits(near.to_bits() - 1)] {
+                proptest::prop_assert_eq!(rounds_to_zero(x, d), round_to(x, d) == 0.0, "{:e} {}", x, d);
+            }
+        }
 
         #[test]
         fn rounding_is_the_library_one(
