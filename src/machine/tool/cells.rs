@@ -122,14 +122,20 @@ const SLOTS: usize = 1024;
 /// the product of three monomials stays far below overflow.
 const CELL_RANGE_MM: f64 = 1e9;
 
-/// Number of recently used cells tried before a table search.
-const RECENT: usize = 8;
+/// Number of recently used cells tried before the region lookup (which
+/// remembers each axis' last region, so it rarely searches a table). One
+/// is the fastest on a raster: consecutive evaluations of a solve share a
+/// cell, and a longer list costs more to scan than the lookup it saves.
+const RECENT: usize = 1;
 
 /// The per-thread cache of cells.
 struct Cache {
     cells: Vec<Option<Box<Cell>>>,
     /// Slots of the most recently used cells, newest first.
     recent: [usize; RECENT],
+    /// Per slot, the table region found last: chain, bounds and index
+    /// (regions do not depend on the direction of motion or the tool).
+    regions: [(u64, f64, f64, u32); 3],
 }
 
 impl Cache {
@@ -137,6 +143,7 @@ impl Cache {
         Cache {
             cells: Vec::new(),
             recent: [0; RECENT],
+            regions: [(0, 0.0, 0.0, 0); 3],
         }
     }
 
@@ -314,8 +321,19 @@ fn with_cell<T>(
         }
         let mut region = [0u32; 3];
         for (a, f) in m.axes.iter().zip(&m.pre.axes) {
-            let k = f.merged.as_ref()?.region(q[a.slot]);
-            *region.get_mut(a.slot)? = u32::try_from(k).ok()?;
+            let v = *q.get(a.slot)?;
+            let memo = cache.regions.get_mut(a.slot)?;
+            let k = if memo.0 == chain && v >= memo.1 && v < memo.2 {
+                memo.3
+            } else {
+                let merged = f.merged.as_ref()?;
+                let k = merged.region(v);
+                let (lo, hi, _) = merged.region_bounds(k);
+                let k = u32::try_from(k).ok()?;
+                *memo = (chain, lo, hi, k);
+                k
+            };
+            *region.get_mut(a.slot)? = k;
         }
         let key = Key {
             chain,
