@@ -154,7 +154,9 @@ pub struct EffectArgs {
     /// Thermal state at the program start: cold, steady (the steady state of the program's mean power) or MINUTES of warm-up at that power.
     #[arg(long, value_name = "START", default_value = "cold")]
     pub thermal_start: String,
-    /// Worker threads (default: all cores). Output is the same for any count.
+    /// Worker threads (default: all cores); a G-code program's own thread
+    /// interprets and writes alongside them. Output is the same for any
+    /// count.
     #[arg(long)]
     pub threads: Option<usize>,
 }
