@@ -158,12 +158,43 @@ pub(crate) fn frames_upto(p: &DhParams, q: &[f64; 6], n: usize) -> Frames {
 
 /// [`frames_upto`] of a prepared parameter set.
 pub(crate) fn frames_prepared(p: &Prepared, q: &[f64; 6], n: usize) -> Frames {
+    frames_core(p, None, q, n).0
+}
+
+/// The half-angle sine and cosine `(sin θi/2, cos θi/2)` of each joint
+/// angle `θi = qi + offset_i` of a configuration.
+pub(crate) type HalfAngles = [(f64, f64); 6];
+
+/// [`frames_prepared`] of all six links, with the half angles it used.
+pub(crate) fn frames_with_half_angles(p: &Prepared, q: &[f64; 6]) -> (Frames, HalfAngles) {
+    let (f, _, half) = frames_core(p, None, q, 6);
+    (f, half)
+}
+
+/// The frames of the first `n` links of `p` at `q`, the flange of `twin`
+/// accumulated from the same half angles (the identity without a twin),
+/// and the half angles. [`prepared_transform`] is [`half_angle`] followed
+/// by [`transform_of_half_angle`], so every caller gets the bits of the
+/// transform-by-transform product.
+fn frames_core(
+    p: &Prepared,
+    twin: Option<&Prepared>,
+    q: &[f64; 6],
+    n: usize,
+) -> (Frames, Isometry3<f64>, HalfAngles) {
     let mut link = [Isometry3::identity(); 6];
     let mut axis_origin = [Vector3::zeros(); 6];
     let mut axis_dir = [Vector3::z(); 6];
+    let mut half = [(0.0, 1.0); 6];
     let mut prev = Isometry3::identity();
+    let mut other = Isometry3::identity();
     for (i, (j, qi)) in p.joints.iter().zip(q).enumerate().take(n.min(6)) {
-        let t = prev * prepared_transform(j, p.convention, *qi);
+        let (sz, cz) = half_angle(j, *qi);
+        half[i] = (sz, cz);
+        let t = prev * transform_of_half_angle(j, p.convention, sz, cz);
+        if let Some(jt) = twin.and_then(|tw| tw.joints.get(i)) {
+            other *= transform_of_half_angle(jt, p.convention, sz, cz);
+        }
         match p.convention {
             // Classic: joint i turns about z of frame i-1.
             Convention::Dh => {
@@ -179,47 +210,13 @@ pub(crate) fn frames_prepared(p: &Prepared, q: &[f64; 6], n: usize) -> Frames {
         link[i] = t;
         prev = t;
     }
-    Frames {
-        link,
-        axis_origin,
-        axis_dir,
-    }
-}
-
-/// The half-angle sine and cosine `(sin θi/2, cos θi/2)` of each joint
-/// angle `θi = qi + offset_i` of a configuration.
-pub(crate) type HalfAngles = [(f64, f64); 6];
-
-/// [`frames_prepared`] of all six links, with the half angles it used.
-pub(crate) fn frames_with_half_angles(p: &Prepared, q: &[f64; 6]) -> (Frames, HalfAngles) {
-    let mut half = [(0.0, 1.0); 6];
-    let mut link = [Isometry3::identity(); 6];
-    let mut axis_origin = [Vector3::zeros(); 6];
-    let mut axis_dir = [Vector3::z(); 6];
-    let mut prev = Isometry3::identity();
-    for (i, (j, qi)) in p.joints.iter().zip(q).enumerate() {
-        let (sz, cz) = half_angle(j, *qi);
-        half[i] = (sz, cz);
-        let t = prev * transform_of_half_angle(j, p.convention, sz, cz);
-        match p.convention {
-            Convention::Dh => {
-                axis_origin[i] = prev.translation.vector;
-                axis_dir[i] = prev.rotation * Vector3::z();
-            }
-            Convention::ModifiedDh => {
-                axis_origin[i] = t.translation.vector;
-                axis_dir[i] = t.rotation * Vector3::z();
-            }
-        }
-        link[i] = t;
-        prev = t;
-    }
     (
         Frames {
             link,
             axis_origin,
             axis_dir,
         },
+        other,
         half,
     )
 }
@@ -290,39 +287,7 @@ pub(crate) fn frames_and_twin_flange(
     if !same {
         return None;
     }
-    let mut link = [Isometry3::identity(); 6];
-    let mut axis_origin = [Vector3::zeros(); 6];
-    let mut axis_dir = [Vector3::z(); 6];
-    let mut prev = Isometry3::identity();
-    let mut other = Isometry3::identity();
-    let mut half = [(0.0, 1.0); 6];
-    for (i, ((j, jt), qi)) in p.joints.iter().zip(&twin.joints).zip(q).enumerate() {
-        let (sz, cz) = half_angle(j, *qi);
-        half[i] = (sz, cz);
-        let t = prev * transform_of_half_angle(j, p.convention, sz, cz);
-        other *= transform_of_half_angle(jt, p.convention, sz, cz);
-        match p.convention {
-            Convention::Dh => {
-                axis_origin[i] = prev.translation.vector;
-                axis_dir[i] = prev.rotation * Vector3::z();
-            }
-            Convention::ModifiedDh => {
-                axis_origin[i] = t.translation.vector;
-                axis_dir[i] = t.rotation * Vector3::z();
-            }
-        }
-        link[i] = t;
-        prev = t;
-    }
-    Some((
-        Frames {
-            link,
-            axis_origin,
-            axis_dir,
-        },
-        other,
-        half,
-    ))
+    Some(frames_core(p, Some(twin), q, 6))
 }
 
 /// What the confdata test needs of a configuration (frames up to the
