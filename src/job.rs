@@ -627,7 +627,8 @@ impl<'m> Job<'m> {
         }
         let n = st.n;
         // The results of the chunk this stage held before are overwritten
-        // in place: their split-point storage is reused.
+        // in place: their split-point storage is reused (`finish` gave
+        // large storage back).
         st.results.truncate(n);
         st.results.resize_with(n, || None);
         let plans = &st.plans[..n];
@@ -639,7 +640,7 @@ impl<'m> Job<'m> {
                 let mut carry = None;
                 for ((r, p), c) in rs.iter_mut().zip(ps).zip(cs) {
                     let segments = match r.take() {
-                        Some(Ok(old)) if old.segments.capacity() <= REUSE_SEGMENTS => old.segments,
+                        Some(Ok(old)) => old.segments,
                         _ => Vec::new(),
                     };
                     *r = Some(compensate::block_reusing(
@@ -691,8 +692,7 @@ impl<'m> Job<'m> {
         let mut prepare = |st: &mut Stage, summary: &mut Summary| -> Result<()> {
             let chunk = &mut st.chunk;
             let n = chunk.ranges.len();
-            // Lines interpreted so far (all of them unless there is an error).
-            st.n = 0;
+            st.n = n;
             if st.plans.len() < n {
                 st.plans.resize(n, Plan::default());
             }
@@ -753,7 +753,6 @@ impl<'m> Job<'m> {
                         &mut extra_warnings,
                     ));
                 }
-                st.n = i + 1;
             }
             summary.lines = chunk.first_line + chunk.ranges.len();
             Ok(())
@@ -764,11 +763,9 @@ impl<'m> Job<'m> {
             let chunk = &st.chunk;
             let plans = &st.plans[..st.n];
             if self.predictor.is_none() || (!solving && rows.is_none()) {
-                // Nothing is solved: every (interpreted) line is written as
-                // it is.
-                let end = chunk.ranges.get(st.n).map_or(chunk.buf.len(), |r| r.0);
+                // Nothing is solved: every line is written as it is.
                 if let Some(out) = out.as_deref_mut() {
-                    out.write_all(&chunk.buf[..end])
+                    out.write_all(&chunk.buf)
                         .map_err(|e| Error::io("output", e))?;
                 }
                 return Ok(());

@@ -226,3 +226,51 @@ ENDMODULE\n",
         "the second literal's line break is gone:\n{text}"
     );
 }
+
+/// Errors of the input come before compensation failures wherever they are
+/// (the streaming pipeline used to decide this per 4096-line chunk):
+/// `compensate` names the malformed line `check` names, and a program whose
+/// only fault is an unreachable target names that target. No output file
+/// either way.
+#[test]
+fn regression_input_errors_come_before_compensation_failures() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut program = String::from("G90 G54 G0 X0 Y0 Z20\nG1 X900 Y10 F1000\n");
+    for k in 0..6000 {
+        program.push_str(&format!("G1 X{} Y{}\n", k % 300, k % 7));
+    }
+    let clean = dir.path().join("clean.nc");
+    std::fs::write(&clean, &program).unwrap();
+    // A syntax error some chunks after the unreachable target.
+    let lines: Vec<&str> = program.lines().collect();
+    let mut bad = lines.clone();
+    bad[4999] = "G1 X1 Q";
+    let faulty = dir.path().join("faulty.nc");
+    std::fs::write(&faulty, bad.join("\n") + "\n").unwrap();
+
+    let run = |cmd: &str, file: &std::path::Path| {
+        let out_path = dir.path().join("out.nc");
+        let mut c = postproc();
+        c.args([cmd, "--machine", "afm-r1000"]);
+        if cmd == "compensate" {
+            c.arg("-o").arg(&out_path);
+        }
+        let out = c.arg(file).output().unwrap();
+        assert!(!out_path.exists(), "no output file after an error");
+        (
+            out.status.code(),
+            String::from_utf8_lossy(&out.stderr).into_owned(),
+        )
+    };
+    for cmd in ["compensate", "check"] {
+        let (code, err) = run(cmd, &faulty);
+        assert_eq!(code, Some(2), "{cmd}: {err}");
+        assert!(err.contains("faulty.nc:5000:"), "{cmd}: {err}");
+    }
+    let (code, err) = run("compensate", &clean);
+    assert_eq!(code, Some(2), "{err}");
+    assert!(
+        err.contains("clean.nc:2:") && err.contains("outside the travel"),
+        "{err}"
+    );
+}

@@ -18,8 +18,8 @@
 //! `Π (A_i + u_i B_i)` factor by factor (`A_i` the factor at `o_i`, `B_i`
 //! its derivative), which is exact; an evaluation is then 4 products and
 //! 42 multiply-adds instead of the chain's table searches and HTM
-//! products (about 1 100 instructions). The two agree to rounding, about
-//! 1e-12 mm (tested against the chain on the bundled three-axis machine and
+//! products (about 1 100 instructions). The two agree to rounding, below
+//! 1e-11 mm (tested against the chain on the bundled three-axis machine and
 //! variants of it: axes on either side, spindle errors, tables on
 //! different knots; at knots and beyond the tables). Commands beyond
 //! ±1e9 mm, where the monomials could overflow, use the chain itself.

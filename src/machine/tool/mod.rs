@@ -284,8 +284,9 @@ impl MachineTool {
     }
 
     /// [`Self::geometric`] by the chain product alone (the reference of the
-    /// cell form).
-    pub fn geometric_chain(&self, cmd: &AxisVec, dirs: &DirVec, tool_mm: f64) -> TipPose {
+    /// cell form in the tests).
+    #[cfg(test)]
+    fn geometric_chain(&self, cmd: &AxisVec, dirs: &DirVec, tool_mm: f64) -> TipPose {
         pose_aff(&self.tip_htm(cmd, dirs, tool_mm, true))
     }
 
@@ -724,9 +725,9 @@ mod tests {
     }
 
     /// Agreement of the cell form with the chain product: positions in mm
-    /// (the chain's own rounding at 1 000 mm is about 1e-13 mm), unit tool
-    /// axis.
-    const CELL_POS_TOL_MM: f64 = 1e-9;
+    /// (the chain's own rounding at 1 000 mm is about 1e-13 mm; the largest
+    /// difference seen is 6e-13 mm), unit tool axis.
+    const CELL_POS_TOL_MM: f64 = 1e-11;
     const CELL_DIR_TOL: f64 = 1e-12;
 
     /// Random commands over and beyond the travel, a tenth of them on a knot.
