@@ -600,7 +600,6 @@ impl Robot {
 mod tests {
     use super::super::kinematics::frames_prepared;
     use super::*;
-    use crate::machine::Machine;
     use crate::machine::robot::ConfData;
     use approx::assert_abs_diff_eq;
 
@@ -638,10 +637,7 @@ mod tests {
     #[test]
     fn stages_and_prediction_equal_the_stage_by_stage_reference() {
         use crate::machine::robot::ProcessWrench;
-        let text = include_str!("../../../machines/abb-irb1600.yaml");
-        let Ok(Machine::Robot(r)) = Machine::from_yaml_str(text, "abb-irb1600.yaml") else {
-            panic!("abb-irb1600.yaml is a robot file")
-        };
+        let r = crate::machine::robot::test_irb1600();
         let warm = r.with_thermal_power(&[20.0, 150.0, 80.0, 0.0, 0.0, 0.0]);
         let loaded = warm.with_process_wrench(Some(ProcessWrench {
             force_n: Vector3::new(10.0, -40.0, -120.0),
@@ -649,13 +645,7 @@ mod tests {
             in_tool_frame: true,
         }));
         let unloaded = warm.with_process_wrench(None);
-        let mut state = 0x2545_f491_4f6c_dd1du64;
-        let mut next = || {
-            state = state
-                .wrapping_mul(6_364_136_223_846_793_005)
-                .wrapping_add(1_442_695_040_888_963_407);
-            ((state >> 11) as f64 / (1u64 << 53) as f64 - 0.5) * 2.0
-        };
+        let mut next = crate::machine::robot::test_sequence(0x2545_f491_4f6c_dd1d);
         for view in [&r, &loaded, &unloaded] {
             for _ in 0..100 {
                 let q: [f64; 6] = std::array::from_fn(|_| next());
@@ -700,10 +690,7 @@ mod tests {
     /// gives the compensation computed without it, bit for bit.
     #[test]
     fn nominal_flange_seed_equals_the_unseeded_compensation() {
-        let text = include_str!("../../../machines/abb-irb1600.yaml");
-        let Ok(Machine::Robot(r)) = Machine::from_yaml_str(text, "abb-irb1600.yaml") else {
-            panic!("abb-irb1600.yaml is a robot file")
-        };
+        let r = crate::machine::robot::test_irb1600();
         let growth = r.thermal_growth_mm(&[30.0, 90.0, 40.0, 0.0, 0.0, 0.0]);
         let mut checked = 0;
         for (x, y, z) in [
@@ -745,10 +732,7 @@ mod tests {
 
     #[test]
     fn growth_override_equals_a_robot_at_that_power() {
-        let text = include_str!("../../../machines/abb-irb1600.yaml");
-        let Ok(Machine::Robot(r)) = Machine::from_yaml_str(text, "abb-irb1600.yaml") else {
-            panic!("abb-irb1600.yaml is a robot file")
-        };
+        let r = crate::machine::robot::test_irb1600();
         // Warm joints 2 and 3 (W): the thermal section grows row 2's a.
         let p = [0.0, 150.0, 80.0, 0.0, 0.0, 0.0];
         let warm = r.with_thermal_power(&p);

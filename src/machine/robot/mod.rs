@@ -784,6 +784,30 @@ impl Robot {
     }
 }
 
+/// The bundled ABB IRB 1600 file (tests).
+#[cfg(test)]
+pub(crate) fn test_irb1600() -> Robot {
+    let text = include_str!("../../../machines/abb-irb1600.yaml");
+    let Ok(crate::machine::Machine::Robot(r)) =
+        crate::machine::Machine::from_yaml_str(text, "abb-irb1600.yaml")
+    else {
+        panic!("abb-irb1600.yaml is a robot file")
+    };
+    r
+}
+
+/// A fixed pseudo-random sequence in [−1, 1) (tests).
+#[cfg(test)]
+pub(crate) fn test_sequence(seed: u64) -> impl FnMut() -> f64 {
+    let mut state = seed;
+    move || {
+        state = state
+            .wrapping_mul(6_364_136_223_846_793_005)
+            .wrapping_add(1_442_695_040_888_963_407);
+        ((state >> 11) as f64 / (1u64 << 53) as f64 - 0.5) * 2.0
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -793,21 +817,11 @@ mod tests {
     /// the asked cfx, or none, for random poses and every cfx.
     #[test]
     fn conf_branch_equals_the_first_matching_branch() {
-        use crate::machine::Machine;
-        let text = include_str!("../../../machines/abb-irb1600.yaml");
-        let Ok(Machine::Robot(r)) = Machine::from_yaml_str(text, "abb-irb1600.yaml") else {
-            panic!("abb-irb1600.yaml is a robot file")
-        };
+        let r = super::test_irb1600();
         let Some(cf) = r.d.closed_form.as_ref() else {
             panic!("the IRB 1600 has a closed form")
         };
-        let mut state = 0x2545_f491_4f6c_dd1du64;
-        let mut next = || {
-            state = state
-                .wrapping_mul(6_364_136_223_846_793_005)
-                .wrapping_add(1_442_695_040_888_963_407);
-            ((state >> 11) as f64 / (1u64 << 53) as f64 - 0.5) * 2.0
-        };
+        let mut next = super::test_sequence(0x2545_f491_4f6c_dd1d);
         let mut matched = 0;
         for _ in 0..300 {
             let q: [f64; 6] = std::array::from_fn(|_| next());
@@ -832,11 +846,7 @@ mod tests {
     /// setters: `flange_for_tcp` equals the product with fresh inverses.
     #[test]
     fn flange_for_tcp_uses_current_inverses() {
-        use crate::machine::Machine;
-        let text = include_str!("../../../machines/abb-irb1600.yaml");
-        let Ok(Machine::Robot(r)) = Machine::from_yaml_str(text, "abb-irb1600.yaml") else {
-            panic!("abb-irb1600.yaml is a robot file")
-        };
+        let r = super::test_irb1600();
         let frame = |x: f64, a: f64| {
             Isometry3::from_parts(
                 nalgebra::Translation3::new(x, -2.0 * x, 0.5 * x),

@@ -244,8 +244,7 @@ impl MachineTool {
     /// translation: the tip is accumulated by its column alone, with the
     /// same additions in the same order as the chain product (same bits).
     pub fn nominal(&self, cmd: &AxisVec, tool_mm: f64) -> TipPose {
-        let finite = tool_mm.is_finite() && cmd.iter().all(|v| v.is_finite());
-        if self.pre.cells_id.is_some() && finite {
+        if self.pre.cells_id.is_some() && tool_mm.is_finite() && cmd.iter().all(|v| v.is_finite()) {
             let mut p = [0.0f64; 3];
             for (i, a) in self.axes.iter().enumerate() {
                 if i == self.n_workpiece {
