@@ -1,5 +1,6 @@
 //! Writers: byte-faithful program emitters and deviation reports.
 
+pub(crate) mod fixed;
 pub mod gcode;
 pub mod rapid;
 pub mod report;

@@ -113,78 +113,19 @@ fn push_fixed_slow(out: &mut String, v: f64, decimals: usize) {
     }
 }
 
-/// Largest scaled magnitude `|v|·10^decimals` of the fast path: below
-/// 2^40 the product's rounding error is under 2^-12, far inside
-/// [`FIXED_TIE_GUARD`].
-const FIXED_FAST_MAX: f64 = (1u64 << 40) as f64;
-/// Distance of the scaled fraction from one half below which the fast path
-/// defers to `format!` (which rounds the exact binary value).
-const FIXED_TIE_GUARD: f64 = 1e-3;
-
 /// Appends [`format_fixed`]`(v, decimals)` to `out` without an allocation
 /// of its own; false (nothing appended) for NaN or infinity. Byte-identical
-/// to the `format!` path: the rounding is decided on `|v|·10^decimals` in
-/// f64 unless that product lies within `FIXED_TIE_GUARD` of a half (then
-/// `format!` decides).
+/// to the `format!` path: the digits come from the shared fixed-decimal
+/// formatter of the writers, which defers to `format!` near a rounding tie.
 pub fn push_fixed(out: &mut String, v: f64, decimals: usize) -> bool {
     if !v.is_finite() {
         return false;
     }
-    const POW10: [u64; 10] = [
-        1,
-        10,
-        100,
-        1_000,
-        10_000,
-        100_000,
-        1_000_000,
-        10_000_000,
-        100_000_000,
-        1_000_000_000,
-    ];
-    let Some(&scale) = POW10.get(decimals) else {
-        push_fixed_slow(out, v, decimals);
-        return true;
-    };
-    let t = v.abs() * scale as f64;
-    if t >= FIXED_FAST_MAX {
-        push_fixed_slow(out, v, decimals);
-        return true;
-    }
-    let n = t.floor();
-    let frac = t - n;
-    if (frac - 0.5).abs() < FIXED_TIE_GUARD {
-        push_fixed_slow(out, v, decimals);
-        return true;
-    }
-    // `t < 2^40`: exact in u64.
-    let m = n as u64 + u64::from(frac > 0.5);
-    if v.is_sign_negative() && m != 0 {
-        out.push('-');
-    }
-    let (int, fr) = (m / scale, m % scale);
-    let mut buf = [0u8; 20];
-    let mut i = buf.len();
-    let mut x = int;
-    loop {
-        i -= 1;
-        buf[i] = b'0' + (x % 10) as u8;
-        x /= 10;
-        if x == 0 {
-            break;
-        }
-    }
-    // ASCII digits: pushed as chars (no UTF-8 validation of the buffer).
-    out.extend(buf[i..].iter().map(|&b| char::from(b)));
-    if decimals > 0 {
-        out.push('.');
-        let mut d = [b'0'; 9];
-        let mut x = fr;
-        for k in (0..decimals).rev() {
-            d[k] = b'0' + (x % 10) as u8;
-            x /= 10;
-        }
-        out.extend(d[..decimals].iter().map(|&b| char::from(b)));
+    let mut buf = [0u8; super::fixed::FIXED_MAX];
+    match super::fixed::fixed_digits(&mut buf, v, decimals) {
+        // ASCII digits: pushed as chars (no UTF-8 validation of the buffer).
+        Some(len) => out.extend(buf.iter().take(len).map(|&b| char::from(b))),
+        None => push_fixed_slow(out, v, decimals),
     }
     true
 }
