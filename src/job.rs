@@ -471,9 +471,7 @@ type Solved = Option<std::result::Result<BlockResult, Failure>>;
 #[derive(Default)]
 struct Stage {
     chunk: Chunk,
-    /// Number of lines of the chunk interpreted into `plans`.
-    n: usize,
-    /// The plans of the chunk's lines (the first `n` are valid; kept between
+    /// The plans of the chunk's lines (one per line of `chunk`; kept between
     /// chunks so that they are reused).
     plans: Vec<Plan>,
     /// The block context of each line (with process effects).
@@ -625,7 +623,7 @@ impl<'m> Job<'m> {
             st.results.clear();
             return;
         }
-        let n = st.n;
+        let n = st.chunk.ranges.len();
         // The results of the chunk this stage held before are overwritten
         // in place: their split-point storage is reused (`finish` gave
         // large storage back).
@@ -692,7 +690,6 @@ impl<'m> Job<'m> {
         let mut prepare = |st: &mut Stage, summary: &mut Summary| -> Result<()> {
             let chunk = &mut st.chunk;
             let n = chunk.ranges.len();
-            st.n = n;
             if st.plans.len() < n {
                 st.plans.resize(n, Plan::default());
             }
@@ -761,7 +758,7 @@ impl<'m> Job<'m> {
         // Writes one compensated chunk (and hands over its rows).
         let mut finish = |st: &mut Stage, summary: &mut Summary| -> Result<()> {
             let chunk = &st.chunk;
-            let plans = &st.plans[..st.n];
+            let plans = &st.plans[..chunk.ranges.len()];
             if self.predictor.is_none() || (!solving && rows.is_none()) {
                 // Nothing is solved: every line is written as it is.
                 if let Some(out) = out.as_deref_mut() {
