@@ -414,14 +414,10 @@ mod tests {
 
     /// Random joint vectors in ±π (a fixed linear congruential sequence).
     fn random_joints(n: usize) -> Vec<[f64; 6]> {
-        let mut state = 0x9e37_79b9_7f4a_7c15u64;
-        let mut next = || {
-            state = state
-                .wrapping_mul(6_364_136_223_846_793_005)
-                .wrapping_add(1_442_695_040_888_963_407);
-            ((state >> 11) as f64 / (1u64 << 53) as f64 - 0.5) * 2.0 * std::f64::consts::PI
-        };
-        (0..n).map(|_| std::array::from_fn(|_| next())).collect()
+        let mut next = crate::machine::robot::test_sequence(0x9e37_79b9_7f4a_7c15);
+        (0..n)
+            .map(|_| std::array::from_fn(|_| next() * std::f64::consts::PI))
+            .collect()
     }
 
     fn assert_same_pose(a: &Isometry3<f64>, b: &Isometry3<f64>) {

@@ -249,13 +249,8 @@ mod tests {
             com_mm: Vector3::new(12.0, -30.0, 95.0),
         };
         // A fixed linear congruential sequence: random joints in ±π.
-        let mut state = 0x2545_f491_4f6c_dd1du64;
-        let mut next = || {
-            state = state
-                .wrapping_mul(6_364_136_223_846_793_005)
-                .wrapping_add(1_442_695_040_888_963_407);
-            ((state >> 11) as f64 / (1u64 << 53) as f64 - 0.5) * 2.0 * std::f64::consts::PI
-        };
+        let mut sequence = crate::machine::robot::test_sequence(0x2545_f491_4f6c_dd1d);
+        let mut next = || sequence() * std::f64::consts::PI;
         for r in &robots {
             for view in [
                 r.clone(),
