@@ -340,6 +340,8 @@ pub(crate) struct Precomputed {
     pub(crate) cells_id: Option<u64>,
     /// Bit `s` set when slot `s` has an axis.
     pub(crate) cells_slots: u8,
+    /// Chain index of the axis in slot Z (`usize::MAX` when there is none).
+    pub(crate) z_index: usize,
 }
 
 impl Precomputed {
@@ -349,6 +351,7 @@ impl Precomputed {
         Precomputed {
             cells_id: super::cells::chain_id(axes, &fast),
             cells_slots: axes.iter().fold(0u8, |m, a| m | (1u8 << (a.slot % 8))),
+            z_index: axes.iter().position(|a| a.slot == 2).unwrap_or(usize::MAX),
             axes: fast,
             spindle: (!spindle.is_zero()).then(|| from_m4(&spindle.htm())),
             lip: LipGeo::new(axes, &spindle),

@@ -245,24 +245,30 @@ impl MachineTool {
     /// same additions in the same order as the chain product (same bits).
     pub fn nominal(&self, cmd: &AxisVec, tool_mm: f64) -> TipPose {
         if self.pre.cells_id.is_some() && tool_mm.is_finite() && cmd.iter().all(|v| v.is_finite()) {
-            let mut p = [0.0f64; 3];
-            for (i, a) in self.axes.iter().enumerate() {
-                if i == self.n_workpiece {
-                    p[2] += tool_mm;
+            // The rotation part stays the identity: an axis in slot `r`
+            // adds its value to row `r` alone (the other rows add a zero,
+            // which leaves them as they are), each slot has at most one
+            // axis, and the tool length is added where the workpiece side
+            // of the chain ends (before or after the Z axis) and taken off
+            // at the tip. The sums start from zero as the chain's do
+            // (`0 + q` turns a −0 into +0).
+            let slots = self.pre.cells_slots;
+            let along = |s: usize| {
+                if slots & (1 << s) != 0 {
+                    0.0 + cmd[s]
+                } else {
+                    0.0
                 }
-                let r = a.slot % 3;
-                let q = cmd.get(a.slot).copied().unwrap_or(0.0);
-                // The rotation part stays the identity: column `r` is the
-                // unit vector `r`, so only row `r` changes (the other rows
-                // add a zero, which leaves them as they are).
-                p[r] += q;
-            }
-            if self.n_workpiece == self.axes.len() {
-                p[2] += tool_mm;
-            }
-            p[2] += -tool_mm;
+            };
+            let z = if self.pre.z_index == usize::MAX {
+                0.0 + tool_mm
+            } else if self.pre.z_index >= self.n_workpiece {
+                (0.0 + tool_mm) + cmd[2]
+            } else {
+                (0.0 + cmd[2]) + tool_mm
+            };
             return TipPose {
-                pos: Vector3::new(p[0], p[1], p[2]),
+                pos: Vector3::new(along(0), along(1), z + -tool_mm),
                 dir: Vector3::z(),
             };
         }
