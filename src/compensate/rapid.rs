@@ -11,6 +11,7 @@
 
 use std::collections::HashMap;
 use std::rc::Rc;
+use std::sync::Arc;
 
 use rayon::prelude::*;
 
@@ -702,7 +703,7 @@ struct Rewriter<'m> {
     taken: Vec<String>,
     /// Robot views (one per tool, work object and process wrench; the
     /// thermal state of a move goes with its job) and the index of each.
-    views: Vec<Robot>,
+    views: Arc<Vec<Robot>>,
     view_of: HashMap<ViewKey, usize>,
     /// The view used last, with its key.
     last_view: Option<(ViewKey, usize)>,
@@ -734,27 +735,24 @@ struct Job {
     seed: Seed,
 }
 
-/// The two walks over the moves: the first collects every compensation as
-/// a [`Job`]; the second solves them (in parallel, a chunk at a time; each
-/// job is independent of the others and of the thread count) and writes the
-/// results back in source order.
+/// The two walks over the moves, interleaved a chunk at a time: the first
+/// collects the compensations of the chunk's moves as [`Job`]s; they are
+/// solved on the pool (each job independent of the others and of the
+/// thread count) while the second walk writes back the results of the chunk
+/// before, in source order.
 enum Phase {
-    /// The jobs in chunks of [`JOB_CHUNK`].
-    Collect(Vec<Vec<Job>>),
-    /// The chunks of jobs still to solve, and the results of the chunk
-    /// being written back: each chunk is freed once used up.
-    Apply {
-        jobs: std::vec::IntoIter<Vec<Job>>,
-        results: std::vec::IntoIter<Solved>,
-    },
+    /// Collecting the jobs of a chunk.
+    Collect(Vec<Job>),
+    /// The results of the chunk being written back, in job order.
+    Apply(std::vec::IntoIter<Solved>),
 }
 
 /// The solved compensation of one job.
 type Solved = std::result::Result<Compensation, RobotError>;
 
-/// Jobs per chunk, solved in parallel within the chunk: the jobs and results
-/// of one chunk at a time live while the move records grow, never those of
-/// all the moves.
+/// Jobs per chunk (a chunk ends at the move that reaches it): the jobs and
+/// results of two chunks at a time live while the move records grow, never
+/// those of all the moves.
 const JOB_CHUNK: usize = 4096;
 
 /// Solves one chunk of jobs in parallel (rayon keeps the input order in
@@ -809,8 +807,11 @@ impl Rewriter<'_> {
                     .with_tool(tool.tframe, tool.load, false)
                     .with_process_wrench(self.state.wrench)
                     .with_spindle_rpm(self.state.rpm);
-                self.views.push(r);
-                let i = self.views.len() - 1;
+                // Unique but while a chunk is being solved, when this
+                // only meets views made for that chunk's moves.
+                let views = Arc::make_mut(&mut self.views);
+                views.push(r);
+                let i = views.len() - 1;
                 self.view_of.insert(vk.clone(), i);
                 i
             }
@@ -839,34 +840,20 @@ impl Rewriter<'_> {
     ) -> Option<Solved> {
         let growth = self.growth();
         match &mut self.phase {
-            Phase::Collect(chunks) => {
-                let job = Job {
+            Phase::Collect(jobs) => {
+                jobs.push(Job {
                     view,
                     pose,
                     sel,
                     growth,
                     seed,
-                };
-                match chunks.last_mut() {
-                    Some(c) if c.len() < JOB_CHUNK => c.push(job),
-                    _ => {
-                        let mut c = Vec::with_capacity(JOB_CHUNK);
-                        c.push(job);
-                        chunks.push(c);
-                    }
-                }
+                });
                 None
             }
-            // The results run out only after a collection that stopped at
-            // an error, which this walk meets first; solve directly anyway.
-            Phase::Apply { jobs, results } => {
-                if results.len() == 0 {
-                    // Free the used-up chunk before solving the next one.
-                    *results = Vec::new().into_iter();
-                    if let Some(chunk) = jobs.next() {
-                        *results = solve_chunk(&self.views, &chunk, self.opts.effects).into_iter();
-                    }
-                }
+            // The results run out only for the moves after a collection
+            // that stopped at an error, which this walk meets first; solve
+            // directly anyway.
+            Phase::Apply(results) => {
                 Some(
                     results
                         .next()
@@ -1568,7 +1555,7 @@ pub fn compensate_module(
         edits: Vec::new(),
         inserts: Vec::new(),
         taken: Vec::new(),
-        views: Vec::new(),
+        views: Arc::new(Vec::new()),
         view_of: HashMap::new(),
         last_view: None,
         phase: Phase::Collect(Vec::new()),
@@ -1628,57 +1615,112 @@ pub fn compensate_module(
             key,
         ));
     }
-    // Walk 1: collect the compensation jobs. It stops at the first error;
-    // walk 2 meets the same error at the same move, after reporting any
-    // failure of an earlier target, as a single walk would.
-    for (mv, plan, _, state, key) in &keyed {
-        rw.state = *state;
-        if rw.walk(mv, key, *plan).is_err() {
+    // The walks, a chunk of moves at a time. Walk 1 collects the jobs of
+    // the next chunk; it stops at the first error, which walk 2 meets at
+    // the same move after reporting any failure of an earlier target, as a
+    // single walk would. The chunk's jobs are solved on the pool while walk
+    // 2 writes back the chunk before.
+    let n = keyed.len();
+    let mut collected = 0;
+    let mut collecting = true;
+    let collect = |rw: &mut Rewriter, collected: &mut usize, collecting: &mut bool| {
+        rw.phase = Phase::Collect(Vec::new());
+        while *collecting && *collected < n {
+            let Some((mv, plan, _, state, key)) = keyed.get(*collected) else {
+                break;
+            };
+            rw.state = *state;
+            let ok = rw.walk(mv, key, *plan).is_ok();
+            // The failing move goes with this chunk (its jobs before the
+            // error are in it).
+            *collected += 1;
+            *collecting = ok;
+            if matches!(&rw.phase, Phase::Collect(j) if j.len() >= JOB_CHUNK) {
+                break;
+            }
+        }
+        let jobs = match std::mem::replace(&mut rw.phase, Phase::Apply(Vec::new().into_iter())) {
+            Phase::Collect(jobs) => jobs,
+            Phase::Apply(_) => Vec::new(),
+        };
+        (jobs, *collected)
+    };
+    let (jobs, mut end) = collect(&mut rw, &mut collected, &mut collecting);
+    let mut results = solve_chunk(&rw.views, &jobs, fx);
+    drop(jobs);
+    let mut walked = 0;
+    let mut max_vib = (0.0, 0, None);
+    loop {
+        // The last chunk takes the moves after a collection that stopped.
+        let last = end >= n || !collecting;
+        if last {
+            end = n;
+        }
+        let (next_jobs, next_end) = if last {
+            (Vec::new(), n)
+        } else {
+            collect(&mut rw, &mut collected, &mut collecting)
+        };
+        let views = Arc::clone(&rw.views);
+        let mut next_results = Vec::new();
+        rw.phase = Phase::Apply(std::mem::take(&mut results).into_iter());
+        let mut failed = None;
+        rayon::in_place_scope(|s| {
+            if !next_jobs.is_empty() {
+                let (views, jobs, slot) = (&views, &next_jobs, &mut next_results);
+                s.spawn(move |_| *slot = solve_chunk(views, jobs, fx));
+            }
+            // Walk 2: write the chunk's results back in source order.
+            for (mv, plan, seg, state, key) in keyed.get(walked..end).unwrap_or(&[]) {
+                let (mv, seg) = (*mv, *seg);
+                rw.state = *state;
+                let wrench = state.wrench;
+                let power = state.power;
+                let dev = match rw.walk(mv, key, *plan) {
+                    Ok(Some(dev)) => dev,
+                    Ok(None) => continue,
+                    Err(e) => {
+                        failed = Some(e);
+                        break;
+                    }
+                };
+                outcome.moves += 1;
+                let d = dev.total.pos_mm.norm();
+                if d > outcome.max_deviation_mm {
+                    outcome.max_deviation_mm = d;
+                    outcome.max_deviation_line = mv.line;
+                }
+                let v = dev.vibration_mm.norm();
+                if v > max_vib.0 {
+                    max_vib = (v, mv.line, state.rpm);
+                }
+                if opts.annotate {
+                    rw.edits.push(annotate_with(src, &mv.span, |out| {
+                        write_dev_comment(out, &dev)
+                    }));
+                }
+                outcome.records.push(MoveRecord {
+                    line: mv.line,
+                    kind: mv.kind.name(),
+                    programmed_mm: rw.last_tcp,
+                    deviation: dev,
+                    wrench,
+                    duration_s: seg.duration_s,
+                    power_w: seg.power_w,
+                    thermal_power_w: power.unwrap_or([0.0; 6]),
+                });
+            }
+        });
+        if let Some(e) = failed {
+            return Err(e);
+        }
+        walked = end;
+        if last {
             break;
         }
-    }
-    let Phase::Collect(jobs) = std::mem::replace(&mut rw.phase, Phase::Collect(Vec::new())) else {
-        return Err(Error::Usage("compensation jobs already applied".into()));
-    };
-    rw.phase = Phase::Apply {
-        jobs: jobs.into_iter(),
-        results: Vec::new().into_iter(),
-    };
-    // Walk 2: write the results back in source order.
-    let mut max_vib = (0.0, 0, None);
-    for (mv, plan, seg, state, key) in &keyed {
-        let (mv, seg) = (*mv, *seg);
-        rw.state = *state;
-        let wrench = state.wrench;
-        let power = state.power;
-        let Some(dev) = rw.walk(mv, key, *plan)? else {
-            continue;
-        };
-        outcome.moves += 1;
-        let d = dev.total.pos_mm.norm();
-        if d > outcome.max_deviation_mm {
-            outcome.max_deviation_mm = d;
-            outcome.max_deviation_line = mv.line;
-        }
-        let v = dev.vibration_mm.norm();
-        if v > max_vib.0 {
-            max_vib = (v, mv.line, state.rpm);
-        }
-        if opts.annotate {
-            rw.edits.push(annotate_with(src, &mv.span, |out| {
-                write_dev_comment(out, &dev)
-            }));
-        }
-        outcome.records.push(MoveRecord {
-            line: mv.line,
-            kind: mv.kind.name(),
-            programmed_mm: rw.last_tcp,
-            deviation: dev,
-            wrench,
-            duration_s: seg.duration_s,
-            power_w: seg.power_w,
-            thermal_power_w: power.unwrap_or([0.0; 6]),
-        });
+        drop(next_jobs);
+        results = next_results;
+        end = next_end;
     }
     warn_resonance(robot, fx, max_vib);
     // New declarations: one insertion per original declaration, in order.
@@ -1767,6 +1809,66 @@ fn warn_resonance(robot: &Robot, fx: Effects, (amp_mm, line, rpm): (f64, usize, 
 mod tests {
     use super::*;
     use crate::machine::robot::PoseDelta;
+
+    /// A module of a few chunks of jobs ([`JOB_CHUNK`]), MoveC (two jobs)
+    /// among them so that chunks end at different moves: each move is
+    /// written back with its own result, the same as when it is the only
+    /// move of a module (no thermal time line, so moves are independent).
+    #[test]
+    fn chunked_write_back_gives_each_move_its_own_result() {
+        let robot = crate::machine::robot::test_irb1600();
+        let mut rnd = crate::machine::robot::test_sequence(11);
+        let head = "MODULE M\n  PERS tooldata t1 := [TRUE,[[0,0,150],[1,0,0,0]],[2,[0,0,70],[1,0,0,0],0,0,0]];\n  PROC main()\n";
+        let tail = "  ENDPROC\nENDMODULE\n";
+        let n = 2 * JOB_CHUNK + 9;
+        let mut lines = Vec::with_capacity(n);
+        for i in 0..n {
+            let mut p = || {
+                format!(
+                    "[[{:.1},{:.1},{:.1}],[0,0,1,0],[0,0,0,0],[9E9,9E9,9E9,9E9,9E9,9E9]]",
+                    660.0 + 40.0 * rnd(),
+                    60.0 + 40.0 * rnd(),
+                    340.0 + 60.0 * rnd()
+                )
+            };
+            lines.push(if i % 997 == 3 {
+                format!("    MoveC {},{},v100,z1,t1;", p(), p())
+            } else {
+                format!("    MoveL {},v100,z1,t1;", p())
+            });
+        }
+        let opts = RapidOptions {
+            effects: Effects {
+                thermal: 0.0,
+                ..Effects::ALL
+            },
+            ..RapidOptions::for_robot(&robot)
+        };
+        let src = format!("{head}{}\n{tail}", lines.join("\n"));
+        let whole = compensate_module(&src, "m.mod", &robot, &opts).expect("compensates");
+        let out: Vec<&str> = whole.text.lines().collect();
+        assert_eq!(whole.moves, n);
+        let first = head.lines().count();
+        let mut checked = 0;
+        for i in (0..n).filter(|i| {
+            i % 613 == 0 || (JOB_CHUNK - 3..JOB_CHUNK + 3).contains(&(i % JOB_CHUNK)) || *i == n - 1
+        }) {
+            let single = format!("{head}{}\n{tail}", lines[i]);
+            let alone = compensate_module(&single, "m.mod", &robot, &opts).expect("compensates");
+            assert_eq!(
+                out.get(first + i).copied(),
+                alone.text.lines().nth(first),
+                "move {i}"
+            );
+            assert_ne!(
+                out.get(first + i).copied(),
+                Some(lines[i].as_str()),
+                "move {i} compensated"
+            );
+            checked += 1;
+        }
+        assert!(checked > 20);
+    }
 
     /// The single edit of [`robtarget_in_place`] (position, quaternion and
     /// confdata) against one edit per number: the same output text, for
