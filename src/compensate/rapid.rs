@@ -1481,11 +1481,17 @@ pub fn compensate_module(
 ) -> Result<RapidOutcome> {
     let module = parse_module(src, file)?;
     let moves: Vec<&Move> = module.moves().collect();
-    let mut tool_views = ViewCache::new();
-    let mut plans = Vec::with_capacity(moves.len());
-    for mv in &moves {
-        plans.push(plan_move(&module, src, file, robot, &mut tool_views, mv)?);
-    }
+    // Planning (resolving each move and solving its programmed joints) is
+    // independent per move: in parallel, each thread with its own tool
+    // views; the first error in move order is the error, as in order.
+    let plans = moves
+        .par_iter()
+        .map_init(ViewCache::new, |views, mv| {
+            plan_move(&module, src, file, robot, views, mv)
+        })
+        .collect::<Vec<Result<Planned>>>()
+        .into_iter()
+        .collect::<Result<Vec<Planned>>>()?;
     let fx = opts.effects;
     let thermal = robot.thermal().filter(|_| fx.thermal != 0.0);
     let directives = Directives::parse(src, file)?;
