@@ -123,8 +123,12 @@ pub fn push_fixed(out: &mut String, v: f64, decimals: usize) -> bool {
     }
     let mut buf = [0u8; super::fixed::FIXED_MAX];
     match super::fixed::fixed_digits(&mut buf, v, decimals) {
-        // ASCII digits: pushed as chars (no UTF-8 validation of the buffer).
-        Some(len) => out.extend(buf.iter().take(len).map(|&b| char::from(b))),
+        // ASCII digits, sign and point: valid UTF-8, appended in one copy
+        // (cheaper than a push per character).
+        Some(len) => match buf.get(..len).map(std::str::from_utf8) {
+            Some(Ok(text)) => out.push_str(text),
+            _ => push_fixed_slow(out, v, decimals),
+        },
         None => push_fixed_slow(out, v, decimals),
     }
     true
