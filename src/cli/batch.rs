@@ -269,7 +269,12 @@ fn compensate_one(
                 )));
             }
             let (src, name) = read_program(input)?;
-            let outcome = compensate_module(&src, &name, robot, opts)?;
+            // Move records only feed the report.
+            let opts = crate::compensate::rapid::RapidOptions {
+                records: report.is_some(),
+                ..*opts
+            };
+            let outcome = compensate_module(&src, &name, robot, &opts)?;
             write_atomically(output, |w| {
                 w.write_all(outcome.text.as_bytes())
                     .map_err(|e| Error::io(output, e))

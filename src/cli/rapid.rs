@@ -148,6 +148,7 @@ pub fn check(a: &CheckArgs) -> Result<i32> {
             annotate: false,
             format: Format::default(),
             thermal_start: ThermalStart::Cold,
+            records: false,
         };
         compensate_module(&src, &name, &robot, &opts)?;
     }
@@ -185,6 +186,7 @@ pub(super) fn rapid_options(
         annotate,
         format,
         thermal_start,
+        records: true,
     })
 }
 
@@ -268,12 +270,15 @@ pub fn compensate(a: &CompensateArgs) -> Result<i32> {
             "--tool and --work-offset are G-code options; RAPID takes tooldata and wobjdata from the module",
         ));
     }
-    let opts = rapid_options(
-        &robot,
-        &a.effects,
-        a.annotate == Annotate::Comment,
-        a.decimals,
-    )?;
+    let opts = RapidOptions {
+        records: a.report.is_some(),
+        ..rapid_options(
+            &robot,
+            &a.effects,
+            a.annotate == Annotate::Comment,
+            a.decimals,
+        )?
+    };
     let input = &a.program.file;
     let out_path = match &a.output {
         Some(p) => p.clone(),

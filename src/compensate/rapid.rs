@@ -67,16 +67,21 @@ pub struct RapidOptions {
     pub format: Format,
     /// Initial thermal state of the program's time line.
     pub thermal_start: ThermalStart,
+    /// Keep a [`MoveRecord`] per move in the outcome (for a report); without
+    /// a report they are not needed, and for a large module they are a good
+    /// part of the memory.
+    pub records: bool,
 }
 
 impl Default for RapidOptions {
-    /// All effects, annotated, default formatting, cold start.
+    /// All effects, annotated, default formatting, cold start, move records.
     fn default() -> Self {
         RapidOptions {
             effects: Effects::ALL,
             annotate: true,
             format: Format::default(),
             thermal_start: ThermalStart::Cold,
+            records: true,
         }
     }
 }
@@ -1578,7 +1583,7 @@ pub fn compensate_module(
         added: 0,
         max_deviation_mm: 0.0,
         max_deviation_line: 0,
-        records: Vec::with_capacity(moves.len()),
+        records: Vec::with_capacity(if opts.records { moves.len() } else { 0 }),
     };
     // Load key and state of every move.
     let mut keyed = Vec::with_capacity(moves.len());
@@ -1704,6 +1709,9 @@ pub fn compensate_module(
                     rw.edits.push(annotate_with(src, &mv.span, |out| {
                         write_dev_comment(out, &dev)
                     }));
+                }
+                if !opts.records {
+                    continue;
                 }
                 outcome.records.push(MoveRecord {
                     line: mv.line,
@@ -1874,6 +1882,30 @@ mod tests {
             checked += 1;
         }
         assert!(checked > 20);
+    }
+
+    /// Without move records (no report) the outcome is the same but for
+    /// the records.
+    #[test]
+    fn move_records_change_nothing_else() {
+        let robot = crate::machine::robot::test_irb1600();
+        let src = include_str!("../../samples/milling.mod");
+        let with = RapidOptions::for_robot(&robot);
+        let without = RapidOptions {
+            records: false,
+            ..with
+        };
+        let a = compensate_module(src, "milling.mod", &robot, &with).expect("compensates");
+        let b = compensate_module(src, "milling.mod", &robot, &without).expect("compensates");
+        assert_eq!(a.records.len(), a.moves);
+        assert!(a.moves > 0 && b.records.is_empty());
+        assert_eq!(
+            RapidOutcome {
+                records: Vec::new(),
+                ..a
+            },
+            b
+        );
     }
 
     /// The single edit of [`robtarget_in_place`] (position, quaternion and
