@@ -1413,6 +1413,7 @@ fn move_power<'m>(
     wrench: Option<ProcessWrench>,
     tool: &'m str,
     duration_s: f64,
+    end: Option<EndLoad>,
 ) -> ([f64; 6], Option<Isometry3<f64>>) {
     let (Some(prev), Some(cur)) = (i.checked_sub(1).and_then(|k| plans.get(k)), plans.get(i))
     else {
@@ -1438,8 +1439,12 @@ fn move_power<'m>(
         _ => view.nominal_load_torques(&qa),
     };
     // The nominal flange at the move's programmed joints also gives the
-    // first stage of its deviation breakdown (the seed of its compensation).
-    let (tau_b, flange_b) = view.nominal_load_torques_and_flange(&qb);
+    // first stage of its deviation breakdown (the seed of its compensation);
+    // computed by [`end_load`] under the same conditions.
+    let (tau_b, flange_b) = match end {
+        Some(e) => e,
+        None => view.nominal_load_torques_and_flange(&qb),
+    };
     *last = Some((key, qb.map(f64::to_bits), tau_b));
     let t = (tau_a + tau_b) * 0.5e-3;
     (
@@ -1447,6 +1452,37 @@ fn move_power<'m>(
         Some(flange_b),
     )
 }
+
+/// The nominal load torques and flange at the end of move `i` (its
+/// programmed joints), when [`move_power`] needs them: both ends of the
+/// move solved and a positive duration.
+fn end_load<'m>(
+    robot: &Robot,
+    cache: &mut ViewCache<(&'m str, Option<WrenchBits>)>,
+    plans: &[Planned],
+    i: usize,
+    wrench: Option<ProcessWrench>,
+    tool: &'m str,
+    duration_s: f64,
+) -> Option<EndLoad> {
+    let prev = plans.get(i.checked_sub(1)?)?;
+    let cur = plans.get(i)?;
+    prev.q?;
+    let qb = cur.q?;
+    if duration_s <= 0.0 {
+        return None;
+    }
+    let key = (tool, wrench.as_ref().map(wrench_bits));
+    let view = cache.get(key, || {
+        robot
+            .with_tool(cur.tool.tframe, cur.tool.load, false)
+            .with_process_wrench(wrench)
+    });
+    Some(view.nominal_load_torques_and_flange(&qb))
+}
+
+/// Nominal load torques and flange at a move's end ([`end_load`]).
+type EndLoad = (nalgebra::Vector6<f64>, Isometry3<f64>);
 
 /// The view key, joints (bits) and nominal load torques of the end of the
 /// last move whose power was computed ([`move_power`]).
@@ -1515,12 +1551,9 @@ pub fn compensate_module(
             &mut cache,
         )?);
     }
-    let mut segments = Vec::with_capacity(moves.len());
-    let mut power_views = ViewCache::new();
-    let mut end_torques = None;
-    let mut nominal_flanges: Vec<Option<Isometry3<f64>>> = Vec::new();
+    let mut durations = Vec::with_capacity(moves.len());
     for (i, mv) in moves.iter().enumerate() {
-        let duration_s = match move_duration(robot, &plans, i, mv) {
+        durations.push(match move_duration(robot, &plans, i, mv) {
             Some(t) => t,
             None if thermal.is_some() => {
                 return Err(input_err(
@@ -1534,7 +1567,32 @@ pub fn compensate_module(
                 ));
             }
             None => 0.0,
-        };
+        });
+    }
+    // The load torques and nominal flange at each move's end (the costly
+    // part of its power), in parallel with per-thread views; the power
+    // itself chains the moves (a move starts where the one before ended).
+    let ends: Vec<Option<EndLoad>> = (0..moves.len())
+        .into_par_iter()
+        .map_init(ViewCache::new, |views, i| {
+            let (mv, duration_s) = (moves.get(i)?, *durations.get(i)?);
+            end_load(
+                robot,
+                views,
+                &plans,
+                i,
+                wrenches[i],
+                &mv.tool.text,
+                duration_s,
+            )
+        })
+        .collect();
+    let mut segments = Vec::with_capacity(moves.len());
+    let mut power_views = ViewCache::new();
+    let mut end_torques = None;
+    let mut nominal_flanges: Vec<Option<Isometry3<f64>>> = Vec::new();
+    for (i, mv) in moves.iter().enumerate() {
+        let duration_s = durations[i];
         let (power_w, flange) = move_power(
             robot,
             &mut power_views,
@@ -1544,6 +1602,7 @@ pub fn compensate_module(
             wrenches[i],
             &mv.tool.text,
             duration_s,
+            ends[i],
         );
         // Kept only for a compensation (where the deviation breakdown uses
         // it), one per move.
@@ -1555,6 +1614,7 @@ pub fn compensate_module(
             power_w,
         });
     }
+    drop(ends);
     let thermal_power =
         thermal.map(|t| effective_power(&segments, t.time_constant_s, opts.thermal_start));
     let mut rw = Rewriter {
