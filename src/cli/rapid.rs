@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 
 use super::gcode::{default_output, write_atomically};
 use super::{Annotate, CheckArgs, CompensateArgs, EffectArgs, ProgramArgs, ReportArgs, usage};
-use crate::compensate::rapid::{RapidOptions, RapidOutcome, compensate_module};
+use crate::compensate::rapid::{RapidOptions, RapidOutcome, compensate_module, compensate_parsed};
 use crate::emit::rapid::Format;
 use crate::error::{Error, Result};
 use crate::machine::Machine;
@@ -131,16 +131,14 @@ pub(super) fn read_program(path: &Path) -> Result<(String, String)> {
 pub fn check(a: &CheckArgs) -> Result<i32> {
     let (src, name) = read_program(&a.program.file)?;
     let module = crate::program::rapid::parse_module(&src, &name)?;
-    // Keep only the summary: the compensation below parses its own copy,
-    // and two parsed modules at once would double the peak memory.
-    let summary = (
+    let (module_name, decls, procs, moves) = (
         module.name.clone(),
         module.decls.len(),
         module.procs.len(),
         module.moves().count(),
     );
-    drop(module);
-    let (module_name, decls, procs, moves) = summary;
+    // The compensation takes the parsed module (one parse, one module in
+    // memory).
     if let Some(m) = a.program.machine.as_deref() {
         let robot = load_robot(m)?;
         let opts = RapidOptions {
@@ -150,7 +148,7 @@ pub fn check(a: &CheckArgs) -> Result<i32> {
             thermal_start: ThermalStart::Cold,
             records: false,
         };
-        compensate_module(&src, &name, &robot, &opts)?;
+        compensate_parsed(module, &src, &name, &robot, &opts)?;
     }
     let mut out = std::io::stdout().lock();
     writeln!(

@@ -1520,7 +1520,18 @@ pub fn compensate_module(
     robot: &Robot,
     opts: &RapidOptions,
 ) -> Result<RapidOutcome> {
-    let module = parse_module(src, file)?;
+    compensate_parsed(parse_module(src, file)?, src, file, robot, opts)
+}
+
+/// [`compensate_module`] of `module`, parsed from `src` by the caller
+/// (taken, so that it is freed before the output text is built).
+pub fn compensate_parsed(
+    module: Module,
+    src: &str,
+    file: &str,
+    robot: &Robot,
+    opts: &RapidOptions,
+) -> Result<RapidOutcome> {
     let moves: Vec<&Move> = module.moves().collect();
     // Planning (resolving each move and solving its programmed joints) is
     // independent per move: in parallel, each thread with its own tool
