@@ -812,8 +812,9 @@ impl Rewriter<'_> {
                     .with_tool(tool.tframe, tool.load, false)
                     .with_process_wrench(self.state.wrench)
                     .with_spindle_rpm(self.state.rpm);
-                // Unique but while a chunk is being solved, when this
-                // only meets views made for that chunk's moves.
+                // Walk 1 makes the views while no chunk is being solved
+                // (the list is not shared then, so nothing is copied);
+                // walk 2 meets only the keys walk 1 saw.
                 let views = Arc::make_mut(&mut self.views);
                 views.push(r);
                 let i = views.len() - 1;
