@@ -1657,20 +1657,19 @@ pub fn compensate_parsed(
         max_deviation_line: 0,
         records: Vec::with_capacity(if opts.records { moves.len() } else { 0 }),
     };
-    // Load key and state of every move.
-    let mut keyed = Vec::with_capacity(moves.len());
-    let mut names: Option<(Rc<str>, Rc<str>)> = None;
-    for (i, mv) in moves.iter().enumerate() {
-        let (Some(plan), Some(seg)) = (plans.get(i), segments.get(i)) else {
-            continue;
-        };
+    // Load key and state of move `i`, made when a walk reaches it (not
+    // kept for every move). Consecutive moves mostly share their tool and
+    // work object: `names` shares the lower-case names instead of
+    // allocating them per move.
+    let keyed_at = |i: usize, names: &mut Option<(Rc<str>, Rc<str>)>| {
+        let mv: &Move = moves.get(i)?;
+        let plan = plans.get(i)?;
+        let seg = segments.get(i)?;
         let power = thermal_power.as_ref().and_then(|p| p.get(i).copied());
         let wrench = wrenches.get(i).copied().flatten();
         let rpm = directives.at(mv.line).spindle_rpm;
-        // Consecutive moves mostly share their tool and work object: share
-        // the lower-case names instead of allocating them per move.
         let wobj_text = mv.wobj.as_ref().map_or("wobj0", |w| w.text.as_str());
-        let (tool, wobj) = match &names {
+        let (tool, wobj) = match &*names {
             Some((t, w))
                 if t.eq_ignore_ascii_case(&mv.tool.text) && w.eq_ignore_ascii_case(wobj_text) =>
             {
@@ -1681,7 +1680,7 @@ pub fn compensate_parsed(
                 Rc::from(wobj_text.to_ascii_lowercase()),
             ),
         };
-        names = Some((Rc::clone(&tool), Rc::clone(&wobj)));
+        *names = Some((Rc::clone(&tool), Rc::clone(&wobj)));
         let key = LoadKey {
             tool,
             wobj,
@@ -1690,30 +1689,33 @@ pub fn compensate_parsed(
             rpm: rpm.map(f64::to_bits),
         };
         let flange = nominal_flanges.get(i).and_then(Option::as_ref);
-        keyed.push((
-            *mv,
+        Some((
+            mv,
             (plan, flange),
             seg,
             MoveState { wrench, power, rpm },
             key,
-        ));
-    }
+        ))
+    };
     // The walks, a chunk of moves at a time. Walk 1 collects the jobs of
     // the next chunk; it stops at the first error, which walk 2 meets at
     // the same move after reporting any failure of an earlier target, as a
     // single walk would. The chunk's jobs are solved on the pool while walk
     // 2 writes back the chunk before.
-    let n = keyed.len();
+    let n = moves.len();
     let mut collected = 0;
     let mut collecting = true;
-    let collect = |rw: &mut Rewriter, collected: &mut usize, collecting: &mut bool| {
+    let mut names_1 = None;
+    let mut names_2 = None;
+    let mut collect = |rw: &mut Rewriter, collected: &mut usize, collecting: &mut bool| {
         rw.phase = Phase::Collect(Vec::new());
         while *collecting && *collected < n {
-            let Some((mv, plan, _, state, key)) = keyed.get(*collected) else {
-                break;
+            let Some((mv, plan, _, state, key)) = keyed_at(*collected, &mut names_1) else {
+                *collected += 1;
+                continue;
             };
-            rw.state = *state;
-            let ok = rw.walk(mv, key, *plan).is_ok();
+            rw.state = state;
+            let ok = rw.walk(mv, &key, plan).is_ok();
             // The failing move goes with this chunk (its jobs before the
             // error are in it).
             *collected += 1;
@@ -1754,12 +1756,14 @@ pub fn compensate_parsed(
                 s.spawn(move |_| *slot = solve_chunk(views, jobs, fx));
             }
             // Walk 2: write the chunk's results back in source order.
-            for (mv, plan, seg, state, key) in keyed.get(walked..end).unwrap_or(&[]) {
-                let (mv, seg) = (*mv, *seg);
-                rw.state = *state;
+            for i in walked..end {
+                let Some((mv, plan, seg, state, key)) = keyed_at(i, &mut names_2) else {
+                    continue;
+                };
+                rw.state = state;
                 let wrench = state.wrench;
                 let power = state.power;
-                let dev = match rw.walk(mv, key, *plan) {
+                let dev = match rw.walk(mv, &key, plan) {
                     Ok(Some(dev)) => dev,
                     Ok(None) => continue,
                     Err(e) => {
@@ -1827,7 +1831,6 @@ pub fn compensate_parsed(
     // Free the per-move data before the output text is built (the peak).
     let edits = std::mem::take(&mut rw.edits);
     drop(rw);
-    drop(keyed);
     drop(nominal_flanges);
     drop(plans);
     drop(moves);
