@@ -301,10 +301,20 @@ fn number_value(t: &str) -> Option<f64> {
 pub(super) struct Parser<'a> {
     src: &'a str,
     file: &'a str,
-    line_starts: Vec<usize>,
+    line_starts: std::sync::Arc<[usize]>,
     /// Current nesting of aggregates and `Offs`/`RelTool` calls.
     depth: std::cell::Cell<usize>,
+    /// Smallest routine rest (bytes) whose statements are parsed ahead in
+    /// parallel ([`Parser::parse_ahead`]).
+    ahead_min: usize,
 }
+
+/// Source bytes after a routine header from which its statements are parsed
+/// ahead in parallel: below, the serial loop is as fast.
+const AHEAD_MIN_BYTES: usize = 1 << 18;
+
+/// A statement parsed ahead: its start, where its parse ended, the statement.
+type Ahead = Option<(usize, usize, Stmt)>;
 
 /// Deepest nesting of aggregates / target functions accepted (a robtarget
 /// array needs 3); deeper input is rejected instead of exhausting the stack.
@@ -320,6 +330,12 @@ struct Scan {
 
 impl<'a> Parser<'a> {
     pub(super) fn new(src: &'a str, file: &'a str) -> Self {
+        Self::with_ahead_min(src, file, AHEAD_MIN_BYTES)
+    }
+
+    /// [`Parser::new`] parsing ahead from routines with at least
+    /// `ahead_min` bytes after their header (`usize::MAX`: never).
+    pub(super) fn with_ahead_min(src: &'a str, file: &'a str, ahead_min: usize) -> Self {
         let mut line_starts = vec![0];
         line_starts.extend(
             src.bytes()
@@ -330,9 +346,63 @@ impl<'a> Parser<'a> {
         Parser {
             src,
             file,
-            line_starts,
+            line_starts: line_starts.into(),
             depth: std::cell::Cell::new(0),
+            ahead_min,
         }
+    }
+
+    /// The statements of a routine body starting at line starts, parsed
+    /// ahead in parallel (each thread with a parser of its own): `i` is the
+    /// body after the routine header. Every line start up to the first line
+    /// that opens with a routine or module end is a candidate; a candidate
+    /// inside a statement of several lines fails or is never asked for. The
+    /// body loop takes a statement from here only when it reaches exactly
+    /// its start, where its own parse would give the same result (a
+    /// statement's parse depends on its position alone), so the module is
+    /// the same as parsed in order.
+    fn parse_ahead(&self, i: &'a str) -> Vec<Ahead> {
+        use rayon::prelude::*;
+        if i.len() < self.ahead_min {
+            return Vec::new();
+        }
+        let from = self.pos(i);
+        let first_line = self.line_starts.partition_point(|&s| s <= from);
+        let mut starts = vec![self.pos(ws(i))];
+        for &ls in self.line_starts.get(first_line..).unwrap_or(&[]) {
+            let t = ws(self.at(ls));
+            let (_, after_scope) = scope_prefix(t);
+            if t.is_empty()
+                || ["ENDMODULE", "ENDPROC", "ENDFUNC", "ENDTRAP"]
+                    .iter()
+                    .any(|w| kw(t, w).is_some())
+                || routine_kw(ws(after_scope)).is_some()
+            {
+                break;
+            }
+            let p = self.pos(t);
+            if starts.last().is_some_and(|&last| p > last) {
+                starts.push(p);
+            }
+        }
+        let (src, file, line_starts) = (self.src, self.file, &self.line_starts);
+        starts
+            .par_iter()
+            .map_init(
+                || Parser {
+                    src,
+                    file,
+                    line_starts: std::sync::Arc::clone(line_starts),
+                    depth: std::cell::Cell::new(0),
+                    ahead_min: usize::MAX,
+                },
+                |p, &at| {
+                    p.depth.set(0);
+                    let (rest, stmt) = p.stmt(p.at(at)).ok()?;
+                    Some((at, p.pos(rest), stmt))
+                },
+            )
+            .collect()
     }
 
     pub(super) fn parse(&self) -> Result<Module, Located> {
@@ -890,6 +960,8 @@ impl<'a> Parser<'a> {
             return self.fail_found(self.pos(r), &format!("expected `(` after {word} {name}"));
         }
         let mut body = Vec::new();
+        let mut ahead = self.parse_ahead(r);
+        let mut next = 0;
         loop {
             r = ws(r);
             let here = self.pos(r);
@@ -927,7 +999,23 @@ impl<'a> Parser<'a> {
                     ),
                 );
             }
-            let (rest, stmt) = self.stmt(r)?;
+            // The statement parsed ahead at exactly this position, if any
+            // (positions only grow), else parsed now.
+            while ahead
+                .get(next)
+                .is_some_and(|a| a.as_ref().is_none_or(|(at, _, _)| *at < here))
+            {
+                next += 1;
+            }
+            let (rest, stmt) = match ahead.get_mut(next) {
+                Some(slot @ Some(_)) if slot.as_ref().is_some_and(|(at, _, _)| *at == here) => {
+                    match slot.take() {
+                        Some((_, end, stmt)) => (self.at(end), stmt),
+                        None => self.stmt(r)?,
+                    }
+                }
+                _ => self.stmt(r)?,
+            };
             body.push(stmt);
             r = rest;
         }
@@ -1503,5 +1591,89 @@ mod tests {
                 assert!(fast.is_none(), "scanner accepted {text}");
             }
         }
+    }
+
+    /// Parsing ahead changes nothing: the module (or the error) is the one
+    /// of the serial parse, for the repository's modules, the bad-input
+    /// corpus, generated bodies with statements over several lines,
+    /// comments, control lines, local declarations, several routines and
+    /// errors at many places, and, when `POSTPROC_RAPID_CORPUS` names a
+    /// folder (the fuzz corpus, say), every file in it.
+    #[test]
+    fn parsing_ahead_gives_the_serial_result() {
+        let check = |text: &str, name: &str| {
+            let serial = Parser::with_ahead_min(text, "t.mod", usize::MAX).parse();
+            let ahead = Parser::with_ahead_min(text, "t.mod", 0).parse();
+            assert_eq!(serial, ahead, "{name}");
+            serial.is_ok()
+        };
+        let root = concat!(env!("CARGO_MANIFEST_DIR"), "/");
+        let mut files = vec![
+            format!("{root}samples/drilling.mod"),
+            format!("{root}samples/milling.mod"),
+        ];
+        for dir in [
+            format!("{root}tests/bad/programs"),
+            std::env::var("POSTPROC_RAPID_CORPUS").unwrap_or_default(),
+        ] {
+            if let Ok(entries) = std::fs::read_dir(&dir) {
+                for e in entries.flatten() {
+                    files.push(e.path().display().to_string());
+                }
+            }
+        }
+        let mut parsed = 0;
+        for f in &files {
+            if let Ok(bytes) = std::fs::read(f) {
+                if let Ok(text) = std::str::from_utf8(&bytes) {
+                    check(text, f);
+                    parsed += 1;
+                }
+            }
+        }
+        assert!(parsed >= 2);
+        let mut rnd = crate::machine::robot::test_sequence(5);
+        let pieces = [
+            "    MoveL [[650.0,50.0,300.0],[0,0,1,0],[0,0,0,0],[9E9,9E9,9E9,9E9,9E9,9E9]],v200,z1,tool0;\n",
+            "    MoveL [[650.0,50.0,300.0],[0,0,1,0],\n      [0,0,0,0],[9E9,9E9,9E9,9E9,9E9,9E9]],v200,z1,tool0;\n",
+            "    MoveJ p10,v100,fine,tool0\\WObj:=wobj0;\n",
+            "    MoveC Offs(p10,1,2,3),RelTool(p20,0,0,5\\Rz:=10),v100,z5,tool0;\n",
+            "    ! a comment ; with MoveL in it\n",
+            "\n",
+            "    IF a > 1 THEN\n",
+            "    ENDIF\n",
+            "    FOR i FROM 1 TO 3 DO\n      MoveL p{i},v10,z1,tool0;\n    ENDFOR\n",
+            "    TPWrite \"MoveL; ENDPROC\";\n",
+            "    VAR num k := 2;\n",
+            "    MoveL [[1,2,3],[1,0,0,0],[0,0,0,0],[9E9,9E9,9E9,9E9,9E9,9E9]],v100,z1,tool0; ! done\n",
+            "    MoveL [[1,2,3],[1,0,0,0]],v100,z1,tool0;\n",
+            "    MoveL [[1,2,3,[1,0,0,0],[0,0,0,0],[9E9,9E9,9E9,9E9,9E9,9E9]],v100,z1,tool0;\n",
+            "    MoveAbsJ [[0,0,0,0,30,0],[9E9,9E9,9E9,9E9,9E9,9E9]],v100,fine,tool0;\n",
+            "    MoveL p1,\n      v100,\n      z1,\n      tool0;\n",
+        ];
+        let mut outcomes = [0usize; 2];
+        for case in 0..60 {
+            let mut text = String::from(
+                "MODULE T\n  CONST robtarget p10 := [[1,2,3],[1,0,0,0],[0,0,0,0],[9E9,9E9,9E9,9E9,9E9,9E9]];\n",
+            );
+            for routine in 0..1 + case % 3 {
+                text.push_str(&format!("  PROC r{routine}()\n"));
+                for _ in 0..(rnd().abs() * 40.0) as usize {
+                    let k = ((rnd().abs() * pieces.len() as f64) as usize).min(pieces.len() - 1);
+                    // The two malformed pieces only now and then.
+                    if (k == 12 || k == 13) && case % 4 != 0 {
+                        continue;
+                    }
+                    text.push_str(pieces[k]);
+                }
+                text.push_str("  ENDPROC\n");
+            }
+            if case % 7 != 3 {
+                text.push_str("ENDMODULE\n");
+            }
+            outcomes[usize::from(check(&text, &format!("case {case}:\n{text}")))] += 1;
+        }
+        // Both well-formed modules and errors were compared.
+        assert!(outcomes[0] > 5 && outcomes[1] > 5, "{outcomes:?}");
     }
 }
