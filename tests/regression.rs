@@ -274,3 +274,66 @@ fn regression_input_errors_come_before_compensation_failures() {
         "{err}"
     );
 }
+
+/// Move records became optional (kept only when a report is written): a
+/// RAPID report through `compensate --report` and through `batch
+/// --report-format` must still have one row per move, and compensating
+/// without a report must write the same module.
+#[test]
+fn regression_rapid_reports_keep_a_row_per_move() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = repo("samples/drilling.mod");
+    let moves = std::fs::read_to_string(&input)
+        .unwrap()
+        .lines()
+        .filter(|l| {
+            let t = l.trim_start();
+            ["MoveL", "MoveJ", "MoveC", "MoveAbsJ"]
+                .iter()
+                .any(|k| t.starts_with(k))
+        })
+        .count();
+    assert!(moves > 10);
+    let rows = |path: &std::path::Path| {
+        let v: serde_json::Value =
+            serde_json::from_slice(&std::fs::read(path).expect("report written")).expect("JSON");
+        v["rows"].as_array().map(Vec::len)
+    };
+    let with = dir.path().join("with.mod");
+    let without = dir.path().join("without.mod");
+    let report = dir.path().join("with.json");
+    postproc()
+        .args(["compensate", "--machine", "abb-irb1600", "-o"])
+        .arg(&with)
+        .arg("--report")
+        .arg(&report)
+        .arg(&input)
+        .assert()
+        .code(0);
+    postproc()
+        .args(["compensate", "--machine", "abb-irb1600", "-o"])
+        .arg(&without)
+        .arg(&input)
+        .assert()
+        .code(0);
+    assert_eq!(rows(&report), Some(moves));
+    assert_eq!(
+        std::fs::read(&with).unwrap(),
+        std::fs::read(&without).unwrap()
+    );
+    let out = dir.path().join("batch");
+    postproc()
+        .args([
+            "batch",
+            "--machine",
+            "abb-irb1600",
+            "--report-format",
+            "json",
+            "--out-dir",
+        ])
+        .arg(&out)
+        .arg(&input)
+        .assert()
+        .code(0);
+    assert_eq!(rows(&out.join("drilling.mod.report.json")), Some(moves));
+}
