@@ -420,6 +420,16 @@ mod tests {
             .collect()
     }
 
+    /// Positions within `pos_mm`, rotation matrices within `rot`.
+    fn assert_pose_near(a: &Isometry3<f64>, b: &Isometry3<f64>, pos_mm: f64, rot: f64) {
+        assert_abs_diff_eq!(a.translation.vector, b.translation.vector, epsilon = pos_mm);
+        assert_abs_diff_eq!(
+            a.rotation.to_rotation_matrix().into_inner(),
+            b.rotation.to_rotation_matrix().into_inner(),
+            epsilon = rot
+        );
+    }
+
     fn assert_same_pose(a: &Isometry3<f64>, b: &Isometry3<f64>) {
         assert_abs_diff_eq!(a.translation.vector, b.translation.vector, epsilon = SAME);
         assert_abs_diff_eq!(a.rotation.coords, b.rotation.coords, epsilon = SAME);
@@ -481,16 +491,7 @@ mod tests {
                 let qd: [f64; 6] = std::array::from_fn(|i| q[i] + dq[i]);
                 let fast = flange_deflected(&prep, &q, &half, &dq);
                 let slow = flange_prepared(&prep, &qd);
-                assert_abs_diff_eq!(
-                    fast.translation.vector,
-                    slow.translation.vector,
-                    epsilon = POS_ROUNDING_MM
-                );
-                assert_abs_diff_eq!(
-                    fast.rotation.to_rotation_matrix().into_inner(),
-                    slow.rotation.to_rotation_matrix().into_inner(),
-                    epsilon = ROT_ROUNDING
-                );
+                assert_pose_near(&fast, &slow, POS_ROUNDING_MM, ROT_ROUNDING);
             }
         }
     }
@@ -530,16 +531,7 @@ mod tests {
                 for q in [-3.0, -0.4, 0.0, 1.1, 2.5] {
                     let fast = joint_transform(&j, conv, q);
                     let slow = j.transform(conv, q);
-                    assert_abs_diff_eq!(
-                        fast.translation.vector,
-                        slow.translation.vector,
-                        epsilon = POS_TOL_MM
-                    );
-                    assert_abs_diff_eq!(
-                        fast.rotation.to_rotation_matrix().into_inner(),
-                        slow.rotation.to_rotation_matrix().into_inner(),
-                        epsilon = ROT_TOL
-                    );
+                    assert_pose_near(&fast, &slow, POS_TOL_MM, ROT_TOL);
                 }
             }
         }
