@@ -135,30 +135,10 @@ pub fn push_fixed(out: &mut String, v: f64, decimals: usize) -> bool {
 }
 
 /// Appends `v.to_string()` to `out` without the formatting machinery (the
-/// confdata numbers of a rewritten robtarget).
+/// confdata numbers of a rewritten robtarget): the shared fixed-decimal
+/// digits with no decimals, exact for every `i32`.
 pub fn push_int(out: &mut String, v: i32) {
-    if v < 0 {
-        out.push('-');
-    }
-    let mut x = v.unsigned_abs();
-    let mut buf = [b'0'; 10];
-    let mut i = buf.len();
-    loop {
-        i -= 1;
-        if let Some(slot) = buf.get_mut(i) {
-            *slot = b'0' + (x % 10) as u8;
-        }
-        x /= 10;
-        if x == 0 || i == 0 {
-            break;
-        }
-    }
-    out.extend(
-        buf.get(i..)
-            .unwrap_or_default()
-            .iter()
-            .map(|&b| char::from(b)),
-    );
+    push_fixed(out, f64::from(v), 0);
 }
 
 /// Formats a position (mm) with `fmt.position_decimals` decimals.
