@@ -520,10 +520,8 @@ fn product(ms: &[Matrix4<f64>]) -> Matrix4<f64> {
     ms.iter().fold(Matrix4::identity(), |acc, m| acc * m)
 }
 
-/// Tip pose of (the top three rows of) a chain HTM: translation column
-/// and normalized z column.
-/// The pose of columns 2 (tool axis) and 3 (tip) of an HTM, as
-/// [`pose_aff`] takes them.
+/// The tip pose from columns 2 (tool axis, normalised here) and 3 (tip) of
+/// a chain HTM.
 fn pose_cols(d: &[f64; 3], p: &[f64; 3]) -> TipPose {
     let pos = Vector3::new(p[0], p[1], p[2]);
     let d = Vector3::new(d[0], d[1], d[2]);
@@ -532,13 +530,10 @@ fn pose_cols(d: &[f64; 3], p: &[f64; 3]) -> TipPose {
     TipPose { pos, dir }
 }
 
+/// Tip pose of (the top three rows of) a chain HTM.
 fn pose_aff(t: &fast::Aff) -> TipPose {
     let [r0, r1, r2] = t;
-    let pos = Vector3::new(r0[3], r1[3], r2[3]);
-    let d = Vector3::new(r0[2], r1[2], r2[2]);
-    let n = d.norm();
-    let dir = if n > 0.0 { d / n } else { Vector3::z() };
-    TipPose { pos, dir }
+    pose_cols(&[r0[2], r1[2], r2[2]], &[r0[3], r1[3], r2[3]])
 }
 
 #[cfg(test)]
@@ -715,6 +710,12 @@ mod tests {
                 "positions_mm: [10.0, 40.0, 90.0, 160.0, 200.0, 260.0, 300.0, 340.0, 420.0, 450.0, 490.0]",
                 1,
             ),
+            // No Z axis: a slot without an axis (X Y table).
+            match (text.find("  - name: Z"), text.find("\ntools:")) {
+                (Some(z), Some(t)) => format!("{}{}", &text[..z], &text[t + 1..])
+                    .replace("    Z: { scale_ppm_per_kw", "    # Z: { scale_ppm_per_kw"),
+                _ => String::new(),
+            },
         ];
         assert!(
             variants.iter().skip(1).all(|v| *v != text),
@@ -761,7 +762,7 @@ mod tests {
     fn cell_form_agrees_with_the_chain_product() {
         use approx::assert_abs_diff_eq;
         let machines = linear_machines();
-        assert_eq!(machines.len(), 5);
+        assert_eq!(machines.len(), 6);
         let mut s = 11u64;
         for m in &machines {
             assert!(m.pre.cells_id.is_some(), "{}", m.name());
@@ -777,9 +778,12 @@ mod tests {
                 let want = m.geometric_chain(c, &dirs, tool);
                 assert_abs_diff_eq!(got.pos, want.pos, epsilon = CELL_POS_TOL_MM);
                 assert_abs_diff_eq!(got.dir, want.dir, epsilon = CELL_DIR_TOL);
-                // The error itself (µm) is not lost in the rounding.
+                // The error itself (µm; the X Y machine, without the Z
+                // errors and squareness, has points below 0.1 µm) is not
+                // lost in the rounding.
+                let floor = if m.axes.len() == 3 { 1e-4 } else { 1e-6 };
                 let err = (want.pos - m.nominal(c, tool).pos).norm();
-                assert!(err > 1e-4, "{c:?}: error {err}");
+                assert!(err > floor, "{c:?}: error {err}");
             }
         }
     }
