@@ -337,3 +337,62 @@ fn regression_rapid_reports_keep_a_row_per_move() {
         .code(0);
     assert_eq!(rows(&out.join("drilling.mod.report.json")), Some(moves));
 }
+
+/// The RAPID walks go a chunk of 4 096 jobs at a time (collecting the next
+/// chunk, where a resolution error stops the collection, while the chunk
+/// before is solved and written back): the error reported is still that of
+/// the first failing move, whichever walk finds it and whichever chunks the
+/// two failures are in (found by review: no test crossed chunks).
+#[test]
+fn regression_rapid_first_failing_move_across_chunks() {
+    let dir = tempfile::tempdir().unwrap();
+    let head = "MODULE M\n  PERS tooldata t1 := [TRUE,[[0,0,150],[1,0,0,0]],[2,[0,0,70],[1,0,0,0],0,0,0]];\n  PROC main()\n";
+    // Line numbers: the header takes 3 lines, move k is on line k + 4.
+    let far = "    MoveL [[9000,0,300],[0,0,1,0],[0,0,0,0],[9E9,9E9,9E9,9E9,9E9,9E9]],v100,z1,t1;";
+    let limits = "    MoveAbsJ [[500,0,0,0,30,0],[9E9,9E9,9E9,9E9,9E9,9E9]],v100,fine,t1;";
+    // (unreachable target, joint-limit error): the first of the two fails.
+    for (unreachable, beyond_limits) in [(4090, 4300), (4300, 4090), (100, 8800), (8800, 100)] {
+        let mut text = String::from(head);
+        for k in 0..9000 {
+            let line = if k == unreachable {
+                far.to_string()
+            } else if k == beyond_limits {
+                limits.to_string()
+            } else {
+                format!(
+                    "    MoveL [[{:.1},{:.1},300],[0,0,1,0],[0,0,0,0],[9E9,9E9,9E9,9E9,9E9,9E9]],v100,z1,t1;",
+                    650.0 + (k % 50) as f64,
+                    50.0 + (k % 37) as f64
+                )
+            };
+            text.push_str(&line);
+            text.push('\n');
+        }
+        text.push_str("  ENDPROC\nENDMODULE\n");
+        let input = dir.path().join("m.mod");
+        std::fs::write(&input, &text).unwrap();
+        for threads in ["1", "2"] {
+            let out = postproc()
+                .args([
+                    "compensate",
+                    "--machine",
+                    "abb-irb1600",
+                    "--threads",
+                    threads,
+                    "-o",
+                ])
+                .arg(dir.path().join("out.mod"))
+                .arg(&input)
+                .output()
+                .unwrap();
+            let stderr = String::from_utf8_lossy(&out.stderr);
+            let first = unreachable.min(beyond_limits) + 4;
+            assert_eq!(out.status.code(), Some(2), "{stderr}");
+            assert!(
+                stderr.contains(&format!("m.mod:{first}:")),
+                "{unreachable} {beyond_limits}: {stderr}"
+            );
+            assert!(!dir.path().join("out.mod").exists());
+        }
+    }
+}
