@@ -1414,49 +1414,53 @@ fn move_power<'m>(
     wrench: Option<ProcessWrench>,
     tool: &'m str,
     duration_s: f64,
-    end: Option<EndLoad>,
-) -> ([f64; 6], Option<Isometry3<f64>>) {
-    let (Some(prev), Some(cur)) = (i.checked_sub(1).and_then(|k| plans.get(k)), plans.get(i))
-    else {
-        return ([0.0; 6], None);
+    tau_b: nalgebra::Vector6<f64>,
+) -> [f64; 6] {
+    // [`end_load`] gave the torques at the end: both ends are solved and
+    // the duration is positive.
+    let prev_q = i
+        .checked_sub(1)
+        .and_then(|k| plans.get(k))
+        .and_then(|p| p.q);
+    let (Some(qa), Some(cur)) = (prev_q, plans.get(i)) else {
+        return [0.0; 6];
     };
-    let (Some(qa), Some(qb)) = (prev.q, cur.q) else {
-        return ([0.0; 6], None);
+    let Some(qb) = cur.q else {
+        return [0.0; 6];
     };
-    if duration_s <= 0.0 {
-        return ([0.0; 6], None);
-    }
     let key = (tool, wrench.as_ref().map(wrench_bits));
-    let view = cache.get(key, || {
-        robot
-            .with_tool(cur.tool.tframe, cur.tool.load, false)
-            .with_process_wrench(wrench)
-    });
     // A move starts where the previous one ended: with the same view, the
     // torques there are those computed for the previous move's end.
     let qa_bits = qa.map(f64::to_bits);
     let tau_a = match last {
         Some((k, q, t)) if *k == key && *q == qa_bits => *t,
-        _ => view.nominal_load_torques(&qa),
-    };
-    // The nominal flange at the move's programmed joints also gives the
-    // first stage of its deviation breakdown (the seed of its compensation);
-    // computed by [`end_load`] under the same conditions.
-    let (tau_b, flange_b) = match end {
-        Some(e) => e,
-        None => view.nominal_load_torques_and_flange(&qb),
+        _ => load_view(robot, cache, cur, wrench, tool).nominal_load_torques(&qa),
     };
     *last = Some((key, qb.map(f64::to_bits), tau_b));
     let t = (tau_a + tau_b) * 0.5e-3;
-    (
-        std::array::from_fn(|j| (t[j] * (qb[j] - qa[j]) / duration_s).abs()),
-        Some(flange_b),
-    )
+    std::array::from_fn(|j| (t[j] * (qb[j] - qa[j]) / duration_s).abs())
+}
+
+/// The robot view of move `cur` for the power: its tool and process wrench
+/// (the tool is resolved from its name alone: equal names, equal views).
+fn load_view<'c, 'm>(
+    robot: &Robot,
+    cache: &'c mut ViewCache<(&'m str, Option<WrenchBits>)>,
+    cur: &Planned,
+    wrench: Option<ProcessWrench>,
+    tool: &'m str,
+) -> &'c Robot {
+    cache.get((tool, wrench.as_ref().map(wrench_bits)), || {
+        robot
+            .with_tool(cur.tool.tframe, cur.tool.load, false)
+            .with_process_wrench(wrench)
+    })
 }
 
 /// The nominal load torques and flange at the end of move `i` (its
 /// programmed joints), when [`move_power`] needs them: both ends of the
-/// move solved and a positive duration.
+/// move solved and a positive duration. The flange also gives the first
+/// stage of the move's deviation breakdown (the seed of its compensation).
 fn end_load<'m>(
     robot: &Robot,
     cache: &mut ViewCache<(&'m str, Option<WrenchBits>)>,
@@ -1466,20 +1470,13 @@ fn end_load<'m>(
     tool: &'m str,
     duration_s: f64,
 ) -> Option<EndLoad> {
-    let prev = plans.get(i.checked_sub(1)?)?;
+    plans.get(i.checked_sub(1)?)?.q?;
     let cur = plans.get(i)?;
-    prev.q?;
     let qb = cur.q?;
     if duration_s <= 0.0 {
         return None;
     }
-    let key = (tool, wrench.as_ref().map(wrench_bits));
-    let view = cache.get(key, || {
-        robot
-            .with_tool(cur.tool.tframe, cur.tool.load, false)
-            .with_process_wrench(wrench)
-    });
-    Some(view.nominal_load_torques_and_flange(&qb))
+    Some(load_view(robot, cache, cur, wrench, tool).nominal_load_torques_and_flange(&qb))
 }
 
 /// Nominal load torques and flange at a move's end ([`end_load`]).
@@ -1584,42 +1581,54 @@ pub fn compensate_parsed(
     // The load torques and nominal flange at each move's end (the costly
     // part of its power), in parallel with per-thread views; the power
     // itself chains the moves (a move starts where the one before ended).
-    let ends: Vec<Option<EndLoad>> = (0..moves.len())
-        .into_par_iter()
-        .map_init(ViewCache::new, |views, i| {
-            let (mv, duration_s) = (moves.get(i)?, *durations.get(i)?);
-            end_load(
-                robot,
-                views,
-                &plans,
-                i,
-                wrenches[i],
-                &mv.tool.text,
-                duration_s,
-            )
-        })
-        .collect();
+    // The power feeds the thermal time line and the report's rows, the
+    // flange a compensation's breakdown: without them (a `check`) neither
+    // is computed.
+    let power_needed = thermal.is_some() || opts.records;
+    let ends: Vec<Option<EndLoad>> = if power_needed || fx.compensates() {
+        (0..moves.len())
+            .into_par_iter()
+            .map_init(ViewCache::new, |views, i| {
+                let (mv, duration_s) = (moves.get(i)?, *durations.get(i)?);
+                end_load(
+                    robot,
+                    views,
+                    &plans,
+                    i,
+                    wrenches[i],
+                    &mv.tool.text,
+                    duration_s,
+                )
+            })
+            .collect()
+    } else {
+        Vec::new()
+    };
     let mut segments = Vec::with_capacity(moves.len());
     let mut power_views = ViewCache::new();
     let mut end_torques = None;
     let mut nominal_flanges: Vec<Option<Isometry3<f64>>> = Vec::new();
     for (i, mv) in moves.iter().enumerate() {
         let duration_s = durations[i];
-        let (power_w, flange) = move_power(
-            robot,
-            &mut power_views,
-            &mut end_torques,
-            &plans,
-            i,
-            wrenches[i],
-            &mv.tool.text,
-            duration_s,
-            ends[i],
-        );
+        let end = ends.get(i).copied().flatten();
+        let power_w = match end {
+            Some((tau_b, _)) if power_needed => move_power(
+                robot,
+                &mut power_views,
+                &mut end_torques,
+                &plans,
+                i,
+                wrenches[i],
+                &mv.tool.text,
+                duration_s,
+                tau_b,
+            ),
+            _ => [0.0; 6],
+        };
         // Kept only for a compensation (where the deviation breakdown uses
         // it), one per move.
         if fx.compensates() {
-            nominal_flanges.push(flange);
+            nominal_flanges.push(end.map(|(_, flange)| flange));
         }
         segments.push(Segment {
             duration_s,
@@ -1746,14 +1755,14 @@ pub fn compensate_parsed(
         } else {
             collect(&mut rw, &mut collected, &mut collecting)
         };
-        let views = Arc::clone(&rw.views);
         let mut next_results = Vec::new();
         rw.phase = Phase::Apply(std::mem::take(&mut results).into_iter());
         let mut failed = None;
         rayon::in_place_scope(|s| {
             if !next_jobs.is_empty() {
-                let (views, jobs, slot) = (&views, &next_jobs, &mut next_results);
-                s.spawn(move |_| *slot = solve_chunk(views, jobs, fx));
+                // The solve shares the views (walk 2 makes none).
+                let (views, jobs, slot) = (Arc::clone(&rw.views), &next_jobs, &mut next_results);
+                s.spawn(move |_| *slot = solve_chunk(&views, jobs, fx));
             }
             // Walk 2: write the chunk's results back in source order.
             for i in walked..end {
