@@ -1532,7 +1532,7 @@ pub fn compensate_parsed(
 ) -> Result<RapidOutcome> {
     let moves: Vec<&Move> = module.moves().collect();
     // Planning (resolving each move and solving its programmed joints) is
-    // independent per move: in parallel, each thread with its own tool
+    // independent per move: in parallel, each rayon task with its own tool
     // views; the first error in move order is the error, as in order.
     let plans = moves
         .par_iter()
@@ -1579,7 +1579,7 @@ pub fn compensate_parsed(
         });
     }
     // The load torques and nominal flange at each move's end (the costly
-    // part of its power), in parallel with per-thread views; the power
+    // part of its power), in parallel, each rayon task with its own views; the power
     // itself chains the moves (a move starts where the one before ended).
     // The power feeds the thermal time line and the report's rows, the
     // flange a compensation's breakdown: without them (a `check`) neither

@@ -1043,14 +1043,12 @@ impl<'a> Parser<'a> {
             {
                 next += 1;
             }
-            let (rest, stmt) = match ahead.get_mut(next) {
-                Some(slot @ Some(_)) if slot.as_ref().is_some_and(|(at, _, _)| *at == here) => {
-                    match slot.take() {
-                        Some((_, end, stmt)) => (self.at(end), stmt),
-                        None => self.stmt(r)?,
-                    }
-                }
-                _ => self.stmt(r)?,
+            let parsed = ahead
+                .get_mut(next)
+                .and_then(|slot| slot.take_if(|(at, _, _)| *at == here));
+            let (rest, stmt) = match parsed {
+                Some((_, end, stmt)) => (self.at(end), stmt),
+                None => self.stmt(r)?,
             };
             body.push(stmt);
             r = rest;
