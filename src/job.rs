@@ -615,14 +615,10 @@ impl<'m> Job<'m> {
     /// previous end's solution for its start); the runs start at fixed
     /// blocks, so the output does not depend on the number of threads.
     fn compensate_stage(&self, st: &mut Stage, solving: bool) {
-        let Some(pred) = &self.predictor else {
+        let (true, Some(pred)) = (solving, &self.predictor) else {
             st.results.clear();
             return;
         };
-        if !solving {
-            st.results.clear();
-            return;
-        }
         let n = st.chunk.ranges.len();
         // The results of the chunk this stage held before are overwritten
         // in place: their split-point storage is reused (`finish` gave
@@ -759,7 +755,7 @@ impl<'m> Job<'m> {
         let mut finish = |st: &mut Stage, summary: &mut Summary| -> Result<()> {
             let chunk = &st.chunk;
             let plans = &st.plans[..chunk.ranges.len()];
-            if self.predictor.is_none() || (!solving && rows.is_none()) {
+            if !solving {
                 // Nothing is solved: every line is written as it is.
                 if let Some(out) = out.as_deref_mut() {
                     out.write_all(&chunk.buf)

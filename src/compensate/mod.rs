@@ -728,14 +728,21 @@ pub fn block_reusing(
                 }
                 _ => solve_near(pred, &mv.start, &c1, &mv.end, &mv.dirs, &lip)?.0,
             };
-            let mut pts = std::mem::take(&mut res.segments);
             split_line(
-                pred, &mv.start, &mv.end, &c0, &c1, &mv.dirs, &lip, tol, false, &mut pts,
+                pred,
+                &mv.start,
+                &mv.end,
+                &c0,
+                &c1,
+                &mv.dirs,
+                &lip,
+                tol,
+                false,
+                &mut res.segments,
             )?;
-            for p in &pts {
+            for p in &res.segments {
                 check_travel(pred, p)?;
             }
-            res.segments = pts;
         }
         (_, Some(arc)) => arc_block(pred, &mv, &arc, tool, tol, &mut res)?,
         (_, None) => {}
@@ -791,8 +798,8 @@ fn arc_block(
     let max_step = 2.0 * (1.0 - sag / r).clamp(-1.0, 1.0).acos();
     let chords = ((arc.sweep.abs() / max_step.max(1e-6)).ceil() as usize).clamp(1, 1 << 16);
     let mut prev_p = mv.start;
-    let mut pts = std::mem::take(&mut res.segments);
-    pts.clear();
+    // `block_reusing` cleared the storage of the split points.
+    let pts = &mut res.segments;
     let lip = Lip::new(tool);
     for k in 1..=chords {
         let s = k as f64 / chords as f64;
@@ -803,26 +810,14 @@ fn arc_block(
         // junction is the machine's, not something subdivision can remove.
         let (c0, _) = solve(pred, &prev_p, &d, tool)?;
         let (c, _) = solve(pred, &p, &d, tool)?;
-        split_line(
-            pred,
-            &prev_p,
-            &p,
-            &c0,
-            &c,
-            &d,
-            &lip,
-            tol - sag,
-            true,
-            &mut pts,
-        )?;
+        split_line(pred, &prev_p, &p, &c0, &c, &d, &lip, tol - sag, true, pts)?;
         prev_p = p;
     }
     // The last point is the end point, recomputed with the end direction.
     pts.pop();
-    for p in &pts {
+    for p in pts.iter() {
         check_travel(pred, p)?;
     }
-    res.segments = pts;
     Ok(())
 }
 

@@ -538,6 +538,9 @@ impl Emitter {
         if !res.segments.is_empty() {
             let eol: &[u8] = if eol.is_empty() { b"\n" } else { eol };
             let points = res.segments[1..].iter().chain(std::iter::once(&res.end));
+            // Decimals per axis (from the block's word), found at the
+            // axis' first word.
+            let mut digits = [None; 6];
             for p in points {
                 let mark = out.len();
                 for slot in 0..6 {
@@ -546,8 +549,10 @@ impl Emitter {
                     if p[slot] == now {
                         continue;
                     }
-                    let w = block.words.iter().find(|w| w.letter == AXIS_LETTERS[slot]);
-                    let d = self.decimals(w, scale, slot >= 3);
+                    let d = *digits[slot].get_or_insert_with(|| {
+                        let w = block.words.iter().find(|w| w.letter == AXIS_LETTERS[slot]);
+                        self.decimals(w, scale, slot >= 3)
+                    });
                     let v = round_to(to_program(plan, slot, p[slot], now), d);
                     let cur = round_to(to_program(plan, slot, now, now), d);
                     if v != cur {

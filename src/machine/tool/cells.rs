@@ -51,7 +51,7 @@ pub(crate) fn chain_id(axes: &[Axis], fast: &[AxisFast]) -> Option<u64> {
             return None;
         }
     }
-    (axes.len() == fast.len()).then(|| NEXT_ID.fetch_add(1, Ordering::Relaxed))
+    Some(NEXT_ID.fetch_add(1, Ordering::Relaxed))
 }
 
 /// The key of a cell: the chain, the tool length, and per slot the table
@@ -122,17 +122,14 @@ const SLOTS: usize = 1024;
 /// the product of three monomials stays far below overflow.
 const CELL_RANGE_MM: f64 = 1e9;
 
-/// Number of recently used cells tried before the region lookup (which
-/// remembers each axis' last region, so it rarely searches a table). One
-/// is the fastest on a raster: consecutive evaluations of a solve share a
-/// cell, and a longer list costs more to scan than the lookup it saves.
-const RECENT: usize = 1;
-
 /// The per-thread cache of cells.
 struct Cache {
     cells: Vec<Option<Box<Cell>>>,
-    /// Slots of the most recently used cells, newest first.
-    recent: [usize; RECENT],
+    /// Slot of the cell used last, tried before the region lookup: the
+    /// points of a solve and of neighbouring moves mostly share a cell
+    /// (remembering two or four cells cost more to scan than the lookups
+    /// they saved).
+    last: usize,
     /// Per slot, the table region found last: chain, bounds and index
     /// (regions do not depend on the direction of motion or the tool).
     regions: [(u64, f64, f64, u32); 3],
@@ -142,24 +139,9 @@ impl Cache {
     const fn new() -> Self {
         Cache {
             cells: Vec::new(),
-            recent: [0; RECENT],
+            last: 0,
             regions: [(0, 0.0, 0.0, 0); 3],
         }
-    }
-
-    /// Marks slot `h` as the most recently used.
-    #[inline(always)]
-    fn touch(&mut self, h: usize) {
-        if self.recent[0] == h {
-            return;
-        }
-        let at = self
-            .recent
-            .iter()
-            .position(|&r| r == h)
-            .unwrap_or(RECENT - 1);
-        self.recent.copy_within(0..at, 1);
-        self.recent[0] = h;
     }
 }
 
@@ -303,20 +285,15 @@ fn with_cell<T>(
         & m.pre.cells_slots;
     let tool_bits = tool_mm.to_bits();
     CACHE.with_borrow_mut(|cache| {
-        // Recently used cells first (the points of a move and of its
-        // neighbours mostly share a few).
-        for i in 0..RECENT {
-            let h = cache.recent[i];
-            if let Some(c) = cache.cells.get(h).and_then(Option::as_deref) {
-                if c.key.chain == chain
-                    && c.key.tool_bits == tool_bits
-                    && c.key.reverse == reverse
-                    && c.contains(&q)
-                {
-                    let v = f(c, &q);
-                    cache.touch(h);
-                    return Some(v);
-                }
+        // The cell used last first (the points of a move and of its
+        // neighbours mostly share it).
+        if let Some(c) = cache.cells.get(cache.last).and_then(Option::as_deref) {
+            if c.key.chain == chain
+                && c.key.tool_bits == tool_bits
+                && c.key.reverse == reverse
+                && c.contains(&q)
+            {
+                return Some(f(c, &q));
             }
         }
         let mut region = [0u32; 3];
@@ -351,7 +328,7 @@ fn with_cell<T>(
             Some(c) => **c = build(m, key, &d3)?,
             None => *slot = Some(Box::new(build(m, key, &d3)?)),
         }
-        cache.touch(h);
+        cache.last = h;
         cache.cells.get(h)?.as_deref().map(|c| f(c, &q))
     })
 }
