@@ -161,8 +161,7 @@ impl MergedTables {
         knots.dedup();
         let mut segs = Vec::with_capacity(2 * (knots.len() + 1));
         for k in 0..=knots.len() {
-            // Lower end of the region (none for the first).
-            let lo = k.checked_sub(1).and_then(|i| knots.get(i)).copied();
+            let lo = lower_knot(&knots, k);
             for dir in [1i8, -1] {
                 let mut errs = [Lin::constant(0.0); 6];
                 for (e, t) in errs.iter_mut().zip(&c.tables) {
@@ -184,16 +183,13 @@ impl MergedTables {
         if q.is_nan() {
             return None;
         }
-        let k = self.knots.partition_point(|&x| x <= q);
-        let s = self.segs.get(2 * k + usize::from(dir <= 0))?;
+        let s = self.segs.get(2 * self.region(q) + usize::from(dir <= 0))?;
         Some((
             [s[0].at(q), s[1].at(q), s[2].at(q)],
             [s[3].at(q), s[4].at(q), s[5].at(q)],
         ))
     }
-}
 
-impl MergedTables {
     /// The region of `q` (see [`Self::segs`]): `knots[k−1] ≤ q < knots[k]`.
     #[inline(always)]
     pub(crate) fn region(&self, q: f64) -> usize {
@@ -203,7 +199,7 @@ impl MergedTables {
     /// Bounds of region `k` (infinite at the open ends) and a fixed point
     /// of it: its lower knot, else its upper knot, else zero.
     pub(crate) fn region_bounds(&self, k: usize) -> (f64, f64, f64) {
-        let lo = k.checked_sub(1).and_then(|i| self.knots.get(i)).copied();
+        let lo = lower_knot(&self.knots, k);
         let hi = self.knots.get(k).copied();
         let origin = lo.or(hi).unwrap_or(0.0);
         (
@@ -225,6 +221,11 @@ impl MergedTables {
         }
         Some((v, d))
     }
+}
+
+/// The lower knot of region `k` of `knots` (none for the first region).
+fn lower_knot(knots: &[f64], k: usize) -> Option<f64> {
+    k.checked_sub(1).and_then(|i| knots.get(i)).copied()
 }
 
 /// The table `p`, `col` on the region starting at `lo` (`None`: below every
