@@ -10,6 +10,27 @@ pub(crate) const POW10: [f64; 10] = [1e0, 1e1, 1e2, 1e3, 1e4, 1e5, 1e6, 1e7, 1e8
 /// the fraction.
 pub(crate) const FIXED_MAX: usize = 32;
 
+/// `10^d`: the table's exact powers (what `powi` gives for them), `powi`
+/// beyond.
+#[inline(always)]
+pub(crate) fn pow10(d: usize) -> f64 {
+    POW10
+        .get(d)
+        .copied()
+        .unwrap_or_else(|| 10f64.powi(d as i32))
+}
+
+/// `format!("{v:.d$}")` with the sign of a zero dropped: the exact path of
+/// both writers, taken where [`fixed_digits`] declines (near a rounding
+/// tie, beyond its range).
+pub(crate) fn exact_fixed(v: f64, d: usize) -> String {
+    let mut s = format!("{v:.d$}");
+    if s.starts_with('-') && s.bytes().skip(1).all(|b| b == b'0' || b == b'.') {
+        s.remove(0);
+    }
+    s
+}
+
 /// `x.round()` (half away from zero) for `|x| < 2^52`, without the library
 /// call: the conversion truncates exactly and `x − trunc(x)` is exact there.
 #[inline(always)]

@@ -8,7 +8,7 @@
 //! (case, spacing, line ending). An annotation comment with the predicted
 //! deviation is appended in the program's comment style.
 
-use super::fixed::{FIXED_MAX, POW10, fixed_digits, round_half_away};
+use super::fixed::{FIXED_MAX, exact_fixed, fixed_digits, pow10, round_half_away};
 use crate::compensate::BlockResult;
 use crate::machine::{AXIS_LETTERS, AxisVec};
 use crate::predict::Effect;
@@ -84,15 +84,7 @@ pub fn write_number(out: &mut Vec<u8>, v: f64, d: usize, trim: bool) {
         return;
     }
     let start = out.len();
-    {
-        use std::io::Write;
-        // Writing into a `Vec` cannot fail.
-        let _ = write!(out, "{v:.d$}");
-    }
-    let s = &out[start..];
-    if s.first() == Some(&b'-') && s[1..].iter().all(|&b| b == b'0' || b == b'.') {
-        out.remove(start);
-    }
+    out.extend_from_slice(exact_fixed(v, d).as_bytes());
     let has_point = out[start..].contains(&b'.');
     if trim && has_point {
         while out.last() == Some(&b'0') {
@@ -125,19 +117,11 @@ fn write_fixed(out: &mut Vec<u8>, v: f64, d: usize) -> bool {
 /// zero exactly when it is below one half in magnitude (false for NaN).
 #[inline]
 fn rounds_to_zero(v: f64, d: usize) -> bool {
-    let f = POW10
-        .get(d)
-        .copied()
-        .unwrap_or_else(|| 10f64.powi(d as i32));
-    (v * f).abs() < 0.5
+    (v * pow10(d)).abs() < 0.5
 }
 
 fn round_to(v: f64, d: usize) -> f64 {
-    // The table holds exactly what `powi` gives for these (exact) powers.
-    let f = POW10
-        .get(d)
-        .copied()
-        .unwrap_or_else(|| 10f64.powi(d as i32));
+    let f = pow10(d);
     round_half_away(v * f) / f
 }
 
@@ -708,7 +692,7 @@ mod tests {
 
     #[test]
     fn power_table_is_powi() {
-        for (d, p) in POW10.iter().enumerate() {
+        for (d, p) in crate::emit::fixed::POW10.iter().enumerate() {
             assert_eq!(p.to_bits(), 10f64.powi(d as i32).to_bits());
         }
     }

@@ -102,15 +102,7 @@ pub fn format_fixed(v: f64, decimals: usize) -> Option<String> {
 
 /// [`format_fixed`] through `format!` (the reference of the fast path).
 fn push_fixed_slow(out: &mut String, v: f64, decimals: usize) {
-    use std::fmt::Write;
-    let start = out.len();
-    let _ = write!(out, "{v:.decimals$}");
-    let all_zero = out
-        .get(start + 1..)
-        .is_some_and(|abs| abs.bytes().all(|b| b == b'0' || b == b'.'));
-    if out.as_bytes().get(start) == Some(&b'-') && all_zero {
-        out.remove(start);
-    }
+    out.push_str(&super::fixed::exact_fixed(v, decimals));
 }
 
 /// Appends [`format_fixed`]`(v, decimals)` to `out` without an allocation
