@@ -147,7 +147,7 @@ fn scan_number(input: &[u8]) -> Option<(usize, Option<f64>)> {
         return None;
     }
     let fast = (int_digits + frac_digits <= 19 && mant <= (1u64 << 53))
-        .then(|| POW10.get(frac_digits))
+        .then(|| super::EXACT_POW10.get(frac_digits))
         .flatten()
         .map(|p| {
             let v = mant as f64 / p;
@@ -184,12 +184,6 @@ fn digits_len(input: &[u8], at: usize) -> usize {
         .map_or(0, |s| s.iter().take_while(|c| c.is_ascii_digit()).count())
 }
 
-/// Exact powers of ten of the fast decimal path.
-const POW10: [f64; 23] = [
-    1e0, 1e1, 1e2, 1e3, 1e4, 1e5, 1e6, 1e7, 1e8, 1e9, 1e10, 1e11, 1e12, 1e13, 1e14, 1e15, 1e16,
-    1e17, 1e18, 1e19, 1e20, 1e21, 1e22,
-];
-
 /// The value of a number recognised by `number_len`, exactly as
 /// `str::parse::<f64>` gives it, without going through `str`: when the
 /// digits form an integer of at most 2^53 and there are at most 22 decimals,
@@ -225,7 +219,7 @@ pub fn fast_decimal(num: &[u8]) -> Option<f64> {
     if digits == 0 || mant > (1u64 << 53) {
         return None;
     }
-    let v = mant as f64 / *POW10.get(frac.unwrap_or(0))?;
+    let v = mant as f64 / *super::EXACT_POW10.get(frac.unwrap_or(0))?;
     Some(if neg { -v } else { v })
 }
 

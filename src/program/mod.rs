@@ -4,3 +4,12 @@
 pub mod gcode;
 pub mod interp;
 pub mod rapid;
+
+/// The powers of ten that are exact in f64 (`1e0` to `1e22`): a decimal
+/// literal of at most 15 significant digits scaled by one of them is
+/// rounded once, as `str::parse` rounds it (the fast number paths of both
+/// parsers).
+pub(crate) const EXACT_POW10: [f64; 23] = [
+    1e0, 1e1, 1e2, 1e3, 1e4, 1e5, 1e6, 1e7, 1e8, 1e9, 1e10, 1e11, 1e12, 1e13, 1e14, 1e15, 1e16,
+    1e17, 1e18, 1e19, 1e20, 1e21, 1e22,
+];

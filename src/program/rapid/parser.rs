@@ -238,10 +238,6 @@ pub(super) fn parse_number(text: &str) -> Option<f64> {
 /// is what the full parser returns (it rounds correctly too). Anything
 /// else goes to the full parser.
 fn number_value(t: &str) -> Option<f64> {
-    const POW10: [f64; 23] = [
-        1e0, 1e1, 1e2, 1e3, 1e4, 1e5, 1e6, 1e7, 1e8, 1e9, 1e10, 1e11, 1e12, 1e13, 1e14, 1e15, 1e16,
-        1e17, 1e18, 1e19, 1e20, 1e21, 1e22,
-    ];
     let b = t.as_bytes();
     let neg = b.first() == Some(&b'-');
     let mut k = usize::from(matches!(b.first(), Some(b'+' | b'-')));
@@ -287,7 +283,7 @@ fn number_value(t: &str) -> Option<f64> {
     let e10 = exp - frac;
     if k == b.len() && digits <= 15 && (-22..=22).contains(&e10) {
         let m = m as f64;
-        let v = match POW10.get(e10.unsigned_abs() as usize) {
+        let v = match crate::program::EXACT_POW10.get(e10.unsigned_abs() as usize) {
             Some(p) if e10 >= 0 => m * p,
             Some(p) => m / p,
             None => return t.parse::<f64>().ok(),
