@@ -357,6 +357,102 @@ impl<'m> ToolPredictor<'m> {
         }
     }
 
+    /// Upper bound of the second derivative of the static deflection under
+    /// the block's force along any straight line away from the stiffness
+    /// grid positions (mm per mm², unscaled by the gain; 0 without a force
+    /// or a stiffness map): [`crate::machine::tool::Stiffness::curvature_mm`].
+    pub fn static_curvature_mm(&self) -> f64 {
+        match self.machine.stiffness() {
+            Some(k) if self.ctx.force_n != Vector3::zeros() => k.curvature_mm(&self.ctx.force_n),
+            _ => 0.0,
+        }
+    }
+
+    /// Upper bound of `|d² attained(c).pos / ds²|` (1/mm; `s` the arc
+    /// length of the commands, mm) on the straight segment of commands
+    /// `a → b`, which must cross no breakpoint of the model
+    /// ([`MachineTool::breakpoints`]), from bounds that hold for the whole
+    /// machine (cheap, loose for long moves of several axes; see
+    /// [`Self::curvature_in_cell`] for the tight one). `static_mm` is
+    /// [`Self::static_curvature_mm`] (computed once per block by the
+    /// caller). The sum of:
+    ///
+    /// * the geometric chain's: at most `K₂ · ((Σ|d_i|)² − 1)` for the unit
+    ///   direction `d` of the segment, times the gain (the chain is affine
+    ///   in each axis between knots, so a single moving axis does not bend
+    ///   it; the nominal chain is affine on these machines);
+    /// * the static deflection's, times its gain;
+    /// * the thermal drift's: the scale errors are affine in the position;
+    ///   the spindle growth acts along the tool axis, which bends with the
+    ///   geometric errors when the geometric gain is one.
+    ///
+    /// `None` for machines with rotary axes, or an end outside the box of
+    /// [`MachineTool::lipschitz_geo`].
+    pub fn curvature(&self, a: &AxisVec, b: &AxisVec, tool_mm: f64, static_mm: f64) -> Option<f64> {
+        let sg = self.machine.second_geo(a, b, tool_mm)?;
+        let mut d = [0.0; 3];
+        for (s, v) in d.iter_mut().enumerate() {
+            *v = b[s] - a[s];
+        }
+        let len = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+        let x = if len > 0.0 {
+            let l1 = (d[0].abs() + d[1].abs() + d[2].abs()) / len;
+            (l1 * l1 - 1.0).max(0.0)
+        } else {
+            0.0
+        };
+        let g = self.effects.gain(Effect::Geometric);
+        let mut m = g.abs() * sg.k2 * x + self.static_curvature_part(static_mm);
+        if let Some(growth_mm) = self.bending_growth_mm() {
+            m += growth_mm * (sg.axis2 * x + sg.axis1_sq);
+        }
+        m.is_finite().then_some(m)
+    }
+
+    /// [`Self::curvature`] from the cell polynomial of the segment (tight:
+    /// the geometric part is the exact second derivative at the ends, which
+    /// is affine along the segment); `dirs` are the directions of motion.
+    /// `None` on machines without the cell form (a rotary axis), or where
+    /// the tool axis cannot be bounded.
+    pub fn curvature_in_cell(
+        &self,
+        a: &AxisVec,
+        b: &AxisVec,
+        dirs: &DirVec,
+        tool_mm: f64,
+        static_mm: f64,
+    ) -> Option<f64> {
+        let growth = self.bending_growth_mm();
+        let sb = self
+            .machine
+            .segment_bounds(a, b, dirs, tool_mm, growth.is_some())?;
+        let g = self.effects.gain(Effect::Geometric);
+        let mut m = g.abs() * sb.pos2 + self.static_curvature_part(static_mm);
+        if let Some(growth_mm) = growth {
+            let n = sb.dir_norm_lo;
+            if n.is_nan() || n <= 0.5 {
+                return None;
+            }
+            m += growth_mm * (2.0 * sb.dir2 / n + 6.0 * sb.dir1 * sb.dir1 / (n * n));
+        }
+        m.is_finite().then_some(m)
+    }
+
+    /// The static part of the curvature bounds: `static_mm` times the gain.
+    fn static_curvature_part(&self, static_mm: f64) -> f64 {
+        let gs = self.effects.gain(Effect::Static);
+        if gs != 0.0 { gs.abs() * static_mm } else { 0.0 }
+    }
+
+    /// The spindle growth (mm, times the gain) when it acts along the
+    /// attained tool axis, which bends along a move (geometric gain one,
+    /// thermal drift active; see [`Self::attained`]).
+    fn bending_growth_mm(&self) -> Option<f64> {
+        (self.effects.gain(Effect::Geometric) == 1.0 && self.thermal_active()).then(|| {
+            self.effects.gain(Effect::Thermal).abs() * self.ctx.thermal.growth_um.abs() * 1e-3
+        })
+    }
+
     /// True when the thermal part may be non-zero (so the nominal tool axis
     /// is needed).
     fn thermal_active(&self) -> bool {
@@ -710,6 +806,131 @@ thermal:
             }
         }
         assert!(tools >= 2, "machine tools found: {tools}");
+    }
+
+    /// The curvature bounds of [`ToolPredictor::curvature`] and
+    /// [`ToolPredictor::curvature_in_cell`] hold against central second
+    /// differences of the attained tip along random segments that cross no
+    /// breakpoint, for each effect alone, all of them, gains other than one,
+    /// cold and hot (force and thermal drift) contexts; the segments are
+    /// general or one axis with a µm drift of the others.
+    #[test]
+    fn curvature_bounds_hold_against_second_differences() {
+        let path = concat!(env!("CARGO_MANIFEST_DIR"), "/machines/afm-r1000.yaml");
+        let text = std::fs::read_to_string(path).unwrap_or_default();
+        let m = match MachineTool::from_yaml_str(&text, path) {
+            Ok(m) => m,
+            Err(e) => panic!("{e}"),
+        };
+        let mut specs: Vec<EffectSet> = Vec::new();
+        for spec in ["geometric", "static", "thermal", "all"] {
+            match EffectSet::parse(spec) {
+                Ok(e) => specs.push(e),
+                Err(e) => panic!("{spec}: {e}"),
+            }
+        }
+        for gain in ["thermal=0.5", "static=2", "geometric=0.25"] {
+            let mut e = EffectSet::default();
+            if let Err(err) = e.set_gain(gain) {
+                panic!("{gain}: {err}");
+            }
+            specs.push(e);
+        }
+        let hot = BlockContext {
+            force_n: Vector3::new(900.0, -700.0, 500.0),
+            thermal: ThermalState {
+                growth_um: 60.0,
+                scale_ppm: [12.0, -8.0, 5.0],
+            },
+            ..BlockContext::default()
+        };
+        let mut s = 5u64;
+        let mut rng = || {
+            s = s
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (s >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let mut checked = 0;
+        for effects in &specs {
+            for ctx in [BlockContext::default(), hot] {
+                let p = ToolPredictor::new(&m, *effects).with_context(ctx);
+                let stat = p.static_curvature_mm();
+                for k in 0..300 {
+                    let mut a = [0.0; 6];
+                    for (slot, v) in a.iter_mut().enumerate().take(3) {
+                        let (lo, hi) = m.travel(slot).unwrap_or((0.0, 0.0));
+                        *v = lo + (hi - lo) * rng();
+                    }
+                    let mut d = [rng() - 0.5, rng() - 0.5, rng() - 0.5];
+                    if k % 2 == 1 {
+                        d = d.map(|v| v * 1e-5);
+                        d[k % 3] = 1.0;
+                    }
+                    let n = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+                    let mut len = 200.0 * rng();
+                    for slot in 0..3 {
+                        d[slot] /= n;
+                        let bp = m.breakpoints(slot);
+                        let next = if d[slot] > 0.0 {
+                            bp.iter()
+                                .find(|&&x| x > a[slot])
+                                .map(|x| (x - a[slot]) / d[slot])
+                        } else {
+                            bp.iter()
+                                .rev()
+                                .find(|&&x| x < a[slot])
+                                .map(|x| (x - a[slot]) / d[slot])
+                        };
+                        if let Some(t) = next {
+                            len = len.min(t);
+                        }
+                    }
+                    if len < 4.0 {
+                        continue;
+                    }
+                    let mut b = a;
+                    let mut dirs = [1i8; 6];
+                    for slot in 0..3 {
+                        b[slot] = a[slot] + d[slot] * len;
+                        if d[slot] < 0.0 {
+                            dirs[slot] = -1;
+                        }
+                    }
+                    let tool = [0.0, 62.5, 140.0][k % 3];
+                    let (Some(global), Some(cell)) = (
+                        p.curvature(&a, &b, tool, stat),
+                        p.curvature_in_cell(&a, &b, &dirs, tool, stat),
+                    ) else {
+                        panic!("no bound on {a:?} → {b:?}");
+                    };
+                    let h = len / 8.0;
+                    let at = |t: f64| {
+                        let mut c = a;
+                        for i in 0..3 {
+                            c[i] = a[i] + d[i] * t;
+                        }
+                        p.attained(&c, &dirs, tool).pos
+                    };
+                    // Rounding of three evaluations (≈ 1e-13 mm) over h².
+                    let noise = 1e-12 / (h * h);
+                    for j in 1..8 {
+                        let t = h * j as f64;
+                        let second = (at(t + h) - at(t) * 2.0 + at(t - h)).norm() / (h * h);
+                        assert!(
+                            second <= global * (1.0 + 1e-9) + noise,
+                            "{second:e} > global {global:e}"
+                        );
+                        assert!(
+                            second <= cell * (1.0 + 1e-9) + noise,
+                            "{second:e} > cell {cell:e}"
+                        );
+                    }
+                    checked += 1;
+                }
+            }
+        }
+        assert!(checked > 2000, "{checked} segments");
     }
 
     #[test]

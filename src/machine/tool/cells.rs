@@ -262,6 +262,143 @@ pub(crate) fn geometric(
     })
 }
 
+/// Bounds of the derivatives of the geometric chain along a straight
+/// segment of commands that lies in one cell (no knot strictly inside),
+/// with respect to the arc length `s` (mm) of the segment.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) struct SegmentBounds {
+    /// Bound of `|d² tip / ds²|`, 1/mm.
+    pub(crate) pos2: f64,
+    /// Bound of `|dv / ds|` of the (not normalised) tool-axis column `v`,
+    /// 1/mm.
+    pub(crate) dir1: f64,
+    /// Bound of `|d² v / ds²|`, 1/mm².
+    pub(crate) dir2: f64,
+    /// Lower bound of `|v|` on the segment.
+    pub(crate) dir_norm_lo: f64,
+}
+
+/// Subset masks of two slots, with the two slots.
+const PAIRS: [(usize, usize, usize); 3] = [(3, 0, 1), (5, 0, 2), (6, 1, 2)];
+
+impl Cell {
+    /// Whether `q` lies in the closed cell, with a rounding allowance.
+    fn holds(&self, q: &[f64; 3]) -> bool {
+        (0..3).all(|s| {
+            let slack = 1e-9 * (1.0 + q[s].abs());
+            q[s] >= self.lo[s] - slack && q[s] <= self.hi[s] + slack
+        })
+    }
+
+    /// Bounds of the first and second derivative of the column `t` along
+    /// the unit direction `d` between the monomial offsets `ua` and `ub`
+    /// (`u = q − origin` at the ends).
+    ///
+    /// Inside a cell a column is `Σ_S t_S Π_{i∈S} u_i` with `u` affine in
+    /// `s`, so the second derivative is `Σ_{|S|=2} 2 t_S d_i d_j + 2 t_xyz
+    /// (d_x d_y u_z + d_x d_z u_y + d_y d_z u_x)`: affine in `s`, its norm
+    /// is largest at an end. The first derivative is bounded term by term
+    /// with `|u_i| ≤ max(|ua_i|, |ub_i|)`.
+    fn derivative_bounds(
+        t: &[[f64; 3]; 8],
+        d: &[f64; 3],
+        ua: &[f64; 3],
+        ub: &[f64; 3],
+    ) -> (f64, f64) {
+        let norm = |v: &[f64; 3]| (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+        let mut v0 = [0.0; 3];
+        for &(mask, i, j) in &PAIRS {
+            for (r, v) in v0.iter_mut().enumerate() {
+                *v += 2.0 * t[mask][r] * d[i] * d[j];
+            }
+        }
+        let w = |u: &[f64; 3]| d[0] * d[1] * u[2] + d[0] * d[2] * u[1] + d[1] * d[2] * u[0];
+        let at = |u: &[f64; 3]| {
+            let wu = w(u);
+            let mut v = v0;
+            for (r, x) in v.iter_mut().enumerate() {
+                *x += 2.0 * t[7][r] * wu;
+            }
+            norm(&v)
+        };
+        let second = at(ua).max(at(ub));
+        let um = [0, 1, 2].map(|i| ua[i].abs().max(ub[i].abs()));
+        let mut lin = [0.0; 3];
+        for (i, mask) in [1usize, 2, 4].into_iter().enumerate() {
+            for (r, v) in lin.iter_mut().enumerate() {
+                *v += t[mask][r] * d[i];
+            }
+        }
+        let mut first = norm(&lin);
+        for &(mask, i, j) in &PAIRS {
+            first += norm(&t[mask]) * (d[i].abs() * um[j] + d[j].abs() * um[i]);
+        }
+        first += norm(&t[7])
+            * (d[0].abs() * um[1] * um[2]
+                + um[0] * d[1].abs() * um[2]
+                + um[0] * um[1] * d[2].abs());
+        (first, second)
+    }
+}
+
+/// Derivative bounds of the geometric chain of `m` along the straight
+/// segment `a → b` of commands, which must lie in one cell (no knot of the
+/// merged tables strictly between its ends); the tool-axis bounds only
+/// with `axis` (zero otherwise): `None` when the chain has no cells, or the
+/// ends are not in the cell of the segment's midpoint.
+pub(crate) fn segment_bounds(
+    m: &MachineTool,
+    a: &[f64; 6],
+    b: &[f64; 6],
+    dirs: &[i8; 6],
+    tool_mm: f64,
+    axis: bool,
+) -> Option<SegmentBounds> {
+    let mut mid = *a;
+    for (s, v) in mid.iter_mut().enumerate() {
+        *v = 0.5 * (a[s] + b[s]);
+    }
+    let qa = [a[0], a[1], a[2]];
+    let qb = [b[0], b[1], b[2]];
+    let dq = [qb[0] - qa[0], qb[1] - qa[1], qb[2] - qa[2]];
+    let len = (dq[0] * dq[0] + dq[1] * dq[1] + dq[2] * dq[2]).sqrt();
+    if !len.is_finite() {
+        return None;
+    }
+    let d = if len > 0.0 {
+        [dq[0] / len, dq[1] / len, dq[2] / len]
+    } else {
+        [0.0; 3]
+    };
+    with_cell(m, &mid, dirs, tool_mm, |c, _| {
+        if !(c.holds(&qa) && c.holds(&qb)) {
+            return None;
+        }
+        let ua = [0, 1, 2].map(|i| qa[i] - c.origin[i]);
+        let ub = [0, 1, 2].map(|i| qb[i] - c.origin[i]);
+        let (_, pos2) = Cell::derivative_bounds(&c.pos, &d, &ua, &ub);
+        if !axis {
+            return Some(SegmentBounds {
+                pos2,
+                dir1: 0.0,
+                dir2: 0.0,
+                dir_norm_lo: 0.0,
+            });
+        }
+        let (dir1, dir2) = Cell::derivative_bounds(&c.dir, &d, &ua, &ub);
+        let norm = |v: [f64; 3]| (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+        let na = norm(Cell::col(&c.dir, &c.weights(&qa)));
+        let nb = norm(Cell::col(&c.dir, &c.weights(&qb)));
+        Some(SegmentBounds {
+            pos2,
+            dir1,
+            dir2,
+            dir_norm_lo: na.min(nb) - dir1 * len / 2.0,
+        })
+    })
+    .flatten()
+}
+
 /// `f` applied to the cell of `cmd` (from the thread's cache, built when
 /// missing) and the command's X Y Z.
 #[inline]

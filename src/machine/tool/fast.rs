@@ -421,6 +421,28 @@ pub(crate) struct LipGeo {
     pos1: f64,
     /// Bound of the change of the unit tool axis per mm of command.
     dir: f64,
+    /// Second derivatives (see [`LipGeo::second`]): `K₂(tool) = k2_0 +
+    /// k2_1 · |tool|`, and the tool-axis terms.
+    k2_0: f64,
+    k2_1: f64,
+    axis2: f64,
+    axis1_sq: f64,
+}
+
+/// Global bounds of the second derivatives of the geometric chain of a
+/// machine without rotary axes along a straight segment of commands that
+/// crosses no knot, per unit `X = (Σ|d_i|)² − 1` of a unit direction `d`
+/// (zero when a single axis moves: the chain is affine in each axis).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) struct SecondGeo {
+    /// Bound of the mixed partials `|∂²G/∂q_k∂q_j|` of the tip (1/mm): the
+    /// tip's second derivative is at most `k2 · X`.
+    pub(crate) k2: f64,
+    /// The unit tool axis' second derivative is at most
+    /// `axis2 · X + axis1_sq` (1/mm²).
+    pub(crate) axis2: f64,
+    /// See `axis2`.
+    pub(crate) axis1_sq: f64,
 }
 
 impl LipGeo {
@@ -481,14 +503,43 @@ impl LipGeo {
         // The z column moves by at most e^2E · Σ ε' per mm; the unit axis by
         // at most twice that (its norm stays above 1/2).
         let dir = 2.0 * grow2 * slopes_e;
-        let all = [pos0, pos1, dir, angles];
+        // Second derivatives. Differentiating the column ∂G/∂q_k above by
+        // another axis j: R_k changes by at most e^E·|ε'_j| and w_k by at
+        // most e^2E·(1 + |δ'_j| + |ε'_j|·|w|), so
+        // |∂²G/∂q_k∂q_j| ≤ Σε'·(e^E + e^3E)·(1 + Σδ' + Σε'·W) with
+        // W = e^2E·(Σ translations + 2|tool|). The pure second derivatives
+        // vanish (each factor is affine in its own axis between knots), so
+        // along a unit d the tip bends by at most that times
+        // Σ_{k≠j}|d_k d_j| = (Σ|d_i|)² − 1. The z column v = R·ẑ has
+        // |∂²v/∂q_k∂q_j| ≤ e^E·(Σε')² and |v'| ≤ e^2E·Σε', |v| ≥ ½, and the
+        // unit axis u = v/|v| has |u''| ≤ 2|v''|/|v| + 6|v'|²/|v|².
+        let cross = slopes_e * (grow + grow * grow2);
+        let k2_0 = cross * (1.0 + slopes_d + slopes_e * grow2 * translations);
+        let k2_1 = cross * slopes_e * grow2 * 2.0;
+        let axis2 = 4.0 * grow * slopes_e * slopes_e;
+        let axis1_sq = 24.0 * (grow2 * slopes_e).powi(2);
+        let all = [pos0, pos1, dir, angles, k2_0, k2_1, axis2, axis1_sq];
         (all.iter().all(|v| v.is_finite()) && angles < 0.1).then_some(LipGeo {
             lo,
             hi,
             pos0,
             pos1,
             dir,
+            k2_0,
+            k2_1,
+            axis2,
+            axis1_sq,
         })
+    }
+
+    /// The second-derivative bounds for tool length `tool_mm`.
+    #[inline]
+    pub(crate) fn second(&self, tool_mm: f64) -> SecondGeo {
+        SecondGeo {
+            k2: self.k2_0 + self.k2_1 * tool_mm.abs(),
+            axis2: self.axis2,
+            axis1_sq: self.axis1_sq,
+        }
     }
 
     /// True when every linear slot of `c` lies in the box of the bounds.

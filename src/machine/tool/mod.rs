@@ -35,8 +35,10 @@ pub mod stiffness;
 mod table;
 pub mod thermal;
 
+pub(crate) use cells::SegmentBounds;
 pub use component::{ComponentErrors, ComponentValue};
 pub use dynamics::{Modal, Mode};
+pub(crate) use fast::SecondGeo;
 pub use location::{LocationErrors, SpindleErrors};
 pub use stiffness::Stiffness;
 pub use table::{ErrorTable, Lookup};
@@ -288,6 +290,23 @@ impl MachineTool {
         pose_aff(&self.tip_htm(cmd, dirs, tool_mm, true))
     }
 
+    /// Bounds of the derivatives of the geometric chain along the straight
+    /// segment `a → b` of commands, which must not cross a breakpoint
+    /// ([`Self::breakpoints`]) of an X, Y or Z table: `None` on machines
+    /// without the multi-affine cell form (a rotary axis) or when the ends
+    /// are not in one cell.
+    /// With `axis` false the tool-axis bounds are left at zero.
+    pub(crate) fn segment_bounds(
+        &self,
+        a: &AxisVec,
+        b: &AxisVec,
+        dirs: &DirVec,
+        tool_mm: f64,
+        axis: bool,
+    ) -> Option<SegmentBounds> {
+        cells::segment_bounds(self, a, b, dirs, tool_mm, axis)
+    }
+
     /// [`Self::geometric`] by the chain product alone (the reference of the
     /// cell form in the tests).
     #[cfg(test)]
@@ -328,6 +347,15 @@ impl MachineTool {
     pub fn lipschitz_geo(&self, c: &AxisVec, tool_mm: f64) -> Option<(f64, f64)> {
         let l = self.pre.lip.as_ref()?;
         l.contains(c).then(|| l.bounds(tool_mm))
+    }
+
+    /// Global bounds of the second derivatives of the geometric chain along
+    /// a straight segment of commands `a → b` crossing no breakpoint, for
+    /// tool length `tool_mm` (see `fast::LipGeo`): `None` when an end leaves
+    /// the box of [`Self::lipschitz_geo`] or for machines with rotary axes.
+    pub(crate) fn second_geo(&self, a: &AxisVec, b: &AxisVec, tool_mm: f64) -> Option<SecondGeo> {
+        let l = self.pre.lip.as_ref()?;
+        (l.contains(a) && l.contains(b)).then(|| l.second(tool_mm))
     }
 
     /// [`Self::lipschitz_geo`] without the box test (see
@@ -756,6 +784,150 @@ mod tests {
             cmds.push(c);
         }
         cmds
+    }
+
+    /// A random straight segment of commands inside one cell of `m` (no
+    /// breakpoint between its ends): start in the travel, a direction that
+    /// is either general or one axis with a µm-scale drift of the others
+    /// (a compensated axis-parallel move), length up to 300 mm. `None` when
+    /// the cell is too short for second differences.
+    fn segment_in_cell(m: &MachineTool, s: &mut u64) -> Option<(AxisVec, AxisVec, [i8; 6])> {
+        let mut a = [0.0; 6];
+        for (slot, v) in a.iter_mut().enumerate().take(3) {
+            let (lo, hi) = m.travel(slot).unwrap_or((-100.0, 100.0));
+            *v = lo + (hi - lo) * rng(s);
+        }
+        let mut d = [0.0; 3];
+        if rng(s) < 0.5 {
+            for v in d.iter_mut() {
+                *v = rng(s) - 0.5;
+            }
+        } else {
+            for v in d.iter_mut() {
+                *v = (rng(s) - 0.5) * 1e-5;
+            }
+            d[(rng(s) * 3.0) as usize % 3] = 1.0;
+        }
+        let n = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+        let mut len = 300.0 * rng(s);
+        for slot in 0..3 {
+            d[slot] /= n;
+            if d[slot] == 0.0 || !m.has_axis(slot) {
+                continue;
+            }
+            let bp = m.breakpoints(slot);
+            let next = if d[slot] > 0.0 {
+                bp.iter()
+                    .find(|&&x| x > a[slot])
+                    .map(|x| (x - a[slot]) / d[slot])
+            } else {
+                bp.iter()
+                    .rev()
+                    .find(|&&x| x < a[slot])
+                    .map(|x| (x - a[slot]) / d[slot])
+            };
+            if let Some(t) = next {
+                len = len.min(t);
+            }
+        }
+        if len < 4.0 {
+            return None;
+        }
+        let mut b = a;
+        let mut dirs = [1i8; 6];
+        for slot in 0..3 {
+            if !m.has_axis(slot) {
+                d[slot] = 0.0;
+                a[slot] = 0.0;
+            }
+            b[slot] = a[slot] + d[slot] * len;
+            if d[slot] < 0.0 {
+                dirs[slot] = -1;
+            }
+        }
+        Some((a, b, dirs))
+    }
+
+    /// The derivative bounds of a segment inside a cell, per cell and
+    /// global, hold against central second differences of the geometric
+    /// tip and unit tool axis (the cell form is cubic along a line, so the
+    /// differences are exact up to rounding), and the per-cell bound of
+    /// the tip is tight: it is the second derivative at an end.
+    #[test]
+    fn segment_bounds_hold_against_second_differences() {
+        let mut s = 29u64;
+        let mut tested = 0;
+        let mut tight = 0;
+        for m in linear_machines() {
+            for k in 0..400 {
+                let Some((a, b, dirs)) = segment_in_cell(&m, &mut s) else {
+                    continue;
+                };
+                let tool = [0.0, 62.5, 140.0][k % 3];
+                let Some(sb) = m.segment_bounds(&a, &b, &dirs, tool, true) else {
+                    panic!("{}: no bounds on {a:?} → {b:?}", m.name());
+                };
+                let Some(sg) = m.second_geo(&a, &b, tool) else {
+                    panic!("{}: no global bounds", m.name());
+                };
+                let len = (0..3).map(|i| (b[i] - a[i]).powi(2)).sum::<f64>().sqrt();
+                let l1 = (0..3).map(|i| (b[i] - a[i]).abs()).sum::<f64>() / len;
+                let x = (l1 * l1 - 1.0).max(0.0);
+                let h = len / 8.0;
+                let at = |t: f64| {
+                    let mut c = a;
+                    for i in 0..3 {
+                        c[i] = a[i] + (b[i] - a[i]) * (t / len);
+                    }
+                    m.geometric(&c, &dirs, tool)
+                };
+                let mut pos_max = 0.0f64;
+                for j in 1..8 {
+                    let t = h * j as f64;
+                    let (p0, p1, p2) = (at(t - h), at(t), at(t + h));
+                    let pos = (p2.pos - p1.pos * 2.0 + p0.pos).norm() / (h * h);
+                    let dir = (p2.dir - p1.dir * 2.0 + p0.dir).norm() / (h * h);
+                    // Rounding of the tip (≈ 1e-13 mm) over h² ≥ 0.25 mm².
+                    let noise = 1e-12 / (h * h);
+                    assert!(
+                        pos <= sb.pos2 * (1.0 + 1e-9) + noise,
+                        "{}: tip {pos:e} > cell {:e}",
+                        m.name(),
+                        sb.pos2
+                    );
+                    assert!(
+                        pos <= sg.k2 * x + noise,
+                        "{}: tip {pos:e} > global {:e}",
+                        m.name(),
+                        sg.k2 * x
+                    );
+                    // The unit axis: u'' varies along the segment; its
+                    // second difference is u'' at some point of the stretch.
+                    let n = sb.dir_norm_lo;
+                    let cell_axis = 2.0 * sb.dir2 / n + 6.0 * sb.dir1 * sb.dir1 / (n * n);
+                    assert!(
+                        dir <= cell_axis * (1.0 + 1e-6) + noise,
+                        "{}: axis {dir:e} > cell {cell_axis:e}",
+                        m.name()
+                    );
+                    assert!(
+                        dir <= sg.axis2 * x + sg.axis1_sq + noise,
+                        "{}: axis {dir:e} > global",
+                        m.name()
+                    );
+                    pos_max = pos_max.max(pos);
+                }
+                tested += 1;
+                // The tip's second derivative is affine along the segment
+                // and the bound is its value at an end, one step h beyond
+                // the outermost difference.
+                if pos_max >= 0.75 * sb.pos2 - 1e-12 / (h * h) {
+                    tight += 1;
+                }
+            }
+        }
+        assert!(tested > 1000, "{tested} segments");
+        assert!(tight * 10 > tested * 9, "tight on {tight} of {tested}");
     }
 
     #[test]

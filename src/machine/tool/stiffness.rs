@@ -158,6 +158,93 @@ impl Stiffness {
         l
     }
 
+    /// Upper bound of the second derivative (Euclidean norm, mm per mm²)
+    /// of [`Self::deflection_mm`] along any straight line of positions
+    /// under the force `f`, away from the grid positions (where the
+    /// trilinear map has kinks).
+    ///
+    /// Along a unit direction `d` the deflection `F_i / k_i · 1e-3` has the
+    /// second derivative `F_i · 1e-3 · (2 (∇k_i·d)² / k_i³ − dᵀ H_i d / k_i²)`.
+    /// A trilinear map has `|∇k·d|² ≤ Σ_j G_j²` with `G_j` its largest
+    /// difference quotient along `j`, and a Hessian with a zero diagonal
+    /// whose entries are convex combinations of the mixed quotients of the
+    /// grid faces, so `|dᵀ H d| ≤ 2 H_max` (`Σ_{j<l} |d_j d_l| ≤ 1`).
+    pub fn curvature_mm(&self, f: &Vector3<f64>) -> f64 {
+        let mut sq = 0.0;
+        for i in 0..3 {
+            if f[i] == 0.0 {
+                continue;
+            }
+            let table = i * 2 + usize::from(f[i] < 0.0);
+            let c = f[i].abs() * 1e-3 * self.second_bound(table);
+            sq += c * c;
+        }
+        sq.sqrt()
+    }
+
+    /// `2 Σ_j G_j² / k_min³ + 2 H_max / k_min²` of one table of values (see
+    /// [`Self::curvature_mm`]).
+    fn second_bound(&self, table: usize) -> f64 {
+        let Some(vals) = self.k.get(table) else {
+            return 0.0;
+        };
+        let kmin = vals.iter().fold(f64::INFINITY, |m, &v| m.min(v));
+        let n = [self.grid[0].len(), self.grid[1].len(), self.grid[2].len()];
+        let stride = [1, n[0], n[0] * n[1]];
+        let value = |i: [usize; 3]| {
+            vals.get(i[0] + stride[1] * i[1] + stride[2] * i[2])
+                .copied()
+                .unwrap_or(0.0)
+        };
+        let step = |j: usize, i: usize| -> f64 {
+            let pts = &self.grid[j];
+            match (pts.get(i), pts.get(i + 1)) {
+                (Some(a), Some(b)) => b - a,
+                _ => f64::INFINITY,
+            }
+        };
+        let mut grad_sq = 0.0;
+        let mut mixed = 0.0f64;
+        for j in 0..3 {
+            let mut g = 0.0f64;
+            for l in (j + 1)..3 {
+                for iz in 0..n[2] {
+                    for iy in 0..n[1] {
+                        for ix in 0..n[0] {
+                            let i = [ix, iy, iz];
+                            if i[j] + 1 >= n[j] || i[l] + 1 >= n[l] {
+                                continue;
+                            }
+                            let (mut a, mut b, mut c) = (i, i, i);
+                            a[j] += 1;
+                            b[l] += 1;
+                            c[j] += 1;
+                            c[l] += 1;
+                            let q = (value(c) - value(a) - value(b) + value(i))
+                                / (step(j, i[j]) * step(l, i[l]));
+                            mixed = mixed.max(q.abs());
+                        }
+                    }
+                }
+            }
+            for iz in 0..n[2] {
+                for iy in 0..n[1] {
+                    for ix in 0..n[0] {
+                        let i = [ix, iy, iz];
+                        if i[j] + 1 >= n[j] {
+                            continue;
+                        }
+                        let mut a = i;
+                        a[j] += 1;
+                        g = g.max(((value(a) - value(i)) / step(j, i[j])).abs());
+                    }
+                }
+            }
+            grad_sq += g * g;
+        }
+        2.0 * grad_sq / (kmin * kmin * kmin) + 2.0 * mixed / (kmin * kmin)
+    }
+
     /// Validates the `stiffness:` block.
     pub(crate) fn from_raw(raw: &RawStiffness) -> Result<Self, Invalid> {
         let grid_given = raw.grid_mm.is_some();
@@ -348,5 +435,85 @@ mod tests {
         let dp = s.deflection_mm(&Vector3::new(50.0 + h, 0.0, 0.0), &f);
         let dm = s.deflection_mm(&Vector3::new(50.0 - h, 0.0, 0.0), &f);
         assert_abs_diff_eq!((dp[0] - dm[0]) / (2.0 * h), -0.15e-3, epsilon = 1e-9);
+    }
+
+    /// Hand-derived: `k_x+` grows from 10 to 30 N/µm over 100 mm along X
+    /// (G = 0.2 N/µm per mm, no mixed term), so under 1 000 N along +X the
+    /// bound is `1e-3 · 1000 · 2 · 0.2² / 10³ = 8e-5` mm/mm², which is the
+    /// exact `F · 1e-3 · 2 k'² / k³` at X = 0, the softest point. The other
+    /// tables are uniform: a force along −X or Y bends nothing.
+    #[test]
+    fn curvature_golden() {
+        let s = map();
+        assert_abs_diff_eq!(
+            s.curvature_mm(&Vector3::new(1000.0, 0.0, 0.0)),
+            8e-5,
+            epsilon = 1e-18
+        );
+        assert_abs_diff_eq!(
+            s.curvature_mm(&Vector3::new(-1000.0, 300.0, 0.0)),
+            0.0,
+            epsilon = 1e-18
+        );
+        let fd = |x: f64| {
+            let h = 1e-2;
+            let d = |x: f64| {
+                s.deflection_mm(&Vector3::new(x, 0.0, 0.0), &Vector3::new(1000.0, 0.0, 0.0))[0]
+            };
+            (d(x + h) - 2.0 * d(x) + d(x - h)) / (h * h)
+        };
+        assert_abs_diff_eq!(fd(1.0), 8e-5 * (10.0f64 / 10.2).powi(3), epsilon = 1e-9);
+    }
+
+    /// The bound holds against central second differences of the deflection
+    /// along random lines through a three-dimensional map with mixed terms,
+    /// away from the grid positions.
+    #[test]
+    fn curvature_bounds_second_differences() {
+        let mut s = Stiffness::uniform([[20.0, 25.0], [15.0, 16.0], [40.0, 50.0]]);
+        s.grid = [
+            vec![0.0, 100.0, 300.0],
+            vec![0.0, 200.0],
+            vec![0.0, 50.0, 150.0],
+        ];
+        let mut state = 7u64;
+        let mut rnd = || {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            (state >> 11) as f64 / (1u64 << 53) as f64
+        };
+        for slot in s.k.iter_mut() {
+            *slot = (0..18).map(|_| 5.0 + 40.0 * rnd()).collect();
+        }
+        // Within one grid cell, clamped beyond: the cells of the lines below.
+        let cells = [[0.0, 100.0], [0.0, 200.0], [0.0, 50.0]];
+        let mut worst = 0.0f64;
+        for _ in 0..2000 {
+            let f = Vector3::new(
+                2000.0 * rnd() - 1000.0,
+                2000.0 * rnd() - 1000.0,
+                2000.0 * rnd() - 1000.0,
+            );
+            let bound = s.curvature_mm(&f);
+            let d = Vector3::new(rnd() - 0.5, rnd() - 0.5, rnd() - 0.5).normalize();
+            let p = Vector3::new(
+                cells[0][0] + 10.0 + 80.0 * rnd(),
+                cells[1][0] + 10.0 + 180.0 * rnd(),
+                cells[2][0] + 10.0 + 30.0 * rnd(),
+            );
+            let h = 1.0;
+            let at = |t: f64| s.deflection_mm(&(p + d * t), &f);
+            let second = (at(h) - at(0.0) * 2.0 + at(-h)).norm() / (h * h);
+            assert!(
+                second <= bound * (1.0 + 1e-9) + 1e-15,
+                "{second:e} > {bound:e}"
+            );
+            worst = worst.max(second / bound);
+        }
+        // Not vacuous. The bound takes the softest value of the whole map
+        // (here 5 of 5..45 N/µm, cubed), so a random line reaches about 1 %
+        // of it; the golden above shows it exact where the map is softest.
+        assert!(worst > 0.005, "largest ratio {worst}");
     }
 }
