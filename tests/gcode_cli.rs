@@ -373,6 +373,40 @@ fn usage_errors_exit_2() {
     assert_eq!(files_in(tmp.path()), ["machine.yaml"]);
 }
 
+/// Regression: a tolerance at the solver's own convergence (1e-7 mm) cannot
+/// be proven for any piece (its solved ends may each be 1e-7 mm off), so it
+/// is refused as bad usage instead of failing with "more than 65536
+/// segments" at the first feed move; 1e-6 mm, the smallest accepted, runs.
+#[test]
+fn regression_tolerance_below_the_solver_convergence_is_refused() {
+    let tmp = tempfile::tempdir().expect("temp dir");
+    let m = machine(tmp.path());
+    let out = tmp.path().join("out.nc");
+    for (tol, code) in [("1e-7", 2), ("0.0000005", 2), ("1e-6", 0)] {
+        let a = postproc()
+            .arg("compensate")
+            .arg(repo("samples/part.nc"))
+            .arg("--machine")
+            .arg(&m)
+            .args(tool_args())
+            .args(["--tolerance", tol, "-o"])
+            .arg(&out)
+            .assert()
+            .code(code);
+        let stderr = String::from_utf8_lossy(&a.get_output().stderr).to_string();
+        if code == 2 {
+            assert!(
+                stderr.contains("--tolerance")
+                    && stderr.contains("must be within [0.000001, 1] mm"),
+                "{stderr}"
+            );
+            assert!(!out.exists(), "no output for a refused tolerance");
+        } else {
+            assert!(out.exists(), "{stderr}");
+        }
+    }
+}
+
 /// Runs `report` on samples/part.nc in a format; stdout.
 fn report(format: &str) -> String {
     let tmp = tempfile::tempdir().expect("temp dir");

@@ -446,9 +446,11 @@ pub(super) fn build_job<'m>(
     decimals: Option<usize>,
     annotate: bool,
 ) -> Result<Job<'m>> {
-    if !tolerance.is_finite() || tolerance <= 0.0 || tolerance > 1.0 {
+    let min = crate::compensate::MIN_TOLERANCE_MM;
+    if !tolerance.is_finite() || tolerance < min || tolerance > 1.0 {
         return Err(usage(format!(
-            "--tolerance {tolerance}: must be within (0, 1] mm"
+            "--tolerance {tolerance}: must be within [{min}, 1] mm (the solver converges to {} mm)",
+            crate::compensate::SOLVE_TOL_MM
         )));
     }
     if let Some(d) = decimals {

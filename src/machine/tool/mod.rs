@@ -33,6 +33,8 @@ mod location;
 mod raw;
 pub mod stiffness;
 mod table;
+#[cfg(test)]
+pub(crate) mod testing;
 pub mod thermal;
 
 pub(crate) use cells::SegmentBounds;
@@ -858,7 +860,16 @@ mod tests {
         let mut s = 29u64;
         let mut tested = 0;
         let mut tight = 0;
-        for m in linear_machines() {
+        // Angular errors 300 times the calibrated ones: the tool axis bends
+        // enough along a move for its second differences to stand above
+        // the rounding.
+        let mut machines = linear_machines();
+        machines.push(testing::load(
+            &testing::scale_angles(&testing::afm_text(), 300.0),
+            "afm-angles-x300.yaml",
+        ));
+        let mut axis_seen = 0.0f64;
+        for m in machines {
             for k in 0..400 {
                 let Some((a, b, dirs)) = segment_in_cell(&m, &mut s) else {
                     continue;
@@ -916,6 +927,9 @@ mod tests {
                         m.name()
                     );
                     pos_max = pos_max.max(pos);
+                    if dir > noise {
+                        axis_seen = axis_seen.max(dir / cell_axis);
+                    }
                 }
                 tested += 1;
                 // The tip's second derivative is affine along the segment
@@ -928,6 +942,9 @@ mod tests {
         }
         assert!(tested > 1000, "{tested} segments");
         assert!(tight * 10 > tested * 9, "tight on {tight} of {tested}");
+        // The axis bound is exercised: some bend stands above the rounding
+        // and reaches a good part of it.
+        assert!(axis_seen > 0.05, "axis bend / bound at most {axis_seen}");
     }
 
     #[test]

@@ -182,6 +182,152 @@ impl Stiffness {
         sq.sqrt()
     }
 
+    /// [`Self::curvature_mm`] on the straight segment `a → b`, which must
+    /// lie in one cell of the grid (the stretch of a move between two
+    /// breakpoints does). Local to the segment: inside a cell the map is
+    /// trilinear, so over the segment's bounding box the value is at least
+    /// its smallest corner value, each partial `∂_j k` (bilinear in the two
+    /// other coordinates) at most its largest value at the box's corners,
+    /// and each mixed partial (linear in the third coordinate) at most its
+    /// largest at the box's faces; the direction `d` of the segment weighs
+    /// them: `|∇k·d| ≤ Σ_j G_j |d_j|`, `|dᵀHd| ≤ 2 Σ_{j<l} H_jl |d_j d_l|`.
+    /// Along an axis where the segment is beyond the grid the map is
+    /// constant (clamped). The bound tends to the exact second derivative
+    /// as the segment shrinks, so a move split where the deflection bends
+    /// is not split much further.
+    pub fn curvature_on_mm(&self, a: &Vector3<f64>, b: &Vector3<f64>, f: &Vector3<f64>) -> f64 {
+        let diff = b - a;
+        let len = diff.norm();
+        let d = if len > 0.0 {
+            diff / len
+        } else {
+            Vector3::zeros()
+        };
+        let mid = (a + b) * 0.5;
+        // Per axis: the cell's lower corner index and width, whether the
+        // map varies along the axis there, and the segment's range in the
+        // cell's unit coordinate.
+        let mut lo = [0usize; 3];
+        let mut width = [1.0; 3];
+        let mut varies = [false; 3];
+        let mut range = [(0.0, 0.0); 3];
+        for j in 0..3 {
+            let pts = &self.grid[j];
+            let (Some(&first), Some(&last)) = (pts.first(), pts.last()) else {
+                continue;
+            };
+            if pts.len() < 2 {
+                continue;
+            }
+            let i = pts
+                .partition_point(|&x| x <= mid[j])
+                .saturating_sub(1)
+                .min(pts.len() - 2);
+            let x0 = pts.get(i).copied().unwrap_or(0.0);
+            lo[j] = i;
+            width[j] = pts.get(i + 1).copied().unwrap_or(1.0) - x0;
+            varies[j] = mid[j] > first && mid[j] < last;
+            let unit = |x: f64| ((x - x0) / width[j]).clamp(0.0, 1.0);
+            let (ua, ub) = (unit(a[j]), unit(b[j]));
+            range[j] = (ua.min(ub), ua.max(ub));
+        }
+        let n = [self.grid[0].len(), self.grid[1].len(), self.grid[2].len()];
+        let pick = |j: usize, hi: bool| if hi { range[j].1 } else { range[j].0 };
+        let mut sq = 0.0;
+        for i in 0..3 {
+            if f[i] == 0.0 {
+                continue;
+            }
+            let Some(vals) = self.k.get(i * 2 + usize::from(f[i] < 0.0)) else {
+                continue;
+            };
+            // Corner `c` ∈ {0, 1}³ of the cell.
+            let corner = |c: [usize; 3]| -> f64 {
+                let ix = (lo[0] + c[0]).min(n[0].saturating_sub(1));
+                let iy = (lo[1] + c[1]).min(n[1].saturating_sub(1));
+                let iz = (lo[2] + c[2]).min(n[2].saturating_sub(1));
+                vals.get(ix + n[0] * (iy + n[1] * iz))
+                    .copied()
+                    .unwrap_or(f64::INFINITY)
+            };
+            // A function of the corners, interpolated multilinearly at the
+            // unit coordinates `t` over the axes in `axes`, the others at 0.
+            let lerp = |t: [f64; 3], value: &dyn Fn([usize; 3]) -> f64, axes: [bool; 3]| -> f64 {
+                let mut sum = 0.0;
+                for c in 0..8 {
+                    let bits = [c & 1, (c >> 1) & 1, (c >> 2) & 1];
+                    let mut w = 1.0;
+                    for j in 0..3 {
+                        if axes[j] {
+                            w *= if bits[j] == 1 { t[j] } else { 1.0 - t[j] };
+                        } else if bits[j] == 1 {
+                            w = 0.0;
+                        }
+                    }
+                    if w != 0.0 {
+                        sum += w * value(bits);
+                    }
+                }
+                sum
+            };
+            let box_corner = |c: usize| {
+                [
+                    pick(0, c & 1 == 1),
+                    pick(1, c & 2 == 2),
+                    pick(2, c & 4 == 4),
+                ]
+            };
+            let kmin = (0..8)
+                .map(|c| lerp(box_corner(c), &corner, [true; 3]))
+                .fold(f64::INFINITY, f64::min);
+            let mut slope = 0.0;
+            let mut mixed = 0.0;
+            for j in 0..3 {
+                if !varies[j] {
+                    continue;
+                }
+                // ∂_j k: the quotient of the two faces across j, bilinear
+                // in the other coordinates.
+                let quotient = |c: [usize; 3]| {
+                    let (mut p, mut q) = (c, c);
+                    p[j] = 1;
+                    q[j] = 0;
+                    (corner(p) - corner(q)) / width[j]
+                };
+                let mut other = [true; 3];
+                other[j] = false;
+                let g = (0..8)
+                    .map(|c| lerp(box_corner(c), &quotient, other).abs())
+                    .fold(0.0, f64::max);
+                slope += g * d[j].abs();
+                for l in (j + 1)..3 {
+                    if !varies[l] {
+                        continue;
+                    }
+                    let cross = |c: [usize; 3]| {
+                        let at = |x: usize, y: usize| {
+                            let mut e = c;
+                            e[j] = x;
+                            e[l] = y;
+                            corner(e)
+                        };
+                        (at(1, 1) - at(1, 0) - at(0, 1) + at(0, 0)) / (width[j] * width[l])
+                    };
+                    let mut third = [false; 3];
+                    third[3 - j - l] = true;
+                    let h = (0..8)
+                        .map(|c| lerp(box_corner(c), &cross, third).abs())
+                        .fold(0.0, f64::max);
+                    mixed += 2.0 * h * (d[j] * d[l]).abs();
+                }
+            }
+            let bound = 2.0 * slope * slope / (kmin * kmin * kmin) + mixed / (kmin * kmin);
+            let c = f[i].abs() * 1e-3 * bound;
+            sq += c * c;
+        }
+        sq.sqrt()
+    }
+
     /// `2 Σ_j G_j² / k_min³ + 2 H_max / k_min²` of one table of values (see
     /// [`Self::curvature_mm`]).
     fn second_bound(&self, table: usize) -> f64 {
@@ -515,5 +661,102 @@ mod tests {
         // (here 5 of 5..45 N/µm, cubed), so a random line reaches about 1 %
         // of it; the golden above shows it exact where the map is softest.
         assert!(worst > 0.005, "largest ratio {worst}");
+    }
+
+    /// Hand-derived, where the mixed term decides: k = 1000 + 1e-4·x·y
+    /// N/µm on a 100 mm square (corner values 1000, 1000, 1000, 1001), a
+    /// force of 1 000 N along +X, the diagonal segment from (40, 40) to
+    /// (60, 60). Over its box ∂k/∂x = 1e-4·y ≤ 6e-3, the same for y, the
+    /// mixed partial is 1e-4, k ≥ 1000.16, and with d = (1, 1)/√2 the bound
+    /// is `1e-3·1000·(2·(2·6e-3/√2)²/k³ + 2·1e-4·½/k²)`; the deflection's
+    /// second derivative there, `−F·1e-3·(k''/k² − 2k'²/k³)`, is about
+    /// 1e-10 — twenty times what the bound would be without its mixed term.
+    #[test]
+    fn curvature_on_golden_with_a_mixed_term() {
+        let mut s = Stiffness::uniform([[1000.0, 1000.0], [1000.0, 1000.0], [1000.0, 1000.0]]);
+        s.grid = [vec![0.0, 100.0], vec![0.0, 100.0], vec![0.0]];
+        s.k[0] = vec![1000.0, 1000.0, 1000.0, 1001.0];
+        let f = Vector3::new(1000.0, 0.0, 0.0);
+        let (a, b) = (Vector3::new(40.0, 40.0, 0.0), Vector3::new(60.0, 60.0, 0.0));
+        let bound = s.curvature_on_mm(&a, &b, &f);
+        let k = 1000.16f64;
+        let g = 6e-3 * 2.0 / 2f64.sqrt();
+        let want = 2.0 * g * g / k.powi(3) + 2.0 * 1e-4 * 0.5 / (k * k);
+        assert_abs_diff_eq!(bound, want, epsilon = 1e-22);
+        let d = (b - a).normalize();
+        let h = 10.0;
+        let at = |t: f64| s.deflection_mm(&(Vector3::new(50.0, 50.0, 0.0) + d * t), &f)[0];
+        let second = ((at(h) - 2.0 * at(0.0) + at(-h)) / (h * h)).abs();
+        assert!(second <= bound, "{second:e} > {bound:e}");
+        assert!(second > 20.0 * 2.0 * g * g / k.powi(3), "{second:e}");
+        // Never above the whole map's bound.
+        assert!(bound <= s.curvature_mm(&f));
+    }
+
+    /// The segment bound holds against second differences along random
+    /// segments inside random cells of a random three-dimensional map, is
+    /// never above the whole map's bound, and comes near the truth (the
+    /// largest ratio seen).
+    #[test]
+    fn curvature_on_bounds_second_differences_on_its_segment() {
+        let mut s = Stiffness::uniform([[20.0, 25.0], [15.0, 16.0], [40.0, 50.0]]);
+        s.grid = [
+            vec![0.0, 100.0, 300.0],
+            vec![0.0, 200.0],
+            vec![0.0, 50.0, 150.0],
+        ];
+        let mut state = 3u64;
+        let mut rnd = || {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            (state >> 11) as f64 / (1u64 << 53) as f64
+        };
+        for slot in s.k.iter_mut() {
+            *slot = (0..18).map(|_| 4.0 + 36.0 * rnd()).collect();
+        }
+        let mut worst = 0.0f64;
+        for k in 0..4000 {
+            let f = Vector3::new(
+                2000.0 * rnd() - 1000.0,
+                2000.0 * rnd() - 1000.0,
+                2000.0 * rnd() - 1000.0,
+            );
+            // A cell, or beyond the grid along some axes (clamped).
+            let mut p = Vector3::zeros();
+            let mut room = f64::INFINITY;
+            for j in 0..3 {
+                let g = &s.grid[j];
+                let cell = (rnd() * (g.len() + 1) as f64) as usize;
+                let (a, b) = match cell {
+                    0 => (g[0] - 100.0, g[0]),
+                    c if c >= g.len() => (g[g.len() - 1], g[g.len() - 1] + 100.0),
+                    c => (g[c - 1], g[c]),
+                };
+                let t = 0.2 + 0.6 * rnd();
+                p[j] = a + (b - a) * t;
+                room = room.min((p[j] - a).min(b - p[j]));
+            }
+            let mut d = Vector3::new(rnd() - 0.5, rnd() - 0.5, rnd() - 0.5);
+            if k % 2 == 0 {
+                // Along one axis, with a µm-scale drift of the others.
+                d *= 1e-5;
+                d[k % 3] = 1.0;
+            }
+            let d = d.normalize();
+            let h = (room * 0.9).min(5.0);
+            let at = |t: f64| s.deflection_mm(&(p + d * t), &f);
+            let second = (at(h) - at(0.0) * 2.0 + at(-h)).norm() / (h * h);
+            let bound = s.curvature_on_mm(&(p - d * h), &(p + d * h), &f);
+            assert!(
+                second <= bound * (1.0 + 1e-9) + 1e-15,
+                "{k}: {second:e} > {bound:e}"
+            );
+            assert!(bound <= s.curvature_mm(&f) * (1.0 + 1e-12));
+            if bound > 0.0 {
+                worst = worst.max(second / bound);
+            }
+        }
+        assert!(worst > 0.5, "largest ratio {worst}");
     }
 }

@@ -1,0 +1,90 @@
+//! Test helpers: the bundled AFM R-1000 and variants of it made by editing
+//! its text (larger angular errors, a stiffness map that varies a lot, a
+//! table value of −0).
+
+use super::MachineTool;
+
+/// The text of `machines/afm-r1000.yaml`.
+pub(crate) fn afm_text() -> String {
+    let path = concat!(env!("CARGO_MANIFEST_DIR"), "/machines/afm-r1000.yaml");
+    std::fs::read_to_string(path).unwrap_or_default()
+}
+
+/// A machine from its text; panics (in a test) on an error.
+pub(crate) fn load(text: &str, name: &str) -> MachineTool {
+    match MachineTool::from_yaml_str(text, name) {
+        Ok(m) => m,
+        Err(e) => panic!("{name}: {e}"),
+    }
+}
+
+/// `list` (`[a, b, …]`, the text after the key) with every number times
+/// `factor`.
+fn scale_list(list: &str, factor: f64) -> String {
+    let inner = list.trim().trim_start_matches('[').trim_end_matches(']');
+    let values: Vec<String> = inner
+        .split(',')
+        .map(|v| match v.trim().parse::<f64>() {
+            Ok(x) => format!("{:?}", x * factor),
+            Err(_) => v.trim().to_string(),
+        })
+        .collect();
+    format!("[{}]", values.join(", "))
+}
+
+/// Every angular component-error table (keys ending in `_urad`) times
+/// `factor`: larger bends of the tool axis and of the tip along a move.
+pub(crate) fn scale_angles(text: &str, factor: f64) -> String {
+    let mut out = String::new();
+    let mut angular = false;
+    for line in text.lines() {
+        let t = line.trim_start();
+        if t.ends_with(':') && !t.starts_with('-') {
+            angular = t.ends_with("_urad:");
+        }
+        let scaled = ["forward:", "reverse:"].iter().find_map(|key| {
+            t.strip_prefix(key).filter(|_| angular).map(|rest| {
+                format!(
+                    "{}{key} {}",
+                    &line[..line.len() - t.len()],
+                    scale_list(rest, factor)
+                )
+            })
+        });
+        out.push_str(&scaled.unwrap_or_else(|| line.to_string()));
+        out.push('\n');
+    }
+    out
+}
+
+/// The stiffness values replaced by pseudo-random ones within 4..40 N/µm:
+/// a map that varies by a factor ten from corner to corner.
+pub(crate) fn soft_stiffness(text: &str) -> String {
+    let mut s = 17u64;
+    let mut out = String::new();
+    for line in text.lines() {
+        if line.trim_start().starts_with("- [[") {
+            let indent = &line[..line.len() - line.trim_start().len()];
+            let mut row = |n: usize| {
+                (0..n)
+                    .map(|_| {
+                        s ^= s << 13;
+                        s ^= s >> 7;
+                        s ^= s << 17;
+                        format!(
+                            "{:.2}",
+                            4.0 + 36.0 * ((s >> 11) as f64 / (1u64 << 53) as f64)
+                        )
+                    })
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            };
+            let (a, b) = (row(3), row(3));
+            out.push_str(&format!("{indent}- [[{a}], [{b}]]\n"));
+        } else {
+            out.push_str(line);
+            out.push('\n');
+        }
+    }
+    out
+}
