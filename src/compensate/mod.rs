@@ -594,15 +594,14 @@ impl Piece<'_, '_> {
     /// length of that stretch (mm) and `M₂` bounds `|g''|`
     /// ([`ToolPredictor::curvature`]; the nominal part is affine). The ends
     /// of the piece are solved (gap below [`SOLVE_TOL_MM`]); the gap is
-    /// evaluated at each crossing. A piece crossing more than
-    /// [`MAX_BREAKS`] breakpoints fails (and is split).
+    /// evaluated at each crossing.
     fn certify(&self, ta: f64, tb: f64, ca: &AxisVec, cb: &AxisVec) -> Option<bool> {
         let pred = self.pred;
         let budget = self.tol - SKIP_MARGIN_MM;
-        let mut fs = [0.0f64; MAX_BREAKS + 2];
-        let mut n = 1;
-        let mut axes_crossing = 0;
-        for s in 0..3 {
+        // Per axis, the breakpoints strictly inside the piece.
+        let mut inner: [&[f64]; 3] = [&[]; 3];
+        let mut total = 0;
+        for (s, slot) in inner.iter_mut().enumerate() {
             let (a, b) = (ca[s], cb[s]);
             let d = b - a;
             if d == 0.0 || !d.is_finite() {
@@ -612,17 +611,25 @@ impl Piece<'_, '_> {
             let (lo, hi) = if a < b { (a, b) } else { (b, a) };
             let i0 = bp.partition_point(|&x| x <= lo);
             let i1 = bp.partition_point(|&x| x < hi);
-            let inner = bp.get(i0..i1).unwrap_or(&[]);
-            if n + inner.len() > MAX_BREAKS {
-                return Some(false);
-            }
-            if inner.is_empty() {
+            *slot = bp.get(i0..i1).unwrap_or(&[]);
+            total += slot.len();
+        }
+        let stretches = Stretches::new(self, ta, tb, ca, cb, budget);
+        if total > MAX_BREAKS {
+            return self.certify_in_order(&inner, &stretches);
+        }
+        let mut fs = [0.0f64; MAX_BREAKS + 2];
+        let mut n = 1;
+        let mut axes_crossing = 0;
+        for (s, xs) in inner.iter().enumerate() {
+            if xs.is_empty() {
                 continue;
             }
+            let (a, d) = (ca[s], cb[s] - ca[s]);
             axes_crossing += 1;
             // In the order of the piece: ascending parameters.
             let first = n;
-            for &x in inner {
+            for &x in xs.iter() {
                 *fs.get_mut(n)? = ((x - a) / d).clamp(0.0, 1.0);
                 n += 1;
             }
@@ -652,42 +659,64 @@ impl Piece<'_, '_> {
                 lo -= 1;
                 lo
             };
-            let f = *fs.get(k)?;
-            let got = pred
-                .attained(&lerp(ca, cb, f), self.dirs, self.lip.tool_mm)
-                .pos;
-            let gap = (got - self.nominal(ta + (tb - ta) * f)).norm();
-            // A NaN gap fails too.
-            if gap.is_nan() || gap > budget {
-                return Some(false);
+            match stretches.gap(*fs.get(k)?) {
+                Some(gap) => *gaps.get_mut(k)? = gap,
+                None => return Some(false),
             }
-            *gaps.get_mut(k)? = gap.max(SOLVE_TOL_MM);
         }
-        // Then the bend of each stretch between crossings: the machine's
-        // global bound first, the stretch's cell where that is too loose.
-        let len = (0..3).map(|s| (cb[s] - ca[s]).powi(2)).sum::<f64>().sqrt();
-        let stat = self.lip.static_curvature(pred);
-        let tool = self.lip.tool_mm;
-        let global = pred.curvature(ca, cb, tool, stat);
+        // Then the bend of each stretch between crossings.
         for (k, w) in fs.windows(2).enumerate() {
             let [fa, fb] = [*w.first()?, *w.get(1)?];
-            let h = (fb - fa) * len;
             let base = gaps.get(k)?.max(*gaps.get(k + 1)?);
-            let fits = |m2: f64| base + m2 * h * h / 8.0 <= budget;
-            if global.is_some_and(fits) {
-                continue;
-            }
-            match pred.curvature_in_cell(&lerp(ca, cb, fa), &lerp(ca, cb, fb), self.dirs, tool) {
-                Some(m2) if fits(m2) => {}
-                // Split: the global bound shrinks with h², so the pieces of
-                // a machine without the cell form (a table value of −0)
-                // are proven too, only shorter.
-                Some(_) => return Some(false),
-                None if global.is_some() => return Some(false),
-                None => return None,
+            if !stretches.bend_fits(fa, fb, base)? {
+                return Some(false);
             }
         }
         Some(true)
+    }
+
+    /// [`Self::certify`] for a piece crossing more breakpoints than its
+    /// arrays hold (fine-pitch tables): the crossings of the three axes are
+    /// merged in the order of the piece and each stretch is checked as it
+    /// comes, without storing them.
+    fn certify_in_order(&self, inner: &[&[f64]; 3], st: &Stretches) -> Option<bool> {
+        let (ca, cb) = (st.ca, st.cb);
+        // Per axis, how many of its crossings are taken.
+        let mut taken = [0usize; 3];
+        let next = |s: usize, taken: &[usize; 3]| -> Option<f64> {
+            let xs = inner.get(s)?;
+            let k = *taken.get(s)?;
+            let d = cb[s] - ca[s];
+            let x = if d > 0.0 {
+                xs.get(k)?
+            } else {
+                xs.get(xs.len().checked_sub(k + 1)?)?
+            };
+            Some(((x - ca[s]) / d).clamp(0.0, 1.0))
+        };
+        let (mut f_prev, mut gap_prev) = (0.0, SOLVE_TOL_MM);
+        loop {
+            let pick = (0..3)
+                .filter_map(|s| next(s, &taken).map(|f| (s, f)))
+                .min_by(|a, b| a.1.total_cmp(&b.1));
+            let (f, gap) = match pick {
+                Some((s, f)) => {
+                    *taken.get_mut(s)? += 1;
+                    match st.gap(f) {
+                        Some(g) => (f, g),
+                        None => return Some(false),
+                    }
+                }
+                None => (1.0, SOLVE_TOL_MM),
+            };
+            if !st.bend_fits(f_prev, f, gap_prev.max(gap))? {
+                return Some(false);
+            }
+            if pick.is_none() {
+                return Some(true);
+            }
+            (f_prev, gap_prev) = (f, gap);
+        }
     }
 
     /// The gap at the quarter points of the piece within the tolerance (the
@@ -706,6 +735,86 @@ impl Piece<'_, '_> {
             }
         }
         worst <= self.tol
+    }
+}
+
+/// What [`Piece::certify`] needs of one compensated piece: the gap at a
+/// parameter and the bend of a stretch between two crossings.
+struct Stretches<'a, 'b, 'p> {
+    piece: &'a Piece<'b, 'p>,
+    ta: f64,
+    tb: f64,
+    ca: &'a AxisVec,
+    cb: &'a AxisVec,
+    budget: f64,
+    /// Length of the piece, mm of command.
+    len: f64,
+    /// The machine-wide bend bound on this piece.
+    global: Option<f64>,
+}
+
+impl<'a, 'b, 'p> Stretches<'a, 'b, 'p> {
+    fn new(
+        piece: &'a Piece<'b, 'p>,
+        ta: f64,
+        tb: f64,
+        ca: &'a AxisVec,
+        cb: &'a AxisVec,
+        budget: f64,
+    ) -> Self {
+        let pred = piece.pred;
+        let stat = piece.lip.static_curvature(pred);
+        Stretches {
+            piece,
+            ta,
+            tb,
+            ca,
+            cb,
+            budget,
+            len: (0..3).map(|s| (cb[s] - ca[s]).powi(2)).sum::<f64>().sqrt(),
+            global: pred.curvature(ca, cb, piece.lip.tool_mm, stat),
+        }
+    }
+
+    /// The gap at parameter `f` of the piece (at least the solve
+    /// tolerance), or `None` beyond the budget (NaN included).
+    fn gap(&self, f: f64) -> Option<f64> {
+        let p = self.piece;
+        let got = p
+            .pred
+            .attained(&lerp(self.ca, self.cb, f), p.dirs, p.lip.tool_mm)
+            .pos;
+        let gap = (got - p.nominal(self.ta + (self.tb - self.ta) * f)).norm();
+        (gap <= self.budget).then_some(gap.max(SOLVE_TOL_MM))
+    }
+
+    /// Whether the stretch `fa..fb` (no breakpoint inside) stays within the
+    /// budget with `base` the larger gap at its ends: the machine's global
+    /// bend bound first, the stretch's own where that is too loose. `None`
+    /// where neither applies (the piece is then sampled).
+    fn bend_fits(&self, fa: f64, fb: f64, base: f64) -> Option<bool> {
+        let h = (fb - fa) * self.len;
+        if h <= 0.0 {
+            return Some(base <= self.budget);
+        }
+        let fits = |m2: f64| base + m2 * h * h / 8.0 <= self.budget;
+        if self.global.is_some_and(fits) {
+            return Some(true);
+        }
+        let p = self.piece;
+        match p.pred.curvature_in_cell(
+            &lerp(self.ca, self.cb, fa),
+            &lerp(self.ca, self.cb, fb),
+            p.dirs,
+            p.lip.tool_mm,
+        ) {
+            Some(m2) => Some(fits(m2)),
+            // Split: the global bound shrinks with h², so the pieces of a
+            // machine without the cell form (a table value of −0) are
+            // proven too, only shorter.
+            None if self.global.is_some() => Some(false),
+            None => None,
+        }
     }
 }
 
@@ -1084,8 +1193,8 @@ mod tests {
     /// parameter (the pieces' programmed ends from the attained ones) is
     /// sampled at 401 points and at every knot of each piece: the bundled
     /// machine, one with 30 times its angular errors, one with a stiffness
-    /// map of 4 to 40 N/µm; cold and with force and thermal drift; at 1 and
-    /// 0.3 µm.
+    /// map of 4 to 40 N/µm, one with its tables on a 5 mm pitch; cold and
+    /// with force and thermal drift; at 1 and 0.3 µm.
     #[test]
     fn regression_split_pieces_stay_within_the_tolerance_between_samples() {
         use crate::machine::tool::{ThermalState, testing};
@@ -1094,6 +1203,8 @@ mod tests {
             testing::load(&text, "afm-r1000.yaml"),
             testing::load(&testing::scale_angles(&text, 30.0), "afm-angles-x30.yaml"),
             testing::load(&testing::soft_stiffness(&text), "afm-soft.yaml"),
+            // Tables on a 5 mm pitch: the crossings are taken in order.
+            testing::load(&testing::fine_tables(&text, 5.0), "afm-fine.yaml"),
         ];
         let hot = crate::predict::BlockContext {
             force_n: Vector3::new(1500.0, -1200.0, 900.0),
@@ -1200,5 +1311,76 @@ mod tests {
                 );
             }
         }
+    }
+
+    /// A piece crossing more breakpoints than the proof's arrays hold is
+    /// proven by taking its crossings in order, not split for their number:
+    /// with the tables resampled on a 5 mm pitch (the same error functions,
+    /// about 200 knots on X), long moves get as many pieces as with the
+    /// 100 mm tables (equal up to where a split falls), and moves that need
+    /// no split on the coarse machine need none on the fine one.
+    #[test]
+    fn fine_pitch_tables_do_not_force_splits() {
+        use crate::machine::tool::testing;
+        let text = testing::afm_text();
+        let fine_text = testing::fine_tables(&text, 5.0);
+        let coarse = testing::load(&text, "afm-r1000.yaml");
+        let fine = testing::load(&fine_text, "afm-fine.yaml");
+        assert!(
+            fine.breakpoints(0).len() > 3 * MAX_BREAKS,
+            "{}",
+            fine.breakpoints(0).len()
+        );
+        let tool = 62.5;
+        let mut whole = 0;
+        let mut long = 0;
+        for tol in [1e-3, 1e-2] {
+            let (pc, pf) = (
+                ToolPredictor::new(&coarse, EffectSet::default()),
+                ToolPredictor::new(&fine, EffectSet::default()),
+            );
+            for (k, ((p0, p1, dirs, c0, c1), (_, _, _, f0, f1))) in random_moves(&pc, tool, 60, 21)
+                .into_iter()
+                .zip(random_moves(&pf, tool, 60, 21))
+                .enumerate()
+            {
+                let pieces = |pred: &ToolPredictor, a: &AxisVec, b: &AxisVec| {
+                    let mut pts = Vec::new();
+                    match split_line(
+                        pred,
+                        &p0,
+                        &p1,
+                        a,
+                        b,
+                        &dirs,
+                        &Lip::new(tool),
+                        tol,
+                        true,
+                        &mut pts,
+                    ) {
+                        Ok(()) => pts.len(),
+                        Err(e) => panic!("{k}: {e}"),
+                    }
+                };
+                let (n_coarse, n_fine) = (pieces(&pc, &c0, &c1), pieces(&pf, &f0, &f1));
+                let crossings = fine
+                    .breakpoints(0)
+                    .iter()
+                    .filter(|&&x| (x - p0[0]) * (x - p1[0]) < 0.0)
+                    .count();
+                if crossings > MAX_BREAKS {
+                    long += 1;
+                }
+                if n_coarse == 1 && crossings > MAX_BREAKS {
+                    whole += 1;
+                    assert_eq!(n_fine, 1, "{k}: a move proven whole on the coarse tables");
+                }
+                assert!(
+                    n_fine <= n_coarse + 1 + n_coarse / 4,
+                    "{k}: {n_fine} pieces, {n_coarse} with coarse tables"
+                );
+            }
+        }
+        assert!(long > 20 && whole > 3, "{long} long moves, {whole} whole");
     }
 }

@@ -88,3 +88,62 @@ pub(crate) fn soft_stiffness(text: &str) -> String {
     }
     out
 }
+
+/// The numbers of a list `[a, b, …]`.
+fn numbers(list: &str) -> Vec<f64> {
+    list.trim()
+        .trim_start_matches('[')
+        .trim_end_matches(']')
+        .split(',')
+        .filter_map(|v| v.trim().parse().ok())
+        .collect()
+}
+
+/// Every component-error table resampled on a pitch of `step_mm` by linear
+/// interpolation: the same error functions with many more knots (as a
+/// laser calibration at a fine pitch gives).
+pub(crate) fn fine_tables(text: &str, step_mm: f64) -> String {
+    let mut out = String::new();
+    let mut positions: Vec<f64> = Vec::new();
+    let mut fine: Vec<f64> = Vec::new();
+    let list = |v: &[f64]| {
+        let items: Vec<String> = v.iter().map(|x| format!("{x:?}")).collect();
+        format!("[{}]", items.join(", "))
+    };
+    for line in text.lines() {
+        let t = line.trim_start();
+        let indent = &line[..line.len() - t.len()];
+        if let Some(rest) = t.strip_prefix("positions_mm:") {
+            positions = numbers(rest);
+            fine.clear();
+            if let (Some(&a), Some(&b)) = (positions.first(), positions.last()) {
+                let n = ((b - a) / step_mm).round() as usize;
+                fine = (0..=n).map(|k| a + (b - a) * k as f64 / n as f64).collect();
+            }
+            out.push_str(&format!("{indent}positions_mm: {}\n", list(&fine)));
+            continue;
+        }
+        let key = ["forward:", "reverse:"]
+            .into_iter()
+            .find(|k| t.starts_with(k));
+        match key {
+            Some(key) if !fine.is_empty() => {
+                let v = numbers(&t[key.len()..]);
+                let at = |x: f64| {
+                    let i = positions
+                        .partition_point(|&p| p <= x)
+                        .clamp(1, positions.len() - 1);
+                    let (p0, p1) = (positions[i - 1], positions[i]);
+                    v[i - 1] + (v[i] - v[i - 1]) * (x - p0) / (p1 - p0)
+                };
+                let resampled: Vec<f64> = fine.iter().map(|&x| at(x)).collect();
+                out.push_str(&format!("{indent}{key} {}\n", list(&resampled)));
+            }
+            _ => {
+                out.push_str(line);
+                out.push('\n');
+            }
+        }
+    }
+    out
+}
