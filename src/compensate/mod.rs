@@ -749,8 +749,9 @@ struct Stretches<'a, 'b, 'p> {
     budget: f64,
     /// Length of the piece, mm of command.
     len: f64,
-    /// The machine-wide bend bound on this piece.
-    global: Option<f64>,
+    /// The machine-wide bend bound on this piece, on first use (a piece
+    /// that fails at a crossing never needs it).
+    global: std::cell::Cell<Option<Option<f64>>>,
 }
 
 impl<'a, 'b, 'p> Stretches<'a, 'b, 'p> {
@@ -762,8 +763,6 @@ impl<'a, 'b, 'p> Stretches<'a, 'b, 'p> {
         cb: &'a AxisVec,
         budget: f64,
     ) -> Self {
-        let pred = piece.pred;
-        let stat = piece.lip.static_curvature(pred);
         Stretches {
             piece,
             ta,
@@ -772,8 +771,20 @@ impl<'a, 'b, 'p> Stretches<'a, 'b, 'p> {
             cb,
             budget,
             len: (0..3).map(|s| (cb[s] - ca[s]).powi(2)).sum::<f64>().sqrt(),
-            global: pred.curvature(ca, cb, piece.lip.tool_mm, stat),
+            global: std::cell::Cell::new(None),
         }
+    }
+
+    /// [`ToolPredictor::curvature`] of the piece.
+    fn global(&self) -> Option<f64> {
+        if let Some(g) = self.global.get() {
+            return g;
+        }
+        let p = self.piece;
+        let stat = p.lip.static_curvature(p.pred);
+        let g = p.pred.curvature(self.ca, self.cb, p.lip.tool_mm, stat);
+        self.global.set(Some(g));
+        g
     }
 
     /// The gap at parameter `f` of the piece (at least the solve
@@ -798,7 +809,8 @@ impl<'a, 'b, 'p> Stretches<'a, 'b, 'p> {
             return Some(base <= self.budget);
         }
         let fits = |m2: f64| base + m2 * h * h / 8.0 <= self.budget;
-        if self.global.is_some_and(fits) {
+        let global = self.global();
+        if global.is_some_and(fits) {
             return Some(true);
         }
         let p = self.piece;
@@ -812,7 +824,7 @@ impl<'a, 'b, 'p> Stretches<'a, 'b, 'p> {
             // Split: the global bound shrinks with h², so the pieces of a
             // machine without the cell form (a table value of −0) are
             // proven too, only shorter.
-            None if self.global.is_some() => Some(false),
+            None if global.is_some() => Some(false),
             None => None,
         }
     }
