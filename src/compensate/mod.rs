@@ -596,24 +596,8 @@ impl Piece<'_, '_> {
     /// of the piece are solved (gap below [`SOLVE_TOL_MM`]); the gap is
     /// evaluated at each crossing.
     fn certify(&self, ta: f64, tb: f64, ca: &AxisVec, cb: &AxisVec) -> Option<bool> {
-        let pred = self.pred;
         let budget = self.tol - SKIP_MARGIN_MM;
-        // Per axis, the breakpoints strictly inside the piece.
-        let mut inner: [&[f64]; 3] = [&[]; 3];
-        let mut total = 0;
-        for (s, slot) in inner.iter_mut().enumerate() {
-            let (a, b) = (ca[s], cb[s]);
-            let d = b - a;
-            if d == 0.0 || !d.is_finite() {
-                continue;
-            }
-            let bp = pred.machine.breakpoints(s);
-            let (lo, hi) = if a < b { (a, b) } else { (b, a) };
-            let i0 = bp.partition_point(|&x| x <= lo);
-            let i1 = bp.partition_point(|&x| x < hi);
-            *slot = bp.get(i0..i1).unwrap_or(&[]);
-            total += slot.len();
-        }
+        let (inner, total) = self.inside(ca, cb);
         let stretches = Stretches::new(self, ta, tb, ca, cb, budget);
         if total > MAX_BREAKS {
             return self.certify_in_order(&inner, &stretches);
@@ -665,14 +649,38 @@ impl Piece<'_, '_> {
             }
         }
         // Then the bend of each stretch between crossings.
+        let mut unknown = false;
         for (k, w) in fs.windows(2).enumerate() {
             let [fa, fb] = [*w.first()?, *w.get(1)?];
             let base = gaps.get(k)?.max(*gaps.get(k + 1)?);
-            if !stretches.bend_fits(fa, fb, base)? {
-                return Some(false);
+            match stretches.bend_fits(fa, fb, base) {
+                Some(false) => return Some(false),
+                Some(true) => {}
+                None => unknown = true,
             }
         }
-        Some(true)
+        (!unknown).then_some(true)
+    }
+
+    /// Per axis, the breakpoints strictly inside the compensated piece
+    /// `ca → cb`, and how many there are in all.
+    fn inside(&self, ca: &AxisVec, cb: &AxisVec) -> ([&[f64]; 3], usize) {
+        let mut inner: [&[f64]; 3] = [&[]; 3];
+        let mut total = 0;
+        for (s, slot) in inner.iter_mut().enumerate() {
+            let (a, b) = (ca[s], cb[s]);
+            let d = b - a;
+            if d == 0.0 || !d.is_finite() {
+                continue;
+            }
+            let bp = self.pred.machine.breakpoints(s);
+            let (lo, hi) = if a < b { (a, b) } else { (b, a) };
+            let i0 = bp.partition_point(|&x| x <= lo);
+            let i1 = bp.partition_point(|&x| x < hi);
+            *slot = bp.get(i0..i1).unwrap_or(&[]);
+            total += slot.len();
+        }
+        (inner, total)
     }
 
     /// [`Self::certify`] for a piece crossing more breakpoints than its
@@ -695,6 +703,9 @@ impl Piece<'_, '_> {
             Some(((x - ca[s]) / d).clamp(0.0, 1.0))
         };
         let (mut f_prev, mut gap_prev) = (0.0, SOLVE_TOL_MM);
+        // A stretch neither bend bound applies to: the verdict is then the
+        // samples' (as in the array path), unless a crossing fails.
+        let mut unknown = false;
         loop {
             let pick = (0..3)
                 .filter_map(|s| next(s, &taken).map(|f| (s, f)))
@@ -709,11 +720,13 @@ impl Piece<'_, '_> {
                 }
                 None => (1.0, SOLVE_TOL_MM),
             };
-            if !st.bend_fits(f_prev, f, gap_prev.max(gap))? {
-                return Some(false);
+            match st.bend_fits(f_prev, f, gap_prev.max(gap)) {
+                Some(false) => return Some(false),
+                Some(true) => {}
+                None => unknown = true,
             }
             if pick.is_none() {
-                return Some(true);
+                return (!unknown).then_some(true);
             }
             (f_prev, gap_prev) = (f, gap);
         }
@@ -722,6 +735,8 @@ impl Piece<'_, '_> {
     /// The gap at the quarter points of the piece within the tolerance (the
     /// check where [`Self::certify`] does not apply).
     fn sampled(&self, ta: f64, tb: f64, ca: &AxisVec, cb: &AxisVec) -> bool {
+        #[cfg(test)]
+        tests::SAMPLED.with(|n| n.set(n.get() + 1));
         let mut worst = 0.0f64;
         for f in [0.25, 0.5, 0.75] {
             let got = self
@@ -804,8 +819,10 @@ impl<'a, 'b, 'p> Stretches<'a, 'b, 'p> {
     /// bend bound first, the stretch's own where that is too loose. `None`
     /// where neither applies (the piece is then sampled).
     fn bend_fits(&self, fa: f64, fb: f64, base: f64) -> Option<bool> {
-        let h = (fb - fa) * self.len;
-        if h <= 0.0 {
+        // The stretches come in order (fb ≥ fa); the length is taken
+        // whatever the order, so a wrong one could not skip the bend.
+        let h = (fb - fa).abs() * self.len;
+        if h == 0.0 {
             return Some(base <= self.budget);
         }
         let fits = |m2: f64| base + m2 * h * h / 8.0 <= self.budget;
@@ -1088,6 +1105,11 @@ fn arc_block(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    thread_local! {
+        /// Pieces judged by [`Piece::sampled`] on this thread.
+        pub(super) static SAMPLED: std::cell::Cell<usize> = const { std::cell::Cell::new(0) };
+    }
     use crate::machine::tool::MachineTool;
     use crate::predict::EffectSet;
     use crate::program::interp::{Interpreter, Setup};
@@ -1227,9 +1249,9 @@ mod tests {
             ..crate::predict::BlockContext::default()
         };
         let tool = 140.0;
-        let mut split = 0;
-        let mut worst = 0.0f64;
         for m in &machines {
+            let mut split = 0;
+            let mut worst = 0.0f64;
             for ctx in [crate::predict::BlockContext::default(), hot] {
                 let pred = ToolPredictor::new(m, EffectSet::default()).with_context(ctx);
                 for tol in [1e-3, 3e-4] {
@@ -1276,15 +1298,18 @@ mod tests {
                     }
                 }
             }
+            // Each machine splits moves, and its pieces use the tolerance,
+            // not a small part of it.
+            assert!(split > 40, "{}: split moves: {split}", m.name());
+            assert!(worst > 0.5, "{}: largest gap / tolerance {worst}", m.name());
         }
-        assert!(split > 150, "split moves: {split}");
-        // The pieces use the tolerance, not a small part of it.
-        assert!(worst > 0.5, "largest gap / tolerance {worst}");
     }
 
     /// The proof applies to every piece of a machine without rotary axes:
-    /// never the sampled fallback, also on a machine whose tables hold a −0
-    /// (no cell form: the global bounds decide, on shorter pieces).
+    /// splitting random moves never falls back to the samples, also on a
+    /// machine whose tables hold a −0 (no cell form: the global bounds
+    /// decide, on shorter pieces), and the bend bounds are reached (moves
+    /// proven whole or in pieces, not only failed at a crossing).
     #[test]
     fn every_piece_of_a_linear_machine_is_proven() {
         use crate::machine::tool::testing;
@@ -1297,7 +1322,45 @@ mod tests {
         ] {
             let pred = ToolPredictor::new(&m, EffectSet::default());
             let tool = 62.5;
-            for (p0, p1, dirs, c0, c1) in random_moves(&pred, tool, 90, 7) {
+            let mut pieces = 0;
+            SAMPLED.with(|n| n.set(0));
+            for tol in [1e-3, 1e-2] {
+                for (p0, p1, dirs, c0, c1) in random_moves(&pred, tool, 90, 7) {
+                    let mut pts = vec![c0];
+                    if let Err(e) = split_line(
+                        &pred,
+                        &p0,
+                        &p1,
+                        &c0,
+                        &c1,
+                        &dirs,
+                        &Lip::new(tool),
+                        tol,
+                        true,
+                        &mut pts,
+                    ) {
+                        panic!("{e}");
+                    }
+                    pieces += pts.len() - 1;
+                }
+            }
+            assert_eq!(SAMPLED.with(|n| n.get()), 0, "pieces sampled");
+            assert!(pieces > 180, "{pieces} pieces");
+        }
+    }
+
+    /// The two ways of taking the crossings of a piece (all at once from the
+    /// middle outwards, or one by one in order) give the same verdict on
+    /// every piece they can both take.
+    #[test]
+    fn both_orders_of_crossings_agree() {
+        use crate::machine::tool::testing;
+        let m = testing::load(&testing::afm_text(), "afm-r1000.yaml");
+        let pred = ToolPredictor::new(&m, EffectSet::default());
+        let tool = 62.5;
+        let (mut compared, mut passed) = (0, 0);
+        for tol in [1e-3, 1e-2] {
+            for (p0, p1, dirs, c0, c1) in random_moves(&pred, tool, 120, 3) {
                 let lip = Lip::new(tool);
                 let piece = Piece {
                     pred: &pred,
@@ -1307,22 +1370,25 @@ mod tests {
                     ts: &[],
                     dirs: &dirs,
                     lip: &lip,
-                    tol: 1e-3,
+                    tol,
                     keep_end: true,
                 };
-                // The whole move, and a short piece of it.
-                let mut c_short = c0;
-                for i in 0..3 {
-                    c_short[i] += (c1[i] - c0[i]) * 1e-3;
+                let (inner, total) = piece.inside(&c0, &c1);
+                if total == 0 || total > MAX_BREAKS {
+                    continue;
                 }
-                assert!(piece.certify(0.0, 1.0, &c0, &c1).is_some(), "{}", m.name());
-                assert!(
-                    piece.certify(0.0, 1e-3, &c0, &c_short).is_some(),
-                    "{}",
-                    m.name()
-                );
+                let budget = tol - SKIP_MARGIN_MM;
+                let stretches = Stretches::new(&piece, 0.0, 1.0, &c0, &c1, budget);
+                let at_once = piece.certify(0.0, 1.0, &c0, &c1);
+                assert_eq!(at_once, piece.certify_in_order(&inner, &stretches));
+                compared += 1;
+                passed += usize::from(at_once == Some(true));
             }
         }
+        assert!(
+            compared > 100 && passed > 20,
+            "{compared} compared, {passed} proven"
+        );
     }
 
     /// A piece crossing more breakpoints than the proof's arrays hold is

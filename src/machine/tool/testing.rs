@@ -127,7 +127,7 @@ pub(crate) fn fine_tables(text: &str, step_mm: f64) -> String {
             .into_iter()
             .find(|k| t.starts_with(k));
         match key {
-            Some(key) if !fine.is_empty() => {
+            Some(key) if !fine.is_empty() && positions.len() >= 2 => {
                 let v = numbers(&t[key.len()..]);
                 let at = |x: f64| {
                     let i = positions
