@@ -157,7 +157,9 @@ impl std::fmt::Display for Failure {
 #[derive(Debug, Clone, Copy)]
 pub struct Settings {
     /// Largest allowed gap between the attained path and the programmed
-    /// path along a move, mm.
+    /// path along a move, mm; at least [`MIN_TOLERANCE_MM`] (below it no
+    /// piece can be proven and long moves fail with
+    /// [`Failure::TooManySegments`]; the command line refuses it).
     pub tolerance_mm: f64,
 }
 
