@@ -85,7 +85,8 @@ pub struct BatchArgs {
     /// Effects.
     #[command(flatten)]
     pub effects: EffectArgs,
-    /// Largest gap between attained and programmed path along a move, mm.
+    /// Largest gap between attained and programmed path along a move, mm
+    /// (at least 0.000001: ten times the solver's convergence).
     #[arg(long, default_value_t = 0.001)]
     pub tolerance: f64,
     /// Annotate compensated blocks with their predicted deviation.
@@ -173,7 +174,8 @@ pub struct CompensateArgs {
     /// Output path (default `<stem>.comp.<ext>` beside the input; `-` = stdout).
     #[arg(short, long)]
     pub output: Option<PathBuf>,
-    /// Largest gap between attained and programmed path along a move, mm.
+    /// Largest gap between attained and programmed path along a move, mm
+    /// (at least 0.000001: ten times the solver's convergence).
     #[arg(long, default_value_t = 0.001)]
     pub tolerance: f64,
     /// Annotate compensated blocks with their predicted deviation.

@@ -469,15 +469,7 @@ fn crossings(pred: &ToolPredictor, p0: &AxisVec, p1: &AxisVec, ts: &mut [f64]) -
     for s in 0..6 {
         let (a, b) = (p0[s], p1[s]);
         let d = b - a;
-        if d == 0.0 || !d.is_finite() {
-            continue;
-        }
-        let bp = pred.machine.breakpoints(s);
-        let (lo, hi) = if a < b { (a, b) } else { (b, a) };
-        // Breakpoints strictly inside (lo, hi).
-        let i0 = bp.partition_point(|&x| x <= lo);
-        let i1 = bp.partition_point(|&x| x < hi);
-        let inner = bp.get(i0..i1).unwrap_or(&[]);
+        let inner = breaks_inside(pred, s, a, b);
         if n + inner.len() > ts.len() {
             return 0;
         }
@@ -492,6 +484,19 @@ fn crossings(pred: &ToolPredictor, p0: &AxisVec, p1: &AxisVec, ts: &mut [f64]) -
         t.sort_unstable_by(f64::total_cmp);
     }
     n
+}
+
+/// The breakpoints of slot `s` strictly between the positions `a` and `b`
+/// (none when they are equal or not finite), ascending.
+fn breaks_inside<'m>(pred: &ToolPredictor<'m>, s: usize, a: f64, b: f64) -> &'m [f64] {
+    if a == b || !(b - a).is_finite() {
+        return &[];
+    }
+    let bp = pred.machine.breakpoints(s);
+    let (lo, hi) = if a < b { (a, b) } else { (b, a) };
+    let i0 = bp.partition_point(|&x| x <= lo);
+    let i1 = bp.partition_point(|&x| x < hi);
+    bp.get(i0..i1).unwrap_or(&[])
 }
 
 /// One straight move being split: its programmed ends, the nominal tip at
@@ -667,22 +672,8 @@ impl Piece<'_, '_> {
     /// Per axis, the breakpoints strictly inside the compensated piece
     /// `ca → cb`, and how many there are in all.
     fn inside(&self, ca: &AxisVec, cb: &AxisVec) -> ([&[f64]; 3], usize) {
-        let mut inner: [&[f64]; 3] = [&[]; 3];
-        let mut total = 0;
-        for (s, slot) in inner.iter_mut().enumerate() {
-            let (a, b) = (ca[s], cb[s]);
-            let d = b - a;
-            if d == 0.0 || !d.is_finite() {
-                continue;
-            }
-            let bp = self.pred.machine.breakpoints(s);
-            let (lo, hi) = if a < b { (a, b) } else { (b, a) };
-            let i0 = bp.partition_point(|&x| x <= lo);
-            let i1 = bp.partition_point(|&x| x < hi);
-            *slot = bp.get(i0..i1).unwrap_or(&[]);
-            total += slot.len();
-        }
-        (inner, total)
+        let inner: [&[f64]; 3] = [0, 1, 2].map(|s| breaks_inside(self.pred, s, ca[s], cb[s]));
+        (inner, inner.iter().map(|x| x.len()).sum())
     }
 
     /// [`Self::certify`] for a piece crossing more breakpoints than its
