@@ -706,6 +706,17 @@ thermal:
         }
     }
 
+    /// Deterministic pseudo-random numbers in [0, 1) from `seed`.
+    fn lcg(seed: u64) -> impl FnMut() -> f64 {
+        let mut s = seed;
+        move || {
+            s = s
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (s >> 11) as f64 / (1u64 << 53) as f64
+        }
+    }
+
     /// Checks `|G(b) − G(a)| ≤ L·|b − a|` (G = attained − nominal) on
     /// random pairs of commands of the machine file `name` with `effects`;
     /// returns the largest ratio seen over far pairs (0 when the bound does
@@ -725,13 +736,7 @@ thermal:
             },
             ..BlockContext::default()
         };
-        let mut s = 11u64;
-        let mut rng = || {
-            s = s
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            (s >> 11) as f64 / (1u64 << 53) as f64
-        };
+        let mut rng = lcg(11u64);
         let mut worst_ratio = 0.0f64;
         for ctx in [BlockContext::default(), hot] {
             let p = ToolPredictor::new(&m, effects).with_context(ctx);
@@ -859,13 +864,7 @@ thermal:
             },
             ..BlockContext::default()
         };
-        let mut s = 5u64;
-        let mut rng = || {
-            s = s
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            (s >> 11) as f64 / (1u64 << 53) as f64
-        };
+        let mut rng = lcg(5u64);
         let mut checked = 0;
         let mut ratio = [0.0f64; 2];
         for m in &machines {
@@ -874,46 +873,12 @@ thermal:
                     let p = ToolPredictor::new(m, *effects).with_context(ctx);
                     let stat = p.static_curvature_mm();
                     for k in 0..300 {
-                        let mut a = [0.0; 6];
-                        for (slot, v) in a.iter_mut().enumerate().take(3) {
-                            let (lo, hi) = m.travel(slot).unwrap_or((0.0, 0.0));
-                            *v = lo + (hi - lo) * rng();
-                        }
-                        let mut d = [rng() - 0.5, rng() - 0.5, rng() - 0.5];
-                        if k % 2 == 1 {
-                            d = d.map(|v| v * 1e-5);
-                            d[k % 3] = 1.0;
-                        }
-                        let n = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
-                        let mut len = 200.0 * rng();
-                        for slot in 0..3 {
-                            d[slot] /= n;
-                            let bp = m.breakpoints(slot);
-                            let next = if d[slot] > 0.0 {
-                                bp.iter()
-                                    .find(|&&x| x > a[slot])
-                                    .map(|x| (x - a[slot]) / d[slot])
-                            } else {
-                                bp.iter()
-                                    .rev()
-                                    .find(|&&x| x < a[slot])
-                                    .map(|x| (x - a[slot]) / d[slot])
-                            };
-                            if let Some(t) = next {
-                                len = len.min(t);
-                            }
-                        }
-                        if len < 4.0 {
+                        let Some((a, b, dirs)) = testing::segment_in_cell(m, &mut rng, 200.0)
+                        else {
                             continue;
-                        }
-                        let mut b = a;
-                        let mut dirs = [1i8; 6];
-                        for slot in 0..3 {
-                            b[slot] = a[slot] + d[slot] * len;
-                            if d[slot] < 0.0 {
-                                dirs[slot] = -1;
-                            }
-                        }
+                        };
+                        let len = (0..3).map(|i| (b[i] - a[i]).powi(2)).sum::<f64>().sqrt();
+                        let d = [0, 1, 2].map(|i| (b[i] - a[i]) / len);
                         let tool = [0.0, 62.5, 140.0][k % 3];
                         let (Some(global), Some(cell)) = (
                             p.curvature(&a, &b, tool, stat),

@@ -788,68 +788,6 @@ mod tests {
         cmds
     }
 
-    /// A random straight segment of commands inside one cell of `m` (no
-    /// breakpoint between its ends): start in the travel, a direction that
-    /// is either general or one axis with a µm-scale drift of the others
-    /// (a compensated axis-parallel move), length up to 300 mm. `None` when
-    /// the cell is too short for second differences.
-    fn segment_in_cell(m: &MachineTool, s: &mut u64) -> Option<(AxisVec, AxisVec, [i8; 6])> {
-        let mut a = [0.0; 6];
-        for (slot, v) in a.iter_mut().enumerate().take(3) {
-            let (lo, hi) = m.travel(slot).unwrap_or((-100.0, 100.0));
-            *v = lo + (hi - lo) * rng(s);
-        }
-        let mut d = [0.0; 3];
-        if rng(s) < 0.5 {
-            for v in d.iter_mut() {
-                *v = rng(s) - 0.5;
-            }
-        } else {
-            for v in d.iter_mut() {
-                *v = (rng(s) - 0.5) * 1e-5;
-            }
-            d[(rng(s) * 3.0) as usize % 3] = 1.0;
-        }
-        let n = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
-        let mut len = 300.0 * rng(s);
-        for slot in 0..3 {
-            d[slot] /= n;
-            if d[slot] == 0.0 || !m.has_axis(slot) {
-                continue;
-            }
-            let bp = m.breakpoints(slot);
-            let next = if d[slot] > 0.0 {
-                bp.iter()
-                    .find(|&&x| x > a[slot])
-                    .map(|x| (x - a[slot]) / d[slot])
-            } else {
-                bp.iter()
-                    .rev()
-                    .find(|&&x| x < a[slot])
-                    .map(|x| (x - a[slot]) / d[slot])
-            };
-            if let Some(t) = next {
-                len = len.min(t);
-            }
-        }
-        if len < 4.0 {
-            return None;
-        }
-        let mut b = a;
-        let mut dirs = [1i8; 6];
-        for slot in 0..3 {
-            if !m.has_axis(slot) {
-                d[slot] = 0.0;
-                a[slot] = 0.0;
-            }
-            b[slot] = a[slot] + d[slot] * len;
-            if d[slot] < 0.0 {
-                dirs[slot] = -1;
-            }
-        }
-        Some((a, b, dirs))
-    }
-
     /// The derivative bounds of a segment inside a cell, per cell and
     /// global, hold against central second differences of the geometric
     /// tip and unit tool axis (the cell form is cubic along a line, so the
@@ -871,7 +809,8 @@ mod tests {
         let mut axis_seen = 0.0f64;
         for m in machines {
             for k in 0..400 {
-                let Some((a, b, dirs)) = segment_in_cell(&m, &mut s) else {
+                let Some((a, b, dirs)) = testing::segment_in_cell(&m, &mut || rng(&mut s), 300.0)
+                else {
                     continue;
                 };
                 let tool = [0.0, 62.5, 140.0][k % 3];

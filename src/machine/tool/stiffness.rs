@@ -611,27 +611,34 @@ mod tests {
         assert_abs_diff_eq!(fd(1.0), 8e-5 * (10.0f64 / 10.2).powi(3), epsilon = 1e-9);
     }
 
-    /// The bound holds against central second differences of the deflection
-    /// along random lines through a three-dimensional map with mixed terms,
-    /// away from the grid positions.
-    #[test]
-    fn curvature_bounds_second_differences() {
+    /// A map on a 3 × 2 × 3 grid with values drawn from `lo..hi` N/µm, and
+    /// the generator (seeded with `seed`) for the test to go on with.
+    fn random_map(seed: u64, lo: f64, hi: f64) -> (Stiffness, impl FnMut() -> f64) {
         let mut s = Stiffness::uniform([[20.0, 25.0], [15.0, 16.0], [40.0, 50.0]]);
         s.grid = [
             vec![0.0, 100.0, 300.0],
             vec![0.0, 200.0],
             vec![0.0, 50.0, 150.0],
         ];
-        let mut state = 7u64;
-        let mut rnd = || {
+        let mut state = seed;
+        let mut rnd = move || {
             state ^= state << 13;
             state ^= state >> 7;
             state ^= state << 17;
             (state >> 11) as f64 / (1u64 << 53) as f64
         };
         for slot in s.k.iter_mut() {
-            *slot = (0..18).map(|_| 5.0 + 40.0 * rnd()).collect();
+            *slot = (0..18).map(|_| lo + (hi - lo) * rnd()).collect();
         }
+        (s, rnd)
+    }
+
+    /// The bound holds against central second differences of the deflection
+    /// along random lines through a three-dimensional map with mixed terms,
+    /// away from the grid positions.
+    #[test]
+    fn curvature_bounds_second_differences() {
+        let (s, mut rnd) = random_map(7, 5.0, 45.0);
         // Within one grid cell, clamped beyond: the cells of the lines below.
         let cells = [[0.0, 100.0], [0.0, 200.0], [0.0, 50.0]];
         let mut worst = 0.0f64;
@@ -699,22 +706,7 @@ mod tests {
     /// largest ratio seen).
     #[test]
     fn curvature_on_bounds_second_differences_on_its_segment() {
-        let mut s = Stiffness::uniform([[20.0, 25.0], [15.0, 16.0], [40.0, 50.0]]);
-        s.grid = [
-            vec![0.0, 100.0, 300.0],
-            vec![0.0, 200.0],
-            vec![0.0, 50.0, 150.0],
-        ];
-        let mut state = 3u64;
-        let mut rnd = || {
-            state ^= state << 13;
-            state ^= state >> 7;
-            state ^= state << 17;
-            (state >> 11) as f64 / (1u64 << 53) as f64
-        };
-        for slot in s.k.iter_mut() {
-            *slot = (0..18).map(|_| 4.0 + 36.0 * rnd()).collect();
-        }
+        let (s, mut rnd) = random_map(3, 4.0, 40.0);
         let mut worst = 0.0f64;
         for k in 0..4000 {
             let f = Vector3::new(

@@ -3,6 +3,7 @@
 //! table value of −0).
 
 use super::MachineTool;
+use crate::machine::{AxisVec, DirVec};
 
 /// The text of `machines/afm-r1000.yaml`.
 pub(crate) fn afm_text() -> String {
@@ -146,4 +147,70 @@ pub(crate) fn fine_tables(text: &str, step_mm: f64) -> String {
         }
     }
     out
+}
+
+/// A random straight segment of commands inside one cell of `m` (no
+/// breakpoint between its ends): start in the travel, a direction that
+/// is either general or one axis with a µm-scale drift of the others
+/// (a compensated axis-parallel move), length up to `max_len_mm`. `None` when
+/// the cell is too short for second differences.
+pub(crate) fn segment_in_cell(
+    m: &MachineTool,
+    rng: &mut dyn FnMut() -> f64,
+    max_len_mm: f64,
+) -> Option<(AxisVec, AxisVec, DirVec)> {
+    let mut a = [0.0; 6];
+    for (slot, v) in a.iter_mut().enumerate().take(3) {
+        let (lo, hi) = m.travel(slot).unwrap_or((-100.0, 100.0));
+        *v = lo + (hi - lo) * rng();
+    }
+    let mut d = [0.0; 3];
+    if rng() < 0.5 {
+        for v in d.iter_mut() {
+            *v = rng() - 0.5;
+        }
+    } else {
+        for v in d.iter_mut() {
+            *v = (rng() - 0.5) * 1e-5;
+        }
+        d[(rng() * 3.0) as usize % 3] = 1.0;
+    }
+    let n = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+    let mut len = max_len_mm * rng();
+    for slot in 0..3 {
+        d[slot] /= n;
+        if d[slot] == 0.0 || !m.has_axis(slot) {
+            continue;
+        }
+        let bp = m.breakpoints(slot);
+        let next = if d[slot] > 0.0 {
+            bp.iter()
+                .find(|&&x| x > a[slot])
+                .map(|x| (x - a[slot]) / d[slot])
+        } else {
+            bp.iter()
+                .rev()
+                .find(|&&x| x < a[slot])
+                .map(|x| (x - a[slot]) / d[slot])
+        };
+        if let Some(t) = next {
+            len = len.min(t);
+        }
+    }
+    if len < 4.0 {
+        return None;
+    }
+    let mut b = a;
+    let mut dirs = [1i8; 6];
+    for slot in 0..3 {
+        if !m.has_axis(slot) {
+            d[slot] = 0.0;
+            a[slot] = 0.0;
+        }
+        b[slot] = a[slot] + d[slot] * len;
+        if d[slot] < 0.0 {
+            dirs[slot] = -1;
+        }
+    }
+    Some((a, b, dirs))
 }
