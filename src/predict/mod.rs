@@ -336,12 +336,18 @@ impl<'m> ToolPredictor<'m> {
     /// Static deflection (mm, unscaled) at the command; zero without a
     /// stiffness map or force.
     fn static_part(&self, cmd: &AxisVec) -> Vector3<f64> {
-        match self.machine.stiffness() {
-            Some(k) if self.ctx.force_n != Vector3::zeros() => {
-                k.deflection_mm(&Vector3::new(cmd[0], cmd[1], cmd[2]), &self.ctx.force_n)
-            }
-            _ => Vector3::zeros(),
+        match self.loaded_stiffness() {
+            Some(k) => k.deflection_mm(&Vector3::new(cmd[0], cmd[1], cmd[2]), &self.ctx.force_n),
+            None => Vector3::zeros(),
         }
+    }
+
+    /// The stiffness map when the block has a process force to deflect the
+    /// tool (`None` without either).
+    fn loaded_stiffness(&self) -> Option<&'m crate::machine::tool::Stiffness> {
+        self.machine
+            .stiffness()
+            .filter(|_| self.ctx.force_n != Vector3::zeros())
     }
 
     /// Thermal deviation (mm, unscaled) at the command with the nominal tool
@@ -362,10 +368,8 @@ impl<'m> ToolPredictor<'m> {
     /// grid positions (mm per mm², unscaled by the gain; 0 without a force
     /// or a stiffness map): [`crate::machine::tool::Stiffness::curvature_mm`].
     pub fn static_curvature_mm(&self) -> f64 {
-        match self.machine.stiffness() {
-            Some(k) if self.ctx.force_n != Vector3::zeros() => k.curvature_mm(&self.ctx.force_n),
-            _ => 0.0,
-        }
+        self.loaded_stiffness()
+            .map_or(0.0, |k| k.curvature_mm(&self.ctx.force_n))
     }
 
     /// Upper bound of `|d² attained(c).pos / ds²|` (1/mm; `s` the arc
@@ -428,16 +432,13 @@ impl<'m> ToolPredictor<'m> {
             .machine
             .segment_bounds(a, b, dirs, tool_mm, growth.is_some())?;
         let g = self.effects.gain(Effect::Geometric);
-        let stat = match self.machine.stiffness() {
-            Some(k) if self.ctx.force_n != Vector3::zeros() => {
-                let (pa, pb) = (
-                    Vector3::new(a[0], a[1], a[2]),
-                    Vector3::new(b[0], b[1], b[2]),
-                );
-                k.curvature_on_mm(&pa, &pb, &self.ctx.force_n)
-            }
-            _ => 0.0,
-        };
+        let stat = self.loaded_stiffness().map_or(0.0, |k| {
+            let (pa, pb) = (
+                Vector3::new(a[0], a[1], a[2]),
+                Vector3::new(b[0], b[1], b[2]),
+            );
+            k.curvature_on_mm(&pa, &pb, &self.ctx.force_n)
+        });
         let mut m = g.abs() * sb.pos2 + self.static_curvature_part(stat);
         if let Some(growth_mm) = growth {
             let n = sb.dir_norm_lo;
