@@ -478,6 +478,10 @@ struct Stage {
     contexts: Vec<BlockContext>,
     /// The compensation of each line.
     results: Vec<Solved>,
+    /// The last lines with a move before the chunk (plan and block context,
+    /// in order; at most [`compensate::CARRY_LOOKBACK`] + 1): where the
+    /// chunk's first run of blocks starts from.
+    before: Vec<(Plan, BlockContext)>,
 }
 
 /// Lines parsed in order by one task when a chunk is parsed in parallel.
@@ -626,12 +630,40 @@ impl<'m> Job<'m> {
         st.results.truncate(n);
         st.results.resize_with(n, || None);
         let plans = &st.plans[..n];
+        let contexts = &st.contexts;
+        let before = &st.before;
         st.results
             .par_chunks_mut(GROUP_BLOCKS)
             .zip(plans.par_chunks(GROUP_BLOCKS))
             .zip(st.contexts.par_chunks(GROUP_BLOCKS))
-            .for_each(|((rs, ps), cs)| {
-                let mut carry = None;
+            .enumerate()
+            .for_each(|(g, ((rs, ps), cs))| {
+                // The run starts from the last move before it, as if it
+                // had gone through the blocks before.
+                let start = g * GROUP_BLOCKS;
+                let keep = compensate::CARRY_LOOKBACK + 1;
+                let mut last: Vec<(ToolPredictor, Plan)> = plans
+                    .get(..start)
+                    .unwrap_or(&[])
+                    .iter()
+                    .zip(contexts)
+                    .rev()
+                    .filter(|(p, _)| p.mv.is_some())
+                    .take(keep)
+                    .map(|(p, c)| (pred.with_context(*c), *p))
+                    .collect();
+                let more = keep - last.len();
+                let from = before.len().saturating_sub(more);
+                last.extend(
+                    before
+                        .get(from..)
+                        .unwrap_or(&[])
+                        .iter()
+                        .rev()
+                        .map(|(p, c)| (pred.with_context(*c), *p)),
+                );
+                last.reverse();
+                let mut carry = compensate::carry_before(&last, &self.settings);
                 for ((r, p), c) in rs.iter_mut().zip(ps).zip(cs) {
                     let segments = match r.take() {
                         Some(Ok(old)) => old.segments,
@@ -682,6 +714,8 @@ impl<'m> Job<'m> {
             .as_ref()
             .is_some_and(|p| !p.effects.is_none() || rows.is_some());
 
+        // The last lines with a move so far (plan and context, in order).
+        let mut last_moves: Vec<(Plan, BlockContext)> = Vec::new();
         // Interprets one parsed chunk: its plans and block contexts.
         let mut prepare = |st: &mut Stage, summary: &mut Summary| -> Result<()> {
             let chunk = &mut st.chunk;
@@ -690,6 +724,8 @@ impl<'m> Job<'m> {
                 st.plans.resize(n, Plan::default());
             }
             st.contexts.clear();
+            st.before.clear();
+            st.before.extend_from_slice(&last_moves);
             for (i, plan) in st.plans[..n].iter_mut().enumerate() {
                 chunk.block(i)?;
                 let (s, e) = chunk.ranges[i];
@@ -748,6 +784,20 @@ impl<'m> Job<'m> {
                 }
             }
             summary.lines = chunk.first_line + chunk.ranges.len();
+            // The chunk's last moves, after those before it.
+            let keep = compensate::CARRY_LOOKBACK + 1;
+            let mine: Vec<(Plan, BlockContext)> = st.plans[..n]
+                .iter()
+                .zip(&st.contexts)
+                .rev()
+                .filter(|(p, _)| p.mv.is_some())
+                .take(keep)
+                .map(|(p, c)| (*p, *c))
+                .collect();
+            let from_before = keep - mine.len();
+            let skip = last_moves.len().saturating_sub(from_before);
+            last_moves.drain(..skip);
+            last_moves.extend(mine.into_iter().rev());
             Ok(())
         };
 

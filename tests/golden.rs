@@ -128,9 +128,16 @@ fn z_pitch_with_tool_length_gives_abbe_shift() {
         &m,
         "G0 X0 Y0 Z50\nG43 H1 Z40\nG1 X200 Y100 F1000\nG49 G0 Z60\nG1 X300\n",
     );
+    // `G43 H1 Z40` positions Z only: X stays at X0, which was right without
+    // the tool. With it the start X0 needs the same Abbe shift, so the feed
+    // first takes up X0.01; after `G49 G0 Z60` X stands at 200.01, and the
+    // next feed, without tool length, first takes up X200.
     let lines: Vec<&str> = out.lines().collect();
-    assert_abs_diff_eq!(word(lines[2], 'X').unwrap(), 200.01, epsilon = WORD_TOL_MM);
-    assert_abs_diff_eq!(word(lines[4], 'X').unwrap(), 300.0, epsilon = WORD_TOL_MM);
+    assert_abs_diff_eq!(word(lines[2], 'X').unwrap(), 0.01, epsilon = WORD_TOL_MM);
+    assert_abs_diff_eq!(word(lines[3], 'X').unwrap(), 200.01, epsilon = WORD_TOL_MM);
+    assert_abs_diff_eq!(word(lines[5], 'X').unwrap(), 200.0, epsilon = WORD_TOL_MM);
+    assert_abs_diff_eq!(word(lines[6], 'X').unwrap(), 300.0, epsilon = WORD_TOL_MM);
+    assert_eq!(lines.len(), 7, "{out}");
 }
 
 #[test]
@@ -186,7 +193,18 @@ fn compensated_long_moves_stay_within_tolerance() {
     };
     let dir = tempfile::tempdir().unwrap();
     let program = "G90 G54 G0 X-200 Y-100 Z20\nG43 H1 Z5\nG1 X500 Y300 Z-10 F2000\nX-240\n";
-    let out = compensate(dir.path(), &text, program);
+    // With annotations: a takeup point is marked.
+    std::fs::write(dir.path().join("m.yaml"), &text).unwrap();
+    std::fs::write(dir.path().join("p.nc"), program).unwrap();
+    let run = postproc()
+        .args(["compensate", "-o", "-", "--machine"])
+        .arg(dir.path().join("m.yaml"))
+        .arg(dir.path().join("p.nc"))
+        .output()
+        .unwrap();
+    assert_eq!(run.status.code(), Some(0));
+    let out = String::from_utf8(run.stdout).unwrap();
+    let lines: Vec<&str> = out.lines().collect();
     let programmed: Vec<Vector3<f64>> = moves(&machine, program)
         .iter()
         .map(|(m, _)| m.end3())
@@ -218,7 +236,8 @@ fn compensated_long_moves_stay_within_tolerance() {
             .fold(f64::INFINITY, f64::min)
     };
     let mut checked = 0;
-    for (mv, _) in compensated
+    let mut takeups = 0;
+    for (mv, line) in compensated
         .iter()
         .filter(|(m, _)| m.motion == Motion::Linear)
     {
@@ -232,6 +251,12 @@ fn compensated_long_moves_stay_within_tolerance() {
             d_end <= POINT_TOL_MM,
             "emitted point off the programmed path by {d_end} mm"
         );
+        // The move onto a takeup point is not along the programmed path: it
+        // brings the machine onto the start (its end is checked above).
+        if lines[line - 1].contains("takeup") {
+            takeups += 1;
+            continue;
+        }
         // Sample the straight command between consecutive emitted points.
         for k in 1..10 {
             let t = k as f64 / 10.0;
@@ -248,6 +273,9 @@ fn compensated_long_moves_stay_within_tolerance() {
         checked += 1;
     }
     assert!(checked >= 4);
+    // After the positioning `G43 H1 Z5` (X and Y stay where they were,
+    // right without the tool) and where X reverses.
+    assert_eq!(takeups, 2, "{out}");
     // The final point of each programmed move is reached exactly.
     let last = compensated.last().unwrap().0;
     let got = machine.geometric(&last.end, &dirs[1], tool).pos;
@@ -545,4 +573,100 @@ fn work_offset_and_decimals_options_apply() {
     ]);
     let text = String::from_utf8(out).unwrap();
     assert_eq!(text.lines().nth(1).unwrap(), "G1 X399.99 F1000");
+}
+
+#[test]
+fn regression_reversed_passes_start_on_the_programmed_path() {
+    // Raster passes along X with short Y steps on the AFM R-1000: every pass
+    // reverses X, and the direction-dependent errors change the correction
+    // at the reversal by about 3.5 µm. The step's end was solved for the
+    // old direction; a pass that left from there ran its first piece up to
+    // that far off the programmed path (before the fix: 3.4 µm at 1 µm
+    // tolerance, fading along the piece). Now a takeup point (the pass's
+    // start solved for the new direction) comes first. Every other
+    // straight piece is checked against the programmed move it belongs
+    // to, with that move's directions of motion, at 20 points.
+    let text = std::fs::read_to_string(repo("machines/afm-r1000.yaml")).unwrap();
+    let Machine::Tool(machine) = Machine::from_yaml_str(&text, "afm").unwrap() else {
+        panic!("not a machine tool")
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let mut program = String::from("G90 G54 G0 X-200 Y-100 Z20\nG43 H1 Z5\nG1 X300 F2000\n");
+    for k in 1..=6 {
+        let x = if k % 2 == 1 { -200 } else { 300 };
+        program += &format!("Y{:.1}\nX{x}\n", -100.0 + 0.1 * k as f64);
+    }
+    let m = dir.path().join("m.yaml");
+    std::fs::write(&m, &text).unwrap();
+    let p = dir.path().join("p.nc");
+    std::fs::write(&p, &program).unwrap();
+    let out = postproc()
+        .args([
+            "compensate",
+            "--effects",
+            "geometric",
+            "-o",
+            "-",
+            "--machine",
+        ])
+        .arg(&m)
+        .arg(&p)
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(0));
+    let out = String::from_utf8(out.stdout).unwrap();
+    let programmed = moves(&machine, &program);
+    let compensated = moves(&machine, &out);
+    let lines: Vec<&str> = out.lines().collect();
+    let tool = machine.tool_length_mm(1).unwrap();
+    let tolerance = 0.001;
+    // Each annotated line starts the next programmed move's commands.
+    let mut owner = vec![usize::MAX; lines.len() + 1];
+    let mut j = usize::MAX;
+    for (i, l) in lines.iter().enumerate() {
+        if l.contains("(dev ") {
+            j = j.wrapping_add(1);
+        }
+        owner[i + 1] = j;
+    }
+    let mut takeups = 0;
+    let mut checked = 0;
+    for (mv, line) in &compensated {
+        let (pm, _) = &programmed[owner[*line]];
+        if pm.motion != Motion::Linear {
+            continue;
+        }
+        if lines[line - 1].contains("takeup") {
+            // The move onto the takeup point: the programmed start with the
+            // new direction at its end.
+            let got = machine.geometric(&mv.end, &pm.dirs, tool).pos;
+            assert!(
+                (got - pm.start3()).norm() <= POINT_TOL_MM,
+                "{}",
+                lines[line - 1]
+            );
+            takeups += 1;
+            continue;
+        }
+        for k in 0..=20 {
+            let t = k as f64 / 20.0;
+            let mut c = mv.start;
+            for (ci, (s, e)) in c.iter_mut().zip(mv.start.iter().zip(mv.end.iter())) {
+                *ci = s + (e - s) * t;
+            }
+            let got = machine.geometric(&c, &pm.dirs, tool).pos;
+            let d = dist_to_segment(&got, &pm.start3(), &pm.end3());
+            assert!(
+                d <= tolerance + POINT_TOL_MM,
+                "gap {d} mm at {t} of the piece ending on line {line}: {}",
+                lines[line - 1]
+            );
+        }
+        checked += 1;
+    }
+    // Every X pass after the first reverses X, and the first feed starts
+    // after `G43 H1 Z5`, which positions Z only: X and Y stay where they
+    // were, right without the tool, not with it.
+    assert_eq!(takeups, 7, "{out}");
+    assert!(checked >= 18, "{checked} pieces\n{out}");
 }

@@ -184,6 +184,11 @@ pub struct BlockResult {
     pub segments: Vec<AxisVec>,
     /// The arc is replaced by straight segments.
     pub arc_replaced: bool,
+    /// The first of `segments` is a takeup point: the programmed start
+    /// solved for this move, where the previous block's end (solved for its
+    /// own directions of motion, load or temperature) would leave the
+    /// attained point more than [`TAKEUP_SHARE`] of the tolerance away.
+    pub takeup: bool,
     /// Predicted deviation of the uncompensated target, with its breakdown.
     pub deviation: Breakdown,
     /// Predicted position error left at the compensated end point, mm.
@@ -418,8 +423,12 @@ const BREAK_MARGIN: f64 = 1e-6;
 /// final one `c1` only with `keep_end` (so that a move that needs no split
 /// pushes nothing and allocates nothing).
 ///
-/// `c0` and `c1` must be solutions of `p0` and `p1` (residual below
-/// [`SOLVE_TOL_MM`] with `dirs`, `tool` and the predictor's context).
+/// `c1` must be a solution of `p1` (residual below [`SOLVE_TOL_MM`] with
+/// `dirs`, `tool` and the predictor's context); `c0` is where the machine
+/// starts, with `start_gap` (at least [`SOLVE_TOL_MM`]) the distance from
+/// its attained point to the nominal point of `p0` — [`SOLVE_TOL_MM`] when
+/// it is a solution of `p0` too, more when it was solved for the previous
+/// block's directions of motion, load or temperature.
 ///
 /// The error model is piecewise linear in each axis position (component
 /// tables, stiffness grid), so the exact compensation of a straight move
@@ -434,6 +443,7 @@ fn split_line<'m>(
     p1: &AxisVec,
     c0: &AxisVec,
     c1: &AxisVec,
+    start_gap: f64,
     dirs: &DirVec,
     lip: &Lip<'m>,
     tol: f64,
@@ -459,7 +469,7 @@ fn split_line<'m>(
         tol,
         keep_end,
     };
-    piece.split(0.0, 1.0, c0, c1, 0, out)
+    piece.split(0.0, 1.0, c0, c1, start_gap, 0, out)
 }
 
 /// Parameters in (0, 1), sorted, where the straight move `p0 → p1` crosses
@@ -526,7 +536,8 @@ impl Piece<'_, '_> {
         }
     }
 
-    /// Splits the part `ta..tb` of the move (compensated ends `ca`, `cb`).
+    /// Splits the part `ta..tb` of the move (compensated ends `ca`, `cb`;
+    /// `ga` the gap at `ca`, [`SOLVE_TOL_MM`] where it is solved).
     #[allow(clippy::too_many_arguments)]
     fn split(
         &self,
@@ -534,18 +545,20 @@ impl Piece<'_, '_> {
         tb: f64,
         ca: &AxisVec,
         cb: &AxisVec,
+        ga: f64,
         depth: u32,
         out: &mut Vec<AxisVec>,
     ) -> Result<(), Failure> {
-        // Both ends are solved (residual below SOLVE_TOL_MM) and the
-        // nominal chain is affine, so the gap at any point of the piece is
-        // at most that residual plus L·|cb − ca| (the error's departure
-        // from its chord): when that meets the tolerance, the check below
-        // would pass.
+        // The end is solved (residual below SOLVE_TOL_MM), the start's gap
+        // is `ga`, and the nominal chain is affine, so the gap at any point
+        // of the piece is at most the larger end gap plus L·|cb − ca| (the
+        // error's departure from its chord): when that meets the
+        // tolerance, the check below would pass.
+        let ga = ga.max(SOLVE_TOL_MM);
         if self.ends.is_some() {
             if let Some(l) = self.lip.on(self.pred, ca, cb) {
                 let dc = (0..3).map(|s| (cb[s] - ca[s]).powi(2)).sum::<f64>().sqrt();
-                if SOLVE_TOL_MM + l * dc + SKIP_MARGIN_MM <= self.tol {
+                if ga + l * dc + SKIP_MARGIN_MM <= self.tol {
                     if tb < 1.0 || self.keep_end {
                         out.push(*cb);
                     }
@@ -554,7 +567,7 @@ impl Piece<'_, '_> {
             }
         }
         let verdict = if self.ends.is_some() {
-            self.certify(ta, tb, ca, cb)
+            self.certify(ta, tb, ca, cb, ga)
         } else {
             None
         };
@@ -585,8 +598,8 @@ impl Piece<'_, '_> {
         let pa = lerp(self.p0, self.p1, ta);
         let pm = lerp(self.p0, self.p1, tm);
         let (cm, _) = solve_near(self.pred, &pm, ca, &pa, self.dirs, self.lip)?;
-        self.split(ta, tm, ca, &cm, depth + 1, out)?;
-        self.split(tm, tb, &cm, cb, depth + 1, out)
+        self.split(ta, tm, ca, &cm, ga, depth + 1, out)?;
+        self.split(tm, tb, &cm, cb, SOLVE_TOL_MM, depth + 1, out)
     }
 
     /// Whether the compensated straight piece `ca → cb` (programmed part
@@ -599,15 +612,18 @@ impl Piece<'_, '_> {
     /// `g(f) = attained(c(f)) − nominal(t(f))` is smooth, and `|g|` is at
     /// most the larger of its end values plus `M₂ h² / 8`, where `h` is the
     /// length of that stretch (mm) and `M₂` bounds `|g''|`
-    /// ([`ToolPredictor::curvature`]; the nominal part is affine). The ends
-    /// of the piece are solved (gap below [`SOLVE_TOL_MM`]); the gap is
-    /// evaluated at each crossing.
-    fn certify(&self, ta: f64, tb: f64, ca: &AxisVec, cb: &AxisVec) -> Option<bool> {
+    /// ([`ToolPredictor::curvature`]; the nominal part is affine). The end
+    /// of the piece is solved (gap below [`SOLVE_TOL_MM`]), its start has
+    /// the gap `ga`; the gap is evaluated at each crossing.
+    fn certify(&self, ta: f64, tb: f64, ca: &AxisVec, cb: &AxisVec, ga: f64) -> Option<bool> {
         let budget = self.tol - SKIP_MARGIN_MM;
+        if ga > budget {
+            return Some(false);
+        }
         let (inner, total) = self.inside(ca, cb);
         let stretches = Stretches::new(self, ta, tb, ca, cb, budget);
         if total > MAX_BREAKS {
-            return self.certify_in_order(&inner, &stretches);
+            return self.certify_in_order(&inner, &stretches, ga);
         }
         let mut fs = [0.0f64; MAX_BREAKS + 2];
         let mut n = 1;
@@ -639,6 +655,7 @@ impl Piece<'_, '_> {
         // failing piece is largest there most often, so a failure usually
         // costs one evaluation.
         let mut gaps = [SOLVE_TOL_MM; MAX_BREAKS + 2];
+        gaps[0] = ga;
         let centre = fs.get(1..n)?.partition_point(|&f| f < 0.5) + 1;
         let (mut lo, mut hi) = (centre, centre);
         while lo > 1 || hi < n {
@@ -680,7 +697,7 @@ impl Piece<'_, '_> {
     /// arrays hold (fine-pitch tables): the crossings of the three axes are
     /// merged in the order of the piece and each stretch is checked as it
     /// comes, without storing them.
-    fn certify_in_order(&self, inner: &[&[f64]; 3], st: &Stretches) -> Option<bool> {
+    fn certify_in_order(&self, inner: &[&[f64]; 3], st: &Stretches, ga: f64) -> Option<bool> {
         let (ca, cb) = (st.ca, st.cb);
         // Per axis, how many of its crossings are taken.
         let mut taken = [0usize; 3];
@@ -695,7 +712,7 @@ impl Piece<'_, '_> {
             };
             Some(((x - ca[s]) / d).clamp(0.0, 1.0))
         };
-        let (mut f_prev, mut gap_prev) = (0.0, SOLVE_TOL_MM);
+        let (mut f_prev, mut gap_prev) = (0.0, ga);
         // A stretch neither bend bound applies to: the verdict is then the
         // samples' (as in the array path), unless a crossing fails.
         let mut unknown = false;
@@ -858,6 +875,40 @@ fn with_xyz(base: &AxisVec, p: &Vector3<f64>) -> AxisVec {
     o
 }
 
+/// Share of the tolerance up to which a move starts from where the
+/// previous block left the machine; beyond it a takeup move comes first.
+pub const TAKEUP_SHARE: f64 = 0.5;
+
+/// How a move that starts at the programmed `p0` begins when the machine
+/// stands at the command `at`, solved for the previous block's directions
+/// of motion, load or temperature. While the attained point of `at` under
+/// this move's conditions stays within [`TAKEUP_SHARE`] of the tolerance
+/// of the nominal start, the move starts from `at` and its pieces are
+/// proven with that gap. Otherwise (typically an axis that reverses: the
+/// direction-dependent error changes at once) the start solved for this
+/// move is pushed to `out` as a takeup point — the machine first moves
+/// there, as a controller's reversal compensation would, so that the move
+/// itself leaves from the programmed point. Returns the start command, its
+/// gap (at least [`SOLVE_TOL_MM`]) and whether a takeup point was pushed.
+fn start_from<'m>(
+    pred: &ToolPredictor<'m>,
+    p0: &AxisVec,
+    at: &AxisVec,
+    dirs: &DirVec,
+    lip: &Lip<'m>,
+    tol: f64,
+    out: &mut Vec<AxisVec>,
+) -> Result<(AxisVec, f64, bool), Failure> {
+    let tool = lip.tool_mm;
+    let gap = (pred.attained(at, dirs, tool).pos - pred.nominal(p0, tool).pos).norm();
+    if gap <= tol * TAKEUP_SHARE {
+        return Ok((*at, gap.max(SOLVE_TOL_MM), false));
+    }
+    let (c0, _) = solve_near(pred, p0, at, p0, dirs, lip)?;
+    out.push(c0);
+    Ok((c0, SOLVE_TOL_MM, true))
+}
+
 /// Compensates one interpreted block.
 pub fn block(
     pred: &ToolPredictor,
@@ -879,13 +930,37 @@ pub struct Carry {
     tool: f64,
     /// Block context it was solved with.
     ctx: BlockContext,
-    /// The compensated command.
+    /// Where the block left the machine: the compensated command.
     c: AxisVec,
+    /// `c` is the solution of `target` (false after a positioning move that
+    /// leaves some axes where they were).
+    solved: bool,
 }
 
 impl Carry {
     fn matches(&self, target: &AxisVec, dirs: &DirVec, tool: f64, ctx: &BlockContext) -> bool {
-        self.target == *target && self.dirs == *dirs && self.tool == tool && self.ctx == *ctx
+        self.solved
+            && self.target == *target
+            && self.dirs == *dirs
+            && self.tool == tool
+            && self.ctx == *ctx
+    }
+
+    /// The carry after a positioning move whose compensated end is `c`:
+    /// the axes the block does not program stay where the previous block
+    /// left them (`None` when that is not known).
+    fn after_positioning(
+        pred: &ToolPredictor,
+        plan: &Plan,
+        mut c: AxisVec,
+        before: Option<&Carry>,
+    ) -> Option<AxisVec> {
+        for (s, v) in c.iter_mut().enumerate() {
+            if plan.programmed & (1 << s) == 0 && pred.machine.has_axis(s) {
+                *v = *before?.c.get(s)?;
+            }
+        }
+        Some(c)
     }
 }
 
@@ -902,6 +977,92 @@ pub fn block_after(
     carry: &mut Option<Carry>,
 ) -> Result<BlockResult, Failure> {
     block_reusing(pred, plan, settings, carry, Vec::new())
+}
+
+/// Positioning moves that [`carry_before`] looks back over for the last
+/// move that sets every axis.
+pub const CARRY_LOOKBACK: usize = 8;
+
+/// The carry a run of blocks holds after the moves `before` (each with the
+/// predictor of its block context, in program order; the last one just
+/// before the run), so that a run seeded with it gives the same results as
+/// one that went through those blocks (see [`block_after`]): the output
+/// then does not depend on where runs begin. Only the last move matters,
+/// unless it is a positioning move that leaves axes where they were: then
+/// the moves before it count, up to [`CARRY_LOOKBACK`] of them. `None`
+/// where no move leaves a carry (or one cannot be compensated: the run
+/// fails there anyway).
+pub fn carry_before<'p>(
+    before: &[(ToolPredictor<'p>, Plan)],
+    settings: &Settings,
+) -> Option<Carry> {
+    // The last move that does not depend on the carry before it.
+    let n = before.len();
+    let first = (0..n).rev().take(CARRY_LOOKBACK + 1).find(|&i| {
+        before
+            .get(i)
+            .is_some_and(|(pred, plan)| !needs_carry(pred, plan))
+    })?;
+    let mut carry = None;
+    for (pred, plan) in before.get(first..)? {
+        carry = carry_after(pred, plan, settings, carry.as_ref());
+    }
+    carry
+}
+
+/// A positioning move that leaves some axes of the machine where they were.
+fn needs_carry(pred: &ToolPredictor, plan: &Plan) -> bool {
+    plan.kind == PlanKind::Motion
+        && plan.mv.is_some_and(|mv| mv.motion == Motion::Rapid)
+        && (0..6).any(|s| plan.programmed & (1 << s) == 0 && pred.machine.has_axis(s))
+}
+
+/// The carry after `plan` given the one before it, as [`block_after`]
+/// leaves it, without splitting the move.
+fn carry_after(
+    pred: &ToolPredictor,
+    plan: &Plan,
+    settings: &Settings,
+    before: Option<&Carry>,
+) -> Option<Carry> {
+    let Some(mv) = plan.mv else {
+        return before.copied();
+    };
+    if plan.kind != PlanKind::Motion {
+        return None;
+    }
+    if mv.arc.is_some() {
+        // A replaced arc ends with its last chord's direction of motion.
+        let mut carry = before.copied();
+        block_reusing(pred, plan, settings, &mut carry, Vec::new()).ok()?;
+        return carry;
+    }
+    let tool = mv.tool_len_mm;
+    let (_, at_end, nom_end) = pred.evaluate(&mv.end, &mv.dirs, tool);
+    let lip = Lip::new(tool);
+    let (c1, _) = solve_from(
+        pred,
+        &mv.end,
+        &nom_end,
+        &mv.end,
+        Some(at_end),
+        &mv.dirs,
+        &lip,
+    )
+    .ok()?;
+    let c = if mv.motion == Motion::Rapid {
+        Carry::after_positioning(pred, plan, c1, before)?
+    } else {
+        c1
+    };
+    Some(Carry {
+        target: mv.end,
+        dirs: mv.dirs,
+        tool,
+        ctx: pred.ctx,
+        c,
+        solved: c == c1,
+    })
 }
 
 /// [`block_after`] with `segments` (cleared first) as the storage of the
@@ -974,13 +1135,15 @@ pub fn block_reusing(
     )?;
     res.end = c1;
     res.residual_mm = r1;
-    let carry_out = Carry {
+    let mut carry_out = Carry {
         target: mv.end,
         dirs: mv.dirs,
         tool,
         ctx: pred.ctx,
         c: c1,
+        solved: true,
     };
+    let mut positioned_unknown = false;
     match (mv.motion, mv.arc) {
         (Motion::Rapid, _) => {
             // Positioning: only the axes the block programs are corrected;
@@ -991,16 +1154,40 @@ pub fn block_reusing(
                 }
             }
             res.residual_mm = (pred.attained(&res.end, &mv.dirs, tool).pos - nom_end.pos).norm();
+            match Carry::after_positioning(pred, plan, c1, carry_in) {
+                Some(c) => {
+                    carry_out.solved = c == c1;
+                    carry_out.c = c;
+                }
+                None => positioned_unknown = true,
+            }
         }
         (Motion::Linear, _) => {
-            // The start is the previous block's end: its compensation is
-            // that block's when the directions, tool and context agree.
-            let c0 = match carry_in {
-                Some(k) if k.matches(&mv.start, &mv.dirs, tool, &pred.ctx) => k.c,
-                Some(k) if k.target == mv.start => {
-                    solve_near(pred, &mv.start, &k.c, &k.target, &mv.dirs, &lip)?.0
+            // The start is the previous block's end: where that block left
+            // the machine when it ended here with the same tool.
+            let (c0, start_gap) = match carry_in {
+                Some(k) if k.matches(&mv.start, &mv.dirs, tool, &pred.ctx) => (k.c, SOLVE_TOL_MM),
+                Some(k) if k.target == mv.start && k.tool == tool => {
+                    let (c0, gap, takeup) = start_from(
+                        pred,
+                        &mv.start,
+                        &k.c,
+                        &mv.dirs,
+                        &lip,
+                        tol,
+                        &mut res.segments,
+                    )?;
+                    res.takeup = takeup;
+                    (c0, gap)
                 }
-                _ => solve_near(pred, &mv.start, &c1, &mv.end, &mv.dirs, &lip)?.0,
+                Some(k) if k.target == mv.start => (
+                    solve_near(pred, &mv.start, &k.c, &k.target, &mv.dirs, &lip)?.0,
+                    SOLVE_TOL_MM,
+                ),
+                _ => (
+                    solve_near(pred, &mv.start, &c1, &mv.end, &mv.dirs, &lip)?.0,
+                    SOLVE_TOL_MM,
+                ),
             };
             split_line(
                 pred,
@@ -1008,6 +1195,7 @@ pub fn block_reusing(
                 &mv.end,
                 &c0,
                 &c1,
+                start_gap,
                 &mv.dirs,
                 &lip,
                 tol,
@@ -1018,22 +1206,32 @@ pub fn block_reusing(
                 check_travel(pred, p)?;
             }
         }
-        (_, Some(arc)) => arc_block(pred, &mv, &arc, tool, tol, &mut res)?,
+        (_, Some(arc)) => {
+            if let Some(d) = arc_block(pred, &mv, &arc, tool, tol, carry_in, &mut res)? {
+                carry_out.dirs = d;
+                carry_out.c = res.end;
+            }
+        }
         (_, None) => {}
     }
     check_travel(pred, &res.end)?;
-    *carry = Some(carry_out);
+    *carry = (!positioned_unknown).then_some(carry_out);
     Ok(res)
 }
 
+/// An arc: kept as an arc with a shifted centre when the correction is
+/// uniform enough along it, otherwise replaced by chords each split like a
+/// straight move. Returns the direction of motion the replaced arc ends
+/// with (its last chord's), `None` when it is kept.
 fn arc_block(
     pred: &ToolPredictor,
     mv: &Move,
     arc: &crate::program::interp::ArcGeom,
     tool: f64,
     tol: f64,
+    carry_in: Option<&Carry>,
     res: &mut BlockResult,
-) -> Result<(), Failure> {
+) -> Result<Option<DirVec>, Failure> {
     let s3 = mv.start3();
     let e3 = mv.end3();
     // Sample the correction along the arc with the local direction of motion.
@@ -1062,7 +1260,7 @@ fn arc_block(
     if spread <= tol {
         let last = Vector3::new(res.end[0] - e3[0], res.end[1] - e3[1], res.end[2] - e3[2]);
         res.center = Some(arc.center + (first + last) / 2.0);
-        return Ok(());
+        return Ok(None);
     }
     // Replace by chords: sagitta within half the tolerance, then each
     // chord split like a straight move with the rest of the budget.
@@ -1072,27 +1270,61 @@ fn arc_block(
     let max_step = 2.0 * (1.0 - sag / r).clamp(-1.0, 1.0).acos();
     let chords = ((arc.sweep.abs() / max_step.max(1e-6)).ceil() as usize).clamp(1, 1 << 16);
     let mut prev_p = mv.start;
+    let lip = Lip::new(tool);
+    // Where the machine stands: the previous block's end, when it ended
+    // at the arc's start with the same tool.
+    let mut at: Option<(AxisVec, DirVec)> = carry_in
+        .filter(|k| k.target == mv.start && k.tool == tool)
+        .map(|k| (k.c, k.dirs));
+    let mut last_dirs = mv.dirs;
     // `block_reusing` cleared the storage of the split points.
     let pts = &mut res.segments;
-    let lip = Lip::new(tool);
+    let mut takeup = false;
     for k in 1..=chords {
         let s = k as f64 / chords as f64;
         let p = with_xyz(&lerp(&mv.start, &mv.end, s), &arc.point(&s3, &e3, s));
         let chord_dir = Vector3::new(p[0] - prev_p[0], p[1] - prev_p[1], p[2] - prev_p[2]);
         let d = dirs_of(&chord_dir, &mv.dirs);
-        // Both ends with this chord's direction of motion: a reversal at the
-        // junction is the machine's, not something subdivision can remove.
-        let (c0, _) = solve(pred, &prev_p, &d, tool)?;
+        // Each chord with its own direction of motion. Where that differs
+        // from the previous chord's (an axis reverses inside the arc), or at
+        // the previous block's end, the chord starts as a straight move does.
+        let (c0, gap) = match at {
+            Some((c, pd)) if pd == d && k > 1 => (c, SOLVE_TOL_MM),
+            Some((c, _)) => {
+                let (c0, gap, t) = start_from(pred, &prev_p, &c, &d, &lip, tol - sag, pts)?;
+                takeup |= t && k == 1;
+                (c0, gap)
+            }
+            None => (solve(pred, &prev_p, &d, tool)?.0, SOLVE_TOL_MM),
+        };
         let (c, _) = solve(pred, &p, &d, tool)?;
-        split_line(pred, &prev_p, &p, &c0, &c, &d, &lip, tol - sag, true, pts)?;
+        split_line(
+            pred,
+            &prev_p,
+            &p,
+            &c0,
+            &c,
+            gap,
+            &d,
+            &lip,
+            tol - sag,
+            true,
+            pts,
+        )?;
+        at = Some((c, d));
+        last_dirs = d;
         prev_p = p;
     }
-    // The last point is the end point, recomputed with the end direction.
-    pts.pop();
-    for p in pts.iter() {
+    // The arc ends where its last chord does, solved for that chord's
+    // direction of motion.
+    if let Some(end) = pts.pop() {
+        res.end = end;
+    }
+    for p in res.segments.iter() {
         check_travel(pred, p)?;
     }
-    Ok(())
+    res.takeup = takeup;
+    Ok(Some(last_dirs))
 }
 
 #[cfg(test)]
@@ -1103,9 +1335,128 @@ mod tests {
         /// Pieces judged by [`Piece::sampled`] on this thread.
         pub(super) static SAMPLED: std::cell::Cell<usize> = const { std::cell::Cell::new(0) };
     }
-    use crate::machine::tool::MachineTool;
+    use crate::machine::tool::{MachineTool, testing};
     use crate::predict::EffectSet;
     use crate::program::interp::{Interpreter, Setup};
+
+    /// The plans of `program` on the AFM R-1000 (three axes).
+    fn afm_plans(program: &[&str]) -> Vec<Plan> {
+        let setup = Setup {
+            axes: [true, true, true, false, false, false],
+            ..Setup::default()
+        };
+        let mut interp = Interpreter::new(setup, "p.nc");
+        let mut plans = Vec::new();
+        for (k, line) in program.iter().enumerate() {
+            let mut block = crate::program::gcode::Block::default();
+            if let Err(e) =
+                crate::program::gcode::parse_line(line.as_bytes(), k + 1, "p.nc", &mut block)
+            {
+                panic!("{e}");
+            }
+            match interp.step(&block, line.as_bytes()) {
+                Ok(p) => plans.push(p),
+                Err(e) => panic!("{e}"),
+            }
+        }
+        plans
+    }
+
+    #[test]
+    fn runs_seeded_with_the_carry_before_them_give_the_same_results() {
+        // A run started at any block from `carry_before` of the moves
+        // before it gives what one run over every block gives: takeups at
+        // reversals, arcs replaced by chords (ending with their last
+        // chord's direction), positioning moves that leave axes where they
+        // were, and moves after a comment line included.
+        let m = testing::load(&testing::afm_text(), "afm");
+        let pred = ToolPredictor::new(&m, EffectSet::default());
+        let plans = afm_plans(&[
+            "G0 X10 Y10 Z10",
+            "G1 X400 Y10.5 F1000",
+            "Y20",
+            "X10",
+            "(a comment)",
+            "G2 X20 Y30 I0 J10",
+            "G1 X300",
+            "G0 Z20",
+            "G0 Y40",
+            "G1 Z5",
+            "X10",
+        ]);
+        let settings = Settings::default();
+        let mut carry = None;
+        let whole: Vec<_> = plans
+            .iter()
+            .map(|p| block_after(&pred, p, &settings, &mut carry))
+            .collect();
+        let takeups = whole
+            .iter()
+            .filter(|r| r.as_ref().is_ok_and(|r| r.takeup))
+            .count();
+        assert!(takeups >= 2, "{takeups} takeups");
+        for k in 1..plans.len() {
+            let before: Vec<(ToolPredictor, Plan)> = plans[..k]
+                .iter()
+                .filter(|p| p.mv.is_some())
+                .map(|p| (pred, *p))
+                .collect();
+            let mut carry = carry_before(&before, &settings);
+            for (i, p) in plans.iter().enumerate().skip(k) {
+                let r = block_after(&pred, p, &settings, &mut carry);
+                assert_eq!(r, whole[i], "run from block {k}, block {i}");
+            }
+        }
+    }
+
+    #[test]
+    fn a_reversal_is_taken_up_and_the_move_starts_on_the_programmed_point() {
+        // X reverses after the Y step: the step's end was solved for +X.
+        // Under −X the attained point there is off by the reversal value
+        // (more than the tolerance on this machine), so the result starts
+        // with the start solved for −X and the rest of the move is proven
+        // from it; without a reversal no takeup is needed.
+        let m = testing::load(&testing::afm_text(), "afm");
+        let pred = ToolPredictor::new(&m, EffectSet::default());
+        let plans = afm_plans(&[
+            "G0 X10 Y10 Z10",
+            "G1 X400 F1000",
+            "Y20",
+            "X10",
+            "Y30",
+            "X400",
+        ]);
+        let settings = Settings::default();
+        let tool = 0.0;
+        let mut carry = None;
+        let res: Vec<BlockResult> = plans
+            .iter()
+            .map(|p| match block_after(&pred, p, &settings, &mut carry) {
+                Ok(r) => r,
+                Err(e) => panic!("{e}"),
+            })
+            .collect();
+        for (k, (r, p)) in res.iter().zip(&plans).enumerate().skip(2) {
+            let Some(mv) = p.mv else { continue };
+            let prev_end = res[k - 1].end;
+            // Where the machine stands, seen with this move's directions.
+            let off = (pred.attained(&prev_end, &mv.dirs, tool).pos
+                - pred.nominal(&mv.start, tool).pos)
+                .norm();
+            let reversal = mv.dirs != plans[k - 1].mv.map(|m| m.dirs).unwrap_or(mv.dirs);
+            assert_eq!(
+                r.takeup,
+                reversal && off > settings.tolerance_mm * TAKEUP_SHARE
+            );
+            if reversal {
+                assert!(off > settings.tolerance_mm, "block {k}: {off} mm");
+                let c0 = r.segments[0];
+                let at = pred.attained(&c0, &mv.dirs, tool).pos;
+                assert!((at - pred.nominal(&mv.start, tool).pos).norm() <= SOLVE_TOL_MM);
+            }
+        }
+        assert_eq!(res.iter().filter(|r| r.takeup).count(), 2);
+    }
 
     /// A recycled split-point storage, whatever it held, gives the result
     /// of a fresh one, and keeps its allocation.
@@ -1224,7 +1575,7 @@ mod tests {
     /// with force and thermal drift; at 1 and 0.3 µm.
     #[test]
     fn regression_split_pieces_stay_within_the_tolerance_between_samples() {
-        use crate::machine::tool::{ThermalState, testing};
+        use crate::machine::tool::ThermalState;
         let text = testing::afm_text();
         let machines = [
             testing::load(&text, "afm-r1000.yaml"),
@@ -1251,9 +1602,19 @@ mod tests {
                     for (p0, p1, dirs, c0, c1) in random_moves(&pred, tool, 30, 999) {
                         let lip = Lip::new(tool);
                         let mut pts = vec![c0];
-                        if let Err(e) =
-                            split_line(&pred, &p0, &p1, &c0, &c1, &dirs, &lip, tol, true, &mut pts)
-                        {
+                        if let Err(e) = split_line(
+                            &pred,
+                            &p0,
+                            &p1,
+                            &c0,
+                            &c1,
+                            SOLVE_TOL_MM,
+                            &dirs,
+                            &lip,
+                            tol,
+                            true,
+                            &mut pts,
+                        ) {
                             panic!("{}: {e}", m.name());
                         }
                         split += usize::from(pts.len() > 2);
@@ -1305,7 +1666,6 @@ mod tests {
     /// proven whole or in pieces, not only failed at a crossing).
     #[test]
     fn every_piece_of_a_linear_machine_is_proven() {
-        use crate::machine::tool::testing;
         let text = testing::afm_text();
         let negative_zero = text.replacen("forward: [0.0, 2.3", "forward: [-0.0, 2.3", 1);
         assert_ne!(negative_zero, text);
@@ -1326,6 +1686,7 @@ mod tests {
                         &p1,
                         &c0,
                         &c1,
+                        SOLVE_TOL_MM,
                         &dirs,
                         &Lip::new(tool),
                         tol,
@@ -1372,8 +1733,11 @@ mod tests {
                 }
                 let budget = tol - SKIP_MARGIN_MM;
                 let stretches = Stretches::new(&piece, 0.0, 1.0, &c0, &c1, budget);
-                let at_once = piece.certify(0.0, 1.0, &c0, &c1);
-                assert_eq!(at_once, piece.certify_in_order(&inner, &stretches));
+                let at_once = piece.certify(0.0, 1.0, &c0, &c1, SOLVE_TOL_MM);
+                assert_eq!(
+                    at_once,
+                    piece.certify_in_order(&inner, &stretches, SOLVE_TOL_MM)
+                );
                 compared += 1;
                 passed += usize::from(at_once == Some(true));
             }
@@ -1423,6 +1787,7 @@ mod tests {
                         &p1,
                         a,
                         b,
+                        SOLVE_TOL_MM,
                         &dirs,
                         &Lip::new(tool),
                         tol,

@@ -44,6 +44,9 @@ pub struct Emitter {
     cycle_r: Option<f64>,
     /// The program writes `;` comments rather than `( )`.
     semicolon_comments: Option<bool>,
+    /// The program separates its words by spaces (from its last block of
+    /// two words or more; a block of one word shows no style).
+    spaced: bool,
     /// Changed blocks so far.
     changed: usize,
     /// Blocks added by segmentation.
@@ -207,6 +210,7 @@ impl Emitter {
             cycle_z: None,
             cycle_r: None,
             semicolon_comments: None,
+            spaced: true,
             changed: 0,
             added: 0,
             edits: Edits::default(),
@@ -248,6 +252,9 @@ impl Emitter {
                 self.semicolon_comments = Some(c.semicolon);
             }
         }
+        if block.words.len() > 1 {
+            self.spaced = block.spaced;
+        }
         let (Some(mv), Some(res)) = (plan.mv, res) else {
             out.extend_from_slice(line);
             self.track_unchanged(block, plan);
@@ -284,7 +291,9 @@ impl Emitter {
         let eol = &line[text.len()..];
         let scale = plan.scale;
         let lower = block.lower_case;
-        let sep = if block.spaced { " " } else { "" };
+        // Words added to a block of one word follow the program's style.
+        let spaced = self.spaced;
+        let sep = if spaced { " " } else { "" };
         let is_cycle = matches!(plan.kind, PlanKind::Cycle { .. });
         let first_target = if let Some(first) = res.segments.first() {
             *first
@@ -315,7 +324,7 @@ impl Emitter {
                     let g: &[u8] = if lower { b"g1" } else { b"G1" };
                     edits.push(at, at, |t| {
                         t.extend_from_slice(g);
-                        if block.spaced || at > 0 {
+                        if spaced || at > 0 {
                             t.push(b' ');
                         }
                     });
@@ -502,6 +511,11 @@ impl Emitter {
                     t.push(b' ');
                     write_number(t, part, dd, false);
                 }
+                // The block's own words carry a takeup point (see
+                // `BlockResult::takeup`); the move follows on added lines.
+                if res.takeup {
+                    t.extend_from_slice(b" takeup");
+                }
                 if !semicolon {
                     t.push(b')');
                 }
@@ -540,7 +554,7 @@ impl Emitter {
                     let v = round_to(to_program(plan, slot, p[slot], now), d);
                     let cur = round_to(to_program(plan, slot, now, now), d);
                     if v != cur {
-                        if out.len() > mark && block.spaced {
+                        if out.len() > mark && spaced {
                             out.push(b' ');
                         }
                         out.push(letter_case(AXIS_LETTERS[slot], lower));
