@@ -637,47 +637,52 @@ impl<'m> Job<'m> {
             .zip(plans.par_chunks(GROUP_BLOCKS))
             .zip(st.contexts.par_chunks(GROUP_BLOCKS))
             .enumerate()
-            .for_each(|(g, ((rs, ps), cs))| {
-                // The run starts from the last move before it, as if it
-                // had gone through the blocks before.
-                let start = g * GROUP_BLOCKS;
-                let keep = compensate::CARRY_LOOKBACK + 1;
-                let mut last: Vec<(ToolPredictor, Plan)> = plans
-                    .get(..start)
-                    .unwrap_or(&[])
-                    .iter()
-                    .zip(contexts)
-                    .rev()
-                    .filter(|(p, _)| p.mv.is_some())
-                    .take(keep)
-                    .map(|(p, c)| (pred.with_context(*c), *p))
-                    .collect();
-                let more = keep - last.len();
-                let from = before.len().saturating_sub(more);
-                last.extend(
-                    before
-                        .get(from..)
-                        .unwrap_or(&[])
-                        .iter()
-                        .rev()
-                        .map(|(p, c)| (pred.with_context(*c), *p)),
-                );
-                last.reverse();
-                let mut carry = compensate::carry_before(&last, &self.settings);
-                for ((r, p), c) in rs.iter_mut().zip(ps).zip(cs) {
-                    let segments = match r.take() {
-                        Some(Ok(old)) => old.segments,
-                        _ => Vec::new(),
-                    };
-                    *r = Some(compensate::block_reusing(
-                        &pred.with_context(*c),
-                        p,
-                        &self.settings,
-                        &mut carry,
-                        segments,
-                    ));
-                }
-            });
+            .for_each_init(
+                || Vec::with_capacity(compensate::CARRY_LOOKBACK + 1),
+                |last: &mut Vec<(ToolPredictor, Plan)>, (g, ((rs, ps), cs))| {
+                    // The run starts from the last move before it, as if it
+                    // had gone through the blocks before.
+                    let start = g * GROUP_BLOCKS;
+                    let keep = compensate::CARRY_LOOKBACK + 1;
+                    last.clear();
+                    last.extend(
+                        plans
+                            .get(..start)
+                            .unwrap_or(&[])
+                            .iter()
+                            .zip(contexts)
+                            .rev()
+                            .filter(|(p, _)| p.mv.is_some())
+                            .take(keep)
+                            .map(|(p, c)| (pred.with_context(*c), *p)),
+                    );
+                    let more = keep - last.len();
+                    let from = before.len().saturating_sub(more);
+                    last.extend(
+                        before
+                            .get(from..)
+                            .unwrap_or(&[])
+                            .iter()
+                            .rev()
+                            .map(|(p, c)| (pred.with_context(*c), *p)),
+                    );
+                    last.reverse();
+                    let mut carry = compensate::carry_before(last, &self.settings);
+                    for ((r, p), c) in rs.iter_mut().zip(ps).zip(cs) {
+                        let segments = match r.take() {
+                            Some(Ok(old)) => old.segments,
+                            _ => Vec::new(),
+                        };
+                        *r = Some(compensate::block_reusing(
+                            &pred.with_context(*c),
+                            p,
+                            &self.settings,
+                            &mut carry,
+                            segments,
+                        ));
+                    }
+                },
+            );
     }
 
     /// Runs the job over `input`. With `out`, the (compensated) program is

@@ -935,6 +935,10 @@ pub struct Carry {
     /// `c` is the solution of `target` (false after a positioning move that
     /// leaves some axes where they were).
     solved: bool,
+    /// Positioning moves in a row that left axes where they were, up to
+    /// this block (a chain longer than [`CARRY_LOOKBACK`] ends the carry,
+    /// as [`carry_before`] does not look back further).
+    positioned: usize,
 }
 
 impl Carry {
@@ -946,21 +950,28 @@ impl Carry {
             && self.ctx == *ctx
     }
 
-    /// The carry after a positioning move whose compensated end is `c`:
-    /// the axes the block does not program stay where the previous block
-    /// left them (`None` when that is not known).
+    /// Where a positioning move whose compensated end is `c` leaves the
+    /// machine, and how many such moves in a row left axes where they
+    /// were: the axes the block does not program stay where the previous
+    /// block left them (`None` when that is not known, or after more than
+    /// [`CARRY_LOOKBACK`] of them).
     fn after_positioning(
         pred: &ToolPredictor,
         plan: &Plan,
         mut c: AxisVec,
         before: Option<&Carry>,
-    ) -> Option<AxisVec> {
+    ) -> Option<(AxisVec, usize)> {
+        if !needs_carry(pred, plan) {
+            return Some((c, 0));
+        }
+        let before = before?;
         for (s, v) in c.iter_mut().enumerate() {
             if plan.programmed & (1 << s) == 0 && pred.machine.has_axis(s) {
-                *v = *before?.c.get(s)?;
+                *v = *before.c.get(s)?;
             }
         }
-        Some(c)
+        let positioned = before.positioned + 1;
+        (positioned <= CARRY_LOOKBACK).then_some((c, positioned))
     }
 }
 
@@ -1050,10 +1061,10 @@ fn carry_after(
         &lip,
     )
     .ok()?;
-    let c = if mv.motion == Motion::Rapid {
+    let (c, positioned) = if mv.motion == Motion::Rapid {
         Carry::after_positioning(pred, plan, c1, before)?
     } else {
-        c1
+        (c1, 0)
     };
     Some(Carry {
         target: mv.end,
@@ -1062,6 +1073,7 @@ fn carry_after(
         ctx: pred.ctx,
         c,
         solved: c == c1,
+        positioned,
     })
 }
 
@@ -1142,6 +1154,7 @@ pub fn block_reusing(
         ctx: pred.ctx,
         c: c1,
         solved: true,
+        positioned: 0,
     };
     let mut positioned_unknown = false;
     match (mv.motion, mv.arc) {
@@ -1155,19 +1168,20 @@ pub fn block_reusing(
             }
             res.residual_mm = (pred.attained(&res.end, &mv.dirs, tool).pos - nom_end.pos).norm();
             match Carry::after_positioning(pred, plan, c1, carry_in) {
-                Some(c) => {
+                Some((c, positioned)) => {
                     carry_out.solved = c == c1;
                     carry_out.c = c;
+                    carry_out.positioned = positioned;
                 }
                 None => positioned_unknown = true,
             }
         }
         (Motion::Linear, _) => {
             // The start is the previous block's end: where that block left
-            // the machine when it ended here with the same tool.
+            // the machine (with whatever tool length it was solved for).
             let (c0, start_gap) = match carry_in {
                 Some(k) if k.matches(&mv.start, &mv.dirs, tool, &pred.ctx) => (k.c, SOLVE_TOL_MM),
-                Some(k) if k.target == mv.start && k.tool == tool => {
+                Some(k) if k.target == mv.start => {
                     let (c0, gap, takeup) = start_from(
                         pred,
                         &mv.start,
@@ -1180,10 +1194,6 @@ pub fn block_reusing(
                     res.takeup = takeup;
                     (c0, gap)
                 }
-                Some(k) if k.target == mv.start => (
-                    solve_near(pred, &mv.start, &k.c, &k.target, &mv.dirs, &lip)?.0,
-                    SOLVE_TOL_MM,
-                ),
                 _ => (
                     solve_near(pred, &mv.start, &c1, &mv.end, &mv.dirs, &lip)?.0,
                     SOLVE_TOL_MM,
@@ -1272,11 +1282,12 @@ fn arc_block(
     let mut prev_p = mv.start;
     let lip = Lip::new(tool);
     // Where the machine stands: the previous block's end, when it ended
-    // at the arc's start with the same tool.
+    // at the arc's start.
     let mut at: Option<(AxisVec, DirVec)> = carry_in
-        .filter(|k| k.target == mv.start && k.tool == tool)
+        .filter(|k| k.target == mv.start)
         .map(|k| (k.c, k.dirs));
     let mut last_dirs = mv.dirs;
+    let mut end_residual = res.residual_mm;
     // `block_reusing` cleared the storage of the split points.
     let pts = &mut res.segments;
     let mut takeup = false;
@@ -1297,7 +1308,8 @@ fn arc_block(
             }
             None => (solve(pred, &prev_p, &d, tool)?.0, SOLVE_TOL_MM),
         };
-        let (c, _) = solve(pred, &p, &d, tool)?;
+        let (c, r) = solve(pred, &p, &d, tool)?;
+        end_residual = r;
         split_line(
             pred,
             &prev_p,
@@ -1319,6 +1331,7 @@ fn arc_block(
     // direction of motion.
     if let Some(end) = pts.pop() {
         res.end = end;
+        res.residual_mm = end_residual;
     }
     for p in res.segments.iter() {
         check_travel(pred, p)?;
@@ -1341,10 +1354,11 @@ mod tests {
 
     /// The plans of `program` on the AFM R-1000 (three axes).
     fn afm_plans(program: &[&str]) -> Vec<Plan> {
-        let setup = Setup {
+        let mut setup = Setup {
             axes: [true, true, true, false, false, false],
             ..Setup::default()
         };
+        setup.tools.insert(1, 150.0);
         let mut interp = Interpreter::new(setup, "p.nc");
         let mut plans = Vec::new();
         for (k, line) in program.iter().enumerate() {
@@ -1368,7 +1382,9 @@ mod tests {
         // before it gives what one run over every block gives: takeups at
         // reversals, arcs replaced by chords (ending with their last
         // chord's direction), positioning moves that leave axes where they
-        // were, and moves after a comment line included.
+        // were (also more of them in a row than it looks back over), a
+        // tool length taken on between moves, and moves after a comment
+        // line included.
         let m = testing::load(&testing::afm_text(), "afm");
         let pred = ToolPredictor::new(&m, EffectSet::default());
         let plans = afm_plans(&[
@@ -1383,6 +1399,27 @@ mod tests {
             "G0 Y40",
             "G1 Z5",
             "X10",
+            // A tool length taken on without a move.
+            "G43 H1",
+            "G1 X200",
+            // More positioning moves in a row than `carry_before` looks
+            // back over, then fewer.
+            "G0 Z40",
+            "G0 X300",
+            "G0 Y100",
+            "G0 X400",
+            "G0 Y200",
+            "G0 X500",
+            "G0 Y300",
+            "G0 X600",
+            "G0 Y400",
+            "G0 X800",
+            "G0 Y450",
+            "G1 Z30",
+            "X300",
+            "G0 Z30",
+            "G0 X100",
+            "G1 Z10",
         ]);
         let settings = Settings::default();
         let mut carry = None;
@@ -1407,6 +1444,38 @@ mod tests {
                 assert_eq!(r, whole[i], "run from block {k}, block {i}");
             }
         }
+    }
+
+    #[test]
+    fn a_tool_length_taken_on_between_moves_is_taken_up() {
+        // `G43 H1` on its own line: the machine stands where the previous
+        // move left it, solved without the tool; with 150 mm of tool the
+        // angular errors move the tip there by more than half the
+        // tolerance (Abbe), so the next move starts with a takeup point
+        // solved with the tool.
+        let m = testing::load(&testing::afm_text(), "afm");
+        let pred = ToolPredictor::new(&m, EffectSet::default());
+        let plans = afm_plans(&["G0 X10 Y10 Z10", "G1 X400 Y300 F1000", "G43 H1", "G1 X500"]);
+        let settings = Settings::default();
+        let mut carry = None;
+        let res: Vec<BlockResult> = plans
+            .iter()
+            .map(|p| match block_after(&pred, p, &settings, &mut carry) {
+                Ok(r) => r,
+                Err(e) => panic!("{e}"),
+            })
+            .collect();
+        let Some(mv) = plans[3].mv else {
+            panic!("no move")
+        };
+        assert_eq!(mv.tool_len_mm, 150.0);
+        let off = (pred.attained(&res[1].end, &mv.dirs, 150.0).pos
+            - pred.nominal(&mv.start, 150.0).pos)
+            .norm();
+        assert!(off > settings.tolerance_mm * TAKEUP_SHARE, "{off} mm");
+        assert!(res[3].takeup);
+        let at = pred.attained(&res[3].segments[0], &mv.dirs, 150.0).pos;
+        assert!((at - pred.nominal(&mv.start, 150.0).pos).norm() <= SOLVE_TOL_MM);
     }
 
     #[test]
