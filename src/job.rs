@@ -615,9 +615,11 @@ impl<'m> Job<'m> {
 
     /// Compensates the blocks of a prepared stage (on the job's pool: the
     /// caller runs this inside a task of it). Runs of [`GROUP_BLOCKS`]
-    /// blocks go in order on one thread (a straight move reuses the
-    /// previous end's solution for its start); the runs start at fixed
-    /// blocks, so the output does not depend on the number of threads.
+    /// blocks go in order on one thread (a straight move starts where the
+    /// previous one left the machine); each run is seeded with the carry
+    /// of the moves before it ([`compensate::carry_before`]), so the
+    /// output depends neither on the number of threads nor on where the
+    /// runs begin.
     fn compensate_stage(&self, st: &mut Stage, solving: bool) {
         let (true, Some(pred)) = (solving, &self.predictor) else {
             st.results.clear();

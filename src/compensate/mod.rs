@@ -976,11 +976,13 @@ impl Carry {
 }
 
 /// [`block`] for the next block of a run compensated in order: `carry`
-/// holds the previous block's compensated end (`None` at the start of the
-/// run) and is updated. A straight move that starts where the previous one
-/// ended, with the same directions of motion, tool and context, reuses that
-/// solution for its start point instead of solving it again. The result
-/// depends on where runs begin, so callers cut runs at fixed places.
+/// holds where the previous move left the machine (`None` where that is not
+/// known) and is updated. A straight move (or replaced arc) that starts
+/// there starts from that command: reused as it is when the directions of
+/// motion, tool and context agree, otherwise with its gap measured or a
+/// takeup point first (see [`BlockResult::takeup`]). A run that starts
+/// after other blocks is seeded with [`carry_before`] of them, so the
+/// result does not depend on where runs begin.
 pub fn block_after(
     pred: &ToolPredictor,
     plan: &Plan,
