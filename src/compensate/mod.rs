@@ -950,28 +950,41 @@ impl Carry {
             && self.ctx == *ctx
     }
 
-    /// Where a positioning move whose compensated end is `c` leaves the
-    /// machine, and how many such moves in a row left axes where they
-    /// were: the axes the block does not program stay where the previous
-    /// block left them (`None` when that is not known, or after more than
-    /// [`CARRY_LOOKBACK`] of them).
-    fn after_positioning(
+    /// Where the move `mv` of `plan`, whose end is solved as `c1`, leaves
+    /// the machine, given where the block before left it. A positioning
+    /// move leaves the axes it does not program where they were (`None`
+    /// when that is not known, or after more than [`CARRY_LOOKBACK`] such
+    /// moves in a row).
+    fn after(
         pred: &ToolPredictor,
         plan: &Plan,
-        mut c: AxisVec,
+        mv: &Move,
+        c1: AxisVec,
         before: Option<&Carry>,
-    ) -> Option<(AxisVec, usize)> {
-        if !needs_carry(pred, plan) {
-            return Some((c, 0));
-        }
-        let before = before?;
-        for (s, v) in c.iter_mut().enumerate() {
-            if plan.programmed & (1 << s) == 0 && pred.machine.has_axis(s) {
-                *v = *before.c.get(s)?;
+    ) -> Option<Carry> {
+        let mut carry = Carry {
+            target: mv.end,
+            dirs: mv.dirs,
+            tool: mv.tool_len_mm,
+            ctx: pred.ctx,
+            c: c1,
+            solved: true,
+            positioned: 0,
+        };
+        if needs_carry(pred, plan) {
+            let before = before?;
+            for (s, v) in carry.c.iter_mut().enumerate() {
+                if plan.programmed & (1 << s) == 0 && pred.machine.has_axis(s) {
+                    *v = *before.c.get(s)?;
+                }
+            }
+            carry.solved = carry.c == c1;
+            carry.positioned = before.positioned + 1;
+            if carry.positioned > CARRY_LOOKBACK {
+                return None;
             }
         }
-        let positioned = before.positioned + 1;
-        (positioned <= CARRY_LOOKBACK).then_some((c, positioned))
+        Some(carry)
     }
 }
 
@@ -1050,33 +1063,28 @@ fn carry_after(
         block_reusing(pred, plan, settings, &mut carry, Vec::new()).ok()?;
         return carry;
     }
-    let tool = mv.tool_len_mm;
-    let (_, at_end, nom_end) = pred.evaluate(&mv.end, &mv.dirs, tool);
-    let lip = Lip::new(tool);
-    let (c1, _) = solve_from(
+    let (_, c1, _, _) = solve_end(pred, &mv, &Lip::new(mv.tool_len_mm)).ok()?;
+    Carry::after(pred, plan, &mv, c1, before)
+}
+
+/// The deviation of the move's programmed end, its compensated end with
+/// the residual left there, and its nominal pose.
+fn solve_end<'m>(
+    pred: &ToolPredictor<'m>,
+    mv: &Move,
+    lip: &Lip<'m>,
+) -> Result<(Breakdown, AxisVec, f64, TipPose), Failure> {
+    let (dev, at_end, nom_end) = pred.evaluate(&mv.end, &mv.dirs, lip.tool_mm);
+    let (c1, r1) = solve_from(
         pred,
         &mv.end,
         &nom_end,
         &mv.end,
         Some(at_end),
         &mv.dirs,
-        &lip,
-    )
-    .ok()?;
-    let (c, positioned) = if mv.motion == Motion::Rapid {
-        Carry::after_positioning(pred, plan, c1, before)?
-    } else {
-        (c1, 0)
-    };
-    Some(Carry {
-        target: mv.end,
-        dirs: mv.dirs,
-        tool,
-        ctx: pred.ctx,
-        c,
-        solved: c == c1,
-        positioned,
-    })
+        lip,
+    )?;
+    Ok((dev, c1, r1, nom_end))
 }
 
 /// [`block_after`] with `segments` (cleared first) as the storage of the
@@ -1135,30 +1143,12 @@ pub fn block_reusing(
         }
         PlanKind::Motion => {}
     }
-    let (dev, at_end, nom_end) = pred.evaluate(&mv.end, &mv.dirs, tool);
-    res.deviation = dev;
     let lip = Lip::new(tool);
-    let (c1, r1) = solve_from(
-        pred,
-        &mv.end,
-        &nom_end,
-        &mv.end,
-        Some(at_end),
-        &mv.dirs,
-        &lip,
-    )?;
+    let (dev, c1, r1, nom_end) = solve_end(pred, &mv, &lip)?;
+    res.deviation = dev;
     res.end = c1;
     res.residual_mm = r1;
-    let mut carry_out = Carry {
-        target: mv.end,
-        dirs: mv.dirs,
-        tool,
-        ctx: pred.ctx,
-        c: c1,
-        solved: true,
-        positioned: 0,
-    };
-    let mut positioned_unknown = false;
+    let mut carry_out = Carry::after(pred, plan, &mv, c1, carry_in);
     match (mv.motion, mv.arc) {
         (Motion::Rapid, _) => {
             // Positioning: only the axes the block programs are corrected;
@@ -1169,14 +1159,6 @@ pub fn block_reusing(
                 }
             }
             res.residual_mm = (pred.attained(&res.end, &mv.dirs, tool).pos - nom_end.pos).norm();
-            match Carry::after_positioning(pred, plan, c1, carry_in) {
-                Some((c, positioned)) => {
-                    carry_out.solved = c == c1;
-                    carry_out.c = c;
-                    carry_out.positioned = positioned;
-                }
-                None => positioned_unknown = true,
-            }
         }
         (Motion::Linear, _) => {
             // The start is the previous block's end: where that block left
@@ -1220,14 +1202,16 @@ pub fn block_reusing(
         }
         (_, Some(arc)) => {
             if let Some(d) = arc_block(pred, &mv, &arc, tool, tol, carry_in, &mut res)? {
-                carry_out.dirs = d;
-                carry_out.c = res.end;
+                if let Some(k) = carry_out.as_mut() {
+                    k.dirs = d;
+                    k.c = res.end;
+                }
             }
         }
         (_, None) => {}
     }
     check_travel(pred, &res.end)?;
-    *carry = (!positioned_unknown).then_some(carry_out);
+    *carry = carry_out;
     Ok(res)
 }
 
@@ -1350,7 +1334,7 @@ mod tests {
         /// Pieces judged by [`Piece::sampled`] on this thread.
         pub(super) static SAMPLED: std::cell::Cell<usize> = const { std::cell::Cell::new(0) };
     }
-    use crate::machine::tool::{MachineTool, testing};
+    use crate::machine::tool::testing;
     use crate::predict::EffectSet;
     use crate::program::interp::{Interpreter, Setup};
 
@@ -1376,6 +1360,20 @@ mod tests {
             }
         }
         plans
+    }
+
+    /// [`block_after`] over `plans` in one run; panics on a failure.
+    fn run_all(pred: &ToolPredictor, plans: &[Plan]) -> Vec<BlockResult> {
+        let mut carry = None;
+        plans
+            .iter()
+            .map(
+                |p| match block_after(pred, p, &Settings::default(), &mut carry) {
+                    Ok(r) => r,
+                    Err(e) => panic!("{e}"),
+                },
+            )
+            .collect()
     }
 
     #[test]
@@ -1459,14 +1457,7 @@ mod tests {
         let pred = ToolPredictor::new(&m, EffectSet::default());
         let plans = afm_plans(&["G0 X10 Y10 Z10", "G1 X400 Y300 F1000", "G43 H1", "G1 X500"]);
         let settings = Settings::default();
-        let mut carry = None;
-        let res: Vec<BlockResult> = plans
-            .iter()
-            .map(|p| match block_after(&pred, p, &settings, &mut carry) {
-                Ok(r) => r,
-                Err(e) => panic!("{e}"),
-            })
-            .collect();
+        let res = run_all(&pred, &plans);
         let Some(mv) = plans[3].mv else {
             panic!("no move")
         };
@@ -1499,14 +1490,7 @@ mod tests {
         ]);
         let settings = Settings::default();
         let tool = 0.0;
-        let mut carry = None;
-        let res: Vec<BlockResult> = plans
-            .iter()
-            .map(|p| match block_after(&pred, p, &settings, &mut carry) {
-                Ok(r) => r,
-                Err(e) => panic!("{e}"),
-            })
-            .collect();
+        let res = run_all(&pred, &plans);
         for (k, (r, p)) in res.iter().zip(&plans).enumerate().skip(2) {
             let Some(mv) = p.mv else { continue };
             let prev_end = res[k - 1].end;
@@ -1533,37 +1517,14 @@ mod tests {
     /// of a fresh one, and keeps its allocation.
     #[test]
     fn reused_segment_storage_gives_the_same_result() {
-        let path = concat!(env!("CARGO_MANIFEST_DIR"), "/machines/afm-r1000.yaml");
-        let text = std::fs::read_to_string(path).unwrap_or_default();
-        let m = match MachineTool::from_yaml_str(&text, path) {
-            Ok(m) => m,
-            Err(e) => panic!("{e}"),
-        };
+        let m = testing::load(&testing::afm_text(), "afm");
         let pred = ToolPredictor::new(&m, EffectSet::default());
-        let setup = Setup {
-            axes: [true, true, true, false, false, false],
-            ..Setup::default()
-        };
-        let mut interp = Interpreter::new(setup, "p.nc");
-        let program = [
+        let plans = afm_plans(&[
             "G0 X0 Y0 Z10",
             "G1 X900 Y20 F1000",
             "G2 X910 Y30 I0 J10",
             "G1 Y20",
-        ];
-        let mut plans = Vec::new();
-        for (k, line) in program.iter().enumerate() {
-            let mut block = crate::program::gcode::Block::default();
-            if let Err(e) =
-                crate::program::gcode::parse_line(line.as_bytes(), k + 1, "p.nc", &mut block)
-            {
-                panic!("{e}");
-            }
-            match interp.step(&block, line.as_bytes()) {
-                Ok(p) => plans.push(p),
-                Err(e) => panic!("{e}"),
-            }
-        }
+        ]);
         let settings = Settings::default();
         let (mut fresh_carry, mut reuse_carry) = (None, None);
         let mut split = false;
