@@ -629,6 +629,7 @@ fn regression_reversed_passes_start_on_the_programmed_path() {
         }
         owner[i + 1] = j;
     }
+    let mut x_takeup = Vec::new();
     let mut takeups = 0;
     let mut checked = 0;
     for (mv, line) in &compensated {
@@ -645,6 +646,7 @@ fn regression_reversed_passes_start_on_the_programmed_path() {
                 "{}",
                 lines[line - 1]
             );
+            x_takeup.push((mv.end[0] - mv.start[0]).abs());
             takeups += 1;
             continue;
         }
@@ -663,6 +665,23 @@ fn regression_reversed_passes_start_on_the_programmed_path() {
             );
         }
         checked += 1;
+    }
+    // At each X reversal the takeup moves X by the AFM R-1000's reversal
+    // difference there (3.4–3.6 µm in its example calibration; the first
+    // takeup follows the `G43` positioning instead).
+    for x in &x_takeup[1..] {
+        assert!((0.0030..=0.0040).contains(x), "{x_takeup:?}");
+    }
+    // Words added to the one-word step blocks (`Y-99.9`) keep the
+    // program's spacing.
+    for l in &lines {
+        let code = l.split('(').next().unwrap_or("").as_bytes();
+        assert!(
+            !code
+                .windows(2)
+                .any(|w| w[0].is_ascii_digit() && b"XYZ".contains(&w[1])),
+            "{l}"
+        );
     }
     // Every X pass after the first reverses X, and the first feed starts
     // after `G43 H1 Z5`, which positions Z only: X and Y stay where they

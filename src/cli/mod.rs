@@ -125,7 +125,9 @@ pub struct CheckArgs {
 /// Where annotations go.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
 pub enum Annotate {
-    /// Append a comment with the predicted deviation to compensated blocks.
+    /// Append a comment with the predicted deviation to compensated blocks
+    /// (ending in `takeup` where the block's own line first moves onto its
+    /// start, solved for the new direction of motion, load or tool).
     Comment,
     /// No annotation.
     None,
