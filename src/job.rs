@@ -467,6 +467,25 @@ const REUSE_SEGMENTS: usize = 64;
 /// The compensation of a block: `None` for blocks not solved.
 type Solved = Option<std::result::Result<BlockResult, Failure>>;
 
+/// The last lines with a move (plan and block context), newest first: those
+/// of `plans` (with their `contexts`), then those of `before` (the moves
+/// before them, in order); at most [`compensate::CARRY_LOOKBACK`] + 1, what
+/// [`compensate::carry_before`] looks at.
+fn moves_back<'a>(
+    plans: &'a [Plan],
+    contexts: &'a [BlockContext],
+    before: &'a [(Plan, BlockContext)],
+) -> impl Iterator<Item = (Plan, BlockContext)> + 'a {
+    plans
+        .iter()
+        .zip(contexts)
+        .rev()
+        .filter(|(p, _)| p.mv.is_some())
+        .map(|(p, c)| (*p, *c))
+        .chain(before.iter().rev().copied())
+        .take(compensate::CARRY_LOOKBACK + 1)
+}
+
 /// One chunk in flight through [`Job::run`] with what the stages made of it.
 #[derive(Default)]
 struct Stage {
@@ -645,28 +664,10 @@ impl<'m> Job<'m> {
                     // The run starts from the last move before it, as if it
                     // had gone through the blocks before.
                     let start = g * GROUP_BLOCKS;
-                    let keep = compensate::CARRY_LOOKBACK + 1;
                     last.clear();
                     last.extend(
-                        plans
-                            .get(..start)
-                            .unwrap_or(&[])
-                            .iter()
-                            .zip(contexts)
-                            .rev()
-                            .filter(|(p, _)| p.mv.is_some())
-                            .take(keep)
-                            .map(|(p, c)| (pred.with_context(*c), *p)),
-                    );
-                    let more = keep - last.len();
-                    let from = before.len().saturating_sub(more);
-                    last.extend(
-                        before
-                            .get(from..)
-                            .unwrap_or(&[])
-                            .iter()
-                            .rev()
-                            .map(|(p, c)| (pred.with_context(*c), *p)),
+                        moves_back(plans.get(..start).unwrap_or(&[]), contexts, before)
+                            .map(|(p, c)| (pred.with_context(c), p)),
                     );
                     last.reverse();
                     let mut carry = compensate::carry_before(last, &self.settings);
@@ -792,19 +793,10 @@ impl<'m> Job<'m> {
             }
             summary.lines = chunk.first_line + chunk.ranges.len();
             // The chunk's last moves, after those before it.
-            let keep = compensate::CARRY_LOOKBACK + 1;
-            let mine: Vec<(Plan, BlockContext)> = st.plans[..n]
-                .iter()
-                .zip(&st.contexts)
-                .rev()
-                .filter(|(p, _)| p.mv.is_some())
-                .take(keep)
-                .map(|(p, c)| (*p, *c))
-                .collect();
-            let from_before = keep - mine.len();
-            let skip = last_moves.len().saturating_sub(from_before);
-            last_moves.drain(..skip);
-            last_moves.extend(mine.into_iter().rev());
+            let last: Vec<(Plan, BlockContext)> =
+                moves_back(&st.plans[..n], &st.contexts, &last_moves).collect();
+            last_moves.clear();
+            last_moves.extend(last.into_iter().rev());
             Ok(())
         };
 

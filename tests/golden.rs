@@ -53,12 +53,19 @@ output:
 }
 
 fn compensate(dir: &std::path::Path, machine: &str, program: &str) -> String {
+    compensate_with(dir, machine, program, &["--annotate", "none"])
+}
+
+/// [`compensate`] with `args` instead of `--annotate none`.
+fn compensate_with(dir: &std::path::Path, machine: &str, program: &str, args: &[&str]) -> String {
     let m = dir.join("m.yaml");
     std::fs::write(&m, machine).unwrap();
     let p = dir.join("p.nc");
     std::fs::write(&p, program).unwrap();
     let out = postproc()
-        .args(["compensate", "--annotate", "none", "-o", "-", "--machine"])
+        .arg("compensate")
+        .args(args)
+        .args(["-o", "-", "--machine"])
         .arg(&m)
         .arg(&p)
         .output()
@@ -194,16 +201,7 @@ fn compensated_long_moves_stay_within_tolerance() {
     let dir = tempfile::tempdir().unwrap();
     let program = "G90 G54 G0 X-200 Y-100 Z20\nG43 H1 Z5\nG1 X500 Y300 Z-10 F2000\nX-240\n";
     // With annotations: a takeup point is marked.
-    std::fs::write(dir.path().join("m.yaml"), &text).unwrap();
-    std::fs::write(dir.path().join("p.nc"), program).unwrap();
-    let run = postproc()
-        .args(["compensate", "-o", "-", "--machine"])
-        .arg(dir.path().join("m.yaml"))
-        .arg(dir.path().join("p.nc"))
-        .output()
-        .unwrap();
-    assert_eq!(run.status.code(), Some(0));
-    let out = String::from_utf8(run.stdout).unwrap();
+    let out = compensate_with(dir.path(), &text, program, &[]);
     let lines: Vec<&str> = out.lines().collect();
     let programmed: Vec<Vector3<f64>> = moves(&machine, program)
         .iter()
@@ -596,25 +594,7 @@ fn regression_reversed_passes_start_on_the_programmed_path() {
         let x = if k % 2 == 1 { -200 } else { 300 };
         program += &format!("Y{:.1}\nX{x}\n", -100.0 + 0.1 * k as f64);
     }
-    let m = dir.path().join("m.yaml");
-    std::fs::write(&m, &text).unwrap();
-    let p = dir.path().join("p.nc");
-    std::fs::write(&p, &program).unwrap();
-    let out = postproc()
-        .args([
-            "compensate",
-            "--effects",
-            "geometric",
-            "-o",
-            "-",
-            "--machine",
-        ])
-        .arg(&m)
-        .arg(&p)
-        .output()
-        .unwrap();
-    assert_eq!(out.status.code(), Some(0));
-    let out = String::from_utf8(out.stdout).unwrap();
+    let out = compensate_with(dir.path(), &text, &program, &["--effects", "geometric"]);
     let programmed = moves(&machine, &program);
     let compensated = moves(&machine, &out);
     let lines: Vec<&str> = out.lines().collect();
