@@ -1,6 +1,7 @@
 //! The one integration-test binary: CLI tests through the real executable,
 //! goldens, property tests and regressions.
 
+mod alloc;
 mod bad_corpus;
 mod batch_cli;
 mod calibrate_cli;

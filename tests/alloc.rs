@@ -1,0 +1,152 @@
+//! Hot-path hygiene: heap allocations do not grow with the number of blocks.
+//!
+//! The test binary's global allocator counts the allocations (and
+//! reallocations) made on the threads that opt in: the test's own thread
+//! and the worker threads of a pool built for the test (its start handler
+//! opts them in). Other tests running at the same time on other threads are
+//! not counted. A G-code job is run in process on a raster program of `n`
+//! and of `2 n` blocks with every effect on; the allocations of the extra
+//! `n` blocks, per block, must stay far below one: what allocates is per
+//! chunk of 4096 lines or per run of 64 blocks, not per block.
+
+use std::alloc::{GlobalAlloc, Layout, System};
+use std::cell::Cell;
+use std::fmt::Write as _;
+use std::io::{BufReader, Cursor};
+use std::sync::atomic::{AtomicU64, Ordering};
+
+use postproc::compensate::Settings;
+use postproc::emit::gcode::EmitOptions;
+use postproc::job::Job;
+use postproc::machine::Machine;
+use postproc::predict::{EffectSet, ProcessSetup, ToolPredictor};
+use postproc::program::interp::Setup;
+
+use crate::common::repo;
+
+/// The system allocator, counting on the threads that opted in.
+struct Counting;
+
+static ALLOCATIONS: AtomicU64 = AtomicU64::new(0);
+
+thread_local! {
+    static COUNTED: Cell<bool> = const { Cell::new(false) };
+}
+
+fn count() {
+    // `try_with`: the allocator also runs while a thread's locals are torn
+    // down.
+    if COUNTED.try_with(Cell::get).unwrap_or(false) {
+        ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
+    }
+}
+
+// SAFETY: every call is forwarded to `System` with the same arguments; the
+// counter has no effect on the memory handed out.
+unsafe impl GlobalAlloc for Counting {
+    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+        count();
+        // SAFETY: the caller's contract is forwarded unchanged.
+        unsafe { System.alloc(layout) }
+    }
+    unsafe fn alloc_zeroed(&self, layout: Layout) -> *mut u8 {
+        count();
+        // SAFETY: as above.
+        unsafe { System.alloc_zeroed(layout) }
+    }
+    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+        // SAFETY: as above.
+        unsafe { System.dealloc(ptr, layout) }
+    }
+    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
+        count();
+        // SAFETY: as above.
+        unsafe { System.realloc(ptr, layout, new_size) }
+    }
+}
+
+#[global_allocator]
+static GLOBAL: Counting = Counting;
+
+/// Largest number of allocations per added block: per-run (64 blocks) and
+/// per-chunk (4096 lines) buffers give about 1/64 = 0.016; an allocation
+/// in every block would give at least 1.
+const MAX_ALLOCATIONS_PER_BLOCK: f64 = 0.05;
+
+/// A cutting raster with reversals at every pass (takeup points), a
+/// process force and a spindle (thermal source), over several chunks.
+fn raster(passes: usize) -> String {
+    let mut p = String::from(
+        "%\nO2002 (ALLOC)\nG90 G17 G21 G54\nT1 M6\nG43 H1 G0 X0 Y0 Z20\nS6000 M3\n(POSTPROC MILLING DEPTH=2 WIDTH=3)\nG1 Z0 F2000\n",
+    );
+    let mut y = 0.0f64;
+    for n in 0..passes {
+        let x = if n % 2 == 0 { 400.0 } else { 0.0 };
+        let _ = writeln!(p, "X{x:.3} Y{y:.3}");
+        y += 0.01;
+        let _ = writeln!(p, "Y{y:.3}");
+    }
+    p.push_str("M30\n%\n");
+    p
+}
+
+/// Allocations counted while compensating `program`, and its output size.
+fn allocations(job: &Job, program: &str) -> (u64, usize) {
+    // The output buffer is sized up front: its growth is not the engine's.
+    let mut sink: Vec<u8> = Vec::with_capacity(program.len() * 16);
+    let input = BufReader::new(Cursor::new(program.as_bytes()));
+    COUNTED.with(|c| c.set(true));
+    let before = ALLOCATIONS.load(Ordering::Relaxed);
+    let summary = job.run(input, "alloc.nc", Some(&mut sink), None);
+    let after = ALLOCATIONS.load(Ordering::Relaxed);
+    COUNTED.with(|c| c.set(false));
+    let summary = summary.expect("the job runs");
+    assert!(summary.changed > 0, "the program was compensated");
+    assert!(sink.len() <= program.len() * 16, "the sink did not grow");
+    (after - before, summary.blocks)
+}
+
+#[test]
+fn gcode_compensation_does_not_allocate_per_block() {
+    let text = std::fs::read_to_string(repo("machines/afm-r1000.yaml")).unwrap();
+    let Ok(Machine::Tool(machine)) = Machine::from_yaml_str(&text, "afm-r1000.yaml") else {
+        panic!("afm-r1000.yaml is not a machine tool")
+    };
+    let mut setup = Setup {
+        axes: [true, true, true, false, false, false],
+        ..Setup::default()
+    };
+    setup
+        .tools
+        .insert(1, machine.tool_length_mm(1).unwrap_or(0.0));
+    setup.work_offsets[0] = machine.work_offset_mm("G54");
+    setup.home = [0.0, 0.0, 500.0, 0.0, 0.0, 0.0];
+    let process = ProcessSetup::for_machine(&machine);
+    assert!(process.force.is_some(), "the example has a force model");
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(2)
+        .start_handler(|_| COUNTED.with(|c| c.set(true)))
+        .build()
+        .unwrap();
+    let job = Job {
+        predictor: Some(ToolPredictor::new(&machine, EffectSet::default()).with_process(&process)),
+        setup,
+        settings: Settings::default(),
+        emit: EmitOptions {
+            decimals_mm: Some(4),
+            decimals_deg: None,
+            annotate: true,
+        },
+        pool: Some(&pool),
+    };
+    // Warm up (lazy statics, the pool's own buffers), then n and 2n blocks.
+    allocations(&job, &raster(1000));
+    let (a1, b1) = allocations(&job, &raster(10_000));
+    let (a2, b2) = allocations(&job, &raster(20_000));
+    assert!(b2 > b1 + 19_000, "{b1} and {b2} blocks");
+    let per_block = a2.saturating_sub(a1) as f64 / (b2 - b1) as f64;
+    assert!(
+        per_block < MAX_ALLOCATIONS_PER_BLOCK,
+        "{a1} allocations for {b1} blocks, {a2} for {b2}: {per_block:.3} per added block"
+    );
+}
