@@ -669,3 +669,91 @@ fn regression_reversed_passes_start_on_the_programmed_path() {
     assert_eq!(takeups, 7, "{out}");
     assert!(checked >= 18, "{checked} pieces\n{out}");
 }
+
+#[test]
+fn regression_kept_arcs_after_a_reversal_start_on_the_programmed_path() {
+    // Pocket corners on the AFM R-1000: a straight move, then a quarter arc
+    // whose first motion reverses an axis (X at the first corner, Y at the
+    // second). The arc's correction is uniform enough to keep it as an
+    // arc, but the machine stood where the straight move's end was solved
+    // for the old direction: before the fix the arc left from there, about
+    // 3.5 µm off its programmed start at 1 µm tolerance. Now the block's own
+    // line moves straight to a takeup point (the arc's start solved for its
+    // first directions of motion) and the arc follows on an added line.
+    let text = std::fs::read_to_string(repo("machines/afm-r1000.yaml")).unwrap();
+    let Machine::Tool(machine) = Machine::from_yaml_str(&text, "afm").unwrap() else {
+        panic!("not a machine tool")
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let program = "G90 G54 G0 X-200 Y-100 Z20\nG43 H1 Z5\nG1 X100 F2000\nY0\n\
+                   G3 X92 Y8 R8\nG1 X-100\nG3 X-108 Y0 I0 J-8\nG1 Y-92\n";
+    let out = compensate_with(dir.path(), &text, program, &["--effects", "geometric"]);
+    let lines: Vec<&str> = out.lines().collect();
+    let programmed = moves(&machine, program);
+    let compensated = moves(&machine, &out);
+    let tool = machine.tool_length_mm(1).unwrap();
+    let tolerance = 0.001;
+    // The arcs as programmed (lines 5 and 7) and their first directions of
+    // motion, read off the drawing: the first leaves (100, 0) up and to the
+    // left (−X after +X), the second leaves (−100, 8) to the left and down
+    // (−Y after +Y).
+    let arcs = [(5, [-1, 1]), (7, [-1, -1])];
+    let mut checked = 0;
+    for (line, first_xy) in arcs {
+        let Some((pm, _)) = programmed.iter().find(|(_, l)| *l == line) else {
+            panic!("no move on line {line}")
+        };
+        let Some(parc) = pm.arc else {
+            panic!("line {line} is not an arc")
+        };
+        let mut dirs = pm.dirs;
+        dirs[0] = first_xy[0];
+        dirs[1] = first_xy[1];
+        // The block's own line: a straight move onto the takeup point.
+        let own = lines
+            .iter()
+            .position(|l| {
+                l.starts_with(if line == 5 { "G1 X99" } else { "G1 X-100" }) && l.contains("takeup")
+            })
+            .unwrap_or_else(|| panic!("no takeup for line {line}\n{out}"));
+        let Some((takeup, _)) = compensated.iter().find(|(_, l)| *l == own + 1) else {
+            panic!("no move on output line {}", own + 1)
+        };
+        assert_eq!(takeup.motion, Motion::Linear, "{}", lines[own]);
+        let got = machine.geometric(&takeup.end, &dirs, tool).pos;
+        assert!(
+            (got - pm.start3()).norm() <= POINT_TOL_MM,
+            "{} lands {} mm off",
+            lines[own],
+            (got - pm.start3()).norm()
+        );
+        // The added line: the arc itself, kept, from the takeup point.
+        let Some((mv, _)) = compensated.iter().find(|(_, l)| *l == own + 2) else {
+            panic!("no move on output line {}", own + 2)
+        };
+        let arc = mv
+            .arc
+            .unwrap_or_else(|| panic!("not an arc: {}", lines[own + 1]));
+        assert_eq!(mv.motion, pm.motion, "{}", lines[own + 1]);
+        // Every point of it lands on the programmed circle within the
+        // tolerance (a quarter arc: its directions of motion do not change).
+        for k in 0..=20 {
+            let s = k as f64 / 20.0;
+            let p = arc.point(&mv.start3(), &mv.end3(), s);
+            let mut c = mv.end;
+            c[0] = p[0];
+            c[1] = p[1];
+            c[2] = p[2];
+            let got = machine.geometric(&c, &dirs, tool).pos;
+            let radial =
+                ((got[0] - parc.center[0]).hypot(got[1] - parc.center[1]) - parc.radius).abs();
+            assert!(
+                radial <= tolerance + POINT_TOL_MM,
+                "{radial} mm off the circle at {s} of {}",
+                lines[own + 1]
+            );
+        }
+        checked += 1;
+    }
+    assert_eq!(checked, 2);
+}

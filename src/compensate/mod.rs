@@ -879,6 +879,12 @@ fn with_xyz(base: &AxisVec, p: &Vector3<f64>) -> AxisVec {
 /// previous block left the machine; beyond it a takeup move comes first.
 pub const TAKEUP_SHARE: f64 = 0.5;
 
+/// How far from the programmed start `p0` the machine is when it stands at
+/// the command `at` and moves off with the directions of motion `dirs`, mm.
+fn start_gap(pred: &ToolPredictor, p0: &AxisVec, at: &AxisVec, dirs: &DirVec, tool: f64) -> f64 {
+    (pred.attained(at, dirs, tool).pos - pred.nominal(p0, tool).pos).norm()
+}
+
 /// How a move that starts at the programmed `p0` begins when the machine
 /// stands at the command `at`, solved for the previous block's directions
 /// of motion, load or temperature. While the attained point of `at` under
@@ -899,8 +905,7 @@ fn start_from<'m>(
     tol: f64,
     out: &mut Vec<AxisVec>,
 ) -> Result<(AxisVec, f64, bool), Failure> {
-    let tool = lip.tool_mm;
-    let gap = (pred.attained(at, dirs, tool).pos - pred.nominal(p0, tool).pos).norm();
+    let gap = start_gap(pred, p0, at, dirs, lip.tool_mm);
     if gap <= tol * TAKEUP_SHARE {
         return Ok((*at, gap.max(SOLVE_TOL_MM), false));
     }
@@ -1236,6 +1241,7 @@ fn arc_block(
     let mut corr_min = Vector3::repeat(f64::INFINITY);
     let mut corr_max = Vector3::repeat(f64::NEG_INFINITY);
     let mut first = Vector3::zeros();
+    let mut start_c = mv.start;
     for k in 0..=n {
         let s = k as f64 / n as f64;
         let p = arc.point(&s3, &e3, s);
@@ -1248,12 +1254,25 @@ fn arc_block(
         let corr = Vector3::new(c[0] - p[0], c[1] - p[1], c[2] - p[2]);
         if k == 0 {
             first = corr;
+            start_c = c;
         }
         corr_min = corr_min.inf(&corr);
         corr_max = corr_max.sup(&corr);
     }
     let spread = (corr_max - corr_min).norm();
     if spread <= tol {
+        // A kept arc starts where the machine stands. Beyond the takeup
+        // share of the tolerance from the programmed start (an axis that
+        // reverses at the arc's start), the start solved for the arc's
+        // first direction of motion comes first, as a takeup point.
+        let stands_off = carry_in.filter(|k| k.target == mv.start).is_some_and(|k| {
+            start_gap(pred, &mv.start, &k.c, &start_dirs, tool) > tol * TAKEUP_SHARE
+        });
+        if stands_off {
+            check_travel(pred, &start_c)?;
+            res.segments.push(start_c);
+            res.takeup = true;
+        }
         let last = Vector3::new(res.end[0] - e3[0], res.end[1] - e3[1], res.end[2] - e3[2]);
         res.center = Some(arc.center + (first + last) / 2.0);
         return Ok(None);
@@ -1511,6 +1530,45 @@ mod tests {
             }
         }
         assert_eq!(res.iter().filter(|r| r.takeup).count(), 2);
+    }
+
+    #[test]
+    fn an_arc_that_starts_with_a_reversal_starts_on_the_programmed_point() {
+        // A small arc (uniform correction: kept as an arc when nothing
+        // else is in the way) that leaves its start in −X after a move in
+        // +X. The machine stands where the straight move's end was solved
+        // for +X; seen under −X it is off the arc's start by the reversal
+        // value (more than the tolerance). The arc must not start from
+        // there: the start solved for −X comes first (a takeup point), and
+        // the arc, still kept, leaves from it.
+        let m = testing::load(&testing::afm_text(), "afm");
+        let pred = ToolPredictor::new(&m, EffectSet::default());
+        let tol = Settings::default().tolerance_mm;
+        let tool = 0.0;
+        // Without the reversal (the arc starts in +X), it is kept.
+        let plans = afm_plans(&["G0 X10 Y10 Z10", "G1 X400 F1000", "G3 X402 Y12 I0 J2"]);
+        let res = run_all(&pred, &plans);
+        assert!(!res[2].arc_replaced && !res[2].takeup);
+        assert!(res[2].center.is_some());
+        // With it.
+        let plans = afm_plans(&["G0 X10 Y10 Z10", "G1 X400 F1000", "G2 X398 Y12 I0 J2"]);
+        let res = run_all(&pred, &plans);
+        let (Some(line), Some(arc)) = (plans[1].mv, plans[2].mv) else {
+            panic!("no move")
+        };
+        assert_eq!(line.dirs[0], 1);
+        assert!(res[2].takeup, "no takeup point");
+        assert!(!res[2].arc_replaced && res[2].center.is_some());
+        assert_eq!(res[2].segments.len(), 1);
+        // The clockwise quarter from the bottom of the circle about
+        // (400, 12) to its left: −X and +Y all along.
+        let start_dirs = dirs_of(&Vector3::new(-1.0, 1.0, 0.0), &arc.dirs);
+        let off = (pred.attained(&res[1].end, &start_dirs, tool).pos
+            - pred.nominal(&arc.start, tool).pos)
+            .norm();
+        assert!(off > tol, "{off} mm");
+        let at = pred.attained(&res[2].segments[0], &start_dirs, tool).pos;
+        assert!((at - pred.nominal(&arc.start, tool).pos).norm() <= SOLVE_TOL_MM);
     }
 
     /// A recycled split-point storage, whatever it held, gives the result

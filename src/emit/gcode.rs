@@ -9,6 +9,8 @@
 //! deviation is appended in the program's comment style.
 
 use super::fixed::{FIXED_MAX, exact_fixed, fixed_digits, pow10, round_half_away};
+use nalgebra::Vector3;
+
 use crate::compensate::BlockResult;
 use crate::machine::{AXIS_LETTERS, AxisVec};
 use crate::predict::Effect;
@@ -301,12 +303,18 @@ impl Emitter {
             res.end
         };
 
+        // A kept arc after a takeup point: the block's own line moves
+        // straight to the takeup point, the arc follows on an added line.
+        let arc_after_takeup = res.takeup && res.center.is_some() && !res.arc_replaced;
+        // The block's own line is a straight move (G1, no centre words).
+        let own_linear = res.arc_replaced || arc_after_takeup;
+
         // Motion word handling for replaced arcs and pending modal motion.
         let motion_word = block
             .words
             .iter()
             .find(|w| w.letter == b'G' && matches!(w.code10(), 0 | 10 | 20 | 30));
-        if res.arc_replaced {
+        if own_linear {
             match motion_word {
                 Some(w) => {
                     let old = &text[w.num_start as usize..w.end as usize];
@@ -356,6 +364,7 @@ impl Emitter {
             }
         }
         if motion_word.is_some() || !res.arc_replaced {
+            // (After a takeup point, the added arc line states its motion.)
             self.motion_pending = None;
         }
         if res.arc_replaced {
@@ -430,7 +439,7 @@ impl Emitter {
             }
         }
         // Arc centre words.
-        if let (Some(center), Some(arc)) = (res.center, mv.arc) {
+        if let (Some(center), Some(arc), false) = (res.center, mv.arc, arc_after_takeup) {
             let (a, b, _) = arc.plane.axes();
             let (la, lb) = arc.plane.center_letters();
             let r_word = block.word(b'R');
@@ -532,9 +541,14 @@ impl Emitter {
             out.extend_from_slice(eol);
         }
         self.emitted = new_emitted;
-        // Added segment blocks.
-        if !res.segments.is_empty() {
-            let eol: &[u8] = if eol.is_empty() { b"\n" } else { eol };
+        let eol_added: &[u8] = if eol.is_empty() { b"\n" } else { eol };
+        if let (Some(center), Some(arc), true) = (res.center, mv.arc, arc_after_takeup) {
+            self.arc_line(
+                block, plan, mv.motion, &arc, &center, &res.end, eol_added, out,
+            );
+        } else if !res.segments.is_empty() {
+            // Added segment blocks.
+            let eol = eol_added;
             let points = res.segments[1..].iter().chain(std::iter::once(&res.end));
             // Decimals per axis (from the block's word), found at the
             // axis' first word.
@@ -569,6 +583,76 @@ impl Emitter {
                 self.added += 1;
             }
         }
+    }
+
+    /// The added line of a kept arc after its takeup point: the motion
+    /// word, the end point's words that differ from where the takeup point
+    /// left the machine, and the centre (`R` when the block gives one,
+    /// else the centre words: the block's own and any that are non-zero),
+    /// relative to the takeup point unless the program's arc centres are
+    /// absolute.
+    #[allow(clippy::too_many_arguments)]
+    fn arc_line(
+        &mut self,
+        block: &Block,
+        plan: &Plan,
+        motion: Motion,
+        arc: &crate::program::interp::ArcGeom,
+        center: &Vector3<f64>,
+        end: &AxisVec,
+        eol: &[u8],
+        out: &mut Vec<u8>,
+    ) {
+        let (scale, lower, spaced) = (plan.scale, block.lower_case, self.spaced);
+        let sep: &[u8] = if spaced { b" " } else { b"" };
+        let start = self.emitted;
+        out.push(if lower { b'g' } else { b'G' });
+        out.push(if motion == Motion::ArcCw { b'2' } else { b'3' });
+        for slot in 0..6 {
+            let now = self.emitted[slot];
+            if end[slot] == now {
+                continue;
+            }
+            let w = block.words.iter().find(|w| w.letter == AXIS_LETTERS[slot]);
+            let d = self.decimals(w, scale, slot >= 3);
+            let v = round_to(to_program(plan, slot, end[slot], now), d);
+            if v != round_to(to_program(plan, slot, now, now), d) {
+                out.extend_from_slice(sep);
+                out.push(letter_case(AXIS_LETTERS[slot], lower));
+                write_number(out, v, d, true);
+                self.emitted[slot] = to_machine(plan, slot, v, now);
+            }
+        }
+        let (a, b, _) = arc.plane.axes();
+        let e = self.emitted;
+        if let Some(r) = block.word(b'R') {
+            let ra = ((start[a] - center[a]).hypot(start[b] - center[b])
+                + (e[a] - center[a]).hypot(e[b] - center[b]))
+                / 2.0;
+            let d = self.decimals(Some(r), scale, false);
+            out.extend_from_slice(sep);
+            out.push(letter_case(b'R', lower));
+            write_number(out, round_to(ra / scale * r.value.signum(), d), d, true);
+        } else {
+            let (la, lb) = arc.plane.center_letters();
+            for (slot, letter) in [(a, la), (b, lb)] {
+                let w = block.word(letter);
+                let d = self.decimals(w, scale, false);
+                let v = if plan.arc_absolute {
+                    (center[slot] - plan.offset[slot]) / scale
+                } else {
+                    (center[slot] - start[slot]) / scale
+                };
+                let v = round_to(v, d);
+                if w.is_some() || v != 0.0 || plan.arc_absolute {
+                    out.extend_from_slice(sep);
+                    out.push(letter_case(letter, lower));
+                    write_number(out, v, d, true);
+                }
+            }
+        }
+        out.extend_from_slice(eol);
+        self.added += 1;
     }
 
     fn has_axis_word_or_moved(&self, slot: usize, target: f64) -> bool {
