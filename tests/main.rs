@@ -17,6 +17,7 @@ mod observations;
 mod paper_b;
 mod rapid;
 mod rapid_cli;
+mod readme;
 mod regression;
 mod report_cli;
 mod robot;
