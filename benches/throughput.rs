@@ -55,15 +55,7 @@ fn main() {
     let Ok(Machine::Tool(machine)) = Machine::from_yaml_str(&text, "afm-r1000.yaml") else {
         panic!("afm-r1000.yaml is not a machine tool")
     };
-    let mut setup = Setup {
-        axes: [true, true, true, false, false, false],
-        ..Setup::default()
-    };
-    setup
-        .tools
-        .insert(1, machine.tool_length_mm(1).unwrap_or(0.0));
-    setup.work_offsets[0] = machine.work_offset_mm("G54");
-    setup.home = [0.0, 0.0, 500.0, 0.0, 0.0, 0.0];
+    let setup = Setup::for_machine(&machine);
     let emit = EmitOptions {
         decimals_mm: Some(4),
         decimals_deg: None,

@@ -112,15 +112,7 @@ fn gcode_compensation_does_not_allocate_per_block() {
     let Ok(Machine::Tool(machine)) = Machine::from_yaml_str(&text, "afm-r1000.yaml") else {
         panic!("afm-r1000.yaml is not a machine tool")
     };
-    let mut setup = Setup {
-        axes: [true, true, true, false, false, false],
-        ..Setup::default()
-    };
-    setup
-        .tools
-        .insert(1, machine.tool_length_mm(1).unwrap_or(0.0));
-    setup.work_offsets[0] = machine.work_offset_mm("G54");
-    setup.home = [0.0, 0.0, 500.0, 0.0, 0.0, 0.0];
+    let setup = Setup::for_machine(&machine);
     let process = ProcessSetup::for_machine(&machine);
     assert!(process.force.is_some(), "the example has a force model");
     let pool = rayon::ThreadPoolBuilder::new()

@@ -161,17 +161,7 @@ fn error_free_machine_changes_nothing() {
 
 /// Interprets a program and returns its moves (end point, dirs, motion, line).
 fn moves(machine: &MachineTool, text: &str) -> Vec<(postproc::program::interp::Move, usize)> {
-    let mut setup = Setup::default();
-    for (s, a) in setup.axes.iter_mut().enumerate() {
-        *a = machine.has_axis(s);
-    }
-    setup
-        .tools
-        .insert(1, machine.tool_length_mm(1).unwrap_or(0.0));
-    for (i, wo) in setup.work_offsets.iter_mut().enumerate() {
-        *wo = machine.work_offset_mm(&format!("G{}", 54 + i));
-    }
-    let mut it = Interpreter::new(setup, "t");
+    let mut it = Interpreter::new(Setup::for_machine(machine), "t");
     let mut b = Block::default();
     let mut out = vec![];
     for (i, l) in text.lines().enumerate() {
@@ -756,4 +746,16 @@ fn regression_kept_arcs_after_a_reversal_start_on_the_programmed_path() {
         checked += 1;
     }
     assert_eq!(checked, 2);
+    // The added arc line follows the program's style: lower case, two-digit
+    // motion codes, no spaces.
+    let haas = "g90g54g0x-200y-100z20\ng43h1z5\ng01x100f2000\ny0\ng03x92y8r8\ng01x-100\n";
+    let out = compensate_with(dir.path(), &text, haas, &["--effects", "geometric"]);
+    let lines: Vec<&str> = out.lines().collect();
+    let own = lines
+        .iter()
+        .position(|l| l.starts_with("g01x99") && l.contains("takeup"))
+        .unwrap_or_else(|| panic!("no takeup\n{out}"));
+    assert!(lines[own + 1].starts_with("g03x91.9"), "{out}");
+    assert!(lines[own + 1].contains("r7.9999"), "{out}");
+    assert!(!lines[own + 1].contains(' '), "{out}");
 }

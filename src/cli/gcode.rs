@@ -30,20 +30,13 @@ fn load_machine(name: &str) -> Result<MachineTool> {
 }
 
 pub(super) fn parse_setup(args: &ProgramArgs, machine: Option<&MachineTool>) -> Result<Setup> {
-    let mut setup = Setup::default();
-    match machine {
-        Some(m) => {
-            for (slot, has) in setup.axes.iter_mut().enumerate() {
-                *has = m.has_axis(slot);
-            }
-            setup.tools.extend(m.tools());
-            for (i, wo) in setup.work_offsets.iter_mut().enumerate() {
-                *wo = m.work_offset_mm(&format!("G{}", 54 + i));
-            }
-            setup.home = home_position(m);
-        }
-        None => setup.axes = [true; 6],
-    }
+    let mut setup = match machine {
+        Some(m) => Setup::for_machine(m),
+        None => Setup {
+            axes: [true; 6],
+            ..Setup::default()
+        },
+    };
     for t in &args.tools {
         let (h, len) = t
             .split_once('=')
@@ -232,19 +225,6 @@ fn fmt_axes(v: &[f64; 6], setup: &Setup) -> String {
         }
     }
     s
-}
-
-/// The reference position the interpreter starts from and G28 returns to:
-/// machine zero clamped into each axis' travel, with Z at its upper limit
-/// (spindle retracted).
-pub fn home_position(m: &MachineTool) -> [f64; 6] {
-    let mut home = [0.0; 6];
-    for (slot, h) in home.iter_mut().enumerate() {
-        if let Some((lo, hi)) = m.travel(slot) {
-            *h = if slot == 2 { hi } else { 0.0f64.clamp(lo, hi) };
-        }
-    }
-    home
 }
 
 /// `postproc check`.

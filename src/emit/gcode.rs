@@ -440,48 +440,27 @@ impl Emitter {
         }
         // Arc centre words.
         if let (Some(center), Some(arc), false) = (res.center, mv.arc, arc_after_takeup) {
-            let (a, b, _) = arc.plane.axes();
-            let (la, lb) = arc.plane.center_letters();
-            let r_word = block.word(b'R');
-            if let Some(r) = r_word {
-                let (e, st) = (first_target, start_emitted);
-                let ra = ((st[a] - center[a]).hypot(st[b] - center[b])
-                    + (e[a] - center[a]).hypot(e[b] - center[b]))
-                    / 2.0;
-                let d = self.decimals(Some(r), scale, false);
-                let v = round_to(ra / scale * r.value.signum(), d);
-                if v != round_to(r.value, d) {
-                    edits.number(r, v, d);
-                }
-            } else {
-                for (slot, letter) in [(a, la), (b, lb)] {
-                    let w = block.word(letter);
-                    let d = self.decimals(w, scale, false);
-                    let v = if plan.arc_absolute {
-                        (center[slot] - plan.offset[slot]) / scale
-                    } else {
-                        (center[slot] - start_emitted[slot]) / scale
-                    };
-                    let v = round_to(v, d);
-                    match w {
-                        Some(w) => {
-                            if v != round_to(w.value, d) {
-                                edits.number(w, v, d);
-                            }
+            let words =
+                self.centre_words(block, plan, &arc, &center, &start_emitted, &first_target);
+            for (letter, v, d, w) in words.into_iter().flatten() {
+                match w {
+                    Some(w) => {
+                        if v != round_to(w.value, d) {
+                            edits.number(w, v, d);
                         }
-                        None => {
-                            if v != 0.0 || plan.arc_absolute {
-                                let at = block
-                                    .words
-                                    .iter()
-                                    .filter(|w| matches!(w.letter, b'I' | b'J' | b'K'))
-                                    .map(|w| w.end as usize)
-                                    .max()
-                                    .or(last_axis_end)
-                                    .unwrap_or(text.len());
-                                let l = letter_case(letter, lower);
-                                edits.insert_word(at, sep, l, v, d);
-                            }
+                    }
+                    None => {
+                        if v != 0.0 || plan.arc_absolute {
+                            let at = block
+                                .words
+                                .iter()
+                                .filter(|w| matches!(w.letter, b'I' | b'J' | b'K'))
+                                .map(|w| w.end as usize)
+                                .max()
+                                .or(last_axis_end)
+                                .unwrap_or(text.len());
+                            let l = letter_case(letter, lower);
+                            edits.insert_word(at, sep, l, v, d);
                         }
                     }
                 }
@@ -543,8 +522,19 @@ impl Emitter {
         self.emitted = new_emitted;
         let eol_added: &[u8] = if eol.is_empty() { b"\n" } else { eol };
         if let (Some(center), Some(arc), true) = (res.center, mv.arc, arc_after_takeup) {
+            // `G02` in programs that write two digits.
+            let two_digit = motion_word.is_some_and(|w| {
+                w.end > w.num_start + 1 && text.get(w.num_start as usize) == Some(&b'0')
+            });
             self.arc_line(
-                block, plan, mv.motion, &arc, &center, &res.end, eol_added, out,
+                block,
+                plan,
+                (mv.motion, two_digit),
+                &arc,
+                &center,
+                &res.end,
+                eol_added,
+                out,
             );
         } else if !res.segments.is_empty() {
             // Added segment blocks.
@@ -586,7 +576,7 @@ impl Emitter {
     }
 
     /// The added line of a kept arc after its takeup point: the motion
-    /// word, the end point's words that differ from where the takeup point
+    /// word (two digits when the block's has them), the end point's words that differ from where the takeup point
     /// left the machine, and the centre (`R` when the block gives one,
     /// else the centre words: the block's own and any that are non-zero),
     /// relative to the takeup point unless the program's arc centres are
@@ -596,7 +586,7 @@ impl Emitter {
         &mut self,
         block: &Block,
         plan: &Plan,
-        motion: Motion,
+        (motion, two_digit): (Motion, bool),
         arc: &crate::program::interp::ArcGeom,
         center: &Vector3<f64>,
         end: &AxisVec,
@@ -607,6 +597,9 @@ impl Emitter {
         let sep: &[u8] = if spaced { b" " } else { b"" };
         let start = self.emitted;
         out.push(if lower { b'g' } else { b'G' });
+        if two_digit {
+            out.push(b'0');
+        }
         out.push(if motion == Motion::ArcCw { b'2' } else { b'3' });
         for slot in 0..6 {
             let now = self.emitted[slot];
@@ -623,36 +616,55 @@ impl Emitter {
                 self.emitted[slot] = to_machine(plan, slot, v, now);
             }
         }
-        let (a, b, _) = arc.plane.axes();
-        let e = self.emitted;
-        if let Some(r) = block.word(b'R') {
-            let ra = ((start[a] - center[a]).hypot(start[b] - center[b])
-                + (e[a] - center[a]).hypot(e[b] - center[b]))
-                / 2.0;
-            let d = self.decimals(Some(r), scale, false);
-            out.extend_from_slice(sep);
-            out.push(letter_case(b'R', lower));
-            write_number(out, round_to(ra / scale * r.value.signum(), d), d, true);
-        } else {
-            let (la, lb) = arc.plane.center_letters();
-            for (slot, letter) in [(a, la), (b, lb)] {
-                let w = block.word(letter);
-                let d = self.decimals(w, scale, false);
-                let v = if plan.arc_absolute {
-                    (center[slot] - plan.offset[slot]) / scale
-                } else {
-                    (center[slot] - start[slot]) / scale
-                };
-                let v = round_to(v, d);
-                if w.is_some() || v != 0.0 || plan.arc_absolute {
-                    out.extend_from_slice(sep);
-                    out.push(letter_case(letter, lower));
-                    write_number(out, v, d, true);
-                }
+        let words = self.centre_words(block, plan, arc, center, &start, end);
+        for (letter, v, d, w) in words.into_iter().flatten() {
+            if w.is_some() || v != 0.0 || plan.arc_absolute {
+                out.extend_from_slice(sep);
+                out.push(letter_case(letter, lower));
+                write_number(out, v, d, true);
             }
         }
         out.extend_from_slice(eol);
         self.added += 1;
+    }
+
+    /// The centre words of an arc from `start` to `end` (machine
+    /// coordinates) about `center`, rounded, each with its decimals and the
+    /// block's own word: `R` when the block gives one (the mean of the two
+    /// radii, with the sign of the block's), else the plane's two centre
+    /// letters, relative to `start` unless the program's arc centres are
+    /// absolute.
+    #[allow(clippy::type_complexity)]
+    fn centre_words<'b>(
+        &self,
+        block: &'b Block,
+        plan: &Plan,
+        arc: &crate::program::interp::ArcGeom,
+        center: &Vector3<f64>,
+        start: &AxisVec,
+        end: &AxisVec,
+    ) -> [Option<(u8, f64, usize, Option<&'b Word>)>; 2] {
+        let scale = plan.scale;
+        let (a, b, _) = arc.plane.axes();
+        if let Some(r) = block.word(b'R') {
+            let ra = ((start[a] - center[a]).hypot(start[b] - center[b])
+                + (end[a] - center[a]).hypot(end[b] - center[b]))
+                / 2.0;
+            let d = self.decimals(Some(r), scale, false);
+            let v = round_to(ra / scale * r.value.signum(), d);
+            return [Some((b'R', v, d, Some(r))), None];
+        }
+        let (la, lb) = arc.plane.center_letters();
+        [(a, la), (b, lb)].map(|(slot, letter)| {
+            let w = block.word(letter);
+            let d = self.decimals(w, scale, false);
+            let v = if plan.arc_absolute {
+                (center[slot] - plan.offset[slot]) / scale
+            } else {
+                (center[slot] - start[slot]) / scale
+            };
+            Some((letter, round_to(v, d), d, w))
+        })
     }
 
     fn has_axis_word_or_moved(&self, slot: usize, target: f64) -> bool {

@@ -258,6 +258,37 @@ pub struct Setup {
     pub home: AxisVec,
 }
 
+impl Setup {
+    /// The setup a machine tool file gives: its axes, its tool table, its
+    /// work offsets G54..G59 and its reference position (see
+    /// [`home_position`]).
+    pub fn for_machine(m: &crate::machine::tool::MachineTool) -> Setup {
+        let mut setup = Setup::default();
+        for (slot, has) in setup.axes.iter_mut().enumerate() {
+            *has = m.has_axis(slot);
+        }
+        setup.tools.extend(m.tools());
+        for (i, wo) in setup.work_offsets.iter_mut().enumerate() {
+            *wo = m.work_offset_mm(&format!("G{}", 54 + i));
+        }
+        setup.home = home_position(m);
+        setup
+    }
+}
+
+/// The reference position the interpreter starts from and G28 returns to:
+/// machine zero clamped into each axis' travel, with Z at its upper limit
+/// (spindle retracted).
+pub fn home_position(m: &crate::machine::tool::MachineTool) -> AxisVec {
+    let mut home = [0.0; 6];
+    for (slot, h) in home.iter_mut().enumerate() {
+        if let Some((lo, hi)) = m.travel(slot) {
+            *h = if slot == 2 { hi } else { 0.0f64.clamp(lo, hi) };
+        }
+    }
+    home
+}
+
 /// A warning about the program (not an error), with its first line.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct Warning {
