@@ -174,6 +174,15 @@ fn moves(machine: &MachineTool, text: &str) -> Vec<(postproc::program::interp::M
     out
 }
 
+/// The bundled AFM R-1000 example file: its text and the machine.
+fn afm() -> (String, MachineTool) {
+    let text = std::fs::read_to_string(repo("machines/afm-r1000.yaml")).unwrap();
+    let Machine::Tool(machine) = Machine::from_yaml_str(&text, "afm").unwrap() else {
+        panic!("not a machine tool")
+    };
+    (text, machine)
+}
+
 fn dist_to_segment(p: &Vector3<f64>, a: &Vector3<f64>, b: &Vector3<f64>) -> f64 {
     let ab = b - a;
     let t = ((p - a).dot(&ab) / ab.norm_squared()).clamp(0.0, 1.0);
@@ -184,10 +193,7 @@ fn dist_to_segment(p: &Vector3<f64>, a: &Vector3<f64>, b: &Vector3<f64>) -> f64 
 fn compensated_long_moves_stay_within_tolerance() {
     // The bundled AFM R-1000 example calibration; a long diagonal feed and a
     // long X feed that need splitting at 1 µm.
-    let text = std::fs::read_to_string(repo("machines/afm-r1000.yaml")).unwrap();
-    let Machine::Tool(machine) = Machine::from_yaml_str(&text, "afm").unwrap() else {
-        panic!("not a machine tool")
-    };
+    let (text, machine) = afm();
     let dir = tempfile::tempdir().unwrap();
     let program = "G90 G54 G0 X-200 Y-100 Z20\nG43 H1 Z5\nG1 X500 Y300 Z-10 F2000\nX-240\n";
     // With annotations: a takeup point is marked.
@@ -574,10 +580,7 @@ fn regression_reversed_passes_start_on_the_programmed_path() {
     // start solved for the new direction) comes first. Every other
     // straight piece is checked against the programmed move it belongs
     // to, with that move's directions of motion, at 20 points.
-    let text = std::fs::read_to_string(repo("machines/afm-r1000.yaml")).unwrap();
-    let Machine::Tool(machine) = Machine::from_yaml_str(&text, "afm").unwrap() else {
-        panic!("not a machine tool")
-    };
+    let (text, machine) = afm();
     let dir = tempfile::tempdir().unwrap();
     let mut program = String::from("G90 G54 G0 X-200 Y-100 Z20\nG43 H1 Z5\nG1 X300 F2000\n");
     for k in 1..=6 {
@@ -670,10 +673,7 @@ fn regression_kept_arcs_after_a_reversal_start_on_the_programmed_path() {
     // 3.5 µm off its programmed start at 1 µm tolerance. Now the block's own
     // line moves straight to a takeup point (the arc's start solved for its
     // first directions of motion) and the arc follows on an added line.
-    let text = std::fs::read_to_string(repo("machines/afm-r1000.yaml")).unwrap();
-    let Machine::Tool(machine) = Machine::from_yaml_str(&text, "afm").unwrap() else {
-        panic!("not a machine tool")
-    };
+    let (text, machine) = afm();
     let dir = tempfile::tempdir().unwrap();
     let program = "G90 G54 G0 X-200 Y-100 Z20\nG43 H1 Z5\nG1 X100 F2000\nY0\n\
                    G3 X92 Y8 R8\nG1 X-100\nG3 X-108 Y0 I0 J-8\nG1 Y-92\n";
