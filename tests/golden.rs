@@ -759,3 +759,45 @@ fn regression_kept_arcs_after_a_reversal_start_on_the_programmed_path() {
     assert!(lines[own + 1].contains("r7.9999"), "{out}");
     assert!(!lines[own + 1].contains(' '), "{out}");
 }
+
+#[test]
+fn regression_lines_added_after_a_last_line_without_newline_stay_lines() {
+    // A program whose last line has no line end, ending in a move that gets
+    // a takeup point and added lines (a kept arc; a straight pass after a
+    // reversal). Before the fix the added lines were glued to it
+    // (`… takeup)G3 X…`), which no controller reads as intended and which
+    // `check` refused (two motion codes in one block). Now each added line
+    // starts with a newline and the file still ends without one.
+    let (text, _) = afm();
+    let dir = tempfile::tempdir().unwrap();
+    for (program, added) in [
+        (
+            "G90 G54 G0 X-200 Y-100 Z20\nG43 H1 Z5\nG1 X100 F2000\nY0\nG3 X92 Y8 R8",
+            "G3 X",
+        ),
+        (
+            "G90 G54 G0 X-200 Y-100 Z20\nG43 H1 Z5\nG1 X300 F2000\nY-99.9\nX-200",
+            "X",
+        ),
+    ] {
+        let out = compensate_with(dir.path(), &text, program, &["--effects", "geometric"]);
+        assert!(!out.ends_with('\n'), "{out:?}");
+        let lines: Vec<&str> = out.lines().collect();
+        let Some(own) = lines.iter().rposition(|l| l.contains("(dev ")) else {
+            panic!("{out}")
+        };
+        assert!(lines[own].ends_with("takeup)"), "{out}");
+        assert!(own + 1 < lines.len(), "no added lines\n{out}");
+        assert!(lines[own + 1].starts_with(added), "{out}");
+        // The output reads back.
+        let p = dir.path().join("out.nc");
+        std::fs::write(&p, &out).unwrap();
+        let m = dir.path().join("m.yaml");
+        postproc()
+            .args(["check", "--machine"])
+            .arg(&m)
+            .arg(&p)
+            .assert()
+            .success();
+    }
+}

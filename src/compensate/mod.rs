@@ -1220,6 +1220,9 @@ pub fn block_reusing(
     Ok(res)
 }
 
+/// Sweep within which of a whole turn an arc counts as a full turn, rad.
+const FULL_TURN_EPS_RAD: f64 = 1e-9;
+
 /// An arc: kept as an arc with a shifted centre when the correction is
 /// uniform enough along it, otherwise replaced by chords each split like a
 /// straight move. Returns the direction of motion the replaced arc ends
@@ -1242,12 +1245,18 @@ fn arc_block(
     let mut corr_max = Vector3::repeat(f64::NEG_INFINITY);
     let mut first = Vector3::zeros();
     let mut start_c = mv.start;
+    let mut d = start_dirs;
     for k in 0..=n {
         let s = k as f64 / n as f64;
         let p = arc.point(&s3, &e3, s);
-        // Reversal errors inside an arc cannot be removed by shifting it;
-        // uniformity is judged with the direction of motion at the start.
-        let d = start_dirs;
+        // Each point with the direction of motion there (an axis keeps its
+        // direction where its tangent component vanishes): where an axis
+        // reverses inside the arc, the correction jumps by the reversal
+        // error, which shifting the arc cannot remove, and the spread shows
+        // it.
+        if k > 0 && k < n {
+            d = dirs_of(&arc.tangent(&s3, &e3, s), &d);
+        }
         let target = with_xyz(&lerp(&mv.start, &mv.end, s), &p);
         let (c, _) = solve(pred, &target, &d, tool)?;
         let c = if k == n { res.end } else { c };
@@ -1260,14 +1269,27 @@ fn arc_block(
         corr_max = corr_max.sup(&corr);
     }
     let spread = (corr_max - corr_min).norm();
-    if spread <= tol {
-        // A kept arc starts where the machine stands. Beyond the takeup
-        // share of the tolerance from the programmed start (an axis that
-        // reverses at the arc's start), the start solved for the arc's
-        // first direction of motion comes first, as a takeup point.
-        let stands_off = carry_in.filter(|k| k.target == mv.start).is_some_and(|k| {
-            start_gap(pred, &mv.start, &k.c, &start_dirs, tool) > tol * TAKEUP_SHARE
-        });
+    // A kept arc starts where the machine stands. Beyond the takeup share
+    // of the tolerance from the programmed start (an axis that reverses at
+    // the arc's start), the start solved for the arc's first direction of
+    // motion comes first, as a takeup point.
+    let here = carry_in.filter(|k| k.target == mv.start).map(|k| k.c);
+    let stands_off = here
+        .is_some_and(|c| start_gap(pred, &mv.start, &c, &start_dirs, tool) > tol * TAKEUP_SHARE);
+    let arc_start = match here {
+        Some(_) if stands_off => start_c,
+        Some(c) => c,
+        None => mv.start,
+    };
+    // A full turn (start and end the same in the plane) stays an arc only
+    // while its compensated start and end coincide (on an error-free
+    // machine, say); in general they do not (the end is solved for its own
+    // conditions), and an arc between two points microns apart cuts almost
+    // nothing, or almost a full turn. It is replaced by chords.
+    let (a, b, _) = arc.plane.axes();
+    let open_turn = arc.sweep.abs() >= std::f64::consts::TAU - FULL_TURN_EPS_RAD
+        && (arc_start[a] - res.end[a]).hypot(arc_start[b] - res.end[b]) > SOLVE_TOL_MM;
+    if spread <= tol && !open_turn {
         if stands_off {
             check_travel(pred, &start_c)?;
             res.segments.push(start_c);
@@ -1569,6 +1591,77 @@ mod tests {
         assert!(off > tol, "{off} mm");
         let at = pred.attained(&res[2].segments[0], &start_dirs, tool).pos;
         assert!((at - pred.nominal(&arc.start, tool).pos).norm() <= SOLVE_TOL_MM);
+    }
+
+    /// [`block_after`] over `plans` in one run at `tolerance_mm`.
+    fn run_at(pred: &ToolPredictor, plans: &[Plan], tolerance_mm: f64) -> Vec<BlockResult> {
+        let settings = Settings { tolerance_mm };
+        let mut carry = None;
+        plans
+            .iter()
+            .map(|p| match block_after(pred, p, &settings, &mut carry) {
+                Ok(r) => r,
+                Err(e) => panic!("{e}"),
+            })
+            .collect()
+    }
+
+    #[test]
+    fn an_arc_whose_axes_reverse_inside_it_is_judged_with_them() {
+        // 350° clockwise about (100, 92), from 95° to 105°: it starts and
+        // ends moving +X +Y, but both axes reverse twice inside it, by
+        // about 3.5 µm on this machine. Judged with the direction of motion
+        // at the start only, the correction looked uniform within 2 µm and
+        // the arc was kept, its reversal errors left in; judged with the
+        // direction at every point, it is replaced by chords.
+        let m = testing::load(&testing::afm_text(), "afm");
+        let pred = ToolPredictor::new(&m, EffectSet::default());
+        let plans = afm_plans(&[
+            "G0 X99.30275 Y80 Z10",
+            "G1 Y99.96956 F1000",
+            "G2 X97.92945 Y99.72741 I0.69725 J-7.96956",
+        ]);
+        let res = run_at(&pred, &plans, 0.002);
+        assert!(res[2].arc_replaced, "kept as an arc");
+        // Within one quadrant (no reversal inside) the same arc stays.
+        let plans = afm_plans(&[
+            "G0 X100 Y80 Z10",
+            "G1 Y100 F1000",
+            "G2 X105.65685 Y97.65685 I0 J-8",
+        ]);
+        let res = run_at(&pred, &plans, 0.002);
+        assert!(!res[2].arc_replaced, "replaced");
+    }
+
+    #[test]
+    fn a_full_turn_that_does_not_close_is_replaced_by_chords() {
+        // A full circle entered moving −X, leaving +X: the machine stands
+        // where the entry's end was solved for −X, and the circle's end is
+        // solved for +X, microns apart. With a tolerance loose enough for
+        // its correction to count as uniform, kept as an arc it would run
+        // between those two points: a controller reads that as an arc of
+        // almost nothing (or almost a full turn). It is replaced by chords
+        // that go round. Entered moving +X, its start and end are the same
+        // command and it stays a full circle.
+        let m = testing::load(&testing::afm_text(), "afm");
+        let pred = ToolPredictor::new(&m, EffectSet::default());
+        let plans = afm_plans(&["G0 X200 Y100 Z10", "G1 X150 F1000", "X100", "G2 I0 J-8"]);
+        let Some(arc) = plans[3].mv.and_then(|mv| mv.arc) else {
+            panic!("no arc")
+        };
+        assert!((arc.sweep.abs() - std::f64::consts::TAU).abs() < 1e-12);
+        let res = run_at(&pred, &plans, 0.05);
+        assert!(res[3].arc_replaced, "kept as an arc");
+        let end = res[3].end;
+        assert!(
+            (end[0] - 100.0).abs() < 0.1 && (end[1] - 100.0).abs() < 0.1,
+            "{end:?}"
+        );
+        assert!(res[3].segments.len() > 10, "{}", res[3].segments.len());
+        let plans = afm_plans(&["G0 X0 Y100 Z10", "G1 X50 F1000", "X100", "G2 I0 J-8"]);
+        let res = run_at(&pred, &plans, 0.05);
+        assert!(!res[3].arc_replaced && res[3].center.is_some());
+        assert_eq!(res[2].end, res[3].end);
     }
 
     /// A recycled split-point storage, whatever it held, gives the result

@@ -520,7 +520,9 @@ impl Emitter {
             out.extend_from_slice(eol);
         }
         self.emitted = new_emitted;
-        let eol_added: &[u8] = if eol.is_empty() { b"\n" } else { eol };
+        // Added lines end with the block's line end; after a last line
+        // without one, each starts with a newline instead (the file still
+        // ends without one).
         if let (Some(center), Some(arc), true) = (res.center, mv.arc, arc_after_takeup) {
             // `G02` in programs that write two digits.
             let two_digit = motion_word.is_some_and(|w| {
@@ -533,18 +535,21 @@ impl Emitter {
                 &arc,
                 &center,
                 &res.end,
-                eol_added,
+                eol,
                 out,
             );
         } else if !res.segments.is_empty() {
             // Added segment blocks.
-            let eol = eol_added;
             let points = res.segments[1..].iter().chain(std::iter::once(&res.end));
             // Decimals per axis (from the block's word), found at the
             // axis' first word.
             let mut digits = [None; 6];
             for p in points {
                 let mark = out.len();
+                if eol.is_empty() {
+                    out.push(b'\n');
+                }
+                let words = out.len();
                 for slot in 0..6 {
                     let now = self.emitted[slot];
                     // An axis that stays where it is needs no word.
@@ -558,7 +563,7 @@ impl Emitter {
                     let v = round_to(to_program(plan, slot, p[slot], now), d);
                     let cur = round_to(to_program(plan, slot, now, now), d);
                     if v != cur {
-                        if out.len() > mark && spaced {
+                        if out.len() > words && spaced {
                             out.push(b' ');
                         }
                         out.push(letter_case(AXIS_LETTERS[slot], lower));
@@ -566,7 +571,8 @@ impl Emitter {
                         self.emitted[slot] = to_machine(plan, slot, v, now);
                     }
                 }
-                if out.len() == mark {
+                if out.len() == words {
+                    out.truncate(mark);
                     continue;
                 }
                 out.extend_from_slice(eol);
@@ -596,6 +602,9 @@ impl Emitter {
         let (scale, lower, spaced) = (plan.scale, block.lower_case, self.spaced);
         let sep: &[u8] = if spaced { b" " } else { b"" };
         let start = self.emitted;
+        if eol.is_empty() {
+            out.push(b'\n');
+        }
         out.push(if lower { b'g' } else { b'G' });
         if two_digit {
             out.push(b'0');
