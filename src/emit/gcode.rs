@@ -202,6 +202,18 @@ impl Edits {
     }
 }
 
+/// Largest ratio of the radius to the centre's distance from the chord at
+/// which a moved arc keeps its `R` word: the centre an `R` word gives moves
+/// by this ratio times the change of the radius, so within about 11.5° of a
+/// half turn (where it exceeds 10) the rounding of `R` and the two slightly
+/// different radii of a compensated arc would put the centre microns off.
+pub const R_FORM_MAX_GAIN: f64 = 10.0;
+
+/// An `R` word can carry the centre of `arc` (see [`R_FORM_MAX_GAIN`]).
+fn r_form_holds(arc: &crate::program::interp::ArcGeom) -> bool {
+    (arc.sweep / 2.0).cos().abs() * R_FORM_MAX_GAIN >= 1.0
+}
+
 impl Emitter {
     /// A new emitter; the controller starts at machine zero.
     pub fn new(opts: EmitOptions) -> Self {
@@ -440,8 +452,25 @@ impl Emitter {
         }
         // Arc centre words.
         if let (Some(center), Some(arc), false) = (res.center, mv.arc, arc_after_takeup) {
-            let words =
-                self.centre_words(block, plan, &arc, &center, &start_emitted, &first_target);
+            // An `R` word that cannot carry the moved centre is replaced by
+            // the centre words.
+            let moved = first_target != mv.end || start_emitted != mv.start;
+            let r_form = !moved || r_form_holds(&arc);
+            if let Some(r) = block.word(b'R').filter(|_| !r_form) {
+                let mut start = r.start as usize;
+                if start > 0 && text.get(start - 1) == Some(&b' ') {
+                    start -= 1;
+                }
+                edits.push(start, r.end as usize, |_| {});
+            }
+            let words = self.centre_words(
+                block,
+                plan,
+                &arc,
+                &center,
+                (&start_emitted, &first_target),
+                r_form,
+            );
             for (letter, v, d, w) in words.into_iter().flatten() {
                 match w {
                     Some(w) => {
@@ -625,7 +654,7 @@ impl Emitter {
                 self.emitted[slot] = to_machine(plan, slot, v, now);
             }
         }
-        let words = self.centre_words(block, plan, arc, center, &start, end);
+        let words = self.centre_words(block, plan, arc, center, (&start, end), r_form_holds(arc));
         for (letter, v, d, w) in words.into_iter().flatten() {
             if w.is_some() || v != 0.0 || plan.arc_absolute {
                 out.extend_from_slice(sep);
@@ -639,10 +668,10 @@ impl Emitter {
 
     /// The centre words of an arc from `start` to `end` (machine
     /// coordinates) about `center`, rounded, each with its decimals and the
-    /// block's own word: `R` when the block gives one (the mean of the two
-    /// radii, with the sign of the block's), else the plane's two centre
-    /// letters, relative to `start` unless the program's arc centres are
-    /// absolute.
+    /// block's own word: `R` when the block gives one and `r_form` holds
+    /// (the mean of the two radii, with the sign of the block's), else the
+    /// plane's two centre letters, relative to `start` unless the program's
+    /// arc centres are absolute.
     #[allow(clippy::type_complexity)]
     fn centre_words<'b>(
         &self,
@@ -650,12 +679,12 @@ impl Emitter {
         plan: &Plan,
         arc: &crate::program::interp::ArcGeom,
         center: &Vector3<f64>,
-        start: &AxisVec,
-        end: &AxisVec,
+        (start, end): (&AxisVec, &AxisVec),
+        r_form: bool,
     ) -> [Option<(u8, f64, usize, Option<&'b Word>)>; 2] {
         let scale = plan.scale;
         let (a, b, _) = arc.plane.axes();
-        if let Some(r) = block.word(b'R') {
+        if let Some(r) = block.word(b'R').filter(|_| r_form) {
             let ra = ((start[a] - center[a]).hypot(start[b] - center[b])
                 + (end[a] - center[a]).hypot(end[b] - center[b]))
                 / 2.0;
