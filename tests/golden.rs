@@ -748,13 +748,16 @@ fn regression_kept_arcs_after_a_reversal_start_on_the_programmed_path() {
     assert_eq!(checked, 2);
     // The added arc line follows the program's style: lower case, two-digit
     // motion codes, no spaces.
-    let haas = "g90g54g0x-200y-100z20\ng43h1z5\ng01x100f2000\ny0\ng03x92y8r8\ng01x-100\n";
+    let haas = "g90g54g0x-200y-100z20\ng43h1z5\ng01x100f2000\ny0\ng03x92y8r8p1\ng01x-100\n";
     let out = compensate_with(dir.path(), &text, haas, &["--effects", "geometric"]);
     let lines: Vec<&str> = out.lines().collect();
     let own = lines
         .iter()
         .position(|l| l.starts_with("g01x99") && l.contains("takeup"))
         .unwrap_or_else(|| panic!("no takeup\n{out}"));
+    // The arc's words leave the straight line: r, and the turn count p1.
+    let code = lines[own].split('(').next().unwrap_or_default();
+    assert!(!code.contains('r') && !code.contains('p'), "{out}");
     assert!(lines[own + 1].starts_with("g03x91.9"), "{out}");
     assert!(lines[own + 1].contains("r7.9999"), "{out}");
     assert!(!lines[own + 1].contains(' '), "{out}");

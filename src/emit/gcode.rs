@@ -350,10 +350,12 @@ impl Emitter {
                     });
                 }
             }
+            // The arc's words go: its centre and its number of turns (`P1`;
+            // more turns are refused by the interpreter).
             for w in block
                 .words
                 .iter()
-                .filter(|w| matches!(w.letter, b'I' | b'J' | b'K' | b'R'))
+                .filter(|w| matches!(w.letter, b'I' | b'J' | b'K' | b'R' | b'P'))
             {
                 // Take the separating space before the word with it.
                 let mut start = w.start as usize;
