@@ -1153,11 +1153,10 @@ fn tcp_speed(module: &Module, mv: &Move) -> Option<f64> {
             _ => None,
         };
     }
-    let lower = name.to_ascii_lowercase();
-    if lower == "vmax" {
+    if name.eq_ignore_ascii_case("vmax") {
         return Some(7000.0);
     }
-    let n: u32 = lower.strip_prefix('v')?.parse().ok()?;
+    let n: u32 = name.strip_prefix(['v', 'V'])?.parse().ok()?;
     PREDEFINED_SPEEDS.contains(&n).then_some(f64::from(n))
 }
 
@@ -1907,6 +1906,27 @@ fn warn_resonance(robot: &Robot, fx: Effects, (amp_mm, line, rpm): (f64, usize, 
 mod tests {
     use super::*;
     use crate::machine::robot::PoseDelta;
+
+    /// Predefined speeds in either case, `vmax`, a declared speeddata and
+    /// `\V:=` give the TCP speed; an unknown name gives none.
+    #[test]
+    fn tcp_speeds_of_predefined_declared_and_given_speeds() {
+        let src = "MODULE M\n  CONST speeddata vFast := [750,500,5000,1000];\n  PROC main()\n    MoveL p,v200,z1,t;\n    MoveL p,V1000,z1,t;\n    MoveL p,VMAX,z1,t;\n    MoveL p,vFast,z1,t;\n    MoveL p,v100\\V:=333,z1,t;\n    MoveL p,v123,z1,t;\n    MoveL p,speed,z1,t;\n  ENDPROC\nENDMODULE\n";
+        let module = parse_module(src, "m.mod").unwrap();
+        let speeds: Vec<Option<f64>> = module.moves().map(|mv| tcp_speed(&module, mv)).collect();
+        assert_eq!(
+            speeds,
+            [
+                Some(200.0),
+                Some(1000.0),
+                Some(7000.0),
+                Some(750.0),
+                Some(333.0),
+                None,
+                None
+            ]
+        );
+    }
 
     /// A module of a few chunks of jobs ([`JOB_CHUNK`]), MoveC (two jobs)
     /// among them so that chunks end at different moves: each move is
