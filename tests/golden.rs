@@ -848,6 +848,13 @@ fn regression_half_turns_given_by_r_keep_their_centre() {
         // off the circle at 5 µm tolerance)
         assert!(!arc_line.contains('R') && arc_line.contains('I'), "{out}");
         assert!(!arc_line.contains("takeup"), "{out}");
+        // At 5 µm the arc follows a takeup point (an added line); at 20 µm
+        // it is the block's own line.
+        assert_eq!(
+            lines[line - 2].contains("takeup"),
+            tolerance < 0.01,
+            "{out}"
+        );
         let arc = mv.arc.unwrap();
         for k in 0..=40 {
             let s = k as f64 / 40.0;
@@ -872,4 +879,46 @@ fn regression_half_turns_given_by_r_keep_their_centre() {
             );
         }
     }
+}
+
+#[test]
+fn regression_lines_added_to_a_block_delete_block_are_skipped_with_it() {
+    // A `/` block that gets added lines: a kept arc after a reversal (its
+    // takeup point on the block's line, the arc on an added line) and a
+    // straight move split into pieces. With the block-delete switch on,
+    // the controller skips the `/` lines; before the fix the added lines
+    // had no `/`, so it skipped the takeup but cut the arc (or the rest of
+    // the pieces) anyway.
+    let (text, _) = afm();
+    let dir = tempfile::tempdir().unwrap();
+    let program = "G90 G54 G0 X-200 Y-100 Z20\nG43 H1 Z5\nG1 X100 F2000\nY0\n\
+                   /G3 X92 Y8 R8\n/G1 X-200 Y300 Z-10\nG1 X-150\n";
+    let out = compensate_with(dir.path(), &text, program, &["--effects", "geometric"]);
+    let lines: Vec<&str> = out.lines().collect();
+    // Each block's lines: from its annotated line to the next one.
+    let block_of = |start: &str| -> Vec<&str> {
+        let Some(i) = lines.iter().position(|l| l.starts_with(start)) else {
+            panic!("no `{start}` line\n{out}")
+        };
+        let n = lines[i + 1..]
+            .iter()
+            .position(|l| l.contains("(dev "))
+            .unwrap_or(lines.len() - i - 1);
+        lines[i..=i + n].to_vec()
+    };
+    let arc = block_of("/G1 X99.98");
+    assert_eq!(arc.len(), 2, "{out}");
+    assert!(
+        arc[0].contains("takeup") && arc[1].starts_with("/G3 X91.98"),
+        "{out}"
+    );
+    let pieces = block_of("/G1 X-");
+    assert!(pieces.len() >= 2, "{out}");
+    assert!(pieces.iter().all(|l| l.starts_with('/')), "{out}");
+    // The block after them is not deleted, nor are its added lines.
+    let Some(last) = lines.iter().rposition(|l| l.contains("(dev ")) else {
+        panic!("{out}")
+    };
+    assert!(lines[last..].iter().all(|l| !l.starts_with('/')), "{out}");
+    assert_eq!(lines[last - 1], *pieces.last().unwrap_or(&""));
 }

@@ -17,6 +17,7 @@ mod observations;
 mod paper_b;
 mod rapid;
 mod rapid_cli;
+#[cfg(unix)] // links the inputs into a scratch folder, runs bash
 mod readme;
 mod regression;
 mod report_cli;

@@ -188,6 +188,11 @@ pub struct BlockResult {
     /// solved for this move, where the previous block's end (solved for its
     /// own directions of motion, load or temperature) would leave the
     /// attained point more than [`TAKEUP_SHARE`] of the tolerance away.
+    /// Never while cutter radius compensation is active
+    /// ([`Plan::cutter_comp`]): a short move against the direction of
+    /// travel would upset the controller's offset path (an interference
+    /// alarm or a gouge), so there the move starts where the machine
+    /// stands, as before takeup points existed.
     pub takeup: bool,
     /// Predicted deviation of the uncompensated target, with its breakdown.
     pub deviation: Breakdown,
@@ -1170,6 +1175,10 @@ pub fn block_reusing(
             // the machine (with whatever tool length it was solved for).
             let (c0, start_gap) = match carry_in {
                 Some(k) if k.matches(&mv.start, &mv.dirs, tool, &pred.ctx) => (k.c, SOLVE_TOL_MM),
+                // Under cutter radius compensation no takeup point: the
+                // move starts where the machine stands (see
+                // [`BlockResult::takeup`]).
+                Some(k) if k.target == mv.start && plan.cutter_comp => (k.c, SOLVE_TOL_MM),
                 Some(k) if k.target == mv.start => {
                     let (c0, gap, takeup) = start_from(
                         pred,
@@ -1206,7 +1215,8 @@ pub fn block_reusing(
             }
         }
         (_, Some(arc)) => {
-            if let Some(d) = arc_block(pred, &mv, &arc, tool, tol, carry_in, &mut res)? {
+            let takeups = !plan.cutter_comp;
+            if let Some(d) = arc_block(pred, &mv, &arc, (tool, tol, takeups), carry_in, &mut res)? {
                 if let Some(k) = carry_out.as_mut() {
                     k.dirs = d;
                     k.c = res.end;
@@ -1231,8 +1241,7 @@ fn arc_block(
     pred: &ToolPredictor,
     mv: &Move,
     arc: &crate::program::interp::ArcGeom,
-    tool: f64,
-    tol: f64,
+    (tool, tol, takeups): (f64, f64, bool),
     carry_in: Option<&Carry>,
     res: &mut BlockResult,
 ) -> Result<Option<DirVec>, Failure> {
@@ -1274,8 +1283,10 @@ fn arc_block(
     // the arc's start), the start solved for the arc's first direction of
     // motion comes first, as a takeup point.
     let here = carry_in.filter(|k| k.target == mv.start).map(|k| k.c);
-    let stands_off = here
-        .is_some_and(|c| start_gap(pred, &mv.start, &c, &start_dirs, tool) > tol * TAKEUP_SHARE);
+    let stands_off = takeups
+        && here.is_some_and(|c| {
+            start_gap(pred, &mv.start, &c, &start_dirs, tool) > tol * TAKEUP_SHARE
+        });
     let arc_start = match here {
         Some(_) if stands_off => start_c,
         Some(c) => c,
@@ -1328,6 +1339,7 @@ fn arc_block(
         // the previous block's end, the chord starts as a straight move does.
         let (c0, gap) = match at {
             Some((c, pd)) if pd == d && k > 1 => (c, SOLVE_TOL_MM),
+            Some((c, _)) if !takeups => (c, SOLVE_TOL_MM),
             Some((c, _)) => {
                 let (c0, gap, t) = start_from(pred, &prev_p, &c, &d, &lip, tol - sag, pts)?;
                 takeup |= t && k == 1;
@@ -1662,6 +1674,50 @@ mod tests {
         let res = run_at(&pred, &plans, 0.05);
         assert!(!res[3].arc_replaced && res[3].center.is_some());
         assert_eq!(res[2].end, res[3].end);
+    }
+
+    #[test]
+    fn no_takeup_points_under_cutter_radius_compensation() {
+        // The raster passes and the pocket-corner arc of the takeup tests,
+        // with G41 active: the controller offsets the path, and a takeup
+        // (a move of microns against the direction of travel) would upset
+        // its offset computation. Every move starts where the machine
+        // stands; after G40 the takeups are back.
+        let m = testing::load(&testing::afm_text(), "afm");
+        let pred = ToolPredictor::new(&m, EffectSet::default());
+        let plans = afm_plans(&[
+            "G0 X10 Y10 Z10",
+            "G41 D1 G1 X400 F1000",
+            "Y20",
+            "X10",
+            "Y30",
+            "X400",
+            "Y10",
+            "G2 X398 Y12 I0 J2",
+            "G40 G1 Y40",
+            "X400",
+        ]);
+        let res = run_all(&pred, &plans);
+        for (k, (p, r)) in plans.iter().zip(&res).enumerate() {
+            assert_eq!(p.cutter_comp, (1..=7).contains(&k), "block {k}");
+            assert_eq!(r.takeup, k == 9, "block {k}");
+        }
+        // The arc after the reversal is kept, from where the machine stands.
+        assert!(!res[7].arc_replaced && res[7].segments.is_empty());
+        // Without G41 the same blocks have their takeups.
+        let plain: Vec<&str> = [
+            "G0 X10 Y10 Z10",
+            "G1 X400 F1000",
+            "Y20",
+            "X10",
+            "Y30",
+            "X400",
+            "Y10",
+            "G2 X398 Y12 I0 J2",
+        ]
+        .to_vec();
+        let res = run_all(&pred, &afm_plans(&plain));
+        assert!(res[3].takeup && res[5].takeup && res[7].takeup);
     }
 
     /// A recycled split-point storage, whatever it held, gives the result

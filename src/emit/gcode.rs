@@ -580,6 +580,10 @@ impl Emitter {
                 if eol.is_empty() {
                     out.push(b'\n');
                 }
+                // Lines added to a block-delete block are skipped with it.
+                if block.block_delete {
+                    out.push(b'/');
+                }
                 let words = out.len();
                 for slot in 0..6 {
                     let now = self.emitted[slot];
@@ -635,6 +639,9 @@ impl Emitter {
         let start = self.emitted;
         if eol.is_empty() {
             out.push(b'\n');
+        }
+        if block.block_delete {
+            out.push(b'/');
         }
         out.push(if lower { b'g' } else { b'G' });
         if two_digit {

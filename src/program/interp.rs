@@ -242,6 +242,9 @@ pub struct Plan {
     /// Milling engagement set by `(POSTPROC MILLING DEPTH=… WIDTH=…)`
     /// directives so far: axial depth and radial width, mm.
     pub milling_mm: [Option<f64>; 2],
+    /// Cutter radius compensation (G41/G42) is active for this block's
+    /// move (set on the block itself or before it, until G40).
+    pub cutter_comp: bool,
 }
 
 /// Tool table and work offsets the interpreter uses.
@@ -330,6 +333,8 @@ pub struct Interpreter {
     dirs: DirVec,
     warnings: Vec<Warning>,
     comp_warned: bool,
+    /// G41/G42 active (until G40).
+    cutter_comp: bool,
 }
 
 const MAX_WARNINGS: usize = 64;
@@ -367,6 +372,7 @@ impl Interpreter {
             dirs: [1; 6],
             warnings: Vec::new(),
             comp_warned: false,
+            cutter_comp: false,
         }
     }
 
@@ -433,7 +439,9 @@ impl Interpreter {
         text: &[u8],
         plan: &mut Plan,
     ) -> Result<(), Located> {
-        self.step_block(block, text, plan).map_err(|mut e| {
+        let done = self.step_block(block, text, plan);
+        plan.cutter_comp = self.cutter_comp;
+        done.map_err(|mut e| {
             if !e.message.contains('`') {
                 let line = String::from_utf8_lossy(text);
                 let line = line.trim();
@@ -628,11 +636,12 @@ impl Interpreter {
                         901 => self.arc_absolute = true,
                         911 => self.arc_absolute = false,
                         540..=590 if code % 10 == 0 => self.work = ((code - 540) / 10) as usize,
-                        400 => {}
+                        400 => self.cutter_comp = false,
                         410 | 420 => {
+                            self.cutter_comp = true;
                             if !self.comp_warned {
                                 self.comp_warned = true;
-                                self.warn(line, "cutter radius compensation (G41/G42) is passed through: deviations are evaluated on the programmed path, not the offset path".into());
+                                self.warn(line, "cutter radius compensation (G41/G42) is passed through: deviations are evaluated on the programmed path, not the offset path, and no takeup points are written while it is active (a short move against the direction of travel would upset the controller's offset path)".into());
                             }
                         }
                         430 => h_word = h_word.or(Some(w)),
