@@ -6,6 +6,7 @@ mod bad_corpus;
 mod batch_cli;
 mod calibrate_cli;
 mod common;
+mod compensate_props;
 mod diagnose;
 mod effects;
 mod gcode_cli;

@@ -1,0 +1,240 @@
+//! Property test of the compensated G-code as a program: whatever mix of
+//! straight moves, arcs (I/J or R, either direction, full circles),
+//! reversals, block-delete lines, cutter radius compensation, letter case,
+//! spacing, line ends and a missing last line end the input has, the
+//! output (with its takeup points, pieces and added arc lines) reads back
+//! without error, keeps every input line's annotated block in order, keeps
+//! the `/` of block-delete lines on the lines added to them, and ends
+//! where the program ends, within the size of the corrections.
+
+use std::io::{BufReader, Cursor};
+
+use postproc::compensate::Settings;
+use postproc::emit::gcode::EmitOptions;
+use postproc::job::Job;
+use postproc::machine::Machine;
+use postproc::machine::tool::MachineTool;
+use postproc::predict::{EffectSet, ToolPredictor};
+use postproc::program::gcode::{Block, parse_line};
+use postproc::program::interp::{Interpreter, Setup};
+use proptest::prelude::*;
+
+use crate::common::repo;
+
+/// Largest distance between the end of the compensated and of the
+/// programmed program, mm (the AFM R-1000's corrections are tens of µm).
+const END_TOL_MM: f64 = 0.1;
+
+/// One block of a generated program (work coordinates, mm).
+#[derive(Debug, Clone)]
+enum Step {
+    /// A straight feed to (x, y, z).
+    Line(f64, f64, f64),
+    /// An arc in the XY plane from the current point about the centre at
+    /// `angle0` (the start seen from the centre) with `radius`, sweeping
+    /// `sweep` degrees (negative: clockwise); `full` makes it a full circle;
+    /// `r_form` writes it with R.
+    Arc {
+        radius: f64,
+        angle0: f64,
+        sweep: f64,
+        full: bool,
+        r_form: bool,
+    },
+    /// G41 (true) or G40 (false) on a short straight move in Y.
+    Comp(bool),
+}
+
+fn step() -> impl Strategy<Value = Step> {
+    prop_oneof![
+        4 => (10.0..290.0f64, 10.0..190.0f64, -5.0..5.0f64).prop_map(|(x, y, z)| Step::Line(x, y, z)),
+        3 => (2.0..20.0f64, 0.0..360.0f64, -350.0..350.0f64, prop::bool::weighted(0.15), any::<bool>())
+            .prop_map(|(radius, angle0, sweep, full, r_form)| Step::Arc { radius, angle0, sweep, full, r_form }),
+        1 => any::<bool>().prop_map(Step::Comp),
+    ]
+}
+
+/// Style of a generated program.
+#[derive(Debug, Clone, Copy)]
+struct Style {
+    lower: bool,
+    spaced: bool,
+    crlf: bool,
+    last_eol: bool,
+}
+
+/// The program text; each block gets a `/` where `deleted` says so.
+fn program(steps: &[(Step, bool)], style: Style) -> String {
+    let (sep, eol) = (
+        if style.spaced { " " } else { "" },
+        if style.crlf { "\r\n" } else { "\n" },
+    );
+    let mut lines = vec![
+        format!("G90{sep}G54{sep}G0{sep}X150.{sep}Y100.{sep}Z20."),
+        format!("G43{sep}H1{sep}Z5."),
+        format!("G1{sep}Z0{sep}F1500"),
+    ];
+    let (mut x, mut y) = (150.0f64, 100.0f64);
+    for (s, deleted) in steps {
+        let slash = if *deleted { "/" } else { "" };
+        let line = match s {
+            Step::Line(tx, ty, z) => {
+                x = *tx;
+                y = *ty;
+                format!("{slash}G1{sep}X{x:.3}{sep}Y{y:.3}{sep}Z{z:.3}")
+            }
+            Step::Arc {
+                radius,
+                angle0,
+                sweep,
+                full,
+                r_form,
+            } => {
+                let a0 = angle0.to_radians();
+                let (cx, cy) = (x - radius * a0.cos(), y - radius * a0.sin());
+                // Keep the circle inside the work area.
+                if cx - radius < 5.0
+                    || cx + radius > 295.0
+                    || cy - radius < 5.0
+                    || cy + radius > 195.0
+                {
+                    continue;
+                }
+                let sweep = if *full {
+                    360f64.copysign(*sweep)
+                } else {
+                    *sweep
+                };
+                if sweep.abs() < 5.0 {
+                    continue;
+                }
+                let g = if sweep < 0.0 { "G2" } else { "G3" };
+                let (i, j) = (cx - x, cy - y);
+                if *full {
+                    format!("{slash}{g}{sep}I{i:.3}{sep}J{j:.3}")
+                } else {
+                    let a1 = a0 + sweep.to_radians();
+                    let (ex, ey) = (cx + radius * a1.cos(), cy + radius * a1.sin());
+                    let text = if *r_form {
+                        let r = if sweep.abs() > 180.0 {
+                            -radius
+                        } else {
+                            *radius
+                        };
+                        format!("{slash}{g}{sep}X{ex:.3}{sep}Y{ey:.3}{sep}R{r:.3}")
+                    } else {
+                        format!("{slash}{g}{sep}X{ex:.3}{sep}Y{ey:.3}{sep}I{i:.3}{sep}J{j:.3}")
+                    };
+                    // The next block starts where this one ends as printed.
+                    x = (ex * 1000.0).round() / 1000.0;
+                    y = (ey * 1000.0).round() / 1000.0;
+                    text
+                }
+            }
+            Step::Comp(on) => {
+                y = if y > 100.0 { y - 1.0 } else { y + 1.0 };
+                let g = if *on {
+                    format!("G41{sep}D1{sep}")
+                } else {
+                    format!("G40{sep}")
+                };
+                format!("{slash}{g}G1{sep}Y{y:.3}")
+            }
+        };
+        lines.push(line);
+    }
+    lines.push("M30".into());
+    let mut text = lines.join(eol);
+    if style.last_eol {
+        text.push_str(eol);
+    }
+    if style.lower {
+        text = text.to_ascii_lowercase();
+    }
+    text
+}
+
+fn afm() -> MachineTool {
+    let text = std::fs::read_to_string(repo("machines/afm-r1000.yaml")).unwrap();
+    let Ok(Machine::Tool(m)) = Machine::from_yaml_str(&text, "afm-r1000.yaml") else {
+        panic!("not a machine tool")
+    };
+    m
+}
+
+/// The end points of the moves of `text`, and its annotated lines' texts
+/// (block by block); panics with the output when it does not read back.
+fn read_back(machine: &MachineTool, text: &str) -> (Vec<[f64; 6]>, usize) {
+    let mut it = Interpreter::new(Setup::for_machine(machine), "out.nc");
+    let mut b = Block::default();
+    let mut ends = Vec::new();
+    let mut annotated = 0;
+    for (i, l) in text.split_inclusive('\n').enumerate() {
+        let l = l.trim_end_matches(['\n', '\r']);
+        if let Err(e) = parse_line(l.as_bytes(), i + 1, "out.nc", &mut b) {
+            panic!("{e}\n{text}");
+        }
+        let plan = match it.step(&b, l.as_bytes()) {
+            Ok(p) => p,
+            Err(e) => panic!("{e}\n{text}"),
+        };
+        if let Some(mv) = plan.mv {
+            ends.push(mv.end);
+        }
+        annotated += usize::from(l.contains("(dev ") || l.contains("(DEV "));
+    }
+    (ends, annotated)
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(64))]
+
+    #[test]
+    fn compensated_programs_read_back(
+        steps in prop::collection::vec((step(), prop::bool::weighted(0.15)), 1..14),
+        lower in any::<bool>(),
+        spaced in any::<bool>(),
+        crlf in any::<bool>(),
+        last_eol in any::<bool>(),
+        tolerance in prop_oneof![Just(0.001), Just(0.005), Just(0.02)],
+    ) {
+        let machine = afm();
+        let input = program(&steps, Style { lower, spaced, crlf, last_eol });
+        let job = Job {
+            predictor: Some(ToolPredictor::new(&machine, EffectSet::default())),
+            setup: Setup::for_machine(&machine),
+            settings: Settings { tolerance_mm: tolerance },
+            emit: EmitOptions { decimals_mm: Some(4), decimals_deg: None, annotate: true },
+            pool: None,
+        };
+        let mut out = Vec::new();
+        let summary = job.run(BufReader::new(Cursor::new(input.as_bytes())), "in.nc", Some(&mut out), None);
+        let summary = match summary {
+            Ok(s) => s,
+            Err(e) => panic!("{e}\n{input}"),
+        };
+        let out = String::from_utf8(out).unwrap();
+        let (ends_in, _) = read_back(&machine, &input);
+        let (ends_out, annotated) = read_back(&machine, &out);
+        // Every input move is there (annotated), with added lines besides.
+        prop_assert_eq!(annotated, ends_in.len(), "{}", out);
+        prop_assert!(ends_out.len() >= ends_in.len());
+        prop_assert_eq!(summary.added, ends_out.len() - ends_in.len(), "{}", out);
+        // It ends where the program ends.
+        let (a, b) = (ends_in[ends_in.len() - 1], ends_out[ends_out.len() - 1]);
+        let gap = (0..3).map(|s| (a[s] - b[s]).powi(2)).sum::<f64>().sqrt();
+        prop_assert!(gap < END_TOL_MM, "{} mm\n{}", gap, out);
+        // Line ends: as the input's, and no last one where it had none.
+        prop_assert_eq!(out.ends_with('\n'), last_eol);
+        prop_assert_eq!(out.contains("\r\n"), crlf && out.contains('\n'));
+        // A `/` line's added lines (up to the next annotated line) keep it.
+        let mut deleted = false;
+        for l in out.lines() {
+            if l.contains("(dev ") || l.contains("(DEV ") || l.starts_with('M') || l.starts_with('m') {
+                deleted = l.starts_with('/');
+            } else if deleted {
+                prop_assert!(l.starts_with('/'), "{}\n{}", l, out);
+            }
+        }
+    }
+}
