@@ -145,6 +145,8 @@ pub struct Summary {
     pub deviation: DevStats,
     /// Largest position error left after compensation, mm.
     pub max_residual_mm: f64,
+    /// Line of the largest position error left (0 when none).
+    pub max_residual_line: usize,
     /// The program is in inches.
     pub inch: bool,
     /// Duration of the program on its time line, s (0 when no process
@@ -837,8 +839,9 @@ impl<'m> Job<'m> {
                     if plan.kind != PlanKind::Pass {
                         let dev = r.deviation.total().norm();
                         summary.deviation.add(dev, block.line_no);
-                        if mv.motion != Motion::Rapid {
-                            summary.max_residual_mm = summary.max_residual_mm.max(r.residual_mm);
+                        if mv.motion != Motion::Rapid && r.residual_mm > summary.max_residual_mm {
+                            summary.max_residual_mm = r.residual_mm;
+                            summary.max_residual_line = block.line_no;
                         }
                         if let Some(rows) = rows.as_deref_mut() {
                             rows(Row {

@@ -922,3 +922,46 @@ fn regression_lines_added_to_a_block_delete_block_are_skipped_with_it() {
     assert!(lines[last..].iter().all(|l| !l.starts_with('/')), "{out}");
     assert_eq!(lines[last - 1], *pieces.last().unwrap_or(&""));
 }
+
+#[test]
+fn regression_no_takeups_under_cutter_compensation_and_the_gap_is_reported() {
+    // Raster passes with G41 active, then G40 on a pass. Under cutter radius
+    // compensation no takeup point is written (a move of microns against
+    // the direction of travel upsets the controller's offset path), not
+    // on the G40 block either, which still moves with the offset. What the
+    // takeups would have removed (3–4 µm at 1 µm tolerance) is left, so
+    // the run ends with exit code 1 and a warning that names the line.
+    let (text, _) = afm();
+    let dir = tempfile::tempdir().unwrap();
+    let m = dir.path().join("m.yaml");
+    std::fs::write(&m, &text).unwrap();
+    let p = dir.path().join("p.nc");
+    std::fs::write(
+        &p,
+        "G90 G54 G0 X10 Y10 Z10\nG43 H1 Z5\nG41 D1 G1 X400 F1000\nY20\nX10\nG40 X400\nY30\nX10\nM30\n",
+    )
+    .unwrap();
+    let out = postproc()
+        .args(["compensate", "-o", "-", "--machine"])
+        .arg(&m)
+        .arg(&p)
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(1));
+    let stdout = String::from_utf8(out.stdout).unwrap();
+    let stderr = String::from_utf8(out.stderr).unwrap();
+    let takeups: Vec<&str> = stdout.lines().filter(|l| l.contains("takeup")).collect();
+    assert_eq!(takeups.len(), 1, "{stdout}");
+    // The G40 block reverses X but has no takeup; the only takeup is on
+    // the X reversal after it.
+    let lines: Vec<&str> = stdout.lines().collect();
+    let g40 = lines.iter().position(|l| l.starts_with("G40")).unwrap();
+    assert!(!lines[g40].contains("takeup"), "{stdout}");
+    assert!(takeups[0].starts_with("X399.98"), "{stdout}");
+    assert!(stderr.contains("no takeup points are written"), "{stderr}");
+    assert!(
+        stderr.contains("p.nc:3: the compensated program is still 0.003")
+            && stderr.contains("more than the tolerance 0.001 mm"),
+        "{stderr}"
+    );
+}

@@ -615,6 +615,12 @@ pub fn compensate(a: &CompensateArgs) -> Result<i32> {
         );
     }
     Ok(if summary.max_residual_mm > a.tolerance {
+        tracing::warn!(
+            "{file}:{}: the compensated program is still {:.4} mm off here, more than the tolerance {} mm",
+            summary.max_residual_line,
+            summary.max_residual_mm,
+            a.tolerance
+        );
         1
     } else {
         0

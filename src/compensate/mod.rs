@@ -196,7 +196,11 @@ pub struct BlockResult {
     pub takeup: bool,
     /// Predicted deviation of the uncompensated target, with its breakdown.
     pub deviation: Breakdown,
-    /// Predicted position error left at the compensated end point, mm.
+    /// Predicted position error left by the compensation, mm: at the
+    /// compensated end point, or, where takeup points are not written
+    /// (cutter radius compensation), at the start of a move that leaves
+    /// from where the machine stands more than [`TAKEUP_SHARE`] of the
+    /// tolerance off its programmed start.
     pub residual_mm: f64,
 }
 
@@ -899,24 +903,58 @@ fn start_gap(pred: &ToolPredictor, p0: &AxisVec, at: &AxisVec, dirs: &DirVec, to
 /// direction-dependent error changes at once) the start solved for this
 /// move is pushed to `out` as a takeup point — the machine first moves
 /// there, as a controller's reversal compensation would, so that the move
-/// itself leaves from the programmed point. Returns the start command, its
-/// gap (at least [`SOLVE_TOL_MM`]) and whether a takeup point was pushed.
+/// itself leaves from the programmed point. Without `takeups` (cutter
+/// radius compensation active, see [`BlockResult::takeup`]) the move starts
+/// from `at` whatever the gap; a gap beyond the share cannot be proven
+/// away and is returned as left over.
 fn start_from<'m>(
     pred: &ToolPredictor<'m>,
     p0: &AxisVec,
     at: &AxisVec,
     dirs: &DirVec,
     lip: &Lip<'m>,
-    tol: f64,
+    (tol, takeups): (f64, bool),
     out: &mut Vec<AxisVec>,
-) -> Result<(AxisVec, f64, bool), Failure> {
+) -> Result<Start, Failure> {
     let gap = start_gap(pred, p0, at, dirs, lip.tool_mm);
     if gap <= tol * TAKEUP_SHARE {
-        return Ok((*at, gap.max(SOLVE_TOL_MM), false));
+        return Ok(Start {
+            c: *at,
+            gap: gap.max(SOLVE_TOL_MM),
+            takeup: false,
+            left_mm: 0.0,
+        });
+    }
+    if !takeups {
+        return Ok(Start {
+            c: *at,
+            gap: SOLVE_TOL_MM,
+            takeup: false,
+            left_mm: gap,
+        });
     }
     let (c0, _) = solve_near(pred, p0, at, p0, dirs, lip)?;
     out.push(c0);
-    Ok((c0, SOLVE_TOL_MM, true))
+    Ok(Start {
+        c: c0,
+        gap: SOLVE_TOL_MM,
+        takeup: true,
+        left_mm: 0.0,
+    })
+}
+
+/// Where a move starts ([`start_from`]).
+struct Start {
+    /// The start command.
+    c: AxisVec,
+    /// The start's gap that the proof of the first piece counts, mm (at
+    /// least [`SOLVE_TOL_MM`]).
+    gap: f64,
+    /// A takeup point was pushed.
+    takeup: bool,
+    /// The gap left at the start, beyond what the proof counts, mm (0 but
+    /// without takeup points).
+    left_mm: f64,
 }
 
 /// Compensates one interpreted block.
@@ -1175,22 +1213,19 @@ pub fn block_reusing(
             // the machine (with whatever tool length it was solved for).
             let (c0, start_gap) = match carry_in {
                 Some(k) if k.matches(&mv.start, &mv.dirs, tool, &pred.ctx) => (k.c, SOLVE_TOL_MM),
-                // Under cutter radius compensation no takeup point: the
-                // move starts where the machine stands (see
-                // [`BlockResult::takeup`]).
-                Some(k) if k.target == mv.start && plan.cutter_comp => (k.c, SOLVE_TOL_MM),
                 Some(k) if k.target == mv.start => {
-                    let (c0, gap, takeup) = start_from(
+                    let st = start_from(
                         pred,
                         &mv.start,
                         &k.c,
                         &mv.dirs,
                         &lip,
-                        tol,
+                        (tol, !plan.cutter_comp),
                         &mut res.segments,
                     )?;
-                    res.takeup = takeup;
-                    (c0, gap)
+                    res.takeup = st.takeup;
+                    res.residual_mm = res.residual_mm.max(st.left_mm);
+                    (st.c, st.gap)
                 }
                 _ => (
                     solve_near(pred, &mv.start, &c1, &mv.end, &mv.dirs, &lip)?.0,
@@ -1283,10 +1318,11 @@ fn arc_block(
     // the arc's start), the start solved for the arc's first direction of
     // motion comes first, as a takeup point.
     let here = carry_in.filter(|k| k.target == mv.start).map(|k| k.c);
-    let stands_off = takeups
-        && here.is_some_and(|c| {
-            start_gap(pred, &mv.start, &c, &start_dirs, tool) > tol * TAKEUP_SHARE
-        });
+    // The gap where the machine stands, when beyond the takeup share.
+    let beyond = here
+        .map(|c| start_gap(pred, &mv.start, &c, &start_dirs, tool))
+        .filter(|&g| g > tol * TAKEUP_SHARE);
+    let stands_off = takeups && beyond.is_some();
     let arc_start = match here {
         Some(_) if stands_off => start_c,
         Some(c) => c,
@@ -1305,6 +1341,9 @@ fn arc_block(
             check_travel(pred, &start_c)?;
             res.segments.push(start_c);
             res.takeup = true;
+        } else if let Some(gap) = beyond {
+            // No takeup allowed: the arc starts off by the gap.
+            res.residual_mm = res.residual_mm.max(gap);
         }
         let last = Vector3::new(res.end[0] - e3[0], res.end[1] - e3[1], res.end[2] - e3[2]);
         res.center = Some(arc.center + (first + last) / 2.0);
@@ -1329,6 +1368,8 @@ fn arc_block(
     // `block_reusing` cleared the storage of the split points.
     let pts = &mut res.segments;
     let mut takeup = false;
+    // The largest gap left at a chord start without takeup points.
+    let mut left = 0.0f64;
     for k in 1..=chords {
         let s = k as f64 / chords as f64;
         let p = with_xyz(&lerp(&mv.start, &mv.end, s), &arc.point(&s3, &e3, s));
@@ -1339,11 +1380,11 @@ fn arc_block(
         // the previous block's end, the chord starts as a straight move does.
         let (c0, gap) = match at {
             Some((c, pd)) if pd == d && k > 1 => (c, SOLVE_TOL_MM),
-            Some((c, _)) if !takeups => (c, SOLVE_TOL_MM),
             Some((c, _)) => {
-                let (c0, gap, t) = start_from(pred, &prev_p, &c, &d, &lip, tol - sag, pts)?;
-                takeup |= t && k == 1;
-                (c0, gap)
+                let st = start_from(pred, &prev_p, &c, &d, &lip, (tol - sag, takeups), pts)?;
+                takeup |= st.takeup && k == 1;
+                left = left.max(st.left_mm);
+                (st.c, st.gap)
             }
             None => (solve(pred, &prev_p, &d, tool)?.0, SOLVE_TOL_MM),
         };
@@ -1372,6 +1413,7 @@ fn arc_block(
         res.end = end;
         res.residual_mm = end_residual;
     }
+    res.residual_mm = res.residual_mm.max(left);
     for p in res.segments.iter() {
         check_travel(pred, p)?;
     }
@@ -1698,12 +1740,42 @@ mod tests {
             "X400",
         ]);
         let res = run_all(&pred, &plans);
+        let tol = Settings::default().tolerance_mm;
         for (k, (p, r)) in plans.iter().zip(&res).enumerate() {
-            assert_eq!(p.cutter_comp, (1..=7).contains(&k), "block {k}");
+            // The G41 block starts it, the G40 block ends it: both count.
+            assert_eq!(p.cutter_comp, (1..=8).contains(&k), "block {k}");
             assert_eq!(r.takeup, k == 9, "block {k}");
         }
         // The arc after the reversal is kept, from where the machine stands.
         assert!(!res[7].arc_replaced && res[7].segments.is_empty());
+        // What the takeups would have removed is reported as left over:
+        // the reversals of X (blocks 3, 5), of Y (6) and at the arc's
+        // start (7).
+        for k in [3, 5, 6, 7] {
+            assert!(
+                res[k].residual_mm > tol,
+                "block {k}: {}",
+                res[k].residual_mm
+            );
+        }
+        for k in [2, 4, 9] {
+            assert!(
+                res[k].residual_mm <= tol,
+                "block {k}: {}",
+                res[k].residual_mm
+            );
+        }
+        // A `/G40` line may be skipped: compensation may go on after it.
+        let plans = afm_plans(&[
+            "G0 X10 Y10 Z10",
+            "G41 D1 G1 X400 F1000",
+            "/G40 Y20",
+            "X10",
+            "G40 Y30",
+            "X400",
+        ]);
+        let comp: Vec<bool> = plans.iter().map(|p| p.cutter_comp).collect();
+        assert_eq!(comp, [false, true, true, true, true, false]);
         // Without G41 the same blocks have their takeups.
         let plain: Vec<&str> = [
             "G0 X10 Y10 Z10",

@@ -242,8 +242,11 @@ pub struct Plan {
     /// Milling engagement set by `(POSTPROC MILLING DEPTH=… WIDTH=…)`
     /// directives so far: axial depth and radial width, mm.
     pub milling_mm: [Option<f64>; 2],
-    /// Cutter radius compensation (G41/G42) is active for this block's
-    /// move (set on the block itself or before it, until G40).
+    /// Cutter radius compensation (G41/G42) may be active during this
+    /// block's move: it was before the block or is after it (so the
+    /// block that starts it and the `G40` block that ends it count), with
+    /// the block-delete switch in either position (a `/G41` line may
+    /// start it, a `/G40` line may not end it).
     pub cutter_comp: bool,
 }
 
@@ -333,7 +336,9 @@ pub struct Interpreter {
     dirs: DirVec,
     warnings: Vec<Warning>,
     comp_warned: bool,
-    /// G41/G42 active (until G40).
+    /// G41/G42 may be active with the block-delete switch in either
+    /// position: set by G41/G42 on any line, cleared by G40 on a line
+    /// without `/`.
     cutter_comp: bool,
 }
 
@@ -439,8 +444,9 @@ impl Interpreter {
         text: &[u8],
         plan: &mut Plan,
     ) -> Result<(), Located> {
+        let before = self.cutter_comp;
         let done = self.step_block(block, text, plan);
-        plan.cutter_comp = self.cutter_comp;
+        plan.cutter_comp = before || self.cutter_comp;
         done.map_err(|mut e| {
             if !e.message.contains('`') {
                 let line = String::from_utf8_lossy(text);
@@ -636,7 +642,8 @@ impl Interpreter {
                         901 => self.arc_absolute = true,
                         911 => self.arc_absolute = false,
                         540..=590 if code % 10 == 0 => self.work = ((code - 540) / 10) as usize,
-                        400 => self.cutter_comp = false,
+                        400 if !block.block_delete => self.cutter_comp = false,
+                        400 => {}
                         410 | 420 => {
                             self.cutter_comp = true;
                             if !self.comp_warned {
