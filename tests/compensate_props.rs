@@ -3,9 +3,12 @@
 //! reversals, block-delete lines, cutter radius compensation, letter case,
 //! spacing, line ends and a missing last line end the input has, the
 //! output (with its takeup points, pieces and added arc lines) reads back
-//! without error, keeps every input line's annotated block in order, keeps
-//! the `/` of block-delete lines on the lines added to them, and ends
-//! where the program ends, within the size of the corrections.
+//! without error; each input move is there, annotated and in order, and
+//! its block ends where the move ends (within the size of the
+//! corrections); arcs that stay arcs keep their direction, centre and
+//! radius; no takeup point is written while cutter radius compensation may
+//! be active; every line ends as the input's lines do; and exactly the
+//! lines of block-delete blocks start with `/`.
 
 use std::io::{BufReader, Cursor};
 
@@ -162,13 +165,32 @@ fn afm() -> MachineTool {
     m
 }
 
-/// The end points of the moves of `text`, and its annotated lines' texts
-/// (block by block); panics with the output when it does not read back.
-fn read_back(machine: &MachineTool, text: &str) -> (Vec<[f64; 6]>, usize) {
+/// What a program reads back to.
+struct ReadBack {
+    /// End point of every move.
+    ends: Vec<[f64; 6]>,
+    /// Per annotated line (one per compensated input move): the end of the
+    /// last move before the next annotated line.
+    block_ends: Vec<[f64; 6]>,
+    /// Arcs: clockwise, centre (x, y), radius.
+    arcs: Vec<(bool, [f64; 2], f64)>,
+    /// Lines with a takeup point while cutter radius compensation may be
+    /// active (from the G41/G42 block through the G40 block; a `/G40` does
+    /// not end it).
+    takeups_under_comp: usize,
+}
+
+/// Reads `text` back; panics with it when it does not.
+fn read_back(machine: &MachineTool, text: &str) -> ReadBack {
     let mut it = Interpreter::new(Setup::for_machine(machine), "out.nc");
     let mut b = Block::default();
-    let mut ends = Vec::new();
-    let mut annotated = 0;
+    let mut r = ReadBack {
+        ends: Vec::new(),
+        block_ends: Vec::new(),
+        arcs: Vec::new(),
+        takeups_under_comp: 0,
+    };
+    let mut comp = false;
     for (i, l) in text.split_inclusive('\n').enumerate() {
         let l = l.trim_end_matches(['\n', '\r']);
         if let Err(e) = parse_line(l.as_bytes(), i + 1, "out.nc", &mut b) {
@@ -178,12 +200,37 @@ fn read_back(machine: &MachineTool, text: &str) -> (Vec<[f64; 6]>, usize) {
             Ok(p) => p,
             Err(e) => panic!("{e}\n{text}"),
         };
-        if let Some(mv) = plan.mv {
-            ends.push(mv.end);
+        let upper = l.to_ascii_uppercase();
+        let before = comp;
+        if upper.contains("G41") || upper.contains("G42") {
+            comp = true;
+        } else if upper.contains("G40") && !upper.starts_with('/') {
+            comp = false;
         }
-        annotated += usize::from(l.contains("(dev ") || l.contains("(DEV "));
+        if l.contains("takeup") && (before || comp) {
+            r.takeups_under_comp += 1;
+        }
+        if l.contains("(dev ") {
+            r.block_ends.push([f64::NAN; 6]);
+        }
+        if let Some(mv) = plan.mv {
+            r.ends.push(mv.end);
+            if let Some(last) = r.block_ends.last_mut() {
+                *last = mv.end;
+            }
+            if let Some(arc) = mv.arc {
+                let cw = arc.sweep < 0.0;
+                r.arcs
+                    .push((cw, [arc.center[0], arc.center[1]], arc.radius));
+            }
+        }
     }
-    (ends, annotated)
+    r
+}
+
+/// Distance of two points in X, Y, Z, mm.
+fn dist(a: &[f64; 6], b: &[f64; 6]) -> f64 {
+    (0..3).map(|s| (a[s] - b[s]).powi(2)).sum::<f64>().sqrt()
 }
 
 proptest! {
@@ -214,26 +261,42 @@ proptest! {
             Err(e) => panic!("{e}\n{input}"),
         };
         let out = String::from_utf8(out).unwrap();
-        let (ends_in, _) = read_back(&machine, &input);
-        let (ends_out, annotated) = read_back(&machine, &out);
-        // Every input move is there (annotated), with added lines besides.
-        prop_assert_eq!(annotated, ends_in.len(), "{}", out);
-        prop_assert!(ends_out.len() >= ends_in.len());
-        prop_assert_eq!(summary.added, ends_out.len() - ends_in.len(), "{}", out);
-        // It ends where the program ends.
-        let (a, b) = (ends_in[ends_in.len() - 1], ends_out[ends_out.len() - 1]);
-        let gap = (0..3).map(|s| (a[s] - b[s]).powi(2)).sum::<f64>().sqrt();
-        prop_assert!(gap < END_TOL_MM, "{} mm\n{}", gap, out);
-        // Line ends: as the input's, and no last one where it had none.
+        let before = read_back(&machine, &input);
+        let after = read_back(&machine, &out);
+        // Every input move is there, annotated, in order: each annotated
+        // block (with its added lines) ends where its input move ends,
+        // within the size of the corrections.
+        prop_assert_eq!(after.block_ends.len(), before.ends.len(), "{}", out);
+        for (k, (a, b)) in before.ends.iter().zip(&after.block_ends).enumerate() {
+            prop_assert!(dist(a, b) < END_TOL_MM, "move {}: {} mm\n{}", k, dist(a, b), out);
+        }
+        prop_assert_eq!(summary.added, after.ends.len() - before.ends.len(), "{}", out);
+        // Arcs that stay arcs keep their direction, centre and radius
+        // (within the corrections), in order.
+        let mut programmed = before.arcs.iter();
+        for (cw, c, r) in &after.arcs {
+            let found = programmed.any(|(pcw, pc, pr)| {
+                pcw == cw && (pc[0] - c[0]).hypot(pc[1] - c[1]) < END_TOL_MM && (pr - r).abs() < END_TOL_MM
+            });
+            prop_assert!(found, "arc cw={} c={:?} r={} not programmed\n{}", cw, c, r, out);
+        }
+        // No takeup point while cutter radius compensation may be active.
+        prop_assert_eq!(after.takeups_under_comp, 0, "{}", out);
+        prop_assert_eq!(before.takeups_under_comp, 0);
+        // Line ends: the input's on every line, none after the last line
+        // where the input had none.
         prop_assert_eq!(out.ends_with('\n'), last_eol);
-        prop_assert_eq!(out.contains("\r\n"), crlf && out.contains('\n'));
-        // A `/` line's added lines (up to the next annotated line) keep it.
+        for l in out.split_inclusive('\n').filter(|l| l.ends_with('\n')) {
+            prop_assert_eq!(l.ends_with("\r\n"), crlf, "{:?}", l);
+        }
+        // A `/` line's added lines (up to the next annotated line) keep it;
+        // no other line has one.
         let mut deleted = false;
         for l in out.lines() {
-            if l.contains("(dev ") || l.contains("(DEV ") || l.starts_with('M') || l.starts_with('m') {
+            if l.contains("(dev ") || l.starts_with('M') || l.starts_with('m') {
                 deleted = l.starts_with('/');
-            } else if deleted {
-                prop_assert!(l.starts_with('/'), "{}\n{}", l, out);
+            } else {
+                prop_assert_eq!(l.starts_with('/'), deleted, "{}\n{}", l, out);
             }
         }
     }
