@@ -174,6 +174,24 @@ fn moves(machine: &MachineTool, text: &str) -> Vec<(postproc::program::interp::M
     out
 }
 
+/// How far the point `p` (X, Y, Z; the other axes of `at`) of a
+/// compensated arc lands off the programmed circle `parc`, with the
+/// directions of motion `dirs`, mm.
+fn off_circle(
+    machine: &MachineTool,
+    (at, p): (&[f64; 6], &Vector3<f64>),
+    dirs: &[i8; 6],
+    tool: f64,
+    parc: &postproc::program::interp::ArcGeom,
+) -> f64 {
+    let mut c = *at;
+    c[0] = p[0];
+    c[1] = p[1];
+    c[2] = p[2];
+    let got = machine.geometric(&c, dirs, tool).pos;
+    ((got[0] - parc.center[0]).hypot(got[1] - parc.center[1]) - parc.radius).abs()
+}
+
 /// The bundled AFM R-1000 example file: its text and the machine.
 fn afm() -> (String, MachineTool) {
     let text = std::fs::read_to_string(repo("machines/afm-r1000.yaml")).unwrap();
@@ -730,13 +748,7 @@ fn regression_kept_arcs_after_a_reversal_start_on_the_programmed_path() {
         for k in 0..=20 {
             let s = k as f64 / 20.0;
             let p = arc.point(&mv.start3(), &mv.end3(), s);
-            let mut c = mv.end;
-            c[0] = p[0];
-            c[1] = p[1];
-            c[2] = p[2];
-            let got = machine.geometric(&c, &dirs, tool).pos;
-            let radial =
-                ((got[0] - parc.center[0]).hypot(got[1] - parc.center[1]) - parc.radius).abs();
+            let radial = off_circle(&machine, (&mv.end, &p), &dirs, tool, &parc);
             assert!(
                 radial <= tolerance + POINT_TOL_MM,
                 "{radial} mm off the circle at {s} of {}",
@@ -866,13 +878,7 @@ fn regression_half_turns_given_by_r_keep_their_centre() {
                     dirs[i] = if t[i] > 0.0 { 1 } else { -1 };
                 }
             }
-            let mut c = mv.end;
-            c[0] = p[0];
-            c[1] = p[1];
-            c[2] = p[2];
-            let got = machine.geometric(&c, &dirs, tool).pos;
-            let radial =
-                ((got[0] - parc.center[0]).hypot(got[1] - parc.center[1]) - parc.radius).abs();
+            let radial = off_circle(&machine, (&mv.end, &p), &dirs, tool, &parc);
             assert!(
                 radial <= tolerance + POINT_TOL_MM,
                 "{radial} mm off the circle at {s} of {arc_line} (tolerance {tolerance})"

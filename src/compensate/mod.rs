@@ -1459,16 +1459,7 @@ mod tests {
 
     /// [`block_after`] over `plans` in one run; panics on a failure.
     fn run_all(pred: &ToolPredictor, plans: &[Plan]) -> Vec<BlockResult> {
-        let mut carry = None;
-        plans
-            .iter()
-            .map(
-                |p| match block_after(pred, p, &Settings::default(), &mut carry) {
-                    Ok(r) => r,
-                    Err(e) => panic!("{e}"),
-                },
-            )
-            .collect()
+        run_at(pred, plans, Settings::default().tolerance_mm)
     }
 
     #[test]
