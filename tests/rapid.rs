@@ -181,10 +181,10 @@ fn sample_module_structure() {
     // The drilling move of hole 1: MoveL Offs(holes{1},0,0,-12), vDrill, fine, tDrill\WObj:=wPlate;
     let drill = m.moves().nth(4).expect("fifth move");
     assert_eq!(drill.kind, MoveKind::MoveL);
-    assert_eq!(drill.speed.text, "vDrill");
-    assert_eq!(drill.zone.text, "fine");
-    assert_eq!(drill.tool.text, "tDrill");
-    assert_eq!(drill.wobj.as_ref().map(|a| a.text.as_str()), Some("wPlate"));
+    assert_eq!(&*drill.speed.text, "vDrill");
+    assert_eq!(&*drill.zone.text, "fine");
+    assert_eq!(&*drill.tool.text, "tDrill");
+    assert_eq!(drill.wobj.as_ref().map(|a| &*a.text), Some("wPlate"));
     let Target::Offs { base, offsets, .. } = &drill.target else {
         panic!("Offs target: {:?}", drill.target);
     };
@@ -228,22 +228,22 @@ fn optional_arguments_with_and_without_comma() {
     let moves: Vec<_> = m.moves().collect();
     assert_eq!(moves.len(), 4);
     for mv in &moves[..2] {
-        assert_eq!(mv.speed.text, "v100");
-        assert_eq!(mv.zone.text, "z10");
-        assert_eq!(mv.tool.text, "tool1");
-        assert_eq!(mv.wobj.as_ref().map(|a| a.text.as_str()), Some("wobj1"));
-        assert_eq!(mv.tload.as_ref().map(|a| a.text.as_str()), Some("load1"));
+        assert_eq!(&*mv.speed.text, "v100");
+        assert_eq!(&*mv.zone.text, "z10");
+        assert_eq!(&*mv.tool.text, "tool1");
+        assert_eq!(mv.wobj.as_ref().map(|a| &*a.text), Some("wobj1"));
+        assert_eq!(mv.tload.as_ref().map(|a| &*a.text), Some("load1"));
         let v = mv
             .opt("v")
             .and_then(|o| o.value.as_ref())
             .expect("\\V given");
-        assert_eq!(v.text, "150");
+        assert_eq!(&*v.text, "150");
         assert!(!mv.conc);
     }
     for mv in &moves[2..] {
         assert!(mv.conc);
         assert!(matches!(&mv.target, Target::Named { name, .. } if name == "p1"));
-        assert_eq!(mv.tool.text, "tool1");
+        assert_eq!(&*mv.tool.text, "tool1");
     }
 }
 

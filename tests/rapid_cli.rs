@@ -350,7 +350,7 @@ fn drilling_sample_thrust_only_on_the_twelve_plunges_and_targets_land() {
     let mut drilled = 0;
     for (rec, mv) in out.records.iter().zip(&moves_in) {
         assert_eq!(rec.line, mv.line);
-        match (&rec.wrench, mv.speed.text.as_str()) {
+        match (&rec.wrench, &*mv.speed.text) {
             (Some(w), "vDrill") => {
                 assert!(w.in_tool_frame);
                 assert_abs_diff_eq!(

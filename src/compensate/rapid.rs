@@ -460,7 +460,7 @@ fn resolve_cart<'m>(
 }
 
 fn resolve_tool(module: &Module, src: &str, file: &str, mv: &Move) -> Result<ToolView> {
-    let name = mv.tool.text.as_str();
+    let name = &*mv.tool.text;
     if name.eq_ignore_ascii_case("tool0") {
         return Ok(ToolView {
             tframe: Isometry3::identity(),
@@ -507,7 +507,7 @@ fn resolve_wobj(module: &Module, src: &str, file: &str, mv: &Move) -> Result<Iso
     let Some(arg) = &mv.wobj else {
         return Ok(Isometry3::identity());
     };
-    let name = arg.text.as_str();
+    let name = &*arg.text;
     if name.eq_ignore_ascii_case("wobj0") {
         return Ok(Isometry3::identity());
     }
@@ -1205,7 +1205,7 @@ fn plan_move<'m>(
     let tool = resolve_tool(module, src, file, mv)?;
     let wobj = resolve_wobj(module, src, file, mv)?;
     // The tool is resolved from its name alone: equal names, equal views.
-    let view = cache.get(mv.tool.text.as_str(), || {
+    let view = cache.get(&*mv.tool.text, || {
         robot.with_tool(tool.tframe, tool.load, false)
     });
     let (pose, q, branch) = if mv.kind == MoveKind::MoveAbsJ {
@@ -1676,7 +1676,7 @@ pub fn compensate_parsed(
         let power = thermal_power.as_ref().and_then(|p| p.get(i).copied());
         let wrench = wrenches.get(i).copied().flatten();
         let rpm = directives.at(mv.line).spindle_rpm;
-        let wobj_text = mv.wobj.as_ref().map_or("wobj0", |w| w.text.as_str());
+        let wobj_text = mv.wobj.as_ref().map_or("wobj0", |w| &*w.text);
         let (tool, wobj) = match &*names {
             Some((t, w))
                 if t.eq_ignore_ascii_case(&mv.tool.text) && w.eq_ignore_ascii_case(wobj_text) =>

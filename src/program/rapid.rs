@@ -281,8 +281,9 @@ pub struct Decl {
 /// An argument passed as written: its trimmed text and span.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Arg {
-    /// The text (e.g. `v100`, `tool1`, `[500,500,5000,1000]`).
-    pub text: String,
+    /// The text (e.g. `v100`, `tool1`, `[500,500,5000,1000]`), shared
+    /// between the arguments of a module that read the same.
+    pub text: std::sync::Arc<str>,
     /// Where it is.
     pub span: Span,
 }

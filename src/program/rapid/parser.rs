@@ -3,6 +3,8 @@
 //! declarations, routines and motion instructions. Positions are byte offsets
 //! into the source, computed from the remaining input.
 
+use std::sync::Arc;
+
 use nom::IResult;
 use nom::error::{ErrorKind, ParseError};
 
@@ -303,7 +305,13 @@ pub(super) struct Parser<'a> {
     /// Smallest routine rest (bytes) whose statements are parsed ahead in
     /// parallel ([`Parser::parse_ahead`]).
     ahead_min: usize,
+    /// The argument texts met last (`v100`, `z1`, `tool1`: a module repeats
+    /// a few of them), shared instead of allocated per move.
+    texts: std::cell::RefCell<Vec<Arc<str>>>,
 }
+
+/// Argument texts [`Parser::text`] keeps to share.
+const SHARED_TEXTS: usize = 16;
 
 /// Source bytes after a routine header from which its statements are parsed
 /// ahead in parallel: below, the serial loop is as fast.
@@ -344,6 +352,7 @@ impl<'a> Parser<'a> {
             file,
             line_starts: line_starts.into(),
             depth: std::cell::Cell::new(0),
+            texts: std::cell::RefCell::new(Vec::new()),
             ahead_min,
         }
     }
@@ -431,6 +440,7 @@ impl<'a> Parser<'a> {
                     file,
                     line_starts: std::sync::Arc::clone(line_starts),
                     depth: std::cell::Cell::new(0),
+                    texts: std::cell::RefCell::new(Vec::new()),
                     ahead_min: usize::MAX,
                 },
                 |p, &at| {
@@ -440,6 +450,21 @@ impl<'a> Parser<'a> {
                 },
             )
             .collect()
+    }
+
+    /// The source text at `span`, shared with an equal text met lately.
+    fn text(&self, span: Span) -> Arc<str> {
+        let t = self.src.get(span).unwrap_or("");
+        let mut texts = self.texts.borrow_mut();
+        if let Some(k) = texts.iter().position(|s| **s == *t) {
+            return Arc::clone(&texts[k]);
+        }
+        let a: Arc<str> = Arc::from(t);
+        if texts.len() >= SHARED_TEXTS {
+            texts.remove(0);
+        }
+        texts.push(Arc::clone(&a));
+        a
     }
 
     pub(super) fn parse(&self) -> Result<Module, Located> {
@@ -1188,7 +1213,7 @@ impl<'a> Parser<'a> {
                 let (o, span) = self.expr(r, b",;\\")?;
                 if let Some(slot) = plain.get_mut(n_plain) {
                     *slot = Some(Arg {
-                        text: self.src.get(span.clone()).unwrap_or("").to_string(),
+                        text: self.text(span.clone()),
                         span,
                     });
                 }
@@ -1282,7 +1307,7 @@ impl<'a> Parser<'a> {
             let (v, span) = self.expr(v, stops)?;
             end = span.end;
             value = Some(Arg {
-                text: self.src.get(span.clone()).unwrap_or("").to_string(),
+                text: self.text(span.clone()),
                 span,
             });
             v
