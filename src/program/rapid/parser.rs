@@ -1573,6 +1573,41 @@ fn clip_end(s: &str, n: usize) -> String {
 mod tests {
     use super::*;
 
+    /// Moves that repeat an argument text share one allocation of it (in
+    /// the parse ahead, within each parallel task), and the texts read as
+    /// written.
+    #[test]
+    fn repeated_argument_texts_are_shared() {
+        for ahead_min in [usize::MAX, 0] {
+            let mut src = String::from("MODULE M\n  PROC main()\n");
+            for k in 0..40 {
+                let speed = if k % 2 == 0 { "v100" } else { "V200" };
+                src += &format!("    MoveL p{k},{speed},z1,tool1\\WObj:=wobj1;\n");
+            }
+            src += "  ENDPROC\nENDMODULE\n";
+            let m = Parser::with_ahead_min(&src, "m.mod", ahead_min)
+                .parse()
+                .unwrap();
+            let moves: Vec<&crate::program::rapid::Move> = m.moves().collect();
+            assert_eq!(moves.len(), 40);
+            for (k, mv) in moves.iter().enumerate() {
+                assert_eq!(&*mv.tool.text, "tool1");
+                assert_eq!(&*mv.zone.text, "z1");
+                assert_eq!(&*mv.speed.text, if k % 2 == 0 { "v100" } else { "V200" });
+                assert_eq!(mv.wobj.as_ref().map(|w| &*w.text), Some("wobj1"));
+            }
+            if ahead_min == usize::MAX {
+                let (a, b) = (moves[10], moves[30]);
+                assert!(Arc::ptr_eq(&a.tool.text, &b.tool.text));
+                assert!(Arc::ptr_eq(&a.zone.text, &b.zone.text));
+                assert!(Arc::ptr_eq(&a.speed.text, &b.speed.text));
+                let wobj =
+                    |m: &crate::program::rapid::Move| m.wobj.as_ref().map(|w| Arc::clone(&w.text));
+                assert!(matches!((wobj(a), wobj(b)), (Some(x), Some(y)) if Arc::ptr_eq(&x, &y)));
+            }
+        }
+    }
+
     proptest::proptest! {
         /// The fast path of [`number_value`] against `str::parse`: the same
         /// f64 bits (or the same failure) for literals of every shape the
