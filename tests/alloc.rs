@@ -1,4 +1,6 @@
-//! Hot-path hygiene: heap allocations do not grow with the number of blocks.
+//! Hot-path hygiene: heap allocations do not grow with the number of
+//! G-code blocks, and grow by a bounded few per RAPID target (whose module
+//! is held whole).
 //!
 //! The test binary's global allocator counts the allocations (and
 //! reallocations) made on the threads that opt in: the test's own thread
@@ -140,5 +142,64 @@ fn gcode_compensation_does_not_allocate_per_block() {
     assert!(
         per_block < MAX_ALLOCATIONS_PER_BLOCK,
         "{a1} allocations for {b1} blocks, {a2} for {b2}: {per_block:.3} per added block"
+    );
+}
+
+/// Largest number of allocations per added RAPID target. The module is
+/// held whole: the parsed statement and the texts of its two edits are
+/// three per target (3.04 measured); the argument texts (`v200`, `z1`,
+/// `tSpindle`) are shared, and with one allocation each the test reads
+/// 6.03 and fails.
+const MAX_ALLOCATIONS_PER_TARGET: f64 = 4.0;
+
+#[test]
+fn rapid_compensation_allocates_a_bounded_number_of_times_per_target() {
+    use postproc::compensate::rapid::{RapidOptions, compensate_module};
+    let text = std::fs::read_to_string(repo("machines/abb-irb1600.yaml")).unwrap();
+    let Ok(Machine::Robot(robot)) = Machine::from_yaml_str(&text, "abb-irb1600.yaml") else {
+        panic!("abb-irb1600.yaml is not a robot")
+    };
+    let module = |n: usize| {
+        let mut m = String::from(
+            "MODULE Bench\n  PERS tooldata tSpindle := [TRUE,[[0,0,150],[1,0,0,0]],[2,[0,0,70],[1,0,0,0],0.01,0.01,0.004]];\n  PROC main()\n",
+        );
+        for i in 0..n {
+            let x = 650.0 + (i % 40) as f64 * 5.0;
+            let y = 50.0 + (i / 40 % 50) as f64 * 2.0;
+            let _ = writeln!(
+                m,
+                "    MoveL [[{x:.1},{y:.1},300.0],[0,0,1,0],[0,0,0,0],[9E9,9E9,9E9,9E9,9E9,9E9]],v200,z1,tSpindle;"
+            );
+        }
+        m.push_str("  ENDPROC\nENDMODULE\n");
+        m
+    };
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(2)
+        .start_handler(|_| COUNTED.with(|c| c.set(true)))
+        .build()
+        .unwrap();
+    // Every effect on, annotated, no report records.
+    let opts = RapidOptions {
+        records: false,
+        ..RapidOptions::for_robot(&robot)
+    };
+    let count = |n: usize| {
+        let src = module(n);
+        COUNTED.with(|c| c.set(true));
+        let before = ALLOCATIONS.load(Ordering::Relaxed);
+        let r = pool.install(|| compensate_module(&src, "bench.mod", &robot, &opts));
+        let after = ALLOCATIONS.load(Ordering::Relaxed);
+        COUNTED.with(|c| c.set(false));
+        let r = r.expect("the module compensates");
+        assert_eq!(r.moves, n);
+        after - before
+    };
+    count(200);
+    let (a1, a2) = (count(2000), count(4000));
+    let per_target = a2.saturating_sub(a1) as f64 / 2000.0;
+    assert!(
+        per_target < MAX_ALLOCATIONS_PER_TARGET,
+        "{a1} allocations for 2000 targets, {a2} for 4000: {per_target:.2} per added target"
     );
 }
