@@ -202,6 +202,20 @@ impl Edits {
     }
 }
 
+/// Starts a line added after `block`'s: a newline first when the block's
+/// line has no line end (the file's last line), and the `/` of a
+/// block-delete block (the switch skips the added lines with it). Returns
+/// where the line's words begin.
+fn added_line_start(block: &Block, eol: &[u8], out: &mut Vec<u8>) -> usize {
+    if eol.is_empty() {
+        out.push(b'\n');
+    }
+    if block.block_delete {
+        out.push(b'/');
+    }
+    out.len()
+}
+
 /// Largest ratio of the radius to the centre's distance from the chord at
 /// which a moved arc keeps its `R` word: the centre an `R` word gives moves
 /// by this ratio times the change of the radius, so within about 11.5° of a
@@ -577,35 +591,8 @@ impl Emitter {
             let mut digits = [None; 6];
             for p in points {
                 let mark = out.len();
-                if eol.is_empty() {
-                    out.push(b'\n');
-                }
-                // Lines added to a block-delete block are skipped with it.
-                if block.block_delete {
-                    out.push(b'/');
-                }
-                let words = out.len();
-                for slot in 0..6 {
-                    let now = self.emitted[slot];
-                    // An axis that stays where it is needs no word.
-                    if p[slot] == now {
-                        continue;
-                    }
-                    let d = *digits[slot].get_or_insert_with(|| {
-                        let w = block.words.iter().find(|w| w.letter == AXIS_LETTERS[slot]);
-                        self.decimals(w, scale, slot >= 3)
-                    });
-                    let v = round_to(to_program(plan, slot, p[slot], now), d);
-                    let cur = round_to(to_program(plan, slot, now, now), d);
-                    if v != cur {
-                        if out.len() > words && spaced {
-                            out.push(b' ');
-                        }
-                        out.push(letter_case(AXIS_LETTERS[slot], lower));
-                        write_number(out, v, d, true);
-                        self.emitted[slot] = to_machine(plan, slot, v, now);
-                    }
-                }
+                let words = added_line_start(block, eol, out);
+                self.axis_words(block, plan, p, (words, &mut digits), out);
                 if out.len() == words {
                     out.truncate(mark);
                     continue;
@@ -616,12 +603,48 @@ impl Emitter {
         }
     }
 
+    /// The words of the axes whose value at `p` differs, as written, from
+    /// where the machine was left (which they update), each after a space
+    /// in a spaced program unless it is the first after `words` (where the
+    /// line's words begin); `digits` keeps each axis' decimals, found at
+    /// its first word.
+    fn axis_words(
+        &mut self,
+        block: &Block,
+        plan: &Plan,
+        p: &AxisVec,
+        (words, digits): (usize, &mut [Option<usize>; 6]),
+        out: &mut Vec<u8>,
+    ) {
+        for slot in 0..6 {
+            let now = self.emitted[slot];
+            // An axis that stays where it is needs no word.
+            if p[slot] == now {
+                continue;
+            }
+            let d = *digits[slot].get_or_insert_with(|| {
+                let w = block.words.iter().find(|w| w.letter == AXIS_LETTERS[slot]);
+                self.decimals(w, plan.scale, slot >= 3)
+            });
+            let v = round_to(to_program(plan, slot, p[slot], now), d);
+            let cur = round_to(to_program(plan, slot, now, now), d);
+            if v != cur {
+                if out.len() > words && self.spaced {
+                    out.push(b' ');
+                }
+                out.push(letter_case(AXIS_LETTERS[slot], block.lower_case));
+                write_number(out, v, d, true);
+                self.emitted[slot] = to_machine(plan, slot, v, now);
+            }
+        }
+    }
+
     /// The added line of a kept arc after its takeup point: the motion
-    /// word (two digits when the block's has them), the end point's words that differ from where the takeup point
-    /// left the machine, and the centre (`R` when the block gives one,
-    /// else the centre words: the block's own and any that are non-zero),
-    /// relative to the takeup point unless the program's arc centres are
-    /// absolute.
+    /// word (two digits when the block's has them), the end point's words
+    /// that differ from where the takeup point left the machine, and the
+    /// centre (`R` when the block gives one, else the centre words: the
+    /// block's own and any that are non-zero), relative to the takeup point
+    /// unless the program's arc centres are absolute.
     #[allow(clippy::too_many_arguments)]
     fn arc_line(
         &mut self,
@@ -634,35 +657,16 @@ impl Emitter {
         eol: &[u8],
         out: &mut Vec<u8>,
     ) {
-        let (scale, lower, spaced) = (plan.scale, block.lower_case, self.spaced);
-        let sep: &[u8] = if spaced { b" " } else { b"" };
+        let lower = block.lower_case;
+        let sep: &[u8] = if self.spaced { b" " } else { b"" };
         let start = self.emitted;
-        if eol.is_empty() {
-            out.push(b'\n');
-        }
-        if block.block_delete {
-            out.push(b'/');
-        }
+        let words = added_line_start(block, eol, out);
         out.push(if lower { b'g' } else { b'G' });
         if two_digit {
             out.push(b'0');
         }
         out.push(if motion == Motion::ArcCw { b'2' } else { b'3' });
-        for slot in 0..6 {
-            let now = self.emitted[slot];
-            if end[slot] == now {
-                continue;
-            }
-            let w = block.words.iter().find(|w| w.letter == AXIS_LETTERS[slot]);
-            let d = self.decimals(w, scale, slot >= 3);
-            let v = round_to(to_program(plan, slot, end[slot], now), d);
-            if v != round_to(to_program(plan, slot, now, now), d) {
-                out.extend_from_slice(sep);
-                out.push(letter_case(AXIS_LETTERS[slot], lower));
-                write_number(out, v, d, true);
-                self.emitted[slot] = to_machine(plan, slot, v, now);
-            }
-        }
+        self.axis_words(block, plan, end, (words, &mut [None; 6]), out);
         let words = self.centre_words(block, plan, arc, center, (&start, end), r_form_holds(arc));
         for (letter, v, d, w) in words.into_iter().flatten() {
             if w.is_some() || v != 0.0 || plan.arc_absolute {
