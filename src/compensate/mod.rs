@@ -952,8 +952,8 @@ struct Start {
     gap: f64,
     /// A takeup point was pushed.
     takeup: bool,
-    /// The gap left at the start, beyond what the proof counts, mm (0 but
-    /// without takeup points).
+    /// The gap left at the start, beyond what the proof counts, mm (0
+    /// unless takeup points are not allowed).
     left_mm: f64,
 }
 
@@ -1317,7 +1317,10 @@ fn arc_block(
     // of the tolerance from the programmed start (an axis that reverses at
     // the arc's start), the start solved for the arc's first direction of
     // motion comes first, as a takeup point.
-    let here = carry_in.filter(|k| k.target == mv.start).map(|k| k.c);
+    // Where the machine stands: the previous block's end, when it ended at
+    // the arc's start.
+    let stood = carry_in.filter(|k| k.target == mv.start);
+    let here = stood.map(|k| k.c);
     // The gap where the machine stands, when beyond the takeup share.
     let beyond = here
         .map(|c| start_gap(pred, &mv.start, &c, &start_dirs, tool))
@@ -1358,11 +1361,7 @@ fn arc_block(
     let chords = ((arc.sweep.abs() / max_step.max(1e-6)).ceil() as usize).clamp(1, 1 << 16);
     let mut prev_p = mv.start;
     let lip = Lip::new(tool);
-    // Where the machine stands: the previous block's end, when it ended
-    // at the arc's start.
-    let mut at: Option<(AxisVec, DirVec)> = carry_in
-        .filter(|k| k.target == mv.start)
-        .map(|k| (k.c, k.dirs));
+    let mut at: Option<(AxisVec, DirVec)> = stood.map(|k| (k.c, k.dirs));
     let mut last_dirs = mv.dirs;
     let mut end_residual = res.residual_mm;
     // `block_reusing` cleared the storage of the split points.

@@ -266,8 +266,8 @@ pub struct Setup {
 
 impl Setup {
     /// The setup a machine tool file gives: its axes, its tool table, its
-    /// work offsets G54..G59 and its reference position (see
-    /// [`home_position`]).
+    /// work offsets G54..G59 and its reference position (machine zero
+    /// clamped into each axis' travel, Z at its upper limit).
     pub fn for_machine(m: &crate::machine::tool::MachineTool) -> Setup {
         let mut setup = Setup::default();
         for (slot, has) in setup.axes.iter_mut().enumerate() {
@@ -285,7 +285,7 @@ impl Setup {
 /// The reference position the interpreter starts from and G28 returns to:
 /// machine zero clamped into each axis' travel, with Z at its upper limit
 /// (spindle retracted).
-pub fn home_position(m: &crate::machine::tool::MachineTool) -> AxisVec {
+fn home_position(m: &crate::machine::tool::MachineTool) -> AxisVec {
     let mut home = [0.0; 6];
     for (slot, h) in home.iter_mut().enumerate() {
         if let Some((lo, hi)) = m.travel(slot) {
