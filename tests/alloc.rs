@@ -3,10 +3,10 @@
 //! is held whole).
 //!
 //! The test binary's global allocator counts the allocations (and
-//! reallocations) made on the threads that opt in: the test's own thread
-//! and the worker threads of a pool built for the test (its start handler
-//! opts them in). Other tests running at the same time on other threads are
-//! not counted. A G-code job is run in process on a raster program of `n`
+//! reallocations) made on the threads that opt in, each into its test's
+//! own counter: the test's own thread and the worker threads of a pool
+//! built for the test (its start handler opts them in). Other tests running
+//! at the same time, these among them, are not counted. A G-code job is run in process on a raster program of `n`
 //! and of `2 n` blocks with every effect on; the allocations of the extra
 //! `n` blocks, per block, must stay far below one: what allocates is per
 //! chunk of 4096 lines or per run of 64 blocks, not per block.
@@ -29,17 +29,16 @@ use crate::common::repo;
 /// The system allocator, counting on the threads that opted in.
 struct Counting;
 
-static ALLOCATIONS: AtomicU64 = AtomicU64::new(0);
-
 thread_local! {
-    static COUNTED: Cell<bool> = const { Cell::new(false) };
+    /// The counter of the test this thread works for, if it counts.
+    static COUNTER: Cell<Option<&'static AtomicU64>> = const { Cell::new(None) };
 }
 
 fn count() {
     // `try_with`: the allocator also runs while a thread's locals are torn
     // down.
-    if COUNTED.try_with(Cell::get).unwrap_or(false) {
-        ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
+    if let Some(c) = COUNTER.try_with(Cell::get).ok().flatten() {
+        c.fetch_add(1, Ordering::Relaxed);
     }
 }
 
@@ -92,20 +91,44 @@ fn raster(passes: usize) -> String {
     p
 }
 
-/// Allocations counted while compensating `program`, and its output size.
+/// What `f` returns, and the allocations counted into `counter` while it
+/// ran (on this thread and on those of [`counting_pool`]`(counter)`).
+fn counted<T>(counter: &'static AtomicU64, f: impl FnOnce() -> T) -> (T, u64) {
+    COUNTER.with(|c| c.set(Some(counter)));
+    let before = counter.load(Ordering::Relaxed);
+    let value = f();
+    let after = counter.load(Ordering::Relaxed);
+    COUNTER.with(|c| c.set(None));
+    (value, after - before)
+}
+
+/// Two worker threads whose allocations are counted into `counter`.
+fn counting_pool(counter: &'static AtomicU64) -> rayon::ThreadPool {
+    rayon::ThreadPoolBuilder::new()
+        .num_threads(2)
+        .start_handler(move |_| COUNTER.with(|c| c.set(Some(counter))))
+        .build()
+        .unwrap()
+}
+
+/// The counter of the G-code test.
+static GCODE_ALLOCATIONS: AtomicU64 = AtomicU64::new(0);
+
+/// The counter of the RAPID test.
+static RAPID_ALLOCATIONS: AtomicU64 = AtomicU64::new(0);
+
+/// Allocations counted while compensating `program`, and its blocks.
 fn allocations(job: &Job, program: &str) -> (u64, usize) {
     // The output buffer is sized up front: its growth is not the engine's.
     let mut sink: Vec<u8> = Vec::with_capacity(program.len() * 16);
     let input = BufReader::new(Cursor::new(program.as_bytes()));
-    COUNTED.with(|c| c.set(true));
-    let before = ALLOCATIONS.load(Ordering::Relaxed);
-    let summary = job.run(input, "alloc.nc", Some(&mut sink), None);
-    let after = ALLOCATIONS.load(Ordering::Relaxed);
-    COUNTED.with(|c| c.set(false));
+    let (summary, n) = counted(&GCODE_ALLOCATIONS, || {
+        job.run(input, "alloc.nc", Some(&mut sink), None)
+    });
     let summary = summary.expect("the job runs");
     assert!(summary.changed > 0, "the program was compensated");
     assert!(sink.len() <= program.len() * 16, "the sink did not grow");
-    (after - before, summary.blocks)
+    (n, summary.blocks)
 }
 
 #[test]
@@ -117,11 +140,7 @@ fn gcode_compensation_does_not_allocate_per_block() {
     let setup = Setup::for_machine(&machine);
     let process = ProcessSetup::for_machine(&machine);
     assert!(process.force.is_some(), "the example has a force model");
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(2)
-        .start_handler(|_| COUNTED.with(|c| c.set(true)))
-        .build()
-        .unwrap();
+    let pool = counting_pool(&GCODE_ALLOCATIONS);
     let job = Job {
         predictor: Some(ToolPredictor::new(&machine, EffectSet::default()).with_process(&process)),
         setup,
@@ -174,11 +193,7 @@ fn rapid_compensation_allocates_a_bounded_number_of_times_per_target() {
         m.push_str("  ENDPROC\nENDMODULE\n");
         m
     };
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(2)
-        .start_handler(|_| COUNTED.with(|c| c.set(true)))
-        .build()
-        .unwrap();
+    let pool = counting_pool(&RAPID_ALLOCATIONS);
     // Every effect on, annotated, no report records.
     let opts = RapidOptions {
         records: false,
@@ -186,14 +201,12 @@ fn rapid_compensation_allocates_a_bounded_number_of_times_per_target() {
     };
     let count = |n: usize| {
         let src = module(n);
-        COUNTED.with(|c| c.set(true));
-        let before = ALLOCATIONS.load(Ordering::Relaxed);
-        let r = pool.install(|| compensate_module(&src, "bench.mod", &robot, &opts));
-        let after = ALLOCATIONS.load(Ordering::Relaxed);
-        COUNTED.with(|c| c.set(false));
+        let (r, allocations) = counted(&RAPID_ALLOCATIONS, || {
+            pool.install(|| compensate_module(&src, "bench.mod", &robot, &opts))
+        });
         let r = r.expect("the module compensates");
         assert_eq!(r.moves, n);
-        after - before
+        allocations
     };
     count(200);
     let (a1, a2) = (count(2000), count(4000));
