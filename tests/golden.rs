@@ -735,6 +735,14 @@ fn regression_kept_arcs_after_a_reversal_start_on_the_programmed_path() {
             lines[own],
             (got - pm.start3()).norm()
         );
+        // The takeup moves the machine by the reversal there: what the arc
+        // was off its start before the fix (the README's 2.6–3.5 µm).
+        let step = (takeup.end3() - takeup.start3()).norm();
+        assert!(
+            (0.0026..=0.0035).contains(&step),
+            "{step} mm: {}",
+            lines[own]
+        );
         // The added line: the arc itself, kept, from the takeup point.
         let Some((mv, _)) = compensated.iter().find(|(_, l)| *l == own + 2) else {
             panic!("no move on output line {}", own + 2)
