@@ -1,6 +1,6 @@
 //! Hot-path hygiene: heap allocations do not grow with the number of
-//! G-code blocks, and grow by a bounded few per RAPID target (whose module
-//! is held whole).
+//! G-code blocks, and by one per RAPID target (its parsed statement, held
+//! with the module).
 //!
 //! The test binary's global allocator counts the allocations (and
 //! reallocations) made on the threads that opt in, each into its test's
@@ -9,7 +9,8 @@
 //! at the same time, these among them, are not counted. A G-code job is run in process on a raster program of `n`
 //! and of `2 n` blocks with every effect on; the allocations of the extra
 //! `n` blocks, per block, must stay far below one: what allocates is per
-//! chunk of 4096 lines or per run of 64 blocks, not per block.
+//! chunk of 4096 lines or per run of 64 blocks, not per block. A RAPID
+//! module of `n` and of `2 n` targets is compensated the same way.
 
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::cell::Cell;
@@ -165,11 +166,16 @@ fn gcode_compensation_does_not_allocate_per_block() {
 }
 
 /// Largest number of allocations per added RAPID target. The module is
-/// held whole: the parsed statement and the texts of its two edits are
-/// three per target (3.04 measured); the argument texts (`v200`, `z1`,
-/// `tSpindle`) are shared, and with one allocation each the test reads
-/// 6.03 and fails.
-const MAX_ALLOCATIONS_PER_TARGET: f64 = 4.0;
+/// held whole: each parsed move is one allocation (boxed; held inline in
+/// the statement list, the list's growth cost more time than the boxes:
+/// 0.68 s against 0.62 s on the 100 000-target bench module). The edits'
+/// texts share one growing buffer and the argument texts (`v200`, `z1`,
+/// `tSpindle`) are shared, so nothing else grows with the targets. What
+/// the parallel passes allocate depends on how rayon happened to split
+/// them (each split makes its own caches): up to about 0.05 per added
+/// target either way. Measured 1.0-1.1; with one string per edit, as
+/// before, it reads 3.0 and fails.
+const MAX_ALLOCATIONS_PER_TARGET: f64 = 1.25;
 
 #[test]
 fn rapid_compensation_allocates_a_bounded_number_of_times_per_target() {
@@ -209,10 +215,10 @@ fn rapid_compensation_allocates_a_bounded_number_of_times_per_target() {
         allocations
     };
     count(200);
-    let (a1, a2) = (count(2000), count(4000));
-    let per_target = a2.saturating_sub(a1) as f64 / 2000.0;
+    let (a1, a2) = (count(2000), count(6000));
+    let per_target = a2.saturating_sub(a1) as f64 / 4000.0;
     assert!(
         per_target < MAX_ALLOCATIONS_PER_TARGET,
-        "{a1} allocations for 2000 targets, {a2} for 4000: {per_target:.2} per added target"
+        "{a1} allocations for 2000 targets, {a2} for 6000: {per_target:.3} per added target"
     );
 }

@@ -18,8 +18,8 @@ use rayon::prelude::*;
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 
 use crate::emit::rapid::{
-    Edit, Format, annotate_with, apply_edits, format_fixed, format_position, format_quaternion,
-    insert_after_decl,
+    EditList, Format, format_fixed, format_position, format_quaternion, insert_after_decl,
+    push_annotation, push_robtarget_edit,
 };
 use crate::error::{Error, Located, Result};
 use crate::machine::robot::pose::pose_from_abb;
@@ -612,7 +612,7 @@ fn robtarget_text(
 /// the confdata changes) while they lie on one line; otherwise one edit per
 /// number.
 fn robtarget_in_place(
-    edits: &mut Vec<Edit>,
+    edits: &mut EditList,
     src: &str,
     rt: &RobTarget,
     pose: &Isometry3<f64>,
@@ -638,24 +638,22 @@ fn robtarget_in_place(
         .get(rt.trans[0].span.start..end)
         .is_some_and(|t| !t.contains('\n'));
     if one_line {
-        edits.push(crate::emit::rapid::robtarget_edit(
+        push_robtarget_edit(
+            edits,
             src,
             rt,
             &pos,
             Some(&quat),
             changed.then_some(&new_conf),
             fmt,
-        )?);
+        )?;
     } else {
-        edits.extend(crate::emit::rapid::robtarget_edits(
-            rt,
-            &pos,
-            Some(&quat),
-            fmt,
-        )?);
+        for e in crate::emit::rapid::robtarget_edits(rt, &pos, Some(&quat), fmt)? {
+            edits.push(&e);
+        }
         if changed {
             for (n, v) in rt.robconf.iter().zip(new_conf) {
-                edits.push(Edit::replace(n.span.clone(), v.to_string()));
+                edits.push_str(n.span.clone(), &v.to_string());
             }
         }
     }
@@ -702,7 +700,7 @@ struct Rewriter<'m> {
     file: &'m str,
     robot: &'m Robot,
     opts: RapidOptions,
-    edits: Vec<Edit>,
+    edits: EditList,
     /// New declaration lines per module declaration index.
     inserts: Vec<(usize, String)>,
     taken: Vec<String>,
@@ -936,7 +934,7 @@ impl Rewriter<'_> {
             }
             (Origin::Inline, true) => {
                 let text = robtarget_text(self.src, u.rt, &new_obj, comp.conf, &fmt)?;
-                self.edits.push(Edit::replace(target.span(), text));
+                self.edits.push_str(target.span(), &text);
             }
             (origin @ Origin::Decl { decl, .. }, false) => {
                 let owner = self
@@ -973,7 +971,7 @@ impl Rewriter<'_> {
                         text,
                         "robtarget",
                     )?;
-                    self.edits.push(Edit::replace(target.span(), name));
+                    self.edits.push_str(target.span(), &name);
                 }
             }
             (origin @ Origin::Decl { decl, .. }, true) => {
@@ -990,7 +988,7 @@ impl Rewriter<'_> {
                     text,
                     "robtarget",
                 )?;
-                self.edits.push(Edit::replace(target.span(), name));
+                self.edits.push_str(target.span(), &name);
             }
         }
         Ok(Some(comp.deviation))
@@ -1085,7 +1083,7 @@ impl Rewriter<'_> {
             Origin::Inline => {
                 for (n, v) in jt.robax.iter().zip(new_deg) {
                     let t = joint_word(v, self.src, self.file, n.span.start)?;
-                    self.edits.push(Edit::replace(n.span.clone(), t));
+                    self.edits.push_str(n.span.clone(), &t);
                 }
             }
             Origin::Decl { decl, .. } => {
@@ -1102,7 +1100,7 @@ impl Rewriter<'_> {
                     {
                         for (n, v) in jt.robax.iter().zip(new_deg) {
                             let t = joint_word(v, self.src, self.file, n.span.start)?;
-                            self.edits.push(Edit::replace(n.span.clone(), t));
+                            self.edits.push_str(n.span.clone(), &t);
                         }
                     }
                 } else {
@@ -1118,7 +1116,7 @@ impl Rewriter<'_> {
                         text,
                         "jointtarget",
                     )?;
-                    self.edits.push(Edit::replace(target.span(), name));
+                    self.edits.push_str(target.span(), &name);
                 }
             }
         }
@@ -1643,7 +1641,7 @@ pub fn compensate_parsed(
         file,
         robot,
         opts: *opts,
-        edits: Vec::new(),
+        edits: EditList::new(),
         inserts: Vec::new(),
         taken: Vec::new(),
         views: Arc::new(Vec::new()),
@@ -1790,9 +1788,9 @@ pub fn compensate_parsed(
                     max_vib = (v, mv.line, state.rpm);
                 }
                 if opts.annotate {
-                    rw.edits.push(annotate_with(src, &mv.span, |out| {
+                    push_annotation(&mut rw.edits, src, &mv.span, |out| {
                         write_dev_comment(out, &dev)
-                    }));
+                    });
                 }
                 if !opts.records {
                     continue;
@@ -1832,7 +1830,7 @@ pub fn compensate_parsed(
     for (d, lines) in by_decl {
         if let Some(decl) = module.decls.get(d) {
             rw.edits
-                .push(insert_after_decl(src, &decl.span, &lines.join("\n")));
+                .push(&insert_after_decl(src, &decl.span, &lines.join("\n")));
         }
     }
     outcome.added = rw.added;
@@ -1843,7 +1841,7 @@ pub fn compensate_parsed(
     drop(plans);
     drop(moves);
     drop(module);
-    outcome.text = apply_edits(src, &edits)?;
+    outcome.text = edits.apply(src)?;
     Ok(outcome)
 }
 
@@ -1905,6 +1903,7 @@ fn warn_resonance(robot: &Robot, fx: Effects, (amp_mm, line, rpm): (f64, usize, 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::emit::rapid::{Edit, apply_edits};
     use crate::machine::robot::PoseDelta;
 
     /// Predefined speeds in either case, `vmax`, a declared speeddata and
@@ -2049,7 +2048,7 @@ mod tests {
             };
             let old = conf_of(rt).expect("integer confdata");
             for conf in confs {
-                let mut one = Vec::new();
+                let mut one = EditList::new();
                 robtarget_in_place(&mut one, src, rt, &pose, old, conf, &fmt).expect("edits");
                 let q = pose.rotation.quaternion();
                 let mut each = crate::emit::rapid::robtarget_edits(
@@ -2069,7 +2068,7 @@ mod tests {
                     }
                 }
                 assert_eq!(
-                    apply_edits(src, &one).expect("applies"),
+                    one.apply(src).expect("applies"),
                     apply_edits(src, &each).expect("applies")
                 );
                 seen += 1;

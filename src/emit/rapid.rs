@@ -65,10 +65,105 @@ pub fn apply_edits(src: &str, edits: &[Edit]) -> Result<String, Error> {
     let mut order: Vec<&Edit> = edits.iter().collect();
     order.sort_by_key(|e| (e.span.start, e.span.end));
     let extra: usize = edits.iter().map(|e| e.text.len()).sum();
+    splice(
+        src,
+        order.into_iter().map(|e| (e.span.clone(), e.text.as_str())),
+        extra,
+    )
+}
+
+/// A list of edits whose texts share one buffer: pushing an edit allocates
+/// nothing of its own (the list and the buffer grow amortised), so a
+/// rewrite of a large module costs no allocation per edit.
+/// [`EditList::apply`] is [`apply_edits`] of the same edits.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct EditList {
+    /// Each edit's span of the source and the range of its text in `text`.
+    items: Vec<(Range<usize>, Range<usize>)>,
+    /// The edits' texts, one after the other.
+    text: String,
+}
+
+impl EditList {
+    /// An empty list.
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// Number of edits.
+    pub fn len(&self) -> usize {
+        self.items.len()
+    }
+
+    /// True when there is no edit.
+    pub fn is_empty(&self) -> bool {
+        self.items.is_empty()
+    }
+
+    /// Adds `edit` (its text copied into the shared buffer).
+    pub fn push(&mut self, edit: &Edit) {
+        self.push_str(edit.span.clone(), &edit.text);
+    }
+
+    /// Adds the replacement of `span` with `text`.
+    pub fn push_str(&mut self, span: Range<usize>, text: &str) {
+        let start = self.text.len();
+        self.text.push_str(text);
+        self.items.push((span, start..self.text.len()));
+    }
+
+    /// Adds an edit whose text `write` appends to the buffer and whose span
+    /// it returns; on an error nothing is added.
+    pub fn push_with<E>(
+        &mut self,
+        write: impl FnOnce(&mut String) -> Result<Range<usize>, E>,
+    ) -> Result<(), E> {
+        let start = self.text.len();
+        match write(&mut self.text) {
+            Ok(span) => {
+                self.items.push((span, start..self.text.len()));
+                Ok(())
+            }
+            Err(e) => {
+                self.text.truncate(start);
+                Err(e)
+            }
+        }
+    }
+
+    /// The edits as [`Edit`]s, in the order they were added.
+    pub fn to_edits(&self) -> Vec<Edit> {
+        self.items
+            .iter()
+            .map(|(span, t)| Edit::replace(span.clone(), self.text.get(t.clone()).unwrap_or("")))
+            .collect()
+    }
+
+    /// `src` with the edits applied, as [`apply_edits`].
+    pub fn apply(&self, src: &str) -> Result<String, Error> {
+        let mut order: Vec<&(Range<usize>, Range<usize>)> = self.items.iter().collect();
+        order.sort_by_key(|(span, _)| (span.start, span.end));
+        splice(
+            src,
+            order
+                .into_iter()
+                .map(|(span, t)| (span.clone(), self.text.get(t.clone()).unwrap_or(""))),
+            self.text.len(),
+        )
+    }
+}
+
+/// `src` with the replacements `edits` (sorted by span) applied; `extra`
+/// is the total length of their texts.
+fn splice<'t>(
+    src: &str,
+    edits: impl Iterator<Item = (Range<usize>, &'t str)>,
+    extra: usize,
+) -> Result<String, Error> {
     let mut out = String::with_capacity(src.len() + extra);
     let mut at = 0;
-    for e in order {
-        let Range { start, end } = e.span;
+    for (span, text) in edits {
+        let Range { start, end } = span;
         if start > end || end > src.len() {
             return Err(Error::Usage(format!(
                 "edit {start}..{end} is outside the program ({} bytes)",
@@ -86,7 +181,7 @@ pub fn apply_edits(src: &str, edits: &[Edit]) -> Result<String, Error> {
             )));
         };
         out.push_str(keep);
-        out.push_str(&e.text);
+        out.push_str(text);
         at = end;
     }
     out.push_str(src.get(at..).unwrap_or(""));
@@ -234,8 +329,35 @@ pub fn robtarget_edit(
     conf: Option<&[i32; 4]>,
     fmt: &Format,
 ) -> Result<Edit, Error> {
-    let start = rt.trans[0].span.start;
     let mut text = String::with_capacity(96);
+    let span = write_robtarget_edit(&mut text, src, rt, pos, quat, conf, fmt)?;
+    Ok(Edit::replace(span, text))
+}
+
+/// [`robtarget_edit`] written into `edits`' shared buffer.
+pub fn push_robtarget_edit(
+    edits: &mut EditList,
+    src: &str,
+    rt: &RobTarget,
+    pos: &[f64; 3],
+    quat: Option<&[f64; 4]>,
+    conf: Option<&[i32; 4]>,
+    fmt: &Format,
+) -> Result<(), Error> {
+    edits.push_with(|text| write_robtarget_edit(text, src, rt, pos, quat, conf, fmt))
+}
+
+/// Appends the text of [`robtarget_edit`] to `text`; returns its span.
+fn write_robtarget_edit(
+    text: &mut String,
+    src: &str,
+    rt: &RobTarget,
+    pos: &[f64; 3],
+    quat: Option<&[f64; 4]>,
+    conf: Option<&[i32; 4]>,
+    fmt: &Format,
+) -> Result<Range<usize>, Error> {
+    let start = rt.trans[0].span.start;
     let mut at = start;
     let mut gap = |text: &mut String, n: &crate::program::rapid::Number| {
         let between = src.get(at..n.span.start).ok_or_else(|| {
@@ -249,8 +371,8 @@ pub fn robtarget_edit(
         Ok::<(), Error>(())
     };
     for (n, &v) in rt.trans.iter().zip(pos) {
-        gap(&mut text, n)?;
-        if !push_fixed(&mut text, v, fmt.position_decimals) {
+        gap(text, n)?;
+        if !push_fixed(text, v, fmt.position_decimals) {
             return Err(Error::Usage(format!(
                 "position component {v} is not a finite number"
             )));
@@ -260,19 +382,19 @@ pub fn robtarget_edit(
         let reference = rt.rot.each_ref().map(|n| n.value);
         let c = quaternion_components(q, Some(&reference), fmt)?;
         for (n, &v) in rt.rot.iter().zip(&c) {
-            gap(&mut text, n)?;
-            if !push_fixed(&mut text, v, fmt.quaternion_decimals) {
+            gap(text, n)?;
+            if !push_fixed(text, v, fmt.quaternion_decimals) {
                 text.push('0');
             }
         }
         if let Some(conf) = conf {
             for (n, v) in rt.robconf.iter().zip(conf) {
-                gap(&mut text, n)?;
-                push_int(&mut text, *v);
+                gap(text, n)?;
+                push_int(text, *v);
             }
         }
     }
-    Ok(Edit::replace(start..at, text))
+    Ok(start..at)
 }
 
 /// Edits replacing exactly the position numbers of `rt` with `pos` and, when
@@ -369,14 +491,21 @@ pub fn annotate(src: &str, stmt: &Range<usize>, comment: &str) -> Edit {
 }
 
 /// [`annotate`] with the comment written by `write` (which must not write
-/// a line break) straight after the ` ! `: one string, no copy.
-pub fn annotate_with(src: &str, stmt: &Range<usize>, write: impl FnOnce(&mut String)) -> Edit {
+/// a line break) straight after the ` ! `, into `edits`' shared buffer.
+pub fn push_annotation(
+    edits: &mut EditList,
+    src: &str,
+    stmt: &Range<usize>,
+    write: impl FnOnce(&mut String),
+) {
     let last = stmt.end.saturating_sub(1).max(stmt.start);
     let at = line_end(src, last);
-    let mut text = String::with_capacity(80);
-    text.push_str(" ! ");
-    write(&mut text);
-    Edit::insert(at, text)
+    let pushed: Result<(), std::convert::Infallible> = edits.push_with(|text| {
+        text.push_str(" ! ");
+        write(text);
+        Ok(at..at)
+    });
+    let Ok(()) = pushed;
 }
 
 /// An insertion of `text` (one or more lines, without a final line break) on
@@ -438,6 +567,55 @@ mod tests {
         let mut s = String::new();
         push_fixed_slow(&mut s, v, decimals);
         Some(s)
+    }
+
+    /// The shared-buffer list applies as the list of owned edits does:
+    /// same text, same order of insertions at one offset, same errors; a
+    /// failed `push_with` leaves nothing behind.
+    #[test]
+    fn edit_list_applies_as_owned_edits() {
+        let src = "MoveL p1,v100,z1,tool0;\nMoveL p2,v100,fine,tool0;\n";
+        let cases: Vec<Vec<Edit>> = vec![
+            vec![],
+            vec![Edit::replace(6..8, "p1_c2")],
+            // Given out of order; two insertions at one offset keep theirs.
+            vec![
+                Edit::insert(23, " ! b"),
+                Edit::replace(30..32, "p9"),
+                Edit::insert(23, " ! a"),
+                Edit::insert(0, "! head\n"),
+            ],
+            vec![Edit::insert(src.len(), "\n")],
+            // Errors: overlap, outside the source.
+            vec![Edit::replace(6..10, "x"), Edit::replace(8..12, "y")],
+            vec![Edit::replace(40..999, "x")],
+        ];
+        for edits in cases {
+            let mut list = EditList::new();
+            for e in &edits {
+                list.push(e);
+            }
+            assert_eq!(list.len(), edits.len());
+            assert_eq!(list.to_edits(), edits);
+            let (a, b) = (apply_edits(src, &edits), list.apply(src));
+            assert_eq!(a.is_ok(), b.is_ok(), "{edits:?}");
+            if let (Ok(a), Ok(b)) = (a, b) {
+                assert_eq!(a, b);
+            }
+        }
+        let mut list = EditList::new();
+        list.push_str(6..8, "p1_c2");
+        let failed: Result<(), &str> = list.push_with(|t| {
+            t.push_str("half written");
+            Err("no")
+        });
+        assert_eq!(failed, Err("no"));
+        assert_eq!(list.len(), 1);
+        assert_eq!(list.to_edits(), vec![Edit::replace(6..8, "p1_c2")]);
+        assert_eq!(
+            list.apply(src).expect("applies"),
+            src.replacen("p1", "p1_c2", 1)
+        );
     }
 
     #[test]
