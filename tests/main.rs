@@ -16,6 +16,7 @@ mod gperf;
 mod machine_tool;
 mod observations;
 mod paper_b;
+mod peers;
 mod rapid;
 mod rapid_cli;
 #[cfg(unix)] // links the inputs into a scratch folder, runs bash

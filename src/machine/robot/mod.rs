@@ -525,9 +525,15 @@ impl Robot {
     pub fn frames(&self, model: Model, q: &[f64; 6]) -> Frames {
         kinematics::frames(self.params(model), q)
     }
-    /// Flange pose in the robot base frame.
+    /// Flange pose in the robot base frame (from the model's stored
+    /// prepared rows: the bits of [`kinematics::flange`] without
+    /// recomputing the twists or storing the link frames).
     pub fn flange_pose(&self, model: Model, q: &[f64; 6]) -> Isometry3<f64> {
-        kinematics::flange(self.params(model), q)
+        let prepared = match model {
+            Model::Nominal => &self.d.nominal_prep,
+            Model::Actual => &self.d.actual_prep,
+        };
+        kinematics::flange_prepared(prepared, q)
     }
     /// TCP pose in the world frame: `base · flange(q) · flange_to_tool`.
     pub fn tcp_pose(&self, model: Model, q: &[f64; 6]) -> Isometry3<f64> {
@@ -867,6 +873,34 @@ mod tests {
             assert_eq!(got.translation.vector, fresh.translation.vector);
             assert_eq!(got.rotation.coords, fresh.rotation.coords);
         }
+    }
+
+    /// `flange_pose` from the stored prepared rows has the bits of the
+    /// frame-by-frame product of the model's parameters, for both models,
+    /// also after the actual set is replaced (a thermal state).
+    #[test]
+    fn flange_pose_equals_the_frame_product_bit_for_bit() {
+        let r = super::test_irb1600();
+        let warm = r.at_joint_power(&[900.0, 700.0, 0.0, 0.0, 0.0, 0.0]);
+        let mut next = super::test_sequence(0x9e37_79b9_7f4a_7c15);
+        for _ in 0..200 {
+            let q: [f64; 6] = std::array::from_fn(|_| 3.0 * next());
+            for robot in [&r, &warm] {
+                for model in [Model::Nominal, Model::Actual] {
+                    let fast = robot.flange_pose(model, &q);
+                    let slow = kinematics::flange(robot.params(model), &q);
+                    assert_eq!(fast.translation.vector, slow.translation.vector);
+                    assert_eq!(fast.rotation.coords, slow.rotation.coords);
+                }
+            }
+        }
+        assert_ne!(
+            warm.flange_pose(Model::Actual, &[0.0; 6])
+                .translation
+                .vector,
+            r.flange_pose(Model::Actual, &[0.0; 6]).translation.vector,
+            "the warm robot's actual set differs"
+        );
     }
 
     #[test]
