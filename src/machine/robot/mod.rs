@@ -521,19 +521,24 @@ impl Robot {
         self.d.process_wrench.as_ref()
     }
 
-    /// All joint frames of a model in the robot base frame.
+    /// All joint frames of a model in the robot base frame (from the
+    /// model's stored prepared rows: the bits of [`kinematics::frames`]
+    /// without recomputing the twists).
     pub fn frames(&self, model: Model, q: &[f64; 6]) -> Frames {
-        kinematics::frames(self.params(model), q)
+        kinematics::frames_prepared(self.prepared(model), q, 6)
     }
     /// Flange pose in the robot base frame (from the model's stored
     /// prepared rows: the bits of [`kinematics::flange`] without
     /// recomputing the twists or storing the link frames).
     pub fn flange_pose(&self, model: Model, q: &[f64; 6]) -> Isometry3<f64> {
-        let prepared = match model {
+        kinematics::flange_prepared(self.prepared(model), q)
+    }
+    /// The stored prepared rows of a model.
+    fn prepared(&self, model: Model) -> &kinematics::Prepared {
+        match model {
             Model::Nominal => &self.d.nominal_prep,
             Model::Actual => &self.d.actual_prep,
-        };
-        kinematics::flange_prepared(prepared, q)
+        }
     }
     /// TCP pose in the world frame: `base · flange(q) · flange_to_tool`.
     pub fn tcp_pose(&self, model: Model, q: &[f64; 6]) -> Isometry3<f64> {
@@ -875,11 +880,11 @@ mod tests {
         }
     }
 
-    /// `flange_pose` from the stored prepared rows has the bits of the
-    /// frame-by-frame product of the model's parameters, for both models,
-    /// also after the actual set is replaced (a thermal state).
+    /// `flange_pose` and `frames` from the stored prepared rows have the
+    /// bits of the frame-by-frame product of the model's parameters, for
+    /// both models, also after the actual set is replaced (a thermal state).
     #[test]
-    fn flange_pose_equals_the_frame_product_bit_for_bit() {
+    fn flange_pose_and_frames_equal_the_frame_product_bit_for_bit() {
         let r = super::test_irb1600();
         let warm = r.at_joint_power(&[900.0, 700.0, 0.0, 0.0, 0.0, 0.0]);
         let mut next = super::test_sequence(0x9e37_79b9_7f4a_7c15);
@@ -891,6 +896,16 @@ mod tests {
                     let slow = kinematics::flange(robot.params(model), &q);
                     assert_eq!(fast.translation.vector, slow.translation.vector);
                     assert_eq!(fast.rotation.coords, slow.rotation.coords);
+                    let (fast, slow) = (
+                        robot.frames(model, &q),
+                        kinematics::frames(robot.params(model), &q),
+                    );
+                    for i in 0..6 {
+                        assert_eq!(fast.link[i].translation, slow.link[i].translation);
+                        assert_eq!(fast.link[i].rotation.coords, slow.link[i].rotation.coords);
+                        assert_eq!(fast.axis_origin[i], slow.axis_origin[i]);
+                        assert_eq!(fast.axis_dir[i], slow.axis_dir[i]);
+                    }
                 }
             }
         }
