@@ -979,3 +979,83 @@ fn regression_no_takeups_under_cutter_compensation_and_the_gap_is_reported() {
         "{stderr}"
     );
 }
+
+#[test]
+fn regression_full_turns_that_do_not_close_are_written_as_chords() {
+    // A full circle (`G2 I0 J-8`, start = end) entered moving −X and left
+    // moving −X after it: the machine stands where the entry's end was
+    // solved for −X, the circle's end is solved for +X (its direction of
+    // motion there), microns apart. At a tolerance loose enough for the
+    // correction to count as uniform, kept as an arc it would run between
+    // those two points, which a controller reads as an arc of almost
+    // nothing (or almost a full turn). Through the binary: the block is
+    // written as chords that go round once, every vertex and chord middle
+    // on the programmed circle within the tolerance. Entered moving +X,
+    // its start and end are the same command and it stays a full circle
+    // (`G2` with I and J, no end words).
+    let (text, machine) = afm();
+    let dir = tempfile::tempdir().unwrap();
+    let tolerance = 0.05;
+    let args = [
+        "--effects",
+        "geometric",
+        "--tolerance",
+        "0.05",
+        "--annotate",
+        "none",
+    ];
+    let open = "G90 G54 G0 X200 Y100 Z20\nG43 H1 Z5\nG1 X150 F1000\nX100\nG2 I0 J-8\nG1 X50\n";
+    let programmed = moves(&machine, open);
+    let Some((pm, _)) = programmed.iter().find(|(m, _)| m.arc.is_some()) else {
+        panic!("no arc")
+    };
+    let parc = pm.arc.unwrap();
+    let tool = machine.tool_length_mm(1).unwrap();
+    let out = compensate_with(dir.path(), &text, open, &args);
+    assert!(!out.contains("G2"), "{out}");
+    let compensated = moves(&machine, &out);
+    // The chords: every move from the arc block's line up to the last
+    // block's (the `G1 X50`, the last move).
+    let chords: Vec<_> = compensated
+        .iter()
+        .filter(|(_, l)| *l >= 5)
+        .map(|(m, _)| m)
+        .collect();
+    let chords = &chords[..chords.len() - 1];
+    assert!(chords.len() > 10, "{} chords\n{out}", chords.len());
+    let mut turned = 0.0;
+    for mv in chords {
+        assert_eq!(mv.motion, Motion::Linear, "{out}");
+        let (a, b) = (mv.start3(), mv.end3());
+        let mut dirs = pm.dirs;
+        for i in 0..3 {
+            if (b[i] - a[i]).abs() > 1e-9 {
+                dirs[i] = if b[i] > a[i] { 1 } else { -1 };
+            }
+        }
+        for p in [b, (a + b) / 2.0] {
+            let radial = off_circle(&machine, (&mv.end, &p), &dirs, tool, &parc);
+            assert!(
+                radial <= tolerance + POINT_TOL_MM,
+                "{radial} mm off the circle at {p:?}\n{out}"
+            );
+        }
+        let angle = |p: &Vector3<f64>| (p[1] - parc.center[1]).atan2(p[0] - parc.center[0]);
+        let step = angle(&b) - angle(&a);
+        turned += step - std::f64::consts::TAU * (step / std::f64::consts::TAU).round();
+    }
+    // Clockwise once round (to the chord resolution of the start and end).
+    assert!(
+        (turned + std::f64::consts::TAU).abs() < 0.01,
+        "turned {turned} rad\n{out}"
+    );
+    let closed = "G90 G54 G0 X0 Y100 Z20\nG43 H1 Z5\nG1 X50 F1000\nX100\nG2 I0 J-8\nG1 X150\n";
+    let out = compensate_with(dir.path(), &text, closed, &args);
+    let Some(arc_line) = out.lines().find(|l| l.contains("G2")) else {
+        panic!("the closed circle is not an arc\n{out}")
+    };
+    assert!(
+        arc_line.contains('I') && arc_line.contains('J') && !arc_line.contains('X'),
+        "{out}"
+    );
+}
