@@ -1059,3 +1059,54 @@ fn regression_full_turns_that_do_not_close_are_written_as_chords() {
         "{out}"
     );
 }
+
+#[test]
+fn regression_a_move_after_a_machine_coordinate_retract_starts_where_the_machine_stands() {
+    // `G53 Z400` sends Z to a machine position, uncompensated; X and Y
+    // stay where the line before left them (solved at Z 5). The feed move
+    // after it needs X, Y and Z solved at its own start: its line becomes
+    // a takeup point onto that start (attained within the words' rounding
+    // of the programmed start) and the move follows on an added line.
+    // Before, the move after a G28/G53 was written as if the machine stood
+    // on its compensated start (13 µm off in X here).
+    let (text, machine) = afm();
+    let dir = tempfile::tempdir().unwrap();
+    let program = "G90 G54 G0 X200 Y100 Z20\nG43 H1 Z5\nG1 X300 F1000\nG53 Z400\nG1 X250\n";
+    let programmed = moves(&machine, program);
+    let Some((pm, _)) = programmed.iter().find(|(_, l)| *l == 5) else {
+        panic!("no move on line 5")
+    };
+    let out = compensate_with(dir.path(), &text, program, &["--effects", "geometric"]);
+    let lines: Vec<&str> = out.lines().collect();
+    assert_eq!(lines.len(), 7, "{out}");
+    assert_eq!(lines[4], "G53 Z400", "{out}");
+    assert!(lines[5].contains("takeup"), "{out}");
+    let compensated = moves(&machine, &out);
+    let at_line = |n: usize| {
+        compensated
+            .iter()
+            .find(|(_, l)| *l == n)
+            .map(|(m, _)| *m)
+            .unwrap_or_else(|| panic!("no move on line {n} of\n{out}"))
+    };
+    let (stood, takeup) = (at_line(4), at_line(6));
+    let tool = machine.tool_length_mm(1).unwrap();
+    let at = machine.geometric(&takeup.end, &pm.dirs, tool).pos;
+    let off = (0..3)
+        .map(|i| (at[i] - pm.start[i]).powi(2))
+        .sum::<f64>()
+        .sqrt();
+    assert!(off <= WORD_TOL_MM * 3f64.sqrt(), "{off} mm off\n{out}");
+    // The takeup moves X by microns from where the line before left it.
+    assert!((takeup.end[0] - stood.end[0]).abs() > 0.005, "{out}");
+    // The move itself follows, to its compensated end.
+    let end = machine.geometric(&at_line(7).end, &pm.dirs, tool).pos;
+    let off = (0..3)
+        .map(|i| (end[i] - pm.end[i]).powi(2))
+        .sum::<f64>()
+        .sqrt();
+    assert!(
+        off <= WORD_TOL_MM * 3f64.sqrt(),
+        "{off} mm off at the end\n{out}"
+    );
+}

@@ -1034,6 +1034,43 @@ impl Carry {
         }
         Some(carry)
     }
+
+    /// Where a move to a machine-defined place (G28, G53), which is not
+    /// compensated, leaves the machine: its programmed axes at their
+    /// commanded end, the others where the block before left them (`None`
+    /// when that is not known, or after more than [`CARRY_LOOKBACK`]
+    /// positioning moves in a row). Never the solution of its end, so the
+    /// move after it starts from where the machine stands (a takeup point,
+    /// or the gap measured).
+    fn at_fixed(
+        pred: &ToolPredictor,
+        plan: &Plan,
+        mv: &Move,
+        before: Option<&Carry>,
+    ) -> Option<Carry> {
+        let mut carry = Carry {
+            target: mv.end,
+            dirs: mv.dirs,
+            tool: mv.tool_len_mm,
+            ctx: pred.ctx,
+            c: mv.end,
+            solved: false,
+            positioned: 0,
+        };
+        if needs_carry(pred, plan) {
+            let before = before?;
+            for (s, v) in carry.c.iter_mut().enumerate() {
+                if plan.programmed & (1 << s) == 0 && pred.machine.has_axis(s) {
+                    *v = *before.c.get(s)?;
+                }
+            }
+            carry.positioned = before.positioned + 1;
+            if carry.positioned > CARRY_LOOKBACK {
+                return None;
+            }
+        }
+        Some(carry)
+    }
 }
 
 /// [`block`] for the next block of a run compensated in order: `carry`
@@ -1084,11 +1121,15 @@ pub fn carry_before<'p>(
     carry
 }
 
-/// A positioning move that leaves some axes of the machine where they were.
+/// A positioning move (a rapid, or a move to a machine-defined place) that
+/// leaves some axes of the machine where they were.
 fn needs_carry(pred: &ToolPredictor, plan: &Plan) -> bool {
-    plan.kind == PlanKind::Motion
-        && plan.mv.is_some_and(|mv| mv.motion == Motion::Rapid)
-        && (0..6).any(|s| plan.programmed & (1 << s) == 0 && pred.machine.has_axis(s))
+    let positioning = match plan.kind {
+        PlanKind::Motion => plan.mv.is_some_and(|mv| mv.motion == Motion::Rapid),
+        PlanKind::Fixed => plan.mv.is_some(),
+        PlanKind::Pass | PlanKind::Cycle { .. } => false,
+    };
+    positioning && (0..6).any(|s| plan.programmed & (1 << s) == 0 && pred.machine.has_axis(s))
 }
 
 /// The carry after `plan` given the one before it, as [`block_after`]
@@ -1102,8 +1143,10 @@ fn carry_after(
     let Some(mv) = plan.mv else {
         return before.copied();
     };
-    if plan.kind != PlanKind::Motion {
-        return None;
+    match plan.kind {
+        PlanKind::Motion => {}
+        PlanKind::Fixed => return Carry::at_fixed(pred, plan, &mv, before),
+        PlanKind::Pass | PlanKind::Cycle { .. } => return None,
     }
     if mv.arc.is_some() {
         // A replaced arc ends with its last chord's direction of motion.
@@ -1169,6 +1212,7 @@ pub fn block_reusing(
             res.end = mv.end;
             res.deviation = pred.breakdown(&mv.end, &mv.dirs, tool);
             res.residual_mm = res.deviation.total().norm();
+            *carry = Carry::at_fixed(pred, plan, &mv, carry_in);
             return Ok(res);
         }
         PlanKind::Cycle { r_level, .. } => {
@@ -1469,7 +1513,7 @@ mod tests {
         // chord's direction), positioning moves that leave axes where they
         // were (also more of them in a row than it looks back over), a
         // tool length taken on between moves, and moves after a comment
-        // line included.
+        // line included, and moves to machine-defined places (G28, G53).
         let m = testing::load(&testing::afm_text(), "afm");
         let pred = ToolPredictor::new(&m, EffectSet::default());
         let plans = afm_plans(&[
@@ -1484,6 +1528,15 @@ mod tests {
             "G0 Y40",
             "G1 Z5",
             "X10",
+            // Moves to machine-defined places (not compensated) that leave
+            // axes where they were, and moves after them.
+            "G91 G28 Z0",
+            "G90",
+            "G0 X50 Y50",
+            "G0 Z20",
+            "G1 Z5",
+            "G53 Z12",
+            "G1 X60 Y40",
             // A tool length taken on without a move.
             "G43 H1",
             "G1 X200",
@@ -1517,6 +1570,20 @@ mod tests {
             .filter(|r| r.as_ref().is_ok_and(|r| r.takeup))
             .count();
         assert!(takeups >= 2, "{takeups} takeups");
+        // The move after `G53 Z12` starts where the machine stands: X and
+        // Y as the line before left them, Z at 12 uncompensated.
+        let after_g53 = plans
+            .iter()
+            .position(|p| {
+                p.kind == PlanKind::Fixed
+                    && p.programmed == 0b100
+                    && p.mv.is_some_and(|m| m.end[2] == 12.0)
+            })
+            .map(|k| k + 1);
+        assert!(
+            after_g53.is_some_and(|k| whole[k].as_ref().is_ok_and(|r| r.takeup)),
+            "no takeup after G53"
+        );
         for k in 1..plans.len() {
             let before: Vec<(ToolPredictor, Plan)> = plans[..k]
                 .iter()
@@ -1529,6 +1596,34 @@ mod tests {
                 assert_eq!(r, whole[i], "run from block {k}, block {i}");
             }
         }
+    }
+
+    #[test]
+    fn a_move_after_a_move_to_a_machine_position_starts_where_the_machine_stands() {
+        // `G53 Z50` is not compensated: Z goes to its command, X and Y stay
+        // where the line before left them (solved for Z 10). The next move
+        // needs X, Y and Z solved for its own start, more than half the
+        // tolerance away: it starts with a takeup point onto it (before,
+        // the machine-coordinate move dropped what the block before left,
+        // and the move assumed it started on its compensated start).
+        let m = testing::load(&testing::afm_text(), "afm");
+        let pred = ToolPredictor::new(&m, EffectSet::default());
+        let plans = afm_plans(&["G0 X10 Y10 Z10", "G1 X400 Y300 F1000", "G53 Z50", "G1 X500"]);
+        assert_eq!(plans[2].kind, PlanKind::Fixed);
+        let settings = Settings::default();
+        let res = run_all(&pred, &plans);
+        let Some(mv) = plans[3].mv else {
+            panic!("no move")
+        };
+        let mut stands = res[1].end;
+        stands[2] = 50.0;
+        assert_eq!(res[2].end, [400.0, 300.0, 50.0, 0.0, 0.0, 0.0]);
+        let off =
+            (pred.attained(&stands, &mv.dirs, 0.0).pos - pred.nominal(&mv.start, 0.0).pos).norm();
+        assert!(off > settings.tolerance_mm * TAKEUP_SHARE, "{off} mm");
+        assert!(res[3].takeup);
+        let at = pred.attained(&res[3].segments[0], &mv.dirs, 0.0).pos;
+        assert!((at - pred.nominal(&mv.start, 0.0).pos).norm() <= SOLVE_TOL_MM);
     }
 
     #[test]

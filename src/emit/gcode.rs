@@ -293,8 +293,14 @@ impl Emitter {
             return;
         }
         if plan.kind == PlanKind::Fixed {
+            // Its axes go to their (uncompensated) commands; the others
+            // stay where the lines before left them.
             out.extend_from_slice(line);
-            self.emitted = mv.end;
+            for (slot, e) in self.emitted.iter_mut().enumerate() {
+                if plan.programmed & (1 << slot) != 0 {
+                    *e = mv.end[slot];
+                }
+            }
             return;
         }
         let mut edits = std::mem::take(&mut self.edits);

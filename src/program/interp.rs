@@ -788,11 +788,7 @@ impl Interpreter {
             }
         }
         let any_axis = axis.iter().any(|a| a.is_some());
-        plan.programmed = axis
-            .iter()
-            .enumerate()
-            .filter(|(_, a)| a.is_some())
-            .fold(0u8, |m, (i, _)| m | (1 << i));
+        plan.programmed = programmed_axes(&axis);
         if self.cycle.is_some() {
             if let Some(r) = r_word {
                 self.cycle_r = Some(r.value);
@@ -1284,6 +1280,7 @@ impl Interpreter {
         let mv = self.make_move(Motion::Rapid, mid, home, None);
         plan.kind = PlanKind::Fixed;
         plan.mv = Some(mv);
+        plan.programmed = programmed_axes(axis);
         Ok(())
     }
 
@@ -1312,8 +1309,17 @@ impl Interpreter {
         let mv = self.make_move(Motion::Rapid, self.pos, end, None);
         plan.kind = PlanKind::Fixed;
         plan.mv = Some(mv);
+        plan.programmed = programmed_axes(axis);
         Ok(())
     }
+}
+
+/// The axis slots a block gives words for, one bit each.
+fn programmed_axes(axis: &[Option<&Word>; 6]) -> u8 {
+    axis.iter()
+        .enumerate()
+        .filter(|(_, a)| a.is_some())
+        .fold(0u8, |m, (i, _)| m | (1 << i))
 }
 
 #[cfg(test)]
