@@ -4,12 +4,14 @@
 //! - **G-code parsing**: postproc's syntactic parser (`parse_line`, the
 //!   first stage of `check` and `compensate`) against the `gcode` crate
 //!   (gcode-rs 0.6, a `no_std` lexer and parser) on a 100 000-line raster,
-//!   once with modal lines (`X400.000 Y0.010`, as `scripts/bench` writes)
-//!   and once with a `G1` on every line (gcode-rs keeps a line's arguments
-//!   only behind a command, so only this form gives both parsers the same
-//!   words; `tests/peers.rs` checks that they agree on it).
+//!   with a `G1` on every line (`tests/peers.rs` checks that both read the
+//!   same words there), and for reference with modal lines
+//!   (`X400.000 Y0.010`, as `scripts/bench` writes them): not the same
+//!   work, gcode-rs drops words that follow no command.
 //! - **Robot kinematics**: postproc's closed-form inverse kinematics (all
-//!   eight solutions) and nominal forward kinematics of the ABB IRB 1600
+//!   eight solutions; also with each solution checked by its forward
+//!   kinematics and collected, as rs-opw-kinematics does) and nominal
+//!   forward kinematics of the ABB IRB 1600
 //!   against `rs-opw-kinematics` (the OPW closed form of Brandstötter et
 //!   al.) with the same geometry, on 1 000 flange poses of random joint
 //!   values within the limits (`tests/peers.rs` checks that both give the
@@ -79,6 +81,12 @@ fn gcode_parsing(c: &mut Criterion) {
     g.finish();
 }
 
+/// Position tolerance of the forward check of an inverse solution, mm
+/// (rs-opw-kinematics checks its solutions to 1 µm).
+const CHECK_TOL_MM: f64 = 1e-3;
+/// Orientation tolerance of the same check, rad.
+const CHECK_TOL_RAD: f64 = 1e-6;
+
 /// The bundled IRB 1600 without its tool (the TCP is the flange).
 fn irb1600() -> Robot {
     let path = format!("{}/machines/abb-irb1600.yaml", env!("CARGO_MANIFEST_DIR"));
@@ -139,6 +147,31 @@ fn robot_kinematics(c: &mut Criterion) {
                 .sum::<usize>()
         })
     });
+    // rs-opw-kinematics checks every solution by its forward kinematics
+    // (and drops those off the pose) and returns them in a Vec: the same
+    // work on postproc's side.
+    g.bench_function(
+        "postproc inverse, all 8 solutions, each checked by forward",
+        |b| {
+            b.iter(|| {
+                ours.iter()
+                    .filter_map(|p| robot.ik_all(black_box(p)).ok().map(|s| (p, s)))
+                    .map(|(p, s)| {
+                        s.iter()
+                            .flatten()
+                            .filter(|q| {
+                                let f = robot.flange_pose(Model::Nominal, q);
+                                (f.translation.vector - p.translation.vector).norm() < CHECK_TOL_MM
+                                    && f.rotation.angle_to(&p.rotation) < CHECK_TOL_RAD
+                            })
+                            .copied()
+                            .collect::<Vec<_>>()
+                            .len()
+                    })
+                    .sum::<usize>()
+            })
+        },
+    );
     g.bench_function("rs-opw-kinematics inverse, all solutions", |b| {
         b.iter(|| {
             theirs

@@ -9,8 +9,9 @@
 //! at the same time, these among them, are not counted. A G-code job is run in process on a raster program of `n`
 //! and of `2 n` blocks with every effect on; the allocations of the extra
 //! `n` blocks, per block, must stay far below one: what allocates is per
-//! chunk of 4096 lines or per run of 64 blocks, not per block. A RAPID
-//! module of `n` and of `2 n` targets is compensated the same way.
+//! chunk of 4096 lines or per run of 64 blocks, not per block. RAPID
+//! modules of 2000 and 6000 targets are compensated the same way: one
+//! allocation per added target (its parsed statement) is left.
 
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::cell::Cell;

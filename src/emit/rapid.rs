@@ -113,13 +113,21 @@ impl EditList {
     }
 
     /// Adds an edit whose text `write` appends to the buffer and whose span
-    /// it returns; on an error nothing is added.
+    /// it returns; on an error nothing is added. `write` must only append:
+    /// a buffer shorter afterwards than before is refused (the edits
+    /// before would lose their texts).
     pub fn push_with<E>(
         &mut self,
         write: impl FnOnce(&mut String) -> Result<Range<usize>, E>,
     ) -> Result<(), E> {
         let start = self.text.len();
-        match write(&mut self.text) {
+        let written = write(&mut self.text);
+        if self.text.len() < start {
+            // Marks the list as broken: `apply` refuses it.
+            self.items.push((0..0, start..start));
+            return written.map(|_| ());
+        }
+        match written {
             Ok(span) => {
                 self.items.push((span, start..self.text.len()));
                 Ok(())
@@ -139,17 +147,21 @@ impl EditList {
             .collect()
     }
 
-    /// `src` with the edits applied, as [`apply_edits`].
+    /// `src` with the edits applied, as [`apply_edits`]. Fails on an edit
+    /// whose text is not in the buffer (a writer that did not only append).
     pub fn apply(&self, src: &str) -> Result<String, Error> {
-        let mut order: Vec<&(Range<usize>, Range<usize>)> = self.items.iter().collect();
+        let mut order = Vec::with_capacity(self.items.len());
+        for (span, t) in &self.items {
+            let text = self.text.get(t.clone()).ok_or_else(|| {
+                Error::Usage(format!(
+                    "edit text {t:?} is outside the edit buffer ({} bytes)",
+                    self.text.len()
+                ))
+            })?;
+            order.push((span.clone(), text));
+        }
         order.sort_by_key(|(span, _)| (span.start, span.end));
-        splice(
-            src,
-            order
-                .into_iter()
-                .map(|(span, t)| (span.clone(), self.text.get(t.clone()).unwrap_or(""))),
-            self.text.len(),
-        )
+        splice(src, order.into_iter(), self.text.len())
     }
 }
 
@@ -616,6 +628,14 @@ mod tests {
             list.apply(src).expect("applies"),
             src.replacen("p1", "p1_c2", 1)
         );
+        // A writer that takes text away is refused at `apply` instead of
+        // leaving the earlier edit without its text.
+        let cut: Result<(), &str> = list.push_with(|t| {
+            t.clear();
+            Ok(30..32)
+        });
+        assert_eq!(cut, Ok(()));
+        assert!(list.apply(src).is_err());
     }
 
     #[test]
