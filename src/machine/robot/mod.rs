@@ -145,12 +145,11 @@ pub struct Robot {
 #[derive(Debug, Clone)]
 struct RobotData {
     name: String,
-    nominal: DhParams,
-    /// `nominal` with the twist sines and cosines precomputed (confdata).
-    nominal_prep: kinematics::Prepared,
-    actual: DhParams,
-    /// `actual` prepared (the kinematic stage at gain 1); set with it.
-    actual_prep: kinematics::Prepared,
+    /// The controller's parameters, with their prepared rows (confdata).
+    nominal: paired::Paired,
+    /// The calibrated parameters, with their prepared rows (the kinematic
+    /// stage at gain 1).
+    actual: paired::Paired,
     closed_form: Option<ik::ClosedForm>,
     limits_rad: [[f64; 2]; 6],
     speed_rad_per_s: [f64; 6],
@@ -438,10 +437,8 @@ impl Robot {
         Ok(Robot {
             d: Box::new(RobotData {
                 name: raw.name.unwrap_or_else(|| "robot".to_string()),
-                nominal_prep: kinematics::Prepared::new(&nominal),
-                nominal,
-                actual_prep: kinematics::Prepared::new(&actual),
-                actual,
+                nominal: paired::Paired::new(nominal),
+                actual: paired::Paired::new(actual),
                 closed_form,
                 limits_rad,
                 speed_rad_per_s,
@@ -471,8 +468,8 @@ impl Robot {
     /// Parameter set of a model.
     pub fn params(&self, model: Model) -> &DhParams {
         match model {
-            Model::Nominal => &self.d.nominal,
-            Model::Actual => &self.d.actual,
+            Model::Nominal => self.d.nominal.params(),
+            Model::Actual => self.d.actual.params(),
         }
     }
     /// Whether the nominal model has the ABB-style closed-form inverse.
@@ -536,8 +533,8 @@ impl Robot {
     /// The stored prepared rows of a model.
     fn prepared(&self, model: Model) -> &kinematics::Prepared {
         match model {
-            Model::Nominal => &self.d.nominal_prep,
-            Model::Actual => &self.d.actual_prep,
+            Model::Nominal => self.d.nominal.prepared(),
+            Model::Actual => self.d.actual.prepared(),
         }
     }
     /// TCP pose in the world frame: `base · flange(q) · flange_to_tool`.
@@ -550,23 +547,22 @@ impl Robot {
     }
     /// The nominal parameter set with its twists precomputed.
     pub(crate) fn nominal_prepared(&self) -> &kinematics::Prepared {
-        &self.d.nominal_prep
+        self.d.nominal.prepared()
     }
 
     /// The actual parameter set with its twists precomputed.
     pub(crate) fn actual_prepared(&self) -> &kinematics::Prepared {
-        &self.d.actual_prep
+        self.d.actual.prepared()
     }
 
     /// Replaces the actual parameter set (and its prepared rows).
     pub(crate) fn set_actual(&mut self, actual: DhParams) {
-        self.d.actual_prep = kinematics::Prepared::new(&actual);
-        self.d.actual = actual;
+        self.d.actual = paired::Paired::new(actual);
     }
 
     /// ABB confdata of a joint vector (nominal model).
     pub fn confdata(&self, q: &[f64; 6]) -> ConfData {
-        ik::confdata_prepared(&self.d.nominal_prep, q)
+        ik::confdata_prepared(self.d.nominal.prepared(), q)
     }
 
     /// Checks every joint against its limits.
@@ -708,7 +704,7 @@ impl Robot {
             // The last bit of cfx is `q5 < 0`: a branch whose wrist sign
             // differs cannot match, and needs no frames.
             let hit = (q[4] < 0.0) == (conf.cfx & 1 == 1)
-                && ik::confdata_prepared(&self.d.nominal_prep, &q).cfx == conf.cfx;
+                && ik::confdata_prepared(self.d.nominal.prepared(), &q).cfx == conf.cfx;
             if hit {
                 found = Some((q, k));
             }
@@ -726,7 +722,7 @@ impl Robot {
                 available: sols
                     .iter()
                     .flatten()
-                    .map(|q| ik::confdata_prepared(&self.d.nominal_prep, q).to_string())
+                    .map(|q| ik::confdata_prepared(self.d.nominal.prepared(), q).to_string())
                     .collect::<Vec<_>>()
                     .join(" "),
             }
@@ -791,6 +787,42 @@ impl Robot {
         match sel {
             IkSelect::Conf(c) => self.ik_conf(tcp_world, *c),
             IkSelect::Near(seed) => self.ik_numeric(Model::Nominal, tcp_world, seed),
+        }
+    }
+}
+
+/// A parameter set with its prepared rows, made together and only
+/// together: the rows can never describe other parameters than the set
+/// (the fields are private to this module, so not even the rest of the
+/// robot module can change one without the other).
+mod paired {
+    use super::DhParams;
+    use super::kinematics::Prepared;
+
+    /// Parameters and their prepared rows.
+    #[derive(Debug, Clone)]
+    pub(super) struct Paired {
+        params: DhParams,
+        prepared: Prepared,
+    }
+
+    impl Paired {
+        /// Prepares `params`.
+        pub(super) fn new(params: DhParams) -> Self {
+            Paired {
+                prepared: Prepared::new(&params),
+                params,
+            }
+        }
+
+        /// The parameters.
+        pub(super) fn params(&self) -> &DhParams {
+            &self.params
+        }
+
+        /// Their prepared rows.
+        pub(super) fn prepared(&self) -> &Prepared {
+            &self.prepared
         }
     }
 }

@@ -257,7 +257,11 @@ impl Robot {
     /// powers. The thermal stage of the prediction is left as it was.
     pub fn at_joint_power(&self, p_w: &[f64; 6]) -> Robot {
         let mut r = self.clone();
-        r.set_actual(grown(&self.d.actual, &self.thermal_growth_mm(p_w), 1.0));
+        r.set_actual(grown(
+            self.d.actual.params(),
+            &self.thermal_growth_mm(p_w),
+            1.0,
+        ));
         r
     }
 
