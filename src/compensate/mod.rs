@@ -1010,29 +1010,7 @@ impl Carry {
         c1: AxisVec,
         before: Option<&Carry>,
     ) -> Option<Carry> {
-        let mut carry = Carry {
-            target: mv.end,
-            dirs: mv.dirs,
-            tool: mv.tool_len_mm,
-            ctx: pred.ctx,
-            c: c1,
-            solved: true,
-            positioned: 0,
-        };
-        if needs_carry(pred, plan) {
-            let before = before?;
-            for (s, v) in carry.c.iter_mut().enumerate() {
-                if plan.programmed & (1 << s) == 0 && pred.machine.has_axis(s) {
-                    *v = *before.c.get(s)?;
-                }
-            }
-            carry.solved = carry.c == c1;
-            carry.positioned = before.positioned + 1;
-            if carry.positioned > CARRY_LOOKBACK {
-                return None;
-            }
-        }
-        Some(carry)
+        Self::standing(pred, plan, mv, c1, true, before)
     }
 
     /// Where a move to a machine-defined place (G28, G53), which is not
@@ -1048,13 +1026,27 @@ impl Carry {
         mv: &Move,
         before: Option<&Carry>,
     ) -> Option<Carry> {
+        Self::standing(pred, plan, mv, mv.end, false, before)
+    }
+
+    /// The carry of a move commanded to `c` (`solution`: `c` solves the
+    /// move's end), its unprogrammed axes where `before` left them when
+    /// [`needs_carry`].
+    fn standing(
+        pred: &ToolPredictor,
+        plan: &Plan,
+        mv: &Move,
+        c: AxisVec,
+        solution: bool,
+        before: Option<&Carry>,
+    ) -> Option<Carry> {
         let mut carry = Carry {
             target: mv.end,
             dirs: mv.dirs,
             tool: mv.tool_len_mm,
             ctx: pred.ctx,
-            c: mv.end,
-            solved: false,
+            c,
+            solved: solution,
             positioned: 0,
         };
         if needs_carry(pred, plan) {
@@ -1064,6 +1056,7 @@ impl Carry {
                     *v = *before.c.get(s)?;
                 }
             }
+            carry.solved = solution && carry.c == c;
             carry.positioned = before.positioned + 1;
             if carry.positioned > CARRY_LOOKBACK {
                 return None;

@@ -326,27 +326,14 @@ pub fn quaternion_components(
     Ok(best.1)
 }
 
-/// [`robtarget_edits`] as ONE edit, from the first position number to the
-/// last quaternion number (or the last position number without `quat`),
-/// the text between the numbers copied from `src`: the same output bytes
-/// (and the same errors) with one string instead of seven. With `conf`
-/// (and `quat`), the edit goes on to the last confdata number and writes
-/// `conf` there too (as one edit per confdata number with `to_string`
-/// would).
-pub fn robtarget_edit(
-    src: &str,
-    rt: &RobTarget,
-    pos: &[f64; 3],
-    quat: Option<&[f64; 4]>,
-    conf: Option<&[i32; 4]>,
-    fmt: &Format,
-) -> Result<Edit, Error> {
-    let mut text = String::with_capacity(96);
-    let span = write_robtarget_edit(&mut text, src, rt, pos, quat, conf, fmt)?;
-    Ok(Edit::replace(span, text))
-}
-
-/// [`robtarget_edit`] written into `edits`' shared buffer.
+/// [`robtarget_edits`] as ONE edit, pushed onto `edits` (its text written
+/// straight into their shared buffer): from the first position number to
+/// the last quaternion number (or the last position number without
+/// `quat`), the text between the numbers copied from `src`. The same
+/// output bytes (and the same errors) with one edit instead of seven. With
+/// `conf` (and `quat`), the edit goes on to the last confdata number and
+/// writes `conf` there too (as one edit per confdata number with
+/// `to_string` would).
 pub fn push_robtarget_edit(
     edits: &mut EditList,
     src: &str,
@@ -359,7 +346,8 @@ pub fn push_robtarget_edit(
     edits.push_with(|text| write_robtarget_edit(text, src, rt, pos, quat, conf, fmt))
 }
 
-/// Appends the text of [`robtarget_edit`] to `text`; returns its span.
+/// Appends the text of [`push_robtarget_edit`]'s edit to `text`; returns
+/// its span.
 fn write_robtarget_edit(
     text: &mut String,
     src: &str,
