@@ -22,13 +22,12 @@
 use std::hint::black_box;
 
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
-use nalgebra::Isometry3;
-use postproc::machine::Machine;
-use postproc::machine::robot::{Model, Robot};
+use postproc::machine::robot::Model;
 use postproc::program::gcode::{Block, parse_line};
 use rs_opw_kinematics::kinematic_traits::Kinematics;
-use rs_opw_kinematics::kinematics_impl::OPWKinematics;
-use rs_opw_kinematics::parameters::opw_kinematics::Parameters;
+
+mod peer_setup;
+use peer_setup::{irb1600, irb1600_opw, joints};
 
 /// A raster of `lines` moves: 400 mm passes in X, 0.01 mm steps in Y; with
 /// `explicit` every line starts with `G1`.
@@ -86,47 +85,6 @@ fn gcode_parsing(c: &mut Criterion) {
 const CHECK_TOL_MM: f64 = 1e-3;
 /// Orientation tolerance of the same check, rad.
 const CHECK_TOL_RAD: f64 = 1e-6;
-
-/// The bundled IRB 1600 without its tool (the TCP is the flange).
-fn irb1600() -> Robot {
-    let path = format!("{}/machines/abb-irb1600.yaml", env!("CARGO_MANIFEST_DIR"));
-    let text = std::fs::read_to_string(&path).expect("machine file");
-    let Ok(Machine::Robot(r)) = Machine::from_yaml_str(&text, &path) else {
-        panic!("abb-irb1600 is not a robot")
-    };
-    r.with_tool(Isometry3::identity(), None, true)
-}
-
-/// The OPW parameters of the IRB 1600's nominal geometry (metres).
-fn irb1600_opw() -> OPWKinematics {
-    OPWKinematics::new(Parameters {
-        a1: 0.150,
-        a2: 0.0,
-        b: 0.0,
-        c1: 0.4865,
-        c2: 0.700,
-        c3: 0.600,
-        c4: 0.065,
-        offsets: [0.0, 0.0, -std::f64::consts::FRAC_PI_2, 0.0, 0.0, 0.0],
-        sign_corrections: [1; 6],
-        dof: 6,
-    })
-}
-
-/// `n` joint vectors spread over the joint ranges (a fixed sequence).
-fn joints(robot: &Robot, n: usize) -> Vec<[f64; 6]> {
-    let mut state = 0x2545_f491_4f6c_dd1du64;
-    let mut next = || {
-        state ^= state << 13;
-        state ^= state >> 7;
-        state ^= state << 17;
-        (state >> 11) as f64 / (1u64 << 53) as f64
-    };
-    let lim = *robot.joint_limits_rad();
-    (0..n)
-        .map(|_| std::array::from_fn(|i| lim[i][0] + (lim[i][1] - lim[i][0]) * next()))
-        .collect()
-}
 
 fn robot_kinematics(c: &mut Criterion) {
     let robot = irb1600();

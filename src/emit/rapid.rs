@@ -343,58 +343,46 @@ pub fn push_robtarget_edit(
     conf: Option<&[i32; 4]>,
     fmt: &Format,
 ) -> Result<(), Error> {
-    edits.push_with(|text| write_robtarget_edit(text, src, rt, pos, quat, conf, fmt))
-}
-
-/// Appends the text of [`push_robtarget_edit`]'s edit to `text`; returns
-/// its span.
-fn write_robtarget_edit(
-    text: &mut String,
-    src: &str,
-    rt: &RobTarget,
-    pos: &[f64; 3],
-    quat: Option<&[f64; 4]>,
-    conf: Option<&[i32; 4]>,
-    fmt: &Format,
-) -> Result<Range<usize>, Error> {
-    let start = rt.trans[0].span.start;
-    let mut at = start;
-    let mut gap = |text: &mut String, n: &crate::program::rapid::Number| {
-        let between = src.get(at..n.span.start).ok_or_else(|| {
-            Error::Usage(format!(
-                "robtarget number span {:?} is outside the program",
-                n.span
-            ))
-        })?;
-        text.push_str(between);
-        at = n.span.end;
-        Ok::<(), Error>(())
-    };
-    for (n, &v) in rt.trans.iter().zip(pos) {
-        gap(text, n)?;
-        if !push_fixed(text, v, fmt.position_decimals) {
-            return Err(Error::Usage(format!(
-                "position component {v} is not a finite number"
-            )));
-        }
-    }
-    if let Some(q) = quat {
-        let reference = rt.rot.each_ref().map(|n| n.value);
-        let c = quaternion_components(q, Some(&reference), fmt)?;
-        for (n, &v) in rt.rot.iter().zip(&c) {
+    edits.push_with(|text| {
+        let start = rt.trans[0].span.start;
+        let mut at = start;
+        let mut gap = |text: &mut String, n: &crate::program::rapid::Number| {
+            let between = src.get(at..n.span.start).ok_or_else(|| {
+                Error::Usage(format!(
+                    "robtarget number span {:?} is outside the program",
+                    n.span
+                ))
+            })?;
+            text.push_str(between);
+            at = n.span.end;
+            Ok::<(), Error>(())
+        };
+        for (n, &v) in rt.trans.iter().zip(pos) {
             gap(text, n)?;
-            if !push_fixed(text, v, fmt.quaternion_decimals) {
-                text.push('0');
+            if !push_fixed(text, v, fmt.position_decimals) {
+                return Err(Error::Usage(format!(
+                    "position component {v} is not a finite number"
+                )));
             }
         }
-        if let Some(conf) = conf {
-            for (n, v) in rt.robconf.iter().zip(conf) {
+        if let Some(q) = quat {
+            let reference = rt.rot.each_ref().map(|n| n.value);
+            let c = quaternion_components(q, Some(&reference), fmt)?;
+            for (n, &v) in rt.rot.iter().zip(&c) {
                 gap(text, n)?;
-                push_int(text, *v);
+                if !push_fixed(text, v, fmt.quaternion_decimals) {
+                    text.push('0');
+                }
+            }
+            if let Some(conf) = conf {
+                for (n, v) in rt.robconf.iter().zip(conf) {
+                    gap(text, n)?;
+                    push_int(text, *v);
+                }
             }
         }
-    }
-    Ok(start..at)
+        Ok(start..at)
+    })
 }
 
 /// Edits replacing exactly the position numbers of `rt` with `pos` and, when
