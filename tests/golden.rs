@@ -1110,3 +1110,77 @@ fn regression_a_move_after_a_machine_coordinate_retract_starts_where_the_machine
         "{off} mm off at the end\n{out}"
     );
 }
+
+#[test]
+fn regression_incremental_moves_after_a_machine_coordinate_retract_count_from_where_the_machine_stands()
+ {
+    // After `G53 Z400` the emitter took every axis as standing at its
+    // uncompensated command, so a following G91 move's increments were
+    // counted from there: the machine went 9 µm (X) and 7 µm (Y) beside
+    // the point the same program reaches written in G90. Now only the
+    // axes G53 names are taken as moved; the two programs command the same
+    // positions (re-interpreted, to the rounding of the words).
+    let (text, machine) = afm();
+    let dir = tempfile::tempdir().unwrap();
+    let head = "G54 G0 X10 Y10\nG43 H1 Z20\nG1 X50 F1000\nG53 Z400.\n";
+    let absolute = format!("{head}G1 X60.\nY30.\n");
+    let incremental = format!("{head}G91 G1 X10.\nY20.\nG90\n");
+    let args = ["--effects", "geometric"];
+    let a = moves(
+        &machine,
+        &compensate_with(dir.path(), &text, &absolute, &args),
+    );
+    let i = moves(
+        &machine,
+        &compensate_with(dir.path(), &text, &incremental, &args),
+    );
+    assert_eq!(a.len(), i.len());
+    assert!(a.len() >= 7, "{} moves", a.len());
+    for ((ma, la), (mi, _)) in a.iter().zip(&i) {
+        for s in 0..3 {
+            assert!(
+                (ma.end[s] - mi.end[s]).abs() <= 2.0 * WORD_TOL_MM,
+                "line {la}, axis {s}: {} (G90) against {} (G91)",
+                ma.end[s],
+                mi.end[s]
+            );
+        }
+    }
+}
+
+#[test]
+fn regression_no_takeup_point_beyond_the_end_of_travel() {
+    // `G28 Z0` leaves Z at the top of its travel (500 mm, uncompensated);
+    // the feed down from there needs its start 11 µm higher, beyond the
+    // travel. That takeup point failed the run ("outside the travel").
+    // Now the move starts where the machine stands and the gap is
+    // reported: exit code 1, a warning naming the line, no takeup.
+    let (text, _) = afm();
+    let dir = tempfile::tempdir().unwrap();
+    let m = dir.path().join("m.yaml");
+    std::fs::write(&m, &text).unwrap();
+    let p = dir.path().join("p.nc");
+    std::fs::write(
+        &p,
+        "G90 G0 X10 Y10 Z100\nG91 G28 Z0\nG90\nG0 X80 Y40\nG1 Z10 F900\nG1 X100\n",
+    )
+    .unwrap();
+    let out = postproc()
+        .args(["compensate", "-o", "-", "--machine"])
+        .arg(&m)
+        .arg(&p)
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{stderr}");
+    assert!(
+        stderr.contains("p.nc:5: the compensated program is still"),
+        "{stderr}"
+    );
+    let line5 = stdout.lines().nth(4).unwrap_or("");
+    assert!(
+        line5.starts_with("G1 ") && !line5.contains("takeup"),
+        "{stdout}"
+    );
+}

@@ -904,9 +904,10 @@ fn start_gap(pred: &ToolPredictor, p0: &AxisVec, at: &AxisVec, dirs: &DirVec, to
 /// move is pushed to `out` as a takeup point — the machine first moves
 /// there, as a controller's reversal compensation would, so that the move
 /// itself leaves from the programmed point. Without `takeups` (cutter
-/// radius compensation active, see [`BlockResult::takeup`]) the move starts
-/// from `at` whatever the gap; a gap beyond the share cannot be proven
-/// away and is returned as left over.
+/// radius compensation active, see [`BlockResult::takeup`]), or when the
+/// takeup point lies beyond an end of travel, the move starts from `at`
+/// whatever the gap; a gap beyond the share cannot be proven away and is
+/// returned as left over.
 fn start_from<'m>(
     pred: &ToolPredictor<'m>,
     p0: &AxisVec,
@@ -925,15 +926,23 @@ fn start_from<'m>(
             left_mm: 0.0,
         });
     }
+    let left = Start {
+        c: *at,
+        gap: SOLVE_TOL_MM,
+        takeup: false,
+        left_mm: gap,
+    };
     if !takeups {
-        return Ok(Start {
-            c: *at,
-            gap: SOLVE_TOL_MM,
-            takeup: false,
-            left_mm: gap,
-        });
+        return Ok(left);
     }
     let (c0, _) = solve_near(pred, p0, at, p0, dirs, lip)?;
+    if check_travel(pred, &c0).is_err() {
+        // The start solved for this move lies beyond an end of travel
+        // (a move straight out of the reference position at the end of
+        // Z, say): the machine cannot stand there, so the move starts
+        // where it stands and the gap is left over.
+        return Ok(left);
+    }
     out.push(c0);
     Ok(Start {
         c: c0,
@@ -1362,7 +1371,8 @@ fn arc_block(
     let beyond = here
         .map(|c| start_gap(pred, &mv.start, &c, &start_dirs, tool))
         .filter(|&g| g > tol * TAKEUP_SHARE);
-    let stands_off = takeups && beyond.is_some();
+    // No takeup point beyond an end of travel (see `start_from`).
+    let stands_off = takeups && beyond.is_some() && check_travel(pred, &start_c).is_ok();
     let arc_start = match here {
         Some(_) if stands_off => start_c,
         Some(c) => c,

@@ -293,14 +293,8 @@ impl Emitter {
             return;
         }
         if plan.kind == PlanKind::Fixed {
-            // Its axes go to their (uncompensated) commands; the others
-            // stay where the lines before left them.
             out.extend_from_slice(line);
-            for (slot, e) in self.emitted.iter_mut().enumerate() {
-                if plan.programmed & (1 << slot) != 0 {
-                    *e = mv.end[slot];
-                }
-            }
+            self.track_unchanged(block, plan);
             return;
         }
         let mut edits = std::mem::take(&mut self.edits);
@@ -778,7 +772,18 @@ impl Emitter {
     /// Keeps the emitted position in step for blocks written unchanged.
     fn track_unchanged(&mut self, block: &Block, plan: &Plan) {
         if let Some(mv) = plan.mv {
-            self.emitted = mv.end;
+            if plan.kind == PlanKind::Fixed {
+                // A move to a machine-defined place (G28, G53): the axes it
+                // names go to their (uncompensated) commands, the others
+                // stay where the lines before left them.
+                for (slot, e) in self.emitted.iter_mut().enumerate() {
+                    if plan.programmed & (1 << slot) != 0 {
+                        *e = mv.end[slot];
+                    }
+                }
+            } else {
+                self.emitted = mv.end;
+            }
             if block
                 .words
                 .iter()
