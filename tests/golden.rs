@@ -56,20 +56,31 @@ fn compensate(dir: &std::path::Path, machine: &str, program: &str) -> String {
     compensate_with(dir, machine, program, &["--annotate", "none"])
 }
 
-/// [`compensate`] with `args` instead of `--annotate none`.
-fn compensate_with(dir: &std::path::Path, machine: &str, program: &str, args: &[&str]) -> String {
+/// Runs `postproc compensate ARGS -o - --machine m.yaml p.nc` on `machine`
+/// and `program` written to `dir`, whatever its exit code.
+fn run_compensate(
+    dir: &std::path::Path,
+    machine: &str,
+    program: &str,
+    args: &[&str],
+) -> std::process::Output {
     let m = dir.join("m.yaml");
     std::fs::write(&m, machine).unwrap();
     let p = dir.join("p.nc");
     std::fs::write(&p, program).unwrap();
-    let out = postproc()
+    postproc()
         .arg("compensate")
         .args(args)
         .args(["-o", "-", "--machine"])
         .arg(&m)
         .arg(&p)
         .output()
-        .unwrap();
+        .unwrap()
+}
+
+/// [`compensate`] with `args` instead of `--annotate none`.
+fn compensate_with(dir: &std::path::Path, machine: &str, program: &str, args: &[&str]) -> String {
+    let out = run_compensate(dir, machine, program, args);
     assert!(
         out.status.code() == Some(0),
         "{}",
@@ -947,20 +958,12 @@ fn regression_no_takeups_under_cutter_compensation_and_the_gap_is_reported() {
     // the run ends with exit code 1 and a warning that names the line.
     let (text, _) = afm();
     let dir = tempfile::tempdir().unwrap();
-    let m = dir.path().join("m.yaml");
-    std::fs::write(&m, &text).unwrap();
-    let p = dir.path().join("p.nc");
-    std::fs::write(
-        &p,
+    let out = run_compensate(
+        dir.path(),
+        &text,
         "G90 G54 G0 X10 Y10 Z10\nG43 H1 Z5\nG41 D1 G1 X400 F1000\nY20\nX10\nG40 X400\nY30\nX10\nM30\n",
-    )
-    .unwrap();
-    let out = postproc()
-        .args(["compensate", "-o", "-", "--machine"])
-        .arg(&m)
-        .arg(&p)
-        .output()
-        .unwrap();
+        &[],
+    );
     assert_eq!(out.status.code(), Some(1));
     let stdout = String::from_utf8(out.stdout).unwrap();
     let stderr = String::from_utf8(out.stderr).unwrap();
@@ -1157,20 +1160,12 @@ fn regression_no_takeup_point_beyond_the_end_of_travel() {
     // reported: exit code 1, a warning naming the line, no takeup.
     let (text, _) = afm();
     let dir = tempfile::tempdir().unwrap();
-    let m = dir.path().join("m.yaml");
-    std::fs::write(&m, &text).unwrap();
-    let p = dir.path().join("p.nc");
-    std::fs::write(
-        &p,
+    let out = run_compensate(
+        dir.path(),
+        &text,
         "G90 G0 X10 Y10 Z100\nG91 G28 Z0\nG90\nG0 X80 Y40\nG1 Z10 F900\nG1 X100\n",
-    )
-    .unwrap();
-    let out = postproc()
-        .args(["compensate", "-o", "-", "--machine"])
-        .arg(&m)
-        .arg(&p)
-        .output()
-        .unwrap();
+        &[],
+    );
     let stdout = String::from_utf8_lossy(&out.stdout);
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert_eq!(out.status.code(), Some(1), "{stderr}");

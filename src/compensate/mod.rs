@@ -1503,6 +1503,18 @@ mod tests {
         plans
     }
 
+    /// The AFM R-1000 example machine, loaded once for the tests.
+    fn afm_machine() -> &'static crate::machine::tool::MachineTool {
+        static AFM: std::sync::OnceLock<crate::machine::tool::MachineTool> =
+            std::sync::OnceLock::new();
+        AFM.get_or_init(|| testing::load(&testing::afm_text(), "afm"))
+    }
+
+    /// A predictor of the AFM R-1000 with the default effects.
+    fn afm_pred() -> ToolPredictor<'static> {
+        ToolPredictor::new(afm_machine(), EffectSet::default())
+    }
+
     /// [`block_after`] over `plans` in one run; panics on a failure.
     fn run_all(pred: &ToolPredictor, plans: &[Plan]) -> Vec<BlockResult> {
         run_at(pred, plans, Settings::default().tolerance_mm)
@@ -1517,8 +1529,7 @@ mod tests {
         // were (also more of them in a row than it looks back over), a
         // tool length taken on between moves, and moves after a comment
         // line included, and moves to machine-defined places (G28, G53).
-        let m = testing::load(&testing::afm_text(), "afm");
-        let pred = ToolPredictor::new(&m, EffectSet::default());
+        let pred = afm_pred();
         let plans = afm_plans(&[
             "G0 X10 Y10 Z10",
             "G1 X400 Y10.5 F1000",
@@ -1609,8 +1620,7 @@ mod tests {
         // tolerance away: it starts with a takeup point onto it (before,
         // the machine-coordinate move dropped what the block before left,
         // and the move assumed it started on its compensated start).
-        let m = testing::load(&testing::afm_text(), "afm");
-        let pred = ToolPredictor::new(&m, EffectSet::default());
+        let pred = afm_pred();
         let plans = afm_plans(&["G0 X10 Y10 Z10", "G1 X400 Y300 F1000", "G53 Z50", "G1 X500"]);
         assert_eq!(plans[2].kind, PlanKind::Fixed);
         let settings = Settings::default();
@@ -1636,8 +1646,7 @@ mod tests {
         // angular errors move the tip there by more than half the
         // tolerance (Abbe), so the next move starts with a takeup point
         // solved with the tool.
-        let m = testing::load(&testing::afm_text(), "afm");
-        let pred = ToolPredictor::new(&m, EffectSet::default());
+        let pred = afm_pred();
         let plans = afm_plans(&["G0 X10 Y10 Z10", "G1 X400 Y300 F1000", "G43 H1", "G1 X500"]);
         let settings = Settings::default();
         let res = run_all(&pred, &plans);
@@ -1661,8 +1670,7 @@ mod tests {
         // (more than the tolerance on this machine), so the result starts
         // with the start solved for −X and the rest of the move is proven
         // from it; without a reversal no takeup is needed.
-        let m = testing::load(&testing::afm_text(), "afm");
-        let pred = ToolPredictor::new(&m, EffectSet::default());
+        let pred = afm_pred();
         let plans = afm_plans(&[
             "G0 X10 Y10 Z10",
             "G1 X400 F1000",
@@ -1705,8 +1713,7 @@ mod tests {
         // value (more than the tolerance). The arc must not start from
         // there: the start solved for −X comes first (a takeup point), and
         // the arc, still kept, leaves from it.
-        let m = testing::load(&testing::afm_text(), "afm");
-        let pred = ToolPredictor::new(&m, EffectSet::default());
+        let pred = afm_pred();
         let tol = Settings::default().tolerance_mm;
         let tool = 0.0;
         // Without the reversal (the arc starts in +X), it is kept.
@@ -1756,8 +1763,7 @@ mod tests {
         // at the start only, the correction looked uniform within 2 µm and
         // the arc was kept, its reversal errors left in; judged with the
         // direction at every point, it is replaced by chords.
-        let m = testing::load(&testing::afm_text(), "afm");
-        let pred = ToolPredictor::new(&m, EffectSet::default());
+        let pred = afm_pred();
         let plans = afm_plans(&[
             "G0 X99.30275 Y80 Z10",
             "G1 Y99.96956 F1000",
@@ -1785,8 +1791,7 @@ mod tests {
         // almost nothing (or almost a full turn). It is replaced by chords
         // that go round. Entered moving +X, its start and end are the same
         // command and it stays a full circle.
-        let m = testing::load(&testing::afm_text(), "afm");
-        let pred = ToolPredictor::new(&m, EffectSet::default());
+        let pred = afm_pred();
         let plans = afm_plans(&["G0 X200 Y100 Z10", "G1 X150 F1000", "X100", "G2 I0 J-8"]);
         let Some(arc) = plans[3].mv.and_then(|mv| mv.arc) else {
             panic!("no arc")
@@ -1813,8 +1818,7 @@ mod tests {
         // (a move of microns against the direction of travel) would upset
         // its offset computation. Every move starts where the machine
         // stands; after G40 the takeups are back.
-        let m = testing::load(&testing::afm_text(), "afm");
-        let pred = ToolPredictor::new(&m, EffectSet::default());
+        let pred = afm_pred();
         let plans = afm_plans(&[
             "G0 X10 Y10 Z10",
             "G41 D1 G1 X400 F1000",
@@ -1884,8 +1888,7 @@ mod tests {
     /// of a fresh one, and keeps its allocation.
     #[test]
     fn reused_segment_storage_gives_the_same_result() {
-        let m = testing::load(&testing::afm_text(), "afm");
-        let pred = ToolPredictor::new(&m, EffectSet::default());
+        let pred = afm_pred();
         let plans = afm_plans(&[
             "G0 X0 Y0 Z10",
             "G1 X900 Y20 F1000",
