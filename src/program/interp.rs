@@ -713,6 +713,7 @@ impl Interpreter {
         plan.absolute = self.absolute;
         plan.arc_absolute = self.arc_absolute;
         plan.offset = self.offset();
+        plan.programmed = programmed_axes(&axis);
 
         // Non-modal codes.
         if let Some(w) = non_modal {
@@ -788,7 +789,6 @@ impl Interpreter {
             }
         }
         let any_axis = axis.iter().any(|a| a.is_some());
-        plan.programmed = programmed_axes(&axis);
         if self.cycle.is_some() {
             if let Some(r) = r_word {
                 self.cycle_r = Some(r.value);
@@ -1280,7 +1280,6 @@ impl Interpreter {
         let mv = self.make_move(Motion::Rapid, mid, home, None);
         plan.kind = PlanKind::Fixed;
         plan.mv = Some(mv);
-        plan.programmed = programmed_axes(axis);
         Ok(())
     }
 
@@ -1309,7 +1308,6 @@ impl Interpreter {
         let mv = self.make_move(Motion::Rapid, self.pos, end, None);
         plan.kind = PlanKind::Fixed;
         plan.mv = Some(mv);
-        plan.programmed = programmed_axes(axis);
         Ok(())
     }
 }
