@@ -169,7 +169,8 @@ fn gcode_compensation_does_not_allocate_per_block() {
 /// Largest number of allocations per added RAPID target. The module is
 /// held whole: each parsed move is one allocation (boxed; held inline in
 /// the statement list, the list's growth cost more time than the boxes:
-/// 0.68 s against 0.62 s on the 100 000-target bench module). The edits'
+/// 0.68 s against 0.62 s on the 100 000-target bench module, a one-off
+/// hand measurement). The edits'
 /// texts share one growing buffer and the argument texts (`v200`, `z1`,
 /// `tSpindle`) are shared, so nothing else grows with the targets. What
 /// the parallel passes allocate depends on how rayon happened to split
