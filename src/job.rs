@@ -855,17 +855,7 @@ impl<'m> Job<'m> {
                     }
                 }
                 if out.is_some() {
-                    emitter.write(
-                        chunk.line(i),
-                        block,
-                        plan,
-                        if plan.kind == PlanKind::Fixed {
-                            None
-                        } else {
-                            res
-                        },
-                        &mut out_buf,
-                    );
+                    emitter.write(chunk.line(i), block, plan, res, &mut out_buf);
                 }
             }
             if let Some(out) = out.as_deref_mut() {
