@@ -9,6 +9,8 @@
 //! `Offs`/`RelTool` targets, joint-space `MoveAbsJ`) are documented in
 //! `grammar/rapid.md`, section "Compensation rewriting".
 
+pub mod stream;
+
 use std::collections::HashMap;
 use std::rc::Rc;
 use std::sync::Arc;
@@ -26,7 +28,7 @@ use crate::machine::robot::pose::pose_from_abb;
 use crate::machine::robot::process::{
     CutSettings, Directives, feed_frame_vector, plunge_direction, travel_direction,
 };
-use crate::machine::robot::thermal::{Segment, effective_power};
+use crate::machine::robot::thermal::{Segment, effective_power, effective_power_from};
 use crate::machine::robot::{
     Compensation, ConfData, Deviation, DhGrowth, Effects, ForceFrame, ForceModel, IkSelect, Model,
     PointMass, ProcessWrench, Robot, RobotError, Seed, ThermalStart,
@@ -1425,15 +1427,19 @@ fn move_power<'m>(
     let Some(qb) = cur.q else {
         return [0.0; 6];
     };
-    let key = (tool, wrench.as_ref().map(wrench_bits));
+    let bits = wrench.as_ref().map(wrench_bits);
     // A move starts where the previous one ended: with the same view, the
     // torques there are those computed for the previous move's end.
     let qa_bits = qa.map(f64::to_bits);
     let tau_a = match last {
-        Some((k, q, t)) if *k == key && *q == qa_bits => *t,
+        Some(((k, b), q, t)) if k == tool && *b == bits && *q == qa_bits => *t,
         _ => load_view(robot, cache, cur, wrench, tool).nominal_load_torques(&qa),
     };
-    *last = Some((key, qb.map(f64::to_bits), tau_b));
+    *last = Some((
+        (std::borrow::Cow::Borrowed(tool), bits),
+        qb.map(f64::to_bits),
+        tau_b,
+    ));
     let t = (tau_a + tau_b) * 0.5e-3;
     std::array::from_fn(|j| (t[j] * (qb[j] - qa[j]) / duration_s).abs())
 }
@@ -1482,7 +1488,7 @@ type EndLoad = (nalgebra::Vector6<f64>, Isometry3<f64>);
 /// The view key, joints (bits) and nominal load torques of the end of the
 /// last move whose power was computed ([`move_power`]).
 type EndTorques<'m> = Option<(
-    (&'m str, Option<WrenchBits>),
+    (std::borrow::Cow<'m, str>, Option<WrenchBits>),
     [u64; 6],
     nalgebra::Vector6<f64>,
 )>;
@@ -1527,28 +1533,132 @@ pub fn compensate_parsed(
     robot: &Robot,
     opts: &RapidOptions,
 ) -> Result<RapidOutcome> {
+    let mut carry = Carry::default();
+    let mut edits = compensate_window(&module, src, file, robot, opts, &mut carry, None, 0)?;
+    let spans: Vec<_> = module.decls.iter().map(|d| d.span.clone()).collect();
+    // Free the parsed module before the output text is built (the peak).
+    drop(module);
+    carry.push_inserts(src, &spans, &mut edits);
+    let mut outcome = carry.outcome(robot, opts);
+    outcome.text = edits.apply(src)?;
+    Ok(outcome)
+}
+
+/// What the compensation of one window of a module hands to the next: a
+/// module read a window at a time ([`stream`]) is compensated as if whole,
+/// and a module compensated whole is one window.
+#[derive(Default)]
+pub(crate) struct Carry {
+    /// Plan of the last move of the windows before (the one before the
+    /// next window's first move).
+    prev_plan: Option<Planned>,
+    /// Load torques at the end of that move ([`move_power`]).
+    end_torques: EndTorques<'static>,
+    /// Effective thermal power at the end of the windows before (a cold
+    /// start when none).
+    thermal_x: Option<[f64; 6]>,
+    /// Edits of the text before the window's part (the module's
+    /// declarations), for a module read a window at a time.
+    pub(crate) before: EditList,
+    inserts: Vec<(usize, String)>,
+    taken: Vec<String>,
+    owner: HashMap<Origin, LoadKey>,
+    made: HashMap<(Origin, String, LoadKey), String>,
+    derived_count: HashMap<Origin, usize>,
+    added: usize,
+    last_tcp: [f64; 3],
+    moves: usize,
+    max_deviation: (f64, usize),
+    max_vib: (f64, usize, Option<f64>),
+    records: Vec<MoveRecord>,
+}
+
+impl Carry {
+    /// The new declarations (`_cN` copies, `_oN` targets) as edits of
+    /// `src`, whose module declarations have the spans `decls`: one
+    /// insertion per original declaration, in order.
+    pub(crate) fn push_inserts(
+        &mut self,
+        src: &str,
+        decls: &[crate::program::rapid::Span],
+        edits: &mut EditList,
+    ) {
+        let mut by_decl: Vec<(usize, Vec<String>)> = Vec::new();
+        for (d, line) in std::mem::take(&mut self.inserts) {
+            match by_decl.iter_mut().find(|(k, _)| *k == d) {
+                Some((_, v)) => v.push(line),
+                None => by_decl.push((d, vec![line])),
+            }
+        }
+        for (d, lines) in by_decl {
+            if let Some(span) = decls.get(d) {
+                edits.push(&insert_after_decl(src, span, &lines.join("\n")));
+            }
+        }
+    }
+
+    /// The outcome of the windows compensated (without the text), after
+    /// the resonance warning of the whole module.
+    pub(crate) fn outcome(&mut self, robot: &Robot, opts: &RapidOptions) -> RapidOutcome {
+        warn_resonance(robot, opts.effects, self.max_vib);
+        RapidOutcome {
+            text: String::new(),
+            moves: self.moves,
+            added: self.added,
+            max_deviation_mm: self.max_deviation.0,
+            max_deviation_line: self.max_deviation.1,
+            records: std::mem::take(&mut self.records),
+        }
+    }
+}
+
+/// Compensates the moves of `module` (parsed from `src`), continuing the
+/// windows before from `carry`. `directives`: the program's
+/// `! POSTPROC MILLING` settings of the window (parsed from `src` when
+/// `None`). Returns the edits of `src` from byte `before` on; those before
+/// it go to `carry.before`.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn compensate_window(
+    module: &Module,
+    src: &str,
+    file: &str,
+    robot: &Robot,
+    opts: &RapidOptions,
+    carry: &mut Carry,
+    directives: Option<Directives>,
+    before: usize,
+) -> Result<EditList> {
     let moves: Vec<&Move> = module.moves().collect();
     // Planning (resolving each move and solving its programmed joints) is
     // independent per move: in parallel, each rayon task with its own tool
     // views; the first error in move order is the error, as in order.
-    let plans = moves
+    let window_plans = moves
         .par_iter()
         .map_init(ViewCache::new, |views, mv| {
-            plan_move(&module, src, file, robot, views, mv)
+            plan_move(module, src, file, robot, views, mv)
         })
         .collect::<Vec<Result<Planned>>>()
         .into_iter()
         .collect::<Result<Vec<Planned>>>()?;
+    // `plans[i + o]` is the plan of move `i`, `plans[i + o - 1]` that of
+    // the move before (the last of the windows before for the first).
+    let o = usize::from(carry.prev_plan.is_some());
+    let mut plans = Vec::with_capacity(window_plans.len() + o);
+    plans.extend(carry.prev_plan.take());
+    plans.extend(window_plans);
     let fx = opts.effects;
     let thermal = robot.thermal().filter(|_| fx.thermal != 0.0);
-    let directives = Directives::parse(src, file)?;
+    let directives = match directives {
+        Some(d) => d,
+        None => Directives::parse(src, file)?,
+    };
     let mut cache = MillingCache::default();
     let mut wrenches = Vec::with_capacity(moves.len());
     for (i, mv) in moves.iter().enumerate() {
         wrenches.push(move_wrench(
             robot,
             &plans,
-            i,
+            i + o,
             mv,
             src,
             file,
@@ -1559,7 +1669,7 @@ pub fn compensate_parsed(
     }
     let mut durations = Vec::with_capacity(moves.len());
     for (i, mv) in moves.iter().enumerate() {
-        durations.push(match move_duration(robot, &plans, i, mv) {
+        durations.push(match move_duration(robot, &plans, i + o, mv) {
             Some(t) => t,
             None if thermal.is_some() => {
                 return Err(input_err(
@@ -1591,7 +1701,7 @@ pub fn compensate_parsed(
                     robot,
                     views,
                     &plans,
-                    i,
+                    i + o,
                     wrenches[i],
                     &mv.tool.text,
                     duration_s,
@@ -1603,7 +1713,7 @@ pub fn compensate_parsed(
     };
     let mut segments = Vec::with_capacity(moves.len());
     let mut power_views = ViewCache::new();
-    let mut end_torques = None;
+    let mut end_torques: EndTorques = carry.end_torques.take();
     let mut nominal_flanges: Vec<Option<Isometry3<f64>>> = Vec::new();
     for (i, mv) in moves.iter().enumerate() {
         let duration_s = durations[i];
@@ -1614,7 +1724,7 @@ pub fn compensate_parsed(
                 &mut power_views,
                 &mut end_torques,
                 &plans,
-                i,
+                i + o,
                 wrenches[i],
                 &mv.tool.text,
                 duration_s,
@@ -1633,43 +1743,53 @@ pub fn compensate_parsed(
         });
     }
     drop(ends);
-    let thermal_power =
-        thermal.map(|t| effective_power(&segments, t.time_constant_s, opts.thermal_start));
+    carry.end_torques = end_torques.map(|((tool, bits), q, t)| {
+        (
+            (std::borrow::Cow::Owned(tool.into_owned()), bits),
+            q,
+            t,
+        )
+    });
+    // A window after the first continues the time line (a cold start:
+    // streaming is for cold starts only); a module compensated whole
+    // starts it as asked.
+    let thermal_power = thermal.map(|t| match carry.thermal_x {
+        Some(x0) => effective_power_from(&segments, t.time_constant_s, x0),
+        None => effective_power(&segments, t.time_constant_s, opts.thermal_start),
+    });
+    if let Some(last) = thermal_power.as_ref().and_then(|p| p.last()) {
+        carry.thermal_x = Some(*last);
+    }
     let mut rw = Rewriter {
-        module: &module,
+        module,
         src,
         file,
         robot,
         opts: *opts,
         edits: EditList::new(),
-        inserts: Vec::new(),
-        taken: Vec::new(),
+        inserts: std::mem::take(&mut carry.inserts),
+        taken: std::mem::take(&mut carry.taken),
         views: Arc::new(Vec::new()),
         view_of: HashMap::new(),
         last_view: None,
         phase: Phase::Collect(Vec::new()),
-        owner: HashMap::new(),
-        made: HashMap::new(),
-        derived_count: HashMap::new(),
-        added: 0,
+        owner: std::mem::take(&mut carry.owner),
+        made: std::mem::take(&mut carry.made),
+        derived_count: std::mem::take(&mut carry.derived_count),
+        added: carry.added,
         state: MoveState::default(),
-        last_tcp: [0.0; 3],
+        last_tcp: carry.last_tcp,
     };
-    let mut outcome = RapidOutcome {
-        text: String::new(),
-        moves: 0,
-        added: 0,
-        max_deviation_mm: 0.0,
-        max_deviation_line: 0,
-        records: Vec::with_capacity(if opts.records { moves.len() } else { 0 }),
-    };
+    if opts.records {
+        carry.records.reserve(moves.len());
+    }
     // Load key and state of move `i`, made when a walk reaches it (not
     // kept for every move). Consecutive moves mostly share their tool and
     // work object: `names` shares the lower-case names instead of
     // allocating them per move.
     let keyed_at = |i: usize, names: &mut Option<(Rc<str>, Rc<str>)>| {
         let mv: &Move = moves.get(i)?;
-        let plan = plans.get(i)?;
+        let plan = plans.get(i + o)?;
         let seg = segments.get(i)?;
         let power = thermal_power.as_ref().and_then(|p| p.get(i).copied());
         let wrench = wrenches.get(i).copied().flatten();
@@ -1740,7 +1860,6 @@ pub fn compensate_parsed(
     let mut results = solve_chunk(&rw.views, &jobs, fx);
     drop(jobs);
     let mut walked = 0;
-    let mut max_vib = (0.0, 0, None);
     loop {
         // The last chunk takes the moves after a collection that stopped.
         let last = end >= n || !collecting;
@@ -1777,15 +1896,14 @@ pub fn compensate_parsed(
                         break;
                     }
                 };
-                outcome.moves += 1;
+                carry.moves += 1;
                 let d = dev.total.pos_mm.norm();
-                if d > outcome.max_deviation_mm {
-                    outcome.max_deviation_mm = d;
-                    outcome.max_deviation_line = mv.line;
+                if d > carry.max_deviation.0 {
+                    carry.max_deviation = (d, mv.line);
                 }
                 let v = dev.vibration_mm.norm();
-                if v > max_vib.0 {
-                    max_vib = (v, mv.line, state.rpm);
+                if v > carry.max_vib.0 {
+                    carry.max_vib = (v, mv.line, state.rpm);
                 }
                 if opts.annotate {
                     push_annotation(&mut rw.edits, src, &mv.span, |out| {
@@ -1795,7 +1913,7 @@ pub fn compensate_parsed(
                 if !opts.records {
                     continue;
                 }
-                outcome.records.push(MoveRecord {
+                carry.records.push(MoveRecord {
                     line: mv.line,
                     kind: mv.kind.name(),
                     programmed_mm: rw.last_tcp,
@@ -1818,31 +1936,23 @@ pub fn compensate_parsed(
         results = next_results;
         end = next_end;
     }
-    warn_resonance(robot, fx, max_vib);
-    // New declarations: one insertion per original declaration, in order.
-    let mut by_decl: Vec<(usize, Vec<String>)> = Vec::new();
-    for (d, line) in std::mem::take(&mut rw.inserts) {
-        match by_decl.iter_mut().find(|(k, _)| *k == d) {
-            Some((_, v)) => v.push(line),
-            None => by_decl.push((d, vec![line])),
-        }
-    }
-    for (d, lines) in by_decl {
-        if let Some(decl) = module.decls.get(d) {
-            rw.edits
-                .push(&insert_after_decl(src, &decl.span, &lines.join("\n")));
-        }
-    }
-    outcome.added = rw.added;
-    // Free the per-move data before the output text is built (the peak).
     let edits = std::mem::take(&mut rw.edits);
+    carry.inserts = std::mem::take(&mut rw.inserts);
+    carry.taken = std::mem::take(&mut rw.taken);
+    carry.owner = std::mem::take(&mut rw.owner);
+    carry.made = std::mem::take(&mut rw.made);
+    carry.derived_count = std::mem::take(&mut rw.derived_count);
+    carry.added = rw.added;
+    carry.last_tcp = rw.last_tcp;
     drop(rw);
     drop(nominal_flanges);
-    drop(plans);
-    drop(moves);
-    drop(module);
-    outcome.text = edits.apply(src)?;
-    Ok(outcome)
+    carry.prev_plan = plans.pop();
+    if before == 0 {
+        return Ok(edits);
+    }
+    let (head, rest) = edits.split_at(before);
+    carry.before.append(&head);
+    Ok(rest)
 }
 
 impl Rewriter<'_> {

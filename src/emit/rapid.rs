@@ -147,6 +147,51 @@ impl EditList {
             .collect()
     }
 
+    /// Splits the list at byte `boundary` of the source: the edits that
+    /// start before it, and the others, each in the order pushed.
+    pub fn split_at(&self, boundary: usize) -> (EditList, EditList) {
+        let (mut below, mut rest) = (EditList::new(), EditList::new());
+        for (span, t) in &self.items {
+            let text = self.text.get(t.clone()).unwrap_or("");
+            let side = if span.start < boundary {
+                &mut below
+            } else {
+                &mut rest
+            };
+            side.push_str(span.clone(), text);
+        }
+        (below, rest)
+    }
+
+    /// Appends the edits of `other`, in their order.
+    pub fn append(&mut self, other: &EditList) {
+        for (span, t) in &other.items {
+            self.push_str(span.clone(), other.text.get(t.clone()).unwrap_or(""));
+        }
+    }
+
+    /// [`EditList::apply`] to the part `range` of `src`: every edit must
+    /// lie within it (its spans count from the start of `src`).
+    pub fn apply_in(&self, src: &str, range: Range<usize>) -> Result<String, Error> {
+        let part = src.get(range.clone()).ok_or_else(|| {
+            Error::Usage(format!(
+                "part {range:?} is outside the program ({} bytes)",
+                src.len()
+            ))
+        })?;
+        let mut shifted = EditList::new();
+        for (span, t) in &self.items {
+            if span.start < range.start || span.end > range.end {
+                return Err(Error::Usage(format!(
+                    "edit {span:?} is outside the part {range:?} of the program"
+                )));
+            }
+            let text = self.text.get(t.clone()).unwrap_or("");
+            shifted.push_str(span.start - range.start..span.end - range.start, text);
+        }
+        shifted.apply(part)
+    }
+
     /// `src` with the edits applied, as [`apply_edits`]. Fails on an edit
     /// whose text is not in the buffer (a writer that did not only append).
     pub fn apply(&self, src: &str) -> Result<String, Error> {

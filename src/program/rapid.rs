@@ -15,6 +15,7 @@
 
 mod parser;
 mod typed;
+pub mod windows;
 
 use std::ops::Range;
 

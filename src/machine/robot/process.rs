@@ -452,9 +452,25 @@ impl Directives {
     /// Finds the directives of a module's text. Errors (`file:line:col`)
     /// for an unknown key, a bad value or a directive without keys.
     pub fn parse(src: &str, file: &str) -> Result<Directives> {
+        Self::parse_lines(src, file, 1, CutSettings::default())
+    }
+
+    /// [`Directives::parse`] of a piece of a module whose first line is
+    /// line `first_line` of the file, with the settings `start` in force
+    /// before it (those of the pieces before, for a module read a window at
+    /// a time). The settings in force at its end are [`Directives::last`].
+    pub fn parse_lines(
+        src: &str,
+        file: &str,
+        first_line: usize,
+        start: CutSettings,
+    ) -> Result<Directives> {
         let mut at = Vec::new();
-        let mut cur = CutSettings::default();
-        for (k, line) in src.lines().enumerate() {
+        if start != CutSettings::default() {
+            at.push((0, start));
+        }
+        let mut cur = start;
+        for (k, line) in (first_line - 1..).zip(src.lines()) {
             let Some(bang) = comment_start(line) else {
                 continue;
             };
@@ -529,6 +545,12 @@ impl Directives {
         n.checked_sub(1)
             .and_then(|i| self.at.get(i))
             .map_or_else(CutSettings::default, |(_, s)| *s)
+    }
+
+    /// The settings in force after the last directive (the defaults
+    /// without one).
+    pub fn last(&self) -> CutSettings {
+        self.at.last().map_or_else(CutSettings::default, |(_, s)| *s)
     }
 
     /// True without directives.

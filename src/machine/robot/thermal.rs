@@ -206,18 +206,7 @@ pub fn mean_power(segments: &[Segment]) -> [f64; 6] {
 /// Effective (thermal) power per joint at the END of every segment, W,
 /// filtered with time constant `tau_s` from the initial state `start`.
 pub fn effective_power(segments: &[Segment], tau_s: f64, start: ThermalStart) -> Vec<[f64; 6]> {
-    let run = |x0: [f64; 6]| -> Vec<[f64; 6]> {
-        let mut x = x0;
-        segments
-            .iter()
-            .map(|s| {
-                for (xj, pj) in x.iter_mut().zip(&s.power_w) {
-                    *xj = first_order(*xj, *pj, s.duration_s, tau_s);
-                }
-                x
-            })
-            .collect()
-    };
+    let run = |x0: [f64; 6]| effective_power_from(segments, tau_s, x0);
     let x0 = match start {
         ThermalStart::Cold => [0.0; 6],
         ThermalStart::WarmUpMin(m) => {
@@ -238,6 +227,22 @@ pub fn effective_power(segments: &[Segment], tau_s: f64, start: ThermalStart) ->
         }
     };
     run(x0)
+}
+
+/// [`effective_power`] from the effective power `x0` at the start of the
+/// first segment (a module compensated a window at a time continues the
+/// time line of the windows before with the last state of theirs).
+pub fn effective_power_from(segments: &[Segment], tau_s: f64, x0: [f64; 6]) -> Vec<[f64; 6]> {
+    let mut x = x0;
+    segments
+        .iter()
+        .map(|s| {
+            for (xj, pj) in x.iter_mut().zip(&s.power_w) {
+                *xj = first_order(*xj, *pj, s.duration_s, tau_s);
+            }
+            x
+        })
+        .collect()
 }
 
 impl Robot {

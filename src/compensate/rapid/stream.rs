@@ -1,0 +1,303 @@
+//! Compensation of a RAPID module read a window at a time
+//! ([`crate::program::rapid::windows`]), so that memory does not grow with
+//! the module: each window is parsed as a module of its own (the
+//! declarations and the window's lines), compensated from the state the
+//! windows before left ([`Carry`]), and its rewritten lines are written
+//! out at once. Only the edits of the declarations (in-place values, new
+//! `_cN`/`_oN` declarations) wait for the end, with the declarations.
+//!
+//! The result is the one of the module compensated whole, byte for byte
+//! (tested with windows of every size on the sample modules). Where the
+//! window reading does not apply — a module of another shape, a thermal
+//! time line that starts from the program's own mean power (`steady`, a
+//! warm-up), a report of every move, or any error — the caller
+//! compensates the module whole, which also reports every error exactly
+//! as it always does.
+
+use std::io::{BufRead, Write};
+
+use super::{Carry, RapidOptions, RapidOutcome, compensate_window};
+use crate::error::{Error, Result};
+use crate::machine::robot::process::{CutSettings, Directives};
+use crate::machine::robot::{Robot, ThermalStart};
+use crate::program::rapid::windows::{Piece, Unsupported, Windows};
+use crate::program::rapid::{Span, Stmt, parse_module};
+
+/// Lines per window unless asked otherwise: windows of a few megabytes
+/// (the memory of a window is about 2 KB per move while it is worked on).
+pub const WINDOW_LINES: usize = 8192;
+
+/// Bytes after which a window ends at the next statement boundary whatever
+/// its number of lines.
+const WINDOW_BYTES: usize = 4 << 20;
+
+/// A module compensated (or checked) a window at a time.
+#[derive(Debug)]
+pub struct Streamed {
+    /// Moves, extremes and records, as [`super::compensate_module`] gives
+    /// them (the text is empty: it went to the output as it was made).
+    pub outcome: RapidOutcome,
+    /// The module's name.
+    pub name: String,
+    /// Module-level declarations.
+    pub decls: usize,
+    /// Routines.
+    pub routines: usize,
+    /// Motion instructions.
+    pub moves: usize,
+}
+
+/// Whether a run with `opts` can read a module a window at a time: the
+/// thermal time line (when on) starts cold, and no report of every move
+/// is asked for (its records would grow with the module).
+pub fn applies(robot: &Robot, opts: &RapidOptions) -> bool {
+    let thermal_on = robot.thermal().is_some() && opts.effects.thermal != 0.0;
+    !opts.records && (!thermal_on || opts.thermal_start == ThermalStart::Cold)
+}
+
+/// Why a module was not read a window at a time.
+#[derive(Debug)]
+pub enum Fallback {
+    /// Its shape ([`Unsupported`]).
+    Shape(Unsupported),
+    /// An error, left for the whole-module run to report as it does.
+    Error(Error),
+}
+
+impl From<Unsupported> for Fallback {
+    fn from(u: Unsupported) -> Self {
+        Fallback::Shape(u)
+    }
+}
+
+impl From<Error> for Fallback {
+    fn from(e: Error) -> Self {
+        Fallback::Error(e)
+    }
+}
+
+impl From<crate::error::Located> for Fallback {
+    fn from(e: crate::error::Located) -> Self {
+        Fallback::Error(e.into())
+    }
+}
+
+/// Compensates the module read from `reader` (named `file` in messages) a
+/// window of `window_lines` lines at a time. The text after the
+/// declarations goes to `body` as it is made; the returned prologue (the
+/// module header and declarations, with their edits and new declarations)
+/// goes before it. `body` is `None` for a check (nothing written).
+pub fn compensate_streamed<R: BufRead>(
+    reader: R,
+    file: &str,
+    robot: &Robot,
+    opts: &RapidOptions,
+    window_lines: usize,
+    mut body: Option<&mut dyn Write>,
+) -> std::result::Result<(Streamed, String), Fallback> {
+    let mut w = Windows::new(reader, window_lines, WINDOW_BYTES)?;
+    let prologue_len = w.prologue().len();
+    let mut cut = Directives::parse_lines(w.prologue(), file, 1, CutSettings::default())?.last();
+    let mut carry = Carry::default();
+    let mut decls: Option<(String, Vec<Span>)> = None;
+    let mut moves = 0;
+    let mut write = |text: &str| -> Result<()> {
+        match body.as_deref_mut() {
+            Some(out) => out
+                .write_all(text.as_bytes())
+                .map_err(|e| Error::io(file, e)),
+            None => Ok(()),
+        }
+    };
+    while let Some(piece) = w.next_piece()? {
+        match piece {
+            Piece::Verbatim { text, line } => {
+                cut = Directives::parse_lines(&text, file, line, cut)?.last();
+                write(&text)?;
+            }
+            Piece::Window {
+                body: lines,
+                line,
+                header,
+                end_word,
+            } => {
+                let text = w.window_text(&header, &lines, end_word);
+                let mut module = parse_module(&text, file)?;
+                if module.procs.len() != 1 {
+                    return Err(Unsupported("a window is not one routine".into()).into());
+                }
+                // The window's lines start on line `prologue_lines + 2` of
+                // its text and on `line` of the file.
+                let shift = line - (w.prologue_lines() + 2);
+                for p in &mut module.procs {
+                    for s in &mut p.body {
+                        match s {
+                            Stmt::Move(m) => m.line += shift,
+                            Stmt::Decl(d) => d.line += shift,
+                            Stmt::Control { line, .. } | Stmt::Opaque { line, .. } => {
+                                *line += shift
+                            }
+                        }
+                    }
+                }
+                if decls.is_none() {
+                    decls = Some((
+                        module.name.clone(),
+                        module.decls.iter().map(|d| d.span.clone()).collect(),
+                    ));
+                }
+                moves += module.moves().count();
+                let directives = Directives::parse_lines(&lines, file, line, cut)?;
+                cut = directives.last();
+                let start = prologue_len + header.len();
+                let edits = compensate_window(
+                    &module,
+                    &text,
+                    file,
+                    robot,
+                    opts,
+                    &mut carry,
+                    Some(directives),
+                    start,
+                )?;
+                write(&edits.apply_in(&text, start..start + lines.len())?)?;
+            }
+        }
+    }
+    let (name, spans) = decls.ok_or_else(|| Unsupported("no routine body".into()))?;
+    let mut edits = std::mem::take(&mut carry.before);
+    carry.push_inserts(w.prologue(), &spans, &mut edits);
+    let prologue = edits.apply(w.prologue())?;
+    let streamed = Streamed {
+        outcome: carry.outcome(robot, opts),
+        name,
+        decls: spans.len(),
+        routines: w.routines(),
+        moves,
+    };
+    Ok((streamed, prologue))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::machine::robot::Effects;
+
+    fn robot() -> Robot {
+        let path = crate::machine::Machine::resolve("abb-irb1600").unwrap();
+        match crate::machine::Machine::load(&path).unwrap() {
+            crate::machine::Machine::Robot(r) => r,
+            crate::machine::Machine::Tool(_) => panic!("not a robot"),
+        }
+    }
+
+    fn streamed(src: &str, robot: &Robot, opts: &RapidOptions, lines: usize) -> Option<String> {
+        let mut body = Vec::new();
+        let (_, prologue) =
+            compensate_streamed(src.as_bytes(), "t.mod", robot, opts, lines, Some(&mut body))
+                .ok()?;
+        Some(prologue + std::str::from_utf8(&body).unwrap())
+    }
+
+    fn robot_file(path: &str) -> Robot {
+        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join(path);
+        match crate::machine::Machine::load(&path).unwrap() {
+            crate::machine::Machine::Robot(r) => r,
+            crate::machine::Machine::Tool(_) => panic!("not a robot"),
+        }
+    }
+
+    /// Named targets used under two tools (in-place values and `_cN`
+    /// copies), `Offs`/`RelTool` targets (`_oN`), an array element, a
+    /// circle, a joint move, work objects, directives in a body and
+    /// between routines, comments, three routines; CRLF line breaks in
+    /// the variant.
+    const RICH: &str = r#"MODULE Rich
+  PERS tooldata tA := [TRUE,[[0,0,150],[1,0,0,0]],[2,[0,0,70],[1,0,0,0],0.01,0.01,0.004]];
+  PERS tooldata tB := [TRUE,[[10,0,200],[1,0,0,0]],[3,[0,0,90],[1,0,0,0],0.01,0.01,0.004]];
+  PERS wobjdata wP := [FALSE,TRUE,"",[[600,-200,350],[1,0,0,0]],[[0,0,0],[1,0,0,0]]];
+  CONST speeddata vF := [20,30,5000,1000];
+  CONST jointtarget jH := [[0,-10,20,0,80,0],[9E9,9E9,9E9,9E9,9E9,9E9]];
+  CONST robtarget p1 := [[750,0,500],[0,0,1,0],[0,0,0,0],[9E9,9E9,9E9,9E9,9E9,9E9]];
+  CONST robtarget p2 := [[760,20,480],[0,0,1,0],[0,0,0,0],[9E9,9E9,9E9,9E9,9E9,9E9]];
+  CONST robtarget c{2} := [
+    [[100,250,0],[0,0,1,0],[0,0,0,0],[9E9,9E9,9E9,9E9,9E9,9E9]],
+    [[150,260,0],[0,0,1,0],[0,0,0,0],[9E9,9E9,9E9,9E9,9E9,9E9]]];
+  ! POSTPROC MILLING DEPTH=3 WIDTH=1
+  PROC main()
+    MoveAbsJ jH\NoEOffs, v1000, fine, tA;
+    MoveJ p1, v1000, z50, tA;
+    MoveL p2, vF, z1, tA;
+    MoveL p1, vF, z1, tB;
+    ! a comment; MoveL p2
+    MoveC p2, p1, vF, z1, tA;
+    MoveL Offs(c{1},0,0,-2), vF, fine, tA\WObj:=wP;
+    MoveL Offs(c{2},0,0,-2), vF, z1, tA\WObj:=wP;
+    ! POSTPROC MILLING DEPTH=5 RPM=18000
+    MoveL c{1}, vF, z1, tA\WObj:=wP;
+    IF TRUE THEN
+      MoveL RelTool(p1,0,0,-20), v100, z10,
+        tB;
+    ENDIF
+    MoveL [[800,-0.5,450],[0,0,1,0],[-1,0,-1,0],[9E9,9E9,9E9,9E9,9E9,9E9]], v100, fine, tA;
+    two;
+  ENDPROC
+
+  ! POSTPROC MILLING WIDTH=0.5
+  LOCAL PROC two()
+    MoveL p2, vF, z1, tB;
+    MoveL Offs(p2,0,5,0), vF, z1, tB;
+    MoveL p1, vF, z1, tA;
+  ENDPROC
+  TRAP t
+    MoveL p2, vF, fine, tA;
+  ENDTRAP
+ENDMODULE
+"#;
+
+    /// Modules compensated a window at a time, windows of every size, read
+    /// byte for byte as compensated whole: the sample modules and a module
+    /// with every rewriting rule, on both robot files, every effect on
+    /// (the thermal time line, process forces), with and without
+    /// annotations.
+    #[test]
+    fn windows_of_any_size_give_the_whole_module_result() {
+        let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("samples");
+        let mut modules: Vec<(String, String)> = ["milling.mod", "drilling.mod"]
+            .iter()
+            .map(|f| (f.to_string(), std::fs::read_to_string(dir.join(f)).unwrap()))
+            .collect();
+        modules.push(("rich".into(), RICH.to_string()));
+        modules.push(("rich crlf".into(), RICH.replace('\n', "\r\n")));
+        let robots = [robot(), robot_file("samples/irb1600-milling.yaml")];
+        let mut checked = 0;
+        for (name, src) in &modules {
+            for robot in &robots {
+                for annotate in [true, false] {
+                    let opts = RapidOptions {
+                        effects: Effects::ALL,
+                        annotate,
+                        records: false,
+                        ..RapidOptions::for_robot(robot)
+                    };
+                    let whole = super::super::compensate_module(src, "t.mod", robot, &opts)
+                        .unwrap_or_else(|e| panic!("{name}: {e}"));
+                    assert!(whole.moves > 0 && whole.text != *src);
+                    if name.starts_with("rich") {
+                        // p1/p2 copies under tB, three `Offs`, a `RelTool`.
+                        assert!(whole.added >= 5, "{name}: {} added", whole.added);
+                        assert!(whole.text.contains("p1_c2") && whole.text.contains("c2_o1"));
+                    }
+                    let lines = src.lines().count();
+                    for n in [1, 2, 3, 7, lines] {
+                        let text = streamed(src, robot, &opts, n)
+                            .unwrap_or_else(|| panic!("{name}: not streamed"));
+                        assert_eq!(text, whole.text, "{name} in windows of {n} lines");
+                        checked += 1;
+                    }
+                }
+            }
+        }
+        assert_eq!(checked, 4 * 2 * 2 * 5);
+    }
+}
