@@ -19,6 +19,7 @@ mod paper_b;
 mod peers;
 mod rapid;
 mod rapid_cli;
+mod rapid_stream;
 #[cfg(unix)] // links the inputs into a scratch folder, runs bash
 mod readme;
 mod regression;

@@ -320,6 +320,7 @@ pub fn run(a: &BatchArgs, quiet: bool) -> Result<i32> {
                 machine: None,
                 tools: a.tools.clone(),
                 work_offsets: a.work_offsets.clone(),
+                rapid_window_lines: None,
             };
             let setup = parse_setup(&program, Some(&tool))?;
             process = process_setup(&a.effects, &tool)?;

@@ -112,6 +112,11 @@ pub struct ProgramArgs {
     /// Work offset overriding the machine file: G54=X,Y,Z (mm, machine coordinates).
     #[arg(long = "work-offset", value_name = "GXX=X,Y,Z")]
     pub work_offsets: Vec<String>,
+    /// Read a RAPID module a window of this many lines at a time whatever
+    /// its size (modules of 16 MB and more are read so by default; for
+    /// tests).
+    #[arg(long = "rapid-window-lines", value_name = "LINES", hide = true)]
+    pub rapid_window_lines: Option<usize>,
 }
 
 /// `postproc check`.

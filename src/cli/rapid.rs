@@ -6,7 +6,9 @@ use std::path::{Path, PathBuf};
 
 use super::gcode::{default_output, write_atomically};
 use super::{Annotate, CheckArgs, CompensateArgs, EffectArgs, ProgramArgs, ReportArgs, usage};
-use crate::compensate::rapid::{RapidOptions, RapidOutcome, compensate_module, compensate_parsed};
+use crate::compensate::rapid::{
+    RapidOptions, RapidOutcome, compensate_module, compensate_parsed, stream,
+};
 use crate::emit::rapid::Format;
 use crate::error::{Error, Result};
 use crate::machine::Machine;
@@ -126,9 +128,76 @@ pub(super) fn read_program(path: &Path) -> Result<(String, String)> {
     Ok((text, name))
 }
 
+/// Modules of at least this size are read a window at a time when their
+/// shape and the run allow it ([`crate::compensate::rapid::stream`]).
+pub const STREAM_MIN_BYTES: u64 = 16 << 20;
+
+/// The window size, in lines, when the module `program` names should be
+/// read a window at a time: a file (not standard input) of at least
+/// [`STREAM_MIN_BYTES`], or any file with `--rapid-window-lines`.
+fn window_lines(program: &ProgramArgs) -> Result<Option<usize>> {
+    let path = &program.file;
+    if path == Path::new("-") {
+        return Ok(None);
+    }
+    if let Some(n) = program.rapid_window_lines {
+        if n == 0 {
+            return Err(usage("--rapid-window-lines must be at least 1"));
+        }
+        return Ok(Some(n));
+    }
+    let big = std::fs::metadata(path).is_ok_and(|m| m.is_file() && m.len() >= STREAM_MIN_BYTES);
+    Ok(big.then_some(stream::WINDOW_LINES))
+}
+
+/// Compensates (`body` given) or checks the module at `path` a window at a
+/// time; `None` when it is to be read whole instead (its shape, or an
+/// error that the whole-module run reports).
+fn try_streamed(
+    path: &Path,
+    name: &str,
+    robot: &Robot,
+    opts: &RapidOptions,
+    lines: usize,
+    body: Option<&mut dyn Write>,
+) -> Result<Option<(stream::Streamed, String)>> {
+    if !stream::applies(robot, opts) {
+        tracing::info!("{name}: read whole (a report of every move, or a warm thermal start)");
+        return Ok(None);
+    }
+    let file = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
+    let reader = std::io::BufReader::with_capacity(1 << 16, file);
+    match stream::compensate_streamed(reader, name, robot, opts, lines, body) {
+        Ok(done) => Ok(Some(done)),
+        Err(stream::Fallback::Shape(why)) => {
+            tracing::info!("{name}: read whole: {}", why.0);
+            Ok(None)
+        }
+        Err(stream::Fallback::Error(e)) => {
+            tracing::debug!("{name}: read whole after an error in a window: {e}");
+            Ok(None)
+        }
+    }
+}
+
 /// `postproc check` of a RAPID module: parse, resolve and (with a robot)
 /// check that every target is reachable with its confdata.
 pub fn check(a: &CheckArgs) -> Result<i32> {
+    if let (Some(lines), Some(m)) = (window_lines(&a.program)?, a.program.machine.as_deref()) {
+        let robot = load_robot(m)?;
+        let opts = check_options();
+        let name = a.program.file.display().to_string();
+        if let Some((s, _)) = try_streamed(&a.program.file, &name, &robot, &opts, lines, None)? {
+            let mut out = std::io::stdout().lock();
+            writeln!(
+                out,
+                "{name}: module {}, {} declarations, {} routines, {} moves",
+                s.name, s.decls, s.routines, s.moves
+            )
+            .map_err(|e| Error::io("stdout", e))?;
+            return Ok(0);
+        }
+    }
     let (src, name) = read_program(&a.program.file)?;
     let module = crate::program::rapid::parse_module(&src, &name)?;
     let (module_name, decls, procs, moves) = (
@@ -141,14 +210,7 @@ pub fn check(a: &CheckArgs) -> Result<i32> {
     // memory).
     if let Some(m) = a.program.machine.as_deref() {
         let robot = load_robot(m)?;
-        let opts = RapidOptions {
-            effects: Effects::NONE,
-            annotate: false,
-            format: Format::default(),
-            thermal_start: ThermalStart::Cold,
-            records: false,
-        };
-        compensate_parsed(module, &src, &name, &robot, &opts)?;
+        compensate_parsed(module, &src, &name, &robot, &check_options())?;
     }
     let mut out = std::io::stdout().lock();
     writeln!(
@@ -157,6 +219,18 @@ pub fn check(a: &CheckArgs) -> Result<i32> {
     )
     .map_err(|e| Error::io("stdout", e))?;
     Ok(0)
+}
+
+/// The options of a check: resolve and solve every target, compensate
+/// nothing.
+fn check_options() -> RapidOptions {
+    RapidOptions {
+        effects: Effects::NONE,
+        annotate: false,
+        format: Format::default(),
+        thermal_start: ThermalStart::Cold,
+        records: false,
+    }
 }
 
 /// The RAPID options of a run from the effect flags (`--effects`, `--gain`,
@@ -285,7 +359,6 @@ pub fn compensate(a: &CompensateArgs) -> Result<i32> {
     };
     super::gcode::refuse_overwrite(&out_path, &[input])?;
     super::gcode::check_report_path(a.report.as_deref(), input, &out_path)?;
-    let (src, name) = read_program(input)?;
     let mut pool = rayon::ThreadPoolBuilder::new();
     if let Some(n) = a.effects.threads {
         if n == 0 {
@@ -296,6 +369,16 @@ pub fn compensate(a: &CompensateArgs) -> Result<i32> {
     let pool = pool
         .build()
         .map_err(|e| usage(format!("cannot start worker threads: {e}")))?;
+    if let Some(lines) = window_lines(&a.program)? {
+        let name = input.display().to_string();
+        if let Some(outcome) =
+            pool.install(|| compensate_streamed_to(input, &name, &robot, &opts, lines, &out_path))?
+        {
+            log_outcome(&out_path, &outcome);
+            return Ok(0);
+        }
+    }
+    let (src, name) = read_program(input)?;
     let outcome = pool.install(|| compensate_module(&src, &name, &robot, &opts))?;
     if out_path == Path::new("-") {
         let mut stdout = std::io::stdout().lock();
@@ -315,6 +398,11 @@ pub fn compensate(a: &CompensateArgs) -> Result<i32> {
             .unwrap_or_else(|| super::Format::from_path(path));
         write_atomically(path, |w| write_report(w, &outcome, &name, format))?;
     }
+    log_outcome(&out_path, &outcome);
+    Ok(0)
+}
+
+fn log_outcome(out_path: &Path, outcome: &RapidOutcome) {
     tracing::info!(
         "{}: {} moves compensated, {} targets added; largest predicted deviation {:.4} mm (line {})",
         out_path.display(),
@@ -323,7 +411,50 @@ pub fn compensate(a: &CompensateArgs) -> Result<i32> {
         outcome.max_deviation_mm,
         outcome.max_deviation_line
     );
-    Ok(0)
+}
+
+/// Compensates the module at `input` a window at a time into `out_path`:
+/// the rewritten routines go to a temporary file beside the output as they
+/// are made, then the declarations and that file to the output (written
+/// atomically, as always). `None` when the module is to be read whole.
+fn compensate_streamed_to(
+    input: &Path,
+    name: &str,
+    robot: &Robot,
+    opts: &RapidOptions,
+    lines: usize,
+    out_path: &Path,
+) -> Result<Option<RapidOutcome>> {
+    let dir = match out_path.parent() {
+        Some(p) if !p.as_os_str().is_empty() && out_path != Path::new("-") => p.to_path_buf(),
+        _ if out_path == Path::new("-") => std::env::temp_dir(),
+        _ => PathBuf::from("."),
+    };
+    let spill = tempfile::tempfile_in(&dir).map_err(|e| Error::io(&dir, e))?;
+    let mut body = std::io::BufWriter::with_capacity(1 << 16, spill);
+    let Some((streamed, prologue)) =
+        try_streamed(input, name, robot, opts, lines, Some(&mut body))?
+    else {
+        return Ok(None);
+    };
+    let mut spill = body
+        .into_inner()
+        .map_err(|e| Error::io(&dir, e.into_error()))?;
+    std::io::Seek::rewind(&mut spill).map_err(|e| Error::io(&dir, e))?;
+    let mut copy = |w: &mut dyn Write| -> Result<()> {
+        w.write_all(prologue.as_bytes())
+            .map_err(|e| Error::io(out_path, e))?;
+        std::io::copy(&mut spill, w).map_err(|e| Error::io(out_path, e))?;
+        Ok(())
+    };
+    if out_path == Path::new("-") {
+        let mut stdout = std::io::stdout().lock();
+        copy(&mut stdout)?;
+        stdout.flush().map_err(|e| Error::io("stdout", e))?;
+    } else {
+        write_atomically(out_path, copy)?;
+    }
+    Ok(Some(streamed.outcome))
 }
 
 /// Writes the deviation report of a compensated (or dry-run) RAPID module:

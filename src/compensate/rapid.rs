@@ -1743,13 +1743,8 @@ pub(crate) fn compensate_window(
         });
     }
     drop(ends);
-    carry.end_torques = end_torques.map(|((tool, bits), q, t)| {
-        (
-            (std::borrow::Cow::Owned(tool.into_owned()), bits),
-            q,
-            t,
-        )
-    });
+    carry.end_torques = end_torques
+        .map(|((tool, bits), q, t)| ((std::borrow::Cow::Owned(tool.into_owned()), bits), q, t));
     // A window after the first continues the time line (a cold start:
     // streaming is for cold starts only); a module compensated whole
     // starts it as asked.

@@ -2,7 +2,7 @@
 //! ([`crate::program::rapid::windows`]), so that memory does not grow with
 //! the module: each window is parsed as a module of its own (the
 //! declarations and the window's lines), compensated from the state the
-//! windows before left ([`Carry`]), and its rewritten lines are written
+//! windows before left (the engine's `Carry`), and its rewritten lines are written
 //! out at once. Only the edits of the declarations (in-place values, new
 //! `_cN`/`_oN` declarations) wait for the end, with the declarations.
 //!

@@ -550,7 +550,9 @@ impl Directives {
     /// The settings in force after the last directive (the defaults
     /// without one).
     pub fn last(&self) -> CutSettings {
-        self.at.last().map_or_else(CutSettings::default, |(_, s)| *s)
+        self.at
+            .last()
+            .map_or_else(CutSettings::default, |(_, s)| *s)
     }
 
     /// True without directives.

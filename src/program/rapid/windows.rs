@@ -353,9 +353,7 @@ mod tests {
         let mut s = prologue.to_string();
         for p in pieces {
             match p {
-                Piece::Verbatim { text, .. } | Piece::Window { body: text, .. } => {
-                    s.push_str(text)
-                }
+                Piece::Verbatim { text, .. } | Piece::Window { body: text, .. } => s.push_str(text),
             }
         }
         s
@@ -388,8 +386,14 @@ mod tests {
             windows,
             vec![
                 ("    MoveL p, v100, z1, tool0;\n", 4),
-                ("    IF TRUE THEN\n      MoveL\n        p, v100, z1, tool0;\n", 5),
-                ("    ENDIF\n    ! a comment; PROC x()\n    TPWrite \"a!b\";\n", 8),
+                (
+                    "    IF TRUE THEN\n      MoveL\n        p, v100, z1, tool0;\n",
+                    5
+                ),
+                (
+                    "    ENDIF\n    ! a comment; PROC x()\n    TPWrite \"a!b\";\n",
+                    8
+                ),
                 ("    MoveJ p, v100, fine, tool0;\n", 14),
             ]
         );
@@ -429,9 +433,18 @@ mod tests {
                 "MODULE M\nPROC a()\nENDPROC\nCONST num n := 1;\nENDMODULE\n",
                 "text between routines",
             ),
-            ("MODULE M\nPROC a(\n num x)\nENDPROC\nENDMODULE\n", "not one whole line"),
-            ("MODULE M\nPROC a()\nMoveL p,v1,z1,t;\n", "end of file inside"),
-            ("MODULE M\nPROC a()\nENDPROC\nENDMODULE\nx\n", "after ENDMODULE"),
+            (
+                "MODULE M\nPROC a(\n num x)\nENDPROC\nENDMODULE\n",
+                "not one whole line",
+            ),
+            (
+                "MODULE M\nPROC a()\nMoveL p,v1,z1,t;\n",
+                "end of file inside",
+            ),
+            (
+                "MODULE M\nPROC a()\nENDPROC\nENDMODULE\nx\n",
+                "after ENDMODULE",
+            ),
         ];
         for (src, why) in cases {
             let got = pieces(src, 10).map(|_| ()).unwrap_err();

@@ -1,0 +1,272 @@
+//! Integration tests: RAPID modules read a window at a time
+//! (`--rapid-window-lines`, the default for modules of 16 MB and more)
+//! give, through the binary, the bytes, messages and exit codes of the
+//! module read whole.
+
+use std::path::{Path, PathBuf};
+
+use crate::common::{postproc, repo};
+
+/// The sample modules with the robot file each is written for, and
+/// another robot file for each.
+fn cases() -> Vec<(PathBuf, PathBuf)> {
+    let milling = repo("samples/irb1600-milling.yaml");
+    let plain = repo("machines/abb-irb1600.yaml");
+    let mut v = Vec::new();
+    for m in ["samples/milling.mod", "samples/drilling.mod"] {
+        v.push((repo(m), milling.clone()));
+        v.push((repo(m), plain.clone()));
+    }
+    v
+}
+
+/// Runs `postproc ARGS…` and returns exit code, stdout and stderr.
+fn run(args: &[&str]) -> (i32, Vec<u8>, String) {
+    let out = postproc().args(args).output().expect("runs");
+    (
+        out.status.code().unwrap_or(-1),
+        out.stdout,
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+/// The files in `dir`, sorted.
+fn listing(dir: &Path) -> Vec<String> {
+    let mut v: Vec<String> = std::fs::read_dir(dir)
+        .expect("dir")
+        .map(|e| e.expect("entry").file_name().to_string_lossy().into_owned())
+        .collect();
+    v.sort();
+    v
+}
+
+#[test]
+fn streamed_compensation_writes_the_bytes_of_the_whole_module() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    for (k, (module, machine)) in cases().iter().enumerate() {
+        let (m, p) = (machine.to_str().unwrap(), module.to_str().unwrap());
+        let whole = dir.path().join(format!("whole{k}.mod"));
+        let (code, _, err) = run(&[
+            "compensate",
+            "--machine",
+            m,
+            "--effects",
+            "all",
+            "-o",
+            whole.to_str().unwrap(),
+            p,
+        ]);
+        assert_eq!(code, 0, "{p}: {err}");
+        let want = std::fs::read(&whole).expect("output");
+        for lines in ["1", "2", "5", "1000"] {
+            let streamed = dir.path().join(format!("s{k}_{lines}.mod"));
+            let (code, _, err) = run(&[
+                "compensate",
+                "--machine",
+                m,
+                "--effects",
+                "all",
+                "--rapid-window-lines",
+                lines,
+                "-o",
+                streamed.to_str().unwrap(),
+                p,
+            ]);
+            assert_eq!(code, 0, "{p}: {err}");
+            assert_eq!(
+                std::fs::read(&streamed).expect("output"),
+                want,
+                "{p} with {m}, windows of {lines} lines"
+            );
+        }
+        // To standard output as well.
+        let (code, stdout, err) = run(&[
+            "compensate",
+            "--machine",
+            m,
+            "--effects",
+            "all",
+            "--rapid-window-lines",
+            "3",
+            "-o",
+            "-",
+            p,
+        ]);
+        assert_eq!(code, 0, "{p}: {err}");
+        assert_eq!(stdout, want, "{p} to standard output");
+    }
+    // Outputs only: no temporary file is left beside them.
+    assert!(
+        listing(dir.path())
+            .iter()
+            .all(|f| f.starts_with("whole") || f.starts_with('s')),
+        "{:?}",
+        listing(dir.path())
+    );
+}
+
+#[test]
+fn streamed_check_prints_what_the_whole_module_check_prints() {
+    for (module, machine) in cases() {
+        let (m, p) = (machine.to_str().unwrap(), module.to_str().unwrap());
+        let whole = run(&["check", "--machine", m, p]);
+        let streamed = run(&["check", "--machine", m, "--rapid-window-lines", "2", p]);
+        assert_eq!(whole.0, 0, "{p}: {}", whole.2);
+        assert_eq!(streamed.0, whole.0);
+        assert_eq!(
+            String::from_utf8_lossy(&streamed.1),
+            String::from_utf8_lossy(&whole.1)
+        );
+    }
+}
+
+/// Runs that do not read a window at a time (a report of every move, a
+/// steady thermal start) give the same bytes with the option as without.
+#[test]
+fn runs_that_need_the_whole_module_read_it_whole() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let (m, p) = (
+        repo("samples/irb1600-milling.yaml"),
+        repo("samples/milling.mod"),
+    );
+    let (m, p) = (m.to_str().unwrap(), p.to_str().unwrap());
+    for extra in [
+        &["--report", "REPORT"][..],
+        &["--thermal-start", "steady"][..],
+    ] {
+        let mut outs = Vec::new();
+        for window in [None, Some("2")] {
+            let out = dir.path().join(format!("o{}.mod", outs.len()));
+            let report = dir.path().join(format!("r{}.csv", outs.len()));
+            let mut args = vec!["compensate", "--machine", m, "--effects", "all"];
+            for a in extra {
+                args.push(if *a == "REPORT" {
+                    report.to_str().unwrap()
+                } else {
+                    a
+                });
+            }
+            if let Some(w) = window {
+                args.extend(["--rapid-window-lines", w]);
+            }
+            args.extend(["-o", out.to_str().unwrap(), p]);
+            let (code, _, err) = run(&args);
+            assert_eq!(code, 0, "{extra:?}: {err}");
+            outs.push(std::fs::read(&out).expect("output"));
+            if extra[0] == "--report" {
+                outs.push(std::fs::read(&report).expect("report"));
+            }
+        }
+        let half = outs.len() / 2;
+        assert_eq!(outs[..half], outs[half..], "{extra:?}");
+    }
+}
+
+/// A module with an error — one the window reader meets in a later window,
+/// after earlier windows were written — and the malformed modules of the
+/// corpus: the message and exit code of the whole-module run, and no
+/// output file.
+#[test]
+fn errors_are_those_of_the_whole_module_and_leave_nothing() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let mut src = String::from(
+        "MODULE Late\n  PERS tooldata t1 := [TRUE,[[0,0,150],[1,0,0,0]],[2,[0,0,70],[1,0,0,0],0.01,0.01,0.004]];\n  PROC main()\n",
+    );
+    for k in 0..40 {
+        src.push_str(&format!(
+            "    MoveL [[{},50,300],[0,0,1,0],[0,0,0,0],[9E9,9E9,9E9,9E9,9E9,9E9]],v200,z1,t1;\n",
+            650 + 5 * k
+        ));
+    }
+    src.push_str(
+        "    MoveL [[5000,50,300],[0,0,1,0],[0,0,0,0],[9E9,9E9,9E9,9E9,9E9,9E9]],v200,z1,t1;\n",
+    );
+    // Line 44: a target out of reach (found when solving); line 45 in the
+    // second file: an undeclared one (found when planning, first).
+    let unreachable = dir.path().join("late_unreachable.mod");
+    std::fs::write(&unreachable, format!("{src}  ENDPROC\nENDMODULE\n")).expect("write");
+    let missing = dir.path().join("late_missing.mod");
+    std::fs::write(
+        &missing,
+        format!("{src}    MoveL pMissing,v200,z1,t1;\n  ENDPROC\nENDMODULE\n"),
+    )
+    .expect("write");
+    let mut files = vec![unreachable, missing];
+    for e in std::fs::read_dir(repo("tests/bad/programs")).expect("corpus") {
+        let p = e.expect("entry").path();
+        if p.extension().is_some_and(|x| x == "mod") {
+            files.push(p);
+        }
+    }
+    files.sort();
+    let m = repo("machines/abb-irb1600.yaml");
+    let m = m.to_str().unwrap();
+    for p in &files {
+        let p = p.to_str().unwrap();
+        let out = dir.path().join("out.mod");
+        let whole = run(&["compensate", "--machine", m, "-o", out.to_str().unwrap(), p]);
+        assert_ne!(whole.0, 0, "{p} compensates");
+        assert!(!out.exists());
+        for lines in ["1", "4"] {
+            let streamed = run(&[
+                "compensate",
+                "--machine",
+                m,
+                "--rapid-window-lines",
+                lines,
+                "-o",
+                out.to_str().unwrap(),
+                p,
+            ]);
+            assert_eq!((streamed.0, &streamed.2), (whole.0, &whole.2), "{p}");
+            assert!(!out.exists(), "{p}: output left");
+            let check = run(&["check", "--machine", m, "--rapid-window-lines", lines, p]);
+            let check_whole = run(&["check", "--machine", m, p]);
+            assert_eq!((check.0, &check.2), (check_whole.0, &check_whole.2), "{p}");
+        }
+    }
+    let m_out = dir.path().join("out.mod");
+    for (file, want) in [
+        ("late_unreachable.mod", "late_unreachable.mod:44:"),
+        (
+            "late_missing.mod",
+            "late_missing.mod:45:11: `pMissing` is not declared",
+        ),
+    ] {
+        let (_, _, err) = run(&[
+            "compensate",
+            "--machine",
+            m,
+            "--rapid-window-lines",
+            "2",
+            "-o",
+            m_out.to_str().unwrap(),
+            dir.path().join(file).to_str().unwrap(),
+        ]);
+        assert!(err.contains(want), "{file}: {err}");
+    }
+    assert_eq!(
+        listing(dir.path()),
+        vec![
+            "late_missing.mod".to_string(),
+            "late_unreachable.mod".to_string()
+        ]
+    );
+}
+
+#[test]
+fn a_window_of_zero_lines_is_refused() {
+    let (code, _, err) = run(&[
+        "check",
+        "--machine",
+        "abb-irb1600",
+        "--rapid-window-lines",
+        "0",
+        repo("samples/milling.mod").to_str().unwrap(),
+    ]);
+    assert_eq!(code, 2, "{err}");
+    assert!(
+        err.contains("--rapid-window-lines must be at least 1"),
+        "{err}"
+    );
+}
