@@ -257,6 +257,7 @@ impl<R: BufRead> Windows<R> {
     }
 
     /// The next window of the current routine body, or its end line.
+    /// Lines are read straight into the window's text.
     fn window(&mut self) -> Result<Piece, Unsupported> {
         let first = self.next_line;
         let mut body = String::new();
@@ -265,12 +266,28 @@ impl<R: BufRead> Windows<R> {
         let mut open = false;
         loop {
             let line_no = self.next_line;
-            let Some(line) = self.take_line()? else {
-                return Err(Unsupported("end of file inside a routine".into()));
-            };
-            let code = code_of(&line);
+            let start = body.len();
+            match self.pending.take() {
+                Some(l) => body.push_str(&l),
+                None => {
+                    if !read_line_into(&mut self.reader, &mut body)? {
+                        return Err(Unsupported("end of file inside a routine".into()));
+                    }
+                }
+            }
+            let line = body.get(start..).unwrap_or("");
+            let code = code_of(line);
             let word = first_word(code);
-            if !open && word.eq_ignore_ascii_case(self.end_word) {
+            let ends_body = !open && word.eq_ignore_ascii_case(self.end_word);
+            if !ends_body && BODY_STOP_WORDS.iter().any(|k| word.eq_ignore_ascii_case(k)) {
+                return Err(Unsupported(format!(
+                    "line {line_no}: `{word}` in a routine body"
+                )));
+            }
+            let code = code.trim_end();
+            let (blank, ends_statement) = (code.is_empty(), code.ends_with(';'));
+            if ends_body {
+                let line = body.split_off(start);
                 if body.is_empty() {
                     self.next_line += 1;
                     self.state = State::Between;
@@ -282,33 +299,10 @@ impl<R: BufRead> Windows<R> {
                 self.pending = Some(line);
                 break;
             }
-            let upper = word.to_ascii_uppercase();
-            if matches!(
-                upper.as_str(),
-                "CONST"
-                    | "VAR"
-                    | "PERS"
-                    | "LOCAL"
-                    | "TASK"
-                    | "PROC"
-                    | "FUNC"
-                    | "TRAP"
-                    | "ENDPROC"
-                    | "ENDFUNC"
-                    | "ENDTRAP"
-                    | "MODULE"
-                    | "ENDMODULE"
-            ) {
-                return Err(Unsupported(format!(
-                    "line {line_no}: `{word}` in a routine body"
-                )));
-            }
             self.next_line += 1;
-            body.push_str(&line);
             lines += 1;
-            let code = code.trim_end();
-            if !code.is_empty() {
-                open = !code.ends_with(';');
+            if !blank {
+                open = !ends_statement;
             }
             if !open && (lines >= self.max_lines || body.len() >= self.max_bytes) {
                 break;
@@ -323,17 +317,42 @@ impl<R: BufRead> Windows<R> {
     }
 }
 
-/// One line with its line break (`None` at the end of the file); text that
-/// is not UTF-8 is left to the whole-module reader (which locates it).
-fn read_line<R: BufRead>(r: &mut R) -> Result<Option<String>, Unsupported> {
-    let mut buf = Vec::new();
-    match r.read_until(b'\n', &mut buf) {
-        Ok(0) => Ok(None),
-        Ok(_) => String::from_utf8(buf)
-            .map(Some)
-            .map_err(|_| Unsupported("text that is not UTF-8".into())),
+/// First words that a routine body of a module read a window at a time
+/// may not hold (data declarations, routine and module keywords).
+const BODY_STOP_WORDS: [&str; 13] = [
+    "CONST",
+    "VAR",
+    "PERS",
+    "LOCAL",
+    "TASK",
+    "PROC",
+    "FUNC",
+    "TRAP",
+    "ENDPROC",
+    "ENDFUNC",
+    "ENDTRAP",
+    "MODULE",
+    "ENDMODULE",
+];
+
+/// Appends one line with its line break to `out`; false at the end of the
+/// file. Text that is not UTF-8 is left to the whole-module reader (which
+/// locates it).
+fn read_line_into<R: BufRead>(r: &mut R, out: &mut String) -> Result<bool, Unsupported> {
+    match r.read_line(out) {
+        Ok(0) => Ok(false),
+        Ok(_) => Ok(true),
+        Err(e) if e.kind() == std::io::ErrorKind::InvalidData => {
+            Err(Unsupported("text that is not UTF-8".into()))
+        }
         Err(e) => Err(Unsupported(format!("read error: {e}"))),
     }
+}
+
+/// One line with its line break (`None` at the end of the file).
+fn read_line<R: BufRead>(r: &mut R) -> Result<Option<String>, Unsupported> {
+    let mut line = String::new();
+    Ok(read_line_into(r, &mut line)?.then_some(line))
 }
 
 #[cfg(test)]
