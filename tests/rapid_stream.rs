@@ -120,46 +120,69 @@ fn streamed_check_prints_what_the_whole_module_check_prints() {
     }
 }
 
-/// Runs that do not read a window at a time (a report of every move, a
-/// steady thermal start) give the same bytes with the option as without.
+/// A run with a steady thermal start reads the module whole: the same
+/// bytes with the option as without.
 #[test]
-fn runs_that_need_the_whole_module_read_it_whole() {
+fn a_steady_thermal_start_reads_the_module_whole() {
     let dir = tempfile::tempdir().expect("tempdir");
     let (m, p) = (
         repo("samples/irb1600-milling.yaml"),
         repo("samples/milling.mod"),
     );
     let (m, p) = (m.to_str().unwrap(), p.to_str().unwrap());
-    for extra in [
-        &["--report", "REPORT"][..],
-        &["--thermal-start", "steady"][..],
-    ] {
-        let mut outs = Vec::new();
-        for window in [None, Some("2")] {
-            let out = dir.path().join(format!("o{}.mod", outs.len()));
-            let report = dir.path().join(format!("r{}.csv", outs.len()));
-            let mut args = vec!["compensate", "--machine", m, "--effects", "all"];
-            for a in extra {
-                args.push(if *a == "REPORT" {
-                    report.to_str().unwrap()
-                } else {
-                    a
-                });
-            }
-            if let Some(w) = window {
-                args.extend(["--rapid-window-lines", w]);
-            }
-            args.extend(["-o", out.to_str().unwrap(), p]);
-            let (code, _, err) = run(&args);
-            assert_eq!(code, 0, "{extra:?}: {err}");
-            outs.push(std::fs::read(&out).expect("output"));
-            if extra[0] == "--report" {
-                outs.push(std::fs::read(&report).expect("report"));
-            }
-        }
-        let half = outs.len() / 2;
-        assert_eq!(outs[..half], outs[half..], "{extra:?}");
+    let mut outs = Vec::new();
+    for window in [&[][..], &["--rapid-window-lines", "2"][..]] {
+        let out = dir.path().join(format!("o{}.mod", outs.len()));
+        let mut args = vec!["compensate", "--machine", m, "--effects", "all"];
+        args.extend(["--thermal-start", "steady"]);
+        args.extend(window);
+        args.extend(["-o", out.to_str().unwrap(), p]);
+        let (code, _, err) = run(&args);
+        assert_eq!(code, 0, "{err}");
+        outs.push(std::fs::read(&out).expect("output"));
     }
+    assert_eq!(outs[0], outs[1]);
+}
+
+/// Reports of every move (`compensate --report`, `report`) written a
+/// window at a time are those of the module read whole, in every format.
+#[test]
+fn reports_from_windows_are_the_whole_module_reports() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    for (module, machine) in cases() {
+        let (m, p) = (machine.to_str().unwrap(), module.to_str().unwrap());
+        for ext in ["csv", "json", "svg"] {
+            let mut got = Vec::new();
+            for window in [&[][..], &["--rapid-window-lines", "3"][..]] {
+                let k = got.len();
+                let out = dir.path().join(format!("o{k}.mod"));
+                let report = dir.path().join(format!("r{k}.{ext}"));
+                let mut args = vec!["compensate", "--machine", m, "--effects", "all"];
+                args.extend(window);
+                args.extend(["--report", report.to_str().unwrap()]);
+                args.extend(["-o", out.to_str().unwrap(), p]);
+                let (code, _, err) = run(&args);
+                assert_eq!(code, 0, "{p} {ext}: {err}");
+                got.push(std::fs::read(&out).expect("output"));
+                got.push(std::fs::read(&report).expect("report"));
+                // The dry run, to standard output.
+                let mut args = vec!["report", "--machine", m, "--effects", "all"];
+                args.extend(window);
+                args.extend(["--format", ext, p]);
+                let (code, stdout, err) = run(&args);
+                assert_eq!(code, 0, "{p} {ext}: {err}");
+                got.push(stdout);
+            }
+            assert!(got[1].len() > 100 && got[2].len() > 100);
+            assert_eq!(got[..3], got[3..], "{p} with {m}, {ext}");
+        }
+    }
+    let left = listing(dir.path());
+    assert!(
+        left.iter()
+            .all(|f| f.starts_with('o') || f.starts_with('r')),
+        "{left:?}"
+    );
 }
 
 /// A module with an error — one the window reader meets in a later window,

@@ -7,7 +7,7 @@ use std::path::{Path, PathBuf};
 use super::gcode::{default_output, write_atomically};
 use super::{Annotate, CheckArgs, CompensateArgs, EffectArgs, ProgramArgs, ReportArgs, usage};
 use crate::compensate::rapid::{
-    RapidOptions, RapidOutcome, compensate_module, compensate_parsed, stream,
+    MoveRecord, RapidOptions, RapidOutcome, compensate_module, compensate_parsed, stream,
 };
 use crate::emit::rapid::Format;
 use crate::error::{Error, Result};
@@ -160,14 +160,15 @@ fn try_streamed(
     opts: &RapidOptions,
     lines: usize,
     body: Option<&mut dyn Write>,
+    records: Option<stream::RecordSink>,
 ) -> Result<Option<(stream::Streamed, String)>> {
     if !stream::applies(robot, opts) {
-        tracing::info!("{name}: read whole (a report of every move, or a warm thermal start)");
+        tracing::info!("{name}: read whole (the thermal time line starts warm)");
         return Ok(None);
     }
     let file = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
     let reader = std::io::BufReader::with_capacity(1 << 16, file);
-    match stream::compensate_streamed(reader, name, robot, opts, lines, body) {
+    match stream::compensate_streamed(reader, name, robot, opts, lines, body, records) {
         Ok(done) => Ok(Some(done)),
         Err(stream::Fallback::Shape(why)) => {
             tracing::info!("{name}: read whole: {}", why.0);
@@ -187,7 +188,9 @@ pub fn check(a: &CheckArgs) -> Result<i32> {
         let robot = load_robot(m)?;
         let opts = check_options();
         let name = a.program.file.display().to_string();
-        if let Some((s, _)) = try_streamed(&a.program.file, &name, &robot, &opts, lines, None)? {
+        if let Some((s, _)) =
+            try_streamed(&a.program.file, &name, &robot, &opts, lines, None, None)?
+        {
             let mut out = std::io::stdout().lock();
             writeln!(
                 out,
@@ -371,9 +374,16 @@ pub fn compensate(a: &CompensateArgs) -> Result<i32> {
         .map_err(|e| usage(format!("cannot start worker threads: {e}")))?;
     if let Some(lines) = window_lines(&a.program)? {
         let name = input.display().to_string();
-        if let Some(outcome) =
-            pool.install(|| compensate_streamed_to(input, &name, &robot, &opts, lines, &out_path))?
-        {
+        let report = a.report.as_deref().map(|path| {
+            let format = a
+                .report_format
+                .unwrap_or_else(|| super::Format::from_path(path));
+            (path, format)
+        });
+        let outcome = pool.install(|| {
+            compensate_streamed_to(input, &name, &robot, &opts, lines, Some(&out_path), report)
+        })?;
+        if let Some(outcome) = outcome {
             log_outcome(&out_path, &outcome);
             return Ok(0);
         }
@@ -413,63 +423,102 @@ fn log_outcome(out_path: &Path, outcome: &RapidOutcome) {
     );
 }
 
-/// Compensates the module at `input` a window at a time into `out_path`:
-/// the rewritten routines go to a temporary file beside the output as they
-/// are made, then the declarations and that file to the output (written
-/// atomically, as always). `None` when the module is to be read whole.
+/// A temporary file beside `path` (in the temporary folder for standard
+/// output), unnamed: nothing is left behind whatever happens.
+fn spill_beside(path: &Path) -> Result<std::fs::File> {
+    let dir = match path.parent() {
+        _ if path == Path::new("-") => std::env::temp_dir(),
+        Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
+        _ => PathBuf::from("."),
+    };
+    tempfile::tempfile_in(&dir).map_err(|e| Error::io(&dir, e))
+}
+
+/// Writes `head` and then the contents of `spill` (written, not yet
+/// rewound) to `path`, atomically (or to standard output for `-`).
+fn write_spilled(path: &Path, head: &str, spill: std::io::BufWriter<std::fs::File>) -> Result<()> {
+    let mut file = spill
+        .into_inner()
+        .map_err(|e| Error::io(path, e.into_error()))?;
+    std::io::Seek::rewind(&mut file).map_err(|e| Error::io(path, e))?;
+    super::gcode::emit_to(path, |w| {
+        w.write_all(head.as_bytes())
+            .map_err(|e| Error::io(path, e))?;
+        std::io::copy(&mut file, w).map_err(|e| Error::io(path, e))?;
+        Ok(())
+    })
+}
+
+/// Compensates the module at `input` a window at a time into `out_path`
+/// (`None` for a dry run) and the report of every move into `report`:
+/// the rewritten routines and the report rows go to temporary files beside
+/// their outputs as they are made, then to the outputs (atomically, as
+/// always). `None` when the module is to be read whole.
 fn compensate_streamed_to(
     input: &Path,
     name: &str,
     robot: &Robot,
     opts: &RapidOptions,
     lines: usize,
-    out_path: &Path,
+    out_path: Option<&Path>,
+    report: Option<(&Path, super::Format)>,
 ) -> Result<Option<RapidOutcome>> {
-    let dir = match out_path.parent() {
-        Some(p) if !p.as_os_str().is_empty() && out_path != Path::new("-") => p.to_path_buf(),
-        _ if out_path == Path::new("-") => std::env::temp_dir(),
-        _ => PathBuf::from("."),
+    use crate::emit::report::{Layout, ReportWriter};
+    let mut body = match out_path {
+        Some(p) => Some(std::io::BufWriter::with_capacity(1 << 16, spill_beside(p)?)),
+        None => None,
     };
-    let spill = tempfile::tempfile_in(&dir).map_err(|e| Error::io(&dir, e))?;
-    let mut body = std::io::BufWriter::with_capacity(1 << 16, spill);
-    let Some((streamed, prologue)) =
-        try_streamed(input, name, robot, opts, lines, Some(&mut body))?
-    else {
+    let mut report_spill = match report {
+        Some((p, _)) => Some(std::io::BufWriter::with_capacity(1 << 16, spill_beside(p)?)),
+        None => None,
+    };
+    let mut writer = match (report, report_spill.as_mut()) {
+        (Some((_, format)), Some(w)) => Some(
+            ReportWriter::with_layout(w, Layout::rapid(), format, name)?
+                .with_source(Path::new(name)),
+        ),
+        _ => None,
+    };
+    let mut sink = |records: &[MoveRecord]| -> Result<()> {
+        match writer.as_mut() {
+            Some(rw) => write_records(rw, records),
+            None => Ok(()),
+        }
+    };
+    let streamed = try_streamed(
+        input,
+        name,
+        robot,
+        &RapidOptions {
+            records: report.is_some(),
+            ..*opts
+        },
+        lines,
+        body.as_mut().map(|b| b as &mut dyn Write),
+        Some(&mut sink),
+    )?;
+    let Some((streamed, prologue)) = streamed else {
         return Ok(None);
     };
-    let mut spill = body
-        .into_inner()
-        .map_err(|e| Error::io(&dir, e.into_error()))?;
-    std::io::Seek::rewind(&mut spill).map_err(|e| Error::io(&dir, e))?;
-    let mut copy = |w: &mut dyn Write| -> Result<()> {
-        w.write_all(prologue.as_bytes())
-            .map_err(|e| Error::io(out_path, e))?;
-        std::io::copy(&mut spill, w).map_err(|e| Error::io(out_path, e))?;
-        Ok(())
-    };
-    if out_path == Path::new("-") {
-        let mut stdout = std::io::stdout().lock();
-        copy(&mut stdout)?;
-        stdout.flush().map_err(|e| Error::io("stdout", e))?;
-    } else {
-        write_atomically(out_path, copy)?;
+    if let (Some(p), Some(b)) = (out_path, body) {
+        write_spilled(p, &prologue, b)?;
+    }
+    if let (Some(rw), Some((p, _))) = (writer, report) {
+        rw.finish(crate::emit::report::Totals {
+            blocks: streamed.outcome.moves,
+            moves: streamed.outcome.moves,
+        })?;
+        if let Some(spill) = report_spill {
+            write_spilled(p, "", spill)?;
+        }
     }
     Ok(Some(streamed.outcome))
 }
 
-/// Writes the deviation report of a compensated (or dry-run) RAPID module:
-/// a row per motion instruction with the kinematic, thermal, gravity, process and dynamic (vibration)
-/// parts of its predicted deviation.
-pub(super) fn write_report(
-    out: &mut dyn Write,
-    outcome: &RapidOutcome,
-    name: &str,
-    format: super::Format,
-) -> Result<()> {
-    use crate::emit::report::{Entry, Layout, ReportWriter, Totals};
-    let mut rw =
-        ReportWriter::with_layout(out, Layout::rapid(), format, name)?.with_source(Path::new(name));
-    for t in &outcome.records {
+/// Writes the report rows of `records`.
+fn write_records(rw: &mut crate::emit::report::ReportWriter, records: &[MoveRecord]) -> Result<()> {
+    use crate::emit::report::Entry;
+    for t in records {
         let d = &t.deviation;
         rw.entry(&Entry {
             line: t.line,
@@ -488,6 +537,22 @@ pub(super) fn write_report(
             orient_urad: d.total.rot_rad.norm() * 1e6,
         })?;
     }
+    Ok(())
+}
+
+/// Writes the deviation report of a compensated (or dry-run) RAPID module:
+/// a row per motion instruction with the kinematic, thermal, gravity, process and dynamic (vibration)
+/// parts of its predicted deviation.
+pub(super) fn write_report(
+    out: &mut dyn Write,
+    outcome: &RapidOutcome,
+    name: &str,
+    format: super::Format,
+) -> Result<()> {
+    use crate::emit::report::{Layout, ReportWriter, Totals};
+    let mut rw =
+        ReportWriter::with_layout(out, Layout::rapid(), format, name)?.with_source(Path::new(name));
+    write_records(&mut rw, &outcome.records)?;
     rw.finish(Totals {
         blocks: outcome.moves,
         moves: outcome.moves,
@@ -508,10 +573,19 @@ pub fn report(a: &ReportArgs) -> Result<i32> {
         ));
     }
     let opts = rapid_options(&robot, &a.effects, false, None)?;
-    let (src, name) = read_program(&a.program.file)?;
-    let outcome = compensate_module(&src, &name, &robot, &opts)?;
     let out = a.output.clone().unwrap_or_else(|| PathBuf::from("-"));
     super::gcode::refuse_overwrite(&out, &[&a.program.file])?;
+    if let Some(lines) = window_lines(&a.program)? {
+        let name = a.program.file.display().to_string();
+        let report = Some((out.as_path(), a.format));
+        if compensate_streamed_to(&a.program.file, &name, &robot, &opts, lines, None, report)?
+            .is_some()
+        {
+            return Ok(0);
+        }
+    }
+    let (src, name) = read_program(&a.program.file)?;
+    let outcome = compensate_module(&src, &name, &robot, &opts)?;
     super::gcode::emit_to(&out, |w| write_report(w, &outcome, &name, a.format))?;
     Ok(0)
 }

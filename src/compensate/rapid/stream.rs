@@ -16,7 +16,7 @@
 
 use std::io::{BufRead, Write};
 
-use super::{Carry, RapidOptions, RapidOutcome, compensate_window};
+use super::{Carry, MoveRecord, RapidOptions, RapidOutcome, compensate_window};
 use crate::error::{Error, Result};
 use crate::machine::robot::process::{CutSettings, Directives};
 use crate::machine::robot::{Robot, ThermalStart};
@@ -48,12 +48,15 @@ pub struct Streamed {
 }
 
 /// Whether a run with `opts` can read a module a window at a time: the
-/// thermal time line (when on) starts cold, and no report of every move
-/// is asked for (its records would grow with the module).
+/// thermal time line (when on) starts cold.
 pub fn applies(robot: &Robot, opts: &RapidOptions) -> bool {
     let thermal_on = robot.thermal().is_some() && opts.effects.thermal != 0.0;
-    !opts.records && (!thermal_on || opts.thermal_start == ThermalStart::Cold)
+    !thermal_on || opts.thermal_start == ThermalStart::Cold
 }
+
+/// What takes the move records of each window (with `opts.records`), in
+/// move order: a report writer, row by row.
+pub type RecordSink<'s> = &'s mut dyn FnMut(&[MoveRecord]) -> Result<()>;
 
 /// Why a module was not read a window at a time.
 #[derive(Debug)]
@@ -86,7 +89,9 @@ impl From<crate::error::Located> for Fallback {
 /// window of `window_lines` lines at a time. The text after the
 /// declarations goes to `body` as it is made; the returned prologue (the
 /// module header and declarations, with their edits and new declarations)
-/// goes before it. `body` is `None` for a check (nothing written).
+/// goes before it. `body` is `None` for a check (nothing written). With
+/// `opts.records`, the records of each window go to `records` (and the
+/// outcome has none).
 pub fn compensate_streamed<R: BufRead>(
     reader: R,
     file: &str,
@@ -94,6 +99,7 @@ pub fn compensate_streamed<R: BufRead>(
     opts: &RapidOptions,
     window_lines: usize,
     mut body: Option<&mut dyn Write>,
+    mut records: Option<RecordSink>,
 ) -> std::result::Result<(Streamed, String), Fallback> {
     let mut w = Windows::new(reader, window_lines, WINDOW_BYTES)?;
     let prologue_len = w.prologue().len();
@@ -161,6 +167,10 @@ pub fn compensate_streamed<R: BufRead>(
                     start,
                 )?;
                 write(&edits.apply_in(&text, start..start + lines.len())?)?;
+                if let Some(sink) = records.as_deref_mut() {
+                    sink(&carry.records)?;
+                    carry.records.clear();
+                }
             }
         }
     }
@@ -193,9 +203,16 @@ mod tests {
 
     fn streamed(src: &str, robot: &Robot, opts: &RapidOptions, lines: usize) -> Option<String> {
         let mut body = Vec::new();
-        let (_, prologue) =
-            compensate_streamed(src.as_bytes(), "t.mod", robot, opts, lines, Some(&mut body))
-                .ok()?;
+        let (_, prologue) = compensate_streamed(
+            src.as_bytes(),
+            "t.mod",
+            robot,
+            opts,
+            lines,
+            Some(&mut body),
+            None,
+        )
+        .ok()?;
         Some(prologue + std::str::from_utf8(&body).unwrap())
     }
 
@@ -299,5 +316,38 @@ ENDMODULE
             }
         }
         assert_eq!(checked, 4 * 2 * 2 * 5);
+    }
+
+    /// The records a report is written from, window by window, are those
+    /// of the module compensated whole.
+    #[test]
+    fn records_go_out_window_by_window_as_whole() {
+        let robot = robot_file("samples/irb1600-milling.yaml");
+        let opts = RapidOptions {
+            effects: Effects::ALL,
+            records: true,
+            ..RapidOptions::for_robot(&robot)
+        };
+        let whole = super::super::compensate_module(RICH, "t.mod", &robot, &opts).unwrap();
+        assert_eq!(whole.records.len(), whole.moves);
+        for lines in [1, 4, 100] {
+            let mut got = Vec::new();
+            let mut sink = |r: &[MoveRecord]| -> Result<()> {
+                got.extend_from_slice(r);
+                Ok(())
+            };
+            let (s, _) = compensate_streamed(
+                RICH.as_bytes(),
+                "t.mod",
+                &robot,
+                &opts,
+                lines,
+                None,
+                Some(&mut sink),
+            )
+            .unwrap();
+            assert!(s.outcome.records.is_empty());
+            assert_eq!(got, whole.records, "windows of {lines} lines");
+        }
     }
 }
