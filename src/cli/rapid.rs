@@ -162,13 +162,9 @@ fn try_streamed(
     body: Option<&mut dyn Write>,
     records: Option<stream::RecordSink>,
 ) -> Result<Option<(stream::Streamed, String)>> {
-    if !stream::applies(robot, opts) {
-        tracing::info!("{name}: read whole (the thermal time line starts warm)");
-        return Ok(None);
-    }
-    let file = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
-    let reader = std::io::BufReader::with_capacity(1 << 16, file);
-    match stream::compensate_streamed(reader, name, robot, opts, lines, body, records) {
+    let mut open =
+        || std::fs::File::open(path).map(|f| std::io::BufReader::with_capacity(1 << 16, f));
+    match stream::compensate_streamed(&mut open, name, robot, opts, lines, body, records) {
         Ok(done) => Ok(Some(done)),
         Err(stream::Fallback::Shape(why)) => {
             tracing::info!("{name}: read whole: {}", why.0);

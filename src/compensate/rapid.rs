@@ -28,7 +28,9 @@ use crate::machine::robot::pose::pose_from_abb;
 use crate::machine::robot::process::{
     CutSettings, Directives, feed_frame_vector, plunge_direction, travel_direction,
 };
-use crate::machine::robot::thermal::{Segment, effective_power, effective_power_from};
+use crate::machine::robot::thermal::{
+    Segment, TimeLineTotals, effective_power, effective_power_from,
+};
 use crate::machine::robot::{
     Compensation, ConfData, Deviation, DhGrowth, Effects, ForceFrame, ForceModel, IkSelect, Model,
     PointMass, ProcessWrench, Robot, RobotError, Seed, ThermalStart,
@@ -1554,9 +1556,13 @@ pub(crate) struct Carry {
     prev_plan: Option<Planned>,
     /// Load torques at the end of that move ([`move_power`]).
     end_torques: EndTorques<'static>,
-    /// Effective thermal power at the end of the windows before (a cold
-    /// start when none).
-    thermal_x: Option<[f64; 6]>,
+    /// Effective thermal power at the end of the windows before (the
+    /// start asked for when none).
+    pub(crate) thermal_x: Option<[f64; 6]>,
+    /// A first pass over the module that only adds up its thermal time
+    /// line (a start from the program's own mean power needs the whole of
+    /// it before the first move): nothing is compensated or written.
+    pub(crate) time_line: Option<TimeLineTotals>,
     /// Edits of the text before the window's part (the module's
     /// declarations), for a module read a window at a time.
     pub(crate) before: EditList,
@@ -1745,9 +1751,17 @@ pub(crate) fn compensate_window(
     drop(ends);
     carry.end_torques = end_torques
         .map(|((tool, bits), q, t)| ((std::borrow::Cow::Owned(tool.into_owned()), bits), q, t));
-    // A window after the first continues the time line (a cold start:
-    // streaming is for cold starts only); a module compensated whole
-    // starts it as asked.
+    if let Some(totals) = carry.time_line.as_mut() {
+        if let Some(t) = thermal {
+            totals.add(&segments, t.time_constant_s);
+        }
+        carry.prev_plan = plans.pop();
+        return Ok(EditList::new());
+    }
+    // A window after the first continues the time line from the state the
+    // windows before left (the first window of a module read a window at a
+    // time starts from the state its first pass found); a module
+    // compensated whole starts it as asked.
     let thermal_power = thermal.map(|t| match carry.thermal_x {
         Some(x0) => effective_power_from(&segments, t.time_constant_s, x0),
         None => effective_power(&segments, t.time_constant_s, opts.thermal_start),

@@ -7,18 +7,19 @@
 //! `_cN`/`_oN` declarations) wait for the end, with the declarations.
 //!
 //! The result is the one of the module compensated whole, byte for byte
-//! (tested with windows of every size on the sample modules). Where the
-//! window reading does not apply — a module of another shape, a thermal
+//! (tested with windows of every size on the sample modules). A thermal
 //! time line that starts from the program's own mean power (`steady`, a
-//! warm-up), a report of every move, or any error — the caller
-//! compensates the module whole, which also reports every error exactly
-//! as it always does.
+//! warm-up) is added up by a first pass over the module that compensates
+//! nothing. Where the window reading does not apply — a module of another
+//! shape, or any error — the caller compensates the module whole, which
+//! also reports every error exactly as it always does.
 
 use std::io::{BufRead, Write};
 
 use super::{Carry, MoveRecord, RapidOptions, RapidOutcome, compensate_window};
 use crate::error::{Error, Result};
 use crate::machine::robot::process::{CutSettings, Directives};
+use crate::machine::robot::thermal::TimeLineTotals;
 use crate::machine::robot::{Robot, ThermalStart};
 use crate::program::rapid::windows::{Piece, Unsupported, Windows};
 use crate::program::rapid::{Span, Stmt, parse_module};
@@ -45,13 +46,6 @@ pub struct Streamed {
     pub routines: usize,
     /// Motion instructions.
     pub moves: usize,
-}
-
-/// Whether a run with `opts` can read a module a window at a time: the
-/// thermal time line (when on) starts cold.
-pub fn applies(robot: &Robot, opts: &RapidOptions) -> bool {
-    let thermal_on = robot.thermal().is_some() && opts.effects.thermal != 0.0;
-    !thermal_on || opts.thermal_start == ThermalStart::Cold
 }
 
 /// What takes the move records of each window (with `opts.records`), in
@@ -85,26 +79,78 @@ impl From<crate::error::Located> for Fallback {
     }
 }
 
-/// Compensates the module read from `reader` (named `file` in messages) a
+/// Compensates the module that `open` reads (named `file` in messages) a
 /// window of `window_lines` lines at a time. The text after the
 /// declarations goes to `body` as it is made; the returned prologue (the
 /// module header and declarations, with their edits and new declarations)
 /// goes before it. `body` is `None` for a check (nothing written). With
 /// `opts.records`, the records of each window go to `records` (and the
-/// outcome has none).
+/// outcome has none). A thermal time line that starts from the program's
+/// own mean power (steady, warm-up) takes a first pass over the module
+/// (`open` is called twice) that adds it up.
 pub fn compensate_streamed<R: BufRead>(
+    open: &mut dyn FnMut() -> std::io::Result<R>,
+    file: &str,
+    robot: &Robot,
+    opts: &RapidOptions,
+    window_lines: usize,
+    body: Option<&mut dyn Write>,
+    records: Option<RecordSink>,
+) -> std::result::Result<(Streamed, String), Fallback> {
+    let mut carry = Carry::default();
+    let thermal = robot.thermal().filter(|_| opts.effects.thermal != 0.0);
+    if let Some(t) = thermal.filter(|_| opts.thermal_start != ThermalStart::Cold) {
+        let mut first = Carry {
+            time_line: Some(TimeLineTotals::default()),
+            ..Carry::default()
+        };
+        let first_opts = RapidOptions {
+            records: false,
+            annotate: false,
+            ..*opts
+        };
+        let reader = open().map_err(|e| Error::io(file, e))?;
+        pass(
+            reader,
+            file,
+            robot,
+            &first_opts,
+            window_lines,
+            &mut first,
+            None,
+            None,
+        )?;
+        let totals = first.time_line.unwrap_or_default();
+        carry.thermal_x = Some(totals.start_state(opts.thermal_start, t.time_constant_s));
+    }
+    let reader = open().map_err(|e| Error::io(file, e))?;
+    pass(
+        reader,
+        file,
+        robot,
+        opts,
+        window_lines,
+        &mut carry,
+        body,
+        records,
+    )
+}
+
+/// One pass over the module in `reader`, from the state in `carry`.
+#[allow(clippy::too_many_arguments)]
+fn pass<R: BufRead>(
     reader: R,
     file: &str,
     robot: &Robot,
     opts: &RapidOptions,
     window_lines: usize,
+    carry: &mut Carry,
     mut body: Option<&mut dyn Write>,
     mut records: Option<RecordSink>,
 ) -> std::result::Result<(Streamed, String), Fallback> {
     let mut w = Windows::new(reader, window_lines, WINDOW_BYTES)?;
     let prologue_len = w.prologue().len();
     let mut cut = Directives::parse_lines(w.prologue(), file, 1, CutSettings::default())?.last();
-    let mut carry = Carry::default();
     let mut decls: Option<(String, Vec<Span>)> = None;
     let mut moves = 0;
     let mut write = |text: &str| -> Result<()> {
@@ -162,7 +208,7 @@ pub fn compensate_streamed<R: BufRead>(
                     file,
                     robot,
                     opts,
-                    &mut carry,
+                    carry,
                     Some(directives),
                     start,
                 )?;
@@ -204,7 +250,7 @@ mod tests {
     fn streamed(src: &str, robot: &Robot, opts: &RapidOptions, lines: usize) -> Option<String> {
         let mut body = Vec::new();
         let (_, prologue) = compensate_streamed(
-            src.as_bytes(),
+            &mut || Ok(src.as_bytes()),
             "t.mod",
             robot,
             opts,
@@ -275,8 +321,8 @@ ENDMODULE
     /// Modules compensated a window at a time, windows of every size, read
     /// byte for byte as compensated whole: the sample modules and a module
     /// with every rewriting rule, on both robot files, every effect on
-    /// (the thermal time line, process forces), with and without
-    /// annotations.
+    /// (the thermal time line from a cold, steady or warm start, process
+    /// forces), with and without annotations.
     #[test]
     fn windows_of_any_size_give_the_whole_module_result() {
         let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("samples");
@@ -290,11 +336,17 @@ ENDMODULE
         let mut checked = 0;
         for (name, src) in &modules {
             for robot in &robots {
-                for annotate in [true, false] {
+                for (annotate, thermal_start) in [
+                    (true, ThermalStart::Cold),
+                    (false, ThermalStart::Cold),
+                    (true, ThermalStart::Steady),
+                    (true, ThermalStart::WarmUpMin(15.0)),
+                ] {
                     let opts = RapidOptions {
                         effects: Effects::ALL,
                         annotate,
                         records: false,
+                        thermal_start,
                         ..RapidOptions::for_robot(robot)
                     };
                     let whole = super::super::compensate_module(src, "t.mod", robot, &opts)
@@ -315,7 +367,7 @@ ENDMODULE
                 }
             }
         }
-        assert_eq!(checked, 4 * 2 * 2 * 5);
+        assert_eq!(checked, 4 * 2 * 4 * 5);
     }
 
     /// The records a report is written from, window by window, are those
@@ -337,7 +389,7 @@ ENDMODULE
                 Ok(())
             };
             let (s, _) = compensate_streamed(
-                RICH.as_bytes(),
+                &mut || Ok(RICH.as_bytes()),
                 "t.mod",
                 &robot,
                 &opts,
