@@ -61,6 +61,7 @@ fn streamed_compensation_writes_the_bytes_of_the_whole_module() {
         for lines in ["1", "2", "5", "1000"] {
             let streamed = dir.path().join(format!("s{k}_{lines}.mod"));
             let (code, _, err) = run(&[
+                "-v",
                 "compensate",
                 "--machine",
                 m,
@@ -73,6 +74,9 @@ fn streamed_compensation_writes_the_bytes_of_the_whole_module() {
                 p,
             ]);
             assert_eq!(code, 0, "{p}: {err}");
+            // Read a window at a time indeed (not read whole after all).
+            let said = format!("read a window of {lines} lines at a time");
+            assert!(err.contains(&said), "{err}");
             assert_eq!(
                 std::fs::read(&streamed).expect("output"),
                 want,
@@ -110,8 +114,17 @@ fn streamed_check_prints_what_the_whole_module_check_prints() {
     for (module, machine) in cases() {
         let (m, p) = (machine.to_str().unwrap(), module.to_str().unwrap());
         let whole = run(&["check", "--machine", m, p]);
-        let streamed = run(&["check", "--machine", m, "--rapid-window-lines", "2", p]);
+        let streamed = run(&[
+            "-v",
+            "check",
+            "--machine",
+            m,
+            "--rapid-window-lines",
+            "2",
+            p,
+        ]);
         assert_eq!(whole.0, 0, "{p}: {}", whole.2);
+        assert!(streamed.2.contains("at a time"), "{}", streamed.2);
         assert_eq!(streamed.0, whole.0);
         assert_eq!(
             String::from_utf8_lossy(&streamed.1),
@@ -138,8 +151,10 @@ fn warm_thermal_starts_give_the_whole_module_bytes() {
             args.extend(["--thermal-start", start]);
             args.extend(window);
             args.extend(["-o", out.to_str().unwrap(), p]);
+            args.insert(0, "-v");
             let (code, _, err) = run(&args);
             assert_eq!(code, 0, "{err}");
+            assert_eq!(err.contains("at a time"), !window.is_empty(), "{err}");
             outs.push(std::fs::read(&out).expect("output"));
         }
         assert_eq!(outs[0], outs[1], "--thermal-start {start}");
@@ -159,12 +174,13 @@ fn reports_from_windows_are_the_whole_module_reports() {
                 let k = got.len();
                 let out = dir.path().join(format!("o{k}.mod"));
                 let report = dir.path().join(format!("r{k}.{ext}"));
-                let mut args = vec!["compensate", "--machine", m, "--effects", "all"];
+                let mut args = vec!["-v", "compensate", "--machine", m, "--effects", "all"];
                 args.extend(window);
                 args.extend(["--report", report.to_str().unwrap()]);
                 args.extend(["-o", out.to_str().unwrap(), p]);
                 let (code, _, err) = run(&args);
                 assert_eq!(code, 0, "{p} {ext}: {err}");
+                assert_eq!(err.contains("at a time"), !window.is_empty(), "{err}");
                 got.push(std::fs::read(&out).expect("output"));
                 got.push(std::fs::read(&report).expect("report"));
                 // The dry run, to standard output.
@@ -294,4 +310,52 @@ fn a_window_of_zero_lines_is_refused() {
         err.contains("--rapid-window-lines must be at least 1"),
         "{err}"
     );
+}
+
+/// `batch` reads RAPID modules a window at a time as `compensate` does
+/// (forced here): the same programs and reports as read whole.
+#[test]
+fn batch_reads_modules_a_window_at_a_time_with_the_same_results() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let mut outs = Vec::new();
+    for window in [&[][..], &["--rapid-window-lines", "2"][..]] {
+        let out = dir.path().join(format!("out{}", outs.len()));
+        let (code, _, err) = {
+            let mut args = vec![
+                "-v",
+                "batch",
+                "--machine",
+                "abb-irb1600",
+                "--report-format",
+                "csv",
+            ];
+            args.extend(window);
+            args.push("--out-dir");
+            let o = postproc()
+                .args(&args)
+                .arg(&out)
+                .arg(repo("samples/drilling.mod"))
+                .arg(repo("samples/milling.mod"))
+                .output()
+                .expect("runs");
+            (
+                o.status.code().unwrap_or(-1),
+                o.stdout,
+                String::from_utf8_lossy(&o.stderr).into_owned(),
+            )
+        };
+        assert_eq!(code, 0, "{err}");
+        assert_eq!(err.contains("at a time"), !window.is_empty(), "{err}");
+        let files: Vec<Vec<u8>> = [
+            "drilling.mod",
+            "milling.mod",
+            "drilling.mod.report.csv",
+            "milling.mod.report.csv",
+        ]
+        .iter()
+        .map(|f| std::fs::read(out.join(f)).unwrap_or_else(|_| panic!("{f}")))
+        .collect();
+        outs.push(files);
+    }
+    assert_eq!(outs[0], outs[1]);
 }

@@ -197,7 +197,9 @@ struct Done {
 /// The configured engine for the batch's machine.
 enum Engine<'m> {
     Tool(Box<crate::job::Job<'m>>),
-    Robot(crate::machine::robot::Robot, RapidOptions),
+    /// A robot, the options of its runs, and the window size forced by
+    /// `--rapid-window-lines`.
+    Robot(crate::machine::robot::Robot, RapidOptions, Option<usize>),
 }
 
 /// Path of a program's report beside its output: `<output>.report.<ext>`.
@@ -262,18 +264,45 @@ fn compensate_one(
                 residual: Some(s.max_residual_mm),
             })
         }
-        Engine::Robot(robot, opts) => {
+        Engine::Robot(robot, opts, forced_window) => {
             if !is_rapid(input) {
                 return Err(usage(format!(
                     "{name}: a G-code program needs a machine-tool machine file"
                 )));
             }
-            let (src, name) = read_program(input)?;
             // Move records only feed the report.
             let opts = crate::compensate::rapid::RapidOptions {
                 records: report.is_some(),
                 ..*opts
             };
+            // A large module is read a window at a time, as by `compensate`.
+            let big = std::fs::metadata(input)
+                .is_ok_and(|m| m.is_file() && m.len() >= super::rapid::STREAM_MIN_BYTES);
+            let window =
+                forced_window.or(big.then_some(crate::compensate::rapid::stream::WINDOW_LINES));
+            if let Some(lines) = window {
+                let name = input.display().to_string();
+                let report_file = report.map(|f| (report_path(output, f), f));
+                let streamed = super::rapid::compensate_streamed_to(
+                    input,
+                    &name,
+                    robot,
+                    &opts,
+                    lines,
+                    Some(output),
+                    report_file.as_ref().map(|(p, f)| (p.as_path(), *f)),
+                )?;
+                if let Some(outcome) = streamed {
+                    return Ok(Done {
+                        blocks: outcome.moves,
+                        moves: outcome.moves,
+                        max_dev: outcome.max_deviation_mm,
+                        max_line: outcome.max_deviation_line,
+                        residual: None,
+                    });
+                }
+            }
+            let (src, name) = read_program(input)?;
             let outcome = compensate_module(&src, &name, robot, &opts)?;
             write_atomically(output, |w| {
                 w.write_all(outcome.text.as_bytes())
@@ -351,7 +380,10 @@ pub fn run(a: &BatchArgs, quiet: bool) -> Result<i32> {
             }
             let robot = super::rapid::robot_with_process(load_robot(&a.machine)?, &a.effects)?;
             let opts = super::rapid::rapid_options(&robot, &a.effects, annotate, None)?;
-            Engine::Robot(robot, opts)
+            if a.rapid_window_lines == Some(0) {
+                return Err(usage("--rapid-window-lines must be at least 1"));
+            }
+            Engine::Robot(robot, opts, a.rapid_window_lines)
         }
     };
     let bar = if quiet || !std::io::stderr().is_terminal() {

@@ -76,6 +76,11 @@ pub struct BatchArgs {
     /// their sub-folders) and batch-summary.json.
     #[arg(long)]
     pub out_dir: PathBuf,
+    /// Read RAPID modules a window of this many lines at a time whatever
+    /// their size (those of 16 MB and more are read so by default; for
+    /// tests).
+    #[arg(long = "rapid-window-lines", value_name = "LINES", hide = true)]
+    pub rapid_window_lines: Option<usize>,
     /// G-code: tool length for an H number, overriding the machine file: H1=123.4 (mm).
     #[arg(long = "tool", value_name = "H=LENGTH")]
     pub tools: Vec<String>,

@@ -165,7 +165,10 @@ fn try_streamed(
     let mut open =
         || std::fs::File::open(path).map(|f| std::io::BufReader::with_capacity(1 << 16, f));
     match stream::compensate_streamed(&mut open, name, robot, opts, lines, body, records) {
-        Ok(done) => Ok(Some(done)),
+        Ok(done) => {
+            tracing::info!("{name}: read a window of {lines} lines at a time");
+            Ok(Some(done))
+        }
         Err(stream::Fallback::Shape(why)) => {
             tracing::info!("{name}: read whole: {}", why.0);
             Ok(None)
@@ -450,7 +453,7 @@ fn write_spilled(path: &Path, head: &str, spill: std::io::BufWriter<std::fs::Fil
 /// the rewritten routines and the report rows go to temporary files beside
 /// their outputs as they are made, then to the outputs (atomically, as
 /// always). `None` when the module is to be read whole.
-fn compensate_streamed_to(
+pub(super) fn compensate_streamed_to(
     input: &Path,
     name: &str,
     robot: &Robot,
