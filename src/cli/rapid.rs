@@ -140,14 +140,21 @@ fn window_lines(program: &ProgramArgs) -> Result<Option<usize>> {
     if path == Path::new("-") {
         return Ok(None);
     }
-    if let Some(n) = program.rapid_window_lines {
-        if n == 0 {
-            return Err(usage("--rapid-window-lines must be at least 1"));
-        }
-        return Ok(Some(n));
+    if program.rapid_window_lines == Some(0) {
+        return Err(usage("--rapid-window-lines must be at least 1"));
     }
-    let big = std::fs::metadata(path).is_ok_and(|m| m.is_file() && m.len() >= STREAM_MIN_BYTES);
-    Ok(big.then_some(stream::WINDOW_LINES))
+    // A regular file only: the module may be read twice (after an error,
+    // or for a warm thermal start).
+    let Ok(meta) = std::fs::metadata(path) else {
+        return Ok(None);
+    };
+    if !meta.is_file() {
+        return Ok(None);
+    }
+    Ok(match program.rapid_window_lines {
+        Some(n) => Some(n),
+        None => (meta.len() >= STREAM_MIN_BYTES).then_some(stream::WINDOW_LINES),
+    })
 }
 
 /// Compensates (`body` given) or checks the module at `path` a window at a
@@ -422,15 +429,21 @@ fn log_outcome(out_path: &Path, outcome: &RapidOutcome) {
     );
 }
 
-/// A temporary file beside `path` (in the temporary folder for standard
-/// output), unnamed: nothing is left behind whatever happens.
-fn spill_beside(path: &Path) -> Result<std::fs::File> {
-    let dir = match path.parent() {
-        _ if path == Path::new("-") => std::env::temp_dir(),
-        Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
-        _ => PathBuf::from("."),
+/// A temporary file beside `path` — in the temporary folder for standard
+/// output, a device, or a folder that takes no new file — unnamed: nothing
+/// is left behind whatever happens. `None` when neither place takes one
+/// (the module is then read whole, and the output's own errors are those
+/// of that run).
+fn spill_beside(path: &Path) -> Option<std::fs::File> {
+    let regular = std::fs::metadata(path).map_or(true, |m| m.is_file());
+    let beside = match path.parent() {
+        _ if path == Path::new("-") || !regular => None,
+        Some(p) if !p.as_os_str().is_empty() => Some(p.to_path_buf()),
+        _ => Some(PathBuf::from(".")),
     };
-    tempfile::tempfile_in(&dir).map_err(|e| Error::io(&dir, e))
+    beside
+        .and_then(|dir| tempfile::tempfile_in(dir).ok())
+        .or_else(|| tempfile::tempfile().ok())
 }
 
 /// Writes `head` and then the contents of `spill` (written, not yet
@@ -463,12 +476,19 @@ pub(super) fn compensate_streamed_to(
     report: Option<(&Path, super::Format)>,
 ) -> Result<Option<RapidOutcome>> {
     use crate::emit::report::{Layout, ReportWriter};
+    let spill = |p: &Path| spill_beside(p).map(|f| std::io::BufWriter::with_capacity(1 << 16, f));
     let mut body = match out_path {
-        Some(p) => Some(std::io::BufWriter::with_capacity(1 << 16, spill_beside(p)?)),
+        Some(p) => match spill(p) {
+            Some(b) => Some(b),
+            None => return Ok(None),
+        },
         None => None,
     };
     let mut report_spill = match report {
-        Some((p, _)) => Some(std::io::BufWriter::with_capacity(1 << 16, spill_beside(p)?)),
+        Some((p, _)) => match spill(p) {
+            Some(b) => Some(b),
+            None => return Ok(None),
+        },
         None => None,
     };
     let mut writer = match (report, report_spill.as_mut()) {

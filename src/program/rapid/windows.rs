@@ -23,6 +23,15 @@
 
 use std::io::BufRead;
 
+/// Prologues from this size on make windows [`PROLOGUE_WINDOWS`] times as
+/// long as themselves (at least).
+const BIG_PROLOGUE_BYTES: usize = 1 << 20;
+
+/// How many times its prologue a window is at least, for a big prologue:
+/// parsing the prologue again then costs at most a fifth of a window's
+/// parse.
+const PROLOGUE_WINDOWS: usize = 4;
+
 /// Why a module cannot be read a window at a time (the caller then reads
 /// it whole).
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -85,16 +94,68 @@ pub struct Windows<R> {
     max_bytes: usize,
     /// Routines met so far.
     routines: usize,
+    /// Windows handed out of the current routine.
+    windows_in_routine: usize,
+    /// Bytes below which a window does not end: a large prologue (a module
+    /// of declared targets) is parsed again with every window, so windows
+    /// are made several times as long as it.
+    min_bytes: usize,
 }
 
 /// The first word of a line's code (after blanks), if it starts with a
 /// letter.
 fn first_word(code: &str) -> &str {
-    let t = code.trim_start();
+    let t = code.trim_start_matches(is_blank);
     let end = t
         .find(|c: char| !(c.is_ascii_alphanumeric() || c == '_'))
         .unwrap_or(t.len());
     t.get(..end).unwrap_or("")
+}
+
+/// The blanks of the module parser: ASCII space, tab and line breaks, and
+/// the byte-order mark (other Unicode spaces are not blanks to it).
+fn is_blank(c: char) -> bool {
+    matches!(c, ' ' | '\t' | '\r' | '\n' | '\u{feff}')
+}
+
+/// `code` without the parser's blanks at either end.
+fn trim_blanks(code: &str) -> &str {
+    code.trim_matches(is_blank)
+}
+
+/// Whether a body line's code (trimmed) ends a statement: a `;`, a control
+/// keyword that stands alone (`ENDIF`, `ENDWHILE`, …), or the header of an
+/// `IF … THEN`, `ELSEIF … THEN`, `FOR … DO`, `WHILE … DO` (the module parser
+/// keeps control lines as statements of their own).
+fn ends_statement(code: &str) -> bool {
+    if code.ends_with(';') {
+        return true;
+    }
+    const ALONE: [&str; 8] = [
+        "ELSE", "ENDIF", "ENDFOR", "ENDWHILE", "ENDTEST", "ERROR", "BACKWARD", "UNDO",
+    ];
+    if ALONE.iter().any(|w| code.eq_ignore_ascii_case(w)) {
+        return true;
+    }
+    let first = first_word(code);
+    let last = code
+        .rsplit(|c: char| !(c.is_ascii_alphanumeric() || c == '_'))
+        .next()
+        .unwrap_or("");
+    let before_last = code.len() > last.len()
+        && code
+            .as_bytes()
+            .get(code.len() - last.len() - 1)
+            .is_some_and(|b| *b == b' ' || *b == b'\t');
+    before_last
+        && ((["IF", "ELSEIF"]
+            .iter()
+            .any(|w| first.eq_ignore_ascii_case(w))
+            && last.eq_ignore_ascii_case("THEN"))
+            || (["FOR", "WHILE"]
+                .iter()
+                .any(|w| first.eq_ignore_ascii_case(w))
+                && last.eq_ignore_ascii_case("DO")))
 }
 
 /// The code of a line: the text before a `!` comment outside strings.
@@ -125,6 +186,31 @@ fn routine_start(code: &str) -> Option<&'static str> {
     }
 }
 
+/// Whether a routine's first line (its code, trimmed) is its whole
+/// header: `[LOCAL] PROC name(…)`, `[LOCAL] FUNC type name(…)` with
+/// nothing after the parameter list, or `[LOCAL] TRAP name` alone (a
+/// statement after it would be parsed with every window).
+fn whole_header(code: &str, end_word: &str) -> bool {
+    if end_word == "ENDTRAP" {
+        let words: Vec<&str> = code.split(is_blank).filter(|w| !w.is_empty()).collect();
+        let ident = |w: &&str| {
+            w.bytes().next().is_some_and(|b| b.is_ascii_alphabetic())
+                && w.bytes().all(|b| b.is_ascii_alphanumeric() || b == b'_')
+        };
+        return match words.as_slice() {
+            [t, n] => t.eq_ignore_ascii_case("TRAP") && ident(n),
+            [l, t, n] => {
+                l.eq_ignore_ascii_case("LOCAL") && t.eq_ignore_ascii_case("TRAP") && ident(n)
+            }
+            _ => false,
+        };
+    }
+    match (code.find('('), code.find(')')) {
+        (Some(open), Some(close)) => open < close && close + 1 == code.len() && !code.contains(';'),
+        _ => false,
+    }
+}
+
 impl<R: BufRead> Windows<R> {
     /// Reads the prologue of the module in `reader`; windows of at most
     /// about `max_lines` lines or `max_bytes` bytes (a window ends at the
@@ -146,6 +232,7 @@ impl<R: BufRead> Windows<R> {
             prologue.push_str(&line);
             lines += 1;
         };
+        let prologue_len = prologue.len();
         Ok(Windows {
             reader,
             prologue,
@@ -158,6 +245,12 @@ impl<R: BufRead> Windows<R> {
             max_lines: max_lines.max(1),
             max_bytes,
             routines: 0,
+            windows_in_routine: 0,
+            min_bytes: if prologue_len >= BIG_PROLOGUE_BYTES {
+                PROLOGUE_WINDOWS * prologue_len
+            } else {
+                0
+            },
         })
     }
 
@@ -215,22 +308,13 @@ impl<R: BufRead> Windows<R> {
                         continue;
                     };
                     self.next_line += 1;
-                    let code = code_of(&line);
+                    let code = trim_blanks(code_of(&line));
                     if self.state == State::Tail {
-                        if !code.trim().is_empty() {
+                        if !code.is_empty() {
                             return Err(Unsupported("text after ENDMODULE".into()));
                         }
                     } else if let Some(end_word) = routine_start(code) {
-                        // A header on one line, its parameter list closed, nothing
-                        // after it.
-                        let after = code.find('(').map(|p| code.get(p..).unwrap_or(""));
-                        let closed = match after {
-                            Some(a) => a.find(')').is_some_and(|q| {
-                                a.get(q + 1..).is_some_and(|r| r.trim().is_empty())
-                            }),
-                            None => end_word == "ENDTRAP",
-                        };
-                        if !closed {
+                        if !whole_header(code, end_word) {
                             return Err(Unsupported(format!(
                                 "routine header on line {line_no} is not one whole line"
                             )));
@@ -239,9 +323,10 @@ impl<R: BufRead> Windows<R> {
                         self.header = std::rc::Rc::from(line.as_str());
                         self.end_word = end_word;
                         self.state = State::Body;
-                    } else if first_word(code).eq_ignore_ascii_case("ENDMODULE") {
+                        self.windows_in_routine = 0;
+                    } else if code.eq_ignore_ascii_case("ENDMODULE") {
                         self.state = State::Tail;
-                    } else if !code.trim().is_empty() {
+                    } else if !code.is_empty() {
                         return Err(Unsupported(format!(
                             "line {line_no}: text between routines (module data after the first routine)"
                         )));
@@ -276,19 +361,25 @@ impl<R: BufRead> Windows<R> {
                 }
             }
             let line = body.get(start..).unwrap_or("");
-            let code = code_of(line);
+            let code = trim_blanks(code_of(line));
             let word = first_word(code);
-            let ends_body = !open && word.eq_ignore_ascii_case(self.end_word);
-            if !ends_body && BODY_STOP_WORDS.iter().any(|k| word.eq_ignore_ascii_case(k)) {
+            let at_end = word.eq_ignore_ascii_case(self.end_word);
+            if at_end && (open || !code.eq_ignore_ascii_case(self.end_word)) {
+                return Err(Unsupported(format!(
+                    "line {line_no}: `{code}` does not end the routine alone"
+                )));
+            }
+            if !at_end && BODY_STOP_WORDS.iter().any(|k| word.eq_ignore_ascii_case(k)) {
                 return Err(Unsupported(format!(
                     "line {line_no}: `{word}` in a routine body"
                 )));
             }
-            let code = code.trim_end();
-            let (blank, ends_statement) = (code.is_empty(), code.ends_with(';'));
-            if ends_body {
+            let (blank, ends) = (code.is_empty(), ends_statement(code));
+            if at_end {
                 let line = body.split_off(start);
-                if body.is_empty() {
+                // Every routine gives at least one window, so that its
+                // header is parsed.
+                if body.is_empty() && self.windows_in_routine > 0 {
                     self.next_line += 1;
                     self.state = State::Between;
                     return Ok(Piece::Verbatim {
@@ -302,12 +393,15 @@ impl<R: BufRead> Windows<R> {
             self.next_line += 1;
             lines += 1;
             if !blank {
-                open = !ends_statement;
+                open = !ends;
             }
-            if !open && (lines >= self.max_lines || body.len() >= self.max_bytes) {
+            let long = (lines >= self.max_lines && body.len() >= self.min_bytes)
+                || body.len() >= self.max_bytes.max(self.min_bytes);
+            if !open && long {
                 break;
             }
         }
+        self.windows_in_routine += 1;
         Ok(Piece::Window {
             body,
             line: first,
@@ -399,20 +493,17 @@ mod tests {
                 Piece::Verbatim { .. } => None,
             })
             .collect();
-        // The IF line and the two-line move stay with the statement that
-        // ends them; the comment line ends no statement but opens none.
+        // A control line is a statement of its own; the two-line move
+        // stays whole; the comment line ends no statement but opens none.
         assert_eq!(
             windows,
             vec![
                 ("    MoveL p, v100, z1, tool0;\n", 4),
-                (
-                    "    IF TRUE THEN\n      MoveL\n        p, v100, z1, tool0;\n",
-                    5
-                ),
-                (
-                    "    ENDIF\n    ! a comment; PROC x()\n    TPWrite \"a!b\";\n",
-                    8
-                ),
+                ("    IF TRUE THEN\n", 5),
+                ("      MoveL\n        p, v100, z1, tool0;\n", 6),
+                ("    ENDIF\n", 8),
+                ("    ! a comment; PROC x()\n", 9),
+                ("    TPWrite \"a!b\";\n", 10),
                 ("    MoveJ p, v100, fine, tool0;\n", 14),
             ]
         );
@@ -438,6 +529,47 @@ mod tests {
         }
         assert_eq!(moves, 3);
         assert_eq!(w.routines(), 2);
+    }
+
+    /// A routine without statements still gives a window (its header is
+    /// parsed with it), and a control line ends a statement: a main loop
+    /// `WHILE … DO … ENDWHILE` before `ENDPROC` is taken.
+    #[test]
+    fn empty_routines_and_control_lines_are_taken() {
+        let src = "MODULE M\nPROC a()\nENDPROC\nPROC b()\n  WHILE TRUE DO\n    MoveL p, v1, z1, t0;\n  ENDWHILE\nENDPROC\nLOCAL TRAP t\nENDTRAP\nENDMODULE\n";
+        let (pro, ps) = pieces(src, 1).unwrap();
+        assert_eq!(join(&pro, &ps), src);
+        let windows: Vec<&str> = ps
+            .iter()
+            .filter_map(|p| match p {
+                Piece::Window { body, .. } => Some(body.as_str()),
+                Piece::Verbatim { .. } => None,
+            })
+            .collect();
+        assert_eq!(
+            windows,
+            vec![
+                "",
+                "  WHILE TRUE DO\n",
+                "    MoveL p, v1, z1, t0;\n",
+                "  ENDWHILE\n",
+                ""
+            ]
+        );
+        for (code, ends) in [
+            ("ENDIF", true),
+            ("endwhile", true),
+            ("IF a > 1 THEN", true),
+            ("ELSEIF a THEN", true),
+            ("FOR i FROM 1 TO 3 DO", true),
+            ("WHILE TRUE DO", true),
+            ("IF a > 1", false),
+            ("MoveL p,", false),
+            ("x := THEN", false),
+            ("WHILE TRUEDO", false),
+        ] {
+            assert_eq!(ends_statement(code), ends, "{code}");
+        }
     }
 
     #[test]
@@ -466,6 +598,51 @@ mod tests {
             ),
         ];
         for (src, why) in cases {
+            let got = pieces(src, 10).map(|_| ()).unwrap_err();
+            assert!(got.0.contains(why), "{src:?}: {got:?}");
+        }
+        // Lines written out unchanged are never parsed: anything but
+        // blanks (the parser's: no form feed, no Unicode space) and the bare
+        // end words is left to the whole-module parse (review, session 10).
+        let more = [
+            (
+                "MODULE M\nPROC a()\nENDPROC;\nENDMODULE\n",
+                "does not end the routine alone",
+            ),
+            (
+                "MODULE M\nPROC a()\nENDPROC x\nENDMODULE\n",
+                "does not end the routine alone",
+            ),
+            (
+                "MODULE M\nPROC a()\nENDPROC\nENDMODULE garbage\n",
+                "text between routines",
+            ),
+            (
+                "MODULE M\nPROC a()\nENDPROC\n\u{c}\nENDMODULE\n",
+                "text between routines",
+            ),
+            (
+                "MODULE M\nPROC a()\nENDPROC\n\u{a0}\nENDMODULE\n",
+                "text between routines",
+            ),
+            (
+                "MODULE M\nPROC a()\nENDPROC\nENDMODULE\n\u{3000}\n",
+                "after ENDMODULE",
+            ),
+            (
+                "MODULE M\nPROC a()\n\u{a0}ENDPROC\nENDMODULE\n",
+                "in a routine body",
+            ),
+            (
+                "MODULE M\nTRAP t MoveL p, v1, z1, t0;\nENDTRAP\nENDMODULE\n",
+                "not one whole line",
+            ),
+            (
+                "MODULE M\nPROC a() MoveL p,v1,z1,t;\nENDPROC\nENDMODULE\n",
+                "not one whole",
+            ),
+        ];
+        for (src, why) in more {
             let got = pieces(src, 10).map(|_| ()).unwrap_err();
             assert!(got.0.contains(why), "{src:?}: {got:?}");
         }
