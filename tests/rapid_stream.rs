@@ -30,6 +30,14 @@ fn run(args: &[&str]) -> (i32, Vec<u8>, String) {
     )
 }
 
+/// `postproc -v SUB --rapid-window-lines LINES REST…`: a run that reads
+/// its module a window at a time (and says so at `-v`).
+fn run_windowed(sub: &str, lines: &str, rest: &[&str]) -> (i32, Vec<u8>, String) {
+    let mut args = vec!["-v", sub, "--rapid-window-lines", lines];
+    args.extend(rest);
+    run(&args)
+}
+
 /// The files in `dir`, sorted.
 fn listing(dir: &Path) -> Vec<String> {
     let mut v: Vec<String> = std::fs::read_dir(dir)
@@ -114,15 +122,7 @@ fn streamed_check_prints_what_the_whole_module_check_prints() {
     for (module, machine) in cases() {
         let (m, p) = (machine.to_str().unwrap(), module.to_str().unwrap());
         let whole = run(&["check", "--machine", m, p]);
-        let streamed = run(&[
-            "-v",
-            "check",
-            "--machine",
-            m,
-            "--rapid-window-lines",
-            "2",
-            p,
-        ]);
+        let streamed = run_windowed("check", "2", &["--machine", m, p]);
         assert_eq!(whole.0, 0, "{p}: {}", whole.2);
         assert!(streamed.2.contains("at a time"), "{}", streamed.2);
         assert_eq!(streamed.0, whole.0);
@@ -443,33 +443,20 @@ fn lines_outside_windows_are_held_to_the_whole_parse() {
 fn device_and_missing_folder_outputs_behave_as_whole() {
     let p = repo("samples/drilling.mod");
     let p = p.to_str().unwrap();
-    let dev = run(&[
-        "-v",
+    let dev = run_windowed(
         "compensate",
-        "--machine",
-        "abb-irb1600",
-        "--rapid-window-lines",
         "3",
-        "-o",
-        "/dev/null",
-        p,
-    ]);
+        &["--machine", "abb-irb1600", "-o", "/dev/null", p],
+    );
     assert_eq!(dev.0, 0, "{}", dev.2);
     assert!(dev.2.contains("at a time"), "{}", dev.2);
     let dir = tempfile::tempdir().expect("tempdir");
     let missing = dir.path().join("nodir/out.mod");
     let m = missing.to_str().unwrap();
     let whole = run(&["compensate", "--machine", "abb-irb1600", "-o", m, p]);
-    let windows = run(&[
-        "compensate",
-        "--machine",
-        "abb-irb1600",
-        "--rapid-window-lines",
-        "3",
-        "-o",
-        m,
-        p,
-    ]);
+    let mut args = vec!["compensate", "--rapid-window-lines", "3"];
+    args.extend(["--machine", "abb-irb1600", "-o", m, p]);
+    let windows = run(&args);
     assert_ne!(whole.0, 0);
     assert_eq!((windows.0, &windows.2), (whole.0, &whole.2));
     let report = dir.path().join("nodir/r.csv");
