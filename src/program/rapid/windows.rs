@@ -25,12 +25,12 @@ use std::io::BufRead;
 
 /// Prologues from this size on make windows [`PROLOGUE_WINDOWS`] times as
 /// long as themselves (at least).
-const BIG_PROLOGUE_BYTES: usize = 1 << 20;
+pub const BIG_PROLOGUE_BYTES: usize = 64 << 10;
 
 /// How many times its prologue a window is at least, for a big prologue:
-/// parsing the prologue again then costs at most a fifth of a window's
+/// parsing the prologue again then costs at most an eighth of a window's
 /// parse.
-const PROLOGUE_WINDOWS: usize = 4;
+pub const PROLOGUE_WINDOWS: usize = 8;
 
 /// Why a module cannot be read a window at a time (the caller then reads
 /// it whole).
