@@ -562,6 +562,20 @@ impl Module {
     }
 }
 
+/// Byte offset of the `!` that starts a RAPID comment on `line` (outside
+/// string literals; strings do not span lines).
+pub fn comment_start(line: &str) -> Option<usize> {
+    let mut in_string = false;
+    for (i, b) in line.bytes().enumerate() {
+        match b {
+            b'"' => in_string = !in_string,
+            b'!' if !in_string => return Some(i),
+            _ => {}
+        }
+    }
+    None
+}
+
 /// Parses a RAPID module from text. `file` is used in error messages only.
 ///
 /// Errors read `file:line:column: what, found `text``; no input panics.

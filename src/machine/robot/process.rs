@@ -471,7 +471,7 @@ impl Directives {
         }
         let mut cur = start;
         for (k, line) in (first_line - 1..).zip(src.lines()) {
-            let Some(bang) = comment_start(line) else {
+            let Some(bang) = crate::program::rapid::comment_start(line) else {
                 continue;
             };
             let body = line.get(bang + 1..).unwrap_or("");
@@ -559,20 +559,6 @@ impl Directives {
     pub fn is_empty(&self) -> bool {
         self.at.is_empty()
     }
-}
-
-/// Byte offset of the `!` that starts a RAPID comment on `line` (outside
-/// string literals).
-fn comment_start(line: &str) -> Option<usize> {
-    let mut in_string = false;
-    for (i, b) in line.bytes().enumerate() {
-        match b {
-            b'"' => in_string = !in_string,
-            b'!' if !in_string => return Some(i),
-            _ => {}
-        }
-    }
-    None
 }
 
 /// Whitespace-separated words of `s` with their byte offsets.

@@ -160,15 +160,10 @@ fn ends_statement(code: &str) -> bool {
 
 /// The code of a line: the text before a `!` comment outside strings.
 fn code_of(line: &str) -> &str {
-    let mut in_string = false;
-    for (i, b) in line.bytes().enumerate() {
-        match b {
-            b'"' => in_string = !in_string,
-            b'!' if !in_string => return line.get(..i).unwrap_or(""),
-            _ => {}
-        }
+    match super::comment_start(line) {
+        Some(bang) => line.get(..bang).unwrap_or(""),
+        None => line,
     }
-    line
 }
 
 /// The routine keyword of a routine's first line (`[LOCAL] PROC|FUNC|TRAP`)
