@@ -206,27 +206,13 @@ pub fn mean_power(segments: &[Segment]) -> [f64; 6] {
 /// Effective (thermal) power per joint at the END of every segment, W,
 /// filtered with time constant `tau_s` from the initial state `start`.
 pub fn effective_power(segments: &[Segment], tau_s: f64, start: ThermalStart) -> Vec<[f64; 6]> {
-    let run = |x0: [f64; 6]| effective_power_from(segments, tau_s, x0);
-    let x0 = match start {
-        ThermalStart::Cold => [0.0; 6],
-        ThermalStart::WarmUpMin(m) => {
-            let f = 1.0 - (-m * 60.0 / tau_s).exp();
-            mean_power(segments).map(|p| p * f)
-        }
-        ThermalStart::Steady => {
-            // Linear filter: end(x0) = x0·e^(−T/τ) + end(0); the periodic
-            // state has end(x0) = x0.
-            let total: f64 = segments.iter().map(|s| s.duration_s).sum();
-            let decay = (-total / tau_s).exp();
-            let end0 = run([0.0; 6]).last().copied().unwrap_or([0.0; 6]);
-            if decay < 1.0 {
-                end0.map(|e| e / (1.0 - decay))
-            } else {
-                [0.0; 6]
-            }
-        }
-    };
-    run(x0)
+    // The start state of a warm start (steady: the periodic state, where
+    // end(x0) = x0·e^(−T/τ) + end(0) equals x0) follows from the totals.
+    let mut totals = TimeLineTotals::default();
+    if start != ThermalStart::Cold {
+        totals.add(segments, tau_s);
+    }
+    effective_power_from(segments, tau_s, totals.start_state(start, tau_s))
 }
 
 /// The totals of a time line met a piece at a time (a module read a window
@@ -364,6 +350,28 @@ mod tests {
                 assert_eq!(effective_power_from(&segments, tau, x0), whole, "{start:?}");
             }
         }
+        // The start states by their definitions: the steady state repeats
+        // itself at the end of the program, a warm-up is the mean power
+        // reached after `m` minutes from cold.
+        let cold = effective_power(&segments, tau, ThermalStart::Cold);
+        let total: f64 = segments.iter().map(|s| s.duration_s).sum();
+        let end0 = *cold.last().unwrap();
+        let steady_x0 = end0.map(|e| e / (1.0 - (-total / tau).exp()));
+        let steady = effective_power(&segments, tau, ThermalStart::Steady);
+        assert_eq!(steady, effective_power_from(&segments, tau, steady_x0));
+        for j in 0..6 {
+            approx::assert_relative_eq!(
+                steady.last().unwrap()[j],
+                steady_x0[j],
+                max_relative = 1e-12
+            );
+        }
+        let f = 1.0 - (-20.0 * 60.0 / tau).exp();
+        let warm_x0 = mean_power(&segments).map(|p| p * f);
+        assert_eq!(
+            effective_power(&segments, tau, ThermalStart::WarmUpMin(20.0)),
+            effective_power_from(&segments, tau, warm_x0)
+        );
         // Steady and warm-up starts are warm: the check is not vacuous.
         assert_ne!(
             effective_power(&segments, tau, ThermalStart::Steady)[0],
