@@ -359,12 +359,8 @@ mod tests {
         let steady_x0 = end0.map(|e| e / (1.0 - (-total / tau).exp()));
         let steady = effective_power(&segments, tau, ThermalStart::Steady);
         assert_eq!(steady, effective_power_from(&segments, tau, steady_x0));
-        for j in 0..6 {
-            approx::assert_relative_eq!(
-                steady.last().unwrap()[j],
-                steady_x0[j],
-                max_relative = 1e-12
-            );
+        for (end, x0) in steady.last().unwrap().iter().zip(&steady_x0) {
+            approx::assert_relative_eq!(*end, *x0, max_relative = 1e-12);
         }
         let f = 1.0 - (-20.0 * 60.0 / tau).exp();
         let warm_x0 = mean_power(&segments).map(|p| p * f);
