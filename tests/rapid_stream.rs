@@ -68,19 +68,9 @@ fn streamed_compensation_writes_the_bytes_of_the_whole_module() {
         let want = std::fs::read(&whole).expect("output");
         for lines in ["1", "2", "5", "1000"] {
             let streamed = dir.path().join(format!("s{k}_{lines}.mod"));
-            let (code, _, err) = run(&[
-                "-v",
-                "compensate",
-                "--machine",
-                m,
-                "--effects",
-                "all",
-                "--rapid-window-lines",
-                lines,
-                "-o",
-                streamed.to_str().unwrap(),
-                p,
-            ]);
+            let out = streamed.to_str().unwrap();
+            let args = ["--machine", m, "--effects", "all", "-o", out, p];
+            let (code, _, err) = run_windowed("compensate", lines, &args);
             assert_eq!(code, 0, "{p}: {err}");
             // Read a window at a time indeed (not read whole after all).
             let said = format!("read a window of {lines} lines at a time");

@@ -428,6 +428,18 @@ ENDMODULE
         )
     }
 
+    /// `MODULE M` and `n` robtarget declarations.
+    fn declarations(n: usize) -> String {
+        let mut src = String::from("MODULE M\n");
+        for k in 0..n {
+            src.push_str(&format!(
+                "  CONST robtarget p{k} := [[{},0,500],[0,0,1,0],[0,0,0,0],[9E9,9E9,9E9,9E9,9E9,9E9]];\n",
+                700 + k % 50
+            ));
+        }
+        src
+    }
+
     /// A header line the scanner sees inside what the parser reads as
     /// something else (a multi-line attribute list) is refused: the
     /// declarations' edits would land in the wrong place (second review
@@ -449,29 +461,21 @@ ENDMODULE
     /// 0.6 s whole).
     #[test]
     fn many_short_routines_after_long_declarations_are_read_whole() {
-        let mut src = String::from("MODULE M\n");
-        for k in 0..800 {
-            src.push_str(&format!(
-                "  CONST robtarget p{k} := [[{},0,500],[0,0,1,0],[0,0,0,0],[9E9,9E9,9E9,9E9,9E9,9E9]];\n",
-                700 + k % 50
-            ));
-        }
+        let mut src = declarations(800);
         assert!(src.len() >= LONG_PROLOGUE_BYTES);
         let mut few = src.clone();
-        for k in 0..300 {
-            src.push_str(&format!(
-                "  PROC r{k}()\n    MoveL p{k}, v100, z1, tool0;\n  ENDPROC\n"
-            ));
-        }
-        src.push_str("ENDMODULE\n");
+        let routines = |src: &mut String, n: usize| {
+            for k in 0..n {
+                src.push_str(&format!(
+                    "  PROC r{k}()\n    MoveL p{k}, v100, z1, tool0;\n  ENDPROC\n"
+                ));
+            }
+            src.push_str("ENDMODULE\n");
+        };
+        routines(&mut src, 300);
         assert!(shape_refused(&src, 1000));
         // A few routines after the same declarations are taken.
-        for k in 0..3 {
-            few.push_str(&format!(
-                "  PROC r{k}()\n    MoveL p{k}, v100, z1, tool0;\n  ENDPROC\n"
-            ));
-        }
-        few.push_str("ENDMODULE\n");
+        routines(&mut few, 3);
         assert!(!shape_refused(&few, 1000));
     }
 
@@ -480,13 +484,7 @@ ENDMODULE
     /// against parsing them again does not read it whole).
     #[test]
     fn a_long_routine_after_long_declarations_is_taken() {
-        let mut src = String::from("MODULE M\n");
-        for k in 0..760 {
-            src.push_str(&format!(
-                "  CONST robtarget p{k} := [[{},0,500],[0,0,1,0],[0,0,0,0],[9E9,9E9,9E9,9E9,9E9,9E9]];\n",
-                700 + k % 50
-            ));
-        }
+        let mut src = declarations(760);
         let prologue = src.len();
         src.push_str("  PROC main()\n");
         for k in 0..20000 {
