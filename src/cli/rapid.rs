@@ -190,37 +190,26 @@ fn try_streamed(
 /// `postproc check` of a RAPID module: parse, resolve and (with a robot)
 /// check that every target is reachable with its confdata.
 pub fn check(a: &CheckArgs) -> Result<i32> {
-    if let (Some(lines), Some(m)) = (window_lines(&a.program)?, a.program.machine.as_deref()) {
-        let robot = load_robot(m)?;
-        let opts = check_options();
-        let name = a.program.file.display().to_string();
-        if let Some((s, _)) =
-            try_streamed(&a.program.file, &name, &robot, &opts, lines, None, None)?
-        {
-            let mut out = std::io::stdout().lock();
-            writeln!(
-                out,
-                "{name}: module {}, {} declarations, {} routines, {} moves",
-                s.name, s.decls, s.routines, s.moves
-            )
-            .map_err(|e| Error::io("stdout", e))?;
-            return Ok(0);
+    let (name, module_name, decls, procs, moves) = match check_streamed(a)? {
+        Some(found) => found,
+        None => {
+            let (src, name) = read_program(&a.program.file)?;
+            let module = crate::program::rapid::parse_module(&src, &name)?;
+            let found = (
+                module.name.clone(),
+                module.decls.len(),
+                module.procs.len(),
+                module.moves().count(),
+            );
+            // The compensation takes the parsed module (one parse, one
+            // module in memory).
+            if let Some(m) = a.program.machine.as_deref() {
+                let robot = load_robot(m)?;
+                compensate_parsed(module, &src, &name, &robot, &check_options())?;
+            }
+            (name, found.0, found.1, found.2, found.3)
         }
-    }
-    let (src, name) = read_program(&a.program.file)?;
-    let module = crate::program::rapid::parse_module(&src, &name)?;
-    let (module_name, decls, procs, moves) = (
-        module.name.clone(),
-        module.decls.len(),
-        module.procs.len(),
-        module.moves().count(),
-    );
-    // The compensation takes the parsed module (one parse, one module in
-    // memory).
-    if let Some(m) = a.program.machine.as_deref() {
-        let robot = load_robot(m)?;
-        compensate_parsed(module, &src, &name, &robot, &check_options())?;
-    }
+    };
     let mut out = std::io::stdout().lock();
     writeln!(
         out,
@@ -228,6 +217,30 @@ pub fn check(a: &CheckArgs) -> Result<i32> {
     )
     .map_err(|e| Error::io("stdout", e))?;
     Ok(0)
+}
+
+/// What `check` prints: file name, module name, and the counts of
+/// declarations, routines and moves.
+type CheckSummary = (String, String, usize, usize, usize);
+
+/// The [`CheckSummary`] of a check against a robot read a window at a time; `None` when
+/// the module is to be read whole.
+fn check_streamed(a: &CheckArgs) -> Result<Option<CheckSummary>> {
+    let (Some(lines), Some(m)) = (window_lines(&a.program)?, a.program.machine.as_deref()) else {
+        return Ok(None);
+    };
+    let robot = load_robot(m)?;
+    let name = a.program.file.display().to_string();
+    let streamed = try_streamed(
+        &a.program.file,
+        &name,
+        &robot,
+        &check_options(),
+        lines,
+        None,
+        None,
+    )?;
+    Ok(streamed.map(|(s, _)| (name, s.name, s.decls, s.routines, s.moves)))
 }
 
 /// The options of a check: resolve and solve every target, compensate
