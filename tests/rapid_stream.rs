@@ -111,15 +111,22 @@ fn streamed_compensation_writes_the_bytes_of_the_whole_module() {
 fn streamed_check_prints_what_the_whole_module_check_prints() {
     for (module, machine) in cases() {
         let (m, p) = (machine.to_str().unwrap(), module.to_str().unwrap());
-        let whole = run(&["check", "--machine", m, p]);
-        let streamed = run_windowed("check", "2", &["--machine", m, p]);
-        assert_eq!(whole.0, 0, "{p}: {}", whole.2);
-        assert!(streamed.2.contains("at a time"), "{}", streamed.2);
-        assert_eq!(streamed.0, whole.0);
-        assert_eq!(
-            String::from_utf8_lossy(&streamed.1),
-            String::from_utf8_lossy(&whole.1)
-        );
+        // Against a robot, and of the syntax alone (no machine).
+        for machine_args in [vec!["--machine", m], vec![]] {
+            let mut args = machine_args.clone();
+            args.push(p);
+            let mut whole_args = vec!["check"];
+            whole_args.extend(&args);
+            let whole = run(&whole_args);
+            let streamed = run_windowed("check", "2", &args);
+            assert_eq!(whole.0, 0, "{p}: {}", whole.2);
+            assert!(streamed.2.contains("at a time"), "{}", streamed.2);
+            assert_eq!(streamed.0, whole.0);
+            assert_eq!(
+                String::from_utf8_lossy(&streamed.1),
+                String::from_utf8_lossy(&whole.1)
+            );
+        }
     }
 }
 
@@ -254,6 +261,10 @@ fn errors_are_those_of_the_whole_module_and_leave_nothing() {
             let check = run(&["check", "--machine", m, "--rapid-window-lines", lines, p]);
             let check_whole = run(&["check", "--machine", m, p]);
             assert_eq!((check.0, &check.2), (check_whole.0, &check_whole.2), "{p}");
+            // The syntax check (no machine) as well.
+            let syntax = run(&["check", "--rapid-window-lines", lines, p]);
+            let syntax_whole = run(&["check", p]);
+            assert_eq!(syntax, syntax_whole, "{p}");
         }
     }
     let m_out = dir.path().join("out.mod");
@@ -415,6 +426,8 @@ fn lines_outside_windows_are_held_to_the_whole_parse() {
                 (whole_check.0, &whole_check.1),
                 "case {k}"
             );
+            let syntax = run(&["check", "--rapid-window-lines", lines, p]);
+            assert_eq!(syntax, run(&["check", p]), "case {k}");
             assert_eq!((comp.0, &comp.2), (whole.0, &whole.2), "case {k}");
             assert_eq!(std::fs::read(&out).ok(), whole_out, "case {k}");
             let _ = std::fs::remove_file(&out);
@@ -468,4 +481,96 @@ fn device_and_missing_folder_outputs_behave_as_whole() {
     }
     assert_ne!(got[0].0, 0);
     assert_eq!(got[0], got[1]);
+}
+
+/// Runs `postproc ARGS…` with `input` on standard input.
+fn run_piped(args: &[&str], input: &[u8]) -> (i32, Vec<u8>, String) {
+    let out = postproc()
+        .args(args)
+        .write_stdin(input.to_vec())
+        .output()
+        .expect("runs");
+    (
+        out.status.code().unwrap_or(-1),
+        out.stdout,
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+/// A module on standard input is copied to a temporary file (from
+/// 16 MB on; whatever its length with `--rapid-window-lines`) and read a
+/// window at a time: the bytes, reports, messages and exit codes of the
+/// module read whole from standard input.
+#[test]
+fn standard_input_is_read_a_window_at_a_time() {
+    for (module, machine) in cases() {
+        let (m, p) = (machine.to_str().unwrap(), module.to_str().unwrap());
+        let src = std::fs::read(&module).expect("module");
+        for sub in [
+            vec![
+                "compensate",
+                "--machine",
+                m,
+                "--effects",
+                "all",
+                "-o",
+                "-",
+                "-",
+            ],
+            vec![
+                "compensate",
+                "--machine",
+                m,
+                "--thermal-start",
+                "steady",
+                "-o",
+                "-",
+                "-",
+            ],
+            vec!["report", "--machine", m, "--format", "csv", "-"],
+            vec!["check", "--machine", m, "-"],
+        ] {
+            let whole = run_piped(&sub, &src);
+            assert_eq!(whole.0, 0, "{p} {sub:?}: {}", whole.2);
+            let mut args = vec!["-v", sub[0], "--rapid-window-lines", "3"];
+            args.extend(&sub[1..]);
+            let streamed = run_piped(&args, &src);
+            assert!(
+                streamed.2.contains("-: read a window of 3 lines at a time"),
+                "{p} {sub:?}: {}",
+                streamed.2
+            );
+            assert_eq!(
+                (streamed.0, &streamed.1),
+                (whole.0, &whole.1),
+                "{p} {sub:?}"
+            );
+        }
+    }
+    // Errors: those of the module read whole, for every malformed module.
+    let m = repo("machines/abb-irb1600.yaml");
+    let m = m.to_str().unwrap();
+    for e in std::fs::read_dir(repo("tests/bad/programs")).expect("corpus") {
+        let p = e.expect("entry").path();
+        if p.extension().is_none_or(|x| x != "mod") {
+            continue;
+        }
+        let src = std::fs::read(&p).expect("module");
+        let whole = run_piped(&["compensate", "--machine", m, "-o", "-", "-"], &src);
+        let streamed = run_piped(
+            &[
+                "compensate",
+                "--machine",
+                m,
+                "--rapid-window-lines",
+                "2",
+                "-o",
+                "-",
+                "-",
+            ],
+            &src,
+        );
+        assert_ne!(whole.0, 0, "{p:?}");
+        assert_eq!(streamed, whole, "{p:?}");
+    }
 }

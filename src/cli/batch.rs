@@ -18,7 +18,7 @@ use super::gcode::{
     build_job, effects, parse_setup, process_setup, run_reporting, same_file, thread_pool,
     write_atomically,
 };
-use super::rapid::{load_robot, read_program, write_report};
+use super::rapid::{Source, load_robot, write_report};
 use super::{Annotate, BatchArgs, Format, ProgramArgs, usage};
 use crate::compensate::rapid::{RapidOptions, compensate_module};
 use crate::error::{Error, Result};
@@ -276,16 +276,11 @@ fn compensate_one(
                 ..*opts
             };
             // A large module is read a window at a time, as by `compensate`.
-            let big = std::fs::metadata(input)
-                .is_ok_and(|m| m.is_file() && m.len() >= super::rapid::STREAM_MIN_BYTES);
-            let window =
-                forced_window.or(big.then_some(crate::compensate::rapid::stream::WINDOW_LINES));
-            if let Some(lines) = window {
-                let name = input.display().to_string();
+            let source = Source::new(input, *forced_window)?;
+            if let Some(lines) = source.window_lines(*forced_window)? {
                 let report_file = report.map(|f| (report_path(output, f), f));
                 let streamed = super::rapid::compensate_streamed_to(
-                    input,
-                    &name,
+                    &source,
                     robot,
                     &opts,
                     lines,
@@ -302,7 +297,7 @@ fn compensate_one(
                     });
                 }
             }
-            let (src, name) = read_program(input)?;
+            let (src, name) = source.read_whole()?;
             let outcome = compensate_module(&src, &name, robot, &opts)?;
             write_atomically(output, |w| {
                 w.write_all(outcome.text.as_bytes())

@@ -107,82 +107,177 @@ pub fn robot_gains(mut e: Effects, gains: &[String]) -> Result<Effects> {
     Ok(e)
 }
 
-pub(super) fn read_program(path: &Path) -> Result<(String, String)> {
-    let name = path.display().to_string();
-    let bytes = if path == Path::new("-") {
-        let mut b = Vec::new();
-        std::io::Read::read_to_end(&mut std::io::stdin(), &mut b).map_err(|e| Error::io("-", e))?;
-        b
-    } else {
-        std::fs::read(path).map_err(|e| Error::io(path, e))?
-    };
-    // Keep the text; invalid UTF-8 gets a located error (the module itself
-    // is parsed once, by the caller).
-    let text = match String::from_utf8(bytes) {
-        Ok(t) => t,
-        Err(e) => {
-            parse_module_bytes(e.as_bytes(), &name)?;
-            return Err(usage(format!("{name}: {}", e.utf8_error())));
-        }
-    };
-    Ok((text, name))
-}
-
 /// Modules of at least this size are read a window at a time when their
 /// shape and the run allow it ([`crate::compensate::rapid::stream`]).
 pub const STREAM_MIN_BYTES: u64 = 16 << 20;
 
-/// The window size, in lines, when the module `program` names should be
-/// read a window at a time: a file (not standard input) of at least
-/// [`STREAM_MIN_BYTES`], or any file with `--rapid-window-lines`.
-fn window_lines(program: &ProgramArgs) -> Result<Option<usize>> {
-    let path = &program.file;
-    if path == Path::new("-") {
-        return Ok(None);
-    }
-    if program.rapid_window_lines == Some(0) {
-        return Err(usage("--rapid-window-lines must be at least 1"));
-    }
-    // A regular file only: the module may be read twice (after an error,
-    // or for a warm thermal start).
-    let Ok(meta) = std::fs::metadata(path) else {
-        return Ok(None);
-    };
-    if !meta.is_file() {
-        return Ok(None);
-    }
-    Ok(match program.rapid_window_lines {
-        Some(n) => Some(n),
-        None => (meta.len() >= STREAM_MIN_BYTES).then_some(stream::WINDOW_LINES),
-    })
+/// A module to read: a file, or standard input. Standard input is held in
+/// memory while it is shorter than [`STREAM_MIN_BYTES`]; a longer one is
+/// copied to an unnamed temporary file as it is read, so that it can be
+/// read a window at a time (and twice, for a warm thermal start or after
+/// an error) like a file.
+pub(super) struct Source {
+    path: PathBuf,
+    name: String,
+    stdin: Option<Stdin>,
 }
 
-/// Compensates (`body` given) or checks the module at `path` a window at a
+/// Standard input, read.
+enum Stdin {
+    Held(Vec<u8>),
+    Spilled(std::fs::File),
+}
+
+impl Source {
+    /// The module `path` names (`-`: standard input, read now; copied to
+    /// a temporary file whatever its length when `forced`, the
+    /// `--rapid-window-lines` of the run, asks for windows).
+    pub(super) fn new(path: &Path, forced: Option<usize>) -> Result<Self> {
+        let name = path.display().to_string();
+        let stdin = if path == Path::new("-") {
+            let spill_from = if forced.is_some() {
+                0
+            } else {
+                STREAM_MIN_BYTES
+            };
+            Some(read_stdin(spill_from).map_err(|e| Error::io("-", e))?)
+        } else {
+            None
+        };
+        Ok(Source {
+            path: path.to_path_buf(),
+            name,
+            stdin,
+        })
+    }
+
+    /// The name of the module in messages.
+    pub(super) fn name(&self) -> &str {
+        &self.name
+    }
+
+    /// The window size, in lines, when the module should be read a window
+    /// at a time: a regular file of at least [`STREAM_MIN_BYTES`] (standard
+    /// input copied to a file), or any regular file with `forced`
+    /// (`--rapid-window-lines`).
+    pub(super) fn window_lines(&self, forced: Option<usize>) -> Result<Option<usize>> {
+        if forced == Some(0) {
+            return Err(usage("--rapid-window-lines must be at least 1"));
+        }
+        let big = match &self.stdin {
+            Some(Stdin::Held(_)) => return Ok(None),
+            Some(Stdin::Spilled(_)) => true,
+            // A regular file only: the module may be read twice (after an
+            // error, or for a warm thermal start).
+            None => match std::fs::metadata(&self.path) {
+                Ok(meta) if meta.is_file() => meta.len() >= STREAM_MIN_BYTES,
+                _ => return Ok(None),
+            },
+        };
+        Ok(forced.or(big.then_some(stream::WINDOW_LINES)))
+    }
+
+    /// A reader of the module from its start.
+    fn open(&self) -> std::io::Result<std::io::BufReader<std::fs::File>> {
+        let file = match &self.stdin {
+            Some(Stdin::Spilled(f)) => {
+                let mut f = f.try_clone()?;
+                std::io::Seek::rewind(&mut f)?;
+                f
+            }
+            Some(Stdin::Held(_)) => {
+                return Err(std::io::Error::other("standard input is held in memory"));
+            }
+            None => std::fs::File::open(&self.path)?,
+        };
+        Ok(std::io::BufReader::with_capacity(1 << 16, file))
+    }
+
+    /// The whole module text and its name; invalid UTF-8 gets a located
+    /// error (the module itself is parsed once, by the caller).
+    pub(super) fn read_whole(self) -> Result<(String, String)> {
+        let name = self.name;
+        let bytes = match self.stdin {
+            Some(Stdin::Held(b)) => b,
+            Some(Stdin::Spilled(mut f)) => {
+                let mut b = Vec::new();
+                std::io::Seek::rewind(&mut f)
+                    .and_then(|()| std::io::Read::read_to_end(&mut f, &mut b))
+                    .map_err(|e| Error::io("-", e))?;
+                b
+            }
+            None => std::fs::read(&self.path).map_err(|e| Error::io(&self.path, e))?,
+        };
+        let text = match String::from_utf8(bytes) {
+            Ok(t) => t,
+            Err(e) => {
+                parse_module_bytes(e.as_bytes(), &name)?;
+                return Err(usage(format!("{name}: {}", e.utf8_error())));
+            }
+        };
+        Ok((text, name))
+    }
+}
+
+/// Reads standard input: held in memory while shorter than `spill_from`
+/// bytes, copied to an unnamed temporary file from there on (held whole
+/// when no temporary file can be made).
+fn read_stdin(spill_from: u64) -> std::io::Result<Stdin> {
+    use std::io::Read;
+    let mut input = std::io::stdin().lock();
+    let mut head = Vec::new();
+    (&mut input).take(spill_from).read_to_end(&mut head)?;
+    if (head.len() as u64) < spill_from {
+        return Ok(Stdin::Held(head));
+    }
+    let Ok(file) = tempfile::tempfile() else {
+        input.read_to_end(&mut head)?;
+        return Ok(Stdin::Held(head));
+    };
+    let mut spill = std::io::BufWriter::with_capacity(1 << 16, file);
+    spill.write_all(&head)?;
+    drop(head);
+    std::io::copy(&mut input, &mut spill)?;
+    let file = spill.into_inner().map_err(|e| e.into_error())?;
+    Ok(Stdin::Spilled(file))
+}
+
+/// Compensates (`body` given) or checks the module of `source` a window at a
 /// time; `None` when it is to be read whole instead (its shape, or an
 /// error that the whole-module run reports).
 fn try_streamed(
-    path: &Path,
-    name: &str,
+    source: &Source,
     robot: &Robot,
     opts: &RapidOptions,
     lines: usize,
     body: Option<&mut dyn Write>,
     records: Option<stream::RecordSink>,
 ) -> Result<Option<(stream::Streamed, String)>> {
-    let mut open =
-        || std::fs::File::open(path).map(|f| std::io::BufReader::with_capacity(1 << 16, f));
-    match stream::compensate_streamed(&mut open, name, robot, opts, lines, body, records) {
+    let name = source.name();
+    let mut open = || source.open();
+    let done = stream::compensate_streamed(&mut open, name, robot, opts, lines, body, records);
+    Ok(windowed(name, lines, done))
+}
+
+/// The result of a run read a window at a time, logged; `None` (logged
+/// why) when the module is to be read whole.
+fn windowed<T>(
+    name: &str,
+    lines: usize,
+    run: std::result::Result<T, stream::Fallback>,
+) -> Option<T> {
+    match run {
         Ok(done) => {
             tracing::info!("{name}: read a window of {lines} lines at a time");
-            Ok(Some(done))
+            Some(done)
         }
         Err(stream::Fallback::Shape(why)) => {
             tracing::info!("{name}: read whole: {}", why.0);
-            Ok(None)
+            None
         }
         Err(stream::Fallback::Error(e)) => {
             tracing::debug!("{name}: read whole after an error in a window: {e}");
-            Ok(None)
+            None
         }
     }
 }
@@ -190,10 +285,11 @@ fn try_streamed(
 /// `postproc check` of a RAPID module: parse, resolve and (with a robot)
 /// check that every target is reachable with its confdata.
 pub fn check(a: &CheckArgs) -> Result<i32> {
-    let (name, module_name, decls, procs, moves) = match check_streamed(a)? {
+    let source = Source::new(&a.program.file, a.program.rapid_window_lines)?;
+    let (name, module_name, decls, procs, moves) = match check_streamed(a, &source)? {
         Some(found) => found,
         None => {
-            let (src, name) = read_program(&a.program.file)?;
+            let (src, name) = source.read_whole()?;
             let module = crate::program::rapid::parse_module(&src, &name)?;
             let found = (
                 module.name.clone(),
@@ -223,23 +319,25 @@ pub fn check(a: &CheckArgs) -> Result<i32> {
 /// declarations, routines and moves.
 type CheckSummary = (String, String, usize, usize, usize);
 
-/// The [`CheckSummary`] of a check against a robot read a window at a time; `None` when
+/// The [`CheckSummary`] of a check read a window at a time (against the
+/// robot of `--machine`, or of the syntax alone without one); `None` when
 /// the module is to be read whole.
-fn check_streamed(a: &CheckArgs) -> Result<Option<CheckSummary>> {
-    let (Some(lines), Some(m)) = (window_lines(&a.program)?, a.program.machine.as_deref()) else {
+fn check_streamed(a: &CheckArgs, source: &Source) -> Result<Option<CheckSummary>> {
+    let Some(lines) = source.window_lines(a.program.rapid_window_lines)? else {
         return Ok(None);
     };
+    let name = source.name().to_string();
+    let Some(m) = a.program.machine.as_deref() else {
+        let reader = source.open().map_err(|e| Error::io(&name, e))?;
+        let found = windowed(
+            &name,
+            lines,
+            stream::check_syntax_streamed(reader, &name, lines),
+        );
+        return Ok(found.map(|s| (name, s.name, s.decls, s.routines, s.moves)));
+    };
     let robot = load_robot(m)?;
-    let name = a.program.file.display().to_string();
-    let streamed = try_streamed(
-        &a.program.file,
-        &name,
-        &robot,
-        &check_options(),
-        lines,
-        None,
-        None,
-    )?;
+    let streamed = try_streamed(source, &robot, &check_options(), lines, None, None)?;
     Ok(streamed.map(|(s, _)| (name, s.name, s.decls, s.routines, s.moves)))
 }
 
@@ -391,8 +489,8 @@ pub fn compensate(a: &CompensateArgs) -> Result<i32> {
     let pool = pool
         .build()
         .map_err(|e| usage(format!("cannot start worker threads: {e}")))?;
-    if let Some(lines) = window_lines(&a.program)? {
-        let name = input.display().to_string();
+    let source = Source::new(input, a.program.rapid_window_lines)?;
+    if let Some(lines) = source.window_lines(a.program.rapid_window_lines)? {
         let report = a.report.as_deref().map(|path| {
             let format = a
                 .report_format
@@ -400,14 +498,14 @@ pub fn compensate(a: &CompensateArgs) -> Result<i32> {
             (path, format)
         });
         let outcome = pool.install(|| {
-            compensate_streamed_to(input, &name, &robot, &opts, lines, Some(&out_path), report)
+            compensate_streamed_to(&source, &robot, &opts, lines, Some(&out_path), report)
         })?;
         if let Some(outcome) = outcome {
             log_outcome(&out_path, &outcome);
             return Ok(0);
         }
     }
-    let (src, name) = read_program(input)?;
+    let (src, name) = source.read_whole()?;
     let outcome = pool.install(|| compensate_module(&src, &name, &robot, &opts))?;
     if out_path == Path::new("-") {
         let mut stdout = std::io::stdout().lock();
@@ -480,8 +578,7 @@ fn write_spilled(path: &Path, head: &str, spill: std::io::BufWriter<std::fs::Fil
 /// their outputs as they are made, then to the outputs (atomically, as
 /// always). `None` when the module is to be read whole.
 pub(super) fn compensate_streamed_to(
-    input: &Path,
-    name: &str,
+    source: &Source,
     robot: &Robot,
     opts: &RapidOptions,
     lines: usize,
@@ -489,6 +586,7 @@ pub(super) fn compensate_streamed_to(
     report: Option<(&Path, super::Format)>,
 ) -> Result<Option<RapidOutcome>> {
     use crate::emit::report::{Layout, ReportWriter};
+    let name = source.name();
     let spill = |p: &Path| spill_beside(p).map(|f| std::io::BufWriter::with_capacity(1 << 16, f));
     let mut body = match out_path {
         Some(p) => match spill(p) {
@@ -518,8 +616,7 @@ pub(super) fn compensate_streamed_to(
         }
     };
     let streamed = try_streamed(
-        input,
-        name,
+        source,
         robot,
         &RapidOptions {
             records: report.is_some(),
@@ -607,16 +704,14 @@ pub fn report(a: &ReportArgs) -> Result<i32> {
     let opts = rapid_options(&robot, &a.effects, false, None)?;
     let out = a.output.clone().unwrap_or_else(|| PathBuf::from("-"));
     super::gcode::refuse_overwrite(&out, &[&a.program.file])?;
-    if let Some(lines) = window_lines(&a.program)? {
-        let name = a.program.file.display().to_string();
+    let source = Source::new(&a.program.file, a.program.rapid_window_lines)?;
+    if let Some(lines) = source.window_lines(a.program.rapid_window_lines)? {
         let report = Some((out.as_path(), a.format));
-        if compensate_streamed_to(&a.program.file, &name, &robot, &opts, lines, None, report)?
-            .is_some()
-        {
+        if compensate_streamed_to(&source, &robot, &opts, lines, None, report)?.is_some() {
             return Ok(0);
         }
     }
-    let (src, name) = read_program(&a.program.file)?;
+    let (src, name) = source.read_whole()?;
     let outcome = compensate_module(&src, &name, &robot, &opts)?;
     super::gcode::emit_to(&out, |w| write_report(w, &outcome, &name, a.format))?;
     Ok(0)

@@ -120,7 +120,7 @@ pub fn compensate_streamed<R: BufRead>(
         pass(
             reader,
             file,
-            robot,
+            Some(robot),
             &first_opts,
             window_lines,
             &mut first,
@@ -134,7 +134,7 @@ pub fn compensate_streamed<R: BufRead>(
     pass(
         reader,
         file,
-        robot,
+        Some(robot),
         opts,
         window_lines,
         &mut carry,
@@ -143,12 +143,44 @@ pub fn compensate_streamed<R: BufRead>(
     )
 }
 
-/// One pass over the module in `reader`, from the state in `carry`.
+/// Checks the syntax of the module that `reader` reads (named `file` in
+/// messages) a window of `window_lines` lines at a time, as `check` without
+/// a machine does with the module read whole: every window is parsed,
+/// nothing is resolved or solved. The outcome counts the moves.
+pub fn check_syntax_streamed<R: BufRead>(
+    reader: R,
+    file: &str,
+    window_lines: usize,
+) -> std::result::Result<Streamed, Fallback> {
+    let opts = RapidOptions {
+        effects: crate::machine::robot::Effects::NONE,
+        annotate: false,
+        format: crate::emit::rapid::Format::default(),
+        thermal_start: ThermalStart::Cold,
+        records: false,
+    };
+    let mut carry = Carry::default();
+    let (streamed, _) = pass(
+        reader,
+        file,
+        None,
+        &opts,
+        window_lines,
+        &mut carry,
+        None,
+        None,
+    )?;
+    Ok(streamed)
+}
+
+/// One pass over the module in `reader`, from the state in `carry`;
+/// without a robot, only the windows' syntax (nothing is resolved,
+/// compensated or written).
 #[allow(clippy::too_many_arguments)]
 fn pass<R: BufRead>(
     reader: R,
     file: &str,
-    robot: &Robot,
+    robot: Option<&Robot>,
     opts: &RapidOptions,
     window_lines: usize,
     carry: &mut Carry,
@@ -157,7 +189,10 @@ fn pass<R: BufRead>(
 ) -> std::result::Result<(Streamed, String), Fallback> {
     let mut w = Windows::new(reader, window_lines, WINDOW_BYTES)?;
     let prologue_len = w.prologue().len();
-    let mut cut = Directives::parse_lines(w.prologue(), file, 1, CutSettings::default())?.last();
+    let mut cut = CutSettings::default();
+    if robot.is_some() {
+        cut = Directives::parse_lines(w.prologue(), file, 1, cut)?.last();
+    }
     let mut decls: Option<(String, Vec<Span>)> = None;
     let mut moves = 0;
     let (mut reparsed, mut routine_bytes) = (0usize, 0usize);
@@ -172,7 +207,9 @@ fn pass<R: BufRead>(
     while let Some(piece) = w.next_piece()? {
         match piece {
             Piece::Verbatim { text, line } => {
-                cut = Directives::parse_lines(&text, file, line, cut)?.last();
+                if robot.is_some() {
+                    cut = Directives::parse_lines(&text, file, line, cut)?.last();
+                }
                 write(&text)?;
             }
             Piece::Window {
@@ -240,6 +277,7 @@ fn pass<R: BufRead>(
                     .into());
                 }
                 moves += module.moves().count();
+                let Some(robot) = robot else { continue };
                 let directives = Directives::parse_lines(&lines, file, line, cut)?;
                 cut = directives.last();
                 let start = prologue_len + header.len();
@@ -265,8 +303,19 @@ fn pass<R: BufRead>(
     let mut edits = std::mem::take(&mut carry.before);
     carry.push_inserts(w.prologue(), &spans, &mut edits);
     let prologue = edits.apply(w.prologue())?;
+    let outcome = match robot {
+        Some(robot) => carry.outcome(robot, opts),
+        None => RapidOutcome {
+            text: String::new(),
+            moves,
+            added: 0,
+            max_deviation_mm: 0.0,
+            max_deviation_line: 0,
+            records: Vec::new(),
+        },
+    };
     let streamed = Streamed {
-        outcome: carry.outcome(robot, opts),
+        outcome,
         name,
         decls: spans.len(),
         routines: w.routines(),
