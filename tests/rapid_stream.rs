@@ -1,5 +1,5 @@
 //! Integration tests: RAPID modules read a window at a time
-//! (`--rapid-window-lines`, the default for modules of 16 MB and more)
+//! (`--rapid-window-lines`, the default for modules of 1 MB and more)
 //! give, through the binary, the bytes, messages and exit codes of the
 //! module read whole.
 
@@ -498,7 +498,7 @@ fn run_piped(args: &[&str], input: &[u8]) -> (i32, Vec<u8>, String) {
 }
 
 /// A module on standard input is copied to a temporary file (from
-/// 16 MB on; whatever its length with `--rapid-window-lines`) and read a
+/// 1 MB on; whatever its length with `--rapid-window-lines`) and read a
 /// window at a time: the bytes, reports, messages and exit codes of the
 /// module read whole from standard input.
 #[test]
@@ -573,4 +573,69 @@ fn standard_input_is_read_a_window_at_a_time() {
         assert_ne!(whole.0, 0, "{p:?}");
         assert_eq!(streamed, whole, "{p:?}");
     }
+}
+
+/// Modules of 1 MB and more are read a window at a time by default; with a
+/// warm thermal start (a first pass over the module) only from 16 MB on.
+/// The same module on standard input is copied to a temporary file and
+/// taken the same way.
+#[test]
+fn windows_are_taken_from_one_megabyte_on_and_from_sixteen_with_a_warm_start() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let mut src = String::from("MODULE Big\n  PROC main()\n");
+    let mut k = 0;
+    while src.len() < (1 << 20) {
+        src.push_str(&format!(
+            "    MoveL [[{},{},400],[0,0,1,0],[0,0,0,0],[9E9,9E9,9E9,9E9,9E9,9E9]],v200,z1,tool0;\n",
+            700 + k % 50,
+            k % 40
+        ));
+        k += 1;
+    }
+    src.push_str("  ENDPROC\nENDMODULE\n");
+    let big = dir.path().join("big.mod");
+    std::fs::write(&big, &src).expect("write");
+    let b = big.to_str().unwrap();
+    let out = dir.path().join("out.mod");
+    let o = out.to_str().unwrap();
+    let said = |err: &str| err.contains("read a window of 8192 lines at a time");
+    let (code, _, err) = run(&["-v", "check", b]);
+    assert!(code == 0 && said(&err), "{err}");
+    let (code, _, err) = run(&["-v", "check", "--machine", "abb-irb1600", b]);
+    assert!(code == 0 && said(&err), "{err}");
+    let (code, _, err) = run(&["-v", "compensate", "--machine", "abb-irb1600", "-o", o, b]);
+    assert!(code == 0 && said(&err), "{err}");
+    let cold = std::fs::read(&out).expect("output");
+    let piped = run_piped(
+        &[
+            "-v",
+            "compensate",
+            "--machine",
+            "abb-irb1600",
+            "-o",
+            "-",
+            "-",
+        ],
+        src.as_bytes(),
+    );
+    assert!(said(&piped.2), "{}", piped.2);
+    assert_eq!((piped.0, &piped.1), (0, &cold));
+    let steady = [
+        "-v",
+        "compensate",
+        "--machine",
+        "abb-irb1600",
+        "--thermal-start",
+        "steady",
+        "-o",
+        o,
+        b,
+    ];
+    let (code, _, err) = run(&steady);
+    assert!(code == 0 && !err.contains("at a time"), "{err}");
+    // Without the thermal effect there is no first pass: windows again.
+    let mut no_thermal = steady.to_vec();
+    no_thermal.splice(4..4, ["--effects", "geometric"]);
+    let (code, _, err) = run(&no_thermal);
+    assert!(code == 0 && said(&err), "{err}");
 }

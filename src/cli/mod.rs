@@ -77,7 +77,8 @@ pub struct BatchArgs {
     #[arg(long)]
     pub out_dir: PathBuf,
     /// Read RAPID modules a window of this many lines at a time whatever
-    /// their size (those of 16 MB and more are read so by default; for
+    /// their size (those of 1 MB and more are read so by default, 16 MB with
+    /// a warm thermal start; for
     /// tests).
     #[arg(long = "rapid-window-lines", value_name = "LINES", hide = true)]
     pub rapid_window_lines: Option<usize>,
@@ -118,7 +119,8 @@ pub struct ProgramArgs {
     #[arg(long = "work-offset", value_name = "GXX=X,Y,Z")]
     pub work_offsets: Vec<String>,
     /// Read a RAPID module a window of this many lines at a time whatever
-    /// its size (modules of 16 MB and more are read so by default; for
+    /// its size (modules of 1 MB and more are read so by default, 16 MB
+    /// with a warm thermal start; for
     /// tests).
     #[arg(long = "rapid-window-lines", value_name = "LINES", hide = true)]
     pub rapid_window_lines: Option<usize>,

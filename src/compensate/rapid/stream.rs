@@ -105,8 +105,7 @@ pub fn compensate_streamed<R: BufRead>(
     records: Option<RecordSink>,
 ) -> std::result::Result<(Streamed, String), Fallback> {
     let mut carry = Carry::default();
-    let thermal = robot.thermal().filter(|_| opts.effects.thermal != 0.0);
-    if let Some(t) = thermal.filter(|_| opts.thermal_start != ThermalStart::Cold) {
+    if let Some(t) = robot.thermal().filter(|_| first_pass(robot, opts)) {
         let mut first = Carry {
             time_line: Some(TimeLineTotals::default()),
             ..Carry::default()
@@ -141,6 +140,14 @@ pub fn compensate_streamed<R: BufRead>(
         body,
         records,
     )
+}
+
+/// Whether [`compensate_streamed`] takes a first pass over the module: a
+/// thermal time line that starts from the program's own mean power.
+pub fn first_pass(robot: &Robot, opts: &RapidOptions) -> bool {
+    robot.thermal().is_some()
+        && opts.effects.thermal != 0.0
+        && opts.thermal_start != ThermalStart::Cold
 }
 
 /// Checks the syntax of the module that `reader` reads (named `file` in
