@@ -396,3 +396,215 @@ fn regression_rapid_first_failing_move_across_chunks() {
         }
     }
 }
+
+/// Runs `postproc ARGS…` in `dir`: exit code and stderr.
+fn run_in(dir: &std::path::Path, args: &[&str]) -> (Option<i32>, String) {
+    let out = postproc().current_dir(dir).args(args).output().unwrap();
+    (
+        out.status.code(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+/// Outputs were checked against the program only: `-o` or `--report` on
+/// the machine file or the force table replaced it, and two spellings of
+/// one new file (`out.nc`, `./out.nc`) or a hard link of the program were
+/// taken for different files (audit of session 11).
+#[test]
+fn regression_outputs_never_overwrite_any_input_in_any_spelling() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    std::fs::copy(repo("machines/afm-r1000.yaml"), d.join("m.yaml")).unwrap();
+    std::fs::copy(repo("machines/abb-irb1600.yaml"), d.join("r.yaml")).unwrap();
+    std::fs::copy(repo("samples/part.nc"), d.join("p.nc")).unwrap();
+    std::fs::copy(repo("samples/drilling.mod"), d.join("d.mod")).unwrap();
+    std::fs::write(d.join("f.csv"), "line,fx_n,fy_n,fz_n\n3,100,0,0\n").unwrap();
+    std::fs::hard_link(d.join("p.nc"), d.join("hard.nc")).unwrap();
+    std::fs::create_dir(d.join("sub")).unwrap();
+    let before: Vec<(String, Vec<u8>)> = ["m.yaml", "r.yaml", "p.nc", "d.mod", "f.csv"]
+        .iter()
+        .map(|f| (f.to_string(), std::fs::read(d.join(f)).unwrap()))
+        .collect();
+    let cases: &[(&[&str], &str)] = &[
+        (
+            &["compensate", "p.nc", "-m", "m.yaml", "-o", "m.yaml"],
+            "output would overwrite the input",
+        ),
+        (
+            &["compensate", "p.nc", "-m", "m.yaml", "-o", "./m.yaml"],
+            "output would overwrite the input",
+        ),
+        (
+            &[
+                "compensate",
+                "p.nc",
+                "-m",
+                "m.yaml",
+                "-o",
+                "o.nc",
+                "--report",
+                "sub/../m.yaml",
+            ],
+            "report would overwrite the input",
+        ),
+        (
+            &[
+                "compensate",
+                "p.nc",
+                "-m",
+                "m.yaml",
+                "--force-table",
+                "f.csv",
+                "-o",
+                "f.csv",
+            ],
+            "output would overwrite the input",
+        ),
+        (
+            &[
+                "report",
+                "p.nc",
+                "-m",
+                "m.yaml",
+                "--force-table",
+                "f.csv",
+                "-o",
+                "./f.csv",
+            ],
+            "output would overwrite the input",
+        ),
+        (
+            &["report", "p.nc", "-m", "m.yaml", "-o", "m.yaml"],
+            "output would overwrite the input",
+        ),
+        (
+            &["report", "d.mod", "-m", "r.yaml", "-o", "r.yaml"],
+            "output would overwrite the input",
+        ),
+        (
+            &[
+                "compensate",
+                "d.mod",
+                "-m",
+                "r.yaml",
+                "-o",
+                "o.mod",
+                "--report",
+                "./r.yaml",
+            ],
+            "report would overwrite the input",
+        ),
+        (
+            &[
+                "compensate",
+                "p.nc",
+                "-m",
+                "m.yaml",
+                "-o",
+                "out.nc",
+                "--report",
+                "./out.nc",
+            ],
+            "report would overwrite the output",
+        ),
+        (
+            &[
+                "compensate",
+                "d.mod",
+                "-m",
+                "r.yaml",
+                "-o",
+                "out.mod",
+                "--report",
+                "sub/../out.mod",
+            ],
+            "report would overwrite the output",
+        ),
+        (
+            &["compensate", "p.nc", "-m", "m.yaml", "-o", "hard.nc"],
+            "output would overwrite the input",
+        ),
+    ];
+    for (args, want) in cases {
+        let (code, err) = run_in(d, args);
+        assert_eq!(code, Some(2), "{args:?}: {err}");
+        assert!(err.contains(want), "{args:?}: {err}");
+    }
+    for (f, bytes) in &before {
+        assert_eq!(&std::fs::read(d.join(f)).unwrap(), bytes, "{f} changed");
+    }
+    let mut left: Vec<String> = std::fs::read_dir(d)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    left.sort();
+    assert_eq!(
+        left,
+        [
+            "d.mod", "f.csv", "hard.nc", "m.yaml", "p.nc", "r.yaml", "sub"
+        ]
+    );
+}
+
+/// `calibrate` printed its summary with `print!`, which panicked (exit
+/// 101) when standard output failed, after the model was written; it must
+/// fail with exit 2 and write nothing (audit of session 11).
+#[test]
+fn regression_calibrate_on_a_failing_stdout_exits_2_and_writes_nothing() {
+    if !std::path::Path::new("/dev/full").exists() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let out_yaml = dir.path().join("c.yaml");
+    let out = std::process::Command::new(assert_cmd::cargo::cargo_bin("postproc"))
+        .args([
+            "calibrate",
+            "kinematics",
+            "--machine",
+            "abb-irb1600",
+            "--observations",
+        ])
+        .arg(repo("samples/observations/irb1600-kinematic-measured.csv"))
+        .arg("-o")
+        .arg(&out_yaml)
+        .stdout(std::fs::File::create("/dev/full").unwrap())
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{err}");
+    assert!(err.contains("stdout"), "{err}");
+    assert!(!err.contains("panicked"), "{err}");
+    assert!(!out_yaml.exists());
+}
+
+/// `simulate --noise-um-per-m 1e308` wrote `-inf` coordinates and
+/// `--noise-um 1e9` 300-digit ones: noise beyond 10 mm is refused
+/// (audit of session 11).
+#[test]
+fn regression_simulate_refuses_absurd_noise() {
+    let dir = tempfile::tempdir().unwrap();
+    let out_csv = dir.path().join("s.csv");
+    for (flag, v) in [
+        ("--noise-um-per-m", "1e308"),
+        ("--noise-um", "1e9"),
+        ("--noise-um=-1", ""),
+        ("--noise-um", "NaN"),
+    ] {
+        let out = postproc()
+            .args(["simulate", "--machine", "abb-irb1600", "--observations"])
+            .arg(repo("samples/observations/irb1600-kinematic-poses.csv"))
+            .args([flag, v].into_iter().filter(|a| !a.is_empty()))
+            .arg("-o")
+            .arg(&out_csv)
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{flag} {v}: {err}");
+        let name = flag.split('=').next().unwrap_or(flag);
+        assert!(
+            err.contains(&format!("{name} must be a number within 0..10000")),
+            "{err}"
+        );
+        assert!(!out_csv.exists());
+    }
+}

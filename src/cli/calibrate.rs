@@ -83,12 +83,18 @@ fn read_machine(name: &str) -> Result<(String, String)> {
     Ok((text, path.display().to_string()))
 }
 
+/// Largest simulated measurement noise, µm (and µm per metre): 10 mm, far
+/// beyond any metrology instrument, keeps every simulated coordinate within
+/// the observation files' magnitude limit.
+const MAX_NOISE_UM: f64 = 1e4;
+
 fn non_negative(flag: &str, v: f64) -> Result<()> {
-    if v.is_finite() && v >= 0.0 {
+    if v.is_finite() && (0.0..=MAX_NOISE_UM).contains(&v) {
         Ok(())
     } else {
         Err(usage(format!(
-            "{flag} must be a finite number ≥ 0, got {v}"
+            "{flag} must be a number within 0..{MAX_NOISE_UM}, got {}",
+            crate::error::show_number(v)
         )))
     }
 }
@@ -156,11 +162,19 @@ pub fn run_calibrate(a: &CalibrateArgs) -> Result<i32> {
         &a.output,
         &[&a.observations, &Machine::resolve(&a.machine)?],
     )?;
+    // The summary first: standard output that fails (closed, full) fails
+    // the run before the model is written.
+    let mut stdout = std::io::stdout().lock();
+    let say = |out: &mut std::io::StdoutLock, text: &str| {
+        out.write_all(text.as_bytes())
+            .and_then(|()| out.flush())
+            .map_err(|e| Error::io("stdout", e))
+    };
+    say(&mut stdout, &cal.to_string())?;
     write_atomically(&a.output, |w| {
         w.write_all(yaml.as_bytes())
             .map_err(|e| Error::io(&a.output, e))
     })?;
-    print!("{cal}");
-    println!("wrote {}", a.output.display());
+    say(&mut stdout, &format!("wrote {}\n", a.output.display()))?;
     Ok(0)
 }

@@ -314,12 +314,12 @@ pub fn default_output(input: &Path) -> PathBuf {
 /// Refuses an output path that is one of the command's input files (stdout
 /// `-` and stdin are never the same file). Every command that writes a file
 /// calls this before writing.
-pub fn refuse_overwrite(out: &Path, inputs: &[&Path]) -> Result<()> {
+pub fn refuse_overwrite<P: AsRef<Path>>(out: &Path, inputs: &[P]) -> Result<()> {
     if out == Path::new("-") {
         return Ok(());
     }
-    for input in inputs {
-        if *input != Path::new("-") && (out == *input || same_file(input, out)) {
+    for input in inputs.iter().map(AsRef::as_ref) {
+        if input != Path::new("-") && (out == input || same_file(input, out)) {
             return Err(usage(format!(
                 "{}: the output would overwrite the input",
                 out.display()
@@ -329,11 +329,36 @@ pub fn refuse_overwrite(out: &Path, inputs: &[&Path]) -> Result<()> {
     Ok(())
 }
 
+/// Whether the paths `a` and `b` name the same file: the same device and
+/// inode when both exist (symbolic and hard links included), else the same
+/// path once the folders are resolved (for a file not made yet: `./x`,
+/// `d/../x` and an absolute spelling are one file).
 pub(super) fn same_file(a: &Path, b: &Path) -> bool {
-    match (a.canonicalize(), b.canonicalize()) {
-        (Ok(x), Ok(y)) => x == y,
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::MetadataExt;
+        if let (Ok(x), Ok(y)) = (std::fs::metadata(a), std::fs::metadata(b)) {
+            return x.dev() == y.dev() && x.ino() == y.ino();
+        }
+    }
+    match (resolved(a), resolved(b)) {
+        (Some(x), Some(y)) => x == y,
         _ => false,
     }
+}
+
+/// `path` with its links, `.` and `..` resolved, also when the file itself
+/// does not exist yet (its folder is resolved and its name joined).
+fn resolved(path: &Path) -> Option<PathBuf> {
+    if let Ok(p) = path.canonicalize() {
+        return Some(p);
+    }
+    let name = path.file_name()?;
+    let dir = match path.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p,
+        _ => Path::new("."),
+    };
+    Some(dir.canonicalize().ok()?.join(name))
 }
 
 /// Writes through a temporary file in the target directory and renames it
@@ -465,14 +490,19 @@ fn machine_setup(program: &ProgramArgs, command: &str) -> Result<(MachineTool, S
 }
 
 /// Refuses a `--report` path that would replace the input or the output.
-pub(super) fn check_report_path(report: Option<&Path>, input: &Path, output: &Path) -> Result<()> {
+pub(super) fn check_report_path(
+    report: Option<&Path>,
+    inputs: &[PathBuf],
+    output: &Path,
+) -> Result<()> {
     let Some(report) = report else {
         return Ok(());
     };
     if report == Path::new("-") {
         return Err(usage("--report needs a file path (the program goes to -o)"));
     }
-    for (other, what) in [(input, "input"), (output, "output")] {
+    let named = inputs.iter().map(|p| (p.as_path(), "input"));
+    for (other, what) in named.chain([(output, "output")]) {
         if other != Path::new("-") && (report == other || same_file(report, other)) {
             return Err(usage(format!(
                 "{}: the report would overwrite the {what}",
@@ -481,6 +511,17 @@ pub(super) fn check_report_path(report: Option<&Path>, input: &Path, output: &Pa
         }
     }
     Ok(())
+}
+
+/// The files a run reads: the program, the machine file and the force
+/// table (none of them may be an output).
+pub(super) fn input_files(program: &ProgramArgs, effects: &EffectArgs) -> Result<Vec<PathBuf>> {
+    let mut files = vec![program.file.clone()];
+    if let Some(m) = &program.machine {
+        files.push(crate::machine::Machine::resolve(m)?);
+    }
+    files.extend(effects.force_table.clone());
+    Ok(files)
 }
 
 /// Writes to `path` atomically, or to standard output for `-`.
@@ -579,8 +620,9 @@ pub fn compensate(a: &CompensateArgs) -> Result<i32> {
         None if input_path == Path::new("-") => PathBuf::from("-"),
         None => default_output(input_path),
     };
-    refuse_overwrite(&out_path, &[input_path])?;
-    check_report_path(a.report.as_deref(), input_path, &out_path)?;
+    let inputs = input_files(&a.program, &a.effects)?;
+    refuse_overwrite(&out_path, &inputs)?;
+    check_report_path(a.report.as_deref(), &inputs, &out_path)?;
     let (input, file) = open_input(input_path)?;
     let summary: Summary = match &a.report {
         Some(report_path) => {
@@ -633,7 +675,7 @@ pub fn report(a: &ReportArgs) -> Result<i32> {
     let job = run.job(0.001, None, false)?;
     let (input, file) = open_input(&a.program.file)?;
     let out = a.output.clone().unwrap_or_else(|| PathBuf::from("-"));
-    refuse_overwrite(&out, &[&a.program.file])?;
+    refuse_overwrite(&out, &input_files(&a.program, &a.effects)?)?;
     emit_to(&out, |w| {
         run_reporting(&job, input, &file, None, w, &run.setup, a.format)
     })?;

@@ -495,8 +495,9 @@ pub fn compensate(a: &CompensateArgs) -> Result<i32> {
         None if input == Path::new("-") => PathBuf::from("-"),
         None => default_output(input),
     };
-    super::gcode::refuse_overwrite(&out_path, &[input])?;
-    super::gcode::check_report_path(a.report.as_deref(), input, &out_path)?;
+    let inputs = super::gcode::input_files(&a.program, &a.effects)?;
+    super::gcode::refuse_overwrite(&out_path, &inputs)?;
+    super::gcode::check_report_path(a.report.as_deref(), &inputs, &out_path)?;
     let mut pool = rayon::ThreadPoolBuilder::new();
     if let Some(n) = a.effects.threads {
         if n == 0 {
@@ -724,7 +725,7 @@ pub fn report(a: &ReportArgs) -> Result<i32> {
     }
     let opts = rapid_options(&robot, &a.effects, false, None)?;
     let out = a.output.clone().unwrap_or_else(|| PathBuf::from("-"));
-    super::gcode::refuse_overwrite(&out, &[&a.program.file])?;
+    super::gcode::refuse_overwrite(&out, &super::gcode::input_files(&a.program, &a.effects)?)?;
     let source = Source::new(&a.program.file, a.program.rapid_window_lines)?;
     if let Some(lines) = source.window_lines(
         a.program.rapid_window_lines,
