@@ -639,3 +639,132 @@ fn windows_are_taken_from_one_megabyte_on_and_from_sixteen_with_a_warm_start() {
     let (code, _, err) = run(&no_thermal);
     assert!(code == 0 && said(&err), "{err}");
 }
+
+/// Review of session 11: a module read a window at a time named standard
+/// output `-` in write errors (read whole: `stdout`, `report`); a check
+/// against a machine that cannot be loaded put the machine's error before
+/// the module's syntax error (read whole: the module is parsed first);
+/// `--rapid-window-lines 0` on standard input is refused before it is read.
+#[test]
+fn errors_of_windows_read_as_the_whole_module_s() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let src = std::fs::read_to_string(repo("samples/drilling.mod")).expect("module");
+    let good = dir.path().join("good.mod");
+    std::fs::write(&good, &src).expect("write");
+    let bad = dir.path().join("bad.mod");
+    std::fs::write(&bad, src.replace("ENDMODULE", "")).expect("write");
+    let (g, b) = (good.to_str().unwrap(), bad.to_str().unwrap());
+    let full = std::path::Path::new("/dev/full");
+    for args in [
+        vec!["compensate", "--machine", "abb-irb1600", "-o", "-", g],
+        vec!["report", "--machine", "abb-irb1600", g],
+    ] {
+        if !full.exists() {
+            break;
+        }
+        let mut windowed = args.clone();
+        windowed.splice(1..1, ["--rapid-window-lines", "2"]);
+        let outputs: Vec<(Option<i32>, String)> = [args, windowed]
+            .iter()
+            .map(|a| {
+                let out = std::process::Command::new(assert_cmd::cargo::cargo_bin("postproc"))
+                    .args(a)
+                    .stdout(std::fs::File::create(full).expect("/dev/full"))
+                    .output()
+                    .expect("runs");
+                (
+                    out.status.code(),
+                    String::from_utf8_lossy(&out.stderr).into_owned(),
+                )
+            })
+            .collect();
+        assert_eq!(outputs[0], outputs[1]);
+        assert_eq!(outputs[0].0, Some(2));
+        assert!(!outputs[0].1.contains(" -:"), "{}", outputs[0].1);
+    }
+    for machine in ["nosuch", "afm-r1000", "abb-irb1600"] {
+        for p in [g, b] {
+            let whole = run(&["check", "--machine", machine, p]);
+            let windowed = run(&[
+                "check",
+                "--machine",
+                machine,
+                "--rapid-window-lines",
+                "2",
+                p,
+            ]);
+            assert_eq!(windowed, whole, "{machine} {p}");
+        }
+    }
+    let whole_bad = run(&["check", "--machine", "nosuch", b]);
+    assert!(whole_bad.2.contains("without ENDMODULE"), "{}", whole_bad.2);
+    let zero = run_piped(
+        &[
+            "compensate",
+            "--machine",
+            "abb-irb1600",
+            "--rapid-window-lines",
+            "0",
+            "-o",
+            "-",
+            "-",
+        ],
+        src.as_bytes(),
+    );
+    assert_eq!(zero.0, 2);
+    assert!(
+        zero.2.contains("--rapid-window-lines must be at least 1"),
+        "{}",
+        zero.2
+    );
+}
+
+/// Review of session 11: standard input with a warm thermal start is held
+/// in memory below 16 MB (windows only from there on), not copied to a
+/// temporary file to be read back whole; and standard input is held in
+/// memory when no temporary file can be made.
+#[test]
+fn standard_input_is_copied_only_when_windows_will_read_it() {
+    let mut src = String::from("MODULE Big\n  PROC main()\n");
+    let mut k = 0;
+    while src.len() < (1 << 20) {
+        src.push_str(&format!(
+            "    MoveL [[{},{},400],[0,0,1,0],[0,0,0,0],[9E9,9E9,9E9,9E9,9E9,9E9]],v200,z1,tool0;\n",
+            700 + k % 50,
+            k % 40
+        ));
+        k += 1;
+    }
+    src.push_str("  ENDPROC\nENDMODULE\n");
+    let args = |start: &'static str| {
+        vec![
+            "-v",
+            "compensate",
+            "--machine",
+            "abb-irb1600",
+            "--thermal-start",
+            start,
+            "-o",
+            "-",
+            "-",
+        ]
+    };
+    let cold = run_piped(&args("cold"), src.as_bytes());
+    assert!(
+        cold.2.contains("-: read a window of 8192 lines"),
+        "{}",
+        cold.2
+    );
+    let steady = run_piped(&args("steady"), src.as_bytes());
+    assert_eq!(steady.0, 0, "{}", steady.2);
+    assert!(!steady.2.contains("at a time"), "{}", steady.2);
+    // No temporary folder: held in memory, the same bytes.
+    let out = postproc()
+        .args(args("cold"))
+        .env("TMPDIR", "/nonexistent/postproc-test")
+        .write_stdin(src.clone().into_bytes())
+        .output()
+        .expect("runs");
+    assert_eq!(out.status.code(), Some(0));
+    assert_eq!(out.stdout, cold.1);
+}

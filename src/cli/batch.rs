@@ -276,11 +276,9 @@ fn compensate_one(
                 ..*opts
             };
             // A large module is read a window at a time, as by `compensate`.
-            let source = Source::new(input, *forced_window)?;
-            if let Some(lines) = source.window_lines(
-                *forced_window,
-                crate::compensate::rapid::stream::first_pass(robot, &opts),
-            )? {
+            let warm = crate::compensate::rapid::stream::first_pass(robot, &opts);
+            let source = Source::new(input, *forced_window, warm)?;
+            if let Some(lines) = source.window_lines() {
                 let report_file = report.map(|f| (report_path(output, f), f));
                 let streamed = super::rapid::compensate_streamed_to(
                     &source,

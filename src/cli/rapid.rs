@@ -130,6 +130,10 @@ pub(super) struct Source {
     path: PathBuf,
     name: String,
     stdin: Option<Stdin>,
+    /// `--rapid-window-lines`.
+    forced: Option<usize>,
+    /// A warm thermal start (windows from [`STREAM_MIN_BYTES_WARM`] on).
+    warm: bool,
 }
 
 /// Standard input, read.
@@ -143,13 +147,18 @@ impl Source {
     /// The module `path` names (`-`: standard input, read now; copied to
     /// a temporary file whatever its length when `forced`, the
     /// `--rapid-window-lines` of the run, asks for windows).
-    pub(super) fn new(path: &Path, forced: Option<usize>) -> Result<Self> {
+    /// `warm`: the run has a warm thermal start (windows from
+    /// [`STREAM_MIN_BYTES_WARM`] on).
+    pub(super) fn new(path: &Path, forced: Option<usize>, warm: bool) -> Result<Self> {
+        if forced == Some(0) {
+            return Err(usage("--rapid-window-lines must be at least 1"));
+        }
         let name = path.display().to_string();
         let stdin = if path == Path::new("-") {
-            let spill_from = if forced.is_some() {
-                0
-            } else {
-                STREAM_MIN_BYTES
+            let spill_from = match (forced, warm) {
+                (Some(_), _) => 0,
+                (None, false) => STREAM_MIN_BYTES,
+                (None, true) => STREAM_MIN_BYTES_WARM,
             };
             Some(read_stdin(spill_from).map_err(|e| Error::io("-", e))?)
         } else {
@@ -159,6 +168,8 @@ impl Source {
             path: path.to_path_buf(),
             name,
             stdin,
+            forced,
+            warm,
         })
     }
 
@@ -169,29 +180,25 @@ impl Source {
 
     /// The window size, in lines, when the module should be read a window
     /// at a time: a regular file (standard input copied to a file) of at
-    /// least [`STREAM_MIN_BYTES`] ([`STREAM_MIN_BYTES_WARM`] for a `warm`
-    /// thermal start), or any regular file with `forced`
-    /// (`--rapid-window-lines`).
-    pub(super) fn window_lines(&self, forced: Option<usize>, warm: bool) -> Result<Option<usize>> {
-        if forced == Some(0) {
-            return Err(usage("--rapid-window-lines must be at least 1"));
-        }
+    /// least [`STREAM_MIN_BYTES`] ([`STREAM_MIN_BYTES_WARM`] for a warm
+    /// thermal start), or any regular file with `--rapid-window-lines`.
+    pub(super) fn window_lines(&self) -> Option<usize> {
         let len = match &self.stdin {
-            Some(Stdin::Held(_)) => return Ok(None),
+            Some(Stdin::Held(_)) => return None,
             Some(Stdin::Spilled(_, len)) => *len,
             // A regular file only: the module may be read twice (after an
             // error, or for a warm thermal start).
             None => match std::fs::metadata(&self.path) {
                 Ok(meta) if meta.is_file() => meta.len(),
-                _ => return Ok(None),
+                _ => return None,
             },
         };
-        let min = if warm {
+        let min = if self.warm {
             STREAM_MIN_BYTES_WARM
         } else {
             STREAM_MIN_BYTES
         };
-        Ok(forced.or((len >= min).then_some(stream::WINDOW_LINES)))
+        self.forced.or((len >= min).then_some(stream::WINDOW_LINES))
     }
 
     /// A reader of the module from its start.
@@ -237,27 +244,42 @@ impl Source {
 }
 
 /// Reads standard input: held in memory while shorter than `spill_from`
-/// bytes, copied to an unnamed temporary file from there on (held whole
-/// when no temporary file can be made).
+/// bytes, copied to an unnamed temporary file from there on. When no
+/// temporary file can be made or written (a full temporary folder), it is
+/// held whole instead: what was copied is read back.
 fn read_stdin(spill_from: u64) -> std::io::Result<Stdin> {
-    use std::io::Read;
+    use std::io::{Read, Seek};
     let mut input = std::io::stdin().lock();
     let mut head = Vec::new();
     (&mut input).take(spill_from).read_to_end(&mut head)?;
     if (head.len() as u64) < spill_from {
         return Ok(Stdin::Held(head));
     }
-    let Ok(file) = tempfile::tempfile() else {
+    let Ok(mut file) = tempfile::tempfile() else {
         input.read_to_end(&mut head)?;
         return Ok(Stdin::Held(head));
     };
-    let mut spill = std::io::BufWriter::with_capacity(1 << 16, file);
-    spill.write_all(&head)?;
-    let head_len = head.len() as u64;
-    drop(head);
-    let len = head_len + std::io::copy(&mut input, &mut spill)?;
-    let file = spill.into_inner().map_err(|e| e.into_error())?;
-    Ok(Stdin::Spilled(file, len))
+    // Copied a chunk at a time: the chunk that fails to go to the file is
+    // still at hand, and every byte before it is in the file.
+    let mut chunk = head;
+    let mut copied = 0u64;
+    loop {
+        if let Err(e) = file.write_all(&chunk) {
+            tracing::debug!("standard input held in memory: temporary file: {e}");
+            let mut held = Vec::new();
+            file.rewind()?;
+            (&mut file).take(copied).read_to_end(&mut held)?;
+            held.extend_from_slice(&chunk);
+            input.read_to_end(&mut held)?;
+            return Ok(Stdin::Held(held));
+        }
+        copied += chunk.len() as u64;
+        chunk.clear();
+        if (&mut input).take(1 << 16).read_to_end(&mut chunk)? == 0 {
+            break;
+        }
+    }
+    Ok(Stdin::Spilled(file, copied))
 }
 
 /// Compensates (`body` given) or checks the module of `source` a window at a
@@ -303,7 +325,7 @@ fn windowed<T>(
 /// `postproc check` of a RAPID module: parse, resolve and (with a robot)
 /// check that every target is reachable with its confdata.
 pub fn check(a: &CheckArgs) -> Result<i32> {
-    let source = Source::new(&a.program.file, a.program.rapid_window_lines)?;
+    let source = Source::new(&a.program.file, a.program.rapid_window_lines, false)?;
     let (name, module_name, decls, procs, moves) = match check_streamed(a, &source)? {
         Some(found) => found,
         None => {
@@ -341,7 +363,7 @@ type CheckSummary = (String, String, usize, usize, usize);
 /// robot of `--machine`, or of the syntax alone without one); `None` when
 /// the module is to be read whole.
 fn check_streamed(a: &CheckArgs, source: &Source) -> Result<Option<CheckSummary>> {
-    let Some(lines) = source.window_lines(a.program.rapid_window_lines, false)? else {
+    let Some(lines) = source.window_lines() else {
         return Ok(None);
     };
     let name = source.name().to_string();
@@ -354,7 +376,18 @@ fn check_streamed(a: &CheckArgs, source: &Source) -> Result<Option<CheckSummary>
         );
         return Ok(found.map(|s| (name, s.name, s.decls, s.routines, s.moves)));
     };
-    let robot = load_robot(m)?;
+    let robot = match load_robot(m) {
+        Ok(robot) => robot,
+        // The module read whole is parsed before the machine is loaded:
+        // its syntax errors come first.
+        Err(e) => {
+            let reader = source.open().map_err(|e| Error::io(&name, e))?;
+            return match stream::check_syntax_streamed(reader, &name, lines) {
+                Ok(_) => Err(e),
+                Err(_) => Ok(None),
+            };
+        }
+    };
     let streamed = try_streamed(source, &robot, &check_options(), lines, None, None)?;
     Ok(streamed.map(|(s, _)| (name, s.name, s.decls, s.routines, s.moves)))
 }
@@ -508,11 +541,12 @@ pub fn compensate(a: &CompensateArgs) -> Result<i32> {
     let pool = pool
         .build()
         .map_err(|e| usage(format!("cannot start worker threads: {e}")))?;
-    let source = Source::new(input, a.program.rapid_window_lines)?;
-    if let Some(lines) = source.window_lines(
+    let source = Source::new(
+        input,
         a.program.rapid_window_lines,
         stream::first_pass(&robot, &opts),
-    )? {
+    )?;
+    if let Some(lines) = source.window_lines() {
         let report = a.report.as_deref().map(|path| {
             let format = a
                 .report_format
@@ -580,16 +614,28 @@ fn spill_beside(path: &Path) -> Option<std::fs::File> {
 }
 
 /// Writes `head` and then the contents of `spill` (written, not yet
-/// rewound) to `path`, atomically (or to standard output for `-`).
-fn write_spilled(path: &Path, head: &str, spill: std::io::BufWriter<std::fs::File>) -> Result<()> {
+/// rewound) to `path`, atomically (or to standard output for `-`, named
+/// `stdout_name` in errors as the module read whole names it: `stdout` for
+/// the program, `report` for a report).
+fn write_spilled(
+    path: &Path,
+    stdout_name: &str,
+    head: &str,
+    spill: std::io::BufWriter<std::fs::File>,
+) -> Result<()> {
+    let shown = if path == Path::new("-") {
+        Path::new(stdout_name)
+    } else {
+        path
+    };
     let mut file = spill
         .into_inner()
-        .map_err(|e| Error::io(path, e.into_error()))?;
-    std::io::Seek::rewind(&mut file).map_err(|e| Error::io(path, e))?;
+        .map_err(|e| Error::io(shown, e.into_error()))?;
+    std::io::Seek::rewind(&mut file).map_err(|e| Error::io(shown, e))?;
     super::gcode::emit_to(path, |w| {
         w.write_all(head.as_bytes())
-            .map_err(|e| Error::io(path, e))?;
-        std::io::copy(&mut file, w).map_err(|e| Error::io(path, e))?;
+            .map_err(|e| Error::io(shown, e))?;
+        std::io::copy(&mut file, w).map_err(|e| Error::io(shown, e))?;
         Ok(())
     })
 }
@@ -652,7 +698,7 @@ pub(super) fn compensate_streamed_to(
         return Ok(None);
     };
     if let (Some(p), Some(b)) = (out_path, body) {
-        write_spilled(p, &prologue, b)?;
+        write_spilled(p, "stdout", &prologue, b)?;
     }
     if let (Some(rw), Some((p, _))) = (writer, report) {
         rw.finish(crate::emit::report::Totals {
@@ -660,7 +706,7 @@ pub(super) fn compensate_streamed_to(
             moves: streamed.outcome.moves,
         })?;
         if let Some(spill) = report_spill {
-            write_spilled(p, "", spill)?;
+            write_spilled(p, "report", "", spill)?;
         }
     }
     Ok(Some(streamed.outcome))
@@ -726,11 +772,12 @@ pub fn report(a: &ReportArgs) -> Result<i32> {
     let opts = rapid_options(&robot, &a.effects, false, None)?;
     let out = a.output.clone().unwrap_or_else(|| PathBuf::from("-"));
     super::gcode::refuse_overwrite(&out, &super::gcode::input_files(&a.program, &a.effects)?)?;
-    let source = Source::new(&a.program.file, a.program.rapid_window_lines)?;
-    if let Some(lines) = source.window_lines(
+    let source = Source::new(
+        &a.program.file,
         a.program.rapid_window_lines,
         stream::first_pass(&robot, &opts),
-    )? {
+    )?;
+    if let Some(lines) = source.window_lines() {
         let report = Some((out.as_path(), a.format));
         if compensate_streamed_to(&source, &robot, &opts, lines, None, report)?.is_some() {
             return Ok(0);

@@ -21,19 +21,23 @@ use crate::error::{Error, Result};
 use crate::machine::robot::process::{CutSettings, Directives};
 use crate::machine::robot::thermal::TimeLineTotals;
 use crate::machine::robot::{Robot, ThermalStart};
-use crate::program::rapid::windows::{self, Piece, Unsupported, Windows};
+use crate::program::rapid::windows::{Piece, Unsupported, Windows};
 use crate::program::rapid::{Span, Stmt, parse_module};
 
 /// Lines per window unless asked otherwise: windows of a few megabytes
 /// (the memory of a window is about 2 KB per move while it is worked on).
 pub const WINDOW_LINES: usize = 8192;
 
-/// Declarations (bytes before the first routine) from which parsing them
-/// again with every window is held to a quarter of the routines' parse
-/// (after four times their own length; the windows of a routine are then
-/// [`windows::PROLOGUE_WINDOWS`] times as long as they): many short
-/// routines after long declarations are read whole instead.
-const LONG_PROLOGUE_BYTES: usize = windows::BIG_PROLOGUE_BYTES;
+/// What a window costs beyond the lines it holds, in bytes of parsing:
+/// the declarations (bytes before the first routine), parsed again with
+/// every window, and this much for the rest of its set-up. That cost, for
+/// the windows a routine's end cuts short, is held to a quarter of the
+/// routines' parse, after four windows' worth:
+/// many short routines after declarations are read whole instead (each
+/// routine gives a window of its own; the windows of a routine after
+/// declarations of [`crate::program::rapid::windows::BIG_PROLOGUE_BYTES`]
+/// and more are made [`crate::program::rapid::windows::PROLOGUE_WINDOWS`] times as long as they).
+const WINDOW_SETUP_BYTES: usize = 256;
 
 /// Bytes after which a window ends at the next statement boundary whatever
 /// its number of lines.
@@ -271,13 +275,15 @@ fn pass<R: BufRead>(
                 }
                 // Each window parses the declarations again: that may cost
                 // at most a quarter of parsing the routines, beyond a start
-                // allowance (many short routines after long declarations are
-                // read whole instead).
-                reparsed += prologue_len;
+                // allowance (many short routines after declarations are
+                // read whole instead). Windows of the length asked for are
+                // the caller's choice; those a routine's end cut short count.
+                let per_window = prologue_len + WINDOW_SETUP_BYTES;
+                if lines.bytes().filter(|&b| b == b'\n').count() < window_lines {
+                    reparsed += per_window;
+                }
                 routine_bytes += lines.len();
-                if prologue_len >= LONG_PROLOGUE_BYTES
-                    && reparsed > routine_bytes / 4 + 4 * prologue_len
-                {
+                if reparsed > routine_bytes / 4 + 4 * per_window {
                     return Err(Unsupported(
                         "the declarations would be parsed again for many short routines".into(),
                     )
@@ -335,6 +341,7 @@ fn pass<R: BufRead>(
 mod tests {
     use super::*;
     use crate::machine::robot::Effects;
+    use crate::program::rapid::windows;
 
     fn robot() -> Robot {
         let path = crate::machine::Machine::resolve("abb-irb1600").unwrap();
@@ -519,7 +526,7 @@ ENDMODULE
     #[test]
     fn many_short_routines_after_long_declarations_are_read_whole() {
         let mut src = declarations(800);
-        assert!(src.len() >= LONG_PROLOGUE_BYTES);
+        assert!(src.len() >= windows::BIG_PROLOGUE_BYTES);
         let mut few = src.clone();
         let routines = |src: &mut String, n: usize| {
             for k in 0..n {
@@ -531,6 +538,22 @@ ENDMODULE
         };
         routines(&mut src, 300);
         assert!(shape_refused(&src, 1000));
+        // Shorter declarations too (review of session 11: 16 KB of them
+        // before one-move routines took 9 s against 0.03 s whole), and none.
+        for n in [190, 0] {
+            let mut short = declarations(n);
+            for k in 0..300 {
+                let target = match n {
+                    0 => "[[700,0,500],[0,0,1,0],[0,0,0,0],[9E9,9E9,9E9,9E9,9E9,9E9]]".to_string(),
+                    n => format!("p{}", k % n),
+                };
+                short.push_str(&format!(
+                    "  PROC r{k}()\n    MoveL {target}, v100, z1, tool0;\n  ENDPROC\n"
+                ));
+            }
+            short.push_str("ENDMODULE\n");
+            assert!(shape_refused(&short, 1000), "{n} declarations");
+        }
         // A few routines after the same declarations are taken.
         routines(&mut few, 3);
         assert!(!shape_refused(&few, 1000));
