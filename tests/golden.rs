@@ -593,6 +593,9 @@ fn work_offset_and_decimals_options_apply() {
         "G54=100,0,0",
         "--decimals",
         "2",
+        // Two decimals round by up to 0.005 mm: within this tolerance only.
+        "--tolerance",
+        "0.005",
     ]);
     let text = String::from_utf8(out).unwrap();
     assert_eq!(text.lines().nth(1).unwrap(), "G1 X399.99 F1000");

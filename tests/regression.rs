@@ -608,3 +608,158 @@ fn regression_simulate_refuses_absurd_noise() {
         assert!(!out_csv.exists());
     }
 }
+
+/// Audit of session 11: absurd or useless options were taken — a robot
+/// warm-up of 1e308 minutes, `--decimals` that round the compensation
+/// away (G-code 0–2 at the default tolerance; RAPID 0–2 silently became
+/// 3), a diagnose hold-out of no rows; and `batch` made its output folder
+/// before refusing its options.
+#[test]
+fn regression_useless_options_are_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let o = dir.path().join("o.out");
+    let o = o.to_str().unwrap();
+    let part = repo("samples/part.nc");
+    let drilling = repo("samples/drilling.mod");
+    let (part, drilling) = (part.to_str().unwrap(), drilling.to_str().unwrap());
+    let model = repo("samples/diagnose/model.yaml");
+    let measured = repo("samples/diagnose/measured.csv");
+    let out_dir = dir.path().join("batch-out");
+    let cases: Vec<(Vec<&str>, &str)> = vec![
+        (
+            vec![
+                "compensate",
+                drilling,
+                "-m",
+                "abb-irb1600",
+                "-o",
+                o,
+                "--thermal-start",
+                "1e308",
+            ],
+            "number of minutes (0..100000)",
+        ),
+        (
+            vec![
+                "compensate",
+                part,
+                "-m",
+                "afm-r1000",
+                "-o",
+                o,
+                "--decimals",
+                "2",
+            ],
+            "--decimals 2: rounding moves coordinates by up to 0.005 mm",
+        ),
+        (
+            vec![
+                "compensate",
+                drilling,
+                "-m",
+                "abb-irb1600",
+                "-o",
+                o,
+                "--decimals",
+                "0",
+            ],
+            "robot targets keep at least 3 decimals",
+        ),
+        (
+            vec![
+                "diagnose",
+                "--machine",
+                model.to_str().unwrap(),
+                "--observations",
+                measured.to_str().unwrap(),
+                "--holdout",
+                "0.0000001",
+            ],
+            "holds out 0 of the",
+        ),
+        (
+            vec![
+                "batch",
+                part,
+                "-m",
+                "afm-r1000",
+                "--out-dir",
+                out_dir.to_str().unwrap(),
+                "--tolerance",
+                "0",
+            ],
+            "--tolerance 0",
+        ),
+    ];
+    for (args, want) in cases {
+        let out = postproc().args(&args).output().unwrap();
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{args:?}: {err}");
+        assert!(err.contains(want), "{args:?}: {err}");
+    }
+    assert!(!std::path::Path::new(o).exists());
+    assert!(!out_dir.exists(), "batch made its output folder");
+    // Coarser decimals within a coarser tolerance are fine.
+    let out = postproc()
+        .args([
+            "compensate",
+            part,
+            "-m",
+            "afm-r1000",
+            "-o",
+            o,
+            "--decimals",
+            "2",
+            "--tolerance",
+            "0.005",
+        ])
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(0));
+}
+
+/// Audit of session 11: `batch` followed a link back up its folder tree
+/// (41 nested copies; a link to the parent never ended) and hung on a
+/// named pipe with a program's extension. Folders are now followed once
+/// and only regular files are taken.
+#[cfg(unix)]
+#[test]
+fn regression_batch_follows_each_folder_once_and_takes_regular_files_only() {
+    let dir = tempfile::tempdir().unwrap();
+    let tree = dir.path().join("L");
+    std::fs::create_dir(&tree).unwrap();
+    std::fs::copy(repo("samples/part.nc"), tree.join("part.nc")).unwrap();
+    std::os::unix::fs::symlink("../L", tree.join("self")).unwrap();
+    std::os::unix::fs::symlink("..", tree.join("up")).unwrap();
+    let fifo = tree.join("pipe.nc");
+    let made = std::process::Command::new("mkfifo").arg(&fifo).status();
+    let out_dir = dir.path().join("out");
+    let out = postproc()
+        .args(["batch", "--machine", "afm-r1000", "--out-dir"])
+        .arg(&out_dir)
+        .arg(&tree)
+        .timeout(std::time::Duration::from_secs(60))
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(0), "{err}");
+    let mut written: Vec<String> = std::fs::read_dir(&out_dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    written.sort();
+    assert_eq!(written, ["batch-summary.json", "part.nc"]);
+    if made.is_ok_and(|s| s.success()) {
+        let out = postproc()
+            .args(["batch", "--machine", "afm-r1000", "--out-dir"])
+            .arg(dir.path().join("out2"))
+            .arg(&fifo)
+            .timeout(std::time::Duration::from_secs(60))
+            .output()
+            .unwrap();
+        let summary = std::fs::read_to_string(dir.path().join("out2/batch-summary.json")).unwrap();
+        // A program that fails is bad input: exit 2.
+        assert_eq!(out.status.code(), Some(2), "{summary}");
+        assert!(summary.contains("not a regular file"), "{summary}");
+    }
+}

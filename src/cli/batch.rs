@@ -7,7 +7,7 @@
 //! no times, so every byte written is the same for any `--threads`.
 //! Every output is written atomically (temporary file, then rename).
 
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, BTreeSet};
 use std::io::{BufReader, IsTerminal, Write};
 use std::path::{Path, PathBuf};
 
@@ -55,10 +55,22 @@ struct Item {
     problem: Option<String>,
 }
 
-/// Programs under a folder, recursively, in name order; hidden entries and
-/// the output folder are skipped. A folder that cannot be read becomes a
-/// failed entry.
-fn walk(root: &Path, dir: &Path, skip: Option<&Path>, items: &mut Vec<Item>) {
+/// Programs under a folder, recursively, in name order; hidden entries,
+/// the output folder, anything but regular files (named pipes, devices)
+/// and folders seen before (a link back up the tree) are skipped. A folder
+/// that cannot be read becomes a failed entry.
+fn walk(
+    root: &Path,
+    dir: &Path,
+    skip: Option<&Path>,
+    seen: &mut BTreeSet<PathBuf>,
+    items: &mut Vec<Item>,
+) {
+    if let Ok(canonical) = dir.canonicalize() {
+        if !seen.insert(canonical) {
+            return;
+        }
+    }
     let read = match std::fs::read_dir(dir) {
         Ok(r) => r,
         Err(e) => {
@@ -83,8 +95,8 @@ fn walk(root: &Path, dir: &Path, skip: Option<&Path>, items: &mut Vec<Item>) {
             if skip.is_some_and(|s| path.canonicalize().is_ok_and(|p| p == s)) {
                 continue;
             }
-            walk(root, &path, skip, items);
-        } else if is_program(&path) {
+            walk(root, &path, skip, seen, items);
+        } else if is_program(&path) && path.is_file() {
             let rel = path.strip_prefix(root).unwrap_or(&path).to_path_buf();
             items.push(Item {
                 input: path,
@@ -102,13 +114,19 @@ fn collect(inputs: &[PathBuf], out_dir: &Path) -> Vec<Item> {
     let mut items = Vec::new();
     for input in inputs {
         if input.is_dir() {
-            walk(input, input, skip.as_deref(), &mut items);
+            // Folders are followed once per input (links may lead back).
+            let mut seen = BTreeSet::new();
+            walk(input, input, skip.as_deref(), &mut seen, &mut items);
         } else {
             let rel = input
                 .file_name()
                 .map(PathBuf::from)
                 .unwrap_or_else(|| PathBuf::from("program"));
-            let problem = (!input.is_file()).then(|| format!("{}: no such file", input.display()));
+            let problem = match std::fs::metadata(input) {
+                Ok(m) if m.is_file() => None,
+                Ok(_) => Some(format!("{}: not a regular file", input.display())),
+                Err(_) => Some(format!("{}: no such file", input.display())),
+            };
             items.push(Item {
                 input: input.clone(),
                 rel,
@@ -325,7 +343,6 @@ pub fn run(a: &BatchArgs, quiet: bool) -> Result<i32> {
     let pool = thread_pool(a.effects.threads)?;
     let machine_path = Machine::resolve(&a.machine)?;
     let machine = Machine::load(&machine_path)?;
-    std::fs::create_dir_all(&a.out_dir).map_err(|e| Error::io(&a.out_dir, e))?;
     let items = collect(&a.inputs, &a.out_dir);
     if items.is_empty() {
         return Err(usage(format!(
@@ -382,6 +399,8 @@ pub fn run(a: &BatchArgs, quiet: bool) -> Result<i32> {
             Engine::Robot(robot, opts, a.rapid_window_lines)
         }
     };
+    // The output folder is made once every option has been checked.
+    std::fs::create_dir_all(&a.out_dir).map_err(|e| Error::io(&a.out_dir, e))?;
     let bar = if quiet || !std::io::stderr().is_terminal() {
         indicatif::ProgressBar::hidden()
     } else {

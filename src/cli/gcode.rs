@@ -462,6 +462,15 @@ pub(super) fn build_job<'m>(
         if d > 6 {
             return Err(usage("--decimals: at most 6"));
         }
+        // Rounding moves a coordinate by up to half a unit of its last
+        // decimal: that must stay within the tolerance, or the rounding
+        // would undo the compensation.
+        let half_unit = 0.5 * 10f64.powi(-(d as i32));
+        if half_unit > tolerance {
+            return Err(usage(format!(
+                "--decimals {d}: rounding moves coordinates by up to {half_unit} mm, more than the tolerance {tolerance} mm"
+            )));
+        }
     }
     Ok(Job {
         predictor: Some(ToolPredictor::new(machine, effects).with_process(process)),

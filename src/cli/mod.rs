@@ -195,7 +195,7 @@ pub struct CompensateArgs {
     /// Annotate compensated blocks with their predicted deviation.
     #[arg(long, value_enum, default_value_t = Annotate::Comment)]
     pub annotate: Annotate,
-    /// Decimals of rewritten mm coordinates (default: the machine file's, else the program's, at least 3).
+    /// Decimals of rewritten mm coordinates (default: the machine file's, else the program's, at least 3); half a unit of the last one must stay within the tolerance (RAPID: at least 3).
     #[arg(long)]
     pub decimals: Option<usize>,
     /// Also write the deviation report to this path (format from the

@@ -418,7 +418,14 @@ pub(super) fn rapid_options(
         if d > 6 {
             return Err(usage("--decimals: at most 6"));
         }
-        format.position_decimals = d.max(3);
+        // Fewer than three decimals (0.01 mm) would round the compensation
+        // of a robot target, a few tenths of a millimetre, away in part.
+        if d < 3 {
+            return Err(usage(format!(
+                "--decimals {d}: robot targets keep at least 3 decimals (0.001 mm); fewer would round the compensation away"
+            )));
+        }
+        format.position_decimals = d;
     }
     let thermal_start: ThermalStart = effects
         .thermal_start

@@ -196,6 +196,16 @@ pub fn diagnose(
     let screen = screen(&sens, &names);
 
     let (train, hold) = holdout_split(rows.len(), opts.holdout, opts.seed);
+    // An effect is accepted only when held-out rows confirm it: a split
+    // that leaves either side empty could confirm nothing.
+    if hold.is_empty() || train.is_empty() {
+        return Err(crate::error::Error::Usage(format!(
+            "--holdout {}: holds out {} of the {} rows; both the held-out and the fitted rows need at least one",
+            crate::error::show_number(opts.holdout),
+            hold.len(),
+            rows.len()
+        )));
+    }
     let mut r = DVector::zeros(3 * rows.len());
     for (i, v) in res.iter().enumerate() {
         for c in 0..3 {

@@ -240,6 +240,10 @@ pub struct ToolPredictor<'m> {
     pub process: Option<&'m ProcessSetup>,
 }
 
+/// Longest warm-up of `--thermal-start MINUTES` (about ten weeks: any
+/// machine is at its steady state long before).
+pub const MAX_WARM_UP_MIN: f64 = 1e5;
+
 /// How the thermal state of the machine starts.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub enum ThermalStart {
@@ -259,7 +263,9 @@ impl ThermalStart {
             "cold" => Ok(ThermalStart::Cold),
             "steady" => Ok(ThermalStart::Steady),
             m => match m.parse::<f64>() {
-                Ok(v) if v.is_finite() && (0.0..=1e5).contains(&v) => Ok(ThermalStart::Minutes(v)),
+                Ok(v) if v.is_finite() && (0.0..=MAX_WARM_UP_MIN).contains(&v) => {
+                    Ok(ThermalStart::Minutes(v))
+                }
                 _ => Err(Error::Usage(format!(
                     "--thermal-start: `{s}` is not cold, steady or a number of minutes (0..100000)"
                 ))),

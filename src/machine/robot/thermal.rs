@@ -164,9 +164,11 @@ impl std::str::FromStr for ThermalStart {
             "cold" => Ok(ThermalStart::Cold),
             "steady" => Ok(ThermalStart::Steady),
             t => match t.parse::<f64>() {
-                Ok(m) if m.is_finite() && m >= 0.0 => Ok(ThermalStart::WarmUpMin(m)),
+                Ok(m) if m.is_finite() && (0.0..=crate::predict::MAX_WARM_UP_MIN).contains(&m) => {
+                    Ok(ThermalStart::WarmUpMin(m))
+                }
                 _ => Err(format!(
-                    "`{s}` is not `cold`, `steady` or a non-negative number of minutes"
+                    "`{s}` is not `cold`, `steady` or a number of minutes (0..100000)"
                 )),
             },
         }
