@@ -763,3 +763,68 @@ fn regression_batch_follows_each_folder_once_and_takes_regular_files_only() {
         assert!(summary.contains("not a regular file"), "{summary}");
     }
 }
+
+/// Audit of session 11: with `--report` on a device that fails (`/dev/full`)
+/// the program was already renamed into place when the report failed
+/// (exit 2 with an output written). Neither output is put in place unless
+/// both are written: G-code, RAPID read whole and a window at a time.
+#[test]
+fn regression_a_failing_report_leaves_the_program_unwritten() {
+    if !std::path::Path::new("/dev/full").exists() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("o.out");
+    let o = out.to_str().unwrap();
+    let part = repo("samples/part.nc");
+    let drilling = repo("samples/drilling.mod");
+    let (part, drilling) = (part.to_str().unwrap(), drilling.to_str().unwrap());
+    for args in [
+        vec![
+            "compensate",
+            part,
+            "-m",
+            "afm-r1000",
+            "-o",
+            o,
+            "--report",
+            "/dev/full",
+        ],
+        vec![
+            "compensate",
+            drilling,
+            "-m",
+            "abb-irb1600",
+            "-o",
+            o,
+            "--report",
+            "/dev/full",
+        ],
+        vec![
+            "compensate",
+            drilling,
+            "-m",
+            "abb-irb1600",
+            "--rapid-window-lines",
+            "2",
+            "-o",
+            o,
+            "--report",
+            "/dev/full",
+        ],
+    ] {
+        // An earlier output stays as it was.
+        std::fs::write(&out, "earlier\n").unwrap();
+        let run = postproc().args(&args).output().unwrap();
+        let err = String::from_utf8_lossy(&run.stderr);
+        assert_eq!(run.status.code(), Some(2), "{args:?}: {err}");
+        assert!(err.contains("No space left"), "{args:?}: {err}");
+        assert_eq!(
+            std::fs::read_to_string(&out).unwrap(),
+            "earlier\n",
+            "{args:?}"
+        );
+        let left: Vec<_> = std::fs::read_dir(dir.path()).unwrap().collect();
+        assert_eq!(left.len(), 1, "{args:?}: temporary files left");
+    }
+}

@@ -15,7 +15,7 @@ use rayon::prelude::*;
 use serde::Serialize;
 
 use super::gcode::{
-    build_job, effects, parse_setup, process_setup, run_reporting, same_file, thread_pool,
+    Staged, build_job, effects, parse_setup, process_setup, run_reporting, same_file, thread_pool,
     write_atomically,
 };
 use super::rapid::{Source, load_robot, write_report};
@@ -259,19 +259,24 @@ fn compensate_one(
             let f = std::fs::File::open(input).map_err(|e| Error::io(input, e))?;
             let reader = BufReader::with_capacity(1 << 16, f);
             let s = match report {
-                Some(format) => write_atomically(&report_path(output, format), |rep| {
-                    write_atomically(output, |w| {
-                        run_reporting(
-                            job,
-                            Box::new(reader),
-                            &name,
-                            Some(w),
-                            rep,
-                            &job.setup,
-                            format,
-                        )
-                    })
-                })?,
+                Some(format) => {
+                    // Neither output is put in place unless both are written.
+                    let mut rep = Staged::open(&report_path(output, format))?;
+                    let mut out = Staged::open(output)?;
+                    let s = run_reporting(
+                        job,
+                        Box::new(reader),
+                        &name,
+                        Some(out.writer()),
+                        rep.writer(),
+                        &job.setup,
+                        format,
+                    )?;
+                    let (rep, out) = (rep.finish()?, out.finish()?);
+                    out.commit()?;
+                    rep.commit()?;
+                    s
+                }
                 None => write_atomically(output, |w| job.run(reader, &name, Some(w), None))?,
             };
             Ok(Done {
@@ -318,14 +323,22 @@ fn compensate_one(
             }
             let (src, name) = source.read_whole()?;
             let outcome = compensate_module(&src, &name, robot, &opts)?;
-            write_atomically(output, |w| {
-                w.write_all(outcome.text.as_bytes())
-                    .map_err(|e| Error::io(output, e))
-            })?;
-            if let Some(format) = report {
-                write_atomically(&report_path(output, format), |w| {
-                    write_report(w, &outcome, &name, format)
-                })?;
+            // Neither output is put in place unless both are written.
+            let mut out = Staged::open(output)?;
+            out.writer()
+                .write_all(outcome.text.as_bytes())
+                .map_err(|e| Error::io(output, e))?;
+            let rep = match report {
+                Some(format) => {
+                    let mut rep = Staged::open(&report_path(output, format))?;
+                    write_report(rep.writer(), &outcome, &name, format)?;
+                    Some(rep.finish()?)
+                }
+                None => None,
+            };
+            out.finish()?.commit()?;
+            if let Some(rep) = rep {
+                rep.commit()?;
             }
             Ok(Done {
                 blocks: outcome.moves,

@@ -369,75 +369,136 @@ fn resolved(path: &Path) -> Option<PathBuf> {
 /// would replace the device or pipe with a file. A symbolic link is followed,
 /// so the file it points at is replaced and the link stays.
 pub fn write_atomically<T>(path: &Path, f: impl FnOnce(&mut dyn Write) -> Result<T>) -> Result<T> {
-    let is_link = std::fs::symlink_metadata(path)
-        .map(|m| m.file_type().is_symlink())
-        .unwrap_or(false);
-    match std::fs::metadata(path) {
-        Ok(m) if !m.is_file() && !m.is_dir() => return write_through(path, f),
-        Ok(m) if m.is_file() && is_link => {
-            let target = path.canonicalize().map_err(|e| Error::io(path, e))?;
-            return replace_file(&target, path, f);
+    let mut out = Staged::file(path)?;
+    let value = f(out.writer())?;
+    out.finish()?.commit()?;
+    Ok(value)
+}
+
+/// An output being written ([`write_atomically`]'s parts, for runs that
+/// write two outputs and put neither in place unless both are written): a
+/// temporary file beside it, renamed into place by [`Pending::commit`], or
+/// a special file or standard output written straight.
+pub(super) struct Staged {
+    shown: PathBuf,
+    sink: Sink,
+}
+
+enum Sink {
+    /// A temporary file to be renamed to the path.
+    Temp(BufWriter<std::fs::File>, tempfile::TempPath, PathBuf),
+    /// A device or named pipe, written straight.
+    Through(BufWriter<std::fs::File>),
+    /// Standard output.
+    Stdout(BufWriter<std::io::Stdout>),
+}
+
+/// A written output waiting to be put in place.
+pub(super) struct Pending(Option<(tempfile::TempPath, PathBuf, PathBuf)>);
+
+impl Staged {
+    /// The output `path`, or standard output for `-`.
+    pub(super) fn open(path: &Path) -> Result<Self> {
+        if path == Path::new("-") {
+            return Ok(Staged {
+                shown: PathBuf::from("stdout"),
+                sink: Sink::Stdout(BufWriter::new(std::io::stdout())),
+            });
         }
-        _ => {}
+        Staged::file(path)
     }
-    replace_file(path, path, f)
+
+    /// The output file `path` (see [`write_atomically`]).
+    fn file(path: &Path) -> Result<Self> {
+        let is_link = std::fs::symlink_metadata(path)
+            .map(|m| m.file_type().is_symlink())
+            .unwrap_or(false);
+        let target = match std::fs::metadata(path) {
+            Ok(m) if !m.is_file() && !m.is_dir() => {
+                let file = std::fs::OpenOptions::new()
+                    .write(true)
+                    .open(path)
+                    .map_err(|e| Error::io(path, e))?;
+                return Ok(Staged {
+                    shown: path.to_path_buf(),
+                    sink: Sink::Through(BufWriter::with_capacity(1 << 16, file)),
+                });
+            }
+            Ok(m) if m.is_file() && is_link => {
+                path.canonicalize().map_err(|e| Error::io(path, e))?
+            }
+            _ => path.to_path_buf(),
+        };
+        let dir = match target.parent() {
+            Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
+            _ => PathBuf::from("."),
+        };
+        // The temporary file's random name means nothing to the user: name
+        // the output and its folder only.
+        let tmp = tempfile::Builder::new()
+            .prefix(".postproc-")
+            .tempfile_in(&dir)
+            .map_err(|e| {
+                Error::io(
+                    path,
+                    std::io::Error::new(
+                        e.kind(),
+                        format!("cannot create a file in {}: {}", dir.display(), e.kind()),
+                    ),
+                )
+            })?;
+        let (file, tmp_path) = tmp.into_parts();
+        Ok(Staged {
+            shown: path.to_path_buf(),
+            sink: Sink::Temp(BufWriter::with_capacity(1 << 20, file), tmp_path, target),
+        })
+    }
+
+    /// Where the output goes.
+    pub(super) fn writer(&mut self) -> &mut dyn Write {
+        match &mut self.sink {
+            Sink::Temp(w, _, _) | Sink::Through(w) => w,
+            Sink::Stdout(w) => w,
+        }
+    }
+
+    /// Flushes the output (and syncs a temporary file): what is left is to
+    /// put it in place.
+    pub(super) fn finish(self) -> Result<Pending> {
+        let shown = self.shown;
+        match self.sink {
+            Sink::Through(mut w) => w.flush().map_err(|e| Error::io(&shown, e))?,
+            Sink::Stdout(mut w) => w.flush().map_err(|e| Error::io(&shown, e))?,
+            Sink::Temp(w, tmp_path, target) => {
+                let file = w
+                    .into_inner()
+                    .map_err(|e| Error::io(&shown, e.into_error()))?;
+                file.sync_all().map_err(|e| Error::io(&shown, e))?;
+                // Temporary files are private (0600); the result is an
+                // ordinary file.
+                #[cfg(unix)]
+                {
+                    use std::os::unix::fs::PermissionsExt;
+                    file.set_permissions(std::fs::Permissions::from_mode(0o644))
+                        .map_err(|e| Error::io(&shown, e))?;
+                }
+                return Ok(Pending(Some((tmp_path, target, shown))));
+            }
+        }
+        Ok(Pending(None))
+    }
 }
 
-/// Writes straight into an existing special file (device, pipe).
-fn write_through<T>(path: &Path, f: impl FnOnce(&mut dyn Write) -> Result<T>) -> Result<T> {
-    let file = std::fs::OpenOptions::new()
-        .write(true)
-        .open(path)
-        .map_err(|e| Error::io(path, e))?;
-    let mut w = BufWriter::with_capacity(1 << 16, file);
-    let value = f(&mut w)?;
-    w.flush().map_err(|e| Error::io(path, e))?;
-    Ok(value)
-}
-
-/// The temporary-file-and-rename write of `write_atomically`; `shown` is the
-/// path named in errors (the one the user gave).
-fn replace_file<T>(
-    path: &Path,
-    shown: &Path,
-    f: impl FnOnce(&mut dyn Write) -> Result<T>,
-) -> Result<T> {
-    let dir = match path.parent() {
-        Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
-        _ => PathBuf::from("."),
-    };
-    // The temporary file's random name means nothing to the user: name the
-    // output and its folder only.
-    let tmp = tempfile::Builder::new()
-        .prefix(".postproc-")
-        .tempfile_in(&dir)
-        .map_err(|e| {
-            Error::io(
-                shown,
-                std::io::Error::new(
-                    e.kind(),
-                    format!("cannot create a file in {}: {}", dir.display(), e.kind()),
-                ),
-            )
-        })?;
-    let (file, tmp_path) = tmp.into_parts();
-    let mut w = BufWriter::with_capacity(1 << 20, file);
-    let value = f(&mut w)?;
-    let file = w
-        .into_inner()
-        .map_err(|e| Error::io(shown, e.into_error()))?;
-    file.sync_all().map_err(|e| Error::io(shown, e))?;
-    // Temporary files are private (0600); the result is an ordinary file.
-    #[cfg(unix)]
-    {
-        use std::os::unix::fs::PermissionsExt;
-        file.set_permissions(std::fs::Permissions::from_mode(0o644))
-            .map_err(|e| Error::io(shown, e))?;
+impl Pending {
+    /// Puts the output in place (renames the temporary file).
+    pub(super) fn commit(self) -> Result<()> {
+        if let Some((tmp_path, target, shown)) = self.0 {
+            tmp_path
+                .persist(&target)
+                .map_err(|e| Error::io(&shown, e.error))?;
+        }
+        Ok(())
     }
-    tmp_path
-        .persist(path)
-        .map_err(|e| Error::io(shown, e.error))?;
-    Ok(value)
 }
 
 #[allow(clippy::too_many_arguments)]
@@ -535,14 +596,10 @@ pub(super) fn input_files(program: &ProgramArgs, effects: &EffectArgs) -> Result
 
 /// Writes to `path` atomically, or to standard output for `-`.
 pub(super) fn emit_to<T>(path: &Path, f: impl FnOnce(&mut dyn Write) -> Result<T>) -> Result<T> {
-    if path == Path::new("-") {
-        let mut stdout = BufWriter::new(std::io::stdout().lock());
-        let value = f(&mut stdout)?;
-        stdout.flush().map_err(|e| Error::io("stdout", e))?;
-        Ok(value)
-    } else {
-        write_atomically(path, f)
-    }
+    let mut out = Staged::open(path)?;
+    let value = f(out.writer())?;
+    out.finish()?.commit()?;
+    Ok(value)
 }
 
 /// Runs the job, streaming a row per motion block into a report.
@@ -638,11 +695,22 @@ pub fn compensate(a: &CompensateArgs) -> Result<i32> {
             let format = a
                 .report_format
                 .unwrap_or_else(|| Format::from_path(report_path));
-            write_atomically(report_path, |rep| {
-                emit_to(&out_path, |w| {
-                    run_reporting(&job, input, &file, Some(w), rep, setup, format)
-                })
-            })?
+            // Neither is put in place unless both are written.
+            let mut rep = Staged::open(report_path)?;
+            let mut out = Staged::open(&out_path)?;
+            let summary = run_reporting(
+                &job,
+                input,
+                &file,
+                Some(out.writer()),
+                rep.writer(),
+                setup,
+                format,
+            )?;
+            let (rep, out) = (rep.finish()?, out.finish()?);
+            out.commit()?;
+            rep.commit()?;
+            summary
         }
         None => emit_to(&out_path, |w| job.run(input, &file, Some(w), None))?,
     };

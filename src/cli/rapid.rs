@@ -4,7 +4,7 @@
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
-use super::gcode::{default_output, write_atomically};
+use super::gcode::{Pending, Staged, default_output};
 use super::{Annotate, CheckArgs, CompensateArgs, EffectArgs, ProgramArgs, ReportArgs, usage};
 use crate::compensate::rapid::{
     MoveRecord, RapidOptions, RapidOutcome, compensate_module, compensate_parsed, stream,
@@ -570,23 +570,30 @@ pub fn compensate(a: &CompensateArgs) -> Result<i32> {
     }
     let (src, name) = source.read_whole()?;
     let outcome = pool.install(|| compensate_module(&src, &name, &robot, &opts))?;
-    if out_path == Path::new("-") {
-        let mut stdout = std::io::stdout().lock();
-        stdout
-            .write_all(outcome.text.as_bytes())
-            .and_then(|()| stdout.flush())
-            .map_err(|e| Error::io("stdout", e))?;
+    // Neither output is put in place unless both are written.
+    let mut out = Staged::open(&out_path)?;
+    let shown = if out_path == Path::new("-") {
+        Path::new("stdout")
     } else {
-        write_atomically(&out_path, |w| {
-            w.write_all(outcome.text.as_bytes())
-                .map_err(|e| Error::io(&out_path, e))
-        })?;
-    }
-    if let Some(path) = &a.report {
-        let format = a
-            .report_format
-            .unwrap_or_else(|| super::Format::from_path(path));
-        write_atomically(path, |w| write_report(w, &outcome, &name, format))?;
+        out_path.as_path()
+    };
+    out.writer()
+        .write_all(outcome.text.as_bytes())
+        .map_err(|e| Error::io(shown, e))?;
+    let report = match &a.report {
+        Some(path) => {
+            let format = a
+                .report_format
+                .unwrap_or_else(|| super::Format::from_path(path));
+            let mut rep = Staged::open(path)?;
+            write_report(rep.writer(), &outcome, &name, format)?;
+            Some(rep.finish()?)
+        }
+        None => None,
+    };
+    out.finish()?.commit()?;
+    if let Some(rep) = report {
+        rep.commit()?;
     }
     log_outcome(&out_path, &outcome);
     Ok(0)
@@ -621,15 +628,16 @@ fn spill_beside(path: &Path) -> Option<std::fs::File> {
 }
 
 /// Writes `head` and then the contents of `spill` (written, not yet
-/// rewound) to `path`, atomically (or to standard output for `-`, named
+/// rewound) to `path` (or to standard output for `-`, named
 /// `stdout_name` in errors as the module read whole names it: `stdout` for
-/// the program, `report` for a report).
+/// the program, `report` for a report); the file is put in place by the
+/// caller, once every output is written.
 fn write_spilled(
     path: &Path,
     stdout_name: &str,
     head: &str,
     spill: std::io::BufWriter<std::fs::File>,
-) -> Result<()> {
+) -> Result<Pending> {
     let shown = if path == Path::new("-") {
         Path::new(stdout_name)
     } else {
@@ -639,12 +647,12 @@ fn write_spilled(
         .into_inner()
         .map_err(|e| Error::io(shown, e.into_error()))?;
     std::io::Seek::rewind(&mut file).map_err(|e| Error::io(shown, e))?;
-    super::gcode::emit_to(path, |w| {
-        w.write_all(head.as_bytes())
-            .map_err(|e| Error::io(shown, e))?;
-        std::io::copy(&mut file, w).map_err(|e| Error::io(shown, e))?;
-        Ok(())
-    })
+    let mut out = Staged::open(path)?;
+    let w = out.writer();
+    w.write_all(head.as_bytes())
+        .map_err(|e| Error::io(shown, e))?;
+    std::io::copy(&mut file, w).map_err(|e| Error::io(shown, e))?;
+    out.finish()
 }
 
 /// Compensates the module at `input` a window at a time into `out_path`
@@ -704,8 +712,9 @@ pub(super) fn compensate_streamed_to(
     let Some((streamed, prologue)) = streamed else {
         return Ok(None);
     };
+    let mut pending = Vec::new();
     if let (Some(p), Some(b)) = (out_path, body) {
-        write_spilled(p, "stdout", &prologue, b)?;
+        pending.push(write_spilled(p, "stdout", &prologue, b)?);
     }
     if let (Some(rw), Some((p, _))) = (writer, report) {
         rw.finish(crate::emit::report::Totals {
@@ -713,8 +722,12 @@ pub(super) fn compensate_streamed_to(
             moves: streamed.outcome.moves,
         })?;
         if let Some(spill) = report_spill {
-            write_spilled(p, "report", "", spill)?;
+            pending.push(write_spilled(p, "report", "", spill)?);
         }
+    }
+    // Neither output is put in place unless both are written.
+    for p in pending {
+        p.commit()?;
     }
     Ok(Some(streamed.outcome))
 }
