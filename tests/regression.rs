@@ -828,3 +828,48 @@ fn regression_a_failing_report_leaves_the_program_unwritten() {
         assert_eq!(left.len(), 1, "{args:?}: temporary files left");
     }
 }
+
+/// Audit of session 11: the SVG report of a one-move module labelled its
+/// axes `-1 -0 -0 -0 -0 -0 0 0 0 0 0` and its source-line axis
+/// `4 4 4 4 4 4 5 5 5 5 5`: tick labels are now told apart and never `-0`.
+#[test]
+fn regression_svg_ticks_are_distinct_and_never_negative_zero() {
+    let dir = tempfile::tempdir().unwrap();
+    let one = dir.path().join("one.mod");
+    std::fs::write(
+        &one,
+        "MODULE One\n  PROC main()\n    MoveL [[700,0,400],[0,0,1,0],[0,0,0,0],[9E9,9E9,9E9,9E9,9E9,9E9]],v100,z1,tool0;\n  ENDPROC\nENDMODULE\n",
+    )
+    .unwrap();
+    let g28 = dir.path().join("g28.nc");
+    std::fs::write(&g28, "G91 G28 Z0.\n").unwrap();
+    for (p, m) in [(&one, "abb-irb1600"), (&g28, "afm-r1000")] {
+        let out = postproc()
+            .args(["report", "--machine", m, "--format", "svg"])
+            .arg(p)
+            .output()
+            .unwrap();
+        assert_eq!(out.status.code(), Some(0));
+        let svg = String::from_utf8(out.stdout).unwrap();
+        let doc = roxmltree::Document::parse(&svg).unwrap();
+        let texts: Vec<String> = doc
+            .descendants()
+            .filter(|n| n.has_tag_name("text"))
+            .map(|n| n.text().unwrap_or("").trim().to_string())
+            .collect();
+        let numeric: Vec<&String> = texts
+            .iter()
+            .filter(|t| !t.is_empty() && t.parse::<f64>().is_ok())
+            .collect();
+        assert!(numeric.len() > 10, "{texts:?}");
+        for t in &numeric {
+            assert!(
+                !(t.starts_with('-') && t.parse::<f64>().unwrap() == 0.0),
+                "{p:?}: {t}"
+            );
+        }
+        for w in numeric.windows(2) {
+            assert_ne!(w[0], w[1], "{p:?}: repeated tick label in {numeric:?}");
+        }
+    }
+}

@@ -210,6 +210,35 @@ fn equal_ranges(
     (cx - hx..cx + hx, cy - hy..cy + hy)
 }
 
+/// Decimals that tell apart the ten or so ticks of an axis spanning
+/// `range` (0 for spans of 10 and more, at most 6).
+fn tick_decimals(range: &std::ops::Range<f64>) -> usize {
+    let step = (range.end - range.start).abs() / 10.0;
+    if !(step.is_finite() && step > 0.0) {
+        return 0;
+    }
+    (-step.log10()).ceil().clamp(0.0, 6.0) as usize
+}
+
+/// A tick label with `d` decimals, never `-0`.
+fn tick_label(v: f64, d: usize) -> String {
+    let s = format!("{v:.d$}");
+    match s.strip_prefix('-') {
+        Some(rest) if rest.bytes().all(|b| b == b'0' || b == b'.') => rest.to_string(),
+        _ => s,
+    }
+}
+
+/// A tick label of a source-line axis: whole lines only (ticks between
+/// two lines get none).
+fn line_label(v: f64) -> String {
+    if v.fract() == 0.0 {
+        tick_label(v, 0)
+    } else {
+        String::new()
+    }
+}
+
 /// One projection of the toolpath (axes `a`, `b` of the position).
 #[allow(clippy::too_many_arguments)]
 fn view(
@@ -237,6 +266,7 @@ fn view(
     // Plot area: minus label areas (70 left, 45 bottom), margins and caption.
     let (px, py) = (w as f64 - 70.0 - 30.0, h as f64 - 45.0 - 60.0);
     let (xr, yr) = equal_ranges(xs, ys, px.max(10.0), py.max(10.0));
+    let (dx, dy) = (tick_decimals(&xr), tick_decimals(&yr));
     let mut chart = ChartBuilder::on(area)
         .caption(caption, ("sans-serif", 18))
         .margin(15)
@@ -248,8 +278,8 @@ fn view(
         .configure_mesh()
         .x_desc(xdesc)
         .y_desc(ydesc)
-        .x_label_formatter(&|v| format!("{v:.0}"))
-        .y_label_formatter(&|v| format!("{v:.0}"))
+        .x_label_formatter(&|v| tick_label(*v, dx))
+        .y_label_formatter(&|v| tick_label(*v, dy))
         .label_style(("sans-serif", 13))
         .axis_desc_style(("sans-serif", 14))
         .light_line_style(RGBColor(235, 235, 235))
@@ -326,7 +356,7 @@ fn colour_bar(area: &DrawingArea<SVGBackend, Shift>, scale: &Scale) -> Result<()
         .y_desc("cutting moves' range; beyond it saturates")
         .label_style(("sans-serif", 13))
         .axis_desc_style(("sans-serif", 14))
-        .y_label_formatter(&|v| format!("{v:.4}"))
+        .y_label_formatter(&|v| tick_label(*v, 4))
         .draw()
         .map_err(plot_err)?;
     chart
@@ -365,10 +395,10 @@ fn along(
         .configure_mesh()
         .x_desc("source line")
         .y_desc("|deviation| (mm)")
-        .x_label_formatter(&|v| format!("{v:.0}"))
+        .x_label_formatter(&|v| line_label(*v))
         .label_style(("sans-serif", 13))
         .axis_desc_style(("sans-serif", 14))
-        .y_label_formatter(&|v| format!("{v:.4}"))
+        .y_label_formatter(&|v| tick_label(*v, 4))
         .light_line_style(RGBColor(235, 235, 235))
         .bold_line_style(RGBColor(215, 215, 215))
         .draw()
