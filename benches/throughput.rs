@@ -78,6 +78,7 @@ fn main() {
             settings: Settings::default(),
             emit,
             pool: None,
+            travel: None,
         };
         let mut sink: Vec<u8> = Vec::with_capacity(program.len() * 2);
         let t = Instant::now();

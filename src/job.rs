@@ -183,6 +183,10 @@ pub struct Job<'m> {
     pub emit: EmitOptions,
     /// Worker threads for the per-block prediction (rayon's global pool when `None`).
     pub pool: Option<&'m rayon::ThreadPool>,
+    /// A machine whose travel every programmed position must keep to, for
+    /// runs without a predictor (`check --machine`); a compensation checks
+    /// the travel as it solves.
+    pub travel: Option<&'m MachineTool>,
 }
 
 /// The in-order pass of the process effects: puts the program on a time
@@ -726,6 +730,9 @@ impl<'m> Job<'m> {
 
         // The last lines with a move so far (plan and context, in order).
         let mut last_moves: Vec<(Plan, BlockContext)> = Vec::new();
+        // The first position beyond the travel (`travel` runs): reported
+        // after the input errors, like a compensation failure.
+        let mut travel_failure: Option<Error> = None;
         // Interprets one parsed chunk: its plans and block contexts.
         let mut prepare = |st: &mut Stage, summary: &mut Summary| -> Result<()> {
             let chunk = &mut st.chunk;
@@ -747,6 +754,31 @@ impl<'m> Job<'m> {
                     summary.blocks += 1;
                 }
                 if let Some(mv) = plan.mv {
+                    if let Some(m) = self.travel {
+                        for (slot, &letter) in crate::machine::AXIS_LETTERS.iter().enumerate() {
+                            let Some((lo, hi)) = m.travel(slot) else {
+                                continue;
+                            };
+                            let v = mv.end[slot];
+                            let outside = v < lo - crate::compensate::TRAVEL_SLACK
+                                || v > hi + crate::compensate::TRAVEL_SLACK;
+                            if outside && travel_failure.is_none() {
+                                travel_failure = Some(Error::Unachievable(Located::new(
+                                    file,
+                                    block.line_no,
+                                    1,
+                                    format!(
+                                        "programmed {} = {v:.4} is outside the travel [{lo}, {hi}]: `{}`",
+                                        letter as char,
+                                        String::from_utf8_lossy(crate::program::gcode::strip_eol(
+                                            line
+                                        ))
+                                        .trim()
+                                    ),
+                                )));
+                            }
+                        }
+                    }
                     summary.moves += 1;
                     match (plan.kind, mv.motion) {
                         (PlanKind::Cycle { .. }, _) => summary.holes += 1,
@@ -942,7 +974,7 @@ impl<'m> Job<'m> {
             std::mem::swap(&mut parsed, &mut read);
             has_parsed = has_read;
         }
-        if let Some(e) = failure {
+        if let Some(e) = failure.or(travel_failure) {
             return Err(e);
         }
         summary.inch = interp.inch();
@@ -1038,6 +1070,7 @@ axes:
                 annotate: false,
             },
             pool: None,
+            travel: None,
         }
     }
 

@@ -153,6 +153,7 @@ fn gcode_compensation_does_not_allocate_per_block() {
             annotate: true,
         },
         pool: Some(&pool),
+        travel: None,
     };
     // Warm up (lazy statics, the pool's own buffers), then n and 2n blocks.
     allocations(&job, &raster(1000));

@@ -253,6 +253,7 @@ proptest! {
             settings: Settings { tolerance_mm: tolerance },
             emit: EmitOptions { decimals_mm: Some(4), decimals_deg: None, annotate: true },
             pool: None,
+            travel: None,
         };
         let mut out = Vec::new();
         let summary = job.run(BufReader::new(Cursor::new(input.as_bytes())), "in.nc", Some(&mut out), None);

@@ -873,3 +873,35 @@ fn regression_svg_ticks_are_distinct_and_never_negative_zero() {
         }
     }
 }
+
+/// Audit of session 11: `check --machine` passed programs that leave the
+/// machine's travel (exit 0, "warnings: 0") while `compensate` refuses
+/// them; it now refuses them with the same message, after any input error.
+#[test]
+fn regression_check_refuses_positions_beyond_the_travel() {
+    for bad in ["travel.nc", "wild-incremental.nc"] {
+        let p = repo("tests/bad/programs").join(bad);
+        let check = postproc()
+            .args(["check", "--machine", "afm-r1000"])
+            .arg(&p)
+            .output()
+            .unwrap();
+        let comp = postproc()
+            .args(["compensate", "--machine", "afm-r1000", "-o", "-"])
+            .arg(&p)
+            .output()
+            .unwrap();
+        let (ce, me) = (
+            String::from_utf8_lossy(&check.stderr),
+            String::from_utf8_lossy(&comp.stderr),
+        );
+        assert_eq!(check.status.code(), Some(2), "{bad}: {ce}");
+        assert!(ce.contains("outside the travel"), "{bad}: {ce}");
+        let error_line = |t: &str| {
+            t.lines()
+                .find(|l| l.starts_with("error:"))
+                .map(str::to_string)
+        };
+        assert_eq!(error_line(&ce), error_line(&me), "{bad}");
+    }
+}

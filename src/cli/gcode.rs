@@ -193,6 +193,7 @@ fn add_mean_power(
                 annotate: false,
             },
             pool: None,
+            travel: None,
         };
         let (input, name) = open_input(input)?;
         job.mean_power(input, &name)?
@@ -242,6 +243,9 @@ pub fn check(a: &CheckArgs) -> Result<i32> {
             annotate: false,
         },
         pool: None,
+        // With a machine, every programmed position must be within its
+        // travel, as `compensate` requires.
+        travel: machine.as_ref(),
     };
     let s = job.run(input, &name, None, None)?;
     let mut out = std::io::stdout().lock();
@@ -545,6 +549,7 @@ pub(super) fn build_job<'m>(
             annotate,
         },
         pool: Some(pool),
+        travel: None,
     })
 }
 

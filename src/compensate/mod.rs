@@ -404,10 +404,13 @@ fn check_programmed_travel(pred: &ToolPredictor, p: &AxisVec) -> Result<(), Fail
     }
 }
 
+/// Rounding allowance of the travel limits, mm or deg.
+pub(crate) const TRAVEL_SLACK: f64 = 1e-9;
+
 fn check_travel(pred: &ToolPredictor, c: &AxisVec) -> Result<(), Failure> {
     for (s, &letter) in crate::machine::AXIS_LETTERS.iter().enumerate() {
         if let Some((lo, hi)) = pred.machine.travel(s) {
-            if c[s] < lo - 1e-9 || c[s] > hi + 1e-9 {
+            if c[s] < lo - TRAVEL_SLACK || c[s] > hi + TRAVEL_SLACK {
                 return Err(Failure::OutOfTravel {
                     axis: letter as char,
                     value: c[s],
