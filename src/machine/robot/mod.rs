@@ -190,11 +190,29 @@ pub struct OutputDecimals {
     pub quaternion: usize,
 }
 
+/// Largest magnitude of any number of a robot file: beyond every length
+/// (mm), angle, speed, mass or joint stiffness (N·m/rad) of a real robot,
+/// so that an absurd value is an error rather than an infinity later on.
+const MAX_VALUE: f64 = 1e9;
+
 fn finite(path: &str, v: &[f64]) -> std::result::Result<(), Invalid> {
-    match v.iter().find(|x| !x.is_finite()) {
-        Some(x) => Err(Invalid::new(
+    within(path, v, MAX_VALUE)
+}
+
+/// Every value of `v` finite and within ±`max`.
+fn within(path: &str, v: &[f64], max: f64) -> std::result::Result<(), Invalid> {
+    match v.iter().find(|x| !x.is_finite() || x.abs() > max) {
+        Some(x) if !x.is_finite() => Err(Invalid::new(
             path,
             format!("value `{x}` is not a finite number"),
+        )),
+        Some(x) => Err(Invalid::new(
+            path,
+            format!(
+                "value `{}` is beyond ±{} (not a plausible value)",
+                crate::error::show_number(*x),
+                crate::error::show_number(max)
+            ),
         )),
         None => Ok(()),
     }
@@ -222,9 +240,12 @@ fn joints(
         theta_offset_rad: 0.0,
     }; 6];
     for (i, r) in rows.iter().enumerate() {
-        finite(
+        // Link lengths within 100 m, angles within a turn.
+        within(&format!("{path}[{i}]"), &[r.a_mm, r.d_mm], 1e5)?;
+        within(
             &format!("{path}[{i}]"),
-            &[r.a_mm, r.alpha_deg, r.d_mm, r.theta_offset_deg],
+            &[r.alpha_deg, r.theta_offset_deg],
+            360.0,
         )?;
         out[i] = DhJoint {
             a_mm: r.a_mm,

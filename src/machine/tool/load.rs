@@ -67,6 +67,28 @@ fn finite(path: &str, v: f64) -> V<f64> {
     }
 }
 
+/// Largest magnitude of a position, length or speed of a machine-tool file
+/// (mm, deg, mm/min, deg/min): beyond every real machine, so that an
+/// absurd value is an error rather than an infinity later on. (Errors and
+/// stiffnesses have limits of their own.)
+const MAX_PLAUSIBLE: f64 = 1e7;
+
+/// [`finite`] and within ±[`MAX_PLAUSIBLE`].
+fn plausible(path: &str, v: f64) -> V<f64> {
+    let v = finite(path, v)?;
+    if v.abs() > MAX_PLAUSIBLE {
+        return Err(Invalid::new(
+            path,
+            format!(
+                "value `{}` is beyond ±{} (not a plausible value)",
+                crate::error::show_number(v),
+                crate::error::show_number(MAX_PLAUSIBLE)
+            ),
+        ));
+    }
+    Ok(v)
+}
+
 fn validate(raw: RawMachineTool) -> V<MachineTool> {
     if raw.kind != "machine_tool" {
         return Err(Invalid::new(
@@ -130,7 +152,7 @@ fn validate(raw: RawMachineTool) -> V<MachineTool> {
     let mut tools = BTreeMap::new();
     for (h, t) in &raw.tools {
         let path = format!("tools.{h}.length_mm");
-        let l = finite(&path, t.length_mm)?;
+        let l = plausible(&path, t.length_mm)?;
         if l < 0.0 {
             return Err(Invalid::new(path, format!("tool length `{l}` is negative")));
         }
@@ -147,7 +169,7 @@ fn validate(raw: RawMachineTool) -> V<MachineTool> {
             ));
         }
         for v in xyz {
-            finite(&path, *v)?;
+            plausible(&path, *v)?;
         }
         work_offsets.insert(code.clone(), *xyz);
     }
@@ -455,8 +477,8 @@ fn validate_axis(p: &str, ra: &RawAxis) -> V<Axis> {
     }
     let tpath = format!("{p}.{travel_key}");
     let [lo, hi] = travel.ok_or_else(|| Invalid::new(p, format!("missing `{travel_key}`")))?;
-    let lo = finite(&tpath, lo)?;
-    let hi = finite(&tpath, hi)?;
+    let lo = plausible(&tpath, lo)?;
+    let hi = plausible(&tpath, hi)?;
     if lo >= hi {
         return Err(Invalid::new(
             tpath,
@@ -465,7 +487,7 @@ fn validate_axis(p: &str, ra: &RawAxis) -> V<Axis> {
     }
     let rpath = format!("{p}.{rapid_key}");
     let rapid = rapid.ok_or_else(|| Invalid::new(p, format!("missing `{rapid_key}`")))?;
-    let rapid = finite(&rpath, rapid)?;
+    let rapid = plausible(&rpath, rapid)?;
     if rapid <= 0.0 {
         return Err(Invalid::new(
             rpath,
@@ -482,9 +504,9 @@ fn validate_axis(p: &str, ra: &RawAxis) -> V<Axis> {
         (Some(v), false) => {
             let path = format!("{p}.pivot_mm");
             Vector3::new(
-                finite(&path, v[0])?,
-                finite(&path, v[1])?,
-                finite(&path, v[2])?,
+                plausible(&path, v[0])?,
+                plausible(&path, v[1])?,
+                plausible(&path, v[2])?,
             )
         }
         (None, _) => Vector3::zeros(),
@@ -556,7 +578,7 @@ fn validate_table(
         return Err(Invalid::new(ppath, "the table has no positions"));
     }
     for v in positions {
-        finite(&ppath, *v)?;
+        plausible(&ppath, *v)?;
     }
     for w in positions.windows(2) {
         if let [a, b] = w {
