@@ -116,6 +116,24 @@ impl Error {
     }
 }
 
+/// `bytes` as text, or the line and column of the first byte that is not
+/// valid UTF-8 in `file`.
+pub fn utf8_text<'a>(bytes: &'a [u8], file: &str) -> std::result::Result<&'a str, Located> {
+    std::str::from_utf8(bytes).map_err(|e| {
+        let good = bytes.get(..e.valid_up_to()).unwrap_or_default();
+        let line = 1 + good.iter().filter(|&&b| b == b'\n').count();
+        let line_start = good.iter().rposition(|&b| b == b'\n').map_or(0, |p| p + 1);
+        let column = good.len() - line_start + 1;
+        let byte = bytes.get(e.valid_up_to()).copied().unwrap_or(0);
+        Located::new(
+            file,
+            line,
+            column,
+            format!("invalid UTF-8: byte 0x{byte:02X} is not valid text"),
+        )
+    })
+}
+
 /// A number for an error message: plain when of ordinary size, in exponent
 /// notation when huge or tiny, so an absurd input cannot flood the message.
 pub fn show_number(v: f64) -> String {

@@ -905,3 +905,70 @@ fn regression_check_refuses_positions_beyond_the_travel() {
         assert_eq!(error_line(&ce), error_line(&me), "{bad}");
     }
 }
+
+/// Audit of session 11: messages that lacked a location or misled — a
+/// force table with invalid UTF-8 had no line and column, a machine that
+/// is a device was "not found", and an absurd option value was echoed in
+/// 309 digits.
+#[test]
+fn regression_messages_locate_and_stay_short() {
+    let dir = tempfile::tempdir().unwrap();
+    let table = dir.path().join("ft.csv");
+    std::fs::write(&table, b"line,fx_n,fy_n,fz_n\n3,1\xff0,0,0\n").unwrap();
+    let part = repo("samples/part.nc");
+    let cases: Vec<(Vec<&std::ffi::OsStr>, &str)> = vec![
+        (
+            vec![
+                "report".as_ref(),
+                part.as_os_str(),
+                "-m".as_ref(),
+                "afm-r1000".as_ref(),
+                "--force-table".as_ref(),
+                table.as_os_str(),
+            ],
+            "ft.csv:2:4: invalid UTF-8: byte 0xFF",
+        ),
+        (
+            vec![
+                "check".as_ref(),
+                part.as_os_str(),
+                "--machine".as_ref(),
+                dir.path().as_os_str(),
+            ],
+            "is not a regular file",
+        ),
+        (
+            vec![
+                "compensate".as_ref(),
+                part.as_os_str(),
+                "-m".as_ref(),
+                "afm-r1000".as_ref(),
+                "-o".as_ref(),
+                "-".as_ref(),
+                "--tolerance".as_ref(),
+                "1e308".as_ref(),
+            ],
+            "--tolerance 1e308: must be within",
+        ),
+        (
+            vec![
+                "compensate".as_ref(),
+                part.as_os_str(),
+                "-m".as_ref(),
+                "afm-r1000".as_ref(),
+                "-o".as_ref(),
+                "-".as_ref(),
+                "--milling-depth".as_ref(),
+                "1e308".as_ref(),
+            ],
+            "--milling-depth 1e308: must be within",
+        ),
+    ];
+    for (args, want) in cases {
+        let out = postproc().args(&args).output().unwrap();
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{args:?}: {err}");
+        assert!(err.contains(want), "{args:?}: {err}");
+        assert!(err.len() < 300, "{args:?}: {err}");
+    }
+}

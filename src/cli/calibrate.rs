@@ -141,7 +141,7 @@ pub fn run_calibrate(a: &CalibrateArgs) -> Result<i32> {
     if !(a.holdout.is_finite() && (0.0..0.9).contains(&a.holdout)) {
         return Err(usage(format!(
             "--holdout must be in [0, 0.9), got {}",
-            a.holdout
+            crate::error::show_number(a.holdout)
         )));
     }
     let (text, file) = read_machine(&a.machine)?;

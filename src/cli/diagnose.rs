@@ -91,7 +91,7 @@ pub fn run(a: &DiagnoseArgs) -> Result<i32> {
     if !(a.holdout > 0.0 && a.holdout < 1.0) {
         return Err(Error::Usage(format!(
             "--holdout {} must be above 0 and below 1 (an effect is accepted only when held-out rows confirm it)",
-            a.holdout
+            crate::error::show_number(a.holdout)
         )));
     }
     let (machine, text) = load(m)?;

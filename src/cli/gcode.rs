@@ -155,7 +155,10 @@ pub(super) fn process_setup(args: &EffectArgs, machine: &MachineTool) -> Result<
     ] {
         if let Some(v) = v {
             if !v.is_finite() || !(0.0..=1e4).contains(&v) {
-                return Err(usage(format!("{flag} {v}: must be within 0..10000 mm")));
+                return Err(usage(format!(
+                    "{flag} {}: must be within 0..10000 mm",
+                    crate::error::show_number(v)
+                )));
             }
         }
     }
@@ -519,7 +522,8 @@ pub(super) fn build_job<'m>(
     let min = crate::compensate::MIN_TOLERANCE_MM;
     if !tolerance.is_finite() || tolerance < min || tolerance > 1.0 {
         return Err(usage(format!(
-            "--tolerance {tolerance}: must be within [{min}, 1] mm (the solver converges to {} mm)",
+            "--tolerance {}: must be within [{min}, 1] mm (the solver converges to {} mm)",
+            crate::error::show_number(tolerance),
             crate::compensate::SOLVE_TOL_MM
         )));
     }

@@ -92,7 +92,10 @@ pub fn robot_gains(mut e: Effects, gains: &[String]) -> Result<Effects> {
             .parse()
             .map_err(|_| usage(format!("--gain {name}: `{value}` is not a number")))?;
         if !v.is_finite() || !(0.0..=10.0).contains(&v) {
-            return Err(usage(format!("--gain {name}: {v} is outside 0..10")));
+            return Err(usage(format!(
+                "--gain {name}: {} is outside 0..10",
+                crate::error::show_number(v)
+            )));
         }
         let g = robot_effect(&mut e, name.trim()).ok_or_else(|| {
             usage(format!(
@@ -498,7 +501,10 @@ pub(super) fn robot_with_process(robot: Robot, e: &EffectArgs) -> Result<Robot> 
     ] {
         if let Some(v) = v {
             if !v.is_finite() || !(0.0..=1e4).contains(&v) {
-                return Err(usage(format!("{flag} {v}: must be within 0..10000 mm")));
+                return Err(usage(format!(
+                    "{flag} {}: must be within 0..10000 mm",
+                    crate::error::show_number(v)
+                )));
             }
             *slot = v;
         }

@@ -106,9 +106,13 @@ impl Machine {
             }
         }
         candidates.into_iter().find(|p| p.is_file()).ok_or_else(|| {
-            Error::Usage(format!(
-                "machine `{name}` not found (no such file, and no machines/{file})"
-            ))
+            if direct.exists() {
+                Error::Usage(format!("machine `{name}` is not a regular file"))
+            } else {
+                Error::Usage(format!(
+                    "machine `{name}` not found (no such file, and no machines/{file})"
+                ))
+            }
         })
     }
 }

@@ -150,7 +150,10 @@ impl EffectSet {
             .parse()
             .map_err(|_| Error::Usage(format!("--gain {name}: `{value}` is not a number")))?;
         if !v.is_finite() || !(0.0..=10.0).contains(&v) {
-            return Err(Error::Usage(format!("--gain {name}: {v} is outside 0..10")));
+            return Err(Error::Usage(format!(
+                "--gain {name}: {} is outside 0..10",
+                crate::error::show_number(v)
+            )));
         }
         if self.gains[*e as usize] != 0.0 {
             self.gains[*e as usize] = v;

@@ -123,8 +123,9 @@ impl ForceTable {
 
     /// Reads a table from a file.
     pub fn load(path: &std::path::Path) -> Result<Self> {
-        let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
-        Self::from_csv_str(&text, &path.display().to_string())
+        let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+        let name = path.display().to_string();
+        Self::from_csv_str(crate::error::utf8_text(&bytes, &name)?, &name)
     }
 
     /// Force for a program line, N.

@@ -586,20 +586,5 @@ pub fn parse_module(src: &str, file: &str) -> Result<Module, Located> {
 /// Parses a RAPID module from bytes, rejecting invalid UTF-8 with the line
 /// and column of the first bad byte.
 pub fn parse_module_bytes(src: &[u8], file: &str) -> Result<Module, Located> {
-    match std::str::from_utf8(src) {
-        Ok(text) => parse_module(text, file),
-        Err(e) => {
-            let good = src.get(..e.valid_up_to()).unwrap_or_default();
-            let line = 1 + good.iter().filter(|&&b| b == b'\n').count();
-            let line_start = good.iter().rposition(|&b| b == b'\n').map_or(0, |p| p + 1);
-            let column = good.len() - line_start + 1;
-            let byte = src.get(e.valid_up_to()).copied().unwrap_or(0);
-            Err(Located::new(
-                file,
-                line,
-                column,
-                format!("invalid UTF-8: byte 0x{byte:02X} is not valid text"),
-            ))
-        }
-    }
+    parse_module(crate::error::utf8_text(src, file)?, file)
 }
