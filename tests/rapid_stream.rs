@@ -582,17 +582,7 @@ fn standard_input_is_read_a_window_at_a_time() {
 #[test]
 fn windows_are_taken_from_one_megabyte_on_and_from_sixteen_with_a_warm_start() {
     let dir = tempfile::tempdir().expect("tempdir");
-    let mut src = String::from("MODULE Big\n  PROC main()\n");
-    let mut k = 0;
-    while src.len() < (1 << 20) {
-        src.push_str(&format!(
-            "    MoveL [[{},{},400],[0,0,1,0],[0,0,0,0],[9E9,9E9,9E9,9E9,9E9,9E9]],v200,z1,tool0;\n",
-            700 + k % 50,
-            k % 40
-        ));
-        k += 1;
-    }
-    src.push_str("  ENDPROC\nENDMODULE\n");
+    let src = one_megabyte_module();
     let big = dir.path().join("big.mod");
     std::fs::write(&big, &src).expect("write");
     let b = big.to_str().unwrap();
@@ -725,17 +715,7 @@ fn errors_of_windows_read_as_the_whole_module_s() {
 /// memory when no temporary file can be made.
 #[test]
 fn standard_input_is_copied_only_when_windows_will_read_it() {
-    let mut src = String::from("MODULE Big\n  PROC main()\n");
-    let mut k = 0;
-    while src.len() < (1 << 20) {
-        src.push_str(&format!(
-            "    MoveL [[{},{},400],[0,0,1,0],[0,0,0,0],[9E9,9E9,9E9,9E9,9E9,9E9]],v200,z1,tool0;\n",
-            700 + k % 50,
-            k % 40
-        ));
-        k += 1;
-    }
-    src.push_str("  ENDPROC\nENDMODULE\n");
+    let src = one_megabyte_module();
     let args = |start: &'static str| {
         vec![
             "-v",
@@ -767,4 +747,21 @@ fn standard_input_is_copied_only_when_windows_will_read_it() {
         .expect("runs");
     assert_eq!(out.status.code(), Some(0));
     assert_eq!(out.stdout, cold.1);
+}
+
+/// A module of one routine of one-line moves, just over 1 MB (the default
+/// size from which modules are read a window at a time).
+fn one_megabyte_module() -> String {
+    let mut src = String::from("MODULE Big\n  PROC main()\n");
+    let mut k = 0;
+    while src.len() < (1 << 20) {
+        src.push_str(&format!(
+            "    MoveL [[{},{},400],[0,0,1,0],[0,0,0,0],[9E9,9E9,9E9,9E9,9E9,9E9]],v200,z1,tool0;\n",
+            700 + k % 50,
+            k % 40
+        ));
+        k += 1;
+    }
+    src.push_str("  ENDPROC\nENDMODULE\n");
+    src
 }
