@@ -972,3 +972,65 @@ fn regression_messages_locate_and_stay_short() {
         assert!(err.len() < 300, "{args:?}: {err}");
     }
 }
+
+/// Audit of session 11: an interrupt (SIGINT, SIGTERM) while a large
+/// program was being written left the hidden temporary file
+/// (`.postproc-XXXXXX`, tens of MB) beside the output. The run now removes
+/// it before it ends.
+#[cfg(unix)]
+#[test]
+fn regression_an_interrupt_leaves_no_temporary_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let program = dir.path().join("big.nc");
+    let mut text = String::from("G90 G17 G21 G54\nT1 M6\nG43 H1 G0 X0 Y0 Z20\nG1 Z0 F2000\n");
+    for k in 0..400_000 {
+        let x = if k % 2 == 0 { 400 } else { 0 };
+        text.push_str(&format!("X{x} Y{:.3}\n", k as f64 * 0.001));
+    }
+    std::fs::write(&program, text).unwrap();
+    let out_dir = dir.path().join("out");
+    std::fs::create_dir(&out_dir).unwrap();
+    let mut interrupted = 0;
+    for signal in ["-INT", "-TERM"] {
+        let mut child = std::process::Command::new(assert_cmd::cargo::cargo_bin("postproc"))
+            .args(["compensate", "--machine", "afm-r1000", "-o"])
+            .arg(out_dir.join("o.nc"))
+            .arg(&program)
+            .stderr(std::process::Stdio::null())
+            .spawn()
+            .unwrap();
+        // Wait for the temporary file to appear (or the run to end).
+        let mut seen = false;
+        for _ in 0..400 {
+            if std::fs::read_dir(&out_dir).unwrap().next().is_some() {
+                seen = true;
+                break;
+            }
+            if child.try_wait().unwrap().is_some() {
+                break;
+            }
+            std::thread::sleep(std::time::Duration::from_millis(5));
+        }
+        let killed = std::process::Command::new("kill")
+            .arg(signal)
+            .arg(child.id().to_string())
+            .status()
+            .unwrap();
+        let status = child.wait().unwrap();
+        let left: Vec<String> = std::fs::read_dir(&out_dir)
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .collect();
+        if seen && killed.success() && !status.success() {
+            interrupted += 1;
+            assert!(left.is_empty(), "{signal}: left {left:?}");
+        } else {
+            // The run ended before the signal: only the finished output.
+            assert!(left.iter().all(|f| f == "o.nc"), "{signal}: left {left:?}");
+            let _ = std::fs::remove_file(out_dir.join("o.nc"));
+        }
+    }
+    // A 400 000-block program takes far longer than the wait for its
+    // temporary file: at least one run was interrupted while writing.
+    assert!(interrupted > 0, "no run was interrupted");
+}

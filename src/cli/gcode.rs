@@ -392,8 +392,14 @@ pub(super) struct Staged {
 }
 
 enum Sink {
-    /// A temporary file to be renamed to the path.
-    Temp(BufWriter<std::fs::File>, tempfile::TempPath, PathBuf),
+    /// A temporary file to be renamed to the path (removed on an
+    /// interrupt while the guard lives).
+    Temp(
+        BufWriter<std::fs::File>,
+        tempfile::TempPath,
+        PathBuf,
+        super::interrupt::Guard,
+    ),
     /// A device or named pipe, written straight.
     Through(BufWriter<std::fs::File>),
     /// Standard output.
@@ -401,7 +407,14 @@ enum Sink {
 }
 
 /// A written output waiting to be put in place.
-pub(super) struct Pending(Option<(tempfile::TempPath, PathBuf, PathBuf)>);
+pub(super) struct Pending(
+    Option<(
+        tempfile::TempPath,
+        PathBuf,
+        PathBuf,
+        super::interrupt::Guard,
+    )>,
+);
 
 impl Staged {
     /// The output `path`, or standard output for `-`.
@@ -455,16 +468,22 @@ impl Staged {
                 )
             })?;
         let (file, tmp_path) = tmp.into_parts();
+        let guard = super::interrupt::register(&tmp_path);
         Ok(Staged {
             shown: path.to_path_buf(),
-            sink: Sink::Temp(BufWriter::with_capacity(1 << 20, file), tmp_path, target),
+            sink: Sink::Temp(
+                BufWriter::with_capacity(1 << 20, file),
+                tmp_path,
+                target,
+                guard,
+            ),
         })
     }
 
     /// Where the output goes.
     pub(super) fn writer(&mut self) -> &mut dyn Write {
         match &mut self.sink {
-            Sink::Temp(w, _, _) | Sink::Through(w) => w,
+            Sink::Temp(w, ..) | Sink::Through(w) => w,
             Sink::Stdout(w) => w,
         }
     }
@@ -476,7 +495,7 @@ impl Staged {
         match self.sink {
             Sink::Through(mut w) => w.flush().map_err(|e| Error::io(&shown, e))?,
             Sink::Stdout(mut w) => w.flush().map_err(|e| Error::io(&shown, e))?,
-            Sink::Temp(w, tmp_path, target) => {
+            Sink::Temp(w, tmp_path, target, guard) => {
                 let file = w
                     .into_inner()
                     .map_err(|e| Error::io(&shown, e.into_error()))?;
@@ -489,7 +508,7 @@ impl Staged {
                     file.set_permissions(std::fs::Permissions::from_mode(0o644))
                         .map_err(|e| Error::io(&shown, e))?;
                 }
-                return Ok(Pending(Some((tmp_path, target, shown))));
+                return Ok(Pending(Some((tmp_path, target, shown, guard))));
             }
         }
         Ok(Pending(None))
@@ -499,10 +518,11 @@ impl Staged {
 impl Pending {
     /// Puts the output in place (renames the temporary file).
     pub(super) fn commit(self) -> Result<()> {
-        if let Some((tmp_path, target, shown)) = self.0 {
+        if let Some((tmp_path, target, shown, guard)) = self.0 {
             tmp_path
                 .persist(&target)
                 .map_err(|e| Error::io(&shown, e.error))?;
+            drop(guard);
         }
         Ok(())
     }

@@ -5,6 +5,7 @@ mod batch;
 mod calibrate;
 mod diagnose;
 mod gcode;
+mod interrupt;
 mod rapid;
 
 use std::path::PathBuf;
