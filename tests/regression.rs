@@ -1034,3 +1034,49 @@ fn regression_an_interrupt_leaves_no_temporary_file() {
     // temporary file: at least one run was interrupted while writing.
     assert!(interrupted > 0, "no run was interrupted");
 }
+
+/// Audit of session 11: `batch` wrote its outputs and summary through a
+/// link planted in the output folder, which could reach the machine
+/// file; they are checked against every input like `compensate`'s.
+#[cfg(unix)]
+#[test]
+fn regression_batch_outputs_never_reach_an_input_through_a_link() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    std::fs::copy(repo("machines/afm-r1000.yaml"), d.join("m.yaml")).unwrap();
+    std::fs::copy(repo("samples/part.nc"), d.join("part.nc")).unwrap();
+    let machine = std::fs::read(d.join("m.yaml")).unwrap();
+    for planted in ["part.nc", "batch-summary.json"] {
+        let out = d.join(format!("out-{planted}"));
+        std::fs::create_dir(&out).unwrap();
+        std::os::unix::fs::symlink(d.join("m.yaml"), out.join(planted)).unwrap();
+        let run = postproc()
+            .args(["batch", "--machine"])
+            .arg(d.join("m.yaml"))
+            .arg("--out-dir")
+            .arg(&out)
+            .arg(d.join("part.nc"))
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&run.stderr);
+        assert_eq!(run.status.code(), Some(2), "{planted}: {err}");
+        assert_eq!(
+            std::fs::read(d.join("m.yaml")).unwrap(),
+            machine,
+            "{planted}"
+        );
+        // The planted link, and the summary of the failed program (a
+        // summary that would reach an input is refused before any program).
+        let mut left: Vec<String> = std::fs::read_dir(&out)
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .collect();
+        left.sort();
+        let want: &[&str] = if planted == "part.nc" {
+            &["batch-summary.json", "part.nc"]
+        } else {
+            &["batch-summary.json"]
+        };
+        assert_eq!(left, want, "{planted}");
+    }
+}

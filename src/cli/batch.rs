@@ -15,8 +15,8 @@ use rayon::prelude::*;
 use serde::Serialize;
 
 use super::gcode::{
-    Staged, build_job, effects, parse_setup, process_setup, run_reporting, same_file, thread_pool,
-    write_atomically,
+    Staged, build_job, effects, parse_setup, process_setup, refuse_overwrite, run_reporting,
+    thread_pool, write_atomically,
 };
 use super::rapid::{Source, load_robot, write_report};
 use super::{Annotate, BatchArgs, Format, ProgramArgs, usage};
@@ -238,12 +238,15 @@ fn compensate_one(
     input: &Path,
     output: &Path,
     report: Option<Format>,
+    files: &[PathBuf],
 ) -> Result<Done> {
-    if same_file(input, output) {
-        return Err(usage(format!(
-            "{}: the output would overwrite the input",
-            output.display()
-        )));
+    // Neither output may be an input (the program, the machine file, the
+    // force table), also through a link planted in the output folder.
+    let mut inputs = vec![input.to_path_buf()];
+    inputs.extend_from_slice(files);
+    refuse_overwrite(output, &inputs)?;
+    if let Some(format) = report {
+        refuse_overwrite(&report_path(output, format), &inputs)?;
     }
     if let Some(dir) = output.parent() {
         std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
@@ -356,6 +359,9 @@ pub fn run(a: &BatchArgs, quiet: bool) -> Result<i32> {
     let pool = thread_pool(a.effects.threads)?;
     let machine_path = Machine::resolve(&a.machine)?;
     let machine = Machine::load(&machine_path)?;
+    // The files every program's run reads besides the program itself.
+    let mut files = vec![machine_path.clone()];
+    files.extend(a.effects.force_table.clone());
     let items = collect(&a.inputs, &a.out_dir);
     if items.is_empty() {
         return Err(usage(format!(
@@ -412,8 +418,10 @@ pub fn run(a: &BatchArgs, quiet: bool) -> Result<i32> {
             Engine::Robot(robot, opts, a.rapid_window_lines)
         }
     };
-    // The output folder is made once every option has been checked.
+    // The output folder is made once every option has been checked; the
+    // summary may not be an input either (checked before any program).
     std::fs::create_dir_all(&a.out_dir).map_err(|e| Error::io(&a.out_dir, e))?;
+    refuse_overwrite(&a.out_dir.join(SUMMARY_FILE), &files)?;
     let bar = if quiet || !std::io::stderr().is_terminal() {
         indicatif::ProgressBar::hidden()
     } else {
@@ -432,7 +440,7 @@ pub fn run(a: &BatchArgs, quiet: bool) -> Result<i32> {
                 let output = a.out_dir.join(&item.rel);
                 let done = match &item.problem {
                     Some(p) => Err(usage(p.clone())),
-                    None => compensate_one(&engine, &item.input, &output, a.report_format),
+                    None => compensate_one(&engine, &item.input, &output, a.report_format, &files),
                 };
                 bar.inc(1);
                 let input = item.input.display().to_string();
