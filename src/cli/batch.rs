@@ -15,10 +15,10 @@ use rayon::prelude::*;
 use serde::Serialize;
 
 use super::gcode::{
-    Staged, build_job, effects, parse_setup, process_setup, refuse_overwrite, run_reporting,
-    thread_pool, write_atomically,
+    Staged, build_job, effects, finish_both, parse_setup, process_setup, refuse_overwrite,
+    run_reporting, thread_pool, write_atomically,
 };
-use super::rapid::{Source, load_robot, write_report};
+use super::rapid::{Source, load_robot};
 use super::{Annotate, BatchArgs, Format, ProgramArgs, usage};
 use crate::compensate::rapid::{RapidOptions, compensate_module};
 use crate::error::{Error, Result};
@@ -275,9 +275,7 @@ fn compensate_one(
                         &job.setup,
                         format,
                     )?;
-                    let (rep, out) = (rep.finish()?, out.finish()?);
-                    out.commit()?;
-                    rep.commit()?;
+                    finish_both(out, rep)?;
                     s
                 }
                 None => write_atomically(output, |w| job.run(reader, &name, Some(w), None))?,
@@ -301,55 +299,35 @@ fn compensate_one(
                 records: report.is_some(),
                 ..*opts
             };
+            let report_file = report.map(|f| (report_path(output, f), f));
+            let report_to = report_file.as_ref().map(|(p, f)| (p.as_path(), *f));
+            let done = |o: &crate::compensate::rapid::RapidOutcome| Done {
+                blocks: o.moves,
+                moves: o.moves,
+                max_dev: o.max_deviation_mm,
+                max_line: o.max_deviation_line,
+                residual: None,
+            };
             // A large module is read a window at a time, as by `compensate`.
             let warm = crate::compensate::rapid::stream::first_pass(robot, &opts);
             let source = Source::new(input, *forced_window, warm)?;
             if let Some(lines) = source.window_lines() {
-                let report_file = report.map(|f| (report_path(output, f), f));
                 let streamed = super::rapid::compensate_streamed_to(
                     &source,
                     robot,
                     &opts,
                     lines,
                     Some(output),
-                    report_file.as_ref().map(|(p, f)| (p.as_path(), *f)),
+                    report_to,
                 )?;
                 if let Some(outcome) = streamed {
-                    return Ok(Done {
-                        blocks: outcome.moves,
-                        moves: outcome.moves,
-                        max_dev: outcome.max_deviation_mm,
-                        max_line: outcome.max_deviation_line,
-                        residual: None,
-                    });
+                    return Ok(done(&outcome));
                 }
             }
             let (src, name) = source.read_whole()?;
             let outcome = compensate_module(&src, &name, robot, &opts)?;
-            // Neither output is put in place unless both are written.
-            let mut out = Staged::open(output)?;
-            out.writer()
-                .write_all(outcome.text.as_bytes())
-                .map_err(|e| Error::io(output, e))?;
-            let rep = match report {
-                Some(format) => {
-                    let mut rep = Staged::open(&report_path(output, format))?;
-                    write_report(rep.writer(), &outcome, &name, format)?;
-                    Some(rep.finish()?)
-                }
-                None => None,
-            };
-            out.finish()?.commit()?;
-            if let Some(rep) = rep {
-                rep.commit()?;
-            }
-            Ok(Done {
-                blocks: outcome.moves,
-                moves: outcome.moves,
-                max_dev: outcome.max_deviation_mm,
-                max_line: outcome.max_deviation_line,
-                residual: None,
-            })
+            super::rapid::write_outcome(output, &outcome, &name, report_to)?;
+            Ok(done(&outcome))
         }
     }
 }

@@ -515,6 +515,14 @@ impl Staged {
     }
 }
 
+/// Finishes a program and its report, then puts both in place: neither
+/// is, unless both are written.
+pub(super) fn finish_both(out: Staged, report: Staged) -> Result<()> {
+    let (report, out) = (report.finish()?, out.finish()?);
+    out.commit()?;
+    report.commit()
+}
+
 impl Pending {
     /// Puts the output in place (renames the temporary file).
     pub(super) fn commit(self) -> Result<()> {
@@ -736,9 +744,7 @@ pub fn compensate(a: &CompensateArgs) -> Result<i32> {
                 setup,
                 format,
             )?;
-            let (rep, out) = (rep.finish()?, out.finish()?);
-            out.commit()?;
-            rep.commit()?;
+            finish_both(out, rep)?;
             summary
         }
         None => emit_to(&out_path, |w| job.run(input, &file, Some(w), None))?,

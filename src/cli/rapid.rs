@@ -576,33 +576,48 @@ pub fn compensate(a: &CompensateArgs) -> Result<i32> {
     }
     let (src, name) = source.read_whole()?;
     let outcome = pool.install(|| compensate_module(&src, &name, &robot, &opts))?;
-    // Neither output is put in place unless both are written.
-    let mut out = Staged::open(&out_path)?;
+    let report = a.report.as_deref().map(|path| {
+        let format = a
+            .report_format
+            .unwrap_or_else(|| super::Format::from_path(path));
+        (path, format)
+    });
+    write_outcome(&out_path, &outcome, &name, report)?;
+    log_outcome(&out_path, &outcome);
+    Ok(0)
+}
+
+/// Writes a module compensated whole to `out_path` (`-`: standard output)
+/// and its report to `report`; neither file is put in place unless both
+/// are written.
+pub(super) fn write_outcome(
+    out_path: &Path,
+    outcome: &RapidOutcome,
+    name: &str,
+    report: Option<(&Path, super::Format)>,
+) -> Result<()> {
+    let mut out = Staged::open(out_path)?;
     let shown = if out_path == Path::new("-") {
         Path::new("stdout")
     } else {
-        out_path.as_path()
+        out_path
     };
     out.writer()
         .write_all(outcome.text.as_bytes())
         .map_err(|e| Error::io(shown, e))?;
-    let report = match &a.report {
-        Some(path) => {
-            let format = a
-                .report_format
-                .unwrap_or_else(|| super::Format::from_path(path));
+    let report = match report {
+        Some((path, format)) => {
             let mut rep = Staged::open(path)?;
-            write_report(rep.writer(), &outcome, &name, format)?;
+            write_report(rep.writer(), outcome, name, format)?;
             Some(rep.finish()?)
         }
         None => None,
     };
     out.finish()?.commit()?;
-    if let Some(rep) = report {
-        rep.commit()?;
+    match report {
+        Some(rep) => rep.commit(),
+        None => Ok(()),
     }
-    log_outcome(&out_path, &outcome);
-    Ok(0)
 }
 
 fn log_outcome(out_path: &Path, outcome: &RapidOutcome) {
