@@ -114,13 +114,14 @@ pub fn robot_gains(mut e: Effects, gains: &[String]) -> Result<Effects> {
 /// shape and the run allow it ([`crate::compensate::rapid::stream`]):
 /// from a window's length up, windows take no more time than the module
 /// read whole (on the 100 000-target bench module, 6 % less CPU time for
-/// `compensate`, 12 % for `check`, the mean of eight and five runs,
-/// session 11) and far less memory (33 MB against 185 MB).
+/// `compensate`, 12 % for `check`, the mean of eight and five runs of a
+/// one-off hand measurement in session 11 that no script repeats) and far
+/// less memory (33 MB against 185 MB, as `scripts/bench` shows).
 pub const STREAM_MIN_BYTES: u64 = 1 << 20;
 
 /// The same with a warm thermal start (`steady`, a warm-up), whose first
 /// pass over the module costs about a third more CPU time read a window at
-/// a time than read whole (the same measurement): windows from this size
+/// a time than read whole (the same one-off measurement): windows from this size
 /// on, where memory matters more.
 pub const STREAM_MIN_BYTES_WARM: u64 = 16 << 20;
 
