@@ -755,28 +755,17 @@ impl<'m> Job<'m> {
                 }
                 if let Some(mv) = plan.mv {
                     if let Some(m) = self.travel {
-                        for (slot, &letter) in crate::machine::AXIS_LETTERS.iter().enumerate() {
-                            let Some((lo, hi)) = m.travel(slot) else {
-                                continue;
-                            };
-                            let v = mv.end[slot];
-                            let outside = v < lo - crate::compensate::TRAVEL_SLACK
-                                || v > hi + crate::compensate::TRAVEL_SLACK;
-                            if outside && travel_failure.is_none() {
-                                travel_failure = Some(Error::Unachievable(Located::new(
-                                    file,
-                                    block.line_no,
-                                    1,
-                                    format!(
-                                        "programmed {} = {v:.4} is outside the travel [{lo}, {hi}]: `{}`",
-                                        letter as char,
-                                        String::from_utf8_lossy(crate::program::gcode::strip_eol(
-                                            line
-                                        ))
-                                        .trim()
-                                    ),
-                                )));
-                            }
+                        if let (Err(f), None) = (
+                            crate::compensate::programmed_travel(m, &mv.end),
+                            &travel_failure,
+                        ) {
+                            let text = crate::program::gcode::strip_eol(line);
+                            travel_failure = Some(Error::Unachievable(Located::new(
+                                file,
+                                block.line_no,
+                                1,
+                                format!("{f}: `{}`", String::from_utf8_lossy(text).trim()),
+                            )));
                         }
                     }
                     summary.moves += 1;

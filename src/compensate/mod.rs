@@ -7,6 +7,7 @@ pub mod rapid;
 
 use nalgebra::{SMatrix, SVector, Vector3};
 
+use crate::machine::tool::MachineTool;
 use crate::machine::{AxisVec, DirVec, TipPose};
 use crate::predict::{BlockContext, Breakdown, LipschitzBound, ToolPredictor};
 use crate::program::interp::{END_INSIDE, Motion, Move, Plan, PlanKind};
@@ -390,7 +391,13 @@ fn lerp(a: &AxisVec, b: &AxisVec, t: f64) -> AxisVec {
 /// solved or split (a wild target would otherwise surface as a segment or
 /// convergence failure).
 fn check_programmed_travel(pred: &ToolPredictor, p: &AxisVec) -> Result<(), Failure> {
-    match check_travel(pred, p) {
+    programmed_travel(pred.machine, p)
+}
+
+/// [`check_programmed_travel`] against a machine (also for `check`, which
+/// solves nothing).
+pub(crate) fn programmed_travel(m: &MachineTool, p: &AxisVec) -> Result<(), Failure> {
+    match travel(m, p) {
         Err(Failure::OutOfTravel {
             axis,
             value,
@@ -405,11 +412,16 @@ fn check_programmed_travel(pred: &ToolPredictor, p: &AxisVec) -> Result<(), Fail
 }
 
 /// Rounding allowance of the travel limits, mm or deg.
-pub(crate) const TRAVEL_SLACK: f64 = 1e-9;
+const TRAVEL_SLACK: f64 = 1e-9;
 
 fn check_travel(pred: &ToolPredictor, c: &AxisVec) -> Result<(), Failure> {
+    travel(pred.machine, c)
+}
+
+/// Every axis of `c` within the travel of `m`.
+fn travel(m: &MachineTool, c: &AxisVec) -> Result<(), Failure> {
     for (s, &letter) in crate::machine::AXIS_LETTERS.iter().enumerate() {
-        if let Some((lo, hi)) = pred.machine.travel(s) {
+        if let Some((lo, hi)) = m.travel(s) {
             if c[s] < lo - TRAVEL_SLACK || c[s] > hi + TRAVEL_SLACK {
                 return Err(Failure::OutOfTravel {
                     axis: letter as char,
