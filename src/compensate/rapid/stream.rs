@@ -279,7 +279,7 @@ fn pass<R: BufRead>(
                 // read whole instead). Windows of the length asked for are
                 // the caller's choice; those a routine's end cut short count.
                 let per_window = prologue_len + WINDOW_SETUP_BYTES;
-                if lines.bytes().filter(|&b| b == b'\n').count() < window_lines {
+                if memchr::memchr_iter(b'\n', lines.as_bytes()).count() < window_lines {
                     reparsed += per_window;
                 }
                 routine_bytes += lines.len();
