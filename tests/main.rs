@@ -26,3 +26,4 @@ mod regression;
 mod report_cli;
 mod robot;
 mod robot_process;
+mod snapshots;
