@@ -1,66 +1,112 @@
-//! The README's examples show real output. Every fenced block that starts
-//! with a `$ postproc …` command line is run (its `$` lines as one bash
-//! script, standard error into standard output, in a scratch folder that
-//! links the repository's `samples`, `machines` and `tests`); the block's
-//! other lines must appear in the output in the same order (`...` stands
-//! for lines left out). The excerpts of `postproc compensate
-//! samples/part.nc --machine afm-r1000`, shown without a `$` line, must be
-//! lines of that command's output.
+//! The examples of README.md and of the command references in docs/ show
+//! real output, and are run here.
+//!
+//! An example is a fenced block whose first line starts with `$ `. Each
+//! `$ ` line is one command, run by bash in a scratch folder that holds
+//! copies of the repository's `samples/`, `machines/`, `tests/bad/` and
+//! the pictures of `docs/` (one folder per document, the examples run in
+//! document order, so an example may read what an earlier one wrote). A
+//! picture of `docs/` that an example writes must come out as committed. The lines after a command,
+//! up to the next `$ ` line or the end of the block, are its output —
+//! standard output and standard error together — compared exactly (blanks
+//! at line ends and empty lines at the end aside). The binary under test
+//! comes first on the PATH.
+//!
+//! Commands that start with `cargo` are shown, not run (installing, and the
+//! test suite itself). Every fenced block of the README is an example: text
+//! that only looks like output cannot drift from the program.
+//!
+//! When outputs change on purpose, refresh the shown outputs with
+//!
+//! ```text
+//! UPDATE_README=1 cargo test --test integration readme
+//! ```
+//!
+//! (which also writes the pictures of `docs/` the examples make) and read
+//! the diff of the documents before committing it.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::process::Command;
 
 use crate::common::{postproc, repo};
 
-/// The fenced code blocks of a Markdown text, as lists of lines.
-fn blocks(text: &str) -> Vec<Vec<&str>> {
-    let mut out = Vec::new();
-    let mut open: Option<Vec<&str>> = None;
-    for line in text.lines() {
-        if line.starts_with("```") {
-            match open.take() {
-                Some(b) => out.push(b),
-                None => open = Some(Vec::new()),
-            }
-        } else if let Some(b) = open.as_mut() {
-            b.push(line);
+/// The documents whose examples are run.
+const DOCUMENTS: [&str; 3] = ["README.md", "docs/calibration.md", "docs/diagnose.md"];
+
+/// The README stays a guide of a few hundred lines.
+const README_MAX_LINES: usize = 400;
+
+/// Whether the run rewrites the shown outputs instead of comparing them.
+fn updating() -> bool {
+    std::env::var_os("UPDATE_README").is_some_and(|v| v == "1")
+}
+
+/// Copies `from` into `to` recursively, leaving out compensated programs
+/// (`*.comp.*`) that a run in the repository may have left behind.
+fn copy_tree(from: &Path, to: &Path) {
+    std::fs::create_dir_all(to).unwrap();
+    for entry in std::fs::read_dir(from).unwrap() {
+        let entry = entry.unwrap();
+        let name = entry.file_name();
+        if name.to_string_lossy().contains(".comp.") {
+            continue;
+        }
+        let kind = entry.file_type().unwrap();
+        if kind.is_dir() {
+            copy_tree(&entry.path(), &to.join(&name));
+        } else if kind.is_file() {
+            std::fs::copy(entry.path(), to.join(&name)).unwrap();
         }
     }
-    out
 }
 
-/// Checks that `want` (without `...` lines) is a subsequence of the lines
-/// of `got`; returns the first line that is not found.
-fn missing<'a>(want: &[&'a str], got: &str) -> Option<&'a str> {
-    let mut lines = got.lines();
-    want.iter()
-        .filter(|w| w.trim() != "...")
-        .find(|w| !lines.any(|g| g.trim_end() == w.trim_end()))
-        .copied()
+/// The files of `docs/` that are not Markdown (pictures the examples
+/// make).
+fn pictures() -> Vec<String> {
+    let mut v: Vec<String> = std::fs::read_dir(repo("docs"))
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .filter(|n| !n.ends_with(".md"))
+        .collect();
+    v.sort();
+    v
 }
 
-/// A scratch folder with the repository's inputs linked into it.
+/// A scratch folder with copies of the inputs the examples use.
 fn scratch() -> tempfile::TempDir {
     let dir = tempfile::tempdir().unwrap();
-    for d in ["samples", "machines", "tests"] {
-        std::os::unix::fs::symlink(repo(d), dir.path().join(d)).unwrap();
+    for d in ["samples", "machines", "tests/bad"] {
+        copy_tree(&repo(d), &dir.path().join(d));
+    }
+    std::fs::create_dir(dir.path().join("docs")).unwrap();
+    for p in pictures() {
+        let rel = format!("docs/{p}");
+        std::fs::copy(repo(&rel), dir.path().join(&rel)).unwrap();
     }
     dir
 }
 
-/// Runs `script` with bash in `dir`, with the binary under test first on
-/// the PATH; standard output and error together.
-fn run(script: &str, dir: &Path) -> String {
+/// The folder of the binary under test.
+fn bin_dir() -> PathBuf {
     let bin = postproc().get_program().to_owned();
-    let bin_dir = Path::new(&bin).parent().unwrap().to_owned();
+    Path::new(&bin).parent().unwrap().to_owned()
+}
+
+/// Runs one command line with bash in `dir`; standard output and error
+/// together.
+fn run(command: &str, dir: &Path) -> String {
     let path = format!(
         "{}:{}",
-        bin_dir.display(),
+        bin_dir().display(),
         std::env::var("PATH").unwrap_or_default()
     );
+    // `> /dev/null` goes to a scratch file instead: on a machine where
+    // /dev/null is an ordinary file (seen on a CI machine), writing to it
+    // would change what other processes read from it.
+    let command = command.replace("> /dev/null", "> discarded.out");
     let out = Command::new("bash")
         .arg("-c")
-        .arg(format!("exec 2>&1\n{script}"))
+        .arg(format!("exec 2>&1\n{command}"))
         .current_dir(dir)
         .env("PATH", path)
         .env("NO_COLOR", "1")
@@ -70,64 +116,237 @@ fn run(script: &str, dir: &Path) -> String {
     String::from_utf8_lossy(&out.stdout).into_owned()
 }
 
-#[test]
-fn readme_examples_show_real_output() {
-    let text = std::fs::read_to_string(repo("README.md")).unwrap();
+/// Output lines as compared: blanks at line ends and empty lines at the
+/// end dropped.
+fn normalised<'a>(lines: impl Iterator<Item = &'a str>) -> Vec<&'a str> {
+    let mut v: Vec<&str> = lines.map(str::trim_end).collect();
+    while v.last().is_some_and(|l| l.is_empty()) {
+        v.pop();
+    }
+    v
+}
+
+/// What running the examples of one document gave.
+struct Outcome {
+    /// The document with every shown output replaced by the real one.
+    refreshed: String,
+    /// Commands whose shown output differs: command, shown, real.
+    differences: Vec<(String, String, String)>,
+    /// Commands run.
+    ran: usize,
+    /// Fenced blocks that are not examples (first line of each).
+    other_blocks: Vec<String>,
+    /// `cargo` commands shown.
+    cargo: Vec<String>,
+    /// Pictures of `docs/` the examples wrote differently: name, bytes.
+    pictures: Vec<(String, Vec<u8>)>,
+}
+
+/// Runs every example of `text` in a fresh scratch folder.
+fn run_document(text: &str) -> Outcome {
     let dir = scratch();
-    let mut ran = 0;
-    for block in blocks(&text) {
-        if !block.first().is_some_and(|l| l.starts_with("$ postproc ")) {
+    let lines: Vec<&str> = text.lines().collect();
+    let mut out = Outcome {
+        refreshed: String::with_capacity(text.len()),
+        differences: Vec::new(),
+        ran: 0,
+        other_blocks: Vec::new(),
+        cargo: Vec::new(),
+        pictures: Vec::new(),
+    };
+    let mut i = 0;
+    while i < lines.len() {
+        let line = lines[i];
+        out.refreshed.push_str(line);
+        out.refreshed.push('\n');
+        i += 1;
+        if !line.starts_with("```") {
             continue;
         }
-        let script: Vec<&str> = block.iter().filter_map(|l| l.strip_prefix("$ ")).collect();
-        let want: Vec<&str> = block
-            .iter()
-            .filter(|l| !l.starts_with("$ "))
-            .copied()
-            .collect();
-        // `> /dev/null` goes to a scratch file instead: on a machine where
-        // /dev/null is an ordinary file (seen on a CI machine), writing to
-        // it would change what other processes read from it.
-        let script = script.join("\n").replace("> /dev/null", "> discarded.out");
-        let got = run(&script, dir.path());
-        if let Some(line) = missing(&want, &got) {
-            panic!(
-                "README example `{script}`: this line is not in the output:\n{line}\noutput:\n{got}"
-            );
+        // A fenced block: lines[i..end] is its body, lines[end] the fence.
+        let end = (i..lines.len())
+            .find(|&j| lines[j].starts_with("```"))
+            .unwrap_or(lines.len());
+        let body = &lines[i..end];
+        if !body.first().is_some_and(|l| l.starts_with("$ ")) {
+            out.other_blocks
+                .push(body.first().copied().unwrap_or("(empty block)").to_owned());
+            for l in body {
+                out.refreshed.push_str(l);
+                out.refreshed.push('\n');
+            }
+        } else {
+            run_block(body, dir.path(), &mut out);
         }
-        ran += 1;
+        // The closing fence.
+        if let Some(fence) = lines.get(end) {
+            out.refreshed.push_str(fence);
+            out.refreshed.push('\n');
+        }
+        i = end + 1;
     }
-    assert!(ran >= 10, "{ran} examples");
+    if !text.ends_with('\n') {
+        out.refreshed.pop();
+    }
+    for p in pictures() {
+        let rel = format!("docs/{p}");
+        let made = std::fs::read(dir.path().join(&rel)).unwrap();
+        if made != std::fs::read(repo(&rel)).unwrap() {
+            out.pictures.push((rel, made));
+        }
+    }
+    out
+}
+
+/// Runs the commands of one example block, comparing and refreshing their
+/// outputs.
+fn run_block(body: &[&str], dir: &Path, out: &mut Outcome) {
+    let mut k = 0;
+    while k < body.len() {
+        let command = body[k].strip_prefix("$ ").expect("a command line");
+        let shown_end = (k + 1..body.len())
+            .find(|&j| body[j].starts_with("$ "))
+            .unwrap_or(body.len());
+        let shown = &body[k + 1..shown_end];
+        out.refreshed.push_str(body[k]);
+        out.refreshed.push('\n');
+        if command.starts_with("cargo ") {
+            out.cargo.push(command.to_owned());
+            for l in shown {
+                out.refreshed.push_str(l);
+                out.refreshed.push('\n');
+            }
+        } else {
+            let got = run(command, dir);
+            let got = normalised(got.lines());
+            if got != normalised(shown.iter().copied()) {
+                out.differences
+                    .push((command.to_owned(), shown.join("\n"), got.join("\n")));
+            }
+            for l in &got {
+                out.refreshed.push_str(l);
+                out.refreshed.push('\n');
+            }
+            out.ran += 1;
+        }
+        k = shown_end;
+    }
+}
+
+/// Runs the examples of one document; in update mode writes the real
+/// outputs into it, else fails on the first difference.
+fn check_document(rel: &str) -> Outcome {
+    let path = repo(rel);
+    let text = std::fs::read_to_string(&path).unwrap();
+    let outcome = run_document(&text);
+    if updating() {
+        if outcome.refreshed != text {
+            std::fs::write(&path, &outcome.refreshed).unwrap();
+        }
+        for (rel, bytes) in &outcome.pictures {
+            std::fs::write(repo(rel), bytes).unwrap();
+        }
+    } else if let Some((command, shown, got)) = outcome.differences.first() {
+        panic!(
+            "{rel}: the example `{command}` shows an output that is not the real one \
+             ({} of its examples differ; UPDATE_README=1 refreshes them).\n\
+             shown:\n{shown}\nreal:\n{got}",
+            outcome.differences.len()
+        );
+    } else if let Some((picture, _)) = outcome.pictures.first() {
+        panic!(
+            "{rel}: its examples make another {picture} than the committed one \
+             (UPDATE_README=1 writes it)"
+        );
+    }
+    outcome
 }
 
 #[test]
-fn readme_excerpts_of_the_compensated_part_are_real() {
-    let text = std::fs::read_to_string(repo("README.md")).unwrap();
-    let dir = scratch();
-    let got = run(
-        "postproc compensate samples/part.nc --machine afm-r1000 -o -",
-        dir.path(),
+fn readme_examples_show_real_output() {
+    let outcome = check_document(DOCUMENTS[0]);
+    assert!(outcome.ran >= 10, "{} README examples", outcome.ran);
+    assert!(
+        outcome.other_blocks.is_empty(),
+        "README blocks that are not examples (every block starts with a `$ ` command): {:?}",
+        outcome.other_blocks
     );
-    // The excerpts: blocks of compensated part.nc lines (`N… (dev …)` and
-    // the lines added after them).
-    let mut checked = 0;
-    for block in blocks(&text) {
-        let is_part = block
-            .iter()
-            .any(|l| l.starts_with('N') && l.contains("(dev ") && l.contains(" mm geo "))
-            && !block.iter().any(|l| l.starts_with("$ "));
-        if !is_part {
-            continue;
-        }
-        // In order (the excerpt may leave lines out between its lines).
-        let mut rest = got.lines();
-        for line in &block {
-            assert!(
-                rest.any(|g| g == *line),
-                "README excerpt line not in the output of part.nc, or out of order:\n{line}"
-            );
-            checked += 1;
+}
+
+#[test]
+fn reference_examples_show_real_output() {
+    for rel in &DOCUMENTS[1..] {
+        let outcome = check_document(rel);
+        assert!(outcome.ran >= 1, "{rel}: no example ran");
+    }
+}
+
+#[test]
+fn readme_installs_and_tests_with_the_commands_ci_runs() {
+    let text = std::fs::read_to_string(repo("README.md")).unwrap();
+    let mut cargo = Vec::new();
+    for line in text.lines() {
+        if let Some(c) = line.strip_prefix("$ cargo ") {
+            cargo.push(c.trim());
         }
     }
-    assert!(checked >= 14, "{checked} lines");
+    assert_eq!(
+        cargo,
+        ["install --path .", "test"],
+        "the README's cargo commands"
+    );
+    // The README's test command is the last command of the CI script.
+    let ci = std::fs::read_to_string(repo(".ci/run")).unwrap();
+    let last = ci
+        .lines()
+        .map(str::trim)
+        .rfind(|l| l.starts_with("cargo "))
+        .unwrap();
+    assert_eq!(last, "cargo test", ".ci/run's test command");
+}
+
+#[test]
+fn readme_is_a_guide_of_a_few_hundred_lines() {
+    let text = std::fs::read_to_string(repo("README.md")).unwrap();
+    let n = text.lines().count();
+    assert!(n < README_MAX_LINES, "README.md has {n} lines");
+}
+
+/// Markdown files of the repository (build and fuzzing output left out).
+fn markdown_files(dir: &Path, out: &mut Vec<PathBuf>) {
+    for entry in std::fs::read_dir(dir).unwrap() {
+        let entry = entry.unwrap();
+        let name = entry.file_name();
+        let name = name.to_string_lossy();
+        if name.starts_with('.') || name == "target" || name == "corpus" || name == "artifacts" {
+            continue;
+        }
+        let path = entry.path();
+        if entry.file_type().unwrap().is_dir() {
+            markdown_files(&path, out);
+        } else if name.ends_with(".md") {
+            out.push(path);
+        }
+    }
+}
+
+#[test]
+fn no_document_links_outside_the_repository() {
+    let mut files = Vec::new();
+    markdown_files(&repo(""), &mut files);
+    assert!(files.len() >= 5, "{} Markdown files", files.len());
+    let mut outside = Vec::new();
+    for f in &files {
+        let text = std::fs::read_to_string(f).unwrap();
+        for (n, line) in text.lines().enumerate() {
+            if line.contains("http://") || line.contains("https://") || line.contains("](//") {
+                outside.push(format!("{}:{}: {}", f.display(), n + 1, line.trim()));
+            }
+        }
+    }
+    assert!(
+        outside.is_empty(),
+        "links outside the repository:\n{}",
+        outside.join("\n")
+    );
 }
