@@ -282,6 +282,42 @@ fn robot_tcp_offset() {
     }
 }
 
+/// The same TCP offset in a deviation file (`dx_mm…`): the real tool is
+/// 0.4/−0.3/+0.25 mm off the one the controller was told, so the attained
+/// point moves while the commanded point (the nominal model with the
+/// controller's tool, i.e. the model file's) does not. Diagnose names
+/// `tcp_offset` (not a DH length), recovers all three components, and its
+/// noise floor is the injected noise's (within 25 %), not a wrong fit's.
+#[test]
+fn robot_tcp_offset_in_deviations() {
+    let model = text("machines/abb-irb1600.yaml");
+    let controller = machine(&model);
+    let truth_text = model.replace(
+        "flange_to_tool: { x_mm: 0.0, y_mm: 0.0, z_mm: 150.0,",
+        "flange_to_tool: { x_mm: 0.4, y_mm: -0.3, z_mm: 150.25,",
+    );
+    assert_ne!(truth_text, model);
+    let truth = machine(&truth_text);
+    for seed in [4, 5] {
+        let (mut obs, noise) = measure_with_noise(&truth, robot_rows(80, seed), 1.0, seed);
+        for r in &mut obs.rows {
+            r.measured_mm -= forward::predict(&controller, r, "t")
+                .expect("row")
+                .commanded_mm;
+        }
+        obs.measured = MeasuredKind::Deviation;
+        let d = run(&model, &obs, seed);
+        assert_found(&d, "tcp_offset", 0, 400.0, noise);
+        assert_found(&d, "tcp_offset", 1, -300.0, noise);
+        assert_found(&d, "tcp_offset", 2, 250.0, noise);
+        assert!(
+            (d.gap.noise_floor_um - noise).abs() <= 0.25 * noise,
+            "noise floor {:.1} µm, injected {noise:.1} µm",
+            d.gap.noise_floor_um
+        );
+    }
+}
+
 /// Nothing hidden: the model is the truth.
 #[test]
 fn robot_nothing_hidden() {
@@ -302,8 +338,8 @@ fn robot_nothing_hidden() {
 fn robot_confounded_joint1_zero_vs_base_rotation() {
     let model = text("machines/abb-irb1600.yaml");
     let truth_text = model.replace(
-        "{ a_mm: 0.0,    alpha_deg: 0.0,    d_mm: 486.62, theta_offset_deg: 0.021 }",
-        "{ a_mm: 0.0,    alpha_deg: 0.0,    d_mm: 486.62, theta_offset_deg: 0.041 }",
+        "{ a_mm: 0.0,    alpha_deg: 0.0,     d_mm: 486.59, theta_offset_deg: 0.016 }",
+        "{ a_mm: 0.0,    alpha_deg: 0.0,     d_mm: 486.59, theta_offset_deg: 0.036 }",
     );
     assert_ne!(truth_text, model);
     let truth = machine(&truth_text);
@@ -438,8 +474,10 @@ fn robot_payload_error() {
     }
 }
 
-/// Backlash of joint 2, 200 µrad: the joint stops b/2 short on the side it
-/// came from, θ2 + dir2·100 µrad (truth per row through `Robot::with_actual`).
+/// Backlash of joint 2, 200 µrad: the joint stops b/2 short of the side it
+/// came from (the machine-tool reversal, reverse = forward + b),
+/// θ2 − dir2·100 µrad (truth per row through `Robot::with_actual`); the fit
+/// is +200 µrad within its uncertainty.
 #[test]
 fn robot_joint_backlash() {
     let model = text("machines/abb-irb1600.yaml");
@@ -454,7 +492,7 @@ fn robot_joint_backlash() {
             let Pose::Robot(rp) = &row.pose else { panic!() };
             let dir = f64::from(rp.dir[1].expect("dir2"));
             let mut dh = *r.params(postproc::machine::robot::Model::Actual);
-            dh.joints[1].theta_offset_rad += dir * 100e-6;
+            dh.joints[1].theta_offset_rad -= dir * 100e-6;
             let truth = Machine::Robot(r.with_actual(dh));
             let p = forward::predict(&truth, row, "truth")
                 .expect("row")

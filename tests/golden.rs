@@ -473,6 +473,79 @@ fn regression_g99_cycle_leaves_the_tool_at_the_r_level() {
     assert_eq!(compensate(dir.path(), &m, prog), prog);
 }
 
+/// Z backlash of 10 µm (EZZ reverse column +10 µm, forward 0): the tip is
+/// 10 µm high wherever Z arrived moving down. A G99 hole's R level is solved
+/// for the direction the machine arrives there: the first hole comes down
+/// from Z25 (R 3 − 0.010 = 2.99), the next one comes up from the bottom of
+/// the hole before (the forward column: R 3.000).
+#[test]
+fn g99_r_level_is_solved_for_the_direction_of_arrival() {
+    let dir = tempfile::tempdir().unwrap();
+    let m = machine_yaml(
+        "",
+        "",
+        "    component_errors:\n      EZZ_um: { positions_mm: [-10, 510], forward: [0, 0], reverse: [10, 10] }",
+    );
+    let prog = "G90 G54 G0 X0 Y0 Z25\nG43 H1 Z20\nG99 G81 X10 Y10 Z-5 R3 F100\nX20 R3\nG80\n";
+    let out = compensate(dir.path(), &m, prog);
+    let lines: Vec<&str> = out.lines().collect();
+    assert_abs_diff_eq!(word(lines[2], 'R').unwrap(), 2.99, epsilon = WORD_TOL_MM);
+    assert_abs_diff_eq!(word(lines[3], 'R').unwrap(), 3.0, epsilon = WORD_TOL_MM);
+    // Both hole bottoms are reached moving down: Z −5 − 0.010 (the second
+    // block keeps the modal Z).
+    assert_abs_diff_eq!(word(lines[2], 'Z').unwrap(), -5.01, epsilon = WORD_TOL_MM);
+    assert_eq!(word(lines[3], 'Z'), None, "{out}");
+}
+
+/// One convention for an axis that has not moved yet: the G-code
+/// interpreter starts every axis moving in +, and an observation row without
+/// a `dir` cell (what `simulate`, `calibrate` and `diagnose` read) is
+/// predicted the same way — the forward column (machines/README.md).
+#[test]
+fn an_axis_that_has_not_moved_uses_the_forward_column_everywhere() {
+    use postproc::calibrate::forward;
+    use postproc::calibrate::observations::{Observation, Pose, ToolPose};
+    let m = machine_yaml(
+        "",
+        "    component_errors:\n      EYY_um: { positions_mm: [-10, 510], forward: [0, 0], reverse: [7, 7] }",
+        "",
+    );
+    let Machine::Tool(tool) = Machine::from_yaml_str(&m, "m.yaml").unwrap() else {
+        panic!("machine tool")
+    };
+    // Only X moves: Y and Z have not moved yet.
+    let mv = moves(&tool, "G90 G1 X100 F500\n").pop().unwrap().0;
+    assert_eq!(&mv.dirs[..3], &[1, 1, 1]);
+    let by_gcode = tool.geometric(&mv.end, &mv.dirs, 100.0).pos;
+    let row = Observation {
+        line: 1,
+        id: "p".into(),
+        t_s: None,
+        measured_mm: Vector3::zeros(),
+        force_n: Vector3::zeros(),
+        moment_nm: Vector3::zeros(),
+        ambient_c: None,
+        pose: Pose::Tool(ToolPose {
+            xyz_mm: Vector3::new(mv.end[0], mv.end[1], mv.end[2]),
+            abc_deg: [None; 3],
+            dir: [Some(1), None, None, None, None, None],
+            tool_mm: Some(100.0),
+            spindle_rpm: None,
+            spindle_w: None,
+            p_w: [None; 6],
+        }),
+    };
+    let by_row = forward::predict(&Machine::Tool(tool.clone()), &row, "o.csv")
+        .unwrap()
+        .attained_mm;
+    assert_abs_diff_eq!(by_row, by_gcode, epsilon = 1e-12);
+    // The reverse column would put y 7 µm off: the convention matters here.
+    let mut rev = mv.dirs;
+    rev[1] = -1;
+    let other = tool.geometric(&mv.end, &rev, 100.0).pos;
+    assert_abs_diff_eq!((other - by_gcode).y, 0.007, epsilon = 1e-9);
+}
+
 fn run_ok(args: &[&str]) -> Vec<u8> {
     let out = postproc().args(args).output().unwrap();
     assert_eq!(

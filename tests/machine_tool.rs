@@ -131,6 +131,24 @@ fn xy_squareness_gives_minus_eps_y_in_x() {
     assert_abs_diff_eq!(d.z, 0.0, epsilon = POS_TOL_MM);
 }
 
+/// Squareness between X and the tool-side Z: `EB0Z = ε` tilts the Z motion
+/// about y. The tilt acts on everything after Z in the chain, i.e. from the
+/// Z frame origin (machine zero of the gauge line) to the tip at height
+/// z − L: x error = ε·(z − L), exactly ε·z only for a zero-length tool.
+/// ε = 40 µrad, z = 200 mm: L = 0 → 0.008 mm; L = 150 → 0.002 mm;
+/// L = 260 (tip below machine zero) → −0.0024 mm.
+#[test]
+fn xz_squareness_acts_through_z_minus_the_tool_length() {
+    let m = three_axis("", "", "    location_errors:\n      EB0Z_urad: 40\n");
+    let cmd: AxisVec = [300.0, 100.0, 200.0, 0.0, 0.0, 0.0];
+    for (l, want) in [(0.0, 0.008), (150.0, 0.002), (260.0, -0.0024)] {
+        let d = m.tip_error_mm(&cmd, &FWD, l);
+        assert_abs_diff_eq!(d.x, 40e-6 * (200.0 - l), epsilon = POS_TOL_MM);
+        assert_abs_diff_eq!(d.x, want, epsilon = 1e-9);
+        assert_abs_diff_eq!(d.y, 0.0, epsilon = POS_TOL_MM);
+    }
+}
+
 #[test]
 fn z_pitch_acts_through_the_tool_length() {
     // EBZ = ε = 20 µrad (constant), Z on the tool side. Its COM sits at the
@@ -198,10 +216,10 @@ fn bidirectional_lookup_interpolation_and_clamping() {
         epsilon = POS_TOL_MM
     );
     let mut dirs = FWD;
-    dirs[0] = 0; // zero counts as reverse
+    dirs[0] = 0; // unknown (not moved yet) counts as forward
     assert_abs_diff_eq!(
         m.tip_error_mm(&cmd, &dirs, 0.0).x,
-        0.0065,
+        0.0025,
         epsilon = POS_TOL_MM
     );
     assert_eq!(m.clamped_axes(&cmd), 0);

@@ -1245,7 +1245,10 @@ pub fn block_reusing(
                 force_n: Vector3::zeros(),
                 ..pred.ctx
             });
-            let (cr, _) = solve(&free, &at_r, &mv.dirs, tool)?;
+            // The R level is reached with the directions before the feed:
+            // moving down from above for the first hole, moving up (the
+            // retract of the hole before) for the next G99 holes.
+            let (cr, _) = solve(&free, &at_r, &mv.prev_dirs, tool)?;
             check_travel(pred, &cr)?;
             res.r_level = cr[2];
             return Ok(res);

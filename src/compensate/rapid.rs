@@ -1362,7 +1362,7 @@ fn move_wrench(
             if plunge_direction(&d, &z, pf.axis_tolerance_rad) != Some(true) {
                 return Ok(None);
             }
-            Ok(speed("drilling thrust")?.and_then(|v| pf.drilling_wrench(v)))
+            Ok(speed("drilling thrust")?.and_then(|v| pf.drilling_wrench(v, &(to_base * z))))
         }
         ForceModel::Table => Ok(robot
             .force_table()

@@ -62,7 +62,9 @@ pub enum Action {
         /// Joint whose motor power drives the growth.
         power: usize,
     },
-    /// Robot: backlash of a joint (µrad): ±b/2 by the last motion sign.
+    /// Robot: backlash of a joint (µrad): the joint stops b/2 short of the
+    /// side it came from, θ − dir·b/2 (reverse − forward = b, as the
+    /// machine-tool reversal).
     RobotBacklash(usize),
     /// Machine tool: a location error key of an axis (or of the spindle,
     /// `axis = None`), in µrad or µm.
@@ -143,7 +145,7 @@ pub const FAMILIES: &[(&str, &str)] = &[
     ),
     (
         "robot",
-        "jointN_backlash — backlash of joint N from dirN, µrad",
+        "jointN_backlash — backlash of joint N from dirN, µrad: the joint stops b/2 short of the side it came from (θ − dirN·b/2)",
     ),
     (
         "machine tool",
@@ -170,6 +172,8 @@ pub const FAMILIES: &[(&str, &str)] = &[
 
 const NOT_THERMAL_TIME: &str = "the thermal section is driven by power (rows at the steady state of spindle_w / pX_w); a growth with time alone has no key: measure the spindle power, or calibrate the time constant; not written";
 const NOT_FRAME: &str = "observations are in the robot base frame: a frame offset is a registration error of the measurement set-up, not a machine parameter; not written";
+/// Why a TCP offset found in a deviation file is not written.
+pub const NOT_TCP_DEVIATION: &str = "in a deviation file the commanded point is the controller's, with the tool it was told (`flange_to_tool`): writing the real tool there would move the commanded point as well; measure the tool (TCP calibration) and update the tool data; not written";
 const NOT_ROBOT_BACKLASH: &str = "the robot file has no joint backlash key; not written";
 const NOT_TOOL_LENGTH: &str = "the tool table holds the length the controller compensates, so editing it changes nothing in the model: re-measure the tool (its offset) instead; not written";
 const NOT_STIFFNESS: &str = "the file has no `stiffness:` section (a new one would need all six directions and load signs, which one compliance does not give); not written";
@@ -605,12 +609,20 @@ pub fn sensitivity(effect: &Effect, ctx: &Context, rows: &[Observation]) -> Resu
             diff_column(&plus, ctx.machine, COMPLIANCE_STEP, rows, ctx, &mut s, 0)?;
         }
         (Action::Tcp, Machine::Robot(r)) => {
+            // The real tool differs from the one the controller was told:
+            // only the attained point moves; the commanded point (the
+            // nominal model with the controller's tool) stays, so the column
+            // is the same for positions and deviations.
+            let attained = Context {
+                kind: MeasuredKind::Position,
+                ..*ctx
+            };
             for c in 0..3 {
                 let mut d = Vector3::zeros();
                 d[c] = STEP;
                 let p = Machine::Robot(robot_tcp(r, d));
                 let m = Machine::Robot(robot_tcp(r, -d));
-                diff_column(&p, &m, 2.0 * STEP, rows, ctx, &mut s, c)?;
+                diff_column(&p, &m, 2.0 * STEP, rows, &attained, &mut s, c)?;
             }
         }
         (Action::Payload, Machine::Robot(r)) => {
@@ -674,11 +686,13 @@ pub fn sensitivity(effect: &Effect, ctx: &Context, rows: &[Observation]) -> Resu
             )?;
             for (i, row) in rows.iter().enumerate() {
                 let d = robot_row_value(row, |rp| rp.dir.get(*j).copied().flatten().map(f64::from));
-                // The joint stops b/2 short on the side it came from.
+                // The joint stops b/2 short of the side it came from (the
+                // machine-tool reversal `reverse = forward + b`): moving up
+                // (dir +1) it lags by −b/2, moving down by +b/2.
                 let half = if d > 0.0 {
-                    0.5
-                } else if d < 0.0 {
                     -0.5
+                } else if d < 0.0 {
+                    0.5
                 } else {
                     0.0
                 };
@@ -1156,6 +1170,33 @@ mod tests {
         assert_abs_diff_eq!(sp[(2, 0)], 2.0 * s[(2, 0)], epsilon = EXACT_TOL);
         let sk = sensitivity(find(&lib, "X_stiffness"), &ctx, &rows).unwrap();
         assert_abs_diff_eq!(sk[(0, 0)], 0.1, epsilon = EXACT_TOL);
+    }
+
+    /// Robot backlash by the machine-tool convention: a joint moving up
+    /// (dir +1) stops b/2 short, θ − b/2; moving down θ + b/2. Its column
+    /// is −½ (dir +1) or +½ (dir −1) times the joint-zero column.
+    #[test]
+    fn robot_backlash_stops_short_of_the_side_it_came_from() {
+        let (m, _, v) = load("machines/abb-irb1600.yaml");
+        let rows = [
+            robot_row([10.0, 20.0, -15.0, 30.0, 40.0, 50.0], Vector3::zeros(), 1),
+            robot_row([10.0, 20.0, -15.0, 30.0, 40.0, 50.0], Vector3::zeros(), -1),
+        ];
+        let ctx = Context {
+            machine: &m,
+            yaml: &v,
+            kind: MeasuredKind::Position,
+            file: "t",
+        };
+        let lib = library(&m, &rows);
+        for j in 1..=6 {
+            let b = sensitivity(find(&lib, &format!("joint{j}_backlash")), &ctx, &rows).unwrap();
+            let z = sensitivity(find(&lib, &format!("joint{j}_zero")), &ctx, &rows).unwrap();
+            for c in 0..3 {
+                assert_abs_diff_eq!(b[(c, 0)], -0.5 * z[(c, 0)], epsilon = EXACT_TOL);
+                assert_abs_diff_eq!(b[(3 + c, 0)], 0.5 * z[(3 + c, 0)], epsilon = EXACT_TOL);
+            }
+        }
     }
 
     /// Linear straightness is not offered (it is squareness by definition).

@@ -20,7 +20,7 @@ use serde::Serialize;
 use tracing::warn;
 
 use crate::calibrate::forward;
-use crate::calibrate::observations::{Observations, holdout_split};
+use crate::calibrate::observations::{MeasuredKind, Observations, holdout_split};
 use crate::calibrate::stats;
 use crate::error::{Error, Result};
 use crate::machine::Machine;
@@ -108,8 +108,10 @@ pub struct Gap {
     /// Percentage of the RMS gap closed.
     pub closed_pct: f64,
     /// Estimated measurement-noise floor of the 3D RMS, µm: √3 × the
-    /// per-coordinate standard deviation of the training residual after the
-    /// fit (no model can go below it).
+    /// dof-corrected per-coordinate standard deviation of the training
+    /// residual left by every candidate of the library fitted at once (or by
+    /// the accepted effects, if lower) — what no effect of the library can
+    /// explain.
     pub noise_floor_um: f64,
     /// Percentage of the closable gap (before − noise floor) closed.
     pub closed_of_closable_pct: f64,
@@ -179,7 +181,12 @@ pub fn diagnose(
         .collect();
     let where_ = residuals::analyse(rows, &res);
 
-    let lib = library(machine, rows);
+    let mut lib = library(machine, rows);
+    if obs.measured == MeasuredKind::Deviation {
+        for e in lib.iter_mut().filter(|e| e.action == effects::Action::Tcp) {
+            e.not_writable = Some(effects::NOT_TCP_DEVIATION.into());
+        }
+    }
     let mut kept = Vec::new();
     let mut sens = Vec::new();
     for e in lib {
@@ -287,7 +294,10 @@ pub fn diagnose(
         None => (sel.steps.first().map_or(0.0, |s| s.rss_before_um2), 0),
     };
     let dof = (3 * train.len()).saturating_sub(k_t).max(1) as f64;
-    let noise_floor_um = (3.0 * rss_t / dof).sqrt();
+    let noise_floor_um = match library_noise_floor(&r, &sens, &train) {
+        Some(f) => f.min((3.0 * rss_t / dof).sqrt()),
+        None => (3.0 * rss_t / dof).sqrt(),
+    };
     let closable = mb.rms_um - noise_floor_um;
     let gap = Gap {
         rows: hold.len(),
@@ -355,6 +365,67 @@ fn verdict(steps: &[Step], found: &[Found]) -> String {
         }
         parts.join("; ")
     }
+}
+
+/// Relative singular value below which a direction of the whole library's
+/// (column-normalised) design counts as absent.
+const RANK_TOL: f64 = 1e-9;
+
+/// Noise floor (3D RMS, µm) from every candidate of the library fitted at
+/// once on the training rows: √3 × the dof-corrected per-coordinate standard
+/// deviation of what no combination of candidates explains. It depends on
+/// no selection decision (an accepted or rejected effect); `None` when the
+/// library leaves fewer than half the training equations as degrees of
+/// freedom (the estimate would rest on too little).
+fn library_noise_floor(r: &DVector<f64>, sens: &[DMatrix<f64>], train: &[usize]) -> Option<f64> {
+    let n = 3 * train.len();
+    let k: usize = sens.iter().map(DMatrix::ncols).sum();
+    if n == 0 || k == 0 {
+        return None;
+    }
+    let mut x = DMatrix::zeros(n, k);
+    let mut y = DVector::zeros(n);
+    for (row, &i) in train.iter().enumerate() {
+        for c in 0..3 {
+            y[3 * row + c] = r.get(3 * i + c).copied().unwrap_or(0.0);
+        }
+    }
+    let mut col = 0;
+    for s in sens {
+        for j in 0..s.ncols() {
+            for (row, &i) in train.iter().enumerate() {
+                for c in 0..3 {
+                    x[(3 * row + c, col)] = s.get((3 * i + c, j)).copied().unwrap_or(0.0);
+                }
+            }
+            let norm = x.column(col).norm();
+            if norm > 0.0 {
+                x.column_mut(col).unscale_mut(norm);
+            }
+            col += 1;
+        }
+    }
+    let svd = x.svd(true, false);
+    let u = svd.u.as_ref()?;
+    let smax = svd.singular_values.max();
+    if !(smax > 0.0) {
+        return None;
+    }
+    let mut fitted = DVector::zeros(n);
+    let mut rank = 0;
+    for (j, sv) in svd.singular_values.iter().enumerate() {
+        if *sv > RANK_TOL * smax {
+            let uj = u.column(j);
+            fitted += uj * uj.dot(&y);
+            rank += 1;
+        }
+    }
+    let dof = n.checked_sub(rank)?;
+    if 2 * dof < n {
+        return None;
+    }
+    let rss = (y - fitted).norm_squared();
+    Some((3.0 * rss / dof as f64).sqrt())
 }
 
 /// Pairs of single-parameter candidates with near-collinear sensitivities.

@@ -130,13 +130,21 @@ impl ProcessForce {
     }
 
     /// The wrench on the robot of a drilling plunge at `v_tcp_mm_per_s`: the
-    /// workpiece pushes the drill back, `F = −thrust · z_tool` (tool frame).
-    pub fn drilling_wrench(&self, v_tcp_mm_per_s: f64) -> Option<ProcessWrench> {
+    /// workpiece pushes the drill back along the PROGRAMMED tool axis,
+    /// `F = −thrust · z_tool`, with `z_tool` the target's tool z axis in the
+    /// robot base frame (the hole is drilled along the programmed axis; the
+    /// arm's own small orientation error does not turn the thrust). The
+    /// wrench is in the base frame.
+    pub fn drilling_wrench(
+        &self,
+        v_tcp_mm_per_s: f64,
+        z_tool: &Vector3<f64>,
+    ) -> Option<ProcessWrench> {
         self.drilling_thrust_n(v_tcp_mm_per_s)
             .map(|f| ProcessWrench {
-                force_n: Vector3::new(0.0, 0.0, -f),
+                force_n: -f * z_tool,
                 moment_nmm: Vector3::zeros(),
-                in_tool_frame: true,
+                in_tool_frame: false,
             })
     }
 
@@ -779,5 +787,39 @@ mod tests {
             epsilon = FORCE_TOL_N
         );
         assert_eq!(pf.with_rpm(None), pf);
+    }
+
+    /// The thrust pushes back along the programmed tool axis: at the actual
+    /// arm (whose DH errors tilt its tool axis by ≈ 1 mrad against the
+    /// nominal one) the base-frame force is still −thrust · z_programmed.
+    #[test]
+    fn drilling_thrust_acts_along_the_programmed_tool_axis() {
+        use crate::machine::robot::Model;
+        let pf = ProcessForce {
+            model: ForceModel::Drilling {
+                drill: Drilling {
+                    thrust_coefficient_n_per_mm2: 450.0,
+                    drill_diameter_mm: 6.8,
+                },
+                max_feed_mm_per_rev: DEFAULT_MAX_FEED_MM_PER_REV,
+            },
+            spindle_rpm: Some(3000.0),
+            flutes: 2,
+            axis_tolerance_rad: DEFAULT_AXIS_TOLERANCE_DEG.to_radians(),
+        };
+        let r = crate::machine::robot::test_irb1600();
+        let q = [0.3, 0.2, -0.1, 0.4, 1.2, -0.5];
+        let tool = |m: Model| (r.flange_pose(m, &q) * r.flange_to_tool()).rotation * Vector3::z();
+        let z_prog = tool(Model::Nominal);
+        // The actual arm's tool axis differs (the test means something).
+        assert!((tool(Model::Actual) - z_prog).norm() > 1e-5);
+        let w = pf.drilling_wrench(4.0, &z_prog).expect("drills");
+        let loaded = r.with_process_wrench(Some(w));
+        let base = loaded.process_wrench_base(Model::Actual, &q);
+        let want = -122.4 * z_prog;
+        for c in 0..3 {
+            assert_abs_diff_eq!(base[c], want[c], epsilon = FORCE_TOL_N);
+            assert_abs_diff_eq!(base[3 + c], 0.0, epsilon = FORCE_TOL_N);
+        }
     }
 }

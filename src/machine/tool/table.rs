@@ -13,6 +13,16 @@ pub struct Lookup {
     pub clamped: bool,
 }
 
+/// Whether the direction of motion `dir` selects the forward column: the
+/// one convention of every command for an axis whose last motion is not
+/// known (`0`: it has not moved yet in the program, or the observation row
+/// has no `dir` cell) is that it arrived moving in + — the G-code
+/// interpreter starts every axis at +1. Only a known −1 selects `reverse`.
+#[inline(always)]
+pub fn uses_forward(dir: i8) -> bool {
+    dir >= 0
+}
+
 /// A validated error table (positions strictly increasing, equal column
 /// lengths, finite values). Values are stored in internal units (mm, rad);
 /// positions in command units (mm for linear, degrees for rotary axes).
@@ -78,8 +88,9 @@ impl ErrorTable {
             .fold(0.0, |m, v| m.max(v.abs()))
     }
 
-    /// Value at position `q` for the direction of motion `dir` (`> 0` uses
-    /// the forward column, anything else the reverse column).
+    /// Value at position `q` for the direction of motion `dir` (see
+    /// [`uses_forward`]: `−1` uses the reverse column, `+1` and `0` the
+    /// forward one).
     pub fn lookup(&self, q: f64, dir: i8) -> Lookup {
         let mut hint = 0;
         self.lookup_hinted(q, dir, &mut hint)
@@ -91,7 +102,7 @@ impl ErrorTable {
     /// axis rather than once per table. The result is the same as
     /// [`Self::lookup`]'s.
     pub fn lookup_hinted(&self, q: f64, dir: i8, hint: &mut usize) -> Lookup {
-        let col = if dir > 0 {
+        let col = if uses_forward(dir) {
             &self.forward
         } else {
             &self.reverse
@@ -168,8 +179,9 @@ mod tests {
         assert_abs_diff_eq!(t.lookup(150.0, 1).slope, -0.06, epsilon = TOL);
         // Exactly on a knot.
         assert_abs_diff_eq!(t.lookup(100.0, -1).value, 12.0, epsilon = TOL);
-        // dir 0 uses the reverse column.
-        assert_abs_diff_eq!(t.lookup(0.0, 0).value, 2.0, epsilon = TOL);
+        // dir 0 (not moved yet) uses the forward column.
+        assert_abs_diff_eq!(t.lookup(0.0, 0).value, 0.0, epsilon = TOL);
+        assert_abs_diff_eq!(t.lookup(25.0, 0).value, 2.5, epsilon = TOL);
     }
 
     #[test]
