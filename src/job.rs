@@ -1080,9 +1080,9 @@ axes:
         }
     }
 
-    /// Regression: the next chunk was read before the current one was
-    /// processed, so a read error there hid a located error earlier in the
-    /// program. The first error in line order is the one reported.
+    /// The first error in line order is the one reported: a located error
+    /// in one chunk comes before a read error met while reading the next
+    /// chunk, so the read error cannot hide it.
     #[test]
     fn an_error_in_a_chunk_comes_before_a_read_error_after_it() {
         let m = xyz_machine("");

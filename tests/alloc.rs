@@ -168,16 +168,15 @@ fn gcode_compensation_does_not_allocate_per_block() {
 }
 
 /// Largest number of allocations per added RAPID target. The module is
-/// held whole: each parsed move is one allocation (boxed; held inline in
-/// the statement list, the list's growth cost more time than the boxes:
-/// 0.68 s against 0.62 s on the 100 000-target bench module, a one-off
-/// hand measurement). The edits'
-/// texts share one growing buffer and the argument texts (`v200`, `z1`,
-/// `tSpindle`) are shared, so nothing else grows with the targets. What
-/// the parallel passes allocate depends on how rayon happened to split
-/// them (each split makes its own caches): up to about 0.05 per added
-/// target either way. Measured 1.0-1.1; with one string per edit, as
-/// before, it reads 3.0 and fails.
+/// held whole: each parsed move is one allocation (boxed, because moves
+/// held inline would make the statement list large and its growth costs
+/// more than the boxes). The edits' texts share one growing buffer and
+/// the argument texts (`v200`, `z1`, `tSpindle`) are shared, so nothing
+/// else grows with the targets. What the parallel passes allocate depends
+/// on how rayon happens to split them (each split makes its own caches):
+/// up to about 0.05 per added target either way. The test's module gives
+/// 1.0–1.1 per added target; one allocated string per edit would add
+/// about two more and fail the bound.
 const MAX_ALLOCATIONS_PER_TARGET: f64 = 1.25;
 
 #[test]

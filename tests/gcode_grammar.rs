@@ -1,6 +1,6 @@
 //! Integration tests: every example of grammar/gcode.md parses as documented,
 //! property tests of the G-code syntax and interpreter (no input panics; word
-//! spans slice back to their text), and regressions of interpreter bugs.
+//! spans slice back to their text), and regression tests of the interpreter.
 
 use postproc::error::Located;
 use postproc::program::gcode::{Block, LETTERS, parse_line};
@@ -190,8 +190,9 @@ fn samples_parse_and_interpret() {
 
 // ---------------------------------------------------------------- regressions
 
-/// Bug: `G53 G0` (and `G0 G28`) did not make G0 modal, so a later block with
-/// axis words only kept feeding at the G1 set before.
+/// `G53 G0` (and `G0 G28`) make G0 modal, so a later block with axis words
+/// only is a rapid, not a feed at the G1 set before; G28 alone leaves the
+/// modal motion as it is.
 #[test]
 fn g53_and_g28_keep_their_motion_code_modal() {
     let plans = run_program("G1 X1 F100\nG53 G0 Z0\nX5\n", doc_setup()).expect("valid");
@@ -205,8 +206,9 @@ fn g53_and_g28_keep_their_motion_code_modal() {
     assert_eq!(plans[2].mv.expect("X5 moves").motion, Motion::Linear);
 }
 
-/// Bug: `Interpreter::step` sliced the line text by the word span for the
-/// plane-normal message and panicked when given a shorter text.
+/// `Interpreter::step` given a line text shorter than the block's word
+/// spans reports the plane-normal error at the word's column instead of
+/// panicking on the slice.
 #[test]
 fn step_with_text_shorter_than_the_block_does_not_panic() {
     let mut interp = Interpreter::new(doc_setup(), "t.nc");
@@ -220,8 +222,8 @@ fn step_with_text_shorter_than_the_block_does_not_panic() {
     assert_eq!((e.line, e.column), (2, 14));
 }
 
-/// Bug: a Siemens-style `X=10.` was reported as "letter `X` without a
-/// number" instead of naming the assignment.
+/// A Siemens-style `X=10.` is reported as an assignment, at the `=`, not as
+/// "letter `X` without a number".
 #[test]
 fn assignment_after_a_letter_is_named() {
     let mut block = Block::default();

@@ -371,7 +371,7 @@ fn tool_orientation_error_is_reported() {
 fn five_axis_sample_is_compensated_to_its_word_resolution() {
     // The AC trunnion example: every feed end point of the compensated
     // program, re-interpreted, reaches the programmed tool tip within
-    // 0.0001 mm (issue 3). The machine file writes X Y Z at 4 decimals (each
+    // 0.0001 mm. The machine file writes X Y Z at 4 decimals (each
     // word rounded by at most 0.05 µm, so at most 0.087 µm together) and A/C
     // at 6 decimals (0.0000005° = 8.7 nrad, at most 0.003 µm per axis at a
     // 300 mm lever arm); the solve itself converges to far below that.
@@ -463,9 +463,10 @@ fn clamped_component_table_is_warned_once() {
 
 #[test]
 fn regression_g99_cycle_leaves_the_tool_at_the_r_level() {
-    // After a G99 hole the controller is at the R level. The emitter once
-    // kept the Z from before the cycle, so on an error-free machine the next
-    // feed block without a Z word got a spurious `Z3.` inserted.
+    // After a G99 hole the controller is at the R level, and the emitter
+    // tracks it there: were it to keep the Z from before the cycle, the
+    // next feed block without a Z word would get a spurious `Z3.` inserted
+    // even on an error-free machine.
     let dir = tempfile::tempdir().unwrap();
     let m = machine_yaml("", "", "").replace("G54: [0.0, 0.0, 0.0]", "G54: [100.0, 100.0, 100.0]");
     let prog =
@@ -678,10 +679,10 @@ fn work_offset_and_decimals_options_apply() {
 fn regression_reversed_passes_start_on_the_programmed_path() {
     // Raster passes along X with short Y steps on the AFM R-1000: every pass
     // reverses X, and the direction-dependent errors change the correction
-    // at the reversal by about 3.5 µm. The step's end was solved for the
-    // old direction; a pass that left from there ran its first piece up to
-    // that far off the programmed path (before the fix: 3.4 µm at 1 µm
-    // tolerance, fading along the piece). Now a takeup point (the pass's
+    // at the reversal by about 3.5 µm. The step's end is solved for the
+    // step's own direction; a pass that left from there would run its first
+    // piece up to that far off the programmed path (fading along the
+    // piece), beyond the 1 µm tolerance. So a takeup point (the pass's
     // start solved for the new direction) comes first. Every other
     // straight piece is checked against the programmed move it belongs
     // to, with that move's directions of motion, at 20 points.
@@ -773,11 +774,12 @@ fn regression_kept_arcs_after_a_reversal_start_on_the_programmed_path() {
     // Pocket corners on the AFM R-1000: a straight move, then a quarter arc
     // whose first motion reverses an axis (X at the first corner, Y at the
     // second). The arc's correction is uniform enough to keep it as an
-    // arc, but the machine stood where the straight move's end was solved
-    // for the old direction: before the fix the arc left from there, about
-    // 3.5 µm off its programmed start at 1 µm tolerance. Now the block's own
-    // line moves straight to a takeup point (the arc's start solved for its
-    // first directions of motion) and the arc follows on an added line.
+    // arc, but the machine stands where the straight move's end was solved
+    // for the straight move's direction: an arc leaving from there would
+    // start about 3.5 µm off its programmed start, beyond the 1 µm
+    // tolerance. So the block's own line moves straight to a takeup point
+    // (the arc's start solved for its first directions of motion) and the
+    // arc follows on an added line.
     let (text, machine) = afm();
     let dir = tempfile::tempdir().unwrap();
     let program = "G90 G54 G0 X-200 Y-100 Z20\nG43 H1 Z5\nG1 X100 F2000\nY0\n\
@@ -822,8 +824,9 @@ fn regression_kept_arcs_after_a_reversal_start_on_the_programmed_path() {
             lines[own],
             (got - pm.start3()).norm()
         );
-        // The takeup moves the machine by the reversal there: what the arc
-        // was off its start before the fix (the README's 2.6–3.5 µm).
+        // The takeup moves the machine by the jump of the correction at the
+        // reversal, 2.6–3.5 µm here: how far off its start the arc would
+        // begin without it.
         let step = (takeup.end3() - takeup.start3()).norm();
         assert!(
             (0.0026..=0.0035).contains(&step),
@@ -874,10 +877,10 @@ fn regression_kept_arcs_after_a_reversal_start_on_the_programmed_path() {
 fn regression_lines_added_after_a_last_line_without_newline_stay_lines() {
     // A program whose last line has no line end, ending in a move that gets
     // a takeup point and added lines (a kept arc; a straight pass after a
-    // reversal). Before the fix the added lines were glued to it
-    // (`… takeup)G3 X…`), which no controller reads as intended and which
-    // `check` refused (two motion codes in one block). Now each added line
-    // starts with a newline and the file still ends without one.
+    // reversal). Each added line starts with a newline and the file still
+    // ends without one: glued to the last line (`… takeup)G3 X…`), the
+    // added lines would make a block no controller reads as intended and
+    // that `check` refuses (two motion codes in one block).
     let (text, _) = afm();
     let dir = tempfile::tempdir().unwrap();
     for (program, added) in [
@@ -917,9 +920,9 @@ fn regression_half_turns_given_by_r_keep_their_centre() {
     // A half circle written with `R8`, compensated. The centre an R word
     // gives sits on the chord's bisector at sqrt(R² − (c/2)²): near a half
     // turn that distance changes by R/h times any change of R, so the
-    // rounded mean radius of a compensated arc put the centre 27 µm off at
-    // 5 µm tolerance (the arc read back swept 179.6°). Now such an arc is
-    // written with I and J. Checked with the takeup point's added arc line
+    // rounded mean radius of a compensated arc would put the centre tens of
+    // µm off, far beyond the tolerance. Such an arc is therefore written
+    // with I and J. Checked with the takeup point's added arc line
     // (5 µm) and with the block's own line (20 µm, no takeup): every point
     // of the arc as written lands on the programmed circle within the
     // tolerance, with the direction of motion at that point.
@@ -987,9 +990,9 @@ fn regression_lines_added_to_a_block_delete_block_are_skipped_with_it() {
     // A `/` block that gets added lines: a kept arc after a reversal (its
     // takeup point on the block's line, the arc on an added line) and a
     // straight move split into pieces. With the block-delete switch on,
-    // the controller skips the `/` lines; before the fix the added lines
-    // had no `/`, so it skipped the takeup but cut the arc (or the rest of
-    // the pieces) anyway.
+    // the controller skips the `/` lines, so the added lines carry the `/`
+    // too: without it the controller would skip the takeup but cut the arc
+    // (or the rest of the pieces) anyway.
     let (text, _) = afm();
     let dir = tempfile::tempdir().unwrap();
     let program = "G90 G54 G0 X-200 Y-100 Z20\nG43 H1 Z5\nG1 X100 F2000\nY0\n\
@@ -1146,8 +1149,8 @@ fn regression_a_move_after_a_machine_coordinate_retract_starts_where_the_machine
     // after it needs X, Y and Z solved at its own start: its line becomes
     // a takeup point onto that start (attained within the words' rounding
     // of the programmed start) and the move follows on an added line.
-    // Before, the move after a G28/G53 was written as if the machine stood
-    // on its compensated start (13 µm off in X here).
+    // The machine does not stand on the move's compensated start after a
+    // G28/G53, so writing the move as if it did would start it microns off.
     let (text, machine) = afm();
     let dir = tempfile::tempdir().unwrap();
     let program = "G90 G54 G0 X200 Y100 Z20\nG43 H1 Z5\nG1 X300 F1000\nG53 Z400\nG1 X250\n";
@@ -1193,12 +1196,12 @@ fn regression_a_move_after_a_machine_coordinate_retract_starts_where_the_machine
 #[test]
 fn regression_incremental_moves_after_a_machine_coordinate_retract_count_from_where_the_machine_stands()
  {
-    // After `G53 Z400` the emitter took every axis as standing at its
-    // uncompensated command, so a following G91 move's increments were
-    // counted from there: the machine went 9 µm (X) and 7 µm (Y) beside
-    // the point the same program reaches written in G90. Now only the
-    // axes G53 names are taken as moved; the two programs command the same
-    // positions (re-interpreted, to the rounding of the words).
+    // After `G53 Z400` only the axes G53 names are taken as standing at
+    // their uncompensated command; the others keep their compensated
+    // position, from which a following G91 move's increments count. Taking
+    // every axis as moved would put the machine microns beside the point
+    // the same program reaches written in G90. The two programs command the
+    // same positions (re-interpreted, to the rounding of the words).
     let (text, machine) = afm();
     let dir = tempfile::tempdir().unwrap();
     let head = "G54 G0 X10 Y10\nG43 H1 Z20\nG1 X50 F1000\nG53 Z400.\n";
@@ -1231,9 +1234,9 @@ fn regression_incremental_moves_after_a_machine_coordinate_retract_count_from_wh
 fn regression_no_takeup_point_beyond_the_end_of_travel() {
     // `G28 Z0` leaves Z at the top of its travel (500 mm, uncompensated);
     // the feed down from there needs its start 11 µm higher, beyond the
-    // travel. That takeup point failed the run ("outside the travel").
-    // Now the move starts where the machine stands and the gap is
-    // reported: exit code 1, a warning naming the line, no takeup.
+    // travel, so no takeup point is written there (it would fail the run
+    // with "outside the travel"): the move starts where the machine stands
+    // and the gap is reported: exit code 1, a warning naming the line.
     let (text, _) = afm();
     let dir = tempfile::tempdir().unwrap();
     let out = run_compensate(

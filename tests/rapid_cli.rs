@@ -23,7 +23,7 @@ const POS_TOL_MM: f64 = 1e-3;
 /// (the best of the 16 roundings is never worse than plain rounding).
 const ROT_TOL_RAD: f64 = 1e-6;
 /// Position agreement of a MoveAbsJ target written with 6-decimal degrees,
-/// mm (issue 4: 1 µm). Derivation: each joint moves by ≤ 0.0000005° =
+/// mm (1 µm). Derivation: each joint moves by ≤ 0.0000005° =
 /// 8.7e-9 rad; the lever arm from any joint axis to the TCP is < 1.6 m for
 /// this arm + tool (0.7 + 0.6 + 0.065 + 0.1825 m), so
 /// |δp| ≤ 6 · 8.7e-9 · 1600 mm = 0.000084 mm, plus the solve's residual.

@@ -361,15 +361,15 @@ fn batch_reads_modules_a_window_at_a_time_with_the_same_results() {
     assert_eq!(outs[0], outs[1]);
 }
 
-/// The prologue of the modules of the review's cases.
+/// The prologue of the modules of the cases below: two robtargets.
 const P: &str = "MODULE T\n  CONST robtarget p1 := [[750,0,500],[0,0,1,0],[0,0,0,0],[9E9,9E9,9E9,9E9,9E9,9E9]];\n  CONST robtarget p2 := [[760,20,480],[0,0,1,0],[0,0,0,0],[9E9,9E9,9E9,9E9,9E9,9E9]];\n";
 
 /// Modules whose lines outside any window the whole parse refuses (end
 /// lines with text after the end word, a bad header of an empty routine,
 /// blanks the parser does not take) and a TRAP with a statement on its
 /// header line: `check` and `compensate` with windows say and write what
-/// they do without (review of session 10: these ran to exit 0, the TRAP
-/// move counted once per window).
+/// they do without (the refused modules fail rather than run to exit 0,
+/// and the TRAP move is counted once, not once per window).
 #[test]
 fn lines_outside_windows_are_held_to_the_whole_parse() {
     let dir = tempfile::tempdir().expect("tempdir");
@@ -440,8 +440,8 @@ fn lines_outside_windows_are_held_to_the_whole_parse() {
 
 /// Outputs that are devices or in folders that do not exist: the module
 /// read a window at a time writes to the device, and fails on the folder
-/// with the message of the whole-module run (review of session 10: the
-/// temporary file was made beside the output first).
+/// with the message of the whole-module run (the folder is checked before
+/// any temporary file is made beside the output).
 #[test]
 fn device_and_missing_folder_outputs_behave_as_whole() {
     let p = repo("samples/drilling.mod");
@@ -630,10 +630,10 @@ fn windows_are_taken_from_one_megabyte_on_and_from_sixteen_with_a_warm_start() {
     assert!(code == 0 && said(&err), "{err}");
 }
 
-/// Review of session 11: a module read a window at a time named standard
-/// output `-` in write errors (read whole: `stdout`, `report`); a check
-/// against a machine that cannot be loaded put the machine's error before
-/// the module's syntax error (read whole: the module is parsed first);
+/// A module read a window at a time fails as the whole module does: write
+/// errors name standard output as the whole-module run does (`stdout`,
+/// `report`), never `-`; a check against a machine that cannot be loaded reports the
+/// module's syntax error first (the module is parsed first);
 /// `--rapid-window-lines 0` on standard input is refused before it is read.
 #[test]
 fn errors_of_windows_read_as_the_whole_module_s() {
@@ -709,10 +709,10 @@ fn errors_of_windows_read_as_the_whole_module_s() {
     );
 }
 
-/// Review of session 11: standard input with a warm thermal start is held
-/// in memory below 16 MB (windows only from there on), not copied to a
-/// temporary file to be read back whole; and standard input is held in
-/// memory when no temporary file can be made.
+/// Standard input with a warm thermal start is held in memory below 16 MB
+/// (windows only from there on), not copied to a temporary file to be read
+/// back whole; and standard input is held in memory when no temporary file
+/// can be made.
 #[test]
 fn standard_input_is_copied_only_when_windows_will_read_it() {
     let src = one_megabyte_module();

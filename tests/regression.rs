@@ -1,10 +1,12 @@
-//! Integration tests: regressions — every bug fixed gets a test here (or
-//! beside the feature it broke), named after what went wrong.
+//! Integration tests: regressions — each test pins one behaviour that a
+//! specific fault would break (a lost file, a wrong edit, a crash, a
+//! misleading message) and is named after that behaviour; others sit
+//! beside the feature they guard.
 
 use crate::common::{postproc, repo};
 
-/// `report -o PROGRAM` once replaced the program with its own report
-/// (G-code and RAPID); it must be refused like `compensate -o PROGRAM`.
+/// `report -o PROGRAM` must not replace the program with its own report
+/// (G-code and RAPID): it is refused like `compensate -o PROGRAM`.
 #[test]
 fn regression_report_never_overwrites_its_input() {
     let dir = tempfile::tempdir().unwrap();
@@ -28,8 +30,9 @@ fn regression_report_never_overwrites_its_input() {
     }
 }
 
-/// A failure to create the output named the random temporary file
-/// (`.postproc-XXXXXX`); it must name the output path the user gave.
+/// A failure to create the output names the output path the user gave,
+/// never the random temporary file (`.postproc-XXXXXX`) it is written
+/// through.
 #[test]
 fn regression_unwritable_output_names_the_output() {
     let dir = tempfile::tempdir().unwrap();
@@ -46,9 +49,9 @@ fn regression_unwritable_output_names_the_output() {
     assert!(!stderr.contains(".postproc-"), "{stderr}");
 }
 
-/// `simulate`, `calibrate` and `diagnose --write-model` once wrote over
-/// their own input files when `-o` named one of them (and `diagnose` wrote
-/// non-atomically); each must be refused with the inputs left as they were.
+/// `simulate`, `calibrate` and `diagnose --write-model` refuse an `-o`
+/// that names one of their own input files, and leave every input as it
+/// was.
 #[test]
 fn regression_calibration_commands_never_overwrite_their_inputs() {
     let dir = tempfile::tempdir().unwrap();
@@ -111,10 +114,10 @@ fn regression_calibration_commands_never_overwrite_their_inputs() {
     }
 }
 
-/// `-o /dev/null` (or any existing device or named pipe) was renamed over:
-/// run as root, the write replaced the device with an ordinary file — the
-/// very fault that broke cargo on the CI machine. Special files are now
-/// written to directly and stay what they were.
+/// `-o /dev/null` (or any existing device or named pipe) is written to
+/// directly, never renamed over: run as root, a rename would replace the
+/// device with an ordinary file and break every other program that uses
+/// it. Special files stay what they were.
 #[cfg(unix)]
 #[test]
 fn regression_output_to_a_named_pipe_keeps_the_pipe() {
@@ -160,8 +163,9 @@ fn regression_output_to_a_named_pipe_keeps_the_pipe() {
     assert_eq!(through_pipe, std::fs::read(&plain).unwrap());
 }
 
-/// An output given as a symbolic link replaced the link with a file; the
-/// file it points at must be replaced and the link kept.
+/// An output given as a symbolic link: the file it points at is replaced
+/// and the link kept (a rename onto the link's own path would replace the
+/// link with a file).
 #[cfg(unix)]
 #[test]
 fn regression_output_through_a_symlink_keeps_the_link() {
@@ -187,9 +191,10 @@ fn regression_output_through_a_symlink_keeps_the_link() {
 }
 
 /// A robtarget literal spread over two lines, after another move on the
-/// same line: its position-and-quaternion edit spanned the line end where
-/// the first move's annotation goes, and the run failed with "edit …
-/// overlaps a previous edit" (exit 2) on a valid module.
+/// same line: its position-and-quaternion edit spans the line end where
+/// the first move's annotation goes. The module is valid, so both targets
+/// are rewritten (exit 0, no "edit … overlaps a previous edit") and the
+/// line break inside the second literal is kept.
 #[test]
 fn regression_multi_line_robtarget_after_a_move_on_its_line() {
     let dir = tempfile::tempdir().unwrap();
@@ -227,11 +232,11 @@ ENDMODULE\n",
     );
 }
 
-/// Errors of the input come before compensation failures wherever they are
-/// (the streaming pipeline used to decide this per 4096-line chunk):
-/// `compensate` names the malformed line `check` names, and a program whose
-/// only fault is an unreachable target names that target. No output file
-/// either way.
+/// Errors of the input come before compensation failures wherever they are,
+/// across the streaming pipeline's 4096-line chunks (the decision is made
+/// for the whole program, not per chunk): `compensate` names the malformed
+/// line `check` names, and a program whose only fault is an unreachable
+/// target names that target. No output file either way.
 #[test]
 fn regression_input_errors_come_before_compensation_failures() {
     let dir = tempfile::tempdir().unwrap();
@@ -275,10 +280,10 @@ fn regression_input_errors_come_before_compensation_failures() {
     );
 }
 
-/// Move records became optional (kept only when a report is written): a
-/// RAPID report through `compensate --report` and through `batch
-/// --report-format` must still have one row per move, and compensating
-/// without a report must write the same module.
+/// Move records are kept only when a report is written: a RAPID report
+/// through `compensate --report` and through `batch --report-format` has
+/// one row per move, and compensating without a report writes the same
+/// module.
 #[test]
 fn regression_rapid_reports_keep_a_row_per_move() {
     let dir = tempfile::tempdir().unwrap();
@@ -342,7 +347,8 @@ fn regression_rapid_reports_keep_a_row_per_move() {
 /// chunk, where a resolution error stops the collection, while the chunk
 /// before is solved and written back): the error reported is still that of
 /// the first failing move, whichever walk finds it and whichever chunks the
-/// two failures are in (found by review: no test crossed chunks).
+/// two failures are in (the cases put them on either side of a chunk
+/// boundary, close together and far apart, in either order).
 #[test]
 fn regression_rapid_first_failing_move_across_chunks() {
     let dir = tempfile::tempdir().unwrap();
@@ -406,10 +412,10 @@ fn run_in(dir: &std::path::Path, args: &[&str]) -> (Option<i32>, String) {
     )
 }
 
-/// Outputs were checked against the program only: `-o` or `--report` on
-/// the machine file or the force table replaced it, and two spellings of
-/// one new file (`out.nc`, `./out.nc`) or a hard link of the program were
-/// taken for different files (audit of session 11).
+/// Outputs are checked against every input, not only the program: `-o` or
+/// `--report` on the machine file or the force table is refused, and two
+/// spellings of one new file (`out.nc`, `./out.nc`) or a hard link of the
+/// program are recognised as the same file.
 #[test]
 fn regression_outputs_never_overwrite_any_input_in_any_spelling() {
     let dir = tempfile::tempdir().unwrap();
@@ -546,9 +552,9 @@ fn regression_outputs_never_overwrite_any_input_in_any_spelling() {
     );
 }
 
-/// `calibrate` printed its summary with `print!`, which panicked (exit
-/// 101) when standard output failed, after the model was written; it must
-/// fail with exit 2 and write nothing (audit of session 11).
+/// When standard output fails, `calibrate` exits 2 with a message naming
+/// stdout, does not panic (no exit 101, as `print!` would), and writes no
+/// model.
 #[test]
 fn regression_calibrate_on_a_failing_stdout_exits_2_and_writes_nothing() {
     if !std::path::Path::new("/dev/full").exists() {
@@ -577,9 +583,9 @@ fn regression_calibrate_on_a_failing_stdout_exits_2_and_writes_nothing() {
     assert!(!out_yaml.exists());
 }
 
-/// `simulate --noise-um-per-m 1e308` wrote `-inf` coordinates and
-/// `--noise-um 1e9` 300-digit ones: noise beyond 10 mm is refused
-/// (audit of session 11).
+/// Noise beyond 10 mm is refused, as are negative and NaN values: taken,
+/// `simulate --noise-um-per-m 1e308` would write `-inf` coordinates and
+/// `--noise-um 1e9` 300-digit ones.
 #[test]
 fn regression_simulate_refuses_absurd_noise() {
     let dir = tempfile::tempdir().unwrap();
@@ -609,11 +615,11 @@ fn regression_simulate_refuses_absurd_noise() {
     }
 }
 
-/// Audit of session 11: absurd or useless options were taken — a robot
-/// warm-up of 1e308 minutes, `--decimals` that round the compensation
-/// away (G-code 0–2 at the default tolerance; RAPID 0–2 silently became
-/// 3), a diagnose hold-out of no rows; and `batch` made its output folder
-/// before refusing its options.
+/// Absurd or useless options are refused with exit 2: a robot warm-up of
+/// 1e308 minutes, `--decimals` that would round the compensation away
+/// (G-code 0–2 at the default tolerance; RAPID 0–2, refused rather than
+/// raised to 3), a diagnose hold-out of no rows; and `batch` refuses its
+/// options before it makes its output folder.
 #[test]
 fn regression_useless_options_are_refused() {
     let dir = tempfile::tempdir().unwrap();
@@ -718,10 +724,10 @@ fn regression_useless_options_are_refused() {
     assert_eq!(out.status.code(), Some(0));
 }
 
-/// Audit of session 11: `batch` followed a link back up its folder tree
-/// (41 nested copies; a link to the parent never ended) and hung on a
-/// named pipe with a program's extension. Folders are now followed once
-/// and only regular files are taken.
+/// `batch` follows each folder once, so a link back up its folder tree
+/// neither multiplies the outputs nor loops forever, and takes regular
+/// files only, so a named pipe with a program's extension cannot hang it
+/// (it is reported as "not a regular file").
 #[cfg(unix)]
 #[test]
 fn regression_batch_follows_each_folder_once_and_takes_regular_files_only() {
@@ -764,10 +770,10 @@ fn regression_batch_follows_each_folder_once_and_takes_regular_files_only() {
     }
 }
 
-/// Audit of session 11: with `--report` on a device that fails (`/dev/full`)
-/// the program was already renamed into place when the report failed
-/// (exit 2 with an output written). Neither output is put in place unless
-/// both are written: G-code, RAPID read whole and a window at a time.
+/// With `--report` on a device that fails (`/dev/full`) the run exits 2
+/// and the program is not put in place either: neither output is renamed
+/// into place unless both are written. G-code, RAPID read whole and a
+/// window at a time.
 #[test]
 fn regression_a_failing_report_leaves_the_program_unwritten() {
     if !std::path::Path::new("/dev/full").exists() {
@@ -829,9 +835,10 @@ fn regression_a_failing_report_leaves_the_program_unwritten() {
     }
 }
 
-/// Audit of session 11: the SVG report of a one-move module labelled its
-/// axes `-1 -0 -0 -0 -0 -0 0 0 0 0 0` and its source-line axis
-/// `4 4 4 4 4 4 5 5 5 5 5`: tick labels are now told apart and never `-0`.
+/// The tick labels of an SVG report are told apart and never `-0`, even
+/// for a one-move module whose ranges are tiny (rounded naively, its axes
+/// would read `-1 -0 -0 -0 -0 -0 0 0 0 0 0` and its source-line axis
+/// `4 4 4 4 4 4 5 5 5 5 5`).
 #[test]
 fn regression_svg_ticks_are_distinct_and_never_negative_zero() {
     let dir = tempfile::tempdir().unwrap();
@@ -874,9 +881,9 @@ fn regression_svg_ticks_are_distinct_and_never_negative_zero() {
     }
 }
 
-/// Audit of session 11: `check --machine` passed programs that leave the
-/// machine's travel (exit 0, "warnings: 0") while `compensate` refuses
-/// them; it now refuses them with the same message, after any input error.
+/// `check --machine` refuses programs that leave the machine's travel with
+/// the same message as `compensate`, after any input error, rather than
+/// passing them (exit 0, "warnings: 0").
 #[test]
 fn regression_check_refuses_positions_beyond_the_travel() {
     for bad in ["travel.nc", "wild-incremental.nc"] {
@@ -906,10 +913,10 @@ fn regression_check_refuses_positions_beyond_the_travel() {
     }
 }
 
-/// Audit of session 11: messages that lacked a location or misled — a
-/// force table with invalid UTF-8 had no line and column, a machine that
-/// is a device was "not found", and an absurd option value was echoed in
-/// 309 digits.
+/// Messages locate the fault and stay short: a force table with invalid
+/// UTF-8 gets a line and column, a machine path that is not a regular file
+/// is called so (not "not found"), and an absurd option value is not
+/// echoed in 309 digits.
 #[test]
 fn regression_messages_locate_and_stay_short() {
     let dir = tempfile::tempdir().unwrap();
@@ -973,10 +980,9 @@ fn regression_messages_locate_and_stay_short() {
     }
 }
 
-/// Audit of session 11: an interrupt (SIGINT, SIGTERM) while a large
-/// program was being written left the hidden temporary file
-/// (`.postproc-XXXXXX`, tens of MB) beside the output. The run now removes
-/// it before it ends.
+/// An interrupt (SIGINT, SIGTERM) while a large program is being written
+/// leaves no hidden temporary file (`.postproc-XXXXXX`, tens of MB) beside
+/// the output: the run removes it before it ends.
 #[cfg(unix)]
 #[test]
 fn regression_an_interrupt_leaves_no_temporary_file() {
@@ -1035,9 +1041,9 @@ fn regression_an_interrupt_leaves_no_temporary_file() {
     assert!(interrupted > 0, "no run was interrupted");
 }
 
-/// Audit of session 11: `batch` wrote its outputs and summary through a
-/// link planted in the output folder, which could reach the machine
-/// file; they are checked against every input like `compensate`'s.
+/// `batch` never writes its outputs and summary through a link planted in
+/// the output folder that reaches an input such as the machine file: they
+/// are checked against every input like `compensate`'s.
 #[cfg(unix)]
 #[test]
 fn regression_batch_outputs_never_reach_an_input_through_a_link() {

@@ -597,7 +597,7 @@ fn malformed_yaml_is_located() {
 }
 
 // ---------------------------------------------------------------------------
-// Issue 5: thermal (Paper B), process force, modal, effect gains.
+// Thermal growth (Paper B), process force, modal response, effect gains.
 
 /// Tolerance of hand-evaluated exponentials, mm.
 const THERMAL_TOL_MM: f64 = 1e-6;

@@ -4,14 +4,14 @@
 //!
 //! A change that alters any output byte fails here, so restructuring the code
 //! is proven byte-identical, and a deliberate change of output shows up as a
-//! diff of the expected files in review. The comparison is byte for byte
-//! (CRLF and ISO-8859-1 samples included), which is why the expected files
-//! are plain files rather than a snapshot crate's normalised text.
+//! diff of the expected files in the same commit. The comparison is byte for
+//! byte (CRLF and ISO-8859-1 samples included), which is why the expected
+//! files are plain files rather than a snapshot crate's normalised text.
 //!
 //! To accept a deliberate change, run
-//! `UPDATE_SNAPSHOTS=1 cargo test --test integration snapshots` and review
-//! the diff of `tests/snapshots/`. On a mismatch the new bytes are written
-//! to `target/snapshots-new/` for inspection.
+//! `UPDATE_SNAPSHOTS=1 cargo test --test integration snapshots` and read the
+//! diff of `tests/snapshots/` before committing it. On a mismatch the new
+//! bytes are written to `target/snapshots-new/` for inspection.
 
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};

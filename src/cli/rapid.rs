@@ -113,16 +113,14 @@ pub fn robot_gains(mut e: Effects, gains: &[String]) -> Result<Effects> {
 /// Modules of at least this size are read a window at a time when their
 /// shape and the run allow it ([`crate::compensate::rapid::stream`]):
 /// from a window's length up, windows take no more time than the module
-/// read whole (on the 100 000-target bench module, 6 % less CPU time for
-/// `compensate`, 12 % for `check`, the mean of eight and five runs of a
-/// one-off hand measurement in session 11 that no script repeats) and far
-/// less memory (33 MB against 185 MB, as `scripts/bench` shows).
+/// read whole and far less memory, bounded whatever the module's length
+/// (`scripts/bench` prints the peak memory of its runs on a 100 000-target
+/// module; docs/performance.md).
 pub const STREAM_MIN_BYTES: u64 = 1 << 20;
 
 /// The same with a warm thermal start (`steady`, a warm-up), whose first
-/// pass over the module costs about a third more CPU time read a window at
-/// a time than read whole (the same one-off measurement): windows from this size
-/// on, where memory matters more.
+/// pass over the module costs more CPU time read a window at a time than
+/// read whole: windows from this size on, where memory matters more.
 pub const STREAM_MIN_BYTES_WARM: u64 = 16 << 20;
 
 /// A module to read: a file, or standard input. Standard input is held in

@@ -505,9 +505,8 @@ ENDMODULE
 
     /// A header line the scanner sees inside what the parser reads as
     /// something else (a multi-line attribute list) is refused: the
-    /// declarations' edits would land in the wrong place (second review
-    /// of session 10: a new declaration was written into the attribute
-    /// list).
+    /// declarations' edits would land in the wrong place (a new declaration
+    /// would be written into the attribute list).
     #[test]
     fn declarations_must_end_where_the_scanner_saw_the_first_routine() {
         let src = "MODULE M(\nTRAP t\n) CONST robtarget q := [[720,-40,420],[0,0,1,0],[-1,0,-1,0],[9E9,9E9,9E9,9E9,9E9,9E9]]; TRAP y\nMoveL Offs(q,1,2,3), v100, z1, tool0;\nENDTRAP\nENDMODULE\n";
@@ -520,9 +519,9 @@ ENDMODULE
     }
 
     /// Long declarations parsed again for each of many short routines are
-    /// read whole instead (second review of session 10 measured, once, by
-    /// hand: 45 s against
-    /// 0.6 s whole).
+    /// read whole instead: a window per routine would parse the
+    /// declarations once per routine, many times the cost of parsing the
+    /// module once.
     #[test]
     fn many_short_routines_after_long_declarations_are_read_whole() {
         let mut src = declarations(800);
@@ -538,9 +537,9 @@ ENDMODULE
         };
         routines(&mut src, 300);
         assert!(shape_refused(&src, 1000));
-        // Shorter declarations too (review of session 11: 16 KB of them
-        // before one-move routines took 9 s against 0.03 s whole, the reviewer's
-        // one-off hand measurement), and none.
+        // Shorter declarations too (16 KB of them, parsed again before each
+        // of many one-move routines, still cost far more than one parse),
+        // and none.
         for n in [190, 0] {
             let mut short = declarations(n);
             for k in 0..300 {

@@ -1,6 +1,7 @@
-//! The parser as it was before the hand-written scanner (nom grammar for
-//! numbers and spaces, `str::parse` for values): the reference the property
-//! tests compare [`super::parse_line`] with.
+//! A second, independent G-code line parser written for clarity rather than
+//! speed (nom grammar for numbers and spaces, `str::parse` for values): the
+//! reference the property tests compare the hand-written scanner
+//! [`super::parse_line`] with.
 
 use nom::IResult;
 use nom::branch::alt;

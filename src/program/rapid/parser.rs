@@ -63,7 +63,8 @@ impl Val {
 }
 
 /// Words that start a statement; a line starting with one of them cannot be
-/// the continuation of the previous statement (used to report a missing `;`).
+/// the continuation of the previous statement (this is how a missing `;` is
+/// told from a statement spread over several lines).
 const STATEMENT_WORDS: &[&str] = &[
     "MoveL",
     "MoveJ",
@@ -1777,12 +1778,12 @@ mod tests {
         assert!(outcomes[0] > 5 && outcomes[1] > 5, "{outcomes:?}");
     }
 
-    /// Found by review: every line start was a candidate, so a statement of
-    /// many lines (a local array of one number per line) was parsed from
-    /// each of its lines to its end, quadratic in its length (a 340 KB
-    /// routine took 15 s). Candidates now follow a `;` at bracket depth 0:
-    /// here the first statement and the one after the array, and the module
-    /// is still the serial one.
+    /// Candidates for parsing ahead follow a `;` at bracket depth 0, not
+    /// every line start: a statement of many lines (a local array of one
+    /// number per line) would otherwise be parsed from each of its lines to
+    /// its end, quadratic in its length. Here the candidates are the first
+    /// statement and the one after the array, and the module is the serial
+    /// one.
     #[test]
     fn parsing_ahead_tries_each_statement_once() {
         let mut text = String::from("MODULE T\n  PROC main()\n    VAR num a{20000} := [\n");

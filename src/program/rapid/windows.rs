@@ -594,7 +594,7 @@ mod tests {
         ];
         // Lines written out unchanged are never parsed: anything but
         // blanks (the parser's: no form feed, no Unicode space) and the bare
-        // end words is left to the whole-module parse (review, session 10).
+        // end words is left to the whole-module parse.
         let more = [
             (
                 "MODULE M\nPROC a()\nENDPROC;\nENDMODULE\n",
