@@ -1,13 +1,13 @@
-//! Integration test: the Paper B thermal form through the binary (issue 5
-//! "Done when"): the IRB 1600's a2 stays between 149.95 and 150.15 mm over
-//! the Paper B power range.
+//! Integration test: the Paper B thermal form through the binary: the
+//! IRB 1600's a2 stays between 149.95 and 150.15 mm over the Paper B power
+//! range (docs/physics.md, "Figures from the sources").
 
 use approx::assert_abs_diff_eq;
 
 use crate::common::{postproc, repo};
 
-/// The Paper B powers (W) at TCP speeds 300/750/1200/1350 mm/s
-/// (MODELS.md §4).
+/// The Paper B powers (W) at TCP speeds 300/750/1200/1350 mm/s (thesis,
+/// Paper B; summarised in docs/physics.md, "Figures from the sources").
 const P_J1: [f64; 4] = [22.0, 60.0, 115.0, 126.0];
 const P_J2: [f64; 4] = [18.0, 52.0, 94.0, 112.0];
 const P_J3: [f64; 4] = [9.0, 20.0, 35.0, 38.0];
