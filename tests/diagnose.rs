@@ -318,6 +318,28 @@ fn robot_tcp_offset_in_deviations() {
     }
 }
 
+/// With a TCP off the joint-6 axis (30, −20, 150 mm), a joint-6 zero offset
+/// moves the TCP along a direction the three-parameter TCP offset also
+/// spans: on position-only data the screen lists the pair (principal angle
+/// zero) though no single TCP column matches it.
+#[test]
+fn robot_screen_lists_joint6_zero_with_tcp_offset() {
+    let model = text("machines/abb-irb1600.yaml").replace(
+        "flange_to_tool: { x_mm: 0.0, y_mm: 0.0, z_mm: 150.0,",
+        "flange_to_tool: { x_mm: 30.0, y_mm: -20.0, z_mm: 150.0,",
+    );
+    let truth = machine(&model);
+    let obs = measure(&truth, robot_rows(40, 11), 1.0, 11);
+    let d = run(&model, &obs, 11);
+    assert!(
+        d.screen
+            .iter()
+            .any(|c| c.a == "joint6_zero" && c.b == "tcp_offset"),
+        "{}",
+        diagnose::report::render_table(&d)
+    );
+}
+
 /// Nothing hidden: the model is the truth.
 #[test]
 fn robot_nothing_hidden() {

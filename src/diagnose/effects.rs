@@ -276,11 +276,12 @@ fn robot_library(rows: &[Observation]) -> Vec<Effect> {
         Action::Payload,
     ));
     // Paper B couplings (a2 ← P1, P2; d4 ← P1, P2, P3; a3 ← P2, P3), written
-    // generically: every a and d of joints 2..6 with the powers of the joint
-    // before, the joint itself and the joint after.
-    for i in 1usize..6 {
+    // generically: every a and d of joints 1..6 (every DH length a motor's
+    // heat can grow, the base column's d1 and a1 included) with the power
+    // of every joint whose power the rows carry.
+    for i in 0usize..6 {
         for (f, s) in [(DhField::A, "a"), (DhField::D, "d")] {
-            for p in i.saturating_sub(1)..=(i + 1).min(5) {
+            for p in 0usize..6 {
                 if !has_power(p) {
                     continue;
                 }
@@ -1196,6 +1197,39 @@ mod tests {
                 assert_abs_diff_eq!(b[(c, 0)], -0.5 * z[(c, 0)], epsilon = EXACT_TOL);
                 assert_abs_diff_eq!(b[(3 + c, 0)], 0.5 * z[(3 + c, 0)], epsilon = EXACT_TOL);
             }
+        }
+    }
+
+    /// Every DH length of joints 1..6 (d1 and a1 included) has a thermal
+    /// candidate with every joint's power: 12 × 6 = 72; the column of d1
+    /// with joint 3's power is the d1 column times p3_w (here 100 W).
+    #[test]
+    fn thermal_candidates_cover_every_length_and_power() {
+        let (m, _, v) = load("machines/abb-irb1600.yaml");
+        let rows = [robot_row([10.0, 20.0, -15.0, 30.0, 40.0, 50.0], Vector3::zeros(), 1)];
+        let lib = library(&m, &rows);
+        let thermal: Vec<&Effect> = lib
+            .iter()
+            .filter(|e| matches!(e.action, Action::Thermal { .. }))
+            .collect();
+        assert_eq!(thermal.len(), 72);
+        for j in 1..=6 {
+            for f in ["a", "d"] {
+                for p in 1..=6 {
+                    find(&lib, &format!("thermal_joint{j}_{f}_p{p}"));
+                }
+            }
+        }
+        let ctx = Context {
+            machine: &m,
+            yaml: &v,
+            kind: MeasuredKind::Position,
+            file: "t",
+        };
+        let t = sensitivity(find(&lib, "thermal_joint1_d_p3"), &ctx, &rows).unwrap();
+        let d = sensitivity(find(&lib, "joint1_d"), &ctx, &rows).unwrap();
+        for c in 0..3 {
+            assert_abs_diff_eq!(t[(c, 0)], 100.0 * d[(c, 0)], epsilon = EXACT_TOL);
         }
     }
 

@@ -1,6 +1,6 @@
 //! Diagnosis of disagreement between simulation and measurement: where the
 //! model and the measured observations disagree ([`residuals`]), which named
-//! effect is missing ([`effects`], [`select`]), the model with that effect
+//! effect is missing ([`effects`], [`screen`], [`select`]), the model with that effect
 //! added ([`mod@write`]) and the gap before and after on held-out rows
 //! ([`report`]).
 //!
@@ -12,6 +12,7 @@
 pub mod effects;
 pub mod report;
 pub mod residuals;
+pub mod screen;
 pub mod select;
 pub mod write;
 
@@ -50,14 +51,15 @@ impl Default for Options {
     }
 }
 
-/// Two candidates whose sensitivities the rows cannot tell apart.
+/// Two candidates whose sensitivities the rows cannot tell apart (their
+/// column spaces share a direction).
 #[derive(Debug, Clone, Serialize)]
 pub struct Confusable {
     /// First candidate.
     pub a: String,
     /// Second candidate.
     pub b: String,
-    /// |cos| of the angle between their sensitivity columns.
+    /// Cosine of the smallest principal angle between their column spaces.
     pub cos: f64,
 }
 
@@ -135,6 +137,9 @@ pub struct Diagnosis {
     pub where_: Where,
     /// Identifiability screen: candidate pairs the rows cannot separate.
     pub screen: Vec<Confusable>,
+    /// Identifiability screen: candidates that are combinations of several
+    /// others in these rows.
+    pub groups: Vec<Group>,
     /// Forward-selection steps.
     pub steps: Vec<Step>,
     /// Accepted effects with fitted parameters.
@@ -145,8 +150,11 @@ pub struct Diagnosis {
     pub verdict: String,
 }
 
-/// |cos| above which two single-column candidates count as inseparable.
-pub const SCREEN_COS: f64 = 0.9995;
+pub use screen::{Group, SCREEN_COS};
+
+/// Largest sensitivity (mm per display unit) a candidate the rows cannot
+/// see at all may have: numerical differences of identical predictions.
+const NO_SENSITIVITY_MM: f64 = 1e-12;
 
 /// Runs the diagnosis. `machine_text` is the YAML of `machine`; `obs_file`
 /// names the observation file in errors.
@@ -191,7 +199,7 @@ pub fn diagnose(
     let mut sens = Vec::new();
     for e in lib {
         match effects::sensitivity(&e, &ctx, rows) {
-            Ok(s) if s.iter().all(|v| v.is_finite()) && s.iter().any(|v| *v != 0.0) => {
+            Ok(s) if s.iter().all(|v| v.is_finite()) && s.amax() > NO_SENSITIVITY_MM => {
                 sens.push(s * 1000.0);
                 kept.push(e);
             }
@@ -200,7 +208,8 @@ pub fn diagnose(
         }
     }
     let names: Vec<String> = kept.iter().map(|e| e.name.clone()).collect();
-    let screen = screen(&sens, &names);
+    let screen = screen::pairs(&sens, &names);
+    let groups = screen::groups(&sens, &names, &screen);
 
     let (train, hold) = holdout_split(rows.len(), opts.holdout, opts.seed);
     // An effect is accepted only when held-out rows confirm it: a split
@@ -327,6 +336,7 @@ pub fn diagnose(
         candidates: kept.len(),
         where_,
         screen,
+        groups,
         steps: sel.steps,
         found,
         gap,
@@ -426,38 +436,6 @@ fn library_noise_floor(r: &DVector<f64>, sens: &[DMatrix<f64>], train: &[usize])
     }
     let rss = (y - fitted).norm_squared();
     Some((3.0 * rss / dof as f64).sqrt())
-}
-
-/// Pairs of single-parameter candidates with near-collinear sensitivities.
-fn screen(sens: &[DMatrix<f64>], names: &[String]) -> Vec<Confusable> {
-    let cols: Vec<Option<DVector<f64>>> = sens
-        .iter()
-        .map(|s| {
-            if s.ncols() == 1 {
-                let c = s.column(0).into_owned();
-                let n = c.norm();
-                (n > 0.0).then(|| c / n)
-            } else {
-                None
-            }
-        })
-        .collect();
-    let mut out = Vec::new();
-    for i in 0..cols.len() {
-        for j in i + 1..cols.len() {
-            if let (Some(Some(a)), Some(Some(b))) = (cols.get(i), cols.get(j)) {
-                let cos = a.dot(b).abs();
-                if cos > SCREEN_COS {
-                    out.push(Confusable {
-                        a: names.get(i).cloned().unwrap_or_default(),
-                        b: names.get(j).cloned().unwrap_or_default(),
-                        cos,
-                    });
-                }
-            }
-        }
-    }
-    out
 }
 
 /// Error statistics of `machine` (e.g. a written model) on the held-out rows

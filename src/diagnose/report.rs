@@ -83,6 +83,14 @@ pub fn render_table(d: &Diagnosis) -> String {
             pairs.join(", ")
         );
     }
+    for g in &d.groups {
+        let _ = writeln!(
+            o,
+            "  identifiability screen: {} is a combination of {} in these rows",
+            g.candidate,
+            g.of.join(" + ")
+        );
+    }
     for (i, s) in d.steps.iter().enumerate() {
         let _ = writeln!(
             o,
