@@ -167,7 +167,11 @@ impl MergedTables {
                 for (e, t) in errs.iter_mut().zip(&c.tables) {
                     let Some(t) = t else { continue };
                     let (p, fw, rv) = t.columns();
-                    let col = if super::table::uses_forward(dir) { fw } else { rv };
+                    let col = if super::table::uses_forward(dir) {
+                        fw
+                    } else {
+                        rv
+                    };
                     *e = segment(p, col, lo);
                 }
                 segs.push(errs);
@@ -183,7 +187,9 @@ impl MergedTables {
         if q.is_nan() {
             return None;
         }
-        let s = self.segs.get(2 * self.region(q) + usize::from(!super::table::uses_forward(dir)))?;
+        let s = self
+            .segs
+            .get(2 * self.region(q) + usize::from(!super::table::uses_forward(dir)))?;
         Some((
             [s[0].at(q), s[1].at(q), s[2].at(q)],
             [s[3].at(q), s[4].at(q), s[5].at(q)],
@@ -212,7 +218,9 @@ impl MergedTables {
     /// Value at `q` and slope of the six errors (translations, then
     /// rotations) on region `k` for the direction of motion `dir`.
     pub(crate) fn affine(&self, k: usize, dir: i8, q: f64) -> Option<([f64; 6], [f64; 6])> {
-        let s = self.segs.get(2 * k + usize::from(!super::table::uses_forward(dir)))?;
+        let s = self
+            .segs
+            .get(2 * k + usize::from(!super::table::uses_forward(dir)))?;
         let mut v = [0.0; 6];
         let mut d = [0.0; 6];
         for ((l, v), d) in s.iter().zip(&mut v).zip(&mut d) {
