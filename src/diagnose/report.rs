@@ -172,7 +172,7 @@ pub fn render_table(d: &Diagnosis) -> String {
     metrics_row(&mut o, "after", &d.gap.after);
     let _ = writeln!(
         o,
-        "  gap closed: {:.1} % of the RMS; {:.1} % of the closable part (noise floor ≈ {:.1} µm RMS, from the fit residual)",
+        "  gap closed: {:.1} % of the RMS; {:.1} % of the closable part (noise floor ≈ {:.1} µm RMS, what no candidate of the library explains)",
         d.gap.closed_pct, d.gap.closed_of_closable_pct, d.gap.noise_floor_um
     );
     let _ = writeln!(o, "\nVERDICT: {}", d.verdict);
