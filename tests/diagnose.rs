@@ -28,27 +28,27 @@ const MIN_CLOSED_SHARE: f64 = 0.6;
 /// RMS by this factor (fit uncertainty, held-out sampling).
 const NOISE_FLOOR_FACTOR: f64 = 1.2;
 
-fn text(rel: &str) -> String {
+pub(crate) fn text(rel: &str) -> String {
     std::fs::read_to_string(repo(rel)).expect("machine file")
 }
 
-fn machine(t: &str) -> Machine {
+pub(crate) fn machine(t: &str) -> Machine {
     Machine::from_yaml_str(t, "m.yaml").expect("valid machine file")
 }
 
 /// Noise model: standard deviation 15 µm + 6 µm/m × distance from the origin
 /// (scaled by `level`, 1 = laser-tracker level).
-fn noise_sd_mm(p: &Vector3<f64>, level: f64) -> f64 {
+pub(crate) fn noise_sd_mm(p: &Vector3<f64>, level: f64) -> f64 {
     level * (0.015 + 0.006 * p.norm() / 1000.0)
 }
 
-fn columns(names: &[&str]) -> BTreeSet<Column> {
+pub(crate) fn columns(names: &[&str]) -> BTreeSet<Column> {
     names.iter().filter_map(|n| Column::from_name(n)).collect()
 }
 
 /// Robot rows: joints spread over a safe part of the workspace, external
 /// forces up to ±300 N at the TCP, powers 0…600 W, random last-motion signs.
-fn robot_rows(n: usize, seed: u64) -> Vec<Observation> {
+pub(crate) fn robot_rows(n: usize, seed: u64) -> Vec<Observation> {
     let mut rng = SplitMix64::new(seed);
     let mut u = |lo: f64, hi: f64| lo + (hi - lo) * rng.next_f64();
     (0..n)
@@ -85,7 +85,7 @@ fn robot_rows(n: usize, seed: u64) -> Vec<Observation> {
 }
 
 /// Machine-tool rows over the AFM travel (X 0…1000, Y 0…500, Z 0…500 mm).
-fn tool_rows(n: usize, seed: u64) -> Vec<Observation> {
+pub(crate) fn tool_rows(n: usize, seed: u64) -> Vec<Observation> {
     let mut rng = SplitMix64::new(seed);
     let mut u = |lo: f64, hi: f64| lo + (hi - lo) * rng.next_f64();
     (0..n)
@@ -115,7 +115,12 @@ fn tool_rows(n: usize, seed: u64) -> Vec<Observation> {
 }
 
 /// Measured = forward model of the true machine + noise.
-fn measure(truth: &Machine, rows: Vec<Observation>, level: f64, seed: u64) -> Observations {
+pub(crate) fn measure(
+    truth: &Machine,
+    rows: Vec<Observation>,
+    level: f64,
+    seed: u64,
+) -> Observations {
     measure_with_noise(truth, rows, level, seed).0
 }
 
@@ -164,7 +169,7 @@ fn measure_with_noise(
     (obs, (sum2 / n).sqrt())
 }
 
-fn run(model_text: &str, obs: &Observations, seed: u64) -> Diagnosis {
+pub(crate) fn run(model_text: &str, obs: &Observations, seed: u64) -> Diagnosis {
     let opts = Options {
         holdout: 0.3,
         seed,

@@ -8,6 +8,7 @@ mod calibrate_cli;
 mod common;
 mod compensate_props;
 mod diagnose;
+mod diagnose_matrix;
 mod effects;
 mod gcode_cli;
 mod gcode_grammar;

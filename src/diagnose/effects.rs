@@ -1206,7 +1206,11 @@ mod tests {
     #[test]
     fn thermal_candidates_cover_every_length_and_power() {
         let (m, _, v) = load("machines/abb-irb1600.yaml");
-        let rows = [robot_row([10.0, 20.0, -15.0, 30.0, 40.0, 50.0], Vector3::zeros(), 1)];
+        let rows = [robot_row(
+            [10.0, 20.0, -15.0, 30.0, 40.0, 50.0],
+            Vector3::zeros(),
+            1,
+        )];
         let lib = library(&m, &rows);
         let thermal: Vec<&Effect> = lib
             .iter()

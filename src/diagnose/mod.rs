@@ -1,5 +1,6 @@
 //! Diagnosis of disagreement between simulation and measurement: where the
-//! model and the measured observations disagree ([`residuals`]), which named
+//! model and the measured observations disagree ([`residuals`],
+//! [`patterns`]), which named
 //! effect is missing ([`effects`], [`screen`], [`select`]), the model with that effect
 //! added ([`mod@write`]) and the gap before and after on held-out rows
 //! ([`report`]).
@@ -10,6 +11,7 @@
 //! is computed once, and a fit is linear least squares on those columns.
 
 pub mod effects;
+pub mod patterns;
 pub mod report;
 pub mod residuals;
 pub mod screen;
@@ -152,6 +154,9 @@ pub struct Diagnosis {
 
 pub use screen::{Group, SCREEN_COS};
 
+/// Smallest adjusted R² of a pattern for the "where" sentence to name it.
+const PATTERN_R2: f64 = 0.1;
+
 /// Largest sensitivity (mm per display unit) a candidate the rows cannot
 /// see at all may have: numerical differences of identical predictions.
 const NO_SENSITIVITY_MM: f64 = 1e-12;
@@ -187,7 +192,14 @@ pub fn diagnose(
         .zip(&sim)
         .map(|(r, s)| r.measured_mm - s)
         .collect();
-    let where_ = residuals::analyse(rows, &res);
+    let mut where_ = residuals::analyse(rows, &res);
+    where_.patterns = patterns::rank(machine, rows, &res);
+    if let Some(p) = where_.patterns.first().filter(|p| p.r2_adj >= PATTERN_R2) {
+        where_.sentence.push_str(&format!(
+            " The pattern that explains most of the residual: {} (adjusted R² {:.2}).",
+            p.name, p.r2_adj
+        ));
+    }
 
     let mut lib = library(machine, rows);
     if obs.measured == MeasuredKind::Deviation {
@@ -418,7 +430,7 @@ fn library_noise_floor(r: &DVector<f64>, sens: &[DMatrix<f64>], train: &[usize])
     let svd = x.svd(true, false);
     let u = svd.u.as_ref()?;
     let smax = svd.singular_values.max();
-    if !(smax > 0.0) {
+    if smax.is_nan() || smax <= 0.0 {
         return None;
     }
     let mut fitted = DVector::zeros(n);

@@ -3,6 +3,7 @@
 
 use std::fmt::Write as _;
 
+use super::patterns::PATTERNS_SHOWN;
 use super::select::{Outcome, SHOW};
 use super::{Diagnosis, Metrics};
 use crate::diagnose::effects::{Effect, FAMILIES};
@@ -59,6 +60,12 @@ pub fn render_table(d: &Diagnosis) -> String {
             pct(t.p_holm),
             bins.join(" ")
         );
+    }
+    if !d.where_.patterns.is_empty() {
+        let _ = writeln!(o, "  {:<44} {:>6} {:>8}", "pattern", "params", "R² adj");
+        for p in d.where_.patterns.iter().take(PATTERNS_SHOWN) {
+            let _ = writeln!(o, "  {:<44} {:>6} {:>8.3}", p.name, p.params, p.r2_adj);
+        }
     }
     let _ = writeln!(o, "  {}", d.where_.sentence);
 
@@ -165,7 +172,7 @@ pub fn render_table(d: &Diagnosis) -> String {
     metrics_row(&mut o, "after", &d.gap.after);
     let _ = writeln!(
         o,
-        "  gap closed: {:.1} % of the RMS; {:.1} % of the closable part (noise floor ≈ {:.1} µm RMS, from the fit residual)",
+        "  gap closed: {:.1} % of the RMS; {:.1} % of the closable part (noise floor ≈ {:.1} µm RMS, what no candidate of the library explains)",
         d.gap.closed_pct, d.gap.closed_of_closable_pct, d.gap.noise_floor_um
     );
     let _ = writeln!(o, "\nVERDICT: {}", d.verdict);

@@ -48,6 +48,9 @@ pub struct Where {
     pub rms_um: [f64; 3],
     /// Every trend, strongest (smallest Holm p) first.
     pub trends: Vec<Trend>,
+    /// Patterns in the frames where effects show (tool frame, joint space,
+    /// load), best first ([`super::patterns`]).
+    pub patterns: Vec<super::patterns::Pattern>,
     /// One plain sentence.
     pub sentence: String,
 }
@@ -199,6 +202,7 @@ pub fn analyse(rows: &[Observation], residual_mm: &[Vector3<f64>]) -> Where {
     Where {
         rms_um,
         trends,
+        patterns: Vec::new(),
         sentence,
     }
 }

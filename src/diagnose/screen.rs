@@ -44,7 +44,7 @@ fn basis(s: &DMatrix<f64>) -> Option<DMatrix<f64>> {
     let svd = s.clone().svd(true, false);
     let u = svd.u?;
     let smax = svd.singular_values.max();
-    if !(smax > 0.0) {
+    if smax.is_nan() || smax <= 0.0 {
         return None;
     }
     let keep: Vec<usize> = (0..svd.singular_values.len())
@@ -91,7 +91,7 @@ pub fn groups(sens: &[DMatrix<f64>], names: &[String], pairs: &[Confusable]) -> 
         for j in 0..s.ncols() {
             let col = s.column(j).into_owned();
             let norm = col.norm();
-            if !(norm > 0.0) || col.len() != n {
+            if norm.is_nan() || norm <= 0.0 || col.len() != n {
                 continue;
             }
             let x = col / norm;
