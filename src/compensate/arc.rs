@@ -435,3 +435,42 @@ pub(super) fn arc_block(
     }
     Ok(last_dirs)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::program::interp::Plane;
+
+    /// Parameters agree with a hand count of quadrant points.
+    const PARAM_TOL: f64 = 1e-12;
+
+    fn arc_from(angle0_deg: f64, sweep_deg: f64) -> (ArcGeom, Vector3<f64>) {
+        let a0 = angle0_deg.to_radians();
+        let arc = ArcGeom {
+            plane: Plane::XY,
+            center: Vector3::new(10.0, 20.0, 0.0),
+            sweep: sweep_deg.to_radians(),
+            radius: 5.0,
+        };
+        let start = Vector3::new(10.0 + 5.0 * a0.cos(), 20.0 + 5.0 * a0.sin(), 0.0);
+        (arc, start)
+    }
+
+    #[test]
+    fn reversals_are_the_quadrant_points_inside_the_arc() {
+        let mut ts = [0.0; MAX_REVERSALS];
+        // A full turn from 0°: X reverses at 90° and 270°, Y at 180°.
+        let (arc, s3) = arc_from(0.0, 360.0);
+        assert_eq!(reversals(&arc, &s3, &mut ts), 3);
+        for (t, want) in ts.iter().zip([0.25, 0.5, 0.75]) {
+            assert!((t - want).abs() < PARAM_TOL, "{ts:?}");
+        }
+        // A quarter between quadrant points: none inside.
+        let (arc, s3) = arc_from(0.0, 90.0);
+        assert_eq!(reversals(&arc, &s3, &mut ts), 0);
+        // Clockwise from 45° through 0° to −90°: one inside, at a third.
+        let (arc, s3) = arc_from(45.0, -135.0);
+        assert_eq!(reversals(&arc, &s3, &mut ts), 1);
+        assert!((ts[0] - 1.0 / 3.0).abs() < PARAM_TOL, "{ts:?}");
+    }
+}

@@ -465,6 +465,76 @@ impl Emitter {
         let own_piece = res.arcs.first().filter(|p| p.to == 0);
         let own_linear = mv.arc.is_some() && own_piece.is_none();
 
+        let motion_word = self.motion_edits(block, text, (own_linear, is_cycle), edits);
+
+        // Axis words.
+        let start_emitted = self.emitted;
+        let (mut new_emitted, last_axis_end) =
+            self.axis_edits(block, plan, &mv, &first_target, edits);
+        if let PlanKind::Cycle { .. } = plan.kind {
+            self.cycle_words(block, plan, res, edits, sep, lower);
+            // G99 leaves the tool at the (compensated) R level; G98 returns
+            // it to the initial level it came from.
+            if let PlanKind::Cycle {
+                r_level, retract, ..
+            } = plan.kind
+            {
+                if retract == r_level && plan.absolute {
+                    new_emitted[2] = res.r_level;
+                }
+            }
+        }
+        // Arc centre words.
+        if let (Some(piece), Some(arc)) = (own_piece, mv.arc) {
+            let ends = (&start_emitted, &first_target, last_axis_end);
+            self.centre_edits(block, text, plan, (&mv, &arc, piece), ends, edits);
+        }
+        if self.opts.annotate {
+            self.annotation(block, text, res, scale, edits);
+        }
+        if edits.is_empty() {
+            out.extend_from_slice(line);
+        } else {
+            self.changed += 1;
+            edits.apply(text, out);
+            out.extend_from_slice(eol);
+        }
+        self.emitted = new_emitted;
+        // Added lines end with the block's line end; after a last line
+        // without one, each starts with a newline instead (the file still
+        // ends without one).
+        if !res.segments.is_empty() {
+            // `G02` in programs that write two digits.
+            let two_digit = motion_word.is_some_and(|w| {
+                w.end > w.num_start + 1 && text.get(w.num_start as usize) == Some(&b'0')
+            });
+            let first = if own_linear {
+                Motion::Linear
+            } else {
+                mv.motion
+            };
+            let last = self.added_lines(block, plan, (&mv, res), (first, two_digit), eol, out);
+            if mv.arc.is_some() && last != mv.motion {
+                self.motion_pending = Some(mv.motion);
+            }
+        } else if own_linear {
+            self.motion_pending = Some(mv.motion);
+        }
+    }
+
+    /// The edits of a compensated block's motion word: `G1` where an arc
+    /// block's own line is straight (its centre and turn words dropped),
+    /// the motion mode a block lacks after a line that changed it. Returns
+    /// the block's motion word.
+    fn motion_edits<'b>(
+        &mut self,
+        block: &'b Block,
+        text: &[u8],
+        (own_linear, is_cycle): (bool, bool),
+        edits: &mut Edits,
+    ) -> Option<&'b Word> {
+        let lower = block.lower_case;
+        let spaced = self.spaced;
         // Motion word handling for replaced arcs and pending modal motion.
         let motion_word = block
             .words
@@ -523,9 +593,25 @@ impl Emitter {
         }
         // Set again after the added lines (see `added_lines`).
         self.motion_pending = None;
+        motion_word
+    }
 
-        // Axis words.
-        let start_emitted = self.emitted;
+    /// The edits of a compensated block's axis words for its first target:
+    /// its own words rewritten, the words its correction needs inserted in
+    /// axis order. Returns where the machine then stands and where the
+    /// block's last axis word ends.
+    fn axis_edits(
+        &self,
+        block: &Block,
+        plan: &Plan,
+        mv: &crate::program::interp::Move,
+        first_target: &AxisVec,
+        edits: &mut Edits,
+    ) -> (AxisVec, Option<usize>) {
+        let scale = plan.scale;
+        let lower = block.lower_case;
+        let sep = if self.spaced { " " } else { "" };
+        let is_cycle = matches!(plan.kind, PlanKind::Cycle { .. });
         let mut last_axis_end: Option<usize> = None;
         let mut new_emitted = self.emitted;
         for slot in 0..6 {
@@ -582,143 +668,131 @@ impl Emitter {
                 }
             }
         }
-        if let PlanKind::Cycle { .. } = plan.kind {
-            self.cycle_words(block, plan, res, edits, sep, lower);
-            // G99 leaves the tool at the (compensated) R level; G98 returns
-            // it to the initial level it came from.
-            if let PlanKind::Cycle {
-                r_level, retract, ..
-            } = plan.kind
-            {
-                if retract == r_level && plan.absolute {
-                    new_emitted[2] = res.r_level;
+        (new_emitted, last_axis_end)
+    }
+
+    /// The edits of the centre words of the arc piece a block's own line
+    /// writes (from `start` to `first`; `last_axis_end` where the block's
+    /// axis words end).
+    fn centre_edits(
+        &self,
+        block: &Block,
+        text: &[u8],
+        plan: &Plan,
+        (mv, arc, piece): (
+            &crate::program::interp::Move,
+            &ArcGeom,
+            &crate::compensate::ArcPiece,
+        ),
+        (start_emitted, first_target, last_axis_end): (&AxisVec, &AxisVec, Option<usize>),
+        edits: &mut Edits,
+    ) {
+        let lower = block.lower_case;
+        let sep = if self.spaced { " " } else { "" };
+        let center = piece.center;
+        let arc = ArcGeom {
+            sweep: piece.sweep,
+            ..*arc
+        };
+        // An `R` word that cannot carry the moved centre is replaced by
+        // the centre words.
+        let moved = *first_target != mv.end || *start_emitted != mv.start;
+        let r_form = !moved || r_form_holds(&arc);
+        if let Some(r) = block.word(b'R').filter(|_| !r_form) {
+            let mut start = r.start as usize;
+            if start > 0 && text.get(start - 1) == Some(&b' ') {
+                start -= 1;
+            }
+            edits.push(start, r.end as usize, |_| {});
+        }
+        let words = self.centre_words(
+            block,
+            plan,
+            &arc,
+            &center,
+            (start_emitted, first_target),
+            r_form,
+        );
+        for (letter, v, d, w) in words.into_iter().flatten() {
+            match w {
+                Some(w) => {
+                    if v != round_to(w.value, d) {
+                        edits.number(w, v, d);
+                    }
+                }
+                None => {
+                    if v != 0.0 || plan.arc_absolute {
+                        let at = block
+                            .words
+                            .iter()
+                            .filter(|w| matches!(w.letter, b'I' | b'J' | b'K'))
+                            .map(|w| w.end as usize)
+                            .max()
+                            .or(last_axis_end)
+                            .unwrap_or(text.len());
+                        let l = letter_case(letter, lower);
+                        edits.insert_word(at, sep, l, v, d);
+                    }
                 }
             }
         }
-        // Arc centre words.
-        if let (Some(piece), Some(arc)) = (own_piece, mv.arc) {
-            let center = piece.center;
-            let arc = ArcGeom {
-                sweep: piece.sweep,
-                ..arc
-            };
-            // An `R` word that cannot carry the moved centre is replaced by
-            // the centre words.
-            let moved = first_target != mv.end || start_emitted != mv.start;
-            let r_form = !moved || r_form_holds(&arc);
-            if let Some(r) = block.word(b'R').filter(|_| !r_form) {
-                let mut start = r.start as usize;
-                if start > 0 && text.get(start - 1) == Some(&b' ') {
-                    start -= 1;
-                }
-                edits.push(start, r.end as usize, |_| {});
-            }
-            let words = self.centre_words(
-                block,
-                plan,
-                &arc,
-                &center,
-                (&start_emitted, &first_target),
-                r_form,
-            );
-            for (letter, v, d, w) in words.into_iter().flatten() {
-                match w {
-                    Some(w) => {
-                        if v != round_to(w.value, d) {
-                            edits.number(w, v, d);
-                        }
-                    }
-                    None => {
-                        if v != 0.0 || plan.arc_absolute {
-                            let at = block
-                                .words
-                                .iter()
-                                .filter(|w| matches!(w.letter, b'I' | b'J' | b'K'))
-                                .map(|w| w.end as usize)
-                                .max()
-                                .or(last_axis_end)
-                                .unwrap_or(text.len());
-                            let l = letter_case(letter, lower);
-                            edits.insert_word(at, sep, l, v, d);
-                        }
-                    }
-                }
-            }
-        }
-        if self.opts.annotate {
-            let dev = res.deviation.total().norm() / scale;
-            let unit: &[u8] = if scale != 1.0 { b"in" } else { b"mm" };
-            let dd = if scale != 1.0 { 5 } else { 4 };
-            let semicolon = self.semicolon_comments == Some(true);
-            // Before a trailing `;` comment, parentheses would be swallowed by it.
-            let at = match block.comments.last() {
-                Some(cm) if cm.semicolon && !semicolon => cm.start as usize,
-                _ => text.len(),
-            };
-            let inside = at < text.len();
-            edits.push(at, at, |t| {
-                // ` (dev … mm geo …)` at the end, `(dev … mm geo …) ` inside.
-                if !inside {
-                    t.push(b' ');
-                }
-                t.extend_from_slice(if semicolon { b"; dev " } else { b"(dev " });
-                write_number(t, dev, dd, false);
+    }
+
+    /// The annotation of a compensated block: `(dev … mm geo …)` with the
+    /// predicted deviation and its parts, and `takeup` where the block's own
+    /// line goes to a takeup point.
+    fn annotation(
+        &self,
+        block: &Block,
+        text: &[u8],
+        res: &BlockResult,
+        scale: f64,
+        edits: &mut Edits,
+    ) {
+        let dev = res.deviation.total().norm() / scale;
+        let unit: &[u8] = if scale != 1.0 { b"in" } else { b"mm" };
+        let dd = if scale != 1.0 { 5 } else { 4 };
+        let semicolon = self.semicolon_comments == Some(true);
+        // Before a trailing `;` comment, parentheses would be swallowed by it.
+        let at = match block.comments.last() {
+            Some(cm) if cm.semicolon && !semicolon => cm.start as usize,
+            _ => text.len(),
+        };
+        let inside = at < text.len();
+        edits.push(at, at, |t| {
+            // ` (dev … mm geo …)` at the end, `(dev … mm geo …) ` inside.
+            if !inside {
                 t.push(b' ');
-                t.extend_from_slice(unit);
-                // Every part that is non-zero at the printed precision; the
-                // dynamic one is a vibration amplitude (not in `dev`, not
-                // compensated).
-                for e in Effect::ALL {
-                    let part = res.deviation.part(e).norm() / scale;
-                    if rounds_to_zero(part, dd) {
-                        continue;
-                    }
-                    t.push(b' ');
-                    t.extend_from_slice(e.short().as_bytes());
-                    t.push(b' ');
-                    write_number(t, part, dd, false);
-                }
-                // The block's own words carry a takeup point (see
-                // `BlockResult::takeup`); the move follows on added lines.
-                if res.takeup {
-                    t.extend_from_slice(b" takeup");
-                }
-                if !semicolon {
-                    t.push(b')');
-                }
-                if inside {
-                    t.push(b' ');
-                }
-            });
-        }
-        if edits.is_empty() {
-            out.extend_from_slice(line);
-        } else {
-            self.changed += 1;
-            edits.apply(text, out);
-            out.extend_from_slice(eol);
-        }
-        self.emitted = new_emitted;
-        // Added lines end with the block's line end; after a last line
-        // without one, each starts with a newline instead (the file still
-        // ends without one).
-        if !res.segments.is_empty() {
-            // `G02` in programs that write two digits.
-            let two_digit = motion_word.is_some_and(|w| {
-                w.end > w.num_start + 1 && text.get(w.num_start as usize) == Some(&b'0')
-            });
-            let first = if own_linear {
-                Motion::Linear
-            } else {
-                mv.motion
-            };
-            let last = self.added_lines(block, plan, (&mv, res), (first, two_digit), eol, out);
-            if mv.arc.is_some() && last != mv.motion {
-                self.motion_pending = Some(mv.motion);
             }
-        } else if own_linear {
-            self.motion_pending = Some(mv.motion);
-        }
+            t.extend_from_slice(if semicolon { b"; dev " } else { b"(dev " });
+            write_number(t, dev, dd, false);
+            t.push(b' ');
+            t.extend_from_slice(unit);
+            // Every part that is non-zero at the printed precision; the
+            // dynamic one is a vibration amplitude (not in `dev`, not
+            // compensated).
+            for e in Effect::ALL {
+                let part = res.deviation.part(e).norm() / scale;
+                if rounds_to_zero(part, dd) {
+                    continue;
+                }
+                t.push(b' ');
+                t.extend_from_slice(e.short().as_bytes());
+                t.push(b' ');
+                write_number(t, part, dd, false);
+            }
+            // The block's own words carry a takeup point (see
+            // `BlockResult::takeup`); the move follows on added lines.
+            if res.takeup {
+                t.extend_from_slice(b" takeup");
+            }
+            if !semicolon {
+                t.push(b')');
+            }
+            if inside {
+                t.push(b' ');
+            }
+        });
     }
 
     /// The lines added after a compensated block's own line: to each of the
