@@ -141,6 +141,8 @@ pub struct Summary {
     pub changed: usize,
     /// Blocks added by segmentation.
     pub added: usize,
+    /// The added blocks by why they were added.
+    pub added_by: crate::emit::gcode::AddedLines,
     /// Predicted deviation of the uncompensated program, mm.
     pub deviation: DevStats,
     /// Largest position error left after compensation, mm.
@@ -712,7 +714,7 @@ impl<'m> Job<'m> {
         mut rows: Option<&mut dyn FnMut(Row)>,
     ) -> Result<Summary> {
         let mut interp = Interpreter::new(self.setup.clone(), file);
-        let mut emitter = Emitter::new(self.emit);
+        let mut emitter = Emitter::new(self.emit).with_tolerance(self.settings.tolerance_mm);
         let mut summary = Summary::default();
         let mut out_buf: Vec<u8> = Vec::with_capacity(1 << 20);
         let mut tools: std::collections::BTreeSet<u32> = Default::default();
@@ -972,6 +974,7 @@ impl<'m> Job<'m> {
         summary.tools = tools.into_iter().collect();
         summary.changed = emitter.changed_blocks();
         summary.added = emitter.added_blocks();
+        summary.added_by = emitter.added_by();
         if let Some(t) = &tracker {
             summary.duration_s = t.time_s;
             summary.mean_power_w = t.mean_power();

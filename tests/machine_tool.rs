@@ -636,3 +636,29 @@ fn output_decimals_are_read_and_bounded() {
     assert!(e.contains("output.decimals_deg"), "{e}");
     assert!(e.contains("12"), "{e}");
 }
+
+#[test]
+fn compensation_tolerance_is_read_and_validated() {
+    // The bundled machine tools give the model's own accuracy.
+    for rel in ["machines/afm-r1000.yaml", "machines/five-axis-ac.yaml"] {
+        let m = load_bundled(rel);
+        assert_eq!(m.compensation_tolerance_mm(), Some(0.003), "{rel}");
+    }
+    let base = BASE3
+        .replace("{X}", "")
+        .replace("{Y}", "")
+        .replace("{Z}", "");
+    let m = MachineTool::from_yaml_str(&base, "t.yaml").unwrap();
+    assert_eq!(m.compensation_tolerance_mm(), None);
+    let with = |v: &str| format!("{base}compensation:\n  tolerance_mm: {v}\n");
+    let m = MachineTool::from_yaml_str(&with("0.002"), "t.yaml").unwrap();
+    assert_eq!(m.compensation_tolerance_mm(), Some(0.002));
+    // Below ten times the solver's convergence, above 1 mm, not a number,
+    // or an unknown key: refused at the key.
+    for bad in ["0.0000001", "2", "-0.003", ".nan"] {
+        let e = err_of(&with(bad));
+        assert!(e.contains("compensation.tolerance_mm"), "{bad}: {e}");
+    }
+    let e = err_of(&format!("{base}compensation:\n  tolerance_um: 3\n"));
+    assert!(e.contains("tolerance_um"), "{e}");
+}

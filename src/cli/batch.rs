@@ -337,6 +337,7 @@ pub fn run(a: &BatchArgs, quiet: bool) -> Result<i32> {
     let pool = thread_pool(a.effects.threads)?;
     let machine_path = Machine::resolve(&a.machine)?;
     let machine = Machine::load(&machine_path)?;
+    let tolerance = super::gcode::tolerance_for(a.tolerance, &machine);
     // The files every program's run reads besides the program itself.
     let mut files = vec![machine_path.clone()];
     files.extend(a.effects.force_table.clone());
@@ -374,7 +375,7 @@ pub fn run(a: &BatchArgs, quiet: bool) -> Result<i32> {
                 &pool,
                 setup,
                 effects(&a.effects)?,
-                a.tolerance,
+                tolerance,
                 None,
                 annotate,
             )?;
@@ -424,7 +425,7 @@ pub fn run(a: &BatchArgs, quiet: bool) -> Result<i32> {
                 let input = item.input.display().to_string();
                 match done {
                     Ok(d) => {
-                        let findings = d.residual.is_some_and(|r| r > a.tolerance);
+                        let findings = d.residual.is_some_and(|r| r > tolerance);
                         FileResult {
                             input,
                             output: Some(output.display().to_string()),
@@ -471,7 +472,7 @@ pub fn run(a: &BatchArgs, quiet: bool) -> Result<i32> {
     };
     let summary = BatchSummary {
         machine: a.machine.clone(),
-        tolerance_mm: a.tolerance,
+        tolerance_mm: tolerance,
         programs: results.len(),
         ok,
         findings,
@@ -501,7 +502,7 @@ pub fn run(a: &BatchArgs, quiet: bool) -> Result<i32> {
                 "findings  {}: residual {} mm > tolerance {} mm\n",
                 r.input,
                 r.max_residual_mm.unwrap_or(0.0),
-                a.tolerance
+                tolerance
             ))?,
             _ => {}
         }

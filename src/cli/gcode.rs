@@ -716,7 +716,8 @@ impl Prepared {
 pub fn compensate(a: &CompensateArgs) -> Result<i32> {
     let run = Prepared::new(&a.program, &a.effects, "compensate")?;
     let setup = &run.setup;
-    let job = run.job(a.tolerance, a.decimals, a.annotate == Annotate::Comment)?;
+    let tolerance = tolerance_of(a.tolerance, Some(&run.machine));
+    let job = run.job(tolerance, a.decimals, a.annotate == Annotate::Comment)?;
     let input_path = &a.program.file;
     let out_path = match &a.output {
         Some(p) => p.clone(),
@@ -750,10 +751,10 @@ pub fn compensate(a: &CompensateArgs) -> Result<i32> {
         None => emit_to(&out_path, |w| job.run(input, &file, Some(w), None))?,
     };
     tracing::info!(
-        "{}: {} blocks changed, {} added; predicted deviation mean {:.4} max {:.4} mm (line {})",
+        "{}: {} blocks changed, {}; predicted deviation mean {:.4} max {:.4} mm (line {})",
         out_path.display(),
         summary.changed,
-        summary.added,
+        added_lines(&summary, tolerance),
         summary.deviation.mean(),
         summary.deviation.max,
         summary.deviation.max_line
@@ -768,17 +769,60 @@ pub fn compensate(a: &CompensateArgs) -> Result<i32> {
             summary.mean_power_w[3]
         );
     }
-    Ok(if summary.max_residual_mm > a.tolerance {
+    Ok(if summary.max_residual_mm > tolerance {
         tracing::warn!(
             "{file}:{}: the compensated program is still {:.4} mm off here, more than the tolerance {} mm",
             summary.max_residual_line,
             summary.max_residual_mm,
-            a.tolerance
+            tolerance
         );
         1
     } else {
         0
     })
+}
+
+/// The tolerance of a run: `--tolerance`, else the machine file's
+/// `compensation.tolerance_mm`, else the default [`Settings`]' (mm).
+pub(super) fn tolerance_of(arg: Option<f64>, machine: Option<&MachineTool>) -> f64 {
+    arg.or_else(|| machine.and_then(MachineTool::compensation_tolerance_mm))
+        .unwrap_or(Settings::default().tolerance_mm)
+}
+
+/// [`tolerance_of`] for a machine file of either kind (robots have no
+/// `compensation.tolerance_mm`).
+pub(super) fn tolerance_for(arg: Option<f64>, machine: &crate::machine::Machine) -> f64 {
+    match machine {
+        crate::machine::Machine::Tool(m) => tolerance_of(arg, Some(m)),
+        crate::machine::Machine::Robot(_) => tolerance_of(arg, None),
+    }
+}
+
+/// How many lines the compensation added and why, for the summary line:
+/// `12 lines added (8 after takeup points, 4 arcs cut at reversals) at
+/// tolerance 0.003 mm`.
+pub(super) fn added_lines(summary: &Summary, tolerance: f64) -> String {
+    let by = summary.added_by;
+    let mut why: Vec<String> = Vec::new();
+    for (n, what) in [
+        (by.takeups, "after takeup points"),
+        (by.arcs, "arcs cut at reversals"),
+        (by.chords, "arc chords"),
+        (by.splits, "straight-move splits"),
+    ] {
+        if n > 0 {
+            why.push(format!("{n} {what}"));
+        }
+    }
+    let mut s = format!("{} lines added", summary.added);
+    if !why.is_empty() {
+        s.push_str(&format!(" ({})", why.join(", ")));
+    }
+    s.push_str(&format!(
+        " at tolerance {} mm",
+        crate::error::show_number(tolerance)
+    ));
+    s
 }
 
 /// `postproc report` (dry run).

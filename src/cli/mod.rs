@@ -93,9 +93,10 @@ pub struct BatchArgs {
     #[command(flatten)]
     pub effects: EffectArgs,
     /// Largest gap between attained and programmed path along a move, mm
-    /// (at least 0.000001: ten times the solver's convergence).
-    #[arg(long, default_value_t = 0.001)]
-    pub tolerance: f64,
+    /// (at least 0.000001: ten times the solver's convergence; default: the
+    /// machine file's `compensation.tolerance_mm`, else 0.001).
+    #[arg(long)]
+    pub tolerance: Option<f64>,
     /// Annotate compensated blocks with their predicted deviation.
     #[arg(long, value_enum, default_value_t = Annotate::Comment)]
     pub annotate: Annotate,
@@ -190,9 +191,10 @@ pub struct CompensateArgs {
     #[arg(short, long)]
     pub output: Option<PathBuf>,
     /// Largest gap between attained and programmed path along a move, mm
-    /// (at least 0.000001: ten times the solver's convergence).
-    #[arg(long, default_value_t = 0.001)]
-    pub tolerance: f64,
+    /// (at least 0.000001: ten times the solver's convergence; default: the
+    /// machine file's `compensation.tolerance_mm`, else 0.001).
+    #[arg(long)]
+    pub tolerance: Option<f64>,
     /// Annotate compensated blocks with their predicted deviation.
     #[arg(long, value_enum, default_value_t = Annotate::Comment)]
     pub annotate: Annotate,

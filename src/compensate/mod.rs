@@ -3,14 +3,17 @@
 //! compensated straight line (or arc) would leave the exact compensation by
 //! more than the tolerance.
 
+mod arc;
 pub mod rapid;
+
+pub use arc::{ArcPiece, MAX_ARC_DEPTH};
 
 use nalgebra::{SMatrix, SVector, Vector3};
 
 use crate::machine::tool::MachineTool;
 use crate::machine::{AxisVec, DirVec, TipPose};
 use crate::predict::{BlockContext, Breakdown, LipschitzBound, ToolPredictor};
-use crate::program::interp::{END_INSIDE, Motion, Move, Plan, PlanKind};
+use crate::program::interp::{Motion, Move, Plan, PlanKind};
 
 /// Convergence of the inverse solve on the tool-tip position, mm.
 pub const SOLVE_TOL_MM: f64 = 1e-7;
@@ -179,11 +182,20 @@ pub struct BlockResult {
     pub end: AxisVec,
     /// Cycles: compensated machine Z of the R level.
     pub r_level: f64,
-    /// Arcs kept as arcs: compensated centre.
+    /// Arcs whose last piece is an arc: its compensated centre.
     pub center: Option<Vector3<f64>>,
     /// Intermediate compensated points before `end` when the move is split.
+    /// The block's own line goes to the first (to `end` when there are
+    /// none), added lines to the others and then to `end`; each is reached
+    /// by a straight move unless [`Self::arcs`] names it.
     pub segments: Vec<AxisVec>,
-    /// The arc is replaced by straight segments.
+    /// The pieces of an arc that are written as arcs, in order of their
+    /// targets (an arc kept whole: one piece to `end`).
+    pub arcs: Vec<ArcPiece>,
+    /// Takeup points among `segments` after the first (inside an arc, at a
+    /// reversal of an axis), by index.
+    pub takeup_at: Vec<usize>,
+    /// Part of the arc is written as straight chords.
     pub arc_replaced: bool,
     /// The first of `segments` is a takeup point: the programmed start
     /// solved for this move, where the previous block's end (solved for its
@@ -1315,11 +1327,10 @@ pub fn block_reusing(
         }
         (_, Some(arc)) => {
             let takeups = !plan.cutter_comp;
-            if let Some(d) = arc_block(pred, &mv, &arc, (tool, tol, takeups), carry_in, &mut res)? {
-                if let Some(k) = carry_out.as_mut() {
-                    k.dirs = d;
-                    k.c = res.end;
-                }
+            let d = arc::arc_block(pred, &mv, &arc, (tool, tol, takeups), carry_in, &mut res)?;
+            if let Some(k) = carry_out.as_mut() {
+                k.dirs = d;
+                k.c = res.end;
             }
         }
         (_, None) => {}
@@ -1327,162 +1338,6 @@ pub fn block_reusing(
     check_travel(pred, &res.end)?;
     *carry = carry_out;
     Ok(res)
-}
-
-/// Sweep within which of a whole turn an arc counts as a full turn, rad.
-const FULL_TURN_EPS_RAD: f64 = 1e-9;
-
-/// An arc: kept as an arc with a shifted centre when the correction is
-/// uniform enough along it, otherwise replaced by chords each split like a
-/// straight move. Returns the direction of motion the replaced arc ends
-/// with (its last chord's), `None` when it is kept.
-fn arc_block(
-    pred: &ToolPredictor,
-    mv: &Move,
-    arc: &crate::program::interp::ArcGeom,
-    (tool, tol, takeups): (f64, f64, bool),
-    carry_in: Option<&Carry>,
-    res: &mut BlockResult,
-) -> Result<Option<DirVec>, Failure> {
-    let s3 = mv.start3();
-    let e3 = mv.end3();
-    // Sample the correction along the arc with the local direction of motion.
-    let n = ((arc.sweep.abs() / (5f64).to_radians()).ceil() as usize).clamp(4, 72);
-    let start_dirs = dirs_of(&arc.tangent(&s3, &e3, 1.0 - END_INSIDE), &mv.dirs);
-    let mut corr_min = Vector3::repeat(f64::INFINITY);
-    let mut corr_max = Vector3::repeat(f64::NEG_INFINITY);
-    let mut first = Vector3::zeros();
-    let mut start_c = mv.start;
-    let mut d = start_dirs;
-    for k in 0..=n {
-        let s = k as f64 / n as f64;
-        let p = arc.point(&s3, &e3, s);
-        // Each point with the direction of motion there (an axis keeps its
-        // direction where its tangent component vanishes): where an axis
-        // reverses inside the arc, the correction jumps by the reversal
-        // error, which shifting the arc cannot remove, and the spread shows
-        // it.
-        if k > 0 && k < n {
-            d = dirs_of(&arc.tangent(&s3, &e3, s), &d);
-        }
-        let target = with_xyz(&lerp(&mv.start, &mv.end, s), &p);
-        let (c, _) = solve(pred, &target, &d, tool)?;
-        let c = if k == n { res.end } else { c };
-        let corr = Vector3::new(c[0] - p[0], c[1] - p[1], c[2] - p[2]);
-        if k == 0 {
-            first = corr;
-            start_c = c;
-        }
-        corr_min = corr_min.inf(&corr);
-        corr_max = corr_max.sup(&corr);
-    }
-    let spread = (corr_max - corr_min).norm();
-    // A kept arc starts where the machine stands. Beyond the takeup share
-    // of the tolerance from the programmed start (an axis that reverses at
-    // the arc's start), the start solved for the arc's first direction of
-    // motion comes first, as a takeup point.
-    // Where the machine stands: the previous block's end, when it ended at
-    // the arc's start.
-    let stood = carry_in.filter(|k| k.target == mv.start);
-    let here = stood.map(|k| k.c);
-    // The gap where the machine stands, when beyond the takeup share.
-    let beyond = here
-        .map(|c| start_gap(pred, &mv.start, &c, &start_dirs, tool))
-        .filter(|&g| g > tol * TAKEUP_SHARE);
-    // No takeup point beyond an end of travel (see `start_from`).
-    let stands_off = takeups && beyond.is_some() && check_travel(pred, &start_c).is_ok();
-    let arc_start = match here {
-        Some(_) if stands_off => start_c,
-        Some(c) => c,
-        None => mv.start,
-    };
-    // A full turn (start and end the same in the plane) stays an arc only
-    // while its compensated start and end coincide (on an error-free
-    // machine, say); in general they do not (the end is solved for its own
-    // conditions), and an arc between two points microns apart cuts almost
-    // nothing, or almost a full turn. It is replaced by chords.
-    let (a, b, _) = arc.plane.axes();
-    let open_turn = arc.sweep.abs() >= std::f64::consts::TAU - FULL_TURN_EPS_RAD
-        && (arc_start[a] - res.end[a]).hypot(arc_start[b] - res.end[b]) > SOLVE_TOL_MM;
-    if spread <= tol && !open_turn {
-        if stands_off {
-            check_travel(pred, &start_c)?;
-            res.segments.push(start_c);
-            res.takeup = true;
-        } else if let Some(gap) = beyond {
-            // No takeup allowed: the arc starts off by the gap.
-            res.residual_mm = res.residual_mm.max(gap);
-        }
-        let last = Vector3::new(res.end[0] - e3[0], res.end[1] - e3[1], res.end[2] - e3[2]);
-        res.center = Some(arc.center + (first + last) / 2.0);
-        return Ok(None);
-    }
-    // Replace by chords: sagitta within half the tolerance, then each
-    // chord split like a straight move with the rest of the budget.
-    res.arc_replaced = true;
-    let sag = tol / 2.0;
-    let r = arc.radius.max(1e-9);
-    let max_step = 2.0 * (1.0 - sag / r).clamp(-1.0, 1.0).acos();
-    let chords = ((arc.sweep.abs() / max_step.max(1e-6)).ceil() as usize).clamp(1, 1 << 16);
-    let mut prev_p = mv.start;
-    let lip = Lip::new(tool);
-    let mut at: Option<(AxisVec, DirVec)> = stood.map(|k| (k.c, k.dirs));
-    let mut last_dirs = mv.dirs;
-    let mut end_residual = res.residual_mm;
-    // `block_reusing` cleared the storage of the split points.
-    let pts = &mut res.segments;
-    let mut takeup = false;
-    // The largest gap left at a chord start without takeup points.
-    let mut left = 0.0f64;
-    for k in 1..=chords {
-        let s = k as f64 / chords as f64;
-        let p = with_xyz(&lerp(&mv.start, &mv.end, s), &arc.point(&s3, &e3, s));
-        let chord_dir = Vector3::new(p[0] - prev_p[0], p[1] - prev_p[1], p[2] - prev_p[2]);
-        let d = dirs_of(&chord_dir, &mv.dirs);
-        // Each chord with its own direction of motion. Where that differs
-        // from the previous chord's (an axis reverses inside the arc), or at
-        // the previous block's end, the chord starts as a straight move does.
-        let (c0, gap) = match at {
-            Some((c, pd)) if pd == d && k > 1 => (c, SOLVE_TOL_MM),
-            Some((c, _)) => {
-                let st = start_from(pred, &prev_p, &c, &d, &lip, (tol - sag, takeups), pts)?;
-                takeup |= st.takeup && k == 1;
-                left = left.max(st.left_mm);
-                (st.c, st.gap)
-            }
-            None => (solve(pred, &prev_p, &d, tool)?.0, SOLVE_TOL_MM),
-        };
-        let (c, r) = solve(pred, &p, &d, tool)?;
-        end_residual = r;
-        split_line(
-            pred,
-            &prev_p,
-            &p,
-            &c0,
-            &c,
-            gap,
-            &d,
-            &lip,
-            tol - sag,
-            true,
-            pts,
-        )?;
-        at = Some((c, d));
-        last_dirs = d;
-        prev_p = p;
-    }
-    // The arc ends where its last chord does, solved for that chord's
-    // direction of motion.
-    if let Some(end) = pts.pop() {
-        res.end = end;
-        res.residual_mm = end_residual;
-    }
-    res.residual_mm = res.residual_mm.max(left);
-    for p in res.segments.iter() {
-        check_travel(pred, p)?;
-    }
-    res.takeup = takeup;
-    Ok(Some(last_dirs))
 }
 
 #[cfg(test)]
@@ -1779,8 +1634,10 @@ mod tests {
         // ends moving +X +Y, but both axes reverse twice inside it, by
         // about 3.5 µm on this machine. Judged with the direction of motion
         // at the start only, the correction looked uniform within 2 µm and
-        // the arc was kept, its reversal errors left in; judged with the
-        // direction at every point, it is replaced by chords.
+        // the arc would be kept whole, its reversal errors left in; judged
+        // with the direction at every point, it is cut at the four
+        // reversals into arcs, with a takeup point at each reversal (3.5 µm
+        // is beyond half the tolerance), and no chords.
         let pred = afm_pred();
         let plans = afm_plans(&[
             "G0 X99.30275 Y80 Z10",
@@ -1788,7 +1645,10 @@ mod tests {
             "G2 X97.92945 Y99.72741 I0.69725 J-7.96956",
         ]);
         let res = run_at(&pred, &plans, 0.002);
-        assert!(res[2].arc_replaced, "kept as an arc");
+        assert!(!res[2].arc_replaced, "chords");
+        assert_eq!(res[2].arcs.len(), 5, "{:?}", res[2].arcs);
+        assert_eq!(res[2].takeup_at.len(), 4, "{:?}", res[2].takeup_at);
+        assert!(res[2].center.is_some());
         // Within one quadrant (no reversal inside) the same arc stays.
         let plans = afm_plans(&[
             "G0 X100 Y80 Z10",
@@ -1797,18 +1657,20 @@ mod tests {
         ]);
         let res = run_at(&pred, &plans, 0.002);
         assert!(!res[2].arc_replaced, "replaced");
+        assert_eq!(res[2].arcs.len(), 1);
+        assert_eq!(res[2].segments.len(), usize::from(res[2].takeup));
     }
 
     #[test]
-    fn a_full_turn_that_does_not_close_is_replaced_by_chords() {
+    fn a_full_turn_that_does_not_close_is_cut_into_arcs() {
         // A full circle entered moving −X, leaving +X: the machine stands
         // where the entry's end was solved for −X, and the circle's end is
         // solved for +X, microns apart. With a tolerance loose enough for
-        // its correction to count as uniform, kept as an arc it would run
+        // its correction to count as uniform, kept whole it would run
         // between those two points: a controller reads that as an arc of
-        // almost nothing (or almost a full turn). It is replaced by chords
-        // that go round. Entered moving +X, its start and end are the same
-        // command and it stays a full circle.
+        // almost nothing (or almost a full turn). It is cut at its
+        // reversals into quarter arcs that go round. Entered moving +X, its
+        // start and end are the same command and it stays a full circle.
         let pred = afm_pred();
         let plans = afm_plans(&["G0 X200 Y100 Z10", "G1 X150 F1000", "X100", "G2 I0 J-8"]);
         let Some(arc) = plans[3].mv.and_then(|mv| mv.arc) else {
@@ -1816,16 +1678,20 @@ mod tests {
         };
         assert!((arc.sweep.abs() - std::f64::consts::TAU).abs() < 1e-12);
         let res = run_at(&pred, &plans, 0.05);
-        assert!(res[3].arc_replaced, "kept as an arc");
+        assert!(!res[3].arc_replaced, "chords");
         let end = res[3].end;
         assert!(
             (end[0] - 100.0).abs() < 0.1 && (end[1] - 100.0).abs() < 0.1,
             "{end:?}"
         );
-        assert!(res[3].segments.len() > 10, "{}", res[3].segments.len());
+        assert_eq!(res[3].arcs.len(), 4, "{:?}", res[3].arcs);
+        for piece in &res[3].arcs {
+            assert!(piece.sweep.abs() < std::f64::consts::PI, "{piece:?}");
+        }
         let plans = afm_plans(&["G0 X0 Y100 Z10", "G1 X50 F1000", "X100", "G2 I0 J-8"]);
         let res = run_at(&pred, &plans, 0.05);
         assert!(!res[3].arc_replaced && res[3].center.is_some());
+        assert_eq!(res[3].arcs.len(), 1);
         assert_eq!(res[2].end, res[3].end);
     }
 

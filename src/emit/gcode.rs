@@ -15,7 +15,7 @@ use crate::compensate::BlockResult;
 use crate::machine::{AXIS_LETTERS, AxisVec};
 use crate::predict::Effect;
 use crate::program::gcode::{Block, Word, strip_eol};
-use crate::program::interp::{Motion, Plan, PlanKind};
+use crate::program::interp::{ArcGeom, Motion, Plan, PlanKind};
 
 /// Output options.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -32,6 +32,45 @@ pub struct EmitOptions {
 
 /// Default decimals of rewritten mm words when the program has fewer.
 pub const DEFAULT_DECIMALS_MM: usize = 3;
+
+/// Share of the tolerance that rounding a written coordinate may take (half
+/// a unit of its last decimal, in mm): the decimals grow until it fits.
+pub const ROUNDING_SHARE: f64 = 0.25;
+
+/// Share of the tolerance within which a canned cycle's hole block keeps
+/// the modal Z, R or axis value it inherits instead of getting a word for
+/// the corrected one (per word; X, Y and Z together stay within about 0.43
+/// of the tolerance).
+pub const KEPT_WORD_SHARE: f64 = 0.25;
+
+/// Most decimals a written coordinate gets.
+const MAX_DECIMALS: usize = 8;
+
+/// The lines a compensated program has beyond its input's, by why they
+/// were added.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct AddedLines {
+    /// After a takeup point: the move that continues from it (the block's
+    /// own line goes to the takeup point), or the move onto one at a
+    /// reversal inside an arc.
+    pub takeups: usize,
+    /// Arcs cut where an axis of their plane reverses, or halved where one
+    /// arc cannot follow the correction: the arc lines after the first.
+    pub arcs: usize,
+    /// Parts of arcs that no arc fits, written as straight chords.
+    pub chords: usize,
+    /// Straight moves split where the predicted error bends beyond the
+    /// tolerance.
+    pub splits: usize,
+}
+
+/// What an added line is (see [`AddedLines`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum AddedKind {
+    Arc,
+    Chord,
+    Split,
+}
 
 /// Streaming emitter state (what the controller will have been told so far).
 #[derive(Debug, Clone)]
@@ -53,8 +92,12 @@ pub struct Emitter {
     changed: usize,
     /// Blocks added by segmentation.
     added: usize,
+    /// The added blocks by why they were added.
+    added_by: AddedLines,
     /// Edits of the block being written (kept for their buffers).
     edits: Edits,
+    /// Tolerance of the compensation, mm (see [`Emitter::with_tolerance`]).
+    tolerance_mm: Option<f64>,
 }
 
 /// Formats `v` with `d` decimals, never in exponent notation and never as
@@ -170,10 +213,22 @@ impl Edits {
 
     /// Inserts ` X1.234` (with `sep` before the letter) at `at`.
     fn insert_word(&mut self, at: usize, sep: &str, letter: u8, v: f64, d: usize) {
+        self.insert_at(Slot::After(at), sep, letter, v, d);
+    }
+
+    /// Inserts a word at `slot`: ` X1.234` after a word, `X1.234 ` before
+    /// one (`sep` between the words).
+    fn insert_at(&mut self, slot: Slot, sep: &str, letter: u8, v: f64, d: usize) {
+        let at = slot.pos();
         self.push(at, at, |t| {
-            t.extend_from_slice(sep.as_bytes());
+            if let Slot::After(_) = slot {
+                t.extend_from_slice(sep.as_bytes());
+            }
             t.push(letter);
             write_number(t, v, d, true);
+            if let Slot::Before(_) = slot {
+                t.extend_from_slice(sep.as_bytes());
+            }
         });
     }
 
@@ -200,6 +255,42 @@ impl Edits {
         }
         out.extend_from_slice(&text[pos..]);
     }
+}
+
+/// Where an inserted word goes: after the word ending at the position, or
+/// before the word starting there.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Slot {
+    After(usize),
+    Before(usize),
+}
+
+impl Slot {
+    fn pos(self) -> usize {
+        match self {
+            Slot::After(p) | Slot::Before(p) => p,
+        }
+    }
+}
+
+/// Where a missing axis word of `slot` goes so that the block's axis words
+/// stay together and in axis order (X Y Z A B C): after the block's word of
+/// the nearest axis before it, else before the word of the nearest axis
+/// after it, else where [`insert_point_for_axes`] puts the first axis word
+/// of a block (before its feed, speed and auxiliary words).
+fn axis_slot_for(block: &Block, slot: usize) -> Slot {
+    let word = |s: usize| {
+        AXIS_LETTERS
+            .get(s)
+            .and_then(|&l| block.words.iter().find(|w| w.letter == l))
+    };
+    if let Some(w) = (0..slot).rev().find_map(word) {
+        return Slot::After(w.end as usize);
+    }
+    if let Some(w) = (slot + 1..6).find_map(word) {
+        return Slot::Before(w.start as usize);
+    }
+    insert_point_for_axes(block)
 }
 
 /// Starts a line added after `block`'s: a newline first when the block's
@@ -241,8 +332,29 @@ impl Emitter {
             spaced: true,
             changed: 0,
             added: 0,
+            added_by: AddedLines::default(),
             edits: Edits::default(),
+            tolerance_mm: None,
         }
+    }
+
+    /// The emitter for a compensation at `tolerance_mm`: words are written
+    /// with enough decimals that rounding moves a point by at most
+    /// [`ROUNDING_SHARE`] of the tolerance (inch programs get more decimals
+    /// than the machine file's mm setting gives them when needed), and the
+    /// hole blocks of canned cycles get no word they lack while the modal
+    /// value stays within [`KEPT_WORD_SHARE`] of the tolerance of the
+    /// corrected one.
+    pub fn with_tolerance(mut self, tolerance_mm: f64) -> Self {
+        self.tolerance_mm = Some(tolerance_mm);
+        self
+    }
+
+    /// How far (mm) a canned cycle's modal word may be from its corrected
+    /// value before the hole block gets the word: [`KEPT_WORD_SHARE`] of
+    /// the tolerance (0 without one: any change adds the word).
+    fn kept_word_mm(&self) -> f64 {
+        self.tolerance_mm.map_or(0.0, |t| t * KEPT_WORD_SHARE)
     }
 
     /// Number of blocks whose text changed.
@@ -255,15 +367,33 @@ impl Emitter {
         self.added
     }
 
+    /// The blocks added by segmentation, by why they were added.
+    pub fn added_by(&self) -> AddedLines {
+        self.added_by
+    }
+
     fn decimals(&self, w: Option<&Word>, scale: f64, rotary: bool) -> usize {
         let own = w.and_then(|w| w.decimals).unwrap_or(0) as usize;
         let base = if rotary {
             self.opts.decimals_deg.unwrap_or(DEFAULT_DECIMALS_MM)
         } else {
             let d = self.opts.decimals_mm.unwrap_or(DEFAULT_DECIMALS_MM);
-            if scale != 1.0 { d + 1 } else { d }
+            let d = if scale != 1.0 { d + 1 } else { d };
+            d.max(self.tolerance_decimals(scale))
         };
         own.max(base)
+    }
+
+    /// The fewest decimals of a linear word (in program units of `scale` mm)
+    /// whose rounding stays within [`ROUNDING_SHARE`] of the tolerance (0
+    /// without a tolerance).
+    fn tolerance_decimals(&self, scale: f64) -> usize {
+        let Some(tol) = self.tolerance_mm else {
+            return 0;
+        };
+        (0..MAX_DECIMALS)
+            .find(|&d| 0.5 * scale / pow10(d) <= tol * ROUNDING_SHARE)
+            .unwrap_or(MAX_DECIMALS)
     }
 
     /// Writes one line (`line` includes its end-of-line bytes).
@@ -329,12 +459,82 @@ impl Emitter {
             res.end
         };
 
-        // A kept arc after a takeup point: the block's own line moves
-        // straight to the takeup point, the arc follows on an added line.
-        let arc_after_takeup = res.takeup && res.center.is_some() && !res.arc_replaced;
-        // The block's own line is a straight move (G1, no centre words).
-        let own_linear = res.arc_replaced || arc_after_takeup;
+        // The arc piece the block's own line writes, if any; without one,
+        // an arc block's own line is a straight move (G1, no centre words)
+        // to a takeup point or the first chord's end.
+        let own_piece = res.arcs.first().filter(|p| p.to == 0);
+        let own_linear = mv.arc.is_some() && own_piece.is_none();
 
+        let motion_word = self.motion_edits(block, text, (own_linear, is_cycle), edits);
+
+        // Axis words.
+        let start_emitted = self.emitted;
+        let (mut new_emitted, last_axis_end) =
+            self.axis_edits(block, plan, &mv, &first_target, edits);
+        if let PlanKind::Cycle { .. } = plan.kind {
+            self.cycle_words(block, plan, res, edits, sep, lower);
+            // G99 leaves the tool at the (compensated) R level; G98 returns
+            // it to the initial level it came from.
+            if let PlanKind::Cycle {
+                r_level, retract, ..
+            } = plan.kind
+            {
+                if retract == r_level && plan.absolute {
+                    new_emitted[2] = res.r_level;
+                }
+            }
+        }
+        // Arc centre words.
+        if let (Some(piece), Some(arc)) = (own_piece, mv.arc) {
+            let ends = (&start_emitted, &first_target, last_axis_end);
+            self.centre_edits(block, text, plan, (&mv, &arc, piece), ends, edits);
+        }
+        if self.opts.annotate {
+            self.annotation(block, text, res, scale, edits);
+        }
+        if edits.is_empty() {
+            out.extend_from_slice(line);
+        } else {
+            self.changed += 1;
+            edits.apply(text, out);
+            out.extend_from_slice(eol);
+        }
+        self.emitted = new_emitted;
+        // Added lines end with the block's line end; after a last line
+        // without one, each starts with a newline instead (the file still
+        // ends without one).
+        if !res.segments.is_empty() {
+            // `G02` in programs that write two digits.
+            let two_digit = motion_word.is_some_and(|w| {
+                w.end > w.num_start + 1 && text.get(w.num_start as usize) == Some(&b'0')
+            });
+            let first = if own_linear {
+                Motion::Linear
+            } else {
+                mv.motion
+            };
+            let last = self.added_lines(block, plan, (&mv, res), (first, two_digit), eol, out);
+            if mv.arc.is_some() && last != mv.motion {
+                self.motion_pending = Some(mv.motion);
+            }
+        } else if own_linear {
+            self.motion_pending = Some(mv.motion);
+        }
+    }
+
+    /// The edits of a compensated block's motion word: `G1` where an arc
+    /// block's own line is straight (its centre and turn words dropped),
+    /// the motion mode a block lacks after a line that changed it. Returns
+    /// the block's motion word.
+    fn motion_edits<'b>(
+        &mut self,
+        block: &'b Block,
+        text: &[u8],
+        (own_linear, is_cycle): (bool, bool),
+        edits: &mut Edits,
+    ) -> Option<&'b Word> {
+        let lower = block.lower_case;
+        let spaced = self.spaced;
         // Motion word handling for replaced arcs and pending modal motion.
         let motion_word = block
             .words
@@ -391,16 +591,27 @@ impl Emitter {
                 edits.push(at, at, |t| t.extend_from_slice(&[g, code, b' ']));
             }
         }
-        if motion_word.is_some() || !res.arc_replaced {
-            // (After a takeup point, the added arc line states its motion.)
-            self.motion_pending = None;
-        }
-        if res.arc_replaced {
-            self.motion_pending = Some(mv.motion);
-        }
+        // Set again after the added lines (see `added_lines`).
+        self.motion_pending = None;
+        motion_word
+    }
 
-        // Axis words.
-        let start_emitted = self.emitted;
+    /// The edits of a compensated block's axis words for its first target:
+    /// its own words rewritten, the words its correction needs inserted in
+    /// axis order. Returns where the machine then stands and where the
+    /// block's last axis word ends.
+    fn axis_edits(
+        &self,
+        block: &Block,
+        plan: &Plan,
+        mv: &crate::program::interp::Move,
+        first_target: &AxisVec,
+        edits: &mut Edits,
+    ) -> (AxisVec, Option<usize>) {
+        let scale = plan.scale;
+        let lower = block.lower_case;
+        let sep = if self.spaced { " " } else { "" };
+        let is_cycle = matches!(plan.kind, PlanKind::Cycle { .. });
         let mut last_axis_end: Option<usize> = None;
         let mut new_emitted = self.emitted;
         for slot in 0..6 {
@@ -441,165 +652,229 @@ impl Emitter {
                     // Rapids position only the axes they program.
                     let positioning =
                         mv.motion == Motion::Rapid && plan.programmed & (1 << slot) == 0;
+                    // A hole of a canned cycle keeps the modal value
+                    // while it is close enough to the corrected one.
+                    let kept =
+                        is_cycle && slot < 3 && (want - now).abs() * scale <= self.kept_word_mm();
                     if want != now
                         && !positioning
+                        && !kept
                         && (slot < 3 || self.has_axis_word_or_moved(slot, target))
                     {
-                        let at = last_axis_end.unwrap_or_else(|| insert_point_for_axes(block));
                         let letter = letter_case(AXIS_LETTERS[slot], lower);
-                        edits.insert_word(at, sep, letter, want, d);
+                        edits.insert_at(axis_slot_for(block, slot), sep, letter, want, d);
                         new_emitted[slot] = to_machine(plan, slot, want, self.emitted[slot]);
                     }
                 }
             }
         }
-        if let PlanKind::Cycle { .. } = plan.kind {
-            self.cycle_words(block, plan, res, edits, last_axis_end, sep, lower);
-            // G99 leaves the tool at the (compensated) R level; G98 returns
-            // it to the initial level it came from.
-            if let PlanKind::Cycle {
-                r_level, retract, ..
-            } = plan.kind
-            {
-                if retract == r_level && plan.absolute {
-                    new_emitted[2] = res.r_level;
+        (new_emitted, last_axis_end)
+    }
+
+    /// The edits of the centre words of the arc piece a block's own line
+    /// writes (from `start` to `first`; `last_axis_end` where the block's
+    /// axis words end).
+    fn centre_edits(
+        &self,
+        block: &Block,
+        text: &[u8],
+        plan: &Plan,
+        (mv, arc, piece): (
+            &crate::program::interp::Move,
+            &ArcGeom,
+            &crate::compensate::ArcPiece,
+        ),
+        (start_emitted, first_target, last_axis_end): (&AxisVec, &AxisVec, Option<usize>),
+        edits: &mut Edits,
+    ) {
+        let lower = block.lower_case;
+        let sep = if self.spaced { " " } else { "" };
+        let center = piece.center;
+        let arc = ArcGeom {
+            sweep: piece.sweep,
+            ..*arc
+        };
+        // An `R` word that cannot carry the moved centre is replaced by
+        // the centre words.
+        let moved = *first_target != mv.end || *start_emitted != mv.start;
+        let r_form = !moved || r_form_holds(&arc);
+        if let Some(r) = block.word(b'R').filter(|_| !r_form) {
+            let mut start = r.start as usize;
+            if start > 0 && text.get(start - 1) == Some(&b' ') {
+                start -= 1;
+            }
+            edits.push(start, r.end as usize, |_| {});
+        }
+        let words = self.centre_words(
+            block,
+            plan,
+            &arc,
+            &center,
+            (start_emitted, first_target),
+            r_form,
+        );
+        for (letter, v, d, w) in words.into_iter().flatten() {
+            match w {
+                Some(w) => {
+                    if v != round_to(w.value, d) {
+                        edits.number(w, v, d);
+                    }
+                }
+                None => {
+                    if v != 0.0 || plan.arc_absolute {
+                        let at = block
+                            .words
+                            .iter()
+                            .filter(|w| matches!(w.letter, b'I' | b'J' | b'K'))
+                            .map(|w| w.end as usize)
+                            .max()
+                            .or(last_axis_end)
+                            .unwrap_or(text.len());
+                        let l = letter_case(letter, lower);
+                        edits.insert_word(at, sep, l, v, d);
+                    }
                 }
             }
         }
-        // Arc centre words.
-        if let (Some(center), Some(arc), false) = (res.center, mv.arc, arc_after_takeup) {
-            // An `R` word that cannot carry the moved centre is replaced by
-            // the centre words.
-            let moved = first_target != mv.end || start_emitted != mv.start;
-            let r_form = !moved || r_form_holds(&arc);
-            if let Some(r) = block.word(b'R').filter(|_| !r_form) {
-                let mut start = r.start as usize;
-                if start > 0 && text.get(start - 1) == Some(&b' ') {
-                    start -= 1;
-                }
-                edits.push(start, r.end as usize, |_| {});
-            }
-            let words = self.centre_words(
-                block,
-                plan,
-                &arc,
-                &center,
-                (&start_emitted, &first_target),
-                r_form,
-            );
-            for (letter, v, d, w) in words.into_iter().flatten() {
-                match w {
-                    Some(w) => {
-                        if v != round_to(w.value, d) {
-                            edits.number(w, v, d);
-                        }
-                    }
-                    None => {
-                        if v != 0.0 || plan.arc_absolute {
-                            let at = block
-                                .words
-                                .iter()
-                                .filter(|w| matches!(w.letter, b'I' | b'J' | b'K'))
-                                .map(|w| w.end as usize)
-                                .max()
-                                .or(last_axis_end)
-                                .unwrap_or(text.len());
-                            let l = letter_case(letter, lower);
-                            edits.insert_word(at, sep, l, v, d);
-                        }
-                    }
-                }
-            }
-        }
-        if self.opts.annotate {
-            let dev = res.deviation.total().norm() / scale;
-            let unit: &[u8] = if scale != 1.0 { b"in" } else { b"mm" };
-            let dd = if scale != 1.0 { 5 } else { 4 };
-            let semicolon = self.semicolon_comments == Some(true);
-            // Before a trailing `;` comment, parentheses would be swallowed by it.
-            let at = match block.comments.last() {
-                Some(cm) if cm.semicolon && !semicolon => cm.start as usize,
-                _ => text.len(),
-            };
-            let inside = at < text.len();
-            edits.push(at, at, |t| {
-                // ` (dev … mm geo …)` at the end, `(dev … mm geo …) ` inside.
-                if !inside {
-                    t.push(b' ');
-                }
-                t.extend_from_slice(if semicolon { b"; dev " } else { b"(dev " });
-                write_number(t, dev, dd, false);
+    }
+
+    /// The annotation of a compensated block: `(dev … mm geo …)` with the
+    /// predicted deviation and its parts, and `takeup` where the block's own
+    /// line goes to a takeup point.
+    fn annotation(
+        &self,
+        block: &Block,
+        text: &[u8],
+        res: &BlockResult,
+        scale: f64,
+        edits: &mut Edits,
+    ) {
+        let dev = res.deviation.total().norm() / scale;
+        let unit: &[u8] = if scale != 1.0 { b"in" } else { b"mm" };
+        let dd = if scale != 1.0 { 5 } else { 4 };
+        let semicolon = self.semicolon_comments == Some(true);
+        // Before a trailing `;` comment, parentheses would be swallowed by it.
+        let at = match block.comments.last() {
+            Some(cm) if cm.semicolon && !semicolon => cm.start as usize,
+            _ => text.len(),
+        };
+        let inside = at < text.len();
+        edits.push(at, at, |t| {
+            // ` (dev … mm geo …)` at the end, `(dev … mm geo …) ` inside.
+            if !inside {
                 t.push(b' ');
-                t.extend_from_slice(unit);
-                // Every part that is non-zero at the printed precision; the
-                // dynamic one is a vibration amplitude (not in `dev`, not
-                // compensated).
-                for e in Effect::ALL {
-                    let part = res.deviation.part(e).norm() / scale;
-                    if rounds_to_zero(part, dd) {
-                        continue;
-                    }
-                    t.push(b' ');
-                    t.extend_from_slice(e.short().as_bytes());
-                    t.push(b' ');
-                    write_number(t, part, dd, false);
-                }
-                // The block's own words carry a takeup point (see
-                // `BlockResult::takeup`); the move follows on added lines.
-                if res.takeup {
-                    t.extend_from_slice(b" takeup");
-                }
-                if !semicolon {
-                    t.push(b')');
-                }
-                if inside {
-                    t.push(b' ');
-                }
-            });
-        }
-        if edits.is_empty() {
-            out.extend_from_slice(line);
-        } else {
-            self.changed += 1;
-            edits.apply(text, out);
-            out.extend_from_slice(eol);
-        }
-        self.emitted = new_emitted;
-        // Added lines end with the block's line end; after a last line
-        // without one, each starts with a newline instead (the file still
-        // ends without one).
-        if let (Some(center), Some(arc), true) = (res.center, mv.arc, arc_after_takeup) {
-            // `G02` in programs that write two digits.
-            let two_digit = motion_word.is_some_and(|w| {
-                w.end > w.num_start + 1 && text.get(w.num_start as usize) == Some(&b'0')
-            });
-            self.arc_line(
-                block,
-                plan,
-                (mv.motion, two_digit),
-                &arc,
-                &center,
-                &res.end,
-                eol,
-                out,
-            );
-        } else if !res.segments.is_empty() {
-            // Added segment blocks.
-            let points = res.segments[1..].iter().chain(std::iter::once(&res.end));
-            // Decimals per axis (from the block's word), found at the
-            // axis' first word.
-            let mut digits = [None; 6];
-            for p in points {
-                let mark = out.len();
-                let words = added_line_start(block, eol, out);
-                self.axis_words(block, plan, p, (words, &mut digits), out);
-                if out.len() == words {
-                    out.truncate(mark);
+            }
+            t.extend_from_slice(if semicolon { b"; dev " } else { b"(dev " });
+            write_number(t, dev, dd, false);
+            t.push(b' ');
+            t.extend_from_slice(unit);
+            // Every part that is non-zero at the printed precision; the
+            // dynamic one is a vibration amplitude (not in `dev`, not
+            // compensated).
+            for e in Effect::ALL {
+                let part = res.deviation.part(e).norm() / scale;
+                if rounds_to_zero(part, dd) {
                     continue;
                 }
-                out.extend_from_slice(eol);
-                self.added += 1;
+                t.push(b' ');
+                t.extend_from_slice(e.short().as_bytes());
+                t.push(b' ');
+                write_number(t, part, dd, false);
             }
+            // The block's own words carry a takeup point (see
+            // `BlockResult::takeup`); the move follows on added lines.
+            if res.takeup {
+                t.extend_from_slice(b" takeup");
+            }
+            if !semicolon {
+                t.push(b')');
+            }
+            if inside {
+                t.push(b' ');
+            }
+        });
+    }
+
+    /// The lines added after a compensated block's own line: to each of the
+    /// block's targets after the first, a straight move (`G1` first where
+    /// the line before was an arc) or, for the pieces of an arc written as
+    /// arcs, an arc line. `motion` is the motion mode in force after the
+    /// block's own line; returns the one after the last added line.
+    fn added_lines(
+        &mut self,
+        block: &Block,
+        plan: &Plan,
+        (mv, res): (&crate::program::interp::Move, &BlockResult),
+        (mut motion, two_digit): (Motion, bool),
+        eol: &[u8],
+        out: &mut Vec<u8>,
+    ) -> Motion {
+        let n = res.segments.len();
+        // Decimals per axis (from the block's word), found at the axis'
+        // first word.
+        let mut digits = [None; 6];
+        let mut pieces = res.arcs.iter().filter(|p| p.to > 0).peekable();
+        for k in 1..=n {
+            let p = res.segments.get(k).unwrap_or(&res.end);
+            // The line exists because of a takeup point: it goes to one
+            // inside an arc, or on from the block's first.
+            let takeup = res.takeup_at.contains(&k) || (k == 1 && res.takeup);
+            let piece = pieces.next_if(|pc| pc.to == k);
+            if let (Some(pc), Some(arc)) = (piece, mv.arc) {
+                let sub = ArcGeom {
+                    sweep: pc.sweep,
+                    ..arc
+                };
+                self.arc_line(
+                    block,
+                    plan,
+                    (mv.motion, two_digit),
+                    &sub,
+                    &pc.center,
+                    p,
+                    eol,
+                    out,
+                );
+                motion = mv.motion;
+                self.count_added(takeup, AddedKind::Arc);
+                continue;
+            }
+            let mark = out.len();
+            let words = added_line_start(block, eol, out);
+            if motion != Motion::Linear {
+                out.push(letter_case(b'G', block.lower_case));
+                if two_digit {
+                    out.push(b'0');
+                }
+                out.push(b'1');
+            }
+            let start = out.len();
+            self.axis_words(block, plan, p, (words, &mut digits), out);
+            if out.len() == start {
+                out.truncate(mark);
+                continue;
+            }
+            out.extend_from_slice(eol);
+            motion = Motion::Linear;
+            let kind = if mv.arc.is_some() {
+                AddedKind::Chord
+            } else {
+                AddedKind::Split
+            };
+            self.count_added(takeup, kind);
+        }
+        motion
+    }
+
+    /// Counts an added line by why it was added.
+    fn count_added(&mut self, takeup: bool, kind: AddedKind) {
+        self.added += 1;
+        let by = &mut self.added_by;
+        match (takeup, kind) {
+            (true, _) => by.takeups += 1,
+            (false, AddedKind::Arc) => by.arcs += 1,
+            (false, AddedKind::Chord) => by.chords += 1,
+            (false, AddedKind::Split) => by.splits += 1,
         }
     }
 
@@ -676,7 +951,6 @@ impl Emitter {
             }
         }
         out.extend_from_slice(eol);
-        self.added += 1;
     }
 
     /// The centre words of an arc from `start` to `end` (machine
@@ -702,7 +976,14 @@ impl Emitter {
                 + (end[a] - center[a]).hypot(end[b] - center[b]))
                 / 2.0;
             let d = self.decimals(Some(r), scale, false);
-            let v = round_to(ra / scale * r.value.signum(), d);
+            // Negative for more than a half turn (a piece of an arc may
+            // sweep less than the block's).
+            let sign = if arc.sweep.abs() > std::f64::consts::PI {
+                -1.0
+            } else {
+                1.0
+            };
+            let v = round_to(ra / scale * sign, d);
             return [Some((b'R', v, d, Some(r))), None];
         }
         let (la, lb) = arc.plane.center_letters();
@@ -729,7 +1010,6 @@ impl Emitter {
         plan: &Plan,
         res: &BlockResult,
         edits: &mut Edits,
-        last_axis_end: Option<usize>,
         sep: &str,
         lower: bool,
     ) {
@@ -738,7 +1018,9 @@ impl Emitter {
             // Incremental cycles: only the hole position is rewritten.
             return;
         }
-        let at_end = last_axis_end.unwrap_or_else(|| insert_point_for_axes(block));
+        let kept_word_mm = self.kept_word_mm();
+        // Z with the axis words, R after it (or where Z is inserted).
+        let z_slot = axis_slot_for(block, 2);
         for (letter, value) in [(b'Z', res.end[2]), (b'R', res.r_level)] {
             let w = block.word(letter);
             let d = self.decimals(w, scale, false);
@@ -759,9 +1041,14 @@ impl Emitter {
                 }
                 None => {
                     let cur = modal.map(|m| round_to(m, d));
-                    if cur != Some(v) {
+                    let keep = cur.is_some_and(|c| (c - v).abs() * scale <= kept_word_mm);
+                    if cur != Some(v) && !keep {
                         let l = letter_case(letter, lower);
-                        edits.insert_word(at_end, sep, l, v, d);
+                        let at = match block.word(b'Z') {
+                            Some(z) if letter == b'R' => Slot::After(z.end as usize),
+                            _ => z_slot,
+                        };
+                        edits.insert_at(at, sep, l, v, d);
                         *modal = Some(v);
                     }
                 }
@@ -847,15 +1134,25 @@ fn insert_point_for_motion(block: &Block) -> usize {
     }
 }
 
-/// Where to insert an axis word in a block that has none.
-fn insert_point_for_axes(block: &Block) -> usize {
-    block
+/// Where to insert an axis word in a block that has none: before its
+/// first feed, speed, tool or auxiliary word (F, S, T, M) that follows its
+/// last N or G word, else after its last word.
+fn insert_point_for_axes(block: &Block) -> Slot {
+    let codes_end = block
         .words
         .iter()
         .filter(|w| matches!(w.letter, b'N' | b'G'))
-        .map(|w| w.end as usize)
+        .map(|w| w.end)
         .max()
-        .unwrap_or_else(|| block.words.last().map_or(0, |w| w.end as usize))
+        .unwrap_or(0);
+    let trailing = block
+        .words
+        .iter()
+        .find(|w| w.start >= codes_end && matches!(w.letter, b'F' | b'S' | b'T' | b'M'));
+    match trailing {
+        Some(w) => Slot::Before(w.start as usize),
+        None => Slot::After(block.words.last().map_or(0, |w| w.end as usize)),
+    }
 }
 
 #[cfg(test)]

@@ -56,6 +56,24 @@ fn locate_invalid(text: &str, file: &str, inv: Invalid) -> crate::error::Error {
     }
 }
 
+/// A compensation tolerance: within [`crate::compensate::MIN_TOLERANCE_MM`]
+/// and 1 mm.
+fn tolerance(path: &str, v: f64) -> V<f64> {
+    let min = crate::compensate::MIN_TOLERANCE_MM;
+    if v.is_finite() && (min..=1.0).contains(&v) {
+        Ok(v)
+    } else {
+        Err(Invalid::new(
+            path,
+            format!(
+                "`{}` is not a tolerance within [{min}, 1] mm (the solver converges to {} mm)",
+                crate::error::show_number(v),
+                crate::compensate::SOLVE_TOL_MM
+            ),
+        ))
+    }
+}
+
 fn finite(path: &str, v: f64) -> V<f64> {
     if v.is_finite() {
         Ok(v)
@@ -190,6 +208,13 @@ fn validate(raw: RawMachineTool) -> V<MachineTool> {
         }
     }
 
+    let tolerance_mm = raw
+        .compensation
+        .as_ref()
+        .and_then(|c| c.tolerance_mm)
+        .map(|t| tolerance("compensation.tolerance_mm", t))
+        .transpose()?;
+
     let process_force = raw.process_force.as_ref().map(validate_force).transpose()?;
     let stiffness = raw
         .stiffness
@@ -223,6 +248,7 @@ fn validate(raw: RawMachineTool) -> V<MachineTool> {
         work_offsets,
         decimals,
         decimals_deg,
+        tolerance_mm,
         error_free,
         process: (process_force.is_some()
             || stiffness.is_some()

@@ -110,6 +110,9 @@ pub struct MachineTool {
     work_offsets: BTreeMap<String, [f64; 3]>,
     decimals: Option<usize>,
     decimals_deg: Option<usize>,
+    /// `compensation.tolerance_mm`: the default tolerance of compensated
+    /// programs, mm.
+    tolerance_mm: Option<f64>,
     error_free: bool,
     /// The optional process sections, boxed to keep `Machine` small.
     process: Option<Box<ProcessSections>>,
@@ -195,6 +198,13 @@ impl MachineTool {
     /// Work offset `G54`…`G59` (machine coordinates of the work zero), mm.
     pub fn work_offset_mm(&self, code: &str) -> Option<[f64; 3]> {
         self.work_offsets.get(code).copied()
+    }
+
+    /// The default tolerance of compensated programs
+    /// (`compensation.tolerance_mm`: the accuracy of the model itself), mm,
+    /// if the machine file gives one.
+    pub fn compensation_tolerance_mm(&self) -> Option<f64> {
+        self.tolerance_mm
     }
 
     /// Output decimals for mm programs, if the machine file fixes them.

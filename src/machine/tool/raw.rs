@@ -21,6 +21,8 @@ pub(crate) struct RawMachineTool {
     #[serde(default)]
     pub output: Option<RawOutput>,
     #[serde(default)]
+    pub compensation: Option<RawCompensation>,
+    #[serde(default)]
     pub process_force: Option<RawProcessForce>,
     #[serde(default)]
     pub stiffness: Option<RawStiffness>,
@@ -106,6 +108,14 @@ pub(crate) struct RawOutput {
     pub decimals_mm: Option<usize>,
     #[serde(default)]
     pub decimals_deg: Option<usize>,
+}
+
+/// `compensation:` block.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct RawCompensation {
+    #[serde(default)]
+    pub tolerance_mm: Option<f64>,
 }
 
 /// `process_force:` block.
