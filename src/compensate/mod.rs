@@ -4,6 +4,7 @@
 //! more than the tolerance.
 
 pub mod rapid;
+pub mod tcpm;
 
 use nalgebra::{SMatrix, SVector, Vector3};
 
@@ -1498,6 +1499,8 @@ mod tests {
     fn afm_plans(program: &[&str]) -> Vec<Plan> {
         let mut setup = Setup {
             axes: [true, true, true, false, false, false],
+            // The machine file's default unit.
+            units_default: Some(crate::program::interp::Units::Mm),
             ..Setup::default()
         };
         setup.tools.insert(1, 150.0);

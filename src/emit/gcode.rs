@@ -9,6 +9,7 @@
 //! deviation is appended in the program's comment style.
 
 use super::fixed::{FIXED_MAX, exact_fixed, fixed_digits, pow10, round_half_away};
+use super::inverse_time::{PieceFeeds, decimals};
 use nalgebra::Vector3;
 
 use crate::compensate::BlockResult;
@@ -511,6 +512,16 @@ impl Emitter {
                 }
             }
         }
+        // G93: each piece of a split move gets its share of the duration.
+        let feeds = (plan.inverse_time && !res.segments.is_empty())
+            .then(|| block.word(b'F'))
+            .flatten()
+            .map(|f| {
+                let pieces = res.segments.iter().chain(std::iter::once(&res.end));
+                let feeds = PieceFeeds::new(f.value, &start_emitted, pieces);
+                edits.number(f, feeds.feed(&start_emitted, &first_target), decimals(f));
+                (feeds, decimals(f))
+            });
         if self.opts.annotate {
             let dev = res.deviation.total().norm() / scale;
             let unit: &[u8] = if scale != 1.0 { b"in" } else { b"mm" };
@@ -583,12 +594,21 @@ impl Emitter {
                 eol,
                 out,
             );
+            if let Some((feeds, d)) = &feeds {
+                let at = out.len() - eol.len();
+                let f = feeds.feed(&first_target, &res.end);
+                let mut word = Vec::new();
+                word.extend_from_slice(if self.spaced { b" F" } else { b"F" });
+                write_number(&mut word, f, *d, true);
+                out.splice(at..at, word);
+            }
         } else if !res.segments.is_empty() {
             // Added segment blocks.
             let points = res.segments[1..].iter().chain(std::iter::once(&res.end));
             // Decimals per axis (from the block's word), found at the
             // axis' first word.
             let mut digits = [None; 6];
+            let mut prev = first_target;
             for p in points {
                 let mark = out.len();
                 let words = added_line_start(block, eol, out);
@@ -596,6 +616,12 @@ impl Emitter {
                 if out.len() == words {
                     out.truncate(mark);
                     continue;
+                }
+                if let Some((feeds, d)) = &feeds {
+                    out.extend_from_slice(if self.spaced { b" " } else { b"" });
+                    out.push(letter_case(b'F', block.lower_case));
+                    write_number(out, feeds.feed(&prev, p), *d, true);
+                    prev = *p;
                 }
                 out.extend_from_slice(eol);
                 self.added += 1;
