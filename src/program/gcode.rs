@@ -49,7 +49,7 @@ impl Word {
     /// for anything else (`G2.95`, `G0.96`, `G-1`).
     pub fn exact_code10(&self) -> Option<i64> {
         let d = i32::from(self.decimals.unwrap_or(0));
-        if !(self.value >= 0.0) || d > MAX_CODE_DECIMALS {
+        if self.value.is_sign_negative() || !self.value.is_finite() || d > MAX_CODE_DECIMALS {
             return None;
         }
         // Exact: the value has at most `d` decimals and is at most 1e9.
