@@ -1469,6 +1469,13 @@ impl Interpreter {
                     .into(),
             ));
         }
+        if let Some(w) = g.center.iter().flatten().next() {
+            return Err(self.err(
+                block.line_no,
+                Some(w),
+                "tool orientation vectors (I J K) under G43.4/G43.5 cannot be compensated offline: program the rotary axes' angles".into(),
+            ));
+        }
         let tip = self.target_from(&self.tip, &g.axis, plan.scale, &plan.offset);
         let axes = self
             .setup
@@ -2301,5 +2308,39 @@ mod tests {
         assert!(e.message.contains("lathe"), "{e}");
         let e = refused_at_last(&["G0 X0", "G71 P10 Q20 D1. F0.2"]);
         assert!(e.message.contains("lathe"), "{e}");
+    }
+
+    #[test]
+    fn tool_centre_point_control_takes_tips_and_refuses_orientation_vectors() {
+        let path = concat!(env!("CARGO_MANIFEST_DIR"), "/machines/five-axis-ac.yaml");
+        let text = std::fs::read_to_string(path).unwrap_or_default();
+        let m = crate::machine::tool::testing::load(&text, "ac");
+        let setup = Setup::for_machine(&m);
+        let p = run_setup(
+            setup.clone(),
+            &["G90 G21 G54 G43.4 H1 G0 X10 Y20 Z30 A30 C45", "G49 G0 Z50"],
+        )
+        .expect("valid");
+        // The axis positions put the nominal tip on the programmed one.
+        let mv = p[0].mv.unwrap();
+        assert!(p[0].tcpm && !p[1].tcpm);
+        let tip = m.tip_of(&mv.end, mv.tool_len_mm);
+        let g54 = m.work_offset_mm("G54").unwrap();
+        for (k, want) in [10.0, 20.0, 30.0].iter().enumerate() {
+            assert_abs_diff_eq!(tip[k], want + g54[k], epsilon = 1e-9);
+        }
+        assert!((mv.end[1] - (20.0 + g54[1])).abs() > 1.0, "A30 moves Y");
+        let e = run_setup(
+            setup.clone(),
+            &["G90 G21 G43.5 H1 G1 X10 Y20 Z30 I0 J0.5 K0.866 F100"],
+        )
+        .expect_err("orientation vector");
+        assert!(e.message.contains("orientation vectors"), "{e}");
+        assert_eq!(e.column, 33);
+        let e =
+            run_setup(setup, &["G21 G43.4 H1 G0 X0 Y0 Z0", "G2 X1 Y1 R1 F100"]).expect_err("arc");
+        assert!(e.message.contains("arcs under G43.4"), "{e}");
+        let e = run(&["G43.4 H1"]).expect_err("no kinematics");
+        assert!(e.message.contains("kinematics"), "{e}");
     }
 }
