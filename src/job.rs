@@ -369,8 +369,9 @@ impl<'a> Tracker<'a> {
                     .map(|s| (mv.end[s] - mv.start[s]).abs())
                     .fold(0.0, f64::max)
             };
+            // A repeat count runs the same path again (`Plan::extra_repeats`).
             let dt = if mv.feed_mm_min > 0.0 {
-                len / mv.feed_mm_min * 60.0
+                len / mv.feed_mm_min * 60.0 * f64::from(1 + plan.extra_repeats)
             } else {
                 0.0
             };
@@ -825,6 +826,9 @@ impl<'m> Job<'m> {
             Ok(())
         };
 
+        // Storage of a block under tool centre point control in tool tips.
+        let mut tip_plan = Plan::default();
+        let mut tip_res = BlockResult::default();
         // Writes one compensated chunk (and hands over its rows).
         let mut finish = |st: &mut Stage, summary: &mut Summary| -> Result<()> {
             let chunk = &st.chunk;
@@ -878,7 +882,26 @@ impl<'m> Job<'m> {
                     }
                 }
                 if out.is_some() {
-                    emitter.write(chunk.line(i), block, plan, res, &mut out_buf);
+                    match (plan.tcpm, res, &self.predictor) {
+                        // Tool centre point control: written as tool tips.
+                        (true, Some(r), Some(pred)) => {
+                            compensate::tcpm::to_tips(
+                                pred.machine,
+                                plan,
+                                r,
+                                &mut tip_plan,
+                                &mut tip_res,
+                            );
+                            emitter.write(
+                                chunk.line(i),
+                                block,
+                                &tip_plan,
+                                Some(&tip_res),
+                                &mut out_buf,
+                            );
+                        }
+                        _ => emitter.write(chunk.line(i), block, plan, res, &mut out_buf),
+                    }
                 }
             }
             if let Some(out) = out.as_deref_mut() {
@@ -1042,10 +1065,12 @@ axes:
         }
     }
 
-    /// X, Y and Z on, everything else default.
+    /// X, Y and Z on, a control reading programs in mm, everything else
+    /// default.
     fn xyz_setup() -> Setup {
         Setup {
             axes: [true, true, true, false, false, false],
+            units_default: Some(crate::program::interp::Units::Mm),
             ..Setup::default()
         }
     }

@@ -19,6 +19,7 @@ const REPORT_TOL_MM: f64 = 1e-5;
 
 const AXES: &str = "kind: machine_tool
 name: effects test
+units_default: mm
 axes:
   - { name: X, type: linear, side: workpiece, travel_mm: [-500, 500], rapid_mm_per_min: 60000 }
   - { name: Y, type: linear, side: workpiece, travel_mm: [-500, 500], rapid_mm_per_min: 60000 }
@@ -409,6 +410,7 @@ fn tooth_passing_at_the_natural_frequency_warns_with_a_suggested_speed() {
 fn full_machine(dir: &Path) -> PathBuf {
     let text = "kind: machine_tool
 name: all effects
+units_default: mm
 axes:
   - name: X
     type: linear

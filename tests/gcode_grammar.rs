@@ -4,21 +4,30 @@
 
 use postproc::error::Located;
 use postproc::program::gcode::{Block, LETTERS, parse_line};
-use postproc::program::interp::{Interpreter, Motion, Setup};
+use postproc::program::interp::{Interpreter, Motion, Setup, Units};
 use proptest::prelude::*;
 
 use crate::common::repo;
 
 /// The setup the grammar document promises its examples run with:
-/// H1…H20 = 100 mm, no work offsets, X Y Z only.
+/// H1…H20 = 100 mm, no work offsets (G54…G59, G54.1 P1, G154 P1 and P2
+/// at machine zero), the G30 point at X0 Y0 Z100, X Y Z only, a control
+/// that reads programs without G20/G21 in mm.
 fn doc_setup() -> Setup {
     let mut setup = Setup {
         axes: [true, true, true, false, false, false],
+        units_default: Some(Units::Mm),
         ..Setup::default()
     };
     for h in 1..=20 {
         setup.tools.insert(h, 100.0);
     }
+    for key in ["G54.1P1", "G154P1", "G154P2"] {
+        setup.extra_offsets.insert(key.into(), [0.0; 3]);
+    }
+    setup
+        .reference_points
+        .insert("G30".into(), [0.0, 0.0, 100.0]);
     setup
 }
 
@@ -44,13 +53,28 @@ struct Example {
     doc_line: usize,
     /// `Some(phrase)` for `gcode-reject` blocks.
     reject: Option<String>,
+    /// The control's default unit, when an `<!-- units_default: … -->`
+    /// comment before the block changes the document's (mm).
+    units: Option<Option<Units>>,
     text: String,
+}
+
+impl Example {
+    /// The document's setup with the example's default unit.
+    fn setup(&self) -> Setup {
+        let mut setup = doc_setup();
+        if let Some(u) = self.units {
+            setup.units_default = u;
+        }
+        setup
+    }
 }
 
 fn doc_examples() -> Vec<Example> {
     let doc = std::fs::read_to_string(repo("grammar/gcode.md")).expect("grammar/gcode.md exists");
     let mut out = Vec::new();
     let mut expect: Option<String> = None;
+    let mut units: Option<Option<Units>> = None;
     let mut current: Option<Example> = None;
     for (i, line) in doc.lines().enumerate() {
         let trimmed = line.trim_end();
@@ -63,7 +87,14 @@ fn doc_examples() -> Vec<Example> {
             }
             continue;
         }
-        if let Some(rest) = trimmed.strip_prefix("<!-- expect:") {
+        if let Some(rest) = trimmed.strip_prefix("<!-- units_default:") {
+            units = Some(match rest.trim_end_matches("-->").trim() {
+                "none" => None,
+                "inch" => Some(Units::Inch),
+                "mm" => Some(Units::Mm),
+                other => panic!("grammar/gcode.md:{}: units_default `{other}`", i + 1),
+            });
+        } else if let Some(rest) = trimmed.strip_prefix("<!-- expect:") {
             let phrase = rest.trim_end_matches("-->").trim();
             expect = Some(phrase.to_string());
         } else if trimmed == "```gcode" {
@@ -75,6 +106,7 @@ fn doc_examples() -> Vec<Example> {
             current = Some(Example {
                 doc_line: i + 1,
                 reject: None,
+                units: units.take(),
                 text: String::new(),
             });
         } else if trimmed == "```gcode-reject" {
@@ -87,6 +119,7 @@ fn doc_examples() -> Vec<Example> {
             current = Some(Example {
                 doc_line: i + 1,
                 reject: Some(phrase),
+                units: units.take(),
                 text: String::new(),
             });
         }
@@ -109,7 +142,7 @@ fn grammar_doc_accepted_examples_interpret() {
         examples.len()
     );
     for ex in &examples {
-        let plans = run_program(&ex.text, doc_setup()).unwrap_or_else(|e| {
+        let plans = run_program(&ex.text, ex.setup()).unwrap_or_else(|e| {
             panic!(
                 "grammar/gcode.md:{}: documented as accepted, but: {e}",
                 ex.doc_line
@@ -136,7 +169,7 @@ fn grammar_doc_rejected_examples_fail_with_their_phrase() {
     );
     for ex in &examples {
         let phrase = ex.reject.as_deref().unwrap_or_default();
-        match run_program(&ex.text, doc_setup()) {
+        match run_program(&ex.text, ex.setup()) {
             Ok(_) => panic!(
                 "grammar/gcode.md:{}: documented as rejected (`{phrase}`), but accepted",
                 ex.doc_line
@@ -243,6 +276,7 @@ fn assignment_after_a_letter_is_named() {
 fn any_setup() -> Setup {
     let mut setup = Setup {
         axes: [true; 6],
+        units_default: Some(Units::Mm),
         ..Setup::default()
     };
     setup.tools.insert(1, 100.0);

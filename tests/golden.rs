@@ -23,6 +23,7 @@ fn machine_yaml(x_extra: &str, y_extra: &str, z_extra: &str) -> String {
     format!(
         "kind: machine_tool
 name: golden
+units_default: mm
 axes:
   - name: X
     type: linear

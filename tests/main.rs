@@ -20,6 +20,7 @@ mod observations;
 mod output_words;
 mod paper_b;
 mod peers;
+mod posts;
 mod rapid;
 mod rapid_cli;
 mod rapid_stream;

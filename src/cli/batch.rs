@@ -360,6 +360,7 @@ pub fn run(a: &BatchArgs, quiet: bool) -> Result<i32> {
                 machine: None,
                 tools: a.tools.clone(),
                 work_offsets: a.work_offsets.clone(),
+                units: a.units,
                 rapid_window_lines: None,
             };
             let setup = parse_setup(&program, Some(&tool))?;

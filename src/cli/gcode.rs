@@ -62,13 +62,18 @@ pub(super) fn parse_setup(args: &ProgramArgs, machine: Option<&MachineTool>) -> 
             .ok_or_else(|| usage(format!("--work-offset expects G54=X,Y,Z, got `{w}`")))?;
         let code = code.trim().to_ascii_uppercase();
         let idx = match code.as_str() {
-            "G54" => 0,
-            "G55" => 1,
-            "G56" => 2,
-            "G57" => 3,
-            "G58" => 4,
-            "G59" => 5,
-            _ => return Err(usage(format!("--work-offset: `{code}` is not G54..G59"))),
+            "G54" => Some(0),
+            "G55" => Some(1),
+            "G56" => Some(2),
+            "G57" => Some(3),
+            "G58" => Some(4),
+            "G59" => Some(5),
+            c if crate::machine::tool::work_offset_key(c) => None,
+            _ => {
+                return Err(usage(format!(
+                    "--work-offset: `{code}` is not G54..G59, G54.1P1..G54.1P300 or G154P1..G154P99"
+                )));
+            }
         };
         let v: Vec<f64> = xyz
             .split(',')
@@ -80,7 +85,18 @@ pub(super) fn parse_setup(args: &ProgramArgs, machine: Option<&MachineTool>) -> 
                 "--work-offset: `{w}`: expected three finite numbers"
             )));
         }
-        setup.work_offsets[idx] = Some([v[0], v[1], v[2]]);
+        match idx {
+            Some(i) => setup.work_offsets[i] = Some([v[0], v[1], v[2]]),
+            None => {
+                setup.extra_offsets.insert(code, [v[0], v[1], v[2]]);
+            }
+        }
+    }
+    if let Some(u) = args.units {
+        setup.units_default = Some(match u {
+            super::UnitsArg::Mm => crate::program::interp::Units::Mm,
+            super::UnitsArg::Inch => crate::program::interp::Units::Inch,
+        });
     }
     Ok(setup)
 }

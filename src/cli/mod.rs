@@ -89,6 +89,9 @@ pub struct BatchArgs {
     /// G-code: work offset overriding the machine file: G54=X,Y,Z (mm, machine coordinates).
     #[arg(long = "work-offset", value_name = "GXX=X,Y,Z")]
     pub work_offsets: Vec<String>,
+    /// G-code: the control's unit for programs without G20/G21.
+    #[arg(long, value_enum)]
+    pub units: Option<UnitsArg>,
     /// Effects.
     #[command(flatten)]
     pub effects: EffectArgs,
@@ -117,9 +120,14 @@ pub struct ProgramArgs {
     /// Tool length for an H number, overriding the machine file: H1=123.4 (mm).
     #[arg(long = "tool", value_name = "H=LENGTH")]
     pub tools: Vec<String>,
-    /// Work offset overriding the machine file: G54=X,Y,Z (mm, machine coordinates).
+    /// Work offset overriding the machine file: G54=X,Y,Z (mm, machine
+    /// coordinates; also G54.1P1, G154P1).
     #[arg(long = "work-offset", value_name = "GXX=X,Y,Z")]
     pub work_offsets: Vec<String>,
+    /// The control's unit for a program without G20/G21, overriding the
+    /// machine file's `units_default`.
+    #[arg(long, value_enum)]
+    pub units: Option<UnitsArg>,
     /// Read a RAPID module a window of this many lines at a time whatever
     /// its size (modules of 1 MB and more are read so by default, 16 MB
     /// with a warm thermal start; for
@@ -134,6 +142,15 @@ pub struct CheckArgs {
     /// The program and machine.
     #[command(flatten)]
     pub program: ProgramArgs,
+}
+
+/// `--units`: the control's unit for programs that set none.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum UnitsArg {
+    /// Millimetres (as G21).
+    Mm,
+    /// Inches (as G20).
+    Inch,
 }
 
 /// Where annotations go.

@@ -5,6 +5,7 @@
 
 mod arc;
 pub mod rapid;
+pub mod tcpm;
 
 pub use arc::{ArcPiece, MAX_ARC_DEPTH};
 
@@ -1356,6 +1357,8 @@ mod tests {
     fn afm_plans(program: &[&str]) -> Vec<Plan> {
         let mut setup = Setup {
             axes: [true, true, true, false, false, false],
+            // The machine file's default unit.
+            units_default: Some(crate::program::interp::Units::Mm),
             ..Setup::default()
         };
         setup.tools.insert(1, 150.0);

@@ -9,6 +9,7 @@
 //! deviation is appended in the program's comment style.
 
 use super::fixed::{FIXED_MAX, exact_fixed, fixed_digits, pow10, round_half_away};
+use super::inverse_time::{PieceFeeds, decimals};
 use nalgebra::Vector3;
 
 use crate::compensate::BlockResult;
@@ -489,6 +490,16 @@ impl Emitter {
             let ends = (&start_emitted, &first_target, last_axis_end);
             self.centre_edits(block, text, plan, (&mv, &arc, piece), ends, edits);
         }
+        // G93: each piece of a split move gets its share of the duration.
+        let feeds = (plan.inverse_time && !res.segments.is_empty())
+            .then(|| block.word(b'F'))
+            .flatten()
+            .map(|f| {
+                let pieces = res.segments.iter().chain(std::iter::once(&res.end));
+                let feeds = PieceFeeds::new(f.value, &start_emitted, pieces);
+                edits.number(f, feeds.feed(&start_emitted, &first_target), decimals(f));
+                (feeds, decimals(f), first_target)
+            });
         if self.opts.annotate {
             self.annotation(block, text, res, scale, edits);
         }
@@ -513,7 +524,15 @@ impl Emitter {
             } else {
                 mv.motion
             };
-            let last = self.added_lines(block, plan, (&mv, res), (first, two_digit), eol, out);
+            let last = self.added_lines(
+                block,
+                plan,
+                (&mv, res),
+                (first, two_digit),
+                feeds.as_ref(),
+                eol,
+                out,
+            );
             if mv.arc.is_some() && last != mv.motion {
                 self.motion_pending = Some(mv.motion);
             }
@@ -806,10 +825,14 @@ impl Emitter {
         plan: &Plan,
         (mv, res): (&crate::program::interp::Move, &BlockResult),
         (mut motion, two_digit): (Motion, bool),
+        feeds: Option<&(PieceFeeds, usize, AxisVec)>,
         eol: &[u8],
         out: &mut Vec<u8>,
     ) -> Motion {
         let n = res.segments.len();
+        // Under G93, where the line before ended (each piece's F is its
+        // share of the block's duration).
+        let mut prev = feeds.map(|f| f.2);
         // Decimals per axis (from the block's word), found at the axis'
         // first word.
         let mut digits = [None; 6];
@@ -835,6 +858,14 @@ impl Emitter {
                     eol,
                     out,
                 );
+                if let (Some((feeds, d, _)), Some(from)) = (feeds, prev.as_mut()) {
+                    let at = out.len() - eol.len();
+                    let mut word = Vec::new();
+                    word.extend_from_slice(if self.spaced { b" F" } else { b"F" });
+                    write_number(&mut word, feeds.feed(from, p), *d, true);
+                    out.splice(at..at, word);
+                    *from = *p;
+                }
                 motion = mv.motion;
                 self.count_added(takeup, AddedKind::Arc);
                 continue;
@@ -853,6 +884,12 @@ impl Emitter {
             if out.len() == start {
                 out.truncate(mark);
                 continue;
+            }
+            if let (Some((feeds, d, _)), Some(from)) = (feeds, prev.as_mut()) {
+                out.extend_from_slice(if self.spaced { b" " } else { b"" });
+                out.push(letter_case(b'F', block.lower_case));
+                write_number(out, feeds.feed(from, p), *d, true);
+                *from = *p;
             }
             out.extend_from_slice(eol);
             motion = Motion::Linear;

@@ -2,6 +2,7 @@
 
 pub(crate) mod fixed;
 pub mod gcode;
+mod inverse_time;
 pub mod rapid;
 pub mod report;
 pub mod svg;

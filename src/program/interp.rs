@@ -13,6 +13,7 @@ use std::collections::BTreeMap;
 use nalgebra::Vector3;
 
 use crate::error::Located;
+pub use crate::machine::tool::Units;
 use crate::machine::{AxisVec, DirVec, axis_slot};
 use crate::program::gcode::{Block, Word};
 
@@ -34,22 +35,24 @@ const MAX_SPINDLE_RPM: f64 = 200_000.0;
 const LINE_QUOTE_MAX: usize = 60;
 
 /// Number of modal groups checked by [`modal_group`].
-const MODAL_GROUPS: usize = 8;
+const MODAL_GROUPS: usize = 9;
 
 /// The modal group of a G code (code × 10) whose members exclude each other
 /// within one block, other than the motion group (checked on its own): plane,
 /// distance mode, arc distance mode, units, work offset, cutter compensation,
-/// tool length offset, canned-cycle return level.
+/// tool length offset, canned-cycle return level, feed mode.
 fn modal_group(code: i64) -> Option<usize> {
     Some(match code {
         170 | 180 | 190 => 0,
         900 | 910 => 1,
         901 | 911 => 2,
         200 | 210 => 3,
-        540 | 550 | 560 | 570 | 580 | 590 => 4,
+        540 | 550 | 560 | 570 | 580 | 590 | 541 | 1540 => 4,
+        1100..=1290 if code % 10 == 0 => 4,
         400 | 410 | 420 => 5,
-        430 | 490 => 6,
+        430 | 434 | 435 | 490 => 6,
         980 | 990 => 7,
+        930 | 940 | 950 => 8,
         _ => return None,
     })
 }
@@ -197,6 +200,19 @@ impl Move {
             None => (self.end3() - self.start3()).norm(),
         }
     }
+
+    /// The length the feed is taken along: the path length of the linear
+    /// axes, or for a move of rotary axes alone the largest angle, deg.
+    pub fn timed_length(&self) -> f64 {
+        let len = self.length_mm();
+        if len > 1e-9 {
+            len
+        } else {
+            (3..6)
+                .map(|s| (self.end[s] - self.start[s]).abs())
+                .fold(0.0, f64::max)
+        }
+    }
 }
 
 /// What a block does, for prediction and for rewriting.
@@ -248,6 +264,17 @@ pub struct Plan {
     /// the block-delete switch in either position (a `/G41` line may
     /// start it, a `/G40` line may not end it).
     pub cutter_comp: bool,
+    /// Times the block's move runs again after the first (a repeat count
+    /// `L`/`K` whose repeats run the same path: a closed move, or a hole
+    /// drilled again).
+    pub extra_repeats: u32,
+    /// A feed move under G93: its F word is the inverse of its duration
+    /// (1/min), so each piece of a split move needs its own F.
+    pub inverse_time: bool,
+    /// A move under tool centre point control (G43.4/G43.5): its axis
+    /// positions come from programmed tool tips, and its words are written
+    /// back as the tool tips of the compensated axis positions.
+    pub tcpm: bool,
 }
 
 /// Tool table and work offsets the interpreter uses.
@@ -262,6 +289,18 @@ pub struct Setup {
     /// Reference position (power-on position and G28 target), machine
     /// coordinates.
     pub home: AxisVec,
+    /// Work offsets beyond G59 by key (`G54.1P1`, `G154P1`; `G110`–`G129`
+    /// are `G154P1`–`G154P20`), machine coordinates of the work zero, mm.
+    pub extra_offsets: BTreeMap<String, [f64; 3]>,
+    /// Reference points of G30 by key (`G30` for P2, `G30P3`, `G30P4`),
+    /// machine coordinates of X, Y, Z, mm.
+    pub reference_points: BTreeMap<String, [f64; 3]>,
+    /// The control's unit at power-on, for programs that set none
+    /// (`None`: such a program is refused at its first length).
+    pub units_default: Option<Units>,
+    /// The machine's nominal kinematics, for tool centre point control
+    /// (G43.4/G43.5); `None` refuses it.
+    pub kinematics: Option<std::sync::Arc<crate::machine::tool::MachineTool>>,
 }
 
 impl Setup {
@@ -276,6 +315,20 @@ impl Setup {
         setup.tools.extend(m.tools());
         for (i, wo) in setup.work_offsets.iter_mut().enumerate() {
             *wo = m.work_offset_mm(&format!("G{}", 54 + i));
+        }
+        setup.extra_offsets.extend(
+            m.work_offsets()
+                .filter(|(k, _)| {
+                    !matches!(k.as_str(), "G54" | "G55" | "G56" | "G57" | "G58" | "G59")
+                })
+                .map(|(k, v)| (k.clone(), *v)),
+        );
+        setup
+            .reference_points
+            .extend(m.reference_points().map(|(k, v)| (k.clone(), *v)));
+        setup.units_default = m.units_default();
+        if (3..6).any(|s| m.has_axis(s)) {
+            setup.kinematics = Some(std::sync::Arc::new(m.clone()));
         }
         setup.home = home_position(m);
         setup
@@ -316,8 +369,18 @@ pub struct Interpreter {
     plane: Plane,
     absolute: bool,
     arc_absolute: bool,
-    inch: bool,
-    work: usize,
+    /// G20 (`Some(true)`) or G21; `None` until the program or the
+    /// setup's default says.
+    inch: Option<bool>,
+    /// G93 inverse-time feed.
+    inverse_time: bool,
+    /// The active work offset, machine coordinates of the work zero, mm.
+    work: [f64; 3],
+    /// Tool centre point control (G43.4/G43.5) is on.
+    tcpm: bool,
+    /// Under tool centre point control: the programmed tool tip (X, Y, Z
+    /// in the workpiece frame; rotary axes as programmed).
+    tip: AxisVec,
     tool_len_mm: f64,
     h_active: Option<u32>,
     retract_initial: bool,
@@ -350,6 +413,8 @@ impl Interpreter {
     /// direction.
     pub fn new(setup: Setup, file: &str) -> Self {
         let home = setup.home;
+        let setup_units = setup.units_default;
+        let first_offset = setup.work_offsets[0];
         Interpreter {
             setup,
             file: file.to_string(),
@@ -358,8 +423,11 @@ impl Interpreter {
             plane: Plane::XY,
             absolute: true,
             arc_absolute: false,
-            inch: false,
-            work: 0,
+            inch: setup_units.map(|u| u == Units::Inch),
+            inverse_time: false,
+            work: first_offset.unwrap_or([0.0; 3]),
+            tcpm: false,
+            tip: home,
             tool_len_mm: 0.0,
             h_active: None,
             retract_initial: true,
@@ -398,7 +466,7 @@ impl Interpreter {
 
     /// Whether the program is in inches (G20).
     pub fn inch(&self) -> bool {
-        self.inch
+        self.inch == Some(true)
     }
 
     fn warn(&mut self, line: usize, message: String) {
@@ -419,12 +487,16 @@ impl Interpreter {
     }
 
     fn offset(&self) -> AxisVec {
-        let wo = self.setup.work_offsets[self.work].unwrap_or([0.0; 3]);
+        let wo = self.work;
         [wo[0], wo[1], wo[2], 0.0, 0.0, 0.0]
     }
 
     fn scale(&self) -> f64 {
-        if self.inch { MM_PER_INCH } else { 1.0 }
+        if self.inch == Some(true) {
+            MM_PER_INCH
+        } else {
+            1.0
+        }
     }
 
     /// Interprets one parsed block. `text` is the line (for messages): an
@@ -464,7 +536,6 @@ impl Interpreter {
     }
 
     fn step_block(&mut self, block: &Block, text: &[u8], plan: &mut Plan) -> Result<(), Located> {
-        let line = block.line_no;
         *plan = Plan {
             scale: self.scale(),
             absolute: self.absolute,
@@ -480,26 +551,45 @@ impl Interpreter {
             }
             return Ok(());
         }
-        let quote = |w: &Word| {
-            String::from_utf8_lossy(text.get(w.start as usize..w.end as usize).unwrap_or(b""))
-                .to_string()
-        };
+        let words = self.gather(block, text)?;
+        self.check(block, &words, text)?;
+        self.modal(block, &words)?;
+        self.check_units(block, &words)?;
+        if let Some(w) = words.tool_length {
+            self.tool_length(block, &words)?;
+            if let (true, Some(k)) = (self.tcpm, &self.setup.kinematics) {
+                if matches!(w.code10(), 434 | 435) {
+                    self.tip = k.tip_of(&self.pos, self.tool_len_mm);
+                }
+            }
+        }
+        plan.scale = self.scale();
+        self.directives(block, text)?;
+        plan.milling_mm = self.milling_mm;
+        plan.absolute = self.absolute;
+        plan.arc_absolute = self.arc_absolute;
+        plan.offset = self.offset();
+        plan.programmed = programmed_axes(&words.axis);
+        if let Some(w) = words.non_modal {
+            if let Some(done) = self.non_modal(block, &words, w, plan, text)? {
+                return Ok(done);
+            }
+        }
+        self.motion(block, &words, plan, text)
+    }
 
-        // Gather the block's words.
-        let mut axis: [Option<&Word>; 6] = [None; 6];
-        let mut center: [Option<&Word>; 3] = [None; 3];
-        let mut r_word = None;
-        let mut motion_g: Option<&Word> = None;
-        let mut non_modal: Option<&Word> = None;
-        let mut h_word = None;
-        let mut p_word = None;
-        let mut groups: [Option<&Word>; MODAL_GROUPS] = [None; MODAL_GROUPS];
-        let mut spindle_m: Option<&Word> = None;
+    /// Collects the block's words and checks each on its own (codes written
+    /// exactly, numbers that must be whole, words given twice, codes of one
+    /// modal group) before the block changes any state.
+    fn gather<'b>(&self, block: &'b Block, text: &[u8]) -> Result<Words<'b>, Located> {
+        let line = block.line_no;
+        let quote = |w: &Word| quote_word(text, w);
+        let mut g = Words::default();
         for w in &block.words {
             match w.letter {
                 b'X' | b'Y' | b'Z' | b'A' | b'B' | b'C' => {
                     let slot = axis_slot(w.letter).unwrap_or(0);
-                    if axis[slot].is_some() {
+                    if g.axis[slot].is_some() {
                         return Err(self.err(
                             line,
                             Some(w),
@@ -517,12 +607,12 @@ impl Interpreter {
                             ),
                         ));
                     }
-                    axis[slot] = Some(w);
+                    g.axis[slot] = Some(w);
                 }
-                b'I' | b'J' | b'K' => center[(w.letter - b'I') as usize] = Some(w),
-                b'R' => r_word = Some(w),
-                b'H' => h_word = Some(w),
-                b'P' => p_word = Some(w),
+                b'I' | b'J' | b'K' => g.center[(w.letter - b'I') as usize] = Some(w),
+                b'R' => g.r = Some(w),
+                b'P' => g.p = Some(w),
+                b'Q' => g.q = Some(w),
                 b'F' => {
                     if w.value < 0.0 {
                         return Err(self.err(
@@ -531,7 +621,7 @@ impl Interpreter {
                             format!("negative feed `{}`", quote(w)),
                         ));
                     }
-                    self.feed = w.value;
+                    g.f = Some(w);
                 }
                 b'S' => {
                     if w.value < 0.0 {
@@ -551,233 +641,518 @@ impl Interpreter {
                             ),
                         ));
                     }
-                    self.spindle = w.value;
+                    g.s = Some(w);
                 }
-                b'T' => {
-                    if w.value < 0.0 || w.value.fract() != 0.0 {
+                b'T' | b'H' | b'D' | b'L' => {
+                    if w.whole().is_none() {
+                        let what = match w.letter {
+                            b'T' => "tool number",
+                            b'H' => "tool length offset number",
+                            b'D' => "cutter radius offset number",
+                            _ => "repeat count",
+                        };
                         return Err(self.err(
                             line,
                             Some(w),
-                            format!("tool number must be a whole number ≥ 0: `{}`", quote(w)),
+                            format!("{what} must be a whole number ≥ 0: `{}`", quote(w)),
                         ));
                     }
-                    self.tool_selected = w.value as u32;
+                    match w.letter {
+                        b'T' => g.t = Some(w),
+                        b'H' => g.h = Some(w),
+                        b'L' => g.l = Some(w),
+                        _ => {}
+                    }
                 }
-                b'L' if w.value != 1.0 => {
-                    return Err(self.err(line, Some(w), format!("repeat counts cannot be compensated offline (expand them in CAM): `{}`", quote(w))));
+                b'M' => self.gather_m(line, w, &mut g, text)?,
+                b'G' => self.gather_g(line, w, &mut g, text)?,
+                _ => {}
+            }
+        }
+        Ok(g)
+    }
+
+    fn gather_m<'b>(
+        &self,
+        line: usize,
+        w: &'b Word,
+        g: &mut Words<'b>,
+        text: &[u8],
+    ) -> Result<(), Located> {
+        let quote = |w: &Word| quote_word(text, w);
+        let code = match w.exact_code10() {
+            Some(c) if c % 10 == 0 => c,
+            _ => {
+                return Err(self.err(
+                    line,
+                    Some(w),
+                    format!(
+                        "`{}` is not an M code: M numbers are whole numbers (`M3`, `M30`)",
+                        quote(w)
+                    ),
+                ));
+            }
+        };
+        match code {
+            30 | 40 | 50 => {
+                if let Some(first) = g.spindle_m {
+                    return Err(self.err(
+                        line,
+                        Some(w),
+                        format!(
+                            "`{}` and `{}` both set the spindle in one block",
+                            quote(first),
+                            quote(w)
+                        ),
+                    ));
                 }
-                b'M' => match w.code10() {
-                    60 => self.tool_active = self.tool_selected,
-                    30 | 40 | 50 if spindle_m.is_some() => {
-                        return Err(self.err(
-                            line,
-                            Some(w),
-                            format!(
-                                "`{}` and `{}` both set the spindle in one block",
-                                spindle_m.map(&quote).unwrap_or_default(),
-                                quote(w)
-                            ),
-                        ));
-                    }
-                    30 | 40 => {
-                        spindle_m = Some(w);
-                        self.spindle_on = true;
-                    }
-                    50 => {
-                        spindle_m = Some(w);
-                        self.spindle_on = false;
-                    }
-                    20 | 300 => self.spindle_on = false,
-                    980 | 990 | 970 | 1980 => {
-                        return Err(self.err(line, Some(w), format!("subprogram calls cannot be compensated offline (expand them in CAM): `{}`", quote(w))));
-                    }
-                    _ => {}
-                },
-                b'G' => {
-                    let code = w.code10();
-                    if let Some(g) = modal_group(code) {
-                        if let Some(first) = groups[g] {
+                g.spindle_m = Some(w);
+            }
+            980 | 990 | 970 | 1980 => {
+                return Err(self.err(
+                    line,
+                    Some(w),
+                    format!(
+                        "subprogram calls cannot be compensated offline (expand them in CAM): `{}`",
+                        quote(w)
+                    ),
+                ));
+            }
+            _ => {}
+        }
+        Ok(())
+    }
+
+    fn gather_g<'b>(
+        &self,
+        line: usize,
+        w: &'b Word,
+        g: &mut Words<'b>,
+        text: &[u8],
+    ) -> Result<(), Located> {
+        let quote = |w: &Word| quote_word(text, w);
+        let Some(code) = w.exact_code10() else {
+            return Err(self.err(
+                line,
+                Some(w),
+                format!(
+                    "`{}` is not a G code: G numbers are written exactly as listed (`G1`, `G54.1`, `G43.4`)",
+                    quote(w)
+                ),
+            ));
+        };
+        if let Some(k) = modal_group(code) {
+            if let Some(first) = g.groups[k] {
+                return Err(self.err(
+                    line,
+                    Some(w),
+                    format!(
+                        "`{}` and `{}` belong to the same modal group and cannot share a block",
+                        quote(first),
+                        quote(w)
+                    ),
+                ));
+            }
+            g.groups[k] = Some(w);
+        }
+        match g_class(code) {
+            GClass::Motion | GClass::Cycle => {
+                if let Some(first) = g.motion {
+                    return Err(self.err(
+                        line,
+                        Some(w),
+                        format!(
+                            "two motion codes in one block: `{}` and `{}`",
+                            quote(first),
+                            quote(w)
+                        ),
+                    ));
+                }
+                g.motion = Some(w);
+            }
+            GClass::NonModal => {
+                if let Some(first) = g.non_modal {
+                    return Err(self.err(
+                        line,
+                        Some(w),
+                        format!(
+                            "`{}` and `{}` are both one-block codes and cannot share a block",
+                            quote(first),
+                            quote(w)
+                        ),
+                    ));
+                }
+                g.non_modal = Some(w);
+            }
+            GClass::Modal | GClass::Neutral => {}
+            GClass::Spline => g.spline = Some(w),
+            GClass::Refused(what) => {
+                return Err(self.err(
+                    line,
+                    Some(w),
+                    format!("{what} cannot be compensated offline: `{}`", quote(w)),
+                ));
+            }
+        }
+        if matches!(code, 430 | 434 | 435) {
+            g.tool_length = Some(w);
+        }
+        Ok(())
+    }
+
+    /// Checks that need the block as a whole: G5/G5.1 as a mode or as a
+    /// spline.
+    fn check(&self, block: &Block, g: &Words, text: &[u8]) -> Result<(), Located> {
+        let line = block.line_no;
+        if let Some(w) = g.spline {
+            let moves = g.axis.iter().any(Option::is_some) || g.center.iter().any(Option::is_some);
+            let mode = match w.code10() {
+                // `G05 P10000` / `G05 P0`: high-speed machining mode.
+                50 => g.p.is_some() && g.q.is_none() && g.r.is_none() && !moves,
+                // `G05.1 Q1` (`R` level): AI contour control.
+                51 => g.q.is_some() && g.p.is_none() && !moves,
+                _ => false,
+            };
+            if !mode {
+                let what = match w.code10() {
+                    50 => "G5 (cubic spline)",
+                    51 => "G5.1 (quadratic spline)",
+                    _ => "G5.2/G5.3 and G6.2 (NURBS)",
+                };
+                return Err(self.err(
+                    line,
+                    Some(w),
+                    format!(
+                        "{what} cannot be compensated offline (post the path as lines and arcs): `{}`",
+                        quote_word(text, w)
+                    ),
+                ));
+            }
+        }
+        Ok(())
+    }
+
+    /// Applies the block's modal words in the order written.
+    fn modal(&mut self, block: &Block, g: &Words) -> Result<(), Located> {
+        if let Some(f) = g.f {
+            self.feed = f.value;
+        }
+        if let Some(s) = g.s {
+            self.spindle = s.value;
+        }
+        if let Some(t) = g.t {
+            self.tool_selected = t.whole().unwrap_or(0);
+        }
+        for w in &block.words {
+            match (w.letter, w.code10()) {
+                (b'M', 60) => self.tool_active = self.tool_selected,
+                (b'M', 30 | 40) => self.spindle_on = true,
+                (b'M', 50 | 20 | 300) => self.spindle_on = false,
+                (b'G', code) => self.modal_g(block, g, w, code)?,
+                _ => {}
+            }
+        }
+        Ok(())
+    }
+
+    fn modal_g(&mut self, block: &Block, g: &Words, w: &Word, code: i64) -> Result<(), Located> {
+        match code {
+            800 => {
+                self.cycle = None;
+                self.cycle_r = None;
+                self.cycle_z = None;
+                if self.motion.is_none() {
+                    self.motion = Some(Motion::Rapid);
+                }
+            }
+            170 => self.plane = Plane::XY,
+            180 => self.plane = Plane::ZX,
+            190 => self.plane = Plane::YZ,
+            200 => self.inch = Some(true),
+            210 => self.inch = Some(false),
+            900 => self.absolute = true,
+            910 => self.absolute = false,
+            901 => self.arc_absolute = true,
+            911 => self.arc_absolute = false,
+            540..=590 if code % 10 == 0 => {
+                let i = ((code - 540) / 10) as usize;
+                self.work = self.setup.work_offsets[i].unwrap_or([0.0; 3]);
+            }
+            541 | 1540 | 1100..=1290 => self.work = self.extended_offset(block, g, w, code)?,
+            400 if !block.block_delete => self.cutter_comp = false,
+            410 | 420 => {
+                self.cutter_comp = true;
+                if !self.comp_warned {
+                    self.comp_warned = true;
+                    self.warn(block.line_no, "cutter radius compensation (G41/G42) is passed through: deviations are evaluated on the programmed path, not the offset path, and no takeup points are written while it is active (a short move against the direction of travel would upset the controller's offset path)".into());
+                }
+            }
+            490 => {
+                self.tool_len_mm = 0.0;
+                self.h_active = None;
+                self.tcpm = false;
+            }
+            430 => self.tcpm = false,
+            434 | 435 => {
+                if self.setup.kinematics.is_none() {
+                    return Err(self.err(
+                        block.line_no,
+                        Some(w),
+                        "G43.4/G43.5 (tool centre point control) needs the machine's kinematics: a machine file with rotary axes (--machine)".into(),
+                    ));
+                }
+                self.tcpm = true;
+            }
+            980 => self.retract_initial = true,
+            990 => self.retract_initial = false,
+            930 => {
+                self.inverse_time = true;
+                self.per_rev = false;
+            }
+            940 => {
+                self.inverse_time = false;
+                self.per_rev = false;
+            }
+            950 => {
+                self.inverse_time = false;
+                self.per_rev = true;
+            }
+            _ => {}
+        }
+        Ok(())
+    }
+
+    /// The work offset of `G54.1 Pn`, `G154 Pn` or `G110`–`G129` (the same
+    /// registers as `G154 P1`–`P20`), from the setup's extended offsets.
+    fn extended_offset(
+        &self,
+        block: &Block,
+        g: &Words,
+        w: &Word,
+        code: i64,
+    ) -> Result<[f64; 3], Located> {
+        let line = block.line_no;
+        let key = match code {
+            1100..=1290 => {
+                if code % 10 != 0 {
+                    return Err(self.err(
+                        line,
+                        Some(w),
+                        format!("this G code cannot be compensated offline: `{}`", w.value),
+                    ));
+                }
+                format!("G154P{}", (code - 1100) / 10 + 1)
+            }
+            _ => {
+                let base = if code == 541 { "G54.1" } else { "G154" };
+                let n = match g.p {
+                    Some(p) => match p.whole() {
+                        Some(n) if n >= 1 => n,
+                        _ => {
                             return Err(self.err(
                                 line,
-                                Some(w),
+                                Some(p),
                                 format!(
-                                    "`{}` and `{}` belong to the same modal group and cannot share a block",
-                                    quote(first),
-                                    quote(w)
+                                    "the work offset number of {base} must be a whole number ≥ 1: `P{}`",
+                                    p.value
                                 ),
                             ));
                         }
-                        groups[g] = Some(w);
-                    }
-                    match code {
-                        0 | 10 | 20 | 30 => {
-                            if motion_g.is_some() {
-                                return Err(self.err(
-                                    line,
-                                    Some(w),
-                                    format!("two motion codes in one block: `{}`", quote(w)),
-                                ));
-                            }
-                            motion_g = Some(w);
-                        }
-                        730 | 810 | 820 | 830 | 840 | 850 | 860 | 870 | 880 | 890 => {
-                            motion_g = Some(w);
-                        }
-                        800 => {
-                            self.cycle = None;
-                            self.cycle_r = None;
-                            self.cycle_z = None;
-                            if self.motion.is_none() {
-                                self.motion = Some(Motion::Rapid);
-                            }
-                        }
-                        40 | 280 | 530 | 90 => non_modal = Some(w),
-                        170 => self.plane = Plane::XY,
-                        180 => self.plane = Plane::ZX,
-                        190 => self.plane = Plane::YZ,
-                        200 => self.inch = true,
-                        210 => self.inch = false,
-                        900 => self.absolute = true,
-                        910 => self.absolute = false,
-                        901 => self.arc_absolute = true,
-                        911 => self.arc_absolute = false,
-                        540..=590 if code % 10 == 0 => self.work = ((code - 540) / 10) as usize,
-                        400 if !block.block_delete => self.cutter_comp = false,
-                        400 => {}
-                        410 | 420 => {
-                            self.cutter_comp = true;
-                            if !self.comp_warned {
-                                self.comp_warned = true;
-                                self.warn(line, "cutter radius compensation (G41/G42) is passed through: deviations are evaluated on the programmed path, not the offset path, and no takeup points are written while it is active (a short move against the direction of travel would upset the controller's offset path)".into());
-                            }
-                        }
-                        430 => h_word = h_word.or(Some(w)),
-                        490 => {
-                            self.tool_len_mm = 0.0;
-                            self.h_active = None;
-                        }
-                        980 => self.retract_initial = true,
-                        990 => self.retract_initial = false,
-                        940 => self.per_rev = false,
-                        950 => self.per_rev = true,
-                        // Harmless modes: exact stop, path control, AI contour,
-                        // polar/rotation/scaling cancel, spindle speed modes.
-                        610 | 640 | 51 | 150 | 690 | 500 | 501 | 960 | 970 => {}
-                        _ => {
-                            let what = match code {
-                                100 => "G10 (programmable data input)",
-                                920 => "G92 (coordinate system shift)",
-                                520 => "G52 (local coordinate system)",
-                                680 | 682 | 684 => "G68 (coordinate rotation)",
-                                510 | 511 => "G51 (scaling/mirroring)",
-                                160 => "G16 (polar coordinates)",
-                                650 | 660 | 661 | 670 => "G65/G66 (macro calls)",
-                                434 | 435 => "G43.4/G43.5 (tool centre point control)",
-                                _ => "this G code",
-                            };
-                            return Err(self.err(
-                                line,
-                                Some(w),
-                                format!("{what} cannot be compensated offline: `{}`", quote(w)),
-                            ));
-                        }
-                    }
-                }
-                _ => {}
-            }
-        }
-        // G43 tool length.
-        if block
-            .words
-            .iter()
-            .any(|w| w.letter == b'G' && w.code10() == 430)
-        {
-            let h = match h_word {
-                Some(hw) if hw.letter == b'H' => hw.value.max(0.0) as u32,
-                _ => self.tool_active.max(self.tool_selected),
-            };
-            match self.setup.tools.get(&h) {
-                Some(&len) => {
-                    self.tool_len_mm = len;
-                    self.h_active = Some(h);
-                }
-                None => {
-                    let at = block.words.iter().find(|w| w.letter == b'H');
-                    return Err(self.err(line, at, format!("tool length offset H{h} is not in the tool table (machine file `tools`, or --tool H{h}=LENGTH)")));
-                }
-            }
-        }
-        plan.scale = self.scale();
-        self.directives(block, text)?;
-        plan.milling_mm = self.milling_mm;
-        plan.absolute = self.absolute;
-        plan.arc_absolute = self.arc_absolute;
-        plan.offset = self.offset();
-        plan.programmed = programmed_axes(&axis);
-
-        // Non-modal codes.
-        if let Some(w) = non_modal {
-            match w.code10() {
-                40 => {
-                    // Dwell: P in ms (integer) / s (with point), or X in s.
-                    let (word, dwell_s) = match (p_word, axis[0]) {
-                        (Some(p), _) if p.decimals.is_none() => (Some(p), p.value / 1000.0),
-                        (Some(p), _) => (Some(p), p.value),
-                        (None, Some(x)) => (Some(x), x.value),
-                        _ => (None, 0.0),
-                    };
-                    if dwell_s < 0.0 {
+                    },
+                    None if code == 541 => 1,
+                    None => {
                         return Err(self.err(
                             line,
-                            word,
-                            format!(
-                                "negative dwell time: `{}`",
-                                word.map(&quote).unwrap_or_default()
-                            ),
+                            Some(w),
+                            "G154 needs the work offset number as a P word (`G154 P1`)".into(),
                         ));
                     }
-                    plan.dwell_s = dwell_s;
-                    return Ok(());
-                }
-                90 => {}
-                280 => {
-                    // A motion code written with G28 stays modal (`G0 G28 G91 Z0.`).
-                    if let Some(g) = motion_g {
-                        self.set_motion_mode(g);
-                    }
-                    return self.reference_return(block, &axis, plan, line);
-                }
-                530 => return self.machine_move(block, &axis, plan, motion_g, line),
-                _ => {}
+                };
+                format!("{base}P{n}")
             }
-        }
+        };
+        self.setup.extra_offsets.get(&key).copied().ok_or_else(|| {
+            self.err(
+                line,
+                Some(w),
+                format!(
+                    "work offset {key} is not in the machine file (`work_offsets_mm: {{{key}: [X, Y, Z]}}`, or --work-offset {key}=X,Y,Z)"
+                ),
+            )
+        })
+    }
 
-        if let Some(g) = motion_g {
-            match g.code10() {
-                0 => {
-                    self.motion = Some(Motion::Rapid);
-                    self.cycle = None;
+    /// A block with a length in program units needs to know the units:
+    /// set by G20/G21, or the control's default from the setup.
+    fn check_units(&self, block: &Block, g: &Words) -> Result<(), Located> {
+        if self.inch.is_some() {
+            return Ok(());
+        }
+        let dwell = g.non_modal.is_some_and(|w| w.code10() == 40);
+        let inverse_time = self.inverse_time;
+        let first = block.words.iter().find(|w| match w.letter {
+            b'X' => !dwell,
+            b'Y' | b'Z' | b'I' | b'J' | b'K' | b'R' => true,
+            b'F' => !inverse_time,
+            _ => false,
+        });
+        match first {
+            None => Ok(()),
+            Some(w) => Err(self.err(
+                block.line_no,
+                Some(w),
+                format!(
+                    "the program has not set its units (G20 inch or G21 mm) before `{}{}`, and the machine file gives no `units_default` (or pass --units mm|inch)",
+                    w.letter as char, w.value
+                ),
+            )),
+        }
+    }
+
+    /// G43 (G43.4, G43.5): the tool length of H, or of the active tool.
+    fn tool_length(&mut self, block: &Block, g: &Words) -> Result<(), Located> {
+        let h = match g.h {
+            Some(hw) => hw.whole().unwrap_or(0),
+            None => self.tool_active.max(self.tool_selected),
+        };
+        match self.setup.tools.get(&h) {
+            Some(&len) => {
+                self.tool_len_mm = len;
+                self.h_active = Some(h);
+                Ok(())
+            }
+            None => Err(self.err(
+                block.line_no,
+                g.h,
+                format!(
+                    "tool length offset H{h} is not in the tool table (machine file `tools`, or --tool H{h}=LENGTH)"
+                ),
+            )),
+        }
+    }
+
+    /// One-block codes (dwell, reference returns, machine coordinates):
+    /// `Some(())` when the block is done.
+    fn non_modal(
+        &mut self,
+        block: &Block,
+        g: &Words,
+        w: &Word,
+        plan: &mut Plan,
+        text: &[u8],
+    ) -> Result<Option<()>, Located> {
+        let line = block.line_no;
+        if self.tcpm && w.code10() != 40 {
+            return Err(self.err(
+                line,
+                Some(w),
+                format!(
+                    "`{}` under G43.4/G43.5 (tool centre point control) cannot be compensated offline: cancel it with G49 first",
+                    quote_word(text, w)
+                ),
+            ));
+        }
+        match w.code10() {
+            40 => {
+                // Dwell: P in ms (integer) / s (with point), or X in s.
+                let (word, dwell_s) = match (g.p, g.axis[0]) {
+                    (Some(p), _) if p.decimals.is_none() => (Some(p), p.value / 1000.0),
+                    (Some(p), _) => (Some(p), p.value),
+                    (None, Some(x)) => (Some(x), x.value),
+                    _ => (None, 0.0),
+                };
+                if dwell_s < 0.0 {
+                    return Err(self.err(
+                        line,
+                        word,
+                        format!(
+                            "negative dwell time: `{}`",
+                            word.map(|w| quote_word(text, w)).unwrap_or_default()
+                        ),
+                    ));
                 }
-                10 => {
-                    self.motion = Some(Motion::Linear);
-                    self.cycle = None;
+                plan.dwell_s = dwell_s;
+                Ok(Some(()))
+            }
+            280 | 300 => {
+                // A motion code written with G28/G30 stays modal (`G0 G28 G91 Z0.`).
+                if let Some(m) = g.motion {
+                    self.set_motion_mode(m);
                 }
-                20 => {
-                    self.motion = Some(Motion::ArcCw);
-                    self.cycle = None;
+                let target = if w.code10() == 280 {
+                    self.setup.home
+                } else {
+                    self.second_reference(line, g, w)?
+                };
+                self.reference_return(&g.axis, plan, &target);
+                Ok(Some(()))
+            }
+            530 => {
+                self.machine_move(&g.axis, plan, g.motion, line)?;
+                Ok(Some(()))
+            }
+            _ => Ok(None),
+        }
+    }
+
+    /// The position `G30` (P2, the default, P3 or P4) returns to, from the
+    /// setup's reference points; rotary axes go to the reference position.
+    fn second_reference(&self, line: usize, g: &Words, w: &Word) -> Result<AxisVec, Located> {
+        let n = match g.p {
+            None => 2,
+            Some(p) => match p.whole() {
+                Some(n @ 2..=4) => n,
+                _ => {
+                    return Err(self.err(
+                        line,
+                        Some(p),
+                        format!(
+                            "G30 takes P2, P3 or P4 (the reference point): `P{}`",
+                            p.value
+                        ),
+                    ));
                 }
-                30 => {
-                    self.motion = Some(Motion::ArcCcw);
-                    self.cycle = None;
-                }
+            },
+        };
+        let key = if n == 2 {
+            "G30".to_string()
+        } else {
+            format!("G30P{n}")
+        };
+        let xyz = self.setup.reference_points.get(&key).ok_or_else(|| {
+            self.err(
+                line,
+                Some(w),
+                format!(
+                    "{key} returns to a reference point the machine file does not give (`reference_points_mm: {{{key}: [X, Y, Z]}}`)"
+                ),
+            )
+        })?;
+        let mut target = self.setup.home;
+        target[..3].copy_from_slice(xyz);
+        Ok(target)
+    }
+
+    /// Motion codes and the move of the block: G0–G3, canned-cycle holes.
+    fn motion(
+        &mut self,
+        block: &Block,
+        g: &Words,
+        plan: &mut Plan,
+        text: &[u8],
+    ) -> Result<(), Located> {
+        let line = block.line_no;
+        if let Some(m) = g.motion {
+            match m.code10() {
+                0 | 10 | 20 | 30 => self.set_motion_mode(m),
                 code => {
                     if self.plane != Plane::XY {
                         return Err(self.err(
                             line,
-                            Some(g),
+                            Some(m),
                             format!(
                                 "canned cycles are supported in the G17 plane only: `{}`",
-                                quote(g)
+                                quote_word(text, m)
                             ),
                         ));
                     }
@@ -788,34 +1163,43 @@ impl Interpreter {
                 }
             }
         }
-        let any_axis = axis.iter().any(|a| a.is_some());
+        let any_axis = g.axis.iter().any(|a| a.is_some());
         if self.cycle.is_some() {
-            if let Some(r) = r_word {
+            if let Some(r) = g.r {
                 self.cycle_r = Some(r.value);
             }
-            if let Some(z) = axis[2] {
+            if let Some(z) = g.axis[2] {
                 self.cycle_z = Some(z.value);
             }
             if any_axis {
-                return self.cycle_hole(block, &axis, plan, line, text);
+                if self.tcpm {
+                    return Err(self.err(
+                        line,
+                        g.motion.or(g.axis.iter().flatten().next().copied()),
+                        "canned cycles cannot run under G43.4/G43.5 (tool centre point control)"
+                            .into(),
+                    ));
+                }
+                if self.inverse_time {
+                    return Err(self.err(
+                        line,
+                        g.motion.or(g.axis.iter().flatten().next().copied()),
+                        "canned cycles cannot run under G93 (inverse-time feed)".into(),
+                    ));
+                }
+                return self.cycle_hole(block, g, plan, line, text);
             }
             return Ok(());
         }
-        if !any_axis {
-            if let Some(g) = motion_g {
-                if matches!(g.code10(), 20 | 30) && center.iter().any(|c| c.is_some()) {
-                    // A full circle written without end coordinates.
-                } else {
-                    return Ok(());
-                }
-            } else {
-                return Ok(());
-            }
+        let full_circle = g.motion.is_some_and(|m| matches!(m.code10(), 20 | 30))
+            && g.center.iter().any(|c| c.is_some());
+        if !any_axis && !full_circle {
+            return Ok(());
         }
         let motion = match self.motion {
             Some(m) => m,
             None => {
-                let first = axis.iter().flatten().next().copied();
+                let first = g.axis.iter().flatten().next().copied();
                 return Err(self.err(
                     line,
                     first,
@@ -823,32 +1207,98 @@ impl Interpreter {
                 ));
             }
         };
-        let end = self.target(&axis, plan.scale, &plan.offset);
         let start = self.pos;
+        let end = if self.tcpm {
+            self.tcpm_target(block, g, motion, plan)?
+        } else {
+            self.target(&g.axis, plan.scale, &plan.offset)
+        };
         let arc = match motion {
-            Motion::ArcCw | Motion::ArcCcw => Some(self.arc(
-                block, &start, &end, &center, r_word, p_word, motion, line, text,
-            )?),
+            Motion::ArcCw | Motion::ArcCcw => {
+                Some(self.arc(block, &start, &end, &g.center, g.r, g.p, motion, line, text)?)
+            }
             _ => None,
         };
-        for (slot, a) in axis.iter().enumerate() {
+        for (slot, a) in g.axis.iter().enumerate() {
             if let Some(w) = a {
                 if !end[slot].is_finite() {
                     return Err(self.err(
                         line,
                         Some(w),
-                        format!("coordinate out of range: `{}`", quote(w)),
+                        format!("coordinate out of range: `{}`", quote_word(text, w)),
                     ));
                 }
             }
         }
-        if motion != Motion::Rapid && end != start {
-            self.require_feed(line, block.words.iter().find(|w| w.letter == b'F'))?;
+        if motion != Motion::Rapid && self.inverse_time && g.f.is_none() {
+            let first = g.axis.iter().flatten().next().copied();
+            return Err(self.err(
+                line,
+                first,
+                "under G93 (inverse-time feed) every feed move needs its own F word".into(),
+            ));
         }
-        let mv = self.make_move(motion, start, end, arc);
+        if motion != Motion::Rapid && end != start {
+            self.require_feed(line, g.f)?;
+        }
+        plan.extra_repeats = self.repeats(line, g, motion, &start, &end, text)?;
+        let mut mv = self.make_move(motion, start, end, arc);
+        plan.tcpm = self.tcpm;
+        if motion != Motion::Rapid && self.inverse_time {
+            // F is 1/min: the block lasts 1/F minutes whatever its length.
+            mv.feed_mm_min = mv.timed_length() * self.feed;
+            plan.inverse_time = true;
+        }
         plan.kind = PlanKind::Motion;
         plan.mv = Some(mv);
         Ok(())
+    }
+
+    /// Repeats of a move after the first (`L`): accepted when every repeat
+    /// runs the same path (a closed move, run again) or goes nowhere (an
+    /// absolute line, already at its end), so one correction serves them
+    /// all; refused when each repeat would go elsewhere.
+    fn repeats(
+        &self,
+        line: usize,
+        g: &Words,
+        motion: Motion,
+        start: &AxisVec,
+        end: &AxisVec,
+        text: &[u8],
+    ) -> Result<u32, Located> {
+        let Some(l) = g.l else { return Ok(0) };
+        let n = l.whole().unwrap_or(0);
+        if n == 1 {
+            return Ok(0);
+        }
+        let closed = (0..6).all(|s| (end[s] - start[s]).abs() <= MOTION_EPS);
+        let linear = matches!(motion, Motion::Rapid | Motion::Linear);
+        if n == 0 {
+            Err(self.err(
+                line,
+                Some(l),
+                format!(
+                    "repeat count must be a whole number ≥ 1: `{}`",
+                    quote_word(text, l)
+                ),
+            ))
+        } else if closed {
+            // The same path again each time: predicted as often as run.
+            Ok(n - 1)
+        } else if linear && self.absolute {
+            // Already at the end: the repeats do not move.
+            Ok(0)
+        } else {
+            Err(self.err(
+                line,
+                Some(l),
+                format!(
+                    "repeat count `{}`: each repeat goes elsewhere and needs its own correction; repeat counts cannot be compensated offline here (expand them in CAM)",
+                    quote_word(text, l)
+                ),
+            ))
+        }
     }
 
     /// Reads `(POSTPROC MILLING DEPTH=d WIDTH=w)` directive comments (values
@@ -1000,16 +1450,73 @@ impl Interpreter {
         }
     }
 
+    /// Under tool centre point control: the programmed tip of the block
+    /// (kept as the new tip) turned into axis positions by the nominal
+    /// kinematics.
+    fn tcpm_target(
+        &mut self,
+        block: &Block,
+        g: &Words,
+        motion: Motion,
+        plan: &Plan,
+    ) -> Result<AxisVec, Located> {
+        let first = g.motion.or(g.axis.iter().flatten().next().copied());
+        if matches!(motion, Motion::ArcCw | Motion::ArcCcw) {
+            return Err(self.err(
+                block.line_no,
+                first,
+                "arcs under G43.4/G43.5 (tool centre point control) cannot be compensated offline"
+                    .into(),
+            ));
+        }
+        if let Some(w) = g.center.iter().flatten().next() {
+            return Err(self.err(
+                block.line_no,
+                Some(w),
+                "tool orientation vectors (I J K) under G43.4/G43.5 cannot be compensated offline: program the rotary axes' angles".into(),
+            ));
+        }
+        let tip = self.target_from(&self.tip, &g.axis, plan.scale, &plan.offset);
+        let axes = self
+            .setup
+            .kinematics
+            .as_ref()
+            .and_then(|k| k.axes_for_tip(&tip, self.tool_len_mm));
+        match axes {
+            Some(end) => {
+                self.tip = tip;
+                Ok(end)
+            }
+            None => Err(self.err(
+                block.line_no,
+                first,
+                "no axis positions put the tool tip there".into(),
+            )),
+        }
+    }
+
     /// Machine coordinates of the block's end point.
     fn target(&self, axis: &[Option<&Word>; 6], scale: f64, offset: &AxisVec) -> AxisVec {
-        let mut end = self.pos;
+        self.target_from(&self.pos, axis, scale, offset)
+    }
+
+    /// The block's end point from `from` (absolute words replace, incremental
+    /// words add to it).
+    fn target_from(
+        &self,
+        from: &AxisVec,
+        axis: &[Option<&Word>; 6],
+        scale: f64,
+        offset: &AxisVec,
+    ) -> AxisVec {
+        let mut end = *from;
         for (slot, a) in axis.iter().enumerate() {
             if let Some(w) = a {
                 let s = if slot < 3 { scale } else { 1.0 };
                 end[slot] = if self.absolute {
                     w.value * s + offset[slot]
                 } else {
-                    self.pos[slot] + w.value * s
+                    from[slot] + w.value * s
                 };
             }
         }
@@ -1165,11 +1672,12 @@ impl Interpreter {
     fn cycle_hole(
         &mut self,
         block: &Block,
-        axis: &[Option<&Word>; 6],
+        g: &Words,
         plan: &mut Plan,
         line: usize,
         text: &[u8],
     ) -> Result<(), Located> {
+        let axis = &g.axis;
         let scale = plan.scale;
         let off = plan.offset;
         let first = axis.iter().flatten().next().copied();
@@ -1188,19 +1696,7 @@ impl Interpreter {
                 ),
             ));
         };
-        if block
-            .words
-            .iter()
-            .any(|w| w.letter == b'K' && w.value != 1.0)
-            && self.cycle.is_some()
-        {
-            let k = block.words.iter().find(|w| w.letter == b'K');
-            return Err(self.err(
-                line,
-                k,
-                "repeat counts cannot be compensated offline (expand them in CAM)".into(),
-            ));
-        }
+        plan.extra_repeats = self.cycle_repeats(block, g, text)?;
         let initial = self.cycle_initial;
         // Hole XY position.
         let mut xy = self.pos;
@@ -1260,32 +1756,63 @@ impl Interpreter {
         Ok(())
     }
 
+    /// The holes a cycle block drills after the first (`K`, or Haas `L`):
+    /// under G90 the same hole again (one correction serves them all);
+    /// under G91 each repeat is another hole, refused.
+    fn cycle_repeats(&self, block: &Block, g: &Words, text: &[u8]) -> Result<u32, Located> {
+        let Some(w) = g.l.or(g.center[2]) else {
+            return Ok(0);
+        };
+        let n = match w.whole() {
+            Some(0) | None => {
+                return Err(self.err(
+                    block.line_no,
+                    Some(w),
+                    format!(
+                        "repeat count must be a whole number ≥ 1: `{}`",
+                        quote_word(text, w)
+                    ),
+                ));
+            }
+            Some(n) => n,
+        };
+        if n > 1 && !self.absolute {
+            return Err(self.err(
+                block.line_no,
+                Some(w),
+                format!(
+                    "repeat count `{}` under G91 drills a row of holes, each needing its own correction; repeat counts cannot be compensated offline here (expand them in CAM)",
+                    quote_word(text, w)
+                ),
+            ));
+        }
+        Ok(n - 1)
+    }
+
+    /// G28/G30: the axes named move at rapid to the intermediate point (in
+    /// the current G90/G91 mode) and then to `reference`.
     fn reference_return(
         &mut self,
-        _block: &Block,
         axis: &[Option<&Word>; 6],
         plan: &mut Plan,
-        _line: usize,
-    ) -> Result<(), Located> {
-        // Through the intermediate point to the reference position (machine zero).
+        reference: &AxisVec,
+    ) {
         let mid = self.target(axis, plan.scale, &plan.offset);
         let start = self.pos;
         self.make_move(Motion::Rapid, start, mid, None);
         let mut home = mid;
         for (slot, a) in axis.iter().enumerate() {
             if a.is_some() {
-                home[slot] = self.setup.home[slot];
+                home[slot] = reference[slot];
             }
         }
         let mv = self.make_move(Motion::Rapid, mid, home, None);
         plan.kind = PlanKind::Fixed;
         plan.mv = Some(mv);
-        Ok(())
     }
 
     fn machine_move(
         &mut self,
-        _block: &Block,
         axis: &[Option<&Word>; 6],
         plan: &mut Plan,
         motion_g: Option<&Word>,
@@ -1312,6 +1839,108 @@ impl Interpreter {
     }
 }
 
+/// How the interpreter takes a G code (code × 10).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum GClass {
+    /// G0, G1, G2, G3.
+    Motion,
+    /// A canned drilling cycle.
+    Cycle,
+    /// One-block codes with their own handling: G4, G28, G30, G53.
+    NonModal,
+    /// A mode the interpreter keeps (plane, units, offsets, …).
+    Modal,
+    /// A mode or one-block code that changes no geometry (smoothing,
+    /// look-ahead, exact stop, …): passed through with its words.
+    Neutral,
+    /// G5, G5.1 (a mode with P or Q alone, else a spline), G5.2, G5.3, G6.2.
+    Spline,
+    /// Refused, with what the code is.
+    Refused(&'static str),
+}
+
+/// The class of a G code written exactly (code × 10).
+fn g_class(code: i64) -> GClass {
+    match code {
+        0 | 10 | 20 | 30 => GClass::Motion,
+        730 | 740 | 760 | 810 | 820 | 830 | 840 | 850 | 860 | 870 | 880 | 890 => GClass::Cycle,
+        40 | 280 | 300 | 530 => GClass::NonModal,
+        800 | 170 | 180 | 190 | 200 | 210 | 900 | 910 | 901 | 911 | 400 | 410 | 420 | 430 | 490
+        | 980 | 990 | 930 | 940 | 950 | 541 | 1540 | 434 | 435 => GClass::Modal,
+        540..=590 | 1100..=1290 if code % 10 == 0 => GClass::Modal,
+        // G8 look-ahead, G9 exact stop, G11, G13.1 polar interpolation
+        // cancel, G15 polar cancel, G50/G50.1 scaling/mirror cancel,
+        // G61/G61.1 exact stop and path modes, G62/G63 corner override
+        // and tapping modes, G64 path blending, G67 modal macro cancel,
+        // G69 rotation cancel, G96/G97 spindle speed modes, G103 block
+        // look-ahead, G187 smoothing.
+        80 | 90 | 110 | 131 | 150 | 500 | 501 | 610 | 611 | 620 | 630 | 640 | 670 | 690 | 960
+        | 970 | 1030 | 1870 => GClass::Neutral,
+        50 | 51 | 52 | 53 | 62 => GClass::Spline,
+        _ => GClass::Refused(refused_g(code)),
+    }
+}
+
+/// What a refused G code is, for the message.
+fn refused_g(code: i64) -> &'static str {
+    match code {
+        24 | 34 => "G2.4/G3.4 (3D arcs)",
+        71 => "G7.1 (cylindrical interpolation)",
+        100 => "G10 (programmable data input)",
+        120 | 130 => "G12/G13 (circular pocket milling)",
+        121 => "G12.1 (polar interpolation)",
+        160 => "G16 (polar coordinates)",
+        310 | 311 | 312 | 313 | 382 | 383 | 384 | 385 => "G31/G38 (probing)",
+        320 | 330 | 340 | 350 => "G32–G35 (thread cutting)",
+        470 => "G47 (engraving)",
+        520 => "G52 (local coordinate system)",
+        510 | 511 => "G51 (scaling/mirroring)",
+        531 => "G53.1 (tool axis direction control)",
+        600 => "G60 (single-direction positioning)",
+        650 | 660 | 661 => "G65/G66 (macro calls)",
+        680 => "G68 (coordinate rotation)",
+        681 | 682 | 684 => "G68.2 (tilted working plane)",
+        700 | 710 | 720 | 750 => {
+            "G70–G72, G75 (lathe turning cycles; lathe programs are not supported)"
+        }
+        920 | 921 => "G92 (coordinate system shift)",
+        1410 => "G141 (3D cutter compensation)",
+        1500 => "G150 (pocket milling)",
+        _ => "this G code",
+    }
+}
+
+/// The words of one block, gathered and checked before the block changes
+/// any state.
+#[derive(Default)]
+struct Words<'b> {
+    axis: [Option<&'b Word>; 6],
+    center: [Option<&'b Word>; 3],
+    r: Option<&'b Word>,
+    p: Option<&'b Word>,
+    q: Option<&'b Word>,
+    h: Option<&'b Word>,
+    f: Option<&'b Word>,
+    s: Option<&'b Word>,
+    t: Option<&'b Word>,
+    l: Option<&'b Word>,
+    /// G0–G3 or a cycle code.
+    motion: Option<&'b Word>,
+    /// G4, G28, G30 or G53.
+    non_modal: Option<&'b Word>,
+    /// G43, G43.4 or G43.5.
+    tool_length: Option<&'b Word>,
+    /// G5, G5.1, G5.2, G5.3 or G6.2.
+    spline: Option<&'b Word>,
+    groups: [Option<&'b Word>; MODAL_GROUPS],
+    spindle_m: Option<&'b Word>,
+}
+
+/// A word's text within its line.
+fn quote_word(text: &[u8], w: &Word) -> String {
+    String::from_utf8_lossy(text.get(w.start as usize..w.end as usize).unwrap_or(b"")).to_string()
+}
+
 /// The axis slots a block gives words for, one bit each.
 fn programmed_axes(axis: &[Option<&Word>; 6]) -> u8 {
     axis.iter()
@@ -1331,6 +1960,7 @@ mod tests {
     fn run(lines: &[&str]) -> Result<Vec<Plan>, Located> {
         let mut setup = Setup {
             axes: [true, true, true, false, false, true],
+            units_default: Some(Units::Mm),
             ..Setup::default()
         };
         setup.tools.insert(1, 100.0);
@@ -1435,5 +2065,282 @@ mod tests {
     fn inch_program_scales_to_mm() {
         let p = run(&["G20 G0 X1 Y0 Z0"]).unwrap();
         assert_abs_diff_eq!(p[0].mv.unwrap().end[0], 25.4 + 100.0, epsilon = TOL);
+    }
+    fn run_setup(setup: Setup, lines: &[&str]) -> Result<Vec<Plan>, Located> {
+        let mut it = Interpreter::new(setup, "t.nc");
+        let mut b = Block::default();
+        let mut out = vec![];
+        for (i, l) in lines.iter().enumerate() {
+            parse_line(l.as_bytes(), i + 1, "t.nc", &mut b)?;
+            out.push(it.step(&b, l.as_bytes())?);
+        }
+        Ok(out)
+    }
+
+    /// The error of the last line of `lines`, which must be refused there.
+    fn refused_at_last(lines: &[&str]) -> Located {
+        let e = run(lines).expect_err("refused");
+        assert_eq!(e.line, lines.len(), "{e}");
+        e
+    }
+
+    #[test]
+    fn codes_with_more_than_a_written_decimal_are_refused_where_they_stand() {
+        // Each of these once ran as the nearest tenth: a CCW arc, a feed
+        // move, incremental mode, G56.
+        for (line, col) in [
+            ("G0 X0 Y0 G2.95 X1 I1 F100", 10),
+            ("G0.96 X1", 1),
+            ("G90.96 X1", 1),
+            ("G55.96", 1),
+            ("M3.5", 1),
+        ] {
+            let e = refused_at_last(&["G0 X0", line]);
+            assert_eq!(e.column, col, "{line}: {e}");
+            assert!(
+                e.message.contains("is not a G code") || e.message.contains("is not an M code"),
+                "{line}: {e}"
+            );
+        }
+        // Listed codes with their decimals, and zeros after them, are codes.
+        let p = run(&["G90.1", "G1.0 X1 F100", "G54.0", "G91.10"]).expect("valid");
+        assert_eq!(p[1].mv.map(|m| m.motion), Some(Motion::Linear));
+    }
+
+    #[test]
+    fn tool_and_offset_numbers_must_be_whole() {
+        for (line, what) in [
+            ("G43 H1.96 Z10", "tool length offset number"),
+            ("G43 H0.96 Z10", "tool length offset number"),
+            ("T1.5 M6", "tool number"),
+            ("G41 D1.5 X1", "cutter radius offset number"),
+        ] {
+            let e = refused_at_last(&["G0 X0", line]);
+            assert!(e.message.contains(what), "{line}: {e}");
+            assert!(e.message.contains("whole number"), "{line}: {e}");
+            assert_eq!(e.column, line.find(['H', 'T', 'D']).unwrap() + 1, "{line}");
+        }
+        let mut setup = Setup {
+            axes: [true, true, true, false, false, false],
+            units_default: Some(Units::Mm),
+            ..Setup::default()
+        };
+        setup
+            .extra_offsets
+            .insert("G54.1P1".into(), [1.0, 2.0, 3.0]);
+        let e = run_setup(setup, &["G54.1 P1.5"]).expect_err("P not whole");
+        assert!(e.message.contains("whole number ≥ 1"), "{e}");
+        assert_eq!(e.column, 7);
+    }
+
+    #[test]
+    fn extended_work_offsets_come_from_the_setup() {
+        let mut setup = Setup {
+            axes: [true, true, true, false, false, false],
+            units_default: Some(Units::Mm),
+            ..Setup::default()
+        };
+        setup
+            .extra_offsets
+            .insert("G54.1P7".into(), [10.0, 20.0, 30.0]);
+        setup
+            .extra_offsets
+            .insert("G154P1".into(), [-5.0, 0.0, 0.0]);
+        setup
+            .extra_offsets
+            .insert("G154P20".into(), [0.0, -7.0, 0.0]);
+        let p = run_setup(
+            setup.clone(),
+            &[
+                "G54.1 P7 G0 X1 Y1 Z1",
+                "G154 P1 X1",
+                "G110 X2",
+                "G129 Y3",
+                "G54 X0",
+            ],
+        )
+        .expect("valid");
+        assert_eq!(&p[0].mv.unwrap().end[..3], &[11.0, 21.0, 31.0]);
+        assert_eq!(p[1].mv.unwrap().end[0], -4.0);
+        // G110 is G154 P1, G129 is G154 P20.
+        assert_eq!(p[2].mv.unwrap().end[0], -3.0);
+        assert_eq!(p[3].mv.unwrap().end[1], -4.0);
+        assert_eq!(p[4].mv.unwrap().end[0], 0.0);
+        for (line, key) in [
+            ("G54.1 P2", "G54.1P2"),
+            ("G154 P3", "G154P3"),
+            ("G111", "G154P2"),
+        ] {
+            let e = run_setup(setup.clone(), &[line]).expect_err("not in the setup");
+            assert!(e.message.contains(key), "{line}: {e}");
+        }
+        let e = run_setup(setup, &["G154 G0 X1"]).expect_err("no P");
+        assert!(e.message.contains("P word"), "{e}");
+    }
+
+    #[test]
+    fn g30_returns_to_the_reference_point_of_the_setup() {
+        let mut setup = Setup {
+            axes: [true, true, true, false, false, false],
+            units_default: Some(Units::Mm),
+            ..Setup::default()
+        };
+        let e = run_setup(setup.clone(), &["G91 G30 Z0"]).expect_err("no G30 point");
+        assert!(e.message.contains("reference_points_mm"), "{e}");
+        setup
+            .reference_points
+            .insert("G30".into(), [1.0, 2.0, 300.0]);
+        setup
+            .reference_points
+            .insert("G30P3".into(), [5.0, 6.0, 7.0]);
+        let p = run_setup(
+            setup.clone(),
+            &["G0 X10 Y10 Z10", "G91 G30 Z0", "G90 G30 P3 X0 Y0"],
+        )
+        .expect("valid");
+        assert_eq!(p[1].kind, PlanKind::Fixed);
+        assert_eq!(&p[1].mv.unwrap().end[..3], &[10.0, 10.0, 300.0]);
+        assert_eq!(&p[2].mv.unwrap().end[..3], &[5.0, 6.0, 300.0]);
+        let e = run_setup(setup, &["G30 P5 Z0"]).expect_err("P5");
+        assert!(e.message.contains("P2, P3 or P4"), "{e}");
+    }
+
+    #[test]
+    fn a_program_without_units_needs_the_controls_default() {
+        let bare = Setup {
+            axes: [true, true, true, false, false, false],
+            ..Setup::default()
+        };
+        let e = run_setup(bare.clone(), &["G90 G17", "G0 X1 Y2"]).expect_err("no units");
+        assert_eq!((e.line, e.column), (2, 4));
+        assert!(e.message.contains("units_default"), "{e}");
+        // Units set by the program, or the setup's default, are fine.
+        let p = run_setup(bare.clone(), &["G20", "G0 X1"]).expect("G20");
+        assert_abs_diff_eq!(p[1].mv.unwrap().end[0], 25.4, epsilon = TOL);
+        let inch = Setup {
+            units_default: Some(Units::Inch),
+            ..bare
+        };
+        let p = run_setup(inch, &["G0 X1", "G21 G0 X1"]).expect("default inch");
+        assert_abs_diff_eq!(p[0].mv.unwrap().end[0], 25.4, epsilon = TOL);
+        assert_abs_diff_eq!(p[1].mv.unwrap().end[0], 1.0, epsilon = TOL);
+    }
+
+    #[test]
+    fn geometry_neutral_modes_pass_with_their_words() {
+        let p = run(&[
+            "G187 P1 E0.005",
+            "G05 P10000",
+            "G05.1 Q1 R5",
+            "G08 P1",
+            "G61.1",
+            "G64 P0.01 Q0.01",
+            "G103 P1",
+            "G67",
+            "G0 X1 Y1",
+            "G61",
+            "G1 X2 F100",
+        ])
+        .expect("valid");
+        assert!(
+            p[..8]
+                .iter()
+                .all(|p| p.kind == PlanKind::Pass && p.mv.is_none())
+        );
+        assert_eq!(p[10].mv.unwrap().end[0], 102.0);
+    }
+
+    #[test]
+    fn splines_are_refused() {
+        for (line, what) in [
+            ("G5 I1 J1 P2 Q2 X5 Y5", "G5 (cubic spline)"),
+            ("G5 P1 Q1", "G5 (cubic spline)"),
+            ("G5.1 X5 Y5 I1 J1", "G5.1 (quadratic spline)"),
+            ("G5.2 X1 Y1 P1 L3", "NURBS"),
+            ("G6.2 X1 Y1 P1 K0", "NURBS"),
+        ] {
+            let e = refused_at_last(&["G0 X0 Y0", line]);
+            assert!(e.message.contains(what), "{line}: {e}");
+            assert_eq!(e.column, 1, "{line}");
+        }
+    }
+
+    #[test]
+    fn repeats_of_the_same_path_are_kept_and_counted() {
+        let p = run(&[
+            "G0 X0 Y0 Z5",
+            "G99 G81 X10 Y5 Z-3 R2 F80 L3",
+            "G80",
+            "G0 X10 Y0",
+            "G2 I-10 F100 L4",
+            "G1 X20 L2",
+        ])
+        .expect("valid");
+        assert_eq!(p[1].extra_repeats, 2);
+        assert_eq!(p[4].extra_repeats, 3);
+        assert_eq!(p[5].extra_repeats, 0);
+        assert_eq!(p[5].mv.unwrap().end[0], 120.0);
+        for lines in [
+            &["G0 X0 Y0 Z5", "G91 G81 X10 Z-3 R-3 F80 L3"][..],
+            &["G0 X0 Y0 Z5", "G91 G1 X1 F100 L5"][..],
+            &["G0 X0 Y0 Z5", "G1 X1 F100 L0"][..],
+        ] {
+            let e = refused_at_last(lines);
+            assert!(e.message.contains("repeat count"), "{lines:?}: {e}");
+        }
+    }
+
+    #[test]
+    fn other_dialects_are_named() {
+        for (line, dialect) in [
+            ("DEF REAL DEPTH=5", "Siemens"),
+            ("N10 R1=5", "Siemens"),
+            ("CYCLE81(10,0,2,-5)", "Siemens"),
+            ("0 BEGIN PGM PART MM", "Heidenhain"),
+            ("5 L X+10 Y+5 R0 FMAX", "Heidenhain"),
+            ("G1 U-1.5 F0.2", "lathe"),
+        ] {
+            let e = run(&[line]).expect_err("other dialect");
+            assert!(e.message.contains(dialect), "{line}: {e}");
+            assert!(e.message.contains("not supported"), "{line}: {e}");
+        }
+        let e = refused_at_last(&["G0 X0", "G71 P10 Q20 U0.5 W0.1 F0.2"]);
+        assert!(e.message.contains("lathe"), "{e}");
+        let e = refused_at_last(&["G0 X0", "G71 P10 Q20 D1. F0.2"]);
+        assert!(e.message.contains("lathe"), "{e}");
+    }
+
+    #[test]
+    fn tool_centre_point_control_takes_tips_and_refuses_orientation_vectors() {
+        let path = concat!(env!("CARGO_MANIFEST_DIR"), "/machines/five-axis-ac.yaml");
+        let text = std::fs::read_to_string(path).unwrap_or_default();
+        let m = crate::machine::tool::testing::load(&text, "ac");
+        let setup = Setup::for_machine(&m);
+        let p = run_setup(
+            setup.clone(),
+            &["G90 G21 G54 G43.4 H1 G0 X10 Y20 Z30 A30 C45", "G49 G0 Z50"],
+        )
+        .expect("valid");
+        // The axis positions put the nominal tip on the programmed one.
+        let mv = p[0].mv.unwrap();
+        assert!(p[0].tcpm && !p[1].tcpm);
+        let tip = m.tip_of(&mv.end, mv.tool_len_mm);
+        let g54 = m.work_offset_mm("G54").unwrap();
+        for (k, want) in [10.0, 20.0, 30.0].iter().enumerate() {
+            assert_abs_diff_eq!(tip[k], want + g54[k], epsilon = 1e-9);
+        }
+        assert!((mv.end[1] - (20.0 + g54[1])).abs() > 1.0, "A30 moves Y");
+        let e = run_setup(
+            setup.clone(),
+            &["G90 G21 G43.5 H1 G1 X10 Y20 Z30 I0 J0.5 K0.866 F100"],
+        )
+        .expect_err("orientation vector");
+        assert!(e.message.contains("orientation vectors"), "{e}");
+        assert_eq!(e.column, 33);
+        let e =
+            run_setup(setup, &["G21 G43.4 H1 G0 X0 Y0 Z0", "G2 X1 Y1 R1 F100"]).expect_err("arc");
+        assert!(e.message.contains("arcs under G43.4"), "{e}");
+        let e = run(&["G43.4 H1"]).expect_err("no kinematics");
+        assert!(e.message.contains("kinematics"), "{e}");
     }
 }

@@ -10,7 +10,9 @@ use super::component::ComponentErrors;
 use super::location::{
     LocationErrors, LocationKey, SpindleErrors, component_key, location_key, spindle_key,
 };
-use super::raw::{RawAxis, RawAxisType, RawMachineTool, RawProcessForce, RawSide, RawTable};
+use super::raw::{
+    RawAxis, RawAxisType, RawMachineTool, RawProcessForce, RawSide, RawTable, RawUnits,
+};
 use super::table::ErrorTable;
 use super::{Axis, AxisKind, MachineTool, Side};
 use crate::error::{Invalid, Result};
@@ -180,10 +182,12 @@ fn validate(raw: RawMachineTool) -> V<MachineTool> {
     let mut work_offsets = BTreeMap::new();
     for (code, xyz) in &raw.work_offsets_mm {
         let path = format!("work_offsets_mm.{code}");
-        if !matches!(code.as_str(), "G54" | "G55" | "G56" | "G57" | "G58" | "G59") {
+        if !work_offset_key(code) {
             return Err(Invalid::new(
                 path,
-                format!("unknown work offset `{code}` (expected G54 … G59)"),
+                format!(
+                    "unknown work offset `{code}` (expected G54 … G59, G54.1P1 … G54.1P300 or G154P1 … G154P99)"
+                ),
             ));
         }
         for v in xyz {
@@ -191,6 +195,25 @@ fn validate(raw: RawMachineTool) -> V<MachineTool> {
         }
         work_offsets.insert(code.clone(), *xyz);
     }
+
+    let mut reference_points = BTreeMap::new();
+    for (code, xyz) in &raw.reference_points_mm {
+        let path = format!("reference_points_mm.{code}");
+        if !matches!(code.as_str(), "G30" | "G30P3" | "G30P4") {
+            return Err(Invalid::new(
+                path,
+                format!("unknown reference point `{code}` (expected G30, G30P3 or G30P4)"),
+            ));
+        }
+        for v in xyz {
+            plausible(&path, *v)?;
+        }
+        reference_points.insert(code.clone(), *xyz);
+    }
+    let units_default = raw.units_default.map(|u| match u {
+        RawUnits::Mm => super::Units::Mm,
+        RawUnits::Inch => super::Units::Inch,
+    });
 
     let decimals = raw.output.as_ref().and_then(|o| o.decimals_mm);
     let decimals_deg = raw.output.as_ref().and_then(|o| o.decimals_deg);
@@ -246,6 +269,8 @@ fn validate(raw: RawMachineTool) -> V<MachineTool> {
         slot_index,
         tools,
         work_offsets,
+        reference_points,
+        units_default,
         decimals,
         decimals_deg,
         tolerance_mm,
@@ -429,6 +454,21 @@ fn check_rad(path: &str, v: f64) -> V<f64> {
     Ok(v)
 }
 
+/// A key of `work_offsets_mm`: `G54`…`G59`, `G54.1P1`…`G54.1P300`,
+/// `G154P1`…`G154P99`.
+pub(crate) fn work_offset_key(code: &str) -> bool {
+    let numbered = |prefix: &str, max: u32| {
+        code.strip_prefix(prefix).is_some_and(|n| {
+            !n.starts_with('0')
+                && n.bytes().all(|c| c.is_ascii_digit())
+                && n.parse::<u32>().is_ok_and(|n| (1..=max).contains(&n))
+        })
+    };
+    matches!(code, "G54" | "G55" | "G56" | "G57" | "G58" | "G59")
+        || numbered("G54.1P", 300)
+        || numbered("G154P", 99)
+}
+
 fn validate_axis(p: &str, ra: &RawAxis) -> V<Axis> {
     let slot = match ra.name.as_bytes() {
         [b] => axis_slot(*b),
@@ -463,12 +503,6 @@ fn validate_axis(p: &str, ra: &RawAxis) -> V<Axis> {
         RawSide::Workpiece => Side::Workpiece,
         RawSide::Tool => Side::Tool,
     };
-    if kind == AxisKind::Rotary && side == Side::Tool {
-        return Err(Invalid::new(
-            format!("{p}.side"),
-            "rotary axes on the tool side (swivel heads) are not supported; rotary axes must be on the workpiece side",
-        ));
-    }
     let linear = kind == AxisKind::Linear;
     let (unit, travel_key, rapid_key, pos_key) = if linear {
         ("mm", "travel_mm", "rapid_mm_per_min", "positions_mm")

@@ -33,6 +33,7 @@ mod location;
 mod raw;
 pub mod stiffness;
 mod table;
+mod tcpm;
 #[cfg(test)]
 pub(crate) mod testing;
 pub mod thermal;
@@ -41,6 +42,7 @@ pub(crate) use cells::SegmentBounds;
 pub use component::{ComponentErrors, ComponentValue};
 pub use dynamics::{Modal, Mode};
 pub(crate) use fast::SecondGeo;
+pub(crate) use load::work_offset_key;
 pub use location::{LocationErrors, SpindleErrors};
 pub use stiffness::Stiffness;
 pub use table::{ErrorTable, Lookup};
@@ -60,6 +62,15 @@ pub enum AxisKind {
     Linear,
     /// Rotation about x, y or z (degrees in commands).
     Rotary,
+}
+
+/// The unit of length of part programs (G20/G21).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Units {
+    /// Millimetres (G21).
+    Mm,
+    /// Inches (G20).
+    Inch,
 }
 
 /// Which side of the machine structure carries an axis.
@@ -108,6 +119,8 @@ pub struct MachineTool {
     slot_index: [Option<u8>; 6],
     tools: BTreeMap<u32, f64>,
     work_offsets: BTreeMap<String, [f64; 3]>,
+    reference_points: BTreeMap<String, [f64; 3]>,
+    units_default: Option<Units>,
     decimals: Option<usize>,
     decimals_deg: Option<usize>,
     /// `compensation.tolerance_mm`: the default tolerance of compensated
@@ -195,7 +208,8 @@ impl MachineTool {
         self.tools.iter().map(|(&h, &l)| (h, l))
     }
 
-    /// Work offset `G54`…`G59` (machine coordinates of the work zero), mm.
+    /// Work offset `G54`…`G59`, `G54.1P1`…, `G154P1`… (machine
+    /// coordinates of the work zero), mm.
     pub fn work_offset_mm(&self, code: &str) -> Option<[f64; 3]> {
         self.work_offsets.get(code).copied()
     }
@@ -205,6 +219,22 @@ impl MachineTool {
     /// if the machine file gives one.
     pub fn compensation_tolerance_mm(&self) -> Option<f64> {
         self.tolerance_mm
+    }
+
+    /// Every work offset of the file, by key.
+    pub fn work_offsets(&self) -> impl Iterator<Item = (&String, &[f64; 3])> {
+        self.work_offsets.iter()
+    }
+
+    /// The reference points of G30 (`G30`, `G30P3`, `G30P4`), machine
+    /// coordinates of X, Y, Z, mm.
+    pub fn reference_points(&self) -> impl Iterator<Item = (&String, &[f64; 3])> {
+        self.reference_points.iter()
+    }
+
+    /// The control's unit for programs that set none (`units_default`).
+    pub fn units_default(&self) -> Option<Units> {
+        self.units_default
     }
 
     /// Output decimals for mm programs, if the machine file fixes them.
@@ -1001,6 +1031,74 @@ mod tests {
                 }
             }
         }
+    }
+
+    /// A B head on X, Y, Z over a C table, error free: table pivot
+    /// (10, 20, 0), head pivot 120 mm above the gauge line.
+    const HEAD_TABLE: &str = "kind: machine_tool
+name: head table
+axes:
+  - { name: C, type: rotary, side: workpiece, pivot_mm: [10, 20, 0], travel_deg: [-360, 360], rapid_deg_per_min: 3600 }
+  - { name: X, type: linear, side: tool, travel_mm: [-500, 500], rapid_mm_per_min: 10000 }
+  - { name: Y, type: linear, side: tool, travel_mm: [-500, 500], rapid_mm_per_min: 10000 }
+  - { name: Z, type: linear, side: tool, travel_mm: [-500, 500], rapid_mm_per_min: 10000 }
+  - { name: B, type: rotary, side: tool, pivot_mm: [0, 0, 120], travel_deg: [-110, 110], rapid_deg_per_min: 3600 }
+";
+
+    /// Tolerance of hand-derived head poses (rounded decimals of cos 30°).
+    const HAND_TOL: f64 = 1e-9;
+
+    #[test]
+    fn a_swivel_head_turns_the_tool_about_its_pivot_by_hand() {
+        // pos = P_C + Rz(C)·(p + c − Ry(B)·c − P_C), c = P_B + L·ẑ, dir =
+        // Rz(C)·Ry(B)·ẑ, with Ry(θ)(x, y, z) = (x cos θ + z sin θ, y,
+        // −x sin θ + z cos θ) and Rz(90°)(x, y, z) = (−y, x, z).
+        let m = testing::load(HEAD_TABLE, "head.yaml");
+        let l = 80.0;
+        // c = (0, 0, 200). B = 90°, C = 0: Ry c = (200, 0, 0), tip at
+        // p + (−200, 0, 200), tool axis +x.
+        let t = m.nominal(&[10.0, 20.0, 30.0, 0.0, 90.0, 0.0], l);
+        assert!(
+            (t.pos - Vector3::new(-190.0, 20.0, 230.0)).norm() < HAND_TOL,
+            "{t:?}"
+        );
+        assert!((t.dir - Vector3::x()).norm() < HAND_TOL, "{t:?}");
+        // B = 30°, C = 90°, p = (50, 20, 30): Ry c = (100, 0, 173.2050808),
+        // r = p + c − Ry c = (−50, 20, 56.7949192), r − P_C = (−60, 0, 56.79…)
+        // → (0, −60, 56.79…) → + P_C = (10, −40, 56.7949192); dir
+        // Rz(90°)(0.5, 0, 0.8660254) = (0, 0.5, 0.8660254).
+        let t = m.nominal(&[50.0, 20.0, 30.0, 0.0, 30.0, 90.0], l);
+        let z = 230.0 - 200.0 * 30f64.to_radians().cos();
+        assert!(
+            (t.pos - Vector3::new(10.0, -40.0, z)).norm() < HAND_TOL,
+            "{t:?}"
+        );
+        let d = Vector3::new(0.0, 0.5, 30f64.to_radians().cos());
+        assert!((t.dir - d).norm() < HAND_TOL, "{t:?}");
+        // An error-free head attains what it is commanded.
+        let g = m.geometric(&[50.0, 20.0, 30.0, 0.0, 30.0, 90.0], &[1; 6], l);
+        assert!((g.pos - t.pos).norm() < HAND_TOL);
+    }
+
+    #[test]
+    fn a_head_offset_error_acts_only_when_the_head_turns() {
+        // EX0B = d along x: the error is (I − Ry(B))·d, zero at B = 0; at
+        // B = 90° Ry(90°)(d, 0, 0) = (0, 0, −d), so the tip moves by (d, 0, d).
+        let text = HEAD_TABLE.replace(
+            "pivot_mm: [0, 0, 120], travel_deg: [-110, 110], rapid_deg_per_min: 3600 }",
+            "pivot_mm: [0, 0, 120], travel_deg: [-110, 110], rapid_deg_per_min: 3600, location_errors: { EX0B_mm: 0.01 } }",
+        );
+        let m = testing::load(&text, "head.yaml");
+        let at = |b: f64| {
+            let c = [10.0, 20.0, 30.0, 0.0, b, 0.0];
+            m.geometric(&c, &[1; 6], 80.0).pos - m.nominal(&c, 80.0).pos
+        };
+        assert!(at(0.0).norm() < HAND_TOL, "{:?}", at(0.0));
+        assert!(
+            (at(90.0) - Vector3::new(0.01, 0.0, 0.01)).norm() < HAND_TOL,
+            "{:?}",
+            at(90.0)
+        );
     }
 
     #[test]

@@ -19,6 +19,10 @@ pub(crate) struct RawMachineTool {
     #[serde(default)]
     pub work_offsets_mm: BTreeMap<String, [f64; 3]>,
     #[serde(default)]
+    pub reference_points_mm: BTreeMap<String, [f64; 3]>,
+    #[serde(default)]
+    pub units_default: Option<RawUnits>,
+    #[serde(default)]
     pub output: Option<RawOutput>,
     #[serde(default)]
     pub compensation: Option<RawCompensation>,
@@ -30,6 +34,14 @@ pub(crate) struct RawMachineTool {
     pub thermal: Option<RawThermal>,
     #[serde(default)]
     pub modal: Option<RawModal>,
+}
+
+/// The control's unit for programs without G20/G21.
+#[derive(Debug, Deserialize, Clone, Copy, PartialEq, Eq)]
+#[serde(rename_all = "lowercase")]
+pub(crate) enum RawUnits {
+    Mm,
+    Inch,
 }
 
 /// Linear or rotary axis.

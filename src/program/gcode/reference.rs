@@ -37,6 +37,10 @@ fn show(bytes: &[u8]) -> String {
 ///
 /// Errors are located at `file:line:column` and quote the offending text.
 pub fn parse_line(line: &[u8], line_no: usize, file: &str, out: &mut Block) -> Result<(), Located> {
+    scan_line(line, line_no, file, out).map_err(|e| super::dialect::refine(line, e))
+}
+
+fn scan_line(line: &[u8], line_no: usize, file: &str, out: &mut Block) -> Result<(), Located> {
     out.clear();
     out.line_no = line_no;
     let text = strip_eol(line);
