@@ -143,6 +143,9 @@ pub struct Summary {
     pub added: usize,
     /// Predicted deviation of the uncompensated program, mm.
     pub deviation: DevStats,
+    /// The same over the cutting moves only (feeds, arcs and cycle holes;
+    /// not rapids, not moves to machine-defined places such as G28), mm.
+    pub cutting: DevStats,
     /// Largest position error left after compensation, mm.
     pub max_residual_mm: f64,
     /// Line of the largest position error left (0 when none).
@@ -860,6 +863,9 @@ impl<'m> Job<'m> {
                     if plan.kind != PlanKind::Pass {
                         let dev = r.deviation.total().norm();
                         summary.deviation.add(dev, block.line_no);
+                        if plan.kind != PlanKind::Fixed && mv.motion != Motion::Rapid {
+                            summary.cutting.add(dev, block.line_no);
+                        }
                         if mv.motion != Motion::Rapid && r.residual_mm > summary.max_residual_mm {
                             summary.max_residual_mm = r.residual_mm;
                             summary.max_residual_line = block.line_no;

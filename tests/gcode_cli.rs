@@ -5,7 +5,7 @@
 use std::fs;
 use std::path::{Path, PathBuf};
 
-use crate::common::{postproc, repo};
+use crate::common::{postproc, repo, without_header};
 
 /// A minimal machine file: today's loader needs only the kind.
 fn machine(dir: &Path) -> PathBuf {
@@ -66,7 +66,8 @@ fn compensate_without_effects_is_byte_identical_to_file() {
             .arg(&out)
             .assert()
             .success();
-        let written = fs::read(&out).expect("output written");
+        // The provenance header is the only addition.
+        let written = without_header(&fs::read(&out).expect("output written"));
         assert!(
             written == original,
             "{}: output differs from input",
@@ -94,7 +95,7 @@ fn compensate_without_effects_is_byte_identical_to_stdout() {
             .stdout
             .clone();
         assert!(
-            out == original,
+            without_header(&out) == original,
             "{}: stdout differs from input",
             input.display()
         );
@@ -129,8 +130,9 @@ fn compensate_default_output_name_is_stem_comp_ext() {
             .to_string_lossy()
             .to_string();
         let expected = tmp.path().join(format!("{stem}.comp.{ext}"));
-        let written =
-            fs::read(&expected).unwrap_or_else(|_| panic!("{} not written", expected.display()));
+        let written = without_header(
+            &fs::read(&expected).unwrap_or_else(|_| panic!("{} not written", expected.display())),
+        );
         assert!(
             written == fs::read(&input).expect("read"),
             "{}",
@@ -155,7 +157,10 @@ fn compensate_reads_stdin() {
         .get_output()
         .stdout
         .clone();
-    assert!(out == original, "stdin pass-through differs");
+    assert!(
+        without_header(&out) == original,
+        "stdin pass-through differs"
+    );
 }
 
 #[test]

@@ -17,6 +17,7 @@ mod machine_tool;
 mod observations;
 mod paper_b;
 mod peers;
+mod provenance_cli;
 mod rapid;
 mod rapid_cli;
 mod rapid_stream;

@@ -282,10 +282,12 @@ fn table_and_csv_reports_for_gcode_and_rapid() {
     for row in &data {
         assert_eq!(row.split(',').count(), 15, "{row}");
     }
+    // The summary comment line, then the provenance comment line.
+    let tail: Vec<&str> = csv.lines().rev().take(2).collect();
+    assert!(tail[1].starts_with("# summary:"), "{csv}");
     assert!(
-        csv.lines()
-            .last()
-            .is_some_and(|l| l.starts_with("# summary:"))
+        tail[0].starts_with("# provenance: postproc ") && tail[0].contains("abb-irb1600.yaml"),
+        "{csv}"
     );
 
     let rapid_table = drilling_report("table");

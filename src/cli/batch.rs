@@ -21,6 +21,7 @@ use super::gcode::{
 use super::rapid::{Source, load_robot};
 use super::{Annotate, BatchArgs, Format, ProgramArgs, usage};
 use crate::compensate::rapid::{RapidOptions, compensate_module};
+use crate::emit::header::{HeaderWriter, Provenance};
 use crate::error::{Error, Result};
 use crate::machine::Machine;
 
@@ -220,6 +221,14 @@ enum Engine<'m> {
     Robot(crate::machine::robot::Robot, RapidOptions, Option<usize>),
 }
 
+/// What every program of the batch shares: the engine, the provenance its
+/// outputs carry, and whether programs compensated before are taken.
+struct Setting<'m> {
+    engine: Engine<'m>,
+    provenance: Provenance,
+    recompensate: bool,
+}
+
 /// Path of a program's report beside its output: `<output>.report.<ext>`.
 fn report_path(output: &Path, format: Format) -> PathBuf {
     let ext = match format {
@@ -234,7 +243,7 @@ fn report_path(output: &Path, format: Format) -> PathBuf {
 }
 
 fn compensate_one(
-    engine: &Engine,
+    setting: &Setting,
     input: &Path,
     output: &Path,
     report: Option<Format>,
@@ -252,7 +261,8 @@ fn compensate_one(
         std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
     }
     let name = input.display().to_string();
-    match engine {
+    let provenance = &setting.provenance;
+    match &setting.engine {
         Engine::Tool(job) => {
             if is_rapid(input) {
                 return Err(usage(format!(
@@ -260,25 +270,34 @@ fn compensate_one(
                 )));
             }
             let f = std::fs::File::open(input).map_err(|e| Error::io(input, e))?;
-            let reader = BufReader::with_capacity(1 << 16, f);
+            let reader = Box::new(BufReader::with_capacity(1 << 16, f));
+            let (head, reader) = super::machines::peek_head(reader, &name)?;
+            super::machines::refuse_compensated(&head, &name, setting.recompensate)?;
             let s = match report {
                 Some(format) => {
                     // Neither output is put in place unless both are written.
                     let mut rep = Staged::open(&report_path(output, format))?;
                     let mut out = Staged::open(output)?;
+                    let mut hw = HeaderWriter::new(out.writer(), provenance.clone(), false);
                     let s = run_reporting(
                         job,
-                        Box::new(reader),
+                        reader,
                         &name,
-                        Some(out.writer()),
+                        Some(&mut hw),
                         rep.writer(),
-                        &job.setup,
                         format,
+                        Some(provenance),
                     )?;
+                    hw.finish().map_err(|e| Error::io(output, e))?;
                     finish_both(out, rep)?;
                     s
                 }
-                None => write_atomically(output, |w| job.run(reader, &name, Some(w), None))?,
+                None => write_atomically(output, |w| {
+                    let mut hw = HeaderWriter::new(w, provenance.clone(), false);
+                    let s = job.run(reader, &name, Some(&mut hw), None)?;
+                    hw.finish().map_err(|e| Error::io(output, e))?;
+                    Ok(s)
+                })?,
             };
             Ok(Done {
                 blocks: s.blocks,
@@ -311,6 +330,11 @@ fn compensate_one(
             // A large module is read a window at a time, as by `compensate`.
             let warm = crate::compensate::rapid::stream::first_pass(robot, &opts);
             let source = Source::new(input, *forced_window, warm)?;
+            super::machines::refuse_compensated(
+                &source.head()?,
+                source.name(),
+                setting.recompensate,
+            )?;
             if let Some(lines) = source.window_lines() {
                 let streamed = super::rapid::compensate_streamed_to(
                     &source,
@@ -319,6 +343,7 @@ fn compensate_one(
                     lines,
                     Some(output),
                     report_to,
+                    provenance,
                 )?;
                 if let Some(outcome) = streamed {
                     return Ok(done(&outcome));
@@ -326,7 +351,7 @@ fn compensate_one(
             }
             let (src, name) = source.read_whole()?;
             let outcome = compensate_module(&src, &name, robot, &opts)?;
-            super::rapid::write_outcome(output, &outcome, &name, report_to)?;
+            super::rapid::write_outcome(output, &outcome, &name, report_to, provenance)?;
             Ok(done(&outcome))
         }
     }
@@ -335,10 +360,9 @@ fn compensate_one(
 /// `postproc batch`; `quiet` hides the progress bar.
 pub fn run(a: &BatchArgs, quiet: bool) -> Result<i32> {
     let pool = thread_pool(a.effects.threads)?;
-    let machine_path = Machine::resolve(&a.machine)?;
-    let machine = Machine::load(&machine_path)?;
+    let (machine, loaded) = super::machines::open(&a.machine)?;
     // The files every program's run reads besides the program itself.
-    let mut files = vec![machine_path.clone()];
+    let mut files: Vec<PathBuf> = loaded.file.path.iter().cloned().collect();
     files.extend(a.effects.force_table.clone());
     let items = collect(&a.inputs, &a.out_dir);
     if items.is_empty() {
@@ -351,7 +375,7 @@ pub fn run(a: &BatchArgs, quiet: bool) -> Result<i32> {
     let annotate = a.annotate == Annotate::Comment;
     let tool;
     let process;
-    let engine = match machine {
+    let (engine, effects_run) = match machine {
         Machine::Tool(m) => {
             tool = m;
             let program = ProgramArgs {
@@ -368,19 +392,23 @@ pub fn run(a: &BatchArgs, quiet: bool) -> Result<i32> {
                     "batch starts every program cold (--thermal-start cold); a steady or warm-up start needs each program's mean power, so compensate those one by one",
                 ));
             }
+            let set = effects(&a.effects)?;
             let mut job = build_job(
                 &tool,
                 &process,
                 &pool,
                 setup,
-                effects(&a.effects)?,
+                set,
                 a.tolerance,
                 None,
                 annotate,
             )?;
             // The programs already run on the pool's threads.
             job.pool = None;
-            Engine::Tool(Box::new(job))
+            (
+                Engine::Tool(Box::new(job)),
+                super::machines::tool_effects(&set),
+            )
         }
         Machine::Robot(_) => {
             if !a.tools.is_empty() || !a.work_offsets.is_empty() {
@@ -393,8 +421,20 @@ pub fn run(a: &BatchArgs, quiet: bool) -> Result<i32> {
             if a.rapid_window_lines == Some(0) {
                 return Err(usage("--rapid-window-lines must be at least 1"));
             }
-            Engine::Robot(robot, opts, a.rapid_window_lines)
+            let effects = super::machines::robot_effects(&opts.effects);
+            (Engine::Robot(robot, opts, a.rapid_window_lines), effects)
         }
+    };
+    let is_tool = matches!(engine, Engine::Tool(_));
+    let setting = Setting {
+        engine,
+        provenance: super::machines::provenance(
+            &loaded,
+            effects_run,
+            is_tool.then_some(a.tolerance),
+            annotate,
+        ),
+        recompensate: a.recompensate,
     };
     // The output folder is made once every option has been checked; the
     // summary may not be an input either (checked before any program).
@@ -418,7 +458,7 @@ pub fn run(a: &BatchArgs, quiet: bool) -> Result<i32> {
                 let output = a.out_dir.join(&item.rel);
                 let done = match &item.problem {
                     Some(p) => Err(usage(p.clone())),
-                    None => compensate_one(&engine, &item.input, &output, a.report_format, &files),
+                    None => compensate_one(&setting, &item.input, &output, a.report_format, &files),
                 };
                 bar.inc(1);
                 let input = item.input.display().to_string();

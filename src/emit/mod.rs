@@ -2,6 +2,7 @@
 
 pub(crate) mod fixed;
 pub mod gcode;
+pub mod header;
 pub mod rapid;
 pub mod report;
 pub mod svg;

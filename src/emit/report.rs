@@ -179,6 +179,8 @@ pub struct ReportWriter<'w> {
     worst_cut: Option<PlotWorst>,
     /// The program file, re-read at the end for the text of the worst blocks.
     source: Option<std::path::PathBuf>,
+    /// What made the run (machine file, effects, tolerance).
+    provenance: Option<crate::emit::header::Provenance>,
 }
 
 /// Longest source text quoted for a worst block, characters.
@@ -302,6 +304,7 @@ impl<'w> ReportWriter<'w> {
             worst_point: None,
             worst_cut: None,
             source: None,
+            provenance: None,
         };
         let mut cols: Vec<String> = vec!["line".into(), "motion".into()];
         for (a, unit) in &w.layout.axes {
@@ -349,6 +352,13 @@ impl<'w> ReportWriter<'w> {
         if path != std::path::Path::new("-") {
             self.source = Some(path.to_path_buf());
         }
+        self
+    }
+
+    /// Records what made the run in the report (CSV and table: a comment
+    /// line at the end; JSON: `provenance`).
+    pub fn with_provenance(mut self, provenance: Option<&crate::emit::header::Provenance>) -> Self {
+        self.provenance = provenance.cloned();
         self
     }
 
@@ -526,9 +536,14 @@ impl<'w> ReportWriter<'w> {
                         worst.join(",")
                     ));
                 }
+                let provenance = self
+                    .provenance
+                    .as_ref()
+                    .map(|p| format!(",\"provenance\":{}", p.to_json()))
+                    .unwrap_or_default();
                 writeln!(
                     self.out,
-                    "],\"summary\":{{\"blocks\":{},\"moves\":{},\"rows\":{},\"mean_mm\":{},\"max_mm\":{},\"max_line\":{},\"p95_mm\":{},\"effects\":[{}]}}}}",
+                    "],\"summary\":{{\"blocks\":{},\"moves\":{},\"rows\":{},\"mean_mm\":{},\"max_mm\":{},\"max_line\":{},\"p95_mm\":{},\"effects\":[{}]}}{provenance}}}",
                     totals.blocks,
                     totals.moves,
                     rows,
@@ -568,6 +583,9 @@ impl<'w> ReportWriter<'w> {
                     .unwrap_or_default();
                 line.push_str(&format!("; worst lines {}", worst.join(" ")));
                 writeln!(self.out, "{line}").map_err(io)?;
+                if let Some(p) = &self.provenance {
+                    writeln!(self.out, "# provenance: {}", p.one_line()).map_err(io)?;
+                }
             }
             Format::Table => {
                 writeln!(
@@ -609,6 +627,9 @@ impl<'w> ReportWriter<'w> {
                             format!("  line {line:<6} {:>10} mm  {motion:<9} {text}", num(*v, 5));
                         writeln!(self.out, "{}", row.trim_end()).map_err(io)?;
                     }
+                }
+                if let Some(p) = &self.provenance {
+                    writeln!(self.out, "provenance: {}", p.one_line()).map_err(io)?;
                 }
             }
             Format::Svg => {
