@@ -70,12 +70,23 @@ pub const BATCH_EXIT_HELP: &str = "Exit codes: 0 every program compensated; 1 ev
 #[derive(Debug, Args)]
 pub struct BatchArgs {
     /// Programs or folders (searched recursively for .nc .ngc .tap .gcode
-    /// .cnc and RAPID .mod .modx .prg).
+    /// .cnc and RAPID .mod .modx .prg); with --merge-summaries, the
+    /// summaries of the shards.
     #[arg(required = true)]
     pub inputs: Vec<PathBuf>,
     /// Machine file, or the name of a bundled one (`postproc machines`).
-    #[arg(short, long)]
-    pub machine: String,
+    #[arg(short, long, required_unless_present = "merge_summaries")]
+    pub machine: Option<String>,
+    /// Compensate only the K-th of N shares of the programs (1 <= K <= N):
+    /// program i of the sorted list belongs to share i mod N + 1, so N runs
+    /// with K = 1..N cover every program once (a Slurm job array, a
+    /// Kubernetes indexed Job; docs/batch.md).
+    #[arg(long, value_name = "K/N", conflicts_with = "merge_summaries")]
+    pub shard: Option<String>,
+    /// Merge the batch-summary.json files of shards (the inputs) into one
+    /// in --out-dir; nothing is compensated.
+    #[arg(long)]
+    pub merge_summaries: bool,
     /// Folder for the compensated programs (same names; folder inputs keep
     /// their sub-folders) and batch-summary.json.
     #[arg(long)]
