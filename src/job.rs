@@ -456,6 +456,45 @@ impl<'a> Tracker<'a> {
     }
 }
 
+/// A compensation failure in words. A programmed position beyond the
+/// travel is a machine coordinate: it is given with its work coordinate
+/// and the work and tool offsets between them (`machine Y = 500.0500
+/// (work Y350.0500 + offsets 150.0000 mm) is outside the travel [0, 500]`).
+fn failure_text(f: &Failure, plan: &Plan) -> String {
+    match *f {
+        Failure::ProgrammedOutOfTravel {
+            axis,
+            value,
+            limits,
+        } => {
+            let slot = crate::machine::axis_slot(axis as u8).unwrap_or(0);
+            let (offset, scale) = if slot < 3 {
+                (plan.offset[slot], plan.scale)
+            } else {
+                (0.0, 1.0)
+            };
+            let scale = if scale.is_finite() && scale > 0.0 {
+                scale
+            } else {
+                1.0
+            };
+            let program = (value - offset) / scale;
+            let unit = if slot >= 3 {
+                " deg"
+            } else if scale != 1.0 {
+                " in"
+            } else {
+                ""
+            };
+            format!(
+                "machine {axis} = {value:.4} (work {axis}{program:.4}{unit} + offsets {offset:.4} mm) is outside the travel [{}, {}]",
+                limits.0, limits.1
+            )
+        }
+        _ => f.to_string(),
+    }
+}
+
 fn motion_label(plan: &Plan) -> &'static str {
     match (plan.kind, plan.mv.map(|m| m.motion)) {
         (PlanKind::Cycle { .. }, _) => "cycle",
@@ -767,7 +806,11 @@ impl<'m> Job<'m> {
                                 file,
                                 block.line_no,
                                 1,
-                                format!("{f}: `{}`", String::from_utf8_lossy(text).trim()),
+                                format!(
+                                    "{}: `{}`",
+                                    failure_text(&f, plan),
+                                    String::from_utf8_lossy(text).trim()
+                                ),
                             )));
                         }
                     }
@@ -849,7 +892,8 @@ impl<'m> Job<'m> {
                             block.line_no,
                             1,
                             format!(
-                                "{f}: `{}`",
+                                "{}: `{}`",
+                                failure_text(f, plan),
                                 String::from_utf8_lossy(crate::program::gcode::strip_eol(
                                     chunk.line(i)
                                 ))

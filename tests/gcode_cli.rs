@@ -478,3 +478,33 @@ fn report_table_has_a_row_per_motion_block() {
     assert_eq!(rows, PART_MOTION_BLOCKS);
     assert!(out.contains("summary: 54 rows"), "{out}");
 }
+
+#[test]
+fn regression_travel_error_names_the_machine_coordinate_and_the_work_coordinate() {
+    // Y350.05 in G54 (Y 150) is machine Y500.05, beyond the travel [0, 500]:
+    // the message calls it a machine coordinate and shows the work
+    // coordinate and the offset between them.
+    let tmp = tempfile::tempdir().expect("temp dir");
+    let p = tmp.path().join("p.nc");
+    fs::write(&p, "G90 G54 G0 X10 Y10\nG0 Y350.05\n").expect("write");
+    for command in ["check", "compensate"] {
+        let out = postproc()
+            .arg(command)
+            .arg(&p)
+            .args(
+                ["--machine", "afm-r1000", "-o", "-"]
+                    .iter()
+                    .take(if command == "check" { 2 } else { 4 }),
+            )
+            .output()
+            .expect("runs");
+        assert_eq!(out.status.code(), Some(2), "{command}");
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(
+            err.contains(
+                "p.nc:2:1: machine Y = 500.0500 (work Y350.0500 + offsets 150.0000 mm) is outside the travel [0, 500]: `G0 Y350.05`"
+            ),
+            "{command}: {err}"
+        );
+    }
+}
