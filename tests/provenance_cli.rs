@@ -422,3 +422,57 @@ fn calibrate_records_a_calibrated_status_that_programs_then_carry() {
     );
     assert!(!String::from_utf8_lossy(&run.stderr).contains("example values"));
 }
+
+#[test]
+fn report_headline_is_about_the_cutting_moves_with_positioning_moves_apart() {
+    let part = repo("samples/part.nc");
+    let run = postproc()
+        .args(["report", "-m", "afm-r1000", "--format", "json"])
+        .arg(&part)
+        .output()
+        .unwrap();
+    let v: serde_json::Value = serde_json::from_slice(&run.stdout).unwrap();
+    // Counted from the rows themselves: which are cutting moves, and the
+    // largest deviation of each group.
+    let rows = v["rows"].as_array().unwrap();
+    let positioning = |m: &str| matches!(m, "rapid" | "fixed");
+    let group_max = |cut: bool| {
+        rows.iter()
+            .filter(|r| positioning(r["motion"].as_str().unwrap()) != cut)
+            .map(|r| (r["dev_mm"].as_f64().unwrap(), r["line"].as_u64().unwrap()))
+            .fold((0.0, 0), |a, b| if b.0 > a.0 { b } else { a })
+    };
+    let (cut_max, cut_line) = group_max(true);
+    let (pos_max, pos_line) = group_max(false);
+    let s = &v["summary"];
+    assert_eq!(s["cutting"]["max_line"].as_u64().unwrap(), cut_line);
+    assert_eq!(s["cutting"]["max_mm"].as_f64().unwrap(), cut_max);
+    assert_eq!(s["positioning"]["max_line"].as_u64().unwrap(), pos_line);
+    assert_eq!(s["positioning"]["max_mm"].as_f64().unwrap(), pos_max);
+    assert!(
+        s["cutting"]["worst"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .all(|w| !positioning(w["motion"].as_str().unwrap()))
+    );
+    // The table leads with the same headline and labels the positions.
+    let table = postproc()
+        .args(["report", "-m", "afm-r1000"])
+        .arg(&part)
+        .output()
+        .unwrap();
+    let text = String::from_utf8_lossy(&table.stdout);
+    let headline = text
+        .lines()
+        .find(|l| l.starts_with("cutting moves ("))
+        .unwrap_or_else(|| panic!("{text}"));
+    assert!(
+        headline.contains(&format!("(line {cut_line})"))
+            && headline.contains("rapids and machine-defined moves")
+            && headline.ends_with(&format!("(line {pos_line})")),
+        "{headline}"
+    );
+    assert!(text.contains("\nworst cutting blocks:\n"), "{text}");
+    assert!(text.contains("\npositions: machine coordinates"), "{text}");
+}
