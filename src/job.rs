@@ -145,6 +145,9 @@ pub struct Summary {
     pub added_by: crate::emit::gcode::AddedLines,
     /// Predicted deviation of the uncompensated program, mm.
     pub deviation: DevStats,
+    /// The same over the cutting moves only (feeds, arcs and cycle holes;
+    /// not rapids, not moves to machine-defined places such as G28), mm.
+    pub cutting: DevStats,
     /// Largest position error left after compensation, mm.
     pub max_residual_mm: f64,
     /// Line of the largest position error left (0 when none).
@@ -453,6 +456,45 @@ impl<'a> Tracker<'a> {
             message,
             count: 1,
         });
+    }
+}
+
+/// A compensation failure in words. A programmed position beyond the
+/// travel is a machine coordinate: it is given with its work coordinate
+/// and the work and tool offsets between them (`machine Y = 500.0500
+/// (work Y350.0500 + offsets 150.0000 mm) is outside the travel [0, 500]`).
+fn failure_text(f: &Failure, plan: &Plan) -> String {
+    match *f {
+        Failure::ProgrammedOutOfTravel {
+            axis,
+            value,
+            limits,
+        } => {
+            let slot = crate::machine::axis_slot(axis as u8).unwrap_or(0);
+            let (offset, scale) = if slot < 3 {
+                (plan.offset[slot], plan.scale)
+            } else {
+                (0.0, 1.0)
+            };
+            let scale = if scale.is_finite() && scale > 0.0 {
+                scale
+            } else {
+                1.0
+            };
+            let program = (value - offset) / scale;
+            let unit = if slot >= 3 {
+                " deg"
+            } else if scale != 1.0 {
+                " in"
+            } else {
+                ""
+            };
+            format!(
+                "machine {axis} = {value:.4} (work {axis}{program:.4}{unit} + offsets {offset:.4} mm) is outside the travel [{}, {}]",
+                limits.0, limits.1
+            )
+        }
+        _ => f.to_string(),
     }
 }
 
@@ -767,7 +809,11 @@ impl<'m> Job<'m> {
                                 file,
                                 block.line_no,
                                 1,
-                                format!("{f}: `{}`", String::from_utf8_lossy(text).trim()),
+                                format!(
+                                    "{}: `{}`",
+                                    failure_text(&f, plan),
+                                    String::from_utf8_lossy(text).trim()
+                                ),
                             )));
                         }
                     }
@@ -852,7 +898,8 @@ impl<'m> Job<'m> {
                             block.line_no,
                             1,
                             format!(
-                                "{f}: `{}`",
+                                "{}: `{}`",
+                                failure_text(f, plan),
                                 String::from_utf8_lossy(crate::program::gcode::strip_eol(
                                     chunk.line(i)
                                 ))
@@ -866,6 +913,9 @@ impl<'m> Job<'m> {
                     if plan.kind != PlanKind::Pass {
                         let dev = r.deviation.total().norm();
                         summary.deviation.add(dev, block.line_no);
+                        if plan.kind != PlanKind::Fixed && mv.motion != Motion::Rapid {
+                            summary.cutting.add(dev, block.line_no);
+                        }
                         if mv.motion != Motion::Rapid && r.residual_mm > summary.max_residual_mm {
                             summary.max_residual_mm = r.residual_mm;
                             summary.max_residual_line = block.line_no;

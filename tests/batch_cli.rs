@@ -110,6 +110,17 @@ fn validate(summary: &serde_json::Value) {
     let mut compiler = boon::Compiler::new();
     let url = "https://postproc.example/schemas/batch-summary.schema.json";
     compiler.add_resource(url, schema).expect("schema resource");
+    // The provenance object is defined in the report schema.
+    let report: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(repo("schemas/report.schema.json")).expect("report schema"),
+    )
+    .expect("report schema is JSON");
+    compiler
+        .add_resource(
+            "https://postproc.example/schemas/report.schema.json",
+            report,
+        )
+        .expect("report schema resource");
     let idx = compiler
         .compile(url, &mut schemas)
         .expect("schema compiles");
@@ -147,6 +158,8 @@ fn batch_of_fifty_reports_exactly_the_broken_ones_and_is_thread_independent() {
         .map(|r| {
             assert!(r["output"].is_null());
             assert!(r["error"].as_str().is_some_and(|e| !e.is_empty()));
+            // A failed program has no deviation (not 0).
+            assert!(r["max_deviation_mm"].is_null() && r["max_deviation_line"].is_null());
             r["input"].as_str().unwrap_or("").to_string()
         })
         .collect();
@@ -166,7 +179,16 @@ fn batch_of_fifty_reports_exactly_the_broken_ones_and_is_thread_independent() {
     for f in &expected {
         assert!(stdout1.contains(f.as_str()), "{stdout1}");
     }
-    assert!(stdout1.contains("batch: 50 programs: 47 compensated (0 with findings), 3 failed"));
+    assert!(
+        stdout1.contains(
+            "batch: 50 programs: 47 compensated (0 with findings, 0 empty), 3 failed; 1 skipped"
+        ),
+        "{stdout1}"
+    );
+    // The file that is not a program is listed as skipped.
+    let notes = input.join("notes.txt").display().to_string();
+    assert_eq!(summary["skipped"][0]["path"], notes.as_str());
+    assert!(stdout1.contains(&format!("skipped   {notes}: not a program extension")));
 
     // 47 compensated programs (same relative names) + the summary; no
     // partial or temporary files for the broken ones.
@@ -256,4 +278,221 @@ fn batch_exit_codes_success_and_usage() {
     // --help lists the exit codes.
     let help = postproc().args(["batch", "--help"]).output().expect("help");
     assert!(String::from_utf8_lossy(&help.stdout).contains("Exit codes: 0"));
+}
+
+fn run_batch(args: &[&str]) -> (i32, String, String) {
+    let out = postproc().args(args).output().expect("runs");
+    (
+        out.status.code().unwrap_or(-1),
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+fn summary_of(dir: &Path) -> serde_json::Value {
+    let v: serde_json::Value = serde_json::from_slice(
+        &std::fs::read(dir.join("batch-summary.json")).expect("summary written"),
+    )
+    .expect("JSON");
+    validate(&v);
+    v
+}
+
+#[test]
+fn shards_cover_every_program_once_and_merge_into_the_whole_batch_summary() {
+    let tmp = tempfile::tempdir().expect("temp dir");
+    let input = tmp.path().join("in");
+    make_inputs(&input);
+    let inp = input.to_str().unwrap();
+    let whole = tmp.path().join("whole");
+    let (code, _, err) = run_batch(&[
+        "-q",
+        "batch",
+        "--machine",
+        "afm-r1000",
+        "--tool",
+        "H1=100",
+        "--out-dir",
+        whole.to_str().unwrap(),
+        inp,
+    ]);
+    assert_eq!(code, 2, "{err}");
+    let mut shard_summaries = Vec::new();
+    let mut seen = Vec::new();
+    for k in 1..=3 {
+        let out = tmp.path().join(format!("shard{k}"));
+        let (code, _, err) = run_batch(&[
+            "-q",
+            "batch",
+            "--machine",
+            "afm-r1000",
+            "--tool",
+            "H1=100",
+            "--shard",
+            &format!("{k}/3"),
+            "--out-dir",
+            out.to_str().unwrap(),
+            inp,
+        ]);
+        assert!(code == 0 || code == 2, "{err}");
+        let s = summary_of(&out);
+        assert_eq!(s["shard"]["index"], k);
+        for r in s["results"].as_array().unwrap() {
+            seen.push(r["input"].as_str().unwrap().to_string());
+        }
+        shard_summaries.push(out.join("batch-summary.json"));
+    }
+    // Every program in exactly one shard.
+    seen.sort();
+    let before = seen.len();
+    seen.dedup();
+    assert_eq!((before, seen.len()), (PROGRAMS, PROGRAMS));
+    // Merged, the shards' summaries are the whole batch's (apart from the
+    // output folder names and the list of merged shards).
+    let merged = tmp.path().join("merged");
+    let mut args = vec![
+        "batch",
+        "--merge-summaries",
+        "--out-dir",
+        merged.to_str().unwrap(),
+    ];
+    let paths: Vec<String> = shard_summaries
+        .iter()
+        .map(|p| p.display().to_string())
+        .collect();
+    args.extend(paths.iter().map(String::as_str));
+    let (code, stdout, err) = run_batch(&args);
+    assert_eq!(code, 2, "{err}");
+    assert!(
+        stdout.contains("batch: 50 programs: 47 compensated"),
+        "{stdout}"
+    );
+    let mut m = summary_of(&merged);
+    let mut w = summary_of(&whole);
+    assert_eq!(m["merged"].as_array().unwrap().len(), 3);
+    m["merged"] = serde_json::Value::Null;
+    w["merged"] = serde_json::Value::Null;
+    let strip = |v: &serde_json::Value| {
+        let text = v.to_string();
+        let mut t = text.clone();
+        for k in 1..=3 {
+            t = t.replace(&format!("shard{k}"), "OUT");
+        }
+        t.replace("whole", "OUT")
+    };
+    assert_eq!(strip(&m), strip(&w));
+    // A shard given twice is refused.
+    let (code, _, err) = run_batch(&[
+        "batch",
+        "--merge-summaries",
+        "--out-dir",
+        merged.to_str().unwrap(),
+        &paths[0],
+        &paths[0],
+    ]);
+    assert_eq!(code, 2);
+    assert!(err.contains("given twice"), "{err}");
+    // A bad shard spec is a usage error.
+    let (code, _, err) = run_batch(&[
+        "batch",
+        "--machine",
+        "afm-r1000",
+        "--shard",
+        "4/3",
+        "--out-dir",
+        merged.to_str().unwrap(),
+        inp,
+    ]);
+    assert_eq!(code, 2);
+    assert!(err.contains("--shard 4/3"), "{err}");
+}
+
+#[test]
+fn batch_flags_empty_and_compensated_programs_and_lists_each_file_once() {
+    let tmp = tempfile::tempdir().expect("temp dir");
+    let input = tmp.path().join("in");
+    std::fs::create_dir_all(&input).unwrap();
+    std::fs::write(input.join("a.nc"), program(1)).unwrap();
+    std::fs::write(input.join("empty.nc"), "").unwrap();
+    std::fs::write(input.join(".hidden.nc"), program(2)).unwrap();
+    // A program compensated before.
+    let once = tmp.path().join("once.nc");
+    let (code, _, err) = run_batch(&[
+        "-q",
+        "compensate",
+        input.join("a.nc").to_str().unwrap(),
+        "-m",
+        "afm-r1000",
+        "--tool",
+        "H1=100",
+        "-o",
+        once.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "{err}");
+    std::fs::copy(&once, input.join("b.nc")).unwrap();
+    let out = tmp.path().join("out");
+    let a_twice = format!("{}/./a.nc", input.display());
+    let (code, stdout, err) = run_batch(&[
+        "-q",
+        "batch",
+        "--machine",
+        "afm-r1000",
+        "--tool",
+        "H1=100",
+        "--out-dir",
+        out.to_str().unwrap(),
+        input.to_str().unwrap(),
+        &a_twice,
+    ]);
+    assert_eq!(code, 2, "{err}");
+    let s = summary_of(&out);
+    let results = s["results"].as_array().unwrap();
+    // a.nc once although named twice; b.nc refused; empty.nc flagged.
+    let status: Vec<(String, String)> = results
+        .iter()
+        .map(|r| {
+            let p = r["input"].as_str().unwrap();
+            let name = Path::new(p)
+                .file_name()
+                .unwrap()
+                .to_string_lossy()
+                .into_owned();
+            (name, r["status"].as_str().unwrap().to_string())
+        })
+        .collect();
+    assert_eq!(
+        status,
+        [
+            ("a.nc".to_string(), "ok".to_string()),
+            ("b.nc".to_string(), "failed".to_string()),
+            ("empty.nc".to_string(), "empty".to_string()),
+        ],
+        "{s:#}"
+    );
+    assert!(
+        results[1]["error"]
+            .as_str()
+            .unwrap()
+            .contains("compensated by postproc"),
+        "{s:#}"
+    );
+    assert_eq!(s["empty"], 1);
+    assert!(stdout.contains("empty     "), "{stdout}");
+    assert_eq!(s["skipped"][0]["reason"], "hidden");
+    assert!(s["provenance"]["machine"]["sha256"].is_string());
+    // With --recompensate b.nc is taken.
+    let out2 = tmp.path().join("out2");
+    let (code, _, err) = run_batch(&[
+        "-q",
+        "batch",
+        "--machine",
+        "afm-r1000",
+        "--tool",
+        "H1=100",
+        "--recompensate",
+        "--out-dir",
+        out2.to_str().unwrap(),
+        input.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "{err}");
 }

@@ -37,3 +37,59 @@ pub fn assert_csv_close(got: &str, want: &str, what: &str) {
         }
     }
 }
+
+/// Words that open the lines of a postproc provenance header after its
+/// first line (docs/provenance.md).
+const HEADER_KEYS: [&str; 7] = [
+    "machine ",
+    "sha256 ",
+    "observations ",
+    "effects ",
+    "tolerance ",
+    "note: ",
+    "postproc ",
+];
+
+/// The program without its postproc provenance header: the marker line
+/// (`postproc VERSION compensated program - …`) and the header lines after
+/// it are removed, every other byte is kept. Panics when the program has no
+/// header: every compensated program carries one.
+pub fn without_header(program: &[u8]) -> Vec<u8> {
+    let lines: Vec<&[u8]> = program.split_inclusive(|&b| b == b'\n').collect();
+    let body = |l: &[u8]| -> Option<String> {
+        let t = String::from_utf8_lossy(l).trim().to_string();
+        let inner = if let Some(r) = t.strip_prefix('(') {
+            r.strip_suffix(')')?.to_string()
+        } else if let Some(r) = t.strip_prefix(';').or_else(|| t.strip_prefix('!')) {
+            r.trim_start().to_string()
+        } else {
+            return None;
+        };
+        Some(inner)
+    };
+    let start = lines
+        .iter()
+        .position(|l| {
+            body(l).is_some_and(|b| {
+                b.starts_with("postproc ")
+                    && b.ends_with("compensated program - do not compensate it again")
+            })
+        })
+        .expect("a postproc header in the compensated program");
+    let mut end = start + 1;
+    while end < lines.len()
+        && body(lines[end]).is_some_and(|b| HEADER_KEYS.iter().any(|k| b.starts_with(k)))
+    {
+        end += 1;
+    }
+    let mut out = Vec::with_capacity(program.len());
+    for l in lines[..start].iter().chain(&lines[end..]) {
+        out.extend_from_slice(l);
+    }
+    out
+}
+
+/// [`without_header`] of a text.
+pub fn text_without_header(program: &str) -> String {
+    String::from_utf8(without_header(program.as_bytes())).expect("utf-8")
+}

@@ -10,7 +10,7 @@ use std::path::{Path, PathBuf};
 
 use approx::assert_abs_diff_eq;
 
-use crate::common::{postproc, repo};
+use crate::common::{postproc, repo, text_without_header};
 
 /// Compensated coordinates are written with 6 decimals.
 const POS_TOL_MM: f64 = 1e-6;
@@ -52,7 +52,7 @@ fn compensate(machine: &Path, program: &Path, extra: &[&str]) -> String {
         "compensate failed: {}",
         String::from_utf8_lossy(&out.stderr)
     );
-    String::from_utf8(out.stdout).expect("utf-8 output")
+    text_without_header(&String::from_utf8(out.stdout).expect("utf-8 output"))
 }
 
 /// The value of `letter` in the `n`-th (1-based) output line.
@@ -385,7 +385,7 @@ fn tooth_passing_at_the_natural_frequency_warns_with_a_suggested_speed() {
     );
     // The vibration is reported, not compensated: the program is unchanged
     // apart from the annotation.
-    let text = String::from_utf8_lossy(&out.stdout);
+    let text = text_without_header(&String::from_utf8_lossy(&out.stdout));
     assert!(
         text.lines()
             .nth(2)

@@ -5,7 +5,7 @@
 use std::fs;
 use std::path::{Path, PathBuf};
 
-use crate::common::{postproc, repo};
+use crate::common::{postproc, repo, without_header};
 
 /// A minimal machine file: today's loader needs only the kind.
 fn machine(dir: &Path) -> PathBuf {
@@ -66,7 +66,8 @@ fn compensate_without_effects_is_byte_identical_to_file() {
             .arg(&out)
             .assert()
             .success();
-        let written = fs::read(&out).expect("output written");
+        // The provenance header is the only addition.
+        let written = without_header(&fs::read(&out).expect("output written"));
         assert!(
             written == original,
             "{}: output differs from input",
@@ -94,7 +95,7 @@ fn compensate_without_effects_is_byte_identical_to_stdout() {
             .stdout
             .clone();
         assert!(
-            out == original,
+            without_header(&out) == original,
             "{}: stdout differs from input",
             input.display()
         );
@@ -129,8 +130,9 @@ fn compensate_default_output_name_is_stem_comp_ext() {
             .to_string_lossy()
             .to_string();
         let expected = tmp.path().join(format!("{stem}.comp.{ext}"));
-        let written =
-            fs::read(&expected).unwrap_or_else(|_| panic!("{} not written", expected.display()));
+        let written = without_header(
+            &fs::read(&expected).unwrap_or_else(|_| panic!("{} not written", expected.display())),
+        );
         assert!(
             written == fs::read(&input).expect("read"),
             "{}",
@@ -155,7 +157,10 @@ fn compensate_reads_stdin() {
         .get_output()
         .stdout
         .clone();
-    assert!(out == original, "stdin pass-through differs");
+    assert!(
+        without_header(&out) == original,
+        "stdin pass-through differs"
+    );
 }
 
 #[test]
@@ -472,4 +477,34 @@ fn report_table_has_a_row_per_motion_block() {
         .count();
     assert_eq!(rows, PART_MOTION_BLOCKS);
     assert!(out.contains("summary: 54 rows"), "{out}");
+}
+
+#[test]
+fn regression_travel_error_names_the_machine_coordinate_and_the_work_coordinate() {
+    // Y350.05 in G54 (Y 150) is machine Y500.05, beyond the travel [0, 500]:
+    // the message calls it a machine coordinate and shows the work
+    // coordinate and the offset between them.
+    let tmp = tempfile::tempdir().expect("temp dir");
+    let p = tmp.path().join("p.nc");
+    fs::write(&p, "G90 G54 G0 X10 Y10\nG0 Y350.05\n").expect("write");
+    for command in ["check", "compensate"] {
+        let out = postproc()
+            .arg(command)
+            .arg(&p)
+            .args(
+                ["--machine", "afm-r1000", "-o", "-"]
+                    .iter()
+                    .take(if command == "check" { 2 } else { 4 }),
+            )
+            .output()
+            .expect("runs");
+        assert_eq!(out.status.code(), Some(2), "{command}");
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(
+            err.contains(
+                "p.nc:2:1: machine Y = 500.0500 (work Y350.0500 + offsets 150.0000 mm) is outside the travel [0, 500]: `G0 Y350.05`"
+            ),
+            "{command}: {err}"
+        );
+    }
 }

@@ -10,7 +10,7 @@ use postproc::machine::tool::MachineTool;
 use postproc::program::gcode::{Block, parse_line};
 use postproc::program::interp::{Interpreter, Motion, Setup};
 
-use crate::common::{postproc, repo};
+use crate::common::{postproc, repo, text_without_header};
 
 /// Resolution of a 4-decimal output word, mm.
 const WORD_TOL_MM: f64 = 0.00005;
@@ -87,7 +87,7 @@ fn compensate_with(dir: &std::path::Path, machine: &str, program: &str, args: &[
         "{}",
         String::from_utf8_lossy(&out.stderr)
     );
-    String::from_utf8(out.stdout).unwrap()
+    text_without_header(&String::from_utf8(out.stdout).unwrap())
 }
 
 fn word(line: &str, letter: char) -> Option<f64> {
@@ -456,8 +456,7 @@ fn clamped_component_table_is_warned_once() {
         "{stderr}"
     );
     // Clamped at 20 µm: X1005 is commanded as 1004.98.
-    let line = String::from_utf8(out.stdout)
-        .unwrap()
+    let line = text_without_header(&String::from_utf8(out.stdout).unwrap())
         .lines()
         .nth(1)
         .unwrap()
@@ -614,7 +613,7 @@ fn gain_scales_the_correction_linearly() {
         "--gain",
         "geometric=0.5",
     ]);
-    let text = String::from_utf8(out).unwrap();
+    let text = text_without_header(&String::from_utf8(out).unwrap());
     let line = text.lines().nth(1).unwrap();
     assert_abs_diff_eq!(word(line, 'X').unwrap(), 499.995, epsilon = WORD_TOL_MM);
     assert!(line.ends_with("(dev 0.0050 mm geo 0.0050)"), "{line}");
@@ -637,8 +636,15 @@ fn report_option_writes_a_csv_beside_the_program() {
         rep.to_str().unwrap(),
     ]);
     let csv = std::fs::read_to_string(rep).unwrap();
-    // One header, 54 motion rows (as `check` counts them), one summary line.
-    assert_eq!(csv.lines().count(), 1 + 54 + 1);
+    // One header, 54 motion rows (as `check` counts them), the cutting-move
+    // headline, the summary line and the provenance line.
+    assert_eq!(csv.lines().count(), 1 + 54 + 1 + 1 + 1);
+    assert!(
+        csv.lines()
+            .last()
+            .unwrap()
+            .starts_with("# provenance: postproc ")
+    );
     assert!(csv.starts_with("line,motion,X_mm,Y_mm,Z_mm,dx_mm"));
     assert!(out.exists());
 }
@@ -675,7 +681,7 @@ fn work_offset_and_decimals_options_apply() {
         "--tolerance",
         "0.005",
     ]);
-    let text = String::from_utf8(out).unwrap();
+    let text = text_without_header(&String::from_utf8(out).unwrap());
     assert_eq!(text.lines().nth(1).unwrap(), "G1 X399.99 F1000");
 }
 
@@ -1054,7 +1060,7 @@ fn regression_no_takeups_under_cutter_compensation_and_the_gap_is_reported() {
         &[],
     );
     assert_eq!(out.status.code(), Some(1));
-    let stdout = String::from_utf8(out.stdout).unwrap();
+    let stdout = text_without_header(&String::from_utf8(out.stdout).unwrap());
     let stderr = String::from_utf8(out.stderr).unwrap();
     let takeups: Vec<&str> = stdout.lines().filter(|l| l.contains("takeup")).collect();
     assert_eq!(takeups.len(), 1, "{stdout}");
@@ -1261,7 +1267,7 @@ fn regression_no_takeup_point_beyond_the_end_of_travel() {
         "G90 G0 X10 Y10 Z100\nG91 G28 Z0\nG90\nG0 X80 Y40\nG1 Z10 F900\nG1 X100\n",
         &[],
     );
-    let stdout = String::from_utf8_lossy(&out.stdout);
+    let stdout = text_without_header(&String::from_utf8_lossy(&out.stdout));
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert_eq!(out.status.code(), Some(1), "{stderr}");
     assert!(

@@ -21,6 +21,7 @@ mod output_words;
 mod paper_b;
 mod peers;
 mod posts;
+mod provenance_cli;
 mod rapid;
 mod rapid_cli;
 mod rapid_stream;

@@ -21,6 +21,7 @@ use super::gcode::{
 use super::rapid::{Source, load_robot};
 use super::{Annotate, BatchArgs, Format, ProgramArgs, usage};
 use crate::compensate::rapid::{RapidOptions, compensate_module};
+use crate::emit::header::{HeaderWriter, Provenance};
 use crate::error::{Error, Result};
 use crate::machine::Machine;
 
@@ -65,6 +66,7 @@ fn walk(
     skip: Option<&Path>,
     seen: &mut BTreeSet<PathBuf>,
     items: &mut Vec<Item>,
+    skipped: &mut Vec<Skipped>,
 ) {
     if let Ok(canonical) = dir.canonicalize() {
         if !seen.insert(canonical) {
@@ -88,15 +90,27 @@ fn walk(
         let hidden = path
             .file_name()
             .is_some_and(|n| n.to_string_lossy().starts_with('.'));
+        let mut skip_as = |reason: &str| {
+            skipped.push(Skipped {
+                path: path.display().to_string(),
+                reason: reason.to_string(),
+            })
+        };
         if hidden {
+            skip_as("hidden");
             continue;
         }
         if path.is_dir() {
             if skip.is_some_and(|s| path.canonicalize().is_ok_and(|p| p == s)) {
+                skip_as("the output folder");
                 continue;
             }
-            walk(root, &path, skip, seen, items);
-        } else if is_program(&path) && path.is_file() {
+            walk(root, &path, skip, seen, items, skipped);
+        } else if !is_program(&path) {
+            skip_as("not a program extension");
+        } else if !path.is_file() {
+            skip_as("not a regular file");
+        } else {
             let rel = path.strip_prefix(root).unwrap_or(&path).to_path_buf();
             items.push(Item {
                 input: path,
@@ -107,16 +121,34 @@ fn walk(
     }
 }
 
-/// Expands the inputs into programs, sorted by input path; an input that
-/// does not exist, or two programs with one output name, become failures.
-fn collect(inputs: &[PathBuf], out_dir: &Path) -> Vec<Item> {
+/// A file or folder of the inputs' folders that is not compensated, and
+/// why.
+#[derive(Debug, Clone, Serialize, serde::Deserialize, PartialEq, Eq, PartialOrd, Ord)]
+struct Skipped {
+    path: String,
+    reason: String,
+}
+
+/// Expands the inputs into programs, sorted by input path, each file once
+/// however it is reached; an input that does not exist, or two programs
+/// with one output name, become failures. Also gives the entries of the
+/// folders that are skipped.
+fn collect(inputs: &[PathBuf], out_dir: &Path) -> (Vec<Item>, Vec<Skipped>) {
     let skip = out_dir.canonicalize().ok();
     let mut items = Vec::new();
+    let mut skipped = Vec::new();
     for input in inputs {
         if input.is_dir() {
             // Folders are followed once per input (links may lead back).
             let mut seen = BTreeSet::new();
-            walk(input, input, skip.as_deref(), &mut seen, &mut items);
+            walk(
+                input,
+                input,
+                skip.as_deref(),
+                &mut seen,
+                &mut items,
+                &mut skipped,
+            );
         } else {
             let rel = input
                 .file_name()
@@ -136,6 +168,13 @@ fn collect(inputs: &[PathBuf], out_dir: &Path) -> Vec<Item> {
     }
     items.sort_by(|a, b| a.input.cmp(&b.input));
     items.dedup_by(|a, b| a.input == b.input);
+    // One file named two ways (`./a.nc`, `d/../a.nc`, a link): the first
+    // spelling in path order is kept.
+    let mut files = BTreeSet::new();
+    items.retain(|item| match item.input.canonicalize() {
+        Ok(c) if item.problem.is_none() => files.insert(c),
+        _ => true,
+    });
     let mut owner: BTreeMap<PathBuf, PathBuf> = BTreeMap::new();
     for item in &mut items {
         if item.problem.is_some() {
@@ -155,36 +194,58 @@ fn collect(inputs: &[PathBuf], out_dir: &Path) -> Vec<Item> {
             }
         }
     }
-    items
+    skipped.sort();
+    skipped.dedup();
+    (items, skipped)
 }
 
 /// Result of one program, as written to `batch-summary.json`.
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
 struct FileResult {
     input: String,
     output: Option<String>,
     report: Option<String>,
-    /// `ok`, `findings` (out of tolerance) or `failed`.
-    status: &'static str,
+    /// `ok`, `empty` (written, but it has no moves), `findings` (out of
+    /// tolerance) or `failed`.
+    status: String,
     error: Option<String>,
     blocks: usize,
     moves: usize,
-    max_deviation_mm: f64,
-    max_deviation_line: usize,
+    /// `None` for a failed program.
+    max_deviation_mm: Option<f64>,
+    max_deviation_line: Option<usize>,
     max_residual_mm: Option<f64>,
 }
 
+/// `--shard K/N`: the K-th (1-based) of N shares of the programs.
+#[derive(Debug, Clone, Copy, Serialize, serde::Deserialize, PartialEq, Eq)]
+#[serde(deny_unknown_fields)]
+struct Shard {
+    index: usize,
+    count: usize,
+}
+
 /// The summary file.
-#[derive(Debug, Serialize)]
+#[derive(Debug, Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
 struct BatchSummary {
     machine: String,
     tolerance_mm: f64,
+    /// What made the outputs (docs/provenance.md).
+    provenance: serde_json::Value,
+    /// The share of the inputs this summary covers (`None`: all of them;
+    /// a merged summary lists the shards it holds in `merged`).
+    shard: Option<Shard>,
+    merged: Vec<Shard>,
     programs: usize,
     ok: usize,
+    empty: usize,
     findings: usize,
     failed: usize,
     exit_code: i32,
     results: Vec<FileResult>,
+    skipped: Vec<Skipped>,
 }
 
 /// Rounds to 6 decimals (1 nm) for the summary.
@@ -220,6 +281,14 @@ enum Engine<'m> {
     Robot(crate::machine::robot::Robot, RapidOptions, Option<usize>),
 }
 
+/// What every program of the batch shares: the engine, the provenance its
+/// outputs carry, and whether programs compensated before are taken.
+struct Setting<'m> {
+    engine: Engine<'m>,
+    provenance: Provenance,
+    recompensate: bool,
+}
+
 /// Path of a program's report beside its output: `<output>.report.<ext>`.
 fn report_path(output: &Path, format: Format) -> PathBuf {
     let ext = match format {
@@ -234,7 +303,7 @@ fn report_path(output: &Path, format: Format) -> PathBuf {
 }
 
 fn compensate_one(
-    engine: &Engine,
+    setting: &Setting,
     input: &Path,
     output: &Path,
     report: Option<Format>,
@@ -252,7 +321,8 @@ fn compensate_one(
         std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
     }
     let name = input.display().to_string();
-    match engine {
+    let provenance = &setting.provenance;
+    match &setting.engine {
         Engine::Tool(job) => {
             if is_rapid(input) {
                 return Err(usage(format!(
@@ -260,25 +330,34 @@ fn compensate_one(
                 )));
             }
             let f = std::fs::File::open(input).map_err(|e| Error::io(input, e))?;
-            let reader = BufReader::with_capacity(1 << 16, f);
+            let reader = Box::new(BufReader::with_capacity(1 << 16, f));
+            let (head, reader) = super::machines::peek_head(reader, &name)?;
+            super::machines::refuse_compensated(&head, &name, setting.recompensate)?;
             let s = match report {
                 Some(format) => {
                     // Neither output is put in place unless both are written.
                     let mut rep = Staged::open(&report_path(output, format))?;
                     let mut out = Staged::open(output)?;
+                    let mut hw = HeaderWriter::new(out.writer(), provenance.clone(), false);
                     let s = run_reporting(
                         job,
-                        Box::new(reader),
+                        reader,
                         &name,
-                        Some(out.writer()),
+                        Some(&mut hw),
                         rep.writer(),
-                        &job.setup,
                         format,
+                        Some(provenance),
                     )?;
+                    hw.finish().map_err(|e| Error::io(output, e))?;
                     finish_both(out, rep)?;
                     s
                 }
-                None => write_atomically(output, |w| job.run(reader, &name, Some(w), None))?,
+                None => write_atomically(output, |w| {
+                    let mut hw = HeaderWriter::new(w, provenance.clone(), false);
+                    let s = job.run(reader, &name, Some(&mut hw), None)?;
+                    hw.finish().map_err(|e| Error::io(output, e))?;
+                    Ok(s)
+                })?,
             };
             Ok(Done {
                 blocks: s.blocks,
@@ -311,6 +390,11 @@ fn compensate_one(
             // A large module is read a window at a time, as by `compensate`.
             let warm = crate::compensate::rapid::stream::first_pass(robot, &opts);
             let source = Source::new(input, *forced_window, warm)?;
+            super::machines::refuse_compensated(
+                &source.head()?,
+                source.name(),
+                setting.recompensate,
+            )?;
             if let Some(lines) = source.window_lines() {
                 let streamed = super::rapid::compensate_streamed_to(
                     &source,
@@ -319,6 +403,7 @@ fn compensate_one(
                     lines,
                     Some(output),
                     report_to,
+                    provenance,
                 )?;
                 if let Some(outcome) = streamed {
                     return Ok(done(&outcome));
@@ -326,7 +411,7 @@ fn compensate_one(
             }
             let (src, name) = source.read_whole()?;
             let outcome = compensate_module(&src, &name, robot, &opts)?;
-            super::rapid::write_outcome(output, &outcome, &name, report_to)?;
+            super::rapid::write_outcome(output, &outcome, &name, report_to, provenance)?;
             Ok(done(&outcome))
         }
     }
@@ -334,14 +419,21 @@ fn compensate_one(
 
 /// `postproc batch`; `quiet` hides the progress bar.
 pub fn run(a: &BatchArgs, quiet: bool) -> Result<i32> {
+    if a.merge_summaries {
+        return merge(a);
+    }
+    let machine_name = a
+        .machine
+        .clone()
+        .ok_or_else(|| usage("batch needs --machine"))?;
     let pool = thread_pool(a.effects.threads)?;
-    let machine_path = Machine::resolve(&a.machine)?;
-    let machine = Machine::load(&machine_path)?;
+    let (machine, loaded) = super::machines::open(&machine_name)?;
     let tolerance = super::gcode::tolerance_for(a.tolerance, &machine);
     // The files every program's run reads besides the program itself.
-    let mut files = vec![machine_path.clone()];
+    let mut files: Vec<PathBuf> = loaded.file.path.iter().cloned().collect();
     files.extend(a.effects.force_table.clone());
-    let items = collect(&a.inputs, &a.out_dir);
+    let (items, skipped) = collect(&a.inputs, &a.out_dir);
+    let shard = a.shard.as_deref().map(parse_shard).transpose()?;
     if items.is_empty() {
         return Err(usage(format!(
             "no programs found (extensions: {}, {})",
@@ -352,7 +444,7 @@ pub fn run(a: &BatchArgs, quiet: bool) -> Result<i32> {
     let annotate = a.annotate == Annotate::Comment;
     let tool;
     let process;
-    let engine = match machine {
+    let (engine, effects_run) = match machine {
         Machine::Tool(m) => {
             tool = m;
             let program = ProgramArgs {
@@ -370,19 +462,23 @@ pub fn run(a: &BatchArgs, quiet: bool) -> Result<i32> {
                     "batch starts every program cold (--thermal-start cold); a steady or warm-up start needs each program's mean power, so compensate those one by one",
                 ));
             }
+            let set = effects(&a.effects)?;
             let mut job = build_job(
                 &tool,
                 &process,
                 &pool,
                 setup,
-                effects(&a.effects)?,
+                set,
                 tolerance,
                 None,
                 annotate,
             )?;
             // The programs already run on the pool's threads.
             job.pool = None;
-            Engine::Tool(Box::new(job))
+            (
+                Engine::Tool(Box::new(job)),
+                super::machines::tool_effects(&set),
+            )
         }
         Machine::Robot(_) => {
             if !a.tools.is_empty() || !a.work_offsets.is_empty() {
@@ -390,13 +486,25 @@ pub fn run(a: &BatchArgs, quiet: bool) -> Result<i32> {
                     "--tool and --work-offset are G-code options; RAPID takes tooldata and wobjdata from the module",
                 ));
             }
-            let robot = super::rapid::robot_with_process(load_robot(&a.machine)?, &a.effects)?;
+            let robot = super::rapid::robot_with_process(load_robot(&machine_name)?, &a.effects)?;
             let opts = super::rapid::rapid_options(&robot, &a.effects, annotate, None)?;
             if a.rapid_window_lines == Some(0) {
                 return Err(usage("--rapid-window-lines must be at least 1"));
             }
-            Engine::Robot(robot, opts, a.rapid_window_lines)
+            let effects = super::machines::robot_effects(&opts.effects);
+            (Engine::Robot(robot, opts, a.rapid_window_lines), effects)
         }
+    };
+    let is_tool = matches!(engine, Engine::Tool(_));
+    let setting = Setting {
+        engine,
+        provenance: super::machines::provenance(
+            &loaded,
+            effects_run,
+            is_tool.then_some(tolerance),
+            annotate,
+        ),
+        recompensate: a.recompensate,
     };
     // The output folder is made once every option has been checked; the
     // summary may not be an input either (checked before any program).
@@ -413,6 +521,15 @@ pub fn run(a: &BatchArgs, quiet: bool) -> Result<i32> {
         }
         b
     };
+    let items: Vec<Item> = match shard {
+        Some(sh) => items
+            .into_iter()
+            .enumerate()
+            .filter(|(i, _)| i % sh.count == sh.index - 1)
+            .map(|(_, item)| item)
+            .collect(),
+        None => items,
+    };
     let results: Vec<FileResult> = pool.install(|| {
         items
             .par_iter()
@@ -420,25 +537,30 @@ pub fn run(a: &BatchArgs, quiet: bool) -> Result<i32> {
                 let output = a.out_dir.join(&item.rel);
                 let done = match &item.problem {
                     Some(p) => Err(usage(p.clone())),
-                    None => compensate_one(&engine, &item.input, &output, a.report_format, &files),
+                    None => compensate_one(&setting, &item.input, &output, a.report_format, &files),
                 };
                 bar.inc(1);
                 let input = item.input.display().to_string();
                 match done {
                     Ok(d) => {
                         let findings = d.residual.is_some_and(|r| r > tolerance);
+                        let status = match (findings, d.moves) {
+                            (true, _) => "findings",
+                            (false, 0) => "empty",
+                            (false, _) => "ok",
+                        };
                         FileResult {
                             input,
                             output: Some(output.display().to_string()),
                             report: a
                                 .report_format
                                 .map(|f| report_path(&output, f).display().to_string()),
-                            status: if findings { "findings" } else { "ok" },
+                            status: status.into(),
                             error: None,
                             blocks: d.blocks,
                             moves: d.moves,
-                            max_deviation_mm: round6(d.max_dev),
-                            max_deviation_line: d.max_line,
+                            max_deviation_mm: Some(round6(d.max_dev)),
+                            max_deviation_line: Some(d.max_line),
                             max_residual_mm: d.residual.map(round6),
                         }
                     }
@@ -448,12 +570,12 @@ pub fn run(a: &BatchArgs, quiet: bool) -> Result<i32> {
                             input,
                             output: None,
                             report: None,
-                            status: "failed",
+                            status: "failed".into(),
                             error: Some(message(&e)),
                             blocks: 0,
                             moves: 0,
-                            max_deviation_mm: 0.0,
-                            max_deviation_line: 0,
+                            max_deviation_mm: None,
+                            max_deviation_line: None,
                             max_residual_mm: None,
                         }
                     }
@@ -462,8 +584,38 @@ pub fn run(a: &BatchArgs, quiet: bool) -> Result<i32> {
             .collect()
     });
     bar.finish_and_clear();
+    let summary = summarize(
+        machine_name,
+        tolerance,
+        setting.provenance.to_json(),
+        shard,
+        Vec::new(),
+        results,
+        skipped,
+    );
+    let summary_path = a.out_dir.join(SUMMARY_FILE);
+    write_summary(&summary_path, &summary)?;
+    print_summary(&summary, &summary_path)?;
+    Ok(summary.exit_code)
+}
+
+/// The summary of `results`: the counts and the exit code.
+fn summarize(
+    machine: String,
+    tolerance_mm: f64,
+    provenance: serde_json::Value,
+    shard: Option<Shard>,
+    merged: Vec<Shard>,
+    results: Vec<FileResult>,
+    skipped: Vec<Skipped>,
+) -> BatchSummary {
     let count = |s: &str| results.iter().filter(|r| r.status == s).count();
-    let (ok, findings, failed) = (count("ok"), count("findings"), count("failed"));
+    let (ok, empty, findings, failed) = (
+        count("ok"),
+        count("empty"),
+        count("findings"),
+        count("failed"),
+    );
     let exit_code = if failed > 0 {
         2
     } else if findings > 0 {
@@ -471,29 +623,56 @@ pub fn run(a: &BatchArgs, quiet: bool) -> Result<i32> {
     } else {
         0
     };
-    let summary = BatchSummary {
-        machine: a.machine.clone(),
-        tolerance_mm: tolerance,
+    BatchSummary {
+        machine,
+        tolerance_mm,
+        provenance,
+        shard,
+        merged,
         programs: results.len(),
         ok,
+        empty,
         findings,
         failed,
         exit_code,
         results,
-    };
-    let summary_path = a.out_dir.join(SUMMARY_FILE);
-    write_atomically(&summary_path, |w| {
-        serde_json::to_writer_pretty(&mut *w, &summary)
-            .map_err(|e| Error::io(&summary_path, std::io::Error::other(e)))?;
-        w.write_all(b"\n").map_err(|e| Error::io(&summary_path, e))
-    })?;
+        skipped,
+    }
+}
+
+fn write_summary(path: &Path, summary: &BatchSummary) -> Result<()> {
+    write_atomically(path, |w| {
+        serde_json::to_writer_pretty(&mut *w, summary)
+            .map_err(|e| Error::io(path, std::io::Error::other(e)))?;
+        w.write_all(b"\n").map_err(|e| Error::io(path, e))
+    })
+}
+
+/// Parses `--shard K/N` (1 ≤ K ≤ N).
+fn parse_shard(text: &str) -> Result<Shard> {
+    let bad = || usage(format!("--shard {text}: expected K/N with 1 <= K <= N"));
+    let (k, n) = text.split_once('/').ok_or_else(bad)?;
+    let (index, count): (usize, usize) = (
+        k.trim().parse().map_err(|_| bad())?,
+        n.trim().parse().map_err(|_| bad())?,
+    );
+    if index == 0 || index > count {
+        return Err(bad());
+    }
+    Ok(Shard { index, count })
+}
+
+/// Prints the failed, empty and out-of-tolerance programs, the skipped
+/// entries and the totals on standard output.
+fn print_summary(summary: &BatchSummary, summary_path: &Path) -> Result<()> {
     let mut out = std::io::stdout().lock();
     let mut say = |t: String| {
         out.write_all(t.as_bytes())
             .map_err(|e| Error::io("stdout", e))
     };
     for r in &summary.results {
-        match r.status {
+        match r.status.as_str() {
+            "empty" => say(format!("empty     {}: no moves\n", r.input))?,
             "failed" => say(format!(
                 "failed    {}: {}\n",
                 r.input,
@@ -503,18 +682,112 @@ pub fn run(a: &BatchArgs, quiet: bool) -> Result<i32> {
                 "findings  {}: residual {} mm > tolerance {} mm\n",
                 r.input,
                 r.max_residual_mm.unwrap_or(0.0),
-                tolerance
+                summary.tolerance_mm
             ))?,
             _ => {}
         }
     }
+    for sk in &summary.skipped {
+        say(format!("skipped   {}: {}\n", sk.path, sk.reason))?;
+    }
     say(format!(
-        "batch: {} programs: {} compensated ({} with findings), {} failed; summary in {}\n",
+        "batch: {} programs: {} compensated ({} with findings, {} empty), {} failed; {} skipped; summary in {}\n",
         summary.programs,
-        ok + findings,
-        findings,
-        failed,
+        summary.ok + summary.findings + summary.empty,
+        summary.findings,
+        summary.empty,
+        summary.failed,
+        summary.skipped.len(),
         summary_path.display()
     ))?;
-    Ok(exit_code)
+    Ok(())
+}
+
+/// `postproc batch --merge-summaries`: the summaries of the shards of one
+/// batch (the same machine, tolerance and provenance, each shard once)
+/// merged into `--out-dir`/batch-summary.json, results in input order.
+fn merge(a: &BatchArgs) -> Result<i32> {
+    let mut parts = Vec::new();
+    for path in &a.inputs {
+        let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+        let part: BatchSummary = serde_json::from_str(&text).map_err(|e| {
+            usage(format!(
+                "{}: not a batch summary of this postproc: {e}",
+                path.display()
+            ))
+        })?;
+        parts.push((path, part));
+    }
+    let Some((first_path, first)) = parts.first() else {
+        return Err(usage("--merge-summaries needs the summaries of the shards"));
+    };
+    let mut shards = Vec::new();
+    for (path, part) in &parts {
+        if part.machine != first.machine
+            || part.tolerance_mm != first.tolerance_mm
+            || part.provenance != first.provenance
+        {
+            return Err(usage(format!(
+                "{}: another machine, tolerance or provenance than {}: not shards of one batch",
+                path.display(),
+                first_path.display()
+            )));
+        }
+        let here: Vec<Shard> = match part.shard {
+            Some(s) => vec![s],
+            None => part.merged.clone(),
+        };
+        if here.is_empty() {
+            return Err(usage(format!(
+                "{}: the summary of a whole batch, not of a shard",
+                path.display()
+            )));
+        }
+        shards.extend(here);
+    }
+    shards.sort_by_key(|s| (s.count, s.index));
+    let count = shards[0].count;
+    if let Some(s) = shards.iter().find(|s| s.count != count) {
+        return Err(usage(format!(
+            "shards of {count} and of {} programs' shares mixed",
+            s.count
+        )));
+    }
+    if let Some(w) = shards.windows(2).find(|w| w[0] == w[1]) {
+        return Err(usage(format!(
+            "shard {}/{} given twice",
+            w[0].index, w[0].count
+        )));
+    }
+    if shards.len() < count {
+        let missing: Vec<String> = (1..=count)
+            .filter(|k| !shards.iter().any(|s| s.index == *k))
+            .map(|k| format!("{k}/{count}"))
+            .collect();
+        tracing::warn!("shards missing: {}", missing.join(", "));
+    }
+    let machine = first.machine.clone();
+    let tolerance = first.tolerance_mm;
+    let provenance = first.provenance.clone();
+    let mut results = Vec::new();
+    let mut skipped = Vec::new();
+    for (_, part) in parts {
+        results.extend(part.results);
+        skipped.extend(part.skipped);
+    }
+    results.sort_by(|x, y| x.input.cmp(&y.input));
+    if let Some(w) = results.windows(2).find(|w| w[0].input == w[1].input) {
+        return Err(usage(format!("{} is in two shards' summaries", w[0].input)));
+    }
+    skipped.sort();
+    skipped.dedup();
+    let summary = summarize(
+        machine, tolerance, provenance, None, shards, results, skipped,
+    );
+    std::fs::create_dir_all(&a.out_dir).map_err(|e| Error::io(&a.out_dir, e))?;
+    let summary_path = a.out_dir.join(SUMMARY_FILE);
+    refuse_overwrite(&summary_path, &a.inputs)?;
+    write_summary(&summary_path, &summary)?;
+    print_summary(&summary, &summary_path)?;
+    Ok(summary.exit_code)
 }

@@ -14,7 +14,8 @@ use crate::calibrate::simulate::{Noise, simulate};
 use crate::calibrate::stiffness::{Options, calibrate_stiffness};
 use crate::calibrate::thermal::calibrate_thermal;
 use crate::error::{Error, Result};
-use crate::machine::Machine;
+use crate::machine::status::Calibration;
+use crate::machine::{Machine, MachineFile};
 
 use super::gcode::write_atomically;
 use super::usage;
@@ -78,9 +79,38 @@ pub struct CalibrateArgs {
 }
 
 fn read_machine(name: &str) -> Result<(String, String)> {
-    let path = Machine::resolve(name)?;
-    let text = std::fs::read_to_string(&path).map_err(|e| Error::io(&path, e))?;
-    Ok((text, path.display().to_string()))
+    let file = MachineFile::open(name)?;
+    Ok((file.text.into_owned(), file.shown))
+}
+
+/// The files a run reads: the observations and the machine file (none of
+/// them may be the output).
+fn read_files(observations: &Path, machine: &str) -> Result<Vec<PathBuf>> {
+    let mut files = vec![observations.to_path_buf()];
+    files.extend(MachineFile::open(machine)?.path);
+    Ok(files)
+}
+
+/// The record of a calibration from the observation file at `path` (of
+/// `rows` rows) with fit residual RMS `fit_rms_mm`.
+pub(super) fn calibration_record(
+    kind: &str,
+    path: &Path,
+    rows: usize,
+    fit_rms_mm: f64,
+) -> Result<Calibration> {
+    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    Ok(Calibration {
+        date: crate::machine::status::today(),
+        kind: kind.to_string(),
+        observations: path.file_name().map_or_else(
+            || path.display().to_string(),
+            |n| n.to_string_lossy().into_owned(),
+        ),
+        observations_sha256: crate::machine::status::sha256_hex(&bytes),
+        rows,
+        fit_rms_mm,
+    })
 }
 
 /// Largest simulated measurement noise, µm (and µm per metre): 10 mm, far
@@ -124,10 +154,7 @@ pub fn run_simulate(a: &SimulateArgs) -> Result<i32> {
         seed: a.seed,
     };
     let out = simulate(&machine, &poses, &obs_file, &noise)?;
-    super::gcode::refuse_overwrite(
-        &a.output,
-        &[&a.observations, &Machine::resolve(&a.machine)?],
-    )?;
+    super::gcode::refuse_overwrite(&a.output, &read_files(&a.observations, &a.machine)?)?;
     let out_name = a.output.display().to_string();
     emit(&a.output, |w| {
         write_observations(w, &out).map_err(|e| Error::io(&out_name, e))
@@ -157,11 +184,14 @@ pub fn run_calibrate(a: &CalibrateArgs) -> Result<i32> {
         CalibrationKind::Geometry => calibrate_geometry(&text, &file, &obs, &obs_file, &opts)?,
         CalibrationKind::Thermal => calibrate_thermal(&text, &file, &obs, &obs_file, &opts)?,
     };
-    let yaml = cal.yaml.clone();
-    super::gcode::refuse_overwrite(
-        &a.output,
-        &[&a.observations, &Machine::resolve(&a.machine)?],
+    let record = calibration_record(
+        &format!("{:?}", a.kind).to_ascii_lowercase(),
+        &a.observations,
+        obs.rows.len(),
+        cal.rms_fit_mm,
     )?;
+    let yaml = crate::machine::status::set_calibrated(&cal.yaml, &file, &record)?;
+    super::gcode::refuse_overwrite(&a.output, &read_files(&a.observations, &a.machine)?)?;
     // The summary first: standard output that fails (closed, full) fails
     // the run before the model is written.
     let mut stdout = std::io::stdout().lock();

@@ -9,7 +9,7 @@ use clap::{Args, ValueEnum};
 use crate::calibrate::observations::load_observations;
 use crate::diagnose::{self, Options, report, write};
 use crate::error::{Error, Result};
-use crate::machine::Machine;
+use crate::machine::{Machine, MachineFile};
 
 /// Output format of `diagnose`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
@@ -50,10 +50,9 @@ pub struct DiagnoseArgs {
 }
 
 fn load(name: &str) -> Result<(Machine, String)> {
-    let path = Machine::resolve(name)?;
-    let text = std::fs::read_to_string(&path).map_err(|e| Error::io(&path, e))?;
-    let m = Machine::from_yaml_str(&text, &path.display().to_string())?;
-    Ok((m, text))
+    let file = MachineFile::open(name)?;
+    let m = file.load()?;
+    Ok((m, file.text.into_owned()))
 }
 
 fn print(s: &str) -> Result<()> {
@@ -109,8 +108,25 @@ pub fn run(a: &DiagnoseArgs) -> Result<i32> {
             .map_err(|e| Error::Usage(format!("cannot write JSON: {e}")))?,
     };
     if let Some(path) = &a.write_model {
-        let w = write::write_model(&machine, &text, &d.found)?;
-        super::gcode::refuse_overwrite(path, &[&Machine::resolve(m)?, o])?;
+        let mut w = write::write_model(&machine, &text, &d.found)?;
+        if !w.written.is_empty() {
+            // The fit: the 3D RMS of the held-out rows with the accepted
+            // effects (µm → mm).
+            let record = super::calibrate::calibration_record(
+                "diagnose",
+                o,
+                obs.rows.len(),
+                d.gap.after.rms_um * 1e-3,
+            )?;
+            w.text = crate::machine::status::set_calibrated(
+                &w.text,
+                &path.display().to_string(),
+                &record,
+            )?;
+        }
+        let mut inputs = vec![o.clone()];
+        inputs.extend(MachineFile::open(m)?.path);
+        super::gcode::refuse_overwrite(path, &inputs)?;
         super::gcode::write_atomically(path, |out| {
             out.write_all(w.text.as_bytes())
                 .map_err(|e| Error::io(path, e))

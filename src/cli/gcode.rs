@@ -4,11 +4,13 @@ use std::fs::File;
 use std::io::{BufRead, BufReader, BufWriter, Read, Write};
 use std::path::{Path, PathBuf};
 
+use super::machines::Loaded;
 use super::{
     Annotate, CheckArgs, CompensateArgs, EffectArgs, Format, ProgramArgs, ReportArgs, usage,
 };
 use crate::compensate::Settings;
 use crate::emit::gcode::EmitOptions;
+use crate::emit::header::{HeaderWriter, Provenance};
 use crate::emit::report::ReportWriter;
 use crate::error::{Error, Result};
 use crate::job::{Job, Summary};
@@ -18,13 +20,12 @@ use crate::predict::{EffectSet, ProcessSetup, ThermalStart, ToolPredictor};
 use crate::process::{ForceModel, ForceTable, Frame};
 use crate::program::interp::Setup;
 
-fn load_machine(name: &str) -> Result<MachineTool> {
-    let path = Machine::resolve(name)?;
-    match Machine::load(&path)? {
-        Machine::Tool(m) => Ok(m),
-        Machine::Robot(_) => Err(usage(format!(
+fn load_machine(name: &str) -> Result<(MachineTool, Loaded)> {
+    match super::machines::open(name)? {
+        (Machine::Tool(m), loaded) => Ok((m, loaded)),
+        (Machine::Robot(_), loaded) => Err(usage(format!(
             "{}: is a robot; G-code programs need a machine tool",
-            path.display()
+            loaded.file.shown
         ))),
     }
 }
@@ -249,7 +250,13 @@ fn fmt_axes(v: &[f64; 6], setup: &Setup) -> String {
 
 /// `postproc check`.
 pub fn check(a: &CheckArgs) -> Result<i32> {
-    let machine = a.program.machine.as_deref().map(load_machine).transpose()?;
+    let machine = a
+        .program
+        .machine
+        .as_deref()
+        .map(load_machine)
+        .transpose()?
+        .map(|(m, _)| m);
     let setup = parse_setup(&a.program, machine.as_ref())?;
     let (input, name) = open_input(&a.program.file)?;
     let job = Job {
@@ -602,14 +609,14 @@ pub(super) fn build_job<'m>(
 }
 
 /// Loads the `--machine` file with the program's tool table and work offsets.
-fn machine_setup(program: &ProgramArgs, command: &str) -> Result<(MachineTool, Setup)> {
+fn machine_setup(program: &ProgramArgs, command: &str) -> Result<(MachineTool, Loaded, Setup)> {
     let name = program
         .machine
         .as_deref()
         .ok_or_else(|| usage(format!("{command} needs --machine")))?;
-    let machine = load_machine(name)?;
+    let (machine, loaded) = load_machine(name)?;
     let setup = parse_setup(program, Some(&machine))?;
-    Ok((machine, setup))
+    Ok((machine, loaded, setup))
 }
 
 /// Refuses a `--report` path that would replace the input or the output.
@@ -641,7 +648,7 @@ pub(super) fn check_report_path(
 pub(super) fn input_files(program: &ProgramArgs, effects: &EffectArgs) -> Result<Vec<PathBuf>> {
     let mut files = vec![program.file.clone()];
     if let Some(m) = &program.machine {
-        files.push(crate::machine::Machine::resolve(m)?);
+        files.extend(crate::machine::MachineFile::open(m)?.path);
     }
     files.extend(effects.force_table.clone());
     Ok(files)
@@ -662,10 +669,12 @@ pub(super) fn run_reporting(
     file: &str,
     out: Option<&mut dyn Write>,
     report: &mut dyn Write,
-    setup: &Setup,
     format: Format,
+    provenance: Option<&Provenance>,
 ) -> Result<Summary> {
-    let mut rw = ReportWriter::new(report, setup, format, file)?.with_source(Path::new(file));
+    let mut rw = ReportWriter::new(report, &job.setup, format, file)?
+        .with_source(Path::new(file))
+        .with_provenance(provenance);
     let mut err = None;
     let summary = job.run(
         input,
@@ -692,6 +701,7 @@ pub(super) fn run_reporting(
 /// the program's mean power for a warm thermal start).
 struct Prepared {
     machine: MachineTool,
+    loaded: Loaded,
     setup: Setup,
     pool: rayon::ThreadPool,
     effects: EffectSet,
@@ -700,13 +710,14 @@ struct Prepared {
 
 impl Prepared {
     fn new(program: &ProgramArgs, args: &EffectArgs, command: &str) -> Result<Self> {
-        let (machine, setup) = machine_setup(program, command)?;
+        let (machine, loaded, setup) = machine_setup(program, command)?;
         let pool = thread_pool(args.threads)?;
         let effects = effects(args)?;
         let mut process = process_setup(args, &machine)?;
         add_mean_power(&mut process, &machine, &setup, effects, &program.file)?;
         Ok(Prepared {
             machine,
+            loaded,
             setup,
             pool,
             effects,
@@ -729,11 +740,11 @@ impl Prepared {
 }
 
 /// `postproc compensate`.
-pub fn compensate(a: &CompensateArgs) -> Result<i32> {
+pub fn compensate(a: &CompensateArgs, quiet: bool) -> Result<i32> {
     let run = Prepared::new(&a.program, &a.effects, "compensate")?;
-    let setup = &run.setup;
     let tolerance = tolerance_of(a.tolerance, Some(&run.machine));
-    let job = run.job(tolerance, a.decimals, a.annotate == Annotate::Comment)?;
+    let annotate = a.annotate == Annotate::Comment;
+    let job = run.job(tolerance, a.decimals, annotate)?;
     let input_path = &a.program.file;
     let out_path = match &a.output {
         Some(p) => p.clone(),
@@ -744,6 +755,14 @@ pub fn compensate(a: &CompensateArgs) -> Result<i32> {
     refuse_overwrite(&out_path, &inputs)?;
     check_report_path(a.report.as_deref(), &inputs, &out_path)?;
     let (input, file) = open_input(input_path)?;
+    let (head, input) = super::machines::peek_head(input, &file)?;
+    super::machines::refuse_compensated(&head, &file, a.recompensate)?;
+    let provenance = super::machines::provenance(
+        &run.loaded,
+        super::machines::tool_effects(&run.effects),
+        Some(tolerance),
+        annotate,
+    );
     let summary: Summary = match &a.report {
         Some(report_path) => {
             let format = a
@@ -752,29 +771,30 @@ pub fn compensate(a: &CompensateArgs) -> Result<i32> {
             // Neither is put in place unless both are written.
             let mut rep = Staged::open(report_path)?;
             let mut out = Staged::open(&out_path)?;
+            let mut hw = HeaderWriter::new(out.writer(), provenance.clone(), false);
             let summary = run_reporting(
                 &job,
                 input,
                 &file,
-                Some(out.writer()),
+                Some(&mut hw),
                 rep.writer(),
-                setup,
                 format,
+                Some(&provenance),
             )?;
+            hw.finish().map_err(|e| Error::io(&out_path, e))?;
             finish_both(out, rep)?;
             summary
         }
-        None => emit_to(&out_path, |w| job.run(input, &file, Some(w), None))?,
+        None => emit_to(&out_path, |w| {
+            let mut hw = HeaderWriter::new(w, provenance.clone(), false);
+            let s = job.run(input, &file, Some(&mut hw), None)?;
+            hw.finish().map_err(|e| Error::io(&out_path, e))?;
+            Ok(s)
+        })?,
     };
-    tracing::info!(
-        "{}: {} blocks changed, {}; predicted deviation mean {:.4} max {:.4} mm (line {})",
-        out_path.display(),
-        summary.changed,
-        added_lines(&summary, tolerance),
-        summary.deviation.mean(),
-        summary.deviation.max,
-        summary.deviation.max_line
-    );
+    if !quiet {
+        eprintln!("{}", summary_line(&file, &out_path, &summary, tolerance));
+    }
     if summary.duration_s > 0.0 {
         tracing::info!(
             "time line {:.1} min; mean power spindle {:.0} W, drives X {:.0} Y {:.0} Z {:.0} W",
@@ -830,7 +850,11 @@ pub(super) fn added_lines(summary: &Summary, tolerance: f64) -> String {
             why.push(format!("{n} {what}"));
         }
     }
-    let mut s = format!("{} lines added", summary.added);
+    let mut s = format!(
+        "{} {} added",
+        grouped(summary.added),
+        if summary.added == 1 { "line" } else { "lines" }
+    );
     if !why.is_empty() {
         s.push_str(&format!(" ({})", why.join(", ")));
     }
@@ -841,6 +865,55 @@ pub(super) fn added_lines(summary: &Summary, tolerance: f64) -> String {
     s
 }
 
+/// A count with thin groups of three digits: `1 040`.
+pub(super) fn grouped(n: usize) -> String {
+    let digits = n.to_string();
+    let mut out = String::with_capacity(digits.len() + digits.len() / 3);
+    for (i, c) in digits.chars().enumerate() {
+        if i > 0 && (digits.len() - i) % 3 == 0 {
+            out.push(' ');
+        }
+        out.push(c);
+    }
+    out
+}
+
+/// The line `compensate` prints on standard error: what was written, how
+/// much it changed and the largest predicted deviation of the cutting
+/// moves (the one of rapids and machine-defined moves after it).
+pub(super) fn summary_line(input: &str, output: &Path, s: &Summary, tolerance: f64) -> String {
+    let out = if output == Path::new("-") {
+        "stdout".to_string()
+    } else {
+        output.display().to_string()
+    };
+    let plural = |n: usize, one: &str, many: &str| {
+        format!("{} {}", grouped(n), if n == 1 { one } else { many })
+    };
+    let mut line = format!(
+        "{input} → {out}: {} changed, {}",
+        plural(s.changed, "block", "blocks"),
+        added_lines(s, tolerance)
+    );
+    if s.cutting.count > 0 {
+        line.push_str(&format!(
+            "; predicted deviation of cutting moves max {:.4} mm (line {})",
+            s.cutting.max, s.cutting.max_line
+        ));
+    }
+    let other = s.deviation.count - s.cutting.count;
+    if other > 0 {
+        // The largest of rapids and machine-defined moves, when larger.
+        if s.deviation.max > s.cutting.max || s.cutting.count == 0 {
+            line.push_str(&format!(
+                "; rapids and machine-defined moves max {:.4} mm (line {})",
+                s.deviation.max, s.deviation.max_line
+            ));
+        }
+    }
+    line
+}
+
 /// `postproc report` (dry run).
 pub fn report(a: &ReportArgs) -> Result<i32> {
     let run = Prepared::new(&a.program, &a.effects, "report")?;
@@ -848,8 +921,14 @@ pub fn report(a: &ReportArgs) -> Result<i32> {
     let (input, file) = open_input(&a.program.file)?;
     let out = a.output.clone().unwrap_or_else(|| PathBuf::from("-"));
     refuse_overwrite(&out, &input_files(&a.program, &a.effects)?)?;
+    let provenance = super::machines::provenance(
+        &run.loaded,
+        super::machines::tool_effects(&run.effects),
+        None,
+        false,
+    );
     emit_to(&out, |w| {
-        run_reporting(&job, input, &file, None, w, &run.setup, a.format)
+        run_reporting(&job, input, &file, None, w, a.format, Some(&provenance))
     })?;
     Ok(0)
 }

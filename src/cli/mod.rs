@@ -6,6 +6,7 @@ mod calibrate;
 mod diagnose;
 mod gcode;
 mod interrupt;
+mod machines;
 mod rapid;
 
 use std::path::PathBuf;
@@ -58,6 +59,8 @@ pub enum Command {
     Calibrate(calibrate::CalibrateArgs),
     /// Find where model and measurements disagree, name the missing effect, add it.
     Diagnose(DiagnoseArgs),
+    /// List the machine files bundled in the binary, with their status.
+    Machines,
 }
 
 /// Exit codes of `batch`, also listed in its `--help`.
@@ -67,12 +70,23 @@ pub const BATCH_EXIT_HELP: &str = "Exit codes: 0 every program compensated; 1 ev
 #[derive(Debug, Args)]
 pub struct BatchArgs {
     /// Programs or folders (searched recursively for .nc .ngc .tap .gcode
-    /// .cnc and RAPID .mod .modx .prg).
+    /// .cnc and RAPID .mod .modx .prg); with --merge-summaries, the
+    /// summaries of the shards.
     #[arg(required = true)]
     pub inputs: Vec<PathBuf>,
-    /// Machine file, or the name of a bundled one (machines/NAME.yaml).
-    #[arg(short, long)]
-    pub machine: String,
+    /// Machine file, or the name of a bundled one (`postproc machines`).
+    #[arg(short, long, required_unless_present = "merge_summaries")]
+    pub machine: Option<String>,
+    /// Compensate only the K-th of N shares of the programs (1 <= K <= N):
+    /// program i of the sorted list belongs to share i mod N + 1, so N runs
+    /// with K = 1..N cover every program once (a Slurm job array, a
+    /// Kubernetes indexed Job; docs/batch.md).
+    #[arg(long, value_name = "K/N", conflicts_with = "merge_summaries")]
+    pub shard: Option<String>,
+    /// Merge the batch-summary.json files of shards (the inputs) into one
+    /// in --out-dir; nothing is compensated.
+    #[arg(long)]
+    pub merge_summaries: bool,
     /// Folder for the compensated programs (same names; folder inputs keep
     /// their sub-folders) and batch-summary.json.
     #[arg(long)]
@@ -107,6 +121,10 @@ pub struct BatchArgs {
     /// `<output>.report.<txt|csv|json|svg>`.
     #[arg(long, value_enum)]
     pub report_format: Option<Format>,
+    /// Compensate programs that carry a postproc header too (refused by
+    /// default: the correction would be applied twice).
+    #[arg(long)]
+    pub recompensate: bool,
 }
 
 /// Options shared by the commands that read a G-code program.
@@ -114,7 +132,7 @@ pub struct BatchArgs {
 pub struct ProgramArgs {
     /// The program (`-` reads standard input).
     pub file: PathBuf,
-    /// Machine file, or the name of a bundled one (machines/NAME.yaml).
+    /// Machine file, or the name of a bundled one (`postproc machines`).
     #[arg(short, long)]
     pub machine: Option<String>,
     /// Tool length for an H number, overriding the machine file: H1=123.4 (mm).
@@ -225,6 +243,10 @@ pub struct CompensateArgs {
     /// Format of the --report file, overriding its extension.
     #[arg(long, value_enum, requires = "report")]
     pub report_format: Option<Format>,
+    /// Compensate a program that carries a postproc header (refused by
+    /// default: the correction would be applied twice).
+    #[arg(long)]
+    pub recompensate: bool,
 }
 
 /// Report formats.
@@ -300,18 +322,21 @@ pub fn init_logging(quiet: bool, verbose: u8) {
 pub fn run(cli: Cli) -> Result<i32> {
     init_logging(cli.quiet, cli.verbose);
     let quiet = cli.quiet;
-    match cli.command {
+    let code = match cli.command {
         Command::Check(a) if rapid::wants(&a.program) => rapid::check(&a),
         Command::Check(a) => gcode::check(&a),
-        Command::Compensate(a) if rapid::wants(&a.program) => rapid::compensate(&a),
-        Command::Compensate(a) => gcode::compensate(&a),
+        Command::Compensate(a) if rapid::wants(&a.program) => rapid::compensate(&a, quiet),
+        Command::Compensate(a) => gcode::compensate(&a, quiet),
         Command::Report(a) if rapid::wants(&a.program) => rapid::report(&a),
         Command::Report(a) => gcode::report(&a),
         Command::Batch(a) => batch::run(&a, quiet),
         Command::Simulate(a) => calibrate::run_simulate(&a),
         Command::Calibrate(a) => calibrate::run_calibrate(&a),
         Command::Diagnose(a) => diagnose::run(&a),
-    }
+        Command::Machines => machines::list(),
+    }?;
+    machines::warn_example_used();
+    Ok(code)
 }
 
 pub(crate) fn usage(msg: impl Into<String>) -> Error {

@@ -9,6 +9,7 @@ use super::{Annotate, CheckArgs, CompensateArgs, EffectArgs, ProgramArgs, Report
 use crate::compensate::rapid::{
     MoveRecord, RapidOptions, RapidOutcome, compensate_module, compensate_parsed, stream,
 };
+use crate::emit::header::{HeaderWriter, Provenance};
 use crate::emit::rapid::Format;
 use crate::error::{Error, Result};
 use crate::machine::Machine;
@@ -27,20 +28,25 @@ pub fn wants(program: &ProgramArgs) -> bool {
     }
     match program.machine.as_deref() {
         Some(name) => matches!(
-            Machine::resolve(name).and_then(|p| Machine::load(&p)),
+            crate::machine::MachineFile::open(name).and_then(|f| f.load()),
             Ok(Machine::Robot(_))
         ),
         None => false,
     }
 }
 
+/// The robot of `--machine NAME`.
 pub(super) fn load_robot(name: &str) -> Result<Robot> {
-    let path = Machine::resolve(name)?;
-    match Machine::load(&path)? {
-        Machine::Robot(r) => Ok(r),
-        Machine::Tool(_) => Err(usage(format!(
+    load_robot_file(name).map(|(r, _)| r)
+}
+
+/// The robot of `--machine NAME` and its file.
+pub(super) fn load_robot_file(name: &str) -> Result<(Robot, super::machines::Loaded)> {
+    match super::machines::open(name)? {
+        (Machine::Robot(r), loaded) => Ok((r, loaded)),
+        (Machine::Tool(_), loaded) => Err(usage(format!(
             "{}: is a machine tool; RAPID programs need a robot",
-            path.display()
+            loaded.file.shown
         ))),
     }
 }
@@ -217,6 +223,21 @@ impl Source {
             None => std::fs::File::open(&self.path)?,
         };
         Ok(std::io::BufReader::with_capacity(1 << 16, file))
+    }
+
+    /// The first bytes of the module ([`crate::emit::header::HEAD_BYTES`]),
+    /// where a postproc header would be.
+    pub(super) fn head(&self) -> Result<Vec<u8>> {
+        use std::io::Read;
+        let limit = crate::emit::header::HEAD_BYTES;
+        if let Some(Stdin::Held(b)) = &self.stdin {
+            return Ok(b[..b.len().min(limit)].to_vec());
+        }
+        let mut head = Vec::new();
+        self.open()
+            .and_then(|r| r.take(limit as u64).read_to_end(&mut head))
+            .map_err(|e| Error::io(&self.name, e))?;
+        Ok(head)
     }
 
     /// The whole module text and its name; invalid UTF-8 gets a located
@@ -513,13 +534,14 @@ pub(super) fn robot_with_process(robot: Robot, e: &EffectArgs) -> Result<Robot> 
 }
 
 /// `postproc compensate` of a RAPID module.
-pub fn compensate(a: &CompensateArgs) -> Result<i32> {
+pub fn compensate(a: &CompensateArgs, quiet: bool) -> Result<i32> {
     let machine = a
         .program
         .machine
         .as_deref()
         .ok_or_else(|| usage("compensate needs --machine"))?;
-    let robot = robot_with_process(load_robot(machine)?, &a.effects)?;
+    let (robot, loaded) = load_robot_file(machine)?;
+    let robot = robot_with_process(robot, &a.effects)?;
     if !a.program.tools.is_empty() || !a.program.work_offsets.is_empty() {
         return Err(usage(
             "--tool and --work-offset are G-code options; RAPID takes tooldata and wobjdata from the module",
@@ -558,31 +580,41 @@ pub fn compensate(a: &CompensateArgs) -> Result<i32> {
         a.program.rapid_window_lines,
         stream::first_pass(&robot, &opts),
     )?;
-    if let Some(lines) = source.window_lines() {
-        let report = a.report.as_deref().map(|path| {
-            let format = a
-                .report_format
-                .unwrap_or_else(|| super::Format::from_path(path));
-            (path, format)
-        });
-        let outcome = pool.install(|| {
-            compensate_streamed_to(&source, &robot, &opts, lines, Some(&out_path), report)
-        })?;
-        if let Some(outcome) = outcome {
-            log_outcome(&out_path, &outcome);
-            return Ok(0);
-        }
-    }
-    let (src, name) = source.read_whole()?;
-    let outcome = pool.install(|| compensate_module(&src, &name, &robot, &opts))?;
+    super::machines::refuse_compensated(&source.head()?, source.name(), a.recompensate)?;
+    let provenance = super::machines::provenance(
+        &loaded,
+        super::machines::robot_effects(&opts.effects),
+        None,
+        a.annotate == Annotate::Comment,
+    );
     let report = a.report.as_deref().map(|path| {
         let format = a
             .report_format
             .unwrap_or_else(|| super::Format::from_path(path));
         (path, format)
     });
-    write_outcome(&out_path, &outcome, &name, report)?;
-    log_outcome(&out_path, &outcome);
+    let input_name = source.name().to_string();
+    if let Some(lines) = source.window_lines() {
+        let outcome = pool.install(|| {
+            compensate_streamed_to(
+                &source,
+                &robot,
+                &opts,
+                lines,
+                Some(&out_path),
+                report,
+                &provenance,
+            )
+        })?;
+        if let Some(outcome) = outcome {
+            log_outcome(&input_name, &out_path, &outcome, quiet);
+            return Ok(0);
+        }
+    }
+    let (src, name) = source.read_whole()?;
+    let outcome = pool.install(|| compensate_module(&src, &name, &robot, &opts))?;
+    write_outcome(&out_path, &outcome, &name, report, &provenance)?;
+    log_outcome(&input_name, &out_path, &outcome, quiet);
     Ok(0)
 }
 
@@ -594,6 +626,7 @@ pub(super) fn write_outcome(
     outcome: &RapidOutcome,
     name: &str,
     report: Option<(&Path, super::Format)>,
+    provenance: &Provenance,
 ) -> Result<()> {
     let mut out = Staged::open(out_path)?;
     let shown = if out_path == Path::new("-") {
@@ -601,13 +634,14 @@ pub(super) fn write_outcome(
     } else {
         out_path
     };
-    out.writer()
-        .write_all(outcome.text.as_bytes())
+    let mut hw = HeaderWriter::new(out.writer(), provenance.clone(), true);
+    hw.write_all(outcome.text.as_bytes())
+        .and_then(|()| hw.finish())
         .map_err(|e| Error::io(shown, e))?;
     let report = match report {
         Some((path, format)) => {
             let mut rep = Staged::open(path)?;
-            write_report(rep.writer(), outcome, name, format)?;
+            write_report(rep.writer(), outcome, name, format, Some(provenance))?;
             Some(rep.finish()?)
         }
         None => None,
@@ -619,12 +653,27 @@ pub(super) fn write_outcome(
     }
 }
 
-fn log_outcome(out_path: &Path, outcome: &RapidOutcome) {
-    tracing::info!(
-        "{}: {} moves compensated, {} targets added; largest predicted deviation {:.4} mm (line {})",
-        out_path.display(),
-        outcome.moves,
-        outcome.added,
+/// The summary line on standard error (unless `quiet`).
+fn log_outcome(input: &str, out_path: &Path, outcome: &RapidOutcome, quiet: bool) {
+    if quiet {
+        return;
+    }
+    let out = if out_path == Path::new("-") {
+        "stdout".to_string()
+    } else {
+        out_path.display().to_string()
+    };
+    let plural = |n: usize, one: &str, many: &str| {
+        format!(
+            "{} {}",
+            super::gcode::grouped(n),
+            if n == 1 { one } else { many }
+        )
+    };
+    eprintln!(
+        "{input} → {out}: {} compensated, {} added; largest predicted deviation {:.4} mm (line {})",
+        plural(outcome.moves, "move", "moves"),
+        plural(outcome.added, "target", "targets"),
         outcome.max_deviation_mm,
         outcome.max_deviation_line
     );
@@ -657,6 +706,7 @@ fn write_spilled(
     stdout_name: &str,
     head: &str,
     spill: std::io::BufWriter<std::fs::File>,
+    provenance: Option<&Provenance>,
 ) -> Result<Pending> {
     let shown = if path == Path::new("-") {
         Path::new(stdout_name)
@@ -668,10 +718,21 @@ fn write_spilled(
         .map_err(|e| Error::io(shown, e.into_error()))?;
     std::io::Seek::rewind(&mut file).map_err(|e| Error::io(shown, e))?;
     let mut out = Staged::open(path)?;
-    let w = out.writer();
-    w.write_all(head.as_bytes())
-        .map_err(|e| Error::io(shown, e))?;
-    std::io::copy(&mut file, w).map_err(|e| Error::io(shown, e))?;
+    match provenance {
+        Some(p) => {
+            let mut w = HeaderWriter::new(out.writer(), p.clone(), true);
+            w.write_all(head.as_bytes())
+                .and_then(|()| std::io::copy(&mut file, &mut w).map(drop))
+                .and_then(|()| w.finish())
+                .map_err(|e| Error::io(shown, e))?;
+        }
+        None => {
+            let w = out.writer();
+            w.write_all(head.as_bytes())
+                .map_err(|e| Error::io(shown, e))?;
+            std::io::copy(&mut file, w).map_err(|e| Error::io(shown, e))?;
+        }
+    }
     out.finish()
 }
 
@@ -687,6 +748,7 @@ pub(super) fn compensate_streamed_to(
     lines: usize,
     out_path: Option<&Path>,
     report: Option<(&Path, super::Format)>,
+    provenance: &Provenance,
 ) -> Result<Option<RapidOutcome>> {
     use crate::emit::report::{Layout, ReportWriter};
     let name = source.name();
@@ -708,7 +770,8 @@ pub(super) fn compensate_streamed_to(
     let mut writer = match (report, report_spill.as_mut()) {
         (Some((_, format)), Some(w)) => Some(
             ReportWriter::with_layout(w, Layout::rapid(), format, name)?
-                .with_source(Path::new(name)),
+                .with_source(Path::new(name))
+                .with_provenance(Some(provenance)),
         ),
         _ => None,
     };
@@ -734,7 +797,7 @@ pub(super) fn compensate_streamed_to(
     };
     let mut pending = Vec::new();
     if let (Some(p), Some(b)) = (out_path, body) {
-        pending.push(write_spilled(p, "stdout", &prologue, b)?);
+        pending.push(write_spilled(p, "stdout", &prologue, b, Some(provenance))?);
     }
     if let (Some(rw), Some((p, _))) = (writer, report) {
         rw.finish(crate::emit::report::Totals {
@@ -742,7 +805,7 @@ pub(super) fn compensate_streamed_to(
             moves: streamed.outcome.moves,
         })?;
         if let Some(spill) = report_spill {
-            pending.push(write_spilled(p, "report", "", spill)?);
+            pending.push(write_spilled(p, "report", "", spill, None)?);
         }
     }
     // Neither output is put in place unless both are written.
@@ -785,10 +848,12 @@ pub(super) fn write_report(
     outcome: &RapidOutcome,
     name: &str,
     format: super::Format,
+    provenance: Option<&Provenance>,
 ) -> Result<()> {
     use crate::emit::report::{Layout, ReportWriter, Totals};
-    let mut rw =
-        ReportWriter::with_layout(out, Layout::rapid(), format, name)?.with_source(Path::new(name));
+    let mut rw = ReportWriter::with_layout(out, Layout::rapid(), format, name)?
+        .with_source(Path::new(name))
+        .with_provenance(provenance);
     write_records(&mut rw, &outcome.records)?;
     rw.finish(Totals {
         blocks: outcome.moves,
@@ -803,7 +868,8 @@ pub fn report(a: &ReportArgs) -> Result<i32> {
         .machine
         .as_deref()
         .ok_or_else(|| usage("report needs --machine"))?;
-    let robot = robot_with_process(load_robot(machine)?, &a.effects)?;
+    let (robot, loaded) = load_robot_file(machine)?;
+    let robot = robot_with_process(robot, &a.effects)?;
     if !a.program.tools.is_empty() || !a.program.work_offsets.is_empty() {
         return Err(usage(
             "--tool and --work-offset are G-code options; RAPID takes tooldata and wobjdata from the module",
@@ -817,14 +883,24 @@ pub fn report(a: &ReportArgs) -> Result<i32> {
         a.program.rapid_window_lines,
         stream::first_pass(&robot, &opts),
     )?;
+    let provenance = super::machines::provenance(
+        &loaded,
+        super::machines::robot_effects(&opts.effects),
+        None,
+        false,
+    );
     if let Some(lines) = source.window_lines() {
         let report = Some((out.as_path(), a.format));
-        if compensate_streamed_to(&source, &robot, &opts, lines, None, report)?.is_some() {
+        if compensate_streamed_to(&source, &robot, &opts, lines, None, report, &provenance)?
+            .is_some()
+        {
             return Ok(0);
         }
     }
     let (src, name) = source.read_whole()?;
     let outcome = compensate_module(&src, &name, &robot, &opts)?;
-    super::gcode::emit_to(&out, |w| write_report(w, &outcome, &name, a.format))?;
+    super::gcode::emit_to(&out, |w| {
+        write_report(w, &outcome, &name, a.format, Some(&provenance))
+    })?;
     Ok(0)
 }

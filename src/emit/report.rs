@@ -173,12 +173,18 @@ pub struct ReportWriter<'w> {
     file: String,
     /// Index 0: total; then one per effect.
     stats: Vec<Stat>,
+    /// |deviation| of the cutting moves, and of rapids and moves to
+    /// machine-defined places (G28, G53; RAPID MoveJ, MoveAbsJ).
+    cutting: Stat,
+    positioning: Stat,
     plot: Option<Decimator>,
     /// Largest deviation of all moves, and of the cutting moves.
     worst_point: Option<PlotWorst>,
     worst_cut: Option<PlotWorst>,
     /// The program file, re-read at the end for the text of the worst blocks.
     source: Option<std::path::PathBuf>,
+    /// What made the run (machine file, effects, tolerance).
+    provenance: Option<crate::emit::header::Provenance>,
 }
 
 /// Longest source text quoted for a worst block, characters.
@@ -274,6 +280,40 @@ fn stat_name(layout: &Layout, i: usize) -> &str {
     }
 }
 
+/// Whether a motion is a positioning move (rapid, machine-defined place,
+/// RAPID joint move) rather than a cutting move.
+fn is_positioning(motion: &str) -> bool {
+    matches!(motion, "rapid" | "fixed" | "MoveJ" | "MoveAbsJ")
+}
+
+/// The statistics of one group of moves as a JSON object.
+fn group_json(s: &Stat, texts: &std::collections::BTreeMap<usize, String>) -> String {
+    let worst: Vec<String> = s
+        .worst
+        .iter()
+        .map(|(v, line, motion)| {
+            let source = texts
+                .get(line)
+                .map(|t| format!(",\"source\":{}", json_str(t)))
+                .unwrap_or_default();
+            format!(
+                "{{\"line\":{line},\"motion\":{},\"dev_mm\":{}{source}}}",
+                json_str(motion),
+                jnum(*v, 5)
+            )
+        })
+        .collect();
+    format!(
+        "{{\"moves\":{},\"mean_mm\":{},\"p95_mm\":{},\"max_mm\":{},\"max_line\":{},\"worst\":[{}]}}",
+        s.hist.count,
+        jnum(s.mean(), 5),
+        jnum(s.percentile(95.0), 5),
+        jnum(s.max(), 5),
+        s.max_line(),
+        worst.join(",")
+    )
+}
+
 /// Points kept for the picture, whatever the program length.
 pub const PLOT_POINTS: usize = 4000;
 
@@ -298,10 +338,13 @@ impl<'w> ReportWriter<'w> {
             rows: 0,
             file: file.to_string(),
             stats,
+            cutting: Stat::new(),
+            positioning: Stat::new(),
             plot: (format == Format::Svg).then(|| Decimator::new(PLOT_POINTS)),
             worst_point: None,
             worst_cut: None,
             source: None,
+            provenance: None,
         };
         let mut cols: Vec<String> = vec!["line".into(), "motion".into()];
         for (a, unit) in &w.layout.axes {
@@ -352,6 +395,13 @@ impl<'w> ReportWriter<'w> {
         self
     }
 
+    /// Records what made the run in the report (CSV and table: a comment
+    /// line at the end; JSON: `provenance`).
+    pub fn with_provenance(mut self, provenance: Option<&crate::emit::header::Provenance>) -> Self {
+        self.provenance = provenance.cloned();
+        self
+    }
+
     /// Writes the row of a G-code motion block.
     pub fn row(&mut self, r: &Row) -> Result<()> {
         let mut axes = [0.0; 6];
@@ -388,9 +438,14 @@ impl<'w> ReportWriter<'w> {
         for (s, &v) in self.stats.iter_mut().skip(1).zip(r.effects_mm) {
             s.add(v, r.line, r.motion);
         }
+        let rapid = is_positioning(r.motion);
+        if rapid {
+            self.positioning.add(dev, r.line, r.motion);
+        } else {
+            self.cutting.add(dev, r.line, r.motion);
+        }
         match self.format {
             Format::Svg => {
-                let rapid = matches!(r.motion, "rapid" | "fixed" | "MoveJ" | "MoveAbsJ");
                 let p = PlotPoint {
                     line: r.line,
                     pos: r.position_mm,
@@ -477,6 +532,39 @@ impl<'w> ReportWriter<'w> {
         Ok(())
     }
 
+    /// The headline: the cutting moves, then the rapids and moves to
+    /// machine-defined places on their own.
+    fn groups_line(&self) -> String {
+        let c = &self.cutting;
+        let mut line = format!(
+            "cutting moves ({}): |dev| mean {} mm, max {} mm (line {}), p95 {} mm",
+            c.hist.count,
+            num(c.mean(), 5),
+            num(c.max(), 5),
+            c.max_line(),
+            num(c.percentile(95.0), 5)
+        );
+        let p = &self.positioning;
+        if p.hist.count > 0 {
+            line.push_str(&format!(
+                "; rapids and machine-defined moves ({}): max {} mm (line {})",
+                p.hist.count,
+                num(p.max(), 5),
+                p.max_line()
+            ));
+        }
+        line
+    }
+
+    /// What the position columns are.
+    fn positions_label(&self) -> &'static str {
+        if self.layout.kind == "rapid" {
+            "programmed TCP, world frame"
+        } else {
+            "machine coordinates (work offsets and tool lengths applied)"
+        }
+    }
+
     /// Writes the summary (and, for SVG, the picture) and ends the report.
     pub fn finish(mut self, totals: Totals) -> Result<()> {
         let p95: Vec<f64> = self.stats.iter().map(|s| s.percentile(95.0)).collect();
@@ -491,6 +579,7 @@ impl<'w> ReportWriter<'w> {
                 let wanted = self
                     .stats
                     .iter()
+                    .chain([&self.cutting, &self.positioning])
                     .flat_map(|s| s.worst.iter().map(|w| w.1))
                     .collect();
                 source_lines(path, &wanted)
@@ -526,9 +615,14 @@ impl<'w> ReportWriter<'w> {
                         worst.join(",")
                     ));
                 }
+                let provenance = self
+                    .provenance
+                    .as_ref()
+                    .map(|p| format!(",\"provenance\":{}", p.to_json()))
+                    .unwrap_or_default();
                 writeln!(
                     self.out,
-                    "],\"summary\":{{\"blocks\":{},\"moves\":{},\"rows\":{},\"mean_mm\":{},\"max_mm\":{},\"max_line\":{},\"p95_mm\":{},\"effects\":[{}]}}}}",
+                    "],\"summary\":{{\"blocks\":{},\"moves\":{},\"rows\":{},\"mean_mm\":{},\"max_mm\":{},\"max_line\":{},\"p95_mm\":{},\"cutting\":{},\"positioning\":{},\"effects\":[{}]}}{provenance}}}",
                     totals.blocks,
                     totals.moves,
                     rows,
@@ -536,6 +630,8 @@ impl<'w> ReportWriter<'w> {
                     jnum(total.1, 5),
                     total.2,
                     jnum(p95_total, 5),
+                    group_json(&self.cutting, &texts),
+                    group_json(&self.positioning, &texts),
                     effects.join(",")
                 )
                 .map_err(io)?;
@@ -567,9 +663,14 @@ impl<'w> ReportWriter<'w> {
                     .map(|s| s.worst.iter().map(|w| w.1.to_string()).collect())
                     .unwrap_or_default();
                 line.push_str(&format!("; worst lines {}", worst.join(" ")));
+                writeln!(self.out, "# {}", self.groups_line()).map_err(io)?;
                 writeln!(self.out, "{line}").map_err(io)?;
+                if let Some(p) = &self.provenance {
+                    writeln!(self.out, "# provenance: {}", p.one_line()).map_err(io)?;
+                }
             }
             Format::Table => {
+                writeln!(self.out, "{}", self.groups_line()).map_err(io)?;
                 writeln!(
                     self.out,
                     "summary: {rows} rows; |dev| mean {} mm, max {} mm (line {}), p95 {} mm",
@@ -601,14 +702,25 @@ impl<'w> ReportWriter<'w> {
                     );
                     writeln!(self.out, "{}", line.trim_end()).map_err(io)?;
                 }
-                if let Some(s) = self.stats.first().filter(|s| !s.worst.is_empty()) {
-                    writeln!(self.out, "worst blocks:").map_err(io)?;
+                let groups = [
+                    ("worst blocks:", self.stats.first()),
+                    ("worst cutting blocks:", Some(&self.cutting)),
+                ];
+                for (title, s) in groups {
+                    let Some(s) = s.filter(|s| !s.worst.is_empty()) else {
+                        continue;
+                    };
+                    writeln!(self.out, "{title}").map_err(io)?;
                     for (v, line, motion) in &s.worst {
                         let text = texts.get(line).map_or("", String::as_str);
                         let row =
                             format!("  line {line:<6} {:>10} mm  {motion:<9} {text}", num(*v, 5));
                         writeln!(self.out, "{}", row.trim_end()).map_err(io)?;
                     }
+                }
+                writeln!(self.out, "positions: {}", self.positions_label()).map_err(io)?;
+                if let Some(p) = &self.provenance {
+                    writeln!(self.out, "provenance: {}", p.one_line()).map_err(io)?;
                 }
             }
             Format::Svg => {

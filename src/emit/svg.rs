@@ -195,6 +195,44 @@ fn level_colour(l: usize) -> RGBColor {
     colour((l as f64 + 0.5) / LEVELS as f64)
 }
 
+/// The part of the segment `p`–`q` inside the rectangle `(x0, x1, y0, y1)`
+/// (Liang–Barsky), or `None` when none of it is.
+fn clip(
+    p: (f64, f64),
+    q: (f64, f64),
+    (x0, x1, y0, y1): (f64, f64, f64, f64),
+) -> Option<((f64, f64), (f64, f64))> {
+    let (dx, dy) = (q.0 - p.0, q.1 - p.1);
+    let (mut t0, mut t1) = (0.0_f64, 1.0_f64);
+    for (pk, qk) in [
+        (-dx, p.0 - x0),
+        (dx, x1 - p.0),
+        (-dy, p.1 - y0),
+        (dy, y1 - p.1),
+    ] {
+        if pk == 0.0 {
+            if qk < 0.0 {
+                return None;
+            }
+        } else {
+            let t = qk / pk;
+            if pk < 0.0 {
+                t0 = t0.max(t);
+            } else {
+                t1 = t1.min(t);
+            }
+        }
+    }
+    if t0 > t1 {
+        return None;
+    }
+    let at = |t: f64| (p.0 + t * dx, p.1 + t * dy);
+    Some((
+        if t0 > 0.0 { at(t0) } else { p },
+        if t1 < 1.0 { at(t1) } else { q },
+    ))
+}
+
 /// Axis ranges with equal mm per pixel on both axes for a plot area of
 /// `px` × `py` pixels.
 fn equal_ranges(
@@ -250,11 +288,17 @@ fn view(
     (xdesc, ydesc): (&str, &str),
     scale: &Scale,
 ) -> Result<()> {
+    // The view fits the cutting moves (both ends of each), so that rapids
+    // to far places (G28, a tool change position) do not shrink the part;
+    // without cutting moves it fits every point.
+    let cutting = points.iter().any(|p| !p.rapid);
+    let fitted =
+        |i: usize| !cutting || !points[i].rapid || points.get(i + 1).is_some_and(|n| !n.rapid);
     let bounds = |k: usize| {
-        points
-            .iter()
-            .fold((f64::INFINITY, f64::NEG_INFINITY), |r, p| {
-                let v = p.pos.get(k).copied().unwrap_or(0.0);
+        (0..points.len())
+            .filter(|&i| fitted(i))
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |r, i| {
+                let v = points[i].pos.get(k).copied().unwrap_or(0.0);
                 (r.0.min(v), r.1.max(v))
             })
     };
@@ -267,6 +311,7 @@ fn view(
     let (px, py) = (w as f64 - 70.0 - 30.0, h as f64 - 45.0 - 60.0);
     let (xr, yr) = equal_ranges(xs, ys, px.max(10.0), py.max(10.0));
     let (dx, dy) = (tick_decimals(&xr), tick_decimals(&yr));
+    let rect = (xr.start, xr.end, yr.start, yr.end);
     let mut chart = ChartBuilder::on(area)
         .caption(caption, ("sans-serif", 18))
         .margin(15)
@@ -292,20 +337,52 @@ fn view(
             p.pos.get(b).copied().unwrap_or(0.0),
         )
     };
-    // Runs of segments with the same colour level and kind: one polyline each.
+    // Runs of segments with the same colour level and kind: one polyline
+    // each, cut at the view's edges (a rapid leaving the view is drawn up to
+    // its edge).
     let mut i = 1;
     while i < points.len() {
         let key = (level(points[i].dev, scale), points[i].rapid);
-        let mut run = vec![at(&points[i - 1]), at(&points[i])];
-        let mut j = i + 1;
-        while j < points.len() && (level(points[j].dev, scale), points[j].rapid) == key {
-            run.push(at(&points[j]));
+        let style = level_colour(key.0).stroke_width(if key.1 { 1 } else { 3 });
+        let mut run: Vec<(f64, f64)> = Vec::new();
+        let mut j = i;
+        while j < points.len() && (j == i || (level(points[j].dev, scale), points[j].rapid) == key)
+        {
+            match clip(at(&points[j - 1]), at(&points[j]), rect) {
+                Some((p, q)) => {
+                    if run.last() != Some(&p) {
+                        if run.len() > 1 {
+                            chart
+                                .draw_series(std::iter::once(PathElement::new(
+                                    std::mem::take(&mut run),
+                                    style,
+                                )))
+                                .map_err(plot_err)?;
+                        }
+                        run.clear();
+                        run.push(p);
+                    }
+                    run.push(q);
+                }
+                None => {
+                    if run.len() > 1 {
+                        chart
+                            .draw_series(std::iter::once(PathElement::new(
+                                std::mem::take(&mut run),
+                                style,
+                            )))
+                            .map_err(plot_err)?;
+                    }
+                    run.clear();
+                }
+            }
             j += 1;
         }
-        let style = level_colour(key.0).stroke_width(if key.1 { 1 } else { 3 });
-        chart
-            .draw_series(std::iter::once(PathElement::new(run, style)))
-            .map_err(plot_err)?;
+        if run.len() > 1 {
+            chart
+                .draw_series(std::iter::once(PathElement::new(run, style)))
+                .map_err(plot_err)?;
+        }
         i = j;
     }
     // Circles on the marks; their meaning in a boxed legend in the upper
@@ -316,6 +393,11 @@ fn view(
             wp.pos.get(a).copied().unwrap_or(0.0),
             wp.pos.get(b).copied().unwrap_or(0.0),
         );
+        // A mark outside the view (a far rapid) is named in the title and
+        // the deviation plot only.
+        if !(rect.0..=rect.1).contains(&c.0) || !(rect.2..=rect.3).contains(&c.1) {
+            continue;
+        }
         chart
             .draw_series(std::iter::once(
                 EmptyElement::at(c) + Circle::new((0, 0), 9, colour.stroke_width(3)),
@@ -521,6 +603,25 @@ mod tests {
             d.push(pt(i, 0.0));
         }
         assert_eq!(d.finish().len(), 10);
+    }
+
+    #[test]
+    fn segments_are_clipped_to_the_view() {
+        let r = (0.0, 10.0, 0.0, 10.0);
+        // Inside: unchanged; crossing the top edge: cut there; outside: none.
+        assert_eq!(
+            clip((1.0, 1.0), (2.0, 3.0), r),
+            Some(((1.0, 1.0), (2.0, 3.0)))
+        );
+        assert_eq!(
+            clip((5.0, 5.0), (5.0, 20.0), r),
+            Some(((5.0, 5.0), (5.0, 10.0)))
+        );
+        assert_eq!(
+            clip((-5.0, 5.0), (15.0, 5.0), r),
+            Some(((0.0, 5.0), (10.0, 5.0)))
+        );
+        assert_eq!(clip((11.0, 11.0), (20.0, 30.0), r), None);
     }
 
     #[test]

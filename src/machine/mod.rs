@@ -1,12 +1,18 @@
 //! Machine definitions: YAML files are read into strict raw structs
 //! (`deny_unknown_fields`), then validated once into an immutable [`Machine`]
-//! that the engine shares between threads.
+//! that the engine shares between threads. The bundled machine files are
+//! part of the binary ([`BUNDLED`]), so `--machine NAME` works wherever the
+//! binary runs.
 
 pub mod robot;
+pub mod status;
 pub mod tool;
 pub mod yaml;
 
+use std::borrow::Cow;
 use std::path::{Path, PathBuf};
+
+pub use status::Status;
 
 use crate::error::{Error, Result};
 
@@ -82,37 +88,110 @@ impl Machine {
             ))),
         }
     }
+}
 
-    /// Resolves `--machine NAME`: an existing path, or `machines/NAME.yaml`
-    /// bundled with the tool (looked up beside the executable's source tree
-    /// and in the current directory).
-    pub fn resolve(name: &str) -> Result<PathBuf> {
-        let direct = PathBuf::from(name);
+/// The machine files bundled with postproc, compiled into the binary:
+/// (name, text). `--machine NAME` selects one by name.
+pub const BUNDLED: [(&str, &str); 4] = [
+    (
+        "abb-irb1600",
+        include_str!("../../machines/abb-irb1600.yaml"),
+    ),
+    ("afm-r1000", include_str!("../../machines/afm-r1000.yaml")),
+    (
+        "five-axis-ac",
+        include_str!("../../machines/five-axis-ac.yaml"),
+    ),
+    (
+        "staubli-tx200",
+        include_str!("../../machines/staubli-tx200.yaml"),
+    ),
+];
+
+/// A machine file as a run reads it: a file on disk or a bundled one.
+#[derive(Debug, Clone)]
+pub struct MachineFile {
+    /// How errors name it: the path, or `NAME.yaml (bundled)`.
+    pub shown: String,
+    /// The file name without folders (`afm-r1000.yaml`), as provenance
+    /// records it.
+    pub file_name: String,
+    /// The path on disk; `None` for a bundled file.
+    pub path: Option<PathBuf>,
+    /// The YAML text.
+    pub text: Cow<'static, str>,
+}
+
+impl MachineFile {
+    /// Resolves `--machine NAME`: an existing file wins; else the name of a
+    /// bundled machine (`afm-r1000`, also spelt `afm-r1000.yaml` or
+    /// `machines/afm-r1000.yaml`), whatever the current directory.
+    pub fn open(name: &str) -> Result<MachineFile> {
+        let direct = Path::new(name);
         if direct.is_file() {
-            return Ok(direct);
+            let text = std::fs::read_to_string(direct).map_err(|e| Error::io(direct, e))?;
+            return Ok(MachineFile {
+                shown: direct.display().to_string(),
+                file_name: direct
+                    .file_name()
+                    .map_or_else(|| name.to_string(), |n| n.to_string_lossy().to_string()),
+                path: Some(direct.to_path_buf()),
+                text: Cow::Owned(text),
+            });
         }
-        let file = if name.ends_with(".yaml") || name.ends_with(".yml") {
-            name.to_string()
+        if let Some(file) = Self::bundled(name) {
+            return Ok(file);
+        }
+        if direct.exists() {
+            Err(Error::Usage(format!(
+                "machine `{name}` is not a regular file"
+            )))
         } else {
-            format!("{name}.yaml")
-        };
-        let mut candidates = vec![PathBuf::from("machines").join(&file)];
-        if let Some(dir) = option_env!("CARGO_MANIFEST_DIR") {
-            candidates.push(PathBuf::from(dir).join("machines").join(&file));
+            let names: Vec<&str> = BUNDLED.iter().map(|(n, _)| *n).collect();
+            Err(Error::Usage(format!(
+                "machine `{name}` not found: no such file, and not a bundled machine ({})",
+                names.join(", ")
+            )))
         }
-        if let Ok(exe) = std::env::current_exe() {
-            for anc in exe.ancestors().skip(1).take(4) {
-                candidates.push(anc.join("machines").join(&file));
-            }
-        }
-        candidates.into_iter().find(|p| p.is_file()).ok_or_else(|| {
-            if direct.exists() {
-                Error::Usage(format!("machine `{name}` is not a regular file"))
-            } else {
-                Error::Usage(format!(
-                    "machine `{name}` not found (no such file, and no machines/{file})"
-                ))
-            }
-        })
+    }
+
+    /// The bundled machine `name` (`afm-r1000`, `afm-r1000.yaml`,
+    /// `machines/afm-r1000.yaml`).
+    pub fn bundled(name: &str) -> Option<MachineFile> {
+        let bare = name.strip_prefix("machines/").unwrap_or(name);
+        let bare = bare
+            .strip_suffix(".yaml")
+            .or_else(|| bare.strip_suffix(".yml"))
+            .unwrap_or(bare);
+        BUNDLED
+            .iter()
+            .find(|(n, _)| *n == bare)
+            .map(|(n, text)| MachineFile {
+                shown: format!("{n}.yaml (bundled)"),
+                file_name: format!("{n}.yaml"),
+                path: None,
+                text: Cow::Borrowed(text),
+            })
+    }
+
+    /// Parses and validates the machine.
+    pub fn load(&self) -> Result<Machine> {
+        Machine::from_yaml_str(&self.text, &self.shown)
+    }
+
+    /// The file's `status` and `calibrations`.
+    pub fn status(&self) -> Result<Status> {
+        Status::from_yaml_str(&self.text, &self.shown)
+    }
+
+    /// SHA-256 of the file's bytes, lower-case hex (what `sha256sum`
+    /// prints for the file).
+    pub fn sha256(&self) -> String {
+        status::sha256_hex(self.text.as_bytes())
+    }
+
+    /// Whether this is a bundled machine rather than a file on disk.
+    pub fn is_bundled(&self) -> bool {
+        self.path.is_none()
     }
 }

@@ -344,8 +344,8 @@ mod tests {
     use crate::program::rapid::windows;
 
     fn robot() -> Robot {
-        let path = crate::machine::Machine::resolve("abb-irb1600").unwrap();
-        match crate::machine::Machine::load(&path).unwrap() {
+        let file = crate::machine::MachineFile::bundled("abb-irb1600").unwrap();
+        match file.load().unwrap() {
             crate::machine::Machine::Robot(r) => r,
             crate::machine::Machine::Tool(_) => panic!("not a robot"),
         }

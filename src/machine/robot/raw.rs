@@ -36,6 +36,11 @@ pub(crate) struct RawRobot {
     pub modal: Option<Vec<RawMode>>,
     #[serde(default)]
     pub output: Option<RawOutput>,
+    /// `status` and `calibrations`, read by [`crate::machine::status`].
+    #[serde(default, rename = "status")]
+    pub _status: Option<serde::de::IgnoredAny>,
+    #[serde(default, rename = "calibrations")]
+    pub _calibrations: Option<serde::de::IgnoredAny>,
 }
 
 /// `process_force:` — the predicted process force at the TCP.

@@ -34,6 +34,11 @@ pub(crate) struct RawMachineTool {
     pub thermal: Option<RawThermal>,
     #[serde(default)]
     pub modal: Option<RawModal>,
+    /// `status` and `calibrations`, read by [`crate::machine::status`].
+    #[serde(default, rename = "status")]
+    pub _status: Option<serde::de::IgnoredAny>,
+    #[serde(default, rename = "calibrations")]
+    pub _calibrations: Option<serde::de::IgnoredAny>,
 }
 
 /// The control's unit for programs without G20/G21.
