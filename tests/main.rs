@@ -9,6 +9,7 @@ mod common;
 mod compensate_props;
 mod diagnose;
 mod effects;
+mod frames;
 mod gcode_cli;
 mod gcode_grammar;
 mod golden;

@@ -28,6 +28,24 @@ pub(crate) struct RawMachineTool {
     pub thermal: Option<RawThermal>,
     #[serde(default)]
     pub modal: Option<RawModal>,
+    /// Pose of the measuring instrument in the workpiece frame (written by
+    /// calibration from instrument-frame observations; not part of the model).
+    #[serde(default)]
+    pub measurement_frame: Option<RawMeasurementFrame>,
+}
+
+/// `measurement_frame:` — translation and roll-pitch-yaw.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct RawMeasurementFrame {
+    #[serde(default)]
+    pub x_mm: f64,
+    #[serde(default)]
+    pub y_mm: f64,
+    #[serde(default)]
+    pub z_mm: f64,
+    #[serde(default)]
+    pub rpy_deg: [f64; 3],
 }
 
 /// Linear or rotary axis.
