@@ -90,7 +90,11 @@ fn stiffness_recovers_paper_c_style_truth() {
             START_ROBOT,
             &obs,
             "ldbb.csv",
-            &Options { holdout: 0.3, seed },
+            &Options {
+                holdout: 0.3,
+                seed,
+                ..Options::default()
+            },
         )
         .expect("stiffness identified");
         for (i, &k) in TRUE_K.iter().enumerate() {
@@ -184,7 +188,11 @@ fn kinematics_recovers_truth() {
             "start.yaml",
             &obs,
             "k.csv",
-            &Options { holdout: 0.3, seed },
+            &Options {
+                holdout: 0.3,
+                seed,
+                ..Options::default()
+            },
         )
         .expect("kinematics identified");
         let fixed = cal.fixed();
@@ -269,7 +277,11 @@ fn geometry_recovers_truth_tables_and_squareness() {
             "machines/afm-r1000.yaml",
             &obs,
             "g.csv",
-            &Options { holdout: 0.3, seed },
+            &Options {
+                holdout: 0.3,
+                seed,
+                ..Options::default()
+            },
         )
         .expect("geometry identified");
         // Squareness of the truth file (hand-edited values).
@@ -599,6 +611,7 @@ fn binary_deviation_files() {
         &Options {
             holdout: 0.0,
             seed: 1,
+            ..Options::default()
         },
     )
     .expect("identified");
@@ -638,6 +651,7 @@ fn geometry_on_a_five_axis_machine() {
         &Options {
             holdout: 0.0,
             seed: 1,
+            ..Options::default()
         },
     )
     .expect("identified");
@@ -702,7 +716,11 @@ fn thermal_recovers_paper_b_terms() {
             "start.yaml",
             &obs,
             "obs.csv",
-            &Options { holdout: 0.3, seed },
+            &Options {
+                holdout: 0.3,
+                seed,
+                ..Options::default()
+            },
         )
         .expect("thermal calibration");
         assert!(cal.fixed().is_empty(), "{cal}");
@@ -753,6 +771,7 @@ fn thermal_constant_power_term_is_fixed() {
     let opts = Options {
         holdout: 0.3,
         seed: 3,
+        ..Options::default()
     };
     let cal = postproc::calibrate::thermal::calibrate_thermal(&start, "s", &obs, "o", &opts)
         .expect("calibration runs");
@@ -822,6 +841,7 @@ fn thermal_machine_tool_gains() {
         &Options {
             holdout: 0.3,
             seed: 8,
+            ..Options::default()
         },
     )
     .expect("calibration");

@@ -65,6 +65,7 @@ pub(crate) fn robot_rows(n: usize, seed: u64) -> Vec<Observation> {
             let p_w = [0; 6].map(|_| Some(u(0.0, 600.0)));
             let dir = [0; 6].map(|_| Some(if u(0.0, 1.0) < 0.5 { -1 } else { 1 }));
             Observation {
+                orientation: None,
                 line: 0,
                 id: (i + 1).to_string(),
                 t_s: Some(60.0 * i as f64),
@@ -93,6 +94,7 @@ pub(crate) fn tool_rows(n: usize, seed: u64) -> Vec<Observation> {
             let xyz = Vector3::new(u(0.0, 1000.0), u(0.0, 500.0), u(0.0, 500.0));
             let dir = [0; 6].map(|_| Some(if u(0.0, 1.0) < 0.5 { -1 } else { 1 }));
             Observation {
+                orientation: None,
                 line: 0,
                 id: (i + 1).to_string(),
                 t_s: Some(30.0 * i as f64),
@@ -162,6 +164,7 @@ fn measure_with_noise(
     };
     let obs = Observations {
         kind,
+        frame: Default::default(),
         measured: MeasuredKind::Position,
         columns: cols,
         rows,

@@ -529,6 +529,7 @@ fn an_axis_that_has_not_moved_uses_the_forward_column_everywhere() {
         force_n: Vector3::zeros(),
         moment_nm: Vector3::zeros(),
         ambient_c: None,
+        orientation: None,
         pose: Pose::Tool(ToolPose {
             xyz_mm: Vector3::new(mv.end[0], mv.end[1], mv.end[2]),
             abc_deg: [None; 3],

@@ -37,7 +37,7 @@
 //!     `idle_w_per_rpm · spindle_rpm` is added), and `t_s` alone does not
 //!     drive the thermal model (a row without powers is cold).
 
-use nalgebra::{Point3, Vector3, Vector6};
+use nalgebra::{Point3, UnitQuaternion, Vector3, Vector6};
 
 use crate::error::{Error, Located, Result};
 use crate::machine::Machine;
@@ -56,6 +56,10 @@ pub struct Predicted {
     pub commanded_mm: Vector3<f64>,
     /// Where the model says the measured point really is, mm.
     pub attained_mm: Vector3<f64>,
+    /// Orientation of the measured frame the model predicts (robot: the
+    /// deflected flange carrying the tool frame's rotation); `None` for a
+    /// machine tool.
+    pub attained_rot: Option<UnitQuaternion<f64>>,
 }
 
 impl Predicted {
@@ -92,11 +96,60 @@ pub fn check_kind(machine: &Machine, obs: &Observations, file: &str) -> Result<(
     }
 }
 
+/// Which effects a prediction includes (all by default): geometric (the
+/// actual DH parameters / the error tables), static (gravity sag and the
+/// row's wrench / the row's force through the stiffness map) and thermal
+/// (the row's powers through the `thermal` terms).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Switches {
+    /// Geometric errors.
+    pub geometric: bool,
+    /// Deflection under gravity and loads.
+    pub static_: bool,
+    /// Thermal growth at the row's powers.
+    pub thermal: bool,
+}
+
+impl Default for Switches {
+    fn default() -> Self {
+        Switches {
+            geometric: true,
+            static_: true,
+            thermal: true,
+        }
+    }
+}
+
 /// Predicts one row. `file` names the observation file in errors.
 pub fn predict(machine: &Machine, row: &Observation, file: &str) -> Result<Predicted> {
+    predict_with(machine, row, file, Switches::default())
+}
+
+/// [`predict`] with only the effects `sw` switched on.
+pub fn predict_with(
+    machine: &Machine,
+    row: &Observation,
+    file: &str,
+    sw: Switches,
+) -> Result<Predicted> {
     let p = match (machine, &row.pose) {
-        (Machine::Robot(r), Pose::Robot(rp)) => predict_robot(r, row, rp),
-        (Machine::Tool(t), Pose::Tool(tp)) => predict_tool(t, row, tp),
+        (Machine::Robot(r), Pose::Robot(rp)) if sw == Switches::default() => {
+            predict_robot(r, row, rp, true)
+        }
+        (Machine::Robot(r), Pose::Robot(rp)) => {
+            let r = if sw.geometric {
+                r.clone()
+            } else {
+                r.with_actual(*r.params(Model::Nominal))
+            };
+            let p = predict_robot(&r, row, rp, sw.static_);
+            if sw.thermal {
+                p
+            } else {
+                predict_robot_at(&r, row, rp, sw.static_)
+            }
+        }
+        (Machine::Tool(t), Pose::Tool(tp)) => predict_tool(t, row, tp, sw),
         _ => {
             return Err(Error::Usage(format!(
                 "{file}: row `{}` does not match the kind of machine file",
@@ -146,12 +199,12 @@ pub fn row_wrench(row: &Observation) -> Vector6<f64> {
     w
 }
 
-fn predict_robot(robot: &Robot, row: &Observation, rp: &RobotPose) -> Predicted {
+fn predict_robot(robot: &Robot, row: &Observation, rp: &RobotPose, loads: bool) -> Predicted {
     if rp.p_w.iter().any(Option::is_some) && robot.thermal().is_some() {
         let hot = robot.at_joint_power(&rp.p_w.map(|p| p.unwrap_or(0.0)));
-        return predict_robot_at(&hot, row, rp);
+        return predict_robot_at(&hot, row, rp, loads);
     }
-    predict_robot_at(robot, row, rp)
+    predict_robot_at(robot, row, rp, loads)
 }
 
 /// Predicts a robot row with the actual DH lengths grown by `growth` (mm,
@@ -176,7 +229,7 @@ pub fn predict_robot_with_growth(
         j.d_mm += g[1];
     }
     let grown = robot.with_actual(p);
-    let out = predict_robot_at(&grown, row, rp);
+    let out = predict_robot_at(&grown, row, rp, true);
     if out
         .attained_mm
         .iter()
@@ -194,17 +247,23 @@ pub fn predict_robot_with_growth(
     }
 }
 
-fn predict_robot_at(robot: &Robot, row: &Observation, rp: &RobotPose) -> Predicted {
+fn predict_robot_at(robot: &Robot, row: &Observation, rp: &RobotPose, loads: bool) -> Predicted {
     let q = joints_rad(rp);
     let mp = Point3::from(measured_point(robot, rp));
     let wp = wrench_point(robot, rp);
-    let tau = robot.gravity_torques(Model::Actual, &q)
-        + robot.wrench_torques(Model::Actual, &q, &wp, &row_wrench(row));
-    let attained = robot.deflected_flange(Model::Actual, &q, &tau) * mp;
+    let tau = if loads {
+        robot.gravity_torques(Model::Actual, &q)
+            + robot.wrench_torques(Model::Actual, &q, &wp, &row_wrench(row))
+    } else {
+        Default::default()
+    };
+    let flange = robot.deflected_flange(Model::Actual, &q, &tau);
+    let attained = flange * mp;
     let commanded = robot.flange_pose(Model::Nominal, &q) * mp;
     Predicted {
         commanded_mm: commanded.coords,
         attained_mm: attained.coords,
+        attained_rot: Some(flange.rotation * robot.flange_to_tool().rotation),
     }
 }
 
@@ -225,24 +284,29 @@ pub fn tool_powers(tp: &ToolPose) -> Option<Powers> {
     })
 }
 
-fn predict_tool(tool: &MachineTool, row: &Observation, tp: &ToolPose) -> Predicted {
+fn predict_tool(tool: &MachineTool, row: &Observation, tp: &ToolPose, sw: Switches) -> Predicted {
     let cmd = tp.axes();
     let len = tool_length(tool, tp);
     let nominal = tool.nominal(&cmd, len);
-    let mut attained = tool.geometric(&cmd, &tp.dirs(), len).pos;
+    let mut attained = if sw.geometric {
+        tool.geometric(&cmd, &tp.dirs(), len).pos
+    } else {
+        nominal.pos
+    };
     let q = Vector3::new(cmd[0], cmd[1], cmd[2]);
-    if let Some(k) = tool.stiffness() {
+    if let (Some(k), true) = (tool.stiffness(), sw.static_) {
         if row.force_n != Vector3::zeros() {
             attained += k.deflection_mm(&q, &row.force_n);
         }
     }
-    if let (Some(t), Some(p)) = (tool.thermal(), tool_powers(tp)) {
+    if let (Some(t), Some(p), true) = (tool.thermal(), tool_powers(tp), sw.thermal) {
         let state = t.warm_up(&p, f64::INFINITY);
         attained += t.deviation_mm(&state, &q, &nominal.dir);
     }
     Predicted {
         commanded_mm: nominal.pos,
         attained_mm: attained,
+        attained_rot: None,
     }
 }
 
@@ -260,6 +324,7 @@ mod tests {
 
     fn robot_row(q_deg: [f64; 6], force_n: Vector3<f64>) -> Observation {
         Observation {
+            orientation: None,
             line: 0,
             id: "r".into(),
             t_s: None,
@@ -372,6 +437,7 @@ mod tests {
         px_w: Option<f64>,
     ) -> Observation {
         Observation {
+            orientation: None,
             line: 0,
             id: "p".into(),
             t_s: Some(3600.0),
@@ -451,6 +517,7 @@ mod tests {
     fn error_free_tool_attains_command() {
         let m = Machine::from_yaml_str(&error_free_yaml(), "t.yaml").expect("machine file");
         let row = Observation {
+            orientation: None,
             line: 0,
             id: "p".into(),
             t_s: None,

@@ -40,8 +40,11 @@ use crate::machine::Machine;
 use crate::machine::tool::{AxisKind, MachineTool};
 
 use super::forward::{check_kind, predict};
-use super::observations::{Observations, Pose, holdout_split};
+use super::observations::{Observations, Pose};
 use super::report::{CONDITION_LIMIT, Calibration, Estimate, Validation};
+use super::screen::{
+    describe_outliers, distinct_poses, dominating_rows, drop_copies, grouped_split, implausible,
+};
 use super::stiffness::Options;
 use super::yaml_edit::{set_component_table, set_location_error};
 
@@ -192,6 +195,34 @@ fn norms(r: &DVector<f64>) -> Vec<f64> {
     (0..r.len() / 3).map(|k| r.rows(3 * k, 3).norm()).collect()
 }
 
+/// The forward model of a trial value vector on some rows: the machine
+/// file text with the values written in, and the rows' predictions.
+type Eval<'a> = dyn Fn(&[f64], &[usize]) -> Result<(String, DVector<f64>)> + 'a;
+
+/// The design matrix: the change of the fit rows' predictions for +1 µm
+/// (µrad) of each value, at `x0` (predictions `d0`).
+fn design(
+    x0: &[f64],
+    d0: &DVector<f64>,
+    n: usize,
+    eval: &Eval<'_>,
+    fit: &[usize],
+) -> Result<DMatrix<f64>> {
+    let mut a = DMatrix::zeros(d0.len(), n);
+    let mut xp = x0.to_vec();
+    for k in 0..n {
+        if let Some(v) = xp.get_mut(k) {
+            *v += 1.0;
+        }
+        let (_, dk) = eval(&xp, fit)?;
+        if let Some(v) = xp.get_mut(k) {
+            *v -= 1.0;
+        }
+        a.set_column(k, &(dk - d0));
+    }
+    Ok(a)
+}
+
 /// Identifies the component error tables and squareness from `obs`.
 pub fn calibrate_geometry(
     text: &str,
@@ -207,9 +238,43 @@ pub fn calibrate_geometry(
             "{machine_file}: geometric calibration needs a machine-tool file"
         )));
     };
-    let axes: Vec<usize> = (0..3)
+    let (clean, copies) = drop_copies(obs, obs_file);
+    let obs = &clean;
+    let mut early_notes: Vec<String> = copies.into_iter().collect();
+    let linear: Vec<usize> = (0..3)
         .filter(|&s| tool.axis(s).is_some_and(|a| a.kind == AxisKind::Linear))
         .collect();
+    // An axis at one position in every row: its tables cannot be written
+    // on one target (that would replace the file's table by a constant) and
+    // its squareness is not seen. It keeps the file's values.
+    let mut axes = Vec::new();
+    for &a in &linear {
+        let mut g: Vec<f64> = obs
+            .rows
+            .iter()
+            .filter_map(|r| match &r.pose {
+                Pose::Tool(tp) => Some(tp.xyz_mm[a]),
+                Pose::Robot(_) => None,
+            })
+            .collect();
+        g.sort_by(f64::total_cmp);
+        g.dedup();
+        if g.len() >= 2 {
+            axes.push(a);
+        } else {
+            early_notes.push(format!(
+                "axis {} is at one position in every row: its tables and the squareness \
+                 errors involving it are not identified and keep the file's values",
+                LETTERS[a]
+            ));
+        }
+    }
+    if axes.is_empty() {
+        return Err(Error::Usage(format!(
+            "{obs_file}: no linear axis takes two different positions; geometric calibration \
+             needs measurements along the axes"
+        )));
+    }
     for slot in 3..6 {
         let mut values: Vec<f64> = obs
             .rows
@@ -255,7 +320,7 @@ pub fn calibrate_geometry(
         }
         grids[a] = g;
     }
-    let square = axes.len() == 3;
+    let square = axes.len() == 3 && linear.len() == 3;
     let mut params = Vec::new();
     for &a in &axes {
         let n = grids[a].len();
@@ -306,12 +371,13 @@ pub fn calibrate_geometry(
         square,
     };
     let n = prob.params.len();
-    let (fit, hold) = holdout_split(obs.rows.len(), opts.holdout, opts.seed);
-    let m = 3 * fit.len();
-    if n == 0 || m <= n {
+    let (mut fit, hold) = grouped_split(obs, opts.holdout, opts.seed);
+    let distinct = distinct_poses(obs, &fit);
+    if n == 0 || 3 * distinct <= n {
         return Err(Error::Usage(format!(
-            "{obs_file}: {} rows left for the fit ({m} equations) for {n} table values and \
-             squareness errors; measure more points (or fewer targets per axis)",
+            "{obs_file}: {distinct} distinct poses left for the fit ({} rows; repeated poses \
+             count once) for {n} table values and squareness errors; measure more points \
+             (or fewer targets per axis)",
             fit.len()
         )));
     }
@@ -330,37 +396,66 @@ pub fn calibrate_geometry(
         let mm = Machine::from_yaml_str(&t, machine_file)?;
         Ok((t, deviations(&mm, obs, rows, obs_file)?))
     };
-    let (_, d0) = eval(&x0, &fit)?;
-    let mut a = DMatrix::zeros(m, n);
-    let mut xp = x0.clone();
-    for k in 0..n {
-        if let Some(v) = xp.get_mut(k) {
-            *v += 1.0;
-        }
-        let (_, dk) = eval(&xp, &fit)?;
-        if let Some(v) = xp.get_mut(k) {
-            *v -= 1.0;
-        }
-        a.set_column(k, &(dk - &d0));
-    }
-    let meas = measured(obs, &fit);
+    let (_, d0_all) = eval(&x0, &fit)?;
+    let mut d0_all = d0_all;
+    let mut a_all = design(&x0, &d0_all, n, &eval, &fit)?;
     let lsq = LsqOptions::default();
-    let solve = |b: &DVector<f64>| {
-        solve_linear(&a, b, &lsq).map_err(|e| Error::Usage(format!("{obs_file}: {e}")))
+    let solve = |a: &DMatrix<f64>, b: &DVector<f64>| {
+        solve_linear(a, b, &lsq).map_err(|e| Error::Usage(format!("{obs_file}: {e}")))
     };
-    let sol0 = solve(&(&meas - &d0))?;
-    let x1: Vec<f64> = x0
-        .iter()
-        .zip(sol0.params.iter())
-        .map(|(s, d)| s + d)
-        .collect();
-    let (_, d1) = eval(&x1, &fit)?;
-    let sol = solve(&(&meas - &d1))?;
-    let x: Vec<f64> = x1
-        .iter()
-        .zip(sol.params.iter())
-        .map(|(s, d)| s + d)
-        .collect();
+    // Rows that disagree with every other row leave the fit, the worst
+    // first, one per pass (a gross outlier drags its neighbours' residuals
+    // along until it is gone), at most a tenth of the rows.
+    let max_passes = (fit.len() / 10).max(1);
+    let mut passes = 0;
+    let (sol, x, m) = loop {
+        let a = a_all.clone();
+        let d0 = d0_all.clone();
+        let m = 3 * fit.len();
+        let meas = measured(obs, &fit);
+        let sol0 = solve(&a, &(&meas - &d0))?;
+        if passes < max_passes {
+            passes += 1;
+            let ident: Vec<usize> = sol0.identifiability.identifiable.clone();
+            let a_id = a.select_columns(ident.iter());
+            let outliers: Vec<_> = dominating_rows(&a_id, &sol0.residuals, &fit)
+                .into_iter()
+                .take(1)
+                .collect();
+            if !outliers.is_empty() {
+                let text = describe_outliers(obs, obs_file, &outliers);
+                tracing::warn!("rows left out of the fit as outliers: {text}");
+                early_notes.push(format!("row left out of the fit as an outlier: {text}"));
+                let gone: Vec<usize> = fit
+                    .iter()
+                    .enumerate()
+                    .filter(|(_, i)| outliers.iter().any(|o| o.row == **i))
+                    .map(|(k, _)| k)
+                    .collect();
+                let rows_kept: Vec<usize> = (0..fit.len())
+                    .filter(|k| !gone.contains(k))
+                    .flat_map(|k| [3 * k, 3 * k + 1, 3 * k + 2])
+                    .collect();
+                a_all = a_all.select_rows(rows_kept.iter());
+                d0_all = d0_all.select_rows(rows_kept.iter());
+                fit.retain(|i| !outliers.iter().any(|o| o.row == *i));
+                continue;
+            }
+        }
+        let x1: Vec<f64> = x0
+            .iter()
+            .zip(sol0.params.iter())
+            .map(|(s, d)| s + d)
+            .collect();
+        let (_, d1) = eval(&x1, &fit).map_err(|e| implausible(&e, obs_file, fit.len()))?;
+        let sol = solve(&a, &(&meas - &d1))?;
+        let x: Vec<f64> = x1
+            .iter()
+            .zip(sol.params.iter())
+            .map(|(s, d)| s + d)
+            .collect();
+        break (sol, x, m);
+    };
     let id = &sol.identifiability;
     if id.condition_number_identified > CONDITION_LIMIT {
         return Err(Error::Usage(format!(
@@ -370,8 +465,7 @@ pub fn calibrate_geometry(
             id.condition_number_identified, CONDITION_LIMIT, id.observability_o1
         )));
     }
-    let (yaml, _) = eval(&x, &[])?;
-    Machine::from_yaml_str(&yaml, machine_file)?;
+    let (yaml, _) = eval(&x, &[]).map_err(|e| implausible(&e, obs_file, fit.len()))?;
     let u = sol.std_uncertainty();
     let fixed: std::collections::BTreeSet<usize> = id.unidentifiable.iter().copied().collect();
     let mut params = Vec::with_capacity(n);
@@ -401,6 +495,9 @@ pub fn calibrate_geometry(
     let mh = measured(obs, &hold);
     let before = norms(&(&mh - deviations(&machine, obs, &hold, obs_file)?));
     let after = norms(&(&mh - deviations(&calibrated, obs, &hold, obs_file)?));
+    let mf = measured(obs, &fit);
+    let fit_before = norms(&(&mf - deviations(&machine, obs, &fit, obs_file)?));
+    let fit_after = norms(&(&mf - deviations(&calibrated, obs, &fit, obs_file)?));
     let mut notes = vec![
         "angular errors (EA*, EB*, EC*) and rotary axes are not identified from tip positions \
          at one tool length; they keep the file's values"
@@ -411,8 +508,9 @@ pub fn calibrate_geometry(
             .to_string(),
     ];
     if !prob.square {
-        notes.push("squareness needs X, Y and Z linear axes; not identified".into());
+        notes.push("squareness needs X, Y and Z linear axes, all varied; not identified".into());
     }
+    notes.append(&mut early_notes);
     let mut cal = Calibration {
         kind: "geometry",
         n_fit: fit.len(),
@@ -422,6 +520,9 @@ pub fn calibrate_geometry(
         rms_fit_mm: sol.sigma2.map_or((sol.rss / m as f64).sqrt(), f64::sqrt),
         params,
         validation: Validation::from_norms(&before, &after),
+        fit_check: Validation::from_norms(&fit_before, &fit_after),
+        frame: None,
+        insignificant: Vec::new(),
         notes: std::mem::take(&mut notes),
         yaml,
     };

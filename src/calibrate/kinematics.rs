@@ -20,25 +20,46 @@
 //! look like a shift of the measuring frame.) A remaining condition number
 //! above [`CONDITION_LIMIT`] is refused.
 //!
-//! The robot base frame is the frame of the observations (contract), so the
-//! `base` of the machine file is neither identified nor edited: in a
-//! modified-DH model the x and z offsets of the arm in that frame are the
-//! first row's `a_mm` and `d_mm`.
+//! Frames ([`super::frame`], docs/frames.md): positions in the robot base
+//! frame are used as they are (the `base` of the machine file is neither
+//! identified nor edited: in a modified-DH model the x and z offsets of the
+//! arm in that frame are the first row's `a_mm` and `d_mm`); world-frame
+//! rows are carried back through `base`; for instrument-frame rows the six
+//! parameters of the instrument's pose are identified with the model, and
+//! model parameters that move the points like a rigid motion of the
+//! instrument are fixed and listed as absorbed by it.
+//!
+//! Rows with a measured orientation add three residuals (the rotation
+//! vector of measured · predicted⁻¹, times
+//! [`Options::orientation_mm_per_rad`]).
+//!
+//! Subset selection: after the identifiability screen and a full fit,
+//! corrections that are not significant on the fit rows (Bayesian
+//! information criterion, linearised at the solution) keep the file's
+//! value and the rest is fitted again; the held-out rows check
+//! the result (per-point RMS and max before and after, fit and held-out).
+//! Rows whose deleted residual marks them as outliers
+//! ([`super::screen::dominating_rows`]) leave the fit, named.
 
-use nalgebra::{DVector, Isometry3, Translation3};
+use nalgebra::{DMatrix, DVector, Isometry3, Translation3};
 
 use crate::calibrate::lsq::{
-    LmOptions, LsqOptions, expand_free, fit_free, numeric_jacobian, solve_linear,
+    LmOptions, LsqOptions, expand_free, fit_free, forward_jacobian_free, numeric_jacobian,
+    solve_linear,
 };
 use crate::error::{Error, Result};
 use crate::machine::Machine;
 use crate::machine::robot::{DhParams, Model, Robot};
 
 use super::forward::{check_kind, predict};
-use super::observations::{MeasuredKind, Observations, Pose, holdout_split};
-use super::report::{CONDITION_LIMIT, Calibration, Estimate, Validation};
+use super::frame::{FRAME_NAMES, FRAME_PARAMS, frame_with, register, rpy_deg, world_to_reference};
+use super::observations::{MeasuredKind, MeasurementFrame, Observation, Observations, Pose};
+use super::report::{CONDITION_LIMIT, Calibration, Estimate, FrameEstimate, Validation};
+use super::screen::{
+    describe_outliers, distinct_poses, dominating_rows, drop_copies, grouped_split, implausible,
+};
 use super::stiffness::Options;
-use super::yaml_edit::{DhRow, set_actual_dh, set_frame_translation};
+use super::yaml_edit::{DhRow, set_actual_dh, set_frame_translation, set_measurement_frame};
 
 /// Relative rank threshold of the identification Jacobian: a parameter
 /// whose effect, after removing what the already chosen parameters explain,
@@ -53,6 +74,10 @@ use super::yaml_edit::{DhRow, set_actual_dh, set_frame_translation};
 /// (1 mrad moves a point 1 m away by 1 mm).
 pub const KIN_RANK_RTOL: f64 = 1e-3;
 
+/// Most rows a kinematic calibration leaves out as outliers (one per
+/// refit, the worst first).
+const MAX_OUTLIER_PASSES: usize = 3;
+
 /// Forward-difference step of the identification Jacobian (mm or mrad).
 const FD_STEP: f64 = 1e-4;
 
@@ -66,24 +91,43 @@ const DH_NAMES: [(&str, &str); 4] = [
     ("theta_offset_deg", "deg"),
 ];
 
-/// Parameter vector layout: 24 DH corrections, then optionally 3 TCP ones.
+/// Parameter vector layout: 24 DH corrections, then optionally 3 TCP ones,
+/// then optionally the 6 parameters of an instrument frame
+/// ([`super::frame`]).
 struct Layout {
     base: Robot,
     dh: DhParams,
     tool: bool,
+    /// Start pose of the instrument frame (instrument data only).
+    frame: Option<Isometry3<f64>>,
+    /// Weight of the orientation residuals, mm/rad (0: none).
+    w_rot: f64,
 }
 
 impl Layout {
-    fn n(&self) -> usize {
+    /// Number of model parameters (DH and TCP).
+    fn n_model(&self) -> usize {
         if self.tool { 27 } else { 24 }
+    }
+
+    fn n(&self) -> usize {
+        self.n_model()
+            + if self.frame.is_some() {
+                FRAME_PARAMS
+            } else {
+                0
+            }
     }
 
     fn name(&self, k: usize) -> (String, &'static str) {
         if k < 24 {
             let (n, u) = DH_NAMES[k % 4];
             (format!("j{}.{n}", k / 4 + 1), u)
-        } else {
+        } else if k < self.n_model() {
             (format!("tool.{}_mm", ["x", "y", "z"][(k - 24) % 3]), "mm")
+        } else {
+            let (n, u) = FRAME_NAMES[(k - self.n_model()) % FRAME_PARAMS];
+            (n.to_string(), u)
         }
     }
 
@@ -129,6 +173,35 @@ impl Layout {
             r
         }
     }
+
+    /// The instrument frame for the parameters `x` (identity without one).
+    fn frame_at(&self, x: &[f64]) -> Isometry3<f64> {
+        match &self.frame {
+            Some(f0) => frame_with(f0, x.get(self.n_model()..).unwrap_or(&[])),
+            None => Isometry3::identity(),
+        }
+    }
+
+    /// Equations of a row: 3 for the position, 3 more for a measured
+    /// orientation when orientations are weighted.
+    fn eqs(&self, row: &Observation) -> usize {
+        if self.w_rot > 0.0 && row.orientation.is_some() {
+            6
+        } else {
+            3
+        }
+    }
+}
+
+/// First equation of each of `rows` and the total number of equations.
+fn offsets(layout: &Layout, obs: &Observations, rows: &[usize]) -> (Vec<usize>, usize) {
+    let mut off = Vec::with_capacity(rows.len());
+    let mut m = 0;
+    for &i in rows {
+        off.push(m);
+        m += obs.rows.get(i).map_or(3, |r| layout.eqs(r));
+    }
+    (off, m)
 }
 
 /// Joints (1-based) at the same angle in every row.
@@ -149,16 +222,66 @@ fn constant_joints(obs: &Observations) -> Vec<usize> {
 /// Poses of the structural identifiability check.
 const REFERENCE_POSES: usize = 60;
 
+/// Which model parameters a Jacobian identifies. Without a frame: the rank
+/// screen of [`solve_linear`] on the model columns. With one: the frame
+/// columns must have full rank (else `Err` with the reason), and the model
+/// columns are screened after removing what the frame columns explain
+/// (`(I − Q Qᵀ) J_model`, `Q` an orthonormal basis of the frame columns):
+/// a model parameter that moves the measured point like a rigid motion of
+/// the instrument is unidentifiable. Returns (unidentifiable given the
+/// frame, unidentifiable without it).
+fn screen(
+    layout: &Layout,
+    j: &DMatrix<f64>,
+    r0: &DVector<f64>,
+    lsq: &LsqOptions,
+) -> std::result::Result<(Vec<usize>, Vec<usize>), String> {
+    let nm = layout.n_model();
+    let jm = j.columns(0, nm).into_owned();
+    let plain = solve_linear(&jm, r0, lsq).map_err(|e| e.to_string())?;
+    if layout.frame.is_none() {
+        let u = plain.identifiability.unidentifiable.clone();
+        return Ok((u.clone(), u));
+    }
+    let jf = j.columns(nm, FRAME_PARAMS).into_owned();
+    let f = solve_linear(&jf, r0, &LsqOptions::default()).map_err(|e| e.to_string())?;
+    if !f.identifiability.unidentifiable.is_empty() {
+        return Err(
+            "the measured points do not span the space (too few or too little varied poses): \
+             the instrument frame cannot be registered"
+                .into(),
+        );
+    }
+    let q = jf.qr().q();
+    let proj = &jm - &q * (q.transpose() * &jm);
+    // The rank threshold stays relative to the strongest model column
+    // before the projection: a column the frame explains must count as
+    // gone, not be judged against other weakened columns.
+    let strongest = jm.column_iter().map(|c| c.norm()).fold(0.0, f64::max);
+    let mut given = solve_linear(&proj, r0, lsq)
+        .map_err(|e| e.to_string())?
+        .identifiability
+        .unidentifiable;
+    for (k, c) in proj.column_iter().enumerate() {
+        if c.norm() < lsq.rank_rtol * strongest && !given.contains(&k) {
+            given.push(k);
+        }
+    }
+    given.sort_unstable();
+    Ok((given, plain.identifiability.unidentifiable))
+}
+
 /// The parameters that no pose set identifies: the identifiability of the
 /// same parameters and measured points at [`REFERENCE_POSES`] joint vectors
-/// spread over the joint ranges (deterministic).
+/// spread over the joint ranges (deterministic). Returns (given the frame,
+/// without the frame), as [`screen`].
 fn structurally_unidentifiable(
     layout: &Layout,
     obs: &Observations,
     fit: &[usize],
     file: &str,
     lm_opts: &LmOptions,
-) -> Result<Vec<usize>> {
+) -> Result<(Vec<usize>, Vec<usize>)> {
     let limits = *layout.base.joint_limits_rad();
     let mut rng = crate::calibrate::stats::SplitMix64::new(0x5EED_CA1B);
     let mut reference = obs.clone();
@@ -176,28 +299,41 @@ fn structurally_unidentifiable(
                 *q = (lo + t * (hi - lo)).to_degrees();
             }
         }
+        if let Some(f0) = &layout.frame {
+            // The point where the start model puts it, seen by the
+            // instrument: the frame columns need the real lever arms.
+            let m = Machine::Robot(layout.base.clone());
+            if let Ok(p) = predict(&m, &row, file) {
+                row.measured_mm = (f0.inverse() * nalgebra::Point3::from(p.attained_mm)).coords;
+            }
+        }
         reference.rows.push(row);
     }
     let rows: Vec<usize> = (0..reference.rows.len()).collect();
+    let (_, m) = offsets(layout, &reference, &rows);
     let n = layout.n();
     let zero = DVector::zeros(n);
-    let mut r0 = DVector::zeros(3 * rows.len());
+    let mut r0 = DVector::zeros(m);
     residuals(layout, &reference, &rows, zero.as_slice(), &mut r0, file);
     if r0.iter().any(|v| !v.is_finite()) {
-        return Ok(Vec::new());
+        return Ok((Vec::new(), Vec::new()));
     }
     let j = numeric_jacobian(
         |x, r| residuals(layout, &reference, &rows, x.as_slice(), r, file),
         &zero,
-        3 * rows.len(),
+        m,
         lm_opts.fd_relative_step,
     );
-    let sol =
-        solve_linear(&j, &r0, &lm_opts.lsq).map_err(|e| Error::Usage(format!("{file}: {e}")))?;
-    Ok(sol.identifiability.unidentifiable)
+    // A reference set that cannot register the frame (it always can with
+    // varied poses) says nothing structural.
+    Ok(screen(layout, &j, &r0, &lm_opts.lsq).unwrap_or_default())
 }
 
-/// Residuals `measured − model` of `rows` for the full correction vector.
+/// Residuals `measured − model` of `rows` for the full parameter vector:
+/// per row the position (the measured point carried into the reference
+/// frame by the instrument frame, if any) and, for a row with a measured
+/// orientation, the rotation vector of `measured · predicted⁻¹` times the
+/// orientation weight.
 fn residuals(
     layout: &Layout,
     obs: &Observations,
@@ -207,36 +343,214 @@ fn residuals(
     file: &str,
 ) {
     let m = Machine::Robot(layout.robot(x));
-    for (k, &i) in rows.iter().enumerate() {
+    let f = layout.frame_at(x);
+    let mut at = 0;
+    for &i in rows {
         let Some(row) = obs.rows.get(i) else { continue };
+        let eqs = layout.eqs(row);
         match predict(&m, row, file) {
             Ok(p) => {
-                let d = row.measured_mm - p.measured(obs.measured);
+                let meas = if layout.frame.is_some() {
+                    (f * nalgebra::Point3::from(row.measured_mm)).coords
+                } else {
+                    row.measured_mm
+                };
+                let d = meas - p.measured(obs.measured);
                 for r in 0..3 {
-                    out[3 * k + r] = d[r];
+                    out[at + r] = d[r];
+                }
+                if eqs == 6 {
+                    let e = match (row.orientation, p.attained_rot) {
+                        (Some(q), Some(pr)) => {
+                            (f.rotation * q * pr.inverse()).scaled_axis() * layout.w_rot
+                        }
+                        _ => nalgebra::Vector3::zeros(),
+                    };
+                    for r in 0..3 {
+                        out[at + 3 + r] = e[r];
+                    }
                 }
             }
             Err(_) => {
-                for r in 0..3 {
-                    out[3 * k + r] = f64::NAN;
+                for r in 0..eqs {
+                    out[at + r] = f64::NAN;
                 }
             }
         }
+        at += eqs;
     }
 }
 
-fn row_norms(m: &Machine, obs: &Observations, rows: &[usize], file: &str) -> Result<Vec<f64>> {
+/// Per-point position residual norms of `rows` for the model `m` and the
+/// frame `f` (measured points carried by `f`).
+fn row_norms(
+    m: &Machine,
+    f: &Isometry3<f64>,
+    obs: &Observations,
+    rows: &[usize],
+    file: &str,
+) -> Result<Vec<f64>> {
     let mut v = Vec::with_capacity(rows.len());
     for &i in rows {
         if let Some(row) = obs.rows.get(i) {
             let p = predict(m, row, file)?;
-            v.push((row.measured_mm - p.measured(obs.measured)).norm());
+            let meas = (f * nalgebra::Point3::from(row.measured_mm)).coords;
+            v.push((meas - p.measured(obs.measured)).norm());
         }
     }
     Ok(v)
 }
 
-/// Identifies the actual DH parameters (and the TCP translation) from `obs`.
+/// Position equations (3 per row) of a Jacobian and residual vector laid
+/// out by [`offsets`].
+fn position_rows(
+    off: &[usize],
+    j: &DMatrix<f64>,
+    e: &DVector<f64>,
+) -> (DMatrix<f64>, DVector<f64>) {
+    let idx: Vec<usize> = off.iter().flat_map(|&o| [o, o + 1, o + 2]).collect();
+    (j.select_rows(idx.iter()), e.select_rows(idx.iter()))
+}
+
+/// Backward elimination on the fit rows, linearised at the full fit: drops,
+/// one at a time, the free model parameter whose correction is least
+/// significant (`t² = δ² / var(δ)`), while its `t²` is below `ln(m)` — the
+/// Bayesian information criterion's price of a parameter (dropping it
+/// lowers the BIC). Frame parameters always stay. Returns the kept and the
+/// dropped parameters, each dropped one with the standard uncertainty (mm
+/// or mrad) the full fit would give its correction.
+fn select_parameters(
+    j0: &DMatrix<f64>,
+    r0: &DVector<f64>,
+    free: &[usize],
+    n_model: usize,
+    lsq: &LsqOptions,
+) -> (Vec<usize>, Vec<(usize, f64)>) {
+    let m = j0.nrows();
+    let price = (m as f64).ln();
+    let mut kept = free.to_vec();
+    let mut dropped = Vec::new();
+    // σ² of the full linearised fit: the yardstick of every step.
+    let full = j0.select_columns(kept.iter());
+    let Ok(sol) = solve_linear(&full, r0, lsq) else {
+        return (kept, dropped);
+    };
+    let Some(s2) = sol.sigma2.filter(|s| *s > 0.0) else {
+        return (kept, dropped);
+    };
+    let u_full = sol.std_uncertainty();
+    let u_of = |k: usize| {
+        free.iter()
+            .position(|&f| f == k)
+            .and_then(|c| u_full.as_ref().map(|u| u[c]))
+            .unwrap_or(f64::NAN)
+    };
+    loop {
+        let a = j0.select_columns(kept.iter());
+        let Ok(sol) = solve_linear(&a, r0, lsq) else {
+            break;
+        };
+        let Some(cov) = sol.covariance else { break };
+        let sigma2 = sol.sigma2.unwrap_or(s2).max(f64::MIN_POSITIVE);
+        let weakest = kept
+            .iter()
+            .enumerate()
+            .filter(|(_, k)| **k < n_model)
+            .map(|(c, &k)| {
+                let var = cov[(c, c)] / sigma2 * s2;
+                let t2 = if var > 0.0 {
+                    sol.params[c] * sol.params[c] / var
+                } else {
+                    f64::INFINITY
+                };
+                (k, t2)
+            })
+            .min_by(|a, b| a.1.total_cmp(&b.1));
+        match weakest {
+            Some((k, t2)) if t2 < price => {
+                kept.retain(|&x| x != k);
+                dropped.push((k, u_of(k)));
+            }
+            _ => break,
+        }
+    }
+    dropped.sort_unstable_by_key(|d| d.0);
+    (kept, dropped)
+}
+
+/// The data of a kinematic calibration run after the screening.
+struct Prepared {
+    layout: Layout,
+    obs: Observations,
+    fit: Vec<usize>,
+    hold: Vec<usize>,
+    notes: Vec<String>,
+}
+
+fn prepare(robot: &Robot, obs: &Observations, obs_file: &str, opts: &Options) -> Result<Prepared> {
+    let mut notes = Vec::new();
+    let (obs, copies) = drop_copies(
+        &world_to_reference(&Machine::Robot(robot.clone()), obs),
+        obs_file,
+    );
+    notes.extend(copies);
+    let instrument = obs.frame == MeasurementFrame::Instrument;
+    // Deviations (attained − commanded of the same point) hardly see where
+    // the point is: the TCP translation is identified from positions only.
+    let tool = obs.measured == MeasuredKind::Position
+        && obs
+            .rows
+            .iter()
+            .all(|r| matches!(&r.pose, Pose::Robot(rp) if rp.mp_mm.is_none()));
+    let mut layout = Layout {
+        base: robot.clone(),
+        dh: *robot.params(Model::Actual),
+        tool,
+        frame: None,
+        w_rot: opts.orientation_mm_per_rad,
+    };
+    let (fit, hold) = grouped_split(&obs, opts.holdout, opts.seed);
+    if instrument {
+        let m = Machine::Robot(robot.clone());
+        let mut meas = Vec::new();
+        let mut model = Vec::new();
+        for &i in &fit {
+            if let Some(row) = obs.rows.get(i) {
+                meas.push(row.measured_mm);
+                model.push(predict(&m, row, obs_file)?.attained_mm);
+            }
+        }
+        let f0 = register(&meas, &model).ok_or_else(|| {
+            Error::Usage(format!(
+                "{obs_file}: the measured points lie on a line or are too few (fit rows: {}): \
+                 the instrument frame cannot be registered; measure varied poses",
+                fit.len()
+            ))
+        })?;
+        layout.frame = Some(f0);
+    }
+    let n = layout.n();
+    let distinct = distinct_poses(&obs, &fit);
+    if 3 * distinct < 2 * n {
+        return Err(Error::Usage(format!(
+            "{obs_file}: {distinct} distinct poses left for the fit ({} rows; repeated poses \
+             count once) for {n} parameters; kinematic calibration needs at least {} distinct \
+             poses, better several times more",
+            fit.len(),
+            (2 * n).div_ceil(3)
+        )));
+    }
+    Ok(Prepared {
+        layout,
+        obs,
+        fit,
+        hold,
+        notes,
+    })
+}
+
+/// Identifies the actual DH parameters (and the TCP translation; and the
+/// instrument frame for `# frame: instrument` data) from `obs`.
 pub fn calibrate_kinematics(
     text: &str,
     machine_file: &str,
@@ -251,43 +565,21 @@ pub fn calibrate_kinematics(
             "{machine_file}: kinematic calibration needs a robot machine file"
         )));
     };
-    // Deviations (attained − commanded of the same point) hardly see where
-    // the point is: the TCP translation is identified from positions only.
-    let tool = obs.measured == MeasuredKind::Position
-        && obs
-            .rows
-            .iter()
-            .all(|r| matches!(&r.pose, Pose::Robot(rp) if rp.mp_mm.is_none()));
-    let layout = Layout {
-        base: robot.clone(),
-        dh: *robot.params(Model::Actual),
-        tool,
-    };
+    let Prepared {
+        layout,
+        obs,
+        mut fit,
+        hold,
+        mut notes,
+    } = prepare(robot, obs, obs_file, opts)?;
+    let obs = &obs;
     let n = layout.n();
-    let (fit, hold) = holdout_split(obs.rows.len(), opts.holdout, opts.seed);
-    let m = 3 * fit.len();
-    if m < 2 * n {
-        return Err(Error::Usage(format!(
-            "{obs_file}: {} rows left for the fit ({m} equations) for {n} parameters; \
-             kinematic calibration needs at least {} rows, better several times more",
-            fit.len(),
-            (2 * n).div_ceil(3)
-        )));
-    }
+    let nm = layout.n_model();
     tracing::info!(
         "kinematics: {} rows for the fit, {} held out, {n} parameters",
         fit.len(),
         hold.len()
     );
-    // Identifiability at the start point.
-    let zero = DVector::zeros(n);
-    let mut r0 = DVector::zeros(m);
-    residuals(&layout, obs, &fit, zero.as_slice(), &mut r0, obs_file);
-    if r0.iter().any(|v| !v.is_finite()) {
-        return Err(Error::Usage(format!(
-            "{obs_file}: the model cannot be evaluated for some rows"
-        )));
-    }
     let lm_opts = LmOptions {
         lsq: LsqOptions {
             rank_rtol: KIN_RANK_RTOL,
@@ -295,26 +587,250 @@ pub fn calibrate_kinematics(
         },
         ..LmOptions::default()
     };
+    let usage = |e: String| Error::Usage(format!("{obs_file}: {e}"));
+    let Screened {
+        fixed,
+        absorbed,
+        free,
+    } = screen_data(&layout, obs, &fit, obs_file, &lm_opts)?;
+    // Fit; then, once each: rows that disagree with all the others leave
+    // the fit (the worst first, at most MAX_OUTLIER_PASSES), and the
+    // corrections that are not significant at the solution are dropped
+    // (subset selection, linearised there); after either, fit again.
+    let mut free = free;
+    let mut insignificant: Vec<(usize, f64)> = Vec::new();
+    let mut outlier_passes = 0;
+    let mut selected = false;
+    let fit_result = loop {
+        let (off, m) = offsets(&layout, obs, &fit);
+        let fr = fit_free(
+            |x, out| residuals(&layout, obs, &fit, x, out, obs_file),
+            n,
+            &free,
+            m,
+            FD_STEP,
+            &lm_opts,
+        )
+        .map_err(|e| usage(e.to_string()))?;
+        if selected && outlier_passes >= MAX_OUTLIER_PASSES {
+            break fr;
+        }
+        let full = expand_free(n, &free, fr.solution.params.as_slice());
+        let mut r = DVector::zeros(m);
+        residuals(&layout, obs, &fit, &full, &mut r, obs_file);
+        let mut jf = DMatrix::zeros(m, free.len());
+        forward_jacobian_free(
+            |x, out| residuals(&layout, obs, &fit, x, out, obs_file),
+            &full,
+            &free,
+            &r,
+            FD_STEP,
+            &mut jf,
+        );
+        if outlier_passes < MAX_OUTLIER_PASSES {
+            let (jp, ep) = position_rows(&off, &jf, &r);
+            if let Some(worst) = dominating_rows(&jp, &ep, &fit).into_iter().next() {
+                outlier_passes += 1;
+                let text = describe_outliers(obs, obs_file, std::slice::from_ref(&worst));
+                tracing::warn!("row left out of the fit as an outlier: {text}");
+                notes.push(format!("row left out of the fit as an outlier: {text}"));
+                fit.retain(|&i| i != worst.row);
+                continue;
+            }
+            outlier_passes = MAX_OUTLIER_PASSES;
+        }
+        if !selected {
+            selected = true;
+            // The linear model at the solution: r(x) ≈ (r* − J x*) + J x.
+            let mut jn = DMatrix::zeros(m, n);
+            for (c, &k) in free.iter().enumerate() {
+                jn.set_column(k, &jf.column(c));
+            }
+            let xs = DVector::from_column_slice(&full);
+            let b = &jn * &xs - &r;
+            let (kept, dropped) = select_parameters(&jn, &b, &free, nm, &lm_opts.lsq);
+            if !dropped.is_empty() {
+                free = kept;
+                insignificant = dropped;
+                continue;
+            }
+        }
+        break fr;
+    };
+    let sol = &fit_result.solution;
+    let id = &sol.identifiability;
+    if id.condition_number_identified > CONDITION_LIMIT {
+        return Err(Error::Usage(format!(
+            "{obs_file}: badly conditioned data set: condition number {:.3e} > {:.0e} \
+             (O1 = {:.3e}) after fixing {} unidentifiable parameter(s); the poses do not \
+             excite the kinematic parameters independently. Measure more varied poses \
+             (all joints over their range)",
+            id.condition_number_identified,
+            CONDITION_LIMIT,
+            id.observability_o1,
+            fixed.len()
+        )));
+    }
+    let full = expand_free(n, &free, sol.params.as_slice());
+    let u_red = sol.std_uncertainty();
+    let u_of = |k: usize| {
+        free.iter()
+            .position(|&f| f == k)
+            .and_then(|a| u_red.as_ref().map(|u| u[a]))
+    };
+    let mut params = Vec::with_capacity(nm);
+    for k in 0..nm {
+        let (name, unit) = layout.name(k);
+        let is_free = free.contains(&k);
+        let start = layout.start(k);
+        let f = if unit == "deg" { DEG_PER_UNIT } else { 1.0 };
+        params.push(Estimate {
+            name,
+            unit,
+            start,
+            value: start + f * full.get(k).copied().unwrap_or(0.0),
+            u: if is_free {
+                u_of(k).map(|u| f * u)
+            } else {
+                // A correction left out as insignificant: the uncertainty
+                // the full fit gives it (the file's value is within it).
+                insignificant
+                    .iter()
+                    .find(|d| d.0 == k)
+                    .map(|d| f * d.1)
+                    .filter(|u| u.is_finite())
+            },
+            fixed: !is_free,
+        });
+    }
+    let calibrated_robot = layout.robot(&full);
+    let calibrated = Machine::Robot(calibrated_robot.clone());
+    let f_start = layout.frame_at(&[]);
+    let f_end = layout.frame_at(&full);
+    // The input model is judged with the frame registered to it, the
+    // calibrated one with the identified frame.
+    let before = row_norms(&machine, &f_start, obs, &hold, obs_file)?;
+    let after = row_norms(&calibrated, &f_end, obs, &hold, obs_file)?;
+    let fit_before = row_norms(&machine, &f_start, obs, &fit, obs_file)?;
+    let fit_after = row_norms(&calibrated, &f_end, obs, &fit, obs_file)?;
+    let frame = layout.frame.map(|_| {
+        let u = |o: usize| u_of(nm + o);
+        let all = |s: f64, o: usize| -> Option<[f64; 3]> {
+            Some([u(o)? * s, u(o + 1)? * s, u(o + 2)? * s])
+        };
+        FrameEstimate {
+            xyz_mm: f_end.translation.vector.into(),
+            rpy_deg: rpy_deg(&f_end),
+            u_xyz_mm: all(1.0, 0),
+            u_rot_deg: all(DEG_PER_UNIT, 3),
+        }
+    });
+    let yaml = write_yaml(
+        text,
+        machine_file,
+        &calibrated_robot,
+        layout.tool,
+        frame.as_ref(),
+    )
+    .map_err(|e| implausible(&e, obs_file, fit.len()))?;
+    let insignificant: Vec<usize> = insignificant.iter().map(|d| d.0).collect();
+    notes_for(&layout, obs, &fixed, &absorbed, &insignificant, &mut notes);
+    let (_, m) = offsets(&layout, obs, &fit);
+    let mut cal = Calibration {
+        kind: "kinematics",
+        n_fit: fit.len(),
+        n_equations: m,
+        observability_o1: 0.0,
+        condition_number: 0.0,
+        rms_fit_mm: sol.sigma2.map_or((sol.rss / m as f64).sqrt(), f64::sqrt),
+        params,
+        validation: Validation::from_norms(&before, &after),
+        fit_check: Validation::from_norms(&fit_before, &fit_after),
+        frame,
+        insignificant: insignificant.iter().map(|&k| layout.name(k).0).collect(),
+        notes,
+        yaml,
+    };
+    cal.set_identifiability(id);
+    cal.check_validation();
+    Ok(cal)
+}
+
+/// The outcome of the identifiability screen on the fit rows.
+struct Screened {
+    /// Model parameters kept at the file's value.
+    fixed: Vec<usize>,
+    /// Of those, the ones the instrument frame absorbs.
+    absorbed: Vec<usize>,
+    /// The parameters to fit (model and frame).
+    free: Vec<usize>,
+}
+
+/// The identifiability screen at the start point: parameters no pose set
+/// identifies (redundant with others in the model, or with the instrument
+/// frame) are fixed quietly; parameters only THESE poses cannot identify
+/// mean a badly conditioned data set: fitting the rest would push their
+/// errors into neighbouring parameters with confident uncertainties — the
+/// run is refused naming them.
+fn screen_data(
+    layout: &Layout,
+    obs: &Observations,
+    fit: &[usize],
+    obs_file: &str,
+    lm_opts: &LmOptions,
+) -> Result<Screened> {
+    let n = layout.n();
+    let (_, m) = offsets(layout, obs, fit);
+    let zero = DVector::zeros(n);
+    let mut r0 = DVector::zeros(m);
+    residuals(layout, obs, fit, zero.as_slice(), &mut r0, obs_file);
+    if r0.iter().any(|v| !v.is_finite()) {
+        return Err(Error::Usage(format!(
+            "{obs_file}: the model cannot be evaluated for some rows"
+        )));
+    }
+    // With an instrument frame, the frame's columns are taken at the points
+    // the start model predicts (seen by the instrument), so that a model
+    // parameter that is a rigid motion is exactly parallel to them, whatever
+    // the start model's errors.
+    let seen;
+    let obs = match &layout.frame {
+        Some(f0) => {
+            let m0 = Machine::Robot(layout.base.clone());
+            let mut o = obs.clone();
+            for &i in fit {
+                if let Some(row) = o.rows.get_mut(i) {
+                    let p = predict(&m0, row, obs_file)?;
+                    row.measured_mm = (f0.inverse() * nalgebra::Point3::from(p.attained_mm)).coords;
+                }
+            }
+            seen = o;
+            &seen
+        }
+        None => obs,
+    };
     let j0 = numeric_jacobian(
-        |x, r| residuals(&layout, obs, &fit, x.as_slice(), r, obs_file),
+        |x, r| residuals(layout, obs, fit, x.as_slice(), r, obs_file),
         &zero,
         m,
         lm_opts.fd_relative_step,
     );
-    let pre = solve_linear(&j0, &r0, &lm_opts.lsq)
+    let (fixed, _) = screen(layout, &j0, &r0, &lm_opts.lsq)
         .map_err(|e| Error::Usage(format!("{obs_file}: {e}")))?;
-    let free = pre.identifiability.identifiable.clone();
-    let fixed = pre.identifiability.unidentifiable.clone();
-    // Parameters no pose set identifies (redundant with others in the
-    // model) are fixed quietly; parameters only THESE poses cannot identify
-    // mean a badly conditioned data set: fitting the rest would push their
-    // errors into neighbouring parameters with confident uncertainties.
-    let structural = structurally_unidentifiable(&layout, obs, &fit, obs_file, &lm_opts)?;
-    let data_caused: Vec<usize> = fixed
-        .iter()
-        .copied()
-        .filter(|k| !structural.contains(k))
-        .collect();
+    let (structural, structural_plain) =
+        structurally_unidentifiable(layout, obs, fit, obs_file, lm_opts)?;
+    // The same number of unidentifiable parameters as at the reference
+    // poses is the same redundancy (the rank decision may pick another
+    // member of a redundant pair); more means these poses lack something.
+    let data_caused: Vec<usize> = if fixed.len() <= structural.len() {
+        Vec::new()
+    } else {
+        fixed
+            .iter()
+            .copied()
+            .filter(|k| !structural.contains(k))
+            .collect()
+    };
     if !data_caused.is_empty() {
         let names: Vec<String> = data_caused.iter().map(|&k| layout.name(k).0).collect();
         let mut why = constant_joints(obs)
@@ -333,6 +849,11 @@ pub fn calibrate_kinematics(
             names.join(", ")
         )));
     }
+    let absorbed: Vec<usize> = fixed
+        .iter()
+        .copied()
+        .filter(|k| !structural_plain.contains(k))
+        .collect();
     if !fixed.is_empty() {
         let names: Vec<String> = fixed.iter().map(|&k| layout.name(k).0).collect();
         tracing::warn!(
@@ -341,55 +862,24 @@ pub fn calibrate_kinematics(
             names.join(", ")
         );
     }
-    // Forward differences (half the cost of central ones): the model is
-    // smooth on the scale of FD_STEP, the truncation error is
-    // ≈ FD_STEP · 1 mm/mrad² ≈ 1e-7 mm per unit.
-    let fit_result = fit_free(
-        |x, out| residuals(&layout, obs, &fit, x, out, obs_file),
-        n,
-        &free,
-        m,
-        FD_STEP,
-        &lm_opts,
-    )
-    .map_err(|e| Error::Usage(format!("{obs_file}: {e}")))?;
-    let sol = &fit_result.solution;
-    let id = &sol.identifiability;
-    if id.condition_number_identified > CONDITION_LIMIT {
-        return Err(Error::Usage(format!(
-            "{obs_file}: badly conditioned data set: condition number {:.3e} > {:.0e} \
-             (O1 = {:.3e}) after fixing {} unidentifiable parameter(s); the poses do not \
-             excite the kinematic parameters independently. Measure more varied poses \
-             (all joints over their range)",
-            id.condition_number_identified,
-            CONDITION_LIMIT,
-            id.observability_o1,
-            fixed.len()
-        )));
-    }
-    let full = expand_free(n, &free, sol.params.as_slice());
-    let u_red = sol.std_uncertainty();
-    let mut params = Vec::with_capacity(n);
-    for k in 0..n {
-        let (name, unit) = layout.name(k);
-        let pos = free.iter().position(|&f| f == k);
-        let start = layout.start(k);
-        let f = if unit == "deg" { DEG_PER_UNIT } else { 1.0 };
-        params.push(Estimate {
-            name,
-            unit,
-            start,
-            value: start + f * full.get(k).copied().unwrap_or(0.0),
-            u: pos.and_then(|a| u_red.as_ref().map(|u| f * u[a])),
-            fixed: pos.is_none(),
-        });
-    }
-    let calibrated_robot = layout.robot(&full);
-    let calibrated = Machine::Robot(calibrated_robot.clone());
-    let before = row_norms(&machine, obs, &hold, obs_file)?;
-    let after = row_norms(&calibrated, obs, &hold, obs_file)?;
-    // The calibrated file.
-    let dh = calibrated_robot.params(Model::Actual);
+    let free: Vec<usize> = (0..n).filter(|k| !fixed.contains(k)).collect();
+    Ok(Screened {
+        fixed,
+        absorbed,
+        free,
+    })
+}
+
+/// The calibrated machine file: the actual DH rows, the TCP translation
+/// (when identified) and the measurement frame (instrument data).
+fn write_yaml(
+    text: &str,
+    machine_file: &str,
+    robot: &Robot,
+    tool: bool,
+    frame: Option<&FrameEstimate>,
+) -> Result<String> {
+    let dh = robot.params(Model::Actual);
     let rows: [DhRow; 6] = std::array::from_fn(|j| DhRow {
         a_mm: dh.joints[j].a_mm,
         alpha_deg: dh.joints[j].alpha_rad.to_degrees(),
@@ -398,16 +888,47 @@ pub fn calibrate_kinematics(
     });
     let mut yaml = set_actual_dh(text, machine_file, &rows)?;
     if tool {
-        let t = calibrated_robot.flange_to_tool().translation.vector;
+        let t = robot.flange_to_tool().translation.vector;
         yaml = set_frame_translation(&yaml, machine_file, "flange_to_tool", [t.x, t.y, t.z])?;
     }
+    if let Some(f) = frame {
+        yaml = set_measurement_frame(&yaml, machine_file, f.xyz_mm, f.rpy_deg)?;
+    }
     Machine::from_yaml_str(&yaml, machine_file)?;
-    let mut notes = Vec::new();
+    Ok(yaml)
+}
+
+fn notes_for(
+    layout: &Layout,
+    obs: &Observations,
+    fixed: &[usize],
+    absorbed: &[usize],
+    insignificant: &[usize],
+    notes: &mut Vec<String>,
+) {
+    let n = layout.n_model();
     if !fixed.is_empty() {
         notes.push(format!(
             "{} of {n} parameters are not identifiable from these poses (they move the \
              measured point like a combination of the others); they keep the file's value",
             fixed.len()
+        ));
+    }
+    if !absorbed.is_empty() {
+        let names: Vec<String> = absorbed.iter().map(|&k| layout.name(k).0).collect();
+        notes.push(format!(
+            "absorbed by the instrument frame (they move the measured points like a rigid \
+             motion of the instrument; kept at the file's value, and the frame is identified \
+             relative to these values — a joint-1 offset wrong by θ turns the frame by θ): {}",
+            names.join(", ")
+        ));
+    }
+    if !insignificant.is_empty() {
+        let names: Vec<String> = insignificant.iter().map(|&k| layout.name(k).0).collect();
+        notes.push(format!(
+            "not significant on the fit rows (a correction below its price in the Bayesian \
+             information criterion; kept at the file's value): {}",
+            names.join(", ")
         ));
     }
     for j in constant_joints(obs) {
@@ -417,20 +938,12 @@ pub fn calibrate_kinematics(
              (badly conditioned for those parameters); move joint {j} as well"
         ));
     }
-    notes.push("the base frame is the frame of the observations and is not identified".into());
-    let mut cal = Calibration {
-        kind: "kinematics",
-        n_fit: fit.len(),
-        n_equations: m,
-        observability_o1: 0.0,
-        condition_number: 0.0,
-        rms_fit_mm: sol.sigma2.map_or((sol.rss / m as f64).sqrt(), f64::sqrt),
-        params,
-        validation: Validation::from_norms(&before, &after),
-        notes,
-        yaml,
-    };
-    cal.set_identifiability(id);
-    cal.check_validation();
-    Ok(cal)
+    notes.push(match layout.frame {
+        Some(_) => "positions measured in an instrument frame: the frame is identified \
+                    together with the model and written to `measurement_frame`"
+            .into(),
+        None => "positions in the robot base frame (the machine's reference frame); \
+                 no measurement frame is identified"
+            .into(),
+    });
 }

@@ -2,11 +2,13 @@
 //! parameters from them.
 
 pub mod forward;
+pub mod frame;
 pub mod geometry;
 pub mod kinematics;
 pub mod lsq;
 pub mod observations;
 pub mod report;
+pub mod screen;
 pub mod simulate;
 pub mod stats;
 pub mod stiffness;

@@ -31,14 +31,14 @@ use std::collections::BTreeSet;
 use std::io::{BufRead, Write};
 use std::path::Path;
 
-use nalgebra::Vector3;
+use nalgebra::{Quaternion, UnitQuaternion, Vector3};
 
 use crate::calibrate::stats::SplitMix64;
 use crate::error::{Error, Located, Result};
 use crate::machine::{AxisVec, DirVec};
 
 /// Every known column name, in the canonical (writing) order.
-const NAMES: [&str; 60] = [
+const NAMES: [&str; 64] = [
     "id",
     "t_s",
     "x_mm",
@@ -99,6 +99,10 @@ const NAMES: [&str; 60] = [
     "pA_w",
     "pB_w",
     "pC_w",
+    "qw",
+    "qx",
+    "qy",
+    "qz",
 ];
 
 // Index of the first column of each group in NAMES.
@@ -120,9 +124,10 @@ const TOOL_MM: usize = 51;
 const SPINDLE_RPM: usize = 52;
 const SPINDLE_W: usize = 53;
 const P_TOOL: usize = 54;
+const QUAT: usize = 60;
 /// Robot-only columns are `ROBOT_ONLY`, machine-tool-only ones `TOOL_ONLY`.
 const ROBOT_ONLY: std::ops::Range<usize> = Q..AXES;
-const TOOL_ONLY: std::ops::Range<usize> = AXES..NAMES.len();
+const TOOL_ONLY: std::ops::Range<usize> = AXES..QUAT;
 
 /// A known column of an observation file. Ordered canonically (the order
 /// [`write_observations`] uses).
@@ -248,6 +253,9 @@ pub struct Observation {
     pub ambient_c: Option<f64>,
     /// Machine-specific data.
     pub pose: Pose,
+    /// Measured orientation of the measured frame (`qw, qx, qy, qz`), in
+    /// the frame of the positions; `None` when not given.
+    pub orientation: Option<UnitQuaternion<f64>>,
 }
 
 impl PartialEq for Observation {
@@ -260,6 +268,44 @@ impl PartialEq for Observation {
             && self.moment_nm == o.moment_nm
             && self.ambient_c == o.ambient_c
             && self.pose == o.pose
+            && self.orientation.map(|q| q.coords) == o.orientation.map(|q| q.coords)
+    }
+}
+
+/// The frame the measured positions (and orientations) of a file are in:
+/// the comment line `# frame: …` before the header.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum MeasurementFrame {
+    /// The machine's reference frame (robot: base frame; machine tool:
+    /// workpiece frame). `# frame: base` or `# frame: reference`, or no line.
+    #[default]
+    Reference,
+    /// Robot: the world frame, related to the base frame by the machine
+    /// file's `base` (`# frame: world`).
+    World,
+    /// An instrument frame whose transform to the reference frame is not
+    /// known: identified together with the model (`# frame: instrument`).
+    Instrument,
+}
+
+impl MeasurementFrame {
+    /// The word of the `# frame:` line.
+    pub fn name(self) -> &'static str {
+        match self {
+            MeasurementFrame::Reference => "base",
+            MeasurementFrame::World => "world",
+            MeasurementFrame::Instrument => "instrument",
+        }
+    }
+
+    /// Parses the word of a `# frame:` line or of `--frame`.
+    pub fn parse(word: &str) -> Option<MeasurementFrame> {
+        match word {
+            "base" | "reference" => Some(MeasurementFrame::Reference),
+            "world" => Some(MeasurementFrame::World),
+            "instrument" => Some(MeasurementFrame::Instrument),
+            _ => None,
+        }
     }
 }
 
@@ -268,6 +314,8 @@ impl PartialEq for Observation {
 pub struct Observations {
     /// Robot or machine tool.
     pub kind: ObsKind,
+    /// The frame of the measured positions.
+    pub frame: MeasurementFrame,
     /// Meaning of every row's `measured_mm`.
     pub measured: MeasuredKind,
     /// Columns present in the file (or to be written), canonical order.
@@ -535,6 +583,19 @@ fn parse_header(ctx: &Ctx, line: usize, cells: &[Cell], poses_only: bool) -> Res
             }
         }
     }
+    let quat: Vec<usize> = (QUAT..QUAT + 4).filter(|&i| h.has(i)).collect();
+    if let Some(&first) = quat.first() {
+        if quat.len() < 4 {
+            return Err(ctx.err(
+                line,
+                h.byte_col(first),
+                format!(
+                    "column \"{}\" needs the other orientation columns too (qw, qx, qy, qz: all four or none)",
+                    NAMES[first]
+                ),
+            ));
+        }
+    }
     h.measured = match (h.has(POS), h.has(DEV)) {
         (true, true) => {
             let at = h.byte_col(POS).max(h.byte_col(DEV));
@@ -732,8 +793,10 @@ fn parse_row(
             p_w: six(P_TOOL),
         }),
     };
+    let orientation = row_orientation(ctx, line, &vals, &at)?;
     Ok(Observation {
         line,
+        orientation,
         id: id.unwrap_or_else(|| row_no.to_string()),
         t_s: vals[T_S],
         measured_mm,
@@ -742,6 +805,65 @@ fn parse_row(
         ambient_c: vals[AMBIENT],
         pose,
     })
+}
+
+/// Largest accepted deviation of a measured quaternion's norm from 1.
+pub const QUATERNION_NORM_TOL: f64 = 1e-3;
+
+/// The orientation of a row: all four cells or none; the norm within
+/// [`QUATERNION_NORM_TOL`] of 1 (then normalised).
+fn row_orientation(
+    ctx: &Ctx,
+    line: usize,
+    vals: &[Option<f64>; NAMES.len()],
+    at: &[usize; NAMES.len()],
+) -> Result<Option<UnitQuaternion<f64>>> {
+    let q: [Option<f64>; 4] = std::array::from_fn(|k| vals[QUAT + k]);
+    if q.iter().all(Option::is_none) {
+        return Ok(None);
+    }
+    if let Some(k) = q.iter().position(Option::is_none) {
+        return Err(ctx.err(
+            line,
+            at[QUAT + k],
+            format!(
+                "column \"{}\": empty but other orientation cells are given (all four or none)",
+                NAMES[QUAT + k]
+            ),
+        ));
+    }
+    let [w, x, y, z] = q.map(|v| v.unwrap_or(0.0));
+    let raw = Quaternion::new(w, x, y, z);
+    if (raw.norm() - 1.0).abs() > QUATERNION_NORM_TOL {
+        return Err(ctx.err(
+            line,
+            at[QUAT],
+            format!(
+                "the orientation (qw, qx, qy, qz) has norm {:.6}; a unit quaternion is expected",
+                raw.norm()
+            ),
+        ));
+    }
+    Ok(Some(UnitQuaternion::from_quaternion(raw)))
+}
+
+/// The `# frame: …` comment: `Some(Ok(frame))`, `Some(Err((column, message)))`
+/// for a frame line with an unknown word, `None` for any other comment.
+fn frame_comment(b: &[u8]) -> Option<std::result::Result<MeasurementFrame, (usize, String)>> {
+    let text = std::str::from_utf8(b).ok()?;
+    let body = text.trim_start().strip_prefix('#')?.trim_start();
+    let rest = body.strip_prefix("frame:")?;
+    let word = rest.trim();
+    Some(MeasurementFrame::parse(word).ok_or_else(|| {
+        let col = text.len() - rest.trim_start().len() + 1;
+        (
+            col,
+            format!(
+                "unknown measurement frame \"{}\" (base, world or instrument)",
+                crate::error::clip(word)
+            ),
+        )
+    }))
 }
 
 /// Reads an observation file from a buffered reader, line by line. `file` is
@@ -770,6 +892,7 @@ fn read_rows<R: BufRead>(mut reader: R, file: &str, poses_only: bool) -> Result<
     let mut line_no = 0usize;
     let mut header: Option<Header> = None;
     let mut rows = Vec::new();
+    let mut frame: Option<(MeasurementFrame, usize)> = None;
     loop {
         buf.clear();
         let n = reader
@@ -791,6 +914,23 @@ fn read_rows<R: BufRead>(mut reader: R, file: &str, poses_only: bool) -> Result<
             &buf
         };
         match bytes.iter().find(|b| !is_blank(**b)) {
+            Some(b'#') if header.is_none() => {
+                match frame_comment(bytes) {
+                    Some(Ok(f)) => {
+                        if let Some((_, first)) = frame {
+                            return Err(ctx.err(
+                                line_no,
+                                1,
+                                format!("second \"# frame:\" line (the first is line {first})"),
+                            ));
+                        }
+                        frame = Some((f, line_no));
+                    }
+                    Some(Err((col, msg))) => return Err(ctx.err(line_no, col, msg)),
+                    None => {}
+                }
+                continue;
+            }
             None | Some(b'#') => continue,
             Some(_) => {}
         }
@@ -806,8 +946,32 @@ fn read_rows<R: BufRead>(mut reader: R, file: &str, poses_only: bool) -> Result<
     let Some(h) = header else {
         return Err(ctx.err(line_no.max(1), 1, "no header row (the file has no data)"));
     };
+    let frame = match frame {
+        Some((MeasurementFrame::Reference, _)) | None => MeasurementFrame::Reference,
+        Some((f, at)) if h.measured == MeasuredKind::Deviation && h.has(DEV) => {
+            return Err(ctx.err(
+                at,
+                1,
+                format!(
+                    "\"# frame: {}\" with deviation columns (dx_mm, dy_mm, dz_mm): deviations \
+                     are always in the reference frame",
+                    f.name()
+                ),
+            ));
+        }
+        Some((MeasurementFrame::World, at)) if h.kind == ObsKind::MachineTool => {
+            return Err(ctx.err(
+                at,
+                1,
+                "\"# frame: world\" is for robots (the world frame of `base`); a machine tool's \
+                 reference frame is its workpiece frame",
+            ));
+        }
+        Some((f, _)) => f,
+    };
     Ok(Observations {
         kind: h.kind,
+        frame,
         measured: h.measured,
         columns: h.cols.iter().copied().collect(),
         rows,
@@ -888,6 +1052,9 @@ impl Observations {
             if r.ambient_c.is_some() {
                 set.insert(AMBIENT);
             }
+            if r.orientation.is_some() {
+                set.extend(QUAT..QUAT + 4);
+            }
             for i in 0..3 {
                 if r.force_n[i] != 0.0 {
                     set.insert(FORCE + i);
@@ -925,9 +1092,15 @@ impl Observations {
     }
 }
 
-fn cell_value(obs: &Observations, r: &Observation, k: usize, idx: usize) -> Option<String> {
-    let num = |v: f64| Some(format_number(v));
-    let opt = |v: Option<f64>| v.map(format_number);
+fn cell_value(
+    obs: &Observations,
+    r: &Observation,
+    k: usize,
+    idx: usize,
+    fmt: &dyn Fn(f64) -> String,
+) -> Option<String> {
+    let num = |v: f64| Some(fmt(v));
+    let opt = |v: Option<f64>| v.map(fmt);
     let dir = |v: Option<i8>| v.map(|d| if d > 0 { "1".into() } else { "-1".into() });
     let in3 = |start: usize| (start..start + 3).contains(&idx).then(|| idx - start);
     let in6 = |start: usize| (start..start + 6).contains(&idx).then(|| idx - start);
@@ -950,6 +1123,12 @@ fn cell_value(obs: &Observations, r: &Observation, k: usize, idx: usize) -> Opti
     };
     if let Some(i) = in3(mine) {
         return num(r.measured_mm[i]);
+    }
+    if (QUAT..QUAT + 4).contains(&idx) {
+        return r.orientation.map(|q| {
+            let c = [q.w, q.i, q.j, q.k];
+            fmt(c[idx - QUAT])
+        });
     }
     if let Some(i) = in3(FORCE) {
         return num(r.force_n[i]);
@@ -1008,8 +1187,20 @@ fn cell_value(obs: &Observations, r: &Observation, k: usize, idx: usize) -> Opti
 /// `read_observations(write_observations(x)) == x` (equality ignores source lines).
 /// Fails with `InvalidInput` when a row's pose does not match `obs.kind`.
 pub fn write_observations<W: Write>(mut w: W, obs: &Observations) -> std::io::Result<()> {
+    write_observations_with(&mut w, obs, &format_number)
+}
+
+/// [`write_observations`] with every number written by `num`.
+pub fn write_observations_with<W: Write>(
+    mut w: W,
+    obs: &Observations,
+    num: &dyn Fn(f64) -> String,
+) -> std::io::Result<()> {
     let cols = obs.effective_columns();
     let names: Vec<&str> = cols.iter().map(|c| c.name()).collect();
+    if obs.frame != MeasurementFrame::Reference {
+        writeln!(w, "# frame: {}", obs.frame.name())?;
+    }
     writeln!(w, "{}", names.join(","))?;
     for (k, r) in obs.rows.iter().enumerate() {
         let fits = matches!(
@@ -1028,7 +1219,7 @@ pub fn write_observations<W: Write>(mut w: W, obs: &Observations) -> std::io::Re
         }
         let cells: Vec<String> = cols
             .iter()
-            .map(|c| cell_value(obs, r, k, c.idx()).unwrap_or_default())
+            .map(|c| cell_value(obs, r, k, c.idx(), num).unwrap_or_default())
             .collect();
         writeln!(w, "{}", cells.join(","))?;
     }

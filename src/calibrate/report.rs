@@ -24,8 +24,10 @@ pub struct Estimate {
     pub start: f64,
     /// Identified value (the start value when fixed).
     pub value: f64,
-    /// Standard uncertainty (k = 1); `None` when fixed or when the residual
-    /// variance is unknown (no redundancy).
+    /// Standard uncertainty (k = 1); `None` when fixed as unidentifiable or
+    /// when the residual variance is unknown (no redundancy). A parameter
+    /// kept at the file's value because its correction is not significant
+    /// carries the uncertainty the full fit gives that correction.
     pub u: Option<f64>,
     /// True when the data cannot identify it: kept at the start value.
     pub fixed: bool,
@@ -44,6 +46,10 @@ pub struct Validation {
     pub after_mean_mm: f64,
     /// Max residual norm with the calibrated machine file, mm.
     pub after_max_mm: f64,
+    /// RMS residual norm (per point) with the original machine file, mm.
+    pub before_rms_mm: f64,
+    /// RMS residual norm (per point) with the calibrated machine file, mm.
+    pub after_rms_mm: f64,
 }
 
 impl Validation {
@@ -54,7 +60,10 @@ impl Validation {
         }
         let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len() as f64;
         let max = |v: &[f64]| v.iter().copied().fold(0.0, f64::max);
+        let rms = |v: &[f64]| (v.iter().map(|x| x * x).sum::<f64>() / v.len() as f64).sqrt();
         Some(Validation {
+            before_rms_mm: rms(before),
+            after_rms_mm: rms(after),
             n: before.len(),
             before_mean_mm: mean(before),
             before_max_mm: max(before),
@@ -84,13 +93,70 @@ pub struct Calibration {
     pub params: Vec<Estimate>,
     /// Held-out validation; `None` when nothing was held out.
     pub validation: Option<Validation>,
+    /// The same figures on the rows (items) of the fit.
+    pub fit_check: Option<Validation>,
+    /// The identified measurement frame (instrument data), if any.
+    pub frame: Option<FrameEstimate>,
+    /// Fixed parameters that the data could identify but whose correction
+    /// is not significant on the fit rows (subset selection).
+    pub insignificant: Vec<String>,
     /// Things the data does not support, said in words.
     pub notes: Vec<String>,
     /// The calibrated machine file (original text with edited values).
     pub yaml: String,
 }
 
+/// The identified transform of an instrument frame: the pose of the
+/// instrument in the machine's reference frame, with standard uncertainties.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FrameEstimate {
+    /// Origin of the instrument frame in the reference frame, mm.
+    pub xyz_mm: [f64; 3],
+    /// Its orientation as roll, pitch, yaw (fixed x, y, z), degrees.
+    pub rpy_deg: [f64; 3],
+    /// Standard uncertainty of `xyz_mm`, mm (`None` without redundancy).
+    pub u_xyz_mm: Option<[f64; 3]>,
+    /// Standard uncertainty of the orientation as small rotations about
+    /// the reference frame's x, y, z axes, degrees.
+    pub u_rot_deg: Option<[f64; 3]>,
+}
+
+impl fmt::Display for FrameEstimate {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let u = |v: Option<[f64; 3]>, k: usize| v.map_or("?".to_string(), |v| g(v[k]));
+        writeln!(
+            f,
+            "measurement frame (instrument in the reference frame), value ± u (k=1):"
+        )?;
+        for (k, c) in ["x", "y", "z"].iter().enumerate() {
+            writeln!(
+                f,
+                "  {c}: {:>14} ± {:>10} mm",
+                format!("{:.4}", self.xyz_mm[k]),
+                u(self.u_xyz_mm, k)
+            )?;
+        }
+        for (k, c) in ["roll", "pitch", "yaw"].iter().enumerate() {
+            writeln!(
+                f,
+                "  {c}: {:>11} ± {:>10} deg",
+                format!("{:.6}", self.rpy_deg[k]),
+                u(self.u_rot_deg, k)
+            )?;
+        }
+        Ok(())
+    }
+}
+
 impl Calibration {
+    /// True when the calibrated model predicts the held-out items worse
+    /// (higher RMS per point) than the input model: such a model is not
+    /// written unless forced.
+    pub fn worse_on_holdout(&self) -> bool {
+        self.validation
+            .is_some_and(|v| v.after_rms_mm > v.before_rms_mm)
+    }
+
     /// Fills O1 and the condition number from an identifiability report.
     pub fn set_identifiability(&mut self, id: &Identifiability) {
         self.observability_o1 = id.observability_o1;
@@ -122,7 +188,7 @@ impl Calibration {
     pub fn fixed(&self) -> Vec<&str> {
         self.params
             .iter()
-            .filter(|p| p.fixed)
+            .filter(|p| p.fixed && !self.insignificant.contains(&p.name))
             .map(|p| p.name.as_str())
             .collect()
     }
@@ -165,7 +231,8 @@ impl fmt::Display for Calibration {
         )?;
         for p in &self.params {
             let (u, uu, rel) = match (p.fixed, p.u) {
-                (true, _) => ("fixed".to_string(), "-".to_string(), "-".to_string()),
+                (true, Some(u)) => (g(u), g(COVERAGE_K * u), "kept".to_string()),
+                (true, None) => ("fixed".to_string(), "-".to_string(), "-".to_string()),
                 (false, Some(u)) => {
                     let rel = if p.value != 0.0 {
                         format!("{:.2}", 100.0 * COVERAGE_K * u / p.value.abs())
@@ -203,6 +270,22 @@ impl fmt::Display for Calibration {
                 v.n, v.before_mean_mm, v.before_max_mm, v.after_mean_mm, v.after_max_mm
             )?,
             None => writeln!(f, "held-out validation: none (--holdout 0)")?,
+        }
+        let per_point = |f: &mut fmt::Formatter<'_>, what: &str, v: &Validation| {
+            writeln!(
+                f,
+                "per point, {what} ({}): RMS {:.4} mm, max {:.4} mm before; RMS {:.4} mm, max {:.4} mm after",
+                v.n, v.before_rms_mm, v.before_max_mm, v.after_rms_mm, v.after_max_mm
+            )
+        };
+        if let Some(v) = &self.fit_check {
+            per_point(f, "fit", v)?;
+        }
+        if let Some(v) = &self.validation {
+            per_point(f, "held-out", v)?;
+        }
+        if let Some(fr) = &self.frame {
+            write!(f, "{fr}")?;
         }
         for n in &self.notes {
             writeln!(f, "note: {n}")?;

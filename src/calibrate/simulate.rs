@@ -10,11 +10,13 @@
 //! The same seed gives the same numbers on every platform
 //! ([`super::stats::SplitMix64`]).
 
-use crate::error::Result;
+use nalgebra::{Isometry3, Point3, UnitQuaternion, Vector3};
+
+use crate::error::{Error, Result};
 use crate::machine::Machine;
 
-use super::forward::{check_kind, predict};
-use super::observations::{MeasuredKind, Observations};
+use super::forward::{Switches, check_kind, predict_with};
+use super::observations::{MeasuredKind, MeasurementFrame, Observations};
 use super::stats::SplitMix64;
 
 /// Measurement noise of a simulation.
@@ -38,17 +40,125 @@ pub fn simulate(
     file: &str,
     noise: &Noise,
 ) -> Result<Observations> {
+    simulate_with(
+        machine,
+        poses,
+        file,
+        &Simulation {
+            noise: *noise,
+            ..Simulation::default()
+        },
+    )
+}
+
+/// The frame simulated positions are written in.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub enum OutputFrame {
+    /// The machine's reference frame (robot base, workpiece frame).
+    #[default]
+    Reference,
+    /// Robot: the world frame, `base · p`.
+    World,
+    /// An instrument whose pose in the reference frame is `F`: `F⁻¹ · p`.
+    Instrument(Isometry3<f64>),
+}
+
+/// Everything a simulation is asked for.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Simulation {
+    /// Position noise.
+    pub noise: Noise,
+    /// Orientation noise: standard deviation of a small rotation about each
+    /// axis, mrad (only with `orientation`).
+    pub noise_mrad: f64,
+    /// Frame of the written positions.
+    pub frame: OutputFrame,
+    /// Also write the measured orientation (`qw, qx, qy, qz`, robots).
+    pub orientation: bool,
+    /// The effects simulated.
+    pub effects: Switches,
+}
+
+impl Default for Simulation {
+    fn default() -> Self {
+        Simulation {
+            noise: Noise::default(),
+            noise_mrad: 0.0,
+            frame: OutputFrame::Reference,
+            orientation: false,
+            effects: Switches::default(),
+        }
+    }
+}
+
+/// [`simulate`] with a frame, orientations and a choice of effects. The
+/// noise is added in the output frame (an instrument's noise grows with
+/// the distance from the instrument).
+pub fn simulate_with(
+    machine: &Machine,
+    poses: &Observations,
+    file: &str,
+    sim: &Simulation,
+) -> Result<Observations> {
     check_kind(machine, poses, file)?;
+    let noise = &sim.noise;
+    let to_out = match (sim.frame, machine) {
+        (OutputFrame::Reference, _) => Isometry3::identity(),
+        (OutputFrame::World, Machine::Robot(r)) => *r.base(),
+        (OutputFrame::World, Machine::Tool(_)) => {
+            return Err(Error::Usage(
+                "--frame world is for robots (the world frame of `base`); a machine tool's \
+                 positions are in its workpiece frame"
+                    .into(),
+            ));
+        }
+        (OutputFrame::Instrument(f), _) => f.inverse(),
+    };
+    if sim.frame != OutputFrame::Reference && poses.measured == MeasuredKind::Deviation {
+        return Err(Error::Usage(format!(
+            "{file}: deviations (dx_mm …) are always in the reference frame; give a poses \
+             file with x_mm, y_mm, z_mm (or none) to simulate positions in another frame"
+        )));
+    }
+    if sim.orientation && !matches!(machine, Machine::Robot(_)) {
+        return Err(Error::Usage(
+            "--orientation is for robots (the orientation of the tool frame)".into(),
+        ));
+    }
     let mut out = poses.clone();
+    out.frame = match sim.frame {
+        OutputFrame::Reference => MeasurementFrame::Reference,
+        OutputFrame::World => MeasurementFrame::World,
+        OutputFrame::Instrument(_) => MeasurementFrame::Instrument,
+    };
     let mut rng = SplitMix64::new(noise.seed);
     for row in &mut out.rows {
-        let p = predict(machine, row, file)?;
-        let sd_mm = (noise.um + noise.um_per_m * p.attained_mm.norm() / 1000.0) / 1000.0;
+        let p = predict_with(machine, row, file, sim.effects)?;
         let mut v = p.measured(poses.measured);
+        if poses.measured == MeasuredKind::Position {
+            v = (to_out * Point3::from(v)).coords;
+        }
+        let dist_mm = if sim.frame == OutputFrame::Reference {
+            p.attained_mm.norm()
+        } else {
+            v.norm()
+        };
+        let sd_mm = (noise.um + noise.um_per_m * dist_mm / 1000.0) / 1000.0;
         for c in v.iter_mut() {
             *c += rng.gaussian(0.0, sd_mm);
         }
         row.measured_mm = v;
+        row.orientation = match (sim.orientation, p.attained_rot) {
+            (true, Some(q)) => {
+                let e = Vector3::new(
+                    rng.gaussian(0.0, sim.noise_mrad),
+                    rng.gaussian(0.0, sim.noise_mrad),
+                    rng.gaussian(0.0, sim.noise_mrad),
+                ) * 1e-3;
+                Some(UnitQuaternion::from_scaled_axis(e) * to_out.rotation * q)
+            }
+            _ => None,
+        };
     }
     if poses.measured == MeasuredKind::Position {
         tracing::debug!("simulated {} rows (positions)", out.rows.len());

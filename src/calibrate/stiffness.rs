@@ -51,13 +51,24 @@ pub struct Options {
     pub holdout: f64,
     /// Seed of the reproducible split.
     pub seed: u64,
+    /// Weight of the orientation residuals of rows with `qw…qz`: the ratio
+    /// of the position noise to the orientation noise, mm per rad (an
+    /// orientation residual of θ rad counts like a position residual of
+    /// `θ · weight` mm). 0 ignores measured orientations.
+    pub orientation_mm_per_rad: f64,
 }
+
+/// Default ratio of position to orientation noise, mm/rad: a laser tracker
+/// with a 6-DOF probe measures position to ≈ 20 µm and orientation to
+/// ≈ 0.01° (≈ 0.17 mrad): 0.02 mm / 0.00017 rad ≈ 115 mm/rad, rounded to 100.
+pub const ORIENTATION_MM_PER_RAD: f64 = 100.0;
 
 impl Default for Options {
     fn default() -> Self {
         Options {
             holdout: 0.3,
             seed: 1,
+            orientation_mm_per_rad: ORIENTATION_MM_PER_RAD,
         }
     }
 }
@@ -372,7 +383,8 @@ pub fn calibrate_stiffness(
     }
     let values: Vec<String> = params.iter().map(|p| fmt_value(p.value, 1)).collect();
     let yaml = set_top_level_list(text, machine_file, "k_nm_per_rad", &values)?;
-    Machine::from_yaml_str(&yaml, machine_file)?;
+    Machine::from_yaml_str(&yaml, machine_file)
+        .map_err(|e| super::screen::implausible(&e, obs_file, obs.rows.len()))?;
     let mut cal = Calibration {
         kind: "stiffness",
         n_fit: n_loaded,
@@ -382,6 +394,9 @@ pub fn calibrate_stiffness(
         rms_fit_mm: (sol.rss / dof_true as f64).sqrt(),
         params,
         validation: Validation::from_norms(&before, &after),
+        fit_check: None,
+        frame: None,
+        insignificant: Vec::new(),
         notes,
         yaml,
     };
@@ -409,6 +424,7 @@ mod tests {
 
     fn row(force: Vector3<f64>) -> Observation {
         Observation {
+            orientation: None,
             line: 2,
             id: "r".into(),
             t_s: None,

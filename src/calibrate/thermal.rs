@@ -343,7 +343,8 @@ pub fn calibrate_thermal(
     for (k, t) in terms.iter().enumerate() {
         yaml = set_thermal_term(&yaml, machine_file, k, t.lb_mm, t.ub_mm, t.ts_per_w)?;
     }
-    Machine::from_yaml_str(&yaml, machine_file)?;
+    Machine::from_yaml_str(&yaml, machine_file)
+        .map_err(|e| super::screen::implausible(&e, obs_file, obs.rows.len()))?;
     let mut cal = Calibration {
         kind: "thermal",
         n_fit: fit.len(),
@@ -353,6 +354,9 @@ pub fn calibrate_thermal(
         rms_fit_mm: sol.sigma2.map_or((sol.rss / m as f64).sqrt(), f64::sqrt),
         params,
         validation: Validation::from_norms(&before, &after),
+        fit_check: None,
+        frame: None,
+        insignificant: Vec::new(),
         notes,
         yaml,
     };
@@ -538,6 +542,9 @@ pub fn calibrate_tool_thermal(
         rms_fit_mm: sol.sigma2.map_or((sol.rss / m as f64).sqrt(), f64::sqrt),
         params,
         validation: Validation::from_norms(&before, &after),
+        fit_check: None,
+        frame: None,
+        insignificant: Vec::new(),
         notes,
         yaml,
     };

@@ -146,6 +146,61 @@ pub fn set_frame_translation(
     Ok(join(lines, text))
 }
 
+/// Sets the top-level `measurement_frame:` (the pose of the measuring
+/// instrument in the machine's reference frame) to a one-line flow map
+/// `{ x_mm, y_mm, z_mm, rpy_deg: [roll, pitch, yaw] }`: the existing line is
+/// replaced (its comment kept; a block map under it is refused), otherwise
+/// the key is appended at the end of the file with a comment saying what it is.
+pub fn set_measurement_frame(
+    text: &str,
+    file: &str,
+    xyz_mm: [f64; 3],
+    rpy_deg: [f64; 3],
+) -> Result<String> {
+    let value = format!(
+        "{{ x_mm: {}, y_mm: {}, z_mm: {}, rpy_deg: [{}, {}, {}] }}",
+        fmt_value(xyz_mm[0], 4),
+        fmt_value(xyz_mm[1], 4),
+        fmt_value(xyz_mm[2], 4),
+        fmt_value(rpy_deg[0], 6),
+        fmt_value(rpy_deg[1], 6),
+        fmt_value(rpy_deg[2], 6)
+    );
+    let mut lines: Vec<String> = text.lines().map(str::to_string).collect();
+    match top_level_line(&lines, "measurement_frame") {
+        Some(i) => {
+            let (content, comment) = split_comment(&lines[i]);
+            if !content.contains('{') {
+                return Err(edit_err(
+                    file,
+                    "`measurement_frame` is not a one-line flow map",
+                ));
+            }
+            lines[i] = format!("measurement_frame: {value}{}", {
+                if comment.is_empty() {
+                    String::new()
+                } else {
+                    format!("  {}", comment.trim_start())
+                }
+            });
+            Ok(join(lines, text))
+        }
+        None => {
+            let mut t = text.to_string();
+            if !t.is_empty() && !t.ends_with('\n') {
+                t.push('\n');
+            }
+            t.push_str(
+                "# Pose of the measuring instrument in the machine's reference frame,\n\
+                 # identified by `postproc calibrate` from `# frame: instrument`\n\
+                 # observations (docs/frames.md). Not part of the model.\n",
+            );
+            t.push_str(&format!("measurement_frame: {value}\n"));
+            Ok(t)
+        }
+    }
+}
+
 /// One DH row as written in a machine file (lengths mm, angles degrees).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct DhRow {

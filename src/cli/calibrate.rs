@@ -7,11 +7,15 @@ use std::path::{Path, PathBuf};
 
 use clap::{Args, ValueEnum};
 
+use crate::calibrate::forward::Switches;
+use crate::calibrate::frame::{calibrate_by_registration, world_to_reference};
 use crate::calibrate::geometry::calibrate_geometry;
 use crate::calibrate::kinematics::calibrate_kinematics;
-use crate::calibrate::observations::{load_observations, load_poses, write_observations};
-use crate::calibrate::simulate::{Noise, simulate};
-use crate::calibrate::stiffness::{Options, calibrate_stiffness};
+use crate::calibrate::observations::{
+    MeasurementFrame, load_observations, load_poses, write_observations_with,
+};
+use crate::calibrate::simulate::{Noise, OutputFrame, Simulation, simulate_with};
+use crate::calibrate::stiffness::{ORIENTATION_MM_PER_RAD, Options, calibrate_stiffness};
 use crate::calibrate::thermal::calibrate_thermal;
 use crate::error::{Error, Result};
 use crate::machine::status::Calibration;
@@ -41,6 +45,78 @@ pub struct SimulateArgs {
     /// Output observation file (`-` for standard output).
     #[arg(short, long)]
     pub output: PathBuf,
+    /// Decimals of every number written (fixed format; the default 9
+    /// keeps simulated data exact to a nanometre).
+    #[arg(long, default_value_t = 9)]
+    pub decimals: usize,
+    /// Effects simulated: all, none, or a list of geometric, static, thermal.
+    #[arg(long, default_value = "all")]
+    pub effects: String,
+    /// Frame of the written positions: base (the machine's reference
+    /// frame), world (robot: through the machine file's `base`) or
+    /// instrument (`--instrument`, else the machine file's `measurement_frame`).
+    #[arg(long, value_parser = parse_frame, default_value = "base")]
+    pub frame: MeasurementFrame,
+    /// Pose of the instrument in the reference frame for `--frame
+    /// instrument`: `X,Y,Z,ROLL,PITCH,YAW` (mm, degrees).
+    #[arg(long, value_name = "X,Y,Z,R,P,Y")]
+    pub instrument: Option<String>,
+    /// Also write the measured orientation of the tool frame (qw, qx, qy, qz; robots).
+    #[arg(long)]
+    pub orientation: bool,
+    /// Orientation noise, standard deviation of a rotation about each axis, mrad.
+    #[arg(long, default_value_t = 0.0)]
+    pub noise_mrad: f64,
+}
+
+/// Largest `--decimals` of `simulate`.
+const MAX_DECIMALS: usize = 12;
+
+fn parse_instrument(s: &str) -> Result<nalgebra::Isometry3<f64>> {
+    let v: Vec<f64> = s
+        .split(',')
+        .map(|t| t.trim().parse::<f64>())
+        .collect::<std::result::Result<_, _>>()
+        .map_err(|_| {
+            usage(format!(
+                "--instrument expects X,Y,Z,ROLL,PITCH,YAW numbers, got `{}`",
+                crate::error::clip(s)
+            ))
+        })?;
+    let ok = v.len() == 6
+        && v.iter().all(|x| x.is_finite())
+        && v[..3].iter().all(|x| x.abs() <= 1e6)
+        && v[3..].iter().all(|x| x.abs() <= 360.0);
+    if !ok {
+        return Err(usage(format!(
+            "--instrument expects six numbers X,Y,Z (mm, within ±1e6) and ROLL,PITCH,YAW (deg, within ±360), got `{}`",
+            crate::error::clip(s)
+        )));
+    }
+    Ok(nalgebra::Isometry3::from_parts(
+        nalgebra::Translation3::new(v[0], v[1], v[2]),
+        nalgebra::UnitQuaternion::from_euler_angles(
+            v[3].to_radians(),
+            v[4].to_radians(),
+            v[5].to_radians(),
+        ),
+    ))
+}
+
+/// `--effects` of `simulate`: the effects of the forward model.
+fn parse_switches(spec: &str) -> Result<Switches> {
+    let set = crate::predict::EffectSet::parse(spec)?;
+    use crate::predict::Effect;
+    if spec.split(',').any(|s| s.trim() == "dynamic") {
+        return Err(usage(
+            "--effects: dynamic is not simulated (observations are static poses)".to_string(),
+        ));
+    }
+    Ok(Switches {
+        geometric: set.gain(Effect::Geometric) > 0.0,
+        static_: set.gain(Effect::Static) > 0.0,
+        thermal: set.gain(Effect::Thermal) > 0.0,
+    })
 }
 
 /// What to identify.
@@ -76,6 +152,25 @@ pub struct CalibrateArgs {
     /// Seed of the reproducible hold-out split.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
+    /// Frame of the measured positions, overriding the file's `# frame:`
+    /// line: `base` (the machine's reference frame), `world` (robot: through
+    /// the machine file's `base`) or `instrument` (unknown; identified).
+    #[arg(long, value_parser = parse_frame)]
+    pub frame: Option<MeasurementFrame>,
+    /// Ratio of position to orientation noise for rows with `qw…qz`, mm per
+    /// rad (0 ignores measured orientations).
+    #[arg(long, default_value_t = ORIENTATION_MM_PER_RAD)]
+    pub orientation_weight_mm_per_rad: f64,
+    /// Write the calibrated file even when it predicts the held-out rows
+    /// worse than the input file.
+    #[arg(long)]
+    pub force: bool,
+}
+
+/// Parses `--frame`.
+pub fn parse_frame(s: &str) -> std::result::Result<MeasurementFrame, String> {
+    MeasurementFrame::parse(s)
+        .ok_or_else(|| format!("unknown frame `{s}` (base, world or instrument)"))
 }
 
 fn read_machine(name: &str) -> Result<(String, String)> {
@@ -118,6 +213,9 @@ pub(super) fn calibration_record(
 /// the observation files' magnitude limit.
 const MAX_NOISE_UM: f64 = 1e4;
 
+/// Largest accepted position-to-orientation noise ratio, mm/rad.
+const MAX_ORIENTATION_WEIGHT: f64 = 1e6;
+
 fn non_negative(flag: &str, v: f64) -> Result<()> {
     if v.is_finite() && (0.0..=MAX_NOISE_UM).contains(&v) {
         Ok(())
@@ -148,18 +246,67 @@ pub fn run_simulate(a: &SimulateArgs) -> Result<i32> {
     let machine = Machine::from_yaml_str(&text, &file)?;
     let poses = load_poses(&a.observations)?;
     let obs_file = a.observations.display().to_string();
+    if a.decimals > MAX_DECIMALS {
+        return Err(usage(format!(
+            "--decimals must be within 0..{MAX_DECIMALS}, got {}",
+            a.decimals
+        )));
+    }
+    if !(a.noise_mrad.is_finite() && (0.0..=1000.0).contains(&a.noise_mrad)) {
+        return Err(usage(format!(
+            "--noise-mrad must be a number within 0..1000, got {}",
+            crate::error::show_number(a.noise_mrad)
+        )));
+    }
     let noise = Noise {
         um: a.noise_um,
         um_per_m: a.noise_um_per_m,
         seed: a.seed,
     };
-    let out = simulate(&machine, &poses, &obs_file, &noise)?;
+    let frame = match (a.frame, &a.instrument) {
+        (MeasurementFrame::Instrument, Some(s)) => OutputFrame::Instrument(parse_instrument(s)?),
+        (MeasurementFrame::Instrument, None) => {
+            OutputFrame::Instrument(machine.measurement_frame().ok_or_else(|| {
+                usage(format!(
+                    "--frame instrument needs --instrument X,Y,Z,ROLL,PITCH,YAW or a \
+                     `measurement_frame` in {file}"
+                ))
+            })?)
+        }
+        (_, Some(_)) => {
+            return Err(usage("--instrument needs --frame instrument".to_string()));
+        }
+        (MeasurementFrame::World, None) => OutputFrame::World,
+        (MeasurementFrame::Reference, None) => OutputFrame::Reference,
+    };
+    let sim = Simulation {
+        noise,
+        noise_mrad: a.noise_mrad,
+        frame,
+        orientation: a.orientation,
+        effects: parse_switches(&a.effects)?,
+    };
+    let out = simulate_with(&machine, &poses, &obs_file, &sim)?;
+    let decimals = a.decimals;
+    let fixed = move |v: f64| {
+        let s = format!("{v:.decimals$}");
+        // No "-0.000": a value that rounds to zero is written as zero.
+        if s.starts_with('-') && s[1..].bytes().all(|b| b == b'0' || b == b'.') {
+            s[1..].to_string()
+        } else {
+            s
+        }
+    };
     super::gcode::refuse_overwrite(&a.output, &read_files(&a.observations, &a.machine)?)?;
     let out_name = a.output.display().to_string();
     emit(&a.output, |w| {
-        write_observations(w, &out).map_err(|e| Error::io(&out_name, e))
+        write_observations_with(w, &out, &fixed).map_err(|e| Error::io(&out_name, e))
     })?;
-    tracing::info!("wrote {} simulated rows to {out_name}", out.rows.len());
+    tracing::info!(
+        "wrote {} simulated rows to {out_name} (positions in the {} frame)",
+        out.rows.len(),
+        out.frame.name()
+    );
     Ok(0)
 }
 
@@ -171,18 +318,45 @@ pub fn run_calibrate(a: &CalibrateArgs) -> Result<i32> {
             crate::error::show_number(a.holdout)
         )));
     }
+    if !(a.orientation_weight_mm_per_rad.is_finite()
+        && (0.0..=MAX_ORIENTATION_WEIGHT).contains(&a.orientation_weight_mm_per_rad))
+    {
+        return Err(usage(format!(
+            "--orientation-weight-mm-per-rad must be within 0..{MAX_ORIENTATION_WEIGHT}, got {}",
+            crate::error::show_number(a.orientation_weight_mm_per_rad)
+        )));
+    }
     let (text, file) = read_machine(&a.machine)?;
-    let obs = load_observations(&a.observations)?;
+    let mut obs = load_observations(&a.observations)?;
+    if let Some(f) = a.frame {
+        obs.frame = f;
+    }
     let obs_file = a.observations.display().to_string();
     let opts = Options {
         holdout: a.holdout,
         seed: a.seed,
+        orientation_mm_per_rad: a.orientation_weight_mm_per_rad,
     };
-    let cal = match a.kind {
-        CalibrationKind::Stiffness => calibrate_stiffness(&text, &file, &obs, &obs_file, &opts)?,
-        CalibrationKind::Kinematics => calibrate_kinematics(&text, &file, &obs, &obs_file, &opts)?,
-        CalibrationKind::Geometry => calibrate_geometry(&text, &file, &obs, &obs_file, &opts)?,
-        CalibrationKind::Thermal => calibrate_thermal(&text, &file, &obs, &obs_file, &opts)?,
+    let machine = Machine::from_yaml_str(&text, &file)?;
+    let obs = world_to_reference(&machine, &obs);
+    tracing::info!(
+        "measured positions in the {} frame",
+        match obs.frame {
+            MeasurementFrame::Instrument => "instrument",
+            _ => "machine's reference (robot base or workpiece)",
+        }
+    );
+    let run = |o: &crate::calibrate::observations::Observations| match a.kind {
+        CalibrationKind::Stiffness => calibrate_stiffness(&text, &file, o, &obs_file, &opts),
+        CalibrationKind::Kinematics => calibrate_kinematics(&text, &file, o, &obs_file, &opts),
+        CalibrationKind::Geometry => calibrate_geometry(&text, &file, o, &obs_file, &opts),
+        CalibrationKind::Thermal => calibrate_thermal(&text, &file, o, &obs_file, &opts),
+    };
+    let cal = if obs.frame == MeasurementFrame::Instrument && a.kind != CalibrationKind::Kinematics
+    {
+        calibrate_by_registration(&text, &file, &obs, &obs_file, &run)?
+    } else {
+        run(&obs)?
     };
     let record = calibration_record(
         &format!("{:?}", a.kind).to_ascii_lowercase(),
@@ -201,6 +375,27 @@ pub fn run_calibrate(a: &CalibrateArgs) -> Result<i32> {
             .map_err(|e| Error::io("stdout", e))
     };
     say(&mut stdout, &cal.to_string())?;
+    if let (true, Some(v)) = (cal.worse_on_holdout(), cal.validation) {
+        let numbers = format!(
+            "the calibrated model predicts the {} held-out items worse than the input model \
+             (RMS per point {:.4} → {:.4} mm, max {:.4} → {:.4} mm)",
+            v.n, v.before_rms_mm, v.after_rms_mm, v.before_max_mm, v.after_max_mm
+        );
+        if !a.force {
+            say(
+                &mut stdout,
+                &format!(
+                    "not written: {numbers}; the data do not support this model \
+                     (--force writes it anyway)\n"
+                ),
+            )?;
+            return Ok(1);
+        }
+        say(
+            &mut stdout,
+            &format!("warning: {numbers}; written because of --force\n"),
+        )?;
+    }
     write_atomically(&a.output, |w| {
         w.write_all(yaml.as_bytes())
             .map_err(|e| Error::io(&a.output, e))

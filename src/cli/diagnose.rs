@@ -47,7 +47,80 @@ pub struct DiagnoseArgs {
     /// List the candidate effects (instances for --machine and --observations, when given) and exit.
     #[arg(long)]
     pub list_effects: bool,
+    /// Frame of the measured positions, overriding the file's `# frame:`
+    /// line: base, world (robot: through `base`) or instrument (registered
+    /// to the model first).
+    #[arg(long, value_parser = super::calibrate::parse_frame)]
+    pub frame: Option<crate::calibrate::observations::MeasurementFrame>,
 }
+
+/// Observations in the machine's reference frame: world positions through
+/// `base`; instrument positions through the rigid transform that registers
+/// them to the model's predictions (reported in the returned text). Exact
+/// copies of rows are dropped, and too few distinct poses are refused.
+fn in_reference_frame(
+    machine: &Machine,
+    obs: &crate::calibrate::observations::Observations,
+    file: &str,
+) -> Result<(crate::calibrate::observations::Observations, String)> {
+    use crate::calibrate::frame::{frame_uncertainty, register, rpy_deg, world_to_reference};
+    use crate::calibrate::observations::MeasurementFrame;
+    let (mut obs, copies) =
+        crate::calibrate::screen::drop_copies(&world_to_reference(machine, obs), file);
+    let all: Vec<usize> = (0..obs.rows.len()).collect();
+    let distinct = crate::calibrate::screen::distinct_poses(&obs, &all);
+    if distinct < MIN_DISTINCT_POSES {
+        return Err(Error::Usage(format!(
+            "{file}: {distinct} distinct pose(s) in {} rows (repeats count once); diagnosis \
+             needs at least {MIN_DISTINCT_POSES} different poses",
+            obs.rows.len()
+        )));
+    }
+    let mut said = copies.map(|c| format!("note: {c}\n")).unwrap_or_default();
+    if obs.frame == MeasurementFrame::Instrument {
+        let model: Vec<nalgebra::Vector3<f64>> = obs
+            .rows
+            .iter()
+            .map(|r| crate::calibrate::forward::predict(machine, r, file).map(|p| p.attained_mm))
+            .collect::<Result<_>>()?;
+        let meas: Vec<nalgebra::Vector3<f64>> = obs.rows.iter().map(|r| r.measured_mm).collect();
+        let f = register(&meas, &model).ok_or_else(|| {
+            Error::Usage(format!(
+                "{file}: the measured points lie on a line or are too few: the instrument frame cannot be registered"
+            ))
+        })?;
+        let u = frame_uncertainty(&f, &meas, &model);
+        let t = f.translation.vector;
+        let r = rpy_deg(&f);
+        said.push_str(&format!(
+            "measurement frame (instrument in the reference frame, registered to the model): \
+             x {:.4} y {:.4} z {:.4} mm{}, roll {:.6} pitch {:.6} yaw {:.6} deg{}\n",
+            t.x,
+            t.y,
+            t.z,
+            u.map_or(String::new(), |u| format!(
+                " (u {:.4} {:.4} {:.4})",
+                u.0[0], u.0[1], u.0[2]
+            )),
+            r[0],
+            r[1],
+            r[2],
+            u.map_or(String::new(), |u| format!(
+                " (u {:.6} {:.6} {:.6})",
+                u.1[0], u.1[1], u.1[2]
+            )),
+        ));
+        for row in &mut obs.rows {
+            row.measured_mm = (f * nalgebra::Point3::from(row.measured_mm)).coords;
+            row.orientation = row.orientation.map(|q| f.rotation * q);
+        }
+        obs.frame = MeasurementFrame::Reference;
+    }
+    Ok((obs, said))
+}
+
+/// Fewest distinct poses a diagnosis accepts.
+const MIN_DISTINCT_POSES: usize = 4;
 
 fn load(name: &str) -> Result<(Machine, String)> {
     let file = MachineFile::open(name)?;
@@ -94,15 +167,22 @@ pub fn run(a: &DiagnoseArgs) -> Result<i32> {
         )));
     }
     let (machine, text) = load(m)?;
-    let obs = load_observations(o)?;
+    let mut obs = load_observations(o)?;
+    if let Some(f) = a.frame {
+        obs.frame = f;
+    }
+    let (obs, frame_text) = in_reference_frame(&machine, &obs, &o.display().to_string())?;
     let opts = Options {
         holdout: a.holdout,
         seed: a.seed,
         bootstrap: a.bootstrap,
     };
     let d = diagnose::diagnose(&machine, &text, &obs, &o.display().to_string(), &opts)?;
+    if a.format == DiagnoseFormat::Json && !frame_text.is_empty() {
+        tracing::info!("{}", frame_text.trim_end());
+    }
     let mut out = match a.format {
-        DiagnoseFormat::Table => report::render_table(&d),
+        DiagnoseFormat::Table => frame_text + &report::render_table(&d),
         DiagnoseFormat::Json => serde_json::to_string_pretty(&d)
             .map(|s| s + "\n")
             .map_err(|e| Error::Usage(format!("cannot write JSON: {e}")))?,

@@ -998,6 +998,7 @@ mod tests {
 
     fn robot_row(q_deg: [f64; 6], f: Vector3<f64>, dir: i8) -> Observation {
         Observation {
+            orientation: None,
             line: 0,
             id: "r".into(),
             t_s: None,
@@ -1017,6 +1018,7 @@ mod tests {
 
     fn tool_row(xyz: [f64; 3], dir: i8, t_s: f64) -> Observation {
         Observation {
+            orientation: None,
             line: 0,
             id: "t".into(),
             t_s: Some(t_s),

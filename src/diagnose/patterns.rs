@@ -225,6 +225,7 @@ mod tests {
             force_n: f,
             moment_nm: Vector3::zeros(),
             ambient_c: None,
+            orientation: None,
             pose: Pose::Robot(RobotPose {
                 q_deg,
                 mp_mm: None,

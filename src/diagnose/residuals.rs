@@ -237,6 +237,7 @@ mod tests {
 
     fn row(x: f64) -> Observation {
         Observation {
+            orientation: None,
             line: 0,
             id: "r".into(),
             t_s: None,

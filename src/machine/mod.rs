@@ -59,6 +59,15 @@ struct KindOnly {
 }
 
 impl Machine {
+    /// Pose of the measuring instrument in the machine's reference frame
+    /// (the file's `measurement_frame`), if given.
+    pub fn measurement_frame(&self) -> Option<nalgebra::Isometry3<f64>> {
+        match self {
+            Machine::Tool(t) => t.measurement_frame().copied(),
+            Machine::Robot(r) => r.measurement_frame().copied(),
+        }
+    }
+
     /// Loads and validates a machine file. Errors name the file, line and key
     /// path.
     pub fn load(path: &Path) -> Result<Machine> {

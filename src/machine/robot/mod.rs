@@ -145,6 +145,9 @@ pub struct Robot {
 #[derive(Debug, Clone)]
 struct RobotData {
     name: String,
+    /// `measurement_frame`: pose of the measuring instrument in the robot
+    /// base frame (not part of the model).
+    measurement_frame: Option<Isometry3<f64>>,
     /// The controller's parameters, with their prepared rows (confdata).
     nominal: paired::Paired,
     /// The calibrated parameters, with their prepared rows (the kinematic
@@ -363,6 +366,10 @@ impl Robot {
             Some(f) => frame("base", f)?,
             None => Isometry3::identity(),
         };
+        let measurement_frame = match &raw.measurement_frame {
+            Some(f) => Some(frame("measurement_frame", f)?),
+            None => None,
+        };
         finite("gravity_m_per_s2", &raw.gravity_m_per_s2)?;
         let links_raw = six("links", raw.links.iter().collect::<Vec<_>>().as_slice())?;
         let mut links = [PointMass {
@@ -457,6 +464,7 @@ impl Robot {
         let closed_form = ik::ClosedForm::new(&nominal);
         Ok(Robot {
             d: Box::new(RobotData {
+                measurement_frame,
                 name: raw.name.unwrap_or_else(|| "robot".to_string()),
                 nominal: paired::Paired::new(nominal),
                 actual: paired::Paired::new(actual),
@@ -508,6 +516,11 @@ impl Robot {
     /// Default TCP: flange → tool.
     pub fn flange_to_tool(&self) -> &Isometry3<f64> {
         &self.d.tool
+    }
+    /// Pose of the measuring instrument in the robot base frame (the
+    /// file's `measurement_frame`), if given.
+    pub fn measurement_frame(&self) -> Option<&Isometry3<f64>> {
+        self.d.measurement_frame.as_ref()
     }
     /// Robot base frame in the world frame.
     pub fn base(&self) -> &Isometry3<f64> {

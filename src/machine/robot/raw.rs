@@ -21,6 +21,11 @@ pub(crate) struct RawRobot {
     pub flange_to_tool: Option<RawFrame>,
     #[serde(default)]
     pub base: Option<RawFrame>,
+    /// Pose of the measuring instrument in the robot base frame (written
+    /// by calibration from instrument-frame observations; not part of the
+    /// model).
+    #[serde(default)]
+    pub measurement_frame: Option<RawFrame>,
     pub gravity_m_per_s2: [f64; 3],
     pub links: Vec<RawLink>,
     #[serde(default)]

@@ -255,6 +255,30 @@ fn validate(raw: RawMachineTool) -> V<MachineTool> {
         .map(super::dynamics::Modal::from_raw)
         .transpose()?;
 
+    let measurement_frame = match &raw.measurement_frame {
+        Some(f) => {
+            let v = [
+                f.x_mm,
+                f.y_mm,
+                f.z_mm,
+                f.rpy_deg[0],
+                f.rpy_deg[1],
+                f.rpy_deg[2],
+            ];
+            if v.iter().any(|x| !x.is_finite()) {
+                return Err(Invalid::new(
+                    "measurement_frame",
+                    "every value must be a finite number",
+                ));
+            }
+            let [r, p, y] = f.rpy_deg.map(f64::to_radians);
+            Some(nalgebra::Isometry3::from_parts(
+                nalgebra::Translation3::new(f.x_mm, f.y_mm, f.z_mm),
+                nalgebra::UnitQuaternion::from_euler_angles(r, p, y),
+            ))
+        }
+        None => None,
+    };
     let error_free = spindle.is_zero()
         && axes
             .iter()
@@ -275,6 +299,7 @@ fn validate(raw: RawMachineTool) -> V<MachineTool> {
         decimals_deg,
         tolerance_mm,
         error_free,
+        measurement_frame: measurement_frame.map(Box::new),
         process: (process_force.is_some()
             || stiffness.is_some()
             || thermal.is_some()

@@ -127,6 +127,9 @@ pub struct MachineTool {
     /// programs, mm.
     tolerance_mm: Option<f64>,
     error_free: bool,
+    /// `measurement_frame`: pose of the measuring instrument in the
+    /// workpiece frame (not part of the model); boxed to keep `Machine` small.
+    measurement_frame: Option<Box<nalgebra::Isometry3<f64>>>,
     /// The optional process sections, boxed to keep `Machine` small.
     process: Option<Box<ProcessSections>>,
     /// Position-independent parts of the chain (see [`fast`]), boxed to
@@ -261,6 +264,12 @@ impl MachineTool {
     /// The thermal model (`thermal:`).
     pub fn thermal(&self) -> Option<&Thermal> {
         self.process.as_ref().and_then(|p| p.thermal.as_ref())
+    }
+
+    /// Pose of the measuring instrument in the workpiece frame (the
+    /// file's `measurement_frame`), if given.
+    pub fn measurement_frame(&self) -> Option<&nalgebra::Isometry3<f64>> {
+        self.measurement_frame.as_deref()
     }
 
     /// The dominant modes (`modal:`).

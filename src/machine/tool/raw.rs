@@ -39,6 +39,24 @@ pub(crate) struct RawMachineTool {
     pub _status: Option<serde::de::IgnoredAny>,
     #[serde(default, rename = "calibrations")]
     pub _calibrations: Option<serde::de::IgnoredAny>,
+    /// Pose of the measuring instrument in the workpiece frame (written by
+    /// calibration from instrument-frame observations; not part of the model).
+    #[serde(default)]
+    pub measurement_frame: Option<RawMeasurementFrame>,
+}
+
+/// `measurement_frame:` — translation and roll-pitch-yaw.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct RawMeasurementFrame {
+    #[serde(default)]
+    pub x_mm: f64,
+    #[serde(default)]
+    pub y_mm: f64,
+    #[serde(default)]
+    pub z_mm: f64,
+    #[serde(default)]
+    pub rpy_deg: [f64; 3],
 }
 
 /// The control's unit for programs without G20/G21.

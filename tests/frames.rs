@@ -1,0 +1,633 @@
+//! Integration tests: degenerate identification data (repeated rows, one
+//! pose copied, axes never varied, a model worse on the held-out rows, an
+//! outlier row), the instrument frame identified with the model, measured
+//! orientations, the world frame of a moved and turned `base`, and the
+//! fixed number format and effect choice of `simulate`.
+
+use std::path::{Path, PathBuf};
+
+use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion};
+use postproc::calibrate::kinematics::calibrate_kinematics;
+use postproc::calibrate::observations::{
+    Observations, load_observations, load_poses, parse_observations, write_observations,
+};
+use postproc::calibrate::screen::grouped_split;
+use postproc::calibrate::simulate::{Noise, OutputFrame, Simulation, simulate, simulate_with};
+use postproc::calibrate::stiffness::Options;
+use postproc::machine::Machine;
+
+use crate::common::{postproc, repo};
+
+/// Coverage factor of the recovery checks (as in calibrate_cli.rs).
+const K_TEST: f64 = 3.0;
+/// Mean norm of 3-D isotropic noise of σ per coordinate, in σ.
+const MAXWELL_MEAN: f64 = 1.596;
+
+const TRUTH_ROBOT: &str = "samples/observations/irb1600-truth.yaml";
+const START_ROBOT: &str = "machines/abb-irb1600.yaml";
+const KIN_POSES: &str = "samples/observations/irb1600-kinematic-poses.csv";
+const GRID: &str = "samples/observations/afm-r1000-grid-measured.csv";
+
+fn text(rel: &str) -> String {
+    std::fs::read_to_string(repo(rel)).expect("file in the repository")
+}
+
+fn machine(rel: &str) -> Machine {
+    Machine::from_yaml_str(&text(rel), rel).expect("machine file")
+}
+
+fn write(dir: &Path, name: &str, body: &str) -> PathBuf {
+    let p = dir.join(name);
+    std::fs::write(&p, body).expect("write");
+    p
+}
+
+fn csv(obs: &Observations) -> String {
+    let mut b = Vec::new();
+    write_observations(&mut b, obs).expect("csv");
+    String::from_utf8(b).expect("utf8")
+}
+
+fn tracker(seed: u64) -> Noise {
+    Noise {
+        um: 15.0,
+        um_per_m: 6.0,
+        seed,
+    }
+}
+
+/// Five grid rows repeated twenty times are five poses, not a hundred:
+/// geometry is refused (the copies neither identify the tables nor may
+/// they stand in the hold-out for their own originals).
+#[test]
+fn geometry_refuses_five_rows_repeated_twenty_times() {
+    let grid = text(GRID);
+    let mut lines = grid.lines();
+    let header = lines.next().expect("header");
+    let five: Vec<&str> = lines.take(5).collect();
+    let mut body = format!("{header}\n");
+    for _ in 0..20 {
+        for l in &five {
+            body.push_str(l);
+            body.push('\n');
+        }
+    }
+    let dir = tempfile::tempdir().expect("tempdir");
+    let obs = write(dir.path(), "rep.csv", &body);
+    let out = dir.path().join("cal.yaml");
+    let a = postproc()
+        .args(["calibrate", "geometry", "--machine"])
+        .arg(repo("machines/afm-r1000.yaml"))
+        .arg("--observations")
+        .arg(&obs)
+        .arg("-o")
+        .arg(&out)
+        .assert()
+        .code(2);
+    let err = String::from_utf8_lossy(&a.get_output().stderr).to_string();
+    assert!(err.contains("distinct poses"), "{err}");
+    assert!(
+        err.contains("exact copies") || err.contains("count once"),
+        "{err}"
+    );
+    assert!(!out.exists());
+}
+
+/// One row copied a hundred times is one pose: diagnose refuses instead of
+/// naming an effect with a zero uncertainty.
+#[test]
+fn diagnose_refuses_one_row_copied_a_hundred_times() {
+    let m = text("samples/diagnose/measured.csv");
+    let mut lines = m.lines();
+    let header = lines.next().expect("header");
+    let row = lines.next().expect("row");
+    let mut body = format!("{header}\n");
+    for _ in 0..100 {
+        body.push_str(row);
+        body.push('\n');
+    }
+    let dir = tempfile::tempdir().expect("tempdir");
+    let obs = write(dir.path(), "one.csv", &body);
+    let a = postproc()
+        .args(["diagnose", "--machine"])
+        .arg(repo("samples/diagnose/model.yaml"))
+        .arg("--observations")
+        .arg(&obs)
+        .assert()
+        .code(2);
+    let err = String::from_utf8_lossy(&a.get_output().stderr).to_string();
+    assert!(err.contains("1 distinct pose"), "{err}");
+}
+
+/// Geometry data with Y and Z never varied: their tables are not
+/// identified (a one-target table would replace the file's table), and
+/// with one pass per target and direction the X tables are exactly
+/// determined by as many values as equations — refused, nothing written.
+#[test]
+fn geometry_with_y_and_z_never_varied_is_refused() {
+    let mut body = String::from("X_mm,Y_mm,Z_mm,dirX,dirY,dirZ,tool_mm\n");
+    for rep in 0..3 {
+        for k in 0..=10 {
+            for dir in [1, -1] {
+                let _ = rep;
+                body.push_str(&format!("{},300,0,{dir},1,1,100\n", 100 * k));
+            }
+        }
+    }
+    let dir = tempfile::tempdir().expect("tempdir");
+    let poses = write(dir.path(), "p.csv", &body);
+    let meas = dir.path().join("m.csv");
+    postproc()
+        .args(["simulate", "--machine"])
+        .arg(repo("samples/observations/afm-r1000-truth.yaml"))
+        .arg("--observations")
+        .arg(&poses)
+        .args(["--noise-um", "1", "-o"])
+        .arg(&meas)
+        .assert()
+        .success();
+    let out = dir.path().join("cal.yaml");
+    let a = postproc()
+        .args(["calibrate", "geometry", "--machine"])
+        .arg(repo("machines/afm-r1000.yaml"))
+        .arg("--observations")
+        .arg(&meas)
+        .arg("-o")
+        .arg(&out)
+        .assert()
+        .code(2);
+    let err = String::from_utf8_lossy(&a.get_output().stderr).to_string();
+    assert!(err.contains("distinct poses"), "{err}");
+    assert!(!out.exists());
+}
+
+/// Fit rows measured on one robot, held-out rows on another (the input
+/// file itself): the calibrated model is worse on the held-out rows than
+/// the input, so it is not written (exit 1, the numbers said); `--force`
+/// writes it with a warning.
+#[test]
+fn kinematics_worse_on_the_held_out_rows_is_not_written() {
+    let poses = load_poses(&repo(KIN_POSES)).expect("poses");
+    let (_, hold) = grouped_split(&poses, 0.3, 1);
+    let truth = simulate(&machine(TRUTH_ROBOT), &poses, "p", &tracker(4)).expect("sim");
+    let start = simulate(&machine(START_ROBOT), &poses, "p", &tracker(5)).expect("sim");
+    let mut mixed = truth.clone();
+    for &i in &hold {
+        mixed.rows[i] = start.rows[i].clone();
+    }
+    let dir = tempfile::tempdir().expect("tempdir");
+    let obs = write(dir.path(), "mixed.csv", &csv(&mixed));
+    let out = dir.path().join("cal.yaml");
+    let a = postproc()
+        .args(["calibrate", "kinematics", "--machine"])
+        .arg(repo(START_ROBOT))
+        .arg("--observations")
+        .arg(&obs)
+        .arg("-o")
+        .arg(&out)
+        .assert()
+        .code(1);
+    let stdout = String::from_utf8_lossy(&a.get_output().stdout).to_string();
+    assert!(stdout.contains("not written:"), "{stdout}");
+    assert!(stdout.contains("RMS per point"), "{stdout}");
+    assert!(stdout.contains("per point, held-out ("), "{stdout}");
+    assert!(stdout.contains("per point, fit ("), "{stdout}");
+    assert!(!out.exists());
+    let a = postproc()
+        .args(["calibrate", "kinematics", "--force", "--machine"])
+        .arg(repo(START_ROBOT))
+        .arg("--observations")
+        .arg(&obs)
+        .arg("-o")
+        .arg(&out)
+        .assert()
+        .success();
+    let stdout = String::from_utf8_lossy(&a.get_output().stdout).to_string();
+    assert!(stdout.contains("written because of --force"), "{stdout}");
+    assert!(out.exists());
+}
+
+/// One fit row moved by 300 mm: it is named (file:line) and left out of
+/// the fit, the tables are identified from the others, and nothing blames
+/// the machine file.
+#[test]
+fn geometry_outlier_row_is_named_and_left_out() {
+    let obs = load_observations(&repo(GRID)).expect("grid");
+    let (fit, _) = grouped_split(&obs, 0.3, 1);
+    let k = fit[fit.len() / 2];
+    let mut bad = obs.clone();
+    bad.rows[k].measured_mm.x += 300.0;
+    let dir = tempfile::tempdir().expect("tempdir");
+    let p = write(dir.path(), "grid.csv", &csv(&bad));
+    let out = dir.path().join("cal.yaml");
+    let a = postproc()
+        .args(["calibrate", "geometry", "--machine"])
+        .arg(repo("machines/afm-r1000.yaml"))
+        .arg("--observations")
+        .arg(&p)
+        .arg("-o")
+        .arg(&out)
+        .assert()
+        .success();
+    let stdout = String::from_utf8_lossy(&a.get_output().stdout).to_string();
+    let line = format!("grid.csv:{} (row `{}`)", k + 2, bad.rows[k].id);
+    assert!(
+        stdout.contains("left out of the fit as an outlier"),
+        "{stdout}"
+    );
+    assert!(stdout.contains(&line), "{line} in:\n{stdout}");
+    assert!(!stdout.contains("afm-r1000.yaml:"), "{stdout}");
+    assert!(out.exists());
+}
+
+fn instrument() -> Isometry3<f64> {
+    Isometry3::from_parts(
+        Translation3::new(2600.0, -1400.0, -350.0),
+        UnitQuaternion::from_euler_angles(0.8f64.to_radians(), -1.1f64.to_radians(), 2.4),
+    )
+}
+
+/// A tracker standing 3 m off the base, turned by 137° and tilted: the
+/// kinematic calibration identifies its frame within the reported
+/// uncertainty, recovers the DH deviations, brings the held-out error to
+/// the noise level, and says which parameters the frame absorbs.
+#[test]
+fn instrument_frame_identified_with_the_kinematics() {
+    let poses = load_poses(&repo(KIN_POSES)).expect("poses");
+    let f = instrument();
+    // The frame absorbs the first DH row (a rigid motion of the whole arm):
+    // it is identified relative to the file's first row, so the start file
+    // gets the true first row for the frame to be the true one.
+    let start = text(START_ROBOT).replace(
+        "  - { a_mm: 0.0,    alpha_deg: 0.0,    d_mm: 486.62, theta_offset_deg: 0.021 }",
+        "  - { a_mm: 0.0,    alpha_deg: 0.0,    d_mm: 486.31, theta_offset_deg: 0.0 }",
+    );
+    assert_ne!(start, text(START_ROBOT));
+    for seed in [41, 42] {
+        let sim = Simulation {
+            noise: tracker(seed),
+            frame: OutputFrame::Instrument(f),
+            ..Simulation::default()
+        };
+        let obs = simulate_with(&machine(TRUTH_ROBOT), &poses, "p", &sim).expect("sim");
+        let cal = calibrate_kinematics(
+            &start,
+            START_ROBOT,
+            &obs,
+            "i.csv",
+            &Options {
+                holdout: 0.3,
+                seed,
+                ..Options::default()
+            },
+        )
+        .expect("calibrated");
+        let fr = cal.frame.expect("frame identified");
+        let u = fr.u_xyz_mm.expect("uncertainty");
+        for ((got, want), u) in fr.xyz_mm.iter().zip(f.translation.vector.iter()).zip(u) {
+            assert!((got - want).abs() <= K_TEST * u, "{cal}");
+        }
+        let [r, p, y] = fr.rpy_deg.map(f64::to_radians);
+        let got = UnitQuaternion::from_euler_angles(r, p, y);
+        let ur = fr.u_rot_deg.expect("uncertainty");
+        let angle = got.angle_to(&f.rotation).to_degrees();
+        assert!(
+            angle <= K_TEST * (ur[0] + ur[1] + ur[2]),
+            "{angle} deg\n{cal}"
+        );
+        // The DH parameters: identified (an uncertainty) and the model
+        // predicts the held-out rows at the noise level (below).
+        for name in ["j2.a_mm", "j3.a_mm", "j4.d_mm", "j5.alpha_deg"] {
+            let e = cal.params.iter().find(|e| e.name == name).expect("param");
+            assert!(!e.fixed && e.u.is_some(), "{name}\n{cal}");
+        }
+        let v = cal.validation.expect("held out");
+        // σ ≈ 15 µm + 6 µm/m × ≈ 3.5 m ≈ 36 µm per coordinate.
+        assert!(v.after_mean_mm < 1.5 * MAXWELL_MEAN * 0.036, "{cal}");
+        assert!(
+            cal.notes
+                .iter()
+                .any(|n| n.contains("absorbed by the instrument frame")
+                    && n.contains("j1.theta_offset_deg")),
+            "{cal}"
+        );
+        let written = Machine::from_yaml_str(&cal.yaml, "out.yaml").expect("valid");
+        let mf = written
+            .measurement_frame()
+            .expect("measurement_frame written");
+        assert!((mf.translation.vector - f.translation.vector).norm() < 1.0);
+    }
+}
+
+/// Too few poses for the model and the frame: refused, nothing fitted.
+#[test]
+fn instrument_frame_with_too_few_poses_is_refused() {
+    let mut poses = load_poses(&repo(KIN_POSES)).expect("poses");
+    poses.rows.truncate(12);
+    let sim = Simulation {
+        noise: tracker(1),
+        frame: OutputFrame::Instrument(instrument()),
+        ..Simulation::default()
+    };
+    let obs = simulate_with(&machine(TRUTH_ROBOT), &poses, "p", &sim).expect("sim");
+    let err = calibrate_kinematics(
+        &text(START_ROBOT),
+        START_ROBOT,
+        &obs,
+        "few.csv",
+        &Options::default(),
+    )
+    .expect_err("refused");
+    assert_eq!(err.exit_code(), 2);
+    assert!(err.to_string().contains("distinct poses"), "{err}");
+}
+
+/// Measured orientations identify what positions alone cannot: with the
+/// TCP on the joint-6 axis, the joint-6 offset turns the tool frame but
+/// does not move the point.
+#[test]
+fn orientation_rows_identify_the_joint_six_offset() {
+    let poses = load_poses(&repo(KIN_POSES)).expect("poses");
+    let sim = Simulation {
+        noise: tracker(7),
+        noise_mrad: 0.2,
+        orientation: true,
+        ..Simulation::default()
+    };
+    let obs = simulate_with(&machine(TRUTH_ROBOT), &poses, "p", &sim).expect("sim");
+    assert!(obs.rows.iter().all(|r| r.orientation.is_some()));
+    let with = calibrate_kinematics(
+        &text(START_ROBOT),
+        START_ROBOT,
+        &obs,
+        "o.csv",
+        &Options::default(),
+    )
+    .expect("calibrated");
+    assert!(!with.fixed().contains(&"j6.theta_offset_deg"), "{with}");
+    let e = with
+        .params
+        .iter()
+        .find(|e| e.name == "j6.theta_offset_deg")
+        .expect("param");
+    assert!(e.u.is_some(), "{with}");
+    let without = calibrate_kinematics(
+        &text(START_ROBOT),
+        START_ROBOT,
+        &obs,
+        "o.csv",
+        &Options {
+            orientation_mm_per_rad: 0.0,
+            ..Options::default()
+        },
+    )
+    .expect("calibrated");
+    assert!(
+        without.fixed().contains(&"j6.theta_offset_deg"),
+        "{without}"
+    );
+    // The written file reads back with the orientations.
+    let back = parse_observations(&csv(&obs), "o.csv").expect("round trip");
+    for (a, b) in back.rows.iter().zip(&obs.rows) {
+        let (qa, qb) = (a.orientation.expect("q"), b.orientation.expect("q"));
+        assert!(qa.angle_to(&qb) < 1e-12, "{qa} {qb}");
+    }
+}
+
+/// A robot on a pedestal, turned by 90°: `simulate --frame world` writes
+/// `base · p` of the base-frame positions (and says so in its first line),
+/// and calibrating from the world-frame file gives the parameters of the
+/// base-frame file.
+#[test]
+fn moved_and_turned_base_world_frame_through_simulate_and_calibrate() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let start = text(START_ROBOT).replace(
+        "base: { x_mm: 0.0, y_mm: 0.0, z_mm: 0.0, quaternion: [1.0, 0.0, 0.0, 0.0] }",
+        "base: { x_mm: 900.0, y_mm: -250.0, z_mm: 750.0, rpy_deg: [0.0, 0.0, 90.0] }",
+    );
+    let truth = text(TRUTH_ROBOT).replace(
+        "base: { x_mm: 0.0, y_mm: 0.0, z_mm: 0.0, quaternion: [1.0, 0.0, 0.0, 0.0] }",
+        "base: { x_mm: 900.0, y_mm: -250.0, z_mm: 750.0, rpy_deg: [0.0, 0.0, 90.0] }",
+    );
+    assert_ne!(start, text(START_ROBOT));
+    let start_p = write(dir.path(), "start.yaml", &start);
+    let truth_p = write(dir.path(), "truth.yaml", &truth);
+    let sim = |frame: &str, out: &Path| {
+        postproc()
+            .args(["simulate", "--machine"])
+            .arg(&truth_p)
+            .arg("--observations")
+            .arg(repo(KIN_POSES))
+            .args(["--decimals", "9", "--frame", frame, "-o"])
+            .arg(out)
+            .assert()
+            .success();
+    };
+    let base_csv = dir.path().join("base.csv");
+    let world_csv = dir.path().join("world.csv");
+    sim("base", &base_csv);
+    sim("world", &world_csv);
+    let world_text = std::fs::read_to_string(&world_csv).expect("world");
+    assert!(world_text.starts_with("# frame: world\n"), "{world_text}");
+    let b = load_observations(&base_csv).expect("base");
+    let w = load_observations(&world_csv).expect("world");
+    let m = Machine::from_yaml_str(&truth, "t").expect("truth");
+    let Machine::Robot(r) = &m else {
+        panic!("robot")
+    };
+    for (rb, rw) in b.rows.iter().zip(&w.rows) {
+        let want = (r.base() * Point3::from(rb.measured_mm)).coords;
+        assert!(
+            (want - rw.measured_mm).norm() < 1e-6,
+            "{want} {}",
+            rw.measured_mm
+        );
+    }
+    let opts = Options::default();
+    let cb = calibrate_kinematics(&start, "s", &b, "b.csv", &opts).expect("base");
+    let cw = calibrate_kinematics(&start, "s", &w, "w.csv", &opts).expect("world");
+    for (pb, pw) in cb.params.iter().zip(&cw.params) {
+        assert!((pb.value - pw.value).abs() < 1e-5, "{cb}\n{cw}");
+    }
+    let out = dir.path().join("cal.yaml");
+    postproc()
+        .args(["calibrate", "kinematics", "--machine"])
+        .arg(&start_p)
+        .arg("--observations")
+        .arg(&world_csv)
+        .arg("-o")
+        .arg(&out)
+        .assert()
+        .success();
+}
+
+/// A ceiling-mounted robot (base turned upside down): gravity acts the
+/// other way in the base frame, so the simulated sag flips sign.
+#[test]
+fn ceiling_mounted_robot_sags_the_other_way() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let floor = text(START_ROBOT);
+    let ceiling = floor.replace(
+        "base: { x_mm: 0.0, y_mm: 0.0, z_mm: 0.0, quaternion: [1.0, 0.0, 0.0, 0.0] }",
+        "base: { x_mm: 0.0, y_mm: 0.0, z_mm: 3000.0, rpy_deg: [180.0, 0.0, 0.0] }",
+    );
+    let poses = write(
+        dir.path(),
+        "p.csv",
+        "q1_deg,q2_deg,q3_deg,q4_deg,q5_deg,q6_deg,dx_mm,dy_mm,dz_mm\n0,30,-20,0,40,0,0,0,0\n45,-10,10,30,20,0,0,0,0\n",
+    );
+    let mut dev = Vec::new();
+    for (name, body) in [("floor.yaml", &floor), ("ceiling.yaml", &ceiling)] {
+        let m = write(dir.path(), name, body);
+        let out = dir.path().join(format!("{name}.csv"));
+        postproc()
+            .args(["simulate", "--effects", "static", "--machine"])
+            .arg(&m)
+            .arg("--observations")
+            .arg(&poses)
+            .arg("-o")
+            .arg(&out)
+            .assert()
+            .success();
+        dev.push(load_observations(&out).expect("sim"));
+    }
+    for (f, c) in dev[0].rows.iter().zip(&dev[1].rows) {
+        let sag = f.measured_mm.norm();
+        assert!(sag > 0.01, "a visible sag: {sag}");
+        assert!((f.measured_mm + c.measured_mm).norm() < 0.01 * sag + 1e-6);
+    }
+}
+
+/// `simulate --decimals 3` writes every number with three decimals;
+/// `--effects none` simulates the nominal machine (zero deviations).
+#[test]
+fn simulate_writes_one_fixed_format_and_chosen_effects() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let out = dir.path().join("m.csv");
+    postproc()
+        .args([
+            "simulate",
+            "--decimals",
+            "3",
+            "--noise-um",
+            "5",
+            "--machine",
+        ])
+        .arg(repo(TRUTH_ROBOT))
+        .arg("--observations")
+        .arg(repo(KIN_POSES))
+        .arg("-o")
+        .arg(&out)
+        .assert()
+        .success();
+    let body = std::fs::read_to_string(&out).expect("out");
+    for line in body.lines().skip(1) {
+        for cell in line.split(',').skip(1) {
+            let (int, frac) = cell.split_once('.').unwrap_or((cell, ""));
+            assert!(
+                frac.len() == 3
+                    && int
+                        .trim_start_matches('-')
+                        .bytes()
+                        .all(|b| b.is_ascii_digit()),
+                "{cell} in {line}"
+            );
+        }
+    }
+    let poses = write(
+        dir.path(),
+        "p.csv",
+        "q1_deg,q2_deg,q3_deg,q4_deg,q5_deg,q6_deg,dx_mm,dy_mm,dz_mm\n0,30,-20,0,40,0,0,0,0\n",
+    );
+    let none = dir.path().join("none.csv");
+    postproc()
+        .args([
+            "simulate",
+            "--effects",
+            "none",
+            "--decimals",
+            "4",
+            "--machine",
+        ])
+        .arg(repo(TRUTH_ROBOT))
+        .arg("--observations")
+        .arg(&poses)
+        .arg("-o")
+        .arg(&none)
+        .assert()
+        .success();
+    let back = load_observations(&none).expect("none");
+    assert_eq!(back.rows[0].measured_mm, nalgebra::Vector3::zeros());
+    let body = std::fs::read_to_string(&none).expect("none");
+    assert!(body.contains("0.0000,0.0000,0.0000"), "{body}");
+    postproc()
+        .args(["simulate", "--effects", "dynamic", "--machine"])
+        .arg(repo(TRUTH_ROBOT))
+        .arg("--observations")
+        .arg(&poses)
+        .arg("-o")
+        .arg(dir.path().join("x.csv"))
+        .assert()
+        .code(2);
+}
+
+/// The tracker sample is what its recorded command writes, and its
+/// calibration through the binary identifies the tracker's pose (within
+/// 3u of the command's) and writes it to `measurement_frame`.
+#[test]
+fn tracker_sample_is_made_by_its_command_and_calibrates() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let meas = dir.path().join("m.csv");
+    postproc()
+        .args(["simulate", "--machine"])
+        .arg(repo(TRUTH_ROBOT))
+        .arg("--observations")
+        .arg(repo(KIN_POSES))
+        .args([
+            "--frame",
+            "instrument",
+            "--instrument",
+            "2600,-1400,-350,0.8,-1.1,137.5",
+            "--noise-um",
+            "15",
+            "--noise-um-per-m",
+            "6",
+            "--seed",
+            "6",
+            "-o",
+        ])
+        .arg(&meas)
+        .assert()
+        .success();
+    assert_eq!(
+        std::fs::read_to_string(&meas).expect("simulated"),
+        text("samples/observations/irb1600-tracker-measured.csv"),
+        "the sample is made by the recorded command"
+    );
+    let out = dir.path().join("cal.yaml");
+    let a = postproc()
+        .args(["calibrate", "kinematics", "--machine"])
+        .arg(repo(START_ROBOT))
+        .arg("--observations")
+        .arg(repo("samples/observations/irb1600-tracker-measured.csv"))
+        .arg("-o")
+        .arg(&out)
+        .assert()
+        .success();
+    let stdout = String::from_utf8_lossy(&a.get_output().stdout).to_string();
+    assert!(
+        stdout.contains("measurement frame (instrument in the reference frame)"),
+        "{stdout}"
+    );
+    assert!(
+        stdout.contains("absorbed by the instrument frame"),
+        "{stdout}"
+    );
+    let written =
+        Machine::from_yaml_str(&std::fs::read_to_string(&out).expect("out"), "out").expect("valid");
+    let f = written.measurement_frame().expect("measurement_frame");
+    // Within 3 mm: the start file's first DH row (0.021° joint-1 offset,
+    // 0.31 mm height) differs from the truth's, and the frame absorbs it.
+    let want = nalgebra::Vector3::new(2600.0, -1400.0, -350.0);
+    assert!((f.translation.vector - want).norm() < 3.0, "{stdout}");
+}
