@@ -13,6 +13,7 @@ mod gcode_cli;
 mod gcode_grammar;
 mod golden;
 mod gperf;
+mod hostile;
 mod machine_tool;
 mod observations;
 mod paper_b;

@@ -35,6 +35,7 @@ use nalgebra::Vector3;
 
 use crate::calibrate::stats::SplitMix64;
 use crate::error::{Error, Located, Result};
+use crate::limits;
 use crate::machine::{AxisVec, DirVec};
 
 /// Every known column name, in the canonical (writing) order.
@@ -772,7 +773,7 @@ fn read_rows<R: BufRead>(mut reader: R, file: &str, poses_only: bool) -> Result<
     let mut rows = Vec::new();
     loop {
         buf.clear();
-        let n = reader
+        let n = std::io::Read::take(&mut reader, limits::LINE_MAX_BYTES as u64 + 2)
             .read_until(b'\n', &mut buf)
             .map_err(|e| Error::io(file, e))?;
         if n == 0 {
@@ -784,6 +785,9 @@ fn read_rows<R: BufRead>(mut reader: R, file: &str, poses_only: bool) -> Result<
         }
         if buf.last() == Some(&b'\r') {
             buf.pop();
+        }
+        if buf.len() > limits::LINE_MAX_BYTES {
+            return Err(limits::line_too_long(file, line_no).into());
         }
         let bytes: &[u8] = if line_no == 1 {
             buf.strip_prefix(b"\xEF\xBB\xBF".as_slice()).unwrap_or(&buf)
@@ -798,6 +802,16 @@ fn read_rows<R: BufRead>(mut reader: R, file: &str, poses_only: bool) -> Result<
         match &header {
             None => header = Some(parse_header(&ctx, line_no, &cells, poses_only)?),
             Some(h) => {
+                if rows.len() >= limits::OBSERVATION_MAX_ROWS {
+                    return Err(ctx.err(
+                        line_no,
+                        1,
+                        format!(
+                            "more than {} data rows (the limit of an observation file)",
+                            limits::OBSERVATION_MAX_ROWS
+                        ),
+                    ));
+                }
                 let row = parse_row(&ctx, h, line_no, bytes.len(), rows.len() + 1, &cells)?;
                 rows.push(row);
             }

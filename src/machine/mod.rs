@@ -56,8 +56,10 @@ impl Machine {
     /// Loads and validates a machine file. Errors name the file, line and key
     /// path.
     pub fn load(path: &Path) -> Result<Machine> {
-        let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
-        Self::from_yaml_str(&text, &path.display().to_string())
+        let file = path.display().to_string();
+        let bytes = crate::limits::read_file_bounded(path, crate::limits::YAML_MAX_BYTES)?;
+        let text = crate::error::utf8_text(&bytes, &file)?;
+        Self::from_yaml_str(text, &file)
     }
 
     /// Parses and validates machine YAML text; `file` names it in errors.

@@ -26,9 +26,8 @@ pub const ARC_RADIUS_TOL_MM: f64 = 0.01;
 /// Arc parameter just inside the ends, where tangent directions are read.
 pub const END_INSIDE: f64 = 1.0 - 1e-6;
 
-/// Largest accepted spindle speed, 1/min (the fastest machining spindles
-/// run at about 100 000).
-const MAX_SPINDLE_RPM: f64 = 200_000.0;
+/// Largest accepted spindle speed, 1/min.
+const MAX_SPINDLE_RPM: f64 = crate::process::limits::SPINDLE_MAX_RPM;
 
 /// Longest block text quoted in a message, characters.
 const LINE_QUOTE_MAX: usize = 60;
@@ -531,6 +530,15 @@ impl Interpreter {
                             format!("negative feed `{}`", quote(w)),
                         ));
                     }
+                    if let Some((max, unit)) =
+                        crate::process::limits::feed_limit(w.value * self.scale(), self.per_rev)
+                    {
+                        return Err(self.err(
+                            line,
+                            Some(w),
+                            format!("feed above {max} {unit}: `{}`", quote(w)),
+                        ));
+                    }
                     self.feed = w.value;
                 }
                 b'S' => {
@@ -889,9 +897,13 @@ impl Interpreter {
                 let x: f64 = v
                     .parse()
                     .ok()
-                    .filter(|x: &f64| x.is_finite() && *x >= 0.0 && *x <= 1e4)
+                    .filter(|x: &f64| x.is_finite() && *x >= 0.0)
                     .ok_or_else(|| at(format!("`{t}`: the value must be a length of 0 or more")))?;
                 let scale = self.scale();
+                let max = crate::process::limits::CUT_MAX_MM;
+                if x * scale > max {
+                    return Err(at(format!("`{t}`: more than {max} mm of cut")));
+                }
                 if let Some(m) = self.milling_mm.get_mut(slot) {
                     *m = Some(x * scale);
                 }
