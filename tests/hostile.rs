@@ -234,6 +234,10 @@ fn a_line_beyond_the_limit_is_refused_at_its_line() {
 #[cfg(unix)]
 #[test]
 fn dev_zero_is_refused_in_bounded_time_and_memory() {
+    use std::os::unix::fs::FileTypeExt;
+    if !std::fs::metadata("/dev/zero").is_ok_and(|m| m.file_type().is_char_device()) {
+        return; // not the endless device here
+    }
     for machine in ["afm-r1000", "abb-irb1600"] {
         let start = Instant::now();
         let out = crate::common::postproc()
@@ -395,9 +399,20 @@ const INTERESTING: &[&[u8]] = &[
 /// One mutant of `seed`: one to four byte-level edits.
 fn mutate(rng: &mut Rng, seed: &[u8]) -> Vec<u8> {
     let mut v = seed.to_vec();
-    for _ in 0..1 + rng.below(4) {
+    // Half the mutants have one edit (most of them still parse), the others
+    // two to four.
+    let edits = if rng.below(2) == 0 {
+        1
+    } else {
+        2 + rng.below(3)
+    };
+    for _ in 0..edits {
         let at = rng.below(v.len() + 1);
-        match rng.below(7) {
+        match rng.below(8) {
+            7 if at < v.len() && v[at].is_ascii_digit() => {
+                // Another digit: the same syntax, another value.
+                v[at] = b'0' + rng.below(10) as u8;
+            }
             0 if at < v.len() => v[at] = rng.next() as u8,
             1 if at < v.len() => {
                 let end = (at + 1 + rng.below(8)).min(v.len());
@@ -818,4 +833,31 @@ fn a_compensation_that_flips_the_wrist_near_the_singularity_is_refused() {
     let programmed = r.tcp_pose(Model::Nominal, &q);
     r.compensate(&programmed, &IkSelect::Conf(r.confdata(&q)), Effects::ALL)
         .expect("regular target");
+}
+
+#[test]
+fn an_observation_file_beyond_the_row_limit_is_refused_with_the_limit() {
+    use postproc::limits::OBSERVATION_MAX_ROWS;
+    let mut csv = String::from("x_mm,y_mm,z_mm,X_mm,Y_mm,Z_mm\n");
+    for i in 0..=OBSERVATION_MAX_ROWS {
+        csv.push_str(&format!("{i},1,2,{i},1,2\n"));
+    }
+    let err = postproc::calibrate::observations::parse_observations(&csv, "o.csv")
+        .unwrap_err()
+        .to_string();
+    let line = OBSERVATION_MAX_ROWS + 2;
+    assert!(
+        err.starts_with(&format!(
+            "o.csv:{line}:1: more than {OBSERVATION_MAX_ROWS} data rows"
+        )),
+        "{err}"
+    );
+    // At the limit the file is read.
+    let at_limit: String = csv
+        .lines()
+        .take(OBSERVATION_MAX_ROWS + 1)
+        .map(|l| format!("{l}\n"))
+        .collect();
+    let obs = postproc::calibrate::observations::parse_observations(&at_limit, "o.csv").unwrap();
+    assert_eq!(obs.rows.len(), OBSERVATION_MAX_ROWS);
 }
