@@ -252,6 +252,13 @@ fn dev_zero_is_refused_in_bounded_time_and_memory() {
         );
         assert!(start.elapsed() < Duration::from_secs(20));
     }
+    let err = postproc::process::ForceTable::load(std::path::Path::new("/dev/zero"))
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.starts_with("/dev/zero:1:") && err.contains("line longer than"),
+        "{err}"
+    );
 }
 
 #[test]

@@ -79,7 +79,7 @@ pub struct CalibrateArgs {
 
 fn read_machine(name: &str) -> Result<(String, String)> {
     let path = Machine::resolve(name)?;
-    let text = std::fs::read_to_string(&path).map_err(|e| Error::io(&path, e))?;
+    let text = Machine::read_text(&path)?;
     Ok((text, path.display().to_string()))
 }
 

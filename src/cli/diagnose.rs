@@ -51,7 +51,7 @@ pub struct DiagnoseArgs {
 
 fn load(name: &str) -> Result<(Machine, String)> {
     let path = Machine::resolve(name)?;
-    let text = std::fs::read_to_string(&path).map_err(|e| Error::io(&path, e))?;
+    let text = Machine::read_text(&path)?;
     let m = Machine::from_yaml_str(&text, &path.display().to_string())?;
     Ok((m, text))
 }
