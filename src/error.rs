@@ -41,8 +41,29 @@ impl fmt::Display for Located {
         write!(
             f,
             "{}:{}:{}: {}",
-            self.file, self.line, self.column, self.message
+            Escaped(&self.file),
+            self.line,
+            self.column,
+            Escaped(&self.message)
         )
+    }
+}
+
+/// Text for a message with its control characters (C0, DEL, C1; tab and
+/// line breaks included) written as `\u{..}` escapes, so that no input can
+/// move the cursor, clear the terminal or forge lines of output.
+pub struct Escaped<'a>(pub &'a str);
+
+impl fmt::Display for Escaped<'_> {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let mut rest = self.0;
+        while let Some(pos) = rest.find(char::is_control) {
+            f.write_str(&rest[..pos])?;
+            let c = rest[pos..].chars().next().unwrap_or(' ');
+            write!(f, "\\u{{{:x}}}", c as u32)?;
+            rest = &rest[pos + c.len_utf8()..];
+        }
+        f.write_str(rest)
     }
 }
 
@@ -83,11 +104,11 @@ pub enum Error {
     #[error(transparent)]
     Input(#[from] Located),
     /// Bad command-line usage or an inconsistent request.
-    #[error("{0}")]
+    #[error("{}", Escaped(.0))]
     Usage(String),
     /// A file could not be read or written. The message includes the
     /// cause, so it is not repeated as an error source.
-    #[error("{}: {}", path.display(), cause)]
+    #[error("{}: {}", Escaped(&path.display().to_string()), cause)]
     Io {
         /// The file concerned.
         path: PathBuf,
@@ -165,3 +186,20 @@ pub fn clip_to(text: &str, max: usize) -> String {
 
 /// Result type of the library.
 pub type Result<T, E = Error> = std::result::Result<T, E>;
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn control_characters_are_escaped_in_messages() {
+        let e = Located::new("a\x1b[2Jb.mod", 3, 4, "unknown `\x1b]0;x\x07\r\n\u{85}é\t`");
+        let shown = e.to_string();
+        assert_eq!(
+            shown,
+            "a\\u{1b}[2Jb.mod:3:4: unknown `\\u{1b}]0;x\\u{7}\\u{d}\\u{a}\\u{85}é\\u{9}`"
+        );
+        let u = Error::Usage("bad \x1b[31m".into()).to_string();
+        assert_eq!(u, "bad \\u{1b}[31m");
+    }
+}

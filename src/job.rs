@@ -609,6 +609,10 @@ impl Chunk {
             let mut taken = avail.len();
             for nl in memchr::memchr_iter(b'\n', avail) {
                 let end = base + nl + 1;
+                if end - start > crate::limits::LINE_MAX_BYTES + 1 {
+                    let line = first_line + self.ranges.len() + 1;
+                    return Err(crate::limits::line_too_long(file, line).into());
+                }
                 self.ranges.push((start, end));
                 start = end;
                 if self.ranges.len() == CHUNK_LINES {
@@ -618,6 +622,10 @@ impl Chunk {
             }
             self.buf.extend_from_slice(&avail[..taken]);
             input.consume(taken);
+            if self.buf.len() - start > crate::limits::LINE_MAX_BYTES + 1 {
+                let line = first_line + self.ranges.len() + 1;
+                return Err(crate::limits::line_too_long(file, line).into());
+            }
         }
         self.eof = false;
         Ok(())

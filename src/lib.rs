@@ -14,6 +14,7 @@ pub mod diagnose;
 pub mod emit;
 pub mod error;
 pub mod job;
+pub mod limits;
 pub mod machine;
 pub mod predict;
 pub mod process;

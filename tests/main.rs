@@ -16,6 +16,7 @@ mod gcode_cli;
 mod gcode_grammar;
 mod golden;
 mod gperf;
+mod hostile;
 mod machine_tool;
 mod observations;
 mod output_words;

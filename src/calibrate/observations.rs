@@ -35,6 +35,7 @@ use nalgebra::{Quaternion, UnitQuaternion, Vector3};
 
 use crate::calibrate::stats::SplitMix64;
 use crate::error::{Error, Located, Result};
+use crate::limits;
 use crate::machine::{AxisVec, DirVec};
 
 /// Every known column name, in the canonical (writing) order.
@@ -895,7 +896,7 @@ fn read_rows<R: BufRead>(mut reader: R, file: &str, poses_only: bool) -> Result<
     let mut frame: Option<(MeasurementFrame, usize)> = None;
     loop {
         buf.clear();
-        let n = reader
+        let n = std::io::Read::take(&mut reader, limits::LINE_MAX_BYTES as u64 + 2)
             .read_until(b'\n', &mut buf)
             .map_err(|e| Error::io(file, e))?;
         if n == 0 {
@@ -907,6 +908,9 @@ fn read_rows<R: BufRead>(mut reader: R, file: &str, poses_only: bool) -> Result<
         }
         if buf.last() == Some(&b'\r') {
             buf.pop();
+        }
+        if buf.len() > limits::LINE_MAX_BYTES {
+            return Err(limits::line_too_long(file, line_no).into());
         }
         let bytes: &[u8] = if line_no == 1 {
             buf.strip_prefix(b"\xEF\xBB\xBF".as_slice()).unwrap_or(&buf)
@@ -938,6 +942,16 @@ fn read_rows<R: BufRead>(mut reader: R, file: &str, poses_only: bool) -> Result<
         match &header {
             None => header = Some(parse_header(&ctx, line_no, &cells, poses_only)?),
             Some(h) => {
+                if rows.len() >= limits::OBSERVATION_MAX_ROWS {
+                    return Err(ctx.err(
+                        line_no,
+                        1,
+                        format!(
+                            "more than {} data rows (the limit of an observation file)",
+                            limits::OBSERVATION_MAX_ROWS
+                        ),
+                    ));
+                }
                 let row = parse_row(&ctx, h, line_no, bytes.len(), rows.len() + 1, &cells)?;
                 rows.push(row);
             }

@@ -208,9 +208,14 @@ pub struct EffectArgs {
     pub thermal_start: String,
     /// Worker threads (default: all cores); a G-code program's own thread
     /// interprets and writes alongside them. Output is the same for any
-    /// count.
-    #[arg(long)]
+    /// count. At most 4 per core.
+    #[arg(long, value_parser = crate::limits::parse_threads)]
     pub threads: Option<usize>,
+    /// Robots: accept compensated targets that change the configuration or
+    /// move a joint by more than 5° from the programmed solution (near a
+    /// singularity); refused by default.
+    #[arg(long)]
+    pub allow_reconfiguration: bool,
 }
 
 /// `postproc compensate`.

@@ -168,7 +168,7 @@ impl Source {
                 (None, false) => STREAM_MIN_BYTES,
                 (None, true) => STREAM_MIN_BYTES_WARM,
             };
-            Some(read_stdin(spill_from).map_err(|e| Error::io("-", e))?)
+            Some(read_stdin(spill_from).map_err(|e| crate::limits::io_error("-", e))?)
         } else {
             None
         };
@@ -253,7 +253,7 @@ impl Source {
                     .map_err(|e| Error::io("-", e))?;
                 b
             }
-            None => std::fs::read(&self.path).map_err(|e| Error::io(&self.path, e))?,
+            None => crate::limits::read_file_bounded(&self.path, u64::MAX)?,
         };
         let text = match String::from_utf8(bytes) {
             Ok(t) => t,
@@ -272,7 +272,7 @@ impl Source {
 /// held whole instead: what was copied is read back.
 fn read_stdin(spill_from: u64) -> std::io::Result<Stdin> {
     use std::io::{Read, Seek};
-    let mut input = std::io::stdin().lock();
+    let mut input = crate::limits::LineLimited::new(std::io::stdin().lock(), "-");
     let mut head = Vec::new();
     (&mut input).take(spill_from).read_to_end(&mut head)?;
     if (head.len() as u64) < spill_from {
@@ -473,7 +473,7 @@ pub(super) fn rapid_options(
 /// them). Milling flags without a milling model are refused.
 pub(super) fn robot_with_process(robot: Robot, e: &EffectArgs) -> Result<Robot> {
     use crate::machine::robot::{ForceFrame, ForceModel, ProcessForce};
-    let mut robot = robot;
+    let mut robot = robot.allowing_reconfiguration(e.allow_reconfiguration);
     if let Some(spec) = &e.force {
         let pf = match super::gcode::parse_force(spec)? {
             Some(crate::process::ForceModel::Constant { force_n, frame }) => {

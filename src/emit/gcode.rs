@@ -375,6 +375,7 @@ impl Emitter {
 
     fn decimals(&self, w: Option<&Word>, scale: f64, rotary: bool) -> usize {
         let own = w.and_then(|w| w.decimals).unwrap_or(0) as usize;
+        let own = own.min(crate::limits::EMIT_MAX_DECIMALS);
         let base = if rotary {
             self.opts.decimals_deg.unwrap_or(DEFAULT_DECIMALS_MM)
         } else {

@@ -71,8 +71,18 @@ impl Machine {
     /// Loads and validates a machine file. Errors name the file, line and key
     /// path.
     pub fn load(path: &Path) -> Result<Machine> {
-        let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+        let text = Self::read_text(path)?;
         Self::from_yaml_str(&text, &path.display().to_string())
+    }
+
+    /// The text of a machine file, at most [`crate::limits::YAML_MAX_BYTES`]
+    /// long with lines of at most [`crate::limits::LINE_MAX_BYTES`]; invalid
+    /// UTF-8 is a located error.
+    pub fn read_text(path: &Path) -> Result<String> {
+        let file = path.display().to_string();
+        let bytes = crate::limits::read_file_bounded(path, crate::limits::YAML_MAX_BYTES)?;
+        crate::error::utf8_text(&bytes, &file)?;
+        Ok(String::from_utf8(bytes).unwrap_or_default())
     }
 
     /// Parses and validates machine YAML text; `file` names it in errors.
@@ -138,7 +148,7 @@ impl MachineFile {
     pub fn open(name: &str) -> Result<MachineFile> {
         let direct = Path::new(name);
         if direct.is_file() {
-            let text = std::fs::read_to_string(direct).map_err(|e| Error::io(direct, e))?;
+            let text = Machine::read_text(direct)?;
             return Ok(MachineFile {
                 shown: direct.display().to_string(),
                 file_name: direct

@@ -25,6 +25,7 @@
 //! The *tool frame* has z along the tool axis, x the workpiece X axis made
 //! normal to it (workpiece Y when X is along the tool) and y = z × x.
 
+pub mod limits;
 mod table;
 
 pub use table::ForceTable;

@@ -123,7 +123,7 @@ impl ForceTable {
 
     /// Reads a table from a file.
     pub fn load(path: &std::path::Path) -> Result<Self> {
-        let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+        let bytes = crate::limits::read_file_bounded(path, u64::MAX)?;
         let name = path.display().to_string();
         Self::from_csv_str(crate::error::utf8_text(&bytes, &name)?, &name)
     }

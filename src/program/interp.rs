@@ -27,9 +27,8 @@ pub const ARC_RADIUS_TOL_MM: f64 = 0.01;
 /// Arc parameter just inside the ends, where tangent directions are read.
 pub const END_INSIDE: f64 = 1.0 - 1e-6;
 
-/// Largest accepted spindle speed, 1/min (the fastest machining spindles
-/// run at about 100 000).
-const MAX_SPINDLE_RPM: f64 = 200_000.0;
+/// Largest accepted spindle speed, 1/min.
+const MAX_SPINDLE_RPM: f64 = crate::process::limits::SPINDLE_MAX_RPM;
 
 /// Longest block text quoted in a message, characters.
 const LINE_QUOTE_MAX: usize = 60;
@@ -554,6 +553,7 @@ impl Interpreter {
         let words = self.gather(block, text)?;
         self.check(block, &words, text)?;
         self.modal(block, &words)?;
+        self.check_feed(block, &words, text)?;
         self.check_units(block, &words)?;
         if let Some(w) = words.tool_length {
             self.tool_length(block, &words)?;
@@ -853,6 +853,20 @@ impl Interpreter {
             }
         }
         Ok(())
+    }
+
+    /// Refuses a feed beyond the plausibility limit, in the unit and feed
+    /// mode the block leaves in force.
+    fn check_feed(&self, block: &Block, g: &Words, text: &[u8]) -> Result<(), Located> {
+        let Some(w) = g.f else { return Ok(()) };
+        match crate::process::limits::feed_limit(w.value * self.scale(), self.per_rev) {
+            Some((max, unit)) => Err(self.err(
+                block.line_no,
+                Some(w),
+                format!("feed above {max} {unit}: `{}`", quote_word(text, w)),
+            )),
+            None => Ok(()),
+        }
     }
 
     fn modal_g(&mut self, block: &Block, g: &Words, w: &Word, code: i64) -> Result<(), Located> {
@@ -1339,9 +1353,13 @@ impl Interpreter {
                 let x: f64 = v
                     .parse()
                     .ok()
-                    .filter(|x: &f64| x.is_finite() && *x >= 0.0 && *x <= 1e4)
+                    .filter(|x: &f64| x.is_finite() && *x >= 0.0)
                     .ok_or_else(|| at(format!("`{t}`: the value must be a length of 0 or more")))?;
                 let scale = self.scale();
+                let max = crate::process::limits::CUT_MAX_MM;
+                if x * scale > max {
+                    return Err(at(format!("`{t}`: more than {max} mm of cut")));
+                }
                 if let Some(m) = self.milling_mm.get_mut(slot) {
                     *m = Some(x * scale);
                 }

@@ -47,6 +47,12 @@ fn blend(nominal: &DhParams, actual: &DhParams, gain: f64) -> DhParams {
     out
 }
 
+/// Largest change of any joint between the programmed and the compensated
+/// target, degrees. A correction of a millimetre moves the joints by
+/// hundredths of a degree; a larger change is the arm flipping its wrist
+/// near a singularity.
+pub const JOINT_JUMP_MAX_DEG: f64 = 5.0;
+
 /// Position tolerance of the compensation iteration, mm (0.1 nm).
 pub const COMP_POS_TOL_MM: f64 = 1e-7;
 /// Orientation tolerance of the compensation iteration, rad.
@@ -550,6 +556,7 @@ impl Robot {
             last = (dp.norm(), dr.norm());
             if last.0 < COMP_POS_TOL_MM && last.1 < COMP_ROT_TOL_RAD {
                 self.check_limits(&q)?;
+                self.check_reconfiguration(&q0, &q)?;
                 return Ok(Compensation {
                     pose: cmd,
                     q_programmed: q0,
@@ -592,6 +599,30 @@ impl Robot {
             iterations: COMP_MAX_ITER,
             pos_mm: last.0,
             rot_rad: last.1,
+        })
+    }
+}
+
+impl Robot {
+    /// Refuses a compensated solution `q` that moves a joint by more than
+    /// [`JOINT_JUMP_MAX_DEG`] from the programmed `q0` or changes the
+    /// configuration, unless the robot allows it.
+    fn check_reconfiguration(&self, q0: &[f64; 6], q: &[f64; 6]) -> Result<(), RobotError> {
+        if self.d.allow_reconfiguration {
+            return Ok(());
+        }
+        let deltas: [f64; 6] = std::array::from_fn(|j| (q[j] - q0[j]).to_degrees());
+        let jump = deltas.iter().any(|d| d.abs() > JOINT_JUMP_MAX_DEG);
+        let (from, to) = (self.confdata(q0), self.confdata(q));
+        if !jump && from.cfx == to.cfx {
+            return Ok(());
+        }
+        let shown: Vec<String> = deltas.iter().map(|d| format!("{d:.3}")).collect();
+        Err(RobotError::Reconfiguration {
+            deltas: format!("[{}]°", shown.join(", ")),
+            limit: JOINT_JUMP_MAX_DEG,
+            from,
+            to,
         })
     }
 }

@@ -17,6 +17,7 @@ pub mod dh;
 pub mod dynamics;
 pub mod ik;
 pub mod kinematics;
+pub mod plausible;
 pub mod pose;
 pub mod process;
 mod raw;
@@ -25,7 +26,7 @@ pub mod thermal;
 mod with_tool;
 
 pub(crate) use compensate::Seed;
-pub use compensate::{Compensation, Deviation, Effects, PoseDelta};
+pub use compensate::{Compensation, Deviation, Effects, JOINT_JUMP_MAX_DEG, PoseDelta};
 pub use dh::{Convention, DhJoint, DhParams};
 pub use dynamics::{Modal, Mode, Resonance};
 pub use ik::ConfData;
@@ -86,6 +87,23 @@ pub enum RobotError {
         "this robot has no closed-form inverse kinematics; give a seed joint vector instead of confdata"
     )]
     NoClosedForm,
+    /// The compensated target's joints depart from the programmed ones by
+    /// more than [`JOINT_JUMP_MAX_DEG`] on a joint, or its
+    /// configuration differs (near a singularity): the motion would not be
+    /// the programmed one.
+    #[error(
+        "the compensated target changes the arm's motion near a singularity: joint deltas {deltas} (limit {limit}°), configuration {from} → {to} (--allow-reconfiguration accepts it)"
+    )]
+    Reconfiguration {
+        /// Compensated minus programmed joints, degrees, as `[d1, …, d6]`.
+        deltas: String,
+        /// The limit, degrees.
+        limit: f64,
+        /// Configuration of the programmed joints.
+        from: ConfData,
+        /// Configuration of the compensated joints.
+        to: ConfData,
+    },
 }
 
 impl RobotError {
@@ -175,6 +193,9 @@ struct RobotData {
     thermal_growth: DhGrowth,
     modal: Option<Modal>,
     output: OutputDecimals,
+    /// Compensated targets may change configuration or move a joint by
+    /// more than [`JOINT_JUMP_MAX_DEG`] (off unless set).
+    allow_reconfiguration: bool,
 }
 
 /// Default decimals of written quaternion components: 7 keeps the written
@@ -458,6 +479,7 @@ impl Robot {
                 output.quaternion = d;
             }
         }
+        plausible::check(&raw)?;
         let thermal_growth = thermal
             .as_ref()
             .map_or([[0.0; 2]; 6], |t| t.growth_mm(&[0.0; 6]));
@@ -486,8 +508,16 @@ impl Robot {
                 thermal_growth,
                 modal,
                 output,
+                allow_reconfiguration: false,
             }),
         })
+    }
+
+    /// This robot, allowing (or not) compensated targets that change
+    /// configuration or jump a joint ([`RobotError::Reconfiguration`]).
+    pub fn allowing_reconfiguration(mut self, allow: bool) -> Robot {
+        self.d.allow_reconfiguration = allow;
+        self
     }
 
     /// Display name.

@@ -34,9 +34,9 @@ pub const DEFAULT_AXIS_TOLERANCE_DEG: f64 = 3.0;
 /// Default number of flutes (a twist drill has two).
 pub const DEFAULT_FLUTES: u32 = 2;
 /// Largest accepted depth or width of cut in a directive, mm.
-const MAX_CUT_MM: f64 = 1e4;
+const MAX_CUT_MM: f64 = crate::process::limits::CUT_MAX_MM;
 /// Largest accepted spindle speed, 1/min.
-const MAX_RPM: f64 = 1e6;
+const MAX_RPM: f64 = crate::process::limits::SPINDLE_MAX_RPM;
 
 /// Frame a constant force is given in.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

@@ -428,8 +428,12 @@ const BODY_STOP_WORDS: [&str; 13] = [
 /// file. Text that is not UTF-8 is left to the whole-module reader (which
 /// locates it).
 fn read_line_into<R: BufRead>(r: &mut R, out: &mut String) -> Result<bool, Unsupported> {
-    match r.read_line(out) {
+    let cap = crate::limits::LINE_MAX_BYTES as u64 + 2;
+    match std::io::Read::take(&mut *r, cap).read_line(out) {
         Ok(0) => Ok(false),
+        Ok(n) if n as u64 == cap && !out.ends_with('\n') => {
+            Err(Unsupported("a line longer than the line limit".into()))
+        }
         Ok(_) => Ok(true),
         Err(e) if e.kind() == std::io::ErrorKind::InvalidData => {
             Err(Unsupported("text that is not UTF-8".into()))

@@ -1,0 +1,870 @@
+//! Hostile inputs: regression tests for inputs that used to be misread or
+//! exhaust resources, and a bounded mutation run (byte mutants of programs,
+//! machine files and observation files) checking that every mutant is
+//! either processed or refused cleanly. The long run is `scripts/hostile`.
+
+use std::time::{Duration, Instant};
+
+use postproc::machine::Machine;
+
+use crate::common::repo;
+
+fn machine_text(name: &str) -> String {
+    std::fs::read_to_string(repo(&format!("machines/{name}.yaml"))).unwrap()
+}
+
+/// Loads machine text and returns the error message (the load must fail).
+fn machine_error(text: &str) -> String {
+    match Machine::from_yaml_str(text, "m.yaml") {
+        Ok(_) => panic!("accepted:\n{text}"),
+        Err(e) => e.to_string(),
+    }
+}
+
+/// The line number (1-based) of the first line of `text` that starts with
+/// `prefix` after `after` lines.
+fn line_of(text: &str, prefix: &str, after: usize) -> usize {
+    text.lines()
+        .enumerate()
+        .skip(after)
+        .find(|(_, l)| l.starts_with(prefix))
+        .map(|(i, _)| i + 1)
+        .unwrap_or_else(|| panic!("no line `{prefix}`"))
+}
+
+#[test]
+fn a_duplicate_tool_is_refused_at_its_second_line() {
+    let base = machine_text("afm-r1000");
+    let text = base.replace(
+        "  2: { length_mm: 75.0 }\n",
+        "  2: { length_mm: 75.0 }\n  1: { length_mm: 99.0 }\n",
+    );
+    let err = machine_error(&text);
+    let line = line_of(&text, "  1: { length_mm: 99.0 }", 0);
+    assert!(
+        err.starts_with(&format!("m.yaml:{line}:3: tools: duplicate key `1`")),
+        "{err}"
+    );
+}
+
+#[test]
+fn a_duplicate_work_offset_is_refused() {
+    let base = machine_text("afm-r1000");
+    let text = base.replace(
+        "  G59: [0.0, 0.0, 0.0]\n",
+        "  G59: [0.0, 0.0, 0.0]\n  G54: [1.0, 2.0, 3.0]\n",
+    );
+    let err = machine_error(&text);
+    let line = line_of(&text, "  G54: [1.0", 0);
+    assert!(
+        err.starts_with(&format!(
+            "m.yaml:{line}:3: work_offsets_mm: duplicate key `G54`"
+        )),
+        "{err}"
+    );
+}
+
+#[test]
+fn a_second_error_table_of_the_same_name_is_refused() {
+    let base = machine_text("afm-r1000");
+    let first = line_of(&base, "      EXX_um:", 0);
+    let table: Vec<&str> = base.lines().skip(first - 1).take(4).collect();
+    let dup = format!("{}\n", table.join("\n")).replace("2.3, 4.2", "920.0, 4.2");
+    let anchor = "      EYX_um:\n";
+    let text = base.replacen(anchor, &format!("{dup}{anchor}"), 1);
+    let err = machine_error(&text);
+    let line = line_of(&text, "      EXX_um:", first);
+    assert!(
+        err.starts_with(&format!(
+            "m.yaml:{line}:7: axes[0].component_errors: duplicate key `EXX_um`"
+        )),
+        "{err}"
+    );
+}
+
+#[test]
+fn duplicate_keys_are_refused_at_every_level_and_in_robots() {
+    let base = machine_text("afm-r1000");
+    let text = format!("{base}name: again\n");
+    let err = machine_error(&text);
+    assert!(err.contains("duplicate key `name`"), "{err}");
+    let text = base.replace(
+        "  1: { length_mm: 62.5 }",
+        "  1: { length_mm: 62.5, length_mm: 70 }",
+    );
+    let err = machine_error(&text);
+    assert!(err.contains("tools.1: duplicate key `length_mm`"), "{err}");
+    let robot = machine_text("abb-irb1600");
+    let text = format!("{robot}kind: robot\n");
+    let err = machine_error(&text);
+    assert!(err.contains("duplicate key `kind`"), "{err}");
+}
+
+#[test]
+fn deep_yaml_nesting_is_refused_quickly() {
+    let base = machine_text("afm-r1000");
+    for nest in [
+        format!("x: {}{}\n", "[".repeat(40_000), "]".repeat(40_000)),
+        format!("x: {}{}\n", "{a: ".repeat(20_000), "}".repeat(20_000)),
+        format!("x:\n{}1\n", "- ".repeat(20_000)),
+        (1..400)
+            .map(|i| format!("{}a{i}:\n", " ".repeat(i)))
+            .collect::<String>(),
+    ] {
+        let text = format!("{base}{nest}");
+        let start = Instant::now();
+        let err = machine_error(&text);
+        assert!(
+            start.elapsed() < Duration::from_secs(2),
+            "{:?}",
+            start.elapsed()
+        );
+        assert!(err.contains("nesting deeper than 32 levels"), "{err}");
+    }
+}
+
+fn robot_error(from: &str, to: &str) -> String {
+    let base = machine_text("abb-irb1600");
+    assert!(base.contains(from), "{from}");
+    let text = base.replacen(from, to, 1);
+    let err = machine_error(&text);
+    assert!(err.starts_with("m.yaml:"), "{err}");
+    err
+}
+
+#[test]
+fn robot_values_beyond_plausibility_are_refused_with_their_key_path() {
+    let err = robot_error("a_mm: 699.61", "a_mm: 999.61");
+    assert!(err.contains("actual[2].a_mm: 999.61 mm is 299.61"), "{err}");
+    let err = robot_error("theta_offset_deg: 0.042", "theta_offset_deg: 5.0");
+    assert!(err.contains("actual[2].theta_offset_deg"), "{err}");
+    let err = robot_error("lb_mm: 0.10, ub_mm: 0.10", "lb_mm: 0.10, ub_mm: 90.0");
+    assert!(
+        err.contains("thermal.terms[0]: grows its DH length by 90 mm"),
+        "{err}"
+    );
+    let err = robot_error("[0.0, 0.0, -9.81]", "[0.0, 0.0, -1000.0]");
+    assert!(
+        err.contains("gravity_m_per_s2: magnitude 1000 m/s²"),
+        "{err}"
+    );
+    let err = robot_error("tool_load: { mass_kg: 5.0", "tool_load: { mass_kg: 50000.0");
+    assert!(err.contains("tool_load.mass_kg: 50000 kg exceeds"), "{err}");
+    // The line is that of the key.
+    let base = machine_text("abb-irb1600");
+    let text = base.replacen("[0.0, 0.0, -9.81]", "[0.0, 0.0, -1000.0]", 1);
+    let line = line_of(&text, "gravity_m_per_s2:", 0);
+    assert!(machine_error(&text).starts_with(&format!("m.yaml:{line}:")));
+}
+
+/// Writes `text` to a scratch file named `name` and runs `postproc check`
+/// on it with `machine`; (exit code, stderr).
+fn check_program(name: &str, text: &[u8], machine: &str, extra: &[&str]) -> (i32, String) {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join(name);
+    std::fs::write(&path, text).unwrap();
+    let out = crate::common::postproc()
+        .args(["check", "--machine", machine])
+        .args(extra)
+        .arg(&path)
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
+    (out.status.code().unwrap_or(-1), stderr)
+}
+
+#[test]
+fn implausible_process_inputs_are_refused_at_their_block() {
+    let prog = "G21 G90 G94\nG0 X0 Y0 Z10\nS1000 M3\nG1 Z0 F1000000\n";
+    let (code, err) = check_program("f.nc", prog.as_bytes(), "afm-r1000", &[]);
+    assert_eq!(code, 2, "{err}");
+    assert!(
+        err.contains("f.nc:4:") && err.contains("feed above 100000 mm/min"),
+        "{err}"
+    );
+    let prog =
+        "G21 G90 G94\n(POSTPROC MILLING DEPTH=1000 WIDTH=5)\nG0 X0 Y0 Z10\nS1000 M3\nG1 Z0 F100\n";
+    let (code, err) = check_program("d.nc", prog.as_bytes(), "afm-r1000", &[]);
+    assert_eq!(code, 2, "{err}");
+    assert!(
+        err.contains("d.nc:2:") && err.contains("more than 100 mm of cut"),
+        "{err}"
+    );
+}
+
+#[test]
+fn a_line_beyond_the_limit_is_refused_at_its_line() {
+    let mut prog = b"G21 G90 G94\nG0 X0 Y0 Z10\n(".to_vec();
+    prog.extend(std::iter::repeat_n(
+        b'A',
+        postproc::limits::LINE_MAX_BYTES + 10,
+    ));
+    prog.extend_from_slice(b")\nG1 X1 F100\n");
+    let (code, err) = check_program("long.nc", &prog, "afm-r1000", &[]);
+    assert_eq!(code, 2, "{err}");
+    assert!(
+        err.contains("long.nc:3:") && err.contains("line longer than 1048576 bytes"),
+        "{err}"
+    );
+    let mut module = b"MODULE M\n  PROC main()\n    ! ".to_vec();
+    module.extend(std::iter::repeat_n(
+        b'A',
+        postproc::limits::LINE_MAX_BYTES + 10,
+    ));
+    module.extend_from_slice(b"\n  ENDPROC\nENDMODULE\n");
+    let (code, err) = check_program("long.mod", &module, "abb-irb1600", &[]);
+    assert_eq!(code, 2, "{err}");
+    assert!(
+        err.contains("long.mod:3:") && err.contains("line longer than"),
+        "{err}"
+    );
+    let endless = std::io::Read::take(std::io::repeat(b'1'), 3 << 20);
+    let err = postproc::calibrate::observations::read_observations(
+        std::io::BufReader::new(endless),
+        "o.csv",
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(
+        err.starts_with("o.csv:1:") && err.contains("line longer than"),
+        "{err}"
+    );
+}
+
+#[cfg(unix)]
+#[test]
+fn dev_zero_is_refused_in_bounded_time_and_memory() {
+    use std::os::unix::fs::FileTypeExt;
+    if !std::fs::metadata("/dev/zero").is_ok_and(|m| m.file_type().is_char_device()) {
+        return; // not the endless device here
+    }
+    for machine in ["afm-r1000", "abb-irb1600"] {
+        let start = Instant::now();
+        let out = crate::common::postproc()
+            .args(["check", "--machine", machine, "/dev/zero"])
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{err}");
+        assert!(
+            err.contains("/dev/zero:1:") && err.contains("line longer than"),
+            "{err}"
+        );
+        assert!(start.elapsed() < Duration::from_secs(20));
+    }
+    let err = postproc::process::ForceTable::load(std::path::Path::new("/dev/zero"))
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.starts_with("/dev/zero:1:") && err.contains("line longer than"),
+        "{err}"
+    );
+}
+
+#[test]
+fn threads_are_bounded_by_the_cores() {
+    let dir = tempfile::tempdir().unwrap();
+    let out_path = dir.path().join("t.nc");
+    let out = crate::common::postproc()
+        .args([
+            "compensate",
+            "--machine",
+            "afm-r1000",
+            "--threads",
+            "100000",
+            "-o",
+        ])
+        .arg(&out_path)
+        .arg(repo("samples/effects.nc"))
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{err}");
+    assert!(err.contains("per core"), "{err}");
+    assert!(!out_path.exists());
+}
+
+#[test]
+fn emitted_decimals_are_capped() {
+    let digits = "1".repeat(255);
+    let prog = format!("G21 G90 G94\nG0 X0 Y0 Z10\nS1000 M3\nG1 X10.{digits} Z5 F100\n");
+    let out = crate::common::postproc()
+        .args(["compensate", "--machine", "afm-r1000", "-o", "-", "-"])
+        .write_stdin(prog)
+        .output()
+        .unwrap();
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert_eq!(
+        out.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let line = text.lines().nth(3).unwrap();
+    let x = line
+        .split_whitespace()
+        .find(|w| w.starts_with('X'))
+        .unwrap();
+    let decimals = x.split_once('.').map_or(0, |(_, d)| d.len());
+    assert!(decimals <= postproc::limits::EMIT_MAX_DECIMALS, "{line}");
+}
+
+#[test]
+fn control_characters_are_escaped_in_rapid_and_csv_errors() {
+    let module =
+        "MODULE M\n  PROC main()\n    MoveL p\x1b[2J, v100, z1, tool0;\n  ENDPROC\nENDMODULE\n";
+    let (code, err) = check_program("c.mod", module.as_bytes(), "abb-irb1600", &[]);
+    assert_eq!(code, 2, "{err}");
+    assert!(!err.contains('\x1b') && err.contains("\\u{1b}"), "{err}");
+    let csv = "x_mm,y_mm,z_mm,measured_x_mm,measured_y_mm,measured_z_mm\n1,2,\x07\x1b3,1,2,3\n";
+    let err = postproc::calibrate::observations::parse_observations(csv, "o.csv")
+        .unwrap_err()
+        .to_string();
+    assert!(!err.contains('\x1b') && !err.contains('\x07'), "{err}");
+}
+
+// ---------------------------------------------------------------------------
+// Mutation run
+// ---------------------------------------------------------------------------
+
+/// Mutants per input kind in the test run (`HOSTILE_MUTANTS` overrides;
+/// `scripts/hostile` runs many more).
+const CI_MUTANTS: usize = 1000;
+/// Of those, mutants per kind that also go through the binary
+/// (`HOSTILE_BINARY` overrides).
+const CI_BINARY: usize = 2;
+
+/// A small deterministic generator (SplitMix64).
+struct Rng(u64);
+
+impl Rng {
+    fn next(&mut self) -> u64 {
+        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        z ^ (z >> 31)
+    }
+    fn below(&mut self, n: usize) -> usize {
+        (self.next() % n.max(1) as u64) as usize
+    }
+}
+
+/// Bytes that make interesting mutants of text inputs.
+const INTERESTING: &[&[u8]] = &[
+    b"0",
+    b"-",
+    b".",
+    b"e",
+    b"E",
+    b"9",
+    b":",
+    b"[",
+    b"]",
+    b"{",
+    b"}",
+    b",",
+    b"\n",
+    b"\r",
+    b" ",
+    b"\t",
+    b"#",
+    b"(",
+    b")",
+    b";",
+    b"!",
+    b"\"",
+    b"'",
+    b"\0",
+    b"\x1b",
+    b"\xff",
+    b"\xc3",
+    b"G",
+    b"M",
+    b"X",
+    b"Z",
+    b"F",
+    b"S",
+    b"H",
+    b"T",
+    b"1e308",
+    b"-1e308",
+    b"1e-320",
+    b"NaN",
+    b"inf",
+    b"999999999",
+    b"-0",
+    b"0.000001",
+    b"&a",
+    b"*a",
+    b"<<: ",
+    b"- ",
+    b"? ",
+    b"~",
+];
+
+/// One mutant of `seed`: one to four byte-level edits.
+fn mutate(rng: &mut Rng, seed: &[u8]) -> Vec<u8> {
+    let mut v = seed.to_vec();
+    // Half the mutants have one edit (most of them still parse), the others
+    // two to four.
+    let edits = if rng.below(2) == 0 {
+        1
+    } else {
+        2 + rng.below(3)
+    };
+    for _ in 0..edits {
+        let at = rng.below(v.len() + 1);
+        match rng.below(8) {
+            7 if at < v.len() && v[at].is_ascii_digit() => {
+                // Another digit: the same syntax, another value.
+                v[at] = b'0' + rng.below(10) as u8;
+            }
+            0 if at < v.len() => v[at] = rng.next() as u8,
+            1 if at < v.len() => {
+                let end = (at + 1 + rng.below(8)).min(v.len());
+                v.drain(at..end);
+            }
+            2 => {
+                let piece = INTERESTING[rng.below(INTERESTING.len())];
+                v.splice(at..at, piece.iter().copied());
+            }
+            3 if at < v.len() => {
+                // Duplicate the line around `at`.
+                let start = v[..at]
+                    .iter()
+                    .rposition(|&b| b == b'\n')
+                    .map_or(0, |p| p + 1);
+                let end = v[at..]
+                    .iter()
+                    .position(|&b| b == b'\n')
+                    .map_or(v.len(), |p| at + p + 1);
+                let line = v[start..end].to_vec();
+                v.splice(end..end, line);
+            }
+            4 if at < v.len() && v[at].is_ascii_digit() => {
+                let piece = INTERESTING[34 + rng.below(9)];
+                v.splice(at..at + 1, piece.iter().copied());
+            }
+            5 if !v.is_empty() => {
+                // Copy a random slice elsewhere.
+                let s = rng.below(v.len());
+                let e = (s + 1 + rng.below(40)).min(v.len());
+                let piece = v[s..e].to_vec();
+                let to = rng.below(v.len() + 1);
+                v.splice(to..to, piece);
+            }
+            _ => {
+                if let Some(b) = v.get_mut(at) {
+                    *b ^= 1 << rng.below(8);
+                }
+            }
+        }
+    }
+    v
+}
+
+/// Occurrences of the words a non-finite number prints as.
+fn non_finite_words(b: &[u8]) -> usize {
+    let t = String::from_utf8_lossy(b);
+    t.matches("NaN").count() + t.matches("inf").count()
+}
+
+/// The message of an error, checked for raw control characters.
+fn clean_message(e: &postproc::Error) -> Result<(), String> {
+    let m = e.to_string();
+    if m.chars().any(char::is_control) {
+        return Err(format!("raw control character in `{m:?}`"));
+    }
+    if e.exit_code() != 2 {
+        return Err(format!("exit code {} for `{m}`", e.exit_code()));
+    }
+    Ok(())
+}
+
+struct Pools {
+    one: rayon::ThreadPool,
+    two: rayon::ThreadPool,
+}
+
+fn pools() -> Pools {
+    let p = |n| {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(n)
+            .build()
+            .unwrap()
+    };
+    Pools {
+        one: p(1),
+        two: p(2),
+    }
+}
+
+/// Compensates G-code `input` on `machine` with one pool; the output or the
+/// error message.
+fn gcode_run(
+    machine: &postproc::machine::tool::MachineTool,
+    input: &[u8],
+    pool: &rayon::ThreadPool,
+) -> Result<Vec<u8>, String> {
+    use postproc::compensate::Settings;
+    use postproc::emit::gcode::EmitOptions;
+    use postproc::predict::{EffectSet, ToolPredictor};
+    use postproc::program::interp::Setup;
+    let job = postproc::job::Job {
+        predictor: Some(ToolPredictor::new(machine, EffectSet::default())),
+        setup: Setup::for_machine(machine),
+        settings: Settings {
+            tolerance_mm: 0.001,
+        },
+        emit: EmitOptions {
+            decimals_mm: None,
+            decimals_deg: None,
+            annotate: true,
+        },
+        pool: Some(pool),
+        travel: None,
+    };
+    let mut out = Vec::new();
+    match job.run(std::io::BufReader::new(input), "m.nc", Some(&mut out), None) {
+        Ok(_) => Ok(out),
+        Err(e) => {
+            clean_message(&e)?;
+            Err(format!("error: {e}"))
+        }
+    }
+}
+
+/// The properties of one G-code mutant: no panic, same result for 1 and 2
+/// threads, no non-finite number written that the input did not have.
+fn gcode_props(
+    machine: &postproc::machine::tool::MachineTool,
+    input: &[u8],
+    pools: &Pools,
+) -> Result<bool, String> {
+    let one = gcode_run(machine, input, &pools.one);
+    let two = gcode_run(machine, input, &pools.two);
+    if one != two {
+        return Err("1 and 2 threads differ".into());
+    }
+    match one {
+        Ok(out) if non_finite_words(&out) > non_finite_words(input) => {
+            Err("non-finite number in the output".into())
+        }
+        Ok(_) => Ok(true),
+        Err(m) if m.starts_with("error: ") => Ok(false),
+        Err(m) => Err(m),
+    }
+}
+
+fn rapid_props(
+    robot: &postproc::machine::robot::Robot,
+    input: &[u8],
+    pools: &Pools,
+) -> Result<bool, String> {
+    use postproc::compensate::rapid::{RapidOptions, compensate_module};
+    let Ok(text) = std::str::from_utf8(input) else {
+        return match postproc::program::rapid::parse_module_bytes(input, "m.mod") {
+            Ok(_) => Err("invalid UTF-8 accepted".into()),
+            Err(e) => clean_message(&e.into()).map(|()| false),
+        };
+    };
+    let run = |pool: &rayon::ThreadPool| {
+        pool.install(
+            || match compensate_module(text, "m.mod", robot, &RapidOptions::default()) {
+                Ok(o) => Ok(Ok(o.text)),
+                Err(e) => clean_message(&e).map(|()| Err(e.to_string())),
+            },
+        )
+    };
+    let one = run(&pools.one)?;
+    let two = run(&pools.two)?;
+    if one != two {
+        return Err("1 and 2 threads differ".into());
+    }
+    match one {
+        Ok(out) if non_finite_words(out.as_bytes()) > non_finite_words(input) => {
+            Err("non-finite number in the output".into())
+        }
+        Ok(_) => Ok(true),
+        Err(_) => Ok(false),
+    }
+}
+
+/// A machine-file mutant: loaded or refused; one that loads compensates
+/// `gcode` (machine tools) or `rapid` (robots) with the same checks.
+fn machine_props(input: &[u8], gcode: &[u8], rapid: &[u8], pools: &Pools) -> Result<bool, String> {
+    let Ok(text) = std::str::from_utf8(input) else {
+        return Ok(false);
+    };
+    match Machine::from_yaml_str(text, "m.yaml") {
+        Err(e) => clean_message(&e).map(|()| false),
+        Ok(Machine::Tool(m)) => gcode_props(&m, gcode, pools).map(|_| true),
+        Ok(Machine::Robot(r)) => rapid_props(&r, rapid, pools).map(|_| true),
+    }
+}
+
+fn observation_props(input: &[u8]) -> Result<bool, String> {
+    match postproc::calibrate::observations::read_observations(input, "m.csv") {
+        Ok(_) => Ok(true),
+        Err(e) => clean_message(&e).map(|()| false),
+    }
+}
+
+/// Runs `check` (accepted or cleanly refused, else the problem) on `count`
+/// mutants of the seeds; (accepted mutants, findings).
+fn mutation_run(
+    kind: &str,
+    seeds: &[Vec<u8>],
+    count: usize,
+    mut check: impl FnMut(&[u8]) -> Result<bool, String>,
+) -> (usize, Vec<String>) {
+    let mut rng = Rng(0x5EED ^ (kind.len() as u64 * 7919));
+    let mut findings = Vec::new();
+    let mut accepted = 0;
+    for (k, seed) in seeds.iter().enumerate() {
+        assert_eq!(check(seed), Ok(true), "{kind} seed {k} is not accepted");
+    }
+    for i in 0..count {
+        let seed = &seeds[i % seeds.len()];
+        let m = mutate(&mut rng, seed);
+        let r = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| check(&m)));
+        let problem = match r {
+            Ok(Ok(ok)) => {
+                accepted += usize::from(ok);
+                continue;
+            }
+            Ok(Err(p)) => p,
+            Err(_) => "panic".to_string(),
+        };
+        let dir = std::env::temp_dir().join("postproc-hostile");
+        let _ = std::fs::create_dir_all(&dir);
+        let path = dir.join(format!("{kind}-{i}"));
+        let _ = std::fs::write(&path, &m);
+        findings.push(format!("{kind} mutant {i} ({}): {problem}", path.display()));
+    }
+    (accepted, findings)
+}
+
+fn env_count(name: &str, default: usize) -> usize {
+    std::env::var(name)
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(default)
+}
+
+fn read(rel: &str) -> Vec<u8> {
+    std::fs::read(repo(rel)).unwrap_or_else(|e| panic!("{rel}: {e}"))
+}
+
+fn tool(name: &str) -> postproc::machine::tool::MachineTool {
+    match Machine::from_yaml_str(&machine_text(name), name) {
+        Ok(Machine::Tool(m)) => m,
+        _ => panic!("{name}"),
+    }
+}
+
+fn robot(rel: &str) -> postproc::machine::robot::Robot {
+    let text = String::from_utf8(read(rel)).unwrap();
+    match Machine::from_yaml_str(&text, rel) {
+        Ok(Machine::Robot(r)) => r,
+        _ => panic!("{rel}"),
+    }
+}
+
+/// Reports the figures of one kind's run (stderr, shown with --nocapture).
+fn report(kind: &str, count: usize, start: Instant, (accepted, findings): &(usize, Vec<String>)) {
+    eprintln!(
+        "\nhostile {kind}: {count} mutants ({accepted} accepted, {} refused) in {:.1} s, {} findings",
+        count - accepted - findings.len(),
+        start.elapsed().as_secs_f64(),
+        findings.len()
+    );
+    for f in findings.iter().take(20) {
+        eprintln!("  {f}");
+    }
+    assert!(findings.is_empty(), "{findings:#?}");
+}
+
+#[test]
+fn mutants_of_gcode_programs_are_processed_or_refused_cleanly() {
+    let count = env_count("HOSTILE_MUTANTS", CI_MUTANTS);
+    let m = tool("afm-r1000");
+    let pools = pools();
+    let seeds = [
+        read("samples/effects.nc"),
+        read("samples/part.nc"),
+        read("samples/gcode/mastercam_haas.nc"),
+    ];
+    let start = Instant::now();
+    let run = mutation_run("gcode", &seeds, count, |b| gcode_props(&m, b, &pools));
+    report("gcode", count, start, &run);
+}
+
+#[test]
+fn mutants_of_rapid_modules_are_processed_or_refused_cleanly() {
+    let count = env_count("HOSTILE_MUTANTS", CI_MUTANTS);
+    let r = robot("machines/abb-irb1600.yaml");
+    let pools = pools();
+    let seeds = [read("samples/drilling.mod"), read("samples/milling.mod")];
+    let start = Instant::now();
+    let run = mutation_run("rapid", &seeds, count, |b| rapid_props(&r, b, &pools));
+    report("rapid", count, start, &run);
+}
+
+#[test]
+fn mutants_of_machine_files_are_loaded_or_refused_cleanly() {
+    let count = env_count("HOSTILE_MUTANTS", CI_MUTANTS);
+    let pools = pools();
+    let probe = read("samples/effects.nc");
+    let module = read("samples/drilling.mod");
+    let seeds: Vec<Vec<u8>> = ["afm-r1000", "five-axis-ac", "abb-irb1600", "staubli-tx200"]
+        .iter()
+        .map(|n| read(&format!("machines/{n}.yaml")))
+        .collect();
+    let start = Instant::now();
+    let run = mutation_run("machine", &seeds, count, |b| {
+        machine_props(b, &probe, &module, &pools)
+    });
+    report("machine", count, start, &run);
+}
+
+#[test]
+fn mutants_of_observation_files_are_read_or_refused_cleanly() {
+    let count = env_count("HOSTILE_MUTANTS", CI_MUTANTS);
+    let seeds = [
+        read("samples/observations/afm-r1000-grid-measured.csv"),
+        read("samples/observations/irb1600-kinematic-measured.csv"),
+        read("samples/observations/irb1600-thermal-measured.csv"),
+    ];
+    let start = Instant::now();
+    let run = mutation_run("observations", &seeds, count, observation_props);
+    report("observations", count, start, &run);
+}
+
+/// A few mutants through the binary: exit code 0, 1 or 2 only, no panic,
+/// no output file left on an error, same bytes for 1 and 2 threads.
+#[test]
+fn mutants_through_the_binary_exit_cleanly() {
+    let count = env_count("HOSTILE_BINARY", CI_BINARY);
+    let mut rng = Rng(0xB1A2);
+    let dir = tempfile::tempdir().unwrap();
+    let cases: [(&str, &str, &str); 2] = [
+        ("samples/part.nc", "afm-r1000", "p.nc"),
+        ("samples/drilling.mod", "abb-irb1600", "p.mod"),
+    ];
+    let mut findings = Vec::new();
+    for (seed, machine, name) in cases {
+        let seed = read(seed);
+        for i in 0..count {
+            let input = dir.path().join(name);
+            std::fs::write(&input, mutate(&mut rng, &seed)).unwrap();
+            let mut outputs = Vec::new();
+            for threads in ["1", "2"] {
+                let out_path = dir.path().join(format!("out-{threads}-{name}"));
+                let _ = std::fs::remove_file(&out_path);
+                let out = crate::common::postproc()
+                    .args([
+                        "compensate",
+                        "--machine",
+                        machine,
+                        "--threads",
+                        threads,
+                        "-o",
+                    ])
+                    .arg(&out_path)
+                    .arg(&input)
+                    .output()
+                    .unwrap();
+                let code = out.status.code();
+                let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
+                if !matches!(code, Some(0..=2)) || stderr.contains("panicked") {
+                    findings.push(format!("{name} {i}: exit {code:?}: {stderr}"));
+                }
+                if code == Some(2) && out_path.exists() {
+                    findings.push(format!("{name} {i}: output left after an error"));
+                }
+                outputs.push((code, std::fs::read(&out_path).ok()));
+            }
+            if outputs[0] != outputs[1] {
+                findings.push(format!("{name} {i}: 1 and 2 threads differ"));
+            }
+        }
+    }
+    assert!(findings.is_empty(), "{findings:#?}");
+}
+
+#[test]
+fn a_compensation_that_flips_the_wrist_near_the_singularity_is_refused() {
+    use postproc::machine::robot::{Effects, IkSelect, JOINT_JUMP_MAX_DEG, Model, RobotError};
+    let r = robot("machines/abb-irb1600.yaml");
+    let allowing = r.clone().allowing_reconfiguration(true);
+    let mut refused = 0;
+    // Wrist nearly straight (q5 of ±0.1°): a sub-millimetre correction
+    // turns q4 and q6 by more than 10° each way.
+    for q5 in [0.002, -0.002] {
+        let q = [0.0, 0.5, 0.2, 1.0, q5, -0.3];
+        let programmed = r.tcp_pose(Model::Nominal, &q);
+        let sel = IkSelect::Conf(r.confdata(&q));
+        let Ok(free) = allowing.compensate(&programmed, &sel, Effects::ALL) else {
+            // No solution at all this close to the singularity.
+            assert!(r.compensate(&programmed, &sel, Effects::ALL).is_err());
+            continue;
+        };
+        let jump = free
+            .q_compensated
+            .iter()
+            .zip(&free.q_programmed)
+            .map(|(a, b)| (a - b).to_degrees().abs())
+            .fold(0.0, f64::max);
+        match r.compensate(&programmed, &sel, Effects::ALL) {
+            Err(e @ RobotError::Reconfiguration { .. }) => {
+                refused += 1;
+                assert!(
+                    jump > JOINT_JUMP_MAX_DEG || free.conf.cfx != r.confdata(&q).cfx,
+                    "{e}"
+                );
+                let m = e.to_string();
+                assert!(
+                    m.contains("joint deltas [") && m.contains("--allow-reconfiguration"),
+                    "{m}"
+                );
+            }
+            Ok(c) => assert!(jump <= JOINT_JUMP_MAX_DEG, "{:?}", c.q_compensated),
+            Err(e) => panic!("{e}"),
+        }
+    }
+    assert_eq!(refused, 2, "targets near the singularity were accepted");
+    // Farther from the singularity the same kind of target is compensated.
+    let q = [0.0, 0.5, 0.2, 1.0, 0.02, -0.3];
+    let programmed = r.tcp_pose(Model::Nominal, &q);
+    r.compensate(&programmed, &IkSelect::Conf(r.confdata(&q)), Effects::ALL)
+        .expect("regular target");
+}
+
+#[test]
+fn an_observation_file_beyond_the_row_limit_is_refused_with_the_limit() {
+    use postproc::limits::OBSERVATION_MAX_ROWS;
+    let mut csv = String::from("x_mm,y_mm,z_mm,X_mm,Y_mm,Z_mm\n");
+    for i in 0..=OBSERVATION_MAX_ROWS {
+        csv.push_str(&format!("{i},1,2,{i},1,2\n"));
+    }
+    let err = postproc::calibrate::observations::parse_observations(&csv, "o.csv")
+        .unwrap_err()
+        .to_string();
+    let line = OBSERVATION_MAX_ROWS + 2;
+    assert!(
+        err.starts_with(&format!(
+            "o.csv:{line}:1: more than {OBSERVATION_MAX_ROWS} data rows"
+        )),
+        "{err}"
+    );
+    // At the limit the file is read.
+    let at_limit: String = csv
+        .lines()
+        .take(OBSERVATION_MAX_ROWS + 1)
+        .map(|l| format!("{l}\n"))
+        .collect();
+    let obs = postproc::calibrate::observations::parse_observations(&at_limit, "o.csv").unwrap();
+    assert_eq!(obs.rows.len(), OBSERVATION_MAX_ROWS);
+}
