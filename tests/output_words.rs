@@ -28,7 +28,7 @@ fn compensate(machine: &str, program: &str, args: &[&str]) -> String {
         .success()
         .get_output()
         .clone();
-    String::from_utf8(out.stdout).unwrap()
+    String::from_utf8(crate::common::without_header(&out.stdout)).unwrap()
 }
 
 /// The letters of a line's words, in order.

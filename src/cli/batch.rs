@@ -464,14 +464,7 @@ pub fn run(a: &BatchArgs, quiet: bool) -> Result<i32> {
             }
             let set = effects(&a.effects)?;
             let mut job = build_job(
-                &tool,
-                &process,
-                &pool,
-                setup,
-                set,
-                tolerance,
-                None,
-                annotate,
+                &tool, &process, &pool, setup, set, tolerance, None, annotate,
             )?;
             // The programs already run on the pool's threads.
             job.pool = None;

@@ -2,8 +2,8 @@
 
 pub(crate) mod fixed;
 pub mod gcode;
-mod inverse_time;
 pub mod header;
+mod inverse_time;
 pub mod rapid;
 pub mod report;
 pub mod svg;
