@@ -529,8 +529,7 @@ impl Emitter {
                 block,
                 plan,
                 (&mv, res),
-                (first, two_digit),
-                feeds.as_ref(),
+                (first, two_digit, feeds.as_ref()),
                 eol,
                 out,
             );
@@ -825,8 +824,7 @@ impl Emitter {
         block: &Block,
         plan: &Plan,
         (mv, res): (&crate::program::interp::Move, &BlockResult),
-        (mut motion, two_digit): (Motion, bool),
-        feeds: Option<&(PieceFeeds, usize, AxisVec)>,
+        (mut motion, two_digit, feeds): (Motion, bool, Option<&(PieceFeeds, usize, AxisVec)>),
         eol: &[u8],
         out: &mut Vec<u8>,
     ) -> Motion {

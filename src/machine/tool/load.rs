@@ -14,7 +14,7 @@ use super::raw::{
     RawAxis, RawAxisType, RawMachineTool, RawProcessForce, RawSide, RawTable, RawUnits,
 };
 use super::table::ErrorTable;
-use super::{Axis, AxisKind, MachineTool, Side};
+use super::{Axis, AxisKind, ControlDefaults, MachineTool, Side};
 use crate::error::{Invalid, Result};
 use crate::machine::{axis_slot, yaml};
 use crate::process::{Drilling, ForceModel, Frame, Milling};
@@ -293,11 +293,13 @@ fn validate(raw: RawMachineTool) -> V<MachineTool> {
         slot_index,
         tools,
         work_offsets,
-        reference_points,
-        units_default,
+        control: Box::new(ControlDefaults {
+            reference_points,
+            units_default,
+            tolerance_mm,
+        }),
         decimals,
         decimals_deg,
-        tolerance_mm,
         error_free,
         measurement_frame: measurement_frame.map(Box::new),
         process: (process_force.is_some()

@@ -119,13 +119,11 @@ pub struct MachineTool {
     slot_index: [Option<u8>; 6],
     tools: BTreeMap<u32, f64>,
     work_offsets: BTreeMap<String, [f64; 3]>,
-    reference_points: BTreeMap<String, [f64; 3]>,
-    units_default: Option<Units>,
+    /// The control's settings a program may rely on (G30 points, default
+    /// unit, tolerance), boxed to keep `Machine` small.
+    control: Box<ControlDefaults>,
     decimals: Option<usize>,
     decimals_deg: Option<usize>,
-    /// `compensation.tolerance_mm`: the default tolerance of compensated
-    /// programs, mm.
-    tolerance_mm: Option<f64>,
     error_free: bool,
     /// `measurement_frame`: pose of the measuring instrument in the
     /// workpiece frame (not part of the model); boxed to keep `Machine` small.
@@ -135,6 +133,18 @@ pub struct MachineTool {
     /// Position-independent parts of the chain (see [`fast`]), boxed to
     /// keep `Machine` small.
     pre: Box<fast::Precomputed>,
+}
+
+/// The control's settings of a machine file that programs rely on.
+#[derive(Debug, Clone)]
+pub(crate) struct ControlDefaults {
+    /// The reference points of G30 by key (`G30`, `G30P3`, `G30P4`).
+    pub(crate) reference_points: BTreeMap<String, [f64; 3]>,
+    /// `units_default`: the unit of programs without G20/G21.
+    pub(crate) units_default: Option<Units>,
+    /// `compensation.tolerance_mm`: the default tolerance of compensated
+    /// programs, mm.
+    pub(crate) tolerance_mm: Option<f64>,
 }
 
 /// The optional process sections of a machine file.
@@ -221,7 +231,7 @@ impl MachineTool {
     /// (`compensation.tolerance_mm`: the accuracy of the model itself), mm,
     /// if the machine file gives one.
     pub fn compensation_tolerance_mm(&self) -> Option<f64> {
-        self.tolerance_mm
+        self.control.tolerance_mm
     }
 
     /// Every work offset of the file, by key.
@@ -232,12 +242,12 @@ impl MachineTool {
     /// The reference points of G30 (`G30`, `G30P3`, `G30P4`), machine
     /// coordinates of X, Y, Z, mm.
     pub fn reference_points(&self) -> impl Iterator<Item = (&String, &[f64; 3])> {
-        self.reference_points.iter()
+        self.control.reference_points.iter()
     }
 
     /// The control's unit for programs that set none (`units_default`).
     pub fn units_default(&self) -> Option<Units> {
-        self.units_default
+        self.control.units_default
     }
 
     /// Output decimals for mm programs, if the machine file fixes them.
