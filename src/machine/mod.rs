@@ -111,7 +111,7 @@ impl Machine {
 
 /// The machine files bundled with postproc, compiled into the binary:
 /// (name, text). `--machine NAME` selects one by name.
-pub const BUNDLED: [(&str, &str); 4] = [
+pub const BUNDLED: [(&str, &str); 5] = [
     (
         "abb-irb1600",
         include_str!("../../machines/abb-irb1600.yaml"),
@@ -120,6 +120,10 @@ pub const BUNDLED: [(&str, &str); 4] = [
     (
         "five-axis-ac",
         include_str!("../../machines/five-axis-ac.yaml"),
+    ),
+    (
+        "head-table-bc",
+        include_str!("../../machines/head-table-bc.yaml"),
     ),
     (
         "staubli-tx200",
