@@ -63,7 +63,7 @@ const START_ROBOT: &str = "machines/abb-irb1600.yaml";
 /// True joint stiffness of irb1600-truth.yaml, N·m/rad (its `k_nm_per_rad`).
 const TRUE_K: [f64; 6] = [262000.0, 447000.0, 134500.0, 11900.0, 9050.0, 5650.0];
 
-/// Laser tracker noise of the data sets: 15 µm + 6 µm/m (MODELS.md §5).
+/// Laser tracker noise of the data sets: 15 µm + 6 µm/m (docs/physics.md).
 fn tracker(seed: u64) -> Noise {
     Noise {
         um: 15.0,

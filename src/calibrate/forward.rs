@@ -343,7 +343,7 @@ mod tests {
     }
 
     /// At all joints zero the nominal IRB 1600 flange is at (815, 0, 1186.5)
-    /// mm (MODELS.md §1.2: 150 + 600 + 65 in front, 486.5 + 700 above).
+    /// mm (docs/physics.md: 150 + 600 + 65 in front, 486.5 + 700 above).
     #[test]
     fn robot_commanded_is_nominal_flange() {
         let m = irb1600();
@@ -382,7 +382,7 @@ mod tests {
 
     /// Measured joint powers grow the DH lengths (Paper B). At all joints
     /// zero the IRB 1600 flange sits at x = a2 + d4 + d6, z = d1 + a3
-    /// (mDH, MODELS.md §1.2), so the attained point moves by
+    /// (mDH), so the attained point moves by
     /// (Δa2 + Δd4, 0, Δa3) between a row at 0 W and a row at the Paper B
     /// top powers; the gravity sag barely changes for a 0.1 mm longer arm.
     /// The example calibration's joint-angle and twist errors (about a

@@ -1,7 +1,7 @@
 //! Least-squares identification: linear least squares and Levenberg–Marquardt
 //! with parameter covariance, standard and expanded uncertainties, and an
 //! identifiability report (singular values, condition number, observability
-//! index O1 of MODELS.md §5, and the parameters that cannot be identified).
+//! index O1 of docs/physics.md, and the parameters that cannot be identified).
 //!
 //! Conventions:
 //! - Residuals are `r = A x − b` (linear) or `r = f(x)` (nonlinear); the

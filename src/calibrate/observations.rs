@@ -1,5 +1,5 @@
 //! Observation files (the measured-data contract of
-//! `shared/formats/observations.md`): reading with located errors, writing in
+//! docs/calibration.md): reading with located errors, writing in
 //! a canonical form, a reproducible train/holdout split and seeded noise.
 //!
 //! Decisions on top of the contract:

@@ -3,7 +3,7 @@
 //! measurement noise — how the test data of calibration and diagnosis are
 //! made.
 //!
-//! Noise model (laser-tracker style, MODELS.md §5: ≈ 15 µm + 6 µm/m): every
+//! Noise model (laser-tracker style, docs/physics.md: ≈ 15 µm + 6 µm/m): every
 //! coordinate of every row gets an independent normal error with standard
 //! deviation `noise_um + noise_um_per_m · ‖p‖` (µm), `‖p‖` the distance of
 //! the attained point from the origin of the measuring frame in metres.

@@ -1,4 +1,4 @@
-//! Robot joint-stiffness identification (Paper C eq. 6–8, MODELS.md §2).
+//! Robot joint-stiffness identification (Paper C eq. 6–8).
 //!
 //! Data: *load groups*. Rows are grouped by identical joint angles and
 //! measured point (one configuration of the arm, one measured point); a

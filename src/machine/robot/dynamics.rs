@@ -2,7 +2,7 @@
 //! single-degree-of-freedom mode per Cartesian direction of the robot base
 //! frame (natural frequency, damping ratio, modal stiffness). A harmonic
 //! force of amplitude `F` at frequency `f` gives the amplitude
-//! `X = F / k · 1 / √((1 − r²)² + (2ζr)²)`, `r = f / f_n` (MODELS.md §3).
+//! `X = F / k · 1 / √((1 − r²)² + (2ζr)²)`, `r = f / f_n` (docs/physics.md).
 //! Vibration is reported, never compensated.
 
 use nalgebra::Vector3;

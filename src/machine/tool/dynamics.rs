@@ -1,4 +1,4 @@
-//! Dynamics of a machine tool (MODELS.md §3): the dominant mode per axis
+//! Dynamics of a machine tool (docs/physics.md): the dominant mode per axis
 //! direction (natural frequency, damping ratio, modal stiffness) and the
 //! single-degree-of-freedom response to a harmonic force. The vibration
 //! amplitude is reported, never compensated.

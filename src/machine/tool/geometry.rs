@@ -1,6 +1,6 @@
 //! Homogeneous transformation helpers (4×4, f64) for the kinematic chain:
 //! translations, finite rotations about a coordinate axis and the
-//! small-angle error HTM of MODELS.md §1.1.
+//! small-angle error HTM of docs/physics.md.
 
 use nalgebra::{Matrix4, Vector3};
 

@@ -2,7 +2,7 @@
 //! tool table, work offsets) and its geometric error model — a chain of
 //! homogeneous transformations from the workpiece to the tool tip with
 //! location and bidirectional component errors per axis (ISO 230-1,
-//! MODELS.md §1.1). The file format and every sign convention are documented
+//! docs/physics.md). The file format and every sign convention are documented
 //! in `machines/README.md`.
 //!
 //! Chain (product from left to right, in the order of `axes` in the file):

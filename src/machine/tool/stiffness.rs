@@ -1,4 +1,4 @@
-//! Static stiffness of a machine tool at the tool tip (MODELS.md §2): a
+//! Static stiffness of a machine tool at the tool tip (docs/physics.md): a
 //! diagonal translational stiffness per axis direction and per load sign,
 //! each a function of the position in the workspace given on a grid and
 //! interpolated trilinearly (clamped at the grid ends). The deflection of

@@ -1,4 +1,4 @@
-//! Thermal drift of a machine tool over time (MODELS.md §4): heat sources
+//! Thermal drift of a machine tool over time (docs/physics.md): heat sources
 //! (the spindle and the feed drive of each linear axis) with a power
 //! estimated per block, each driving one error parameter through a
 //! first-order response
