@@ -1,4 +1,4 @@
-//! Hostile inputs: regression tests for inputs that used to be misread or
+//! Hostile inputs: regression tests for inputs that could be misread or
 //! exhaust resources, and a bounded mutation run (byte mutants of programs,
 //! machine files and observation files) checking that every mutant is
 //! either processed or refused cleanly. The long run is `scripts/hostile`.

@@ -1851,12 +1851,9 @@ mod tests {
 
     /// Regression: the attained point of a split straight move stays within
     /// the tolerance of the programmed point everywhere, not only where it
-    /// is checked. The check used to sample each piece at its quarter
-    /// points and missed the largest gaps, which sit where the piece
-    /// crosses a knot of the error tables (a one-off dense sampling found
-    /// gaps up to 1.09 µm at 1 µm on the AFM R-1000, up to 2.2 times the
-    /// tolerance with larger angular errors; this test fails with the old
-    /// check, by 0.7 nm on its first move). Here the gap to the programmed point at the same
+    /// is checked. The largest gaps sit where a piece crosses a knot of
+    /// the error tables, so sampling a piece at a few points is not
+    /// enough. Here the gap to the programmed point at the same
     /// parameter (the pieces' programmed ends from the attained ones) is
     /// sampled at 401 points and at every knot of each piece: the bundled
     /// machine, one with 30 times its angular errors, one with a stiffness

@@ -636,8 +636,8 @@ mod tests {
         }
     }
 
-    /// The 4×4 chain product as it was computed before the top-three-rows
-    /// path (the reference for bit-identical results).
+    /// The full 4×4 chain product: the reference the top-three-rows path
+    /// must match bit for bit.
     fn tip_htm_reference(
         m: &MachineTool,
         cmd: &AxisVec,
@@ -975,8 +975,8 @@ mod tests {
         }
     }
 
-    /// Found by review: far beyond the tables a zero coefficient times an
-    /// overflowing monomial gave NaN where the chain is finite.
+    /// Far beyond the tables a zero coefficient times an overflowing
+    /// monomial would give NaN: the cell form must equal the finite chain.
     #[test]
     fn cell_form_far_beyond_the_travel_is_the_chain() {
         use approx::assert_relative_eq;
