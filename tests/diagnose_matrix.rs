@@ -681,9 +681,8 @@ fn matrix_subset() {
 }
 
 /// The whole matrix: every case, three seeds, noise levels 1 and 0.5
-/// (scripts/diagnose-matrix).
+/// (also run alone, with its rates printed, by scripts/diagnose-matrix).
 #[test]
-#[ignore = "the whole matrix takes minutes: scripts/diagnose-matrix"]
 fn matrix_full() {
     let cases: Vec<Case> = robot_cases().into_iter().chain(tool_cases()).collect();
     run_matrix(&cases, &[101, 202, 303], &[1.0, 0.5]);
