@@ -729,7 +729,9 @@ impl<'m> Job<'m> {
                             .map(|(p, c)| (pred.with_context(c), p)),
                     );
                     last.reverse();
-                    let mut carry = compensate::carry_before(last, &self.settings);
+                    // Fewer moves than the lookback: all since the start.
+                    let from_start = last.len() <= compensate::CARRY_LOOKBACK;
+                    let mut carry = compensate::carry_before(last, &self.settings, from_start);
                     for ((r, p), c) in rs.iter_mut().zip(ps).zip(cs) {
                         let segments = match r.take() {
                             Some(Ok(old)) => old.segments,

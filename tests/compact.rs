@@ -285,19 +285,9 @@ fn check_compact(name: &str, program: &str, with_arcs: bool) {
     let written = moves(&m, &text);
     let mut at = 0usize;
     let (mut checked, mut arcs, mut worst) = (0usize, 0usize, 0.0f64);
-    // The first feed move starts where the positioning moves before it
-    // left the machine, which the compensation does not know at the start
-    // of a program (the axes they do not name): checked from the second.
-    let first_end = programmed[0].end3();
-    let mut started = false;
     for mv in written.iter().filter(|mv| mv.motion != Motion::Rapid) {
         let tool = mv.tool_len_mm;
         let (s3, e3) = (mv.start3(), mv.end3());
-        if !started {
-            let got = m.geometric(&mv.end, &mv.dirs, tool).pos;
-            started = (got - first_end).norm() <= tol;
-            continue;
-        }
         // Takeups: only their end is on the path (the next move's start).
         if mv.arc.is_none() && (e3 - s3).norm() < TAKEUP_LEN_MM {
             continue;

@@ -362,7 +362,7 @@ pub(super) fn arc_block(
     // Where the machine stands: the previous block's end, when it ended at
     // the arc's start.
     let mut at: Option<(AxisVec, DirVec)> = carry_in
-        .filter(|k| k.target == mv.start)
+        .filter(|k| k.stands_at(&mv.start))
         .map(|k| (k.c, k.dirs));
     let mut left = 0.0f64;
     let mut last_dirs = mv.dirs;

@@ -1024,11 +1024,48 @@ pub struct Carry {
     /// this block (a chain longer than [`CARRY_LOOKBACK`] ends the carry,
     /// as [`carry_before`] does not look back further).
     positioned: usize,
+    /// The axes (bit `s` for axis `s`) whose command `c` holds. At the
+    /// start of a program no axis is known ([`Carry::program_start`]); the
+    /// positioning moves there name them one by one (`G0 X Y`, then
+    /// `G43 H1 Z`), and a straight move starts from the carry once every
+    /// axis of the machine is known.
+    known: u8,
 }
 
+/// Every axis known (see [`Carry::known`]).
+const ALL_AXES: u8 = 0b11_1111;
+
 impl Carry {
+    /// Where the machine stands at the start of a program: nowhere known.
+    /// Seeds a run that begins with the program's first block, so that
+    /// the positioning moves there, each naming some axes, leave a carry
+    /// the first feed move starts from.
+    pub fn program_start() -> Self {
+        Carry {
+            target: [0.0; 6],
+            dirs: DirVec::default(),
+            tool: 0.0,
+            ctx: BlockContext::default(),
+            c: [0.0; 6],
+            solved: false,
+            positioned: 0,
+            known: 0,
+        }
+    }
+
+    /// The command of every axis is known.
+    fn complete(&self) -> bool {
+        self.known == ALL_AXES
+    }
+
+    /// The machine stands at a known command whose programmed point is `p`.
+    fn stands_at(&self, p: &AxisVec) -> bool {
+        self.complete() && self.target == *p
+    }
+
     fn matches(&self, target: &AxisVec, dirs: &DirVec, tool: f64, ctx: &BlockContext) -> bool {
-        self.solved
+        self.complete()
+            && self.solved
             && self.target == *target
             && self.dirs == *dirs
             && self.tool == tool
@@ -1085,15 +1122,19 @@ impl Carry {
             c,
             solved: solution,
             positioned: 0,
+            known: ALL_AXES,
         };
         if needs_carry(pred, plan) {
             let before = before?;
             for (s, v) in carry.c.iter_mut().enumerate() {
                 if plan.programmed & (1 << s) == 0 && pred.machine.has_axis(s) {
                     *v = *before.c.get(s)?;
+                    if before.known & (1 << s) == 0 {
+                        carry.known &= !(1 << s);
+                    }
                 }
             }
-            carry.solved = solution && carry.c == c;
+            carry.solved = solution && carry.c == c && carry.complete();
             carry.positioned = before.positioned + 1;
             if carry.positioned > CARRY_LOOKBACK {
                 return None;
@@ -1132,11 +1173,21 @@ pub const CARRY_LOOKBACK: usize = 8;
 /// unless it is a positioning move that leaves axes where they were: then
 /// the moves before it count, up to [`CARRY_LOOKBACK`] of them. `None`
 /// where no move leaves a carry (or one cannot be compensated: the run
-/// fails there anyway).
+/// fails there anyway). With `from_start`, `before` holds every move since
+/// the start of the program, and the carry is folded from
+/// [`Carry::program_start`], as a run from the first block does.
 pub fn carry_before<'p>(
     before: &[(ToolPredictor<'p>, Plan)],
     settings: &Settings,
+    from_start: bool,
 ) -> Option<Carry> {
+    if from_start {
+        let mut carry = Some(Carry::program_start());
+        for (pred, plan) in before {
+            carry = carry_after(pred, plan, settings, carry.as_ref());
+        }
+        return carry;
+    }
     // The last move that does not depend on the carry before it.
     let n = before.len();
     let first = (0..n).rev().take(CARRY_LOOKBACK + 1).find(|&i| {
@@ -1290,7 +1341,7 @@ pub fn block_reusing(
             // the machine (with whatever tool length it was solved for).
             let (c0, start_gap) = match carry_in {
                 Some(k) if k.matches(&mv.start, &mv.dirs, tool, &pred.ctx) => (k.c, SOLVE_TOL_MM),
-                Some(k) if k.target == mv.start => {
+                Some(k) if k.stands_at(&mv.start) => {
                     let st = start_from(
                         pred,
                         &mv.start,
@@ -1407,6 +1458,10 @@ mod tests {
         // line included, and moves to machine-defined places (G28, G53).
         let pred = afm_pred();
         let plans = afm_plans(&[
+            // The program's first positioning moves name some axes each.
+            "G0 X5 Y5",
+            "G0 Z15",
+            "G1 Z10 F500",
             "G0 X10 Y10 Z10",
             "G1 X400 Y10.5 F1000",
             "Y20",
@@ -1450,7 +1505,7 @@ mod tests {
             "G1 Z10",
         ]);
         let settings = Settings::default();
-        let mut carry = None;
+        let mut carry = Some(Carry::program_start());
         let whole: Vec<_> = plans
             .iter()
             .map(|p| block_after(&pred, p, &settings, &mut carry))
@@ -1480,12 +1535,51 @@ mod tests {
                 .filter(|p| p.mv.is_some())
                 .map(|p| (pred, *p))
                 .collect();
-            let mut carry = carry_before(&before, &settings);
+            let from_start = before.len() <= CARRY_LOOKBACK;
+            let mut carry = carry_before(&before, &settings, from_start);
             for (i, p) in plans.iter().enumerate().skip(k) {
                 let r = block_after(&pred, p, &settings, &mut carry);
                 assert_eq!(r, whole[i], "run from block {k}, block {i}");
             }
         }
+    }
+
+    #[test]
+    fn the_first_feed_starts_where_the_positioning_moves_left_the_machine() {
+        // `G0 X Y` at the start of a program leaves Z unknown: X and Y are
+        // solved for a Z that is not where the machine stands. `G43 H1 Z`
+        // then moves Z only. The first feed move starts where these two
+        // left the machine, all three axes now known; at 3 µm the X and Y
+        // solved for the wrong Z are too far off, so it starts with a
+        // takeup point onto its programmed start, and its pieces hold the
+        // tolerance from there.
+        let pred = afm_pred();
+        let plans = afm_plans(&[
+            "G90 G54 G0 X150 Y120",
+            "G43 H1 Z50",
+            "G1 Z5 F500",
+            "G1 X350",
+        ]);
+        let tol = 0.003;
+        let res = run_at(&pred, &plans, tol);
+        let Some(mv) = plans[2].mv else {
+            panic!("no move")
+        };
+        assert!(res[2].takeup, "the first feed starts without a takeup");
+        let nominal = pred.nominal(&mv.start, mv.tool_len_mm).pos;
+        let first = res[2].segments.first().copied().unwrap_or(res[2].end);
+        let got = pred.attained(&first, &mv.dirs, mv.tool_len_mm).pos;
+        assert!(
+            (got - nominal).norm() <= tol,
+            "starts {:.4} mm off",
+            (got - nominal).norm()
+        );
+        // Where the positioning moves left it, it is further off than the
+        // tolerance allows (otherwise this test proves nothing).
+        let mut stands = res[0].end;
+        stands[2] = res[1].end[2];
+        let off = (pred.attained(&stands, &mv.dirs, mv.tool_len_mm).pos - nominal).norm();
+        assert!(off > tol * TAKEUP_SHARE, "stands only {off:.4} mm off");
     }
 
     #[test]
@@ -1621,7 +1715,7 @@ mod tests {
     /// [`block_after`] over `plans` in one run at `tolerance_mm`.
     fn run_at(pred: &ToolPredictor, plans: &[Plan], tolerance_mm: f64) -> Vec<BlockResult> {
         let settings = Settings { tolerance_mm };
-        let mut carry = None;
+        let mut carry = Some(Carry::program_start());
         plans
             .iter()
             .map(|p| match block_after(pred, p, &settings, &mut carry) {

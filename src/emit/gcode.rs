@@ -308,16 +308,22 @@ fn added_line_start(block: &Block, eol: &[u8], out: &mut Vec<u8>) -> usize {
     out.len()
 }
 
-/// Largest ratio of the radius to the centre's distance from the chord at
-/// which a moved arc keeps its `R` word: the centre an `R` word gives moves
-/// by this ratio times the change of the radius, so within about 11.5° of a
-/// half turn (where it exceeds 10) the rounding of `R` and the two slightly
-/// different radii of a compensated arc would put the centre microns off.
+/// Largest gain from a rounding or a correction to the centre an `R` word
+/// gives, at which a moved arc keeps its `R` word. The centre moves by the
+/// ratio of the radius to the centre's distance from the chord times the
+/// change of the radius, so within about 11.5° of a half turn (where that
+/// ratio exceeds 10) the rounding of `R` and the two slightly different
+/// radii of a compensated arc would put the centre microns off. It moves
+/// by the ratio of the radius to the half chord times the rounding of the
+/// end points, so an arc (or piece of one) of less than about 11.5° gets
+/// its centre words too: a piece of a few microns cut off at a reversal
+/// next to the arc's start would otherwise put the centre far off.
 pub const R_FORM_MAX_GAIN: f64 = 10.0;
 
 /// An `R` word can carry the centre of `arc` (see [`R_FORM_MAX_GAIN`]).
 fn r_form_holds(arc: &crate::program::interp::ArcGeom) -> bool {
-    (arc.sweep / 2.0).cos().abs() * R_FORM_MAX_GAIN >= 1.0
+    let half = arc.sweep / 2.0;
+    half.cos().abs() * R_FORM_MAX_GAIN >= 1.0 && half.sin().abs() * R_FORM_MAX_GAIN >= 1.0
 }
 
 impl Emitter {
@@ -1194,6 +1200,35 @@ fn insert_point_for_axes(block: &Block) -> Slot {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn r_words_are_kept_only_where_they_fix_the_centre() {
+        // The centre of an `R` arc is 10× as sensitive as its radius at
+        // 2·acos(0.1) = 168.5°, and 10× as sensitive as its end points at
+        // 2·asin(0.1) = 11.5°: kept between the two, and for the mirror
+        // images beyond a half turn.
+        let arc = |deg: f64| crate::program::interp::ArcGeom {
+            plane: crate::program::interp::Plane::XY,
+            center: Vector3::zeros(),
+            sweep: deg.to_radians(),
+            radius: 2.0,
+        };
+        for (deg, holds) in [
+            (0.1, false),
+            (11.0, false),
+            (12.0, true),
+            (90.0, true),
+            (-90.0, true),
+            (168.0, true),
+            (169.0, false),
+            (191.0, false),
+            (192.0, true),
+            (-348.0, true),
+            (-349.0, false),
+        ] {
+            assert_eq!(r_form_holds(&arc(deg)), holds, "{deg}°");
+        }
+    }
 
     #[test]
     fn power_table_is_powi() {
