@@ -226,7 +226,7 @@ fn the_grammar_directive_example_runs_and_bad_directives_are_located() {
         .expect("run");
     assert_eq!(out.status.code(), Some(2));
     let err = String::from_utf8_lossy(&out.stderr);
-    assert!(err.contains("bad.nc:2:12: unknown key `SPEED`"), "{err}");
+    assert!(err.contains("bad.nc:2:38: unknown key `SPEED`"), "{err}");
     let bad = write(dir.path(), "bad2.nc", "(POSTPROC MILLING DEPTH=-2)\n");
     let out = postproc()
         .args(["check"])
@@ -237,7 +237,7 @@ fn the_grammar_directive_example_runs_and_bad_directives_are_located() {
         .expect("run");
     assert_eq!(out.status.code(), Some(2));
     assert!(
-        String::from_utf8_lossy(&out.stderr).contains("bad2.nc:1:1: `DEPTH=-2`"),
+        String::from_utf8_lossy(&out.stderr).contains("bad2.nc:1:19: `DEPTH=-2`"),
         "{}",
         String::from_utf8_lossy(&out.stderr)
     );

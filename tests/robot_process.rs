@@ -7,9 +7,11 @@ use std::path::{Path, PathBuf};
 
 use approx::assert_abs_diff_eq;
 use nalgebra::{Isometry3, Vector3};
-use postproc::machine::robot::process::{CutSettings, Directives, travel_direction};
+use postproc::machine::robot::process::travel_direction;
 use postproc::machine::robot::{ForceModel, IkSelect, Model, Robot};
+use postproc::process::CutSettings;
 use postproc::process::MillingCache;
+use postproc::program::rapid::directives::Directives;
 
 use crate::common::{postproc, repo};
 

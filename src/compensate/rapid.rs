@@ -25,9 +25,7 @@ use crate::emit::rapid::{
 };
 use crate::error::{Error, Located, Result};
 use crate::machine::robot::pose::pose_from_abb;
-use crate::machine::robot::process::{
-    CutSettings, Directives, feed_frame_vector, plunge_direction, travel_direction,
-};
+use crate::machine::robot::process::{feed_frame_vector, plunge_direction, travel_direction};
 use crate::machine::robot::thermal::{
     Segment, TimeLineTotals, effective_power, effective_power_from,
 };
@@ -35,7 +33,9 @@ use crate::machine::robot::{
     Compensation, ConfData, Deviation, DhGrowth, Effects, ForceFrame, ForceModel, IkSelect, Model,
     PointMass, ProcessWrench, Robot, RobotError, Seed, ThermalStart,
 };
+use crate::process::CutSettings;
 use crate::process::MillingCache;
+use crate::program::rapid::directives::Directives;
 use crate::program::rapid::{
     DataValue, Decl, JointTarget, Module, Move, MoveKind, Number, Pose, RobTarget, Scalar, Target,
     parse_module,

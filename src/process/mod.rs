@@ -28,6 +28,19 @@
 pub mod limits;
 mod table;
 
+/// Cutting settings a program sets from a position on (`POSTPROC MILLING`
+/// directives, see `crate::program::directive`); `None` keeps the machine
+/// file's (or the command line's) value.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct CutSettings {
+    /// Axial depth of cut, mm.
+    pub depth_mm: Option<f64>,
+    /// Radial width of cut, mm.
+    pub width_mm: Option<f64>,
+    /// Spindle speed, 1/min.
+    pub spindle_rpm: Option<f64>,
+}
+
 pub use table::ForceTable;
 
 use std::f64::consts::PI;

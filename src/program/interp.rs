@@ -1316,60 +1316,32 @@ impl Interpreter {
     }
 
     /// Reads `(POSTPROC MILLING DEPTH=d WIDTH=w)` directive comments (values
-    /// in program units, either key optional; modal until the next one).
+    /// in program units, either key optional; modal until the next one),
+    /// with [`crate::program::directive::read`].
     fn directives(&mut self, block: &Block, text: &[u8]) -> Result<(), Located> {
         for c in &block.comments {
             let raw = text.get(c.start as usize..c.end as usize).unwrap_or(b"");
             let body = String::from_utf8_lossy(raw);
-            let body = body.trim_start_matches(['(', ';']).trim_end_matches(')');
-            let mut tokens = body.split_whitespace();
-            // Only `POSTPROC MILLING …` is a directive; any other comment
-            // (including other text after POSTPROC) is left alone.
-            match (tokens.next(), tokens.next()) {
-                (Some(a), Some(b))
-                    if a.eq_ignore_ascii_case("POSTPROC") && b.eq_ignore_ascii_case("MILLING") => {}
-                _ => continue,
-            }
-            let at =
-                |msg: String| Located::new(&self.file, block.line_no, c.start as usize + 1, msg);
-            let mut any = false;
-            for t in tokens {
-                let (k, v) = t.split_once('=').ok_or_else(|| {
-                    at(format!(
-                        "expected KEY=VALUE, found `{t}` in `{}`",
-                        body.trim()
-                    ))
-                })?;
-                let slot = if k.eq_ignore_ascii_case("DEPTH") {
-                    0
-                } else if k.eq_ignore_ascii_case("WIDTH") {
-                    1
-                } else {
-                    return Err(at(format!(
-                        "unknown key `{k}` in `{}` (expected DEPTH or WIDTH)",
-                        body.trim()
-                    )));
-                };
-                let x: f64 = v
-                    .parse()
-                    .ok()
-                    .filter(|x: &f64| x.is_finite() && *x >= 0.0)
-                    .ok_or_else(|| at(format!("`{t}`: the value must be a length of 0 or more")))?;
-                let scale = self.scale();
-                let max = crate::process::limits::CUT_MAX_MM;
-                if x * scale > max {
-                    return Err(at(format!("`{t}`: more than {max} mm of cut")));
+            let open = body.get(..1).unwrap_or("");
+            let inner = body.get(1..).unwrap_or("");
+            let inner = if open == "(" {
+                inner.strip_suffix(')').unwrap_or(inner)
+            } else {
+                inner
+            };
+            let cur = crate::process::CutSettings {
+                depth_mm: self.milling_mm[0],
+                width_mm: self.milling_mm[1],
+                spindle_rpm: None,
+            };
+            match crate::program::directive::read(inner, false, self.scale(), cur) {
+                Ok(None) => {}
+                Ok(Some(set)) => self.milling_mm = [set.depth_mm, set.width_mm],
+                Err(r) => {
+                    // Columns are 1-based: the opener is at `c.start + 1`.
+                    let col = c.start as usize + 1 + r.word_at.map_or(0, |off| 1 + off);
+                    return Err(Located::new(&self.file, block.line_no, col, r.message));
                 }
-                if let Some(m) = self.milling_mm.get_mut(slot) {
-                    *m = Some(x * scale);
-                }
-                any = true;
-            }
-            if !any {
-                return Err(at(format!(
-                    "`{}` sets nothing (expected DEPTH=… and/or WIDTH=…)",
-                    body.trim()
-                )));
             }
         }
         Ok(())

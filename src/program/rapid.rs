@@ -13,6 +13,7 @@
 //! statement with its span. The accepted subset is documented in
 //! `grammar/rapid.md`. Keywords are case-insensitive, as in RAPID.
 
+pub mod directives;
 mod parser;
 mod typed;
 pub mod windows;

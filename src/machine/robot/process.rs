@@ -14,7 +14,8 @@
 //! Which moves cut or drill is decided by the RAPID pipeline with
 //! [`plunge_direction`], [`travel_direction`] and the methods of
 //! [`ProcessForce`]; depth, width and spindle speed can be set per program
-//! by a `! POSTPROC MILLING …` directive ([`Directives`]).
+//! by a `! POSTPROC MILLING …` directive
+//! (`crate::program::rapid::directives`).
 
 use std::sync::Arc;
 
@@ -22,7 +23,8 @@ use nalgebra::Vector3;
 
 use super::raw::{RawForceFrame, RawForceModel, RawProcessForce, RawWrench, RawWrenchFrame};
 use super::{ProcessWrench, Robot};
-use crate::error::{Error, Invalid, Located, Result};
+use crate::error::{Invalid, Result};
+use crate::process::CutSettings;
 use crate::process::{self, CutState, Drilling, ForceTable, Frame, Milling, MillingCache};
 
 /// Default largest feed per revolution still taken as drilling, mm/rev: a
@@ -33,10 +35,6 @@ pub const DEFAULT_MAX_FEED_MM_PER_REV: f64 = 0.5;
 pub const DEFAULT_AXIS_TOLERANCE_DEG: f64 = 3.0;
 /// Default number of flutes (a twist drill has two).
 pub const DEFAULT_FLUTES: u32 = 2;
-/// Largest accepted depth or width of cut in a directive, mm.
-const MAX_CUT_MM: f64 = crate::process::limits::CUT_MAX_MM;
-/// Largest accepted spindle speed, 1/min.
-const MAX_RPM: f64 = crate::process::limits::SPINDLE_MAX_RPM;
 
 /// Frame a constant force is given in.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -90,18 +88,6 @@ pub struct ProcessForce {
     pub flutes: u32,
     /// Largest angle between a move and the tool axis for a plunge, rad.
     pub axis_tolerance_rad: f64,
-}
-
-/// Cutting settings of a program position (from [`Directives`]); `None`
-/// keeps the machine file's (or the command line's) value.
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
-pub struct CutSettings {
-    /// Axial depth of cut, mm.
-    pub depth_mm: Option<f64>,
-    /// Radial width of cut, mm.
-    pub width_mm: Option<f64>,
-    /// Spindle speed, 1/min.
-    pub spindle_rpm: Option<f64>,
 }
 
 impl ProcessForce {
@@ -444,137 +430,6 @@ pub fn travel_direction(
     // Circumcentre of the three points.
     let c = p0 + (v.cross(&w) * u.norm_squared() + w.cross(&u) * v.norm_squared()) / (2.0 * w2);
     w.cross(&(p1 - c))
-}
-
-/// `! POSTPROC MILLING KEY=VALUE …` directive comments of a RAPID module, in
-/// line order: each sets the axial depth (`DEPTH`, mm), radial width
-/// (`WIDTH`, mm) and spindle speed (`RPM`, 1/min) that the process-force
-/// models use from its line on, over the machine file's values.
-#[derive(Debug, Clone, PartialEq, Default)]
-pub struct Directives {
-    /// Settings in force from each directive's line on (cumulative).
-    at: Vec<(usize, CutSettings)>,
-}
-
-impl Directives {
-    /// Finds the directives of a module's text. Errors (`file:line:col`)
-    /// for an unknown key, a bad value or a directive without keys.
-    pub fn parse(src: &str, file: &str) -> Result<Directives> {
-        Self::parse_lines(src, file, 1, CutSettings::default())
-    }
-
-    /// [`Directives::parse`] of a piece of a module whose first line is
-    /// line `first_line` of the file, with the settings `start` in force
-    /// before it (those of the pieces before, for a module read a window at
-    /// a time). The settings in force at its end are [`Directives::last`].
-    pub fn parse_lines(
-        src: &str,
-        file: &str,
-        first_line: usize,
-        start: CutSettings,
-    ) -> Result<Directives> {
-        let mut at = Vec::new();
-        if start != CutSettings::default() {
-            at.push((0, start));
-        }
-        let mut cur = start;
-        for (k, line) in (first_line - 1..).zip(src.lines()) {
-            let Some(bang) = crate::program::rapid::comment_start(line) else {
-                continue;
-            };
-            let body = line.get(bang + 1..).unwrap_or("");
-            let mut words = word_spans(body);
-            let is_directive = matches!(
-                (words.next(), words.next()),
-                (Some((_, a)), Some((_, b)))
-                    if a.eq_ignore_ascii_case("POSTPROC") && b.eq_ignore_ascii_case("MILLING")
-            );
-            if !is_directive {
-                continue;
-            }
-            let err = |off: usize, msg: String| {
-                Error::Input(Located::new(file, k + 1, bang + 1 + off + 1, msg))
-            };
-            let mut any = false;
-            for (off, word) in words {
-                let (key, value) = word.split_once('=').ok_or_else(|| {
-                    err(
-                        off,
-                        format!("`{word}`: expected KEY=VALUE (DEPTH, WIDTH, RPM)"),
-                    )
-                })?;
-                let v: f64 = value
-                    .parse()
-                    .ok()
-                    .filter(|v: &f64| v.is_finite())
-                    .ok_or_else(|| err(off, format!("`{word}`: `{value}` is not a number")))?;
-                match key.to_ascii_uppercase().as_str() {
-                    "DEPTH" | "WIDTH" if !(0.0..=MAX_CUT_MM).contains(&v) => {
-                        return Err(err(
-                            off,
-                            format!("`{word}`: must be a length within 0..{MAX_CUT_MM} mm"),
-                        ));
-                    }
-                    "DEPTH" => cur.depth_mm = Some(v),
-                    "WIDTH" => cur.width_mm = Some(v),
-                    "RPM" if v <= 0.0 || v > MAX_RPM => {
-                        return Err(err(
-                            off,
-                            format!("`{word}`: must be a spindle speed in (0, {MAX_RPM}] 1/min"),
-                        ));
-                    }
-                    "RPM" => cur.spindle_rpm = Some(v),
-                    _ => {
-                        return Err(err(
-                            off,
-                            format!("unknown key `{key}` (expected DEPTH, WIDTH or RPM)"),
-                        ));
-                    }
-                }
-                any = true;
-            }
-            if !any {
-                return Err(Error::Input(Located::new(
-                    file,
-                    k + 1,
-                    bang + 1,
-                    "POSTPROC MILLING directive without a key (DEPTH, WIDTH, RPM)",
-                )));
-            }
-            at.push((k + 1, cur));
-        }
-        Ok(Directives { at })
-    }
-
-    /// The settings in force on 1-based `line` (a directive on the same
-    /// line counts).
-    pub fn at(&self, line: usize) -> CutSettings {
-        let n = self.at.partition_point(|(l, _)| *l <= line);
-        n.checked_sub(1)
-            .and_then(|i| self.at.get(i))
-            .map_or_else(CutSettings::default, |(_, s)| *s)
-    }
-
-    /// The settings in force after the last directive (the defaults
-    /// without one).
-    pub fn last(&self) -> CutSettings {
-        self.at
-            .last()
-            .map_or_else(CutSettings::default, |(_, s)| *s)
-    }
-
-    /// True without directives.
-    pub fn is_empty(&self) -> bool {
-        self.at.is_empty()
-    }
-}
-
-/// Whitespace-separated words of `s` with their byte offsets.
-fn word_spans(s: &str) -> impl Iterator<Item = (usize, &str)> {
-    s.split_ascii_whitespace().map(move |w| {
-        let off = w.as_ptr() as usize - s.as_ptr() as usize;
-        (off, w)
-    })
 }
 
 /// Direction of a straight move relative to the tool axis `z_tool` (unit):
