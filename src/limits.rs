@@ -8,6 +8,32 @@ use std::path::Path;
 
 use crate::error::{Error, Located};
 
+/// Convergence of the inverse solve on the tool-tip position, mm.
+pub const SOLVE_TOL_MM: f64 = 1e-7;
+
+/// Smallest accepted tolerance of the attained path, mm: ten times the
+/// solver's convergence ([`SOLVE_TOL_MM`]), which bounds the gap at the
+/// solved ends of every piece; below it no piece could be proven within
+/// the tolerance.
+pub const MIN_TOLERANCE_MM: f64 = 10.0 * SOLVE_TOL_MM;
+
+/// Largest accepted tolerance of the attained path, mm.
+pub const MAX_TOLERANCE_MM: f64 = 1.0;
+
+/// A tolerance of the attained path (`compensation.tolerance_mm`,
+/// `--tolerance`): within [[`MIN_TOLERANCE_MM`], [`MAX_TOLERANCE_MM`]]; the
+/// message otherwise, without the key or flag name.
+pub fn tolerance_mm(v: f64) -> Result<f64, String> {
+    if v.is_finite() && (MIN_TOLERANCE_MM..=MAX_TOLERANCE_MM).contains(&v) {
+        Ok(v)
+    } else {
+        Err(format!(
+            "`{}` is not a tolerance within [{MIN_TOLERANCE_MM}, {MAX_TOLERANCE_MM}] mm (the solver converges to {SOLVE_TOL_MM} mm)",
+            crate::error::show_number(v)
+        ))
+    }
+}
+
 /// Longest input line, bytes (end of line excluded): G-code, RAPID and
 /// observation CSV alike. Memory held for a line is bounded by it.
 pub const LINE_MAX_BYTES: usize = 1 << 20;

@@ -16,15 +16,9 @@ use crate::machine::{AxisVec, DirVec, TipPose};
 use crate::predict::{BlockContext, Breakdown, LipschitzBound, ToolPredictor};
 use crate::program::interp::{Motion, Move, Plan, PlanKind};
 
-/// Convergence of the inverse solve on the tool-tip position, mm.
-pub const SOLVE_TOL_MM: f64 = 1e-7;
+pub use crate::limits::{MIN_TOLERANCE_MM, SOLVE_TOL_MM};
 /// Convergence of the inverse solve on the tool direction, rad.
 pub const SOLVE_TOL_RAD: f64 = 1e-8;
-/// Smallest accepted tolerance of the attained path, mm: ten times the
-/// solver's convergence ([`SOLVE_TOL_MM`]), which bounds the gap at the
-/// solved ends of every piece; below it no piece could be proven within
-/// the tolerance.
-pub const MIN_TOLERANCE_MM: f64 = 10.0 * SOLVE_TOL_MM;
 /// Largest number of solver iterations before a block is reported.
 pub const MAX_ITER: usize = 50;
 /// Deepest bisection of one move (2^16 segments).

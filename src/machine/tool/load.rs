@@ -58,22 +58,9 @@ fn locate_invalid(text: &str, file: &str, inv: Invalid) -> crate::error::Error {
     }
 }
 
-/// A compensation tolerance: within [`crate::compensate::MIN_TOLERANCE_MM`]
-/// and 1 mm.
+/// A compensation tolerance ([`crate::limits::tolerance_mm`]).
 fn tolerance(path: &str, v: f64) -> V<f64> {
-    let min = crate::compensate::MIN_TOLERANCE_MM;
-    if v.is_finite() && (min..=1.0).contains(&v) {
-        Ok(v)
-    } else {
-        Err(Invalid::new(
-            path,
-            format!(
-                "`{}` is not a tolerance within [{min}, 1] mm (the solver converges to {} mm)",
-                crate::error::show_number(v),
-                crate::compensate::SOLVE_TOL_MM
-            ),
-        ))
-    }
+    crate::limits::tolerance_mm(v).map_err(|m| Invalid::new(path, m))
 }
 
 fn finite(path: &str, v: f64) -> V<f64> {
