@@ -15,6 +15,7 @@
 
 pub mod directives;
 mod parser;
+pub mod resolve;
 mod typed;
 pub mod windows;
 
