@@ -493,3 +493,100 @@ fn compensate_refuses_a_report_path_that_would_replace_a_program() {
     assert_eq!(std::fs::read(&input).expect("read"), before);
     assert!(!out.exists());
 }
+
+/// Widest line of the text report, characters.
+const TABLE_COLUMNS: usize = 120;
+
+fn report_of(program: &str, machine: &str, format: &str) -> String {
+    let p = repo(program);
+    run(&[
+        "report",
+        p.to_str().expect("utf-8 path"),
+        "--machine",
+        machine,
+        "--format",
+        format,
+    ])
+}
+
+#[test]
+fn text_report_fits_120_columns_and_csv_json_keep_every_column() {
+    for (program, machine) in [
+        ("samples/part.nc", "afm-r1000"),
+        ("samples/drilling.mod", "abb-irb1600"),
+        ("samples/milling.mod", "abb-irb1600"),
+    ] {
+        let table = report_of(program, machine, "table");
+        for l in table.lines() {
+            assert!(
+                l.chars().count() <= TABLE_COLUMNS,
+                "{program}: {} characters: {l}",
+                l.chars().count()
+            );
+        }
+        // Every table column is a CSV column of the same name, and the
+        // values agree row by row.
+        let csv = report_of(program, machine, "csv");
+        let csv_header: Vec<&str> = csv.lines().next().unwrap_or("").split(',').collect();
+        let table_header: Vec<&str> = table
+            .lines()
+            .next()
+            .unwrap_or("")
+            .split_whitespace()
+            .collect();
+        for h in &table_header {
+            assert!(csv_header.contains(h), "{program}: {h} not in CSV");
+        }
+        let csv_rows: Vec<Vec<&str>> = csv
+            .lines()
+            .skip(1)
+            .filter(|l| !l.starts_with('#'))
+            .map(|l| l.split(',').collect())
+            .collect();
+        let table_rows: Vec<Vec<&str>> = table
+            .lines()
+            .skip(1)
+            .take(csv_rows.len())
+            .map(|l| l.split_whitespace().collect())
+            .collect();
+        assert_eq!(table_rows.len(), csv_rows.len(), "{program}");
+        let dev_t = table_header
+            .iter()
+            .position(|h| *h == "dev_mm")
+            .expect("dev_mm");
+        let dev_c = csv_header
+            .iter()
+            .position(|h| *h == "dev_mm")
+            .expect("dev_mm");
+        for (t, c) in table_rows.iter().zip(&csv_rows) {
+            assert_eq!(t.first(), c.first(), "{program}: same line");
+            assert_eq!(t.get(dev_t), c.get(dev_c), "{program}: same dev_mm");
+        }
+        // The columns left out of the table are in CSV and JSON.
+        let json: serde_json::Value =
+            serde_json::from_str(&report_of(program, machine, "json")).expect("JSON report");
+        let row = &json["rows"][0];
+        for col in ["dx_mm", "dy_mm", "dz_mm", "orient_urad"] {
+            assert!(csv_header.contains(&col), "{program}: {col} not in CSV");
+            assert!(
+                !table_header.contains(&col),
+                "{program}: {col} in the table"
+            );
+        }
+        assert_eq!(row["deviation_mm"].as_array().map(Vec::len), Some(3));
+        assert!(row["orient_urad"].is_number(), "{row}");
+        if program.ends_with(".nc") {
+            assert!(csv_header.contains(&"residual_mm"));
+            assert!(!table_header.contains(&"residual_mm"));
+            assert!(row["residual_mm"].is_number(), "{row}");
+        }
+        // The provenance is a block of `key: value` lines.
+        assert!(table.lines().any(|l| l == "provenance:"), "{table}");
+        assert!(
+            table
+                .lines()
+                .any(|l| l.starts_with("  machine sha256: ") && l.len() == 18 + 64),
+            "{table}"
+        );
+    }
+}

@@ -170,6 +170,31 @@ impl Provenance {
         line
     }
 
+    /// The provenance as `key: value` lines, for the end of a table report:
+    /// the fields of [`Provenance::one_line`], one per line, so that none
+    /// is wider than the machine file's name or the effects need.
+    pub fn key_lines(&self) -> Vec<String> {
+        let mut lines = vec![
+            format!("postproc: {}", self.version),
+            format!(
+                "machine: {}{}",
+                self.machine_file,
+                if self.machine_bundled {
+                    " (bundled)"
+                } else {
+                    ""
+                }
+            ),
+            format!("machine sha256: {}", self.machine_sha256),
+            format!("machine status: {}", self.status.describe()),
+            format!("effects: {}", self.effects_text()),
+        ];
+        if let Some(t) = self.tolerance_mm {
+            lines.push(format!("tolerance: {} mm", fmt_mm(t)));
+        }
+        lines
+    }
+
     /// `geometric 1, static 1, thermal 0.8, dynamic 1 reported only`.
     pub fn effects_text(&self) -> String {
         let parts: Vec<String> = self
