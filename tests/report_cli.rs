@@ -410,7 +410,9 @@ fn svg_of_a_long_program_is_decimated() {
         .map(|n| polyline_points(&n))
         .sum();
     assert!(points > 1000, "{points}");
-    assert!(points <= 3 * 2 * 4001 + 200, "{points}");
+    // Five series of at most 2 × 4001 kept points: plan and side view,
+    // the deviation along the program, and the before/after panel's two.
+    assert!(points <= 5 * 2 * 4001 + 200, "{points}");
 }
 
 #[test]
@@ -589,4 +591,134 @@ fn text_report_fits_120_columns_and_csv_json_keep_every_column() {
             "{table}"
         );
     }
+}
+
+/// Points `(x, y)` of the polyline of the SVG group with this id.
+fn series(doc: &roxmltree::Document, id: &str) -> Option<Vec<(f64, f64)>> {
+    let g = doc.descendants().find(|n| n.attribute("id") == Some(id))?;
+    let line = g.children().find(|n| n.tag_name().name() == "polyline")?;
+    line.attribute("points")?
+        .split_whitespace()
+        .map(|p| {
+            let (x, y) = p.split_once(',')?;
+            Some((x.parse().ok()?, y.parse().ok()?))
+        })
+        .collect()
+}
+
+/// The CSV rows of a report as maps from column name to cell.
+fn csv_rows(csv: &str) -> Vec<std::collections::HashMap<String, String>> {
+    let mut lines = csv.lines().filter(|l| !l.starts_with('#'));
+    let header: Vec<&str> = lines.next().unwrap_or("").split(',').collect();
+    lines
+        .map(|l| {
+            header
+                .iter()
+                .zip(l.split(','))
+                .map(|(h, c)| (h.to_string(), c.to_string()))
+                .collect()
+        })
+        .collect()
+}
+
+/// A cutting move: neither a rapid, a move to a machine-defined place nor
+/// a robot joint move.
+fn cutting(motion: &str) -> bool {
+    !matches!(motion, "rapid" | "fixed" | "MoveJ" | "MoveAbsJ")
+}
+
+/// Pixels the before/after points may be off the common scale: the
+/// CSV's 5-decimal rounding and the SVG's 1-decimal coordinates.
+const PIXEL_TOL: f64 = 0.5;
+
+#[test]
+fn svg_before_after_panel_has_a_point_per_cutting_move_on_one_scale() {
+    let svg = part_report("svg");
+    let doc = roxmltree::Document::parse(&svg).expect("SVG parses as XML");
+    let panel = doc
+        .descendants()
+        .find(|n| n.attribute("id") == Some("before-after"))
+        .expect("before/after panel");
+    let legend: String = panel
+        .descendants()
+        .filter(|n| n.tag_name().name() == "text")
+        .filter_map(|n| n.text())
+        .collect::<Vec<_>>()
+        .join("|");
+    assert!(legend.contains("before compensation"), "{legend}");
+    assert!(legend.contains("after compensation"), "{legend}");
+    let text: String = doc
+        .descendants()
+        .filter(|n| n.tag_name().name() == "text")
+        .filter_map(|n| n.text())
+        .collect::<Vec<_>>()
+        .join("|");
+    for label in [
+        "before and after compensation",
+        "deviation (mm)",
+        "source line (cutting moves)",
+    ] {
+        assert!(text.contains(label), "{label} missing in {text}");
+    }
+    let before = series(&doc, "before-after-before").expect("before series");
+    let after = series(&doc, "before-after-after").expect("after series");
+    // The cutting moves of the same run, from its CSV report.
+    let rows: Vec<_> = csv_rows(&part_report("csv"))
+        .into_iter()
+        .filter(|r| cutting(&r["motion"]))
+        .collect();
+    let value = |r: &std::collections::HashMap<String, String>, k: &str| -> f64 {
+        r[k].parse().expect("number")
+    };
+    assert_eq!(before.len(), rows.len());
+    assert_eq!(after.len(), rows.len());
+    // One scale: pixel height is linear in the deviation, fitted on the
+    // before series' smallest and largest values, and holds for both.
+    let (lo, hi) =
+        rows.iter()
+            .zip(&before)
+            .fold(((f64::MAX, 0.0), (f64::MIN, 0.0)), |(lo, hi), (r, p)| {
+                let d = value(r, "dev_mm");
+                (
+                    if d < lo.0 { (d, p.1) } else { lo },
+                    if d > hi.0 { (d, p.1) } else { hi },
+                )
+            });
+    assert!(hi.0 > lo.0, "deviations vary");
+    let per_mm = (hi.1 - lo.1) / (hi.0 - lo.0);
+    let y_of = |v: f64| lo.1 + (v - lo.0) * per_mm;
+    assert!(per_mm < 0.0, "larger deviations are higher up");
+    let mut helped = 0;
+    for ((r, b), a) in rows.iter().zip(&before).zip(&after) {
+        let (dev, residual) = (value(r, "dev_mm"), value(r, "residual_mm"));
+        assert_eq!(a.0, b.0, "line {}: same abscissa", r["line"]);
+        assert!((b.1 - y_of(dev)).abs() <= PIXEL_TOL, "line {}", r["line"]);
+        assert!(
+            (a.1 - y_of(residual)).abs() <= PIXEL_TOL,
+            "line {}",
+            r["line"]
+        );
+        // Where the compensation is expected to help (residual clearly
+        // below the deviation), the after point is lower on the page.
+        if residual < dev / 2.0 {
+            helped += 1;
+            assert!(a.1 > b.1, "line {}: {a:?} not below {b:?}", r["line"]);
+        }
+    }
+    assert!(helped > rows.len() / 2, "{helped} of {}", rows.len());
+    // Program order along the x axis.
+    assert!(before.windows(2).all(|w| w[0].0 < w[1].0));
+
+    // A robot program: the before series only (no residual is reported).
+    let svg = drilling_report("svg");
+    let doc = roxmltree::Document::parse(&svg).expect("SVG parses as XML");
+    let cuts = csv_rows(&drilling_report("csv"))
+        .iter()
+        .filter(|r| cutting(&r["motion"]))
+        .count();
+    assert_eq!(
+        series(&doc, "before-after-before").map(|s| s.len()),
+        Some(cuts)
+    );
+    assert!(series(&doc, "before-after-after").is_none());
 }

@@ -486,6 +486,7 @@ impl<'w> ReportWriter<'w> {
                     pos: r.position_mm,
                     dev,
                     rapid,
+                    residual: r.residual_mm,
                 };
                 if let Some(plot) = self.plot.as_mut() {
                     plot.push(p);
