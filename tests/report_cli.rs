@@ -582,6 +582,18 @@ fn text_report_fits_120_columns_and_csv_json_keep_every_column() {
             assert!(!table_header.contains(&"residual_mm"));
             assert!(row["residual_mm"].is_number(), "{row}");
         }
+        // Every format says what the positions are.
+        let (frame, label) = if program.ends_with(".nc") {
+            ("machine", "positions: machine coordinates")
+        } else {
+            ("world", "positions: programmed TCP, world frame")
+        };
+        assert_eq!(json["positions"], frame, "{program}");
+        assert!(table.lines().any(|l| l.starts_with(label)), "{table}");
+        assert!(
+            csv.lines().any(|l| l.starts_with(&format!("# {label}"))),
+            "{csv}"
+        );
         // The provenance is a block of `key: value` lines.
         assert!(table.lines().any(|l| l == "provenance:"), "{table}");
         assert!(

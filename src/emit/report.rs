@@ -408,10 +408,11 @@ impl<'w> ReportWriter<'w> {
                     .collect();
                 write!(
                     w.out,
-                    "{{\"file\":{},\"kind\":{},\"axes\":[{}],\"effects\":[{}],\"rows\":[",
+                    "{{\"file\":{},\"kind\":{},\"axes\":[{}],\"positions\":{},\"effects\":[{}],\"rows\":[",
                     json_str(&w.file),
                     json_str(w.layout.kind),
                     axes.join(","),
+                    json_str(w.positions_frame()),
                     effects.join(",")
                 )
                 .map_err(io)?
@@ -601,6 +602,15 @@ impl<'w> ReportWriter<'w> {
         })
     }
 
+    /// The frame of the position columns: `machine` or `world`.
+    fn positions_frame(&self) -> &'static str {
+        if self.layout.kind == "rapid" {
+            "world"
+        } else {
+            "machine"
+        }
+    }
+
     /// What the position columns are.
     fn positions_label(&self) -> &'static str {
         if self.layout.kind == "rapid" {
@@ -779,6 +789,7 @@ impl<'w> ReportWriter<'w> {
                 if let Some(p) = self.positioning_line() {
                     groups.push_str(&format!("; {p}"));
                 }
+                writeln!(self.out, "# positions: {}", self.positions_label()).map_err(io)?;
                 writeln!(self.out, "# {groups}").map_err(io)?;
                 writeln!(self.out, "{line}").map_err(io)?;
                 if let Some(p) = &self.provenance {
