@@ -521,6 +521,36 @@ mod tests {
         }
     }
 
+    #[test]
+    fn key_lines_hold_the_one_line_fields_one_per_line() {
+        let p = provenance();
+        let lines = p.key_lines();
+        let keys: Vec<&str> = lines
+            .iter()
+            .map(|l| l.split_once(": ").map_or("", |(k, _)| k))
+            .collect();
+        assert_eq!(
+            keys,
+            [
+                "postproc",
+                "machine",
+                "machine sha256",
+                "machine status",
+                "effects",
+                "tolerance"
+            ]
+        );
+        // The same values as the one-line form.
+        let one = p.one_line();
+        for l in &lines {
+            let (_, value) = l.split_once(": ").unwrap_or_default();
+            assert!(one.contains(value), "{value} not in {one}");
+        }
+        let mut p = p;
+        p.tolerance_mm = None;
+        assert!(p.key_lines().iter().all(|l| !l.starts_with("tolerance")));
+    }
+
     fn through(program: &[u8], rapid: bool, chunk: usize) -> Vec<u8> {
         let mut out = Vec::new();
         let mut w = HeaderWriter::new(&mut out, provenance(), rapid);

@@ -782,6 +782,41 @@ mod tests {
         assert_eq!(clip((11.0, 11.0), (20.0, 30.0), r), None);
     }
 
+    /// Points of the polyline in the SVG group `id` (`None` without one).
+    fn group_points(svg: &str, id: &str) -> Option<usize> {
+        let at = svg.find(&format!("<g id=\"{id}\""))?;
+        let rest = &svg[at..];
+        let end = rest.find("</g>")?;
+        let line = rest[..end].split("points=\"").nth(1)?;
+        Some(line.split('"').next()?.split_whitespace().count())
+    }
+
+    #[test]
+    fn before_after_panel_takes_the_cutting_moves_only() {
+        // Ten moves, every third a rapid: seven cutting moves.
+        let points: Vec<PlotPoint> = (1..=10)
+            .map(|i| PlotPoint {
+                rapid: i % 3 == 0,
+                ..pt(i, 0.01 * i as f64)
+            })
+            .collect();
+        let svg = render(&points, &[], "t").expect("renders");
+        assert_eq!(group_points(&svg, "before-after-before"), Some(7));
+        assert_eq!(group_points(&svg, "before-after-after"), Some(7));
+        assert!(svg.trim_end().ends_with("</svg>"));
+        // Without residuals (robot programs): the before series alone.
+        let robot: Vec<PlotPoint> = points
+            .iter()
+            .map(|p| PlotPoint {
+                residual: None,
+                ..*p
+            })
+            .collect();
+        let svg = render(&robot, &[], "t").expect("renders");
+        assert_eq!(group_points(&svg, "before-after-before"), Some(7));
+        assert_eq!(group_points(&svg, "before-after-after"), None);
+    }
+
     #[test]
     fn colour_map_ends() {
         assert_eq!(colour(0.0), RGBColor(68, 1, 84));
