@@ -637,9 +637,10 @@ fn report_option_writes_a_csv_beside_the_program() {
         rep.to_str().unwrap(),
     ]);
     let csv = std::fs::read_to_string(rep).unwrap();
-    // One header, 54 motion rows (as `check` counts them), the cutting-move
-    // headline, the summary line and the provenance line.
-    assert_eq!(csv.lines().count(), 1 + 54 + 1 + 1 + 1);
+    // One header, 54 motion rows (as `check` counts them), the positions'
+    // frame, the cutting-move headline, the summary line and the
+    // provenance line.
+    assert_eq!(csv.lines().count(), 1 + 54 + 1 + 1 + 1 + 1);
     assert!(
         csv.lines()
             .last()

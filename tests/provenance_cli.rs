@@ -463,16 +463,44 @@ fn report_headline_is_about_the_cutting_moves_with_positioning_moves_apart() {
         .output()
         .unwrap();
     let text = String::from_utf8_lossy(&table.stdout);
-    let headline = text
-        .lines()
-        .find(|l| l.starts_with("cutting moves ("))
+    let lines: Vec<&str> = text.lines().collect();
+    let at = lines
+        .iter()
+        .position(|l| l.starts_with("cutting moves ("))
         .unwrap_or_else(|| panic!("{text}"));
+    let headline = lines[at];
     assert!(
-        headline.contains(&format!("(line {cut_line})"))
-            && headline.contains("rapids and machine-defined moves")
-            && headline.ends_with(&format!("(line {pos_line})")),
+        headline.contains(&format!("(line {cut_line}),")) && !headline.contains("rapid"),
         "{headline}"
     );
-    assert!(text.contains("\nworst cutting blocks:\n"), "{text}");
+    // The rapids and machine-defined moves on their own line, next.
+    let positioning = lines.get(at + 1).copied().unwrap_or("");
+    assert!(
+        positioning.starts_with("rapids and machine-defined moves (")
+            && positioning.ends_with(&format!("(line {pos_line})")),
+        "{positioning}"
+    );
+    // The worst cutting blocks come before the positioning moves' and
+    // hold no positioning move.
+    let cut_at = lines.iter().position(|l| *l == "worst cutting blocks:");
+    let pos_at = lines
+        .iter()
+        .position(|l| *l == "worst rapids and machine-defined moves:");
+    let (Some(cut_at), Some(pos_at)) = (cut_at, pos_at) else {
+        panic!("{text}");
+    };
+    assert!(cut_at < pos_at, "{text}");
+    let listed = &lines[cut_at + 1..pos_at];
+    assert!(!listed.is_empty());
+    assert!(
+        listed
+            .iter()
+            .all(|l| l.starts_with("  line ") && !l.contains(" rapid ") && !l.contains(" fixed ")),
+        "{text}"
+    );
+    assert!(
+        listed[0].starts_with(&format!("  line {cut_line} ")),
+        "{text}"
+    );
     assert!(text.contains("\npositions: machine coordinates"), "{text}");
 }

@@ -410,7 +410,9 @@ fn svg_of_a_long_program_is_decimated() {
         .map(|n| polyline_points(&n))
         .sum();
     assert!(points > 1000, "{points}");
-    assert!(points <= 3 * 2 * 4001 + 200, "{points}");
+    // Five series of at most 2 × 4001 kept points: plan and side view,
+    // the deviation along the program, and the before/after panel's two.
+    assert!(points <= 5 * 2 * 4001 + 200, "{points}");
 }
 
 #[test]
@@ -492,4 +494,243 @@ fn compensate_refuses_a_report_path_that_would_replace_a_program() {
     }
     assert_eq!(std::fs::read(&input).expect("read"), before);
     assert!(!out.exists());
+}
+
+/// Widest line of the text report, characters.
+const TABLE_COLUMNS: usize = 120;
+
+fn report_of(program: &str, machine: &str, format: &str) -> String {
+    let p = repo(program);
+    run(&[
+        "report",
+        p.to_str().expect("utf-8 path"),
+        "--machine",
+        machine,
+        "--format",
+        format,
+    ])
+}
+
+#[test]
+fn text_report_fits_120_columns_and_csv_json_keep_every_column() {
+    for (program, machine) in [
+        ("samples/part.nc", "afm-r1000"),
+        ("samples/drilling.mod", "abb-irb1600"),
+        ("samples/milling.mod", "abb-irb1600"),
+    ] {
+        let table = report_of(program, machine, "table");
+        for l in table.lines() {
+            assert!(
+                l.chars().count() <= TABLE_COLUMNS,
+                "{program}: {} characters: {l}",
+                l.chars().count()
+            );
+        }
+        // Every table column is a CSV column of the same name, and the
+        // values agree row by row.
+        let csv = report_of(program, machine, "csv");
+        let csv_header: Vec<&str> = csv.lines().next().unwrap_or("").split(',').collect();
+        let table_header: Vec<&str> = table
+            .lines()
+            .next()
+            .unwrap_or("")
+            .split_whitespace()
+            .collect();
+        for h in &table_header {
+            assert!(csv_header.contains(h), "{program}: {h} not in CSV");
+        }
+        let csv_rows: Vec<Vec<&str>> = csv
+            .lines()
+            .skip(1)
+            .filter(|l| !l.starts_with('#'))
+            .map(|l| l.split(',').collect())
+            .collect();
+        let table_rows: Vec<Vec<&str>> = table
+            .lines()
+            .skip(1)
+            .take(csv_rows.len())
+            .map(|l| l.split_whitespace().collect())
+            .collect();
+        assert_eq!(table_rows.len(), csv_rows.len(), "{program}");
+        let dev_t = table_header
+            .iter()
+            .position(|h| *h == "dev_mm")
+            .expect("dev_mm");
+        let dev_c = csv_header
+            .iter()
+            .position(|h| *h == "dev_mm")
+            .expect("dev_mm");
+        for (t, c) in table_rows.iter().zip(&csv_rows) {
+            assert_eq!(t.first(), c.first(), "{program}: same line");
+            assert_eq!(t.get(dev_t), c.get(dev_c), "{program}: same dev_mm");
+        }
+        // The columns left out of the table are in CSV and JSON.
+        let json: serde_json::Value =
+            serde_json::from_str(&report_of(program, machine, "json")).expect("JSON report");
+        let row = &json["rows"][0];
+        for col in ["dx_mm", "dy_mm", "dz_mm", "orient_urad"] {
+            assert!(csv_header.contains(&col), "{program}: {col} not in CSV");
+            assert!(
+                !table_header.contains(&col),
+                "{program}: {col} in the table"
+            );
+        }
+        assert_eq!(row["deviation_mm"].as_array().map(Vec::len), Some(3));
+        assert!(row["orient_urad"].is_number(), "{row}");
+        if program.ends_with(".nc") {
+            assert!(csv_header.contains(&"residual_mm"));
+            assert!(!table_header.contains(&"residual_mm"));
+            assert!(row["residual_mm"].is_number(), "{row}");
+        }
+        // Every format says what the positions are.
+        let (frame, label) = if program.ends_with(".nc") {
+            ("machine", "positions: machine coordinates")
+        } else {
+            ("world", "positions: programmed TCP, world frame")
+        };
+        assert_eq!(json["positions"], frame, "{program}");
+        assert!(table.lines().any(|l| l.starts_with(label)), "{table}");
+        assert!(
+            csv.lines().any(|l| l.starts_with(&format!("# {label}"))),
+            "{csv}"
+        );
+        // The provenance is a block of `key: value` lines.
+        assert!(table.lines().any(|l| l == "provenance:"), "{table}");
+        assert!(
+            table
+                .lines()
+                .any(|l| l.starts_with("  machine sha256: ") && l.len() == 18 + 64),
+            "{table}"
+        );
+    }
+}
+
+/// Points `(x, y)` of the polyline of the SVG group with this id.
+fn series(doc: &roxmltree::Document, id: &str) -> Option<Vec<(f64, f64)>> {
+    let g = doc.descendants().find(|n| n.attribute("id") == Some(id))?;
+    let line = g.children().find(|n| n.tag_name().name() == "polyline")?;
+    line.attribute("points")?
+        .split_whitespace()
+        .map(|p| {
+            let (x, y) = p.split_once(',')?;
+            Some((x.parse().ok()?, y.parse().ok()?))
+        })
+        .collect()
+}
+
+/// The CSV rows of a report as maps from column name to cell.
+fn csv_rows(csv: &str) -> Vec<std::collections::HashMap<String, String>> {
+    let mut lines = csv.lines().filter(|l| !l.starts_with('#'));
+    let header: Vec<&str> = lines.next().unwrap_or("").split(',').collect();
+    lines
+        .map(|l| {
+            header
+                .iter()
+                .zip(l.split(','))
+                .map(|(h, c)| (h.to_string(), c.to_string()))
+                .collect()
+        })
+        .collect()
+}
+
+/// A cutting move: neither a rapid, a move to a machine-defined place nor
+/// a robot joint move.
+fn cutting(motion: &str) -> bool {
+    !matches!(motion, "rapid" | "fixed" | "MoveJ" | "MoveAbsJ")
+}
+
+/// Pixels the before/after points may be off the common scale: the
+/// CSV's 5-decimal rounding and the SVG's 1-decimal coordinates.
+const PIXEL_TOL: f64 = 0.5;
+
+#[test]
+fn svg_before_after_panel_has_a_point_per_cutting_move_on_one_scale() {
+    let svg = part_report("svg");
+    let doc = roxmltree::Document::parse(&svg).expect("SVG parses as XML");
+    let panel = doc
+        .descendants()
+        .find(|n| n.attribute("id") == Some("before-after"))
+        .expect("before/after panel");
+    let legend: String = panel
+        .descendants()
+        .filter(|n| n.tag_name().name() == "text")
+        .filter_map(|n| n.text())
+        .collect::<Vec<_>>()
+        .join("|");
+    assert!(legend.contains("before compensation"), "{legend}");
+    assert!(legend.contains("after compensation"), "{legend}");
+    let text: String = doc
+        .descendants()
+        .filter(|n| n.tag_name().name() == "text")
+        .filter_map(|n| n.text())
+        .collect::<Vec<_>>()
+        .join("|");
+    for label in [
+        "before and after compensation",
+        "deviation (mm)",
+        "source line (cutting moves)",
+    ] {
+        assert!(text.contains(label), "{label} missing in {text}");
+    }
+    let before = series(&doc, "before-after-before").expect("before series");
+    let after = series(&doc, "before-after-after").expect("after series");
+    // The cutting moves of the same run, from its CSV report.
+    let rows: Vec<_> = csv_rows(&part_report("csv"))
+        .into_iter()
+        .filter(|r| cutting(&r["motion"]))
+        .collect();
+    let value = |r: &std::collections::HashMap<String, String>, k: &str| -> f64 {
+        r[k].parse().expect("number")
+    };
+    assert_eq!(before.len(), rows.len());
+    assert_eq!(after.len(), rows.len());
+    // One scale: pixel height is linear in the deviation, fitted on the
+    // before series' smallest and largest values, and holds for both.
+    let (lo, hi) =
+        rows.iter()
+            .zip(&before)
+            .fold(((f64::MAX, 0.0), (f64::MIN, 0.0)), |(lo, hi), (r, p)| {
+                let d = value(r, "dev_mm");
+                (
+                    if d < lo.0 { (d, p.1) } else { lo },
+                    if d > hi.0 { (d, p.1) } else { hi },
+                )
+            });
+    assert!(hi.0 > lo.0, "deviations vary");
+    let per_mm = (hi.1 - lo.1) / (hi.0 - lo.0);
+    let y_of = |v: f64| lo.1 + (v - lo.0) * per_mm;
+    assert!(per_mm < 0.0, "larger deviations are higher up");
+    let mut helped = 0;
+    for ((r, b), a) in rows.iter().zip(&before).zip(&after) {
+        let (dev, residual) = (value(r, "dev_mm"), value(r, "residual_mm"));
+        assert_eq!(a.0, b.0, "line {}: same abscissa", r["line"]);
+        assert!((b.1 - y_of(dev)).abs() <= PIXEL_TOL, "line {}", r["line"]);
+        assert!(
+            (a.1 - y_of(residual)).abs() <= PIXEL_TOL,
+            "line {}",
+            r["line"]
+        );
+        // Where the compensation is expected to help (residual clearly
+        // below the deviation), the after point is lower on the page.
+        if residual < dev / 2.0 {
+            helped += 1;
+            assert!(a.1 > b.1, "line {}: {a:?} not below {b:?}", r["line"]);
+        }
+    }
+    assert!(helped > rows.len() / 2, "{helped} of {}", rows.len());
+    // Program order along the x axis.
+    assert!(before.windows(2).all(|w| w[0].0 < w[1].0));
+
+    // A robot program: the before series only (no residual is reported).
+    let svg = drilling_report("svg");
+    let doc = roxmltree::Document::parse(&svg).expect("SVG parses as XML");
+    let cuts = csv_rows(&drilling_report("csv"))
+        .iter()
+        .filter(|r| cutting(&r["motion"]))
+        .count();
+    assert_eq!(
+        series(&doc, "before-after-before").map(|s| s.len()),
+        Some(cuts)
+    );
+    assert!(series(&doc, "before-after-after").is_none());
 }

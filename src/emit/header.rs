@@ -170,6 +170,31 @@ impl Provenance {
         line
     }
 
+    /// The provenance as `key: value` lines, for the end of a table report:
+    /// the fields of [`Provenance::one_line`], one per line, so that none
+    /// is wider than the machine file's name or the effects need.
+    pub fn key_lines(&self) -> Vec<String> {
+        let mut lines = vec![
+            format!("postproc: {}", self.version),
+            format!(
+                "machine: {}{}",
+                self.machine_file,
+                if self.machine_bundled {
+                    " (bundled)"
+                } else {
+                    ""
+                }
+            ),
+            format!("machine sha256: {}", self.machine_sha256),
+            format!("machine status: {}", self.status.describe()),
+            format!("effects: {}", self.effects_text()),
+        ];
+        if let Some(t) = self.tolerance_mm {
+            lines.push(format!("tolerance: {} mm", fmt_mm(t)));
+        }
+        lines
+    }
+
     /// `geometric 1, static 1, thermal 0.8, dynamic 1 reported only`.
     pub fn effects_text(&self) -> String {
         let parts: Vec<String> = self
@@ -494,6 +519,36 @@ mod tests {
             tolerance_mm: Some(0.001),
             annotated: true,
         }
+    }
+
+    #[test]
+    fn key_lines_hold_the_one_line_fields_one_per_line() {
+        let p = provenance();
+        let lines = p.key_lines();
+        let keys: Vec<&str> = lines
+            .iter()
+            .map(|l| l.split_once(": ").map_or("", |(k, _)| k))
+            .collect();
+        assert_eq!(
+            keys,
+            [
+                "postproc",
+                "machine",
+                "machine sha256",
+                "machine status",
+                "effects",
+                "tolerance"
+            ]
+        );
+        // The same values as the one-line form.
+        let one = p.one_line();
+        for l in &lines {
+            let (_, value) = l.split_once(": ").unwrap_or_default();
+            assert!(one.contains(value), "{value} not in {one}");
+        }
+        let mut p = p;
+        p.tolerance_mm = None;
+        assert!(p.key_lines().iter().all(|l| !l.starts_with("tolerance")));
     }
 
     fn through(program: &[u8], rapid: bool, chunk: usize) -> Vec<u8> {

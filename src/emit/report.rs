@@ -185,6 +185,8 @@ pub struct ReportWriter<'w> {
     source: Option<std::path::PathBuf>,
     /// What made the run (machine file, effects, tolerance).
     provenance: Option<crate::emit::header::Provenance>,
+    /// Widths of the table's columns.
+    widths: Vec<usize>,
 }
 
 /// Longest source text quoted for a worst block, characters.
@@ -251,20 +253,36 @@ fn jnum(v: f64, d: usize) -> String {
     }
 }
 
-/// One aligned table line: the motion column left-aligned, numbers right.
-fn table_line(cells: &[String]) -> String {
-    let cells: Vec<String> = cells
-        .iter()
-        .enumerate()
-        .map(|(i, c)| {
-            if i == 1 {
-                format!("{c:<8}")
-            } else {
-                format!("{c:>12}")
-            }
-        })
-        .collect();
-    cells.join(" ")
+/// Widest line of a table report, characters.
+pub const TABLE_COLUMNS: usize = 120;
+
+/// Width of the table's `line` column.
+const LINE_W: usize = 6;
+/// Width of the table's `motion` column.
+const MOTION_W: usize = 8;
+/// Width of a position column of the table (3 decimals: `-1234.567`).
+const AXIS_W: usize = 9;
+/// Narrowest deviation column of the table (5 decimals: `12.34567`).
+const DEV_W: usize = 8;
+/// Decimals of the table's position columns (1 µm; CSV and JSON keep 4).
+const TABLE_AXIS_DECIMALS: usize = 3;
+
+/// One aligned table line: the motion column left-aligned, numbers right,
+/// each cell at least its column's width.
+fn table_line(cells: &[String], widths: &[usize]) -> String {
+    let mut line = String::with_capacity(TABLE_COLUMNS);
+    for (i, c) in cells.iter().enumerate() {
+        let w = widths.get(i).copied().unwrap_or(DEV_W);
+        if i > 0 {
+            line.push(' ');
+        }
+        if i == 1 {
+            line.push_str(&format!("{c:<w$}"));
+        } else {
+            line.push_str(&format!("{c:>w$}"));
+        }
+    }
+    line
 }
 
 fn json_str(s: &str) -> String {
@@ -331,7 +349,7 @@ impl<'w> ReportWriter<'w> {
         file: &str,
     ) -> Result<Self> {
         let stats = (0..=layout.effects.len()).map(|_| Stat::new()).collect();
-        let w = ReportWriter {
+        let mut w = ReportWriter {
             out,
             format,
             layout,
@@ -345,7 +363,24 @@ impl<'w> ReportWriter<'w> {
             worst_cut: None,
             source: None,
             provenance: None,
+            widths: Vec::new(),
         };
+        // The table keeps the columns a reader scans (where, how far off,
+        // which effect); the components, the residual and the tool-axis
+        // error are in CSV and JSON.
+        let mut table: Vec<String> = vec!["line".into(), "motion".into()];
+        w.widths = vec![LINE_W, MOTION_W];
+        for (a, unit) in &w.layout.axes {
+            table.push(format!("{a}_{unit}"));
+            w.widths.push(AXIS_W);
+        }
+        table.push("dev_mm".into());
+        w.widths.push(DEV_W);
+        for e in &w.layout.effects {
+            let name = format!("{e}_mm");
+            w.widths.push(name.len().max(DEV_W));
+            table.push(name);
+        }
         let mut cols: Vec<String> = vec!["line".into(), "motion".into()];
         for (a, unit) in &w.layout.axes {
             cols.push(format!("{a}_{unit}"));
@@ -362,7 +397,7 @@ impl<'w> ReportWriter<'w> {
         cols.push("orient_urad".into());
         match format {
             Format::Csv => writeln!(w.out, "{}", cols.join(",")).map_err(io)?,
-            Format::Table => writeln!(w.out, "{}", table_line(&cols)).map_err(io)?,
+            Format::Table => writeln!(w.out, "{}", table_line(&table, &w.widths)).map_err(io)?,
             Format::Json => {
                 let effects: Vec<String> = w.layout.effects.iter().map(|e| json_str(e)).collect();
                 let axes: Vec<String> = w
@@ -373,10 +408,11 @@ impl<'w> ReportWriter<'w> {
                     .collect();
                 write!(
                     w.out,
-                    "{{\"file\":{},\"kind\":{},\"axes\":[{}],\"effects\":[{}],\"rows\":[",
+                    "{{\"file\":{},\"kind\":{},\"axes\":[{}],\"positions\":{},\"effects\":[{}],\"rows\":[",
                     json_str(&w.file),
                     json_str(w.layout.kind),
                     axes.join(","),
+                    json_str(w.positions_frame()),
                     effects.join(",")
                 )
                 .map_err(io)?
@@ -451,6 +487,7 @@ impl<'w> ReportWriter<'w> {
                     pos: r.position_mm,
                     dev,
                     rapid,
+                    residual: r.residual_mm,
                 };
                 if let Some(plot) = self.plot.as_mut() {
                     plot.push(p);
@@ -468,7 +505,18 @@ impl<'w> ReportWriter<'w> {
                     self.worst_cut = Some(mark);
                 }
             }
-            Format::Csv | Format::Table => {
+            Format::Table => {
+                let mut vals: Vec<String> = vec![r.line.to_string(), r.motion.to_string()];
+                for &v in r.axes {
+                    vals.push(num(v, TABLE_AXIS_DECIMALS));
+                }
+                vals.push(num(dev, 5));
+                for &v in r.effects_mm {
+                    vals.push(num(v, 5));
+                }
+                writeln!(self.out, "{}", table_line(&vals, &self.widths)).map_err(io)?;
+            }
+            Format::Csv => {
                 let mut vals: Vec<String> = vec![r.line.to_string(), r.motion.to_string()];
                 for &v in r.axes {
                     vals.push(num(v, 4));
@@ -483,12 +531,7 @@ impl<'w> ReportWriter<'w> {
                     vals.push(num(res, 6));
                 }
                 vals.push(num(r.orient_urad, 2));
-                let text = if self.format == Format::Csv {
-                    vals.join(",")
-                } else {
-                    table_line(&vals)
-                };
-                writeln!(self.out, "{text}").map_err(io)?;
+                writeln!(self.out, "{}", vals.join(",")).map_err(io)?;
             }
             Format::Json => {
                 let mut o = format!(
@@ -532,28 +575,40 @@ impl<'w> ReportWriter<'w> {
         Ok(())
     }
 
-    /// The headline: the cutting moves, then the rapids and moves to
-    /// machine-defined places on their own.
-    fn groups_line(&self) -> String {
+    /// The headline: the cutting moves.
+    fn cutting_line(&self) -> String {
         let c = &self.cutting;
-        let mut line = format!(
+        format!(
             "cutting moves ({}): |dev| mean {} mm, max {} mm (line {}), p95 {} mm",
             c.hist.count,
             num(c.mean(), 5),
             num(c.max(), 5),
             c.max_line(),
             num(c.percentile(95.0), 5)
-        );
+        )
+    }
+
+    /// The rapids and moves to machine-defined places, on their own (`None`
+    /// when the program has none).
+    fn positioning_line(&self) -> Option<String> {
         let p = &self.positioning;
-        if p.hist.count > 0 {
-            line.push_str(&format!(
-                "; rapids and machine-defined moves ({}): max {} mm (line {})",
+        (p.hist.count > 0).then(|| {
+            format!(
+                "rapids and machine-defined moves ({}): max {} mm (line {})",
                 p.hist.count,
                 num(p.max(), 5),
                 p.max_line()
-            ));
+            )
+        })
+    }
+
+    /// The frame of the position columns: `machine` or `world`.
+    fn positions_frame(&self) -> &'static str {
+        if self.layout.kind == "rapid" {
+            "world"
+        } else {
+            "machine"
         }
-        line
     }
 
     /// What the position columns are.
@@ -563,6 +618,73 @@ impl<'w> ReportWriter<'w> {
         } else {
             "machine coordinates (work offsets and tool lengths applied)"
         }
+    }
+
+    /// The summary of a table report, every line at most [`TABLE_COLUMNS`]
+    /// characters: the cutting moves, the positioning moves on their own
+    /// line, all moves, the effects, the worst blocks of each group, what
+    /// the positions are and the provenance as `key: value` lines.
+    fn table_summary(
+        &mut self,
+        rows: usize,
+        (mean, max, max_line): (f64, f64, usize),
+        p95: &[f64],
+        texts: &std::collections::BTreeMap<usize, String>,
+    ) -> Result<()> {
+        let mut lines = vec![self.cutting_line()];
+        lines.extend(self.positioning_line());
+        lines.push(format!(
+            "summary: {rows} rows; |dev| mean {} mm, max {} mm (line {max_line}), p95 {} mm",
+            num(mean, 5),
+            num(max, 5),
+            num(p95.first().copied().unwrap_or(0.0), 5)
+        ));
+        lines.push(format!(
+            "{:<10} {:>10} {:>10} {:>10}   worst blocks (all moves): line (mm)",
+            "effect", "mean_mm", "p95_mm", "max_mm"
+        ));
+        for (i, s) in self.stats.iter().enumerate() {
+            let mut line = format!(
+                "{:<10} {:>10} {:>10} {:>10}  ",
+                stat_name(&self.layout, i),
+                num(s.mean(), 5),
+                num(p95.get(i).copied().unwrap_or(0.0), 5),
+                num(s.max(), 5),
+            );
+            // As many of the worst blocks as the width holds.
+            for (k, (v, at, _)) in s.worst.iter().enumerate() {
+                let item = format!("{} {at} ({})", if k == 0 { "" } else { "," }, num(*v, 5));
+                if line.chars().count() + item.chars().count() > TABLE_COLUMNS {
+                    break;
+                }
+                line.push_str(&item);
+            }
+            lines.push(line.trim_end().to_string());
+        }
+        let groups = [
+            ("worst cutting blocks:", &self.cutting),
+            ("worst rapids and machine-defined moves:", &self.positioning),
+        ];
+        for (title, s) in groups {
+            if s.worst.is_empty() {
+                continue;
+            }
+            lines.push(title.to_string());
+            for (v, line, motion) in &s.worst {
+                let text = texts.get(line).map_or("", String::as_str);
+                let row = format!("  line {line:<6} {:>10} mm  {motion:<9} {text}", num(*v, 5));
+                lines.push(row.trim_end().to_string());
+            }
+        }
+        lines.push(format!("positions: {}", self.positions_label()));
+        if let Some(p) = &self.provenance {
+            lines.push("provenance:".into());
+            lines.extend(p.key_lines().into_iter().map(|l| format!("  {l}")));
+        }
+        for line in lines {
+            writeln!(self.out, "{line}").map_err(io)?;
+        }
+        Ok(())
     }
 
     /// Writes the summary (and, for SVG, the picture) and ends the report.
@@ -663,66 +785,18 @@ impl<'w> ReportWriter<'w> {
                     .map(|s| s.worst.iter().map(|w| w.1.to_string()).collect())
                     .unwrap_or_default();
                 line.push_str(&format!("; worst lines {}", worst.join(" ")));
-                writeln!(self.out, "# {}", self.groups_line()).map_err(io)?;
+                let mut groups = self.cutting_line();
+                if let Some(p) = self.positioning_line() {
+                    groups.push_str(&format!("; {p}"));
+                }
+                writeln!(self.out, "# positions: {}", self.positions_label()).map_err(io)?;
+                writeln!(self.out, "# {groups}").map_err(io)?;
                 writeln!(self.out, "{line}").map_err(io)?;
                 if let Some(p) = &self.provenance {
                     writeln!(self.out, "# provenance: {}", p.one_line()).map_err(io)?;
                 }
             }
-            Format::Table => {
-                writeln!(self.out, "{}", self.groups_line()).map_err(io)?;
-                writeln!(
-                    self.out,
-                    "summary: {rows} rows; |dev| mean {} mm, max {} mm (line {}), p95 {} mm",
-                    num(total.0, 5),
-                    num(total.1, 5),
-                    total.2,
-                    num(p95_total, 5)
-                )
-                .map_err(io)?;
-                writeln!(
-                    self.out,
-                    "{:<10} {:>10} {:>10} {:>10}   worst blocks: line (mm)",
-                    "effect", "mean_mm", "p95_mm", "max_mm"
-                )
-                .map_err(io)?;
-                for (i, s) in self.stats.iter().enumerate() {
-                    let worst: Vec<String> = s
-                        .worst
-                        .iter()
-                        .map(|(v, line, _)| format!("{line} ({})", num(*v, 5)))
-                        .collect();
-                    let line = format!(
-                        "{:<10} {:>10} {:>10} {:>10}   {}",
-                        stat_name(&self.layout, i),
-                        num(s.mean(), 5),
-                        num(p95.get(i).copied().unwrap_or(0.0), 5),
-                        num(s.max(), 5),
-                        worst.join(", ")
-                    );
-                    writeln!(self.out, "{}", line.trim_end()).map_err(io)?;
-                }
-                let groups = [
-                    ("worst blocks:", self.stats.first()),
-                    ("worst cutting blocks:", Some(&self.cutting)),
-                ];
-                for (title, s) in groups {
-                    let Some(s) = s.filter(|s| !s.worst.is_empty()) else {
-                        continue;
-                    };
-                    writeln!(self.out, "{title}").map_err(io)?;
-                    for (v, line, motion) in &s.worst {
-                        let text = texts.get(line).map_or("", String::as_str);
-                        let row =
-                            format!("  line {line:<6} {:>10} mm  {motion:<9} {text}", num(*v, 5));
-                        writeln!(self.out, "{}", row.trim_end()).map_err(io)?;
-                    }
-                }
-                writeln!(self.out, "positions: {}", self.positions_label()).map_err(io)?;
-                if let Some(p) = &self.provenance {
-                    writeln!(self.out, "provenance: {}", p.one_line()).map_err(io)?;
-                }
-            }
+            Format::Table => self.table_summary(rows, total, &p95, &texts)?,
             Format::Svg => {
                 let points = self.plot.take().map(Decimator::finish).unwrap_or_default();
                 let title = format!(

@@ -1,7 +1,13 @@
 //! The deviation picture of `report --format svg`: the toolpath in plan (XY)
 //! and side (XZ) view coloured by the predicted |deviation|, the deviation
-//! along the program, a colour bar, and the worst block marked — drawn with
-//! `plotters` (SVG backend, no system fonts).
+//! along the program, a colour bar, the worst block marked, and the cutting
+//! moves' predicted deviation before compensation next to the residual
+//! after it — drawn with `plotters` (SVG backend, no system fonts).
+//!
+//! The two series of the before/after panel are written as SVG groups of
+//! their own (`<g id="before-after">` holding `before-after-before`,
+//! `before-after-after` and the legend), on the panel's axes, so that a
+//! reader or a program can pick them out.
 //!
 //! Long programs are decimated into a bounded number of points by
 //! [`Decimator`]: contiguous buckets of blocks, each represented by its block
@@ -14,7 +20,16 @@ use plotters::prelude::*;
 use crate::error::{Error, Result};
 
 /// Canvas size, pixels.
-const SIZE: (u32, u32) = (1200, 900);
+const SIZE: (u32, u32) = (1200, 1240);
+/// Height of the toolpath views' row, pixels.
+const VIEWS_H: u32 = 500;
+/// Height of the deviation-along-the-program panel, pixels (the
+/// before/after panel takes the rest).
+const ALONG_H: u32 = 350;
+/// Colour of the before-compensation series.
+const BEFORE: RGBColor = RGBColor(59, 82, 139);
+/// Colour of the after-compensation series.
+const AFTER: RGBColor = RGBColor(230, 110, 0);
 /// Width of the colour-bar column, pixels.
 const BAR_W: u32 = 130;
 /// Colour levels of the toolpath (runs of one level become one polyline).
@@ -31,6 +46,9 @@ pub struct PlotPoint {
     pub dev: f64,
     /// A positioning move (rapid, joint move), drawn thin.
     pub rapid: bool,
+    /// Predicted position error left after compensation, mm (`None` when
+    /// the report does not predict it: robot programs).
+    pub residual: Option<f64>,
 }
 
 /// A block marked in the picture: the largest deviation of all moves, and
@@ -518,6 +536,138 @@ fn along(
     Ok(())
 }
 
+/// `x` in `[lo, hi]` mapped linearly onto the pixels `[p0, p1]`.
+fn to_pixel(x: f64, (lo, hi): (f64, f64), (p0, p1): (f64, f64)) -> f64 {
+    let t = if hi > lo { (x - lo) / (hi - lo) } else { 0.0 };
+    p0 + t.clamp(-0.05, 1.05) * (p1 - p0)
+}
+
+/// One series of the before/after panel as an SVG group: a polyline
+/// through its points and a dot on each.
+fn series_group(id: &str, colour: RGBColor, pixels: &[(f64, f64)]) -> String {
+    let RGBColor(r, g, b) = colour;
+    let stroke = format!("#{r:02X}{g:02X}{b:02X}");
+    let mut out = format!("<g id=\"{id}\" fill=\"{stroke}\" stroke=\"{stroke}\">\n");
+    if !pixels.is_empty() {
+        let pts: Vec<String> = pixels
+            .iter()
+            .map(|(x, y)| format!("{x:.1},{y:.1}"))
+            .collect();
+        out.push_str(&format!(
+            "<polyline fill=\"none\" stroke-width=\"2\" points=\"{}\"/>\n",
+            pts.join(" ")
+        ));
+        for (x, y) in pixels {
+            out.push_str(&format!(
+                "<circle cx=\"{x:.1}\" cy=\"{y:.1}\" r=\"2.5\" stroke=\"none\"/>\n"
+            ));
+        }
+    }
+    out.push_str("</g>\n");
+    out
+}
+
+/// The before/after panel: for each cutting move along the program, the
+/// predicted |deviation| without compensation and the predicted residual
+/// after it, on one deviation axis. Plotters draws the axes; the series
+/// and the legend come back as SVG markup to append to the document.
+fn before_after(area: &DrawingArea<SVGBackend, Shift>, points: &[PlotPoint]) -> Result<String> {
+    let cuts: Vec<&PlotPoint> = points.iter().filter(|p| !p.rapid).collect();
+    let residuals = cuts.iter().all(|p| p.residual.is_some());
+    let first = cuts.first().map_or(0, |p| p.line) as f64;
+    let last = cuts.last().map_or(1, |p| p.line) as f64;
+    let last = if last > first { last } else { first + 1.0 };
+    let top = cuts
+        .iter()
+        .flat_map(|p| [p.dev, p.residual.unwrap_or(0.0)])
+        .filter(|d| d.is_finite())
+        .fold(0.0, f64::max);
+    // Headroom above the largest value for the legend.
+    let ymax = if top > 0.0 { top * 1.35 } else { 1e-3 };
+    let mut chart = ChartBuilder::on(area)
+        .caption(
+            "Cutting moves: predicted deviation before and after compensation",
+            ("sans-serif", 18),
+        )
+        .margin(15)
+        .x_label_area_size(45)
+        .y_label_area_size(70)
+        .build_cartesian_2d(first..last, 0.0..ymax)
+        .map_err(plot_err)?;
+    chart
+        .configure_mesh()
+        .x_desc("source line (cutting moves)")
+        .y_desc("deviation (mm)")
+        .x_label_formatter(&|v| line_label(*v))
+        .label_style(("sans-serif", 13))
+        .axis_desc_style(("sans-serif", 14))
+        .y_label_formatter(&|v| tick_label(*v, 4))
+        .light_line_style(RGBColor(235, 235, 235))
+        .bold_line_style(RGBColor(215, 215, 215))
+        .draw()
+        .map_err(plot_err)?;
+    let (xs, ys) = chart.plotting_area().get_pixel_range();
+    let px = (f64::from(xs.start), f64::from(xs.end - 1));
+    // Pixel rows grow downwards: 0 mm at the bottom.
+    let py = (f64::from(ys.end - 1), f64::from(ys.start));
+    let at = |line: usize, v: f64| {
+        (
+            to_pixel(line as f64, (first, last), px),
+            to_pixel(v, (0.0, ymax), py),
+        )
+    };
+    let before: Vec<(f64, f64)> = cuts.iter().map(|p| at(p.line, p.dev)).collect();
+    let after: Vec<(f64, f64)> = cuts
+        .iter()
+        .filter_map(|p| p.residual.map(|r| at(p.line, r)))
+        .collect();
+    let mut svg = String::from("<g id=\"before-after\">\n");
+    svg.push_str(&series_group("before-after-before", BEFORE, &before));
+    if residuals {
+        svg.push_str(&series_group("before-after-after", AFTER, &after));
+    }
+    // The legend, in the panel's upper right corner above the plot.
+    let after_label = if residuals {
+        "after compensation: predicted residual (residual_mm)"
+    } else {
+        "after compensation: residual not reported for robot programs"
+    };
+    let (x0, y0) = (px.1 - 380.0, py.1 + 8.0);
+    svg.push_str("<g id=\"before-after-legend\" font-family=\"sans-serif\" font-size=\"12\">\n");
+    svg.push_str(&format!(
+        "<rect x=\"{:.1}\" y=\"{:.1}\" width=\"375\" height=\"44\" fill=\"#FFFFFF\" fill-opacity=\"0.85\" stroke=\"#999999\"/>\n",
+        x0 - 6.0,
+        y0 - 4.0
+    ));
+    for (k, (colour, label)) in [
+        (
+            BEFORE,
+            "before compensation: predicted |deviation| (dev_mm)",
+        ),
+        (AFTER, after_label),
+    ]
+    .into_iter()
+    .enumerate()
+    {
+        let RGBColor(r, g, b) = colour;
+        let y = y0 + 10.0 + 18.0 * k as f64;
+        // A line sample for each series drawn.
+        if k == 0 || residuals {
+            svg.push_str(&format!(
+                "<line x1=\"{x0:.1}\" y1=\"{y:.1}\" x2=\"{:.1}\" y2=\"{y:.1}\" stroke=\"#{r:02X}{g:02X}{b:02X}\" stroke-width=\"2\"/>\n",
+                x0 + 24.0
+            ));
+        }
+        svg.push_str(&format!(
+            "<text x=\"{:.1}\" y=\"{:.1}\" fill=\"#000000\">{label}</text>\n",
+            x0 + 32.0,
+            y + 4.0
+        ));
+    }
+    svg.push_str("</g>\n</g>\n");
+    Ok(svg)
+}
+
 /// Renders the picture as an SVG document, with `marks` circled and
 /// labelled in every view.
 pub fn render(points: &[PlotPoint], marks: &[Worst], title: &str) -> Result<String> {
@@ -530,7 +680,7 @@ pub fn render(points: &[PlotPoint], marks: &[Worst], title: &str) -> Result<Stri
     let dmax = if top > 0.0 { top } else { 1e-3 };
     let scale = Scale::of(points, marks);
     let mut buf = String::new();
-    {
+    let series = {
         let root = SVGBackend::with_string(&mut buf, SIZE).into_drawing_area();
         root.fill(&WHITE).map_err(plot_err)?;
         let (head, body) = root.split_vertically(40);
@@ -540,7 +690,8 @@ pub fn render(points: &[PlotPoint], marks: &[Worst], title: &str) -> Result<Stri
             ("sans-serif", 17).into_font(),
         ))
         .map_err(plot_err)?;
-        let (top_row, bottom_row) = body.split_vertically(500);
+        let (top_row, rest) = body.split_vertically(VIEWS_H);
+        let (along_row, before_after_row) = rest.split_vertically(ALONG_H);
         let (views, bar) = top_row.split_horizontally(SIZE.0 - BAR_W);
         let (plan, side) = views.split_horizontally((SIZE.0 - BAR_W) / 2);
         view(
@@ -562,10 +713,16 @@ pub fn render(points: &[PlotPoint], marks: &[Worst], title: &str) -> Result<Stri
             &scale,
         )?;
         colour_bar(&bar, &scale)?;
-        let (program, _) = bottom_row.split_horizontally(SIZE.0 - BAR_W);
+        let (program, _) = along_row.split_horizontally(SIZE.0 - BAR_W);
         along(&program, points, marks, dmax, &scale)?;
+        let (panel, _) = before_after_row.split_horizontally(SIZE.0 - BAR_W);
+        let series = before_after(&panel, points)?;
         root.present().map_err(plot_err)?;
-    }
+        series
+    };
+    // The before/after series go last, inside the document element.
+    let end = buf.rfind("</svg>").unwrap_or(buf.len());
+    buf.insert_str(end, &series);
     Ok(buf)
 }
 
@@ -579,6 +736,7 @@ mod tests {
             pos: [line as f64, 0.0, 0.0],
             dev,
             rapid: false,
+            residual: Some(dev / 2.0),
         }
     }
 
@@ -622,6 +780,41 @@ mod tests {
             Some(((0.0, 5.0), (10.0, 5.0)))
         );
         assert_eq!(clip((11.0, 11.0), (20.0, 30.0), r), None);
+    }
+
+    /// Points of the polyline in the SVG group `id` (`None` without one).
+    fn group_points(svg: &str, id: &str) -> Option<usize> {
+        let at = svg.find(&format!("<g id=\"{id}\""))?;
+        let rest = &svg[at..];
+        let end = rest.find("</g>")?;
+        let line = rest[..end].split("points=\"").nth(1)?;
+        Some(line.split('"').next()?.split_whitespace().count())
+    }
+
+    #[test]
+    fn before_after_panel_takes_the_cutting_moves_only() {
+        // Ten moves, every third a rapid: seven cutting moves.
+        let points: Vec<PlotPoint> = (1..=10)
+            .map(|i| PlotPoint {
+                rapid: i % 3 == 0,
+                ..pt(i, 0.01 * i as f64)
+            })
+            .collect();
+        let svg = render(&points, &[], "t").expect("renders");
+        assert_eq!(group_points(&svg, "before-after-before"), Some(7));
+        assert_eq!(group_points(&svg, "before-after-after"), Some(7));
+        assert!(svg.trim_end().ends_with("</svg>"));
+        // Without residuals (robot programs): the before series alone.
+        let robot: Vec<PlotPoint> = points
+            .iter()
+            .map(|p| PlotPoint {
+                residual: None,
+                ..*p
+            })
+            .collect();
+        let svg = render(&robot, &[], "t").expect("renders");
+        assert_eq!(group_points(&svg, "before-after-before"), Some(7));
+        assert_eq!(group_points(&svg, "before-after-after"), None);
     }
 
     #[test]
