@@ -215,10 +215,16 @@ struct ReportRow {
 /// `report --format csv`: the rows and the two summary comment lines
 /// (lengths only; the provenance line, which names the file, is left out).
 fn report(machine: &Path, program: &Path) -> (Vec<ReportRow>, Vec<String>) {
+    report_with(machine, program, &[])
+}
+
+/// [`report`] with more options.
+fn report_with(machine: &Path, program: &Path, opts: &[&str]) -> (Vec<ReportRow>, Vec<String>) {
     let a = postproc()
         .args(["report", "-q", "--format", "csv", "--machine"])
         .arg(machine)
         .arg(program)
+        .args(opts)
         .assert()
         .success();
     let out = String::from_utf8_lossy(&a.get_output().stdout).to_string();
@@ -358,6 +364,48 @@ fn report_and_compensate(mount: Mount) {
         !want.contains("[[100,150,40]") && want.contains("PERS wobjdata wCell"),
         "the targets are compensated:\n{want}"
     );
+}
+
+/// Process forces turn with the cell: a constant force on the work object,
+/// on the tool or along the feed, a per-line force table (work object
+/// frame) and the milling force model, on a wall-mounted arm whose whole
+/// cell (work object and gravity) is turned with it, give the floor report
+/// seen through the mount.
+#[test]
+fn process_forces_turn_with_the_cell() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let d = dir.path();
+    let t = Mount::Wall.base();
+    let floor_prog = write(d, "floor.mod", &program(&wobj_floor()));
+    let moved_prog = write(d, "moved.mod", &program(&(t * wobj_floor())));
+    let g_turned = t.rotation * Vector3::from(G_WORLD);
+    let table = write(
+        d,
+        "forces.csv",
+        "line,fx_n,fy_n,fz_n\n15,40,-20,-150\n16,-60,30,-250\n19,80,10,-40\n",
+    );
+    let table = table.to_str().expect("utf-8 path");
+    let cases: [(&str, &[&str]); 5] = [
+        (ROBOT, &["--force", "constant:30,-50,-200@workpiece"]),
+        (ROBOT, &["--force", "constant:30,-50,-200@tool"]),
+        (ROBOT, &["--force", "constant:30,-50,-200@feed"]),
+        (ROBOT, &["--force-table", table]),
+        (
+            "samples/irb1600-milling.yaml",
+            &["--milling-depth", "2", "--milling-width", "6"],
+        ),
+    ];
+    for (rel, opts) in cases {
+        let floor = repo(rel);
+        let cell = write(d, "cell.yaml", &machine_text(&text(rel), &t, &g_turned));
+        let want = report_with(&floor, &floor_prog, opts);
+        assert!(
+            want.0.iter().any(|r| r.lengths[4] > MOUNT_CHANGES_SAG_MM),
+            "{rel} {opts:?}: a process deflection"
+        );
+        let got = report_with(&cell, &moved_prog, opts);
+        assert_report_moved(&got, &want, &t, &format!("{rel} {opts:?}"));
+    }
 }
 
 #[test]
