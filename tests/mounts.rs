@@ -566,7 +566,8 @@ struct Param {
     kept: bool,
 }
 
-/// `calibrate KIND` through the binary; the parameter table.
+/// `calibrate KIND` of world-frame positions through the binary; the
+/// parameter table.
 fn calibrate(kind: &str, machine: &Path, obs: &Path, out: &Path) -> BTreeMap<String, Param> {
     let a = postproc()
         .args(["calibrate", kind, "-q", "--machine"])
@@ -578,6 +579,10 @@ fn calibrate(kind: &str, machine: &Path, obs: &Path, out: &Path) -> BTreeMap<Str
         .assert()
         .success();
     let stdout = String::from_utf8_lossy(&a.get_output().stdout).to_string();
+    assert!(
+        stdout.contains("note: positions in the world frame, carried into the robot base frame through the machine file's `base` ("),
+        "the frame of the positions is said:\n{stdout}"
+    );
     let mut table = BTreeMap::new();
     let mut in_table = false;
     for l in stdout.lines() {
@@ -794,6 +799,14 @@ fn wall_diagnose_finds_the_hidden_compliance() {
         .assert()
         .success();
     let out = String::from_utf8_lossy(&a.get_output().stdout).to_string();
+    assert!(
+        out.contains(
+            "note: positions in the world frame, carried into the robot base frame through \
+             the machine file's `base` (x -900.0000 y 0.0000 z 1100.0000 mm, roll 0.000000 \
+             pitch 90.000000 yaw 0.000000 deg)"
+        ),
+        "{out}"
+    );
     assert!(
         out.contains("VERDICT: missing effect: joint3_compliance"),
         "{out}"

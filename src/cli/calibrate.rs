@@ -8,7 +8,7 @@ use std::path::{Path, PathBuf};
 use clap::{Args, ValueEnum};
 
 use crate::calibrate::forward::Switches;
-use crate::calibrate::frame::{calibrate_by_registration, world_to_reference};
+use crate::calibrate::frame::{calibrate_by_registration, world_note, world_to_reference};
 use crate::calibrate::geometry::calibrate_geometry;
 use crate::calibrate::kinematics::calibrate_kinematics;
 use crate::calibrate::observations::{
@@ -338,7 +338,13 @@ pub fn run_calibrate(a: &CalibrateArgs) -> Result<i32> {
         orientation_mm_per_rad: a.orientation_weight_mm_per_rad,
     };
     let machine = Machine::from_yaml_str(&text, &file)?;
-    let obs = world_to_reference(&machine, &obs);
+    // Kinematics carries world positions itself (and says so in its notes).
+    let read_frame = obs.frame;
+    let obs = if a.kind == CalibrationKind::Kinematics {
+        obs
+    } else {
+        world_to_reference(&machine, &obs)
+    };
     tracing::info!(
         "measured positions in the {} frame",
         match obs.frame {
@@ -352,12 +358,15 @@ pub fn run_calibrate(a: &CalibrateArgs) -> Result<i32> {
         CalibrationKind::Geometry => calibrate_geometry(&text, &file, o, &obs_file, &opts),
         CalibrationKind::Thermal => calibrate_thermal(&text, &file, o, &obs_file, &opts),
     };
-    let cal = if obs.frame == MeasurementFrame::Instrument && a.kind != CalibrationKind::Kinematics
-    {
-        calibrate_by_registration(&text, &file, &obs, &obs_file, &run)?
-    } else {
-        run(&obs)?
-    };
+    let mut cal =
+        if obs.frame == MeasurementFrame::Instrument && a.kind != CalibrationKind::Kinematics {
+            calibrate_by_registration(&text, &file, &obs, &obs_file, &run)?
+        } else {
+            run(&obs)?
+        };
+    if a.kind != CalibrationKind::Kinematics {
+        cal.notes.extend(world_note(&machine, read_frame));
+    }
     let record = calibration_record(
         &format!("{:?}", a.kind).to_ascii_lowercase(),
         &a.observations,
