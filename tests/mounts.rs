@@ -373,6 +373,10 @@ fn report_and_compensate(mount: Mount) {
         .replace(&wobj_decl(&(t * wobj_floor())), &wobj_decl(&wobj_floor()));
     let want = compensate(&feeling, &floor_prog, "f.mod");
     assert_eq!(got, want, "{}: compensated program", mount.name());
+    let got = compensate(&cell, &moved_prog, "c.mod")
+        .replace(&wobj_decl(&(t * wobj_floor())), &wobj_decl(&wobj_floor()));
+    let want_cell = compensate(&floor, &floor_prog, "c0.mod");
+    assert_eq!(got, want_cell, "{}: whole cell compensated", mount.name());
     assert!(
         !want.contains("[[100,150,40]") && want.contains("PERS wobjdata wCell"),
         "the targets are compensated:\n{want}"
@@ -460,7 +464,10 @@ fn check_reaches_the_targets_through_base() {
         .assert()
         .code(2);
     let err = String::from_utf8_lossy(&a.get_output().stderr).to_string();
-    assert!(err.contains("floor.mod:"), "{err}");
+    assert!(
+        err.contains("floor.mod:6:") && err.contains("out of reach"),
+        "{err}"
+    );
 }
 
 /// `simulate --decimals 9 --frame F` of a poses file, read back.
@@ -526,6 +533,13 @@ fn simulate_mounted(mount: Mount) {
         &["--orientation"],
     );
     let world = simulate(&m, &poses, "world", &d.join("w.csv"), &["--orientation"]);
+    // The whole cell moved (gravity turned too): the same base-frame data.
+    let g_turned = t.rotation * Vector3::from(G_WORLD);
+    let cell = write(d, "c.yaml", &machine_text(&text(ROBOT), &t, &g_turned));
+    let cell = simulate(&cell, &poses, "base", &d.join("c.csv"), &["--orientation"]);
+    for (c, f0) in cell.rows.iter().zip(&floor.rows) {
+        assert!((c.measured_mm - f0.measured_mm).amax() <= SIM_TOL_MM);
+    }
     assert_eq!(world.frame, MeasurementFrame::World);
     assert_eq!(base.frame, MeasurementFrame::Reference);
     let mut moved = 0.0f64;
