@@ -25,8 +25,13 @@ use std::sync::OnceLock;
 
 use nalgebra::{Isometry3, Point3, Quaternion, Translation3, UnitQuaternion, Vector3};
 use postproc::calibrate::observations::{
-    MeasurementFrame, Observations, load_observations, write_observations,
+    MeasurementFrame, Observations, load_observations, load_poses, write_observations,
 };
+use postproc::calibrate::report::Calibration;
+use postproc::calibrate::simulate::{self as sim, Noise};
+use postproc::calibrate::stiffness::{Options, calibrate_stiffness};
+use postproc::calibrate::thermal::calibrate_thermal;
+use postproc::machine::Machine;
 
 use crate::common::{postproc, repo, text_without_header};
 
@@ -683,12 +688,18 @@ fn calibrate(kind: &str, machine: &Path, obs: &Path, out: &Path) -> Fit {
 
 /// Base-frame observations carried into the world frame of `base` by the
 /// test (`# frame: world`).
-fn to_world(obs: &Observations, base: &Isometry3<f64>) -> String {
+fn in_world(obs: &Observations, base: &Isometry3<f64>) -> Observations {
     let mut w = obs.clone();
     w.frame = MeasurementFrame::World;
     for r in &mut w.rows {
         r.measured_mm = (base * Point3::from(r.measured_mm)).coords;
     }
+    w
+}
+
+/// [`in_world`] as an observation file.
+fn to_world(obs: &Observations, base: &Isometry3<f64>) -> String {
+    let w = in_world(obs, base);
     let mut b = Vec::new();
     write_observations(&mut b, &w).expect("csv");
     String::from_utf8(b).expect("utf8")
@@ -925,4 +936,62 @@ fn wall_diagnose_finds_the_hidden_compliance() {
         .map(|s| s.trim().parse().expect("number"))
         .collect();
     assert!((nums[0] - 1.0).abs() <= K_TEST * nums[1], "{line}");
+}
+
+/// The library's stiffness and thermal calibrations read `# frame: world`
+/// observations as its kinematic calibration does: carried into the base
+/// frame through `base` and said in a note, the result that of the same
+/// data in the base frame.
+#[test]
+fn library_calibrations_carry_world_positions_into_the_base_frame() {
+    type Run = fn(&str, &str, &Observations, &str, &Options) -> postproc::Result<Calibration>;
+    let t = Mount::Wall.base();
+    let g = Vector3::from(G_WORLD);
+    let cases: [(&str, &str, &str, Run); 2] = [
+        (ROBOT, TRUTH_ROBOT, LDBB_POSES, calibrate_stiffness),
+        (
+            THERMAL_START,
+            THERMAL_TRUTH,
+            THERMAL_POSES,
+            calibrate_thermal,
+        ),
+    ];
+    for (start, truth, poses, run) in cases {
+        let start = machine_text(&text(start), &t, &g);
+        let truth_m =
+            Machine::from_yaml_str(&machine_text(&text(truth), &t, &g), truth).expect("truth");
+        let noise = Noise {
+            um: 15.0,
+            um_per_m: 6.0,
+            seed: 5,
+        };
+        let poses = load_poses(&repo(poses)).expect("poses");
+        let base = sim::simulate(&truth_m, &poses, "p", &noise).expect("simulated");
+        let world = in_world(&base, &t);
+        let opts = Options::default();
+        let b = run(&start, "start.yaml", &base, "b.csv", &opts).expect("base frame");
+        let w = run(&start, "start.yaml", &world, "w.csv", &opts).expect("world frame");
+        for (pb, pw) in b.params.iter().zip(&w.params) {
+            if THERMAL_FLAT.contains(&pb.name.as_str()) {
+                continue;
+            }
+            let tol = pb.u.map_or(0.0, |u| SAME_FIT_TOL_U * u) + PRINTED_REL * pb.value.abs();
+            assert!((pb.value - pw.value).abs() <= tol, "{b}\n{w}");
+        }
+        let (vb, vw) = (
+            b.validation.expect("held out"),
+            w.validation.expect("held out"),
+        );
+        assert!(
+            (vb.after_rms_mm - vw.after_rms_mm).abs() <= HELD_OUT_TOL_MM,
+            "{b}\n{w}"
+        );
+        assert!(
+            w.notes
+                .iter()
+                .any(|n| n.starts_with("positions in the world frame")),
+            "{w}"
+        );
+        assert!(!b.notes.iter().any(|n| n.contains("world frame")), "{b}");
+    }
 }
