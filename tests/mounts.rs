@@ -329,7 +329,8 @@ fn assert_report_moved(
 /// - Real mount (gravity down): the report of the floor robot feeling
 ///   `Rᵀ g`, seen through `T`; the gravity part changes with a turn.
 /// - The compensated program (targets in the work object) is the floor
-///   robot's feeling `Rᵀ g`, byte for byte apart from the work object.
+///   robot's feeling `Rᵀ g`, byte for byte apart from the work object, and
+///   `batch` writes the same; with the whole cell moved, the floor robot's.
 fn report_and_compensate(mount: Mount) {
     let dir = tempfile::tempdir().expect("tempdir");
     let d = dir.path();
@@ -374,8 +375,20 @@ fn report_and_compensate(mount: Mount) {
             .success();
         text_without_header(&std::fs::read_to_string(&out).expect("compensated"))
     };
-    let got = compensate(&mounted_m, &moved_prog, "m.mod")
-        .replace(&wobj_decl(&(t * wobj_floor())), &wobj_decl(&wobj_floor()));
+    let mounted_out = compensate(&mounted_m, &moved_prog, "m.mod");
+    // `batch` writes what `compensate` writes.
+    let batch_dir = d.join("batch");
+    postproc()
+        .args(["batch", "-q", "--threads", "1", "--machine"])
+        .arg(&mounted_m)
+        .arg("--out-dir")
+        .arg(&batch_dir)
+        .arg(&moved_prog)
+        .assert()
+        .success();
+    let batched = std::fs::read_to_string(batch_dir.join("moved.mod")).expect("batch output");
+    assert_eq!(text_without_header(&batched), mounted_out, "batch");
+    let got = mounted_out.replace(&wobj_decl(&(t * wobj_floor())), &wobj_decl(&wobj_floor()));
     let want = compensate(&feeling, &floor_prog, "f.mod");
     assert_eq!(got, want, "{}: compensated program", mount.name());
     let got = compensate(&cell, &moved_prog, "c.mod")
