@@ -18,6 +18,7 @@ mod golden;
 mod gperf;
 mod hostile;
 mod machine_tool;
+mod mounts;
 mod observations;
 mod output_words;
 mod paper_b;

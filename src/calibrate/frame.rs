@@ -81,6 +81,33 @@ pub fn register(measured: &[Vector3<f64>], model: &[Vector3<f64>]) -> Option<Iso
     Some(Isometry3::from_parts(Translation3::from(t), rot))
 }
 
+/// The note of a command that read robot positions in the world frame
+/// (`# frame: world`): they were carried into the robot base frame through
+/// the machine file's `base`, given as position (mm) and roll, pitch, yaw
+/// (deg). `None` for any other frame or machine.
+pub fn world_note(machine: &Machine, frame: MeasurementFrame) -> Option<String> {
+    let Machine::Robot(r) = machine else {
+        return None;
+    };
+    if frame != MeasurementFrame::World {
+        return None;
+    }
+    let b = r.base();
+    // Rounded to the printed digits first: no `-0.0000`.
+    let shown = |v: f64, digits: i32| {
+        let s = 10f64.powi(digits);
+        (v * s).round() / s + 0.0
+    };
+    let t = b.translation.vector.map(|v| shown(v, 4));
+    let [roll, pitch, yaw] = rpy_deg(b).map(|v| shown(v, 6));
+    Some(format!(
+        "positions in the world frame, carried into the robot base frame through the \
+         machine file's `base` (x {:.4} y {:.4} z {:.4} mm, roll {roll:.6} pitch {pitch:.6} \
+         yaw {yaw:.6} deg)",
+        t.x, t.y, t.z
+    ))
+}
+
 /// Observations in the world frame (`# frame: world`) brought into the
 /// robot base frame through the machine file's `base`; other frames are
 /// returned unchanged.

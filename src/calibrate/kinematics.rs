@@ -52,7 +52,9 @@ use crate::machine::Machine;
 use crate::machine::robot::{DhParams, Model, Robot};
 
 use super::forward::{check_kind, predict};
-use super::frame::{FRAME_NAMES, FRAME_PARAMS, frame_with, register, rpy_deg, world_to_reference};
+use super::frame::{
+    FRAME_NAMES, FRAME_PARAMS, frame_with, register, rpy_deg, world_note, world_to_reference,
+};
 use super::observations::{MeasuredKind, MeasurementFrame, Observation, Observations, Pose};
 use super::report::{CONDITION_LIMIT, Calibration, Estimate, FrameEstimate, Validation};
 use super::screen::{
@@ -565,6 +567,7 @@ pub fn calibrate_kinematics(
             "{machine_file}: kinematic calibration needs a robot machine file"
         )));
     };
+    let read_frame = obs.frame;
     let Prepared {
         layout,
         obs,
@@ -735,6 +738,7 @@ pub fn calibrate_kinematics(
     .map_err(|e| implausible(&e, obs_file, fit.len()))?;
     let insignificant: Vec<usize> = insignificant.iter().map(|d| d.0).collect();
     notes_for(&layout, obs, &fixed, &absorbed, &insignificant, &mut notes);
+    notes.push(frame_note(&machine, &layout, read_frame));
     let (_, m) = offsets(&layout, obs, &fit);
     let mut cal = Calibration {
         kind: "kinematics",
@@ -938,12 +942,20 @@ fn notes_for(
              (badly conditioned for those parameters); move joint {j} as well"
         ));
     }
-    notes.push(match layout.frame {
-        Some(_) => "positions measured in an instrument frame: the frame is identified \
-                    together with the model and written to `measurement_frame`"
+}
+
+/// The note on the frame of the positions read (`read`: the file's frame,
+/// before world positions are carried into the base frame).
+fn frame_note(machine: &Machine, layout: &Layout, read: MeasurementFrame) -> String {
+    if layout.frame.is_some() {
+        return "positions measured in an instrument frame: the frame is identified together \
+                with the model and written to `measurement_frame`"
+            .into();
+    }
+    match world_note(machine, read) {
+        Some(w) => format!("{w}; no measurement frame is identified"),
+        None => "positions in the robot base frame (the machine's reference frame); no \
+                 measurement frame is identified"
             .into(),
-        None => "positions in the robot base frame (the machine's reference frame); \
-                 no measurement frame is identified"
-            .into(),
-    });
+    }
 }

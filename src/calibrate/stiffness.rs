@@ -37,6 +37,7 @@ use crate::machine::robot::kinematics::jacobian;
 use crate::machine::robot::{Model, Robot};
 
 use super::forward::{check_kind, joints_rad, measured_point, predict, row_wrench, wrench_point};
+use super::frame::{world_note, world_to_reference};
 use super::observations::{Observation, Observations, Pose, holdout_split};
 use super::report::{CONDITION_LIMIT, Calibration, Estimate, Validation};
 use super::yaml_edit::{fmt_value, set_top_level_list};
@@ -214,6 +215,9 @@ pub fn calibrate_stiffness(
             "{machine_file}: stiffness calibration needs a robot machine file"
         )));
     };
+    // World positions are carried into the base frame (and said so).
+    let world = world_note(&machine, obs.frame);
+    let obs = &world_to_reference(&machine, obs);
     let groups = load_groups(obs, obs_file)?;
     let (fit_idx, hold_idx) = holdout_split(groups.len(), opts.holdout, opts.seed);
     let pick = |idx: &[usize]| -> Vec<Vec<usize>> {
@@ -385,6 +389,7 @@ pub fn calibrate_stiffness(
     let yaml = set_top_level_list(text, machine_file, "k_nm_per_rad", &values)?;
     Machine::from_yaml_str(&yaml, machine_file)
         .map_err(|e| super::screen::implausible(&e, obs_file, obs.rows.len()))?;
+    notes.extend(world);
     let mut cal = Calibration {
         kind: "stiffness",
         n_fit: n_loaded,

@@ -39,6 +39,7 @@ use crate::machine::robot::thermal::DhLength;
 use crate::machine::robot::{DhGrowth, Robot, ThermalTerm};
 
 use super::forward::{self, check_kind};
+use super::frame::{world_note, world_to_reference};
 use super::observations::{Observations, Pose, holdout_split};
 use super::report::{CONDITION_LIMIT, Calibration, Estimate, Validation};
 use super::stiffness::Options;
@@ -171,6 +172,9 @@ pub fn calibrate_thermal(
             return calibrate_tool_thermal(text, machine_file, &machine, obs, obs_file, opts);
         }
     };
+    // World positions are carried into the base frame (and said so).
+    let world = world_note(&machine, obs.frame);
+    let obs = &world_to_reference(&machine, obs);
     let base: Vec<ThermalTerm> = robot.thermal().map(|t| t.terms.clone()).unwrap_or_default();
     if base.is_empty() {
         return Err(Error::Usage(format!(
@@ -345,6 +349,7 @@ pub fn calibrate_thermal(
     }
     Machine::from_yaml_str(&yaml, machine_file)
         .map_err(|e| super::screen::implausible(&e, obs_file, obs.rows.len()))?;
+    notes.extend(world);
     let mut cal = Calibration {
         kind: "thermal",
         n_fit: fit.len(),

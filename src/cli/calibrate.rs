@@ -8,7 +8,7 @@ use std::path::{Path, PathBuf};
 use clap::{Args, ValueEnum};
 
 use crate::calibrate::forward::Switches;
-use crate::calibrate::frame::{calibrate_by_registration, world_to_reference};
+use crate::calibrate::frame::calibrate_by_registration;
 use crate::calibrate::geometry::calibrate_geometry;
 use crate::calibrate::kinematics::calibrate_kinematics;
 use crate::calibrate::observations::{
@@ -337,15 +337,16 @@ pub fn run_calibrate(a: &CalibrateArgs) -> Result<i32> {
         seed: a.seed,
         orientation_mm_per_rad: a.orientation_weight_mm_per_rad,
     };
-    let machine = Machine::from_yaml_str(&text, &file)?;
-    let obs = world_to_reference(&machine, &obs);
     tracing::info!(
         "measured positions in the {} frame",
         match obs.frame {
             MeasurementFrame::Instrument => "instrument",
-            _ => "machine's reference (robot base or workpiece)",
+            MeasurementFrame::World => "world",
+            MeasurementFrame::Reference => "machine's reference (robot base or workpiece)",
         }
     );
+    // The robot calibrations carry world positions into the base frame
+    // themselves (and say so in their notes).
     let run = |o: &crate::calibrate::observations::Observations| match a.kind {
         CalibrationKind::Stiffness => calibrate_stiffness(&text, &file, o, &obs_file, &opts),
         CalibrationKind::Kinematics => calibrate_kinematics(&text, &file, o, &obs_file, &opts),
@@ -358,6 +359,7 @@ pub fn run_calibrate(a: &CalibrateArgs) -> Result<i32> {
     } else {
         run(&obs)?
     };
+
     let record = calibration_record(
         &format!("{:?}", a.kind).to_ascii_lowercase(),
         &a.observations,

@@ -63,8 +63,11 @@ fn in_reference_frame(
     obs: &crate::calibrate::observations::Observations,
     file: &str,
 ) -> Result<(crate::calibrate::observations::Observations, String)> {
-    use crate::calibrate::frame::{frame_uncertainty, register, rpy_deg, world_to_reference};
+    use crate::calibrate::frame::{
+        frame_uncertainty, register, rpy_deg, world_note, world_to_reference,
+    };
     use crate::calibrate::observations::MeasurementFrame;
+    let world = world_note(machine, obs.frame);
     let (mut obs, copies) =
         crate::calibrate::screen::drop_copies(&world_to_reference(machine, obs), file);
     let all: Vec<usize> = (0..obs.rows.len()).collect();
@@ -77,6 +80,9 @@ fn in_reference_frame(
         )));
     }
     let mut said = copies.map(|c| format!("note: {c}\n")).unwrap_or_default();
+    if let Some(w) = world {
+        said.push_str(&format!("note: {w}\n"));
+    }
     if obs.frame == MeasurementFrame::Instrument {
         let model: Vec<nalgebra::Vector3<f64>> = obs
             .rows

@@ -922,10 +922,15 @@ fn move_wrench(
                     }
                 }
                 ForceFrame::Feed => {
-                    let t = travel();
+                    // In the work object's frame, as on a machine tool: a
+                    // plunge along the tool axis (no tangential direction)
+                    // takes the work object's x, which moves with the cell,
+                    // not the world's.
+                    let w = cur.wobj.rotation;
+                    let (t, z) = (w.inverse() * travel(), w.inverse() * z);
                     in_base(
-                        feed_frame_vector(&force_n, &t, &z),
-                        feed_frame_vector(&moment_nmm, &t, &z),
+                        w * feed_frame_vector(&force_n, &t, &z),
+                        w * feed_frame_vector(&moment_nmm, &t, &z),
                     )
                 }
             }))

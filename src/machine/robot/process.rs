@@ -47,7 +47,8 @@ pub enum ForceFrame {
     Base,
     /// The feed frame of [`crate::process`]: x tangential (direction of
     /// travel), z axial (the tool axis from the tip towards the flange, i.e.
-    /// −z of the TCP frame), y = z × x.
+    /// −z of the TCP frame), y = z × x; on a plunge along the tool axis x
+    /// is the work object's x made normal to the tool axis.
     Feed,
 }
 
