@@ -337,6 +337,16 @@ pub fn calibrate_thermal(
         "rows are at the thermal steady state of their powers: time_constant_min is not identified"
             .into(),
     );
+    // Uncertain unknowns keep the file's value (super::honesty).
+    let withheld = opts.honesty.withheld(&params);
+    let uncertain = opts.honesty.uncertain(&params);
+    let mut full = full;
+    for (j, w) in withheld.iter().enumerate() {
+        if let (true, Some(x)) = (*w, full.get_mut(j)) {
+            *x = 0.0;
+        }
+    }
+    let terms = terms_with(&base, &full);
     let before = norms(robot, &base, obs, &hold, obs_file)?;
     let after = norms(robot, &terms, obs, &hold, obs_file)?;
     let mut yaml = text.to_string();
@@ -357,6 +367,8 @@ pub fn calibrate_thermal(
         fit_check: None,
         frame: None,
         insignificant: Vec::new(),
+        uncertain,
+        honesty: opts.honesty,
         notes,
         yaml,
     };
@@ -493,15 +505,17 @@ pub fn calibrate_tool_thermal(
         };
         if k == 0 {
             let start = thermal.spindle.map_or(0.0, |s| s.gain_per_kw);
-            params.push(Estimate {
+            let est = Estimate {
                 name: "spindle.growth".into(),
                 unit: "µm/kW",
                 start,
                 value: start + delta,
                 u: uc,
                 fixed,
-            });
-            if !fixed {
+            };
+            let write = !fixed && !opts.honesty.withholds(&est);
+            params.push(est);
+            if write {
                 yaml = super::yaml_edit::set_spindle_growth(
                     &yaml,
                     machine_file,
@@ -513,15 +527,17 @@ pub fn calibrate_tool_thermal(
         } else {
             let name = ["X", "Y", "Z"][k - 1];
             let start = thermal.axes[k - 1].map_or(0.0, |s| s.gain_per_kw);
-            params.push(Estimate {
+            let est = Estimate {
                 name: format!("{name}.scale"),
                 unit: "ppm/kW",
                 start,
                 value: start + delta,
                 u: uc,
                 fixed,
-            });
-            if !fixed {
+            };
+            let write = !fixed && !opts.honesty.withholds(&est);
+            params.push(est);
+            if write {
                 yaml = super::yaml_edit::set_axis_scale(&yaml, machine_file, name, start + delta)?;
             }
         }
@@ -530,6 +546,7 @@ pub fn calibrate_tool_thermal(
         "rows are at the thermal steady state of their powers: time constants are not identified"
             .into(),
     );
+    let uncertain = opts.honesty.uncertain(&params);
     let calibrated = Machine::from_yaml_str(&yaml, machine_file)?;
     let before = machine_norms(machine, obs, &hold, obs_file)?;
     let after = machine_norms(&calibrated, obs, &hold, obs_file)?;
@@ -545,6 +562,8 @@ pub fn calibrate_tool_thermal(
         fit_check: None,
         frame: None,
         insignificant: Vec::new(),
+        uncertain,
+        honesty: opts.honesty,
         notes,
         yaml,
     };
