@@ -4,7 +4,8 @@
 //! uncertain parameters and the written file keeps their input values;
 //! with `--write-uncertain` the identified values are written; a
 //! well-identified data set lists nothing and writes every identified
-//! value.
+//! value. `diagnose --write-model` leaves uncertain parameters of an
+//! accepted effect out the same way.
 //!
 //! What a file holds is read back through the binary: calibrating the
 //! written file again (from the other data set of the kind, so that the
@@ -366,4 +367,89 @@ fn uncertain_above_sets_the_threshold() {
             .stderr(predicates::str::contains("--uncertain-above"));
     }
     assert!(!dir.path().join("bad.yaml").exists());
+}
+
+/// The TCP of the flange, mm, of the robot machine file at `path`.
+fn tcp_mm(path: &Path) -> [f64; 3] {
+    let text = std::fs::read_to_string(path).expect("written model");
+    match postproc::machine::Machine::from_yaml_str(&text, "model.yaml").expect("loads") {
+        postproc::machine::Machine::Robot(r) => r.flange_to_tool().translation.vector.into(),
+        postproc::machine::Machine::Tool(_) => panic!("a robot"),
+    }
+}
+
+/// `diagnose --write-model` adds an accepted effect's parameters under the
+/// same rule: a hidden TCP offset of 0.3 mm in x (none in y, z) is found;
+/// its y and z components are uncertain and not added (listed as not
+/// written) unless --write-uncertain.
+#[test]
+fn diagnose_write_model_leaves_uncertain_parameters_out() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let model = repo("samples/diagnose/model.yaml");
+    let text = std::fs::read_to_string(&model).expect("model");
+    let from = "flange_to_tool: { x_mm: 0.0, y_mm: 0.0, z_mm: 150.0";
+    assert!(text.contains(from));
+    let truth = dir.path().join("true.yaml");
+    std::fs::write(
+        &truth,
+        text.replacen(
+            from,
+            "flange_to_tool: { x_mm: 0.3, y_mm: 0.0, z_mm: 150.0",
+            1,
+        ),
+    )
+    .expect("write truth");
+    let measured = dir.path().join("measured.csv");
+    postproc()
+        .args(["simulate", "--machine"])
+        .arg(&truth)
+        .arg("--observations")
+        .arg(repo("samples/diagnose/measured.csv"))
+        .args([
+            "--noise-um",
+            "15",
+            "--noise-um-per-m",
+            "6",
+            "--seed",
+            "4",
+            "-o",
+        ])
+        .arg(&measured)
+        .assert()
+        .success();
+    let run = |out: &Path, extra: &[&str]| -> String {
+        let a = postproc()
+            .args(["diagnose", "--machine"])
+            .arg(&model)
+            .arg("--observations")
+            .arg(&measured)
+            .arg("--write-model")
+            .arg(out)
+            .args(extra)
+            .assert()
+            .success();
+        String::from_utf8_lossy(&a.get_output().stdout).into_owned()
+    };
+    let kept = dir.path().join("kept.yaml");
+    let stdout = run(&kept, &[]);
+    assert!(stdout.contains("added tcp_offset"), "{stdout}");
+    for c in ["dy", "dz"] {
+        assert!(
+            stdout.contains(&format!("not written: tcp_offset: {c} [µm] = ")),
+            "{c} listed:\n{stdout}"
+        );
+    }
+    assert!(!stdout.contains("tcp_offset: dx"), "{stdout}");
+    let t = tcp_mm(&kept);
+    assert!((t[0] - 0.3).abs() < 0.03, "x added: {t:?}");
+    assert_eq!([t[1], t[2]], [0.0, 150.0], "y, z keep the file's values");
+    let all = dir.path().join("all.yaml");
+    let stdout = run(&all, &["--write-uncertain"]);
+    assert!(!stdout.contains("not written: tcp_offset"), "{stdout}");
+    let t_all = tcp_mm(&all);
+    assert_eq!(t_all[0], t[0]);
+    assert!(
+        t_all[1] != 0.0 && t_all[2] != 150.0,
+        "y, z added: {t_all:?}"
+    );
 }

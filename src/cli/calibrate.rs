@@ -180,6 +180,18 @@ pub struct CalibrateArgs {
 /// Largest `--uncertain-above`: 100 (10 000 %).
 const MAX_UNCERTAIN_ABOVE: f64 = 100.0;
 
+/// Checks `--uncertain-above` (calibrate and diagnose).
+pub(super) fn check_uncertain_above(v: f64) -> Result<()> {
+    if v.is_finite() && v > 0.0 && v <= MAX_UNCERTAIN_ABOVE {
+        return Ok(());
+    }
+    Err(usage(format!(
+        "--uncertain-above must be a fraction above 0 and at most {MAX_UNCERTAIN_ABOVE} \
+         (0.5 = 50 %), got {}",
+        crate::error::show_number(v)
+    )))
+}
+
 /// Parses `--frame`.
 pub fn parse_frame(s: &str) -> std::result::Result<MeasurementFrame, String> {
     MeasurementFrame::parse(s)
@@ -339,16 +351,7 @@ pub fn run_calibrate(a: &CalibrateArgs) -> Result<i32> {
             crate::error::show_number(a.orientation_weight_mm_per_rad)
         )));
     }
-    if !(a.uncertain_above.is_finite()
-        && a.uncertain_above > 0.0
-        && a.uncertain_above <= MAX_UNCERTAIN_ABOVE)
-    {
-        return Err(usage(format!(
-            "--uncertain-above must be a fraction above 0 and at most {MAX_UNCERTAIN_ABOVE} \
-             (0.5 = 50 %), got {}",
-            crate::error::show_number(a.uncertain_above)
-        )));
-    }
+    check_uncertain_above(a.uncertain_above)?;
     let (text, file) = read_machine(&a.machine)?;
     let mut obs = load_observations(&a.observations)?;
     if let Some(f) = a.frame {
