@@ -208,17 +208,19 @@ impl Calibration {
         if self.uncertain.is_empty() {
             return Ok(());
         }
-        let limit = 100.0 * self.honesty.max_relative;
+        // The threshold in per cent, without trailing zeros (50, 12.5).
+        let pct = format!("{:.3}", 100.0 * self.honesty.max_relative);
+        let limit = pct.trim_end_matches('0').trim_end_matches('.');
         if self.honesty.write_uncertain {
             writeln!(
                 f,
-                "uncertain (U(k=2) above {limit:.0} % of max(|value|, |change|)), written because \
+                "uncertain (U(k=2) above {limit} % of max(|value|, |change|)), written because \
                  of --write-uncertain:"
             )?;
         } else {
             writeln!(
                 f,
-                "uncertain (U(k=2) above {limit:.0} % of max(|value|, |change|)), NOT written \
+                "uncertain (U(k=2) above {limit} % of max(|value|, |change|)), NOT written \
                  (the file's value is kept; --write-uncertain writes them):"
             )?;
         }
