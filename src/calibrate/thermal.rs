@@ -18,7 +18,8 @@
 //! start point (e.g. two terms on the same length share the constant `ub`
 //! direction, so one `ub` is fixed; with fewer than three power levels `ts`
 //! cannot be told from `lb`). The time constant is not identified: rows at
-//! the steady state carry no time information.
+//! the steady state carry no time information. Uncertain unknowns
+//! ([`super::honesty`]) keep the file's value, in both kinds.
 //!
 //! Machine tools ([`calibrate_tool_thermal`]): the steady-state gains of the
 //! file's `thermal:` section from rows with powers — the spindle growth
