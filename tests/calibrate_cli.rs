@@ -913,3 +913,45 @@ fn binary_calibrate_thermal_sample() {
     assert!(matches!(m, Machine::Robot(_)));
     assert!(written.contains("# START file"), "comments kept");
 }
+
+/// Data that support no correction of a file (the file already fits them
+/// within their large noise): the kinematic calibration still runs and
+/// prints its table instead of failing on an empty fit.
+#[test]
+fn kinematics_with_no_significant_correction_runs() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let calibrated = dir.path().join("cal.yaml");
+    postproc()
+        .args(["calibrate", "kinematics", "--machine"])
+        .arg(repo(START_ROBOT))
+        .arg("--observations")
+        .arg(repo("samples/observations/irb1600-kinematic-measured.csv"))
+        .arg("-o")
+        .arg(&calibrated)
+        .assert()
+        .success();
+    let noisy = dir.path().join("noisy.csv");
+    postproc()
+        .args(["simulate", "--machine"])
+        .arg(repo(TRUTH_ROBOT))
+        .arg("--observations")
+        .arg(repo("samples/observations/irb1600-kinematic-poses.csv"))
+        .args(["--noise-um", "300", "--seed", "2", "-o"])
+        .arg(&noisy)
+        .assert()
+        .success();
+    let a = postproc()
+        .args(["calibrate", "kinematics", "--holdout", "0", "--machine"])
+        .arg(&calibrated)
+        .arg("--observations")
+        .arg(&noisy)
+        .arg("-o")
+        .arg(dir.path().join("again.yaml"))
+        .assert()
+        .success();
+    let stdout = String::from_utf8_lossy(&a.get_output().stdout).to_string();
+    assert!(
+        stdout.contains("not significant on the fit rows"),
+        "{stdout}"
+    );
+}

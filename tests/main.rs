@@ -16,6 +16,7 @@ mod gcode_cli;
 mod gcode_grammar;
 mod golden;
 mod gperf;
+mod honesty_cli;
 mod hostile;
 mod machine_tool;
 mod mounts;

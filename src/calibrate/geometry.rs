@@ -30,7 +30,8 @@
 //! order; the design matrix is the finite difference (1 µm or 1 µrad) of the
 //! exact forward model ([`super::forward::predict`]) of the machine file with
 //! the values written in ([`super::yaml_edit`]), solved by linear least
-//! squares with one Gauss–Newton refinement.
+//! squares with one Gauss–Newton refinement. Uncertain values
+//! ([`super::honesty`]) keep the file's value.
 
 use nalgebra::{DMatrix, DVector};
 
@@ -465,7 +466,6 @@ pub fn calibrate_geometry(
             id.condition_number_identified, CONDITION_LIMIT, id.observability_o1
         )));
     }
-    let (yaml, _) = eval(&x, &[]).map_err(|e| implausible(&e, obs_file, fit.len()))?;
     let u = sol.std_uncertainty();
     let fixed: std::collections::BTreeSet<usize> = id.unidentifiable.iter().copied().collect();
     let mut params = Vec::with_capacity(n);
@@ -491,6 +491,16 @@ pub fn calibrate_geometry(
             fixed: is_fixed,
         });
     }
+    // Uncertain values keep the file's value (super::honesty).
+    let withheld = opts.honesty.withheld(&params);
+    let uncertain = opts.honesty.uncertain(&params);
+    let x: Vec<f64> = x
+        .iter()
+        .zip(&x0)
+        .zip(&withheld)
+        .map(|((&v, &v0), &w)| if w { v0 } else { v })
+        .collect();
+    let (yaml, _) = eval(&x, &[]).map_err(|e| implausible(&e, obs_file, fit.len()))?;
     let calibrated = Machine::from_yaml_str(&yaml, machine_file)?;
     let mh = measured(obs, &hold);
     let before = norms(&(&mh - deviations(&machine, obs, &hold, obs_file)?));
@@ -523,6 +533,8 @@ pub fn calibrate_geometry(
         fit_check: Validation::from_norms(&fit_before, &fit_after),
         frame: None,
         insignificant: Vec::new(),
+        uncertain,
+        honesty: opts.honesty,
         notes: std::mem::take(&mut notes),
         yaml,
     };

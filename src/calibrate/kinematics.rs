@@ -39,7 +39,9 @@
 //! value and the rest is fitted again; the held-out rows check
 //! the result (per-point RMS and max before and after, fit and held-out).
 //! Rows whose deleted residual marks them as outliers
-//! ([`super::screen::dominating_rows`]) leave the fit, named.
+//! ([`super::screen::dominating_rows`]) leave the fit, named. Uncertain
+//! parameters ([`super::honesty`]) keep the file's value in the written
+//! file and its validation.
 
 use nalgebra::{DMatrix, DVector, Isometry3, Translation3};
 
@@ -418,7 +420,9 @@ fn position_rows(
 /// one at a time, the free model parameter whose correction is least
 /// significant (`t² = δ² / var(δ)`), while its `t²` is below `ln(m)` — the
 /// Bayesian information criterion's price of a parameter (dropping it
-/// lowers the BIC). Frame parameters always stay. Returns the kept and the
+/// lowers the BIC). Frame parameters always stay, and so does the last
+/// model parameter when nothing else is free (a fit needs an unknown; the
+/// honesty rule of [`super::honesty`] still judges it). Returns the kept and the
 /// dropped parameters, each dropped one with the standard uncertainty (mm
 /// or mrad) the full fit would give its correction.
 fn select_parameters(
@@ -469,7 +473,7 @@ fn select_parameters(
             })
             .min_by(|a, b| a.1.total_cmp(&b.1));
         match weakest {
-            Some((k, t2)) if t2 < price => {
+            Some((k, t2)) if t2 < price && kept.len() > 1 => {
                 kept.retain(|&x| x != k);
                 dropped.push((k, u_of(k)));
             }
@@ -706,6 +710,16 @@ pub fn calibrate_kinematics(
             fixed: !is_free,
         });
     }
+    // Uncertain parameters keep the file's value (super::honesty): their
+    // corrections are not applied.
+    let withheld = opts.honesty.withheld(&params);
+    let uncertain = opts.honesty.uncertain(&params);
+    let mut full = full;
+    for (k, w) in withheld.iter().enumerate() {
+        if let (true, Some(x)) = (*w, full.get_mut(k)) {
+            *x = 0.0;
+        }
+    }
     let calibrated_robot = layout.robot(&full);
     let calibrated = Machine::Robot(calibrated_robot.clone());
     let f_start = layout.frame_at(&[]);
@@ -752,6 +766,8 @@ pub fn calibrate_kinematics(
         fit_check: Validation::from_norms(&fit_before, &fit_after),
         frame,
         insignificant: insignificant.iter().map(|&k| layout.name(k).0).collect(),
+        uncertain,
+        honesty: opts.honesty,
         notes,
         yaml,
     };

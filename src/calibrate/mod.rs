@@ -4,6 +4,7 @@
 pub mod forward;
 pub mod frame;
 pub mod geometry;
+pub mod honesty;
 pub mod kinematics;
 pub mod lsq;
 pub mod observations;

@@ -4,6 +4,7 @@
 
 use std::fmt;
 
+use super::honesty::{Rule, relative_uncertainty};
 use super::lsq::{COVERAGE_K, Identifiability};
 
 /// A scaled condition number (unit-norm columns) above this makes the data
@@ -100,6 +101,12 @@ pub struct Calibration {
     /// Fixed parameters that the data could identify but whose correction
     /// is not significant on the fit rows (subset selection).
     pub insignificant: Vec<String>,
+    /// Indices into `params` of the uncertain parameters
+    /// ([`super::honesty`]); they keep the file's value in `yaml` unless
+    /// `honesty.write_uncertain`.
+    pub uncertain: Vec<usize>,
+    /// The rule that judged them.
+    pub honesty: Rule,
     /// Things the data does not support, said in words.
     pub notes: Vec<String>,
     /// The calibrated machine file (original text with edited values).
@@ -194,6 +201,51 @@ impl Calibration {
     }
 }
 
+impl Calibration {
+    /// The list of uncertain parameters: value ± U, the judged ratio and
+    /// what was written.
+    fn fmt_uncertain(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        if self.uncertain.is_empty() {
+            return Ok(());
+        }
+        // The threshold in per cent, without trailing zeros (50, 12.5).
+        let pct = format!("{:.3}", 100.0 * self.honesty.max_relative);
+        let limit = pct.trim_end_matches('0').trim_end_matches('.');
+        if self.honesty.write_uncertain {
+            writeln!(
+                f,
+                "uncertain (U(k=2) above {limit} % of max(|value|, |change|)), written because \
+                 of --write-uncertain:"
+            )?;
+        } else {
+            writeln!(
+                f,
+                "uncertain (U(k=2) above {limit} % of max(|value|, |change|)), NOT written \
+                 (the file's value is kept; --write-uncertain writes them):"
+            )?;
+        }
+        for p in self.uncertain.iter().filter_map(|&i| self.params.get(i)) {
+            let big_u = p.u.map_or("?".to_string(), |u| g(COVERAGE_K * u));
+            let ratio =
+                relative_uncertainty(p).map_or("?".to_string(), |r| format!("{:.1} %", 100.0 * r));
+            write!(
+                f,
+                "  {}: {} ± {} {} ({ratio})",
+                p.name,
+                g(p.value),
+                big_u,
+                p.unit
+            )?;
+            if self.honesty.write_uncertain {
+                writeln!(f)?;
+            } else {
+                writeln!(f, ", kept {}", g(p.start))?;
+            }
+        }
+        Ok(())
+    }
+}
+
 /// About seven significant digits, fixed point where that reads well.
 fn g(v: f64) -> String {
     let a = v.abs();
@@ -263,6 +315,7 @@ impl fmt::Display for Calibration {
                 fixed.join(", ")
             )?;
         }
+        self.fmt_uncertain(f)?;
         match &self.validation {
             Some(v) => writeln!(
                 f,

@@ -24,7 +24,8 @@
 //! ([`super::forward::predict`]) at the estimate:
 //! `y ← y − (Δx_model(c) − A c)`.
 //! Uncertainties: `u(c)` from the residual variance; `u(k) = u(c) / c²`
-//! (first-order propagation). A non-positive compliance is refused.
+//! (first-order propagation). A non-positive compliance is refused; an
+//! uncertain stiffness ([`super::honesty`]) keeps the file's value.
 
 use std::collections::HashMap;
 
@@ -57,6 +58,8 @@ pub struct Options {
     /// orientation residual of θ rad counts like a position residual of
     /// `θ · weight` mm). 0 ignores measured orientations.
     pub orientation_mm_per_rad: f64,
+    /// What happens to uncertain parameters ([`super::honesty`]).
+    pub honesty: super::honesty::Rule,
 }
 
 /// Default ratio of position to orientation noise, mm/rad: a laser tracker
@@ -70,6 +73,7 @@ impl Default for Options {
             holdout: 0.3,
             seed: 1,
             orientation_mm_per_rad: ORIENTATION_MM_PER_RAD,
+            honesty: super::honesty::Rule::default(),
         }
     }
 }
@@ -342,21 +346,9 @@ pub fn calibrate_stiffness(
     let k_nmm = stiffness_from(&c);
     let uc = sol.std_uncertainty().map(|u| u * dof_factor);
     let mut params = Vec::with_capacity(6);
-    let mut notes = Vec::new();
     for i in 0..6 {
         let k = k_nmm[i] / 1000.0;
         let u = uc.as_ref().map(|u| u[i] / (c[i] * c[i] * C_UNIT) / 1000.0);
-        if let Some(u) = u {
-            if 2.0 * u > 0.1 * k {
-                notes.push(format!(
-                    "k{} is poorly determined (U(k=2) = {:.0} % of the value): the loads twist \
-                     joint {} little, its deflection is near the noise",
-                    i + 1,
-                    200.0 * u / k,
-                    i + 1
-                ));
-            }
-        }
         params.push(Estimate {
             name: format!("k{}", i + 1),
             unit: "N·m/rad",
@@ -366,7 +358,15 @@ pub fn calibrate_stiffness(
             fixed: false,
         });
     }
-    let calibrated = Machine::Robot(robot.with_stiffness(k_nmm));
+    // Uncertain stiffnesses keep the file's value (super::honesty).
+    let withheld = opts.honesty.withheld(&params);
+    let uncertain = opts.honesty.uncertain(&params);
+    let written: [f64; 6] = std::array::from_fn(|i| match params.get(i) {
+        Some(p) if withheld.get(i) == Some(&true) => p.start,
+        Some(p) => p.value,
+        None => 0.0,
+    });
+    let calibrated = Machine::Robot(robot.with_stiffness(written.map(|k| k * 1000.0)));
     let mut before = Vec::new();
     let mut after = Vec::new();
     for g in &hold {
@@ -385,7 +385,7 @@ pub fn calibrate_stiffness(
             after.push((meas - model_deflection(&calibrated, row, obs_file)?).norm());
         }
     }
-    let values: Vec<String> = params.iter().map(|p| fmt_value(p.value, 1)).collect();
+    let values: Vec<String> = written.iter().map(|&k| fmt_value(k, 1)).collect();
     let yaml = set_top_level_list(text, machine_file, "k_nm_per_rad", &values)?;
     Machine::from_yaml_str(&yaml, machine_file)
         .map_err(|e| super::screen::implausible(&e, obs_file, obs.rows.len()))?;
@@ -402,7 +402,9 @@ pub fn calibrate_stiffness(
         fit_check: None,
         frame: None,
         insignificant: Vec::new(),
-        notes,
+        uncertain,
+        honesty: opts.honesty,
+        notes: Vec::new(),
         yaml,
     };
     cal.set_identifiability(&id);

@@ -18,7 +18,8 @@
 //! start point (e.g. two terms on the same length share the constant `ub`
 //! direction, so one `ub` is fixed; with fewer than three power levels `ts`
 //! cannot be told from `lb`). The time constant is not identified: rows at
-//! the steady state carry no time information.
+//! the steady state carry no time information. Uncertain unknowns
+//! ([`super::honesty`]) keep the file's value, in both kinds.
 //!
 //! Machine tools ([`calibrate_tool_thermal`]): the steady-state gains of the
 //! file's `thermal:` section from rows with powers — the spindle growth
@@ -341,6 +342,16 @@ pub fn calibrate_thermal(
         "rows are at the thermal steady state of their powers: time_constant_min is not identified"
             .into(),
     );
+    // Uncertain unknowns keep the file's value (super::honesty).
+    let withheld = opts.honesty.withheld(&params);
+    let uncertain = opts.honesty.uncertain(&params);
+    let mut full = full;
+    for (j, w) in withheld.iter().enumerate() {
+        if let (true, Some(x)) = (*w, full.get_mut(j)) {
+            *x = 0.0;
+        }
+    }
+    let terms = terms_with(&base, &full);
     let before = norms(robot, &base, obs, &hold, obs_file)?;
     let after = norms(robot, &terms, obs, &hold, obs_file)?;
     let mut yaml = text.to_string();
@@ -362,6 +373,8 @@ pub fn calibrate_thermal(
         fit_check: None,
         frame: None,
         insignificant: Vec::new(),
+        uncertain,
+        honesty: opts.honesty,
         notes,
         yaml,
     };
@@ -498,15 +511,17 @@ pub fn calibrate_tool_thermal(
         };
         if k == 0 {
             let start = thermal.spindle.map_or(0.0, |s| s.gain_per_kw);
-            params.push(Estimate {
+            let est = Estimate {
                 name: "spindle.growth".into(),
                 unit: "µm/kW",
                 start,
                 value: start + delta,
                 u: uc,
                 fixed,
-            });
-            if !fixed {
+            };
+            let write = !fixed && !opts.honesty.withholds(&est);
+            params.push(est);
+            if write {
                 yaml = super::yaml_edit::set_spindle_growth(
                     &yaml,
                     machine_file,
@@ -518,15 +533,17 @@ pub fn calibrate_tool_thermal(
         } else {
             let name = ["X", "Y", "Z"][k - 1];
             let start = thermal.axes[k - 1].map_or(0.0, |s| s.gain_per_kw);
-            params.push(Estimate {
+            let est = Estimate {
                 name: format!("{name}.scale"),
                 unit: "ppm/kW",
                 start,
                 value: start + delta,
                 u: uc,
                 fixed,
-            });
-            if !fixed {
+            };
+            let write = !fixed && !opts.honesty.withholds(&est);
+            params.push(est);
+            if write {
                 yaml = super::yaml_edit::set_axis_scale(&yaml, machine_file, name, start + delta)?;
             }
         }
@@ -535,6 +552,7 @@ pub fn calibrate_tool_thermal(
         "rows are at the thermal steady state of their powers: time constants are not identified"
             .into(),
     );
+    let uncertain = opts.honesty.uncertain(&params);
     let calibrated = Machine::from_yaml_str(&yaml, machine_file)?;
     let before = machine_norms(machine, obs, &hold, obs_file)?;
     let after = machine_norms(&calibrated, obs, &hold, obs_file)?;
@@ -550,6 +568,8 @@ pub fn calibrate_tool_thermal(
         fit_check: None,
         frame: None,
         insignificant: Vec::new(),
+        uncertain,
+        honesty: opts.honesty,
         notes,
         yaml,
     };

@@ -10,6 +10,7 @@ use clap::{Args, ValueEnum};
 use crate::calibrate::forward::Switches;
 use crate::calibrate::frame::calibrate_by_registration;
 use crate::calibrate::geometry::calibrate_geometry;
+use crate::calibrate::honesty::{MAX_RELATIVE_UNCERTAINTY, Rule};
 use crate::calibrate::kinematics::calibrate_kinematics;
 use crate::calibrate::observations::{
     MeasurementFrame, load_observations, load_poses, write_observations_with,
@@ -165,6 +166,30 @@ pub struct CalibrateArgs {
     /// worse than the input file.
     #[arg(long)]
     pub force: bool,
+    /// Largest accepted expanded uncertainty U(k=2) of a parameter, as a
+    /// fraction of the larger of its identified value and its change (a
+    /// length known to within 2 µm is always accepted). Parameters above
+    /// it are uncertain: listed, and not written unless --write-uncertain.
+    #[arg(long, value_name = "FRACTION", default_value_t = MAX_RELATIVE_UNCERTAINTY)]
+    pub uncertain_above: f64,
+    /// Write the uncertain parameters too (they are still listed).
+    #[arg(long)]
+    pub write_uncertain: bool,
+}
+
+/// Largest `--uncertain-above`: 100 (10 000 %).
+const MAX_UNCERTAIN_ABOVE: f64 = 100.0;
+
+/// Checks `--uncertain-above` (calibrate and diagnose).
+pub(super) fn check_uncertain_above(v: f64) -> Result<()> {
+    if v.is_finite() && v > 0.0 && v <= MAX_UNCERTAIN_ABOVE {
+        return Ok(());
+    }
+    Err(usage(format!(
+        "--uncertain-above must be a fraction above 0 and at most {MAX_UNCERTAIN_ABOVE} \
+         (0.5 = 50 %), got {}",
+        crate::error::show_number(v)
+    )))
 }
 
 /// Parses `--frame`.
@@ -326,6 +351,7 @@ pub fn run_calibrate(a: &CalibrateArgs) -> Result<i32> {
             crate::error::show_number(a.orientation_weight_mm_per_rad)
         )));
     }
+    check_uncertain_above(a.uncertain_above)?;
     let (text, file) = read_machine(&a.machine)?;
     let mut obs = load_observations(&a.observations)?;
     if let Some(f) = a.frame {
@@ -336,6 +362,10 @@ pub fn run_calibrate(a: &CalibrateArgs) -> Result<i32> {
         holdout: a.holdout,
         seed: a.seed,
         orientation_mm_per_rad: a.orientation_weight_mm_per_rad,
+        honesty: Rule {
+            max_relative: a.uncertain_above,
+            write_uncertain: a.write_uncertain,
+        },
     };
     tracing::info!(
         "measured positions in the {} frame",
@@ -377,6 +407,12 @@ pub fn run_calibrate(a: &CalibrateArgs) -> Result<i32> {
             .map_err(|e| Error::io("stdout", e))
     };
     say(&mut stdout, &cal.to_string())?;
+    if !cal.uncertain.is_empty() && !a.write_uncertain {
+        tracing::warn!(
+            "{} uncertain parameter(s) keep the file's value (--write-uncertain writes them)",
+            cal.uncertain.len()
+        );
+    }
     if let (true, Some(v)) = (cal.worse_on_holdout(), cal.validation) {
         let numbers = format!(
             "the calibrated model predicts the {} held-out items worse than the input model \

@@ -52,6 +52,16 @@ pub struct DiagnoseArgs {
     /// to the model first).
     #[arg(long, value_parser = super::calibrate::parse_frame)]
     pub frame: Option<crate::calibrate::observations::MeasurementFrame>,
+    /// With --write-model: add the uncertain parameters of the accepted
+    /// effects too (U(k=2) above --uncertain-above of their value; they are
+    /// listed as not added otherwise).
+    #[arg(long)]
+    pub write_uncertain: bool,
+    /// Largest accepted expanded uncertainty U(k=2) of an added parameter,
+    /// as a fraction of its value (a length known to within 2 µm is always
+    /// accepted); see `calibrate --uncertain-above`.
+    #[arg(long, value_name = "FRACTION", default_value_t = crate::calibrate::honesty::MAX_RELATIVE_UNCERTAINTY)]
+    pub uncertain_above: f64,
 }
 
 /// Observations in the machine's reference frame: world positions through
@@ -143,6 +153,7 @@ fn print(s: &str) -> Result<()> {
 
 /// Runs `postproc diagnose`.
 pub fn run(a: &DiagnoseArgs) -> Result<i32> {
+    super::calibrate::check_uncertain_above(a.uncertain_above)?;
     if a.list_effects {
         let text = match (&a.machine, &a.observations) {
             (Some(m), Some(o)) => {
@@ -194,7 +205,13 @@ pub fn run(a: &DiagnoseArgs) -> Result<i32> {
             .map_err(|e| Error::Usage(format!("cannot write JSON: {e}")))?,
     };
     if let Some(path) = &a.write_model {
-        let mut w = write::write_model(&machine, &text, &d.found)?;
+        let rule = crate::calibrate::honesty::Rule {
+            max_relative: a.uncertain_above,
+            write_uncertain: a.write_uncertain,
+        };
+        let (found, withheld) = write::withhold_uncertain(&machine, &d.found, &rule);
+        let mut w = write::write_model(&machine, &text, &found)?;
+        w.not_written.extend(withheld);
         if !w.written.is_empty() {
             // The fit: the 3D RMS of the held-out rows with the accepted
             // effects (µm → mm).

@@ -55,6 +55,12 @@ pub enum Command {
     #[command(after_help = EXIT_HELP)]
     Simulate(calibrate::SimulateArgs),
     /// Identify model parameters from measurements; write a calibrated machine file.
+    ///
+    /// Prints every parameter with its uncertainty. A parameter whose
+    /// expanded uncertainty U(k=2) is above --uncertain-above (default 50 %)
+    /// of the larger of its identified value and its change is uncertain:
+    /// it is listed and keeps the input file's value unless
+    /// --write-uncertain (docs/calibration.md, "Uncertain parameters").
     #[command(after_help = EXIT_HELP)]
     Calibrate(calibrate::CalibrateArgs),
     /// Find where model and measurements disagree, name the missing effect, add it.

@@ -26,6 +26,10 @@
 //!   `thermal.spindle.growth_um_per_kw` (a new `spindle:` gets
 //!   `idle_w_per_rpm: 0` and an assumed `time_constant_min: 30`).
 //!
+//! Uncertain parameters (the calibration rule of
+//! [`crate::calibrate::honesty`], on the added value) are not added unless
+//! asked for ([`withhold_uncertain`]).
+//!
 //! The file's text is edited in place: every value that changed is
 //! rewritten on its own line (scalars and one-line flow sequences/mappings),
 //! so comments and layout are kept. When a change cannot be made that way
@@ -37,6 +41,9 @@ use serde_yaml::{Mapping, Value};
 
 use super::Found;
 use super::effects::{Action, DhField, apply_to_yaml, round9};
+use crate::calibrate::honesty::{Rule, relative_uncertainty};
+use crate::calibrate::lsq::COVERAGE_K;
+use crate::calibrate::report::Estimate;
 use crate::calibrate::yaml_edit::{ThermalTermText, add_thermal_term, set_spindle_growth};
 use crate::error::{Error, Result};
 use crate::machine::Machine;
@@ -441,6 +448,75 @@ fn flow(v: &Value) -> Option<String> {
         }
         _ => return None,
     })
+}
+
+/// The unit of a fitted parameter's name (`dx [µm]` → `µm`), for the
+/// length floor of [`honesty`]; empty when it is not a length.
+fn length_unit(name: &str) -> &'static str {
+    let unit = name
+        .rsplit_once('[')
+        .and_then(|(_, u)| u.strip_suffix(']'))
+        .unwrap_or("");
+    match unit {
+        "µm" => "µm",
+        "mm" => "mm",
+        _ => "",
+    }
+}
+
+/// Applies the calibration honesty rule ([`honesty`]) to the accepted
+/// effects before they are written: an uncertain parameter is not added
+/// (its value becomes 0, the file keeps its value), an effect whose every
+/// parameter is uncertain is left out. Returns the effects to write and,
+/// per parameter withheld, the effect's name and why.
+pub fn withhold_uncertain(
+    machine: &Machine,
+    found: &[Found],
+    rule: &Rule,
+) -> (Vec<Found>, Vec<(String, String)>) {
+    let mut kept = Vec::with_capacity(found.len());
+    let mut withheld = Vec::new();
+    for f in found {
+        let mut f = f.clone();
+        let mut n_uncertain = 0;
+        for p in &mut f.params {
+            let est = Estimate {
+                name: p.name.clone(),
+                unit: length_unit(&p.name),
+                start: 0.0,
+                value: p.value,
+                u: Some(p.u),
+                fixed: false,
+            };
+            if rule.withholds(&est) {
+                n_uncertain += 1;
+                let ratio = relative_uncertainty(&est).unwrap_or(f64::INFINITY);
+                withheld.push((
+                    f.effect.name.clone(),
+                    format!(
+                        "{} = {:.4} ± {:.4} (U(k=2) = {:.1} % of the value) is uncertain; \
+                         not added (--write-uncertain adds it)",
+                        p.name,
+                        p.value,
+                        COVERAGE_K * p.u,
+                        100.0 * ratio
+                    ),
+                ));
+                p.value = 0.0;
+                p.name = format!("{} (uncertain, not added)", p.name);
+            }
+        }
+        // Thermal and machine-tool effects write their first parameter only.
+        let first_withheld = f
+            .params
+            .first()
+            .is_some_and(|p| p.name.ends_with("(uncertain, not added)"));
+        let first_only = is_thermal(&f.effect.action) || matches!(machine, Machine::Tool(_));
+        if n_uncertain < f.params.len() && !(first_withheld && first_only) {
+            kept.push(f);
+        }
+    }
+    (kept, withheld)
 }
 
 #[cfg(test)]
