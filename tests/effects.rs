@@ -588,7 +588,10 @@ fn bad_process_flags_are_usage_errors() {
             vec!["--force", "constant:1,2,3@wrist"],
             "--force: `constant:1,2,3@wrist`",
         ),
-        (vec!["--thermal-start", "warm"], "--thermal-start: `warm`"),
+        (
+            vec!["--thermal-start", "warm"],
+            "for '--thermal-start <START>': `warm` is not cold, steady",
+        ),
         (vec!["--milling-depth=-1"], "--milling-depth -1"),
         (vec!["--gain", "vibration=2"], "unknown effect `vibration`"),
     ] {

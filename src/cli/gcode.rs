@@ -16,7 +16,7 @@ use crate::error::{Error, Result};
 use crate::job::{Job, Summary};
 use crate::machine::Machine;
 use crate::machine::tool::MachineTool;
-use crate::predict::{EffectSet, ProcessSetup, ThermalStart, ToolPredictor};
+use crate::predict::{EffectSet, ProcessSetup, ToolPredictor};
 use crate::process::{ForceModel, ForceTable, Frame};
 use crate::program::interp::Setup;
 
@@ -181,7 +181,7 @@ pub(super) fn process_setup(args: &EffectArgs, machine: &MachineTool) -> Result<
     }
     p.milling_depth_mm = args.milling_depth;
     p.milling_width_mm = args.milling_width;
-    p.thermal_start = ThermalStart::parse(&args.thermal_start)?;
+    p.thermal_start = args.thermal_start;
     Ok(p)
 }
 

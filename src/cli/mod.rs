@@ -14,6 +14,7 @@ use std::path::PathBuf;
 use clap::{Args, Parser, Subcommand, ValueEnum};
 
 use crate::error::{Error, Result};
+use crate::machine::ThermalStart;
 
 pub use diagnose::{DiagnoseArgs, DiagnoseFormat};
 
@@ -205,7 +206,7 @@ pub struct EffectArgs {
     pub milling_width: Option<f64>,
     /// Thermal state at the program start: cold, steady (the steady state of the program's mean power) or MINUTES of warm-up at that power.
     #[arg(long, value_name = "START", default_value = "cold")]
-    pub thermal_start: String,
+    pub thermal_start: ThermalStart,
     /// Worker threads (default: all cores); a G-code program's own thread
     /// interprets and writes alongside them. Output is the same for any
     /// count. At most 4 per core.

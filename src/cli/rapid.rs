@@ -13,7 +13,8 @@ use crate::emit::header::{HeaderWriter, Provenance};
 use crate::emit::rapid::Format;
 use crate::error::{Error, Result};
 use crate::machine::Machine;
-use crate::machine::robot::{Effects, Robot, ThermalStart};
+use crate::machine::ThermalStart;
+use crate::machine::robot::{Effects, Robot};
 use crate::program::rapid::parse_module_bytes;
 
 /// True when the program should take the RAPID path: its extension is
@@ -450,10 +451,7 @@ pub(super) fn rapid_options(
         }
         format.position_decimals = d;
     }
-    let thermal_start: ThermalStart = effects
-        .thermal_start
-        .parse()
-        .map_err(|e| usage(format!("--thermal-start: {e}")))?;
+    let thermal_start = effects.thermal_start;
     Ok(RapidOptions {
         effects: robot_gains(robot_effects(&effects.effects)?, &effects.gains)?,
         annotate,

@@ -24,6 +24,7 @@ use crate::emit::rapid::{
     push_annotation, push_robtarget_edit,
 };
 use crate::error::{Error, Located, Result};
+use crate::machine::ThermalStart;
 use crate::machine::robot::pose::pose_from_abb;
 use crate::machine::robot::process::{
     CutSettings, Directives, feed_frame_vector, plunge_direction, travel_direction,
@@ -33,7 +34,7 @@ use crate::machine::robot::thermal::{
 };
 use crate::machine::robot::{
     Compensation, ConfData, Deviation, DhGrowth, Effects, ForceFrame, ForceModel, IkSelect, Model,
-    PointMass, ProcessWrench, Robot, RobotError, Seed, ThermalStart,
+    PointMass, ProcessWrench, Robot, RobotError, Seed,
 };
 use crate::process::MillingCache;
 use crate::program::rapid::{

@@ -6,6 +6,7 @@
 
 pub mod robot;
 pub mod status;
+pub mod thermal_start;
 pub mod tool;
 pub mod yaml;
 
@@ -13,6 +14,7 @@ use std::borrow::Cow;
 use std::path::{Path, PathBuf};
 
 pub use status::Status;
+pub use thermal_start::{MAX_WARM_UP_MIN, ThermalStart};
 
 use crate::error::{Error, Result};
 

@@ -243,49 +243,6 @@ pub struct ToolPredictor<'m> {
     pub process: Option<&'m ProcessSetup>,
 }
 
-/// Longest warm-up of `--thermal-start MINUTES` (about ten weeks: any
-/// machine is at its steady state long before).
-pub const MAX_WARM_UP_MIN: f64 = 1e5;
-
-/// How the thermal state of the machine starts.
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
-pub enum ThermalStart {
-    /// Cold machine: every thermal error parameter zero.
-    #[default]
-    Cold,
-    /// Steady state at the program's mean power (a repeated task).
-    Steady,
-    /// Warm-up from cold at the program's mean power for this many minutes.
-    Minutes(f64),
-}
-
-impl ThermalStart {
-    /// Parses `cold`, `steady` or a number of minutes.
-    pub fn parse(s: &str) -> Result<Self> {
-        match s.trim() {
-            "cold" => Ok(ThermalStart::Cold),
-            "steady" => Ok(ThermalStart::Steady),
-            m => match m.parse::<f64>() {
-                Ok(v) if v.is_finite() && (0.0..=MAX_WARM_UP_MIN).contains(&v) => {
-                    Ok(ThermalStart::Minutes(v))
-                }
-                _ => Err(Error::Usage(format!(
-                    "--thermal-start: `{s}` is not cold, steady or a number of minutes (0..100000)"
-                ))),
-            },
-        }
-    }
-
-    /// True when the start needs the program's mean power.
-    pub fn needs_mean_power(self) -> bool {
-        match self {
-            ThermalStart::Cold => false,
-            ThermalStart::Steady => true,
-            ThermalStart::Minutes(m) => m > 0.0,
-        }
-    }
-}
-
 /// Job-level settings of the process effects (force model, milling
 /// engagement, thermal start), shared by every block of a job.
 #[derive(Debug, Clone, PartialEq, Default)]
@@ -297,7 +254,7 @@ pub struct ProcessSetup {
     /// Radial width of cut for milling until a program directive sets one, mm.
     pub milling_width_mm: Option<f64>,
     /// Initial thermal state.
-    pub thermal_start: ThermalStart,
+    pub thermal_start: crate::machine::ThermalStart,
     /// Mean power of each heat source over the program (spindle, X, Y, Z),
     /// W, for the `steady` and warm-up starts.
     pub mean_power_w: Option<crate::machine::tool::thermal::Powers>,
@@ -933,21 +890,5 @@ thermal:
             ratio[1] > 0.1 && ratio[0] > 0.01,
             "largest ratios {ratio:?}"
         );
-    }
-
-    #[test]
-    fn thermal_start_parses() {
-        assert_eq!(ThermalStart::parse("cold").ok(), Some(ThermalStart::Cold));
-        assert_eq!(
-            ThermalStart::parse("steady").ok(),
-            Some(ThermalStart::Steady)
-        );
-        assert_eq!(
-            ThermalStart::parse("30").ok(),
-            Some(ThermalStart::Minutes(30.0))
-        );
-        assert!(ThermalStart::parse("warm").is_err());
-        assert!(ThermalStart::parse("-5").is_err());
-        assert!(!ThermalStart::Minutes(0.0).needs_mean_power());
     }
 }

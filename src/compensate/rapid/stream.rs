@@ -18,9 +18,10 @@ use std::io::{BufRead, Write};
 
 use super::{Carry, MoveRecord, RapidOptions, RapidOutcome, compensate_window};
 use crate::error::{Error, Result};
+use crate::machine::ThermalStart;
+use crate::machine::robot::Robot;
 use crate::machine::robot::process::{CutSettings, Directives};
 use crate::machine::robot::thermal::TimeLineTotals;
-use crate::machine::robot::{Robot, ThermalStart};
 use crate::program::rapid::windows::{Piece, Unsupported, Windows};
 use crate::program::rapid::{Span, Stmt, parse_module};
 
