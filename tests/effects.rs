@@ -583,10 +583,13 @@ fn bad_process_flags_are_usage_errors() {
     let m = thermal_machine(dir.path());
     let p = write(dir.path(), "p.nc", "G0 X0 Y0 Z0\n");
     for (args, needle) in [
-        (vec!["--force", "constant:1,2"], "--force: `constant:1,2`"),
+        (
+            vec!["--force", "constant:1,2"],
+            "for '--force <SPEC>': `constant:1,2`",
+        ),
         (
             vec!["--force", "constant:1,2,3@wrist"],
-            "--force: `constant:1,2,3@wrist`",
+            "for '--force <SPEC>': `constant:1,2,3@wrist`",
         ),
         (
             vec!["--thermal-start", "warm"],

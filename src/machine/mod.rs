@@ -4,6 +4,7 @@
 //! part of the binary ([`BUNDLED`]), so `--machine NAME` works wherever the
 //! binary runs.
 
+pub mod effects;
 pub mod robot;
 pub mod status;
 pub mod thermal_start;

@@ -14,6 +14,7 @@
 use nalgebra::Vector3;
 
 use crate::error::{Error, Result};
+use crate::machine::effects::{EffectName, EffectSpec, Gain};
 use crate::machine::tool::{MachineTool, ThermalState};
 use crate::machine::{AxisVec, DirVec, TipPose};
 
@@ -57,6 +58,19 @@ impl Effect {
             Effect::Thermal => "therm",
             Effect::Dynamic => "vib",
         }
+    }
+
+    /// The [`EffectSet`] slot of the effect a command-line name means
+    /// (`None`: a robot effect).
+    pub fn slot_for(name: EffectName) -> Option<usize> {
+        let e = match name {
+            EffectName::Geometric => Effect::Geometric,
+            EffectName::Static => Effect::Static,
+            EffectName::Thermal => Effect::Thermal,
+            EffectName::Dynamic => Effect::Dynamic,
+            _ => return None,
+        };
+        Some(e as usize)
     }
 
     /// True for the effects that shift the tool tip and are compensated.
@@ -105,60 +119,26 @@ impl EffectSet {
         }
     }
 
-    /// Parses `--effects` (`all`, `none` or a comma-separated list of names).
+    /// Parses `--effects` (`all`, `none` or a comma-separated list of
+    /// names, any case) for a machine tool.
     pub fn parse(spec: &str) -> Result<Self> {
-        let spec = spec.trim();
-        if spec == "all" {
-            return Ok(Self::default());
-        }
-        let mut set = Self::none();
-        if spec == "none" || spec.is_empty() {
-            return Ok(set);
-        }
-        for name in spec.split(',') {
-            let name = name.trim();
-            let e = Effect::ALL
-                .iter()
-                .find(|e| e.name() == name)
-                .ok_or_else(|| {
-                    Error::Usage(format!(
-                        "unknown effect `{name}` in --effects (known: all, none, {})",
-                        names()
-                    ))
-                })?;
-            set.gains[*e as usize] = 1.0;
-        }
-        Ok(set)
+        let spec: EffectSpec = spec
+            .parse()
+            .map_err(|e| Error::Usage(format!("--effects: {e}")))?;
+        Self::from_flags(&spec, &[])
     }
 
-    /// Applies `--gain name=value`.
-    pub fn set_gain(&mut self, spec: &str) -> Result<()> {
-        let (name, value) = spec
-            .split_once('=')
-            .ok_or_else(|| Error::Usage(format!("--gain expects NAME=VALUE, got `{spec}`")))?;
-        let e = Effect::ALL
-            .iter()
-            .find(|e| e.name() == name.trim())
-            .ok_or_else(|| {
-                Error::Usage(format!(
-                    "unknown effect `{name}` in --gain (known: {})",
-                    names()
-                ))
-            })?;
-        let v: f64 = value
-            .trim()
-            .parse()
-            .map_err(|_| Error::Usage(format!("--gain {name}: `{value}` is not a number")))?;
-        if !v.is_finite() || !(0.0..=10.0).contains(&v) {
-            return Err(Error::Usage(format!(
-                "--gain {name}: {} is outside 0..10",
-                crate::error::show_number(v)
-            )));
-        }
-        if self.gains[*e as usize] != 0.0 {
-            self.gains[*e as usize] = v;
-        }
-        Ok(())
+    /// The effects `--effects` turns on, scaled by `--gain`; names that do
+    /// not apply to a machine tool (`gravity`, `process`, …) are refused.
+    pub fn from_flags(spec: &EffectSpec, gains: &[Gain]) -> Result<Self> {
+        let gains = crate::machine::effects::gains_for(
+            spec,
+            gains,
+            Effect::slot_for,
+            "a machine tool",
+            &names(),
+        )?;
+        Ok(EffectSet { gains })
     }
 
     /// Gain of an effect (0 when off).
@@ -638,6 +618,12 @@ thermal:
         assert_abs_diff_eq!(got, want, epsilon = POS_TOL_MM);
     }
 
+    /// Every effect, with the one `--gain` `gain`.
+    fn with_gain(gain: &str) -> EffectSet {
+        let g: Gain = gain.parse().unwrap_or_else(|e| panic!("{gain}: {e}"));
+        EffectSet::from_flags(&EffectSpec::All, &[g]).unwrap_or_else(|e| panic!("{gain}: {e}"))
+    }
+
     #[test]
     fn switches_and_gains_act_on_their_part_only() {
         let m = machine();
@@ -655,8 +641,7 @@ thermal:
             let b = ToolPredictor::new(&m, set)
                 .with_context(ctx())
                 .breakdown(&cmd, &[1; 6], 0.0);
-            let mut set = EffectSet::default();
-            assert!(set.set_gain(&format!("{}=0.25", e.name())).is_ok());
+            let set = with_gain(&format!("{}=0.25", e.name()));
             let g = ToolPredictor::new(&m, set)
                 .with_context(ctx())
                 .breakdown(&cmd, &[1; 6], 0.0);
@@ -760,11 +745,7 @@ thermal:
             }
         }
         for gain in ["thermal=0.5", "static=2", "geometric=0.25"] {
-            let mut e = EffectSet::default();
-            if let Err(err) = e.set_gain(gain) {
-                panic!("{gain}: {err}");
-            }
-            specs.push(e);
+            specs.push(with_gain(gain));
         }
         let dir = concat!(env!("CARGO_MANIFEST_DIR"), "/machines");
         let mut names: Vec<String> = std::fs::read_dir(dir)
@@ -817,11 +798,7 @@ thermal:
             }
         }
         for gain in ["thermal=0.5", "static=2", "geometric=0.25"] {
-            let mut e = EffectSet::default();
-            if let Err(err) = e.set_gain(gain) {
-                panic!("{gain}: {err}");
-            }
-            specs.push(e);
+            specs.push(with_gain(gain));
         }
         let hot = BlockContext {
             force_n: Vector3::new(900.0, -700.0, 500.0),

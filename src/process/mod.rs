@@ -25,9 +25,11 @@
 //! The *tool frame* has z along the tool axis, x the workpiece X axis made
 //! normal to it (workpiece Y when X is along the tool) and y = z × x.
 
+mod force_spec;
 pub mod limits;
 mod table;
 
+pub use force_spec::{ForceSpec, MAX_FORCE_N};
 pub use table::ForceTable;
 
 use std::f64::consts::PI;
