@@ -19,9 +19,10 @@ use crate::error::{Error, Located, Result};
 use nalgebra::Vector3;
 
 use crate::machine::AxisVec;
+use crate::machine::ThermalStart;
 use crate::machine::tool::thermal::Powers;
 use crate::machine::tool::{MachineTool, Modal, Thermal, ThermalState};
-use crate::predict::{BlockContext, Effect, ThermalStart, ToolPredictor};
+use crate::predict::{BlockContext, Effect, ToolPredictor};
 use crate::process::{CutState, ForceModel, MillingCache};
 use crate::program::gcode::{Block, parse_line};
 use crate::program::interp::{END_INSIDE, Interpreter, Motion, Plan, PlanKind, Setup, Warning};
@@ -243,7 +244,7 @@ impl<'a> Tracker<'a> {
             state = match p.thermal_start {
                 ThermalStart::Cold => state,
                 ThermalStart::Steady => t.warm_up(&mean, f64::INFINITY),
-                ThermalStart::Minutes(min) => t.warm_up(&mean, min),
+                ThermalStart::WarmUpMin(min) => t.warm_up(&mean, min),
             };
         }
         let active = (force.is_some()

@@ -583,12 +583,18 @@ fn bad_process_flags_are_usage_errors() {
     let m = thermal_machine(dir.path());
     let p = write(dir.path(), "p.nc", "G0 X0 Y0 Z0\n");
     for (args, needle) in [
-        (vec!["--force", "constant:1,2"], "--force: `constant:1,2`"),
+        (
+            vec!["--force", "constant:1,2"],
+            "for '--force <SPEC>': `constant:1,2`",
+        ),
         (
             vec!["--force", "constant:1,2,3@wrist"],
-            "--force: `constant:1,2,3@wrist`",
+            "for '--force <SPEC>': `constant:1,2,3@wrist`",
         ),
-        (vec!["--thermal-start", "warm"], "--thermal-start: `warm`"),
+        (
+            vec!["--thermal-start", "warm"],
+            "for '--thermal-start <START>': `warm` is not cold, steady",
+        ),
         (vec!["--milling-depth=-1"], "--milling-depth -1"),
         (vec!["--gain", "vibration=2"], "unknown effect `vibration`"),
     ] {

@@ -11,6 +11,7 @@ mod compensate_props;
 mod diagnose;
 mod diagnose_matrix;
 mod effects;
+mod engine_flags;
 mod frames;
 mod gcode_cli;
 mod gcode_grammar;

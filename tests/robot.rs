@@ -654,7 +654,7 @@ fn paper_b_a2_range_golden() {
 
 #[test]
 fn thermal_filter_goldens() {
-    use postproc::machine::robot::ThermalStart;
+    use postproc::machine::ThermalStart;
     use postproc::machine::robot::thermal::{Segment, effective_power};
     let tau = 1800.0;
     // Constant 100 W on joint 1 for one time constant from cold: (1 − e^−1)·100.

@@ -389,7 +389,7 @@ pub fn calibrate_stiffness(
     let yaml = set_top_level_list(text, machine_file, "k_nm_per_rad", &values)?;
     Machine::from_yaml_str(&yaml, machine_file)
         .map_err(|e| super::screen::implausible(&e, obs_file, obs.rows.len()))?;
-    notes.extend(world);
+    let notes: Vec<String> = world.into_iter().collect();
     let mut cal = Calibration {
         kind: "stiffness",
         n_fit: n_loaded,
@@ -404,7 +404,7 @@ pub fn calibrate_stiffness(
         insignificant: Vec::new(),
         uncertain,
         honesty: opts.honesty,
-        notes: Vec::new(),
+        notes,
         yaml,
     };
     cal.set_identifiability(&id);

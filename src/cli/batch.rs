@@ -14,11 +14,10 @@ use std::path::{Path, PathBuf};
 use rayon::prelude::*;
 use serde::Serialize;
 
-use super::gcode::{
-    Staged, build_job, effects, finish_both, parse_setup, process_setup, refuse_overwrite,
-    run_reporting, thread_pool, write_atomically,
-};
-use super::rapid::{Source, load_robot};
+use super::config::{Given, Kind};
+use super::gcode::{build_job, effects, parse_setup, process_setup, run_reporting, thread_pool};
+use super::output::{Staged, finish_both, refuse_overwrite, write_atomically};
+use super::rapid::Source;
 use super::{Annotate, BatchArgs, Format, ProgramArgs, usage};
 use crate::compensate::rapid::{RapidOptions, compensate_module};
 use crate::emit::header::{HeaderWriter, Provenance};
@@ -221,9 +220,28 @@ struct FileResult {
 /// `--shard K/N`: the K-th (1-based) of N shares of the programs.
 #[derive(Debug, Clone, Copy, Serialize, serde::Deserialize, PartialEq, Eq)]
 #[serde(deny_unknown_fields)]
-struct Shard {
-    index: usize,
-    count: usize,
+pub struct Shard {
+    /// K, 1..=N.
+    pub index: usize,
+    /// N, at least 1.
+    pub count: usize,
+}
+
+/// Parses `K/N` (1 <= K <= N); the message names the value, not the flag.
+impl std::str::FromStr for Shard {
+    type Err = String;
+    fn from_str(text: &str) -> std::result::Result<Self, String> {
+        let bad = || format!("`{text}`: expected K/N with 1 <= K <= N");
+        let (k, n) = text.split_once('/').ok_or_else(bad)?;
+        let (index, count): (usize, usize) = (
+            k.trim().parse().map_err(|_| bad())?,
+            n.trim().parse().map_err(|_| bad())?,
+        );
+        if index == 0 || index > count {
+            return Err(bad());
+        }
+        Ok(Shard { index, count })
+    }
 }
 
 /// The summary file.
@@ -428,12 +446,23 @@ pub fn run(a: &BatchArgs, quiet: bool) -> Result<i32> {
         .ok_or_else(|| usage("batch needs --machine"))?;
     let pool = thread_pool(a.effects.threads)?;
     let (machine, loaded) = super::machines::open(&machine_name)?;
+    Given {
+        tools_or_offsets: !a.tools.is_empty() || !a.work_offsets.is_empty(),
+        units: a.units.is_some(),
+        tolerance: a.tolerance.is_some(),
+        allow_reconfiguration: a.effects.allow_reconfiguration,
+        rapid_window_lines: a.rapid_window_lines.is_some(),
+    }
+    .refuse_for(match machine {
+        Machine::Tool(_) => Kind::Tool,
+        Machine::Robot(_) => Kind::Robot,
+    })?;
     let tolerance = super::gcode::tolerance_for(a.tolerance, &machine);
     // The files every program's run reads besides the program itself.
     let mut files: Vec<PathBuf> = loaded.file.path.iter().cloned().collect();
     files.extend(a.effects.force_table.clone());
     let (items, skipped) = collect(&a.inputs, &a.out_dir);
-    let shard = a.shard.as_deref().map(parse_shard).transpose()?;
+    let shard = a.shard;
     if items.is_empty() {
         return Err(usage(format!(
             "no programs found (extensions: {}, {})",
@@ -473,13 +502,8 @@ pub fn run(a: &BatchArgs, quiet: bool) -> Result<i32> {
                 super::machines::tool_effects(&set),
             )
         }
-        Machine::Robot(_) => {
-            if !a.tools.is_empty() || !a.work_offsets.is_empty() {
-                return Err(usage(
-                    "--tool and --work-offset are G-code options; RAPID takes tooldata and wobjdata from the module",
-                ));
-            }
-            let robot = super::rapid::robot_with_process(load_robot(&machine_name)?, &a.effects)?;
+        Machine::Robot(robot) => {
+            let robot = super::rapid::robot_with_process(robot, &a.effects)?;
             let opts = super::rapid::rapid_options(&robot, &a.effects, annotate, None)?;
             if a.rapid_window_lines == Some(0) {
                 return Err(usage("--rapid-window-lines must be at least 1"));
@@ -641,20 +665,6 @@ fn write_summary(path: &Path, summary: &BatchSummary) -> Result<()> {
     })
 }
 
-/// Parses `--shard K/N` (1 ≤ K ≤ N).
-fn parse_shard(text: &str) -> Result<Shard> {
-    let bad = || usage(format!("--shard {text}: expected K/N with 1 <= K <= N"));
-    let (k, n) = text.split_once('/').ok_or_else(bad)?;
-    let (index, count): (usize, usize) = (
-        k.trim().parse().map_err(|_| bad())?,
-        n.trim().parse().map_err(|_| bad())?,
-    );
-    if index == 0 || index > count {
-        return Err(bad());
-    }
-    Ok(Shard { index, count })
-}
-
 /// Prints the failed, empty and out-of-tolerance programs, the skipped
 /// entries and the totals on standard output.
 fn print_summary(summary: &BatchSummary, summary_path: &Path) -> Result<()> {
@@ -783,4 +793,19 @@ fn merge(a: &BatchArgs) -> Result<i32> {
     write_summary(&summary_path, &summary)?;
     print_summary(&summary, &summary_path)?;
     Ok(summary.exit_code)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn shards_parse_k_of_n_and_refuse_the_rest() {
+        assert_eq!("2/3".parse::<Shard>(), Ok(Shard { index: 2, count: 3 }));
+        assert_eq!(" 1 / 1 ".parse::<Shard>(), Ok(Shard { index: 1, count: 1 }));
+        for bad in ["4/3", "0/3", "3", "a/3", "1/b", "-1/3", ""] {
+            let err = bad.parse::<Shard>().expect_err(bad);
+            assert_eq!(err, format!("`{bad}`: expected K/N with 1 <= K <= N"));
+        }
+    }
 }

@@ -22,7 +22,7 @@ use crate::error::{Error, Result};
 use crate::machine::status::Calibration;
 use crate::machine::{Machine, MachineFile};
 
-use super::gcode::write_atomically;
+use super::output::write_atomically;
 use super::usage;
 
 /// `postproc simulate`.
@@ -322,7 +322,7 @@ pub fn run_simulate(a: &SimulateArgs) -> Result<i32> {
             s
         }
     };
-    super::gcode::refuse_overwrite(&a.output, &read_files(&a.observations, &a.machine)?)?;
+    super::output::refuse_overwrite(&a.output, &read_files(&a.observations, &a.machine)?)?;
     let out_name = a.output.display().to_string();
     emit(&a.output, |w| {
         write_observations_with(w, &out, &fixed).map_err(|e| Error::io(&out_name, e))
@@ -397,7 +397,7 @@ pub fn run_calibrate(a: &CalibrateArgs) -> Result<i32> {
         cal.rms_fit_mm,
     )?;
     let yaml = crate::machine::status::set_calibrated(&cal.yaml, &file, &record)?;
-    super::gcode::refuse_overwrite(&a.output, &read_files(&a.observations, &a.machine)?)?;
+    super::output::refuse_overwrite(&a.output, &read_files(&a.observations, &a.machine)?)?;
     // The summary first: standard output that fails (closed, full) fails
     // the run before the model is written.
     let mut stdout = std::io::stdout().lock();

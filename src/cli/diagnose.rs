@@ -229,8 +229,8 @@ pub fn run(a: &DiagnoseArgs) -> Result<i32> {
         }
         let mut inputs = vec![o.clone()];
         inputs.extend(MachineFile::open(m)?.path);
-        super::gcode::refuse_overwrite(path, &inputs)?;
-        super::gcode::write_atomically(path, |out| {
+        super::output::refuse_overwrite(path, &inputs)?;
+        super::output::write_atomically(path, |out| {
             out.write_all(w.text.as_bytes())
                 .map_err(|e| Error::io(path, e))
         })?;

@@ -1,10 +1,14 @@
 //! The G-code commands: `check`, `compensate` and `report`.
 
 use std::fs::File;
-use std::io::{BufRead, BufReader, BufWriter, Read, Write};
+use std::io::{BufRead, BufReader, Read, Write};
 use std::path::{Path, PathBuf};
 
 use super::machines::Loaded;
+use super::output::{
+    Staged, check_report_path, default_output, emit_to, finish_both, refuse_overwrite,
+};
+/// The output writing of `calibrate` and `simulate`.
 use super::{
     Annotate, CheckArgs, CompensateArgs, EffectArgs, Format, ProgramArgs, ReportArgs, usage,
 };
@@ -14,21 +18,10 @@ use crate::emit::header::{HeaderWriter, Provenance};
 use crate::emit::report::ReportWriter;
 use crate::error::{Error, Result};
 use crate::job::{Job, Summary};
-use crate::machine::Machine;
 use crate::machine::tool::MachineTool;
-use crate::predict::{EffectSet, ProcessSetup, ThermalStart, ToolPredictor};
-use crate::process::{ForceModel, ForceTable, Frame};
+use crate::predict::{EffectSet, ProcessSetup, ToolPredictor};
+use crate::process::{ForceModel, ForceTable};
 use crate::program::interp::Setup;
-
-fn load_machine(name: &str) -> Result<(MachineTool, Loaded)> {
-    match super::machines::open(name)? {
-        (Machine::Tool(m), loaded) => Ok((m, loaded)),
-        (Machine::Robot(_), loaded) => Err(usage(format!(
-            "{}: is a robot; G-code programs need a machine tool",
-            loaded.file.shown
-        ))),
-    }
-}
 
 pub(super) fn parse_setup(args: &ProgramArgs, machine: Option<&MachineTool>) -> Result<Setup> {
     let mut setup = match machine {
@@ -39,57 +32,13 @@ pub(super) fn parse_setup(args: &ProgramArgs, machine: Option<&MachineTool>) -> 
         },
     };
     for t in &args.tools {
-        let (h, len) = t
-            .split_once('=')
-            .ok_or_else(|| usage(format!("--tool expects H<n>=LENGTH, got `{t}`")))?;
-        let h = h.trim().trim_start_matches(['H', 'h']);
-        let h: u32 = h
-            .parse()
-            .map_err(|_| usage(format!("--tool: `{t}`: bad H number")))?;
-        let len: f64 = len
-            .trim()
-            .parse()
-            .map_err(|_| usage(format!("--tool: `{t}`: bad length")))?;
-        if !len.is_finite() || !(0.0..=2000.0).contains(&len) {
-            return Err(usage(format!(
-                "--tool: `{t}`: length must be within 0..2000 mm"
-            )));
-        }
-        setup.tools.insert(h, len);
+        setup.tools.insert(t.h, t.length_mm);
     }
     for w in &args.work_offsets {
-        let (code, xyz) = w
-            .split_once('=')
-            .ok_or_else(|| usage(format!("--work-offset expects G54=X,Y,Z, got `{w}`")))?;
-        let code = code.trim().to_ascii_uppercase();
-        let idx = match code.as_str() {
-            "G54" => Some(0),
-            "G55" => Some(1),
-            "G56" => Some(2),
-            "G57" => Some(3),
-            "G58" => Some(4),
-            "G59" => Some(5),
-            c if crate::machine::tool::work_offset_key(c) => None,
-            _ => {
-                return Err(usage(format!(
-                    "--work-offset: `{code}` is not G54..G59, G54.1P1..G54.1P300 or G154P1..G154P99"
-                )));
-            }
-        };
-        let v: Vec<f64> = xyz
-            .split(',')
-            .map(|s| s.trim().parse::<f64>())
-            .collect::<std::result::Result<_, _>>()
-            .map_err(|_| usage(format!("--work-offset: `{w}`: expected three numbers")))?;
-        if v.len() != 3 || v.iter().any(|x| !x.is_finite() || x.abs() > 1e6) {
-            return Err(usage(format!(
-                "--work-offset: `{w}`: expected three finite numbers"
-            )));
-        }
-        match idx {
-            Some(i) => setup.work_offsets[i] = Some([v[0], v[1], v[2]]),
+        match w.slot {
+            Some(i) => setup.work_offsets[i] = Some(w.xyz_mm),
             None => {
-                setup.extra_offsets.insert(code, [v[0], v[1], v[2]]);
+                setup.extra_offsets.insert(w.code.clone(), w.xyz_mm);
             }
         }
     }
@@ -117,51 +66,16 @@ fn open_input(path: &Path) -> Result<(Box<dyn BufRead>, String)> {
     ))
 }
 
+/// The machine-tool effects of `--effects` and `--gain`.
 pub(super) fn effects(args: &EffectArgs) -> Result<EffectSet> {
-    let mut set = EffectSet::parse(&args.effects)?;
-    for g in &args.gains {
-        set.set_gain(g)?;
-    }
-    Ok(set)
-}
-
-/// Parses `--force`: `none` or `constant:FX,FY,FZ[@frame]`.
-pub(super) fn parse_force(spec: &str) -> Result<Option<ForceModel>> {
-    let spec = spec.trim();
-    if spec == "none" {
-        return Ok(None);
-    }
-    let bad = || {
-        usage(format!(
-            "--force: `{spec}`: expected none or constant:FX,FY,FZ[@workpiece|tool|feed] (N)"
-        ))
-    };
-    let body = spec.strip_prefix("constant:").ok_or_else(bad)?;
-    let (vals, frame) = match body.split_once('@') {
-        Some((v, f)) => (v, Frame::parse(f).ok_or_else(bad)?),
-        None => (body, Frame::Workpiece),
-    };
-    let v: Vec<f64> = vals
-        .split(',')
-        .map(|x| x.trim().parse::<f64>())
-        .collect::<std::result::Result<_, _>>()
-        .map_err(|_| bad())?;
-    match v.as_slice() {
-        [x, y, z] if v.iter().all(|c| c.is_finite() && c.abs() <= 1e6) => {
-            Ok(Some(ForceModel::Constant {
-                force_n: nalgebra::Vector3::new(*x, *y, *z),
-                frame,
-            }))
-        }
-        _ => Err(bad()),
-    }
+    EffectSet::from_flags(&args.effects, &args.gains)
 }
 
 /// The job's process settings from the machine file and the flags.
 pub(super) fn process_setup(args: &EffectArgs, machine: &MachineTool) -> Result<ProcessSetup> {
     let mut p = ProcessSetup::for_machine(machine);
-    if let Some(spec) = &args.force {
-        p.force = parse_force(spec)?;
+    if let Some(spec) = args.force {
+        p.force = spec.model();
     }
     if let Some(path) = &args.force_table {
         p.force = Some(ForceModel::Table(ForceTable::load(path)?));
@@ -181,7 +95,7 @@ pub(super) fn process_setup(args: &EffectArgs, machine: &MachineTool) -> Result<
     }
     p.milling_depth_mm = args.milling_depth;
     p.milling_width_mm = args.milling_width;
-    p.thermal_start = ThermalStart::parse(&args.thermal_start)?;
+    p.thermal_start = args.thermal_start;
     Ok(p)
 }
 
@@ -249,14 +163,8 @@ fn fmt_axes(v: &[f64; 6], setup: &Setup) -> String {
 }
 
 /// `postproc check`.
-pub fn check(a: &CheckArgs) -> Result<i32> {
-    let machine = a
-        .program
-        .machine
-        .as_deref()
-        .map(load_machine)
-        .transpose()?
-        .map(|(m, _)| m);
+pub fn check(a: &CheckArgs, machine: Option<(MachineTool, Loaded)>) -> Result<i32> {
+    let machine = machine.map(|(m, _)| m);
     let setup = parse_setup(&a.program, machine.as_ref())?;
     let (input, name) = open_input(&a.program.file)?;
     let job = Job {
@@ -328,237 +236,6 @@ pub fn check(a: &CheckArgs) -> Result<i32> {
     Ok(0)
 }
 
-/// Default output path: `<stem>.comp.<ext>` beside the input.
-pub fn default_output(input: &Path) -> PathBuf {
-    let stem = input
-        .file_stem()
-        .map(|s| s.to_string_lossy().to_string())
-        .unwrap_or_else(|| "program".into());
-    let name = match input.extension() {
-        Some(ext) => format!("{stem}.comp.{}", ext.to_string_lossy()),
-        None => format!("{stem}.comp"),
-    };
-    input.with_file_name(name)
-}
-
-/// Refuses an output path that is one of the command's input files (stdout
-/// `-` and stdin are never the same file). Every command that writes a file
-/// calls this before writing.
-pub fn refuse_overwrite<P: AsRef<Path>>(out: &Path, inputs: &[P]) -> Result<()> {
-    if out == Path::new("-") {
-        return Ok(());
-    }
-    for input in inputs.iter().map(AsRef::as_ref) {
-        if input != Path::new("-") && (out == input || same_file(input, out)) {
-            return Err(usage(format!(
-                "{}: the output would overwrite the input",
-                out.display()
-            )));
-        }
-    }
-    Ok(())
-}
-
-/// Whether the paths `a` and `b` name the same file: the same device and
-/// inode when both exist (symbolic and hard links included), else the same
-/// path once the folders are resolved (for a file not made yet: `./x`,
-/// `d/../x` and an absolute spelling are one file).
-pub(super) fn same_file(a: &Path, b: &Path) -> bool {
-    #[cfg(unix)]
-    {
-        use std::os::unix::fs::MetadataExt;
-        if let (Ok(x), Ok(y)) = (std::fs::metadata(a), std::fs::metadata(b)) {
-            return x.dev() == y.dev() && x.ino() == y.ino();
-        }
-    }
-    match (resolved(a), resolved(b)) {
-        (Some(x), Some(y)) => x == y,
-        _ => false,
-    }
-}
-
-/// `path` with its links, `.` and `..` resolved, also when the file itself
-/// does not exist yet (its folder is resolved and its name joined).
-fn resolved(path: &Path) -> Option<PathBuf> {
-    if let Ok(p) = path.canonicalize() {
-        return Some(p);
-    }
-    let name = path.file_name()?;
-    let dir = match path.parent() {
-        Some(p) if !p.as_os_str().is_empty() => p,
-        _ => Path::new("."),
-    };
-    Some(dir.canonicalize().ok()?.join(name))
-}
-
-/// Writes through a temporary file in the target directory and renames it
-/// into place only when `f` succeeds; on failure nothing is left behind.
-///
-/// An output that already exists and is not an ordinary file (`/dev/null`,
-/// `/dev/stdout`, a named pipe) is written to directly: renaming over it
-/// would replace the device or pipe with a file. A symbolic link is followed,
-/// so the file it points at is replaced and the link stays.
-pub fn write_atomically<T>(path: &Path, f: impl FnOnce(&mut dyn Write) -> Result<T>) -> Result<T> {
-    let mut out = Staged::file(path)?;
-    let value = f(out.writer())?;
-    out.finish()?.commit()?;
-    Ok(value)
-}
-
-/// An output being written ([`write_atomically`]'s parts, for runs that
-/// write two outputs and put neither in place unless both are written): a
-/// temporary file beside it, renamed into place by [`Pending::commit`], or
-/// a special file or standard output written straight.
-pub(super) struct Staged {
-    shown: PathBuf,
-    sink: Sink,
-}
-
-enum Sink {
-    /// A temporary file to be renamed to the path (removed on an
-    /// interrupt while the guard lives).
-    Temp(
-        BufWriter<std::fs::File>,
-        tempfile::TempPath,
-        PathBuf,
-        super::interrupt::Guard,
-    ),
-    /// A device or named pipe, written straight.
-    Through(BufWriter<std::fs::File>),
-    /// Standard output.
-    Stdout(BufWriter<std::io::Stdout>),
-}
-
-/// A written output waiting to be put in place.
-pub(super) struct Pending(
-    Option<(
-        tempfile::TempPath,
-        PathBuf,
-        PathBuf,
-        super::interrupt::Guard,
-    )>,
-);
-
-impl Staged {
-    /// The output `path`, or standard output for `-`.
-    pub(super) fn open(path: &Path) -> Result<Self> {
-        if path == Path::new("-") {
-            return Ok(Staged {
-                shown: PathBuf::from("stdout"),
-                sink: Sink::Stdout(BufWriter::new(std::io::stdout())),
-            });
-        }
-        Staged::file(path)
-    }
-
-    /// The output file `path` (see [`write_atomically`]).
-    fn file(path: &Path) -> Result<Self> {
-        let is_link = std::fs::symlink_metadata(path)
-            .map(|m| m.file_type().is_symlink())
-            .unwrap_or(false);
-        let target = match std::fs::metadata(path) {
-            Ok(m) if !m.is_file() && !m.is_dir() => {
-                let file = std::fs::OpenOptions::new()
-                    .write(true)
-                    .open(path)
-                    .map_err(|e| Error::io(path, e))?;
-                return Ok(Staged {
-                    shown: path.to_path_buf(),
-                    sink: Sink::Through(BufWriter::with_capacity(1 << 16, file)),
-                });
-            }
-            Ok(m) if m.is_file() && is_link => {
-                path.canonicalize().map_err(|e| Error::io(path, e))?
-            }
-            _ => path.to_path_buf(),
-        };
-        let dir = match target.parent() {
-            Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
-            _ => PathBuf::from("."),
-        };
-        // The temporary file's random name means nothing to the user: name
-        // the output and its folder only.
-        let tmp = tempfile::Builder::new()
-            .prefix(".postproc-")
-            .tempfile_in(&dir)
-            .map_err(|e| {
-                Error::io(
-                    path,
-                    std::io::Error::new(
-                        e.kind(),
-                        format!("cannot create a file in {}: {}", dir.display(), e.kind()),
-                    ),
-                )
-            })?;
-        let (file, tmp_path) = tmp.into_parts();
-        let guard = super::interrupt::register(&tmp_path);
-        Ok(Staged {
-            shown: path.to_path_buf(),
-            sink: Sink::Temp(
-                BufWriter::with_capacity(1 << 20, file),
-                tmp_path,
-                target,
-                guard,
-            ),
-        })
-    }
-
-    /// Where the output goes.
-    pub(super) fn writer(&mut self) -> &mut dyn Write {
-        match &mut self.sink {
-            Sink::Temp(w, ..) | Sink::Through(w) => w,
-            Sink::Stdout(w) => w,
-        }
-    }
-
-    /// Flushes the output (and syncs a temporary file): what is left is to
-    /// put it in place.
-    pub(super) fn finish(self) -> Result<Pending> {
-        let shown = self.shown;
-        match self.sink {
-            Sink::Through(mut w) => w.flush().map_err(|e| Error::io(&shown, e))?,
-            Sink::Stdout(mut w) => w.flush().map_err(|e| Error::io(&shown, e))?,
-            Sink::Temp(w, tmp_path, target, guard) => {
-                let file = w
-                    .into_inner()
-                    .map_err(|e| Error::io(&shown, e.into_error()))?;
-                file.sync_all().map_err(|e| Error::io(&shown, e))?;
-                // Temporary files are private (0600); the result is an
-                // ordinary file.
-                #[cfg(unix)]
-                {
-                    use std::os::unix::fs::PermissionsExt;
-                    file.set_permissions(std::fs::Permissions::from_mode(0o644))
-                        .map_err(|e| Error::io(&shown, e))?;
-                }
-                return Ok(Pending(Some((tmp_path, target, shown, guard))));
-            }
-        }
-        Ok(Pending(None))
-    }
-}
-
-/// Finishes a program and its report, then puts both in place: neither
-/// is, unless both are written.
-pub(super) fn finish_both(out: Staged, report: Staged) -> Result<()> {
-    let (report, out) = (report.finish()?, out.finish()?);
-    out.commit()?;
-    report.commit()
-}
-
-impl Pending {
-    /// Puts the output in place (renames the temporary file).
-    pub(super) fn commit(self) -> Result<()> {
-        if let Some((tmp_path, target, shown, guard)) = self.0 {
-            tmp_path
-                .persist(&target)
-                .map_err(|e| Error::io(&shown, e.error))?;
-            drop(guard);
-        }
-        Ok(())
-    }
-}
-
 #[allow(clippy::too_many_arguments)]
 pub(super) fn build_job<'m>(
     machine: &'m MachineTool,
@@ -608,58 +285,17 @@ pub(super) fn build_job<'m>(
     })
 }
 
-/// Loads the `--machine` file with the program's tool table and work offsets.
-fn machine_setup(program: &ProgramArgs, command: &str) -> Result<(MachineTool, Loaded, Setup)> {
-    let name = program
-        .machine
-        .as_deref()
-        .ok_or_else(|| usage(format!("{command} needs --machine")))?;
-    let (machine, loaded) = load_machine(name)?;
-    let setup = parse_setup(program, Some(&machine))?;
-    Ok((machine, loaded, setup))
-}
-
-/// Refuses a `--report` path that would replace the input or the output.
-pub(super) fn check_report_path(
-    report: Option<&Path>,
-    inputs: &[PathBuf],
-    output: &Path,
-) -> Result<()> {
-    let Some(report) = report else {
-        return Ok(());
-    };
-    if report == Path::new("-") {
-        return Err(usage("--report needs a file path (the program goes to -o)"));
-    }
-    let named = inputs.iter().map(|p| (p.as_path(), "input"));
-    for (other, what) in named.chain([(output, "output")]) {
-        if other != Path::new("-") && (report == other || same_file(report, other)) {
-            return Err(usage(format!(
-                "{}: the report would overwrite the {what}",
-                report.display()
-            )));
-        }
-    }
-    Ok(())
-}
-
 /// The files a run reads: the program, the machine file and the force
 /// table (none of them may be an output).
-pub(super) fn input_files(program: &ProgramArgs, effects: &EffectArgs) -> Result<Vec<PathBuf>> {
+pub(super) fn input_files(
+    program: &ProgramArgs,
+    loaded: &Loaded,
+    effects: &EffectArgs,
+) -> Vec<PathBuf> {
     let mut files = vec![program.file.clone()];
-    if let Some(m) = &program.machine {
-        files.extend(crate::machine::MachineFile::open(m)?.path);
-    }
+    files.extend(loaded.file.path.clone());
     files.extend(effects.force_table.clone());
-    Ok(files)
-}
-
-/// Writes to `path` atomically, or to standard output for `-`.
-pub(super) fn emit_to<T>(path: &Path, f: impl FnOnce(&mut dyn Write) -> Result<T>) -> Result<T> {
-    let mut out = Staged::open(path)?;
-    let value = f(out.writer())?;
-    out.finish()?.commit()?;
-    Ok(value)
+    files
 }
 
 /// Runs the job, streaming a row per motion block into a report.
@@ -709,8 +345,14 @@ struct Prepared {
 }
 
 impl Prepared {
-    fn new(program: &ProgramArgs, args: &EffectArgs, command: &str) -> Result<Self> {
-        let (machine, loaded, setup) = machine_setup(program, command)?;
+    fn new(
+        program: &ProgramArgs,
+        args: &EffectArgs,
+        machine: Option<(MachineTool, Loaded)>,
+        command: &str,
+    ) -> Result<Self> {
+        let (machine, loaded) = super::config::needed(machine, command)?;
+        let setup = parse_setup(program, Some(&machine))?;
         let pool = thread_pool(args.threads)?;
         let effects = effects(args)?;
         let mut process = process_setup(args, &machine)?;
@@ -740,8 +382,12 @@ impl Prepared {
 }
 
 /// `postproc compensate`.
-pub fn compensate(a: &CompensateArgs, quiet: bool) -> Result<i32> {
-    let run = Prepared::new(&a.program, &a.effects, "compensate")?;
+pub fn compensate(
+    a: &CompensateArgs,
+    machine: Option<(MachineTool, Loaded)>,
+    quiet: bool,
+) -> Result<i32> {
+    let run = Prepared::new(&a.program, &a.effects, machine, "compensate")?;
     let tolerance = tolerance_of(a.tolerance, Some(&run.machine));
     let annotate = a.annotate == Annotate::Comment;
     let job = run.job(tolerance, a.decimals, annotate)?;
@@ -751,7 +397,7 @@ pub fn compensate(a: &CompensateArgs, quiet: bool) -> Result<i32> {
         None if input_path == Path::new("-") => PathBuf::from("-"),
         None => default_output(input_path),
     };
-    let inputs = input_files(&a.program, &a.effects)?;
+    let inputs = input_files(&a.program, &run.loaded, &a.effects);
     refuse_overwrite(&out_path, &inputs)?;
     check_report_path(a.report.as_deref(), &inputs, &out_path)?;
     let (input, file) = open_input(input_path)?;
@@ -915,12 +561,12 @@ pub(super) fn summary_line(input: &str, output: &Path, s: &Summary, tolerance: f
 }
 
 /// `postproc report` (dry run).
-pub fn report(a: &ReportArgs) -> Result<i32> {
-    let run = Prepared::new(&a.program, &a.effects, "report")?;
+pub fn report(a: &ReportArgs, machine: Option<(MachineTool, Loaded)>) -> Result<i32> {
+    let run = Prepared::new(&a.program, &a.effects, machine, "report")?;
     let job = run.job(0.001, None, false)?;
     let (input, file) = open_input(&a.program.file)?;
     let out = a.output.clone().unwrap_or_else(|| PathBuf::from("-"));
-    refuse_overwrite(&out, &input_files(&a.program, &a.effects)?)?;
+    refuse_overwrite(&out, &input_files(&a.program, &run.loaded, &a.effects))?;
     let provenance = super::machines::provenance(
         &run.loaded,
         super::machines::tool_effects(&run.effects),

@@ -2,7 +2,7 @@
 //! is interrupted (SIGINT, SIGTERM, SIGHUP), so that an interrupted run
 //! leaves no partial file behind either: an output is written to a hidden
 //! temporary file beside it and renamed into place at the end
-//! ([`super::gcode::Staged`]); a failure removes the file as the run
+//! ([`super::output::Staged`]); a failure removes the file as the run
 //! unwinds, a signal would end the process before that.
 //!
 //! The paths of the files being written sit in a fixed table of atomic

@@ -3,10 +3,12 @@
 
 mod batch;
 mod calibrate;
+mod config;
 mod diagnose;
 mod gcode;
 mod interrupt;
 mod machines;
+mod output;
 mod rapid;
 
 use std::path::PathBuf;
@@ -14,7 +16,12 @@ use std::path::PathBuf;
 use clap::{Args, Parser, Subcommand, ValueEnum};
 
 use crate::error::{Error, Result};
+use crate::machine::ThermalStart;
+use crate::machine::effects::{EffectSpec, Gain};
+use crate::machine::tool::{ToolLength, WorkOffset};
+use crate::process::ForceSpec;
 
+pub use batch::Shard;
 pub use diagnose::{DiagnoseArgs, DiagnoseFormat};
 
 /// Exit codes, also listed in `--help`.
@@ -88,7 +95,7 @@ pub struct BatchArgs {
     /// with K = 1..N cover every program once (a Slurm job array, a
     /// Kubernetes indexed Job; docs/batch.md).
     #[arg(long, value_name = "K/N", conflicts_with = "merge_summaries")]
-    pub shard: Option<String>,
+    pub shard: Option<Shard>,
     /// Merge the batch-summary.json files of shards (the inputs) into one
     /// in --out-dir; nothing is compensated.
     #[arg(long)]
@@ -105,19 +112,20 @@ pub struct BatchArgs {
     pub rapid_window_lines: Option<usize>,
     /// G-code: tool length for an H number, overriding the machine file: H1=123.4 (mm).
     #[arg(long = "tool", value_name = "H=LENGTH")]
-    pub tools: Vec<String>,
+    pub tools: Vec<ToolLength>,
     /// G-code: work offset overriding the machine file: G54=X,Y,Z (mm, machine coordinates).
     #[arg(long = "work-offset", value_name = "GXX=X,Y,Z")]
-    pub work_offsets: Vec<String>,
+    pub work_offsets: Vec<WorkOffset>,
     /// G-code: the control's unit for programs without G20/G21.
     #[arg(long, value_enum)]
     pub units: Option<UnitsArg>,
     /// Effects.
     #[command(flatten)]
     pub effects: EffectArgs,
-    /// Largest gap between attained and programmed path along a move, mm
-    /// (at least 0.000001: ten times the solver's convergence; default: the
-    /// machine file's `compensation.tolerance_mm`, else 0.001).
+    /// Machine tools: largest gap between attained and programmed path
+    /// along a move, mm (at least 0.000001: ten times the solver's
+    /// convergence; default: the machine file's
+    /// `compensation.tolerance_mm`, else 0.001).
     #[arg(long)]
     pub tolerance: Option<f64>,
     /// Annotate compensated blocks with their predicted deviation.
@@ -141,15 +149,15 @@ pub struct ProgramArgs {
     /// Machine file, or the name of a bundled one (`postproc machines`).
     #[arg(short, long)]
     pub machine: Option<String>,
-    /// Tool length for an H number, overriding the machine file: H1=123.4 (mm).
+    /// G-code: tool length for an H number, overriding the machine file: H1=123.4 (mm).
     #[arg(long = "tool", value_name = "H=LENGTH")]
-    pub tools: Vec<String>,
-    /// Work offset overriding the machine file: G54=X,Y,Z (mm, machine
-    /// coordinates; also G54.1P1, G154P1).
+    pub tools: Vec<ToolLength>,
+    /// G-code: work offset overriding the machine file: G54=X,Y,Z (mm,
+    /// machine coordinates; also G54.1P1, G154P1).
     #[arg(long = "work-offset", value_name = "GXX=X,Y,Z")]
-    pub work_offsets: Vec<String>,
-    /// The control's unit for a program without G20/G21, overriding the
-    /// machine file's `units_default`.
+    pub work_offsets: Vec<WorkOffset>,
+    /// G-code: the control's unit for a program without G20/G21,
+    /// overriding the machine file's `units_default`.
     #[arg(long, value_enum)]
     pub units: Option<UnitsArg>,
     /// Read a RAPID module a window of this many lines at a time whatever
@@ -191,15 +199,15 @@ pub enum Annotate {
 /// Options of a prediction (effects and gains).
 #[derive(Debug, Args, Clone)]
 pub struct EffectArgs {
-    /// Effects to predict: all, none, or a list of geometric, static, thermal, dynamic (dynamic is reported, not compensated).
+    /// Effects to predict: all, none, or a list (machine tools: geometric, static, thermal, dynamic; robots: kinematic, gravity, process, thermal, dynamic; dynamic is reported, not compensated).
     #[arg(long, default_value = "all")]
-    pub effects: String,
-    /// Scale an effect: --gain geometric=0.5, --gain thermal=0.8.
+    pub effects: EffectSpec,
+    /// Scale an effect: --gain geometric=0.5, --gain thermal=0.8 (0..10).
     #[arg(long = "gain", value_name = "EFFECT=GAIN")]
-    pub gains: Vec<String>,
+    pub gains: Vec<Gain>,
     /// Process force instead of the machine file's `process_force`: none, or `constant:FX,FY,FZ[@workpiece|tool|feed]` (N, force on the tool).
     #[arg(long, value_name = "SPEC")]
-    pub force: Option<String>,
+    pub force: Option<ForceSpec>,
     /// Per-line process forces from a CSV file (line,fx_n,fy_n,fz_n; workpiece frame, N).
     #[arg(long, value_name = "FILE", conflicts_with = "force")]
     pub force_table: Option<PathBuf>,
@@ -211,7 +219,7 @@ pub struct EffectArgs {
     pub milling_width: Option<f64>,
     /// Thermal state at the program start: cold, steady (the steady state of the program's mean power) or MINUTES of warm-up at that power.
     #[arg(long, value_name = "START", default_value = "cold")]
-    pub thermal_start: String,
+    pub thermal_start: ThermalStart,
     /// Worker threads (default: all cores); a G-code program's own thread
     /// interprets and writes alongside them. Output is the same for any
     /// count. At most 4 per core.
@@ -236,9 +244,10 @@ pub struct CompensateArgs {
     /// Output path (default `<stem>.comp.<ext>` beside the input; `-` = stdout).
     #[arg(short, long)]
     pub output: Option<PathBuf>,
-    /// Largest gap between attained and programmed path along a move, mm
-    /// (at least 0.000001: ten times the solver's convergence; default: the
-    /// machine file's `compensation.tolerance_mm`, else 0.001).
+    /// Machine tools: largest gap between attained and programmed path
+    /// along a move, mm (at least 0.000001: ten times the solver's
+    /// convergence; default: the machine file's
+    /// `compensation.tolerance_mm`, else 0.001).
     #[arg(long)]
     pub tolerance: Option<f64>,
     /// Annotate compensated blocks with their predicted deviation.
@@ -331,15 +340,24 @@ pub fn init_logging(quiet: bool, verbose: u8) {
 
 /// Runs a parsed command line; returns the process exit code.
 pub fn run(cli: Cli) -> Result<i32> {
+    use config::Engine;
     init_logging(cli.quiet, cli.verbose);
     let quiet = cli.quiet;
     let code = match cli.command {
-        Command::Check(a) if rapid::wants(&a.program) => rapid::check(&a),
-        Command::Check(a) => gcode::check(&a),
-        Command::Compensate(a) if rapid::wants(&a.program) => rapid::compensate(&a, quiet),
-        Command::Compensate(a) => gcode::compensate(&a, quiet),
-        Command::Report(a) if rapid::wants(&a.program) => rapid::report(&a),
-        Command::Report(a) => gcode::report(&a),
+        Command::Check(a) => match Engine::choose(&a.program, config::Given::check(&a))? {
+            Engine::Robot(robot) => rapid::check(&a, robot),
+            Engine::Tool(machine) => gcode::check(&a, machine),
+        },
+        Command::Compensate(a) => {
+            match Engine::choose(&a.program, config::Given::compensate(&a))? {
+                Engine::Robot(robot) => rapid::compensate(&a, robot, quiet),
+                Engine::Tool(machine) => gcode::compensate(&a, machine, quiet),
+            }
+        }
+        Command::Report(a) => match Engine::choose(&a.program, config::Given::report(&a))? {
+            Engine::Robot(robot) => rapid::report(&a, robot),
+            Engine::Tool(machine) => gcode::report(&a, machine),
+        },
         Command::Batch(a) => batch::run(&a, quiet),
         Command::Simulate(a) => calibrate::run_simulate(&a),
         Command::Calibrate(a) => calibrate::run_calibrate(&a),

@@ -4,117 +4,18 @@
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
-use super::gcode::{Pending, Staged, default_output};
-use super::{Annotate, CheckArgs, CompensateArgs, EffectArgs, ProgramArgs, ReportArgs, usage};
+use super::machines::Loaded;
+use super::output::{Pending, Staged, default_output};
+use super::{Annotate, CheckArgs, CompensateArgs, EffectArgs, ReportArgs, usage};
 use crate::compensate::rapid::{
     MoveRecord, RapidOptions, RapidOutcome, compensate_module, compensate_parsed, stream,
 };
 use crate::emit::header::{HeaderWriter, Provenance};
 use crate::emit::rapid::Format;
 use crate::error::{Error, Result};
-use crate::machine::Machine;
-use crate::machine::robot::{Effects, Robot, ThermalStart};
+use crate::machine::ThermalStart;
+use crate::machine::robot::{Effects, Robot};
 use crate::program::rapid::parse_module_bytes;
-
-/// True when the program should take the RAPID path: its extension is
-/// `.mod`, `.modx` or `.prg`, or the machine file is a robot.
-pub fn wants(program: &ProgramArgs) -> bool {
-    let ext = program
-        .file
-        .extension()
-        .map(|e| e.to_string_lossy().to_ascii_lowercase());
-    if matches!(ext.as_deref(), Some("mod" | "modx" | "prg")) {
-        return true;
-    }
-    match program.machine.as_deref() {
-        Some(name) => matches!(
-            crate::machine::MachineFile::open(name).and_then(|f| f.load()),
-            Ok(Machine::Robot(_))
-        ),
-        None => false,
-    }
-}
-
-/// The robot of `--machine NAME`.
-pub(super) fn load_robot(name: &str) -> Result<Robot> {
-    load_robot_file(name).map(|(r, _)| r)
-}
-
-/// The robot of `--machine NAME` and its file.
-pub(super) fn load_robot_file(name: &str) -> Result<(Robot, super::machines::Loaded)> {
-    match super::machines::open(name)? {
-        (Machine::Robot(r), loaded) => Ok((r, loaded)),
-        (Machine::Tool(_), loaded) => Err(usage(format!(
-            "{}: is a machine tool; RAPID programs need a robot",
-            loaded.file.shown
-        ))),
-    }
-}
-
-/// Parses `--effects` for a robot: `all`, `none`, or a comma list of
-/// `kinematic` (alias `geometric`), `gravity`, `process` (alias `load`),
-/// `thermal`, `dynamic` (alias `vibration`).
-pub fn robot_effects(text: &str) -> Result<Effects> {
-    match text.trim().to_ascii_lowercase().as_str() {
-        "all" => return Ok(Effects::ALL),
-        "none" => return Ok(Effects::NONE),
-        _ => {}
-    }
-    let mut e = Effects::NONE;
-    for part in text.split(',') {
-        *robot_effect(&mut e, part.trim()).ok_or_else(|| {
-            usage(format!(
-                "--effects: unknown robot effect `{}` (all, none, {ROBOT_EFFECTS})",
-                part.trim()
-            ))
-        })? = 1.0;
-    }
-    Ok(e)
-}
-
-const ROBOT_EFFECTS: &str = "kinematic, gravity, process, thermal, dynamic";
-
-/// The gain field of the robot effect `name` (with its aliases).
-fn robot_effect<'e>(e: &'e mut Effects, name: &str) -> Option<&'e mut f64> {
-    match name.to_ascii_lowercase().as_str() {
-        "kinematic" | "geometric" => Some(&mut e.kinematic),
-        "gravity" => Some(&mut e.gravity),
-        "process" | "load" => Some(&mut e.process),
-        "thermal" => Some(&mut e.thermal),
-        "dynamic" | "vibration" => Some(&mut e.dynamic),
-        _ => None,
-    }
-}
-
-/// Applies `--gain EFFECT=GAIN` (0..10) to the effects that are on; an
-/// effect switched off by `--effects` stays off.
-pub fn robot_gains(mut e: Effects, gains: &[String]) -> Result<Effects> {
-    for spec in gains {
-        let (name, value) = spec
-            .split_once('=')
-            .ok_or_else(|| usage(format!("--gain expects EFFECT=GAIN, got `{spec}`")))?;
-        let v: f64 = value
-            .trim()
-            .parse()
-            .map_err(|_| usage(format!("--gain {name}: `{value}` is not a number")))?;
-        if !v.is_finite() || !(0.0..=10.0).contains(&v) {
-            return Err(usage(format!(
-                "--gain {name}: {} is outside 0..10",
-                crate::error::show_number(v)
-            )));
-        }
-        let g = robot_effect(&mut e, name.trim()).ok_or_else(|| {
-            usage(format!(
-                "--gain: unknown robot effect `{}` ({ROBOT_EFFECTS})",
-                name.trim()
-            ))
-        })?;
-        if *g != 0.0 {
-            *g = v;
-        }
-    }
-    Ok(e)
-}
 
 /// Modules of at least this size are read a window at a time when their
 /// shape and the run allow it ([`crate::compensate::rapid::stream`]):
@@ -347,9 +248,10 @@ fn windowed<T>(
 
 /// `postproc check` of a RAPID module: parse, resolve and (with a robot)
 /// check that every target is reachable with its confdata.
-pub fn check(a: &CheckArgs) -> Result<i32> {
+pub fn check(a: &CheckArgs, robot: Option<Result<(Robot, Loaded)>>) -> Result<i32> {
     let source = Source::new(&a.program.file, a.program.rapid_window_lines, false)?;
-    let (name, module_name, decls, procs, moves) = match check_streamed(a, &source)? {
+    let mut robot = robot.map(|r| r.map(|(robot, _)| robot));
+    let (name, module_name, decls, procs, moves) = match check_streamed(&mut robot, &source)? {
         Some(found) => found,
         None => {
             let (src, name) = source.read_whole()?;
@@ -362,9 +264,8 @@ pub fn check(a: &CheckArgs) -> Result<i32> {
             );
             // The compensation takes the parsed module (one parse, one
             // module in memory).
-            if let Some(m) = a.program.machine.as_deref() {
-                let robot = load_robot(m)?;
-                compensate_parsed(module, &src, &name, &robot, &check_options())?;
+            if let Some(robot) = robot {
+                compensate_parsed(module, &src, &name, &robot?, &check_options())?;
             }
             (name, found.0, found.1, found.2, found.3)
         }
@@ -384,13 +285,18 @@ type CheckSummary = (String, String, usize, usize, usize);
 
 /// The [`CheckSummary`] of a check read a window at a time (against the
 /// robot of `--machine`, or of the syntax alone without one); `None` when
-/// the module is to be read whole.
-fn check_streamed(a: &CheckArgs, source: &Source) -> Result<Option<CheckSummary>> {
+/// the module is to be read whole. Without a robot (a machine file that
+/// does not load, or is no robot), the module's syntax errors come first:
+/// the error of the machine is taken from `robot` when the syntax is good.
+fn check_streamed(
+    robot: &mut Option<Result<Robot>>,
+    source: &Source,
+) -> Result<Option<CheckSummary>> {
     let Some(lines) = source.window_lines() else {
         return Ok(None);
     };
     let name = source.name().to_string();
-    let Some(m) = a.program.machine.as_deref() else {
+    let Some(found) = robot.as_ref() else {
         let reader = source.open().map_err(|e| Error::io(&name, e))?;
         let found = windowed(
             &name,
@@ -399,19 +305,19 @@ fn check_streamed(a: &CheckArgs, source: &Source) -> Result<Option<CheckSummary>
         );
         return Ok(found.map(|s| (name, s.name, s.decls, s.routines, s.moves)));
     };
-    let robot = match load_robot(m) {
-        Ok(robot) => robot,
-        // The module read whole is parsed before the machine is loaded:
+    let Ok(robot) = found else {
+        // The module read whole is parsed before the machine is taken:
         // its syntax errors come first.
-        Err(e) => {
-            let reader = source.open().map_err(|e| Error::io(&name, e))?;
-            return match stream::check_syntax_streamed(reader, &name, lines) {
-                Ok(_) => Err(e),
-                Err(_) => Ok(None),
-            };
-        }
+        let reader = source.open().map_err(|e| Error::io(&name, e))?;
+        return match stream::check_syntax_streamed(reader, &name, lines) {
+            Ok(_) => match robot.take() {
+                Some(Err(e)) => Err(e),
+                _ => Ok(None),
+            },
+            Err(_) => Ok(None),
+        };
     };
-    let streamed = try_streamed(source, &robot, &check_options(), lines, None, None)?;
+    let streamed = try_streamed(source, robot, &check_options(), lines, None, None)?;
     Ok(streamed.map(|(s, _)| (name, s.name, s.decls, s.routines, s.moves)))
 }
 
@@ -450,12 +356,9 @@ pub(super) fn rapid_options(
         }
         format.position_decimals = d;
     }
-    let thermal_start: ThermalStart = effects
-        .thermal_start
-        .parse()
-        .map_err(|e| usage(format!("--thermal-start: {e}")))?;
+    let thermal_start = effects.thermal_start;
     Ok(RapidOptions {
-        effects: robot_gains(robot_effects(&effects.effects)?, &effects.gains)?,
+        effects: Effects::from_flags(&effects.effects, &effects.gains)?,
         annotate,
         format,
         thermal_start,
@@ -474,9 +377,9 @@ pub(super) fn rapid_options(
 pub(super) fn robot_with_process(robot: Robot, e: &EffectArgs) -> Result<Robot> {
     use crate::machine::robot::{ForceFrame, ForceModel, ProcessForce};
     let mut robot = robot.allowing_reconfiguration(e.allow_reconfiguration);
-    if let Some(spec) = &e.force {
-        let pf = match super::gcode::parse_force(spec)? {
-            Some(crate::process::ForceModel::Constant { force_n, frame }) => {
+    if let Some(spec) = e.force {
+        let pf = match spec {
+            crate::process::ForceSpec::Constant { force_n, frame } => {
                 let old = robot.process_force();
                 Some(ProcessForce {
                     model: ForceModel::Constant {
@@ -495,7 +398,7 @@ pub(super) fn robot_with_process(robot: Robot, e: &EffectArgs) -> Result<Robot> 
                         .to_radians(),
                 })
             }
-            _ => None,
+            crate::process::ForceSpec::None => None,
         };
         robot = robot.with_process_force(pf);
     }
@@ -534,19 +437,13 @@ pub(super) fn robot_with_process(robot: Robot, e: &EffectArgs) -> Result<Robot> 
 }
 
 /// `postproc compensate` of a RAPID module.
-pub fn compensate(a: &CompensateArgs, quiet: bool) -> Result<i32> {
-    let machine = a
-        .program
-        .machine
-        .as_deref()
-        .ok_or_else(|| usage("compensate needs --machine"))?;
-    let (robot, loaded) = load_robot_file(machine)?;
+pub fn compensate(
+    a: &CompensateArgs,
+    robot: Option<Result<(Robot, Loaded)>>,
+    quiet: bool,
+) -> Result<i32> {
+    let (robot, loaded) = super::config::needed(robot, "compensate")??;
     let robot = robot_with_process(robot, &a.effects)?;
-    if !a.program.tools.is_empty() || !a.program.work_offsets.is_empty() {
-        return Err(usage(
-            "--tool and --work-offset are G-code options; RAPID takes tooldata and wobjdata from the module",
-        ));
-    }
     let opts = RapidOptions {
         records: a.report.is_some(),
         ..rapid_options(
@@ -562,19 +459,10 @@ pub fn compensate(a: &CompensateArgs, quiet: bool) -> Result<i32> {
         None if input == Path::new("-") => PathBuf::from("-"),
         None => default_output(input),
     };
-    let inputs = super::gcode::input_files(&a.program, &a.effects)?;
-    super::gcode::refuse_overwrite(&out_path, &inputs)?;
-    super::gcode::check_report_path(a.report.as_deref(), &inputs, &out_path)?;
-    let mut pool = rayon::ThreadPoolBuilder::new();
-    if let Some(n) = a.effects.threads {
-        if n == 0 {
-            return Err(usage("--threads must be at least 1"));
-        }
-        pool = pool.num_threads(n);
-    }
-    let pool = pool
-        .build()
-        .map_err(|e| usage(format!("cannot start worker threads: {e}")))?;
+    let inputs = super::gcode::input_files(&a.program, &loaded, &a.effects);
+    super::output::refuse_overwrite(&out_path, &inputs)?;
+    super::output::check_report_path(a.report.as_deref(), &inputs, &out_path)?;
+    let pool = super::gcode::thread_pool(a.effects.threads)?;
     let source = Source::new(
         input,
         a.program.rapid_window_lines,
@@ -862,22 +750,15 @@ pub(super) fn write_report(
 }
 
 /// `postproc report` of a RAPID module (dry run against a robot).
-pub fn report(a: &ReportArgs) -> Result<i32> {
-    let machine = a
-        .program
-        .machine
-        .as_deref()
-        .ok_or_else(|| usage("report needs --machine"))?;
-    let (robot, loaded) = load_robot_file(machine)?;
+pub fn report(a: &ReportArgs, robot: Option<Result<(Robot, Loaded)>>) -> Result<i32> {
+    let (robot, loaded) = super::config::needed(robot, "report")??;
     let robot = robot_with_process(robot, &a.effects)?;
-    if !a.program.tools.is_empty() || !a.program.work_offsets.is_empty() {
-        return Err(usage(
-            "--tool and --work-offset are G-code options; RAPID takes tooldata and wobjdata from the module",
-        ));
-    }
     let opts = rapid_options(&robot, &a.effects, false, None)?;
     let out = a.output.clone().unwrap_or_else(|| PathBuf::from("-"));
-    super::gcode::refuse_overwrite(&out, &super::gcode::input_files(&a.program, &a.effects)?)?;
+    super::output::refuse_overwrite(
+        &out,
+        &super::gcode::input_files(&a.program, &loaded, &a.effects),
+    )?;
     let source = Source::new(
         &a.program.file,
         a.program.rapid_window_lines,
@@ -899,7 +780,7 @@ pub fn report(a: &ReportArgs) -> Result<i32> {
     }
     let (src, name) = source.read_whole()?;
     let outcome = compensate_module(&src, &name, &robot, &opts)?;
-    super::gcode::emit_to(&out, |w| {
+    super::output::emit_to(&out, |w| {
         write_report(w, &outcome, &name, a.format, Some(&provenance))
     })?;
     Ok(0)

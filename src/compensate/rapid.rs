@@ -24,13 +24,14 @@ use crate::emit::rapid::{
     push_annotation, push_robtarget_edit,
 };
 use crate::error::{Error, Located, Result};
+use crate::machine::ThermalStart;
 use crate::machine::robot::process::{feed_frame_vector, plunge_direction, travel_direction};
 use crate::machine::robot::thermal::{
     Segment, TimeLineTotals, effective_power, effective_power_from,
 };
 use crate::machine::robot::{
     Compensation, ConfData, Deviation, DhGrowth, Effects, ForceFrame, ForceModel, IkSelect, Model,
-    ProcessWrench, Robot, RobotError, Seed, ThermalStart,
+    ProcessWrench, Robot, RobotError, Seed,
 };
 use crate::process::CutSettings;
 use crate::process::MillingCache;

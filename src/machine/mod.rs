@@ -4,8 +4,10 @@
 //! part of the binary ([`BUNDLED`]), so `--machine NAME` works wherever the
 //! binary runs.
 
+pub mod effects;
 pub mod robot;
 pub mod status;
+pub mod thermal_start;
 pub mod tool;
 pub mod yaml;
 
@@ -13,6 +15,7 @@ use std::borrow::Cow;
 use std::path::{Path, PathBuf};
 
 pub use status::Status;
+pub use thermal_start::{MAX_WARM_UP_MIN, ThermalStart};
 
 use crate::error::{Error, Result};
 

@@ -14,6 +14,7 @@
 use nalgebra::Vector3;
 
 use crate::error::{Error, Result};
+use crate::machine::effects::{EffectName, EffectSpec, Gain};
 use crate::machine::tool::{MachineTool, ThermalState};
 use crate::machine::{AxisVec, DirVec, TipPose};
 
@@ -57,6 +58,19 @@ impl Effect {
             Effect::Thermal => "therm",
             Effect::Dynamic => "vib",
         }
+    }
+
+    /// The [`EffectSet`] slot of the effect a command-line name means
+    /// (`None`: a robot effect).
+    pub fn slot_for(name: EffectName) -> Option<usize> {
+        let e = match name {
+            EffectName::Geometric => Effect::Geometric,
+            EffectName::Static => Effect::Static,
+            EffectName::Thermal => Effect::Thermal,
+            EffectName::Dynamic => Effect::Dynamic,
+            _ => return None,
+        };
+        Some(e as usize)
     }
 
     /// True for the effects that shift the tool tip and are compensated.
@@ -105,60 +119,26 @@ impl EffectSet {
         }
     }
 
-    /// Parses `--effects` (`all`, `none` or a comma-separated list of names).
+    /// Parses `--effects` (`all`, `none` or a comma-separated list of
+    /// names, any case) for a machine tool.
     pub fn parse(spec: &str) -> Result<Self> {
-        let spec = spec.trim();
-        if spec == "all" {
-            return Ok(Self::default());
-        }
-        let mut set = Self::none();
-        if spec == "none" || spec.is_empty() {
-            return Ok(set);
-        }
-        for name in spec.split(',') {
-            let name = name.trim();
-            let e = Effect::ALL
-                .iter()
-                .find(|e| e.name() == name)
-                .ok_or_else(|| {
-                    Error::Usage(format!(
-                        "unknown effect `{name}` in --effects (known: all, none, {})",
-                        names()
-                    ))
-                })?;
-            set.gains[*e as usize] = 1.0;
-        }
-        Ok(set)
+        let spec: EffectSpec = spec
+            .parse()
+            .map_err(|e| Error::Usage(format!("--effects: {e}")))?;
+        Self::from_flags(&spec, &[])
     }
 
-    /// Applies `--gain name=value`.
-    pub fn set_gain(&mut self, spec: &str) -> Result<()> {
-        let (name, value) = spec
-            .split_once('=')
-            .ok_or_else(|| Error::Usage(format!("--gain expects NAME=VALUE, got `{spec}`")))?;
-        let e = Effect::ALL
-            .iter()
-            .find(|e| e.name() == name.trim())
-            .ok_or_else(|| {
-                Error::Usage(format!(
-                    "unknown effect `{name}` in --gain (known: {})",
-                    names()
-                ))
-            })?;
-        let v: f64 = value
-            .trim()
-            .parse()
-            .map_err(|_| Error::Usage(format!("--gain {name}: `{value}` is not a number")))?;
-        if !v.is_finite() || !(0.0..=10.0).contains(&v) {
-            return Err(Error::Usage(format!(
-                "--gain {name}: {} is outside 0..10",
-                crate::error::show_number(v)
-            )));
-        }
-        if self.gains[*e as usize] != 0.0 {
-            self.gains[*e as usize] = v;
-        }
-        Ok(())
+    /// The effects `--effects` turns on, scaled by `--gain`; names that do
+    /// not apply to a machine tool (`gravity`, `process`, …) are refused.
+    pub fn from_flags(spec: &EffectSpec, gains: &[Gain]) -> Result<Self> {
+        let gains = crate::machine::effects::gains_for(
+            spec,
+            gains,
+            Effect::slot_for,
+            "a machine tool",
+            &names(),
+        )?;
+        Ok(EffectSet { gains })
     }
 
     /// Gain of an effect (0 when off).
@@ -243,49 +223,6 @@ pub struct ToolPredictor<'m> {
     pub process: Option<&'m ProcessSetup>,
 }
 
-/// Longest warm-up of `--thermal-start MINUTES` (about ten weeks: any
-/// machine is at its steady state long before).
-pub const MAX_WARM_UP_MIN: f64 = 1e5;
-
-/// How the thermal state of the machine starts.
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
-pub enum ThermalStart {
-    /// Cold machine: every thermal error parameter zero.
-    #[default]
-    Cold,
-    /// Steady state at the program's mean power (a repeated task).
-    Steady,
-    /// Warm-up from cold at the program's mean power for this many minutes.
-    Minutes(f64),
-}
-
-impl ThermalStart {
-    /// Parses `cold`, `steady` or a number of minutes.
-    pub fn parse(s: &str) -> Result<Self> {
-        match s.trim() {
-            "cold" => Ok(ThermalStart::Cold),
-            "steady" => Ok(ThermalStart::Steady),
-            m => match m.parse::<f64>() {
-                Ok(v) if v.is_finite() && (0.0..=MAX_WARM_UP_MIN).contains(&v) => {
-                    Ok(ThermalStart::Minutes(v))
-                }
-                _ => Err(Error::Usage(format!(
-                    "--thermal-start: `{s}` is not cold, steady or a number of minutes (0..100000)"
-                ))),
-            },
-        }
-    }
-
-    /// True when the start needs the program's mean power.
-    pub fn needs_mean_power(self) -> bool {
-        match self {
-            ThermalStart::Cold => false,
-            ThermalStart::Steady => true,
-            ThermalStart::Minutes(m) => m > 0.0,
-        }
-    }
-}
-
 /// Job-level settings of the process effects (force model, milling
 /// engagement, thermal start), shared by every block of a job.
 #[derive(Debug, Clone, PartialEq, Default)]
@@ -297,7 +234,7 @@ pub struct ProcessSetup {
     /// Radial width of cut for milling until a program directive sets one, mm.
     pub milling_width_mm: Option<f64>,
     /// Initial thermal state.
-    pub thermal_start: ThermalStart,
+    pub thermal_start: crate::machine::ThermalStart,
     /// Mean power of each heat source over the program (spindle, X, Y, Z),
     /// W, for the `steady` and warm-up starts.
     pub mean_power_w: Option<crate::machine::tool::thermal::Powers>,
@@ -681,6 +618,12 @@ thermal:
         assert_abs_diff_eq!(got, want, epsilon = POS_TOL_MM);
     }
 
+    /// Every effect, with the one `--gain` `gain`.
+    fn with_gain(gain: &str) -> EffectSet {
+        let g: Gain = gain.parse().unwrap_or_else(|e| panic!("{gain}: {e}"));
+        EffectSet::from_flags(&EffectSpec::All, &[g]).unwrap_or_else(|e| panic!("{gain}: {e}"))
+    }
+
     #[test]
     fn switches_and_gains_act_on_their_part_only() {
         let m = machine();
@@ -698,8 +641,7 @@ thermal:
             let b = ToolPredictor::new(&m, set)
                 .with_context(ctx())
                 .breakdown(&cmd, &[1; 6], 0.0);
-            let mut set = EffectSet::default();
-            assert!(set.set_gain(&format!("{}=0.25", e.name())).is_ok());
+            let set = with_gain(&format!("{}=0.25", e.name()));
             let g = ToolPredictor::new(&m, set)
                 .with_context(ctx())
                 .breakdown(&cmd, &[1; 6], 0.0);
@@ -803,11 +745,7 @@ thermal:
             }
         }
         for gain in ["thermal=0.5", "static=2", "geometric=0.25"] {
-            let mut e = EffectSet::default();
-            if let Err(err) = e.set_gain(gain) {
-                panic!("{gain}: {err}");
-            }
-            specs.push(e);
+            specs.push(with_gain(gain));
         }
         let dir = concat!(env!("CARGO_MANIFEST_DIR"), "/machines");
         let mut names: Vec<String> = std::fs::read_dir(dir)
@@ -860,11 +798,7 @@ thermal:
             }
         }
         for gain in ["thermal=0.5", "static=2", "geometric=0.25"] {
-            let mut e = EffectSet::default();
-            if let Err(err) = e.set_gain(gain) {
-                panic!("{gain}: {err}");
-            }
-            specs.push(e);
+            specs.push(with_gain(gain));
         }
         let hot = BlockContext {
             force_n: Vector3::new(900.0, -700.0, 500.0),
@@ -933,21 +867,5 @@ thermal:
             ratio[1] > 0.1 && ratio[0] > 0.01,
             "largest ratios {ratio:?}"
         );
-    }
-
-    #[test]
-    fn thermal_start_parses() {
-        assert_eq!(ThermalStart::parse("cold").ok(), Some(ThermalStart::Cold));
-        assert_eq!(
-            ThermalStart::parse("steady").ok(),
-            Some(ThermalStart::Steady)
-        );
-        assert_eq!(
-            ThermalStart::parse("30").ok(),
-            Some(ThermalStart::Minutes(30.0))
-        );
-        assert!(ThermalStart::parse("warm").is_err());
-        assert!(ThermalStart::parse("-5").is_err());
-        assert!(!ThermalStart::Minutes(0.0).needs_mean_power());
     }
 }

@@ -25,6 +25,7 @@
 //! The *tool frame* has z along the tool axis, x the workpiece X axis made
 //! normal to it (workpiece Y when X is along the tool) and y = z × x.
 
+mod force_spec;
 pub mod limits;
 mod table;
 
@@ -41,6 +42,7 @@ pub struct CutSettings {
     pub spindle_rpm: Option<f64>,
 }
 
+pub use force_spec::{ForceSpec, MAX_FORCE_N};
 pub use table::ForceTable;
 
 use std::f64::consts::PI;

@@ -18,8 +18,9 @@ use std::io::{BufRead, Write};
 
 use super::{Carry, MoveRecord, RapidOptions, RapidOutcome, compensate_window};
 use crate::error::{Error, Result};
+use crate::machine::ThermalStart;
+use crate::machine::robot::Robot;
 use crate::machine::robot::thermal::TimeLineTotals;
-use crate::machine::robot::{Robot, ThermalStart};
 use crate::process::CutSettings;
 use crate::program::rapid::directives::Directives;
 use crate::program::rapid::windows::{Piece, Unsupported, Windows};

@@ -96,6 +96,37 @@ impl Effects {
         thermal: 0.0,
         dynamic: 0.0,
     };
+    /// The effects `--effects` turns on, scaled by `--gain`; names that do
+    /// not apply to a robot (`static`) are refused.
+    pub fn from_flags(
+        spec: &crate::machine::effects::EffectSpec,
+        gains: &[crate::machine::effects::Gain],
+    ) -> crate::error::Result<Effects> {
+        use crate::machine::effects::EffectName as N;
+        let slot = |name| match name {
+            N::Kinematic | N::Geometric => Some(0),
+            N::Gravity => Some(1),
+            N::Process | N::Load => Some(2),
+            N::Thermal => Some(3),
+            N::Dynamic | N::Vibration => Some(4),
+            N::Static => None,
+        };
+        let [kinematic, gravity, process, thermal, dynamic] = crate::machine::effects::gains_for(
+            spec,
+            gains,
+            slot,
+            "a robot",
+            "kinematic, gravity, process, thermal, dynamic",
+        )?;
+        Ok(Effects {
+            kinematic,
+            gravity,
+            process,
+            thermal,
+            dynamic,
+        })
+    }
+
     /// True when some quasi-static effect (one that changes targets) is on.
     pub fn compensates(&self) -> bool {
         self.kinematic != 0.0 || self.gravity != 0.0 || self.process != 0.0 || self.thermal != 0.0

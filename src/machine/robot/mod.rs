@@ -32,7 +32,7 @@ pub use dynamics::{Modal, Mode, Resonance};
 pub use ik::ConfData;
 pub use kinematics::Frames;
 pub use process::{ForceFrame, ForceModel, ProcessForce};
-pub use thermal::{DhGrowth, Thermal, ThermalStart, ThermalTerm};
+pub use thermal::{DhGrowth, Thermal, ThermalTerm};
 
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 

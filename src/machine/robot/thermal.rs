@@ -8,6 +8,7 @@
 use super::raw::RawThermal;
 use super::{DhParams, Robot};
 use crate::error::Invalid;
+use crate::machine::ThermalStart;
 
 /// Which DH length a thermal term changes.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -143,36 +144,6 @@ pub(crate) fn grown(p: &DhParams, g: &DhGrowth, gain: f64) -> DhParams {
         j.d_mm += gain * d[1];
     }
     out
-}
-
-/// Initial thermal state of a program run (`--thermal-start`).
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
-pub enum ThermalStart {
-    /// Motors at ambient temperature: effective power 0.
-    #[default]
-    Cold,
-    /// The periodic steady state of the program run as a repeated task.
-    Steady,
-    /// After this many minutes of the program's mean power from cold.
-    WarmUpMin(f64),
-}
-
-impl std::str::FromStr for ThermalStart {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, String> {
-        match s.trim().to_ascii_lowercase().as_str() {
-            "cold" => Ok(ThermalStart::Cold),
-            "steady" => Ok(ThermalStart::Steady),
-            t => match t.parse::<f64>() {
-                Ok(m) if m.is_finite() && (0.0..=crate::predict::MAX_WARM_UP_MIN).contains(&m) => {
-                    Ok(ThermalStart::WarmUpMin(m))
-                }
-                _ => Err(format!(
-                    "`{s}` is not `cold`, `steady` or a number of minutes (0..100000)"
-                )),
-            },
-        }
-    }
 }
 
 /// One piece of the program's time line: a move of `duration_s` with

@@ -1,0 +1,275 @@
+//! Writing outputs: a temporary file beside the output, renamed into
+//! place only once everything is written (nothing is left behind on an
+//! error or an interrupt; two outputs of one run are put in place only
+//! when both are written), standard output for `-`, devices and named
+//! pipes written straight; default output names, and the refusal of an
+//! output that would overwrite an input.
+
+use std::io::{BufWriter, Write};
+use std::path::{Path, PathBuf};
+
+use super::usage;
+use crate::error::{Error, Result};
+
+/// Default output path: `<stem>.comp.<ext>` beside the input.
+pub fn default_output(input: &Path) -> PathBuf {
+    let stem = input
+        .file_stem()
+        .map(|s| s.to_string_lossy().to_string())
+        .unwrap_or_else(|| "program".into());
+    let name = match input.extension() {
+        Some(ext) => format!("{stem}.comp.{}", ext.to_string_lossy()),
+        None => format!("{stem}.comp"),
+    };
+    input.with_file_name(name)
+}
+
+/// Refuses an output path that is one of the command's input files (stdout
+/// `-` and stdin are never the same file). Every command that writes a file
+/// calls this before writing.
+pub fn refuse_overwrite<P: AsRef<Path>>(out: &Path, inputs: &[P]) -> Result<()> {
+    if out == Path::new("-") {
+        return Ok(());
+    }
+    for input in inputs.iter().map(AsRef::as_ref) {
+        if input != Path::new("-") && (out == input || same_file(input, out)) {
+            return Err(usage(format!(
+                "{}: the output would overwrite the input",
+                out.display()
+            )));
+        }
+    }
+    Ok(())
+}
+
+/// Whether the paths `a` and `b` name the same file: the same device and
+/// inode when both exist (symbolic and hard links included), else the same
+/// path once the folders are resolved (for a file not made yet: `./x`,
+/// `d/../x` and an absolute spelling are one file).
+pub(super) fn same_file(a: &Path, b: &Path) -> bool {
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::MetadataExt;
+        if let (Ok(x), Ok(y)) = (std::fs::metadata(a), std::fs::metadata(b)) {
+            return x.dev() == y.dev() && x.ino() == y.ino();
+        }
+    }
+    match (resolved(a), resolved(b)) {
+        (Some(x), Some(y)) => x == y,
+        _ => false,
+    }
+}
+
+/// `path` with its links, `.` and `..` resolved, also when the file itself
+/// does not exist yet (its folder is resolved and its name joined).
+fn resolved(path: &Path) -> Option<PathBuf> {
+    if let Ok(p) = path.canonicalize() {
+        return Some(p);
+    }
+    let name = path.file_name()?;
+    let dir = match path.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p,
+        _ => Path::new("."),
+    };
+    Some(dir.canonicalize().ok()?.join(name))
+}
+
+/// Writes through a temporary file in the target directory and renames it
+/// into place only when `f` succeeds; on failure nothing is left behind.
+///
+/// An output that already exists and is not an ordinary file (`/dev/null`,
+/// `/dev/stdout`, a named pipe) is written to directly: renaming over it
+/// would replace the device or pipe with a file. A symbolic link is followed,
+/// so the file it points at is replaced and the link stays.
+pub fn write_atomically<T>(path: &Path, f: impl FnOnce(&mut dyn Write) -> Result<T>) -> Result<T> {
+    let mut out = Staged::file(path)?;
+    let value = f(out.writer())?;
+    out.finish()?.commit()?;
+    Ok(value)
+}
+
+/// An output being written ([`write_atomically`]'s parts, for runs that
+/// write two outputs and put neither in place unless both are written): a
+/// temporary file beside it, renamed into place by [`Pending::commit`], or
+/// a special file or standard output written straight.
+pub(super) struct Staged {
+    shown: PathBuf,
+    sink: Sink,
+}
+
+enum Sink {
+    /// A temporary file to be renamed to the path (removed on an
+    /// interrupt while the guard lives).
+    Temp(
+        BufWriter<std::fs::File>,
+        tempfile::TempPath,
+        PathBuf,
+        super::interrupt::Guard,
+    ),
+    /// A device or named pipe, written straight.
+    Through(BufWriter<std::fs::File>),
+    /// Standard output.
+    Stdout(BufWriter<std::io::Stdout>),
+}
+
+/// A written output waiting to be put in place.
+pub(super) struct Pending(
+    Option<(
+        tempfile::TempPath,
+        PathBuf,
+        PathBuf,
+        super::interrupt::Guard,
+    )>,
+);
+
+impl Staged {
+    /// The output `path`, or standard output for `-`.
+    pub(super) fn open(path: &Path) -> Result<Self> {
+        if path == Path::new("-") {
+            return Ok(Staged {
+                shown: PathBuf::from("stdout"),
+                sink: Sink::Stdout(BufWriter::new(std::io::stdout())),
+            });
+        }
+        Staged::file(path)
+    }
+
+    /// The output file `path` (see [`write_atomically`]).
+    fn file(path: &Path) -> Result<Self> {
+        let is_link = std::fs::symlink_metadata(path)
+            .map(|m| m.file_type().is_symlink())
+            .unwrap_or(false);
+        let target = match std::fs::metadata(path) {
+            Ok(m) if !m.is_file() && !m.is_dir() => {
+                let file = std::fs::OpenOptions::new()
+                    .write(true)
+                    .open(path)
+                    .map_err(|e| Error::io(path, e))?;
+                return Ok(Staged {
+                    shown: path.to_path_buf(),
+                    sink: Sink::Through(BufWriter::with_capacity(1 << 16, file)),
+                });
+            }
+            Ok(m) if m.is_file() && is_link => {
+                path.canonicalize().map_err(|e| Error::io(path, e))?
+            }
+            _ => path.to_path_buf(),
+        };
+        let dir = match target.parent() {
+            Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
+            _ => PathBuf::from("."),
+        };
+        // The temporary file's random name means nothing to the user: name
+        // the output and its folder only.
+        let tmp = tempfile::Builder::new()
+            .prefix(".postproc-")
+            .tempfile_in(&dir)
+            .map_err(|e| {
+                Error::io(
+                    path,
+                    std::io::Error::new(
+                        e.kind(),
+                        format!("cannot create a file in {}: {}", dir.display(), e.kind()),
+                    ),
+                )
+            })?;
+        let (file, tmp_path) = tmp.into_parts();
+        let guard = super::interrupt::register(&tmp_path);
+        Ok(Staged {
+            shown: path.to_path_buf(),
+            sink: Sink::Temp(
+                BufWriter::with_capacity(1 << 20, file),
+                tmp_path,
+                target,
+                guard,
+            ),
+        })
+    }
+
+    /// Where the output goes.
+    pub(super) fn writer(&mut self) -> &mut dyn Write {
+        match &mut self.sink {
+            Sink::Temp(w, ..) | Sink::Through(w) => w,
+            Sink::Stdout(w) => w,
+        }
+    }
+
+    /// Flushes the output (and syncs a temporary file): what is left is to
+    /// put it in place.
+    pub(super) fn finish(self) -> Result<Pending> {
+        let shown = self.shown;
+        match self.sink {
+            Sink::Through(mut w) => w.flush().map_err(|e| Error::io(&shown, e))?,
+            Sink::Stdout(mut w) => w.flush().map_err(|e| Error::io(&shown, e))?,
+            Sink::Temp(w, tmp_path, target, guard) => {
+                let file = w
+                    .into_inner()
+                    .map_err(|e| Error::io(&shown, e.into_error()))?;
+                file.sync_all().map_err(|e| Error::io(&shown, e))?;
+                // Temporary files are private (0600); the result is an
+                // ordinary file.
+                #[cfg(unix)]
+                {
+                    use std::os::unix::fs::PermissionsExt;
+                    file.set_permissions(std::fs::Permissions::from_mode(0o644))
+                        .map_err(|e| Error::io(&shown, e))?;
+                }
+                return Ok(Pending(Some((tmp_path, target, shown, guard))));
+            }
+        }
+        Ok(Pending(None))
+    }
+}
+
+/// Finishes a program and its report, then puts both in place: neither
+/// is, unless both are written.
+pub(super) fn finish_both(out: Staged, report: Staged) -> Result<()> {
+    let (report, out) = (report.finish()?, out.finish()?);
+    out.commit()?;
+    report.commit()
+}
+
+impl Pending {
+    /// Puts the output in place (renames the temporary file).
+    pub(super) fn commit(self) -> Result<()> {
+        if let Some((tmp_path, target, shown, guard)) = self.0 {
+            tmp_path
+                .persist(&target)
+                .map_err(|e| Error::io(&shown, e.error))?;
+            drop(guard);
+        }
+        Ok(())
+    }
+}
+
+/// Refuses a `--report` path that would replace the input or the output.
+pub(super) fn check_report_path(
+    report: Option<&Path>,
+    inputs: &[PathBuf],
+    output: &Path,
+) -> Result<()> {
+    let Some(report) = report else {
+        return Ok(());
+    };
+    if report == Path::new("-") {
+        return Err(usage("--report needs a file path (the program goes to -o)"));
+    }
+    let named = inputs.iter().map(|p| (p.as_path(), "input"));
+    for (other, what) in named.chain([(output, "output")]) {
+        if other != Path::new("-") && (report == other || same_file(report, other)) {
+            return Err(usage(format!(
+                "{}: the report would overwrite the {what}",
+                report.display()
+            )));
+        }
+    }
+    Ok(())
+}
+
+/// Writes to `path` atomically, or to standard output for `-`.
+pub(super) fn emit_to<T>(path: &Path, f: impl FnOnce(&mut dyn Write) -> Result<T>) -> Result<T> {
+    let mut out = Staged::open(path)?;
+    let value = f(out.writer())?;
+    out.finish()?.commit()?;
+    Ok(value)
+}
