@@ -470,31 +470,39 @@ fn colour_bar(area: &DrawingArea<SVGBackend, Shift>, scale: &Scale) -> Result<()
     Ok(())
 }
 
-/// |deviation| against the source line.
-fn along(
-    area: &DrawingArea<SVGBackend, Shift>,
-    points: &[PlotPoint],
-    marks: &[Worst],
-    dmax: f64,
-    scale: &Scale,
-) -> Result<()> {
-    let first = points.first().map_or(0, |p| p.line) as f64;
-    let last = points.last().map_or(1, |p| p.line) as f64;
-    let last = if last > first { last } else { first + 1.0 };
+/// The range of source lines a panel spans (at least one line wide).
+fn line_range<'a>(lines: impl Iterator<Item = &'a PlotPoint> + Clone) -> std::ops::Range<f64> {
+    let first = lines.clone().next().map_or(0, |p| p.line) as f64;
+    let last = lines.last().map_or(1, |p| p.line) as f64;
+    first..if last > first { last } else { first + 1.0 }
+}
+
+/// A chart of deviations (0..`ymax` mm) against the source lines `x`, with
+/// its caption, axes and grid drawn.
+fn line_chart<'a, 'b>(
+    area: &'a DrawingArea<SVGBackend<'b>, Shift>,
+    caption: &str,
+    x: std::ops::Range<f64>,
+    ymax: f64,
+    (x_desc, y_desc): (&str, &str),
+) -> Result<
+    ChartContext<
+        'a,
+        SVGBackend<'b>,
+        Cartesian2d<plotters::coord::types::RangedCoordf64, plotters::coord::types::RangedCoordf64>,
+    >,
+> {
     let mut chart = ChartBuilder::on(area)
-        .caption(
-            "Predicted |deviation| along the program",
-            ("sans-serif", 18),
-        )
+        .caption(caption, ("sans-serif", 18))
         .margin(15)
         .x_label_area_size(45)
         .y_label_area_size(70)
-        .build_cartesian_2d(first..last, 0.0..dmax * 1.1)
+        .build_cartesian_2d(x, 0.0..ymax)
         .map_err(plot_err)?;
     chart
         .configure_mesh()
-        .x_desc("source line")
-        .y_desc("|deviation| (mm)")
+        .x_desc(x_desc)
+        .y_desc(y_desc)
         .x_label_formatter(&|v| line_label(*v))
         .label_style(("sans-serif", 13))
         .axis_desc_style(("sans-serif", 14))
@@ -503,6 +511,25 @@ fn along(
         .bold_line_style(RGBColor(215, 215, 215))
         .draw()
         .map_err(plot_err)?;
+    Ok(chart)
+}
+
+/// |deviation| against the source line.
+fn along(
+    area: &DrawingArea<SVGBackend, Shift>,
+    points: &[PlotPoint],
+    marks: &[Worst],
+    dmax: f64,
+    scale: &Scale,
+) -> Result<()> {
+    let x = line_range(points.iter());
+    let mut chart = line_chart(
+        area,
+        "Predicted |deviation| along the program",
+        x,
+        dmax * 1.1,
+        ("source line", "|deviation| (mm)"),
+    )?;
     chart
         .draw_series(LineSeries::new(
             points.iter().map(|p| (p.line as f64, p.dev)),
@@ -574,9 +601,8 @@ fn series_group(id: &str, colour: RGBColor, pixels: &[(f64, f64)]) -> String {
 fn before_after(area: &DrawingArea<SVGBackend, Shift>, points: &[PlotPoint]) -> Result<String> {
     let cuts: Vec<&PlotPoint> = points.iter().filter(|p| !p.rapid).collect();
     let residuals = cuts.iter().all(|p| p.residual.is_some());
-    let first = cuts.first().map_or(0, |p| p.line) as f64;
-    let last = cuts.last().map_or(1, |p| p.line) as f64;
-    let last = if last > first { last } else { first + 1.0 };
+    let x = line_range(cuts.iter().copied());
+    let (first, last) = (x.start, x.end);
     let top = cuts
         .iter()
         .flat_map(|p| [p.dev, p.residual.unwrap_or(0.0)])
@@ -584,28 +610,13 @@ fn before_after(area: &DrawingArea<SVGBackend, Shift>, points: &[PlotPoint]) -> 
         .fold(0.0, f64::max);
     // Headroom above the largest value for the legend.
     let ymax = if top > 0.0 { top * 1.35 } else { 1e-3 };
-    let mut chart = ChartBuilder::on(area)
-        .caption(
-            "Cutting moves: predicted deviation before and after compensation",
-            ("sans-serif", 18),
-        )
-        .margin(15)
-        .x_label_area_size(45)
-        .y_label_area_size(70)
-        .build_cartesian_2d(first..last, 0.0..ymax)
-        .map_err(plot_err)?;
-    chart
-        .configure_mesh()
-        .x_desc("source line (cutting moves)")
-        .y_desc("deviation (mm)")
-        .x_label_formatter(&|v| line_label(*v))
-        .label_style(("sans-serif", 13))
-        .axis_desc_style(("sans-serif", 14))
-        .y_label_formatter(&|v| tick_label(*v, 4))
-        .light_line_style(RGBColor(235, 235, 235))
-        .bold_line_style(RGBColor(215, 215, 215))
-        .draw()
-        .map_err(plot_err)?;
+    let chart = line_chart(
+        area,
+        "Cutting moves: predicted deviation before and after compensation",
+        x,
+        ymax,
+        ("source line (cutting moves)", "deviation (mm)"),
+    )?;
     let (xs, ys) = chart.plotting_area().get_pixel_range();
     let px = (f64::from(xs.start), f64::from(xs.end - 1));
     // Pixel rows grow downwards: 0 mm at the bottom.
