@@ -216,6 +216,20 @@ pub(crate) fn resolve_cart<'m>(
 ) -> Result<CartUse<'m>> {
     let at = target.span().start;
     let bad_rt = |what: &str| input_err(src, file, at, what.to_string());
+    // The robtarget an `Offs`/`RelTool` starts from, and its offsets.
+    let offset_base =
+        |base: &'m Target, offsets: &[Scalar; 3]| -> Result<(CartUse<'m>, [f64; 3])> {
+            let b = resolve_cart(module, src, file, base)?;
+            if b.derived {
+                return Err(bad_rt("nested Offs/RelTool is not supported"));
+            }
+            let d = [
+                literal(src, file, &offsets[0])?,
+                literal(src, file, &offsets[1])?,
+                literal(src, file, &offsets[2])?,
+            ];
+            Ok((b, d))
+        };
     match target {
         Target::Inline(rt) => Ok(CartUse {
             rt,
@@ -242,15 +256,7 @@ pub(crate) fn resolve_cart<'m>(
             })
         }
         Target::Offs { base, offsets, .. } => {
-            let b = resolve_cart(module, src, file, base)?;
-            if b.derived {
-                return Err(bad_rt("nested Offs/RelTool is not supported"));
-            }
-            let d = [
-                literal(src, file, &offsets[0])?,
-                literal(src, file, &offsets[1])?,
-                literal(src, file, &offsets[2])?,
-            ];
+            let (b, d) = offset_base(base, offsets)?;
             // Offs: translation along the object frame axes.
             let pose_obj = Isometry3::from_parts(
                 Translation3::from(b.pose_obj.translation.vector + Vector3::from(d)),
@@ -271,15 +277,7 @@ pub(crate) fn resolve_cart<'m>(
             rz,
             ..
         } => {
-            let b = resolve_cart(module, src, file, base)?;
-            if b.derived {
-                return Err(bad_rt("nested Offs/RelTool is not supported"));
-            }
-            let d = [
-                literal(src, file, &offsets[0])?,
-                literal(src, file, &offsets[1])?,
-                literal(src, file, &offsets[2])?,
-            ];
+            let (b, d) = offset_base(base, offsets)?;
             let angle = |s: &Option<Scalar>| -> Result<f64> {
                 match s {
                     Some(s) => Ok(literal(src, file, s)?.to_radians()),
