@@ -9,8 +9,6 @@
 //! the ≈5 % of honest 2u outliers; with k = 3 a normal parameter fails with
 //! probability 0.27 %).
 
-use std::path::Path;
-
 use postproc::calibrate::geometry::calibrate_geometry;
 use postproc::calibrate::kinematics::calibrate_kinematics;
 use postproc::calibrate::observations::{Observations, load_observations, load_poses};
@@ -19,7 +17,7 @@ use postproc::calibrate::simulate::{Noise, simulate};
 use postproc::calibrate::stiffness::{Options, calibrate_stiffness};
 use postproc::machine::Machine;
 
-use crate::common::{postproc, repo};
+use crate::common::{postproc, repo, text, write};
 
 /// Coverage factor of the recovery test (see the module doc).
 const K_TEST: f64 = 3.0;
@@ -27,10 +25,6 @@ const K_TEST: f64 = 3.0;
 /// Mean norm of a 3-D isotropic normal error with standard deviation σ per
 /// coordinate: σ·√(8/π) ≈ 1.596 σ (Maxwell distribution mean).
 const MAXWELL_MEAN: f64 = 1.596;
-
-fn text(rel: &str) -> String {
-    std::fs::read_to_string(repo(rel)).expect("file in the repository")
-}
 
 fn machine(rel: &str) -> Machine {
     Machine::from_yaml_str(&text(rel), rel).expect("machine file")
@@ -319,12 +313,6 @@ fn geometry_recovers_truth_tables_and_squareness() {
         assert!(v.after_mean_mm < 1.5 * MAXWELL_MEAN * 0.001, "{v:?}");
         assert!(v.before_mean_mm > 3.0 * v.after_mean_mm, "{v:?}");
     }
-}
-
-fn write(dir: &Path, name: &str, body: &str) -> std::path::PathBuf {
-    let p = dir.join(name);
-    std::fs::write(&p, body).expect("write");
-    p
 }
 
 /// Through the binary: simulate writes a file that calibrate reads; the

@@ -9,6 +9,19 @@ pub fn repo(rel: &str) -> PathBuf {
 }
 
 /// The `postproc` binary under test.
+/// The text of a file of the repository.
+pub fn text(rel: &str) -> String {
+    std::fs::read_to_string(repo(rel)).expect("file in the repository")
+}
+
+/// Writes `body` to `dir/name` and gives the path.
+pub fn write(dir: &std::path::Path, name: &str, body: &str) -> PathBuf {
+    let p = dir.join(name);
+    std::fs::write(&p, body).expect("write");
+    p
+}
+
+/// The `postproc` binary.
 pub fn postproc() -> assert_cmd::Command {
     assert_cmd::Command::cargo_bin("postproc").expect("binary built")
 }

@@ -5,12 +5,11 @@
 //! error-free unless the test needs geometric errors, so each expected value
 //! can be derived by hand (derivations in the comments).
 
-use std::fs;
 use std::path::{Path, PathBuf};
 
 use approx::assert_abs_diff_eq;
 
-use crate::common::{postproc, repo, text_without_header};
+use crate::common::{postproc, repo, text_without_header, write};
 
 /// Compensated coordinates are written with 6 decimals.
 const POS_TOL_MM: f64 = 1e-6;
@@ -29,12 +28,6 @@ axes:
 const STIFF_20: &str = "stiffness:
   k_n_per_um: { x_pos: 20, x_neg: 20, y_pos: 20, y_neg: 20, z_pos: 20, z_neg: 40 }
 ";
-
-fn write(dir: &Path, name: &str, text: &str) -> PathBuf {
-    let p = dir.join(name);
-    fs::write(&p, text).expect("write test file");
-    p
-}
 
 /// Runs `compensate … -o - --decimals 6` and returns stdout.
 fn compensate(machine: &Path, program: &Path, extra: &[&str]) -> String {

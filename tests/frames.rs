@@ -4,7 +4,7 @@
 //! orientations, the world frame of a moved and turned `base`, and the
 //! fixed number format and effect choice of `simulate`.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion};
 use postproc::calibrate::kinematics::calibrate_kinematics;
@@ -16,7 +16,7 @@ use postproc::calibrate::simulate::{Noise, OutputFrame, Simulation, simulate, si
 use postproc::calibrate::stiffness::Options;
 use postproc::machine::Machine;
 
-use crate::common::{postproc, repo};
+use crate::common::{postproc, repo, text, write};
 
 /// Coverage factor of the recovery checks (as in calibrate_cli.rs).
 const K_TEST: f64 = 3.0;
@@ -28,18 +28,8 @@ const START_ROBOT: &str = "machines/abb-irb1600.yaml";
 const KIN_POSES: &str = "samples/observations/irb1600-kinematic-poses.csv";
 const GRID: &str = "samples/observations/afm-r1000-grid-measured.csv";
 
-fn text(rel: &str) -> String {
-    std::fs::read_to_string(repo(rel)).expect("file in the repository")
-}
-
 fn machine(rel: &str) -> Machine {
     Machine::from_yaml_str(&text(rel), rel).expect("machine file")
-}
-
-fn write(dir: &Path, name: &str, body: &str) -> PathBuf {
-    let p = dir.join(name);
-    std::fs::write(&p, body).expect("write");
-    p
 }
 
 fn csv(obs: &Observations) -> String {

@@ -8,15 +8,10 @@
 //! `E = Trans(P+d) · LOC · Rot(ê, θ+ε0) · COM(θ) · Trans(−(P+d))`,
 //! small-angle `COM = [[1,−εc,εb,δx],[εc,1,−εa,δy],[−εb,εa,1,δz]]`.
 
+use crate::common::repo;
 use approx::assert_abs_diff_eq;
 use postproc::machine::tool::MachineTool;
 use postproc::machine::{AxisVec, DirVec, Machine};
-
-/// Path of a file in the repository (kept local so this file also builds
-/// as a stand-alone test target).
-fn repo(rel: &str) -> std::path::PathBuf {
-    std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join(rel)
-}
 
 /// Position tolerance for exact (closed-form) goldens, mm.
 const POS_TOL_MM: f64 = 1e-12;

@@ -33,7 +33,7 @@ use postproc::calibrate::stiffness::{Options, calibrate_stiffness};
 use postproc::calibrate::thermal::calibrate_thermal;
 use postproc::machine::Machine;
 
-use crate::common::{postproc, repo, text_without_header};
+use crate::common::{postproc, repo, text, text_without_header, write};
 
 /// Coverage factor of the recovery checks (as in calibrate_cli.rs).
 const K_TEST: f64 = 3.0;
@@ -124,16 +124,6 @@ impl Mount {
             Mount::Ceiling => "ceiling",
         }
     }
-}
-
-fn text(rel: &str) -> String {
-    std::fs::read_to_string(repo(rel)).expect("file in the repository")
-}
-
-fn write(dir: &Path, name: &str, body: &str) -> PathBuf {
-    let p = dir.join(name);
-    std::fs::write(&p, body).expect("write");
-    p
 }
 
 /// The `base:` line of a machine file.

@@ -1,6 +1,7 @@
 //! Integration tests: the RAPID front end (grammar examples, spans, errors)
 //! and the byte-faithful rewriter.
 
+use crate::common::repo;
 use approx::assert_abs_diff_eq;
 use postproc::emit::rapid::{
     Edit, Format, annotate, apply_edits, decl_copy, format_fixed, format_quaternion,
@@ -11,12 +12,6 @@ use postproc::program::rapid::{
     parse_module_bytes,
 };
 use proptest::prelude::*;
-
-/// Path of a file in the repository. (Not `common::repo`: Cargo also builds
-/// this file as its own test target, where `crate::common` does not exist.)
-fn repo(rel: &str) -> std::path::PathBuf {
-    std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join(rel)
-}
 
 /// Tolerance on values read back from literals (they are parsed exactly).
 const VALUE_TOL: f64 = 1e-12;

@@ -1,6 +1,7 @@
 //! Integration tests: robot machine files, kinematics, IK with confdata,
 //! statics (Paper C) and target compensation.
 
+use crate::common::repo;
 use std::f64::consts::{FRAC_PI_2, PI};
 
 use approx::assert_abs_diff_eq;
@@ -9,12 +10,6 @@ use postproc::machine::Machine;
 use postproc::machine::robot::{
     ConfData, Effects, IkSelect, Model, Robot, RobotError, pose::pose_error,
 };
-
-/// Path of a file in the repository (local so this file also builds as a
-/// stand-alone test target).
-fn repo(rel: &str) -> std::path::PathBuf {
-    std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join(rel)
-}
 
 /// Position tolerance of exact geometry, mm.
 const POS_TOL_MM: f64 = 1e-9;

@@ -3,7 +3,7 @@
 //! real binary, with hand-derived goldens.
 
 use std::f64::consts::FRAC_PI_2;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 use approx::assert_abs_diff_eq;
 use nalgebra::{Isometry3, Vector3};
@@ -13,7 +13,7 @@ use postproc::process::CutSettings;
 use postproc::process::MillingCache;
 use postproc::program::rapid::directives::Directives;
 
-use crate::common::{postproc, repo};
+use crate::common::{postproc, repo, write};
 
 /// Force tolerance, N: closed-form expressions, rounding only.
 const FORCE_TOL_N: f64 = 1e-9;
@@ -46,12 +46,6 @@ fn irb1600_with(block: &str) -> String {
     let start = text.find("process_force:\n").expect("process_force");
     let end = start + text[start..].find("\n#").expect("comment after") + 1;
     format!("{}{block}{}", &text[..start], &text[end..])
-}
-
-fn write(dir: &Path, name: &str, text: &str) -> PathBuf {
-    let p = dir.join(name);
-    std::fs::write(&p, text).expect("write");
-    p
 }
 
 /// The spindle tool of the programs: TCP 182.5 mm along flange z, no load.
