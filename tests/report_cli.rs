@@ -323,12 +323,7 @@ fn svg_report_is_xml_with_the_toolpath_and_is_deterministic() {
     // 53 segments each, plus the 54-point deviation curve.
     let points: usize = polylines.iter().map(polyline_points).sum();
     assert!(points >= 2 * 54 + 54, "{points} polyline points");
-    let text: String = doc
-        .descendants()
-        .filter(|n| n.tag_name().name() == "text")
-        .filter_map(|n| n.text())
-        .collect::<Vec<_>>()
-        .join("|");
+    let text: String = svg_texts(doc.root_element());
     for label in [
         "Plan view (XY)",
         "Side view (XZ)",
@@ -651,20 +646,10 @@ fn svg_before_after_panel_has_a_point_per_cutting_move_on_one_scale() {
         .descendants()
         .find(|n| n.attribute("id") == Some("before-after"))
         .expect("before/after panel");
-    let legend: String = panel
-        .descendants()
-        .filter(|n| n.tag_name().name() == "text")
-        .filter_map(|n| n.text())
-        .collect::<Vec<_>>()
-        .join("|");
+    let legend: String = svg_texts(panel);
     assert!(legend.contains("before compensation"), "{legend}");
     assert!(legend.contains("after compensation"), "{legend}");
-    let text: String = doc
-        .descendants()
-        .filter(|n| n.tag_name().name() == "text")
-        .filter_map(|n| n.text())
-        .collect::<Vec<_>>()
-        .join("|");
+    let text: String = svg_texts(doc.root_element());
     for label in [
         "before and after compensation",
         "deviation (mm)",
@@ -733,4 +718,13 @@ fn svg_before_after_panel_has_a_point_per_cutting_move_on_one_scale() {
         Some(cuts)
     );
     assert!(series(&doc, "before-after-after").is_none());
+}
+
+/// The texts under `node` of an SVG, joined with `|`.
+fn svg_texts(node: roxmltree::Node) -> String {
+    node.descendants()
+        .filter(|n| n.tag_name().name() == "text")
+        .filter_map(|n| n.text())
+        .collect::<Vec<_>>()
+        .join("|")
 }
