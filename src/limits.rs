@@ -28,7 +28,7 @@ pub fn tolerance_mm(v: f64) -> Result<f64, String> {
         Ok(v)
     } else {
         Err(format!(
-            "`{}` is not a tolerance within [{MIN_TOLERANCE_MM}, {MAX_TOLERANCE_MM}] mm (the solver converges to {SOLVE_TOL_MM} mm)",
+            "{}: must be within [{MIN_TOLERANCE_MM}, {MAX_TOLERANCE_MM}] mm (the solver converges to {SOLVE_TOL_MM} mm)",
             crate::error::show_number(v)
         ))
     }

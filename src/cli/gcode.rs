@@ -247,14 +247,7 @@ pub(super) fn build_job<'m>(
     decimals: Option<usize>,
     annotate: bool,
 ) -> Result<Job<'m>> {
-    let min = crate::compensate::MIN_TOLERANCE_MM;
-    if !tolerance.is_finite() || tolerance < min || tolerance > 1.0 {
-        return Err(usage(format!(
-            "--tolerance {}: must be within [{min}, 1] mm (the solver converges to {} mm)",
-            crate::error::show_number(tolerance),
-            crate::compensate::SOLVE_TOL_MM
-        )));
-    }
+    crate::limits::tolerance_mm(tolerance).map_err(|m| usage(format!("--tolerance {m}")))?;
     if let Some(d) = decimals {
         if d > 6 {
             return Err(usage("--decimals: at most 6"));
