@@ -398,7 +398,7 @@ fn compensate_one(
             };
             let report_file = report.map(|f| (report_path(output, f), f));
             let report_to = report_file.as_ref().map(|(p, f)| (p.as_path(), *f));
-            let done = |o: &crate::compensate::rapid::RapidOutcome| Done {
+            let done = |o: &crate::compensate::outcome::RapidOutcome| Done {
                 blocks: o.moves,
                 moves: o.moves,
                 max_dev: o.max_deviation_mm,

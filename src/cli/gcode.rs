@@ -13,11 +13,12 @@ use super::{
     Annotate, CheckArgs, CompensateArgs, EffectArgs, Format, ProgramArgs, ReportArgs, usage,
 };
 use crate::compensate::Settings;
+use crate::compensate::outcome::Summary;
 use crate::emit::gcode::EmitOptions;
 use crate::emit::header::{HeaderWriter, Provenance};
 use crate::emit::report::ReportWriter;
 use crate::error::{Error, Result};
-use crate::job::{Job, Summary};
+use crate::job::Job;
 use crate::machine::tool::MachineTool;
 use crate::predict::{EffectSet, ProcessSetup, ToolPredictor};
 use crate::process::{ForceModel, ForceTable};

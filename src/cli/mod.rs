@@ -21,6 +21,7 @@ use crate::machine::effects::{EffectSpec, Gain};
 use crate::machine::tool::{ToolLength, WorkOffset};
 use crate::process::ForceSpec;
 
+pub use crate::emit::report::Format;
 pub use batch::Shard;
 pub use diagnose::{DiagnoseArgs, DiagnoseFormat};
 
@@ -267,36 +268,6 @@ pub struct CompensateArgs {
     /// default: the correction would be applied twice).
     #[arg(long)]
     pub recompensate: bool,
-}
-
-/// Report formats.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
-pub enum Format {
-    /// Aligned text table.
-    Table,
-    /// Comma-separated values.
-    Csv,
-    /// JSON document (schema: schemas/report.schema.json).
-    Json,
-    /// SVG picture: toolpath in plan and side view coloured by deviation,
-    /// deviation along the program.
-    Svg,
-}
-
-impl Format {
-    /// The format a report path asks for by its extension (`.csv`, `.json`,
-    /// `.svg`, `.txt`); CSV for any other.
-    pub fn from_path(path: &std::path::Path) -> Format {
-        let ext = path
-            .extension()
-            .map(|e| e.to_string_lossy().to_ascii_lowercase());
-        match ext.as_deref() {
-            Some("json") => Format::Json,
-            Some("svg") => Format::Svg,
-            Some("txt" | "text" | "table") => Format::Table,
-            _ => Format::Csv,
-        }
-    }
 }
 
 /// `postproc report`.

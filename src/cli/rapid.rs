@@ -7,9 +7,8 @@ use std::path::{Path, PathBuf};
 use super::machines::Loaded;
 use super::output::{Pending, Staged, default_output};
 use super::{Annotate, CheckArgs, CompensateArgs, EffectArgs, ReportArgs, usage};
-use crate::compensate::rapid::{
-    MoveRecord, RapidOptions, RapidOutcome, compensate_module, compensate_parsed, stream,
-};
+use crate::compensate::outcome::{MoveRecord, RapidOutcome};
+use crate::compensate::rapid::{RapidOptions, compensate_module, compensate_parsed, stream};
 use crate::emit::header::{HeaderWriter, Provenance};
 use crate::emit::rapid::Format;
 use crate::error::{Error, Result};

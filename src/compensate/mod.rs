@@ -4,6 +4,7 @@
 //! more than the tolerance.
 
 mod arc;
+pub mod outcome;
 pub mod rapid;
 pub mod tcpm;
 

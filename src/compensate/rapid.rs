@@ -19,6 +19,7 @@ use rayon::prelude::*;
 
 use nalgebra::{Isometry3, Vector3};
 
+use crate::compensate::outcome::{MoveRecord, RapidOutcome};
 use crate::emit::rapid::{
     EditList, Format, format_fixed, format_position, format_quaternion, insert_after_decl,
     push_annotation, push_robtarget_edit,
@@ -107,44 +108,6 @@ impl RapidOptions {
             ..RapidOptions::default()
         }
     }
-}
-
-/// What the pipeline predicted for one motion instruction.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct MoveRecord {
-    /// 1-based line of the instruction.
-    pub line: usize,
-    /// Instruction name (`MoveL`, `MoveJ`, `MoveC`, `MoveAbsJ`).
-    pub kind: &'static str,
-    /// Programmed TCP position, world frame, mm.
-    pub programmed_mm: [f64; 3],
-    /// Predicted deviation of the uncompensated target, by effect.
-    pub deviation: Deviation,
-    /// Process wrench acting during the move, if any.
-    pub wrench: Option<ProcessWrench>,
-    /// Estimated duration of the move, s (0 when unknown).
-    pub duration_s: f64,
-    /// Mean motor power per joint during the move, W.
-    pub power_w: [f64; 6],
-    /// Effective (thermal) power per joint at the end of the move, W.
-    pub thermal_power_w: [f64; 6],
-}
-
-/// Result of compensating a module.
-#[derive(Debug, Clone, PartialEq)]
-pub struct RapidOutcome {
-    /// The rewritten module text.
-    pub text: String,
-    /// Motion instructions compensated.
-    pub moves: usize,
-    /// Declarations added (`_cN` copies and `_oN` materialised targets).
-    pub added: usize,
-    /// Largest predicted deviation of an uncompensated target, mm.
-    pub max_deviation_mm: f64,
-    /// 1-based line of the move with the largest deviation.
-    pub max_deviation_line: usize,
-    /// One record per motion instruction, in source order.
-    pub records: Vec<MoveRecord>,
 }
 
 /// Tool and work object of one move, its process wrench and its thermal

@@ -13,6 +13,7 @@ use super::inverse_time::{PieceFeeds, decimals};
 use nalgebra::Vector3;
 
 use crate::compensate::BlockResult;
+pub use crate::compensate::outcome::AddedLines;
 use crate::machine::{AXIS_LETTERS, AxisVec};
 use crate::predict::Effect;
 use crate::program::gcode::{Block, Word, strip_eol};
@@ -46,24 +47,6 @@ pub const KEPT_WORD_SHARE: f64 = 0.25;
 
 /// Most decimals a written coordinate gets.
 const MAX_DECIMALS: usize = 8;
-
-/// The lines a compensated program has beyond its input's, by why they
-/// were added.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
-pub struct AddedLines {
-    /// After a takeup point: the move that continues from it (the block's
-    /// own line goes to the takeup point), or the move onto one at a
-    /// reversal inside an arc.
-    pub takeups: usize,
-    /// Arcs cut where an axis of their plane reverses, or halved where one
-    /// arc cannot follow the correction: the arc lines after the first.
-    pub arcs: usize,
-    /// Parts of arcs that no arc fits, written as straight chords.
-    pub chords: usize,
-    /// Straight moves split where the predicted error bends beyond the
-    /// tolerance.
-    pub splits: usize,
-}
 
 /// What an added line is (see [`AddedLines`]).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

@@ -11,13 +11,42 @@
 
 use std::io::Write;
 
-use crate::cli::Format;
+use crate::compensate::outcome::{DevStats, Row};
 use crate::emit::svg::{Decimator, PlotPoint, Worst as PlotWorst};
 use crate::error::{Error, Result};
-use crate::job::{DevStats, Row};
 use crate::machine::AXIS_LETTERS;
 use crate::predict::Effect;
 use crate::program::interp::Setup;
+
+/// Report formats.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum Format {
+    /// Aligned text table.
+    Table,
+    /// Comma-separated values.
+    Csv,
+    /// JSON document (schema: schemas/report.schema.json).
+    Json,
+    /// SVG picture: toolpath in plan and side view coloured by deviation,
+    /// deviation along the program.
+    Svg,
+}
+
+impl Format {
+    /// The format a report path asks for by its extension (`.csv`, `.json`,
+    /// `.svg`, `.txt`); CSV for any other.
+    pub fn from_path(path: &std::path::Path) -> Format {
+        let ext = path
+            .extension()
+            .map(|e| e.to_string_lossy().to_ascii_lowercase());
+        match ext.as_deref() {
+            Some("json") => Format::Json,
+            Some("svg") => Format::Svg,
+            Some("txt" | "text" | "table") => Format::Table,
+            _ => Format::Csv,
+        }
+    }
+}
 
 /// Smallest deviation listed among the worst blocks, mm: half the last
 /// printed digit (values below print as 0.00000).
@@ -842,7 +871,7 @@ mod tests {
         assert_abs_diff_eq!(
             s.percentile(95.0),
             0.095,
-            epsilon = crate::job::DEV_BIN_MM + TOL_MM
+            epsilon = crate::compensate::outcome::DEV_BIN_MM + TOL_MM
         );
         let lines: Vec<usize> = s.worst.iter().map(|w| w.1).collect();
         assert_eq!(lines, [100, 99, 98, 97, 96]);

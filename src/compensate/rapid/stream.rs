@@ -16,7 +16,8 @@
 
 use std::io::{BufRead, Write};
 
-use super::{Carry, MoveRecord, RapidOptions, RapidOutcome, compensate_window};
+use super::{Carry, RapidOptions, compensate_window};
+use crate::compensate::outcome::{MoveRecord, RapidOutcome};
 use crate::error::{Error, Result};
 use crate::machine::ThermalStart;
 use crate::machine::robot::Robot;
