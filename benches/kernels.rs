@@ -12,10 +12,10 @@ use std::hint::black_box;
 
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
-use postproc::compensate::rapid::{RapidOptions, compensate_module};
 use postproc::compensate::{Settings, block_after};
 use postproc::machine::Machine;
 use postproc::machine::robot::{ConfData, Effects, IkSelect, PointMass, Robot};
+use postproc::pipeline::rapid::{RapidOptions, compensate_module};
 use postproc::predict::{EffectSet, ToolPredictor};
 use postproc::program::interp::{Motion, Move, Plan, PlanKind};
 

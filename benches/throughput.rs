@@ -9,8 +9,8 @@ use std::time::Instant;
 
 use postproc::compensate::Settings;
 use postproc::emit::gcode::EmitOptions;
-use postproc::job::Job;
 use postproc::machine::Machine;
+use postproc::pipeline::gcode::Job;
 use postproc::predict::{EffectSet, ToolPredictor};
 use postproc::program::interp::Setup;
 

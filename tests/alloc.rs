@@ -21,8 +21,8 @@ use std::sync::atomic::{AtomicU64, Ordering};
 
 use postproc::compensate::Settings;
 use postproc::emit::gcode::EmitOptions;
-use postproc::job::Job;
 use postproc::machine::Machine;
+use postproc::pipeline::gcode::Job;
 use postproc::predict::{EffectSet, ProcessSetup, ToolPredictor};
 use postproc::program::interp::Setup;
 
@@ -181,7 +181,7 @@ const MAX_ALLOCATIONS_PER_TARGET: f64 = 1.25;
 
 #[test]
 fn rapid_compensation_allocates_a_bounded_number_of_times_per_target() {
-    use postproc::compensate::rapid::{RapidOptions, compensate_module};
+    use postproc::pipeline::rapid::{RapidOptions, compensate_module};
     let text = std::fs::read_to_string(repo("machines/abb-irb1600.yaml")).unwrap();
     let Ok(Machine::Robot(robot)) = Machine::from_yaml_str(&text, "abb-irb1600.yaml") else {
         panic!("abb-irb1600.yaml is not a robot")

@@ -14,9 +14,9 @@ use std::io::{BufReader, Cursor};
 
 use postproc::compensate::Settings;
 use postproc::emit::gcode::EmitOptions;
-use postproc::job::Job;
 use postproc::machine::Machine;
 use postproc::machine::tool::MachineTool;
+use postproc::pipeline::gcode::Job;
 use postproc::predict::{EffectSet, ToolPredictor};
 use postproc::program::gcode::{Block, parse_line};
 use postproc::program::interp::{Interpreter, Setup};

@@ -512,7 +512,7 @@ fn gcode_run(
     use postproc::emit::gcode::EmitOptions;
     use postproc::predict::{EffectSet, ToolPredictor};
     use postproc::program::interp::Setup;
-    let job = postproc::job::Job {
+    let job = postproc::pipeline::gcode::Job {
         predictor: Some(ToolPredictor::new(machine, EffectSet::default())),
         setup: Setup::for_machine(machine),
         settings: Settings {
@@ -563,7 +563,7 @@ fn rapid_props(
     input: &[u8],
     pools: &Pools,
 ) -> Result<bool, String> {
-    use postproc::compensate::rapid::{RapidOptions, compensate_module};
+    use postproc::pipeline::rapid::{RapidOptions, compensate_module};
     let Ok(text) = std::str::from_utf8(input) else {
         return match postproc::program::rapid::parse_module_bytes(input, "m.mod") {
             Ok(_) => Err("invalid UTF-8 accepted".into()),

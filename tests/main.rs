@@ -19,6 +19,7 @@ mod golden;
 mod gperf;
 mod honesty_cli;
 mod hostile;
+mod layers;
 mod machine_tool;
 mod mounts;
 mod observations;

@@ -3,10 +3,10 @@
 
 use approx::assert_abs_diff_eq;
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
-use postproc::compensate::rapid::{RapidOptions, compensate_module};
 use postproc::machine::ThermalStart;
 use postproc::machine::robot::pose::pose_error;
 use postproc::machine::robot::{ConfData, Effects, Model, PointMass, Robot};
+use postproc::pipeline::rapid::{RapidOptions, compensate_module};
 use postproc::program::rapid::{DataValue, Module, RobTarget, Target, parse_module};
 
 use crate::common::{postproc, repo, text_without_header, without_header};

@@ -19,10 +19,10 @@ use super::gcode::{build_job, effects, parse_setup, process_setup, run_reporting
 use super::output::{Staged, finish_both, refuse_overwrite, write_atomically};
 use super::rapid::Source;
 use super::{Annotate, BatchArgs, Format, ProgramArgs, usage};
-use crate::compensate::rapid::{RapidOptions, compensate_module};
 use crate::emit::header::{HeaderWriter, Provenance};
 use crate::error::{Error, Result};
 use crate::machine::Machine;
+use crate::pipeline::rapid::{RapidOptions, compensate_module};
 
 /// Extensions of G-code programs picked up from folders.
 pub const GCODE_EXTENSIONS: [&str; 5] = ["nc", "ngc", "tap", "gcode", "cnc"];
@@ -293,7 +293,7 @@ struct Done {
 
 /// The configured engine for the batch's machine.
 enum Engine<'m> {
-    Tool(Box<crate::job::Job<'m>>),
+    Tool(Box<crate::pipeline::gcode::Job<'m>>),
     /// A robot, the options of its runs, and the window size forced by
     /// `--rapid-window-lines`.
     Robot(crate::machine::robot::Robot, RapidOptions, Option<usize>),
@@ -392,7 +392,7 @@ fn compensate_one(
                 )));
             }
             // Move records only feed the report.
-            let opts = crate::compensate::rapid::RapidOptions {
+            let opts = crate::pipeline::rapid::RapidOptions {
                 records: report.is_some(),
                 ..*opts
             };
@@ -406,7 +406,7 @@ fn compensate_one(
                 residual: None,
             };
             // A large module is read a window at a time, as by `compensate`.
-            let warm = crate::compensate::rapid::stream::first_pass(robot, &opts);
+            let warm = crate::pipeline::rapid::stream::first_pass(robot, &opts);
             let source = Source::new(input, *forced_window, warm)?;
             super::machines::refuse_compensated(
                 &source.head()?,

@@ -8,16 +8,16 @@ use super::machines::Loaded;
 use super::output::{Pending, Staged, default_output};
 use super::{Annotate, CheckArgs, CompensateArgs, EffectArgs, ReportArgs, usage};
 use crate::compensate::outcome::{MoveRecord, RapidOutcome};
-use crate::compensate::rapid::{RapidOptions, compensate_module, compensate_parsed, stream};
 use crate::emit::header::{HeaderWriter, Provenance};
 use crate::emit::rapid::Format;
 use crate::error::{Error, Result};
 use crate::machine::ThermalStart;
 use crate::machine::robot::{Effects, Robot};
+use crate::pipeline::rapid::{RapidOptions, compensate_module, compensate_parsed, stream};
 use crate::program::rapid::parse_module_bytes;
 
 /// Modules of at least this size are read a window at a time when their
-/// shape and the run allow it ([`crate::compensate::rapid::stream`]):
+/// shape and the run allow it ([`crate::pipeline::rapid::stream`]):
 /// from a window's length up, windows take no more time than the module
 /// read whole and far less memory, bounded whatever the module's length
 /// (`scripts/bench` prints the peak memory of its runs on a 100 000-target

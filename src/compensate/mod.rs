@@ -5,7 +5,6 @@
 
 mod arc;
 pub mod outcome;
-pub mod rapid;
 pub mod tcpm;
 
 pub use arc::{ArcPiece, MAX_ARC_DEPTH};

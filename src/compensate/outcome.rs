@@ -1,5 +1,5 @@
 //! What a compensation run found, per move and in total: the result types
-//! that the pipeline fills and the writers ([`crate::emit`]) read.
+//! that the pipelines fill and the report and summary writers read.
 //!
 //! The G-code job fills a [`Summary`] and one [`Row`] per block; the RAPID
 //! job a [`RapidOutcome`] with one [`MoveRecord`] per motion instruction.

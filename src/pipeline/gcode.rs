@@ -1,4 +1,4 @@
-//! A G-code job: streams a program through parse → interpret →
+//! The G-code pipeline: streams a program through parse → interpret →
 //! predict/compensate → emit in bounded chunks.
 //!
 //! Lines are read in chunks of [`CHUNK_LINES`]; parsing and the modal
