@@ -692,3 +692,41 @@ fn rapid_output_is_the_same_for_one_and_two_threads() {
         assert!(one == two, "1 and 2 threads differ for {module:?}");
     }
 }
+
+/// A system module (`.sys`) and a module whose extension says nothing
+/// (`.txt`, none) are read as RAPID without a machine file: `check`
+/// reports the module's structure, not G-code errors. A G-code program
+/// without a RAPID extension stays G-code.
+#[test]
+fn system_modules_and_modules_by_content_are_rapid() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let module = "%%%\r\n  VERSION:1\r\n  LANGUAGE:ENGLISH\r\n%%%\r\n\r\nMODULE user (SYSMODULE)\r\n  ! cell data\r\n  PERS num nCycles := 0;\r\n  PROC reset()\r\n    nCycles := 0;\r\n  ENDPROC\r\nENDMODULE\r\n";
+    for name in [
+        "user.sys",
+        "USER.SYS",
+        "cell.modx",
+        "old.prg",
+        "user.txt",
+        "user",
+    ] {
+        let path = crate::common::write(dir.path(), name, module);
+        let out = postproc().arg("check").arg(&path).output().expect("runs");
+        let stdout = String::from_utf8_lossy(&out.stdout);
+        assert!(
+            out.status.success(),
+            "{name}: {stdout} {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        assert!(
+            stdout.contains("module user, 1 declarations, 1 routines, 0 moves"),
+            "{name}: {stdout}"
+        );
+    }
+    let gcode = crate::common::write(dir.path(), "part", "G21 G90\nG1 X10 F100\nM30\n");
+    let out = postproc().arg("check").arg(&gcode).output().expect("runs");
+    assert!(
+        !String::from_utf8_lossy(&out.stdout).contains("module"),
+        "{}",
+        String::from_utf8_lossy(&out.stdout)
+    );
+}

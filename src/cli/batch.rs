@@ -24,10 +24,8 @@ use crate::error::{Error, Result};
 use crate::machine::Machine;
 use crate::pipeline::rapid::{RapidOptions, compensate_module};
 
-/// Extensions of G-code programs picked up from folders.
-pub const GCODE_EXTENSIONS: [&str; 5] = ["nc", "ngc", "tap", "gcode", "cnc"];
-/// Extensions of RAPID modules picked up from folders.
-pub const RAPID_EXTENSIONS: [&str; 3] = ["mod", "modx", "prg"];
+/// Extensions of the programs picked up from folders.
+pub use crate::program::language::{GCODE_EXTENSIONS, RAPID_EXTENSIONS};
 /// Name of the summary written into the output folder.
 pub const SUMMARY_FILE: &str = "batch-summary.json";
 
@@ -43,7 +41,7 @@ fn is_program(path: &Path) -> bool {
 }
 
 fn is_rapid(path: &Path) -> bool {
-    extension(path).is_some_and(|e| RAPID_EXTENSIONS.contains(&e.as_str()))
+    crate::program::language::is_rapid(path)
 }
 
 /// One program to compensate: where it is, where its output goes (relative

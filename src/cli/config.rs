@@ -112,19 +112,15 @@ impl Given {
     }
 }
 
-/// True when `program` names a RAPID module by its extension (`.mod`,
-/// `.modx`, `.prg`).
+/// True when `program` names a RAPID module, by its extension or its
+/// content ([`crate::program::language::is_rapid`]).
 fn rapid_extension(program: &ProgramArgs) -> bool {
-    let ext = program
-        .file
-        .extension()
-        .map(|e| e.to_string_lossy().to_ascii_lowercase());
-    matches!(ext.as_deref(), Some("mod" | "modx" | "prg"))
+    crate::program::language::is_rapid(&program.file)
 }
 
 impl Engine {
     /// Loads the machine of `program` once and chooses the engine: RAPID
-    /// for a module (by its extension) or a robot, G-code otherwise; then
+    /// for a module (by its extension or content) or a robot, G-code otherwise; then
     /// refuses the `given` flags that do not apply to it.
     pub(super) fn choose(program: &ProgramArgs, given: Given) -> Result<Engine> {
         let rapid = rapid_extension(program);

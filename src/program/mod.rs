@@ -4,6 +4,7 @@
 pub mod directive;
 pub mod gcode;
 pub mod interp;
+pub mod language;
 pub mod rapid;
 
 /// The powers of ten that are exact in f64 (`1e0` to `1e22`): a decimal
