@@ -11,14 +11,23 @@
 //! `F(δ) = (Rot(δr) · R₀, t₀ + δt)`: the translation parameters are the
 //! origin itself, so its uncertainty is theirs.
 
-use nalgebra::{Isometry3, Matrix3, Rotation3, Translation3, UnitQuaternion, Vector3};
+use nalgebra::{
+    DMatrix, DVector, Isometry3, Matrix3, Matrix3x6, Rotation3, Translation3, UnitQuaternion,
+    Vector3,
+};
 
+use crate::error::{Error, Result};
 use crate::machine::Machine;
 
+use super::lsq::{LsqOptions, solve_linear};
 use super::observations::{MeasurementFrame, Observations};
+use super::report::FrameEstimate;
 
 /// Number of frame parameters.
 pub const FRAME_PARAMS: usize = 6;
+
+/// Degrees per mrad (the internal unit of the frame's small rotations).
+pub const DEG_PER_MRAD: f64 = 0.18 / std::f64::consts::PI;
 
 /// Names and units of the frame parameters.
 pub const FRAME_NAMES: [(&str, &str); FRAME_PARAMS] = [
@@ -163,73 +172,150 @@ pub fn frame_uncertainty(
     ))
 }
 
-/// Runs a calibration on instrument-frame observations by alternation:
-/// the frame is registered to the start model's predictions, the
-/// calibration runs on the positions carried into the reference frame, the
-/// frame is registered again to the calibrated model and the calibration
-/// repeated from the start file. The result carries the final frame with
-/// its uncertainty (from the registration residuals) and the file gets its
-/// `measurement_frame`. (Kinematic calibration identifies the frame
-/// together with the model instead.)
-pub fn calibrate_by_registration(
-    text: &str,
-    machine_file: &str,
-    obs: &Observations,
-    obs_file: &str,
-    run: &dyn Fn(&Observations) -> crate::error::Result<super::report::Calibration>,
-) -> crate::error::Result<super::report::Calibration> {
-    use crate::error::Error;
-    let start = Machine::from_yaml_str(text, machine_file)?;
-    let attained = |m: &Machine| -> crate::error::Result<Vec<Vector3<f64>>> {
-        obs.rows
-            .iter()
-            .map(|r| super::forward::predict(m, r, obs_file).map(|p| p.attained_mm))
-            .collect()
-    };
-    let measured: Vec<Vector3<f64>> = obs.rows.iter().map(|r| r.measured_mm).collect();
-    let refuse = || {
-        Error::Usage(format!(
-            "{obs_file}: the measured points lie on a line or are too few: the instrument \
-             frame cannot be registered; measure varied poses"
-        ))
-    };
-    let carried = |f: &Isometry3<f64>| {
-        let mut o = obs.clone();
-        o.frame = MeasurementFrame::Reference;
-        for r in &mut o.rows {
-            r.measured_mm = (f * nalgebra::Point3::from(r.measured_mm)).coords;
-            r.orientation = r.orientation.map(|q| f.rotation * q);
-        }
-        o
-    };
-    let f1 = register(&measured, &attained(&start)?).ok_or_else(refuse)?;
-    let first = run(&carried(&f1))?;
-    let calibrated = Machine::from_yaml_str(&first.yaml, machine_file)?;
-    let model = attained(&calibrated)?;
-    let f2 = register(&measured, &model).ok_or_else(refuse)?;
-    let mut cal = run(&carried(&f2))?;
-    let model = attained(&Machine::from_yaml_str(&cal.yaml, machine_file)?)?;
-    let f3 = register(&measured, &model).ok_or_else(refuse)?;
-    let u = frame_uncertainty(&f3, &measured, &model);
-    let est = super::report::FrameEstimate {
-        xyz_mm: f3.translation.vector.into(),
-        rpy_deg: rpy_deg(&f3),
-        u_xyz_mm: u.map(|u| u.0),
-        u_rot_deg: u.map(|u| u.1),
-    };
-    cal.yaml =
-        super::yaml_edit::set_measurement_frame(&cal.yaml, machine_file, est.xyz_mm, est.rpy_deg)?;
-    Machine::from_yaml_str(&cal.yaml, machine_file)?;
-    cal.frame = Some(est);
-    cal.notes.push(
-        "positions measured in an instrument frame: the frame is registered to the model \
-         (alternating with the calibration, not fitted with it; its uncertainty is that of \
-         the registration) and written to `measurement_frame`; parameters that move the \
-         points rigidly are not told from the frame"
-            .into(),
-    );
-    Ok(cal)
+/// `F · m`: a measured point carried into the reference frame.
+pub fn carry(f: &Isometry3<f64>, m: &Vector3<f64>) -> Vector3<f64> {
+    (f * nalgebra::Point3::from(*m)).coords
 }
+
+/// The 3 × 6 Jacobian of `F(δ) · m` at `δ = 0` ([`frame_with`] around
+/// `f`): `I` for the origin (per mm) and `−[R m]×` for the small rotation
+/// (per mrad).
+pub fn point_jacobian(f: &Isometry3<f64>, m: &Vector3<f64>) -> Matrix3x6<f64> {
+    let v = f.rotation * m;
+    let mut j = Matrix3x6::zeros();
+    j.fixed_view_mut::<3, 3>(0, 0)
+        .copy_from(&Matrix3::identity());
+    j.fixed_view_mut::<3, 3>(0, 3)
+        .copy_from(&(-v.cross_matrix() * 1e-3));
+    j
+}
+
+/// The frame columns of an identification Jacobian for the residuals
+/// `F · m_i − model_i` of `rows` (3 equations per row, in order), at `f`.
+pub fn frame_columns(f: &Isometry3<f64>, obs: &Observations, rows: &[usize]) -> DMatrix<f64> {
+    let mut j = DMatrix::zeros(3 * rows.len(), FRAME_PARAMS);
+    for (k, &i) in rows.iter().enumerate() {
+        if let Some(row) = obs.rows.get(i) {
+            j.view_mut((3 * k, 0), (3, FRAME_PARAMS))
+                .copy_from(&point_jacobian(f, &row.measured_mm));
+        }
+    }
+    j
+}
+
+/// The start pose of an instrument frame: the rigid registration (Kabsch,
+/// [`register`]) of the measured points of `rows` onto the positions the
+/// machine `m` predicts for them. Refused (exit 2) for points on a line or
+/// fewer than three.
+pub fn start_frame(
+    m: &Machine,
+    obs: &Observations,
+    rows: &[usize],
+    obs_file: &str,
+) -> Result<Isometry3<f64>> {
+    let mut meas = Vec::with_capacity(rows.len());
+    let mut model = Vec::with_capacity(rows.len());
+    for &i in rows {
+        if let Some(row) = obs.rows.get(i) {
+            meas.push(row.measured_mm);
+            model.push(super::forward::predict(m, row, obs_file)?.attained_mm);
+        }
+    }
+    register(&meas, &model).ok_or_else(|| {
+        Error::Usage(format!(
+            "{obs_file}: the measured points lie on a line or are too few (fit rows: {}): \
+             the instrument frame cannot be registered; measure varied poses",
+            rows.len()
+        ))
+    })
+}
+
+/// Which model parameters a Jacobian identifies, with the frame columns
+/// `jf` (if any) beside the model columns `jm`. Without a frame: the rank
+/// screen of [`solve_linear`] on `jm`. With one: the frame columns must
+/// have full rank (else `Err` with the reason), and the model columns are
+/// screened after removing what the frame columns explain
+/// (`(I − Q Qᵀ) J_model`, `Q` an orthonormal basis of the frame columns):
+/// a model parameter that moves the measured points like a rigid motion of
+/// the instrument is unidentifiable. A projected column below
+/// `lsq.rank_rtol` of the strongest model column (unscaled problems) or of
+/// its own norm (column-scaled ones) counts as gone. Returns
+/// (unidentifiable given the frame, unidentifiable without it), indices
+/// into the model columns.
+pub fn screen_model(
+    jm: &DMatrix<f64>,
+    jf: Option<&DMatrix<f64>>,
+    r0: &DVector<f64>,
+    lsq: &LsqOptions,
+) -> std::result::Result<(Vec<usize>, Vec<usize>), String> {
+    let plain = solve_linear(jm, r0, lsq).map_err(|e| e.to_string())?;
+    let Some(jf) = jf else {
+        let u = plain.identifiability.unidentifiable.clone();
+        return Ok((u.clone(), u));
+    };
+    let f = solve_linear(jf, r0, &LsqOptions::default()).map_err(|e| e.to_string())?;
+    if !f.identifiability.unidentifiable.is_empty() {
+        return Err(
+            "the measured points do not span the space (too few or too little varied poses): \
+             the instrument frame cannot be registered"
+                .into(),
+        );
+    }
+    let q = jf.clone().qr().q();
+    let proj = jm - &q * (q.transpose() * jm);
+    // The rank threshold stays relative to the columns before the
+    // projection: a column the frame explains must count as gone, not be
+    // judged against other weakened columns.
+    let strongest = jm.column_iter().map(|c| c.norm()).fold(0.0, f64::max);
+    let mut given = solve_linear(&proj, r0, lsq)
+        .map_err(|e| e.to_string())?
+        .identifiability
+        .unidentifiable;
+    for (k, c) in proj.column_iter().enumerate() {
+        let reference = if lsq.scale_columns {
+            jm.column(k).norm()
+        } else {
+            strongest
+        };
+        if c.norm() < lsq.rank_rtol * reference && !given.contains(&k) {
+            given.push(k);
+        }
+    }
+    given.sort_unstable();
+    Ok((given, plain.identifiability.unidentifiable))
+}
+
+/// The identified frame with its standard uncertainties `u` (origin mm,
+/// small rotations mrad, the order of [`FRAME_NAMES`]).
+pub fn estimate(f: &Isometry3<f64>, u: Option<[f64; FRAME_PARAMS]>) -> FrameEstimate {
+    let deg = |v: f64| v * DEG_PER_MRAD;
+    FrameEstimate {
+        xyz_mm: f.translation.vector.into(),
+        rpy_deg: rpy_deg(f),
+        u_xyz_mm: u.map(|u| [u[0], u[1], u[2]]),
+        u_rot_deg: u.map(|u| [deg(u[3]), deg(u[4]), deg(u[5])]),
+    }
+}
+
+/// The note listing the model parameters an instrument frame absorbs
+/// (`names`; `None` when there are none). `example` says what such a
+/// parameter does to the frame.
+pub fn absorbed_note(names: &[String], example: &str) -> Option<String> {
+    if names.is_empty() {
+        return None;
+    }
+    Some(format!(
+        "absorbed by the instrument frame (they move the measured points like a rigid \
+         motion of the instrument; kept at the file's value, and the frame is identified \
+         relative to these values — {example}): {}",
+        names.join(", ")
+    ))
+}
+
+/// The note of a calibration that identified an instrument frame with its
+/// model.
+pub const IDENTIFIED_NOTE: &str = "positions measured in an instrument frame: the frame is \
+    identified together with the model and written to `measurement_frame`";
 
 #[cfg(test)]
 mod tests {

@@ -33,21 +33,25 @@
 //! squares with one Gauss–Newton refinement. Uncertain values
 //! ([`super::honesty`]) keep the file's value.
 
-use nalgebra::{DMatrix, DVector};
+use nalgebra::{DMatrix, DVector, Isometry3};
 
-use crate::calibrate::lsq::{LsqOptions, solve_linear};
+use crate::calibrate::lsq::{LsqOptions, Solution, solve_linear};
 use crate::error::{Error, Result};
 use crate::machine::Machine;
 use crate::machine::tool::{AxisKind, MachineTool};
 
 use super::forward::{check_kind, predict};
-use super::observations::{Observations, Pose};
+use super::frame::{
+    FRAME_PARAMS, IDENTIFIED_NOTE, absorbed_note, carry, estimate, frame_columns, frame_with,
+    screen_model, start_frame,
+};
+use super::observations::{MeasurementFrame, Observations, Pose};
 use super::report::{CONDITION_LIMIT, Calibration, Estimate, Validation};
 use super::screen::{
     describe_outliers, distinct_poses, dominating_rows, drop_copies, grouped_split, implausible,
 };
 use super::stiffness::Options;
-use super::yaml_edit::{set_component_table, set_location_error};
+use super::yaml_edit::{set_component_table, set_location_error, set_measurement_frame};
 
 /// Largest number of distinct target positions per axis.
 pub const MAX_TARGETS: usize = 41;
@@ -224,32 +228,19 @@ fn design(
     Ok(a)
 }
 
-/// Identifies the component error tables and squareness from `obs`.
-pub fn calibrate_geometry(
-    text: &str,
-    machine_file: &str,
+/// The linear axes with at least two positions (an axis at one position
+/// is said in `notes`) and their target grids; refuses moving rotary axes
+/// and too many targets.
+fn axes_and_grids(
+    tool: &MachineTool,
     obs: &Observations,
     obs_file: &str,
-    opts: &Options,
-) -> Result<Calibration> {
-    let machine = Machine::from_yaml_str(text, machine_file)?;
-    check_kind(&machine, obs, obs_file)?;
-    let Machine::Tool(tool) = &machine else {
-        return Err(Error::Usage(format!(
-            "{machine_file}: geometric calibration needs a machine-tool file"
-        )));
-    };
-    let (clean, copies) = drop_copies(obs, obs_file);
-    let obs = &clean;
-    let mut early_notes: Vec<String> = copies.into_iter().collect();
+    notes: &mut Vec<String>,
+) -> Result<(Vec<usize>, [Vec<f64>; 3], bool)> {
     let linear: Vec<usize> = (0..3)
         .filter(|&s| tool.axis(s).is_some_and(|a| a.kind == AxisKind::Linear))
         .collect();
-    // An axis at one position in every row: its tables cannot be written
-    // on one target (that would replace the file's table by a constant) and
-    // its squareness is not seen. It keeps the file's values.
-    let mut axes = Vec::new();
-    for &a in &linear {
+    let positions = |a: usize| {
         let mut g: Vec<f64> = obs
             .rows
             .iter()
@@ -260,10 +251,17 @@ pub fn calibrate_geometry(
             .collect();
         g.sort_by(f64::total_cmp);
         g.dedup();
-        if g.len() >= 2 {
+        g
+    };
+    // An axis at one position in every row: its tables cannot be written
+    // on one target (that would replace the file's table by a constant) and
+    // its squareness is not seen. It keeps the file's values.
+    let mut axes = Vec::new();
+    for &a in &linear {
+        if positions(a).len() >= 2 {
             axes.push(a);
         } else {
-            early_notes.push(format!(
+            notes.push(format!(
                 "axis {} is at one position in every row: its tables and the squareness \
                  errors involving it are not identified and keep the file's values",
                 LETTERS[a]
@@ -300,16 +298,7 @@ pub fn calibrate_geometry(
     }
     let mut grids: [Vec<f64>; 3] = Default::default();
     for &a in &axes {
-        let mut g: Vec<f64> = obs
-            .rows
-            .iter()
-            .filter_map(|r| match &r.pose {
-                Pose::Tool(tp) => Some(tp.xyz_mm[a]),
-                Pose::Robot(_) => None,
-            })
-            .collect();
-        g.sort_by(f64::total_cmp);
-        g.dedup();
+        let g = positions(a);
         if g.len() > MAX_TARGETS {
             return Err(Error::Usage(format!(
                 "{obs_file}: axis {} has {} distinct commanded positions; geometric \
@@ -322,8 +311,14 @@ pub fn calibrate_geometry(
         grids[a] = g;
     }
     let square = axes.len() == 3 && linear.len() == 3;
+    Ok((axes, grids, square))
+}
+
+/// The unknowns: every table value the datums leave free, then the
+/// squareness errors (X, Y and Z linear and varied).
+fn unknowns(axes: &[usize], grids: &[Vec<f64>; 3], square: bool) -> Vec<Param> {
     let mut params = Vec::new();
-    for &a in &axes {
+    for &a in axes {
         let n = grids[a].len();
         for e in 0..3 {
             for node in 0..n {
@@ -352,19 +347,168 @@ pub fn calibrate_geometry(
         }
     }
     if square {
-        params.push(Param::Square {
-            axis: 1,
-            key: "EC0Y_urad",
-        });
-        params.push(Param::Square {
-            axis: 2,
-            key: "EA0Z_urad",
-        });
-        params.push(Param::Square {
-            axis: 2,
-            key: "EB0Z_urad",
-        });
+        for (axis, key) in [(1, "EC0Y_urad"), (2, "EA0Z_urad"), (2, "EB0Z_urad")] {
+            params.push(Param::Square { axis, key });
+        }
     }
+    params
+}
+
+/// The measured points of `rows` carried into the reference frame by `f`.
+fn measured_at(obs: &Observations, rows: &[usize], f: &Isometry3<f64>) -> DVector<f64> {
+    let mut v = measured(obs, rows);
+    if *f == Isometry3::identity() {
+        return v;
+    }
+    for k in 0..rows.len() {
+        let p = carry(f, &v.fixed_rows::<3>(3 * k).into_owned());
+        v.fixed_rows_mut::<3>(3 * k).copy_from(&p);
+    }
+    v
+}
+
+/// The design with the frame's columns (negated, at `f`) beside the
+/// model's, for instrument data.
+fn with_frame(
+    a: &DMatrix<f64>,
+    f: Option<&Isometry3<f64>>,
+    obs: &Observations,
+    fit: &[usize],
+) -> DMatrix<f64> {
+    let Some(f) = f else { return a.clone() };
+    let n = a.ncols();
+    let mut out = a.clone().resize_horizontally(n + FRAME_PARAMS, 0.0);
+    out.columns_mut(n, FRAME_PARAMS)
+        .copy_from(&(-frame_columns(f, obs, fit)));
+    out
+}
+
+/// The result of the geometric fit.
+struct Fitted {
+    sol: Solution,
+    /// Identified values (µm, µrad), all unknowns.
+    x: Vec<f64>,
+    /// The fit rows left after the outliers.
+    fit: Vec<usize>,
+    /// The identified instrument frame.
+    frame: Option<Isometry3<f64>>,
+}
+
+/// The geometric fit: linear least squares at the start values `x0` with
+/// one Gauss–Newton refinement, rows that disagree with every other row
+/// left out first (the worst first, one per pass, at most a tenth of the
+/// rows; said in `notes`). For instrument data the frame's six columns
+/// are appended (from the start registration `f0`), and the model columns
+/// in `absorbed` are zeroed (they keep the file's values).
+#[allow(clippy::too_many_arguments)]
+fn fit_tables(
+    eval: &Eval<'_>,
+    x0: &[f64],
+    obs: &Observations,
+    mut fit: Vec<usize>,
+    f0: Option<Isometry3<f64>>,
+    absorbed: &[usize],
+    obs_file: &str,
+    notes: &mut Vec<String>,
+) -> Result<Fitted> {
+    let n = x0.len();
+    let (_, mut d0_all) = eval(x0, &fit)?;
+    let mut a_all = design(x0, &d0_all, n, eval, &fit)?;
+    for &c in absorbed {
+        a_all.column_mut(c).fill(0.0);
+    }
+    let lsq = LsqOptions::default();
+    let solve = |a: &DMatrix<f64>, b: &DVector<f64>| {
+        solve_linear(a, b, &lsq).map_err(|e| Error::Usage(format!("{obs_file}: {e}")))
+    };
+    let id = Isometry3::identity();
+    let max_passes = (fit.len() / 10).max(1);
+    let mut passes = 0;
+    loop {
+        let a = with_frame(&a_all, f0.as_ref(), obs, &fit);
+        let meas = measured_at(obs, &fit, f0.as_ref().unwrap_or(&id));
+        let sol0 = solve(&a, &(&meas - &d0_all))?;
+        if passes < max_passes {
+            passes += 1;
+            let ident: Vec<usize> = sol0.identifiability.identifiable.clone();
+            let a_id = a.select_columns(ident.iter());
+            let outliers: Vec<_> = dominating_rows(&a_id, &sol0.residuals, &fit)
+                .into_iter()
+                .take(1)
+                .collect();
+            if !outliers.is_empty() {
+                let text = describe_outliers(obs, obs_file, &outliers);
+                tracing::warn!("rows left out of the fit as outliers: {text}");
+                notes.push(format!("row left out of the fit as an outlier: {text}"));
+                let rows_kept: Vec<usize> = fit
+                    .iter()
+                    .enumerate()
+                    .filter(|(_, i)| !outliers.iter().any(|o| o.row == **i))
+                    .flat_map(|(k, _)| [3 * k, 3 * k + 1, 3 * k + 2])
+                    .collect();
+                a_all = a_all.select_rows(rows_kept.iter());
+                d0_all = d0_all.select_rows(rows_kept.iter());
+                fit.retain(|i| !outliers.iter().any(|o| o.row == *i));
+                continue;
+            }
+        }
+        let step = |x: &[f64], d: &DVector<f64>| -> Vec<f64> {
+            x.iter().zip(d.iter()).map(|(s, d)| s + d).collect()
+        };
+        let tail = |d: &DVector<f64>| -> Vec<f64> { d.iter().skip(n).copied().collect() };
+        let x1 = step(x0, &sol0.params);
+        let f1 = f0.map(|f| frame_with(&f, &tail(&sol0.params)));
+        let (_, d1) = eval(&x1, &fit).map_err(|e| implausible(&e, obs_file, fit.len()))?;
+        let a = with_frame(&a_all, f1.as_ref(), obs, &fit);
+        let meas = measured_at(obs, &fit, f1.as_ref().unwrap_or(&id));
+        let sol = solve(&a, &(&meas - &d1))?;
+        let x = step(&x1, &sol.params);
+        let frame = f1.map(|f| frame_with(&f, &tail(&sol.params)));
+        return Ok(Fitted { sol, x, fit, frame });
+    }
+}
+
+/// The model columns an instrument frame absorbs at the start values:
+/// the table values and squareness errors that move the fit rows' points
+/// like a rigid motion of the instrument.
+fn absorbed_by_frame(
+    eval: &Eval<'_>,
+    x0: &[f64],
+    obs: &Observations,
+    fit: &[usize],
+    f0: &Isometry3<f64>,
+    obs_file: &str,
+) -> Result<Vec<usize>> {
+    let (_, d0) = eval(x0, fit)?;
+    let a = design(x0, &d0, x0.len(), eval, fit)?;
+    let jf = frame_columns(f0, obs, fit);
+    let b = measured_at(obs, fit, f0) - d0;
+    let (given, plain) = screen_model(&a, Some(&jf), &b, &LsqOptions::default())
+        .map_err(|e| Error::Usage(format!("{obs_file}: {e}")))?;
+    Ok(given.into_iter().filter(|c| !plain.contains(c)).collect())
+}
+
+/// Identifies the component error tables and squareness from `obs` (and
+/// the instrument frame for `# frame: instrument` data).
+pub fn calibrate_geometry(
+    text: &str,
+    machine_file: &str,
+    obs: &Observations,
+    obs_file: &str,
+    opts: &Options,
+) -> Result<Calibration> {
+    let machine = Machine::from_yaml_str(text, machine_file)?;
+    check_kind(&machine, obs, obs_file)?;
+    let Machine::Tool(tool) = &machine else {
+        return Err(Error::Usage(format!(
+            "{machine_file}: geometric calibration needs a machine-tool file"
+        )));
+    };
+    let (clean, copies) = drop_copies(obs, obs_file);
+    let obs = &clean;
+    let mut early_notes: Vec<String> = copies.into_iter().collect();
+    let (axes, grids, square) = axes_and_grids(tool, obs, obs_file, &mut early_notes)?;
+    let params = unknowns(&axes, &grids, square);
     let prob = Problem {
         grids,
         axes,
@@ -372,14 +516,21 @@ pub fn calibrate_geometry(
         square,
     };
     let n = prob.params.len();
-    let (mut fit, hold) = grouped_split(obs, opts.holdout, opts.seed);
+    let instrument = obs.frame == MeasurementFrame::Instrument;
+    let n_all = n + if instrument { FRAME_PARAMS } else { 0 };
+    let (fit, hold) = grouped_split(obs, opts.holdout, opts.seed);
     let distinct = distinct_poses(obs, &fit);
-    if n == 0 || 3 * distinct <= n {
+    if n == 0 || 3 * distinct <= n_all {
         return Err(Error::Usage(format!(
             "{obs_file}: {distinct} distinct poses left for the fit ({} rows; repeated poses \
-             count once) for {n} table values and squareness errors; measure more points \
+             count once) for {n} table values and squareness errors{}; measure more points \
              (or fewer targets per axis)",
-            fit.len()
+            fit.len(),
+            if instrument {
+                " and the 6 parameters of the instrument frame"
+            } else {
+                ""
+            }
         )));
     }
     tracing::info!(
@@ -397,66 +548,26 @@ pub fn calibrate_geometry(
         let mm = Machine::from_yaml_str(&t, machine_file)?;
         Ok((t, deviations(&mm, obs, rows, obs_file)?))
     };
-    let (_, d0_all) = eval(&x0, &fit)?;
-    let mut d0_all = d0_all;
-    let mut a_all = design(&x0, &d0_all, n, &eval, &fit)?;
-    let lsq = LsqOptions::default();
-    let solve = |a: &DMatrix<f64>, b: &DVector<f64>| {
-        solve_linear(a, b, &lsq).map_err(|e| Error::Usage(format!("{obs_file}: {e}")))
+    let f0 = if instrument {
+        Some(start_frame(&machine, obs, &fit, obs_file)?)
+    } else {
+        None
     };
-    // Rows that disagree with every other row leave the fit, the worst
-    // first, one per pass (a gross outlier drags its neighbours' residuals
-    // along until it is gone), at most a tenth of the rows.
-    let max_passes = (fit.len() / 10).max(1);
-    let mut passes = 0;
-    let (sol, x, m) = loop {
-        let a = a_all.clone();
-        let d0 = d0_all.clone();
-        let m = 3 * fit.len();
-        let meas = measured(obs, &fit);
-        let sol0 = solve(&a, &(&meas - &d0))?;
-        if passes < max_passes {
-            passes += 1;
-            let ident: Vec<usize> = sol0.identifiability.identifiable.clone();
-            let a_id = a.select_columns(ident.iter());
-            let outliers: Vec<_> = dominating_rows(&a_id, &sol0.residuals, &fit)
-                .into_iter()
-                .take(1)
-                .collect();
-            if !outliers.is_empty() {
-                let text = describe_outliers(obs, obs_file, &outliers);
-                tracing::warn!("rows left out of the fit as outliers: {text}");
-                early_notes.push(format!("row left out of the fit as an outlier: {text}"));
-                let gone: Vec<usize> = fit
-                    .iter()
-                    .enumerate()
-                    .filter(|(_, i)| outliers.iter().any(|o| o.row == **i))
-                    .map(|(k, _)| k)
-                    .collect();
-                let rows_kept: Vec<usize> = (0..fit.len())
-                    .filter(|k| !gone.contains(k))
-                    .flat_map(|k| [3 * k, 3 * k + 1, 3 * k + 2])
-                    .collect();
-                a_all = a_all.select_rows(rows_kept.iter());
-                d0_all = d0_all.select_rows(rows_kept.iter());
-                fit.retain(|i| !outliers.iter().any(|o| o.row == *i));
-                continue;
-            }
-        }
-        let x1: Vec<f64> = x0
-            .iter()
-            .zip(sol0.params.iter())
-            .map(|(s, d)| s + d)
-            .collect();
-        let (_, d1) = eval(&x1, &fit).map_err(|e| implausible(&e, obs_file, fit.len()))?;
-        let sol = solve(&a, &(&meas - &d1))?;
-        let x: Vec<f64> = x1
-            .iter()
-            .zip(sol.params.iter())
-            .map(|(s, d)| s + d)
-            .collect();
-        break (sol, x, m);
+    let absorbed = match &f0 {
+        Some(f) => absorbed_by_frame(&eval, &x0, obs, &fit, f, obs_file)?,
+        None => Vec::new(),
     };
+    let Fitted { sol, x, fit, frame } = fit_tables(
+        &eval,
+        &x0,
+        obs,
+        fit,
+        f0,
+        &absorbed,
+        obs_file,
+        &mut early_notes,
+    )?;
+    let m = 3 * fit.len();
     let id = &sol.identifiability;
     if id.condition_number_identified > CONDITION_LIMIT {
         return Err(Error::Usage(format!(
@@ -500,14 +611,18 @@ pub fn calibrate_geometry(
         .zip(&withheld)
         .map(|((&v, &v0), &w)| if w { v0 } else { v })
         .collect();
-    let (yaml, _) = eval(&x, &[]).map_err(|e| implausible(&e, obs_file, fit.len()))?;
+    let (mut yaml, _) = eval(&x, &[]).map_err(|e| implausible(&e, obs_file, fit.len()))?;
     let calibrated = Machine::from_yaml_str(&yaml, machine_file)?;
-    let mh = measured(obs, &hold);
-    let before = norms(&(&mh - deviations(&machine, obs, &hold, obs_file)?));
-    let after = norms(&(&mh - deviations(&calibrated, obs, &hold, obs_file)?));
-    let mf = measured(obs, &fit);
-    let fit_before = norms(&(&mf - deviations(&machine, obs, &fit, obs_file)?));
-    let fit_after = norms(&(&mf - deviations(&calibrated, obs, &fit, obs_file)?));
+    let ident = Isometry3::identity();
+    let (f_start, f_end) = (f0.unwrap_or(ident), frame.unwrap_or(ident));
+    let mh0 = measured_at(obs, &hold, &f_start);
+    let mh1 = measured_at(obs, &hold, &f_end);
+    let before = norms(&(&mh0 - deviations(&machine, obs, &hold, obs_file)?));
+    let after = norms(&(&mh1 - deviations(&calibrated, obs, &hold, obs_file)?));
+    let mf0 = measured_at(obs, &fit, &f_start);
+    let mf1 = measured_at(obs, &fit, &f_end);
+    let fit_before = norms(&(&mf0 - deviations(&machine, obs, &fit, obs_file)?));
+    let fit_after = norms(&(&mf1 - deviations(&calibrated, obs, &fit, obs_file)?));
     let mut notes = vec![
         "angular errors (EA*, EB*, EC*) and rotary axes are not identified from tip positions \
          at one tool length; they keep the file's values"
@@ -521,6 +636,25 @@ pub fn calibrate_geometry(
         notes.push("squareness needs X, Y and Z linear axes, all varied; not identified".into());
     }
     notes.append(&mut early_notes);
+    let frame_est = frame.map(|f| {
+        let u = u
+            .as_ref()
+            .map(|u| std::array::from_fn(|o| u.get(n + o).copied().unwrap_or(f64::NAN)));
+        estimate(&f, u)
+    });
+    if let Some(f) = &frame_est {
+        yaml = set_measurement_frame(&yaml, machine_file, f.xyz_mm, f.rpy_deg)?;
+        let names: Vec<String> = absorbed
+            .iter()
+            .filter_map(|&c| params.get(c).map(|p| p.name.clone()))
+            .collect();
+        notes.extend(absorbed_note(
+            &names,
+            "the positioning offsets and the straightness slopes are then relative to the \
+             frame",
+        ));
+        notes.push(IDENTIFIED_NOTE.into());
+    }
     let mut cal = Calibration {
         kind: "geometry",
         n_fit: fit.len(),
@@ -531,7 +665,7 @@ pub fn calibrate_geometry(
         params,
         validation: Validation::from_norms(&before, &after),
         fit_check: Validation::from_norms(&fit_before, &fit_after),
-        frame: None,
+        frame: frame_est,
         insignificant: Vec::new(),
         uncertain,
         honesty: opts.honesty,

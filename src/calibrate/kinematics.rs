@@ -55,7 +55,8 @@ use crate::machine::robot::{DhParams, Model, Robot};
 
 use super::forward::{check_kind, predict};
 use super::frame::{
-    FRAME_NAMES, FRAME_PARAMS, frame_with, register, rpy_deg, world_note, world_to_reference,
+    FRAME_NAMES, FRAME_PARAMS, IDENTIFIED_NOTE, absorbed_note, estimate, frame_with, screen_model,
+    start_frame, world_note, world_to_reference,
 };
 use super::observations::{MeasuredKind, MeasurementFrame, Observation, Observations, Pose};
 use super::report::{CONDITION_LIMIT, Calibration, Estimate, FrameEstimate, Validation};
@@ -242,37 +243,10 @@ fn screen(
 ) -> std::result::Result<(Vec<usize>, Vec<usize>), String> {
     let nm = layout.n_model();
     let jm = j.columns(0, nm).into_owned();
-    let plain = solve_linear(&jm, r0, lsq).map_err(|e| e.to_string())?;
-    if layout.frame.is_none() {
-        let u = plain.identifiability.unidentifiable.clone();
-        return Ok((u.clone(), u));
-    }
-    let jf = j.columns(nm, FRAME_PARAMS).into_owned();
-    let f = solve_linear(&jf, r0, &LsqOptions::default()).map_err(|e| e.to_string())?;
-    if !f.identifiability.unidentifiable.is_empty() {
-        return Err(
-            "the measured points do not span the space (too few or too little varied poses): \
-             the instrument frame cannot be registered"
-                .into(),
-        );
-    }
-    let q = jf.qr().q();
-    let proj = &jm - &q * (q.transpose() * &jm);
-    // The rank threshold stays relative to the strongest model column
-    // before the projection: a column the frame explains must count as
-    // gone, not be judged against other weakened columns.
-    let strongest = jm.column_iter().map(|c| c.norm()).fold(0.0, f64::max);
-    let mut given = solve_linear(&proj, r0, lsq)
-        .map_err(|e| e.to_string())?
-        .identifiability
-        .unidentifiable;
-    for (k, c) in proj.column_iter().enumerate() {
-        if c.norm() < lsq.rank_rtol * strongest && !given.contains(&k) {
-            given.push(k);
-        }
-    }
-    given.sort_unstable();
-    Ok((given, plain.identifiability.unidentifiable))
+    let jf = layout
+        .frame
+        .map(|_| j.columns(nm, FRAME_PARAMS).into_owned());
+    screen_model(&jm, jf.as_ref(), r0, lsq)
 }
 
 /// The parameters that no pose set identifies: the identifiability of the
@@ -518,22 +492,7 @@ fn prepare(robot: &Robot, obs: &Observations, obs_file: &str, opts: &Options) ->
     let (fit, hold) = grouped_split(&obs, opts.holdout, opts.seed);
     if instrument {
         let m = Machine::Robot(robot.clone());
-        let mut meas = Vec::new();
-        let mut model = Vec::new();
-        for &i in &fit {
-            if let Some(row) = obs.rows.get(i) {
-                meas.push(row.measured_mm);
-                model.push(predict(&m, row, obs_file)?.attained_mm);
-            }
-        }
-        let f0 = register(&meas, &model).ok_or_else(|| {
-            Error::Usage(format!(
-                "{obs_file}: the measured points lie on a line or are too few (fit rows: {}): \
-                 the instrument frame cannot be registered; measure varied poses",
-                fit.len()
-            ))
-        })?;
-        layout.frame = Some(f0);
+        layout.frame = Some(start_frame(&m, &obs, &fit, obs_file)?);
     }
     let n = layout.n();
     let distinct = distinct_poses(&obs, &fit);
@@ -731,16 +690,8 @@ pub fn calibrate_kinematics(
     let fit_before = row_norms(&machine, &f_start, obs, &fit, obs_file)?;
     let fit_after = row_norms(&calibrated, &f_end, obs, &fit, obs_file)?;
     let frame = layout.frame.map(|_| {
-        let u = |o: usize| u_of(nm + o);
-        let all = |s: f64, o: usize| -> Option<[f64; 3]> {
-            Some([u(o)? * s, u(o + 1)? * s, u(o + 2)? * s])
-        };
-        FrameEstimate {
-            xyz_mm: f_end.translation.vector.into(),
-            rpy_deg: rpy_deg(&f_end),
-            u_xyz_mm: all(1.0, 0),
-            u_rot_deg: all(DEG_PER_UNIT, 3),
-        }
+        let u: Option<Vec<f64>> = (0..FRAME_PARAMS).map(|o| u_of(nm + o)).collect();
+        estimate(&f_end, u.and_then(|u| u.try_into().ok()))
     });
     let yaml = write_yaml(
         text,
@@ -934,15 +885,11 @@ fn notes_for(
             fixed.len()
         ));
     }
-    if !absorbed.is_empty() {
-        let names: Vec<String> = absorbed.iter().map(|&k| layout.name(k).0).collect();
-        notes.push(format!(
-            "absorbed by the instrument frame (they move the measured points like a rigid \
-             motion of the instrument; kept at the file's value, and the frame is identified \
-             relative to these values — a joint-1 offset wrong by θ turns the frame by θ): {}",
-            names.join(", ")
-        ));
-    }
+    let absorbed: Vec<String> = absorbed.iter().map(|&k| layout.name(k).0).collect();
+    notes.extend(absorbed_note(
+        &absorbed,
+        "a joint-1 offset wrong by θ turns the frame by θ",
+    ));
     if !insignificant.is_empty() {
         let names: Vec<String> = insignificant.iter().map(|&k| layout.name(k).0).collect();
         notes.push(format!(
@@ -964,9 +911,7 @@ fn notes_for(
 /// before world positions are carried into the base frame).
 fn frame_note(machine: &Machine, layout: &Layout, read: MeasurementFrame) -> String {
     if layout.frame.is_some() {
-        return "positions measured in an instrument frame: the frame is identified together \
-                with the model and written to `measurement_frame`"
-            .into();
+        return IDENTIFIED_NOTE.into();
     }
     match world_note(machine, read) {
         Some(w) => format!("{w}; no measurement frame is identified"),

@@ -29,7 +29,7 @@
 
 use std::collections::HashMap;
 
-use nalgebra::{DMatrix, DVector, SMatrix, Vector3, Vector6};
+use nalgebra::{DMatrix, DVector, Isometry3, SMatrix, Vector3, Vector6};
 
 use crate::calibrate::lsq::{LsqOptions, Solution, solve_linear};
 use crate::error::{Error, Result};
@@ -38,10 +38,13 @@ use crate::machine::robot::kinematics::jacobian;
 use crate::machine::robot::{Model, Robot};
 
 use super::forward::{check_kind, joints_rad, measured_point, predict, row_wrench, wrench_point};
-use super::frame::{world_note, world_to_reference};
-use super::observations::{Observation, Observations, Pose, holdout_split};
-use super::report::{CONDITION_LIMIT, Calibration, Estimate, Validation};
-use super::yaml_edit::{fmt_value, set_top_level_list};
+use super::frame::{
+    DEG_PER_MRAD, carry, estimate, frame_with, point_jacobian, screen_model, start_frame,
+    world_note, world_to_reference,
+};
+use super::observations::{MeasurementFrame, Observation, Observations, Pose, holdout_split};
+use super::report::{CONDITION_LIMIT, Calibration, Estimate, FrameEstimate, Validation};
+use super::yaml_edit::{fmt_value, set_measurement_frame, set_top_level_list};
 
 /// µrad/(N·m) expressed in rad/(N·mm).
 const C_UNIT: f64 = 1e-9;
@@ -203,7 +206,180 @@ fn stiffness_from(c: &DVector<f64>) -> [f64; 6] {
     std::array::from_fn(|i| 1.0 / (c[i] * C_UNIT))
 }
 
-/// Identifies the joint stiffnesses from the load pairs of `obs`.
+/// The part of the exact model the linear design misses, per row (given
+/// the row's design block), mm.
+type SecondOrder<'a> = dyn Fn(&Observation, &SMatrix<f64, 3, 6>) -> Result<Vector3<f64>> + 'a;
+
+/// Columns of the frame's small rotation in the centred design.
+const ROT_PARAMS: usize = 3;
+
+/// The centred system of the fit groups (rows in group order): the design
+/// of the compliances (6 columns) and, with an instrument frame `f`, the
+/// negated columns of the frame's small rotation (its origin cancels in
+/// the centring); the observations are the measured points carried by `f`
+/// minus `second(row)` (the part of the exact model the design misses).
+fn centred_system(
+    robot: &Robot,
+    obs: &Observations,
+    fit: &[Vec<usize>],
+    f: Option<&Isometry3<f64>>,
+    second: &SecondOrder<'_>,
+) -> Result<(DMatrix<f64>, DVector<f64>)> {
+    let m = 3 * fit.iter().map(Vec::len).sum::<usize>();
+    let nr = if f.is_some() { ROT_PARAMS } else { 0 };
+    let mut a = DMatrix::zeros(m, 6 + nr);
+    let mut y = DVector::zeros(m);
+    let mut k = 0;
+    for g in fit {
+        let start = k;
+        for &i in g {
+            let Some(row) = obs.rows.get(i) else { continue };
+            let blk = design_block(robot, row);
+            a.view_mut((3 * k, 0), (3, 6)).copy_from(&blk);
+            let meas = match f {
+                Some(f) => {
+                    let j = point_jacobian(f, &row.measured_mm);
+                    a.view_mut((3 * k, 6), (3, ROT_PARAMS))
+                        .copy_from(&(-j.fixed_columns::<3>(3)));
+                    carry(f, &row.measured_mm)
+                }
+                None => row.measured_mm,
+            };
+            y.rows_mut(3 * k, 3).copy_from(&(meas - second(row, &blk)?));
+            k += 1;
+        }
+        center(&mut a, &mut y, start, k);
+    }
+    Ok((a, y))
+}
+
+/// Refuses a design whose compliances are not identified or badly
+/// conditioned.
+fn check_identified(sol: &Solution, obs_file: &str) -> Result<()> {
+    let id = &sol.identifiability;
+    if !id.unidentifiable.is_empty() {
+        let names: Vec<String> = id
+            .unidentifiable
+            .iter()
+            .map(|&i| {
+                if i < 6 {
+                    format!("k{}", i + 1)
+                } else {
+                    format!("the instrument frame's rotation {}", i - 5)
+                }
+            })
+            .collect();
+        return Err(Error::Usage(format!(
+            "{obs_file}: badly conditioned data set: the stiffness of {} cannot be identified \
+             (the loads do not twist these joints independently of the others; O1 = {:.3e}). \
+             Load the arm in more directions and configurations",
+            names.join(", "),
+            id.observability_o1
+        )));
+    }
+    if id.condition_number_identified > CONDITION_LIMIT {
+        return Err(Error::Usage(format!(
+            "{obs_file}: badly conditioned data set: condition number {:.3e} > {:.0e} \
+             (O1 = {:.3e}); the joint compliances are nearly linearly dependent in these \
+             data (e.g. all loads in one direction). Vary the load direction and the \
+             configuration",
+            id.condition_number_identified, CONDITION_LIMIT, id.observability_o1
+        )));
+    }
+    Ok(())
+}
+
+/// The identified compliances: the linear solution, then two fixed-point
+/// corrections with the exact forward model; with an instrument frame its
+/// small rotation is found with them (the frame moves to each solution).
+/// Returns the solution and the final frame.
+fn solve_compliances(
+    robot: &Robot,
+    obs: &Observations,
+    fit: &[Vec<usize>],
+    f0: Option<Isometry3<f64>>,
+    obs_file: &str,
+) -> Result<(Solution, Option<Isometry3<f64>>)> {
+    let lsq = LsqOptions::default();
+    let solve = |a: &DMatrix<f64>, b: &DVector<f64>| -> Result<Solution> {
+        solve_linear(a, b, &lsq).map_err(|e| Error::Usage(format!("{obs_file}: {e}")))
+    };
+    let turn = |f: Option<Isometry3<f64>>, sol: &Solution| {
+        f.map(|f| {
+            let d: Vec<f64> = (0..6)
+                .map(|k| if k < 3 { 0.0 } else { sol.params[k + 3] })
+                .collect();
+            frame_with(&f, &d)
+        })
+    };
+    let none = |_: &Observation, _: &SMatrix<f64, 3, 6>| Ok(Vector3::zeros());
+    let (a, y) = centred_system(robot, obs, fit, f0.as_ref(), &none)?;
+    if f0.is_some() {
+        screen_model(
+            &a.columns(0, 6).into_owned(),
+            Some(&a.columns(6, ROT_PARAMS).into_owned()),
+            &y,
+            &lsq,
+        )
+        .map_err(|e| Error::Usage(format!("{obs_file}: {e}")))?;
+    }
+    let mut sol = solve(&a, &y)?;
+    check_identified(&sol, obs_file)?;
+    let mut f = turn(f0, &sol);
+    // Second-order correction with the exact forward model.
+    for _ in 0..2 {
+        let c = sol.params.rows(0, 6).into_owned();
+        if c.iter().any(|&c| c <= 0.0) {
+            break;
+        }
+        let trial = Machine::Robot(robot.with_stiffness(stiffness_from(&c)));
+        let second = |row: &Observation, blk: &SMatrix<f64, 3, 6>| -> Result<Vector3<f64>> {
+            Ok(model_deflection(&trial, row, obs_file)?
+                - blk * Vector6::from_column_slice(c.as_slice()))
+        };
+        let (a, y) = centred_system(robot, obs, fit, f.as_ref(), &second)?;
+        sol = solve(&a, &y)?;
+        f = turn(f, &sol);
+    }
+    Ok((sol, f))
+}
+
+/// The origin of an instrument frame of rotation `f.rotation`: the mean of
+/// `p_i − R m_i` over the unloaded fit rows `p_i` of the calibrated model
+/// `m`, with the standard uncertainty of that mean per coordinate
+/// (`None` below two rows). The load differences do not see it.
+fn frame_origin(
+    m: &Machine,
+    f: &Isometry3<f64>,
+    obs: &Observations,
+    fit: &[Vec<usize>],
+    obs_file: &str,
+) -> Result<(Isometry3<f64>, Option<[f64; 3]>)> {
+    let mut d = Vec::new();
+    for row in fit.iter().flatten().filter_map(|&i| obs.rows.get(i)) {
+        if !loaded(row) {
+            d.push(predict(m, row, obs_file)?.attained_mm - f.rotation * row.measured_mm);
+        }
+    }
+    let n = d.len();
+    if n == 0 {
+        return Ok((*f, None));
+    }
+    let mean = d.iter().sum::<Vector3<f64>>() / n as f64;
+    let u = (n > 1).then(|| {
+        std::array::from_fn(|r| {
+            let ss: f64 = d.iter().map(|v| (v[r] - mean[r]).powi(2)).sum();
+            (ss / (n - 1) as f64 / n as f64).sqrt()
+        })
+    });
+    Ok((
+        Isometry3::from_parts(nalgebra::Translation3::from(mean), f.rotation),
+        u,
+    ))
+}
+
+/// Identifies the joint stiffnesses from the load pairs of `obs` (with
+/// the instrument frame for `# frame: instrument` data).
 /// `text`/`machine_file`: the machine file (edited into the result).
 pub fn calibrate_stiffness(
     text: &str,
@@ -236,7 +412,9 @@ pub fn calibrate_stiffness(
         .count();
     let m = 3 * fit_rows.len();
     let dof_lost = 3 * fit.len();
-    if m < dof_lost + 18 {
+    let instrument = obs.frame == MeasurementFrame::Instrument;
+    let nr = if instrument { ROT_PARAMS } else { 0 };
+    if m < dof_lost + 18 + 3 * nr {
         return Err(Error::Usage(format!(
             "{obs_file}: {n_loaded} loaded row(s) in {} group(s) left for the fit; 6 \
              stiffnesses need at least 18 equations beyond the unloaded references, \
@@ -249,83 +427,23 @@ pub fn calibrate_stiffness(
         fit.len(),
         hold.len()
     );
-    // Rows in group order; the design of every group is centred.
-    let mut a = DMatrix::zeros(m, 6);
-    let mut y = DVector::zeros(m);
-    let mut k = 0;
-    for g in &fit {
-        let start = k;
-        for &i in g {
-            let Some(row) = obs.rows.get(i) else { continue };
-            a.view_mut((3 * k, 0), (3, 6))
-                .copy_from(&design_block(robot, row));
-            y.rows_mut(3 * k, 3).copy_from(&row.measured_mm);
-            k += 1;
-        }
-        center(&mut a, &mut y, start, k);
-    }
-    let lsq = LsqOptions::default();
-    let solve = |b: &DVector<f64>| -> Result<Solution> {
-        solve_linear(&a, b, &lsq).map_err(|e| Error::Usage(format!("{obs_file}: {e}")))
+    let f0 = if instrument {
+        Some(start_frame(&machine, obs, &fit_rows, obs_file)?)
+    } else {
+        None
     };
-    let mut sol = solve(&y)?;
+    let (sol, f_rot) = solve_compliances(robot, obs, &fit, f0, obs_file)?;
     let id = sol.identifiability.clone();
-    if !id.unidentifiable.is_empty() {
-        let names: Vec<String> = id
-            .unidentifiable
-            .iter()
-            .map(|i| format!("k{}", i + 1))
-            .collect();
-        return Err(Error::Usage(format!(
-            "{obs_file}: badly conditioned data set: the stiffness of {} cannot be identified \
-             (the loads do not twist these joints independently of the others; O1 = {:.3e}). \
-             Load the arm in more directions and configurations",
-            names.join(", "),
-            id.observability_o1
-        )));
-    }
-    if id.condition_number_identified > CONDITION_LIMIT {
-        return Err(Error::Usage(format!(
-            "{obs_file}: badly conditioned data set: condition number {:.3e} > {:.0e} \
-             (O1 = {:.3e}); the joint compliances are nearly linearly dependent in these \
-             data (e.g. all loads in one direction). Vary the load direction and the \
-             configuration",
-            id.condition_number_identified, CONDITION_LIMIT, id.observability_o1
-        )));
-    }
-    // Second-order correction with the exact forward model.
-    for _ in 0..2 {
-        if sol.params.iter().any(|&c| c <= 0.0) {
-            break;
-        }
-        let trial = Machine::Robot(robot.with_stiffness(stiffness_from(&sol.params)));
-        let mut yc = DVector::zeros(m);
-        let mut lin = DMatrix::zeros(m, 6);
-        let mut k = 0;
-        for g in &fit {
-            let start = k;
-            for &i in g {
-                let Some(row) = obs.rows.get(i) else { continue };
-                let blk = design_block(robot, row);
-                let second = model_deflection(&trial, row, obs_file)?
-                    - blk * Vector6::from_column_slice(sol.params.as_slice());
-                yc.rows_mut(3 * k, 3).copy_from(&(row.measured_mm - second));
-                lin.view_mut((3 * k, 0), (3, 6)).copy_from(&blk);
-                k += 1;
-            }
-            center(&mut lin, &mut yc, start, k);
-        }
-        sol = solve(&yc)?;
-    }
     // The centring used 3 degrees of freedom per group.
-    let dof_true = m.saturating_sub(dof_lost + 6);
+    let dof_true = m.saturating_sub(dof_lost + 6 + nr);
     if dof_true == 0 {
         return Err(Error::Usage(format!(
             "{obs_file}: no redundancy left for the uncertainty (equations = unknowns)"
         )));
     }
     let dof_factor = (sol.dof as f64 / dof_true as f64).sqrt();
-    if let Some(i) = sol.params.iter().position(|&c| c <= 0.0) {
+    let c = sol.params.rows(0, 6).into_owned();
+    if let Some(i) = c.iter().position(|&c| c <= 0.0) {
         let u = sol
             .std_uncertainty()
             .map(|u| u[i] * dof_factor)
@@ -338,11 +456,10 @@ pub fn calibrate_stiffness(
              frame; joint angles in the controller convention), or a joint the loads hardly \
              twist, so its compliance is zero within the noise",
             i + 1,
-            sol.params[i],
+            c[i],
             u
         )));
     }
-    let c = sol.params.clone();
     let k_nmm = stiffness_from(&c);
     let uc = sol.std_uncertainty().map(|u| u * dof_factor);
     let mut params = Vec::with_capacity(6);
@@ -367,6 +484,7 @@ pub fn calibrate_stiffness(
         None => 0.0,
     });
     let calibrated = Machine::Robot(robot.with_stiffness(written.map(|k| k * 1000.0)));
+    let rot = |f: &Option<Isometry3<f64>>, v: Vector3<f64>| f.map_or(v, |f| f.rotation * v);
     let mut before = Vec::new();
     let mut after = Vec::new();
     for g in &hold {
@@ -381,15 +499,38 @@ pub fn calibrate_stiffness(
             .filter(|r| loaded(r))
         {
             let meas = row.measured_mm - u0.measured_mm;
-            before.push((meas - model_deflection(&machine, row, obs_file)?).norm());
-            after.push((meas - model_deflection(&calibrated, row, obs_file)?).norm());
+            before.push((rot(&f0, meas) - model_deflection(&machine, row, obs_file)?).norm());
+            after.push((rot(&f_rot, meas) - model_deflection(&calibrated, row, obs_file)?).norm());
         }
     }
     let values: Vec<String> = written.iter().map(|&k| fmt_value(k, 1)).collect();
-    let yaml = set_top_level_list(text, machine_file, "k_nm_per_rad", &values)?;
+    let mut yaml = set_top_level_list(text, machine_file, "k_nm_per_rad", &values)?;
+    let mut notes: Vec<String> = world.into_iter().collect();
+    let frame = match &f_rot {
+        Some(f) => {
+            let (f, u_xyz) = frame_origin(&calibrated, f, obs, &fit, obs_file)?;
+            let u_rot = sol
+                .std_uncertainty()
+                .map(|u| std::array::from_fn(|r| u[6 + r] * dof_factor * DEG_PER_MRAD));
+            let est = FrameEstimate {
+                u_xyz_mm: u_xyz,
+                u_rot_deg: u_rot,
+                ..estimate(&f, None)
+            };
+            yaml = set_measurement_frame(&yaml, machine_file, est.xyz_mm, est.rpy_deg)?;
+            notes.push(
+                "positions measured in an instrument frame: its rotation is identified \
+                 together with the stiffnesses (from the load differences); its origin, which \
+                 load differences do not see, is the mean offset of the unloaded rows from the \
+                 calibrated model (uncertainty of that mean); written to `measurement_frame`"
+                    .into(),
+            );
+            Some(est)
+        }
+        None => None,
+    };
     Machine::from_yaml_str(&yaml, machine_file)
         .map_err(|e| super::screen::implausible(&e, obs_file, obs.rows.len()))?;
-    let notes: Vec<String> = world.into_iter().collect();
     let mut cal = Calibration {
         kind: "stiffness",
         n_fit: n_loaded,
@@ -400,7 +541,7 @@ pub fn calibrate_stiffness(
         params,
         validation: Validation::from_norms(&before, &after),
         fit_check: None,
-        frame: None,
+        frame,
         insignificant: Vec::new(),
         uncertain,
         honesty: opts.honesty,

@@ -29,22 +29,26 @@
 //! them, so it is one linear least-squares step on the residuals of the
 //! file's model ([`solve_linear`], same identifiability analysis).
 
-use nalgebra::DVector;
+use nalgebra::{DMatrix, DVector, Isometry3};
 
 use crate::calibrate::lsq::{
-    LmOptions, LsqOptions, expand_free, fit_free, numeric_jacobian, solve_linear,
+    LmOptions, LsqOptions, Solution, expand_free, fit_free, numeric_jacobian, solve_linear,
 };
 use crate::error::{Error, Result};
 use crate::machine::Machine;
 use crate::machine::robot::thermal::DhLength;
 use crate::machine::robot::{DhGrowth, Robot, ThermalTerm};
+use crate::machine::tool::MachineTool;
 
 use super::forward::{self, check_kind};
-use super::frame::{world_note, world_to_reference};
-use super::observations::{Observations, Pose, holdout_split};
+use super::frame::{
+    FRAME_PARAMS, IDENTIFIED_NOTE, absorbed_note, carry, estimate, frame_with, point_jacobian,
+    screen_model, start_frame, world_note, world_to_reference,
+};
+use super::observations::{MeasurementFrame, Observations, Pose, holdout_split};
 use super::report::{CONDITION_LIMIT, Calibration, Estimate, Validation};
 use super::stiffness::Options;
-use super::yaml_edit::set_thermal_term;
+use super::yaml_edit::{set_measurement_frame, set_thermal_term};
 
 /// Internal unit of `ts`: per kW (1/W × 1000).
 const TS_SCALE: f64 = 1000.0;
@@ -110,22 +114,55 @@ fn terms_with(base: &[ThermalTerm], x: &[f64]) -> Vec<ThermalTerm> {
         .collect()
 }
 
+/// The terms' unknowns and, for instrument-frame data, the frame's six
+/// parameters after them.
+struct Unknowns<'a> {
+    robot: &'a Robot,
+    base: &'a [ThermalTerm],
+    /// Start pose of the instrument frame (instrument data only).
+    frame: Option<Isometry3<f64>>,
+}
+
+impl Unknowns<'_> {
+    /// Number of model unknowns (3 per term).
+    fn n_model(&self) -> usize {
+        3 * self.base.len()
+    }
+
+    fn n(&self) -> usize {
+        self.n_model()
+            + if self.frame.is_some() {
+                FRAME_PARAMS
+            } else {
+                0
+            }
+    }
+
+    /// The instrument frame for the unknowns `x` (identity without one).
+    fn frame_at(&self, x: &[f64]) -> Isometry3<f64> {
+        match &self.frame {
+            Some(f0) => frame_with(f0, x.get(self.n_model()..).unwrap_or(&[])),
+            None => Isometry3::identity(),
+        }
+    }
+}
+
 fn residuals(
-    robot: &Robot,
-    base: &[ThermalTerm],
+    u: &Unknowns<'_>,
     obs: &Observations,
     rows: &[usize],
     x: &[f64],
     out: &mut DVector<f64>,
     file: &str,
 ) {
-    let terms = terms_with(base, x);
+    let terms = terms_with(u.base, x);
+    let f = u.frame_at(x);
     for (k, &i) in rows.iter().enumerate() {
         let Some(row) = obs.rows.get(i) else { continue };
         let g = row_powers(row).map_or([[0.0; 2]; 6], |p| growth(&terms, &p));
-        match forward::predict_robot_with_growth(robot, row, &g, file) {
+        match forward::predict_robot_with_growth(u.robot, row, &g, file) {
             Ok(p) => {
-                let d = row.measured_mm - p.measured(obs.measured);
+                let d = carry(&f, &row.measured_mm) - p.measured(obs.measured);
                 for r in 0..3 {
                     out[3 * k + r] = d[r];
                 }
@@ -142,6 +179,7 @@ fn residuals(
 fn norms(
     robot: &Robot,
     terms: &[ThermalTerm],
+    f: &Isometry3<f64>,
     obs: &Observations,
     rows: &[usize],
     file: &str,
@@ -151,13 +189,158 @@ fn norms(
         if let Some(row) = obs.rows.get(i) {
             let g = row_powers(row).map_or([[0.0; 2]; 6], |p| growth(terms, &p));
             let p = forward::predict_robot_with_growth(robot, row, &g, file)?;
-            v.push((row.measured_mm - p.measured(obs.measured)).norm());
+            v.push((carry(f, &row.measured_mm) - p.measured(obs.measured)).norm());
         }
     }
     Ok(v)
 }
 
-/// Identifies the Paper B terms of the robot file `text` from `obs`.
+/// Which terms' joint power varies in the fitted rows (the others are
+/// fixed, said in `notes`).
+fn varying_terms(
+    base: &[ThermalTerm],
+    obs: &Observations,
+    fit: &[usize],
+    notes: &mut Vec<String>,
+) -> Vec<bool> {
+    let mut varies = vec![true; base.len()];
+    for (k, t) in base.iter().enumerate() {
+        let ps: Vec<f64> = fit
+            .iter()
+            .filter_map(|&i| obs.rows.get(i).and_then(row_powers))
+            .filter_map(|p| p.get(t.joint).copied())
+            .collect();
+        let lo = ps.iter().copied().fold(f64::INFINITY, f64::min);
+        let hi = ps.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        let spread = hi - lo;
+        if spread.is_nan() || spread <= 1e-9 {
+            varies[k] = false;
+            notes.push(format!(
+                "term {}: the power of joint {} never varies in the fitted rows; \
+                 its lb, ub and ts are fixed at the file's values",
+                term_name(t),
+                t.joint + 1
+            ));
+        }
+    }
+    varies
+}
+
+/// The identifiability screen at the start point over the unknowns of the
+/// varying terms (`candidates`), with the frame's columns beside them for
+/// instrument data. Returns (free unknowns, frame last; model unknowns the
+/// frame absorbs).
+fn screen_unknowns(
+    u: &Unknowns<'_>,
+    obs: &Observations,
+    fit: &[usize],
+    candidates: &[usize],
+    lm_opts: &LmOptions,
+    obs_file: &str,
+) -> Result<(Vec<usize>, Vec<usize>)> {
+    let n = u.n();
+    let nm = u.n_model();
+    let m = 3 * fit.len();
+    let mut r0 = DVector::zeros(m);
+    residuals(u, obs, fit, &vec![0.0; n], &mut r0, obs_file);
+    if r0.iter().any(|v| !v.is_finite()) {
+        return Err(Error::Usage(format!(
+            "{obs_file}: the model cannot be evaluated for some rows"
+        )));
+    }
+    let frame_cols: Vec<usize> = (nm..n).collect();
+    if candidates.is_empty() {
+        return Ok((frame_cols, Vec::new()));
+    }
+    let cols: Vec<usize> = candidates.iter().chain(&frame_cols).copied().collect();
+    let j0 = numeric_jacobian(
+        |x, r| {
+            let full = expand_free(n, &cols, x.as_slice());
+            residuals(u, obs, fit, &full, r, obs_file);
+        },
+        &DVector::zeros(cols.len()),
+        m,
+        lm_opts.fd_relative_step,
+    );
+    let jm = j0.columns(0, candidates.len()).into_owned();
+    let jf = u
+        .frame
+        .map(|_| j0.columns(candidates.len(), FRAME_PARAMS).into_owned());
+    let (given, plain) = screen_model(&jm, jf.as_ref(), &r0, &lm_opts.lsq)
+        .map_err(|e| Error::Usage(format!("{obs_file}: {e}")))?;
+    let free: Vec<usize> = candidates
+        .iter()
+        .enumerate()
+        .filter(|(a, _)| !given.contains(a))
+        .map(|(_, &k)| k)
+        .chain(frame_cols)
+        .collect();
+    let absorbed: Vec<usize> = given
+        .iter()
+        .filter(|a| !plain.contains(a))
+        .filter_map(|&a| candidates.get(a).copied())
+        .collect();
+    Ok((free, absorbed))
+}
+
+/// The report's rows: three unknowns per term, identified (with their
+/// uncertainty) or kept; `true` when some unknown of a varying term was
+/// fixed by the rank screen.
+fn term_estimates(
+    base: &[ThermalTerm],
+    varies: &[bool],
+    free: &[usize],
+    full: &[f64],
+    u_red: Option<&DVector<f64>>,
+) -> (Vec<Estimate>, bool) {
+    let mut params = Vec::with_capacity(3 * base.len());
+    let mut any_fixed_by_rank = false;
+    for (k, t) in base.iter().enumerate() {
+        let name = term_name(t);
+        for (o, (key, unit, start, scale)) in [
+            ("lb", "mm", t.lb_mm, 1.0),
+            ("ub", "mm", t.ub_mm, 1.0),
+            ("ts", "1/W", t.ts_per_w, 1.0 / TS_SCALE),
+        ]
+        .into_iter()
+        .enumerate()
+        {
+            let j = 3 * k + o;
+            let pos = free.iter().position(|&f| f == j);
+            if pos.is_none() && varies.get(k) == Some(&true) {
+                any_fixed_by_rank = true;
+            }
+            params.push(Estimate {
+                name: format!("{name}.{key}"),
+                unit,
+                start,
+                value: start + scale * full.get(j).copied().unwrap_or(0.0),
+                u: pos.and_then(|a| u_red.map(|u| scale * u[a])),
+                fixed: pos.is_none(),
+            });
+        }
+    }
+    (params, any_fixed_by_rank)
+}
+
+/// Refuses a fitted `ts` outside `0..TS_MAX`.
+fn check_ts(terms: &[ThermalTerm], obs_file: &str) -> Result<()> {
+    for t in terms {
+        if !(t.ts_per_w.is_finite() && (0.0..=TS_MAX).contains(&t.ts_per_w)) {
+            return Err(Error::Usage(format!(
+                "{obs_file}: term {}: the fit gives ts = {} 1/W, outside 0..{TS_MAX}; \
+                 the data do not support this term's exponential form (too few power \
+                 levels, or the coupling is not in the data)",
+                term_name(t),
+                t.ts_per_w
+            )));
+        }
+    }
+    Ok(())
+}
+
+/// Identifies the Paper B terms of the robot file `text` from `obs` (and
+/// the instrument frame for `# frame: instrument` data).
 pub fn calibrate_thermal(
     text: &str,
     machine_file: &str,
@@ -190,8 +373,18 @@ pub fn calibrate_thermal(
              rows measured at the steady state of several power levels"
         )));
     }
-    let n = 3 * base.len();
     let (fit, hold) = holdout_split(obs.rows.len(), opts.holdout, opts.seed);
+    let frame = if obs.frame == MeasurementFrame::Instrument {
+        Some(start_frame(&machine, obs, &fit, obs_file)?)
+    } else {
+        None
+    };
+    let unknowns = Unknowns {
+        robot,
+        base: &base,
+        frame,
+    };
+    let n = unknowns.n();
     let m = 3 * fit.len();
     if m < 2 * n {
         return Err(Error::Usage(format!(
@@ -203,35 +396,8 @@ pub fn calibrate_thermal(
     }
     // Terms whose power never varies in the fitted rows are fixed.
     let mut notes = Vec::new();
-    let mut varies = vec![true; base.len()];
-    for (k, t) in base.iter().enumerate() {
-        let ps: Vec<f64> = fit
-            .iter()
-            .filter_map(|&i| obs.rows.get(i).and_then(row_powers))
-            .filter_map(|p| p.get(t.joint).copied())
-            .collect();
-        let lo = ps.iter().copied().fold(f64::INFINITY, f64::min);
-        let hi = ps.iter().copied().fold(f64::NEG_INFINITY, f64::max);
-        let spread = hi - lo;
-        if spread.is_nan() || spread <= 1e-9 {
-            varies[k] = false;
-            notes.push(format!(
-                "term {}: the power of joint {} never varies in the fitted rows; \
-                 its lb, ub and ts are fixed at the file's values",
-                term_name(t),
-                t.joint + 1
-            ));
-        }
-    }
-    let candidates: Vec<usize> = (0..n).filter(|&k| varies[k / 3]).collect();
-    let zero = DVector::zeros(n);
-    let mut r0 = DVector::zeros(m);
-    residuals(robot, &base, obs, &fit, zero.as_slice(), &mut r0, obs_file);
-    if r0.iter().any(|v| !v.is_finite()) {
-        return Err(Error::Usage(format!(
-            "{obs_file}: the model cannot be evaluated for some rows"
-        )));
-    }
+    let varies = varying_terms(&base, obs, &fit, &mut notes);
+    let candidates: Vec<usize> = (0..unknowns.n_model()).filter(|&k| varies[k / 3]).collect();
     let lm_opts = LmOptions {
         max_iterations: MAX_ITERATIONS,
         lsq: LsqOptions {
@@ -240,29 +406,8 @@ pub fn calibrate_thermal(
         },
         ..LmOptions::default()
     };
-    // Identifiability at the start point, over the varying terms.
-    let free: Vec<usize> = if candidates.is_empty() {
-        Vec::new()
-    } else {
-        let x0 = DVector::zeros(candidates.len());
-        let j0 = numeric_jacobian(
-            |x, r| {
-                let full = expand_free(n, &candidates, x.as_slice());
-                residuals(robot, &base, obs, &fit, &full, r, obs_file);
-            },
-            &x0,
-            m,
-            lm_opts.fd_relative_step,
-        );
-        let pre = solve_linear(&j0, &r0, &lm_opts.lsq)
-            .map_err(|e| Error::Usage(format!("{obs_file}: {e}")))?;
-        pre.identifiability
-            .identifiable
-            .iter()
-            .filter_map(|&a| candidates.get(a).copied())
-            .collect()
-    };
-    if free.is_empty() {
+    let (free, absorbed) = screen_unknowns(&unknowns, obs, &fit, &candidates, &lm_opts, obs_file)?;
+    if free.iter().all(|&k| k >= unknowns.n_model()) {
         return Err(Error::Usage(format!(
             "{obs_file}: no thermal parameter can be identified from these rows: \
              measure at several power levels of the joints the terms name"
@@ -271,7 +416,7 @@ pub fn calibrate_thermal(
     // Forward differences (half the cost of central ones); the growth is
     // smooth on the scale of FD_STEP (1e-6 mm, 1e-6/kW).
     let fit_result = fit_free(
-        |x, out| residuals(robot, &base, obs, &fit, x, out, obs_file),
+        |x, out| residuals(&unknowns, obs, &fit, x, out, obs_file),
         n,
         &free,
         m,
@@ -290,46 +435,9 @@ pub fn calibrate_thermal(
         )));
     }
     let full = expand_free(n, &free, sol.params.as_slice());
-    let terms = terms_with(&base, &full);
-    for t in &terms {
-        if !(t.ts_per_w.is_finite() && (0.0..=TS_MAX).contains(&t.ts_per_w)) {
-            return Err(Error::Usage(format!(
-                "{obs_file}: term {}: the fit gives ts = {} 1/W, outside 0..{TS_MAX}; \
-                 the data do not support this term's exponential form (too few power \
-                 levels, or the coupling is not in the data)",
-                term_name(t),
-                t.ts_per_w
-            )));
-        }
-    }
+    check_ts(&terms_with(&base, &full), obs_file)?;
     let u_red = sol.std_uncertainty();
-    let mut params = Vec::with_capacity(n);
-    let mut any_fixed_by_rank = false;
-    for (k, t) in base.iter().enumerate() {
-        let name = term_name(t);
-        for (o, (key, unit, start, scale)) in [
-            ("lb", "mm", t.lb_mm, 1.0),
-            ("ub", "mm", t.ub_mm, 1.0),
-            ("ts", "1/W", t.ts_per_w, 1.0 / TS_SCALE),
-        ]
-        .into_iter()
-        .enumerate()
-        {
-            let j = 3 * k + o;
-            let pos = free.iter().position(|&f| f == j);
-            if pos.is_none() && varies[k] {
-                any_fixed_by_rank = true;
-            }
-            params.push(Estimate {
-                name: format!("{name}.{key}"),
-                unit,
-                start,
-                value: start + scale * full.get(j).copied().unwrap_or(0.0),
-                u: pos.and_then(|a| u_red.as_ref().map(|u| scale * u[a])),
-                fixed: pos.is_none(),
-            });
-        }
-    }
+    let (params, any_fixed_by_rank) = term_estimates(&base, &varies, &free, &full, u_red.as_ref());
     if any_fixed_by_rank {
         notes.push(
             "some unknowns move the measured points like a combination of the others \
@@ -352,11 +460,33 @@ pub fn calibrate_thermal(
         }
     }
     let terms = terms_with(&base, &full);
-    let before = norms(robot, &base, obs, &hold, obs_file)?;
-    let after = norms(robot, &terms, obs, &hold, obs_file)?;
+    let (f_start, f_end) = (unknowns.frame_at(&[]), unknowns.frame_at(&full));
+    let before = norms(robot, &base, &f_start, obs, &hold, obs_file)?;
+    let after = norms(robot, &terms, &f_end, obs, &hold, obs_file)?;
+    let frame = unknowns.frame.map(|_| {
+        let u: Option<Vec<f64>> = (unknowns.n_model()..n)
+            .map(|k| {
+                let a = free.iter().position(|&f| f == k)?;
+                u_red.as_ref().map(|u| u[a])
+            })
+            .collect();
+        estimate(&f_end, u.and_then(|u| u.try_into().ok()))
+    });
     let mut yaml = text.to_string();
     for (k, t) in terms.iter().enumerate() {
         yaml = set_thermal_term(&yaml, machine_file, k, t.lb_mm, t.ub_mm, t.ts_per_w)?;
+    }
+    if let Some(f) = &frame {
+        yaml = set_measurement_frame(&yaml, machine_file, f.xyz_mm, f.rpy_deg)?;
+        let names: Vec<String> = absorbed
+            .iter()
+            .filter_map(|&k| params.get(k).map(|p| p.name.clone()))
+            .collect();
+        notes.extend(absorbed_note(
+            &names,
+            "a growth that shifts every point alike moves the frame's origin",
+        ));
+        notes.push(IDENTIFIED_NOTE.into());
     }
     Machine::from_yaml_str(&yaml, machine_file)
         .map_err(|e| super::screen::implausible(&e, obs_file, obs.rows.len()))?;
@@ -371,7 +501,7 @@ pub fn calibrate_thermal(
         params,
         validation: Validation::from_norms(&before, &after),
         fit_check: None,
-        frame: None,
+        frame,
         insignificant: Vec::new(),
         uncertain,
         honesty: opts.honesty,
@@ -383,34 +513,34 @@ pub fn calibrate_thermal(
     Ok(cal)
 }
 
-/// Residual norms of the rows `rows` for a machine, mm.
-fn machine_norms(m: &Machine, obs: &Observations, rows: &[usize], file: &str) -> Result<Vec<f64>> {
+/// Residual norms of the rows `rows` for a machine and the instrument
+/// frame `f` (identity for reference-frame data), mm.
+fn machine_norms(
+    m: &Machine,
+    f: &Isometry3<f64>,
+    obs: &Observations,
+    rows: &[usize],
+    file: &str,
+) -> Result<Vec<f64>> {
     let mut v = Vec::with_capacity(rows.len());
     for &i in rows {
         if let Some(row) = obs.rows.get(i) {
             let p = forward::predict(m, row, file)?;
-            v.push((row.measured_mm - p.measured(obs.measured)).norm());
+            v.push((carry(f, &row.measured_mm) - p.measured(obs.measured)).norm());
         }
     }
     Ok(v)
 }
 
-/// Identifies the steady-state thermal gains of a machine-tool file: spindle
-/// `growth_um_per_kw` (rows with `spindle_w`) and `scale_ppm_per_kw` of the
-/// axes that have a `thermal.axes` entry (rows with `pX_w` …).
-pub fn calibrate_tool_thermal(
-    text: &str,
-    machine_file: &str,
-    machine: &Machine,
+/// The unknowns of a machine-tool thermal calibration that the rows can
+/// identify: 0 = spindle (µm/kW), 1..4 = X, Y, Z scale (ppm/kW); what is
+/// left out is said in `notes`.
+fn tool_unknowns(
+    tool: &MachineTool,
     obs: &Observations,
     obs_file: &str,
-    opts: &Options,
-) -> Result<Calibration> {
-    let Machine::Tool(tool) = machine else {
-        return Err(Error::Usage(format!(
-            "{machine_file}: not a machine-tool file"
-        )));
-    };
+    notes: &mut Vec<String>,
+) -> Result<Vec<usize>> {
     let thermal = tool.thermal().copied().unwrap_or_default();
     let powers = |i: usize| -> Vec<f64> {
         obs.rows
@@ -427,8 +557,6 @@ pub fn calibrate_tool_thermal(
         let hi = v.iter().copied().fold(f64::NEG_INFINITY, f64::max);
         hi - lo > 1e-9
     };
-    let mut notes = Vec::new();
-    // Unknowns: 0 = spindle (µm/kW), 1..4 = X, Y, Z scale (ppm/kW).
     let mut unknowns: Vec<usize> = Vec::new();
     if varies(&powers(0)) {
         unknowns.push(0);
@@ -455,21 +583,32 @@ pub fn calibrate_tool_thermal(
              for an axis with a thermal.axes entry) at several power levels"
         )));
     }
-    let (fit, hold) = holdout_split(obs.rows.len(), opts.holdout, opts.seed);
+    Ok(unknowns)
+}
+
+/// The linear problem of a machine-tool thermal calibration on the fit
+/// rows: the design (one column per unknown, then the negated frame
+/// columns at `f` for instrument data) and the residuals of the file's
+/// model, the measured points carried by `f`.
+fn tool_design(
+    machine: &Machine,
+    tool: &MachineTool,
+    obs: &Observations,
+    fit: &[usize],
+    unknowns: &[usize],
+    f: Option<&Isometry3<f64>>,
+    obs_file: &str,
+) -> Result<(DMatrix<f64>, DVector<f64>)> {
     let m = 3 * fit.len();
-    if m < 2 * unknowns.len() {
-        return Err(Error::Usage(format!(
-            "{obs_file}: {} rows left for the fit; too few",
-            fit.len()
-        )));
-    }
-    let mut a = nalgebra::DMatrix::zeros(m, unknowns.len());
+    let nf = if f.is_some() { FRAME_PARAMS } else { 0 };
+    let mut a = DMatrix::zeros(m, unknowns.len() + nf);
     let mut b = DVector::zeros(m);
+    let id = Isometry3::identity();
     for (k, &i) in fit.iter().enumerate() {
         let Some(row) = obs.rows.get(i) else { continue };
         let Pose::Tool(tp) = &row.pose else { continue };
         let p = forward::predict(machine, row, obs_file)?;
-        let d = row.measured_mm - p.measured(obs.measured);
+        let d = carry(f.unwrap_or(&id), &row.measured_mm) - p.measured(obs.measured);
         let pw = forward::tool_powers(tp).unwrap_or([0.0; 4]);
         let cmd = tp.axes();
         let dir = tool.nominal(&cmd, forward::tool_length(tool, tp)).dir;
@@ -488,9 +627,94 @@ pub fn calibrate_tool_thermal(
                 a[(3 * k + ax, c)] = cmd[ax] * pw[u] * 1e-9;
             }
         }
+        if let Some(f) = f {
+            a.view_mut((3 * k, unknowns.len()), (3, FRAME_PARAMS))
+                .copy_from(&(-point_jacobian(f, &row.measured_mm)));
+        }
     }
-    let sol = solve_linear(&a, &b, &LsqOptions::default())
+    Ok((a, b))
+}
+
+/// Solves the machine-tool thermal problem; for instrument data the frame
+/// is found with the gains: the model columns the frame explains are
+/// zeroed (they keep the file's value) and the linearisation of the frame
+/// is repeated once at the first solution. Returns the solution, the
+/// final frame and the model columns the frame absorbs.
+fn solve_tool(
+    machine: &Machine,
+    tool: &MachineTool,
+    obs: &Observations,
+    fit: &[usize],
+    unknowns: &[usize],
+    f0: Option<Isometry3<f64>>,
+    obs_file: &str,
+) -> Result<(Solution, Option<Isometry3<f64>>, Vec<usize>)> {
+    let lsq = LsqOptions::default();
+    let solve = |a: &DMatrix<f64>, b: &DVector<f64>| {
+        solve_linear(a, b, &lsq).map_err(|e| Error::Usage(format!("{obs_file}: {e}")))
+    };
+    let nu = unknowns.len();
+    let Some(mut f) = f0 else {
+        let (a, b) = tool_design(machine, tool, obs, fit, unknowns, None, obs_file)?;
+        return Ok((solve(&a, &b)?, None, Vec::new()));
+    };
+    let (a, b) = tool_design(machine, tool, obs, fit, unknowns, Some(&f), obs_file)?;
+    let jm = a.columns(0, nu).into_owned();
+    let jf = a.columns(nu, FRAME_PARAMS).into_owned();
+    let (given, plain) = screen_model(&jm, Some(&jf), &b, &lsq)
         .map_err(|e| Error::Usage(format!("{obs_file}: {e}")))?;
+    let absorbed: Vec<usize> = given.into_iter().filter(|c| !plain.contains(c)).collect();
+    let mut sol = None;
+    for _ in 0..2 {
+        let (mut a, b) = tool_design(machine, tool, obs, fit, unknowns, Some(&f), obs_file)?;
+        for &c in &absorbed {
+            a.column_mut(c).fill(0.0);
+        }
+        let s = solve(&a, &b)?;
+        let d: Vec<f64> = (nu..nu + FRAME_PARAMS).map(|k| s.params[k]).collect();
+        f = frame_with(&f, &d);
+        sol = Some(s);
+    }
+    let sol = sol.ok_or_else(|| Error::Usage(format!("{obs_file}: nothing solved")))?;
+    Ok((sol, Some(f), absorbed))
+}
+
+/// Identifies the steady-state thermal gains of a machine-tool file: spindle
+/// `growth_um_per_kw` (rows with `spindle_w`) and `scale_ppm_per_kw` of the
+/// axes that have a `thermal.axes` entry (rows with `pX_w` …); and the
+/// instrument frame for `# frame: instrument` data.
+pub fn calibrate_tool_thermal(
+    text: &str,
+    machine_file: &str,
+    machine: &Machine,
+    obs: &Observations,
+    obs_file: &str,
+    opts: &Options,
+) -> Result<Calibration> {
+    let Machine::Tool(tool) = machine else {
+        return Err(Error::Usage(format!(
+            "{machine_file}: not a machine-tool file"
+        )));
+    };
+    let thermal = tool.thermal().copied().unwrap_or_default();
+    let mut notes = Vec::new();
+    let unknowns = tool_unknowns(tool, obs, obs_file, &mut notes)?;
+    let (fit, hold) = holdout_split(obs.rows.len(), opts.holdout, opts.seed);
+    let m = 3 * fit.len();
+    let instrument = obs.frame == MeasurementFrame::Instrument;
+    let nf = if instrument { FRAME_PARAMS } else { 0 };
+    if m < 2 * (unknowns.len() + nf) {
+        return Err(Error::Usage(format!(
+            "{obs_file}: {} rows left for the fit; too few",
+            fit.len()
+        )));
+    }
+    let f0 = if instrument {
+        Some(start_frame(machine, obs, &fit, obs_file)?)
+    } else {
+        None
+    };
+    let (sol, frame, absorbed) = solve_tool(machine, tool, obs, &fit, &unknowns, f0, obs_file)?;
     let id = &sol.identifiability;
     if id.condition_number_identified > CONDITION_LIMIT {
         return Err(Error::Usage(format!(
@@ -552,10 +776,42 @@ pub fn calibrate_tool_thermal(
         "rows are at the thermal steady state of their powers: time constants are not identified"
             .into(),
     );
+    let nu = unknowns.len();
+    let frame_est = frame.map(|f| {
+        let u = u
+            .as_ref()
+            .map(|u| std::array::from_fn(|o| u.get(nu + o).copied().unwrap_or(f64::NAN)));
+        estimate(&f, u)
+    });
+    if let Some(f) = &frame_est {
+        yaml = set_measurement_frame(&yaml, machine_file, f.xyz_mm, f.rpy_deg)?;
+        let names: Vec<String> = absorbed
+            .iter()
+            .filter_map(|&c| params.get(c).map(|p| p.name.clone()))
+            .collect();
+        notes.extend(absorbed_note(
+            &names,
+            "a growth that moves every point alike moves the frame's origin",
+        ));
+        notes.push(IDENTIFIED_NOTE.into());
+    }
     let uncertain = opts.honesty.uncertain(&params);
     let calibrated = Machine::from_yaml_str(&yaml, machine_file)?;
-    let before = machine_norms(machine, obs, &hold, obs_file)?;
-    let after = machine_norms(&calibrated, obs, &hold, obs_file)?;
+    let id_frame = Isometry3::identity();
+    let before = machine_norms(
+        machine,
+        f0.as_ref().unwrap_or(&id_frame),
+        obs,
+        &hold,
+        obs_file,
+    )?;
+    let after = machine_norms(
+        &calibrated,
+        frame.as_ref().unwrap_or(&id_frame),
+        obs,
+        &hold,
+        obs_file,
+    )?;
     let mut cal = Calibration {
         kind: "thermal",
         n_fit: fit.len(),
@@ -566,7 +822,7 @@ pub fn calibrate_tool_thermal(
         params,
         validation: Validation::from_norms(&before, &after),
         fit_check: None,
-        frame: None,
+        frame: frame_est,
         insignificant: Vec::new(),
         uncertain,
         honesty: opts.honesty,

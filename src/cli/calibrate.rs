@@ -8,7 +8,6 @@ use std::path::{Path, PathBuf};
 use clap::{Args, ValueEnum};
 
 use crate::calibrate::forward::Switches;
-use crate::calibrate::frame::calibrate_by_registration;
 use crate::calibrate::geometry::calibrate_geometry;
 use crate::calibrate::honesty::{MAX_RELATIVE_UNCERTAINTY, Rule};
 use crate::calibrate::kinematics::calibrate_kinematics;
@@ -383,12 +382,7 @@ pub fn run_calibrate(a: &CalibrateArgs) -> Result<i32> {
         CalibrationKind::Geometry => calibrate_geometry(&text, &file, o, &obs_file, &opts),
         CalibrationKind::Thermal => calibrate_thermal(&text, &file, o, &obs_file, &opts),
     };
-    let cal = if obs.frame == MeasurementFrame::Instrument && a.kind != CalibrationKind::Kinematics
-    {
-        calibrate_by_registration(&text, &file, &obs, &obs_file, &run)?
-    } else {
-        run(&obs)?
-    };
+    let cal = run(&obs)?;
 
     let record = calibration_record(
         &format!("{:?}", a.kind).to_ascii_lowercase(),
