@@ -532,6 +532,317 @@ impl Chunk {
     }
 }
 
+/// The interpretation stage of a [`Job::run`]: runs in program order over
+/// each parsed chunk, giving its plans, block contexts and counts.
+struct InterpretStage<'j, 'm> {
+    job: &'j Job<'m>,
+    file: &'j str,
+    interp: Interpreter,
+    tools: std::collections::BTreeSet<u32>,
+    last_tool: u32,
+    /// Axes whose component-error tables were already reported as clamped.
+    clamped: u8,
+    /// Warnings found by the job itself: clamped tables, resonance.
+    extra_warnings: Vec<Warning>,
+    tracker: Option<Tracker<'m>>,
+    /// The last lines with a move so far (plan and context, in order).
+    last_moves: Vec<(Plan, BlockContext)>,
+    /// The first position beyond the travel (`travel` runs): reported
+    /// after the input errors, like a compensation failure.
+    travel_failure: Option<Error>,
+}
+
+impl<'j, 'm> InterpretStage<'j, 'm> {
+    fn new(job: &'j Job<'m>, file: &'j str) -> Self {
+        InterpretStage {
+            job,
+            file,
+            interp: Interpreter::new(job.setup.clone(), file),
+            tools: Default::default(),
+            last_tool: 0,
+            clamped: 0,
+            extra_warnings: Vec::new(),
+            tracker: job.predictor.as_ref().map(|p| Tracker::new(p, false)),
+            last_moves: Vec::new(),
+            travel_failure: None,
+        }
+    }
+
+    /// Interprets one parsed chunk: its plans and block contexts.
+    fn chunk(&mut self, st: &mut Stage, summary: &mut Summary) -> Result<()> {
+        let chunk = &mut st.chunk;
+        let n = chunk.ranges.len();
+        if st.plans.len() < n {
+            st.plans.resize(n, Plan::default());
+        }
+        st.contexts.clear();
+        st.before.clear();
+        st.before.extend_from_slice(&self.last_moves);
+        for (i, plan) in st.plans[..n].iter_mut().enumerate() {
+            chunk.block(i)?;
+            let (s, e) = chunk.ranges[i];
+            let line = &chunk.buf[s..e];
+            let block = &chunk.blocks[i];
+            self.interp.step_into(block, line, plan)?;
+            let plan = &*plan;
+            if !block.is_empty() {
+                summary.blocks += 1;
+            }
+            if let Some(mv) = plan.mv {
+                self.count_move(plan, &mv, block.line_no, line, summary);
+            }
+            if let Some(t) = self.tracker.as_mut() {
+                st.contexts.push(t.advance(
+                    plan,
+                    self.interp.spindle_rpm(),
+                    block.line_no,
+                    self.file,
+                    &mut self.extra_warnings,
+                ));
+            }
+        }
+        summary.lines = chunk.first_line + chunk.ranges.len();
+        // The chunk's last moves, after those before it.
+        let last: Vec<(Plan, BlockContext)> =
+            moves_back(&st.plans[..n], &st.contexts, &self.last_moves).collect();
+        self.last_moves.clear();
+        self.last_moves.extend(last.into_iter().rev());
+        Ok(())
+    }
+
+    /// Counts a move in the summary, checks it against the travel
+    /// (`travel` runs) and reports component-error tables it leaves.
+    fn count_move(
+        &mut self,
+        plan: &Plan,
+        mv: &crate::program::interp::Move,
+        line_no: usize,
+        line: &[u8],
+        summary: &mut Summary,
+    ) {
+        let file = self.file;
+        if let Some(m) = self.job.travel {
+            if let (Err(f), None) = (
+                crate::compensate::programmed_travel(m, &mv.end),
+                &self.travel_failure,
+            ) {
+                let text = crate::program::gcode::strip_eol(line);
+                self.travel_failure = Some(Error::Unachievable(Located::new(
+                    file,
+                    line_no,
+                    1,
+                    format!(
+                        "{}: `{}`",
+                        failure_text(&f, plan),
+                        String::from_utf8_lossy(text).trim()
+                    ),
+                )));
+            }
+        }
+        summary.moves += 1;
+        match (plan.kind, mv.motion) {
+            (PlanKind::Cycle { .. }, _) => summary.holes += 1,
+            (_, Motion::Rapid) => summary.rapids += 1,
+            (_, Motion::Linear) => summary.feeds += 1,
+            _ => summary.arcs += 1,
+        }
+        let (lo, hi) = summary.extents.get_or_insert((mv.end, mv.end));
+        for k in 0..6 {
+            lo[k] = lo[k].min(mv.end[k]);
+            hi[k] = hi[k].max(mv.end[k]);
+        }
+        if mv.tool != 0 && mv.tool != self.last_tool {
+            self.tools.insert(mv.tool);
+            self.last_tool = mv.tool;
+        }
+        // Component-error tables are clamped at their ends: say so once
+        // per axis.
+        if let Some(pred) = &self.job.predictor {
+            let fresh = pred.machine.clamped_axes(&mv.end) & !self.clamped;
+            for slot in (0..6).filter(|s| fresh & (1 << s) != 0) {
+                let message = format!(
+                    "{} axis position {:.3} lies outside its component-error tables; the table end values are used",
+                    crate::machine::AXIS_LETTERS[slot] as char,
+                    mv.end[slot]
+                );
+                tracing::warn!("{file}:{line_no}: {message}");
+                self.extra_warnings.push(Warning {
+                    line: line_no,
+                    message,
+                    count: 1,
+                });
+            }
+            self.clamped |= fresh;
+        }
+    }
+
+    /// Completes the summary after the last chunk: units, warnings, tools
+    /// and the time line.
+    fn finish(self, summary: &mut Summary) {
+        summary.inch = self.interp.inch();
+        summary.warnings = self.interp.warnings().to_vec();
+        summary.warnings.extend(self.extra_warnings);
+        summary.tools = self.tools.into_iter().collect();
+        if let Some(t) = &self.tracker {
+            summary.duration_s = t.time_s;
+            summary.mean_power_w = t.mean_power();
+        }
+    }
+}
+
+/// The writing stage of a [`Job::run`]: hands over each compensated
+/// chunk's deviations (summary and report rows) and writes its lines.
+struct WriteStage<'j, 'm, 'o, 'r> {
+    job: &'j Job<'m>,
+    file: &'j str,
+    solving: bool,
+    emitter: Emitter,
+    out: Option<&'o mut dyn Write>,
+    rows: Option<&'r mut dyn FnMut(Row)>,
+    out_buf: Vec<u8>,
+    /// Storage of a block under tool centre point control in tool tips.
+    tip_plan: Plan,
+    tip_res: BlockResult,
+}
+
+impl<'j, 'm, 'o, 'r> WriteStage<'j, 'm, 'o, 'r> {
+    fn new(
+        job: &'j Job<'m>,
+        file: &'j str,
+        solving: bool,
+        out: Option<&'o mut dyn Write>,
+        rows: Option<&'r mut dyn FnMut(Row)>,
+    ) -> Self {
+        WriteStage {
+            job,
+            file,
+            solving,
+            emitter: Emitter::new(job.emit).with_tolerance(job.settings.tolerance_mm),
+            out,
+            rows,
+            out_buf: Vec::with_capacity(1 << 20),
+            tip_plan: Plan::default(),
+            tip_res: BlockResult::default(),
+        }
+    }
+
+    /// Writes one compensated chunk (and hands over its rows).
+    fn chunk(&mut self, st: &mut Stage, summary: &mut Summary) -> Result<()> {
+        let chunk = &st.chunk;
+        let plans = &st.plans[..chunk.ranges.len()];
+        if !self.solving {
+            // Nothing is solved: every line is written as it is.
+            if let Some(out) = self.out.as_deref_mut() {
+                out.write_all(&chunk.buf)
+                    .map_err(|e| Error::io("output", e))?;
+            }
+            return Ok(());
+        }
+        self.out_buf.clear();
+        for (i, plan) in plans.iter().enumerate() {
+            let block = &chunk.blocks[i];
+            let res = match st.results.get(i) {
+                Some(Some(Ok(r))) => Some(r),
+                Some(Some(Err(f))) => {
+                    return Err(Error::Unachievable(Located::new(
+                        self.file,
+                        block.line_no,
+                        1,
+                        format!(
+                            "{}: `{}`",
+                            failure_text(f, plan),
+                            String::from_utf8_lossy(crate::program::gcode::strip_eol(
+                                chunk.line(i)
+                            ))
+                            .trim()
+                        ),
+                    )));
+                }
+                _ => None,
+            };
+            if let (Some(r), Some(mv)) = (res, plan.mv) {
+                if plan.kind != PlanKind::Pass {
+                    self.record(plan, &mv, r, block.line_no, summary);
+                }
+            }
+            if self.out.is_some() {
+                match (plan.tcpm, res, &self.job.predictor) {
+                    // Tool centre point control: written as tool tips.
+                    (true, Some(r), Some(pred)) => {
+                        compensate::tcpm::to_tips(
+                            pred.machine,
+                            plan,
+                            r,
+                            &mut self.tip_plan,
+                            &mut self.tip_res,
+                        );
+                        self.emitter.write(
+                            chunk.line(i),
+                            block,
+                            &self.tip_plan,
+                            Some(&self.tip_res),
+                            &mut self.out_buf,
+                        );
+                    }
+                    _ => self
+                        .emitter
+                        .write(chunk.line(i), block, plan, res, &mut self.out_buf),
+                }
+            }
+        }
+        if let Some(out) = self.out.as_deref_mut() {
+            out.write_all(&self.out_buf)
+                .map_err(|e| Error::io("output", e))?;
+        }
+        // The stage waits for its next chunk: large split-point storage
+        // is given back now rather than when it is compensated again.
+        for r in st.results.iter_mut().flatten().flatten() {
+            if r.segments.capacity() > REUSE_SEGMENTS {
+                r.segments = Vec::new();
+            }
+        }
+        Ok(())
+    }
+
+    /// Adds a compensated move's deviation to the summary and hands over
+    /// its report row.
+    fn record(
+        &mut self,
+        plan: &Plan,
+        mv: &crate::program::interp::Move,
+        r: &BlockResult,
+        line_no: usize,
+        summary: &mut Summary,
+    ) {
+        let dev = r.deviation.total().norm();
+        summary.deviation.add(dev, line_no);
+        if plan.kind != PlanKind::Fixed && mv.motion != Motion::Rapid {
+            summary.cutting.add(dev, line_no);
+        }
+        if mv.motion != Motion::Rapid && r.residual_mm > summary.max_residual_mm {
+            summary.max_residual_mm = r.residual_mm;
+            summary.max_residual_line = line_no;
+        }
+        if let Some(rows) = self.rows.as_deref_mut() {
+            rows(Row {
+                line: line_no,
+                motion: motion_label(plan),
+                commanded: mv.end,
+                compensated: r.end,
+                result: r.clone(),
+            });
+        }
+    }
+
+    /// Completes the summary after the last chunk: the lines changed and
+    /// added.
+    fn finish(self, summary: &mut Summary) {
+        summary.changed = self.emitter.changed_blocks();
+        summary.added = self.emitter.added_blocks();
+        summary.added_by = self.emitter.added_by();
+    }
+}
+
 /// Runs `op` in a fork-join scope of the job's pool (rayon's global pool
 /// when `None`), on the calling thread.
 fn in_scope<'s, R>(pool: Option<&rayon::ThreadPool>, op: impl FnOnce(&rayon::Scope<'s>) -> R) -> R {
@@ -621,220 +932,18 @@ impl<'m> Job<'m> {
         &self,
         mut input: R,
         file: &str,
-        mut out: Option<&mut dyn Write>,
-        mut rows: Option<&mut dyn FnMut(Row)>,
+        out: Option<&mut dyn Write>,
+        rows: Option<&mut dyn FnMut(Row)>,
     ) -> Result<Summary> {
-        let mut interp = Interpreter::new(self.setup.clone(), file);
-        let mut emitter = Emitter::new(self.emit).with_tolerance(self.settings.tolerance_mm);
-        let mut summary = Summary::default();
-        let mut out_buf: Vec<u8> = Vec::with_capacity(1 << 20);
-        let mut tools: std::collections::BTreeSet<u32> = Default::default();
-        let mut last_tool = 0u32;
-        let mut clamped = 0u8;
-        // Warnings found by the job itself: clamped tables, resonance.
-        let mut extra_warnings: Vec<Warning> = Vec::new();
-        let mut tracker = self.predictor.as_ref().map(|p| Tracker::new(p, false));
         // With every effect off the output is the input; a report still
         // wants its rows (of zero deviation).
         let solving = self
             .predictor
             .as_ref()
             .is_some_and(|p| !p.effects.is_none() || rows.is_some());
-
-        // The last lines with a move so far (plan and context, in order).
-        let mut last_moves: Vec<(Plan, BlockContext)> = Vec::new();
-        // The first position beyond the travel (`travel` runs): reported
-        // after the input errors, like a compensation failure.
-        let mut travel_failure: Option<Error> = None;
-        // Interprets one parsed chunk: its plans and block contexts.
-        let mut prepare = |st: &mut Stage, summary: &mut Summary| -> Result<()> {
-            let chunk = &mut st.chunk;
-            let n = chunk.ranges.len();
-            if st.plans.len() < n {
-                st.plans.resize(n, Plan::default());
-            }
-            st.contexts.clear();
-            st.before.clear();
-            st.before.extend_from_slice(&last_moves);
-            for (i, plan) in st.plans[..n].iter_mut().enumerate() {
-                chunk.block(i)?;
-                let (s, e) = chunk.ranges[i];
-                let line = &chunk.buf[s..e];
-                let block = &chunk.blocks[i];
-                interp.step_into(block, line, plan)?;
-                let plan = &*plan;
-                if !block.is_empty() {
-                    summary.blocks += 1;
-                }
-                if let Some(mv) = plan.mv {
-                    if let Some(m) = self.travel {
-                        if let (Err(f), None) = (
-                            crate::compensate::programmed_travel(m, &mv.end),
-                            &travel_failure,
-                        ) {
-                            let text = crate::program::gcode::strip_eol(line);
-                            travel_failure = Some(Error::Unachievable(Located::new(
-                                file,
-                                block.line_no,
-                                1,
-                                format!(
-                                    "{}: `{}`",
-                                    failure_text(&f, plan),
-                                    String::from_utf8_lossy(text).trim()
-                                ),
-                            )));
-                        }
-                    }
-                    summary.moves += 1;
-                    match (plan.kind, mv.motion) {
-                        (PlanKind::Cycle { .. }, _) => summary.holes += 1,
-                        (_, Motion::Rapid) => summary.rapids += 1,
-                        (_, Motion::Linear) => summary.feeds += 1,
-                        _ => summary.arcs += 1,
-                    }
-                    let (lo, hi) = summary.extents.get_or_insert((mv.end, mv.end));
-                    for k in 0..6 {
-                        lo[k] = lo[k].min(mv.end[k]);
-                        hi[k] = hi[k].max(mv.end[k]);
-                    }
-                    if mv.tool != 0 && mv.tool != last_tool {
-                        tools.insert(mv.tool);
-                        last_tool = mv.tool;
-                    }
-                    // Component-error tables are clamped at their ends: say so
-                    // once per axis.
-                    if let Some(pred) = &self.predictor {
-                        let fresh = pred.machine.clamped_axes(&mv.end) & !clamped;
-                        for slot in (0..6).filter(|s| fresh & (1 << s) != 0) {
-                            let message = format!(
-                                "{} axis position {:.3} lies outside its component-error tables; the table end values are used",
-                                crate::machine::AXIS_LETTERS[slot] as char,
-                                mv.end[slot]
-                            );
-                            tracing::warn!("{file}:{}: {message}", block.line_no);
-                            extra_warnings.push(Warning {
-                                line: block.line_no,
-                                message,
-                                count: 1,
-                            });
-                        }
-                        clamped |= fresh;
-                    }
-                }
-                if let Some(t) = tracker.as_mut() {
-                    st.contexts.push(t.advance(
-                        plan,
-                        interp.spindle_rpm(),
-                        block.line_no,
-                        file,
-                        &mut extra_warnings,
-                    ));
-                }
-            }
-            summary.lines = chunk.first_line + chunk.ranges.len();
-            // The chunk's last moves, after those before it.
-            let last: Vec<(Plan, BlockContext)> =
-                moves_back(&st.plans[..n], &st.contexts, &last_moves).collect();
-            last_moves.clear();
-            last_moves.extend(last.into_iter().rev());
-            Ok(())
-        };
-
-        // Storage of a block under tool centre point control in tool tips.
-        let mut tip_plan = Plan::default();
-        let mut tip_res = BlockResult::default();
-        // Writes one compensated chunk (and hands over its rows).
-        let mut finish = |st: &mut Stage, summary: &mut Summary| -> Result<()> {
-            let chunk = &st.chunk;
-            let plans = &st.plans[..chunk.ranges.len()];
-            if !solving {
-                // Nothing is solved: every line is written as it is.
-                if let Some(out) = out.as_deref_mut() {
-                    out.write_all(&chunk.buf)
-                        .map_err(|e| Error::io("output", e))?;
-                }
-                return Ok(());
-            }
-            out_buf.clear();
-            for (i, plan) in plans.iter().enumerate() {
-                let block = &chunk.blocks[i];
-                let res = match st.results.get(i) {
-                    Some(Some(Ok(r))) => Some(r),
-                    Some(Some(Err(f))) => {
-                        return Err(Error::Unachievable(Located::new(
-                            file,
-                            block.line_no,
-                            1,
-                            format!(
-                                "{}: `{}`",
-                                failure_text(f, plan),
-                                String::from_utf8_lossy(crate::program::gcode::strip_eol(
-                                    chunk.line(i)
-                                ))
-                                .trim()
-                            ),
-                        )));
-                    }
-                    _ => None,
-                };
-                if let (Some(r), Some(mv)) = (res, plan.mv) {
-                    if plan.kind != PlanKind::Pass {
-                        let dev = r.deviation.total().norm();
-                        summary.deviation.add(dev, block.line_no);
-                        if plan.kind != PlanKind::Fixed && mv.motion != Motion::Rapid {
-                            summary.cutting.add(dev, block.line_no);
-                        }
-                        if mv.motion != Motion::Rapid && r.residual_mm > summary.max_residual_mm {
-                            summary.max_residual_mm = r.residual_mm;
-                            summary.max_residual_line = block.line_no;
-                        }
-                        if let Some(rows) = rows.as_deref_mut() {
-                            rows(Row {
-                                line: block.line_no,
-                                motion: motion_label(plan),
-                                commanded: mv.end,
-                                compensated: r.end,
-                                result: r.clone(),
-                            });
-                        }
-                    }
-                }
-                if out.is_some() {
-                    match (plan.tcpm, res, &self.predictor) {
-                        // Tool centre point control: written as tool tips.
-                        (true, Some(r), Some(pred)) => {
-                            compensate::tcpm::to_tips(
-                                pred.machine,
-                                plan,
-                                r,
-                                &mut tip_plan,
-                                &mut tip_res,
-                            );
-                            emitter.write(
-                                chunk.line(i),
-                                block,
-                                &tip_plan,
-                                Some(&tip_res),
-                                &mut out_buf,
-                            );
-                        }
-                        _ => emitter.write(chunk.line(i), block, plan, res, &mut out_buf),
-                    }
-                }
-            }
-            if let Some(out) = out.as_deref_mut() {
-                out.write_all(&out_buf)
-                    .map_err(|e| Error::io("output", e))?;
-            }
-            // The stage waits for its next chunk: large split-point storage
-            // is given back now rather than when it is compensated again.
-            for r in st.results.iter_mut().flatten().flatten() {
-                if r.segments.capacity() > REUSE_SEGMENTS {
-                    r.segments = Vec::new();
-                }
-            }
-            Ok(())
-        };
+        let mut summary = Summary::default();
+        let mut interpret = InterpretStage::new(self, file);
+        let mut write = WriteStage::new(self, file, solving, out, rows);
 
         // The four chunks in flight, oldest first: `done` is compensated
         // (to be written), `solve` is interpreted (to be compensated),
@@ -882,10 +991,10 @@ impl<'m> Job<'m> {
                     s.spawn(move |_| read_ref.parse(file));
                 }
                 if has_done && !scanning {
-                    written = finish(&mut done, &mut summary);
+                    written = write.chunk(&mut done, &mut summary);
                 }
                 if has_parsed {
-                    interpreted = prepare(&mut parsed, &mut summary);
+                    interpreted = interpret.chunk(&mut parsed, &mut summary);
                 }
             });
             // Input errors in line order (this chunk's lines come before
@@ -906,20 +1015,11 @@ impl<'m> Job<'m> {
             std::mem::swap(&mut parsed, &mut read);
             has_parsed = has_read;
         }
-        if let Some(e) = failure.or(travel_failure) {
+        if let Some(e) = failure.or(interpret.travel_failure.take()) {
             return Err(e);
         }
-        summary.inch = interp.inch();
-        summary.warnings = interp.warnings().to_vec();
-        summary.warnings.extend(extra_warnings);
-        summary.tools = tools.into_iter().collect();
-        summary.changed = emitter.changed_blocks();
-        summary.added = emitter.added_blocks();
-        summary.added_by = emitter.added_by();
-        if let Some(t) = &tracker {
-            summary.duration_s = t.time_s;
-            summary.mean_power_w = t.mean_power();
-        }
+        interpret.finish(&mut summary);
+        write.finish(&mut summary);
         Ok(summary)
     }
 

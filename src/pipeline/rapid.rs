@@ -32,7 +32,7 @@ use crate::machine::robot::thermal::{
 };
 use crate::machine::robot::{
     Compensation, ConfData, Deviation, DhGrowth, Effects, ForceFrame, ForceModel, IkSelect, Model,
-    ProcessWrench, Robot, RobotError, Seed,
+    ProcessWrench, Robot, RobotError, Seed, Thermal,
 };
 use crate::process::CutSettings;
 use crate::process::MillingCache;
@@ -1194,174 +1194,236 @@ pub(crate) fn compensate_window(
     before: usize,
 ) -> Result<EditList> {
     let moves: Vec<&Move> = module.moves().collect();
-    // Planning (resolving each move and solving its programmed joints) is
-    // independent per move: in parallel, each rayon task with its own tool
-    // views; the first error in move order is the error, as in order.
-    let window_plans = moves
-        .par_iter()
-        .map_init(ViewCache::new, |views, mv| {
-            plan_move(module, src, file, robot, views, mv)
-        })
-        .collect::<Vec<Result<Planned>>>()
-        .into_iter()
-        .collect::<Result<Vec<Planned>>>()?;
-    // `plans[i + o]` is the plan of move `i`, `plans[i + o - 1]` that of
-    // the move before (the last of the windows before for the first).
-    let o = usize::from(carry.prev_plan.is_some());
-    let mut plans = Vec::with_capacity(window_plans.len() + o);
-    plans.extend(carry.prev_plan.take());
-    plans.extend(window_plans);
-    let fx = opts.effects;
-    let thermal = robot.thermal().filter(|_| fx.thermal != 0.0);
-    let directives = match directives {
-        Some(d) => d,
-        None => Directives::parse(src, file)?,
-    };
-    let mut cache = MillingCache::default();
-    let mut wrenches = Vec::with_capacity(moves.len());
-    for (i, mv) in moves.iter().enumerate() {
-        wrenches.push(move_wrench(
-            robot,
-            &plans,
-            i + o,
-            mv,
-            src,
-            file,
-            fx.process != 0.0 || thermal.is_some(),
-            &directives.at(mv.line),
-            &mut cache,
-        )?);
+    let mut line = TimeLine::of_window(&moves, module, src, file, robot, opts, carry, directives)?;
+    if let Some(totals) = carry.time_line.as_mut() {
+        if let Some(t) = line.thermal {
+            totals.add(&line.segments, t.time_constant_s);
+        }
+        carry.prev_plan = line.plans.pop();
+        return Ok(EditList::new());
     }
-    let mut durations = Vec::with_capacity(moves.len());
-    for (i, mv) in moves.iter().enumerate() {
-        durations.push(match move_duration(robot, &plans, i + o, mv) {
-            Some(t) => t,
-            None if thermal.is_some() => {
-                return Err(input_err(
-                    src,
-                    file,
-                    mv.speed.span.start,
-                    format!(
-                        "speed `{}` cannot be resolved offline; the thermal time line needs the TCP speed",
-                        mv.speed.text
-                    ),
-                ));
-            }
-            None => 0.0,
-        });
+    line.start_thermal(carry, opts.thermal_start);
+    let mut rw = Rewriter::resume(module, src, file, robot, opts, carry);
+    if opts.records {
+        carry.records.reserve(moves.len());
     }
-    // The load torques and nominal flange at each move's end (the costly
-    // part of its power), in parallel, each rayon task with its own views; the power
-    // itself chains the moves (a move starts where the one before ended).
-    // The power feeds the thermal time line and the report's rows, the
-    // flange a compensation's breakdown: without them (a `check`) neither
-    // is computed.
-    let power_needed = thermal.is_some() || opts.records;
-    let ends: Vec<Option<EndLoad>> = if power_needed || fx.compensates() {
-        (0..moves.len())
-            .into_par_iter()
-            .map_init(ViewCache::new, |views, i| {
-                let (mv, duration_s) = (moves.get(i)?, *durations.get(i)?);
-                end_load(
+    rw.walks(&moves, &line, carry)?;
+    let edits = rw.suspend(carry);
+    drop(line.nominal_flanges);
+    carry.prev_plan = line.plans.pop();
+    if before == 0 {
+        return Ok(edits);
+    }
+    let (head, rest) = edits.split_at(before);
+    carry.before.append(&head);
+    Ok(rest)
+}
+
+/// The time line of a window's moves, before any target is compensated:
+/// each move's plan, process wrench, duration, joint powers and thermal
+/// power, and the nominal flange at its end.
+struct TimeLine<'r> {
+    /// `plans[i + o]` is the plan of move `i`, `plans[i + o - 1]` that of
+    /// the move before (the last of the windows before for the first).
+    plans: Vec<Planned>,
+    o: usize,
+    thermal: Option<&'r Thermal>,
+    /// The program's `! POSTPROC MILLING` settings.
+    directives: Directives,
+    wrenches: Vec<Option<ProcessWrench>>,
+    segments: Vec<Segment>,
+    /// Nominal flange at each move's end (only for a compensation, where
+    /// the deviation breakdown uses it).
+    nominal_flanges: Vec<Option<Isometry3<f64>>>,
+    /// Effective thermal power per joint at each move's end.
+    thermal_power: Option<Vec<[f64; 6]>>,
+}
+
+impl<'r> TimeLine<'r> {
+    /// Plans the moves of a window (continuing the windows before from
+    /// `carry`) and puts them on the time line.
+    #[allow(clippy::too_many_arguments)]
+    fn of_window(
+        moves: &[&Move],
+        module: &Module,
+        src: &str,
+        file: &str,
+        robot: &'r Robot,
+        opts: &RapidOptions,
+        carry: &mut Carry,
+        directives: Option<Directives>,
+    ) -> Result<Self> {
+        // Planning (resolving each move and solving its programmed joints) is
+        // independent per move: in parallel, each rayon task with its own tool
+        // views; the first error in move order is the error, as in order.
+        let window_plans = moves
+            .par_iter()
+            .map_init(ViewCache::new, |views, mv| {
+                plan_move(module, src, file, robot, views, mv)
+            })
+            .collect::<Vec<Result<Planned>>>()
+            .into_iter()
+            .collect::<Result<Vec<Planned>>>()?;
+        let o = usize::from(carry.prev_plan.is_some());
+        let mut plans = Vec::with_capacity(window_plans.len() + o);
+        plans.extend(carry.prev_plan.take());
+        plans.extend(window_plans);
+        let fx = opts.effects;
+        let thermal = robot.thermal().filter(|_| fx.thermal != 0.0);
+        let directives = match directives {
+            Some(d) => d,
+            None => Directives::parse(src, file)?,
+        };
+        let mut cache = MillingCache::default();
+        let mut wrenches = Vec::with_capacity(moves.len());
+        for (i, mv) in moves.iter().enumerate() {
+            wrenches.push(move_wrench(
+                robot,
+                &plans,
+                i + o,
+                mv,
+                src,
+                file,
+                fx.process != 0.0 || thermal.is_some(),
+                &directives.at(mv.line),
+                &mut cache,
+            )?);
+        }
+        let mut durations = Vec::with_capacity(moves.len());
+        for (i, mv) in moves.iter().enumerate() {
+            durations.push(match move_duration(robot, &plans, i + o, mv) {
+                Some(t) => t,
+                None if thermal.is_some() => {
+                    return Err(input_err(
+                        src,
+                        file,
+                        mv.speed.span.start,
+                        format!(
+                            "speed `{}` cannot be resolved offline; the thermal time line needs the TCP speed",
+                            mv.speed.text
+                        ),
+                    ));
+                }
+                None => 0.0,
+            });
+        }
+        let mut line = TimeLine {
+            plans,
+            o,
+            thermal,
+            directives,
+            wrenches,
+            segments: Vec::with_capacity(moves.len()),
+            nominal_flanges: Vec::new(),
+            thermal_power: None,
+        };
+        line.powers(moves, robot, opts, carry, &durations);
+        Ok(line)
+    }
+
+    /// The joint powers of the moves (`segments`) and, for a compensation,
+    /// the nominal flange at each move's end.
+    fn powers(
+        &mut self,
+        moves: &[&Move],
+        robot: &Robot,
+        opts: &RapidOptions,
+        carry: &mut Carry,
+        durations: &[f64],
+    ) {
+        let fx = opts.effects;
+        let (plans, o, wrenches) = (&self.plans, self.o, &self.wrenches);
+        // The load torques and nominal flange at each move's end (the costly
+        // part of its power), in parallel, each rayon task with its own views; the power
+        // itself chains the moves (a move starts where the one before ended).
+        // The power feeds the thermal time line and the report's rows, the
+        // flange a compensation's breakdown: without them (a `check`) neither
+        // is computed.
+        let power_needed = self.thermal.is_some() || opts.records;
+        let ends: Vec<Option<EndLoad>> = if power_needed || fx.compensates() {
+            (0..moves.len())
+                .into_par_iter()
+                .map_init(ViewCache::new, |views, i| {
+                    let (mv, duration_s) = (moves.get(i)?, *durations.get(i)?);
+                    end_load(
+                        robot,
+                        views,
+                        plans,
+                        i + o,
+                        wrenches[i],
+                        &mv.tool.text,
+                        duration_s,
+                    )
+                })
+                .collect()
+        } else {
+            Vec::new()
+        };
+        let mut power_views = ViewCache::new();
+        let mut end_torques: EndTorques = carry.end_torques.take();
+        for (i, mv) in moves.iter().enumerate() {
+            let duration_s = durations[i];
+            let end = ends.get(i).copied().flatten();
+            let power_w = match end {
+                Some((tau_b, _)) if power_needed => move_power(
                     robot,
-                    views,
-                    &plans,
+                    &mut power_views,
+                    &mut end_torques,
+                    plans,
                     i + o,
                     wrenches[i],
                     &mv.tool.text,
                     duration_s,
-                )
-            })
-            .collect()
-    } else {
-        Vec::new()
-    };
-    let mut segments = Vec::with_capacity(moves.len());
-    let mut power_views = ViewCache::new();
-    let mut end_torques: EndTorques = carry.end_torques.take();
-    let mut nominal_flanges: Vec<Option<Isometry3<f64>>> = Vec::new();
-    for (i, mv) in moves.iter().enumerate() {
-        let duration_s = durations[i];
-        let end = ends.get(i).copied().flatten();
-        let power_w = match end {
-            Some((tau_b, _)) if power_needed => move_power(
-                robot,
-                &mut power_views,
-                &mut end_torques,
-                &plans,
-                i + o,
-                wrenches[i],
-                &mv.tool.text,
+                    tau_b,
+                ),
+                _ => [0.0; 6],
+            };
+            // Kept only for a compensation (where the deviation breakdown uses
+            // it), one per move.
+            if fx.compensates() {
+                self.nominal_flanges.push(end.map(|(_, flange)| flange));
+            }
+            self.segments.push(Segment {
                 duration_s,
-                tau_b,
-            ),
-            _ => [0.0; 6],
-        };
-        // Kept only for a compensation (where the deviation breakdown uses
-        // it), one per move.
-        if fx.compensates() {
-            nominal_flanges.push(end.map(|(_, flange)| flange));
+                power_w,
+            });
         }
-        segments.push(Segment {
-            duration_s,
-            power_w,
+        drop(ends);
+        carry.end_torques = end_torques
+            .map(|((tool, bits), q, t)| ((std::borrow::Cow::Owned(tool.into_owned()), bits), q, t));
+    }
+
+    /// The thermal power along the window. A window after the first
+    /// continues the time line from the state the windows before left (the
+    /// first window of a module read a window at a time starts from the
+    /// state its first pass found); a module compensated whole starts it
+    /// as asked.
+    fn start_thermal(&mut self, carry: &mut Carry, start: ThermalStart) {
+        self.thermal_power = self.thermal.map(|t| match carry.thermal_x {
+            Some(x0) => effective_power_from(&self.segments, t.time_constant_s, x0),
+            None => effective_power(&self.segments, t.time_constant_s, start),
         });
-    }
-    drop(ends);
-    carry.end_torques = end_torques
-        .map(|((tool, bits), q, t)| ((std::borrow::Cow::Owned(tool.into_owned()), bits), q, t));
-    if let Some(totals) = carry.time_line.as_mut() {
-        if let Some(t) = thermal {
-            totals.add(&segments, t.time_constant_s);
+        if let Some(last) = self.thermal_power.as_ref().and_then(|p| p.last()) {
+            carry.thermal_x = Some(*last);
         }
-        carry.prev_plan = plans.pop();
-        return Ok(EditList::new());
     }
-    // A window after the first continues the time line from the state the
-    // windows before left (the first window of a module read a window at a
-    // time starts from the state its first pass found); a module
-    // compensated whole starts it as asked.
-    let thermal_power = thermal.map(|t| match carry.thermal_x {
-        Some(x0) => effective_power_from(&segments, t.time_constant_s, x0),
-        None => effective_power(&segments, t.time_constant_s, opts.thermal_start),
-    });
-    if let Some(last) = thermal_power.as_ref().and_then(|p| p.last()) {
-        carry.thermal_x = Some(*last);
-    }
-    let mut rw = Rewriter {
-        module,
-        src,
-        file,
-        robot,
-        opts: *opts,
-        edits: EditList::new(),
-        inserts: std::mem::take(&mut carry.inserts),
-        taken: std::mem::take(&mut carry.taken),
-        views: Arc::new(Vec::new()),
-        view_of: HashMap::new(),
-        last_view: None,
-        phase: Phase::Collect(Vec::new()),
-        owner: std::mem::take(&mut carry.owner),
-        made: std::mem::take(&mut carry.made),
-        derived_count: std::mem::take(&mut carry.derived_count),
-        added: carry.added,
-        state: MoveState::default(),
-        last_tcp: carry.last_tcp,
-    };
-    if opts.records {
-        carry.records.reserve(moves.len());
-    }
-    // Load key and state of move `i`, made when a walk reaches it (not
-    // kept for every move). Consecutive moves mostly share their tool and
-    // work object: `names` shares the lower-case names instead of
-    // allocating them per move.
-    let keyed_at = |i: usize, names: &mut Option<(Rc<str>, Rc<str>)>| {
+
+    /// Load key and state of move `i`, made when a walk reaches it (not
+    /// kept for every move). Consecutive moves mostly share their tool and
+    /// work object: `names` shares the lower-case names instead of
+    /// allocating them per move.
+    fn keyed<'a>(
+        &'a self,
+        moves: &[&'a Move],
+        i: usize,
+        names: &mut Option<(Rc<str>, Rc<str>)>,
+    ) -> Option<Keyed<'a>> {
         let mv: &Move = moves.get(i)?;
-        let plan = plans.get(i + o)?;
-        let seg = segments.get(i)?;
-        let power = thermal_power.as_ref().and_then(|p| p.get(i).copied());
-        let wrench = wrenches.get(i).copied().flatten();
-        let rpm = directives.at(mv.line).spindle_rpm;
+        let plan = self.plans.get(i + self.o)?;
+        let seg = self.segments.get(i)?;
+        let power = self.thermal_power.as_ref().and_then(|p| p.get(i).copied());
+        let wrench = self.wrenches.get(i).copied().flatten();
+        let rpm = self.directives.at(mv.line).spindle_rpm;
         let wobj_text = mv.wobj.as_ref().map_or("wobj0", |w| &*w.text);
         let (tool, wobj) = match &*names {
             Some((t, w))
@@ -1382,7 +1444,7 @@ pub(crate) fn compensate_window(
             power: power.map(|p| p.map(f64::to_bits)),
             rpm: rpm.map(f64::to_bits),
         };
-        let flange = nominal_flanges.get(i).and_then(Option::as_ref);
+        let flange = self.nominal_flanges.get(i).and_then(Option::as_ref);
         Some((
             mv,
             (plan, flange),
@@ -1390,137 +1452,206 @@ pub(crate) fn compensate_window(
             MoveState { wrench, power, rpm },
             key,
         ))
-    };
-    // The walks, a chunk of moves at a time. Walk 1 collects the jobs of
-    // the next chunk; it stops at the first error, which walk 2 meets at
-    // the same move after reporting any failure of an earlier target, as a
-    // single walk would. The chunk's jobs are solved on the pool while walk
-    // 2 writes back the chunk before.
-    let n = moves.len();
-    let mut collected = 0;
-    let mut collecting = true;
-    let mut names_1 = None;
-    let mut names_2 = None;
-    let mut collect = |rw: &mut Rewriter, collected: &mut usize, collecting: &mut bool| {
-        rw.phase = Phase::Collect(Vec::new());
-        while *collecting && *collected < n {
-            let Some((mv, plan, _, state, key)) = keyed_at(*collected, &mut names_1) else {
+    }
+}
+
+/// A move on the time line with what its rewriting needs: the move, its
+/// plan and nominal end flange, its segment, state and load key.
+type Keyed<'a> = (
+    &'a Move,
+    (&'a Planned, Option<&'a Isometry3<f64>>),
+    &'a Segment,
+    MoveState,
+    LoadKey,
+);
+
+impl<'m> Rewriter<'m> {
+    /// A rewriter of a window that continues the windows before (`carry`).
+    fn resume(
+        module: &'m Module,
+        src: &'m str,
+        file: &'m str,
+        robot: &'m Robot,
+        opts: &RapidOptions,
+        carry: &mut Carry,
+    ) -> Self {
+        Rewriter {
+            module,
+            src,
+            file,
+            robot,
+            opts: *opts,
+            edits: EditList::new(),
+            inserts: std::mem::take(&mut carry.inserts),
+            taken: std::mem::take(&mut carry.taken),
+            views: Arc::new(Vec::new()),
+            view_of: HashMap::new(),
+            last_view: None,
+            phase: Phase::Collect(Vec::new()),
+            owner: std::mem::take(&mut carry.owner),
+            made: std::mem::take(&mut carry.made),
+            derived_count: std::mem::take(&mut carry.derived_count),
+            added: carry.added,
+            state: MoveState::default(),
+            last_tcp: carry.last_tcp,
+        }
+    }
+
+    /// The window's edits; what the next window continues from goes to
+    /// `carry`.
+    fn suspend(mut self, carry: &mut Carry) -> EditList {
+        let edits = std::mem::take(&mut self.edits);
+        carry.inserts = std::mem::take(&mut self.inserts);
+        carry.taken = std::mem::take(&mut self.taken);
+        carry.owner = std::mem::take(&mut self.owner);
+        carry.made = std::mem::take(&mut self.made);
+        carry.derived_count = std::mem::take(&mut self.derived_count);
+        carry.added = self.added;
+        carry.last_tcp = self.last_tcp;
+        edits
+    }
+
+    /// Walk 1 over the next moves from `*collected`: collects their
+    /// compensation jobs, up to [`JOB_CHUNK`] of them; stops for good
+    /// (`*collecting` false) at the first error. Gives the jobs and the
+    /// index after the last move walked.
+    fn collect(
+        &mut self,
+        moves: &[&Move],
+        line: &TimeLine,
+        collected: &mut usize,
+        collecting: &mut bool,
+        names: &mut Option<(Rc<str>, Rc<str>)>,
+    ) -> (Vec<Job>, usize) {
+        self.phase = Phase::Collect(Vec::new());
+        while *collecting && *collected < moves.len() {
+            let Some((mv, plan, _, state, key)) = line.keyed(moves, *collected, names) else {
                 *collected += 1;
                 continue;
             };
-            rw.state = state;
-            let ok = rw.walk(mv, &key, plan).is_ok();
+            self.state = state;
+            let ok = self.walk(mv, &key, plan).is_ok();
             // The failing move goes with this chunk (its jobs before the
             // error are in it).
             *collected += 1;
             *collecting = ok;
-            if matches!(&rw.phase, Phase::Collect(j) if j.len() >= JOB_CHUNK) {
+            if matches!(&self.phase, Phase::Collect(j) if j.len() >= JOB_CHUNK) {
                 break;
             }
         }
-        let jobs = match std::mem::replace(&mut rw.phase, Phase::Apply(Vec::new().into_iter())) {
+        let jobs = match std::mem::replace(&mut self.phase, Phase::Apply(Vec::new().into_iter())) {
             Phase::Collect(jobs) => jobs,
             Phase::Apply(_) => Vec::new(),
         };
         (jobs, *collected)
-    };
-    let (jobs, mut end) = collect(&mut rw, &mut collected, &mut collecting);
-    let mut results = solve_chunk(&rw.views, &jobs, fx);
-    drop(jobs);
-    let mut walked = 0;
-    loop {
-        // The last chunk takes the moves after a collection that stopped.
-        let last = end >= n || !collecting;
-        if last {
-            end = n;
-        }
-        let (next_jobs, next_end) = if last {
-            (Vec::new(), n)
-        } else {
-            collect(&mut rw, &mut collected, &mut collecting)
-        };
-        let mut next_results = Vec::new();
-        rw.phase = Phase::Apply(std::mem::take(&mut results).into_iter());
-        let mut failed = None;
-        rayon::in_place_scope(|s| {
-            if !next_jobs.is_empty() {
-                // The solve shares the views (walk 2 makes none).
-                let (views, jobs, slot) = (Arc::clone(&rw.views), &next_jobs, &mut next_results);
-                s.spawn(move |_| *slot = solve_chunk(&views, jobs, fx));
+    }
+
+    /// The walks, a chunk of moves at a time. Walk 1 collects the jobs of
+    /// the next chunk; it stops at the first error, which walk 2 meets at
+    /// the same move after reporting any failure of an earlier target, as a
+    /// single walk would. The chunk's jobs are solved on the pool while walk
+    /// 2 writes back the chunk before.
+    fn walks(&mut self, moves: &[&Move], line: &TimeLine, carry: &mut Carry) -> Result<()> {
+        let fx = self.opts.effects;
+        let n = moves.len();
+        let mut collected = 0;
+        let mut collecting = true;
+        let mut names_1 = None;
+        let mut names_2 = None;
+        let (jobs, mut end) =
+            self.collect(moves, line, &mut collected, &mut collecting, &mut names_1);
+        let mut results = solve_chunk(&self.views, &jobs, fx);
+        drop(jobs);
+        let mut walked = 0;
+        loop {
+            // The last chunk takes the moves after a collection that stopped.
+            let last = end >= n || !collecting;
+            if last {
+                end = n;
             }
-            // Walk 2: write the chunk's results back in source order.
-            for i in walked..end {
-                let Some((mv, plan, seg, state, key)) = keyed_at(i, &mut names_2) else {
-                    continue;
-                };
-                rw.state = state;
-                let wrench = state.wrench;
-                let power = state.power;
-                let dev = match rw.walk(mv, &key, plan) {
-                    Ok(Some(dev)) => dev,
-                    Ok(None) => continue,
-                    Err(e) => {
-                        failed = Some(e);
-                        break;
+            let (next_jobs, next_end) = if last {
+                (Vec::new(), n)
+            } else {
+                self.collect(moves, line, &mut collected, &mut collecting, &mut names_1)
+            };
+            let mut next_results = Vec::new();
+            self.phase = Phase::Apply(std::mem::take(&mut results).into_iter());
+            let mut failed = None;
+            rayon::in_place_scope(|s| {
+                if !next_jobs.is_empty() {
+                    // The solve shares the views (walk 2 makes none).
+                    let (views, jobs, slot) =
+                        (Arc::clone(&self.views), &next_jobs, &mut next_results);
+                    s.spawn(move |_| *slot = solve_chunk(&views, jobs, fx));
+                }
+                // Walk 2: write the chunk's results back in source order.
+                for i in walked..end {
+                    let Some((mv, plan, seg, state, key)) = line.keyed(moves, i, &mut names_2)
+                    else {
+                        continue;
+                    };
+                    self.state = state;
+                    match self.walk(mv, &key, plan) {
+                        Ok(Some(dev)) => self.record(carry, mv, seg, &state, &dev),
+                        Ok(None) => continue,
+                        Err(e) => {
+                            failed = Some(e);
+                            break;
+                        }
                     }
-                };
-                carry.moves += 1;
-                let d = dev.total.pos_mm.norm();
-                if d > carry.max_deviation.0 {
-                    carry.max_deviation = (d, mv.line);
                 }
-                let v = dev.vibration_mm.norm();
-                if v > carry.max_vib.0 {
-                    carry.max_vib = (v, mv.line, state.rpm);
-                }
-                if opts.annotate {
-                    push_annotation(&mut rw.edits, src, &mv.span, |out| {
-                        write_dev_comment(out, &dev)
-                    });
-                }
-                if !opts.records {
-                    continue;
-                }
-                carry.records.push(MoveRecord {
-                    line: mv.line,
-                    kind: mv.kind.name(),
-                    programmed_mm: rw.last_tcp,
-                    deviation: dev,
-                    wrench,
-                    duration_s: seg.duration_s,
-                    power_w: seg.power_w,
-                    thermal_power_w: power.unwrap_or([0.0; 6]),
-                });
+            });
+            if let Some(e) = failed {
+                return Err(e);
             }
+            walked = end;
+            if last {
+                break;
+            }
+            drop(next_jobs);
+            results = next_results;
+            end = next_end;
+        }
+        Ok(())
+    }
+
+    /// Counts a compensated move, annotates it and keeps its record.
+    fn record(
+        &mut self,
+        carry: &mut Carry,
+        mv: &Move,
+        seg: &Segment,
+        state: &MoveState,
+        dev: &Deviation,
+    ) {
+        carry.moves += 1;
+        let d = dev.total.pos_mm.norm();
+        if d > carry.max_deviation.0 {
+            carry.max_deviation = (d, mv.line);
+        }
+        let v = dev.vibration_mm.norm();
+        if v > carry.max_vib.0 {
+            carry.max_vib = (v, mv.line, state.rpm);
+        }
+        if self.opts.annotate {
+            push_annotation(&mut self.edits, self.src, &mv.span, |out| {
+                write_dev_comment(out, dev)
+            });
+        }
+        if !self.opts.records {
+            return;
+        }
+        carry.records.push(MoveRecord {
+            line: mv.line,
+            kind: mv.kind.name(),
+            programmed_mm: self.last_tcp,
+            deviation: *dev,
+            wrench: state.wrench,
+            duration_s: seg.duration_s,
+            power_w: seg.power_w,
+            thermal_power_w: state.power.unwrap_or([0.0; 6]),
         });
-        if let Some(e) = failed {
-            return Err(e);
-        }
-        walked = end;
-        if last {
-            break;
-        }
-        drop(next_jobs);
-        results = next_results;
-        end = next_end;
     }
-    let edits = std::mem::take(&mut rw.edits);
-    carry.inserts = std::mem::take(&mut rw.inserts);
-    carry.taken = std::mem::take(&mut rw.taken);
-    carry.owner = std::mem::take(&mut rw.owner);
-    carry.made = std::mem::take(&mut rw.made);
-    carry.derived_count = std::mem::take(&mut rw.derived_count);
-    carry.added = rw.added;
-    carry.last_tcp = rw.last_tcp;
-    drop(rw);
-    drop(nominal_flanges);
-    carry.prev_plan = plans.pop();
-    if before == 0 {
-        return Ok(edits);
-    }
-    let (head, rest) = edits.split_at(before);
-    carry.before.append(&head);
-    Ok(rest)
 }
 
 impl Rewriter<'_> {
