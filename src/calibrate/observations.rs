@@ -626,27 +626,18 @@ fn is_dir(idx: usize) -> bool {
     (DIR_ROBOT..DIR_ROBOT + 6).contains(&idx) || (DIR_TOOL..DIR_TOOL + 6).contains(&idx)
 }
 
-fn parse_row(
-    ctx: &Ctx,
-    h: &Header,
-    line: usize,
-    line_len: usize,
-    row_no: usize,
-    cells: &[Cell],
-) -> Result<Observation> {
-    if cells.len() != h.cols.len() {
-        let col = cells.get(h.cols.len()).map_or(line_len + 1, |c| c.col);
-        return Err(ctx.err(
-            line,
-            col,
-            format!(
-                "row has {} cells but the header (line {}) has {} columns",
-                cells.len(),
-                h.line,
-                h.cols.len()
-            ),
-        ));
-    }
+/// The cells of one row by column index: the value of each numeric cell
+/// (`None` when empty), the byte column of each cell, and the `id` cell.
+struct Cells {
+    vals: [Option<f64>; NAMES.len()],
+    at: [usize; NAMES.len()],
+    id: Option<String>,
+}
+
+/// Reads and checks each cell of a row whose count matches the header:
+/// valid UTF-8, a finite number of plausible size, `1` or `-1` for a
+/// direction.
+fn read_cells(ctx: &Ctx, h: &Header, line: usize, cells: &[Cell]) -> Result<Cells> {
     let mut vals: [Option<f64>; NAMES.len()] = [None; NAMES.len()];
     let mut at = [0usize; NAMES.len()];
     let mut id = None;
@@ -714,6 +705,31 @@ fn parse_row(
         }
         vals[idx] = Some(v);
     }
+    Ok(Cells { vals, at, id })
+}
+
+fn parse_row(
+    ctx: &Ctx,
+    h: &Header,
+    line: usize,
+    line_len: usize,
+    row_no: usize,
+    cells: &[Cell],
+) -> Result<Observation> {
+    if cells.len() != h.cols.len() {
+        let col = cells.get(h.cols.len()).map_or(line_len + 1, |c| c.col);
+        return Err(ctx.err(
+            line,
+            col,
+            format!(
+                "row has {} cells but the header (line {}) has {} columns",
+                cells.len(),
+                h.line,
+                h.cols.len()
+            ),
+        ));
+    }
+    let Cells { vals, at, id } = read_cells(ctx, h, line, cells)?;
     let required = |idx: usize| -> Result<f64> {
         vals[idx].ok_or_else(|| {
             ctx.err(

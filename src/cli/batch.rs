@@ -433,6 +433,70 @@ fn compensate_one(
     }
 }
 
+/// The progress bar of `n` programs: hidden when `quiet` or when standard
+/// error is not a terminal.
+fn progress_bar(quiet: bool, n: usize) -> indicatif::ProgressBar {
+    if quiet || !std::io::stderr().is_terminal() {
+        return indicatif::ProgressBar::hidden();
+    }
+    let b = indicatif::ProgressBar::new(n as u64);
+    if let Ok(style) = indicatif::ProgressStyle::with_template(
+        "{bar:40} {pos}/{len} programs {elapsed_precise} {wide_msg}",
+    ) {
+        b.set_style(style);
+    }
+    b
+}
+
+/// The summary line of the program `input` written to `output`: its
+/// status, counts and deviation, or its error.
+fn file_result(
+    input: &Path,
+    output: &Path,
+    done: Result<Done>,
+    report_format: Option<Format>,
+    tolerance: f64,
+) -> FileResult {
+    let input = input.display().to_string();
+    match done {
+        Ok(d) => {
+            let findings = d.residual.is_some_and(|r| r > tolerance);
+            let status = match (findings, d.moves) {
+                (true, _) => "findings",
+                (false, 0) => "empty",
+                (false, _) => "ok",
+            };
+            FileResult {
+                input,
+                output: Some(output.display().to_string()),
+                report: report_format.map(|f| report_path(output, f).display().to_string()),
+                status: status.into(),
+                error: None,
+                blocks: d.blocks,
+                moves: d.moves,
+                max_deviation_mm: Some(round6(d.max_dev)),
+                max_deviation_line: Some(d.max_line),
+                max_residual_mm: d.residual.map(round6),
+            }
+        }
+        Err(e) => {
+            tracing::debug!("{}", message(&e));
+            FileResult {
+                input,
+                output: None,
+                report: None,
+                status: "failed".into(),
+                error: Some(message(&e)),
+                blocks: 0,
+                moves: 0,
+                max_deviation_mm: None,
+                max_deviation_line: None,
+                max_residual_mm: None,
+            }
+        }
+    }
+}
+
 /// `postproc batch`; `quiet` hides the progress bar.
 pub fn run(a: &BatchArgs, quiet: bool) -> Result<i32> {
     if a.merge_summaries {
@@ -525,17 +589,7 @@ pub fn run(a: &BatchArgs, quiet: bool) -> Result<i32> {
     // summary may not be an input either (checked before any program).
     std::fs::create_dir_all(&a.out_dir).map_err(|e| Error::io(&a.out_dir, e))?;
     refuse_overwrite(&a.out_dir.join(SUMMARY_FILE), &files)?;
-    let bar = if quiet || !std::io::stderr().is_terminal() {
-        indicatif::ProgressBar::hidden()
-    } else {
-        let b = indicatif::ProgressBar::new(items.len() as u64);
-        if let Ok(style) = indicatif::ProgressStyle::with_template(
-            "{bar:40} {pos}/{len} programs {elapsed_precise} {wide_msg}",
-        ) {
-            b.set_style(style);
-        }
-        b
-    };
+    let bar = progress_bar(quiet, items.len());
     let items: Vec<Item> = match shard {
         Some(sh) => items
             .into_iter()
@@ -555,46 +609,7 @@ pub fn run(a: &BatchArgs, quiet: bool) -> Result<i32> {
                     None => compensate_one(&setting, &item.input, &output, a.report_format, &files),
                 };
                 bar.inc(1);
-                let input = item.input.display().to_string();
-                match done {
-                    Ok(d) => {
-                        let findings = d.residual.is_some_and(|r| r > tolerance);
-                        let status = match (findings, d.moves) {
-                            (true, _) => "findings",
-                            (false, 0) => "empty",
-                            (false, _) => "ok",
-                        };
-                        FileResult {
-                            input,
-                            output: Some(output.display().to_string()),
-                            report: a
-                                .report_format
-                                .map(|f| report_path(&output, f).display().to_string()),
-                            status: status.into(),
-                            error: None,
-                            blocks: d.blocks,
-                            moves: d.moves,
-                            max_deviation_mm: Some(round6(d.max_dev)),
-                            max_deviation_line: Some(d.max_line),
-                            max_residual_mm: d.residual.map(round6),
-                        }
-                    }
-                    Err(e) => {
-                        tracing::debug!("{}", message(&e));
-                        FileResult {
-                            input,
-                            output: None,
-                            report: None,
-                            status: "failed".into(),
-                            error: Some(message(&e)),
-                            blocks: 0,
-                            moves: 0,
-                            max_deviation_mm: None,
-                            max_deviation_line: None,
-                            max_residual_mm: None,
-                        }
-                    }
-                }
+                file_result(&item.input, &output, done, a.report_format, tolerance)
             })
             .collect()
     });

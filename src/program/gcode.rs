@@ -287,12 +287,27 @@ pub fn parse_line(line: &[u8], line_no: usize, file: &str, out: &mut Block) -> R
     scan_line(line, line_no, file, out).map_err(|e| dialect::refine(line, e))
 }
 
+/// Where the line being scanned sits, for located errors.
+#[derive(Clone, Copy)]
+struct At<'a> {
+    file: &'a str,
+    line_no: usize,
+}
+
+impl At<'_> {
+    /// The error at byte `pos` (0-based) of the line.
+    #[cold]
+    fn err(self, pos: usize, msg: String) -> Located {
+        Located::new(self.file, self.line_no, pos + 1, msg)
+    }
+}
+
 fn scan_line(line: &[u8], line_no: usize, file: &str, out: &mut Block) -> Result<(), Located> {
     out.clear();
     out.line_no = line_no;
     let text = strip_eol(line);
     out.text_len = text.len() as u32;
-    let err = |pos: usize, msg: String| Located::new(file, line_no, pos + 1, msg);
+    let at = At { file, line_no };
 
     let mut pos = skip_ws(text, 0);
     if text.get(pos) == Some(&b'%') {
@@ -314,28 +329,7 @@ fn scan_line(line: &[u8], line_no: usize, file: &str, out: &mut Block) -> Result
                 saw_space = true;
                 pos += 1;
             }
-            b'(' => {
-                let close = text[pos..].iter().position(|&c| c == b')');
-                match close {
-                    Some(off) => {
-                        out.comments.push(Comment {
-                            start: pos as u32,
-                            end: (pos + off + 1) as u32,
-                            semicolon: false,
-                        });
-                        pos += off + 1;
-                    }
-                    None => {
-                        return Err(err(
-                            pos,
-                            format!(
-                                "unterminated comment, no `)` before the end of the line: `{}`",
-                                show(&text[pos..])
-                            ),
-                        ));
-                    }
-                }
-            }
+            b'(' => pos = paren_comment(text, pos, out, at)?,
             b';' => {
                 out.comments.push(Comment {
                     start: pos as u32,
@@ -344,212 +338,217 @@ fn scan_line(line: &[u8], line_no: usize, file: &str, out: &mut Block) -> Result
                 });
                 pos = text.len();
             }
-            b'#' => {
-                return Err(err(
-                    pos,
-                    format!(
-                        "`#` parameters cannot be compensated offline (expand them in CAM): `{}`",
-                        show(&text[pos..])
-                    ),
-                ));
-            }
-            b'[' | b']' => {
-                return Err(err(
-                    pos,
-                    format!(
-                        "`[ ]` expressions cannot be compensated offline (expand them in CAM): `{}`",
-                        show(&text[pos..])
-                    ),
-                ));
-            }
-            b'=' => {
-                return Err(err(
-                    pos,
-                    format!(
-                        "assignments cannot be compensated offline: `{}`",
-                        show(&text[pos..])
-                    ),
-                ));
-            }
             _ if b.is_ascii_alphabetic() => {
-                let letter = b.to_ascii_uppercase();
                 if b.is_ascii_lowercase() {
                     lower += 1;
                 } else {
                     upper += 1;
                 }
-                let after_letter = skip_ws(text, pos + 1);
-                if !IS_LETTER[letter as usize] {
-                    return Err(err(
-                        pos,
-                        format!(
-                            "unknown word letter `{}`: `{}`",
-                            b as char,
-                            show(&text[pos..])
-                        ),
-                    ));
-                }
-                let rest = text.get(after_letter..).unwrap_or(b"");
-                match scan_number(rest) {
-                    Some((len, fast)) => {
-                        let num = &rest[..len];
-                        let num_start = after_letter;
-                        let num_end = after_letter + len;
-                        let num_str = || String::from_utf8_lossy(num);
-                        let value: f64 = match fast.or_else(|| decimal(num)) {
-                            Some(v) => v,
-                            None => {
-                                return Err(err(
-                                    num_start,
-                                    format!(
-                                        "malformed number `{}`",
-                                        crate::error::clip(&num_str())
-                                    ),
-                                ));
-                            }
-                        };
-                        if !value.is_finite() || value.abs() > 1e9 {
-                            return Err(err(
-                                num_start,
-                                format!("absurd number `{}`", crate::error::clip(&num_str())),
-                            ));
-                        }
-                        let decimals = num
-                            .iter()
-                            .position(|&c| c == b'.')
-                            .map(|d| (num.len() - d - 1).min(255) as u8);
-                        // A second number glued to this one (`X1.2.3`, `X1-2`).
-                        if let Some(&next) = text.get(num_end) {
-                            if next == b'.' || next.is_ascii_digit() || next == b'-' || next == b'+'
-                            {
-                                return Err(err(
-                                    num_end,
-                                    format!("two numbers in one word: `{}`", show(&text[pos..])),
-                                ));
-                            }
-                        }
-                        if letter == b'O' && out.words.is_empty() {
-                            // `O100 sub`, `o100 while …`: subroutines and loops.
-                            let tail = skip_ws(text, num_end);
-                            if text.get(tail).is_some_and(|c| c.is_ascii_alphabetic()) {
-                                let kw: Vec<u8> = text[tail..]
-                                    .iter()
-                                    .take_while(|c| c.is_ascii_alphabetic())
-                                    .copied()
-                                    .collect();
-                                let kw = String::from_utf8_lossy(&kw).to_ascii_lowercase();
-                                if matches!(
-                                    kw.as_str(),
-                                    "sub"
-                                        | "endsub"
-                                        | "call"
-                                        | "while"
-                                        | "endwhile"
-                                        | "do"
-                                        | "if"
-                                        | "else"
-                                        | "elseif"
-                                        | "endif"
-                                        | "repeat"
-                                        | "endrepeat"
-                                        | "return"
-                                        | "break"
-                                        | "continue"
-                                ) {
-                                    return Err(err(
-                                        pos,
-                                        format!(
-                                            "O-word subroutines and loops cannot be compensated offline: `{}`",
-                                            show(text)
-                                        ),
-                                    ));
-                                }
-                            }
-                        }
-                        out.words.push(Word {
-                            letter,
-                            value,
-                            start: pos as u32,
-                            num_start: num_start as u32,
-                            end: num_end as u32,
-                            decimals,
-                        });
-                        pos = num_end;
-                    }
-                    None => {
-                        match rest.first() {
-                            Some(b'#') => {
-                                return Err(err(
-                                    after_letter,
-                                    format!(
-                                        "`#` parameters cannot be compensated offline (expand them in CAM): `{}`",
-                                        show(&text[pos..])
-                                    ),
-                                ));
-                            }
-                            Some(b'[') => {
-                                return Err(err(
-                                    after_letter,
-                                    format!(
-                                        "`[ ]` expressions cannot be compensated offline (expand them in CAM): `{}`",
-                                        show(&text[pos..])
-                                    ),
-                                ));
-                            }
-                            Some(b'=') => {
-                                // `X=10.`, `R1=5` (Siemens-style assignments).
-                                return Err(err(
-                                    after_letter,
-                                    format!(
-                                        "assignments cannot be compensated offline: `{}`",
-                                        show(&text[pos..])
-                                    ),
-                                ));
-                            }
-                            _ => {}
-                        }
-                        if after_letter >= text.len() {
-                            return Err(err(
-                                pos,
-                                format!(
-                                    "truncated word: letter `{}` with no number at the end of the line",
-                                    b as char
-                                ),
-                            ));
-                        }
-                        return Err(err(
-                            pos,
-                            format!(
-                                "letter `{}` without a number: `{}`",
-                                b as char,
-                                show(&text[pos..])
-                            ),
-                        ));
-                    }
-                }
+                pos = word(text, pos, out, at)?;
             }
-            _ if b.is_ascii_digit() || b == b'.' || b == b'-' || b == b'+' => {
-                return Err(err(
-                    pos,
-                    format!("number without a letter: `{}`", show(&text[pos..])),
-                ));
-            }
-            _ => {
-                let shown = if b.is_ascii_graphic() {
-                    format!("`{}`", b as char)
-                } else {
-                    format!("byte 0x{b:02X}")
-                };
-                return Err(err(
-                    pos,
-                    format!("unexpected character {shown} outside a comment"),
-                ));
-            }
+            _ => return Err(stray(text, pos, at)),
         }
     }
     out.lower_case = lower > upper;
     out.spaced = saw_space && out.words.len() > 1;
     Ok(())
+}
+
+/// The `( … )` comment opening at `pos`: recorded in `out`; the position
+/// after its `)`.
+#[inline]
+fn paren_comment(text: &[u8], pos: usize, out: &mut Block, at: At) -> Result<usize, Located> {
+    let Some(off) = text[pos..].iter().position(|&c| c == b')') else {
+        return Err(at.err(
+            pos,
+            format!(
+                "unterminated comment, no `)` before the end of the line: `{}`",
+                show(&text[pos..])
+            ),
+        ));
+    };
+    out.comments.push(Comment {
+        start: pos as u32,
+        end: (pos + off + 1) as u32,
+        semicolon: false,
+    });
+    Ok(pos + off + 1)
+}
+
+/// The word whose letter is at `pos`: pushed to `out`; the position after
+/// its number.
+#[inline]
+fn word(text: &[u8], pos: usize, out: &mut Block, at: At) -> Result<usize, Located> {
+    let b = text[pos];
+    let letter = b.to_ascii_uppercase();
+    let after_letter = skip_ws(text, pos + 1);
+    if !IS_LETTER[letter as usize] {
+        return Err(at.err(
+            pos,
+            format!(
+                "unknown word letter `{}`: `{}`",
+                b as char,
+                show(&text[pos..])
+            ),
+        ));
+    }
+    let rest = text.get(after_letter..).unwrap_or(b"");
+    let Some((len, fast)) = scan_number(rest) else {
+        return Err(no_number(text, pos, after_letter, at));
+    };
+    let num = &rest[..len];
+    let num_end = after_letter + len;
+    let Some(value) = fast.or_else(|| decimal(num)) else {
+        return Err(bad_number(num, after_letter, "malformed", at));
+    };
+    if !value.is_finite() || value.abs() > 1e9 {
+        return Err(bad_number(num, after_letter, "absurd", at));
+    }
+    let decimals = num
+        .iter()
+        .position(|&c| c == b'.')
+        .map(|d| (num.len() - d - 1).min(255) as u8);
+    // A second number glued to this one (`X1.2.3`, `X1-2`).
+    if let Some(&next) = text.get(num_end) {
+        if next == b'.' || next.is_ascii_digit() || next == b'-' || next == b'+' {
+            return Err(at.err(
+                num_end,
+                format!("two numbers in one word: `{}`", show(&text[pos..])),
+            ));
+        }
+    }
+    if letter == b'O' && out.words.is_empty() {
+        o_word_control(text, pos, num_end, at)?;
+    }
+    out.words.push(Word {
+        letter,
+        value,
+        start: pos as u32,
+        num_start: after_letter as u32,
+        end: num_end as u32,
+        decimals,
+    });
+    Ok(num_end)
+}
+
+/// `what` (`malformed`, `absurd`) number `num` starting at `pos`.
+#[cold]
+fn bad_number(num: &[u8], pos: usize, what: &str, at: At) -> Located {
+    let shown = crate::error::clip(&String::from_utf8_lossy(num));
+    at.err(pos, format!("{what} number `{shown}`"))
+}
+
+/// Refuses `O100 sub`, `o100 while …` (subroutines and loops) when the O
+/// word at `pos`, ending at `num_end`, opens the line.
+fn o_word_control(text: &[u8], pos: usize, num_end: usize, at: At) -> Result<(), Located> {
+    let tail = skip_ws(text, num_end);
+    if !text.get(tail).is_some_and(|c| c.is_ascii_alphabetic()) {
+        return Ok(());
+    }
+    let kw: Vec<u8> = text[tail..]
+        .iter()
+        .take_while(|c| c.is_ascii_alphabetic())
+        .copied()
+        .collect();
+    let kw = String::from_utf8_lossy(&kw).to_ascii_lowercase();
+    if matches!(
+        kw.as_str(),
+        "sub"
+            | "endsub"
+            | "call"
+            | "while"
+            | "endwhile"
+            | "do"
+            | "if"
+            | "else"
+            | "elseif"
+            | "endif"
+            | "repeat"
+            | "endrepeat"
+            | "return"
+            | "break"
+            | "continue"
+    ) {
+        return Err(at.err(
+            pos,
+            format!(
+                "O-word subroutines and loops cannot be compensated offline: `{}`",
+                show(text)
+            ),
+        ));
+    }
+    Ok(())
+}
+
+/// The letter at `pos` has no number after it (at `after_letter`).
+#[cold]
+fn no_number(text: &[u8], pos: usize, after_letter: usize, at: At) -> Located {
+    let b = text[pos];
+    let rest = text.get(after_letter..).unwrap_or(b"");
+    if let Some(msg) = rest.first().and_then(|&c| offline_only(c, &text[pos..])) {
+        // `X#1`, `X[1+2]`, `X=10.`, `R1=5` (Siemens-style assignments).
+        return at.err(after_letter, msg);
+    }
+    if after_letter >= text.len() {
+        return at.err(
+            pos,
+            format!(
+                "truncated word: letter `{}` with no number at the end of the line",
+                b as char
+            ),
+        );
+    }
+    at.err(
+        pos,
+        format!(
+            "letter `{}` without a number: `{}`",
+            b as char,
+            show(&text[pos..])
+        ),
+    )
+}
+
+/// The message for a byte that opens a construct (parameter, expression,
+/// assignment) only the controller can evaluate, quoting `from`; `None`
+/// for other bytes.
+fn offline_only(c: u8, from: &[u8]) -> Option<String> {
+    let shown = show(from);
+    Some(match c {
+        b'#' => {
+            format!("`#` parameters cannot be compensated offline (expand them in CAM): `{shown}`")
+        }
+        b'[' => format!(
+            "`[ ]` expressions cannot be compensated offline (expand them in CAM): `{shown}`"
+        ),
+        b'=' => format!("assignments cannot be compensated offline: `{shown}`"),
+        _ => return None,
+    })
+}
+
+/// The error for the byte at `pos`, which starts neither a word nor a
+/// comment.
+#[cold]
+fn stray(text: &[u8], pos: usize, at: At) -> Located {
+    let b = text[pos];
+    let c = if b == b']' { b'[' } else { b };
+    if let Some(msg) = offline_only(c, &text[pos..]) {
+        return at.err(pos, msg);
+    }
+    if b.is_ascii_digit() || b == b'.' || b == b'-' || b == b'+' {
+        return at.err(
+            pos,
+            format!("number without a letter: `{}`", show(&text[pos..])),
+        );
+    }
+    let shown = if b.is_ascii_graphic() {
+        format!("`{}`", b as char)
+    } else {
+        format!("byte 0x{b:02X}")
+    };
+    at.err(
+        pos,
+        format!("unexpected character {shown} outside a comment"),
+    )
 }
 
 fn skip_ws(text: &[u8], mut pos: usize) -> usize {

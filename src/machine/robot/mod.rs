@@ -333,6 +333,124 @@ fn locate_invalid(text: &str, file: &str, inv: Invalid) -> Error {
     }
 }
 
+/// `joint_limits_deg`: six ordered pairs, as radians.
+fn joint_limits(raw: &[[f64; 2]]) -> std::result::Result<[[f64; 2]; 6], Invalid> {
+    let lim = six("joint_limits_deg", raw)?;
+    let mut limits_rad = [[0.0; 2]; 6];
+    for (i, l) in lim.iter().enumerate() {
+        let p = format!("joint_limits_deg[{i}]");
+        finite(&p, l)?;
+        if l[0] >= l[1] {
+            return Err(Invalid::new(
+                p,
+                format!("minimum {} must be below maximum {}", l[0], l[1]),
+            ));
+        }
+        limits_rad[i] = [l[0].to_radians(), l[1].to_radians()];
+    }
+    Ok(limits_rad)
+}
+
+/// `joint_speed_deg_per_s`: six positive speeds, as rad/s.
+fn joint_speeds(raw: &[f64]) -> std::result::Result<[f64; 6], Invalid> {
+    let sp = six("joint_speed_deg_per_s", raw)?;
+    let mut speed_rad_per_s = [0.0; 6];
+    for (i, s) in sp.iter().enumerate() {
+        let p = format!("joint_speed_deg_per_s[{i}]");
+        finite(&p, &[*s])?;
+        if *s <= 0.0 {
+            return Err(Invalid::new(p, format!("speed {s} must be positive")));
+        }
+        speed_rad_per_s[i] = s.to_radians();
+    }
+    Ok(speed_rad_per_s)
+}
+
+/// `links`: the mass and centre of mass of each of the six links.
+fn link_masses(raw: &[raw::RawLink]) -> std::result::Result<[PointMass; 6], Invalid> {
+    let links_raw = six("links", raw.iter().collect::<Vec<_>>().as_slice())?;
+    let mut links = [PointMass {
+        mass_kg: 0.0,
+        com_mm: Vector3::zeros(),
+    }; 6];
+    for (i, l) in links_raw.iter().enumerate() {
+        let p = format!("links[{i}]");
+        finite(&format!("{p}.mass_kg"), &[l.mass_kg])?;
+        finite(&format!("{p}.com_mm"), &l.com_mm)?;
+        if l.mass_kg <= 0.0 {
+            return Err(Invalid::new(
+                format!("{p}.mass_kg"),
+                format!("mass {} must be positive", l.mass_kg),
+            ));
+        }
+        links[i] = PointMass {
+            mass_kg: l.mass_kg,
+            com_mm: Vector3::from(l.com_mm),
+        };
+    }
+    Ok(links)
+}
+
+/// `tool_load`: the mass and centre of gravity of the tool.
+fn tool_load(l: &raw::RawLoad) -> std::result::Result<PointMass, Invalid> {
+    finite("tool_load.mass_kg", &[l.mass_kg])?;
+    finite("tool_load.cog_mm", &l.cog_mm)?;
+    if l.mass_kg <= 0.0 {
+        return Err(Invalid::new(
+            "tool_load.mass_kg",
+            format!("mass {} must be positive", l.mass_kg),
+        ));
+    }
+    Ok(PointMass {
+        mass_kg: l.mass_kg,
+        com_mm: Vector3::from(l.cog_mm),
+    })
+}
+
+/// `k_nm_per_rad`: six positive joint stiffnesses, as N·mm/rad.
+fn joint_stiffness(raw: &[f64]) -> std::result::Result<[f64; 6], Invalid> {
+    let k = six("k_nm_per_rad", raw)?;
+    let mut k_nmm_per_rad = [0.0; 6];
+    for (i, v) in k.iter().enumerate() {
+        let p = format!("k_nm_per_rad[{i}]");
+        finite(&p, &[*v])?;
+        if *v <= 0.0 {
+            return Err(Invalid::new(p, format!("stiffness {v} must be positive")));
+        }
+        k_nmm_per_rad[i] = v * 1000.0;
+    }
+    Ok(k_nmm_per_rad)
+}
+
+/// `output`: decimals of positions and quaternions, defaults where unset.
+fn output_decimals(raw: Option<&raw::RawOutput>) -> std::result::Result<OutputDecimals, Invalid> {
+    let mut output = OutputDecimals {
+        mm: DEFAULT_POSITION_DECIMALS,
+        quaternion: DEFAULT_QUATERNION_DECIMALS,
+    };
+    if let Some(o) = raw {
+        if let Some(d) = o.decimals_mm {
+            if !(1..=6).contains(&d) {
+                return Err(Invalid::new(
+                    "output.decimals_mm",
+                    format!("{d} must be 1..6"),
+                ));
+            }
+            output.mm = d;
+        }
+        if let Some(d) = o.decimals_quaternion {
+            if !(4..=9).contains(&d) {
+                return Err(Invalid::new(
+                    "output.decimals_quaternion",
+                    format!("{d} must be 4..9"),
+                ));
+            }
+            output.quaternion = d;
+        }
+    }
+    Ok(output)
+}
+
 impl Robot {
     /// Parses and validates robot YAML; `file` names it in errors.
     pub fn from_yaml_str(text: &str, file: &str) -> Result<Self> {
@@ -356,29 +474,8 @@ impl Robot {
             Some(a) => joints("actual", conv, a)?,
             None => nominal,
         };
-        let lim = six("joint_limits_deg", &raw.joint_limits_deg)?;
-        let mut limits_rad = [[0.0; 2]; 6];
-        for (i, l) in lim.iter().enumerate() {
-            let p = format!("joint_limits_deg[{i}]");
-            finite(&p, l)?;
-            if l[0] >= l[1] {
-                return Err(Invalid::new(
-                    p,
-                    format!("minimum {} must be below maximum {}", l[0], l[1]),
-                ));
-            }
-            limits_rad[i] = [l[0].to_radians(), l[1].to_radians()];
-        }
-        let sp = six("joint_speed_deg_per_s", &raw.joint_speed_deg_per_s)?;
-        let mut speed_rad_per_s = [0.0; 6];
-        for (i, s) in sp.iter().enumerate() {
-            let p = format!("joint_speed_deg_per_s[{i}]");
-            finite(&p, &[*s])?;
-            if *s <= 0.0 {
-                return Err(Invalid::new(p, format!("speed {s} must be positive")));
-            }
-            speed_rad_per_s[i] = s.to_radians();
-        }
+        let limits_rad = joint_limits(&raw.joint_limits_deg)?;
+        let speed_rad_per_s = joint_speeds(&raw.joint_speed_deg_per_s)?;
         let tool = match &raw.flange_to_tool {
             Some(f) => frame("flange_to_tool", f)?,
             None => Isometry3::identity(),
@@ -392,53 +489,9 @@ impl Robot {
             None => None,
         };
         finite("gravity_m_per_s2", &raw.gravity_m_per_s2)?;
-        let links_raw = six("links", raw.links.iter().collect::<Vec<_>>().as_slice())?;
-        let mut links = [PointMass {
-            mass_kg: 0.0,
-            com_mm: Vector3::zeros(),
-        }; 6];
-        for (i, l) in links_raw.iter().enumerate() {
-            let p = format!("links[{i}]");
-            finite(&format!("{p}.mass_kg"), &[l.mass_kg])?;
-            finite(&format!("{p}.com_mm"), &l.com_mm)?;
-            if l.mass_kg <= 0.0 {
-                return Err(Invalid::new(
-                    format!("{p}.mass_kg"),
-                    format!("mass {} must be positive", l.mass_kg),
-                ));
-            }
-            links[i] = PointMass {
-                mass_kg: l.mass_kg,
-                com_mm: Vector3::from(l.com_mm),
-            };
-        }
-        let tool_load = match &raw.tool_load {
-            Some(l) => {
-                finite("tool_load.mass_kg", &[l.mass_kg])?;
-                finite("tool_load.cog_mm", &l.cog_mm)?;
-                if l.mass_kg <= 0.0 {
-                    return Err(Invalid::new(
-                        "tool_load.mass_kg",
-                        format!("mass {} must be positive", l.mass_kg),
-                    ));
-                }
-                Some(PointMass {
-                    mass_kg: l.mass_kg,
-                    com_mm: Vector3::from(l.cog_mm),
-                })
-            }
-            None => None,
-        };
-        let k = six("k_nm_per_rad", &raw.k_nm_per_rad)?;
-        let mut k_nmm_per_rad = [0.0; 6];
-        for (i, v) in k.iter().enumerate() {
-            let p = format!("k_nm_per_rad[{i}]");
-            finite(&p, &[*v])?;
-            if *v <= 0.0 {
-                return Err(Invalid::new(p, format!("stiffness {v} must be positive")));
-            }
-            k_nmm_per_rad[i] = v * 1000.0;
-        }
+        let links = link_masses(&raw.links)?;
+        let tool_load = raw.tool_load.as_ref().map(tool_load).transpose()?;
+        let k_nmm_per_rad = joint_stiffness(&raw.k_nm_per_rad)?;
         let process_force = match (&raw.process_wrench, &raw.process_force) {
             (Some(_), Some(_)) => {
                 return Err(Invalid::new(
@@ -455,30 +508,7 @@ impl Robot {
         let process_wrench = process::default_wrench(process_force.as_ref());
         let thermal = raw.thermal.as_ref().map(Thermal::from_raw).transpose()?;
         let modal = raw.modal.as_deref().map(Modal::from_raw).transpose()?;
-        let mut output = OutputDecimals {
-            mm: DEFAULT_POSITION_DECIMALS,
-            quaternion: DEFAULT_QUATERNION_DECIMALS,
-        };
-        if let Some(o) = &raw.output {
-            if let Some(d) = o.decimals_mm {
-                if !(1..=6).contains(&d) {
-                    return Err(Invalid::new(
-                        "output.decimals_mm",
-                        format!("{d} must be 1..6"),
-                    ));
-                }
-                output.mm = d;
-            }
-            if let Some(d) = o.decimals_quaternion {
-                if !(4..=9).contains(&d) {
-                    return Err(Invalid::new(
-                        "output.decimals_quaternion",
-                        format!("{d} must be 4..9"),
-                    ));
-                }
-                output.quaternion = d;
-            }
-        }
+        let output = output_decimals(raw.output.as_ref())?;
         plausible::check(&raw)?;
         let thermal_growth = thermal
             .as_ref()

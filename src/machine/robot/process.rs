@@ -174,39 +174,16 @@ impl ProcessForce {
     }
 
     pub(crate) fn from_raw(r: &RawProcessForce) -> Result<Self, Invalid> {
-        let p = "process_force";
         let model_name = match r.model {
             RawForceModel::Constant => "constant",
             RawForceModel::Milling => "milling",
             RawForceModel::Drilling => "drilling",
             RawForceModel::Table => {
                 return Err(Invalid::new(
-                    format!("{p}.model"),
+                    format!("{P}.model"),
                     "a force table is given per run with --force-table FILE",
                 ));
             }
-        };
-        let positive = |k: &str, v: Option<f64>| -> Result<Option<f64>, Invalid> {
-            match v {
-                Some(x) if !x.is_finite() || x <= 0.0 => Err(Invalid::new(
-                    format!("{p}.{k}"),
-                    format!("`{x}` must be a positive number"),
-                )),
-                other => Ok(other),
-            }
-        };
-        let need = |k: &str, v: Option<f64>| -> Result<f64, Invalid> {
-            positive(k, v)?
-                .ok_or_else(|| Invalid::new(p, format!("model `{model_name}` needs `{k}`")))
-        };
-        // A milling value within lo..=hi; `None` → `default` (or an error).
-        let within = |k: &str, v: Option<f64>, lo: f64, hi: f64, default: Option<f64>| match v {
-            Some(x) if !x.is_finite() || x < lo || x > hi => Err(Invalid::new(
-                format!("{p}.{k}"),
-                format!("`{x}` is outside {lo}..{hi}"),
-            )),
-            Some(x) => Ok(x),
-            None => default.ok_or_else(|| Invalid::new(p, format!("model `milling` needs `{k}`"))),
         };
         let spindle_rpm = positive("spindle_rpm", r.spindle_rpm)?;
         let tol_deg = positive("axis_tolerance_deg", r.axis_tolerance_deg)?
@@ -214,119 +191,16 @@ impl ProcessForce {
         let flutes = r.flutes.unwrap_or(DEFAULT_FLUTES);
         if flutes == 0 || flutes > 64 {
             return Err(Invalid::new(
-                format!("{p}.flutes"),
+                format!("{P}.flutes"),
                 format!("`{flutes}` flutes is outside 1..64"),
             ));
         }
-        // Keys of another model are mistakes, not options.
-        let given: [(&str, bool); 16] = [
-            ("force_n", r.force_n.is_some()),
-            ("moment_nm", r.moment_nm.is_some()),
-            ("frame", r.frame.is_some()),
-            (
-                "thrust_coefficient_n_per_mm2",
-                r.thrust_coefficient_n_per_mm2.is_some(),
-            ),
-            ("drill_diameter_mm", r.drill_diameter_mm.is_some()),
-            ("max_feed_mm_per_rev", r.max_feed_mm_per_rev.is_some()),
-            ("axis_tolerance_deg", r.axis_tolerance_deg.is_some()),
-            ("kt_n_per_mm2", r.kt_n_per_mm2.is_some()),
-            ("kr_n_per_mm2", r.kr_n_per_mm2.is_some()),
-            ("ka_n_per_mm2", r.ka_n_per_mm2.is_some()),
-            ("kte_n_per_mm", r.kte_n_per_mm.is_some()),
-            ("kre_n_per_mm", r.kre_n_per_mm.is_some()),
-            ("kae_n_per_mm", r.kae_n_per_mm.is_some()),
-            ("tool_diameter_mm", r.tool_diameter_mm.is_some()),
-            ("axial_depth_mm", r.axial_depth_mm.is_some()),
-            ("radial_width_mm", r.radial_width_mm.is_some()),
-        ];
-        let allowed: &[&str] = match r.model {
-            RawForceModel::Constant => &["force_n", "moment_nm", "frame"],
-            RawForceModel::Drilling => &[
-                "thrust_coefficient_n_per_mm2",
-                "drill_diameter_mm",
-                "max_feed_mm_per_rev",
-                "axis_tolerance_deg",
-            ],
-            RawForceModel::Table => &[],
-            RawForceModel::Milling => &[
-                "kt_n_per_mm2",
-                "kr_n_per_mm2",
-                "ka_n_per_mm2",
-                "kte_n_per_mm",
-                "kre_n_per_mm",
-                "kae_n_per_mm",
-                "tool_diameter_mm",
-                "axial_depth_mm",
-                "radial_width_mm",
-            ],
-        };
-        if let Some((k, _)) = given
-            .iter()
-            .find(|(k, present)| *present && !allowed.contains(k))
-        {
-            return Err(Invalid::new(
-                format!("{p}.{k}"),
-                format!("`{k}` does not apply to model `{model_name}`"),
-            ));
-        }
+        refuse_other_keys(r, model_name)?;
         let model = match r.model {
-            RawForceModel::Constant => {
-                let f = r.force_n.ok_or_else(|| {
-                    Invalid::new(p, "model `constant` needs `force_n: [x, y, z]`")
-                })?;
-                let m = r.moment_nm.unwrap_or([0.0; 3]);
-                if f.iter().chain(&m).any(|v| !v.is_finite()) {
-                    return Err(Invalid::new(
-                        format!("{p}.force_n"),
-                        "force and moment must be finite numbers",
-                    ));
-                }
-                ForceModel::Constant {
-                    force_n: Vector3::from(f),
-                    moment_nmm: Vector3::from(m) * 1000.0,
-                    frame: match r.frame.unwrap_or(RawForceFrame::Tool) {
-                        RawForceFrame::Tool => ForceFrame::Tool,
-                        RawForceFrame::Workpiece => ForceFrame::Workpiece,
-                        RawForceFrame::Base => ForceFrame::Base,
-                        RawForceFrame::Feed => ForceFrame::Feed,
-                    },
-                }
-            }
-            RawForceModel::Milling => {
-                need("spindle_rpm", r.spindle_rpm)?;
-                if r.flutes.is_none() {
-                    return Err(Invalid::new(p, "model `milling` needs `flutes`"));
-                }
-                let d = within("tool_diameter_mm", r.tool_diameter_mm, 0.01, 1000.0, None)?;
-                ForceModel::Milling(Milling {
-                    kt_n_per_mm2: within("kt_n_per_mm2", r.kt_n_per_mm2, 0.0, 1e5, None)?,
-                    kr_n_per_mm2: within("kr_n_per_mm2", r.kr_n_per_mm2, 0.0, 1e5, None)?,
-                    ka_n_per_mm2: within("ka_n_per_mm2", r.ka_n_per_mm2, 0.0, 1e5, Some(0.0))?,
-                    kte_n_per_mm: within("kte_n_per_mm", r.kte_n_per_mm, 0.0, 1e6, Some(0.0))?,
-                    kre_n_per_mm: within("kre_n_per_mm", r.kre_n_per_mm, 0.0, 1e6, Some(0.0))?,
-                    kae_n_per_mm: within("kae_n_per_mm", r.kae_n_per_mm, 0.0, 1e6, Some(0.0))?,
-                    tool_diameter_mm: d,
-                    flutes,
-                    axial_depth_mm: within("axial_depth_mm", r.axial_depth_mm, 0.0, 1000.0, None)?,
-                    radial_width_mm: within("radial_width_mm", r.radial_width_mm, 0.0, d, None)?,
-                })
-            }
+            RawForceModel::Constant => constant_model(r)?,
+            RawForceModel::Milling => milling_model(r, flutes)?,
             // (`table` was refused above.)
-            RawForceModel::Drilling | RawForceModel::Table => {
-                need("spindle_rpm", r.spindle_rpm)?;
-                ForceModel::Drilling {
-                    drill: Drilling {
-                        thrust_coefficient_n_per_mm2: need(
-                            "thrust_coefficient_n_per_mm2",
-                            r.thrust_coefficient_n_per_mm2,
-                        )?,
-                        drill_diameter_mm: need("drill_diameter_mm", r.drill_diameter_mm)?,
-                    },
-                    max_feed_mm_per_rev: positive("max_feed_mm_per_rev", r.max_feed_mm_per_rev)?
-                        .unwrap_or(DEFAULT_MAX_FEED_MM_PER_REV),
-                }
-            }
+            RawForceModel::Drilling | RawForceModel::Table => drilling_model(r, model_name)?,
         };
         Ok(ProcessForce {
             model,
@@ -358,6 +232,155 @@ impl ProcessForce {
             axis_tolerance_rad: DEFAULT_AXIS_TOLERANCE_DEG.to_radians(),
         })
     }
+}
+
+/// The key of `process_force:` in machine files.
+const P: &str = "process_force";
+
+/// An optional value that must be positive when given.
+fn positive(k: &str, v: Option<f64>) -> Result<Option<f64>, Invalid> {
+    match v {
+        Some(x) if !x.is_finite() || x <= 0.0 => Err(Invalid::new(
+            format!("{P}.{k}"),
+            format!("`{x}` must be a positive number"),
+        )),
+        other => Ok(other),
+    }
+}
+
+/// A positive value that model `model_name` needs.
+fn need(k: &str, v: Option<f64>, model_name: &str) -> Result<f64, Invalid> {
+    positive(k, v)?.ok_or_else(|| Invalid::new(P, format!("model `{model_name}` needs `{k}`")))
+}
+
+/// A milling value within lo..=hi; `None` → `default` (or an error).
+fn within(k: &str, v: Option<f64>, lo: f64, hi: f64, default: Option<f64>) -> Result<f64, Invalid> {
+    match v {
+        Some(x) if !x.is_finite() || x < lo || x > hi => Err(Invalid::new(
+            format!("{P}.{k}"),
+            format!("`{x}` is outside {lo}..{hi}"),
+        )),
+        Some(x) => Ok(x),
+        None => default.ok_or_else(|| Invalid::new(P, format!("model `milling` needs `{k}`"))),
+    }
+}
+
+/// Refuses the keys of another model: they are mistakes, not options.
+fn refuse_other_keys(r: &RawProcessForce, model_name: &str) -> Result<(), Invalid> {
+    let given: [(&str, bool); 16] = [
+        ("force_n", r.force_n.is_some()),
+        ("moment_nm", r.moment_nm.is_some()),
+        ("frame", r.frame.is_some()),
+        (
+            "thrust_coefficient_n_per_mm2",
+            r.thrust_coefficient_n_per_mm2.is_some(),
+        ),
+        ("drill_diameter_mm", r.drill_diameter_mm.is_some()),
+        ("max_feed_mm_per_rev", r.max_feed_mm_per_rev.is_some()),
+        ("axis_tolerance_deg", r.axis_tolerance_deg.is_some()),
+        ("kt_n_per_mm2", r.kt_n_per_mm2.is_some()),
+        ("kr_n_per_mm2", r.kr_n_per_mm2.is_some()),
+        ("ka_n_per_mm2", r.ka_n_per_mm2.is_some()),
+        ("kte_n_per_mm", r.kte_n_per_mm.is_some()),
+        ("kre_n_per_mm", r.kre_n_per_mm.is_some()),
+        ("kae_n_per_mm", r.kae_n_per_mm.is_some()),
+        ("tool_diameter_mm", r.tool_diameter_mm.is_some()),
+        ("axial_depth_mm", r.axial_depth_mm.is_some()),
+        ("radial_width_mm", r.radial_width_mm.is_some()),
+    ];
+    let allowed: &[&str] = match r.model {
+        RawForceModel::Constant => &["force_n", "moment_nm", "frame"],
+        RawForceModel::Drilling => &[
+            "thrust_coefficient_n_per_mm2",
+            "drill_diameter_mm",
+            "max_feed_mm_per_rev",
+            "axis_tolerance_deg",
+        ],
+        RawForceModel::Table => &[],
+        RawForceModel::Milling => &[
+            "kt_n_per_mm2",
+            "kr_n_per_mm2",
+            "ka_n_per_mm2",
+            "kte_n_per_mm",
+            "kre_n_per_mm",
+            "kae_n_per_mm",
+            "tool_diameter_mm",
+            "axial_depth_mm",
+            "radial_width_mm",
+        ],
+    };
+    if let Some((k, _)) = given
+        .iter()
+        .find(|(k, present)| *present && !allowed.contains(k))
+    {
+        return Err(Invalid::new(
+            format!("{P}.{k}"),
+            format!("`{k}` does not apply to model `{model_name}`"),
+        ));
+    }
+    Ok(())
+}
+
+/// Model `constant`: a force and moment in a chosen frame.
+fn constant_model(r: &RawProcessForce) -> Result<ForceModel, Invalid> {
+    let f = r
+        .force_n
+        .ok_or_else(|| Invalid::new(P, "model `constant` needs `force_n: [x, y, z]`"))?;
+    let m = r.moment_nm.unwrap_or([0.0; 3]);
+    if f.iter().chain(&m).any(|v| !v.is_finite()) {
+        return Err(Invalid::new(
+            format!("{P}.force_n"),
+            "force and moment must be finite numbers",
+        ));
+    }
+    Ok(ForceModel::Constant {
+        force_n: Vector3::from(f),
+        moment_nmm: Vector3::from(m) * 1000.0,
+        frame: match r.frame.unwrap_or(RawForceFrame::Tool) {
+            RawForceFrame::Tool => ForceFrame::Tool,
+            RawForceFrame::Workpiece => ForceFrame::Workpiece,
+            RawForceFrame::Base => ForceFrame::Base,
+            RawForceFrame::Feed => ForceFrame::Feed,
+        },
+    })
+}
+
+/// Model `milling`: cutting coefficients, tool and engagement.
+fn milling_model(r: &RawProcessForce, flutes: u32) -> Result<ForceModel, Invalid> {
+    need("spindle_rpm", r.spindle_rpm, "milling")?;
+    if r.flutes.is_none() {
+        return Err(Invalid::new(P, "model `milling` needs `flutes`"));
+    }
+    let d = within("tool_diameter_mm", r.tool_diameter_mm, 0.01, 1000.0, None)?;
+    Ok(ForceModel::Milling(Milling {
+        kt_n_per_mm2: within("kt_n_per_mm2", r.kt_n_per_mm2, 0.0, 1e5, None)?,
+        kr_n_per_mm2: within("kr_n_per_mm2", r.kr_n_per_mm2, 0.0, 1e5, None)?,
+        ka_n_per_mm2: within("ka_n_per_mm2", r.ka_n_per_mm2, 0.0, 1e5, Some(0.0))?,
+        kte_n_per_mm: within("kte_n_per_mm", r.kte_n_per_mm, 0.0, 1e6, Some(0.0))?,
+        kre_n_per_mm: within("kre_n_per_mm", r.kre_n_per_mm, 0.0, 1e6, Some(0.0))?,
+        kae_n_per_mm: within("kae_n_per_mm", r.kae_n_per_mm, 0.0, 1e6, Some(0.0))?,
+        tool_diameter_mm: d,
+        flutes,
+        axial_depth_mm: within("axial_depth_mm", r.axial_depth_mm, 0.0, 1000.0, None)?,
+        radial_width_mm: within("radial_width_mm", r.radial_width_mm, 0.0, d, None)?,
+    }))
+}
+
+/// Model `drilling`: thrust from the feed per revolution.
+fn drilling_model(r: &RawProcessForce, model_name: &str) -> Result<ForceModel, Invalid> {
+    need("spindle_rpm", r.spindle_rpm, model_name)?;
+    Ok(ForceModel::Drilling {
+        drill: Drilling {
+            thrust_coefficient_n_per_mm2: need(
+                "thrust_coefficient_n_per_mm2",
+                r.thrust_coefficient_n_per_mm2,
+                model_name,
+            )?,
+            drill_diameter_mm: need("drill_diameter_mm", r.drill_diameter_mm, model_name)?,
+        },
+        max_feed_mm_per_rev: positive("max_feed_mm_per_rev", r.max_feed_mm_per_rev)?
+            .unwrap_or(DEFAULT_MAX_FEED_MM_PER_REV),
+    })
 }
 
 /// The wrench the process stage applies without a per-move one: a constant

@@ -11,7 +11,8 @@ use super::location::{
     LocationErrors, LocationKey, SpindleErrors, component_key, location_key, spindle_key,
 };
 use super::raw::{
-    RawAxis, RawAxisType, RawMachineTool, RawProcessForce, RawSide, RawTable, RawUnits,
+    RawAxis, RawAxisType, RawMachineTool, RawMeasurementFrame, RawOutput, RawProcessForce, RawSide,
+    RawSpindle, RawTable, RawTool, RawUnits,
 };
 use super::table::ErrorTable;
 use super::{Axis, AxisKind, ControlDefaults, MachineTool, Side};
@@ -106,117 +107,17 @@ fn validate(raw: RawMachineTool) -> V<MachineTool> {
     if raw.name.trim().is_empty() {
         return Err(Invalid::new("name", "the machine name is empty"));
     }
-    if raw.axes.is_empty() {
-        return Err(Invalid::new(
-            "axes",
-            "a machine tool needs at least one axis",
-        ));
-    }
-    let mut axes: Vec<Axis> = Vec::with_capacity(raw.axes.len());
-    let mut slot_index = [None; 6];
-    let mut seen_tool_side = false;
-    for (i, ra) in raw.axes.iter().enumerate() {
-        let p = format!("axes[{i}]");
-        let axis = validate_axis(&p, ra)?;
-        let Some(entry) = slot_index.get_mut(axis.slot) else {
-            return Err(Invalid::new(format!("{p}.name"), "axis slot out of range"));
-        };
-        if entry.is_some() {
-            return Err(Invalid::new(
-                format!("{p}.name"),
-                format!("duplicate axis `{}`", ra.name),
-            ));
-        }
-        *entry = u8::try_from(i).ok();
-        match axis.side {
-            Side::Tool => seen_tool_side = true,
-            Side::Workpiece if seen_tool_side => {
-                return Err(Invalid::new(
-                    format!("{p}.side"),
-                    "workpiece-side axes must all come before the tool-side axes (chain order: from the workpiece out to the base, then from the base to the spindle)",
-                ));
-            }
-            Side::Workpiece => {}
-        }
-        axes.push(axis);
-    }
+    let (mut axes, slot_index) = validate_axes(&raw.axes)?;
     let n_workpiece = axes.iter().filter(|a| a.side == Side::Workpiece).count();
-
-    let mut spindle = SpindleErrors::default();
-    if let Some(s) = &raw.spindle {
-        for (k, v) in &s.location_errors {
-            let path = format!("spindle.location_errors.{k}");
-            let key = spindle_key(k).map_err(|m| Invalid::new(&path, m))?;
-            let v = finite(&path, *v)?;
-            match key {
-                LocationKey::Offset(t) => spindle.offset_mm[t] = check_mm(&path, v)?,
-                LocationKey::Angle(r) => spindle.angles_rad[r] = check_rad(&path, v * 1e-6)?,
-                LocationKey::Zero => {}
-            }
-        }
-    }
-
-    let mut tools = BTreeMap::new();
-    for (h, t) in &raw.tools {
-        let path = format!("tools.{h}.length_mm");
-        let l = plausible(&path, t.length_mm)?;
-        if l < 0.0 {
-            return Err(Invalid::new(path, format!("tool length `{l}` is negative")));
-        }
-        tools.insert(*h, l);
-    }
-
-    let mut work_offsets = BTreeMap::new();
-    for (code, xyz) in &raw.work_offsets_mm {
-        let path = format!("work_offsets_mm.{code}");
-        if !work_offset_key(code) {
-            return Err(Invalid::new(
-                path,
-                format!(
-                    "unknown work offset `{code}` (expected G54 … G59, G54.1P1 … G54.1P300 or G154P1 … G154P99)"
-                ),
-            ));
-        }
-        for v in xyz {
-            plausible(&path, *v)?;
-        }
-        work_offsets.insert(code.clone(), *xyz);
-    }
-
-    let mut reference_points = BTreeMap::new();
-    for (code, xyz) in &raw.reference_points_mm {
-        let path = format!("reference_points_mm.{code}");
-        if !matches!(code.as_str(), "G30" | "G30P3" | "G30P4") {
-            return Err(Invalid::new(
-                path,
-                format!("unknown reference point `{code}` (expected G30, G30P3 or G30P4)"),
-            ));
-        }
-        for v in xyz {
-            plausible(&path, *v)?;
-        }
-        reference_points.insert(code.clone(), *xyz);
-    }
+    let spindle = validate_spindle(raw.spindle.as_ref())?;
+    let tools = validate_tools(&raw.tools)?;
+    let work_offsets = validate_work_offsets(&raw.work_offsets_mm)?;
+    let reference_points = validate_reference_points(&raw.reference_points_mm)?;
     let units_default = raw.units_default.map(|u| match u {
         RawUnits::Mm => super::Units::Mm,
         RawUnits::Inch => super::Units::Inch,
     });
-
-    let decimals = raw.output.as_ref().and_then(|o| o.decimals_mm);
-    let decimals_deg = raw.output.as_ref().and_then(|o| o.decimals_deg);
-    for (key, value) in [
-        ("output.decimals_mm", decimals),
-        ("output.decimals_deg", decimals_deg),
-    ] {
-        if let Some(d) = value {
-            if d > MAX_DECIMALS {
-                return Err(Invalid::new(
-                    key,
-                    format!("`{d}` decimals is more than {MAX_DECIMALS}"),
-                ));
-            }
-        }
-    }
+    let (decimals, decimals_deg) = validate_decimals(raw.output.as_ref())?;
 
     let tolerance_mm = raw
         .compensation
@@ -242,30 +143,11 @@ fn validate(raw: RawMachineTool) -> V<MachineTool> {
         .map(super::dynamics::Modal::from_raw)
         .transpose()?;
 
-    let measurement_frame = match &raw.measurement_frame {
-        Some(f) => {
-            let v = [
-                f.x_mm,
-                f.y_mm,
-                f.z_mm,
-                f.rpy_deg[0],
-                f.rpy_deg[1],
-                f.rpy_deg[2],
-            ];
-            if v.iter().any(|x| !x.is_finite()) {
-                return Err(Invalid::new(
-                    "measurement_frame",
-                    "every value must be a finite number",
-                ));
-            }
-            let [r, p, y] = f.rpy_deg.map(f64::to_radians);
-            Some(nalgebra::Isometry3::from_parts(
-                nalgebra::Translation3::new(f.x_mm, f.y_mm, f.z_mm),
-                nalgebra::UnitQuaternion::from_euler_angles(r, p, y),
-            ))
-        }
-        None => None,
-    };
+    let measurement_frame = raw
+        .measurement_frame
+        .as_ref()
+        .map(validate_measurement_frame)
+        .transpose()?;
     let error_free = spindle.is_zero()
         && axes
             .iter()
@@ -302,6 +184,161 @@ fn validate(raw: RawMachineTool) -> V<MachineTool> {
             })
         }),
     })
+}
+
+/// The axes in chain order (workpiece side first) and the index of the
+/// axis of each slot (X, Y, Z, A, B, C).
+fn validate_axes(raw: &[RawAxis]) -> V<(Vec<Axis>, [Option<u8>; 6])> {
+    if raw.is_empty() {
+        return Err(Invalid::new(
+            "axes",
+            "a machine tool needs at least one axis",
+        ));
+    }
+    let mut axes: Vec<Axis> = Vec::with_capacity(raw.len());
+    let mut slot_index = [None; 6];
+    let mut seen_tool_side = false;
+    for (i, ra) in raw.iter().enumerate() {
+        let p = format!("axes[{i}]");
+        let axis = validate_axis(&p, ra)?;
+        let Some(entry) = slot_index.get_mut(axis.slot) else {
+            return Err(Invalid::new(format!("{p}.name"), "axis slot out of range"));
+        };
+        if entry.is_some() {
+            return Err(Invalid::new(
+                format!("{p}.name"),
+                format!("duplicate axis `{}`", ra.name),
+            ));
+        }
+        *entry = u8::try_from(i).ok();
+        match axis.side {
+            Side::Tool => seen_tool_side = true,
+            Side::Workpiece if seen_tool_side => {
+                return Err(Invalid::new(
+                    format!("{p}.side"),
+                    "workpiece-side axes must all come before the tool-side axes (chain order: from the workpiece out to the base, then from the base to the spindle)",
+                ));
+            }
+            Side::Workpiece => {}
+        }
+        axes.push(axis);
+    }
+    Ok((axes, slot_index))
+}
+
+/// `spindle.location_errors`.
+fn validate_spindle(raw: Option<&RawSpindle>) -> V<SpindleErrors> {
+    let mut spindle = SpindleErrors::default();
+    if let Some(s) = raw {
+        for (k, v) in &s.location_errors {
+            let path = format!("spindle.location_errors.{k}");
+            let key = spindle_key(k).map_err(|m| Invalid::new(&path, m))?;
+            let v = finite(&path, *v)?;
+            match key {
+                LocationKey::Offset(t) => spindle.offset_mm[t] = check_mm(&path, v)?,
+                LocationKey::Angle(r) => spindle.angles_rad[r] = check_rad(&path, v * 1e-6)?,
+                LocationKey::Zero => {}
+            }
+        }
+    }
+    Ok(spindle)
+}
+
+/// `tools`: the length of each tool, by H number.
+fn validate_tools(raw: &BTreeMap<u32, RawTool>) -> V<BTreeMap<u32, f64>> {
+    let mut tools = BTreeMap::new();
+    for (h, t) in raw {
+        let path = format!("tools.{h}.length_mm");
+        let l = plausible(&path, t.length_mm)?;
+        if l < 0.0 {
+            return Err(Invalid::new(path, format!("tool length `{l}` is negative")));
+        }
+        tools.insert(*h, l);
+    }
+    Ok(tools)
+}
+
+/// `work_offsets_mm`, by code (`G54`, `G54.1P7`, `G154P3`).
+fn validate_work_offsets(raw: &BTreeMap<String, [f64; 3]>) -> V<BTreeMap<String, [f64; 3]>> {
+    let mut work_offsets = BTreeMap::new();
+    for (code, xyz) in raw {
+        let path = format!("work_offsets_mm.{code}");
+        if !work_offset_key(code) {
+            return Err(Invalid::new(
+                path,
+                format!(
+                    "unknown work offset `{code}` (expected G54 … G59, G54.1P1 … G54.1P300 or G154P1 … G154P99)"
+                ),
+            ));
+        }
+        for v in xyz {
+            plausible(&path, *v)?;
+        }
+        work_offsets.insert(code.clone(), *xyz);
+    }
+    Ok(work_offsets)
+}
+
+/// `reference_points_mm`, by code (`G30`, `G30P3`, `G30P4`).
+fn validate_reference_points(raw: &BTreeMap<String, [f64; 3]>) -> V<BTreeMap<String, [f64; 3]>> {
+    let mut reference_points = BTreeMap::new();
+    for (code, xyz) in raw {
+        let path = format!("reference_points_mm.{code}");
+        if !matches!(code.as_str(), "G30" | "G30P3" | "G30P4") {
+            return Err(Invalid::new(
+                path,
+                format!("unknown reference point `{code}` (expected G30, G30P3 or G30P4)"),
+            ));
+        }
+        for v in xyz {
+            plausible(&path, *v)?;
+        }
+        reference_points.insert(code.clone(), *xyz);
+    }
+    Ok(reference_points)
+}
+
+/// `output.decimals_mm` and `output.decimals_deg`.
+fn validate_decimals(raw: Option<&RawOutput>) -> V<(Option<usize>, Option<usize>)> {
+    let decimals = raw.and_then(|o| o.decimals_mm);
+    let decimals_deg = raw.and_then(|o| o.decimals_deg);
+    for (key, value) in [
+        ("output.decimals_mm", decimals),
+        ("output.decimals_deg", decimals_deg),
+    ] {
+        if let Some(d) = value {
+            if d > MAX_DECIMALS {
+                return Err(Invalid::new(
+                    key,
+                    format!("`{d}` decimals is more than {MAX_DECIMALS}"),
+                ));
+            }
+        }
+    }
+    Ok((decimals, decimals_deg))
+}
+
+/// `measurement_frame`: the pose of the measuring instrument's frame.
+fn validate_measurement_frame(f: &RawMeasurementFrame) -> V<nalgebra::Isometry3<f64>> {
+    let v = [
+        f.x_mm,
+        f.y_mm,
+        f.z_mm,
+        f.rpy_deg[0],
+        f.rpy_deg[1],
+        f.rpy_deg[2],
+    ];
+    if v.iter().any(|x| !x.is_finite()) {
+        return Err(Invalid::new(
+            "measurement_frame",
+            "every value must be a finite number",
+        ));
+    }
+    let [r, p, y] = f.rpy_deg.map(f64::to_radians);
+    Ok(nalgebra::Isometry3::from_parts(
+        nalgebra::Translation3::new(f.x_mm, f.y_mm, f.z_mm),
+        nalgebra::UnitQuaternion::from_euler_angles(r, p, y),
+    ))
 }
 
 /// Validates `process_force:`: the keys the model needs must be there, the

@@ -40,12 +40,44 @@ pub fn parse_line(line: &[u8], line_no: usize, file: &str, out: &mut Block) -> R
     scan_line(line, line_no, file, out).map_err(|e| super::dialect::refine(line, e))
 }
 
+/// The file and line of the text being parsed, for located errors.
+#[derive(Clone, Copy)]
+struct Place<'a> {
+    file: &'a str,
+    line_no: usize,
+}
+
+impl Place<'_> {
+    fn err(self, pos: usize, msg: String) -> Located {
+        Located::new(self.file, self.line_no, pos + 1, msg)
+    }
+}
+
+/// Keywords after a leading O word that open subroutines and loops.
+const O_CONTROL: [&str; 15] = [
+    "sub",
+    "endsub",
+    "call",
+    "while",
+    "endwhile",
+    "do",
+    "if",
+    "else",
+    "elseif",
+    "endif",
+    "repeat",
+    "endrepeat",
+    "return",
+    "break",
+    "continue",
+];
+
 fn scan_line(line: &[u8], line_no: usize, file: &str, out: &mut Block) -> Result<(), Located> {
     out.clear();
     out.line_no = line_no;
     let text = strip_eol(line);
     out.text_len = text.len() as u32;
-    let err = |pos: usize, msg: String| Located::new(file, line_no, pos + 1, msg);
+    let place = Place { file, line_no };
 
     let mut pos = skip_ws(text, 0);
     if text.get(pos) == Some(&b'%') {
@@ -62,243 +94,192 @@ fn scan_line(line: &[u8], line_no: usize, file: &str, out: &mut Block) -> Result
     let mut upper = 0usize;
     while pos < text.len() {
         let b = text[pos];
-        match b {
-            b' ' | b'\t' => {
-                saw_space = true;
-                pos += 1;
+        if b == b' ' || b == b'\t' {
+            saw_space = true;
+            pos += 1;
+        } else if b == b'(' || b == b';' {
+            pos = comment(text, pos, out, place)?;
+        } else if b.is_ascii_alphabetic() {
+            if b.is_ascii_lowercase() {
+                lower += 1;
+            } else {
+                upper += 1;
             }
-            b'(' => {
-                let close = text[pos..].iter().position(|&c| c == b')');
-                match close {
-                    Some(off) => {
-                        out.comments.push(Comment {
-                            start: pos as u32,
-                            end: (pos + off + 1) as u32,
-                            semicolon: false,
-                        });
-                        pos += off + 1;
-                    }
-                    None => {
-                        return Err(err(
-                            pos,
-                            format!(
-                                "unterminated comment, no `)` before the end of the line: `{}`",
-                                show(&text[pos..])
-                            ),
-                        ));
-                    }
-                }
-            }
-            b';' => {
-                out.comments.push(Comment {
-                    start: pos as u32,
-                    end: text.len() as u32,
-                    semicolon: true,
-                });
-                pos = text.len();
-            }
-            b'#' => {
-                return Err(err(
-                    pos,
-                    format!(
-                        "`#` parameters cannot be compensated offline (expand them in CAM): `{}`",
-                        show(&text[pos..])
-                    ),
-                ));
-            }
-            b'[' | b']' => {
-                return Err(err(
-                    pos,
-                    format!(
-                        "`[ ]` expressions cannot be compensated offline (expand them in CAM): `{}`",
-                        show(&text[pos..])
-                    ),
-                ));
-            }
-            b'=' => {
-                return Err(err(
-                    pos,
-                    format!(
-                        "assignments cannot be compensated offline: `{}`",
-                        show(&text[pos..])
-                    ),
-                ));
-            }
-            _ if b.is_ascii_alphabetic() => {
-                let letter = b.to_ascii_uppercase();
-                if b.is_ascii_lowercase() {
-                    lower += 1;
-                } else {
-                    upper += 1;
-                }
-                let after_letter = skip_ws(text, pos + 1);
-                if !LETTERS.contains(&letter) {
-                    return Err(err(
-                        pos,
-                        format!(
-                            "unknown word letter `{}`: `{}`",
-                            b as char,
-                            show(&text[pos..])
-                        ),
-                    ));
-                }
-                let rest = &text[after_letter..];
-                match number(rest) {
-                    Ok((_, num)) => {
-                        let num_start = after_letter;
-                        let num_end = after_letter + num.len();
-                        let num_str = std::str::from_utf8(num).unwrap_or("");
-                        let value: f64 = match num_str.parse() {
-                            Ok(v) => v,
-                            Err(_) => {
-                                return Err(err(
-                                    num_start,
-                                    format!("malformed number `{}`", crate::error::clip(num_str)),
-                                ));
-                            }
-                        };
-                        if !value.is_finite() || value.abs() > 1e9 {
-                            return Err(err(
-                                num_start,
-                                format!("absurd number `{}`", crate::error::clip(num_str)),
-                            ));
-                        }
-                        let decimals = num
-                            .iter()
-                            .position(|&c| c == b'.')
-                            .map(|d| (num.len() - d - 1).min(255) as u8);
-                        // A second number glued to this one (`X1.2.3`, `X1-2`).
-                        if let Some(&next) = text.get(num_end) {
-                            if next == b'.' || next.is_ascii_digit() || next == b'-' || next == b'+'
-                            {
-                                return Err(err(
-                                    num_end,
-                                    format!("two numbers in one word: `{}`", show(&text[pos..])),
-                                ));
-                            }
-                        }
-                        if letter == b'O' && out.words.is_empty() {
-                            // `O100 sub`, `o100 while …`: subroutines and loops.
-                            let tail = skip_ws(text, num_end);
-                            if text.get(tail).is_some_and(|c| c.is_ascii_alphabetic()) {
-                                let kw: Vec<u8> = text[tail..]
-                                    .iter()
-                                    .take_while(|c| c.is_ascii_alphabetic())
-                                    .copied()
-                                    .collect();
-                                let kw = String::from_utf8_lossy(&kw).to_ascii_lowercase();
-                                if matches!(
-                                    kw.as_str(),
-                                    "sub"
-                                        | "endsub"
-                                        | "call"
-                                        | "while"
-                                        | "endwhile"
-                                        | "do"
-                                        | "if"
-                                        | "else"
-                                        | "elseif"
-                                        | "endif"
-                                        | "repeat"
-                                        | "endrepeat"
-                                        | "return"
-                                        | "break"
-                                        | "continue"
-                                ) {
-                                    return Err(err(
-                                        pos,
-                                        format!(
-                                            "O-word subroutines and loops cannot be compensated offline: `{}`",
-                                            show(text)
-                                        ),
-                                    ));
-                                }
-                            }
-                        }
-                        out.words.push(Word {
-                            letter,
-                            value,
-                            start: pos as u32,
-                            num_start: num_start as u32,
-                            end: num_end as u32,
-                            decimals,
-                        });
-                        pos = num_end;
-                    }
-                    Err(_) => {
-                        match rest.first() {
-                            Some(b'#') => {
-                                return Err(err(
-                                    after_letter,
-                                    format!(
-                                        "`#` parameters cannot be compensated offline (expand them in CAM): `{}`",
-                                        show(&text[pos..])
-                                    ),
-                                ));
-                            }
-                            Some(b'[') => {
-                                return Err(err(
-                                    after_letter,
-                                    format!(
-                                        "`[ ]` expressions cannot be compensated offline (expand them in CAM): `{}`",
-                                        show(&text[pos..])
-                                    ),
-                                ));
-                            }
-                            Some(b'=') => {
-                                // `X=10.`, `R1=5` (Siemens-style assignments).
-                                return Err(err(
-                                    after_letter,
-                                    format!(
-                                        "assignments cannot be compensated offline: `{}`",
-                                        show(&text[pos..])
-                                    ),
-                                ));
-                            }
-                            _ => {}
-                        }
-                        if after_letter >= text.len() {
-                            return Err(err(
-                                pos,
-                                format!(
-                                    "truncated word: letter `{}` with no number at the end of the line",
-                                    b as char
-                                ),
-                            ));
-                        }
-                        return Err(err(
-                            pos,
-                            format!(
-                                "letter `{}` without a number: `{}`",
-                                b as char,
-                                show(&text[pos..])
-                            ),
-                        ));
-                    }
-                }
-            }
-            _ if b.is_ascii_digit() || b == b'.' || b == b'-' || b == b'+' => {
-                return Err(err(
-                    pos,
-                    format!("number without a letter: `{}`", show(&text[pos..])),
-                ));
-            }
-            _ => {
-                let shown = if b.is_ascii_graphic() {
-                    format!("`{}`", b as char)
-                } else {
-                    format!("byte 0x{b:02X}")
-                };
-                return Err(err(
-                    pos,
-                    format!("unexpected character {shown} outside a comment"),
-                ));
-            }
+            pos = word(text, pos, out, place)?;
+        } else {
+            return Err(not_a_word(text, pos, place));
         }
     }
     out.lower_case = lower > upper;
     out.spaced = saw_space && out.words.len() > 1;
     Ok(())
+}
+
+/// The comment opening at `pos` (`(` to `)`, or `;` to the end of the
+/// line), recorded in `out`; the position after it.
+fn comment(text: &[u8], pos: usize, out: &mut Block, place: Place) -> Result<usize, Located> {
+    let (end, semicolon) = if text[pos] == b';' {
+        (text.len(), true)
+    } else {
+        match text[pos..].iter().position(|&c| c == b')') {
+            Some(off) => (pos + off + 1, false),
+            None => {
+                return Err(place.err(
+                    pos,
+                    format!(
+                        "unterminated comment, no `)` before the end of the line: `{}`",
+                        show(&text[pos..])
+                    ),
+                ));
+            }
+        }
+    };
+    out.comments.push(Comment {
+        start: pos as u32,
+        end: end as u32,
+        semicolon,
+    });
+    Ok(end)
+}
+
+/// The word whose letter is at `pos`, pushed to `out`; the position after
+/// its number.
+fn word(text: &[u8], pos: usize, out: &mut Block, place: Place) -> Result<usize, Located> {
+    let b = text[pos];
+    let letter = b.to_ascii_uppercase();
+    let after_letter = skip_ws(text, pos + 1);
+    if !LETTERS.contains(&letter) {
+        return Err(place.err(
+            pos,
+            format!(
+                "unknown word letter `{}`: `{}`",
+                b as char,
+                show(&text[pos..])
+            ),
+        ));
+    }
+    let rest = &text[after_letter..];
+    let Ok((_, num)) = number(rest) else {
+        return Err(letter_alone(text, pos, after_letter, place));
+    };
+    let num_start = after_letter;
+    let num_end = after_letter + num.len();
+    let num_str = std::str::from_utf8(num).unwrap_or("");
+    let value: f64 = num_str.parse().map_err(|_| {
+        place.err(
+            num_start,
+            format!("malformed number `{}`", crate::error::clip(num_str)),
+        )
+    })?;
+    if !value.is_finite() || value.abs() > 1e9 {
+        return Err(place.err(
+            num_start,
+            format!("absurd number `{}`", crate::error::clip(num_str)),
+        ));
+    }
+    let decimals = num
+        .iter()
+        .position(|&c| c == b'.')
+        .map(|d| (num.len() - d - 1).min(255) as u8);
+    // A second number glued to this one (`X1.2.3`, `X1-2`).
+    if let Some(&next) = text.get(num_end) {
+        if next == b'.' || next.is_ascii_digit() || next == b'-' || next == b'+' {
+            return Err(place.err(
+                num_end,
+                format!("two numbers in one word: `{}`", show(&text[pos..])),
+            ));
+        }
+    }
+    if letter == b'O' && out.words.is_empty() {
+        // `O100 sub`, `o100 while …`: subroutines and loops.
+        let tail = skip_ws(text, num_end);
+        let kw: String = text[tail..]
+            .iter()
+            .take_while(|c| c.is_ascii_alphabetic())
+            .map(|&c| char::from(c.to_ascii_lowercase()))
+            .collect();
+        if O_CONTROL.contains(&kw.as_str()) {
+            return Err(place.err(
+                pos,
+                format!(
+                    "O-word subroutines and loops cannot be compensated offline: `{}`",
+                    show(text)
+                ),
+            ));
+        }
+    }
+    out.words.push(Word {
+        letter,
+        value,
+        start: pos as u32,
+        num_start: num_start as u32,
+        end: num_end as u32,
+        decimals,
+    });
+    Ok(num_end)
+}
+
+/// The error for the letter at `pos` with no number at `after_letter`.
+fn letter_alone(text: &[u8], pos: usize, after_letter: usize, place: Place) -> Located {
+    let b = text[pos];
+    let from = &text[pos..];
+    match text.get(after_letter) {
+        Some(b'#') => place.err(after_letter, parameters(from)),
+        Some(b'[') => place.err(after_letter, expressions(from)),
+        // `X=10.`, `R1=5` (Siemens-style assignments).
+        Some(b'=') => place.err(after_letter, assignments(from)),
+        None => place.err(
+            pos,
+            format!(
+                "truncated word: letter `{}` with no number at the end of the line",
+                b as char
+            ),
+        ),
+        Some(_) => place.err(
+            pos,
+            format!("letter `{}` without a number: `{}`", b as char, show(from)),
+        ),
+    }
+}
+
+/// The error for the byte at `pos`: neither space, comment nor letter.
+fn not_a_word(text: &[u8], pos: usize, place: Place) -> Located {
+    let b = text[pos];
+    let from = &text[pos..];
+    let msg = match b {
+        b'#' => parameters(from),
+        b'[' | b']' => expressions(from),
+        b'=' => assignments(from),
+        _ if b.is_ascii_digit() || b == b'.' || b == b'-' || b == b'+' => {
+            format!("number without a letter: `{}`", show(from))
+        }
+        _ if b.is_ascii_graphic() => {
+            format!("unexpected character `{}` outside a comment", b as char)
+        }
+        _ => format!("unexpected character byte 0x{b:02X} outside a comment"),
+    };
+    place.err(pos, msg)
+}
+
+fn parameters(from: &[u8]) -> String {
+    format!(
+        "`#` parameters cannot be compensated offline (expand them in CAM): `{}`",
+        show(from)
+    )
+}
+
+fn expressions(from: &[u8]) -> String {
+    format!(
+        "`[ ]` expressions cannot be compensated offline (expand them in CAM): `{}`",
+        show(from)
+    )
+}
+
+fn assignments(from: &[u8]) -> String {
+    format!(
+        "assignments cannot be compensated offline: `{}`",
+        show(from)
+    )
 }
 
 fn skip_ws(text: &[u8], mut pos: usize) -> usize {
