@@ -140,7 +140,10 @@ fn sample_module_structure() {
     // 2 MoveAbsJ + 2 MoveJ pClear + 12 holes × 4 moves.
     assert_eq!(m.moves().count(), 52);
     let holes = m.decl("HOLES").expect("case-insensitive lookup");
-    assert_eq!(holes.dims, vec![12]);
+    assert_eq!(
+        holes.dims.iter().map(|d| d.value).collect::<Vec<_>>(),
+        vec![Some(12)]
+    );
     assert_eq!(holes.data_type, DataType::RobTarget);
     let Some(DataValue::Array { items, .. }) = &holes.value else {
         panic!("holes is an array");
@@ -561,4 +564,208 @@ proptest! {
         let plain: [String; 4] = n.map(|c| format_fixed(c, 6).expect("finite"));
         prop_assert!(written_angle(&t6, &n) <= written_angle(&plain, &n) + 1e-15);
     }
+}
+
+/// A module shaped like a controller backup's data module: a `%%%`
+/// header, record types (one LOCAL) with their fields, a record declared
+/// with one, and arrays sized by constants.
+const CELL_DATA: &str = "%%%\r\n  VERSION:1\r\n  LANGUAGE:ENGLISH\r\n%%%\r\n\r\nMODULE CellData\r\n  CONST num MAX_BUFFER := 16;\r\n  CONST num nRows := 3;\r\n  CONST num nCols := 2;\r\n  RECORD partdata\r\n    robtarget pPick;\r\n    ! where the part goes\r\n    robtarget pPlace;\r\n    num nHeight;\r\n  ENDRECORD\r\n  LOCAL RECORD counters\r\n    num nGood; num nBad;\r\n  ENDRECORD\r\n  PERS partdata part1 := [[[612,-85,240],[0,0,1,0],[0,0,0,0],[9E9,9E9,9E9,9E9,9E9,9E9]],[[300,410,120],[0,0,1,0],[1,0,1,0],[9E9,9E9,9E9,9E9,9E9,9E9]],35];\r\n  VAR robtarget buf{MAX_BUFFER};\r\n  CONST num slots{nRows * nCols, nCols DIV 2 + (1 - 1)} := [[1],[2],[3],[4],[5],[6]];\r\n  VAR num tbl{nRows+1} := [0,0,0,0];\r\n  VAR num other{nUnknown};\r\n  PROC main()\r\n    VAR num local{nRows};\r\n    MoveL part1.pPick, v500, z10, tool0;\r\n  ENDPROC\r\nENDMODULE\r\n";
+
+#[test]
+fn records_and_constant_array_sizes_are_read() {
+    let m = parse(CELL_DATA);
+    let header = m.header.clone().expect("header");
+    assert_eq!(
+        &CELL_DATA[header],
+        "%%%\r\n  VERSION:1\r\n  LANGUAGE:ENGLISH\r\n%%%"
+    );
+    assert_eq!(m.name, "CellData");
+    assert_eq!(m.records.len(), 2);
+    let part = m.record("PARTDATA").expect("record by name, any case");
+    assert_eq!(part.scope, Scope::Global);
+    let fields: Vec<(&str, &str)> = part
+        .fields
+        .iter()
+        .map(|f| (f.type_name.as_str(), f.name.as_str()))
+        .collect();
+    assert_eq!(
+        fields,
+        vec![
+            ("robtarget", "pPick"),
+            ("robtarget", "pPlace"),
+            ("num", "nHeight")
+        ]
+    );
+    assert_eq!(part.fields[1].data_type, DataType::RobTarget);
+    assert_eq!(part.field("pplace").map(|(k, _)| k), Some(1));
+    assert_eq!(&CELL_DATA[part.fields[2].span.clone()], "num nHeight;");
+    assert!(CELL_DATA[part.span.clone()].starts_with("RECORD partdata"));
+    assert!(CELL_DATA[part.span.clone()].ends_with("ENDRECORD"));
+    assert_eq!(part.line, 10);
+    let counters = m.record("counters").expect("local record");
+    assert_eq!(counters.scope, Scope::Local);
+    assert_eq!(counters.fields.len(), 2);
+    // A declaration of a record type keeps its value as written.
+    let part1 = m.decl("part1").expect("part1");
+    assert_eq!(part1.type_name, "partdata");
+    assert!(matches!(part1.value, Some(DataValue::Other { .. })));
+    let dims = |name: &str| -> Vec<(String, Option<usize>)> {
+        m.decl(name)
+            .expect(name)
+            .dims
+            .iter()
+            .map(|d| (CELL_DATA[d.span.clone()].to_string(), d.value))
+            .collect()
+    };
+    assert_eq!(dims("buf"), vec![("MAX_BUFFER".to_string(), Some(16))]);
+    assert_eq!(
+        dims("slots"),
+        vec![
+            ("nRows * nCols".to_string(), Some(6)),
+            ("nCols DIV 2 + (1 - 1)".to_string(), Some(1))
+        ]
+    );
+    assert_eq!(dims("tbl"), vec![("nRows+1".to_string(), Some(4))]);
+    // A constant of another module: the size is not known here.
+    assert_eq!(dims("other"), vec![("nUnknown".to_string(), None)]);
+    assert_eq!(m.moves().count(), 1);
+    assert_eq!(apply_edits(CELL_DATA, &[]).expect("no edits"), CELL_DATA);
+}
+
+#[test]
+fn constant_array_sizes_are_checked_and_errors_located() {
+    let e = parse_err("MODULE M\nCONST num N := 2;\nCONST num a{N*2} := [1,2,3];\nENDMODULE\n");
+    assert!(
+        e.starts_with("t.mod:3:21: array declared with 4 elements has 3"),
+        "{e}"
+    );
+    // A size that is not a constant integer: no value, no check.
+    for size in ["N/2", "M", "N+", "0-N", "2.5", "PERS_N"] {
+        let src = format!(
+            "MODULE M\nCONST num N := 2;\nPERS num PERS_N := 2;\nCONST num a{{{size}}} := [1,2,3];\nENDMODULE\n"
+        );
+        let m = parse(&src);
+        assert_eq!(m.decl("a").expect("a").dims[0].value, None, "{size}");
+    }
+    let e = parse_err("MODULE M\nCONST num a{0} := [];\nENDMODULE\n");
+    assert!(
+        e.starts_with("t.mod:2:13: array size must be at least 1"),
+        "{e}"
+    );
+    let e = parse_err("MODULE M\nVAR num a{};\nENDMODULE\n");
+    assert!(e.starts_with("t.mod:2:11: expected an array size"), "{e}");
+    let e = parse_err("MODULE M\nVAR num a{2;\nENDMODULE\n");
+    assert!(e.starts_with("t.mod:2:"), "{e}");
+    // Records: a missing ENDRECORD and a field without its `;`.
+    let e = parse_err("MODULE M\nRECORD r\n  num a;\nPROC main()\nENDPROC\nENDMODULE\n");
+    assert!(
+        e.starts_with("t.mod:2:1: unterminated RECORD r: expected ENDRECORD"),
+        "{e}"
+    );
+    let e = parse_err("MODULE M\nRECORD r\n  num a\n  num b;\nENDRECORD\nENDMODULE\n");
+    assert!(
+        e.starts_with("t.mod:3:8: expected `;` to end the field a"),
+        "{e}"
+    );
+    let e = parse_err("MODULE M\nRECORD\nENDRECORD\nENDMODULE\n");
+    assert!(e.starts_with("t.mod:3:1: expected a record name"), "{e}");
+}
+
+/// An error handler for a list of error numbers, and compact `IF`s with
+/// their statement on the same line or the next, in a socket loop.
+#[test]
+fn error_lists_and_compact_ifs_are_read() {
+    let src = "MODULE PcLink\n  VAR socketdev sock;\n  VAR string msg;\n  PROC serve(bool bHome)\n    WHILE TRUE DO\n      SocketReceive sock \\Str:=msg \\Time:=10;\n      IF msg = \"home\"\n        MoveJ pHome, v1000, fine, tool0;\n      IF bHome AND (msg <> \"\") ! the same, checked twice\n        TPWrite \"home\";\n      IF msg = \"quit\" RETURN;\n    ENDWHILE\n  ERROR (ERR_SOCK_TIMEOUT,\n         ERR_SOCK_CLOSED)\n    SocketClose sock;\n    RETRY;\n  ENDPROC\n  TRAP stop\n    StopMove;\n  ERROR\n    RETURN;\n  ENDTRAP\nENDMODULE\n";
+    let m = parse(src);
+    let body = &m.procs[0].body;
+    let texts: Vec<&str> = body.iter().map(|s| &src[s.span()]).collect();
+    assert_eq!(
+        texts,
+        vec![
+            "WHILE TRUE DO",
+            "SocketReceive sock \\Str:=msg \\Time:=10;",
+            "IF msg = \"home\"\n        MoveJ pHome, v1000, fine, tool0;",
+            "IF bHome AND (msg <> \"\") ! the same, checked twice\n        TPWrite \"home\";",
+            "IF msg = \"quit\" RETURN;",
+            "ENDWHILE",
+            "ERROR (ERR_SOCK_TIMEOUT,\n         ERR_SOCK_CLOSED)",
+            "SocketClose sock;",
+            "RETRY;",
+        ]
+    );
+    assert!(matches!(&body[2], Stmt::Opaque { line: 7, .. }));
+    assert!(matches!(&body[6], Stmt::Control { keyword, line: 13, .. } if keyword == "ERROR"));
+    let trap = &m.procs[1].body;
+    assert!(matches!(&trap[1], Stmt::Control { keyword, .. } if keyword == "ERROR"));
+    // A compact IF whose next line is not a statement of its own is an error.
+    for bad in [
+        "MODULE M\nPROC a()\n  IF x\n  ENDPROC\nENDMODULE\n",
+        "MODULE M\nPROC a()\n  IF x\n    IF y THEN\n  ENDIF\nENDPROC\nENDMODULE\n",
+        "MODULE M\nPROC a()\n  IF x\n    MoveL p, v1, z1;\nENDPROC\nENDMODULE\n",
+        "MODULE M\nPROC a()\n  ERROR (ERR_A\nENDPROC\nENDMODULE\n",
+    ] {
+        let e = parse_err(bad);
+        assert!(e.starts_with("t.mod:"), "{e}");
+    }
+}
+
+/// Editor placeholders are kept byte for byte; a routine holding one is
+/// marked and gives no moves; the others are as without it.
+#[test]
+fn editor_placeholders_mark_their_routine() {
+    let md = grammar();
+    let src = blocks(&md, "rapid")
+        .into_iter()
+        .find(|b| b.contains("MODULE Unfinished"))
+        .expect("the placeholder example");
+    let m = parse(&src);
+    let marked: Vec<(&str, bool)> = m
+        .procs
+        .iter()
+        .map(|p| (p.name.as_str(), p.placeholder))
+        .collect();
+    assert_eq!(
+        marked,
+        vec![("pick", true), ("place", false), ("<ID>", true)]
+    );
+    assert_eq!(m.placeholders.len(), 1);
+    assert_eq!(&src[m.placeholders[0].clone()], "<DDN>");
+    assert_eq!(m.decl("<ID>").map(|d| d.type_name.as_str()), Some("num"));
+    // Only the finished routine's move is a move to compensate.
+    let moves: Vec<&str> = m.moves().map(|mv| &src[mv.span.clone()]).collect();
+    assert_eq!(moves, vec!["MoveL pPlace, v500, fine, tool0;"]);
+    let pick = &m.procs[0].body;
+    let texts: Vec<&str> = pick.iter().map(|s| &src[s.span()]).collect();
+    assert_eq!(
+        texts,
+        vec![
+            "MoveL pApproach, v500, z10, tool0;",
+            "<SMT>",
+            "IF <EXP> THEN",
+            "<SMT>",
+            "<EIT>",
+            "ENDIF",
+            "MoveL <EXP>, v100, fine, tool0;",
+        ]
+    );
+    // The moves are still in the tree of the marked routine.
+    assert_eq!(
+        pick.iter().filter(|s| matches!(s, Stmt::Move(_))).count(),
+        2
+    );
+    // A placeholder in a comment or a string is text, not a placeholder;
+    // an unfinished move with too few arguments is kept as written.
+    let src = "MODULE M\n  PROC a()\n    ! <SMT> still to do\n    TPWrite \"<EXP>\";\n    MoveL p1, v100, z10, tool0;\n  ENDPROC\n  PROC b()\n    MoveL <ARG>;\n    <SMT>;\n  ENDPROC\nENDMODULE\n";
+    let m = parse(src);
+    assert!(!m.procs[0].placeholder);
+    assert!(m.procs[1].placeholder);
+    assert_eq!(m.moves().count(), 1);
+    assert_eq!(&src[m.procs[1].body[0].span()], "MoveL <ARG>;");
+    assert_eq!(&src[m.procs[1].body[1].span()], "<SMT>;");
+    // Not placeholders: lower case, unknown names; an unfinished move
+    // without one is still an error.
+    let e = parse_err("MODULE M\nPROC a()\n  <smt>\nENDPROC\nENDMODULE\n");
+    assert!(e.starts_with("t.mod:3:"), "{e}");
+    let e = parse_err("MODULE M\nPROC a()\n  MoveL p1;\nENDPROC\nENDMODULE\n");
+    assert!(e.starts_with("t.mod:3:3: MoveL takes 4 arguments"), "{e}");
 }

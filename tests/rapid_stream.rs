@@ -765,3 +765,59 @@ fn one_megabyte_module() -> String {
     src.push_str("  ENDPROC\nENDMODULE\n");
     src
 }
+
+/// A module in the shape controller backups have: a `%%%` header, a
+/// record type and a constant-sized array among the declarations, a
+/// compact `IF` with its move on the next line and an error handler with a
+/// list of error numbers. Read a window at a time it gives the bytes and
+/// messages of the module read whole; with an editor placeholder in a
+/// routine it is read whole (the routine is left as written as a whole).
+#[test]
+fn real_module_constructs_read_a_window_at_a_time() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let head = "%%%\r\n  VERSION:1\r\n  LANGUAGE:ENGLISH\r\n%%%\r\n\r\nMODULE Cell\r\n  CONST num N := 2;\r\n  RECORD partdata\r\n    robtarget pPick;\r\n    num nHeight;\r\n  ENDRECORD\r\n  CONST robtarget p1 := [[750,0,500],[0,0,1,0],[0,0,0,0],[9E9,9E9,9E9,9E9,9E9,9E9]];\r\n  CONST robtarget p2 := [[760,20,480],[0,0,1,0],[0,0,0,0],[9E9,9E9,9E9,9E9,9E9,9E9]];\r\n  CONST robtarget row{N} := [[[700,30,450],[0,0,1,0],[0,0,0,0],[9E9,9E9,9E9,9E9,9E9,9E9]],\r\n    [[700,80,450],[0,0,1,0],[0,0,0,0],[9E9,9E9,9E9,9E9,9E9,9E9]]];\r\n";
+    let main = "  PROC main()\r\n    MoveJ p1, v1000, z50, tool0;\r\n    IF bSkip\r\n      MoveL p2, v100, fine, tool0;\r\n    MoveL row{1}, v100, z10, tool0;\r\n    MoveL row{2}, v100, fine, tool0;\r\n  ERROR (ERR_PATH_STOP,\r\n      ERR_COLL_STOP)\r\n    RETRY;\r\n  ENDPROC\r\n";
+    let teach = "  PROC teach()\r\n    MoveL p1, v100, fine, tool0;\r\n    <SMT>\r\n  ENDPROC\r\n";
+    let plain = format!("{head}{main}ENDMODULE\r\n");
+    let unfinished = format!("{head}{main}{teach}ENDMODULE\r\n");
+    for (k, (src, windows)) in [(&plain, true), (&unfinished, false)].iter().enumerate() {
+        let path = dir.path().join(format!("cell{k}.mod"));
+        std::fs::write(&path, src).expect("write");
+        let p = path.to_str().unwrap();
+        let whole_out = dir.path().join(format!("whole{k}.mod"));
+        let (code, _, err) = run(&[
+            "compensate",
+            "--machine",
+            "abb-irb1600",
+            "-o",
+            whole_out.to_str().unwrap(),
+            p,
+        ]);
+        assert_eq!(code, 0, "{err}");
+        let want = std::fs::read(&whole_out).expect("output");
+        for lines in ["1", "2", "5"] {
+            let out = dir.path().join(format!("w{k}_{lines}.mod"));
+            let args = ["--machine", "abb-irb1600", "-o", out.to_str().unwrap(), p];
+            let (code, _, err) = run_windowed("compensate", lines, &args);
+            assert_eq!(code, 0, "{err}");
+            assert_eq!(err.contains("at a time"), *windows, "{err}");
+            if !windows {
+                assert!(err.contains("editor placeholder"), "{err}");
+            }
+            assert_eq!(std::fs::read(&out).expect("output"), want, "case {k}");
+            let check = run_windowed("check", lines, &["--machine", "abb-irb1600", p]);
+            assert_eq!(check.0, 0, "{}", check.2);
+            // The move in the compact IF is passed through; the one of
+            // the unfinished routine is not counted.
+            assert!(
+                String::from_utf8_lossy(&check.1).contains("3 moves"),
+                "{}",
+                String::from_utf8_lossy(&check.1)
+            );
+        }
+        // The unfinished routine is written as it was read.
+        let text = String::from_utf8(want).expect("utf-8");
+        assert_eq!(text.contains(teach), !*windows);
+        assert!(!text.contains(main), "main is compensated");
+    }
+}

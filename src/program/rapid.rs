@@ -271,14 +271,122 @@ pub struct Decl {
     pub name: String,
     /// Span of the data name.
     pub name_span: Span,
-    /// Array dimensions (`{12}` gives `[12]`); empty for a scalar.
-    pub dims: Vec<usize>,
+    /// Array dimensions (`{12}`, `{MAX_BUFFER}`, `{N+1, 3}`); empty for a
+    /// scalar.
+    pub dims: Vec<Dim>,
     /// The initial value, if any.
     pub value: Option<DataValue>,
     /// From the first keyword to the `;` included.
     pub span: Span,
     /// 1-based line of the first keyword.
     pub line: usize,
+}
+
+/// One array dimension of a declaration: an integer literal or a constant
+/// expression (`MAX_BUFFER`, `N+1`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Dim {
+    /// Span of its text, trimmed.
+    pub span: Span,
+    /// Its value: the literal, or the expression evaluated with the
+    /// module's `CONST num` declarations before it (integers, `+`, `-`,
+    /// `*`, `DIV`, parentheses); `None` when it cannot be known from the
+    /// module (a constant of another module, an editor placeholder).
+    pub value: Option<usize>,
+}
+
+/// A field of a `RECORD`: `type name;`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Field {
+    /// Classified type.
+    pub data_type: DataType,
+    /// The type name as written.
+    pub type_name: String,
+    /// The field name as written.
+    pub name: String,
+    /// From the type name to the `;` included.
+    pub span: Span,
+}
+
+/// A record type declaration `[LOCAL] RECORD name { type field; } ENDRECORD`,
+/// kept as written (a data declaration of its type is an ordinary
+/// declaration whose value is passed through).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Record {
+    /// Scope prefix.
+    pub scope: Scope,
+    /// The record type name as written.
+    pub name: String,
+    /// The fields, in order.
+    pub fields: Vec<Field>,
+    /// From the first keyword to `ENDRECORD` included.
+    pub span: Span,
+    /// 1-based line of the first keyword.
+    pub line: usize,
+}
+
+impl Record {
+    /// The field named `name` (case-insensitive) and its 0-based position.
+    pub fn field(&self, name: &str) -> Option<(usize, &Field)> {
+        self.fields
+            .iter()
+            .enumerate()
+            .find(|(_, f)| f.name.eq_ignore_ascii_case(name))
+    }
+}
+
+/// The editor placeholders of RAPID (the program editor writes them where
+/// a part of the program is still to be filled in): type, data and routine
+/// declarations, parameters, alternative parameters, array dimensions,
+/// statements, data references, `ELSEIF` and `CASE` clauses, expressions,
+/// arguments and identifiers.
+pub const PLACEHOLDERS: [&str; 13] = [
+    "<TDN>", "<DDN>", "<RDN>", "<PAR>", "<ALT>", "<DIM>", "<SMT>", "<VAR>", "<EIT>", "<CSE>",
+    "<EXP>", "<ARG>", "<ID>",
+];
+
+/// The placeholder at the start of `text` ([`PLACEHOLDERS`], as written:
+/// upper case), if any.
+pub fn placeholder_at(text: &str) -> Option<&'static str> {
+    if !text.starts_with('<') {
+        return None;
+    }
+    PLACEHOLDERS.iter().copied().find(|p| text.starts_with(p))
+}
+
+/// Byte offset of the first editor placeholder in `text` that is code (not
+/// in a `!` comment or a string literal), if any.
+pub fn find_placeholder(text: &str) -> Option<usize> {
+    let mut from = 0;
+    while let Some(k) = text.get(from..).and_then(|t| t.find('<')) {
+        let at = from + k;
+        if placeholder_at(text.get(at..).unwrap_or("")).is_some() {
+            let line_start = text
+                .get(..at)
+                .and_then(|t| t.rfind('\n'))
+                .map_or(0, |p| p + 1);
+            let line = text.get(line_start..at).unwrap_or("");
+            if is_code_end(line) {
+                return Some(at);
+            }
+        }
+        from = at + 1;
+    }
+    None
+}
+
+/// True when the end of `line` (a line's text up to a position) is code:
+/// outside a string literal and before any `!` comment.
+fn is_code_end(line: &str) -> bool {
+    let mut in_string = false;
+    for b in line.bytes() {
+        match b {
+            b'"' => in_string = !in_string,
+            b'!' if !in_string => return false,
+            _ => {}
+        }
+    }
+    !in_string
 }
 
 /// An argument passed as written: its trimmed text and span.
@@ -519,6 +627,10 @@ pub struct Proc {
     pub span: Span,
     /// 1-based line of the routine keyword.
     pub line: usize,
+    /// True when the routine holds an editor placeholder (`<SMT>`,
+    /// `<EXP>`, … in its code): it is unfinished, and is left as written
+    /// ([`Module::moves`] passes over it).
+    pub placeholder: bool,
 }
 
 /// A parsed RAPID module.
@@ -534,6 +646,11 @@ pub struct Module {
     pub attributes: Option<Span>,
     /// Module-level declarations, in order.
     pub decls: Vec<Decl>,
+    /// Record type declarations, in order.
+    pub records: Vec<Record>,
+    /// Editor placeholders standing for a module-level declaration
+    /// (`<DDN>`, `<RDN>`, `<TDN>`), in order.
+    pub placeholders: Vec<Span>,
     /// Routines, in order.
     pub procs: Vec<Proc>,
 }
@@ -553,9 +670,18 @@ impl Module {
             .find(|p| p.name.eq_ignore_ascii_case(name))
     }
 
-    /// Every motion instruction of every routine, in source order.
+    /// The record type named `name` (case-insensitive).
+    pub fn record(&self, name: &str) -> Option<&Record> {
+        self.records
+            .iter()
+            .find(|r| r.name.eq_ignore_ascii_case(name))
+    }
+
+    /// Every motion instruction of every routine, in source order, except
+    /// those of routines holding an editor placeholder ([`Proc::placeholder`]):
+    /// an unfinished routine is left as written.
     pub fn moves(&self) -> impl Iterator<Item = &Move> {
-        self.procs.iter().flat_map(|p| {
+        self.procs.iter().filter(|p| !p.placeholder).flat_map(|p| {
             p.body.iter().filter_map(|s| match s {
                 Stmt::Move(m) => Some(m.as_ref()),
                 _ => None,

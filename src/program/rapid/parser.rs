@@ -9,8 +9,9 @@ use nom::IResult;
 use nom::error::{ErrorKind, ParseError};
 
 use super::{
-    Arg, DataType, Decl, Index, Module, Move, MoveKind, Number, OptArg, Proc, RobTarget,
-    RoutineKind, Scalar, Scope, Span, Stmt, Storage, Target,
+    Arg, DataType, DataValue, Decl, Dim, Field, Index, Module, Move, MoveKind, Number, OptArg,
+    Proc, Record, RobTarget, RoutineKind, Scalar, Scope, Span, Stmt, Storage, Target,
+    find_placeholder, placeholder_at,
 };
 use crate::error::Located;
 
@@ -92,6 +93,8 @@ const STATEMENT_WORDS: &[&str] = &[
     "PERS",
     "LOCAL",
     "RETURN",
+    "RECORD",
+    "ENDRECORD",
 ];
 
 fn is_ident_byte(b: u8) -> bool {
@@ -575,7 +578,9 @@ impl<'a> Parser<'a> {
             attributes = Some(a0..a0 + k);
             i = &a[k + 1..];
         }
-        let mut decls = Vec::new();
+        let mut decls: Vec<Decl> = Vec::new();
+        let mut records = Vec::new();
+        let mut placeholders = Vec::new();
         let mut procs = Vec::new();
         loop {
             i = ws(i);
@@ -592,8 +597,16 @@ impl<'a> Parser<'a> {
             let (scope, r) = scope_prefix(i);
             let r = ws(r);
             if storage_kw(r).is_some() {
-                let (rest, d) = self.decl(i)?;
+                let (rest, mut d) = self.decl(i)?;
+                self.evaluate_dims(&mut d, &decls)?;
                 decls.push(d);
+                i = rest;
+            } else if let Some(r) = kw(r, "RECORD") {
+                let (rest, rec) = self.record(i, r, scope)?;
+                records.push(rec);
+                i = rest;
+            } else if let Some((rest, span)) = self.alone_placeholder(i) {
+                placeholders.push(span);
                 i = rest;
             } else if routine_kw(r).is_some() {
                 let (rest, p) = self.routine(i, scope)?;
@@ -602,7 +615,7 @@ impl<'a> Parser<'a> {
             } else {
                 return self.fail_found(
                     self.pos(i),
-                    "expected a declaration (CONST, PERS, VAR), a routine (PROC, FUNC, TRAP) or ENDMODULE",
+                    "expected a declaration (CONST, PERS, VAR, RECORD), a routine (PROC, FUNC, TRAP) or ENDMODULE",
                 );
             }
         }
@@ -619,9 +632,116 @@ impl<'a> Parser<'a> {
                 header,
                 attributes,
                 decls,
+                records,
+                placeholders,
                 procs,
             },
         ))
+    }
+
+    /// A placeholder that stands alone for a statement or declaration
+    /// (`<SMT>`, `<DDN>`, …), with its `;` when one follows on its line:
+    /// the rest and its span. `None` when `i` starts otherwise, or when
+    /// more code follows the placeholder on its line (`<VAR> := <EXP>;`).
+    fn alone_placeholder(&self, i: &'a str) -> Option<(&'a str, Span)> {
+        let p = placeholder_at(i)?;
+        let start = self.pos(i);
+        let after = i.get(p.len()..)?;
+        let r = inline_ws(after);
+        if let Some(r) = r.strip_prefix(';') {
+            return Some((r, start..self.pos(r)));
+        }
+        let line_end = matches!(r.as_bytes().first(), None | Some(b'\r' | b'\n' | b'!'));
+        line_end.then(|| (after, start..self.pos(after)))
+    }
+
+    /// `[LOCAL] RECORD name { type field; } ENDRECORD`; `i` starts at the
+    /// first keyword, `r` just after `RECORD`.
+    fn record(&self, i: &'a str, r: &'a str, scope: Scope) -> PResult<'a, Record> {
+        let start = self.pos(i);
+        let r = ws(r);
+        let name = match ident(r) {
+            Ok((_, name)) if name.eq_ignore_ascii_case("ENDRECORD") => None,
+            Ok(found) => Some(found),
+            Err(_) => None,
+        };
+        let Some((mut r, name)) = name else {
+            return self.fail_found(self.pos(r), "expected a record name after RECORD");
+        };
+        let mut fields = Vec::new();
+        loop {
+            r = ws(r);
+            if let Some(rest) = kw(r, "ENDRECORD") {
+                return Ok((
+                    rest,
+                    Record {
+                        scope,
+                        name: name.to_string(),
+                        fields,
+                        span: start..self.pos(rest),
+                        line: self.line_of(start),
+                    },
+                ));
+            }
+            let field_start = self.pos(r);
+            if r.is_empty() || ends_routine(r) || kw(r, "RECORD").is_some() {
+                return self.fail_found(
+                    start,
+                    &format!("unterminated RECORD {name}: expected ENDRECORD"),
+                );
+            }
+            let Ok((r1, type_name)) = ident(r) else {
+                return self.fail_found(field_start, "expected a field `type name;` or ENDRECORD");
+            };
+            let r1 = ws(r1);
+            let Ok((r2, field)) = ident(r1) else {
+                return self.fail_found(self.pos(r1), "expected a field name after its type");
+            };
+            let last = self.pos(r2);
+            let Some(r3) = ws(r2).strip_prefix(';') else {
+                return self.fail_after(last, &format!("expected `;` to end the field {field}"));
+            };
+            fields.push(Field {
+                data_type: DataType::from_name(type_name),
+                type_name: type_name.to_string(),
+                name: field.to_string(),
+                span: field_start..self.pos(r3),
+            });
+            r = r3;
+        }
+    }
+
+    /// Gives the array sizes of `d` that are constant expressions their
+    /// value from the `CONST num` declarations `before` it, and checks an
+    /// array value against them.
+    fn evaluate_dims(&self, d: &mut Decl, before: &[Decl]) -> Result<(), nom::Err<PErr<'a>>> {
+        if d.dims.iter().all(|x| x.value.is_some()) {
+            return Ok(());
+        }
+        for dim in &mut d.dims {
+            if dim.value.is_none() {
+                let text = self.src.get(dim.span.clone()).unwrap_or("");
+                dim.value = super::typed::const_int(text, before)
+                    .and_then(|v| usize::try_from(v).ok().filter(|&n| n > 0));
+            }
+        }
+        let mut value = d.value.as_ref();
+        for dim in &d.dims {
+            let Some(DataValue::Array { span, items }) = value else {
+                break;
+            };
+            if let Some(n) = dim.value.filter(|&n| n != items.len()) {
+                return Err(self.err_found(
+                    span.start,
+                    &format!(
+                        "array declared with {n} elements has {} in its value",
+                        items.len()
+                    ),
+                ));
+            }
+            value = items.first();
+        }
+        Ok(())
     }
 
     // ----- declarations ------------------------------------------------
@@ -635,11 +755,11 @@ impl<'a> Parser<'a> {
             return self.fail_found(self.pos(r), "expected CONST, PERS or VAR");
         };
         let r = ws(r);
-        let Ok((r, type_name)) = ident(r) else {
+        let Ok((r, type_name)) = ident_or_placeholder(r) else {
             return self.fail_found(self.pos(r), "expected a data type name");
         };
         let r = ws(r);
-        let Ok((r, name)) = ident(r) else {
+        let Ok((r, name)) = ident_or_placeholder(r) else {
             return self.fail_found(self.pos(r), "expected a data name");
         };
         let name_span = self.pos(r) - name.len()..self.pos(r);
@@ -650,16 +770,22 @@ impl<'a> Parser<'a> {
             let mut d = d;
             loop {
                 let d1 = ws(d);
-                let nd = digits(d1.as_bytes());
-                let (Some(d2), Some(digits)) = (d1.get(nd..), d1.get(..nd).filter(|_| nd > 0))
-                else {
-                    return self
-                        .fail_found(self.pos(d1), "expected an integer array size inside `{…}`");
+                if d1.starts_with([',', '}']) {
+                    return self.fail_found(self.pos(d1), "expected an array size inside `{…}`");
+                }
+                let (d2, span) = self.expr(d1, b",}")?;
+                let text = self.src.get(span.clone()).unwrap_or("");
+                let value = if !text.is_empty() && text.bytes().all(|b| b.is_ascii_digit()) {
+                    match text.parse::<usize>().ok().filter(|&n| n > 0) {
+                        Some(n) => Some(n),
+                        None => {
+                            return self.fail_found(span.start, "array size must be at least 1");
+                        }
+                    }
+                } else {
+                    None
                 };
-                let Some(n) = digits.parse::<usize>().ok().filter(|&n| n > 0) else {
-                    return self.fail_found(self.pos(d1), "array size must be at least 1");
-                };
-                dims.push(n);
+                dims.push(Dim { span, value });
                 let d3 = ws(d2);
                 if let Some(d4) = d3.strip_prefix(',') {
                     d = d4;
@@ -1002,7 +1128,7 @@ impl<'a> Parser<'a> {
             };
             r = ws(r1);
         }
-        let Ok((r1, name)) = ident(r) else {
+        let Ok((r1, name)) = ident_or_placeholder(r) else {
             return self.fail_found(
                 self.pos(r),
                 &format!("expected a routine name after {word}"),
@@ -1035,6 +1161,8 @@ impl<'a> Parser<'a> {
                 );
             }
             if let Some(rest) = kw(r, end_word) {
+                let span = start..self.pos(rest);
+                let text = self.src.get(span.clone()).unwrap_or("");
                 return Ok((
                     rest,
                     Proc {
@@ -1043,8 +1171,9 @@ impl<'a> Parser<'a> {
                         name: name.to_string(),
                         params,
                         body,
-                        span: start..self.pos(rest),
+                        span,
                         line: self.line_of(start),
+                        placeholder: find_placeholder(text).is_some(),
                     },
                 ));
             }
@@ -1093,9 +1222,15 @@ impl<'a> Parser<'a> {
             ("MoveAbsJ", MoveKind::MoveAbsJ),
         ] {
             if let Some(r) = kw(i, word) {
-                let (r, m) = self.move_stmt(i, r, kind)?;
-                return Ok((r, Stmt::Move(Box::new(m))));
+                return match self.move_stmt(i, r, kind) {
+                    Ok((r, m)) => Ok((r, Stmt::Move(Box::new(m)))),
+                    // An unfinished move (`MoveL <ARG>;`) is kept as written.
+                    Err(e) => self.opaque_with_placeholder(i).ok_or(e),
+                };
             }
+        }
+        if let Some((r, span)) = self.alone_placeholder(i) {
+            return Ok((r, Stmt::Opaque { span, line }));
         }
         let control = |r: &'a str, keyword: &str| -> PResult<'a, Stmt> {
             Ok((
@@ -1107,8 +1242,22 @@ impl<'a> Parser<'a> {
                 },
             ))
         };
+        if let Some(r) = kw(i, "ERROR") {
+            // An error handler for the listed error numbers only:
+            // `ERROR (ERR_SOCK_TIMEOUT, ERR_SOCK_CLOSED)`.
+            let r1 = inline_ws(r);
+            if let Some(list) = r1.strip_prefix('(') {
+                let scan = self.scan(list, b";", &[], false)?;
+                let rest = list.get(scan.stop..).unwrap_or("");
+                let Some(after) = rest.strip_prefix(')') else {
+                    return self.fail_found(self.pos(r1), "expected `)` to close the ERROR list");
+                };
+                return control(after, "ERROR");
+            }
+            return control(r, "ERROR");
+        }
         for word in [
-            "ELSE", "ENDIF", "ENDFOR", "ENDWHILE", "ENDTEST", "ERROR", "BACKWARD", "UNDO",
+            "ELSE", "ENDIF", "ENDFOR", "ENDWHILE", "ENDTEST", "BACKWARD", "UNDO",
         ] {
             if let Some(r) = kw(i, word) {
                 return control(r, word);
@@ -1122,7 +1271,13 @@ impl<'a> Parser<'a> {
             ("WHILE", "DO"),
         ] {
             if let Some(r) = kw(i, word) {
-                let scan = self.scan(r, b";", &[until], false)?;
+                let scan = match self.scan(r, b";", &[until], false) {
+                    Ok(scan) => scan,
+                    Err(e) if word == "IF" => {
+                        return self.compact_if_next_line(i, r).ok_or(e);
+                    }
+                    Err(e) => return Err(e),
+                };
                 let rest = r.get(scan.stop..).unwrap_or("");
                 if let Some(after) = kw(rest, until) {
                     return control(after, word);
@@ -1179,6 +1334,51 @@ impl<'a> Parser<'a> {
             None if scan.last == 0 => self.fail_found(start, "unexpected text"),
             None => self.fail_after(start + scan.last, "missing `;` at the end of the statement"),
         }
+    }
+
+    /// A compact `IF cond` whose one statement is on the next line
+    /// (`IF bFlag` then `MoveL p1, v100, fine, tool0;`), as one opaque
+    /// statement: `i` starts at `IF`, `r` just after it. `None` unless the
+    /// condition is the rest of the `IF` line and the next line holds a
+    /// statement other than a control line.
+    fn compact_if_next_line(&self, i: &'a str, r: &'a str) -> Option<(&'a str, Stmt)> {
+        let start = self.pos(i);
+        let line_end = r.find('\n')?;
+        let head = r.get(..line_end)?;
+        let code = head.get(..super::comment_start(head).unwrap_or(head.len()))?;
+        if code.trim().is_empty() || code.contains(';') {
+            return None;
+        }
+        let next = ws(r.get(line_end..)?);
+        let (rest, inner) = self.stmt(next).ok()?;
+        match inner {
+            Stmt::Move(_) | Stmt::Opaque { .. } => Some((
+                rest,
+                Stmt::Opaque {
+                    span: start..self.pos(rest),
+                    line: self.line_of(start),
+                },
+            )),
+            Stmt::Decl(_) | Stmt::Control { .. } => None,
+        }
+    }
+
+    /// The statement at `i` up to its `;` as an opaque statement, when it
+    /// holds an editor placeholder (an unfinished statement is kept as
+    /// written).
+    fn opaque_with_placeholder(&self, i: &'a str) -> Option<(&'a str, Stmt)> {
+        let scan = self.scan(i, b";", &[], false).ok()?;
+        let text = i.get(..scan.stop)?;
+        find_placeholder(text)?;
+        let rest = i.get(scan.stop..)?.strip_prefix(';')?;
+        let start = self.pos(i);
+        Some((
+            rest,
+            Stmt::Opaque {
+                span: start..self.pos(rest),
+                line: self.line_of(start),
+            },
+        ))
     }
 
     // ----- motion instructions -------------------------------------------
@@ -1507,6 +1707,17 @@ impl<'a> Parser<'a> {
     }
 }
 
+/// An identifier, or an editor placeholder standing for one (`<ID>`).
+fn ident_or_placeholder(i: &str) -> PResult<'_, &str> {
+    match placeholder_at(i) {
+        Some(p) => match (i.get(p.len()..), i.get(..p.len())) {
+            (Some(rest), Some(word)) => Ok((rest, word)),
+            _ => Err(no_match(i)),
+        },
+        None => ident(i),
+    }
+}
+
 /// Skips spaces and tabs only.
 fn inline_ws(i: &str) -> &str {
     i.trim_start_matches([' ', '\t'])
@@ -1538,10 +1749,11 @@ fn storage_kw(i: &str) -> Option<(Storage, &str)> {
 /// or the header of the next routine.
 fn ends_routine(t: &str) -> bool {
     let (_, after_scope) = scope_prefix(t);
-    ["ENDMODULE", "ENDPROC", "ENDFUNC", "ENDTRAP"]
+    ["ENDMODULE", "ENDPROC", "ENDFUNC", "ENDTRAP", "ENDRECORD"]
         .iter()
         .any(|w| kw(t, w).is_some())
         || routine_kw(ws(after_scope)).is_some()
+        || kw(ws(after_scope), "RECORD").is_some()
 }
 
 fn routine_kw(i: &str) -> Option<(RoutineKind, &str)> {
@@ -1751,6 +1963,12 @@ mod tests {
             "    MoveL [[1,2,3,[1,0,0,0],[0,0,0,0],[9E9,9E9,9E9,9E9,9E9,9E9]],v100,z1,tool0;\n",
             "    MoveAbsJ [[0,0,0,0,30,0],[9E9,9E9,9E9,9E9,9E9,9E9]],v100,fine,tool0;\n",
             "    MoveL p1,\n      v100,\n      z1,\n      tool0;\n",
+            "    IF a > 1\n      MoveL p1,v100,z1,tool0;\n",
+            "    IF a > 1\n      SetDO do1, 1;\n",
+            "  ERROR (ERR_A,\n    ERR_B)\n",
+            "    <SMT>\n",
+            "    MoveL <EXP>, v100, z1, tool0;\n",
+            "    VAR robtarget buf{MAX_N + 1};\n",
         ];
         let mut outcomes = [0usize; 2];
         for case in 0..60 {

@@ -7,8 +7,8 @@
 
 use super::parser::{Parser, Val};
 use super::{
-    DataType, DataValue, JointTarget, Number, Pose, RobTarget, SpeedData, ToolData, WobjData,
-    ZoneData,
+    DataType, DataValue, Decl, Dim, JointTarget, Number, Pose, RobTarget, SpeedData, Storage,
+    ToolData, WobjData, ZoneData,
 };
 
 type E<'a> = nom::Err<super::parser::PErr<'a>>;
@@ -30,13 +30,13 @@ impl<'a> Parser<'a> {
     pub(super) fn typed_value(
         &self,
         data_type: &DataType,
-        dims: &[usize],
+        dims: &[Dim],
         v: &Val,
     ) -> Result<DataValue, E<'a>> {
-        if let Some((&n, inner)) = dims.split_first() {
+        if let Some((dim, inner)) = dims.split_first() {
             return match v {
                 Val::List { span, items } => {
-                    if items.len() != n {
+                    if let Some(n) = dim.value.filter(|&n| items.len() != n) {
                         return Err(self.err_found(
                             span.start,
                             &format!(
@@ -345,6 +345,129 @@ impl<'a> Parser<'a> {
             Val::Word { text, .. } if text.eq_ignore_ascii_case("FALSE") => Ok(Some(false)),
             Val::Word { .. } | Val::Expr { .. } => Ok(None),
             _ => Err(self.err_found(v.span().start, what)),
+        }
+    }
+}
+
+/// Deepest nesting of parentheses [`const_int`] evaluates.
+const MAX_CONST_DEPTH: usize = 8;
+
+/// The value of a constant integer expression `text` (an array size such
+/// as `MAX_BUFFER` or `N+1`): integer literals, names of `CONST num`
+/// declarations among `decls` with an integer value, `+`, `-`, `*`, `DIV`
+/// and parentheses. `None` for anything else, or on overflow.
+pub(super) fn const_int(text: &str, decls: &[Decl]) -> Option<i64> {
+    let mut e = ConstExpr {
+        b: text.as_bytes(),
+        k: 0,
+        decls,
+    };
+    let v = e.sum(0)?;
+    e.blanks();
+    (e.k == e.b.len()).then_some(v)
+}
+
+/// The state of [`const_int`]: the text and the position in it.
+struct ConstExpr<'t> {
+    b: &'t [u8],
+    k: usize,
+    decls: &'t [Decl],
+}
+
+impl<'t> ConstExpr<'t> {
+    fn blanks(&mut self) {
+        while self.b.get(self.k).is_some_and(u8::is_ascii_whitespace) {
+            self.k += 1;
+        }
+    }
+
+    fn word(&mut self) -> &'t str {
+        let start = self.k;
+        while self
+            .b
+            .get(self.k)
+            .is_some_and(|c| c.is_ascii_alphanumeric() || *c == b'_')
+        {
+            self.k += 1;
+        }
+        let b: &'t [u8] = self.b;
+        std::str::from_utf8(b.get(start..self.k).unwrap_or_default()).unwrap_or("")
+    }
+
+    fn sum(&mut self, depth: usize) -> Option<i64> {
+        let mut v = self.product(depth)?;
+        loop {
+            self.blanks();
+            match self.b.get(self.k) {
+                Some(b'+') => {
+                    self.k += 1;
+                    v = v.checked_add(self.product(depth)?)?;
+                }
+                Some(b'-') => {
+                    self.k += 1;
+                    v = v.checked_sub(self.product(depth)?)?;
+                }
+                _ => return Some(v),
+            }
+        }
+    }
+
+    fn product(&mut self, depth: usize) -> Option<i64> {
+        let mut v = self.factor(depth)?;
+        loop {
+            self.blanks();
+            if self.b.get(self.k) == Some(&b'*') {
+                self.k += 1;
+                v = v.checked_mul(self.factor(depth)?)?;
+                continue;
+            }
+            let save = self.k;
+            if self.word().eq_ignore_ascii_case("DIV") {
+                let d = self.factor(depth)?;
+                v = v.checked_div(d)?;
+                continue;
+            }
+            self.k = save;
+            return Some(v);
+        }
+    }
+
+    fn factor(&mut self, depth: usize) -> Option<i64> {
+        self.blanks();
+        match *self.b.get(self.k)? {
+            b'-' => {
+                self.k += 1;
+                self.factor(depth)?.checked_neg()
+            }
+            b'+' => {
+                self.k += 1;
+                self.factor(depth)
+            }
+            b'(' if depth < MAX_CONST_DEPTH => {
+                self.k += 1;
+                let v = self.sum(depth + 1)?;
+                self.blanks();
+                (self.b.get(self.k) == Some(&b')')).then_some(())?;
+                self.k += 1;
+                Some(v)
+            }
+            c if c.is_ascii_digit() => self.word().parse::<i64>().ok(),
+            c if c.is_ascii_alphabetic() => {
+                let name = self.word();
+                let d = self
+                    .decls
+                    .iter()
+                    .find(|d| d.name.eq_ignore_ascii_case(name))?;
+                match (&d.storage, &d.data_type, &d.value, d.dims.is_empty()) {
+                    (Storage::Const, DataType::Num, Some(DataValue::Num(n)), true)
+                        if n.value.fract() == 0.0 && n.value.abs() < 1e15 =>
+                    {
+                        Some(n.value as i64)
+                    }
+                    _ => None,
+                }
+            }
+            _ => None,
         }
     }
 }

@@ -138,6 +138,12 @@ fn ends_statement(code: &str) -> bool {
         return true;
     }
     let first = first_word(code);
+    // An error handler with its list of error numbers.
+    if first.eq_ignore_ascii_case("ERROR") && code.ends_with(')') {
+        return code
+            .get(first.len()..)
+            .is_some_and(|r| r.trim_start_matches(is_blank).starts_with('('));
+    }
     let last = code
         .rsplit(|c: char| !(c.is_ascii_alphanumeric() || c == '_'))
         .next()
@@ -309,6 +315,11 @@ impl<R: BufRead> Windows<R> {
                             return Err(Unsupported("text after ENDMODULE".into()));
                         }
                     } else if let Some(end_word) = routine_start(code) {
+                        if super::find_placeholder(code).is_some() {
+                            return Err(Unsupported(format!(
+                                "line {line_no}: an editor placeholder in a routine header"
+                            )));
+                        }
                         if !whole_header(code, end_word) {
                             return Err(Unsupported(format!(
                                 "routine header on line {line_no} is not one whole line"
@@ -367,6 +378,12 @@ impl<R: BufRead> Windows<R> {
             if !at_end && BODY_STOP_WORDS.iter().any(|k| word.eq_ignore_ascii_case(k)) {
                 return Err(Unsupported(format!(
                     "line {line_no}: `{word}` in a routine body"
+                )));
+            }
+            if super::find_placeholder(code).is_some() {
+                // The routine is left as written as a whole.
+                return Err(Unsupported(format!(
+                    "line {line_no}: an editor placeholder in a routine body"
                 )));
             }
             let (blank, ends) = (code.is_empty(), ends_statement(code));
@@ -566,6 +583,10 @@ mod tests {
             ("MoveL p,", false),
             ("x := THEN", false),
             ("WHILE TRUEDO", false),
+            ("ERROR (ERR_SOCK_TIMEOUT, ERR_SOCK_CLOSED)", true),
+            ("error(ERR_A)", true),
+            ("ERROR (ERR_A,", false),
+            ("ERRORS(1)", false),
         ] {
             assert_eq!(ends_statement(code), ends, "{code}");
         }
@@ -635,6 +656,14 @@ mod tests {
             (
                 "MODULE M\nPROC a() MoveL p,v1,z1,t;\nENDPROC\nENDMODULE\n",
                 "not one whole",
+            ),
+            (
+                "MODULE M\nPROC a()\n  MoveL p,v1,z1,t;\n  <SMT>\nENDPROC\nENDMODULE\n",
+                "placeholder in a routine body",
+            ),
+            (
+                "MODULE M\nPROC <ID>()\nENDPROC\nENDMODULE\n",
+                "placeholder in a routine header",
             ),
         ];
         for (src, why) in cases.into_iter().chain(more) {
