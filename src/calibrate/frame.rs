@@ -26,6 +26,14 @@ use super::report::FrameEstimate;
 /// Number of frame parameters.
 pub const FRAME_PARAMS: usize = 6;
 
+/// Relative rank threshold of the screen against the frame in the
+/// calibrations of tables and gains (unit-norm columns): a combination of
+/// model columns that the frame's columns explain to within 10⁻³ of its
+/// size moves the points like a rigid motion of the instrument, up to the
+/// second-order effect of the machine's own errors on the lever arms; it
+/// is absorbed by the frame (as [`super::kinematics::KIN_RANK_RTOL`]).
+pub const FRAME_RANK_RTOL: f64 = 1e-3;
+
 /// Degrees per mrad (the internal unit of the frame's small rotations).
 pub const DEG_PER_MRAD: f64 = 0.18 / std::f64::consts::PI;
 

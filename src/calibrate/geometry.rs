@@ -42,8 +42,8 @@ use crate::machine::tool::{AxisKind, MachineTool};
 
 use super::forward::{check_kind, predict};
 use super::frame::{
-    FRAME_PARAMS, IDENTIFIED_NOTE, absorbed_note, carry, estimate, frame_columns, frame_with,
-    screen_model, start_frame,
+    FRAME_PARAMS, FRAME_RANK_RTOL, IDENTIFIED_NOTE, absorbed_note, carry, estimate, frame_columns,
+    frame_with, screen_model, start_frame,
 };
 use super::observations::{MeasurementFrame, Observations, Pose};
 use super::report::{CONDITION_LIMIT, Calibration, Estimate, Validation};
@@ -481,9 +481,23 @@ fn absorbed_by_frame(
 ) -> Result<Vec<usize>> {
     let (_, d0) = eval(x0, fit)?;
     let a = design(x0, &d0, x0.len(), eval, fit)?;
-    let jf = frame_columns(f0, obs, fit);
+    // The frame's columns at the points the start model predicts, seen by
+    // the instrument: a rigid motion is then exactly a motion of those
+    // points, whatever the noise.
+    let mut seen = obs.clone();
+    let back = f0.inverse();
+    for (k, &i) in fit.iter().enumerate() {
+        if let Some(row) = seen.rows.get_mut(i) {
+            row.measured_mm = carry(&back, &d0.fixed_rows::<3>(3 * k).into_owned());
+        }
+    }
+    let jf = frame_columns(f0, &seen, fit);
     let b = measured_at(obs, fit, f0) - d0;
-    let (given, plain) = screen_model(&a, Some(&jf), &b, &LsqOptions::default())
+    let lsq = LsqOptions {
+        rank_rtol: FRAME_RANK_RTOL,
+        scale_columns: true,
+    };
+    let (given, plain) = screen_model(&a, Some(&jf), &b, &lsq)
         .map_err(|e| Error::Usage(format!("{obs_file}: {e}")))?;
     Ok(given.into_iter().filter(|c| !plain.contains(c)).collect())
 }

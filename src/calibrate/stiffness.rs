@@ -29,7 +29,7 @@
 
 use std::collections::HashMap;
 
-use nalgebra::{DMatrix, DVector, Isometry3, SMatrix, Vector3, Vector6};
+use nalgebra::{DMatrix, DVector, Isometry3, Matrix3, SMatrix, Vector3, Vector6};
 
 use crate::calibrate::lsq::{LsqOptions, Solution, solve_linear};
 use crate::error::{Error, Result};
@@ -193,7 +193,7 @@ fn center(a: &mut DMatrix<f64>, y: &mut DVector<f64>, start: usize, end: usize) 
         for &i in &idx {
             y[i] -= ym;
         }
-        for c in 0..6 {
+        for c in 0..a.ncols() {
             let am = idx.iter().map(|&i| a[(i, c)]).sum::<f64>() / n;
             for &i in &idx {
                 a[(i, c)] -= am;
@@ -346,19 +346,25 @@ fn solve_compliances(
 
 /// The origin of an instrument frame of rotation `f.rotation`: the mean of
 /// `p_i − R m_i` over the unloaded fit rows `p_i` of the calibrated model
-/// `m`, with the standard uncertainty of that mean per coordinate
-/// (`None` below two rows). The load differences do not see it.
+/// `m`. Its standard uncertainty per coordinate combines that of the mean
+/// with the rotation's (covariance `cov_rot`, mrad²) carried over the lever
+/// `R m̄` of the mean measured point (`None` below two rows). The load
+/// differences do not see the origin.
 fn frame_origin(
     m: &Machine,
     f: &Isometry3<f64>,
+    cov_rot: Option<Matrix3<f64>>,
     obs: &Observations,
     fit: &[Vec<usize>],
     obs_file: &str,
 ) -> Result<(Isometry3<f64>, Option<[f64; 3]>)> {
     let mut d = Vec::new();
+    let mut lever = Vector3::zeros();
     for row in fit.iter().flatten().filter_map(|&i| obs.rows.get(i)) {
         if !loaded(row) {
-            d.push(predict(m, row, obs_file)?.attained_mm - f.rotation * row.measured_mm);
+            let v = f.rotation * row.measured_mm;
+            d.push(predict(m, row, obs_file)?.attained_mm - v);
+            lever += v;
         }
     }
     let n = d.len();
@@ -366,10 +372,12 @@ fn frame_origin(
         return Ok((*f, None));
     }
     let mean = d.iter().sum::<Vector3<f64>>() / n as f64;
-    let u = (n > 1).then(|| {
+    let j = (lever / n as f64).cross_matrix() * 1e-3;
+    let turned = cov_rot.map(|c| j * c * j.transpose());
+    let u = (n > 1).then_some(()).and(turned).map(|t| {
         std::array::from_fn(|r| {
             let ss: f64 = d.iter().map(|v| (v[r] - mean[r]).powi(2)).sum();
-            (ss / (n - 1) as f64 / n as f64).sqrt()
+            (ss / (n - 1) as f64 / n as f64 + t[(r, r)]).max(0.0).sqrt()
         })
     });
     Ok((
@@ -508,7 +516,11 @@ pub fn calibrate_stiffness(
     let mut notes: Vec<String> = world.into_iter().collect();
     let frame = match &f_rot {
         Some(f) => {
-            let (f, u_xyz) = frame_origin(&calibrated, f, obs, &fit, obs_file)?;
+            let cov_rot = sol
+                .covariance
+                .as_ref()
+                .map(|c| c.fixed_view::<3, 3>(6, 6).into_owned() * (dof_factor * dof_factor));
+            let (f, u_xyz) = frame_origin(&calibrated, f, cov_rot, obs, &fit, obs_file)?;
             let u_rot = sol
                 .std_uncertainty()
                 .map(|u| std::array::from_fn(|r| u[6 + r] * dof_factor * DEG_PER_MRAD));
