@@ -5,6 +5,7 @@
 
 mod arc;
 pub mod outcome;
+pub mod robot;
 pub mod tcpm;
 
 pub use arc::{ArcPiece, MAX_ARC_DEPTH};

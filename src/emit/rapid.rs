@@ -6,11 +6,19 @@
 //! numbers (fixed decimals, never exponent notation, never `-0.000`), append
 //! a `!` annotation at the end of a statement's line and insert new
 //! declarations after an existing one with its indentation and line ending.
+//!
+//! The texts the RAPID pipeline writes are made here too: rewritten
+//! robtarget and jointtarget literals, the `! dev …` comment of a
+//! compensated move and the names of new declarations.
 
 use std::ops::Range;
 
-use crate::error::Error;
-use crate::program::rapid::{Decl, RobTarget};
+use nalgebra::Isometry3;
+
+use crate::error::{Error, Located, Result};
+use crate::machine::robot::{ConfData, Deviation};
+use crate::program::rapid::resolve::{line_col, lookup};
+use crate::program::rapid::{Decl, JointTarget, Module, RobTarget};
 
 /// One edit: replace `span` of the source with `text` (an empty span inserts).
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -588,9 +596,188 @@ pub fn decl_copy(src: &str, decl: &Decl, new_name: &str, value: &str) -> Option<
     apply_edits(text, &edits).ok()
 }
 
+/// Decimals of rewritten jointtarget axis values (degrees): 0.0000005° =
+/// 8.7 nrad per joint, ≤ 0.014 µm at the 1.6 m lever arm of an IRB 1600 with
+/// a tool, so a compensated MoveAbsJ target lands within 1 µm / 1 µrad.
+pub const JOINT_DECIMALS: usize = 6;
+
+/// A compensated joint value as written, or an error naming the target when
+/// the solve produced a non-finite number (it is never written as 0).
+pub(crate) fn joint_word(v: f64, src: &str, file: &str, at: usize) -> Result<String> {
+    format_fixed(v, JOINT_DECIMALS).ok_or_else(|| {
+        let (line, column) = line_col(src, at);
+        Error::Unachievable(Located::new(
+            file,
+            line,
+            column,
+            format!("the compensated joint value {v} is not a finite number"),
+        ))
+    })
+}
+
+/// The comment appended to a compensated move: the predicted deviation of
+/// the uncompensated target and its parts (mm), and the vibration amplitude
+/// (mm, reported only).
+/// Writes [`dev_comment`] into `out` (fast fixed-decimal numbers, the
+/// same text).
+pub(crate) fn write_dev_comment(out: &mut String, d: &Deviation) {
+    let num = |out: &mut String, v: f64, decimals: usize| {
+        if !push_fixed(out, v, decimals) {
+            use std::fmt::Write;
+            let _ = write!(out, "{v:.decimals$}");
+        }
+    };
+    out.push_str("dev ");
+    num(out, d.total.pos_mm.norm(), 3);
+    out.push_str(" mm (kin ");
+    num(out, d.kinematic.pos_mm.norm(), 3);
+    out.push_str(" therm ");
+    num(out, d.thermal.pos_mm.norm(), 3);
+    out.push_str(" grav ");
+    num(out, d.gravity.pos_mm.norm(), 3);
+    out.push_str(" proc ");
+    num(out, d.process.pos_mm.norm(), 3);
+    out.push_str(" vib ");
+    num(out, d.vibration_mm.norm(), 4);
+    out.push(')');
+}
+
+#[cfg(test)]
+pub(crate) fn dev_comment(d: &Deviation) -> String {
+    format!(
+        "dev {:.3} mm (kin {:.3} therm {:.3} grav {:.3} proc {:.3} vib {:.4})",
+        d.total.pos_mm.norm(),
+        d.kinematic.pos_mm.norm(),
+        d.thermal.pos_mm.norm(),
+        d.gravity.pos_mm.norm(),
+        d.process.pos_mm.norm(),
+        d.vibration_mm.norm()
+    )
+}
+
+/// The text of a robtarget literal with new position, quaternion and
+/// confdata; the external axes as written.
+pub(crate) fn robtarget_text(
+    src: &str,
+    rt: &RobTarget,
+    pose: &Isometry3<f64>,
+    conf: ConfData,
+    fmt: &Format,
+) -> Result<String> {
+    let p = format_position(&pose.translation.vector.into(), fmt)?;
+    let q = pose.rotation.quaternion();
+    let reference = rt.rot.each_ref().map(|n| n.value);
+    let q = format_quaternion(&[q.w, q.i, q.j, q.k], Some(&reference), fmt)?;
+    let (Some(first), Some(last)) = (rt.extax.first(), rt.extax.last()) else {
+        return Err(Error::Usage("robtarget without external axes".into()));
+    };
+    let extax = src
+        .get(first.span.start..last.span.end)
+        .ok_or_else(|| Error::Usage("robtarget span outside the program".into()))?;
+    Ok(format!(
+        "[[{},{},{}],[{},{},{},{}],[{},{},{},{}],[{extax}]]",
+        p[0], p[1], p[2], q[0], q[1], q[2], q[3], conf.cf1, conf.cf4, conf.cf6, conf.cfx
+    ))
+}
+
+/// In-place edits of a robtarget literal, pushed onto `edits`: one edit
+/// for the position and quaternion numbers (and the confdata numbers when
+/// the confdata changes) while they lie on one line; otherwise one edit per
+/// number.
+pub(crate) fn robtarget_in_place(
+    edits: &mut EditList,
+    src: &str,
+    rt: &RobTarget,
+    pose: &Isometry3<f64>,
+    old_conf: ConfData,
+    conf: ConfData,
+    fmt: &Format,
+) -> Result<()> {
+    let q = pose.rotation.quaternion();
+    let pos: [f64; 3] = pose.translation.vector.into();
+    let quat = [q.w, q.i, q.j, q.k];
+    // One edit over the whole position-and-quaternion text (and the
+    // confdata when it changes) is cheaper, but only while it stays on one
+    // line: an annotation inserted at the end of an earlier statement's
+    // line would fall inside a multi-line span.
+    let new_conf = [conf.cf1, conf.cf4, conf.cf6, conf.cfx];
+    let changed = conf != old_conf;
+    let end = if changed {
+        rt.robconf[3].span.end
+    } else {
+        rt.rot[3].span.end
+    };
+    let one_line = src
+        .get(rt.trans[0].span.start..end)
+        .is_some_and(|t| !t.contains('\n'));
+    if one_line {
+        push_robtarget_edit(
+            edits,
+            src,
+            rt,
+            &pos,
+            Some(&quat),
+            changed.then_some(&new_conf),
+            fmt,
+        )?;
+    } else {
+        for e in robtarget_edits(rt, &pos, Some(&quat), fmt)? {
+            edits.push(&e);
+        }
+        if changed {
+            for (n, v) in rt.robconf.iter().zip(new_conf) {
+                edits.push_str(n.span.clone(), &v.to_string());
+            }
+        }
+    }
+    Ok(())
+}
+
+pub(crate) fn joint_text(
+    src: &str,
+    file: &str,
+    jt: &JointTarget,
+    q_deg: &[f64; 6],
+) -> Result<String> {
+    let (Some(first), Some(last)) = (jt.extax.first(), jt.extax.last()) else {
+        return Err(Error::Usage("jointtarget without external axes".into()));
+    };
+    let extax = src
+        .get(first.span.start..last.span.end)
+        .ok_or_else(|| Error::Usage("jointtarget span outside the program".into()))?;
+    let words = q_deg
+        .iter()
+        .map(|&v| joint_word(v, src, file, jt.span.start))
+        .collect::<Result<Vec<_>>>()?;
+    Ok(format!("[[{}],[{extax}]]", words.join(",")))
+}
+
+/// A name not yet declared in the module nor already created.
+pub(crate) fn fresh_name(
+    module: &Module,
+    taken: &mut Vec<String>,
+    stem: &str,
+    tag: &str,
+    from: usize,
+) -> String {
+    let mut n = from;
+    loop {
+        let name = format!("{stem}_{tag}{n}");
+        if lookup(module, &name).is_none() && !taken.iter().any(|t| t.eq_ignore_ascii_case(&name)) {
+            taken.push(name.clone());
+            return name;
+        }
+        n += 1;
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::machine::robot::PoseDelta;
+    use crate::program::rapid::Target;
+    use crate::program::rapid::resolve::conf_of;
+    use nalgebra::Vector3;
     use proptest::prelude::*;
 
     fn slow(v: f64, decimals: usize) -> Option<String> {
@@ -764,6 +951,121 @@ mod tests {
             let v = (k as f64 + 0.5) / 10f64.powi(d as i32);
             let v = f64::from_bits((v.to_bits() as i64 + ulps) as u64);
             prop_assert_eq!(format_fixed(v, d), slow(v, d));
+        }
+    }
+
+    /// The single edit of [`robtarget_in_place`] (position, quaternion and
+    /// confdata) against one edit per number: the same output text, for
+    /// literals on one line and spread over lines, with and without a
+    /// confdata change.
+    #[test]
+    fn one_robtarget_edit_equals_the_per_number_edits() {
+        let src = "MODULE M\n  PROC main()\n    MoveL [[650.0,50.0,300.0],[0,0,1,0],[0,0,0,0],[9E9,9E9,9E9,9E9,9E9,9E9]],v200,z1,t1;\n    MoveL [ [ 1 , 2,3 ],[1,0 ,0,0] , [-1, 0,-2 ,5],[9E9,9E9,9E9,9E9,9E9,9E9]],v200,z1,t1;\n    MoveL [[1,2,3],[1,0,0,0],\n      [0,0,0,0],[9E9,9E9,9E9,9E9,9E9,9E9]],v200,z1,t1;\n  ENDPROC\nENDMODULE\n";
+        let module = crate::program::rapid::parse_module(src, "t.mod").expect("valid module");
+        let fmt = Format {
+            position_decimals: 3,
+            quaternion_decimals: 7,
+        };
+        let pose = Isometry3::from_parts(
+            nalgebra::Translation3::new(650.97234, -49.2148, 300.92649),
+            nalgebra::UnitQuaternion::from_euler_angles(0.0008, -0.0003, 3.1),
+        );
+        let confs = [
+            ConfData {
+                cf1: 0,
+                cf4: 0,
+                cf6: 0,
+                cfx: 0,
+            },
+            ConfData {
+                cf1: -1,
+                cf4: 2,
+                cf6: -3,
+                cfx: 7,
+            },
+        ];
+        let mut seen = 0;
+        for mv in module.moves() {
+            let Target::Inline(rt) = &mv.target else {
+                panic!("inline targets")
+            };
+            let old = conf_of(rt).expect("integer confdata");
+            for conf in confs {
+                let mut one = EditList::new();
+                robtarget_in_place(&mut one, src, rt, &pose, old, conf, &fmt).expect("edits");
+                let q = pose.rotation.quaternion();
+                let mut each = crate::emit::rapid::robtarget_edits(
+                    rt,
+                    &pose.translation.vector.into(),
+                    Some(&[q.w, q.i, q.j, q.k]),
+                    &fmt,
+                )
+                .expect("edits");
+                if conf != old {
+                    for (n, v) in rt
+                        .robconf
+                        .iter()
+                        .zip([conf.cf1, conf.cf4, conf.cf6, conf.cfx])
+                    {
+                        each.push(Edit::replace(n.span.clone(), v.to_string()));
+                    }
+                }
+                assert_eq!(
+                    one.apply(src).expect("applies"),
+                    apply_edits(src, &each).expect("applies")
+                );
+                seen += 1;
+            }
+        }
+        assert_eq!(seen, 6);
+    }
+
+    #[test]
+    fn fast_deviation_comment_equals_the_formatted_one() {
+        let mut state = 0x9e37_79b9_7f4a_7c15u64;
+        let mut next = || {
+            state = state
+                .wrapping_mul(6_364_136_223_846_793_005)
+                .wrapping_add(1_442_695_040_888_963_407);
+            let u = (state >> 11) as f64 / (1u64 << 53) as f64 - 0.5;
+            // Magnitudes from 1e-6 mm to 1e3 mm, both signs.
+            u * 10f64.powf((state % 10) as f64 - 6.0)
+        };
+        let mut delta = |k: f64| PoseDelta {
+            pos_mm: Vector3::new(next(), next(), next()) * k,
+            rot_rad: Vector3::zeros(),
+        };
+        let mut cases = vec![Deviation::default()];
+        for k in [1.0, 0.5, 1e-3, 2.0] {
+            let (a, b, c, d, e) = (delta(k), delta(k), delta(k), delta(k), delta(k));
+            cases.push(Deviation {
+                kinematic: a,
+                thermal: b,
+                gravity: c,
+                process: d,
+                total: e,
+                vibration_mm: Vector3::new(0.00005, 0.0, 0.0) * k,
+            });
+        }
+        let mut odd = Deviation::default();
+        odd.total.pos_mm = Vector3::new(f64::NAN, 0.0, 0.0);
+        odd.process.pos_mm = Vector3::new(f64::INFINITY, 0.0, 0.0);
+        cases.push(odd);
+        for _ in 0..2000 {
+            let (a, b, c, d, e) = (delta(1.0), delta(1.0), delta(1.0), delta(1.0), delta(1.0));
+            cases.push(Deviation {
+                kinematic: a,
+                thermal: b,
+                gravity: c,
+                process: d,
+                total: e,
+                vibration_mm: a.pos_mm,
+            });
+        }
+        for d in &cases {
+            let mut fast = String::new();
+            write_dev_comment(&mut fast, d);
+            assert_eq!(fast, dev_comment(d));
         }
     }
 }

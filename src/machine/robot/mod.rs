@@ -12,25 +12,24 @@
 //!   (`τ = Jᵀ W`); the joints yield by `Δθ = Kθ⁻¹ τ`.
 
 mod calib;
-mod compensate;
 pub mod dh;
 pub mod dynamics;
 pub mod ik;
 pub mod kinematics;
 pub mod plausible;
 pub mod pose;
+mod predict;
 pub mod process;
 mod raw;
 mod statics;
 pub mod thermal;
 mod with_tool;
 
-pub(crate) use compensate::Seed;
-pub use compensate::{Compensation, Deviation, Effects, JOINT_JUMP_MAX_DEG, PoseDelta};
 pub use dh::{Convention, DhJoint, DhParams};
 pub use dynamics::{Modal, Mode, Resonance};
 pub use ik::ConfData;
 pub use kinematics::Frames;
+pub use predict::{Deviation, Effects, JOINT_JUMP_MAX_DEG, PoseDelta};
 pub use process::{ForceFrame, ForceModel, ProcessForce};
 pub use thermal::{DhGrowth, Thermal, ThermalTerm};
 

@@ -1,4 +1,5 @@
-//! Prediction and compensation of one robot target.
+//! Prediction of one robot target: where the arm really goes for commanded
+//! joints, split by effect.
 //!
 //! The controller turns a programmed TCP pose into joints with its NOMINAL
 //! model (closed-form IK with confdata, or numeric IK from a seed). The real
@@ -6,14 +7,10 @@
 //! `base · FK_actual(q + Kθ⁻¹ (τ_gravity(q) + τ_process(q))) · tool`.
 //! Small-deflection form: the torques are evaluated at the commanded joints
 //! `q` of the actual model, not at the deflected ones (second-order effect).
-//!
-//! Compensation searches the commanded pose `C` whose predicted attained pose
-//! equals the programmed pose `P`, by the fixed-point iteration
-//! `C ← C + (P − attained(C))` (position added, rotation vector applied on
-//! the left). It converges quickly because the deviation changes little over
-//! the size of the correction.
+//! The inverse (the commanded pose whose prediction is the programmed one)
+//! is solved in the compensation layer (`src/compensate/robot.rs`).
 
-use nalgebra::{Isometry3, Matrix6, Translation3, UnitQuaternion, Vector3, Vector6};
+use nalgebra::{Isometry3, Vector3, Vector6};
 
 use super::dh::DhParams;
 use super::kinematics::{
@@ -22,7 +19,7 @@ use super::kinematics::{
 };
 use super::pose::pose_error;
 use super::thermal::{DhGrowth, grown};
-use super::{IkSelect, Model, Robot, RobotError};
+use super::{Model, Robot, RobotError};
 
 /// Parameters `gain` of the way from `nominal` to `actual` (exactly one of
 /// them for a gain of 0 or 1).
@@ -52,13 +49,6 @@ fn blend(nominal: &DhParams, actual: &DhParams, gain: f64) -> DhParams {
 /// hundredths of a degree; a larger change is the arm flipping its wrist
 /// near a singularity.
 pub const JOINT_JUMP_MAX_DEG: f64 = 5.0;
-
-/// Position tolerance of the compensation iteration, mm (0.1 nm).
-pub const COMP_POS_TOL_MM: f64 = 1e-7;
-/// Orientation tolerance of the compensation iteration, rad.
-pub const COMP_ROT_TOL_RAD: f64 = 1e-10;
-/// Iteration limit of the compensation.
-pub const COMP_MAX_ITER: usize = 50;
 
 /// Which effects the prediction includes, as gains: 0 = off, 1 = as
 /// modelled; other values scale the effect linearly (kinematic: the DH
@@ -143,7 +133,7 @@ pub struct PoseDelta {
 }
 
 impl PoseDelta {
-    fn between(attained: &Isometry3<f64>, reference: &Isometry3<f64>) -> Self {
+    pub(crate) fn between(attained: &Isometry3<f64>, reference: &Isometry3<f64>) -> Self {
         let (p, r) = pose_error(attained, reference);
         PoseDelta {
             pos_mm: p,
@@ -171,48 +161,6 @@ pub struct Deviation {
     pub vibration_mm: Vector3<f64>,
 }
 
-/// Result of compensating one target.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Compensation {
-    /// The pose to program instead (world frame).
-    pub pose: Isometry3<f64>,
-    /// Controller joints of the programmed (uncompensated) pose, rad.
-    pub q_programmed: [f64; 6],
-    /// Controller joints of the compensated pose, rad.
-    pub q_compensated: [f64; 6],
-    /// Confdata of `q_compensated`, to be written with the compensated
-    /// target: it differs from the programmed one when a joint crosses a
-    /// quadrant boundary (cf1/cf4/cf6) during compensation.
-    pub conf: super::ConfData,
-    /// Predicted deviation of the uncompensated target.
-    pub deviation: Deviation,
-    /// Remaining predicted error of the compensated target.
-    pub residual: PoseDelta,
-    /// Iterations used.
-    pub iterations: usize,
-}
-
-/// What planning a move found about its programmed pose, to start its
-/// compensation from ([`Robot::compensate_seeded`]).
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
-pub(crate) struct Seed {
-    /// Controller joints of the programmed pose (`ik_nominal(programmed,
-    /// sel)`, limits checked).
-    pub q: Option<[f64; 6]>,
-    /// Closed-form branch of `q` ([`Robot::ik_conf_indexed`]).
-    pub branch: Option<usize>,
-    /// Nominal flange pose (robot base frame) at `q`, computed as the last
-    /// frame of `frames_prepared(nominal, q, 6)` (ignored without `q`).
-    pub nominal_flange: Option<Isometry3<f64>>,
-}
-
-/// The closed-form branch of a target's inverse kinematics, kept over the
-/// compensation iteration when `fixed`.
-struct BranchMemo {
-    fixed: bool,
-    k: Option<usize>,
-}
-
 /// True when two vectors are equal bit for bit (a computation from them
 /// gives the same bits).
 fn same_bits(a: &Vector6<f64>, b: &Vector6<f64>) -> bool {
@@ -221,76 +169,7 @@ fn same_bits(a: &Vector6<f64>, b: &Vector6<f64>) -> bool {
         .all(|(x, y)| x.to_bits() == y.to_bits())
 }
 
-/// Weight of rotation against position in the progress test, mm/rad.
-const ROT_SCALE_MM: f64 = 1000.0;
-
-/// Moves a pose by `[Δp (mm); Δφ (rad)]`, rotation applied on the left.
-fn perturb(c: &Isometry3<f64>, d: &Vector6<f64>) -> Isometry3<f64> {
-    Isometry3::from_parts(
-        Translation3::from(c.translation.vector + d.fixed_rows::<3>(0)),
-        UnitQuaternion::from_scaled_axis(d.fixed_rows::<3>(3).into_owned()) * c.rotation,
-    )
-}
-
 impl Robot {
-    /// Controller joints of a commanded pose, continuing from `q`.
-    /// With a branch in `branch` (the closed-form branch index of the
-    /// target, once known), only that branch is solved
-    /// ([`Robot::ik_conf_near_branch`]); otherwise every branch is
-    /// searched, and the one found is kept when `branch.fixed`.
-    fn controller_joints(
-        &self,
-        cmd: &Isometry3<f64>,
-        q: &[f64; 6],
-        sel: &IkSelect,
-        branch: &mut BranchMemo,
-    ) -> Result<[f64; 6], RobotError> {
-        match sel {
-            IkSelect::Conf(c) => match branch.k {
-                Some(k) => self.ik_conf_near_branch(cmd, *c, q, k),
-                None => {
-                    let (q, k) = self.ik_conf_branch(cmd, *c, Some(q))?;
-                    if branch.fixed {
-                        branch.k = Some(k);
-                    }
-                    Ok(q)
-                }
-            },
-            IkSelect::Near(_) => {
-                super::ik::solve_numeric(self.params(Model::Nominal), &self.flange_for_tcp(cmd), q)
-            }
-        }
-    }
-
-    /// Finite-difference Jacobian of the attained pose with respect to the
-    /// commanded pose (both as `[Δp; Δφ]`).
-    #[allow(clippy::too_many_arguments)]
-    fn deviation_jacobian(
-        &self,
-        cmd: &Isometry3<f64>,
-        q: &[f64; 6],
-        attained: &Isometry3<f64>,
-        sel: &IkSelect,
-        model: &Prepared,
-        effects: Effects,
-        branch: &mut BranchMemo,
-    ) -> Result<Matrix6<f64>, RobotError> {
-        const H: [f64; 2] = [1e-4, 1e-7];
-        let mut m = Matrix6::zeros();
-        for k in 0..6 {
-            let h = H[k / 3];
-            let mut d = Vector6::zeros();
-            d[k] = h;
-            let qk = self.controller_joints(&perturb(cmd, &d), q, sel, branch)?;
-            let (dp, dr) = pose_error(&self.predict_with(model, &qk, effects), attained);
-            for r in 0..3 {
-                m[(r, k)] = dp[r] / h;
-                m[(r + 3, k)] = dr[r] / h;
-            }
-        }
-        Ok(m)
-    }
-
     /// The kinematic (calibrated, blended) and the full (kinematic plus
     /// thermal growth) parameter sets of a prediction. Resolved once per
     /// target: every iteration reuses them.
@@ -311,7 +190,11 @@ impl Robot {
     /// [`Robot::prediction_params`] prepared: the kinematic set (the
     /// robot's prepared nominal rows at a kinematic gain of 0) and the full
     /// set, which differs from it by lengths only and shares its twists.
-    fn prediction_prepared(&self, effects: Effects, growth: &DhGrowth) -> (Prepared, Prepared) {
+    pub(crate) fn prediction_prepared(
+        &self,
+        effects: Effects,
+        growth: &DhGrowth,
+    ) -> (Prepared, Prepared) {
         let (kin, model) = self.prediction_params(effects, growth);
         let kin = if effects.kinematic == 0.0 {
             *self.nominal_prepared()
@@ -368,7 +251,12 @@ impl Robot {
     /// [`Robot::prediction_params`]: one set of joint frames feeds the
     /// gravity and the process torques, one more forward kinematics gives
     /// the deflected pose (the hot path of the compensation iteration).
-    fn predict_with(&self, model: &Prepared, q: &[f64; 6], effects: Effects) -> Isometry3<f64> {
+    pub(crate) fn predict_with(
+        &self,
+        model: &Prepared,
+        q: &[f64; 6],
+        effects: Effects,
+    ) -> Isometry3<f64> {
         let (f, half) = frames_with_half_angles(model, q);
         let (tau_g, tau) = self.load_torques(&f, effects);
         if effects.process != 0.0 {
@@ -402,7 +290,7 @@ impl Robot {
     /// [`Robot::stages_with`] with the nominal flange pose at `q`, when
     /// already known (the flange of `frames_prepared(nominal, q, 6)`, the
     /// same bits as [`flange_prepared`]).
-    fn stages_from(
+    pub(crate) fn stages_from(
         &self,
         kin: &Prepared,
         model: &Prepared,
@@ -469,176 +357,17 @@ impl Robot {
         let (_, model) = self.prediction_prepared(effects, self.current_thermal_growth_mm());
         self.predict_with(&model, q, effects)
     }
-
-    /// Compensates one programmed TCP pose (world frame): returns the pose to
-    /// program so that the predicted attained pose equals `programmed`
-    /// within `COMP_POS_TOL_MM` / `COMP_ROT_TOL_RAD`.
-    pub fn compensate(
-        &self,
-        programmed: &Isometry3<f64>,
-        sel: &IkSelect,
-        effects: Effects,
-    ) -> Result<Compensation, RobotError> {
-        self.compensate_with_growth(programmed, sel, effects, self.current_thermal_growth_mm())
-    }
-
-    /// [`Robot::compensate`] with the thermal prediction stage using the DH
-    /// growth `growth` (mm) instead of the robot's current one: the same
-    /// result as `with_thermal_power(p).compensate(…)` for the growth of the
-    /// powers `p`, without a copy of the robot per target.
-    pub fn compensate_with_growth(
-        &self,
-        programmed: &Isometry3<f64>,
-        sel: &IkSelect,
-        effects: Effects,
-        growth: &DhGrowth,
-    ) -> Result<Compensation, RobotError> {
-        self.compensate_seeded(programmed, sel, effects, growth, &Seed::default())
-    }
-
-    /// [`Robot::compensate_with_growth`] with what planning the move already
-    /// found ([`Seed`]): saves one inverse kinematics (and the nominal
-    /// forward kinematics of the deviation breakdown, when given).
-    pub(crate) fn compensate_seeded(
-        &self,
-        programmed: &Isometry3<f64>,
-        sel: &IkSelect,
-        effects: Effects,
-        growth: &DhGrowth,
-        seed: &Seed,
-    ) -> Result<Compensation, RobotError> {
-        let Seed {
-            q: q_programmed,
-            branch,
-            nominal_flange,
-        } = *seed;
-        // The flange is that of the given joints only.
-        let nominal_flange = nominal_flange.filter(|_| q_programmed.is_some());
-        // Fast path: the closed-form branch found by the first inverse
-        // kinematics of the iteration is the only one solved afterwards.
-        // Its result stands when the final joints still have the asked
-        // cfx (the branch cannot change over sub-millimetre corrections);
-        // otherwise, and on any error, the search over every branch at
-        // every step decides (the same result and the same error as
-        // before the fast path).
-        if let IkSelect::Conf(c) = sel {
-            let seed = q_programmed.and(branch);
-            if let Ok(r) = self.compensate_branch(
-                programmed,
-                sel,
-                effects,
-                growth,
-                (q_programmed, nominal_flange),
-                Some(seed),
-            ) {
-                if r.conf.cfx == c.cfx {
-                    return Ok(r);
-                }
-            }
-        }
-        self.compensate_branch(
-            programmed,
-            sel,
-            effects,
-            growth,
-            (q_programmed, nominal_flange),
-            None,
-        )
-    }
-
-    /// [`Robot::compensate_seeded`]; with `fixed_branch`, the inverse
-    /// kinematics of the iteration solves only one branch: the given one,
-    /// else the branch of its first solution.
-    fn compensate_branch(
-        &self,
-        programmed: &Isometry3<f64>,
-        sel: &IkSelect,
-        effects: Effects,
-        growth: &DhGrowth,
-        (q_programmed, nominal_flange): (Option<[f64; 6]>, Option<Isometry3<f64>>),
-        fixed_branch: Option<Option<usize>>,
-    ) -> Result<Compensation, RobotError> {
-        let mut branch = BranchMemo {
-            fixed: fixed_branch.is_some(),
-            k: fixed_branch.flatten(),
-        };
-        let q0 = match q_programmed {
-            Some(q) => q,
-            None => self.ik_nominal(programmed, sel)?,
-        };
-        let (kin, model) = self.prediction_prepared(effects, growth);
-        let st = self.stages_from(&kin, &model, &q0, effects, nominal_flange);
-        let deviation = Deviation {
-            kinematic: PoseDelta::between(&st[1], &st[0]),
-            thermal: PoseDelta::between(&st[2], &st[1]),
-            gravity: PoseDelta::between(&st[3], &st[2]),
-            process: PoseDelta::between(&st[4], &st[3]),
-            total: PoseDelta::between(&st[4], programmed),
-            vibration_mm: self.vibration_mm(&q0, effects),
-        };
-        let mut cmd = *programmed;
-        let mut q = q0;
-        let mut attained = st[4];
-        let mut last = (f64::INFINITY, f64::INFINITY);
-        let mut newton = false;
-        for it in 0..COMP_MAX_ITER {
-            let (dp, dr) = pose_error(programmed, &attained);
-            let prev = last.0 + ROT_SCALE_MM * last.1;
-            last = (dp.norm(), dr.norm());
-            if last.0 < COMP_POS_TOL_MM && last.1 < COMP_ROT_TOL_RAD {
-                self.check_limits(&q)?;
-                self.check_reconfiguration(&q0, &q)?;
-                return Ok(Compensation {
-                    pose: cmd,
-                    q_programmed: q0,
-                    q_compensated: q,
-                    conf: self.confdata(&q),
-                    deviation,
-                    residual: PoseDelta::between(&attained, programmed),
-                    iterations: it,
-                });
-            }
-            // The plain fixed-point step contracts unless the deviation
-            // changes fast with the pose (near the wrist singularity); then
-            // switch to Newton steps with a finite-difference Jacobian.
-            if last.0 + ROT_SCALE_MM * last.1 > 0.5 * prev {
-                newton = true;
-            }
-            let mut e = Vector6::zeros();
-            e.fixed_rows_mut::<3>(0).copy_from(&dp);
-            e.fixed_rows_mut::<3>(3).copy_from(&dr);
-            let step = if newton {
-                let m = self.deviation_jacobian(
-                    &cmd,
-                    &q,
-                    &attained,
-                    sel,
-                    &model,
-                    effects,
-                    &mut branch,
-                )?;
-                m.lu().solve(&e).unwrap_or(e)
-            } else {
-                e
-            };
-            cmd = perturb(&cmd, &step);
-            q = self.controller_joints(&cmd, &q, sel, &mut branch)?;
-            attained = self.predict_with(&model, &q, effects);
-        }
-        Err(RobotError::NoConvergence {
-            what: "target compensation",
-            iterations: COMP_MAX_ITER,
-            pos_mm: last.0,
-            rot_rad: last.1,
-        })
-    }
 }
 
 impl Robot {
     /// Refuses a compensated solution `q` that moves a joint by more than
     /// [`JOINT_JUMP_MAX_DEG`] from the programmed `q0` or changes the
     /// configuration, unless the robot allows it.
-    fn check_reconfiguration(&self, q0: &[f64; 6], q: &[f64; 6]) -> Result<(), RobotError> {
+    pub(crate) fn check_reconfiguration(
+        &self,
+        q0: &[f64; 6],
+        q: &[f64; 6],
+    ) -> Result<(), RobotError> {
         if self.d.allow_reconfiguration {
             return Ok(());
         }
@@ -662,7 +391,6 @@ impl Robot {
 mod tests {
     use super::super::kinematics::frames_prepared;
     use super::*;
-    use crate::machine::robot::ConfData;
     use approx::assert_abs_diff_eq;
 
     /// Both paths run the same arithmetic: equal to the last bit.
@@ -746,86 +474,5 @@ mod tests {
                 }
             }
         }
-    }
-
-    /// A seed with the nominal flange taken from the planning's frames
-    /// gives the compensation computed without it, bit for bit.
-    #[test]
-    fn nominal_flange_seed_equals_the_unseeded_compensation() {
-        let r = crate::machine::robot::test_irb1600();
-        let growth = r.thermal_growth_mm(&[30.0, 90.0, 40.0, 0.0, 0.0, 0.0]);
-        let mut checked = 0;
-        for (x, y, z) in [
-            (650.0, 50.0, 300.0),
-            (900.0, -200.0, 700.0),
-            (500.0, 400.0, 150.0),
-        ] {
-            let pose = Isometry3::from_parts(
-                Translation3::new(x, y, z),
-                UnitQuaternion::from_axis_angle(&Vector3::y_axis(), 3.0),
-            );
-            let Ok(sols) = r.ik_all(&pose) else {
-                continue;
-            };
-            for s in sols.iter().flatten() {
-                let conf = r.confdata(s);
-                let Ok((q, branch)) = r.ik_conf_indexed(&pose, conf) else {
-                    continue;
-                };
-                let sel = IkSelect::Conf(conf);
-                let (_, flange) = r.nominal_load_torques_and_flange(&q);
-                let plain = Seed {
-                    q: Some(q),
-                    branch: Some(branch),
-                    nominal_flange: None,
-                };
-                let seeded = Seed {
-                    nominal_flange: Some(flange),
-                    ..plain
-                };
-                let a = r.compensate_seeded(&pose, &sel, Effects::ALL, &growth, &plain);
-                let b = r.compensate_seeded(&pose, &sel, Effects::ALL, &growth, &seeded);
-                assert_eq!(a, b);
-                checked += 1;
-            }
-        }
-        assert!(checked >= 3);
-    }
-
-    #[test]
-    fn growth_override_equals_a_robot_at_that_power() {
-        let r = crate::machine::robot::test_irb1600();
-        // Warm joints 2 and 3 (W): the thermal section grows row 2's a.
-        let p = [0.0, 150.0, 80.0, 0.0, 0.0, 0.0];
-        let warm = r.with_thermal_power(&p);
-        let growth = r.thermal_growth_mm(&p);
-        assert!(growth.iter().flatten().any(|g| *g != 0.0));
-        let pose = Isometry3::from_parts(
-            Translation3::new(750.0, 150.0, 400.0),
-            UnitQuaternion::from_axis_angle(&Vector3::y_axis(), std::f64::consts::PI),
-        );
-        let sel = IkSelect::Conf(ConfData {
-            cf1: 0,
-            cf4: 0,
-            cf6: 0,
-            cfx: 0,
-        });
-        let a = warm
-            .compensate(&pose, &sel, Effects::ALL)
-            .expect("reachable");
-        let b = r
-            .compensate_with_growth(&pose, &sel, Effects::ALL, &growth)
-            .expect("reachable");
-        assert_abs_diff_eq!(
-            a.pose.translation.vector,
-            b.pose.translation.vector,
-            epsilon = SAME
-        );
-        assert_abs_diff_eq!(
-            a.deviation.thermal.pos_mm,
-            b.deviation.thermal.pos_mm,
-            epsilon = SAME
-        );
-        assert!(a.deviation.thermal.pos_mm.norm() > 0.0);
     }
 }
