@@ -1,5 +1,9 @@
-//! Typed errors of the library. `main` prints one error chain and maps the
-//! variant to the process exit code (2 = bad input or usage, 1 = findings).
+//! Typed errors of the library, by kind: input text, machine file,
+//! measured data, command-line usage, unachievable targets, I/O, and
+//! internal invariants (bugs). `main` prints one error chain and
+//! [`Error::exit_code`] maps the kind to the process exit code in one match
+//! (2 for every kind but [`ErrorKind::Internal`], which gets 3; 1 is for
+//! findings, not errors).
 
 use std::fmt;
 use std::path::PathBuf;
@@ -7,6 +11,8 @@ use std::path::PathBuf;
 /// A problem located in an input text: `file:line:column: message`.
 ///
 /// Lines and columns are 1-based; the column counts bytes of the line.
+/// A problem of the file as a whole ([`Located::whole_file`]) has line and
+/// column 0 and shows as `file: message`.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct Located {
     /// File name as the user gave it (`-` for standard input).
@@ -34,10 +40,19 @@ impl Located {
             message: message.into(),
         }
     }
+
+    /// A problem of the file as a whole, at no particular line:
+    /// `file: message`.
+    pub fn whole_file(file: impl Into<String>, message: impl Into<String>) -> Self {
+        Located::new(file, 0, 0, message)
+    }
 }
 
 impl fmt::Display for Located {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        if self.line == 0 {
+            return write!(f, "{}: {}", Escaped(&self.file), Escaped(&self.message));
+        }
         write!(
             f,
             "{}:{}:{}: {}",
@@ -97,13 +112,27 @@ impl fmt::Display for Invalid {
 
 impl std::error::Error for Invalid {}
 
-/// Every error the library reports.
+/// Every error the library reports. The variant is its kind
+/// ([`Error::kind`]); the message is the same whatever the kind.
 #[derive(Debug, thiserror::Error)]
 pub enum Error {
-    /// Malformed or unsupported input at a known place.
+    /// Malformed or unsupported input text (a program, an observation
+    /// file, a force table) at a known place.
     #[error(transparent)]
     Input(#[from] Located),
-    /// Bad command-line usage or an inconsistent request.
+    /// A machine file that does not give a valid model: YAML syntax,
+    /// unknown, missing or duplicate keys, values out of range or
+    /// inconsistent. The message names the key path where there is one.
+    #[error(transparent)]
+    Machine(Located),
+    /// Measured data that cannot answer the question asked: too few rows,
+    /// an ill-conditioned or rank-deficient fit, parameters the data does
+    /// not identify.
+    #[error("{}", Escaped(.0))]
+    Data(String),
+    /// Bad command-line usage or an inconsistent request (flags that do
+    /// not apply, conflicting or missing options, a file of the wrong
+    /// kind for the command).
     #[error("{}", Escaped(.0))]
     Usage(String),
     /// A file could not be read or written. The message includes the
@@ -119,13 +148,64 @@ pub enum Error {
     /// a solve that did not converge). It names the block or target.
     #[error("{0}")]
     Unachievable(Located),
+    /// An invariant of the engine does not hold: a bug in postproc, not a
+    /// problem of the input.
+    #[error("{}", Escaped(.0))]
+    Internal(String),
 }
 
+/// The kind of an [`Error`], for matching and for the exit code.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum ErrorKind {
+    /// [`Error::Input`].
+    Input,
+    /// [`Error::Machine`].
+    Machine,
+    /// [`Error::Data`].
+    Data,
+    /// [`Error::Usage`].
+    Usage,
+    /// [`Error::Io`].
+    Io,
+    /// [`Error::Unachievable`].
+    Unachievable,
+    /// [`Error::Internal`].
+    Internal,
+}
+
+/// Exit code of every error but an internal one: bad input, machine file,
+/// data or usage, an unreadable file, an unachievable target.
+pub const EXIT_ERROR: i32 = 2;
+/// Exit code of an internal error (a bug).
+pub const EXIT_INTERNAL: i32 = 3;
+
 impl Error {
-    /// The process exit code this error maps to: 2 for every error (bad
-    /// input, usage, unreadable files, unachievable targets).
+    /// The kind of this error.
+    pub fn kind(&self) -> ErrorKind {
+        match self {
+            Error::Input(_) => ErrorKind::Input,
+            Error::Machine(_) => ErrorKind::Machine,
+            Error::Data(_) => ErrorKind::Data,
+            Error::Usage(_) => ErrorKind::Usage,
+            Error::Io { .. } => ErrorKind::Io,
+            Error::Unachievable(_) => ErrorKind::Unachievable,
+            Error::Internal(_) => ErrorKind::Internal,
+        }
+    }
+
+    /// The process exit code of this error, by kind: [`EXIT_INTERNAL`] for
+    /// a bug, [`EXIT_ERROR`] for everything else (nothing is written
+    /// either way).
     pub fn exit_code(&self) -> i32 {
-        2
+        match self.kind() {
+            ErrorKind::Input
+            | ErrorKind::Machine
+            | ErrorKind::Data
+            | ErrorKind::Usage
+            | ErrorKind::Io
+            | ErrorKind::Unachievable => EXIT_ERROR,
+            ErrorKind::Internal => EXIT_INTERNAL,
+        }
     }
 
     /// Wraps an I/O error with the path it concerns.
@@ -201,5 +281,14 @@ mod tests {
         );
         let u = Error::Usage("bad \x1b[31m".into()).to_string();
         assert_eq!(u, "bad \\u{1b}[31m");
+    }
+
+    #[test]
+    fn a_problem_of_the_whole_file_shows_without_line_and_column() {
+        let e = Located::whole_file("m\x1b.yaml", "cannot edit \x07");
+        assert_eq!(e.to_string(), "m\\u{1b}.yaml: cannot edit \\u{7}");
+        let m = Error::Machine(e);
+        assert_eq!(m.kind(), ErrorKind::Machine);
+        assert_eq!(m.to_string(), "m\\u{1b}.yaml: cannot edit \\u{7}");
     }
 }

@@ -1,5 +1,7 @@
 //! The `postproc` binary: parses flags, runs the command, prints the error
-//! chain once and maps it to the exit code (0 ok, 1 findings, 2 bad input).
+//! chain once and maps its kind to the exit code (0 ok, 1 findings, 2 an
+//! error of the input, machine file, data, usage, I/O or an unachievable
+//! target, 3 an internal error; docs/cli.md).
 
 use clap::Parser;
 

@@ -12,6 +12,7 @@ mod diagnose;
 mod diagnose_matrix;
 mod effects;
 mod engine_flags;
+mod error_kinds;
 mod frames;
 mod gcode_cli;
 mod gcode_grammar;

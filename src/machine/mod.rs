@@ -83,8 +83,14 @@ impl Machine {
     /// UTF-8 is a located error.
     pub fn read_text(path: &Path) -> Result<String> {
         let file = path.display().to_string();
-        let bytes = crate::limits::read_file_bounded(path, crate::limits::YAML_MAX_BYTES)?;
-        crate::error::utf8_text(&bytes, &file)?;
+        let bytes =
+            crate::limits::read_file_bounded(path, crate::limits::YAML_MAX_BYTES).map_err(|e| {
+                match e {
+                    Error::Input(at) => Error::Machine(at),
+                    other => other,
+                }
+            })?;
+        crate::error::utf8_text(&bytes, &file).map_err(Error::Machine)?;
         Ok(String::from_utf8(bytes).unwrap_or_default())
     }
 
@@ -102,7 +108,7 @@ impl Machine {
                 "kind",
                 &format!("unknown machine kind `{other}` (expected `machine_tool` or `robot`)"),
             )),
-            None => Err(Error::Input(crate::error::Located::new(
+            None => Err(Error::Machine(crate::error::Located::new(
                 file,
                 1,
                 1,

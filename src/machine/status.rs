@@ -15,7 +15,7 @@
 
 use serde::Deserialize;
 
-use crate::error::{Error, Result};
+use crate::error::{Error, Located, Result};
 
 use super::yaml;
 
@@ -277,8 +277,9 @@ pub fn set_calibrated(text: &str, file: &str, calibration: &Calibration) -> Resu
             let after = top(&lines, "name")
                 .or_else(|| top(&lines, "kind"))
                 .ok_or_else(|| {
-                    Error::Usage(format!(
-                        "{file}: cannot record the calibration: no top-level `kind:` line"
+                    Error::Machine(Located::whole_file(
+                        file,
+                        "cannot record the calibration: no top-level `kind:` line",
                     ))
                 })?;
             lines.insert(after + 1, "status: calibrated".into());
@@ -288,8 +289,9 @@ pub fn set_calibrated(text: &str, file: &str, calibration: &Calibration) -> Resu
     match top(&lines, "calibrations") {
         Some(i) => {
             if lines[i].trim_end() != "calibrations:" {
-                return Err(Error::Usage(format!(
-                    "{file}: cannot record the calibration: `calibrations` must be a block list (one `  - {{ … }}` line per calibration)"
+                return Err(Error::Machine(Located::whole_file(
+                    file,
+                    "cannot record the calibration: `calibrations` must be a block list (one `  - { … }` line per calibration)",
                 )));
             }
             let mut end = i + 1;
@@ -317,7 +319,7 @@ pub fn set_calibrated(text: &str, file: &str, calibration: &Calibration) -> Resu
     };
     match Status::from_yaml_str(&out, file)? {
         Status::Calibrated(list) if list.last() == Some(&want) => Ok(out),
-        _ => Err(Error::Usage(format!(
+        _ => Err(Error::Internal(format!(
             "{file}: cannot record the calibration: the edited `status`/`calibrations` keys do not read back"
         ))),
     }

@@ -49,7 +49,7 @@ pub fn deserialize<T: DeserializeOwned>(text: &str, file: &str) -> Result<T, Err
             } else {
                 format!("{path}: {msg}")
             };
-            Err(Error::Input(Located::new(file, line, column, message)))
+            Err(Error::Machine(Located::new(file, line, column, message)))
         }
     }
 }
@@ -120,7 +120,7 @@ pub fn check_depth(text: &str, file: &str) -> Result<(), Error> {
 
 fn too_deep(depth: usize, line: usize, col: usize, file: &str) -> Result<(), Error> {
     if depth > limits::YAML_MAX_DEPTH {
-        return Err(Error::Input(Located::new(
+        return Err(Error::Machine(Located::new(
             file,
             line + 1,
             col + 1,
@@ -160,7 +160,7 @@ pub fn check_unique_keys(text: &str, file: &str) -> Result<(), Error> {
     } else {
         format!("{path}: duplicate key `{key}`: a key may appear once in a mapping")
     };
-    Err(Error::Input(Located::new(file, line, column, message)))
+    Err(Error::Machine(Located::new(file, line, column, message)))
 }
 
 const DUPLICATE: &str = "duplicate key \u{1}";
@@ -320,7 +320,7 @@ impl<'de> Visitor<'de> for UniqueVisitor {
     }
 }
 
-/// Turns a validation failure into a located input error.
+/// Turns a validation failure into a located machine-file error.
 pub fn invalid(text: &str, file: &str, inv: Invalid) -> Error {
     located(text, file, &inv.path, &inv.message)
 }
@@ -329,7 +329,7 @@ pub fn invalid(text: &str, file: &str, inv: Invalid) -> Error {
 /// `text` where possible (line 1 otherwise).
 pub fn located(text: &str, file: &str, path: &str, message: &str) -> Error {
     let (line, column) = locate(text, path).unwrap_or((1, 1));
-    Error::Input(Located::new(
+    Error::Machine(Located::new(
         file,
         line,
         column,

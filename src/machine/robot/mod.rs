@@ -323,7 +323,7 @@ fn locate_invalid(text: &str, file: &str, inv: Invalid) -> Error {
     let mut probe = inv.path.as_str();
     loop {
         if let Some((line, column)) = yaml::locate(text, probe) {
-            return Error::Input(Located::new(file, line, column, inv.to_string()));
+            return Error::Machine(Located::new(file, line, column, inv.to_string()));
         }
         match probe.rfind(['.', '[']) {
             Some(cut) if cut > 0 => probe = &probe[..cut],

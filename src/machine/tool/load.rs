@@ -45,7 +45,7 @@ fn locate_invalid(text: &str, file: &str, inv: Invalid) -> crate::error::Error {
     let mut prefix: &str = &inv.path;
     loop {
         if let Some((line, column)) = yaml::locate(text, prefix) {
-            return crate::error::Error::Input(crate::error::Located::new(
+            return crate::error::Error::Machine(crate::error::Located::new(
                 file,
                 line,
                 column,
