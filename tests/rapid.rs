@@ -769,3 +769,26 @@ fn editor_placeholders_mark_their_routine() {
     let e = parse_err("MODULE M\nPROC a()\n  MoveL p1;\nENDPROC\nENDMODULE\n");
     assert!(e.starts_with("t.mod:3:3: MoveL takes 4 arguments"), "{e}");
 }
+
+/// Deep chains in the new constructs are errors or unknown sizes, not a
+/// crash: compact IFs each on the line before the next, and array sizes
+/// with long runs of signs or parentheses.
+#[test]
+fn deep_compact_ifs_and_sizes_do_not_crash() {
+    let ifs = format!(
+        "MODULE M\nPROC main()\n{}  MoveL p1, v100, z10, tool0;\nENDPROC\nENDMODULE\n",
+        "  IF a\n".repeat(100_000)
+    );
+    assert!(parse_err(&ifs).starts_with("t.mod:"));
+    let two = "MODULE M\nPROC main()\n  IF a\n  IF b\n  MoveL p1, v100, z10, tool0;\nENDPROC\nENDMODULE\n";
+    assert_eq!(parse(two).procs[0].body.len(), 1);
+    for size in [
+        "-".repeat(100_000) + "1",
+        "(".repeat(100_000) + "1" + &")".repeat(100_000),
+    ] {
+        let src = format!("MODULE M\nVAR num a{{{size}}};\nENDMODULE\n");
+        if let Ok(m) = parse_module(&src, "t.mod") {
+            assert_eq!(m.decls[0].dims[0].value, None);
+        }
+    }
+}

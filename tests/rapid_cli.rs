@@ -730,3 +730,97 @@ fn system_modules_and_modules_by_content_are_rapid() {
         String::from_utf8_lossy(&out.stdout)
     );
 }
+
+/// A palletizing module as a controller saves it: ISO-8859-1 text (German
+/// comments, a string with `é`), CRLF line ends, a `%%%` header.
+fn latin1_module() -> Vec<u8> {
+    let mut m = Vec::new();
+    m.extend_from_slice(
+        b"%%%\r\n  VERSION:1\r\n  LANGUAGE:ENGLISH\r\n%%%\r\n\r\nMODULE Palette\r\n",
+    );
+    m.extend_from_slice(b"  ! Gr\xf6\xdfe der Palette: 4 \xd7 3, Abst\xe4nde in mm\r\n");
+    m.extend_from_slice(b"  CONST robtarget pAblage := [[750,0,500],[0,0,1,0],[0,0,0,0],[9E9,9E9,9E9,9E9,9E9,9E9]];\r\n");
+    m.extend_from_slice(b"  CONST robtarget pVor := [[760,20,480],[0,0,1,0],[0,0,0,0],[9E9,9E9,9E9,9E9,9E9,9E9]]; ! \xfcber der Ablage\r\n");
+    m.extend_from_slice(b"  PROC main()\r\n    TPWrite \"Palette voll, caf\xe9 \xb0C\";\r\n");
+    m.extend_from_slice(b"    MoveJ pVor, v1000, z50, tool0;\r\n    MoveL pAblage, v100, fine, tool0; ! Ablegen\r\n");
+    m.extend_from_slice(b"  ENDPROC\r\nENDMODULE\r\n");
+    m
+}
+
+/// An ISO-8859-1 module is read and written back byte for byte: with
+/// nothing to compensate the output is the input; compensated, every line
+/// but the changed targets' is the input's, the new numbers are in the
+/// same character set; `check` accepts it, with and without a robot.
+#[test]
+fn latin1_modules_come_back_byte_for_byte() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let input = dir.path().join("palette.mod");
+    let module = latin1_module();
+    assert!(std::str::from_utf8(&module).is_err(), "not UTF-8");
+    std::fs::write(&input, &module).expect("write");
+    let machine = repo("machines/abb-irb1600.yaml");
+    let run = |out: &str, extra: &[&str]| -> Vec<u8> {
+        let output = dir.path().join(out);
+        postproc()
+            .arg("compensate")
+            .arg(&input)
+            .arg("--machine")
+            .arg(&machine)
+            .arg("-o")
+            .arg(&output)
+            .args(extra)
+            .assert()
+            .success();
+        without_header(&std::fs::read(&output).expect("output"))
+    };
+    let same = run("none.mod", &["--effects", "none", "--annotate", "none"]);
+    assert!(same == module, "output differs from the input");
+    let compensated = run("all.mod", &[]);
+    // Asked to read it a window at a time, the run reads it whole.
+    assert!(run("windows.mod", &["--rapid-window-lines", "1"]) == compensated);
+    let lines = |b: &[u8]| -> Vec<Vec<u8>> {
+        b.split_inclusive(|&c| c == b'\n')
+            .map(<[u8]>::to_vec)
+            .collect()
+    };
+    let (a, b) = (lines(&module), lines(&compensated));
+    assert_eq!(a.len(), b.len());
+    let mut changed = Vec::new();
+    for (k, (x, y)) in a.iter().zip(&b).enumerate() {
+        if x != y {
+            changed.push(k + 1);
+            // A changed line keeps its comment's bytes and its line end.
+            if let Some(p) = x.iter().position(|&c| c == b'!') {
+                let comment = &x[p..x.len() - 2];
+                assert!(
+                    y.windows(comment.len()).any(|w| w == comment),
+                    "line {}",
+                    k + 1
+                );
+            }
+            assert!(y.ends_with(b"\r\n"));
+        }
+    }
+    // The two targets and the two annotated moves.
+    assert_eq!(changed, vec![8, 9, 12, 13]);
+    assert!(b[8].ends_with(b"; ! \xfcber der Ablage\r\n"));
+    assert!(b[12].windows(9).any(|w| w == b"! Ablegen"));
+    assert!(b[12].windows(6).any(|w| w == b"! dev "));
+    for args in [
+        vec!["check", "--machine", machine.to_str().expect("utf8")],
+        vec!["check"],
+    ] {
+        let out = postproc().args(&args).arg(&input).output().expect("runs");
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        assert!(
+            String::from_utf8_lossy(&out.stdout)
+                .contains("module Palette, 2 declarations, 1 routines, 2 moves"),
+            "{}",
+            String::from_utf8_lossy(&out.stdout)
+        );
+    }
+}

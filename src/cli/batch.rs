@@ -425,9 +425,9 @@ fn compensate_one(
                     return Ok(done(&outcome));
                 }
             }
-            let (src, name) = source.read_whole()?;
+            let (src, name, charset) = source.read_whole_text()?;
             let outcome = compensate_module(&src, &name, robot, &opts)?;
-            super::rapid::write_outcome(output, &outcome, &name, report_to, provenance)?;
+            super::rapid::write_outcome(output, &outcome, &name, report_to, provenance, charset)?;
             Ok(done(&outcome))
         }
     }

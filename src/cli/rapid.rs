@@ -14,7 +14,7 @@ use crate::error::{Error, Result};
 use crate::machine::ThermalStart;
 use crate::machine::robot::{Effects, Robot};
 use crate::pipeline::rapid::{RapidOptions, compensate_module, compensate_parsed, stream};
-use crate::program::rapid::parse_module_bytes;
+use crate::program::charset::{Charset, Latin1Writer};
 
 /// Modules of at least this size are read a window at a time when their
 /// shape and the run allow it ([`crate::pipeline::rapid::stream`]):
@@ -140,9 +140,16 @@ impl Source {
         Ok(head)
     }
 
-    /// The whole module text and its name; invalid UTF-8 gets a located
-    /// error (the module itself is parsed once, by the caller).
+    /// The whole module text and its name (the module itself is parsed
+    /// once, by the caller).
     pub(super) fn read_whole(self) -> Result<(String, String)> {
+        self.read_whole_text().map(|(text, name, _)| (text, name))
+    }
+
+    /// [`Source::read_whole`] and the character set of the module: UTF-8,
+    /// or ISO-8859-1 when it is not valid UTF-8
+    /// ([`crate::program::charset`]).
+    pub(super) fn read_whole_text(self) -> Result<(String, String, Charset)> {
         let name = self.name;
         let bytes = match self.stdin {
             Some(Stdin::Held(b)) => b,
@@ -155,14 +162,11 @@ impl Source {
             }
             None => crate::limits::read_file_bounded(&self.path, u64::MAX)?,
         };
-        let text = match String::from_utf8(bytes) {
-            Ok(t) => t,
-            Err(e) => {
-                parse_module_bytes(e.as_bytes(), &name)?;
-                return Err(usage(format!("{name}: {}", e.utf8_error())));
-            }
-        };
-        Ok((text, name))
+        let (text, charset) = crate::program::charset::decode(bytes);
+        if charset == Charset::Latin1 {
+            tracing::info!("{name}: not UTF-8; read as ISO-8859-1");
+        }
+        Ok((text, name, charset))
     }
 }
 
@@ -498,22 +502,23 @@ pub fn compensate(
             return Ok(0);
         }
     }
-    let (src, name) = source.read_whole()?;
+    let (src, name, charset) = source.read_whole_text()?;
     let outcome = pool.install(|| compensate_module(&src, &name, &robot, &opts))?;
-    write_outcome(&out_path, &outcome, &name, report, &provenance)?;
+    write_outcome(&out_path, &outcome, &name, report, &provenance, charset)?;
     log_outcome(&input_name, &out_path, &outcome, quiet);
     Ok(0)
 }
 
 /// Writes a module compensated whole to `out_path` (`-`: standard output)
-/// and its report to `report`; neither file is put in place unless both
-/// are written.
+/// in the character set of its input, and its report to `report`; neither
+/// file is put in place unless both are written.
 pub(super) fn write_outcome(
     out_path: &Path,
     outcome: &RapidOutcome,
     name: &str,
     report: Option<(&Path, super::Format)>,
     provenance: &Provenance,
+    charset: Charset,
 ) -> Result<()> {
     let mut out = Staged::open(out_path)?;
     let shown = if out_path == Path::new("-") {
@@ -521,7 +526,15 @@ pub(super) fn write_outcome(
     } else {
         out_path
     };
-    let mut hw = HeaderWriter::new(out.writer(), provenance.clone(), true);
+    let mut latin1;
+    let inner: &mut dyn Write = match charset {
+        Charset::Utf8 => out.writer(),
+        Charset::Latin1 => {
+            latin1 = Latin1Writer::new(out.writer());
+            &mut latin1
+        }
+    };
+    let mut hw = HeaderWriter::new(inner, provenance.clone(), true);
     hw.write_all(outcome.text.as_bytes())
         .and_then(|()| hw.finish())
         .map_err(|e| Error::io(shown, e))?;

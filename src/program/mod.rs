@@ -1,6 +1,7 @@
 //! Programs: syntax (G-code and RAPID parsers that keep byte spans) and the
 //! modal interpretation that turns G-code blocks into a stream of moves.
 
+pub mod charset;
 pub mod directive;
 pub mod gcode;
 pub mod interp;

@@ -1350,7 +1350,8 @@ impl<'a> Parser<'a> {
             return None;
         }
         let next = ws(r.get(line_end..)?);
-        let (rest, inner) = self.stmt(next).ok()?;
+        // One level deeper for each compact IF before the statement.
+        let (rest, inner) = self.nested(next, |p| p.stmt(next)).ok()?;
         match inner {
             Stmt::Move(_) | Stmt::Opaque { .. } => Some((
                 rest,

@@ -435,13 +435,13 @@ impl<'t> ConstExpr<'t> {
     fn factor(&mut self, depth: usize) -> Option<i64> {
         self.blanks();
         match *self.b.get(self.k)? {
-            b'-' => {
+            b'-' if depth < MAX_CONST_DEPTH => {
                 self.k += 1;
-                self.factor(depth)?.checked_neg()
+                self.factor(depth + 1)?.checked_neg()
             }
-            b'+' => {
+            b'+' if depth < MAX_CONST_DEPTH => {
                 self.k += 1;
-                self.factor(depth)
+                self.factor(depth + 1)
             }
             b'(' if depth < MAX_CONST_DEPTH => {
                 self.k += 1;
