@@ -50,7 +50,7 @@ impl Located {
 
 impl fmt::Display for Located {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        if self.line == 0 {
+        if self.line == 0 && self.column == 0 {
             return write!(f, "{}: {}", Escaped(&self.file), Escaped(&self.message));
         }
         write!(
