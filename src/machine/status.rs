@@ -319,8 +319,9 @@ pub fn set_calibrated(text: &str, file: &str, calibration: &Calibration) -> Resu
     };
     match Status::from_yaml_str(&out, file)? {
         Status::Calibrated(list) if list.last() == Some(&want) => Ok(out),
-        _ => Err(Error::Internal(format!(
-            "{file}: cannot record the calibration: the edited `status`/`calibrations` keys do not read back"
+        _ => Err(Error::Machine(Located::whole_file(
+            file,
+            "cannot record the calibration: the edited `status`/`calibrations` keys do not read back",
         ))),
     }
 }

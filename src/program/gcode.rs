@@ -438,6 +438,25 @@ fn bad_number(num: &[u8], pos: usize, what: &str, at: At) -> Located {
     at.err(pos, format!("{what} number `{shown}`"))
 }
 
+/// Keywords of O-word subroutines and loops (LinuxCNC), any case.
+const O_WORD_CONTROL: [&str; 15] = [
+    "sub",
+    "endsub",
+    "call",
+    "while",
+    "endwhile",
+    "do",
+    "if",
+    "else",
+    "elseif",
+    "endif",
+    "repeat",
+    "endrepeat",
+    "return",
+    "break",
+    "continue",
+];
+
 /// Refuses `O100 sub`, `o100 while …` (subroutines and loops) when the O
 /// word at `pos`, ending at `num_end`, opens the line.
 fn o_word_control(text: &[u8], pos: usize, num_end: usize, at: At) -> Result<(), Located> {
@@ -445,30 +464,15 @@ fn o_word_control(text: &[u8], pos: usize, num_end: usize, at: At) -> Result<(),
     if !text.get(tail).is_some_and(|c| c.is_ascii_alphabetic()) {
         return Ok(());
     }
-    let kw: Vec<u8> = text[tail..]
+    let len = text[tail..]
         .iter()
         .take_while(|c| c.is_ascii_alphabetic())
-        .copied()
-        .collect();
-    let kw = String::from_utf8_lossy(&kw).to_ascii_lowercase();
-    if matches!(
-        kw.as_str(),
-        "sub"
-            | "endsub"
-            | "call"
-            | "while"
-            | "endwhile"
-            | "do"
-            | "if"
-            | "else"
-            | "elseif"
-            | "endif"
-            | "repeat"
-            | "endrepeat"
-            | "return"
-            | "break"
-            | "continue"
-    ) {
+        .count();
+    let kw = &text[tail..tail + len];
+    if O_WORD_CONTROL
+        .iter()
+        .any(|k| kw.eq_ignore_ascii_case(k.as_bytes()))
+    {
         return Err(at.err(
             pos,
             format!(
