@@ -894,3 +894,29 @@ fn a_backup_module_with_every_construct_comes_back_as_written() {
         String::from_utf8_lossy(&check.stdout)
     );
 }
+
+/// `batch` over a controller's task folder picks up system modules
+/// (`.sys`) with the program modules, and writes an ISO-8859-1 module back
+/// in ISO-8859-1, byte for byte with nothing to compensate.
+#[test]
+fn batch_takes_system_modules_and_latin1_modules() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let input = dir.path().join("TASK1");
+    std::fs::create_dir_all(input.join("PROGMOD")).expect("mkdir");
+    std::fs::create_dir_all(input.join("SYSMOD")).expect("mkdir");
+    let user = b"MODULE user (SYSMODULE)\r\n  PERS num nCycles := 0;\r\nENDMODULE\r\n";
+    std::fs::write(input.join("SYSMOD/user.sys"), user).expect("write");
+    let palette = latin1_module();
+    std::fs::write(input.join("PROGMOD/Palette.mod"), &palette).expect("write");
+    let out = dir.path().join("out");
+    postproc()
+        .args(["batch", "--machine", "abb-irb1600", "--effects", "none"])
+        .args(["--annotate", "none", "--out-dir"])
+        .arg(&out)
+        .arg(&input)
+        .assert()
+        .success();
+    let written = |rel: &str| without_header(&std::fs::read(out.join(rel)).expect(rel));
+    assert!(written("SYSMOD/user.sys") == user, "user.sys");
+    assert!(written("PROGMOD/Palette.mod") == palette, "Palette.mod");
+}
