@@ -762,6 +762,9 @@ fn editor_placeholders_mark_their_routine() {
     assert_eq!(m.moves().count(), 1);
     assert_eq!(&src[m.procs[1].body[0].span()], "MoveL <ARG>;");
     assert_eq!(&src[m.procs[1].body[1].span()], "<SMT>;");
+    // A function whose type and name are still to be given.
+    let m = parse("MODULE M\n  FUNC <ID> <ID>(<PAR>)\n    RETURN <EXP>;\n  ENDFUNC\nENDMODULE\n");
+    assert!(m.procs[0].placeholder);
     // Not placeholders: lower case, unknown names; an unfinished move
     // without one is still an error.
     let e = parse_err("MODULE M\nPROC a()\n  <smt>\nENDPROC\nENDMODULE\n");

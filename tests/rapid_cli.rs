@@ -824,3 +824,99 @@ fn latin1_modules_come_back_byte_for_byte() {
         );
     }
 }
+
+/// A main module in the shape of a controller backup, with every construct
+/// of `grammar/rapid.md` that real modules use at once: `%%%` header,
+/// ISO-8859-1 comments, CRLF, a record type, constant-sized arrays, a
+/// socket loop with an error handler for a list of errors, compact IFs
+/// with their statement on the next line and an unfinished routine. With
+/// nothing to compensate it comes back byte for byte; compensated, the
+/// unfinished routine and every line without a compensated move or target
+/// are as written.
+#[test]
+fn a_backup_module_with_every_construct_comes_back_as_written() {
+    let mut module = Vec::new();
+    module.extend_from_slice(
+        b"%%%\r\n  VERSION:1\r\n  LANGUAGE:ENGLISH\r\n%%%\r\n\r\nMODULE MainModule\r\n",
+    );
+    module.extend_from_slice(b"  ! Zelle 3 \xb7 Schwei\xdfen und Palettieren\r\n");
+    module.extend_from_slice(b"  CONST num MAX_PARTS := 2;\r\n  RECORD partdata\r\n    robtarget pPick;\r\n    num nHeight;\r\n  ENDRECORD\r\n");
+    module.extend_from_slice(b"  VAR partdata parts{MAX_PARTS};\r\n  VAR socketdev sock;\r\n  VAR string cmd;\r\n  VAR bool bHome := FALSE;\r\n");
+    module.extend_from_slice(b"  CONST robtarget pHome := [[750,0,500],[0,0,1,0],[0,0,0,0],[9E9,9E9,9E9,9E9,9E9,9E9]];\r\n");
+    module.extend_from_slice(b"  CONST robtarget pDrop{MAX_PARTS} := [[[700,30,450],[0,0,1,0],[0,0,0,0],[9E9,9E9,9E9,9E9,9E9,9E9]],\r\n    [[700,80,450],[0,0,1,0],[0,0,0,0],[9E9,9E9,9E9,9E9,9E9,9E9]]];\r\n");
+    let main = b"  PROC main()\r\n    MoveJ pHome, v1000, z50, tool0;\r\n    WHILE TRUE DO\r\n      SocketReceive sock \\Str:=cmd \\Time:=30;\r\n      IF cmd = \"home\"\r\n        MoveJ pHome, v500, fine, tool0;\r\n      IF bHome\r\n        TPWrite \"Grundstellung \xfcberf\xe4hrt\";\r\n      MoveL pDrop{1}, v200, z10, tool0;\r\n      MoveL pDrop{2}, v200, fine, tool0;\r\n    ENDWHILE\r\n  ERROR (ERR_SOCK_TIMEOUT, ERR_SOCK_CLOSED)\r\n    SocketClose sock;\r\n    RETRY;\r\n  ENDPROC\r\n";
+    let teach: &[u8] = b"  PROC teach()\r\n    MoveL pDrop{1}, v100, fine, tool0;\r\n    <SMT>\r\n    MoveL Offs(pHome, 0, 0, <EXP>), v100, fine, tool0;\r\n  ENDPROC\r\n";
+    module.extend_from_slice(main);
+    module.extend_from_slice(teach);
+    module.extend_from_slice(b"ENDMODULE\r\n");
+    let dir = tempfile::tempdir().expect("tempdir");
+    let input = dir.path().join("MainModule.mod");
+    std::fs::write(&input, &module).expect("write");
+    let machine = repo("machines/abb-irb1600.yaml");
+    let run = |out: &str, extra: &[&str]| -> Vec<u8> {
+        let output = dir.path().join(out);
+        postproc()
+            .arg("compensate")
+            .arg(&input)
+            .arg("--machine")
+            .arg(&machine)
+            .arg("-o")
+            .arg(&output)
+            .args(extra)
+            .assert()
+            .success();
+        without_header(&std::fs::read(&output).expect("output"))
+    };
+    let same = run("none.mod", &["--effects", "none", "--annotate", "none"]);
+    assert!(same == module, "output differs from the input");
+    let out = run("all.mod", &[]);
+    assert!(out != module, "the main routine is compensated");
+    assert!(
+        out.windows(teach.len()).any(|w| w == teach),
+        "teach is as written"
+    );
+    let check = postproc()
+        .args(["check", "--machine"])
+        .arg(&machine)
+        .arg(&input)
+        .output()
+        .expect("runs");
+    assert!(
+        check.status.success(),
+        "{}",
+        String::from_utf8_lossy(&check.stderr)
+    );
+    // The moves of main (the one in a compact IF passed through); teach's
+    // are not counted.
+    assert!(
+        String::from_utf8_lossy(&check.stdout).contains("2 routines, 3 moves"),
+        "{}",
+        String::from_utf8_lossy(&check.stdout)
+    );
+}
+
+/// `batch` over a controller's task folder picks up system modules
+/// (`.sys`) with the program modules, and writes an ISO-8859-1 module back
+/// in ISO-8859-1, byte for byte with nothing to compensate.
+#[test]
+fn batch_takes_system_modules_and_latin1_modules() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let input = dir.path().join("TASK1");
+    std::fs::create_dir_all(input.join("PROGMOD")).expect("mkdir");
+    std::fs::create_dir_all(input.join("SYSMOD")).expect("mkdir");
+    let user = b"MODULE user (SYSMODULE)\r\n  PERS num nCycles := 0;\r\nENDMODULE\r\n";
+    std::fs::write(input.join("SYSMOD/user.sys"), user).expect("write");
+    let palette = latin1_module();
+    std::fs::write(input.join("PROGMOD/Palette.mod"), &palette).expect("write");
+    let out = dir.path().join("out");
+    postproc()
+        .args(["batch", "--machine", "abb-irb1600", "--effects", "none"])
+        .args(["--annotate", "none", "--out-dir"])
+        .arg(&out)
+        .arg(&input)
+        .assert()
+        .success();
+    let written = |rel: &str| without_header(&std::fs::read(out.join(rel)).expect(rel));
+    assert!(written("SYSMOD/user.sys") == user, "user.sys");
+    assert!(written("PROGMOD/Palette.mod") == palette, "Palette.mod");
+}

@@ -114,7 +114,7 @@ impl Given {
 
 /// True when `program` names a RAPID module, by its extension or its
 /// content ([`crate::program::language::is_rapid`]).
-fn rapid_extension(program: &ProgramArgs) -> bool {
+fn rapid_program(program: &ProgramArgs) -> bool {
     crate::program::language::is_rapid(&program.file)
 }
 
@@ -123,7 +123,7 @@ impl Engine {
     /// for a module (by its extension or content) or a robot, G-code otherwise; then
     /// refuses the `given` flags that do not apply to it.
     pub(super) fn choose(program: &ProgramArgs, given: Given) -> Result<Engine> {
-        let rapid = rapid_extension(program);
+        let rapid = rapid_program(program);
         let machine = program.machine.as_deref().map(super::machines::open);
         let engine = match machine {
             None if rapid => Engine::Robot(None),

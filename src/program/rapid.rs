@@ -10,7 +10,10 @@
 //! (`PROC`, `FUNC`, `TRAP`) and the motion instructions `MoveL`, `MoveJ`,
 //! `MoveC`, `MoveAbsJ` with their targets (named, array element, inline
 //! literal, `Offs`, `RelTool`). Every other statement is kept as an opaque
-//! statement with its span. The accepted subset is documented in
+//! statement with its span. Record types (`RECORD … ENDRECORD`) are kept
+//! with their fields, array sizes with their constant expressions, and a
+//! routine that holds an editor placeholder (`<SMT>`, `<EXP>`, …) is
+//! marked as unfinished. The accepted subset is documented in
 //! `grammar/rapid.md`. Keywords are case-insensitive, as in RAPID.
 
 pub mod directives;

@@ -1123,7 +1123,7 @@ impl<'a> Parser<'a> {
         };
         let mut r = ws(r);
         if kind == RoutineKind::Func {
-            let Ok((r1, _)) = ident(r) else {
+            let Ok((r1, _)) = ident_or_placeholder(r) else {
                 return self.fail_found(self.pos(r), "expected the return type after FUNC");
             };
             r = ws(r1);

@@ -19,7 +19,9 @@
 //! for the one module parser to read. The scan is line-based and
 //! conservative: anything it does not recognise ends it with
 //! [`Unsupported`], and the caller reads the module whole instead (which is
-//! also where every syntax error is reported).
+//! also where every syntax error is reported). So does an editor
+//! placeholder in a routine (the routine is left as written as a whole,
+//! which a window of it cannot tell) and text that is not UTF-8.
 
 use std::io::BufRead;
 
