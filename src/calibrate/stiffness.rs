@@ -534,7 +534,8 @@ pub fn calibrate_stiffness(
                 "positions measured in an instrument frame: its rotation is identified \
                  together with the stiffnesses (from the load differences); its origin, which \
                  load differences do not see, is the mean offset of the unloaded rows from the \
-                 calibrated model (uncertainty of that mean); written to `measurement_frame`"
+                 calibrated model (its uncertainty that of the mean and of the rotation over the \
+                 lever of the points); written to `measurement_frame`"
                     .into(),
             );
             Some(est)

@@ -126,6 +126,11 @@ fn in_reference_frame(
                 u.1[0], u.1[1], u.1[2]
             )),
         ));
+        said.push_str(
+            "note: the frame is fitted again with every candidate effect (each is judged \
+             with the frame that suits it); effects that move the points like a rigid motion \
+             of the instrument are absorbed by the frame and not candidates\n",
+        );
         for row in &mut obs.rows {
             row.measured_mm = (f * nalgebra::Point3::from(row.measured_mm)).coords;
             row.orientation = row.orientation.map(|q| f.rotation * q);
@@ -188,11 +193,13 @@ pub fn run(a: &DiagnoseArgs) -> Result<i32> {
     if let Some(f) = a.frame {
         obs.frame = f;
     }
+    let instrument = obs.frame == crate::calibrate::observations::MeasurementFrame::Instrument;
     let (obs, frame_text) = in_reference_frame(&machine, &obs, &o.display().to_string())?;
     let opts = Options {
         holdout: a.holdout,
         seed: a.seed,
         bootstrap: a.bootstrap,
+        instrument,
     };
     let d = diagnose::diagnose(&machine, &text, &obs, &o.display().to_string(), &opts)?;
     if a.format == DiagnoseFormat::Json && !frame_text.is_empty() {

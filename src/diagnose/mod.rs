@@ -41,6 +41,12 @@ pub struct Options {
     pub seed: u64,
     /// Bootstrap resamples.
     pub bootstrap: usize,
+    /// The positions were measured in an instrument frame and carried into
+    /// the reference frame by a registration to the current model: the
+    /// frame's six parameters are fitted again with every candidate variant
+    /// (the residual and every sensitivity are projected off the frame's
+    /// columns, separately on the fitted and the held-out rows).
+    pub instrument: bool,
 }
 
 impl Default for Options {
@@ -49,6 +55,7 @@ impl Default for Options {
             holdout: 0.3,
             seed: 1,
             bootstrap: 30,
+            instrument: false,
         }
     }
 }
@@ -161,6 +168,192 @@ const PATTERN_R2: f64 = 0.1;
 /// see at all may have: numerical differences of identical predictions.
 const NO_SENSITIVITY_MM: f64 = 1e-12;
 
+/// Projection off the columns of an instrument frame's six parameters
+/// (a shift, and a small rotation `−[p]×` about the reference axes, at the
+/// measured points `p`), on each of the row sets separately: what remains
+/// of a residual or a sensitivity after the frame of those rows is fitted
+/// with it (Frisch–Waugh–Lovell).
+struct FrameProjection {
+    /// Per row set: the rows and an orthonormal basis of the frame columns.
+    blocks: Vec<(Vec<usize>, DMatrix<f64>)>,
+}
+
+impl FrameProjection {
+    fn new(rows: &[crate::calibrate::observations::Observation], sets: &[&[usize]]) -> Self {
+        let blocks = sets
+            .iter()
+            .map(|set| {
+                let mut j = DMatrix::zeros(3 * set.len(), 6);
+                for (k, &i) in set.iter().enumerate() {
+                    let p = rows.get(i).map_or(Vector3::zeros(), |r| r.measured_mm);
+                    j.view_mut((3 * k, 0), (3, 3))
+                        .copy_from(&nalgebra::Matrix3::identity());
+                    j.view_mut((3 * k, 3), (3, 3))
+                        .copy_from(&(-p.cross_matrix()));
+                }
+                (set.to_vec(), j.qr().q())
+            })
+            .collect();
+        FrameProjection { blocks }
+    }
+
+    /// `m` (3 rows per observation row) with the frame's part removed.
+    fn apply(&self, m: &DMatrix<f64>) -> DMatrix<f64> {
+        let mut out = m.clone();
+        for (set, q) in &self.blocks {
+            let idx: Vec<usize> = set
+                .iter()
+                .flat_map(|&i| [3 * i, 3 * i + 1, 3 * i + 2])
+                .collect();
+            let block = m.select_rows(idx.iter());
+            let rest = &block - q * (q.transpose() * &block);
+            for (k, &r) in idx.iter().enumerate() {
+                out.row_mut(r).copy_from(&rest.row(k));
+            }
+        }
+        out
+    }
+}
+
+/// The candidates' sensitivities (µm per display unit), the candidates the
+/// rows can see. With an instrument frame, a candidate the frame's columns
+/// explain (to within [`crate::calibrate::frame::FRAME_RANK_RTOL`]) is
+/// absorbed by the frame and left out.
+fn sensitivities(
+    lib: Vec<Effect>,
+    ctx: &effects::Context<'_>,
+    rows: &[crate::calibrate::observations::Observation],
+    frame: Option<&FrameProjection>,
+) -> (Vec<Effect>, Vec<DMatrix<f64>>) {
+    let mut kept = Vec::new();
+    let mut sens = Vec::new();
+    for e in lib {
+        match effects::sensitivity(&e, ctx, rows) {
+            Ok(s) if s.iter().all(|v| v.is_finite()) && s.amax() > NO_SENSITIVITY_MM => {
+                let s = s * 1000.0;
+                let s = match frame {
+                    Some(f) => {
+                        let p = f.apply(&s);
+                        if p.norm() < crate::calibrate::frame::FRAME_RANK_RTOL * s.norm() {
+                            warn!("candidate {}: absorbed by the instrument frame", e.name);
+                            continue;
+                        }
+                        p
+                    }
+                    None => s,
+                };
+                sens.push(s);
+                kept.push(e);
+            }
+            Ok(_) => {}
+            Err(err) => warn!("candidate {}: {err}", e.name),
+        }
+    }
+    (kept, sens)
+}
+
+/// The accepted effects with their fitted parameters, and the fitted
+/// coefficients.
+fn found_effects(sel: &select::Selection, kept: &[Effect]) -> (Vec<Found>, DVector<f64>) {
+    let mut found = Vec::new();
+    let Some(fit) = &sel.fit else {
+        return (found, DVector::zeros(0));
+    };
+    let u = fit
+        .std_uncertainty()
+        .unwrap_or_else(|| DVector::from_element(fit.params.len(), f64::NAN));
+    let mut col = 0;
+    for (step, &c) in sel.accepted.iter().enumerate() {
+        let Some(e) = kept.get(c) else { continue };
+        let params = e
+            .params
+            .iter()
+            .map(|p| {
+                let v = Param {
+                    name: p.clone(),
+                    value: fit.params.get(col).copied().unwrap_or(0.0),
+                    u: u.get(col).copied().unwrap_or(f64::NAN),
+                };
+                col += 1;
+                v
+            })
+            .collect();
+        let bootstrap = sel
+            .steps
+            .get(step)
+            .and_then(|s| s.candidates.iter().find(|x| x.index == c))
+            .map_or(0.0, |x| x.bootstrap);
+        found.push(Found {
+            effect: e.clone(),
+            params,
+            bootstrap,
+        });
+    }
+    (found, fit.params.clone())
+}
+
+/// The held-out gap with the accepted effects (fitted on the training rows).
+fn held_out_gap(
+    sel: &select::Selection,
+    sens: &[DMatrix<f64>],
+    r: &DVector<f64>,
+    res: &[Vector3<f64>],
+    beta: &DVector<f64>,
+    train: &[usize],
+    hold: &[usize],
+) -> Gap {
+    let n = res.len();
+    let before: Vec<Vector3<f64>> = hold.iter().filter_map(|&i| res.get(i).copied()).collect();
+    let after: Vec<Vector3<f64>> = if sel.accepted.is_empty() {
+        before.clone()
+    } else {
+        let x = select::design(sens, &sel.accepted, 3 * n);
+        let corr: DVector<f64> = if x.ncols() == beta.len() {
+            &x * beta
+        } else {
+            DVector::zeros(3 * n)
+        };
+        hold.iter()
+            .filter_map(|&i| {
+                let v = res.get(i)?;
+                Some(Vector3::new(
+                    v.x - corr[3 * i] * 1e-3,
+                    v.y - corr[3 * i + 1] * 1e-3,
+                    v.z - corr[3 * i + 2] * 1e-3,
+                ))
+            })
+            .collect()
+    };
+    let mb = metrics(&before);
+    let ma = metrics(&after);
+    let (rss_t, k_t) = match &sel.fit {
+        Some(f) => (f.rss, f.params.len()),
+        None => (sel.steps.first().map_or(0.0, |s| s.rss_before_um2), 0),
+    };
+    let dof = (3 * train.len()).saturating_sub(k_t).max(1) as f64;
+    let noise_floor_um = match library_noise_floor(r, sens, train) {
+        Some(f) => f.min((3.0 * rss_t / dof).sqrt()),
+        None => (3.0 * rss_t / dof).sqrt(),
+    };
+    let closable = mb.rms_um - noise_floor_um;
+    Gap {
+        rows: hold.len(),
+        before: mb,
+        after: ma,
+        closed_pct: if mb.rms_um > 0.0 {
+            100.0 * (1.0 - ma.rms_um / mb.rms_um)
+        } else {
+            0.0
+        },
+        noise_floor_um,
+        closed_of_closable_pct: if closable > 0.0 {
+            (100.0 * (mb.rms_um - ma.rms_um) / closable).min(100.0)
+        } else {
+            0.0
+        },
+    }
+}
+
 /// Runs the diagnosis. `machine_text` is the YAML of `machine`; `obs_file`
 /// names the observation file in errors.
 pub fn diagnose(
@@ -186,12 +379,44 @@ pub fn diagnose(
             rows.len()
         )));
     }
+    let (train, hold) = holdout_split(rows.len(), opts.holdout, opts.seed);
+    // An effect is accepted only when held-out rows confirm it: a split
+    // that leaves either side empty could confirm nothing.
+    if hold.is_empty() || train.is_empty() {
+        return Err(crate::error::Error::Usage(format!(
+            "--holdout {}: holds out {} of the {} rows; both the held-out and the fitted rows need at least one",
+            crate::error::show_number(opts.holdout),
+            hold.len(),
+            rows.len()
+        )));
+    }
+    let frame = opts
+        .instrument
+        .then(|| FrameProjection::new(rows, &[&train, &hold]));
     let sim = effects::simulate(&ctx, rows)?;
-    let res: Vec<Vector3<f64>> = rows
-        .iter()
-        .zip(&sim)
-        .map(|(r, s)| r.measured_mm - s)
-        .collect();
+    let mut r = DVector::zeros(3 * rows.len());
+    for (i, (row, s)) in rows.iter().zip(&sim).enumerate() {
+        let v = row.measured_mm - s;
+        for c in 0..3 {
+            r[3 * i + c] = v[c] * 1000.0;
+        }
+    }
+    let res: Vec<Vector3<f64>> = match &frame {
+        Some(f) => {
+            r = f
+                .apply(&DMatrix::from_column_slice(r.len(), 1, r.as_slice()))
+                .column(0)
+                .into_owned();
+            (0..rows.len())
+                .map(|i| Vector3::new(r[3 * i], r[3 * i + 1], r[3 * i + 2]) * 1e-3)
+                .collect()
+        }
+        None => rows
+            .iter()
+            .zip(&sim)
+            .map(|(r, s)| r.measured_mm - s)
+            .collect(),
+    };
     let mut where_ = residuals::analyse(rows, &res);
     where_.patterns = patterns::rank(machine, rows, &res);
     if let Some(p) = where_.patterns.first().filter(|p| p.r2_adj >= PATTERN_R2) {
@@ -207,39 +432,10 @@ pub fn diagnose(
             e.not_writable = Some(effects::NOT_TCP_DEVIATION.into());
         }
     }
-    let mut kept = Vec::new();
-    let mut sens = Vec::new();
-    for e in lib {
-        match effects::sensitivity(&e, &ctx, rows) {
-            Ok(s) if s.iter().all(|v| v.is_finite()) && s.amax() > NO_SENSITIVITY_MM => {
-                sens.push(s * 1000.0);
-                kept.push(e);
-            }
-            Ok(_) => {}
-            Err(err) => warn!("candidate {}: {err}", e.name),
-        }
-    }
+    let (kept, sens) = sensitivities(lib, &ctx, rows, frame.as_ref());
     let names: Vec<String> = kept.iter().map(|e| e.name.clone()).collect();
     let screen = screen::pairs(&sens, &names);
     let groups = screen::groups(&sens, &names, &screen);
-
-    let (train, hold) = holdout_split(rows.len(), opts.holdout, opts.seed);
-    // An effect is accepted only when held-out rows confirm it: a split
-    // that leaves either side empty could confirm nothing.
-    if hold.is_empty() || train.is_empty() {
-        return Err(crate::error::Error::Usage(format!(
-            "--holdout {}: holds out {} of the {} rows; both the held-out and the fitted rows need at least one",
-            crate::error::show_number(opts.holdout),
-            hold.len(),
-            rows.len()
-        )));
-    }
-    let mut r = DVector::zeros(3 * rows.len());
-    for (i, v) in res.iter().enumerate() {
-        for c in 0..3 {
-            r[3 * i + c] = v[c] * 1000.0;
-        }
-    }
     let sel = select::select(&select::Problem {
         r: &r,
         s: &sens,
@@ -249,93 +445,8 @@ pub fn diagnose(
         bootstrap: opts.bootstrap,
         seed: opts.seed,
     });
-
-    let mut found = Vec::new();
-    let mut beta = DVector::zeros(0);
-    if let Some(fit) = &sel.fit {
-        let u = fit
-            .std_uncertainty()
-            .unwrap_or_else(|| DVector::from_element(fit.params.len(), f64::NAN));
-        let mut col = 0;
-        for (step, &c) in sel.accepted.iter().enumerate() {
-            let Some(e) = kept.get(c) else { continue };
-            let params = e
-                .params
-                .iter()
-                .map(|p| {
-                    let v = Param {
-                        name: p.clone(),
-                        value: fit.params.get(col).copied().unwrap_or(0.0),
-                        u: u.get(col).copied().unwrap_or(f64::NAN),
-                    };
-                    col += 1;
-                    v
-                })
-                .collect();
-            let bootstrap = sel
-                .steps
-                .get(step)
-                .and_then(|s| s.candidates.iter().find(|x| x.index == c))
-                .map_or(0.0, |x| x.bootstrap);
-            found.push(Found {
-                effect: e.clone(),
-                params,
-                bootstrap,
-            });
-        }
-        beta = fit.params.clone();
-    }
-
-    // Held-out gap with the accepted effects (fitted on the training rows).
-    let before: Vec<Vector3<f64>> = hold.iter().filter_map(|&i| res.get(i).copied()).collect();
-    let after: Vec<Vector3<f64>> = if sel.accepted.is_empty() {
-        before.clone()
-    } else {
-        let x = select::design(&sens, &sel.accepted, 3 * rows.len());
-        let corr: DVector<f64> = if x.ncols() == beta.len() {
-            &x * &beta
-        } else {
-            DVector::zeros(3 * rows.len())
-        };
-        hold.iter()
-            .filter_map(|&i| {
-                let v = res.get(i)?;
-                Some(Vector3::new(
-                    v.x - corr[3 * i] * 1e-3,
-                    v.y - corr[3 * i + 1] * 1e-3,
-                    v.z - corr[3 * i + 2] * 1e-3,
-                ))
-            })
-            .collect()
-    };
-    let mb = metrics(&before);
-    let ma = metrics(&after);
-    let (rss_t, k_t) = match &sel.fit {
-        Some(f) => (f.rss, f.params.len()),
-        None => (sel.steps.first().map_or(0.0, |s| s.rss_before_um2), 0),
-    };
-    let dof = (3 * train.len()).saturating_sub(k_t).max(1) as f64;
-    let noise_floor_um = match library_noise_floor(&r, &sens, &train) {
-        Some(f) => f.min((3.0 * rss_t / dof).sqrt()),
-        None => (3.0 * rss_t / dof).sqrt(),
-    };
-    let closable = mb.rms_um - noise_floor_um;
-    let gap = Gap {
-        rows: hold.len(),
-        before: mb,
-        after: ma,
-        closed_pct: if mb.rms_um > 0.0 {
-            100.0 * (1.0 - ma.rms_um / mb.rms_um)
-        } else {
-            0.0
-        },
-        noise_floor_um,
-        closed_of_closable_pct: if closable > 0.0 {
-            (100.0 * (mb.rms_um - ma.rms_um) / closable).min(100.0)
-        } else {
-            0.0
-        },
-    };
+    let (found, beta) = found_effects(&sel, &kept);
+    let gap = held_out_gap(&sel, &sens, &r, &res, &beta, &train, &hold);
     let verdict = verdict(&sel.steps, &found);
     Ok(Diagnosis {
         machine_kind: match machine {
