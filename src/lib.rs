@@ -4,7 +4,9 @@
 //! The pipeline: a program (G-code or ABB RAPID) is parsed syntactically
 //! ([`program`]), interpreted into a stream of poses, predicted block by block
 //! against a calibrated [`machine`] model ([`predict`]), compensated by an
-//! inverse solve ([`compensate`]) and written back byte-faithfully ([`emit`]).
+//! inverse solve ([`compensate`]) and written back byte-faithfully ([`emit`]);
+//! [`pipeline`] drives a whole program of either language through these
+//! stages.
 #![deny(missing_docs)]
 
 pub mod calibrate;

@@ -717,27 +717,7 @@ pub(super) fn compensate_streamed_to(
 
 /// Writes the report rows of `records`.
 fn write_records(rw: &mut crate::emit::report::ReportWriter, records: &[MoveRecord]) -> Result<()> {
-    use crate::emit::report::Entry;
-    for t in records {
-        let d = &t.deviation;
-        rw.entry(&Entry {
-            line: t.line,
-            motion: t.kind,
-            axes: &t.programmed_mm,
-            position_mm: t.programmed_mm,
-            deviation_mm: d.total.pos_mm.into(),
-            effects_mm: &[
-                d.kinematic.pos_mm.norm(),
-                d.thermal.pos_mm.norm(),
-                d.gravity.pos_mm.norm(),
-                d.process.pos_mm.norm(),
-                d.vibration_mm.norm(),
-            ],
-            residual_mm: None,
-            orient_urad: d.total.rot_rad.norm() * 1e6,
-        })?;
-    }
-    Ok(())
+    records.iter().try_for_each(|t| rw.record(t))
 }
 
 /// Writes the deviation report of a compensated (or dry-run) RAPID module:

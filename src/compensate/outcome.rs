@@ -210,4 +210,16 @@ pub struct RapidOutcome {
     pub max_deviation_line: usize,
     /// One record per motion instruction, in source order.
     pub records: Vec<MoveRecord>,
+    /// Motion instructions left as written, each with its reason, in
+    /// source order (not counted in `moves`, no record).
+    pub as_written: Vec<AsWritten>,
+}
+
+/// A motion instruction the RAPID pipeline leaves as written, and why.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct AsWritten {
+    /// 1-based line of the instruction.
+    pub line: usize,
+    /// Why it is not compensated.
+    pub reason: String,
 }

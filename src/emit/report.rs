@@ -11,7 +11,7 @@
 
 use std::io::Write;
 
-use crate::compensate::outcome::{DevStats, Row};
+use crate::compensate::outcome::{DevStats, MoveRecord, Row};
 use crate::emit::svg::{Decimator, PlotPoint, Worst as PlotWorst};
 use crate::error::{Error, Result};
 use crate::machine::AXIS_LETTERS;
@@ -490,6 +490,29 @@ impl<'w> ReportWriter<'w> {
             residual_mm: Some(r.result.residual_mm),
             // Tool-axis direction error: a three-axis machine cannot correct it.
             orient_urad: r.result.deviation.orientation.norm() * 1e6,
+        })
+    }
+
+    /// Writes the row of a RAPID motion instruction: the kinematic,
+    /// thermal, gravity, process and dynamic (vibration) parts of its
+    /// predicted deviation ([`Layout::rapid`]).
+    pub fn record(&mut self, t: &MoveRecord) -> Result<()> {
+        let d = &t.deviation;
+        self.entry(&Entry {
+            line: t.line,
+            motion: t.kind,
+            axes: &t.programmed_mm,
+            position_mm: t.programmed_mm,
+            deviation_mm: d.total.pos_mm.into(),
+            effects_mm: &[
+                d.kinematic.pos_mm.norm(),
+                d.thermal.pos_mm.norm(),
+                d.gravity.pos_mm.norm(),
+                d.process.pos_mm.norm(),
+                d.vibration_mm.norm(),
+            ],
+            residual_mm: None,
+            orient_urad: d.total.rot_rad.norm() * 1e6,
         })
     }
 

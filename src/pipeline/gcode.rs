@@ -874,7 +874,7 @@ impl<'m> Job<'m> {
         };
         let n = st.chunk.ranges.len();
         // The results of the chunk this stage held before are overwritten
-        // in place: their split-point storage is reused (`finish` gave
+        // in place: their split-point storage is reused (`WriteStage::chunk` gave
         // large storage back).
         st.results.truncate(n);
         st.results.resize_with(n, || None);

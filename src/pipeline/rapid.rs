@@ -19,7 +19,7 @@ use rayon::prelude::*;
 
 use nalgebra::{Isometry3, Vector3};
 
-use crate::compensate::outcome::{MoveRecord, RapidOutcome};
+use crate::compensate::outcome::{AsWritten, MoveRecord, RapidOutcome};
 use crate::compensate::robot::{Compensation, Seed};
 use crate::emit::rapid::{
     EditList, Format, fresh_name, insert_after_decl, joint_text, push_annotation,
@@ -970,6 +970,8 @@ pub(crate) struct Carry {
     max_deviation: (f64, usize),
     max_vib: (f64, usize, Option<f64>),
     records: Vec<MoveRecord>,
+    /// Moves left as written, with their reasons.
+    as_written: Vec<AsWritten>,
 }
 
 impl Carry {
@@ -1007,6 +1009,7 @@ impl Carry {
             max_deviation_mm: self.max_deviation.0,
             max_deviation_line: self.max_deviation.1,
             records: std::mem::take(&mut self.records),
+            as_written: std::mem::take(&mut self.as_written),
         }
     }
 }

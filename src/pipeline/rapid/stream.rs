@@ -328,6 +328,7 @@ fn pass<R: BufRead>(
             max_deviation_mm: 0.0,
             max_deviation_line: 0,
             records: Vec::new(),
+            as_written: Vec::new(),
         },
     };
     let streamed = Streamed {
