@@ -929,7 +929,12 @@ pub fn compensate_parsed(
     opts: &RapidOptions,
 ) -> Result<RapidOutcome> {
     let mut carry = Carry::default();
-    let mut edits = compensate_window(&module, src, file, robot, opts, &mut carry, None, 0)?;
+    let text = ModuleText {
+        module: &module,
+        src,
+        file,
+    };
+    let mut edits = compensate_window(text, robot, opts, &mut carry, None, 0)?;
     let spans: Vec<_> = module.decls.iter().map(|d| d.span.clone()).collect();
     // Free the parsed module before the output text is built (the peak).
     drop(module);
@@ -1014,24 +1019,32 @@ impl Carry {
     }
 }
 
-/// Compensates the moves of `module` (parsed from `src`), continuing the
-/// windows before from `carry`. `directives`: the program's
-/// `! POSTPROC MILLING` settings of the window (parsed from `src` when
-/// `None`). Returns the edits of `src` from byte `before` on; those before
-/// it go to `carry.before`.
-#[allow(clippy::too_many_arguments)]
+/// A parsed module (or the window of one being compensated) with the text
+/// its spans point into and the file name of its messages.
+#[derive(Clone, Copy)]
+pub(crate) struct ModuleText<'a> {
+    /// The parsed module.
+    pub(crate) module: &'a Module,
+    /// The text it was parsed from.
+    pub(crate) src: &'a str,
+    /// File name for messages.
+    pub(crate) file: &'a str,
+}
+
+/// Compensates the moves of `text.module`, continuing the windows before
+/// from `carry`. `directives`: the program's `! POSTPROC MILLING` settings
+/// of the window (parsed from `text.src` when `None`). Returns the edits of
+/// `text.src` from byte `before` on; those before it go to `carry.before`.
 pub(crate) fn compensate_window(
-    module: &Module,
-    src: &str,
-    file: &str,
+    text: ModuleText,
     robot: &Robot,
     opts: &RapidOptions,
     carry: &mut Carry,
     directives: Option<Directives>,
     before: usize,
 ) -> Result<EditList> {
-    let moves: Vec<&Move> = module.moves().collect();
-    let mut line = TimeLine::of_window(&moves, module, src, file, robot, opts, carry, directives)?;
+    let moves: Vec<&Move> = text.module.moves().collect();
+    let mut line = TimeLine::of_window(&moves, text, robot, opts, carry, directives)?;
     if let Some(totals) = carry.time_line.as_mut() {
         if let Some(t) = line.thermal {
             totals.add(&line.segments, t.time_constant_s);
@@ -1040,7 +1053,7 @@ pub(crate) fn compensate_window(
         return Ok(EditList::new());
     }
     line.start_thermal(carry, opts.thermal_start);
-    let mut rw = Rewriter::resume(module, src, file, robot, opts, carry);
+    let mut rw = Rewriter::resume(text, robot, opts, carry);
     if opts.records {
         carry.records.reserve(moves.len());
     }
@@ -1079,17 +1092,15 @@ struct TimeLine<'r> {
 impl<'r> TimeLine<'r> {
     /// Plans the moves of a window (continuing the windows before from
     /// `carry`) and puts them on the time line.
-    #[allow(clippy::too_many_arguments)]
     fn of_window(
         moves: &[&Move],
-        module: &Module,
-        src: &str,
-        file: &str,
+        text: ModuleText,
         robot: &'r Robot,
         opts: &RapidOptions,
         carry: &mut Carry,
         directives: Option<Directives>,
     ) -> Result<Self> {
+        let ModuleText { module, src, file } = text;
         // Planning (resolving each move and solving its programmed joints) is
         // independent per move: in parallel, each rayon task with its own tool
         // views; the first error in move order is the error, as in order.
@@ -1305,17 +1316,15 @@ type Keyed<'a> = (
 impl<'m> Rewriter<'m> {
     /// A rewriter of a window that continues the windows before (`carry`).
     fn resume(
-        module: &'m Module,
-        src: &'m str,
-        file: &'m str,
+        text: ModuleText<'m>,
         robot: &'m Robot,
         opts: &RapidOptions,
         carry: &mut Carry,
     ) -> Self {
         Rewriter {
-            module,
-            src,
-            file,
+            module: text.module,
+            src: text.src,
+            file: text.file,
             robot,
             opts: *opts,
             edits: EditList::new(),

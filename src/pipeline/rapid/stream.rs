@@ -16,7 +16,7 @@
 
 use std::io::{BufRead, Write};
 
-use super::{Carry, RapidOptions, compensate_window};
+use super::{Carry, ModuleText, RapidOptions, compensate_window};
 use crate::compensate::outcome::{MoveRecord, RapidOutcome};
 use crate::error::{Error, Result};
 use crate::machine::ThermalStart;
@@ -297,16 +297,12 @@ fn pass<R: BufRead>(
                 let directives = Directives::parse_lines(&lines, file, line, cut)?;
                 cut = directives.last();
                 let start = prologue_len + header.len();
-                let edits = compensate_window(
-                    &module,
-                    &text,
+                let window = ModuleText {
+                    module: &module,
+                    src: &text,
                     file,
-                    robot,
-                    opts,
-                    carry,
-                    Some(directives),
-                    start,
-                )?;
+                };
+                let edits = compensate_window(window, robot, opts, carry, Some(directives), start)?;
                 write(&edits.apply_in(&text, start..start + lines.len())?)?;
                 if let Some(sink) = records.as_deref_mut() {
                     sink(&carry.records)?;
