@@ -19,6 +19,12 @@
 //!   axis). The slopes of `EYX`, `EZX`, `EZY` are identified as they are:
 //!   the observations are in the machine's own workpiece frame, whose
 //!   orientation is not a free parameter.
+//! - Instrument-frame data (`# frame: instrument`): the six parameters of
+//!   the instrument's pose are identified with the tables
+//!   ([`super::frame`]); the values that move the points like a rigid
+//!   motion of the instrument (one of each positioning table, one of
+//!   `EYX`, `EZX`, `EZY`) are absorbed by it, keep the file's values and
+//!   are listed.
 //! - Angular errors (`EAX` … `ECZ`) and rotary axes are *not* identified:
 //!   tip positions at one tool length cannot separate an angular error from
 //!   the straightness it causes at the tip. They keep the file's values (and

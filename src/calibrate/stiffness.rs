@@ -12,7 +12,11 @@
 //! degrees of freedom lose 3 per group, and the uncertainties are computed
 //! with that (sharing one reference row between two loads correlates their
 //! loaded − unloaded differences; the centred form accounts for it). A
-//! loaded row alone in its group is an error.
+//! loaded row alone in its group is an error. With instrument-frame data
+//! the small rotation of the instrument's frame is identified with the
+//! compliances (three more columns of the centred design; its origin
+//! cancels), and the origin is the mean offset of the unloaded fit rows
+//! from the calibrated model.
 //!
 //! Model: with the compliances `c_i = 1/kθi` the deflection of a loaded row
 //! from its unloaded state is linear in c:

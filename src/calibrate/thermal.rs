@@ -28,6 +28,10 @@
 //! `thermal.axes` entry from its `pX_w`. The forward model is linear in
 //! them, so it is one linear least-squares step on the residuals of the
 //! file's model ([`solve_linear`], same identifiability analysis).
+//!
+//! Both kinds identify an instrument frame (`# frame: instrument`) with
+//! their unknowns: its six parameters beside the model's, the model's
+//! screened against them ([`super::frame::screen_model`]).
 
 use nalgebra::{DMatrix, DVector, Isometry3};
 
