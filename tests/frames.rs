@@ -844,6 +844,13 @@ fn instrument_frame_identified_with_the_stiffness() {
             cal.notes.iter().any(|n| n.contains("instrument frame")),
             "{cal}"
         );
+        // Pair differences: σ√2 per coordinate, σ ≈ 15 + 6 µm/m × 3.5 m.
+        let v = cal.validation.expect("held-out pairs");
+        let sigma_pair_mm = 0.036 * std::f64::consts::SQRT_2;
+        assert!(
+            v.after_mean_mm < 1.3 * MAXWELL_MEAN * sigma_pair_mm,
+            "{cal}"
+        );
     }
 }
 
@@ -955,6 +962,8 @@ fn instrument_frame_identified_with_the_tool_thermal_gains() {
         assert_param(&cal, "spindle.growth", 11.0);
         assert_param(&cal, "X.scale", 90.0);
         assert_frame_recovered(&cal, &tool_instrument());
+        let v = cal.validation.expect("held out");
+        assert!(v.after_mean_mm <= 1.25 * MAXWELL_MEAN * 0.001, "{cal}");
     }
 }
 

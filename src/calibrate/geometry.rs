@@ -19,6 +19,12 @@
 //!   axis). The slopes of `EYX`, `EZX`, `EZY` are identified as they are:
 //!   the observations are in the machine's own workpiece frame, whose
 //!   orientation is not a free parameter.
+//! - Instrument-frame data (`# frame: instrument`): the six parameters of
+//!   the instrument's pose are identified with the tables
+//!   ([`super::frame`]); the values that move the points like a rigid
+//!   motion of the instrument (one of each positioning table, one of
+//!   `EYX`, `EZX`, `EZY`) are absorbed by it, keep the file's values and
+//!   are listed.
 //! - Angular errors (`EAX` … `ECZ`) and rotary axes are *not* identified:
 //!   tip positions at one tool length cannot separate an angular error from
 //!   the straightness it causes at the tip. They keep the file's values (and
@@ -502,6 +508,69 @@ fn absorbed_by_frame(
     Ok(given.into_iter().filter(|c| !plain.contains(c)).collect())
 }
 
+/// The report's rows: every unknown, identified (with its uncertainty) or
+/// kept at its start value `x0` when the solution cannot identify it.
+fn estimates(prob: &Problem, sol: &Solution, x0: &[f64], x: &[f64]) -> Vec<Estimate> {
+    let u = sol.std_uncertainty();
+    let fixed: std::collections::BTreeSet<usize> =
+        sol.identifiability.unidentifiable.iter().copied().collect();
+    let mut params = Vec::with_capacity(prob.params.len());
+    for (k, p) in prob.params.iter().enumerate() {
+        let is_fixed = fixed.contains(&k);
+        params.push(Estimate {
+            name: prob.name(p),
+            unit: match p {
+                Param::Table { .. } => "µm",
+                Param::Square { .. } => "µrad",
+            },
+            start: x0.get(k).copied().unwrap_or(0.0),
+            value: if is_fixed {
+                x0.get(k).copied().unwrap_or(0.0)
+            } else {
+                x.get(k).copied().unwrap_or(0.0)
+            },
+            u: if is_fixed {
+                None
+            } else {
+                u.as_ref().map(|u| u[k])
+            },
+            fixed: is_fixed,
+        });
+    }
+    params
+}
+
+/// The notes every geometric calibration gives: what is not identified and
+/// the table conventions.
+fn fixed_notes(square: bool) -> Vec<String> {
+    let mut notes = vec![
+        "angular errors (EA*, EB*, EC*) and rotary axes are not identified from tip positions \
+         at one tool length; they keep the file's values"
+            .to_string(),
+        "straightness tables are zero at the first target (forward; the offsets are in the \
+         positioning tables); EXY, EXZ, EYZ use the end-point reference line, their slopes \
+         are in EC0Y, EB0Z, EA0Z"
+            .to_string(),
+    ];
+    if !square {
+        notes.push("squareness needs X, Y and Z linear axes, all varied; not identified".into());
+    }
+    notes
+}
+
+/// Refuses a badly conditioned fit.
+fn check_condition(id: &crate::calibrate::lsq::Identifiability, obs_file: &str) -> Result<()> {
+    if id.condition_number_identified > CONDITION_LIMIT {
+        return Err(Error::Usage(format!(
+            "{obs_file}: badly conditioned data set: condition number {:.3e} > {:.0e} \
+             (O1 = {:.3e}); vary all axes independently over their targets and the \
+             approach directions",
+            id.condition_number_identified, CONDITION_LIMIT, id.observability_o1
+        )));
+    }
+    Ok(())
+}
+
 /// Identifies the component error tables and squareness from `obs` (and
 /// the instrument frame for `# frame: instrument` data).
 pub fn calibrate_geometry(
@@ -583,39 +652,8 @@ pub fn calibrate_geometry(
     )?;
     let m = 3 * fit.len();
     let id = &sol.identifiability;
-    if id.condition_number_identified > CONDITION_LIMIT {
-        return Err(Error::Usage(format!(
-            "{obs_file}: badly conditioned data set: condition number {:.3e} > {:.0e} \
-             (O1 = {:.3e}); vary all axes independently over their targets and the \
-             approach directions",
-            id.condition_number_identified, CONDITION_LIMIT, id.observability_o1
-        )));
-    }
-    let u = sol.std_uncertainty();
-    let fixed: std::collections::BTreeSet<usize> = id.unidentifiable.iter().copied().collect();
-    let mut params = Vec::with_capacity(n);
-    for (k, p) in prob.params.iter().enumerate() {
-        let is_fixed = fixed.contains(&k);
-        params.push(Estimate {
-            name: prob.name(p),
-            unit: match p {
-                Param::Table { .. } => "µm",
-                Param::Square { .. } => "µrad",
-            },
-            start: x0.get(k).copied().unwrap_or(0.0),
-            value: if is_fixed {
-                x0.get(k).copied().unwrap_or(0.0)
-            } else {
-                x.get(k).copied().unwrap_or(0.0)
-            },
-            u: if is_fixed {
-                None
-            } else {
-                u.as_ref().map(|u| u[k])
-            },
-            fixed: is_fixed,
-        });
-    }
+    check_condition(id, obs_file)?;
+    let params = estimates(&prob, &sol, &x0, &x);
     // Uncertain values keep the file's value (super::honesty).
     let withheld = opts.honesty.withheld(&params);
     let uncertain = opts.honesty.uncertain(&params);
@@ -629,30 +667,20 @@ pub fn calibrate_geometry(
     let calibrated = Machine::from_yaml_str(&yaml, machine_file)?;
     let ident = Isometry3::identity();
     let (f_start, f_end) = (f0.unwrap_or(ident), frame.unwrap_or(ident));
-    let mh0 = measured_at(obs, &hold, &f_start);
-    let mh1 = measured_at(obs, &hold, &f_end);
-    let before = norms(&(&mh0 - deviations(&machine, obs, &hold, obs_file)?));
-    let after = norms(&(&mh1 - deviations(&calibrated, obs, &hold, obs_file)?));
-    let mf0 = measured_at(obs, &fit, &f_start);
-    let mf1 = measured_at(obs, &fit, &f_end);
-    let fit_before = norms(&(&mf0 - deviations(&machine, obs, &fit, obs_file)?));
-    let fit_after = norms(&(&mf1 - deviations(&calibrated, obs, &fit, obs_file)?));
-    let mut notes = vec![
-        "angular errors (EA*, EB*, EC*) and rotary axes are not identified from tip positions \
-         at one tool length; they keep the file's values"
-            .to_string(),
-        "straightness tables are zero at the first target (forward; the offsets are in the \
-         positioning tables); EXY, EXZ, EYZ use the end-point reference line, their slopes \
-         are in EC0Y, EB0Z, EA0Z"
-            .to_string(),
-    ];
-    if !prob.square {
-        notes.push("squareness needs X, Y and Z linear axes, all varied; not identified".into());
-    }
+    let residual_norms = |m: &Machine, f: &Isometry3<f64>, rows: &[usize]| -> Result<Vec<f64>> {
+        Ok(norms(
+            &(measured_at(obs, rows, f) - deviations(m, obs, rows, obs_file)?),
+        ))
+    };
+    let before = residual_norms(&machine, &f_start, &hold)?;
+    let after = residual_norms(&calibrated, &f_end, &hold)?;
+    let fit_before = residual_norms(&machine, &f_start, &fit)?;
+    let fit_after = residual_norms(&calibrated, &f_end, &fit)?;
+    let mut notes = fixed_notes(prob.square);
     notes.append(&mut early_notes);
     let frame_est = frame.map(|f| {
-        let u = u
-            .as_ref()
+        let u = sol
+            .std_uncertainty()
             .map(|u| std::array::from_fn(|o| u.get(n + o).copied().unwrap_or(f64::NAN)));
         estimate(&f, u)
     });

@@ -514,6 +514,104 @@ fn prepare(robot: &Robot, obs: &Observations, obs_file: &str, opts: &Options) ->
     })
 }
 
+/// The outcome of the fit with outlier removal and subset selection.
+struct Fitted {
+    fit_result: crate::calibrate::lsq::LmFit,
+    /// The parameters fitted in the end (model and frame).
+    free: Vec<usize>,
+    /// Corrections dropped as insignificant, with the uncertainty the full
+    /// fit gives them.
+    insignificant: Vec<(usize, f64)>,
+}
+
+/// Fits the free parameters on the `fit` rows; then, once each: rows that
+/// disagree with all the others leave the fit (the worst first, at most
+/// [`MAX_OUTLIER_PASSES`]; named in `notes`), and the corrections that are
+/// not significant at the solution are dropped (subset selection,
+/// linearised there); after either, fits again.
+fn fit_and_select(
+    layout: &Layout,
+    obs: &Observations,
+    fit: &mut Vec<usize>,
+    free: Vec<usize>,
+    lm_opts: &LmOptions,
+    obs_file: &str,
+    notes: &mut Vec<String>,
+) -> Result<Fitted> {
+    let n = layout.n();
+    let nm = layout.n_model();
+    let usage = |e: String| Error::Usage(format!("{obs_file}: {e}"));
+    let mut free = free;
+    // Fit; then, once each: rows that disagree with all the others leave
+    // the fit (the worst first, at most MAX_OUTLIER_PASSES), and the
+    // corrections that are not significant at the solution are dropped
+    // (subset selection, linearised there); after either, fit again.
+    let mut insignificant: Vec<(usize, f64)> = Vec::new();
+    let mut outlier_passes = 0;
+    let mut selected = false;
+    let fit_result = loop {
+        let (off, m) = offsets(layout, obs, fit);
+        let fr = fit_free(
+            |x, out| residuals(layout, obs, fit, x, out, obs_file),
+            n,
+            &free,
+            m,
+            FD_STEP,
+            lm_opts,
+        )
+        .map_err(|e| usage(e.to_string()))?;
+        if selected && outlier_passes >= MAX_OUTLIER_PASSES {
+            break fr;
+        }
+        let full = expand_free(n, &free, fr.solution.params.as_slice());
+        let mut r = DVector::zeros(m);
+        residuals(layout, obs, fit, &full, &mut r, obs_file);
+        let mut jf = DMatrix::zeros(m, free.len());
+        forward_jacobian_free(
+            |x, out| residuals(layout, obs, fit, x, out, obs_file),
+            &full,
+            &free,
+            &r,
+            FD_STEP,
+            &mut jf,
+        );
+        if outlier_passes < MAX_OUTLIER_PASSES {
+            let (jp, ep) = position_rows(&off, &jf, &r);
+            if let Some(worst) = dominating_rows(&jp, &ep, fit).into_iter().next() {
+                outlier_passes += 1;
+                let text = describe_outliers(obs, obs_file, std::slice::from_ref(&worst));
+                tracing::warn!("row left out of the fit as an outlier: {text}");
+                notes.push(format!("row left out of the fit as an outlier: {text}"));
+                fit.retain(|&i| i != worst.row);
+                continue;
+            }
+            outlier_passes = MAX_OUTLIER_PASSES;
+        }
+        if !selected {
+            selected = true;
+            // The linear model at the solution: r(x) ≈ (r* − J x*) + J x.
+            let mut jn = DMatrix::zeros(m, n);
+            for (c, &k) in free.iter().enumerate() {
+                jn.set_column(k, &jf.column(c));
+            }
+            let xs = DVector::from_column_slice(&full);
+            let b = &jn * &xs - &r;
+            let (kept, dropped) = select_parameters(&jn, &b, &free, nm, &lm_opts.lsq);
+            if !dropped.is_empty() {
+                free = kept;
+                insignificant = dropped;
+                continue;
+            }
+        }
+        break fr;
+    };
+    Ok(Fitted {
+        fit_result,
+        free,
+        insignificant,
+    })
+}
+
 /// Identifies the actual DH parameters (and the TCP translation; and the
 /// instrument frame for `# frame: instrument` data) from `obs`.
 pub fn calibrate_kinematics(
@@ -553,76 +651,16 @@ pub fn calibrate_kinematics(
         },
         ..LmOptions::default()
     };
-    let usage = |e: String| Error::Usage(format!("{obs_file}: {e}"));
     let Screened {
         fixed,
         absorbed,
         free,
     } = screen_data(&layout, obs, &fit, obs_file, &lm_opts)?;
-    // Fit; then, once each: rows that disagree with all the others leave
-    // the fit (the worst first, at most MAX_OUTLIER_PASSES), and the
-    // corrections that are not significant at the solution are dropped
-    // (subset selection, linearised there); after either, fit again.
-    let mut free = free;
-    let mut insignificant: Vec<(usize, f64)> = Vec::new();
-    let mut outlier_passes = 0;
-    let mut selected = false;
-    let fit_result = loop {
-        let (off, m) = offsets(&layout, obs, &fit);
-        let fr = fit_free(
-            |x, out| residuals(&layout, obs, &fit, x, out, obs_file),
-            n,
-            &free,
-            m,
-            FD_STEP,
-            &lm_opts,
-        )
-        .map_err(|e| usage(e.to_string()))?;
-        if selected && outlier_passes >= MAX_OUTLIER_PASSES {
-            break fr;
-        }
-        let full = expand_free(n, &free, fr.solution.params.as_slice());
-        let mut r = DVector::zeros(m);
-        residuals(&layout, obs, &fit, &full, &mut r, obs_file);
-        let mut jf = DMatrix::zeros(m, free.len());
-        forward_jacobian_free(
-            |x, out| residuals(&layout, obs, &fit, x, out, obs_file),
-            &full,
-            &free,
-            &r,
-            FD_STEP,
-            &mut jf,
-        );
-        if outlier_passes < MAX_OUTLIER_PASSES {
-            let (jp, ep) = position_rows(&off, &jf, &r);
-            if let Some(worst) = dominating_rows(&jp, &ep, &fit).into_iter().next() {
-                outlier_passes += 1;
-                let text = describe_outliers(obs, obs_file, std::slice::from_ref(&worst));
-                tracing::warn!("row left out of the fit as an outlier: {text}");
-                notes.push(format!("row left out of the fit as an outlier: {text}"));
-                fit.retain(|&i| i != worst.row);
-                continue;
-            }
-            outlier_passes = MAX_OUTLIER_PASSES;
-        }
-        if !selected {
-            selected = true;
-            // The linear model at the solution: r(x) ≈ (r* − J x*) + J x.
-            let mut jn = DMatrix::zeros(m, n);
-            for (c, &k) in free.iter().enumerate() {
-                jn.set_column(k, &jf.column(c));
-            }
-            let xs = DVector::from_column_slice(&full);
-            let b = &jn * &xs - &r;
-            let (kept, dropped) = select_parameters(&jn, &b, &free, nm, &lm_opts.lsq);
-            if !dropped.is_empty() {
-                free = kept;
-                insignificant = dropped;
-                continue;
-            }
-        }
-        break fr;
-    };
+    let Fitted {
+        fit_result,
+        free,
+        insignificant,
+    } = fit_and_select(&layout, obs, &mut fit, free, &lm_opts, obs_file, &mut notes)?;
     let sol = &fit_result.solution;
     let id = &sol.identifiability;
     if id.condition_number_identified > CONDITION_LIMIT {

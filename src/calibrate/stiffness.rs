@@ -12,7 +12,11 @@
 //! degrees of freedom lose 3 per group, and the uncertainties are computed
 //! with that (sharing one reference row between two loads correlates their
 //! loaded − unloaded differences; the centred form accounts for it). A
-//! loaded row alone in its group is an error.
+//! loaded row alone in its group is an error. With instrument-frame data
+//! the small rotation of the instrument's frame is identified with the
+//! compliances (three more columns of the centred design; its origin
+//! cancels), and the origin is the mean offset of the unloaded fit rows
+//! from the calibrated model.
 //!
 //! Model: with the compliances `c_i = 1/kθi` the deflection of a loaded row
 //! from its unloaded state is linear in c:
@@ -386,6 +390,75 @@ fn frame_origin(
     ))
 }
 
+/// The note of a stiffness run on instrument-frame data.
+const FRAME_NOTE: &str = "positions measured in an instrument frame: its rotation is \
+    identified together with the stiffnesses (from the load differences); its origin, which \
+    load differences do not see, is the mean offset of the unloaded rows from the calibrated \
+    model (its uncertainty that of the mean and of the rotation over the lever of the \
+    points); written to `measurement_frame`";
+
+/// The identified instrument frame of a stiffness run: the rotation `f`
+/// from the joint solution `sol` (uncertainties scaled by `dof_factor`),
+/// the origin from [`frame_origin`].
+fn frame_estimate(
+    calibrated: &Machine,
+    f: &Isometry3<f64>,
+    sol: &Solution,
+    dof_factor: f64,
+    obs: &Observations,
+    fit: &[Vec<usize>],
+    obs_file: &str,
+) -> Result<FrameEstimate> {
+    let cov_rot = sol
+        .covariance
+        .as_ref()
+        .map(|c| c.fixed_view::<3, 3>(6, 6).into_owned() * (dof_factor * dof_factor));
+    let (f, u_xyz) = frame_origin(calibrated, f, cov_rot, obs, fit, obs_file)?;
+    let u_rot = sol
+        .std_uncertainty()
+        .map(|u| std::array::from_fn(|r| u[6 + r] * dof_factor * DEG_PER_MRAD));
+    Ok(FrameEstimate {
+        u_xyz_mm: u_xyz,
+        u_rot_deg: u_rot,
+        ..estimate(&f, None)
+    })
+}
+
+/// Residual norms of the loaded held-out rows' deflections (from their
+/// group's unloaded row, turned by the frame's rotation for instrument
+/// data) against the model, before and after: each side a machine and its
+/// frame.
+fn held_out_deflections(
+    before_model: (&Machine, Option<&Isometry3<f64>>),
+    after_model: (&Machine, Option<&Isometry3<f64>>),
+    obs: &Observations,
+    hold: &[Vec<usize>],
+    obs_file: &str,
+) -> Result<(Vec<f64>, Vec<f64>)> {
+    let rot = |f: Option<&Isometry3<f64>>, v: Vector3<f64>| f.map_or(v, |f| f.rotation * v);
+    let mut before = Vec::new();
+    let mut after = Vec::new();
+    for g in hold {
+        let reference = g
+            .iter()
+            .filter_map(|&i| obs.rows.get(i))
+            .find(|r| !loaded(r));
+        let Some(u0) = reference else { continue };
+        for row in g
+            .iter()
+            .filter_map(|&i| obs.rows.get(i))
+            .filter(|r| loaded(r))
+        {
+            let meas = row.measured_mm - u0.measured_mm;
+            let (m0, f0) = before_model;
+            let (m1, f1) = after_model;
+            before.push((rot(f0, meas) - model_deflection(m0, row, obs_file)?).norm());
+            after.push((rot(f1, meas) - model_deflection(m1, row, obs_file)?).norm());
+        }
+    }
+    Ok((before, after))
+}
+
 /// Identifies the joint stiffnesses from the load pairs of `obs` (with
 /// the instrument frame for `# frame: instrument` data).
 /// `text`/`machine_file`: the machine file (edited into the result).
@@ -492,52 +565,21 @@ pub fn calibrate_stiffness(
         None => 0.0,
     });
     let calibrated = Machine::Robot(robot.with_stiffness(written.map(|k| k * 1000.0)));
-    let rot = |f: &Option<Isometry3<f64>>, v: Vector3<f64>| f.map_or(v, |f| f.rotation * v);
-    let mut before = Vec::new();
-    let mut after = Vec::new();
-    for g in &hold {
-        let reference = g
-            .iter()
-            .filter_map(|&i| obs.rows.get(i))
-            .find(|r| !loaded(r));
-        let Some(u0) = reference else { continue };
-        for row in g
-            .iter()
-            .filter_map(|&i| obs.rows.get(i))
-            .filter(|r| loaded(r))
-        {
-            let meas = row.measured_mm - u0.measured_mm;
-            before.push((rot(&f0, meas) - model_deflection(&machine, row, obs_file)?).norm());
-            after.push((rot(&f_rot, meas) - model_deflection(&calibrated, row, obs_file)?).norm());
-        }
-    }
+    let (before, after) = held_out_deflections(
+        (&machine, f0.as_ref()),
+        (&calibrated, f_rot.as_ref()),
+        obs,
+        &hold,
+        obs_file,
+    )?;
     let values: Vec<String> = written.iter().map(|&k| fmt_value(k, 1)).collect();
     let mut yaml = set_top_level_list(text, machine_file, "k_nm_per_rad", &values)?;
     let mut notes: Vec<String> = world.into_iter().collect();
     let frame = match &f_rot {
         Some(f) => {
-            let cov_rot = sol
-                .covariance
-                .as_ref()
-                .map(|c| c.fixed_view::<3, 3>(6, 6).into_owned() * (dof_factor * dof_factor));
-            let (f, u_xyz) = frame_origin(&calibrated, f, cov_rot, obs, &fit, obs_file)?;
-            let u_rot = sol
-                .std_uncertainty()
-                .map(|u| std::array::from_fn(|r| u[6 + r] * dof_factor * DEG_PER_MRAD));
-            let est = FrameEstimate {
-                u_xyz_mm: u_xyz,
-                u_rot_deg: u_rot,
-                ..estimate(&f, None)
-            };
+            let est = frame_estimate(&calibrated, f, &sol, dof_factor, obs, &fit, obs_file)?;
             yaml = set_measurement_frame(&yaml, machine_file, est.xyz_mm, est.rpy_deg)?;
-            notes.push(
-                "positions measured in an instrument frame: its rotation is identified \
-                 together with the stiffnesses (from the load differences); its origin, which \
-                 load differences do not see, is the mean offset of the unloaded rows from the \
-                 calibrated model (its uncertainty that of the mean and of the rotation over the \
-                 lever of the points); written to `measurement_frame`"
-                    .into(),
-            );
+            notes.push(FRAME_NOTE.into());
             Some(est)
         }
         None => None,

@@ -28,6 +28,10 @@
 //! `thermal.axes` entry from its `pX_w`. The forward model is linear in
 //! them, so it is one linear least-squares step on the residuals of the
 //! file's model ([`solve_linear`], same identifiability analysis).
+//!
+//! Both kinds identify an instrument frame (`# frame: instrument`) with
+//! their unknowns: its six parameters beside the model's, the model's
+//! screened against them ([`super::frame::screen_model`]).
 
 use nalgebra::{DMatrix, DVector, Isometry3};
 
@@ -46,7 +50,7 @@ use super::frame::{
     screen_model, start_frame, world_note, world_to_reference,
 };
 use super::observations::{MeasurementFrame, Observations, Pose, holdout_split};
-use super::report::{CONDITION_LIMIT, Calibration, Estimate, Validation};
+use super::report::{CONDITION_LIMIT, Calibration, Estimate, FrameEstimate, Validation};
 use super::stiffness::Options;
 use super::yaml_edit::{set_measurement_frame, set_thermal_term};
 
@@ -339,6 +343,82 @@ fn check_ts(terms: &[ThermalTerm], obs_file: &str) -> Result<()> {
     Ok(())
 }
 
+/// The calibrated file: the terms' lines and, for instrument data, the
+/// frame (with its notes: what it absorbs, that it was identified).
+fn write_terms(
+    text: &str,
+    machine_file: &str,
+    terms: &[ThermalTerm],
+    frame: Option<&FrameEstimate>,
+    absorbed: &[usize],
+    params: &[Estimate],
+    notes: &mut Vec<String>,
+) -> Result<String> {
+    let mut yaml = text.to_string();
+    for (k, t) in terms.iter().enumerate() {
+        yaml = set_thermal_term(&yaml, machine_file, k, t.lb_mm, t.ub_mm, t.ts_per_w)?;
+    }
+    if let Some(f) = frame {
+        yaml = set_measurement_frame(&yaml, machine_file, f.xyz_mm, f.rpy_deg)?;
+        let names: Vec<String> = absorbed
+            .iter()
+            .filter_map(|&k| params.get(k).map(|p| p.name.clone()))
+            .collect();
+        notes.extend(absorbed_note(
+            &names,
+            "a growth that shifts every point alike moves the frame's origin",
+        ));
+        notes.push(IDENTIFIED_NOTE.into());
+    }
+    Ok(yaml)
+}
+
+/// The notes of a robot thermal fit: unknowns the rank analysis fixed
+/// (`any_fixed_by_rank`), and the time constant.
+fn fit_notes(any_fixed_by_rank: bool, notes: &mut Vec<String>) {
+    if any_fixed_by_rank {
+        notes.push(
+            "some unknowns move the measured points like a combination of the others \
+             (e.g. the ub of two terms on the same length, or ts with too few power levels); \
+             they keep the file's value"
+                .into(),
+        );
+    }
+    notes.push(
+        "rows are at the thermal steady state of their powers: time_constant_min is not identified"
+            .into(),
+    );
+}
+
+/// Refuses a badly conditioned fit of the robot terms.
+fn check_condition(id: &crate::calibrate::lsq::Identifiability, obs_file: &str) -> Result<()> {
+    if id.condition_number_identified > CONDITION_LIMIT {
+        return Err(Error::Usage(format!(
+            "{obs_file}: badly conditioned data set: condition number {:.3e} > {:.0e} \
+             (O1 = {:.3e}); the power levels do not excite the thermal terms independently. \
+             Measure at more power levels, varying the joints' powers independently",
+            id.condition_number_identified, CONDITION_LIMIT, id.observability_o1
+        )));
+    }
+    Ok(())
+}
+
+/// The identified frame `f` with the uncertainties of its free unknowns.
+fn frame_estimate(
+    unknowns: &Unknowns<'_>,
+    f: &Isometry3<f64>,
+    free: &[usize],
+    u_red: Option<&DVector<f64>>,
+) -> FrameEstimate {
+    let u: Option<Vec<f64>> = (unknowns.n_model()..unknowns.n())
+        .map(|k| {
+            let a = free.iter().position(|&f| f == k)?;
+            u_red.map(|u| u[a])
+        })
+        .collect();
+    estimate(f, u.and_then(|u| u.try_into().ok()))
+}
+
 /// Identifies the Paper B terms of the robot file `text` from `obs` (and
 /// the instrument frame for `# frame: instrument` data).
 pub fn calibrate_thermal(
@@ -426,30 +506,12 @@ pub fn calibrate_thermal(
     .map_err(|e| Error::Usage(format!("{obs_file}: {e}")))?;
     let sol = &fit_result.solution;
     let id = &sol.identifiability;
-    if id.condition_number_identified > CONDITION_LIMIT {
-        return Err(Error::Usage(format!(
-            "{obs_file}: badly conditioned data set: condition number {:.3e} > {:.0e} \
-             (O1 = {:.3e}); the power levels do not excite the thermal terms independently. \
-             Measure at more power levels, varying the joints' powers independently",
-            id.condition_number_identified, CONDITION_LIMIT, id.observability_o1
-        )));
-    }
+    check_condition(id, obs_file)?;
     let full = expand_free(n, &free, sol.params.as_slice());
     check_ts(&terms_with(&base, &full), obs_file)?;
     let u_red = sol.std_uncertainty();
     let (params, any_fixed_by_rank) = term_estimates(&base, &varies, &free, &full, u_red.as_ref());
-    if any_fixed_by_rank {
-        notes.push(
-            "some unknowns move the measured points like a combination of the others \
-             (e.g. the ub of two terms on the same length, or ts with too few power levels); \
-             they keep the file's value"
-                .into(),
-        );
-    }
-    notes.push(
-        "rows are at the thermal steady state of their powers: time_constant_min is not identified"
-            .into(),
-    );
+    fit_notes(any_fixed_by_rank, &mut notes);
     // Uncertain unknowns keep the file's value (super::honesty).
     let withheld = opts.honesty.withheld(&params);
     let uncertain = opts.honesty.uncertain(&params);
@@ -463,31 +525,18 @@ pub fn calibrate_thermal(
     let (f_start, f_end) = (unknowns.frame_at(&[]), unknowns.frame_at(&full));
     let before = norms(robot, &base, &f_start, obs, &hold, obs_file)?;
     let after = norms(robot, &terms, &f_end, obs, &hold, obs_file)?;
-    let frame = unknowns.frame.map(|_| {
-        let u: Option<Vec<f64>> = (unknowns.n_model()..n)
-            .map(|k| {
-                let a = free.iter().position(|&f| f == k)?;
-                u_red.as_ref().map(|u| u[a])
-            })
-            .collect();
-        estimate(&f_end, u.and_then(|u| u.try_into().ok()))
-    });
-    let mut yaml = text.to_string();
-    for (k, t) in terms.iter().enumerate() {
-        yaml = set_thermal_term(&yaml, machine_file, k, t.lb_mm, t.ub_mm, t.ts_per_w)?;
-    }
-    if let Some(f) = &frame {
-        yaml = set_measurement_frame(&yaml, machine_file, f.xyz_mm, f.rpy_deg)?;
-        let names: Vec<String> = absorbed
-            .iter()
-            .filter_map(|&k| params.get(k).map(|p| p.name.clone()))
-            .collect();
-        notes.extend(absorbed_note(
-            &names,
-            "a growth that shifts every point alike moves the frame's origin",
-        ));
-        notes.push(IDENTIFIED_NOTE.into());
-    }
+    let frame = unknowns
+        .frame
+        .map(|_| frame_estimate(&unknowns, &f_end, &free, u_red.as_ref()));
+    let yaml = write_terms(
+        text,
+        machine_file,
+        &terms,
+        frame.as_ref(),
+        &absorbed,
+        &params,
+        &mut notes,
+    )?;
     Machine::from_yaml_str(&yaml, machine_file)
         .map_err(|e| super::screen::implausible(&e, obs_file, obs.rows.len()))?;
     notes.extend(world);

@@ -588,6 +588,68 @@ fn robot_row_value(
     }
 }
 
+/// The column of a robot joint's backlash `b`: the joint stops b/2 short
+/// of the side it came from (the machine-tool reversal `reverse = forward
+/// + b`): moving up (dir +1) it lags by −b/2, moving down by +b/2.
+fn robot_backlash_column(
+    r: &Robot,
+    j: usize,
+    rows: &[Observation],
+    ctx: &Context,
+    s: &mut DMatrix<f64>,
+) -> Result<()> {
+    let t = DhField::Theta;
+    diff_column(
+        &robot_dh(r, j, t, STEP),
+        &robot_dh(r, j, t, -STEP),
+        2.0 * STEP,
+        rows,
+        ctx,
+        s,
+        0,
+    )?;
+    for (i, row) in rows.iter().enumerate() {
+        let d = robot_row_value(row, |rp| rp.dir.get(j).copied().flatten().map(f64::from));
+        let half = if d > 0.0 {
+            -0.5
+        } else if d < 0.0 {
+            0.5
+        } else {
+            0.0
+        };
+        for c in 0..3 {
+            s[(3 * i + c, 0)] *= half;
+        }
+    }
+    Ok(())
+}
+
+/// The column of a tool (or spindle) longer than the controller knows:
+/// ΔL puts the tip ΔL further along −(tool direction), ∂tip/∂ΔL = −dir,
+/// 1e-3 mm per µm; scaled by the hours (spindle growth with time) or the
+/// kW (with power) of each row.
+fn tool_length_column(
+    t: &crate::machine::tool::MachineTool,
+    action: &Action,
+    rows: &[Observation],
+    s: &mut DMatrix<f64>,
+) {
+    for (i, row) in rows.iter().enumerate() {
+        let Pose::Tool(tp) = &row.pose else { continue };
+        let cmd = tp.axes();
+        let len = tool_length(t, tp);
+        let dp = -t.geometric(&cmd, &tp.dirs(), len).dir * 1e-3;
+        let scale = match action {
+            Action::SpindleTime => row.t_s.unwrap_or(0.0) / 3600.0,
+            Action::SpindlePower => tp.spindle_w.unwrap_or(0.0) / 1000.0,
+            _ => 1.0,
+        };
+        for c in 0..3 {
+            s[(3 * i + c, 0)] = dp[c] * scale;
+        }
+    }
+}
+
 /// Sensitivity matrix (3·rows × parameters), mm per display unit.
 pub fn sensitivity(effect: &Effect, ctx: &Context, rows: &[Observation]) -> Result<DMatrix<f64>> {
     let n = rows.len();
@@ -675,32 +737,7 @@ pub fn sensitivity(effect: &Effect, ctx: &Context, rows: &[Observation]) -> Resu
             }
         }
         (Action::RobotBacklash(j), Machine::Robot(r)) => {
-            let t = DhField::Theta;
-            diff_column(
-                &robot_dh(r, *j, t, STEP),
-                &robot_dh(r, *j, t, -STEP),
-                2.0 * STEP,
-                rows,
-                ctx,
-                &mut s,
-                0,
-            )?;
-            for (i, row) in rows.iter().enumerate() {
-                let d = robot_row_value(row, |rp| rp.dir.get(*j).copied().flatten().map(f64::from));
-                // The joint stops b/2 short of the side it came from (the
-                // machine-tool reversal `reverse = forward + b`): moving up
-                // (dir +1) it lags by −b/2, moving down by +b/2.
-                let half = if d > 0.0 {
-                    -0.5
-                } else if d < 0.0 {
-                    0.5
-                } else {
-                    0.0
-                };
-                for c in 0..3 {
-                    s[(3 * i + c, 0)] *= half;
-                }
-            }
+            robot_backlash_column(r, *j, rows, ctx, &mut s)?;
         }
         (
             Action::Location { .. } | Action::Component { .. } | Action::AxisBacklash { .. },
@@ -715,23 +752,7 @@ pub fn sensitivity(effect: &Effect, ctx: &Context, rows: &[Observation]) -> Resu
             }
         }
         (Action::SpindleTime | Action::SpindlePower | Action::ToolLength, Machine::Tool(t)) => {
-            for (i, row) in rows.iter().enumerate() {
-                let Pose::Tool(tp) = &row.pose else { continue };
-                let cmd = tp.axes();
-                let len = tool_length(t, tp);
-                // The controller compensates the length it knows (`len`); a
-                // real tool (or spindle) longer by ΔL puts the tip ΔL further
-                // along −(tool direction): ∂tip/∂ΔL = −dir, 1e-3 mm per µm.
-                let dp = -t.geometric(&cmd, &tp.dirs(), len).dir * 1e-3;
-                let scale = match effect.action {
-                    Action::SpindleTime => row.t_s.unwrap_or(0.0) / 3600.0,
-                    Action::SpindlePower => tp.spindle_w.unwrap_or(0.0) / 1000.0,
-                    _ => 1.0,
-                };
-                for c in 0..3 {
-                    s[(3 * i + c, 0)] = dp[c] * scale;
-                }
-            }
+            tool_length_column(t, &effect.action, rows, &mut s);
         }
         _ => {
             return Err(Error::Usage(format!(

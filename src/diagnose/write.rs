@@ -464,7 +464,7 @@ fn length_unit(name: &str) -> &'static str {
     }
 }
 
-/// Applies the calibration honesty rule ([`honesty`]) to the accepted
+/// Applies the calibration honesty rule ([`crate::calibrate::honesty`]) to the accepted
 /// effects before they are written: an uncertain parameter is not added
 /// (its value becomes 0, the file keeps its value), an effect whose every
 /// parameter is uncertain is left out. Returns the effects to write and,
