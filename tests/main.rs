@@ -14,6 +14,7 @@ mod effects;
 mod engine_flags;
 mod error_kinds;
 mod frames;
+mod function_size;
 mod gcode_cli;
 mod gcode_grammar;
 mod golden;
