@@ -169,6 +169,28 @@ fn exit_codes_are_decided_by_kind() {
     assert_eq!((EXIT_ERROR, EXIT_INTERNAL), (2, 3));
 }
 
+#[test]
+fn an_edit_the_writers_never_make_is_an_internal_error_with_its_message() {
+    use postproc::emit::rapid::{Edit, apply_edits};
+    let src = "MoveL p10, v100;";
+    let cases = [
+        (
+            vec![Edit::replace(5..8, "a"), Edit::replace(6..9, "b")],
+            "edit 6..9 overlaps a previous edit ending at 8",
+        ),
+        (
+            vec![Edit::replace(10..40, "c")],
+            "edit 10..40 is outside the program (16 bytes)",
+        ),
+    ];
+    for (edits, message) in cases {
+        let (k, e) = kind(apply_edits(src, &edits));
+        assert_eq!(k, ErrorKind::Internal, "{e}");
+        assert_eq!(e.exit_code(), EXIT_INTERNAL);
+        assert_eq!(e.to_string(), message);
+    }
+}
+
 /// Runs `compensate` with `args`; the exit code, stderr, and whether the
 /// output file exists afterwards.
 fn compensate(dir: &Path, args: &[&str]) -> (Option<i32>, String, bool) {

@@ -68,7 +68,8 @@ impl Default for Format {
 /// Applies `edits` (non-overlapping, in any order) to `src`. Insertions at
 /// the same offset keep their order in `edits`. Fails, without panicking, on
 /// an edit outside the source, inside a UTF-8 character, or overlapping
-/// another one.
+/// another one: an [`Error::Internal`], as the writers never make such
+/// edits.
 pub fn apply_edits(src: &str, edits: &[Edit]) -> Result<String, Error> {
     let mut order: Vec<&Edit> = edits.iter().collect();
     order.sort_by_key(|e| (e.span.start, e.span.end));
@@ -182,7 +183,7 @@ impl EditList {
     /// lie within it (its spans count from the start of `src`).
     pub fn apply_in(&self, src: &str, range: Range<usize>) -> Result<String, Error> {
         let part = src.get(range.clone()).ok_or_else(|| {
-            Error::Usage(format!(
+            Error::Internal(format!(
                 "part {range:?} is outside the program ({} bytes)",
                 src.len()
             ))
@@ -190,7 +191,7 @@ impl EditList {
         let mut shifted = EditList::new();
         for (span, t) in &self.items {
             if span.start < range.start || span.end > range.end {
-                return Err(Error::Usage(format!(
+                return Err(Error::Internal(format!(
                     "edit {span:?} is outside the part {range:?} of the program"
                 )));
             }
@@ -206,7 +207,7 @@ impl EditList {
         let mut order = Vec::with_capacity(self.items.len());
         for (span, t) in &self.items {
             let text = self.text.get(t.clone()).ok_or_else(|| {
-                Error::Usage(format!(
+                Error::Internal(format!(
                     "edit text {t:?} is outside the edit buffer ({} bytes)",
                     self.text.len()
                 ))
@@ -230,18 +231,18 @@ fn splice<'t>(
     for (span, text) in edits {
         let Range { start, end } = span;
         if start > end || end > src.len() {
-            return Err(Error::Usage(format!(
+            return Err(Error::Internal(format!(
                 "edit {start}..{end} is outside the program ({} bytes)",
                 src.len()
             )));
         }
         if start < at {
-            return Err(Error::Usage(format!(
+            return Err(Error::Internal(format!(
                 "edit {start}..{end} overlaps a previous edit ending at {at}"
             )));
         }
         let (Some(keep), Some(_)) = (src.get(at..start), src.get(start..end)) else {
-            return Err(Error::Usage(format!(
+            return Err(Error::Internal(format!(
                 "edit {start}..{end} does not fall on character boundaries"
             )));
         };
@@ -296,8 +297,9 @@ pub fn push_int(out: &mut String, v: i32) {
 /// Formats a position (mm) with `fmt.position_decimals` decimals.
 pub fn format_position(p: &[f64; 3], fmt: &Format) -> Result<[String; 3], Error> {
     let f = |v: f64| {
-        format_fixed(v, fmt.position_decimals)
-            .ok_or_else(|| Error::Usage(format!("position component {v} is not a finite number")))
+        format_fixed(v, fmt.position_decimals).ok_or_else(|| {
+            Error::Internal(format!("position component {v} is not a finite number"))
+        })
     };
     Ok([f(p[0])?, f(p[1])?, f(p[2])?])
 }
@@ -352,7 +354,7 @@ pub fn quaternion_components(
     fmt: &Format,
 ) -> Result<[f64; 4], Error> {
     let n = normalise_quaternion(q, reference)
-        .ok_or_else(|| Error::Usage(format!("quaternion {q:?} cannot be normalised")))?;
+        .ok_or_else(|| Error::Internal(format!("quaternion {q:?} cannot be normalised")))?;
     let scale = 10f64.powi(i32::try_from(fmt.quaternion_decimals).unwrap_or(9).min(15));
     let lo = n.map(|c| (c * scale).floor());
     // The two candidate values of each component and their squares,
@@ -401,7 +403,7 @@ pub fn push_robtarget_edit(
         let mut at = start;
         let mut gap = |text: &mut String, n: &crate::program::rapid::Number| {
             let between = src.get(at..n.span.start).ok_or_else(|| {
-                Error::Usage(format!(
+                Error::Internal(format!(
                     "robtarget number span {:?} is outside the program",
                     n.span
                 ))
@@ -413,7 +415,7 @@ pub fn push_robtarget_edit(
         for (n, &v) in rt.trans.iter().zip(pos) {
             gap(text, n)?;
             if !push_fixed(text, v, fmt.position_decimals) {
-                return Err(Error::Usage(format!(
+                return Err(Error::Internal(format!(
                     "position component {v} is not a finite number"
                 )));
             }
@@ -475,7 +477,7 @@ pub fn robtarget_literal(
 ) -> Result<String, Error> {
     let base = rt.span.start;
     let literal = src.get(rt.span.clone()).ok_or_else(|| {
-        Error::Usage(format!(
+        Error::Internal(format!(
             "robtarget span {:?} is outside the program",
             rt.span
         ))
@@ -669,11 +671,11 @@ pub(crate) fn robtarget_text(
     let reference = rt.rot.each_ref().map(|n| n.value);
     let q = format_quaternion(&[q.w, q.i, q.j, q.k], Some(&reference), fmt)?;
     let (Some(first), Some(last)) = (rt.extax.first(), rt.extax.last()) else {
-        return Err(Error::Usage("robtarget without external axes".into()));
+        return Err(Error::Internal("robtarget without external axes".into()));
     };
     let extax = src
         .get(first.span.start..last.span.end)
-        .ok_or_else(|| Error::Usage("robtarget span outside the program".into()))?;
+        .ok_or_else(|| Error::Internal("robtarget span outside the program".into()))?;
     Ok(format!(
         "[[{},{},{}],[{},{},{},{}],[{},{},{},{}],[{extax}]]",
         p[0], p[1], p[2], q[0], q[1], q[2], q[3], conf.cf1, conf.cf4, conf.cf6, conf.cfx
@@ -740,11 +742,11 @@ pub(crate) fn joint_text(
     q_deg: &[f64; 6],
 ) -> Result<String> {
     let (Some(first), Some(last)) = (jt.extax.first(), jt.extax.last()) else {
-        return Err(Error::Usage("jointtarget without external axes".into()));
+        return Err(Error::Internal("jointtarget without external axes".into()));
     };
     let extax = src
         .get(first.span.start..last.span.end)
-        .ok_or_else(|| Error::Usage("jointtarget span outside the program".into()))?;
+        .ok_or_else(|| Error::Internal("jointtarget span outside the program".into()))?;
     let words = q_deg
         .iter()
         .map(|&v| joint_word(v, src, file, jt.span.start))

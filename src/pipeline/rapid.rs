@@ -486,7 +486,7 @@ impl Rewriter<'_> {
             )
         };
         let Some(r) = self.views.get(view) else {
-            return Err(Error::Usage("robot view missing".into()));
+            return Err(Error::Internal("robot view missing".into()));
         };
         r.check_limits(&q)
             .map_err(|e| self.locate(at, e, &what()))?;

@@ -1,7 +1,6 @@
 //! Process-force models: the force the workpiece exerts ON the tool while a
 //! block cuts, machine independent (machine tools use it at the tool tip,
-//! robots will use it as the force part of a wrench at the tool centre
-//! point).
+//! robots as the force part of a wrench at the tool centre point).
 //!
 //! Every model answers one question per block, [`ForceModel::load`]: given
 //! the cutting state of the block ([`CutState`]: direction of travel, tool
@@ -29,8 +28,8 @@ mod force_spec;
 pub mod limits;
 mod table;
 
-/// Cutting settings a program sets from a position on (`POSTPROC MILLING`
-/// directives, see `crate::program::directive`); `None` keeps the machine
+/// Cutting settings a program sets from a position on, by a
+/// `POSTPROC MILLING` comment in its text; `None` keeps the machine
 /// file's (or the command line's) value.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct CutSettings {

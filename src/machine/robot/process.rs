@@ -11,11 +11,11 @@
 //! * `table` — per-move forces from a CSV keyed by line
 //!   ([`crate::process::ForceTable`], set per job).
 //!
-//! Which moves cut or drill is decided by the RAPID pipeline with
-//! [`plunge_direction`], [`travel_direction`] and the methods of
-//! [`ProcessForce`]; depth, width and spindle speed can be set per program
-//! by a `! POSTPROC MILLING …` directive
-//! (`crate::program::rapid::directives`).
+//! Which moves cut or drill is decided per move with [`plunge_direction`],
+//! [`travel_direction`] and the methods of [`ProcessForce`]; depth, width
+//! and spindle speed can be changed from a point of a program on by a
+//! `! POSTPROC MILLING …` comment line in it, which arrives here as a
+//! [`CutSettings`].
 
 use std::sync::Arc;
 
