@@ -89,7 +89,7 @@ impl ErrorTable {
     }
 
     /// Value at position `q` for the direction of motion `dir` (see
-    /// [`uses_forward`]: `−1` uses the reverse column, `+1` and `0` the
+    /// `uses_forward`: `−1` uses the reverse column, `+1` and `0` the
     /// forward one).
     pub fn lookup(&self, q: f64, dir: i8) -> Lookup {
         let mut hint = 0;

@@ -3,7 +3,7 @@
 //!
 //! Their lines fail the syntax of `grammar/gcode.md` in many different ways
 //! (`DEF REAL` is a `D` without a number, `0 BEGIN PGM` a number without a
-//! letter, `U-1.5` an unknown letter). When a line fails, [`refine`] looks
+//! letter, `U-1.5` an unknown letter). When a line fails, `refine` looks
 //! at the whole line and, when it is recognisably one of those dialects,
 //! names the dialect in front of the syntax message, so that the user
 //! learns what is wrong with the program as a whole and not only with its
