@@ -129,6 +129,21 @@ fn grammar_examples_parse_and_rejects_fail() {
     }
 }
 
+/// Every source file the grammar names (`src/….rs` in backquotes) exists.
+#[test]
+fn grammar_names_existing_source_files() {
+    let md = grammar();
+    let named: Vec<&str> = md
+        .match_indices("`src/")
+        .filter_map(|(k, _)| md[k + 1..].split('`').next())
+        .filter(|t| t.ends_with(".rs"))
+        .collect();
+    assert!(!named.is_empty());
+    for path in named {
+        assert!(repo(path).is_file(), "grammar/rapid.md names {path}");
+    }
+}
+
 #[test]
 fn sample_module_structure() {
     let src = sample();
