@@ -655,7 +655,7 @@ fn constant_array_sizes_are_checked_and_errors_located() {
         "{e}"
     );
     // A size that is not a constant integer: no value, no check.
-    for size in ["N/2", "M", "N+", "0-N", "2.5", "PERS_N"] {
+    for size in ["N/2", "M", "N+", "2.5", "PERS_N"] {
         let src = format!(
             "MODULE M\nCONST num N := 2;\nPERS num PERS_N := 2;\nCONST num a{{{size}}} := [1,2,3];\nENDMODULE\n"
         );
@@ -667,6 +667,33 @@ fn constant_array_sizes_are_checked_and_errors_located() {
         e.starts_with("t.mod:2:13: array size must be at least 1"),
         "{e}"
     );
+    // A constant expression that gives a size below 1 is the same error.
+    for size in ["N-2", "0-N", "N - 2 * N"] {
+        let e = parse_err(&format!(
+            "MODULE M\nCONST num N := 2;\nCONST num a{{{size}}} := [1,2,3];\nENDMODULE\n"
+        ));
+        assert!(
+            e.starts_with("t.mod:3:13: array size must be at least 1"),
+            "{size}: {e}"
+        );
+    }
+    // Every sub-array has the size its constant gives, not only the first.
+    let e =
+        parse_err("MODULE M\nCONST num N := 3;\nVAR num g{2, N} := [[1,2,3],[1,2]];\nENDMODULE\n");
+    assert!(
+        e.starts_with("t.mod:3:29: array declared with 3 elements has 2"),
+        "{e}"
+    );
+    let m =
+        parse("MODULE M\nCONST num N := 3;\nVAR num g{2, N} := [[1,2,3],[4,5,6]];\nENDMODULE\n");
+    let dims: Vec<Option<usize>> = m
+        .decl("g")
+        .expect("g")
+        .dims
+        .iter()
+        .map(|d| d.value)
+        .collect();
+    assert_eq!(dims, vec![Some(2), Some(3)]);
     let e = parse_err("MODULE M\nVAR num a{};\nENDMODULE\n");
     assert!(e.starts_with("t.mod:2:11: expected an array size"), "{e}");
     let e = parse_err("MODULE M\nVAR num a{2;\nENDMODULE\n");

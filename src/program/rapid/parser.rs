@@ -721,27 +721,43 @@ impl<'a> Parser<'a> {
         for dim in &mut d.dims {
             if dim.value.is_none() {
                 let text = self.src.get(dim.span.clone()).unwrap_or("");
-                dim.value = super::typed::const_int(text, before)
-                    .and_then(|v| usize::try_from(v).ok().filter(|&n| n > 0));
+                if let Some(v) = super::typed::const_int(text, before) {
+                    match usize::try_from(v).ok().filter(|&n| n > 0) {
+                        Some(n) => dim.value = Some(n),
+                        None => {
+                            return Err(
+                                self.err_found(dim.span.start, "array size must be at least 1")
+                            );
+                        }
+                    }
+                }
             }
         }
-        let mut value = d.value.as_ref();
-        for dim in &d.dims {
-            let Some(DataValue::Array { span, items }) = value else {
-                break;
-            };
-            if let Some(n) = dim.value.filter(|&n| n != items.len()) {
-                return Err(self.err_found(
-                    span.start,
-                    &format!(
-                        "array declared with {n} elements has {} in its value",
-                        items.len()
-                    ),
-                ));
-            }
-            value = items.first();
+        match &d.value {
+            Some(value) => self.check_array(value, &d.dims),
+            None => Ok(()),
         }
-        Ok(())
+    }
+
+    /// Checks that `value` and every array in it has the number of
+    /// elements its size in `dims` gives (where known).
+    fn check_array(&self, value: &DataValue, dims: &[Dim]) -> Result<(), nom::Err<PErr<'a>>> {
+        let (Some((dim, inner)), DataValue::Array { span, items }) = (dims.split_first(), value)
+        else {
+            return Ok(());
+        };
+        if let Some(n) = dim.value.filter(|&n| n != items.len()) {
+            return Err(self.err_found(
+                span.start,
+                &format!(
+                    "array declared with {n} elements has {} in its value",
+                    items.len()
+                ),
+            ));
+        }
+        items
+            .iter()
+            .try_for_each(|item| self.check_array(item, inner))
     }
 
     // ----- declarations ------------------------------------------------
