@@ -749,6 +749,22 @@ fn error_lists_and_compact_ifs_are_read() {
         let e = parse_err(bad);
         assert!(e.starts_with("t.mod:"), "{e}");
     }
+    // The ERROR list is names or integers separated by commas, at least one.
+    for (list, at) in [
+        ("()", "t.mod:3:10: expected an error number"),
+        ("( )", "t.mod:3:11: expected an error number"),
+        ("(A B)", "t.mod:3:12: expected `,` or `)` in the ERROR list"),
+        ("(A,)", "t.mod:3:12: expected an error number"),
+        ("(1A)", "t.mod:3:10: expected an error number"),
+        ("(\"A\")", "t.mod:3:10: expected an error number"),
+    ] {
+        let e = parse_err(&format!(
+            "MODULE M\nPROC a()\n  ERROR {list}\n    RETURN;\nENDPROC\nENDMODULE\n"
+        ));
+        assert!(e.starts_with(at), "{list}: {e}");
+    }
+    let m = parse("MODULE M\nPROC a()\n  ERROR (41, ERR_A , 7)\n    RETURN;\nENDPROC\nENDMODULE\n");
+    assert!(matches!(&m.procs[0].body[0], Stmt::Control { keyword, .. } if keyword == "ERROR"));
 }
 
 /// Editor placeholders are kept byte for byte; a routine holding one is

@@ -1263,11 +1263,7 @@ impl<'a> Parser<'a> {
             // `ERROR (ERR_SOCK_TIMEOUT, ERR_SOCK_CLOSED)`.
             let r1 = inline_ws(r);
             if let Some(list) = r1.strip_prefix('(') {
-                let scan = self.scan(list, b";", &[], false)?;
-                let rest = list.get(scan.stop..).unwrap_or("");
-                let Some(after) = rest.strip_prefix(')') else {
-                    return self.fail_found(self.pos(r1), "expected `)` to close the ERROR list");
-                };
+                let after = self.error_list(list)?;
                 return control(after, "ERROR");
             }
             return control(r, "ERROR");
@@ -1349,6 +1345,37 @@ impl<'a> Parser<'a> {
             )),
             None if scan.last == 0 => self.fail_found(start, "unexpected text"),
             None => self.fail_after(start + scan.last, "missing `;` at the end of the statement"),
+        }
+    }
+
+    /// The list of error numbers of an `ERROR (…)` handler: names or
+    /// integers separated by commas, at least one; `list` starts just after
+    /// the `(`. Gives the text after the `)`.
+    fn error_list(&self, list: &'a str) -> Result<&'a str, nom::Err<PErr<'a>>> {
+        let mut r = list;
+        loop {
+            let item = ws(r);
+            let n = digits(item.as_bytes());
+            let after = if n > 0 {
+                item.get(n..)
+                    .filter(|t| !t.bytes().next().is_some_and(is_ident_byte))
+            } else {
+                ident(item).ok().map(|(t, _)| t)
+            };
+            let Some(after) = after else {
+                return Err(self.err_found(
+                    self.pos(item),
+                    "expected an error number (a name or an integer) in the ERROR list",
+                ));
+            };
+            let sep = ws(after);
+            if let Some(t) = sep.strip_prefix(',') {
+                r = t;
+            } else if let Some(t) = sep.strip_prefix(')') {
+                return Ok(t);
+            } else {
+                return Err(self.err_found(self.pos(sep), "expected `,` or `)` in the ERROR list"));
+            }
         }
     }
 
