@@ -765,6 +765,17 @@ fn error_lists_and_compact_ifs_are_read() {
     }
     let m = parse("MODULE M\nPROC a()\n  ERROR (41, ERR_A , 7)\n    RETURN;\nENDPROC\nENDMODULE\n");
     assert!(matches!(&m.procs[0].body[0], Stmt::Control { keyword, .. } if keyword == "ERROR"));
+    // A `;` in a string of the condition is not the end of the IF.
+    let src = "MODULE M\nPROC a()\n  IF msg = \"a;b\"\n    MoveL p1, v100, z10, tool0;\n  RETURN;\nENDPROC\nENDMODULE\n";
+    let m = parse(src);
+    let texts: Vec<&str> = m.procs[0].body.iter().map(|s| &src[s.span()]).collect();
+    assert_eq!(
+        texts,
+        vec![
+            "IF msg = \"a;b\"\n    MoveL p1, v100, z10, tool0;",
+            "RETURN;"
+        ]
+    );
 }
 
 /// Editor placeholders are kept byte for byte; a routine holding one is

@@ -1389,7 +1389,7 @@ impl<'a> Parser<'a> {
         let line_end = r.find('\n')?;
         let head = r.get(..line_end)?;
         let code = head.get(..super::comment_start(head).unwrap_or(head.len()))?;
-        if code.trim().is_empty() || code.contains(';') {
+        if code.trim().is_empty() {
             return None;
         }
         let next = ws(r.get(line_end..)?);
