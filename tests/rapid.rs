@@ -735,10 +735,55 @@ fn error_lists_and_compact_ifs_are_read() {
             "RETRY;",
         ]
     );
-    assert!(matches!(&body[2], Stmt::Opaque { line: 7, .. }));
+    // The move of a compact IF is a move, its `IF cond` kept as written.
+    let Stmt::Move(mv) = &body[2] else {
+        panic!("a move: {:?}", body[2])
+    };
+    assert_eq!(
+        (mv.line, &src[mv.span.clone()]),
+        (8, "MoveJ pHome, v1000, fine, tool0;")
+    );
+    assert_eq!(
+        mv.condition.clone().map(|c| &src[c]),
+        Some("IF msg = \"home\"")
+    );
+    assert!(matches!(&body[3], Stmt::Opaque { line: 9, .. }));
+    assert_eq!(
+        mv.target.span(),
+        src.find("pHome").map(|k| k..k + 5).expect("pHome")
+    );
+    assert_eq!(mv.zone.text.as_ref(), "fine");
     assert!(matches!(&body[6], Stmt::Control { keyword, line: 13, .. } if keyword == "ERROR"));
     let trap = &m.procs[1].body;
     assert!(matches!(&trap[1], Stmt::Control { keyword, .. } if keyword == "ERROR"));
+    // On the IF's line, and under two compact IFs, as well.
+    let src = "MODULE M\nPROC a()\n  IF b MoveL p1, v100, z10, tool0;\n  IF x > \"MoveL\" ! MoveL\n    IF y MoveC p2, p3, v100, z10, tool0;\n  IF c TPWrite \"MoveL p\";\nENDPROC\nENDMODULE\n";
+    let m = parse(src);
+    let moves: Vec<(&str, &str, usize)> = m
+        .moves()
+        .map(|mv| {
+            let cond = mv.condition.clone().expect("in a compact IF");
+            (&src[cond], &src[mv.span.clone()], mv.line)
+        })
+        .collect();
+    assert_eq!(
+        moves,
+        vec![
+            ("IF b", "MoveL p1, v100, z10, tool0;", 3),
+            (
+                "IF x > \"MoveL\" ! MoveL\n    IF y",
+                "MoveC p2, p3, v100, z10, tool0;",
+                5
+            ),
+        ]
+    );
+    assert!(matches!(&m.procs[0].body[2], Stmt::Opaque { line: 6, .. }));
+    // A move with too few arguments is an error there too, unless it is
+    // unfinished (an editor placeholder).
+    let e = parse_err("MODULE M\nPROC a()\n  IF b MoveL p1, v100;\nENDPROC\nENDMODULE\n");
+    assert!(e.starts_with("t.mod:3:8: MoveL takes 4 arguments"), "{e}");
+    let m = parse("MODULE M\nPROC a()\n  IF b MoveL <ARG>;\nENDPROC\nENDMODULE\n");
+    assert!(matches!(&m.procs[0].body[0], Stmt::Opaque { .. }));
     // A compact IF whose next line is not a statement of its own is an error.
     for bad in [
         "MODULE M\nPROC a()\n  IF x\n  ENDPROC\nENDMODULE\n",

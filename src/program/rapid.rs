@@ -560,6 +560,10 @@ pub struct Move {
     pub span: Span,
     /// 1-based line of the instruction name.
     pub line: usize,
+    /// When the move is the statement of a compact `IF cond stmt` (on the
+    /// same line or the next): from `IF` to the end of the condition, kept
+    /// as written. The move goes to its target whenever it runs.
+    pub condition: Option<Span>,
 }
 
 impl Move {
@@ -602,7 +606,7 @@ impl Stmt {
     /// The statement's span.
     pub fn span(&self) -> Span {
         match self {
-            Stmt::Move(m) => m.span.clone(),
+            Stmt::Move(m) => m.condition.as_ref().map_or(m.span.start, |c| c.start)..m.span.end,
             Stmt::Decl(d) => d.span.clone(),
             Stmt::Control { span, .. } | Stmt::Opaque { span, .. } => span.clone(),
         }
