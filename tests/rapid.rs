@@ -129,6 +129,21 @@ fn grammar_examples_parse_and_rejects_fail() {
     }
 }
 
+/// Every source file the grammar names (`src/….rs` in backquotes) exists.
+#[test]
+fn grammar_names_existing_source_files() {
+    let md = grammar();
+    let named: Vec<&str> = md
+        .match_indices("`src/")
+        .filter_map(|(k, _)| md[k + 1..].split('`').next())
+        .filter(|t| t.ends_with(".rs"))
+        .collect();
+    assert!(!named.is_empty());
+    for path in named {
+        assert!(repo(path).is_file(), "grammar/rapid.md names {path}");
+    }
+}
+
 #[test]
 fn sample_module_structure() {
     let src = sample();
@@ -640,7 +655,7 @@ fn constant_array_sizes_are_checked_and_errors_located() {
         "{e}"
     );
     // A size that is not a constant integer: no value, no check.
-    for size in ["N/2", "M", "N+", "0-N", "2.5", "PERS_N"] {
+    for size in ["N/2", "M", "N+", "2.5", "PERS_N"] {
         let src = format!(
             "MODULE M\nCONST num N := 2;\nPERS num PERS_N := 2;\nCONST num a{{{size}}} := [1,2,3];\nENDMODULE\n"
         );
@@ -652,6 +667,33 @@ fn constant_array_sizes_are_checked_and_errors_located() {
         e.starts_with("t.mod:2:13: array size must be at least 1"),
         "{e}"
     );
+    // A constant expression that gives a size below 1 is the same error.
+    for size in ["N-2", "0-N", "N - 2 * N"] {
+        let e = parse_err(&format!(
+            "MODULE M\nCONST num N := 2;\nCONST num a{{{size}}} := [1,2,3];\nENDMODULE\n"
+        ));
+        assert!(
+            e.starts_with("t.mod:3:13: array size must be at least 1"),
+            "{size}: {e}"
+        );
+    }
+    // Every sub-array has the size its constant gives, not only the first.
+    let e =
+        parse_err("MODULE M\nCONST num N := 3;\nVAR num g{2, N} := [[1,2,3],[1,2]];\nENDMODULE\n");
+    assert!(
+        e.starts_with("t.mod:3:29: array declared with 3 elements has 2"),
+        "{e}"
+    );
+    let m =
+        parse("MODULE M\nCONST num N := 3;\nVAR num g{2, N} := [[1,2,3],[4,5,6]];\nENDMODULE\n");
+    let dims: Vec<Option<usize>> = m
+        .decl("g")
+        .expect("g")
+        .dims
+        .iter()
+        .map(|d| d.value)
+        .collect();
+    assert_eq!(dims, vec![Some(2), Some(3)]);
     let e = parse_err("MODULE M\nVAR num a{};\nENDMODULE\n");
     assert!(e.starts_with("t.mod:2:11: expected an array size"), "{e}");
     let e = parse_err("MODULE M\nVAR num a{2;\nENDMODULE\n");
@@ -693,10 +735,55 @@ fn error_lists_and_compact_ifs_are_read() {
             "RETRY;",
         ]
     );
-    assert!(matches!(&body[2], Stmt::Opaque { line: 7, .. }));
+    // The move of a compact IF is a move, its `IF cond` kept as written.
+    let Stmt::Move(mv) = &body[2] else {
+        panic!("a move: {:?}", body[2])
+    };
+    assert_eq!(
+        (mv.line, &src[mv.span.clone()]),
+        (8, "MoveJ pHome, v1000, fine, tool0;")
+    );
+    assert_eq!(
+        mv.condition.clone().map(|c| &src[c]),
+        Some("IF msg = \"home\"")
+    );
+    assert!(matches!(&body[3], Stmt::Opaque { line: 9, .. }));
+    assert_eq!(
+        mv.target.span(),
+        src.find("pHome").map(|k| k..k + 5).expect("pHome")
+    );
+    assert_eq!(mv.zone.text.as_ref(), "fine");
     assert!(matches!(&body[6], Stmt::Control { keyword, line: 13, .. } if keyword == "ERROR"));
     let trap = &m.procs[1].body;
     assert!(matches!(&trap[1], Stmt::Control { keyword, .. } if keyword == "ERROR"));
+    // On the IF's line, and under two compact IFs, as well.
+    let src = "MODULE M\nPROC a()\n  IF b MoveL p1, v100, z10, tool0;\n  IF x > \"MoveL\" ! MoveL\n    IF y MoveC p2, p3, v100, z10, tool0;\n  IF c TPWrite \"MoveL p\";\nENDPROC\nENDMODULE\n";
+    let m = parse(src);
+    let moves: Vec<(&str, &str, usize)> = m
+        .moves()
+        .map(|mv| {
+            let cond = mv.condition.clone().expect("in a compact IF");
+            (&src[cond], &src[mv.span.clone()], mv.line)
+        })
+        .collect();
+    assert_eq!(
+        moves,
+        vec![
+            ("IF b", "MoveL p1, v100, z10, tool0;", 3),
+            (
+                "IF x > \"MoveL\" ! MoveL\n    IF y",
+                "MoveC p2, p3, v100, z10, tool0;",
+                5
+            ),
+        ]
+    );
+    assert!(matches!(&m.procs[0].body[2], Stmt::Opaque { line: 6, .. }));
+    // A move with too few arguments is an error there too, unless it is
+    // unfinished (an editor placeholder).
+    let e = parse_err("MODULE M\nPROC a()\n  IF b MoveL p1, v100;\nENDPROC\nENDMODULE\n");
+    assert!(e.starts_with("t.mod:3:8: MoveL takes 4 arguments"), "{e}");
+    let m = parse("MODULE M\nPROC a()\n  IF b MoveL <ARG>;\nENDPROC\nENDMODULE\n");
+    assert!(matches!(&m.procs[0].body[0], Stmt::Opaque { .. }));
     // A compact IF whose next line is not a statement of its own is an error.
     for bad in [
         "MODULE M\nPROC a()\n  IF x\n  ENDPROC\nENDMODULE\n",
@@ -707,6 +794,33 @@ fn error_lists_and_compact_ifs_are_read() {
         let e = parse_err(bad);
         assert!(e.starts_with("t.mod:"), "{e}");
     }
+    // The ERROR list is names or integers separated by commas, at least one.
+    for (list, at) in [
+        ("()", "t.mod:3:10: expected an error number"),
+        ("( )", "t.mod:3:11: expected an error number"),
+        ("(A B)", "t.mod:3:12: expected `,` or `)` in the ERROR list"),
+        ("(A,)", "t.mod:3:12: expected an error number"),
+        ("(1A)", "t.mod:3:10: expected an error number"),
+        ("(\"A\")", "t.mod:3:10: expected an error number"),
+    ] {
+        let e = parse_err(&format!(
+            "MODULE M\nPROC a()\n  ERROR {list}\n    RETURN;\nENDPROC\nENDMODULE\n"
+        ));
+        assert!(e.starts_with(at), "{list}: {e}");
+    }
+    let m = parse("MODULE M\nPROC a()\n  ERROR (41, ERR_A , 7)\n    RETURN;\nENDPROC\nENDMODULE\n");
+    assert!(matches!(&m.procs[0].body[0], Stmt::Control { keyword, .. } if keyword == "ERROR"));
+    // A `;` in a string of the condition is not the end of the IF.
+    let src = "MODULE M\nPROC a()\n  IF msg = \"a;b\"\n    MoveL p1, v100, z10, tool0;\n  RETURN;\nENDPROC\nENDMODULE\n";
+    let m = parse(src);
+    let texts: Vec<&str> = m.procs[0].body.iter().map(|s| &src[s.span()]).collect();
+    assert_eq!(
+        texts,
+        vec![
+            "IF msg = \"a;b\"\n    MoveL p1, v100, z10, tool0;",
+            "RETURN;"
+        ]
+    );
 }
 
 /// Editor placeholders are kept byte for byte; a routine holding one is
@@ -773,9 +887,8 @@ fn editor_placeholders_mark_their_routine() {
     assert!(e.starts_with("t.mod:3:3: MoveL takes 4 arguments"), "{e}");
 }
 
-/// Deep chains in the new constructs are errors or unknown sizes, not a
-/// crash: compact IFs each on the line before the next, and array sizes
-/// with long runs of signs or parentheses.
+/// Deep chains of compact IFs, and long runs of signs or parentheses in
+/// array sizes, are errors or unknown sizes, not a crash.
 #[test]
 fn deep_compact_ifs_and_sizes_do_not_crash() {
     let ifs = format!(
@@ -790,8 +903,9 @@ fn deep_compact_ifs_and_sizes_do_not_crash() {
         "(".repeat(100_000) + "1" + &")".repeat(100_000),
     ] {
         let src = format!("MODULE M\nVAR num a{{{size}}};\nENDMODULE\n");
-        if let Ok(m) = parse_module(&src, "t.mod") {
-            assert_eq!(m.decls[0].dims[0].value, None);
+        match parse_module(&src, "t.mod") {
+            Ok(m) => assert_eq!(m.decls[0].dims[0].value, None),
+            Err(e) => assert!(e.to_string().starts_with("t.mod:2:"), "{e}"),
         }
     }
 }

@@ -825,6 +825,42 @@ fn latin1_modules_come_back_byte_for_byte() {
     }
 }
 
+/// An error in an ISO-8859-1 module is located by the bytes of the file:
+/// the `é` before it is one byte there.
+#[test]
+fn latin1_error_columns_count_file_bytes() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let input = dir.path().join("bad.mod");
+    let mut module = b"MODULE M\r\n  PROC main()\r\n    TPWrite \"caf\xe9\"; ".to_vec();
+    // `MoveL` starts at byte 21 of line 3 (4 + 8 + 6 + 2 bytes before it).
+    let column = module.len() - module.iter().rposition(|&b| b == b'\n').expect("line");
+    assert_eq!(column, 21);
+    module.extend_from_slice(b"MoveL p1, v100, z10;\r\n  ENDPROC\r\nENDMODULE\r\n");
+    std::fs::write(&input, &module).expect("write");
+    let machine = repo("machines/abb-irb1600.yaml");
+    let output = dir.path().join("out.mod");
+    let runs = [
+        vec!["check".to_string()],
+        vec![
+            "compensate".to_string(),
+            "--machine".to_string(),
+            machine.display().to_string(),
+            "-o".to_string(),
+            output.display().to_string(),
+        ],
+    ];
+    for args in runs {
+        let out = postproc().args(&args).arg(&input).output().expect("runs");
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{args:?}: {stderr}");
+        assert!(
+            stderr.contains("bad.mod:3:21: MoveL takes 4 arguments"),
+            "{args:?}: {stderr}"
+        );
+    }
+    assert!(!output.exists());
+}
+
 /// A main module in the shape of a controller backup, with every construct
 /// of `grammar/rapid.md` that real modules use at once: `%%%` header,
 /// ISO-8859-1 comments, CRLF, a record type, constant-sized arrays, a
@@ -886,10 +922,10 @@ fn a_backup_module_with_every_construct_comes_back_as_written() {
         "{}",
         String::from_utf8_lossy(&check.stderr)
     );
-    // The moves of main (the one in a compact IF passed through); teach's
-    // are not counted.
+    // The moves of main (the one in a compact IF with them); teach's are
+    // not counted.
     assert!(
-        String::from_utf8_lossy(&check.stdout).contains("2 routines, 3 moves"),
+        String::from_utf8_lossy(&check.stdout).contains("2 routines, 4 moves"),
         "{}",
         String::from_utf8_lossy(&check.stdout)
     );

@@ -807,10 +807,10 @@ fn real_module_constructs_read_a_window_at_a_time() {
             assert_eq!(std::fs::read(&out).expect("output"), want, "case {k}");
             let check = run_windowed("check", lines, &["--machine", "abb-irb1600", p]);
             assert_eq!(check.0, 0, "{}", check.2);
-            // The move in the compact IF is passed through; the one of
-            // the unfinished routine is not counted.
+            // The move in the compact IF is a move; the one of the
+            // unfinished routine is not counted.
             assert!(
-                String::from_utf8_lossy(&check.1).contains("3 moves"),
+                String::from_utf8_lossy(&check.1).contains("4 moves"),
                 "{}",
                 String::from_utf8_lossy(&check.1)
             );
@@ -819,5 +819,61 @@ fn real_module_constructs_read_a_window_at_a_time() {
         let text = String::from_utf8(want).expect("utf-8");
         assert_eq!(text.contains(teach), !*windows);
         assert!(!text.contains(main), "main is compensated");
+    }
+}
+
+/// A move that is the statement of a compact `IF` (on the IF's line or the
+/// next) is compensated like any other: its target's line changes, every
+/// other byte is the input's (the IF lines, the target no move goes to),
+/// and windows of any size give the bytes of the module read whole.
+#[test]
+fn moves_in_compact_ifs_are_compensated() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let rt = |xyz: &str| format!("[[{xyz}],[0,0,1,0],[0,0,0,0],[9E9,9E9,9E9,9E9,9E9,9E9]]");
+    let src = format!(
+        "MODULE Gate\n  CONST robtarget p1 := {};\n  CONST robtarget p2 := {};\n  CONST robtarget p3 := {};\n  CONST robtarget p4 := {};\n  VAR bool bGo := TRUE;\n  PROC main()\n    MoveJ p1, v1000, z50, tool0;\n    IF bGo MoveL p2, v100, z10, tool0;\n    IF bGo AND (nCount > 2) ! counted first\n      MoveL p3, v100, fine, tool0;\n    IF msg = \"a;b\" TPWrite \"p4\";\n  ENDPROC\nENDMODULE\n",
+        rt("750,0,500"),
+        rt("760,20,480"),
+        rt("770,10,490"),
+        rt("700,0,450"),
+    );
+    let path = dir.path().join("gate.mod");
+    std::fs::write(&path, &src).expect("write");
+    let p = path.to_str().unwrap();
+    let compensate = |out: &str, extra: &[&str]| -> Vec<u8> {
+        let out = dir.path().join(out);
+        let mut args = vec!["compensate", "--machine", "abb-irb1600", "-o"];
+        args.push(out.to_str().unwrap());
+        args.extend(extra);
+        args.push(p);
+        let (code, _, err) = run(&args);
+        assert_eq!(code, 0, "{err}");
+        let text = std::fs::read(&out).expect("output");
+        crate::common::without_header(&text)
+    };
+    let same = compensate("none.mod", &["--effects", "none", "--annotate", "none"]);
+    assert!(same == src.as_bytes(), "{}", String::from_utf8_lossy(&same));
+    let want = compensate("whole.mod", &["--annotate", "none"]);
+    let text = String::from_utf8(want.clone()).expect("utf-8");
+    let changed: Vec<usize> = src
+        .lines()
+        .zip(text.lines())
+        .enumerate()
+        .filter(|(_, (a, b))| a != b)
+        .map(|(k, _)| k + 1)
+        .collect();
+    // The targets of the three moves; not p4, not the IF lines.
+    assert_eq!(changed, vec![2, 3, 4], "{text}");
+    assert_eq!(src.lines().count(), text.lines().count());
+    for lines in ["1", "2", "5"] {
+        let out = dir.path().join(format!("w{lines}.mod"));
+        let args = ["--machine", "abb-irb1600", "--annotate", "none", "-o"];
+        let mut args = args.to_vec();
+        args.extend([out.to_str().unwrap(), p]);
+        let (code, _, err) = run_windowed("compensate", lines, &args);
+        assert_eq!(code, 0, "{err}");
+        assert!(err.contains("at a time"), "{err}");
+        let got = crate::common::without_header(&std::fs::read(&out).expect("output"));
+        assert!(got == want, "windows of {lines} lines");
     }
 }

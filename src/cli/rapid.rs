@@ -14,7 +14,7 @@ use crate::error::{Error, Result};
 use crate::machine::ThermalStart;
 use crate::machine::robot::{Effects, Robot};
 use crate::pipeline::rapid::{RapidOptions, compensate_module, compensate_parsed, stream};
-use crate::program::charset::{Charset, Latin1Writer};
+use crate::program::charset::{Charset, Latin1Writer, file_columns};
 
 /// Modules of at least this size are read a window at a time when their
 /// shape and the run allow it ([`crate::pipeline::rapid::stream`]):
@@ -140,13 +140,8 @@ impl Source {
         Ok(head)
     }
 
-    /// The whole module text and its name (the module itself is parsed
-    /// once, by the caller).
-    pub(super) fn read_whole(self) -> Result<(String, String)> {
-        self.read_whole_text().map(|(text, name, _)| (text, name))
-    }
-
-    /// [`Source::read_whole`] and the character set of the module: UTF-8,
+    /// The whole module text, its name (the module itself is parsed once,
+    /// by the caller) and its character set: UTF-8,
     /// or ISO-8859-1 when it is not valid UTF-8
     /// ([`crate::program::charset`]).
     pub(super) fn read_whole_text(self) -> Result<(String, String, Charset)> {
@@ -257,8 +252,10 @@ pub fn check(a: &CheckArgs, robot: Option<Result<(Robot, Loaded)>>) -> Result<i3
     let (name, module_name, decls, procs, moves) = match check_streamed(&mut robot, &source)? {
         Some(found) => found,
         None => {
-            let (src, name) = source.read_whole()?;
-            let module = crate::program::rapid::parse_module(&src, &name)?;
+            let (src, name, charset) = source.read_whole_text()?;
+            let in_file = |e: Error| file_columns(e, &src, charset);
+            let module =
+                crate::program::rapid::parse_module(&src, &name).map_err(|e| in_file(e.into()))?;
             let found = (
                 module.name.clone(),
                 module.decls.len(),
@@ -268,7 +265,8 @@ pub fn check(a: &CheckArgs, robot: Option<Result<(Robot, Loaded)>>) -> Result<i3
             // The compensation takes the parsed module (one parse, one
             // module in memory).
             if let Some(robot) = robot {
-                compensate_parsed(module, &src, &name, &robot?, &check_options())?;
+                compensate_parsed(module, &src, &name, &robot?, &check_options())
+                    .map_err(in_file)?;
             }
             (name, found.0, found.1, found.2, found.3)
         }
@@ -503,7 +501,8 @@ pub fn compensate(
         }
     }
     let (src, name, charset) = source.read_whole_text()?;
-    let outcome = pool.install(|| compensate_module(&src, &name, &robot, &opts))?;
+    let outcome = pool.install(|| compensate_module(&src, &name, &robot, &opts));
+    let outcome = outcome.map_err(|e| file_columns(e, &src, charset))?;
     write_outcome(&out_path, &outcome, &name, report, &provenance, charset)?;
     log_outcome(&input_name, &out_path, &outcome, quiet);
     Ok(0)
@@ -770,8 +769,9 @@ pub fn report(a: &ReportArgs, robot: Option<Result<(Robot, Loaded)>>) -> Result<
             return Ok(0);
         }
     }
-    let (src, name) = source.read_whole()?;
-    let outcome = compensate_module(&src, &name, &robot, &opts)?;
+    let (src, name, charset) = source.read_whole_text()?;
+    let outcome = compensate_module(&src, &name, &robot, &opts)
+        .map_err(|e| file_columns(e, &src, charset))?;
     super::output::emit_to(&out, |w| {
         write_report(w, &outcome, &name, a.format, Some(&provenance))
     })?;

@@ -121,6 +121,36 @@ impl Write for Latin1Writer<'_> {
     }
 }
 
+/// `e` with its column counted in bytes of the file: the text of a
+/// Latin-1 file has two bytes for each character beyond ASCII, its file
+/// one. Any other error, a UTF-8 text and a position at no particular
+/// column are kept as they are.
+pub fn file_columns(e: crate::error::Error, text: &str, charset: Charset) -> crate::error::Error {
+    match e {
+        crate::error::Error::Input(loc) if charset == Charset::Latin1 => {
+            crate::error::Error::Input(file_column(loc, text))
+        }
+        other => other,
+    }
+}
+
+/// [`file_columns`] of one located problem in a Latin-1 text.
+fn file_column(mut loc: crate::error::Located, text: &str) -> crate::error::Located {
+    if loc.line == 0 || loc.column == 0 {
+        return loc;
+    }
+    let Some(line) = text.split('\n').nth(loc.line - 1) else {
+        return loc;
+    };
+    let mut end = (loc.column - 1).min(line.len());
+    while !line.is_char_boundary(end) {
+        end -= 1;
+    }
+    let chars = line.get(..end).map_or(0, |t| t.chars().count());
+    loc.column = chars + 1 + (loc.column - 1 - end);
+    loc
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -162,5 +192,26 @@ mod tests {
         w.write_all(b"a\xffb\xc3").unwrap();
         w.flush().unwrap();
         assert_eq!(out, b"a?b?");
+    }
+
+    /// A column after characters beyond ASCII counts bytes of the Latin-1
+    /// file; in UTF-8 text, and for other errors, it is kept.
+    #[test]
+    fn columns_count_file_bytes() {
+        use crate::error::{Error, Located};
+        let text = "MODULE M\n  TPWrite \"caf\u{e9}\"; x\n";
+        let at = |col| Error::Input(Located::new("t.mod", 2, col, "m"));
+        let col = |e: Error| match e {
+            Error::Input(l) => l.column,
+            _ => 0,
+        };
+        // `x` is byte 20 of the decoded line, byte 19 of the file's.
+        assert_eq!(&text[9..][19..20], "x");
+        assert_eq!(col(file_columns(at(20), text, Charset::Latin1)), 19);
+        assert_eq!(col(file_columns(at(20), text, Charset::Utf8)), 20);
+        // Before the `é`, nothing moves.
+        assert_eq!(col(file_columns(at(3), text, Charset::Latin1)), 3);
+        let whole = Error::Input(Located::whole_file("t.mod", "m"));
+        assert_eq!(col(file_columns(whole, text, Charset::Latin1)), 0);
     }
 }

@@ -381,15 +381,22 @@ pub fn find_placeholder(text: &str) -> Option<usize> {
 /// True when the end of `line` (a line's text up to a position) is code:
 /// outside a string literal and before any `!` comment.
 fn is_code_end(line: &str) -> bool {
+    scan_line(line) == (None, false)
+}
+
+/// One pass over `line` (or the start of one): the byte offset of the `!`
+/// that starts a comment (outside string literals) and whether the text
+/// ends inside a string literal (only without a comment).
+fn scan_line(line: &str) -> (Option<usize>, bool) {
     let mut in_string = false;
-    for b in line.bytes() {
+    for (i, b) in line.bytes().enumerate() {
         match b {
             b'"' => in_string = !in_string,
-            b'!' if !in_string => return false,
+            b'!' if !in_string => return (Some(i), false),
             _ => {}
         }
     }
-    !in_string
+    (None, in_string)
 }
 
 /// An argument passed as written: its trimmed text and span.
@@ -553,6 +560,10 @@ pub struct Move {
     pub span: Span,
     /// 1-based line of the instruction name.
     pub line: usize,
+    /// When the move is the statement of a compact `IF cond stmt` (on the
+    /// same line or the next): from `IF` to the end of the condition, kept
+    /// as written. The move goes to its target whenever it runs.
+    pub condition: Option<Span>,
 }
 
 impl Move {
@@ -595,7 +606,7 @@ impl Stmt {
     /// The statement's span.
     pub fn span(&self) -> Span {
         match self {
-            Stmt::Move(m) => m.span.clone(),
+            Stmt::Move(m) => m.condition.as_ref().map_or(m.span.start, |c| c.start)..m.span.end,
             Stmt::Decl(d) => d.span.clone(),
             Stmt::Control { span, .. } | Stmt::Opaque { span, .. } => span.clone(),
         }
@@ -696,15 +707,7 @@ impl Module {
 /// Byte offset of the `!` that starts a RAPID comment on `line` (outside
 /// string literals; strings do not span lines).
 pub fn comment_start(line: &str) -> Option<usize> {
-    let mut in_string = false;
-    for (i, b) in line.bytes().enumerate() {
-        match b {
-            b'"' => in_string = !in_string,
-            b'!' if !in_string => return Some(i),
-            _ => {}
-        }
-    }
-    None
+    scan_line(line).0
 }
 
 /// Parses a RAPID module from text. `file` is used in error messages only.

@@ -97,6 +97,19 @@ const STATEMENT_WORDS: &[&str] = &[
     "ENDRECORD",
 ];
 
+/// The motion instructions parsed as [`Move`]s.
+const MOVES: [(&str, MoveKind); 4] = [
+    ("MoveL", MoveKind::MoveL),
+    ("MoveJ", MoveKind::MoveJ),
+    ("MoveC", MoveKind::MoveC),
+    ("MoveAbsJ", MoveKind::MoveAbsJ),
+];
+
+/// A blank of the parser ([`ws`]) at the end of a condition.
+fn is_blank_char(c: char) -> bool {
+    matches!(c, ' ' | '\t' | '\r' | '\n' | '\u{feff}')
+}
+
 fn is_ident_byte(b: u8) -> bool {
     b.is_ascii_alphanumeric() || b == b'_'
 }
@@ -721,27 +734,43 @@ impl<'a> Parser<'a> {
         for dim in &mut d.dims {
             if dim.value.is_none() {
                 let text = self.src.get(dim.span.clone()).unwrap_or("");
-                dim.value = super::typed::const_int(text, before)
-                    .and_then(|v| usize::try_from(v).ok().filter(|&n| n > 0));
+                if let Some(v) = super::typed::const_int(text, before) {
+                    match usize::try_from(v).ok().filter(|&n| n > 0) {
+                        Some(n) => dim.value = Some(n),
+                        None => {
+                            return Err(
+                                self.err_found(dim.span.start, "array size must be at least 1")
+                            );
+                        }
+                    }
+                }
             }
         }
-        let mut value = d.value.as_ref();
-        for dim in &d.dims {
-            let Some(DataValue::Array { span, items }) = value else {
-                break;
-            };
-            if let Some(n) = dim.value.filter(|&n| n != items.len()) {
-                return Err(self.err_found(
-                    span.start,
-                    &format!(
-                        "array declared with {n} elements has {} in its value",
-                        items.len()
-                    ),
-                ));
-            }
-            value = items.first();
+        match &d.value {
+            Some(value) => self.check_array(value, &d.dims),
+            None => Ok(()),
         }
-        Ok(())
+    }
+
+    /// Checks that `value` and every array in it has the number of
+    /// elements its size in `dims` gives (where known).
+    fn check_array(&self, value: &DataValue, dims: &[Dim]) -> Result<(), nom::Err<PErr<'a>>> {
+        let (Some((dim, inner)), DataValue::Array { span, items }) = (dims.split_first(), value)
+        else {
+            return Ok(());
+        };
+        if let Some(n) = dim.value.filter(|&n| n != items.len()) {
+            return Err(self.err_found(
+                span.start,
+                &format!(
+                    "array declared with {n} elements has {} in its value",
+                    items.len()
+                ),
+            ));
+        }
+        items
+            .iter()
+            .try_for_each(|item| self.check_array(item, inner))
     }
 
     // ----- declarations ------------------------------------------------
@@ -1215,12 +1244,7 @@ impl<'a> Parser<'a> {
             let (r, d) = self.decl(i)?;
             return Ok((r, Stmt::Decl(Box::new(d))));
         }
-        for (word, kind) in [
-            ("MoveL", MoveKind::MoveL),
-            ("MoveJ", MoveKind::MoveJ),
-            ("MoveC", MoveKind::MoveC),
-            ("MoveAbsJ", MoveKind::MoveAbsJ),
-        ] {
+        for (word, kind) in MOVES {
             if let Some(r) = kw(i, word) {
                 return match self.move_stmt(i, r, kind) {
                     Ok((r, m)) => Ok((r, Stmt::Move(Box::new(m)))),
@@ -1247,11 +1271,7 @@ impl<'a> Parser<'a> {
             // `ERROR (ERR_SOCK_TIMEOUT, ERR_SOCK_CLOSED)`.
             let r1 = inline_ws(r);
             if let Some(list) = r1.strip_prefix('(') {
-                let scan = self.scan(list, b";", &[], false)?;
-                let rest = list.get(scan.stop..).unwrap_or("");
-                let Some(after) = rest.strip_prefix(')') else {
-                    return self.fail_found(self.pos(r1), "expected `)` to close the ERROR list");
-                };
+                let after = self.error_list(list)?;
                 return control(after, "ERROR");
             }
             return control(r, "ERROR");
@@ -1284,6 +1304,9 @@ impl<'a> Parser<'a> {
                 }
                 if let Some(after) = rest.strip_prefix(';') {
                     // A compact `IF cond stmt;`.
+                    if let Some(found) = self.compact_if_move(i, r.get(..scan.stop).unwrap_or("")) {
+                        return found;
+                    }
                     return Ok((
                         after,
                         Stmt::Opaque {
@@ -1336,9 +1359,41 @@ impl<'a> Parser<'a> {
         }
     }
 
+    /// The list of error numbers of an `ERROR (…)` handler: names or
+    /// integers separated by commas, at least one; `list` starts just after
+    /// the `(`. Gives the text after the `)`.
+    fn error_list(&self, list: &'a str) -> Result<&'a str, nom::Err<PErr<'a>>> {
+        let mut r = list;
+        loop {
+            let item = ws(r);
+            let n = digits(item.as_bytes());
+            let after = if n > 0 {
+                item.get(n..)
+                    .filter(|t| !t.bytes().next().is_some_and(is_ident_byte))
+            } else {
+                ident(item).ok().map(|(t, _)| t)
+            };
+            let Some(after) = after else {
+                return Err(self.err_found(
+                    self.pos(item),
+                    "expected an error number (a name or an integer) in the ERROR list",
+                ));
+            };
+            let sep = ws(after);
+            if let Some(t) = sep.strip_prefix(',') {
+                r = t;
+            } else if let Some(t) = sep.strip_prefix(')') {
+                return Ok(t);
+            } else {
+                return Err(self.err_found(self.pos(sep), "expected `,` or `)` in the ERROR list"));
+            }
+        }
+    }
+
     /// A compact `IF cond` whose one statement is on the next line
-    /// (`IF bFlag` then `MoveL p1, v100, fine, tool0;`), as one opaque
-    /// statement: `i` starts at `IF`, `r` just after it. `None` unless the
+    /// (`IF bFlag` then `MoveL p1, v100, fine, tool0;`): a move whose
+    /// `condition` is the `IF` line's code, or else one opaque statement.
+    /// `i` starts at `IF`, `r` just after it. `None` unless the
     /// condition is the rest of the `IF` line and the next line holds a
     /// statement other than a control line.
     fn compact_if_next_line(&self, i: &'a str, r: &'a str) -> Option<(&'a str, Stmt)> {
@@ -1346,14 +1401,20 @@ impl<'a> Parser<'a> {
         let line_end = r.find('\n')?;
         let head = r.get(..line_end)?;
         let code = head.get(..super::comment_start(head).unwrap_or(head.len()))?;
-        if code.trim().is_empty() || code.contains(';') {
+        if code.trim().is_empty() {
             return None;
         }
         let next = ws(r.get(line_end..)?);
         // One level deeper for each compact IF before the statement.
         let (rest, inner) = self.nested(next, |p| p.stmt(next)).ok()?;
         match inner {
-            Stmt::Move(_) | Stmt::Opaque { .. } => Some((
+            Stmt::Move(mut m) => {
+                let end = self.pos(r) + code.trim_end_matches(is_blank_char).len();
+                let end = m.condition.as_ref().map_or(end, |c| c.end);
+                m.condition = Some(start..end);
+                Some((rest, Stmt::Move(m)))
+            }
+            Stmt::Opaque { .. } => Some((
                 rest,
                 Stmt::Opaque {
                     span: start..self.pos(rest),
@@ -1362,6 +1423,44 @@ impl<'a> Parser<'a> {
             )),
             Stmt::Decl(_) | Stmt::Control { .. } => None,
         }
+    }
+
+    /// The move that is the statement of a compact `IF cond stmt;` on one
+    /// line: `i` starts at `IF`, `text` is what follows it up to the `;`.
+    /// `None` when the statement is not a move (the first word of code,
+    /// outside strings and comments, that names a move instruction).
+    fn compact_if_move(&self, i: &'a str, text: &'a str) -> Option<PResult<'a, Stmt>> {
+        let base = self.pos(i) + 2;
+        let b = text.as_bytes();
+        let (mut k, mut in_string) = (0, false);
+        while let Some(&c) = b.get(k) {
+            if in_string || c == b'"' {
+                in_string = (c == b'"') != in_string;
+            } else if c == b'!' {
+                k += text.get(k..)?.find('\n')?;
+                continue;
+            } else if c.is_ascii_alphabetic() && (k == 0 || !is_ident_byte(b[k - 1])) {
+                let word = text.get(k..)?;
+                for (name, kind) in MOVES {
+                    if kw(word, name).is_some() {
+                        // From the source: `text` ends before the `;`.
+                        let start = base + k;
+                        let (at, r) = (self.at(start), self.at(start + name.len()));
+                        let (rest, mut m) = match self.move_stmt(at, r, kind) {
+                            Ok(found) => found,
+                            // An unfinished move is kept as written, as the IF.
+                            Err(_) if find_placeholder(word).is_some() => return None,
+                            Err(e) => return Some(Err(e)),
+                        };
+                        let cond = text.get(..k).unwrap_or("").trim_end_matches(is_blank_char);
+                        m.condition = Some(self.pos(i)..base + cond.len());
+                        return Some(Ok((rest, Stmt::Move(Box::new(m)))));
+                    }
+                }
+            }
+            k += 1;
+        }
+        None
     }
 
     /// The statement at `i` up to its `;` as an opaque statement, when it
@@ -1492,6 +1591,7 @@ impl<'a> Parser<'a> {
                 optional,
                 span: start..self.pos(r),
                 line: self.line_of(start),
+                condition: None,
             },
         ))
     }
