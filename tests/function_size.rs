@@ -32,7 +32,14 @@ fn rust_files(dir: &Path) -> Vec<PathBuf> {
 fn fn_start(line: &str) -> Option<(&str, usize)> {
     let indent = line.len() - line.trim_start().len();
     let mut rest = line.trim_start();
-    for q in ["pub(crate) ", "pub(super) ", "pub ", "const ", "async ", "unsafe "] {
+    for q in [
+        "pub(crate) ",
+        "pub(super) ",
+        "pub ",
+        "const ",
+        "async ",
+        "unsafe ",
+    ] {
         rest = rest.strip_prefix(q).unwrap_or(rest);
     }
     let name = rest.strip_prefix("fn ")?;
@@ -75,7 +82,11 @@ fn no_library_function_is_longer_than_the_limit() {
     let mut found = Vec::new();
     for f in rust_files(&src) {
         let text = std::fs::read_to_string(&f).expect("source");
-        let rel = f.strip_prefix(&src).expect("under src").display().to_string();
+        let rel = f
+            .strip_prefix(&src)
+            .expect("under src")
+            .display()
+            .to_string();
         for (line, len, name) in long_functions(&text, MAX_LINES) {
             found.push(format!("src/{rel}:{line}: {name} has {len} lines"));
         }

@@ -859,6 +859,26 @@ fn latin1_error_columns_count_file_bytes() {
         );
     }
     assert!(!output.exists());
+    // batch reads the module whole too, and names the same column.
+    let out_dir = dir.path().join("out");
+    let out = postproc()
+        .args(["batch", "--machine"])
+        .arg(&machine)
+        .arg("--out-dir")
+        .arg(&out_dir)
+        .arg(&input)
+        .output()
+        .expect("runs");
+    let all = format!(
+        "{}{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert_eq!(out.status.code(), Some(2), "{all}");
+    assert!(
+        all.contains("bad.mod:3:21: MoveL takes 4 arguments"),
+        "{all}"
+    );
 }
 
 /// A main module in the shape of a controller backup, with every construct

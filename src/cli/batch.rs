@@ -426,7 +426,8 @@ fn compensate_one(
                 }
             }
             let (src, name, charset) = source.read_whole_text()?;
-            let outcome = compensate_module(&src, &name, robot, &opts)?;
+            let outcome = compensate_module(&src, &name, robot, &opts)
+                .map_err(|e| crate::program::charset::file_columns(e, &src, charset))?;
             super::rapid::write_outcome(output, &outcome, &name, report_to, provenance, charset)?;
             Ok(done(&outcome))
         }
