@@ -9,7 +9,7 @@ use postproc::machine::robot::{ConfData, Effects, Model, PointMass, Robot};
 use postproc::pipeline::rapid::{RapidOptions, compensate_module};
 use postproc::program::rapid::{DataValue, Module, RobTarget, Target, parse_module};
 
-use crate::common::{postproc, repo, text_without_header, without_header};
+use crate::common::{postproc, repo, text_without_header, without_header, write};
 
 /// Position agreement of the predicted attained TCP with the programmed one,
 /// mm. Derivation: the compensation itself converges to 1e-7 mm; writing
@@ -888,7 +888,7 @@ fn latin1_error_columns_count_file_bytes() {
 /// with their statement on the next line and an unfinished routine. With
 /// nothing to compensate it comes back byte for byte; compensated, the
 /// unfinished routine and every line without a compensated move or target
-/// are as written.
+/// are as written, and the unfinished routine's moves are named and counted.
 #[test]
 fn a_backup_module_with_every_construct_comes_back_as_written() {
     let mut module = Vec::new();
@@ -931,6 +931,34 @@ fn a_backup_module_with_every_construct_comes_back_as_written() {
         out.windows(teach.len()).any(|w| w == teach),
         "teach is as written"
     );
+    // teach's moves are named, each at its line, and counted.
+    let teach_at = module
+        .windows(teach.len())
+        .position(|w| w == teach)
+        .expect("teach");
+    let teach_line = 1 + module[..teach_at].iter().filter(|&&b| b == b'\n').count();
+    let told = postproc()
+        .arg("compensate")
+        .arg(&input)
+        .arg("--machine")
+        .arg(&machine)
+        .arg("-o")
+        .arg(dir.path().join("told.mod"))
+        .output()
+        .expect("runs");
+    let stderr = String::from_utf8_lossy(&told.stderr);
+    assert!(told.status.success(), "{stderr}");
+    let named = format!(
+        "MainModule.mod:{}: MoveL left as written: its routine holds an editor placeholder",
+        teach_line + 1
+    );
+    assert!(stderr.contains(&named), "{named} in:\n{stderr}");
+    let left = stderr.matches("left as written: its routine").count();
+    assert!(left >= 1, "{stderr}");
+    let summary = format!(
+        "4 moves compensated, {left} left as written (its routine holds an editor placeholder)"
+    );
+    assert!(stderr.contains(&summary), "{summary} in:\n{stderr}");
     let check = postproc()
         .args(["check", "--machine"])
         .arg(&machine)
@@ -975,4 +1003,37 @@ fn batch_takes_system_modules_and_latin1_modules() {
     let written = |rel: &str| without_header(&std::fs::read(out.join(rel)).expect(rel));
     assert!(written("SYSMOD/user.sys") == user, "user.sys");
     assert!(written("PROGMOD/Palette.mod") == palette, "Palette.mod");
+}
+
+/// A target shared by a compensated routine and an unfinished one (an
+/// editor placeholder in it): the declaration keeps its value for the
+/// unfinished routine, and the compensated move goes to a copy of it.
+#[test]
+fn a_target_shared_with_an_unfinished_routine_keeps_its_value() {
+    let decl =
+        "  CONST robtarget pHome := [[750,0,500],[0,0,1,0],[0,0,0,0],[9E9,9E9,9E9,9E9,9E9,9E9]];\n";
+    let teach = "  PROC teach()\n    MoveL pHome, v100, fine, tool0;\n    <SMT>\n  ENDPROC\n";
+    let module = format!(
+        "MODULE M\n{decl}  PROC main()\n    MoveJ pHome, v1000, z50, tool0;\n  ENDPROC\n{teach}ENDMODULE\n"
+    );
+    let dir = tempfile::tempdir().expect("tempdir");
+    let input = write(dir.path(), "M.mod", &module);
+    let output = dir.path().join("out.mod");
+    postproc()
+        .args(["compensate", "--machine", "abb-irb1600", "-o"])
+        .arg(&output)
+        .arg(&input)
+        .assert()
+        .success();
+    let out = std::fs::read_to_string(&output).expect("output");
+    assert!(out.contains(decl), "pHome as written:\n{out}");
+    assert!(out.contains(teach), "teach as written:\n{out}");
+    assert!(
+        out.contains("    MoveJ pHome_c"),
+        "main's move goes to a copy:\n{out}"
+    );
+    assert!(
+        out.contains("  CONST robtarget pHome_c"),
+        "the copy is declared:\n{out}"
+    );
 }

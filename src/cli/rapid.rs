@@ -570,12 +570,29 @@ fn log_outcome(input: &str, out_path: &Path, outcome: &RapidOutcome, quiet: bool
         )
     };
     eprintln!(
-        "{input} → {out}: {} compensated, {} added; largest predicted deviation {:.4} mm (line {})",
+        "{input} → {out}: {} compensated{}, {} added; largest predicted deviation {:.4} mm (line {})",
         plural(outcome.moves, "move", "moves"),
+        left_as_written(&outcome.as_written),
         plural(outcome.added, "target", "targets"),
         outcome.max_deviation_mm,
         outcome.max_deviation_line
     );
+}
+
+/// `, N left as written (reasons)` of the summary line, or nothing when
+/// every move is compensated.
+fn left_as_written(left: &[crate::compensate::outcome::AsWritten]) -> String {
+    if left.is_empty() {
+        return String::new();
+    }
+    let mut reasons: Vec<&str> = left.iter().map(|a| a.reason.as_str()).collect();
+    reasons.sort_unstable();
+    reasons.dedup();
+    format!(
+        ", {} left as written ({})",
+        super::gcode::grouped(left.len()),
+        reasons.join("; ")
+    )
 }
 
 /// A temporary file beside `path` — in the temporary folder for standard

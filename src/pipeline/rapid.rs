@@ -104,6 +104,20 @@ struct LoadKey {
     rpm: Option<u64>,
 }
 
+impl LoadKey {
+    /// The owner of a declaration that keeps its value as written (no
+    /// move has an empty tool name).
+    fn as_written() -> LoadKey {
+        LoadKey {
+            tool: Rc::from(""),
+            wobj: Rc::from(""),
+            wrench: None,
+            power: None,
+            rpm: None,
+        }
+    }
+}
+
 /// Tool, work object and process wrench of a move: moves with equal keys
 /// share a robot view.
 #[derive(Debug, Clone, PartialEq, Eq, Hash)]
@@ -934,7 +948,9 @@ pub fn compensate_parsed(
         src,
         file,
     };
+    carry.keep_unfinished_targets(&module, src, file);
     let mut edits = compensate_window(text, robot, opts, &mut carry, None, 0)?;
+    carry.leave_unfinished(&module, file);
     let spans: Vec<_> = module.decls.iter().map(|d| d.span.clone()).collect();
     // Free the parsed module before the output text is built (the peak).
     drop(module);
@@ -943,6 +959,9 @@ pub fn compensate_parsed(
     outcome.text = edits.apply(src)?;
     Ok(outcome)
 }
+
+/// Why a move of a routine holding an editor placeholder is left as written.
+pub const UNFINISHED_ROUTINE: &str = "its routine holds an editor placeholder";
 
 /// What the compensation of one window of a module hands to the next: a
 /// module read a window at a time ([`stream`]) is compensated as if whole,
@@ -1001,6 +1020,44 @@ impl Carry {
                 edits.push(&insert_after_decl(src, span, &lines.join("\n")));
             }
         }
+    }
+
+    /// The robtarget declarations that moves of unfinished routines go to
+    /// keep their values as written: a compensated move to one of them
+    /// gets a copy (`_cN`) instead of the declaration edited in place.
+    fn keep_unfinished_targets(&mut self, module: &Module, src: &str, file: &str) {
+        for m in module.unfinished_moves() {
+            for target in std::iter::once(&m.target).chain(m.via.as_deref()) {
+                // A target that does not resolve (a placeholder in it) is
+                // not a declaration another move could share.
+                if let Ok(u) = resolve_cart(module, src, file, target)
+                    && !u.derived
+                    && matches!(u.origin, Origin::Decl { .. })
+                {
+                    self.owner.insert(u.origin, LoadKey::as_written());
+                }
+            }
+        }
+    }
+
+    /// Leaves the moves of the module's unfinished routines (an editor
+    /// placeholder in them) as written: each is warned about with its
+    /// place and listed in the outcome.
+    fn leave_unfinished(&mut self, module: &Module, file: &str) {
+        for m in module.unfinished_moves() {
+            tracing::warn!(
+                "{}:{}: {} left as written: {}",
+                crate::error::Escaped(file),
+                m.line,
+                m.kind.name(),
+                UNFINISHED_ROUTINE
+            );
+            self.as_written.push(AsWritten {
+                line: m.line,
+                reason: UNFINISHED_ROUTINE.to_string(),
+            });
+        }
+        self.as_written.sort_by_key(|a| a.line);
     }
 
     /// The outcome of the windows compensated (without the text), after

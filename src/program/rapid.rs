@@ -647,6 +647,16 @@ pub struct Proc {
     pub placeholder: bool,
 }
 
+impl Proc {
+    /// The motion instructions of the routine's body, in source order.
+    pub fn moves(&self) -> impl Iterator<Item = &Move> {
+        self.body.iter().filter_map(|s| match s {
+            Stmt::Move(m) => Some(m.as_ref()),
+            _ => None,
+        })
+    }
+}
+
 /// A parsed RAPID module.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Module {
@@ -695,12 +705,19 @@ impl Module {
     /// those of routines holding an editor placeholder ([`Proc::placeholder`]):
     /// an unfinished routine is left as written.
     pub fn moves(&self) -> impl Iterator<Item = &Move> {
-        self.procs.iter().filter(|p| !p.placeholder).flat_map(|p| {
-            p.body.iter().filter_map(|s| match s {
-                Stmt::Move(m) => Some(m.as_ref()),
-                _ => None,
-            })
-        })
+        self.procs
+            .iter()
+            .filter(|p| !p.placeholder)
+            .flat_map(Proc::moves)
+    }
+
+    /// The motion instructions of routines that hold an editor placeholder
+    /// (`<SMT>`, …), in source order: such a routine is left as written.
+    pub fn unfinished_moves(&self) -> impl Iterator<Item = &Move> {
+        self.procs
+            .iter()
+            .filter(|p| p.placeholder)
+            .flat_map(Proc::moves)
     }
 }
 
