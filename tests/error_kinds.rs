@@ -240,3 +240,33 @@ fn each_kind_exits_with_its_code_through_the_binary_and_writes_nothing() {
     assert_eq!(code, Some(0), "{stderr}");
     assert!(written);
 }
+
+/// Too few load rows for a stiffness calibration is a data error naming
+/// the observation file, not a usage error.
+#[test]
+fn too_few_rows_for_a_fit_is_a_data_error_naming_the_observations() {
+    use postproc::calibrate::observations::load_poses;
+    use postproc::calibrate::simulate::{Noise, simulate};
+    use postproc::calibrate::stiffness::{Options, calibrate_stiffness};
+    let truth = "samples/observations/irb1600-truth.yaml";
+    let start = "machines/abb-irb1600.yaml";
+    let mut poses =
+        load_poses(&repo("samples/observations/irb1600-ldbb-poses.csv")).expect("poses");
+    poses.rows.truncate(9);
+    let m = Machine::from_yaml_str(&text(truth), truth).expect("machine");
+    let noise = Noise {
+        um: 15.0,
+        um_per_m: 0.0,
+        seed: 1,
+    };
+    let obs = simulate(&m, &poses, truth, &noise).expect("simulated");
+    let (k, e) = kind(calibrate_stiffness(
+        &text(start),
+        start,
+        &obs,
+        "few.csv",
+        &Options::default(),
+    ));
+    assert_eq!(k, ErrorKind::Data, "{e}");
+    assert!(e.to_string().starts_with("few.csv: "), "{e}");
+}

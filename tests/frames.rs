@@ -1033,7 +1033,7 @@ fn instrument_frame_identified_with_the_geometry() {
 }
 
 /// Instrument-frame data that cannot identify a frame with the model are
-/// refused (exit 2, nothing written): points on one line (geometry with
+/// refused as data errors (exit 2, nothing written): points on one line (geometry with
 /// one axis moving, machine-tool thermal likewise), too few rows (thermal)
 /// and too few load groups (stiffness).
 #[test]
@@ -1050,7 +1050,7 @@ fn instrument_frame_with_degenerate_data_is_refused() {
     let afm = "machines/afm-r1000.yaml";
     let obs = in_instrument(&machine(afm), &poses, f, tracker(1));
     let err = calibrate_geometry(&text(afm), afm, &obs, "line.csv", &opts(1)).expect_err("refused");
-    assert_eq!(err.exit_code(), 2);
+    assert_data(&err, "line.csv: 15 distinct poses left for the fit");
     let err = postproc::calibrate::thermal::calibrate_thermal(
         &text(afm),
         afm,
@@ -1059,8 +1059,7 @@ fn instrument_frame_with_degenerate_data_is_refused() {
         &opts(1),
     )
     .expect_err("refused");
-    assert_eq!(err.exit_code(), 2);
-    assert!(err.to_string().contains("line"), "{err}");
+    assert_data(&err, "line.csv: the measured points lie on a line");
 
     let thermal = "samples/observations/irb1600-thermal-truth.yaml";
     let mut tp =
@@ -1075,13 +1074,22 @@ fn instrument_frame_with_degenerate_data_is_refused() {
         &opts(2),
     )
     .expect_err("refused");
-    assert_eq!(err.exit_code(), 2);
-    assert!(err.to_string().contains("rows left for the fit"), "{err}");
+    assert_data(&err, "rows left for the fit");
 
     let mut lp = load_poses(&repo("samples/observations/irb1600-ldbb-poses.csv")).expect("poses");
     lp.rows.truncate(9);
     let obs = in_instrument(&machine(TRUTH_ROBOT), &lp, instrument(), tracker(3));
     let err = calibrate_stiffness(&text(START_ROBOT), START_ROBOT, &obs, "few.csv", &opts(3))
         .expect_err("refused");
+    assert_data(
+        &err,
+        "few.csv: 3 loaded row(s) in 3 group(s) left for the fit",
+    );
+}
+
+/// A refusal for what the data cannot give: kind Data, exit 2, the reason.
+fn assert_data(err: &postproc::error::Error, fragment: &str) {
+    assert_eq!(err.kind(), postproc::error::ErrorKind::Data, "{err}");
     assert_eq!(err.exit_code(), 2);
+    assert!(err.to_string().contains(fragment), "{err}");
 }

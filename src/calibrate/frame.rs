@@ -230,7 +230,7 @@ pub fn start_frame(
         }
     }
     register(&meas, &model).ok_or_else(|| {
-        Error::Usage(format!(
+        Error::Data(format!(
             "{obs_file}: the measured points lie on a line or are too few (fit rows: {}): \
              the instrument frame cannot be registered; measure varied poses",
             rows.len()

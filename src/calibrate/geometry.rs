@@ -41,7 +41,7 @@
 
 use nalgebra::{DMatrix, DVector, Isometry3};
 
-use crate::calibrate::lsq::{LsqOptions, Solution, solve_linear};
+use crate::calibrate::lsq::{LsqOptions, Solution, data_error, solve_for};
 use crate::error::{Error, Result};
 use crate::machine::Machine;
 use crate::machine::tool::{AxisKind, MachineTool};
@@ -275,7 +275,7 @@ fn axes_and_grids(
         }
     }
     if axes.is_empty() {
-        return Err(Error::Usage(format!(
+        return Err(Error::Data(format!(
             "{obs_file}: no linear axis takes two different positions; geometric calibration \
              needs measurements along the axes"
         )));
@@ -292,7 +292,7 @@ fn axes_and_grids(
         values.sort_by(f64::total_cmp);
         values.dedup();
         if values.len() > 1 {
-            return Err(Error::Usage(format!(
+            return Err(Error::Data(format!(
                 "{obs_file}: the {} axis takes {} different positions; geometric calibration \
                  identifies the linear-axis errors with every rotary axis at one fixed position \
                  (with moving rotary axes the table datums and squareness conventions do not \
@@ -306,7 +306,7 @@ fn axes_and_grids(
     for &a in &axes {
         let g = positions(a);
         if g.len() > MAX_TARGETS {
-            return Err(Error::Usage(format!(
+            return Err(Error::Data(format!(
                 "{obs_file}: axis {} has {} distinct commanded positions; geometric \
                  calibration needs the measurements on target positions (ISO 230-2), \
                  at most {MAX_TARGETS} per axis",
@@ -424,9 +424,7 @@ fn fit_tables(
         a_all.column_mut(c).fill(0.0);
     }
     let lsq = LsqOptions::default();
-    let solve = |a: &DMatrix<f64>, b: &DVector<f64>| {
-        solve_linear(a, b, &lsq).map_err(|e| Error::Usage(format!("{obs_file}: {e}")))
-    };
+    let solve = |a: &DMatrix<f64>, b: &DVector<f64>| solve_for(a, b, &lsq, obs_file);
     let id = Isometry3::identity();
     let max_passes = (fit.len() / 10).max(1);
     let mut passes = 0;
@@ -503,8 +501,8 @@ fn absorbed_by_frame(
         rank_rtol: FRAME_RANK_RTOL,
         scale_columns: true,
     };
-    let (given, plain) = screen_model(&a, Some(&jf), &b, &lsq)
-        .map_err(|e| Error::Usage(format!("{obs_file}: {e}")))?;
+    let (given, plain) =
+        screen_model(&a, Some(&jf), &b, &lsq).map_err(|e| data_error(obs_file, e))?;
     Ok(given.into_iter().filter(|c| !plain.contains(c)).collect())
 }
 
@@ -561,7 +559,7 @@ fn fixed_notes(square: bool) -> Vec<String> {
 /// Refuses a badly conditioned fit.
 fn check_condition(id: &crate::calibrate::lsq::Identifiability, obs_file: &str) -> Result<()> {
     if id.condition_number_identified > CONDITION_LIMIT {
-        return Err(Error::Usage(format!(
+        return Err(Error::Data(format!(
             "{obs_file}: badly conditioned data set: condition number {:.3e} > {:.0e} \
              (O1 = {:.3e}); vary all axes independently over their targets and the \
              approach directions",
@@ -604,7 +602,7 @@ pub fn calibrate_geometry(
     let (fit, hold) = grouped_split(obs, opts.holdout, opts.seed);
     let distinct = distinct_poses(obs, &fit);
     if n == 0 || 3 * distinct <= n_all {
-        return Err(Error::Usage(format!(
+        return Err(Error::Data(format!(
             "{obs_file}: {distinct} distinct poses left for the fit ({} rows; repeated poses \
              count once) for {n} table values and squareness errors{}; measure more points \
              (or fewer targets per axis)",

@@ -22,7 +22,7 @@
 //! from its unloaded state is linear in c:
 //! `Δx = Σ_i c_i · J_MP[:3, i] · (J_WPᵀ W)_i` (actual kinematics at the
 //! commanded joints). The unknowns are `c_i` in µrad/(N·m); they are found by
-//! linear least squares ([`solve_linear`]), then two fixed-point corrections
+//! linear least squares ([`super::lsq::solve_linear`]), then two fixed-point corrections
 //! remove the second-order part (the deflected Jacobian, the gravity-loaded
 //! pose) by evaluating the exact forward model
 //! ([`super::forward::predict`]) at the estimate:
@@ -35,7 +35,7 @@ use std::collections::HashMap;
 
 use nalgebra::{DMatrix, DVector, Isometry3, Matrix3, SMatrix, Vector3, Vector6};
 
-use crate::calibrate::lsq::{LsqOptions, Solution, solve_linear};
+use crate::calibrate::lsq::{LsqOptions, Solution, data_error, solve_for};
 use crate::error::{Error, Result};
 use crate::machine::Machine;
 use crate::machine::robot::kinematics::jacobian;
@@ -134,7 +134,7 @@ pub fn load_groups(obs: &Observations, file: &str) -> Result<Vec<Vec<usize>>> {
     });
     if !orphans.is_empty() {
         let shown: Vec<&str> = orphans.iter().take(5).map(String::as_str).collect();
-        return Err(Error::Usage(format!(
+        return Err(Error::Data(format!(
             "{file}: {} loaded row(s) have no other row at the same joint angles and \
              measured point: {}{}; the stiffness is identified from the differences between \
              the load states of one configuration (measure every configuration also \
@@ -145,7 +145,7 @@ pub fn load_groups(obs: &Observations, file: &str) -> Result<Vec<Vec<usize>>> {
         )));
     }
     if groups.is_empty() {
-        return Err(Error::Usage(format!(
+        return Err(Error::Data(format!(
             "{file}: no row has a force or moment (fx_n … mz_nm): nothing deflects the \
              joints, the stiffness cannot be identified"
         )));
@@ -273,7 +273,7 @@ fn check_identified(sol: &Solution, obs_file: &str) -> Result<()> {
                 }
             })
             .collect();
-        return Err(Error::Usage(format!(
+        return Err(Error::Data(format!(
             "{obs_file}: badly conditioned data set: the stiffness of {} cannot be identified \
              (the loads do not twist these joints independently of the others; O1 = {:.3e}). \
              Load the arm in more directions and configurations",
@@ -282,7 +282,7 @@ fn check_identified(sol: &Solution, obs_file: &str) -> Result<()> {
         )));
     }
     if id.condition_number_identified > CONDITION_LIMIT {
-        return Err(Error::Usage(format!(
+        return Err(Error::Data(format!(
             "{obs_file}: badly conditioned data set: condition number {:.3e} > {:.0e} \
              (O1 = {:.3e}); the joint compliances are nearly linearly dependent in these \
              data (e.g. all loads in one direction). Vary the load direction and the \
@@ -306,7 +306,7 @@ fn solve_compliances(
 ) -> Result<(Solution, Option<Isometry3<f64>>)> {
     let lsq = LsqOptions::default();
     let solve = |a: &DMatrix<f64>, b: &DVector<f64>| -> Result<Solution> {
-        solve_linear(a, b, &lsq).map_err(|e| Error::Usage(format!("{obs_file}: {e}")))
+        solve_for(a, b, &lsq, obs_file)
     };
     let turn = |f: Option<Isometry3<f64>>, sol: &Solution| {
         f.map(|f| {
@@ -325,7 +325,7 @@ fn solve_compliances(
             &y,
             &lsq,
         )
-        .map_err(|e| Error::Usage(format!("{obs_file}: {e}")))?;
+        .map_err(|e| data_error(obs_file, e))?;
     }
     let mut sol = solve(&a, &y)?;
     check_identified(&sol, obs_file)?;
@@ -496,7 +496,7 @@ pub fn calibrate_stiffness(
     let instrument = obs.frame == MeasurementFrame::Instrument;
     let nr = if instrument { ROT_PARAMS } else { 0 };
     if m < dof_lost + 18 + 3 * nr {
-        return Err(Error::Usage(format!(
+        return Err(Error::Data(format!(
             "{obs_file}: {n_loaded} loaded row(s) in {} group(s) left for the fit; 6 \
              stiffnesses need at least 18 equations beyond the unloaded references, \
              better tens of loaded rows",
@@ -518,7 +518,7 @@ pub fn calibrate_stiffness(
     // The centring used 3 degrees of freedom per group.
     let dof_true = m.saturating_sub(dof_lost + 6 + nr);
     if dof_true == 0 {
-        return Err(Error::Usage(format!(
+        return Err(Error::Data(format!(
             "{obs_file}: no redundancy left for the uncertainty (equations = unknowns)"
         )));
     }
@@ -529,7 +529,7 @@ pub fn calibrate_stiffness(
             .std_uncertainty()
             .map(|u| u[i] * dof_factor)
             .unwrap_or(f64::NAN);
-        return Err(Error::Usage(format!(
+        return Err(Error::Data(format!(
             "{obs_file}: the compliance of joint {} came out non-positive ({:.4} ± {:.4} \
              µrad/(N·m)), i.e. a non-positive stiffness, which no real joint has. This \
              usually means a sign or frame error in the data (the force acting ON the \

@@ -14,7 +14,7 @@
 //!
 //! Identifiability: a term whose joint power takes a single value in the
 //! fitted rows is fixed (all three unknowns) and listed; the remaining
-//! columns go through the rank-revealing analysis of [`solve_linear`] at the
+//! columns go through the rank-revealing analysis of [`super::lsq::solve_linear`] at the
 //! start point (e.g. two terms on the same length share the constant `ub`
 //! direction, so one `ub` is fixed; with fewer than three power levels `ts`
 //! cannot be told from `lb`). The time constant is not identified: rows at
@@ -27,7 +27,7 @@
 //! the positioning scale `scale_ppm_per_kw` of each axis with a
 //! `thermal.axes` entry from its `pX_w`. The forward model is linear in
 //! them, so it is one linear least-squares step on the residuals of the
-//! file's model ([`solve_linear`], same identifiability analysis).
+//! file's model ([`super::lsq::solve_linear`], same identifiability analysis).
 //!
 //! Both kinds identify an instrument frame (`# frame: instrument`) with
 //! their unknowns: its six parameters beside the model's, the model's
@@ -36,7 +36,7 @@
 use nalgebra::{DMatrix, DVector, Isometry3};
 
 use crate::calibrate::lsq::{
-    LmOptions, LsqOptions, Solution, expand_free, fit_free, numeric_jacobian, solve_linear,
+    LmOptions, LsqOptions, Solution, data_error, expand_free, fit_free, numeric_jacobian, solve_for,
 };
 use crate::error::{Error, Result};
 use crate::machine::Machine;
@@ -248,7 +248,7 @@ fn screen_unknowns(
     let mut r0 = DVector::zeros(m);
     residuals(u, obs, fit, &vec![0.0; n], &mut r0, obs_file);
     if r0.iter().any(|v| !v.is_finite()) {
-        return Err(Error::Usage(format!(
+        return Err(Error::Data(format!(
             "{obs_file}: the model cannot be evaluated for some rows"
         )));
     }
@@ -270,8 +270,8 @@ fn screen_unknowns(
     let jf = u
         .frame
         .map(|_| j0.columns(candidates.len(), FRAME_PARAMS).into_owned());
-    let (given, plain) = screen_model(&jm, jf.as_ref(), &r0, &lm_opts.lsq)
-        .map_err(|e| Error::Usage(format!("{obs_file}: {e}")))?;
+    let (given, plain) =
+        screen_model(&jm, jf.as_ref(), &r0, &lm_opts.lsq).map_err(|e| data_error(obs_file, e))?;
     let free: Vec<usize> = candidates
         .iter()
         .enumerate()
@@ -331,7 +331,7 @@ fn term_estimates(
 fn check_ts(terms: &[ThermalTerm], obs_file: &str) -> Result<()> {
     for t in terms {
         if !(t.ts_per_w.is_finite() && (0.0..=TS_MAX).contains(&t.ts_per_w)) {
-            return Err(Error::Usage(format!(
+            return Err(Error::Data(format!(
                 "{obs_file}: term {}: the fit gives ts = {} 1/W, outside 0..{TS_MAX}; \
                  the data do not support this term's exponential form (too few power \
                  levels, or the coupling is not in the data)",
@@ -393,7 +393,7 @@ fn fit_notes(any_fixed_by_rank: bool, notes: &mut Vec<String>) {
 /// Refuses a badly conditioned fit of the robot terms.
 fn check_condition(id: &crate::calibrate::lsq::Identifiability, obs_file: &str) -> Result<()> {
     if id.condition_number_identified > CONDITION_LIMIT {
-        return Err(Error::Usage(format!(
+        return Err(Error::Data(format!(
             "{obs_file}: badly conditioned data set: condition number {:.3e} > {:.0e} \
              (O1 = {:.3e}); the power levels do not excite the thermal terms independently. \
              Measure at more power levels, varying the joints' powers independently",
@@ -448,7 +448,7 @@ pub fn calibrate_thermal(
         )));
     }
     if !obs.rows.iter().any(|r| row_powers(r).is_some()) {
-        return Err(Error::Usage(format!(
+        return Err(Error::Data(format!(
             "{obs_file}: no row gives joint powers (p1_w…p6_w); thermal calibration needs \
              rows measured at the steady state of several power levels"
         )));
@@ -467,7 +467,7 @@ pub fn calibrate_thermal(
     let n = unknowns.n();
     let m = 3 * fit.len();
     if m < 2 * n {
-        return Err(Error::Usage(format!(
+        return Err(Error::Data(format!(
             "{obs_file}: {} rows left for the fit ({m} equations) for {n} parameters; \
              thermal calibration needs at least {} rows, better several times more",
             fit.len(),
@@ -488,7 +488,7 @@ pub fn calibrate_thermal(
     };
     let (free, absorbed) = screen_unknowns(&unknowns, obs, &fit, &candidates, &lm_opts, obs_file)?;
     if free.iter().all(|&k| k >= unknowns.n_model()) {
-        return Err(Error::Usage(format!(
+        return Err(Error::Data(format!(
             "{obs_file}: no thermal parameter can be identified from these rows: \
              measure at several power levels of the joints the terms name"
         )));
@@ -503,7 +503,7 @@ pub fn calibrate_thermal(
         FD_STEP,
         &lm_opts,
     )
-    .map_err(|e| Error::Usage(format!("{obs_file}: {e}")))?;
+    .map_err(|e| data_error(obs_file, e))?;
     let sol = &fit_result.solution;
     let id = &sol.identifiability;
     check_condition(id, obs_file)?;
@@ -627,7 +627,7 @@ fn tool_unknowns(
         }
     }
     if unknowns.is_empty() {
-        return Err(Error::Usage(format!(
+        return Err(Error::Data(format!(
             "{obs_file}: no thermal gain can be identified: the rows need spindle_w (or pX_w \
              for an axis with a thermal.axes entry) at several power levels"
         )));
@@ -699,33 +699,32 @@ fn solve_tool(
     obs_file: &str,
 ) -> Result<(Solution, Option<Isometry3<f64>>, Vec<usize>)> {
     let lsq = LsqOptions::default();
-    let solve = |a: &DMatrix<f64>, b: &DVector<f64>| {
-        solve_linear(a, b, &lsq).map_err(|e| Error::Usage(format!("{obs_file}: {e}")))
-    };
+    let solve = |a: &DMatrix<f64>, b: &DVector<f64>| solve_for(a, b, &lsq, obs_file);
     let nu = unknowns.len();
-    let Some(mut f) = f0 else {
+    let Some(f) = f0 else {
         let (a, b) = tool_design(machine, tool, obs, fit, unknowns, None, obs_file)?;
         return Ok((solve(&a, &b)?, None, Vec::new()));
     };
     let (a, b) = tool_design(machine, tool, obs, fit, unknowns, Some(&f), obs_file)?;
     let jm = a.columns(0, nu).into_owned();
     let jf = a.columns(nu, FRAME_PARAMS).into_owned();
-    let (given, plain) = screen_model(&jm, Some(&jf), &b, &lsq)
-        .map_err(|e| Error::Usage(format!("{obs_file}: {e}")))?;
+    let (given, plain) =
+        screen_model(&jm, Some(&jf), &b, &lsq).map_err(|e| data_error(obs_file, e))?;
     let absorbed: Vec<usize> = given.into_iter().filter(|c| !plain.contains(c)).collect();
-    let mut sol = None;
-    for _ in 0..2 {
-        let (mut a, b) = tool_design(machine, tool, obs, fit, unknowns, Some(&f), obs_file)?;
+    // The solution at `f`, and the frame moved to it.
+    let step = |f: &Isometry3<f64>| -> Result<(Solution, Isometry3<f64>)> {
+        let (mut a, b) = tool_design(machine, tool, obs, fit, unknowns, Some(f), obs_file)?;
         for &c in &absorbed {
             a.column_mut(c).fill(0.0);
         }
         let s = solve(&a, &b)?;
         let d: Vec<f64> = (nu..nu + FRAME_PARAMS).map(|k| s.params[k]).collect();
-        f = frame_with(&f, &d);
-        sol = Some(s);
-    }
-    let sol = sol.ok_or_else(|| Error::Usage(format!("{obs_file}: nothing solved")))?;
-    Ok((sol, Some(f), absorbed))
+        let moved = frame_with(f, &d);
+        Ok((s, moved))
+    };
+    let (_, f1) = step(&f)?;
+    let (sol, f2) = step(&f1)?;
+    Ok((sol, Some(f2), absorbed))
 }
 
 /// Identifies the steady-state thermal gains of a machine-tool file: spindle
@@ -753,7 +752,7 @@ pub fn calibrate_tool_thermal(
     let instrument = obs.frame == MeasurementFrame::Instrument;
     let nf = if instrument { FRAME_PARAMS } else { 0 };
     if m < 2 * (unknowns.len() + nf) {
-        return Err(Error::Usage(format!(
+        return Err(Error::Data(format!(
             "{obs_file}: {} rows left for the fit; too few",
             fit.len()
         )));
@@ -766,7 +765,7 @@ pub fn calibrate_tool_thermal(
     let (sol, frame, absorbed) = solve_tool(machine, tool, obs, &fit, &unknowns, f0, obs_file)?;
     let id = &sol.identifiability;
     if id.condition_number_identified > CONDITION_LIMIT {
-        return Err(Error::Usage(format!(
+        return Err(Error::Data(format!(
             "{obs_file}: badly conditioned data set: condition number {:.3e} > {:.0e}",
             id.condition_number_identified, CONDITION_LIMIT
         )));
