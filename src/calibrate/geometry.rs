@@ -39,7 +39,7 @@
 //! squares with one Gauss–Newton refinement. Uncertain values
 //! ([`super::honesty`]) keep the file's value.
 
-use nalgebra::{DMatrix, DVector, Isometry3};
+use nalgebra::{DMatrix, DVector, Isometry3, Vector3};
 
 use crate::calibrate::lsq::{LsqOptions, Solution, data_error, solve_for};
 use crate::error::{Error, Result};
@@ -48,8 +48,8 @@ use crate::machine::tool::{AxisKind, MachineTool};
 
 use super::forward::{check_kind, predict};
 use super::frame::{
-    FRAME_PARAMS, FRAME_RANK_RTOL, IDENTIFIED_NOTE, absorbed_note, carry, estimate, frame_columns,
-    frame_with, screen_model, start_frame,
+    FRAME_PARAMS, FRAME_RANK_RTOL, carry, conditional_uncertainty, finish, frame_columns,
+    frame_with, refit, screen_model, start_frame,
 };
 use super::observations::{MeasurementFrame, Observations, Pose};
 use super::report::{CONDITION_LIMIT, Calibration, Estimate, Validation};
@@ -57,7 +57,7 @@ use super::screen::{
     describe_outliers, distinct_poses, dominating_rows, drop_copies, grouped_split, implausible,
 };
 use super::stiffness::Options;
-use super::yaml_edit::{set_component_table, set_location_error, set_measurement_frame};
+use super::yaml_edit::{set_component_table, set_location_error};
 
 /// Largest number of distinct target positions per axis.
 pub const MAX_TARGETS: usize = 41;
@@ -556,6 +556,40 @@ fn fixed_notes(square: bool) -> Vec<String> {
     notes
 }
 
+/// The instrument frame written with the calibrated model `calibrated`,
+/// with its uncertainties: the joint fit's frame `f` (columns `n..` of
+/// `sol`) when every identified value is written, else the frame re-solved
+/// alone for the written values (the withheld ones at the file's value,
+/// [`refit`]), so that it is the frame of the model it is written with.
+fn written_frame(
+    calibrated: &Machine,
+    obs: &Observations,
+    fit: &[usize],
+    (f, sol): (Isometry3<f64>, &Solution),
+    n: usize,
+    withheld: &[bool],
+    obs_file: &str,
+) -> Result<(Isometry3<f64>, Option<[f64; FRAME_PARAMS]>)> {
+    let fixed: Vec<usize> = (0..n).filter(|&k| withheld.get(k) == Some(&true)).collect();
+    let frame_cols: Vec<usize> = (n..n + FRAME_PARAMS).collect();
+    let joint = conditional_uncertainty(sol.covariance.as_ref(), &frame_cols, &fixed);
+    if fixed.is_empty() {
+        return Ok((f, joint));
+    }
+    let model = deviations(calibrated, obs, fit, obs_file)?;
+    let points = |v: &DVector<f64>| -> Vec<Vector3<f64>> {
+        (0..fit.len())
+            .map(|k| v.fixed_rows::<3>(3 * k).into_owned())
+            .collect()
+    };
+    refit(
+        &points(&measured(obs, fit)),
+        &points(&model),
+        joint,
+        obs_file,
+    )
+}
+
 /// Refuses a badly conditioned fit.
 fn check_condition(id: &crate::calibrate::lsq::Identifiability, obs_file: &str) -> Result<()> {
     if id.condition_number_identified > CONDITION_LIMIT {
@@ -661,10 +695,23 @@ pub fn calibrate_geometry(
         .zip(&withheld)
         .map(|((&v, &v0), &w)| if w { v0 } else { v })
         .collect();
-    let (mut yaml, _) = eval(&x, &[]).map_err(|e| implausible(&e, obs_file, fit.len()))?;
+    let (yaml, _) = eval(&x, &[]).map_err(|e| implausible(&e, obs_file, fit.len()))?;
     let calibrated = Machine::from_yaml_str(&yaml, machine_file)?;
+    let frame = match frame {
+        Some(f) => Some(written_frame(
+            &calibrated,
+            obs,
+            &fit,
+            (f, &sol),
+            n,
+            &withheld,
+            obs_file,
+        )?),
+        None => None,
+    };
     let ident = Isometry3::identity();
-    let (f_start, f_end) = (f0.unwrap_or(ident), frame.unwrap_or(ident));
+    let f_start = f0.unwrap_or(ident);
+    let f_end = frame.map_or(ident, |(f, _)| f);
     let residual_norms = |m: &Machine, f: &Isometry3<f64>, rows: &[usize]| -> Result<Vec<f64>> {
         Ok(norms(
             &(measured_at(obs, rows, f) - deviations(m, obs, rows, obs_file)?),
@@ -676,25 +723,26 @@ pub fn calibrate_geometry(
     let fit_after = residual_norms(&calibrated, &f_end, &fit)?;
     let mut notes = fixed_notes(prob.square);
     notes.append(&mut early_notes);
-    let frame_est = frame.map(|f| {
-        let u = sol
-            .std_uncertainty()
-            .map(|u| std::array::from_fn(|o| u.get(n + o).copied().unwrap_or(f64::NAN)));
-        estimate(&f, u)
-    });
-    if let Some(f) = &frame_est {
-        yaml = set_measurement_frame(&yaml, machine_file, f.xyz_mm, f.rpy_deg)?;
-        let names: Vec<String> = absorbed
-            .iter()
-            .filter_map(|&c| params.get(c).map(|p| p.name.clone()))
-            .collect();
-        notes.extend(absorbed_note(
-            &names,
-            "the positioning offsets and the straightness slopes are then relative to the \
-             frame",
-        ));
-        notes.push(IDENTIFIED_NOTE.into());
-    }
+    let (yaml, frame_est) = match frame {
+        Some((f, u)) => {
+            let names: Vec<String> = absorbed
+                .iter()
+                .filter_map(|&c| params.get(c).map(|p| p.name.clone()))
+                .collect();
+            let (yaml, est) = finish(
+                &yaml,
+                machine_file,
+                &f,
+                u,
+                &names,
+                "the positioning offsets and the straightness slopes are then relative to the \
+                 frame",
+                &mut notes,
+            )?;
+            (yaml, Some(est))
+        }
+        None => (yaml, None),
+    };
     let mut cal = Calibration {
         kind: "geometry",
         n_fit: fit.len(),

@@ -43,8 +43,8 @@ use crate::machine::robot::{Model, Robot};
 
 use super::forward::{check_kind, joints_rad, measured_point, predict, row_wrench, wrench_point};
 use super::frame::{
-    DEG_PER_MRAD, carry, estimate, frame_with, point_jacobian, screen_model, start_frame,
-    world_note, world_to_reference,
+    DEG_PER_MRAD, carry, conditional_covariance, estimate, frame_with, point_jacobian,
+    screen_model, start_frame, world_note, world_to_reference,
 };
 use super::observations::{MeasurementFrame, Observation, Observations, Pose, holdout_split};
 use super::report::{CONDITION_LIMIT, Calibration, Estimate, FrameEstimate, Validation};
@@ -348,6 +348,31 @@ fn solve_compliances(
     Ok((sol, f))
 }
 
+/// The instrument frame's rotation re-solved alone for the stiffnesses of
+/// `calibrated` as written (some kept at the file's value): the rotation
+/// columns of the centred system, with the exact deflections of
+/// `calibrated` removed, solved twice from `f` (the frame moves to each
+/// solution).
+fn refit_rotation(
+    robot: &Robot,
+    calibrated: &Machine,
+    obs: &Observations,
+    fit: &[Vec<usize>],
+    mut f: Isometry3<f64>,
+    obs_file: &str,
+) -> Result<Isometry3<f64>> {
+    let deflection = |row: &Observation, _: &SMatrix<f64, 3, 6>| -> Result<Vector3<f64>> {
+        model_deflection(calibrated, row, obs_file)
+    };
+    for _ in 0..2 {
+        let (a, y) = centred_system(robot, obs, fit, Some(&f), &deflection)?;
+        let rot = a.columns(6, ROT_PARAMS).into_owned();
+        let s = solve_for(&rot, &y, &LsqOptions::default(), obs_file)?;
+        f = frame_with(&f, &[0.0, 0.0, 0.0, s.params[0], s.params[1], s.params[2]]);
+    }
+    Ok(f)
+}
+
 /// The origin of an instrument frame of rotation `f.rotation`: the mean of
 /// `p_i − R m_i` over the unloaded fit rows `p_i` of the calibrated model
 /// `m`. Its standard uncertainty per coordinate combines that of the mean
@@ -398,12 +423,13 @@ const FRAME_NOTE: &str = "positions measured in an instrument frame: its rotatio
     points); written to `measurement_frame`";
 
 /// The identified instrument frame of a stiffness run: the rotation `f`
-/// from the joint solution `sol` (uncertainties scaled by `dof_factor`),
-/// the origin from [`frame_origin`].
+/// with the uncertainties of the joint solution `sol` given the
+/// compliances at `fixed` (kept at the file's value; scaled by
+/// `dof_factor`), the origin from [`frame_origin`].
 fn frame_estimate(
     calibrated: &Machine,
     f: &Isometry3<f64>,
-    sol: &Solution,
+    (sol, fixed): (&Solution, &[usize]),
     dof_factor: f64,
     obs: &Observations,
     fit: &[Vec<usize>],
@@ -412,11 +438,10 @@ fn frame_estimate(
     let cov_rot = sol
         .covariance
         .as_ref()
-        .map(|c| c.fixed_view::<3, 3>(6, 6).into_owned() * (dof_factor * dof_factor));
+        .and_then(|c| conditional_covariance(c, &[6, 7, 8], fixed))
+        .map(|c| Matrix3::from_fn(|r, k| c[(r, k)]) * (dof_factor * dof_factor));
     let (f, u_xyz) = frame_origin(calibrated, f, cov_rot, obs, fit, obs_file)?;
-    let u_rot = sol
-        .std_uncertainty()
-        .map(|u| std::array::from_fn(|r| u[6 + r] * dof_factor * DEG_PER_MRAD));
+    let u_rot = cov_rot.map(|c| std::array::from_fn(|r| c[(r, r)].max(0.0).sqrt() * DEG_PER_MRAD));
     Ok(FrameEstimate {
         u_xyz_mm: u_xyz,
         u_rot_deg: u_rot,
@@ -565,6 +590,13 @@ pub fn calibrate_stiffness(
         None => 0.0,
     });
     let calibrated = Machine::Robot(robot.with_stiffness(written.map(|k| k * 1000.0)));
+    let fixed: Vec<usize> = (0..6).filter(|&i| withheld.get(i) == Some(&true)).collect();
+    let f_rot = match f_rot {
+        Some(f) if !fixed.is_empty() => {
+            Some(refit_rotation(robot, &calibrated, obs, &fit, f, obs_file)?)
+        }
+        other => other,
+    };
     let (before, after) = held_out_deflections(
         (&machine, f0.as_ref()),
         (&calibrated, f_rot.as_ref()),
@@ -577,7 +609,15 @@ pub fn calibrate_stiffness(
     let mut notes: Vec<String> = world.into_iter().collect();
     let frame = match &f_rot {
         Some(f) => {
-            let est = frame_estimate(&calibrated, f, &sol, dof_factor, obs, &fit, obs_file)?;
+            let est = frame_estimate(
+                &calibrated,
+                f,
+                (&sol, &fixed),
+                dof_factor,
+                obs,
+                &fit,
+                obs_file,
+            )?;
             yaml = set_measurement_frame(&yaml, machine_file, est.xyz_mm, est.rpy_deg)?;
             notes.push(FRAME_NOTE.into());
             Some(est)

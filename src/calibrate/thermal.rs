@@ -33,7 +33,7 @@
 //! their unknowns: its six parameters beside the model's, the model's
 //! screened against them ([`super::frame::screen_model`]).
 
-use nalgebra::{DMatrix, DVector, Isometry3};
+use nalgebra::{DMatrix, DVector, Isometry3, Vector3};
 
 use crate::calibrate::lsq::{
     LmOptions, LsqOptions, Solution, data_error, expand_free, fit_free, numeric_jacobian, solve_for,
@@ -46,13 +46,13 @@ use crate::machine::tool::MachineTool;
 
 use super::forward::{self, check_kind};
 use super::frame::{
-    FRAME_PARAMS, IDENTIFIED_NOTE, absorbed_note, carry, estimate, frame_with, point_jacobian,
+    FRAME_PARAMS, carry, conditional_uncertainty, finish, frame_with, point_jacobian, refit,
     screen_model, start_frame, world_note, world_to_reference,
 };
 use super::observations::{MeasurementFrame, Observations, Pose, holdout_split};
 use super::report::{CONDITION_LIMIT, Calibration, Estimate, FrameEstimate, Validation};
 use super::stiffness::Options;
-use super::yaml_edit::{set_measurement_frame, set_thermal_term};
+use super::yaml_edit::set_thermal_term;
 
 /// Internal unit of `ts`: per kW (1/W × 1000).
 const TS_SCALE: f64 = 1000.0;
@@ -349,28 +349,50 @@ fn write_terms(
     text: &str,
     machine_file: &str,
     terms: &[ThermalTerm],
-    frame: Option<&FrameEstimate>,
-    absorbed: &[usize],
-    params: &[Estimate],
+    frame: Option<(Isometry3<f64>, Option<[f64; FRAME_PARAMS]>)>,
+    absorbed: &[String],
     notes: &mut Vec<String>,
-) -> Result<String> {
+) -> Result<(String, Option<FrameEstimate>)> {
     let mut yaml = text.to_string();
     for (k, t) in terms.iter().enumerate() {
         yaml = set_thermal_term(&yaml, machine_file, k, t.lb_mm, t.ub_mm, t.ts_per_w)?;
     }
-    if let Some(f) = frame {
-        yaml = set_measurement_frame(&yaml, machine_file, f.xyz_mm, f.rpy_deg)?;
-        let names: Vec<String> = absorbed
-            .iter()
-            .filter_map(|&k| params.get(k).map(|p| p.name.clone()))
-            .collect();
-        notes.extend(absorbed_note(
-            &names,
-            "a growth that shifts every point alike moves the frame's origin",
-        ));
-        notes.push(IDENTIFIED_NOTE.into());
+    let Some((f, u)) = frame else {
+        return Ok((yaml, None));
+    };
+    let (yaml, est) = finish(
+        &yaml,
+        machine_file,
+        &f,
+        u,
+        absorbed,
+        "a growth that shifts every point alike moves the frame's origin",
+        notes,
+    )?;
+    Ok((yaml, Some(est)))
+}
+
+/// Points in millimetres, one per row.
+type Points = Vec<Vector3<f64>>;
+
+/// The measured points of `rows` and the positions the robot with the
+/// thermal `terms` predicts for them.
+fn robot_points(
+    robot: &Robot,
+    terms: &[ThermalTerm],
+    obs: &Observations,
+    rows: &[usize],
+    file: &str,
+) -> Result<(Points, Points)> {
+    let mut meas = Vec::with_capacity(rows.len());
+    let mut model = Vec::with_capacity(rows.len());
+    for row in rows.iter().filter_map(|&i| obs.rows.get(i)) {
+        let g = row_powers(row).map_or([[0.0; 2]; 6], |p| growth(terms, &p));
+        let p = forward::predict_robot_with_growth(robot, row, &g, file)?;
+        meas.push(row.measured_mm);
+        model.push(p.measured(obs.measured));
     }
-    Ok(yaml)
+    Ok((meas, model))
 }
 
 /// The notes of a robot thermal fit: unknowns the rank analysis fixed
@@ -401,22 +423,6 @@ fn check_condition(id: &crate::calibrate::lsq::Identifiability, obs_file: &str) 
         )));
     }
     Ok(())
-}
-
-/// The identified frame `f` with the uncertainties of its free unknowns.
-fn frame_estimate(
-    unknowns: &Unknowns<'_>,
-    f: &Isometry3<f64>,
-    free: &[usize],
-    u_red: Option<&DVector<f64>>,
-) -> FrameEstimate {
-    let u: Option<Vec<f64>> = (unknowns.n_model()..unknowns.n())
-        .map(|k| {
-            let a = free.iter().position(|&f| f == k)?;
-            u_red.map(|u| u[a])
-        })
-        .collect();
-    estimate(f, u.and_then(|u| u.try_into().ok()))
 }
 
 /// Identifies the Paper B terms of the robot file `text` from `obs` (and
@@ -522,21 +528,33 @@ pub fn calibrate_thermal(
         }
     }
     let terms = terms_with(&base, &full);
-    let (f_start, f_end) = (unknowns.frame_at(&[]), unknowns.frame_at(&full));
+    let f_start = unknowns.frame_at(&[]);
+    let frame = match unknowns.frame {
+        Some(_) => {
+            let at = |k: usize| free.iter().position(|&f| f == k);
+            let frame_cols: Vec<usize> = (unknowns.n_model()..n).filter_map(at).collect();
+            let fixed: Vec<usize> = (0..unknowns.n_model())
+                .filter(|&j| withheld.get(j) == Some(&true))
+                .filter_map(at)
+                .collect();
+            let joint = conditional_uncertainty(sol.covariance.as_ref(), &frame_cols, &fixed);
+            Some(if fixed.is_empty() {
+                (unknowns.frame_at(&full), joint)
+            } else {
+                let (meas, model) = robot_points(robot, &terms, obs, &fit, obs_file)?;
+                refit(&meas, &model, joint, obs_file)?
+            })
+        }
+        None => None,
+    };
+    let f_end = frame.map_or(Isometry3::identity(), |(f, _)| f);
     let before = norms(robot, &base, &f_start, obs, &hold, obs_file)?;
     let after = norms(robot, &terms, &f_end, obs, &hold, obs_file)?;
-    let frame = unknowns
-        .frame
-        .map(|_| frame_estimate(&unknowns, &f_end, &free, u_red.as_ref()));
-    let yaml = write_terms(
-        text,
-        machine_file,
-        &terms,
-        frame.as_ref(),
-        &absorbed,
-        &params,
-        &mut notes,
-    )?;
+    let names: Vec<String> = absorbed
+        .iter()
+        .filter_map(|&k| params.get(k).map(|p| p.name.clone()))
+        .collect();
+    let (yaml, frame) = write_terms(text, machine_file, &terms, frame, &names, &mut notes)?;
     Machine::from_yaml_str(&yaml, machine_file)
         .map_err(|e| super::screen::implausible(&e, obs_file, obs.rows.len()))?;
     notes.extend(world);
@@ -727,6 +745,34 @@ fn solve_tool(
     Ok((sol, Some(f2), absorbed))
 }
 
+/// The instrument frame written with the machine-tool gains of
+/// `calibrated`, with its uncertainties: the joint fit's frame `f`
+/// (columns `nu..` of `sol`) when every identified gain is written, else
+/// the frame re-solved alone for the written gains (those at `withheld`
+/// keep the file's value, [`refit`]).
+fn tool_frame(
+    calibrated: &Machine,
+    obs: &Observations,
+    fit: &[usize],
+    (f, sol): (Isometry3<f64>, &Solution),
+    nu: usize,
+    withheld: &[usize],
+    obs_file: &str,
+) -> Result<(Isometry3<f64>, Option<[f64; FRAME_PARAMS]>)> {
+    let frame_cols: Vec<usize> = (nu..nu + FRAME_PARAMS).collect();
+    let joint = conditional_uncertainty(sol.covariance.as_ref(), &frame_cols, withheld);
+    if withheld.is_empty() {
+        return Ok((f, joint));
+    }
+    let mut meas = Vec::with_capacity(fit.len());
+    let mut model = Vec::with_capacity(fit.len());
+    for row in fit.iter().filter_map(|&i| obs.rows.get(i)) {
+        meas.push(row.measured_mm);
+        model.push(forward::predict(calibrated, row, obs_file)?.measured(obs.measured));
+    }
+    refit(&meas, &model, joint, obs_file)
+}
+
 /// Identifies the steady-state thermal gains of a machine-tool file: spindle
 /// `growth_um_per_kw` (rows with `spindle_w`) and `scale_ppm_per_kw` of the
 /// axes that have a `thermal.axes` entry (rows with `pX_w` …); and the
@@ -772,6 +818,7 @@ pub fn calibrate_tool_thermal(
     }
     let u = sol.std_uncertainty();
     let mut params = Vec::new();
+    let mut withheld = Vec::new();
     let mut yaml = text.to_string();
     for (c, &k) in unknowns.iter().enumerate() {
         let fixed = id.unidentifiable.contains(&c);
@@ -792,6 +839,9 @@ pub fn calibrate_tool_thermal(
                 fixed,
             };
             let write = !fixed && !opts.honesty.withholds(&est);
+            if !fixed && !write {
+                withheld.push(c);
+            }
             params.push(est);
             if write {
                 yaml = super::yaml_edit::set_spindle_growth(
@@ -814,6 +864,9 @@ pub fn calibrate_tool_thermal(
                 fixed,
             };
             let write = !fixed && !opts.honesty.withholds(&est);
+            if !fixed && !write {
+                withheld.push(c);
+            }
             params.push(est);
             if write {
                 yaml = super::yaml_edit::set_axis_scale(&yaml, machine_file, name, start + delta)?;
@@ -824,27 +877,42 @@ pub fn calibrate_tool_thermal(
         "rows are at the thermal steady state of their powers: time constants are not identified"
             .into(),
     );
-    let nu = unknowns.len();
-    let frame_est = frame.map(|f| {
-        let u = u
-            .as_ref()
-            .map(|u| std::array::from_fn(|o| u.get(nu + o).copied().unwrap_or(f64::NAN)));
-        estimate(&f, u)
-    });
-    if let Some(f) = &frame_est {
-        yaml = set_measurement_frame(&yaml, machine_file, f.xyz_mm, f.rpy_deg)?;
-        let names: Vec<String> = absorbed
-            .iter()
-            .filter_map(|&c| params.get(c).map(|p| p.name.clone()))
-            .collect();
-        notes.extend(absorbed_note(
-            &names,
-            "a growth that moves every point alike moves the frame's origin",
-        ));
-        notes.push(IDENTIFIED_NOTE.into());
-    }
     let uncertain = opts.honesty.uncertain(&params);
+    // The frame goes with the gains as written (measurement_frame itself
+    // plays no part in a prediction).
     let calibrated = Machine::from_yaml_str(&yaml, machine_file)?;
+    let frame = match frame {
+        Some(f) => Some(tool_frame(
+            &calibrated,
+            obs,
+            &fit,
+            (f, &sol),
+            unknowns.len(),
+            &withheld,
+            obs_file,
+        )?),
+        None => None,
+    };
+    let frame_est = match frame {
+        Some((f, u)) => {
+            let names: Vec<String> = absorbed
+                .iter()
+                .filter_map(|&c| params.get(c).map(|p| p.name.clone()))
+                .collect();
+            let (edited, est) = finish(
+                &yaml,
+                machine_file,
+                &f,
+                u,
+                &names,
+                "a growth that moves every point alike moves the frame's origin",
+                &mut notes,
+            )?;
+            yaml = edited;
+            Some(est)
+        }
+        None => None,
+    };
     let id_frame = Isometry3::identity();
     let before = machine_norms(
         machine,
@@ -855,7 +923,7 @@ pub fn calibrate_tool_thermal(
     )?;
     let after = machine_norms(
         &calibrated,
-        frame.as_ref().unwrap_or(&id_frame),
+        &frame.map_or(id_frame, |(f, _)| f),
         obs,
         &hold,
         obs_file,
