@@ -7,7 +7,8 @@
 //! reference frame: a point measured at `m` (instrument coordinates) is at
 //! `F · m` in the reference frame. Identification parameters: the origin
 //! of `F` (mm, `frame.x_mm` …) and a small rotation of `F` about the
-//! reference frame's axes through that origin (mrad, `frame.rx_mrad` …),
+//! reference frame's axes through that origin (mrad internally, reported
+//! in degrees as `frame.rx_deg` …),
 //! `F(δ) = (Rot(δr) · R₀, t₀ + δt)`: the translation parameters are the
 //! origin itself, so its uncertainty is theirs.
 
@@ -27,7 +28,8 @@ use super::report::FrameEstimate;
 pub const FRAME_PARAMS: usize = 6;
 
 /// Relative rank threshold of the screen against the frame in the
-/// calibrations of tables and gains (unit-norm columns): a combination of
+/// calibrations of geometric tables and machine-tool thermal gains
+/// (unit-norm columns): a combination of
 /// model columns that the frame's columns explain to within 10⁻³ of its
 /// size moves the points like a rigid motion of the instrument, up to the
 /// second-order effect of the machine's own errors on the lever arms; it

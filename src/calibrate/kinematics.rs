@@ -87,7 +87,7 @@ const MAX_OUTLIER_PASSES: usize = 3;
 const FD_STEP: f64 = 1e-4;
 
 /// Degrees per internal angle unit (mrad).
-const DEG_PER_UNIT: f64 = 0.18 / std::f64::consts::PI;
+const DEG_PER_UNIT: f64 = super::frame::DEG_PER_MRAD;
 
 const DH_NAMES: [(&str, &str); 4] = [
     ("a_mm", "mm"),

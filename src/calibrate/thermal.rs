@@ -46,8 +46,8 @@ use crate::machine::tool::MachineTool;
 
 use super::forward::{self, check_kind};
 use super::frame::{
-    FRAME_PARAMS, carry, conditional_uncertainty, finish, frame_with, point_jacobian, refit,
-    screen_model, start_frame, world_note, world_to_reference,
+    FRAME_PARAMS, FRAME_RANK_RTOL, carry, conditional_uncertainty, finish, frame_with,
+    point_jacobian, refit, screen_model, start_frame, world_note, world_to_reference,
 };
 use super::observations::{MeasurementFrame, Observations, Pose, holdout_split};
 use super::report::{CONDITION_LIMIT, Calibration, Estimate, FrameEstimate, Validation};
@@ -703,10 +703,11 @@ fn tool_design(
 }
 
 /// Solves the machine-tool thermal problem; for instrument data the frame
-/// is found with the gains: the model columns the frame explains are
-/// zeroed (they keep the file's value) and the linearisation of the frame
-/// is repeated once at the first solution. Returns the solution, the
-/// final frame and the model columns the frame absorbs.
+/// is found with the gains: the model columns the frame explains (to within
+/// [`FRAME_RANK_RTOL`]) are zeroed (they keep the file's value) and the
+/// linearisation of the frame is repeated once at the first solution.
+/// Returns the solution, the final frame and the model columns the frame
+/// absorbs.
 fn solve_tool(
     machine: &Machine,
     tool: &MachineTool,
@@ -726,8 +727,12 @@ fn solve_tool(
     let (a, b) = tool_design(machine, tool, obs, fit, unknowns, Some(&f), obs_file)?;
     let jm = a.columns(0, nu).into_owned();
     let jf = a.columns(nu, FRAME_PARAMS).into_owned();
+    let screen = LsqOptions {
+        rank_rtol: FRAME_RANK_RTOL,
+        scale_columns: true,
+    };
     let (given, plain) =
-        screen_model(&jm, Some(&jf), &b, &lsq).map_err(|e| data_error(obs_file, e))?;
+        screen_model(&jm, Some(&jf), &b, &screen).map_err(|e| data_error(obs_file, e))?;
     let absorbed: Vec<usize> = given.into_iter().filter(|c| !plain.contains(c)).collect();
     // The solution at `f`, and the frame moved to it.
     let step = |f: &Isometry3<f64>| -> Result<(Solution, Isometry3<f64>)> {
