@@ -26,8 +26,22 @@ const K_TEST: f64 = 3.0;
 /// Mean norm of 3-D isotropic noise of σ per coordinate, in σ.
 const MAXWELL_MEAN: f64 = 1.596;
 /// Slack on the held-out mean of a calibrated model against the noise's
-/// mean norm (the fit's own uncertainty adds to the noise).
+/// mean norm (the fit's own uncertainty adds to the noise): a few model
+/// parameters beside the frame.
 const HOLDOUT_SLACK: f64 = 1.25;
+/// The same for load-pair differences (stiffness).
+const PAIR_SLACK: f64 = 1.3;
+/// The same for models of tens of parameters (kinematics, geometry).
+const HOLDOUT_SLACK_MANY: f64 = 1.5;
+/// Distance of the tracker from the measured points, for the noise that
+/// grows with it (m).
+const TRACKER_RANGE_M: f64 = 3.5;
+
+/// Standard deviation per coordinate of the noise `n` at the tracker's
+/// range, mm.
+fn sigma_mm(n: &Noise) -> f64 {
+    (n.um + n.um_per_m * TRACKER_RANGE_M) / 1000.0
+}
 
 const TRUTH_ROBOT: &str = "samples/observations/irb1600-truth.yaml";
 const START_ROBOT: &str = "machines/abb-irb1600.yaml";
@@ -278,19 +292,7 @@ fn instrument_frame_identified_with_the_kinematics() {
             },
         )
         .expect("calibrated");
-        let fr = cal.frame.expect("frame identified");
-        let u = fr.u_xyz_mm.expect("uncertainty");
-        for ((got, want), u) in fr.xyz_mm.iter().zip(f.translation.vector.iter()).zip(u) {
-            assert!((got - want).abs() <= K_TEST * u, "{cal}");
-        }
-        let [r, p, y] = fr.rpy_deg.map(f64::to_radians);
-        let got = UnitQuaternion::from_euler_angles(r, p, y);
-        let ur = fr.u_rot_deg.expect("uncertainty");
-        let angle = got.angle_to(&f.rotation).to_degrees();
-        assert!(
-            angle <= K_TEST * (ur[0] + ur[1] + ur[2]),
-            "{angle} deg\n{cal}"
-        );
+        assert_frame_recovered(&cal, &f);
         // The DH parameters: identified (an uncertainty) and the model
         // predicts the held-out rows at the noise level (below).
         for name in ["j2.a_mm", "j3.a_mm", "j4.d_mm", "j4.alpha_deg"] {
@@ -299,7 +301,11 @@ fn instrument_frame_identified_with_the_kinematics() {
         }
         let v = cal.validation.expect("held out");
         // σ ≈ 15 µm + 6 µm/m × ≈ 3.5 m ≈ 36 µm per coordinate.
-        assert!(v.after_mean_mm < 1.5 * MAXWELL_MEAN * 0.036, "{cal}");
+        let sigma = sigma_mm(&tracker(seed));
+        assert!(
+            v.after_mean_mm < HOLDOUT_SLACK_MANY * MAXWELL_MEAN * sigma,
+            "{cal}"
+        );
         assert!(
             cal.notes
                 .iter()
@@ -741,8 +747,11 @@ fn tracker_sample_is_made_by_its_command_and_calibrates() {
     assert!((f.translation.vector - want).norm() < 3.0, "{stdout}");
 }
 
-/// The identified frame lies within 3 u of `f` (origin per coordinate,
-/// rotation angle against the summed per-axis uncertainties).
+/// The identified frame lies within 3 u of `f`: the origin per
+/// coordinate, the rotation per component of the rotation vector
+/// `log(R_got · R_trueᵀ)` (about the reference frame's axes, those of the
+/// reported uncertainties); and the frame written to the machine file is
+/// the one reported.
 fn assert_frame_recovered(cal: &Calibration, f: &Isometry3<f64>) {
     let fr = cal
         .frame
@@ -757,18 +766,31 @@ fn assert_frame_recovered(cal: &Calibration, f: &Isometry3<f64>) {
     let [r, p, y] = fr.rpy_deg.map(f64::to_radians);
     let got = UnitQuaternion::from_euler_angles(r, p, y);
     let ur = fr.u_rot_deg.unwrap_or_else(|| panic!("uncertainty\n{cal}"));
-    let angle = got.angle_to(&f.rotation).to_degrees();
-    assert!(
-        angle <= K_TEST * (ur[0] + ur[1] + ur[2]),
-        "frame turned {angle} deg from the truth\n{cal}"
-    );
+    let turn = (got * f.rotation.inverse())
+        .scaled_axis()
+        .map(f64::to_degrees);
+    for (i, (d, u)) in turn.iter().zip(ur).enumerate() {
+        assert!(
+            d.abs() <= K_TEST * u,
+            "frame turned {d} deg about axis {i} from the truth (u {u})\n{cal}"
+        );
+    }
     let written = Machine::from_yaml_str(&cal.yaml, "out.yaml").expect("valid");
     let mf = written
         .measurement_frame()
         .unwrap_or_else(|| panic!("measurement_frame written\n{cal}"));
-    assert!(
-        (mf.translation.vector - f.translation.vector).norm() <= K_TEST * u.iter().sum::<f64>()
-    );
+    for ((got, want), u) in mf
+        .translation
+        .vector
+        .iter()
+        .zip(f.translation.vector.iter())
+        .zip(u)
+    {
+        assert!(
+            (got - want).abs() <= K_TEST * u,
+            "written origin {got} ± {u}, true {want}\n{cal}"
+        );
+    }
 }
 
 /// A parameter of the report, identified (not fixed), within 3 u of `want`.
@@ -849,9 +871,9 @@ fn instrument_frame_identified_with_the_stiffness() {
         );
         // Pair differences: σ√2 per coordinate, σ ≈ 15 + 6 µm/m × 3.5 m.
         let v = cal.validation.expect("held-out pairs");
-        let sigma_pair_mm = 0.036 * std::f64::consts::SQRT_2;
+        let sigma_pair_mm = sigma_mm(&tracker(seed)) * std::f64::consts::SQRT_2;
         assert!(
-            v.after_mean_mm < 1.3 * MAXWELL_MEAN * sigma_pair_mm,
+            v.after_mean_mm < PAIR_SLACK * MAXWELL_MEAN * sigma_pair_mm,
             "{cal}"
         );
     }
@@ -914,7 +936,11 @@ fn instrument_frame_identified_with_the_thermal_terms() {
         assert!(cal.params.iter().filter(|e| !e.fixed).count() >= 6, "{cal}");
         assert_frame_recovered(&cal, &instrument());
         let v = cal.validation.expect("held out");
-        assert!(v.after_mean_mm <= 1.25 * MAXWELL_MEAN * 0.005, "{cal}");
+        let sigma = sigma_mm(&noise(seed));
+        assert!(
+            v.after_mean_mm <= HOLDOUT_SLACK * MAXWELL_MEAN * sigma,
+            "{cal}"
+        );
     }
 }
 
@@ -966,7 +992,10 @@ fn instrument_frame_identified_with_the_tool_thermal_gains() {
         assert_param(&cal, "X.scale", 90.0);
         assert_frame_recovered(&cal, &tool_instrument());
         let v = cal.validation.expect("held out");
-        assert!(v.after_mean_mm <= 1.25 * MAXWELL_MEAN * 0.001, "{cal}");
+        assert!(
+            v.after_mean_mm <= HOLDOUT_SLACK * MAXWELL_MEAN * sigma_mm(&noise),
+            "{cal}"
+        );
     }
 }
 
@@ -1031,7 +1060,10 @@ fn instrument_frame_identified_with_the_geometry() {
         }
         assert!(checked >= 90, "{checked}\n{cal}");
         let v = cal.validation.expect("held out");
-        assert!(v.after_mean_mm < 1.5 * MAXWELL_MEAN * 0.001, "{cal}");
+        assert!(
+            v.after_mean_mm < HOLDOUT_SLACK_MANY * MAXWELL_MEAN * sigma_mm(&noise),
+            "{cal}"
+        );
     }
 }
 
@@ -1139,9 +1171,8 @@ fn frame_is_solved_again_for_a_withheld_growth() {
         assert!(cal.uncertain.contains(&g), "growth withheld\n{cal}");
         assert_frame_recovered(&cal, &tool_instrument());
         let v = cal.validation.expect("held out");
-        let sigma_mm = noise.um / 1000.0;
         assert!(
-            v.after_mean_mm <= HOLDOUT_SLACK * MAXWELL_MEAN * sigma_mm,
+            v.after_mean_mm <= HOLDOUT_SLACK * MAXWELL_MEAN * sigma_mm(&noise),
             "{cal}"
         );
     }
