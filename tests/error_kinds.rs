@@ -270,3 +270,27 @@ fn too_few_rows_for_a_fit_is_a_data_error_naming_the_observations() {
     assert_eq!(k, ErrorKind::Data, "{e}");
     assert!(e.to_string().starts_with("few.csv: "), "{e}");
 }
+
+/// A robot file without thermal terms cannot be thermally calibrated: a
+/// problem of the machine file, named as the whole file.
+#[test]
+fn thermal_calibration_of_a_file_without_terms_is_a_machine_error() {
+    use postproc::calibrate::observations::load_poses;
+    use postproc::calibrate::stiffness::Options;
+    use postproc::calibrate::thermal::calibrate_thermal;
+    let start = "machines/staubli-tx200.yaml";
+    let obs = load_poses(&repo("samples/observations/irb1600-thermal-poses.csv")).expect("poses");
+    let (k, e) = kind(calibrate_thermal(
+        &text(start),
+        start,
+        &obs,
+        "t.csv",
+        &Options::default(),
+    ));
+    assert_eq!(k, ErrorKind::Machine, "{e}");
+    assert!(
+        e.to_string()
+            .starts_with("machines/staubli-tx200.yaml: no thermal terms"),
+        "{e}"
+    );
+}

@@ -447,10 +447,11 @@ pub fn calibrate_thermal(
     let obs = &world_to_reference(&machine, obs);
     let base: Vec<ThermalTerm> = robot.thermal().map(|t| t.terms.clone()).unwrap_or_default();
     if base.is_empty() {
-        return Err(Error::Usage(format!(
-            "{machine_file}: no thermal terms to identify; add a `thermal:` section with \
+        return Err(Error::Machine(crate::error::Located::whole_file(
+            machine_file,
+            "no thermal terms to identify; add a `thermal:` section with \
              `time_constant_min` and the `terms` (DH length ← joint power, Paper B Table 2: \
-             a2 ← P1, P2; d4 ← P1, P2, P3; a3 ← P2, P3) with start values"
+             a2 ← P1, P2; d4 ← P1, P2, P3; a3 ← P2, P3) with start values",
         )));
     }
     if !obs.rows.iter().any(|r| row_powers(r).is_some()) {
