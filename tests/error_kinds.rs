@@ -262,3 +262,57 @@ fn each_kind_exits_with_its_code_through_the_binary_and_writes_nothing() {
     assert_eq!(code, Some(0), "{stderr}");
     assert!(written);
 }
+
+/// Too few load rows for a stiffness calibration is a data error naming
+/// the observation file, not a usage error.
+#[test]
+fn too_few_rows_for_a_fit_is_a_data_error_naming_the_observations() {
+    use postproc::calibrate::observations::load_poses;
+    use postproc::calibrate::simulate::{Noise, simulate};
+    use postproc::calibrate::stiffness::{Options, calibrate_stiffness};
+    let truth = "samples/observations/irb1600-truth.yaml";
+    let start = "machines/abb-irb1600.yaml";
+    let mut poses =
+        load_poses(&repo("samples/observations/irb1600-ldbb-poses.csv")).expect("poses");
+    poses.rows.truncate(9);
+    let m = Machine::from_yaml_str(&text(truth), truth).expect("machine");
+    let noise = Noise {
+        um: 15.0,
+        um_per_m: 0.0,
+        seed: 1,
+    };
+    let obs = simulate(&m, &poses, truth, &noise).expect("simulated");
+    let (k, e) = kind(calibrate_stiffness(
+        &text(start),
+        start,
+        &obs,
+        "few.csv",
+        &Options::default(),
+    ));
+    assert_eq!(k, ErrorKind::Data, "{e}");
+    assert!(e.to_string().starts_with("few.csv: "), "{e}");
+}
+
+/// A robot file without thermal terms cannot be thermally calibrated: a
+/// problem of the machine file, named as the whole file.
+#[test]
+fn thermal_calibration_of_a_file_without_terms_is_a_machine_error() {
+    use postproc::calibrate::observations::load_poses;
+    use postproc::calibrate::stiffness::Options;
+    use postproc::calibrate::thermal::calibrate_thermal;
+    let start = "machines/staubli-tx200.yaml";
+    let obs = load_poses(&repo("samples/observations/irb1600-thermal-poses.csv")).expect("poses");
+    let (k, e) = kind(calibrate_thermal(
+        &text(start),
+        start,
+        &obs,
+        "t.csv",
+        &Options::default(),
+    ));
+    assert_eq!(k, ErrorKind::Machine, "{e}");
+    assert!(
+        e.to_string()
+            .starts_with("machines/staubli-tx200.yaml: no thermal terms"),
+        "{e}"
+    );
+}

@@ -25,6 +25,23 @@ use crate::common::{postproc, repo, text, write};
 const K_TEST: f64 = 3.0;
 /// Mean norm of 3-D isotropic noise of σ per coordinate, in σ.
 const MAXWELL_MEAN: f64 = 1.596;
+/// Slack on the held-out mean of a calibrated model against the noise's
+/// mean norm (the fit's own uncertainty adds to the noise): a few model
+/// parameters beside the frame.
+const HOLDOUT_SLACK: f64 = 1.25;
+/// The same for load-pair differences (stiffness).
+const PAIR_SLACK: f64 = 1.3;
+/// The same for models of tens of parameters (kinematics, geometry).
+const HOLDOUT_SLACK_MANY: f64 = 1.5;
+/// Distance of the tracker from the measured points, for the noise that
+/// grows with it (m).
+const TRACKER_RANGE_M: f64 = 3.5;
+
+/// Standard deviation per coordinate of the noise `n` at the tracker's
+/// range, mm.
+fn sigma_mm(n: &Noise) -> f64 {
+    (n.um + n.um_per_m * TRACKER_RANGE_M) / 1000.0
+}
 
 const TRUTH_ROBOT: &str = "samples/observations/irb1600-truth.yaml";
 const START_ROBOT: &str = "machines/abb-irb1600.yaml";
@@ -275,19 +292,7 @@ fn instrument_frame_identified_with_the_kinematics() {
             },
         )
         .expect("calibrated");
-        let fr = cal.frame.expect("frame identified");
-        let u = fr.u_xyz_mm.expect("uncertainty");
-        for ((got, want), u) in fr.xyz_mm.iter().zip(f.translation.vector.iter()).zip(u) {
-            assert!((got - want).abs() <= K_TEST * u, "{cal}");
-        }
-        let [r, p, y] = fr.rpy_deg.map(f64::to_radians);
-        let got = UnitQuaternion::from_euler_angles(r, p, y);
-        let ur = fr.u_rot_deg.expect("uncertainty");
-        let angle = got.angle_to(&f.rotation).to_degrees();
-        assert!(
-            angle <= K_TEST * (ur[0] + ur[1] + ur[2]),
-            "{angle} deg\n{cal}"
-        );
+        assert_frame_recovered(&cal, &f);
         // The DH parameters: identified (an uncertainty) and the model
         // predicts the held-out rows at the noise level (below).
         for name in ["j2.a_mm", "j3.a_mm", "j4.d_mm", "j4.alpha_deg"] {
@@ -296,7 +301,11 @@ fn instrument_frame_identified_with_the_kinematics() {
         }
         let v = cal.validation.expect("held out");
         // σ ≈ 15 µm + 6 µm/m × ≈ 3.5 m ≈ 36 µm per coordinate.
-        assert!(v.after_mean_mm < 1.5 * MAXWELL_MEAN * 0.036, "{cal}");
+        let sigma = sigma_mm(&tracker(seed));
+        assert!(
+            v.after_mean_mm < HOLDOUT_SLACK_MANY * MAXWELL_MEAN * sigma,
+            "{cal}"
+        );
         assert!(
             cal.notes
                 .iter()
@@ -738,8 +747,11 @@ fn tracker_sample_is_made_by_its_command_and_calibrates() {
     assert!((f.translation.vector - want).norm() < 3.0, "{stdout}");
 }
 
-/// The identified frame lies within 3 u of `f` (origin per coordinate,
-/// rotation angle against the summed per-axis uncertainties).
+/// The identified frame lies within 3 u of `f`: the origin per
+/// coordinate, the rotation per component of the rotation vector
+/// `log(R_got · R_trueᵀ)` (about the reference frame's axes, those of the
+/// reported uncertainties); and the frame written to the machine file is
+/// the one reported.
 fn assert_frame_recovered(cal: &Calibration, f: &Isometry3<f64>) {
     let fr = cal
         .frame
@@ -754,18 +766,31 @@ fn assert_frame_recovered(cal: &Calibration, f: &Isometry3<f64>) {
     let [r, p, y] = fr.rpy_deg.map(f64::to_radians);
     let got = UnitQuaternion::from_euler_angles(r, p, y);
     let ur = fr.u_rot_deg.unwrap_or_else(|| panic!("uncertainty\n{cal}"));
-    let angle = got.angle_to(&f.rotation).to_degrees();
-    assert!(
-        angle <= K_TEST * (ur[0] + ur[1] + ur[2]),
-        "frame turned {angle} deg from the truth\n{cal}"
-    );
+    let turn = (got * f.rotation.inverse())
+        .scaled_axis()
+        .map(f64::to_degrees);
+    for (i, (d, u)) in turn.iter().zip(ur).enumerate() {
+        assert!(
+            d.abs() <= K_TEST * u,
+            "frame turned {d} deg about axis {i} from the truth (u {u})\n{cal}"
+        );
+    }
     let written = Machine::from_yaml_str(&cal.yaml, "out.yaml").expect("valid");
     let mf = written
         .measurement_frame()
         .unwrap_or_else(|| panic!("measurement_frame written\n{cal}"));
-    assert!(
-        (mf.translation.vector - f.translation.vector).norm() <= K_TEST * u.iter().sum::<f64>()
-    );
+    for ((got, want), u) in mf
+        .translation
+        .vector
+        .iter()
+        .zip(f.translation.vector.iter())
+        .zip(u)
+    {
+        assert!(
+            (got - want).abs() <= K_TEST * u,
+            "written origin {got} ± {u}, true {want}\n{cal}"
+        );
+    }
 }
 
 /// A parameter of the report, identified (not fixed), within 3 u of `want`.
@@ -846,9 +871,9 @@ fn instrument_frame_identified_with_the_stiffness() {
         );
         // Pair differences: σ√2 per coordinate, σ ≈ 15 + 6 µm/m × 3.5 m.
         let v = cal.validation.expect("held-out pairs");
-        let sigma_pair_mm = 0.036 * std::f64::consts::SQRT_2;
+        let sigma_pair_mm = sigma_mm(&tracker(seed)) * std::f64::consts::SQRT_2;
         assert!(
-            v.after_mean_mm < 1.3 * MAXWELL_MEAN * sigma_pair_mm,
+            v.after_mean_mm < PAIR_SLACK * MAXWELL_MEAN * sigma_pair_mm,
             "{cal}"
         );
     }
@@ -911,7 +936,11 @@ fn instrument_frame_identified_with_the_thermal_terms() {
         assert!(cal.params.iter().filter(|e| !e.fixed).count() >= 6, "{cal}");
         assert_frame_recovered(&cal, &instrument());
         let v = cal.validation.expect("held out");
-        assert!(v.after_mean_mm <= 1.25 * MAXWELL_MEAN * 0.005, "{cal}");
+        let sigma = sigma_mm(&noise(seed));
+        assert!(
+            v.after_mean_mm <= HOLDOUT_SLACK * MAXWELL_MEAN * sigma,
+            "{cal}"
+        );
     }
 }
 
@@ -963,16 +992,97 @@ fn instrument_frame_identified_with_the_tool_thermal_gains() {
         assert_param(&cal, "X.scale", 90.0);
         assert_frame_recovered(&cal, &tool_instrument());
         let v = cal.validation.expect("held out");
-        assert!(v.after_mean_mm <= 1.25 * MAXWELL_MEAN * 0.001, "{cal}");
+        assert!(
+            v.after_mean_mm <= HOLDOUT_SLACK * MAXWELL_MEAN * sigma_mm(&noise),
+            "{cal}"
+        );
     }
+}
+
+/// Runs of the geometry test that may add values to keep at the truth.
+const MAX_KEEP_RUNS: usize = 4;
+
+/// The model values a calibration's note names as absorbed by the frame.
+fn absorbed_names(cal: &Calibration) -> Vec<String> {
+    cal.notes
+        .iter()
+        .find(|n| n.starts_with("absorbed by the instrument frame"))
+        .and_then(|n| n.rsplit_once("): "))
+        .map(|(_, names)| names.split(", ").map(str::to_string).collect())
+        .unwrap_or_default()
+}
+
+/// A machine-tool file with every translational table value (`E??_um`)
+/// and squareness error halved, except the table values named in `keep`
+/// (`EXX@800.0-`: error X of axis X at 800 mm, reverse). Edits the text's
+/// lines, so the file keeps its layout.
+fn halve_geometry(text: &str, keep: &[String]) -> String {
+    let kept = |key: &str, at: f64, forward: bool| {
+        keep.iter().any(|k| {
+            let Some((name, pos)) = k.split_once('@') else {
+                return false;
+            };
+            let (num, dir) = pos.split_at(pos.len() - 1);
+            name == key && num.parse::<f64>().is_ok_and(|v| v == at) && (dir == "+") == forward
+        })
+    };
+    let list = |v: &str| -> Vec<f64> {
+        v.trim()
+            .trim_start_matches('[')
+            .trim_end_matches(']')
+            .split(',')
+            .map(|x| x.trim().parse().expect("number"))
+            .collect()
+    };
+    let mut out = String::new();
+    let (mut table, mut at) = (String::new(), Vec::new());
+    for line in text.lines() {
+        let t = line.trim_start();
+        let indent = &line[..line.len() - t.len()];
+        let mut edited = line.to_string();
+        if let Some(name) = t.strip_suffix("_um:") {
+            table = name.to_string();
+        } else if t.ends_with("_urad:") {
+            table.clear();
+        } else if let Some(v) = t.strip_prefix("positions_mm:") {
+            at = list(v);
+        } else if let Some((dir, v)) = t
+            .strip_prefix("forward:")
+            .map(|v| (true, v))
+            .or_else(|| t.strip_prefix("reverse:").map(|v| (false, v)))
+        {
+            if !table.is_empty() {
+                let values: Vec<String> = list(v)
+                    .iter()
+                    .zip(&at)
+                    .map(|(&x, &p)| {
+                        let x = if kept(&table, p, dir) { x } else { 0.5 * x };
+                        format!("{x:?}")
+                    })
+                    .collect();
+                let key = if dir { "forward" } else { "reverse" };
+                edited = format!("{indent}{key}: [{}]", values.join(", "));
+            }
+        } else if let Some((key, v)) = t.split_once("_urad: ") {
+            if key.len() == 4 && key.as_bytes()[2] == b'0' {
+                let x: f64 = v.trim().parse().expect("number");
+                edited = format!("{indent}{key}_urad: {:?}", 0.5 * x);
+            }
+        }
+        out.push_str(&edited);
+        out.push('\n');
+    }
+    out
 }
 
 /// Geometry measured by a tracker beside the machine: the frame within 3 u
 /// of the truth, the values it absorbs (a rigid motion of the instrument)
 /// listed and kept, every identified table value and squareness error
-/// within 3 u of the truth tables. The start file is the truth file: the
+/// within 3 u of the truth tables. The start file is the truth with every
+/// translational table value and squareness error halved, except the values
+/// the frame absorbs (found by earlier runs), which keep the truth's: the
 /// absorbed values keep the start file's value and the others are
-/// identified relative to them.
+/// identified relative to them, from a wrong start.
 #[test]
 fn instrument_frame_identified_with_the_geometry() {
     let truth_file = "samples/observations/afm-r1000-truth.yaml";
@@ -989,8 +1099,23 @@ fn instrument_frame_identified_with_the_geometry() {
             seed,
         };
         let obs = in_instrument(&truth, &poses, tool_instrument(), noise);
-        let cal = calibrate_geometry(&text(truth_file), truth_file, &obs, "g.csv", &opts(seed))
-            .expect("calibrated");
+        // The screen's pivots pick among equivalent values by the start
+        // values: keep at the truth every value a run absorbs until a run
+        // absorbs only kept ones.
+        let mut keep: Vec<String> = Vec::new();
+        let cal = (0..MAX_KEEP_RUNS)
+            .find_map(|_| {
+                let start = halve_geometry(&text(truth_file), &keep);
+                assert_ne!(start, text(truth_file));
+                let cal = calibrate_geometry(&start, truth_file, &obs, "g.csv", &opts(seed))
+                    .expect("calibrated");
+                let absorbed = absorbed_names(&cal);
+                assert!(!absorbed.is_empty(), "{cal}");
+                let new: Vec<String> = absorbed.into_iter().filter(|a| !keep.contains(a)).collect();
+                keep.extend(new.iter().cloned());
+                new.is_empty().then_some(cal)
+            })
+            .unwrap_or_else(|| panic!("absorbed values settle: {keep:?}"));
         assert_frame_recovered(&cal, &tool_instrument());
         assert!(
             cal.notes
@@ -1028,12 +1153,15 @@ fn instrument_frame_identified_with_the_geometry() {
         }
         assert!(checked >= 90, "{checked}\n{cal}");
         let v = cal.validation.expect("held out");
-        assert!(v.after_mean_mm < 1.5 * MAXWELL_MEAN * 0.001, "{cal}");
+        assert!(
+            v.after_mean_mm < HOLDOUT_SLACK_MANY * MAXWELL_MEAN * sigma_mm(&noise),
+            "{cal}"
+        );
     }
 }
 
 /// Instrument-frame data that cannot identify a frame with the model are
-/// refused (exit 2, nothing written): points on one line (geometry with
+/// refused as data errors (exit 2, nothing written): points on one line (geometry with
 /// one axis moving, machine-tool thermal likewise), too few rows (thermal)
 /// and too few load groups (stiffness).
 #[test]
@@ -1050,7 +1178,7 @@ fn instrument_frame_with_degenerate_data_is_refused() {
     let afm = "machines/afm-r1000.yaml";
     let obs = in_instrument(&machine(afm), &poses, f, tracker(1));
     let err = calibrate_geometry(&text(afm), afm, &obs, "line.csv", &opts(1)).expect_err("refused");
-    assert_eq!(err.exit_code(), 2);
+    assert_data(&err, "line.csv: 15 distinct poses left for the fit");
     let err = postproc::calibrate::thermal::calibrate_thermal(
         &text(afm),
         afm,
@@ -1059,8 +1187,7 @@ fn instrument_frame_with_degenerate_data_is_refused() {
         &opts(1),
     )
     .expect_err("refused");
-    assert_eq!(err.exit_code(), 2);
-    assert!(err.to_string().contains("line"), "{err}");
+    assert_data(&err, "line.csv: the measured points lie on a line");
 
     let thermal = "samples/observations/irb1600-thermal-truth.yaml";
     let mut tp =
@@ -1075,13 +1202,71 @@ fn instrument_frame_with_degenerate_data_is_refused() {
         &opts(2),
     )
     .expect_err("refused");
-    assert_eq!(err.exit_code(), 2);
-    assert!(err.to_string().contains("rows left for the fit"), "{err}");
+    assert_data(&err, "rows left for the fit");
 
     let mut lp = load_poses(&repo("samples/observations/irb1600-ldbb-poses.csv")).expect("poses");
     lp.rows.truncate(9);
     let obs = in_instrument(&machine(TRUTH_ROBOT), &lp, instrument(), tracker(3));
     let err = calibrate_stiffness(&text(START_ROBOT), START_ROBOT, &obs, "few.csv", &opts(3))
         .expect_err("refused");
+    assert_data(
+        &err,
+        "few.csv: 3 loaded row(s) in 3 group(s) left for the fit",
+    );
+}
+
+/// A refusal for what the data cannot give: kind Data, exit 2, the reason.
+fn assert_data(err: &postproc::error::Error, fragment: &str) {
+    assert_eq!(err.kind(), postproc::error::ErrorKind::Data, "{err}");
     assert_eq!(err.exit_code(), 2);
+    assert!(err.to_string().contains(fragment), "{err}");
+}
+
+/// Machine-tool spindle growth at a nearly constant spindle power moves
+/// every point almost alike, as a shift of the instrument's origin would:
+/// the growth is uncertain and the honesty rule keeps the file's value.
+/// The frame written is the one of the model written (re-solved with that
+/// value), so it lies within 3 u of the truth and the held-out rows stay at
+/// the noise level, whatever growth the joint fit gave.
+#[test]
+fn frame_is_solved_again_for_a_withheld_growth() {
+    let truth = text("machines/afm-r1000.yaml");
+    let truth_m = Machine::from_yaml_str(&truth, "truth").expect("truth");
+    let mut poses =
+        load_poses(&repo("samples/observations/afm-r1000-grid-poses.csv")).expect("poses");
+    let mut rng = postproc::calibrate::stats::SplitMix64::new(11);
+    for r in &mut poses.rows {
+        if let postproc::calibrate::observations::Pose::Tool(tp) = &mut r.pose {
+            tp.spindle_w = Some(8000.0 + 400.0 * rng.next_f64());
+            tp.p_w[0] = None;
+        }
+    }
+    for seed in [61, 64] {
+        let noise = Noise {
+            um: 1.0,
+            um_per_m: 0.0,
+            seed,
+        };
+        let obs = in_instrument(&truth_m, &poses, tool_instrument(), noise);
+        let cal = postproc::calibrate::thermal::calibrate_thermal(
+            &truth,
+            "afm.yaml",
+            &obs,
+            "obs.csv",
+            &opts(seed),
+        )
+        .expect("calibrated");
+        let g = cal
+            .params
+            .iter()
+            .position(|e| e.name == "spindle.growth")
+            .unwrap_or_else(|| panic!("growth\n{cal}"));
+        assert!(cal.uncertain.contains(&g), "growth withheld\n{cal}");
+        assert_frame_recovered(&cal, &tool_instrument());
+        let v = cal.validation.expect("held out");
+        assert!(
+            v.after_mean_mm <= HOLDOUT_SLACK * MAXWELL_MEAN * sigma_mm(&noise),
+            "{cal}"
+        );
+    }
 }

@@ -7,7 +7,8 @@
 //! reference frame: a point measured at `m` (instrument coordinates) is at
 //! `F · m` in the reference frame. Identification parameters: the origin
 //! of `F` (mm, `frame.x_mm` …) and a small rotation of `F` about the
-//! reference frame's axes through that origin (mrad, `frame.rx_mrad` …),
+//! reference frame's axes through that origin (mrad internally, reported
+//! in degrees as `frame.rx_deg` …),
 //! `F(δ) = (Rot(δr) · R₀, t₀ + δt)`: the translation parameters are the
 //! origin itself, so its uncertainty is theirs.
 
@@ -27,7 +28,8 @@ use super::report::FrameEstimate;
 pub const FRAME_PARAMS: usize = 6;
 
 /// Relative rank threshold of the screen against the frame in the
-/// calibrations of tables and gains (unit-norm columns): a combination of
+/// calibrations of geometric tables and machine-tool thermal gains
+/// (unit-norm columns): a combination of
 /// model columns that the frame's columns explain to within 10⁻³ of its
 /// size moves the points like a rigid motion of the instrument, up to the
 /// second-order effect of the machine's own errors on the lever arms; it
@@ -229,13 +231,105 @@ pub fn start_frame(
             model.push(super::forward::predict(m, row, obs_file)?.attained_mm);
         }
     }
-    register(&meas, &model).ok_or_else(|| {
-        Error::Usage(format!(
-            "{obs_file}: the measured points lie on a line or are too few (fit rows: {}): \
-             the instrument frame cannot be registered; measure varied poses",
-            rows.len()
-        ))
-    })
+    register(&meas, &model).ok_or_else(|| not_registered(obs_file, rows.len()))
+}
+
+/// The refusal of points that cannot register a frame (`n` fit rows).
+fn not_registered(obs_file: &str, n: usize) -> Error {
+    Error::Data(format!(
+        "{obs_file}: the measured points lie on a line or are too few (fit rows: {n}): \
+         the instrument frame cannot be registered; measure varied poses"
+    ))
+}
+
+/// The instrument frame re-solved alone for a model whose values are
+/// fixed (the written ones, after the honesty rule kept some at the
+/// file's value): the rigid registration ([`register`]) of the `measured`
+/// points onto the positions `model` that model predicts for them. Its
+/// standard uncertainties (origin mm, small rotations mrad, the order of
+/// [`FRAME_NAMES`]) are per component the larger of the registration's
+/// own ([`frame_uncertainty`]) and `joint`, those of the joint fit with
+/// the withheld values fixed ([`conditional_uncertainty`]), which carry
+/// the uncertainty of the model values taken from it. Refused for points
+/// on a line or fewer than three.
+pub fn refit(
+    measured: &[Vector3<f64>],
+    model: &[Vector3<f64>],
+    joint: Option<[f64; FRAME_PARAMS]>,
+    obs_file: &str,
+) -> Result<(Isometry3<f64>, Option<[f64; FRAME_PARAMS]>)> {
+    let f = register(measured, model).ok_or_else(|| not_registered(obs_file, measured.len()))?;
+    let own = frame_uncertainty(&f, measured, model).map(|(t, r)| {
+        let mrad = |deg: f64| deg.to_radians() * 1e3;
+        [t[0], t[1], t[2], mrad(r[0]), mrad(r[1]), mrad(r[2])]
+    });
+    let u = match (own, joint) {
+        (Some(a), Some(b)) => Some(std::array::from_fn(|k| a[k].max(b[k]))),
+        (a, b) => a.or(b),
+    };
+    Ok((f, u))
+}
+
+/// The standard uncertainties of the frame parameters at indices `frame`
+/// of a joint covariance `cov`, given the model parameters at `fixed`
+/// (kept at the file's value; those the fit did not identify, with zero
+/// variance, change nothing): the Schur complement
+/// `C_FF − C_FW C_WW⁻¹ C_WF`, the covariance the fit with those values
+/// fixed would give. `None` without a covariance, or when the index lists
+/// do not fit it or `C_WW` is singular.
+pub fn conditional_uncertainty(
+    cov: Option<&DMatrix<f64>>,
+    frame: &[usize],
+    fixed: &[usize],
+) -> Option<[f64; FRAME_PARAMS]> {
+    if frame.len() != FRAME_PARAMS {
+        return None;
+    }
+    let reduced = conditional_covariance(cov?, frame, fixed)?;
+    Some(std::array::from_fn(|k| reduced[(k, k)].max(0.0).sqrt()))
+}
+
+/// The covariance of the parameters `keep` of `c` given those at `fixed`
+/// (zero-variance ones skipped), as [`conditional_uncertainty`].
+pub fn conditional_covariance(
+    c: &DMatrix<f64>,
+    keep: &[usize],
+    fixed: &[usize],
+) -> Option<DMatrix<f64>> {
+    let n = c.nrows();
+    if keep.iter().chain(fixed).any(|&k| k >= n) {
+        return None;
+    }
+    let fixed: Vec<usize> = fixed.iter().copied().filter(|&k| c[(k, k)] > 0.0).collect();
+    let ckk = c.select_rows(keep.iter()).select_columns(keep.iter());
+    if fixed.is_empty() {
+        return Some(ckk);
+    }
+    let ckw = c.select_rows(keep.iter()).select_columns(fixed.iter());
+    let cww = c.select_rows(fixed.iter()).select_columns(fixed.iter());
+    Some(ckk - &ckw * cww.try_inverse()? * ckw.transpose())
+}
+
+/// The end of a calibration that identified an instrument frame `f` (with
+/// uncertainties `u`, as [`estimate`]): the frame written to
+/// `measurement_frame` of `yaml`, the note naming the `absorbed` model
+/// parameters (`example` as [`absorbed_note`]) and [`IDENTIFIED_NOTE`].
+/// Returns the edited text and the frame's estimate.
+pub fn finish(
+    yaml: &str,
+    machine_file: &str,
+    f: &Isometry3<f64>,
+    u: Option<[f64; FRAME_PARAMS]>,
+    absorbed: &[String],
+    example: &str,
+    notes: &mut Vec<String>,
+) -> Result<(String, FrameEstimate)> {
+    let est = estimate(f, u);
+    let yaml =
+        super::yaml_edit::set_measurement_frame(yaml, machine_file, est.xyz_mm, est.rpy_deg)?;
+    notes.extend(absorbed_note(absorbed, example));
+    notes.push(IDENTIFIED_NOTE.into());
+    Ok((yaml, est))
 }
 
 /// Which model parameters a Jacobian identifies, with the frame columns

@@ -39,17 +39,17 @@
 //! squares with one Gauss–Newton refinement. Uncertain values
 //! ([`super::honesty`]) keep the file's value.
 
-use nalgebra::{DMatrix, DVector, Isometry3};
+use nalgebra::{DMatrix, DVector, Isometry3, Vector3};
 
-use crate::calibrate::lsq::{LsqOptions, Solution, solve_linear};
+use crate::calibrate::lsq::{LsqOptions, Solution, data_error, solve_for};
 use crate::error::{Error, Result};
 use crate::machine::Machine;
 use crate::machine::tool::{AxisKind, MachineTool};
 
 use super::forward::{check_kind, predict};
 use super::frame::{
-    FRAME_PARAMS, FRAME_RANK_RTOL, IDENTIFIED_NOTE, absorbed_note, carry, estimate, frame_columns,
-    frame_with, screen_model, start_frame,
+    FRAME_PARAMS, FRAME_RANK_RTOL, carry, conditional_uncertainty, finish, frame_columns,
+    frame_with, refit, screen_model, start_frame,
 };
 use super::observations::{MeasurementFrame, Observations, Pose};
 use super::report::{CONDITION_LIMIT, Calibration, Estimate, Validation};
@@ -57,7 +57,7 @@ use super::screen::{
     describe_outliers, distinct_poses, dominating_rows, drop_copies, grouped_split, implausible,
 };
 use super::stiffness::Options;
-use super::yaml_edit::{set_component_table, set_location_error, set_measurement_frame};
+use super::yaml_edit::{set_component_table, set_location_error};
 
 /// Largest number of distinct target positions per axis.
 pub const MAX_TARGETS: usize = 41;
@@ -275,7 +275,7 @@ fn axes_and_grids(
         }
     }
     if axes.is_empty() {
-        return Err(Error::Usage(format!(
+        return Err(Error::Data(format!(
             "{obs_file}: no linear axis takes two different positions; geometric calibration \
              needs measurements along the axes"
         )));
@@ -292,7 +292,7 @@ fn axes_and_grids(
         values.sort_by(f64::total_cmp);
         values.dedup();
         if values.len() > 1 {
-            return Err(Error::Usage(format!(
+            return Err(Error::Data(format!(
                 "{obs_file}: the {} axis takes {} different positions; geometric calibration \
                  identifies the linear-axis errors with every rotary axis at one fixed position \
                  (with moving rotary axes the table datums and squareness conventions do not \
@@ -306,7 +306,7 @@ fn axes_and_grids(
     for &a in &axes {
         let g = positions(a);
         if g.len() > MAX_TARGETS {
-            return Err(Error::Usage(format!(
+            return Err(Error::Data(format!(
                 "{obs_file}: axis {} has {} distinct commanded positions; geometric \
                  calibration needs the measurements on target positions (ISO 230-2), \
                  at most {MAX_TARGETS} per axis",
@@ -424,9 +424,7 @@ fn fit_tables(
         a_all.column_mut(c).fill(0.0);
     }
     let lsq = LsqOptions::default();
-    let solve = |a: &DMatrix<f64>, b: &DVector<f64>| {
-        solve_linear(a, b, &lsq).map_err(|e| Error::Usage(format!("{obs_file}: {e}")))
-    };
+    let solve = |a: &DMatrix<f64>, b: &DVector<f64>| solve_for(a, b, &lsq, obs_file);
     let id = Isometry3::identity();
     let max_passes = (fit.len() / 10).max(1);
     let mut passes = 0;
@@ -503,8 +501,8 @@ fn absorbed_by_frame(
         rank_rtol: FRAME_RANK_RTOL,
         scale_columns: true,
     };
-    let (given, plain) = screen_model(&a, Some(&jf), &b, &lsq)
-        .map_err(|e| Error::Usage(format!("{obs_file}: {e}")))?;
+    let (given, plain) =
+        screen_model(&a, Some(&jf), &b, &lsq).map_err(|e| data_error(obs_file, e))?;
     Ok(given.into_iter().filter(|c| !plain.contains(c)).collect())
 }
 
@@ -558,10 +556,44 @@ fn fixed_notes(square: bool) -> Vec<String> {
     notes
 }
 
+/// The instrument frame written with the calibrated model `calibrated`,
+/// with its uncertainties: the joint fit's frame `f` (columns `n..` of
+/// `sol`) when every identified value is written, else the frame re-solved
+/// alone for the written values (the withheld ones at the file's value,
+/// [`refit`]), so that it is the frame of the model it is written with.
+fn written_frame(
+    calibrated: &Machine,
+    obs: &Observations,
+    fit: &[usize],
+    (f, sol): (Isometry3<f64>, &Solution),
+    n: usize,
+    withheld: &[bool],
+    obs_file: &str,
+) -> Result<(Isometry3<f64>, Option<[f64; FRAME_PARAMS]>)> {
+    let fixed: Vec<usize> = (0..n).filter(|&k| withheld.get(k) == Some(&true)).collect();
+    let frame_cols: Vec<usize> = (n..n + FRAME_PARAMS).collect();
+    let joint = conditional_uncertainty(sol.covariance.as_ref(), &frame_cols, &fixed);
+    if fixed.is_empty() {
+        return Ok((f, joint));
+    }
+    let model = deviations(calibrated, obs, fit, obs_file)?;
+    let points = |v: &DVector<f64>| -> Vec<Vector3<f64>> {
+        (0..fit.len())
+            .map(|k| v.fixed_rows::<3>(3 * k).into_owned())
+            .collect()
+    };
+    refit(
+        &points(&measured(obs, fit)),
+        &points(&model),
+        joint,
+        obs_file,
+    )
+}
+
 /// Refuses a badly conditioned fit.
 fn check_condition(id: &crate::calibrate::lsq::Identifiability, obs_file: &str) -> Result<()> {
     if id.condition_number_identified > CONDITION_LIMIT {
-        return Err(Error::Usage(format!(
+        return Err(Error::Data(format!(
             "{obs_file}: badly conditioned data set: condition number {:.3e} > {:.0e} \
              (O1 = {:.3e}); vary all axes independently over their targets and the \
              approach directions",
@@ -604,7 +636,7 @@ pub fn calibrate_geometry(
     let (fit, hold) = grouped_split(obs, opts.holdout, opts.seed);
     let distinct = distinct_poses(obs, &fit);
     if n == 0 || 3 * distinct <= n_all {
-        return Err(Error::Usage(format!(
+        return Err(Error::Data(format!(
             "{obs_file}: {distinct} distinct poses left for the fit ({} rows; repeated poses \
              count once) for {n} table values and squareness errors{}; measure more points \
              (or fewer targets per axis)",
@@ -663,10 +695,23 @@ pub fn calibrate_geometry(
         .zip(&withheld)
         .map(|((&v, &v0), &w)| if w { v0 } else { v })
         .collect();
-    let (mut yaml, _) = eval(&x, &[]).map_err(|e| implausible(&e, obs_file, fit.len()))?;
+    let (yaml, _) = eval(&x, &[]).map_err(|e| implausible(&e, obs_file, fit.len()))?;
     let calibrated = Machine::from_yaml_str(&yaml, machine_file)?;
+    let frame = match frame {
+        Some(f) => Some(written_frame(
+            &calibrated,
+            obs,
+            &fit,
+            (f, &sol),
+            n,
+            &withheld,
+            obs_file,
+        )?),
+        None => None,
+    };
     let ident = Isometry3::identity();
-    let (f_start, f_end) = (f0.unwrap_or(ident), frame.unwrap_or(ident));
+    let f_start = f0.unwrap_or(ident);
+    let f_end = frame.map_or(ident, |(f, _)| f);
     let residual_norms = |m: &Machine, f: &Isometry3<f64>, rows: &[usize]| -> Result<Vec<f64>> {
         Ok(norms(
             &(measured_at(obs, rows, f) - deviations(m, obs, rows, obs_file)?),
@@ -678,25 +723,26 @@ pub fn calibrate_geometry(
     let fit_after = residual_norms(&calibrated, &f_end, &fit)?;
     let mut notes = fixed_notes(prob.square);
     notes.append(&mut early_notes);
-    let frame_est = frame.map(|f| {
-        let u = sol
-            .std_uncertainty()
-            .map(|u| std::array::from_fn(|o| u.get(n + o).copied().unwrap_or(f64::NAN)));
-        estimate(&f, u)
-    });
-    if let Some(f) = &frame_est {
-        yaml = set_measurement_frame(&yaml, machine_file, f.xyz_mm, f.rpy_deg)?;
-        let names: Vec<String> = absorbed
-            .iter()
-            .filter_map(|&c| params.get(c).map(|p| p.name.clone()))
-            .collect();
-        notes.extend(absorbed_note(
-            &names,
-            "the positioning offsets and the straightness slopes are then relative to the \
-             frame",
-        ));
-        notes.push(IDENTIFIED_NOTE.into());
-    }
+    let (yaml, frame_est) = match frame {
+        Some((f, u)) => {
+            let names: Vec<String> = absorbed
+                .iter()
+                .filter_map(|&c| params.get(c).map(|p| p.name.clone()))
+                .collect();
+            let (yaml, est) = finish(
+                &yaml,
+                machine_file,
+                &f,
+                u,
+                &names,
+                "the positioning offsets and the straightness slopes are then relative to the \
+                 frame",
+                &mut notes,
+            )?;
+            (yaml, Some(est))
+        }
+        None => (yaml, None),
+    };
     let mut cal = Calibration {
         kind: "geometry",
         n_fit: fit.len(),

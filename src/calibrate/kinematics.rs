@@ -46,8 +46,8 @@
 use nalgebra::{DMatrix, DVector, Isometry3, Translation3};
 
 use crate::calibrate::lsq::{
-    LmOptions, LsqOptions, expand_free, fit_free, forward_jacobian_free, numeric_jacobian,
-    solve_linear,
+    LmOptions, LsqOptions, data_error, expand_free, fit_free, forward_jacobian_free,
+    numeric_jacobian, solve_linear,
 };
 use crate::error::{Error, Result};
 use crate::machine::Machine;
@@ -87,7 +87,7 @@ const MAX_OUTLIER_PASSES: usize = 3;
 const FD_STEP: f64 = 1e-4;
 
 /// Degrees per internal angle unit (mrad).
-const DEG_PER_UNIT: f64 = 0.18 / std::f64::consts::PI;
+const DEG_PER_UNIT: f64 = super::frame::DEG_PER_MRAD;
 
 const DH_NAMES: [(&str, &str); 4] = [
     ("a_mm", "mm"),
@@ -497,7 +497,7 @@ fn prepare(robot: &Robot, obs: &Observations, obs_file: &str, opts: &Options) ->
     let n = layout.n();
     let distinct = distinct_poses(&obs, &fit);
     if 3 * distinct < 2 * n {
-        return Err(Error::Usage(format!(
+        return Err(Error::Data(format!(
             "{obs_file}: {distinct} distinct poses left for the fit ({} rows; repeated poses \
              count once) for {n} parameters; kinematic calibration needs at least {} distinct \
              poses, better several times more",
@@ -540,7 +540,7 @@ fn fit_and_select(
 ) -> Result<Fitted> {
     let n = layout.n();
     let nm = layout.n_model();
-    let usage = |e: String| Error::Usage(format!("{obs_file}: {e}"));
+    let usage = |e: String| data_error(obs_file, e);
     let mut free = free;
     // Fit; then, once each: rows that disagree with all the others leave
     // the fit (the worst first, at most MAX_OUTLIER_PASSES), and the
@@ -664,7 +664,7 @@ pub fn calibrate_kinematics(
     let sol = &fit_result.solution;
     let id = &sol.identifiability;
     if id.condition_number_identified > CONDITION_LIMIT {
-        return Err(Error::Usage(format!(
+        return Err(Error::Data(format!(
             "{obs_file}: badly conditioned data set: condition number {:.3e} > {:.0e} \
              (O1 = {:.3e}) after fixing {} unidentifiable parameter(s); the poses do not \
              excite the kinematic parameters independently. Measure more varied poses \
@@ -794,7 +794,7 @@ fn screen_data(
     let mut r0 = DVector::zeros(m);
     residuals(layout, obs, fit, zero.as_slice(), &mut r0, obs_file);
     if r0.iter().any(|v| !v.is_finite()) {
-        return Err(Error::Usage(format!(
+        return Err(Error::Data(format!(
             "{obs_file}: the model cannot be evaluated for some rows"
         )));
     }
@@ -824,8 +824,7 @@ fn screen_data(
         m,
         lm_opts.fd_relative_step,
     );
-    let (fixed, _) = screen(layout, &j0, &r0, &lm_opts.lsq)
-        .map_err(|e| Error::Usage(format!("{obs_file}: {e}")))?;
+    let (fixed, _) = screen(layout, &j0, &r0, &lm_opts.lsq).map_err(|e| data_error(obs_file, e))?;
     let (structural, structural_plain) =
         structurally_unidentifiable(layout, obs, fit, obs_file, lm_opts)?;
     // The same number of unidentifiable parameters as at the reference
@@ -850,7 +849,7 @@ fn screen_data(
         if why.is_empty() {
             why = "the poses do not vary the joints enough".into();
         }
-        return Err(Error::Usage(format!(
+        return Err(Error::Data(format!(
             "{obs_file}: badly conditioned data set: these poses cannot identify {} \
              (varied poses do) — {why}. Their errors would be absorbed by the other \
              parameters with misleadingly small uncertainties; measure poses that move \

@@ -326,6 +326,24 @@ fn finish(
     }
 }
 
+/// A fit the observations of `obs_file` cannot give (too few rows, an
+/// ill-conditioned or rank-deficient design, points that do not span the
+/// space): [`crate::error::Error::Data`] naming the file.
+pub fn data_error(obs_file: &str, e: impl std::fmt::Display) -> crate::error::Error {
+    crate::error::Error::Data(format!("{obs_file}: {e}"))
+}
+
+/// [`solve_linear`] on the observations of `obs_file`; a failure is a
+/// problem with the data ([`data_error`]).
+pub fn solve_for(
+    a: &DMatrix<f64>,
+    b: &DVector<f64>,
+    opts: &LsqOptions,
+    obs_file: &str,
+) -> crate::error::Result<Solution> {
+    solve_linear(a, b, opts).map_err(|e| data_error(obs_file, e))
+}
+
 /// Solves `min ‖A x − b‖` with covariance and identifiability report.
 /// Unidentifiable parameters (see the module doc) are fixed at 0.
 pub fn solve_linear(

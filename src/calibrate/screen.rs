@@ -286,7 +286,7 @@ pub fn describe_outliers(obs: &Observations, file: &str, out: &[Outlier]) -> Str
 /// machine file: the data, not the machine file, are the cause, so the
 /// message names the observation file (with the validation's words).
 pub fn implausible(e: &crate::error::Error, obs_file: &str, n_fit: usize) -> crate::error::Error {
-    crate::error::Error::Usage(format!(
+    crate::error::Error::Data(format!(
         "{obs_file}: the values identified from these {n_fit} rows are not plausible \
          ({e}); the rows do not determine them — look for outliers, wrong units or \
          axes that are not varied"

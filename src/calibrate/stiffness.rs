@@ -22,7 +22,7 @@
 //! from its unloaded state is linear in c:
 //! `Δx = Σ_i c_i · J_MP[:3, i] · (J_WPᵀ W)_i` (actual kinematics at the
 //! commanded joints). The unknowns are `c_i` in µrad/(N·m); they are found by
-//! linear least squares ([`solve_linear`]), then two fixed-point corrections
+//! linear least squares ([`super::lsq::solve_linear`]), then two fixed-point corrections
 //! remove the second-order part (the deflected Jacobian, the gravity-loaded
 //! pose) by evaluating the exact forward model
 //! ([`super::forward::predict`]) at the estimate:
@@ -35,7 +35,7 @@ use std::collections::HashMap;
 
 use nalgebra::{DMatrix, DVector, Isometry3, Matrix3, SMatrix, Vector3, Vector6};
 
-use crate::calibrate::lsq::{LsqOptions, Solution, solve_linear};
+use crate::calibrate::lsq::{LsqOptions, Solution, data_error, solve_for};
 use crate::error::{Error, Result};
 use crate::machine::Machine;
 use crate::machine::robot::kinematics::jacobian;
@@ -43,8 +43,8 @@ use crate::machine::robot::{Model, Robot};
 
 use super::forward::{check_kind, joints_rad, measured_point, predict, row_wrench, wrench_point};
 use super::frame::{
-    DEG_PER_MRAD, carry, estimate, frame_with, point_jacobian, screen_model, start_frame,
-    world_note, world_to_reference,
+    DEG_PER_MRAD, carry, conditional_covariance, estimate, frame_with, point_jacobian,
+    screen_model, start_frame, world_note, world_to_reference,
 };
 use super::observations::{MeasurementFrame, Observation, Observations, Pose, holdout_split};
 use super::report::{CONDITION_LIMIT, Calibration, Estimate, FrameEstimate, Validation};
@@ -134,7 +134,7 @@ pub fn load_groups(obs: &Observations, file: &str) -> Result<Vec<Vec<usize>>> {
     });
     if !orphans.is_empty() {
         let shown: Vec<&str> = orphans.iter().take(5).map(String::as_str).collect();
-        return Err(Error::Usage(format!(
+        return Err(Error::Data(format!(
             "{file}: {} loaded row(s) have no other row at the same joint angles and \
              measured point: {}{}; the stiffness is identified from the differences between \
              the load states of one configuration (measure every configuration also \
@@ -145,7 +145,7 @@ pub fn load_groups(obs: &Observations, file: &str) -> Result<Vec<Vec<usize>>> {
         )));
     }
     if groups.is_empty() {
-        return Err(Error::Usage(format!(
+        return Err(Error::Data(format!(
             "{file}: no row has a force or moment (fx_n … mz_nm): nothing deflects the \
              joints, the stiffness cannot be identified"
         )));
@@ -273,7 +273,7 @@ fn check_identified(sol: &Solution, obs_file: &str) -> Result<()> {
                 }
             })
             .collect();
-        return Err(Error::Usage(format!(
+        return Err(Error::Data(format!(
             "{obs_file}: badly conditioned data set: the stiffness of {} cannot be identified \
              (the loads do not twist these joints independently of the others; O1 = {:.3e}). \
              Load the arm in more directions and configurations",
@@ -282,7 +282,7 @@ fn check_identified(sol: &Solution, obs_file: &str) -> Result<()> {
         )));
     }
     if id.condition_number_identified > CONDITION_LIMIT {
-        return Err(Error::Usage(format!(
+        return Err(Error::Data(format!(
             "{obs_file}: badly conditioned data set: condition number {:.3e} > {:.0e} \
              (O1 = {:.3e}); the joint compliances are nearly linearly dependent in these \
              data (e.g. all loads in one direction). Vary the load direction and the \
@@ -306,7 +306,7 @@ fn solve_compliances(
 ) -> Result<(Solution, Option<Isometry3<f64>>)> {
     let lsq = LsqOptions::default();
     let solve = |a: &DMatrix<f64>, b: &DVector<f64>| -> Result<Solution> {
-        solve_linear(a, b, &lsq).map_err(|e| Error::Usage(format!("{obs_file}: {e}")))
+        solve_for(a, b, &lsq, obs_file)
     };
     let turn = |f: Option<Isometry3<f64>>, sol: &Solution| {
         f.map(|f| {
@@ -325,7 +325,7 @@ fn solve_compliances(
             &y,
             &lsq,
         )
-        .map_err(|e| Error::Usage(format!("{obs_file}: {e}")))?;
+        .map_err(|e| data_error(obs_file, e))?;
     }
     let mut sol = solve(&a, &y)?;
     check_identified(&sol, obs_file)?;
@@ -346,6 +346,31 @@ fn solve_compliances(
         f = turn(f, &sol);
     }
     Ok((sol, f))
+}
+
+/// The instrument frame's rotation re-solved alone for the stiffnesses of
+/// `calibrated` as written (some kept at the file's value): the rotation
+/// columns of the centred system, with the exact deflections of
+/// `calibrated` removed, solved twice from `f` (the frame moves to each
+/// solution).
+fn refit_rotation(
+    robot: &Robot,
+    calibrated: &Machine,
+    obs: &Observations,
+    fit: &[Vec<usize>],
+    mut f: Isometry3<f64>,
+    obs_file: &str,
+) -> Result<Isometry3<f64>> {
+    let deflection = |row: &Observation, _: &SMatrix<f64, 3, 6>| -> Result<Vector3<f64>> {
+        model_deflection(calibrated, row, obs_file)
+    };
+    for _ in 0..2 {
+        let (a, y) = centred_system(robot, obs, fit, Some(&f), &deflection)?;
+        let rot = a.columns(6, ROT_PARAMS).into_owned();
+        let s = solve_for(&rot, &y, &LsqOptions::default(), obs_file)?;
+        f = frame_with(&f, &[0.0, 0.0, 0.0, s.params[0], s.params[1], s.params[2]]);
+    }
+    Ok(f)
 }
 
 /// The origin of an instrument frame of rotation `f.rotation`: the mean of
@@ -398,12 +423,13 @@ const FRAME_NOTE: &str = "positions measured in an instrument frame: its rotatio
     points); written to `measurement_frame`";
 
 /// The identified instrument frame of a stiffness run: the rotation `f`
-/// from the joint solution `sol` (uncertainties scaled by `dof_factor`),
-/// the origin from [`frame_origin`].
+/// with the uncertainties of the joint solution `sol` given the
+/// compliances at `fixed` (kept at the file's value; scaled by
+/// `dof_factor`), the origin from [`frame_origin`].
 fn frame_estimate(
     calibrated: &Machine,
     f: &Isometry3<f64>,
-    sol: &Solution,
+    (sol, fixed): (&Solution, &[usize]),
     dof_factor: f64,
     obs: &Observations,
     fit: &[Vec<usize>],
@@ -412,11 +438,10 @@ fn frame_estimate(
     let cov_rot = sol
         .covariance
         .as_ref()
-        .map(|c| c.fixed_view::<3, 3>(6, 6).into_owned() * (dof_factor * dof_factor));
+        .and_then(|c| conditional_covariance(c, &[6, 7, 8], fixed))
+        .map(|c| Matrix3::from_fn(|r, k| c[(r, k)]) * (dof_factor * dof_factor));
     let (f, u_xyz) = frame_origin(calibrated, f, cov_rot, obs, fit, obs_file)?;
-    let u_rot = sol
-        .std_uncertainty()
-        .map(|u| std::array::from_fn(|r| u[6 + r] * dof_factor * DEG_PER_MRAD));
+    let u_rot = cov_rot.map(|c| std::array::from_fn(|r| c[(r, r)].max(0.0).sqrt() * DEG_PER_MRAD));
     Ok(FrameEstimate {
         u_xyz_mm: u_xyz,
         u_rot_deg: u_rot,
@@ -496,7 +521,7 @@ pub fn calibrate_stiffness(
     let instrument = obs.frame == MeasurementFrame::Instrument;
     let nr = if instrument { ROT_PARAMS } else { 0 };
     if m < dof_lost + 18 + 3 * nr {
-        return Err(Error::Usage(format!(
+        return Err(Error::Data(format!(
             "{obs_file}: {n_loaded} loaded row(s) in {} group(s) left for the fit; 6 \
              stiffnesses need at least 18 equations beyond the unloaded references, \
              better tens of loaded rows",
@@ -518,7 +543,7 @@ pub fn calibrate_stiffness(
     // The centring used 3 degrees of freedom per group.
     let dof_true = m.saturating_sub(dof_lost + 6 + nr);
     if dof_true == 0 {
-        return Err(Error::Usage(format!(
+        return Err(Error::Data(format!(
             "{obs_file}: no redundancy left for the uncertainty (equations = unknowns)"
         )));
     }
@@ -529,7 +554,7 @@ pub fn calibrate_stiffness(
             .std_uncertainty()
             .map(|u| u[i] * dof_factor)
             .unwrap_or(f64::NAN);
-        return Err(Error::Usage(format!(
+        return Err(Error::Data(format!(
             "{obs_file}: the compliance of joint {} came out non-positive ({:.4} ± {:.4} \
              µrad/(N·m)), i.e. a non-positive stiffness, which no real joint has. This \
              usually means a sign or frame error in the data (the force acting ON the \
@@ -565,6 +590,13 @@ pub fn calibrate_stiffness(
         None => 0.0,
     });
     let calibrated = Machine::Robot(robot.with_stiffness(written.map(|k| k * 1000.0)));
+    let fixed: Vec<usize> = (0..6).filter(|&i| withheld.get(i) == Some(&true)).collect();
+    let f_rot = match f_rot {
+        Some(f) if !fixed.is_empty() => {
+            Some(refit_rotation(robot, &calibrated, obs, &fit, f, obs_file)?)
+        }
+        other => other,
+    };
     let (before, after) = held_out_deflections(
         (&machine, f0.as_ref()),
         (&calibrated, f_rot.as_ref()),
@@ -577,7 +609,15 @@ pub fn calibrate_stiffness(
     let mut notes: Vec<String> = world.into_iter().collect();
     let frame = match &f_rot {
         Some(f) => {
-            let est = frame_estimate(&calibrated, f, &sol, dof_factor, obs, &fit, obs_file)?;
+            let est = frame_estimate(
+                &calibrated,
+                f,
+                (&sol, &fixed),
+                dof_factor,
+                obs,
+                &fit,
+                obs_file,
+            )?;
             yaml = set_measurement_frame(&yaml, machine_file, est.xyz_mm, est.rpy_deg)?;
             notes.push(FRAME_NOTE.into());
             Some(est)

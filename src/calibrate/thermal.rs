@@ -14,7 +14,7 @@
 //!
 //! Identifiability: a term whose joint power takes a single value in the
 //! fitted rows is fixed (all three unknowns) and listed; the remaining
-//! columns go through the rank-revealing analysis of [`solve_linear`] at the
+//! columns go through the rank-revealing analysis of [`super::lsq::solve_linear`] at the
 //! start point (e.g. two terms on the same length share the constant `ub`
 //! direction, so one `ub` is fixed; with fewer than three power levels `ts`
 //! cannot be told from `lb`). The time constant is not identified: rows at
@@ -27,16 +27,16 @@
 //! the positioning scale `scale_ppm_per_kw` of each axis with a
 //! `thermal.axes` entry from its `pX_w`. The forward model is linear in
 //! them, so it is one linear least-squares step on the residuals of the
-//! file's model ([`solve_linear`], same identifiability analysis).
+//! file's model ([`super::lsq::solve_linear`], same identifiability analysis).
 //!
 //! Both kinds identify an instrument frame (`# frame: instrument`) with
 //! their unknowns: its six parameters beside the model's, the model's
 //! screened against them ([`super::frame::screen_model`]).
 
-use nalgebra::{DMatrix, DVector, Isometry3};
+use nalgebra::{DMatrix, DVector, Isometry3, Vector3};
 
 use crate::calibrate::lsq::{
-    LmOptions, LsqOptions, Solution, expand_free, fit_free, numeric_jacobian, solve_linear,
+    LmOptions, LsqOptions, Solution, data_error, expand_free, fit_free, numeric_jacobian, solve_for,
 };
 use crate::error::{Error, Result};
 use crate::machine::Machine;
@@ -46,13 +46,13 @@ use crate::machine::tool::MachineTool;
 
 use super::forward::{self, check_kind};
 use super::frame::{
-    FRAME_PARAMS, IDENTIFIED_NOTE, absorbed_note, carry, estimate, frame_with, point_jacobian,
-    screen_model, start_frame, world_note, world_to_reference,
+    FRAME_PARAMS, FRAME_RANK_RTOL, carry, conditional_uncertainty, finish, frame_with,
+    point_jacobian, refit, screen_model, start_frame, world_note, world_to_reference,
 };
 use super::observations::{MeasurementFrame, Observations, Pose, holdout_split};
 use super::report::{CONDITION_LIMIT, Calibration, Estimate, FrameEstimate, Validation};
 use super::stiffness::Options;
-use super::yaml_edit::{set_measurement_frame, set_thermal_term};
+use super::yaml_edit::set_thermal_term;
 
 /// Internal unit of `ts`: per kW (1/W × 1000).
 const TS_SCALE: f64 = 1000.0;
@@ -248,7 +248,7 @@ fn screen_unknowns(
     let mut r0 = DVector::zeros(m);
     residuals(u, obs, fit, &vec![0.0; n], &mut r0, obs_file);
     if r0.iter().any(|v| !v.is_finite()) {
-        return Err(Error::Usage(format!(
+        return Err(Error::Data(format!(
             "{obs_file}: the model cannot be evaluated for some rows"
         )));
     }
@@ -270,8 +270,8 @@ fn screen_unknowns(
     let jf = u
         .frame
         .map(|_| j0.columns(candidates.len(), FRAME_PARAMS).into_owned());
-    let (given, plain) = screen_model(&jm, jf.as_ref(), &r0, &lm_opts.lsq)
-        .map_err(|e| Error::Usage(format!("{obs_file}: {e}")))?;
+    let (given, plain) =
+        screen_model(&jm, jf.as_ref(), &r0, &lm_opts.lsq).map_err(|e| data_error(obs_file, e))?;
     let free: Vec<usize> = candidates
         .iter()
         .enumerate()
@@ -331,7 +331,7 @@ fn term_estimates(
 fn check_ts(terms: &[ThermalTerm], obs_file: &str) -> Result<()> {
     for t in terms {
         if !(t.ts_per_w.is_finite() && (0.0..=TS_MAX).contains(&t.ts_per_w)) {
-            return Err(Error::Usage(format!(
+            return Err(Error::Data(format!(
                 "{obs_file}: term {}: the fit gives ts = {} 1/W, outside 0..{TS_MAX}; \
                  the data do not support this term's exponential form (too few power \
                  levels, or the coupling is not in the data)",
@@ -349,28 +349,50 @@ fn write_terms(
     text: &str,
     machine_file: &str,
     terms: &[ThermalTerm],
-    frame: Option<&FrameEstimate>,
-    absorbed: &[usize],
-    params: &[Estimate],
+    frame: Option<(Isometry3<f64>, Option<[f64; FRAME_PARAMS]>)>,
+    absorbed: &[String],
     notes: &mut Vec<String>,
-) -> Result<String> {
+) -> Result<(String, Option<FrameEstimate>)> {
     let mut yaml = text.to_string();
     for (k, t) in terms.iter().enumerate() {
         yaml = set_thermal_term(&yaml, machine_file, k, t.lb_mm, t.ub_mm, t.ts_per_w)?;
     }
-    if let Some(f) = frame {
-        yaml = set_measurement_frame(&yaml, machine_file, f.xyz_mm, f.rpy_deg)?;
-        let names: Vec<String> = absorbed
-            .iter()
-            .filter_map(|&k| params.get(k).map(|p| p.name.clone()))
-            .collect();
-        notes.extend(absorbed_note(
-            &names,
-            "a growth that shifts every point alike moves the frame's origin",
-        ));
-        notes.push(IDENTIFIED_NOTE.into());
+    let Some((f, u)) = frame else {
+        return Ok((yaml, None));
+    };
+    let (yaml, est) = finish(
+        &yaml,
+        machine_file,
+        &f,
+        u,
+        absorbed,
+        "a growth that shifts every point alike moves the frame's origin",
+        notes,
+    )?;
+    Ok((yaml, Some(est)))
+}
+
+/// Points in millimetres, one per row.
+type Points = Vec<Vector3<f64>>;
+
+/// The measured points of `rows` and the positions the robot with the
+/// thermal `terms` predicts for them.
+fn robot_points(
+    robot: &Robot,
+    terms: &[ThermalTerm],
+    obs: &Observations,
+    rows: &[usize],
+    file: &str,
+) -> Result<(Points, Points)> {
+    let mut meas = Vec::with_capacity(rows.len());
+    let mut model = Vec::with_capacity(rows.len());
+    for row in rows.iter().filter_map(|&i| obs.rows.get(i)) {
+        let g = row_powers(row).map_or([[0.0; 2]; 6], |p| growth(terms, &p));
+        let p = forward::predict_robot_with_growth(robot, row, &g, file)?;
+        meas.push(row.measured_mm);
+        model.push(p.measured(obs.measured));
     }
-    Ok(yaml)
+    Ok((meas, model))
 }
 
 /// The notes of a robot thermal fit: unknowns the rank analysis fixed
@@ -393,7 +415,7 @@ fn fit_notes(any_fixed_by_rank: bool, notes: &mut Vec<String>) {
 /// Refuses a badly conditioned fit of the robot terms.
 fn check_condition(id: &crate::calibrate::lsq::Identifiability, obs_file: &str) -> Result<()> {
     if id.condition_number_identified > CONDITION_LIMIT {
-        return Err(Error::Usage(format!(
+        return Err(Error::Data(format!(
             "{obs_file}: badly conditioned data set: condition number {:.3e} > {:.0e} \
              (O1 = {:.3e}); the power levels do not excite the thermal terms independently. \
              Measure at more power levels, varying the joints' powers independently",
@@ -401,22 +423,6 @@ fn check_condition(id: &crate::calibrate::lsq::Identifiability, obs_file: &str) 
         )));
     }
     Ok(())
-}
-
-/// The identified frame `f` with the uncertainties of its free unknowns.
-fn frame_estimate(
-    unknowns: &Unknowns<'_>,
-    f: &Isometry3<f64>,
-    free: &[usize],
-    u_red: Option<&DVector<f64>>,
-) -> FrameEstimate {
-    let u: Option<Vec<f64>> = (unknowns.n_model()..unknowns.n())
-        .map(|k| {
-            let a = free.iter().position(|&f| f == k)?;
-            u_red.map(|u| u[a])
-        })
-        .collect();
-    estimate(f, u.and_then(|u| u.try_into().ok()))
 }
 
 /// Identifies the Paper B terms of the robot file `text` from `obs` (and
@@ -441,14 +447,15 @@ pub fn calibrate_thermal(
     let obs = &world_to_reference(&machine, obs);
     let base: Vec<ThermalTerm> = robot.thermal().map(|t| t.terms.clone()).unwrap_or_default();
     if base.is_empty() {
-        return Err(Error::Usage(format!(
-            "{machine_file}: no thermal terms to identify; add a `thermal:` section with \
+        return Err(Error::Machine(crate::error::Located::whole_file(
+            machine_file,
+            "no thermal terms to identify; add a `thermal:` section with \
              `time_constant_min` and the `terms` (DH length ← joint power, Paper B Table 2: \
-             a2 ← P1, P2; d4 ← P1, P2, P3; a3 ← P2, P3) with start values"
+             a2 ← P1, P2; d4 ← P1, P2, P3; a3 ← P2, P3) with start values",
         )));
     }
     if !obs.rows.iter().any(|r| row_powers(r).is_some()) {
-        return Err(Error::Usage(format!(
+        return Err(Error::Data(format!(
             "{obs_file}: no row gives joint powers (p1_w…p6_w); thermal calibration needs \
              rows measured at the steady state of several power levels"
         )));
@@ -467,7 +474,7 @@ pub fn calibrate_thermal(
     let n = unknowns.n();
     let m = 3 * fit.len();
     if m < 2 * n {
-        return Err(Error::Usage(format!(
+        return Err(Error::Data(format!(
             "{obs_file}: {} rows left for the fit ({m} equations) for {n} parameters; \
              thermal calibration needs at least {} rows, better several times more",
             fit.len(),
@@ -488,7 +495,7 @@ pub fn calibrate_thermal(
     };
     let (free, absorbed) = screen_unknowns(&unknowns, obs, &fit, &candidates, &lm_opts, obs_file)?;
     if free.iter().all(|&k| k >= unknowns.n_model()) {
-        return Err(Error::Usage(format!(
+        return Err(Error::Data(format!(
             "{obs_file}: no thermal parameter can be identified from these rows: \
              measure at several power levels of the joints the terms name"
         )));
@@ -503,7 +510,7 @@ pub fn calibrate_thermal(
         FD_STEP,
         &lm_opts,
     )
-    .map_err(|e| Error::Usage(format!("{obs_file}: {e}")))?;
+    .map_err(|e| data_error(obs_file, e))?;
     let sol = &fit_result.solution;
     let id = &sol.identifiability;
     check_condition(id, obs_file)?;
@@ -522,21 +529,33 @@ pub fn calibrate_thermal(
         }
     }
     let terms = terms_with(&base, &full);
-    let (f_start, f_end) = (unknowns.frame_at(&[]), unknowns.frame_at(&full));
+    let f_start = unknowns.frame_at(&[]);
+    let frame = match unknowns.frame {
+        Some(_) => {
+            let at = |k: usize| free.iter().position(|&f| f == k);
+            let frame_cols: Vec<usize> = (unknowns.n_model()..n).filter_map(at).collect();
+            let fixed: Vec<usize> = (0..unknowns.n_model())
+                .filter(|&j| withheld.get(j) == Some(&true))
+                .filter_map(at)
+                .collect();
+            let joint = conditional_uncertainty(sol.covariance.as_ref(), &frame_cols, &fixed);
+            Some(if fixed.is_empty() {
+                (unknowns.frame_at(&full), joint)
+            } else {
+                let (meas, model) = robot_points(robot, &terms, obs, &fit, obs_file)?;
+                refit(&meas, &model, joint, obs_file)?
+            })
+        }
+        None => None,
+    };
+    let f_end = frame.map_or(Isometry3::identity(), |(f, _)| f);
     let before = norms(robot, &base, &f_start, obs, &hold, obs_file)?;
     let after = norms(robot, &terms, &f_end, obs, &hold, obs_file)?;
-    let frame = unknowns
-        .frame
-        .map(|_| frame_estimate(&unknowns, &f_end, &free, u_red.as_ref()));
-    let yaml = write_terms(
-        text,
-        machine_file,
-        &terms,
-        frame.as_ref(),
-        &absorbed,
-        &params,
-        &mut notes,
-    )?;
+    let names: Vec<String> = absorbed
+        .iter()
+        .filter_map(|&k| params.get(k).map(|p| p.name.clone()))
+        .collect();
+    let (yaml, frame) = write_terms(text, machine_file, &terms, frame, &names, &mut notes)?;
     Machine::from_yaml_str(&yaml, machine_file)
         .map_err(|e| super::screen::implausible(&e, obs_file, obs.rows.len()))?;
     notes.extend(world);
@@ -627,7 +646,7 @@ fn tool_unknowns(
         }
     }
     if unknowns.is_empty() {
-        return Err(Error::Usage(format!(
+        return Err(Error::Data(format!(
             "{obs_file}: no thermal gain can be identified: the rows need spindle_w (or pX_w \
              for an axis with a thermal.axes entry) at several power levels"
         )));
@@ -685,10 +704,11 @@ fn tool_design(
 }
 
 /// Solves the machine-tool thermal problem; for instrument data the frame
-/// is found with the gains: the model columns the frame explains are
-/// zeroed (they keep the file's value) and the linearisation of the frame
-/// is repeated once at the first solution. Returns the solution, the
-/// final frame and the model columns the frame absorbs.
+/// is found with the gains: the model columns the frame explains (to within
+/// [`FRAME_RANK_RTOL`]) are zeroed (they keep the file's value) and the
+/// linearisation of the frame is repeated once at the first solution.
+/// Returns the solution, the final frame and the model columns the frame
+/// absorbs.
 fn solve_tool(
     machine: &Machine,
     tool: &MachineTool,
@@ -699,33 +719,64 @@ fn solve_tool(
     obs_file: &str,
 ) -> Result<(Solution, Option<Isometry3<f64>>, Vec<usize>)> {
     let lsq = LsqOptions::default();
-    let solve = |a: &DMatrix<f64>, b: &DVector<f64>| {
-        solve_linear(a, b, &lsq).map_err(|e| Error::Usage(format!("{obs_file}: {e}")))
-    };
+    let solve = |a: &DMatrix<f64>, b: &DVector<f64>| solve_for(a, b, &lsq, obs_file);
     let nu = unknowns.len();
-    let Some(mut f) = f0 else {
+    let Some(f) = f0 else {
         let (a, b) = tool_design(machine, tool, obs, fit, unknowns, None, obs_file)?;
         return Ok((solve(&a, &b)?, None, Vec::new()));
     };
     let (a, b) = tool_design(machine, tool, obs, fit, unknowns, Some(&f), obs_file)?;
     let jm = a.columns(0, nu).into_owned();
     let jf = a.columns(nu, FRAME_PARAMS).into_owned();
-    let (given, plain) = screen_model(&jm, Some(&jf), &b, &lsq)
-        .map_err(|e| Error::Usage(format!("{obs_file}: {e}")))?;
+    let screen = LsqOptions {
+        rank_rtol: FRAME_RANK_RTOL,
+        scale_columns: true,
+    };
+    let (given, plain) =
+        screen_model(&jm, Some(&jf), &b, &screen).map_err(|e| data_error(obs_file, e))?;
     let absorbed: Vec<usize> = given.into_iter().filter(|c| !plain.contains(c)).collect();
-    let mut sol = None;
-    for _ in 0..2 {
-        let (mut a, b) = tool_design(machine, tool, obs, fit, unknowns, Some(&f), obs_file)?;
+    // The solution at `f`, and the frame moved to it.
+    let step = |f: &Isometry3<f64>| -> Result<(Solution, Isometry3<f64>)> {
+        let (mut a, b) = tool_design(machine, tool, obs, fit, unknowns, Some(f), obs_file)?;
         for &c in &absorbed {
             a.column_mut(c).fill(0.0);
         }
         let s = solve(&a, &b)?;
         let d: Vec<f64> = (nu..nu + FRAME_PARAMS).map(|k| s.params[k]).collect();
-        f = frame_with(&f, &d);
-        sol = Some(s);
+        let moved = frame_with(f, &d);
+        Ok((s, moved))
+    };
+    let (_, f1) = step(&f)?;
+    let (sol, f2) = step(&f1)?;
+    Ok((sol, Some(f2), absorbed))
+}
+
+/// The instrument frame written with the machine-tool gains of
+/// `calibrated`, with its uncertainties: the joint fit's frame `f`
+/// (columns `nu..` of `sol`) when every identified gain is written, else
+/// the frame re-solved alone for the written gains (those at `withheld`
+/// keep the file's value, [`refit`]).
+fn tool_frame(
+    calibrated: &Machine,
+    obs: &Observations,
+    fit: &[usize],
+    (f, sol): (Isometry3<f64>, &Solution),
+    nu: usize,
+    withheld: &[usize],
+    obs_file: &str,
+) -> Result<(Isometry3<f64>, Option<[f64; FRAME_PARAMS]>)> {
+    let frame_cols: Vec<usize> = (nu..nu + FRAME_PARAMS).collect();
+    let joint = conditional_uncertainty(sol.covariance.as_ref(), &frame_cols, withheld);
+    if withheld.is_empty() {
+        return Ok((f, joint));
     }
-    let sol = sol.ok_or_else(|| Error::Usage(format!("{obs_file}: nothing solved")))?;
-    Ok((sol, Some(f), absorbed))
+    let mut meas = Vec::with_capacity(fit.len());
+    let mut model = Vec::with_capacity(fit.len());
+    for row in fit.iter().filter_map(|&i| obs.rows.get(i)) {
+        meas.push(row.measured_mm);
+        model.push(forward::predict(calibrated, row, obs_file)?.measured(obs.measured));
+    }
+    refit(&meas, &model, joint, obs_file)
 }
 
 /// Identifies the steady-state thermal gains of a machine-tool file: spindle
@@ -753,7 +804,7 @@ pub fn calibrate_tool_thermal(
     let instrument = obs.frame == MeasurementFrame::Instrument;
     let nf = if instrument { FRAME_PARAMS } else { 0 };
     if m < 2 * (unknowns.len() + nf) {
-        return Err(Error::Usage(format!(
+        return Err(Error::Data(format!(
             "{obs_file}: {} rows left for the fit; too few",
             fit.len()
         )));
@@ -766,13 +817,14 @@ pub fn calibrate_tool_thermal(
     let (sol, frame, absorbed) = solve_tool(machine, tool, obs, &fit, &unknowns, f0, obs_file)?;
     let id = &sol.identifiability;
     if id.condition_number_identified > CONDITION_LIMIT {
-        return Err(Error::Usage(format!(
+        return Err(Error::Data(format!(
             "{obs_file}: badly conditioned data set: condition number {:.3e} > {:.0e}",
             id.condition_number_identified, CONDITION_LIMIT
         )));
     }
     let u = sol.std_uncertainty();
     let mut params = Vec::new();
+    let mut withheld = Vec::new();
     let mut yaml = text.to_string();
     for (c, &k) in unknowns.iter().enumerate() {
         let fixed = id.unidentifiable.contains(&c);
@@ -793,6 +845,9 @@ pub fn calibrate_tool_thermal(
                 fixed,
             };
             let write = !fixed && !opts.honesty.withholds(&est);
+            if !fixed && !write {
+                withheld.push(c);
+            }
             params.push(est);
             if write {
                 yaml = super::yaml_edit::set_spindle_growth(
@@ -815,6 +870,9 @@ pub fn calibrate_tool_thermal(
                 fixed,
             };
             let write = !fixed && !opts.honesty.withholds(&est);
+            if !fixed && !write {
+                withheld.push(c);
+            }
             params.push(est);
             if write {
                 yaml = super::yaml_edit::set_axis_scale(&yaml, machine_file, name, start + delta)?;
@@ -825,27 +883,42 @@ pub fn calibrate_tool_thermal(
         "rows are at the thermal steady state of their powers: time constants are not identified"
             .into(),
     );
-    let nu = unknowns.len();
-    let frame_est = frame.map(|f| {
-        let u = u
-            .as_ref()
-            .map(|u| std::array::from_fn(|o| u.get(nu + o).copied().unwrap_or(f64::NAN)));
-        estimate(&f, u)
-    });
-    if let Some(f) = &frame_est {
-        yaml = set_measurement_frame(&yaml, machine_file, f.xyz_mm, f.rpy_deg)?;
-        let names: Vec<String> = absorbed
-            .iter()
-            .filter_map(|&c| params.get(c).map(|p| p.name.clone()))
-            .collect();
-        notes.extend(absorbed_note(
-            &names,
-            "a growth that moves every point alike moves the frame's origin",
-        ));
-        notes.push(IDENTIFIED_NOTE.into());
-    }
     let uncertain = opts.honesty.uncertain(&params);
+    // The frame goes with the gains as written (measurement_frame itself
+    // plays no part in a prediction).
     let calibrated = Machine::from_yaml_str(&yaml, machine_file)?;
+    let frame = match frame {
+        Some(f) => Some(tool_frame(
+            &calibrated,
+            obs,
+            &fit,
+            (f, &sol),
+            unknowns.len(),
+            &withheld,
+            obs_file,
+        )?),
+        None => None,
+    };
+    let frame_est = match frame {
+        Some((f, u)) => {
+            let names: Vec<String> = absorbed
+                .iter()
+                .filter_map(|&c| params.get(c).map(|p| p.name.clone()))
+                .collect();
+            let (edited, est) = finish(
+                &yaml,
+                machine_file,
+                &f,
+                u,
+                &names,
+                "a growth that moves every point alike moves the frame's origin",
+                &mut notes,
+            )?;
+            yaml = edited;
+            Some(est)
+        }
+        None => None,
+    };
     let id_frame = Isometry3::identity();
     let before = machine_norms(
         machine,
@@ -856,7 +929,7 @@ pub fn calibrate_tool_thermal(
     )?;
     let after = machine_norms(
         &calibrated,
-        frame.as_ref().unwrap_or(&id_frame),
+        &frame.map_or(id_frame, |(f, _)| f),
         obs,
         &hold,
         obs_file,

@@ -83,7 +83,7 @@ fn in_reference_frame(
     let all: Vec<usize> = (0..obs.rows.len()).collect();
     let distinct = crate::calibrate::screen::distinct_poses(&obs, &all);
     if distinct < MIN_DISTINCT_POSES {
-        return Err(Error::Usage(format!(
+        return Err(Error::Data(format!(
             "{file}: {distinct} distinct pose(s) in {} rows (repeats count once); diagnosis \
              needs at least {MIN_DISTINCT_POSES} different poses",
             obs.rows.len()
@@ -101,7 +101,7 @@ fn in_reference_frame(
             .collect::<Result<_>>()?;
         let meas: Vec<nalgebra::Vector3<f64>> = obs.rows.iter().map(|r| r.measured_mm).collect();
         let f = register(&meas, &model).ok_or_else(|| {
-            Error::Usage(format!(
+            Error::Data(format!(
                 "{file}: the measured points lie on a line or are too few: the instrument frame cannot be registered"
             ))
         })?;

@@ -374,7 +374,7 @@ pub fn diagnose(
     };
     let rows = &obs.rows;
     if rows.len() < 4 {
-        return Err(Error::Usage(format!(
+        return Err(Error::Data(format!(
             "{obs_file}: {} rows; diagnose needs at least 4",
             rows.len()
         )));
