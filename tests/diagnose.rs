@@ -904,3 +904,52 @@ fn instrument_frame_names_the_same_missing_effect() {
         .collect();
     assert!((nums[0] - 1.0).abs() <= K_SIGMA * nums[1], "{line}");
 }
+
+/// Rows with a measured orientation: diagnose says that it compares
+/// positions only, and names the same missing effect as without them.
+#[test]
+fn measured_orientations_are_said_to_be_unused() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let run = |extra: &[&str], name: &str| -> String {
+        let out = dir.path().join(name);
+        postproc()
+            .args([
+                "simulate",
+                "--decimals",
+                "9",
+                "--noise-um",
+                "15",
+                "--seed",
+                "31",
+            ])
+            .args(extra)
+            .arg("--machine")
+            .arg(repo("samples/diagnose/true.yaml"))
+            .arg("--observations")
+            .arg(repo("samples/diagnose/measured.csv"))
+            .arg("-o")
+            .arg(&out)
+            .assert()
+            .success();
+        let a = postproc()
+            .args(["diagnose", "-q", "--machine"])
+            .arg(repo("samples/diagnose/model.yaml"))
+            .arg("--observations")
+            .arg(&out)
+            .assert()
+            .success();
+        String::from_utf8_lossy(&a.get_output().stdout).to_string()
+    };
+    let plain = run(&[], "plain.csv");
+    let oriented = run(&["--orientation"], "oriented.csv");
+    let note = "diagnose compares positions only";
+    assert!(!plain.contains(note), "{plain}");
+    assert!(oriented.contains(note), "{oriented}");
+    let verdict = |out: &str| -> String {
+        out.lines()
+            .find(|l| l.starts_with("VERDICT:"))
+            .unwrap_or_else(|| panic!("verdict in\n{out}"))
+            .to_string()
+    };
+    assert_eq!(verdict(&oriented), verdict(&plain), "{oriented}");
+}

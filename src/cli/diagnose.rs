@@ -93,6 +93,13 @@ fn in_reference_frame(
     if let Some(w) = world {
         said.push_str(&format!("note: {w}\n"));
     }
+    let oriented = obs.rows.iter().filter(|r| r.orientation.is_some()).count();
+    if oriented > 0 {
+        said.push_str(&format!(
+            "note: {oriented} row(s) carry a measured orientation (qw, qx, qy, qz); diagnose \
+             compares positions only (calibrate kinematics fits orientations too)\n"
+        ));
+    }
     if obs.frame == MeasurementFrame::Instrument {
         let model: Vec<nalgebra::Vector3<f64>> = obs
             .rows
