@@ -41,12 +41,13 @@
 //! Rows whose deleted residual marks them as outliers
 //! ([`super::screen::dominating_rows`]) leave the fit, named. Uncertain
 //! parameters ([`super::honesty`]) keep the file's value in the written
-//! file and its validation.
+//! file and its validation; the instrument frame is then solved again alone
+//! for the corrections written, and that frame is written and validated.
 
 use nalgebra::{DMatrix, DVector, Isometry3, Translation3};
 
 use crate::calibrate::lsq::{
-    LmOptions, LsqOptions, data_error, expand_free, fit_free, forward_jacobian_free,
+    LmOptions, LsqOptions, Solution, data_error, expand_free, fit_free, forward_jacobian_free,
     numeric_jacobian, solve_linear,
 };
 use crate::error::{Error, Result};
@@ -55,8 +56,8 @@ use crate::machine::robot::{DhParams, Model, Robot};
 
 use super::forward::{check_kind, predict};
 use super::frame::{
-    FRAME_NAMES, FRAME_PARAMS, IDENTIFIED_NOTE, absorbed_note, estimate, frame_with, screen_model,
-    start_frame, world_note, world_to_reference,
+    FRAME_NAMES, FRAME_PARAMS, IDENTIFIED_NOTE, absorbed_note, conditional_uncertainty, estimate,
+    frame_with, screen_model, start_frame, world_note, world_to_reference,
 };
 use super::observations::{MeasuredKind, MeasurementFrame, Observation, Observations, Pose};
 use super::report::{CONDITION_LIMIT, Calibration, Estimate, FrameEstimate, Validation};
@@ -717,6 +718,16 @@ pub fn calibrate_kinematics(
             *x = 0.0;
         }
     }
+    let frame_u = written_frame(
+        &layout,
+        obs,
+        &fit,
+        &mut full,
+        (sol, &free),
+        &withheld,
+        &lm_opts,
+        obs_file,
+    )?;
     let calibrated_robot = layout.robot(&full);
     let calibrated = Machine::Robot(calibrated_robot.clone());
     let f_start = layout.frame_at(&[]);
@@ -727,10 +738,7 @@ pub fn calibrate_kinematics(
     let after = row_norms(&calibrated, &f_end, obs, &hold, obs_file)?;
     let fit_before = row_norms(&machine, &f_start, obs, &fit, obs_file)?;
     let fit_after = row_norms(&calibrated, &f_end, obs, &fit, obs_file)?;
-    let frame = layout.frame.map(|_| {
-        let u: Option<Vec<f64>> = (0..FRAME_PARAMS).map(|o| u_of(nm + o)).collect();
-        estimate(&f_end, u.and_then(|u| u.try_into().ok()))
-    });
+    let frame = layout.frame.map(|_| estimate(&f_end, frame_u));
     let yaml = write_yaml(
         text,
         machine_file,
@@ -763,6 +771,77 @@ pub fn calibrate_kinematics(
     cal.set_identifiability(id);
     cal.check_validation();
     Ok(cal)
+}
+
+/// The instrument frame written with the model written: `full` holds the
+/// joint fit's corrections with the withheld ones (`withheld`, the honesty
+/// rule's flags per model parameter) at zero. When nothing is withheld the
+/// joint fit's frame stays; otherwise the frame alone is solved again
+/// (Levenberg–Marquardt from the joint fit's frame) against that model on
+/// the fit rows, with the residuals of the fit (positions and, weighted the
+/// same, measured orientations), and its parameters in `full` replaced.
+/// Returns the frame's standard uncertainties (origin mm, small rotations
+/// mrad): per component the larger of the frame-alone fit's own and those
+/// of the joint fit `sol` (over the parameters `free`) conditioned on the
+/// withheld values ([`conditional_uncertainty`]). `None` without an
+/// instrument frame.
+#[allow(clippy::too_many_arguments)]
+fn written_frame(
+    layout: &Layout,
+    obs: &Observations,
+    fit: &[usize],
+    full: &mut [f64],
+    (sol, free): (&Solution, &[usize]),
+    withheld: &[bool],
+    lm_opts: &LmOptions,
+    obs_file: &str,
+) -> Result<Option<[f64; FRAME_PARAMS]>> {
+    if layout.frame.is_none() {
+        return Ok(None);
+    }
+    let (nm, n) = (layout.n_model(), layout.n());
+    let at = |k: usize| free.iter().position(|&f| f == k);
+    let frame_cols: Option<Vec<usize>> = (nm..n).map(at).collect();
+    let fixed: Vec<usize> = (0..nm)
+        .filter(|&k| withheld.get(k) == Some(&true))
+        .filter_map(at)
+        .collect();
+    let joint =
+        frame_cols.and_then(|c| conditional_uncertainty(sol.covariance.as_ref(), &c, &fixed));
+    if fixed.is_empty() {
+        return Ok(joint);
+    }
+    let written = full.to_vec();
+    let frame_idx: Vec<usize> = (nm..n).collect();
+    let (_, m) = offsets(layout, obs, fit);
+    let mut y = written.clone();
+    let fr = fit_free(
+        |x, out| {
+            for k in nm..n {
+                y[k] = written[k] + x.get(k).copied().unwrap_or(0.0);
+            }
+            residuals(layout, obs, fit, &y, out, obs_file);
+        },
+        n,
+        &frame_idx,
+        m,
+        FD_STEP,
+        lm_opts,
+    )
+    .map_err(|e| data_error(obs_file, e))?;
+    for (o, d) in fr.solution.params.iter().enumerate() {
+        if let Some(v) = full.get_mut(nm + o) {
+            *v += d;
+        }
+    }
+    let own: Option<[f64; FRAME_PARAMS]> = fr
+        .solution
+        .std_uncertainty()
+        .and_then(|u| u.as_slice().try_into().ok());
+    Ok(match (own, joint) {
+        (Some(a), Some(b)) => Some(std::array::from_fn(|k| a[k].max(b[k]))),
+        (a, b) => a.or(b),
+    })
 }
 
 /// The outcome of the identifiability screen on the fit rows.
