@@ -7,9 +7,10 @@
 //!
 //! What is understood: data declarations (robtarget, jointtarget, tooldata,
 //! wobjdata, speeddata, zonedata, num, bool, arrays of them), routines
-//! (`PROC`, `FUNC`, `TRAP`) and the motion instructions `MoveL`, `MoveJ`,
-//! `MoveC`, `MoveAbsJ` with their targets (named, array element, inline
-//! literal, `Offs`, `RelTool`). Every other statement is kept as an opaque
+//! (`PROC`, `FUNC`, `TRAP`) and the motion instructions of
+//! [`instructions::MOTION_INSTRUCTIONS`] (`MoveL`, `MoveJ`, `MoveC`,
+//! `MoveAbsJ`, `MoveLDO`, `TriggL`, `SearchL`, `ArcL`, …) with their
+//! targets (named, array element, inline literal, `Offs`, `RelTool`). Every other statement is kept as an opaque
 //! statement with its span. Record types (`RECORD … ENDRECORD`) are kept
 //! with their fields, array sizes with their constant expressions, and a
 //! routine that holds an editor placeholder (`<SMT>`, `<EXP>`, …) is
@@ -17,6 +18,7 @@
 //! `grammar/rapid.md`. Keywords are case-insensitive, as in RAPID.
 
 pub mod directives;
+pub mod instructions;
 mod parser;
 pub mod resolve;
 mod typed;
@@ -507,7 +509,9 @@ impl Target {
     }
 }
 
-/// Which motion instruction.
+/// How a motion instruction moves the TCP (the instruction itself, with
+/// its own argument order, is named by [`Move::name`]; see
+/// [`instructions::MOTION_INSTRUCTIONS`]).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum MoveKind {
     /// `MoveL`: linear.
@@ -535,17 +539,21 @@ impl MoveKind {
 /// A motion instruction with its arguments.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Move {
-    /// Which instruction.
+    /// The instruction's name in its canonical spelling (`MoveL`,
+    /// `MoveLDO`, `ArcL`, …), for messages, reports and annotations.
+    pub name: &'static str,
+    /// How it moves: what prediction and compensation use.
     pub kind: MoveKind,
-    /// The circle point of a `MoveC` (boxed: only `MoveC` has one, and a
-    /// `Target` is as large as an inline robtarget).
+    /// The circle point of a circular move (boxed: only those have one,
+    /// and a `Target` is as large as an inline robtarget).
     pub via: Option<Box<Target>>,
     /// The target (`ToPoint`, or `ToJointPos` for `MoveAbsJ`).
     pub target: Target,
     /// Speed argument (`v100`).
     pub speed: Arg,
-    /// Zone argument (`z10`, `fine`).
-    pub zone: Arg,
+    /// Zone argument (`z10`, `fine`); `None` for an instruction without
+    /// one (`SearchL`, `SearchC`).
+    pub zone: Option<Arg>,
     /// Tool argument.
     pub tool: Arg,
     /// Value of `\WObj:=`.
