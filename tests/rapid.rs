@@ -1062,3 +1062,21 @@ fn grammar_motion_table_is_the_parsers() {
     let first = m.moves().next().expect("a move");
     assert_eq!((&*first.speed.text, &*first.tool.text), ("v200", "tool1"));
 }
+
+#[test]
+fn motion_like_statements_to_declared_robtargets_are_listed() {
+    let src = "MODULE M\n  CONST robtarget p10 := [[1,2,3],[1,0,0,0],[0,0,0,0],[9E9,9E9,9E9,9E9,9E9,9E9]];\n  PROC main()\n    VAR robtarget pLocal;\n    SpotL p10, vmax, spot1, gun1, tool1;\n    PaintL pLocal, v100, z1, tool1;\n    SpotL pOther, vmax, spot1, gun1, tool1;\n    MoveL p10, v100, z1, tool1;\n    MoveExtJ jt1, v100, fine;\n    TPWrite \"SpotL p10\";\n    MoveLx := p10;\n    SearchJ \\Stop, di1, pLocal, p10, v100, tool1;\n  ENDPROC\nENDMODULE\n";
+    let m = parse(src);
+    let got: Vec<(String, usize)> = m
+        .unknown_motions(src)
+        .into_iter()
+        .map(|u| (u.name, u.line))
+        .collect();
+    let want = [("SpotL", 5), ("PaintL", 6), ("SearchJ", 12)].map(|(n, l)| (n.to_string(), l));
+    assert_eq!(got, want);
+    // The modules of the grammar examples and the samples hold none.
+    for name in ["samples/drilling.mod", "samples/milling.mod"] {
+        let text = std::fs::read_to_string(repo(name)).expect("sample");
+        assert!(parse(&text).unknown_motions(&text).is_empty(), "{name}");
+    }
+}

@@ -727,6 +727,121 @@ impl Module {
             .filter(|p| p.placeholder)
             .flat_map(Proc::moves)
     }
+
+    /// The opaque statements of `src` (the text this module was parsed
+    /// from) that look like a motion instruction not in
+    /// [`instructions::MOTION_INSTRUCTIONS`] — a first word starting with
+    /// one of [`MOTION_LIKE_PREFIXES`] — and name a robtarget declared in
+    /// the module or in their routine (`SpotL p10, …`): they are passed
+    /// through as written and not compensated. In source order.
+    pub fn unknown_motions(&self, src: &str) -> Vec<UnknownMotion> {
+        let module_targets: Vec<&str> = robtarget_names(self.decls.iter());
+        let mut out = Vec::new();
+        for p in &self.procs {
+            let local_targets = robtarget_names(p.body.iter().filter_map(|s| match s {
+                Stmt::Decl(d) => Some(d.as_ref()),
+                _ => None,
+            }));
+            for s in &p.body {
+                let Stmt::Opaque { span, line } = s else {
+                    continue;
+                };
+                let Some(text) = src.get(span.clone()) else {
+                    continue;
+                };
+                let Some(name) = motion_like_word(text) else {
+                    continue;
+                };
+                let names_target = words(&text[name.len()..]).any(|w| {
+                    module_targets
+                        .iter()
+                        .chain(&local_targets)
+                        .any(|t| t.eq_ignore_ascii_case(w))
+                });
+                if names_target {
+                    out.push(UnknownMotion {
+                        name: name.to_string(),
+                        line: *line,
+                    });
+                }
+            }
+        }
+        out
+    }
+}
+
+/// First-word prefixes of the instructions that may move the TCP to a
+/// robtarget (`Move…`, `Trigg…`, `Search…`, `Arc…`, `Spot…`, `Paint…`,
+/// `Cap…`), matched case-insensitively.
+pub const MOTION_LIKE_PREFIXES: &[&str] =
+    &["Move", "Trigg", "Search", "Arc", "Spot", "Paint", "Cap"];
+
+/// A statement that looks like a motion instruction to a declared
+/// robtarget but is not in the table of motion instructions.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct UnknownMotion {
+    /// Its first word as written (`SpotL`).
+    pub name: String,
+    /// 1-based line of its first byte.
+    pub line: usize,
+}
+
+/// The names of the robtarget declarations of `decls`.
+fn robtarget_names<'a>(decls: impl Iterator<Item = &'a Decl>) -> Vec<&'a str> {
+    decls
+        .filter(|d| d.data_type == DataType::RobTarget)
+        .map(|d| d.name.as_str())
+        .collect()
+}
+
+/// The first word of `text` when it starts with a motion-like prefix and
+/// is used as an instruction (not assigned: no `:=` right after it).
+fn motion_like_word(text: &str) -> Option<&str> {
+    let n = text
+        .bytes()
+        .take_while(|b| b.is_ascii_alphanumeric() || *b == b'_')
+        .count();
+    let word = text.get(..n)?;
+    let prefixed = MOTION_LIKE_PREFIXES.iter().any(|p| {
+        word.len() > p.len()
+            && word
+                .get(..p.len())
+                .is_some_and(|h| h.eq_ignore_ascii_case(p))
+    });
+    let assigned = text.get(n..)?.trim_start().starts_with(":=");
+    (prefixed && !assigned).then_some(word)
+}
+
+/// The identifiers of `text`, outside strings and `!` comments.
+fn words(text: &str) -> impl Iterator<Item = &str> {
+    let mut in_string = false;
+    let mut in_comment = false;
+    let mut start = None;
+    let mut out = Vec::new();
+    for (k, c) in text.char_indices() {
+        let ident = c.is_ascii_alphanumeric() || c == '_';
+        if let Some(s) = start
+            && !ident
+        {
+            out.push(&text[s..k]);
+            start = None;
+        }
+        if in_comment {
+            in_comment = c != '\n';
+        } else if in_string {
+            in_string = c != '"';
+        } else if c == '"' {
+            in_string = true;
+        } else if c == '!' {
+            in_comment = true;
+        } else if ident && start.is_none() {
+            start = Some(k);
+        }
+    }
+    if let Some(s) = start {
+        out.push(&text[s..]);
+    }
+    out.into_iter()
 }
 
 /// Byte offset of the `!` that starts a RAPID comment on `line` (outside
