@@ -195,7 +195,7 @@ fn sample_module_structure() {
     let drill = m.moves().nth(4).expect("fifth move");
     assert_eq!(drill.kind, MoveKind::MoveL);
     assert_eq!(&*drill.speed.text, "vDrill");
-    assert_eq!(&*drill.zone.text, "fine");
+    assert_eq!(&*drill.zone.as_ref().unwrap().text, "fine");
     assert_eq!(&*drill.tool.text, "tDrill");
     assert_eq!(drill.wobj.as_ref().map(|a| &*a.text), Some("wPlate"));
     let Target::Offs { base, offsets, .. } = &drill.target else {
@@ -242,7 +242,7 @@ fn optional_arguments_with_and_without_comma() {
     assert_eq!(moves.len(), 4);
     for mv in &moves[..2] {
         assert_eq!(&*mv.speed.text, "v100");
-        assert_eq!(&*mv.zone.text, "z10");
+        assert_eq!(&*mv.zone.as_ref().unwrap().text, "z10");
         assert_eq!(&*mv.tool.text, "tool1");
         assert_eq!(mv.wobj.as_ref().map(|a| &*a.text), Some("wobj1"));
         assert_eq!(mv.tload.as_ref().map(|a| &*a.text), Some("load1"));
@@ -752,7 +752,7 @@ fn error_lists_and_compact_ifs_are_read() {
         mv.target.span(),
         src.find("pHome").map(|k| k..k + 5).expect("pHome")
     );
-    assert_eq!(mv.zone.text.as_ref(), "fine");
+    assert_eq!(mv.zone.as_ref().unwrap().text.as_ref(), "fine");
     assert!(matches!(&body[6], Stmt::Control { keyword, line: 13, .. } if keyword == "ERROR"));
     let trap = &m.procs[1].body;
     assert!(matches!(&trap[1], Stmt::Control { keyword, .. } if keyword == "ERROR"));
@@ -907,5 +907,176 @@ fn deep_compact_ifs_and_sizes_do_not_crash() {
             Ok(m) => assert_eq!(m.decls[0].dims[0].value, None),
             Err(e) => assert!(e.to_string().starts_with("t.mod:2:"), "{e}"),
         }
+    }
+}
+
+/// One call of each motion instruction of the table, its arguments named
+/// after their roles, with the role names it must parse to.
+#[test]
+fn every_motion_instruction_of_the_table_parses_its_roles() {
+    use postproc::program::rapid::instructions::{MOTION_INSTRUCTIONS, Role};
+    for instr in MOTION_INSTRUCTIONS {
+        let args: Vec<String> = instr
+            .args
+            .iter()
+            .enumerate()
+            .map(|(k, r)| match r {
+                Role::CirPoint => "pCir".to_string(),
+                Role::ToPoint => "pTo".to_string(),
+                Role::Speed => "vS".to_string(),
+                Role::Zone => "zZ".to_string(),
+                Role::Tool => "tT".to_string(),
+                Role::Other(_) => format!("other{k}"),
+            })
+            .collect();
+        let call = format!("{} {}\\WObj:=wW;", instr.name, args.join(", "));
+        let src = format!("MODULE M\nPROC main()\n  {call}\nENDPROC\nENDMODULE\n");
+        let m = parse(&src);
+        let mv = m.moves().next().unwrap_or_else(|| panic!("{call}: a move"));
+        assert_eq!(mv.name, instr.name);
+        assert_eq!(mv.kind, instr.kind, "{call}");
+        assert_eq!(&src[mv.span.clone()], call);
+        let named = |t: &Target| match t {
+            Target::Named { name, .. } => name.clone(),
+            other => panic!("{call}: {other:?}"),
+        };
+        assert_eq!(named(&mv.target), "pTo", "{call}");
+        assert_eq!(
+            mv.via.as_deref().map(named),
+            instr.position(Role::CirPoint).map(|_| "pCir".to_string())
+        );
+        assert_eq!(&*mv.speed.text, "vS", "{call}");
+        assert_eq!(&*mv.tool.text, "tT", "{call}");
+        let zone = mv.zone.as_ref().map(|z| z.text.to_string());
+        let want = instr.position(Role::Zone).map(|_| "zZ".to_string());
+        assert_eq!(zone, want, "{call}");
+        assert_eq!(mv.wobj.as_ref().map(|a| &*a.text), Some("wW"));
+        // Lower case is the same instruction.
+        let lower = src.to_lowercase();
+        let m = parse(&lower);
+        let mv = m.moves().next().expect("a move");
+        assert_eq!(mv.name, instr.name);
+        // One positional argument short is an error naming the signature.
+        let short = format!(
+            "MODULE M\nPROC main()\n  {} {};\nENDPROC\nENDMODULE\n",
+            instr.name,
+            args[..args.len() - 1].join(", ")
+        );
+        let said = parse_err(&short);
+        assert!(said.contains(&instr.signature()), "{said}");
+    }
+}
+
+#[test]
+fn motion_instructions_keep_their_name_and_move_like_their_kind() {
+    let src = "MODULE M\nPROC main()\n  MoveLDO p1, v100, z1, tool1, do1, 1;\n  TriggL p2, v100, trOn \\T2:=trOff, z1, tool1;\n  TriggC \\Conc, c3, p3, v100, trOn, fine, tool1;\n  SearchL \\Stop, diTouch, pFound, p4, v20, tool1;\n  SearchC \\SStop, diTouch, pFound, c5, p5, v20, tool1;\n  ArcLStart p6, v100, seam1, weld1\\Weave:=weave1, fine, tool1;\n  ArcC c7, p7, v100, seam1, weld1, z1, tool1;\n  MoveJSync p8, v100, z1, tool1, \"proc1\";\n  IF bOn MoveCDO c9, p9, v100, z1, tool1, do1, 0;\nENDPROC\nENDMODULE\n";
+    let m = parse(src);
+    let got: Vec<(&str, MoveKind, String, Option<String>)> = m
+        .moves()
+        .map(|mv| {
+            let name = |t: &Target| src[t.span()].to_string();
+            (
+                mv.name,
+                mv.kind,
+                name(&mv.target),
+                mv.via.as_deref().map(name),
+            )
+        })
+        .collect();
+    let c = |s: &str| Some(s.to_string());
+    let want = vec![
+        ("MoveLDO", MoveKind::MoveL, "p1".to_string(), None),
+        ("TriggL", MoveKind::MoveL, "p2".to_string(), None),
+        ("TriggC", MoveKind::MoveC, "p3".to_string(), c("c3")),
+        ("SearchL", MoveKind::MoveL, "p4".to_string(), None),
+        ("SearchC", MoveKind::MoveC, "p5".to_string(), c("c5")),
+        ("ArcLStart", MoveKind::MoveL, "p6".to_string(), None),
+        ("ArcC", MoveKind::MoveC, "p7".to_string(), c("c7")),
+        ("MoveJSync", MoveKind::MoveJ, "p8".to_string(), None),
+        ("MoveCDO", MoveKind::MoveC, "p9".to_string(), c("c9")),
+    ];
+    assert_eq!(got, want);
+    let moves: Vec<_> = m.moves().collect();
+    assert!(moves[1].opt("T2").is_some());
+    assert!(moves[2].conc);
+    assert!(moves[5].opt("Weave").is_some());
+    assert!(moves[8].condition.is_some());
+    // Words that only start like a motion instruction stay opaque.
+    let other = "MODULE M\nPROC main()\n  MoveLDOx p1, v100, z1, tool1;\n  ArcLStartup;\nENDPROC\nENDMODULE\n";
+    assert_eq!(parse(other).moves().count(), 0);
+}
+
+/// The motion instruction table of grammar/rapid.md is the parser's, row
+/// for row, and its example parses to the moves it describes.
+#[test]
+fn grammar_motion_table_is_the_parsers() {
+    use postproc::program::rapid::instructions::MOTION_INSTRUCTIONS;
+    let md = grammar();
+    let rows: Vec<&str> = md
+        .lines()
+        .skip_while(|l| !l.starts_with("### Motion instructions"))
+        .filter(|l| l.starts_with("| `"))
+        .take_while(|l| l.contains("` | "))
+        .collect();
+    assert_eq!(rows.len(), MOTION_INSTRUCTIONS.len(), "{rows:#?}");
+    for (row, instr) in rows.iter().zip(MOTION_INSTRUCTIONS) {
+        let kind = match instr.kind {
+            MoveKind::MoveL => "linear",
+            MoveKind::MoveJ => "joint",
+            MoveKind::MoveC => "circular",
+            MoveKind::MoveAbsJ => "absolute-joint",
+        };
+        let want = format!("| `{}` | {kind} | `{}` |", instr.name, instr.signature());
+        assert_eq!(*row, want);
+    }
+    let example = blocks(&md, "rapid")
+        .into_iter()
+        .find(|b| b.contains("MODULE Process"))
+        .expect("the process example");
+    let m = parse(&example);
+    let got: Vec<_> = m
+        .moves()
+        .map(|mv| {
+            let zone = mv.zone.as_ref().map(|z| z.text.to_string());
+            let via = mv.via.as_deref().map(|t| example[t.span()].to_string());
+            (
+                mv.name,
+                mv.kind,
+                example[mv.target.span()].to_string(),
+                via,
+                zone,
+            )
+        })
+        .collect();
+    let s = |x: &str| Some(x.to_string());
+    let want = vec![
+        ("MoveLDO", MoveKind::MoveL, "p10".into(), None, s("z5")),
+        ("TriggL", MoveKind::MoveL, "p20".into(), None, s("z1")),
+        ("ArcLStart", MoveKind::MoveL, "p30".into(), None, s("fine")),
+        ("ArcC", MoveKind::MoveC, "p40".into(), s("p35"), s("z1")),
+        ("ArcLEnd", MoveKind::MoveL, "p50".into(), None, s("fine")),
+        ("SearchL", MoveKind::MoveL, "p60".into(), None, None),
+        ("MoveJSync", MoveKind::MoveJ, "p70".into(), None, s("z50")),
+    ];
+    assert_eq!(got, want);
+    let first = m.moves().next().expect("a move");
+    assert_eq!((&*first.speed.text, &*first.tool.text), ("v200", "tool1"));
+}
+
+#[test]
+fn motion_like_statements_to_declared_robtargets_are_listed() {
+    let src = "MODULE M\n  CONST robtarget p10 := [[1,2,3],[1,0,0,0],[0,0,0,0],[9E9,9E9,9E9,9E9,9E9,9E9]];\n  PROC main()\n    VAR robtarget pLocal;\n    SpotL p10, vmax, spot1, gun1, tool1;\n    PaintL pLocal, v100, z1, tool1;\n    SpotL pOther, vmax, spot1, gun1, tool1;\n    MoveL p10, v100, z1, tool1;\n    MoveExtJ jt1, v100, fine;\n    TPWrite \"SpotL p10\";\n    MoveLx := p10;\n    SearchJ \\Stop, di1, pLocal, p10, v100, tool1;\n  ENDPROC\nENDMODULE\n";
+    let m = parse(src);
+    let got: Vec<(String, usize)> = m
+        .unknown_motions(src)
+        .into_iter()
+        .map(|u| (u.name, u.line))
+        .collect();
+    let want = [("SpotL", 5), ("PaintL", 6), ("SearchJ", 12)].map(|(n, l)| (n.to_string(), l));
+    assert_eq!(got, want);
+    // The modules of the grammar examples and the samples hold none.
+    for name in ["samples/drilling.mod", "samples/milling.mod"] {
+        let text = std::fs::read_to_string(repo(name)).expect("sample");
+        assert!(parse(&text).unknown_motions(&text).is_empty(), "{name}");
     }
 }

@@ -1037,3 +1037,81 @@ fn a_target_shared_with_an_unfinished_routine_keeps_its_value() {
         "the copy is declared:\n{out}"
     );
 }
+
+/// A module whose moves are a `MoveLDO`, a `TriggL`, an `ArcL` and a
+/// `SearchL` (plus a `SearchPoint` robtarget the controller writes).
+const PROCESS_MODULE: &str = "MODULE Process
+  PERS tooldata tDrill := [TRUE,[[0,0,182.5],[1,0,0,0]],[2.4,[0,0,85],[1,0,0,0],0.012,0.012,0.004]];
+  PERS wobjdata wPlate := [FALSE,TRUE,\"\",[[600,-200,350],[1,0,0,0]],[[0,0,0],[1,0,0,0]]];
+  CONST robtarget pA := [[100,50,40],[0,0,1,0],[-1,0,-1,0],[9E9,9E9,9E9,9E9,9E9,9E9]];
+  CONST robtarget pB := [[175,50,40],[0,0,1,0],[-1,0,-1,0],[9E9,9E9,9E9,9E9,9E9,9E9]];
+  CONST robtarget pC := [[175,150,40],[0,0,1,0],[-1,0,-1,0],[9E9,9E9,9E9,9E9,9E9,9E9]];
+  CONST robtarget pD := [[250,150,0],[0,0,1,0],[-1,0,-1,0],[9E9,9E9,9E9,9E9,9E9,9E9]];
+  VAR robtarget pFound := [[250,150,20],[0,0,1,0],[-1,0,-1,0],[9E9,9E9,9E9,9E9,9E9,9E9]];
+  VAR triggdata trOn;
+
+  PROC main()
+    MoveLDO pA, v100, z1, tDrill\\WObj:=wPlate, doOn, 1;
+    TriggL pB, v100, trOn, z1, tDrill\\WObj:=wPlate;
+    ArcL pC, v100, seam1, weld1\\Weave:=weave1, z1, tDrill\\WObj:=wPlate;
+    SearchL \\Stop, diTouch, pFound, pD, v20, tDrill\\WObj:=wPlate;
+  ENDPROC
+ENDMODULE
+";
+
+#[test]
+fn process_motion_instructions_are_compensated_and_nothing_else_changes() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let input = write(dir.path(), "process.mod", PROCESS_MODULE);
+    let machine = repo("machines/abb-irb1600.yaml");
+    let run = |out: &str, effects: &str| -> String {
+        let output = dir.path().join(out);
+        postproc()
+            .arg("compensate")
+            .arg(&input)
+            .arg("--machine")
+            .arg(&machine)
+            .args(["--effects", effects, "--annotate", "none", "-o"])
+            .arg(&output)
+            .assert()
+            .success();
+        text_without_header(&std::fs::read_to_string(&output).expect("output"))
+    };
+    assert_eq!(run("none.mod", "none"), PROCESS_MODULE);
+    let out = run("out.mod", "kinematic,gravity");
+    let (a, b): (Vec<&str>, Vec<&str>) = (PROCESS_MODULE.lines().collect(), out.lines().collect());
+    assert_eq!(a.len(), b.len(), "{out}");
+    let changed: Vec<&str> = a
+        .iter()
+        .zip(&b)
+        .filter(|(x, y)| x != y)
+        .map(|(x, _)| x.split(":=").next().unwrap_or("").trim())
+        .collect();
+    let want = [
+        "CONST robtarget pA",
+        "CONST robtarget pB",
+        "CONST robtarget pC",
+        "CONST robtarget pD",
+    ];
+    assert_eq!(changed, want, "{out}");
+    // The SearchPoint robtarget is left alone.
+    assert!(
+        out.contains("VAR robtarget pFound := [[250,150,20],"),
+        "{out}"
+    );
+    // The compensated targets, commanded, land on the programmed poses.
+    let m_in = parse_module(PROCESS_MODULE, "in").expect("input parses");
+    let m_out = parse_module(&out, "out").expect("output parses");
+    let robot = robot_with_drill();
+    for name in ["pA", "pB", "pC", "pD"] {
+        let (p_in, p_out) = (robtarget(&m_in, name, None), robtarget(&m_out, name, None));
+        assert_ne!(pose(p_in), pose(p_out), "{name} compensated");
+        let programmed = w_plate() * pose(p_in);
+        let q = robot
+            .ik_conf(&(w_plate() * pose(p_out)), conf(p_out))
+            .expect("controller IK");
+        let (dp, dr) = pose_error(&robot.predict(&q, Effects::ALL), &programmed);
+        assert_abs_diff_eq!(dp.norm(), 0.0, epsilon = POS_TOL_MM);
+        assert_abs_diff_eq!(dr.norm(), 0.0, epsilon = ROT_TOL_RAD);
+    }
+}

@@ -877,3 +877,40 @@ fn moves_in_compact_ifs_are_compensated() {
         assert!(got == want, "windows of {lines} lines");
     }
 }
+
+#[test]
+fn streamed_process_motion_instructions_give_the_bytes_of_the_whole_module() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let src = "MODULE Process\n  PERS tooldata tDrill := [TRUE,[[0,0,182.5],[1,0,0,0]],[2.4,[0,0,85],[1,0,0,0],0.012,0.012,0.004]];\n  PERS wobjdata wPlate := [FALSE,TRUE,\"\",[[600,-200,350],[1,0,0,0]],[[0,0,0],[1,0,0,0]]];\n  CONST robtarget pA := [[100,50,40],[0,0,1,0],[-1,0,-1,0],[9E9,9E9,9E9,9E9,9E9,9E9]];\n  CONST robtarget pD := [[250,150,0],[0,0,1,0],[-1,0,-1,0],[9E9,9E9,9E9,9E9,9E9,9E9]];\n  VAR robtarget pFound := [[250,150,20],[0,0,1,0],[-1,0,-1,0],[9E9,9E9,9E9,9E9,9E9,9E9]];\n  PROC main()\n    MoveLDO pA, v100, z1, tDrill\\WObj:=wPlate, doOn, 1;\n    TriggL [[175,50,40],[0,0,1,0],[-1,0,-1,0],[9E9,9E9,9E9,9E9,9E9,9E9]], v100, trOn, z1, tDrill\\WObj:=wPlate;\n    ArcL Offs(pA,75,100,0), v100, seam1, weld1\\Weave:=weave1, z1, tDrill\\WObj:=wPlate;\n    SearchL \\Stop, diTouch, pFound, pD, v20, tDrill\\WObj:=wPlate;\n  ENDPROC\nENDMODULE\n";
+    let input = dir.path().join("process.mod");
+    std::fs::write(&input, src).expect("write");
+    let m = repo("machines/abb-irb1600.yaml");
+    let (m, p) = (m.to_str().unwrap(), input.to_str().unwrap());
+    let whole = dir.path().join("whole.mod");
+    let (code, _, err) = run(&[
+        "compensate",
+        "--machine",
+        m,
+        "-o",
+        whole.to_str().unwrap(),
+        p,
+    ]);
+    assert_eq!(code, 0, "{err}");
+    let want = std::fs::read(&whole).expect("output");
+    assert_ne!(want, src.as_bytes());
+    for lines in ["1", "2", "5"] {
+        let streamed = dir.path().join(format!("s{lines}.mod"));
+        let out = streamed.to_str().unwrap();
+        let (code, _, err) = run_windowed("compensate", lines, &["--machine", m, "-o", out, p]);
+        assert_eq!(code, 0, "{err}");
+        assert!(
+            err.contains(&format!("read a window of {lines} lines at a time")),
+            "{err}"
+        );
+        assert_eq!(
+            std::fs::read(&streamed).expect("output"),
+            want,
+            "{lines} lines"
+        );
+    }
+}

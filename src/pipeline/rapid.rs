@@ -343,7 +343,7 @@ impl Rewriter<'_> {
             format!(
                 "target `{}` of {} at line {ml}",
                 self.src.get(target.span()).unwrap_or("?"),
-                mv.kind.name()
+                mv.name
             )
         };
         let Some(comp) = self.solve(view, programmed, IkSelect::Conf(u.conf), seed) else {
@@ -1049,7 +1049,7 @@ impl Carry {
                 "{}:{}: {} left as written: {}",
                 crate::error::Escaped(file),
                 m.line,
-                m.kind.name(),
+                m.name,
                 UNFINISHED_ROUTINE
             );
             self.as_written.push(AsWritten {
@@ -1546,7 +1546,7 @@ impl<'m> Rewriter<'m> {
         }
         carry.records.push(MoveRecord {
             line: mv.line,
-            kind: mv.kind.name(),
+            kind: mv.name,
             programmed_mm: self.last_tcp,
             deviation: *dev,
             wrench: state.wrench,

@@ -7,9 +7,10 @@
 //!
 //! What is understood: data declarations (robtarget, jointtarget, tooldata,
 //! wobjdata, speeddata, zonedata, num, bool, arrays of them), routines
-//! (`PROC`, `FUNC`, `TRAP`) and the motion instructions `MoveL`, `MoveJ`,
-//! `MoveC`, `MoveAbsJ` with their targets (named, array element, inline
-//! literal, `Offs`, `RelTool`). Every other statement is kept as an opaque
+//! (`PROC`, `FUNC`, `TRAP`) and the motion instructions of
+//! [`instructions::MOTION_INSTRUCTIONS`] (`MoveL`, `MoveJ`, `MoveC`,
+//! `MoveAbsJ`, `MoveLDO`, `TriggL`, `SearchL`, `ArcL`, …) with their
+//! targets (named, array element, inline literal, `Offs`, `RelTool`). Every other statement is kept as an opaque
 //! statement with its span. Record types (`RECORD … ENDRECORD`) are kept
 //! with their fields, array sizes with their constant expressions, and a
 //! routine that holds an editor placeholder (`<SMT>`, `<EXP>`, …) is
@@ -17,6 +18,7 @@
 //! `grammar/rapid.md`. Keywords are case-insensitive, as in RAPID.
 
 pub mod directives;
+pub mod instructions;
 mod parser;
 pub mod resolve;
 mod typed;
@@ -507,7 +509,9 @@ impl Target {
     }
 }
 
-/// Which motion instruction.
+/// How a motion instruction moves the TCP (the instruction itself, with
+/// its own argument order, is named by [`Move::name`]; see
+/// [`instructions::MOTION_INSTRUCTIONS`]).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum MoveKind {
     /// `MoveL`: linear.
@@ -535,17 +539,21 @@ impl MoveKind {
 /// A motion instruction with its arguments.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Move {
-    /// Which instruction.
+    /// The instruction's name in its canonical spelling (`MoveL`,
+    /// `MoveLDO`, `ArcL`, …), for messages, reports and annotations.
+    pub name: &'static str,
+    /// How it moves: what prediction and compensation use.
     pub kind: MoveKind,
-    /// The circle point of a `MoveC` (boxed: only `MoveC` has one, and a
-    /// `Target` is as large as an inline robtarget).
+    /// The circle point of a circular move (boxed: only those have one,
+    /// and a `Target` is as large as an inline robtarget).
     pub via: Option<Box<Target>>,
     /// The target (`ToPoint`, or `ToJointPos` for `MoveAbsJ`).
     pub target: Target,
     /// Speed argument (`v100`).
     pub speed: Arg,
-    /// Zone argument (`z10`, `fine`).
-    pub zone: Arg,
+    /// Zone argument (`z10`, `fine`); `None` for an instruction without
+    /// one (`SearchL`, `SearchC`).
+    pub zone: Option<Arg>,
     /// Tool argument.
     pub tool: Arg,
     /// Value of `\WObj:=`.
@@ -719,6 +727,121 @@ impl Module {
             .filter(|p| p.placeholder)
             .flat_map(Proc::moves)
     }
+
+    /// The opaque statements of `src` (the text this module was parsed
+    /// from) that look like a motion instruction not in
+    /// [`instructions::MOTION_INSTRUCTIONS`] — a first word starting with
+    /// one of [`MOTION_LIKE_PREFIXES`] — and name a robtarget declared in
+    /// the module or in their routine (`SpotL p10, …`): they are passed
+    /// through as written and not compensated. In source order.
+    pub fn unknown_motions(&self, src: &str) -> Vec<UnknownMotion> {
+        let module_targets: Vec<&str> = robtarget_names(self.decls.iter());
+        let mut out = Vec::new();
+        for p in &self.procs {
+            let local_targets = robtarget_names(p.body.iter().filter_map(|s| match s {
+                Stmt::Decl(d) => Some(d.as_ref()),
+                _ => None,
+            }));
+            for s in &p.body {
+                let Stmt::Opaque { span, line } = s else {
+                    continue;
+                };
+                let Some(text) = src.get(span.clone()) else {
+                    continue;
+                };
+                let Some(name) = motion_like_word(text) else {
+                    continue;
+                };
+                let names_target = words(&text[name.len()..]).any(|w| {
+                    module_targets
+                        .iter()
+                        .chain(&local_targets)
+                        .any(|t| t.eq_ignore_ascii_case(w))
+                });
+                if names_target {
+                    out.push(UnknownMotion {
+                        name: name.to_string(),
+                        line: *line,
+                    });
+                }
+            }
+        }
+        out
+    }
+}
+
+/// First-word prefixes of the instructions that may move the TCP to a
+/// robtarget (`Move…`, `Trigg…`, `Search…`, `Arc…`, `Spot…`, `Paint…`,
+/// `Cap…`), matched case-insensitively.
+pub const MOTION_LIKE_PREFIXES: &[&str] =
+    &["Move", "Trigg", "Search", "Arc", "Spot", "Paint", "Cap"];
+
+/// A statement that looks like a motion instruction to a declared
+/// robtarget but is not in the table of motion instructions.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct UnknownMotion {
+    /// Its first word as written (`SpotL`).
+    pub name: String,
+    /// 1-based line of its first byte.
+    pub line: usize,
+}
+
+/// The names of the robtarget declarations of `decls`.
+fn robtarget_names<'a>(decls: impl Iterator<Item = &'a Decl>) -> Vec<&'a str> {
+    decls
+        .filter(|d| d.data_type == DataType::RobTarget)
+        .map(|d| d.name.as_str())
+        .collect()
+}
+
+/// The first word of `text` when it starts with a motion-like prefix and
+/// is used as an instruction (not assigned: no `:=` right after it).
+fn motion_like_word(text: &str) -> Option<&str> {
+    let n = text
+        .bytes()
+        .take_while(|b| b.is_ascii_alphanumeric() || *b == b'_')
+        .count();
+    let word = text.get(..n)?;
+    let prefixed = MOTION_LIKE_PREFIXES.iter().any(|p| {
+        word.len() > p.len()
+            && word
+                .get(..p.len())
+                .is_some_and(|h| h.eq_ignore_ascii_case(p))
+    });
+    let assigned = text.get(n..)?.trim_start().starts_with(":=");
+    (prefixed && !assigned).then_some(word)
+}
+
+/// The identifiers of `text`, outside strings and `!` comments.
+fn words(text: &str) -> impl Iterator<Item = &str> {
+    let mut in_string = false;
+    let mut in_comment = false;
+    let mut start = None;
+    let mut out = Vec::new();
+    for (k, c) in text.char_indices() {
+        let ident = c.is_ascii_alphanumeric() || c == '_';
+        if let Some(s) = start
+            && !ident
+        {
+            out.push(&text[s..k]);
+            start = None;
+        }
+        if in_comment {
+            in_comment = c != '\n';
+        } else if in_string {
+            in_string = c != '"';
+        } else if c == '"' {
+            in_string = true;
+        } else if c == '!' {
+            in_comment = true;
+        } else if ident && start.is_none() {
+            start = Some(k);
+        }
+    }
+    if let Some(s) = start {
+        out.push(&text[s..]);
+    }
+    out.into_iter()
 }
 
 /// Byte offset of the `!` that starts a RAPID comment on `line` (outside

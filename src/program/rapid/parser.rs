@@ -8,6 +8,7 @@ use std::sync::Arc;
 use nom::IResult;
 use nom::error::{ErrorKind, ParseError};
 
+use super::instructions::{MotionInstruction, Role, motion_instruction};
 use super::{
     Arg, DataType, DataValue, Decl, Dim, Field, Index, Module, Move, MoveKind, Number, OptArg,
     Proc, Record, RobTarget, RoutineKind, Scalar, Scope, Span, Stmt, Storage, Target,
@@ -97,13 +98,12 @@ const STATEMENT_WORDS: &[&str] = &[
     "ENDRECORD",
 ];
 
-/// The motion instructions parsed as [`Move`]s.
-const MOVES: [(&str, MoveKind); 4] = [
-    ("MoveL", MoveKind::MoveL),
-    ("MoveJ", MoveKind::MoveJ),
-    ("MoveC", MoveKind::MoveC),
-    ("MoveAbsJ", MoveKind::MoveAbsJ),
-];
+/// The motion instruction whose name starts `i` (a whole word), and the
+/// text after the name.
+fn motion_at(i: &str) -> Option<(&'static MotionInstruction, &str)> {
+    let (rest, word) = ident(i).ok()?;
+    Some((motion_instruction(word)?, rest))
+}
 
 /// A blank of the parser ([`ws`]) at the end of a condition.
 fn is_blank_char(c: char) -> bool {
@@ -1244,14 +1244,12 @@ impl<'a> Parser<'a> {
             let (r, d) = self.decl(i)?;
             return Ok((r, Stmt::Decl(Box::new(d))));
         }
-        for (word, kind) in MOVES {
-            if let Some(r) = kw(i, word) {
-                return match self.move_stmt(i, r, kind) {
-                    Ok((r, m)) => Ok((r, Stmt::Move(Box::new(m)))),
-                    // An unfinished move (`MoveL <ARG>;`) is kept as written.
-                    Err(e) => self.opaque_with_placeholder(i).ok_or(e),
-                };
-            }
+        if let Some((instr, r)) = motion_at(i) {
+            return match self.move_stmt(i, r, instr) {
+                Ok((r, m)) => Ok((r, Stmt::Move(Box::new(m)))),
+                // An unfinished move (`MoveL <ARG>;`) is kept as written.
+                Err(e) => self.opaque_with_placeholder(i).ok_or(e),
+            };
         }
         if let Some((r, span)) = self.alone_placeholder(i) {
             return Ok((r, Stmt::Opaque { span, line }));
@@ -1441,21 +1439,19 @@ impl<'a> Parser<'a> {
                 continue;
             } else if c.is_ascii_alphabetic() && (k == 0 || !is_ident_byte(b[k - 1])) {
                 let word = text.get(k..)?;
-                for (name, kind) in MOVES {
-                    if kw(word, name).is_some() {
-                        // From the source: `text` ends before the `;`.
-                        let start = base + k;
-                        let (at, r) = (self.at(start), self.at(start + name.len()));
-                        let (rest, mut m) = match self.move_stmt(at, r, kind) {
-                            Ok(found) => found,
-                            // An unfinished move is kept as written, as the IF.
-                            Err(_) if find_placeholder(word).is_some() => return None,
-                            Err(e) => return Some(Err(e)),
-                        };
-                        let cond = text.get(..k).unwrap_or("").trim_end_matches(is_blank_char);
-                        m.condition = Some(self.pos(i)..base + cond.len());
-                        return Some(Ok((rest, Stmt::Move(Box::new(m)))));
-                    }
+                if let Some((instr, _)) = motion_at(word) {
+                    // From the source: `text` ends before the `;`.
+                    let start = base + k;
+                    let (at, r) = (self.at(start), self.at(start + instr.name.len()));
+                    let (rest, mut m) = match self.move_stmt(at, r, instr) {
+                        Ok(found) => found,
+                        // An unfinished move is kept as written, as the IF.
+                        Err(_) if find_placeholder(word).is_some() => return None,
+                        Err(e) => return Some(Err(e)),
+                    };
+                    let cond = text.get(..k).unwrap_or("").trim_end_matches(is_blank_char);
+                    m.condition = Some(self.pos(i)..base + cond.len());
+                    return Some(Ok((rest, Stmt::Move(Box::new(m)))));
                 }
             }
             k += 1;
@@ -1484,17 +1480,21 @@ impl<'a> Parser<'a> {
     // ----- motion instructions -------------------------------------------
 
     /// A motion instruction; `i` starts at its name, `r` just after it.
-    fn move_stmt(&self, i: &'a str, mut r: &'a str, kind: MoveKind) -> PResult<'a, Move> {
+    fn move_stmt(
+        &self,
+        i: &'a str,
+        mut r: &'a str,
+        instr: &'static MotionInstruction,
+    ) -> PResult<'a, Move> {
         let start = self.pos(i);
-        let name = kind.name();
-        // At most two targets and three plain arguments are kept (more
-        // plain ones are only counted, for the error): no vectors.
-        let mut targets: [Option<Target>; 2] = [None, None];
-        let mut n_found_targets = 0;
-        let mut plain: [Option<Arg>; 3] = [None, None, None];
-        let mut n_plain = 0;
+        let (name, kind) = (instr.name, instr.kind);
+        // The arguments in their roles (more positional ones than the
+        // instruction takes are only counted, for the error): no vectors.
+        let mut via = None;
+        let mut target = None;
+        let (mut speed, mut zone, mut tool) = (None, None, None);
+        let mut found = 0;
         let mut optional = Vec::new();
-        let n_targets = if kind == MoveKind::MoveC { 2 } else { 1 };
         loop {
             r = ws(r);
             if let Some(o) = r.strip_prefix('\\') {
@@ -1503,23 +1503,11 @@ impl<'a> Parser<'a> {
                 r = o;
             } else if r.starts_with([';', ',']) || r.is_empty() {
                 return self.fail_found(self.pos(r), &format!("expected an argument of {name}"));
-            } else if n_found_targets < n_targets {
-                let (o, t) = self.target(r, kind == MoveKind::MoveAbsJ)?;
-                if let Some(slot) = targets.get_mut(n_found_targets) {
-                    *slot = Some(t);
-                }
-                n_found_targets += 1;
-                r = o;
             } else {
-                let (o, span) = self.expr(r, b",;\\")?;
-                if let Some(slot) = plain.get_mut(n_plain) {
-                    *slot = Some(Arg {
-                        text: self.text(span.clone()),
-                        span,
-                    });
-                }
-                n_plain += 1;
-                r = o;
+                let role = (instr.args.get(found).copied(), kind == MoveKind::MoveAbsJ);
+                let targets = [&mut via, &mut target];
+                r = self.move_arg(r, role, targets, [&mut speed, &mut zone, &mut tool])?;
+                found += 1;
             }
             let last = self.pos(r);
             let r1 = ws(r);
@@ -1537,32 +1525,18 @@ impl<'a> Parser<'a> {
                 );
             }
         }
-        let wanted = if kind == MoveKind::MoveC {
-            "CirPoint, ToPoint, Speed, Zone, Tool"
-        } else if kind == MoveKind::MoveAbsJ {
-            "ToJointPos, Speed, Zone, Tool"
-        } else {
-            "ToPoint, Speed, Zone, Tool"
-        };
-        let found = n_found_targets + n_plain;
-        if n_found_targets < n_targets || n_plain != 3 {
+        if found != instr.args.len() {
             return self.fail_found(
                 start,
                 &format!(
-                    "{name} takes {} arguments ({wanted}), {found} given",
-                    n_targets + 3
+                    "{name} takes {} arguments ({}), {found} given",
+                    instr.args.len(),
+                    instr.signature()
                 ),
             );
         }
-        let [speed, zone, tool] = plain;
-        let (Some(speed), Some(zone), Some(tool)) = (speed, zone, tool) else {
+        let (Some(speed), Some(tool)) = (speed, tool) else {
             return self.fail_found(start, &format!("{name}: missing arguments"));
-        };
-        let [first, second] = targets;
-        let (via, target) = if kind == MoveKind::MoveC {
-            (first.map(Box::new), second)
-        } else {
-            (None, first)
         };
         let Some(target) = target else {
             return self.fail_found(start, &format!("{name}: missing target"));
@@ -1579,8 +1553,9 @@ impl<'a> Parser<'a> {
         Ok((
             r,
             Move {
+                name,
                 kind,
-                via,
+                via: via.map(Box::new),
                 target,
                 speed,
                 zone,
@@ -1594,6 +1569,42 @@ impl<'a> Parser<'a> {
                 condition: None,
             },
         ))
+    }
+
+    /// One positional argument of a motion instruction, stored by its
+    /// `role` (`None` past the last one: parsed and dropped); `joint` for
+    /// a jointtarget. `targets` are the via and the target; `plain` the
+    /// speed, zone and tool.
+    fn move_arg(
+        &self,
+        r: &'a str,
+        (role, joint): (Option<Role>, bool),
+        targets: [&mut Option<Target>; 2],
+        plain: [&mut Option<Arg>; 3],
+    ) -> Result<&'a str, nom::Err<PErr<'a>>> {
+        let [via, target] = targets;
+        let slot = match role {
+            Some(Role::CirPoint) => via,
+            Some(Role::ToPoint) => target,
+            _ => {
+                let (o, span) = self.expr(r, b",;\\")?;
+                let [speed, zone, tool] = plain;
+                let slot = match role {
+                    Some(Role::Speed) => speed,
+                    Some(Role::Zone) => zone,
+                    Some(Role::Tool) => tool,
+                    _ => return Ok(o),
+                };
+                *slot = Some(Arg {
+                    text: self.text(span.clone()),
+                    span,
+                });
+                return Ok(o);
+            }
+        };
+        let (o, t) = self.target(r, joint)?;
+        *slot = Some(t);
+        Ok(o)
     }
 
     /// `\Name[:=value]`; `i` starts at the backslash, `o` after it.
@@ -1906,14 +1917,17 @@ mod tests {
             assert_eq!(moves.len(), 40);
             for (k, mv) in moves.iter().enumerate() {
                 assert_eq!(&*mv.tool.text, "tool1");
-                assert_eq!(&*mv.zone.text, "z1");
+                assert_eq!(&*mv.zone.as_ref().unwrap().text, "z1");
                 assert_eq!(&*mv.speed.text, if k % 2 == 0 { "v100" } else { "V200" });
                 assert_eq!(mv.wobj.as_ref().map(|w| &*w.text), Some("wobj1"));
             }
             if ahead_min == usize::MAX {
                 let (a, b) = (moves[10], moves[30]);
                 assert!(Arc::ptr_eq(&a.tool.text, &b.tool.text));
-                assert!(Arc::ptr_eq(&a.zone.text, &b.zone.text));
+                assert!(Arc::ptr_eq(
+                    &a.zone.as_ref().unwrap().text,
+                    &b.zone.as_ref().unwrap().text
+                ));
                 assert!(Arc::ptr_eq(&a.speed.text, &b.speed.text));
                 let wobj =
                     |m: &crate::program::rapid::Move| m.wobj.as_ref().map(|w| Arc::clone(&w.text));

@@ -1,0 +1,163 @@
+//! The motion instructions parsed as moves, with the place of each
+//! positional argument.
+//!
+//! Every instruction here moves the TCP to a target the way `MoveL`,
+//! `MoveJ`, `MoveC` or `MoveAbsJ` does (its [`MoveKind`]), and takes its
+//! positional (non-`\`) arguments in the order given by its roles. The
+//! arguments that are not a target, speed, zone or tool (a signal, a
+//! trigger, seam and weld data, the `SearchPoint` the controller writes)
+//! are kept as written and never compensated. The table is documented in
+//! `grammar/rapid.md`.
+
+use super::MoveKind;
+
+/// What a positional argument of a motion instruction is.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Role {
+    /// The circle point of a circular move.
+    CirPoint,
+    /// The target (`ToPoint`; `ToJointPos` for an absolute-joint move).
+    ToPoint,
+    /// The speeddata.
+    Speed,
+    /// The zonedata.
+    Zone,
+    /// The tooldata.
+    Tool,
+    /// Any other argument, by its name in the instruction's signature; kept
+    /// as written.
+    Other(&'static str),
+}
+
+/// One motion instruction: its name, motion kind and argument roles.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct MotionInstruction {
+    /// The name in its canonical spelling (matched case-insensitively).
+    pub name: &'static str,
+    /// How the TCP moves to the target.
+    pub kind: MoveKind,
+    /// The positional arguments in order.
+    pub args: &'static [Role],
+}
+
+impl MotionInstruction {
+    /// The 0-based position of `role` among the positional arguments.
+    pub fn position(&self, role: Role) -> Option<usize> {
+        self.args.iter().position(|&r| r == role)
+    }
+
+    /// The positional arguments by name, comma separated
+    /// (`ToPoint, Speed, Zone, Tool`).
+    pub fn signature(&self) -> String {
+        let names: Vec<&str> = self
+            .args
+            .iter()
+            .map(|r| match r {
+                Role::CirPoint => "CirPoint",
+                Role::ToPoint if self.kind == MoveKind::MoveAbsJ => "ToJointPos",
+                Role::ToPoint => "ToPoint",
+                Role::Speed => "Speed",
+                Role::Zone => "Zone",
+                Role::Tool => "Tool",
+                Role::Other(name) => name,
+            })
+            .collect();
+        names.join(", ")
+    }
+}
+
+use Role::{CirPoint as C, Other as O, Speed as S, ToPoint as P, Tool as T, Zone as Z};
+
+const MOVE: &[Role] = &[P, S, Z, T];
+const MOVE_C: &[Role] = &[C, P, S, Z, T];
+const DO: &[Role] = &[P, S, Z, T, O("Signal"), O("Value")];
+const DO_C: &[Role] = &[C, P, S, Z, T, O("Signal"), O("Value")];
+const SYNC: &[Role] = &[P, S, Z, T, O("ProcName")];
+const SYNC_C: &[Role] = &[C, P, S, Z, T, O("ProcName")];
+const TRIGG: &[Role] = &[P, S, O("Trigg1"), Z, T];
+const TRIGG_C: &[Role] = &[C, P, S, O("Trigg1"), Z, T];
+const SEARCH: &[Role] = &[O("Signal"), O("SearchPoint"), P, S, T];
+const SEARCH_C: &[Role] = &[O("Signal"), O("SearchPoint"), C, P, S, T];
+const ARC: &[Role] = &[P, S, O("Seam"), O("Weld"), Z, T];
+const ARC_C: &[Role] = &[C, P, S, O("Seam"), O("Weld"), Z, T];
+
+const fn entry(name: &'static str, kind: MoveKind, args: &'static [Role]) -> MotionInstruction {
+    MotionInstruction { name, kind, args }
+}
+
+/// Every motion instruction parsed as a move.
+pub const MOTION_INSTRUCTIONS: &[MotionInstruction] = &[
+    entry("MoveL", MoveKind::MoveL, MOVE),
+    entry("MoveJ", MoveKind::MoveJ, MOVE),
+    entry("MoveC", MoveKind::MoveC, MOVE_C),
+    entry("MoveAbsJ", MoveKind::MoveAbsJ, MOVE),
+    entry("MoveLDO", MoveKind::MoveL, DO),
+    entry("MoveJDO", MoveKind::MoveJ, DO),
+    entry("MoveCDO", MoveKind::MoveC, DO_C),
+    entry("MoveLAO", MoveKind::MoveL, DO),
+    entry("MoveJAO", MoveKind::MoveJ, DO),
+    entry("MoveCAO", MoveKind::MoveC, DO_C),
+    entry("MoveLGO", MoveKind::MoveL, DO),
+    entry("MoveJGO", MoveKind::MoveJ, DO),
+    entry("MoveCGO", MoveKind::MoveC, DO_C),
+    entry("MoveLSync", MoveKind::MoveL, SYNC),
+    entry("MoveJSync", MoveKind::MoveJ, SYNC),
+    entry("MoveCSync", MoveKind::MoveC, SYNC_C),
+    entry("TriggL", MoveKind::MoveL, TRIGG),
+    entry("TriggJ", MoveKind::MoveJ, TRIGG),
+    entry("TriggC", MoveKind::MoveC, TRIGG_C),
+    entry("SearchL", MoveKind::MoveL, SEARCH),
+    entry("SearchC", MoveKind::MoveC, SEARCH_C),
+    entry("ArcL", MoveKind::MoveL, ARC),
+    entry("ArcLStart", MoveKind::MoveL, ARC),
+    entry("ArcLEnd", MoveKind::MoveL, ARC),
+    entry("ArcC", MoveKind::MoveC, ARC_C),
+    entry("ArcCStart", MoveKind::MoveC, ARC_C),
+    entry("ArcCEnd", MoveKind::MoveC, ARC_C),
+];
+
+/// The motion instruction named `name` (case-insensitive, as RAPID).
+pub fn motion_instruction(name: &str) -> Option<&'static MotionInstruction> {
+    MOTION_INSTRUCTIONS
+        .iter()
+        .find(|m| m.name.eq_ignore_ascii_case(name))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_entry_has_one_target_speed_and_tool_and_a_via_when_circular() {
+        for m in MOTION_INSTRUCTIONS {
+            let count = |role| m.args.iter().filter(|&&r| r == role).count();
+            assert_eq!(count(Role::ToPoint), 1, "{}", m.name);
+            assert_eq!(count(Role::Speed), 1, "{}", m.name);
+            assert_eq!(count(Role::Tool), 1, "{}", m.name);
+            assert!(count(Role::Zone) <= 1, "{}", m.name);
+            let circular = usize::from(m.kind == MoveKind::MoveC);
+            assert_eq!(count(Role::CirPoint), circular, "{}", m.name);
+            if let (Some(c), Some(p)) = (m.position(Role::CirPoint), m.position(Role::ToPoint)) {
+                assert!(c < p, "{}", m.name);
+            }
+        }
+    }
+
+    #[test]
+    fn names_are_unique_case_insensitively() {
+        for (k, a) in MOTION_INSTRUCTIONS.iter().enumerate() {
+            for b in &MOTION_INSTRUCTIONS[k + 1..] {
+                assert!(!a.name.eq_ignore_ascii_case(b.name), "{}", a.name);
+            }
+        }
+    }
+
+    #[test]
+    fn search_point_is_not_a_target() {
+        let s = motion_instruction("searchl").unwrap();
+        assert_eq!(s.position(Role::ToPoint), Some(2));
+        assert_eq!(s.position(Role::Other("SearchPoint")), Some(1));
+        assert_eq!(s.position(Role::Zone), None);
+        assert_eq!(s.signature(), "Signal, SearchPoint, ToPoint, Speed, Tool");
+    }
+}
