@@ -951,6 +951,7 @@ pub fn compensate_parsed(
     carry.keep_unfinished_targets(&module, src, file);
     let mut edits = compensate_window(text, robot, opts, &mut carry, None, 0)?;
     carry.leave_unfinished(&module, file);
+    carry.leave_unknown(&module, src, file);
     let spans: Vec<_> = module.decls.iter().map(|d| d.span.clone()).collect();
     // Free the parsed module before the output text is built (the peak).
     drop(module);
@@ -962,6 +963,11 @@ pub fn compensate_parsed(
 
 /// Why a move of a routine holding an editor placeholder is left as written.
 pub const UNFINISHED_ROUTINE: &str = "its routine holds an editor placeholder";
+
+/// Why a statement that looks like a motion instruction to a robtarget is
+/// left as written.
+pub const UNKNOWN_MOTION: &str =
+    "not a motion instruction postproc knows (its robtarget is not compensated)";
 
 /// What the compensation of one window of a module hands to the next: a
 /// module read a window at a time ([`stream`]) is compensated as if whole,
@@ -1055,6 +1061,30 @@ impl Carry {
             self.as_written.push(AsWritten {
                 line: m.line,
                 reason: UNFINISHED_ROUTINE.to_string(),
+            });
+        }
+        self.as_written.sort_by_key(|a| a.line);
+    }
+
+    /// Names the statements that look like motion instructions to a
+    /// declared robtarget but are not in the table of motion instructions
+    /// (`SpotL p10, …`): they are left as written, warned about with their
+    /// place and listed in the outcome.
+    pub(crate) fn leave_unknown(&mut self, module: &Module, src: &str, file: &str) {
+        if self.time_line.is_some() {
+            return;
+        }
+        for u in module.unknown_motions(src) {
+            tracing::warn!(
+                "{}:{}: {} left as written: {}",
+                crate::error::Escaped(file),
+                u.line,
+                crate::error::Escaped(&u.name),
+                UNKNOWN_MOTION
+            );
+            self.as_written.push(AsWritten {
+                line: u.line,
+                reason: UNKNOWN_MOTION.to_string(),
             });
         }
         self.as_written.sort_by_key(|a| a.line);

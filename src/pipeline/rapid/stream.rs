@@ -303,6 +303,7 @@ fn pass<R: BufRead>(
                     file,
                 };
                 let edits = compensate_window(window, robot, opts, carry, Some(directives), start)?;
+                carry.leave_unknown(&module, &text, file);
                 write(&edits.apply_in(&text, start..start + lines.len())?)?;
                 if let Some(sink) = records.as_deref_mut() {
                     sink(&carry.records)?;
