@@ -87,6 +87,15 @@ struct Problem {
 }
 
 impl Problem {
+    /// The start values of the unknowns: the file's table values and
+    /// squareness errors.
+    fn start(&self, tool: &MachineTool) -> Vec<f64> {
+        self.params
+            .iter()
+            .map(|p| start_value(tool, self, p))
+            .collect()
+    }
+
     fn name(&self, p: &Param) -> String {
         match *p {
             Param::Table {
@@ -603,6 +612,35 @@ fn check_condition(id: &crate::calibrate::lsq::Identifiability, obs_file: &str) 
     Ok(())
 }
 
+/// The unknowns of a geometric calibration: the axes and grids
+/// [`axes_and_grids`] chooses (its notes added to `notes`), their table
+/// values and the squareness errors when identified.
+fn problem(
+    tool: &MachineTool,
+    obs: &Observations,
+    obs_file: &str,
+    notes: &mut Vec<String>,
+) -> Result<Problem> {
+    let (axes, grids, square) = axes_and_grids(tool, obs, obs_file, notes)?;
+    let params = unknowns(&axes, &grids, square);
+    Ok(Problem {
+        grids,
+        axes,
+        params,
+        square,
+    })
+}
+
+/// The values written: the fitted `x`, with the file's value `x0` where
+/// the honesty rule withholds the estimate (`withheld`).
+fn kept_where_withheld(x: &[f64], x0: &[f64], withheld: &[bool]) -> Vec<f64> {
+    x.iter()
+        .zip(x0)
+        .zip(withheld)
+        .map(|((&v, &v0), &w)| if w { v0 } else { v })
+        .collect()
+}
+
 /// Refuses a fit with too few distinct poses (`distinct` among `n_rows`
 /// fitted rows) for its `n` table values and squareness errors (and the six
 /// frame parameters when `instrument`).
@@ -649,14 +687,7 @@ pub fn calibrate_geometry(
     let (clean, copies) = drop_copies(obs, obs_file);
     let obs = &clean;
     let mut early_notes: Vec<String> = copies.into_iter().collect();
-    let (axes, grids, square) = axes_and_grids(tool, obs, obs_file, &mut early_notes)?;
-    let params = unknowns(&axes, &grids, square);
-    let prob = Problem {
-        grids,
-        axes,
-        params,
-        square,
-    };
+    let prob = problem(tool, obs, obs_file, &mut early_notes)?;
     let n = prob.params.len();
     let instrument = obs.frame == MeasurementFrame::Instrument;
     let (fit, hold) = grouped_split(obs, opts.holdout, opts.seed);
@@ -667,11 +698,7 @@ pub fn calibrate_geometry(
         fit.len(),
         hold.len()
     );
-    let x0: Vec<f64> = prob
-        .params
-        .iter()
-        .map(|p| start_value(tool, &prob, p))
-        .collect();
+    let x0 = prob.start(tool);
     let eval = |x: &[f64], rows: &[usize]| -> Result<(String, DVector<f64>)> {
         let t = prob.write(text, machine_file, x)?;
         let mm = Machine::from_yaml_str(&t, machine_file)?;
@@ -703,12 +730,7 @@ pub fn calibrate_geometry(
     // Uncertain values keep the file's value (super::honesty).
     let withheld = opts.honesty.withheld(&params);
     let uncertain = opts.honesty.uncertain(&params);
-    let x: Vec<f64> = x
-        .iter()
-        .zip(&x0)
-        .zip(&withheld)
-        .map(|((&v, &v0), &w)| if w { v0 } else { v })
-        .collect();
+    let x = kept_where_withheld(&x, &x0, &withheld);
     let (yaml, _) = eval(&x, &[]).map_err(|e| implausible(&e, obs_file, fit.len()))?;
     let calibrated = Machine::from_yaml_str(&yaml, machine_file)?;
     let frame = match frame {

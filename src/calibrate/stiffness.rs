@@ -484,6 +484,20 @@ fn held_out_deflections(
     Ok((before, after))
 }
 
+/// Load groups: the row indices of each group.
+type Groups = Vec<Vec<usize>>;
+
+/// The load groups of `obs` ([`load_groups`]) split into the fitted and the
+/// held-out ones (whole groups, [`holdout_split`] with the run's options).
+fn split_groups(obs: &Observations, obs_file: &str, opts: &Options) -> Result<(Groups, Groups)> {
+    let groups = load_groups(obs, obs_file)?;
+    let (fit_idx, hold_idx) = holdout_split(groups.len(), opts.holdout, opts.seed);
+    let pick = |idx: &[usize]| -> Vec<Vec<usize>> {
+        idx.iter().filter_map(|&i| groups.get(i).cloned()).collect()
+    };
+    Ok((pick(&fit_idx), pick(&hold_idx)))
+}
+
 /// The six joint stiffnesses (N·m/rad) from the compliances of `sol`, with
 /// their uncertainties scaled by `dof_factor` (the redundancy the centring
 /// used up); refused when a compliance comes out non-positive.
@@ -549,13 +563,7 @@ pub fn calibrate_stiffness(
     // World positions are carried into the base frame (and said so).
     let world = world_note(&machine, obs.frame);
     let obs = &world_to_reference(&machine, obs);
-    let groups = load_groups(obs, obs_file)?;
-    let (fit_idx, hold_idx) = holdout_split(groups.len(), opts.holdout, opts.seed);
-    let pick = |idx: &[usize]| -> Vec<Vec<usize>> {
-        idx.iter().filter_map(|&i| groups.get(i).cloned()).collect()
-    };
-    let fit = pick(&fit_idx);
-    let hold = pick(&hold_idx);
+    let (fit, hold) = split_groups(obs, obs_file, opts)?;
     let fit_rows: Vec<usize> = fit.iter().flatten().copied().collect();
     let n_loaded = fit_rows
         .iter()

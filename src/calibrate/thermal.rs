@@ -468,6 +468,20 @@ fn robot_frame(
     }
 }
 
+/// Refuses a fit of `n` unknowns with fewer than two equations per
+/// unknown from its `n_rows` rows (three equations each).
+fn check_enough_rows(n_rows: usize, n: usize, obs_file: &str) -> Result<()> {
+    let m = 3 * n_rows;
+    if m < 2 * n {
+        return Err(Error::Data(format!(
+            "{obs_file}: {n_rows} rows left for the fit ({m} equations) for {n} parameters; \
+             thermal calibration needs at least {} rows, better several times more",
+            (2 * n).div_ceil(3)
+        )));
+    }
+    Ok(())
+}
+
 /// Refuses a badly conditioned fit of the robot terms.
 fn check_condition(id: &crate::calibrate::lsq::Identifiability, obs_file: &str) -> Result<()> {
     if id.condition_number_identified > CONDITION_LIMIT {
@@ -515,14 +529,7 @@ pub fn calibrate_thermal(
     };
     let n = unknowns.n();
     let m = 3 * fit.len();
-    if m < 2 * n {
-        return Err(Error::Data(format!(
-            "{obs_file}: {} rows left for the fit ({m} equations) for {n} parameters; \
-             thermal calibration needs at least {} rows, better several times more",
-            fit.len(),
-            (2 * n).div_ceil(3)
-        )));
-    }
+    check_enough_rows(fit.len(), n, obs_file)?;
     // Terms whose power never varies in the fitted rows are fixed.
     let mut notes = Vec::new();
     let varies = varying_terms(&base, obs, &fit, &mut notes);
