@@ -22,7 +22,7 @@ use crate::machine::Machine;
 
 use super::lsq::{LsqOptions, solve_linear};
 use super::observations::{MeasurementFrame, Observations};
-use super::report::FrameEstimate;
+use super::report::{Estimate, FrameEstimate, names_at};
 
 /// Number of frame parameters.
 pub const FRAME_PARAMS: usize = 6;
@@ -330,6 +330,27 @@ pub fn finish(
     notes.extend(absorbed_note(absorbed, example));
     notes.push(IDENTIFIED_NOTE.into());
     Ok((yaml, est))
+}
+
+/// [`finish`] when an instrument frame was identified (`frame`: the frame
+/// and its uncertainties), naming the parameters of `params` at the indices
+/// `absorbed`; `yaml` unchanged and no estimate otherwise.
+pub fn finish_if_any(
+    yaml: String,
+    machine_file: &str,
+    frame: Option<(Isometry3<f64>, Option<[f64; FRAME_PARAMS]>)>,
+    (params, absorbed): (&[Estimate], &[usize]),
+    example: &str,
+    notes: &mut Vec<String>,
+) -> Result<(String, Option<FrameEstimate>)> {
+    match frame {
+        Some((f, u)) => {
+            let names = names_at(params, absorbed);
+            let (yaml, est) = finish(&yaml, machine_file, &f, u, &names, example, notes)?;
+            Ok((yaml, Some(est)))
+        }
+        None => Ok((yaml, None)),
+    }
 }
 
 /// Which model parameters a Jacobian identifies, with the frame columns

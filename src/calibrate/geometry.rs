@@ -48,11 +48,11 @@ use crate::machine::tool::{AxisKind, MachineTool};
 
 use super::forward::{check_kind, predict};
 use super::frame::{
-    FRAME_PARAMS, FRAME_RANK_RTOL, carry, conditional_uncertainty, finish, frame_columns,
+    FRAME_PARAMS, FRAME_RANK_RTOL, carry, conditional_uncertainty, finish_if_any, frame_columns,
     frame_with, refit, screen_model, start_frame,
 };
 use super::observations::{MeasurementFrame, Observations, Pose};
-use super::report::{CONDITION_LIMIT, Calibration, Estimate, Validation};
+use super::report::{CONDITION_LIMIT, Calibration, Estimate, validations};
 use super::screen::{
     describe_outliers, distinct_poses, dominating_rows, drop_copies, grouped_split, implausible,
 };
@@ -87,6 +87,15 @@ struct Problem {
 }
 
 impl Problem {
+    /// The start values of the unknowns: the file's table values and
+    /// squareness errors.
+    fn start(&self, tool: &MachineTool) -> Vec<f64> {
+        self.params
+            .iter()
+            .map(|p| start_value(tool, self, p))
+            .collect()
+    }
+
     fn name(&self, p: &Param) -> String {
         match *p {
             Param::Table {
@@ -603,6 +612,62 @@ fn check_condition(id: &crate::calibrate::lsq::Identifiability, obs_file: &str) 
     Ok(())
 }
 
+/// The unknowns of a geometric calibration: the axes and grids
+/// [`axes_and_grids`] chooses (its notes added to `notes`), their table
+/// values and the squareness errors when identified.
+fn problem(
+    tool: &MachineTool,
+    obs: &Observations,
+    obs_file: &str,
+    notes: &mut Vec<String>,
+) -> Result<Problem> {
+    let (axes, grids, square) = axes_and_grids(tool, obs, obs_file, notes)?;
+    let params = unknowns(&axes, &grids, square);
+    Ok(Problem {
+        grids,
+        axes,
+        params,
+        square,
+    })
+}
+
+/// The values written: the fitted `x`, with the file's value `x0` where
+/// the honesty rule withholds the estimate (`withheld`).
+fn kept_where_withheld(x: &[f64], x0: &[f64], withheld: &[bool]) -> Vec<f64> {
+    x.iter()
+        .zip(x0)
+        .zip(withheld)
+        .map(|((&v, &v0), &w)| if w { v0 } else { v })
+        .collect()
+}
+
+/// Refuses a fit with too few distinct poses (`distinct` among `n_rows`
+/// fitted rows) for its `n` table values and squareness errors (and the six
+/// frame parameters when `instrument`).
+fn check_enough_poses(
+    distinct: usize,
+    n_rows: usize,
+    n: usize,
+    instrument: bool,
+    obs_file: &str,
+) -> Result<()> {
+    if n == 0 || 3 * distinct <= (n + if instrument { FRAME_PARAMS } else { 0 }) {
+        Err(Error::Data(format!(
+            "{obs_file}: {distinct} distinct poses left for the fit ({} rows; repeated poses \
+             count once) for {n} table values and squareness errors{}; measure more points \
+             (or fewer targets per axis)",
+            n_rows,
+            if instrument {
+                " and the 6 parameters of the instrument frame"
+            } else {
+                ""
+            }
+        )))
+    } else {
+        Ok(())
+    }
+}
+
 /// Identifies the component error tables and squareness from `obs` (and
 /// the instrument frame for `# frame: instrument` data).
 pub fn calibrate_geometry(
@@ -622,42 +687,18 @@ pub fn calibrate_geometry(
     let (clean, copies) = drop_copies(obs, obs_file);
     let obs = &clean;
     let mut early_notes: Vec<String> = copies.into_iter().collect();
-    let (axes, grids, square) = axes_and_grids(tool, obs, obs_file, &mut early_notes)?;
-    let params = unknowns(&axes, &grids, square);
-    let prob = Problem {
-        grids,
-        axes,
-        params,
-        square,
-    };
+    let prob = problem(tool, obs, obs_file, &mut early_notes)?;
     let n = prob.params.len();
     let instrument = obs.frame == MeasurementFrame::Instrument;
-    let n_all = n + if instrument { FRAME_PARAMS } else { 0 };
     let (fit, hold) = grouped_split(obs, opts.holdout, opts.seed);
     let distinct = distinct_poses(obs, &fit);
-    if n == 0 || 3 * distinct <= n_all {
-        return Err(Error::Data(format!(
-            "{obs_file}: {distinct} distinct poses left for the fit ({} rows; repeated poses \
-             count once) for {n} table values and squareness errors{}; measure more points \
-             (or fewer targets per axis)",
-            fit.len(),
-            if instrument {
-                " and the 6 parameters of the instrument frame"
-            } else {
-                ""
-            }
-        )));
-    }
+    check_enough_poses(distinct, fit.len(), n, instrument, obs_file)?;
     tracing::info!(
         "geometry: {} rows for the fit, {} held out, {n} values",
         fit.len(),
         hold.len()
     );
-    let x0: Vec<f64> = prob
-        .params
-        .iter()
-        .map(|p| start_value(tool, &prob, p))
-        .collect();
+    let x0 = prob.start(tool);
     let eval = |x: &[f64], rows: &[usize]| -> Result<(String, DVector<f64>)> {
         let t = prob.write(text, machine_file, x)?;
         let mm = Machine::from_yaml_str(&t, machine_file)?;
@@ -689,12 +730,7 @@ pub fn calibrate_geometry(
     // Uncertain values keep the file's value (super::honesty).
     let withheld = opts.honesty.withheld(&params);
     let uncertain = opts.honesty.uncertain(&params);
-    let x: Vec<f64> = x
-        .iter()
-        .zip(&x0)
-        .zip(&withheld)
-        .map(|((&v, &v0), &w)| if w { v0 } else { v })
-        .collect();
+    let x = kept_where_withheld(&x, &x0, &withheld);
     let (yaml, _) = eval(&x, &[]).map_err(|e| implausible(&e, obs_file, fit.len()))?;
     let calibrated = Machine::from_yaml_str(&yaml, machine_file)?;
     let frame = match frame {
@@ -712,55 +748,43 @@ pub fn calibrate_geometry(
     let ident = Isometry3::identity();
     let f_start = f0.unwrap_or(ident);
     let f_end = frame.map_or(ident, |(f, _)| f);
-    let residual_norms = |m: &Machine, f: &Isometry3<f64>, rows: &[usize]| -> Result<Vec<f64>> {
+    let (validation, fit_check) = validations(&hold, &fit, |cal, rows| {
+        let (m, f) = if cal {
+            (&calibrated, &f_end)
+        } else {
+            (&machine, &f_start)
+        };
         Ok(norms(
             &(measured_at(obs, rows, f) - deviations(m, obs, rows, obs_file)?),
         ))
-    };
-    let before = residual_norms(&machine, &f_start, &hold)?;
-    let after = residual_norms(&calibrated, &f_end, &hold)?;
-    let fit_before = residual_norms(&machine, &f_start, &fit)?;
-    let fit_after = residual_norms(&calibrated, &f_end, &fit)?;
+    })?;
     let mut notes = fixed_notes(prob.square);
     notes.append(&mut early_notes);
-    let (yaml, frame_est) = match frame {
-        Some((f, u)) => {
-            let names: Vec<String> = absorbed
-                .iter()
-                .filter_map(|&c| params.get(c).map(|p| p.name.clone()))
-                .collect();
-            let (yaml, est) = finish(
-                &yaml,
-                machine_file,
-                &f,
-                u,
-                &names,
-                "the positioning offsets and the straightness slopes are then relative to the \
-                 frame",
-                &mut notes,
-            )?;
-            (yaml, Some(est))
-        }
-        None => (yaml, None),
-    };
-    let mut cal = Calibration {
+    let (yaml, frame_est) = finish_if_any(
+        yaml,
+        machine_file,
+        frame,
+        (&params, &absorbed),
+        "the positioning offsets and the straightness slopes are then relative to the \
+         frame",
+        &mut notes,
+    )?;
+    Ok(Calibration {
         kind: "geometry",
         n_fit: fit.len(),
         n_equations: m,
         observability_o1: 0.0,
         condition_number: 0.0,
-        rms_fit_mm: sol.sigma2.map_or((sol.rss / m as f64).sqrt(), f64::sqrt),
+        rms_fit_mm: sol.rms_fit(m),
         params,
-        validation: Validation::from_norms(&before, &after),
-        fit_check: Validation::from_norms(&fit_before, &fit_after),
+        validation,
+        fit_check,
         frame: frame_est,
         insignificant: Vec::new(),
         uncertain,
         honesty: opts.honesty,
         notes: std::mem::take(&mut notes),
         yaml,
-    };
-    cal.set_identifiability(id);
-    cal.check_validation();
-    Ok(cal)
+    }
+    .finished(id))
 }

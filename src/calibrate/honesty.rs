@@ -102,6 +102,14 @@ impl Rule {
     }
 }
 
+/// Sets to zero the corrections of `full` whose flag in `withheld` is set,
+/// so that those parameters keep the file's value.
+pub fn zero_withheld(full: &mut [f64], withheld: &[bool]) {
+    for (x, _) in full.iter_mut().zip(withheld).filter(|(_, w)| **w) {
+        *x = 0.0;
+    }
+}
+
 /// True when `p` is uncertain under the default rule.
 pub fn is_uncertain(p: &Estimate) -> bool {
     Rule::default().is_uncertain(p)

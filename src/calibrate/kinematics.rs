@@ -59,8 +59,9 @@ use super::frame::{
     FRAME_NAMES, FRAME_PARAMS, IDENTIFIED_NOTE, absorbed_note, conditional_uncertainty, estimate,
     frame_with, screen_model, start_frame, world_note, world_to_reference,
 };
+use super::honesty::zero_withheld;
 use super::observations::{MeasuredKind, MeasurementFrame, Observation, Observations, Pose};
-use super::report::{CONDITION_LIMIT, Calibration, Estimate, FrameEstimate, Validation};
+use super::report::{CONDITION_LIMIT, Calibration, Estimate, FrameEstimate, validations};
 use super::screen::{
     describe_outliers, distinct_poses, dominating_rows, drop_copies, grouped_split, implausible,
 };
@@ -613,6 +614,72 @@ fn fit_and_select(
     })
 }
 
+/// Refuses a badly conditioned fit (after fixing `n_fixed` unidentifiable
+/// parameters).
+fn check_condition(
+    id: &crate::calibrate::lsq::Identifiability,
+    n_fixed: usize,
+    obs_file: &str,
+) -> Result<()> {
+    if id.condition_number_identified > CONDITION_LIMIT {
+        Err(Error::Data(format!(
+            "{obs_file}: badly conditioned data set: condition number {:.3e} > {:.0e} \
+             (O1 = {:.3e}) after fixing {} unidentifiable parameter(s); the poses do not \
+             excite the kinematic parameters independently. Measure more varied poses \
+             (all joints over their range)",
+            id.condition_number_identified, CONDITION_LIMIT, id.observability_o1, n_fixed
+        )))
+    } else {
+        Ok(())
+    }
+}
+
+/// The estimates of the model parameters: start values from the file,
+/// values corrected by `full` (angles in degrees), uncertainties of the
+/// `free` ones from the fit `sol`, of the `insignificant` ones the full fit's
+/// (those count as fixed, as the unidentifiable ones).
+fn estimates(
+    layout: &Layout,
+    full: &[f64],
+    sol: &Solution,
+    free: &[usize],
+    insignificant: &[(usize, f64)],
+) -> Vec<Estimate> {
+    let u_red = sol.std_uncertainty();
+    let u_of = |k: usize| {
+        free.iter()
+            .position(|&f| f == k)
+            .and_then(|a| u_red.as_ref().map(|u| u[a]))
+    };
+    let nm = layout.n_model();
+    let mut params = Vec::with_capacity(nm);
+    for k in 0..nm {
+        let (name, unit) = layout.name(k);
+        let is_free = free.contains(&k);
+        let start = layout.start(k);
+        let f = if unit == "deg" { DEG_PER_UNIT } else { 1.0 };
+        params.push(Estimate {
+            name,
+            unit,
+            start,
+            value: start + f * full.get(k).copied().unwrap_or(0.0),
+            u: if is_free {
+                u_of(k).map(|u| f * u)
+            } else {
+                // A correction left out as insignificant: the uncertainty
+                // the full fit gives it (the file's value is within it).
+                insignificant
+                    .iter()
+                    .find(|d| d.0 == k)
+                    .map(|d| f * d.1)
+                    .filter(|u| u.is_finite())
+            },
+            fixed: !is_free,
+        });
+    }
+    params
+}
+
 /// Identifies the actual DH parameters (and the TCP translation; and the
 /// instrument frame for `# frame: instrument` data) from `obs`.
 pub fn calibrate_kinematics(
@@ -639,7 +706,6 @@ pub fn calibrate_kinematics(
     } = prepare(robot, obs, obs_file, opts)?;
     let obs = &obs;
     let n = layout.n();
-    let nm = layout.n_model();
     tracing::info!(
         "kinematics: {} rows for the fit, {} held out, {n} parameters",
         fit.len(),
@@ -664,60 +730,15 @@ pub fn calibrate_kinematics(
     } = fit_and_select(&layout, obs, &mut fit, free, &lm_opts, obs_file, &mut notes)?;
     let sol = &fit_result.solution;
     let id = &sol.identifiability;
-    if id.condition_number_identified > CONDITION_LIMIT {
-        return Err(Error::Data(format!(
-            "{obs_file}: badly conditioned data set: condition number {:.3e} > {:.0e} \
-             (O1 = {:.3e}) after fixing {} unidentifiable parameter(s); the poses do not \
-             excite the kinematic parameters independently. Measure more varied poses \
-             (all joints over their range)",
-            id.condition_number_identified,
-            CONDITION_LIMIT,
-            id.observability_o1,
-            fixed.len()
-        )));
-    }
+    check_condition(id, fixed.len(), obs_file)?;
     let full = expand_free(n, &free, sol.params.as_slice());
-    let u_red = sol.std_uncertainty();
-    let u_of = |k: usize| {
-        free.iter()
-            .position(|&f| f == k)
-            .and_then(|a| u_red.as_ref().map(|u| u[a]))
-    };
-    let mut params = Vec::with_capacity(nm);
-    for k in 0..nm {
-        let (name, unit) = layout.name(k);
-        let is_free = free.contains(&k);
-        let start = layout.start(k);
-        let f = if unit == "deg" { DEG_PER_UNIT } else { 1.0 };
-        params.push(Estimate {
-            name,
-            unit,
-            start,
-            value: start + f * full.get(k).copied().unwrap_or(0.0),
-            u: if is_free {
-                u_of(k).map(|u| f * u)
-            } else {
-                // A correction left out as insignificant: the uncertainty
-                // the full fit gives it (the file's value is within it).
-                insignificant
-                    .iter()
-                    .find(|d| d.0 == k)
-                    .map(|d| f * d.1)
-                    .filter(|u| u.is_finite())
-            },
-            fixed: !is_free,
-        });
-    }
+    let params = estimates(&layout, &full, sol, &free, &insignificant);
     // Uncertain parameters keep the file's value (super::honesty): their
     // corrections are not applied.
     let withheld = opts.honesty.withheld(&params);
     let uncertain = opts.honesty.uncertain(&params);
     let mut full = full;
-    for (k, w) in withheld.iter().enumerate() {
-        if let (true, Some(x)) = (*w, full.get_mut(k)) {
-            *x = 0.0;
-        }
-    }
+    zero_withheld(&mut full, &withheld);
     let frame_u = written_frame(
         &layout,
         obs,
@@ -734,10 +755,14 @@ pub fn calibrate_kinematics(
     let f_end = layout.frame_at(&full);
     // The input model is judged with the frame registered to it, the
     // calibrated one with the identified frame.
-    let before = row_norms(&machine, &f_start, obs, &hold, obs_file)?;
-    let after = row_norms(&calibrated, &f_end, obs, &hold, obs_file)?;
-    let fit_before = row_norms(&machine, &f_start, obs, &fit, obs_file)?;
-    let fit_after = row_norms(&calibrated, &f_end, obs, &fit, obs_file)?;
+    let (validation, fit_check) = validations(&hold, &fit, |cal, rows| {
+        let (m, f) = if cal {
+            (&calibrated, &f_end)
+        } else {
+            (&machine, &f_start)
+        };
+        row_norms(m, f, obs, rows, obs_file)
+    })?;
     let frame = layout.frame.map(|_| estimate(&f_end, frame_u));
     let yaml = write_yaml(
         text,
@@ -751,26 +776,24 @@ pub fn calibrate_kinematics(
     notes_for(&layout, obs, &fixed, &absorbed, &insignificant, &mut notes);
     notes.push(frame_note(&machine, &layout, read_frame));
     let (_, m) = offsets(&layout, obs, &fit);
-    let mut cal = Calibration {
+    Ok(Calibration {
         kind: "kinematics",
         n_fit: fit.len(),
         n_equations: m,
         observability_o1: 0.0,
         condition_number: 0.0,
-        rms_fit_mm: sol.sigma2.map_or((sol.rss / m as f64).sqrt(), f64::sqrt),
+        rms_fit_mm: sol.rms_fit(m),
         params,
-        validation: Validation::from_norms(&before, &after),
-        fit_check: Validation::from_norms(&fit_before, &fit_after),
+        validation,
+        fit_check,
         frame,
         insignificant: insignificant.iter().map(|&k| layout.name(k).0).collect(),
         uncertain,
         honesty: opts.honesty,
         notes,
         yaml,
-    };
-    cal.set_identifiability(id);
-    cal.check_validation();
-    Ok(cal)
+    }
+    .finished(id))
 }
 
 /// The instrument frame written with the model written: `full` holds the

@@ -107,6 +107,12 @@ pub struct Solution {
 }
 
 impl Solution {
+    /// RMS per coordinate of a fit of `m` equations, mm: `√σ²` when the fit
+    /// has redundancy, else `√(RSS / m)`.
+    pub fn rms_fit(&self, m: usize) -> f64 {
+        self.sigma2.map_or((self.rss / m as f64).sqrt(), f64::sqrt)
+    }
+
     /// Standard uncertainties `√diag(cov)`; `None` when there is no covariance.
     pub fn std_uncertainty(&self) -> Option<DVector<f64>> {
         self.covariance.as_ref().map(|c| {

@@ -155,6 +155,32 @@ impl fmt::Display for FrameEstimate {
     }
 }
 
+/// The held-out validation and the fit check of a calibration, in that
+/// order: `norms(calibrated, rows)` gives the residual norms of `rows`
+/// under the input model (`false`) or the calibrated one (`true`).
+pub fn validations(
+    hold: &[usize],
+    fit: &[usize],
+    norms: impl Fn(bool, &[usize]) -> crate::error::Result<Vec<f64>>,
+) -> crate::error::Result<(Option<Validation>, Option<Validation>)> {
+    let before = norms(false, hold)?;
+    let after = norms(true, hold)?;
+    let fit_before = norms(false, fit)?;
+    let fit_after = norms(true, fit)?;
+    Ok((
+        Validation::from_norms(&before, &after),
+        Validation::from_norms(&fit_before, &fit_after),
+    ))
+}
+
+/// Names of the parameters of `params` at the indices `idx`, in that order
+/// (indices past the end are skipped).
+pub fn names_at(params: &[Estimate], idx: &[usize]) -> Vec<String> {
+    idx.iter()
+        .filter_map(|&k| params.get(k).map(|p| p.name.clone()))
+        .collect()
+}
+
 impl Calibration {
     /// True when the calibrated model predicts the held-out items worse
     /// (higher RMS per point) than the input model: such a model is not
@@ -162,6 +188,15 @@ impl Calibration {
     pub fn worse_on_holdout(&self) -> bool {
         self.validation
             .is_some_and(|v| v.after_rms_mm > v.before_rms_mm)
+    }
+
+    /// The report made final: O1 and the condition number filled from `id`
+    /// ([`Calibration::set_identifiability`]) and the held-out verdict
+    /// checked ([`Calibration::check_validation`]).
+    pub fn finished(mut self, id: &Identifiability) -> Calibration {
+        self.set_identifiability(id);
+        self.check_validation();
+        self
     }
 
     /// Fills O1 and the condition number from an identifiability report.

@@ -484,6 +484,65 @@ fn held_out_deflections(
     Ok((before, after))
 }
 
+/// Load groups: the row indices of each group.
+type Groups = Vec<Vec<usize>>;
+
+/// The load groups of `obs` ([`load_groups`]) split into the fitted and the
+/// held-out ones (whole groups, [`holdout_split`] with the run's options).
+fn split_groups(obs: &Observations, obs_file: &str, opts: &Options) -> Result<(Groups, Groups)> {
+    let groups = load_groups(obs, obs_file)?;
+    let (fit_idx, hold_idx) = holdout_split(groups.len(), opts.holdout, opts.seed);
+    let pick = |idx: &[usize]| -> Vec<Vec<usize>> {
+        idx.iter().filter_map(|&i| groups.get(i).cloned()).collect()
+    };
+    Ok((pick(&fit_idx), pick(&hold_idx)))
+}
+
+/// The six joint stiffnesses (N·m/rad) from the compliances of `sol`, with
+/// their uncertainties scaled by `dof_factor` (the redundancy the centring
+/// used up); refused when a compliance comes out non-positive.
+fn stiffness_estimates(
+    robot: &Robot,
+    sol: &Solution,
+    dof_factor: f64,
+    obs_file: &str,
+) -> Result<Vec<Estimate>> {
+    let c = sol.params.rows(0, 6).into_owned();
+    if let Some(i) = c.iter().position(|&c| c <= 0.0) {
+        let u = sol
+            .std_uncertainty()
+            .map(|u| u[i] * dof_factor)
+            .unwrap_or(f64::NAN);
+        return Err(Error::Data(format!(
+            "{obs_file}: the compliance of joint {} came out non-positive ({:.4} ± {:.4} \
+             µrad/(N·m)), i.e. a non-positive stiffness, which no real joint has. This \
+             usually means a sign or frame error in the data (the force acting ON the \
+             robot is expected, in the robot base frame; the wrench point in the flange \
+             frame; joint angles in the controller convention), or a joint the loads hardly \
+             twist, so its compliance is zero within the noise",
+            i + 1,
+            c[i],
+            u
+        )));
+    }
+    let k_nmm = stiffness_from(&c);
+    let uc = sol.std_uncertainty().map(|u| u * dof_factor);
+    let mut params = Vec::with_capacity(6);
+    for i in 0..6 {
+        let k = k_nmm[i] / 1000.0;
+        let u = uc.as_ref().map(|u| u[i] / (c[i] * c[i] * C_UNIT) / 1000.0);
+        params.push(Estimate {
+            name: format!("k{}", i + 1),
+            unit: "N·m/rad",
+            start: robot.k_nmm_per_rad()[i] / 1000.0,
+            value: k,
+            u,
+            fixed: false,
+        });
+    }
+    Ok(params)
+}
+
 /// Identifies the joint stiffnesses from the load pairs of `obs` (with
 /// the instrument frame for `# frame: instrument` data).
 /// `text`/`machine_file`: the machine file (edited into the result).
@@ -504,13 +563,7 @@ pub fn calibrate_stiffness(
     // World positions are carried into the base frame (and said so).
     let world = world_note(&machine, obs.frame);
     let obs = &world_to_reference(&machine, obs);
-    let groups = load_groups(obs, obs_file)?;
-    let (fit_idx, hold_idx) = holdout_split(groups.len(), opts.holdout, opts.seed);
-    let pick = |idx: &[usize]| -> Vec<Vec<usize>> {
-        idx.iter().filter_map(|&i| groups.get(i).cloned()).collect()
-    };
-    let fit = pick(&fit_idx);
-    let hold = pick(&hold_idx);
+    let (fit, hold) = split_groups(obs, obs_file, opts)?;
     let fit_rows: Vec<usize> = fit.iter().flatten().copied().collect();
     let n_loaded = fit_rows
         .iter()
@@ -548,39 +601,7 @@ pub fn calibrate_stiffness(
         )));
     }
     let dof_factor = (sol.dof as f64 / dof_true as f64).sqrt();
-    let c = sol.params.rows(0, 6).into_owned();
-    if let Some(i) = c.iter().position(|&c| c <= 0.0) {
-        let u = sol
-            .std_uncertainty()
-            .map(|u| u[i] * dof_factor)
-            .unwrap_or(f64::NAN);
-        return Err(Error::Data(format!(
-            "{obs_file}: the compliance of joint {} came out non-positive ({:.4} ± {:.4} \
-             µrad/(N·m)), i.e. a non-positive stiffness, which no real joint has. This \
-             usually means a sign or frame error in the data (the force acting ON the \
-             robot is expected, in the robot base frame; the wrench point in the flange \
-             frame; joint angles in the controller convention), or a joint the loads hardly \
-             twist, so its compliance is zero within the noise",
-            i + 1,
-            c[i],
-            u
-        )));
-    }
-    let k_nmm = stiffness_from(&c);
-    let uc = sol.std_uncertainty().map(|u| u * dof_factor);
-    let mut params = Vec::with_capacity(6);
-    for i in 0..6 {
-        let k = k_nmm[i] / 1000.0;
-        let u = uc.as_ref().map(|u| u[i] / (c[i] * c[i] * C_UNIT) / 1000.0);
-        params.push(Estimate {
-            name: format!("k{}", i + 1),
-            unit: "N·m/rad",
-            start: robot.k_nmm_per_rad()[i] / 1000.0,
-            value: k,
-            u,
-            fixed: false,
-        });
-    }
+    let params = stiffness_estimates(robot, &sol, dof_factor, obs_file)?;
     // Uncertain stiffnesses keep the file's value (super::honesty).
     let withheld = opts.honesty.withheld(&params);
     let uncertain = opts.honesty.uncertain(&params);
@@ -626,7 +647,7 @@ pub fn calibrate_stiffness(
     };
     Machine::from_yaml_str(&yaml, machine_file)
         .map_err(|e| super::screen::implausible(&e, obs_file, obs.rows.len()))?;
-    let mut cal = Calibration {
+    Ok(Calibration {
         kind: "stiffness",
         n_fit: n_loaded,
         n_equations: m,
@@ -642,10 +663,8 @@ pub fn calibrate_stiffness(
         honesty: opts.honesty,
         notes,
         yaml,
-    };
-    cal.set_identifiability(&id);
-    cal.check_validation();
-    Ok(cal)
+    }
+    .finished(&id))
 }
 
 #[cfg(test)]

@@ -46,11 +46,12 @@ use crate::machine::tool::MachineTool;
 
 use super::forward::{self, check_kind};
 use super::frame::{
-    FRAME_PARAMS, FRAME_RANK_RTOL, carry, conditional_uncertainty, finish, frame_with,
-    point_jacobian, refit, screen_model, start_frame, world_note, world_to_reference,
+    FRAME_PARAMS, FRAME_RANK_RTOL, carry, conditional_uncertainty, finish, finish_if_any,
+    frame_with, point_jacobian, refit, screen_model, start_frame, world_note, world_to_reference,
 };
+use super::honesty::zero_withheld;
 use super::observations::{MeasurementFrame, Observations, Pose, holdout_split};
-use super::report::{CONDITION_LIMIT, Calibration, Estimate, FrameEstimate, Validation};
+use super::report::{CONDITION_LIMIT, Calibration, Estimate, FrameEstimate, Validation, names_at};
 use super::stiffness::Options;
 use super::yaml_edit::set_thermal_term;
 
@@ -412,6 +413,75 @@ fn fit_notes(any_fixed_by_rank: bool, notes: &mut Vec<String>) {
     );
 }
 
+/// The thermal terms of the robot's file (start values of the fit), refused
+/// when the file declares none or no row of `obs` gives joint powers.
+fn thermal_terms(
+    robot: &Robot,
+    obs: &Observations,
+    machine_file: &str,
+    obs_file: &str,
+) -> Result<Vec<ThermalTerm>> {
+    let base: Vec<ThermalTerm> = robot.thermal().map(|t| t.terms.clone()).unwrap_or_default();
+    if base.is_empty() {
+        return Err(Error::Machine(crate::error::Located::whole_file(
+            machine_file,
+            "no thermal terms to identify; add a `thermal:` section with \
+             `time_constant_min` and the `terms` (DH length ← joint power, Paper B Table 2: \
+             a2 ← P1, P2; d4 ← P1, P2, P3; a3 ← P2, P3) with start values",
+        )));
+    }
+    if !obs.rows.iter().any(|r| row_powers(r).is_some()) {
+        return Err(Error::Data(format!(
+            "{obs_file}: no row gives joint powers (p1_w…p6_w); thermal calibration needs \
+             rows measured at the steady state of several power levels"
+        )));
+    }
+    Ok(base)
+}
+
+/// The instrument frame written with the terms written (`terms`, from
+/// `full` with the `withheld` unknowns at zero) and its uncertainties from
+/// the joint fit `sol` over the `free` unknowns: the fitted frame when
+/// nothing is withheld, else refitted to the model as written.
+fn robot_frame(
+    unknowns: &Unknowns,
+    (sol, free): (&Solution, &[usize]),
+    (full, withheld): (&[f64], &[bool]),
+    terms: &[ThermalTerm],
+    obs: &Observations,
+    fit: &[usize],
+    obs_file: &str,
+) -> Result<(Isometry3<f64>, Option<[f64; FRAME_PARAMS]>)> {
+    let n = unknowns.n();
+    let at = |k: usize| free.iter().position(|&f| f == k);
+    let frame_cols: Vec<usize> = (unknowns.n_model()..n).filter_map(at).collect();
+    let fixed: Vec<usize> = (0..unknowns.n_model())
+        .filter(|&j| withheld.get(j) == Some(&true))
+        .filter_map(at)
+        .collect();
+    let joint = conditional_uncertainty(sol.covariance.as_ref(), &frame_cols, &fixed);
+    if fixed.is_empty() {
+        Ok((unknowns.frame_at(full), joint))
+    } else {
+        let (meas, model) = robot_points(unknowns.robot, terms, obs, fit, obs_file)?;
+        refit(&meas, &model, joint, obs_file)
+    }
+}
+
+/// Refuses a fit of `n` unknowns with fewer than two equations per
+/// unknown from its `n_rows` rows (three equations each).
+fn check_enough_rows(n_rows: usize, n: usize, obs_file: &str) -> Result<()> {
+    let m = 3 * n_rows;
+    if m < 2 * n {
+        return Err(Error::Data(format!(
+            "{obs_file}: {n_rows} rows left for the fit ({m} equations) for {n} parameters; \
+             thermal calibration needs at least {} rows, better several times more",
+            (2 * n).div_ceil(3)
+        )));
+    }
+    Ok(())
+}
+
 /// Refuses a badly conditioned fit of the robot terms.
 fn check_condition(id: &crate::calibrate::lsq::Identifiability, obs_file: &str) -> Result<()> {
     if id.condition_number_identified > CONDITION_LIMIT {
@@ -445,21 +515,7 @@ pub fn calibrate_thermal(
     // World positions are carried into the base frame (and said so).
     let world = world_note(&machine, obs.frame);
     let obs = &world_to_reference(&machine, obs);
-    let base: Vec<ThermalTerm> = robot.thermal().map(|t| t.terms.clone()).unwrap_or_default();
-    if base.is_empty() {
-        return Err(Error::Machine(crate::error::Located::whole_file(
-            machine_file,
-            "no thermal terms to identify; add a `thermal:` section with \
-             `time_constant_min` and the `terms` (DH length ← joint power, Paper B Table 2: \
-             a2 ← P1, P2; d4 ← P1, P2, P3; a3 ← P2, P3) with start values",
-        )));
-    }
-    if !obs.rows.iter().any(|r| row_powers(r).is_some()) {
-        return Err(Error::Data(format!(
-            "{obs_file}: no row gives joint powers (p1_w…p6_w); thermal calibration needs \
-             rows measured at the steady state of several power levels"
-        )));
-    }
+    let base = thermal_terms(robot, obs, machine_file, obs_file)?;
     let (fit, hold) = holdout_split(obs.rows.len(), opts.holdout, opts.seed);
     let frame = if obs.frame == MeasurementFrame::Instrument {
         Some(start_frame(&machine, obs, &fit, obs_file)?)
@@ -473,14 +529,7 @@ pub fn calibrate_thermal(
     };
     let n = unknowns.n();
     let m = 3 * fit.len();
-    if m < 2 * n {
-        return Err(Error::Data(format!(
-            "{obs_file}: {} rows left for the fit ({m} equations) for {n} parameters; \
-             thermal calibration needs at least {} rows, better several times more",
-            fit.len(),
-            (2 * n).div_ceil(3)
-        )));
-    }
+    check_enough_rows(fit.len(), n, obs_file)?;
     // Terms whose power never varies in the fitted rows are fixed.
     let mut notes = Vec::new();
     let varies = varying_terms(&base, obs, &fit, &mut notes);
@@ -523,49 +572,36 @@ pub fn calibrate_thermal(
     let withheld = opts.honesty.withheld(&params);
     let uncertain = opts.honesty.uncertain(&params);
     let mut full = full;
-    for (j, w) in withheld.iter().enumerate() {
-        if let (true, Some(x)) = (*w, full.get_mut(j)) {
-            *x = 0.0;
-        }
-    }
+    zero_withheld(&mut full, &withheld);
     let terms = terms_with(&base, &full);
     let f_start = unknowns.frame_at(&[]);
     let frame = match unknowns.frame {
-        Some(_) => {
-            let at = |k: usize| free.iter().position(|&f| f == k);
-            let frame_cols: Vec<usize> = (unknowns.n_model()..n).filter_map(at).collect();
-            let fixed: Vec<usize> = (0..unknowns.n_model())
-                .filter(|&j| withheld.get(j) == Some(&true))
-                .filter_map(at)
-                .collect();
-            let joint = conditional_uncertainty(sol.covariance.as_ref(), &frame_cols, &fixed);
-            Some(if fixed.is_empty() {
-                (unknowns.frame_at(&full), joint)
-            } else {
-                let (meas, model) = robot_points(robot, &terms, obs, &fit, obs_file)?;
-                refit(&meas, &model, joint, obs_file)?
-            })
-        }
+        Some(_) => Some(robot_frame(
+            &unknowns,
+            (sol, &free),
+            (&full, &withheld),
+            &terms,
+            obs,
+            &fit,
+            obs_file,
+        )?),
         None => None,
     };
     let f_end = frame.map_or(Isometry3::identity(), |(f, _)| f);
     let before = norms(robot, &base, &f_start, obs, &hold, obs_file)?;
     let after = norms(robot, &terms, &f_end, obs, &hold, obs_file)?;
-    let names: Vec<String> = absorbed
-        .iter()
-        .filter_map(|&k| params.get(k).map(|p| p.name.clone()))
-        .collect();
+    let names = names_at(&params, &absorbed);
     let (yaml, frame) = write_terms(text, machine_file, &terms, frame, &names, &mut notes)?;
     Machine::from_yaml_str(&yaml, machine_file)
         .map_err(|e| super::screen::implausible(&e, obs_file, obs.rows.len()))?;
     notes.extend(world);
-    let mut cal = Calibration {
+    Ok(Calibration {
         kind: "thermal",
         n_fit: fit.len(),
         n_equations: m,
         observability_o1: 0.0,
         condition_number: 0.0,
-        rms_fit_mm: sol.sigma2.map_or((sol.rss / m as f64).sqrt(), f64::sqrt),
+        rms_fit_mm: sol.rms_fit(m),
         params,
         validation: Validation::from_norms(&before, &after),
         fit_check: None,
@@ -575,10 +611,8 @@ pub fn calibrate_thermal(
         honesty: opts.honesty,
         notes,
         yaml,
-    };
-    cal.set_identifiability(id);
-    cal.check_validation();
-    Ok(cal)
+    }
+    .finished(id))
 }
 
 /// Residual norms of the rows `rows` for a machine and the instrument
@@ -779,49 +813,21 @@ fn tool_frame(
     refit(&meas, &model, joint, obs_file)
 }
 
-/// Identifies the steady-state thermal gains of a machine-tool file: spindle
-/// `growth_um_per_kw` (rows with `spindle_w`) and `scale_ppm_per_kw` of the
-/// axes that have a `thermal.axes` entry (rows with `pX_w` …); and the
-/// instrument frame for `# frame: instrument` data.
-pub fn calibrate_tool_thermal(
+/// The estimates of the tool's thermal gains (`unknowns` as
+/// [`tool_unknowns`]) from the solution `sol` of their corrections, with the
+/// indices of the identified ones the honesty rule withholds and the file
+/// `text` with the others written (the spindle growth with its assumed time
+/// constant, the axis scales).
+fn tool_estimates(
     text: &str,
     machine_file: &str,
-    machine: &Machine,
-    obs: &Observations,
-    obs_file: &str,
+    tool: &MachineTool,
+    unknowns: &[usize],
+    sol: &Solution,
     opts: &Options,
-) -> Result<Calibration> {
-    let Machine::Tool(tool) = machine else {
-        return Err(Error::Usage(format!(
-            "{machine_file}: not a machine-tool file"
-        )));
-    };
+) -> Result<(Vec<Estimate>, Vec<usize>, String)> {
     let thermal = tool.thermal().copied().unwrap_or_default();
-    let mut notes = Vec::new();
-    let unknowns = tool_unknowns(tool, obs, obs_file, &mut notes)?;
-    let (fit, hold) = holdout_split(obs.rows.len(), opts.holdout, opts.seed);
-    let m = 3 * fit.len();
-    let instrument = obs.frame == MeasurementFrame::Instrument;
-    let nf = if instrument { FRAME_PARAMS } else { 0 };
-    if m < 2 * (unknowns.len() + nf) {
-        return Err(Error::Data(format!(
-            "{obs_file}: {} rows left for the fit; too few",
-            fit.len()
-        )));
-    }
-    let f0 = if instrument {
-        Some(start_frame(machine, obs, &fit, obs_file)?)
-    } else {
-        None
-    };
-    let (sol, frame, absorbed) = solve_tool(machine, tool, obs, &fit, &unknowns, f0, obs_file)?;
     let id = &sol.identifiability;
-    if id.condition_number_identified > CONDITION_LIMIT {
-        return Err(Error::Data(format!(
-            "{obs_file}: badly conditioned data set: condition number {:.3e} > {:.0e}",
-            id.condition_number_identified, CONDITION_LIMIT
-        )));
-    }
     let u = sol.std_uncertainty();
     let mut params = Vec::new();
     let mut withheld = Vec::new();
@@ -879,6 +885,52 @@ pub fn calibrate_tool_thermal(
             }
         }
     }
+    Ok((params, withheld, yaml))
+}
+
+/// Identifies the steady-state thermal gains of a machine-tool file: spindle
+/// `growth_um_per_kw` (rows with `spindle_w`) and `scale_ppm_per_kw` of the
+/// axes that have a `thermal.axes` entry (rows with `pX_w` …); and the
+/// instrument frame for `# frame: instrument` data.
+pub fn calibrate_tool_thermal(
+    text: &str,
+    machine_file: &str,
+    machine: &Machine,
+    obs: &Observations,
+    obs_file: &str,
+    opts: &Options,
+) -> Result<Calibration> {
+    let Machine::Tool(tool) = machine else {
+        return Err(Error::Usage(format!(
+            "{machine_file}: not a machine-tool file"
+        )));
+    };
+    let mut notes = Vec::new();
+    let unknowns = tool_unknowns(tool, obs, obs_file, &mut notes)?;
+    let (fit, hold) = holdout_split(obs.rows.len(), opts.holdout, opts.seed);
+    let m = 3 * fit.len();
+    let instrument = obs.frame == MeasurementFrame::Instrument;
+    let nf = if instrument { FRAME_PARAMS } else { 0 };
+    if m < 2 * (unknowns.len() + nf) {
+        return Err(Error::Data(format!(
+            "{obs_file}: {} rows left for the fit; too few",
+            fit.len()
+        )));
+    }
+    let f0 = if instrument {
+        Some(start_frame(machine, obs, &fit, obs_file)?)
+    } else {
+        None
+    };
+    let (sol, frame, absorbed) = solve_tool(machine, tool, obs, &fit, &unknowns, f0, obs_file)?;
+    let id = &sol.identifiability;
+    if id.condition_number_identified > CONDITION_LIMIT {
+        return Err(Error::Data(format!(
+            "{obs_file}: badly conditioned data set: condition number {:.3e} > {:.0e}",
+            id.condition_number_identified, CONDITION_LIMIT
+        )));
+    }
+    let (params, withheld, yaml) = tool_estimates(text, machine_file, tool, &unknowns, &sol, opts)?;
     notes.push(
         "rows are at the thermal steady state of their powers: time constants are not identified"
             .into(),
@@ -899,26 +951,14 @@ pub fn calibrate_tool_thermal(
         )?),
         None => None,
     };
-    let frame_est = match frame {
-        Some((f, u)) => {
-            let names: Vec<String> = absorbed
-                .iter()
-                .filter_map(|&c| params.get(c).map(|p| p.name.clone()))
-                .collect();
-            let (edited, est) = finish(
-                &yaml,
-                machine_file,
-                &f,
-                u,
-                &names,
-                "a growth that moves every point alike moves the frame's origin",
-                &mut notes,
-            )?;
-            yaml = edited;
-            Some(est)
-        }
-        None => None,
-    };
+    let (yaml, frame_est) = finish_if_any(
+        yaml,
+        machine_file,
+        frame,
+        (&params, &absorbed),
+        "a growth that moves every point alike moves the frame's origin",
+        &mut notes,
+    )?;
     let id_frame = Isometry3::identity();
     let before = machine_norms(
         machine,
@@ -934,13 +974,13 @@ pub fn calibrate_tool_thermal(
         &hold,
         obs_file,
     )?;
-    let mut cal = Calibration {
+    Ok(Calibration {
         kind: "thermal",
         n_fit: fit.len(),
         n_equations: m,
         observability_o1: 0.0,
         condition_number: 0.0,
-        rms_fit_mm: sol.sigma2.map_or((sol.rss / m as f64).sqrt(), f64::sqrt),
+        rms_fit_mm: sol.rms_fit(m),
         params,
         validation: Validation::from_norms(&before, &after),
         fit_check: None,
@@ -950,10 +990,8 @@ pub fn calibrate_tool_thermal(
         honesty: opts.honesty,
         notes,
         yaml,
-    };
-    cal.set_identifiability(id);
-    cal.check_validation();
-    Ok(cal)
+    }
+    .finished(id))
 }
 
 #[cfg(test)]
