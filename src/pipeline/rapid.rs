@@ -371,29 +371,18 @@ impl Rewriter<'_> {
                 let text = robtarget_text(self.src, u.rt, &new_obj, comp.conf, &fmt)?;
                 self.edits.push_str(target.span(), &text);
             }
-            (origin @ Origin::Decl { decl, .. }, false) => {
-                let owner = self
-                    .owner
-                    .entry(origin)
-                    .or_insert_with(|| key.clone())
-                    .clone();
-                if owner == *key {
-                    if self
-                        .made
-                        .insert((origin, String::new(), key.clone()), String::new())
-                        .is_none()
-                    {
-                        robtarget_in_place(
-                            &mut self.edits,
-                            self.src,
-                            u.rt,
-                            &new_obj,
-                            u.conf,
-                            comp.conf,
-                            &fmt,
-                        )?;
-                    }
-                } else {
+            (origin @ Origin::Decl { decl, .. }, false) => match self.in_place(origin, key) {
+                InPlace::Write => robtarget_in_place(
+                    &mut self.edits,
+                    self.src,
+                    u.rt,
+                    &new_obj,
+                    u.conf,
+                    comp.conf,
+                    &fmt,
+                )?,
+                InPlace::Written => {}
+                InPlace::Copy => {
                     let text = robtarget_text(self.src, u.rt, &new_obj, comp.conf, &fmt)?;
                     let name = self.copy_name(
                         origin,
@@ -408,7 +397,7 @@ impl Rewriter<'_> {
                     )?;
                     self.edits.push_str(target.span(), &name);
                 }
-            }
+            },
             (origin @ Origin::Decl { decl, .. }, true) => {
                 let n = self.derived_count.get(&origin).copied().unwrap_or(0) + 1;
                 let text = robtarget_text(self.src, u.rt, &new_obj, comp.conf, &fmt)?;
@@ -521,29 +510,16 @@ impl Rewriter<'_> {
                     self.edits.push_str(n.span.clone(), &t);
                 }
             }
-            Origin::Decl { decl, .. } => {
-                let owner = self
-                    .owner
-                    .entry(origin)
-                    .or_insert_with(|| key.clone())
-                    .clone();
-                if owner == *key {
-                    if self
-                        .made
-                        .insert((origin, String::new(), key.clone()), String::new())
-                        .is_none()
-                    {
-                        for (n, v) in jt.robax.iter().zip(new_deg) {
-                            let t = crate::emit::rapid::joint_word(
-                                v,
-                                self.src,
-                                self.file,
-                                n.span.start,
-                            )?;
-                            self.edits.push_str(n.span.clone(), &t);
-                        }
+            Origin::Decl { decl, .. } => match self.in_place(origin, key) {
+                InPlace::Write => {
+                    for (n, v) in jt.robax.iter().zip(new_deg) {
+                        let t =
+                            crate::emit::rapid::joint_word(v, self.src, self.file, n.span.start)?;
+                        self.edits.push_str(n.span.clone(), &t);
                     }
-                } else {
+                }
+                InPlace::Written => {}
+                InPlace::Copy => {
                     let text = joint_text(self.src, self.file, jt, &new_deg)?;
                     let name = self.copy_name(
                         origin,
@@ -558,9 +534,41 @@ impl Rewriter<'_> {
                     )?;
                     self.edits.push_str(target.span(), &name);
                 }
-            }
+            },
         }
         Ok(Some(comp.deviation))
+    }
+}
+
+/// Where the compensated value of a declared target goes for one move.
+enum InPlace {
+    /// Into the declaration: the first move of the load key that owns it.
+    Write,
+    /// Nowhere new: the declaration already holds it for this load key.
+    Written,
+    /// Into a copy: another load key (or the as-written owner) owns the
+    /// declaration.
+    Copy,
+}
+
+impl Rewriter<'_> {
+    /// Whether the move with `key` writes its compensated target into the
+    /// declaration `origin` (the first load key to come owns it), finds it
+    /// there already, or needs a copy.
+    fn in_place(&mut self, origin: Origin, key: &LoadKey) -> InPlace {
+        let owner = self.owner.entry(origin).or_insert_with(|| key.clone());
+        if owner != key {
+            return InPlace::Copy;
+        }
+        let first = self
+            .made
+            .insert((origin, String::new(), key.clone()), String::new())
+            .is_none();
+        if first {
+            InPlace::Write
+        } else {
+            InPlace::Written
+        }
     }
 }
 
