@@ -741,3 +741,67 @@ fn svg_texts(node: roxmltree::Node) -> String {
         .collect::<Vec<_>>()
         .join("|")
 }
+
+/// The joint-interpolated instructions of the motion table (`MoveJDO`,
+/// `MoveJSync`, `TriggJ`, …) are positioning moves in the report's groups,
+/// as `MoveJ` is; the linear ones (`MoveLDO`, `ArcL`) are cutting moves.
+#[test]
+fn joint_moves_of_every_spelling_are_grouped_as_positioning() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let module = "MODULE Cell\n\
+  PERS tooldata tG := [TRUE,[[0,0,150],[1,0,0,0]],[1,[0,0,60],[1,0,0,0],0,0,0]];\n\
+  CONST robtarget pA := [[700,-100,600],[0,0,1,0],[-1,0,-1,0],[9E9,9E9,9E9,9E9,9E9,9E9]];\n\
+  CONST robtarget pB := [[760,80,520],[0,0,1,0],[0,0,0,0],[9E9,9E9,9E9,9E9,9E9,9E9]];\n\
+  CONST robtarget pC := [[820,40,480],[0,0,1,0],[0,0,0,0],[9E9,9E9,9E9,9E9,9E9,9E9]];\n\
+  PROC main()\n\
+    MoveJDO pA, v1000, z50, tG, doGrip, 1;\n\
+    MoveLDO pB, v100, fine, tG, doGrip, 0;\n\
+    MoveJ pC, v1000, z50, tG;\n\
+    MoveL pA, v100, fine, tG;\n\
+  ENDPROC\n\
+ENDMODULE\n";
+    let path = crate::common::write(dir.path(), "cell.mod", module);
+    let v = validate(&run(&[
+        "report",
+        path.to_str().expect("utf-8 path"),
+        "--machine",
+        "abb-irb1600",
+        "--format",
+        "json",
+    ]));
+    let s = &v["summary"];
+    let lines = |group: &str| -> Vec<u64> {
+        s[group]["worst"]
+            .as_array()
+            .expect("worst list")
+            .iter()
+            .map(|w| w["line"].as_u64().expect("line"))
+            .collect::<std::collections::BTreeSet<u64>>()
+            .into_iter()
+            .collect()
+    };
+    assert_eq!(s["positioning"]["moves"], 2, "{s}");
+    assert_eq!(s["cutting"]["moves"], 2, "{s}");
+    assert_eq!(lines("positioning"), [7, 9], "{s}");
+    assert_eq!(lines("cutting"), [8, 10], "{s}");
+}
+
+/// The report schema's `motion` values name every instruction of the
+/// motion table, so a report of any module that parses validates.
+#[test]
+fn the_report_schema_knows_every_motion_instruction() {
+    use postproc::program::rapid::instructions::MOTION_INSTRUCTIONS;
+    let schema: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(repo("schemas/report.schema.json")).expect("schema file"),
+    )
+    .expect("schema is JSON");
+    let motions: Vec<&str> = schema["$defs"]["row"]["properties"]["motion"]["enum"]
+        .as_array()
+        .expect("motion enum")
+        .iter()
+        .filter_map(|m| m.as_str())
+        .collect();
+    for m in MOTION_INSTRUCTIONS {
+        assert!(motions.contains(&m.name), "{} not in the schema", m.name);
+    }
+}

@@ -17,6 +17,8 @@ use crate::error::{Error, Result};
 use crate::machine::AXIS_LETTERS;
 use crate::predict::Effect;
 use crate::program::interp::Setup;
+use crate::program::rapid::MoveKind;
+use crate::program::rapid::instructions::motion_instruction;
 
 /// Report formats.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
@@ -330,7 +332,9 @@ fn stat_name(layout: &Layout, i: usize) -> &str {
 /// Whether a motion is a positioning move (rapid, machine-defined place,
 /// RAPID joint move) rather than a cutting move.
 fn is_positioning(motion: &str) -> bool {
-    matches!(motion, "rapid" | "fixed" | "MoveJ" | "MoveAbsJ")
+    matches!(motion, "rapid" | "fixed")
+        || motion_instruction(motion)
+            .is_some_and(|m| matches!(m.kind, MoveKind::MoveJ | MoveKind::MoveAbsJ))
 }
 
 /// The statistics of one group of moves as a JSON object.
