@@ -1,0 +1,280 @@
+//! RAPID programs shaped like the ones robot cells really run, written for
+//! these tests: a CAM milling module of 10 000 inline targets and an
+//! arc-welding module. Each comes back byte for byte with nothing to
+//! compensate, every move is compensated otherwise, and the compensated
+//! targets, commanded, land on the programmed poses (forward kinematics of
+//! the robot library).
+
+use std::fmt::Write as _;
+
+use approx::assert_abs_diff_eq;
+use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion, Vector3};
+use postproc::machine::robot::pose::pose_error;
+use postproc::machine::robot::{ConfData, Effects, PointMass, Robot};
+use postproc::program::rapid::{DataValue, Module, RobTarget, Target, parse_module};
+
+use crate::common::{postproc, repo, text_without_header, write};
+
+/// Position agreement of the predicted attained TCP with the programmed
+/// one, mm: the written position has 3 decimals (≤ 0.0005 mm per axis,
+/// 0.00087 mm in all) and the attained pose follows the command 1:1 to
+/// first order.
+const POS_TOL_MM: f64 = 1e-3;
+/// Orientation agreement, rad: quaternions written with 7 decimals turn
+/// the frame by at most 2e-7 rad.
+const ROT_TOL_RAD: f64 = 1e-6;
+
+/// Pose of a robtarget literal (position, quaternion with the scalar first).
+fn pose(rt: &RobTarget) -> Isometry3<f64> {
+    let q = rt.rot.each_ref().map(|n| n.value);
+    Isometry3::from_parts(
+        Translation3::new(rt.trans[0].value, rt.trans[1].value, rt.trans[2].value),
+        UnitQuaternion::from_quaternion(Quaternion::new(q[0], q[1], q[2], q[3])),
+    )
+}
+
+fn conf(rt: &RobTarget) -> ConfData {
+    let v = rt.robconf.each_ref().map(|n| n.value as i32);
+    ConfData {
+        cf1: v[0],
+        cf4: v[1],
+        cf6: v[2],
+        cfx: v[3],
+    }
+}
+
+/// The IRB 1600 with a tool: its TCP along the flange z axis and its mass.
+fn irb1600_with(tcp_z_mm: f64, mass_kg: f64, com_z_mm: f64) -> Robot {
+    let text = std::fs::read_to_string(repo("machines/abb-irb1600.yaml")).expect("machine file");
+    let r = Robot::from_yaml_str(&text, "abb-irb1600.yaml").expect("valid robot");
+    r.with_tool(
+        Isometry3::translation(0.0, 0.0, tcp_z_mm),
+        Some(PointMass {
+            mass_kg,
+            com_mm: Vector3::new(0.0, 0.0, com_z_mm),
+        }),
+        false,
+    )
+}
+
+/// Compensates `module` (written as `name`) on the IRB 1600 with `effects`
+/// and no annotation; the output without its provenance header.
+fn compensate(dir: &std::path::Path, name: &str, module: &str, effects: &str) -> String {
+    let input = write(dir, name, module);
+    let output = dir.join(format!("{effects}.{name}"));
+    postproc()
+        .arg("compensate")
+        .arg(&input)
+        .arg("--machine")
+        .arg(repo("machines/abb-irb1600.yaml"))
+        .args(["--effects", effects, "--annotate", "none", "-o"])
+        .arg(&output)
+        .assert()
+        .success();
+    text_without_header(&std::fs::read_to_string(&output).expect("output"))
+}
+
+/// The robtarget a move goes to: inline, or a declared name.
+fn target_of<'m>(m: &'m Module, t: &'m Target) -> &'m RobTarget {
+    match t {
+        Target::Inline(rt) => rt,
+        Target::Named {
+            name, index: None, ..
+        } => match m.decl(name).and_then(|d| d.value.as_ref()) {
+            Some(DataValue::RobTarget(rt)) => rt,
+            v => panic!("`{name}` is not a robtarget: {v:?}"),
+        },
+        t => panic!("unexpected target {t:?}"),
+    }
+}
+
+/// Every move of `m_out`, commanded, lands on the pose its counterpart in
+/// `m_in` programs (both in `wobj`); returns how many moves were checked.
+fn assert_moves_land(robot: &Robot, wobj: &Isometry3<f64>, m_in: &Module, m_out: &Module) -> usize {
+    let (a, b): (Vec<_>, Vec<_>) = (m_in.moves().collect(), m_out.moves().collect());
+    assert_eq!(a.len(), b.len());
+    for (mi, mo) in a.iter().zip(&b) {
+        let (p_in, p_out) = (target_of(m_in, &mi.target), target_of(m_out, &mo.target));
+        assert_ne!(pose(p_in), pose(p_out), "line {}: compensated", mi.line);
+        let programmed = wobj * pose(p_in);
+        let q = robot
+            .ik_conf(&(wobj * pose(p_out)), conf(p_out))
+            .unwrap_or_else(|e| panic!("line {}: {e}", mo.line));
+        let (dp, dr) = pose_error(&robot.predict(&q, Effects::ALL), &programmed);
+        assert_abs_diff_eq!(dp.norm(), 0.0, epsilon = POS_TOL_MM);
+        assert_abs_diff_eq!(dr.norm(), 0.0, epsilon = ROT_TOL_RAD);
+    }
+    a.len()
+}
+
+/// Passes and points per pass of the milling module.
+const PASSES: usize = 100;
+const POINTS_PER_PASS: usize = 100;
+
+/// A pocket-finishing module as a CAM post writes one: a spindle tool and
+/// a table work object declared at the top, `ConfL \Off`, then one linear
+/// move per point with an inline robtarget (no spaces, the controller's
+/// `9E+09` for unused external axes), a declared cutting speed, a
+/// feed-rate change written as an inline speeddata, and `WObj0`-style
+/// capitalisation on the approach.
+fn cam_milling_module() -> String {
+    let mut m = String::from(
+        "MODULE Pocket_Finish\n\
+         ! Generated by a CAM post: pocket finishing, 100 passes of 100 points.\n\
+         PERS tooldata tSpindle:=[TRUE,[[0,0,215.5],[1,0,0,0]],[8.5,[0,0,90],[1,0,0,0],0.05,0.05,0.02]];\n\
+         PERS wobjdata wTable:=[FALSE,TRUE,\"\",[[650,0,300],[1,0,0,0]],[[0,0,0],[1,0,0,0]]];\n\
+         VAR speeddata vCut:=[40,500,5000,1000];\n\
+         PROC Pocket()\n\
+         ConfL\\Off;\n\
+         MoveL [[0,20,50],[0,0,1,0],[0,0,0,0],[9E+09,9E+09,9E+09,9E+09,9E+09,9E+09]],v200,z5,tSpindle\\WObj:=wTable;\n",
+    );
+    for pass in 0..PASSES {
+        let y = 20.0 + 2.0 * pass as f64;
+        for k in 0..POINTS_PER_PASS {
+            // Every pass reverses x; a gentle ramp in z (a 3D surface).
+            let i = if pass % 2 == 0 {
+                k
+            } else {
+                POINTS_PER_PASS - 1 - k
+            };
+            let x = 2.0 * i as f64;
+            let z = -0.5 - 0.01 * x + 0.002 * y;
+            let speed = if k == 0 { "[20,500,5000,1000]" } else { "vCut" };
+            writeln!(
+                m,
+                "MoveL [[{x:.3},{y:.3},{z:.3}],[0,0,1,0],[0,0,0,0],[9E+09,9E+09,9E+09,9E+09,9E+09,9E+09]],{speed},z1,tSpindle\\WObj:=wTable;"
+            )
+            .expect("string");
+        }
+    }
+    m.push_str(
+        "MoveL [[0,220,50],[0,0,1,0],[0,0,0,0],[9E+09,9E+09,9E+09,9E+09,9E+09,9E+09]],v200,fine,tSpindle\\WObj:=wTable;\n\
+         ENDPROC\n\
+         ENDMODULE\n",
+    );
+    m
+}
+
+#[test]
+fn a_cam_milling_module_of_ten_thousand_targets_is_compensated_move_by_move() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let module = cam_milling_module();
+    assert_eq!(
+        compensate(dir.path(), "pocket.mod", &module, "none"),
+        module,
+        "identity"
+    );
+    let out = compensate(dir.path(), "pocket.mod", &module, "kinematic,gravity");
+    // Only the targets change: every line keeps its place, and the speed,
+    // zone, tool and work object of each move are as written.
+    let (a, b): (Vec<&str>, Vec<&str>) = (module.lines().collect(), out.lines().collect());
+    assert_eq!(a.len(), b.len());
+    for (x, y) in a.iter().zip(&b) {
+        if x.starts_with("MoveL [[") {
+            let tail = |l: &str| l.rsplit_once("]]").map(|(_, t)| t.to_string());
+            assert_eq!(tail(x), tail(y), "{y}");
+        } else {
+            assert_eq!(x, y);
+        }
+    }
+    let m_in = parse_module(&module, "in").expect("input parses");
+    let m_out = parse_module(&out, "out").expect("output parses");
+    let robot = irb1600_with(215.5, 8.5, 90.0);
+    let w_table = Isometry3::translation(650.0, 0.0, 300.0);
+    let checked = assert_moves_land(&robot, &w_table, &m_in, &m_out);
+    assert_eq!(checked, PASSES * POINTS_PER_PASS + 2);
+}
+
+/// Two fillet seams as an arc-welding cell runs them: approach with
+/// `MoveJ`, each seam `ArcLStart` … `ArcL` … `ArcLEnd` with seam, weld and
+/// weave data, a circular piece with `ArcC`, and a torch clean routine
+/// between the seams that goes to a fixed station.
+const WELD_MODULE: &str = "MODULE Weld_Bracket
+  ! Bracket fillet welds, torch 350 A, 22 deg neck.
+  PERS tooldata tTorch := [TRUE,[[0,0,410],[1,0,0,0]],[3.2,[0,0,160],[1,0,0,0],0,0,0]];
+  PERS wobjdata wFixture := [FALSE,TRUE,\"\",[[700,20,420],[1,0,0,0]],[[0,0,0],[1,0,0,0]]];
+  PERS seamdata sm1 := [0.5,0.5,[5,0,24,120,0,0,0,0,0],0.5,1,10,0,5,[5,0,24,120,0,0,0,0,0],0,1,[5,0,24,120,0,0,0,0,0],0,0,[0,0,0,0,0,0,0,0,0],0];
+  PERS welddata wd1 := [10,0,[5,0,24,180,0,0,0,0,0],[0,0,0,0,0,0,0,0,0]];
+  PERS weavedata wv1 := [1,0,3,4,0,0,0,0,0,0,0,0,0,0,0];
+  CONST robtarget pHome := [[600,0,800],[0,0,1,0],[0,0,0,0],[9E+09,9E+09,9E+09,9E+09,9E+09,9E+09]];
+  CONST robtarget pS1App := [[20,20,60],[0,0.0871557,0.9961947,0],[0,0,0,0],[9E+09,9E+09,9E+09,9E+09,9E+09,9E+09]];
+  CONST robtarget pS1Start := [[20,20,2],[0,0.0871557,0.9961947,0],[0,0,0,0],[9E+09,9E+09,9E+09,9E+09,9E+09,9E+09]];
+  CONST robtarget pS1Mid := [[120,20,2],[0,0.0871557,0.9961947,0],[0,0,0,0],[9E+09,9E+09,9E+09,9E+09,9E+09,9E+09]];
+  CONST robtarget pS1Via := [[150,32,2],[0,0.0871557,0.9961947,0],[0,0,0,0],[9E+09,9E+09,9E+09,9E+09,9E+09,9E+09]];
+  CONST robtarget pS1Arc := [[162,62,2],[0,0.0871557,0.9961947,0],[0,0,0,0],[9E+09,9E+09,9E+09,9E+09,9E+09,9E+09]];
+  CONST robtarget pS1End := [[162,180,2],[0,0.0871557,0.9961947,0],[0,0,0,0],[9E+09,9E+09,9E+09,9E+09,9E+09,9E+09]];
+  CONST robtarget pS2Start := [[60,240,2],[0,0.0871557,0.9961947,0],[0,0,0,0],[9E+09,9E+09,9E+09,9E+09,9E+09,9E+09]];
+  CONST robtarget pS2End := [[220,240,2],[0,0.0871557,0.9961947,0],[0,0,0,0],[9E+09,9E+09,9E+09,9E+09,9E+09,9E+09]];
+  CONST robtarget pClean := [[450,350,600],[0,0,1,0],[0,0,0,0],[9E+09,9E+09,9E+09,9E+09,9E+09,9E+09]];
+
+  PROC main()
+    MoveJ pHome, v1000, z50, tTorch;
+    MoveJ pS1App, v500, z10, tTorch\\WObj:=wFixture;
+    ArcLStart pS1Start, v100, sm1, wd1, fine, tTorch\\WObj:=wFixture;
+    ArcL pS1Mid, v20, sm1, wd1\\Weave:=wv1, z1, tTorch\\WObj:=wFixture;
+    ArcC pS1Via, pS1Arc, v20, sm1, wd1\\Weave:=wv1, z1, tTorch\\WObj:=wFixture;
+    ArcLEnd pS1End, v20, sm1, wd1, fine, tTorch\\WObj:=wFixture;
+    CleanTorch;
+    ArcLStart pS2Start, v100, sm1, wd1, fine, tTorch\\WObj:=wFixture;
+    ArcLEnd pS2End, v20, sm1, wd1\\Weave:=wv1, fine, tTorch\\WObj:=wFixture;
+    MoveJ pHome, v1000, fine, tTorch;
+  ENDPROC
+
+  PROC CleanTorch()
+    MoveJ pClean, v1000, fine, tTorch;
+    WaitTime 2;
+  ENDPROC
+ENDMODULE
+";
+
+#[test]
+fn an_arc_welding_module_has_every_seam_target_compensated() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    assert_eq!(
+        compensate(dir.path(), "weld.mod", WELD_MODULE, "none"),
+        WELD_MODULE,
+        "identity"
+    );
+    let out = compensate(dir.path(), "weld.mod", WELD_MODULE, "kinematic,gravity");
+    // The declarations of the targets change, nothing else: the moves, the
+    // seam, weld and weave data, the routine calls are as written.
+    let changed: Vec<&str> = WELD_MODULE
+        .lines()
+        .zip(out.lines())
+        .filter(|(x, y)| x != y)
+        .map(|(x, _)| x.split(":=").next().unwrap_or("").trim())
+        .collect();
+    let targets = [
+        "pHome", "pS1App", "pS1Start", "pS1Mid", "pS1Via", "pS1Arc", "pS1End", "pS2Start",
+        "pS2End", "pClean",
+    ];
+    let want: Vec<String> = targets
+        .iter()
+        .map(|t| format!("CONST robtarget {t}"))
+        .collect();
+    assert_eq!(changed, want, "{out}");
+    let m_in = parse_module(WELD_MODULE, "in").expect("input parses");
+    let m_out = parse_module(&out, "out").expect("output parses");
+    let robot = irb1600_with(410.0, 3.2, 160.0);
+    let w_fixture = Isometry3::translation(700.0, 20.0, 420.0);
+    for name in targets {
+        let rt = |m: &Module| match m.decl(name).and_then(|d| d.value.clone()) {
+            Some(DataValue::RobTarget(rt)) => rt,
+            v => panic!("{name}: {v:?}"),
+        };
+        let (p_in, p_out) = (rt(&m_in), rt(&m_out));
+        // pHome and pClean are in the base frame; the seam in the fixture.
+        let wobj = if matches!(name, "pHome" | "pClean") {
+            Isometry3::identity()
+        } else {
+            w_fixture
+        };
+        let programmed = wobj * pose(&p_in);
+        let q = robot
+            .ik_conf(&(wobj * pose(&p_out)), conf(&p_out))
+            .unwrap_or_else(|e| panic!("{name}: {e}"));
+        let (dp, dr) = pose_error(&robot.predict(&q, Effects::ALL), &programmed);
+        assert_abs_diff_eq!(dp.norm(), 0.0, epsilon = POS_TOL_MM);
+        assert_abs_diff_eq!(dr.norm(), 0.0, epsilon = ROT_TOL_RAD);
+    }
+}
