@@ -756,17 +756,18 @@ fn excitation_at_a_natural_frequency_is_flagged() {
     let r = load("abb-irb1600");
     let m = r.modal().expect("modal section");
     let res = m.resonance(8.5).expect("at the x mode");
-    assert_eq!(res.direction, 'x');
-    // Candidates 15 % off every mode: 7.225, 9.775 (x); 6.375, 8.625 (y);
-    // 8.075, 10.925 (z). Clear of all by ≥ 15 %: 6.375 and 10.925; the
-    // nearer to 8.5 is 6.375 Hz.
-    assert_abs_diff_eq!(res.suggested_hz, 6.375, epsilon = 1e-12);
+    assert_eq!(res.axis_letter(), 'X');
+    // Candidates 0.7 and 1.3 times every mode: 5.95, 11.05 (x); 5.25, 9.75
+    // (y); 6.65, 12.35 (z). Clear of every mode (ratio to each outside
+    // 0.7–1.3): 5.25 and 12.35 only (5.95 is 0.79 of y, 11.05 is 1.16 of
+    // z, 6.65 and 9.75 lie among the modes); the nearer to 8.5 is 5.25 Hz.
+    assert_abs_diff_eq!(m.suggested_hz(8.5), 5.25, epsilon = 1e-12);
     assert!(m.resonance(100.0).is_none());
     // 9.2 Hz lies within 10 % of x (8.2 % above 8.5) and of z (3.2 % below
     // 9.5); the modes are searched in the order x, y, z, so x is reported.
-    assert_eq!(m.resonance(9.2).map(|r| r.direction), Some('x'));
+    assert_eq!(m.resonance(9.2).map(|r| r.axis_letter()), Some('X'));
     // 10.3 Hz: 21 % above x, 8.4 % above z.
-    assert_eq!(m.resonance(10.3).map(|r| r.direction), Some('z'));
+    assert_eq!(m.resonance(10.3).map(|r| r.axis_letter()), Some('Z'));
     // At resonance the amplification is 1/(2ζ) = 10: 100 N against
     // 0.5 N/µm = 500 N/mm gives 0.2 mm static, 2 mm dynamic.
     let mode = m.modes[0].expect("x");

@@ -394,7 +394,8 @@ fn milling_sample_loads_only_the_side_moves_and_warns_at_a_mode() {
     assert!(out.status.success());
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(
-        err.contains("spindle excitation 8.50 Hz") && err.contains("x natural frequency 8.50 Hz"),
+        err.contains("tooth-passing frequency 8.50 Hz (255 rpm x 2 teeth / 60)")
+            && err.contains("X natural frequency 8.50 Hz"),
         "{err}"
     );
     // The finishing lap runs at its directive's 20000 rpm (667 Hz): the

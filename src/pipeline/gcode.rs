@@ -23,7 +23,9 @@ use crate::machine::AxisVec;
 use crate::machine::ThermalStart;
 use crate::machine::tool::thermal::Powers;
 use crate::machine::tool::{MachineTool, Modal, Thermal, ThermalState};
+use crate::pipeline::resonance::ResonanceWatch;
 use crate::predict::{BlockContext, Effect, ToolPredictor};
+use crate::process::modal::harmonic_amplitude;
 use crate::process::{CutState, ForceModel, MillingCache};
 use crate::program::gcode::{Block, parse_line};
 use crate::program::interp::{END_INSIDE, Interpreter, Motion, Plan, PlanKind, Setup, Warning};
@@ -68,7 +70,9 @@ struct Tracker<'a> {
     energy_j: Powers,
     pos: Option<AxisVec>,
     rpm: f64,
-    warned_rpm: Vec<f64>,
+    resonance: ResonanceWatch,
+    /// The dynamic effect is on: moves are checked for resonance.
+    dynamic: bool,
     active: bool,
 }
 
@@ -122,7 +126,8 @@ impl<'a> Tracker<'a> {
             energy_j: [0.0; 4],
             pos: None,
             rpm: 0.0,
-            warned_rpm: Vec::new(),
+            resonance: ResonanceWatch::default(),
+            dynamic: e.gain(Effect::Dynamic) != 0.0,
             active,
         }
     }
@@ -160,14 +165,7 @@ impl<'a> Tracker<'a> {
     }
 
     /// Advances over one block and returns its context.
-    fn advance(
-        &mut self,
-        plan: &Plan,
-        spindle_rpm: f64,
-        line: usize,
-        file: &str,
-        warnings: &mut Vec<Warning>,
-    ) -> BlockContext {
+    fn advance(&mut self, plan: &Plan, spindle_rpm: f64, line: usize) -> BlockContext {
         if !self.active {
             return BlockContext::default();
         }
@@ -245,8 +243,19 @@ impl<'a> Tracker<'a> {
             ctx_force = load.force_n;
             tooth_hz = load.tooth_hz;
             if let (Some(modal), true) = (self.modal, tooth_hz > 0.0) {
-                vibration = modal.amplitude_mm(&load.harmonic_n, tooth_hz);
-                self.check_resonance(modal, tooth_hz, &vibration, line, file, warnings);
+                vibration = modal.amplitude_mm(&harmonic_amplitude(&load.harmonic_n), tooth_hz);
+                let teeth = match self.force {
+                    Some(ForceModel::Milling(mi)) => mi.flutes,
+                    _ => 1,
+                };
+                if self.dynamic {
+                    self.resonance.observe(
+                        modal,
+                        (self.rpm, teeth, tooth_hz),
+                        vibration.norm(),
+                        line,
+                    );
+                }
             }
         } else {
             let dt = rapid_time_s(m, &mv.start, &mv.end);
@@ -275,45 +284,6 @@ impl<'a> Tracker<'a> {
             vibration_mm: vibration,
             ..self.context()
         }
-    }
-
-    /// Warns once per spindle speed when the tooth-passing frequency is
-    /// within 10 % of a natural frequency, with a suggested speed.
-    fn check_resonance(
-        &mut self,
-        modal: &Modal,
-        tooth_hz: f64,
-        vibration: &Vector3<f64>,
-        line: usize,
-        file: &str,
-        warnings: &mut Vec<Warning>,
-    ) {
-        let Some((dir, mode)) = modal.resonance(tooth_hz) else {
-            return;
-        };
-        if self.warned_rpm.contains(&self.rpm) {
-            return;
-        }
-        self.warned_rpm.push(self.rpm);
-        let flutes = match self.force {
-            Some(ForceModel::Milling(mi)) => mi.flutes,
-            _ => 1,
-        };
-        let suggest = modal.suggest_rpm(&mode, flutes, self.rpm);
-        let message = format!(
-            "tooth-passing frequency {tooth_hz:.1} Hz (S{} x {flutes} flutes) is within 10 % of the {} natural frequency {:.1} Hz: predicted vibration {:.4} mm; suggested spindle speed S{suggest:.0} (tooth passing at {:.1} x the natural frequency)",
-            self.rpm,
-            ["X", "Y", "Z"].get(dir).copied().unwrap_or("?"),
-            mode.natural_frequency_hz,
-            vibration.norm(),
-            suggest * f64::from(flutes) / 60.0 / mode.natural_frequency_hz,
-        );
-        tracing::warn!("{file}:{line}: {message}");
-        warnings.push(Warning {
-            line,
-            message,
-            count: 1,
-        });
     }
 }
 
@@ -592,13 +562,8 @@ impl<'j, 'm> InterpretStage<'j, 'm> {
                 self.count_move(plan, &mv, block.line_no, line, summary);
             }
             if let Some(t) = self.tracker.as_mut() {
-                st.contexts.push(t.advance(
-                    plan,
-                    self.interp.spindle_rpm(),
-                    block.line_no,
-                    self.file,
-                    &mut self.extra_warnings,
-                ));
+                st.contexts
+                    .push(t.advance(plan, self.interp.spindle_rpm(), block.line_no));
             }
         }
         summary.lines = chunk.first_line + chunk.ranges.len();
@@ -686,6 +651,11 @@ impl<'j, 'm> InterpretStage<'j, 'm> {
         if let Some(t) = &self.tracker {
             summary.duration_s = t.time_s;
             summary.mean_power_w = t.mean_power();
+            if let Some(modal) = t.modal {
+                summary
+                    .warnings
+                    .extend(t.resonance.warnings(modal, self.file));
+            }
         }
     }
 }
@@ -1033,7 +1003,6 @@ impl<'m> Job<'m> {
         let mut tracker = Tracker::new(pred, true);
         tracker.modal = None;
         let mut interp = Interpreter::new(self.setup.clone(), file);
-        let mut sink = Vec::new();
         let mut chunk = Chunk::default();
         let mut first_line = 0;
         loop {
@@ -1043,7 +1012,7 @@ impl<'m> Job<'m> {
                 chunk.block(i)?;
                 let block = &chunk.blocks[i];
                 let plan = interp.step(block, chunk.line(i))?;
-                tracker.advance(&plan, interp.spindle_rpm(), block.line_no, file, &mut sink);
+                tracker.advance(&plan, interp.spindle_rpm(), block.line_no);
             }
             first_line += chunk.ranges.len();
             if chunk.eof {

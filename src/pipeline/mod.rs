@@ -8,3 +8,4 @@
 
 pub mod gcode;
 pub mod rapid;
+mod resonance;

@@ -35,6 +35,7 @@ use crate::machine::robot::{
     Deviation, DhGrowth, Effects, ForceFrame, ForceModel, IkSelect, Model, ProcessWrench, Robot,
     RobotError, Thermal,
 };
+use crate::pipeline::resonance::ResonanceWatch;
 use crate::process::CutSettings;
 use crate::process::MillingCache;
 use crate::program::rapid::directives::Directives;
@@ -964,7 +965,7 @@ pub fn compensate_parsed(
     // Free the parsed module before the output text is built (the peak).
     drop(module);
     carry.push_inserts(src, &spans, &mut edits);
-    let mut outcome = carry.outcome(robot, opts);
+    let mut outcome = carry.outcome(robot, file);
     outcome.text = edits.apply(src)?;
     Ok(outcome)
 }
@@ -1006,7 +1007,7 @@ pub(crate) struct Carry {
     last_tcp: [f64; 3],
     moves: usize,
     max_deviation: (f64, usize),
-    max_vib: (f64, usize, Option<f64>),
+    resonance: ResonanceWatch,
     records: Vec<MoveRecord>,
     /// Moves left as written, with their reasons.
     as_written: Vec<AsWritten>,
@@ -1099,9 +1100,11 @@ impl Carry {
     }
 
     /// The outcome of the windows compensated (without the text), after
-    /// the resonance warning of the whole module.
-    pub(crate) fn outcome(&mut self, robot: &Robot, opts: &RapidOptions) -> RapidOutcome {
-        warn_resonance(robot, opts.effects, self.max_vib);
+    /// the resonance warnings of the whole module.
+    pub(crate) fn outcome(&mut self, robot: &Robot, file: &str) -> RapidOutcome {
+        if let Some(modal) = robot.modal() {
+            self.resonance.warnings(modal, file);
+        }
         RapidOutcome {
             text: String::new(),
             moves: self.moves,
@@ -1570,10 +1573,7 @@ impl<'m> Rewriter<'m> {
         if d > carry.max_deviation.0 {
             carry.max_deviation = (d, mv.line);
         }
-        let v = dev.vibration_mm.norm();
-        if v > carry.max_vib.0 {
-            carry.max_vib = (v, mv.line, state.rpm);
-        }
+        self.watch_resonance(carry, mv.line, state, dev);
         if self.opts.annotate {
             push_annotation(&mut self.edits, self.src, &mv.span, |out| {
                 write_dev_comment(out, dev)
@@ -1592,6 +1592,29 @@ impl<'m> Rewriter<'m> {
             power_w: seg.power_w,
             thermal_power_w: state.power.unwrap_or([0.0; 6]),
         });
+    }
+}
+
+impl Rewriter<'_> {
+    /// Hands a cutting move at a spindle speed to the resonance check
+    /// (with the dynamic effect on): its tooth passing and its vibration
+    /// amplitude before the effect's gain.
+    fn watch_resonance(&self, carry: &mut Carry, line: usize, state: &MoveState, dev: &Deviation) {
+        let gain = self.opts.effects.dynamic;
+        let (Some(pf), Some(modal), true) = (
+            self.robot.process_force(),
+            self.robot.modal(),
+            gain != 0.0 && state.wrench.is_some(),
+        ) else {
+            return;
+        };
+        let pf = pf.with_rpm(state.rpm);
+        if let (Some(rpm), Some(f_hz)) = (pf.spindle_rpm, pf.excitation_hz()) {
+            let amp = dev.vibration_mm.norm() / gain;
+            carry
+                .resonance
+                .observe(modal, (rpm, pf.flutes, f_hz), amp, line);
+        }
     }
 }
 
@@ -1626,30 +1649,6 @@ impl Rewriter<'_> {
 /// Warns once when the spindle's tooth-passing frequency (at the speed of
 /// the move with the largest vibration, `rpm` from a directive) lies within
 /// 10 % of a natural frequency of the modal model and some move is loaded.
-fn warn_resonance(robot: &Robot, fx: Effects, (amp_mm, line, rpm): (f64, usize, Option<f64>)) {
-    if fx.dynamic == 0.0 || amp_mm <= 0.0 {
-        return;
-    }
-    let (Some(pf), Some(modal)) = (robot.process_force(), robot.modal()) else {
-        return;
-    };
-    let pf = pf.with_rpm(rpm);
-    let Some(f) = pf.excitation_hz() else {
-        return;
-    };
-    if let Some(r) = modal.resonance(f) {
-        let rpm = r.suggested_hz * 60.0 / f64::from(pf.flutes);
-        tracing::warn!(
-            "spindle excitation {:.2} Hz (rpm x flutes / 60) is within 10 % of the {} natural frequency {:.2} Hz: vibration up to {:.4} mm (line {line}); a spindle speed of about {rpm:.0} rpm ({:.2} Hz) avoids the resonance",
-            r.excitation_hz,
-            r.direction,
-            r.natural_hz,
-            amp_mm,
-            r.suggested_hz
-        );
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;

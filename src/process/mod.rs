@@ -26,6 +26,7 @@
 
 mod force_spec;
 pub mod limits;
+pub mod modal;
 mod table;
 
 /// Cutting settings a program sets from a position on, by a

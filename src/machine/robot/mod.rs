@@ -506,7 +506,11 @@ impl Robot {
         // in the tool or base frame (the RAPID pipeline sets it per move).
         let process_wrench = process::default_wrench(process_force.as_ref());
         let thermal = raw.thermal.as_ref().map(Thermal::from_raw).transpose()?;
-        let modal = raw.modal.as_deref().map(Modal::from_raw).transpose()?;
+        let modal = raw
+            .modal
+            .as_deref()
+            .map(dynamics::modal_from_raw)
+            .transpose()?;
         let output = output_decimals(raw.output.as_ref())?;
         plausible::check(&raw)?;
         let thermal_growth = thermal

@@ -140,7 +140,7 @@ fn validate(raw: RawMachineTool) -> V<MachineTool> {
     let modal = raw
         .modal
         .as_ref()
-        .map(super::dynamics::Modal::from_raw)
+        .map(super::dynamics::modal_from_raw)
         .transpose()?;
 
     let measurement_frame = raw

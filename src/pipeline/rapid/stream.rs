@@ -317,7 +317,7 @@ fn pass<R: BufRead>(
     carry.push_inserts(w.prologue(), &spans, &mut edits);
     let prologue = edits.apply(w.prologue())?;
     let outcome = match robot {
-        Some(robot) => carry.outcome(robot, opts),
+        Some(robot) => carry.outcome(robot, file),
         None => RapidOutcome {
             text: String::new(),
             moves,
