@@ -178,6 +178,7 @@ pub(crate) fn run(model_text: &str, obs: &Observations, seed: u64) -> Diagnosis 
         seed,
         bootstrap: 10,
         instrument: false,
+        ..Options::default()
     };
     diagnose::diagnose(&machine(model_text), model_text, obs, "obs.csv", &opts)
         .expect("diagnosis runs")
@@ -228,6 +229,7 @@ fn assert_rerun_clean(model_text: &str, d: &Diagnosis, obs: &Observations, seed:
         seed,
         bootstrap: 10,
         instrument: false,
+        ..Options::default()
     };
     let m = diagnose::holdout_metrics(&machine(&w.text), obs, "obs.csv", &opts).expect("metrics");
     assert!(
@@ -905,12 +907,101 @@ fn instrument_frame_names_the_same_missing_effect() {
     assert!((nums[0] - 1.0).abs() <= K_SIGMA * nums[1], "{line}");
 }
 
-/// Rows with a measured orientation: diagnose says that it compares
-/// positions only, and names the same missing effect as without them.
+/// Orientation noise of a 6-DOF tracker probe, standard deviation per
+/// axis, rad (≈ 0.01°).
+const ORIENTATION_NOISE_RAD: f64 = 1.7e-4;
+
+/// [`measure`] with the measured orientation of the tool frame too: the
+/// true machine's plus a random small rotation of
+/// [`ORIENTATION_NOISE_RAD`] per axis.
+fn measure_oriented(truth: &Machine, rows: Vec<Observation>, seed: u64) -> Observations {
+    let mut obs = measure(truth, rows, 1.0, seed);
+    let mut rng = SplitMix64::new(seed ^ 0x0123_4567);
+    for r in &mut obs.rows {
+        let q = forward::predict(truth, r, "truth")
+            .expect("prediction")
+            .attained_rot
+            .expect("a robot predicts the orientation");
+        let e = Vector3::new(
+            rng.gaussian(0.0, ORIENTATION_NOISE_RAD),
+            rng.gaussian(0.0, ORIENTATION_NOISE_RAD),
+            rng.gaussian(0.0, ORIENTATION_NOISE_RAD),
+        );
+        r.orientation = Some(nalgebra::UnitQuaternion::from_scaled_axis(e) * q);
+    }
+    obs.columns.extend(columns(&["qw", "qx", "qy", "qz"]));
+    obs
+}
+
+/// A joint-6 zero offset of 0.05° with the TCP on the joint-6 axis turns
+/// the tool without moving the measured point: with measured orientations
+/// diagnose names it and recovers it, and the held-out orientation error
+/// falls to the noise; with the orientations left out
+/// (`orientation_mm_per_rad: 0`) the positions cannot see it and nothing
+/// is claimed.
 #[test]
-fn measured_orientations_are_said_to_be_unused() {
+fn orientation_rows_find_a_wrist_zero_offset() {
+    let model_text = text("machines/abb-irb1600.yaml");
+    let Machine::Robot(r) = machine(&model_text) else {
+        panic!("robot")
+    };
+    let truth_deg: f64 = 0.05;
+    let mut p = *r.params(postproc::machine::robot::Model::Actual);
+    p.joints[5].theta_offset_rad += truth_deg.to_radians();
+    let truth = Machine::Robot(r.with_actual(p));
+    let obs = measure_oriented(&truth, robot_rows(60, 71), 72);
+    let with = run(&model_text, &obs, 3);
+    let report = diagnose::report::render_table(&with);
+    let names: Vec<&str> = with.found.iter().map(|f| f.effect.name.as_str()).collect();
+    assert_eq!(names, vec!["joint6_zero"], "{report}");
+    let fitted = &with.found[0].params[0];
+    let truth_urad = truth_deg.to_radians() * 1e6;
+    assert!(
+        (fitted.value - truth_urad).abs() <= K_SIGMA * fitted.u,
+        "fitted {} ± {}, true {truth_urad}\n{report}",
+        fitted.value,
+        fitted.u
+    );
+    let g = with.gap.orientation.expect("orientation gap");
+    assert!(g.before.rms_deg > 0.8 * truth_deg, "{report}");
+    // The RMS angle of 3D rotation noise is √3 σ.
+    let noise_deg = 3f64.sqrt() * ORIENTATION_NOISE_RAD.to_degrees();
+    assert!(
+        g.after.rms_deg <= NOISE_FLOOR_FACTOR * noise_deg,
+        "{report}"
+    );
+    assert!(report.contains("orientation of the"), "{report}");
+    let u = with.orientation.expect("orientations used");
+    assert_eq!(u.rows, obs.rows.len());
+
+    let without = diagnose::diagnose(
+        &machine(&model_text),
+        &model_text,
+        &obs,
+        "obs.csv",
+        &Options {
+            seed: 3,
+            bootstrap: 10,
+            orientation_mm_per_rad: 0.0,
+            ..Options::default()
+        },
+    )
+    .expect("diagnosis runs");
+    let report = diagnose::report::render_table(&without);
+    assert!(without.found.is_empty(), "{report}");
+    assert!(without.gap.orientation.is_none(), "{report}");
+    assert!(without.orientation.is_none(), "{report}");
+}
+
+/// Through the binary, on the sample data simulated with orientations:
+/// the note says how they are weighted, the gap shows the orientation
+/// error before and after, and the effect found is the one found from
+/// positions alone; `--orientation-weight-mm-per-rad 0` leaves them out
+/// and gives the positions-only gap.
+#[test]
+fn measured_orientations_enter_the_diagnosis() {
     let dir = tempfile::tempdir().expect("tempdir");
-    let run = |extra: &[&str], name: &str| -> String {
+    let simulate = |extra: &[&str], name: &str| -> std::path::PathBuf {
         let out = dir.path().join(name);
         postproc()
             .args([
@@ -931,25 +1022,70 @@ fn measured_orientations_are_said_to_be_unused() {
             .arg(&out)
             .assert()
             .success();
+        out
+    };
+    let diagnose = |obs: &std::path::Path, extra: &[&str]| -> String {
         let a = postproc()
             .args(["diagnose", "-q", "--machine"])
             .arg(repo("samples/diagnose/model.yaml"))
             .arg("--observations")
-            .arg(&out)
+            .arg(obs)
+            .args(extra)
             .assert()
             .success();
         String::from_utf8_lossy(&a.get_output().stdout).to_string()
     };
-    let plain = run(&[], "plain.csv");
-    let oriented = run(&["--orientation"], "oriented.csv");
-    let note = "diagnose compares positions only";
-    assert!(!plain.contains(note), "{plain}");
-    assert!(oriented.contains(note), "{oriented}");
-    let verdict = |out: &str| -> String {
+    let plain = simulate(&[], "plain.csv");
+    let oriented = simulate(&["--orientation", "--noise-mrad", "0.17"], "oriented.csv");
+    let p = diagnose(&plain, &[]);
+    let o = diagnose(&oriented, &[]);
+    let o0 = diagnose(&oriented, &["--orientation-weight-mm-per-rad", "0"]);
+    let line = |out: &str, start: &str| -> String {
         out.lines()
-            .find(|l| l.starts_with("VERDICT:"))
-            .unwrap_or_else(|| panic!("verdict in\n{out}"))
+            .find(|l| l.trim_start().starts_with(start))
+            .unwrap_or_else(|| panic!("{start} in\n{out}"))
             .to_string()
     };
-    assert_eq!(verdict(&oriented), verdict(&plain), "{oriented}");
+    assert!(!p.contains("measured orientation"), "{p}");
+    assert!(o.contains("weighted 100 mm/rad"), "{o}");
+    assert!(
+        o0.contains("--orientation-weight-mm-per-rad 0 leaves them out"),
+        "{o0}"
+    );
+    assert_eq!(line(&o, "VERDICT:"), line(&p, "VERDICT:"), "{o}");
+    assert!(o.contains("orientation of the"), "{o}");
+    assert!(!o0.contains("orientation of the"), "{o0}");
+    // Without the orientation equations the gap is the positions' alone:
+    // the same as for the file with the orientation columns removed.
+    let text = std::fs::read_to_string(&oriented).expect("simulated file");
+    let mut keep: Vec<bool> = Vec::new();
+    let mut stripped = String::new();
+    for l in text.lines() {
+        if l.starts_with('#') {
+            stripped.push_str(l);
+        } else {
+            let cells: Vec<&str> = l.split(',').collect();
+            if keep.is_empty() {
+                keep = cells
+                    .iter()
+                    .map(|c| !["qw", "qx", "qy", "qz"].contains(&c.trim()))
+                    .collect();
+            }
+            let kept: Vec<&str> = cells
+                .iter()
+                .zip(&keep)
+                .filter(|(_, k)| **k)
+                .map(|(c, _)| *c)
+                .collect();
+            stripped.push_str(&kept.join(","));
+        }
+        stripped.push('\n');
+    }
+    let positions = dir.path().join("positions.csv");
+    std::fs::write(&positions, stripped).expect("written");
+    let s = diagnose(&positions, &[]);
+    assert!(!s.contains("measured orientation"), "{s}");
+    for start in ["before", "after", "VERDICT:"] {
+        assert_eq!(line(&o0, start), line(&s, start), "{o0}\n{s}");
+    }
 }

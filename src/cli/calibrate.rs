@@ -240,6 +240,19 @@ const MAX_NOISE_UM: f64 = 1e4;
 /// Largest accepted position-to-orientation noise ratio, mm/rad.
 const MAX_ORIENTATION_WEIGHT: f64 = 1e6;
 
+/// Refuses an `--orientation-weight-mm-per-rad` outside
+/// `0..MAX_ORIENTATION_WEIGHT`.
+pub(super) fn check_orientation_weight(w: f64) -> Result<()> {
+    if w.is_finite() && (0.0..=MAX_ORIENTATION_WEIGHT).contains(&w) {
+        Ok(())
+    } else {
+        Err(usage(format!(
+            "--orientation-weight-mm-per-rad must be within 0..{MAX_ORIENTATION_WEIGHT}, got {}",
+            crate::error::show_number(w)
+        )))
+    }
+}
+
 fn non_negative(flag: &str, v: f64) -> Result<()> {
     if v.is_finite() && (0.0..=MAX_NOISE_UM).contains(&v) {
         Ok(())
@@ -342,14 +355,7 @@ pub fn run_calibrate(a: &CalibrateArgs) -> Result<i32> {
             crate::error::show_number(a.holdout)
         )));
     }
-    if !(a.orientation_weight_mm_per_rad.is_finite()
-        && (0.0..=MAX_ORIENTATION_WEIGHT).contains(&a.orientation_weight_mm_per_rad))
-    {
-        return Err(usage(format!(
-            "--orientation-weight-mm-per-rad must be within 0..{MAX_ORIENTATION_WEIGHT}, got {}",
-            crate::error::show_number(a.orientation_weight_mm_per_rad)
-        )));
-    }
+    check_orientation_weight(a.orientation_weight_mm_per_rad)?;
     check_uncertain_above(a.uncertain_above)?;
     let (text, file) = read_machine(&a.machine)?;
     let mut obs = load_observations(&a.observations)?;

@@ -62,6 +62,10 @@ pub struct DiagnoseArgs {
     /// accepted); see `calibrate --uncertain-above`.
     #[arg(long, value_name = "FRACTION", default_value_t = crate::calibrate::honesty::MAX_RELATIVE_UNCERTAINTY)]
     pub uncertain_above: f64,
+    /// Ratio of position to orientation noise for rows with `qw…qz`, mm per
+    /// rad, as in `calibrate` (0 ignores measured orientations).
+    #[arg(long, default_value_t = crate::calibrate::stiffness::ORIENTATION_MM_PER_RAD)]
+    pub orientation_weight_mm_per_rad: f64,
 }
 
 /// Observations in the machine's reference frame: world positions through
@@ -72,6 +76,7 @@ fn in_reference_frame(
     machine: &Machine,
     obs: &crate::calibrate::observations::Observations,
     file: &str,
+    w_rot: f64,
 ) -> Result<(crate::calibrate::observations::Observations, String)> {
     use crate::calibrate::frame::{
         frame_uncertainty, register, rpy_deg, world_note, world_to_reference,
@@ -93,13 +98,7 @@ fn in_reference_frame(
     if let Some(w) = world {
         said.push_str(&format!("note: {w}\n"));
     }
-    let oriented = obs.rows.iter().filter(|r| r.orientation.is_some()).count();
-    if oriented > 0 {
-        said.push_str(&format!(
-            "note: {oriented} row(s) carry a measured orientation (qw, qx, qy, qz); diagnose \
-             compares positions only (calibrate kinematics fits orientations too)\n"
-        ));
-    }
+    said.push_str(&orientation_note(machine, &obs, w_rot));
     if obs.frame == MeasurementFrame::Instrument {
         let model: Vec<nalgebra::Vector3<f64>> = obs
             .rows
@@ -147,6 +146,38 @@ fn in_reference_frame(
     Ok((obs, said))
 }
 
+/// What the diagnosis does with the measured orientations of `obs` (empty
+/// when no row has one): compared with weight `w_rot` (mm/rad), or left out
+/// (weight 0, or a machine tool, whose model predicts positions only).
+fn orientation_note(
+    machine: &Machine,
+    obs: &crate::calibrate::observations::Observations,
+    w_rot: f64,
+) -> String {
+    let n = obs.rows.iter().filter(|r| r.orientation.is_some()).count();
+    if n == 0 {
+        return String::new();
+    }
+    let w = crate::error::show_number(w_rot);
+    if matches!(machine, Machine::Tool(_)) {
+        format!(
+            "note: {n} row(s) carry a measured orientation (qw, qx, qy, qz); the machine-tool \
+             model predicts the tool tip's position only: diagnose compares positions\n"
+        )
+    } else if w_rot > 0.0 {
+        format!(
+            "note: {n} row(s) carry a measured orientation (qw, qx, qy, qz): its residual \
+             enters every fit, test and held-out figure, weighted {w} mm/rad \
+             (--orientation-weight-mm-per-rad; θ rad counts like θ × {w} mm of position)\n"
+        )
+    } else {
+        format!(
+            "note: {n} row(s) carry a measured orientation (qw, qx, qy, qz); \
+             --orientation-weight-mm-per-rad 0 leaves them out: diagnose compares positions\n"
+        )
+    }
+}
+
 /// Fewest distinct poses a diagnosis accepts.
 const MIN_DISTINCT_POSES: usize = 4;
 
@@ -166,6 +197,7 @@ fn print(s: &str) -> Result<()> {
 /// Runs `postproc diagnose`.
 pub fn run(a: &DiagnoseArgs) -> Result<i32> {
     super::calibrate::check_uncertain_above(a.uncertain_above)?;
+    super::calibrate::check_orientation_weight(a.orientation_weight_mm_per_rad)?;
     if a.list_effects {
         let text = match (&a.machine, &a.observations) {
             (Some(m), Some(o)) => {
@@ -201,12 +233,18 @@ pub fn run(a: &DiagnoseArgs) -> Result<i32> {
         obs.frame = f;
     }
     let instrument = obs.frame == crate::calibrate::observations::MeasurementFrame::Instrument;
-    let (obs, frame_text) = in_reference_frame(&machine, &obs, &o.display().to_string())?;
+    let (obs, frame_text) = in_reference_frame(
+        &machine,
+        &obs,
+        &o.display().to_string(),
+        a.orientation_weight_mm_per_rad,
+    )?;
     let opts = Options {
         holdout: a.holdout,
         seed: a.seed,
         bootstrap: a.bootstrap,
         instrument,
+        orientation_mm_per_rad: a.orientation_weight_mm_per_rad,
     };
     let d = diagnose::diagnose(&machine, &text, &obs, &o.display().to_string(), &opts)?;
     if a.format == DiagnoseFormat::Json && !frame_text.is_empty() {

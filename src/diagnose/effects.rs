@@ -10,7 +10,7 @@
 //! parameter); the others are analytic additions (a row covariate times the
 //! derivative of the prediction with respect to a length or angle).
 
-use nalgebra::{DMatrix, Isometry3, Translation3, Vector3};
+use nalgebra::{DMatrix, Isometry3, Translation3, UnitQuaternion, Vector3};
 use serde::Serialize;
 use serde_yaml::{Mapping, Value};
 
@@ -500,15 +500,27 @@ const COMPLIANCE_STEP: f64 = 0.1;
 /// Payload step, kg.
 const MASS_STEP: f64 = 0.5;
 
-fn predict_all(m: &Machine, rows: &[Observation], ctx: &Context) -> Result<Vec<Vector3<f64>>> {
+/// Slots of a row in a pose sensitivity ([`pose_sensitivity`]): the
+/// measured triple (mm per display unit), then the rotation vector of the
+/// measured frame's orientation (rad per display unit).
+pub const SLOTS: usize = 6;
+
+/// The measured triple and the orientation of the measured frame (robots)
+/// predicted by `m` for every row.
+type Predictions = Vec<(Vector3<f64>, Option<UnitQuaternion<f64>>)>;
+
+fn predict_all(m: &Machine, rows: &[Observation], ctx: &Context) -> Result<Predictions> {
     rows.iter()
-        .map(|r| forward::predict(m, r, ctx.file).map(|p| p.measured(ctx.kind)))
+        .map(|r| forward::predict(m, r, ctx.file).map(|p| (p.measured(ctx.kind), p.attained_rot)))
         .collect()
 }
 
 /// Simulated measured triples of the current model, mm.
 pub fn simulate(ctx: &Context, rows: &[Observation]) -> Result<Vec<Vector3<f64>>> {
-    predict_all(ctx.machine, rows, ctx)
+    Ok(predict_all(ctx.machine, rows, ctx)?
+        .into_iter()
+        .map(|p| p.0)
+        .collect())
 }
 
 /// Central difference of the predictions of two machine variants.
@@ -524,8 +536,13 @@ fn diff_column(
     let a = predict_all(plus, rows, ctx)?;
     let b = predict_all(minus, rows, ctx)?;
     for (i, (pa, pb)) in a.iter().zip(&b).enumerate() {
+        let turn = match (pa.1, pb.1) {
+            (Some(qa), Some(qb)) => (qa * qb.inverse()).scaled_axis(),
+            _ => Vector3::zeros(),
+        };
         for c in 0..3 {
-            out[(3 * i + c, col)] = (pa[c] - pb[c]) / h2;
+            out[(SLOTS * i + c, col)] = (pa.0[c] - pb.0[c]) / h2;
+            out[(SLOTS * i + 3 + c, col)] = turn[c] / h2;
         }
     }
     Ok(())
@@ -617,8 +634,8 @@ fn robot_backlash_column(
         } else {
             0.0
         };
-        for c in 0..3 {
-            s[(3 * i + c, 0)] *= half;
+        for c in 0..SLOTS {
+            s[(SLOTS * i + c, 0)] *= half;
         }
     }
     Ok(())
@@ -645,16 +662,33 @@ fn tool_length_column(
             _ => 1.0,
         };
         for c in 0..3 {
-            s[(3 * i + c, 0)] = dp[c] * scale;
+            s[(SLOTS * i + c, 0)] = dp[c] * scale;
         }
     }
 }
 
-/// Sensitivity matrix (3·rows × parameters), mm per display unit.
+/// Sensitivity matrix of the measured triples (3·rows × parameters), mm per
+/// display unit: the position slots of [`pose_sensitivity`].
 pub fn sensitivity(effect: &Effect, ctx: &Context, rows: &[Observation]) -> Result<DMatrix<f64>> {
+    let s = pose_sensitivity(effect, ctx, rows)?;
+    let idx: Vec<usize> = (0..rows.len())
+        .flat_map(|i| [SLOTS * i, SLOTS * i + 1, SLOTS * i + 2])
+        .collect();
+    Ok(s.select_rows(idx.iter()))
+}
+
+/// Sensitivity matrix of the measured triples and of the orientation of the
+/// measured frame ([`SLOTS`]·rows × parameters): per row the triple (mm per
+/// display unit), then the rotation vector of `varied · current⁻¹` (rad per
+/// display unit; zero for a machine whose model gives no orientation).
+pub fn pose_sensitivity(
+    effect: &Effect,
+    ctx: &Context,
+    rows: &[Observation],
+) -> Result<DMatrix<f64>> {
     let n = rows.len();
     let k = effect.params.len();
-    let mut s = DMatrix::zeros(3 * n, k);
+    let mut s = DMatrix::zeros(SLOTS * n, k);
     match (&effect.action, ctx.machine) {
         (Action::Dh(j, f), Machine::Robot(r)) => {
             diff_column(
@@ -695,7 +729,7 @@ pub fn sensitivity(effect: &Effect, ctx: &Context, rows: &[Observation]) -> Resu
         }
         (Action::BaseTrans(c), Machine::Robot(_)) => {
             for i in 0..n {
-                s[(3 * i + c, 0)] = 1e-3;
+                s[(SLOTS * i + c, 0)] = 1e-3;
             }
         }
         (Action::BaseRot(c), Machine::Robot(_)) => {
@@ -708,7 +742,9 @@ pub fn sensitivity(effect: &Effect, ctx: &Context, rows: &[Observation]) -> Resu
             for (i, p) in att.iter().enumerate() {
                 let v = axis.cross(p);
                 for r in 0..3 {
-                    s[(3 * i + r, 0)] = v[r];
+                    s[(SLOTS * i + r, 0)] = v[r];
+                    // The measured frame turns with the measurement frame.
+                    s[(SLOTS * i + 3 + r, 0)] = axis[r];
                 }
             }
         }
@@ -731,8 +767,8 @@ pub fn sensitivity(effect: &Effect, ctx: &Context, rows: &[Observation]) -> Resu
             )?;
             for (i, row) in rows.iter().enumerate() {
                 let p = robot_row_value(row, |rp| rp.p_w.get(*power).copied().flatten());
-                for c in 0..3 {
-                    s[(3 * i + c, 0)] *= p;
+                for c in 0..SLOTS {
+                    s[(SLOTS * i + c, 0)] *= p;
                 }
             }
         }
@@ -748,7 +784,7 @@ pub fn sensitivity(effect: &Effect, ctx: &Context, rows: &[Observation]) -> Resu
         }
         (Action::AxisStiffness(slot), Machine::Tool(_)) => {
             for (i, row) in rows.iter().enumerate() {
-                s[(3 * i + slot, 0)] = row.force_n[*slot] * 1e-3;
+                s[(SLOTS * i + slot, 0)] = row.force_n[*slot] * 1e-3;
             }
         }
         (Action::SpindleTime | Action::SpindlePower | Action::ToolLength, Machine::Tool(t)) => {

@@ -9,8 +9,12 @@
 //! residual = measured − simulated. Everything is linearised about the
 //! current model: each candidate is a parametric addition whose sensitivity
 //! is computed once, and a fit is linear least squares on those columns.
+//! Rows with a measured orientation add weighted orientation residuals to
+//! every fit, test and held-out figure ([`equations`]); the "where" analysis
+//! looks at the positions.
 
 pub mod effects;
+pub mod equations;
 pub mod patterns;
 pub mod report;
 pub mod residuals;
@@ -19,6 +23,8 @@ pub mod select;
 pub mod write;
 
 use nalgebra::{DMatrix, DVector, Vector3};
+
+use equations::{Equations, FrameProjection};
 use serde::Serialize;
 use tracing::warn;
 
@@ -47,6 +53,10 @@ pub struct Options {
     /// (the residual and every sensitivity are projected off the frame's
     /// columns, separately on the fitted and the held-out rows).
     pub instrument: bool,
+    /// Weight of the orientation residuals of rows with `qw…qz`: the ratio
+    /// of position to orientation noise, mm/rad, as in `calibrate` (0
+    /// leaves measured orientations out).
+    pub orientation_mm_per_rad: f64,
 }
 
 impl Default for Options {
@@ -56,6 +66,7 @@ impl Default for Options {
             seed: 1,
             bootstrap: 30,
             instrument: false,
+            orientation_mm_per_rad: crate::calibrate::stiffness::ORIENTATION_MM_PER_RAD,
         }
     }
 }
@@ -107,6 +118,47 @@ pub struct Metrics {
     pub axis_rms_um: [f64; 3],
 }
 
+/// Orientation error statistics of a set of rows, degrees.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct AngleMetrics {
+    /// RMS of the rotation angle of `measured · predicted⁻¹`.
+    pub rms_deg: f64,
+    /// Largest such angle.
+    pub max_deg: f64,
+}
+
+impl AngleMetrics {
+    /// RMS and max of angles given in rad.
+    pub fn of_rad(angles: &[f64]) -> AngleMetrics {
+        let deg: Vec<f64> = angles.iter().map(|a| a.to_degrees()).collect();
+        AngleMetrics {
+            rms_deg: stats::rms(&deg).unwrap_or(0.0),
+            max_deg: stats::max(&deg).unwrap_or(0.0),
+        }
+    }
+}
+
+/// The held-out orientation gap (rows with a measured orientation).
+#[derive(Debug, Clone, Copy, Serialize)]
+pub struct AngleGap {
+    /// Held-out rows with a measured orientation.
+    pub rows: usize,
+    /// Current model.
+    pub before: AngleMetrics,
+    /// With the accepted effects.
+    pub after: AngleMetrics,
+}
+
+/// How measured orientations entered the diagnosis.
+#[derive(Debug, Clone, Copy, Serialize)]
+pub struct OrientationUse {
+    /// Rows whose orientation residuals are in the fits.
+    pub rows: usize,
+    /// Their weight, mm/rad (an orientation residual of θ rad counts like
+    /// a position residual of θ × weight mm).
+    pub weight_mm_per_rad: f64,
+}
+
 /// Held-out gap before and after adding the accepted effects.
 #[derive(Debug, Clone, Copy, Serialize)]
 pub struct Gap {
@@ -126,6 +178,10 @@ pub struct Gap {
     pub noise_floor_um: f64,
     /// Percentage of the closable gap (before − noise floor) closed.
     pub closed_of_closable_pct: f64,
+    /// The orientation error of the held-out rows with a measured
+    /// orientation, when orientations are in the fits.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub orientation: Option<AngleGap>,
 }
 
 /// The whole diagnosis.
@@ -149,6 +205,11 @@ pub struct Diagnosis {
     /// Identifiability screen: candidates that are combinations of several
     /// others in these rows.
     pub groups: Vec<Group>,
+    /// Measured orientations in the fits (`None`: positions only). The
+    /// training RSS and held-out RMS of the selection steps then count the
+    /// weighted orientation residuals too.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub orientation: Option<OrientationUse>,
     /// Forward-selection steps.
     pub steps: Vec<Step>,
     /// Accepted effects with fitted parameters.
@@ -168,67 +229,21 @@ const PATTERN_R2: f64 = 0.1;
 /// see at all may have: numerical differences of identical predictions.
 const NO_SENSITIVITY_MM: f64 = 1e-12;
 
-/// Projection off the columns of an instrument frame's six parameters
-/// (a shift, and a small rotation `−[p]×` about the reference axes, at the
-/// measured points `p`), on each of the row sets separately: what remains
-/// of a residual or a sensitivity after the frame of those rows is fitted
-/// with it (Frisch–Waugh–Lovell).
-struct FrameProjection {
-    /// Per row set: the rows and an orthonormal basis of the frame columns.
-    blocks: Vec<(Vec<usize>, DMatrix<f64>)>,
-}
-
-impl FrameProjection {
-    fn new(rows: &[crate::calibrate::observations::Observation], sets: &[&[usize]]) -> Self {
-        let blocks = sets
-            .iter()
-            .map(|set| {
-                let mut j = DMatrix::zeros(3 * set.len(), 6);
-                for (k, &i) in set.iter().enumerate() {
-                    let p = rows.get(i).map_or(Vector3::zeros(), |r| r.measured_mm);
-                    j.view_mut((3 * k, 0), (3, 3))
-                        .copy_from(&nalgebra::Matrix3::identity());
-                    j.view_mut((3 * k, 3), (3, 3))
-                        .copy_from(&(-p.cross_matrix()));
-                }
-                (set.to_vec(), j.qr().q())
-            })
-            .collect();
-        FrameProjection { blocks }
-    }
-
-    /// `m` (3 rows per observation row) with the frame's part removed.
-    fn apply(&self, m: &DMatrix<f64>) -> DMatrix<f64> {
-        let mut out = m.clone();
-        for (set, q) in &self.blocks {
-            let idx: Vec<usize> = set
-                .iter()
-                .flat_map(|&i| [3 * i, 3 * i + 1, 3 * i + 2])
-                .collect();
-            let block = m.select_rows(idx.iter());
-            let rest = &block - q * (q.transpose() * &block);
-            for (k, &r) in idx.iter().enumerate() {
-                out.row_mut(r).copy_from(&rest.row(k));
-            }
-        }
-        out
-    }
-}
-
-/// The candidates' sensitivities (µm per display unit), the candidates the
-/// rows can see. With an instrument frame, a candidate the frame's columns
+/// The candidates' sensitivities (µm per display unit, on the equations
+/// `eq`), the candidates the rows can see. With an instrument frame, a candidate the frame's columns
 /// explain (to within [`crate::calibrate::frame::FRAME_RANK_RTOL`]) is
 /// absorbed by the frame and left out.
 fn sensitivities(
     lib: Vec<Effect>,
     ctx: &effects::Context<'_>,
     rows: &[crate::calibrate::observations::Observation],
+    eq: &Equations,
     frame: Option<&FrameProjection>,
 ) -> (Vec<Effect>, Vec<DMatrix<f64>>) {
     let mut kept = Vec::new();
     let mut sens = Vec::new();
     for e in lib {
-        match effects::sensitivity(&e, ctx, rows) {
+        match effects::pose_sensitivity(&e, ctx, rows).map(|s| eq.from_slots(&s)) {
             Ok(s) if s.iter().all(|v| v.is_finite()) && s.amax() > NO_SENSITIVITY_MM => {
                 let s = s * 1000.0;
                 let s = match frame {
@@ -292,46 +307,64 @@ fn found_effects(sel: &select::Selection, kept: &[Effect]) -> (Vec<Found>, DVect
     (found, fit.params.clone())
 }
 
+/// The residual with the accepted effects' correction removed (µm, on the
+/// equations): `r − X β` over the accepted candidates' columns.
+fn corrected(
+    sel: &select::Selection,
+    sens: &[DMatrix<f64>],
+    r: &DVector<f64>,
+    beta: &DVector<f64>,
+) -> DVector<f64> {
+    if sel.accepted.is_empty() {
+        return r.clone();
+    }
+    let x = select::design(sens, &sel.accepted, r.len());
+    if x.ncols() == beta.len() {
+        r - &x * beta
+    } else {
+        r.clone()
+    }
+}
+
+/// The position errors (mm) of `rows` in a residual `r` (µm, on `eq`).
+fn positions(eq: &Equations, r: &DVector<f64>, rows: &[usize]) -> Vec<Vector3<f64>> {
+    rows.iter()
+        .map(|&i| {
+            let s = eq.start(i);
+            let v = |c: usize| r.get(s + c).copied().unwrap_or(0.0) * 1e-3;
+            Vector3::new(v(0), v(1), v(2))
+        })
+        .collect()
+}
+
 /// The held-out gap with the accepted effects (fitted on the training rows).
 fn held_out_gap(
     sel: &select::Selection,
     sens: &[DMatrix<f64>],
     r: &DVector<f64>,
-    res: &[Vector3<f64>],
+    eq: &Equations,
     beta: &DVector<f64>,
     train: &[usize],
     hold: &[usize],
 ) -> Gap {
-    let n = res.len();
-    let before: Vec<Vector3<f64>> = hold.iter().filter_map(|&i| res.get(i).copied()).collect();
-    let after: Vec<Vector3<f64>> = if sel.accepted.is_empty() {
-        before.clone()
-    } else {
-        let x = select::design(sens, &sel.accepted, 3 * n);
-        let corr: DVector<f64> = if x.ncols() == beta.len() {
-            &x * beta
-        } else {
-            DVector::zeros(3 * n)
-        };
-        hold.iter()
-            .filter_map(|&i| {
-                let v = res.get(i)?;
-                Some(Vector3::new(
-                    v.x - corr[3 * i] * 1e-3,
-                    v.y - corr[3 * i + 1] * 1e-3,
-                    v.z - corr[3 * i + 2] * 1e-3,
-                ))
-            })
-            .collect()
+    let after_r = corrected(sel, sens, r, beta);
+    let mb = metrics(&positions(eq, r, hold));
+    let ma = metrics(&positions(eq, &after_r, hold));
+    let angles = |v: &DVector<f64>| -> Vec<f64> {
+        hold.iter().filter_map(|&i| eq.angle_rad(v, i)).collect()
     };
-    let mb = metrics(&before);
-    let ma = metrics(&after);
+    let (ab, aa) = (angles(r), angles(&after_r));
+    let orientation = (!ab.is_empty()).then(|| AngleGap {
+        rows: ab.len(),
+        before: AngleMetrics::of_rad(&ab),
+        after: AngleMetrics::of_rad(&aa),
+    });
     let (rss_t, k_t) = match &sel.fit {
         Some(f) => (f.rss, f.params.len()),
         None => (sel.steps.first().map_or(0.0, |s| s.rss_before_um2), 0),
     };
-    let dof = (3 * train.len()).saturating_sub(k_t).max(1) as f64;
-    let noise_floor_um = match library_noise_floor(r, sens, train) {
+    let dof = eq.of(train).len().saturating_sub(k_t).max(1) as f64;
+    let noise_floor_um = match library_noise_floor(r, sens, &eq.of(train)) {
         Some(f) => f.min((3.0 * rss_t / dof).sqrt()),
         None => (3.0 * rss_t / dof).sqrt(),
     };
@@ -351,6 +384,7 @@ fn held_out_gap(
         } else {
             0.0
         },
+        orientation,
     }
 }
 
@@ -390,33 +424,19 @@ pub fn diagnose(
             rows.len()
         )));
     }
+    let eq = Equations::new(machine, rows, opts.orientation_mm_per_rad);
     let frame = opts
         .instrument
-        .then(|| FrameProjection::new(rows, &[&train, &hold]));
-    let sim = effects::simulate(&ctx, rows)?;
-    let mut r = DVector::zeros(3 * rows.len());
-    for (i, (row, s)) in rows.iter().zip(&sim).enumerate() {
-        let v = row.measured_mm - s;
-        for c in 0..3 {
-            r[3 * i + c] = v[c] * 1000.0;
-        }
+        .then(|| FrameProjection::new(rows, &eq, &[&train, &hold]));
+    let mut r = residual(machine, rows, obs, &eq, obs_file)?;
+    if let Some(f) = &frame {
+        r = f
+            .apply(&DMatrix::from_column_slice(r.len(), 1, r.as_slice()))
+            .column(0)
+            .into_owned();
     }
-    let res: Vec<Vector3<f64>> = match &frame {
-        Some(f) => {
-            r = f
-                .apply(&DMatrix::from_column_slice(r.len(), 1, r.as_slice()))
-                .column(0)
-                .into_owned();
-            (0..rows.len())
-                .map(|i| Vector3::new(r[3 * i], r[3 * i + 1], r[3 * i + 2]) * 1e-3)
-                .collect()
-        }
-        None => rows
-            .iter()
-            .zip(&sim)
-            .map(|(r, s)| r.measured_mm - s)
-            .collect(),
-    };
+    let all: Vec<usize> = (0..rows.len()).collect();
+    let res = positions(&eq, &r, &all);
     let mut where_ = residuals::analyse(rows, &res);
     where_.patterns = patterns::rank(machine, rows, &res);
     if let Some(p) = where_.patterns.first().filter(|p| p.r2_adj >= PATTERN_R2) {
@@ -432,13 +452,14 @@ pub fn diagnose(
             e.not_writable = Some(effects::NOT_TCP_DEVIATION.into());
         }
     }
-    let (kept, sens) = sensitivities(lib, &ctx, rows, frame.as_ref());
+    let (kept, sens) = sensitivities(lib, &ctx, rows, &eq, frame.as_ref());
     let names: Vec<String> = kept.iter().map(|e| e.name.clone()).collect();
     let screen = screen::pairs(&sens, &names);
     let groups = screen::groups(&sens, &names, &screen);
     let sel = select::select(&select::Problem {
         r: &r,
         s: &sens,
+        eq: &eq,
         names: &names,
         train: &train,
         holdout: &hold,
@@ -446,7 +467,7 @@ pub fn diagnose(
         seed: opts.seed,
     });
     let (found, beta) = found_effects(&sel, &kept);
-    let gap = held_out_gap(&sel, &sens, &r, &res, &beta, &train, &hold);
+    let gap = held_out_gap(&sel, &sens, &r, &eq, &beta, &train, &hold);
     let verdict = verdict(&sel.steps, &found);
     Ok(Diagnosis {
         machine_kind: match machine {
@@ -460,11 +481,43 @@ pub fn diagnose(
         where_,
         screen,
         groups,
+        orientation: (eq.oriented_rows() > 0).then(|| OrientationUse {
+            rows: eq.oriented_rows(),
+            weight_mm_per_rad: eq.weight(),
+        }),
         steps: sel.steps,
         found,
         gap,
         verdict,
     })
+}
+
+/// The residual `measured − simulated` of the current model on the
+/// equations `eq`, µm: the measured triple, and the weighted orientation
+/// residual of the rows that have orientation equations.
+fn residual(
+    machine: &Machine,
+    rows: &[crate::calibrate::observations::Observation],
+    obs: &Observations,
+    eq: &Equations,
+    obs_file: &str,
+) -> Result<DVector<f64>> {
+    let mut r = DVector::zeros(eq.total());
+    for (i, row) in rows.iter().enumerate() {
+        let p = forward::predict(machine, row, obs_file)?;
+        let v = row.measured_mm - p.measured(obs.measured);
+        let s = eq.start(i);
+        for c in 0..3 {
+            r[s + c] = v[c] * 1000.0;
+        }
+        if let (Some(o), Some(q), Some(pq)) = (eq.orientation(i), row.orientation, p.attained_rot) {
+            let e = eq.orientation_residual(&q, &pq);
+            for c in 0..3 {
+                r[o.start + c] = e[c] * 1000.0;
+            }
+        }
+    }
+    Ok(r)
 }
 
 fn verdict(steps: &[Step], found: &[Found]) -> String {
@@ -509,27 +562,24 @@ const RANK_TOL: f64 = 1e-9;
 /// deviation of what no combination of candidates explains. It depends on
 /// no selection decision (an accepted or rejected effect); `None` when the
 /// library leaves fewer than half the training equations as degrees of
-/// freedom (the estimate would rest on too little).
+/// freedom (the estimate would rest on too little). `train`: the training
+/// rows' equations.
 fn library_noise_floor(r: &DVector<f64>, sens: &[DMatrix<f64>], train: &[usize]) -> Option<f64> {
-    let n = 3 * train.len();
+    let n = train.len();
     let k: usize = sens.iter().map(DMatrix::ncols).sum();
     if n == 0 || k == 0 {
         return None;
     }
     let mut x = DMatrix::zeros(n, k);
     let mut y = DVector::zeros(n);
-    for (row, &i) in train.iter().enumerate() {
-        for c in 0..3 {
-            y[3 * row + c] = r.get(3 * i + c).copied().unwrap_or(0.0);
-        }
+    for (row, &e) in train.iter().enumerate() {
+        y[row] = r.get(e).copied().unwrap_or(0.0);
     }
     let mut col = 0;
     for s in sens {
         for j in 0..s.ncols() {
-            for (row, &i) in train.iter().enumerate() {
-                for c in 0..3 {
-                    x[(3 * row + c, col)] = s.get((3 * i + c, j)).copied().unwrap_or(0.0);
-                }
+            for (row, &e) in train.iter().enumerate() {
+                x[(row, col)] = s.get((e, j)).copied().unwrap_or(0.0);
             }
             let norm = x.column(col).norm();
             if norm > 0.0 {

@@ -73,6 +73,14 @@ pub fn render_table(d: &Diagnosis) -> String {
         o,
         "\nWHAT  forward selection (F test Holm-corrected, ΔBIC, margin, held-out)"
     );
+    if let Some(u) = &d.orientation {
+        let _ = writeln!(
+            o,
+            "  RSS and held-out RMS below count the orientation residuals of {} row(s), weighted {} mm/rad (in µm like the positions)",
+            u.rows,
+            crate::error::show_number(u.weight_mm_per_rad)
+        );
+    }
     if d.screen.is_empty() {
         let _ = writeln!(
             o,
@@ -162,21 +170,33 @@ pub fn render_table(d: &Diagnosis) -> String {
             }
         }
     }
+    render_gap(&mut o, d);
+    let _ = writeln!(o, "\nVERDICT: {}", d.verdict);
+    o
+}
+
+/// The GAP section of the text report.
+fn render_gap(o: &mut String, d: &Diagnosis) {
     let _ = writeln!(o, "\nGAP on {} held-out rows (µm)", d.gap.rows);
     let _ = writeln!(
         o,
         "  {:<8} {:>9} {:>9} {:>9} {:>9} {:>9} {:>9}",
         "", "RMS", "max", "95th", "x RMS", "y RMS", "z RMS"
     );
-    metrics_row(&mut o, "before", &d.gap.before);
-    metrics_row(&mut o, "after", &d.gap.after);
+    metrics_row(o, "before", &d.gap.before);
+    metrics_row(o, "after", &d.gap.after);
+    if let Some(g) = &d.gap.orientation {
+        let _ = writeln!(
+            o,
+            "  orientation of the {} held-out rows with qw…qz (deg): RMS {:.4} → {:.4}, max {:.4} → {:.4}",
+            g.rows, g.before.rms_deg, g.after.rms_deg, g.before.max_deg, g.after.max_deg
+        );
+    }
     let _ = writeln!(
         o,
         "  gap closed: {:.1} % of the RMS; {:.1} % of the closable part (noise floor ≈ {:.1} µm RMS, what no candidate of the library explains)",
         d.gap.closed_pct, d.gap.closed_of_closable_pct, d.gap.noise_floor_um
     );
-    let _ = writeln!(o, "\nVERDICT: {}", d.verdict);
-    o
 }
 
 /// The `--list-effects` listing: families, and the instances for a machine.

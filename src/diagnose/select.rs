@@ -18,6 +18,7 @@
 use nalgebra::{DMatrix, DVector};
 use serde::Serialize;
 
+use super::equations::Equations;
 use crate::calibrate::lsq::{LsqOptions, Solution, solve_linear};
 use crate::calibrate::stats::{self, SplitMix64};
 
@@ -103,10 +104,12 @@ pub struct Step {
 
 /// Data of a selection run (µm and µm per display unit).
 pub struct Problem<'a> {
-    /// Residual vector (measured − simulated), 3 per row, µm.
+    /// Residual vector (measured − simulated) on the equations `eq`, µm.
     pub r: &'a DVector<f64>,
-    /// Sensitivities per candidate, 3 per row × parameters, µm per unit.
+    /// Sensitivities per candidate, equations × parameters, µm per unit.
     pub s: &'a [DMatrix<f64>],
+    /// The equations of each row.
+    pub eq: &'a Equations,
     /// Candidate names.
     pub names: &'a [String],
     /// Training row indices.
@@ -130,27 +133,13 @@ pub struct Selection {
     pub fit: Option<Solution>,
 }
 
-/// Rows `3·i..3·i+3` of `m` for each row index.
-fn take_rows(m: &DMatrix<f64>, idx: &[usize]) -> DMatrix<f64> {
-    let mut out = DMatrix::zeros(3 * idx.len(), m.ncols());
-    for (k, &i) in idx.iter().enumerate() {
-        for r in 0..3 {
-            for c in 0..m.ncols() {
-                out[(3 * k + r, c)] = m.get((3 * i + r, c)).copied().unwrap_or(0.0);
-            }
-        }
-    }
-    out
+/// The equations of rows `idx` of `m`, row after row.
+fn take_rows(m: &DMatrix<f64>, eq: &Equations, idx: &[usize]) -> DMatrix<f64> {
+    m.select_rows(eq.of(idx).iter())
 }
 
-fn take_vec(v: &DVector<f64>, idx: &[usize]) -> DVector<f64> {
-    let mut out = DVector::zeros(3 * idx.len());
-    for (k, &i) in idx.iter().enumerate() {
-        for r in 0..3 {
-            out[3 * k + r] = v.get(3 * i + r).copied().unwrap_or(0.0);
-        }
-    }
-    out
+fn take_vec(v: &DVector<f64>, eq: &Equations, idx: &[usize]) -> DVector<f64> {
+    v.select_rows(eq.of(idx).iter())
 }
 
 /// Design matrix of a set of candidates.
@@ -241,10 +230,13 @@ fn score(
 
 /// Runs the forward selection.
 pub fn select(pb: &Problem) -> Selection {
-    let r_train = take_vec(pb.r, pb.train);
-    let s_train: Vec<DMatrix<f64>> = pb.s.iter().map(|m| take_rows(m, pb.train)).collect();
-    let r_hold = take_vec(pb.r, pb.holdout);
-    let s_hold: Vec<DMatrix<f64>> = pb.s.iter().map(|m| take_rows(m, pb.holdout)).collect();
+    let r_train = take_vec(pb.r, pb.eq, pb.train);
+    let s_train: Vec<DMatrix<f64>> = pb.s.iter().map(|m| take_rows(m, pb.eq, pb.train)).collect();
+    let r_hold = take_vec(pb.r, pb.eq, pb.holdout);
+    let s_hold: Vec<DMatrix<f64>> =
+        pb.s.iter()
+            .map(|m| take_rows(m, pb.eq, pb.holdout))
+            .collect();
     let n = r_train.len();
     let mut accepted: Vec<usize> = Vec::new();
     let mut steps = Vec::new();
@@ -257,9 +249,11 @@ pub fn select(pb: &Problem) -> Selection {
         let mut wins = vec![0usize; pb.s.len()];
         let m = pb.train.len();
         for _ in 0..pb.bootstrap {
-            let idx: Vec<usize> = (0..m).map(|_| rng.below(m as u64) as usize).collect();
-            let rb = take_vec(&r_train, &idx);
-            let sb: Vec<DMatrix<f64>> = s_train.iter().map(|x| take_rows(x, &idx)).collect();
+            let idx: Vec<usize> = (0..m)
+                .map(|_| pb.train[rng.below(m as u64) as usize])
+                .collect();
+            let rb = take_vec(pb.r, pb.eq, &idx);
+            let sb: Vec<DMatrix<f64>> = pb.s.iter().map(|x| take_rows(x, pb.eq, &idx)).collect();
             let (_, sc, _) = score(&rb, &sb, &accepted);
             let ph = stats::holm_bonferroni(&sc.iter().map(|s| s.p).collect::<Vec<_>>());
             if let (Some(best), Some(p)) = (sc.first(), ph.first())
@@ -305,7 +299,7 @@ pub fn select(pb: &Problem) -> Selection {
                     None => r_hold.clone(),
                 }
             };
-            (e.norm_squared() / (e.len() as f64 / 3.0)).sqrt()
+            (e.norm_squared() / pb.holdout.len() as f64).sqrt()
         };
         let Some(best) = scored.first() else {
             steps.push(Step {
@@ -405,6 +399,7 @@ mod tests {
     fn problem<'a>(
         r: &'a DVector<f64>,
         s: &'a [DMatrix<f64>],
+        eq: &'a Equations,
         names: &'a [String],
         train: &'a [usize],
         hold: &'a [usize],
@@ -412,6 +407,7 @@ mod tests {
         Problem {
             r,
             s,
+            eq,
             names,
             train,
             holdout: hold,
@@ -429,7 +425,14 @@ mod tests {
         let names = vec!["a".to_string(), "b".to_string()];
         let train: Vec<usize> = (0..40).filter(|i| i % 4 != 0).collect();
         let hold: Vec<usize> = (0..40).filter(|i| i % 4 == 0).collect();
-        let sel = select(&problem(&r, &s, &names, &train, &hold));
+        let sel = select(&problem(
+            &r,
+            &s,
+            &Equations::positions_only(40),
+            &names,
+            &train,
+            &hold,
+        ));
         assert_eq!(sel.accepted, vec![0]);
         let fit = sel.fit.expect("fit");
         assert_abs_diff_eq!(fit.params[0], 2.0, epsilon = PARAM_TOL);
@@ -448,7 +451,14 @@ mod tests {
         let names = vec!["a".to_string(), "b".to_string(), "a_copy".to_string()];
         let train: Vec<usize> = (0..40).filter(|i| i % 4 != 0).collect();
         let hold: Vec<usize> = (0..40).filter(|i| i % 4 == 0).collect();
-        let sel = select(&problem(&r, &s, &names, &train, &hold));
+        let sel = select(&problem(
+            &r,
+            &s,
+            &Equations::positions_only(40),
+            &names,
+            &train,
+            &hold,
+        ));
         assert!(sel.accepted.is_empty());
         match sel.steps.last().map(|s| &s.outcome) {
             Some(Outcome::Confounded { name, with }) => {
