@@ -117,10 +117,56 @@ pub const MOTION_INSTRUCTIONS: &[MotionInstruction] = &[
 ];
 
 /// The motion instruction named `name` (case-insensitive, as RAPID).
+///
+/// The four plain moves, nearly every statement of a large module, are
+/// told by [`plain_move_at`]; other names are looked up in the table only
+/// when their first letter starts one of its names.
+#[inline]
 pub fn motion_instruction(name: &str) -> Option<&'static MotionInstruction> {
+    let b = name.as_bytes();
+    if !b.first().is_some_and(|&c| may_start_motion(c)) {
+        return None;
+    }
+    if let Some((m, n)) = plain_move_at(b) {
+        if n == b.len() {
+            return Some(m);
+        }
+    }
     MOTION_INSTRUCTIONS
         .iter()
         .find(|m| m.name.eq_ignore_ascii_case(name))
+}
+
+/// The plain move (`MoveL`, `MoveJ`, `MoveC` or `MoveAbsJ`, any case)
+/// whose name starts `b` as a whole word (no letter, digit or `_` after
+/// it), and the length of the name: by the fifth letter and the length,
+/// without a table search.
+#[inline]
+pub fn plain_move_at(b: &[u8]) -> Option<(&'static MotionInstruction, usize)> {
+    let head = b.get(..5)?;
+    if !head[..4].eq_ignore_ascii_case(b"Move") {
+        return None;
+    }
+    let (k, n) = match head[4].to_ascii_uppercase() {
+        b'L' => (0, 5),
+        b'J' => (1, 5),
+        b'C' => (2, 5),
+        b'A' if b.get(5..8).is_some_and(|t| t.eq_ignore_ascii_case(b"bsJ")) => (3, 8),
+        _ => return None,
+    };
+    if b.get(n)
+        .is_some_and(|&c| c.is_ascii_alphanumeric() || c == b'_')
+    {
+        return None;
+    }
+    Some((MOTION_INSTRUCTIONS.get(k)?, n))
+}
+
+/// Whether `c` is the first letter (either case) of a name in
+/// [`MOTION_INSTRUCTIONS`].
+#[inline]
+pub fn may_start_motion(c: u8) -> bool {
+    matches!(c.to_ascii_uppercase(), b'M' | b'T' | b'S' | b'A')
 }
 
 #[cfg(test)]
@@ -149,6 +195,82 @@ mod tests {
             for b in &MOTION_INSTRUCTIONS[k + 1..] {
                 assert!(!a.name.eq_ignore_ascii_case(b.name), "{}", a.name);
             }
+        }
+    }
+
+    #[test]
+    fn every_name_is_found_in_any_case_and_no_other() {
+        for m in MOTION_INSTRUCTIONS {
+            assert!(may_start_motion(m.name.as_bytes()[0]), "{}", m.name);
+            for name in [
+                m.name.to_string(),
+                m.name.to_ascii_lowercase(),
+                m.name.to_ascii_uppercase(),
+            ] {
+                assert_eq!(motion_instruction(&name), Some(m), "{name}");
+                for cut in [1, 2] {
+                    if let Some(shorter) = name.get(..name.len() - cut) {
+                        let found = motion_instruction(shorter).map(|f| f.name);
+                        let listed = MOTION_INSTRUCTIONS
+                            .iter()
+                            .find(|e| e.name.eq_ignore_ascii_case(shorter))
+                            .map(|e| e.name);
+                        assert_eq!(found, listed, "{shorter}");
+                    }
+                }
+                assert_eq!(motion_instruction(&format!("{name}X")), None, "{name}X");
+            }
+        }
+        for other in [
+            "",
+            "M",
+            "Move",
+            "MoveX",
+            "MoveAbsL",
+            "MoveAbsJJ",
+            "WaitTime",
+            "moveabs",
+        ] {
+            assert_eq!(motion_instruction(other), None, "{other}");
+        }
+    }
+
+    #[test]
+    fn plain_moves_are_told_like_the_table_does() {
+        for text in [
+            "MoveL p1",
+            "movel,",
+            "MOVEJ;",
+            "MoveC\t",
+            "MoveAbsJ [",
+            "moveabsj",
+            "MoveL",
+            "MoveLDO p",
+            "MoveL_2 p",
+            "MoveL2",
+            "MoveAbs j",
+            "MoveAbsJX",
+            "Move",
+            "MoveX",
+            "MoveJSync",
+            "Movec",
+            "MoveAbsJ_",
+            "MoveL\u{e9}",
+        ] {
+            let n = text
+                .bytes()
+                .take_while(|c| c.is_ascii_alphanumeric() || *c == b'_')
+                .count();
+            let word = &text[..n];
+            let listed = MOTION_INSTRUCTIONS
+                .iter()
+                .find(|m| m.name.eq_ignore_ascii_case(word));
+            let plain = listed.filter(|m| MOTION_INSTRUCTIONS[..4].contains(m));
+            assert_eq!(
+                plain_move_at(text.as_bytes()),
+                plain.map(|m| (m, n)),
+                "{text}"
+            );
         }
     }
 

@@ -8,7 +8,9 @@ use std::sync::Arc;
 use nom::IResult;
 use nom::error::{ErrorKind, ParseError};
 
-use super::instructions::{MotionInstruction, Role, motion_instruction};
+use super::instructions::{
+    MotionInstruction, Role, may_start_motion, motion_instruction, plain_move_at,
+};
 use super::{
     Arg, DataType, DataValue, Decl, Dim, Field, Index, Module, Move, MoveKind, Number, OptArg,
     Proc, Record, RobTarget, RoutineKind, Scalar, Scope, Span, Stmt, Storage, Target,
@@ -100,7 +102,17 @@ const STATEMENT_WORDS: &[&str] = &[
 
 /// The motion instruction whose name starts `i` (a whole word), and the
 /// text after the name.
+#[inline]
 fn motion_at(i: &str) -> Option<(&'static MotionInstruction, &str)> {
+    // Most statements that are not moves are told by their first byte,
+    // the plain moves by their first letters.
+    let b = i.as_bytes();
+    if !b.first().is_some_and(|&c| may_start_motion(c)) {
+        return None;
+    }
+    if let Some((m, n)) = plain_move_at(b) {
+        return Some((m, i.get(n..)?));
+    }
     let (rest, word) = ident(i).ok()?;
     Some((motion_instruction(word)?, rest))
 }
@@ -310,6 +322,76 @@ fn number_value(t: &str) -> Option<f64> {
         return Some(if neg { -v } else { v });
     }
     t.parse::<f64>().ok()
+}
+
+/// [`number_text`] then [`number_value`] in one pass over the bytes: the
+/// rest after the literal and its value (`None` where either gives none).
+/// The fast path takes the same significant digits and decimal exponent
+/// as [`number_value`]; every other literal goes to `str::parse` too.
+#[inline]
+fn number_at(i: &str) -> Option<(&str, f64)> {
+    let b = i.as_bytes();
+    let neg = b.first() == Some(&b'-');
+    let mut k = usize::from(matches!(b.first(), Some(b'+' | b'-')));
+    let (mut m, mut sig, mut int, mut frac) = (0u64, 0usize, 0usize, 0i64);
+    while let Some(&c) = b.get(k) {
+        if !c.is_ascii_digit() {
+            break;
+        }
+        sig += usize::from(m != 0 || c != b'0');
+        m = m.wrapping_mul(10).wrapping_add(u64::from(c - b'0'));
+        int += 1;
+        k += 1;
+    }
+    if b.get(k) == Some(&b'.') {
+        let mut j = k + 1;
+        while let Some(&c) = b.get(j) {
+            if !c.is_ascii_digit() {
+                break;
+            }
+            sig += usize::from(m != 0 || c != b'0');
+            m = m.wrapping_mul(10).wrapping_add(u64::from(c - b'0'));
+            frac += 1;
+            j += 1;
+        }
+        if int == 0 && frac == 0 {
+            return None;
+        }
+        k = j;
+    } else if int == 0 {
+        return None;
+    }
+    // An exponent only when complete; more than four digits go to the
+    // full parser.
+    let (mut exp, mut short) = (0i64, true);
+    if matches!(b.get(k), Some(b'e' | b'E')) {
+        let sign = usize::from(matches!(b.get(k + 1), Some(b'+' | b'-')));
+        let from = k + 1 + sign;
+        let n = digits(b.get(from..).unwrap_or_default());
+        if n > 0 {
+            short = n <= 4;
+            for &c in b.get(from..from + n.min(4)).unwrap_or_default() {
+                exp = exp * 10 + i64::from(c - b'0');
+            }
+            if b.get(k + 1) == Some(&b'-') {
+                exp = -exp;
+            }
+            k = from + n;
+        }
+    }
+    // ASCII bytes only: both ends are char boundaries.
+    let (text, rest) = (i.get(..k)?, i.get(k..)?);
+    let e10 = exp - frac;
+    if short && sig <= 15 && (-22..=22).contains(&e10) {
+        let m = m as f64;
+        let v = match crate::program::EXACT_POW10.get(e10.unsigned_abs() as usize) {
+            Some(p) if e10 >= 0 => m * p,
+            Some(p) => m / p,
+            None => return Some((rest, text.parse::<f64>().ok()?)),
+        };
+        return Some((rest, if neg { -v } else { v }));
+    }
+    Some((rest, text.parse::<f64>().ok()?))
 }
 
 /// The parser state: the source, for positions and messages.
@@ -883,9 +965,8 @@ impl<'a> Parser<'a> {
             let n = out.len();
             for (k, slot) in out.iter_mut().enumerate() {
                 let i = ws(at);
-                let (rest, t) = number_text(i).ok()?;
+                let (rest, value) = number_at(i)?;
                 let after = ws(rest);
-                let value = number_value(t)?;
                 if !value.is_finite() || value.abs() > MAX_NUMBER {
                     return None;
                 }
@@ -1963,6 +2044,22 @@ mod tests {
                 let slow = lexed.parse::<f64>().ok().map(f64::to_bits);
                 proptest::prop_assert_eq!(fast, slow, "{}", lexed);
             }
+        }
+
+        /// The one-pass [`number_at`] against [`number_text`] then
+        /// [`number_value`]: the same rest and f64 bits (or the same
+        /// failure) for literals of every shape followed by any text.
+        #[test]
+        fn number_at_equals_text_then_value(
+            text in "[-+]?[0-9]{0,18}(\\.[0-9]{0,18})?([eE][-+]?[0-9]{0,6})?",
+            tail in "[ ,\\].eE0-9a-z+-]{0,3}",
+        ) {
+            let t = format!("{text}{tail}");
+            let fused = number_at(&t).map(|(r, v)| (r, v.to_bits()));
+            let split = number_text(&t)
+                .ok()
+                .and_then(|(r, lexed)| number_value(lexed).map(|v| (r, v.to_bits())));
+            proptest::prop_assert_eq!(fused, split, "{}", t);
         }
 
         /// The byte scan of [`ws`] against `trim_start_matches`: the same
