@@ -538,6 +538,30 @@ fn rapid_effects_flags_and_resonance_warning() {
         1,
         "once per speed: {err}"
     );
+    // Read a window at a time from a warm start (two passes over the
+    // module): still one warning.
+    let out = postproc()
+        .arg("compensate")
+        .arg(repo("samples/drilling.mod"))
+        .arg("--machine")
+        .arg(&machine)
+        .args([
+            "--rapid-window-lines",
+            "20",
+            "--thermal-start",
+            "steady",
+            "-o",
+            "-",
+        ])
+        .output()
+        .expect("run");
+    assert_eq!(out.status.code(), Some(0));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(
+        err.matches("tooth-passing").count(),
+        1,
+        "once per speed, read a window at a time: {err}"
+    );
 }
 
 #[test]

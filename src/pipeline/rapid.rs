@@ -1646,9 +1646,6 @@ impl Rewriter<'_> {
     }
 }
 
-/// Warns once when the spindle's tooth-passing frequency (at the speed of
-/// the move with the largest vibration, `rpm` from a directive) lies within
-/// 10 % of a natural frequency of the modal model and some move is loaded.
 #[cfg(test)]
 mod tests {
     use super::*;

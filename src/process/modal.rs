@@ -110,8 +110,9 @@ impl Modal {
     /// frequencies at [`SUGGEST_RATIOS`] times each natural frequency,
     /// those at least that far from every mode (ratio to each mode outside
     /// 0.7–1.3), the one nearest to `f_hz`; the lower one of two equally
-    /// near (a slower spindle). When none is clear of every mode, the
-    /// nearest of all.
+    /// near (a slower spindle). There is always one: 0.7 times the lowest
+    /// natural frequency is below 0.7 of every mode. Without any mode,
+    /// `f_hz` itself.
     pub fn suggested_hz(&self, f_hz: f64) -> f64 {
         let [lo, hi] = SUGGEST_RATIOS;
         let clear = |f: f64| {
@@ -120,20 +121,18 @@ impl Modal {
                 r <= lo + RATIO_SLACK || r >= hi - RATIO_SLACK
             })
         };
-        let candidates = || {
-            self.modes
-                .iter()
-                .flatten()
-                .flat_map(|m| SUGGEST_RATIOS.map(|k| k * m.natural_frequency_hz))
-        };
+        let candidates = self
+            .modes
+            .iter()
+            .flatten()
+            .flat_map(|m| SUGGEST_RATIOS.map(|k| k * m.natural_frequency_hz));
         let nearest = |best: Option<f64>, f: f64| match best {
             Some(b) if ((b - f_hz).abs(), b) <= ((f - f_hz).abs(), f) => Some(b),
             _ => Some(f),
         };
-        candidates()
+        candidates
             .filter(|&f| clear(f))
             .fold(None, nearest)
-            .or_else(|| candidates().fold(None, nearest))
             .unwrap_or(f_hz)
     }
 }

@@ -20,8 +20,8 @@ use super::{Carry, ModuleText, RapidOptions, compensate_window};
 use crate::compensate::outcome::{MoveRecord, RapidOutcome};
 use crate::error::{Error, Result};
 use crate::machine::ThermalStart;
-use crate::machine::robot::Robot;
 use crate::machine::robot::thermal::TimeLineTotals;
+use crate::machine::robot::{Effects, Robot};
 use crate::process::CutSettings;
 use crate::program::rapid::directives::Directives;
 use crate::program::rapid::windows::{Piece, Unsupported, Windows};
@@ -117,9 +117,16 @@ pub fn compensate_streamed<R: BufRead>(
             time_line: Some(TimeLineTotals::default()),
             ..Carry::default()
         };
+        // The first pass only adds up the joint powers: no records, no
+        // annotations, no vibration (the resonance check runs once, in the
+        // second pass).
         let first_opts = RapidOptions {
             records: false,
             annotate: false,
+            effects: Effects {
+                dynamic: 0.0,
+                ..opts.effects
+            },
             ..*opts
         };
         let reader = open().map_err(|e| Error::io(file, e))?;
