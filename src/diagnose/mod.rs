@@ -399,7 +399,7 @@ pub fn diagnose(
 ) -> Result<Diagnosis> {
     forward::check_kind(machine, obs, obs_file)?;
     let yaml: serde_yaml::Value = serde_yaml::from_str(machine_text)
-        .map_err(|e| Error::Usage(format!("machine file: {e}")))?;
+        .map_err(|e| Error::Internal(format!("validated machine file does not parse: {e}")))?;
     let ctx = effects::Context {
         machine,
         yaml: &yaml,
