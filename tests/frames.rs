@@ -1496,3 +1496,59 @@ fn orientation_rows_enter_the_thermal_fit_at_the_noise_level() {
         "{without}"
     );
 }
+
+/// Machine-tool thermal gains from rows that carry a spindle orientation:
+/// the gains are fitted to the positions exactly as without it, and one
+/// note says the orientations are not used (the machine-tool model
+/// predicts the tool tip's position only).
+#[test]
+fn tool_thermal_says_it_leaves_measured_orientations_out() {
+    let model = text("machines/afm-r1000.yaml");
+    let truth = model.replacen("growth_um_per_kw: 3.0", "growth_um_per_kw: 11.0", 1);
+    assert_ne!(truth, model);
+    let mut poses =
+        load_poses(&repo("samples/observations/afm-r1000-grid-poses.csv")).expect("poses");
+    let mut rng = postproc::calibrate::stats::SplitMix64::new(8);
+    for r in &mut poses.rows {
+        if let postproc::calibrate::observations::Pose::Tool(tp) = &mut r.pose {
+            tp.spindle_w = Some(8000.0 * rng.next_f64());
+        }
+    }
+    let truth_m = Machine::from_yaml_str(&truth, "truth").expect("truth");
+    let sim = Simulation {
+        noise: Noise {
+            um: 1.0,
+            um_per_m: 0.0,
+            seed: 57,
+        },
+        ..Simulation::default()
+    };
+    let plain = simulate_with(&truth_m, &poses, "p", &sim).expect("sim");
+    let mut oriented = plain.clone();
+    for r in &mut oriented.rows {
+        r.orientation = Some(UnitQuaternion::identity());
+    }
+    let cal = |obs: &Observations| {
+        postproc::calibrate::thermal::calibrate_thermal(
+            &model,
+            "afm.yaml",
+            obs,
+            "obs.csv",
+            &opts(57),
+        )
+        .expect("calibrated")
+    };
+    let (with, without) = (cal(&oriented), cal(&plain));
+    let note = "not used: the machine-tool model predicts the tool tip's position only";
+    assert_eq!(
+        with.notes.iter().filter(|n| n.contains(note)).count(),
+        1,
+        "{with}"
+    );
+    assert!(
+        !without.notes.iter().any(|n| n.contains("orientation")),
+        "{without}"
+    );
+    assert_eq!(with.params, without.params, "{with}");
+    assert_eq!(with.n_equations, without.n_equations);
+}
