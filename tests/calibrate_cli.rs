@@ -943,3 +943,59 @@ fn kinematics_with_no_significant_correction_runs() {
         "{stdout}"
     );
 }
+
+/// A machine-tool grid whose rows carry a measured orientation: geometry
+/// calibration fits the positions and says in one line that the
+/// orientations are not used (the machine-tool model predicts the tool
+/// tip's position only); without orientation columns no such line.
+#[test]
+fn geometry_says_it_leaves_measured_orientations_out() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let grid = std::fs::read_to_string(repo("samples/observations/afm-r1000-grid-measured.csv"))
+        .expect("grid");
+    let oriented: String = grid
+        .lines()
+        .map(|l| {
+            if l.starts_with('#') {
+                format!("{l}\n")
+            } else if l.starts_with("id,") {
+                format!("{l},qw,qx,qy,qz\n")
+            } else {
+                format!("{l},1,0,0,0\n")
+            }
+        })
+        .collect();
+    let obs = write(dir.path(), "oriented.csv", &oriented);
+    let run = |obs: &std::path::Path, out: &str| -> String {
+        let a = postproc()
+            .args(["calibrate", "geometry", "-q", "--machine"])
+            .arg(repo("machines/afm-r1000.yaml"))
+            .arg("--observations")
+            .arg(obs)
+            .arg("-o")
+            .arg(dir.path().join(out))
+            .assert()
+            .success();
+        String::from_utf8_lossy(&a.get_output().stdout).to_string()
+    };
+    let with = run(&obs, "a.yaml");
+    let plain = run(
+        &repo("samples/observations/afm-r1000-grid-measured.csv"),
+        "b.yaml",
+    );
+    let note = "not used: the machine-tool model predicts the tool tip's position only";
+    assert_eq!(with.matches(note).count(), 1, "{with}");
+    assert!(!plain.contains("measured orientation"), "{plain}");
+    // Everything else is the same.
+    let without_note: String = with
+        .lines()
+        .filter(|l| !l.contains(note) && !l.starts_with("wrote "))
+        .map(|l| format!("{l}\n"))
+        .collect();
+    let plain: String = plain
+        .lines()
+        .filter(|l| !l.starts_with("wrote "))
+        .map(|l| format!("{l}\n"))
+        .collect();
+    assert_eq!(without_note, plain);
+}

@@ -316,3 +316,38 @@ fn thermal_calibration_of_a_file_without_terms_is_a_machine_error() {
         "{e}"
     );
 }
+
+/// A fitted joint compliance so negative that no stiffness can hold it is
+/// a data error of `diagnose --write-model` (the data ask for the
+/// impossible), and an effect the library never offers a robot is an
+/// internal error (the library is built per machine kind).
+#[test]
+fn diagnose_writing_an_impossible_compliance_is_a_data_error() {
+    use postproc::diagnose::{Found, Param, effects, library, write};
+    let t = text("machines/abb-irb1600.yaml");
+    let m = Machine::from_yaml_str(&t, "irb1600.yaml").expect("robot");
+    let joint1 = library(&m, &[])
+        .into_iter()
+        .find(|e| e.name == "joint1_compliance")
+        .expect("joint1_compliance in the robot library");
+    let found = |effect: effects::Effect, value: f64| Found {
+        params: vec![Param {
+            name: effect.params[0].clone(),
+            value,
+            u: 0.1,
+        }],
+        effect,
+        bootstrap: 1.0,
+    };
+    // k1 = 262 000 N·m/rad: a compliance of −1e9 µrad/(N·m) = −1000 rad/(N·m)
+    // is far beyond −1/k.
+    let (k, e) = kind(write::write_model(&m, &t, &[found(joint1.clone(), -1e9)]));
+    assert_eq!(k, ErrorKind::Data, "{e}");
+    assert!(write::write_model(&m, &t, &[found(joint1.clone(), 1.0)]).is_ok());
+    let foreign = effects::Effect {
+        action: effects::Action::SpindleTime,
+        ..joint1
+    };
+    let (k, e) = kind(write::write_model(&m, &t, &[found(foreign, 1.0)]));
+    assert_eq!(k, ErrorKind::Internal, "{e}");
+}

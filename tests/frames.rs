@@ -1349,3 +1349,206 @@ fn kinematic_frame_is_solved_again_for_a_withheld_correction() {
         );
     }
 }
+
+/// Orientation noise of a 6-DOF tracker probe per axis, mrad (≈ 0.01°).
+const PROBE_NOISE_MRAD: f64 = 0.17;
+
+fn u_of(cal: &Calibration, name: &str) -> f64 {
+    cal.params
+        .iter()
+        .find(|e| e.name == name)
+        .and_then(|e| e.u)
+        .unwrap_or_else(|| panic!("{name} with an uncertainty in\n{cal}"))
+}
+
+/// Stiffness from LDBB rows with measured orientations: the turn of the
+/// tool under load adds three equations per row (the wrist joints twist
+/// the tool by milliradians where they move the point by a fraction of a
+/// millimetre), so every stiffness is still recovered within 3 u and the
+/// wrist stiffnesses are known better than from the positions alone (the
+/// same rows with `orientation_mm_per_rad: 0`).
+#[test]
+fn orientation_rows_sharpen_the_wrist_stiffnesses() {
+    let poses = load_poses(&repo("samples/observations/irb1600-ldbb-poses.csv")).expect("poses");
+    let truth_text = text(TRUTH_ROBOT);
+    let start = truth_text.replace(
+        "k_nm_per_rad: [262000.0, 447000.0, 134500.0, 11900.0, 9050.0, 5650.0]",
+        "k_nm_per_rad: [200000.0, 400000.0, 150000.0, 15000.0, 12000.0, 8000.0]",
+    );
+    assert_ne!(start, truth_text);
+    let truth: serde_yaml::Value = serde_yaml::from_str(&truth_text).expect("yaml");
+    let sim = Simulation {
+        noise: tracker(61),
+        noise_mrad: PROBE_NOISE_MRAD,
+        orientation: true,
+        ..Simulation::default()
+    };
+    let obs = simulate_with(&machine(TRUTH_ROBOT), &poses, "p", &sim).expect("sim");
+    let with =
+        calibrate_stiffness(&start, "start.yaml", &obs, "ldbb.csv", &opts(61)).expect("calibrated");
+    let without = calibrate_stiffness(
+        &start,
+        "start.yaml",
+        &obs,
+        "ldbb.csv",
+        &Options {
+            orientation_mm_per_rad: 0.0,
+            ..opts(61)
+        },
+    )
+    .expect("calibrated");
+    for k in 0..6 {
+        let want = truth["k_nm_per_rad"][k].as_f64().expect("k");
+        assert_param(&with, &format!("k{}", k + 1), want);
+    }
+    assert!(with.n_equations > without.n_equations, "{with}");
+    for name in ["k4", "k5", "k6"] {
+        assert!(
+            u_of(&with, name) < u_of(&without, name),
+            "{name}: {} with orientations, {} without\n{with}\n{without}",
+            u_of(&with, name),
+            u_of(&without, name)
+        );
+    }
+    assert!(
+        with.notes.iter().any(|n| n.contains("weighted 100 mm/rad")),
+        "{with}"
+    );
+    assert!(
+        without.notes.iter().any(|n| n.contains("left out")),
+        "{without}"
+    );
+}
+
+/// Thermal terms from rows with measured orientations, in an instrument
+/// frame, weighted by the ratio of the simulated noises: each row adds
+/// three equations, the orientation residuals (the measured orientation
+/// turned by the identified frame) are at the noise level like the
+/// positions — the fit RMS stays at the position noise — and the terms and
+/// the frame are recovered within 3 u.
+#[test]
+fn orientation_rows_enter_the_thermal_fit_at_the_noise_level() {
+    let poses = load_poses(&repo("samples/observations/irb1600-thermal-poses.csv")).expect("poses");
+    let truth_file = "samples/observations/irb1600-thermal-truth.yaml";
+    let truth: serde_yaml::Value = serde_yaml::from_str(&text(truth_file)).expect("yaml");
+    let start = text("samples/observations/irb1600-thermal-start.yaml");
+    let noise = Noise {
+        um: 5.0,
+        um_per_m: 0.0,
+        seed: 62,
+    };
+    let sim = Simulation {
+        noise,
+        noise_mrad: PROBE_NOISE_MRAD,
+        orientation: true,
+        frame: OutputFrame::Instrument(instrument()),
+        ..Simulation::default()
+    };
+    let obs = simulate_with(&machine(truth_file), &poses, "p", &sim).expect("sim");
+    // Position noise over orientation noise, mm/rad.
+    let ratio = noise.um / PROBE_NOISE_MRAD;
+    let all = |w: f64| Options {
+        honesty: Rule {
+            write_uncertain: true,
+            ..Rule::default()
+        },
+        orientation_mm_per_rad: w,
+        ..opts(62)
+    };
+    let thermal = |w: f64| {
+        postproc::calibrate::thermal::calibrate_thermal(
+            &start,
+            "start.yaml",
+            &obs,
+            "thermal.csv",
+            &all(w),
+        )
+        .expect("calibrated")
+    };
+    let (with, without) = (thermal(ratio), thermal(0.0));
+    assert_eq!(with.n_equations, 2 * without.n_equations, "{with}");
+    assert!(
+        with.rms_fit_mm <= HOLDOUT_SLACK * sigma_mm(&noise),
+        "{with}"
+    );
+    for t in truth["thermal"]["terms"].as_sequence().expect("terms") {
+        let name = format!(
+            "{}←P{}",
+            t["parameter"].as_str().expect("parameter"),
+            t["joint"].as_u64().expect("joint")
+        );
+        for (key, field) in [("lb", "lb_mm"), ("ub", "ub_mm"), ("ts", "ts_per_w")] {
+            let full = format!("{name}.{key}");
+            if with.params.iter().any(|e| e.name == full && !e.fixed) {
+                assert_param(&with, &full, t[field].as_f64().expect("v"));
+            }
+        }
+    }
+    assert_frame_recovered(&with, &instrument());
+    assert!(
+        with.notes
+            .iter()
+            .any(|n| n.contains("orientation residuals are in the fit")),
+        "{with}"
+    );
+    assert!(
+        without.notes.iter().any(|n| n.contains("left out")),
+        "{without}"
+    );
+}
+
+/// Machine-tool thermal gains from rows that carry a spindle orientation:
+/// the gains are fitted to the positions exactly as without it, and one
+/// note says the orientations are not used (the machine-tool model
+/// predicts the tool tip's position only).
+#[test]
+fn tool_thermal_says_it_leaves_measured_orientations_out() {
+    let model = text("machines/afm-r1000.yaml");
+    let truth = model.replacen("growth_um_per_kw: 3.0", "growth_um_per_kw: 11.0", 1);
+    assert_ne!(truth, model);
+    let mut poses =
+        load_poses(&repo("samples/observations/afm-r1000-grid-poses.csv")).expect("poses");
+    let mut rng = postproc::calibrate::stats::SplitMix64::new(8);
+    for r in &mut poses.rows {
+        if let postproc::calibrate::observations::Pose::Tool(tp) = &mut r.pose {
+            tp.spindle_w = Some(8000.0 * rng.next_f64());
+        }
+    }
+    let truth_m = Machine::from_yaml_str(&truth, "truth").expect("truth");
+    let sim = Simulation {
+        noise: Noise {
+            um: 1.0,
+            um_per_m: 0.0,
+            seed: 57,
+        },
+        ..Simulation::default()
+    };
+    let plain = simulate_with(&truth_m, &poses, "p", &sim).expect("sim");
+    let mut oriented = plain.clone();
+    for r in &mut oriented.rows {
+        r.orientation = Some(UnitQuaternion::identity());
+    }
+    let cal = |obs: &Observations| {
+        postproc::calibrate::thermal::calibrate_thermal(
+            &model,
+            "afm.yaml",
+            obs,
+            "obs.csv",
+            &opts(57),
+        )
+        .expect("calibrated")
+    };
+    let (with, without) = (cal(&oriented), cal(&plain));
+    let note = "not used: the machine-tool model predicts the tool tip's position only";
+    assert_eq!(
+        with.notes.iter().filter(|n| n.contains(note)).count(),
+        1,
+        "{with}"
+    );
+    assert!(
+        !without.notes.iter().any(|n| n.contains("orientation")),
+        "{without}"
+    );
+    assert_eq!(with.params, without.params, "{with}");
+    assert_eq!(with.n_equations, without.n_equations);
+}

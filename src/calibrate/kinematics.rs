@@ -775,6 +775,7 @@ pub fn calibrate_kinematics(
     let insignificant: Vec<usize> = insignificant.iter().map(|d| d.0).collect();
     notes_for(&layout, obs, &fixed, &absorbed, &insignificant, &mut notes);
     notes.push(frame_note(&machine, &layout, read_frame));
+    notes.extend(obs.orientation_note(layout.w_rot, None));
     let (_, m) = offsets(&layout, obs, &fit);
     Ok(Calibration {
         kind: "kinematics",

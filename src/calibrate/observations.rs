@@ -1054,7 +1054,42 @@ fn is_blank_char(c: char) -> bool {
     c == ' ' || c == '\t'
 }
 
+/// Why a machine-tool calibration leaves measured orientations out.
+pub const TOOL_ORIENTATION_UNUSED: &str = "the machine-tool model predicts the tool tip's \
+    position only (its geometric and thermal errors are fitted to positions; an angular \
+    error shows through the lever of the tool)";
+
 impl Observations {
+    /// Rows with a measured orientation (`qw…qz`).
+    pub fn oriented_rows(&self) -> usize {
+        self.rows.iter().filter(|r| r.orientation.is_some()).count()
+    }
+
+    /// What a calibration did with the measured orientations (`None` when
+    /// no row has one): `used` — their residuals are in the fit, weighted
+    /// `w_rot` mm/rad (0: left out, said so); otherwise `why_not` says why
+    /// the model cannot use them.
+    pub fn orientation_note(&self, w_rot: f64, why_not: Option<&str>) -> Option<String> {
+        let n = self.oriented_rows();
+        if n == 0 {
+            return None;
+        }
+        let w = crate::error::show_number(w_rot);
+        Some(match why_not {
+            Some(why) => {
+                format!("{n} row(s) carry a measured orientation (qw, qx, qy, qz), not used: {why}")
+            }
+            None if w_rot > 0.0 => format!(
+                "{n} row(s) carry a measured orientation (qw, qx, qy, qz): their orientation \
+                 residuals are in the fit, weighted {w} mm/rad (--orientation-weight-mm-per-rad)"
+            ),
+            None => format!(
+                "{n} row(s) carry a measured orientation (qw, qx, qy, qz), left out by \
+                 --orientation-weight-mm-per-rad 0"
+            ),
+        })
+    }
+
     /// The columns [`write_observations`] writes: the declared columns that
     /// fit the kind, the required ones, and every column some row has a
     /// non-default value for. Canonical order.

@@ -27,6 +27,10 @@
 //! pose) by evaluating the exact forward model
 //! ([`super::forward::predict`]) at the estimate:
 //! `y ← y − (Δx_model(c) − A c)`.
+//! Rows with a measured orientation add the turn of the tool frame under
+//! load, `Δθ = Σ_i c_i · z_i · τ_i` (the angular rows of the Jacobian),
+//! centred per group like the positions and weighted by
+//! [`Options::orientation_mm_per_rad`] (see [`centred_system`]).
 //! Uncertainties: `u(c)` from the residual variance; `u(k) = u(c) / c²`
 //! (first-order propagation). A non-positive compliance is refused; an
 //! uncertain stiffness ([`super::honesty`]) keeps the file's value.
@@ -153,10 +157,11 @@ pub fn load_groups(obs: &Observations, file: &str) -> Result<Vec<Vec<usize>>> {
     Ok(groups)
 }
 
-/// Design block (3 × 6) of one row: `A[r, i] = J_MP[r, i] · τ_i · C_UNIT`
-/// with `τ = J_WPᵀ W` (zero for an unloaded row).
-fn design_block(robot: &Robot, row: &Observation) -> SMatrix<f64, 3, 6> {
-    let mut a = SMatrix::<f64, 3, 6>::zeros();
+/// Design block (6 × 6) of one row: `A[r, i] = J_MP[r, i] · τ_i · C_UNIT`
+/// with `τ = J_WPᵀ W` (zero for an unloaded row); rows 0..3 the measured
+/// point's deflection (mm), rows 3..6 the flange's small rotation (rad).
+fn design_block(robot: &Robot, row: &Observation) -> SMatrix<f64, 6, 6> {
+    let mut a = SMatrix::<f64, 6, 6>::zeros();
     let Pose::Robot(rp) = &row.pose else {
         return a;
     };
@@ -166,22 +171,29 @@ fn design_block(robot: &Robot, row: &Observation) -> SMatrix<f64, 3, 6> {
     let jwp = jacobian(&f, &wrench_point(robot, rp));
     let tau = jwp.transpose() * row_wrench(row);
     for i in 0..6 {
-        for r in 0..3 {
+        for r in 0..6 {
             a[(r, i)] = jmp[(r, i)] * tau[i] * C_UNIT;
         }
     }
     a
 }
 
-/// Exact model deflection of a row from its unloaded state, mm.
-fn model_deflection(m: &Machine, row: &Observation, file: &str) -> Result<Vector3<f64>> {
+/// Exact model deflection of a row from its unloaded state: the measured
+/// point's (mm), then the rotation vector of the tool frame's turn (rad).
+fn model_deflection(m: &Machine, row: &Observation, file: &str) -> Result<Vector6<f64>> {
     if !loaded(row) {
-        return Ok(Vector3::zeros());
+        return Ok(Vector6::zeros());
     }
     let mut free = row.clone();
     free.force_n = Vector3::zeros();
     free.moment_nm = Vector3::zeros();
-    Ok(predict(m, row, file)?.attained_mm - predict(m, &free, file)?.attained_mm)
+    let (a, b) = (predict(m, row, file)?, predict(m, &free, file)?);
+    let d = a.attained_mm - b.attained_mm;
+    let t = match (a.attained_rot, b.attained_rot) {
+        (Some(qa), Some(qb)) => (qa * qb.inverse()).scaled_axis(),
+        _ => Vector3::zeros(),
+    };
+    Ok(Vector6::new(d.x, d.y, d.z, t.x, t.y, t.z))
 }
 
 /// Subtracts the mean of rows `[start, end)` (3-vectors) from the design
@@ -211,35 +223,69 @@ fn stiffness_from(c: &DVector<f64>) -> [f64; 6] {
 }
 
 /// The part of the exact model the linear design misses, per row (given
-/// the row's design block), mm.
-type SecondOrder<'a> = dyn Fn(&Observation, &SMatrix<f64, 3, 6>) -> Result<Vector3<f64>> + 'a;
+/// the row's design block): the point's (mm), then the rotation's (rad).
+type SecondOrder<'a> = dyn Fn(&Observation, &SMatrix<f64, 6, 6>) -> Result<Vector6<f64>> + 'a;
 
 /// Columns of the frame's small rotation in the centred design.
 const ROT_PARAMS: usize = 3;
+
+/// Equations of the centred system of the fit groups and the degrees of
+/// freedom its centring takes: 3 per row and per group for the positions,
+/// and, with orientations weighted (`w_rot > 0`), 3 per row with a
+/// measured orientation and per group that has one.
+fn equations(obs: &Observations, fit: &[Vec<usize>], w_rot: f64) -> (usize, usize) {
+    let mut m = 0;
+    let mut lost = 0;
+    for g in fit {
+        let rot = if w_rot > 0.0 {
+            g.iter()
+                .filter(|&&i| obs.rows.get(i).is_some_and(|r| r.orientation.is_some()))
+                .count()
+        } else {
+            0
+        };
+        m += 3 * (g.len() + rot);
+        lost += 3 * (1 + usize::from(rot > 0));
+    }
+    (m, lost)
+}
 
 /// The centred system of the fit groups (rows in group order): the design
 /// of the compliances (6 columns) and, with an instrument frame `f`, the
 /// negated columns of the frame's small rotation (its origin cancels in
 /// the centring); the observations are the measured points carried by `f`
 /// minus `second(row)` (the part of the exact model the design misses).
+/// With `w_rot > 0` the rows with a measured orientation add, after all
+/// positions, the turn of the measured frame from the group's first such
+/// row (rotation vector, carried by `f`), centred per group and weighted
+/// by `w_rot` (mm/rad); the frame's rotation turns every one of a group's
+/// orientations alike, so it cancels there.
 fn centred_system(
     robot: &Robot,
     obs: &Observations,
     fit: &[Vec<usize>],
     f: Option<&Isometry3<f64>>,
+    w_rot: f64,
     second: &SecondOrder<'_>,
 ) -> Result<(DMatrix<f64>, DVector<f64>)> {
-    let m = 3 * fit.iter().map(Vec::len).sum::<usize>();
+    let (m, _) = equations(obs, fit, w_rot);
+    let m_pos = 3 * fit.iter().map(Vec::len).sum::<usize>();
     let nr = if f.is_some() { ROT_PARAMS } else { 0 };
     let mut a = DMatrix::zeros(m, 6 + nr);
     let mut y = DVector::zeros(m);
     let mut k = 0;
+    let mut kr = m_pos / 3;
+    let rot = f.map_or(nalgebra::UnitQuaternion::identity(), |f| f.rotation);
     for g in fit {
         let start = k;
+        let start_r = kr;
+        let mut reference = None;
         for &i in g {
             let Some(row) = obs.rows.get(i) else { continue };
             let blk = design_block(robot, row);
-            a.view_mut((3 * k, 0), (3, 6)).copy_from(&blk);
+            let miss = second(row, &blk)?;
+            a.view_mut((3 * k, 0), (3, 6))
+                .copy_from(&blk.fixed_rows::<3>(0));
             let meas = match f {
                 Some(f) => {
                     let j = point_jacobian(f, &row.measured_mm);
@@ -249,10 +295,22 @@ fn centred_system(
                 }
                 None => row.measured_mm,
             };
-            y.rows_mut(3 * k, 3).copy_from(&(meas - second(row, &blk)?));
+            y.rows_mut(3 * k, 3)
+                .copy_from(&(meas - miss.fixed_rows::<3>(0)));
             k += 1;
+            if let (true, Some(q)) = (w_rot > 0.0, row.orientation) {
+                let q = rot * q;
+                let q0 = *reference.get_or_insert(q);
+                let turn = (q * q0.inverse()).scaled_axis();
+                a.view_mut((3 * kr, 0), (3, 6))
+                    .copy_from(&(blk.fixed_rows::<3>(3) * w_rot));
+                y.rows_mut(3 * kr, 3)
+                    .copy_from(&((turn - miss.fixed_rows::<3>(3)) * w_rot));
+                kr += 1;
+            }
         }
         center(&mut a, &mut y, start, k);
+        center(&mut a, &mut y, start_r, kr);
     }
     Ok((a, y))
 }
@@ -302,6 +360,7 @@ fn solve_compliances(
     obs: &Observations,
     fit: &[Vec<usize>],
     f0: Option<Isometry3<f64>>,
+    w_rot: f64,
     obs_file: &str,
 ) -> Result<(Solution, Option<Isometry3<f64>>)> {
     let lsq = LsqOptions::default();
@@ -316,8 +375,8 @@ fn solve_compliances(
             frame_with(&f, &d)
         })
     };
-    let none = |_: &Observation, _: &SMatrix<f64, 3, 6>| Ok(Vector3::zeros());
-    let (a, y) = centred_system(robot, obs, fit, f0.as_ref(), &none)?;
+    let none = |_: &Observation, _: &SMatrix<f64, 6, 6>| Ok(Vector6::zeros());
+    let (a, y) = centred_system(robot, obs, fit, f0.as_ref(), w_rot, &none)?;
     if f0.is_some() {
         screen_model(
             &a.columns(0, 6).into_owned(),
@@ -337,11 +396,11 @@ fn solve_compliances(
             break;
         }
         let trial = Machine::Robot(robot.with_stiffness(stiffness_from(&c)));
-        let second = |row: &Observation, blk: &SMatrix<f64, 3, 6>| -> Result<Vector3<f64>> {
+        let second = |row: &Observation, blk: &SMatrix<f64, 6, 6>| -> Result<Vector6<f64>> {
             Ok(model_deflection(&trial, row, obs_file)?
                 - blk * Vector6::from_column_slice(c.as_slice()))
         };
-        let (a, y) = centred_system(robot, obs, fit, f.as_ref(), &second)?;
+        let (a, y) = centred_system(robot, obs, fit, f.as_ref(), w_rot, &second)?;
         sol = solve(&a, &y)?;
         f = turn(f, &sol);
     }
@@ -359,13 +418,14 @@ fn refit_rotation(
     obs: &Observations,
     fit: &[Vec<usize>],
     mut f: Isometry3<f64>,
+    w_rot: f64,
     obs_file: &str,
 ) -> Result<Isometry3<f64>> {
-    let deflection = |row: &Observation, _: &SMatrix<f64, 3, 6>| -> Result<Vector3<f64>> {
+    let deflection = |row: &Observation, _: &SMatrix<f64, 6, 6>| -> Result<Vector6<f64>> {
         model_deflection(calibrated, row, obs_file)
     };
     for _ in 0..2 {
-        let (a, y) = centred_system(robot, obs, fit, Some(&f), &deflection)?;
+        let (a, y) = centred_system(robot, obs, fit, Some(&f), w_rot, &deflection)?;
         let rot = a.columns(6, ROT_PARAMS).into_owned();
         let s = solve_for(&rot, &y, &LsqOptions::default(), obs_file)?;
         f = frame_with(&f, &[0.0, 0.0, 0.0, s.params[0], s.params[1], s.params[2]]);
@@ -477,8 +537,14 @@ fn held_out_deflections(
             let meas = row.measured_mm - u0.measured_mm;
             let (m0, f0) = before_model;
             let (m1, f1) = after_model;
-            before.push((rot(f0, meas) - model_deflection(m0, row, obs_file)?).norm());
-            after.push((rot(f1, meas) - model_deflection(m1, row, obs_file)?).norm());
+            let d0 = model_deflection(m0, row, obs_file)?
+                .fixed_rows::<3>(0)
+                .into_owned();
+            let d1 = model_deflection(m1, row, obs_file)?
+                .fixed_rows::<3>(0)
+                .into_owned();
+            before.push((rot(f0, meas) - d0).norm());
+            after.push((rot(f1, meas) - d1).norm());
         }
     }
     Ok((before, after))
@@ -569,8 +635,7 @@ pub fn calibrate_stiffness(
         .iter()
         .filter(|&&i| obs.rows.get(i).is_some_and(loaded))
         .count();
-    let m = 3 * fit_rows.len();
-    let dof_lost = 3 * fit.len();
+    let (m, dof_lost) = equations(obs, &fit, opts.orientation_mm_per_rad);
     let instrument = obs.frame == MeasurementFrame::Instrument;
     let nr = if instrument { ROT_PARAMS } else { 0 };
     if m < dof_lost + 18 + 3 * nr {
@@ -591,7 +656,8 @@ pub fn calibrate_stiffness(
     } else {
         None
     };
-    let (sol, f_rot) = solve_compliances(robot, obs, &fit, f0, obs_file)?;
+    let w_rot = opts.orientation_mm_per_rad;
+    let (sol, f_rot) = solve_compliances(robot, obs, &fit, f0, w_rot, obs_file)?;
     let id = sol.identifiability.clone();
     // The centring used 3 degrees of freedom per group.
     let dof_true = m.saturating_sub(dof_lost + 6 + nr);
@@ -613,9 +679,15 @@ pub fn calibrate_stiffness(
     let calibrated = Machine::Robot(robot.with_stiffness(written.map(|k| k * 1000.0)));
     let fixed: Vec<usize> = (0..6).filter(|&i| withheld.get(i) == Some(&true)).collect();
     let f_rot = match f_rot {
-        Some(f) if !fixed.is_empty() => {
-            Some(refit_rotation(robot, &calibrated, obs, &fit, f, obs_file)?)
-        }
+        Some(f) if !fixed.is_empty() => Some(refit_rotation(
+            robot,
+            &calibrated,
+            obs,
+            &fit,
+            f,
+            w_rot,
+            obs_file,
+        )?),
         other => other,
     };
     let (before, after) = held_out_deflections(
@@ -628,6 +700,7 @@ pub fn calibrate_stiffness(
     let values: Vec<String> = written.iter().map(|&k| fmt_value(k, 1)).collect();
     let mut yaml = set_top_level_list(text, machine_file, "k_nm_per_rad", &values)?;
     let mut notes: Vec<String> = world.into_iter().collect();
+    notes.extend(obs.orientation_note(w_rot, None));
     let frame = match &f_rot {
         Some(f) => {
             let est = frame_estimate(

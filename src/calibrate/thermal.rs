@@ -29,6 +29,12 @@
 //! them, so it is one linear least-squares step on the residuals of the
 //! file's model ([`super::lsq::solve_linear`], same identifiability analysis).
 //!
+//! Robot rows with a measured orientation add the rotation vector of
+//! `measured · predicted⁻¹` weighted by
+//! [`super::stiffness::Options::orientation_mm_per_rad`], as in the
+//! kinematic calibration; the machine-tool model predicts positions only
+//! and says that it leaves orientations out.
+//!
 //! Both kinds identify an instrument frame (`# frame: instrument`) with
 //! their unknowns: its six parameters beside the model's, the model's
 //! screened against them ([`super::frame::screen_model`]).
@@ -126,9 +132,28 @@ struct Unknowns<'a> {
     base: &'a [ThermalTerm],
     /// Start pose of the instrument frame (instrument data only).
     frame: Option<Isometry3<f64>>,
+    /// Weight of the orientation residuals, mm/rad (0: none).
+    w_rot: f64,
 }
 
 impl Unknowns<'_> {
+    /// Equations of a row: 3 for the position, 3 more for a measured
+    /// orientation when orientations are weighted.
+    fn eqs(&self, row: &crate::calibrate::observations::Observation) -> usize {
+        if self.w_rot > 0.0 && row.orientation.is_some() {
+            6
+        } else {
+            3
+        }
+    }
+
+    /// Equations of `rows`.
+    fn equations(&self, obs: &Observations, rows: &[usize]) -> usize {
+        rows.iter()
+            .map(|&i| obs.rows.get(i).map_or(3, |r| self.eqs(r)))
+            .sum()
+    }
+
     /// Number of model unknowns (3 per term).
     fn n_model(&self) -> usize {
         3 * self.base.len()
@@ -162,22 +187,36 @@ fn residuals(
 ) {
     let terms = terms_with(u.base, x);
     let f = u.frame_at(x);
-    for (k, &i) in rows.iter().enumerate() {
+    let mut at = 0;
+    for &i in rows {
         let Some(row) = obs.rows.get(i) else { continue };
+        let eqs = u.eqs(row);
         let g = row_powers(row).map_or([[0.0; 2]; 6], |p| growth(&terms, &p));
         match forward::predict_robot_with_growth(u.robot, row, &g, file) {
             Ok(p) => {
                 let d = carry(&f, &row.measured_mm) - p.measured(obs.measured);
                 for r in 0..3 {
-                    out[3 * k + r] = d[r];
+                    out[at + r] = d[r];
+                }
+                if eqs == 6 {
+                    let e = match (row.orientation, p.attained_rot) {
+                        (Some(q), Some(pr)) => {
+                            (f.rotation * q * pr.inverse()).scaled_axis() * u.w_rot
+                        }
+                        _ => Vector3::zeros(),
+                    };
+                    for r in 0..3 {
+                        out[at + 3 + r] = e[r];
+                    }
                 }
             }
             Err(_) => {
-                for r in 0..3 {
-                    out[3 * k + r] = f64::NAN;
+                for r in 0..eqs {
+                    out[at + r] = f64::NAN;
                 }
             }
         }
+        at += eqs;
     }
 }
 
@@ -245,7 +284,7 @@ fn screen_unknowns(
 ) -> Result<(Vec<usize>, Vec<usize>)> {
     let n = u.n();
     let nm = u.n_model();
-    let m = 3 * fit.len();
+    let m = u.equations(obs, fit);
     let mut r0 = DVector::zeros(m);
     residuals(u, obs, fit, &vec![0.0; n], &mut r0, obs_file);
     if r0.iter().any(|v| !v.is_finite()) {
@@ -526,9 +565,10 @@ pub fn calibrate_thermal(
         robot,
         base: &base,
         frame,
+        w_rot: opts.orientation_mm_per_rad,
     };
     let n = unknowns.n();
-    let m = 3 * fit.len();
+    let m = unknowns.equations(obs, &fit);
     check_enough_rows(fit.len(), n, obs_file)?;
     // Terms whose power never varies in the fitted rows are fixed.
     let mut notes = Vec::new();
@@ -595,6 +635,7 @@ pub fn calibrate_thermal(
     Machine::from_yaml_str(&yaml, machine_file)
         .map_err(|e| super::screen::implausible(&e, obs_file, obs.rows.len()))?;
     notes.extend(world);
+    notes.extend(obs.orientation_note(opts.orientation_mm_per_rad, None));
     Ok(Calibration {
         kind: "thermal",
         n_fit: fit.len(),
@@ -935,6 +976,10 @@ pub fn calibrate_tool_thermal(
         "rows are at the thermal steady state of their powers: time constants are not identified"
             .into(),
     );
+    notes.extend(obs.orientation_note(
+        opts.orientation_mm_per_rad,
+        Some(super::observations::TOOL_ORIENTATION_UNUSED),
+    ));
     let uncertain = opts.honesty.uncertain(&params);
     // The frame goes with the gains as written (measurement_frame itself
     // plays no part in a prediction).

@@ -385,7 +385,15 @@ pub fn run_calibrate(a: &CalibrateArgs) -> Result<i32> {
     let run = |o: &crate::calibrate::observations::Observations| match a.kind {
         CalibrationKind::Stiffness => calibrate_stiffness(&text, &file, o, &obs_file, &opts),
         CalibrationKind::Kinematics => calibrate_kinematics(&text, &file, o, &obs_file, &opts),
-        CalibrationKind::Geometry => calibrate_geometry(&text, &file, o, &obs_file, &opts),
+        CalibrationKind::Geometry => {
+            calibrate_geometry(&text, &file, o, &obs_file, &opts).map(|mut c| {
+                c.notes.extend(o.orientation_note(
+                    opts.orientation_mm_per_rad,
+                    Some(crate::calibrate::observations::TOOL_ORIENTATION_UNUSED),
+                ));
+                c
+            })
+        }
         CalibrationKind::Thermal => calibrate_thermal(&text, &file, o, &obs_file, &opts),
     };
     let cal = run(&obs)?;

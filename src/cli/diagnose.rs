@@ -2,7 +2,7 @@
 //! named effect is missing, and the model with that effect added.
 
 use std::io::Write;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use clap::{Args, ValueEnum};
 
@@ -77,7 +77,11 @@ fn in_reference_frame(
     obs: &crate::calibrate::observations::Observations,
     file: &str,
     w_rot: f64,
-) -> Result<(crate::calibrate::observations::Observations, String)> {
+) -> Result<(
+    crate::calibrate::observations::Observations,
+    String,
+    Option<nalgebra::Isometry3<f64>>,
+)> {
     use crate::calibrate::frame::{
         frame_uncertainty, register, rpy_deg, world_note, world_to_reference,
     };
@@ -142,8 +146,9 @@ fn in_reference_frame(
             row.orientation = row.orientation.map(|q| f.rotation * q);
         }
         obs.frame = MeasurementFrame::Reference;
+        return Ok((obs, said, Some(f)));
     }
-    Ok((obs, said))
+    Ok((obs, said, None))
 }
 
 /// What the diagnosis does with the measured orientations of `obs` (empty
@@ -194,6 +199,177 @@ fn print(s: &str) -> Result<()> {
         .map_err(|e| Error::io(std::path::Path::new("<stdout>"), e))
 }
 
+/// What `--write-model` writes from: the current model, the observations
+/// in the reference frame, the registration that carried instrument
+/// positions there (if any), the diagnosis options.
+struct WrittenModel<'a> {
+    machine: &'a Machine,
+    text: &'a str,
+    obs: &'a crate::calibrate::observations::Observations,
+    registration: Option<nalgebra::Isometry3<f64>>,
+    opts: &'a Options,
+}
+
+impl WrittenModel<'_> {
+    /// Writes the model with the accepted effects of `d` to `path` (and,
+    /// for instrument data, its `measurement_frame`); returns the lines the
+    /// table report adds.
+    fn write(&self, a: &DiagnoseArgs, d: &diagnose::Diagnosis, path: &Path) -> Result<String> {
+        let o = a.observations.as_deref().unwrap_or(Path::new("-"));
+        let file = o.display().to_string();
+        let rule = crate::calibrate::honesty::Rule {
+            max_relative: a.uncertain_above,
+            write_uncertain: a.write_uncertain,
+        };
+        let (found, withheld) = write::withhold_uncertain(self.machine, &d.found, &rule);
+        let mut w = write::write_model(self.machine, self.text, &found)?;
+        w.not_written.extend(withheld);
+        let shown = path.display().to_string();
+        let model = Machine::from_yaml_str(&w.text, &shown)?;
+        // Instrument data: the frame re-identified with the written model
+        // fixed, on the training rows; the held-out rows are judged in it.
+        let (check_obs, frame_said) = match self.registration {
+            Some(f) => {
+                let (obs, est) = reidentified(&model, self.obs, &f, self.opts, &file)?;
+                w.text = crate::calibrate::yaml_edit::set_measurement_frame(
+                    &w.text,
+                    &shown,
+                    est.xyz_mm,
+                    est.rpy_deg,
+                )?;
+                (Some(obs), Some(est))
+            }
+            None => (None, None),
+        };
+        if !w.written.is_empty() {
+            // The fit: the 3D RMS of the held-out rows with the accepted
+            // effects (µm → mm).
+            let record = super::calibrate::calibration_record(
+                "diagnose",
+                o,
+                self.obs.rows.len(),
+                d.gap.after.rms_um * 1e-3,
+            )?;
+            w.text = crate::machine::status::set_calibrated(&w.text, &shown, &record)?;
+        }
+        let mut inputs = vec![o.to_path_buf()];
+        if let Some(m) = &a.machine {
+            inputs.extend(MachineFile::open(m)?.path);
+        }
+        super::output::refuse_overwrite(path, &inputs)?;
+        super::output::write_atomically(path, |out| {
+            out.write_all(w.text.as_bytes())
+                .map_err(|e| Error::io(path, e))
+        })?;
+        let mut out = format!(
+            "\nwrote {} ({}): {}\n",
+            path.display(),
+            if w.in_place {
+                "values edited in place, comments kept"
+            } else {
+                "document rewritten, inner comments not kept"
+            },
+            if w.written.is_empty() {
+                "no effect added (the model is unchanged)".to_string()
+            } else {
+                format!("added {}", w.written.join(", "))
+            }
+        );
+        if let Some(est) = &frame_said {
+            out.push_str(&format!(
+                "wrote measurement_frame, re-identified with the written model on the {} fit \
+                 rows: {}",
+                d.train_rows,
+                frame_line(est)
+            ));
+        }
+        if !w.written.is_empty() || check_obs.is_some() {
+            let obs = check_obs.as_ref().unwrap_or(self.obs);
+            let (m, rot) = diagnose::holdout_check(&model, obs, &file, self.opts)?;
+            out.push_str(&format!(
+                "written model on the {} held-out rows (full forward model{}): RMS {:.1} µm, max {:.1} µm, 95th {:.1} µm{}\n",
+                d.gap.rows,
+                if check_obs.is_some() {
+                    ", in the re-identified frame"
+                } else {
+                    ""
+                },
+                m.rms_um,
+                m.max_um,
+                m.p95_um,
+                rot.map_or(String::new(), |r| format!(
+                    "; orientation RMS {:.4} deg, max {:.4} deg",
+                    r.rms_deg, r.max_deg
+                ))
+            ));
+        }
+        for (name, why) in &w.not_written {
+            out.push_str(&format!("not written: {name}: {why}\n"));
+        }
+        Ok(out)
+    }
+}
+
+/// A frame as one line: origin (mm) and roll, pitch, yaw (deg), with the
+/// standard uncertainties when known.
+fn frame_line(est: &crate::calibrate::report::FrameEstimate) -> String {
+    let t = est.xyz_mm;
+    let r = est.rpy_deg;
+    format!(
+        "x {:.4} y {:.4} z {:.4} mm{}, roll {:.6} pitch {:.6} yaw {:.6} deg{}\n",
+        t[0],
+        t[1],
+        t[2],
+        est.u_xyz_mm.map_or(String::new(), |u| format!(
+            " (u {:.4} {:.4} {:.4})",
+            u[0], u[1], u[2]
+        )),
+        r[0],
+        r[1],
+        r[2],
+        est.u_rot_deg.map_or(String::new(), |u| format!(
+            " (u {:.6} {:.6} {:.6})",
+            u[0], u[1], u[2]
+        )),
+    )
+}
+
+/// The instrument frame re-identified for the written `model` (fixed): the
+/// rigid registration of the instrument positions (`obs` carried back
+/// through the first registration `f`) onto the positions `model` predicts,
+/// on the training rows of the split `opts` selects. Returns the
+/// observations carried into the reference frame by it, and the frame.
+fn reidentified(
+    model: &Machine,
+    obs: &crate::calibrate::observations::Observations,
+    f: &nalgebra::Isometry3<f64>,
+    opts: &Options,
+    file: &str,
+) -> Result<(
+    crate::calibrate::observations::Observations,
+    crate::calibrate::report::FrameEstimate,
+)> {
+    use crate::calibrate::frame::{estimate, refit};
+    let back = f.inverse();
+    let (train, _) =
+        crate::calibrate::observations::holdout_split(obs.rows.len(), opts.holdout, opts.seed);
+    let mut meas = Vec::with_capacity(train.len());
+    let mut pred = Vec::with_capacity(train.len());
+    for &i in &train {
+        let Some(row) = obs.rows.get(i) else { continue };
+        meas.push((back * nalgebra::Point3::from(row.measured_mm)).coords);
+        pred.push(crate::calibrate::forward::predict(model, row, file)?.attained_mm);
+    }
+    let (g, u) = refit(&meas, &pred, None, file)?;
+    let carry = g * back;
+    let mut out = obs.clone();
+    for row in &mut out.rows {
+        row.measured_mm = (carry * nalgebra::Point3::from(row.measured_mm)).coords;
+        row.orientation = row.orientation.map(|q| carry.rotation * q);
+    }
+    Ok((out, estimate(&g, u)))
+}
+
 /// Runs `postproc diagnose`.
 pub fn run(a: &DiagnoseArgs) -> Result<i32> {
     super::calibrate::check_uncertain_above(a.uncertain_above)?;
@@ -233,7 +409,7 @@ pub fn run(a: &DiagnoseArgs) -> Result<i32> {
         obs.frame = f;
     }
     let instrument = obs.frame == crate::calibrate::observations::MeasurementFrame::Instrument;
-    let (obs, frame_text) = in_reference_frame(
+    let (obs, frame_text, registration) = in_reference_frame(
         &machine,
         &obs,
         &o.display().to_string(),
@@ -257,61 +433,16 @@ pub fn run(a: &DiagnoseArgs) -> Result<i32> {
             .map_err(|e| Error::Usage(format!("cannot write JSON: {e}")))?,
     };
     if let Some(path) = &a.write_model {
-        let rule = crate::calibrate::honesty::Rule {
-            max_relative: a.uncertain_above,
-            write_uncertain: a.write_uncertain,
+        let written = WrittenModel {
+            machine: &machine,
+            text: &text,
+            obs: &obs,
+            registration,
+            opts: &opts,
         };
-        let (found, withheld) = write::withhold_uncertain(&machine, &d.found, &rule);
-        let mut w = write::write_model(&machine, &text, &found)?;
-        w.not_written.extend(withheld);
-        if !w.written.is_empty() {
-            // The fit: the 3D RMS of the held-out rows with the accepted
-            // effects (µm → mm).
-            let record = super::calibrate::calibration_record(
-                "diagnose",
-                o,
-                obs.rows.len(),
-                d.gap.after.rms_um * 1e-3,
-            )?;
-            w.text = crate::machine::status::set_calibrated(
-                &w.text,
-                &path.display().to_string(),
-                &record,
-            )?;
-        }
-        let mut inputs = vec![o.clone()];
-        inputs.extend(MachineFile::open(m)?.path);
-        super::output::refuse_overwrite(path, &inputs)?;
-        super::output::write_atomically(path, |out| {
-            out.write_all(w.text.as_bytes())
-                .map_err(|e| Error::io(path, e))
-        })?;
+        let said = written.write(a, &d, path)?;
         if a.format == DiagnoseFormat::Table {
-            out.push_str(&format!(
-                "\nwrote {} ({}): {}\n",
-                path.display(),
-                if w.in_place {
-                    "values edited in place, comments kept"
-                } else {
-                    "document rewritten, inner comments not kept"
-                },
-                if w.written.is_empty() {
-                    "no effect added (the model is unchanged)".to_string()
-                } else {
-                    format!("added {}", w.written.join(", "))
-                }
-            ));
-            if !w.written.is_empty() {
-                let written = Machine::from_yaml_str(&w.text, &path.display().to_string())?;
-                let m = diagnose::holdout_metrics(&written, &obs, &o.display().to_string(), &opts)?;
-                out.push_str(&format!(
-                    "written model on the {} held-out rows (full forward model): RMS {:.1} µm, max {:.1} µm, 95th {:.1} µm\n",
-                    d.gap.rows, m.rms_um, m.max_um, m.p95_um
-                ));
-            }
-            for (name, why) in &w.not_written {
-                out.push_str(&format!("not written: {name}: {why}\n"));
-            }
+            out.push_str(&said);
         }
     }
     print(&out)?;

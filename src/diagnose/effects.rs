@@ -791,7 +791,8 @@ pub fn pose_sensitivity(
             tool_length_column(t, &effect.action, rows, &mut s);
         }
         _ => {
-            return Err(Error::Usage(format!(
+            // The library offers each machine kind its own effects.
+            return Err(Error::Internal(format!(
                 "effect `{}` does not apply to this kind of machine",
                 effect.name
             )));
@@ -816,7 +817,9 @@ fn axis_map(doc: &mut Value, axis: char) -> Result<&mut Mapping> {
     let axes = doc
         .get_mut("axes")
         .and_then(Value::as_sequence_mut)
-        .ok_or_else(|| Error::Usage("machine file has no `axes` list".into()))?;
+        .ok_or_else(|| {
+            Error::Internal("validated machine-tool file without an `axes` list".into())
+        })?;
     axes.iter_mut()
         .filter_map(Value::as_mapping_mut)
         .find(|m| {
@@ -824,7 +827,11 @@ fn axis_map(doc: &mut Value, axis: char) -> Result<&mut Mapping> {
                 .and_then(Value::as_str)
                 .is_some_and(|n| n.eq_ignore_ascii_case(&axis.to_string()))
         })
-        .ok_or_else(|| Error::Usage(format!("machine file has no axis `{axis}`")))
+        .ok_or_else(|| {
+            Error::Internal(format!(
+                "effect of axis `{axis}`, which the machine file does not have"
+            ))
+        })
 }
 
 fn sub_map<'a>(m: &'a mut Mapping, name: &str) -> Result<&'a mut Mapping> {
@@ -834,7 +841,7 @@ fn sub_map<'a>(m: &'a mut Mapping, name: &str) -> Result<&'a mut Mapping> {
     }
     m.get_mut(&k)
         .and_then(Value::as_mapping_mut)
-        .ok_or_else(|| Error::Usage(format!("`{name}` is not a mapping")))
+        .ok_or_else(|| Error::Internal(format!("`{name}` is not a mapping after it was made one")))
 }
 
 fn numbers(v: Option<&Value>) -> Option<Vec<f64>> {
@@ -924,12 +931,14 @@ fn add_compliance(v: &mut Value, c: f64) -> Result<()> {
     match v {
         Value::Sequence(items) => items.iter_mut().try_for_each(|x| add_compliance(x, c)),
         other => {
-            let k = as_f64(other)
-                .ok_or_else(|| Error::Usage("a stiffness value is not a number".into()))?;
+            let k = as_f64(other).ok_or_else(|| {
+                Error::Internal("a validated stiffness value is not a number".into())
+            })?;
             let new = 1.0 / (1.0 / k + c);
             if !(new.is_finite() && new > 0.0) {
-                return Err(Error::Usage(format!(
-                    "compliance {c} µm/N makes the stiffness {k} N/µm non-positive"
+                return Err(Error::Data(format!(
+                    "the fitted compliance {c} µm/N makes the stiffness {k} N/µm non-positive: \
+                     the data ask for a stiffer axis than any the file can hold"
                 )));
             }
             *other = Value::from(round9(new));
@@ -961,9 +970,9 @@ pub fn apply_to_yaml(doc: &mut Value, action: &Action, value: f64, m: &Machine) 
             let map = match axis {
                 Some(a) => sub_map(axis_map(doc, *a)?, "location_errors")?,
                 None => {
-                    let root = doc
-                        .as_mapping_mut()
-                        .ok_or_else(|| Error::Usage("machine file is not a mapping".into()))?;
+                    let root = doc.as_mapping_mut().ok_or_else(|| {
+                        Error::Internal("validated machine file is not a mapping".into())
+                    })?;
                     sub_map(sub_map(root, "spindle")?, "location_errors")?
                 }
             };
@@ -998,23 +1007,30 @@ pub fn apply_to_yaml(doc: &mut Value, action: &Action, value: f64, m: &Machine) 
             // map, both load signs: k' = 1/(1/k + c) at every grid node.
             let dir = ["x", "y", "z"]
                 .get(*slot)
-                .ok_or_else(|| Error::Usage("stiffness of a rotary axis".into()))?;
+                .ok_or_else(|| Error::Internal("stiffness effect of a rotary axis".into()))?;
             let k = doc
                 .as_mapping_mut()
                 .and_then(|r| r.get_mut("stiffness"))
                 .and_then(Value::as_mapping_mut)
                 .and_then(|st| st.get_mut("k_n_per_um"))
                 .and_then(Value::as_mapping_mut)
-                .ok_or_else(|| Error::Usage("the file has no `stiffness.k_n_per_um`".into()))?;
+                .ok_or_else(|| {
+                    // Without the section the effect is marked not writable.
+                    Error::Internal(
+                        "stiffness effect written to a file without `stiffness.k_n_per_um`".into(),
+                    )
+                })?;
             for sign in ["pos", "neg"] {
-                let v = k
-                    .get_mut(format!("{dir}_{sign}").as_str())
-                    .ok_or_else(|| Error::Usage(format!("no stiffness.k_n_per_um.{dir}_{sign}")))?;
+                let v = k.get_mut(format!("{dir}_{sign}").as_str()).ok_or_else(|| {
+                    Error::Internal(format!(
+                        "validated file without stiffness.k_n_per_um.{dir}_{sign}"
+                    ))
+                })?;
                 add_compliance(v, value)?;
             }
         }
         _ => {
-            return Err(Error::Usage(
+            return Err(Error::Internal(
                 "this effect is not expressed through the machine-tool file".into(),
             ));
         }
@@ -1027,7 +1043,7 @@ pub fn tool_variant(doc: &Value, action: &Action, value: f64, m: &Machine) -> Re
     let mut d = doc.clone();
     apply_to_yaml(&mut d, action, value, m)?;
     let text = serde_yaml::to_string(&d)
-        .map_err(|e| Error::Usage(format!("cannot write the machine document: {e}")))?;
+        .map_err(|e| Error::Internal(format!("cannot write the machine document: {e}")))?;
     Machine::from_yaml_str(&text, "(diagnose variant)")
 }
 

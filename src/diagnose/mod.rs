@@ -399,7 +399,7 @@ pub fn diagnose(
 ) -> Result<Diagnosis> {
     forward::check_kind(machine, obs, obs_file)?;
     let yaml: serde_yaml::Value = serde_yaml::from_str(machine_text)
-        .map_err(|e| Error::Usage(format!("machine file: {e}")))?;
+        .map_err(|e| Error::Internal(format!("validated machine file does not parse: {e}")))?;
     let ctx = effects::Context {
         machine,
         yaml: &yaml,
@@ -620,15 +620,33 @@ pub fn holdout_metrics(
     obs_file: &str,
     opts: &Options,
 ) -> Result<Metrics> {
+    holdout_check(machine, obs, obs_file, opts).map(|c| c.0)
+}
+
+/// [`holdout_metrics`], and the orientation error of the held-out rows
+/// with a measured orientation when the diagnosis compares orientations
+/// (a robot and a positive `opts.orientation_mm_per_rad`).
+pub fn holdout_check(
+    machine: &Machine,
+    obs: &Observations,
+    obs_file: &str,
+    opts: &Options,
+) -> Result<(Metrics, Option<AngleMetrics>)> {
     forward::check_kind(machine, obs, obs_file)?;
     let (_, hold) = holdout_split(obs.rows.len(), opts.holdout, opts.seed);
+    let eq = Equations::new(machine, &obs.rows, opts.orientation_mm_per_rad);
     let mut e = Vec::with_capacity(hold.len());
+    let mut angles = Vec::new();
     for &i in &hold {
         let Some(row) = obs.rows.get(i) else { continue };
         let p = forward::predict(machine, row, obs_file)?;
         e.push(row.measured_mm - p.measured(obs.measured));
+        if let (Some(_), Some(q), Some(pq)) = (eq.orientation(i), row.orientation, p.attained_rot) {
+            angles.push((q * pq.inverse()).angle());
+        }
     }
-    Ok(metrics(&e))
+    let orientation = (!angles.is_empty()).then(|| AngleMetrics::of_rad(&angles));
+    Ok((metrics(&e), orientation))
 }
 
 /// RMS, max, 95th percentile and per-axis RMS of 3D errors (mm in, µm out).

@@ -100,7 +100,7 @@ fn thermal_edit(text: &str, action: &Action, v0: f64, m: &Machine) -> Result<Str
                 ASSUMED_TAU,
             )
         }
-        _ => Err(Error::Usage(
+        _ => Err(Error::Internal(
             "this effect is not written into the thermal section".into(),
         )),
     }
@@ -133,7 +133,7 @@ fn as_f64(v: &Value) -> Option<f64> {
 
 fn root(doc: &mut Value) -> Result<&mut Mapping> {
     doc.as_mapping_mut()
-        .ok_or_else(|| Error::Usage("machine file is not a mapping".into()))
+        .ok_or_else(|| Error::Internal("validated machine file is not a mapping".into()))
 }
 
 fn add_num(m: &mut Mapping, k: &str, add: f64) {
@@ -147,10 +147,9 @@ fn robot_edit(doc: &mut Value, action: &Action, p: &[f64], m: &Machine) -> Resul
     match action {
         Action::Dh(j, f) => {
             if !r.get("actual").is_some_and(Value::is_sequence) {
-                let nominal = r
-                    .get("nominal")
-                    .cloned()
-                    .ok_or_else(|| Error::Usage("robot file has no `nominal`".into()))?;
+                let nominal = r.get("nominal").cloned().ok_or_else(|| {
+                    Error::Internal("validated robot file without `nominal`".into())
+                })?;
                 r.insert(key("actual"), nominal);
             }
             let joint = r
@@ -158,7 +157,9 @@ fn robot_edit(doc: &mut Value, action: &Action, p: &[f64], m: &Machine) -> Resul
                 .and_then(Value::as_sequence_mut)
                 .and_then(|s| s.get_mut(*j))
                 .and_then(Value::as_mapping_mut)
-                .ok_or_else(|| Error::Usage(format!("robot file: no actual[{j}]")))?;
+                .ok_or_else(|| {
+                    Error::Internal(format!("validated robot file without actual[{j}]"))
+                })?;
             match f {
                 DhField::Theta => add_num(joint, "theta_offset_deg", (v0 * 1e-6).to_degrees()),
                 DhField::Alpha => add_num(joint, "alpha_deg", (v0 * 1e-6).to_degrees()),
@@ -171,13 +172,16 @@ fn robot_edit(doc: &mut Value, action: &Action, p: &[f64], m: &Machine) -> Resul
                 .get_mut("k_nm_per_rad")
                 .and_then(Value::as_sequence_mut)
                 .and_then(|s| s.get_mut(*j))
-                .ok_or_else(|| Error::Usage(format!("robot file: no k_nm_per_rad[{j}]")))?;
+                .ok_or_else(|| {
+                    Error::Internal(format!("validated robot file without k_nm_per_rad[{j}]"))
+                })?;
             let old = as_f64(k).unwrap_or(f64::INFINITY);
             // Compliance in rad/(N·m) is 1/k; the fitted addition is µrad/(N·m).
             let new = 1.0 / (1.0 / old + v0 * 1e-6);
             if !(new.is_finite() && new > 0.0) {
-                return Err(Error::Usage(format!(
-                    "joint {} compliance {v0} µrad/(N·m) gives a non-positive stiffness",
+                return Err(Error::Data(format!(
+                    "the fitted joint {} compliance {v0} µrad/(N·m) gives a non-positive \
+                     stiffness: the data ask for a stiffer joint than any the file can hold",
                     j + 1
                 )));
             }
@@ -194,7 +198,11 @@ fn robot_edit(doc: &mut Value, action: &Action, p: &[f64], m: &Machine) -> Resul
             let t = r
                 .get_mut("flange_to_tool")
                 .and_then(Value::as_mapping_mut)
-                .ok_or_else(|| Error::Usage("robot file: bad flange_to_tool".into()))?;
+                .ok_or_else(|| {
+                    Error::Internal(
+                        "`flange_to_tool` is not a mapping after it was made one".into(),
+                    )
+                })?;
             for (c, v) in ["x_mm", "y_mm", "z_mm"].iter().zip(p) {
                 add_num(t, c, v * 1e-3);
             }
@@ -218,7 +226,7 @@ fn robot_edit(doc: &mut Value, action: &Action, p: &[f64], m: &Machine) -> Resul
             }
         }
         _ => {
-            return Err(Error::Usage(
+            return Err(Error::Internal(
                 "this effect has no key in the robot file".into(),
             ));
         }
@@ -229,7 +237,7 @@ fn robot_edit(doc: &mut Value, action: &Action, p: &[f64], m: &Machine) -> Resul
 /// Writes `found` into the machine file text.
 pub fn write_model(machine: &Machine, machine_text: &str, found: &[Found]) -> Result<Written> {
     let mut doc: Value = serde_yaml::from_str(machine_text)
-        .map_err(|e| Error::Usage(format!("machine file: {e}")))?;
+        .map_err(|e| Error::Internal(format!("validated machine file does not parse: {e}")))?;
     let mut written = Vec::new();
     let mut not_written = Vec::new();
     for f in found {
@@ -273,7 +281,7 @@ pub fn write_model(machine: &Machine, machine_text: &str, found: &[Found]) -> Re
         ));
     }
     let old: Value = serde_yaml::from_str(machine_text)
-        .map_err(|e| Error::Usage(format!("machine file: {e}")))?;
+        .map_err(|e| Error::Internal(format!("validated machine file does not parse: {e}")))?;
     let mut lines: Vec<String> = machine_text.lines().map(str::to_string).collect();
     let edited = edit(&mut lines, "", &old, &doc).is_some() && {
         let t = lines.join("\n");
@@ -296,7 +304,7 @@ pub fn write_model(machine: &Machine, machine_text: &str, found: &[Found]) -> Re
         }
     } else {
         let body = serde_yaml::to_string(&doc)
-            .map_err(|e| Error::Usage(format!("cannot write the machine file: {e}")))?;
+            .map_err(|e| Error::Internal(format!("cannot write the machine file: {e}")))?;
         for l in machine_text.lines().take(split) {
             text.push_str(l);
             text.push('\n');
