@@ -1090,6 +1090,48 @@ fn measured_orientations_enter_the_diagnosis() {
     }
 }
 
+/// The noise floor is a position figure: with orientation noise far above
+/// the position noise (2 mrad at 100 mm/rad is 200 µm per weighted
+/// component against 15 µm per axis), the floor stays at the position
+/// noise, √3 · 15 ≈ 26 µm RMS, instead of pooling the two.
+#[test]
+fn the_noise_floor_is_the_position_noise_whatever_the_orientation_noise() {
+    /// Band around √3 · σ for a floor estimated from ~80 rows.
+    const FLOOR_BAND: f64 = 0.35;
+    let dir = tempfile::tempdir().expect("tempdir");
+    let obs = dir.path().join("noisy_orientation.csv");
+    postproc()
+        .args(["simulate", "-q", "--decimals", "9", "--noise-um", "15"])
+        .args(["--orientation", "--noise-mrad", "2", "--seed", "31"])
+        .arg("--machine")
+        .arg(repo("samples/diagnose/true.yaml"))
+        .arg("--observations")
+        .arg(repo("samples/diagnose/measured.csv"))
+        .arg("-o")
+        .arg(&obs)
+        .assert()
+        .success();
+    let a = postproc()
+        .args(["diagnose", "-q", "--machine"])
+        .arg(repo("samples/diagnose/model.yaml"))
+        .arg("--observations")
+        .arg(&obs)
+        .assert()
+        .success();
+    let out = String::from_utf8_lossy(&a.get_output().stdout).to_string();
+    let floor: f64 = out
+        .split("noise floor ≈ ")
+        .nth(1)
+        .and_then(|t| t.split_whitespace().next())
+        .and_then(|v| v.parse().ok())
+        .unwrap_or_else(|| panic!("noise floor in\n{out}"));
+    let expected = 3f64.sqrt() * 15.0;
+    assert!(
+        (floor - expected).abs() <= FLOOR_BAND * expected,
+        "floor {floor} µm against {expected:.1} µm\n{out}"
+    );
+}
+
 /// `diagnose --write-model` on the diagnose sample measured by a tracker
 /// 3 m off the base: the written file gets `measurement_frame`, the frame
 /// re-identified with the written model fixed, within 4 u of the true

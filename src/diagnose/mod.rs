@@ -359,12 +359,23 @@ fn held_out_gap(
         before: AngleMetrics::of_rad(&ab),
         after: AngleMetrics::of_rad(&aa),
     });
-    let (rss_t, k_t) = match &sel.fit {
-        Some(f) => (f.rss, f.params.len()),
-        None => (sel.steps.first().map_or(0.0, |s| s.rss_before_um2), 0),
-    };
-    let dof = eq.of(train).len().saturating_sub(k_t).max(1) as f64;
-    let noise_floor_um = match library_noise_floor(r, sens, &eq.of(train)) {
+    // The floor is a position figure, as the gap it is compared with: it
+    // comes from the training rows' position equations only (weighted
+    // orientation residuals have another noise).
+    let train_pos: Vec<usize> = train
+        .iter()
+        .flat_map(|&i| {
+            let s = eq.start(i);
+            s..s + 3
+        })
+        .collect();
+    let rss_t: f64 = train_pos
+        .iter()
+        .map(|&e| after_r.get(e).copied().unwrap_or(0.0).powi(2))
+        .sum();
+    let k_t = sel.fit.as_ref().map_or(0, |f| f.params.len());
+    let dof = train_pos.len().saturating_sub(k_t).max(1) as f64;
+    let noise_floor_um = match library_noise_floor(r, sens, &train_pos) {
         Some(f) => f.min((3.0 * rss_t / dof).sqrt()),
         None => (3.0 * rss_t / dof).sqrt(),
     };
