@@ -23,8 +23,9 @@
 //!   the machine is error-free). The attained position is the tool tip of the
 //!   geometric model for the row's axes, last-motion signs and tool length
 //!   (default: the lowest-numbered tool of the machine file's tool table, or
-//!   the gauge line when the table is empty). Then, as in the G-code
-//!   prediction (machines/README.md, *Process effects*):
+//!   the gauge line when the table is empty). The prediction is the G-code
+//!   path's own ([`crate::predict::ToolPredictor`], machines/README.md,
+//!   *Process effects*) with every switched effect at gain 1:
 //!   - a row force (`fx_n…`, the force on the tool from the workpiece, N)
 //!     deflects the tip through the machine file's `stiffness:` map at the
 //!     commanded X, Y, Z: attained += F/k per axis;
@@ -32,7 +33,7 @@
 //!     `pZ_w`; missing ones 0 W) is at the thermal STEADY STATE of those
 //!     mean powers: the machine file's `thermal:` section grows the spindle
 //!     by `growth_um_per_kw · P_s` (the tip moves that far against the
-//!     nominal tool axis) and scales each axis by `scale_ppm_per_kw · P_i`.
+//!     tool axis) and scales each axis by `scale_ppm_per_kw · P_i`.
 //!     The measured `spindle_w` is the whole spindle power (no
 //!     `idle_w_per_rpm · spindle_rpm` is added), and `t_s` alone does not
 //!     drive the thermal model (a row without powers is cold).
@@ -42,8 +43,9 @@ use nalgebra::{Point3, UnitQuaternion, Vector3, Vector6};
 use crate::error::{Error, Located, Result};
 use crate::machine::Machine;
 use crate::machine::robot::{DhGrowth, Model, Robot};
-use crate::machine::tool::MachineTool;
 use crate::machine::tool::thermal::Powers;
+use crate::machine::tool::{MachineTool, ThermalState};
+use crate::predict::{BlockContext, Effect, EffectSet, ToolPredictor};
 
 use super::observations::{
     MeasuredKind, ObsKind, Observation, Observations, Pose, RobotPose, ToolPose,
@@ -284,28 +286,30 @@ pub fn tool_powers(tp: &ToolPose) -> Option<Powers> {
     })
 }
 
+/// A machine-tool row by the G-code path's predictor
+/// ([`ToolPredictor::evaluate`]): the switched effects at gain 1, the row's
+/// force, and the thermal state of the row's powers held for ever.
 fn predict_tool(tool: &MachineTool, row: &Observation, tp: &ToolPose, sw: Switches) -> Predicted {
-    let cmd = tp.axes();
-    let len = tool_length(tool, tp);
-    let nominal = tool.nominal(&cmd, len);
-    let mut attained = if sw.geometric {
-        tool.geometric(&cmd, &tp.dirs(), len).pos
-    } else {
-        nominal.pos
+    let on = |b: bool| if b { 1.0 } else { 0.0 };
+    let effects = EffectSet::default()
+        .with_gain(Effect::Geometric, on(sw.geometric))
+        .with_gain(Effect::Static, on(sw.static_))
+        .with_gain(Effect::Thermal, on(sw.thermal))
+        .with_gain(Effect::Dynamic, 0.0);
+    let thermal = match (tool.thermal(), tool_powers(tp)) {
+        (Some(t), Some(p)) => t.warm_up(&p, f64::INFINITY),
+        _ => ThermalState::default(),
     };
-    let q = Vector3::new(cmd[0], cmd[1], cmd[2]);
-    if let (Some(k), true) = (tool.stiffness(), sw.static_) {
-        if row.force_n != Vector3::zeros() {
-            attained += k.deflection_mm(&q, &row.force_n);
-        }
-    }
-    if let (Some(t), Some(p), true) = (tool.thermal(), tool_powers(tp), sw.thermal) {
-        let state = t.warm_up(&p, f64::INFINITY);
-        attained += t.deviation_mm(&state, &q, &nominal.dir);
-    }
+    let ctx = BlockContext {
+        force_n: row.force_n,
+        thermal,
+        ..BlockContext::default()
+    };
+    let predictor = ToolPredictor::new(tool, effects).with_context(ctx);
+    let (_, attained, nominal) = predictor.evaluate(&tp.axes(), &tp.dirs(), tool_length(tool, tp));
     Predicted {
         commanded_mm: nominal.pos,
-        attained_mm: attained,
+        attained_mm: attained.pos,
         attained_rot: None,
     }
 }

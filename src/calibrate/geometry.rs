@@ -34,9 +34,12 @@
 //!
 //! Identification: the tip deviation is linear in these values to first
 //! order; the design matrix is the finite difference (1 µm or 1 µrad) of the
-//! exact forward model ([`super::forward::predict`]) of the machine file with
-//! the values written in ([`super::yaml_edit`]), solved by linear least
-//! squares with one Gauss–Newton refinement. Uncertain values
+//! exact forward model ([`super::forward::predict`]) of the model with the
+//! values set ([`MachineTool::with_params`] on the file's model with the
+//! tables on the target grids, each value at the resolution the file is
+//! written with), solved by linear least squares with one Gauss–Newton
+//! refinement; the values found are written into the file once
+//! ([`super::yaml_edit`]). Uncertain values
 //! ([`super::honesty`]) keep the file's value.
 
 use nalgebra::{DMatrix, DVector, Isometry3, Vector3};
@@ -44,7 +47,7 @@ use nalgebra::{DMatrix, DVector, Isometry3, Vector3};
 use crate::calibrate::lsq::{LsqOptions, Solution, data_error, solve_for};
 use crate::error::{Error, Result};
 use crate::machine::Machine;
-use crate::machine::tool::{AxisKind, MachineTool};
+use crate::machine::tool::{AxisKind, LocationParam, MachineTool, ToolParam};
 
 use super::forward::{check_kind, predict};
 use super::frame::{
@@ -57,7 +60,7 @@ use super::screen::{
     describe_outliers, distinct_poses, dominating_rows, drop_copies, grouped_split, implausible,
 };
 use super::stiffness::Options;
-use super::yaml_edit::{set_component_table, set_location_error};
+use super::yaml_edit::{as_written, set_component_table, set_location_error};
 
 /// Largest number of distinct target positions per axis.
 pub const MAX_TARGETS: usize = 41;
@@ -160,6 +163,58 @@ impl Problem {
         }
         Ok(t)
     }
+
+    /// The model of the file with the values `x` written in
+    /// ([`Problem::write`]): every identified table on its axis' grid, so
+    /// that each unknown is one value of the model ([`Problem::edits`]).
+    fn on_grid(&self, text: &str, file: &str, x: &[f64]) -> Result<MachineTool> {
+        match Machine::from_yaml_str(&self.write(text, file, x)?, file)? {
+            Machine::Tool(t) => Ok(t),
+            Machine::Robot(_) => Err(Error::Internal(format!(
+                "{file}: a machine-tool file read back as a robot"
+            ))),
+        }
+    }
+
+    /// The values `x` as parameters of the model [`Problem::on_grid`]
+    /// gives, each at the resolution it is written with
+    /// ([`as_written`]): every trial model is one the written file could
+    /// hold.
+    fn edits(&self, x: &[f64]) -> Vec<(ToolParam, f64)> {
+        self.params
+            .iter()
+            .zip(x)
+            .map(|(p, &v)| {
+                let id = match *p {
+                    Param::Table {
+                        axis,
+                        err,
+                        node,
+                        forward,
+                    } => ToolParam::Component {
+                        axis,
+                        error: err,
+                        node,
+                        forward,
+                    },
+                    Param::Square { axis, key } => ToolParam::Location {
+                        axis,
+                        error: LocationParam::Angle(square_rotation(key)),
+                    },
+                };
+                (id, as_written(v))
+            })
+            .collect()
+    }
+}
+
+/// The rotation (0..3 = about X, Y, Z) of a squareness key.
+fn square_rotation(key: &str) -> usize {
+    match key {
+        "EC0Y_urad" => 2,
+        "EA0Z_urad" => 0,
+        _ => 1,
+    }
 }
 
 /// Value of a parameter in the start machine (µm, µrad).
@@ -178,15 +233,9 @@ fn start_value(tool: &MachineTool, prob: &Problem, p: &Param) -> f64 {
                     t.lookup(q, if forward { 1 } else { -1 }).value * 1000.0
                 })
         }
-        Param::Square { axis, key } => {
-            let r = match key {
-                "EC0Y_urad" => 2,
-                "EA0Z_urad" => 0,
-                _ => 1,
-            };
-            tool.axis(axis)
-                .map_or(0.0, |ax| ax.location.angles_rad[r] * 1e6)
-        }
+        Param::Square { axis, key } => tool
+            .axis(axis)
+            .map_or(0.0, |ax| ax.location.angles_rad[square_rotation(key)] * 1e6),
     }
 }
 
@@ -215,9 +264,9 @@ fn norms(r: &DVector<f64>) -> Vec<f64> {
     (0..r.len() / 3).map(|k| r.rows(3 * k, 3).norm()).collect()
 }
 
-/// The forward model of a trial value vector on some rows: the machine
-/// file text with the values written in, and the rows' predictions.
-type Eval<'a> = dyn Fn(&[f64], &[usize]) -> Result<(String, DVector<f64>)> + 'a;
+/// The forward model of a trial value vector on some rows: the rows'
+/// predictions by the model with the values set.
+type Eval<'a> = dyn Fn(&[f64], &[usize]) -> Result<DVector<f64>> + 'a;
 
 /// The design matrix: the change of the fit rows' predictions for +1 µm
 /// (µrad) of each value, at `x0` (predictions `d0`).
@@ -234,7 +283,7 @@ fn design(
         if let Some(v) = xp.get_mut(k) {
             *v += 1.0;
         }
-        let (_, dk) = eval(&xp, fit)?;
+        let dk = eval(&xp, fit)?;
         if let Some(v) = xp.get_mut(k) {
             *v -= 1.0;
         }
@@ -427,7 +476,7 @@ fn fit_tables(
     notes: &mut Vec<String>,
 ) -> Result<Fitted> {
     let n = x0.len();
-    let (_, mut d0_all) = eval(x0, &fit)?;
+    let mut d0_all = eval(x0, &fit)?;
     let mut a_all = design(x0, &d0_all, n, eval, &fit)?;
     for &c in absorbed {
         a_all.column_mut(c).fill(0.0);
@@ -471,7 +520,7 @@ fn fit_tables(
         let tail = |d: &DVector<f64>| -> Vec<f64> { d.iter().skip(n).copied().collect() };
         let x1 = step(x0, &sol0.params);
         let f1 = f0.map(|f| frame_with(&f, &tail(&sol0.params)));
-        let (_, d1) = eval(&x1, &fit).map_err(|e| implausible(&e, obs_file, fit.len()))?;
+        let d1 = eval(&x1, &fit).map_err(|e| implausible(&e, obs_file, fit.len()))?;
         let a = with_frame(&a_all, f1.as_ref(), obs, &fit);
         let meas = measured_at(obs, &fit, f1.as_ref().unwrap_or(&id));
         let sol = solve(&a, &(&meas - &d1))?;
@@ -492,7 +541,7 @@ fn absorbed_by_frame(
     f0: &Isometry3<f64>,
     obs_file: &str,
 ) -> Result<Vec<usize>> {
-    let (_, d0) = eval(x0, fit)?;
+    let d0 = eval(x0, fit)?;
     let a = design(x0, &d0, x0.len(), eval, fit)?;
     // The frame's columns at the points the start model predicts, seen by
     // the instrument: a rigid motion is then exactly a motion of those
@@ -699,10 +748,10 @@ pub fn calibrate_geometry(
         hold.len()
     );
     let x0 = prob.start(tool);
-    let eval = |x: &[f64], rows: &[usize]| -> Result<(String, DVector<f64>)> {
-        let t = prob.write(text, machine_file, x)?;
-        let mm = Machine::from_yaml_str(&t, machine_file)?;
-        Ok((t, deviations(&mm, obs, rows, obs_file)?))
+    let on_grid = prob.on_grid(text, machine_file, &x0)?;
+    let eval = |x: &[f64], rows: &[usize]| -> Result<DVector<f64>> {
+        let trial = Machine::Tool(on_grid.with_params(&prob.edits(x))?);
+        deviations(&trial, obs, rows, obs_file)
     };
     let f0 = if instrument {
         Some(start_frame(&machine, obs, &fit, obs_file)?)
@@ -731,8 +780,11 @@ pub fn calibrate_geometry(
     let withheld = opts.honesty.withheld(&params);
     let uncertain = opts.honesty.uncertain(&params);
     let x = kept_where_withheld(&x, &x0, &withheld);
-    let (yaml, _) = eval(&x, &[]).map_err(|e| implausible(&e, obs_file, fit.len()))?;
-    let calibrated = Machine::from_yaml_str(&yaml, machine_file)?;
+    let written = prob.write(text, machine_file, &x).and_then(|t| {
+        let m = Machine::from_yaml_str(&t, machine_file)?;
+        Ok((t, m))
+    });
+    let (yaml, calibrated) = written.map_err(|e| implausible(&e, obs_file, fit.len()))?;
     let frame = match frame {
         Some(f) => Some(written_frame(
             &calibrated,

@@ -384,6 +384,16 @@ fn ensure_section(lines: &mut Vec<String>, file: &str, axis: &str, section: &str
     Ok(end)
 }
 
+/// Decimals of the component-table values and location errors written
+/// ([`set_component_table`], [`set_location_error`]): 0.01 µm or µrad.
+pub const ERROR_DECIMALS: usize = 2;
+
+/// `v` as [`set_component_table`] and [`set_location_error`] write it,
+/// read back: the value a model read from the written file holds.
+pub fn as_written(v: f64) -> f64 {
+    fmt_value(v, ERROR_DECIMALS).parse().unwrap_or(v)
+}
+
 /// Writes a bidirectional component-error table `key` (e.g. `EXX_um`) of a
 /// machine-tool axis: replaces the table when present, adds it (and the
 /// `component_errors:` section) when not. Values in the file's units.
@@ -412,8 +422,8 @@ pub fn set_component_table(
     let new = vec![
         format!("{pad}{key}:"),
         format!("{pad}  positions_mm: [{}]", list(positions_mm, 3)),
-        format!("{pad}  forward: [{}]", list(forward, 2)),
-        format!("{pad}  reverse: [{}]", list(reverse, 2)),
+        format!("{pad}  forward: [{}]", list(forward, ERROR_DECIMALS)),
+        format!("{pad}  reverse: [{}]", list(reverse, ERROR_DECIMALS)),
     ];
     match key_line(&lines, sec + 1, sec_end, child_indent, key) {
         Some(i) => {
@@ -442,7 +452,7 @@ pub fn set_location_error(
     let child_indent = (sec + 1..sec_end)
         .find(|&i| is_content(&lines[i]))
         .map_or(indent_of(&lines[sec]) + 2, |i| indent_of(&lines[i]));
-    let v = fmt_value(value, 2);
+    let v = fmt_value(value, ERROR_DECIMALS);
     match key_line(&lines, sec + 1, sec_end, child_indent, key) {
         Some(i) => {
             let (_, comment) = split_comment(&lines[i]);

@@ -141,6 +141,12 @@ impl EffectSet {
         Ok(EffectSet { gains })
     }
 
+    /// The same set with effect `e` at gain `g` (0: off).
+    pub fn with_gain(mut self, e: Effect, g: f64) -> Self {
+        self.gains[e as usize] = g;
+        self
+    }
+
     /// Gain of an effect (0 when off).
     pub fn gain(&self, e: Effect) -> f64 {
         self.gains[e as usize]

@@ -16,6 +16,7 @@ pub mod dh;
 pub mod dynamics;
 pub mod ik;
 pub mod kinematics;
+mod params;
 pub mod plausible;
 pub mod pose;
 mod predict;
@@ -29,6 +30,7 @@ pub use dh::{Convention, DhJoint, DhParams};
 pub use dynamics::{Modal, Mode, Resonance};
 pub use ik::ConfData;
 pub use kinematics::Frames;
+pub use params::{DhField, RobotParam, ThermalField};
 pub use predict::{Deviation, Effects, JOINT_JUMP_MAX_DEG, PoseDelta};
 pub use process::{ForceFrame, ForceModel, ProcessForce};
 pub use thermal::{DhGrowth, Thermal, ThermalTerm};
@@ -195,6 +197,9 @@ struct RobotData {
     /// Compensated targets may change configuration or move a joint by
     /// more than [`JOINT_JUMP_MAX_DEG`] (off unless set).
     allow_reconfiguration: bool,
+    /// The file's values as read, from which [`Robot::with_params`]
+    /// validates a robot with some of them changed.
+    raw: std::sync::Arc<raw::RawRobot>,
 }
 
 /// Default decimals of written quaternion components: 7 keeps the written
@@ -520,7 +525,7 @@ impl Robot {
         Ok(Robot {
             d: Box::new(RobotData {
                 measurement_frame,
-                name: raw.name.unwrap_or_else(|| "robot".to_string()),
+                name: raw.name.clone().unwrap_or_else(|| "robot".to_string()),
                 nominal: paired::Paired::new(nominal),
                 actual: paired::Paired::new(actual),
                 closed_form,
@@ -542,6 +547,7 @@ impl Robot {
                 modal,
                 output,
                 allow_reconfiguration: false,
+                raw: std::sync::Arc::new(raw),
             }),
         })
     }

@@ -5,7 +5,7 @@
 use serde::Deserialize;
 
 /// Top level of a `kind: robot` machine file.
-#[derive(Debug, Deserialize)]
+#[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub(crate) struct RawRobot {
     pub kind: String,
@@ -49,7 +49,7 @@ pub(crate) struct RawRobot {
 }
 
 /// `process_force:` — the predicted process force at the TCP.
-#[derive(Debug, Deserialize)]
+#[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub(crate) struct RawProcessForce {
     pub model: RawForceModel,
@@ -112,7 +112,7 @@ pub(crate) enum RawForceFrame {
 }
 
 /// `thermal:` — Paper B power-dependent DH lengths.
-#[derive(Debug, Deserialize)]
+#[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub(crate) struct RawThermal {
     pub time_constant_min: f64,
@@ -120,7 +120,7 @@ pub(crate) struct RawThermal {
 }
 
 /// One coupling term of `thermal.terms`.
-#[derive(Debug, Deserialize)]
+#[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub(crate) struct RawThermalTerm {
     pub parameter: String,
@@ -131,7 +131,7 @@ pub(crate) struct RawThermalTerm {
 }
 
 /// One entry of `modal:`.
-#[derive(Debug, Deserialize)]
+#[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub(crate) struct RawMode {
     pub direction: String,
@@ -141,7 +141,7 @@ pub(crate) struct RawMode {
 }
 
 /// `output:` — number formatting of rewritten targets.
-#[derive(Debug, Deserialize)]
+#[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub(crate) struct RawOutput {
     #[serde(default)]
@@ -159,7 +159,7 @@ pub(crate) enum RawConvention {
 }
 
 /// One joint's DH parameters as written.
-#[derive(Debug, Deserialize)]
+#[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub(crate) struct RawJoint {
     pub a_mm: f64,
@@ -169,7 +169,7 @@ pub(crate) struct RawJoint {
 }
 
 /// A rigid frame: translation plus exactly one of quaternion / rpy.
-#[derive(Debug, Deserialize)]
+#[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub(crate) struct RawFrame {
     #[serde(default)]
@@ -185,7 +185,7 @@ pub(crate) struct RawFrame {
 }
 
 /// Mass and centre of mass of one link, in that link's DH frame.
-#[derive(Debug, Deserialize)]
+#[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub(crate) struct RawLink {
     pub mass_kg: f64,
@@ -193,7 +193,7 @@ pub(crate) struct RawLink {
 }
 
 /// Tool (payload) load: mass and centre of gravity in the flange frame.
-#[derive(Debug, Deserialize)]
+#[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub(crate) struct RawLoad {
     pub mass_kg: f64,
@@ -201,7 +201,7 @@ pub(crate) struct RawLoad {
 }
 
 /// Process wrench applied at the TCP.
-#[derive(Debug, Deserialize)]
+#[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub(crate) struct RawWrench {
     pub force_n: [f64; 3],

@@ -97,7 +97,7 @@ fn plausible(path: &str, v: f64) -> V<f64> {
     Ok(v)
 }
 
-fn validate(raw: RawMachineTool) -> V<MachineTool> {
+pub(super) fn validate(raw: RawMachineTool) -> V<MachineTool> {
     if raw.kind != "machine_tool" {
         return Err(Invalid::new(
             "kind",
@@ -156,7 +156,7 @@ fn validate(raw: RawMachineTool) -> V<MachineTool> {
     let pre = Box::new(super::fast::Precomputed::new(&axes, spindle));
     Ok(MachineTool {
         pre,
-        name: raw.name,
+        name: raw.name.clone(),
         axes,
         n_workpiece,
         slot_index,
@@ -183,6 +183,7 @@ fn validate(raw: RawMachineTool) -> V<MachineTool> {
                 modal,
             })
         }),
+        raw: std::sync::Arc::new(raw),
     })
 }
 

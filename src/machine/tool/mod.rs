@@ -31,6 +31,7 @@ mod geometry;
 mod load;
 mod location;
 mod offsets;
+mod params;
 mod raw;
 pub mod stiffness;
 mod table;
@@ -45,6 +46,7 @@ pub use dynamics::{Modal, Mode};
 pub(crate) use fast::SecondGeo;
 pub use location::{LocationErrors, SpindleErrors};
 pub use offsets::{MAX_TOOL_LENGTH_MM, MAX_WORK_OFFSET_MM, ToolLength, WorkOffset};
+pub use params::{LocationParam, ToolParam};
 pub use stiffness::Stiffness;
 pub use table::{ErrorTable, Lookup};
 pub use thermal::{Thermal, ThermalState};
@@ -134,6 +136,9 @@ pub struct MachineTool {
     /// Position-independent parts of the chain (see [`fast`]), boxed to
     /// keep `Machine` small.
     pre: Box<fast::Precomputed>,
+    /// The file's values as read, from which [`MachineTool::with_params`]
+    /// validates a model with some of them changed.
+    raw: std::sync::Arc<raw::RawMachineTool>,
 }
 
 /// The control's settings of a machine file that programs rely on.

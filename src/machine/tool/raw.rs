@@ -6,7 +6,7 @@ use std::collections::BTreeMap;
 use serde::Deserialize;
 
 /// Top level of a `kind: machine_tool` file.
-#[derive(Debug, Deserialize)]
+#[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub(crate) struct RawMachineTool {
     pub kind: String,
@@ -46,7 +46,7 @@ pub(crate) struct RawMachineTool {
 }
 
 /// `measurement_frame:` — translation and roll-pitch-yaw.
-#[derive(Debug, Deserialize)]
+#[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub(crate) struct RawMeasurementFrame {
     #[serde(default)]
@@ -84,7 +84,7 @@ pub(crate) enum RawSide {
 }
 
 /// One entry of `axes`.
-#[derive(Debug, Deserialize)]
+#[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub(crate) struct RawAxis {
     pub name: String,
@@ -108,7 +108,7 @@ pub(crate) struct RawAxis {
 }
 
 /// A bidirectional error table over the axis position.
-#[derive(Debug, Deserialize)]
+#[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub(crate) struct RawTable {
     #[serde(default)]
@@ -121,7 +121,7 @@ pub(crate) struct RawTable {
 }
 
 /// `spindle:` block.
-#[derive(Debug, Deserialize)]
+#[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub(crate) struct RawSpindle {
     #[serde(default)]
@@ -129,14 +129,14 @@ pub(crate) struct RawSpindle {
 }
 
 /// One entry of `tools`.
-#[derive(Debug, Deserialize)]
+#[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub(crate) struct RawTool {
     pub length_mm: f64,
 }
 
 /// `output:` block.
-#[derive(Debug, Deserialize)]
+#[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub(crate) struct RawOutput {
     #[serde(default)]
@@ -146,7 +146,7 @@ pub(crate) struct RawOutput {
 }
 
 /// `compensation:` block.
-#[derive(Debug, Deserialize)]
+#[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub(crate) struct RawCompensation {
     #[serde(default)]
@@ -154,7 +154,7 @@ pub(crate) struct RawCompensation {
 }
 
 /// `process_force:` block.
-#[derive(Debug, Deserialize, Default)]
+#[derive(Debug, Clone, Deserialize, Default)]
 #[serde(deny_unknown_fields)]
 pub(crate) struct RawProcessForce {
     pub model: String,
@@ -190,7 +190,7 @@ pub(crate) struct RawProcessForce {
 
 /// A stiffness value: one number for the whole workspace, or a grid
 /// `[iz][iy][ix]` over `stiffness.grid_mm`.
-#[derive(Debug, Deserialize)]
+#[derive(Debug, Clone, Deserialize)]
 #[serde(untagged)]
 pub(crate) enum RawGridValues {
     Uniform(f64),
@@ -198,7 +198,7 @@ pub(crate) enum RawGridValues {
 }
 
 /// `stiffness.grid_mm`.
-#[derive(Debug, Deserialize)]
+#[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub(crate) struct RawGrid {
     pub x: Vec<f64>,
@@ -207,7 +207,7 @@ pub(crate) struct RawGrid {
 }
 
 /// `stiffness.k_n_per_um`: per direction and load sign.
-#[derive(Debug, Deserialize)]
+#[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub(crate) struct RawStiffnessValues {
     pub x_pos: RawGridValues,
@@ -219,7 +219,7 @@ pub(crate) struct RawStiffnessValues {
 }
 
 /// `stiffness:` block.
-#[derive(Debug, Deserialize)]
+#[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub(crate) struct RawStiffness {
     #[serde(default)]
@@ -228,7 +228,7 @@ pub(crate) struct RawStiffness {
 }
 
 /// `thermal.spindle`.
-#[derive(Debug, Deserialize)]
+#[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub(crate) struct RawSpindleThermal {
     #[serde(default)]
@@ -238,7 +238,7 @@ pub(crate) struct RawSpindleThermal {
 }
 
 /// One entry of `thermal.axes`.
-#[derive(Debug, Deserialize)]
+#[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub(crate) struct RawAxisThermal {
     pub scale_ppm_per_kw: f64,
@@ -248,7 +248,7 @@ pub(crate) struct RawAxisThermal {
 }
 
 /// `thermal:` block.
-#[derive(Debug, Deserialize)]
+#[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub(crate) struct RawThermal {
     #[serde(default)]
@@ -258,7 +258,7 @@ pub(crate) struct RawThermal {
 }
 
 /// One mode of `modal:`.
-#[derive(Debug, Deserialize)]
+#[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub(crate) struct RawMode {
     pub natural_frequency_hz: f64,
@@ -267,7 +267,7 @@ pub(crate) struct RawMode {
 }
 
 /// `modal:` block: the dominant mode per direction.
-#[derive(Debug, Deserialize)]
+#[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub(crate) struct RawModal {
     #[serde(default)]
