@@ -1115,3 +1115,258 @@ fn process_motion_instructions_are_compensated_and_nothing_else_changes() {
         assert_abs_diff_eq!(dr.norm(), 0.0, epsilon = ROT_TOL_RAD);
     }
 }
+
+/// A pick-and-place cell whose part positions come from a vision PC over
+/// a socket: targets declared, targets computed by straight-line code,
+/// and targets known at run time only (a socket loop, a FOR index, a
+/// routine parameter, `CRobT`, a target reassigned in another routine).
+pub(crate) const PICK_CELL: &str = "MODULE PickCell
+  ! Pick-and-place cell: part positions come from a vision PC over a socket.
+  CONST robtarget pHome := [[857.5,93.098,1025.25],[0.3061862,-0.1767767,0.9185587,0.1767767],[0,0,-1,0],[9E9,9E9,9E9,9E9,9E9,9E9]];
+  CONST robtarget pPickBase := [[960.127,-147.664,665.921],[0.1828804,0.0723086,0.9537141,0.2274985],[-1,0,-1,0],[9E9,9E9,9E9,9E9,9E9,9E9]];
+  CONST robtarget pPlaceBase := [[960.127,147.664,665.921],[0.1828804,-0.0723086,0.9537141,-0.2274985],[0,-1,0,0],[9E9,9E9,9E9,9E9,9E9,9E9]];
+  VAR robtarget pApproach := [[650,0,600],[0,0,1,0],[0,0,0,0],[9E9,9E9,9E9,9E9,9E9,9E9]];
+  VAR robtarget pRecv := [[700,0,300],[0,0,1,0],[0,0,0,0],[9E9,9E9,9E9,9E9,9E9,9E9]];
+  VAR robtarget pStack{2} := [[[700,200,350],[0,0,1,0],[0,0,0,0],[9E9,9E9,9E9,9E9,9E9,9E9]],[[700,200,400],[0,0,1,0],[0,0,0,0],[9E9,9E9,9E9,9E9,9E9,9E9]]];
+  VAR robtarget pCur;
+  CONST num nLift := 120;
+  VAR num nHeight := 0;
+  VAR socketdev sock;
+  VAR string sData;
+  VAR bool bOk;
+
+  PROC main()
+    MoveJ pHome, v1000, z50, tool0;
+    pApproach := Offs(pPickBase, 0, 0, nLift);
+    MoveJ pApproach, v1000, z50, tool0;
+    MoveL Offs(pPickBase, 0, 0, 20), v200, fine, tool0;
+    pApproach := RelTool(pPlaceBase, 10, 0, -100);
+    MoveL pApproach, v500, z10, tool0;
+    SocketCreate sock;
+    SocketConnect sock, \"192.168.0.10\", 1025;
+    WHILE TRUE DO
+      SocketReceive sock \\Str:=sData;
+      bOk := StrToVal(sData, pRecv);
+      IF bOk THEN
+        MoveL Offs(pRecv, 0, 0, nLift), v500, z10, tool0;
+        MoveL pRecv, v100, fine, tool0;
+      ENDIF
+      nHeight := nHeight + 10;
+      MoveL Offs(pPlaceBase, 0, 0, nHeight), v500, fine, tool0;
+      stack;
+      retreat;
+    ENDWHILE
+  ENDPROC
+
+  PROC stack()
+    FOR i FROM 1 TO 2 DO
+      pStack{i} := Offs(pPlaceBase, 0, 0, i * 50);
+      MoveL pStack{i}, v500, fine, tool0;
+    ENDFOR
+    place pPlaceBase;
+  ENDPROC
+
+  PROC place(robtarget pt)
+    MoveL pt, v200, fine, tool0;
+  ENDPROC
+
+  PROC retreat()
+    pCur := CRobT(\\Tool:=tool0 \\WObj:=wobj0);
+    MoveL Offs(pCur, 0, 0, 100), v200, fine, tool0;
+    MoveL pApproach, v500, z10, tool0;
+    MoveJ pHome, v1000, fine, tool0;
+  ENDPROC
+ENDMODULE
+";
+
+/// The moves of [`PICK_CELL`] left as written: line and reason.
+const PICK_CELL_LEFT: [(usize, &str); 7] = [
+    (29, "target reassigned in a loop"),
+    (30, "target reassigned in a loop"),
+    (33, "run-time offset"),
+    (42, "indexed by a run-time value"),
+    (48, "routine parameter"),
+    (53, "CRobT"),
+    (54, "target reassigned in another routine"),
+];
+
+/// Runs `postproc compensate` of `input` on the IRB 1600 with `extra`
+/// flags into `output`; gives the exit code and standard error.
+fn compensate_cell(
+    input: &std::path::Path,
+    output: &std::path::Path,
+    extra: &[&str],
+) -> (i32, String) {
+    let out = postproc()
+        .arg("compensate")
+        .arg(input)
+        .args([
+            "--machine",
+            repo("machines/abb-irb1600.yaml").to_str().expect("utf8"),
+        ])
+        .arg("-o")
+        .arg(output)
+        .args(extra)
+        .output()
+        .expect("run");
+    (
+        out.status.code().unwrap_or(-1),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+#[test]
+fn run_time_targets_are_left_as_written_and_named() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let input = write(dir.path(), "PickCell.mod", PICK_CELL);
+    // Identity with nothing to compensate, every move still resolved.
+    let same = dir.path().join("same.mod");
+    let (code, err) = compensate_cell(&input, &same, &["--effects", "none", "--annotate", "none"]);
+    assert_eq!(code, 0, "{err}");
+    let got = without_header(&std::fs::read(&same).expect("output"));
+    assert!(
+        got == PICK_CELL.as_bytes(),
+        "{}",
+        String::from_utf8_lossy(&got)
+    );
+    // Every move left as written is named with its place and reason, and
+    // counted in the summary.
+    let out = dir.path().join("out.mod");
+    let (code, err) = compensate_cell(&input, &out, &["--effects", "kinematic"]);
+    assert_eq!(code, 0, "{err}");
+    for (line, reason) in PICK_CELL_LEFT {
+        let said = format!("PickCell.mod:{line}: MoveL left as written ({reason})");
+        assert!(err.contains(&said), "{said}: {err}");
+    }
+    let summary = "5 moves compensated, 7 left as written (CRobT; indexed by a run-time value; routine parameter; run-time offset; target reassigned in a loop; target reassigned in another routine)";
+    assert!(err.contains(summary), "{err}");
+    // The moves left as written and the declarations they read are
+    // written exactly as they were.
+    let text = text_without_header(&std::fs::read_to_string(&out).expect("output"));
+    let src_lines: Vec<&str> = PICK_CELL.lines().collect();
+    for (line, _) in PICK_CELL_LEFT {
+        let moved = src_lines[line - 1];
+        assert!(text.lines().any(|l| l == moved), "{moved}\n{text}");
+    }
+    for kept in [6, 7, 8] {
+        let decl = src_lines[kept - 1];
+        assert!(text.lines().any(|l| l == decl), "{decl}\n{text}");
+    }
+}
+
+#[test]
+fn straight_line_targets_are_compensated_where_the_robot_goes() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let input = write(dir.path(), "PickCell.mod", PICK_CELL);
+    let out = dir.path().join("out.mod");
+    let (code, err) = compensate_cell(
+        &input,
+        &out,
+        &["--effects", "kinematic", "--annotate", "none"],
+    );
+    assert_eq!(code, 0, "{err}");
+    let text = text_without_header(&std::fs::read_to_string(&out).expect("output"));
+    let m_in = parse_module(PICK_CELL, "in").expect("parses");
+    let m_out = parse_module(&text, "out").expect("output re-parses");
+    // The reassigned declaration keeps its value: the moves to it go to
+    // new constants holding the compensated values of the assignments.
+    assert_eq!(
+        pose(robtarget(&m_out, "pApproach", None)),
+        pose(robtarget(&m_in, "pApproach", None))
+    );
+    let base = |n: &str| pose(robtarget(&m_in, n, None));
+    let offs = Isometry3::from_parts(
+        Translation3::new(0.0, 0.0, 120.0),
+        UnitQuaternion::identity(),
+    ) * base("pPickBase");
+    let reltool = base("pPlaceBase") * Translation3::new(10.0, 0.0, -100.0);
+    let offs20 = Isometry3::from_parts(
+        Translation3::new(0.0, 0.0, 20.0),
+        UnitQuaternion::identity(),
+    ) * base("pPickBase");
+    let moves: Vec<_> = m_out.moves().collect();
+    let robot = Robot::from_yaml_str(
+        &std::fs::read_to_string(repo("machines/abb-irb1600.yaml")).expect("machine"),
+        "abb-irb1600.yaml",
+    )
+    .expect("valid robot")
+    // tool0: the flange.
+    .with_tool(Isometry3::identity(), None, false);
+    let kinematic = Effects {
+        kinematic: 1.0,
+        ..Effects::NONE
+    };
+    // The second to fourth moves: `MoveJ pApproach` (an assignment of an
+    // `Offs` of a constant offset), `MoveL Offs(pPickBase, …)` and `MoveL
+    // pApproach` (an assignment of a `RelTool`). The compensated target,
+    // reached on the branch of the programmed one (the controller's joints
+    // of the programmed target seed the solve), lands on the programmed
+    // target.
+    let programmed_conf = conf(robtarget(&m_in, "pPickBase", None));
+    let place_conf = conf(robtarget(&m_in, "pPlaceBase", None));
+    for (k, programmed, c) in [
+        (0, base("pHome"), conf(robtarget(&m_in, "pHome", None))),
+        (1, offs, programmed_conf),
+        (2, offs20, programmed_conf),
+        (3, reltool, place_conf),
+    ] {
+        let Target::Named { name, .. } = &moves[k].target else {
+            panic!("move {k}: a named target")
+        };
+        let rt = robtarget(&m_out, name, None);
+        let q0 = robot.ik_conf(&programmed, c).expect("programmed joints");
+        let q = robot
+            .ik_numeric(Model::Nominal, &pose(rt), &q0)
+            .expect("compensated joints");
+        let (dp, dr) = pose_error(&robot.predict(&q, kinematic), &programmed);
+        assert_abs_diff_eq!(dp.norm(), 0.0, epsilon = POS_TOL_MM);
+        assert_abs_diff_eq!(dr.norm(), 0.0, epsilon = ROT_TOL_RAD);
+        // Compensated indeed (not the programmed value written back).
+        assert!((pose(rt).translation.vector - programmed.translation.vector).norm() > 0.01);
+    }
+}
+
+#[test]
+fn strict_refuses_a_module_with_a_move_left_as_written() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let input = write(dir.path(), "PickCell.mod", PICK_CELL);
+    let out = dir.path().join("out.mod");
+    let (code, err) = compensate_cell(&input, &out, &["--strict"]);
+    assert_eq!(code, 2, "{err}");
+    assert!(
+        err.contains(
+            "PickCell.mod:29:9: MoveL left as written (target reassigned in a loop); --strict"
+        ),
+        "{err}"
+    );
+    assert!(!out.exists(), "no output on error");
+    // The same for a check, with and without a robot, and a report.
+    for args in [
+        vec!["check", "--strict"],
+        vec!["check", "--strict", "--machine", "abb-irb1600"],
+        vec!["report", "--strict", "--machine", "abb-irb1600"],
+    ] {
+        let o = postproc().args(&args).arg(&input).output().expect("run");
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{args:?}: {err}");
+        assert!(
+            err.contains("PickCell.mod:29:9: MoveL left as written"),
+            "{err}"
+        );
+    }
+    // A module whose moves are all known passes.
+    let ok = postproc()
+        .args(["check", "--strict", "--machine", "abb-irb1600"])
+        .arg(repo("samples/milling.mod"))
+        .output()
+        .expect("run");
+    assert_eq!(ok.status.code(), Some(0));
+    // G-code has no move left as written: --strict is refused there.
+    let g = postproc()
+        .args(["check", "--strict"])
+        .arg(repo("samples/part.nc"))
+        .output()
+        .expect("run");
+    assert_eq!(g.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&g.stderr).contains("--strict applies to RAPID modules"));
+}

@@ -249,7 +249,14 @@ fn windowed<T>(
 pub fn check(a: &CheckArgs, robot: Option<Result<(Robot, Loaded)>>) -> Result<i32> {
     let source = Source::new(&a.program.file, a.program.rapid_window_lines, false)?;
     let mut robot = robot.map(|r| r.map(|(robot, _)| robot));
-    let (name, module_name, decls, procs, moves) = match check_streamed(&mut robot, &source)? {
+    let strict = a.program.strict;
+    // Without a robot, a strict check reads the module whole (the moves
+    // left as written are found there).
+    let streamed = match (strict, robot.is_none()) {
+        (true, true) => None,
+        _ => check_streamed(&mut robot, &source, strict)?,
+    };
+    let (name, module_name, decls, procs, moves) = match streamed {
         Some(found) => found,
         None => {
             let (src, name, charset) = source.read_whole_text()?;
@@ -264,9 +271,22 @@ pub fn check(a: &CheckArgs, robot: Option<Result<(Robot, Loaded)>>) -> Result<i3
             );
             // The compensation takes the parsed module (one parse, one
             // module in memory).
-            if let Some(robot) = robot {
-                compensate_parsed(module, &src, &name, &robot?, &check_options())
+            match robot {
+                Some(robot) => {
+                    compensate_parsed(module, &src, &name, &robot?, &check_options(strict))
+                        .map_err(in_file)?;
+                }
+                None if strict => {
+                    let left = crate::pipeline::rapid::left_as_written(&module, &src, &name)
+                        .map_err(in_file)?;
+                    crate::pipeline::rapid::refuse_left_as_written(
+                        &left,
+                        &name,
+                        &check_options(strict),
+                    )
                     .map_err(in_file)?;
+                }
+                None => {}
             }
             (name, found.0, found.1, found.2, found.3)
         }
@@ -292,6 +312,7 @@ type CheckSummary = (String, String, usize, usize, usize);
 fn check_streamed(
     robot: &mut Option<Result<Robot>>,
     source: &Source,
+    strict: bool,
 ) -> Result<Option<CheckSummary>> {
     let Some(lines) = source.window_lines() else {
         return Ok(None);
@@ -318,19 +339,20 @@ fn check_streamed(
             Err(_) => Ok(None),
         };
     };
-    let streamed = try_streamed(source, robot, &check_options(), lines, None, None)?;
+    let streamed = try_streamed(source, robot, &check_options(strict), lines, None, None)?;
     Ok(streamed.map(|(s, _)| (name, s.name, s.decls, s.routines, s.moves)))
 }
 
 /// The options of a check: resolve and solve every target, compensate
-/// nothing.
-fn check_options() -> RapidOptions {
+/// nothing (`strict`: refuse a move left as written).
+fn check_options(strict: bool) -> RapidOptions {
     RapidOptions {
         effects: Effects::NONE,
         annotate: false,
         format: Format::default(),
         thermal_start: ThermalStart::Cold,
         records: false,
+        strict,
     }
 }
 
@@ -364,6 +386,7 @@ pub(super) fn rapid_options(
         format,
         thermal_start,
         records: true,
+        strict: false,
     })
 }
 
@@ -447,6 +470,7 @@ pub fn compensate(
     let robot = robot_with_process(robot, &a.effects)?;
     let opts = RapidOptions {
         records: a.report.is_some(),
+        strict: a.program.strict,
         ..rapid_options(
             &robot,
             &a.effects,
@@ -761,7 +785,10 @@ pub(super) fn write_report(
 pub fn report(a: &ReportArgs, robot: Option<Result<(Robot, Loaded)>>) -> Result<i32> {
     let (robot, loaded) = super::config::needed(robot, "report")??;
     let robot = robot_with_process(robot, &a.effects)?;
-    let opts = rapid_options(&robot, &a.effects, false, None)?;
+    let opts = RapidOptions {
+        strict: a.program.strict,
+        ..rapid_options(&robot, &a.effects, false, None)?
+    };
     let out = a.output.clone().unwrap_or_else(|| PathBuf::from("-"));
     super::output::refuse_overwrite(
         &out,
