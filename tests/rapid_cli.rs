@@ -1370,3 +1370,168 @@ fn strict_refuses_a_module_with_a_move_left_as_written() {
     assert_eq!(g.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&g.stderr).contains("--strict applies to RAPID modules"));
 }
+
+/// The task folder of a controller backup: a calibration data module with
+/// the tool, work object and targets, a `user.sys` with a constant, and a
+/// main module whose moves use them.
+fn backup(dir: &std::path::Path) -> std::path::PathBuf {
+    let task = dir.join("RAPID").join("TASK1");
+    std::fs::create_dir_all(task.join("PROGMOD")).expect("mkdir");
+    std::fs::create_dir_all(task.join("SYSMOD")).expect("mkdir");
+    write(
+        &task.join("PROGMOD"),
+        "CalibData.mod",
+        "MODULE CalibData\n  ! Cell calibration: tool, work object and taught targets.\n  PERS tooldata tGripper := [TRUE,[[0,0,150],[1,0,0,0]],[2,[0,0,60],[1,0,0,0],0,0,0]];\n  TASK PERS wobjdata wTable := [FALSE,TRUE,\"\",[[400,-300,200],[1,0,0,0]],[[0,0,0],[1,0,0,0]]];\n  CONST robtarget pPick := [[500,150,300],[0.1828804,0.0723086,0.9537141,0.2274985],[-1,0,-1,0],[9E9,9E9,9E9,9E9,9E9,9E9]];\n  CONST robtarget pPlace := [[500,450,300],[0.1828804,-0.0723086,0.9537141,-0.2274985],[0,-1,0,0],[9E9,9E9,9E9,9E9,9E9,9E9]];\n  LOCAL CONST robtarget pHome := [[0,0,0],[1,0,0,0],[0,0,0,0],[9E9,9E9,9E9,9E9,9E9,9E9]];\nENDMODULE\n",
+    );
+    write(
+        &task.join("SYSMOD"),
+        "user.sys",
+        "MODULE user(SYSMODULE)\n  ! User data of the system.\n  CONST num nLift := 100;\n  VAR num reg1 := 0;\nENDMODULE\n",
+    );
+    write(
+        &task.join("PROGMOD"),
+        "MainModule.mod",
+        "MODULE MainModule\n  PROC main()\n    MoveJ Offs(pPick, 0, 0, nLift), v1000, z50, tGripper\\WObj:=wTable;\n    MoveL pPick, v200, fine, tGripper\\WObj:=wTable;\n    MoveJ pPlace, v1000, fine, tGripper\\WObj:=wTable;\n    reg1 := reg1 + 1;\n  ENDPROC\nENDMODULE\n",
+    );
+    task
+}
+
+/// The files below `dir` with their bytes, sorted.
+fn tree(dir: &std::path::Path) -> Vec<(std::path::PathBuf, Vec<u8>)> {
+    fn walk(d: &std::path::Path, out: &mut Vec<(std::path::PathBuf, Vec<u8>)>) {
+        for e in std::fs::read_dir(d).expect("dir") {
+            let p = e.expect("entry").path();
+            if p.is_dir() {
+                walk(&p, out);
+            } else {
+                out.push((p.clone(), std::fs::read(&p).expect("read")));
+            }
+        }
+    }
+    let mut v = Vec::new();
+    walk(dir, &mut v);
+    v.sort();
+    v
+}
+
+#[test]
+fn a_backup_folder_is_one_program_and_only_changed_modules_are_written() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let task = backup(dir.path());
+    let before = tree(&task);
+    let m = repo("machines/abb-irb1600.yaml");
+    // Nothing to compensate: nothing written, every module untouched.
+    let o = postproc()
+        .args(["compensate", "--machine", m.to_str().unwrap()])
+        .args(["--effects", "none", "--annotate", "none"])
+        .arg(&task)
+        .output()
+        .expect("run");
+    assert_eq!(
+        o.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    assert_eq!(tree(&task), before);
+    // Names resolve across the modules; only the main module changes.
+    let out = dir.path().join("out");
+    let o = postproc()
+        .args(["compensate", "--machine", m.to_str().unwrap()])
+        .args(["--effects", "kinematic", "--annotate", "none", "--out-dir"])
+        .arg(&out)
+        .arg(&task)
+        .output()
+        .expect("run");
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(0), "{err}");
+    assert!(err.contains("program of 3 modules → 1 written"), "{err}");
+    assert!(err.contains("3 moves compensated"), "{err}");
+    assert_eq!(tree(&task), before);
+    let written = tree(&out);
+    assert_eq!(written.len(), 1, "{written:?}");
+    assert!(written[0].0.ends_with("PROGMOD/MainModule.mod"));
+    let text = text_without_header(&String::from_utf8(written[0].1.clone()).expect("utf-8"));
+    let main = parse_module(&text, "main").expect("re-parses");
+    let calib = std::fs::read_to_string(task.join("PROGMOD/CalibData.mod")).expect("read");
+    let calib = parse_module(&calib, "calib").expect("parses");
+    // The targets of CalibData are never edited there: the moves go to
+    // compensated copies in the main module, which land on the targets.
+    let robot = Robot::from_yaml_str(
+        &std::fs::read_to_string(&m).expect("machine"),
+        "abb-irb1600.yaml",
+    )
+    .expect("valid robot")
+    .with_tool(
+        Isometry3::from_parts(
+            Translation3::new(0.0, 0.0, 150.0),
+            UnitQuaternion::identity(),
+        ),
+        None,
+        false,
+    );
+    let wobj = Isometry3::from_parts(
+        Translation3::new(400.0, -300.0, 200.0),
+        UnitQuaternion::identity(),
+    );
+    let kinematic = Effects {
+        kinematic: 1.0,
+        ..Effects::NONE
+    };
+    let moves: Vec<_> = main.moves().collect();
+    for (k, base, dz) in [(0, "pPick", 100.0), (1, "pPick", 0.0), (2, "pPlace", 0.0)] {
+        let Target::Named { name, .. } = &moves[k].target else {
+            panic!("move {k}: a named target")
+        };
+        let rt_in = robtarget(&calib, base, None);
+        let programmed = wobj
+            * Isometry3::from_parts(Translation3::new(0.0, 0.0, dz), UnitQuaternion::identity())
+            * pose(rt_in);
+        let rt = robtarget(&main, name, None);
+        let q0 = robot
+            .ik_conf(&programmed, conf(rt_in))
+            .expect("programmed joints");
+        let q = robot
+            .ik_numeric(Model::Nominal, &(wobj * pose(rt)), &q0)
+            .expect("compensated joints");
+        let (dp, dr) = pose_error(&robot.predict(&q, kinematic), &programmed);
+        assert_abs_diff_eq!(dp.norm(), 0.0, epsilon = POS_TOL_MM);
+        assert_abs_diff_eq!(dr.norm(), 0.0, epsilon = ROT_TOL_RAD);
+    }
+    // A .pgf program file names the same modules.
+    let pgf = write(
+        &task,
+        "Cell.pgf",
+        "<?xml version=\"1.0\" encoding=\"ISO-8859-1\" ?>\n<Program>\n  <Module>PROGMOD\\CalibData.mod</Module>\n  <Module>SYSMOD\\user.sys</Module>\n  <Module>PROGMOD\\MainModule.mod</Module>\n</Program>\n",
+    );
+    let o = postproc()
+        .args(["check", "--machine", m.to_str().unwrap()])
+        .arg(&pgf)
+        .output()
+        .expect("run");
+    let said = String::from_utf8_lossy(&o.stdout);
+    assert_eq!(
+        o.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    assert_eq!(said.lines().count(), 3, "{said}");
+    assert!(
+        said.contains("MainModule.mod: module MainModule, 0 declarations, 1 routines, 3 moves")
+    );
+    // An error in another module's declaration points into that module.
+    let calib_path = task.join("PROGMOD/CalibData.mod");
+    let bad = std::fs::read_to_string(&calib_path)
+        .expect("read")
+        .replace("[0,-1,0,0]", "[5,5,5,5]");
+    std::fs::write(&calib_path, bad).expect("write");
+    let o = postproc()
+        .args(["check", "--machine", m.to_str().unwrap()])
+        .arg(&task)
+        .output()
+        .expect("run");
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    assert!(err.contains("CalibData.mod:6:29: target `pPlace`"), "{err}");
+}

@@ -547,6 +547,7 @@ pub fn run(a: &BatchArgs, quiet: bool) -> Result<i32> {
                 units: a.units,
                 rapid_window_lines: None,
                 strict: false,
+                more: Vec::new(),
             };
             let setup = parse_setup(&program, Some(&tool))?;
             process = process_setup(&a.effects, &tool)?;

@@ -149,8 +149,13 @@ pub struct BatchArgs {
 /// Options shared by the commands that read a G-code program.
 #[derive(Debug, Args, Clone)]
 pub struct ProgramArgs {
-    /// The program (`-` reads standard input).
+    /// The program (`-` reads standard input); for RAPID also a folder
+    /// (a controller backup's task folder) or a `.pgf` program file.
     pub file: PathBuf,
+    /// RAPID: more modules of the same program (names resolve across
+    /// them).
+    #[arg(value_name = "MORE")]
+    pub more: Vec<PathBuf>,
     /// Machine file, or the name of a bundled one (`postproc machines`).
     #[arg(short, long)]
     pub machine: Option<String>,
@@ -254,6 +259,11 @@ pub struct CompensateArgs {
     /// Output path (default `<stem>.comp.<ext>` beside the input; `-` = stdout).
     #[arg(short, long)]
     pub output: Option<PathBuf>,
+    /// RAPID program of several modules: write the modules that change into
+    /// this folder (same names; a folder input keeps its sub-folders)
+    /// instead of beside their inputs.
+    #[arg(long, conflicts_with = "output")]
+    pub out_dir: Option<PathBuf>,
     /// Machine tools: largest gap between attained and programmed path
     /// along a move, mm (at least 0.000001: ten times the solver's
     /// convergence; default: the machine file's
@@ -360,6 +370,11 @@ pub fn run(cli: Cli) -> Result<i32> {
 /// `--strict` of a G-code program: refused (a G-code block is never left
 /// as written).
 fn refuse_strict(p: &ProgramArgs) -> Result<()> {
+    if !p.more.is_empty() {
+        return Err(usage(
+            "several program files: a RAPID program of several modules (a G-code program is one file)",
+        ));
+    }
     if p.strict {
         return Err(usage(
             "--strict applies to RAPID modules (moves left as written); a G-code program has none",

@@ -196,7 +196,7 @@ pub struct MoveRecord {
 }
 
 /// Result of compensating a module.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, Default, PartialEq)]
 pub struct RapidOutcome {
     /// The rewritten module text.
     pub text: String,

@@ -9,6 +9,7 @@
 //! `Offs`/`RelTool` targets, joint-space `MoveAbsJ`) are documented in
 //! `grammar/rapid.md`, section "Compensation rewriting".
 
+pub mod program;
 pub mod stream;
 
 use std::collections::HashMap;
@@ -163,6 +164,8 @@ struct Rewriter<'m> {
     state: MoveState,
     /// Programmed TCP position (world, mm) of the last target compensated.
     last_tcp: [f64; 3],
+    /// Declarations from this index on are another module's.
+    foreign_from: usize,
 }
 
 /// One target to compensate: robot view, programmed TCP pose (world frame)
@@ -561,6 +564,10 @@ impl Rewriter<'_> {
     /// declaration `origin` (the first load key to come owns it), finds it
     /// there already, or needs a copy.
     fn in_place(&mut self, origin: Origin, key: &LoadKey) -> InPlace {
+        // Another module's declaration is never edited.
+        if matches!(origin, Origin::Decl { decl, .. } if decl >= self.foreign_from) {
+            return InPlace::Copy;
+        }
         let owner = self.owner.entry(origin).or_insert_with(|| key.clone());
         if owner != key {
             return InPlace::Copy;
@@ -954,7 +961,17 @@ pub fn compensate_parsed(
     robot: &Robot,
     opts: &RapidOptions,
 ) -> Result<RapidOutcome> {
-    let mut carry = Carry::default();
+    compensate_carried(module, (src, file), robot, opts, Carry::default())
+}
+
+/// [`compensate_parsed`] from the state `carry` (a module of a program).
+pub(crate) fn compensate_carried(
+    module: Module,
+    (src, file): (&str, &str),
+    robot: &Robot,
+    opts: &RapidOptions,
+    mut carry: Carry,
+) -> Result<RapidOutcome> {
     let text = ModuleText {
         module: &module,
         src,
@@ -1049,6 +1066,8 @@ pub(crate) struct Carry {
     /// Why the module cannot be read a window at a time, found while
     /// compensating a window.
     pub(crate) unsupported: Option<&'static str>,
+    /// The module's place in a program of several modules.
+    pub(crate) scope: Option<ProgramScope>,
     /// Module data written by the windows so far ([`Flow::module_data_written`]).
     module_written: std::collections::HashSet<String>,
     /// Module data read by the moves of the windows so far.
@@ -1066,16 +1085,29 @@ impl Carry {
         edits: &mut EditList,
     ) {
         let mut by_decl: Vec<(usize, Vec<String>)> = Vec::new();
+        // New declarations for another module's go after the own ones.
+        let (from, anchor) = match &self.scope {
+            Some(s) => (s.from, Some(s.anchor.clone())),
+            None => (usize::MAX, None),
+        };
         for (d, line) in std::mem::take(&mut self.inserts) {
+            let d = if d >= from {
+                from.checked_sub(1).unwrap_or(usize::MAX)
+            } else {
+                d
+            };
             match by_decl.iter_mut().find(|(k, _)| *k == d) {
                 Some((_, v)) => v.push(line),
                 None => by_decl.push((d, vec![line])),
             }
         }
         for (d, lines) in by_decl {
-            if let Some(span) = decls.get(d) {
-                edits.push(&insert_after_decl(src, span, &lines.join("\n")));
-            }
+            let span = match (decls.get(d), &anchor) {
+                (Some(span), _) => span,
+                (None, Some(anchor)) => anchor,
+                (None, None) => continue,
+            };
+            edits.push(&insert_after_decl(src, span, &lines.join("\n")));
         }
     }
 
@@ -1161,6 +1193,21 @@ impl Carry {
     }
 }
 
+/// A module of a program of several modules, resolved with the
+/// declarations of the others after its own
+/// ([`crate::program::rapid::program::scoped`]).
+#[derive(Debug, Clone)]
+pub(crate) struct ProgramScope {
+    /// Its own declarations are the first `from` of the module's; the
+    /// others belong to other modules and are never edited.
+    pub(crate) from: usize,
+    /// New declarations for those of the other modules go after this span
+    /// (its last declaration, or its `MODULE` keyword).
+    pub(crate) anchor: crate::program::rapid::Span,
+    /// The data names the other modules' routines write.
+    pub(crate) writes: Vec<String>,
+}
+
 /// The robtargets a move goes to, resolved before run time: its target
 /// and circle point (none for a `MoveAbsJ`, compensated in joint space).
 #[derive(Debug, Clone)]
@@ -1175,7 +1222,10 @@ impl Carry {
     /// ([`Carry::leave`]).
     fn resolve<'m>(&mut self, text: ModuleText<'m>) -> Result<(Vec<&'m Move>, Vec<Resolved<'m>>)> {
         let ModuleText { module, src, file } = text;
-        let flow = Flow::of(module, src);
+        let mut flow = Flow::of(module, src);
+        if let Some(scope) = &self.scope {
+            flow = flow.with_writes_elsewhere(&scope.writes);
+        }
         let mut moves = Vec::new();
         let mut resolved = Vec::new();
         for (at, mv) in flow.moves() {
@@ -1592,6 +1642,7 @@ impl<'m> Rewriter<'m> {
             added: carry.added,
             state: MoveState::default(),
             last_tcp: carry.last_tcp,
+            foreign_from: carry.scope.as_ref().map_or(usize::MAX, |s| s.from),
         }
     }
 

@@ -21,6 +21,7 @@ pub mod directives;
 pub mod flow;
 pub mod instructions;
 mod parser;
+pub mod program;
 pub mod resolve;
 mod typed;
 pub mod windows;
@@ -889,6 +890,12 @@ pub fn comment_start(line: &str) -> Option<usize> {
 /// Errors read `file:line:column: what, found `text``; no input panics.
 pub fn parse_module(src: &str, file: &str) -> Result<Module, Located> {
     parser::Parser::new(src, file).parse()
+}
+
+/// Parses the RAPID module that starts at byte `start` of `src` (and ends
+/// it), with spans into the whole of `src`.
+pub fn parse_module_at(src: &str, file: &str, start: usize) -> Result<Module, Located> {
+    parser::Parser::new(src, file).parse_from(start)
 }
 
 /// Parses a RAPID module from bytes, rejecting invalid UTF-8 with the line

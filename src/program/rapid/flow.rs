@@ -253,6 +253,28 @@ impl<'m> Flow<'m> {
         out
     }
 
+    /// Every data name a statement of the module writes, lower case.
+    pub fn written_names(&self) -> Vec<String> {
+        let mut v: Vec<String> = self.writes.keys().cloned().collect();
+        v.sort_unstable();
+        v
+    }
+
+    /// The flow with the data names `names` (lower case) written by
+    /// routines outside the module (another module of the program).
+    pub fn with_writes_elsewhere(mut self, names: &[String]) -> Self {
+        for n in names {
+            self.writes.entry(n.clone()).or_default().push(Write {
+                at: At {
+                    proc: usize::MAX,
+                    stmt: 0,
+                },
+                kind: Kind::Whole,
+            });
+        }
+        self
+    }
+
     /// The module-level data names the moves resolved so far read, lower
     /// case.
     pub fn module_data_read(&self) -> Vec<String> {

@@ -485,7 +485,12 @@ impl<'a> Parser<'a> {
     }
 
     pub(super) fn parse(&self) -> Result<Module, Located> {
-        match self.module(self.src) {
+        self.parse_from(0)
+    }
+
+    /// [`Parser::parse`] of the module that starts at byte `start`.
+    pub(super) fn parse_from(&self, start: usize) -> Result<Module, Located> {
+        match self.module(self.src.get(start..).unwrap_or("")) {
             Ok((_, m)) => Ok(m),
             Err(nom::Err::Error(e)) | Err(nom::Err::Failure(e)) => Err(self.located(&e)),
             Err(nom::Err::Incomplete(_)) => Err(Located::new(
