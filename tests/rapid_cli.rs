@@ -1520,6 +1520,19 @@ fn a_backup_folder_is_one_program_and_only_changed_modules_are_written() {
     assert!(
         said.contains("MainModule.mod: module MainModule, 0 declarations, 1 routines, 3 moves")
     );
+    // A strict check of a program resolves it against a robot.
+    let o = postproc()
+        .args(["check", "--strict"])
+        .arg(&pgf)
+        .output()
+        .expect("run");
+    assert_eq!(o.status.code(), Some(2));
+    let o = postproc()
+        .args(["check", "--strict", "--machine", m.to_str().unwrap()])
+        .arg(&pgf)
+        .output()
+        .expect("run");
+    assert_eq!(o.status.code(), Some(0));
     // An error in another module's declaration points into that module.
     let calib_path = task.join("PROGMOD/CalibData.mod");
     let bad = std::fs::read_to_string(&calib_path)

@@ -604,6 +604,11 @@ fn check_program(
     let members = load(&module_files(inputs)?)?;
     let robot = match robot {
         Some(r) => Some(r?.0),
+        None if a.program.strict => {
+            return Err(usage(
+                "check --strict of a program of several modules needs --machine",
+            ));
+        }
         None => None,
     };
     let opts = check_options(a.program.strict);
