@@ -1080,3 +1080,42 @@ fn motion_like_statements_to_declared_robtargets_are_listed() {
         assert!(parse(&text).unknown_motions(&text).is_empty(), "{name}");
     }
 }
+
+/// Assignments are typed statements: the name, an index or a component,
+/// and the value read as a target expression; one inside a compact `IF`
+/// stays opaque, and the text is kept byte for byte.
+#[test]
+fn assignments_are_typed_statements() {
+    let src = "MODULE A\n  PROC main()\n    pV := Offs(pBase, 0, 0, nLift);\n    buf{i} := CRobT(\\Tool:=tool1);\n    pV.trans.z := 5;\n    bOk := StrToVal(sData, pRecv);\n    n := n + 1;\n    pV := [[1,2,3],[1,0,0,0],[0,0,0,0],[9E9,9E9,9E9,9E9,9E9,9E9]];\n    IF bOk pV := pBase;\n  ENDPROC\nENDMODULE\n";
+    let m = parse(src);
+    let body = &m.procs[0].body;
+    let assigns: Vec<_> = body
+        .iter()
+        .filter_map(|s| match s {
+            Stmt::Assign(a) => Some(a.as_ref()),
+            _ => None,
+        })
+        .collect();
+    assert_eq!(assigns.len(), 6);
+    assert!(matches!(body[6], Stmt::Opaque { line: 9, .. }));
+    let a = assigns[0];
+    assert_eq!((a.name.as_str(), a.line, a.component), ("pV", 3, false));
+    let Target::Offs { base, offsets, .. } = &a.value else {
+        panic!("{:?}", a.value)
+    };
+    assert!(matches!(base.as_ref(), Target::Named { name, .. } if name == "pBase"));
+    assert_eq!(offsets[2].text, "nLift");
+    let b = assigns[1];
+    assert_eq!(b.index.as_ref().map(|i| i.text.as_str()), Some("i"));
+    assert!(matches!(&b.value, Target::Other { text, .. } if text == "CRobT(\\Tool:=tool1)"));
+    assert!(assigns[2].component);
+    assert!(
+        matches!(&assigns[3].value, Target::Other { text, .. } if text.starts_with("StrToVal("))
+    );
+    assert!(matches!(&assigns[4].value, Target::Other { text, .. } if text == "n + 1"));
+    assert!(matches!(&assigns[5].value, Target::Inline(_)));
+    for s in body {
+        let span = s.span();
+        assert_eq!(src.as_bytes()[span.end - 1], b';', "{:?}", &src[span]);
+    }
+}

@@ -1145,3 +1145,436 @@ fn process_motion_instructions_are_compensated_and_nothing_else_changes() {
         assert_abs_diff_eq!(dr.norm(), 0.0, epsilon = ROT_TOL_RAD);
     }
 }
+
+/// A pick-and-place cell whose part positions come from a vision PC over
+/// a socket: targets declared, targets computed by straight-line code,
+/// and targets known at run time only (a socket loop, a FOR index, a
+/// routine parameter, `CRobT`, a target reassigned in another routine).
+pub(crate) const PICK_CELL: &str = "MODULE PickCell
+  ! Pick-and-place cell: part positions come from a vision PC over a socket.
+  CONST robtarget pHome := [[857.5,93.098,1025.25],[0.3061862,-0.1767767,0.9185587,0.1767767],[0,0,-1,0],[9E9,9E9,9E9,9E9,9E9,9E9]];
+  CONST robtarget pPickBase := [[960.127,-147.664,665.921],[0.1828804,0.0723086,0.9537141,0.2274985],[-1,0,-1,0],[9E9,9E9,9E9,9E9,9E9,9E9]];
+  CONST robtarget pPlaceBase := [[960.127,147.664,665.921],[0.1828804,-0.0723086,0.9537141,-0.2274985],[0,-1,0,0],[9E9,9E9,9E9,9E9,9E9,9E9]];
+  VAR robtarget pApproach := [[650,0,600],[0,0,1,0],[0,0,0,0],[9E9,9E9,9E9,9E9,9E9,9E9]];
+  VAR robtarget pRecv := [[700,0,300],[0,0,1,0],[0,0,0,0],[9E9,9E9,9E9,9E9,9E9,9E9]];
+  VAR robtarget pStack{2} := [[[700,200,350],[0,0,1,0],[0,0,0,0],[9E9,9E9,9E9,9E9,9E9,9E9]],[[700,200,400],[0,0,1,0],[0,0,0,0],[9E9,9E9,9E9,9E9,9E9,9E9]]];
+  VAR robtarget pCur;
+  CONST num nLift := 120;
+  VAR num nHeight := 0;
+  VAR socketdev sock;
+  VAR string sData;
+  VAR bool bOk;
+
+  PROC main()
+    MoveJ pHome, v1000, z50, tool0;
+    pApproach := Offs(pPickBase, 0, 0, nLift);
+    MoveJ pApproach, v1000, z50, tool0;
+    MoveL Offs(pPickBase, 0, 0, 20), v200, fine, tool0;
+    pApproach := RelTool(pPlaceBase, 10, 0, -100);
+    MoveL pApproach, v500, z10, tool0;
+    SocketCreate sock;
+    SocketConnect sock, \"192.168.0.10\", 1025;
+    WHILE TRUE DO
+      SocketReceive sock \\Str:=sData;
+      bOk := StrToVal(sData, pRecv);
+      IF bOk THEN
+        MoveL Offs(pRecv, 0, 0, nLift), v500, z10, tool0;
+        MoveL pRecv, v100, fine, tool0;
+      ENDIF
+      nHeight := nHeight + 10;
+      MoveL Offs(pPlaceBase, 0, 0, nHeight), v500, fine, tool0;
+      stack;
+      retreat;
+    ENDWHILE
+  ENDPROC
+
+  PROC stack()
+    FOR i FROM 1 TO 2 DO
+      pStack{i} := Offs(pPlaceBase, 0, 0, i * 50);
+      MoveL pStack{i}, v500, fine, tool0;
+    ENDFOR
+    place pPlaceBase;
+  ENDPROC
+
+  PROC place(robtarget pt)
+    MoveL pt, v200, fine, tool0;
+  ENDPROC
+
+  PROC retreat()
+    pCur := CRobT(\\Tool:=tool0 \\WObj:=wobj0);
+    MoveL Offs(pCur, 0, 0, 100), v200, fine, tool0;
+    MoveL pApproach, v500, z10, tool0;
+    MoveJ pHome, v1000, fine, tool0;
+  ENDPROC
+ENDMODULE
+";
+
+/// The moves of [`PICK_CELL`] left as written: line and reason.
+const PICK_CELL_LEFT: [(usize, &str); 7] = [
+    (29, "target reassigned in a loop"),
+    (30, "target reassigned in a loop"),
+    (33, "run-time offset"),
+    (42, "indexed by a run-time value"),
+    (48, "routine parameter"),
+    (53, "CRobT"),
+    (54, "target reassigned in another routine"),
+];
+
+/// Runs `postproc compensate` of `input` on the IRB 1600 with `extra`
+/// flags into `output`; gives the exit code and standard error.
+fn compensate_cell(
+    input: &std::path::Path,
+    output: &std::path::Path,
+    extra: &[&str],
+) -> (i32, String) {
+    let out = postproc()
+        .arg("compensate")
+        .arg(input)
+        .args([
+            "--machine",
+            repo("machines/abb-irb1600.yaml").to_str().expect("utf8"),
+        ])
+        .arg("-o")
+        .arg(output)
+        .args(extra)
+        .output()
+        .expect("run");
+    (
+        out.status.code().unwrap_or(-1),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+#[test]
+fn run_time_targets_are_left_as_written_and_named() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let input = write(dir.path(), "PickCell.mod", PICK_CELL);
+    // Identity with nothing to compensate, every move still resolved.
+    let same = dir.path().join("same.mod");
+    let (code, err) = compensate_cell(&input, &same, &["--effects", "none", "--annotate", "none"]);
+    assert_eq!(code, 0, "{err}");
+    let got = without_header(&std::fs::read(&same).expect("output"));
+    assert!(
+        got == PICK_CELL.as_bytes(),
+        "{}",
+        String::from_utf8_lossy(&got)
+    );
+    // Every move left as written is named with its place and reason, and
+    // counted in the summary.
+    let out = dir.path().join("out.mod");
+    let (code, err) = compensate_cell(&input, &out, &["--effects", "kinematic"]);
+    assert_eq!(code, 0, "{err}");
+    for (line, reason) in PICK_CELL_LEFT {
+        let said = format!("PickCell.mod:{line}: MoveL left as written ({reason})");
+        assert!(err.contains(&said), "{said}: {err}");
+    }
+    let summary = "5 moves compensated, 7 left as written (CRobT; indexed by a run-time value; routine parameter; run-time offset; target reassigned in a loop; target reassigned in another routine)";
+    assert!(err.contains(summary), "{err}");
+    // The moves left as written and the declarations they read are
+    // written exactly as they were.
+    let text = text_without_header(&std::fs::read_to_string(&out).expect("output"));
+    let src_lines: Vec<&str> = PICK_CELL.lines().collect();
+    for (line, _) in PICK_CELL_LEFT {
+        let moved = src_lines[line - 1];
+        assert!(text.lines().any(|l| l == moved), "{moved}\n{text}");
+    }
+    for kept in [6, 7, 8] {
+        let decl = src_lines[kept - 1];
+        assert!(text.lines().any(|l| l == decl), "{decl}\n{text}");
+    }
+}
+
+#[test]
+fn straight_line_targets_are_compensated_where_the_robot_goes() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let input = write(dir.path(), "PickCell.mod", PICK_CELL);
+    let out = dir.path().join("out.mod");
+    let (code, err) = compensate_cell(
+        &input,
+        &out,
+        &["--effects", "kinematic", "--annotate", "none"],
+    );
+    assert_eq!(code, 0, "{err}");
+    let text = text_without_header(&std::fs::read_to_string(&out).expect("output"));
+    let m_in = parse_module(PICK_CELL, "in").expect("parses");
+    let m_out = parse_module(&text, "out").expect("output re-parses");
+    // The reassigned declaration keeps its value: the moves to it go to
+    // new constants holding the compensated values of the assignments.
+    assert_eq!(
+        pose(robtarget(&m_out, "pApproach", None)),
+        pose(robtarget(&m_in, "pApproach", None))
+    );
+    let base = |n: &str| pose(robtarget(&m_in, n, None));
+    let offs = Isometry3::from_parts(
+        Translation3::new(0.0, 0.0, 120.0),
+        UnitQuaternion::identity(),
+    ) * base("pPickBase");
+    let reltool = base("pPlaceBase") * Translation3::new(10.0, 0.0, -100.0);
+    let offs20 = Isometry3::from_parts(
+        Translation3::new(0.0, 0.0, 20.0),
+        UnitQuaternion::identity(),
+    ) * base("pPickBase");
+    let moves: Vec<_> = m_out.moves().collect();
+    let robot = Robot::from_yaml_str(
+        &std::fs::read_to_string(repo("machines/abb-irb1600.yaml")).expect("machine"),
+        "abb-irb1600.yaml",
+    )
+    .expect("valid robot")
+    // tool0: the flange.
+    .with_tool(Isometry3::identity(), None, false);
+    let kinematic = Effects {
+        kinematic: 1.0,
+        ..Effects::NONE
+    };
+    // The second to fourth moves: `MoveJ pApproach` (an assignment of an
+    // `Offs` of a constant offset), `MoveL Offs(pPickBase, …)` and `MoveL
+    // pApproach` (an assignment of a `RelTool`). The compensated target,
+    // reached on the branch of the programmed one (the controller's joints
+    // of the programmed target seed the solve), lands on the programmed
+    // target.
+    let programmed_conf = conf(robtarget(&m_in, "pPickBase", None));
+    let place_conf = conf(robtarget(&m_in, "pPlaceBase", None));
+    for (k, programmed, c) in [
+        (0, base("pHome"), conf(robtarget(&m_in, "pHome", None))),
+        (1, offs, programmed_conf),
+        (2, offs20, programmed_conf),
+        (3, reltool, place_conf),
+    ] {
+        let Target::Named { name, .. } = &moves[k].target else {
+            panic!("move {k}: a named target")
+        };
+        let rt = robtarget(&m_out, name, None);
+        let q0 = robot.ik_conf(&programmed, c).expect("programmed joints");
+        let q = robot
+            .ik_numeric(Model::Nominal, &pose(rt), &q0)
+            .expect("compensated joints");
+        let (dp, dr) = pose_error(&robot.predict(&q, kinematic), &programmed);
+        assert_abs_diff_eq!(dp.norm(), 0.0, epsilon = POS_TOL_MM);
+        assert_abs_diff_eq!(dr.norm(), 0.0, epsilon = ROT_TOL_RAD);
+        // Compensated indeed (not the programmed value written back).
+        assert!((pose(rt).translation.vector - programmed.translation.vector).norm() > 0.01);
+    }
+}
+
+#[test]
+fn strict_refuses_a_module_with_a_move_left_as_written() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let input = write(dir.path(), "PickCell.mod", PICK_CELL);
+    let out = dir.path().join("out.mod");
+    let (code, err) = compensate_cell(&input, &out, &["--strict"]);
+    assert_eq!(code, 2, "{err}");
+    assert!(
+        err.contains(
+            "PickCell.mod:29:9: MoveL left as written (target reassigned in a loop); --strict"
+        ),
+        "{err}"
+    );
+    assert!(!out.exists(), "no output on error");
+    // The same for a check, with and without a robot, and a report.
+    for args in [
+        vec!["check", "--strict"],
+        vec!["check", "--strict", "--machine", "abb-irb1600"],
+        vec!["report", "--strict", "--machine", "abb-irb1600"],
+    ] {
+        let o = postproc().args(&args).arg(&input).output().expect("run");
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{args:?}: {err}");
+        assert!(
+            err.contains("PickCell.mod:29:9: MoveL left as written"),
+            "{err}"
+        );
+    }
+    // A module whose moves are all known passes.
+    let ok = postproc()
+        .args(["check", "--strict", "--machine", "abb-irb1600"])
+        .arg(repo("samples/milling.mod"))
+        .output()
+        .expect("run");
+    assert_eq!(ok.status.code(), Some(0));
+    // G-code has no move left as written: --strict is refused there.
+    let g = postproc()
+        .args(["check", "--strict"])
+        .arg(repo("samples/part.nc"))
+        .output()
+        .expect("run");
+    assert_eq!(g.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&g.stderr).contains("--strict applies to RAPID modules"));
+}
+
+/// The task folder of a controller backup: a calibration data module with
+/// the tool, work object and targets, a `user.sys` with a constant, and a
+/// main module whose moves use them.
+fn backup(dir: &std::path::Path) -> std::path::PathBuf {
+    let task = dir.join("RAPID").join("TASK1");
+    std::fs::create_dir_all(task.join("PROGMOD")).expect("mkdir");
+    std::fs::create_dir_all(task.join("SYSMOD")).expect("mkdir");
+    write(
+        &task.join("PROGMOD"),
+        "CalibData.mod",
+        "MODULE CalibData\n  ! Cell calibration: tool, work object and taught targets.\n  PERS tooldata tGripper := [TRUE,[[0,0,150],[1,0,0,0]],[2,[0,0,60],[1,0,0,0],0,0,0]];\n  TASK PERS wobjdata wTable := [FALSE,TRUE,\"\",[[400,-300,200],[1,0,0,0]],[[0,0,0],[1,0,0,0]]];\n  CONST robtarget pPick := [[500,150,300],[0.1828804,0.0723086,0.9537141,0.2274985],[-1,0,-1,0],[9E9,9E9,9E9,9E9,9E9,9E9]];\n  CONST robtarget pPlace := [[500,450,300],[0.1828804,-0.0723086,0.9537141,-0.2274985],[0,-1,0,0],[9E9,9E9,9E9,9E9,9E9,9E9]];\n  LOCAL CONST robtarget pHome := [[0,0,0],[1,0,0,0],[0,0,0,0],[9E9,9E9,9E9,9E9,9E9,9E9]];\nENDMODULE\n",
+    );
+    write(
+        &task.join("SYSMOD"),
+        "user.sys",
+        "MODULE user(SYSMODULE)\n  ! User data of the system.\n  CONST num nLift := 100;\n  VAR num reg1 := 0;\nENDMODULE\n",
+    );
+    write(
+        &task.join("PROGMOD"),
+        "MainModule.mod",
+        "MODULE MainModule\n  PROC main()\n    MoveJ Offs(pPick, 0, 0, nLift), v1000, z50, tGripper\\WObj:=wTable;\n    MoveL pPick, v200, fine, tGripper\\WObj:=wTable;\n    MoveJ pPlace, v1000, fine, tGripper\\WObj:=wTable;\n    reg1 := reg1 + 1;\n  ENDPROC\nENDMODULE\n",
+    );
+    task
+}
+
+/// The files below `dir` with their bytes, sorted.
+fn tree(dir: &std::path::Path) -> Vec<(std::path::PathBuf, Vec<u8>)> {
+    fn walk(d: &std::path::Path, out: &mut Vec<(std::path::PathBuf, Vec<u8>)>) {
+        for e in std::fs::read_dir(d).expect("dir") {
+            let p = e.expect("entry").path();
+            if p.is_dir() {
+                walk(&p, out);
+            } else {
+                out.push((p.clone(), std::fs::read(&p).expect("read")));
+            }
+        }
+    }
+    let mut v = Vec::new();
+    walk(dir, &mut v);
+    v.sort();
+    v
+}
+
+#[test]
+fn a_backup_folder_is_one_program_and_only_changed_modules_are_written() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let task = backup(dir.path());
+    let before = tree(&task);
+    let m = repo("machines/abb-irb1600.yaml");
+    // Nothing to compensate: nothing written, every module untouched.
+    let o = postproc()
+        .args(["compensate", "--machine", m.to_str().unwrap()])
+        .args(["--effects", "none", "--annotate", "none"])
+        .arg(&task)
+        .output()
+        .expect("run");
+    assert_eq!(
+        o.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    assert_eq!(tree(&task), before);
+    // Names resolve across the modules; only the main module changes.
+    let out = dir.path().join("out");
+    let o = postproc()
+        .args(["compensate", "--machine", m.to_str().unwrap()])
+        .args(["--effects", "kinematic", "--annotate", "none", "--out-dir"])
+        .arg(&out)
+        .arg(&task)
+        .output()
+        .expect("run");
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(0), "{err}");
+    assert!(err.contains("program of 3 modules → 1 written"), "{err}");
+    assert!(err.contains("3 moves compensated"), "{err}");
+    assert_eq!(tree(&task), before);
+    let written = tree(&out);
+    assert_eq!(written.len(), 1, "{written:?}");
+    assert!(written[0].0.ends_with("PROGMOD/MainModule.mod"));
+    let text = text_without_header(&String::from_utf8(written[0].1.clone()).expect("utf-8"));
+    let main = parse_module(&text, "main").expect("re-parses");
+    let calib = std::fs::read_to_string(task.join("PROGMOD/CalibData.mod")).expect("read");
+    let calib = parse_module(&calib, "calib").expect("parses");
+    // The targets of CalibData are never edited there: the moves go to
+    // compensated copies in the main module, which land on the targets.
+    let robot = Robot::from_yaml_str(
+        &std::fs::read_to_string(&m).expect("machine"),
+        "abb-irb1600.yaml",
+    )
+    .expect("valid robot")
+    .with_tool(
+        Isometry3::from_parts(
+            Translation3::new(0.0, 0.0, 150.0),
+            UnitQuaternion::identity(),
+        ),
+        None,
+        false,
+    );
+    let wobj = Isometry3::from_parts(
+        Translation3::new(400.0, -300.0, 200.0),
+        UnitQuaternion::identity(),
+    );
+    let kinematic = Effects {
+        kinematic: 1.0,
+        ..Effects::NONE
+    };
+    let moves: Vec<_> = main.moves().collect();
+    for (k, base, dz) in [(0, "pPick", 100.0), (1, "pPick", 0.0), (2, "pPlace", 0.0)] {
+        let Target::Named { name, .. } = &moves[k].target else {
+            panic!("move {k}: a named target")
+        };
+        let rt_in = robtarget(&calib, base, None);
+        let programmed = wobj
+            * Isometry3::from_parts(Translation3::new(0.0, 0.0, dz), UnitQuaternion::identity())
+            * pose(rt_in);
+        let rt = robtarget(&main, name, None);
+        let q0 = robot
+            .ik_conf(&programmed, conf(rt_in))
+            .expect("programmed joints");
+        let q = robot
+            .ik_numeric(Model::Nominal, &(wobj * pose(rt)), &q0)
+            .expect("compensated joints");
+        let (dp, dr) = pose_error(&robot.predict(&q, kinematic), &programmed);
+        assert_abs_diff_eq!(dp.norm(), 0.0, epsilon = POS_TOL_MM);
+        assert_abs_diff_eq!(dr.norm(), 0.0, epsilon = ROT_TOL_RAD);
+    }
+    // A .pgf program file names the same modules.
+    let pgf = write(
+        &task,
+        "Cell.pgf",
+        "<?xml version=\"1.0\" encoding=\"ISO-8859-1\" ?>\n<Program>\n  <Module>PROGMOD\\CalibData.mod</Module>\n  <Module>SYSMOD\\user.sys</Module>\n  <Module>PROGMOD\\MainModule.mod</Module>\n</Program>\n",
+    );
+    let o = postproc()
+        .args(["check", "--machine", m.to_str().unwrap()])
+        .arg(&pgf)
+        .output()
+        .expect("run");
+    let said = String::from_utf8_lossy(&o.stdout);
+    assert_eq!(
+        o.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    assert_eq!(said.lines().count(), 3, "{said}");
+    assert!(
+        said.contains("MainModule.mod: module MainModule, 0 declarations, 1 routines, 3 moves")
+    );
+    // A strict check of a program resolves it against a robot.
+    let o = postproc()
+        .args(["check", "--strict"])
+        .arg(&pgf)
+        .output()
+        .expect("run");
+    assert_eq!(o.status.code(), Some(2));
+    let o = postproc()
+        .args(["check", "--strict", "--machine", m.to_str().unwrap()])
+        .arg(&pgf)
+        .output()
+        .expect("run");
+    assert_eq!(o.status.code(), Some(0));
+    // An error in another module's declaration points into that module.
+    let calib_path = task.join("PROGMOD/CalibData.mod");
+    let bad = std::fs::read_to_string(&calib_path)
+        .expect("read")
+        .replace("[0,-1,0,0]", "[5,5,5,5]");
+    std::fs::write(&calib_path, bad).expect("write");
+    let o = postproc()
+        .args(["check", "--machine", m.to_str().unwrap()])
+        .arg(&task)
+        .output()
+        .expect("run");
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    assert!(err.contains("CalibData.mod:6:29: target `pPlace`"), "{err}");
+}

@@ -965,3 +965,58 @@ fn unknown_motion_instructions_are_named_and_counted() {
         );
     }
 }
+
+/// Moves left as written give the same bytes, summary and warnings read a
+/// window at a time as read whole: read so when they read no declared
+/// target (a `CRobT` offset, a routine parameter), read whole when a
+/// routine assigns module data that moves read (the socket cell).
+#[test]
+fn moves_left_as_written_give_the_bytes_of_the_whole_module() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let windowed_src = "MODULE Cell\n  CONST robtarget p10 := [[700,-200,300],[0,0,1,0],[-1,0,-1,0],[9E9,9E9,9E9,9E9,9E9,9E9]];\n  CONST robtarget p20 := [[700,200,300],[0,0,1,0],[0,0,0,0],[9E9,9E9,9E9,9E9,9E9,9E9]];\n  PROC main()\n    MoveJ p10, v1000, z50, tool0;\n    MoveL Offs(CRobT(), 0, 0, 50), v100, fine, tool0;\n    MoveL p20, v200, fine, tool0;\n    place p20;\n  ENDPROC\n  PROC place(robtarget pt)\n    MoveL Offs(pt, 0, 0, 50), v500, z10, tool0;\n    MoveL pt, v100, fine, tool0;\n    MoveL p20, v100, fine, tool0;\n  ENDPROC\nENDMODULE\n";
+    let m = repo("machines/abb-irb1600.yaml");
+    let m = m.to_str().unwrap();
+    for (k, (src, windowed)) in [(windowed_src, true), (crate::rapid_cli::PICK_CELL, false)]
+        .into_iter()
+        .enumerate()
+    {
+        let input = dir.path().join(format!("cell{k}.mod"));
+        std::fs::write(&input, src).expect("write");
+        let p = input.to_str().unwrap();
+        let whole = dir.path().join(format!("whole{k}.mod"));
+        let (code, _, err) = run(&[
+            "compensate",
+            "--machine",
+            m,
+            "-o",
+            whole.to_str().unwrap(),
+            p,
+        ]);
+        assert_eq!(code, 0, "{err}");
+        let want = std::fs::read(&whole).expect("output");
+        let summary = |err: &str| {
+            err.lines()
+                .find(|l| l.contains("left as written ("))
+                .map(|l| l.split(": ").nth(1).unwrap_or("").to_string())
+                .unwrap_or_default()
+        };
+        let left = |err: &str| -> Vec<String> {
+            err.lines()
+                .filter(|l| l.contains(": MoveL left as written ("))
+                .map(str::to_string)
+                .collect()
+        };
+        assert!(!left(&err).is_empty(), "{err}");
+        for lines in ["1", "2", "5"] {
+            let out = dir.path().join(format!("w{k}_{lines}.mod"));
+            let args = ["--machine", m, "-o", out.to_str().unwrap(), p];
+            let (code, _, werr) = run_windowed("compensate", lines, &args);
+            assert_eq!(code, 0, "{werr}");
+            let said = format!("read a window of {lines} lines at a time");
+            assert_eq!(werr.contains(&said), windowed, "{werr}");
+            assert_eq!(std::fs::read(&out).expect("output"), want, "{lines} lines");
+            assert_eq!(summary(&werr), summary(&err));
+            assert_eq!(left(&werr), left(&err));
+        }
+    }
+}

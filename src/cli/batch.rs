@@ -546,6 +546,8 @@ pub fn run(a: &BatchArgs, quiet: bool) -> Result<i32> {
                 work_offsets: a.work_offsets.clone(),
                 units: a.units,
                 rapid_window_lines: None,
+                strict: false,
+                more: Vec::new(),
             };
             let setup = parse_setup(&program, Some(&tool))?;
             process = process_setup(&a.effects, &tool)?;
@@ -567,7 +569,10 @@ pub fn run(a: &BatchArgs, quiet: bool) -> Result<i32> {
         }
         Machine::Robot(robot) => {
             let robot = super::rapid::robot_with_process(robot, &a.effects)?;
-            let opts = super::rapid::rapid_options(&robot, &a.effects, annotate, None)?;
+            let opts = crate::pipeline::rapid::RapidOptions {
+                strict: a.strict,
+                ..super::rapid::rapid_options(&robot, &a.effects, annotate, None)?
+            };
             if a.rapid_window_lines == Some(0) {
                 return Err(usage("--rapid-window-lines must be at least 1"));
             }

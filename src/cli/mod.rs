@@ -140,13 +140,22 @@ pub struct BatchArgs {
     /// default: the correction would be applied twice).
     #[arg(long)]
     pub recompensate: bool,
+    /// RAPID modules: a module in which a move is left as written (its
+    /// target known at run time only) fails, naming the first one.
+    #[arg(long)]
+    pub strict: bool,
 }
 
 /// Options shared by the commands that read a G-code program.
 #[derive(Debug, Args, Clone)]
 pub struct ProgramArgs {
-    /// The program (`-` reads standard input).
+    /// The program (`-` reads standard input); for RAPID also a folder
+    /// (a controller backup's task folder) or a `.pgf` program file.
     pub file: PathBuf,
+    /// RAPID: more modules of the same program (names resolve across
+    /// them).
+    #[arg(value_name = "MORE")]
+    pub more: Vec<PathBuf>,
     /// Machine file, or the name of a bundled one (`postproc machines`).
     #[arg(short, long)]
     pub machine: Option<String>,
@@ -167,6 +176,11 @@ pub struct ProgramArgs {
     /// tests).
     #[arg(long = "rapid-window-lines", value_name = "LINES", hide = true)]
     pub rapid_window_lines: Option<usize>,
+    /// RAPID: refuse a module in which a move is left as written (its
+    /// target known at run time only), naming the first one (exit code 2).
+    /// Refused for G-code, where no block is left as written.
+    #[arg(long)]
+    pub strict: bool,
 }
 
 /// `postproc check`.
@@ -245,6 +259,11 @@ pub struct CompensateArgs {
     /// Output path (default `<stem>.comp.<ext>` beside the input; `-` = stdout).
     #[arg(short, long)]
     pub output: Option<PathBuf>,
+    /// RAPID program of several modules: write the modules that change into
+    /// this folder (same names; a folder input keeps its sub-folders)
+    /// instead of beside their inputs.
+    #[arg(long, conflicts_with = "output")]
+    pub out_dir: Option<PathBuf>,
     /// Machine tools: largest gap between attained and programmed path
     /// along a move, mm (at least 0.000001: ten times the solver's
     /// convergence; default: the machine file's
@@ -317,17 +336,26 @@ pub fn run(cli: Cli) -> Result<i32> {
     let code = match cli.command {
         Command::Check(a) => match Engine::choose(&a.program, config::Given::check(&a))? {
             Engine::Robot(robot) => rapid::check(&a, robot),
-            Engine::Tool(machine) => gcode::check(&a, machine),
+            Engine::Tool(machine) => {
+                refuse_strict(&a.program)?;
+                gcode::check(&a, machine)
+            }
         },
         Command::Compensate(a) => {
             match Engine::choose(&a.program, config::Given::compensate(&a))? {
                 Engine::Robot(robot) => rapid::compensate(&a, robot, quiet),
-                Engine::Tool(machine) => gcode::compensate(&a, machine, quiet),
+                Engine::Tool(machine) => {
+                    refuse_strict(&a.program)?;
+                    gcode::compensate(&a, machine, quiet)
+                }
             }
         }
         Command::Report(a) => match Engine::choose(&a.program, config::Given::report(&a))? {
             Engine::Robot(robot) => rapid::report(&a, robot),
-            Engine::Tool(machine) => gcode::report(&a, machine),
+            Engine::Tool(machine) => {
+                refuse_strict(&a.program)?;
+                gcode::report(&a, machine)
+            }
         },
         Command::Batch(a) => batch::run(&a, quiet),
         Command::Simulate(a) => calibrate::run_simulate(&a),
@@ -337,6 +365,22 @@ pub fn run(cli: Cli) -> Result<i32> {
     }?;
     machines::warn_example_used();
     Ok(code)
+}
+
+/// `--strict` of a G-code program: refused (a G-code block is never left
+/// as written).
+fn refuse_strict(p: &ProgramArgs) -> Result<()> {
+    if !p.more.is_empty() {
+        return Err(usage(
+            "several program files: a RAPID program of several modules (a G-code program is one file)",
+        ));
+    }
+    if p.strict {
+        return Err(usage(
+            "--strict applies to RAPID modules (moves left as written); a G-code program has none",
+        ));
+    }
+    Ok(())
 }
 
 pub(crate) fn usage(msg: impl Into<String>) -> Error {

@@ -13,8 +13,10 @@ use crate::emit::rapid::Format;
 use crate::error::{Error, Result};
 use crate::machine::ThermalStart;
 use crate::machine::robot::{Effects, Robot};
+use crate::pipeline::rapid::program::compensate_member;
 use crate::pipeline::rapid::{RapidOptions, compensate_module, compensate_parsed, stream};
 use crate::program::charset::{Charset, Latin1Writer, file_columns};
+use crate::program::rapid::program::{is_program, load, module_files};
 
 /// Modules of at least this size are read a window at a time when their
 /// shape and the run allow it ([`crate::pipeline::rapid::stream`]):
@@ -247,9 +249,20 @@ fn windowed<T>(
 /// `postproc check` of a RAPID module: parse, resolve and (with a robot)
 /// check that every target is reachable with its confdata.
 pub fn check(a: &CheckArgs, robot: Option<Result<(Robot, Loaded)>>) -> Result<i32> {
+    let inputs = program_inputs(&a.program);
+    if is_program(&inputs) {
+        return check_program(a, robot, &inputs);
+    }
     let source = Source::new(&a.program.file, a.program.rapid_window_lines, false)?;
     let mut robot = robot.map(|r| r.map(|(robot, _)| robot));
-    let (name, module_name, decls, procs, moves) = match check_streamed(&mut robot, &source)? {
+    let strict = a.program.strict;
+    // Without a robot, a strict check reads the module whole (the moves
+    // left as written are found there).
+    let streamed = match (strict, robot.is_none()) {
+        (true, true) => None,
+        _ => check_streamed(&mut robot, &source, strict)?,
+    };
+    let (name, module_name, decls, procs, moves) = match streamed {
         Some(found) => found,
         None => {
             let (src, name, charset) = source.read_whole_text()?;
@@ -264,9 +277,22 @@ pub fn check(a: &CheckArgs, robot: Option<Result<(Robot, Loaded)>>) -> Result<i3
             );
             // The compensation takes the parsed module (one parse, one
             // module in memory).
-            if let Some(robot) = robot {
-                compensate_parsed(module, &src, &name, &robot?, &check_options())
+            match robot {
+                Some(robot) => {
+                    compensate_parsed(module, &src, &name, &robot?, &check_options(strict))
+                        .map_err(in_file)?;
+                }
+                None if strict => {
+                    let left = crate::pipeline::rapid::left_as_written(&module, &src, &name)
+                        .map_err(in_file)?;
+                    crate::pipeline::rapid::refuse_left_as_written(
+                        &left,
+                        &name,
+                        &check_options(strict),
+                    )
                     .map_err(in_file)?;
+                }
+                None => {}
             }
             (name, found.0, found.1, found.2, found.3)
         }
@@ -292,6 +318,7 @@ type CheckSummary = (String, String, usize, usize, usize);
 fn check_streamed(
     robot: &mut Option<Result<Robot>>,
     source: &Source,
+    strict: bool,
 ) -> Result<Option<CheckSummary>> {
     let Some(lines) = source.window_lines() else {
         return Ok(None);
@@ -318,19 +345,20 @@ fn check_streamed(
             Err(_) => Ok(None),
         };
     };
-    let streamed = try_streamed(source, robot, &check_options(), lines, None, None)?;
+    let streamed = try_streamed(source, robot, &check_options(strict), lines, None, None)?;
     Ok(streamed.map(|(s, _)| (name, s.name, s.decls, s.routines, s.moves)))
 }
 
 /// The options of a check: resolve and solve every target, compensate
-/// nothing.
-fn check_options() -> RapidOptions {
+/// nothing (`strict`: refuse a move left as written).
+fn check_options(strict: bool) -> RapidOptions {
     RapidOptions {
         effects: Effects::NONE,
         annotate: false,
         format: Format::default(),
         thermal_start: ThermalStart::Cold,
         records: false,
+        strict,
     }
 }
 
@@ -364,6 +392,7 @@ pub(super) fn rapid_options(
         format,
         thermal_start,
         records: true,
+        strict: false,
     })
 }
 
@@ -445,8 +474,13 @@ pub fn compensate(
 ) -> Result<i32> {
     let (robot, loaded) = super::config::needed(robot, "compensate")??;
     let robot = robot_with_process(robot, &a.effects)?;
+    let inputs = program_inputs(&a.program);
+    if is_program(&inputs) || a.out_dir.is_some() {
+        return compensate_program(a, (robot, loaded), &inputs, quiet);
+    }
     let opts = RapidOptions {
         records: a.report.is_some(),
+        strict: a.program.strict,
         ..rapid_options(
             &robot,
             &a.effects,
@@ -550,6 +584,170 @@ pub(super) fn write_outcome(
         Some(rep) => rep.commit(),
         None => Ok(()),
     }
+}
+
+/// The files a RAPID program is given as: the program argument and the
+/// more modules after it.
+fn program_inputs(p: &super::ProgramArgs) -> Vec<PathBuf> {
+    std::iter::once(p.file.clone())
+        .chain(p.more.iter().cloned())
+        .collect()
+}
+
+/// `postproc check` of a program of several modules: each module that
+/// holds moves is resolved (and, with a robot, solved) with the others.
+fn check_program(
+    a: &CheckArgs,
+    robot: Option<Result<(Robot, Loaded)>>,
+    inputs: &[PathBuf],
+) -> Result<i32> {
+    let members = load(&module_files(inputs)?)?;
+    let robot = match robot {
+        Some(r) => Some(r?.0),
+        None if a.program.strict => {
+            return Err(usage(
+                "check --strict of a program of several modules needs --machine",
+            ));
+        }
+        None => None,
+    };
+    let opts = check_options(a.program.strict);
+    let mut out = std::io::stdout().lock();
+    for (i, m) in members.iter().enumerate() {
+        if let Some(robot) = &robot {
+            compensate_member(&members, i, robot, &opts)
+                .map_err(|e| file_columns(e, &m.text, m.charset))?;
+        }
+        writeln!(
+            out,
+            "{}: module {}, {} declarations, {} routines, {} moves",
+            m.name,
+            m.module.name,
+            m.module.decls.len(),
+            m.module.procs.len(),
+            m.module.moves().count()
+        )
+        .map_err(|e| Error::io("stdout", e))?;
+    }
+    Ok(0)
+}
+
+/// `postproc compensate` of a program of several modules: each module is
+/// compensated with the others in scope; those that change are written
+/// (beside their inputs, or into `--out-dir`), once every module is
+/// compensated.
+fn compensate_program(
+    a: &CompensateArgs,
+    (robot, loaded): (Robot, Loaded),
+    inputs: &[PathBuf],
+    quiet: bool,
+) -> Result<i32> {
+    if a.output.is_some() {
+        return Err(usage(
+            "-o names one file: a program of several modules is written beside its inputs or into --out-dir",
+        ));
+    }
+    if a.report.is_some() {
+        return Err(usage(
+            "--report: one module at a time (a program of several modules has no report yet)",
+        ));
+    }
+    let opts = RapidOptions {
+        records: false,
+        strict: a.program.strict,
+        ..rapid_options(
+            &robot,
+            &a.effects,
+            a.annotate == Annotate::Comment,
+            a.decimals,
+        )?
+    };
+    let members = load(&module_files(inputs)?)?;
+    let pool = super::gcode::thread_pool(a.effects.threads)?;
+    let provenance = super::machines::provenance(
+        &loaded,
+        super::machines::robot_effects(&opts.effects),
+        None,
+        a.annotate == Annotate::Comment,
+    );
+    let mut written = Vec::new();
+    let mut total = RapidOutcome::default();
+    let mut worst = (0.0, String::new());
+    for (i, m) in members.iter().enumerate() {
+        super::machines::refuse_compensated(m.text.as_bytes(), &m.name, a.recompensate)?;
+        let outcome = pool
+            .install(|| compensate_member(&members, i, &robot, &opts))
+            .map_err(|e| file_columns(e, &m.text, m.charset))?;
+        total.moves += outcome.moves;
+        total.added += outcome.added;
+        total.as_written.extend(outcome.as_written.iter().cloned());
+        if outcome.max_deviation_mm > worst.0 || worst.1.is_empty() && outcome.moves > 0 {
+            worst = (
+                outcome.max_deviation_mm,
+                format!("{}:{}", m.name, outcome.max_deviation_line),
+            );
+        }
+        if outcome.text != m.text {
+            let out = program_output(&m.path, inputs, a.out_dir.as_deref());
+            super::output::refuse_overwrite(&out, &[&m.path])?;
+            written.push((out, outcome, i));
+        }
+    }
+    for (out, outcome, i) in &written {
+        let m = &members[*i];
+        if a.out_dir.is_some()
+            && let Some(parent) = out.parent()
+        {
+            std::fs::create_dir_all(parent).map_err(|e| Error::io(parent, e))?;
+        }
+        write_outcome(out, outcome, &m.name, None, &provenance, m.charset)?;
+    }
+    if !quiet {
+        let names: Vec<String> = written
+            .iter()
+            .map(|(p, _, _)| p.display().to_string())
+            .collect();
+        eprintln!(
+            "program of {} modules → {} written{}: {} compensated{}, {} added; largest predicted deviation {:.4} mm ({})",
+            members.len(),
+            written.len(),
+            if names.is_empty() {
+                String::new()
+            } else {
+                format!(" ({})", names.join(", "))
+            },
+            plural(total.moves, "move", "moves"),
+            left_as_written(&total.as_written),
+            plural(total.added, "target", "targets"),
+            worst.0,
+            if worst.1.is_empty() { "-" } else { &worst.1 }
+        );
+    }
+    Ok(0)
+}
+
+/// Where a changed module of a program goes: beside its input with the
+/// usual naming, or into `out_dir` (its path below a folder input kept).
+fn program_output(path: &Path, inputs: &[PathBuf], out_dir: Option<&Path>) -> PathBuf {
+    let Some(dir) = out_dir else {
+        return default_output(path);
+    };
+    let rel = inputs
+        .iter()
+        .filter(|i| i.is_dir())
+        .find_map(|i| path.strip_prefix(i).ok())
+        .map(Path::to_path_buf)
+        .unwrap_or_else(|| path.file_name().map(PathBuf::from).unwrap_or_default());
+    dir.join(rel)
+}
+
+/// `n one` or `n many`, with the count grouped.
+fn plural(n: usize, one: &str, many: &str) -> String {
+    format!(
+        "{} {}",
+        super::gcode::grouped(n),
+        if n == 1 { one } else { many }
+    )
 }
 
 /// The summary line on standard error (unless `quiet`).
@@ -761,7 +959,10 @@ pub(super) fn write_report(
 pub fn report(a: &ReportArgs, robot: Option<Result<(Robot, Loaded)>>) -> Result<i32> {
     let (robot, loaded) = super::config::needed(robot, "report")??;
     let robot = robot_with_process(robot, &a.effects)?;
-    let opts = rapid_options(&robot, &a.effects, false, None)?;
+    let opts = RapidOptions {
+        strict: a.program.strict,
+        ..rapid_options(&robot, &a.effects, false, None)?
+    };
     let out = a.output.clone().unwrap_or_else(|| PathBuf::from("-"));
     super::output::refuse_overwrite(
         &out,

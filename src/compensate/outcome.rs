@@ -196,7 +196,7 @@ pub struct MoveRecord {
 }
 
 /// Result of compensating a module.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, Default, PartialEq)]
 pub struct RapidOutcome {
     /// The rewritten module text.
     pub text: String,
@@ -220,6 +220,10 @@ pub struct RapidOutcome {
 pub struct AsWritten {
     /// 1-based line of the instruction.
     pub line: usize,
+    /// 1-based byte column of the instruction's name.
+    pub column: usize,
+    /// The instruction's name as written (`MoveL`, `SpotL`).
+    pub instruction: String,
     /// Why it is not compensated.
     pub reason: String,
 }

@@ -9,6 +9,7 @@
 //! `Offs`/`RelTool` targets, joint-space `MoveAbsJ`) are documented in
 //! `grammar/rapid.md`, section "Compensation rewriting".
 
+pub mod program;
 pub mod stream;
 
 use std::collections::HashMap;
@@ -39,11 +40,12 @@ use crate::pipeline::resonance::ResonanceWatch;
 use crate::process::CutSettings;
 use crate::process::MillingCache;
 use crate::program::rapid::directives::Directives;
+use crate::program::rapid::flow::{At, Flow, Left};
 use crate::program::rapid::resolve::{
-    Origin, ToolView, input_err, line_col, named_value, resolve_cart, resolve_tool, resolve_wobj,
-    tcp_speed,
+    CartUse, Origin, ToolView, input_err, line_col, named_value, resolve_cart, resolve_tool,
+    resolve_wobj, tcp_speed,
 };
-use crate::program::rapid::{DataValue, Module, Move, MoveKind, Target, parse_module};
+use crate::program::rapid::{DataValue, Module, Move, MoveKind, Target, column_of, parse_module};
 
 /// Options of a RAPID compensation run.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -60,6 +62,9 @@ pub struct RapidOptions {
     /// a report they are not needed, and for a large module they are a good
     /// part of the memory.
     pub records: bool,
+    /// Refuse the module when a move is left as written
+    /// ([`refuse_left_as_written`]).
+    pub strict: bool,
 }
 
 impl Default for RapidOptions {
@@ -71,6 +76,7 @@ impl Default for RapidOptions {
             format: Format::default(),
             thermal_start: ThermalStart::Cold,
             records: true,
+            strict: false,
         }
     }
 }
@@ -159,6 +165,8 @@ struct Rewriter<'m> {
     state: MoveState,
     /// Programmed TCP position (world, mm) of the last target compensated.
     last_tcp: [f64; 3],
+    /// Declarations from this index on are another module's.
+    foreign_from: usize,
 }
 
 /// One target to compensate: robot view, programmed TCP pose (world frame)
@@ -318,16 +326,16 @@ impl Rewriter<'_> {
     }
 
     /// Compensates one robtarget use; returns the comment source.
+    #[allow(clippy::too_many_arguments)]
     fn cart(
         &mut self,
         mv: &Move,
-        target: &Target,
+        (target, u): (&Target, &CartUse),
         key: &LoadKey,
         tool: &ToolView,
         wobj: &Isometry3<f64>,
         seed: Seed,
     ) -> Result<Option<Deviation>> {
-        let u = resolve_cart(self.module, self.src, self.file, target)?;
         let view = self.view(key, tool);
         let programmed = wobj * u.pose_obj;
         self.last_tcp = programmed.translation.vector.into();
@@ -557,6 +565,10 @@ impl Rewriter<'_> {
     /// declaration `origin` (the first load key to come owns it), finds it
     /// there already, or needs a copy.
     fn in_place(&mut self, origin: Origin, key: &LoadKey) -> InPlace {
+        // Another module's declaration is never edited.
+        if matches!(origin, Origin::Decl { decl, .. } if decl >= self.foreign_from) {
+            return InPlace::Copy;
+        }
         let owner = self.owner.entry(origin).or_insert_with(|| key.clone());
         if owner != key {
             return InPlace::Copy;
@@ -613,7 +625,7 @@ fn plan_move<'m>(
     file: &str,
     robot: &Robot,
     cache: &mut ViewCache<&'m str>,
-    mv: &'m Move,
+    (mv, res): (&'m Move, &Resolved),
 ) -> Result<Planned> {
     let tool = resolve_tool(module, src, file, mv)?;
     let wobj = resolve_wobj(module, src, file, mv)?;
@@ -641,17 +653,16 @@ fn plan_move<'m>(
         let q = jt.robax.each_ref().map(|n| n.value.to_radians());
         (view.tcp_pose(Model::Nominal, &q), Some(q), None)
     } else {
-        let u = resolve_cart(module, src, file, &mv.target)?;
+        let Some(u) = &res.target else {
+            return Err(Error::Internal("move target not resolved".into()));
+        };
         let pose = wobj * u.pose_obj;
         match view.ik_conf_indexed(&pose, u.conf) {
             Ok((q, k)) => (pose, Some(q), Some(k)),
             Err(_) => (pose, None, None),
         }
     };
-    let via = match &mv.via {
-        Some(v) => Some(wobj * resolve_cart(module, src, file, v)?.pose_obj),
-        None => None,
-    };
+    let via = res.via.as_ref().map(|v| wobj * v.pose_obj);
     Ok(Planned {
         tool,
         wobj,
@@ -951,7 +962,17 @@ pub fn compensate_parsed(
     robot: &Robot,
     opts: &RapidOptions,
 ) -> Result<RapidOutcome> {
-    let mut carry = Carry::default();
+    compensate_carried(module, (src, file), robot, opts, Carry::default())
+}
+
+/// [`compensate_parsed`] from the state `carry` (a module of a program).
+pub(crate) fn compensate_carried(
+    module: Module,
+    (src, file): (&str, &str),
+    robot: &Robot,
+    opts: &RapidOptions,
+    mut carry: Carry,
+) -> Result<RapidOutcome> {
     let text = ModuleText {
         module: &module,
         src,
@@ -959,15 +980,47 @@ pub fn compensate_parsed(
     };
     carry.keep_unfinished_targets(&module, src, file);
     let mut edits = compensate_window(text, robot, opts, &mut carry, None, 0)?;
-    carry.leave_unfinished(&module, file);
+    carry.leave_unfinished(&module, src, file);
     carry.leave_unknown(&module, src, file);
     let spans: Vec<_> = module.decls.iter().map(|d| d.span.clone()).collect();
     // Free the parsed module before the output text is built (the peak).
     drop(module);
     carry.push_inserts(src, &spans, &mut edits);
     let mut outcome = carry.outcome(robot, file);
+    refuse_left_as_written(&outcome.as_written, file, opts)?;
     outcome.text = edits.apply(src)?;
     Ok(outcome)
+}
+
+/// The moves of `module` (parsed from `src`) that a compensation leaves as
+/// written, with their reasons, in line order (warned about as a
+/// compensation warns): no robot is needed to find them.
+pub fn left_as_written(module: &Module, src: &str, file: &str) -> Result<Vec<AsWritten>> {
+    let mut carry = Carry::default();
+    carry.resolve(ModuleText { module, src, file })?;
+    carry.leave_unfinished(module, src, file);
+    carry.leave_unknown(module, src, file);
+    Ok(std::mem::take(&mut carry.as_written))
+}
+
+/// With `opts.strict`, a module with a move left as written is an input
+/// error (exit code 2) that names the first one: `file:line:col: MoveL left
+/// as written (CRobT); --strict …`.
+pub fn refuse_left_as_written(left: &[AsWritten], file: &str, opts: &RapidOptions) -> Result<()> {
+    match left.first() {
+        Some(a) if opts.strict => Err(Error::Input(Located::new(
+            file,
+            a.line,
+            a.column,
+            format!(
+                "{} left as written ({}); --strict refuses a module with a move left as written ({} in all)",
+                a.instruction,
+                a.reason,
+                left.len()
+            ),
+        ))),
+        _ => Ok(()),
+    }
 }
 
 /// Why a move of a routine holding an editor placeholder is left as written.
@@ -1011,6 +1064,15 @@ pub(crate) struct Carry {
     records: Vec<MoveRecord>,
     /// Moves left as written, with their reasons.
     as_written: Vec<AsWritten>,
+    /// Why the module cannot be read a window at a time, found while
+    /// compensating a window.
+    pub(crate) unsupported: Option<&'static str>,
+    /// The module's place in a program of several modules.
+    pub(crate) scope: Option<ProgramScope>,
+    /// Module data written by the windows so far ([`Flow::module_data_written`]).
+    module_written: std::collections::HashSet<String>,
+    /// Module data read by the moves of the windows so far.
+    module_read: std::collections::HashSet<String>,
 }
 
 impl Carry {
@@ -1024,16 +1086,29 @@ impl Carry {
         edits: &mut EditList,
     ) {
         let mut by_decl: Vec<(usize, Vec<String>)> = Vec::new();
+        // New declarations for another module's go after the own ones.
+        let (from, anchor) = match &self.scope {
+            Some(s) => (s.from, Some(s.anchor.clone())),
+            None => (usize::MAX, None),
+        };
         for (d, line) in std::mem::take(&mut self.inserts) {
+            let d = if d >= from {
+                from.checked_sub(1).unwrap_or(usize::MAX)
+            } else {
+                d
+            };
             match by_decl.iter_mut().find(|(k, _)| *k == d) {
                 Some((_, v)) => v.push(line),
                 None => by_decl.push((d, vec![line])),
             }
         }
         for (d, lines) in by_decl {
-            if let Some(span) = decls.get(d) {
-                edits.push(&insert_after_decl(src, span, &lines.join("\n")));
-            }
+            let span = match (decls.get(d), &anchor) {
+                (Some(span), _) => span,
+                (None, Some(anchor)) => anchor,
+                (None, None) => continue,
+            };
+            edits.push(&insert_after_decl(src, span, &lines.join("\n")));
         }
     }
 
@@ -1058,7 +1133,7 @@ impl Carry {
     /// Leaves the moves of the module's unfinished routines (an editor
     /// placeholder in them) as written: each is warned about with its
     /// place and listed in the outcome.
-    fn leave_unfinished(&mut self, module: &Module, file: &str) {
+    fn leave_unfinished(&mut self, module: &Module, src: &str, file: &str) {
         for m in module.unfinished_moves() {
             tracing::warn!(
                 "{}:{}: {} left as written: {}",
@@ -1069,6 +1144,8 @@ impl Carry {
             );
             self.as_written.push(AsWritten {
                 line: m.line,
+                column: column_of(src, m.span.start),
+                instruction: m.name.to_string(),
                 reason: UNFINISHED_ROUTINE.to_string(),
             });
         }
@@ -1093,6 +1170,8 @@ impl Carry {
             );
             self.as_written.push(AsWritten {
                 line: u.line,
+                column: u.column,
+                instruction: u.name,
                 reason: UNKNOWN_MOTION.to_string(),
             });
         }
@@ -1115,6 +1194,133 @@ impl Carry {
             as_written: std::mem::take(&mut self.as_written),
         }
     }
+}
+
+/// A module of a program of several modules, resolved with the
+/// declarations of the others after its own
+/// ([`crate::program::rapid::program::scoped`]).
+#[derive(Debug, Clone)]
+pub(crate) struct ProgramScope {
+    /// Its own declarations are the first `from` of the module's; the
+    /// others belong to other modules and are never edited.
+    pub(crate) from: usize,
+    /// New declarations for those of the other modules go after this span
+    /// (its last declaration, or its `MODULE` keyword).
+    pub(crate) anchor: crate::program::rapid::Span,
+    /// The data names the other modules' routines write.
+    pub(crate) writes: Vec<String>,
+}
+
+/// The robtargets a move goes to, resolved before run time: its target
+/// and circle point (none for a `MoveAbsJ`, compensated in joint space).
+#[derive(Debug, Clone)]
+pub(crate) struct Resolved<'m> {
+    target: Option<CartUse<'m>>,
+    via: Option<CartUse<'m>>,
+}
+
+impl Carry {
+    /// The moves of a window whose targets are known before run time, with
+    /// their targets resolved; each other move is left as written
+    /// ([`Carry::leave`]).
+    fn resolve<'m>(&mut self, text: ModuleText<'m>) -> Result<(Vec<&'m Move>, Vec<Resolved<'m>>)> {
+        let ModuleText { module, src, file } = text;
+        let mut flow = Flow::of(module, src);
+        if let Some(scope) = &self.scope {
+            flow = flow.with_writes_elsewhere(&scope.writes);
+        }
+        let mut moves = Vec::new();
+        let mut resolved = Vec::new();
+        for (at, mv) in flow.moves() {
+            match resolve_move(&flow, src, file, at, mv)? {
+                Ok(r) => {
+                    moves.push(mv);
+                    resolved.push(r);
+                }
+                Err(left) => self.leave(mv, left, src, file),
+            }
+        }
+        self.as_written.sort_by_key(|a| a.line);
+        // A window sees one routine: data written in one window and read
+        // in another would resolve otherwise read whole.
+        self.module_written.extend(flow.module_data_written());
+        self.module_read.extend(flow.module_data_read());
+        if self
+            .module_written
+            .iter()
+            .any(|w| self.module_read.contains(w))
+        {
+            self.unsupported.get_or_insert(MODULE_DATA_WRITTEN);
+        }
+        Ok((moves, resolved))
+    }
+
+    /// Leaves a move as written: warned about with its place and reason,
+    /// listed in the outcome; the declarations its target reads keep their
+    /// values as written (a compensated move to one of them gets a copy).
+    fn leave(&mut self, mv: &Move, left: Left, src: &str, file: &str) {
+        if self.time_line.is_some() {
+            return;
+        }
+        tracing::warn!(
+            "{}:{}: {} left as written ({})",
+            crate::error::Escaped(file),
+            mv.line,
+            mv.name,
+            left.reason
+        );
+        for origin in left.reads {
+            self.owner.insert(origin, LoadKey::as_written());
+            self.unsupported.get_or_insert(AS_WRITTEN_READS);
+        }
+        self.as_written.push(AsWritten {
+            line: mv.line,
+            column: column_of(src, mv.span.start),
+            instruction: mv.name.to_string(),
+            reason: left.reason,
+        });
+    }
+}
+
+/// Why a module is not read a window at a time: a routine writes module
+/// data that moves read (a window does not see the other routines).
+pub(crate) const MODULE_DATA_WRITTEN: &str = "a routine assigns module data that moves read";
+
+/// Why a module is not read a window at a time: a move left as written
+/// reads a declaration, which must keep its value from the first window on.
+pub(crate) const AS_WRITTEN_READS: &str = "a move left as written reads a declared target";
+
+/// The targets of move `mv` at `at`, or why it is left as written.
+fn resolve_move<'m>(
+    flow: &Flow<'m>,
+    src: &str,
+    file: &str,
+    at: At,
+    mv: &'m Move,
+) -> Result<std::result::Result<Resolved<'m>, Left>> {
+    if mv.kind == MoveKind::MoveAbsJ {
+        return Ok(match flow.joint_left(at, &mv.target) {
+            Some(left) => Err(left),
+            None => Ok(Resolved {
+                target: None,
+                via: None,
+            }),
+        });
+    }
+    let via = match &mv.via {
+        Some(v) => match flow.cart(src, file, at, v)? {
+            Ok(u) => Some(u),
+            Err(left) => return Ok(Err(left)),
+        },
+        None => None,
+    };
+    Ok(match flow.cart(src, file, at, &mv.target)? {
+        Ok(u) => Ok(Resolved {
+            target: Some(u),
+            via,
+        }),
+        Err(left) => Err(left),
+    })
 }
 
 /// A parsed module (or the window of one being compensated) with the text
@@ -1141,8 +1347,8 @@ pub(crate) fn compensate_window(
     directives: Option<Directives>,
     before: usize,
 ) -> Result<EditList> {
-    let moves: Vec<&Move> = text.module.moves().collect();
-    let mut line = TimeLine::of_window(&moves, text, robot, opts, carry, directives)?;
+    let (moves, resolved) = carry.resolve(text)?;
+    let mut line = TimeLine::of_window((&moves, &resolved), text, robot, opts, carry, directives)?;
     if let Some(totals) = carry.time_line.as_mut() {
         if let Some(t) = line.thermal {
             totals.add(&line.segments, t.time_constant_s);
@@ -1155,7 +1361,7 @@ pub(crate) fn compensate_window(
     if opts.records {
         carry.records.reserve(moves.len());
     }
-    rw.walks(&moves, &line, carry)?;
+    rw.walks((&moves, &resolved), &line, carry)?;
     let edits = rw.suspend(carry);
     drop(line.nominal_flanges);
     carry.prev_plan = line.plans.pop();
@@ -1191,7 +1397,7 @@ impl<'r> TimeLine<'r> {
     /// Plans the moves of a window (continuing the windows before from
     /// `carry`) and puts them on the time line.
     fn of_window(
-        moves: &[&Move],
+        (moves, resolved): (&[&Move], &[Resolved]),
         text: ModuleText,
         robot: &'r Robot,
         opts: &RapidOptions,
@@ -1204,8 +1410,9 @@ impl<'r> TimeLine<'r> {
         // views; the first error in move order is the error, as in order.
         let window_plans = moves
             .par_iter()
-            .map_init(ViewCache::new, |views, mv| {
-                plan_move(module, src, file, robot, views, mv)
+            .zip(resolved.par_iter())
+            .map_init(ViewCache::new, |views, (mv, res)| {
+                plan_move(module, src, file, robot, views, (mv, res))
             })
             .collect::<Vec<Result<Planned>>>()
             .into_iter()
@@ -1438,6 +1645,7 @@ impl<'m> Rewriter<'m> {
             added: carry.added,
             state: MoveState::default(),
             last_tcp: carry.last_tcp,
+            foreign_from: carry.scope.as_ref().map_or(usize::MAX, |s| s.from),
         }
     }
 
@@ -1461,7 +1669,7 @@ impl<'m> Rewriter<'m> {
     /// index after the last move walked.
     fn collect(
         &mut self,
-        moves: &[&Move],
+        (moves, resolved): (&[&Move], &[Resolved]),
         line: &TimeLine,
         collected: &mut usize,
         collecting: &mut bool,
@@ -1474,7 +1682,8 @@ impl<'m> Rewriter<'m> {
                 continue;
             };
             self.state = state;
-            let ok = self.walk(mv, &key, plan).is_ok();
+            let res = resolved.get(*collected);
+            let ok = self.walk((mv, res), &key, plan).is_ok();
             // The failing move goes with this chunk (its jobs before the
             // error are in it).
             *collected += 1;
@@ -1495,15 +1704,25 @@ impl<'m> Rewriter<'m> {
     /// the same move after reporting any failure of an earlier target, as a
     /// single walk would. The chunk's jobs are solved on the pool while walk
     /// 2 writes back the chunk before.
-    fn walks(&mut self, moves: &[&Move], line: &TimeLine, carry: &mut Carry) -> Result<()> {
+    fn walks(
+        &mut self,
+        (moves, resolved): (&[&Move], &[Resolved]),
+        line: &TimeLine,
+        carry: &mut Carry,
+    ) -> Result<()> {
         let fx = self.opts.effects;
         let n = moves.len();
         let mut collected = 0;
         let mut collecting = true;
         let mut names_1 = None;
         let mut names_2 = None;
-        let (jobs, mut end) =
-            self.collect(moves, line, &mut collected, &mut collecting, &mut names_1);
+        let (jobs, mut end) = self.collect(
+            (moves, resolved),
+            line,
+            &mut collected,
+            &mut collecting,
+            &mut names_1,
+        );
         let mut results = solve_chunk(&self.views, &jobs, fx);
         drop(jobs);
         let mut walked = 0;
@@ -1516,7 +1735,13 @@ impl<'m> Rewriter<'m> {
             let (next_jobs, next_end) = if last {
                 (Vec::new(), n)
             } else {
-                self.collect(moves, line, &mut collected, &mut collecting, &mut names_1)
+                self.collect(
+                    (moves, resolved),
+                    line,
+                    &mut collected,
+                    &mut collecting,
+                    &mut names_1,
+                )
             };
             let mut next_results = Vec::new();
             self.phase = Phase::Apply(std::mem::take(&mut results).into_iter());
@@ -1535,7 +1760,7 @@ impl<'m> Rewriter<'m> {
                         continue;
                     };
                     self.state = state;
-                    match self.walk(mv, &key, plan) {
+                    match self.walk((mv, resolved.get(i)), &key, plan) {
                         Ok(Some(dev)) => self.record(carry, mv, seg, &state, &dev),
                         Ok(None) => continue,
                         Err(e) => {
@@ -1623,15 +1848,18 @@ impl Rewriter<'_> {
     /// a MoveC, then its target. The deviation is that of the target.
     fn walk(
         &mut self,
-        mv: &Move,
+        (mv, res): (&Move, Option<&Resolved>),
         key: &LoadKey,
         (plan, nominal_flange): (&Planned, Option<&Isometry3<f64>>),
     ) -> Result<Option<Deviation>> {
         if mv.kind == MoveKind::MoveAbsJ {
             self.joint(mv, key, &plan.tool)
         } else {
-            if let Some(via) = &mv.via {
-                self.cart(mv, via, key, &plan.tool, &plan.wobj, Seed::default())?;
+            let (Some(res), Some(u)) = (res, res.and_then(|r| r.target.as_ref())) else {
+                return Err(Error::Internal("move target not resolved".into()));
+            };
+            if let (Some(via), Some(v)) = (&mv.via, &res.via) {
+                self.cart(mv, (via, v), key, &plan.tool, &plan.wobj, Seed::default())?;
             }
             // Planning solved the target's joints with the same pose,
             // confdata and TCP (`ik_conf`, limits checked), and the nominal
@@ -1641,7 +1869,7 @@ impl Rewriter<'_> {
                 branch: plan.branch,
                 nominal_flange: nominal_flange.copied(),
             };
-            self.cart(mv, &mv.target, key, &plan.tool, &plan.wobj, seed)
+            self.cart(mv, (&mv.target, u), key, &plan.tool, &plan.wobj, seed)
         }
     }
 }

@@ -5,7 +5,8 @@
 //! extension says neither (none, `.txt`, …), its first token decides: a
 //! RAPID module opens with `MODULE` or a `%%%` header, after blanks and
 //! `!` comments (see `grammar/rapid.md`). Only regular files are read for
-//! that: a named pipe or a device is never consumed here.
+//! that: a named pipe or a device is never consumed here. A folder and a
+//! `.pgf` program file are RAPID programs of several modules.
 
 use std::io::Read;
 use std::path::Path;
@@ -72,7 +73,9 @@ pub fn rapid_text(head: &[u8]) -> bool {
 /// regular file ([`rapid_text`]). A file that cannot be read is not
 /// RAPID here (its reader reports the error).
 pub fn is_rapid(path: &Path) -> bool {
-    if rapid_extension(path) {
+    // A folder or a `.pgf` program file: a RAPID program of several
+    // modules (`crate::program::rapid::program`).
+    if rapid_extension(path) || path.is_dir() || crate::program::rapid::program::is_pgf(path) {
         return true;
     }
     if gcode_extension(path) || path == Path::new("-") {
@@ -134,7 +137,9 @@ mod tests {
             assert_eq!(is_rapid(&path), rapid, "{name}");
         }
         assert!(!is_rapid(&dir.path().join("missing")));
-        assert!(!is_rapid(dir.path()));
+        // A folder and a `.pgf` program file are programs of several modules.
+        assert!(is_rapid(dir.path()));
+        assert!(is_rapid(Path::new("cell/Cell.PGF")));
         assert!(!is_rapid(Path::new("-")));
     }
 }

@@ -18,8 +18,10 @@
 //! `grammar/rapid.md`. Keywords are case-insensitive, as in RAPID.
 
 pub mod directives;
+pub mod flow;
 pub mod instructions;
 mod parser;
+pub mod program;
 pub mod resolve;
 mod typed;
 pub mod windows;
@@ -583,6 +585,27 @@ impl Move {
     }
 }
 
+/// An assignment `name := value;`, `name{index} := value;` or
+/// `name.field := value;` (a component of the data).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Assign {
+    /// The assigned data name as written.
+    pub name: String,
+    /// The index, for an array element.
+    pub index: Option<Index>,
+    /// True when a component is assigned (`p.trans.z := 10;`), not the
+    /// whole value.
+    pub component: bool,
+    /// The value, read as a target expression: a robtarget literal, a
+    /// name, `Offs`/`RelTool`, or any other expression (`CRobT()`, `n + 1`,
+    /// a number) as [`Target::Other`].
+    pub value: Target,
+    /// From the name to the `;` included.
+    pub span: Span,
+    /// 1-based line of the name.
+    pub line: usize,
+}
+
 /// One statement of a routine body.
 #[derive(Debug, Clone, PartialEq)]
 pub enum Stmt {
@@ -601,6 +624,8 @@ pub enum Stmt {
         /// 1-based line.
         line: usize,
     },
+    /// An assignment (boxed, as `Move`).
+    Assign(Box<Assign>),
     /// Any other statement, up to and including its `;`, passed through.
     Opaque {
         /// Its span.
@@ -616,6 +641,7 @@ impl Stmt {
         match self {
             Stmt::Move(m) => m.condition.as_ref().map_or(m.span.start, |c| c.start)..m.span.end,
             Stmt::Decl(d) => d.span.clone(),
+            Stmt::Assign(a) => a.span.clone(),
             Stmt::Control { span, .. } | Stmt::Opaque { span, .. } => span.clone(),
         }
     }
@@ -762,6 +788,7 @@ impl Module {
                     out.push(UnknownMotion {
                         name: name.to_string(),
                         line: *line,
+                        column: column_of(src, span.start),
                     });
                 }
             }
@@ -784,6 +811,14 @@ pub struct UnknownMotion {
     pub name: String,
     /// 1-based line of its first byte.
     pub line: usize,
+    /// 1-based byte column of its first byte.
+    pub column: usize,
+}
+
+/// 1-based byte column of byte offset `at` of `src`.
+pub fn column_of(src: &str, at: usize) -> usize {
+    let before = src.get(..at).unwrap_or(src);
+    before.len() - before.rfind('\n').map_or(0, |k| k + 1) + 1
 }
 
 /// The names of the robtarget declarations of `decls`.
@@ -855,6 +890,12 @@ pub fn comment_start(line: &str) -> Option<usize> {
 /// Errors read `file:line:column: what, found `text``; no input panics.
 pub fn parse_module(src: &str, file: &str) -> Result<Module, Located> {
     parser::Parser::new(src, file).parse()
+}
+
+/// Parses the RAPID module that starts at byte `start` of `src` (and ends
+/// it), with spans into the whole of `src`.
+pub fn parse_module_at(src: &str, file: &str, start: usize) -> Result<Module, Located> {
+    parser::Parser::new(src, file).parse_from(start)
 }
 
 /// Parses a RAPID module from bytes, rejecting invalid UTF-8 with the line

@@ -144,7 +144,7 @@ pub fn compensate_streamed<R: BufRead>(
         carry.thermal_x = Some(totals.start_state(opts.thermal_start, t.time_constant_s));
     }
     let reader = open().map_err(|e| Error::io(file, e))?;
-    pass(
+    let done = pass(
         reader,
         file,
         Some(robot),
@@ -153,7 +153,9 @@ pub fn compensate_streamed<R: BufRead>(
         &mut carry,
         body,
         records,
-    )
+    )?;
+    super::refuse_left_as_written(&done.0.outcome.as_written, file, opts)?;
+    Ok(done)
 }
 
 /// Whether [`compensate_streamed`] takes a first pass over the module: a
@@ -179,6 +181,7 @@ pub fn check_syntax_streamed<R: BufRead>(
         format: crate::emit::rapid::Format::default(),
         thermal_start: ThermalStart::Cold,
         records: false,
+        strict: false,
     };
     let mut carry = Carry::default();
     let (streamed, _) = pass(
@@ -252,6 +255,7 @@ fn pass<R: BufRead>(
                         match s {
                             Stmt::Move(m) => m.line += shift,
                             Stmt::Decl(d) => d.line += shift,
+                            Stmt::Assign(a) => a.line += shift,
                             Stmt::Control { line, .. } | Stmt::Opaque { line, .. } => {
                                 *line += shift
                             }
@@ -310,6 +314,9 @@ fn pass<R: BufRead>(
                     file,
                 };
                 let edits = compensate_window(window, robot, opts, carry, Some(directives), start)?;
+                if let Some(why) = carry.unsupported {
+                    return Err(Unsupported(why.into()).into());
+                }
                 carry.leave_unknown(&module, &text, file);
                 write(&edits.apply_in(&text, start..start + lines.len())?)?;
                 if let Some(sink) = records.as_deref_mut() {

@@ -12,8 +12,8 @@ use super::instructions::{
     MotionInstruction, Role, may_start_motion, motion_instruction, plain_move_at,
 };
 use super::{
-    Arg, DataType, DataValue, Decl, Dim, Field, Index, Module, Move, MoveKind, Number, OptArg,
-    Proc, Record, RobTarget, RoutineKind, Scalar, Scope, Span, Stmt, Storage, Target,
+    Arg, Assign, DataType, DataValue, Decl, Dim, Field, Index, Module, Move, MoveKind, Number,
+    OptArg, Proc, Record, RobTarget, RoutineKind, Scalar, Scope, Span, Stmt, Storage, Target,
     find_placeholder, placeholder_at,
 };
 use crate::error::Located;
@@ -567,7 +567,12 @@ impl<'a> Parser<'a> {
     }
 
     pub(super) fn parse(&self) -> Result<Module, Located> {
-        match self.module(self.src) {
+        self.parse_from(0)
+    }
+
+    /// [`Parser::parse`] of the module that starts at byte `start`.
+    pub(super) fn parse_from(&self, start: usize) -> Result<Module, Located> {
+        match self.module(self.src.get(start..).unwrap_or("")) {
             Ok((_, m)) => Ok(m),
             Err(nom::Err::Error(e)) | Err(nom::Err::Failure(e)) => Err(self.located(&e)),
             Err(nom::Err::Incomplete(_)) => Err(Located::new(
@@ -1422,6 +1427,9 @@ impl<'a> Parser<'a> {
                 return control(&r1[1..], "LABEL");
             }
         }
+        if let Some(found) = self.assignment(i, start, line) {
+            return Ok(found);
+        }
         // Anything else: up to its `;`.
         let scan = self.scan(i, b";", &[], false)?;
         let rest = i.get(scan.stop..).unwrap_or("");
@@ -1436,6 +1444,59 @@ impl<'a> Parser<'a> {
             None if scan.last == 0 => self.fail_found(start, "unexpected text"),
             None => self.fail_after(start + scan.last, "missing `;` at the end of the statement"),
         }
+    }
+
+    /// An assignment `name[{index}][.field…] := value;` at `i` (its first
+    /// byte at `start`, on `line`); `None` when `i` does not start with
+    /// one, or when its end is not found (the statement is then read as
+    /// any other, which reports the error).
+    fn assignment(&self, i: &'a str, start: usize, line: usize) -> Option<(&'a str, Stmt)> {
+        let (r, name) = ident(i).ok()?;
+        let mut r = inline_ws(r);
+        let mut index = None;
+        if let Some(x) = r.strip_prefix('{') {
+            let scan = self.scan(x, b"}", &[], false).ok()?;
+            let after = x.get(scan.stop..)?.strip_prefix('}')?;
+            let x0 = self.pos(ws(x));
+            let x_end = (self.pos(x) + scan.last).max(x0);
+            let text = self.src.get(x0..x_end)?.to_string();
+            index = Some(Index {
+                value: text.parse::<usize>().ok(),
+                text,
+                span: x0..x_end,
+            });
+            r = inline_ws(after);
+        }
+        let mut component = false;
+        while let Some(f) = r.strip_prefix('.') {
+            let (after, _) = ident(inline_ws(f)).ok()?;
+            component = true;
+            r = inline_ws(after);
+        }
+        let v = r.strip_prefix(":=")?;
+        let scan = self.scan(v, b";", &[], false).ok()?;
+        let after = v.get(scan.stop..)?.strip_prefix(';')?;
+        let v0 = self.pos(ws(v));
+        let end = self.pos(v) + scan.last;
+        if end <= v0 {
+            return None;
+        }
+        let value = match self.target(v, false) {
+            Ok((rest, t)) if self.pos(ws(rest)) == self.pos(v) + scan.stop => t,
+            _ => Target::Other {
+                text: self.src.get(v0..end)?.to_string(),
+                span: v0..end,
+            },
+        };
+        let assign = Assign {
+            name: name.to_string(),
+            index,
+            component,
+            value,
+            span: start..self.pos(after),
+            line,
+        };
+        Some((after, Stmt::Assign(Box::new(assign))))
     }
 
     /// The list of error numbers of an `ERROR (…)` handler: names or
@@ -1493,7 +1554,8 @@ impl<'a> Parser<'a> {
                 m.condition = Some(start..end);
                 Some((rest, Stmt::Move(m)))
             }
-            Stmt::Opaque { .. } => Some((
+            // A conditional assignment is kept whole, as written.
+            Stmt::Opaque { .. } | Stmt::Assign(_) => Some((
                 rest,
                 Stmt::Opaque {
                     span: start..self.pos(rest),

@@ -194,6 +194,7 @@ pub(crate) fn literal(src: &str, file: &str, s: &Scalar) -> Result<f64> {
 }
 
 /// A robtarget use resolved to its pose in the object frame.
+#[derive(Debug, Clone)]
 pub(crate) struct CartUse<'m> {
     /// The literal whose numbers (conf, extax) are the template.
     pub(crate) rt: &'m RobTarget,

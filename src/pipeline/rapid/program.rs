@@ -1,0 +1,49 @@
+//! Compensation of one module of a RAPID program of several modules
+//! ([`crate::program::rapid::program`]): the module is resolved with the
+//! global declarations of the other modules after its own, and only its
+//! own text is rewritten. A target declared in another module is never
+//! edited there: a move to it goes to a compensated copy (`_cN`, or a
+//! materialised `_oN`) declared in the moving module, after its last
+//! declaration (after its `MODULE` line when it has none).
+
+use super::{Carry, ProgramScope, RapidOptions, compensate_carried};
+use crate::compensate::outcome::RapidOutcome;
+use crate::error::{Error, Result};
+use crate::machine::robot::Robot;
+use crate::program::rapid::program::{Member, relocate, scoped, written_elsewhere};
+
+/// Compensates module `i` of the program `members` (its outcome's text is
+/// the module's own text, rewritten).
+pub fn compensate_member(
+    members: &[Member],
+    i: usize,
+    robot: &Robot,
+    opts: &RapidOptions,
+) -> Result<RapidOutcome> {
+    let own = members
+        .get(i)
+        .ok_or_else(|| Error::Internal("module index".into()))?;
+    let (text, module, borrowed) = scoped(members, i)?;
+    let anchor = match own.module.decls.last() {
+        Some(d) => d.span.clone(),
+        None => own.module.span.start..own.module.span.start + "MODULE".len(),
+    };
+    let carry = Carry {
+        scope: Some(ProgramScope {
+            from: own.module.decls.len(),
+            anchor,
+            writes: written_elsewhere(members, i),
+        }),
+        ..Carry::default()
+    };
+    let mut outcome = compensate_carried(module, (&text, &own.name), robot, opts, carry)
+        .map_err(|e| relocate(e, members, i, &text, &borrowed))?;
+    let tail = text.get(own.text.len()..).unwrap_or("");
+    let Some(own_text) = outcome.text.strip_suffix(tail) else {
+        return Err(Error::Internal(
+            "another module's declarations were rewritten".into(),
+        ));
+    };
+    outcome.text = own_text.to_string();
+    Ok(outcome)
+}
