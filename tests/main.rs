@@ -39,4 +39,5 @@ mod regression;
 mod report_cli;
 mod robot;
 mod robot_process;
+mod robot_samples;
 mod snapshots;

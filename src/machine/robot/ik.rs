@@ -57,7 +57,7 @@ pub fn quadrant(q: f64) -> i32 {
 }
 
 /// Tolerance on the quadrant boundary when matching cf1/cf4/cf6, rad.
-const QUADRANT_TOL_RAD: f64 = 1e-6;
+pub const QUADRANT_TOL_RAD: f64 = 1e-6;
 /// Tolerance on structural parameters for the closed form.
 const STRUCT_TOL: f64 = 1e-9;
 /// Position convergence of the numeric solver, mm.
