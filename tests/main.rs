@@ -8,6 +8,7 @@ mod calibrate_cli;
 mod common;
 mod compact;
 mod compensate_props;
+mod configurations;
 mod diagnose;
 mod diagnose_matrix;
 mod effects;

@@ -31,9 +31,13 @@ pub struct Compensation {
     pub q_programmed: [f64; 6],
     /// Controller joints of the compensated pose, rad.
     pub q_compensated: [f64; 6],
-    /// Confdata of `q_compensated`, to be written with the compensated
-    /// target: it differs from the programmed one when a joint crosses a
-    /// quadrant boundary (cf1/cf4/cf6) during compensation.
+    /// Confdata to write with the compensated target
+    /// ([`crate::machine::robot::ik::confdata_written`]): the programmed
+    /// quadrants of joints 1, 4, 6 while `q_compensated` lies in them
+    /// (within the quadrant tolerance), the quadrant it lies in where
+    /// compensation moves a joint across a boundary; cfx of
+    /// `q_compensated` (always the programmed one: a change of it is
+    /// refused as a reconfiguration).
     pub conf: ConfData,
     /// Predicted deviation of the uncompensated target.
     pub deviation: Deviation,
@@ -258,7 +262,14 @@ impl Robot {
                     pose: cmd,
                     q_programmed: q0,
                     q_compensated: q,
-                    conf: self.confdata(&q),
+                    conf: crate::machine::robot::ik::confdata_written(
+                        self.confdata(&q),
+                        &q,
+                        match sel {
+                            IkSelect::Conf(c) => *c,
+                            IkSelect::Near(_) => self.confdata(&q0),
+                        },
+                    ),
                     deviation,
                     residual: PoseDelta::between(&attained, programmed),
                     iterations: it,
