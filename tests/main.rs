@@ -8,6 +8,7 @@ mod calibrate_cli;
 mod common;
 mod compact;
 mod compensate_props;
+mod conf_off;
 mod configurations;
 mod diagnose;
 mod diagnose_matrix;

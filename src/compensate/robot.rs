@@ -59,6 +59,11 @@ pub(crate) struct Seed {
     /// Nominal flange pose (robot base frame) at `q`, computed as the last
     /// frame of `frames_prepared(nominal, q, 6)` (ignored without `q`).
     pub nominal_flange: Option<Isometry3<f64>>,
+    /// The configuration the move is solved in instead of its target's
+    /// confdata: that of `q`, the solution nearest the previous move's
+    /// joints, where configuration monitoring is off (`ConfL \Off`,
+    /// `ConfJ \Off`). Its confdata is written with the compensated target.
+    pub conf: Option<ConfData>,
 }
 
 /// The closed-form branch of a target's inverse kinematics, kept over the
@@ -181,6 +186,7 @@ impl Robot {
             q: q_programmed,
             branch,
             nominal_flange,
+            ..
         } = *seed;
         // The flange is that of the given joints only.
         let nominal_flange = nominal_flange.filter(|_| q_programmed.is_some());
@@ -351,6 +357,7 @@ mod tests {
                     q: Some(q),
                     branch: Some(branch),
                     nominal_flange: None,
+                    conf: None,
                 };
                 let seeded = Seed {
                     nominal_flange: Some(flange),

@@ -16,6 +16,7 @@ pub mod dh;
 pub mod dynamics;
 pub mod ik;
 pub mod kinematics;
+mod nearest;
 mod numeric_ik;
 pub mod plausible;
 pub mod pose;
