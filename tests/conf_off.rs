@@ -248,3 +248,22 @@ fn conf_on_restores_the_targets_confdata() {
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("target `pA2`"), "{err}");
 }
+
+/// Which moves `ConfL`/`ConfJ` set free: by kind, until `\On`, each routine
+/// starting on; MoveAbsJ never; other statements and look-alikes change
+/// nothing.
+#[test]
+fn configuration_free_moves_follow_the_switches_per_routine() {
+    let src = "MODULE M\n  PROC a()\n    MoveL p1, v100, fine, tool0;\n    ConfL \\Off;\n    MoveJ p2, v100, fine, tool0;\n    MoveL p3, v100, fine, tool0;\n    MoveC p4, p5, v100, fine, tool0;\n    ConfLine \\Off;\n    confj\\OFF;\n    MoveJ p6, v100, fine, tool0;\n    MoveAbsJ j1, v100, fine, tool0;\n    ConfL \\On;\n    MoveL p7, v100, fine, tool0;\n  ENDPROC\n  PROC b()\n    MoveJ p8, v100, fine, tool0;\n    MoveL p9, v100, fine, tool0;\n  ENDPROC\nENDMODULE\n";
+    let m = parse_module(src, "m.mod").expect("parses");
+    let free = m.configuration_free_moves(src);
+    let names: Vec<String> = m
+        .moves()
+        .filter(|mv| free.contains(&mv.span.start))
+        .map(|mv| match &mv.target {
+            Target::Named { name, .. } => name.clone(),
+            t => panic!("{t:?}"),
+        })
+        .collect();
+    assert_eq!(names, ["p3", "p5", "p6"]);
+}

@@ -266,3 +266,35 @@ fn a_refusal_names_configurations_that_reach_the_target() {
         assert!(reached > 0, "{name}: {available}");
     }
 }
+
+proptest::proptest! {
+    #![proptest_config(proptest::prelude::ProptestConfig::with_cases(128))]
+
+    /// The TX200's numeric inverse of a random reachable pose in its own
+    /// configuration: forward kinematics gives the pose back within the
+    /// solver's tolerance and the solution has the asked confdata (joints
+    /// away from the wrist and elbow singularities and from quadrant
+    /// boundaries, where the confdata of the generating joints is itself
+    /// ambiguous).
+    #[test]
+    fn tx200_numeric_inverse_matches_forward_kinematics(
+        u in proptest::array::uniform6(0.02f64..0.98)
+    ) {
+        let r = load("staubli-tx200");
+        let l = *r.joint_limits_rad();
+        let q: [f64; 6] = std::array::from_fn(|i| l[i][0] + (l[i][1] - l[i][0]) * u[i]);
+        let quarter = std::f64::consts::FRAC_PI_2;
+        let near_boundary = [0, 3, 5]
+            .iter()
+            .any(|&i| (q[i] / quarter - (q[i] / quarter).round()).abs() < 1e-3);
+        proptest::prop_assume!(q[4].abs() > 0.05 && q[2].abs() > 0.05 && !near_boundary);
+        let pose = r.tcp_pose(Model::Nominal, &q);
+        let conf = r.confdata(&q);
+        let got = r.ik_conf(&pose, conf);
+        proptest::prop_assert!(got.is_ok(), "{:?}", got);
+        let got = got.unwrap_or(q);
+        let (dp, dr) = pose_error(&r.tcp_pose(Model::Nominal, &got), &pose);
+        proptest::prop_assert!(dp.norm() < IK_POS_TOL_MM && dr.norm() < IK_ROT_TOL_RAD);
+        proptest::prop_assert_eq!(r.confdata(&got), conf);
+    }
+}
