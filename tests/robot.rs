@@ -351,12 +351,19 @@ fn typed_ik_errors() {
         }
         other => panic!("expected joint-limit error, got {other:?}"),
     }
-    // The TX200 has no closed form: confdata is refused with a typed error.
+    // The TX200 has no closed form: confdata selects its numeric solution,
+    // whose forward kinematics is the pose and whose confdata is the asked
+    // one; the list of all eight solutions is refused with a typed error.
     let tx = load("staubli-tx200");
-    assert!(matches!(
-        tx.ik_conf(&pose, conf),
-        Err(RobotError::NoClosedForm)
-    ));
+    let q_tx = [0.4, 0.3, 1.1, -0.6, 0.9, 1.7];
+    let pose_tx = tx.tcp_pose(Model::Nominal, &q_tx);
+    let conf_tx = tx.confdata(&q_tx);
+    let got = tx.ik_conf(&pose_tx, conf_tx).expect("numeric solution");
+    let (dp, dr) = pose_error(&tx.tcp_pose(Model::Nominal, &got), &pose_tx);
+    assert_abs_diff_eq!(dp.norm(), 0.0, epsilon = IK_POS_TOL_MM);
+    assert_abs_diff_eq!(dr.norm(), 0.0, epsilon = IK_ROT_TOL_RAD);
+    assert_eq!(tx.confdata(&got), conf_tx);
+    assert!(matches!(tx.ik_all(&pose_tx), Err(RobotError::NoClosedForm)));
     let e = RobotError::NoClosedForm.at("p.mod", 3, 7).to_string();
     assert!(e.starts_with("p.mod:3:7: "), "{e}");
 }

@@ -31,9 +31,13 @@ pub struct Compensation {
     pub q_programmed: [f64; 6],
     /// Controller joints of the compensated pose, rad.
     pub q_compensated: [f64; 6],
-    /// Confdata of `q_compensated`, to be written with the compensated
-    /// target: it differs from the programmed one when a joint crosses a
-    /// quadrant boundary (cf1/cf4/cf6) during compensation.
+    /// Confdata to write with the compensated target
+    /// ([`crate::machine::robot::ik::confdata_written`]): the programmed
+    /// quadrants of joints 1, 4, 6 while `q_compensated` lies in them
+    /// (within the quadrant tolerance), the quadrant it lies in where
+    /// compensation moves a joint across a boundary; cfx of
+    /// `q_compensated` (always the programmed one: a change of it is
+    /// refused as a reconfiguration).
     pub conf: ConfData,
     /// Predicted deviation of the uncompensated target.
     pub deviation: Deviation,
@@ -55,6 +59,11 @@ pub(crate) struct Seed {
     /// Nominal flange pose (robot base frame) at `q`, computed as the last
     /// frame of `frames_prepared(nominal, q, 6)` (ignored without `q`).
     pub nominal_flange: Option<Isometry3<f64>>,
+    /// The configuration the move is solved in instead of its target's
+    /// confdata: that of `q`, the solution nearest the previous move's
+    /// joints, where configuration monitoring is off (`ConfL \Off`,
+    /// `ConfJ \Off`). Its confdata is written with the compensated target.
+    pub conf: Option<ConfData>,
 }
 
 /// The closed-form branch of a target's inverse kinematics, kept over the
@@ -177,6 +186,7 @@ impl Robot {
             q: q_programmed,
             branch,
             nominal_flange,
+            ..
         } = *seed;
         // The flange is that of the given joints only.
         let nominal_flange = nominal_flange.filter(|_| q_programmed.is_some());
@@ -258,7 +268,14 @@ impl Robot {
                     pose: cmd,
                     q_programmed: q0,
                     q_compensated: q,
-                    conf: self.confdata(&q),
+                    conf: crate::machine::robot::ik::confdata_written(
+                        self.confdata(&q),
+                        &q,
+                        match sel {
+                            IkSelect::Conf(c) => *c,
+                            IkSelect::Near(_) => self.confdata(&q0),
+                        },
+                    ),
                     deviation,
                     residual: PoseDelta::between(&attained, programmed),
                     iterations: it,
@@ -340,6 +357,7 @@ mod tests {
                     q: Some(q),
                     branch: Some(branch),
                     nominal_flange: None,
+                    conf: None,
                 };
                 let seeded = Seed {
                     nominal_flange: Some(flange),

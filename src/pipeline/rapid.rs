@@ -33,8 +33,8 @@ use crate::machine::robot::thermal::{
     Segment, TimeLineTotals, effective_power, effective_power_from,
 };
 use crate::machine::robot::{
-    Deviation, DhGrowth, Effects, ForceFrame, ForceModel, IkSelect, Model, ProcessWrench, Robot,
-    RobotError, Thermal,
+    ConfData, Deviation, DhGrowth, Effects, ForceFrame, ForceModel, IkSelect, Model, ProcessWrench,
+    Robot, RobotError, Thermal,
 };
 use crate::pipeline::resonance::ResonanceWatch;
 use crate::process::CutSettings;
@@ -355,7 +355,8 @@ impl Rewriter<'_> {
                 mv.name
             )
         };
-        let Some(comp) = self.solve(view, programmed, IkSelect::Conf(u.conf), seed) else {
+        let sel = IkSelect::Conf(seed.conf.unwrap_or(u.conf));
+        let Some(comp) = self.solve(view, programmed, sel, seed) else {
             return Ok(None);
         };
         let comp = comp.map_err(|e| self.locate(at, e, &what()))?;
@@ -597,6 +598,9 @@ struct Planned {
     q: Option<[f64; 6]>,
     /// Closed-form branch of `q` (a Cartesian target's).
     branch: Option<usize>,
+    /// Configuration of `q` where configuration monitoring is off for the
+    /// move ([`free_configurations`]).
+    free_conf: Option<ConfData>,
     /// TCP speed, mm/s, when it can be resolved.
     v_tcp: Option<f64>,
 }
@@ -670,8 +674,43 @@ fn plan_move<'m>(
         via,
         q,
         branch,
+        free_conf: None,
         v_tcp: tcp_speed(module, mv),
     })
+}
+
+/// Moves with configuration monitoring off (`ConfL \Off`, `ConfJ \Off`;
+/// span starts in `free`, sorted): their joints become the solution
+/// nearest the previous move's (`plans[i + o - 1]`), whatever their
+/// confdata says, and their configuration is the one written with the
+/// compensated target. A first move with no move before keeps its confdata.
+fn free_configurations(
+    robot: &Robot,
+    moves: &[&Move],
+    plans: &mut [Planned],
+    o: usize,
+    free: &[usize],
+) {
+    let mut views = ViewCache::new();
+    for (i, mv) in moves.iter().enumerate() {
+        if free.binary_search(&mv.span.start).is_err() {
+            continue;
+        }
+        let Some(prev) = (i + o).checked_sub(1).and_then(|k| plans.get(k)?.q) else {
+            continue;
+        };
+        let Some(plan) = plans.get_mut(i + o) else {
+            continue;
+        };
+        let view = views.get(&*mv.tool.text, || {
+            robot.with_tool(plan.tool.tframe, plan.tool.load, false)
+        });
+        if let Ok((q, k)) = view.ik_nearest(&plan.pose, &prev) {
+            plan.free_conf = Some(view.confdata(&q));
+            plan.q = Some(q);
+            plan.branch = Some(k);
+        }
+    }
 }
 
 /// The process wrench of move `i` (see `grammar/rapid.md`, "Process
@@ -1421,6 +1460,10 @@ impl<'r> TimeLine<'r> {
         let mut plans = Vec::with_capacity(window_plans.len() + o);
         plans.extend(carry.prev_plan.take());
         plans.extend(window_plans);
+        let free = module.configuration_free_moves(src);
+        if !free.is_empty() {
+            free_configurations(robot, moves, &mut plans, o, &free);
+        }
         let fx = opts.effects;
         let thermal = robot.thermal().filter(|_| fx.thermal != 0.0);
         let directives = match directives {
@@ -1868,6 +1911,7 @@ impl Rewriter<'_> {
                 q: plan.q,
                 branch: plan.branch,
                 nominal_flange: nominal_flange.copied(),
+                conf: plan.free_conf,
             };
             self.cart(mv, (&mv.target, u), key, &plan.tool, &plan.wobj, seed)
         }

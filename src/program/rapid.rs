@@ -647,6 +647,34 @@ impl Stmt {
     }
 }
 
+/// `ConfL`/`ConfJ` with a switch: `(linear, off)` of a statement's text
+/// (`ConfL \Off;`, `confj\on;`); `None` for any other statement or no
+/// switch.
+fn conf_switch(text: &str) -> Option<(bool, bool)> {
+    let t = text.trim_start();
+    let word = t.get(..5)?;
+    let linear = if word.eq_ignore_ascii_case("ConfL") {
+        true
+    } else if word.eq_ignore_ascii_case("ConfJ") {
+        false
+    } else {
+        return None;
+    };
+    let rest = t[5..].trim_start();
+    let rest = rest.strip_prefix('\\')?.trim_start();
+    let switch: String = rest
+        .chars()
+        .take_while(|c| c.is_ascii_alphanumeric() || *c == '_')
+        .collect();
+    if switch.eq_ignore_ascii_case("Off") {
+        Some((linear, true))
+    } else if switch.eq_ignore_ascii_case("On") {
+        Some((linear, false))
+    } else {
+        None
+    }
+}
+
 /// Routine kind.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum RoutineKind {
@@ -743,6 +771,42 @@ impl Module {
             .iter()
             .filter(|p| !p.placeholder)
             .flat_map(Proc::moves)
+    }
+
+    /// Span starts (in source order) of the moves whose configuration
+    /// monitoring is off: a `MoveL`/`MoveC`-kind move after `ConfL \Off`, a
+    /// `MoveJ`-kind move after `ConfJ \Off`, until `\On` (`src` is the text
+    /// this module was parsed from). The state follows the statements of a
+    /// routine in source order and starts on (the controller's state at
+    /// program start) in every routine. `MoveAbsJ` has no configuration.
+    pub fn configuration_free_moves(&self, src: &str) -> Vec<usize> {
+        let mut out = Vec::new();
+        for p in self.procs.iter().filter(|p| !p.placeholder) {
+            let (mut linear_off, mut joint_off) = (false, false);
+            for s in &p.body {
+                match s {
+                    Stmt::Opaque { span, .. } => {
+                        match src.get(span.clone()).and_then(conf_switch) {
+                            Some((true, off)) => linear_off = off,
+                            Some((false, off)) => joint_off = off,
+                            None => {}
+                        }
+                    }
+                    Stmt::Move(m) => {
+                        let off = match m.kind {
+                            MoveKind::MoveL | MoveKind::MoveC => linear_off,
+                            MoveKind::MoveJ => joint_off,
+                            MoveKind::MoveAbsJ => false,
+                        };
+                        if off {
+                            out.push(m.span.start);
+                        }
+                    }
+                    _ => {}
+                }
+            }
+        }
+        out
     }
 
     /// The motion instructions of routines that hold an editor placeholder

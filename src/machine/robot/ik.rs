@@ -56,8 +56,20 @@ pub fn quadrant(q: f64) -> i32 {
     (q / FRAC_PI_2).floor() as i32
 }
 
-/// Tolerance on the quadrant boundary when matching cf1/cf4/cf6, rad.
-const QUADRANT_TOL_RAD: f64 = 1e-6;
+/// Tolerance on the quadrant boundary when matching cf1/cf4/cf6, rad
+/// (0.00057°): a joint within it of a boundary lies in both quadrants. It
+/// covers the resolution of a written target, which moves the joints that
+/// solve it by a few µrad (7-decimal quaternions: 2e-7 rad; 3-decimal
+/// millimetres: 0.00087 mm, 2e-6 rad at 0.5 m from an axis), so a target
+/// written with a quadrant is solved in that quadrant again.
+pub const QUADRANT_TOL_RAD: f64 = 1e-5;
+/// Band within which a joint keeps its programmed quadrant in the confdata
+/// written with a compensated target ([`confdata_written`]), rad: a tenth
+/// of [`QUADRANT_TOL_RAD`], the rest being the margin for the written
+/// target's resolution. It is larger than the rounding of a joint shown
+/// with four decimals of a degree (0.00005° = 8.7e-7 rad): a joint shown as
+/// −0.0000° keeps quadrant 0.
+pub const QUADRANT_KEEP_RAD: f64 = 1e-6;
 /// Tolerance on structural parameters for the closed form.
 const STRUCT_TOL: f64 = 1e-9;
 /// Position convergence of the numeric solver, mm.
@@ -362,6 +374,42 @@ pub(crate) fn confdata_prepared(p: &Prepared, q: &[f64; 6]) -> ConfData {
         cf4: quadrant(q[3]),
         cf6: quadrant(q[5]),
         cfx: 4 * behind1 as i32 + 2 * behind_arm as i32 + neg5 as i32,
+    }
+}
+
+/// Whether joint value `q` (rad) lies in quadrant `cf` by the rule used to
+/// match confdata: `[cf·90° − tol, (cf+1)·90° + tol]` with
+/// [`QUADRANT_TOL_RAD`].
+pub fn in_quadrant(q: f64, cf: i32) -> bool {
+    let lo = f64::from(cf) * FRAC_PI_2;
+    q >= lo - QUADRANT_TOL_RAD && q <= lo + FRAC_PI_2 + QUADRANT_TOL_RAD
+}
+
+/// Whether joint value `q` (rad) keeps the programmed quadrant `cf` in
+/// written confdata: `[cf·90° − keep, (cf+1)·90° + keep]` with
+/// [`QUADRANT_KEEP_RAD`].
+pub fn keeps_quadrant(q: f64, cf: i32) -> bool {
+    let lo = f64::from(cf) * FRAC_PI_2;
+    q >= lo - QUADRANT_KEEP_RAD && q <= lo + FRAC_PI_2 + QUADRANT_KEEP_RAD
+}
+
+/// The confdata to write for a target reached with joints `q` whose own
+/// confdata is `own` ([`confdata`]), programmed with `programmed`: each of
+/// cf1, cf4, cf6 stays the programmed quadrant while its joint lies in it
+/// ([`keeps_quadrant`], so numerical noise at a boundary never changes the
+/// written data), else it is the joint's own quadrant (the quadrant the
+/// controller finds those joints in); cfx is the solution's. Either way
+/// the written target is solved in the written quadrants again
+/// ([`in_quadrant`] has the wider tolerance).
+pub fn confdata_written(own: ConfData, q: &[f64; 6], programmed: ConfData) -> ConfData {
+    let keep = |cf: i32, prog: i32, j: usize| {
+        if keeps_quadrant(q[j], prog) { prog } else { cf }
+    };
+    ConfData {
+        cf1: keep(own.cf1, programmed.cf1, 0),
+        cf4: keep(own.cf4, programmed.cf4, 3),
+        cf6: keep(own.cf6, programmed.cf6, 5),
+        cfx: own.cfx,
     }
 }
 

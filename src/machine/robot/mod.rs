@@ -16,6 +16,8 @@ pub mod dh;
 pub mod dynamics;
 pub mod ik;
 pub mod kinematics;
+mod nearest;
+mod numeric_ik;
 mod params;
 pub mod plausible;
 pub mod pose;
@@ -83,9 +85,10 @@ pub enum RobotError {
         rot_rad: f64,
     },
     /// The nominal model has no closed-form inverse (not an ABB-style arm):
-    /// select solutions with a seed joint vector instead of confdata.
+    /// its solutions cannot all be listed (confdata selects one
+    /// numerically instead).
     #[error(
-        "this robot has no closed-form inverse kinematics; give a seed joint vector instead of confdata"
+        "this robot has no closed-form inverse kinematics: its eight solutions cannot be listed"
     )]
     NoClosedForm,
     /// The compensated target's joints depart from the programmed ones by
@@ -113,6 +116,10 @@ impl RobotError {
         Error::Unachievable(Located::new(file, line, column, self.to_string()))
     }
 }
+
+/// The branch index of a solution of the numeric inverse kinematics (no
+/// closed-form branch has it: those are `0..8`).
+pub(crate) const NUMERIC_BRANCH: usize = 8;
 
 /// Which parameter set to evaluate.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -768,11 +775,9 @@ impl Robot {
         reference: &[f64; 6],
         k: usize,
     ) -> std::result::Result<[f64; 6], RobotError> {
-        let cf = self
-            .d
-            .closed_form
-            .as_ref()
-            .ok_or(RobotError::NoClosedForm)?;
+        let Some(cf) = self.d.closed_form.as_ref() else {
+            return self.ik_conf_near(tcp_world, conf, reference);
+        };
         let flange = self.flange_for_tcp(tcp_world);
         match cf.solve_branch(&flange, reference[3], k) {
             Some(mut q) => {
@@ -786,18 +791,19 @@ impl Robot {
     }
 
     /// [`Robot::ik_conf_turns`] with the index of the closed-form branch
-    /// that gave the solution.
+    /// that gave the solution ([`NUMERIC_BRANCH`] for a robot without a
+    /// closed form, solved numerically: see `numeric_ik`).
     pub(crate) fn ik_conf_branch(
         &self,
         tcp_world: &Isometry3<f64>,
         conf: ConfData,
         turn_ref: Option<&[f64; 6]>,
     ) -> std::result::Result<([f64; 6], usize), RobotError> {
-        let cf = self
-            .d
-            .closed_form
-            .as_ref()
-            .ok_or(RobotError::NoClosedForm)?;
+        let Some(cf) = self.d.closed_form.as_ref() else {
+            return self
+                .ik_conf_numeric(tcp_world, conf, turn_ref)
+                .map(|q| (q, NUMERIC_BRANCH));
+        };
         let wrist_ref = turn_ref.map_or(0.0, |r| r[3]);
         let flange = self.flange_for_tcp(tcp_world);
         // The first solution (in index order) with the asked cfx; the later

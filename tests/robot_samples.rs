@@ -1,0 +1,280 @@
+//! Integration tests: every bundled RAPID sample compensated on every
+//! bundled robot through the binary, the written targets checked against
+//! the forward kinematics of the robot library (the controller's inverse
+//! of the written target and confdata, then the predicted attained pose).
+//!
+//! The samples describe a cell in front of an IRB 1600: the plate lies
+//! 700–850 mm from the robot's axis 1, 350 mm up. The TX200 is a larger arm:
+//! with joint 3 within ±145° its wrist centre cannot come closer than
+//! about 545 mm to its shoulder, so the plate is out of its reach from the
+//! world origin. It runs the samples mounted 300 mm behind that origin (a
+//! machine file with a `base`), the cell otherwise unchanged.
+
+use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion, Vector3};
+use postproc::machine::robot::pose::pose_error;
+use postproc::machine::robot::{ConfData, Effects, Model, PointMass, Robot};
+use postproc::program::rapid::{DataValue, Module, RobTarget, Target, parse_module};
+
+use crate::common::{postproc, repo, without_header, write};
+
+/// Position agreement of the predicted attained TCP with the programmed one,
+/// mm: the written position's 3 decimals move the TCP by at most
+/// 0.0005·√3 = 0.00087 mm (the derivation of tests/rapid_cli.rs).
+const POS_TOL_MM: f64 = 1e-3;
+/// Orientation agreement, rad: 7-decimal quaternions move the rotation by
+/// at most 2e-7 rad.
+const ROT_TOL_RAD: f64 = 1e-6;
+/// A MoveAbsJ target's agreement, mm and rad: 6-decimal degrees move each
+/// joint by 8.7e-9 rad; the TX200's lever arm to the TCP is under 2.6 m:
+/// 6 · 8.7e-9 · 2600 mm = 0.00014 mm.
+const JOINT_POS_TOL_MM: f64 = 1e-3;
+const JOINT_ROT_TOL_RAD: f64 = 1e-6;
+
+/// The bundled RAPID samples.
+const SAMPLES: [&str; 2] = ["drilling", "milling"];
+
+/// The TX200 mounted for the samples' cell: the bundled file with a base
+/// 300 mm behind the world origin.
+fn tx200_cell_text() -> String {
+    let mut text =
+        std::fs::read_to_string(repo("machines/staubli-tx200.yaml")).expect("machine file");
+    text.push_str(
+        "base: { x_mm: -300.0, y_mm: 0.0, z_mm: 0.0, quaternion: [1.0, 0.0, 0.0, 0.0] }\n",
+    );
+    text
+}
+
+/// (name, machine file text) of both bundled robots, as the samples run them.
+fn robots() -> [(&'static str, String); 2] {
+    [
+        (
+            "abb-irb1600",
+            std::fs::read_to_string(repo("machines/abb-irb1600.yaml")).expect("machine file"),
+        ),
+        ("staubli-tx200", tx200_cell_text()),
+    ]
+}
+
+/// The samples' spindle (tDrill / tMill): TCP 182.5 mm along the flange z
+/// axis, 2.4 kg at 85 mm.
+fn with_spindle(r: Robot) -> Robot {
+    r.with_tool(
+        Isometry3::translation(0.0, 0.0, 182.5),
+        Some(PointMass {
+            mass_kg: 2.4,
+            com_mm: Vector3::new(0.0, 0.0, 85.0),
+        }),
+        false,
+    )
+}
+
+/// The samples' plate frame (wPlate / wPart): translation (600, -200, 350).
+fn plate() -> Isometry3<f64> {
+    Isometry3::translation(600.0, -200.0, 350.0)
+}
+
+fn pose(rt: &RobTarget) -> Isometry3<f64> {
+    let q = rt.rot.each_ref().map(|n| n.value);
+    Isometry3::from_parts(
+        Translation3::new(rt.trans[0].value, rt.trans[1].value, rt.trans[2].value),
+        UnitQuaternion::from_quaternion(Quaternion::new(q[0], q[1], q[2], q[3])),
+    )
+}
+
+fn conf(rt: &RobTarget) -> ConfData {
+    let v = rt.robconf.each_ref().map(|n| n.value as i32);
+    ConfData {
+        cf1: v[0],
+        cf4: v[1],
+        cf6: v[2],
+        cfx: v[3],
+    }
+}
+
+fn declared<'a>(m: &'a Module, name: &str, index: Option<usize>) -> &'a DataValue {
+    let d = m.decl(name).expect("declared");
+    let v = d.value.as_ref().expect("a value");
+    match (v, index) {
+        (DataValue::Array { items, .. }, Some(i)) => &items[i - 1],
+        (v, None) => v,
+        (v, _) => panic!("not an array: {v:?}"),
+    }
+}
+
+fn robtarget<'a>(m: &'a Module, name: &str, index: Option<usize>) -> &'a RobTarget {
+    match declared(m, name, index) {
+        DataValue::RobTarget(rt) => rt,
+        v => panic!("not a robtarget: {v:?}"),
+    }
+}
+
+/// Programmed TCP pose (world) of an input move's target: a named
+/// robtarget (no work object) or `Offs` of an array element in the plate.
+fn programmed(m: &Module, t: &Target) -> Isometry3<f64> {
+    match t {
+        Target::Named {
+            name, index: None, ..
+        } => pose(robtarget(m, name, None)),
+        Target::Offs { base, offsets, .. } => {
+            let Target::Named {
+                name,
+                index: Some(ix),
+                ..
+            } = base.as_ref()
+            else {
+                panic!("Offs of an array element")
+            };
+            let d = Vector3::new(
+                offsets[0].value.expect("dx"),
+                offsets[1].value.expect("dy"),
+                offsets[2].value.expect("dz"),
+            );
+            let p = pose(robtarget(m, name, Some(ix.value.expect("index"))));
+            plate()
+                * Isometry3::from_parts(Translation3::from(p.translation.vector + d), p.rotation)
+        }
+        t => panic!("unexpected target {t:?}"),
+    }
+}
+
+fn compensate(
+    dir: &std::path::Path,
+    sample: &str,
+    machine: &std::path::Path,
+    extra: &[&str],
+) -> (String, String) {
+    let input = dir.join(format!("{sample}.mod"));
+    std::fs::copy(repo(&format!("samples/{sample}.mod")), &input).expect("copy sample");
+    let output = dir.join(format!("{sample}.out.mod"));
+    postproc()
+        .arg("compensate")
+        .arg(&input)
+        .arg("--machine")
+        .arg(machine)
+        .arg("-o")
+        .arg(&output)
+        .args(extra)
+        .assert()
+        .success();
+    (
+        std::fs::read_to_string(&input).expect("input"),
+        std::fs::read_to_string(&output).expect("output"),
+    )
+}
+
+/// Every move of every sample, compensated on each bundled robot, lands on
+/// its programmed pose: the written robtarget (position, quaternion,
+/// confdata) solved by the controller's inverse kinematics — the numeric
+/// one on the TX200 — and predicted by the robot model, or the written
+/// joints of a MoveAbsJ predicted directly.
+#[test]
+fn both_robots_compensate_every_sample_within_the_tolerance() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    for (robot_name, machine_text) in robots() {
+        let machine = write(dir.path(), &format!("{robot_name}.yaml"), &machine_text);
+        let robot = with_spindle(Robot::from_yaml_str(&machine_text, robot_name).expect("valid"));
+        for sample in SAMPLES {
+            let (src_in, src_out) = compensate(
+                dir.path(),
+                sample,
+                &machine,
+                &["--effects", "kinematic,gravity"],
+            );
+            let m_in = parse_module(&src_in, "in").expect("input parses");
+            let m_out = parse_module(&src_out, "out").expect("output parses");
+            let (a, b): (Vec<_>, Vec<_>) = (m_in.moves().collect(), m_out.moves().collect());
+            assert_eq!(a.len(), b.len());
+            let mut checked = 0;
+            for (mi, mo) in a.iter().zip(&b) {
+                let what = format!("{robot_name} {sample} line {}", mi.line);
+                let Target::Named { name, .. } = &mo.target else {
+                    panic!("{what}: written target {:?}", mo.target)
+                };
+                let (dp, dr, tol) = match declared(&m_out, name, None) {
+                    DataValue::JointTarget(jt) => {
+                        let Target::Named { name: n_in, .. } = &mi.target else {
+                            panic!("{what}: a named jointtarget")
+                        };
+                        let DataValue::JointTarget(j_in) = declared(&m_in, n_in, None) else {
+                            panic!("{what}: a jointtarget")
+                        };
+                        let goal = robot.tcp_pose(
+                            Model::Nominal,
+                            &j_in.robax.each_ref().map(|n| n.value.to_radians()),
+                        );
+                        let q = jt.robax.each_ref().map(|n| n.value.to_radians());
+                        let (dp, dr) = pose_error(&robot.predict(&q, Effects::ALL), &goal);
+                        (dp, dr, (JOINT_POS_TOL_MM, JOINT_ROT_TOL_RAD))
+                    }
+                    DataValue::RobTarget(rt) => {
+                        let frame = if mo.wobj.is_some() {
+                            plate()
+                        } else {
+                            Isometry3::identity()
+                        };
+                        let q = robot
+                            .ik_conf(&(frame * pose(rt)), conf(rt))
+                            .unwrap_or_else(|e| panic!("{what}: controller IK: {e}"));
+                        let (dp, dr) = pose_error(
+                            &robot.predict(&q, Effects::ALL),
+                            &programmed(&m_in, &mi.target),
+                        );
+                        (dp, dr, (POS_TOL_MM, ROT_TOL_RAD))
+                    }
+                    v => panic!("{what}: {v:?}"),
+                };
+                assert!(dp.norm() < tol.0, "{what}: {} mm", dp.norm());
+                assert!(dr.norm() < tol.1, "{what}: {} rad", dr.norm());
+                checked += 1;
+            }
+            assert_eq!(checked, a.len());
+            assert!(checked >= 16, "{robot_name} {sample}: {checked} moves");
+        }
+    }
+}
+
+/// With no effect and no annotation, every sample comes back byte for byte
+/// on each bundled robot (the header aside).
+#[test]
+fn both_robots_write_every_sample_back_unchanged_without_effects() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    for (robot_name, machine_text) in robots() {
+        let machine = write(dir.path(), &format!("{robot_name}.yaml"), &machine_text);
+        for sample in SAMPLES {
+            let (src_in, src_out) = compensate(
+                dir.path(),
+                sample,
+                &machine,
+                &["--effects", "none", "--annotate", "none"],
+            );
+            assert!(
+                without_header(src_out.as_bytes()) == src_in.as_bytes(),
+                "{robot_name} {sample}"
+            );
+        }
+    }
+}
+
+/// The bundled TX200 at the world origin cannot reach the samples' plate:
+/// the refusal names the target, its configuration and the configurations
+/// that do reach it.
+#[test]
+fn tx200_at_the_origin_names_the_configurations_that_reach_the_plate() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let input = dir.path().join("milling.mod");
+    std::fs::copy(repo("samples/milling.mod"), &input).expect("copy sample");
+    let out = postproc()
+        .arg("compensate")
+        .arg(&input)
+        .args(["--machine", "staubli-tx200", "-o"])
+        .arg(dir.path().join("out.mod"))
+        .output()
+        .expect("runs");
+    assert_eq!(out.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("no joint solution with confdata [0,0,0,0] (reachable configurations: ["),
+        "{err}"
+    );
+    assert!(err.contains("milling.mod:43:"), "{err}");
+}
