@@ -192,7 +192,7 @@ pub fn set_measurement_frame(
             }
             t.push_str(
                 "# Pose of the measuring instrument in the machine's reference frame,\n\
-                 # identified by `postproc calibrate` from `# frame: instrument`\n\
+                 # identified by `postproc calibrate` or `diagnose` from `# frame: instrument`\n\
                  # observations (docs/frames.md). Not part of the model.\n",
             );
             t.push_str(&format!("measurement_frame: {value}\n"));

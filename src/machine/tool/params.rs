@@ -261,17 +261,21 @@ fn raw_axis(
         .ok_or_else(|| "the machine has no such axis".to_string())
 }
 
-/// Sets node `node` of a table column; a table without `reverse` gets
-/// its own copy of `forward` first, so that the other column keeps its
-/// values.
+/// Sets node `node` of a table column. A table without `reverse` has one
+/// curve for both directions: a forward edit changes it for both; a
+/// reverse edit first gives the table its own copy of `forward` as the
+/// reverse column, so that the forward one keeps its values.
 fn set_table(
     t: &mut RawTable,
     node: usize,
     forward: bool,
     v: f64,
 ) -> std::result::Result<(), String> {
-    let reverse = t.reverse.get_or_insert_with(|| t.forward.clone());
-    let col = if forward { &mut t.forward } else { reverse };
+    let col = if forward {
+        &mut t.forward
+    } else {
+        t.reverse.get_or_insert_with(|| t.forward.clone())
+    };
     *col.get_mut(node)
         .ok_or_else(|| "no such table node".to_string())? = v;
     Ok(())
@@ -361,6 +365,26 @@ thermal:
                 "forward: [0, 1.5, 3.0] }",
                 "forward: [0, 1.5, 3.0], reverse: [0, -2.25, 3.0] }",
             );
+        let f = MachineTool::from_yaml_str(&t, "t.yaml").expect("valid");
+        assert_eq!(model_text(&m), model_text(&f));
+    }
+
+    /// A table given by `forward` only is one curve for both directions:
+    /// a forward edit changes both and adds no reversal error.
+    #[test]
+    fn a_forward_edit_of_a_one_column_table_keeps_one_curve() {
+        let m = base()
+            .with_params(&[(
+                ToolParam::Component {
+                    axis: 0,
+                    error: 0,
+                    node: 1,
+                    forward: true,
+                },
+                2.0,
+            )])
+            .expect("valid");
+        let t = BASE.replace("forward: [0, 1.5, 3.0] }", "forward: [0, 2.0, 3.0] }");
         let f = MachineTool::from_yaml_str(&t, "t.yaml").expect("valid");
         assert_eq!(model_text(&m), model_text(&f));
     }
