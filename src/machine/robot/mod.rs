@@ -750,7 +750,9 @@ impl Robot {
 
     /// Like [`Robot::ik_conf`] without the limit check; with `turn_ref`, the
     /// turns of joints 1, 4, 6 are the ones nearest to it instead of the
-    /// confdata quadrants (used while iterating on a target).
+    /// confdata quadrants (used while iterating on a target). A robot
+    /// without a closed form only starts its solver at `turn_ref` and
+    /// keeps the quadrants and the limits (see `numeric_ik`).
     fn ik_conf_turns(
         &self,
         tcp_world: &Isometry3<f64>,

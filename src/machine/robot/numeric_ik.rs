@@ -14,8 +14,14 @@
 //!
 //! ## Seeds
 //! Tried in this order, the first accepted solution wins:
-//! 1. the caller's seed — the previous move's joints, or a `jointtarget`'s —
-//!    and its wrist-flipped twin (`q4 + 180°`, `−q5`, `q6 + 180°`);
+//! 1. the caller's reference, when given — the joints of the previous step
+//!    of the compensation iteration on the same target — and its
+//!    wrist-flipped twin (`q4 + 180°`, `−q5`, `q6 + 180°`). What the solver
+//!    reaches from there is accepted by a wider test: the target's `cfx`,
+//!    the joint limits, and joints 1, 4, 6 within half a turn of the middle
+//!    of their quadrants, so that an iteration may carry a joint across a
+//!    quadrant boundary (as the closed form's nearest turn does) but never
+//!    to another turn;
 //! 2. a fixed list derived from the target alone: joint 1 towards the wrist
 //!    centre (in front of axis 1, then behind it, the order set by the
 //!    `cfx` bit of the shoulder), joints 2 and 3 on a grid of ±0.3, ±1.0 and ±0.4, ±1.2 rad,
@@ -45,6 +51,13 @@ const SEEDS: usize = 2 * Q2_SEEDS_RAD.len() * Q3_SEEDS_RAD.len();
 /// Magnitude of the joint 5 seed, rad (away from the wrist singularity).
 const WRIST_SEED_RAD: f64 = 0.8;
 
+/// Distance of the wrist centre from axis 1 below which it counts as on the
+/// axis, mm: there joint 1 has no direction towards the wrist centre and
+/// its seed is 0. Any value well below the arm's dimensions does; a
+/// nanometre is far below them and far above the rounding of `atan2`'s
+/// arguments.
+const ON_AXIS_1_MM: f64 = 1e-9;
+
 /// What the seeds found for a refused target.
 enum Found {
     /// No seed converged to any solution.
@@ -56,12 +69,13 @@ enum Found {
 
 impl Robot {
     /// Nominal inverse kinematics of a TCP pose (world frame) in the
-    /// configuration `conf`, by the numeric solver (see the module
-    /// documentation), without the limit check of joints 1, 4, 6 beyond
-    /// their quadrants. With `turn_ref`, the solver starts there and the
-    /// solution keeps the turns it converges to (continuity with the
-    /// reference, used while iterating on a target); it must still have
-    /// the asked `cfx`.
+    /// configuration `conf` and within the joint limits, by the numeric
+    /// solver (see the module documentation). With `turn_ref` (the joints
+    /// of the previous step of an iteration on one target), the solver
+    /// starts there first; what it converges to is accepted when it has
+    /// the asked `cfx`, lies within the limits, and has joints 1, 4, 6 in
+    /// the turns the quadrants name (possibly past a quadrant boundary,
+    /// never a turn away); otherwise the seed list decides.
     pub(crate) fn ik_conf_numeric(
         &self,
         tcp_world: &Isometry3<f64>,
@@ -72,10 +86,11 @@ impl Robot {
         let params = self.params(Model::Nominal);
         if let Some(r) = turn_ref {
             for seed in [*r, wrist_flip(r)] {
-                if let Ok(q) = ik::solve_numeric(params, &flange, &seed) {
-                    if self.confdata(&q).cfx == conf.cfx {
-                        return Ok(q);
-                    }
+                let Ok(q) = ik::solve_numeric(params, &flange, &seed) else {
+                    continue;
+                };
+                if self.in_turns(&q, conf) {
+                    return Ok(q);
                 }
             }
         }
@@ -101,6 +116,20 @@ impl Robot {
                 available: self.reachable_configurations(&flange),
             },
         })
+    }
+
+    /// Whether `q` has the `cfx` of `conf`, lies within the joint limits,
+    /// and has joints 1, 4 and 6 in the turns that the quadrants `cf1`,
+    /// `cf4`, `cf6` name: within half a turn of the middle of their
+    /// quadrant. A joint may so lie past a quadrant boundary (an iteration
+    /// moving it across one, whose confdata is then written with the
+    /// joint's own quadrant), never a whole turn away.
+    fn in_turns(&self, q: &[f64; 6], conf: ConfData) -> bool {
+        self.confdata(q).cfx == conf.cfx
+            && [(0, conf.cf1), (3, conf.cf4), (5, conf.cf6)]
+                .iter()
+                .all(|&(i, c)| (q[i] - quadrant_middle(c)).abs() <= PI)
+            && self.check_limits(q).is_ok()
     }
 
     /// `q` moved by whole turns into the configuration `conf` and the joint
@@ -129,7 +158,7 @@ impl Robot {
     fn conf_seeds(&self, flange: &Isometry3<f64>, conf: ConfData) -> [[f64; 6]; SEEDS] {
         let d6 = self.params(Model::Nominal).joints[5].d_mm;
         let pw = flange.translation.vector - d6 * (flange.rotation * Vector3::z());
-        let toward = if pw.x.hypot(pw.y) < 1e-9 {
+        let toward = if pw.x.hypot(pw.y) < ON_AXIS_1_MM {
             0.0
         } else {
             pw.y.atan2(pw.x)
@@ -140,7 +169,6 @@ impl Robot {
         } else {
             [toward, toward + PI]
         };
-        let mid = |cf: i32| f64::from(cf) * FRAC_PI_2 + FRAC_PI_4;
         let q5 = if conf.cfx & 1 != 0 {
             -WRIST_SEED_RAD
         } else {
@@ -152,7 +180,14 @@ impl Robot {
                 Q2_SEEDS_RAD[(k % n) / Q3_SEEDS_RAD.len()],
                 Q3_SEEDS_RAD[k % Q3_SEEDS_RAD.len()],
             );
-            [q1s[k / n], q2, q3, mid(conf.cf4), q5, mid(conf.cf6)]
+            [
+                q1s[k / n],
+                q2,
+                q3,
+                quadrant_middle(conf.cf4),
+                q5,
+                quadrant_middle(conf.cf6),
+            ]
         })
     }
 
@@ -195,6 +230,11 @@ impl Robot {
     }
 }
 
+/// The middle of quadrant `cf` of a joint, rad.
+fn quadrant_middle(cf: i32) -> f64 {
+    f64::from(cf) * FRAC_PI_2 + FRAC_PI_4
+}
+
 /// The other wrist solution of the same flange pose for a spherical wrist.
 fn wrist_flip(q: &[f64; 6]) -> [f64; 6] {
     [q[0], q[1], q[2], q[3] + PI, -q[4], q[5] + PI]
@@ -208,6 +248,15 @@ mod tests {
     /// Joint agreement of two solutions of one configuration, rad (the
     /// solver's convergence, amplified by the arm's conditioning).
     const SAME_JOINTS_RAD: f64 = 1e-7;
+    /// Distance from a quadrant boundary of joints 1, 4, 6 below which a
+    /// random joint vector is skipped, in quarter turns (0.09°): far
+    /// enough that the solution's quadrant is the generating one's beyond
+    /// doubt ([`ik::QUADRANT_TOL_RAD`] is 100 times smaller).
+    const AWAY_FROM_BOUNDARY_QUARTERS: f64 = 1e-3;
+    /// Joints 3 and 5 closer to 0 than this are skipped, rad (the elbow
+    /// and wrist singularities, where the arm's conditioning spoils the
+    /// joint agreement).
+    const AWAY_FROM_SINGULAR_RAD: f64 = 0.05;
 
     fn tx200() -> Robot {
         let text = include_str!("../../../machines/staubli-tx200.yaml");
@@ -228,10 +277,13 @@ mod tests {
             let q: [f64; 6] = std::array::from_fn(|i| {
                 l[i][0] + 0.05 + (l[i][1] - l[i][0] - 0.1) * (next() + 1.0) / 2.0
             });
-            let near_boundary = [0, 3, 5]
-                .iter()
-                .any(|&i| (q[i] / FRAC_PI_2 - (q[i] / FRAC_PI_2).round()).abs() < 1e-3);
-            if q[4].abs() < 0.05 || q[2].abs() < 0.05 || near_boundary {
+            let near_boundary = [0, 3, 5].iter().any(|&i| {
+                (q[i] / FRAC_PI_2 - (q[i] / FRAC_PI_2).round()).abs() < AWAY_FROM_BOUNDARY_QUARTERS
+            });
+            if q[4].abs() < AWAY_FROM_SINGULAR_RAD
+                || q[2].abs() < AWAY_FROM_SINGULAR_RAD
+                || near_boundary
+            {
                 continue;
             }
             let pose = r.tcp_pose(Model::Nominal, &q);
@@ -240,7 +292,10 @@ mod tests {
                 .ik_conf(&pose, conf)
                 .expect("the generating solution exists");
             let (dp, dr) = pose_error(&pose, &r.tcp_pose(Model::Nominal, &got));
-            assert!(dp.norm() < 1e-6 && dr.norm() < 1e-9, "{dp} {dr}");
+            assert!(
+                dp.norm() < ik::IK_POS_TOL_MM && dr.norm() < ik::IK_ROT_TOL_RAD,
+                "{dp} {dr}"
+            );
             for i in 0..6 {
                 assert!((got[i] - q[i]).abs() < SAME_JOINTS_RAD, "{q:?} {got:?}");
             }
@@ -269,6 +324,27 @@ mod tests {
                 assert!(available.contains(&own.to_string()), "{available}");
             }
             e => panic!("expected a configuration mismatch, got {e:?}"),
+        }
+    }
+
+    /// With a reference one turn away on joint 6 (still within its
+    /// limits), the solver converges there, but that turn lies outside the
+    /// target's quadrant `cf6`: the solution is the one in the quadrant.
+    #[test]
+    fn tx200_reference_a_turn_off_keeps_the_quadrant() {
+        let r = tx200();
+        let q = [0.3, 0.4, 1.2, 0.5, 0.7, -2.0];
+        let pose = r.tcp_pose(Model::Nominal, &q);
+        let conf = r.confdata(&q);
+        let mut reference = q;
+        reference[5] += 2.0 * PI;
+        assert!(r.check_limits(&reference).is_ok(), "a reachable turn");
+        let got = r
+            .ik_conf_numeric(&pose, conf, Some(&reference))
+            .expect("the target's own solution exists");
+        assert_eq!(r.confdata(&got), conf, "{got:?}");
+        for i in 0..6 {
+            assert!((got[i] - q[i]).abs() < SAME_JOINTS_RAD, "{q:?} {got:?}");
         }
     }
 }
