@@ -661,7 +661,7 @@ fn plan_move<'m>(
             return Err(Error::Internal("move target not resolved".into()));
         };
         let pose = wobj * u.pose_obj;
-        match view.ik_conf_indexed(&pose, u.conf) {
+        match view.ik_conf_indexed_for_plan(&pose, u.conf) {
             Ok((q, k)) => (pose, Some(q), Some(k)),
             Err(_) => (pose, None, None),
         }

@@ -737,6 +737,24 @@ impl Robot {
         Ok((q, k))
     }
 
+    /// [`Robot::ik_conf_indexed`] for a move's plan, which only needs the
+    /// solution: a refusal by the numeric inverse does not list the
+    /// configurations that reach the target (hundreds of solves; the
+    /// refusal shown to the user comes from the compensation and lists
+    /// them).
+    pub(crate) fn ik_conf_indexed_for_plan(
+        &self,
+        tcp_world: &Isometry3<f64>,
+        conf: ConfData,
+    ) -> std::result::Result<([f64; 6], usize), RobotError> {
+        if self.d.closed_form.is_some() {
+            return self.ik_conf_indexed(tcp_world, conf);
+        }
+        let q = self.ik_conf_numeric_listing(tcp_world, conf, None, false)?;
+        self.check_limits(&q)?;
+        Ok((q, NUMERIC_BRANCH))
+    }
+
     /// Closed-form solution with confdata `conf`, turns of joints 1, 4, 6
     /// nearest to `reference` (no limit check).
     pub(crate) fn ik_conf_near(

@@ -58,6 +58,9 @@ const WRIST_SEED_RAD: f64 = 0.8;
 /// arguments.
 const ON_AXIS_1_MM: f64 = 1e-9;
 
+/// The configurations of a refusal that did not look for them.
+pub(crate) const UNLISTED: &str = "not listed";
+
 /// What the seeds found for a refused target.
 enum Found {
     /// No seed converged to any solution.
@@ -81,6 +84,20 @@ impl Robot {
         tcp_world: &Isometry3<f64>,
         conf: ConfData,
         turn_ref: Option<&[f64; 6]>,
+    ) -> Result<[f64; 6], RobotError> {
+        self.ik_conf_numeric_listing(tcp_world, conf, turn_ref, true)
+    }
+
+    /// [`Robot::ik_conf_numeric`]; with `list` false a refusal does not
+    /// list the configurations that reach the target (that list costs a
+    /// seed search per configuration: for a caller that only needs the
+    /// solution, such as a move's plan).
+    pub(crate) fn ik_conf_numeric_listing(
+        &self,
+        tcp_world: &Isometry3<f64>,
+        conf: ConfData,
+        turn_ref: Option<&[f64; 6]>,
+        list: bool,
     ) -> Result<[f64; 6], RobotError> {
         let flange = self.flange_for_tcp(tcp_world);
         let params = self.params(Model::Nominal);
@@ -113,7 +130,11 @@ impl Robot {
             ),
             Found::Elsewhere => RobotError::ConfMismatch {
                 conf,
-                available: self.reachable_configurations(&flange),
+                available: if list {
+                    self.reachable_configurations(&flange)
+                } else {
+                    UNLISTED.to_string()
+                },
             },
         })
     }
@@ -325,6 +346,32 @@ mod tests {
             }
             e => panic!("expected a configuration mismatch, got {e:?}"),
         }
+    }
+
+    /// A refusal for a plan does not search the configurations that
+    /// reach the target; the refusal shown to the user does.
+    #[test]
+    fn only_the_shown_refusal_lists_the_reaching_configurations() {
+        let r = tx200();
+        let q = [0.3, 0.4, 1.2, 0.5, 0.7, -2.0];
+        let pose = r.tcp_pose(Model::Nominal, &q);
+        let mut other = r.confdata(&q);
+        other.cfx ^= 1;
+        let listed = r
+            .ik_conf_numeric(&pose, other, None)
+            .expect_err("other cfx");
+        let plan = r
+            .ik_conf_indexed_for_plan(&pose, other)
+            .expect_err("other cfx");
+        let available = |e: &RobotError| match e {
+            RobotError::ConfMismatch { available, .. } => available.clone(),
+            e => panic!("{e}"),
+        };
+        assert_eq!(available(&plan), UNLISTED);
+        assert!(
+            available(&listed).contains(&r.confdata(&q).to_string()),
+            "{listed}"
+        );
     }
 
     /// With a reference one turn away on joint 6 (still within its
