@@ -1578,3 +1578,97 @@ fn a_backup_folder_is_one_program_and_only_changed_modules_are_written() {
     assert_eq!(o.status.code(), Some(2), "{err}");
     assert!(err.contains("CalibData.mod:6:29: target `pPlace`"), "{err}");
 }
+
+/// A backup task folder whose moves are in two modules.
+fn backup_with_service(dir: &std::path::Path) -> std::path::PathBuf {
+    let task = backup(dir);
+    write(
+        &task.join("PROGMOD"),
+        "Service.mod",
+        "MODULE Service\n  ! Service position over the pick place.\n  PROC service()\n    MoveJ Offs(pPick, 0, 0, 200), v500, z50, tGripper\\WObj:=wTable;\n    MoveL pPick, v100, fine, tGripper\\WObj:=wTable;\n  ENDPROC\nENDMODULE\n",
+    );
+    task
+}
+
+/// The CSV rows of a report (comment lines left out) as cells, the header
+/// first.
+fn csv_rows(text: &str) -> Vec<Vec<String>> {
+    text.lines()
+        .filter(|l| !l.starts_with('#'))
+        .map(|l| l.split(',').map(str::to_string).collect())
+        .collect()
+}
+
+/// Checks the rows of a program's report: one per move of every module,
+/// each naming a module file whose line holds that instruction.
+fn assert_rows_point_into_their_files(rows: &[Vec<String>], task: &std::path::Path) {
+    assert_eq!(rows[0][..3], ["file", "line", "motion"]);
+    let mut files = std::collections::BTreeSet::new();
+    for row in &rows[1..] {
+        let text = std::fs::read_to_string(&row[0]).expect("the row's file");
+        assert!(std::path::Path::new(&row[0]).starts_with(task), "{row:?}");
+        let line: usize = row[1].parse().expect("line");
+        let at = text
+            .lines()
+            .nth(line - 1)
+            .expect("line in file")
+            .trim_start();
+        assert!(at.starts_with(&format!("{} ", row[2])), "{row:?}: {at}");
+        files.insert(row[0].clone());
+    }
+    assert_eq!(files.len(), 2, "{files:?}");
+}
+
+#[test]
+fn the_report_of_a_program_has_a_row_per_move_of_every_module() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let task = backup_with_service(dir.path());
+    let m = repo("machines/abb-irb1600.yaml");
+    let o = postproc()
+        .args(["report", "--machine", m.to_str().unwrap()])
+        .args(["--effects", "kinematic", "--format", "csv"])
+        .arg(&task)
+        .output()
+        .expect("run");
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(0), "{err}");
+    let rows = csv_rows(&String::from_utf8(o.stdout).expect("utf-8"));
+    // Three moves in MainModule and two in Service, each module parsed
+    // on its own for its count.
+    let moves: usize = ["MainModule.mod", "Service.mod"]
+        .iter()
+        .map(|f| {
+            let text = std::fs::read_to_string(task.join("PROGMOD").join(f)).expect("read");
+            parse_module(&text, f).expect("parses").moves().count()
+        })
+        .sum();
+    assert_eq!(moves, 5);
+    assert_eq!(rows.len() - 1, moves, "{rows:?}");
+    assert_rows_point_into_their_files(&rows, &task);
+}
+
+#[test]
+fn compensate_of_a_program_writes_its_report() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let task = backup_with_service(dir.path());
+    let before = tree(&task);
+    let m = repo("machines/abb-irb1600.yaml");
+    let out = dir.path().join("out");
+    let report = dir.path().join("program.csv");
+    let o = postproc()
+        .args(["compensate", "--machine", m.to_str().unwrap()])
+        .args(["--effects", "kinematic", "--annotate", "none", "--out-dir"])
+        .arg(&out)
+        .arg("--report")
+        .arg(&report)
+        .arg(&task)
+        .output()
+        .expect("run");
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(0), "{err}");
+    assert!(err.contains("program of 4 modules → 2 written"), "{err}");
+    assert_eq!(tree(&task), before);
+    let rows = csv_rows(&std::fs::read_to_string(&report).expect("report"));
+    assert_eq!(rows.len() - 1, 5, "{rows:?}");
+    assert_rows_point_into_their_files(&rows, &task);
+}

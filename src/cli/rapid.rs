@@ -647,13 +647,8 @@ fn compensate_program(
             "-o names one file: a program of several modules is written beside its inputs or into --out-dir",
         ));
     }
-    if a.report.is_some() {
-        return Err(usage(
-            "--report: one module at a time (a program of several modules has no report yet)",
-        ));
-    }
     let opts = RapidOptions {
-        records: false,
+        records: a.report.is_some(),
         strict: a.program.strict,
         ..rapid_options(
             &robot,
@@ -673,11 +668,15 @@ fn compensate_program(
     let mut written = Vec::new();
     let mut total = RapidOutcome::default();
     let mut worst = (0.0, String::new());
+    let mut outcomes = Vec::with_capacity(members.len());
     for (i, m) in members.iter().enumerate() {
         super::machines::refuse_compensated(m.text.as_bytes(), &m.name, a.recompensate)?;
         let outcome = pool
             .install(|| compensate_member(&members, i, &robot, &opts))
             .map_err(|e| file_columns(e, &m.text, m.charset))?;
+        outcomes.push(outcome);
+    }
+    for ((i, m), outcome) in members.iter().enumerate().zip(outcomes.iter()) {
         total.moves += outcome.moves;
         total.added += outcome.added;
         total.as_written.extend(outcome.as_written.iter().cloned());
@@ -693,6 +692,32 @@ fn compensate_program(
             written.push((out, outcome, i));
         }
     }
+    // The report is written first and put in place after the modules.
+    let report = match a.report.as_deref() {
+        Some(path) => {
+            let paths: Vec<PathBuf> = members.iter().map(|m| m.path.clone()).collect();
+            let outs: Vec<&Path> = written.iter().map(|(p, _, _)| p.as_path()).collect();
+            for out in outs {
+                super::output::check_report_path(Some(path), &paths, out)?;
+            }
+            super::output::check_report_path(Some(path), &paths, Path::new("-"))?;
+            let format = a
+                .report_format
+                .unwrap_or_else(|| super::Format::from_path(path));
+            let mut rep = Staged::open(path)?;
+            let name = inputs[0].display().to_string();
+            write_program_report(
+                rep.writer(),
+                &members,
+                &outcomes,
+                &name,
+                format,
+                &provenance,
+            )?;
+            Some(rep.finish()?)
+        }
+        None => None,
+    };
     for (out, outcome, i) in &written {
         let m = &members[*i];
         if a.out_dir.is_some()
@@ -701,6 +726,9 @@ fn compensate_program(
             std::fs::create_dir_all(parent).map_err(|e| Error::io(parent, e))?;
         }
         write_outcome(out, outcome, &m.name, None, &provenance, m.charset)?;
+    }
+    if let Some(rep) = report {
+        rep.commit()?;
     }
     if !quiet {
         let names: Vec<String> = written
@@ -955,6 +983,34 @@ pub(super) fn write_report(
     })
 }
 
+/// Writes the deviation report of a program of several modules: the rows
+/// of every module, in program order, each naming its module file
+/// ([`crate::emit::report::Layout::with_files`]); `name` names the
+/// program.
+fn write_program_report(
+    out: &mut dyn Write,
+    members: &[crate::program::rapid::program::Member],
+    outcomes: &[RapidOutcome],
+    name: &str,
+    format: super::Format,
+    provenance: &Provenance,
+) -> Result<()> {
+    use crate::emit::report::{Layout, ReportWriter, Totals};
+    let layout = Layout::rapid().with_files();
+    let mut rw =
+        ReportWriter::with_layout(out, layout, format, name)?.with_provenance(Some(provenance));
+    let mut moves = 0;
+    for (m, outcome) in members.iter().zip(outcomes) {
+        rw.file(&m.name, Some(&m.path));
+        write_records(&mut rw, &outcome.records)?;
+        moves += outcome.moves;
+    }
+    rw.finish(Totals {
+        blocks: moves,
+        moves,
+    })
+}
+
 /// `postproc report` of a RAPID module (dry run against a robot).
 pub fn report(a: &ReportArgs, robot: Option<Result<(Robot, Loaded)>>) -> Result<i32> {
     let (robot, loaded) = super::config::needed(robot, "report")??;
@@ -968,6 +1024,31 @@ pub fn report(a: &ReportArgs, robot: Option<Result<(Robot, Loaded)>>) -> Result<
         &out,
         &super::gcode::input_files(&a.program, &loaded, &a.effects),
     )?;
+    let inputs = program_inputs(&a.program);
+    if is_program(&inputs) {
+        let provenance = super::machines::provenance(
+            &loaded,
+            super::machines::robot_effects(&opts.effects),
+            None,
+            false,
+        );
+        let members = load(&module_files(&inputs)?)?;
+        let paths: Vec<PathBuf> = members.iter().map(|m| m.path.clone()).collect();
+        super::output::refuse_overwrite(&out, &paths)?;
+        let pool = super::gcode::thread_pool(a.effects.threads)?;
+        let mut outcomes = Vec::with_capacity(members.len());
+        for (i, m) in members.iter().enumerate() {
+            let outcome = pool
+                .install(|| compensate_member(&members, i, &robot, &opts))
+                .map_err(|e| file_columns(e, &m.text, m.charset))?;
+            outcomes.push(outcome);
+        }
+        let name = inputs[0].display().to_string();
+        super::output::emit_to(&out, |w| {
+            write_program_report(w, &members, &outcomes, &name, a.format, &provenance)
+        })?;
+        return Ok(0);
+    }
     let source = Source::new(
         &a.program.file,
         a.program.rapid_window_lines,
