@@ -1009,9 +1009,10 @@ fn a_backup_module_with_every_construct_comes_back_as_written() {
     );
 }
 
-/// `batch` over a controller's task folder picks up system modules
-/// (`.sys`) with the program modules, and writes an ISO-8859-1 module back
-/// in ISO-8859-1, byte for byte with nothing to compensate.
+/// `batch` takes system modules (`.sys`) with the program modules, and
+/// writes an ISO-8859-1 module back in ISO-8859-1, byte for byte with
+/// nothing to compensate; the task folder itself is one program, of which
+/// no module changes, so none is written.
 #[test]
 fn batch_takes_system_modules_and_latin1_modules() {
     let dir = tempfile::tempdir().expect("tempdir");
@@ -1027,12 +1028,26 @@ fn batch_takes_system_modules_and_latin1_modules() {
         .args(["batch", "--machine", "abb-irb1600", "--effects", "none"])
         .args(["--annotate", "none", "--out-dir"])
         .arg(&out)
-        .arg(&input)
+        .arg(input.join("SYSMOD/user.sys"))
+        .arg(input.join("PROGMOD/Palette.mod"))
         .assert()
         .success();
     let written = |rel: &str| without_header(&std::fs::read(out.join(rel)).expect(rel));
-    assert!(written("SYSMOD/user.sys") == user, "user.sys");
-    assert!(written("PROGMOD/Palette.mod") == palette, "Palette.mod");
+    assert!(written("user.sys") == user, "user.sys");
+    assert!(written("Palette.mod") == palette, "Palette.mod");
+    let whole = dir.path().join("whole");
+    postproc()
+        .args(["batch", "--machine", "abb-irb1600", "--effects", "none"])
+        .args(["--annotate", "none", "--out-dir"])
+        .arg(&whole)
+        .arg(&input)
+        .assert()
+        .success();
+    assert!(!whole.join("TASK1").exists(), "no module changed");
+    let summary: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(whole.join("batch-summary.json")).expect("summary"))
+            .expect("JSON");
+    assert_eq!(summary["results"].as_array().map(Vec::len), Some(1));
 }
 
 /// A target shared by a compensated routine and an unfinished one (an

@@ -657,7 +657,6 @@ fn compensate_program(
             a.decimals,
         )?
     };
-    let members = load(&module_files(inputs)?)?;
     let pool = super::gcode::thread_pool(a.effects.threads)?;
     let provenance = super::machines::provenance(
         &loaded,
@@ -665,76 +664,22 @@ fn compensate_program(
         None,
         a.annotate == Annotate::Comment,
     );
-    let mut written = Vec::new();
-    let mut total = RapidOutcome::default();
-    let mut worst = (0.0, String::new());
-    let mut outcomes = Vec::with_capacity(members.len());
-    for (i, m) in members.iter().enumerate() {
-        super::machines::refuse_compensated(m.text.as_bytes(), &m.name, a.recompensate)?;
-        let outcome = pool
-            .install(|| compensate_member(&members, i, &robot, &opts))
-            .map_err(|e| file_columns(e, &m.text, m.charset))?;
-        outcomes.push(outcome);
-    }
-    for ((i, m), outcome) in members.iter().enumerate().zip(outcomes.iter()) {
-        total.moves += outcome.moves;
-        total.added += outcome.added;
-        total.as_written.extend(outcome.as_written.iter().cloned());
-        if outcome.max_deviation_mm > worst.0 || worst.1.is_empty() && outcome.moves > 0 {
-            worst = (
-                outcome.max_deviation_mm,
-                format!("{}:{}", m.name, outcome.max_deviation_line),
-            );
-        }
-        if outcome.text != m.text {
-            let out = program_output(&m.path, inputs, a.out_dir.as_deref());
-            super::output::refuse_overwrite(&out, &[&m.path])?;
-            written.push((out, outcome, i));
-        }
-    }
-    // The report is written first and put in place after the modules.
-    let report = match a.report.as_deref() {
-        Some(path) => {
-            let paths: Vec<PathBuf> = members.iter().map(|m| m.path.clone()).collect();
-            let outs: Vec<&Path> = written.iter().map(|(p, _, _)| p.as_path()).collect();
-            for out in outs {
-                super::output::check_report_path(Some(path), &paths, out)?;
-            }
-            super::output::check_report_path(Some(path), &paths, Path::new("-"))?;
-            let format = a
-                .report_format
-                .unwrap_or_else(|| super::Format::from_path(path));
-            let mut rep = Staged::open(path)?;
-            let name = inputs[0].display().to_string();
-            write_program_report(
-                rep.writer(),
-                &members,
-                &outcomes,
-                &name,
-                format,
-                &provenance,
-            )?;
-            Some(rep.finish()?)
-        }
-        None => None,
+    let report = a.report.as_deref().map(|path| {
+        let format = a
+            .report_format
+            .unwrap_or_else(|| super::Format::from_path(path));
+        (path, format)
+    });
+    let run = ProgramRun {
+        robot: &robot,
+        opts: &opts,
+        provenance: &provenance,
+        recompensate: a.recompensate,
     };
-    for (out, outcome, i) in &written {
-        let m = &members[*i];
-        if a.out_dir.is_some()
-            && let Some(parent) = out.parent()
-        {
-            std::fs::create_dir_all(parent).map_err(|e| Error::io(parent, e))?;
-        }
-        write_outcome(out, outcome, &m.name, None, &provenance, m.charset)?;
-    }
-    if let Some(rep) = report {
-        rep.commit()?;
-    }
+    let (members, written, total, worst) =
+        pool.install(|| compensate_program_to(&run, inputs, a.out_dir.as_deref(), report))?;
     if !quiet {
-        let names: Vec<String> = written
-            .iter()
-            .map(|(p, _, _)| p.display().to_string())
-            .collect();
+        let names: Vec<String> = written.iter().map(|p| p.display().to_string()).collect();
         eprintln!(
             "program of {} modules → {} written{}: {} compensated{}, {} added; largest predicted deviation {:.4} mm ({})",
             members.len(),
@@ -752,6 +697,102 @@ fn compensate_program(
         );
     }
     Ok(0)
+}
+
+/// What a program's run shares: the robot, options, provenance, and
+/// whether modules compensated before are taken.
+pub(super) struct ProgramRun<'r> {
+    pub(super) robot: &'r Robot,
+    pub(super) opts: &'r RapidOptions,
+    pub(super) provenance: &'r Provenance,
+    pub(super) recompensate: bool,
+}
+
+/// What a program's run did: its modules, the files written, the totals
+/// and the largest predicted deviation with its `FILE:LINE`.
+pub(super) type ProgramDone = (
+    Vec<crate::program::rapid::program::Member>,
+    Vec<PathBuf>,
+    RapidOutcome,
+    (f64, String),
+);
+
+/// Compensates the program `inputs` name: each module with the others in
+/// scope; those that change are written (beside their inputs, or into
+/// `out_dir`), with the report of every module into `report`, once every
+/// module is compensated.
+pub(super) fn compensate_program_to(
+    run: &ProgramRun,
+    inputs: &[PathBuf],
+    out_dir: Option<&Path>,
+    report: Option<(&Path, super::Format)>,
+) -> Result<ProgramDone> {
+    let members = load(&module_files(inputs)?)?;
+    let mut written = Vec::new();
+    let mut total = RapidOutcome::default();
+    let mut worst = (0.0, String::new());
+    let mut outcomes = Vec::with_capacity(members.len());
+    for (i, m) in members.iter().enumerate() {
+        super::machines::refuse_compensated(m.text.as_bytes(), &m.name, run.recompensate)?;
+        let outcome = compensate_member(&members, i, run.robot, run.opts)
+            .map_err(|e| file_columns(e, &m.text, m.charset))?;
+        outcomes.push(outcome);
+    }
+    for ((i, m), outcome) in members.iter().enumerate().zip(outcomes.iter()) {
+        total.moves += outcome.moves;
+        total.added += outcome.added;
+        total.as_written.extend(outcome.as_written.iter().cloned());
+        if outcome.max_deviation_mm > worst.0 || worst.1.is_empty() && outcome.moves > 0 {
+            worst = (
+                outcome.max_deviation_mm,
+                format!("{}:{}", m.name, outcome.max_deviation_line),
+            );
+        }
+        if outcome.text != m.text {
+            let out = program_output(&m.path, inputs, out_dir);
+            super::output::refuse_overwrite(&out, &[&m.path])?;
+            written.push((out, outcome, i));
+        }
+    }
+    // The report is written first and put in place after the modules.
+    let staged = match report {
+        Some((path, format)) => {
+            let paths: Vec<PathBuf> = members.iter().map(|m| m.path.clone()).collect();
+            for (out, _, _) in &written {
+                super::output::check_report_path(Some(path), &paths, out)?;
+            }
+            super::output::check_report_path(Some(path), &paths, Path::new("-"))?;
+            let mut rep = Staged::open(path)?;
+            let name = inputs
+                .first()
+                .map(|p| p.display().to_string())
+                .unwrap_or_default();
+            write_program_report(
+                rep.writer(),
+                &members,
+                &outcomes,
+                &name,
+                format,
+                run.provenance,
+            )?;
+            Some(rep.finish()?)
+        }
+        None => None,
+    };
+    for (out, outcome, i) in &written {
+        let m = &members[*i];
+        if out_dir.is_some()
+            && let Some(parent) = out.parent()
+        {
+            std::fs::create_dir_all(parent).map_err(|e| Error::io(parent, e))?;
+        }
+        write_outcome(out, outcome, &m.name, None, run.provenance, m.charset)?;
+    }
+    if let Some(rep) = staged {
+        rep.commit()?;
+    }
+    let written = written.into_iter().map(|(p, _, _)| p).collect();
+    Ok((members, written, total, worst))
 }
 
 /// Where a changed module of a program goes: beside its input with the
