@@ -1565,13 +1565,19 @@ fn a_backup_folder_is_one_program_and_only_changed_modules_are_written() {
     assert!(
         said.contains("MainModule.mod: module MainModule, 0 declarations, 1 routines, 3 moves")
     );
-    // A strict check of a program resolves it against a robot.
+    // A strict check of a program resolves its names across the modules,
+    // with a robot or without one.
     let o = postproc()
         .args(["check", "--strict"])
         .arg(&pgf)
         .output()
         .expect("run");
-    assert_eq!(o.status.code(), Some(2));
+    assert_eq!(
+        o.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
     let o = postproc()
         .args(["check", "--strict", "--machine", m.to_str().unwrap()])
         .arg(&pgf)
@@ -1686,4 +1692,36 @@ fn compensate_of_a_program_writes_its_report() {
     let rows = csv_rows(&std::fs::read_to_string(&report).expect("report"));
     assert_eq!(rows.len() - 1, 5, "{rows:?}");
     assert_rows_point_into_their_files(&rows, &task);
+}
+
+/// `check --strict` of a program needs no robot: names resolve across the
+/// modules, and a move left as written (a target reassigned in a loop of
+/// the sample) is refused, naming its module file and line.
+#[test]
+fn a_strict_check_of_a_program_without_a_machine_names_a_move_left_as_written() {
+    let task = repo("samples/cell-backup/RAPID/TASK1");
+    let o = postproc()
+        .args(["check", "--strict"])
+        .arg(&task)
+        .output()
+        .expect("run");
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    let main = task.join("PROGMOD/MainModule.mod");
+    let text = std::fs::read_to_string(&main).expect("main");
+    // The first move whose target is reassigned in the loop.
+    let line = text
+        .lines()
+        .position(|l| l.trim_start().starts_with("MoveJ Offs(pStack"))
+        .expect("the move")
+        + 1;
+    let at = format!("{}:{line}:", main.display());
+    assert!(err.contains(&at), "{at} in {err}");
+    assert!(
+        err.contains("left as written (target reassigned in a loop)"),
+        "{err}"
+    );
+    // Without --strict the same check passes.
+    let o = postproc().arg("check").arg(&task).output().expect("run");
+    assert_eq!(o.status.code(), Some(0));
 }

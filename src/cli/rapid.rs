@@ -13,7 +13,7 @@ use crate::emit::rapid::Format;
 use crate::error::{Error, Result};
 use crate::machine::ThermalStart;
 use crate::machine::robot::{Effects, Robot};
-use crate::pipeline::rapid::program::compensate_member;
+use crate::pipeline::rapid::program::{compensate_member, left_as_written_member};
 use crate::pipeline::rapid::{RapidOptions, compensate_module, compensate_parsed, stream};
 use crate::program::charset::{Charset, Latin1Writer, file_columns};
 use crate::program::rapid::program::{is_program, load, module_files};
@@ -602,21 +602,22 @@ fn check_program(
     inputs: &[PathBuf],
 ) -> Result<i32> {
     let members = load(&module_files(inputs)?)?;
-    let robot = match robot {
-        Some(r) => Some(r?.0),
-        None if a.program.strict => {
-            return Err(usage(
-                "check --strict of a program of several modules needs --machine",
-            ));
-        }
-        None => None,
-    };
+    let robot = robot.map(|r| r.map(|(robot, _)| robot)).transpose()?;
     let opts = check_options(a.program.strict);
     let mut out = std::io::stdout().lock();
     for (i, m) in members.iter().enumerate() {
-        if let Some(robot) = &robot {
-            compensate_member(&members, i, robot, &opts)
-                .map_err(|e| file_columns(e, &m.text, m.charset))?;
+        let in_file = |e| file_columns(e, &m.text, m.charset);
+        match &robot {
+            Some(robot) => {
+                compensate_member(&members, i, robot, &opts).map_err(in_file)?;
+            }
+            // Names resolve across the modules without a robot.
+            None if a.program.strict => {
+                let left = left_as_written_member(&members, i).map_err(in_file)?;
+                crate::pipeline::rapid::refuse_left_as_written(&left, &m.name, &opts)
+                    .map_err(in_file)?;
+            }
+            None => {}
         }
         writeln!(
             out,
