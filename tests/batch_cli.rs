@@ -496,3 +496,66 @@ fn batch_flags_empty_and_compensated_programs_and_lists_each_file_once() {
     ]);
     assert_eq!(code, 0, "{err}");
 }
+
+/// A controller-backup task folder given to `batch` is one program: its
+/// changed modules are written into the output folder under the task's
+/// name, the others not at all, with one summary entry and one report of
+/// every module's moves.
+#[test]
+fn batch_of_a_task_folder_is_one_program() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let out = dir.path().join("out");
+    let task = repo("samples/cell-backup/RAPID/TASK1");
+    let m = repo("machines/abb-irb1600.yaml");
+    let (code, _, err) = run_batch(&[
+        "batch",
+        "--machine",
+        m.to_str().unwrap(),
+        "--effects",
+        "kinematic",
+        "--annotate",
+        "none",
+        "--report-format",
+        "csv",
+        "--out-dir",
+        out.to_str().unwrap(),
+        task.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "{err}");
+    let summary = summary_of(&out);
+    let files = summary["results"].as_array().expect("results");
+    assert_eq!(files.len(), 1, "{summary}");
+    let entry = &files[0];
+    assert_eq!(entry["input"].as_str(), Some(task.to_str().unwrap()));
+    assert_eq!(entry["status"].as_str(), Some("ok"), "{entry}");
+    // Only the main module holds moves; the calibration data and the
+    // system module are not written.
+    let written: Vec<PathBuf> = tree(&out).into_iter().map(|(p, _)| p).collect();
+    let main = out.join("TASK1/PROGMOD/MainModule.mod");
+    let report = out.join("TASK1.report.csv");
+    assert_eq!(
+        written,
+        [
+            PathBuf::from("TASK1/PROGMOD/MainModule.mod"),
+            PathBuf::from("TASK1.report.csv"),
+            PathBuf::from("batch-summary.json"),
+        ],
+        "{written:?}"
+    );
+    // One row per move compensated, each in the main module.
+    let rows: Vec<String> = std::fs::read_to_string(&report)
+        .expect("report")
+        .lines()
+        .filter(|l| !l.starts_with('#'))
+        .skip(1)
+        .map(str::to_string)
+        .collect();
+    assert_eq!(Some(rows.len() as u64), entry["moves"].as_u64(), "{rows:?}");
+    assert!(!rows.is_empty());
+    for row in &rows {
+        assert!(row.contains("PROGMOD/MainModule.mod,"), "{row}");
+    }
+    // The written module is a RAPID module of the same name.
+    let text = std::fs::read_to_string(&main).expect("main");
+    assert!(text.contains("MODULE MainModule"), "{text}");
+}

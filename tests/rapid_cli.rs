@@ -1009,9 +1009,10 @@ fn a_backup_module_with_every_construct_comes_back_as_written() {
     );
 }
 
-/// `batch` over a controller's task folder picks up system modules
-/// (`.sys`) with the program modules, and writes an ISO-8859-1 module back
-/// in ISO-8859-1, byte for byte with nothing to compensate.
+/// `batch` takes system modules (`.sys`) with the program modules, and
+/// writes an ISO-8859-1 module back in ISO-8859-1, byte for byte with
+/// nothing to compensate; the task folder itself is one program, of which
+/// no module changes, so none is written.
 #[test]
 fn batch_takes_system_modules_and_latin1_modules() {
     let dir = tempfile::tempdir().expect("tempdir");
@@ -1027,12 +1028,26 @@ fn batch_takes_system_modules_and_latin1_modules() {
         .args(["batch", "--machine", "abb-irb1600", "--effects", "none"])
         .args(["--annotate", "none", "--out-dir"])
         .arg(&out)
-        .arg(&input)
+        .arg(input.join("SYSMOD/user.sys"))
+        .arg(input.join("PROGMOD/Palette.mod"))
         .assert()
         .success();
     let written = |rel: &str| without_header(&std::fs::read(out.join(rel)).expect(rel));
-    assert!(written("SYSMOD/user.sys") == user, "user.sys");
-    assert!(written("PROGMOD/Palette.mod") == palette, "Palette.mod");
+    assert!(written("user.sys") == user, "user.sys");
+    assert!(written("Palette.mod") == palette, "Palette.mod");
+    let whole = dir.path().join("whole");
+    postproc()
+        .args(["batch", "--machine", "abb-irb1600", "--effects", "none"])
+        .args(["--annotate", "none", "--out-dir"])
+        .arg(&whole)
+        .arg(&input)
+        .assert()
+        .success();
+    assert!(!whole.join("TASK1").exists(), "no module changed");
+    let summary: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(whole.join("batch-summary.json")).expect("summary"))
+            .expect("JSON");
+    assert_eq!(summary["results"].as_array().map(Vec::len), Some(1));
 }
 
 /// A target shared by a compensated routine and an unfinished one (an
@@ -1550,13 +1565,19 @@ fn a_backup_folder_is_one_program_and_only_changed_modules_are_written() {
     assert!(
         said.contains("MainModule.mod: module MainModule, 0 declarations, 1 routines, 3 moves")
     );
-    // A strict check of a program resolves it against a robot.
+    // A strict check of a program resolves its names across the modules,
+    // with a robot or without one.
     let o = postproc()
         .args(["check", "--strict"])
         .arg(&pgf)
         .output()
         .expect("run");
-    assert_eq!(o.status.code(), Some(2));
+    assert_eq!(
+        o.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
     let o = postproc()
         .args(["check", "--strict", "--machine", m.to_str().unwrap()])
         .arg(&pgf)
@@ -1577,4 +1598,130 @@ fn a_backup_folder_is_one_program_and_only_changed_modules_are_written() {
     let err = String::from_utf8_lossy(&o.stderr);
     assert_eq!(o.status.code(), Some(2), "{err}");
     assert!(err.contains("CalibData.mod:6:29: target `pPlace`"), "{err}");
+}
+
+/// A backup task folder whose moves are in two modules.
+fn backup_with_service(dir: &std::path::Path) -> std::path::PathBuf {
+    let task = backup(dir);
+    write(
+        &task.join("PROGMOD"),
+        "Service.mod",
+        "MODULE Service\n  ! Service position over the pick place.\n  PROC service()\n    MoveJ Offs(pPick, 0, 0, 200), v500, z50, tGripper\\WObj:=wTable;\n    MoveL pPick, v100, fine, tGripper\\WObj:=wTable;\n  ENDPROC\nENDMODULE\n",
+    );
+    task
+}
+
+/// The CSV rows of a report (comment lines left out) as cells, the header
+/// first.
+fn csv_rows(text: &str) -> Vec<Vec<String>> {
+    text.lines()
+        .filter(|l| !l.starts_with('#'))
+        .map(|l| l.split(',').map(str::to_string).collect())
+        .collect()
+}
+
+/// Checks the rows of a program's report: one per move of every module,
+/// each naming a module file whose line holds that instruction.
+fn assert_rows_point_into_their_files(rows: &[Vec<String>], task: &std::path::Path) {
+    assert_eq!(rows[0][..3], ["file", "line", "motion"]);
+    let mut files = std::collections::BTreeSet::new();
+    for row in &rows[1..] {
+        let text = std::fs::read_to_string(&row[0]).expect("the row's file");
+        assert!(std::path::Path::new(&row[0]).starts_with(task), "{row:?}");
+        let line: usize = row[1].parse().expect("line");
+        let at = text
+            .lines()
+            .nth(line - 1)
+            .expect("line in file")
+            .trim_start();
+        assert!(at.starts_with(&format!("{} ", row[2])), "{row:?}: {at}");
+        files.insert(row[0].clone());
+    }
+    assert_eq!(files.len(), 2, "{files:?}");
+}
+
+#[test]
+fn the_report_of_a_program_has_a_row_per_move_of_every_module() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let task = backup_with_service(dir.path());
+    let m = repo("machines/abb-irb1600.yaml");
+    let o = postproc()
+        .args(["report", "--machine", m.to_str().unwrap()])
+        .args(["--effects", "kinematic", "--format", "csv"])
+        .arg(&task)
+        .output()
+        .expect("run");
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(0), "{err}");
+    let rows = csv_rows(&String::from_utf8(o.stdout).expect("utf-8"));
+    // Three moves in MainModule and two in Service, each module parsed
+    // on its own for its count.
+    let moves: usize = ["MainModule.mod", "Service.mod"]
+        .iter()
+        .map(|f| {
+            let text = std::fs::read_to_string(task.join("PROGMOD").join(f)).expect("read");
+            parse_module(&text, f).expect("parses").moves().count()
+        })
+        .sum();
+    assert_eq!(moves, 5);
+    assert_eq!(rows.len() - 1, moves, "{rows:?}");
+    assert_rows_point_into_their_files(&rows, &task);
+}
+
+#[test]
+fn compensate_of_a_program_writes_its_report() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let task = backup_with_service(dir.path());
+    let before = tree(&task);
+    let m = repo("machines/abb-irb1600.yaml");
+    let out = dir.path().join("out");
+    let report = dir.path().join("program.csv");
+    let o = postproc()
+        .args(["compensate", "--machine", m.to_str().unwrap()])
+        .args(["--effects", "kinematic", "--annotate", "none", "--out-dir"])
+        .arg(&out)
+        .arg("--report")
+        .arg(&report)
+        .arg(&task)
+        .output()
+        .expect("run");
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(0), "{err}");
+    assert!(err.contains("program of 4 modules → 2 written"), "{err}");
+    assert_eq!(tree(&task), before);
+    let rows = csv_rows(&std::fs::read_to_string(&report).expect("report"));
+    assert_eq!(rows.len() - 1, 5, "{rows:?}");
+    assert_rows_point_into_their_files(&rows, &task);
+}
+
+/// `check --strict` of a program needs no robot: names resolve across the
+/// modules, and a move left as written (a target reassigned in a loop of
+/// the sample) is refused, naming its module file and line.
+#[test]
+fn a_strict_check_of_a_program_without_a_machine_names_a_move_left_as_written() {
+    let task = repo("samples/cell-backup/RAPID/TASK1");
+    let o = postproc()
+        .args(["check", "--strict"])
+        .arg(&task)
+        .output()
+        .expect("run");
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    let main = task.join("PROGMOD/MainModule.mod");
+    let text = std::fs::read_to_string(&main).expect("main");
+    // The first move whose target is reassigned in the loop.
+    let line = text
+        .lines()
+        .position(|l| l.trim_start().starts_with("MoveJ Offs(pStack"))
+        .expect("the move")
+        + 1;
+    let at = format!("{}:{line}:", main.display());
+    assert!(err.contains(&at), "{at} in {err}");
+    assert!(
+        err.contains("left as written (target reassigned in a loop)"),
+        "{err}"
+    );
+    // Without --strict the same check passes.
+    let o = postproc().arg("check").arg(&task).output().expect("run");
+    assert_eq!(o.status.code(), Some(0));
 }

@@ -805,3 +805,40 @@ fn the_report_schema_knows_every_motion_instruction() {
         assert!(motions.contains(&m.name), "{} not in the schema", m.name);
     }
 }
+
+/// The JSON report of a program of several modules (the controller-backup
+/// sample) validates, and its rows, worst blocks and maxima name their
+/// module file.
+#[test]
+fn a_program_report_in_json_names_the_module_of_every_line() {
+    let o = postproc()
+        .args(["report", "--machine"])
+        .arg(repo("machines/abb-irb1600.yaml"))
+        .args(["--effects", "kinematic", "--format", "json"])
+        .arg(repo("samples/cell-backup/RAPID/TASK1"))
+        .output()
+        .expect("run");
+    assert_eq!(
+        o.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    let v = validate(&String::from_utf8(o.stdout).expect("utf-8"));
+    let rows = v["rows"].as_array().expect("rows");
+    assert!(!rows.is_empty());
+    for row in rows {
+        let file = row["file"].as_str().expect("file");
+        assert!(file.ends_with(".mod"), "{row}");
+    }
+    let cutting = &v["summary"]["cutting"];
+    let max_file = cutting["max_file"].as_str().expect("max_file");
+    let first = &cutting["worst"][0];
+    assert_eq!(first["file"].as_str(), Some(max_file));
+    assert_eq!(first["line"], cutting["max_line"]);
+    // The quoted source is the text of that line of that file.
+    let text = std::fs::read_to_string(max_file).expect("module");
+    let line = first["line"].as_u64().expect("line") as usize;
+    let at = text.lines().nth(line - 1).expect("line").trim();
+    assert_eq!(first["source"].as_str(), Some(at));
+}

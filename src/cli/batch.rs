@@ -51,6 +51,8 @@ struct Item {
     input: PathBuf,
     rel: PathBuf,
     problem: Option<String>,
+    /// A RAPID program of several modules (a task folder, a `.pgf`).
+    program: bool,
 }
 
 /// Programs under a folder, recursively, in name order; hidden entries,
@@ -77,6 +79,7 @@ fn walk(
                 input: dir.to_path_buf(),
                 rel: dir.to_path_buf(),
                 problem: Some(format!("{}: {e}", dir.display())),
+                program: false,
             });
             return;
         }
@@ -113,6 +116,7 @@ fn walk(
                 input: path,
                 rel,
                 problem: None,
+                program: false,
             });
         }
     }
@@ -130,12 +134,23 @@ struct Skipped {
 /// however it is reached; an input that does not exist, or two programs
 /// with one output name, become failures. Also gives the entries of the
 /// folders that are skipped.
-fn collect(inputs: &[PathBuf], out_dir: &Path) -> (Vec<Item>, Vec<Skipped>) {
+fn collect(inputs: &[PathBuf], out_dir: &Path, robot: bool) -> (Vec<Item>, Vec<Skipped>) {
     let skip = out_dir.canonicalize().ok();
     let mut items = Vec::new();
     let mut skipped = Vec::new();
     for input in inputs {
-        if input.is_dir() {
+        if robot && is_rapid_program(input) {
+            let rel = match input.is_dir() {
+                true => input.file_name().map(PathBuf::from),
+                false => input.file_stem().map(PathBuf::from),
+            };
+            items.push(Item {
+                input: input.clone(),
+                rel: rel.unwrap_or_else(|| PathBuf::from("program")),
+                problem: None,
+                program: true,
+            });
+        } else if input.is_dir() {
             // Folders are followed once per input (links may lead back).
             let mut seen = BTreeSet::new();
             walk(
@@ -160,6 +175,7 @@ fn collect(inputs: &[PathBuf], out_dir: &Path) -> (Vec<Item>, Vec<Skipped>) {
                 input: input.clone(),
                 rel,
                 problem,
+                program: false,
             });
         }
     }
@@ -194,6 +210,24 @@ fn collect(inputs: &[PathBuf], out_dir: &Path) -> (Vec<Item>, Vec<Skipped>) {
     skipped.sort();
     skipped.dedup();
     (items, skipped)
+}
+
+/// True when `input` is a RAPID program of several modules for a robot
+/// batch: a `.pgf` program file, or a task folder (one with a `PROGMOD` or
+/// `SYSMOD` sub-folder, as a controller backup has).
+fn is_rapid_program(input: &Path) -> bool {
+    if crate::program::rapid::program::is_pgf(input) {
+        return input.is_file();
+    }
+    ["PROGMOD", "SYSMOD"].iter().any(|sub| {
+        std::fs::read_dir(input).is_ok_and(|mut r| {
+            r.any(|e| {
+                e.is_ok_and(|e| {
+                    e.path().is_dir() && e.file_name().to_string_lossy().eq_ignore_ascii_case(sub)
+                })
+            })
+        })
+    })
 }
 
 /// Result of one program, as written to `batch-summary.json`.
@@ -285,7 +319,8 @@ struct Done {
     blocks: usize,
     moves: usize,
     max_dev: f64,
-    max_line: usize,
+    /// `None` for a program of several modules (no one file's line).
+    max_line: Option<usize>,
     residual: Option<f64>,
 }
 
@@ -379,7 +414,7 @@ fn compensate_one(
                 blocks: s.blocks,
                 moves: s.moves,
                 max_dev: s.deviation.max,
-                max_line: s.deviation.max_line,
+                max_line: Some(s.deviation.max_line),
                 residual: Some(s.max_residual_mm),
             })
         }
@@ -400,7 +435,7 @@ fn compensate_one(
                 blocks: o.moves,
                 moves: o.moves,
                 max_dev: o.max_deviation_mm,
-                max_line: o.max_deviation_line,
+                max_line: Some(o.max_deviation_line),
                 residual: None,
             };
             // A large module is read a window at a time, as by `compensate`.
@@ -432,6 +467,44 @@ fn compensate_one(
             Ok(done(&outcome))
         }
     }
+}
+
+/// Compensates the RAPID program of several modules at `input` (a task
+/// folder, a `.pgf`): the modules that change are written into the folder
+/// `output`, the report of every module beside it.
+fn compensate_program(
+    setting: &Setting,
+    input: &Path,
+    output: &Path,
+    report: Option<Format>,
+) -> Result<Done> {
+    let Engine::Robot(robot, opts, _) = &setting.engine else {
+        return Err(usage(format!(
+            "{}: a RAPID program needs a robot machine file",
+            input.display()
+        )));
+    };
+    let opts = RapidOptions {
+        records: report.is_some(),
+        ..*opts
+    };
+    let run = super::rapid::ProgramRun {
+        robot,
+        opts: &opts,
+        provenance: &setting.provenance,
+        recompensate: setting.recompensate,
+    };
+    let report_file = report.map(|f| (report_path(output, f), f));
+    let report_to = report_file.as_ref().map(|(p, f)| (p.as_path(), *f));
+    let (_, _, total, worst) =
+        super::rapid::compensate_program_to(&run, &[input.to_path_buf()], Some(output), report_to)?;
+    Ok(Done {
+        blocks: total.moves,
+        moves: total.moves,
+        max_dev: worst.0,
+        max_line: None,
+        residual: None,
+    })
 }
 
 /// The progress bar of `n` programs: hidden when `quiet` or when standard
@@ -476,7 +549,7 @@ fn file_result(
                 blocks: d.blocks,
                 moves: d.moves,
                 max_deviation_mm: Some(round6(d.max_dev)),
-                max_deviation_line: Some(d.max_line),
+                max_deviation_line: d.max_line,
                 max_residual_mm: d.residual.map(round6),
             }
         }
@@ -524,7 +597,7 @@ pub fn run(a: &BatchArgs, quiet: bool) -> Result<i32> {
     // The files every program's run reads besides the program itself.
     let mut files: Vec<PathBuf> = loaded.file.path.iter().cloned().collect();
     files.extend(a.effects.force_table.clone());
-    let (items, skipped) = collect(&a.inputs, &a.out_dir);
+    let (items, skipped) = collect(&a.inputs, &a.out_dir, matches!(machine, Machine::Robot(_)));
     let shard = a.shard;
     if items.is_empty() {
         return Err(usage(format!(
@@ -612,6 +685,9 @@ pub fn run(a: &BatchArgs, quiet: bool) -> Result<i32> {
                 let output = a.out_dir.join(&item.rel);
                 let done = match &item.problem {
                     Some(p) => Err(usage(p.clone())),
+                    None if item.program => {
+                        compensate_program(&setting, &item.input, &output, a.report_format)
+                    }
                     None => compensate_one(&setting, &item.input, &output, a.report_format, &files),
                 };
                 bar.inc(1);

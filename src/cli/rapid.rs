@@ -13,7 +13,7 @@ use crate::emit::rapid::Format;
 use crate::error::{Error, Result};
 use crate::machine::ThermalStart;
 use crate::machine::robot::{Effects, Robot};
-use crate::pipeline::rapid::program::compensate_member;
+use crate::pipeline::rapid::program::{compensate_member, left_as_written_member};
 use crate::pipeline::rapid::{RapidOptions, compensate_module, compensate_parsed, stream};
 use crate::program::charset::{Charset, Latin1Writer, file_columns};
 use crate::program::rapid::program::{is_program, load, module_files};
@@ -602,21 +602,22 @@ fn check_program(
     inputs: &[PathBuf],
 ) -> Result<i32> {
     let members = load(&module_files(inputs)?)?;
-    let robot = match robot {
-        Some(r) => Some(r?.0),
-        None if a.program.strict => {
-            return Err(usage(
-                "check --strict of a program of several modules needs --machine",
-            ));
-        }
-        None => None,
-    };
+    let robot = robot.map(|r| r.map(|(robot, _)| robot)).transpose()?;
     let opts = check_options(a.program.strict);
     let mut out = std::io::stdout().lock();
     for (i, m) in members.iter().enumerate() {
-        if let Some(robot) = &robot {
-            compensate_member(&members, i, robot, &opts)
-                .map_err(|e| file_columns(e, &m.text, m.charset))?;
+        let in_file = |e| file_columns(e, &m.text, m.charset);
+        match &robot {
+            Some(robot) => {
+                compensate_member(&members, i, robot, &opts).map_err(in_file)?;
+            }
+            // Names resolve across the modules without a robot.
+            None if a.program.strict => {
+                let left = left_as_written_member(&members, i).map_err(in_file)?;
+                crate::pipeline::rapid::refuse_left_as_written(&left, &m.name, &opts)
+                    .map_err(in_file)?;
+            }
+            None => {}
         }
         writeln!(
             out,
@@ -647,13 +648,8 @@ fn compensate_program(
             "-o names one file: a program of several modules is written beside its inputs or into --out-dir",
         ));
     }
-    if a.report.is_some() {
-        return Err(usage(
-            "--report: one module at a time (a program of several modules has no report yet)",
-        ));
-    }
     let opts = RapidOptions {
-        records: false,
+        records: a.report.is_some(),
         strict: a.program.strict,
         ..rapid_options(
             &robot,
@@ -662,7 +658,6 @@ fn compensate_program(
             a.decimals,
         )?
     };
-    let members = load(&module_files(inputs)?)?;
     let pool = super::gcode::thread_pool(a.effects.threads)?;
     let provenance = super::machines::provenance(
         &loaded,
@@ -670,43 +665,22 @@ fn compensate_program(
         None,
         a.annotate == Annotate::Comment,
     );
-    let mut written = Vec::new();
-    let mut total = RapidOutcome::default();
-    let mut worst = (0.0, String::new());
-    for (i, m) in members.iter().enumerate() {
-        super::machines::refuse_compensated(m.text.as_bytes(), &m.name, a.recompensate)?;
-        let outcome = pool
-            .install(|| compensate_member(&members, i, &robot, &opts))
-            .map_err(|e| file_columns(e, &m.text, m.charset))?;
-        total.moves += outcome.moves;
-        total.added += outcome.added;
-        total.as_written.extend(outcome.as_written.iter().cloned());
-        if outcome.max_deviation_mm > worst.0 || worst.1.is_empty() && outcome.moves > 0 {
-            worst = (
-                outcome.max_deviation_mm,
-                format!("{}:{}", m.name, outcome.max_deviation_line),
-            );
-        }
-        if outcome.text != m.text {
-            let out = program_output(&m.path, inputs, a.out_dir.as_deref());
-            super::output::refuse_overwrite(&out, &[&m.path])?;
-            written.push((out, outcome, i));
-        }
-    }
-    for (out, outcome, i) in &written {
-        let m = &members[*i];
-        if a.out_dir.is_some()
-            && let Some(parent) = out.parent()
-        {
-            std::fs::create_dir_all(parent).map_err(|e| Error::io(parent, e))?;
-        }
-        write_outcome(out, outcome, &m.name, None, &provenance, m.charset)?;
-    }
+    let report = a.report.as_deref().map(|path| {
+        let format = a
+            .report_format
+            .unwrap_or_else(|| super::Format::from_path(path));
+        (path, format)
+    });
+    let run = ProgramRun {
+        robot: &robot,
+        opts: &opts,
+        provenance: &provenance,
+        recompensate: a.recompensate,
+    };
+    let (members, written, total, worst) =
+        pool.install(|| compensate_program_to(&run, inputs, a.out_dir.as_deref(), report))?;
     if !quiet {
-        let names: Vec<String> = written
-            .iter()
-            .map(|(p, _, _)| p.display().to_string())
-            .collect();
+        let names: Vec<String> = written.iter().map(|p| p.display().to_string()).collect();
         eprintln!(
             "program of {} modules → {} written{}: {} compensated{}, {} added; largest predicted deviation {:.4} mm ({})",
             members.len(),
@@ -724,6 +698,102 @@ fn compensate_program(
         );
     }
     Ok(0)
+}
+
+/// What a program's run shares: the robot, options, provenance, and
+/// whether modules compensated before are taken.
+pub(super) struct ProgramRun<'r> {
+    pub(super) robot: &'r Robot,
+    pub(super) opts: &'r RapidOptions,
+    pub(super) provenance: &'r Provenance,
+    pub(super) recompensate: bool,
+}
+
+/// What a program's run did: its modules, the files written, the totals
+/// and the largest predicted deviation with its `FILE:LINE`.
+pub(super) type ProgramDone = (
+    Vec<crate::program::rapid::program::Member>,
+    Vec<PathBuf>,
+    RapidOutcome,
+    (f64, String),
+);
+
+/// Compensates the program `inputs` name: each module with the others in
+/// scope; those that change are written (beside their inputs, or into
+/// `out_dir`), with the report of every module into `report`, once every
+/// module is compensated.
+pub(super) fn compensate_program_to(
+    run: &ProgramRun,
+    inputs: &[PathBuf],
+    out_dir: Option<&Path>,
+    report: Option<(&Path, super::Format)>,
+) -> Result<ProgramDone> {
+    let members = load(&module_files(inputs)?)?;
+    let mut written = Vec::new();
+    let mut total = RapidOutcome::default();
+    let mut worst = (0.0, String::new());
+    let mut outcomes = Vec::with_capacity(members.len());
+    for (i, m) in members.iter().enumerate() {
+        super::machines::refuse_compensated(m.text.as_bytes(), &m.name, run.recompensate)?;
+        let outcome = compensate_member(&members, i, run.robot, run.opts)
+            .map_err(|e| file_columns(e, &m.text, m.charset))?;
+        outcomes.push(outcome);
+    }
+    for ((i, m), outcome) in members.iter().enumerate().zip(outcomes.iter()) {
+        total.moves += outcome.moves;
+        total.added += outcome.added;
+        total.as_written.extend(outcome.as_written.iter().cloned());
+        if outcome.max_deviation_mm > worst.0 || worst.1.is_empty() && outcome.moves > 0 {
+            worst = (
+                outcome.max_deviation_mm,
+                format!("{}:{}", m.name, outcome.max_deviation_line),
+            );
+        }
+        if outcome.text != m.text {
+            let out = program_output(&m.path, inputs, out_dir);
+            super::output::refuse_overwrite(&out, &[&m.path])?;
+            written.push((out, outcome, i));
+        }
+    }
+    // The report is written first and put in place after the modules.
+    let staged = match report {
+        Some((path, format)) => {
+            let paths: Vec<PathBuf> = members.iter().map(|m| m.path.clone()).collect();
+            for (out, _, _) in &written {
+                super::output::check_report_path(Some(path), &paths, out)?;
+            }
+            super::output::check_report_path(Some(path), &paths, Path::new("-"))?;
+            let mut rep = Staged::open(path)?;
+            let name = inputs
+                .first()
+                .map(|p| p.display().to_string())
+                .unwrap_or_default();
+            write_program_report(
+                rep.writer(),
+                &members,
+                &outcomes,
+                &name,
+                format,
+                run.provenance,
+            )?;
+            Some(rep.finish()?)
+        }
+        None => None,
+    };
+    for (out, outcome, i) in &written {
+        let m = &members[*i];
+        if out_dir.is_some()
+            && let Some(parent) = out.parent()
+        {
+            std::fs::create_dir_all(parent).map_err(|e| Error::io(parent, e))?;
+        }
+        write_outcome(out, outcome, &m.name, None, run.provenance, m.charset)?;
+    }
+    if let Some(rep) = staged {
+        rep.commit()?;
+    }
+    let written = written.into_iter().map(|(p, _, _)| p).collect();
+    Ok((members, written, total, worst))
 }
 
 /// Where a changed module of a program goes: beside its input with the
@@ -955,6 +1025,34 @@ pub(super) fn write_report(
     })
 }
 
+/// Writes the deviation report of a program of several modules: the rows
+/// of every module, in program order, each naming its module file
+/// ([`crate::emit::report::Layout::with_files`]); `name` names the
+/// program.
+fn write_program_report(
+    out: &mut dyn Write,
+    members: &[crate::program::rapid::program::Member],
+    outcomes: &[RapidOutcome],
+    name: &str,
+    format: super::Format,
+    provenance: &Provenance,
+) -> Result<()> {
+    use crate::emit::report::{Layout, ReportWriter, Totals};
+    let layout = Layout::rapid().with_files();
+    let mut rw =
+        ReportWriter::with_layout(out, layout, format, name)?.with_provenance(Some(provenance));
+    let mut moves = 0;
+    for (m, outcome) in members.iter().zip(outcomes) {
+        rw.file(&m.name, Some(&m.path));
+        write_records(&mut rw, &outcome.records)?;
+        moves += outcome.moves;
+    }
+    rw.finish(Totals {
+        blocks: moves,
+        moves,
+    })
+}
+
 /// `postproc report` of a RAPID module (dry run against a robot).
 pub fn report(a: &ReportArgs, robot: Option<Result<(Robot, Loaded)>>) -> Result<i32> {
     let (robot, loaded) = super::config::needed(robot, "report")??;
@@ -968,6 +1066,31 @@ pub fn report(a: &ReportArgs, robot: Option<Result<(Robot, Loaded)>>) -> Result<
         &out,
         &super::gcode::input_files(&a.program, &loaded, &a.effects),
     )?;
+    let inputs = program_inputs(&a.program);
+    if is_program(&inputs) {
+        let provenance = super::machines::provenance(
+            &loaded,
+            super::machines::robot_effects(&opts.effects),
+            None,
+            false,
+        );
+        let members = load(&module_files(&inputs)?)?;
+        let paths: Vec<PathBuf> = members.iter().map(|m| m.path.clone()).collect();
+        super::output::refuse_overwrite(&out, &paths)?;
+        let pool = super::gcode::thread_pool(a.effects.threads)?;
+        let mut outcomes = Vec::with_capacity(members.len());
+        for (i, m) in members.iter().enumerate() {
+            let outcome = pool
+                .install(|| compensate_member(&members, i, &robot, &opts))
+                .map_err(|e| file_columns(e, &m.text, m.charset))?;
+            outcomes.push(outcome);
+        }
+        let name = inputs[0].display().to_string();
+        super::output::emit_to(&out, |w| {
+            write_program_report(w, &members, &outcomes, &name, a.format, &provenance)
+        })?;
+        return Ok(0);
+    }
     let source = Source::new(
         &a.program.file,
         a.program.rapid_window_lines,

@@ -70,6 +70,9 @@ pub struct Layout {
     pub residual: bool,
     /// G-code: axis slot (0..6) of each position column.
     slots: Vec<usize>,
+    /// The report covers several files (the modules of a RAPID program):
+    /// rows and worst blocks name their file ([`ReportWriter::file`]).
+    pub files: bool,
 }
 
 impl Layout {
@@ -91,6 +94,7 @@ impl Layout {
             slots: (0..6)
                 .filter(|&s| setup.axes.get(s).copied().unwrap_or(false))
                 .collect(),
+            files: false,
         }
     }
 
@@ -106,7 +110,15 @@ impl Layout {
             effects: vec!["kinematic", "thermal", "gravity", "process", "dynamic"],
             residual: false,
             slots: vec![0, 1, 2],
+            files: false,
         }
+    }
+
+    /// The same layout for a report of several files: a `file` column
+    /// before `line`, and every line named with its file.
+    pub fn with_files(mut self) -> Self {
+        self.files = true;
+        self
     }
 }
 
@@ -145,8 +157,8 @@ pub struct Totals {
 #[derive(Debug, Clone)]
 struct Stat {
     hist: DevStats,
-    /// Worst blocks, largest first: (value, line, motion).
-    worst: Vec<(f64, usize, String)>,
+    /// Worst blocks, largest first: (value, line, motion, file index).
+    worst: Vec<(f64, usize, String, usize)>,
 }
 
 impl Stat {
@@ -157,7 +169,7 @@ impl Stat {
         }
     }
 
-    fn add(&mut self, v: f64, line: usize, motion: &str) {
+    fn add(&mut self, v: f64, (line, file): (usize, usize), motion: &str) {
         let v = if v.is_finite() { v.abs() } else { 0.0 };
         self.hist.add(v, line);
         // Ties keep the earlier block; blocks whose deviation prints as zero
@@ -168,11 +180,11 @@ impl Stat {
         let at = self.worst.iter().position(|w| v > w.0);
         match at {
             Some(i) => {
-                self.worst.insert(i, (v, line, motion.to_string()));
+                self.worst.insert(i, (v, line, motion.to_string(), file));
                 self.worst.truncate(WORST_BLOCKS);
             }
             None if self.worst.len() < WORST_BLOCKS => {
-                self.worst.push((v, line, motion.to_string()));
+                self.worst.push((v, line, motion.to_string(), file));
             }
             None => {}
         }
@@ -188,6 +200,11 @@ impl Stat {
 
     fn max_line(&self) -> usize {
         self.worst.first().map_or(0, |w| w.1)
+    }
+
+    /// File index and line of the maximum.
+    fn max_at(&self) -> (usize, usize) {
+        self.worst.first().map_or((0, 0), |w| (w.3, w.1))
     }
 
     fn percentile(&self, p: f64) -> f64 {
@@ -214,6 +231,9 @@ pub struct ReportWriter<'w> {
     worst_cut: Option<PlotWorst>,
     /// The program file, re-read at the end for the text of the worst blocks.
     source: Option<std::path::PathBuf>,
+    /// With [`Layout::files`]: the files rows were written for (name, file
+    /// to re-read), the last one current.
+    files: Vec<(String, Option<std::path::PathBuf>)>,
     /// What made the run (machine file, effects, tolerance).
     provenance: Option<crate::emit::header::Provenance>,
     /// Widths of the table's columns.
@@ -291,6 +311,21 @@ pub const TABLE_COLUMNS: usize = 120;
 const LINE_W: usize = 6;
 /// Width of the table's `motion` column.
 const MOTION_W: usize = 8;
+
+/// Width of the table's `file` column (a report of several files).
+const FILE_W: usize = 16;
+
+/// A CSV cell: quoted when it holds a comma, a quote or a line break.
+fn csv_cell(s: &str) -> String {
+    if s.contains([',', '"', '\n', '\r']) {
+        format!("\"{}\"", s.replace('"', "\"\""))
+    } else {
+        s.to_string()
+    }
+}
+
+/// Source texts of worst blocks by (file index, line).
+type Texts = std::collections::BTreeMap<(usize, usize), String>;
 /// Width of a position column of the table (3 decimals: `-1234.567`).
 const AXIS_W: usize = 9;
 /// Narrowest deviation column of the table (5 decimals: `12.34567`).
@@ -298,16 +333,18 @@ const DEV_W: usize = 8;
 /// Decimals of the table's position columns (1 µm; CSV and JSON keep 4).
 const TABLE_AXIS_DECIMALS: usize = 3;
 
-/// One aligned table line: the motion column left-aligned, numbers right,
+/// One aligned table line: the motion column (and the file column of a
+/// report of several files) left-aligned, numbers right,
 /// each cell at least its column's width.
-fn table_line(cells: &[String], widths: &[usize]) -> String {
+fn table_line(cells: &[String], widths: &[usize], files: bool) -> String {
     let mut line = String::with_capacity(TABLE_COLUMNS);
+    let motion = if files { 2 } else { 1 };
     for (i, c) in cells.iter().enumerate() {
         let w = widths.get(i).copied().unwrap_or(DEV_W);
         if i > 0 {
             line.push(' ');
         }
-        if i == 1 {
+        if i == motion || files && i == 0 {
             line.push_str(&format!("{c:<w$}"));
         } else {
             line.push_str(&format!("{c:>w$}"));
@@ -338,31 +375,47 @@ fn is_positioning(motion: &str) -> bool {
 }
 
 /// The statistics of one group of moves as a JSON object.
-fn group_json(s: &Stat, texts: &std::collections::BTreeMap<usize, String>) -> String {
-    let worst: Vec<String> = s
-        .worst
-        .iter()
-        .map(|(v, line, motion)| {
-            let source = texts
-                .get(line)
-                .map(|t| format!(",\"source\":{}", json_str(t)))
-                .unwrap_or_default();
-            format!(
-                "{{\"line\":{line},\"motion\":{},\"dev_mm\":{}{source}}}",
-                json_str(motion),
-                jnum(*v, 5)
-            )
-        })
-        .collect();
+fn group_json(w: &ReportWriter, s: &Stat, texts: &Texts) -> String {
     format!(
-        "{{\"moves\":{},\"mean_mm\":{},\"p95_mm\":{},\"max_mm\":{},\"max_line\":{},\"worst\":[{}]}}",
+        "{{\"moves\":{},\"mean_mm\":{},\"p95_mm\":{},\"max_mm\":{},\"max_line\":{}{},\"worst\":[{}]}}",
         s.hist.count,
         jnum(s.mean(), 5),
         jnum(s.percentile(95.0), 5),
         jnum(s.max(), 5),
         s.max_line(),
-        worst.join(",")
+        max_file_json(w, s),
+        worst_json(w, s, texts)
     )
+}
+
+/// The worst blocks of `s` as JSON objects, comma-separated.
+fn worst_json(w: &ReportWriter, s: &Stat, texts: &Texts) -> String {
+    let worst: Vec<String> = s
+        .worst
+        .iter()
+        .map(|(v, line, motion, file)| {
+            let source = texts
+                .get(&(*file, *line))
+                .map(|t| format!(",\"source\":{}", json_str(t)))
+                .unwrap_or_default();
+            format!(
+                "{{\"line\":{line},\"motion\":{},\"dev_mm\":{}{source}{}}}",
+                json_str(motion),
+                jnum(*v, 5),
+                w.json_file(*file)
+            )
+        })
+        .collect();
+    worst.join(",")
+}
+
+/// `,"max_file":…` (the file of `max_line`) in a report of several files.
+fn max_file_json(w: &ReportWriter, s: &Stat) -> String {
+    if s.worst.is_empty() {
+        return String::new();
+    }
+    w.json_file(s.max_at().0)
+        .replacen("\"file\"", "\"max_file\"", 1)
 }
 
 /// Points kept for the picture, whatever the program length.
@@ -395,6 +448,7 @@ impl<'w> ReportWriter<'w> {
             worst_point: None,
             worst_cut: None,
             source: None,
+            files: Vec::new(),
             provenance: None,
             widths: Vec::new(),
         };
@@ -403,6 +457,10 @@ impl<'w> ReportWriter<'w> {
         // error are in CSV and JSON.
         let mut table: Vec<String> = vec!["line".into(), "motion".into()];
         w.widths = vec![LINE_W, MOTION_W];
+        if w.layout.files {
+            table.insert(0, "file".into());
+            w.widths.insert(0, FILE_W);
+        }
         for (a, unit) in &w.layout.axes {
             table.push(format!("{a}_{unit}"));
             w.widths.push(AXIS_W);
@@ -415,6 +473,9 @@ impl<'w> ReportWriter<'w> {
             table.push(name);
         }
         let mut cols: Vec<String> = vec!["line".into(), "motion".into()];
+        if w.layout.files {
+            cols.insert(0, "file".into());
+        }
         for (a, unit) in &w.layout.axes {
             cols.push(format!("{a}_{unit}"));
         }
@@ -430,7 +491,9 @@ impl<'w> ReportWriter<'w> {
         cols.push("orient_urad".into());
         match format {
             Format::Csv => writeln!(w.out, "{}", cols.join(",")).map_err(io)?,
-            Format::Table => writeln!(w.out, "{}", table_line(&table, &w.widths)).map_err(io)?,
+            Format::Table => {
+                writeln!(w.out, "{}", table_line(&table, &w.widths, w.layout.files)).map_err(io)?
+            }
             Format::Json => {
                 let effects: Vec<String> = w.layout.effects.iter().map(|e| json_str(e)).collect();
                 let axes: Vec<String> = w
@@ -462,6 +525,36 @@ impl<'w> ReportWriter<'w> {
             self.source = Some(path.to_path_buf());
         }
         self
+    }
+
+    /// With [`Layout::files`]: the rows that follow are of the file named
+    /// `name` (its text re-read from `path` at the end for the worst
+    /// blocks; `None`: not quoted).
+    pub fn file(&mut self, name: &str, path: Option<&std::path::Path>) {
+        self.files
+            .push((name.to_string(), path.map(std::path::Path::to_path_buf)));
+    }
+
+    /// The index of the current file.
+    fn current(&self) -> usize {
+        self.files.len().saturating_sub(1)
+    }
+
+    /// A line as the summary names it: `12`, or `Main.mod:12` in a report
+    /// of several files.
+    fn place(&self, (file, line): (usize, usize)) -> String {
+        match self.files.get(file) {
+            Some((name, _)) if self.layout.files => format!("{name}:{line}"),
+            _ => line.to_string(),
+        }
+    }
+
+    /// `,"file":…` of a JSON object in a report of several files.
+    fn json_file(&self, file: usize) -> String {
+        match self.files.get(file) {
+            Some((name, _)) if self.layout.files => format!(",\"file\":{}", json_str(name)),
+            _ => String::new(),
+        }
     }
 
     /// Records what made the run in the report (CSV and table: a comment
@@ -524,18 +617,24 @@ impl<'w> ReportWriter<'w> {
     pub fn entry(&mut self, r: &Entry) -> Result<()> {
         let [dx, dy, dz] = r.deviation_mm;
         let dev = (dx * dx + dy * dy + dz * dz).sqrt();
+        let file = self.current();
+        let at = (r.line, file);
         if let Some(s) = self.stats.first_mut() {
-            s.add(dev, r.line, r.motion);
+            s.add(dev, at, r.motion);
         }
         for (s, &v) in self.stats.iter_mut().skip(1).zip(r.effects_mm) {
-            s.add(v, r.line, r.motion);
+            s.add(v, at, r.motion);
         }
         let rapid = is_positioning(r.motion);
         if rapid {
-            self.positioning.add(dev, r.line, r.motion);
+            self.positioning.add(dev, at, r.motion);
         } else {
-            self.cutting.add(dev, r.line, r.motion);
+            self.cutting.add(dev, at, r.motion);
         }
+        let file_cell = match self.files.get(file) {
+            Some((name, _)) if self.layout.files => Some(name.clone()),
+            _ => None,
+        };
         match self.format {
             Format::Svg => {
                 let p = PlotPoint {
@@ -563,6 +662,9 @@ impl<'w> ReportWriter<'w> {
             }
             Format::Table => {
                 let mut vals: Vec<String> = vec![r.line.to_string(), r.motion.to_string()];
+                if let Some(f) = &file_cell {
+                    vals.insert(0, f.clone());
+                }
                 for &v in r.axes {
                     vals.push(num(v, TABLE_AXIS_DECIMALS));
                 }
@@ -570,10 +672,18 @@ impl<'w> ReportWriter<'w> {
                 for &v in r.effects_mm {
                     vals.push(num(v, 5));
                 }
-                writeln!(self.out, "{}", table_line(&vals, &self.widths)).map_err(io)?;
+                writeln!(
+                    self.out,
+                    "{}",
+                    table_line(&vals, &self.widths, self.layout.files)
+                )
+                .map_err(io)?;
             }
             Format::Csv => {
                 let mut vals: Vec<String> = vec![r.line.to_string(), r.motion.to_string()];
+                if let Some(f) = &file_cell {
+                    vals.insert(0, csv_cell(f));
+                }
                 for &v in r.axes {
                     vals.push(num(v, 4));
                 }
@@ -591,8 +701,12 @@ impl<'w> ReportWriter<'w> {
             }
             Format::Json => {
                 let mut o = format!(
-                    "{}{{\"line\":{},\"motion\":{},\"commanded\":{{",
+                    "{}{{{}\"line\":{},\"motion\":{},\"commanded\":{{",
                     if self.rows > 0 { "," } else { "" },
+                    file_cell
+                        .as_deref()
+                        .map(|f| format!("\"file\":{},", json_str(f)))
+                        .unwrap_or_default(),
                     r.line,
                     json_str(r.motion)
                 );
@@ -639,7 +753,7 @@ impl<'w> ReportWriter<'w> {
             c.hist.count,
             num(c.mean(), 5),
             num(c.max(), 5),
-            c.max_line(),
+            self.place(c.max_at()),
             num(c.percentile(95.0), 5)
         )
     }
@@ -653,7 +767,7 @@ impl<'w> ReportWriter<'w> {
                 "rapids and machine-defined moves ({}): max {} mm (line {})",
                 p.hist.count,
                 num(p.max(), 5),
-                p.max_line()
+                self.place(p.max_at())
             )
         })
     }
@@ -683,10 +797,11 @@ impl<'w> ReportWriter<'w> {
     fn table_summary(
         &mut self,
         rows: usize,
-        (mean, max, max_line): (f64, f64, usize),
+        (mean, max, max_at): (f64, f64, (usize, usize)),
         p95: &[f64],
-        texts: &std::collections::BTreeMap<usize, String>,
+        texts: &Texts,
     ) -> Result<()> {
+        let max_line = self.place(max_at);
         let mut lines = vec![self.cutting_line()];
         lines.extend(self.positioning_line());
         lines.push(format!(
@@ -708,8 +823,13 @@ impl<'w> ReportWriter<'w> {
                 num(s.max(), 5),
             );
             // As many of the worst blocks as the width holds.
-            for (k, (v, at, _)) in s.worst.iter().enumerate() {
-                let item = format!("{} {at} ({})", if k == 0 { "" } else { "," }, num(*v, 5));
+            for (k, (v, at, _, file)) in s.worst.iter().enumerate() {
+                let item = format!(
+                    "{} {} ({})",
+                    if k == 0 { "" } else { "," },
+                    self.place((*file, *at)),
+                    num(*v, 5)
+                );
                 if line.chars().count() + item.chars().count() > TABLE_COLUMNS {
                     break;
                 }
@@ -726,8 +846,9 @@ impl<'w> ReportWriter<'w> {
                 continue;
             }
             lines.push(title.to_string());
-            for (v, line, motion) in &s.worst {
-                let text = texts.get(line).map_or("", String::as_str);
+            for (v, line, motion, file) in &s.worst {
+                let text = texts.get(&(*file, *line)).map_or("", String::as_str);
+                let line = self.place((*file, *line));
                 let row = format!("  line {line:<6} {:>10} mm  {motion:<9} {text}", num(*v, 5));
                 lines.push(row.trim_end().to_string());
             }
@@ -743,6 +864,34 @@ impl<'w> ReportWriter<'w> {
         Ok(())
     }
 
+    /// The source text of the worst blocks, re-read from their files.
+    fn worst_texts(&self) -> Texts {
+        let mut out = Texts::new();
+        let sources: Vec<(usize, &std::path::Path)> = if self.layout.files {
+            self.files
+                .iter()
+                .enumerate()
+                .filter_map(|(i, (_, p))| p.as_deref().map(|p| (i, p)))
+                .collect()
+        } else {
+            self.source.iter().map(|p| (0, p.as_path())).collect()
+        };
+        for (file, path) in sources {
+            let wanted = self
+                .stats
+                .iter()
+                .chain([&self.cutting, &self.positioning])
+                .flat_map(|s| s.worst.iter())
+                .filter(|w| w.3 == file)
+                .map(|w| w.1)
+                .collect();
+            for (line, text) in source_lines(path, &wanted) {
+                out.insert((file, line), text);
+            }
+        }
+        out
+    }
+
     /// Writes the summary (and, for SVG, the picture) and ends the report.
     pub fn finish(mut self, totals: Totals) -> Result<()> {
         let p95: Vec<f64> = self.stats.iter().map(|s| s.percentile(95.0)).collect();
@@ -750,47 +899,25 @@ impl<'w> ReportWriter<'w> {
         let total = self
             .stats
             .first()
-            .map_or((0.0, 0.0, 0), |s| (s.mean(), s.max(), s.max_line()));
+            .map_or((0.0, 0.0, (0, 0)), |s| (s.mean(), s.max(), s.max_at()));
         let p95_total = p95.first().copied().unwrap_or(0.0);
-        let texts = match (&self.source, self.format) {
-            (Some(path), Format::Json | Format::Table) => {
-                let wanted = self
-                    .stats
-                    .iter()
-                    .chain([&self.cutting, &self.positioning])
-                    .flat_map(|s| s.worst.iter().map(|w| w.1))
-                    .collect();
-                source_lines(path, &wanted)
-            }
+        let texts = match self.format {
+            Format::Json | Format::Table => self.worst_texts(),
             _ => Default::default(),
         };
         match self.format {
             Format::Json => {
                 let mut effects = Vec::new();
                 for (i, s) in self.stats.iter().enumerate() {
-                    let worst: Vec<String> = s
-                        .worst
-                        .iter()
-                        .map(|(v, line, motion)| {
-                            let source = texts
-                                .get(line)
-                                .map(|t| format!(",\"source\":{}", json_str(t)))
-                                .unwrap_or_default();
-                            format!(
-                                "{{\"line\":{line},\"motion\":{},\"dev_mm\":{}{source}}}",
-                                json_str(motion),
-                                jnum(*v, 5)
-                            )
-                        })
-                        .collect();
                     effects.push(format!(
-                        "{{\"name\":{},\"mean_mm\":{},\"p95_mm\":{},\"max_mm\":{},\"max_line\":{},\"worst\":[{}]}}",
+                        "{{\"name\":{},\"mean_mm\":{},\"p95_mm\":{},\"max_mm\":{},\"max_line\":{}{},\"worst\":[{}]}}",
                         json_str(stat_name(&self.layout, i)),
                         jnum(s.mean(), 5),
                         jnum(p95.get(i).copied().unwrap_or(0.0), 5),
                         jnum(s.max(), 5),
                         s.max_line(),
-                        worst.join(",")
+                        max_file_json(&self, s),
+                        worst_json(&self, s, &texts)
                     ));
                 }
                 let provenance = self
@@ -798,18 +925,25 @@ impl<'w> ReportWriter<'w> {
                     .as_ref()
                     .map(|p| format!(",\"provenance\":{}", p.to_json()))
                     .unwrap_or_default();
+                let max_file = self
+                    .stats
+                    .first()
+                    .map_or(String::new(), |s| max_file_json(&self, s));
+                let cutting = group_json(&self, &self.cutting, &texts);
+                let positioning = group_json(&self, &self.positioning, &texts);
                 writeln!(
                     self.out,
-                    "],\"summary\":{{\"blocks\":{},\"moves\":{},\"rows\":{},\"mean_mm\":{},\"max_mm\":{},\"max_line\":{},\"p95_mm\":{},\"cutting\":{},\"positioning\":{},\"effects\":[{}]}}{provenance}}}",
+                    "],\"summary\":{{\"blocks\":{},\"moves\":{},\"rows\":{},\"mean_mm\":{},\"max_mm\":{},\"max_line\":{}{},\"p95_mm\":{},\"cutting\":{},\"positioning\":{},\"effects\":[{}]}}{provenance}}}",
                     totals.blocks,
                     totals.moves,
                     rows,
                     jnum(total.0, 5),
                     jnum(total.1, 5),
-                    total.2,
+                    total.2.1,
+                    max_file,
                     jnum(p95_total, 5),
-                    group_json(&self.cutting, &texts),
-                    group_json(&self.positioning, &texts),
+                    cutting,
+                    positioning,
                     effects.join(",")
                 )
                 .map_err(io)?;
@@ -820,7 +954,7 @@ impl<'w> ReportWriter<'w> {
                     "# summary: {rows} rows; |dev| mean {} mm, max {} mm (line {}), p95 {} mm",
                     num(total.0, 5),
                     num(total.1, 5),
-                    total.2,
+                    self.place(total.2),
                     num(p95_total, 5)
                 );
                 for (i, s) in self.stats.iter().enumerate().skip(1) {
@@ -832,13 +966,13 @@ impl<'w> ReportWriter<'w> {
                         num(s.max(), 5),
                     ));
                     if s.max_line() > 0 {
-                        line.push_str(&format!(" (line {})", s.max_line()));
+                        line.push_str(&format!(" (line {})", self.place(s.max_at())));
                     }
                 }
                 let worst: Vec<String> = self
                     .stats
                     .first()
-                    .map(|s| s.worst.iter().map(|w| w.1.to_string()).collect())
+                    .map(|s| s.worst.iter().map(|w| self.place((w.3, w.1))).collect())
                     .unwrap_or_default();
                 line.push_str(&format!("; worst lines {}", worst.join(" ")));
                 let mut groups = self.cutting_line();
@@ -859,7 +993,7 @@ impl<'w> ReportWriter<'w> {
                     "{}: predicted |deviation|, {rows} moves; max {} mm at line {}, p95 {} mm",
                     self.file,
                     num(total.1, 4),
-                    total.2,
+                    self.place(total.2),
                     num(p95_total, 4)
                 );
                 // The overall maximum, and the cutting maximum when it is
@@ -892,7 +1026,7 @@ mod tests {
         // worst five are 0.100 .. 0.096 at lines 100 .. 96.
         let mut s = Stat::new();
         for i in 1..=100 {
-            s.add(i as f64 * 0.001, i, "feed");
+            s.add(i as f64 * 0.001, (i, 0), "feed");
         }
         assert_abs_diff_eq!(s.mean(), 0.0505, epsilon = TOL_MM);
         assert_abs_diff_eq!(
@@ -910,7 +1044,7 @@ mod tests {
         // 3, 4, 5 mm: all beyond 2 mm; p50 = 2nd value = 4 mm.
         let mut s = Stat::new();
         for (i, v) in [5.0, 3.0, 4.0].into_iter().enumerate() {
-            s.add(v, i + 1, "MoveL");
+            s.add(v, (i + 1, 0), "MoveL");
         }
         assert_abs_diff_eq!(s.percentile(50.0), 4.0, epsilon = TOL_MM);
         assert_abs_diff_eq!(s.percentile(100.0), 5.0, epsilon = TOL_MM);
@@ -920,8 +1054,8 @@ mod tests {
     #[test]
     fn ties_keep_the_earlier_block() {
         let mut s = Stat::new();
-        s.add(0.5, 7, "feed");
-        s.add(0.5, 9, "feed");
+        s.add(0.5, (7, 0), "feed");
+        s.add(0.5, (9, 0), "feed");
         assert_eq!(s.max_line(), 7);
     }
 }

@@ -1035,7 +1035,17 @@ pub(crate) fn compensate_carried(
 /// written, with their reasons, in line order (warned about as a
 /// compensation warns): no robot is needed to find them.
 pub fn left_as_written(module: &Module, src: &str, file: &str) -> Result<Vec<AsWritten>> {
-    let mut carry = Carry::default();
+    left_as_written_carried(module, src, file, Carry::default())
+}
+
+/// [`left_as_written`] with what the module carries in (the scope of a
+/// program of several modules).
+pub(crate) fn left_as_written_carried(
+    module: &Module,
+    src: &str,
+    file: &str,
+    mut carry: Carry,
+) -> Result<Vec<AsWritten>> {
     carry.resolve(ModuleText { module, src, file })?;
     carry.leave_unfinished(module, src, file);
     carry.leave_unknown(module, src, file);

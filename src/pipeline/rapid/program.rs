@@ -7,10 +7,39 @@
 //! declaration (after its `MODULE` line when it has none).
 
 use super::{Carry, ProgramScope, RapidOptions, compensate_carried};
-use crate::compensate::outcome::RapidOutcome;
+use crate::compensate::outcome::{AsWritten, RapidOutcome};
 use crate::error::{Error, Result};
 use crate::machine::robot::Robot;
 use crate::program::rapid::program::{Member, relocate, scoped, written_elsewhere};
+
+/// What module `i` of `members` carries in: the scope of the others.
+fn carry_of(members: &[Member], i: usize, own: &Member) -> Carry {
+    let anchor = match own.module.decls.last() {
+        Some(d) => d.span.clone(),
+        None => own.module.span.start..own.module.span.start + "MODULE".len(),
+    };
+    Carry {
+        scope: Some(ProgramScope {
+            from: own.module.decls.len(),
+            anchor,
+            writes: written_elsewhere(members, i),
+        }),
+        ..Carry::default()
+    }
+}
+
+/// The moves of module `i` of the program `members` that a compensation
+/// leaves as written, with their reasons: names resolved across the
+/// modules, no robot needed.
+pub fn left_as_written_member(members: &[Member], i: usize) -> Result<Vec<AsWritten>> {
+    let own = members
+        .get(i)
+        .ok_or_else(|| Error::Internal("module index".into()))?;
+    let (text, module, borrowed) = scoped(members, i)?;
+    let carry = carry_of(members, i, own);
+    super::left_as_written_carried(&module, &text, &own.name, carry)
+        .map_err(|e| relocate(e, members, i, &text, &borrowed))
+}
 
 /// Compensates module `i` of the program `members` (its outcome's text is
 /// the module's own text, rewritten).
@@ -24,18 +53,7 @@ pub fn compensate_member(
         .get(i)
         .ok_or_else(|| Error::Internal("module index".into()))?;
     let (text, module, borrowed) = scoped(members, i)?;
-    let anchor = match own.module.decls.last() {
-        Some(d) => d.span.clone(),
-        None => own.module.span.start..own.module.span.start + "MODULE".len(),
-    };
-    let carry = Carry {
-        scope: Some(ProgramScope {
-            from: own.module.decls.len(),
-            anchor,
-            writes: written_elsewhere(members, i),
-        }),
-        ..Carry::default()
-    };
+    let carry = carry_of(members, i, own);
     let mut outcome = compensate_carried(module, (&text, &own.name), robot, opts, carry)
         .map_err(|e| relocate(e, members, i, &text, &borrowed))?;
     let tail = text.get(own.text.len()..).unwrap_or("");
