@@ -467,6 +467,42 @@ pub(super) fn robot_with_process(robot: Robot, e: &EffectArgs) -> Result<Robot> 
 }
 
 /// `postproc compensate` of a RAPID module.
+/// The options of a `compensate` of a module or a program.
+fn compensate_options(a: &CompensateArgs, robot: &Robot) -> Result<RapidOptions> {
+    Ok(RapidOptions {
+        records: a.report.is_some(),
+        strict: a.program.strict,
+        ..rapid_options(
+            robot,
+            &a.effects,
+            a.annotate == Annotate::Comment,
+            a.decimals,
+        )?
+    })
+}
+
+/// The provenance header of a `compensate` and where its report goes, in
+/// which format (`--report-format`, else the path's extension).
+fn provenance_and_report<'a>(
+    a: &'a CompensateArgs,
+    loaded: &Loaded,
+    opts: &RapidOptions,
+) -> (Provenance, Option<(&'a Path, super::Format)>) {
+    let provenance = super::machines::provenance(
+        loaded,
+        super::machines::robot_effects(&opts.effects),
+        None,
+        a.annotate == Annotate::Comment,
+    );
+    let report = a.report.as_deref().map(|path| {
+        let format = a
+            .report_format
+            .unwrap_or_else(|| super::Format::from_path(path));
+        (path, format)
+    });
+    (provenance, report)
+}
+
 pub fn compensate(
     a: &CompensateArgs,
     robot: Option<Result<(Robot, Loaded)>>,
@@ -478,16 +514,7 @@ pub fn compensate(
     if is_program(&inputs) || a.out_dir.is_some() {
         return compensate_program(a, (robot, loaded), &inputs, quiet);
     }
-    let opts = RapidOptions {
-        records: a.report.is_some(),
-        strict: a.program.strict,
-        ..rapid_options(
-            &robot,
-            &a.effects,
-            a.annotate == Annotate::Comment,
-            a.decimals,
-        )?
-    };
+    let opts = compensate_options(a, &robot)?;
     let input = &a.program.file;
     let out_path = match &a.output {
         Some(p) => p.clone(),
@@ -504,18 +531,7 @@ pub fn compensate(
         stream::first_pass(&robot, &opts),
     )?;
     super::machines::refuse_compensated(&source.head()?, source.name(), a.recompensate)?;
-    let provenance = super::machines::provenance(
-        &loaded,
-        super::machines::robot_effects(&opts.effects),
-        None,
-        a.annotate == Annotate::Comment,
-    );
-    let report = a.report.as_deref().map(|path| {
-        let format = a
-            .report_format
-            .unwrap_or_else(|| super::Format::from_path(path));
-        (path, format)
-    });
+    let (provenance, report) = provenance_and_report(a, &loaded, &opts);
     let input_name = source.name().to_string();
     if let Some(lines) = source.window_lines() {
         let outcome = pool.install(|| {
@@ -648,29 +664,9 @@ fn compensate_program(
             "-o names one file: a program of several modules is written beside its inputs or into --out-dir",
         ));
     }
-    let opts = RapidOptions {
-        records: a.report.is_some(),
-        strict: a.program.strict,
-        ..rapid_options(
-            &robot,
-            &a.effects,
-            a.annotate == Annotate::Comment,
-            a.decimals,
-        )?
-    };
+    let opts = compensate_options(a, &robot)?;
     let pool = super::gcode::thread_pool(a.effects.threads)?;
-    let provenance = super::machines::provenance(
-        &loaded,
-        super::machines::robot_effects(&opts.effects),
-        None,
-        a.annotate == Annotate::Comment,
-    );
-    let report = a.report.as_deref().map(|path| {
-        let format = a
-            .report_format
-            .unwrap_or_else(|| super::Format::from_path(path));
-        (path, format)
-    });
+    let (provenance, report) = provenance_and_report(a, &loaded, &opts);
     let run = ProgramRun {
         robot: &robot,
         opts: &opts,
