@@ -106,3 +106,27 @@ pub fn without_header(program: &[u8]) -> Vec<u8> {
 pub fn text_without_header(program: &str) -> String {
     String::from_utf8(without_header(program.as_bytes())).expect("utf-8")
 }
+
+/// Pose of a robtarget literal: position, quaternion with the scalar first.
+pub fn robtarget_pose(rt: &postproc::program::rapid::RobTarget) -> nalgebra::Isometry3<f64> {
+    let q = rt.rot.each_ref().map(|n| n.value);
+    nalgebra::Isometry3::from_parts(
+        nalgebra::Translation3::new(rt.trans[0].value, rt.trans[1].value, rt.trans[2].value),
+        nalgebra::UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(
+            q[0], q[1], q[2], q[3],
+        )),
+    )
+}
+
+/// The confdata of a robtarget literal.
+pub fn robtarget_conf(
+    rt: &postproc::program::rapid::RobTarget,
+) -> postproc::machine::robot::ConfData {
+    let v = rt.robconf.each_ref().map(|n| n.value as i32);
+    postproc::machine::robot::ConfData {
+        cf1: v[0],
+        cf4: v[1],
+        cf6: v[2],
+        cfx: v[3],
+    }
+}

@@ -4,12 +4,14 @@
 //! the compensated target is written with that solution's confdata and
 //! lands on the programmed pose; `\On` restores the confdata of the targets.
 
-use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion, Vector3};
+use nalgebra::{Isometry3, Vector3};
 use postproc::machine::robot::pose::{pose_error, rotation_to_abb};
 use postproc::machine::robot::{ConfData, Effects, Model, PointMass, Robot};
 use postproc::program::rapid::{DataValue, Module, RobTarget, Target, parse_module};
 
-use crate::common::{postproc, repo, without_header, write};
+use crate::common::{
+    postproc, repo, robtarget_conf as conf, robtarget_pose as pose, without_header, write,
+};
 
 /// Agreement of the predicted attained TCP with the programmed one (the
 /// written 3-decimal position and 7-decimal quaternion: tests/rapid_cli.rs).
@@ -91,24 +93,6 @@ fn robtarget<'a>(m: &'a Module, name: &str) -> &'a RobTarget {
     match m.decl(name).and_then(|d| d.value.as_ref()) {
         Some(DataValue::RobTarget(rt)) => rt,
         v => panic!("{name}: {v:?}"),
-    }
-}
-
-fn pose(rt: &RobTarget) -> Isometry3<f64> {
-    let q = rt.rot.each_ref().map(|n| n.value);
-    Isometry3::from_parts(
-        Translation3::new(rt.trans[0].value, rt.trans[1].value, rt.trans[2].value),
-        UnitQuaternion::from_quaternion(Quaternion::new(q[0], q[1], q[2], q[3])),
-    )
-}
-
-fn conf(rt: &RobTarget) -> ConfData {
-    let v = rt.robconf.each_ref().map(|n| n.value as i32);
-    ConfData {
-        cf1: v[0],
-        cf4: v[1],
-        cf6: v[2],
-        cfx: v[3],
     }
 }
 

@@ -5,11 +5,14 @@ use approx::assert_abs_diff_eq;
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 use postproc::machine::ThermalStart;
 use postproc::machine::robot::pose::pose_error;
-use postproc::machine::robot::{ConfData, Effects, Model, PointMass, Robot};
+use postproc::machine::robot::{Effects, Model, PointMass, Robot};
 use postproc::pipeline::rapid::{RapidOptions, compensate_module};
 use postproc::program::rapid::{DataValue, Module, RobTarget, Target, parse_module};
 
-use crate::common::{postproc, repo, text_without_header, without_header, write};
+use crate::common::{
+    postproc, repo, robtarget_conf as conf, robtarget_pose as pose, text_without_header,
+    without_header, write,
+};
 
 /// Position agreement of the predicted attained TCP with the programmed one,
 /// mm. Derivation: the compensation itself converges to 1e-7 mm; writing
@@ -47,25 +50,6 @@ fn robot_with_drill() -> Robot {
         }),
         false,
     )
-}
-
-/// Pose of a robtarget literal (position, quaternion q1 = scalar).
-fn pose(rt: &RobTarget) -> Isometry3<f64> {
-    let q = rt.rot.each_ref().map(|n| n.value);
-    Isometry3::from_parts(
-        Translation3::new(rt.trans[0].value, rt.trans[1].value, rt.trans[2].value),
-        UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(q[0], q[1], q[2], q[3])),
-    )
-}
-
-fn conf(rt: &RobTarget) -> ConfData {
-    let v = rt.robconf.each_ref().map(|n| n.value as i32);
-    ConfData {
-        cf1: v[0],
-        cf4: v[1],
-        cf6: v[2],
-        cfx: v[3],
-    }
 }
 
 fn robtarget<'a>(m: &'a Module, name: &str, index: Option<usize>) -> &'a RobTarget {

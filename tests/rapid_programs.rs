@@ -8,9 +8,9 @@
 use std::fmt::Write as _;
 
 use approx::assert_abs_diff_eq;
-use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion, Vector3};
+use nalgebra::{Isometry3, Vector3};
 use postproc::machine::robot::pose::pose_error;
-use postproc::machine::robot::{ConfData, Effects, PointMass, Robot};
+use postproc::machine::robot::{Effects, PointMass, Robot};
 
 /// The effects the modules are compensated with (`--effects
 /// kinematic,gravity`), for the forward check.
@@ -23,7 +23,9 @@ const KINEMATIC_GRAVITY: Effects = Effects {
 };
 use postproc::program::rapid::{DataValue, Module, RobTarget, Target, parse_module};
 
-use crate::common::{postproc, repo, text_without_header, write};
+use crate::common::{
+    postproc, repo, robtarget_conf as conf, robtarget_pose as pose, text_without_header, write,
+};
 
 /// Position agreement of the predicted attained TCP with the programmed
 /// one, mm: the written position has 3 decimals (≤ 0.0005 mm per axis,
@@ -33,25 +35,6 @@ const POS_TOL_MM: f64 = 1e-3;
 /// Orientation agreement, rad: quaternions written with 7 decimals turn
 /// the frame by at most 2e-7 rad.
 const ROT_TOL_RAD: f64 = 1e-6;
-
-/// Pose of a robtarget literal (position, quaternion with the scalar first).
-fn pose(rt: &RobTarget) -> Isometry3<f64> {
-    let q = rt.rot.each_ref().map(|n| n.value);
-    Isometry3::from_parts(
-        Translation3::new(rt.trans[0].value, rt.trans[1].value, rt.trans[2].value),
-        UnitQuaternion::from_quaternion(Quaternion::new(q[0], q[1], q[2], q[3])),
-    )
-}
-
-fn conf(rt: &RobTarget) -> ConfData {
-    let v = rt.robconf.each_ref().map(|n| n.value as i32);
-    ConfData {
-        cf1: v[0],
-        cf4: v[1],
-        cf6: v[2],
-        cfx: v[3],
-    }
-}
 
 /// The IRB 1600 with a tool: its TCP along the flange z axis and its mass.
 fn irb1600_with(tcp_z_mm: f64, mass_kg: f64, com_z_mm: f64) -> Robot {

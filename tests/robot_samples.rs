@@ -10,12 +10,14 @@
 //! world origin. It runs the samples mounted 300 mm behind that origin (a
 //! machine file with a `base`), the cell otherwise unchanged.
 
-use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion, Vector3};
+use nalgebra::{Isometry3, Translation3, Vector3};
 use postproc::machine::robot::pose::pose_error;
-use postproc::machine::robot::{ConfData, Effects, Model, PointMass, Robot};
+use postproc::machine::robot::{Effects, Model, PointMass, Robot};
 use postproc::program::rapid::{DataValue, Module, RobTarget, Target, parse_module};
 
-use crate::common::{postproc, repo, without_header, write};
+use crate::common::{
+    postproc, repo, robtarget_conf as conf, robtarget_pose as pose, without_header, write,
+};
 
 /// Position agreement of the predicted attained TCP with the programmed one,
 /// mm: the written position's 3 decimals move the TCP by at most
@@ -71,24 +73,6 @@ fn with_spindle(r: Robot) -> Robot {
 /// The samples' plate frame (wPlate / wPart): translation (600, -200, 350).
 fn plate() -> Isometry3<f64> {
     Isometry3::translation(600.0, -200.0, 350.0)
-}
-
-fn pose(rt: &RobTarget) -> Isometry3<f64> {
-    let q = rt.rot.each_ref().map(|n| n.value);
-    Isometry3::from_parts(
-        Translation3::new(rt.trans[0].value, rt.trans[1].value, rt.trans[2].value),
-        UnitQuaternion::from_quaternion(Quaternion::new(q[0], q[1], q[2], q[3])),
-    )
-}
-
-fn conf(rt: &RobTarget) -> ConfData {
-    let v = rt.robconf.each_ref().map(|n| n.value as i32);
-    ConfData {
-        cf1: v[0],
-        cf4: v[1],
-        cf6: v[2],
-        cfx: v[3],
-    }
 }
 
 fn declared<'a>(m: &'a Module, name: &str, index: Option<usize>) -> &'a DataValue {
