@@ -225,7 +225,7 @@ fn dist_to_move(p: &Vector3<f64>, mv: &Move) -> f64 {
         let s = (phi + k as f64 * tau - a0) / arc.sweep;
         let sc = s.clamp(0.0, 1.0);
         let q = arc.point(&s3, &e3, sc);
-        let d = if (s - sc).abs() < 1e-12 {
+        let d = if (0.0..=1.0).contains(&s) {
             let radial = (p[a] - c[a]).hypot(p[b] - c[b]) - arc.radius;
             radial.hypot(p[n] - q[n])
         } else {

@@ -21,6 +21,9 @@ use crate::common::{postproc, repo};
 
 /// Parameter recovery: |fitted − true| within this many standard uncertainties.
 const K_SIGMA: f64 = 4.0;
+/// Agreement of a value written to a model file with the fitted one: the
+/// writer keeps at least 6 decimals of a gain.
+const WRITTEN_TOL: f64 = 1e-6;
 /// Share of the closable held-out gap (down to the injected noise) a found
 /// effect must close.
 const MIN_CLOSED_SHARE: f64 = 0.6;
@@ -633,7 +636,7 @@ fn tool_spindle_growth_power() {
             .map_or(0.0, |s| s.gain_per_kw);
         let p = &d.found[0].params[0];
         assert!(
-            (g - 3.0 - p.value).abs() < 1e-6,
+            (g - 3.0 - p.value).abs() < WRITTEN_TOL,
             "written {g}, fitted 3 + {}",
             p.value
         );
