@@ -26,6 +26,7 @@ mod hostile;
 mod layers;
 mod machine_tool;
 mod mounts;
+mod new_names;
 mod observations;
 mod output_words;
 mod paper_b;

@@ -204,7 +204,7 @@ fn rapid_offs_target_is_materialised() {
     assert!(!out.contains("Offs("), "every Offs is replaced");
     // Hole 3: approach (dz 40) and retract share holes3_o1; dz 2 → _o2,
     // dz -12 → _o3; declared after the holes array.
-    assert!(out.contains("  CONST robtarget holes3_o1 := [["));
+    assert!(out.contains("  LOCAL CONST robtarget holes3_o1 := [["));
     assert!(out.contains("    MoveJ holes3_o1, v500, zApproach, tDrill\\WObj:=wPlate;\n"));
     assert!(out.contains("    MoveL holes3_o3, vDrill, fine, tDrill\\WObj:=wPlate;\n"));
     assert!(out.contains("    MoveL holes3_o1, vRetract, z10, tDrill\\WObj:=wPlate;\n"));
@@ -265,7 +265,7 @@ fn rapid_target_under_two_tools_is_split() {
     let lines: Vec<&str> = out.lines().collect();
     assert!(lines[2].starts_with("  CONST robtarget p10 := [["), "{out}");
     assert!(
-        lines[3].starts_with("  CONST robtarget p10_c2 := [["),
+        lines[3].starts_with("  LOCAL CONST robtarget p10_c2 := [["),
         "{out}"
     );
     assert_eq!(lines[5], "    MoveL p10, v100, fine, tool0;");
@@ -1062,7 +1062,7 @@ fn a_target_shared_with_an_unfinished_routine_keeps_its_value() {
         "main's move goes to a copy:\n{out}"
     );
     assert!(
-        out.contains("  CONST robtarget pHome_c"),
+        out.contains("  LOCAL CONST robtarget pHome_c"),
         "the copy is declared:\n{out}"
     );
 }

@@ -28,6 +28,10 @@ use crate::machine::Status;
 /// [`find_marker`] looks for.
 pub const MARKER: &str = "compensated program - do not compensate it again";
 
+/// The UTF-8 byte-order mark some editors put first in a file: it stays
+/// first, the header goes after it.
+const BOM: &[u8] = b"\xEF\xBB\xBF";
+
 /// Lines of a program searched for a header and for the place of a new
 /// one; a header is always within them.
 pub const HEAD_LINES: usize = 200;
@@ -328,8 +332,8 @@ pub fn gcode_syntax(head: &[u8]) -> Syntax {
 /// documentation), or `None` when the head does not yet show it (more of
 /// the program is needed).
 pub fn insert_at(head: &[u8], syntax: Syntax, complete: bool) -> Option<usize> {
-    let mut at = 0;
-    let mut lines = head_lines(head).peekable();
+    let mut at = if head.starts_with(BOM) { BOM.len() } else { 0 };
+    let mut lines = head_lines(&head[at..]).peekable();
     if syntax == Syntax::Rapid {
         for line in lines {
             if !line.ends_with(b"\n") && !complete {
@@ -341,9 +345,10 @@ pub fn insert_at(head: &[u8], syntax: Syntax, complete: bool) -> Option<usize> {
                 return Some(at);
             }
         }
-        // No module line (a file of routines): the header opens the file.
+        // No module line (a file of routines): the header opens the file,
+        // after its byte-order mark.
         return if complete || at >= HEAD_BYTES || head.len() >= HEAD_BYTES {
-            Some(0)
+            Some(if head.starts_with(BOM) { BOM.len() } else { 0 })
         } else {
             None
         };
@@ -436,7 +441,7 @@ impl<'w> HeaderWriter<'w> {
         let eol = line_end(&held);
         let (before, after) = held.split_at(at.min(held.len()));
         self.inner.write_all(before)?;
-        if !before.is_empty() && !before.ends_with(b"\n") {
+        if !before.is_empty() && !before.ends_with(b"\n") && before != BOM {
             self.inner.write_all(eol)?;
         }
         self.inner.write_all(&self.provenance.render(syntax, eol))?;
@@ -587,6 +592,15 @@ mod tests {
         let mut want = header(Syntax::GcodeParens, b"\n");
         want.extend_from_slice(b"G0 X1\n");
         assert_eq!(through(b"G0 X1\n", false, 2), want);
+        // A byte-order mark stays first.
+        let mut want = b"\xEF\xBB\xBF%\nO1001\n".to_vec();
+        want.extend(header(Syntax::GcodeParens, b"\n"));
+        want.extend_from_slice(b"G0 X1\n%\n");
+        assert_eq!(through(b"\xEF\xBB\xBF%\nO1001\nG0 X1\n%\n", false, 2), want);
+        let mut want = BOM.to_vec();
+        want.extend(header(Syntax::GcodeParens, b"\n"));
+        want.extend_from_slice(b"G0 X1\n");
+        assert_eq!(through(b"\xEF\xBB\xBFG0 X1\n", false, 2), want);
         // An empty program is the header alone.
         assert_eq!(through(b"", false, 1), header(Syntax::GcodeParens, b"\n"));
     }
@@ -597,6 +611,21 @@ mod tests {
         let mut want = b"%%%\n  VERSION:1\n%%%\n\nMODULE Drill\n".to_vec();
         want.extend(header(Syntax::Rapid, b"\n"));
         want.extend_from_slice(b"  CONST num n := 1;\nENDMODULE\n");
+        assert_eq!(through(program, true, 5), want);
+    }
+
+    #[test]
+    fn rapid_header_after_the_module_line_of_a_file_with_a_byte_order_mark() {
+        let program = b"\xEF\xBB\xBFMODULE Drill\r\n  CONST num n := 1;\r\nENDMODULE\r\n";
+        let mut want = b"\xEF\xBB\xBFMODULE Drill\r\n".to_vec();
+        want.extend(header(Syntax::Rapid, b"\r\n"));
+        want.extend_from_slice(b"  CONST num n := 1;\r\nENDMODULE\r\n");
+        assert_eq!(through(program, true, 5), want);
+        // Without a module line the header still follows the mark.
+        let program = b"\xEF\xBB\xBFPROC p()\nENDPROC\n";
+        let mut want = BOM.to_vec();
+        want.extend(header(Syntax::Rapid, b"\n"));
+        want.extend_from_slice(b"PROC p()\nENDPROC\n");
         assert_eq!(through(program, true, 5), want);
     }
 

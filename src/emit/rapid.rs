@@ -11,6 +11,7 @@
 //! robtarget and jointtarget literals, the `! dev …` comment of a
 //! compensated move and the names of new declarations.
 
+use std::collections::HashSet;
 use std::ops::Range;
 
 use nalgebra::Isometry3;
@@ -754,24 +755,39 @@ pub(crate) fn joint_text(
     Ok(format!("[[{}],[{extax}]]", words.join(",")))
 }
 
-/// A name not yet declared in the module nor already created.
+/// A name not yet declared in the module, nor already created, nor in
+/// `reserved` (lower case: the routines, record types and modules of the
+/// program), of at most [`MAX_IDENT_CHARS`] characters: `{stem}_{tag}{n}`
+/// for the first `n` from `from` on, the stem cut where the name would be
+/// too long.
 pub(crate) fn fresh_name(
     module: &Module,
     taken: &mut Vec<String>,
+    reserved: &HashSet<String>,
     stem: &str,
     tag: &str,
     from: usize,
 ) -> String {
     let mut n = from;
     loop {
-        let name = format!("{stem}_{tag}{n}");
-        if lookup(module, &name).is_none() && !taken.iter().any(|t| t.eq_ignore_ascii_case(&name)) {
+        let suffix = format!("_{tag}{n}");
+        let keep = MAX_IDENT_CHARS.saturating_sub(suffix.len());
+        let end = stem.char_indices().nth(keep).map_or(stem.len(), |(i, _)| i);
+        let name = format!("{}{suffix}", &stem[..end]);
+        if lookup(module, &name).is_none()
+            && !reserved.contains(&name.to_ascii_lowercase())
+            && !taken.iter().any(|t| t.eq_ignore_ascii_case(&name))
+        {
             taken.push(name.clone());
             return name;
         }
         n += 1;
     }
 }
+
+/// The longest identifier RAPID takes, characters: a new name is cut to
+/// it (its stem shortened, its suffix kept).
+pub const MAX_IDENT_CHARS: usize = 32;
 
 #[cfg(test)]
 mod tests {

@@ -12,7 +12,7 @@
 pub mod program;
 pub mod stream;
 
-use std::collections::HashMap;
+use std::collections::{HashMap, HashSet};
 use std::rc::Rc;
 use std::sync::Arc;
 
@@ -146,6 +146,8 @@ struct Rewriter<'m> {
     /// New declaration lines per module declaration index.
     inserts: Vec<(usize, String)>,
     taken: Vec<String>,
+    /// Names new data may not take (lower case): [`Carry::reserved`].
+    reserved: HashSet<String>,
     /// Robot views (one per tool, work object and process wrench; the
     /// thermal state of a move goes with its job) and the index of each.
     views: Arc<Vec<Robot>>,
@@ -322,7 +324,7 @@ impl Rewriter<'_> {
     }
 
     fn decl_text(&self, name: &str, kind: &str, value: &str) -> String {
-        format!("CONST {kind} {name} := {value};")
+        format!("LOCAL CONST {kind} {name} := {value};")
     }
 
     /// Compensates one robtarget use; returns the comment source.
@@ -447,7 +449,14 @@ impl Rewriter<'_> {
         if let Some(n) = self.made.get(&k) {
             return Ok(n.clone());
         }
-        let name = fresh_name(self.module, &mut self.taken, stem, tag, from);
+        let name = fresh_name(
+            self.module,
+            &mut self.taken,
+            &self.reserved,
+            stem,
+            tag,
+            from,
+        );
         if tag == "o" {
             *self.derived_count.entry(origin).or_insert(0) += 1;
         }
@@ -1018,6 +1027,7 @@ pub(crate) fn compensate_carried(
         file,
     };
     carry.keep_unfinished_targets(&module, src, file);
+    carry.reserve_names_of(&module);
     let mut edits = compensate_window(text, robot, opts, &mut carry, None, 0)?;
     carry.leave_unfinished(&module, src, file);
     carry.leave_unknown(&module, src, file);
@@ -1102,6 +1112,10 @@ pub(crate) struct Carry {
     pub(crate) before: EditList,
     inserts: Vec<(usize, String)>,
     taken: Vec<String>,
+    /// Names new data may not take, lower case: the routines, record types
+    /// and module names of the module (of the whole program, for a module
+    /// of several): a data object may not share its name with them.
+    pub(crate) reserved: HashSet<String>,
     owner: HashMap<Origin, LoadKey>,
     made: HashMap<(Origin, String, LoadKey), String>,
     derived_count: HashMap<Origin, usize>,
@@ -1125,6 +1139,15 @@ pub(crate) struct Carry {
 }
 
 impl Carry {
+    /// Reserves the names of `module` that new data may not take: its own
+    /// name, its routines' and its record types'.
+    pub(crate) fn reserve_names_of(&mut self, module: &Module) {
+        let names = std::iter::once(&module.name)
+            .chain(module.procs.iter().map(|p| &p.name))
+            .chain(module.records.iter().map(|r| &r.name));
+        self.reserved.extend(names.map(|n| n.to_ascii_lowercase()));
+    }
+
     /// The new declarations (`_cN` copies, `_oN` targets) as edits of
     /// `src`, whose module declarations have the spans `decls`: one
     /// insertion per original declaration, in order.
@@ -1688,6 +1711,7 @@ impl<'m> Rewriter<'m> {
             edits: EditList::new(),
             inserts: std::mem::take(&mut carry.inserts),
             taken: std::mem::take(&mut carry.taken),
+            reserved: std::mem::take(&mut carry.reserved),
             views: Arc::new(Vec::new()),
             view_of: HashMap::new(),
             last_view: None,
@@ -1708,6 +1732,7 @@ impl<'m> Rewriter<'m> {
         let edits = std::mem::take(&mut self.edits);
         carry.inserts = std::mem::take(&mut self.inserts);
         carry.taken = std::mem::take(&mut self.taken);
+        carry.reserved = std::mem::take(&mut self.reserved);
         carry.owner = std::mem::take(&mut self.owner);
         carry.made = std::mem::take(&mut self.made);
         carry.derived_count = std::mem::take(&mut self.derived_count);

@@ -309,7 +309,13 @@ fn scan_line(line: &[u8], line_no: usize, file: &str, out: &mut Block) -> Result
     out.text_len = text.len() as u32;
     let at = At { file, line_no };
 
-    let mut pos = skip_ws(text, 0);
+    // A UTF-8 byte-order mark (an editor's) opens the file: blank.
+    let start = if line_no == 1 && text.starts_with(b"\xEF\xBB\xBF") {
+        3
+    } else {
+        0
+    };
+    let mut pos = skip_ws(text, start);
     if text.get(pos) == Some(&b'%') {
         out.percent = true;
         // Anything after `%` on the same line is ignored by controllers; keep it verbatim.

@@ -18,14 +18,18 @@ fn carry_of(members: &[Member], i: usize, own: &Member) -> Carry {
         Some(d) => d.span.clone(),
         None => own.module.span.start..own.module.span.start + "MODULE".len(),
     };
-    Carry {
+    let mut carry = Carry {
         scope: Some(ProgramScope {
             from: own.module.decls.len(),
             anchor,
             writes: written_elsewhere(members, i),
         }),
         ..Carry::default()
+    };
+    for m in members {
+        carry.reserve_names_of(&m.module);
     }
+    carry
 }
 
 /// The moves of module `i` of the program `members` that a compensation

@@ -112,6 +112,14 @@ pub fn compensate_streamed<R: BufRead>(
     records: Option<RecordSink>,
 ) -> std::result::Result<(Streamed, String), Fallback> {
     let mut carry = Carry::default();
+    // The routines of later windows are not seen when a window names new
+    // data: their names are read first.
+    let names = open()
+        .and_then(crate::program::rapid::windows::routine_names)
+        .map_err(|e| Error::io(file, e))?;
+    carry
+        .reserved
+        .extend(names.iter().map(|n| n.to_ascii_lowercase()));
     if let Some(t) = robot.thermal().filter(|_| first_pass(robot, opts)) {
         let mut first = Carry {
             time_line: Some(TimeLineTotals::default()),

@@ -189,6 +189,40 @@ fn routine_start(code: &str) -> Option<&'static str> {
     }
 }
 
+/// The names of the module read from `reader`, of the routines it declares
+/// (a line whose code opens with `[LOCAL] PROC|FUNC|TRAP`) and of its
+/// record types: a scan of lines that parses nothing else, for names a
+/// compensation must not give to new data before it has seen the routines
+/// of later windows.
+pub fn routine_names<R: BufRead>(mut reader: R) -> std::io::Result<Vec<String>> {
+    let mut names = Vec::new();
+    let mut buf = Vec::new();
+    loop {
+        buf.clear();
+        if reader.read_until(b'\n', &mut buf)? == 0 {
+            return Ok(names);
+        }
+        let line = String::from_utf8_lossy(&buf);
+        let code = code_of(&line).trim_start_matches(is_blank);
+        let mut words = code
+            .split(|c: char| !(c.is_ascii_alphanumeric() || c == '_'))
+            .filter(|w| !w.is_empty());
+        let mut w = words.next().unwrap_or("");
+        if w.eq_ignore_ascii_case("LOCAL") {
+            w = words.next().unwrap_or("");
+        }
+        let name = match w.to_ascii_uppercase().as_str() {
+            "MODULE" | "PROC" | "TRAP" | "RECORD" => words.next(),
+            // `FUNC type name`.
+            "FUNC" => words.nth(1),
+            _ => None,
+        };
+        if let Some(n) = name {
+            names.push(n.to_string());
+        }
+    }
+}
+
 /// Whether a routine's first line (its code, trimmed) is its whole
 /// header: `[LOCAL] PROC name(…)`, `[LOCAL] FUNC type name(…)` with
 /// nothing after the parameter list, or `[LOCAL] TRAP name` alone (a
@@ -552,6 +586,15 @@ mod tests {
     /// A routine without statements still gives a window (its header is
     /// parsed with it), and a control line ends a statement: a main loop
     /// `WHILE … DO … ENDWHILE` before `ENDPROC` is taken.
+    #[test]
+    fn routine_and_record_names_are_found_by_their_lines() {
+        let src = "MODULE M\n  RECORD pt\n    num x;\n  ENDRECORD\n  CONST num n := 1;\n\
+                   PROC main()\n    p1_c2;\n  ENDPROC\n  LOCAL FUNC num Twice(num x)\n    RETURN 2*x;\n\
+                   ENDFUNC\n  ! PROC commented()\n  TRAP onStop\n  ENDTRAP\nENDMODULE\n";
+        let names = routine_names(src.as_bytes()).expect("read");
+        assert_eq!(names, ["M", "pt", "main", "Twice", "onStop"]);
+    }
+
     #[test]
     fn empty_routines_and_control_lines_are_taken() {
         let src = "MODULE M\nPROC a()\nENDPROC\nPROC b()\n  WHILE TRUE DO\n    MoveL p, v1, z1, t0;\n  ENDWHILE\nENDPROC\nLOCAL TRAP t\nENDTRAP\nENDMODULE\n";
