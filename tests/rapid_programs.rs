@@ -1,6 +1,7 @@
 //! RAPID programs shaped like the ones robot cells really run, written for
-//! these tests: a CAM milling module of 10 000 inline targets and an
-//! arc-welding module. Each comes back byte for byte with nothing to
+//! these tests: a CAM milling module of 10 000 inline targets, an
+//! arc-welding module, a spot-welding module and a module of process
+//! instructions postproc does not compensate (paint, dispense, CAP). Each comes back byte for byte with nothing to
 //! compensate, every move is compensated otherwise, and the compensated
 //! targets, commanded, land on the programmed poses (forward kinematics of
 //! the robot library).
@@ -270,5 +271,273 @@ fn an_arc_welding_module_has_every_seam_target_compensated() {
         let (dp, dr) = pose_error(&robot.predict(&q, KINEMATIC_GRAVITY), &programmed);
         assert_abs_diff_eq!(dp.norm(), 0.0, epsilon = POS_TOL_MM);
         assert_abs_diff_eq!(dr.norm(), 0.0, epsilon = ROT_TOL_RAD);
+    }
+}
+
+/// Runs `postproc [-v] compensate` of `input` on the IRB 1600 with
+/// `effects`, no annotation, and, given, a window of `lines` lines at a
+/// time; the bytes written and the standard error.
+fn compensate_run(
+    input: &std::path::Path,
+    output: &std::path::Path,
+    effects: &str,
+    lines: Option<&str>,
+) -> (Vec<u8>, String) {
+    let mut cmd = postproc();
+    if let Some(n) = lines {
+        cmd.args(["-v", "compensate", "--rapid-window-lines", n]);
+    } else {
+        cmd.arg("compensate");
+    }
+    let out = cmd
+        .arg(input)
+        .arg("--machine")
+        .arg(repo("machines/abb-irb1600.yaml"))
+        .args(["--effects", effects, "--annotate", "none", "-o"])
+        .arg(output)
+        .output()
+        .expect("runs");
+    let err = String::from_utf8_lossy(&out.stderr).into_owned();
+    assert_eq!(out.status.code(), Some(0), "{err}");
+    if let Some(n) = lines {
+        let said = format!("read a window of {n} lines at a time");
+        assert!(err.contains(&said), "{err}");
+    }
+    (std::fs::read(output).expect("output"), err)
+}
+
+/// A door-panel spot-welding cell as a servo-gun cell runs it: home and
+/// approach with `MoveJ`, five spots with `SpotL`/`SpotJ` in the IRC5
+/// SpotWare form (gun data, one with `\GunD`, spot data, one with
+/// `\InPos`), a departure with `MoveL`, and back home.
+const SPOT_MODULE: &str = "MODULE Spot_Door
+  ! Door inner panel, servo gun G1, five spots.
+  PERS tooldata tGun := [TRUE,[[0,0,350],[1,0,0,0]],[8,[0,0,150],[1,0,0,0],0,0,0]];
+  PERS wobjdata wFixture := [FALSE,TRUE,\"\",[[700,20,420],[1,0,0,0]],[[0,0,0],[1,0,0,0]]];
+  PERS spotdata spot10 := [10,1,1,0];
+  PERS spotdata spot20 := [20,2,1,0];
+  CONST robtarget pHome := [[600,0,800],[0,0,1,0],[0,0,0,0],[9E+09,9E+09,9E+09,9E+09,9E+09,9E+09]];
+  CONST robtarget pApp := [[40,40,80],[0,0,1,0],[0,0,0,0],[9E+09,9E+09,9E+09,9E+09,9E+09,9E+09]];
+  CONST robtarget pW1 := [[40,40,2],[0,0,1,0],[0,0,0,0],[9E+09,9E+09,9E+09,9E+09,9E+09,9E+09]];
+  CONST robtarget pW2 := [[100,40,2],[0,0,1,0],[0,0,0,0],[9E+09,9E+09,9E+09,9E+09,9E+09,9E+09]];
+  CONST robtarget pW3 := [[160,40,2],[0,0.0871557,0.9961947,0],[0,0,0,0],[9E+09,9E+09,9E+09,9E+09,9E+09,9E+09]];
+  CONST robtarget pW4 := [[160,120,2],[0,0.0871557,0.9961947,0],[0,0,0,0],[9E+09,9E+09,9E+09,9E+09,9E+09,9E+09]];
+  CONST robtarget pW5 := [[100,180,2],[0,0,1,0],[0,0,0,0],[9E+09,9E+09,9E+09,9E+09,9E+09,9E+09]];
+  CONST robtarget pDep := [[100,180,90],[0,0,1,0],[0,0,0,0],[9E+09,9E+09,9E+09,9E+09,9E+09,9E+09]];
+
+  PROC main()
+    MoveJ pHome, v1000, z50, tGun;
+    MoveJ pApp, v1000, z20, tGun\\WObj:=wFixture;
+    SpotL pW1, vmax, gun1, spot10, tGun\\WObj:=wFixture;
+    SpotL pW2, vmax, gun1\\GunD:=gunDiag, spot10, tGun\\WObj:=wFixture;
+    SpotL pW3, v1500, gun1, spot20\\InPos, tGun\\WObj:=wFixture;
+    SpotJ pW4, vmax, gun1, spot20, tGun\\WObj:=wFixture;
+    SpotL pW5, vmax, gun1, spot10, tGun\\WObj:=wFixture;
+    MoveL pDep, v1000, z20, tGun\\WObj:=wFixture;
+    MoveJ pHome, v1000, fine, tGun;
+  ENDPROC
+ENDMODULE
+";
+
+/// The targets of [`SPOT_MODULE`], in order, and whether each is in the
+/// fixture (else in the base frame).
+const SPOT_TARGETS: [(&str, bool); 8] = [
+    ("pHome", false),
+    ("pApp", true),
+    ("pW1", true),
+    ("pW2", true),
+    ("pW3", true),
+    ("pW4", true),
+    ("pW5", true),
+    ("pDep", true),
+];
+
+/// Every target declaration of `module` named in `targets` changed in
+/// `out`, and nothing else.
+fn assert_only_targets_changed(module: &str, out: &str, targets: &[&str]) {
+    assert_eq!(module.lines().count(), out.lines().count(), "{out}");
+    let changed: Vec<&str> = module
+        .lines()
+        .zip(out.lines())
+        .filter(|(x, y)| x != y)
+        .map(|(x, _)| x.split(":=").next().unwrap_or("").trim())
+        .collect();
+    let want: Vec<String> = targets
+        .iter()
+        .map(|t| format!("CONST robtarget {t}"))
+        .collect();
+    assert_eq!(changed, want, "{out}");
+}
+
+/// The declared target `name` of `m_out`, commanded, lands on the pose
+/// `m_in` declares for it (in `wobj`), with the effects compensated.
+fn assert_target_lands(
+    robot: &Robot,
+    wobj: &Isometry3<f64>,
+    m_in: &Module,
+    m_out: &Module,
+    name: &str,
+) {
+    let rt = |m: &Module| match m.decl(name).and_then(|d| d.value.clone()) {
+        Some(DataValue::RobTarget(rt)) => rt,
+        v => panic!("{name}: {v:?}"),
+    };
+    let (p_in, p_out) = (rt(m_in), rt(m_out));
+    assert_ne!(pose(&p_in), pose(&p_out), "{name} compensated");
+    let programmed = wobj * pose(&p_in);
+    let q = robot
+        .ik_conf(&(wobj * pose(&p_out)), conf(&p_out))
+        .unwrap_or_else(|e| panic!("{name}: {e}"));
+    let (dp, dr) = pose_error(&robot.predict(&q, KINEMATIC_GRAVITY), &programmed);
+    assert_abs_diff_eq!(dp.norm(), 0.0, epsilon = POS_TOL_MM);
+    assert_abs_diff_eq!(dr.norm(), 0.0, epsilon = ROT_TOL_RAD);
+}
+
+#[test]
+fn a_spot_welding_module_has_every_spot_compensated() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let input = write(dir.path(), "spot.mod", SPOT_MODULE);
+    let (none, _) = compensate_run(&input, &dir.path().join("none.mod"), "none", None);
+    let none = text_without_header(&String::from_utf8(none).expect("utf-8"));
+    assert_eq!(none, SPOT_MODULE, "identity");
+    let whole = dir.path().join("whole.mod");
+    let (bytes, err) = compensate_run(&input, &whole, "kinematic,gravity", None);
+    // Nine moves (two of them to pHome), none left as written.
+    assert!(err.contains("spot.mod → "), "{err}");
+    assert!(
+        err.contains(": 9 moves compensated, 0 targets added"),
+        "{err}"
+    );
+    assert!(!err.contains("left as written"), "{err}");
+    let out = text_without_header(&String::from_utf8(bytes.clone()).expect("utf-8"));
+    // The declarations of the targets change, nothing else: the spot
+    // instructions, their gun and spot data, the spotdata declarations.
+    let names: Vec<&str> = SPOT_TARGETS.iter().map(|(n, _)| *n).collect();
+    assert_only_targets_changed(SPOT_MODULE, &out, &names);
+    let m_in = parse_module(SPOT_MODULE, "in").expect("input parses");
+    let m_out = parse_module(&out, "out").expect("output parses");
+    let kinds: Vec<&str> = m_in.moves().map(|mv| mv.name).collect();
+    let want = [
+        "MoveJ", "MoveJ", "SpotL", "SpotL", "SpotL", "SpotJ", "SpotL", "MoveL", "MoveJ",
+    ];
+    assert_eq!(kinds, want);
+    let robot = irb1600_with(350.0, 8.0, 150.0);
+    let w_fixture = Isometry3::translation(700.0, 20.0, 420.0);
+    for (name, in_fixture) in SPOT_TARGETS {
+        let wobj = if in_fixture {
+            w_fixture
+        } else {
+            Isometry3::identity()
+        };
+        assert_target_lands(&robot, &wobj, &m_in, &m_out, name);
+    }
+    // Read a window at a time: the same bytes and the same summary.
+    for lines in ["1", "3"] {
+        let streamed = dir.path().join(format!("s{lines}.mod"));
+        let (got, err) = compensate_run(&input, &streamed, "kinematic,gravity", Some(lines));
+        assert!(
+            err.contains(": 9 moves compensated, 0 targets added"),
+            "{err}"
+        );
+        assert!(got == bytes, "{lines} lines");
+    }
+}
+
+/// A cell of process instructions postproc has no confirmed argument
+/// order for — painting, dispensing, the continuous application platform,
+/// multi-gun spot welding, and a `SpotL` in the older SpotWare form —
+/// between plain moves: the plain moves are compensated, each process
+/// instruction is left as written, named with its line and reason, and
+/// counted, and its target keeps its declared value.
+const PROCESS_CELL: &str = "MODULE Process_Cell
+  PERS tooldata tApp := [TRUE,[[0,0,250],[1,0,0,0]],[4,[0,0,100],[1,0,0,0],0,0,0]];
+  PERS wobjdata wPart := [FALSE,TRUE,\"\",[[700,20,420],[1,0,0,0]],[[0,0,0],[1,0,0,0]]];
+  CONST robtarget pHome := [[600,0,800],[0,0,1,0],[0,0,0,0],[9E+09,9E+09,9E+09,9E+09,9E+09,9E+09]];
+  CONST robtarget pApp := [[40,40,120],[0,0,1,0],[0,0,0,0],[9E+09,9E+09,9E+09,9E+09,9E+09,9E+09]];
+  CONST robtarget pStroke1 := [[40,40,60],[0,0,1,0],[0,0,0,0],[9E+09,9E+09,9E+09,9E+09,9E+09,9E+09]];
+  CONST robtarget pStroke2 := [[200,40,60],[0,0,1,0],[0,0,0,0],[9E+09,9E+09,9E+09,9E+09,9E+09,9E+09]];
+  CONST robtarget pArcVia := [[240,80,60],[0,0,1,0],[0,0,0,0],[9E+09,9E+09,9E+09,9E+09,9E+09,9E+09]];
+  CONST robtarget pArcEnd := [[200,120,60],[0,0,1,0],[0,0,0,0],[9E+09,9E+09,9E+09,9E+09,9E+09,9E+09]];
+  CONST robtarget pBead1 := [[40,160,5],[0,0,1,0],[0,0,0,0],[9E+09,9E+09,9E+09,9E+09,9E+09,9E+09]];
+  CONST robtarget pBead2 := [[200,160,5],[0,0,1,0],[0,0,0,0],[9E+09,9E+09,9E+09,9E+09,9E+09,9E+09]];
+  CONST robtarget pCap1 := [[40,200,5],[0,0,1,0],[0,0,0,0],[9E+09,9E+09,9E+09,9E+09,9E+09,9E+09]];
+  CONST robtarget pCapVia := [[120,220,5],[0,0,1,0],[0,0,0,0],[9E+09,9E+09,9E+09,9E+09,9E+09,9E+09]];
+  CONST robtarget pCap2 := [[200,200,5],[0,0,1,0],[0,0,0,0],[9E+09,9E+09,9E+09,9E+09,9E+09,9E+09]];
+  CONST robtarget pSpot := [[120,240,2],[0,0,1,0],[0,0,0,0],[9E+09,9E+09,9E+09,9E+09,9E+09,9E+09]];
+  CONST robtarget pDep := [[120,240,120],[0,0,1,0],[0,0,0,0],[9E+09,9E+09,9E+09,9E+09,9E+09,9E+09]];
+
+  PROC main()
+    MoveJ pHome, v1000, z50, tApp;
+    MoveJ pApp, v1000, z20, tApp\\WObj:=wPart;
+    PaintL pStroke1, v800, z10, tApp\\WObj:=wPart;
+    PaintL pStroke2, v800, z10, tApp\\WObj:=wPart;
+    PaintC pArcVia, pArcEnd, v800, z10, tApp\\WObj:=wPart;
+    DispL \\On, pBead1, v250, bead1, z10, tApp\\WObj:=wPart;
+    DispL \\Off, pBead2, v250, bead1, fine, tApp\\WObj:=wPart;
+    CapL pCap1, v100, cd1, wsd1, cwd1, fine, tApp\\WObj:=wPart;
+    CapC pCapVia, pCap2, v100, cd1, wsd1, cwd1, fine, tApp\\WObj:=wPart;
+    SpotML pSpot, vmax, spot10, tApp\\WObj:=wPart;
+    SpotL pSpot, vmax, spot10, tApp\\WObj:=wPart;
+    MoveL pDep, v1000, z20, tApp\\WObj:=wPart;
+    MoveJ pHome, v1000, fine, tApp;
+  ENDPROC
+ENDMODULE
+";
+
+#[test]
+fn process_instructions_not_in_the_table_are_named_and_counted() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let input = write(dir.path(), "cell.mod", PROCESS_CELL);
+    let (none, _) = compensate_run(&input, &dir.path().join("none.mod"), "none", None);
+    let none = text_without_header(&String::from_utf8(none).expect("utf-8"));
+    assert_eq!(none, PROCESS_CELL, "identity");
+    let whole = dir.path().join("whole.mod");
+    let (bytes, err) = compensate_run(&input, &whole, "kinematic,gravity", None);
+    // Lines 21 to 29 hold the nine process instructions: each named with
+    // its line and reason, all counted; the four plain moves compensated.
+    let unknown = "left as written: not a motion instruction postproc knows";
+    let other_form = "left as written: positional arguments not those of its row";
+    let named = [
+        (21, "PaintL", unknown),
+        (22, "PaintL", unknown),
+        (23, "PaintC", unknown),
+        (24, "DispL", unknown),
+        (25, "DispL", unknown),
+        (26, "CapL", unknown),
+        (27, "CapC", unknown),
+        (28, "SpotML", unknown),
+        (29, "SpotL", other_form),
+    ];
+    for (line, name, why) in named {
+        let said = format!("cell.mod:{line}: {name} {why}");
+        assert!(err.contains(&said), "{said}\n{err}");
+    }
+    let counted = ": 4 moves compensated, 9 left as written (not a motion instruction postproc knows (its robtarget is not compensated); positional arguments not those of its row of the motion table (its robtarget is not compensated)), 0 targets added";
+    assert!(err.contains(counted), "{err}");
+    let out = text_without_header(&String::from_utf8(bytes.clone()).expect("utf-8"));
+    // Only the targets of the plain moves change; the process targets keep
+    // their declared values and every instruction its text.
+    assert_only_targets_changed(PROCESS_CELL, &out, &["pHome", "pApp", "pDep"]);
+    let m_in = parse_module(PROCESS_CELL, "in").expect("input parses");
+    let m_out = parse_module(&out, "out").expect("output parses");
+    let kinds: Vec<&str> = m_in.moves().map(|mv| mv.name).collect();
+    assert_eq!(kinds, ["MoveJ", "MoveJ", "MoveL", "MoveJ"]);
+    let robot = irb1600_with(250.0, 4.0, 100.0);
+    let w_part = Isometry3::translation(700.0, 20.0, 420.0);
+    assert_target_lands(&robot, &Isometry3::identity(), &m_in, &m_out, "pHome");
+    for name in ["pApp", "pDep"] {
+        assert_target_lands(&robot, &w_part, &m_in, &m_out, name);
+    }
+    for lines in ["1", "4"] {
+        let streamed = dir.path().join(format!("s{lines}.mod"));
+        let (got, err) = compensate_run(&input, &streamed, "kinematic,gravity", Some(lines));
+        assert!(err.contains(counted), "{lines}: {err}");
+        for (line, name, why) in named {
+            assert!(
+                err.contains(&format!("cell.mod:{line}: {name} {why}")),
+                "{err}"
+            );
+        }
+        assert!(got == bytes, "{lines} lines");
     }
 }

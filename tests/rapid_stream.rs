@@ -916,18 +916,18 @@ fn streamed_process_motion_instructions_give_the_bytes_of_the_whole_module() {
 }
 
 /// A statement that looks like a motion instruction to a declared
-/// robtarget but is not in the table (`SpotL`) is left as written, named
+/// robtarget but is not in the table (`PaintL`) is left as written, named
 /// with its line and counted, whether the module is read whole or a window
 /// at a time.
 #[test]
 fn unknown_motion_instructions_are_named_and_counted() {
     let dir = tempfile::tempdir().expect("tempdir");
-    let src = "MODULE Spot\n  CONST robtarget p10 := [[750,0,500],[0,0,1,0],[0,0,0,0],[9E9,9E9,9E9,9E9,9E9,9E9]];\n  CONST robtarget p20 := [[700,50,450],[0,0,1,0],[0,0,0,0],[9E9,9E9,9E9,9E9,9E9,9E9]];\n  PROC main()\n    MoveJ p20, v1000, z50, tool0;\n    SpotL p10, vmax, gun1, spot10, tool0;\n  ENDPROC\nENDMODULE\n";
-    let input = dir.path().join("spot.mod");
+    let src = "MODULE Paint\n  CONST robtarget p10 := [[750,0,500],[0,0,1,0],[0,0,0,0],[9E9,9E9,9E9,9E9,9E9,9E9]];\n  CONST robtarget p20 := [[700,50,450],[0,0,1,0],[0,0,0,0],[9E9,9E9,9E9,9E9,9E9,9E9]];\n  PROC main()\n    MoveJ p20, v1000, z50, tool0;\n    PaintL p10, v800, z10, tool0;\n  ENDPROC\nENDMODULE\n";
+    let input = dir.path().join("paint.mod");
     std::fs::write(&input, src).expect("write");
     let m = repo("machines/abb-irb1600.yaml");
     let (m, p) = (m.to_str().unwrap(), input.to_str().unwrap());
-    let named = "spot.mod:6: SpotL left as written: not a motion instruction postproc knows";
+    let named = "paint.mod:6: PaintL left as written: not a motion instruction postproc knows";
     let counted = "1 move compensated, 1 left as written (not a motion instruction postproc knows";
     let whole = dir.path().join("whole.mod");
     let (code, _, err) = run(&[
@@ -941,10 +941,7 @@ fn unknown_motion_instructions_are_named_and_counted() {
     assert_eq!(code, 0, "{err}");
     assert!(err.contains(named) && err.contains(counted), "{err}");
     let out = std::fs::read_to_string(&whole).expect("output");
-    assert!(
-        out.contains("    SpotL p10, vmax, gun1, spot10, tool0;\n"),
-        "{out}"
-    );
+    assert!(out.contains("    PaintL p10, v800, z10, tool0;\n"), "{out}");
     assert!(
         out.contains(&src.lines().nth(1).expect("p10").to_string()),
         "{out}"

@@ -41,6 +41,7 @@ use crate::process::CutSettings;
 use crate::process::MillingCache;
 use crate::program::rapid::directives::Directives;
 use crate::program::rapid::flow::{At, Flow, Left};
+use crate::program::rapid::instructions::motion_instruction;
 use crate::program::rapid::resolve::{
     CartUse, Origin, ToolView, input_err, line_col, named_value, resolve_cart, resolve_tool,
     resolve_wobj, tcp_speed,
@@ -1090,6 +1091,11 @@ pub const UNFINISHED_ROUTINE: &str = "its routine holds an editor placeholder";
 pub const UNKNOWN_MOTION: &str =
     "not a motion instruction postproc knows (its robtarget is not compensated)";
 
+/// Why a process instruction of the table written with other positional
+/// arguments (another software version's form: `SpotL p10, vmax, spot1,
+/// tool1;`) is left as written.
+pub const OTHER_FORM: &str = "positional arguments not those of its row of the motion table (its robtarget is not compensated)";
+
 /// What the compensation of one window of a module hands to the next: a
 /// module read a window at a time ([`stream`]) is compensated as if whole,
 /// and a module compensated whole is one window.
@@ -1225,26 +1231,31 @@ impl Carry {
     }
 
     /// Names the statements that look like motion instructions to a
-    /// declared robtarget but are not in the table of motion instructions
-    /// (`SpotL p10, …`): they are left as written, warned about with their
-    /// place and listed in the outcome.
+    /// declared robtarget but are not moves of the table of motion
+    /// instructions (`PaintL p10, …`, or `SpotL` in another version's
+    /// form): they are left as written, warned about with their place and
+    /// listed in the outcome.
     pub(crate) fn leave_unknown(&mut self, module: &Module, src: &str, file: &str) {
         if self.time_line.is_some() {
             return;
         }
         for u in module.unknown_motions(src) {
+            let reason = match motion_instruction(&u.name) {
+                Some(_) => OTHER_FORM,
+                None => UNKNOWN_MOTION,
+            };
             tracing::warn!(
                 "{}:{}: {} left as written: {}",
                 crate::error::Escaped(file),
                 u.line,
                 crate::error::Escaped(&u.name),
-                UNKNOWN_MOTION
+                reason
             );
             self.as_written.push(AsWritten {
                 line: u.line,
                 column: u.column,
                 instruction: u.name,
-                reason: UNKNOWN_MOTION.to_string(),
+                reason: reason.to_string(),
             });
         }
         self.as_written.sort_by_key(|a| a.line);

@@ -819,11 +819,13 @@ impl Module {
     }
 
     /// The opaque statements of `src` (the text this module was parsed
-    /// from) that look like a motion instruction not in
-    /// [`instructions::MOTION_INSTRUCTIONS`] — a first word starting with
-    /// one of [`MOTION_LIKE_PREFIXES`] — and name a robtarget declared in
-    /// the module or in their routine (`SpotL p10, …`): they are passed
-    /// through as written and not compensated. In source order.
+    /// from) that look like a motion instruction — a first word starting
+    /// with one of [`MOTION_LIKE_PREFIXES`]: a name not in
+    /// [`instructions::MOTION_INSTRUCTIONS`], or one of its
+    /// [`instructions::MotionInstruction::other_forms`] entries written
+    /// with other arguments — and name a robtarget declared in the module
+    /// or in their routine (`PaintL p10, …`): they are passed through as
+    /// written and not compensated. In source order.
     pub fn unknown_motions(&self, src: &str) -> Vec<UnknownMotion> {
         let module_targets: Vec<&str> = robtarget_names(self.decls.iter());
         let mut out = Vec::new();
@@ -863,15 +865,16 @@ impl Module {
 
 /// First-word prefixes of the instructions that may move the TCP to a
 /// robtarget (`Move…`, `Trigg…`, `Search…`, `Arc…`, `Spot…`, `Paint…`,
-/// `Cap…`), matched case-insensitively.
-pub const MOTION_LIKE_PREFIXES: &[&str] =
-    &["Move", "Trigg", "Search", "Arc", "Spot", "Paint", "Cap"];
+/// `Cap…`, `Disp…`), matched case-insensitively.
+pub const MOTION_LIKE_PREFIXES: &[&str] = &[
+    "Move", "Trigg", "Search", "Arc", "Spot", "Paint", "Cap", "Disp",
+];
 
 /// A statement that looks like a motion instruction to a declared
-/// robtarget but is not in the table of motion instructions.
+/// robtarget but is not a move of the table of motion instructions.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct UnknownMotion {
-    /// Its first word as written (`SpotL`).
+    /// Its first word as written (`PaintL`).
     pub name: String,
     /// 1-based line of its first byte.
     pub line: usize,

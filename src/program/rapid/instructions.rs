@@ -5,9 +5,9 @@
 //! `MoveJ`, `MoveC` or `MoveAbsJ` does (its [`MoveKind`]), and takes its
 //! positional (non-`\`) arguments in the order given by its roles. The
 //! arguments that are not a target, speed, zone or tool (a signal, a
-//! trigger, seam and weld data, the `SearchPoint` the controller writes)
-//! are kept as written and never compensated. The table is documented in
-//! `grammar/rapid.md`.
+//! trigger, seam and weld data, spot-weld gun and spot data, the
+//! `SearchPoint` the controller writes) are kept as written and never
+//! compensated. The table is documented in `grammar/rapid.md`.
 
 use super::MoveKind;
 
@@ -38,6 +38,11 @@ pub struct MotionInstruction {
     pub kind: MoveKind,
     /// The positional arguments in order.
     pub args: &'static [Role],
+    /// Whether other software versions of its process package write it
+    /// with other positional arguments: a statement whose positional
+    /// arguments are not those of [`Self::args`] is then not a move but an
+    /// opaque statement (left as written and named), not an error.
+    pub other_forms: bool,
 }
 
 impl MotionInstruction {
@@ -80,9 +85,24 @@ const SEARCH: &[Role] = &[O("Signal"), O("SearchPoint"), P, S, T];
 const SEARCH_C: &[Role] = &[O("Signal"), O("SearchPoint"), C, P, S, T];
 const ARC: &[Role] = &[P, S, O("Seam"), O("Weld"), Z, T];
 const ARC_C: &[Role] = &[C, P, S, O("Seam"), O("Weld"), Z, T];
+const SPOT: &[Role] = &[P, S, O("Gun"), O("Spot"), T];
 
 const fn entry(name: &'static str, kind: MoveKind, args: &'static [Role]) -> MotionInstruction {
-    MotionInstruction { name, kind, args }
+    MotionInstruction {
+        name,
+        kind,
+        args,
+        other_forms: false,
+    }
+}
+
+/// An entry whose process package writes it otherwise in other software
+/// versions ([`MotionInstruction::other_forms`]).
+const fn versioned(name: &'static str, kind: MoveKind, args: &'static [Role]) -> MotionInstruction {
+    MotionInstruction {
+        other_forms: true,
+        ..entry(name, kind, args)
+    }
 }
 
 /// Every motion instruction parsed as a move.
@@ -114,6 +134,8 @@ pub const MOTION_INSTRUCTIONS: &[MotionInstruction] = &[
     entry("ArcC", MoveKind::MoveC, ARC_C),
     entry("ArcCStart", MoveKind::MoveC, ARC_C),
     entry("ArcCEnd", MoveKind::MoveC, ARC_C),
+    versioned("SpotL", MoveKind::MoveL, SPOT),
+    versioned("SpotJ", MoveKind::MoveJ, SPOT),
 ];
 
 /// The motion instruction named `name` (case-insensitive, as RAPID).
@@ -281,5 +303,22 @@ mod tests {
         assert_eq!(s.position(Role::Other("SearchPoint")), Some(1));
         assert_eq!(s.position(Role::Zone), None);
         assert_eq!(s.signature(), "Signal, SearchPoint, ToPoint, Speed, Tool");
+    }
+
+    #[test]
+    fn spot_welds_end_in_a_stop_point_and_keep_gun_and_spot_data() {
+        for (name, kind) in [("spotl", MoveKind::MoveL), ("SPOTJ", MoveKind::MoveJ)] {
+            let s = motion_instruction(name).unwrap();
+            assert_eq!(s.kind, kind, "{name}");
+            assert_eq!(s.position(Role::ToPoint), Some(0), "{name}");
+            assert_eq!(s.position(Role::Zone), None, "{name}");
+            assert_eq!(s.signature(), "ToPoint, Speed, Gun, Spot, Tool");
+            assert!(s.other_forms, "{name}");
+        }
+        let only_listed = MOTION_INSTRUCTIONS
+            .iter()
+            .filter(|m| m.other_forms)
+            .all(|m| m.name.starts_with("Spot"));
+        assert!(only_listed);
     }
 }

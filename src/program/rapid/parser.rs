@@ -1332,7 +1332,15 @@ impl<'a> Parser<'a> {
         }
         if let Some((instr, r)) = motion_at(i) {
             return match self.move_stmt(i, r, instr) {
-                Ok((r, m)) => Ok((r, Stmt::Move(Box::new(m)))),
+                Ok((r, Some(m))) => Ok((r, Stmt::Move(Box::new(m)))),
+                // Another version's form of a process instruction.
+                Ok((r, None)) => Ok((
+                    r,
+                    Stmt::Opaque {
+                        span: start..self.pos(r),
+                        line,
+                    },
+                )),
                 // An unfinished move (`MoveL <ARG>;`) is kept as written.
                 Err(e) => self.opaque_with_placeholder(i).ok_or(e),
             };
@@ -1587,8 +1595,10 @@ impl<'a> Parser<'a> {
                     let start = base + k;
                     let (at, r) = (self.at(start), self.at(start + instr.name.len()));
                     let (rest, mut m) = match self.move_stmt(at, r, instr) {
-                        Ok(found) => found,
-                        // An unfinished move is kept as written, as the IF.
+                        Ok((rest, Some(m))) => (rest, m),
+                        // Another version's form of a process instruction, or
+                        // an unfinished move, is kept as written, as the IF.
+                        Ok((_, None)) => return None,
                         Err(_) if find_placeholder(word).is_some() => return None,
                         Err(e) => return Some(Err(e)),
                     };
@@ -1623,12 +1633,15 @@ impl<'a> Parser<'a> {
     // ----- motion instructions -------------------------------------------
 
     /// A motion instruction; `i` starts at its name, `r` just after it.
+    /// `None` for a well-formed statement of an instruction with
+    /// [`MotionInstruction::other_forms`] whose positional arguments are
+    /// not those of its row (another software version's form).
     fn move_stmt(
         &self,
         i: &'a str,
         mut r: &'a str,
         instr: &'static MotionInstruction,
-    ) -> PResult<'a, Move> {
+    ) -> PResult<'a, Option<Move>> {
         let start = self.pos(i);
         let (name, kind) = (instr.name, instr.kind);
         // The arguments in their roles (more positional ones than the
@@ -1668,6 +1681,9 @@ impl<'a> Parser<'a> {
                 );
             }
         }
+        if found != instr.args.len() && instr.other_forms {
+            return Ok((r, None));
+        }
         if found != instr.args.len() {
             return self.fail_found(
                 start,
@@ -1695,7 +1711,7 @@ impl<'a> Parser<'a> {
         let conc = optional.iter().any(|o| o.name.eq_ignore_ascii_case("Conc"));
         Ok((
             r,
-            Move {
+            Some(Move {
                 name,
                 kind,
                 via: via.map(Box::new),
@@ -1710,7 +1726,7 @@ impl<'a> Parser<'a> {
                 span: start..self.pos(r),
                 line: self.line_of(start),
                 condition: None,
-            },
+            }),
         ))
     }
 
