@@ -323,7 +323,13 @@ fn scan_line(line: &[u8], line_no: usize, file: &str, out: &mut Block) -> Result
     }
     if text.get(pos) == Some(&b'/') {
         out.block_delete = true;
-        pos = skip_ws(text, pos + 1);
+        pos += 1;
+        // `/2` … `/9`: the optional block skip levels of Fanuc controls,
+        // read as `/`.
+        if text.get(pos).is_some_and(|c| (b'1'..=b'9').contains(c)) {
+            pos += 1;
+        }
+        pos = skip_ws(text, pos);
     }
     let mut saw_space = false;
     let mut lower = 0usize;
@@ -343,6 +349,11 @@ fn scan_line(line: &[u8], line_no: usize, file: &str, out: &mut Block) -> Result
                     semicolon: true,
                 });
                 pos = text.len();
+            }
+            // `:1000`, the ISO form of the program number `O1000`.
+            b':' if out.words.is_empty() && out.comments.is_empty() => {
+                upper += 1;
+                pos = word(text, pos, out, at)?;
             }
             _ if b.is_ascii_alphabetic() => {
                 if b.is_ascii_lowercase() {
@@ -386,7 +397,11 @@ fn paren_comment(text: &[u8], pos: usize, out: &mut Block, at: At) -> Result<usi
 #[inline]
 fn word(text: &[u8], pos: usize, out: &mut Block, at: At) -> Result<usize, Located> {
     let b = text[pos];
-    let letter = b.to_ascii_uppercase();
+    let letter = if b == b':' {
+        b'O'
+    } else {
+        b.to_ascii_uppercase()
+    };
     let after_letter = skip_ws(text, pos + 1);
     if !IS_LETTER[letter as usize] {
         return Err(at.err(
@@ -579,10 +594,16 @@ mod tests {
 
     /// Both parsers on one line: the same block, or the same error.
     fn same_as_reference(line: &[u8]) -> std::result::Result<(), TestCaseError> {
+        // Line 1 (where a byte-order mark may open the file) and another.
+        same_as_reference_at(line, 1)?;
+        same_as_reference_at(line, 3)
+    }
+
+    fn same_as_reference_at(line: &[u8], line_no: usize) -> std::result::Result<(), TestCaseError> {
         let mut fast = Block::default();
         let mut slow = Block::default();
-        let a = parse_line(line, 3, "p.nc", &mut fast);
-        let b = reference::parse_line(line, 3, "p.nc", &mut slow);
+        let a = parse_line(line, line_no, "p.nc", &mut fast);
+        let b = reference::parse_line(line, line_no, "p.nc", &mut slow);
         prop_assert_eq!(&a, &b, "line {:?}", String::from_utf8_lossy(line));
         if a.is_ok() {
             prop_assert_eq!(&fast.words, &slow.words);
@@ -632,7 +653,8 @@ mod tests {
                  prop_oneof![Just(""), Just(" "), Just("  ")]),
                 0..6,
             ),
-            head in prop_oneof![Just(""), Just("/"), Just(" "), Just("%"), Just("N10 ")],
+            head in prop_oneof![Just(""), Just("/"), Just(" "), Just("%"), Just("N10 "),
+                                Just(":"), Just("/2"), Just("\u{feff}"), Just("(c):")],
             tail in prop_oneof![Just(""), Just("\n"), Just("\r\n"), Just(" (c)"), Just(";x"),
                                 Just("(open"), Just("#1"), Just("=2"), Just("[1]"), Just(" sub")],
         ) {
@@ -754,6 +776,13 @@ mod tests {
         assert_eq!(b.text_len, 5);
         assert!(parse("%").unwrap().percent);
         assert_eq!(parse("G90.1").unwrap().word(b'G').unwrap().code10(), 901);
+        // Optional block skip levels and the ISO program number.
+        let b = parse("/2 G1 Z-1.").unwrap();
+        assert!(b.block_delete);
+        assert_eq!(b.word(b'Z').unwrap().value, -1.0);
+        let b = parse(":1000 (PLATE)").unwrap();
+        assert_eq!(b.word(b'O').unwrap().value, 1000.0);
+        assert!(parse("G1 :1000").is_err());
     }
 
     #[test]

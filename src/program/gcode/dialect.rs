@@ -66,10 +66,46 @@ const HEIDENHAIN: &[&str] = &[
     "LBL", "FN", "RND", "CHF", "APPR", "DEP", "CALL", "PLANE", "FUNCTION", "STOP", "POLARKIN",
 ];
 
+/// Statements of Fanuc Macro B (custom macro) that open a line: control
+/// flow and output, run by the controller, never by an offline reader.
+const MACRO_B: &[&str] = &[
+    "IF", "WHILE", "GOTO", "END", "DPRNT", "BPRNT", "POPEN", "PCLOS", "SETVN",
+];
+
+/// The Macro B statement that opens `text` (`IF [#1 GT 0] GOTO 100`,
+/// `WHILE [#1 LT 5] DO1`, `GOTO 100`, `DPRNT[…]`), after an optional block
+/// number.
+fn macro_statement(text: &[u8]) -> Option<&'static str> {
+    let mut t = text.trim_ascii_start();
+    if t.first().is_some_and(|c| c.eq_ignore_ascii_case(&b'N')) {
+        let digits = t[1..].iter().take_while(|c| c.is_ascii_digit()).count();
+        if digits > 0 {
+            t = t[1 + digits..].trim_ascii_start();
+        }
+    }
+    let (word, next) = runs(t).next()?;
+    if word.as_ptr() != t.as_ptr() {
+        return None;
+    }
+    let opens = next.is_none_or(|c| matches!(c, b' ' | b'\t' | b'[' | b'0'..=b'9'));
+    MACRO_B
+        .iter()
+        .find(|k| opens && word.eq_ignore_ascii_case(k.as_bytes()))
+        .copied()
+}
+
 /// Names the dialect of a line that failed to parse, in front of the
 /// syntax message; the error is returned unchanged for a line of no
 /// recognised dialect.
 pub(crate) fn refine(line: &[u8], mut e: Located) -> Located {
+    if let Some(k) = macro_statement(super::strip_eol(line)) {
+        e.message = format!(
+            "Fanuc custom macro statement `{k}` (control flow runs on the controller): \
+             cannot be compensated offline, expand the macro in CAM: {}",
+            e.message
+        );
+        return e;
+    }
     if let Some(d) = dialect_of(super::strip_eol(line)) {
         e.message = format!(
             "{d} programs are not supported, only ISO (Fanuc-style) milling G-code: {}",
@@ -89,6 +125,10 @@ pub fn dialect_of(text: &[u8]) -> Option<&'static str> {
     };
     if heidenhain(text) {
         return Some("Heidenhain conversational (Klartext)");
+    }
+    if text.trim_ascii_end().ends_with(b"*") {
+        // Every block of a Heidenhain DIN/ISO program ends with `*`.
+        return Some("Heidenhain DIN/ISO");
     }
     if siemens(text) {
         return Some("native Siemens 840D (Sinumerik)");
@@ -191,6 +231,35 @@ mod tests {
 
     fn of(s: &str) -> Option<&'static str> {
         dialect_of(s.as_bytes())
+    }
+
+    #[test]
+    fn heidenhain_iso_blocks_are_named_by_their_end() {
+        for l in [
+            "%PLATTE G71 *",
+            "N10 G30 G17 X+0 Y+0 Z-20 *",
+            "N70 G01 Z-5 F200*",
+        ] {
+            assert_eq!(of(l), Some("Heidenhain DIN/ISO"), "{l}");
+        }
+        assert_eq!(of("G1 X1 (a * in a comment)"), None);
+    }
+
+    #[test]
+    fn macro_statements_are_named() {
+        use super::macro_statement;
+        for (l, k) in [
+            ("IF [#1 GT 0] GOTO 100", "IF"),
+            ("N20 WHILE [#1 LT 5] DO1", "WHILE"),
+            ("GOTO 100", "GOTO"),
+            ("DPRNT[X#5021[44]]", "DPRNT"),
+            ("END1", "END"),
+        ] {
+            assert_eq!(macro_statement(l.as_bytes()), Some(k), "{l}");
+        }
+        for l in ["G1 X1", "ENDIF", "IFX", "N10 G0 X1"] {
+            assert_eq!(macro_statement(l.as_bytes()), None, "{l}");
+        }
     }
 
     #[test]

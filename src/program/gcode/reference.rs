@@ -79,7 +79,13 @@ fn scan_line(line: &[u8], line_no: usize, file: &str, out: &mut Block) -> Result
     out.text_len = text.len() as u32;
     let place = Place { file, line_no };
 
-    let mut pos = skip_ws(text, 0);
+    let bom: &[u8] = b"\xEF\xBB\xBF";
+    let start = if line_no == 1 && text.starts_with(bom) {
+        bom.len()
+    } else {
+        0
+    };
+    let mut pos = skip_ws(text, start);
     if text.get(pos) == Some(&b'%') {
         out.percent = true;
         // Anything after `%` on the same line is ignored by controllers; keep it verbatim.
@@ -87,7 +93,8 @@ fn scan_line(line: &[u8], line_no: usize, file: &str, out: &mut Block) -> Result
     }
     if text.get(pos) == Some(&b'/') {
         out.block_delete = true;
-        pos = skip_ws(text, pos + 1);
+        let level = text.get(pos + 1).is_some_and(|c| matches!(c, b'1'..=b'9'));
+        pos = skip_ws(text, pos + 1 + usize::from(level));
     }
     let mut saw_space = false;
     let mut lower = 0usize;
@@ -99,7 +106,9 @@ fn scan_line(line: &[u8], line_no: usize, file: &str, out: &mut Block) -> Result
             pos += 1;
         } else if b == b'(' || b == b';' {
             pos = comment(text, pos, out, place)?;
-        } else if b.is_ascii_alphabetic() {
+        } else if b.is_ascii_alphabetic()
+            || (b == b':' && out.words.is_empty() && out.comments.is_empty())
+        {
             if b.is_ascii_lowercase() {
                 lower += 1;
             } else {
@@ -146,7 +155,12 @@ fn comment(text: &[u8], pos: usize, out: &mut Block, place: Place) -> Result<usi
 /// its number.
 fn word(text: &[u8], pos: usize, out: &mut Block, place: Place) -> Result<usize, Located> {
     let b = text[pos];
-    let letter = b.to_ascii_uppercase();
+    // `:` opens the ISO program number, `O`'s other spelling.
+    let letter = if b == b':' {
+        b'O'
+    } else {
+        b.to_ascii_uppercase()
+    };
     let after_letter = skip_ws(text, pos + 1);
     if !LETTERS.contains(&letter) {
         return Err(place.err(
