@@ -5,7 +5,7 @@
 use std::fs;
 use std::path::{Path, PathBuf};
 
-use crate::common::{postproc, repo, without_header};
+use crate::common::{postproc, repo, text, text_without_header, without_header, write};
 
 /// A minimal machine file: today's loader needs only the kind.
 fn machine(dir: &Path) -> PathBuf {
@@ -507,4 +507,60 @@ fn regression_travel_error_names_the_machine_coordinate_and_the_work_coordinate(
             "{command}: {err}"
         );
     }
+}
+
+/// A hand-written Fanuc program without decimal points, on a control that
+/// reads such words in increments (`integer_words: increments`): `X100` is
+/// 0.100 mm, and every word the compensation writes has its point.
+#[test]
+fn integer_words_in_increments_are_read_and_written_as_the_control_does() {
+    let dir = tempfile::tempdir().expect("dir");
+    let mut machine = text("machines/afm-r1000.yaml");
+    machine.push_str("integer_words: increments\n");
+    let machine = write(dir.path(), "m.yaml", &machine);
+    let program = write(
+        dir.path(),
+        "nodec.nc",
+        "%\nO2000\nG21 G90 G54 G0 X100 Y50 Z50000\nG43 H1 Z20000\nG1 Z-5000 F200\nX150 F600\nM30\n%\n",
+    );
+    let out = postproc()
+        .args(["compensate", "--effects", "geometric", "-o", "-"])
+        .arg("--machine")
+        .arg(&machine)
+        .arg(&program)
+        .assert()
+        .success();
+    let stderr = String::from_utf8_lossy(&out.get_output().stderr).to_string();
+    assert!(!stderr.contains("no decimal point"), "{stderr}");
+    let text = String::from_utf8(out.get_output().stdout.clone()).expect("utf-8");
+    let body = text_without_header(&text);
+    // X150 is 0.150 mm: its compensated word is within microns of it.
+    let line = body
+        .lines()
+        .find(|l| l.starts_with('X') && l.contains("F600"))
+        .expect("the feed line");
+    let x: f64 = line[1..]
+        .split(|c: char| c.is_ascii_alphabetic() || c == ' ')
+        .next()
+        .and_then(|v| v.parse().ok())
+        .expect("an X value");
+    // A compensation of microns, not of the 149.85 mm a misreading gives.
+    const NEAR_MM: f64 = 0.05;
+    assert!((x - 0.15).abs() < NEAR_MM, "{line}");
+    assert!(
+        line[1..].split(' ').next().is_some_and(|w| w.contains('.')),
+        "{line}"
+    );
+    // The same program on a file that does not say: read in whole units,
+    // and warned about once.
+    let out = postproc()
+        .args(["check", "--machine", "afm-r1000"])
+        .arg(&program)
+        .assert();
+    let stderr = String::from_utf8_lossy(&out.get_output().stderr).to_string();
+    assert_eq!(
+        stderr.matches("has no decimal point").count(),
+        1,
+        "{stderr}"
+    );
 }

@@ -550,6 +550,7 @@ impl<'j, 'm> InterpretStage<'j, 'm> {
         st.before.extend_from_slice(&self.last_moves);
         for (i, plan) in st.plans[..n].iter_mut().enumerate() {
             chunk.block(i)?;
+            self.interp.whole_units(&mut chunk.blocks[i]);
             let (s, e) = chunk.ranges[i];
             let line = &chunk.buf[s..e];
             let block = &chunk.blocks[i];

@@ -13,7 +13,7 @@ use std::collections::BTreeMap;
 use nalgebra::Vector3;
 
 use crate::error::Located;
-pub use crate::machine::tool::Units;
+pub use crate::machine::tool::{IntegerWords, Units};
 use crate::machine::{AxisVec, DirVec, axis_slot};
 use crate::program::gcode::{Block, Word};
 
@@ -297,6 +297,9 @@ pub struct Setup {
     /// The control's unit at power-on, for programs that set none
     /// (`None`: such a program is refused at its first length).
     pub units_default: Option<Units>,
+    /// How length and angle words without a decimal point are read
+    /// (`None`: in whole units, with a warning at the first one).
+    pub integer_words: Option<IntegerWords>,
     /// The machine's nominal kinematics, for tool centre point control
     /// (G43.4/G43.5); `None` refuses it.
     pub kinematics: Option<std::sync::Arc<crate::machine::tool::MachineTool>>,
@@ -326,6 +329,7 @@ impl Setup {
             .reference_points
             .extend(m.reference_points().map(|(k, v)| (k.clone(), *v)));
         setup.units_default = m.units_default();
+        setup.integer_words = m.integer_words();
         if (3..6).any(|s| m.has_axis(s)) {
             setup.kinematics = Some(std::sync::Arc::new(m.clone()));
         }
@@ -397,6 +401,11 @@ pub struct Interpreter {
     pos: AxisVec,
     dirs: DirVec,
     warnings: Vec<Warning>,
+    /// A block whose words without a decimal point are read in increments
+    /// (`integer_words: increments`), reused between blocks.
+    scaled: Block,
+    /// A word without a decimal point was warned about.
+    integer_warned: bool,
     comp_warned: bool,
     /// G41/G42 may be active with the block-delete switch in either
     /// position: set by G41/G42 on any line, cleared by G40 on a line
@@ -443,6 +452,8 @@ impl Interpreter {
             pos: home,
             dirs: [1; 6],
             warnings: Vec::new(),
+            scaled: Block::default(),
+            integer_warned: false,
             comp_warned: false,
             cutter_comp: false,
         }
@@ -515,6 +526,110 @@ impl Interpreter {
         text: &[u8],
         plan: &mut Plan,
     ) -> Result<(), Located> {
+        if self.integer_words(block) {
+            let mut scaled = std::mem::take(&mut self.scaled);
+            scaled.clone_from(block);
+            self.to_increments(&mut scaled);
+            let done = self.step_scaled(&scaled, text, plan);
+            self.scaled = scaled;
+            return done;
+        }
+        self.step_scaled(block, text, plan)
+    }
+
+    /// Reads the length and angle words of `block` without a decimal point
+    /// as the control does, in place: with `integer_words: increments` they
+    /// are turned into whole units (and marked as written with a point, so
+    /// that they are not turned twice); without `integer_words` the first
+    /// one is warned about. A pipeline calls it before [`Interpreter::step`]
+    /// so that every later stage sees the values the control uses.
+    pub fn whole_units(&mut self, block: &mut Block) {
+        if self.integer_words(block) {
+            self.to_increments(block);
+        }
+    }
+
+    /// Whether `block` holds a length or angle word without a decimal point
+    /// that the control reads in increments; without `integer_words` in the
+    /// machine file, warns at the first such word (read in whole units).
+    fn integer_words(&mut self, block: &Block) -> bool {
+        let Some(w) = block.words.iter().find(|w| {
+            w.decimals.is_none() && w.value != 0.0 && self.incremental_letter(block, w.letter)
+        }) else {
+            return false;
+        };
+        match self.setup.integer_words {
+            Some(IntegerWords::Increments) => true,
+            Some(IntegerWords::Units) => false,
+            None => {
+                if !self.integer_warned {
+                    self.integer_warned = true;
+                    let unit = if w.letter >= b'A' && w.letter <= b'C' {
+                        "degrees"
+                    } else if self.inch() {
+                        "inches"
+                    } else {
+                        "mm"
+                    };
+                    self.warn(
+                        block.line_no,
+                        format!(
+                            "`{}{}` has no decimal point: read as {} {unit}; Fanuc and Haas controls as delivered read it in increments (0.001 mm, 0.0001 inch, 0.001°): say which with `integer_words: units` or `increments` in the machine file",
+                            w.letter as char, w.value, w.value
+                        ),
+                    );
+                }
+                false
+            }
+        }
+    }
+
+    /// Whether a word of `letter` in `block` is a length or an angle that
+    /// a control reads in increments when it has no decimal point: the axis
+    /// words, arc centres and radius, the cycle's R and Q; not `K` in a
+    /// canned cycle (its repeat count).
+    fn incremental_letter(&self, block: &Block, letter: u8) -> bool {
+        match letter {
+            b'X' | b'Y' | b'Z' | b'A' | b'B' | b'C' | b'I' | b'J' | b'R' | b'Q' => true,
+            b'K' => {
+                self.cycle.is_none()
+                    && !block.words.iter().any(|w| {
+                        w.letter == b'G' && matches!(w.value as i64, 73 | 74 | 76 | 81..=89)
+                    })
+            }
+            _ => false,
+        }
+    }
+
+    /// The words of `block` without a decimal point, in increments, turned
+    /// into whole units (0.001 mm or 0.0001 inch for lengths — the block's
+    /// own G20/G21 first — and 0.001° for angles).
+    fn to_increments(&self, block: &mut Block) {
+        let inch = block
+            .words
+            .iter()
+            .rev()
+            .find(|w| {
+                w.letter == b'G' && matches!(w.value as i64, 20 | 21) && w.value.fract() == 0.0
+            })
+            .map_or(self.inch(), |w| w.value as i64 == 20);
+        let length = if inch { 1e-4 } else { 1e-3 };
+        for i in 0..block.words.len() {
+            let w = block.words[i];
+            if w.decimals.is_none() && self.incremental_letter(block, w.letter) {
+                let step = if (b'A'..=b'C').contains(&w.letter) {
+                    1e-3
+                } else {
+                    length
+                };
+                block.words[i].value = w.value * step;
+                block.words[i].decimals = Some(0);
+            }
+        }
+    }
+
+    /// [`Interpreter::step_into`] of a block whose words are in whole units.
+    fn step_scaled(&mut self, block: &Block, text: &[u8], plan: &mut Plan) -> Result<(), Located> {
         let before = self.cutter_comp;
         let done = self.step_block(block, text, plan);
         plan.cutter_comp = before || self.cutter_comp;
@@ -2049,6 +2164,73 @@ mod tests {
                 .contains("not on the circle")
         );
         assert!(run(&["G0 B10"]).unwrap_err().message.contains("no B axis"));
+    }
+
+    /// The interpreter of [`run`] with `integer_words`, and what it read.
+    fn run_integer(words: Option<IntegerWords>, lines: &[&str]) -> (Vec<Plan>, Vec<Warning>) {
+        let mut setup = Setup {
+            axes: [true, true, true, true, false, true],
+            units_default: Some(Units::Mm),
+            integer_words: words,
+            ..Setup::default()
+        };
+        setup.work_offsets[0] = Some([0.0; 3]);
+        let mut it = Interpreter::new(setup, "t.nc");
+        let mut b = Block::default();
+        let mut out = vec![];
+        for (i, l) in lines.iter().enumerate() {
+            parse_line(l.as_bytes(), i + 1, "t.nc", &mut b).expect("syntax");
+            // Every other line through the pipeline's in-place reading.
+            if i % 2 == 1 {
+                it.whole_units(&mut b);
+            }
+            out.push(it.step(&b, l.as_bytes()).expect("read"));
+        }
+        (out, it.warnings().to_vec())
+    }
+
+    #[test]
+    fn words_without_a_point_are_increments_where_the_control_says_so() {
+        let lines = [
+            "G21 G90 G54 G0 X100 Y50.5 Z-5",
+            "G1 X2000 A100 F500",
+            "G20 G0 X100",
+            "G21 G81 X0 Y0 Z-2000 R1000 K3 F100",
+        ];
+        let (p, warnings) = run_integer(Some(IntegerWords::Increments), &lines);
+        assert!(warnings.is_empty(), "{warnings:?}");
+        let end = |i: usize| p[i].mv.expect("a move").end;
+        // 100 µm, 50.5 mm as written with its point, 5 µm down.
+        assert_abs_diff_eq!(end(0)[0], 0.1, epsilon = TOL);
+        assert_abs_diff_eq!(end(0)[1], 50.5, epsilon = TOL);
+        assert_abs_diff_eq!(end(0)[2], -0.005, epsilon = TOL);
+        // 2 mm and 0.1° (the A axis, slot 3).
+        assert_abs_diff_eq!(end(1)[0], 2.0, epsilon = TOL);
+        assert_abs_diff_eq!(end(1)[3], 0.1, epsilon = TOL);
+        // In inches: 0.0100 inch.
+        assert_abs_diff_eq!(end(2)[0], 0.254, epsilon = TOL);
+        // A cycle's Z and R are lengths, its K a repeat count.
+        let PlanKind::Cycle { .. } = p[3].kind else {
+            panic!("{:?}", p[3].kind)
+        };
+        assert_eq!(p[3].extra_repeats, 2);
+        assert_abs_diff_eq!(p[3].mv.expect("a hole").end[2], -2.0, epsilon = TOL);
+        // The same words read in whole units, as the machine file says.
+        let (p, warnings) = run_integer(Some(IntegerWords::Units), &lines[..2]);
+        assert!(warnings.is_empty(), "{warnings:?}");
+        assert_abs_diff_eq!(p[0].mv.expect("a move").end[0], 100.0, epsilon = TOL);
+        // Not said: whole units, and one warning at the first such word.
+        let (p, warnings) = run_integer(None, &lines[..2]);
+        assert_abs_diff_eq!(p[0].mv.expect("a move").end[0], 100.0, epsilon = TOL);
+        assert_eq!(warnings.len(), 1, "{warnings:?}");
+        assert_eq!(warnings[0].line, 1);
+        assert!(
+            warnings[0].message.contains("`X100` has no decimal point"),
+            "{warnings:?}"
+        );
+        // Words with a point, and zeros, need no word on the matter.
+        let (_, warnings) = run_integer(None, &["G21 G90 G54 G0 X10. Y0 Z.5"]);
+        assert!(warnings.is_empty(), "{warnings:?}");
     }
 
     #[test]

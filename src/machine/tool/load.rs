@@ -11,8 +11,8 @@ use super::location::{
     LocationErrors, LocationKey, SpindleErrors, component_key, location_key, spindle_key,
 };
 use super::raw::{
-    RawAxis, RawAxisType, RawMachineTool, RawMeasurementFrame, RawOutput, RawProcessForce, RawSide,
-    RawSpindle, RawTable, RawTool, RawUnits,
+    RawAxis, RawAxisType, RawIntegerWords, RawMachineTool, RawMeasurementFrame, RawOutput,
+    RawProcessForce, RawSide, RawSpindle, RawTable, RawTool, RawUnits,
 };
 use super::table::ErrorTable;
 use super::{Axis, AxisKind, ControlDefaults, MachineTool, Side};
@@ -117,6 +117,10 @@ pub(super) fn validate(raw: RawMachineTool) -> V<MachineTool> {
         RawUnits::Mm => super::Units::Mm,
         RawUnits::Inch => super::Units::Inch,
     });
+    let integer_words = raw.integer_words.map(|w| match w {
+        RawIntegerWords::Units => super::IntegerWords::Units,
+        RawIntegerWords::Increments => super::IntegerWords::Increments,
+    });
     let (decimals, decimals_deg) = validate_decimals(raw.output.as_ref())?;
 
     let tolerance_mm = raw
@@ -165,6 +169,7 @@ pub(super) fn validate(raw: RawMachineTool) -> V<MachineTool> {
         control: Box::new(ControlDefaults {
             reference_points,
             units_default,
+            integer_words,
             tolerance_mm,
         }),
         decimals,

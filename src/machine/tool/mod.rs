@@ -76,6 +76,19 @@ pub enum Units {
     Inch,
 }
 
+/// How the control reads a length or angle word written without a decimal
+/// point (`X100`): the machine file's `integer_words`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum IntegerWords {
+    /// In whole units: `X100` is 100 mm (or inches, or degrees), as
+    /// LinuxCNC reads it, and Fanuc with calculator-type decimal input or
+    /// Haas with setting 162 on.
+    Units,
+    /// In least input increments: `X100` is 0.100 mm, 0.0100 inch or
+    /// 0.100°, as Fanuc and Haas controls read it as delivered.
+    Increments,
+}
+
 /// Which side of the machine structure carries an axis.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Side {
@@ -148,6 +161,8 @@ pub(crate) struct ControlDefaults {
     pub(crate) reference_points: BTreeMap<String, [f64; 3]>,
     /// `units_default`: the unit of programs without G20/G21.
     pub(crate) units_default: Option<Units>,
+    /// `integer_words`: how words without a decimal point are read.
+    pub(crate) integer_words: Option<IntegerWords>,
     /// `compensation.tolerance_mm`: the default tolerance of compensated
     /// programs, mm.
     pub(crate) tolerance_mm: Option<f64>,
@@ -254,6 +269,12 @@ impl MachineTool {
     /// The control's unit for programs that set none (`units_default`).
     pub fn units_default(&self) -> Option<Units> {
         self.control.units_default
+    }
+
+    /// How the control reads length and angle words without a decimal
+    /// point (`integer_words`; `None` when the file does not say).
+    pub fn integer_words(&self) -> Option<IntegerWords> {
+        self.control.integer_words
     }
 
     /// Output decimals for mm programs, if the machine file fixes them.

@@ -23,6 +23,8 @@ pub(crate) struct RawMachineTool {
     #[serde(default)]
     pub units_default: Option<RawUnits>,
     #[serde(default)]
+    pub integer_words: Option<RawIntegerWords>,
+    #[serde(default)]
     pub output: Option<RawOutput>,
     #[serde(default)]
     pub compensation: Option<RawCompensation>,
@@ -65,6 +67,14 @@ pub(crate) struct RawMeasurementFrame {
 pub(crate) enum RawUnits {
     Mm,
     Inch,
+}
+
+/// `integer_words`: `units` or `increments`.
+#[derive(Debug, Deserialize, Clone, Copy, PartialEq, Eq)]
+#[serde(rename_all = "lowercase")]
+pub(crate) enum RawIntegerWords {
+    Units,
+    Increments,
 }
 
 /// Linear or rotary axis.
