@@ -6,9 +6,11 @@
 //! The samples describe a cell in front of an IRB 1600: the plate lies
 //! 700–850 mm from the robot's axis 1, 350 mm up. The TX200 is a larger arm:
 //! with joint 3 within ±145° its wrist centre cannot come closer than
-//! about 545 mm to its shoulder, so the plate is out of its reach from the
-//! world origin. It runs the samples mounted 300 mm behind that origin (a
-//! machine file with a `base`), the cell otherwise unchanged.
+//! about 545 mm to its shoulder, so the plate is out of its reach in the
+//! samples' configurations from the world origin. The bundled TX200 file
+//! therefore stands where the arm would in that cell: its `base` sets it
+//! 300 mm behind the world origin, the cell otherwise unchanged. Both
+//! bundled files are used as they are.
 
 use nalgebra::{Isometry3, Translation3, Vector3};
 use postproc::machine::robot::pose::pose_error;
@@ -16,7 +18,8 @@ use postproc::machine::robot::{Effects, Model, PointMass, Robot};
 use postproc::program::rapid::{DataValue, Module, RobTarget, Target, parse_module};
 
 use crate::common::{
-    postproc, repo, robtarget_conf as conf, robtarget_pose as pose, without_header, write,
+    postproc, repo, robtarget_conf as conf, robtarget_pose as pose, text, tx200_at_the_origin_text,
+    without_header, write,
 };
 
 /// Position agreement of the predicted attained TCP with the programmed one,
@@ -35,26 +38,9 @@ const JOINT_ROT_TOL_RAD: f64 = 1e-6;
 /// The bundled RAPID samples.
 const SAMPLES: [&str; 2] = ["drilling", "milling"];
 
-/// The TX200 mounted for the samples' cell: the bundled file with a base
-/// 300 mm behind the world origin.
-fn tx200_cell_text() -> String {
-    let mut text =
-        std::fs::read_to_string(repo("machines/staubli-tx200.yaml")).expect("machine file");
-    text.push_str(
-        "base: { x_mm: -300.0, y_mm: 0.0, z_mm: 0.0, quaternion: [1.0, 0.0, 0.0, 0.0] }\n",
-    );
-    text
-}
-
 /// (name, machine file text) of both bundled robots, as the samples run them.
 fn robots() -> [(&'static str, String); 2] {
-    [
-        (
-            "abb-irb1600",
-            std::fs::read_to_string(repo("machines/abb-irb1600.yaml")).expect("machine file"),
-        ),
-        ("staubli-tx200", tx200_cell_text()),
-    ]
+    ["abb-irb1600", "staubli-tx200"].map(|n| (n, text(&format!("machines/{n}.yaml"))))
 }
 
 /// The samples' spindle (tDrill / tMill): TCP 182.5 mm along the flange z
@@ -239,18 +225,21 @@ fn both_robots_write_every_sample_back_unchanged_without_effects() {
     }
 }
 
-/// The bundled TX200 at the world origin cannot reach the samples' plate:
-/// the refusal names the target, its configuration and the configurations
-/// that do reach it.
+/// The TX200 at the world origin (the bundled file without its base)
+/// cannot reach the samples' plate: the refusal names the target, its
+/// configuration and the configurations that do reach it.
 #[test]
 fn tx200_at_the_origin_names_the_configurations_that_reach_the_plate() {
     let dir = tempfile::tempdir().expect("tempdir");
     let input = dir.path().join("milling.mod");
     std::fs::copy(repo("samples/milling.mod"), &input).expect("copy sample");
+    let machine = write(dir.path(), "tx200.yaml", &tx200_at_the_origin_text());
     let out = postproc()
         .arg("compensate")
         .arg(&input)
-        .args(["--machine", "staubli-tx200", "-o"])
+        .arg("--machine")
+        .arg(&machine)
+        .arg("-o")
         .arg(dir.path().join("out.mod"))
         .output()
         .expect("runs");
