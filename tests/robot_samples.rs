@@ -1,7 +1,6 @@
 //! Integration tests: every bundled RAPID sample (the controller backup
-//! included) compensated on every
-//! bundled robot through the binary, the written targets checked against
-//! the forward kinematics of the robot library (the controller's inverse
+//! included) compensated on every bundled robot through the binary, the
+//! written targets checked against the forward kinematics of the robot library (the controller's inverse
 //! of the written target and confdata, then the predicted attained pose).
 //!
 //! The samples describe a cell in front of an IRB 1600: the plate lies
