@@ -130,3 +130,26 @@ pub fn robtarget_conf(
         cfx: v[3],
     }
 }
+
+/// The bundled TX200 file at the world origin: its `base` (where it stands
+/// in the bundled samples' cell) replaced by the identity, for tests of the
+/// arm in its own base frame and of the refusals the samples' plate gets
+/// from there.
+pub fn tx200_at_the_origin_text() -> String {
+    let text = text("machines/staubli-tx200.yaml");
+    let mut found = 0;
+    let out: Vec<String> = text
+        .lines()
+        .map(|l| {
+            if l.starts_with("base:") {
+                found += 1;
+                "base: { x_mm: 0.0, y_mm: 0.0, z_mm: 0.0, quaternion: [1.0, 0.0, 0.0, 0.0] }"
+                    .to_string()
+            } else {
+                l.to_string()
+            }
+        })
+        .collect();
+    assert_eq!(found, 1, "one `base:` line in the bundled TX200 file");
+    out.join("\n") + "\n"
+}

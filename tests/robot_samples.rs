@@ -1,14 +1,16 @@
-//! Integration tests: every bundled RAPID sample compensated on every
-//! bundled robot through the binary, the written targets checked against
-//! the forward kinematics of the robot library (the controller's inverse
+//! Integration tests: every bundled RAPID sample (the controller backup
+//! included) compensated on every bundled robot through the binary, the
+//! written targets checked against the forward kinematics of the robot library (the controller's inverse
 //! of the written target and confdata, then the predicted attained pose).
 //!
 //! The samples describe a cell in front of an IRB 1600: the plate lies
 //! 700–850 mm from the robot's axis 1, 350 mm up. The TX200 is a larger arm:
 //! with joint 3 within ±145° its wrist centre cannot come closer than
-//! about 545 mm to its shoulder, so the plate is out of its reach from the
-//! world origin. It runs the samples mounted 300 mm behind that origin (a
-//! machine file with a `base`), the cell otherwise unchanged.
+//! about 545 mm to its shoulder, so the plate is out of its reach in the
+//! samples' configurations from the world origin. The bundled TX200 file
+//! therefore stands where the arm would in that cell: its `base` sets it
+//! 300 mm behind the world origin, the cell otherwise unchanged. Both
+//! bundled files are used as they are.
 
 use nalgebra::{Isometry3, Translation3, Vector3};
 use postproc::machine::robot::pose::pose_error;
@@ -16,7 +18,8 @@ use postproc::machine::robot::{Effects, Model, PointMass, Robot};
 use postproc::program::rapid::{DataValue, Module, RobTarget, Target, parse_module};
 
 use crate::common::{
-    postproc, repo, robtarget_conf as conf, robtarget_pose as pose, without_header, write,
+    postproc, repo, robtarget_conf as conf, robtarget_pose as pose, text, tx200_at_the_origin_text,
+    without_header, write,
 };
 
 /// Position agreement of the predicted attained TCP with the programmed one,
@@ -35,26 +38,9 @@ const JOINT_ROT_TOL_RAD: f64 = 1e-6;
 /// The bundled RAPID samples.
 const SAMPLES: [&str; 2] = ["drilling", "milling"];
 
-/// The TX200 mounted for the samples' cell: the bundled file with a base
-/// 300 mm behind the world origin.
-fn tx200_cell_text() -> String {
-    let mut text =
-        std::fs::read_to_string(repo("machines/staubli-tx200.yaml")).expect("machine file");
-    text.push_str(
-        "base: { x_mm: -300.0, y_mm: 0.0, z_mm: 0.0, quaternion: [1.0, 0.0, 0.0, 0.0] }\n",
-    );
-    text
-}
-
 /// (name, machine file text) of both bundled robots, as the samples run them.
 fn robots() -> [(&'static str, String); 2] {
-    [
-        (
-            "abb-irb1600",
-            std::fs::read_to_string(repo("machines/abb-irb1600.yaml")).expect("machine file"),
-        ),
-        ("staubli-tx200", tx200_cell_text()),
-    ]
+    ["abb-irb1600", "staubli-tx200"].map(|n| (n, text(&format!("machines/{n}.yaml"))))
 }
 
 /// The samples' spindle (tDrill / tMill): TCP 182.5 mm along the flange z
@@ -239,18 +225,21 @@ fn both_robots_write_every_sample_back_unchanged_without_effects() {
     }
 }
 
-/// The bundled TX200 at the world origin cannot reach the samples' plate:
-/// the refusal names the target, its configuration and the configurations
-/// that do reach it.
+/// The TX200 at the world origin (the bundled file without its base)
+/// cannot reach the samples' plate: the refusal names the target, its
+/// configuration and the configurations that do reach it.
 #[test]
 fn tx200_at_the_origin_names_the_configurations_that_reach_the_plate() {
     let dir = tempfile::tempdir().expect("tempdir");
     let input = dir.path().join("milling.mod");
     std::fs::copy(repo("samples/milling.mod"), &input).expect("copy sample");
+    let machine = write(dir.path(), "tx200.yaml", &tx200_at_the_origin_text());
     let out = postproc()
         .arg("compensate")
         .arg(&input)
-        .args(["--machine", "staubli-tx200", "-o"])
+        .arg("--machine")
+        .arg(&machine)
+        .arg("-o")
         .arg(dir.path().join("out.mod"))
         .output()
         .expect("runs");
@@ -261,4 +250,204 @@ fn tx200_at_the_origin_names_the_configurations_that_reach_the_plate() {
         "{err}"
     );
     assert!(err.contains("milling.mod:43:"), "{err}");
+}
+
+/// The controller backup's gripper (tGripper): TCP 150 mm along the flange
+/// z axis, 2 kg at 60 mm.
+fn with_gripper(r: Robot) -> Robot {
+    r.with_tool(
+        Isometry3::translation(0.0, 0.0, 150.0),
+        Some(PointMass {
+            mass_kg: 2.0,
+            com_mm: Vector3::new(0.0, 0.0, 60.0),
+        }),
+        false,
+    )
+}
+
+/// The controller backup's conveyor frame (wTable): translation
+/// (400, -300, 200).
+fn table() -> Isometry3<f64> {
+    Isometry3::translation(400.0, -300.0, 200.0)
+}
+
+/// The robot view of a move's tool and its work object, by the names the
+/// bundled samples use.
+fn view_of(robot: &Robot, mv: &postproc::program::rapid::Move) -> (Robot, Isometry3<f64>) {
+    let view = match &*mv.tool.text {
+        "tDrill" | "tMill" => with_spindle(robot.clone()),
+        "tGripper" => with_gripper(robot.clone()),
+        t => panic!("tool {t}"),
+    };
+    let frame = match mv.wobj.as_ref().map(|w| &*w.text) {
+        None => Isometry3::identity(),
+        Some("wPlate" | "wPart") => plate(),
+        Some("wTable") => table(),
+        Some(w) => panic!("wobj {w}"),
+    };
+    (view, frame)
+}
+
+/// A copy of the controller-backup sample's task folder in `dir`.
+fn backup_copy(dir: &std::path::Path) -> std::path::PathBuf {
+    let from = repo("samples/cell-backup/RAPID/TASK1");
+    let task = dir.join("TASK1");
+    for sub in ["PROGMOD", "SYSMOD"] {
+        std::fs::create_dir_all(task.join(sub)).expect("mkdir");
+        for e in std::fs::read_dir(from.join(sub)).expect("dir") {
+            let p = e.expect("entry").path();
+            std::fs::copy(&p, task.join(sub).join(p.file_name().expect("name"))).expect("copy");
+        }
+    }
+    task
+}
+
+/// The command a user types, with the bundled TX200 file as it is:
+/// `postproc compensate samples/drilling.mod --machine
+/// machines/staubli-tx200.yaml` (and the milling sample, and the
+/// controller-backup task folder as one program) succeeds with the default
+/// effects, and every robtarget it writes is one the controller solves in
+/// its written confdata within the joint limits.
+#[test]
+fn bundled_tx200_compensates_every_sample_as_a_user_runs_it() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let machine = repo("machines/staubli-tx200.yaml");
+    let robot = Robot::from_yaml_str(&text("machines/staubli-tx200.yaml"), "tx200").expect("valid");
+    let task = backup_copy(dir.path());
+    let mut inputs: Vec<std::path::PathBuf> = SAMPLES
+        .iter()
+        .map(|s| {
+            let p = dir.path().join(format!("{s}.mod"));
+            std::fs::copy(repo(&format!("samples/{s}.mod")), &p).expect("copy sample");
+            p
+        })
+        .collect();
+    inputs.push(task.clone());
+    for input in &inputs {
+        let out = postproc()
+            .arg("compensate")
+            .arg(input)
+            .arg("--machine")
+            .arg(&machine)
+            .output()
+            .expect("runs");
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(0), "{}: {err}", input.display());
+        assert!(err.contains("moves compensated"), "{err}");
+    }
+    let written = [
+        dir.path().join("drilling.comp.mod"),
+        dir.path().join("milling.comp.mod"),
+        task.join("PROGMOD/MainModule.comp.mod"),
+    ];
+    let mut checked = 0;
+    for path in &written {
+        let src = std::fs::read_to_string(path).expect("written module");
+        let m = parse_module(&src, "out").expect("output parses");
+        for mv in m.moves() {
+            let Target::Named {
+                name, index: None, ..
+            } = &mv.target
+            else {
+                continue;
+            };
+            let Some(DataValue::RobTarget(rt)) = m.decl(name).and_then(|d| d.value.as_ref()) else {
+                continue;
+            };
+            let (view, frame) = view_of(&robot, mv);
+            view.ik_conf(&(frame * pose(rt)), conf(rt))
+                .unwrap_or_else(|e| panic!("{} line {}: {e}", path.display(), mv.line));
+            checked += 1;
+        }
+    }
+    assert!(checked >= 36, "{checked} written targets");
+}
+
+/// The controller-backup task folder compensated as one program on the
+/// bundled TX200: the moves whose target is known before run time land on
+/// their programmed pose (the written robtarget solved by the controller's
+/// inverse kinematics in its written confdata, then predicted), the three
+/// whose target is reassigned in the stacking loop are left as written.
+#[test]
+fn bundled_tx200_compensates_the_controller_backup_within_the_tolerance() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let task = backup_copy(dir.path());
+    let out = postproc()
+        .arg("compensate")
+        .arg(&task)
+        .arg("--machine")
+        .arg(repo("machines/staubli-tx200.yaml"))
+        .args(["--effects", "kinematic,gravity"])
+        .output()
+        .expect("runs");
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(0), "{err}");
+    let read = |rel: &str| std::fs::read_to_string(task.join(rel)).expect("module");
+    let (calib_src, user_src) = (read("PROGMOD/CalibData.mod"), read("SYSMOD/user.sys"));
+    let (in_src, out_src) = (
+        read("PROGMOD/MainModule.mod"),
+        read("PROGMOD/MainModule.comp.mod"),
+    );
+    let calib = parse_module(&calib_src, "CalibData").expect("parses");
+    let user = parse_module(&user_src, "user").expect("parses");
+    let m_in = parse_module(&in_src, "in").expect("parses");
+    let m_out = parse_module(&out_src, "out").expect("parses");
+    let num = |s: &postproc::program::rapid::Scalar| match s.value {
+        Some(v) => v,
+        None => match declared(&user, &s.text, None) {
+            DataValue::Num(n) => n.value,
+            v => panic!("{v:?}"),
+        },
+    };
+    // Programmed pose (wTable frame) of an input move's target.
+    let programmed = |t: &Target| match t {
+        Target::Named { name, .. } => pose(robtarget(&calib, name, None)),
+        Target::Offs { base, offsets, .. } => {
+            let Target::Named { name, .. } = base.as_ref() else {
+                panic!("Offs of a name")
+            };
+            let p = pose(robtarget(&calib, name, None));
+            let d = Vector3::new(num(&offsets[0]), num(&offsets[1]), num(&offsets[2]));
+            Isometry3::from_parts(Translation3::from(p.translation.vector + d), p.rotation)
+        }
+        t => panic!("unexpected target {t:?}"),
+    };
+    let robot = Robot::from_yaml_str(&text("machines/staubli-tx200.yaml"), "tx200").expect("valid");
+    let effects = Effects {
+        kinematic: 1.0,
+        gravity: 1.0,
+        ..Effects::NONE
+    };
+    let (a, b): (Vec<_>, Vec<_>) = (m_in.moves().collect(), m_out.moves().collect());
+    assert_eq!(a.len(), b.len());
+    let (mut compensated, mut as_written) = (0, 0);
+    for (mi, mo) in a.iter().zip(&b) {
+        let (t_in, t_out) = (&in_src[mi.target.span()], &out_src[mo.target.span()]);
+        if t_in.contains("pStack") {
+            assert_eq!(t_in, t_out, "line {}", mi.line);
+            as_written += 1;
+            continue;
+        }
+        let Target::Named { name, .. } = &mo.target else {
+            panic!("line {}: written target {t_out}", mi.line)
+        };
+        let rt = robtarget(&m_out, name, None);
+        let (view, frame) = view_of(&robot, mo);
+        let q = view
+            .ik_conf(&(frame * pose(rt)), conf(rt))
+            .unwrap_or_else(|e| panic!("line {}: controller IK: {e}", mi.line));
+        let (dp, dr) = pose_error(
+            &view.predict(&q, effects),
+            &(frame * programmed(&mi.target)),
+        );
+        assert!(dp.norm() < POS_TOL_MM, "line {}: {} mm", mi.line, dp.norm());
+        assert!(
+            dr.norm() < ROT_TOL_RAD,
+            "line {}: {} rad",
+            mi.line,
+            dr.norm()
+        );
+        compensated += 1;
+    }
+    assert_eq!((compensated, as_written), (4, 3));
 }

@@ -169,11 +169,15 @@ impl Robot {
         growth: &DhGrowth,
     ) -> Result<Compensation, RobotError> {
         self.compensate_seeded(programmed, sel, effects, growth, &Seed::default())
+            .map_err(|e| self.with_reaching_configurations(programmed, e))
     }
 
     /// [`Robot::compensate_with_growth`] with what planning the move already
     /// found ([`Seed`]): saves one inverse kinematics (and the nominal
-    /// forward kinematics of the deviation breakdown, when given).
+    /// forward kinematics of the deviation breakdown, when given). A
+    /// refusal by the numeric inverse does not list the configurations that
+    /// reach the target: the caller that shows it adds them
+    /// ([`Robot::with_reaching_configurations`]).
     pub(crate) fn compensate_seeded(
         &self,
         programmed: &Isometry3<f64>,
@@ -190,6 +194,12 @@ impl Robot {
         } = *seed;
         // The flange is that of the given joints only.
         let nominal_flange = nominal_flange.filter(|_| q_programmed.is_some());
+        // The joints of the programmed pose, solved once for both paths
+        // below (a target refused here is refused by both).
+        let q0 = match q_programmed {
+            Some(q) => q,
+            None => self.ik_nominal_unlisted(programmed, sel)?,
+        };
         // Fast path: the closed-form branch found by the first inverse
         // kinematics of the iteration is the only one solved afterwards.
         // Its result stands when the final joints still have the asked
@@ -204,7 +214,7 @@ impl Robot {
                 sel,
                 effects,
                 growth,
-                (q_programmed, nominal_flange),
+                (q0, nominal_flange),
                 Some(seed),
             ) {
                 if r.conf.cfx == c.cfx {
@@ -212,14 +222,7 @@ impl Robot {
                 }
             }
         }
-        self.compensate_branch(
-            programmed,
-            sel,
-            effects,
-            growth,
-            (q_programmed, nominal_flange),
-            None,
-        )
+        self.compensate_branch(programmed, sel, effects, growth, (q0, nominal_flange), None)
     }
 
     /// [`Robot::compensate_seeded`]; with `fixed_branch`, the inverse
@@ -231,16 +234,12 @@ impl Robot {
         sel: &IkSelect,
         effects: Effects,
         growth: &DhGrowth,
-        (q_programmed, nominal_flange): (Option<[f64; 6]>, Option<Isometry3<f64>>),
+        (q0, nominal_flange): ([f64; 6], Option<Isometry3<f64>>),
         fixed_branch: Option<Option<usize>>,
     ) -> Result<Compensation, RobotError> {
         let mut branch = BranchMemo {
             fixed: fixed_branch.is_some(),
             k: fixed_branch.flatten(),
-        };
-        let q0 = match q_programmed {
-            Some(q) => q,
-            None => self.ik_nominal(programmed, sel)?,
         };
         let (kin, model) = self.prediction_prepared(effects, growth);
         let st = self.stages_from(&kin, &model, &q0, effects, nominal_flange);

@@ -362,7 +362,16 @@ impl Rewriter<'_> {
         let Some(comp) = self.solve(view, programmed, sel, seed) else {
             return Ok(None);
         };
-        let comp = comp.map_err(|e| self.locate(at, e, &what()))?;
+        // Only the refusal reported lists the configurations that reach
+        // its target (a search per configuration on a robot solved
+        // numerically; the module is refused at its first).
+        let comp = comp.map_err(|e| {
+            let e = match self.views.get(view) {
+                Some(r) => r.with_reaching_configurations(&programmed, e),
+                None => e,
+            };
+            self.locate(at, e, &what())
+        })?;
         if !self.active() {
             return Ok(Some(comp.deviation));
         }
@@ -671,7 +680,7 @@ fn plan_move<'m>(
             return Err(Error::Internal("move target not resolved".into()));
         };
         let pose = wobj * u.pose_obj;
-        match view.ik_conf_indexed_for_plan(&pose, u.conf) {
+        match view.ik_conf_indexed(&pose, u.conf) {
             Ok((q, k)) => (pose, Some(q), Some(k)),
             Err(_) => (pose, None, None),
         }
@@ -2047,6 +2056,70 @@ mod tests {
             checked += 1;
         }
         assert!(checked > 20);
+    }
+
+    /// A module whose targets the TX200 cannot take in their confdata (the
+    /// samples' plate, from the world origin) is refused at its first
+    /// target, whose message lists the configurations that reach it; that
+    /// list is searched once, and every other refused target costs two
+    /// seed searches (its plan and its compensation), not a listing.
+    #[test]
+    fn a_refused_module_lists_the_reaching_configurations_once() {
+        use crate::machine::robot::ik::NUMERIC_SOLVES;
+        use crate::machine::robot::numeric_ik::{LISTED_CFX, LISTINGS, STARTS};
+        let text = include_str!("../../machines/staubli-tx200.yaml")
+            .lines()
+            .map(|l| {
+                if l.starts_with("base:") {
+                    "base: { x_mm: 0.0, y_mm: 0.0, z_mm: 0.0, quaternion: [1.0, 0.0, 0.0, 0.0] }"
+                } else {
+                    l
+                }
+            })
+            .collect::<Vec<_>>()
+            .join("\n");
+        let robot = Robot::from_yaml_str(&text, "tx200.yaml").expect("valid");
+        let n = 24;
+        let moves: String = (0..n)
+            .map(|i| {
+                format!(
+                    "    MoveL [[{},{},345],[0,0,1,0],[0,0,0,0],[9E9,9E9,9E9,9E9,9E9,9E9]],v100,z1,t1;\n",
+                    700 + 5 * i,
+                    50 + 3 * i
+                )
+            })
+            .collect();
+        let src = format!(
+            "MODULE M\n  PERS tooldata t1 := [TRUE,[[0,0,182.5],[1,0,0,0]],[2.4,[0,0,85],[1,0,0,0],0,0,0]];\n  PROC main()\n{moves}  ENDPROC\nENDMODULE\n"
+        );
+        let opts = RapidOptions::for_robot(&robot);
+        // One worker: the jobs run on the thread whose counters are read.
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(1)
+            .build()
+            .expect("pool");
+        let (result, listings, solves) = pool.install(|| {
+            let (l0, s0) = (
+                LISTINGS.with(std::cell::Cell::get),
+                NUMERIC_SOLVES.with(std::cell::Cell::get),
+            );
+            let r = compensate_module(&src, "m.mod", &robot, &opts);
+            (
+                r,
+                LISTINGS.with(std::cell::Cell::get) - l0,
+                NUMERIC_SOLVES.with(std::cell::Cell::get) - s0,
+            )
+        });
+        let err = result.expect_err("refused").to_string();
+        assert!(
+            err.contains("m.mod:4:") && err.contains("(reachable configurations: ["),
+            "{err}"
+        );
+        assert_eq!(listings, 1);
+        assert!(
+            solves <= n * 2 * STARTS + LISTED_CFX * STARTS,
+            "{solves} numeric solves for {n} refused targets"
+        );
     }
 
     /// Without move records (no report) the outcome is the same but for

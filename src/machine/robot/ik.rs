@@ -426,6 +426,13 @@ pub fn nearest_turn(q: f64, reference: f64) -> f64 {
     q + 2.0 * PI * ((reference - q) / (2.0 * PI)).round()
 }
 
+#[cfg(test)]
+thread_local! {
+    /// Calls of [`solve_numeric`] on this thread (the cost of a search,
+    /// counted by tests).
+    pub(crate) static NUMERIC_SOLVES: std::cell::Cell<usize> = const { std::cell::Cell::new(0) };
+}
+
 /// Damped least-squares IK of the flange pose (robot base frame) for any
 /// parameter set, seeded from `seed`. Rotation rows are weighted by 1000 mm.
 pub fn solve_numeric(
@@ -436,6 +443,8 @@ pub fn solve_numeric(
     const ROT_WEIGHT_MM: f64 = 1000.0;
     const DAMPING_MM2: f64 = 1e-6;
     const MAX_STEP_RAD: f64 = 0.2;
+    #[cfg(test)]
+    NUMERIC_SOLVES.with(|n| n.set(n.get() + 1));
     let mut q = *seed;
     let mut last = (f64::INFINITY, f64::INFINITY);
     for _ in 0..IK_MAX_ITER {

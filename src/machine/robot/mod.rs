@@ -17,7 +17,7 @@ pub mod dynamics;
 pub mod ik;
 pub mod kinematics;
 mod nearest;
-mod numeric_ik;
+pub(crate) mod numeric_ik;
 mod params;
 pub mod plausible;
 pub mod pose;
@@ -720,13 +720,17 @@ impl Robot {
         tcp_world: &Isometry3<f64>,
         conf: ConfData,
     ) -> std::result::Result<[f64; 6], RobotError> {
-        let q = self.ik_conf_turns(tcp_world, conf, None)?;
+        let q = self
+            .ik_conf_turns(tcp_world, conf, None)
+            .map_err(|e| self.with_reaching_configurations(tcp_world, e))?;
         self.check_limits(&q)?;
         Ok(q)
     }
 
     /// [`Robot::ik_conf`] with the index of the closed-form branch of the
-    /// solution (a seed of [`Robot::ik_conf_near_branch`]).
+    /// solution (a seed of [`Robot::ik_conf_near_branch`]). A refusal of
+    /// the numeric inverse does not list the configurations that reach the
+    /// target ([`Robot::with_reaching_configurations`] adds them).
     pub(crate) fn ik_conf_indexed(
         &self,
         tcp_world: &Isometry3<f64>,
@@ -735,24 +739,6 @@ impl Robot {
         let (q, k) = self.ik_conf_branch(tcp_world, conf, None)?;
         self.check_limits(&q)?;
         Ok((q, k))
-    }
-
-    /// [`Robot::ik_conf_indexed`] for a move's plan, which only needs the
-    /// solution: a refusal by the numeric inverse does not list the
-    /// configurations that reach the target (hundreds of solves; the
-    /// refusal shown to the user comes from the compensation and lists
-    /// them).
-    pub(crate) fn ik_conf_indexed_for_plan(
-        &self,
-        tcp_world: &Isometry3<f64>,
-        conf: ConfData,
-    ) -> std::result::Result<([f64; 6], usize), RobotError> {
-        if self.d.closed_form.is_some() {
-            return self.ik_conf_indexed(tcp_world, conf);
-        }
-        let q = self.ik_conf_numeric_listing(tcp_world, conf, None, false)?;
-        self.check_limits(&q)?;
-        Ok((q, NUMERIC_BRANCH))
     }
 
     /// Closed-form solution with confdata `conf`, turns of joints 1, 4, 6
@@ -903,7 +889,9 @@ impl Robot {
         tcp_world: &Isometry3<f64>,
         conf: ConfData,
     ) -> std::result::Result<[f64; 6], RobotError> {
-        let seed = self.ik_conf_turns(tcp_world, conf, None)?;
+        let seed = self
+            .ik_conf_turns(tcp_world, conf, None)
+            .map_err(|e| self.with_reaching_configurations(tcp_world, e))?;
         self.ik_numeric(Model::Actual, tcp_world, &seed)
     }
 
@@ -913,8 +901,24 @@ impl Robot {
         tcp_world: &Isometry3<f64>,
         sel: &IkSelect,
     ) -> std::result::Result<[f64; 6], RobotError> {
+        self.ik_nominal_unlisted(tcp_world, sel)
+            .map_err(|e| self.with_reaching_configurations(tcp_world, e))
+    }
+
+    /// [`Robot::ik_nominal`] whose refusal by the numeric inverse does not
+    /// list the configurations that reach the target
+    /// ([`Robot::with_reaching_configurations`] adds them).
+    pub(crate) fn ik_nominal_unlisted(
+        &self,
+        tcp_world: &Isometry3<f64>,
+        sel: &IkSelect,
+    ) -> std::result::Result<[f64; 6], RobotError> {
         match sel {
-            IkSelect::Conf(c) => self.ik_conf(tcp_world, *c),
+            IkSelect::Conf(c) => {
+                let q = self.ik_conf_turns(tcp_world, *c, None)?;
+                self.check_limits(&q)?;
+                Ok(q)
+            }
             IkSelect::Near(seed) => self.ik_numeric(Model::Nominal, tcp_world, seed),
         }
     }

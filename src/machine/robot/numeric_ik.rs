@@ -32,8 +32,10 @@
 //! solution (the shoulder, elbow and wrist branches are fixed by `cfx`, the
 //! turns by the quadrants), so the seed decides how fast the solver gets
 //! there, not where: the result is the same for every seed that converges,
-//! and deterministic. The list needs no allocation; only a refusal builds
-//! its message (the configurations that do reach the target).
+//! and deterministic. The list needs no allocation; only a refusal that
+//! is shown builds its message (the configurations that do reach the
+//! target, a seed search per configuration): a module refused at its first
+//! target searches them once, however many of its targets are refused.
 
 use std::f64::consts::{FRAC_PI_2, FRAC_PI_4, PI};
 
@@ -61,6 +63,21 @@ const ON_AXIS_1_MM: f64 = 1e-9;
 /// The configurations of a refusal that did not look for them.
 pub(crate) const UNLISTED: &str = "not listed";
 
+/// Starts of one seed search: the seed list and each seed's wrist flip.
+#[cfg(test)]
+pub(crate) const STARTS: usize = 2 * SEEDS;
+
+/// Configurations probed by a listing of the reaching ones (every `cfx`).
+#[cfg(test)]
+pub(crate) const LISTED_CFX: usize = 8;
+
+#[cfg(test)]
+thread_local! {
+    /// Listings of reaching configurations made on this thread (the cost of
+    /// refusals, counted by tests).
+    pub(crate) static LISTINGS: std::cell::Cell<usize> = const { std::cell::Cell::new(0) };
+}
+
 /// What the seeds found for a refused target.
 enum Found {
     /// No seed converged to any solution.
@@ -79,25 +96,17 @@ impl Robot {
     /// the asked `cfx`, lies within the limits, and has joints 1, 4, 6 in
     /// the turns the quadrants name (possibly past a quadrant boundary,
     /// never a turn away); otherwise the seed list decides.
+    ///
+    /// A refusal does not list the configurations that reach the target
+    /// (`available` is [`UNLISTED`]): that list costs a seed search per
+    /// configuration, and most refusals are never shown (a move's plan,
+    /// every target of a module refused at its first). The refusal that
+    /// is shown gets it from [`Robot::with_reaching_configurations`].
     pub(crate) fn ik_conf_numeric(
         &self,
         tcp_world: &Isometry3<f64>,
         conf: ConfData,
         turn_ref: Option<&[f64; 6]>,
-    ) -> Result<[f64; 6], RobotError> {
-        self.ik_conf_numeric_listing(tcp_world, conf, turn_ref, true)
-    }
-
-    /// [`Robot::ik_conf_numeric`]; with `list` false a refusal does not
-    /// list the configurations that reach the target (that list costs a
-    /// seed search per configuration: for a caller that only needs the
-    /// solution, such as a move's plan).
-    pub(crate) fn ik_conf_numeric_listing(
-        &self,
-        tcp_world: &Isometry3<f64>,
-        conf: ConfData,
-        turn_ref: Option<&[f64; 6]>,
-        list: bool,
     ) -> Result<[f64; 6], RobotError> {
         let flange = self.flange_for_tcp(tcp_world);
         let params = self.params(Model::Nominal);
@@ -130,13 +139,29 @@ impl Robot {
             ),
             Found::Elsewhere => RobotError::ConfMismatch {
                 conf,
-                available: if list {
-                    self.reachable_configurations(&flange)
-                } else {
-                    UNLISTED.to_string()
-                },
+                available: UNLISTED.to_string(),
             },
         })
+    }
+
+    /// `e` with the configurations that reach `tcp_world` listed, when it
+    /// is a refusal of the numeric inverse that did not list them
+    /// ([`Robot::ik_conf_numeric`]); any other error as it is. For the
+    /// refusal shown to the user: one seed search per configuration.
+    pub(crate) fn with_reaching_configurations(
+        &self,
+        tcp_world: &Isometry3<f64>,
+        e: RobotError,
+    ) -> RobotError {
+        match e {
+            RobotError::ConfMismatch { conf, available } if available == UNLISTED => {
+                RobotError::ConfMismatch {
+                    conf,
+                    available: self.reachable_configurations(&self.flange_for_tcp(tcp_world)),
+                }
+            }
+            e => e,
+        }
     }
 
     /// Whether `q` has the `cfx` of `conf`, lies within the joint limits,
@@ -215,6 +240,8 @@ impl Robot {
     /// The configurations (confdata, turns within the limits) of the
     /// solutions the seed list reaches, for a refusal's message.
     fn reachable_configurations(&self, flange: &Isometry3<f64>) -> String {
+        #[cfg(test)]
+        LISTINGS.with(|n| n.set(n.get() + 1));
         let params = self.params(Model::Nominal);
         let mut confs: Vec<ConfData> = Vec::new();
         for cfx in 0..8 {
@@ -348,8 +375,9 @@ mod tests {
         }
     }
 
-    /// A refusal for a plan does not search the configurations that
-    /// reach the target; the refusal shown to the user does.
+    /// A refusal of the numeric inverse does not search the configurations
+    /// that reach the target; the refusal shown to the user (`ik_conf`, or
+    /// one completed by `with_reaching_configurations`) does.
     #[test]
     fn only_the_shown_refusal_lists_the_reaching_configurations() {
         let r = tx200();
@@ -357,21 +385,26 @@ mod tests {
         let pose = r.tcp_pose(Model::Nominal, &q);
         let mut other = r.confdata(&q);
         other.cfx ^= 1;
-        let listed = r
-            .ik_conf_numeric(&pose, other, None)
-            .expect_err("other cfx");
-        let plan = r
-            .ik_conf_indexed_for_plan(&pose, other)
-            .expect_err("other cfx");
         let available = |e: &RobotError| match e {
             RobotError::ConfMismatch { available, .. } => available.clone(),
             e => panic!("{e}"),
         };
+        let before = LISTINGS.with(std::cell::Cell::get);
+        let plan = r.ik_conf_indexed(&pose, other).expect_err("other cfx");
+        let unlisted = r
+            .ik_conf_numeric(&pose, other, None)
+            .expect_err("other cfx");
         assert_eq!(available(&plan), UNLISTED);
+        assert_eq!(available(&unlisted), UNLISTED);
+        assert_eq!(LISTINGS.with(std::cell::Cell::get), before);
+        let shown = r.ik_conf(&pose, other).expect_err("other cfx");
+        let completed = r.with_reaching_configurations(&pose, unlisted);
+        assert_eq!(LISTINGS.with(std::cell::Cell::get), before + 2);
         assert!(
-            available(&listed).contains(&r.confdata(&q).to_string()),
-            "{listed}"
+            available(&shown).contains(&r.confdata(&q).to_string()),
+            "{shown}"
         );
+        assert_eq!(available(&completed), available(&shown));
     }
 
     /// With a reference one turn away on joint 6 (still within its
