@@ -35,6 +35,7 @@ mod posts;
 mod provenance_cli;
 mod rapid;
 mod rapid_cli;
+mod rapid_flow;
 mod rapid_programs;
 mod rapid_stream;
 #[cfg(unix)] // links the inputs into a scratch folder, runs bash

@@ -1301,6 +1301,8 @@ pub(crate) struct ProgramScope {
     pub(crate) anchor: crate::program::rapid::Span,
     /// The data names the other modules' routines write.
     pub(crate) writes: Vec<String>,
+    /// The procedures the other modules declare (global ones).
+    pub(crate) procedures: crate::program::rapid::flow::calls::Procedures,
 }
 
 /// The robtargets a move goes to, resolved before run time: its target
@@ -1317,10 +1319,11 @@ impl Carry {
     /// ([`Carry::leave`]).
     fn resolve<'m>(&mut self, text: ModuleText<'m>) -> Result<(Vec<&'m Move>, Vec<Resolved<'m>>)> {
         let ModuleText { module, src, file } = text;
-        let mut flow = Flow::of(module, src);
-        if let Some(scope) = &self.scope {
-            flow = flow.with_writes_elsewhere(&scope.writes);
-        }
+        let flow = match &self.scope {
+            Some(scope) => Flow::of_program(module, src, &scope.procedures)
+                .with_writes_elsewhere(&scope.writes),
+            None => Flow::of(module, src),
+        };
         let mut moves = Vec::new();
         let mut resolved = Vec::new();
         for (at, mv) in flow.moves() {

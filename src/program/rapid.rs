@@ -447,6 +447,47 @@ pub struct Index {
     pub value: Option<usize>,
 }
 
+impl Index {
+    /// The index of each dimension (`1, 2` of `grid{1, 2}` gives `1` and
+    /// `2`): the text cut at its commas outside parentheses, brackets and
+    /// strings, each part trimmed.
+    pub fn parts(&self) -> Vec<&str> {
+        let mut out = Vec::new();
+        let (mut depth, mut quoted, mut from) = (0usize, false, 0);
+        for (k, c) in self.text.char_indices() {
+            match c {
+                '"' => quoted = !quoted,
+                '(' | '[' | '{' if !quoted => depth += 1,
+                ')' | ']' | '}' if !quoted => depth = depth.saturating_sub(1),
+                ',' if !quoted && depth == 0 => {
+                    out.extend(self.text.get(from..k).map(str::trim));
+                    from = k + 1;
+                }
+                _ => {}
+            }
+        }
+        out.extend(self.text.get(from..).map(str::trim));
+        out
+    }
+
+    /// The value of each dimension's index when every one is an integer
+    /// literal (1-based).
+    pub fn literals(&self) -> Option<Vec<usize>> {
+        if let Some(v) = self.value {
+            return Some(vec![v]);
+        }
+        self.parts()
+            .into_iter()
+            .map(|p| {
+                if p.is_empty() || !p.bytes().all(|b| b.is_ascii_digit()) {
+                    return None;
+                }
+                p.parse().ok()
+            })
+            .collect()
+    }
+}
+
 /// The target expression of a move.
 #[derive(Debug, Clone, PartialEq)]
 pub enum Target {

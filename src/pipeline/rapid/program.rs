@@ -10,7 +10,9 @@ use super::{Carry, ProgramScope, RapidOptions, compensate_carried};
 use crate::compensate::outcome::{AsWritten, RapidOutcome};
 use crate::error::{Error, Result};
 use crate::machine::robot::Robot;
-use crate::program::rapid::program::{Member, relocate, scoped, written_elsewhere};
+use crate::program::rapid::program::{
+    Member, procedures_elsewhere, relocate, scoped, written_elsewhere,
+};
 
 /// What module `i` of `members` carries in: the scope of the others.
 fn carry_of(members: &[Member], i: usize, own: &Member) -> Carry {
@@ -23,6 +25,7 @@ fn carry_of(members: &[Member], i: usize, own: &Member) -> Carry {
             from: own.module.decls.len(),
             anchor,
             writes: written_elsewhere(members, i),
+            procedures: procedures_elsewhere(members, i),
         }),
         ..Carry::default()
     };

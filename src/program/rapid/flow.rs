@@ -4,8 +4,9 @@
 //! Every statement that may change a data value is a *write*: an
 //! assignment (`p := …;`, `buf{i} := …;`, `p.trans.z := …;`), an
 //! assignment inside a compact `IF`, a name passed to an instruction
-//! (`StrToVal sData, pRecv;`, `Incr nCount;`) and the search point of a
-//! `Search…` instruction. A move's target is then, per move:
+//! (`StrToVal sData, pRecv;`, `Incr nCount;`), a name passed to a
+//! procedure of the program as the argument of an `INOUT`, `VAR` or `PERS`
+//! parameter ([`calls`]) and the search point of a `Search…` instruction. A move's target is then, per move:
 //!
 //! * the declaration's value, when the data is a constant or never
 //!   written (a routine-local one: not written before the move in its
@@ -27,11 +28,17 @@ use std::collections::HashMap;
 
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 
-use super::resolve::{CartUse, Origin, conf_of, input_err, robtarget_pose};
+use super::resolve::{
+    CartUse, Origin, conf_of, element_at, element_count, element_stem, input_err, robtarget_pose,
+};
 use super::{
     Assign, DataType, DataValue, Decl, Module, Move, RoutineKind, Scalar, Stmt, Storage, Target,
 };
 use crate::error::Result;
+
+pub mod calls;
+
+use calls::Procedures;
 
 /// Why a move is left as written: its target is reassigned in a loop
 /// (around the move, or before it).
@@ -144,6 +151,14 @@ enum Source<'m> {
 impl<'m> Flow<'m> {
     /// The flow of `module`, parsed from `src`.
     pub fn of(module: &'m Module, src: &str) -> Self {
+        Self::of_program(module, src, &Procedures::default())
+    }
+
+    /// The flow of `module`, parsed from `src`, in a program whose other
+    /// modules declare the procedures `elsewhere`.
+    pub fn of_program(module: &'m Module, src: &str, elsewhere: &Procedures) -> Self {
+        let mut procedures = Procedures::of_module(module, src, true);
+        procedures.extend(elsewhere);
         let mut writes: HashMap<String, Vec<Write>> = HashMap::new();
         let mut shapes = Vec::with_capacity(module.procs.len());
         // Functions that may write their arguments: `StrToVal` and the
@@ -200,7 +215,17 @@ impl<'m> Flow<'m> {
                     Stmt::Opaque { span, .. } => {
                         let text = src.get(span.clone()).unwrap_or("");
                         let (first, written) = opaque_writes(text);
+                        // A known procedure changes its by-reference
+                        // arguments only.
+                        let by_ref = procedures.written(first, text);
                         for (name, assigned) in written {
+                            if !assigned
+                                && by_ref.as_ref().is_some_and(|b| {
+                                    !b.iter().any(|w| w.eq_ignore_ascii_case(name))
+                                })
+                            {
+                                continue;
+                            }
                             let kind = match (assigned, first.eq_ignore_ascii_case("IF")) {
                                 (true, false) => Kind::Whole,
                                 (true, true) => Kind::Conditional,
@@ -521,8 +546,13 @@ impl<'m> Flow<'m> {
         };
         match target {
             Target::Named {
-                index: Some(ix), ..
-            } if ix.value.is_none() => left(RUN_TIME_INDEX),
+                name,
+                index: Some(ix),
+                ..
+            } if ix.literals().is_none() => Some(Left {
+                reason: RUN_TIME_INDEX.to_string(),
+                reads: self.all_elements(name, at.proc),
+            }),
             Target::Named { name, .. } => match self.source(name, at)? {
                 Source::Module(..) => None,
                 Source::Local(_) => left("routine-local jointtarget"),
@@ -657,21 +687,13 @@ impl<'m> Flow<'m> {
         let here = target.span().start;
         let k = match index {
             None => None,
-            Some(ix) => match ix
-                .value
-                .map(|v| v as f64)
-                .or_else(|| self.number(&ix.text, at, 0))
-            {
-                Some(v) if v.fract() == 0.0 && (1.0..1e9).contains(&v) => Some(v as usize),
-                Some(v) => {
-                    return Err(input_err(
-                        src,
-                        file,
-                        ix.span.start,
-                        format!("index {v} of `{name}` is not a positive integer"),
-                    ));
+            Some(ix) => match self.indices(src, file, at, name, ix)? {
+                Some(ks) => Some(ks),
+                None => {
+                    // Any element may be the one: they all keep their values.
+                    reads.extend(self.all_elements(name, at.proc));
+                    return Ok(Err(RUN_TIME_INDEX.into()));
                 }
-                None => return Ok(Err(RUN_TIME_INDEX.into())),
             },
         };
         let Some(source) = self.source(name, at) else {
@@ -693,19 +715,16 @@ impl<'m> Flow<'m> {
                 return Ok(Ok(self.followed(u, name, at)));
             }
             Source::Module(di, d) => {
-                let v = element(src, file, here, d, k)?;
-                let origin = Origin::Decl {
-                    decl: di,
-                    elem: k.map(|k| k - 1),
-                };
-                let stem = match k {
-                    Some(k) => format!("{}{k}", d.name),
+                let (v, elem) = element(src, file, here, d, k.as_deref())?;
+                let origin = Origin::Decl { decl: di, elem };
+                let stem = match &k {
+                    Some(ks) => element_stem(&d.name, ks),
                     None => d.name.clone(),
                 };
                 (v, origin, stem)
             }
             Source::Local(d) => (
-                element(src, file, here, d, k)?,
+                element(src, file, here, d, k.as_deref())?.0,
                 Origin::Inline,
                 String::new(),
             ),
@@ -730,6 +749,54 @@ impl<'m> Flow<'m> {
         }
         // A routine-local declaration: its value is materialised.
         Ok(Ok(self.followed(u, name, at)))
+    }
+
+    /// The 1-based index of each dimension of `ix` (of array `name`) at
+    /// `at`, when every one is known before run time.
+    fn indices(
+        &self,
+        src: &str,
+        file: &str,
+        at: At,
+        name: &str,
+        ix: &super::Index,
+    ) -> Result<Option<Vec<usize>>> {
+        let mut ks = Vec::new();
+        for part in ix.parts() {
+            match self.number(part, at, 0) {
+                Some(v) if v.fract() == 0.0 && (1.0..1e9).contains(&v) => ks.push(v as usize),
+                Some(v) => {
+                    return Err(input_err(
+                        src,
+                        file,
+                        ix.span.start,
+                        format!("index {v} of `{name}` is not a positive integer"),
+                    ));
+                }
+                None => return Ok(None),
+            }
+        }
+        Ok(Some(ks))
+    }
+
+    /// Every element of the module array `name` seen from routine `proc`
+    /// (none for a parameter or a routine-local array): what a move to an
+    /// element chosen at run time may read.
+    fn all_elements(&self, name: &str, proc: usize) -> Vec<Origin> {
+        if self.is_param(proc, &name.to_ascii_lowercase()) || self.local_decl(proc, name).is_some()
+        {
+            return Vec::new();
+        }
+        let Some((decl, d)) = self.module_decl(name) else {
+            return Vec::new();
+        };
+        let n = d.value.as_ref().map_or(0, element_count);
+        (0..n)
+            .map(|i| Origin::Decl {
+                decl,
+                elem: Some(i),
+            })
+            .collect()
     }
 
     /// The value `u` that data `name` holds at `at` (followed through an
@@ -773,43 +840,33 @@ fn resolves_moves(d: &Decl) -> bool {
     )
 }
 
-/// The value of declaration `d` (element `k`, 1-based, of an array).
+/// The value of declaration `d` (element `ks`, 1-based, of an array),
+/// with the element's place among the array's ([`element_at`]).
 fn element<'m>(
     src: &str,
     file: &str,
     at: usize,
     d: &'m Decl,
-    k: Option<usize>,
-) -> Result<&'m DataValue> {
+    ks: Option<&[usize]>,
+) -> Result<(&'m DataValue, Option<usize>)> {
+    if let Some(ks) = ks {
+        return element_at(src, file, at, d, ks).map(|(v, i)| (v, Some(i)));
+    }
     let name = &d.name;
-    let value = d
-        .value
-        .as_ref()
-        .ok_or_else(|| input_err(src, file, at, format!("`{name}` has no initial value")))?;
-    match (k, value) {
-        (None, DataValue::Array { .. }) => Err(input_err(
+    match &d.value {
+        None => Err(input_err(
+            src,
+            file,
+            at,
+            format!("`{name}` has no initial value"),
+        )),
+        Some(DataValue::Array { .. }) => Err(input_err(
             src,
             file,
             at,
             format!("`{name}` is an array; index it"),
         )),
-        (None, v) => Ok(v),
-        (Some(k), DataValue::Array { items, .. }) => {
-            k.checked_sub(1).and_then(|i| items.get(i)).ok_or_else(|| {
-                input_err(
-                    src,
-                    file,
-                    at,
-                    format!("index {k} is outside `{name}` (1..={})", items.len()),
-                )
-            })
-        }
-        (Some(_), _) => Err(input_err(
-            src,
-            file,
-            at,
-            format!("`{name}` is not an array"),
-        )),
+        Some(v) => Ok((v, None)),
     }
 }
 

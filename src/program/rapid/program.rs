@@ -14,6 +14,7 @@
 use std::path::{Path, PathBuf};
 
 use super::flow::Flow;
+use super::flow::calls::Procedures;
 use super::{Module, Scope, parse_module, parse_module_at};
 use crate::error::{Error, Located, Result};
 use crate::program::charset::Charset;
@@ -254,10 +255,23 @@ pub fn written_elsewhere(members: &[Member], i: usize) -> Vec<String> {
     let mut out = Vec::new();
     for (j, m) in members.iter().enumerate() {
         if j != i {
-            out.extend(Flow::of(&m.module, &m.text).written_names());
+            let procedures = procedures_elsewhere(members, j);
+            out.extend(Flow::of_program(&m.module, &m.text, &procedures).written_names());
         }
     }
     out.sort_unstable();
     out.dedup();
+    out
+}
+
+/// The procedures the modules other than `i` declare for it (not those
+/// declared `LOCAL`), with their parameters.
+pub fn procedures_elsewhere(members: &[Member], i: usize) -> Procedures {
+    let mut out = Procedures::default();
+    for (j, m) in members.iter().enumerate() {
+        if j != i {
+            out.extend(&Procedures::of_module(&m.module, &m.text, false));
+        }
+    }
     out
 }

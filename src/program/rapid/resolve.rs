@@ -141,8 +141,8 @@ pub(crate) fn named_value<'m>(
             },
             decl.name.clone(),
         )),
-        (Some(ix), DataValue::Array { items, .. }) => {
-            let k = ix.value.ok_or_else(|| {
+        (Some(ix), DataValue::Array { .. }) => {
+            let ks = ix.literals().ok_or_else(|| {
                 input_err(
                     src,
                     file,
@@ -153,21 +153,14 @@ pub(crate) fn named_value<'m>(
                     ),
                 )
             })?;
-            let item = k.checked_sub(1).and_then(|i| items.get(i)).ok_or_else(|| {
-                input_err(
-                    src,
-                    file,
-                    ix.span.start,
-                    format!("index {k} is outside `{name}` (1..={})", items.len()),
-                )
-            })?;
+            let (item, flat) = element_at(src, file, ix.span.start, decl, &ks)?;
             Ok((
                 item,
                 Origin::Decl {
                     decl: di,
-                    elem: Some(k - 1),
+                    elem: Some(flat),
                 },
-                format!("{}{k}", decl.name),
+                element_stem(&decl.name, &ks),
             ))
         }
         (Some(_), _) => Err(input_err(
@@ -177,6 +170,76 @@ pub(crate) fn named_value<'m>(
             format!("`{name}` is not an array"),
         )),
     }
+}
+
+/// The element of array declaration `d` at the 1-based indices `ks`, one
+/// per dimension, with its place among the declaration's elements
+/// (0-based, row by row: RAPID nests the value of `{2, 3}` as two
+/// aggregates of three). Errors at `at`: no value, an index outside its
+/// dimension, a count of indices that is not the array's.
+pub(crate) fn element_at<'m>(
+    src: &str,
+    file: &str,
+    at: usize,
+    d: &'m Decl,
+    ks: &[usize],
+) -> Result<(&'m DataValue, usize)> {
+    let name = &d.name;
+    let mut value = d
+        .value
+        .as_ref()
+        .ok_or_else(|| input_err(src, file, at, format!("`{name}` has no initial value")))?;
+    let dims = || {
+        let n = d.dims.len().max(1);
+        let s = if n == 1 { "" } else { "s" };
+        format!(
+            "`{name}` has {n} dimension{s}; the index gives {}",
+            ks.len()
+        )
+    };
+    if !d.dims.is_empty() && d.dims.len() != ks.len() {
+        return Err(input_err(src, file, at, dims()));
+    }
+    let mut flat = 0usize;
+    for (level, &k) in ks.iter().enumerate() {
+        let DataValue::Array { items, .. } = value else {
+            let what = if level == 0 {
+                format!("`{name}` is not an array")
+            } else {
+                dims()
+            };
+            return Err(input_err(src, file, at, what));
+        };
+        let Some((i, item)) = k.checked_sub(1).and_then(|i| Some((i, items.get(i)?))) else {
+            return Err(input_err(
+                src,
+                file,
+                at,
+                format!("index {k} is outside `{name}` (1..={})", items.len()),
+            ));
+        };
+        flat = flat * items.len() + i;
+        value = item;
+    }
+    if matches!(value, DataValue::Array { .. }) {
+        return Err(input_err(src, file, at, dims()));
+    }
+    Ok((value, flat))
+}
+
+/// How many elements an array value holds in all its dimensions (one for
+/// a value that is not an array).
+pub(crate) fn element_count(value: &DataValue) -> usize {
+    match value {
+        DataValue::Array { items, .. } => items.iter().map(element_count).sum(),
+        _ => 1,
+    }
+}
+
+/// The name stem of element `ks` of array `name`: `holes3`, `grid1_2`.
+pub(crate) fn element_stem(name: &str, ks: &[usize]) -> String {
+    let ks: Vec<String> = ks.iter().map(usize::to_string).collect();
+    format!("{name}{}", ks.join("_"))
 }
 
 pub(crate) fn literal(src: &str, file: &str, s: &Scalar) -> Result<f64> {
