@@ -6,6 +6,7 @@
 use clap::Parser;
 
 fn main() {
+    postproc::cli::memory::keep_freed_memory();
     let cli = postproc::cli::Cli::parse();
     match postproc::cli::run(cli) {
         Ok(code) => std::process::exit(code),

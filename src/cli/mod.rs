@@ -8,6 +8,7 @@ mod diagnose;
 mod gcode;
 mod interrupt;
 mod machines;
+pub mod memory;
 mod output;
 mod rapid;
 

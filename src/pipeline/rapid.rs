@@ -1318,19 +1318,45 @@ impl Carry {
     /// their targets resolved; each other move is left as written
     /// ([`Carry::leave`]).
     fn resolve<'m>(&mut self, text: ModuleText<'m>) -> Result<(Vec<&'m Move>, Vec<Resolved<'m>>)> {
+        let (moves, resolved, _) = self.resolve_with(text, |_, _, _| ())?;
+        Ok((moves, resolved))
+    }
+
+    /// [`Carry::resolve`], with `plan` run on each move resolved (given its
+    /// own robot views): resolving and planning are independent per move,
+    /// so both run in parallel, and what the moves leave (warnings, moves
+    /// left as written, the first error in move order) is taken in order
+    /// after, as one walk would.
+    fn resolve_with<'m, P: Send>(
+        &mut self,
+        text: ModuleText<'m>,
+        plan: impl Fn(&mut ViewCache<&'m str>, &'m Move, &Resolved<'m>) -> P + Sync,
+    ) -> Result<Resolved3<'m, P>> {
         let ModuleText { module, src, file } = text;
         let flow = match &self.scope {
             Some(scope) => Flow::of_program(module, src, &scope.procedures)
                 .with_writes_elsewhere(&scope.writes),
             None => Flow::of(module, src),
         };
-        let mut moves = Vec::new();
-        let mut resolved = Vec::new();
-        for (at, mv) in flow.moves() {
-            match resolve_move(&flow, src, file, at, mv)? {
-                Ok(r) => {
-                    moves.push(mv);
+        let all: Vec<(At, &'m Move)> = flow.moves().collect();
+        let found: Vec<Result<std::result::Result<(Resolved<'m>, P), Left>>> = all
+            .par_iter()
+            .map_init(ViewCache::new, |views, &(at, mv)| {
+                Ok(resolve_move(&flow, src, file, at, mv)?.map(|r| {
+                    let p = plan(views, mv, &r);
+                    (r, p)
+                }))
+            })
+            .collect();
+        let mut moves = Vec::with_capacity(all.len());
+        let mut resolved = Vec::with_capacity(all.len());
+        let mut plans = Vec::with_capacity(all.len());
+        for ((_, mv), f) in all.iter().zip(found) {
+            match f? {
+                Ok((r, p)) => {
+                    moves.push(*mv);
                     resolved.push(r);
+                    plans.push(p);
                 }
                 Err(left) => self.leave(mv, left, src, file),
             }
@@ -1347,7 +1373,7 @@ impl Carry {
         {
             self.unsupported.get_or_insert(MODULE_DATA_WRITTEN);
         }
-        Ok((moves, resolved))
+        Ok((moves, resolved, plans))
     }
 
     /// Leaves a move as written: warned about with its place and reason,
@@ -1376,6 +1402,10 @@ impl Carry {
         });
     }
 }
+
+/// The moves resolved, their targets and what was planned of each
+/// ([`Carry::resolve_with`]).
+type Resolved3<'m, P> = (Vec<&'m Move>, Vec<Resolved<'m>>, Vec<P>);
 
 /// Why a module is not read a window at a time: a routine writes module
 /// data that moves read (a window does not see the other routines).
@@ -1442,8 +1472,13 @@ pub(crate) fn compensate_window(
     directives: Option<Directives>,
     before: usize,
 ) -> Result<EditList> {
-    let (moves, resolved) = carry.resolve(text)?;
-    let mut line = TimeLine::of_window((&moves, &resolved), text, robot, opts, carry, directives)?;
+    let ModuleText { module, src, file } = text;
+    let (moves, resolved, plans) = carry.resolve_with(text, |views, mv, res| {
+        plan_move(module, src, file, robot, views, (mv, res))
+    })?;
+    // The first error in move order is the error, as in order.
+    let plans = plans.into_iter().collect::<Result<Vec<Planned>>>()?;
+    let mut line = TimeLine::of_window((&moves, plans), text, robot, opts, carry, directives)?;
     if let Some(totals) = carry.time_line.as_mut() {
         if let Some(t) = line.thermal {
             totals.add(&line.segments, t.time_constant_s);
@@ -1492,7 +1527,7 @@ impl<'r> TimeLine<'r> {
     /// Plans the moves of a window (continuing the windows before from
     /// `carry`) and puts them on the time line.
     fn of_window(
-        (moves, resolved): (&[&Move], &[Resolved]),
+        (moves, window_plans): (&[&Move], Vec<Planned>),
         text: ModuleText,
         robot: &'r Robot,
         opts: &RapidOptions,
@@ -1500,18 +1535,6 @@ impl<'r> TimeLine<'r> {
         directives: Option<Directives>,
     ) -> Result<Self> {
         let ModuleText { module, src, file } = text;
-        // Planning (resolving each move and solving its programmed joints) is
-        // independent per move: in parallel, each rayon task with its own tool
-        // views; the first error in move order is the error, as in order.
-        let window_plans = moves
-            .par_iter()
-            .zip(resolved.par_iter())
-            .map_init(ViewCache::new, |views, (mv, res)| {
-                plan_move(module, src, file, robot, views, (mv, res))
-            })
-            .collect::<Vec<Result<Planned>>>()
-            .into_iter()
-            .collect::<Result<Vec<Planned>>>()?;
         let o = usize::from(carry.prev_plan.is_some());
         let mut plans = Vec::with_capacity(window_plans.len() + o);
         plans.extend(carry.prev_plan.take());
@@ -1668,7 +1691,7 @@ impl<'r> TimeLine<'r> {
         &'a self,
         moves: &[&'a Move],
         i: usize,
-        names: &mut Option<(Rc<str>, Rc<str>)>,
+        names: &mut LastNames<'a>,
     ) -> Option<Keyed<'a>> {
         let mv: &Move = moves.get(i)?;
         let plan = self.plans.get(i + self.o)?;
@@ -1677,18 +1700,22 @@ impl<'r> TimeLine<'r> {
         let wrench = self.wrenches.get(i).copied().flatten();
         let rpm = self.directives.at(mv.line).spindle_rpm;
         let wobj_text = mv.wobj.as_ref().map_or("wobj0", |w| &*w.text);
+        let tool_text: &'a str = &mv.tool.text;
         let (tool, wobj) = match &*names {
-            Some((t, w))
-                if t.eq_ignore_ascii_case(&mv.tool.text) && w.eq_ignore_ascii_case(wobj_text) =>
+            // The texts as the move before wrote them (a comparison of
+            // bytes, the common case), or the same names in another case.
+            Some(((ts, ws), (t, w)))
+                if (*ts == tool_text && *ws == wobj_text)
+                    || (t.eq_ignore_ascii_case(tool_text) && w.eq_ignore_ascii_case(wobj_text)) =>
             {
                 (Rc::clone(t), Rc::clone(w))
             }
             _ => (
-                Rc::from(mv.tool.text.to_ascii_lowercase()),
+                Rc::from(tool_text.to_ascii_lowercase()),
                 Rc::from(wobj_text.to_ascii_lowercase()),
             ),
         };
-        *names = Some((Rc::clone(&tool), Rc::clone(&wobj)));
+        *names = Some(((tool_text, wobj_text), (Rc::clone(&tool), Rc::clone(&wobj))));
         let key = LoadKey {
             tool,
             wobj,
@@ -1706,6 +1733,10 @@ impl<'r> TimeLine<'r> {
         ))
     }
 }
+
+/// The tool and work object texts of the move a walk met last, as
+/// written, with their lower-case names ([`TimeLine::keyed`]).
+type LastNames<'a> = Option<((&'a str, &'a str), (Rc<str>, Rc<str>))>;
 
 /// A move on the time line with what its rewriting needs: the move, its
 /// plan and nominal end flange, its segment, state and load key.
@@ -1768,15 +1799,18 @@ impl<'m> Rewriter<'m> {
     /// compensation jobs, up to [`JOB_CHUNK`] of them; stops for good
     /// (`*collecting` false) at the first error. Gives the jobs and the
     /// index after the last move walked.
-    fn collect(
+    fn collect<'a>(
         &mut self,
-        (moves, resolved): (&[&Move], &[Resolved]),
-        line: &TimeLine,
+        (moves, resolved): (&[&'a Move], &[Resolved]),
+        line: &'a TimeLine,
         collected: &mut usize,
         collecting: &mut bool,
-        names: &mut Option<(Rc<str>, Rc<str>)>,
+        names: &mut LastNames<'a>,
     ) -> (Vec<Job>, usize) {
-        self.phase = Phase::Collect(Vec::new());
+        // A chunk holds a job per move (two for a MoveC) and ends at the
+        // move that reaches JOB_CHUNK: room for that many from the start.
+        let room = moves.len().saturating_sub(*collected).min(JOB_CHUNK) + 1;
+        self.phase = Phase::Collect(Vec::with_capacity(room));
         while *collecting && *collected < moves.len() {
             let Some((mv, plan, _, state, key)) = line.keyed(moves, *collected, names) else {
                 *collected += 1;

@@ -364,9 +364,7 @@ pub fn placeholder_at(text: &str) -> Option<&'static str> {
 /// Byte offset of the first editor placeholder in `text` that is code (not
 /// in a `!` comment or a string literal), if any.
 pub fn find_placeholder(text: &str) -> Option<usize> {
-    let mut from = 0;
-    while let Some(k) = text.get(from..).and_then(|t| t.find('<')) {
-        let at = from + k;
+    for at in memchr::memchr_iter(b'<', text.as_bytes()) {
         if placeholder_at(text.get(at..).unwrap_or("")).is_some() {
             let line_start = text
                 .get(..at)
@@ -377,7 +375,6 @@ pub fn find_placeholder(text: &str) -> Option<usize> {
                 return Some(at);
             }
         }
-        from = at + 1;
     }
     None
 }

@@ -39,7 +39,7 @@ impl Directives {
             at.push((0, start));
         }
         let mut cur = start;
-        for (k, line) in (first_line.saturating_sub(1)..).zip(src.lines()) {
+        for (k, line) in bang_lines(src, first_line.saturating_sub(1)) {
             let Some(bang) = comment_start(line) else {
                 continue;
             };
@@ -80,5 +80,64 @@ impl Directives {
     /// True without directives.
     pub fn is_empty(&self) -> bool {
         self.at.is_empty()
+    }
+}
+
+/// The lines of `src` (as [`str::lines`] gives them) that hold a `!`, with
+/// their 0-based numbers counted from `first`: a directive is in a comment,
+/// and the lines without one are passed over by a byte search.
+fn bang_lines(src: &str, first: usize) -> impl Iterator<Item = (usize, &str)> {
+    let bytes = src.as_bytes();
+    // Where the search goes on, and the number and start of the line there.
+    let (mut from, mut k, mut counted) = (0, first, 0);
+    std::iter::from_fn(move || {
+        let bang = from + memchr::memchr(b'!', bytes.get(from..)?)?;
+        let start = memchr::memrchr(b'\n', bytes.get(..bang)?).map_or(0, |n| n + 1);
+        k += memchr::memchr_iter(b'\n', bytes.get(counted..start)?).count();
+        counted = start;
+        let line = match memchr::memchr(b'\n', bytes.get(bang..)?) {
+            Some(n) => {
+                from = bang + n + 1;
+                let line = src.get(start..bang + n)?;
+                line.strip_suffix('\r').unwrap_or(line)
+            }
+            None => {
+                from = bytes.len();
+                src.get(start..)?
+            }
+        };
+        Some((k, line))
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The lines found by the byte search are those of `str::lines` that
+    /// hold a `!`, with the same numbers and text: line breaks of both
+    /// kinds, a last line with and without a break, a lone `\r`, several
+    /// `!` on a line, blank lines and a `!` on the first and last byte.
+    #[test]
+    fn bang_lines_are_the_lines_holding_a_bang() {
+        let texts = [
+            "",
+            "!",
+            "a\nb\n",
+            "! first\nMoveL p, v, z, t;\n\n  ! POSTPROC MILLING DEPTH=1\nx ! y ! z\n!",
+            "a\r\n! b\r\n\r\nc \"!\" d\r\n! e\r",
+            "\n\n!\n\n! x\r\n!\n",
+            "x\r! y\nz",
+        ];
+        for src in texts {
+            for first in [0, 41] {
+                let want: Vec<(usize, &str)> = (first..)
+                    .zip(src.lines())
+                    .filter(|(_, l)| l.contains('!'))
+                    .collect();
+                let got: Vec<(usize, &str)> = bang_lines(src, first).collect();
+                assert_eq!(got, want, "{src:?} from {first}");
+            }
+        }
     }
 }

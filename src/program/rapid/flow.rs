@@ -132,8 +132,9 @@ pub struct Flow<'m> {
     shapes: Vec<Shape>,
     /// Writes per data name (lower case), in routine and statement order.
     writes: HashMap<String, Vec<Write>>,
-    /// The module-level data names looked up so far (lower case).
-    read: std::cell::RefCell<Vec<String>>,
+    /// The module-level data names looked up so far (lower case; moves
+    /// may be resolved on several threads).
+    read: std::sync::Mutex<Vec<String>>,
 }
 
 /// Where a data value at a statement comes from.
@@ -252,7 +253,7 @@ impl<'m> Flow<'m> {
             module,
             shapes,
             writes,
-            read: std::cell::RefCell::new(Vec::new()),
+            read: std::sync::Mutex::new(Vec::new()),
         }
     }
 
@@ -301,9 +302,14 @@ impl<'m> Flow<'m> {
     }
 
     /// The module-level data names the moves resolved so far read, lower
-    /// case.
+    /// case, sorted.
     pub fn module_data_read(&self) -> Vec<String> {
-        self.read.borrow().clone()
+        let mut v = self
+            .read
+            .lock()
+            .map_or_else(|p| p.into_inner().clone(), |r| r.clone());
+        v.sort_unstable();
+        v
     }
 
     /// The motion instructions of the module's routines with their
@@ -360,7 +366,7 @@ impl<'m> Flow<'m> {
             Some(d) => (Source::Local(d), d),
             None => {
                 let (i, d) = self.module_decl(name)?;
-                let mut read = self.read.borrow_mut();
+                let mut read = self.read.lock().unwrap_or_else(|p| p.into_inner());
                 if !read.contains(&lower) {
                     read.push(lower.clone());
                 }

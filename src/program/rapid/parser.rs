@@ -440,12 +440,7 @@ impl<'a> Parser<'a> {
     /// `ahead_min` bytes after their header (`usize::MAX`: never).
     pub(super) fn with_ahead_min(src: &'a str, file: &'a str, ahead_min: usize) -> Self {
         let mut line_starts = vec![0];
-        line_starts.extend(
-            src.bytes()
-                .enumerate()
-                .filter(|&(_, b)| b == b'\n')
-                .map(|(k, _)| k + 1),
-        );
+        line_starts.extend(memchr::memchr_iter(b'\n', src.as_bytes()).map(|k| k + 1));
         Parser {
             src,
             file,
@@ -473,60 +468,7 @@ impl<'a> Parser<'a> {
     fn parse_ahead(&self, i: &'a str) -> Vec<Ahead> {
         use rayon::prelude::*;
         let body_start = self.pos(ws(i));
-        let mut starts = vec![body_start];
-        let (mut depth, mut in_string, mut closed, mut at_line_start) =
-            (0usize, false, false, false);
-        let mut k = self.pos(i);
-        let bytes = self.src.as_bytes();
-        while let Some(&b) = bytes.get(k) {
-            if at_line_start {
-                at_line_start = false;
-                // The line's first token, if it has one (blank and comment
-                // lines are passed over byte by byte below).
-                let t = self.at(k).trim_start_matches([' ', '\t', '\r']);
-                if !matches!(t.as_bytes().first(), None | Some(b'!' | b'\n')) {
-                    if ends_routine(t) {
-                        break;
-                    }
-                    if closed && self.pos(t) > starts.last().copied().unwrap_or(0) {
-                        starts.push(self.pos(t));
-                    }
-                }
-            }
-            match b {
-                b'\n' => {
-                    // Strings do not span lines.
-                    in_string = false;
-                    at_line_start = true;
-                }
-                b'"' => {
-                    in_string = !in_string;
-                    closed = false;
-                }
-                _ if in_string => {}
-                b'!' => {
-                    // A comment to the end of the line.
-                    k = self
-                        .src
-                        .get(k..)
-                        .and_then(|t| t.find('\n'))
-                        .map_or(bytes.len(), |n| k + n);
-                    continue;
-                }
-                b'[' | b'(' | b'{' => {
-                    depth += 1;
-                    closed = false;
-                }
-                b']' | b')' | b'}' => {
-                    depth = depth.saturating_sub(1);
-                    closed = false;
-                }
-                b';' => closed = depth == 0,
-                b' ' | b'\t' | b'\r' => {}
-                _ => closed = false,
-            }
-            k += 1;
-        }
+        let (starts, k) = statement_starts(self.src, self.pos(i), body_start);
         if k.saturating_sub(body_start) < self.ahead_min {
             return Vec::new();
         }
@@ -2018,6 +1960,74 @@ fn storage_kw(i: &str) -> Option<(Storage, &str)> {
 
 /// True when `t` (at a token) ends a routine body: a routine or module end,
 /// or the header of the next routine.
+/// The candidate statement starts of a routine body for
+/// [`Parser::parse_ahead`]: `body_start` (its first statement) and every
+/// line start after `from` whose last significant byte before it (outside
+/// strings and `!` comments) is a `;` at bracket depth 0, up to the first
+/// line that opens with a routine or module end; with the byte where the
+/// scan stopped. A function of its own, not inlined: the byte loop keeps
+/// its state in registers instead of the parser's frame.
+#[inline(never)]
+fn statement_starts(src: &str, from: usize, body_start: usize) -> (Vec<usize>, usize) {
+    let mut starts = vec![body_start];
+    let (mut depth, mut in_string, mut closed, mut at_line_start) = (0usize, false, false, false);
+    let mut k = from;
+    let bytes = src.as_bytes();
+    while let Some(&b) = bytes.get(k) {
+        if at_line_start {
+            at_line_start = false;
+            // The line's first token, if it has one (blank and comment
+            // lines are passed over byte by byte below).
+            let t = src
+                .get(k..)
+                .unwrap_or("")
+                .trim_start_matches([' ', '\t', '\r']);
+            if !matches!(t.as_bytes().first(), None | Some(b'!' | b'\n')) {
+                if ends_routine(t) {
+                    break;
+                }
+                let at = src.len() - t.len();
+                if closed && at > starts.last().copied().unwrap_or(0) {
+                    starts.push(at);
+                }
+            }
+        }
+        match b {
+            b'\n' => {
+                // Strings do not span lines.
+                in_string = false;
+                at_line_start = true;
+            }
+            b'"' => {
+                in_string = !in_string;
+                closed = false;
+            }
+            _ if in_string => {}
+            b'!' => {
+                // A comment to the end of the line.
+                k = bytes
+                    .get(k..)
+                    .and_then(|t| memchr::memchr(b'\n', t))
+                    .map_or(bytes.len(), |n| k + n);
+                continue;
+            }
+            b'[' | b'(' | b'{' => {
+                depth += 1;
+                closed = false;
+            }
+            b']' | b')' | b'}' => {
+                depth = depth.saturating_sub(1);
+                closed = false;
+            }
+            b';' => closed = depth == 0,
+            b' ' | b'\t' | b'\r' => {}
+            _ => closed = false,
+        }
+        k += 1;
+    }
+    (starts, k)
+}
+
 fn ends_routine(t: &str) -> bool {
     let (_, after_scope) = scope_prefix(t);
     ["ENDMODULE", "ENDPROC", "ENDFUNC", "ENDTRAP", "ENDRECORD"]
