@@ -44,12 +44,16 @@ use super::effects::{Action, DhField, apply_to_yaml, round9};
 use crate::calibrate::honesty::{Rule, relative_uncertainty};
 use crate::calibrate::lsq::COVERAGE_K;
 use crate::calibrate::report::Estimate;
-use crate::calibrate::yaml_edit::{ThermalTermText, add_thermal_term, set_spindle_growth};
 use crate::error::{Error, Result};
 use crate::machine::Machine;
+use crate::machine::tool::ToolParam;
+use crate::machine::yaml_write::{self, Edit, ThermalTermText, round_sig, round_to};
 
 /// `ts_per_w` of a Paper B term written for a linear growth, 1/W.
 pub const LINEAR_TS_PER_W: f64 = 1e-6;
+
+/// Decimals of the thermal lengths and gains written (mm, µm/kW).
+const THERMAL_DECIMALS: usize = 6;
 
 /// Time constant written into a new thermal section, min (assumed).
 pub const ASSUMED_TIME_CONSTANT_MIN: f64 = 30.0;
@@ -58,7 +62,7 @@ const ASSUMED_TAU: &str = "postproc diagnose: time_constant_min is ASSUMED (rows
 
 /// Applies a thermal effect to the file text.
 fn thermal_edit(text: &str, action: &Action, v0: f64, m: &Machine) -> Result<String> {
-    match (action, m) {
+    let edit = match (action, m) {
         (
             Action::Thermal {
                 joint,
@@ -71,39 +75,40 @@ fn thermal_edit(text: &str, action: &Action, v0: f64, m: &Machine) -> Result<Str
                 DhField::A => 'a',
                 _ => 'd',
             };
-            let amp = round9(v0 * 1e-3 / LINEAR_TS_PER_W);
+            let amp = round_to(round9(v0 * 1e-3 / LINEAR_TS_PER_W), THERMAL_DECIMALS);
             let term = ThermalTermText {
                 parameter: format!("{l}{}", joint + 1),
                 joint: power + 1,
                 lb_mm: amp,
                 ub_mm: amp,
-                ts_per_w: LINEAR_TS_PER_W,
+                ts_per_w: round_sig(LINEAR_TS_PER_W),
             };
-            add_thermal_term(
-                text,
-                "(machine file)",
-                &term,
-                ASSUMED_TIME_CONSTANT_MIN,
-                ASSUMED_TAU,
-            )
+            Edit::ThermalTerm {
+                term,
+                time_constant_min: ASSUMED_TIME_CONSTANT_MIN,
+                comment: ASSUMED_TAU.into(),
+            }
         }
         (Action::SpindlePower, Machine::Tool(t)) => {
-            let old = t
-                .thermal()
-                .and_then(|th| th.spindle)
-                .map_or(0.0, |s| s.gain_per_kw);
-            set_spindle_growth(
-                text,
-                "(machine file)",
-                round9(old + v0),
-                ASSUMED_TIME_CONSTANT_MIN,
-                ASSUMED_TAU,
-            )
+            let spindle = t.thermal().and_then(|th| th.spindle);
+            let old = spindle.map_or(0.0, |s| s.gain_per_kw);
+            let growth = round_to(round9(old + v0), THERMAL_DECIMALS);
+            match spindle {
+                Some(_) => Edit::Tool(ToolParam::SpindleGrowth, growth),
+                None => Edit::Spindle {
+                    growth_um_per_kw: growth,
+                    time_constant_min: ASSUMED_TIME_CONSTANT_MIN,
+                    comment: ASSUMED_TAU.into(),
+                },
+            }
         }
-        _ => Err(Error::Internal(
-            "this effect is not written into the thermal section".into(),
-        )),
-    }
+        _ => {
+            return Err(Error::Internal(
+                "this effect is not written into the thermal section".into(),
+            ));
+        }
+    };
+    yaml_write::apply(text, "(machine file)", "postproc diagnose", &[edit])
 }
 
 fn is_thermal(action: &Action) -> bool {

@@ -1,6 +1,6 @@
 //! Parameters of a robot as data: a typed id for each value a calibration
 //! identifies or a study varies (the actual DH parameters, the joint
-//! stiffnesses, the thermal terms), and [`Robot::with_params`], which gives
+//! stiffnesses, the thermal terms, the tool centre point), and [`Robot::with_params`], which gives
 //! the robot with some of them set and validated again exactly as if the
 //! file had held those values.
 //!
@@ -10,7 +10,7 @@
 use crate::error::{Error, Located, Result};
 
 use super::Robot;
-use super::raw::RawRobot;
+use super::raw::{RawFrame, RawRobot};
 
 /// A field of one row of the DH table.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
@@ -61,6 +61,13 @@ pub enum RobotParam {
     },
     /// `thermal.time_constant_min`.
     ThermalTimeConstant,
+    /// `flange_to_tool.x_mm`, `y_mm`, `z_mm` (`axis` 0..3): the tool
+    /// centre point in the flange frame (a file without `flange_to_tool`
+    /// starts from the flange itself).
+    ToolOffset {
+        /// Flange axis x, y, z (0..3).
+        axis: usize,
+    },
 }
 
 impl RobotParam {
@@ -86,6 +93,10 @@ impl RobotParam {
                 format!("thermal.terms[{term}].{key}")
             }
             RobotParam::ThermalTimeConstant => "thermal.time_constant_min".into(),
+            RobotParam::ToolOffset { axis } => {
+                let key = ["x_mm", "y_mm", "z_mm"].get(axis).copied().unwrap_or("?");
+                format!("flange_to_tool.{key}")
+            }
         }
     }
 }
@@ -161,6 +172,21 @@ fn set(raw: &mut RawRobot, p: RobotParam, v: f64) -> std::result::Result<(), Str
                 .as_mut()
                 .ok_or_else(|| "the file has no `thermal` section".to_string())?
                 .time_constant_min = v;
+        }
+        RobotParam::ToolOffset { axis } => {
+            let f = raw.flange_to_tool.get_or_insert(RawFrame {
+                x_mm: 0.0,
+                y_mm: 0.0,
+                z_mm: 0.0,
+                quaternion: None,
+                rpy_deg: None,
+            });
+            match axis {
+                0 => f.x_mm = v,
+                1 => f.y_mm = v,
+                2 => f.z_mm = v,
+                _ => return Err("no such axis".into()),
+            }
         }
     }
     Ok(())
