@@ -153,7 +153,7 @@ impl Problem {
                 edits.push(Edit::ComponentTable {
                     axis: a,
                     error: e,
-                    positions_mm: positions[a].clone(),
+                    positions: positions[a].clone(),
                     forward: fwd,
                     reverse: rev,
                 });

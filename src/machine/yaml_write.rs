@@ -48,8 +48,8 @@ pub enum Edit {
         axis: usize,
         /// Error direction 0..6 (X Y Z translations, A B C rotations).
         error: usize,
-        /// `positions_mm`.
-        positions_mm: Vec<f64>,
+        /// `positions_mm` (`positions_deg` for a rotary axis A, B, C).
+        positions: Vec<f64>,
         /// `forward`.
         forward: Vec<f64>,
         /// `reverse`.
@@ -89,6 +89,9 @@ pub enum Edit {
     /// `status: calibrated` and one more entry of `calibrations`
     /// ([`set_calibrated`]).
     Calibrated(Calibration),
+    /// A comment line `# …` added at the end of the file's leading comment
+    /// block (after the comment lines added before it).
+    HeaderComment(String),
 }
 
 /// One Paper B thermal term as written in a robot file.
@@ -125,7 +128,7 @@ fn apply_one(text: &str, file: &str, by: &str, edit: &Edit) -> Result<String> {
         Edit::ComponentTable {
             axis,
             error,
-            positions_mm,
+            positions,
             forward,
             reverse,
         } => set_component_table(
@@ -133,7 +136,7 @@ fn apply_one(text: &str, file: &str, by: &str, edit: &Edit) -> Result<String> {
             file,
             *axis,
             *error,
-            [positions_mm.as_slice(), forward, reverse],
+            [positions.as_slice(), forward, reverse],
         ),
         Edit::ThermalTerm {
             term,
@@ -149,6 +152,15 @@ fn apply_one(text: &str, file: &str, by: &str, edit: &Edit) -> Result<String> {
             set_measurement_frame(text, file, *xyz_mm, *rpy_deg)
         }
         Edit::Calibrated(c) => set_calibrated(text, file, c),
+        Edit::HeaderComment(c) => {
+            let mut lines = lines_of(text);
+            let at = lines
+                .iter()
+                .take_while(|l| l.starts_with('#') || l.trim().is_empty())
+                .count();
+            lines.insert(at, format!("# {c}"));
+            Ok(join_nl(lines))
+        }
     }
 }
 
@@ -383,7 +395,30 @@ fn set_robot_param(text: &str, file: &str, by: &str, p: RobotParam, v: f64) -> R
             let key = ["x_mm", "y_mm", "z_mm"]
                 .get(axis)
                 .ok_or_else(|| edit_err(file, "no such tool offset"))?;
-            set_in_flow_map(text, file, "flange_to_tool", "flange_to_tool", key, v)
+            let text = with_top_level(text, "flange_to_tool", || {
+                "{ x_mm: 0.0, y_mm: 0.0, z_mm: 0.0 }".into()
+            });
+            set_in_flow_map(&text, file, "flange_to_tool", "flange_to_tool", key, v)
+        }
+        RobotParam::PayloadMass => {
+            let text = with_top_level(text, "tool_load", || {
+                let doc: Value = serde_yaml::from_str(text).unwrap_or(Value::Null);
+                let c = |k: &str| {
+                    number(
+                        doc.get("flange_to_tool")
+                            .and_then(|f| f.get(k))
+                            .and_then(|v| v.as_f64().or_else(|| v.as_i64().map(|i| i as f64)))
+                            .unwrap_or(0.0),
+                    )
+                };
+                format!(
+                    "{{ mass_kg: 0.0, cog_mm: [{}, {}, {}] }}",
+                    c("x_mm"),
+                    c("y_mm"),
+                    c("z_mm")
+                )
+            });
+            set_in_flow_map(&text, file, "tool_load", "tool_load", "mass_kg", v)
         }
         RobotParam::Thermal { term, field } => {
             let key = match field {
@@ -409,6 +444,20 @@ fn set_robot_param(text: &str, file: &str, by: &str, p: RobotParam, v: f64) -> R
             v,
         ),
     }
+}
+
+/// `text` with the top-level line `key: value()` appended when it has no
+/// top-level `key`.
+fn with_top_level(text: &str, key: &str, value: impl FnOnce() -> String) -> String {
+    if top_level_line(&lines_of(text), key).is_some() {
+        return text.to_string();
+    }
+    let mut t = text.to_string();
+    if !t.is_empty() && !t.ends_with('\n') {
+        t.push('\n');
+    }
+    t.push_str(&format!("{key}: {}\n", value()));
+    t
 }
 
 /// Indices of the six `  - { … }` rows following the top-level line `key:`.
@@ -674,10 +723,22 @@ fn set_tool_param(text: &str, file: &str, p: ToolParam, v: f64) -> Result<String
                 set_scalar(text, file, &format!("{map}.{key}"), &key, v)
             }
         }
-        ToolParam::Stiffness { cell: Some(_), .. } => Err(edit_err(
-            file,
-            format!("`{}`: a stiffness grid is not written by cell", p.path()),
-        )),
+        ToolParam::Stiffness {
+            dir,
+            positive,
+            cell: Some(cell),
+        } => {
+            let key = format!(
+                "{}_{}",
+                letter(dir).to_ascii_lowercase(),
+                if positive { "pos" } else { "neg" }
+            );
+            set_grid_cell(text, file, &format!("stiffness.k_n_per_um.{key}"), cell, v)
+        }
+        ToolParam::SpindleLocation { error } => {
+            let key = super::tool::spindle_key(error);
+            set_spindle_location(text, file, &key, v)
+        }
         ToolParam::SpindleGrowth => set_in_flow_map(
             text,
             file,
@@ -705,6 +766,103 @@ fn set_tool_param(text: &str, file: &str, p: ToolParam, v: f64) -> Result<String
             set_in_flow_map(text, file, &path, &name, key, v)
         }
     }
+}
+
+/// Sets cell `[iz, iy, ix]` of a stiffness grid written as one block-list
+/// item per z plane, each a one-line nested flow list `- [[…], […]]`: only
+/// the number of that cell is replaced.
+fn set_grid_cell(text: &str, file: &str, path: &str, cell: [usize; 3], v: f64) -> Result<String> {
+    let [iz, iy, ix] = cell;
+    let bad = || {
+        edit_err(
+            file,
+            format!("`{path}[{iz}]` is not a one-line nested flow list with cell [{iy}][{ix}]"),
+        )
+    };
+    let i = path_line(text, &format!("{path}[{iz}]"), "").ok_or_else(bad)?;
+    let mut lines = lines_of(text);
+    let (content, comment) = split_comment(&lines[i]);
+    let (start, end) = nested_item(content, iy, ix).ok_or_else(bad)?;
+    lines[i] = format!(
+        "{}{}{}{comment}",
+        &content[..start],
+        number(v),
+        &content[end..]
+    );
+    Ok(join(lines, text))
+}
+
+/// Byte range of item `ix` of inner list `iy` in `- [[a, b], [c, d]]`.
+fn nested_item(content: &str, iy: usize, ix: usize) -> Option<(usize, usize)> {
+    let open = content.find('[')?;
+    let mut depth = 0;
+    let (mut row, mut col) = (0usize, 0usize);
+    let mut start = None;
+    for (k, c) in content.char_indices().skip_while(|&(k, _)| k < open) {
+        match c {
+            '[' => {
+                depth += 1;
+                if depth == 2 && row == iy && col == ix {
+                    start = Some(k + 1);
+                }
+            }
+            ']' | ',' => {
+                if depth == 2 && row == iy && col == ix {
+                    let s = start?;
+                    let item = &content[s..k];
+                    let lead = item.len() - item.trim_start().len();
+                    return Some((s + lead, s + item.trim_end().len()));
+                }
+                if depth == 2 && c == ',' {
+                    col += 1;
+                    if row == iy && col == ix {
+                        start = Some(k + 1);
+                    }
+                }
+                if c == ']' {
+                    depth -= 1;
+                    if depth == 1 {
+                        row += 1;
+                        col = 0;
+                    }
+                    if depth == 0 {
+                        return None;
+                    }
+                }
+            }
+            _ => {}
+        }
+    }
+    None
+}
+
+/// Sets the spindle location error `key`: its line under the top-level
+/// `spindle:` section's `location_errors:` map, added there when absent.
+fn set_spindle_location(text: &str, file: &str, key: &str, v: f64) -> Result<String> {
+    let path = format!("spindle.location_errors.{key}");
+    if path_line(text, &path, key).is_some() {
+        return set_scalar(text, file, &path, key, v);
+    }
+    let bad = || {
+        edit_err(
+            file,
+            format!("`{path}`: the file has no block map `spindle.location_errors` to add it to"),
+        )
+    };
+    let sec = path_line(text, "spindle.location_errors", "location_errors").ok_or_else(bad)?;
+    let mut lines = lines_of(text);
+    if lines[sec].contains('{') {
+        return Err(bad());
+    }
+    let end = block_end(&lines, sec, lines.len());
+    let child = (sec + 1..end)
+        .find(|&i| is_content(&lines[i]))
+        .map_or(indent_of(&lines[sec]) + 2, |i| indent_of(&lines[i]));
+    lines.insert(
+        sec + 1,
+        format!("{}{key}: {}", " ".repeat(child), number(v)),
+    );
+    Ok(join(lines, text))
 }
 
 /// Line range `[start, end)` of the entry `- name: AXIS` of the top-level
@@ -823,9 +981,15 @@ fn set_component_table(
     let list =
         |v: &[f64]| -> String { v.iter().map(|x| number(*x)).collect::<Vec<_>>().join(", ") };
     let pad = " ".repeat(child_indent);
+    // Rotary axes (A, B, C) give their positions in degrees.
+    let positions = if axis < 3 {
+        "positions_mm"
+    } else {
+        "positions_deg"
+    };
     let new = vec![
         format!("{pad}{key}:"),
-        format!("{pad}  positions_mm: [{}]", list(columns[0])),
+        format!("{pad}  {positions}: [{}]", list(columns[0])),
         format!("{pad}  forward: [{}]", list(columns[1])),
         format!("{pad}  reverse: [{}]", list(columns[2])),
     ];
@@ -1244,7 +1408,7 @@ thermal:
         let table = |axis, error, p: &[f64], f: &[f64], r: &[f64]| Edit::ComponentTable {
             axis,
             error,
-            positions_mm: p.to_vec(),
+            positions: p.to_vec(),
             forward: f.to_vec(),
             reverse: r.to_vec(),
         };

@@ -10,7 +10,7 @@
 use crate::error::{Error, Located, Result};
 
 use super::Robot;
-use super::raw::{RawFrame, RawRobot};
+use super::raw::{RawFrame, RawLoad, RawRobot};
 
 /// A field of one row of the DH table.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
@@ -68,6 +68,9 @@ pub enum RobotParam {
         /// Flange axis x, y, z (0..3).
         axis: usize,
     },
+    /// `tool_load.mass_kg` (a file without `tool_load` starts from a
+    /// massless load at the tool centre point).
+    PayloadMass,
 }
 
 impl RobotParam {
@@ -97,6 +100,7 @@ impl RobotParam {
                 let key = ["x_mm", "y_mm", "z_mm"].get(axis).copied().unwrap_or("?");
                 format!("flange_to_tool.{key}")
             }
+            RobotParam::PayloadMass => "tool_load.mass_kg".into(),
         }
     }
 }
@@ -124,6 +128,45 @@ impl Robot {
         r.d.force_table.clone_from(&self.d.force_table);
         r.d.allow_reconfiguration = self.d.allow_reconfiguration;
         Ok(r)
+    }
+
+    /// The value of a parameter as the file gives it (in the unit of its
+    /// key; a DH field of a file without `actual` is the nominal one, a
+    /// missing `flange_to_tool` or `tool_load` gives 0); `None` for a value
+    /// the file does not have.
+    pub fn param_value(&self, p: RobotParam) -> Option<f64> {
+        let raw = &*self.d.raw;
+        match p {
+            RobotParam::Dh { joint, field } => {
+                let row = raw.actual.as_ref().unwrap_or(&raw.nominal).get(joint)?;
+                Some(match field {
+                    DhField::A => row.a_mm,
+                    DhField::Alpha => row.alpha_deg,
+                    DhField::D => row.d_mm,
+                    DhField::ThetaOffset => row.theta_offset_deg,
+                })
+            }
+            RobotParam::JointStiffness { joint } => raw.k_nm_per_rad.get(joint).copied(),
+            RobotParam::Thermal { term, field } => {
+                let t = raw.thermal.as_ref()?.terms.get(term)?;
+                Some(match field {
+                    ThermalField::Lb => t.lb_mm,
+                    ThermalField::Ub => t.ub_mm,
+                    ThermalField::Ts => t.ts_per_w,
+                })
+            }
+            RobotParam::ThermalTimeConstant => Some(raw.thermal.as_ref()?.time_constant_min),
+            RobotParam::ToolOffset { axis } => {
+                let f = raw.flange_to_tool.as_ref();
+                match axis {
+                    0 => Some(f.map_or(0.0, |f| f.x_mm)),
+                    1 => Some(f.map_or(0.0, |f| f.y_mm)),
+                    2 => Some(f.map_or(0.0, |f| f.z_mm)),
+                    _ => None,
+                }
+            }
+            RobotParam::PayloadMass => Some(raw.tool_load.as_ref().map_or(0.0, |l| l.mass_kg)),
+        }
     }
 
     fn param_error(&self, path: &str, message: &str) -> Error {
@@ -187,6 +230,18 @@ fn set(raw: &mut RawRobot, p: RobotParam, v: f64) -> std::result::Result<(), Str
                 2 => f.z_mm = v,
                 _ => return Err("no such axis".into()),
             }
+        }
+        RobotParam::PayloadMass => {
+            let tcp = raw
+                .flange_to_tool
+                .as_ref()
+                .map_or([0.0; 3], |f| [f.x_mm, f.y_mm, f.z_mm]);
+            raw.tool_load
+                .get_or_insert(RawLoad {
+                    mass_kg: 0.0,
+                    cog_mm: tcp,
+                })
+                .mass_kg = v;
         }
     }
     Ok(())
