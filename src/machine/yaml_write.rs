@@ -1285,6 +1285,100 @@ thermal:
         );
     }
 
+    /// A payload and a TCP on a robot file without `tool_load` and
+    /// `flange_to_tool`: the keys are added, and the robot read back equals
+    /// `with_params` (the new load at the TCP).
+    #[test]
+    fn payload_and_tcp_added_read_back_equal_with_params() {
+        let text = bundled("abb-irb1600.yaml");
+        let with_tcp = text
+            .lines()
+            .filter(|l| !l.starts_with("tool_load:"))
+            .map(|l| format!("{l}\n"))
+            .collect::<String>();
+        let edits = [(RobotParam::PayloadMass, 7.5)];
+        let out = apply(&with_tcp, "r.yaml", "t", &[Edit::Robot(edits[0].0, 7.5)]).unwrap();
+        assert!(out.ends_with("tool_load: { mass_kg: 7.5, cog_mm: [0.0, 0.0, 150.0] }\n"));
+        let want = robot(&with_tcp).with_params(&edits).expect("valid");
+        assert_eq!(format!("{:?}", robot(&out)), format!("{want:?}"));
+        let bare = with_tcp
+            .lines()
+            .filter(|l| !l.starts_with("flange_to_tool:"))
+            .map(|l| format!("{l}\n"))
+            .collect::<String>();
+        let edits = [(RobotParam::ToolOffset { axis: 2 }, 120.0)];
+        let out = apply(&bare, "r.yaml", "t", &[Edit::Robot(edits[0].0, 120.0)]).unwrap();
+        assert!(out.ends_with("flange_to_tool: { x_mm: 0.0, y_mm: 0.0, z_mm: 120.0 }\n"));
+        let want = robot(&bare).with_params(&edits).expect("valid");
+        assert_eq!(format!("{:?}", robot(&out)), format!("{want:?}"));
+    }
+
+    /// A stiffness grid cell and spindle location errors (one replaced, one
+    /// added): only those numbers change, and the model read back equals
+    /// `with_params`.
+    #[test]
+    fn grid_cells_and_spindle_errors_read_back_equal_with_params() {
+        let text = bundled("afm-r1000.yaml");
+        let cell = ToolParam::Stiffness {
+            dir: 0,
+            positive: false,
+            cell: Some([1, 1, 2]),
+        };
+        let out = apply(&text, "t.yaml", "t", &[Edit::Tool(cell, 18.25)]).unwrap();
+        assert_eq!(
+            changed(&text, &out),
+            vec!["      - [[20.0, 22.0, 20.0], [19.0, 21.0, 18.25]]".to_string()]
+        );
+        let want = tool(&text).with_params(&[(cell, 18.25)]).expect("valid");
+        assert_eq!(
+            format!("{:?}", tool(&out).stiffness()),
+            format!("{:?}", want.stiffness())
+        );
+        let text = bundled("five-axis-ac.yaml");
+        let edits = [
+            (
+                ToolParam::SpindleLocation {
+                    error: LocationParam::Angle(0),
+                },
+                11.5,
+            ),
+            (
+                ToolParam::SpindleLocation {
+                    error: LocationParam::Offset(1),
+                },
+                0.02,
+            ),
+        ];
+        let typed: Vec<Edit> = edits.iter().map(|&(p, v)| Edit::Tool(p, v)).collect();
+        let out = apply(&text, "t.yaml", "t", &typed).unwrap();
+        assert!(
+            out.contains("spindle:\n  location_errors:\n    EY0S_mm: 0.02\n    EA0S_urad: 11.5\n")
+        );
+        let want = tool(&text).with_params(&edits).expect("valid");
+        let read = tool(&out);
+        assert_eq!(
+            format!("{:?}", read.spindle_errors()),
+            format!("{:?}", want.spindle_errors())
+        );
+    }
+
+    /// Header comments go after the leading comment block, in order.
+    #[test]
+    fn header_comments_follow_the_leading_comments() {
+        let text = "# a\n\n# b\nkind: robot\n# c\n";
+        let out = apply(
+            text,
+            "f",
+            "t",
+            &[
+                Edit::HeaderComment("one".into()),
+                Edit::HeaderComment("two".into()),
+            ],
+        )
+        .unwrap();
+        assert_eq!(out, "# a\n\n# b\n# one\n# two\nkind: robot\n# c\n");
+    }
+
     #[test]
     fn lists_maps_and_frames_are_edited_in_place() {
         let text = "# c\nk_nm_per_rad: [1.0, 2.0]  # keep\nflange_to_tool: { x_mm: 0.0, y_mm: 0.0, z_mm: 150.0, quaternion: [1.0, 0.0, 0.0, 0.0] }\n";

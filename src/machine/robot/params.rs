@@ -332,4 +332,41 @@ mod tests {
             assert!(e.to_string().contains(&p.path()), "{e}");
         }
     }
+
+    /// `param_value` reads what `with_params` set; a payload set on a
+    /// file without `tool_load` sits at the tool centre point.
+    #[test]
+    fn param_value_reads_the_values_set() {
+        let r = load(&text());
+        let params = [
+            (
+                RobotParam::Dh {
+                    joint: 2,
+                    field: DhField::D,
+                },
+                0.05,
+            ),
+            (RobotParam::JointStiffness { joint: 5 }, 20000.0),
+            (RobotParam::ToolOffset { axis: 0 }, 1.5),
+            (RobotParam::PayloadMass, 6.5),
+            (RobotParam::ThermalTimeConstant, 35.0),
+        ];
+        let set = r.with_params(&params).expect("valid");
+        for (p, v) in params {
+            assert_eq!(set.param_value(p), Some(v), "{p:?}");
+        }
+        let bare: String = text()
+            .lines()
+            .filter(|l| !l.starts_with("tool_load:"))
+            .map(|l| format!("{l}\n"))
+            .collect();
+        let r = load(&bare);
+        assert_eq!(r.param_value(RobotParam::PayloadMass), Some(0.0));
+        let set = r
+            .with_params(&[(RobotParam::PayloadMass, 2.0)])
+            .expect("valid");
+        let payload = set.tool_load().expect("a load");
+        assert_eq!(payload.mass_kg, 2.0);
+        assert_eq!(payload.com_mm, set.flange_to_tool().translation.vector);
+    }
 }

@@ -636,4 +636,54 @@ thermal:
         let e = m.with_params(&[(own, 1.0)]).expect_err("EA0X is not a key");
         assert!(e.to_string().contains("EA0X_urad"), "{e}");
     }
+
+    /// `param_value` reads what `with_params` set, and the file's values
+    /// otherwise (a location error the file does not write is 0).
+    #[test]
+    fn param_value_reads_the_values_set() {
+        let m = base();
+        let sq = ToolParam::Location {
+            axis: 1,
+            error: LocationParam::Angle(2),
+        };
+        assert_eq!(m.param_value(sq), Some(12.5));
+        let absent = ToolParam::Location {
+            axis: 2,
+            error: LocationParam::Angle(0),
+        };
+        assert_eq!(m.param_value(absent), Some(0.0));
+        let params = [
+            (sq, -3.0),
+            (
+                ToolParam::Component {
+                    axis: 0,
+                    error: 1,
+                    node: 1,
+                    forward: false,
+                },
+                0.75,
+            ),
+            (
+                ToolParam::SpindleLocation {
+                    error: LocationParam::Offset(0),
+                },
+                0.01,
+            ),
+            (ToolParam::SpindleGrowth, 9.0),
+            (ToolParam::AxisScale { axis: 0 }, 4.0),
+        ];
+        let set = m.with_params(&params).expect("valid");
+        for (p, v) in params {
+            assert_eq!(set.param_value(p), Some(v), "{p:?}");
+        }
+        assert_eq!(m.stiffness_params(0, true).len(), 1);
+        assert_eq!(
+            m.component_table(0, 0),
+            Some([
+                vec![0.0, 250.0, 500.0],
+                vec![0.0, 1.5, 3.0],
+                vec![0.0, 1.5, 3.0]
+            ])
+        );
+    }
 }
