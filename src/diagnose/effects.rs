@@ -10,14 +10,14 @@
 //! parameter); the others are analytic additions (a row covariate times the
 //! derivative of the prediction with respect to a length or angle).
 
-use nalgebra::{DMatrix, Isometry3, Translation3, UnitQuaternion, Vector3};
+use nalgebra::{DMatrix, UnitQuaternion, Vector3};
 use serde::Serialize;
 
 use crate::calibrate::forward::{self, tool_length};
 use crate::calibrate::observations::{MeasuredKind, Observation, Pose};
 use crate::error::{Error, Result};
 use crate::machine::Machine;
-use crate::machine::robot::{Model, PointMass, Robot};
+use crate::machine::robot::{DhField as RobotDh, Robot, RobotParam};
 use crate::machine::tool::{AxisKind, LocationParam, MachineTool, ToolParam};
 use crate::machine::yaml_write::{self, Edit};
 
@@ -548,51 +548,56 @@ fn diff_column(
     Ok(())
 }
 
-fn robot_dh(r: &Robot, joint: usize, f: DhField, v: f64) -> Machine {
-    let mut p = *r.params(Model::Actual);
-    if let Some(j) = p.joints.get_mut(joint) {
-        match f {
-            DhField::Theta => j.theta_offset_rad += v * 1e-6,
-            DhField::Alpha => j.alpha_rad += v * 1e-6,
-            DhField::A => j.a_mm += v * 1e-3,
-            DhField::D => j.d_mm += v * 1e-3,
-        }
-    }
-    Machine::Robot(r.with_actual(p))
+/// Robot with `add` (in the unit of the parameter's key) added to the
+/// file's value of `p`, through [`Robot::with_params`].
+fn robot_added(r: &Robot, p: RobotParam, add: f64) -> Result<Robot> {
+    let old = r
+        .param_value(p)
+        .ok_or_else(|| Error::Internal(format!("validated robot file without {}", p.path())))?;
+    r.with_params(&[(p, old + add)])
+}
+
+/// The robot parameter of a candidate's DH field, and `v` display units
+/// (µm, µrad) in the unit of its key (mm, degrees).
+pub fn dh_param(joint: usize, f: DhField, v: f64) -> (RobotParam, f64) {
+    let (field, add) = match f {
+        DhField::Theta => (RobotDh::ThetaOffset, (v * 1e-6).to_degrees()),
+        DhField::Alpha => (RobotDh::Alpha, (v * 1e-6).to_degrees()),
+        DhField::A => (RobotDh::A, v * 1e-3),
+        DhField::D => (RobotDh::D, v * 1e-3),
+    };
+    (RobotParam::Dh { joint, field }, add)
+}
+
+fn robot_dh(r: &Robot, joint: usize, f: DhField, v: f64) -> Result<Machine> {
+    let (p, add) = dh_param(joint, f, v);
+    robot_added(r, p, add).map(Machine::Robot)
 }
 
 /// Robot with joint `joint`'s compliance raised by `dc` µrad/(N·m).
-pub fn robot_compliance(r: &Robot, joint: usize, dc: f64) -> Robot {
-    let mut k = *r.k_nmm_per_rad();
-    if let Some(kj) = k.get_mut(joint) {
-        // c [rad/(N·mm)] = 1/k; dc µrad/(N·m) = dc·1e-9 rad/(N·mm).
-        *kj = 1.0 / (1.0 / *kj + dc * 1e-9);
-    }
-    r.with_stiffness(k)
+pub fn robot_compliance(r: &Robot, joint: usize, dc: f64) -> Result<Robot> {
+    let p = RobotParam::JointStiffness { joint };
+    let k = r
+        .param_value(p)
+        .ok_or_else(|| Error::Internal(format!("validated robot file without {}", p.path())))?;
+    // c [rad/(N·m)] = 1/k; dc µrad/(N·m) = dc·1e-6 rad/(N·m).
+    r.with_params(&[(p, 1.0 / (1.0 / k + dc * 1e-6))])
 }
 
 /// Robot with the TCP moved by `d` µm in the flange frame.
-pub fn robot_tcp(r: &Robot, d: Vector3<f64>) -> Robot {
-    let tool = Isometry3::from_parts(
-        Translation3::from(d * 1e-3),
-        nalgebra::UnitQuaternion::identity(),
-    ) * r.flange_to_tool();
-    r.with_tool(tool, r.tool_load().copied(), true)
+pub fn robot_tcp(r: &Robot, d: Vector3<f64>) -> Result<Robot> {
+    let mut edits = Vec::with_capacity(3);
+    for axis in 0..3 {
+        let p = RobotParam::ToolOffset { axis };
+        let old = r.param_value(p).unwrap_or(0.0);
+        edits.push((p, old + d[axis] * 1e-3));
+    }
+    r.with_params(&edits)
 }
 
 /// Robot with the payload mass changed by `dm` kg.
-pub fn robot_payload(r: &Robot, dm: f64) -> Robot {
-    let load = match r.tool_load() {
-        Some(l) => PointMass {
-            mass_kg: l.mass_kg + dm,
-            com_mm: l.com_mm,
-        },
-        None => PointMass {
-            mass_kg: dm,
-            com_mm: r.flange_to_tool().translation.vector,
-        },
-    };
-    r.with_tool(*r.flange_to_tool(), Some(load), true)
+pub fn robot_payload(r: &Robot, dm: f64) -> Result<Robot> {
+    robot_added(r, RobotParam::PayloadMass, dm)
 }
 
 fn robot_row_value(
@@ -617,8 +622,8 @@ fn robot_backlash_column(
 ) -> Result<()> {
     let t = DhField::Theta;
     diff_column(
-        &robot_dh(r, j, t, STEP),
-        &robot_dh(r, j, t, -STEP),
+        &robot_dh(r, j, t, STEP)?,
+        &robot_dh(r, j, t, -STEP)?,
         2.0 * STEP,
         rows,
         ctx,
@@ -692,8 +697,8 @@ pub fn pose_sensitivity(
     match (&effect.action, ctx.machine) {
         (Action::Dh(j, f), Machine::Robot(r)) => {
             diff_column(
-                &robot_dh(r, *j, *f, STEP),
-                &robot_dh(r, *j, *f, -STEP),
+                &robot_dh(r, *j, *f, STEP)?,
+                &robot_dh(r, *j, *f, -STEP)?,
                 2.0 * STEP,
                 rows,
                 ctx,
@@ -702,7 +707,7 @@ pub fn pose_sensitivity(
             )?;
         }
         (Action::Compliance(j), Machine::Robot(r)) => {
-            let plus = Machine::Robot(robot_compliance(r, *j, COMPLIANCE_STEP));
+            let plus = Machine::Robot(robot_compliance(r, *j, COMPLIANCE_STEP)?);
             diff_column(&plus, ctx.machine, COMPLIANCE_STEP, rows, ctx, &mut s, 0)?;
         }
         (Action::Tcp, Machine::Robot(r)) => {
@@ -717,14 +722,14 @@ pub fn pose_sensitivity(
             for c in 0..3 {
                 let mut d = Vector3::zeros();
                 d[c] = STEP;
-                let p = Machine::Robot(robot_tcp(r, d));
-                let m = Machine::Robot(robot_tcp(r, -d));
+                let p = Machine::Robot(robot_tcp(r, d)?);
+                let m = Machine::Robot(robot_tcp(r, -d)?);
                 diff_column(&p, &m, 2.0 * STEP, rows, &attained, &mut s, c)?;
             }
         }
         (Action::Payload, Machine::Robot(r)) => {
-            let p = Machine::Robot(robot_payload(r, MASS_STEP));
-            let m = Machine::Robot(robot_payload(r, -MASS_STEP));
+            let p = Machine::Robot(robot_payload(r, MASS_STEP)?);
+            let m = Machine::Robot(robot_payload(r, -MASS_STEP)?);
             diff_column(&p, &m, 2.0 * MASS_STEP, rows, ctx, &mut s, 0)?;
         }
         (Action::BaseTrans(c), Machine::Robot(_)) => {
@@ -757,8 +762,8 @@ pub fn pose_sensitivity(
             Machine::Robot(r),
         ) => {
             diff_column(
-                &robot_dh(r, *joint, *field, STEP),
-                &robot_dh(r, *joint, *field, -STEP),
+                &robot_dh(r, *joint, *field, STEP)?,
+                &robot_dh(r, *joint, *field, -STEP)?,
                 2.0 * STEP,
                 rows,
                 ctx,
@@ -1016,6 +1021,7 @@ pub fn tool_variant(text: &str, action: &Action, value: f64, m: &Machine) -> Res
 mod tests {
     use super::*;
     use crate::calibrate::observations::{RobotPose, ToolPose};
+    use crate::machine::robot::Model;
     use approx::assert_abs_diff_eq;
     use nalgebra::Vector6;
 

@@ -39,13 +39,13 @@
 //! added where it belongs.
 
 use super::Found;
-use super::effects::{Action, DhField, round9, tool_edits};
+use super::effects::{Action, DhField, dh_param, round9, tool_edits};
 use crate::calibrate::honesty::{Rule, relative_uncertainty};
 use crate::calibrate::lsq::COVERAGE_K;
 use crate::calibrate::report::Estimate;
 use crate::error::{Error, Result};
 use crate::machine::Machine;
-use crate::machine::robot::{DhField as RobotDh, Robot, RobotParam};
+use crate::machine::robot::{Robot, RobotParam};
 use crate::machine::tool::ToolParam;
 use crate::machine::yaml_write::{self, Edit, ThermalTermText, round_sig, round_to};
 
@@ -129,17 +129,6 @@ pub struct Written {
     pub in_place: bool,
 }
 
-/// The robot's DH field of a candidate's field.
-fn dh_param(joint: usize, f: DhField) -> RobotParam {
-    let field = match f {
-        DhField::Theta => RobotDh::ThetaOffset,
-        DhField::Alpha => RobotDh::Alpha,
-        DhField::A => RobotDh::A,
-        DhField::D => RobotDh::D,
-    };
-    RobotParam::Dh { joint, field }
-}
-
 /// The edits of the robot file that add the fitted values `p` (display
 /// units) of an effect to the file's values.
 fn robot_edits(r: &Robot, action: &Action, p: &[f64]) -> Result<Vec<Edit>> {
@@ -154,11 +143,8 @@ fn robot_edits(r: &Robot, action: &Action, p: &[f64]) -> Result<Vec<Edit>> {
     };
     Ok(match action {
         Action::Dh(j, f) => {
-            let add = match f {
-                DhField::Theta | DhField::Alpha => (v0 * 1e-6).to_degrees(),
-                DhField::A | DhField::D => v0 * 1e-3,
-            };
-            vec![added(dh_param(*j, *f), add)?]
+            let (param, add) = dh_param(*j, *f, v0);
+            vec![added(param, add)?]
         }
         Action::Compliance(j) => {
             let param = RobotParam::JointStiffness { joint: *j };
