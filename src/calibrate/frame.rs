@@ -12,6 +12,7 @@
 //! `F(δ) = (Rot(δr) · R₀, t₀ + δt)`: the translation parameters are the
 //! origin itself, so its uncertainty is theirs.
 
+use crate::machine::yaml_write::{self, Edit};
 use nalgebra::{
     DMatrix, DVector, Isometry3, Matrix3, Matrix3x6, Rotation3, Translation3, UnitQuaternion,
     Vector3,
@@ -325,8 +326,11 @@ pub fn finish(
     notes: &mut Vec<String>,
 ) -> Result<(String, FrameEstimate)> {
     let est = estimate(f, u);
-    let yaml =
-        super::yaml_edit::set_measurement_frame(yaml, machine_file, est.xyz_mm, est.rpy_deg)?;
+    let frame = Edit::MeasurementFrame {
+        xyz_mm: est.xyz_mm,
+        rpy_deg: est.rpy_deg,
+    };
+    let yaml = yaml_write::apply(yaml, machine_file, "postproc calibrate", &[frame])?;
     notes.extend(absorbed_note(absorbed, example));
     notes.push(IDENTIFIED_NOTE.into());
     Ok((yaml, est))

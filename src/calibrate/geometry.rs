@@ -39,7 +39,7 @@
 //! tables on the target grids, each value at the resolution the file is
 //! written with), solved by linear least squares with one Gauss–Newton
 //! refinement; the values found are written into the file once
-//! ([`super::yaml_edit`]). Uncertain values
+//! ([`crate::machine::yaml_write`]). Uncertain values
 //! ([`super::honesty`]) keep the file's value.
 
 use nalgebra::{DMatrix, DVector, Isometry3, Vector3};
@@ -60,7 +60,7 @@ use super::screen::{
     describe_outliers, distinct_poses, dominating_rows, drop_copies, grouped_split, implausible,
 };
 use super::stiffness::Options;
-use super::yaml_edit::{as_written, set_component_table, set_location_error};
+use crate::machine::yaml_write::{self, Edit, fmt_value, round_to};
 
 /// Largest number of distinct target positions per axis.
 pub const MAX_TARGETS: usize = 41;
@@ -110,9 +110,9 @@ impl Problem {
                 "E{}{}@{}{}",
                 LETTERS[err],
                 LETTERS[axis],
-                crate::calibrate::yaml_edit::fmt_value(
+                fmt_value(
                     self.grids[axis].get(node).copied().unwrap_or(0.0),
-                    3
+                    POSITION_DECIMALS
                 ),
                 if forward { "+" } else { "-" }
             ),
@@ -122,10 +122,16 @@ impl Problem {
 
     /// Writes all identified values `x` (µm, µrad) into `text`.
     fn write(&self, text: &str, file: &str, x: &[f64]) -> Result<String> {
-        let mut t = text.to_string();
+        let mut edits = Vec::new();
+        let positions: [Vec<f64>; 3] = std::array::from_fn(|a| {
+            self.grids[a]
+                .iter()
+                .map(|&q| round_to(q, POSITION_DECIMALS))
+                .collect()
+        });
         for &a in &self.axes {
             let n = self.grids[a].len();
-            for (e, letter) in LETTERS.iter().enumerate() {
+            for e in 0..LETTERS.len() {
                 let mut fwd = vec![0.0; n];
                 let mut rev = vec![0.0; n];
                 for (p, v) in self.params.iter().zip(x) {
@@ -139,29 +145,26 @@ impl Problem {
                         if axis == a && err == e {
                             let col = if forward { &mut fwd } else { &mut rev };
                             if let Some(c) = col.get_mut(node) {
-                                *c = *v;
+                                *c = as_written(*v);
                             }
                         }
                     }
                 }
-                let key = format!("E{letter}{}_um", LETTERS[a]);
-                t = set_component_table(
-                    &t,
-                    file,
-                    &LETTERS[a].to_string(),
-                    &key,
-                    &self.grids[a],
-                    &fwd,
-                    &rev,
-                )?;
+                edits.push(Edit::ComponentTable {
+                    axis: a,
+                    error: e,
+                    positions: positions[a].clone(),
+                    forward: fwd,
+                    reverse: rev,
+                });
             }
         }
         for (p, v) in self.params.iter().zip(x) {
             if let Param::Square { axis, key } = *p {
-                t = set_location_error(&t, file, &LETTERS[axis].to_string(), key, *v)?;
+                edits.push(Edit::Tool(square(axis, key), as_written(*v)));
             }
         }
-        Ok(t)
+        yaml_write::apply(text, file, "postproc calibrate geometry", &edits)
     }
 
     /// The model of the file with the values `x` written in
@@ -197,14 +200,32 @@ impl Problem {
                         node,
                         forward,
                     },
-                    Param::Square { axis, key } => ToolParam::Location {
-                        axis,
-                        error: LocationParam::Angle(square_rotation(key)),
-                    },
+                    Param::Square { axis, key } => square(axis, key),
                 };
                 (id, as_written(v))
             })
             .collect()
+    }
+}
+
+/// Decimals of the component-table values and location errors written:
+/// 0.01 µm or µrad.
+pub const ERROR_DECIMALS: usize = 2;
+
+/// Decimals of the table positions written, mm.
+const POSITION_DECIMALS: usize = 3;
+
+/// `v` as the file is written with it ([`ERROR_DECIMALS`]): the value a
+/// model read from the written file holds.
+pub fn as_written(v: f64) -> f64 {
+    round_to(v, ERROR_DECIMALS)
+}
+
+/// The squareness parameter of `axis` named by `key`.
+fn square(axis: usize, key: &str) -> ToolParam {
+    ToolParam::Location {
+        axis,
+        error: LocationParam::Angle(square_rotation(key)),
     }
 }
 

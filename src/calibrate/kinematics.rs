@@ -66,7 +66,8 @@ use super::screen::{
     describe_outliers, distinct_poses, dominating_rows, drop_copies, grouped_split, implausible,
 };
 use super::stiffness::Options;
-use super::yaml_edit::{DhRow, set_actual_dh, set_frame_translation, set_measurement_frame};
+use crate::machine::robot::{DhField, RobotParam};
+use crate::machine::yaml_write::{self, Edit, round_to};
 
 /// Relative rank threshold of the identification Jacobian: a parameter
 /// whose effect, after removing what the already chosen parameters explain,
@@ -981,6 +982,11 @@ fn screen_data(
     })
 }
 
+/// Decimals of the DH lengths and the TCP written, mm (0.1 µm).
+const LENGTH_DECIMALS: usize = 4;
+/// Decimals of the DH angles written, degrees (≈ 0.2 µrad).
+const ANGLE_DECIMALS: usize = 5;
+
 /// The calibrated machine file: the actual DH rows, the TCP translation
 /// (when identified) and the measurement frame (instrument data).
 fn write_yaml(
@@ -991,20 +997,37 @@ fn write_yaml(
     frame: Option<&FrameEstimate>,
 ) -> Result<String> {
     let dh = robot.params(Model::Actual);
-    let rows: [DhRow; 6] = std::array::from_fn(|j| DhRow {
-        a_mm: dh.joints[j].a_mm,
-        alpha_deg: dh.joints[j].alpha_rad.to_degrees(),
-        d_mm: dh.joints[j].d_mm,
-        theta_offset_deg: dh.joints[j].theta_offset_rad.to_degrees(),
-    });
-    let mut yaml = set_actual_dh(text, machine_file, &rows)?;
+    let mut edits = Vec::with_capacity(6 * 4 + 4);
+    for (joint, j) in dh.joints.iter().enumerate() {
+        for (field, v) in [
+            (DhField::A, round_to(j.a_mm, LENGTH_DECIMALS)),
+            (
+                DhField::Alpha,
+                round_to(j.alpha_rad.to_degrees(), ANGLE_DECIMALS),
+            ),
+            (DhField::D, round_to(j.d_mm, LENGTH_DECIMALS)),
+            (
+                DhField::ThetaOffset,
+                round_to(j.theta_offset_rad.to_degrees(), ANGLE_DECIMALS),
+            ),
+        ] {
+            edits.push(Edit::Robot(RobotParam::Dh { joint, field }, v));
+        }
+    }
     if tool {
         let t = robot.flange_to_tool().translation.vector;
-        yaml = set_frame_translation(&yaml, machine_file, "flange_to_tool", [t.x, t.y, t.z])?;
+        for axis in 0..3 {
+            let v = round_to(t[axis], LENGTH_DECIMALS);
+            edits.push(Edit::Robot(RobotParam::ToolOffset { axis }, v));
+        }
     }
     if let Some(f) = frame {
-        yaml = set_measurement_frame(&yaml, machine_file, f.xyz_mm, f.rpy_deg)?;
+        edits.push(Edit::MeasurementFrame {
+            xyz_mm: f.xyz_mm,
+            rpy_deg: f.rpy_deg,
+        });
     }
+    let yaml = yaml_write::apply(text, machine_file, "postproc calibrate kinematics", &edits)?;
     Machine::from_yaml_str(&yaml, machine_file)?;
     Ok(yaml)
 }

@@ -14,4 +14,3 @@ pub mod simulate;
 pub mod stats;
 pub mod stiffness;
 pub mod thermal;
-pub mod yaml_edit;

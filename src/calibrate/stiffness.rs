@@ -52,7 +52,11 @@ use super::frame::{
 };
 use super::observations::{MeasurementFrame, Observation, Observations, Pose, holdout_split};
 use super::report::{CONDITION_LIMIT, Calibration, Estimate, FrameEstimate, Validation};
-use super::yaml_edit::{fmt_value, set_measurement_frame, set_top_level_list};
+use crate::machine::robot::RobotParam;
+use crate::machine::yaml_write::{self, Edit, round_to};
+
+/// Decimals of the joint stiffnesses written, N·m/rad.
+const STIFFNESS_DECIMALS: usize = 1;
 
 /// µrad/(N·m) expressed in rad/(N·mm).
 const C_UNIT: f64 = 1e-9;
@@ -697,8 +701,16 @@ pub fn calibrate_stiffness(
         &hold,
         obs_file,
     )?;
-    let values: Vec<String> = written.iter().map(|&k| fmt_value(k, 1)).collect();
-    let mut yaml = set_top_level_list(text, machine_file, "k_nm_per_rad", &values)?;
+    let mut edits: Vec<Edit> = written
+        .iter()
+        .enumerate()
+        .map(|(joint, &k)| {
+            Edit::Robot(
+                RobotParam::JointStiffness { joint },
+                round_to(k, STIFFNESS_DECIMALS),
+            )
+        })
+        .collect();
     let mut notes: Vec<String> = world.into_iter().collect();
     notes.extend(obs.orientation_note(w_rot, None));
     let frame = match &f_rot {
@@ -712,12 +724,16 @@ pub fn calibrate_stiffness(
                 &fit,
                 obs_file,
             )?;
-            yaml = set_measurement_frame(&yaml, machine_file, est.xyz_mm, est.rpy_deg)?;
+            edits.push(Edit::MeasurementFrame {
+                xyz_mm: est.xyz_mm,
+                rpy_deg: est.rpy_deg,
+            });
             notes.push(FRAME_NOTE.into());
             Some(est)
         }
         None => None,
     };
+    let yaml = yaml_write::apply(text, machine_file, "postproc calibrate stiffness", &edits)?;
     Machine::from_yaml_str(&yaml, machine_file)
         .map_err(|e| super::screen::implausible(&e, obs_file, obs.rows.len()))?;
     Ok(Calibration {

@@ -59,7 +59,15 @@ use super::honesty::zero_withheld;
 use super::observations::{MeasurementFrame, Observations, Pose, holdout_split};
 use super::report::{CONDITION_LIMIT, Calibration, Estimate, FrameEstimate, Validation, names_at};
 use super::stiffness::Options;
-use super::yaml_edit::set_thermal_term;
+use crate::machine::robot::{RobotParam, ThermalField};
+use crate::machine::tool::ToolParam;
+use crate::machine::yaml_write::{self, Edit, round_sig, round_to};
+
+/// Decimals of the thermal lengths and gains written (mm, µm/kW, ppm/kW).
+const THERMAL_DECIMALS: usize = 6;
+/// Time constant of a new spindle entry, min: assumed, since rows at the
+/// thermal steady state carry no time information.
+const ASSUMED_TIME_CONSTANT_MIN: f64 = 30.0;
 
 /// Internal unit of `ts`: per kW (1/W × 1000).
 const TS_SCALE: f64 = 1000.0;
@@ -393,10 +401,17 @@ fn write_terms(
     absorbed: &[String],
     notes: &mut Vec<String>,
 ) -> Result<(String, Option<FrameEstimate>)> {
-    let mut yaml = text.to_string();
-    for (k, t) in terms.iter().enumerate() {
-        yaml = set_thermal_term(&yaml, machine_file, k, t.lb_mm, t.ub_mm, t.ts_per_w)?;
+    let mut edits = Vec::with_capacity(3 * terms.len());
+    for (term, t) in terms.iter().enumerate() {
+        for (field, v) in [
+            (ThermalField::Lb, round_to(t.lb_mm, THERMAL_DECIMALS)),
+            (ThermalField::Ub, round_to(t.ub_mm, THERMAL_DECIMALS)),
+            (ThermalField::Ts, round_sig(t.ts_per_w)),
+        ] {
+            edits.push(Edit::Robot(RobotParam::Thermal { term, field }, v));
+        }
     }
+    let yaml = yaml_write::apply(text, machine_file, "postproc calibrate thermal", &edits)?;
     let Some((f, u)) = frame else {
         return Ok((yaml, None));
     };
@@ -872,7 +887,7 @@ fn tool_estimates(
     let u = sol.std_uncertainty();
     let mut params = Vec::new();
     let mut withheld = Vec::new();
-    let mut yaml = text.to_string();
+    let mut edits = Vec::new();
     for (c, &k) in unknowns.iter().enumerate() {
         let fixed = id.unidentifiable.contains(&c);
         let delta = sol.params.get(c).copied().unwrap_or(0.0);
@@ -897,13 +912,16 @@ fn tool_estimates(
             }
             params.push(est);
             if write {
-                yaml = super::yaml_edit::set_spindle_growth(
-                    &yaml,
-                    machine_file,
-                    start + delta,
-                    30.0,
-                    "postproc calibrate thermal: time_constant_min is ASSUMED (steady-state rows carry no time information)",
-                )?;
+                let growth = round_to(start + delta, THERMAL_DECIMALS);
+                edits.push(if thermal.spindle.is_some() {
+                    Edit::Tool(ToolParam::SpindleGrowth, growth)
+                } else {
+                    Edit::Spindle {
+                        growth_um_per_kw: growth,
+                        time_constant_min: ASSUMED_TIME_CONSTANT_MIN,
+                        comment: "postproc calibrate thermal: time_constant_min is ASSUMED (steady-state rows carry no time information)".into(),
+                    }
+                });
             }
         } else {
             let name = ["X", "Y", "Z"][k - 1];
@@ -922,10 +940,12 @@ fn tool_estimates(
             }
             params.push(est);
             if write {
-                yaml = super::yaml_edit::set_axis_scale(&yaml, machine_file, name, start + delta)?;
+                let scale = round_to(start + delta, THERMAL_DECIMALS);
+                edits.push(Edit::Tool(ToolParam::AxisScale { axis: k - 1 }, scale));
             }
         }
     }
+    let yaml = yaml_write::apply(text, machine_file, "postproc calibrate thermal", &edits)?;
     Ok((params, withheld, yaml))
 }
 

@@ -404,7 +404,9 @@ pub fn run_calibrate(a: &CalibrateArgs) -> Result<i32> {
         obs.rows.len(),
         cal.rms_fit_mm,
     )?;
-    let yaml = crate::machine::status::set_calibrated(&cal.yaml, &file, &record)?;
+    let status = crate::machine::yaml_write::Edit::Calibrated(record);
+    let yaml =
+        crate::machine::yaml_write::apply(&cal.yaml, &file, "postproc calibrate", &[status])?;
     super::output::refuse_overwrite(&a.output, &read_files(&a.observations, &a.machine)?)?;
     // The summary first: standard output that fails (closed, full) fails
     // the run before the model is written.

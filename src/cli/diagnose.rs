@@ -1,6 +1,7 @@
 //! `postproc diagnose`: where the model and the measurements disagree, which
 //! named effect is missing, and the model with that effect added.
 
+use crate::machine::yaml_write::{self, Edit};
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
@@ -231,12 +232,11 @@ impl WrittenModel<'_> {
         let (check_obs, frame_said) = match self.registration {
             Some(f) => {
                 let (obs, est) = reidentified(&model, self.obs, &f, self.opts, &file)?;
-                w.text = crate::calibrate::yaml_edit::set_measurement_frame(
-                    &w.text,
-                    &shown,
-                    est.xyz_mm,
-                    est.rpy_deg,
-                )?;
+                let frame = Edit::MeasurementFrame {
+                    xyz_mm: est.xyz_mm,
+                    rpy_deg: est.rpy_deg,
+                };
+                w.text = yaml_write::apply(&w.text, &shown, "postproc diagnose", &[frame])?;
                 (Some(obs), Some(est))
             }
             None => (None, None),
@@ -250,7 +250,8 @@ impl WrittenModel<'_> {
                 self.obs.rows.len(),
                 d.gap.after.rms_um * 1e-3,
             )?;
-            w.text = crate::machine::status::set_calibrated(&w.text, &shown, &record)?;
+            let status = Edit::Calibrated(record);
+            w.text = yaml_write::apply(&w.text, &shown, "postproc diagnose", &[status])?;
         }
         let mut inputs = vec![o.to_path_buf()];
         if let Some(m) = &a.machine {

@@ -10,16 +10,16 @@
 //! parameter); the others are analytic additions (a row covariate times the
 //! derivative of the prediction with respect to a length or angle).
 
-use nalgebra::{DMatrix, Isometry3, Translation3, UnitQuaternion, Vector3};
+use nalgebra::{DMatrix, UnitQuaternion, Vector3};
 use serde::Serialize;
-use serde_yaml::{Mapping, Value};
 
 use crate::calibrate::forward::{self, tool_length};
 use crate::calibrate::observations::{MeasuredKind, Observation, Pose};
 use crate::error::{Error, Result};
 use crate::machine::Machine;
-use crate::machine::robot::{Model, PointMass, Robot};
-use crate::machine::tool::AxisKind;
+use crate::machine::robot::{DhField as RobotDh, Robot, RobotParam};
+use crate::machine::tool::{AxisKind, LocationParam, MachineTool, ToolParam};
+use crate::machine::yaml_write::{self, Edit};
 
 /// Axis and error-direction letters in slot order.
 pub const LETTERS: [char; 6] = ['X', 'Y', 'Z', 'A', 'B', 'C'];
@@ -485,8 +485,8 @@ fn tool_library(t: &crate::machine::tool::MachineTool, rows: &[Observation]) -> 
 pub struct Context<'a> {
     /// The current model.
     pub machine: &'a Machine,
-    /// Its YAML document (machine tools are varied through it).
-    pub yaml: &'a Value,
+    /// Its machine file's text (machine-tool tables are varied through it).
+    pub text: &'a str,
     /// Position or deviation files.
     pub kind: MeasuredKind,
     /// Name of the observation file for errors.
@@ -548,51 +548,56 @@ fn diff_column(
     Ok(())
 }
 
-fn robot_dh(r: &Robot, joint: usize, f: DhField, v: f64) -> Machine {
-    let mut p = *r.params(Model::Actual);
-    if let Some(j) = p.joints.get_mut(joint) {
-        match f {
-            DhField::Theta => j.theta_offset_rad += v * 1e-6,
-            DhField::Alpha => j.alpha_rad += v * 1e-6,
-            DhField::A => j.a_mm += v * 1e-3,
-            DhField::D => j.d_mm += v * 1e-3,
-        }
-    }
-    Machine::Robot(r.with_actual(p))
+/// Robot with `add` (in the unit of the parameter's key) added to the
+/// file's value of `p`, through [`Robot::with_params`].
+fn robot_added(r: &Robot, p: RobotParam, add: f64) -> Result<Robot> {
+    let old = r
+        .param_value(p)
+        .ok_or_else(|| Error::Internal(format!("validated robot file without {}", p.path())))?;
+    r.with_params(&[(p, old + add)])
+}
+
+/// The robot parameter of a candidate's DH field, and `v` display units
+/// (µm, µrad) in the unit of its key (mm, degrees).
+pub fn dh_param(joint: usize, f: DhField, v: f64) -> (RobotParam, f64) {
+    let (field, add) = match f {
+        DhField::Theta => (RobotDh::ThetaOffset, (v * 1e-6).to_degrees()),
+        DhField::Alpha => (RobotDh::Alpha, (v * 1e-6).to_degrees()),
+        DhField::A => (RobotDh::A, v * 1e-3),
+        DhField::D => (RobotDh::D, v * 1e-3),
+    };
+    (RobotParam::Dh { joint, field }, add)
+}
+
+fn robot_dh(r: &Robot, joint: usize, f: DhField, v: f64) -> Result<Machine> {
+    let (p, add) = dh_param(joint, f, v);
+    robot_added(r, p, add).map(Machine::Robot)
 }
 
 /// Robot with joint `joint`'s compliance raised by `dc` µrad/(N·m).
-pub fn robot_compliance(r: &Robot, joint: usize, dc: f64) -> Robot {
-    let mut k = *r.k_nmm_per_rad();
-    if let Some(kj) = k.get_mut(joint) {
-        // c [rad/(N·mm)] = 1/k; dc µrad/(N·m) = dc·1e-9 rad/(N·mm).
-        *kj = 1.0 / (1.0 / *kj + dc * 1e-9);
-    }
-    r.with_stiffness(k)
+pub fn robot_compliance(r: &Robot, joint: usize, dc: f64) -> Result<Robot> {
+    let p = RobotParam::JointStiffness { joint };
+    let k = r
+        .param_value(p)
+        .ok_or_else(|| Error::Internal(format!("validated robot file without {}", p.path())))?;
+    // c [rad/(N·m)] = 1/k; dc µrad/(N·m) = dc·1e-6 rad/(N·m).
+    r.with_params(&[(p, 1.0 / (1.0 / k + dc * 1e-6))])
 }
 
 /// Robot with the TCP moved by `d` µm in the flange frame.
-pub fn robot_tcp(r: &Robot, d: Vector3<f64>) -> Robot {
-    let tool = Isometry3::from_parts(
-        Translation3::from(d * 1e-3),
-        nalgebra::UnitQuaternion::identity(),
-    ) * r.flange_to_tool();
-    r.with_tool(tool, r.tool_load().copied(), true)
+pub fn robot_tcp(r: &Robot, d: Vector3<f64>) -> Result<Robot> {
+    let mut edits = Vec::with_capacity(3);
+    for axis in 0..3 {
+        let p = RobotParam::ToolOffset { axis };
+        let old = r.param_value(p).unwrap_or(0.0);
+        edits.push((p, old + d[axis] * 1e-3));
+    }
+    r.with_params(&edits)
 }
 
 /// Robot with the payload mass changed by `dm` kg.
-pub fn robot_payload(r: &Robot, dm: f64) -> Robot {
-    let load = match r.tool_load() {
-        Some(l) => PointMass {
-            mass_kg: l.mass_kg + dm,
-            com_mm: l.com_mm,
-        },
-        None => PointMass {
-            mass_kg: dm,
-            com_mm: r.flange_to_tool().translation.vector,
-        },
-    };
-    r.with_tool(*r.flange_to_tool(), Some(load), true)
+pub fn robot_payload(r: &Robot, dm: f64) -> Result<Robot> {
+    robot_added(r, RobotParam::PayloadMass, dm)
 }
 
 fn robot_row_value(
@@ -617,8 +622,8 @@ fn robot_backlash_column(
 ) -> Result<()> {
     let t = DhField::Theta;
     diff_column(
-        &robot_dh(r, j, t, STEP),
-        &robot_dh(r, j, t, -STEP),
+        &robot_dh(r, j, t, STEP)?,
+        &robot_dh(r, j, t, -STEP)?,
         2.0 * STEP,
         rows,
         ctx,
@@ -692,8 +697,8 @@ pub fn pose_sensitivity(
     match (&effect.action, ctx.machine) {
         (Action::Dh(j, f), Machine::Robot(r)) => {
             diff_column(
-                &robot_dh(r, *j, *f, STEP),
-                &robot_dh(r, *j, *f, -STEP),
+                &robot_dh(r, *j, *f, STEP)?,
+                &robot_dh(r, *j, *f, -STEP)?,
                 2.0 * STEP,
                 rows,
                 ctx,
@@ -702,7 +707,7 @@ pub fn pose_sensitivity(
             )?;
         }
         (Action::Compliance(j), Machine::Robot(r)) => {
-            let plus = Machine::Robot(robot_compliance(r, *j, COMPLIANCE_STEP));
+            let plus = Machine::Robot(robot_compliance(r, *j, COMPLIANCE_STEP)?);
             diff_column(&plus, ctx.machine, COMPLIANCE_STEP, rows, ctx, &mut s, 0)?;
         }
         (Action::Tcp, Machine::Robot(r)) => {
@@ -717,14 +722,14 @@ pub fn pose_sensitivity(
             for c in 0..3 {
                 let mut d = Vector3::zeros();
                 d[c] = STEP;
-                let p = Machine::Robot(robot_tcp(r, d));
-                let m = Machine::Robot(robot_tcp(r, -d));
+                let p = Machine::Robot(robot_tcp(r, d)?);
+                let m = Machine::Robot(robot_tcp(r, -d)?);
                 diff_column(&p, &m, 2.0 * STEP, rows, &attained, &mut s, c)?;
             }
         }
         (Action::Payload, Machine::Robot(r)) => {
-            let p = Machine::Robot(robot_payload(r, MASS_STEP));
-            let m = Machine::Robot(robot_payload(r, -MASS_STEP));
+            let p = Machine::Robot(robot_payload(r, MASS_STEP)?);
+            let m = Machine::Robot(robot_payload(r, -MASS_STEP)?);
             diff_column(&p, &m, 2.0 * MASS_STEP, rows, ctx, &mut s, 0)?;
         }
         (Action::BaseTrans(c), Machine::Robot(_)) => {
@@ -757,8 +762,8 @@ pub fn pose_sensitivity(
             Machine::Robot(r),
         ) => {
             diff_column(
-                &robot_dh(r, *joint, *field, STEP),
-                &robot_dh(r, *joint, *field, -STEP),
+                &robot_dh(r, *joint, *field, STEP)?,
+                &robot_dh(r, *joint, *field, -STEP)?,
                 2.0 * STEP,
                 rows,
                 ctx,
@@ -779,7 +784,7 @@ pub fn pose_sensitivity(
             Action::Location { .. } | Action::Component { .. } | Action::AxisBacklash { .. },
             Machine::Tool(_),
         ) => {
-            let plus = tool_variant(ctx.yaml, &effect.action, STEP, ctx.machine)?;
+            let plus = tool_variant(ctx.text, &effect.action, STEP, ctx.machine)?;
             diff_column(&plus, ctx.machine, STEP, rows, ctx, &mut s, 0)?;
         }
         (Action::AxisStiffness(slot), Machine::Tool(_)) => {
@@ -802,51 +807,8 @@ pub fn pose_sensitivity(
 }
 
 // ---------------------------------------------------------------------------
-// Machine-tool variants through the YAML document
+// Machine-tool effects as edits of the file's values
 // ---------------------------------------------------------------------------
-
-fn key(s: &str) -> Value {
-    Value::String(s.to_string())
-}
-
-fn as_f64(v: &Value) -> Option<f64> {
-    v.as_f64().or_else(|| v.as_i64().map(|i| i as f64))
-}
-
-fn axis_map(doc: &mut Value, axis: char) -> Result<&mut Mapping> {
-    let axes = doc
-        .get_mut("axes")
-        .and_then(Value::as_sequence_mut)
-        .ok_or_else(|| {
-            Error::Internal("validated machine-tool file without an `axes` list".into())
-        })?;
-    axes.iter_mut()
-        .filter_map(Value::as_mapping_mut)
-        .find(|m| {
-            m.get("name")
-                .and_then(Value::as_str)
-                .is_some_and(|n| n.eq_ignore_ascii_case(&axis.to_string()))
-        })
-        .ok_or_else(|| {
-            Error::Internal(format!(
-                "effect of axis `{axis}`, which the machine file does not have"
-            ))
-        })
-}
-
-fn sub_map<'a>(m: &'a mut Mapping, name: &str) -> Result<&'a mut Mapping> {
-    let k = key(name);
-    if !m.get(&k).is_some_and(Value::is_mapping) {
-        m.insert(k.clone(), Value::Mapping(Mapping::new()));
-    }
-    m.get_mut(&k)
-        .and_then(Value::as_mapping_mut)
-        .ok_or_else(|| Error::Internal(format!("`{name}` is not a mapping after it was made one")))
-}
-
-fn numbers(v: Option<&Value>) -> Option<Vec<f64>> {
-    v?.as_sequence()?.iter().map(as_f64).collect()
-}
 
 fn interp(pos: &[f64], val: &[f64], q: f64) -> f64 {
     let (Some(&first), Some(&last)) = (pos.first(), pos.last()) else {
@@ -878,62 +840,96 @@ fn interp(pos: &[f64], val: &[f64], q: f64) -> f64 {
 /// Number of table positions a new component table gets over the travel.
 const GRID: usize = 21;
 
-/// Adds `f(q) = (forward add, reverse add)` to a component table of an axis
-/// mapping, merging the positions with a grid over the travel.
-fn add_to_table(
-    ax: &mut Mapping,
-    name: &str,
-    travel: (f64, f64),
-    rotary: bool,
+/// Distance under which two table positions are one, mm or degrees.
+const SAME_POSITION: f64 = 1e-9;
+
+/// The component table `error` of the axis in `slot` with
+/// `f(q) = (forward add, reverse add)` added, its positions merged with a
+/// grid over the travel: the edit that writes it.
+fn table_edit(
+    t: &MachineTool,
+    slot: usize,
+    error: usize,
     f: impl Fn(f64) -> (f64, f64),
-) -> Result<()> {
-    let pos_key = if rotary {
-        "positions_deg"
-    } else {
-        "positions_mm"
-    };
-    let comp = sub_map(ax, "component_errors")?;
-    let (old_pos, old_f, old_r) = match comp.get(name).and_then(Value::as_mapping) {
-        Some(t) => {
-            let pos = numbers(t.get("positions_mm").or_else(|| t.get("positions_deg")))
-                .unwrap_or_default();
-            let fw = numbers(t.get("forward")).unwrap_or_default();
-            let rv = numbers(t.get("reverse")).unwrap_or_else(|| fw.clone());
-            (pos, fw, rv)
-        }
-        None => (Vec::new(), Vec::new(), Vec::new()),
-    };
-    let (lo, hi) = travel;
+) -> Result<Edit> {
+    let ax = t.axis(slot).ok_or_else(|| {
+        Error::Internal(format!(
+            "effect of axis `{}`, which the machine file does not have",
+            LETTERS.get(slot).copied().unwrap_or('?')
+        ))
+    })?;
+    let (lo, hi) = ax.travel;
+    let [old_pos, old_f, old_r] =
+        t.component_table(slot, error)
+            .unwrap_or([Vec::new(), Vec::new(), Vec::new()]);
     let mut pos: Vec<f64> = (0..GRID)
         .map(|i| lo + (hi - lo) * i as f64 / (GRID - 1) as f64)
         .chain(old_pos.iter().copied())
         .collect();
     pos.sort_by(f64::total_cmp);
-    pos.dedup_by(|a, b| (*a - *b).abs() < 1e-9);
+    pos.dedup_by(|a, b| (*a - *b).abs() < SAME_POSITION);
     let mut fw = Vec::with_capacity(pos.len());
     let mut rv = Vec::with_capacity(pos.len());
     for &q in &pos {
         let (df, dr) = f(q);
-        fw.push(interp(&old_pos, &old_f, q) + df);
-        rv.push(interp(&old_pos, &old_r, q) + dr);
+        fw.push(round9(interp(&old_pos, &old_f, q) + df));
+        rv.push(round9(interp(&old_pos, &old_r, q) + dr));
     }
-    let seq = |v: &[f64]| Value::Sequence(v.iter().map(|x| Value::from(round9(*x))).collect());
-    let mut t = Mapping::new();
-    t.insert(key(pos_key), seq(&pos));
-    t.insert(key("forward"), seq(&fw));
-    t.insert(key("reverse"), seq(&rv));
-    comp.insert(key(name), Value::Mapping(t));
-    Ok(())
+    Ok(Edit::ComponentTable {
+        axis: slot,
+        error,
+        positions: pos.iter().map(|q| round9(*q)).collect(),
+        forward: fw,
+        reverse: rv,
+    })
 }
 
-/// Adds the compliance `c` µm/N to every stiffness number (N/µm) in `v`.
-fn add_compliance(v: &mut Value, c: f64) -> Result<()> {
-    match v {
-        Value::Sequence(items) => items.iter_mut().try_for_each(|x| add_compliance(x, c)),
-        other => {
-            let k = as_f64(other).ok_or_else(|| {
-                Error::Internal("a validated stiffness value is not a number".into())
-            })?;
+/// Slot of an axis letter, error direction of a table key (`EXX_um` → 0).
+fn slot_of(c: char) -> Result<usize> {
+    LETTERS
+        .iter()
+        .position(|l| *l == c)
+        .ok_or_else(|| Error::Internal(format!("no axis or direction `{c}`")))
+}
+
+/// The parameter of a location-error key (`EC0Y_urad`, `EX0B_mm`,
+/// `EB0B_urad`) of the axis `axis` (`None`: the spindle).
+fn location_param(axis: Option<char>, key: &str) -> Result<ToolParam> {
+    let r = key
+        .chars()
+        .nth(1)
+        .ok_or_else(|| Error::Internal(format!("location key `{key}`")))?;
+    let r = slot_of(r)?;
+    let error = match axis {
+        Some(a) if slot_of(a)? == r => LocationParam::Zero,
+        _ if key.ends_with("_mm") => LocationParam::Offset(r),
+        _ => LocationParam::Angle(r.saturating_sub(3)),
+    };
+    Ok(match axis {
+        Some(a) => ToolParam::Location {
+            axis: slot_of(a)?,
+            error,
+        },
+        None => ToolParam::SpindleLocation { error },
+    })
+}
+
+/// The stiffness values of direction `slot` (both load signs) with the
+/// compliance `c` µm/N added: `k' = 1/(1/k + c)` at every grid node.
+fn stiffness_edits(t: &MachineTool, slot: usize, c: f64) -> Result<Vec<Edit>> {
+    let mut out = Vec::new();
+    for positive in [true, false] {
+        let params = t.stiffness_params(slot, positive);
+        if params.is_empty() {
+            // Without the section the effect is marked not writable.
+            return Err(Error::Internal(
+                "stiffness effect written to a file without `stiffness.k_n_per_um`".into(),
+            ));
+        }
+        for p in params {
+            let k = t
+                .param_value(p)
+                .ok_or_else(|| Error::Internal(format!("validated file without {}", p.path())))?;
             let new = 1.0 / (1.0 / k + c);
             if !(new.is_finite() && new > 0.0) {
                 return Err(Error::Data(format!(
@@ -941,10 +937,10 @@ fn add_compliance(v: &mut Value, c: f64) -> Result<()> {
                      the data ask for a stiffer axis than any the file can hold"
                 )));
             }
-            *other = Value::from(round9(new));
-            Ok(())
+            out.push(Edit::Tool(p, round9(new)));
         }
     }
+    Ok(out)
 }
 
 /// Rounds to 9 significant decimals so written files stay readable.
@@ -952,105 +948,80 @@ pub fn round9(x: f64) -> f64 {
     (x * 1e9).round() / 1e9
 }
 
-/// Applies `value` (display units) of a machine-file-expressible effect to
-/// the YAML document.
-pub fn apply_to_yaml(doc: &mut Value, action: &Action, value: f64, m: &Machine) -> Result<()> {
-    let travel = |axis: char| -> (f64, f64, bool) {
-        let slot = LETTERS.iter().position(|c| *c == axis).unwrap_or(0);
-        match m {
-            Machine::Tool(t) => match t.axis(slot) {
-                Some(a) => (a.travel.0, a.travel.1, a.kind == AxisKind::Rotary),
-                None => (0.0, 0.0, false),
-            },
-            Machine::Robot(_) => (0.0, 0.0, false),
-        }
-    };
+/// The edits of the machine-tool file that add `value` (display units) of
+/// a machine-file-expressible effect to the file's values.
+pub fn tool_edits(action: &Action, value: f64, t: &MachineTool) -> Result<Vec<Edit>> {
     match action {
-        Action::Location { axis, key: k } => {
-            let map = match axis {
-                Some(a) => sub_map(axis_map(doc, *a)?, "location_errors")?,
-                None => {
-                    let root = doc.as_mapping_mut().ok_or_else(|| {
-                        Error::Internal("validated machine file is not a mapping".into())
-                    })?;
-                    sub_map(sub_map(root, "spindle")?, "location_errors")?
-                }
-            };
-            let add = if k.ends_with("_mm") {
+        Action::Location { axis, key } => {
+            let p = location_param(*axis, key)?;
+            let add = if key.ends_with("_mm") {
                 value * 1e-3
             } else {
                 value
             };
-            let old = map.get(k.as_str()).and_then(as_f64).unwrap_or(0.0);
-            map.insert(key(k), Value::from(round9(old + add)));
+            let old = t.param_value(p).unwrap_or(0.0);
+            Ok(vec![Edit::Tool(p, round9(old + add))])
         }
-        Action::Component {
-            axis,
-            key: k,
-            power,
-        } => {
-            let (lo, hi, rot) = travel(*axis);
+        Action::Component { axis, key, power } => {
+            let slot = slot_of(*axis)?;
+            let (lo, hi) = t.axis(slot).map_or((0.0, 0.0), |a| a.travel);
             let mid = 0.5 * (lo + hi);
-            let half = (0.5 * (hi - lo)).max(1e-9);
-            let p = *power;
-            add_to_table(axis_map(doc, *axis)?, k, (lo, hi), rot, |q| {
-                let v = value * ((q - mid) / half).powi(p);
+            let half = (0.5 * (hi - lo)).max(SAME_POSITION);
+            let error = slot_of(key.chars().nth(1).unwrap_or('?'))?;
+            let e = table_edit(t, slot, error, |q| {
+                let v = value * ((q - mid) / half).powi(*power);
                 (v, v)
             })?;
+            Ok(vec![e])
         }
-        Action::AxisBacklash { axis, key: k } => {
-            let (lo, hi, rot) = travel(*axis);
-            add_to_table(axis_map(doc, *axis)?, k, (lo, hi), rot, |_| (0.0, value))?;
+        Action::AxisBacklash { axis, key } => {
+            let slot = slot_of(*axis)?;
+            let error = slot_of(key.chars().nth(1).unwrap_or('?'))?;
+            Ok(vec![table_edit(t, slot, error, |_| (0.0, value))?])
         }
         Action::AxisStiffness(slot) => {
-            // A compliance c µm/N added to every value of the direction's
-            // map, both load signs: k' = 1/(1/k + c) at every grid node.
-            let dir = ["x", "y", "z"]
-                .get(*slot)
-                .ok_or_else(|| Error::Internal("stiffness effect of a rotary axis".into()))?;
-            let k = doc
-                .as_mapping_mut()
-                .and_then(|r| r.get_mut("stiffness"))
-                .and_then(Value::as_mapping_mut)
-                .and_then(|st| st.get_mut("k_n_per_um"))
-                .and_then(Value::as_mapping_mut)
-                .ok_or_else(|| {
-                    // Without the section the effect is marked not writable.
-                    Error::Internal(
-                        "stiffness effect written to a file without `stiffness.k_n_per_um`".into(),
-                    )
-                })?;
-            for sign in ["pos", "neg"] {
-                let v = k.get_mut(format!("{dir}_{sign}").as_str()).ok_or_else(|| {
-                    Error::Internal(format!(
-                        "validated file without stiffness.k_n_per_um.{dir}_{sign}"
-                    ))
-                })?;
-                add_compliance(v, value)?;
+            if *slot >= 3 {
+                return Err(Error::Internal("stiffness effect of a rotary axis".into()));
             }
+            stiffness_edits(t, *slot, value)
         }
-        _ => {
-            return Err(Error::Internal(
-                "this effect is not expressed through the machine-tool file".into(),
-            ));
-        }
+        _ => Err(Error::Internal(
+            "this effect is not expressed through the machine-tool file".into(),
+        )),
     }
-    Ok(())
 }
 
-/// A machine-tool variant with one effect's parameter set to `value`.
-pub fn tool_variant(doc: &Value, action: &Action, value: f64, m: &Machine) -> Result<Machine> {
-    let mut d = doc.clone();
-    apply_to_yaml(&mut d, action, value, m)?;
-    let text = serde_yaml::to_string(&d)
-        .map_err(|e| Error::Internal(format!("cannot write the machine document: {e}")))?;
-    Machine::from_yaml_str(&text, "(diagnose variant)")
+/// A machine-tool variant with one effect's parameter set to `value`: a
+/// location error through [`MachineTool::with_params`]; a component table,
+/// whose positions change, through the file written with it
+/// ([`yaml_write`]) and read back.
+pub fn tool_variant(text: &str, action: &Action, value: f64, m: &Machine) -> Result<Machine> {
+    let Machine::Tool(t) = m else {
+        return Err(Error::Internal("a machine-tool variant of a robot".into()));
+    };
+    let edits = tool_edits(action, value, t)?;
+    let params: Option<Vec<(ToolParam, f64)>> = edits
+        .iter()
+        .map(|e| match e {
+            Edit::Tool(p, v) => Some((*p, *v)),
+            _ => None,
+        })
+        .collect();
+    match params {
+        Some(p) => Ok(Machine::Tool(t.with_params(&p)?)),
+        None => {
+            let written =
+                yaml_write::apply(text, "(diagnose variant)", "postproc diagnose", &edits)?;
+            Machine::from_yaml_str(&written, "(diagnose variant)")
+        }
+    }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::calibrate::observations::{RobotPose, ToolPose};
+    use crate::machine::robot::Model;
     use approx::assert_abs_diff_eq;
     use nalgebra::Vector6;
 
@@ -1061,12 +1032,11 @@ mod tests {
     /// Relative tolerance of a first-order (small-deflection) comparison.
     const FIRST_ORDER_REL_TOL: f64 = 1e-2;
 
-    fn load(rel: &str) -> (Machine, String, Value) {
+    fn load(rel: &str) -> (Machine, String) {
         let path = format!("{}/{rel}", env!("CARGO_MANIFEST_DIR"));
         let text = std::fs::read_to_string(&path).expect("machine file");
         let m = Machine::from_yaml_str(&text, &path).expect("valid");
-        let v: Value = serde_yaml::from_str(&text).expect("yaml");
-        (m, text, v)
+        (m, text)
     }
 
     fn robot_row(q_deg: [f64; 6], f: Vector3<f64>, dir: i8) -> Observation {
@@ -1124,7 +1094,7 @@ mod tests {
     /// (≈0.1 % from the ≈1 mrad deflection already present).
     #[test]
     fn robot_compliance_column_matches_statics() {
-        let (m, _, v) = load("machines/abb-irb1600.yaml");
+        let (m, v) = load("machines/abb-irb1600.yaml");
         let Machine::Robot(r) = &m else {
             panic!("robot")
         };
@@ -1135,7 +1105,7 @@ mod tests {
         );
         let ctx = Context {
             machine: &m,
-            yaml: &v,
+            text: &v,
             kind: MeasuredKind::Position,
             file: "t",
         };
@@ -1167,12 +1137,12 @@ mod tests {
     /// a translation of 1 µm along x moves it by (1e-3, 0, 0) mm.
     #[test]
     fn robot_frame_columns_by_hand() {
-        let (m, _, v) = load("machines/abb-irb1600.yaml");
+        let (m, v) = load("machines/abb-irb1600.yaml");
         let row = robot_row([30.0, 10.0, 0.0, 0.0, 20.0, 0.0], Vector3::zeros(), 1);
         let rows = std::slice::from_ref(&row);
         let ctx = Context {
             machine: &m,
-            yaml: &v,
+            text: &v,
             kind: MeasuredKind::Position,
             file: "t",
         };
@@ -1191,12 +1161,12 @@ mod tests {
     /// origin): its column equals the base_rz column to first order.
     #[test]
     fn joint1_zero_equals_base_rz() {
-        let (m, _, v) = load("machines/abb-irb1600.yaml");
+        let (m, v) = load("machines/abb-irb1600.yaml");
         let row = robot_row([30.0, 10.0, 5.0, 20.0, 20.0, 10.0], Vector3::zeros(), 1);
         let rows = std::slice::from_ref(&row);
         let ctx = Context {
             machine: &m,
-            yaml: &v,
+            text: &v,
             kind: MeasuredKind::Position,
             file: "t",
         };
@@ -1218,14 +1188,14 @@ mod tests {
     /// - X stiffness: F_x · 1e-3 mm per µm/N.
     #[test]
     fn tool_columns_by_hand() {
-        let (m, _, v) = load("machines/afm-r1000.yaml");
+        let (m, v) = load("machines/afm-r1000.yaml");
         let rows = [
             tool_row([750.0, 300.0, 200.0], -1, 7200.0),
             tool_row([750.0, 300.0, 200.0], 1, 7200.0),
         ];
         let ctx = Context {
             machine: &m,
-            yaml: &v,
+            text: &v,
             kind: MeasuredKind::Position,
             file: "t",
         };
@@ -1253,14 +1223,14 @@ mod tests {
     /// is −½ (dir +1) or +½ (dir −1) times the joint-zero column.
     #[test]
     fn robot_backlash_stops_short_of_the_side_it_came_from() {
-        let (m, _, v) = load("machines/abb-irb1600.yaml");
+        let (m, v) = load("machines/abb-irb1600.yaml");
         let rows = [
             robot_row([10.0, 20.0, -15.0, 30.0, 40.0, 50.0], Vector3::zeros(), 1),
             robot_row([10.0, 20.0, -15.0, 30.0, 40.0, 50.0], Vector3::zeros(), -1),
         ];
         let ctx = Context {
             machine: &m,
-            yaml: &v,
+            text: &v,
             kind: MeasuredKind::Position,
             file: "t",
         };
@@ -1280,7 +1250,7 @@ mod tests {
     /// with joint 3's power is the d1 column times p3_w (here 100 W).
     #[test]
     fn thermal_candidates_cover_every_length_and_power() {
-        let (m, _, v) = load("machines/abb-irb1600.yaml");
+        let (m, v) = load("machines/abb-irb1600.yaml");
         let rows = [robot_row(
             [10.0, 20.0, -15.0, 30.0, 40.0, 50.0],
             Vector3::zeros(),
@@ -1301,7 +1271,7 @@ mod tests {
         }
         let ctx = Context {
             machine: &m,
-            yaml: &v,
+            text: &v,
             kind: MeasuredKind::Position,
             file: "t",
         };
@@ -1315,7 +1285,7 @@ mod tests {
     /// Linear straightness is not offered (it is squareness by definition).
     #[test]
     fn no_linear_straightness() {
-        let (m, _, _) = load("machines/afm-r1000.yaml");
+        let (m, _) = load("machines/afm-r1000.yaml");
         let lib = library(&m, &[tool_row([0.0; 3], 1, 0.0)]);
         assert!(lib.iter().all(|e| e.name != "EYX_lin"));
         assert!(lib.iter().any(|e| e.name == "EYX_quad"));

@@ -409,11 +409,9 @@ pub fn diagnose(
     opts: &Options,
 ) -> Result<Diagnosis> {
     forward::check_kind(machine, obs, obs_file)?;
-    let yaml: serde_yaml::Value = serde_yaml::from_str(machine_text)
-        .map_err(|e| Error::Internal(format!("validated machine file does not parse: {e}")))?;
     let ctx = effects::Context {
         machine,
-        yaml: &yaml,
+        text: machine_text,
         kind: obs.measured,
         file: obs_file,
     };

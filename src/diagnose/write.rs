@@ -30,35 +30,39 @@
 //! [`crate::calibrate::honesty`], on the added value) are not added unless
 //! asked for ([`withhold_uncertain`]).
 //!
-//! The file's text is edited in place: every value that changed is
-//! rewritten on its own line (scalars and one-line flow sequences/mappings),
-//! so comments and layout are kept. When a change cannot be made that way
-//! (a key the file does not have yet, a multi-line value), the document is
-//! rewritten from its parsed form instead, keeping only the leading comment
-//! block; [`Written::in_place`] says which happened.
-
-use serde_yaml::{Mapping, Value};
+//! Each accepted effect becomes a list of typed edits of the file's values
+//! (`Edit::Robot(RobotParam, v)`, `Edit::Tool(ToolParam, v)`, a whole
+//! component table, a new thermal term, a header comment per effect),
+//! applied by the one machine-file writer ([`crate::machine::yaml_write`]),
+//! which edits the text in place so comments and layout are kept; a key
+//! the file does not have yet (a location error, `actual`, `tool_load`) is
+//! added where it belongs.
 
 use super::Found;
-use super::effects::{Action, DhField, apply_to_yaml, round9};
+use super::effects::{Action, DhField, dh_param, round9, tool_edits};
 use crate::calibrate::honesty::{Rule, relative_uncertainty};
 use crate::calibrate::lsq::COVERAGE_K;
 use crate::calibrate::report::Estimate;
-use crate::calibrate::yaml_edit::{ThermalTermText, add_thermal_term, set_spindle_growth};
 use crate::error::{Error, Result};
 use crate::machine::Machine;
+use crate::machine::robot::{Robot, RobotParam};
+use crate::machine::tool::ToolParam;
+use crate::machine::yaml_write::{self, Edit, ThermalTermText, round_sig, round_to};
 
 /// `ts_per_w` of a Paper B term written for a linear growth, 1/W.
 pub const LINEAR_TS_PER_W: f64 = 1e-6;
+
+/// Decimals of the thermal lengths and gains written (mm, µm/kW).
+const THERMAL_DECIMALS: usize = 6;
 
 /// Time constant written into a new thermal section, min (assumed).
 pub const ASSUMED_TIME_CONSTANT_MIN: f64 = 30.0;
 
 const ASSUMED_TAU: &str = "postproc diagnose: time_constant_min is ASSUMED (rows at the thermal steady state carry no time information)";
 
-/// Applies a thermal effect to the file text.
-fn thermal_edit(text: &str, action: &Action, v0: f64, m: &Machine) -> Result<String> {
-    match (action, m) {
+/// The edit that writes a thermal effect.
+fn thermal_edit(action: &Action, v0: f64, m: &Machine) -> Result<Edit> {
+    let edit = match (action, m) {
         (
             Action::Thermal {
                 joint,
@@ -71,39 +75,40 @@ fn thermal_edit(text: &str, action: &Action, v0: f64, m: &Machine) -> Result<Str
                 DhField::A => 'a',
                 _ => 'd',
             };
-            let amp = round9(v0 * 1e-3 / LINEAR_TS_PER_W);
+            let amp = round_to(round9(v0 * 1e-3 / LINEAR_TS_PER_W), THERMAL_DECIMALS);
             let term = ThermalTermText {
                 parameter: format!("{l}{}", joint + 1),
                 joint: power + 1,
                 lb_mm: amp,
                 ub_mm: amp,
-                ts_per_w: LINEAR_TS_PER_W,
+                ts_per_w: round_sig(LINEAR_TS_PER_W),
             };
-            add_thermal_term(
-                text,
-                "(machine file)",
-                &term,
-                ASSUMED_TIME_CONSTANT_MIN,
-                ASSUMED_TAU,
-            )
+            Edit::ThermalTerm {
+                term,
+                time_constant_min: ASSUMED_TIME_CONSTANT_MIN,
+                comment: ASSUMED_TAU.into(),
+            }
         }
         (Action::SpindlePower, Machine::Tool(t)) => {
-            let old = t
-                .thermal()
-                .and_then(|th| th.spindle)
-                .map_or(0.0, |s| s.gain_per_kw);
-            set_spindle_growth(
-                text,
-                "(machine file)",
-                round9(old + v0),
-                ASSUMED_TIME_CONSTANT_MIN,
-                ASSUMED_TAU,
-            )
+            let spindle = t.thermal().and_then(|th| th.spindle);
+            let old = spindle.map_or(0.0, |s| s.gain_per_kw);
+            let growth = round_to(round9(old + v0), THERMAL_DECIMALS);
+            match spindle {
+                Some(_) => Edit::Tool(ToolParam::SpindleGrowth, growth),
+                None => Edit::Spindle {
+                    growth_um_per_kw: growth,
+                    time_constant_min: ASSUMED_TIME_CONSTANT_MIN,
+                    comment: ASSUMED_TAU.into(),
+                },
+            }
         }
-        _ => Err(Error::Internal(
-            "this effect is not written into the thermal section".into(),
-        )),
-    }
+        _ => {
+            return Err(Error::Internal(
+                "this effect is not written into the thermal section".into(),
+            ));
+        }
+    };
+    Ok(edit)
 }
 
 fn is_thermal(action: &Action) -> bool {
@@ -119,63 +124,31 @@ pub struct Written {
     pub written: Vec<String>,
     /// Effects not written, with the reason.
     pub not_written: Vec<(String, String)>,
-    /// True when the text was edited in place (comments kept).
+    /// True when the text was edited in place (comments kept), which the
+    /// machine-file writer always does.
     pub in_place: bool,
 }
 
-fn key(s: &str) -> Value {
-    Value::String(s.to_string())
-}
-
-fn as_f64(v: &Value) -> Option<f64> {
-    v.as_f64().or_else(|| v.as_i64().map(|i| i as f64))
-}
-
-fn root(doc: &mut Value) -> Result<&mut Mapping> {
-    doc.as_mapping_mut()
-        .ok_or_else(|| Error::Internal("validated machine file is not a mapping".into()))
-}
-
-fn add_num(m: &mut Mapping, k: &str, add: f64) {
-    let old = m.get(k).and_then(as_f64).unwrap_or(0.0);
-    m.insert(key(k), Value::from(round9(old + add)));
-}
-
-fn robot_edit(doc: &mut Value, action: &Action, p: &[f64], m: &Machine) -> Result<()> {
-    let r = root(doc)?;
+/// The edits of the robot file that add the fitted values `p` (display
+/// units) of an effect to the file's values.
+fn robot_edits(r: &Robot, action: &Action, p: &[f64]) -> Result<Vec<Edit>> {
     let v0 = p.first().copied().unwrap_or(0.0);
-    match action {
+    let value = |param: RobotParam| {
+        r.param_value(param).ok_or_else(|| {
+            Error::Internal(format!("validated robot file without {}", param.path()))
+        })
+    };
+    let added = |param: RobotParam, add: f64| -> Result<Edit> {
+        Ok(Edit::Robot(param, round9(value(param)? + add)))
+    };
+    Ok(match action {
         Action::Dh(j, f) => {
-            if !r.get("actual").is_some_and(Value::is_sequence) {
-                let nominal = r.get("nominal").cloned().ok_or_else(|| {
-                    Error::Internal("validated robot file without `nominal`".into())
-                })?;
-                r.insert(key("actual"), nominal);
-            }
-            let joint = r
-                .get_mut("actual")
-                .and_then(Value::as_sequence_mut)
-                .and_then(|s| s.get_mut(*j))
-                .and_then(Value::as_mapping_mut)
-                .ok_or_else(|| {
-                    Error::Internal(format!("validated robot file without actual[{j}]"))
-                })?;
-            match f {
-                DhField::Theta => add_num(joint, "theta_offset_deg", (v0 * 1e-6).to_degrees()),
-                DhField::Alpha => add_num(joint, "alpha_deg", (v0 * 1e-6).to_degrees()),
-                DhField::A => add_num(joint, "a_mm", v0 * 1e-3),
-                DhField::D => add_num(joint, "d_mm", v0 * 1e-3),
-            }
+            let (param, add) = dh_param(*j, *f, v0);
+            vec![added(param, add)?]
         }
         Action::Compliance(j) => {
-            let k = r
-                .get_mut("k_nm_per_rad")
-                .and_then(Value::as_sequence_mut)
-                .and_then(|s| s.get_mut(*j))
-                .ok_or_else(|| {
-                    Error::Internal(format!("validated robot file without k_nm_per_rad[{j}]"))
-                })?;
-            let old = as_f64(k).unwrap_or(f64::INFINITY);
+            let param = RobotParam::JointStiffness { joint: *j };
+            let old = value(param)?;
             // Compliance in rad/(N·m) is 1/k; the fitted addition is µrad/(N·m).
             let new = 1.0 / (1.0 / old + v0 * 1e-6);
             if !(new.is_finite() && new > 0.0) {
@@ -185,84 +158,46 @@ fn robot_edit(doc: &mut Value, action: &Action, p: &[f64], m: &Machine) -> Resul
                     j + 1
                 )));
             }
-            *k = Value::from((new * 1000.0).round() / 1000.0);
+            vec![Edit::Robot(param, (new * 1000.0).round() / 1000.0)]
         }
-        Action::Tcp => {
-            if !r.get("flange_to_tool").is_some_and(Value::is_mapping) {
-                let mut t = Mapping::new();
-                for c in ["x_mm", "y_mm", "z_mm"] {
-                    t.insert(key(c), Value::from(0.0));
-                }
-                r.insert(key("flange_to_tool"), Value::Mapping(t));
-            }
-            let t = r
-                .get_mut("flange_to_tool")
-                .and_then(Value::as_mapping_mut)
-                .ok_or_else(|| {
-                    Error::Internal(
-                        "`flange_to_tool` is not a mapping after it was made one".into(),
-                    )
-                })?;
-            for (c, v) in ["x_mm", "y_mm", "z_mm"].iter().zip(p) {
-                add_num(t, c, v * 1e-3);
-            }
-        }
-        Action::Payload => {
-            if !r.get("tool_load").is_some_and(Value::is_mapping) {
-                let tcp = match m {
-                    Machine::Robot(rb) => rb.flange_to_tool().translation.vector,
-                    Machine::Tool(_) => nalgebra::Vector3::zeros(),
-                };
-                let mut t = Mapping::new();
-                t.insert(key("mass_kg"), Value::from(0.0));
-                t.insert(
-                    key("cog_mm"),
-                    Value::Sequence(tcp.iter().map(|v| Value::from(*v)).collect()),
-                );
-                r.insert(key("tool_load"), Value::Mapping(t));
-            }
-            if let Some(t) = r.get_mut("tool_load").and_then(Value::as_mapping_mut) {
-                add_num(t, "mass_kg", v0);
-            }
-        }
+        Action::Tcp => p
+            .iter()
+            .take(3)
+            .enumerate()
+            .map(|(axis, v)| added(RobotParam::ToolOffset { axis }, v * 1e-3))
+            .collect::<Result<_>>()?,
+        Action::Payload => vec![added(RobotParam::PayloadMass, v0)?],
         _ => {
             return Err(Error::Internal(
                 "this effect has no key in the robot file".into(),
             ));
         }
-    }
-    Ok(())
+    })
 }
 
 /// Writes `found` into the machine file text.
 pub fn write_model(machine: &Machine, machine_text: &str, found: &[Found]) -> Result<Written> {
-    let mut doc: Value = serde_yaml::from_str(machine_text)
-        .map_err(|e| Error::Internal(format!("validated machine file does not parse: {e}")))?;
     let mut written = Vec::new();
     let mut not_written = Vec::new();
+    let mut edits = Vec::new();
+    let mut thermal = Vec::new();
     for f in found {
         if let Some(why) = &f.effect.not_writable {
             not_written.push((f.effect.name.clone(), why.clone()));
             continue;
         }
         let values: Vec<f64> = f.params.iter().map(|p| p.value).collect();
+        let v0 = values.first().copied().unwrap_or(0.0);
         if is_thermal(&f.effect.action) {
-            // Written as text below.
-            written.push(f.effect.name.clone());
-            continue;
-        }
-        match machine {
-            Machine::Robot(_) => robot_edit(&mut doc, &f.effect.action, &values, machine)?,
-            Machine::Tool(_) => apply_to_yaml(
-                &mut doc,
-                &f.effect.action,
-                values.first().copied().unwrap_or(0.0),
-                machine,
-            )?,
+            thermal.push(thermal_edit(&f.effect.action, v0, machine)?);
+        } else {
+            edits.extend(match machine {
+                Machine::Robot(r) => robot_edits(r, &f.effect.action, &values)?,
+                Machine::Tool(t) => tool_edits(&f.effect.action, v0, t)?,
+            });
         }
         written.push(f.effect.name.clone());
     }
-    let mut header = String::new();
     for f in found {
         let vals: Vec<String> = f
             .params
@@ -274,187 +209,21 @@ pub fn write_model(machine: &Machine, machine_text: &str, found: &[Found]) -> Re
         } else {
             "NOT written (no key in the file format)"
         };
-        header.push_str(&format!(
-            "# postproc diagnose: {} {state}: {}\n",
+        edits.push(Edit::HeaderComment(format!(
+            "postproc diagnose: {} {state}: {}",
             f.effect.name,
             vals.join(", ")
-        ));
+        )));
     }
-    let old: Value = serde_yaml::from_str(machine_text)
-        .map_err(|e| Error::Internal(format!("validated machine file does not parse: {e}")))?;
-    let mut lines: Vec<String> = machine_text.lines().map(str::to_string).collect();
-    let edited = edit(&mut lines, "", &old, &doc).is_some() && {
-        let t = lines.join("\n");
-        serde_yaml::from_str::<Value>(&t).is_ok_and(|v| v == doc)
-    };
-    let mut text = String::new();
-    let split = machine_text
-        .lines()
-        .take_while(|l| l.starts_with('#') || l.trim().is_empty())
-        .count();
-    if edited {
-        for l in lines.iter().take(split) {
-            text.push_str(l);
-            text.push('\n');
-        }
-        text.push_str(&header);
-        for l in lines.iter().skip(split) {
-            text.push_str(l);
-            text.push('\n');
-        }
-    } else {
-        let body = serde_yaml::to_string(&doc)
-            .map_err(|e| Error::Internal(format!("cannot write the machine file: {e}")))?;
-        for l in machine_text.lines().take(split) {
-            text.push_str(l);
-            text.push('\n');
-        }
-        text.push_str(&header);
-        text.push_str(
-            "# (rewritten by postproc diagnose: comments inside the document were not kept)\n",
-        );
-        text.push_str(&body);
-    }
-    for f in found {
-        if f.effect.not_writable.is_none() && is_thermal(&f.effect.action) {
-            let v0 = f.params.first().map_or(0.0, |p| p.value);
-            text = thermal_edit(&text, &f.effect.action, v0, machine)?;
-        }
-    }
+    edits.extend(thermal);
+    let text = yaml_write::apply(machine_text, "(machine file)", "postproc diagnose", &edits)?;
     // The written file must load.
     Machine::from_yaml_str(&text, "(written model)")?;
     Ok(Written {
         text,
         written,
         not_written,
-        in_place: edited,
-    })
-}
-
-/// Makes `lines` carry `new` where it differs from `old` at `path`;
-/// `None` when some change cannot be made line-locally.
-fn edit(lines: &mut [String], path: &str, old: &Value, new: &Value) -> Option<()> {
-    if old == new {
-        return Some(());
-    }
-    if !path.is_empty() && replace_value(lines, path, new).is_some() {
-        return Some(());
-    }
-    match (old, new) {
-        (Value::Mapping(a), Value::Mapping(b)) if a.len() == b.len() => {
-            for (k, vb) in b {
-                let va = a.get(k)?;
-                let ks = match k {
-                    Value::String(s) => s.clone(),
-                    Value::Number(n) => n.to_string(),
-                    _ => return None,
-                };
-                let p = if path.is_empty() {
-                    ks
-                } else {
-                    format!("{path}.{ks}")
-                };
-                edit(lines, &p, va, vb)?;
-            }
-            Some(())
-        }
-        (Value::Sequence(a), Value::Sequence(b)) if a.len() == b.len() && !path.is_empty() => {
-            for (i, (va, vb)) in a.iter().zip(b).enumerate() {
-                edit(lines, &format!("{path}[{i}]"), va, vb)?;
-            }
-            Some(())
-        }
-        _ => None,
-    }
-}
-
-/// Replaces the one-line value at `path` by the flow rendering of `v`.
-fn replace_value(lines: &mut [String], path: &str, v: &Value) -> Option<()> {
-    let (line_no, col) = crate::machine::yaml::locate(&lines.join("\n"), path)?;
-    let line = lines.get(line_no.checked_sub(1)?)?.clone();
-    let start_key = col.checked_sub(1)?;
-    let is_item = path.ends_with(']');
-    let rest_from = if is_item {
-        // `col` points at the item's dash.
-        start_key + line.get(start_key..)?.find('-')? + 1
-    } else {
-        let after = line.get(start_key..)?;
-        start_key + after.find(':')? + 1
-    };
-    let rest = line.get(rest_from..)?;
-    let start = rest_from + (rest.len() - rest.trim_start().len());
-    let body = line.get(start..)?;
-    let end = match body.chars().next()? {
-        '{' | '[' => {
-            let mut depth = 0i32;
-            let mut end = None;
-            for (i, c) in body.char_indices() {
-                match c {
-                    '{' | '[' => depth += 1,
-                    '}' | ']' => {
-                        depth -= 1;
-                        if depth == 0 {
-                            end = Some(i + 1);
-                            break;
-                        }
-                    }
-                    '#' | '"' | '\'' => return None,
-                    _ => {}
-                }
-            }
-            start + end?
-        }
-        '#' | '|' | '>' | '&' | '*' | '!' => return None,
-        _ => {
-            if !matches!(v, Value::Number(_)) {
-                return None;
-            }
-            start
-                + body
-                    .find(" #")
-                    .unwrap_or(body.len())
-                    .min(body.trim_end().len())
-        }
-    };
-    let new_line = format!("{}{}{}", line.get(..start)?, flow(v)?, line.get(end..)?);
-    *lines.get_mut(line_no - 1)? = new_line;
-    Some(())
-}
-
-/// One-line flow rendering of numbers, plain strings, sequences and mappings.
-fn flow(v: &Value) -> Option<String> {
-    Some(match v {
-        Value::Number(n) => match n.as_f64() {
-            Some(f) if n.is_f64() => {
-                let s = format!("{f}");
-                if s.contains(['.', 'e', 'E', 'N', 'i']) {
-                    s
-                } else {
-                    format!("{s}.0")
-                }
-            }
-            _ => n.to_string(),
-        },
-        Value::Bool(b) => b.to_string(),
-        Value::String(s)
-            if !s.is_empty()
-                && s.chars()
-                    .all(|c| c.is_ascii_alphanumeric() || "_-. ".contains(c)) =>
-        {
-            s.clone()
-        }
-        Value::Sequence(items) => {
-            let parts: Option<Vec<String>> = items.iter().map(flow).collect();
-            format!("[{}]", parts?.join(", "))
-        }
-        Value::Mapping(m) => {
-            let mut parts = Vec::new();
-            for (k, v) in m {
-                parts.push(format!("{}: {}", flow(k)?, flow(v)?));
-            }
-            format!("{{ {} }}", parts.join(", "))
-        }
-        _ => return None,
+        in_place: true,
     })
 }
 

@@ -10,6 +10,7 @@ pub mod status;
 pub mod thermal_start;
 pub mod tool;
 pub mod yaml;
+pub mod yaml_write;
 
 use std::borrow::Cow;
 use std::path::{Path, PathBuf};

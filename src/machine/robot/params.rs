@@ -1,6 +1,6 @@
 //! Parameters of a robot as data: a typed id for each value a calibration
 //! identifies or a study varies (the actual DH parameters, the joint
-//! stiffnesses, the thermal terms), and [`Robot::with_params`], which gives
+//! stiffnesses, the thermal terms, the tool centre point), and [`Robot::with_params`], which gives
 //! the robot with some of them set and validated again exactly as if the
 //! file had held those values.
 //!
@@ -10,7 +10,7 @@
 use crate::error::{Error, Located, Result};
 
 use super::Robot;
-use super::raw::RawRobot;
+use super::raw::{RawFrame, RawLoad, RawRobot};
 
 /// A field of one row of the DH table.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
@@ -61,6 +61,16 @@ pub enum RobotParam {
     },
     /// `thermal.time_constant_min`.
     ThermalTimeConstant,
+    /// `flange_to_tool.x_mm`, `y_mm`, `z_mm` (`axis` 0..3): the tool
+    /// centre point in the flange frame (a file without `flange_to_tool`
+    /// starts from the flange itself).
+    ToolOffset {
+        /// Flange axis x, y, z (0..3).
+        axis: usize,
+    },
+    /// `tool_load.mass_kg` (a file without `tool_load` starts from a
+    /// massless load at the tool centre point).
+    PayloadMass,
 }
 
 impl RobotParam {
@@ -86,6 +96,11 @@ impl RobotParam {
                 format!("thermal.terms[{term}].{key}")
             }
             RobotParam::ThermalTimeConstant => "thermal.time_constant_min".into(),
+            RobotParam::ToolOffset { axis } => {
+                let key = ["x_mm", "y_mm", "z_mm"].get(axis).copied().unwrap_or("?");
+                format!("flange_to_tool.{key}")
+            }
+            RobotParam::PayloadMass => "tool_load.mass_kg".into(),
         }
     }
 }
@@ -113,6 +128,45 @@ impl Robot {
         r.d.force_table.clone_from(&self.d.force_table);
         r.d.allow_reconfiguration = self.d.allow_reconfiguration;
         Ok(r)
+    }
+
+    /// The value of a parameter as the file gives it (in the unit of its
+    /// key; a DH field of a file without `actual` is the nominal one, a
+    /// missing `flange_to_tool` or `tool_load` gives 0); `None` for a value
+    /// the file does not have.
+    pub fn param_value(&self, p: RobotParam) -> Option<f64> {
+        let raw = &*self.d.raw;
+        match p {
+            RobotParam::Dh { joint, field } => {
+                let row = raw.actual.as_ref().unwrap_or(&raw.nominal).get(joint)?;
+                Some(match field {
+                    DhField::A => row.a_mm,
+                    DhField::Alpha => row.alpha_deg,
+                    DhField::D => row.d_mm,
+                    DhField::ThetaOffset => row.theta_offset_deg,
+                })
+            }
+            RobotParam::JointStiffness { joint } => raw.k_nm_per_rad.get(joint).copied(),
+            RobotParam::Thermal { term, field } => {
+                let t = raw.thermal.as_ref()?.terms.get(term)?;
+                Some(match field {
+                    ThermalField::Lb => t.lb_mm,
+                    ThermalField::Ub => t.ub_mm,
+                    ThermalField::Ts => t.ts_per_w,
+                })
+            }
+            RobotParam::ThermalTimeConstant => Some(raw.thermal.as_ref()?.time_constant_min),
+            RobotParam::ToolOffset { axis } => {
+                let f = raw.flange_to_tool.as_ref();
+                match axis {
+                    0 => Some(f.map_or(0.0, |f| f.x_mm)),
+                    1 => Some(f.map_or(0.0, |f| f.y_mm)),
+                    2 => Some(f.map_or(0.0, |f| f.z_mm)),
+                    _ => None,
+                }
+            }
+            RobotParam::PayloadMass => Some(raw.tool_load.as_ref().map_or(0.0, |l| l.mass_kg)),
+        }
     }
 
     fn param_error(&self, path: &str, message: &str) -> Error {
@@ -161,6 +215,33 @@ fn set(raw: &mut RawRobot, p: RobotParam, v: f64) -> std::result::Result<(), Str
                 .as_mut()
                 .ok_or_else(|| "the file has no `thermal` section".to_string())?
                 .time_constant_min = v;
+        }
+        RobotParam::ToolOffset { axis } => {
+            let f = raw.flange_to_tool.get_or_insert(RawFrame {
+                x_mm: 0.0,
+                y_mm: 0.0,
+                z_mm: 0.0,
+                quaternion: None,
+                rpy_deg: None,
+            });
+            match axis {
+                0 => f.x_mm = v,
+                1 => f.y_mm = v,
+                2 => f.z_mm = v,
+                _ => return Err("no such axis".into()),
+            }
+        }
+        RobotParam::PayloadMass => {
+            let tcp = raw
+                .flange_to_tool
+                .as_ref()
+                .map_or([0.0; 3], |f| [f.x_mm, f.y_mm, f.z_mm]);
+            raw.tool_load
+                .get_or_insert(RawLoad {
+                    mass_kg: 0.0,
+                    cog_mm: tcp,
+                })
+                .mass_kg = v;
         }
     }
     Ok(())
@@ -250,5 +331,42 @@ mod tests {
             assert_eq!(e.kind(), crate::error::ErrorKind::Machine, "{p:?}");
             assert!(e.to_string().contains(&p.path()), "{e}");
         }
+    }
+
+    /// `param_value` reads what `with_params` set; a payload set on a
+    /// file without `tool_load` sits at the tool centre point.
+    #[test]
+    fn param_value_reads_the_values_set() {
+        let r = load(&text());
+        let params = [
+            (
+                RobotParam::Dh {
+                    joint: 2,
+                    field: DhField::D,
+                },
+                0.05,
+            ),
+            (RobotParam::JointStiffness { joint: 5 }, 20000.0),
+            (RobotParam::ToolOffset { axis: 0 }, 1.5),
+            (RobotParam::PayloadMass, 6.5),
+            (RobotParam::ThermalTimeConstant, 35.0),
+        ];
+        let set = r.with_params(&params).expect("valid");
+        for (p, v) in params {
+            assert_eq!(set.param_value(p), Some(v), "{p:?}");
+        }
+        let bare: String = text()
+            .lines()
+            .filter(|l| !l.starts_with("tool_load:"))
+            .map(|l| format!("{l}\n"))
+            .collect();
+        let r = load(&bare);
+        assert_eq!(r.param_value(RobotParam::PayloadMass), Some(0.0));
+        let set = r
+            .with_params(&[(RobotParam::PayloadMass, 2.0)])
+            .expect("valid");
+        let payload = set.tool_load().expect("a load");
+        assert_eq!(payload.mass_kg, 2.0);
+        assert_eq!(payload.com_mm, set.flange_to_tool().translation.vector);
     }
 }

@@ -10,7 +10,7 @@
 use crate::error::{Error, Located, Result};
 
 use super::MachineTool;
-use super::raw::{RawGridValues, RawMachineTool, RawTable};
+use super::raw::{RawGridValues, RawMachineTool, RawSpindle, RawTable};
 
 const LETTERS: [char; 6] = ['X', 'Y', 'Z', 'A', 'B', 'C'];
 
@@ -60,6 +60,12 @@ pub enum ToolParam {
         /// Grid cell, `None` for a uniform value.
         cell: Option<[usize; 3]>,
     },
+    /// A location error of the spindle (`spindle.location_errors`:
+    /// `EX0S_mm`, `EY0S_mm`, `EA0S_urad`, `EB0S_urad`).
+    SpindleLocation {
+        /// Which location error (an offset or an orientation).
+        error: LocationParam,
+    },
     /// `thermal.spindle.growth_um_per_kw`.
     SpindleGrowth,
     /// `thermal.spindle.time_constant_min`.
@@ -103,6 +109,9 @@ impl ToolParam {
                 letter(dir).to_ascii_lowercase(),
                 if positive { "pos" } else { "neg" }
             ),
+            ToolParam::SpindleLocation { error } => {
+                format!("spindle.location_errors.{}", spindle_key(error))
+            }
             ToolParam::SpindleGrowth => "thermal.spindle.growth_um_per_kw".into(),
             ToolParam::SpindleTimeConstant => "thermal.spindle.time_constant_min".into(),
             ToolParam::AxisScale { axis } => {
@@ -116,14 +125,24 @@ impl ToolParam {
 }
 
 /// The file key of a component error table (`EYX_um`, `EAX_urad`).
-fn component_key(axis: usize, error: usize) -> String {
+pub(crate) fn component_key(axis: usize, error: usize) -> String {
     let l = |s: usize| LETTERS.get(s).copied().unwrap_or('?');
     let unit = if error < 3 { "um" } else { "urad" };
     format!("E{}{}_{unit}", l(error), l(axis))
 }
 
+/// The file key of a spindle location error (`EX0S_mm`, `EA0S_urad`).
+pub(crate) fn spindle_key(error: LocationParam) -> String {
+    let l = |s: usize| LETTERS.get(s).copied().unwrap_or('?');
+    match error {
+        LocationParam::Offset(t) => format!("E{}0S_mm", l(t)),
+        LocationParam::Angle(r) => format!("E{}0S_urad", l(r + 3)),
+        LocationParam::Zero => "E?0S_urad".into(),
+    }
+}
+
 /// The file key of a location error (`EC0Y_urad`, `EX0B_mm`, `EB0B_urad`).
-fn location_key(axis: usize, error: LocationParam) -> String {
+pub(crate) fn location_key(axis: usize, error: LocationParam) -> String {
     let l = |s: usize| LETTERS.get(s).copied().unwrap_or('?');
     match error {
         LocationParam::Offset(t) => format!("E{}0{}_mm", l(t), l(axis)),
@@ -148,12 +167,137 @@ impl MachineTool {
         super::load::validate(raw).map_err(|inv| self.param_error(&inv.path, &inv.message))
     }
 
+    /// The value of a parameter as the file gives it (in the unit of its
+    /// key): a location error the file does not write is 0; `None` for a
+    /// value the file does not have (a missing table, section or node).
+    pub fn param_value(&self, p: ToolParam) -> Option<f64> {
+        let raw = &*self.raw;
+        let axis = |slot: usize| {
+            let name = LETTERS.get(slot)?.to_string();
+            raw.axes.iter().find(|a| a.name == name)
+        };
+        match p {
+            ToolParam::Component {
+                axis: a,
+                error,
+                node,
+                forward,
+            } => {
+                let t = axis(a)?.component_errors.get(&component_key(a, error))?;
+                let col = match (&t.reverse, forward) {
+                    (Some(r), false) => r,
+                    _ => &t.forward,
+                };
+                col.get(node).copied()
+            }
+            ToolParam::Location { axis: a, error } => Some(
+                axis(a)?
+                    .location_errors
+                    .get(&location_key(a, error))
+                    .copied()
+                    .unwrap_or(0.0),
+            ),
+            ToolParam::SpindleLocation { error } => Some(
+                raw.spindle
+                    .as_ref()
+                    .and_then(|s| s.location_errors.get(&spindle_key(error)).copied())
+                    .unwrap_or(0.0),
+            ),
+            ToolParam::Stiffness {
+                dir,
+                positive,
+                cell,
+            } => {
+                let values = stiffness_values(raw, dir, positive)?;
+                match (values, cell) {
+                    (RawGridValues::Uniform(u), None) => Some(*u),
+                    (RawGridValues::Grid(g), Some([iz, iy, ix])) => {
+                        g.get(iz)?.get(iy)?.get(ix).copied()
+                    }
+                    _ => None,
+                }
+            }
+            ToolParam::SpindleGrowth | ToolParam::SpindleTimeConstant => {
+                let s = raw.thermal.as_ref()?.spindle.as_ref()?;
+                Some(if p == ToolParam::SpindleGrowth {
+                    s.growth_um_per_kw
+                } else {
+                    s.time_constant_min
+                })
+            }
+            ToolParam::AxisScale { axis: a } | ToolParam::AxisTimeConstant { axis: a } => {
+                let t = raw
+                    .thermal
+                    .as_ref()?
+                    .axes
+                    .get(&LETTERS.get(a)?.to_string())?;
+                Some(if matches!(p, ToolParam::AxisScale { .. }) {
+                    t.scale_ppm_per_kw
+                } else {
+                    t.time_constant_min
+                })
+            }
+        }
+    }
+
+    /// The stiffness parameters of direction `dir` (0..3) and load sign in
+    /// the file: the one uniform value, or every grid cell.
+    pub fn stiffness_params(&self, dir: usize, positive: bool) -> Vec<ToolParam> {
+        let p = |cell| ToolParam::Stiffness {
+            dir,
+            positive,
+            cell,
+        };
+        match stiffness_values(&self.raw, dir, positive) {
+            None => Vec::new(),
+            Some(RawGridValues::Uniform(_)) => vec![p(None)],
+            Some(RawGridValues::Grid(g)) => {
+                let mut out = Vec::new();
+                for (iz, plane) in g.iter().enumerate() {
+                    for (iy, row) in plane.iter().enumerate() {
+                        for ix in 0..row.len() {
+                            out.push(p(Some([iz, iy, ix])));
+                        }
+                    }
+                }
+                out
+            }
+        }
+    }
+
+    /// The component error table of the axis in slot `axis` for error
+    /// direction `error` as the file gives it: positions (mm or degrees),
+    /// forward and reverse columns (the forward one when the file has no
+    /// reverse); `None` when the file has no such table.
+    pub fn component_table(&self, axis: usize, error: usize) -> Option<[Vec<f64>; 3]> {
+        let name = LETTERS.get(axis)?.to_string();
+        let a = self.raw.axes.iter().find(|a| a.name == name)?;
+        let t = a.component_errors.get(&component_key(axis, error))?;
+        let pos = t.positions_mm.clone().or_else(|| t.positions_deg.clone())?;
+        let rev = t.reverse.clone().unwrap_or_else(|| t.forward.clone());
+        Some([pos, t.forward.clone(), rev])
+    }
+
     fn param_error(&self, path: &str, message: &str) -> Error {
         Error::Machine(Located::whole_file(
             format!("machine `{}`", self.name),
             format!("{path}: {message} (a parameter set by value)"),
         ))
     }
+}
+
+/// The stiffness values of direction `dir` and load sign in the file.
+fn stiffness_values(raw: &RawMachineTool, dir: usize, positive: bool) -> Option<&RawGridValues> {
+    let k = &raw.stiffness.as_ref()?.k_n_per_um;
+    Some(match (dir, positive) {
+        (0, true) => &k.x_pos,
+        (0, false) => &k.x_neg,
+        (1, true) => &k.y_pos,
+        (1, false) => &k.y_neg,
+        (2, true) => &k.z_pos,
+        (2, false) => &k.z_neg,
+        _ => return None,
+    })
 }
 
 /// Sets one parameter in the raw file; the message says why it cannot.
@@ -211,6 +355,18 @@ fn set(raw: &mut RawMachineTool, p: ToolParam, v: f64) -> std::result::Result<()
                     return Err("the value is a grid: give its cell".into());
                 }
             }
+            Ok(())
+        }
+        ToolParam::SpindleLocation { error } => {
+            if error == LocationParam::Zero {
+                return Err("the spindle has no zero-angle error".into());
+            }
+            raw.spindle
+                .get_or_insert_with(|| RawSpindle {
+                    location_errors: Default::default(),
+                })
+                .location_errors
+                .insert(spindle_key(error), v);
             Ok(())
         }
         ToolParam::SpindleGrowth | ToolParam::SpindleTimeConstant => {
@@ -479,5 +635,55 @@ thermal:
         };
         let e = m.with_params(&[(own, 1.0)]).expect_err("EA0X is not a key");
         assert!(e.to_string().contains("EA0X_urad"), "{e}");
+    }
+
+    /// `param_value` reads what `with_params` set, and the file's values
+    /// otherwise (a location error the file does not write is 0).
+    #[test]
+    fn param_value_reads_the_values_set() {
+        let m = base();
+        let sq = ToolParam::Location {
+            axis: 1,
+            error: LocationParam::Angle(2),
+        };
+        assert_eq!(m.param_value(sq), Some(12.5));
+        let absent = ToolParam::Location {
+            axis: 2,
+            error: LocationParam::Angle(0),
+        };
+        assert_eq!(m.param_value(absent), Some(0.0));
+        let params = [
+            (sq, -3.0),
+            (
+                ToolParam::Component {
+                    axis: 0,
+                    error: 1,
+                    node: 1,
+                    forward: false,
+                },
+                0.75,
+            ),
+            (
+                ToolParam::SpindleLocation {
+                    error: LocationParam::Offset(0),
+                },
+                0.01,
+            ),
+            (ToolParam::SpindleGrowth, 9.0),
+            (ToolParam::AxisScale { axis: 0 }, 4.0),
+        ];
+        let set = m.with_params(&params).expect("valid");
+        for (p, v) in params {
+            assert_eq!(set.param_value(p), Some(v), "{p:?}");
+        }
+        assert_eq!(m.stiffness_params(0, true).len(), 1);
+        assert_eq!(
+            m.component_table(0, 0),
+            Some([
+                vec![0.0, 250.0, 500.0],
+                vec![0.0, 1.5, 3.0],
+                vec![0.0, 1.5, 3.0]
+            ])
+        );
     }
 }
