@@ -206,7 +206,8 @@ impl<'a> Tracker<'a> {
             if let Some(f) = self.force {
                 let tool_axis = m.nominal(&mv.end, mv.tool_len_mm).dir;
                 let drilling = matches!(plan.kind, PlanKind::Cycle { .. })
-                    || (mv.arc.is_none() && feed_dir.dot(&tool_axis) < -(1.0 - 1e-6));
+                    || (mv.arc.is_none()
+                        && feed_dir.dot(&tool_axis) < -crate::process::AXIAL_FEED_RAD.cos());
                 let state = CutState {
                     line,
                     cutting,

@@ -274,6 +274,12 @@ pub struct MillingCache {
 
 /// Orthonormal basis (x, y, z) with z = `axis` and x the projection of
 /// `toward` normal to it (`fallback` when `toward` is along the axis).
+/// Largest angle between a feed direction and the tool axis at which the
+/// feed counts as axial (a plunge or a retract, no feed across the cutter),
+/// rad. A compensated program tilts such moves by a few micrometres over
+/// their length, which must not turn them into side cuts.
+pub const AXIAL_FEED_RAD: f64 = 0.01;
+
 fn basis(
     axis: &Vector3<f64>,
     toward: &Vector3<f64>,
@@ -281,7 +287,7 @@ fn basis(
 ) -> Option<[Vector3<f64>; 3]> {
     let z = axis.try_normalize(EPS)?;
     let x = (toward - z * z.dot(toward))
-        .try_normalize(1e-6)
+        .try_normalize(AXIAL_FEED_RAD.sin())
         .or_else(|| (fallback - z * z.dot(fallback)).try_normalize(1e-6))?;
     Some([x, z.cross(&x), z])
 }

@@ -10,6 +10,8 @@
 
 use std::collections::BTreeMap;
 
+use std::f64::consts::{FRAC_PI_2, PI};
+
 use nalgebra::Vector3;
 
 use crate::error::Located;
@@ -58,6 +60,74 @@ fn modal_group(code: i64) -> Option<usize> {
 
 /// Below this an axis is considered not to move, mm or deg.
 pub const MOTION_EPS: f64 = 1e-9;
+
+/// Travel below which an axis keeps its direction of motion, mm or deg: a
+/// reversal of the direction-dependent errors (backlash, the reverse column
+/// of the error tables) needs travel to take up the lash, and a move this
+/// short leaves the axis against the side it last moved on. A compensated
+/// program moves axes that stand still in the programmed block by fractions
+/// of a micron (the correction changes along the path); with this deadband
+/// those moves keep the directions the compensation was solved with. See
+/// docs/compensation.md, "Directions of motion".
+pub const DIRECTION_DEADBAND: f64 = 1e-3;
+
+/// Most stretches between reversals looked at, from the end of an arc back.
+const ARC_STRETCHES: usize = 8;
+
+/// The direction of motion at the end of an arc of the in-plane axis whose
+/// position is `r·cos(θ − phase)` about the centre (`phase` 0: the plane's
+/// first axis, π/2: the second), the arc starting at angle `theta0`: the
+/// direction of the last stretch between its reversals (quadrant points)
+/// along which it travels more than [`DIRECTION_DEADBAND`]. An arc that
+/// ends just past a quadrant point leaves the axis moving the way it went
+/// before it. `None` when no stretch travels that far.
+fn arc_axis_direction(g: &ArcGeom, theta0: f64, phase: f64) -> Option<i8> {
+    let pos = |t: f64| g.radius * (t - phase).cos();
+    let end = theta0 + g.sweep;
+    let back = -g.sweep.signum();
+    // The reversal nearest the end, on the arc's side of it: (t − phase) a
+    // multiple of π.
+    let k = ((end - phase) / PI).floor();
+    let mut turn = phase + PI * if back < 0.0 { k } else { k + 1.0 };
+    let mut hi = end;
+    for _ in 0..ARC_STRETCHES {
+        let inside = (turn - theta0) * g.sweep.signum() > 0.0;
+        let lo = if inside { turn } else { theta0 };
+        let d = pos(hi) - pos(lo);
+        if d.abs() > DIRECTION_DEADBAND {
+            return Some(if d > 0.0 { 1 } else { -1 });
+        }
+        if !inside {
+            return None;
+        }
+        hi = turn;
+        turn += back * PI;
+    }
+    None
+}
+
+/// The direction of motion of each axis over the move `start → end` (for an
+/// arc in its plane: along its tangent just before the end), given the
+/// directions `prev` before it: an axis that travels less than
+/// [`DIRECTION_DEADBAND`] keeps its direction. A programmed block and the
+/// pieces of its compensated program are read with this one rule, so that
+/// small moves of the pieces keep the block's directions.
+pub fn directions(prev: &DirVec, start: &AxisVec, end: &AxisVec, arc: Option<&ArcGeom>) -> DirVec {
+    let mut dirs = *prev;
+    for i in 0..6 {
+        let d = end[i] - start[i];
+        if d.abs() > DIRECTION_DEADBAND {
+            dirs[i] = if d > 0.0 { 1 } else { -1 };
+        }
+    }
+    if let Some(g) = arc {
+        let (a, b, _) = g.plane.axes();
+        let theta0 = (start[b] - g.center[b]).atan2(start[a] - g.center[a]);
+        dirs[a] = arc_axis_direction(g, theta0, 0.0).unwrap_or(prev[a]);
+        dirs[b] = arc_axis_direction(g, theta0, FRAC_PI_2).unwrap_or(prev[b]);
+    }
+    dirs
+}
 
 /// Kind of motion of a move.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -1505,36 +1575,7 @@ impl Interpreter {
         arc: Option<ArcGeom>,
     ) -> Move {
         let prev_dirs = self.dirs;
-        let mut dirs = self.dirs;
-        match &arc {
-            Some(g) => {
-                let s3 = Vector3::new(start[0], start[1], start[2]);
-                let e3 = Vector3::new(end[0], end[1], end[2]);
-                // Just before the end: at a quadrant point one component of
-                // the tangent vanishes, and the axis still moved the way it
-                // was going.
-                let t = g.tangent(&s3, &e3, END_INSIDE);
-                for i in 0..3 {
-                    if t[i].abs() > 1e-12 {
-                        dirs[i] = if t[i] > 0.0 { 1 } else { -1 };
-                    }
-                }
-                for i in 3..6 {
-                    let d = end[i] - start[i];
-                    if d.abs() > MOTION_EPS {
-                        dirs[i] = if d > 0.0 { 1 } else { -1 };
-                    }
-                }
-            }
-            None => {
-                for i in 0..6 {
-                    let d = end[i] - start[i];
-                    if d.abs() > MOTION_EPS {
-                        dirs[i] = if d > 0.0 { 1 } else { -1 };
-                    }
-                }
-            }
-        }
+        let dirs = directions(&prev_dirs, &start, &end, arc.as_ref());
         self.dirs = dirs;
         self.pos = end;
         Move {
