@@ -280,3 +280,55 @@ fn the_same_flags_apply_where_they_belong() {
         report_ok(program, machine, args);
     }
 }
+
+/// Regression: `compensate PROGRAM.nc --out-dir DIR` wrote the G-code
+/// output beside the input (`PROGRAM.comp.nc`) and never made `DIR`. Both
+/// languages write `DIR/<the program's file name>`, the same bytes as
+/// `-o`, and nothing beside the input.
+#[test]
+fn regression_out_dir_takes_the_output_for_both_languages() {
+    for (program, machine) in ENGINES {
+        let dir = tempfile::tempdir().unwrap();
+        let name = std::path::Path::new(program).file_name().unwrap();
+        let input = dir.path().join(name);
+        std::fs::copy(repo(program), &input).unwrap();
+        let out_dir = dir.path().join("out");
+        postproc()
+            .args(["-q", "compensate"])
+            .arg(&input)
+            .args(["-m", machine, "--out-dir"])
+            .arg(&out_dir)
+            .assert()
+            .success();
+        let written = std::fs::read(out_dir.join(name)).expect("output in --out-dir");
+        let beside: Vec<_> = std::fs::read_dir(dir.path())
+            .unwrap()
+            .map(|e| e.unwrap().file_name())
+            .collect();
+        assert_eq!(beside.len(), 2, "{program}: {beside:?}");
+        let by_o = dir.path().join("by-o");
+        postproc()
+            .args(["-q", "compensate"])
+            .arg(&input)
+            .args(["-m", machine, "-o"])
+            .arg(&by_o)
+            .assert()
+            .success();
+        assert_eq!(written, std::fs::read(&by_o).unwrap(), "{program}");
+    }
+    // Standard input has no name to write under.
+    let dir = tempfile::tempdir().unwrap();
+    let out = postproc()
+        .args(["compensate", "-", "-m", "afm-r1000", "--out-dir"])
+        .arg(dir.path().join("out"))
+        .write_stdin("G21 G90 G54\nG1 X10. F100.\n")
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    assert!(
+        String::from_utf8_lossy(&out.stderr).contains("--out-dir needs a program file"),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(!dir.path().join("out").exists());
+}

@@ -101,3 +101,75 @@ fn regression_inch_programs_get_decimals_within_the_tolerance() {
         "{out}"
     );
 }
+
+/// Regression: a block written as several pieces (here a takeup point and
+/// the move) kept its M codes and `G9` on its own line, the takeup point,
+/// so `M30` ended the program before the last move, `M0`/`M1` stopped
+/// before the move and `M5` stopped the spindle before the cut. Words that
+/// act at the end of the motion go to the last piece; the block number,
+/// feed and the coolant start `M8` stay on the first.
+#[test]
+fn regression_stops_and_ends_go_to_the_last_piece_of_a_block() {
+    let program = "%\nO2001\nN1 G21 G90 G17\nN2 T1 M6\nN3 G54 G0 X0. Y0. S3000 M3\n\
+                   N4 G43 H1 Z50.\nN5 G1 Z-1. F300.\nN6 G1 X40. F800. M8\nN7 G1 Y25. M5\n\
+                   N8 G1 X0. M1\nN9 G9 G1 Y0.\nN10 G2 X20. Y0. I10. J0. F500. M0\n\
+                   N11 G1 Y10. M30\n%\n";
+    // All effects: the static and thermal parts make the takeup points.
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(dir.path().join("p.nc"), program).unwrap();
+    let written = postproc()
+        .current_dir(dir.path())
+        .args(["compensate", "p.nc", "--machine", "afm-r1000", "-o", "-"])
+        .args(["--annotate", "none"])
+        .assert()
+        .success()
+        .get_output()
+        .stdout
+        .clone();
+    let out = String::from_utf8(crate::common::without_header(&written)).unwrap();
+    // The lines of each numbered block: its own and the ones added after it.
+    let mut blocks: Vec<(String, Vec<&str>)> = Vec::new();
+    for line in out.lines() {
+        match line.split_whitespace().next() {
+            Some(n) if n.starts_with('N') => blocks.push((n.to_string(), vec![line])),
+            Some("%") => blocks.push(("%".into(), vec![line])),
+            _ => {
+                if let Some(b) = blocks.last_mut() {
+                    b.1.push(line);
+                }
+            }
+        }
+    }
+    let lines = |n: &str| {
+        blocks
+            .iter()
+            .find(|b| b.0 == n)
+            .map(|b| b.1.clone())
+            .unwrap_or_else(|| panic!("{n} missing:\n{out}"))
+    };
+    let has = |line: &str, word: &str| line.split_whitespace().any(|w| w == word);
+    for (n, word) in [
+        ("N7", "M5"),
+        ("N8", "M1"),
+        ("N9", "G9"),
+        ("N10", "M0"),
+        ("N11", "M30"),
+    ] {
+        let ls = lines(n);
+        assert!(ls.len() >= 2, "{n} is not split, nothing tested:\n{out}");
+        let (last, before) = ls.split_last().unwrap();
+        assert!(has(last, word), "{n}: {word} not on its last line:\n{out}");
+        assert!(
+            before.iter().all(|l| !has(l, word)),
+            "{n}: {word} before the last piece:\n{out}"
+        );
+    }
+    // The arc after its takeup point carries the stop.
+    assert!(lines("N10").last().unwrap().starts_with("G2 "), "{out}");
+    // The feed and the coolant start act before the motion: first line.
+    let n6 = lines("N6");
+    assert!(n6.len() >= 2, "N6 is not split:\n{out}");
+    assert!(has(n6[0], "M8") && has(n6[0], "F800."), "{out}");
+    assert!(n6[1..].iter().all(|l| !has(l, "M8")), "{out}");
+    assert!(has(lines("N9")[0], "G1"), "{out}");
+}

@@ -260,9 +260,9 @@ pub struct CompensateArgs {
     /// Output path (default `<stem>.comp.<ext>` beside the input; `-` = stdout).
     #[arg(short, long)]
     pub output: Option<PathBuf>,
-    /// RAPID program of several modules: write the modules that change into
-    /// this folder (same names; a folder input keeps its sub-folders)
-    /// instead of beside their inputs.
+    /// Write the output into this folder under the program's own file name
+    /// instead of beside the input (a RAPID program of several modules: the
+    /// modules that change, a folder input keeping its sub-folders).
     #[arg(long, conflicts_with = "output")]
     pub out_dir: Option<PathBuf>,
     /// Machine tools: largest gap between attained and programmed path

@@ -164,6 +164,34 @@ struct Edit {
     start: usize,
     end: usize,
     text: std::ops::Range<usize>,
+    /// The removal of a word that goes to the block's last piece (see
+    /// [`acts_at_block_end`]).
+    moved: bool,
+}
+
+/// M codes that act before the motion of their block: spindle start
+/// (`M3`, `M4`), coolant on (`M7`, `M8`) and spindle start with coolant
+/// (`M13`, `M14`). A block written as several pieces keeps them on its
+/// first line.
+pub const M_BEFORE_MOTION: [i64; 6] = [3, 4, 7, 8, 13, 14];
+
+/// True for a word that acts at or after the end of its block's motion:
+/// every M code but those of [`M_BEFORE_MOTION`] (program stop and end,
+/// spindle and coolant off, tool change, orientation, machine-builder
+/// codes) and the one-shot exact stop `G9`. When a block is written as
+/// several pieces (a takeup point, a split move, an arc cut at its
+/// reversals) these words go to the last piece, so that they act where
+/// the block's motion ends; every other word (N, modal G codes, F, S, T,
+/// H, D) stays on the block's own line, the first piece, and acts before
+/// the motion as written.
+pub fn acts_at_block_end(w: &Word) -> bool {
+    match w.letter {
+        b'M' => !w
+            .exact_code10()
+            .is_some_and(|c| c % 10 == 0 && M_BEFORE_MOTION.contains(&(c / 10))),
+        b'G' => w.exact_code10() == Some(90),
+        _ => false,
+    }
 }
 
 /// The edits of one block, their texts in one buffer; reused between blocks
@@ -192,7 +220,39 @@ impl Edits {
             start,
             end,
             text: from..self.text.len(),
+            moved: false,
         });
+    }
+
+    /// Removes the word `w` of `text` and one space next to it (the one
+    /// before it, else the one after it; not one another moved word takes),
+    /// marked as moved. The word and its space are two edits, so that a
+    /// word inserted before `w` stays.
+    fn remove_moved(&mut self, w: &Word, text: &[u8]) {
+        let (start, end) = (w.start as usize, w.end as usize);
+        let free = |at: usize| {
+            text.get(at) == Some(&b' ') && !self.list.iter().any(|e| e.moved && e.start == at)
+        };
+        let space = [start.checked_sub(1), Some(end)]
+            .into_iter()
+            .flatten()
+            .find(|&at| free(at));
+        for (s, e) in [Some((start, end)), space.map(|s| (s, s + 1))]
+            .into_iter()
+            .flatten()
+        {
+            self.list.push(Edit {
+                start: s,
+                end: e,
+                text: 0..0,
+                moved: true,
+            });
+        }
+    }
+
+    /// Drops the removals of moved words (their words stay where they are).
+    fn keep_moved(&mut self) {
+        self.list.retain(|e| !e.moved);
     }
 
     /// Inserts ` X1.234` (with `sep` before the letter) at `at`.
@@ -493,13 +553,16 @@ impl Emitter {
         if self.opts.annotate {
             self.annotation(block, text, res, scale, edits);
         }
-        if edits.is_empty() {
-            out.extend_from_slice(line);
-        } else {
-            self.changed += 1;
-            edits.apply(text, out);
-            out.extend_from_slice(eol);
+        // Words that act where the block's motion ends go to its last piece.
+        let moved = !res.segments.is_empty() && block.words.iter().any(acts_at_block_end);
+        if moved {
+            for w in block.words.iter().filter(|w| acts_at_block_end(w)) {
+                edits.remove_moved(w, text);
+            }
         }
+        let own_start = out.len();
+        self.write_own(line, eol, edits, out);
+        let own_end = out.len();
         self.emitted = new_emitted;
         // Added lines end with the block's line end; after a last line
         // without one, each starts with a newline instead (the file still
@@ -525,9 +588,59 @@ impl Emitter {
             if mv.arc.is_some() && last != mv.motion {
                 self.motion_pending = Some(mv.motion);
             }
+            if moved {
+                self.place_moved(block, line, eol, edits, (own_start, own_end), out);
+            }
         } else if own_linear {
             self.motion_pending = Some(mv.motion);
         }
+    }
+
+    /// Writes a compensated block's own line: `line` with `edits` applied
+    /// (`line` itself when there are none), ending with `eol`.
+    fn write_own(&mut self, line: &[u8], eol: &[u8], edits: &mut Edits, out: &mut Vec<u8>) {
+        if edits.is_empty() {
+            out.extend_from_slice(line);
+        } else {
+            self.changed += 1;
+            edits.apply(strip_eol(line), out);
+            out.extend_from_slice(eol);
+        }
+    }
+
+    /// Puts the words of a block written as several pieces that act at
+    /// the end of its motion ([`acts_at_block_end`]) at the end of its last
+    /// line, as written and in their order. When no line was added after
+    /// the block's own one (`own` its range in `out`), that line is the
+    /// whole move and is written again with the words where they were.
+    fn place_moved(
+        &mut self,
+        block: &Block,
+        line: &[u8],
+        eol: &[u8],
+        edits: &mut Edits,
+        (own_start, own_end): (usize, usize),
+        out: &mut Vec<u8>,
+    ) {
+        if out.len() == own_end {
+            out.truncate(own_start);
+            if !edits.is_empty() {
+                self.changed -= 1;
+            }
+            edits.keep_moved();
+            self.write_own(line, eol, edits, out);
+            return;
+        }
+        let text = strip_eol(line);
+        let mut words = Vec::new();
+        for w in block.words.iter().filter(|w| acts_at_block_end(w)) {
+            if self.spaced {
+                words.push(b' ');
+            }
+            words.extend_from_slice(text.get(w.start as usize..w.end as usize).unwrap_or(b""));
+        }
+        let at = out.len() - eol.len();
+        out.splice(at..at, words);
     }
 
     /// The edits of a compensated block's motion word: `G1` where an arc
@@ -1183,6 +1296,7 @@ fn insert_point_for_axes(block: &Block) -> Slot {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::program::gcode::parse_line;
 
     #[test]
     fn r_words_are_kept_only_where_they_fix_the_centre() {
@@ -1210,6 +1324,50 @@ mod tests {
             (-349.0, false),
         ] {
             assert_eq!(r_form_holds(&arc(deg)), holds, "{deg}°");
+        }
+    }
+
+    #[test]
+    fn words_acting_at_the_block_end_are_stops_ends_and_exact_stop() {
+        let text: &[u8] =
+            b"N10 G9 G90 G1 G17 X1. F100. S3000 T2 H1 M0 M01 M2 M30 M5 M6 M9 M19 M60 M3 M04 M8 M7 M13 M14";
+        let mut block = Block::default();
+        parse_line(text, 1, "t", &mut block).unwrap();
+        let moved: Vec<&str> = block
+            .words
+            .iter()
+            .filter(|w| acts_at_block_end(w))
+            .map(|w| std::str::from_utf8(&text[w.start as usize..w.end as usize]).unwrap())
+            .collect();
+        assert_eq!(
+            moved,
+            [
+                "G9", "M0", "M01", "M2", "M30", "M5", "M6", "M9", "M19", "M60"
+            ]
+        );
+    }
+
+    #[test]
+    fn moved_words_take_one_space_with_them() {
+        for (line, want) in [
+            ("G1 X1. M30", "G1 X1."),
+            ("G9 G1 X1.", "G1 X1."),
+            ("M5 M9 G1 X1.", "G1 X1."),
+            ("G1 X1. M5 M9", "G1 X1."),
+            ("G1 X1. M5 (END)", "G1 X1. (END)"),
+            ("G1X1.M30", "G1X1."),
+        ] {
+            let mut block = Block::default();
+            parse_line(line.as_bytes(), 1, "t", &mut block).unwrap();
+            let mut edits = Edits::default();
+            for w in block.words.iter().filter(|w| acts_at_block_end(w)) {
+                edits.remove_moved(w, line.as_bytes());
+            }
+            let mut out = Vec::new();
+            edits.apply(line.as_bytes(), &mut out);
+            assert_eq!(String::from_utf8(out).unwrap(), want, "{line}");
+            edits.keep_moved();
+            assert!(edits.is_empty());
         }
     }
 
