@@ -188,7 +188,9 @@ fn batch_of_fifty_reports_exactly_the_broken_ones_and_is_thread_independent() {
     // The file that is not a program is listed as skipped.
     let notes = input.join("notes.txt").display().to_string();
     assert_eq!(summary["skipped"][0]["path"], notes.as_str());
-    assert!(stdout1.contains(&format!("skipped   {notes}: not a program extension")));
+    assert!(stdout1.contains(&format!(
+        "skipped   {notes}: not a program (by its extension or its first block)"
+    )));
 
     // 47 compensated programs (same relative names) + the summary; no
     // partial or temporary files for the broken ones.
@@ -558,4 +560,88 @@ fn batch_of_a_task_folder_is_one_program() {
     // The written module is a RAPID module of the same name.
     let text = std::fs::read_to_string(&main).expect("main");
     assert!(text.contains("MODULE MainModule"), "{text}");
+}
+
+/// A controller backup given whole: each task folder below it is one
+/// program, and an earlier compensated output beside a module is passed
+/// over.
+#[test]
+fn batch_of_a_backup_takes_each_task_folder_as_one_program() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let backup = dir.path().join("backup");
+    let task = backup.join("RAPID/TASK1");
+    for sub in ["PROGMOD", "SYSMOD"] {
+        std::fs::create_dir_all(task.join(sub)).expect("folders");
+        for e in
+            std::fs::read_dir(repo("samples/cell-backup/RAPID/TASK1").join(sub)).expect("sample")
+        {
+            let e = e.expect("entry");
+            std::fs::copy(e.path(), task.join(sub).join(e.file_name())).expect("copy");
+        }
+    }
+    std::fs::copy(
+        task.join("PROGMOD/MainModule.mod"),
+        task.join("PROGMOD/MainModule.comp.mod"),
+    )
+    .expect("an earlier output");
+    let out = dir.path().join("out");
+    let m = repo("machines/abb-irb1600.yaml");
+    let (code, _, err) = run_batch(&[
+        "batch",
+        "--machine",
+        m.to_str().unwrap(),
+        "--out-dir",
+        out.to_str().unwrap(),
+        backup.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "{err}");
+    let summary = summary_of(&out);
+    let files = summary["results"].as_array().expect("results");
+    assert_eq!(files.len(), 1, "{summary}");
+    assert_eq!(files[0]["input"].as_str(), Some(task.to_str().unwrap()));
+    assert_eq!(files[0]["status"].as_str(), Some("ok"), "{summary}");
+    assert!(out.join("RAPID/TASK1/PROGMOD/MainModule.mod").is_file());
+}
+
+/// A shop's program memory copied off a control: files named by their
+/// program number, without an extension, are G-code by their first block;
+/// a note and a compensated output are passed over.
+#[test]
+fn batch_takes_programs_without_an_extension_by_their_first_block() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let input = dir.path().join("memory");
+    std::fs::create_dir_all(&input).expect("folder");
+    let program = "%\nO1001 (PLATE)\nG21 G90 G54 G0 X10. Y10. Z50.\nG43 H1 Z5.\nG1 Z-1. F200.\nX60.\nG0 Z50.\nM30\n%\n";
+    std::fs::write(input.join("O1001"), program).expect("program");
+    std::fs::write(input.join("notes"), "Clamp the plate at both ends.\n").expect("note");
+    std::fs::write(input.join("O1001.comp.nc"), program).expect("an earlier output");
+    let out = dir.path().join("out");
+    let m = repo("machines/afm-r1000.yaml");
+    let (code, stdout, err) = run_batch(&[
+        "batch",
+        "--machine",
+        m.to_str().unwrap(),
+        "--out-dir",
+        out.to_str().unwrap(),
+        input.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "{err}");
+    let summary = summary_of(&out);
+    let files = summary["results"].as_array().expect("results");
+    assert_eq!(files.len(), 1, "{summary}");
+    assert_eq!(
+        files[0]["input"].as_str(),
+        Some(input.join("O1001").to_str().unwrap())
+    );
+    assert!(out.join("O1001").is_file());
+    let skipped = summary["skipped"].as_array().expect("skipped");
+    assert_eq!(skipped.len(), 2, "{summary}");
+    assert!(
+        stdout.contains("a compensated program (*.comp.*)"),
+        "{stdout}"
+    );
+    assert!(
+        stdout.contains("not a program (by its extension or its first block)"),
+        "{stdout}"
+    );
 }

@@ -44,6 +44,22 @@ fn is_rapid(path: &Path) -> bool {
     crate::program::language::is_rapid(path)
 }
 
+/// Whether a file without a program extension is a program of the
+/// machine's language by its first block (a RAPID module for a robot,
+/// G-code for a machine tool).
+fn sniffed(path: &Path, robot: bool) -> bool {
+    use crate::program::language::{gcode_extension, rapid_extension};
+    if rapid_extension(path) || gcode_extension(path) {
+        return false;
+    }
+    let rapid = crate::program::language::is_rapid(path);
+    if robot {
+        rapid
+    } else {
+        !rapid && crate::program::language::program_text(path)
+    }
+}
+
 /// One program to compensate: where it is, where its output goes (relative
 /// to the output folder), or why it cannot be taken.
 #[derive(Debug, Clone)]
@@ -56,11 +72,15 @@ struct Item {
 }
 
 /// Programs under a folder, recursively, in name order; hidden entries,
-/// the output folder, anything but regular files (named pipes, devices)
-/// and folders seen before (a link back up the tree) are skipped. A folder
-/// that cannot be read becomes a failed entry.
+/// the output folder, compensated outputs (`*.comp.*`), anything but
+/// regular files (named pipes, devices) and folders seen before (a link
+/// back up the tree) are skipped. For a robot, a task folder below (one
+/// with `PROGMOD` or `SYSMOD`, as in a controller backup) is one program.
+/// A file without a program extension is taken when its first block is
+/// one of the machine's language. A folder that cannot be read becomes a
+/// failed entry.
 fn walk(
-    root: &Path,
+    (root, robot): (&Path, bool),
     dir: &Path,
     skip: Option<&Path>,
     seen: &mut BTreeSet<PathBuf>,
@@ -100,14 +120,30 @@ fn walk(
             skip_as("hidden");
             continue;
         }
+        let name = path
+            .file_name()
+            .map(|n| n.to_string_lossy().to_ascii_lowercase())
+            .unwrap_or_default();
         if path.is_dir() {
             if skip.is_some_and(|s| path.canonicalize().is_ok_and(|p| p == s)) {
                 skip_as("the output folder");
                 continue;
             }
-            walk(root, &path, skip, seen, items, skipped);
-        } else if !is_program(&path) {
-            skip_as("not a program extension");
+            if robot && is_rapid_program(&path) {
+                let rel = path.strip_prefix(root).unwrap_or(&path).to_path_buf();
+                items.push(Item {
+                    input: path,
+                    rel,
+                    problem: None,
+                    program: true,
+                });
+                continue;
+            }
+            walk((root, robot), &path, skip, seen, items, skipped);
+        } else if name.contains(".comp.") {
+            skip_as("a compensated program (*.comp.*)");
+        } else if !is_program(&path) && !sniffed(&path, robot) {
+            skip_as("not a program (by its extension or its first block)");
         } else if !path.is_file() {
             skip_as("not a regular file");
         } else {
@@ -154,7 +190,7 @@ fn collect(inputs: &[PathBuf], out_dir: &Path, robot: bool) -> (Vec<Item>, Vec<S
             // Folders are followed once per input (links may lead back).
             let mut seen = BTreeSet::new();
             walk(
-                input,
+                (input, robot),
                 input,
                 skip.as_deref(),
                 &mut seen,
