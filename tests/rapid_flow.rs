@@ -394,14 +394,20 @@ ENDMODULE
         parse_module(&text, "out").expect("output parses"),
     );
     let robot = irb1600();
-    for name in ["pA", "pB"] {
-        assert_lands(
-            &robot,
-            robtarget(&m_out, name, &[]),
-            robtarget(&m_in, name, &[]),
-        );
-    }
-    for l in [4, 5] {
+    // `Drill` moves to its parameter, left as written: `pA` keeps its value
+    // for the call, and the compensated `MoveL pA` goes to a copy.
+    assert!(text.contains("    MoveL pA_c2, v100"), "{text}");
+    assert_lands(
+        &robot,
+        robtarget(&m_out, "pA_c2", &[]),
+        robtarget(&m_in, "pA", &[]),
+    );
+    assert_lands(
+        &robot,
+        robtarget(&m_out, "pB", &[]),
+        robtarget(&m_in, "pB", &[]),
+    );
+    for l in [2, 4, 5] {
         assert!(
             text.lines().any(|t| t == line(&module, l)),
             "{}",
@@ -472,4 +478,84 @@ ENDMODULE
         pose(robtarget(&m_out, "pB", &[])),
         pose(robtarget(&m_in, "pB", &[]))
     );
+}
+
+#[test]
+fn an_instruction_not_in_the_table_keeps_its_target_as_written() {
+    let module = format!(
+        "MODULE Spot
+  CONST robtarget pW1 := {};
+  PROC main()
+    MoveL pW1, v100, fine, tool0;
+    PaintL pW1, v100, z10, tool0;
+  ENDPROC
+ENDMODULE
+",
+        rt(700.0, 0.0, 500.0)
+    );
+    let dir = tempfile::tempdir().expect("tempdir");
+    let (text, err) = compensate(dir.path(), "spot.mod", &module);
+    assert!(err.contains("spot.mod:5: PaintL left as written"), "{err}");
+    assert!(text.lines().any(|t| t == line(&module, 2)), "{text}");
+    assert!(text.contains("    MoveL pW1_c2, v100"), "{text}");
+    assert!(text.contains("    PaintL pW1, v100"), "{text}");
+    let (m_in, m_out) = (
+        parse_module(&module, "in").expect("parses"),
+        parse_module(&text, "out").expect("output parses"),
+    );
+    assert_lands(
+        &irb1600(),
+        robtarget(&m_out, "pW1_c2", &[]),
+        robtarget(&m_in, "pW1", &[]),
+    );
+}
+
+#[test]
+fn a_target_passed_to_a_procedure_moving_to_its_parameter_keeps_its_value() {
+    let module = format!(
+        "MODULE Param
+  CONST robtarget pC := {};
+  CONST robtarget pE := {};
+  PROC main()
+    MoveL pC, v100, fine, tool0;
+    Bohren pC;
+    MoveL pE, v100, fine, tool0;
+    Senken pE;
+  ENDPROC
+  PROC Bohren(robtarget pLoch)
+    MoveL Offs(pLoch, 0, 0, 30), v200, z5, tool0;
+    MoveL pLoch, v20, fine, tool0;
+  ENDPROC
+ENDMODULE
+",
+        rt(700.0, 0.0, 500.0),
+        rt(720.0, 0.0, 500.0)
+    );
+    let dir = tempfile::tempdir().expect("tempdir");
+    let (text, err) = compensate(dir.path(), "param.mod", &module);
+    for l in [11, 12] {
+        let said = format!("param.mod:{l}: MoveL left as written (routine parameter)");
+        assert!(err.contains(&said), "{said}: {err}");
+    }
+    // `Senken` is declared nowhere: it may move to what it is given.
+    for l in [2, 3, 6, 8] {
+        assert!(
+            text.lines().any(|t| t == line(&module, l)),
+            "{}",
+            line(&module, l)
+        );
+    }
+    assert!(text.contains("    MoveL pC_c2, v100"), "{text}");
+    assert!(text.contains("    MoveL pE_c2, v100"), "{text}");
+    let (m_in, m_out) = (
+        parse_module(&module, "in").expect("parses"),
+        parse_module(&text, "out").expect("output parses"),
+    );
+    for name in ["pC", "pE"] {
+        assert_lands(
+            &irb1600(),
+            robtarget(&m_out, &format!("{name}_c2"), &[]),
+            robtarget(&m_in, name, &[]),
+        );
+    }
 }

@@ -1361,6 +1361,7 @@ impl Carry {
                 Err(left) => self.leave(mv, left, src, file),
             }
         }
+        self.keep_read_by_other_statements(&flow, src);
         self.as_written.sort_by_key(|a| a.line);
         // A window sees one routine: data written in one window and read
         // in another would resolve otherwise read whole.
@@ -1374,6 +1375,28 @@ impl Carry {
             self.unsupported.get_or_insert(MODULE_DATA_WRITTEN);
         }
         Ok((moves, resolved, plans))
+    }
+
+    /// The declarations that statements other than moves of the table may
+    /// move to (an instruction not in the table, a procedure whose moves to
+    /// its parameter are left as written) keep their values as written, as
+    /// those of a move left as written ([`Flow::read_by_other_statements`]).
+    fn keep_read_by_other_statements(&mut self, flow: &Flow<'_>, src: &str) {
+        if self.time_line.is_some() {
+            return;
+        }
+        let kept = LoadKey::as_written();
+        for origin in flow.read_by_other_statements(src) {
+            // A declaration an earlier window already gave to a compensated
+            // move: the module is read whole instead.
+            if self
+                .owner
+                .insert(origin, kept.clone())
+                .is_some_and(|k| k != kept)
+            {
+                self.unsupported.get_or_insert(AS_WRITTEN_READS);
+            }
+        }
     }
 
     /// Leaves a move as written: warned about with its place and reason,

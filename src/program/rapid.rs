@@ -953,7 +953,7 @@ fn motion_like_word(text: &str) -> Option<&str> {
 }
 
 /// The identifiers of `text`, outside strings and `!` comments.
-fn words(text: &str) -> impl Iterator<Item = &str> {
+pub(crate) fn words(text: &str) -> impl Iterator<Item = &str> {
     let mut in_string = false;
     let mut in_comment = false;
     let mut start = None;

@@ -24,7 +24,7 @@
 //! Numbers (offsets, angles and indices given by name) follow the same
 //! rules.
 
-use std::collections::HashMap;
+use std::collections::{HashMap, HashSet};
 
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 
@@ -135,6 +135,9 @@ pub struct Flow<'m> {
     /// The module-level data names looked up so far (lower case; moves
     /// may be resolved on several threads).
     read: std::sync::Mutex<Vec<String>>,
+    /// The procedures whose parameters are known (the module's own, then
+    /// those of the other modules of the program).
+    procedures: Procedures,
 }
 
 /// Where a data value at a statement comes from.
@@ -254,6 +257,7 @@ impl<'m> Flow<'m> {
             shapes,
             writes,
             read: std::sync::Mutex::new(Vec::new()),
+            procedures,
         }
     }
 
@@ -310,6 +314,90 @@ impl<'m> Flow<'m> {
             .map_or_else(|p| p.into_inner().clone(), |r| r.clone());
         v.sort_unstable();
         v
+    }
+
+    /// The module robtargets and jointtargets (as target origins) that
+    /// statements other than moves of the table may move to, read as
+    /// written: an instruction not in the table (`PaintL p10, …`), or a
+    /// call that passes them to a procedure whose body names the parameter
+    /// (its moves to a parameter are left as written). A procedure whose
+    /// parameters are not known may move to every name passed to it.
+    /// `src` is the text the module was parsed from.
+    pub(crate) fn read_by_other_statements(&self, src: &str) -> Vec<Origin> {
+        // The names read, by routine; then one pass over the declarations.
+        let mut read: Vec<(usize, &str)> = Vec::new();
+        let mut names: HashSet<String> = HashSet::new();
+        for (p, proc) in self.module.procs.iter().enumerate() {
+            for s in &proc.body {
+                let Stmt::Opaque { span, .. } = s else {
+                    continue;
+                };
+                let text = src.get(span.clone()).unwrap_or("");
+                let first = opaque_writes(text).0;
+                let words: Vec<&str> = match self.procedures.named_by_body(first, text) {
+                    Some(args) => args.into_iter().flat_map(super::words).collect(),
+                    None => super::words(text).collect(),
+                };
+                for w in words {
+                    read.push((p, w));
+                    names.insert(w.to_ascii_lowercase());
+                }
+            }
+        }
+        if read.is_empty() {
+            return Vec::new();
+        }
+        let mut decls: HashMap<String, usize> = HashMap::new();
+        let mut lower = String::new();
+        for (i, d) in self.module.decls.iter().enumerate() {
+            lower.clear();
+            lower.extend(d.name.chars().map(|c| c.to_ascii_lowercase()));
+            if names.contains(&lower) && !decls.contains_key(&lower) {
+                decls.insert(lower.clone(), i);
+            }
+        }
+        let mut out = Vec::new();
+        let mut seen = HashSet::new();
+        // Names of each routine's parameters and local declarations.
+        let mut own: HashMap<usize, HashSet<String>> = HashMap::new();
+        for (p, w) in read {
+            let w_lower = w.to_ascii_lowercase();
+            let Some(&decl) = decls.get(&w_lower) else {
+                continue;
+            };
+            let Some(d) = self.module.decls.get(decl) else {
+                continue;
+            };
+            if !matches!(d.data_type, DataType::RobTarget | DataType::JointTarget) {
+                continue;
+            }
+            let own = own.entry(p).or_insert_with(|| self.own_names(p));
+            if own.contains(&w_lower) {
+                continue;
+            }
+            let origins = match d.value {
+                Some(DataValue::Array { .. }) => self.all_elements(w, p),
+                _ => vec![Origin::Decl { decl, elem: None }],
+            };
+            out.extend(origins.into_iter().filter(|o| seen.insert(*o)));
+        }
+        out
+    }
+
+    /// The parameter and local data names of routine `proc`, lower case.
+    fn own_names(&self, proc: usize) -> HashSet<String> {
+        let mut out: HashSet<String> = self
+            .shapes
+            .get(proc)
+            .map(|s| s.params.iter().cloned().collect())
+            .unwrap_or_default();
+        if let Some(p) = self.module.procs.get(proc) {
+            out.extend(p.body.iter().filter_map(|s| match s {
+                Stmt::Decl(d) => Some(d.name.to_ascii_lowercase()),
+                _ => None,
+            }));
+        }
+        out
     }
 
     /// The motion instructions of the module's routines with their

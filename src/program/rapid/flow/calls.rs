@@ -5,7 +5,7 @@
 //! instruction of the controller, a procedure of no module of the
 //! program) may change every name passed to it.
 
-use super::super::{Module, RoutineKind, Scope};
+use super::super::{Module, RoutineKind, Scope, words};
 
 /// One parameter of a procedure, or one group of alternatives
 /// (`\switch On | switch Off`).
@@ -13,9 +13,11 @@ use super::super::{Module, RoutineKind, Scope};
 struct Param {
     /// Optional (`\`): its argument names it.
     optional: bool,
-    /// The alternatives: name (lower case) and whether it is passed by
-    /// reference (`INOUT`, `VAR`, `PERS`).
-    alternatives: Vec<(String, bool)>,
+    /// The alternatives: name (lower case), whether it is passed by
+    /// reference (`INOUT`, `VAR`, `PERS`) and whether the procedure's body
+    /// names it (a move to it, or to a value computed from it, is left as
+    /// written: a parameter is known at run time only).
+    alternatives: Vec<(String, bool, bool)>,
 }
 
 /// The procedures whose parameters are known, by name.
@@ -36,7 +38,16 @@ impl Procedures {
                 continue;
             }
             let text = p.params.as_ref().and_then(|s| src.get(s.clone()));
-            out.add(&p.name, params(text.unwrap_or("")));
+            let mut ps = params(text.unwrap_or(""));
+            if !ps.is_empty() {
+                // The routine's text after its parameter list.
+                let from = p.params.as_ref().map_or(p.span.start, |s| s.end);
+                let body: Vec<&str> = words(src.get(from..p.span.end).unwrap_or("")).collect();
+                for alt in ps.iter_mut().flat_map(|p| &mut p.alternatives) {
+                    alt.2 = body.iter().any(|w| w.eq_ignore_ascii_case(&alt.0));
+                }
+            }
+            out.add(&p.name, ps);
         }
         out
     }
@@ -61,6 +72,40 @@ impl Procedures {
     /// not known, or its arguments do not match its parameters (every name
     /// passed may then change).
     pub fn written<'t>(&self, name: &str, text: &'t str) -> Option<Vec<&'t str>> {
+        let mut out = Vec::new();
+        for (by_ref, _, value) in self.bound(name, text)? {
+            if by_ref {
+                let n = ident_len(value);
+                let called = value.get(n..).unwrap_or("").trim_start().starts_with('(');
+                if n > 0 && !called {
+                    out.extend(value.get(..n));
+                }
+            }
+        }
+        Some(out)
+    }
+
+    /// The arguments of the call statement `text` of procedure `name`
+    /// bound to parameters its body names (whole argument texts: `pHole`,
+    /// `Offs(p, 0, 0, 5)`): a move of the procedure to such a parameter is
+    /// left as written, so it reads what the argument reads. `None` as for
+    /// [`Self::written`].
+    pub fn named_by_body<'t>(&self, name: &str, text: &'t str) -> Option<Vec<&'t str>> {
+        let bound = self.bound(name, text)?;
+        Some(
+            bound
+                .into_iter()
+                .filter(|(_, named, _)| *named)
+                .map(|(_, _, value)| value)
+                .collect(),
+        )
+    }
+
+    /// Each argument of the call statement `text` of procedure `name`:
+    /// whether its parameter is passed by reference, whether the body
+    /// names it, and the argument's value text. `None` as for
+    /// [`Self::written`].
+    fn bound<'t>(&self, name: &str, text: &'t str) -> Option<Vec<(bool, bool, &'t str)>> {
         let (_, params) = self
             .procs
             .iter()
@@ -69,29 +114,23 @@ impl Procedures {
         let mut required = params.iter().filter(|p| !p.optional);
         let mut out = Vec::new();
         for (optional, arg) in arguments(rest) {
-            let (by_ref, value) = if optional {
+            if optional {
                 let n = ident_len(arg);
                 let word = arg.get(..n)?;
-                let by_ref = params
+                let &(_, by_ref, named) = params
                     .iter()
                     .filter(|p| p.optional)
                     .flat_map(|p| &p.alternatives)
-                    .find(|(a, _)| a.eq_ignore_ascii_case(word))?
-                    .1;
+                    .find(|(a, ..)| a.eq_ignore_ascii_case(word))?;
                 let value = arg.get(n..)?.trim_start();
                 // `\Name` alone passes the data of that name.
                 let value = value.strip_prefix(":=").map_or(word, str::trim_start);
-                (by_ref, value)
+                out.push((by_ref, named, value));
             } else {
                 let p = required.next()?;
-                (p.alternatives.iter().any(|(_, r)| *r), arg)
-            };
-            if by_ref {
-                let n = ident_len(value);
-                let called = value.get(n..).unwrap_or("").trim_start().starts_with('(');
-                if n > 0 && !called {
-                    out.extend(value.get(..n));
-                }
+                let by_ref = p.alternatives.iter().any(|a| a.1);
+                let named = p.alternatives.iter().any(|a| a.2);
+                out.push((by_ref, named, arg));
             }
         }
         Some(out)
@@ -123,7 +162,7 @@ fn params(text: &str) -> Vec<Param> {
                     let name = words
                         .last()
                         .map_or(String::new(), |w| w.to_ascii_lowercase());
-                    (name, by_ref)
+                    (name, by_ref, false)
                 })
                 .collect();
             Param {
