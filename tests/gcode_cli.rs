@@ -564,3 +564,48 @@ fn integer_words_in_increments_are_read_and_written_as_the_control_does() {
         "{stderr}"
     );
 }
+
+/// Under G93 a takeup point of microns would need an inverse-time F of
+/// hundreds of thousands: every F written stays within the range a Fanuc
+/// control takes, and the compensated program reads back.
+#[test]
+fn inverse_time_pieces_stay_within_the_controls_range() {
+    let dir = tempfile::tempdir().expect("dir");
+    let program = write(
+        dir.path(),
+        "g93.nc",
+        "%\nO1093\nG21 G90 G54 G0 X100. Y100. Z50.\nG43 H1 Z5.\nG1 Z-1. F200.\nG93 G1 X200. F250.\nX100. F250.\nY200. F250.\nY100. F250.\nG94 G0 Z50.\nM30\n%\n",
+    );
+    let out = dir.path().join("g93.comp.nc");
+    postproc()
+        .args([
+            "compensate",
+            "--machine",
+            "afm-r1000",
+            "--effects",
+            "geometric",
+        ])
+        .arg(&program)
+        .arg("-o")
+        .arg(&out)
+        .assert()
+        .success();
+    let text = std::fs::read_to_string(&out).expect("output");
+    let body = text_without_header(&text);
+    assert!(
+        body.contains("takeup"),
+        "a reversal gives a takeup point:\n{body}"
+    );
+    for word in body
+        .split(|c: char| c.is_whitespace())
+        .filter_map(|w| w.strip_prefix('F'))
+    {
+        let f: f64 = word.parse().expect("an F number");
+        assert!(f <= 9999.999, "F{word} in\n{body}");
+    }
+    postproc()
+        .args(["report", "--machine", "afm-r1000"])
+        .arg(&out)
+        .assert()
+        .success();
+}

@@ -1044,7 +1044,12 @@ impl Interpreter {
     /// mode the block leaves in force.
     fn check_feed(&self, block: &Block, g: &Words, text: &[u8]) -> Result<(), Located> {
         let Some(w) = g.f else { return Ok(()) };
-        match crate::process::limits::feed_limit(w.value * self.scale(), self.per_rev) {
+        let f = if self.inverse_time {
+            w.value
+        } else {
+            w.value * self.scale()
+        };
+        match crate::process::limits::feed_limit_in(f, self.per_rev, self.inverse_time) {
             Some((max, unit)) => Err(self.err(
                 block.line_no,
                 Some(w),
