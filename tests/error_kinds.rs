@@ -351,3 +351,22 @@ fn diagnose_writing_an_impossible_compliance_is_a_data_error() {
     let (k, e) = kind(write::write_model(&m, &t, &[found(foreign, 1.0)]));
     assert_eq!(k, ErrorKind::Internal, "{e}");
 }
+
+/// The help lists every exit code the binary uses, internal errors (3)
+/// included.
+#[test]
+fn help_lists_every_exit_code() {
+    let out = crate::common::postproc()
+        .arg("--help")
+        .output()
+        .expect("runs");
+    let help = String::from_utf8_lossy(&out.stdout);
+    for code in [
+        "0 success",
+        "1 completed",
+        "2 bad input",
+        "3 internal error",
+    ] {
+        assert!(help.contains(code), "{code}: {help}");
+    }
+}

@@ -27,7 +27,7 @@ pub use batch::Shard;
 pub use diagnose::{DiagnoseArgs, DiagnoseFormat};
 
 /// Exit codes, also listed in `--help`.
-pub const EXIT_HELP: &str = "Exit codes: 0 success; 1 completed, but blocks are out of tolerance or limits; 2 bad input or usage.";
+pub const EXIT_HELP: &str = "Exit codes: 0 success; 1 completed, but blocks are out of tolerance or limits; 2 bad input or usage; 3 internal error (a bug in postproc).";
 
 /// postproc — offline compensation post-processor for CNC machine tools and robots.
 #[derive(Debug, Parser)]
