@@ -329,8 +329,10 @@ fn check_reads_stdin_and_reports_inch_and_warnings() {
         .success();
     let stdout = String::from_utf8_lossy(&a.get_output().stdout).to_string();
     assert!(stdout.starts_with("-: 62 lines"), "{stdout}");
-    // G41 at line 33 is passed through with one warning.
-    assert!(stdout.contains("warnings: 1"), "{stdout}");
+    // G41 at line 33 is passed through with one warning; the G53 Z0 of
+    // line 25 goes down from machine Z50 (where the moves before left Z).
+    assert!(stdout.contains("warnings: 2"), "{stdout}");
+    assert!(stdout.contains("line 25: G53 moves Z down"), "{stdout}");
     assert!(
         stdout.contains("line 33: cutter radius compensation"),
         "{stdout}"

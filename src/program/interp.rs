@@ -476,6 +476,8 @@ pub struct Interpreter {
     scaled: Block,
     /// A word without a decimal point was warned about.
     integer_warned: bool,
+    /// A G53 move down in Z was warned about.
+    g53_down_warned: bool,
     comp_warned: bool,
     /// G41/G42 may be active with the block-delete switch in either
     /// position: set by G41/G42 on any line, cleared by G40 on a line
@@ -524,6 +526,7 @@ impl Interpreter {
             warnings: Vec::new(),
             scaled: Block::default(),
             integer_warned: false,
+            g53_down_warned: false,
             comp_warned: false,
             cutter_comp: false,
         }
@@ -1983,12 +1986,26 @@ impl Interpreter {
                 end[slot] = w.value * s;
             }
         }
+        if axis[2].is_some() && end[2] < self.pos[2] - G53_DOWN_MM && !self.g53_down_warned {
+            self.g53_down_warned = true;
+            self.warn(
+                line,
+                format!(
+                    "G53 moves Z down, from machine Z{:.3} to Z{:.3}: programs write a G53 Z move as a retract (on Haas and Fanuc machine Z0 is the top of the travel); check that the machine file's Z axis counts the same way",
+                    self.pos[2], end[2]
+                ),
+            );
+        }
         let mv = self.make_move(Motion::Rapid, self.pos, end, None);
         plan.kind = PlanKind::Fixed;
         plan.mv = Some(mv);
         Ok(())
     }
 }
+
+/// A G53 Z move down by more than this is warned about (a retract that
+/// plunges), mm.
+const G53_DOWN_MM: f64 = 1.0;
 
 /// How the interpreter takes a G code (code × 10).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -2277,6 +2294,32 @@ mod tests {
         // Words with a point, and zeros, need no word on the matter.
         let (_, warnings) = run_integer(None, &["G21 G90 G54 G0 X10. Y0 Z.5"]);
         assert!(warnings.is_empty(), "{warnings:?}");
+    }
+
+    #[test]
+    fn a_g53_move_down_in_z_is_warned_about_once() {
+        let mut setup = Setup {
+            axes: [true, true, true, false, false, false],
+            units_default: Some(Units::Mm),
+            ..Setup::default()
+        };
+        setup.home = [0.0, 0.0, 500.0, 0.0, 0.0, 0.0];
+        let mut it = Interpreter::new(setup, "t.nc");
+        let mut b = Block::default();
+        for (i, l) in ["G53 G0 Z400.", "G53 G0 Z0.", "G53 G0 Z450.", "G53 G0 Z0."]
+            .iter()
+            .enumerate()
+        {
+            parse_line(l.as_bytes(), i + 1, "t.nc", &mut b).expect("syntax");
+            it.step(&b, l.as_bytes()).expect("read");
+        }
+        let w = it.warnings();
+        assert_eq!(w.len(), 1, "{w:?}");
+        assert_eq!(w[0].line, 1);
+        assert!(
+            w[0].message
+                .starts_with("G53 moves Z down, from machine Z500.000 to Z400.000")
+        );
     }
 
     #[test]
