@@ -1222,7 +1222,10 @@ impl Interpreter {
             Some(hw) => hw.whole().unwrap_or(0),
             None => self.tool_active.max(self.tool_selected),
         };
-        match self.setup.tools.get(&h) {
+        // `H0` written: offset number 0, which holds zero on Fanuc and Haas
+        // controls whatever the tool table says.
+        let zero = (g.h.is_some() && h == 0).then_some(&0.0);
+        match zero.or_else(|| self.setup.tools.get(&h)) {
             Some(&len) => {
                 self.tool_len_mm = len;
                 self.h_active = Some(h);
@@ -2320,6 +2323,14 @@ mod tests {
             w[0].message
                 .starts_with("G53 moves Z down, from machine Z500.000 to Z400.000")
         );
+    }
+
+    #[test]
+    fn h0_is_a_zero_tool_length() {
+        let p = run(&["T1 M6", "G43 H0 G0 Z10"]).unwrap();
+        assert_eq!(p[1].mv.unwrap().tool_len_mm, 0.0);
+        // Without H and without a tool, there is no length to take.
+        assert!(run(&["G43 Z10"]).is_err());
     }
 
     #[test]
