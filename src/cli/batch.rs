@@ -48,16 +48,20 @@ fn is_rapid(path: &Path) -> bool {
 /// machine's language by its first block (a RAPID module for a robot,
 /// G-code for a machine tool).
 fn sniffed(path: &Path, robot: bool) -> bool {
-    use crate::program::language::{gcode_extension, rapid_extension};
+    use crate::program::language::{
+        gcode_extension, gcode_text, head, rapid_extension, rapid_text,
+    };
     if rapid_extension(path) || gcode_extension(path) {
         return false;
     }
-    let rapid = crate::program::language::is_rapid(path);
-    if robot {
-        rapid
-    } else {
-        !rapid && crate::program::language::program_text(path)
-    }
+    head(path).is_some_and(|h| {
+        let rapid = rapid_text(&h);
+        if robot {
+            rapid
+        } else {
+            !rapid && gcode_text(&h)
+        }
+    })
 }
 
 /// One program to compensate: where it is, where its output goes (relative

@@ -157,18 +157,19 @@ fn gcode_line(line: &[u8]) -> Option<bool> {
     Some(words > 0)
 }
 
-/// True when the file at `path` holds a program by its content: a RAPID
-/// module ([`rapid_text`]) or a G-code program ([`gcode_text`]). Only
-/// regular files are read; a file that cannot be read holds none.
-pub fn program_text(path: &Path) -> bool {
+/// The first bytes of the regular file at `path` (at most 64 KiB), where
+/// its language is told; `None` for anything else (a folder, a named
+/// pipe, a device) or a file that cannot be read.
+pub fn head(path: &Path) -> Option<Vec<u8>> {
     match std::fs::metadata(path) {
         Ok(m) if m.is_file() => {}
-        _ => return false,
+        _ => return None,
     }
     let mut head = Vec::new();
     std::fs::File::open(path)
         .and_then(|f| f.take(SNIFF_BYTES).read_to_end(&mut head))
-        .is_ok_and(|_| rapid_text(&head) || gcode_text(&head))
+        .ok()
+        .map(|_| head)
 }
 
 /// True when `path` holds a RAPID module: by its extension, or, when the
@@ -184,14 +185,7 @@ pub fn is_rapid(path: &Path) -> bool {
     if gcode_extension(path) || path == Path::new("-") {
         return false;
     }
-    match std::fs::metadata(path) {
-        Ok(m) if m.is_file() => {}
-        _ => return false,
-    }
-    let mut head = Vec::new();
-    std::fs::File::open(path)
-        .and_then(|f| f.take(SNIFF_BYTES).read_to_end(&mut head))
-        .is_ok_and(|_| rapid_text(&head))
+    head(path).is_some_and(|h| rapid_text(&h))
 }
 
 #[cfg(test)]
@@ -257,6 +251,7 @@ mod tests {
 
     #[test]
     fn program_text_reads_regular_files_only() {
+        let program_text = |p: &Path| head(p).is_some_and(|h| rapid_text(&h) || gcode_text(&h));
         let dir = tempfile::tempdir().unwrap();
         for (name, text, program) in [
             ("O1001", "%\nO1001\nG0 X1.\n%\n", true),
