@@ -626,6 +626,12 @@ impl Interpreter {
     /// that the control reads in increments; without `integer_words` in the
     /// machine file, warns at the first such word (read in whole units).
     fn integer_words(&mut self, block: &Block) -> bool {
+        // Nothing to turn or to warn about: no scan of the words.
+        match self.setup.integer_words {
+            Some(IntegerWords::Units) => return false,
+            None if self.integer_warned => return false,
+            _ => {}
+        }
         let Some(w) = block.words.iter().find(|w| {
             w.decimals.is_none() && w.value != 0.0 && self.incremental_letter(block, w.letter)
         }) else {
