@@ -74,8 +74,10 @@ pub enum Command {
     Calibrate(calibrate::CalibrateArgs),
     /// Find where model and measurements disagree, name the missing effect, add it.
     Diagnose(DiagnoseArgs),
-    /// List the machine files bundled in the binary, with their status.
-    Machines,
+    /// List the machine files bundled in the binary (status, a robot's
+    /// reach and payload); `machines new NAME -o FILE` writes a robot cell
+    /// file to start from.
+    Machines(machines::MachinesArgs),
 }
 
 /// Exit codes of `batch`, also listed in its `--help`.
@@ -362,7 +364,7 @@ pub fn run(cli: Cli) -> Result<i32> {
         Command::Simulate(a) => calibrate::run_simulate(&a),
         Command::Calibrate(a) => calibrate::run_calibrate(&a),
         Command::Diagnose(a) => diagnose::run(&a),
-        Command::Machines => machines::list(),
+        Command::Machines(a) => machines::run(&a),
     }?;
     machines::warn_example_used();
     Ok(code)

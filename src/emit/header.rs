@@ -103,6 +103,8 @@ impl Provenance {
             Status::Example => {
                 lines.push("machine status example - illustrative values, not measured data".into())
             }
+            Status::Nominal => lines
+                .push("machine status nominal - published kinematics, no measured errors".into()),
             Status::Unstated => lines.push("machine status not stated".into()),
             Status::Calibrated(list) => {
                 let c = list.last().expect("a calibrated status has a calibration");

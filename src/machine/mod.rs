@@ -120,11 +120,58 @@ impl Machine {
 }
 
 /// The machine files bundled with postproc, compiled into the binary:
-/// (name, text). `--machine NAME` selects one by name.
-pub const BUNDLED: [(&str, &str); 5] = [
+/// (name, text), in name order. `--machine NAME` selects one by name. The
+/// robot library (nominal ABB arms) is described in machines/README.md.
+pub const BUNDLED: [(&str, &str); 18] = [
+    (
+        "abb-crb15000",
+        include_str!("../../machines/abb-crb15000.yaml"),
+    ),
+    ("abb-irb120", include_str!("../../machines/abb-irb120.yaml")),
+    (
+        "abb-irb1200-0.7",
+        include_str!("../../machines/abb-irb1200-0.7.yaml"),
+    ),
+    (
+        "abb-irb1200-0.9",
+        include_str!("../../machines/abb-irb1200-0.9.yaml"),
+    ),
+    ("abb-irb140", include_str!("../../machines/abb-irb140.yaml")),
     (
         "abb-irb1600",
         include_str!("../../machines/abb-irb1600.yaml"),
+    ),
+    (
+        "abb-irb1600-1.2",
+        include_str!("../../machines/abb-irb1600-1.2.yaml"),
+    ),
+    (
+        "abb-irb2400",
+        include_str!("../../machines/abb-irb2400.yaml"),
+    ),
+    (
+        "abb-irb2600-1.65",
+        include_str!("../../machines/abb-irb2600-1.65.yaml"),
+    ),
+    (
+        "abb-irb2600-1.85",
+        include_str!("../../machines/abb-irb2600-1.85.yaml"),
+    ),
+    (
+        "abb-irb4600-2.05",
+        include_str!("../../machines/abb-irb4600-2.05.yaml"),
+    ),
+    (
+        "abb-irb4600-2.55",
+        include_str!("../../machines/abb-irb4600-2.55.yaml"),
+    ),
+    (
+        "abb-irb6640",
+        include_str!("../../machines/abb-irb6640.yaml"),
+    ),
+    (
+        "abb-irb6700",
+        include_str!("../../machines/abb-irb6700.yaml"),
     ),
     ("afm-r1000", include_str!("../../machines/afm-r1000.yaml")),
     (

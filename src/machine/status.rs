@@ -1,5 +1,5 @@
 //! Where a machine file's values come from: its top-level `status` key
-//! (`example` or `calibrated`) and, for a calibrated file, the
+//! (`example`, `nominal` or `calibrated`) and, for a calibrated file, the
 //! `calibrations` list that `calibrate` and `diagnose --write-model` append
 //! to (date, kind, observation file and its SHA-256, row count, fit RMS).
 //!
@@ -43,6 +43,10 @@ pub struct Calibration {
 pub enum Status {
     /// `status: example`: illustrative values, not measured data.
     Example,
+    /// `status: nominal`: the maker's published kinematics of the model
+    /// (no measured errors of one robot), the starting point of a
+    /// calibration.
+    Nominal,
     /// `status: calibrated`: values identified from measurements (oldest
     /// calibration first).
     Calibrated(Vec<Calibration>),
@@ -88,6 +92,13 @@ impl Status {
                     "`example`, but the file records calibrations: set `status: calibrated`",
                 ));
             }
+            (Some("nominal"), None) => Status::Nominal,
+            (Some("nominal"), Some(_)) => {
+                return Err(bad(
+                    "status",
+                    "`nominal`, but the file records calibrations: set `status: calibrated`",
+                ));
+            }
             (Some("calibrated"), Some(list)) if !list.is_empty() => Status::Calibrated(list),
             (Some("calibrated"), _) => {
                 return Err(bad(
@@ -98,7 +109,9 @@ impl Status {
             (Some(other), _) => {
                 return Err(bad(
                     "status",
-                    &format!("unknown status `{other}` (expected `example` or `calibrated`)"),
+                    &format!(
+                        "unknown status `{other}` (expected `example`, `nominal` or `calibrated`)"
+                    ),
                 ));
             }
         };
@@ -117,6 +130,9 @@ impl Status {
     pub fn describe(&self) -> String {
         match self {
             Status::Example => "example (not measured data)".into(),
+            Status::Nominal => {
+                "nominal (published kinematics of the model, no measured errors)".into()
+            }
             Status::Unstated => "not stated (no `status` key)".into(),
             Status::Calibrated(list) => {
                 let last = list.last().expect("a calibrated status has a calibration");
@@ -128,10 +144,12 @@ impl Status {
         }
     }
 
-    /// The word of the `status` key: `example`, `calibrated` or `unstated`.
+    /// The word of the `status` key: `example`, `nominal`, `calibrated` or
+    /// `unstated`.
     pub fn word(&self) -> &'static str {
         match self {
             Status::Example => "example",
+            Status::Nominal => "nominal",
             Status::Calibrated(_) => "calibrated",
             Status::Unstated => "unstated",
         }
@@ -405,6 +423,10 @@ mod tests {
             .to_string();
         assert!(err.starts_with("m.yaml:2:"), "{err}");
         assert!(err.contains("unknown status `measured`"), "{err}");
+        assert_eq!(
+            Status::from_yaml_str("kind: robot\nstatus: nominal\n", "m.yaml").unwrap(),
+            Status::Nominal
+        );
         let err = Status::from_yaml_str("kind: robot\nstatus: calibrated\n", "m.yaml")
             .unwrap_err()
             .to_string();

@@ -161,6 +161,18 @@ pub struct ProcessWrench {
     pub in_tool_frame: bool,
 }
 
+/// The maker's published figures of an arm (`datasheet:`): what `postproc
+/// machines` lists. No prediction uses them.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Datasheet {
+    /// Rated payload, kg.
+    pub payload_kg: f64,
+    /// Published reach, mm.
+    pub reach_mm: f64,
+    /// Mass of the arm, kg, where published.
+    pub robot_mass_kg: Option<f64>,
+}
+
 /// A validated 6R robot (immutable, `Send + Sync`).
 #[derive(Debug, Clone)]
 pub struct Robot {
@@ -201,6 +213,8 @@ struct RobotData {
     thermal_growth: DhGrowth,
     modal: Option<Modal>,
     output: OutputDecimals,
+    /// `datasheet`: published payload, reach and mass.
+    datasheet: Option<Datasheet>,
     /// Compensated targets may change configuration or move a joint by
     /// more than [`JOINT_JUMP_MAX_DEG`] (off unless set).
     allow_reconfiguration: bool,
@@ -433,6 +447,27 @@ fn joint_stiffness(raw: &[f64]) -> std::result::Result<[f64; 6], Invalid> {
     Ok(k_nmm_per_rad)
 }
 
+/// `datasheet`: published payload, reach and mass, each positive.
+fn datasheet(d: &raw::RawDatasheet) -> std::result::Result<Datasheet, Invalid> {
+    let positive = |key: &str, v: f64, max: f64| {
+        let path = format!("datasheet.{key}");
+        within(&path, &[v], max)?;
+        if v <= 0.0 {
+            return Err(Invalid::new(path, format!("{v} must be positive")));
+        }
+        Ok(v)
+    };
+    // The heaviest arms weigh a few tonnes and reach a few metres.
+    Ok(Datasheet {
+        payload_kg: positive("payload_kg", d.payload_kg, 1e4)?,
+        reach_mm: positive("reach_mm", d.reach_mm, 1e5)?,
+        robot_mass_kg: d
+            .robot_mass_kg
+            .map(|m| positive("robot_mass_kg", m, 1e5))
+            .transpose()?,
+    })
+}
+
 /// `output`: decimals of positions and quaternions, defaults where unset.
 fn output_decimals(raw: Option<&raw::RawOutput>) -> std::result::Result<OutputDecimals, Invalid> {
     let mut output = OutputDecimals {
@@ -524,6 +559,7 @@ impl Robot {
             .map(dynamics::modal_from_raw)
             .transpose()?;
         let output = output_decimals(raw.output.as_ref())?;
+        let datasheet = raw.datasheet.as_ref().map(datasheet).transpose()?;
         plausible::check(&raw)?;
         let thermal_growth = thermal
             .as_ref()
@@ -553,6 +589,7 @@ impl Robot {
                 thermal_growth,
                 modal,
                 output,
+                datasheet,
                 allow_reconfiguration: false,
                 raw: std::sync::Arc::new(raw),
             }),
@@ -622,6 +659,10 @@ impl Robot {
     /// [`DEFAULT_POSITION_DECIMALS`], [`DEFAULT_QUATERNION_DECIMALS`]).
     pub fn output_decimals(&self) -> OutputDecimals {
         self.d.output
+    }
+    /// The maker's published figures (`datasheet:`), if given.
+    pub fn datasheet(&self) -> Option<&Datasheet> {
+        self.d.datasheet.as_ref()
     }
     /// Process wrench for prediction, if any.
     pub fn process_wrench(&self) -> Option<&ProcessWrench> {

@@ -41,6 +41,8 @@ pub(crate) struct RawRobot {
     pub modal: Option<Vec<RawMode>>,
     #[serde(default)]
     pub output: Option<RawOutput>,
+    #[serde(default)]
+    pub datasheet: Option<RawDatasheet>,
     /// `status` and `calibrations`, read by [`crate::machine::status`].
     #[serde(default, rename = "status")]
     pub _status: Option<serde::de::IgnoredAny>,
@@ -138,6 +140,16 @@ pub(crate) struct RawMode {
     pub frequency_hz: f64,
     pub damping_ratio: f64,
     pub stiffness_n_per_um: f64,
+}
+
+/// `datasheet:` — the maker's published figures of the arm.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct RawDatasheet {
+    pub payload_kg: f64,
+    pub reach_mm: f64,
+    #[serde(default)]
+    pub robot_mass_kg: Option<f64>,
 }
 
 /// `output:` — number formatting of rewritten targets.
