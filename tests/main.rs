@@ -44,6 +44,7 @@ mod regression;
 mod report_cli;
 mod repredict;
 mod robot;
+mod robot_library;
 mod robot_process;
 mod robot_samples;
 mod snapshots;

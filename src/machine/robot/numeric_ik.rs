@@ -24,7 +24,9 @@
 //!    to another turn;
 //! 2. a fixed list derived from the target alone: joint 1 towards the wrist
 //!    centre (in front of axis 1, then behind it, the order set by the
-//!    `cfx` bit of the shoulder), joints 2 and 3 on a grid of ±0.3, ±1.0 and ±0.4, ±1.2 rad,
+//!    `cfx` bit of the shoulder), joints 2 and 3 on a grid of ±0.3, ±1.0,
+//!    ±2.0 and ±0.4, ±1.2, ±2.2 rad (the outer values for arms whose
+//!    joints 2 and 3 turn far back, such as the GoFa),
 //!    joints 4 and 6 in the middle of their confdata quadrants and joint 5
 //!    at ±0.8 rad by the sign bit of `cfx`; each with its wrist flip.
 //!
@@ -45,9 +47,9 @@ use super::ik::{self, ConfData};
 use super::{Model, Robot, RobotError};
 
 /// Joint 2 starting values of the seed list, rad.
-const Q2_SEEDS_RAD: [f64; 4] = [0.3, -0.3, 1.0, -1.0];
+const Q2_SEEDS_RAD: [f64; 6] = [0.3, -0.3, 1.0, -1.0, 2.0, -2.0];
 /// Joint 3 starting values of the seed list, rad.
-const Q3_SEEDS_RAD: [f64; 4] = [0.4, -0.4, 1.2, -1.2];
+const Q3_SEEDS_RAD: [f64; 6] = [0.4, -0.4, 1.2, -1.2, 2.2, -2.2];
 /// Seeds in the list: two for joint 1 times those of joints 2 and 3.
 const SEEDS: usize = 2 * Q2_SEEDS_RAD.len() * Q3_SEEDS_RAD.len();
 /// Magnitude of the joint 5 seed, rad (away from the wrist singularity).
