@@ -422,7 +422,7 @@ fn machines_lists_every_arm_with_reach_and_payload() {
             .lines()
             .find(|l| l.split_whitespace().next() == Some(a.machine))
             .unwrap_or_else(|| panic!("{} listed:\n{text}", a.machine));
-        let reach = format!("{:.2} m", a.reach / 1000.0);
+        let reach = format!("{} mm", a.reach);
         let payload = format!("{} kg", a.payload);
         assert!(line.contains(" nominal "), "{line}");
         assert!(line.contains(&reach) && line.contains(&payload), "{line}");

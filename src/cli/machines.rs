@@ -189,7 +189,7 @@ fn list() -> Result<i32> {
         };
         let (reach, payload) = match sheet {
             Some(d) => (
-                format!("{:.2} m", d.reach_mm / 1000.0),
+                format!("{:.0} mm", d.reach_mm),
                 format!("{} kg", show_number(d.payload_kg)),
             ),
             None => ("-".to_string(), "-".to_string()),
@@ -208,12 +208,12 @@ fn list() -> Result<i32> {
         "bundled machine files (use with --machine NAME from any folder; a file path is read instead):\n",
     );
     text.push_str(&format!(
-        "  {:<width$} {:<13} {:<11} {:>7} {:>8}  machine\n",
+        "  {:<width$} {:<13} {:<11} {:>7} {:>7}  machine\n",
         "name", "kind", "status", "reach", "payload"
     ));
     for [name, kind, status, reach, payload, title] in &rows {
         text.push_str(&format!(
-            "  {name:<width$} {kind:<13} {status:<11} {reach:>7} {payload:>8}  {title}\n"
+            "  {name:<width$} {kind:<13} {status:<11} {reach:>7} {payload:>7}  {title}\n"
         ));
     }
     text.push_str(
