@@ -191,6 +191,7 @@ const ZERO_POSE_QUAT_TOL: f64 = 1e-7;
 /// ABB's tool0 orientation at the calibration position: the flange z axis
 /// along base x, its x axis pointing down, i.e. 90° about base y, as the
 /// controller shows it [q1, q2, q3, q4] (scalar first).
+#[allow(clippy::approx_constant)] // the 7 decimals the controller shows
 const TOOL0_AT_ZERO: [f64; 4] = [0.7071068, 0.0, 0.7071068, 0.0];
 
 fn robot(name: &str) -> Robot {
