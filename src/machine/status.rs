@@ -427,6 +427,16 @@ mod tests {
             Status::from_yaml_str("kind: robot\nstatus: nominal\n", "m.yaml").unwrap(),
             Status::Nominal
         );
+        let err = Status::from_yaml_str(
+            "kind: robot\nstatus: nominal\ncalibrations:\n  - { date: 2026-11-25, kind: k, observations: o.csv, observations_sha256: 0000000000000000000000000000000000000000000000000000000000000000, rows: 3, fit_rms_mm: 0.1 }\n",
+            "m.yaml",
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(
+            err.contains("`nominal`, but the file records calibrations"),
+            "{err}"
+        );
         let err = Status::from_yaml_str("kind: robot\nstatus: calibrated\n", "m.yaml")
             .unwrap_err()
             .to_string();
