@@ -810,3 +810,38 @@ fn robotstudio_paths_compensate_onto_their_programmed_poses() {
         );
     }
 }
+
+/// A report of a path on a nominal arm records `status: nominal` in its
+/// provenance, as schemas/report.schema.json allows.
+#[test]
+fn reports_on_a_nominal_arm_say_so_within_the_schema() {
+    let run = postproc()
+        .args(["report", "--format", "json", "--machine", "abb-irb1200-0.7"])
+        .arg(repo("tests/robot_library/irb1200_path.mod"))
+        .output()
+        .expect("runs");
+    assert_eq!(
+        run.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    let report: serde_json::Value = serde_json::from_slice(&run.stdout).expect("JSON");
+    assert_eq!(report["provenance"]["machine"]["status"], "nominal");
+    let schema: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(repo("schemas/report.schema.json")).expect("schema file"),
+    )
+    .expect("schema is JSON");
+    let (mut schemas, mut compiler) = (boon::Schemas::new(), boon::Compiler::new());
+    let url = "https://postproc.example/schemas/report.schema.json";
+    compiler.add_resource(url, schema).expect("schema resource");
+    let idx = compiler
+        .compile(url, &mut schemas)
+        .expect("schema compiles");
+    if let Err(e) = schemas.validate(&report, idx) {
+        panic!("report does not match the schema: {e:#}");
+    }
+    let mut other = report.clone();
+    other["provenance"]["machine"]["status"] = serde_json::json!("measured");
+    assert!(schemas.validate(&other, idx).is_err());
+}
