@@ -497,13 +497,13 @@ fn machines_new_writes_a_cell_file_that_loads() {
 /// value, in its standard uncertainty u (k = 1): 3u.
 const K_TEST: f64 = 3.0;
 
-/// The simulated robot's errors from the nominal IRB 4600-60/2.05, per DH
-/// row (a_mm, alpha_deg, d_mm, theta_offset_deg), of the size of an
-/// uncalibrated arm. Only what poses measured in the base frame identify
-/// is changed: `calibrate` fixes the rest (row 2 d, row 5 θ, row 6 α and
-/// θ, the TCP along the flange axis) and keeps those the data do not show
-/// (row 1 a and α, row 6 a, the TCP across the flange axis) at the start
-/// value, which is then the truth.
+/// The simulated robot's errors from a nominal model, per DH row (a_mm,
+/// alpha_deg, d_mm, theta_offset_deg), of the size of an uncalibrated arm.
+/// Only what poses measured in the base frame identify is changed:
+/// `calibrate` fixes the rest (row 5 θ, row 6 α and θ) and keeps those
+/// the data do not show (row 1 a and α, the TCP across the flange axis) at
+/// the start value, which is then the truth. Two pairs move the measured
+/// point alike and are compared by their sum ([`PAIRS`]).
 const TRUE_ERRORS: [[f64; 4]; 6] = [
     [0.0, 0.0, 0.42, 0.021],
     [-0.31, -0.018, 0.0, 0.027],
@@ -512,6 +512,11 @@ const TRUE_ERRORS: [[f64; 4]; 6] = [
     [-0.19, -0.026, 0.23, 0.0],
     [0.0, 0.0, -0.29, 0.0],
 ];
+
+/// Parameters that only their sum shows: offsets along the parallel axes
+/// 2 and 3, and the flange distance and the TCP along axis 6. `calibrate`
+/// fixes one of each pair and identifies the other as the sum.
+const PAIRS: [[&str; 2]; 2] = [["j2.d_mm", "j3.d_mm"], ["j6.d_mm", "tool.z_mm"]];
 
 /// `n` calibration poses within the joint ranges of `r` (90 % of each
 /// range about its middle), as an observation file without measurements.
@@ -533,13 +538,15 @@ fn poses_file(r: &Robot, n: usize) -> String {
 }
 
 /// The nominal file with an `actual` block of the nominal rows plus
-/// [`TRUE_ERRORS`], as `status: example` (a simulated robot).
-fn truth_file(nominal_text: &str, r: &Robot) -> (String, [[f64; 4]; 6]) {
-    let mut rows = [[0.0; 4]; 6];
+/// [`TRUE_ERRORS`], as `status: example` (a simulated robot), and the true
+/// value of every parameter `calibrate` lists (the TCP is the flange).
+fn truth_file(nominal_text: &str, r: &Robot) -> (String, Vec<(String, f64)>) {
+    let fields = ["a_mm", "alpha_deg", "d_mm", "theta_offset_deg"];
+    let mut truth = Vec::new();
     let mut block = String::from("actual:\n");
     for (i, j) in r.params(Model::Nominal).joints.iter().enumerate() {
         let e = TRUE_ERRORS[i];
-        rows[i] = [
+        let row = [
             j.a_mm + e[0],
             j.alpha_rad.to_degrees() + e[1],
             j.d_mm + e[2],
@@ -547,13 +554,19 @@ fn truth_file(nominal_text: &str, r: &Robot) -> (String, [[f64; 4]; 6]) {
         ];
         block.push_str(&format!(
             "  - {{ a_mm: {}, alpha_deg: {}, d_mm: {}, theta_offset_deg: {} }}\n",
-            rows[i][0], rows[i][1], rows[i][2], rows[i][3]
+            row[0], row[1], row[2], row[3]
         ));
+        for (f, v) in fields.iter().zip(row) {
+            truth.push((format!("j{}.{f}", i + 1), v));
+        }
+    }
+    for axis in ["x", "y", "z"] {
+        truth.push((format!("tool.{axis}_mm"), 0.0));
     }
     let text = nominal_text
         .replacen("status: nominal", "status: example", 1)
         .replacen("joint_limits_deg:", &format!("{block}joint_limits_deg:"), 1);
-    (text, rows)
+    (text, truth)
 }
 
 /// (identified value, u) of each parameter row of `calibrate`'s table
@@ -572,19 +585,20 @@ fn identified(stdout: &str) -> Vec<(String, f64, Option<f64>)> {
     rows
 }
 
-#[test]
-fn calibrate_kinematics_recovers_a_simulated_arm_from_its_nominal_model() {
-    let dir = tempfile::tempdir().expect("tempdir");
-    let name = "abb-irb4600-2.05";
+/// Simulates tracker data (20 µm + 6 µm/m) of the nominal model `name` with
+/// [`TRUE_ERRORS`], calibrates the bundled nominal model from it and
+/// checks every parameter (or pair sum) against the truth; the number of
+/// identified parameters compared.
+fn calibrate_recovers(name: &str, dir: &std::path::Path) -> usize {
     let nominal_text = MachineFile::bundled(name)
         .expect("bundled")
         .text
         .to_string();
     let r = robot(name);
-    let (truth_text, rows) = truth_file(&nominal_text, &r);
-    let truth = write(dir.path(), "truth.yaml", &truth_text);
-    let poses = write(dir.path(), "poses.csv", &poses_file(&r, 60));
-    let measured = dir.path().join("measured.csv");
+    let (truth_text, truth) = truth_file(&nominal_text, &r);
+    let truth_file = write(dir, &format!("{name}-truth.yaml"), &truth_text);
+    let poses = write(dir, &format!("{name}-poses.csv"), &poses_file(&r, 60));
+    let measured = dir.join(format!("{name}-measured.csv"));
     postproc()
         .args([
             "simulate",
@@ -596,14 +610,14 @@ fn calibrate_kinematics_recovers_a_simulated_arm_from_its_nominal_model() {
             "5",
         ])
         .arg("--machine")
-        .arg(&truth)
+        .arg(&truth_file)
         .arg("--observations")
         .arg(&poses)
         .arg("-o")
         .arg(&measured)
         .assert()
         .success();
-    let out_file = dir.path().join("calibrated.yaml");
+    let out_file = dir.join(format!("{name}-calibrated.yaml"));
     let run = postproc()
         .args([
             "calibrate",
@@ -618,57 +632,72 @@ fn calibrate_kinematics_recovers_a_simulated_arm_from_its_nominal_model() {
         .output()
         .expect("runs");
     let stdout = String::from_utf8(run.stdout).expect("utf-8");
-    assert_eq!(
-        run.status.code(),
-        Some(0),
-        "{stdout}\n{}",
-        String::from_utf8_lossy(&run.stderr)
-    );
+    let stderr = String::from_utf8_lossy(&run.stderr);
+    assert_eq!(run.status.code(), Some(0), "{name}: {stdout}\n{stderr}");
     let table = identified(&stdout);
-    let fields = ["a_mm", "alpha_deg", "d_mm", "theta_offset_deg"];
+    let row = |key: &str| {
+        let (_, v, u) = table
+            .iter()
+            .find(|(n, ..)| n == key)
+            .unwrap_or_else(|| panic!("{name}: {key} in\n{stdout}"));
+        let t = truth
+            .iter()
+            .find(|(n, _)| n == key)
+            .expect("a true value")
+            .1;
+        (*v, *u, t)
+    };
     let mut checked = 0;
-    for (i, row) in rows.iter().enumerate() {
-        for (f, field) in fields.iter().enumerate() {
-            let key = format!("j{}.{field}", i + 1);
-            let (_, value, u) = table
-                .iter()
-                .find(|(n, ..)| *n == key)
-                .unwrap_or_else(|| panic!("{key} in\n{stdout}"));
-            if TRUE_ERRORS[i][f] == 0.0 {
-                // Fixed or kept: the start value, which is the truth.
-                assert!(
-                    (value - row[f]).abs() <= 1e-9 || u.is_some(),
-                    "{key}: {value}"
-                );
-                if let Some(u) = u {
-                    assert!(
-                        (value - row[f]).abs() <= K_TEST * u,
-                        "{key}: {value} ± {u}, true {}",
-                        row[f]
-                    );
-                }
-                continue;
-            }
-            let u = u.unwrap_or_else(|| panic!("{key} identified:\n{stdout}"));
+    let mut check = |what: &str, value: f64, u: Option<f64>, true_value: f64| match u {
+        Some(u) => {
             assert!(
-                (value - row[f]).abs() <= K_TEST * u,
-                "{key}: identified {value} ± {u}, true {} (start {})\n{stdout}",
-                row[f],
-                row[f] - TRUE_ERRORS[i][f]
+                (value - true_value).abs() <= K_TEST * u,
+                "{name} {what}: identified {value} ± {u}, true {true_value}\n{stdout}"
             );
             checked += 1;
         }
+        // Fixed: the file's value, which must then be the truth.
+        None => assert!(
+            (value - true_value).abs() <= 1e-9,
+            "{name} {what}: fixed at {value}, true {true_value}"
+        ),
+    };
+    for (key, _) in &truth {
+        if !PAIRS.iter().flatten().any(|p| p == key) {
+            let (v, u, t) = row(key);
+            check(key, v, u, t);
+        }
     }
-    assert_eq!(checked, 17);
+    for [a, b] in PAIRS {
+        let ((va, ua, ta), (vb, ub, tb)) = (row(a), row(b));
+        assert!(
+            ua.is_none() || ub.is_none(),
+            "{name}: {a} and {b} both identified"
+        );
+        check(&format!("{a} + {b}"), va + vb, ua.or(ub), ta + tb);
+    }
     let written = std::fs::read_to_string(&out_file).expect("calibrated file");
     assert!(matches!(
-        MachineFile::open(out_file.to_str().expect("utf-8 path"))
-            .expect("opens")
-            .status()
-            .expect("status"),
+        Status::from_yaml_str(&written, "calibrated.yaml").expect("status"),
         Status::Calibrated(_)
     ));
     Machine::from_yaml_str(&written, "calibrated.yaml").expect("loads");
+    checked
+}
+
+/// `calibrate kinematics` from simulated tracker data, starting from the
+/// bundled nominal model, recovers the simulated robot within the stated
+/// uncertainties: a large and a small spherical-wrist arm and the GoFa's
+/// offset wrist.
+#[test]
+fn calibrate_kinematics_recovers_simulated_arms_from_their_nominal_models() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    for name in ["abb-irb4600-2.05", "abb-irb1200-0.9", "abb-crb15000"] {
+        let checked = calibrate_recovers(name, dir.path());
+        // 24 DH parameters and 3 of the TCP, less 3 fixed and 1 of each
+        // pair; some are kept (not significant) with their uncertainty.
+        assert!(checked >= 20, "{name}: {checked} parameters compared");
+    }
 }
 
 /// The RobotStudio-style modules and the bundled arm each was written for,
