@@ -480,6 +480,13 @@ fn machines_new_writes_a_cell_file_that_loads() {
         .assert()
         .code(2);
     assert_eq!(std::fs::read(&cell).expect("cell"), before);
+    // `-o -`: the same cell on standard output.
+    let out = postproc()
+        .args(["machines", "new", "abb-irb1200-0.7", "-o", "-"])
+        .output()
+        .expect("runs");
+    assert_eq!(out.status.code(), Some(0));
+    assert_eq!(out.stdout, before);
     let tool = dir.path().join("tool.yaml");
     postproc()
         .args(["machines", "new", "afm-r1000", "-o"])
