@@ -223,7 +223,7 @@ impl WrittenModel<'_> {
             write_uncertain: a.write_uncertain,
         };
         let (found, withheld) = write::withhold_uncertain(self.machine, &d.found, &rule);
-        let mut w = write::write_model(self.machine, self.text, &found)?;
+        let mut w = write::write_model_for(self.machine, self.text, &found, &self.obs.rows)?;
         w.not_written.extend(withheld);
         let shown = path.display().to_string();
         let model = Machine::from_yaml_str(&w.text, &shown)?;
@@ -441,9 +441,29 @@ pub fn run(a: &DiagnoseArgs) -> Result<i32> {
             registration,
             opts: &opts,
         };
-        let said = written.write(a, &d, path)?;
-        if a.format == DiagnoseFormat::Table {
-            out.push_str(&said);
+        match written.write(a, &d, path) {
+            Ok(said) => {
+                if a.format == DiagnoseFormat::Table {
+                    out.push_str(&said);
+                }
+            }
+            Err(e) => {
+                // The diagnosis stands whatever became of the file: it is
+                // printed whole, then why nothing was written (exit 1).
+                print(&out)?;
+                let mut msg = e.to_string();
+                let mut src = std::error::Error::source(&e);
+                while let Some(s) = src {
+                    msg.push_str(&format!(": {s}"));
+                    src = s.source();
+                }
+                eprintln!(
+                    "error: --write-model {}: the diagnosis above stands, but the model was not \
+                     written (no file left): {msg}",
+                    path.display()
+                );
+                return Ok(1);
+            }
         }
     }
     print(&out)?;

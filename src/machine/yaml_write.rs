@@ -66,6 +66,15 @@ pub enum Edit {
         /// Comment line above a new section (empty: none).
         comment: String,
     },
+    /// The robot's `thermal.rated_power_w` (the section must exist):
+    /// replaced, or added after `time_constant_min` preceded by the
+    /// comment line `comment` (empty: none).
+    RatedPower {
+        /// Highest mean motor power of a joint, W.
+        watts: f64,
+        /// Comment line above a new key.
+        comment: String,
+    },
     /// A new machine-tool `thermal.spindle` entry with
     /// `idle_w_per_rpm: 0.0` (in the `thermal:` section, or a new one),
     /// preceded by `comment`.
@@ -143,6 +152,7 @@ fn apply_one(text: &str, file: &str, by: &str, edit: &Edit) -> Result<String> {
             time_constant_min,
             comment,
         } => add_thermal_term(text, file, term, *time_constant_min, comment),
+        Edit::RatedPower { watts, comment } => set_rated_power(text, file, *watts, comment),
         Edit::Spindle {
             growth_um_per_kw,
             time_constant_min,
@@ -610,6 +620,45 @@ fn add_thermal_term(
         }
     }
     Ok(join_nl(lines))
+}
+
+/// Sets `thermal.rated_power_w` of a robot file in block style: the
+/// existing line's value (its comment kept), or a new line after
+/// `time_constant_min` (first in the section when it has none), preceded by
+/// `# comment`.
+fn set_rated_power(text: &str, file: &str, watts: f64, comment: &str) -> Result<String> {
+    let mut lines = lines_of(text);
+    let t = top_level_line(&lines, "thermal")
+        .ok_or_else(|| edit_err(file, "no `thermal:` section for `rated_power_w`"))?;
+    if split_comment(&lines[t]).0.trim_end() != "thermal:" {
+        return Err(edit_err(
+            file,
+            "`thermal` is not a block map; write it in block style to add `rated_power_w`",
+        ));
+    }
+    let end = block_end(&lines, t, lines.len());
+    let child = (t + 1..end)
+        .find(|&i| is_content(&lines[i]))
+        .map_or(2, |i| indent_of(&lines[i]));
+    if let Some(i) = key_line(&lines, t + 1, end, child, "rated_power_w") {
+        let (content, c) = split_comment(&lines[i]);
+        let trail = &content[content.trim_end().len()..];
+        lines[i] = format!(
+            "{}rated_power_w: {}{trail}{c}",
+            " ".repeat(child),
+            number(watts)
+        );
+        return Ok(join(lines, text));
+    }
+    let at = key_line(&lines, t + 1, end, child, "time_constant_min").map_or(t + 1, |i| i + 1);
+    let pad = " ".repeat(child);
+    let mut new = Vec::new();
+    if !comment.is_empty() {
+        new.push(format!("{pad}# {comment}"));
+    }
+    new.push(format!("{pad}rated_power_w: {}", number(watts)));
+    lines.splice(at..at, new);
+    Ok(join(lines, text))
 }
 
 /// Starts a `thermal:` section at the end of `lines` (trailing blank lines
