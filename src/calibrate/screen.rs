@@ -293,6 +293,82 @@ pub fn implausible(e: &crate::error::Error, obs_file: &str, n_fit: usize) -> cra
     ))
 }
 
+/// Largest ratio of the spread of the measured positions to the spread of
+/// the positions the model predicts for the same rows (either way) that
+/// passes as the same unit: a model wrong by a fifth of its size is not a
+/// calibration problem.
+pub const UNIT_SPREAD_RATIO: f64 = 1.25;
+
+/// Units a position column is often written in by mistake, with their size
+/// in mm.
+const LIKELY_UNITS: [(&str, f64); 5] = [
+    ("inch", 25.4),
+    ("m", 1000.0),
+    ("cm", 10.0),
+    ("µm", 1e-3),
+    ("dm", 100.0),
+];
+
+/// RMS distance of points from their centroid (the spread; unchanged by a
+/// rigid motion of the instrument).
+fn spread(p: &[nalgebra::Vector3<f64>]) -> f64 {
+    if p.is_empty() {
+        return 0.0;
+    }
+    let c = p.iter().sum::<nalgebra::Vector3<f64>>() / p.len() as f64;
+    (p.iter().map(|v| (v - c).norm_squared()).sum::<f64>() / p.len() as f64).sqrt()
+}
+
+/// Refuses measured positions whose scale does not fit the model: the
+/// spread of `x/y/z_mm` against the spread of the positions `machine`
+/// predicts for the same rows, beyond [`UNIT_SPREAD_RATIO`], names the
+/// likely unit (inch, m, cm, µm, dm: the one whose factor is nearest the
+/// ratio). Deviations (`dx_mm` …) and data whose poses do not spread are
+/// not judged.
+pub fn check_units(
+    machine: &crate::machine::Machine,
+    obs: &Observations,
+    file: &str,
+) -> crate::error::Result<()> {
+    use super::observations::MeasuredKind;
+    if obs.measured != MeasuredKind::Position || obs.rows.len() < 3 {
+        return Ok(());
+    }
+    let meas: Vec<_> = obs.rows.iter().map(|r| r.measured_mm).collect();
+    let pred: Vec<_> = obs
+        .rows
+        .iter()
+        .map(|r| super::forward::predict(machine, r, file).map(|p| p.attained_mm))
+        .collect::<crate::error::Result<_>>()?;
+    let (sm, sp) = (spread(&meas), spread(&pred));
+    // Poses within a millimetre of each other tell no unit.
+    if !(sp > 1.0 && sm.is_finite()) {
+        return Ok(());
+    }
+    let ratio = sm / sp;
+    if (1.0 / UNIT_SPREAD_RATIO..=UNIT_SPREAD_RATIO).contains(&ratio) {
+        return Ok(());
+    }
+    let factor = 1.0 / ratio.max(f64::MIN_POSITIVE);
+    let (unit, _) = LIKELY_UNITS
+        .iter()
+        .min_by(|a, b| {
+            (a.1.ln() - factor.ln())
+                .abs()
+                .total_cmp(&(b.1.ln() - factor.ln()).abs())
+        })
+        .copied()
+        .unwrap_or(("another unit", 1.0));
+    Err(crate::error::Error::Data(format!(
+        "{file}: the measured positions spread {} mm around their centre where the model's \
+         positions for the same rows spread {} mm (ratio {}): the x_mm, y_mm, z_mm columns look \
+         like {unit}, not mm; convert them to mm (or check the machine file)",
+        crate::error::show_number((sm * 1000.0).round() / 1000.0),
+        crate::error::show_number((sp * 1000.0).round() / 1000.0),
+        crate::error::show_number((ratio * 10000.0).round() / 10000.0)
+    )))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -396,6 +396,9 @@ pub fn run_calibrate(a: &CalibrateArgs) -> Result<i32> {
         }
         CalibrationKind::Thermal => calibrate_thermal(&text, &file, o, &obs_file, &opts),
     };
+    if let Ok(m) = crate::machine::Machine::from_yaml_str(&text, &file) {
+        crate::calibrate::screen::check_units(&m, &obs, &obs_file)?;
+    }
     let cal = run(&obs)?;
 
     let record = calibration_record(
@@ -422,6 +425,45 @@ pub fn run_calibrate(a: &CalibrateArgs) -> Result<i32> {
             "{} uncertain parameter(s) keep the file's value (--write-uncertain writes them)",
             cal.uncertain.len()
         );
+    }
+    if a.holdout == 0.0 {
+        // Nothing held out: every row is predicted by a model fitted
+        // without it, and that decides.
+        let stiffness = matches!(a.kind, CalibrationKind::Stiffness);
+        match crate::calibrate::crossval::cross_validate(
+            &text, &obs, &obs_file, a.seed, stiffness, run,
+        ) {
+            Ok(cv) => {
+                let numbers = format!(
+                    "cross-validation ({} folds by pose, each of the {} rows predicted by a \
+                     model fitted without it): RMS per point {:.4} mm before, {:.4} mm after",
+                    cv.folds, cv.rows, cv.before_rms_mm, cv.after_rms_mm
+                );
+                if cv.worse() && !a.force {
+                    say(
+                        &mut stdout,
+                        &format!(
+                            "{numbers}\nnot written: the calibrated model predicts rows it did \
+                             not fit worse than the input model; the data do not support this \
+                             model (--force writes it anyway)\n"
+                        ),
+                    )?;
+                    return Ok(1);
+                }
+                let tail = if cv.worse() {
+                    "; worse, written because of --force"
+                } else {
+                    ""
+                };
+                say(&mut stdout, &format!("{numbers}{tail}\n"))?;
+            }
+            Err(why) => say(
+                &mut stdout,
+                &format!(
+                    "note: --holdout 0 and no cross-validation ({why}): nothing judges this model on rows it did not fit\n"
+                ),
+            )?,
+        }
     }
     if let (true, Some(v)) = (cal.worse_on_holdout(), cal.validation) {
         let numbers = format!(

@@ -88,6 +88,7 @@ fn in_reference_frame(
     };
     use crate::calibrate::observations::MeasurementFrame;
     let world = world_note(machine, obs.frame);
+    crate::calibrate::screen::check_units(machine, &world_to_reference(machine, obs), file)?;
     let (mut obs, copies) =
         crate::calibrate::screen::drop_copies(&world_to_reference(machine, obs), file);
     let all: Vec<usize> = (0..obs.rows.len()).collect();
@@ -286,7 +287,8 @@ impl WrittenModel<'_> {
         }
         if !w.written.is_empty() || check_obs.is_some() {
             let obs = check_obs.as_ref().unwrap_or(self.obs);
-            let (m, rot) = diagnose::holdout_check(&model, obs, &file, self.opts)?;
+            let skip: Vec<usize> = d.outliers.rows.iter().map(|o| o.index).collect();
+            let (m, rot) = diagnose::holdout_check_without(&model, obs, &file, self.opts, &skip)?;
             out.push_str(&format!(
                 "written model on the {} held-out rows (full forward model{}): RMS {:.1} µm, max {:.1} µm, 95th {:.1} µm{}\n",
                 d.gap.rows,

@@ -15,6 +15,7 @@
 
 pub mod effects;
 pub mod equations;
+pub mod outliers;
 pub mod patterns;
 pub mod report;
 pub mod residuals;
@@ -218,6 +219,9 @@ pub struct Diagnosis {
     pub gap: Gap,
     /// One-sentence verdict.
     pub verdict: String,
+    /// Gross outliers left out of every fit, test and held-out figure
+    /// ([`outliers`]).
+    pub outliers: outliers::Outliers,
 }
 
 pub use screen::{Group, SCREEN_COS};
@@ -444,17 +448,6 @@ pub fn diagnose(
             .column(0)
             .into_owned();
     }
-    let all: Vec<usize> = (0..rows.len()).collect();
-    let res = positions(&eq, &r, &all);
-    let mut where_ = residuals::analyse(rows, &res);
-    where_.patterns = patterns::rank(machine, rows, &res);
-    if let Some(p) = where_.patterns.first().filter(|p| p.r2_adj >= PATTERN_R2) {
-        where_.sentence.push_str(&format!(
-            " The pattern that explains most of the residual: {} (adjusted R² {:.2}).",
-            p.name, p.r2_adj
-        ));
-    }
-
     let mut lib = library(machine, rows);
     if obs.measured == MeasuredKind::Deviation {
         for e in lib.iter_mut().filter(|e| e.action == effects::Action::Tcp) {
@@ -462,6 +455,27 @@ pub fn diagnose(
         }
     }
     let (kept, sens) = sensitivities(lib, &ctx, rows, &eq, frame.as_ref());
+    let outliers = outliers::find(&r, &sens, &eq, rows.len(), |i| {
+        rows.get(i)
+            .map_or((String::new(), 0), |row| (row.id.clone(), row.line))
+    });
+    let (train, hold) = without_outliers(train, hold, &outliers, rows.len())?;
+    let inliers: Vec<usize> = (0..rows.len())
+        .filter(|i| !outliers.rows.iter().any(|o| o.index == *i))
+        .collect();
+    let in_rows: Vec<_> = inliers
+        .iter()
+        .filter_map(|&i| rows.get(i).cloned())
+        .collect();
+    let res = positions(&eq, &r, &inliers);
+    let mut where_ = residuals::analyse(&in_rows, &res);
+    where_.patterns = patterns::rank(machine, &in_rows, &res);
+    if let Some(p) = where_.patterns.first().filter(|p| p.r2_adj >= PATTERN_R2) {
+        where_.sentence.push_str(&format!(
+            " The pattern that explains most of the residual: {} (adjusted R² {:.2}).",
+            p.name, p.r2_adj
+        ));
+    }
     let names: Vec<String> = kept.iter().map(|e| e.name.clone()).collect();
     let screen = screen::pairs(&sens, &names);
     let groups = screen::groups(&sens, &names, &screen);
@@ -498,7 +512,27 @@ pub fn diagnose(
         found,
         gap,
         verdict,
+        outliers,
     })
+}
+
+/// The split without the outlier rows; both sides must keep a row.
+fn without_outliers(
+    mut train: Vec<usize>,
+    mut hold: Vec<usize>,
+    out: &outliers::Outliers,
+    n: usize,
+) -> Result<(Vec<usize>, Vec<usize>)> {
+    let is_out = |i: &usize| out.rows.iter().any(|o| o.index == *i);
+    train.retain(|i| !is_out(i));
+    hold.retain(|i| !is_out(i));
+    if train.is_empty() || hold.is_empty() {
+        return Err(Error::Data(format!(
+            "{} of the {n} rows are gross outliers; too few rows are left to fit and to hold out",
+            out.rows.len()
+        )));
+    }
+    Ok((train, hold))
 }
 
 /// The residual `measured − simulated` of the current model on the
@@ -641,8 +675,20 @@ pub fn holdout_check(
     obs_file: &str,
     opts: &Options,
 ) -> Result<(Metrics, Option<AngleMetrics>)> {
+    holdout_check_without(machine, obs, obs_file, opts, &[])
+}
+
+/// [`holdout_check`] without the rows `skip` (the diagnosis' outliers).
+pub fn holdout_check_without(
+    machine: &Machine,
+    obs: &Observations,
+    obs_file: &str,
+    opts: &Options,
+    skip: &[usize],
+) -> Result<(Metrics, Option<AngleMetrics>)> {
     forward::check_kind(machine, obs, obs_file)?;
-    let (_, hold) = holdout_split(obs.rows.len(), opts.holdout, opts.seed);
+    let (_, mut hold) = holdout_split(obs.rows.len(), opts.holdout, opts.seed);
+    hold.retain(|i| !skip.contains(i));
     let eq = Equations::new(machine, &obs.rows, opts.orientation_mm_per_rad);
     let mut e = Vec::with_capacity(hold.len());
     let mut angles = Vec::new();

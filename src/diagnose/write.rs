@@ -173,8 +173,9 @@ pub struct Written {
     pub written: Vec<String>,
     /// Effects not written, with the reason.
     pub not_written: Vec<(String, String)>,
-    /// True when the text was edited in place (comments kept), which the
-    /// machine-file writer always does.
+    /// True when the text was edited in place (comments kept); false when
+    /// the writer rewrote a layout it cannot edit in place
+    /// ([`yaml_write::apply_reporting`]).
     pub in_place: bool,
 }
 
@@ -291,14 +292,15 @@ pub fn write_model_for(
         }
     }
     edits.extend(thermal);
-    let text = yaml_write::apply(machine_text, "(machine file)", "postproc diagnose", &edits)?;
+    let (text, in_place) =
+        yaml_write::apply_reporting(machine_text, "(machine file)", "postproc diagnose", &edits)?;
     // The written file must load.
     Machine::from_yaml_str(&text, "(model that was to be written)")?;
     Ok(Written {
         text,
         written,
         not_written,
-        in_place: true,
+        in_place,
     })
 }
 

@@ -118,16 +118,95 @@ pub struct ThermalTermText {
     pub ts_per_w: f64,
 }
 
+mod value;
+
+pub use value::REWRITTEN;
+
 /// Applies `edits` in order to the machine file `text` (named `file` in
 /// errors). `by` names the program in the comment above a section it adds
-/// (`# Identified by `…`.`). The result is not validated here: the caller
-/// reads it back as the machine it writes.
+/// (`# Identified by `…`.`). The caller reads the result back as the
+/// machine it writes ([`apply_reporting`] says whether it was edited in
+/// place).
 pub fn apply(text: &str, file: &str, by: &str, edits: &[Edit]) -> Result<String> {
-    let mut t = text.to_string();
-    for e in edits {
-        t = apply_one(&t, file, by, e)?;
+    apply_reporting(text, file, by, edits).map(|(t, _)| t)
+}
+
+/// [`apply`], and whether the text was edited in place (`true`: every
+/// comment and byte the edits do not touch kept) or — for a layout the
+/// in-place editor does not edit, or an edit that does not read back as
+/// the value it wrote — the document was read as values, edited by key
+/// path and written again (`false`: the comments above the first key kept,
+/// the inner ones not; [`value`]).
+pub fn apply_reporting(text: &str, file: &str, by: &str, edits: &[Edit]) -> Result<(String, bool)> {
+    let in_place = (|| {
+        let mut t = text.to_string();
+        for e in edits {
+            t = apply_one(&t, file, by, e)?;
+        }
+        Ok::<_, Error>(t)
+    })();
+    let check = |t: &str| reads_back(t, edits);
+    match in_place {
+        Ok(t) if check(&t) == ReadBack::Values => Ok((t, true)),
+        Ok(t) => match value::apply(text, file, edits) {
+            Ok(v) if check(&v) == ReadBack::Values => Ok((v, false)),
+            _ if check(&t) == ReadBack::Invalid => Ok((t, true)),
+            _ => Err(edit_err(
+                file,
+                "an edited value does not read back as written; the layout of its key cannot be edited",
+            )),
+        },
+        Err(e) => match value::apply(text, file, edits) {
+            Ok(v) if check(&v) != ReadBack::Wrong => Ok((v, false)),
+            _ => Err(e),
+        },
     }
-    Ok(t)
+}
+
+/// What an edited text reads back as.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum ReadBack {
+    /// A valid machine with every edited model value as written.
+    Values,
+    /// A valid machine with an edited value that differs.
+    Wrong,
+    /// Not a valid machine file (the caller reports why).
+    Invalid,
+}
+
+fn reads_back(text: &str, edits: &[Edit]) -> ReadBack {
+    let Ok(m) = super::Machine::from_yaml_str(text, "(edited file)") else {
+        return ReadBack::Invalid;
+    };
+    let mut last: Vec<(Option<f64>, f64)> = Vec::new();
+    let mut robot: Vec<RobotParam> = Vec::new();
+    let mut tool: Vec<ToolParam> = Vec::new();
+    for e in edits {
+        match (e, &m) {
+            (Edit::Robot(p, v), super::Machine::Robot(r)) => {
+                if let Some(i) = robot.iter().position(|q| q == p) {
+                    last[i].1 = *v;
+                } else {
+                    robot.push(*p);
+                    last.push((r.param_value(*p), *v));
+                }
+            }
+            (Edit::Tool(p, v), super::Machine::Tool(t)) => {
+                if let Some(i) = tool.iter().position(|q| q == p) {
+                    last[robot.len() + i].1 = *v;
+                } else {
+                    tool.push(*p);
+                    last.push((t.param_value(*p), *v));
+                }
+            }
+            _ => {}
+        }
+    }
+    if last.iter().all(|(got, want)| *got == Some(*want)) {
+        ReadBack::Values
+    } else {
+        ReadBack::Wrong
+    }
 }
 
 fn apply_one(text: &str, file: &str, by: &str, edit: &Edit) -> Result<String> {
