@@ -176,6 +176,45 @@ pub struct CalibrateArgs {
     pub write_uncertain: bool,
 }
 
+/// What the cross-validation of a `--holdout 0` run says, and whether the
+/// model is refused (worse on the rows it did not fit, without `--force`).
+fn cross_validation_verdict(
+    cv: std::result::Result<crate::calibrate::crossval::CrossValidation, String>,
+    force: bool,
+) -> (String, bool) {
+    match cv {
+        Ok(cv) => {
+            let numbers = format!(
+                "cross-validation ({} folds by pose, each of the {} rows predicted by a model \
+                 fitted without it): RMS per point {:.4} mm before, {:.4} mm after",
+                cv.folds, cv.rows, cv.before_rms_mm, cv.after_rms_mm
+            );
+            match (cv.worse(), force) {
+                (true, false) => (
+                    format!(
+                        "{numbers}\nnot written: the calibrated model predicts rows it did not \
+                         fit worse than the input model; the data do not support this model \
+                         (--force writes it anyway)\n"
+                    ),
+                    true,
+                ),
+                (true, true) => (
+                    format!("{numbers}; worse, written because of --force\n"),
+                    false,
+                ),
+                (false, _) => (format!("{numbers}\n"), false),
+            }
+        }
+        Err(why) => (
+            format!(
+                "note: --holdout 0 and no cross-validation ({why}): nothing judges this model \
+                 on rows it did not fit\n"
+            ),
+            false,
+        ),
+    }
+}
+
 /// Largest `--uncertain-above`: 100 (10 000 %).
 const MAX_UNCERTAIN_ABOVE: f64 = 100.0;
 
@@ -430,39 +469,13 @@ pub fn run_calibrate(a: &CalibrateArgs) -> Result<i32> {
         // Nothing held out: every row is predicted by a model fitted
         // without it, and that decides.
         let stiffness = matches!(a.kind, CalibrationKind::Stiffness);
-        match crate::calibrate::crossval::cross_validate(
+        let cv = crate::calibrate::crossval::cross_validate(
             &text, &obs, &obs_file, a.seed, stiffness, run,
-        ) {
-            Ok(cv) => {
-                let numbers = format!(
-                    "cross-validation ({} folds by pose, each of the {} rows predicted by a \
-                     model fitted without it): RMS per point {:.4} mm before, {:.4} mm after",
-                    cv.folds, cv.rows, cv.before_rms_mm, cv.after_rms_mm
-                );
-                if cv.worse() && !a.force {
-                    say(
-                        &mut stdout,
-                        &format!(
-                            "{numbers}\nnot written: the calibrated model predicts rows it did \
-                             not fit worse than the input model; the data do not support this \
-                             model (--force writes it anyway)\n"
-                        ),
-                    )?;
-                    return Ok(1);
-                }
-                let tail = if cv.worse() {
-                    "; worse, written because of --force"
-                } else {
-                    ""
-                };
-                say(&mut stdout, &format!("{numbers}{tail}\n"))?;
-            }
-            Err(why) => say(
-                &mut stdout,
-                &format!(
-                    "note: --holdout 0 and no cross-validation ({why}): nothing judges this model on rows it did not fit\n"
-                ),
-            )?,
+        );
+        let (said, refuse) = cross_validation_verdict(cv, a.force);
+        say(&mut stdout, &said)?;
+        if refuse {
+            return Ok(1);
         }
     }
     if let (true, Some(v)) = (cal.worse_on_holdout(), cal.validation) {

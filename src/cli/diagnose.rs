@@ -354,8 +354,7 @@ fn reidentified(
 )> {
     use crate::calibrate::frame::{estimate, refit};
     let back = f.inverse();
-    let (train, _) =
-        crate::calibrate::observations::holdout_split(obs.rows.len(), opts.holdout, opts.seed);
+    let (train, _) = crate::calibrate::screen::grouped_split(obs, opts.holdout, opts.seed);
     let mut meas = Vec::with_capacity(train.len());
     let mut pred = Vec::with_capacity(train.len());
     for &i in &train {

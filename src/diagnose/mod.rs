@@ -11,7 +11,8 @@
 //! is computed once, and a fit is linear least squares on those columns.
 //! Rows with a measured orientation add weighted orientation residuals to
 //! every fit, test and held-out figure ([`equations`]); the "where" analysis
-//! looks at the positions.
+//! looks at the positions. Gross outliers are named and left out of all of
+//! it ([`outliers`]).
 
 pub mod effects;
 pub mod equations;
@@ -30,7 +31,7 @@ use serde::Serialize;
 use tracing::warn;
 
 use crate::calibrate::forward;
-use crate::calibrate::observations::{MeasuredKind, Observations, holdout_split};
+use crate::calibrate::observations::{MeasuredKind, Observations};
 use crate::calibrate::stats;
 use crate::error::{Error, Result};
 use crate::machine::Machine;
@@ -426,7 +427,8 @@ pub fn diagnose(
             rows.len()
         )));
     }
-    let (train, hold) = holdout_split(rows.len(), opts.holdout, opts.seed);
+    // Repeats and near-copies of a pose stay on one side of the split.
+    let (train, hold) = crate::calibrate::screen::grouped_split(obs, opts.holdout, opts.seed);
     // An effect is accepted only when held-out rows confirm it: a split
     // that leaves either side empty could confirm nothing.
     if hold.is_empty() || train.is_empty() {
@@ -687,7 +689,7 @@ pub fn holdout_check_without(
     skip: &[usize],
 ) -> Result<(Metrics, Option<AngleMetrics>)> {
     forward::check_kind(machine, obs, obs_file)?;
-    let (_, mut hold) = holdout_split(obs.rows.len(), opts.holdout, opts.seed);
+    let (_, mut hold) = crate::calibrate::screen::grouped_split(obs, opts.holdout, opts.seed);
     hold.retain(|i| !skip.contains(i));
     let eq = Equations::new(machine, &obs.rows, opts.orientation_mm_per_rad);
     let mut e = Vec::with_capacity(hold.len());

@@ -16,12 +16,17 @@
 //! Thermal growth is written as text (comments kept), adding the section or
 //! the term when absent:
 //! - robot: the linearised growth `g` µm/W of a DH length with a joint's
-//!   power becomes the Paper B term `ub − lb·e^(−ts·P)` with
-//!   `ts` = [`LINEAR_TS_PER_W`] and `lb = ub = g·10⁻³/ts` mm: its slope at
-//!   0 W is `g` and it stays within `ts·P/2` (0.05 % at 1 kW) of the straight
-//!   line; `calibrate thermal` refines lb, ub and ts from rows at several
-//!   power levels. A new section gets `time_constant_min: 30` (assumed:
-//!   steady-state rows carry no time information);
+//!   power becomes the Paper B term `ub − lb·e^(−ts·P)` with slope `g` at
+//!   0 W that saturates: `ts = x/P_max` ([`saturation_x`], `P_max` the
+//!   highest power of that joint in the rows) keeps it within
+//!   [`LINEAR_WITHIN`] of the straight line over the powers the data cover,
+//!   and `lb = ub = g·10⁻³/ts` mm bounds it at any power
+//!   ([`paper_b_term`]); `calibrate thermal` refines lb, ub and ts from rows
+//!   at several power levels. A file whose section states no
+//!   `rated_power_w` (the power the plausibility limit is evaluated to)
+//!   gets the rows' highest joint power, marked as assumed. A new section
+//!   gets `time_constant_min: 30` (assumed: steady-state rows carry no time
+//!   information);
 //! - machine tool: the fitted `g` µm/kW is added to
 //!   `thermal.spindle.growth_um_per_kw` (a new `spindle:` gets
 //!   `idle_w_per_rpm: 0` and an assumed `time_constant_min: 30`).
@@ -34,9 +39,10 @@
 //! (`Edit::Robot(RobotParam, v)`, `Edit::Tool(ToolParam, v)`, a whole
 //! component table, a new thermal term, a header comment per effect),
 //! applied by the one machine-file writer ([`crate::machine::yaml_write`]),
-//! which edits the text in place so comments and layout are kept; a key
-//! the file does not have yet (a location error, `actual`, `tool_load`) is
-//! added where it belongs.
+//! which edits the text in place so comments and layout are kept (other
+//! layouts: by key path on the document's values); a key the file does
+//! not have yet (a location error, `actual`, `tool_load` — at the TCP, as
+//! the payload candidate assumes) is added where it belongs.
 
 use super::Found;
 use super::effects::{Action, DhField, dh_param, round9, tool_edits};

@@ -12,13 +12,17 @@
 //! resolution a value is written with is the caller's choice: it rounds the
 //! value first ([`round_to`], [`round_sig`]).
 //!
-//! Supported layouts are the ones of the bundled machine files: top-level
-//! flow lists (`k_nm_per_rad: [1, 2, 3]`), one-line flow maps
+//! The layouts edited in place are the ones of the bundled machine files:
+//! top-level flow lists (`k_nm_per_rad: [1, 2, 3]`), one-line flow maps
 //! (`flange_to_tool: { x_mm: 0, … }`, `spindle: { … }`, thermal terms), DH
 //! sections written as block lists of one-line flow maps (`actual:` followed
 //! by `  - { a_mm: …, … }` rows) and machine-tool axis entries in block
 //! style (`- name: X` with `component_errors:` / `location_errors:` maps).
-//! Anything else is a clear error naming the key.
+//! Every edited model value is read back from the result; any other layout
+//! the loader reads (or an edit that does not read back) is written by key
+//! path on the document's values instead ([`value`]: the comments above
+//! the first key kept, inner comments not), and [`apply_reporting`] says
+//! which of the two happened.
 
 use serde_yaml::Value;
 
