@@ -9,7 +9,9 @@
 //! folds' rows and the written model predicts the fold's rows; the RMS per
 //! point of all rows so predicted is compared with the input model's on
 //! the same rows. Stiffness compares residuals centred per pose group (the
-//! unknown unloaded position of a group cancels, as in its fit).
+//! unknown unloaded position of a group cancels, as in its fit). The model
+//! is worse when the mean of the rows' `|e_after|² − |e_before|²` exceeds
+//! [`WORSE_SE`] standard errors of those paired differences.
 
 use nalgebra::Vector3;
 
@@ -34,14 +36,40 @@ pub struct CrossValidation {
     pub before_rms_mm: f64,
     /// RMS per point of the fold models on the rows they did not fit, mm.
     pub after_rms_mm: f64,
+    /// Mean over the rows of `|e_after|² − |e_before|²`, mm².
+    pub mean_increase_mm2: f64,
+    /// Its standard error (the rows' paired differences), mm².
+    pub se_increase_mm2: f64,
 }
+
+/// Standard errors by which the mean squared error of the fold models must
+/// exceed the input model's for the calibration to count as worse: a
+/// smaller difference is within what the rows' own scatter gives.
+pub const WORSE_SE: f64 = 2.0;
 
 impl CrossValidation {
     /// True when the calibrated models predict the rows they did not fit
-    /// worse than the input model.
+    /// worse than the input model, by more than [`WORSE_SE`] standard
+    /// errors of the paired difference of squared errors.
     pub fn worse(&self) -> bool {
-        self.after_rms_mm > self.before_rms_mm
+        self.mean_increase_mm2 > WORSE_SE * self.se_increase_mm2
     }
+}
+
+/// Mean and standard error of `a_i² − b_i²`.
+fn paired(after: &[Vector3<f64>], before: &[Vector3<f64>]) -> (f64, f64) {
+    let d: Vec<f64> = after
+        .iter()
+        .zip(before)
+        .map(|(a, b)| a.norm_squared() - b.norm_squared())
+        .collect();
+    let n = d.len() as f64;
+    if d.len() < 2 {
+        return (d.first().copied().unwrap_or(0.0), f64::INFINITY);
+    }
+    let mean = d.iter().sum::<f64>() / n;
+    let var = d.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (n - 1.0);
+    (mean, (var / n).sqrt())
 }
 
 /// The position errors of `m` on the rows `idx` of `obs`, mm.
@@ -157,10 +185,13 @@ pub fn cross_validate(
         before.extend(eb);
         after.extend(ea);
     }
+    let (mean_increase_mm2, se_increase_mm2) = paired(&after, &before);
     Ok(CrossValidation {
         folds,
         rows: before.len(),
         before_rms_mm: rms(&before),
         after_rms_mm: rms(&after),
+        mean_increase_mm2,
+        se_increase_mm2,
     })
 }

@@ -431,6 +431,7 @@ pub fn check_units(
     file: &str,
 ) -> crate::error::Result<()> {
     use super::observations::MeasuredKind;
+    super::forward::check_kind(machine, obs, file)?;
     if obs.measured != MeasuredKind::Position || obs.rows.len() < 3 {
         return Ok(());
     }

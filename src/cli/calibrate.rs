@@ -186,15 +186,21 @@ fn cross_validation_verdict(
         Ok(cv) => {
             let numbers = format!(
                 "cross-validation ({} folds by pose, each of the {} rows predicted by a model \
-                 fitted without it): RMS per point {:.4} mm before, {:.4} mm after",
-                cv.folds, cv.rows, cv.before_rms_mm, cv.after_rms_mm
+                 fitted without it): RMS per point {:.4} mm before, {:.4} mm after (mean \
+                 squared error {:+.3e} ± {:.3e} mm²)",
+                cv.folds,
+                cv.rows,
+                cv.before_rms_mm,
+                cv.after_rms_mm,
+                cv.mean_increase_mm2,
+                cv.se_increase_mm2
             );
             match (cv.worse(), force) {
                 (true, false) => (
                     format!(
                         "{numbers}\nnot written: the calibrated model predicts rows it did not \
-                         fit worse than the input model; the data do not support this model \
-                         (--force writes it anyway)\n"
+                         fit worse than the input model (by more than 2 standard errors); the \
+                         data do not support this model (--force writes it anyway)\n"
                     ),
                     true,
                 ),

@@ -405,6 +405,12 @@ pub fn run(a: &DiagnoseArgs) -> Result<i32> {
             crate::error::show_number(a.holdout)
         )));
     }
+    if let Some(path) = &a.write_model {
+        // Refused before anything is fitted.
+        let mut inputs = vec![o.to_path_buf()];
+        inputs.extend(MachineFile::open(m)?.path);
+        super::output::refuse_overwrite(path, &inputs)?;
+    }
     let (machine, text) = load(m)?;
     let mut obs = load_observations(o)?;
     if let Some(f) = a.frame {
