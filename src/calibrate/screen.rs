@@ -172,6 +172,10 @@ fn near_features(r: &Observation) -> (Vec<u64>, Vec<(f64, f64)>) {
     (d, c)
 }
 
+/// A pose group's first row: its first continuous input, its group and
+/// all its continuous inputs with their tolerances.
+type Representative = (f64, usize, Vec<(f64, f64)>);
+
 /// The pose group (0-based, in order of first appearance) of every row:
 /// rows whose inputs all agree within [`NEAR_DEG`], [`NEAR_MM`] and 0.1 N,
 /// N·m, W, 1/min, °C of the group's first row (repeats, and near-copies
@@ -182,7 +186,7 @@ pub fn pose_groups(obs: &Observations) -> (Vec<usize>, usize) {
     // Group representatives by discrete key, sorted by their first
     // continuous value, so that a row is compared with the few whose first
     // value is within tolerance.
-    let mut reps: HashMap<Vec<u64>, Vec<(f64, usize, Vec<(f64, f64)>)>> = HashMap::new();
+    let mut reps: HashMap<Vec<u64>, Vec<Representative>> = HashMap::new();
     let mut of_row = Vec::with_capacity(obs.rows.len());
     let mut n = 0;
     for r in &obs.rows {

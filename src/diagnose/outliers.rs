@@ -135,7 +135,8 @@ fn structure_residual(
             }
         }
         let Some((c, gain, dirs)) = best else { break };
-        if !(gain > 0.0) {
+        // A gain that is not positive (or not a number) explains nothing.
+        if gain.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) {
             break;
         }
         used[c] = true;
