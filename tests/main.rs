@@ -12,6 +12,7 @@ mod conf_off;
 mod configurations;
 mod diagnose;
 mod diagnose_matrix;
+mod diagnose_write;
 mod effects;
 mod engine_flags;
 mod error_kinds;

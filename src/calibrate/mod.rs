@@ -1,6 +1,7 @@
 //! Calibration: reading measured observations and identifying model
 //! parameters from them.
 
+pub mod crossval;
 pub mod forward;
 pub mod frame;
 pub mod geometry;

@@ -100,15 +100,119 @@ fn full_key(r: &Observation) -> Vec<u64> {
     k
 }
 
-/// The pose group (0-based, in order of first appearance) of every row.
-pub fn pose_groups(obs: &Observations) -> (Vec<usize>, usize) {
-    let mut seen: HashMap<Vec<u64>, usize> = HashMap::new();
-    let mut of_row = Vec::with_capacity(obs.rows.len());
-    for r in &obs.rows {
-        let n = seen.len();
-        of_row.push(*seen.entry(input_key(r)).or_insert(n));
+/// Joint angles (robot) and rotary axes (machine tool) closer than this
+/// are one pose, degrees: a point 1 m out moves by 0.17 mm, far less than
+/// any two poses of an identification data set differ.
+pub const NEAR_DEG: f64 = 0.01;
+/// Linear axes, measured and wrench points and tool lengths closer than
+/// this are one pose, mm.
+pub const NEAR_MM: f64 = 0.01;
+/// Forces (N), moments (N·m), powers (W), speeds (1/min) and temperatures
+/// (°C) closer than this are the same.
+const NEAR_OTHER: f64 = 0.1;
+
+/// Everything the model sees of a row as (value, tolerance) pairs, and its
+/// discrete part (kind, given or not, last-motion signs) as bit patterns.
+fn near_features(r: &Observation) -> (Vec<u64>, Vec<(f64, f64)>) {
+    let mut d: Vec<u64> = Vec::new();
+    let mut c: Vec<(f64, f64)> = Vec::new();
+    let opt = |d: &mut Vec<u64>, c: &mut Vec<(f64, f64)>, v: Option<f64>, tol: f64| match v {
+        Some(v) => {
+            d.push(1);
+            c.push((v, tol));
+        }
+        None => d.push(0),
+    };
+    c.extend(
+        r.force_n
+            .iter()
+            .chain(r.moment_nm.iter())
+            .map(|v| (*v, NEAR_OTHER)),
+    );
+    opt(&mut d, &mut c, r.ambient_c, NEAR_OTHER);
+    let dirs = |d: &mut Vec<u64>, dir: &[Option<i8>]| {
+        d.extend(
+            dir.iter()
+                .map(|x| x.map_or(0, |x| (i64::from(x) + 7) as u64)),
+        );
+    };
+    match &r.pose {
+        Pose::Robot(p) => {
+            d.push(1);
+            c.extend(p.q_deg.iter().map(|v| (*v, NEAR_DEG)));
+            for pt in [p.mp_mm, p.wp_mm] {
+                match pt {
+                    Some(v) => {
+                        d.push(1);
+                        c.extend(v.iter().map(|x| (*x, NEAR_MM)));
+                    }
+                    None => d.push(0),
+                }
+            }
+            for w in p.p_w {
+                opt(&mut d, &mut c, w, NEAR_OTHER);
+            }
+            dirs(&mut d, &p.dir);
+        }
+        Pose::Tool(p) => {
+            d.push(2);
+            c.extend(p.xyz_mm.iter().map(|v| (*v, NEAR_MM)));
+            for a in p.abc_deg {
+                opt(&mut d, &mut c, a, NEAR_DEG);
+            }
+            dirs(&mut d, &p.dir);
+            opt(&mut d, &mut c, p.tool_mm, NEAR_MM);
+            opt(&mut d, &mut c, p.spindle_rpm, NEAR_OTHER);
+            opt(&mut d, &mut c, p.spindle_w, NEAR_OTHER);
+            for w in p.p_w {
+                opt(&mut d, &mut c, w, NEAR_OTHER);
+            }
+        }
     }
-    (of_row, seen.len())
+    (d, c)
+}
+
+/// A pose group's first row: its first continuous input, its group and
+/// all its continuous inputs with their tolerances.
+type Representative = (f64, usize, Vec<(f64, f64)>);
+
+/// The pose group (0-based, in order of first appearance) of every row:
+/// rows whose inputs all agree within [`NEAR_DEG`], [`NEAR_MM`] and 0.1 N,
+/// N·m, W, 1/min, °C of the group's first row (repeats, and near-copies
+/// measured again with a jitter of the pose) are one pose — in every
+/// split, held-out figure, cross-validation fold and count of distinct
+/// poses.
+pub fn pose_groups(obs: &Observations) -> (Vec<usize>, usize) {
+    // Group representatives by discrete key, sorted by their first
+    // continuous value, so that a row is compared with the few whose first
+    // value is within tolerance.
+    let mut reps: HashMap<Vec<u64>, Vec<Representative>> = HashMap::new();
+    let mut of_row = Vec::with_capacity(obs.rows.len());
+    let mut n = 0;
+    for r in &obs.rows {
+        let (d, c) = near_features(r);
+        let first = c.first().map_or(0.0, |x| x.0);
+        let tol = c.first().map_or(0.0, |x| x.1);
+        let list = reps.entry(d).or_default();
+        let lo = list.partition_point(|x| x.0 < first - tol);
+        let hit = list[lo..]
+            .iter()
+            .take_while(|x| x.0 <= first + tol)
+            .find(|x| {
+                x.2.len() == c.len() && x.2.iter().zip(&c).all(|(a, b)| (a.0 - b.0).abs() <= b.1)
+            })
+            .map(|x| x.1);
+        match hit {
+            Some(g) => of_row.push(g),
+            None => {
+                let at = list.partition_point(|x| x.0 < first);
+                list.insert(at, (first, n, c));
+                of_row.push(n);
+                n += 1;
+            }
+        }
+    }
+    (of_row, n)
 }
 
 /// Number of distinct poses among `rows` (repeats counted once).
@@ -293,6 +397,83 @@ pub fn implausible(e: &crate::error::Error, obs_file: &str, n_fit: usize) -> cra
     ))
 }
 
+/// Largest ratio of the spread of the measured positions to the spread of
+/// the positions the model predicts for the same rows (either way) that
+/// passes as the same unit: a model wrong by a fifth of its size is not a
+/// calibration problem.
+pub const UNIT_SPREAD_RATIO: f64 = 1.25;
+
+/// Units a position column is often written in by mistake, with their size
+/// in mm.
+const LIKELY_UNITS: [(&str, f64); 5] = [
+    ("inch", 25.4),
+    ("m", 1000.0),
+    ("cm", 10.0),
+    ("µm", 1e-3),
+    ("dm", 100.0),
+];
+
+/// RMS distance of points from their centroid (the spread; unchanged by a
+/// rigid motion of the instrument).
+fn spread(p: &[nalgebra::Vector3<f64>]) -> f64 {
+    if p.is_empty() {
+        return 0.0;
+    }
+    let c = p.iter().sum::<nalgebra::Vector3<f64>>() / p.len() as f64;
+    (p.iter().map(|v| (v - c).norm_squared()).sum::<f64>() / p.len() as f64).sqrt()
+}
+
+/// Refuses measured positions whose scale does not fit the model: the
+/// spread of `x/y/z_mm` against the spread of the positions `machine`
+/// predicts for the same rows, beyond [`UNIT_SPREAD_RATIO`], names the
+/// likely unit (inch, m, cm, µm, dm: the one whose factor is nearest the
+/// ratio). Deviations (`dx_mm` …) and data whose poses do not spread are
+/// not judged.
+pub fn check_units(
+    machine: &crate::machine::Machine,
+    obs: &Observations,
+    file: &str,
+) -> crate::error::Result<()> {
+    use super::observations::MeasuredKind;
+    super::forward::check_kind(machine, obs, file)?;
+    if obs.measured != MeasuredKind::Position || obs.rows.len() < 3 {
+        return Ok(());
+    }
+    let meas: Vec<_> = obs.rows.iter().map(|r| r.measured_mm).collect();
+    let pred: Vec<_> = obs
+        .rows
+        .iter()
+        .map(|r| super::forward::predict(machine, r, file).map(|p| p.attained_mm))
+        .collect::<crate::error::Result<_>>()?;
+    let (sm, sp) = (spread(&meas), spread(&pred));
+    // Poses within a millimetre of each other tell no unit.
+    if !(sp > 1.0 && sm.is_finite()) {
+        return Ok(());
+    }
+    let ratio = sm / sp;
+    if (1.0 / UNIT_SPREAD_RATIO..=UNIT_SPREAD_RATIO).contains(&ratio) {
+        return Ok(());
+    }
+    let factor = 1.0 / ratio.max(f64::MIN_POSITIVE);
+    let (unit, _) = LIKELY_UNITS
+        .iter()
+        .min_by(|a, b| {
+            (a.1.ln() - factor.ln())
+                .abs()
+                .total_cmp(&(b.1.ln() - factor.ln()).abs())
+        })
+        .copied()
+        .unwrap_or(("another unit", 1.0));
+    Err(crate::error::Error::Data(format!(
+        "{file}: the measured positions spread {} mm around their centre where the model's \
+         positions for the same rows spread {} mm (ratio {}): the x_mm, y_mm, z_mm columns look \
+         like {unit}, not mm; convert them to mm (or check the machine file)",
+        crate::error::show_number((sm * 1000.0).round() / 1000.0),
+        crate::error::show_number((sp * 1000.0).round() / 1000.0),
+        crate::error::show_number((ratio * 10000.0).round() / 10000.0)
+    )))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -304,6 +485,15 @@ mod tests {
             "o.csv",
         )
         .expect("parses")
+    }
+
+    /// Machine-tool rows 0.005 mm apart are one pose; 0.05 mm apart, two
+    /// (the measured deviations do not count).
+    #[test]
+    fn near_copies_are_one_pose() {
+        let o = obs("10,20,30,40,50,60\n10.005,20,29.995,40,50,60.004\n10.05,20,30,40,50,60\n");
+        let (of_row, n) = pose_groups(&o);
+        assert_eq!((of_row, n), (vec![0, 0, 1], 2));
     }
 
     #[test]

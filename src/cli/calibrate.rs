@@ -176,6 +176,51 @@ pub struct CalibrateArgs {
     pub write_uncertain: bool,
 }
 
+/// What the cross-validation of a `--holdout 0` run says, and whether the
+/// model is refused (worse on the rows it did not fit, without `--force`).
+fn cross_validation_verdict(
+    cv: std::result::Result<crate::calibrate::crossval::CrossValidation, String>,
+    force: bool,
+) -> (String, bool) {
+    match cv {
+        Ok(cv) => {
+            let numbers = format!(
+                "cross-validation ({} folds by pose, each of the {} rows predicted by a model \
+                 fitted without it): RMS per point {:.4} mm before, {:.4} mm after (mean \
+                 squared error {:+.3e} ± {:.3e} mm²)",
+                cv.folds,
+                cv.rows,
+                cv.before_rms_mm,
+                cv.after_rms_mm,
+                cv.mean_increase_mm2,
+                cv.se_increase_mm2
+            );
+            match (cv.worse(), force) {
+                (true, false) => (
+                    format!(
+                        "{numbers}\nnot written: the calibrated model predicts rows it did not \
+                         fit worse than the input model (by more than 2 standard errors); the \
+                         data do not support this model (--force writes it anyway)\n"
+                    ),
+                    true,
+                ),
+                (true, true) => (
+                    format!("{numbers}; worse, written because of --force\n"),
+                    false,
+                ),
+                (false, _) => (format!("{numbers}\n"), false),
+            }
+        }
+        Err(why) => (
+            format!(
+                "note: --holdout 0 and no cross-validation ({why}): nothing judges this model \
+                 on rows it did not fit\n"
+            ),
+            false,
+        ),
+    }
+}
+
 /// Largest `--uncertain-above`: 100 (10 000 %).
 const MAX_UNCERTAIN_ABOVE: f64 = 100.0;
 
@@ -396,6 +441,9 @@ pub fn run_calibrate(a: &CalibrateArgs) -> Result<i32> {
         }
         CalibrationKind::Thermal => calibrate_thermal(&text, &file, o, &obs_file, &opts),
     };
+    if let Ok(m) = crate::machine::Machine::from_yaml_str(&text, &file) {
+        crate::calibrate::screen::check_units(&m, &obs, &obs_file)?;
+    }
     let cal = run(&obs)?;
 
     let record = calibration_record(
@@ -422,6 +470,19 @@ pub fn run_calibrate(a: &CalibrateArgs) -> Result<i32> {
             "{} uncertain parameter(s) keep the file's value (--write-uncertain writes them)",
             cal.uncertain.len()
         );
+    }
+    if a.holdout == 0.0 {
+        // Nothing held out: every row is predicted by a model fitted
+        // without it, and that decides.
+        let stiffness = matches!(a.kind, CalibrationKind::Stiffness);
+        let cv = crate::calibrate::crossval::cross_validate(
+            &text, &obs, &obs_file, a.seed, stiffness, run,
+        );
+        let (said, refuse) = cross_validation_verdict(cv, a.force);
+        say(&mut stdout, &said)?;
+        if refuse {
+            return Ok(1);
+        }
     }
     if let (true, Some(v)) = (cal.worse_on_holdout(), cal.validation) {
         let numbers = format!(

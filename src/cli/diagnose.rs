@@ -88,6 +88,7 @@ fn in_reference_frame(
     };
     use crate::calibrate::observations::MeasurementFrame;
     let world = world_note(machine, obs.frame);
+    crate::calibrate::screen::check_units(machine, &world_to_reference(machine, obs), file)?;
     let (mut obs, copies) =
         crate::calibrate::screen::drop_copies(&world_to_reference(machine, obs), file);
     let all: Vec<usize> = (0..obs.rows.len()).collect();
@@ -223,7 +224,7 @@ impl WrittenModel<'_> {
             write_uncertain: a.write_uncertain,
         };
         let (found, withheld) = write::withhold_uncertain(self.machine, &d.found, &rule);
-        let mut w = write::write_model(self.machine, self.text, &found)?;
+        let mut w = write::write_model_for(self.machine, self.text, &found, &self.obs.rows)?;
         w.not_written.extend(withheld);
         let shown = path.display().to_string();
         let model = Machine::from_yaml_str(&w.text, &shown)?;
@@ -286,7 +287,8 @@ impl WrittenModel<'_> {
         }
         if !w.written.is_empty() || check_obs.is_some() {
             let obs = check_obs.as_ref().unwrap_or(self.obs);
-            let (m, rot) = diagnose::holdout_check(&model, obs, &file, self.opts)?;
+            let skip: Vec<usize> = d.outliers.rows.iter().map(|o| o.index).collect();
+            let (m, rot) = diagnose::holdout_check_without(&model, obs, &file, self.opts, &skip)?;
             out.push_str(&format!(
                 "written model on the {} held-out rows (full forward model{}): RMS {:.1} µm, max {:.1} µm, 95th {:.1} µm{}\n",
                 d.gap.rows,
@@ -352,8 +354,7 @@ fn reidentified(
 )> {
     use crate::calibrate::frame::{estimate, refit};
     let back = f.inverse();
-    let (train, _) =
-        crate::calibrate::observations::holdout_split(obs.rows.len(), opts.holdout, opts.seed);
+    let (train, _) = crate::calibrate::screen::grouped_split(obs, opts.holdout, opts.seed);
     let mut meas = Vec::with_capacity(train.len());
     let mut pred = Vec::with_capacity(train.len());
     for &i in &train {
@@ -404,6 +405,12 @@ pub fn run(a: &DiagnoseArgs) -> Result<i32> {
             crate::error::show_number(a.holdout)
         )));
     }
+    if let Some(path) = &a.write_model {
+        // Refused before anything is fitted.
+        let mut inputs = vec![o.to_path_buf()];
+        inputs.extend(MachineFile::open(m)?.path);
+        super::output::refuse_overwrite(path, &inputs)?;
+    }
     let (machine, text) = load(m)?;
     let mut obs = load_observations(o)?;
     if let Some(f) = a.frame {
@@ -441,9 +448,29 @@ pub fn run(a: &DiagnoseArgs) -> Result<i32> {
             registration,
             opts: &opts,
         };
-        let said = written.write(a, &d, path)?;
-        if a.format == DiagnoseFormat::Table {
-            out.push_str(&said);
+        match written.write(a, &d, path) {
+            Ok(said) => {
+                if a.format == DiagnoseFormat::Table {
+                    out.push_str(&said);
+                }
+            }
+            Err(e) => {
+                // The diagnosis stands whatever became of the file: it is
+                // printed whole, then why nothing was written (exit 1).
+                print(&out)?;
+                let mut msg = e.to_string();
+                let mut src = std::error::Error::source(&e);
+                while let Some(s) = src {
+                    msg.push_str(&format!(": {s}"));
+                    src = s.source();
+                }
+                eprintln!(
+                    "error: --write-model {}: the diagnosis above stands, but the model was not \
+                     written (no file left): {msg}",
+                    path.display()
+                );
+                return Ok(1);
+            }
         }
     }
     print(&out)?;

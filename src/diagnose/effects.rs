@@ -50,7 +50,8 @@ pub enum Action {
     BaseTrans(usize),
     /// Robot: measurement-frame rotation about base x/y/z (µrad).
     BaseRot(usize),
-    /// Robot: payload mass error (kg) at the tool load's centre of gravity.
+    /// Robot: payload mass error (kg) at the tool load's centre of gravity
+    /// (a file without `tool_load` gets one at the TCP).
     Payload,
     /// Robot: thermal growth of a DH length with a joint's power (µm/W),
     /// Paper B linearised: Δp = g·P.
@@ -728,9 +729,17 @@ pub fn pose_sensitivity(
             }
         }
         (Action::Payload, Machine::Robot(r)) => {
+            // The deflection is linear in the mass: a file without (or with
+            // a light) tool load is differenced forward from its own mass,
+            // the load added at the TCP as `with_params` adds it.
             let p = Machine::Robot(robot_payload(r, MASS_STEP)?);
-            let m = Machine::Robot(robot_payload(r, -MASS_STEP)?);
-            diff_column(&p, &m, 2.0 * MASS_STEP, rows, ctx, &mut s, 0)?;
+            let light = r.param_value(RobotParam::PayloadMass).unwrap_or(0.0) < MASS_STEP;
+            if light {
+                diff_column(&p, ctx.machine, MASS_STEP, rows, ctx, &mut s, 0)?;
+            } else {
+                let m = Machine::Robot(robot_payload(r, -MASS_STEP)?);
+                diff_column(&p, &m, 2.0 * MASS_STEP, rows, ctx, &mut s, 0)?;
+            }
         }
         (Action::BaseTrans(c), Machine::Robot(_)) => {
             for i in 0..n {

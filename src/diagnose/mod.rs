@@ -11,10 +11,12 @@
 //! is computed once, and a fit is linear least squares on those columns.
 //! Rows with a measured orientation add weighted orientation residuals to
 //! every fit, test and held-out figure ([`equations`]); the "where" analysis
-//! looks at the positions.
+//! looks at the positions. Gross outliers are named and left out of all of
+//! it ([`outliers`]).
 
 pub mod effects;
 pub mod equations;
+pub mod outliers;
 pub mod patterns;
 pub mod report;
 pub mod residuals;
@@ -29,7 +31,7 @@ use serde::Serialize;
 use tracing::warn;
 
 use crate::calibrate::forward;
-use crate::calibrate::observations::{MeasuredKind, Observations, holdout_split};
+use crate::calibrate::observations::{MeasuredKind, Observations};
 use crate::calibrate::stats;
 use crate::error::{Error, Result};
 use crate::machine::Machine;
@@ -218,6 +220,9 @@ pub struct Diagnosis {
     pub gap: Gap,
     /// One-sentence verdict.
     pub verdict: String,
+    /// Gross outliers left out of every fit, test and held-out figure
+    /// ([`outliers`]).
+    pub outliers: outliers::Outliers,
 }
 
 pub use screen::{Group, SCREEN_COS};
@@ -422,7 +427,8 @@ pub fn diagnose(
             rows.len()
         )));
     }
-    let (train, hold) = holdout_split(rows.len(), opts.holdout, opts.seed);
+    // Repeats and near-copies of a pose stay on one side of the split.
+    let (train, hold) = crate::calibrate::screen::grouped_split(obs, opts.holdout, opts.seed);
     // An effect is accepted only when held-out rows confirm it: a split
     // that leaves either side empty could confirm nothing.
     if hold.is_empty() || train.is_empty() {
@@ -444,17 +450,6 @@ pub fn diagnose(
             .column(0)
             .into_owned();
     }
-    let all: Vec<usize> = (0..rows.len()).collect();
-    let res = positions(&eq, &r, &all);
-    let mut where_ = residuals::analyse(rows, &res);
-    where_.patterns = patterns::rank(machine, rows, &res);
-    if let Some(p) = where_.patterns.first().filter(|p| p.r2_adj >= PATTERN_R2) {
-        where_.sentence.push_str(&format!(
-            " The pattern that explains most of the residual: {} (adjusted R² {:.2}).",
-            p.name, p.r2_adj
-        ));
-    }
-
     let mut lib = library(machine, rows);
     if obs.measured == MeasuredKind::Deviation {
         for e in lib.iter_mut().filter(|e| e.action == effects::Action::Tcp) {
@@ -462,6 +457,27 @@ pub fn diagnose(
         }
     }
     let (kept, sens) = sensitivities(lib, &ctx, rows, &eq, frame.as_ref());
+    let outliers = outliers::find(&r, &sens, &eq, rows.len(), |i| {
+        rows.get(i)
+            .map_or((String::new(), 0), |row| (row.id.clone(), row.line))
+    });
+    let (train, hold) = without_outliers(train, hold, &outliers, rows.len())?;
+    let inliers: Vec<usize> = (0..rows.len())
+        .filter(|i| !outliers.rows.iter().any(|o| o.index == *i))
+        .collect();
+    let in_rows: Vec<_> = inliers
+        .iter()
+        .filter_map(|&i| rows.get(i).cloned())
+        .collect();
+    let res = positions(&eq, &r, &inliers);
+    let mut where_ = residuals::analyse(&in_rows, &res);
+    where_.patterns = patterns::rank(machine, &in_rows, &res);
+    if let Some(p) = where_.patterns.first().filter(|p| p.r2_adj >= PATTERN_R2) {
+        where_.sentence.push_str(&format!(
+            " The pattern that explains most of the residual: {} (adjusted R² {:.2}).",
+            p.name, p.r2_adj
+        ));
+    }
     let names: Vec<String> = kept.iter().map(|e| e.name.clone()).collect();
     let screen = screen::pairs(&sens, &names);
     let groups = screen::groups(&sens, &names, &screen);
@@ -498,7 +514,27 @@ pub fn diagnose(
         found,
         gap,
         verdict,
+        outliers,
     })
+}
+
+/// The split without the outlier rows; both sides must keep a row.
+fn without_outliers(
+    mut train: Vec<usize>,
+    mut hold: Vec<usize>,
+    out: &outliers::Outliers,
+    n: usize,
+) -> Result<(Vec<usize>, Vec<usize>)> {
+    let is_out = |i: &usize| out.rows.iter().any(|o| o.index == *i);
+    train.retain(|i| !is_out(i));
+    hold.retain(|i| !is_out(i));
+    if train.is_empty() || hold.is_empty() {
+        return Err(Error::Data(format!(
+            "{} of the {n} rows are gross outliers; too few rows are left to fit and to hold out",
+            out.rows.len()
+        )));
+    }
+    Ok((train, hold))
 }
 
 /// The residual `measured − simulated` of the current model on the
@@ -641,8 +677,20 @@ pub fn holdout_check(
     obs_file: &str,
     opts: &Options,
 ) -> Result<(Metrics, Option<AngleMetrics>)> {
+    holdout_check_without(machine, obs, obs_file, opts, &[])
+}
+
+/// [`holdout_check`] without the rows `skip` (the diagnosis' outliers).
+pub fn holdout_check_without(
+    machine: &Machine,
+    obs: &Observations,
+    obs_file: &str,
+    opts: &Options,
+    skip: &[usize],
+) -> Result<(Metrics, Option<AngleMetrics>)> {
     forward::check_kind(machine, obs, obs_file)?;
-    let (_, hold) = holdout_split(obs.rows.len(), opts.holdout, opts.seed);
+    let (_, mut hold) = crate::calibrate::screen::grouped_split(obs, opts.holdout, opts.seed);
+    hold.retain(|i| !skip.contains(i));
     let eq = Equations::new(machine, &obs.rows, opts.orientation_mm_per_rad);
     let mut e = Vec::with_capacity(hold.len());
     let mut angles = Vec::new();

@@ -27,6 +27,36 @@ fn metrics_row(out: &mut String, label: &str, m: &Metrics) {
     );
 }
 
+/// The gross outliers left out, each by row, and the rule.
+fn render_outliers(o: &mut String, d: &Diagnosis) {
+    let out = &d.outliers;
+    if out.rows.is_empty() {
+        return;
+    }
+    let _ = writeln!(
+        o,
+        "outliers: {} row(s) left out of every fit, test and held-out figure (a coordinate more \
+         than {} robust σ from the median after the library's {} best candidates; \
+         σ = 1.4826·MAD = {:.1} µm):",
+        out.rows.len(),
+        super::outliers::K_SIGMA,
+        out.structure_candidates,
+        out.sigma_um
+    );
+    for r in &out.rows {
+        let line = if r.line > 0 {
+            format!(" (line {})", r.line)
+        } else {
+            String::new()
+        };
+        let _ = writeln!(
+            o,
+            "  row {}{line}: {:.1} µm ({:.0} σ)",
+            r.id, r.residual_um, r.sigmas
+        );
+    }
+}
+
 /// The text report.
 pub fn render_table(d: &Diagnosis) -> String {
     let mut o = String::new();
@@ -35,6 +65,7 @@ pub fn render_table(d: &Diagnosis) -> String {
         "diagnose: {} rows ({} fit, {} held out), {} candidate effects ({})",
         d.rows, d.train_rows, d.holdout_rows, d.candidates, d.machine_kind
     );
+    render_outliers(&mut o, d);
     let _ = writeln!(o, "\nWHERE  residual = measured − simulated");
     let _ = writeln!(
         o,

@@ -16,12 +16,17 @@
 //! Thermal growth is written as text (comments kept), adding the section or
 //! the term when absent:
 //! - robot: the linearised growth `g` µm/W of a DH length with a joint's
-//!   power becomes the Paper B term `ub − lb·e^(−ts·P)` with
-//!   `ts` = [`LINEAR_TS_PER_W`] and `lb = ub = g·10⁻³/ts` mm: its slope at
-//!   0 W is `g` and it stays within `ts·P/2` (0.05 % at 1 kW) of the straight
-//!   line; `calibrate thermal` refines lb, ub and ts from rows at several
-//!   power levels. A new section gets `time_constant_min: 30` (assumed:
-//!   steady-state rows carry no time information);
+//!   power becomes the Paper B term `ub − lb·e^(−ts·P)` with slope `g` at
+//!   0 W that saturates: `ts = x/P_max` ([`saturation_x`], `P_max` the
+//!   highest power of that joint in the rows) keeps it within
+//!   [`LINEAR_WITHIN`] of the straight line over the powers the data cover,
+//!   and `lb = ub = g·10⁻³/ts` mm bounds it at any power
+//!   ([`paper_b_term`]); `calibrate thermal` refines lb, ub and ts from rows
+//!   at several power levels. A file whose section states no
+//!   `rated_power_w` (the power the plausibility limit is evaluated to)
+//!   gets the rows' highest joint power, marked as assumed. A new section
+//!   gets `time_constant_min: 30` (assumed: steady-state rows carry no time
+//!   information);
 //! - machine tool: the fitted `g` µm/kW is added to
 //!   `thermal.spindle.growth_um_per_kw` (a new `spindle:` gets
 //!   `idle_w_per_rpm: 0` and an assumed `time_constant_min: 30`).
@@ -34,14 +39,16 @@
 //! (`Edit::Robot(RobotParam, v)`, `Edit::Tool(ToolParam, v)`, a whole
 //! component table, a new thermal term, a header comment per effect),
 //! applied by the one machine-file writer ([`crate::machine::yaml_write`]),
-//! which edits the text in place so comments and layout are kept; a key
-//! the file does not have yet (a location error, `actual`, `tool_load`) is
-//! added where it belongs.
+//! which edits the text in place so comments and layout are kept (other
+//! layouts: by key path on the document's values); a key the file does
+//! not have yet (a location error, `actual`, `tool_load` — at the TCP, as
+//! the payload candidate assumes) is added where it belongs.
 
 use super::Found;
 use super::effects::{Action, DhField, dh_param, round9, tool_edits};
 use crate::calibrate::honesty::{Rule, relative_uncertainty};
 use crate::calibrate::lsq::COVERAGE_K;
+use crate::calibrate::observations::{Observation, Pose};
 use crate::calibrate::report::Estimate;
 use crate::error::{Error, Result};
 use crate::machine::Machine;
@@ -49,8 +56,32 @@ use crate::machine::robot::{Robot, RobotParam};
 use crate::machine::tool::ToolParam;
 use crate::machine::yaml_write::{self, Edit, ThermalTermText, round_sig, round_to};
 
-/// `ts_per_w` of a Paper B term written for a linear growth, 1/W.
+/// `ts_per_w` of a Paper B term written for a linear growth when the rows
+/// give no power range, 1/W.
 pub const LINEAR_TS_PER_W: f64 = 1e-6;
+
+/// Largest shortfall of a written Paper B term from the straight line of
+/// its fitted slope over the powers the rows cover (fraction).
+pub const LINEAR_WITHIN: f64 = 0.02;
+
+/// `x = ts·P_max` at which the saturating growth `(1 − e^(−x))/x` of a term
+/// with slope 1 at 0 W has fallen [`LINEAR_WITHIN`] below the line (≈ 0.0405;
+/// bisection, the ratio falls monotonically in x).
+pub fn saturation_x() -> f64 {
+    let ratio = |x: f64| -(-x).exp_m1() / x;
+    let (mut lo, mut hi) = (1e-9, 1.0);
+    for _ in 0..100 {
+        let mid = 0.5 * (lo + hi);
+        if ratio(mid) > 1.0 - LINEAR_WITHIN {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    0.5 * (lo + hi)
+}
+
+const ASSUMED_RATED: &str = "postproc diagnose: rated_power_w is ASSUMED: the highest joint power in the observations; the plausibility limit of every thermal term is evaluated from 0 to it (set the motors' rated power)";
 
 /// Decimals of the thermal lengths and gains written (mm, µm/kW).
 const THERMAL_DECIMALS: usize = 6;
@@ -60,8 +91,32 @@ pub const ASSUMED_TIME_CONSTANT_MIN: f64 = 30.0;
 
 const ASSUMED_TAU: &str = "postproc diagnose: time_constant_min is ASSUMED (rows at the thermal steady state carry no time information)";
 
-/// The edit that writes a thermal effect.
-fn thermal_edit(action: &Action, v0: f64, m: &Machine) -> Result<Edit> {
+/// Highest power of joint `j` in `rows`, W (`None`: none above 0).
+fn max_power_w(rows: &[Observation], j: usize) -> Option<f64> {
+    rows.iter()
+        .filter_map(|r| match &r.pose {
+            Pose::Robot(rp) => rp.p_w.get(j).copied().flatten(),
+            Pose::Tool(_) => None,
+        })
+        .filter(|p| p.is_finite() && *p > 0.0)
+        .max_by(f64::total_cmp)
+}
+
+/// The Paper B term `ub − lb·e^(−ts·P)` of a linearised growth `g` µm/W
+/// whose rows cover joint powers up to `p_max_w`: slope `g` at 0 W,
+/// saturating so that it stays within [`LINEAR_WITHIN`] of the line up to
+/// `p_max_w` (`ts = x/p_max_w`, [`saturation_x`]) and bounded by
+/// `lb = ub = g·10⁻³/ts` mm at any power; without a power range, the
+/// nearly linear [`LINEAR_TS_PER_W`]. Returns `(lb = ub, ts)`.
+pub fn paper_b_term(g_um_per_w: f64, p_max_w: Option<f64>) -> (f64, f64) {
+    let ts = round_sig(p_max_w.map_or(LINEAR_TS_PER_W, |p| saturation_x() / p));
+    let amp = round_to(round9(g_um_per_w * 1e-3 / ts), THERMAL_DECIMALS);
+    (amp, ts)
+}
+
+/// The edit that writes a thermal effect; `rows`: the observations (their
+/// power range shapes a robot term).
+fn thermal_edit(action: &Action, v0: f64, m: &Machine, rows: &[Observation]) -> Result<Edit> {
     let edit = match (action, m) {
         (
             Action::Thermal {
@@ -75,13 +130,13 @@ fn thermal_edit(action: &Action, v0: f64, m: &Machine) -> Result<Edit> {
                 DhField::A => 'a',
                 _ => 'd',
             };
-            let amp = round_to(round9(v0 * 1e-3 / LINEAR_TS_PER_W), THERMAL_DECIMALS);
+            let (amp, ts) = paper_b_term(v0, max_power_w(rows, *power));
             let term = ThermalTermText {
                 parameter: format!("{l}{}", joint + 1),
                 joint: power + 1,
                 lb_mm: amp,
                 ub_mm: amp,
-                ts_per_w: round_sig(LINEAR_TS_PER_W),
+                ts_per_w: ts,
             };
             Edit::ThermalTerm {
                 term,
@@ -124,8 +179,9 @@ pub struct Written {
     pub written: Vec<String>,
     /// Effects not written, with the reason.
     pub not_written: Vec<(String, String)>,
-    /// True when the text was edited in place (comments kept), which the
-    /// machine-file writer always does.
+    /// True when the text was edited in place (comments kept); false when
+    /// the writer rewrote a layout it cannot edit in place
+    /// ([`yaml_write::apply_reporting`]).
     pub in_place: bool,
 }
 
@@ -175,8 +231,22 @@ fn robot_edits(r: &Robot, action: &Action, p: &[f64]) -> Result<Vec<Edit>> {
     })
 }
 
-/// Writes `found` into the machine file text.
+/// Writes `found` into the machine file text (thermal terms without the
+/// rows' power range: [`write_model_for`]).
 pub fn write_model(machine: &Machine, machine_text: &str, found: &[Found]) -> Result<Written> {
+    write_model_for(machine, machine_text, found, &[])
+}
+
+/// Writes `found`, fitted on `rows`, into the machine file text. A robot
+/// thermal term is shaped by the powers the rows cover ([`paper_b_term`]);
+/// a robot file whose `thermal` section states no `rated_power_w` gets the
+/// highest joint power of the rows, marked as assumed.
+pub fn write_model_for(
+    machine: &Machine,
+    machine_text: &str,
+    found: &[Found],
+    rows: &[Observation],
+) -> Result<Written> {
     let mut written = Vec::new();
     let mut not_written = Vec::new();
     let mut edits = Vec::new();
@@ -189,7 +259,7 @@ pub fn write_model(machine: &Machine, machine_text: &str, found: &[Found]) -> Re
         let values: Vec<f64> = f.params.iter().map(|p| p.value).collect();
         let v0 = values.first().copied().unwrap_or(0.0);
         if is_thermal(&f.effect.action) {
-            thermal.push(thermal_edit(&f.effect.action, v0, machine)?);
+            thermal.push(thermal_edit(&f.effect.action, v0, machine, rows)?);
         } else {
             edits.extend(match machine {
                 Machine::Robot(r) => robot_edits(r, &f.effect.action, &values)?,
@@ -215,15 +285,28 @@ pub fn write_model(machine: &Machine, machine_text: &str, found: &[Found]) -> Re
             vals.join(", ")
         )));
     }
+    if let (Machine::Robot(r), false) = (machine, thermal.is_empty()) {
+        let stated = r.thermal().and_then(|t| t.rated_power_w);
+        let highest = (0..6)
+            .filter_map(|j| max_power_w(rows, j))
+            .max_by(f64::total_cmp);
+        if let (None, Some(p)) = (stated, highest) {
+            thermal.push(Edit::RatedPower {
+                watts: p.ceil(),
+                comment: ASSUMED_RATED.into(),
+            });
+        }
+    }
     edits.extend(thermal);
-    let text = yaml_write::apply(machine_text, "(machine file)", "postproc diagnose", &edits)?;
+    let (text, in_place) =
+        yaml_write::apply_reporting(machine_text, "(machine file)", "postproc diagnose", &edits)?;
     // The written file must load.
-    Machine::from_yaml_str(&text, "(written model)")?;
+    Machine::from_yaml_str(&text, "(model that was to be written)")?;
     Ok(Written {
         text,
         written,
         not_written,
-        in_place: true,
+        in_place,
     })
 }
 

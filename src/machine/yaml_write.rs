@@ -12,13 +12,17 @@
 //! resolution a value is written with is the caller's choice: it rounds the
 //! value first ([`round_to`], [`round_sig`]).
 //!
-//! Supported layouts are the ones of the bundled machine files: top-level
-//! flow lists (`k_nm_per_rad: [1, 2, 3]`), one-line flow maps
+//! The layouts edited in place are the ones of the bundled machine files:
+//! top-level flow lists (`k_nm_per_rad: [1, 2, 3]`), one-line flow maps
 //! (`flange_to_tool: { x_mm: 0, … }`, `spindle: { … }`, thermal terms), DH
 //! sections written as block lists of one-line flow maps (`actual:` followed
 //! by `  - { a_mm: …, … }` rows) and machine-tool axis entries in block
 //! style (`- name: X` with `component_errors:` / `location_errors:` maps).
-//! Anything else is a clear error naming the key.
+//! Every edited model value is read back from the result; any other layout
+//! the loader reads (or an edit that does not read back) is written by key
+//! path on the document's values instead ([`value`]: the comments above
+//! the first key kept, inner comments not), and [`apply_reporting`] says
+//! which of the two happened.
 
 use serde_yaml::Value;
 
@@ -66,6 +70,15 @@ pub enum Edit {
         /// Comment line above a new section (empty: none).
         comment: String,
     },
+    /// The robot's `thermal.rated_power_w` (the section must exist):
+    /// replaced, or added after `time_constant_min` preceded by the
+    /// comment line `comment` (empty: none).
+    RatedPower {
+        /// Highest mean motor power of a joint, W.
+        watts: f64,
+        /// Comment line above a new key.
+        comment: String,
+    },
     /// A new machine-tool `thermal.spindle` entry with
     /// `idle_w_per_rpm: 0.0` (in the `thermal:` section, or a new one),
     /// preceded by `comment`.
@@ -109,16 +122,95 @@ pub struct ThermalTermText {
     pub ts_per_w: f64,
 }
 
+mod value;
+
+pub use value::REWRITTEN;
+
 /// Applies `edits` in order to the machine file `text` (named `file` in
 /// errors). `by` names the program in the comment above a section it adds
-/// (`# Identified by `…`.`). The result is not validated here: the caller
-/// reads it back as the machine it writes.
+/// (`# Identified by `…`.`). The caller reads the result back as the
+/// machine it writes ([`apply_reporting`] says whether it was edited in
+/// place).
 pub fn apply(text: &str, file: &str, by: &str, edits: &[Edit]) -> Result<String> {
-    let mut t = text.to_string();
-    for e in edits {
-        t = apply_one(&t, file, by, e)?;
+    apply_reporting(text, file, by, edits).map(|(t, _)| t)
+}
+
+/// [`apply`], and whether the text was edited in place (`true`: every
+/// comment and byte the edits do not touch kept) or — for a layout the
+/// in-place editor does not edit, or an edit that does not read back as
+/// the value it wrote — the document was read as values, edited by key
+/// path and written again (`false`: the comments above the first key kept,
+/// the inner ones not; [`value`]).
+pub fn apply_reporting(text: &str, file: &str, by: &str, edits: &[Edit]) -> Result<(String, bool)> {
+    let in_place = (|| {
+        let mut t = text.to_string();
+        for e in edits {
+            t = apply_one(&t, file, by, e)?;
+        }
+        Ok::<_, Error>(t)
+    })();
+    let check = |t: &str| reads_back(t, edits);
+    match in_place {
+        Ok(t) if check(&t) == ReadBack::Values => Ok((t, true)),
+        Ok(t) => match value::apply(text, file, edits) {
+            Ok(v) if check(&v) == ReadBack::Values => Ok((v, false)),
+            _ if check(&t) == ReadBack::Invalid => Ok((t, true)),
+            _ => Err(edit_err(
+                file,
+                "an edited value does not read back as written; the layout of its key cannot be edited",
+            )),
+        },
+        Err(e) => match value::apply(text, file, edits) {
+            Ok(v) if check(&v) != ReadBack::Wrong => Ok((v, false)),
+            _ => Err(e),
+        },
     }
-    Ok(t)
+}
+
+/// What an edited text reads back as.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum ReadBack {
+    /// A valid machine with every edited model value as written.
+    Values,
+    /// A valid machine with an edited value that differs.
+    Wrong,
+    /// Not a valid machine file (the caller reports why).
+    Invalid,
+}
+
+fn reads_back(text: &str, edits: &[Edit]) -> ReadBack {
+    let Ok(m) = super::Machine::from_yaml_str(text, "(edited file)") else {
+        return ReadBack::Invalid;
+    };
+    let mut last: Vec<(Option<f64>, f64)> = Vec::new();
+    let mut robot: Vec<RobotParam> = Vec::new();
+    let mut tool: Vec<ToolParam> = Vec::new();
+    for e in edits {
+        match (e, &m) {
+            (Edit::Robot(p, v), super::Machine::Robot(r)) => {
+                if let Some(i) = robot.iter().position(|q| q == p) {
+                    last[i].1 = *v;
+                } else {
+                    robot.push(*p);
+                    last.push((r.param_value(*p), *v));
+                }
+            }
+            (Edit::Tool(p, v), super::Machine::Tool(t)) => {
+                if let Some(i) = tool.iter().position(|q| q == p) {
+                    last[robot.len() + i].1 = *v;
+                } else {
+                    tool.push(*p);
+                    last.push((t.param_value(*p), *v));
+                }
+            }
+            _ => {}
+        }
+    }
+    if last.iter().all(|(got, want)| *got == Some(*want)) {
+        ReadBack::Values
+    } else {
+        ReadBack::Wrong
+    }
 }
 
 fn apply_one(text: &str, file: &str, by: &str, edit: &Edit) -> Result<String> {
@@ -143,6 +235,7 @@ fn apply_one(text: &str, file: &str, by: &str, edit: &Edit) -> Result<String> {
             time_constant_min,
             comment,
         } => add_thermal_term(text, file, term, *time_constant_min, comment),
+        Edit::RatedPower { watts, comment } => set_rated_power(text, file, *watts, comment),
         Edit::Spindle {
             growth_um_per_kw,
             time_constant_min,
@@ -610,6 +703,45 @@ fn add_thermal_term(
         }
     }
     Ok(join_nl(lines))
+}
+
+/// Sets `thermal.rated_power_w` of a robot file in block style: the
+/// existing line's value (its comment kept), or a new line after
+/// `time_constant_min` (first in the section when it has none), preceded by
+/// `# comment`.
+fn set_rated_power(text: &str, file: &str, watts: f64, comment: &str) -> Result<String> {
+    let mut lines = lines_of(text);
+    let t = top_level_line(&lines, "thermal")
+        .ok_or_else(|| edit_err(file, "no `thermal:` section for `rated_power_w`"))?;
+    if split_comment(&lines[t]).0.trim_end() != "thermal:" {
+        return Err(edit_err(
+            file,
+            "`thermal` is not a block map; write it in block style to add `rated_power_w`",
+        ));
+    }
+    let end = block_end(&lines, t, lines.len());
+    let child = (t + 1..end)
+        .find(|&i| is_content(&lines[i]))
+        .map_or(2, |i| indent_of(&lines[i]));
+    if let Some(i) = key_line(&lines, t + 1, end, child, "rated_power_w") {
+        let (content, c) = split_comment(&lines[i]);
+        let trail = &content[content.trim_end().len()..];
+        lines[i] = format!(
+            "{}rated_power_w: {}{trail}{c}",
+            " ".repeat(child),
+            number(watts)
+        );
+        return Ok(join(lines, text));
+    }
+    let at = key_line(&lines, t + 1, end, child, "time_constant_min").map_or(t + 1, |i| i + 1);
+    let pad = " ".repeat(child);
+    let mut new = Vec::new();
+    if !comment.is_empty() {
+        new.push(format!("{pad}# {comment}"));
+    }
+    new.push(format!("{pad}rated_power_w: {}", number(watts)));
+    lines.splice(at..at, new);
+    Ok(join(lines, text))
 }
 
 /// Starts a `thermal:` section at the end of `lines` (trailing blank lines

@@ -15,7 +15,8 @@ pub const DH_ANGLE_DEVIATION_MAX_DEG: f64 = 1.0;
 /// Largest thermal growth of one term, mm, at any joint power from 0 to
 /// [`JOINT_POWER_MAX_W`] (`ub − lb·e^(−ts·P)`).
 pub const THERMAL_GROWTH_MAX_MM: f64 = 2.0;
-/// Highest joint power the thermal growth is checked to, W.
+/// Highest joint power the thermal growth is checked to when the file
+/// states no `thermal.rated_power_w`, W.
 pub const JOINT_POWER_MAX_W: f64 = 5000.0;
 /// Gravity magnitude band, m/s² (any direction); zero turns gravity off.
 pub const GRAVITY_RANGE_M_PER_S2: [f64; 2] = [9.7, 9.9];
@@ -54,18 +55,25 @@ pub(crate) fn check(raw: &RawRobot) -> V {
         offset("tool_load.cog_mm", &l.cog_mm)?;
     }
     if let Some(t) = &raw.thermal {
+        // Up to the rated power the file states (`thermal.rated_power_w`),
+        // else up to the highest joint power of any robot.
+        let (p_max, whose) = match t.rated_power_w {
+            Some(w) => (w, "the rated power thermal.rated_power_w"),
+            None => (JOINT_POWER_MAX_W, "the limit without thermal.rated_power_w"),
+        };
         for (i, term) in t.terms.iter().enumerate() {
             // The growth is monotonic in the power: its extremes are at the
             // ends of the range.
             let cold = term.ub_mm - term.lb_mm;
-            let hot = term.ub_mm - term.lb_mm * (-term.ts_per_w * JOINT_POWER_MAX_W).exp();
+            let hot = term.ub_mm - term.lb_mm * (-term.ts_per_w * p_max).exp();
             let worst = cold.abs().max(hot.abs());
             if worst > THERMAL_GROWTH_MAX_MM {
                 return Err(Invalid::new(
                     format!("thermal.terms[{i}]"),
                     format!(
-                        "grows its DH length by {} mm between 0 and {JOINT_POWER_MAX_W} W, more than the {THERMAL_GROWTH_MAX_MM} mm limit (check lb_mm, ub_mm and ts_per_w)",
-                        show_number(worst)
+                        "grows its DH length by {} mm between 0 and {} W ({whose}), more than the {THERMAL_GROWTH_MAX_MM} mm limit (check lb_mm, ub_mm and ts_per_w)",
+                        show_number(worst),
+                        show_number(p_max)
                     ),
                 ));
             }

@@ -118,6 +118,10 @@ pub(crate) enum RawForceFrame {
 #[serde(deny_unknown_fields)]
 pub(crate) struct RawThermal {
     pub time_constant_min: f64,
+    /// Highest mean motor power of a joint the robot is rated for, W: the
+    /// plausibility limit of every term is evaluated from 0 to it.
+    #[serde(default)]
+    pub rated_power_w: Option<f64>,
     pub terms: Vec<RawThermalTerm>,
 }
 

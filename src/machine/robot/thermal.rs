@@ -48,6 +48,10 @@ impl ThermalTerm {
 pub struct Thermal {
     /// Time constant of the first-order heat-up, s.
     pub time_constant_s: f64,
+    /// Highest mean motor power of a joint the robot is rated for, W
+    /// (`rated_power_w`; `None`: not stated, the plausibility limit is then
+    /// evaluated up to [`super::plausible::JOINT_POWER_MAX_W`]).
+    pub rated_power_w: Option<f64>,
     /// Coupling terms.
     pub terms: Vec<ThermalTerm>,
 }
@@ -78,6 +82,14 @@ impl Thermal {
                     raw.time_constant_min
                 ),
             ));
+        }
+        if let Some(w) = raw.rated_power_w {
+            if !(w.is_finite() && w > 0.0) {
+                return Err(Invalid::new(
+                    "thermal.rated_power_w",
+                    format!("rated power {w} must be a positive number of watts"),
+                ));
+            }
         }
         let mut terms = Vec::with_capacity(raw.terms.len());
         for (i, t) in raw.terms.iter().enumerate() {
@@ -131,6 +143,7 @@ impl Thermal {
         }
         Ok(Thermal {
             time_constant_s: raw.time_constant_min * 60.0,
+            rated_power_w: raw.rated_power_w,
             terms,
         })
     }
