@@ -869,3 +869,228 @@ fn an_observation_file_beyond_the_row_limit_is_refused_with_the_limit() {
     let obs = postproc::calibrate::observations::parse_observations(&at_limit, "o.csv").unwrap();
     assert_eq!(obs.rows.len(), OBSERVATION_MAX_ROWS);
 }
+
+// ---------------------------------------------------------------------------
+// Signals, links and dwell (issue 43)
+// ---------------------------------------------------------------------------
+
+/// A program long enough that the run is still writing its output when a
+/// signal arrives.
+#[cfg(unix)]
+fn long_program(dir: &std::path::Path) -> std::path::PathBuf {
+    let program = dir.join("big.nc");
+    let mut text = String::from("G90 G17 G21 G54\nT1 M6\nG43 H1 G0 X0 Y0 Z20\nG1 Z0 F2000\n");
+    for k in 0..400_000 {
+        let x = if k % 2 == 0 { 400 } else { 0 };
+        text.push_str(&format!("X{x} Y{:.4}\n", k as f64 * 0.0005));
+    }
+    std::fs::write(&program, text).unwrap();
+    program
+}
+
+/// Starts `compensate` of `program` into `out_dir`, waits for its
+/// temporary file, sends `signal` (a `kill` name); (the run was
+/// interrupted while writing, the files left in `out_dir`).
+#[cfg(unix)]
+fn interrupted_run(
+    program: &std::path::Path,
+    out_dir: &std::path::Path,
+    signal: &str,
+    ignore_hup: bool,
+) -> (bool, Option<i32>, Vec<String>) {
+    use std::os::unix::process::{CommandExt, ExitStatusExt};
+    let mut cmd = std::process::Command::new(assert_cmd::cargo::cargo_bin("postproc"));
+    cmd.args(["compensate", "--machine", "afm-r1000", "-o"])
+        .arg(out_dir.join("o.nc"))
+        .arg(program)
+        // A core dump (QUIT, XFSZ, …) goes nowhere near the repository.
+        .current_dir(out_dir.parent().unwrap())
+        .stderr(std::process::Stdio::null());
+    if ignore_hup {
+        // SAFETY: only async-signal-safe calls between fork and exec.
+        unsafe {
+            cmd.pre_exec(|| {
+                libc::signal(libc::SIGHUP, libc::SIG_IGN);
+                Ok(())
+            });
+        }
+    }
+    let mut child = cmd.spawn().unwrap();
+    let mut seen = false;
+    for _ in 0..2000 {
+        if std::fs::read_dir(out_dir).unwrap().next().is_some() {
+            seen = true;
+            break;
+        }
+        if child.try_wait().unwrap().is_some() {
+            break;
+        }
+        std::thread::sleep(Duration::from_millis(2));
+    }
+    let killed = std::process::Command::new("kill")
+        .arg(format!("-{signal}"))
+        .arg(child.id().to_string())
+        .status()
+        .unwrap();
+    let status = child.wait().unwrap();
+    let mut left: Vec<String> = std::fs::read_dir(out_dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    left.sort();
+    (seen && killed.success(), status.signal(), left)
+}
+
+/// Every signal that ends the process (not only INT, TERM and HUP) leaves
+/// no partial `.postproc-*` file beside the output: each ends the run as
+/// its default action would (by that signal), after the temporary file is
+/// removed.
+#[cfg(unix)]
+#[test]
+fn every_terminating_signal_leaves_no_temporary_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let program = long_program(dir.path());
+    let out_dir = dir.path().join("out");
+    let mut interrupted = 0;
+    for (signal, number) in [
+        ("QUIT", libc::SIGQUIT),
+        ("USR1", libc::SIGUSR1),
+        ("USR2", libc::SIGUSR2),
+        ("ALRM", libc::SIGALRM),
+        ("XFSZ", libc::SIGXFSZ),
+        ("XCPU", libc::SIGXCPU),
+        ("VTALRM", libc::SIGVTALRM),
+        ("PROF", libc::SIGPROF),
+        ("HUP", libc::SIGHUP),
+        ("ABRT", libc::SIGABRT),
+    ] {
+        let _ = std::fs::remove_dir_all(&out_dir);
+        std::fs::create_dir(&out_dir).unwrap();
+        let (sent, by, left) = interrupted_run(&program, &out_dir, signal, false);
+        if sent && by.is_some() {
+            interrupted += 1;
+            assert_eq!(by, Some(number), "{signal}: ended by another signal");
+            assert!(left.is_empty(), "{signal}: left {left:?}");
+        } else {
+            assert!(left.iter().all(|f| f == "o.nc"), "{signal}: left {left:?}");
+        }
+    }
+    assert!(interrupted >= 5, "only {interrupted} runs were interrupted");
+}
+
+/// A signal the run was started with ignored (`nohup`) stays ignored: the
+/// run goes on and writes its output.
+#[cfg(unix)]
+#[test]
+fn an_ignored_hangup_does_not_end_the_run() {
+    let dir = tempfile::tempdir().unwrap();
+    let program = long_program(dir.path());
+    let out_dir = dir.path().join("out");
+    std::fs::create_dir(&out_dir).unwrap();
+    let (_, by, left) = interrupted_run(&program, &out_dir, "HUP", true);
+    assert_eq!(by, None, "ended by a signal it was started ignoring");
+    assert_eq!(left, ["o.nc"]);
+}
+
+/// The temporary file of a run that was killed (SIGKILL cannot be caught)
+/// is removed by the next run writing into the same folder; one of a live
+/// process is left alone.
+#[cfg(unix)]
+#[test]
+fn the_next_run_removes_the_temporary_file_of_a_killed_run() {
+    let dir = tempfile::tempdir().unwrap();
+    let out_dir = dir.path().join("out");
+    std::fs::create_dir(&out_dir).unwrap();
+    let mut gone = std::process::Command::new("true").spawn().unwrap();
+    let dead = gone.id();
+    gone.wait().unwrap();
+    let stale = out_dir.join(format!(".postproc-{dead}-0-0badf00d"));
+    let live = out_dir.join(format!(".postproc-{}-0-0badf00d", std::process::id()));
+    let unrelated = out_dir.join(".postproc-notes");
+    for f in [&stale, &live, &unrelated] {
+        std::fs::write(f, "partial").unwrap();
+    }
+    let out = crate::common::postproc()
+        .args(["compensate", "--machine", "afm-r1000", "-o"])
+        .arg(out_dir.join("o.nc"))
+        .arg(repo("samples/part.nc"))
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(0));
+    assert!(!stale.exists(), "the killed run's file is left");
+    assert!(live.exists() && unrelated.exists());
+}
+
+/// `batch` of a folder does not follow a link inside it that leads out of
+/// it (a folder or a file elsewhere): it is skipped with a warning.
+#[cfg(unix)]
+#[test]
+fn batch_does_not_leave_its_input_folder_through_a_link() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let input = d.join("in");
+    let outside = d.join("elsewhere");
+    std::fs::create_dir_all(input.join("sub")).unwrap();
+    std::fs::create_dir_all(&outside).unwrap();
+    std::fs::copy(repo("samples/part.nc"), input.join("sub/part.nc")).unwrap();
+    std::fs::copy(repo("samples/effects.nc"), outside.join("secret.nc")).unwrap();
+    std::os::unix::fs::symlink(&outside, input.join("linked")).unwrap();
+    std::os::unix::fs::symlink(outside.join("secret.nc"), input.join("one.nc")).unwrap();
+    // A link that stays inside the folder is followed as before.
+    std::os::unix::fs::symlink(input.join("sub"), input.join("again")).unwrap();
+    let out_dir = d.join("out");
+    let run = crate::common::postproc()
+        .args(["batch", "--machine", "afm-r1000", "--out-dir"])
+        .arg(&out_dir)
+        .arg(&input)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&run.stderr);
+    assert_eq!(run.status.code(), Some(0), "{err}");
+    for link in ["linked", "one.nc"] {
+        assert!(
+            err.contains(&format!("{link}: a link out of the input folder")),
+            "{link}: {err}"
+        );
+    }
+    let summary = std::fs::read_to_string(out_dir.join("batch-summary.json")).unwrap();
+    assert!(!summary.contains("secret"), "{summary}");
+    assert!(summary.contains("a link out of the input folder"), "{summary}");
+    let mut outputs: Vec<String> = walk_names(&out_dir);
+    outputs.sort();
+    assert!(outputs.iter().all(|f| !f.contains("secret")), "{outputs:?}");
+    assert!(outputs.iter().any(|f| f.ends_with("part.nc")), "{outputs:?}");
+}
+
+/// File names under `dir`, recursively, relative to it.
+fn walk_names(dir: &std::path::Path) -> Vec<String> {
+    let mut out = Vec::new();
+    let mut stack = vec![dir.to_path_buf()];
+    while let Some(d) = stack.pop() {
+        for e in std::fs::read_dir(&d).unwrap() {
+            let p = e.unwrap().path();
+            if p.is_dir() {
+                stack.push(p);
+            } else {
+                out.push(p.strip_prefix(dir).unwrap().display().to_string());
+            }
+        }
+    }
+    out
+}
+
+/// A negative dwell at the bottom of a canned cycle (`G82 … P-1`) is
+/// refused at its word, as `G4 P-1` is.
+#[test]
+fn a_negative_cycle_dwell_is_refused_at_its_word() {
+    let prog = "G21 G90 G94 G17\nT1 M6\nG43 H1 G0 X0. Y0. Z20.\nS1000 M3\nG98 G82 X10. Y10. Z-5. R2. P-1 F100.\nG80\nM30\n";
+    let (code, err) = check_program("dwell.nc", prog.as_bytes(), "afm-r1000", &[]);
+    assert_eq!(code, 2, "{err}");
+    assert!(
+        err.contains("dwell.nc:5:28: negative dwell time: `P-1`"),
+        "{err}"
+    );
+    let prog = prog.replace("P-1", "P500");
+    let (code, err) = check_program("dwell.nc", prog.as_bytes(), "afm-r1000", &[]);
+    assert!(code == 0 || code == 1, "{err}");
+}
