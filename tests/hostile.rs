@@ -149,7 +149,10 @@ fn robot_values_beyond_plausibility_are_refused_with_their_key_path() {
         "{err}"
     );
     let err = robot_error("tool_load: { mass_kg: 5.0", "tool_load: { mass_kg: 50000.0");
-    assert!(err.contains("tool_load.mass_kg: 50000 kg exceeds"), "{err}");
+    assert!(
+        err.contains("tool_load.mass_kg: 50000 kg is outside 0..3000 kg"),
+        "{err}"
+    );
     // The line is that of the key.
     let base = machine_text("abb-irb1600");
     let text = base.replacen("[0.0, 0.0, -9.81]", "[0.0, 0.0, -1000.0]", 1);
@@ -1093,4 +1096,273 @@ fn a_negative_cycle_dwell_is_refused_at_its_word() {
     let prog = prog.replace("P-1", "P500");
     let (code, err) = check_program("dwell.nc", prog.as_bytes(), "afm-r1000", &[]);
     assert!(code == 0 || code == 1, "{err}");
+}
+
+// ---------------------------------------------------------------------------
+// Implausible models (issue 43)
+// ---------------------------------------------------------------------------
+
+/// Writes machine text `machine` and runs `check` of `program` (a sample)
+/// with it; (exit code, stderr).
+fn check_with_machine(machine: &str, program: &str) -> (i32, String) {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("m.yaml");
+    std::fs::write(&path, machine).unwrap();
+    let out = crate::common::postproc()
+        .current_dir(dir.path())
+        .args(["check", "--machine", "m.yaml"])
+        .arg(repo(program))
+        .output()
+        .unwrap();
+    (
+        out.status.code().unwrap_or(-1),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+/// `base` with `from` replaced by `to` (once; `from` must be there).
+fn edited(base: &str, from: &str, to: &str) -> String {
+    assert!(base.contains(from), "{from}");
+    base.replacen(from, to, 1)
+}
+
+/// The refusal of an implausible model through the binary: exit 2, the
+/// file, line and column of the key, the key path and the range.
+fn refused_at(machine: &str, program: &str, key_line: &str, want: &str) {
+    let (code, err) = check_with_machine(machine, program);
+    assert_eq!(code, 2, "{err}");
+    let line = line_of(machine, key_line, 0);
+    assert!(err.contains(&format!("m.yaml:{line}:")), "line {line}: {err}");
+    assert!(err.contains(want), "{err}");
+    assert!(err.contains(": off }"), "no override named: {err}");
+}
+
+#[test]
+fn robot_joint_stiffness_divided_by_100_is_refused() {
+    let base = machine_text("abb-irb1600");
+    let text = edited(
+        &base,
+        "k_nm_per_rad: [270990.0, 430040.0, 140940.0, 11280.0, 9550.0, 5330.0]",
+        "k_nm_per_rad: [270990.0, 430040.0, 1409.4, 112.8, 95.5, 53.3]",
+    );
+    refused_at(
+        &text,
+        "samples/drilling.mod",
+        "k_nm_per_rad:",
+        "k_nm_per_rad[2]: 1409.4 N·m/rad is outside 5000..50000000 N·m/rad, the plausible range of a main joint's (1–3) stiffness",
+    );
+    // Only the wrist joints: the first of them is named.
+    let text = edited(
+        &base,
+        "11280.0, 9550.0, 5330.0]",
+        "112.8, 95.5, 53.3]",
+    );
+    refused_at(
+        &text,
+        "samples/drilling.mod",
+        "k_nm_per_rad:",
+        "k_nm_per_rad[3]: 112.8 N·m/rad is outside 500..10000000 N·m/rad",
+    );
+}
+
+#[test]
+fn machine_tool_stiffness_off_by_a_thousand_is_refused() {
+    let base = machine_text("five-axis-ac");
+    let stiffness =
+        "k_n_per_um: { x_pos: 12.0, x_neg: 12.5, y_pos: 10.0, y_neg: 11.0, z_pos: 18.0, z_neg: 15.0 }";
+    for (to, want) in [
+        (
+            "k_n_per_um: { x_pos: 0.012, x_neg: 0.0125, y_pos: 0.01, y_neg: 0.011, z_pos: 0.018, z_neg: 0.015 }",
+            "stiffness.k_n_per_um.x_pos: 0.012 N/µm is outside 1..1000 N/µm, the plausible range of a machine tool's static stiffness",
+        ),
+        (
+            "k_n_per_um: { x_pos: 12000, x_neg: 12500, y_pos: 10000, y_neg: 11000, z_pos: 18000, z_neg: 15000 }",
+            "stiffness.k_n_per_um.x_pos: 12000 N/µm is outside 1..1000 N/µm",
+        ),
+    ] {
+        let text = edited(&base, stiffness, to);
+        refused_at(&text, "samples/part.nc", "  k_n_per_um:", want);
+    }
+    // A grid value of the AFM file.
+    let base = machine_text("afm-r1000");
+    let text = edited(&base, "[[18.0, 20.0, 18.0]", "[[18.0, 0.02, 18.0]");
+    refused_at(
+        &text,
+        "samples/part.nc",
+        "    x_pos:",
+        "stiffness.k_n_per_um.x_pos: 0.02 N/µm is outside 1..1000 N/µm",
+    );
+}
+
+#[test]
+fn a_tool_longer_than_the_travel_allows_is_refused() {
+    let base = machine_text("afm-r1000");
+    let text = edited(&base, "1: { length_mm: 62.5 }", "1: { length_mm: 62500 }");
+    refused_at(
+        &text,
+        "samples/part.nc",
+        "  1: { length_mm: 62500 }",
+        "tools.1.length_mm: 62500 mm is outside 0..1000 mm, the plausible range of a tool length (the Z travel of 500 mm plus 500 mm",
+    );
+    // At the Z travel plus 500 mm it is a (long) tool.
+    let text = edited(&base, "1: { length_mm: 62.5 }", "1: { length_mm: 1000 }");
+    let (code, err) = check_with_machine(&text, "samples/part.nc");
+    assert!(code == 0 || code == 1, "{err}");
+}
+
+#[test]
+fn a_heavy_flange_link_is_refused() {
+    let base = machine_text("abb-irb1600");
+    let text = edited(
+        &base,
+        "{ mass_kg: 1.0,  com_mm: [0.0, 0.0, -10.0] }",
+        "{ mass_kg: 1000.0,  com_mm: [0.0, 0.0, -10.0] }",
+    );
+    refused_at(
+        &text,
+        "samples/drilling.mod",
+        "  - { mass_kg: 1000.0",
+        "links[5].mass_kg: 1000 kg is outside 0..100 kg, the plausible range of the flange's (link 6) mass",
+    );
+    let text = edited(
+        &base,
+        "{ mass_kg: 15.0, com_mm: [0.0, 0.0, -250.0] }",
+        "{ mass_kg: 15000.0, com_mm: [0.0, 0.0, -250.0] }",
+    );
+    refused_at(
+        &text,
+        "samples/drilling.mod",
+        "  - { mass_kg: 15000.0",
+        "links[3].mass_kg: 15000 kg is outside 0..1000 kg",
+    );
+}
+
+#[test]
+fn drill_diameters_are_bounded() {
+    let base = machine_text("abb-irb1600");
+    let text = edited(&base, "drill_diameter_mm: 6.8", "drill_diameter_mm: 6800");
+    refused_at(
+        &text,
+        "samples/drilling.mod",
+        "  drill_diameter_mm:",
+        "process_force.drill_diameter_mm: 6800 mm is outside 0.1..150 mm, the plausible range of a drill's diameter",
+    );
+    let base = machine_text("afm-r1000");
+    let milling = "process_force:\n  model: milling\n  kt_n_per_mm2: 800.0\n  kr_n_per_mm2: 170.0\n  ka_n_per_mm2: 220.0\n  kte_n_per_mm: 28.0\n  kre_n_per_mm: 31.0\n  kae_n_per_mm: 2.0\n  tool_diameter_mm: 10.0\n  flutes: 3\n  axial_depth_mm: 2.0\n  radial_width_mm: 3.0\n";
+    let text = edited(
+        &base,
+        milling,
+        "process_force:\n  model: drilling\n  thrust_coefficient_n_per_mm2: 450.0\n  drill_diameter_mm: 680.0\n",
+    );
+    refused_at(
+        &text,
+        "samples/part.nc",
+        "  drill_diameter_mm:",
+        "process_force.drill_diameter_mm: 680 mm is outside 0.1..150 mm",
+    );
+}
+
+#[test]
+fn a_vanishing_modal_stiffness_is_refused_even_with_plausibility_off() {
+    let base = machine_text("abb-irb1600");
+    let text = edited(
+        &base,
+        "damping_ratio: 0.05, stiffness_n_per_um: 0.5 }",
+        "damping_ratio: 0.05, stiffness_n_per_um: 5e-324 }",
+    );
+    let (code, err) = check_with_machine(&text, "samples/milling.mod");
+    assert_eq!(code, 2, "{err}");
+    let line = line_of(&text, "  - { direction: x", 0);
+    assert!(
+        err.contains(&format!("m.yaml:{line}:"))
+            && err.contains("modal[0].stiffness_n_per_um: `5e-324` is outside 0.001..100000"),
+        "{err}"
+    );
+    let off = format!("{text}plausibility:\n  modal: off\n");
+    let (code, err) = check_with_machine(&off, "samples/milling.mod");
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("modal[0].stiffness_n_per_um: `5e-324`"), "{err}");
+    // Machine tools alike; a merely implausible one names the range.
+    let base = machine_text("afm-r1000");
+    let from = "x: { natural_frequency_hz: 62.0, damping_ratio: 0.04, stiffness_n_per_um: 20.0 }";
+    let text = edited(&base, from, &from.replace("20.0 }", "5e-324 }"));
+    let (code, err) = check_with_machine(&text, "samples/part.nc");
+    assert_eq!(code, 2, "{err}");
+    assert!(
+        err.contains("modal.x.stiffness_n_per_um: `5e-324` is outside 0.001..100000"),
+        "{err}"
+    );
+    let text = edited(&base, from, &from.replace("20.0 }", "0.02 }"));
+    refused_at(
+        &text,
+        "samples/part.nc",
+        "  x: { natural_frequency_hz",
+        "modal.x.stiffness_n_per_um: 0.02 N/µm is outside 0.5..2000 N/µm",
+    );
+    let text = edited(&base, from, &from.replace("0.04", "0.0005"));
+    refused_at(
+        &text,
+        "samples/part.nc",
+        "  x: { natural_frequency_hz",
+        "modal.x.damping_ratio: 0.0005 is outside 0.001..0.5, the plausible range of a damping ratio",
+    );
+}
+
+#[test]
+fn plausibility_off_accepts_a_key_with_a_warning_and_only_that_key() {
+    let base = machine_text("abb-irb1600");
+    let soft = edited(
+        &base,
+        "11280.0, 9550.0, 5330.0]",
+        "112.8, 95.5, 53.3]",
+    );
+    let text = format!("{soft}plausibility:\n  k_nm_per_rad: off\n");
+    let (code, err) = check_with_machine(&text, "samples/drilling.mod");
+    assert!(code == 0 || code == 1, "{err}");
+    let line = line_of(&text, "k_nm_per_rad:", 0);
+    assert!(
+        err.contains(&format!("m.yaml:{line}:"))
+            && err.contains("k_nm_per_rad[3]: 112.8 N·m/rad is outside 500..10000000 N·m/rad")
+            && err.contains("accepted because `plausibility: { k_nm_per_rad: off }`"),
+        "{err}"
+    );
+    // One joint's key covers that joint only.
+    let text = format!("{soft}plausibility:\n  k_nm_per_rad[3]: off\n");
+    let (code, err) = check_with_machine(&text, "samples/drilling.mod");
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("k_nm_per_rad[4]: 95.5 N·m/rad"), "{err}");
+    // Another key does not cover it; an unknown key is an error.
+    let text = format!("{soft}plausibility:\n  links: off\n");
+    let (code, err) = check_with_machine(&text, "samples/drilling.mod");
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("k_nm_per_rad[3]"), "{err}");
+    let text = format!("{base}plausibility:\n  k_nm_per_radian: off\n");
+    let (code, err) = check_with_machine(&text, "samples/drilling.mod");
+    assert_eq!(code, 2, "{err}");
+    let line = line_of(&text, "  k_nm_per_radian: off", 0);
+    assert!(
+        err.contains(&format!("m.yaml:{line}:3:"))
+            && err.contains("plausibility.k_nm_per_radian: `k_nm_per_radian` is not the key path"),
+        "{err}"
+    );
+    // Only `off` is a value; an override with nothing to accept is a warning.
+    let text = format!("{base}plausibility:\n  k_nm_per_rad: on\n");
+    let (code, err) = check_with_machine(&text, "samples/drilling.mod");
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("plausibility.k_nm_per_rad"), "{err}");
+    let text = format!("{base}plausibility:\n  k_nm_per_rad: off\n");
+    let (code, err) = check_with_machine(&text, "samples/drilling.mod");
+    assert!(code == 0 || code == 1, "{err}");
+    assert!(err.contains("the override can go"), "{err}");
+    // Machine tools alike.
+    let tool = machine_text("afm-r1000");
+    let long = edited(&tool, "1: { length_mm: 62.5 }", "1: { length_mm: 1500 }");
+    let text = format!("{long}plausibility:\n  tools.1: off\n");
+    let (code, err) = check_with_machine(&text, "samples/part.nc");
+    assert!(code == 0 || code == 1, "{err}");
+    assert!(
+        err.contains("tools.1.length_mm: 1500 mm is outside 0..1000 mm")
+            && err.contains("accepted because `plausibility: { tools.1: off }`"),
+        "{err}"
+    );
 }
