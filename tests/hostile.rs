@@ -1366,3 +1366,287 @@ fn plausibility_off_accepts_a_key_with_a_warning_and_only_that_key() {
         "{err}"
     );
 }
+
+// ---------------------------------------------------------------------------
+// Scaled models: each quantity off by 10^±3 (issue 43)
+// ---------------------------------------------------------------------------
+
+/// Largest deviation a machine-tool model within every plausible range may
+/// predict on the probe programs, mm (its errors are limited to 1 mm and
+/// 1000 µrad each, its stiffness to at least 1 N/µm).
+const TOOL_DEV_MAX_MM: f64 = 2.0;
+/// The same for a robot, mm (uncalibrated arms err by 1–3 mm).
+const ROBOT_DEV_MAX_MM: f64 = 10.0;
+
+/// The numbers of a machine file's text that are values (not keys, not
+/// part of a name, not in a comment): (start, end) byte offsets.
+fn value_tokens(text: &str) -> Vec<(usize, usize)> {
+    let b = text.as_bytes();
+    let mut out = Vec::new();
+    let mut line_start = 0;
+    for line in text.split_inclusive('\n') {
+        let body = match line.find('#') {
+            Some(c) => &line[..c],
+            None => line,
+        };
+        let lb = body.as_bytes();
+        let mut i = 0;
+        while i < lb.len() {
+            let starts = lb[i].is_ascii_digit()
+                || (matches!(lb[i], b'-' | b'.') && lb.get(i + 1).is_some_and(u8::is_ascii_digit));
+            let joined = i > 0 && (lb[i - 1].is_ascii_alphanumeric() || matches!(lb[i - 1], b'_' | b'.'));
+            if !starts || joined {
+                i += 1;
+                continue;
+            }
+            let mut j = i + 1;
+            while j < lb.len()
+                && (lb[j].is_ascii_digit()
+                    || lb[j] == b'.'
+                    || matches!(lb[j], b'e' | b'E')
+                    || (matches!(lb[j], b'-' | b'+') && matches!(lb[j - 1], b'e' | b'E')))
+            {
+                j += 1;
+            }
+            let key = body[j..].trim_start().starts_with(':');
+            let named = j < lb.len() && (lb[j].is_ascii_alphabetic() || lb[j] == b'_');
+            if !key && !named && body[i..j].parse::<f64>().is_ok() {
+                out.push((line_start + i, line_start + j));
+            }
+            i = j;
+        }
+        line_start += line.len();
+    }
+    debug_assert!(out.iter().all(|&(s, e)| e <= b.len() && s < e));
+    out
+}
+
+/// `text` with the tokens `which` multiplied by `factor`.
+fn scaled(text: &str, tokens: &[(usize, usize)], factor: f64) -> String {
+    let mut out = String::with_capacity(text.len() + 16 * tokens.len());
+    let mut at = 0;
+    for &(s, e) in tokens {
+        out.push_str(&text[at..s]);
+        let v: f64 = text[s..e].parse().unwrap_or(0.0);
+        out.push_str(&format!("{}", v * factor));
+        at = e;
+    }
+    out.push_str(&text[at..]);
+    out
+}
+
+/// The scaled mutants of a seed: every value alone, then every line's
+/// values together (a section written in another unit), each by 10^3 and
+/// 10^-3; beyond them, two values of random lines at once.
+fn scaled_mutant(text: &str, tokens: &[(usize, usize)], i: usize, rng: &mut Rng) -> String {
+    let factor = if i % 2 == 0 { 1e3 } else { 1e-3 };
+    let k = i / 2;
+    if k < tokens.len() {
+        return scaled(text, &tokens[k..=k], factor);
+    }
+    let lines: Vec<(usize, usize)> = {
+        let mut v: Vec<(usize, usize)> = Vec::new();
+        let mut start = 0;
+        for line in text.split_inclusive('\n') {
+            v.push((start, start + line.len()));
+            start += line.len();
+        }
+        v
+    };
+    let k = k - tokens.len();
+    if k < lines.len() {
+        let (s, e) = lines[k];
+        let on: Vec<(usize, usize)> = tokens
+            .iter()
+            .copied()
+            .filter(|&(a, b)| a >= s && b <= e)
+            .collect();
+        return scaled(text, &on, factor);
+    }
+    let mut pick = [tokens[rng.below(tokens.len())], tokens[rng.below(tokens.len())]];
+    pick.sort();
+    if pick[0] == pick[1] {
+        return scaled(text, &pick[..1], factor);
+    }
+    let f2 = if rng.below(2) == 0 { 1e3 } else { 1e-3 };
+    let once = scaled(text, &pick[1..], f2);
+    scaled(&once, &pick[..1], factor)
+}
+
+/// The largest `dev N mm` annotation of a compensated program, mm.
+fn largest_dev(out: &[u8]) -> f64 {
+    String::from_utf8_lossy(out)
+        .split("dev ")
+        .skip(1)
+        .filter_map(|t| t.split_whitespace().next()?.parse::<f64>().ok())
+        .fold(0.0, f64::max)
+}
+
+/// Compensates the probe with a loaded model: (largest deviation, the
+/// output's non-finite words beyond the probe's) or the error.
+fn probe(m: &Machine, input: &[u8], pools: &Pools) -> Result<(f64, bool), String> {
+    let out = match m {
+        Machine::Tool(t) => gcode_run(t, input, &pools.one)?,
+        Machine::Robot(r) => {
+            use postproc::pipeline::rapid::{RapidOptions, compensate_module};
+            let text = std::str::from_utf8(input).unwrap_or_default();
+            match compensate_module(text, "m.mod", r, &RapidOptions::default()) {
+                Ok(o) => o.text.into_bytes(),
+                Err(e) => {
+                    clean_message(&e)?;
+                    return Err(format!("error: {e}"));
+                }
+            }
+        }
+    };
+    Ok((
+        largest_dev(&out),
+        non_finite_words(&out) > non_finite_words(input),
+    ))
+}
+
+/// The key path a plausibility refusal names (`m.yaml:L:C: PATH: …`).
+fn refused_key(message: &str) -> Option<String> {
+    if !message.contains(": off }`)") {
+        return None;
+    }
+    let rest = message.strip_prefix("m.yaml:")?;
+    let rest = rest.splitn(3, ':').nth(2)?.trim_start();
+    Some(rest.split(": ").next()?.to_string())
+}
+
+/// A scaled model: refused with a located message, or loaded and then
+/// predicting at most the plausible deviation on the probe (or refusing
+/// the probe cleanly). A value refused as implausible and accepted with
+/// `plausibility: { KEY: off }` must still give finite numbers only.
+fn scaled_props(text: &str, probe_input: &[u8], pools: &Pools) -> Result<bool, String> {
+    let m = match Machine::from_yaml_str(text, "m.yaml") {
+        Ok(m) => m,
+        Err(e) => {
+            clean_message(&e)?;
+            let msg = e.to_string();
+            if !msg.starts_with("m.yaml:") {
+                return Err(format!("refusal without its place: {msg}"));
+            }
+            return overridden_props(text, &msg, probe_input, pools).map(|()| false);
+        }
+    };
+    let limit = match m {
+        Machine::Tool(_) => TOOL_DEV_MAX_MM,
+        Machine::Robot(_) => ROBOT_DEV_MAX_MM,
+    };
+    match probe(&m, probe_input, pools) {
+        Ok((_, true)) => Err("non-finite number in the output".into()),
+        Ok((dev, false)) if dev > limit => Err(format!(
+            "a model within every plausible range predicts {dev} mm (more than {limit} mm)"
+        )),
+        Ok(_) => Ok(true),
+        Err(m) if m.starts_with("error: ") => Ok(true),
+        Err(m) => Err(m),
+    }
+}
+
+/// The model of a plausibility refusal with the refused keys turned off
+/// (up to 4): loaded or refused cleanly, and no non-finite number in what
+/// it writes.
+fn overridden_props(
+    text: &str,
+    first: &str,
+    probe_input: &[u8],
+    pools: &Pools,
+) -> Result<(), String> {
+    let mut keys: Vec<String> = Vec::new();
+    let mut msg = first.to_string();
+    for _ in 0..4 {
+        let Some(key) = refused_key(&msg) else {
+            return Ok(());
+        };
+        if keys.contains(&key) {
+            return Err(format!("`{key}: off` does not accept it: {msg}"));
+        }
+        keys.push(key);
+        let mut with = format!("{text}\nplausibility:\n");
+        for k in &keys {
+            with.push_str(&format!("  {k}: off\n"));
+        }
+        match Machine::from_yaml_str(&with, "m.yaml") {
+            Ok(m) => {
+                return match probe(&m, probe_input, pools) {
+                    Ok((_, true)) => Err(format!(
+                        "non-finite number in the output with {keys:?} off"
+                    )),
+                    Ok(_) => Ok(()),
+                    Err(m) if m.starts_with("error: ") => Ok(()),
+                    Err(m) => Err(m),
+                };
+            }
+            Err(e) => {
+                clean_message(&e)?;
+                msg = e.to_string();
+            }
+        }
+    }
+    Ok(())
+}
+
+#[test]
+fn mutants_of_scaled_models_are_refused_or_predict_plausibly() {
+    let count = env_count("HOSTILE_MUTANTS", CI_MUTANTS / 4);
+    let pools = pools();
+    let cases = [
+        ("afm-r1000", "samples/effects.nc"),
+        ("five-axis-ac", "samples/five-axis.nc"),
+        ("head-table-bc", "samples/head-table.nc"),
+        ("abb-irb1600", "samples/milling.mod"),
+        ("staubli-tx200", "samples/milling.mod"),
+    ];
+    let seeds: Vec<(String, Vec<(usize, usize)>, Vec<u8>)> = cases
+        .iter()
+        .map(|(m, p)| {
+            let text = machine_text(m);
+            let tokens = value_tokens(&text);
+            (text, tokens, read(p))
+        })
+        .collect();
+    for (k, (text, tokens, probe_input)) in seeds.iter().enumerate() {
+        assert!(tokens.len() > 20, "seed {k}: {} values", tokens.len());
+        assert_eq!(scaled_props(text, probe_input, &pools), Ok(true), "seed {k}");
+    }
+    let mut rng = Rng(0x5CA1E);
+    let start = Instant::now();
+    let mut accepted = 0;
+    let mut findings = Vec::new();
+    for i in 0..count {
+        let (text, tokens, probe_input) = &seeds[i % seeds.len()];
+        let m = scaled_mutant(text, tokens, i / seeds.len(), &mut rng);
+        let r = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+            scaled_props(&m, probe_input, &pools)
+        }));
+        let problem = match r {
+            Ok(Ok(ok)) => {
+                accepted += usize::from(ok);
+                continue;
+            }
+            Ok(Err(p)) => p,
+            Err(_) => "panic".to_string(),
+        };
+        let dir = std::env::temp_dir().join("postproc-hostile");
+        let _ = std::fs::create_dir_all(&dir);
+        let path = dir.join(format!("scaled-{i}.yaml"));
+        let _ = std::fs::write(&path, &m);
+        findings.push(format!("scaled mutant {i} ({}): {problem}", path.display()));
+    }
+    report("scaled models", count, start, &(accepted, findings));
+}
+
+#[test]
+fn value_tokens_are_the_numbers_that_are_values() {
+    let text = "a: 1.5 # 7\ntools:\n  12: { length_mm: -6e2 }\nname: G54.1P1 x2\nk: [1, .5]\n";
+    let got: Vec<&str> = value_tokens(text).iter().map(|&(s, e)| &text[s..e]).collect();
+    assert_eq!(got, ["1.5", "-6e2", "1", ".5"]);
+    let toks = value_tokens(text);
+    assert_eq!(
+        scaled(text, &toks[1..2], 1e-3),
+        text.replace("-6e2", "-0.6")
+    );
+}
