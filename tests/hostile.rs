@@ -1058,11 +1058,17 @@ fn batch_does_not_leave_its_input_folder_through_a_link() {
     }
     let summary = std::fs::read_to_string(out_dir.join("batch-summary.json")).unwrap();
     assert!(!summary.contains("secret"), "{summary}");
-    assert!(summary.contains("a link out of the input folder"), "{summary}");
+    assert!(
+        summary.contains("a link out of the input folder"),
+        "{summary}"
+    );
     let mut outputs: Vec<String> = walk_names(&out_dir);
     outputs.sort();
     assert!(outputs.iter().all(|f| !f.contains("secret")), "{outputs:?}");
-    assert!(outputs.iter().any(|f| f.ends_with("part.nc")), "{outputs:?}");
+    assert!(
+        outputs.iter().any(|f| f.ends_with("part.nc")),
+        "{outputs:?}"
+    );
 }
 
 /// File names under `dir`, recursively, relative to it.
@@ -1132,7 +1138,10 @@ fn refused_at(machine: &str, program: &str, key_line: &str, want: &str) {
     let (code, err) = check_with_machine(machine, program);
     assert_eq!(code, 2, "{err}");
     let line = line_of(machine, key_line, 0);
-    assert!(err.contains(&format!("m.yaml:{line}:")), "line {line}: {err}");
+    assert!(
+        err.contains(&format!("m.yaml:{line}:")),
+        "line {line}: {err}"
+    );
     assert!(err.contains(want), "{err}");
     assert!(err.contains(": off }"), "no override named: {err}");
 }
@@ -1152,11 +1161,7 @@ fn robot_joint_stiffness_divided_by_100_is_refused() {
         "k_nm_per_rad[2]: 1409.4 N·m/rad is outside 5000..50000000 N·m/rad, the plausible range of a main joint's (1–3) stiffness",
     );
     // Only the wrist joints: the first of them is named.
-    let text = edited(
-        &base,
-        "11280.0, 9550.0, 5330.0]",
-        "112.8, 95.5, 53.3]",
-    );
+    let text = edited(&base, "11280.0, 9550.0, 5330.0]", "112.8, 95.5, 53.3]");
     refused_at(
         &text,
         "samples/drilling.mod",
@@ -1168,8 +1173,7 @@ fn robot_joint_stiffness_divided_by_100_is_refused() {
 #[test]
 fn machine_tool_stiffness_off_by_a_thousand_is_refused() {
     let base = machine_text("five-axis-ac");
-    let stiffness =
-        "k_n_per_um: { x_pos: 12.0, x_neg: 12.5, y_pos: 10.0, y_neg: 11.0, z_pos: 18.0, z_neg: 15.0 }";
+    let stiffness = "k_n_per_um: { x_pos: 12.0, x_neg: 12.5, y_pos: 10.0, y_neg: 11.0, z_pos: 18.0, z_neg: 15.0 }";
     for (to, want) in [
         (
             "k_n_per_um: { x_pos: 0.012, x_neg: 0.0125, y_pos: 0.01, y_neg: 0.011, z_pos: 0.018, z_neg: 0.015 }",
@@ -1263,6 +1267,18 @@ fn drill_diameters_are_bounded() {
 }
 
 #[test]
+fn a_spindle_speed_off_by_a_thousand_is_refused_by_its_cutting_speed() {
+    let base = machine_text("staubli-tx200");
+    let text = edited(&base, "spindle_rpm: 15000.0", "spindle_rpm: 15");
+    refused_at(
+        &text,
+        "samples/milling.mod",
+        "  spindle_rpm:",
+        "process_force.spindle_rpm: 15 1/min with the 12 mm cutter is a cutting speed of 0.565 m/min, outside 2..6000 m/min",
+    );
+}
+
+#[test]
 fn a_vanishing_modal_stiffness_is_refused_even_with_plausibility_off() {
     let base = machine_text("abb-irb1600");
     let text = edited(
@@ -1281,7 +1297,10 @@ fn a_vanishing_modal_stiffness_is_refused_even_with_plausibility_off() {
     let off = format!("{text}plausibility:\n  modal: off\n");
     let (code, err) = check_with_machine(&off, "samples/milling.mod");
     assert_eq!(code, 2, "{err}");
-    assert!(err.contains("modal[0].stiffness_n_per_um: `5e-324`"), "{err}");
+    assert!(
+        err.contains("modal[0].stiffness_n_per_um: `5e-324`"),
+        "{err}"
+    );
     // Machine tools alike; a merely implausible one names the range.
     let base = machine_text("afm-r1000");
     let from = "x: { natural_frequency_hz: 62.0, damping_ratio: 0.04, stiffness_n_per_um: 20.0 }";
@@ -1311,11 +1330,7 @@ fn a_vanishing_modal_stiffness_is_refused_even_with_plausibility_off() {
 #[test]
 fn plausibility_off_accepts_a_key_with_a_warning_and_only_that_key() {
     let base = machine_text("abb-irb1600");
-    let soft = edited(
-        &base,
-        "11280.0, 9550.0, 5330.0]",
-        "112.8, 95.5, 53.3]",
-    );
+    let soft = edited(&base, "11280.0, 9550.0, 5330.0]", "112.8, 95.5, 53.3]");
     let text = format!("{soft}plausibility:\n  k_nm_per_rad: off\n");
     let (code, err) = check_with_machine(&text, "samples/drilling.mod");
     assert!(code == 0 || code == 1, "{err}");
@@ -1394,7 +1409,8 @@ fn value_tokens(text: &str) -> Vec<(usize, usize)> {
         while i < lb.len() {
             let starts = lb[i].is_ascii_digit()
                 || (matches!(lb[i], b'-' | b'.') && lb.get(i + 1).is_some_and(u8::is_ascii_digit));
-            let joined = i > 0 && (lb[i - 1].is_ascii_alphanumeric() || matches!(lb[i - 1], b'_' | b'.'));
+            let joined =
+                i > 0 && (lb[i - 1].is_ascii_alphanumeric() || matches!(lb[i - 1], b'_' | b'.'));
             if !starts || joined {
                 i += 1;
                 continue;
@@ -1463,7 +1479,10 @@ fn scaled_mutant(text: &str, tokens: &[(usize, usize)], i: usize, rng: &mut Rng)
             .collect();
         return scaled(text, &on, factor);
     }
-    let mut pick = [tokens[rng.below(tokens.len())], tokens[rng.below(tokens.len())]];
+    let mut pick = [
+        tokens[rng.below(tokens.len())],
+        tokens[rng.below(tokens.len())],
+    ];
     pick.sort();
     if pick[0] == pick[1] {
         return scaled(text, &pick[..1], factor);
@@ -1572,9 +1591,9 @@ fn overridden_props(
         match Machine::from_yaml_str(&with, "m.yaml") {
             Ok(m) => {
                 return match probe(&m, probe_input, pools) {
-                    Ok((_, true)) => Err(format!(
-                        "non-finite number in the output with {keys:?} off"
-                    )),
+                    Ok((_, true)) => {
+                        Err(format!("non-finite number in the output with {keys:?} off"))
+                    }
                     Ok(_) => Ok(()),
                     Err(m) if m.starts_with("error: ") => Ok(()),
                     Err(m) => Err(m),
@@ -1610,7 +1629,11 @@ fn mutants_of_scaled_models_are_refused_or_predict_plausibly() {
         .collect();
     for (k, (text, tokens, probe_input)) in seeds.iter().enumerate() {
         assert!(tokens.len() > 20, "seed {k}: {} values", tokens.len());
-        assert_eq!(scaled_props(text, probe_input, &pools), Ok(true), "seed {k}");
+        assert_eq!(
+            scaled_props(text, probe_input, &pools),
+            Ok(true),
+            "seed {k}"
+        );
     }
     let mut rng = Rng(0x5CA1E);
     let start = Instant::now();
@@ -1642,7 +1665,10 @@ fn mutants_of_scaled_models_are_refused_or_predict_plausibly() {
 #[test]
 fn value_tokens_are_the_numbers_that_are_values() {
     let text = "a: 1.5 # 7\ntools:\n  12: { length_mm: -6e2 }\nname: G54.1P1 x2\nk: [1, .5]\n";
-    let got: Vec<&str> = value_tokens(text).iter().map(|&(s, e)| &text[s..e]).collect();
+    let got: Vec<&str> = value_tokens(text)
+        .iter()
+        .map(|&(s, e)| &text[s..e])
+        .collect();
     assert_eq!(got, ["1.5", "-6e2", "1", ".5"]);
     let toks = value_tokens(text);
     assert_eq!(

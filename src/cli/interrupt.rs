@@ -130,7 +130,8 @@ mod imp {
                         continue;
                     }
                     let mut new: libc::sigaction = std::mem::zeroed();
-                    new.sa_sigaction = on_signal as extern "C" fn(libc::c_int) as libc::sighandler_t;
+                    new.sa_sigaction =
+                        on_signal as extern "C" fn(libc::c_int) as libc::sighandler_t;
                     libc::sigemptyset(&mut new.sa_mask);
                     new.sa_flags = libc::SA_RESTART;
                     libc::sigaction(sig, &new, std::ptr::null_mut());

@@ -230,7 +230,12 @@ const K_EDGE: Range = Range::new(0.0, 500.0, "N/mm", "an edge coefficient");
 /// Milling cutters from micro end mills to large face mills.
 const TOOL_DIAMETER: Range = Range::new(0.1, 500.0, "mm", "a milling cutter's diameter");
 /// Axial depth of cut (the limit of a program's `DEPTH=`).
-const DEPTH: Range = Range::new(0.0, crate::process::limits::CUT_MAX_MM, "mm", "a depth of cut");
+const DEPTH: Range = Range::new(
+    0.0,
+    crate::process::limits::CUT_MAX_MM,
+    "mm",
+    "a depth of cut",
+);
 /// Thrust coefficient of a drill: about half the specific cutting force.
 const THRUST: Range = Range::new(0.0, 10_000.0, "N/mm²", "a drill's thrust coefficient");
 /// Twist drills from 0.1 mm to the largest indexable drills.
@@ -242,6 +247,9 @@ const RPM: Range = Range::new(
     "1/min",
     "a spindle speed",
 );
+/// Cutting speed `π·D·n` of a cutter or drill, m/min: from tapping at a
+/// few m/min to high-speed cutting of aluminium.
+pub const CUTTING_SPEED: Range = Range::new(2.0, 6000.0, "m/min", "a cutting speed");
 /// Feed per revolution above which a move along the tool axis is taken for
 /// positioning (the limit of a program's G95 `F`).
 const FEED_REV: Range = Range::new(
@@ -285,6 +293,26 @@ impl Pass {
             if let Some(v) = v {
                 self.range(&format!("{P}.{key}"), v, r);
             }
+        }
+        // The spindle speed with the cutter's diameter: a cutting speed
+        // `π·D·n` far below any real cut makes a feed per tooth of
+        // centimetres, and a force to match.
+        if let (Some(n), Some(d)) = (f.spindle_rpm, f.tool_diameter_mm.or(f.drill_diameter_mm)) {
+            let vc = std::f64::consts::PI * d * n / 1000.0;
+            self.custom(
+                &format!("{P}.spindle_rpm"),
+                (vc.is_finite() && (vc < CUTTING_SPEED.lo || vc > CUTTING_SPEED.hi)).then(|| {
+                    format!(
+                        "{} 1/min with the {} mm {} is a cutting speed of {} m/min, outside {}, the plausible range of {} (check the unit)",
+                        show_number(n),
+                        show_number(d),
+                        if f.tool_diameter_mm.is_some() { "cutter" } else { "drill" },
+                        show_number((vc * 1000.0).round() / 1000.0),
+                        CUTTING_SPEED.shown(),
+                        CUTTING_SPEED.what
+                    )
+                }),
+            );
         }
     }
 }

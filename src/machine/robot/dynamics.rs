@@ -35,7 +35,12 @@ pub(crate) fn modal_from_raw(raw: &[RawMode]) -> Result<Modal, Invalid> {
         // plausible ranges are narrower ([`super::plausible`]).
         for (key, v, lo, hi) in [
             ("frequency_hz", m.frequency_hz, MIN_FREQUENCY_HZ, 1e5),
-            ("stiffness_n_per_um", m.stiffness_n_per_um, MIN_STIFFNESS_N_PER_UM, 1e5),
+            (
+                "stiffness_n_per_um",
+                m.stiffness_n_per_um,
+                MIN_STIFFNESS_N_PER_UM,
+                1e5,
+            ),
             ("damping_ratio", m.damping_ratio, MIN_DAMPING, 1.0),
         ] {
             if !v.is_finite() || v < lo || v >= hi {

@@ -37,8 +37,7 @@ pub const REACH_MM: Range = Range::new(200.0, 10_000.0, "mm", "an arm's reach");
 pub const JOINT_LIMIT_DEG: Range = Range::new(-100_000.0, 100_000.0, "°", "a joint limit");
 /// Joint speeds, °/s (the largest arms' first axes about 50, small
 /// wrists about 1000).
-pub const JOINT_SPEED_DEG_PER_S: Range =
-    Range::new(5.0, 3000.0, "°/s", "a joint speed");
+pub const JOINT_SPEED_DEG_PER_S: Range = Range::new(5.0, 3000.0, "°/s", "a joint speed");
 /// Stiffness of joints 1–3, N·m/rad (IRB 1600 1.4–4.3 × 10⁵, TX200
 /// 0.63–3.9 × 10⁶; a small arm's main axes are stiffer than 10⁴).
 pub const MAIN_JOINT_STIFFNESS: Range =
@@ -93,11 +92,19 @@ pub(crate) fn check(raw: &RawRobot) -> Result<Vec<Invalid>, Invalid> {
     );
     // Frames and mass offsets within the arm's reach (a tool or a load
     // longer than the arm is a unit mistake).
-    let within_reach = Range::new(0.0, reach.max(REACH_MM.lo), "mm", "an offset within the arm's reach");
+    let within_reach = Range::new(
+        0.0,
+        reach.max(REACH_MM.lo),
+        "mm",
+        "an offset within the arm's reach",
+    );
     if let Some(f) = &raw.flange_to_tool {
         p.norm("flange_to_tool", &[f.x_mm, f.y_mm, f.z_mm], within_reach);
     }
-    for (key, f) in [("base", &raw.base), ("measurement_frame", &raw.measurement_frame)] {
+    for (key, f) in [
+        ("base", &raw.base),
+        ("measurement_frame", &raw.measurement_frame),
+    ] {
         if let Some(f) = f {
             p.norm(key, &[f.x_mm, f.y_mm, f.z_mm], PLACEMENT);
         }
@@ -125,9 +132,17 @@ pub(crate) fn check(raw: &RawRobot) -> Result<Vec<Invalid>, Invalid> {
         p.range(&format!("k_nm_per_rad[{i}]"), *k, r);
     }
     if let Some(t) = &raw.thermal {
-        p.range("thermal.time_constant_min", t.time_constant_min, TIME_CONSTANT_MIN);
+        p.range(
+            "thermal.time_constant_min",
+            t.time_constant_min,
+            TIME_CONSTANT_MIN,
+        );
         for (i, term) in t.terms.iter().enumerate() {
-            p.range(&format!("thermal.terms[{i}].ts_per_w"), term.ts_per_w, THERMAL_RATE_PER_W);
+            p.range(
+                &format!("thermal.terms[{i}].ts_per_w"),
+                term.ts_per_w,
+                THERMAL_RATE_PER_W,
+            );
             // The growth is monotonic in the power: its extremes are at the
             // ends of the range.
             let cold = term.ub_mm - term.lb_mm;
@@ -145,7 +160,11 @@ pub(crate) fn check(raw: &RawRobot) -> Result<Vec<Invalid>, Invalid> {
     if let Some(w) = &raw.process_wrench {
         let force = Range::new(0.0, PROCESS_FORCE_MAX_N, "N", "a robot's process force");
         p.norm("process_wrench.force_n", &w.force_n, force);
-        p.norm("process_wrench.moment_nm", &w.moment_nm, Range::new(0.0, 5000.0, "N·m", "a process moment"));
+        p.norm(
+            "process_wrench.moment_nm",
+            &w.moment_nm,
+            Range::new(0.0, 5000.0, "N·m", "a process moment"),
+        );
     }
     if let Some(f) = &raw.process_force {
         if let Some(v) = &f.force_n {
@@ -173,9 +192,21 @@ pub(crate) fn check(raw: &RawRobot) -> Result<Vec<Invalid>, Invalid> {
     }
     if let Some(modes) = &raw.modal {
         for (i, m) in modes.iter().enumerate() {
-            p.range(&format!("modal[{i}].frequency_hz"), m.frequency_hz, MODAL_HZ);
-            p.range(&format!("modal[{i}].damping_ratio"), m.damping_ratio, DAMPING);
-            p.range(&format!("modal[{i}].stiffness_n_per_um"), m.stiffness_n_per_um, MODAL_N_PER_UM);
+            p.range(
+                &format!("modal[{i}].frequency_hz"),
+                m.frequency_hz,
+                MODAL_HZ,
+            );
+            p.range(
+                &format!("modal[{i}].damping_ratio"),
+                m.damping_ratio,
+                DAMPING,
+            );
+            p.range(
+                &format!("modal[{i}].stiffness_n_per_um"),
+                m.stiffness_n_per_um,
+                MODAL_N_PER_UM,
+            );
         }
     }
     p.settle(raw.plausibility.as_ref())

@@ -56,7 +56,7 @@ pub const GROWTH_UM_PER_KW: Range =
     Range::new(-200.0, 200.0, "µm/kW", "a spindle's thermal growth");
 /// Axis thermal scale error per power, ppm/kW.
 pub const SCALE_PPM_PER_KW: Range =
-    Range::new(-500.0, 500.0, "ppm/kW", "an axis' thermal scale error");
+    Range::new(-2000.0, 2000.0, "ppm/kW", "an axis' thermal scale error");
 /// Friction force of an axis, N.
 pub const FRICTION_N: Range = Range::new(0.0, 20_000.0, "N", "an axis' friction force");
 
@@ -169,11 +169,7 @@ fn axes(p: &mut Pass, raw: &RawMachineTool) {
                 &t.positions_deg
             };
             if let Some(v) = positions {
-                p.each(
-                    &format!("{ax}.component_errors.{name}.{pos_key}"),
-                    v,
-                    range,
-                );
+                p.each(&format!("{ax}.component_errors.{name}.{pos_key}"), v, range);
             }
         }
     }
