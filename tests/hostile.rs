@@ -1608,6 +1608,10 @@ fn overridden_props(
     Ok(())
 }
 
+/// A seed of the scaled-model generator: the machine text, its value
+/// tokens and the probe program.
+type ScaledSeed = (String, Vec<(usize, usize)>, Vec<u8>);
+
 #[test]
 fn mutants_of_scaled_models_are_refused_or_predict_plausibly() {
     let count = env_count("HOSTILE_MUTANTS", CI_MUTANTS / 4);
@@ -1619,7 +1623,7 @@ fn mutants_of_scaled_models_are_refused_or_predict_plausibly() {
         ("abb-irb1600", "samples/milling.mod"),
         ("staubli-tx200", "samples/milling.mod"),
     ];
-    let seeds: Vec<(String, Vec<(usize, usize)>, Vec<u8>)> = cases
+    let seeds: Vec<ScaledSeed> = cases
         .iter()
         .map(|(m, p)| {
             let text = machine_text(m);

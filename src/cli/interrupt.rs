@@ -281,7 +281,10 @@ fn remove_stale(dir: &Path) {
         };
         let file = entry.file_type().is_ok_and(|t| t.is_file());
         if file && pid != std::process::id() && gone(pid) {
-            tracing::debug!("removing {} left by a process that ended", name.display());
+            tracing::debug!(
+                "removing {} left by a process that ended",
+                name.to_string_lossy()
+            );
             let _ = std::fs::remove_file(entry.path());
         }
     }

@@ -301,7 +301,7 @@ impl Pass {
             let vc = std::f64::consts::PI * d * n / 1000.0;
             self.custom(
                 &format!("{P}.spindle_rpm"),
-                (vc.is_finite() && (vc < CUTTING_SPEED.lo || vc > CUTTING_SPEED.hi)).then(|| {
+                (vc.is_finite() && !(CUTTING_SPEED.lo..=CUTTING_SPEED.hi).contains(&vc)).then(|| {
                     format!(
                         "{} 1/min with the {} mm {} is a cutting speed of {} m/min, outside {}, the plausible range of {} (check the unit)",
                         show_number(n),
