@@ -1158,7 +1158,7 @@ fn robot_joint_stiffness_divided_by_100_is_refused() {
         &text,
         "samples/drilling.mod",
         "k_nm_per_rad:",
-        "k_nm_per_rad[2]: 1409.4 N·m/rad is outside 5000..50000000 N·m/rad, the plausible range of a main joint's (1–3) stiffness",
+        "k_nm_per_rad[2]: 1409.4 N·m/rad is outside 11800..11800000 N·m/rad, the plausible range of a main joint's (1–3) stiffness on an arm of 196 kg and 2000 mm reach",
     );
     // Only the wrist joints: the first of them is named.
     let text = edited(&base, "11280.0, 9550.0, 5330.0]", "112.8, 95.5, 53.3]");
@@ -1166,7 +1166,7 @@ fn robot_joint_stiffness_divided_by_100_is_refused() {
         &text,
         "samples/drilling.mod",
         "k_nm_per_rad:",
-        "k_nm_per_rad[3]: 112.8 N·m/rad is outside 500..10000000 N·m/rad",
+        "k_nm_per_rad[3]: 112.8 N·m/rad is outside 588..1960000 N·m/rad",
     );
 }
 
@@ -1337,7 +1337,7 @@ fn plausibility_off_accepts_a_key_with_a_warning_and_only_that_key() {
     let line = line_of(&text, "k_nm_per_rad:", 0);
     assert!(
         err.contains(&format!("m.yaml:{line}:"))
-            && err.contains("k_nm_per_rad[3]: 112.8 N·m/rad is outside 500..10000000 N·m/rad")
+            && err.contains("k_nm_per_rad[3]: 112.8 N·m/rad is outside 588..1960000 N·m/rad")
             && err.contains("accepted because `plausibility: { k_nm_per_rad: off }`"),
         "{err}"
     );

@@ -38,14 +38,25 @@ pub const JOINT_LIMIT_DEG: Range = Range::new(-100_000.0, 100_000.0, "°", "a jo
 /// Joint speeds, °/s (the largest arms' first axes about 50, small
 /// wrists about 1000).
 pub const JOINT_SPEED_DEG_PER_S: Range = Range::new(5.0, 3000.0, "°/s", "a joint speed");
-/// Stiffness of joints 1–3, N·m/rad (IRB 1600 1.4–4.3 × 10⁵, TX200
-/// 0.63–3.9 × 10⁶; a small arm's main axes are stiffer than 10⁴).
-pub const MAIN_JOINT_STIFFNESS: Range =
-    Range::new(5000.0, 5e7, "N·m/rad", "a main joint's (1–3) stiffness");
-/// Stiffness of the wrist joints 4–6, N·m/rad (IRB 1600 5.3–11 × 10³,
-/// TX200 10⁵–6.1 × 10⁵).
-pub const WRIST_JOINT_STIFFNESS: Range =
-    Range::new(500.0, 1e7, "N·m/rad", "a wrist joint's (4–6) stiffness");
+/// Stiffness of joints 1–3 per kilogram-metre of the arm's mass (links
+/// and payload) times its reach, N·m/rad/(kg·m): the torques a joint
+/// carries grow with both, and so does the stiffness arms are built with
+/// (IRB 1600 360–1100, TX200 330–2040; the bundled arms from the IRB 120
+/// to the IRB 6700 290–2040).
+pub const MAIN_JOINT_STIFFNESS: Range = Range::new(
+    30.0,
+    30_000.0,
+    "N·m/rad per kg·m",
+    "a main joint's (1–3) stiffness",
+);
+/// Stiffness of the wrist joints 4–6 per kilogram-metre of mass times
+/// reach (IRB 1600 14–29, TX200 52–317; the bundled arms 11–317).
+pub const WRIST_JOINT_STIFFNESS: Range = Range::new(
+    1.5,
+    5000.0,
+    "N·m/rad per kg·m",
+    "a wrist joint's (4–6) stiffness",
+);
 /// Mass of links 1–3, kg (the heaviest arms' columns weigh a tonne or two).
 pub const MAIN_LINK_MASS: Range = Range::new(0.0, 5000.0, "kg", "the mass of link 1, 2 or 3");
 /// Mass of links 4 and 5 (forearm, wrist), kg.
@@ -123,14 +134,7 @@ pub(crate) fn check(raw: &RawRobot) -> Result<Vec<Invalid>, Invalid> {
         p.range("tool_load.mass_kg", l.mass_kg, PAYLOAD_KG);
         p.norm("tool_load.cog_mm", &l.cog_mm, within_reach);
     }
-    for (i, k) in raw.k_nm_per_rad.iter().enumerate() {
-        let r = if i < 3 {
-            MAIN_JOINT_STIFFNESS
-        } else {
-            WRIST_JOINT_STIFFNESS
-        };
-        p.range(&format!("k_nm_per_rad[{i}]"), *k, r);
-    }
+    joint_stiffness(&mut p, raw, reach);
     if let Some(t) = &raw.thermal {
         p.range(
             "thermal.time_constant_min",
@@ -210,6 +214,47 @@ pub(crate) fn check(raw: &RawRobot) -> Result<Vec<Invalid>, Invalid> {
         }
     }
     p.settle(raw.plausibility.as_ref())
+}
+
+/// Joint stiffness against the arm's size: the range per kg·m times the
+/// arm's mass (links and payload) and reach.
+fn joint_stiffness(p: &mut Pass, raw: &RawRobot, reach_mm: f64) {
+    let mass = raw.links.iter().map(|l| l.mass_kg).sum::<f64>()
+        + raw.tool_load.as_ref().map_or(0.0, |l| l.mass_kg);
+    let size = mass * reach_mm / 1000.0;
+    for (i, k) in raw.k_nm_per_rad.iter().enumerate() {
+        let r = if i < 3 {
+            MAIN_JOINT_STIFFNESS
+        } else {
+            WRIST_JOINT_STIFFNESS
+        };
+        let (lo, hi) = (r.lo * size, r.hi * size);
+        let bad = size.is_finite() && size > 0.0 && k.is_finite() && !(lo..=hi).contains(k);
+        p.custom(
+            &format!("k_nm_per_rad[{i}]"),
+            bad.then(|| {
+                format!(
+                    "{} N·m/rad is outside {}..{} N·m/rad, the plausible range of {} on an arm of {} kg and {} mm reach ({} times its mass and reach; check the unit)",
+                    show_number(*k),
+                    show_number(round3(lo)),
+                    show_number(round3(hi)),
+                    r.what,
+                    show_number(round3(mass)),
+                    show_number(round3(reach_mm)),
+                    r.shown()
+                )
+            }),
+        );
+    }
+}
+
+/// `v` rounded to three significant digits, for messages.
+fn round3(v: f64) -> f64 {
+    if v == 0.0 || !v.is_finite() {
+        return v;
+    }
+    let e = 10f64.powi(v.abs().log10().floor() as i32 - 2);
+    (v / e).round() * e
 }
 
 fn dh_deviation(p: &mut Pass, i: usize, a: &RawJoint, n: &RawJoint) {
