@@ -149,7 +149,10 @@ fn robot_values_beyond_plausibility_are_refused_with_their_key_path() {
         "{err}"
     );
     let err = robot_error("tool_load: { mass_kg: 5.0", "tool_load: { mass_kg: 50000.0");
-    assert!(err.contains("tool_load.mass_kg: 50000 kg exceeds"), "{err}");
+    assert!(
+        err.contains("tool_load.mass_kg: 50000 kg is outside 0..3000 kg"),
+        "{err}"
+    );
     // The line is that of the key.
     let base = machine_text("abb-irb1600");
     let text = base.replacen("[0.0, 0.0, -9.81]", "[0.0, 0.0, -1000.0]", 1);
@@ -868,4 +871,812 @@ fn an_observation_file_beyond_the_row_limit_is_refused_with_the_limit() {
         .collect();
     let obs = postproc::calibrate::observations::parse_observations(&at_limit, "o.csv").unwrap();
     assert_eq!(obs.rows.len(), OBSERVATION_MAX_ROWS);
+}
+
+// ---------------------------------------------------------------------------
+// Signals, links and dwell (issue 43)
+// ---------------------------------------------------------------------------
+
+/// A program long enough that the run is still writing its output when a
+/// signal arrives.
+#[cfg(unix)]
+fn long_program(dir: &std::path::Path) -> std::path::PathBuf {
+    let program = dir.join("big.nc");
+    let mut text = String::from("G90 G17 G21 G54\nT1 M6\nG43 H1 G0 X0 Y0 Z20\nG1 Z0 F2000\n");
+    for k in 0..400_000 {
+        let x = if k % 2 == 0 { 400 } else { 0 };
+        text.push_str(&format!("X{x} Y{:.4}\n", k as f64 * 0.0005));
+    }
+    std::fs::write(&program, text).unwrap();
+    program
+}
+
+/// Starts `compensate` of `program` into `out_dir`, waits for its
+/// temporary file, sends `signal` (a `kill` name); (the run was
+/// interrupted while writing, the files left in `out_dir`).
+#[cfg(unix)]
+fn interrupted_run(
+    program: &std::path::Path,
+    out_dir: &std::path::Path,
+    signal: &str,
+    ignore_hup: bool,
+) -> (bool, Option<i32>, Vec<String>) {
+    use std::os::unix::process::{CommandExt, ExitStatusExt};
+    let mut cmd = std::process::Command::new(assert_cmd::cargo::cargo_bin("postproc"));
+    cmd.args(["compensate", "--machine", "afm-r1000", "-o"])
+        .arg(out_dir.join("o.nc"))
+        .arg(program)
+        // A core dump (QUIT, XFSZ, …) goes nowhere near the repository.
+        .current_dir(out_dir.parent().unwrap())
+        .stderr(std::process::Stdio::null());
+    if ignore_hup {
+        // SAFETY: only async-signal-safe calls between fork and exec.
+        unsafe {
+            cmd.pre_exec(|| {
+                libc::signal(libc::SIGHUP, libc::SIG_IGN);
+                Ok(())
+            });
+        }
+    }
+    let mut child = cmd.spawn().unwrap();
+    let mut seen = false;
+    for _ in 0..2000 {
+        if std::fs::read_dir(out_dir).unwrap().next().is_some() {
+            seen = true;
+            break;
+        }
+        if child.try_wait().unwrap().is_some() {
+            break;
+        }
+        std::thread::sleep(Duration::from_millis(2));
+    }
+    let killed = std::process::Command::new("kill")
+        .arg(format!("-{signal}"))
+        .arg(child.id().to_string())
+        .status()
+        .unwrap();
+    let status = child.wait().unwrap();
+    let mut left: Vec<String> = std::fs::read_dir(out_dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    left.sort();
+    (seen && killed.success(), status.signal(), left)
+}
+
+/// Every signal that ends the process (not only INT, TERM and HUP) leaves
+/// no partial `.postproc-*` file beside the output: each ends the run as
+/// its default action would (by that signal), after the temporary file is
+/// removed.
+#[cfg(unix)]
+#[test]
+fn every_terminating_signal_leaves_no_temporary_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let program = long_program(dir.path());
+    let out_dir = dir.path().join("out");
+    let mut interrupted = 0;
+    for (signal, number) in [
+        ("QUIT", libc::SIGQUIT),
+        ("USR1", libc::SIGUSR1),
+        ("USR2", libc::SIGUSR2),
+        ("ALRM", libc::SIGALRM),
+        ("XFSZ", libc::SIGXFSZ),
+        ("XCPU", libc::SIGXCPU),
+        ("VTALRM", libc::SIGVTALRM),
+        ("PROF", libc::SIGPROF),
+        ("HUP", libc::SIGHUP),
+        ("ABRT", libc::SIGABRT),
+    ] {
+        let _ = std::fs::remove_dir_all(&out_dir);
+        std::fs::create_dir(&out_dir).unwrap();
+        let (sent, by, left) = interrupted_run(&program, &out_dir, signal, false);
+        if sent && by.is_some() {
+            interrupted += 1;
+            assert_eq!(by, Some(number), "{signal}: ended by another signal");
+            assert!(left.is_empty(), "{signal}: left {left:?}");
+        } else {
+            assert!(left.iter().all(|f| f == "o.nc"), "{signal}: left {left:?}");
+        }
+    }
+    assert!(interrupted >= 5, "only {interrupted} runs were interrupted");
+}
+
+/// A signal the run was started with ignored (`nohup`) stays ignored: the
+/// run goes on and writes its output.
+#[cfg(unix)]
+#[test]
+fn an_ignored_hangup_does_not_end_the_run() {
+    let dir = tempfile::tempdir().unwrap();
+    let program = long_program(dir.path());
+    let out_dir = dir.path().join("out");
+    std::fs::create_dir(&out_dir).unwrap();
+    let (_, by, left) = interrupted_run(&program, &out_dir, "HUP", true);
+    assert_eq!(by, None, "ended by a signal it was started ignoring");
+    assert_eq!(left, ["o.nc"]);
+}
+
+/// The temporary file of a run that was killed (SIGKILL cannot be caught)
+/// is removed by the next run writing into the same folder; one of a live
+/// process is left alone.
+#[cfg(unix)]
+#[test]
+fn the_next_run_removes_the_temporary_file_of_a_killed_run() {
+    let dir = tempfile::tempdir().unwrap();
+    let out_dir = dir.path().join("out");
+    std::fs::create_dir(&out_dir).unwrap();
+    let mut gone = std::process::Command::new("true").spawn().unwrap();
+    let dead = gone.id();
+    gone.wait().unwrap();
+    let stale = out_dir.join(format!(".postproc-{dead}-0-0badf00d"));
+    let live = out_dir.join(format!(".postproc-{}-0-0badf00d", std::process::id()));
+    let unrelated = out_dir.join(".postproc-notes");
+    for f in [&stale, &live, &unrelated] {
+        std::fs::write(f, "partial").unwrap();
+    }
+    let out = crate::common::postproc()
+        .args(["compensate", "--machine", "afm-r1000", "-o"])
+        .arg(out_dir.join("o.nc"))
+        .arg(repo("samples/part.nc"))
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(0));
+    assert!(!stale.exists(), "the killed run's file is left");
+    assert!(live.exists() && unrelated.exists());
+}
+
+/// `batch` of a folder does not follow a link inside it that leads out of
+/// it (a folder or a file elsewhere): it is skipped with a warning.
+#[cfg(unix)]
+#[test]
+fn batch_does_not_leave_its_input_folder_through_a_link() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let input = d.join("in");
+    let outside = d.join("elsewhere");
+    std::fs::create_dir_all(input.join("sub")).unwrap();
+    std::fs::create_dir_all(&outside).unwrap();
+    std::fs::copy(repo("samples/part.nc"), input.join("sub/part.nc")).unwrap();
+    std::fs::copy(repo("samples/effects.nc"), outside.join("secret.nc")).unwrap();
+    std::os::unix::fs::symlink(&outside, input.join("linked")).unwrap();
+    std::os::unix::fs::symlink(outside.join("secret.nc"), input.join("one.nc")).unwrap();
+    // A link that stays inside the folder is followed as before.
+    std::os::unix::fs::symlink(input.join("sub"), input.join("again")).unwrap();
+    let out_dir = d.join("out");
+    let run = crate::common::postproc()
+        .args(["batch", "--machine", "afm-r1000", "--out-dir"])
+        .arg(&out_dir)
+        .arg(&input)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&run.stderr);
+    assert_eq!(run.status.code(), Some(0), "{err}");
+    for link in ["linked", "one.nc"] {
+        assert!(
+            err.contains(&format!("{link}: a link out of the input folder")),
+            "{link}: {err}"
+        );
+    }
+    let summary = std::fs::read_to_string(out_dir.join("batch-summary.json")).unwrap();
+    assert!(!summary.contains("secret"), "{summary}");
+    assert!(
+        summary.contains("a link out of the input folder"),
+        "{summary}"
+    );
+    let mut outputs: Vec<String> = walk_names(&out_dir);
+    outputs.sort();
+    assert!(outputs.iter().all(|f| !f.contains("secret")), "{outputs:?}");
+    assert!(
+        outputs.iter().any(|f| f.ends_with("part.nc")),
+        "{outputs:?}"
+    );
+}
+
+/// File names under `dir`, recursively, relative to it.
+fn walk_names(dir: &std::path::Path) -> Vec<String> {
+    let mut out = Vec::new();
+    let mut stack = vec![dir.to_path_buf()];
+    while let Some(d) = stack.pop() {
+        for e in std::fs::read_dir(&d).unwrap() {
+            let p = e.unwrap().path();
+            if p.is_dir() {
+                stack.push(p);
+            } else {
+                out.push(p.strip_prefix(dir).unwrap().display().to_string());
+            }
+        }
+    }
+    out
+}
+
+/// A negative dwell at the bottom of a canned cycle (`G82 … P-1`) is
+/// refused at its word, as `G4 P-1` is.
+#[test]
+fn a_negative_cycle_dwell_is_refused_at_its_word() {
+    let prog = "G21 G90 G94 G17\nT1 M6\nG43 H1 G0 X0. Y0. Z20.\nS1000 M3\nG98 G82 X10. Y10. Z-5. R2. P-1 F100.\nG80\nM30\n";
+    let (code, err) = check_program("dwell.nc", prog.as_bytes(), "afm-r1000", &[]);
+    assert_eq!(code, 2, "{err}");
+    assert!(
+        err.contains("dwell.nc:5:28: negative dwell time: `P-1`"),
+        "{err}"
+    );
+    let prog = prog.replace("P-1", "P500");
+    let (code, err) = check_program("dwell.nc", prog.as_bytes(), "afm-r1000", &[]);
+    assert!(code == 0 || code == 1, "{err}");
+}
+
+// ---------------------------------------------------------------------------
+// Implausible models (issue 43)
+// ---------------------------------------------------------------------------
+
+/// Writes machine text `machine` and runs `check` of `program` (a sample)
+/// with it; (exit code, stderr).
+fn check_with_machine(machine: &str, program: &str) -> (i32, String) {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("m.yaml");
+    std::fs::write(&path, machine).unwrap();
+    let out = crate::common::postproc()
+        .current_dir(dir.path())
+        .args(["check", "--machine", "m.yaml"])
+        .arg(repo(program))
+        .output()
+        .unwrap();
+    (
+        out.status.code().unwrap_or(-1),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+/// `base` with `from` replaced by `to` (once; `from` must be there).
+fn edited(base: &str, from: &str, to: &str) -> String {
+    assert!(base.contains(from), "{from}");
+    base.replacen(from, to, 1)
+}
+
+/// The refusal of an implausible model through the binary: exit 2, the
+/// file, line and column of the key, the key path and the range.
+fn refused_at(machine: &str, program: &str, key_line: &str, want: &str) {
+    let (code, err) = check_with_machine(machine, program);
+    assert_eq!(code, 2, "{err}");
+    let line = line_of(machine, key_line, 0);
+    assert!(
+        err.contains(&format!("m.yaml:{line}:")),
+        "line {line}: {err}"
+    );
+    assert!(err.contains(want), "{err}");
+    assert!(err.contains(": off }"), "no override named: {err}");
+}
+
+#[test]
+fn robot_joint_stiffness_divided_by_100_is_refused() {
+    let base = machine_text("abb-irb1600");
+    let text = edited(
+        &base,
+        "k_nm_per_rad: [270990.0, 430040.0, 140940.0, 11280.0, 9550.0, 5330.0]",
+        "k_nm_per_rad: [270990.0, 430040.0, 1409.4, 112.8, 95.5, 53.3]",
+    );
+    refused_at(
+        &text,
+        "samples/drilling.mod",
+        "k_nm_per_rad:",
+        "k_nm_per_rad[2]: 1409.4 N·m/rad is outside 11800..11800000 N·m/rad, the plausible range of a main joint's (1–3) stiffness on an arm of 196 kg and 2000 mm reach",
+    );
+    // Only the wrist joints: the first of them is named.
+    let text = edited(&base, "11280.0, 9550.0, 5330.0]", "112.8, 95.5, 53.3]");
+    refused_at(
+        &text,
+        "samples/drilling.mod",
+        "k_nm_per_rad:",
+        "k_nm_per_rad[3]: 112.8 N·m/rad is outside 588..1960000 N·m/rad",
+    );
+}
+
+#[test]
+fn machine_tool_stiffness_off_by_a_thousand_is_refused() {
+    let base = machine_text("five-axis-ac");
+    let stiffness = "k_n_per_um: { x_pos: 12.0, x_neg: 12.5, y_pos: 10.0, y_neg: 11.0, z_pos: 18.0, z_neg: 15.0 }";
+    for (to, want) in [
+        (
+            "k_n_per_um: { x_pos: 0.012, x_neg: 0.0125, y_pos: 0.01, y_neg: 0.011, z_pos: 0.018, z_neg: 0.015 }",
+            "stiffness.k_n_per_um.x_pos: 0.012 N/µm is outside 1..1000 N/µm, the plausible range of a machine tool's static stiffness",
+        ),
+        (
+            "k_n_per_um: { x_pos: 12000, x_neg: 12500, y_pos: 10000, y_neg: 11000, z_pos: 18000, z_neg: 15000 }",
+            "stiffness.k_n_per_um.x_pos: 12000 N/µm is outside 1..1000 N/µm",
+        ),
+    ] {
+        let text = edited(&base, stiffness, to);
+        refused_at(&text, "samples/part.nc", "  k_n_per_um:", want);
+    }
+    // A grid value of the AFM file.
+    let base = machine_text("afm-r1000");
+    let text = edited(&base, "[[18.0, 20.0, 18.0]", "[[18.0, 0.02, 18.0]");
+    refused_at(
+        &text,
+        "samples/part.nc",
+        "    x_pos:",
+        "stiffness.k_n_per_um.x_pos: 0.02 N/µm is outside 1..1000 N/µm",
+    );
+}
+
+#[test]
+fn a_tool_longer_than_the_travel_allows_is_refused() {
+    let base = machine_text("afm-r1000");
+    let text = edited(&base, "1: { length_mm: 62.5 }", "1: { length_mm: 62500 }");
+    refused_at(
+        &text,
+        "samples/part.nc",
+        "  1: { length_mm: 62500 }",
+        "tools.1.length_mm: 62500 mm is outside 0..1000 mm, the plausible range of a tool length (the Z travel of 500 mm plus 500 mm",
+    );
+    // At the Z travel plus 500 mm it is a (long) tool.
+    let text = edited(&base, "1: { length_mm: 62.5 }", "1: { length_mm: 1000 }");
+    let (code, err) = check_with_machine(&text, "samples/part.nc");
+    assert!(code == 0 || code == 1, "{err}");
+}
+
+#[test]
+fn a_heavy_flange_link_is_refused() {
+    let base = machine_text("abb-irb1600");
+    let text = edited(
+        &base,
+        "{ mass_kg: 1.0,  com_mm: [0.0, 0.0, -10.0] }",
+        "{ mass_kg: 1000.0,  com_mm: [0.0, 0.0, -10.0] }",
+    );
+    refused_at(
+        &text,
+        "samples/drilling.mod",
+        "  - { mass_kg: 1000.0",
+        "links[5].mass_kg: 1000 kg is outside 0..100 kg, the plausible range of the flange's (link 6) mass",
+    );
+    let text = edited(
+        &base,
+        "{ mass_kg: 15.0, com_mm: [0.0, 0.0, -250.0] }",
+        "{ mass_kg: 15000.0, com_mm: [0.0, 0.0, -250.0] }",
+    );
+    refused_at(
+        &text,
+        "samples/drilling.mod",
+        "  - { mass_kg: 15000.0",
+        "links[3].mass_kg: 15000 kg is outside 0..1000 kg",
+    );
+}
+
+#[test]
+fn drill_diameters_are_bounded() {
+    let base = machine_text("abb-irb1600");
+    let text = edited(&base, "drill_diameter_mm: 6.8", "drill_diameter_mm: 6800");
+    refused_at(
+        &text,
+        "samples/drilling.mod",
+        "  drill_diameter_mm:",
+        "process_force.drill_diameter_mm: 6800 mm is outside 0.1..150 mm, the plausible range of a drill's diameter",
+    );
+    let base = machine_text("afm-r1000");
+    let milling = "process_force:\n  model: milling\n  kt_n_per_mm2: 800.0\n  kr_n_per_mm2: 170.0\n  ka_n_per_mm2: 220.0\n  kte_n_per_mm: 28.0\n  kre_n_per_mm: 31.0\n  kae_n_per_mm: 2.0\n  tool_diameter_mm: 10.0\n  flutes: 3\n  axial_depth_mm: 2.0\n  radial_width_mm: 3.0\n";
+    let text = edited(
+        &base,
+        milling,
+        "process_force:\n  model: drilling\n  thrust_coefficient_n_per_mm2: 450.0\n  drill_diameter_mm: 680.0\n",
+    );
+    refused_at(
+        &text,
+        "samples/part.nc",
+        "  drill_diameter_mm:",
+        "process_force.drill_diameter_mm: 680 mm is outside 0.1..150 mm",
+    );
+}
+
+#[test]
+fn a_spindle_speed_off_by_a_thousand_is_refused_by_its_cutting_speed() {
+    let base = machine_text("staubli-tx200");
+    let text = edited(&base, "spindle_rpm: 15000.0", "spindle_rpm: 15");
+    refused_at(
+        &text,
+        "samples/milling.mod",
+        "  spindle_rpm:",
+        "process_force.spindle_rpm: 15 1/min with the 12 mm cutter is a cutting speed of 0.565 m/min, outside 2..6000 m/min",
+    );
+}
+
+#[test]
+fn a_vanishing_modal_stiffness_is_refused_even_with_plausibility_off() {
+    let base = machine_text("abb-irb1600");
+    let text = edited(
+        &base,
+        "damping_ratio: 0.05, stiffness_n_per_um: 0.5 }",
+        "damping_ratio: 0.05, stiffness_n_per_um: 5e-324 }",
+    );
+    let (code, err) = check_with_machine(&text, "samples/milling.mod");
+    assert_eq!(code, 2, "{err}");
+    let line = line_of(&text, "  - { direction: x", 0);
+    assert!(
+        err.contains(&format!("m.yaml:{line}:"))
+            && err.contains("modal[0].stiffness_n_per_um: `5e-324` is outside 0.001..100000"),
+        "{err}"
+    );
+    let off = format!("{text}plausibility:\n  modal: off\n");
+    let (code, err) = check_with_machine(&off, "samples/milling.mod");
+    assert_eq!(code, 2, "{err}");
+    assert!(
+        err.contains("modal[0].stiffness_n_per_um: `5e-324`"),
+        "{err}"
+    );
+    // Machine tools alike; a merely implausible one names the range.
+    let base = machine_text("afm-r1000");
+    let from = "x: { natural_frequency_hz: 62.0, damping_ratio: 0.04, stiffness_n_per_um: 20.0 }";
+    let text = edited(&base, from, &from.replace("20.0 }", "5e-324 }"));
+    let (code, err) = check_with_machine(&text, "samples/part.nc");
+    assert_eq!(code, 2, "{err}");
+    assert!(
+        err.contains("modal.x.stiffness_n_per_um: `5e-324` is outside 0.001..100000"),
+        "{err}"
+    );
+    let text = edited(&base, from, &from.replace("20.0 }", "0.02 }"));
+    refused_at(
+        &text,
+        "samples/part.nc",
+        "  x: { natural_frequency_hz",
+        "modal.x.stiffness_n_per_um: 0.02 N/µm is outside 0.5..2000 N/µm",
+    );
+    let text = edited(&base, from, &from.replace("0.04", "0.0005"));
+    refused_at(
+        &text,
+        "samples/part.nc",
+        "  x: { natural_frequency_hz",
+        "modal.x.damping_ratio: 0.0005 is outside 0.001..0.5, the plausible range of a damping ratio",
+    );
+}
+
+#[test]
+fn plausibility_off_accepts_a_key_with_a_warning_and_only_that_key() {
+    let base = machine_text("abb-irb1600");
+    let soft = edited(&base, "11280.0, 9550.0, 5330.0]", "112.8, 95.5, 53.3]");
+    let text = format!("{soft}plausibility:\n  k_nm_per_rad: off\n");
+    let (code, err) = check_with_machine(&text, "samples/drilling.mod");
+    assert!(code == 0 || code == 1, "{err}");
+    let line = line_of(&text, "k_nm_per_rad:", 0);
+    assert!(
+        err.contains(&format!("m.yaml:{line}:"))
+            && err.contains("k_nm_per_rad[3]: 112.8 N·m/rad is outside 588..1960000 N·m/rad")
+            && err.contains("accepted because `plausibility: { k_nm_per_rad: off }`"),
+        "{err}"
+    );
+    // One joint's key covers that joint only.
+    let text = format!("{soft}plausibility:\n  k_nm_per_rad[3]: off\n");
+    let (code, err) = check_with_machine(&text, "samples/drilling.mod");
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("k_nm_per_rad[4]: 95.5 N·m/rad"), "{err}");
+    // Another key does not cover it; an unknown key is an error.
+    let text = format!("{soft}plausibility:\n  links: off\n");
+    let (code, err) = check_with_machine(&text, "samples/drilling.mod");
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("k_nm_per_rad[3]"), "{err}");
+    let text = format!("{base}plausibility:\n  k_nm_per_radian: off\n");
+    let (code, err) = check_with_machine(&text, "samples/drilling.mod");
+    assert_eq!(code, 2, "{err}");
+    let line = line_of(&text, "  k_nm_per_radian: off", 0);
+    assert!(
+        err.contains(&format!("m.yaml:{line}:3:"))
+            && err.contains("plausibility.k_nm_per_radian: `k_nm_per_radian` is not the key path"),
+        "{err}"
+    );
+    // Only `off` is a value; an override with nothing to accept is a warning.
+    let text = format!("{base}plausibility:\n  k_nm_per_rad: on\n");
+    let (code, err) = check_with_machine(&text, "samples/drilling.mod");
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("plausibility.k_nm_per_rad"), "{err}");
+    let text = format!("{base}plausibility:\n  k_nm_per_rad: off\n");
+    let (code, err) = check_with_machine(&text, "samples/drilling.mod");
+    assert!(code == 0 || code == 1, "{err}");
+    assert!(err.contains("the override can go"), "{err}");
+    // Machine tools alike.
+    let tool = machine_text("afm-r1000");
+    let long = edited(&tool, "1: { length_mm: 62.5 }", "1: { length_mm: 1500 }");
+    let text = format!("{long}plausibility:\n  tools.1: off\n");
+    let (code, err) = check_with_machine(&text, "samples/part.nc");
+    assert!(code == 0 || code == 1, "{err}");
+    assert!(
+        err.contains("tools.1.length_mm: 1500 mm is outside 0..1000 mm")
+            && err.contains("accepted because `plausibility: { tools.1: off }`"),
+        "{err}"
+    );
+}
+
+// ---------------------------------------------------------------------------
+// Scaled models: each quantity off by 10^±3 (issue 43)
+// ---------------------------------------------------------------------------
+
+/// Largest deviation a machine-tool model within every plausible range may
+/// predict on the probe programs, mm (its errors are limited to 1 mm and
+/// 1000 µrad each, its stiffness to at least 1 N/µm).
+const TOOL_DEV_MAX_MM: f64 = 2.0;
+/// The same for a robot, mm (uncalibrated arms err by 1–3 mm).
+const ROBOT_DEV_MAX_MM: f64 = 10.0;
+
+/// The numbers of a machine file's text that are values (not keys, not
+/// part of a name, not in a comment): (start, end) byte offsets.
+fn value_tokens(text: &str) -> Vec<(usize, usize)> {
+    let b = text.as_bytes();
+    let mut out = Vec::new();
+    let mut line_start = 0;
+    for line in text.split_inclusive('\n') {
+        let body = match line.find('#') {
+            Some(c) => &line[..c],
+            None => line,
+        };
+        let lb = body.as_bytes();
+        let mut i = 0;
+        while i < lb.len() {
+            let starts = lb[i].is_ascii_digit()
+                || (matches!(lb[i], b'-' | b'.') && lb.get(i + 1).is_some_and(u8::is_ascii_digit));
+            let joined =
+                i > 0 && (lb[i - 1].is_ascii_alphanumeric() || matches!(lb[i - 1], b'_' | b'.'));
+            if !starts || joined {
+                i += 1;
+                continue;
+            }
+            let mut j = i + 1;
+            while j < lb.len()
+                && (lb[j].is_ascii_digit()
+                    || lb[j] == b'.'
+                    || matches!(lb[j], b'e' | b'E')
+                    || (matches!(lb[j], b'-' | b'+') && matches!(lb[j - 1], b'e' | b'E')))
+            {
+                j += 1;
+            }
+            let key = body[j..].trim_start().starts_with(':');
+            let named = j < lb.len() && (lb[j].is_ascii_alphabetic() || lb[j] == b'_');
+            if !key && !named && body[i..j].parse::<f64>().is_ok() {
+                out.push((line_start + i, line_start + j));
+            }
+            i = j;
+        }
+        line_start += line.len();
+    }
+    debug_assert!(out.iter().all(|&(s, e)| e <= b.len() && s < e));
+    out
+}
+
+/// `text` with the tokens `which` multiplied by `factor`.
+fn scaled(text: &str, tokens: &[(usize, usize)], factor: f64) -> String {
+    let mut out = String::with_capacity(text.len() + 16 * tokens.len());
+    let mut at = 0;
+    for &(s, e) in tokens {
+        out.push_str(&text[at..s]);
+        let v: f64 = text[s..e].parse().unwrap_or(0.0);
+        out.push_str(&format!("{}", v * factor));
+        at = e;
+    }
+    out.push_str(&text[at..]);
+    out
+}
+
+/// The scaled mutants of a seed: every value alone, then every line's
+/// values together (a section written in another unit), each by 10^3 and
+/// 10^-3; beyond them, two values of random lines at once.
+fn scaled_mutant(text: &str, tokens: &[(usize, usize)], i: usize, rng: &mut Rng) -> String {
+    let factor = if i % 2 == 0 { 1e3 } else { 1e-3 };
+    let k = i / 2;
+    if k < tokens.len() {
+        return scaled(text, &tokens[k..=k], factor);
+    }
+    let lines: Vec<(usize, usize)> = {
+        let mut v: Vec<(usize, usize)> = Vec::new();
+        let mut start = 0;
+        for line in text.split_inclusive('\n') {
+            v.push((start, start + line.len()));
+            start += line.len();
+        }
+        v
+    };
+    let k = k - tokens.len();
+    if k < lines.len() {
+        let (s, e) = lines[k];
+        let on: Vec<(usize, usize)> = tokens
+            .iter()
+            .copied()
+            .filter(|&(a, b)| a >= s && b <= e)
+            .collect();
+        return scaled(text, &on, factor);
+    }
+    let mut pick = [
+        tokens[rng.below(tokens.len())],
+        tokens[rng.below(tokens.len())],
+    ];
+    pick.sort();
+    if pick[0] == pick[1] {
+        return scaled(text, &pick[..1], factor);
+    }
+    let f2 = if rng.below(2) == 0 { 1e3 } else { 1e-3 };
+    let once = scaled(text, &pick[1..], f2);
+    scaled(&once, &pick[..1], factor)
+}
+
+/// The largest `dev N mm` annotation of a compensated program, mm.
+fn largest_dev(out: &[u8]) -> f64 {
+    String::from_utf8_lossy(out)
+        .split("dev ")
+        .skip(1)
+        .filter_map(|t| t.split_whitespace().next()?.parse::<f64>().ok())
+        .fold(0.0, f64::max)
+}
+
+/// Compensates the probe with a loaded model: (largest deviation, the
+/// output's non-finite words beyond the probe's) or the error.
+fn probe(m: &Machine, input: &[u8], pools: &Pools) -> Result<(f64, bool), String> {
+    let out = match m {
+        Machine::Tool(t) => gcode_run(t, input, &pools.one)?,
+        Machine::Robot(r) => {
+            use postproc::pipeline::rapid::{RapidOptions, compensate_module};
+            let text = std::str::from_utf8(input).unwrap_or_default();
+            match compensate_module(text, "m.mod", r, &RapidOptions::default()) {
+                Ok(o) => o.text.into_bytes(),
+                Err(e) => {
+                    clean_message(&e)?;
+                    return Err(format!("error: {e}"));
+                }
+            }
+        }
+    };
+    Ok((
+        largest_dev(&out),
+        non_finite_words(&out) > non_finite_words(input),
+    ))
+}
+
+/// The key path a plausibility refusal names (`m.yaml:L:C: PATH: …`).
+fn refused_key(message: &str) -> Option<String> {
+    if !message.contains(": off }`)") {
+        return None;
+    }
+    let rest = message.strip_prefix("m.yaml:")?;
+    let rest = rest.splitn(3, ':').nth(2)?.trim_start();
+    Some(rest.split(": ").next()?.to_string())
+}
+
+/// A scaled model: refused with a located message, or loaded and then
+/// predicting at most the plausible deviation on the probe (or refusing
+/// the probe cleanly). A value refused as implausible and accepted with
+/// `plausibility: { KEY: off }` must still give finite numbers only.
+fn scaled_props(text: &str, probe_input: &[u8], pools: &Pools) -> Result<bool, String> {
+    let m = match Machine::from_yaml_str(text, "m.yaml") {
+        Ok(m) => m,
+        Err(e) => {
+            clean_message(&e)?;
+            let msg = e.to_string();
+            if !msg.starts_with("m.yaml:") {
+                return Err(format!("refusal without its place: {msg}"));
+            }
+            return overridden_props(text, &msg, probe_input, pools).map(|()| false);
+        }
+    };
+    let limit = match m {
+        Machine::Tool(_) => TOOL_DEV_MAX_MM,
+        Machine::Robot(_) => ROBOT_DEV_MAX_MM,
+    };
+    match probe(&m, probe_input, pools) {
+        Ok((_, true)) => Err("non-finite number in the output".into()),
+        Ok((dev, false)) if dev > limit => Err(format!(
+            "a model within every plausible range predicts {dev} mm (more than {limit} mm)"
+        )),
+        Ok(_) => Ok(true),
+        Err(m) if m.starts_with("error: ") => Ok(true),
+        Err(m) => Err(m),
+    }
+}
+
+/// The model of a plausibility refusal with the refused keys turned off
+/// (up to 4): loaded or refused cleanly, and no non-finite number in what
+/// it writes.
+fn overridden_props(
+    text: &str,
+    first: &str,
+    probe_input: &[u8],
+    pools: &Pools,
+) -> Result<(), String> {
+    let mut keys: Vec<String> = Vec::new();
+    let mut msg = first.to_string();
+    for _ in 0..4 {
+        let Some(key) = refused_key(&msg) else {
+            return Ok(());
+        };
+        if keys.contains(&key) {
+            return Err(format!("`{key}: off` does not accept it: {msg}"));
+        }
+        keys.push(key);
+        let mut with = format!("{text}\nplausibility:\n");
+        for k in &keys {
+            with.push_str(&format!("  {k}: off\n"));
+        }
+        match Machine::from_yaml_str(&with, "m.yaml") {
+            Ok(m) => {
+                return match probe(&m, probe_input, pools) {
+                    Ok((_, true)) => {
+                        Err(format!("non-finite number in the output with {keys:?} off"))
+                    }
+                    Ok(_) => Ok(()),
+                    Err(m) if m.starts_with("error: ") => Ok(()),
+                    Err(m) => Err(m),
+                };
+            }
+            Err(e) => {
+                clean_message(&e)?;
+                msg = e.to_string();
+            }
+        }
+    }
+    Ok(())
+}
+
+/// A seed of the scaled-model generator: the machine text, its value
+/// tokens and the probe program.
+type ScaledSeed = (String, Vec<(usize, usize)>, Vec<u8>);
+
+#[test]
+fn mutants_of_scaled_models_are_refused_or_predict_plausibly() {
+    let count = env_count("HOSTILE_MUTANTS", CI_MUTANTS / 4);
+    let pools = pools();
+    let cases = [
+        ("afm-r1000", "samples/effects.nc"),
+        ("five-axis-ac", "samples/five-axis.nc"),
+        ("head-table-bc", "samples/head-table.nc"),
+        ("abb-irb1600", "samples/milling.mod"),
+        ("staubli-tx200", "samples/milling.mod"),
+    ];
+    let seeds: Vec<ScaledSeed> = cases
+        .iter()
+        .map(|(m, p)| {
+            let text = machine_text(m);
+            let tokens = value_tokens(&text);
+            (text, tokens, read(p))
+        })
+        .collect();
+    for (k, (text, tokens, probe_input)) in seeds.iter().enumerate() {
+        assert!(tokens.len() > 20, "seed {k}: {} values", tokens.len());
+        assert_eq!(
+            scaled_props(text, probe_input, &pools),
+            Ok(true),
+            "seed {k}"
+        );
+    }
+    let mut rng = Rng(0x5CA1E);
+    let start = Instant::now();
+    let mut accepted = 0;
+    let mut findings = Vec::new();
+    for i in 0..count {
+        let (text, tokens, probe_input) = &seeds[i % seeds.len()];
+        let m = scaled_mutant(text, tokens, i / seeds.len(), &mut rng);
+        let r = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+            scaled_props(&m, probe_input, &pools)
+        }));
+        let problem = match r {
+            Ok(Ok(ok)) => {
+                accepted += usize::from(ok);
+                continue;
+            }
+            Ok(Err(p)) => p,
+            Err(_) => "panic".to_string(),
+        };
+        let dir = std::env::temp_dir().join("postproc-hostile");
+        let _ = std::fs::create_dir_all(&dir);
+        let path = dir.join(format!("scaled-{i}.yaml"));
+        let _ = std::fs::write(&path, &m);
+        findings.push(format!("scaled mutant {i} ({}): {problem}", path.display()));
+    }
+    report("scaled models", count, start, &(accepted, findings));
+}
+
+#[test]
+fn value_tokens_are_the_numbers_that_are_values() {
+    let text = "a: 1.5 # 7\ntools:\n  12: { length_mm: -6e2 }\nname: G54.1P1 x2\nk: [1, .5]\n";
+    let got: Vec<&str> = value_tokens(text)
+        .iter()
+        .map(|&(s, e)| &text[s..e])
+        .collect();
+    assert_eq!(got, ["1.5", "-6e2", "1", ".5"]);
+    let toks = value_tokens(text);
+    assert_eq!(
+        scaled(text, &toks[1..2], 1e-3),
+        text.replace("-6e2", "-0.6")
+    );
 }

@@ -77,8 +77,9 @@ struct Item {
 
 /// Programs under a folder, recursively, in name order; hidden entries,
 /// the output folder, compensated outputs (`*.comp.*`), anything but
-/// regular files (named pipes, devices) and folders seen before (a link
-/// back up the tree) are skipped. For a robot, a task folder below (one
+/// regular files (named pipes, devices), links that lead out of the input
+/// folder (with a warning) and folders seen before (a link back up the
+/// tree) are skipped. For a robot, a task folder below (one
 /// with `PROGMOD` or `SYSMOD`, as in a controller backup) is one program.
 /// A file without a program extension is taken when its first block is
 /// one of the machine's language. A folder that cannot be read becomes a
@@ -128,6 +129,15 @@ fn walk(
             .file_name()
             .map(|n| n.to_string_lossy().to_ascii_lowercase())
             .unwrap_or_default();
+        if leaves(root, &path) {
+            tracing::warn!(
+                "{}: a link out of the input folder {}, not followed",
+                path.display(),
+                root.display()
+            );
+            skip_as("a link out of the input folder");
+            continue;
+        }
         if path.is_dir() {
             if skip.is_some_and(|s| path.canonicalize().is_ok_and(|p| p == s)) {
                 skip_as("the output folder");
@@ -159,6 +169,18 @@ fn walk(
                 program: false,
             });
         }
+    }
+}
+
+/// Whether `path` is a symbolic link whose target lies outside the input
+/// folder `root` (or cannot be resolved): a batch never leaves its inputs.
+fn leaves(root: &Path, path: &Path) -> bool {
+    if !std::fs::symlink_metadata(path).is_ok_and(|m| m.file_type().is_symlink()) {
+        return false;
+    }
+    match (root.canonicalize(), path.canonicalize()) {
+        (Ok(root), Ok(target)) => !target.starts_with(root),
+        _ => false,
     }
 }
 

@@ -161,20 +161,15 @@ impl Staged {
         };
         // The temporary file's random name means nothing to the user: name
         // the output and its folder only.
-        let tmp = tempfile::Builder::new()
-            .prefix(".postproc-")
-            .tempfile_in(&dir)
-            .map_err(|e| {
-                Error::io(
-                    path,
-                    std::io::Error::new(
-                        e.kind(),
-                        format!("cannot create a file in {}: {}", dir.display(), e.kind()),
-                    ),
-                )
-            })?;
-        let (file, tmp_path) = tmp.into_parts();
-        let guard = super::interrupt::register(&tmp_path);
+        let (tmp_path, file, guard) = super::interrupt::create_temp(&dir).map_err(|e| {
+            Error::io(
+                path,
+                std::io::Error::new(
+                    e.kind(),
+                    format!("cannot create a file in {}: {}", dir.display(), e.kind()),
+                ),
+            )
+        })?;
         Ok(Staged {
             shown: path.to_path_buf(),
             sink: Sink::Temp(

@@ -5,6 +5,7 @@
 //! binary runs.
 
 pub mod effects;
+pub mod plausibility;
 pub mod robot;
 pub mod status;
 pub mod thermal_start;

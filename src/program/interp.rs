@@ -1860,6 +1860,14 @@ impl Interpreter {
             ));
         };
         plan.extra_repeats = self.cycle_repeats(block, g, text)?;
+        // The dwell at the hole bottom (G82, G89; P) cannot be negative.
+        if let Some(p) = g.p.filter(|p| p.value < 0.0) {
+            return Err(self.err(
+                line,
+                Some(p),
+                format!("negative dwell time: `{}`", quote_word(text, p)),
+            ));
+        }
         let initial = self.cycle_initial;
         // Hole XY position.
         let mut xy = self.pos;

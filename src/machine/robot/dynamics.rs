@@ -9,6 +9,13 @@ use crate::error::Invalid;
 pub use crate::process::modal::{Modal, Mode, Resonance};
 
 /// Validates the `modal:` list.
+/// Lowest natural frequency of any mode, Hz.
+pub const MIN_FREQUENCY_HZ: f64 = 1e-3;
+/// Lowest modal stiffness, N/µm (1 N/mm).
+pub const MIN_STIFFNESS_N_PER_UM: f64 = 1e-3;
+/// Lowest damping ratio (an amplification of 5000 at resonance).
+pub const MIN_DAMPING: f64 = 1e-4;
+
 pub(crate) fn modal_from_raw(raw: &[RawMode]) -> Result<Modal, Invalid> {
     let mut out = Modal::default();
     for (i, m) in raw.iter().enumerate() {
@@ -24,22 +31,30 @@ pub(crate) fn modal_from_raw(raw: &[RawMode]) -> Result<Modal, Invalid> {
                 ));
             }
         };
-        for (key, v) in [
-            ("frequency_hz", m.frequency_hz),
-            ("stiffness_n_per_um", m.stiffness_n_per_um),
+        // Hard limits, which keep the amplitude `F / k / (2ζ)` finite; the
+        // plausible ranges are narrower ([`super::plausible`]).
+        for (key, v, lo, hi) in [
+            ("frequency_hz", m.frequency_hz, MIN_FREQUENCY_HZ, 1e5),
+            (
+                "stiffness_n_per_um",
+                m.stiffness_n_per_um,
+                MIN_STIFFNESS_N_PER_UM,
+                1e5,
+            ),
+            ("damping_ratio", m.damping_ratio, MIN_DAMPING, 1.0),
         ] {
-            if !v.is_finite() || v <= 0.0 {
+            if !v.is_finite() || v < lo || v >= hi {
                 return Err(Invalid::new(
                     format!("{p}.{key}"),
-                    format!("`{v}` must be a positive number"),
+                    format!(
+                        "`{}` is outside {}..{} (below {} no model is meaningful)",
+                        crate::error::show_number(v),
+                        crate::error::show_number(lo),
+                        crate::error::show_number(hi),
+                        crate::error::show_number(lo)
+                    ),
                 ));
             }
-        }
-        if !m.damping_ratio.is_finite() || m.damping_ratio <= 0.0 || m.damping_ratio >= 1.0 {
-            return Err(Invalid::new(
-                format!("{p}.damping_ratio"),
-                format!("`{}` must lie in (0, 1)", m.damping_ratio),
-            ));
         }
         if out.modes[k].is_some() {
             return Err(Invalid::new(

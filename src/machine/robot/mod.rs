@@ -501,7 +501,12 @@ impl Robot {
     /// Parses and validates robot YAML; `file` names it in errors.
     pub fn from_yaml_str(text: &str, file: &str) -> Result<Self> {
         let raw: RawRobot = yaml::deserialize(text, file)?;
-        Self::validate(raw).map_err(|inv| locate_invalid(text, file, inv))
+        let r = Self::validate(raw).map_err(|inv| locate_invalid(text, file, inv))?;
+        // The values accepted through `plausibility:` overrides.
+        for w in plausible::check(&r.d.raw).unwrap_or_default() {
+            tracing::warn!("{}", locate_invalid(text, file, w));
+        }
+        Ok(r)
     }
 
     fn validate(raw: RawRobot) -> std::result::Result<Self, Invalid> {

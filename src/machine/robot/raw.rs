@@ -48,6 +48,10 @@ pub(crate) struct RawRobot {
     pub _status: Option<serde::de::IgnoredAny>,
     #[serde(default, rename = "calibrations")]
     pub _calibrations: Option<serde::de::IgnoredAny>,
+    /// `plausibility:` — key paths whose plausibility ranges are not
+    /// applied ([`crate::machine::plausibility`]).
+    #[serde(default)]
+    pub plausibility: Option<crate::machine::plausibility::Overrides>,
 }
 
 /// `process_force:` — the predicted process force at the TCP.

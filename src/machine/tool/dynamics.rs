@@ -22,20 +22,39 @@ pub(crate) fn modal_from_raw(raw: &RawModal) -> Result<Modal, Invalid> {
 }
 
 fn mode(p: &str, m: &RawMode) -> Result<Mode, Invalid> {
+    // Hard limits, which keep the amplitude `F / k / (2ζ)` finite; the
+    // plausible ranges are narrower ([`super::plausible`]).
     let check = |key: &str, v: f64, lo: f64, hi: f64| {
-        if v.is_finite() && v > lo && v <= hi {
+        if v.is_finite() && v >= lo && v <= hi {
             Ok(v)
         } else {
             Err(Invalid::new(
                 format!("{p}.{key}"),
-                format!("`{v}` is outside ({lo}, {hi}]"),
+                format!(
+                    "`{}` is outside {}..{} (below {} no model is meaningful)",
+                    crate::error::show_number(v),
+                    crate::error::show_number(lo),
+                    crate::error::show_number(hi),
+                    crate::error::show_number(lo)
+                ),
             ))
         }
     };
+    use crate::machine::robot::dynamics::{MIN_DAMPING, MIN_FREQUENCY_HZ, MIN_STIFFNESS_N_PER_UM};
     Ok(Mode {
-        natural_frequency_hz: check("natural_frequency_hz", m.natural_frequency_hz, 0.0, 1e5)?,
-        damping_ratio: check("damping_ratio", m.damping_ratio, 0.0, 1.0)?,
-        stiffness_n_per_mm: check("stiffness_n_per_um", m.stiffness_n_per_um, 0.0, 1e5)? * 1e3,
+        natural_frequency_hz: check(
+            "natural_frequency_hz",
+            m.natural_frequency_hz,
+            MIN_FREQUENCY_HZ,
+            1e5,
+        )?,
+        damping_ratio: check("damping_ratio", m.damping_ratio, MIN_DAMPING, 1.0)?,
+        stiffness_n_per_mm: check(
+            "stiffness_n_per_um",
+            m.stiffness_n_per_um,
+            MIN_STIFFNESS_N_PER_UM,
+            1e5,
+        )? * 1e3,
     })
 }
 

@@ -35,7 +35,12 @@ type Check = fn(&str, f64) -> V<f64>;
 /// Parses and validates machine-tool YAML.
 pub(crate) fn load(text: &str, file: &str) -> Result<MachineTool> {
     let raw: RawMachineTool = yaml::deserialize(text, file)?;
-    validate(raw).map_err(|inv| locate_invalid(text, file, inv))
+    let m = validate(raw).map_err(|inv| locate_invalid(text, file, inv))?;
+    // The values accepted through `plausibility:` overrides.
+    for w in super::plausible::check(&m.raw).unwrap_or_default() {
+        tracing::warn!("{}", locate_invalid(text, file, w));
+    }
+    Ok(m)
 }
 
 /// Like [`yaml::invalid`], but when the full key path cannot be found in the
@@ -156,6 +161,7 @@ pub(super) fn validate(raw: RawMachineTool) -> V<MachineTool> {
         && axes
             .iter()
             .all(|a| a.location.is_zero() && a.components.is_zero());
+    super::plausible::check(&raw)?;
     super::set_breakpoints(&mut axes, stiffness.as_ref());
     let pre = Box::new(super::fast::Precomputed::new(&axes, spindle));
     Ok(MachineTool {

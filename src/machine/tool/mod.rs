@@ -32,6 +32,7 @@ mod load;
 mod location;
 mod offsets;
 mod params;
+pub mod plausible;
 mod raw;
 pub mod stiffness;
 mod table;

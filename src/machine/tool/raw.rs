@@ -45,6 +45,10 @@ pub(crate) struct RawMachineTool {
     /// calibration from instrument-frame observations; not part of the model).
     #[serde(default)]
     pub measurement_frame: Option<RawMeasurementFrame>,
+    /// `plausibility:` — key paths whose plausibility ranges are not
+    /// applied ([`crate::machine::plausibility`]).
+    #[serde(default)]
+    pub plausibility: Option<crate::machine::plausibility::Overrides>,
 }
 
 /// `measurement_frame:` — translation and roll-pitch-yaw.
