@@ -1446,6 +1446,19 @@ fn resolve_move<'m>(
     at: At,
     mv: &'m Move,
 ) -> Result<std::result::Result<Resolved<'m>, Left>> {
+    if let Some(mut left) = flow.load_left(at, mv) {
+        // The targets it goes to keep their values as written.
+        if mv.kind != MoveKind::MoveAbsJ {
+            for t in mv.via.iter().map(|v| &**v).chain([&mv.target]) {
+                match flow.cart(src, file, at, t)? {
+                    Ok(u) if matches!(u.origin, Origin::Decl { .. }) => left.reads.push(u.origin),
+                    Ok(_) => {}
+                    Err(l) => left.reads.extend(l.reads),
+                }
+            }
+        }
+        return Ok(Err(left));
+    }
     if mv.kind == MoveKind::MoveAbsJ {
         return Ok(match flow.joint_left(at, &mv.target) {
             Some(left) => Err(left),

@@ -659,6 +659,46 @@ impl<'m> Flow<'m> {
         }
     }
 
+    /// Why a move is left as written because its tool or work object is
+    /// known at run time only, if it is: a `tooldata`/`wobjdata` that a
+    /// statement of the program writes (`tActual := tGripper;`), a
+    /// parameter, a routine-local one, or one declared without a literal
+    /// value. The reason names the data (`run-time tool `tActual``).
+    pub(crate) fn load_left(&self, at: At, mv: &Move) -> Option<Left> {
+        let wobj = mv.wobj.as_ref().map(|w| &*w.text);
+        let pairs = [
+            ("tool", Some(&*mv.tool.text), "tool0"),
+            ("work object", wobj, "wobj0"),
+        ];
+        for (what, name, none) in pairs {
+            let Some(name) = name.map(str::trim) else {
+                continue;
+            };
+            if name.eq_ignore_ascii_case(none) {
+                continue;
+            }
+            let literal = |d: &Decl| {
+                matches!(
+                    d.value,
+                    Some(DataValue::ToolData(_)) | Some(DataValue::WobjData(_))
+                )
+            };
+            let run_time = match self.source(name, at) {
+                // Undeclared: the move's resolution says so.
+                None => false,
+                Some(Source::Module(_, d)) => !literal(d),
+                Some(Source::Local(_) | Source::Assigned(..) | Source::RunTime(_)) => true,
+            };
+            if run_time {
+                return Some(Left {
+                    reason: format!("run-time {what} `{name}`"),
+                    reads: Vec::new(),
+                });
+            }
+        }
+        None
+    }
+
     #[allow(clippy::too_many_arguments)]
     fn cart_at(
         &self,
@@ -993,7 +1033,8 @@ fn is_call(text: &str, name: &str) -> bool {
 /// The parameter names of a routine's parameter text (`robtarget pt,
 /// INOUT num n, \switch s | num t{*}`), lower case.
 fn param_names(text: &str) -> Vec<String> {
-    text.split([',', '|'])
+    without_comments(text)
+        .split([',', '|'])
         .filter_map(|p| {
             let p = p.split('{').next().unwrap_or("");
             let word = p
@@ -1002,6 +1043,15 @@ fn param_names(text: &str) -> Vec<String> {
             Some(word.to_ascii_lowercase())
         })
         .collect()
+}
+
+/// `text` without its `!` comments (a parameter list written over several
+/// lines may hold some; a parameter list holds no strings).
+pub(crate) fn without_comments(text: &str) -> String {
+    text.lines()
+        .map(|l| l.split('!').next().unwrap_or(""))
+        .collect::<Vec<_>>()
+        .join("\n")
 }
 
 /// Words that are never data names in a statement.

@@ -100,6 +100,10 @@ const STATEMENT_WORDS: &[&str] = &[
     "ENDRECORD",
 ];
 
+/// Words that may start a line of a parameter list written over several
+/// lines (`PROC weld(robtarget a,` / `VAR robtarget c)`).
+const PARAMETER_WORDS: &[&str] = &["VAR", "PERS", "INOUT"];
+
 /// The motion instruction whose name starts `i` (a whole word), and the
 /// text after the name.
 #[inline]
@@ -1093,6 +1097,19 @@ impl<'a> Parser<'a> {
         words: &[&str],
         colon: bool,
     ) -> Result<Scan, nom::Err<PErr<'a>>> {
+        self.scan_continued(i, stops, words, colon, &[])
+    }
+
+    /// [`Parser::scan`], where a new line may also start with one of the
+    /// words `continues` (a parameter list's `VAR`, `PERS`, `INOUT`).
+    fn scan_continued(
+        &self,
+        i: &'a str,
+        stops: &[u8],
+        words: &[&str],
+        colon: bool,
+        continues: &[&str],
+    ) -> Result<Scan, nom::Err<PErr<'a>>> {
         let b = i.as_bytes();
         let mut k = 0;
         let mut depth = 0usize;
@@ -1132,7 +1149,9 @@ impl<'a> Parser<'a> {
                 }
                 b'\n' => {
                     let next = ws_inline(i.get(k + 1..).unwrap_or(""));
-                    if STATEMENT_WORDS.iter().any(|w| kw(next, w).is_some()) {
+                    if STATEMENT_WORDS.iter().any(|w| kw(next, w).is_some())
+                        && !continues.iter().any(|w| kw(next, w).is_some())
+                    {
                         let pos = self.pos(i) + last;
                         return Err(self.err_after(pos, "missing `;` at the end of the statement"));
                     }
@@ -1194,7 +1213,7 @@ impl<'a> Parser<'a> {
         let mut r = ws(r1);
         let mut params = None;
         if let Some(p) = r.strip_prefix('(') {
-            let scan = self.scan(p, b")", &[], false)?;
+            let scan = self.scan_continued(p, b")", &[], false, PARAMETER_WORDS)?;
             let p0 = self.pos(p);
             let rest = p.get(scan.stop..).unwrap_or("");
             let Some(rest) = rest.strip_prefix(')') else {

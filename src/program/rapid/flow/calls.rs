@@ -38,7 +38,7 @@ impl Procedures {
                 continue;
             }
             let text = p.params.as_ref().and_then(|s| src.get(s.clone()));
-            let mut ps = params(text.unwrap_or(""));
+            let mut ps = params(&super::without_comments(text.unwrap_or("")));
             if !ps.is_empty() {
                 // The routine's text after its parameter list.
                 let from = p.params.as_ref().map_or(p.span.start, |s| s.end);
