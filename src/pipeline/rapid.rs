@@ -66,7 +66,17 @@ pub struct RapidOptions {
     /// Refuse the module when a move is left as written
     /// ([`refuse_left_as_written`]).
     pub strict: bool,
+    /// Compensate `MoveAbsJ` targets as Cartesian poses (joints moved so
+    /// that the TCP reaches the nominal pose of the programmed joints);
+    /// otherwise each is reported (its predicted deviation) and left as
+    /// written ([`JOINT_TARGET`]).
+    pub joint_cartesian: bool,
 }
+
+/// Why a `MoveAbsJ` is left as written by default: its joints are what the
+/// controller goes to, not a pose it solves (`grammar/rapid.md`, "Joint
+/// targets").
+pub const JOINT_TARGET: &str = "joint target: reported, not compensated";
 
 impl Default for RapidOptions {
     /// All effects, annotated, default formatting, cold start, move records.
@@ -78,6 +88,7 @@ impl Default for RapidOptions {
             thermal_start: ThermalStart::Cold,
             records: true,
             strict: false,
+            joint_cartesian: false,
         }
     }
 }
@@ -524,6 +535,13 @@ impl Rewriter<'_> {
             .map_err(|e| self.locate(at, e, &what()))?;
         let goal = r.tcp_pose(Model::Nominal, &q);
         self.last_tcp = goal.translation.vector.into();
+        if !self.opts.joint_cartesian {
+            return Ok(Some(r.predict_at_joints(
+                &q,
+                self.opts.effects,
+                &self.growth(),
+            )));
+        }
         let Some(comp) = self.solve(view, goal, IkSelect::Near(q), Seed::default()) else {
             return Ok(None);
         };
@@ -620,9 +638,17 @@ struct Planned {
     /// Configuration of `q` where configuration monitoring is off for the
     /// move ([`free_configurations`]).
     free_conf: Option<ConfData>,
-    /// TCP speed, mm/s, when it can be resolved.
+    /// TCP speed, mm/s, when it can be resolved (or its fallback).
     v_tcp: Option<f64>,
+    /// `v_tcp` is [`FALLBACK_TCP_SPEED`]: the move's speed is known at run
+    /// time only.
+    speed_fallback: bool,
 }
+
+/// TCP speed a move whose speed is known at run time only is taken at on
+/// the time line, mm/s: that of the predefined `vmax`, which ABB defines as
+/// the robot's maximum (rated) TCP speed. Said in a warning.
+pub const FALLBACK_TCP_SPEED: f64 = 7000.0;
 
 /// Robot views with a tool mounted, made once per distinct key (a view is a
 /// copy of the robot: one per move would cost a copy per target).
@@ -695,6 +721,7 @@ fn plan_move<'m>(
         branch,
         free_conf: None,
         v_tcp: tcp_speed(module, mv),
+        speed_fallback: false,
     })
 }
 
@@ -775,8 +802,8 @@ fn move_wrench(
     };
     let speed = |what: &str| -> Result<Option<f64>> {
         match cur.v_tcp {
-            Some(v) => Ok(Some(v)),
-            None if need_speed => Err(input_err(
+            Some(v) if !cur.speed_fallback => Ok(Some(v)),
+            _ if need_speed => Err(input_err(
                 src,
                 file,
                 mv.speed.span.start,
@@ -785,7 +812,7 @@ fn move_wrench(
                     mv.speed.text
                 ),
             )),
-            None => Ok(None),
+            _ => Ok(None),
         }
     };
     match pf.model {
@@ -845,6 +872,11 @@ fn move_wrench(
             }
             let d = cur.pose.translation.vector - prev.pose.translation.vector;
             if plunge_direction(&d, &z, pf.axis_tolerance_rad) != Some(true) {
+                return Ok(None);
+            }
+            // A speed known at run time only is taken as the fallback's, a
+            // positioning speed: no thrust (said in the warning).
+            if cur.speed_fallback {
                 return Ok(None);
             }
             Ok(speed("drilling thrust")?.and_then(|v| pf.drilling_wrench(v, &(to_base * z))))
@@ -1076,6 +1108,8 @@ pub(crate) fn left_as_written_carried(
 /// error (exit code 2) that names the first one: `file:line:col: MoveL left
 /// as written (CRobT); --strict …`.
 pub fn refuse_left_as_written(left: &[AsWritten], file: &str, opts: &RapidOptions) -> Result<()> {
+    // A reported joint target is not one known at run time only.
+    let left: Vec<&AsWritten> = left.iter().filter(|a| a.reason != JOINT_TARGET).collect();
     match left.first() {
         Some(a) if opts.strict => Err(Error::Input(Located::new(
             file,
@@ -1151,6 +1185,11 @@ pub(crate) struct Carry {
     module_written: std::collections::HashSet<String>,
     /// Module data read by the moves of the windows so far.
     module_read: std::collections::HashSet<String>,
+    /// Speed names (lower case) taken as [`FALLBACK_TCP_SPEED`] so far.
+    speeds_fallen_back: HashSet<String>,
+    /// `MoveAbsJ` moves are reported and left as written
+    /// ([`RapidOptions::joint_cartesian`] off).
+    joints_reported: bool,
 }
 
 impl Carry {
@@ -1354,6 +1393,9 @@ impl Carry {
         for ((_, mv), f) in all.iter().zip(found) {
             match f? {
                 Ok((r, p)) => {
+                    if self.joints_reported && mv.kind == MoveKind::MoveAbsJ {
+                        self.note_as_written(mv, JOINT_TARGET, src, file);
+                    }
                     moves.push(*mv);
                     resolved.push(r);
                     plans.push(p);
@@ -1399,6 +1441,29 @@ impl Carry {
         }
     }
 
+    /// Gives each move of `plans` (one per move of `moves`) whose speed is
+    /// known at run time only [`FALLBACK_TCP_SPEED`], warning once per
+    /// speed name.
+    fn fall_back_speeds(&mut self, moves: &[&Move], plans: &mut [Planned], file: &str) {
+        for (mv, p) in moves.iter().zip(plans.iter_mut()) {
+            if p.v_tcp.is_some() {
+                continue;
+            }
+            p.v_tcp = Some(FALLBACK_TCP_SPEED);
+            p.speed_fallback = true;
+            let name = mv.speed.text.trim().to_ascii_lowercase();
+            if self.time_line.is_none() && self.speeds_fallen_back.insert(name) {
+                tracing::warn!(
+                    "{}:{}: speed `{}` of {} cannot be resolved offline; the time line takes it as vmax, the robot's rated TCP speed ({FALLBACK_TCP_SPEED} mm/s), and a drilling move with it has no thrust",
+                    crate::error::Escaped(file),
+                    mv.line,
+                    mv.speed.text.trim(),
+                    mv.name
+                );
+            }
+        }
+    }
+
     /// Leaves a move as written: warned about with its place and reason,
     /// listed in the outcome; the declarations its target reads keep their
     /// values as written (a compensated move to one of them gets a copy).
@@ -1422,6 +1487,26 @@ impl Carry {
             column: column_of(src, mv.span.start),
             instruction: mv.name.to_string(),
             reason: left.reason,
+        });
+    }
+
+    /// Counts a move that stays on the time line but is written as it was
+    /// (a reported `MoveAbsJ`), warned about as [`Carry::leave`] does.
+    fn note_as_written(&mut self, mv: &Move, reason: &str, src: &str, file: &str) {
+        if self.time_line.is_some() {
+            return;
+        }
+        tracing::warn!(
+            "{}:{}: {} left as written ({reason})",
+            crate::error::Escaped(file),
+            mv.line,
+            mv.name,
+        );
+        self.as_written.push(AsWritten {
+            line: mv.line,
+            column: column_of(src, mv.span.start),
+            instruction: mv.name.to_string(),
+            reason: reason.to_string(),
         });
     }
 }
@@ -1509,6 +1594,7 @@ pub(crate) fn compensate_window(
     before: usize,
 ) -> Result<EditList> {
     let ModuleText { module, src, file } = text;
+    carry.joints_reported = !opts.joint_cartesian;
     let (moves, resolved, plans) = carry.resolve_with(text, |views, mv, res| {
         plan_move(module, src, file, robot, views, (mv, res))
     })?;
@@ -1581,6 +1667,9 @@ impl<'r> TimeLine<'r> {
         }
         let fx = opts.effects;
         let thermal = robot.thermal().filter(|_| fx.thermal != 0.0);
+        if fx.process != 0.0 || thermal.is_some() {
+            carry.fall_back_speeds(moves, &mut plans[o..], file);
+        }
         let directives = match directives {
             Some(d) => d,
             None => Directives::parse(src, file)?,
@@ -1932,6 +2021,11 @@ impl<'m> Rewriter<'m> {
                     };
                     self.state = state;
                     match self.walk((mv, resolved.get(i)), &key, plan) {
+                        Ok(Some(dev))
+                            if mv.kind == MoveKind::MoveAbsJ && !self.opts.joint_cartesian =>
+                        {
+                            self.record_reported(carry, mv, seg, &state, &dev)
+                        }
                         Ok(Some(dev)) => self.record(carry, mv, seg, &state, &dev),
                         Ok(None) => continue,
                         Err(e) => {
@@ -1953,6 +2047,32 @@ impl<'m> Rewriter<'m> {
             end = next_end;
         }
         Ok(())
+    }
+
+    /// Keeps the record of a move reported and left as written (a
+    /// `MoveAbsJ`): its report row, not counted as compensated, not
+    /// annotated.
+    fn record_reported(
+        &mut self,
+        carry: &mut Carry,
+        mv: &Move,
+        seg: &Segment,
+        state: &MoveState,
+        dev: &Deviation,
+    ) {
+        if !self.opts.records {
+            return;
+        }
+        carry.records.push(MoveRecord {
+            line: mv.line,
+            kind: mv.name,
+            programmed_mm: self.last_tcp,
+            deviation: *dev,
+            wrench: state.wrench,
+            duration_s: seg.duration_s,
+            power_w: seg.power_w,
+            thermal_power_w: state.power.unwrap_or([0.0; 6]),
+        });
     }
 
     /// Counts a compensated move, annotates it and keeps its record.

@@ -190,6 +190,7 @@ pub fn check_syntax_streamed<R: BufRead>(
         thermal_start: ThermalStart::Cold,
         records: false,
         strict: false,
+        joint_cartesian: false,
     };
     let mut carry = Carry::default();
     let (streamed, _) = pass(
