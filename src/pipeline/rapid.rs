@@ -181,6 +181,9 @@ struct Rewriter<'m> {
     last_tcp: [f64; 3],
     /// Declarations from this index on are another module's.
     foreign_from: usize,
+    /// Start of the move annotated last (a `FOR` loop's move is met once
+    /// per element and annotated once, with its first element).
+    last_annotated: Option<usize>,
 }
 
 /// One target to compensate: robot view, programmed TCP pose (world frame)
@@ -344,7 +347,7 @@ impl Rewriter<'_> {
     fn cart(
         &mut self,
         mv: &Move,
-        (target, u): (&Target, &CartUse),
+        (target, u, looped): (&Target, &CartUse, bool),
         key: &LoadKey,
         tool: &ToolView,
         wobj: &Isometry3<f64>,
@@ -415,6 +418,12 @@ impl Rewriter<'_> {
                     &fmt,
                 )?,
                 InPlace::Written => {}
+                InPlace::Copy if looped => {
+                    return Err(Error::Internal(format!(
+                        "the element `{}` of a FOR loop's move is owned by another move",
+                        u.stem
+                    )));
+                }
                 InPlace::Copy => {
                     let text = robtarget_text(self.src, u.rt, &new_obj, comp.conf, &fmt)?;
                     let name = self.copy_name(
@@ -1350,7 +1359,14 @@ pub(crate) struct ProgramScope {
 pub(crate) struct Resolved<'m> {
     target: Option<CartUse<'m>>,
     via: Option<CartUse<'m>>,
+    /// One element of a `FOR` loop's array (the move is met once per
+    /// element: compensated in place only, annotated once).
+    looped: bool,
 }
+
+/// Why a module is not read a window at a time: a `FOR` loop's move goes
+/// to the elements of an array that no other statement may name.
+pub(crate) const LOOP_ELEMENTS: &str = "a FOR loop moves to the elements of an array";
 
 impl Carry {
     /// The moves of a window whose targets are known before run time, with
@@ -1378,13 +1394,21 @@ impl Carry {
             None => Flow::of(module, src),
         };
         let all: Vec<(At, &'m Move)> = flow.moves().collect();
-        let found: Vec<Result<std::result::Result<(Resolved<'m>, P), Left>>> = all
+        let foreign_from = self.scope.as_ref().map_or(usize::MAX, |s| s.from);
+        type Found<'m, P> = Result<std::result::Result<Vec<(Resolved<'m>, P)>, Left>>;
+        let found: Vec<Found<'m, P>> = all
             .par_iter()
             .map_init(ViewCache::new, |views, &(at, mv)| {
-                Ok(resolve_move(&flow, src, file, at, mv)?.map(|r| {
-                    let p = plan(views, mv, &r);
-                    (r, p)
-                }))
+                Ok(
+                    resolve_move(&flow, src, file, at, mv, foreign_from)?.map(|rs| {
+                        rs.into_iter()
+                            .map(|r| {
+                                let p = plan(views, mv, &r);
+                                (r, p)
+                            })
+                            .collect()
+                    }),
+                )
             })
             .collect();
         let mut moves = Vec::with_capacity(all.len());
@@ -1392,13 +1416,20 @@ impl Carry {
         let mut plans = Vec::with_capacity(all.len());
         for ((_, mv), f) in all.iter().zip(found) {
             match f? {
-                Ok((r, p)) => {
+                Ok(rs) => {
                     if self.joints_reported && mv.kind == MoveKind::MoveAbsJ {
                         self.note_as_written(mv, JOINT_TARGET, src, file);
                     }
-                    moves.push(*mv);
-                    resolved.push(r);
-                    plans.push(p);
+                    if rs.iter().any(|(r, _)| r.looped) {
+                        // A window sees one routine: whether the loop's
+                        // array is named elsewhere is the whole module's.
+                        self.unsupported.get_or_insert(LOOP_ELEMENTS);
+                    }
+                    for (r, p) in rs {
+                        moves.push(*mv);
+                        resolved.push(r);
+                        plans.push(p);
+                    }
                 }
                 Err(left) => self.leave(mv, left, src, file),
             }
@@ -1530,7 +1561,8 @@ fn resolve_move<'m>(
     file: &str,
     at: At,
     mv: &'m Move,
-) -> Result<std::result::Result<Resolved<'m>, Left>> {
+    foreign_from: usize,
+) -> Result<std::result::Result<Vec<Resolved<'m>>, Left>> {
     if let Some(mut left) = flow.load_left(at, mv) {
         // The targets it goes to keep their values as written.
         if mv.kind != MoveKind::MoveAbsJ {
@@ -1547,10 +1579,11 @@ fn resolve_move<'m>(
     if mv.kind == MoveKind::MoveAbsJ {
         return Ok(match flow.joint_left(at, &mv.target) {
             Some(left) => Err(left),
-            None => Ok(Resolved {
+            None => Ok(vec![Resolved {
                 target: None,
                 via: None,
-            }),
+                looped: false,
+            }]),
         });
     }
     let via = match &mv.via {
@@ -1561,10 +1594,30 @@ fn resolve_move<'m>(
         None => None,
     };
     Ok(match flow.cart(src, file, at, &mv.target)? {
-        Ok(u) => Ok(Resolved {
+        Ok(u) => Ok(vec![Resolved {
             target: Some(u),
             via,
-        }),
+            looped: false,
+        }]),
+        Err(left)
+            if left.reason == crate::program::rapid::flow::RUN_TIME_INDEX && via.is_none() =>
+        {
+            // Another module's declaration is never edited in place.
+            match flow.loop_elements(src, file, at, &mv.target).filter(|us| {
+                us.iter()
+                    .all(|u| matches!(u.origin, Origin::Decl { decl, .. } if decl < foreign_from))
+            }) {
+                Some(us) => Ok(us
+                    .into_iter()
+                    .map(|u| Resolved {
+                        target: Some(u),
+                        via: None,
+                        looped: true,
+                    })
+                    .collect()),
+                None => Err(left),
+            }
+        }
         Err(left) => Err(left),
     })
 }
@@ -1902,6 +1955,7 @@ impl<'m> Rewriter<'m> {
             state: MoveState::default(),
             last_tcp: carry.last_tcp,
             foreign_from: carry.scope.as_ref().map_or(usize::MAX, |s| s.from),
+            last_annotated: None,
         }
     }
 
@@ -2090,7 +2144,8 @@ impl<'m> Rewriter<'m> {
             carry.max_deviation = (d, mv.line);
         }
         self.watch_resonance(carry, mv.line, state, dev);
-        if self.opts.annotate {
+        if self.opts.annotate && self.last_annotated != Some(mv.span.start) {
+            self.last_annotated = Some(mv.span.start);
             push_annotation(&mut self.edits, self.src, &mv.span, |out| {
                 write_dev_comment(out, dev)
             });
@@ -2150,7 +2205,14 @@ impl Rewriter<'_> {
                 return Err(Error::Internal("move target not resolved".into()));
             };
             if let (Some(via), Some(v)) = (&mv.via, &res.via) {
-                self.cart(mv, (via, v), key, &plan.tool, &plan.wobj, Seed::default())?;
+                self.cart(
+                    mv,
+                    (via, v, false),
+                    key,
+                    &plan.tool,
+                    &plan.wobj,
+                    Seed::default(),
+                )?;
             }
             // Planning solved the target's joints with the same pose,
             // confdata and TCP (`ik_conf`, limits checked), and the nominal
@@ -2161,7 +2223,14 @@ impl Rewriter<'_> {
                 nominal_flange: nominal_flange.copied(),
                 conf: plan.free_conf,
             };
-            self.cart(mv, (&mv.target, u), key, &plan.tool, &plan.wobj, seed)
+            self.cart(
+                mv,
+                (&mv.target, u, res.looped),
+                key,
+                &plan.tool,
+                &plan.wobj,
+                seed,
+            )
         }
     }
 }

@@ -659,6 +659,127 @@ impl<'m> Flow<'m> {
         }
     }
 
+    /// The targets a move to `holes{k}` goes to in a `FOR k FROM a TO b
+    /// [STEP c] DO` loop with bounds known before run time, one per
+    /// element the loop reaches in order, when they can be compensated in
+    /// place: `holes` is a module array that no statement writes and no
+    /// other statement names, the loop is the only one around the move and
+    /// its routine holds no label, and every element reached exists.
+    /// `None` otherwise (the move is left as written).
+    pub(crate) fn loop_elements(
+        &self,
+        src: &str,
+        file: &str,
+        at: At,
+        target: &'m Target,
+    ) -> Option<Vec<CartUse<'m>>> {
+        let Target::Named {
+            name,
+            index: Some(ix),
+            span,
+        } = target
+        else {
+            return None;
+        };
+        let parts = ix.parts();
+        let [var] = parts.as_slice() else {
+            return None;
+        };
+        let shape = self.shapes.get(at.proc)?;
+        let around: Vec<&(usize, usize)> = shape
+            .loops
+            .iter()
+            .filter(|&&(s, e)| s < at.stmt && at.stmt <= e)
+            .collect();
+        let (&[&(start, _)], false) = (around.as_slice(), shape.labels) else {
+            return None;
+        };
+        let body = &self.module.procs.get(at.proc)?.body;
+        let Stmt::Control {
+            keyword,
+            span: head,
+            ..
+        } = body.get(start)?
+        else {
+            return None;
+        };
+        if keyword != "FOR" {
+            return None;
+        }
+        let (v, from, to, step) = for_bounds(src.get(head.clone())?)?;
+        if !v.eq_ignore_ascii_case(var) {
+            return None;
+        }
+        let num = |t: &str| {
+            let x = self.number(
+                t,
+                At {
+                    proc: at.proc,
+                    stmt: start,
+                },
+                0,
+            )?;
+            (x.fract() == 0.0 && x.abs() < 1e6).then_some(x as i64)
+        };
+        let (from, to) = (num(from)?, num(to)?);
+        let step = match step {
+            Some(t) => num(t)?,
+            None => 1,
+        };
+        let Some(Source::Module(di, d)) = self.source(name, at) else {
+            return None;
+        };
+        if d.dims.len() > 1 || self.named_elsewhere(src, name) {
+            return None;
+        }
+        let count = if step > 0 && from <= to {
+            (to - from) / step + 1
+        } else if step < 0 && from >= to {
+            (from - to) / -step + 1
+        } else {
+            0
+        };
+        if !(1..=10_000).contains(&count) {
+            return None;
+        }
+        let mut out = Vec::with_capacity(count as usize);
+        for i in 0..count {
+            let k = usize::try_from(from + i * step).ok().filter(|&k| k >= 1)?;
+            let (v, elem) = element(src, file, span.start, d, Some(&[k])).ok()?;
+            let DataValue::RobTarget(rt) = v else {
+                return None;
+            };
+            out.push(CartUse {
+                rt,
+                origin: Origin::Decl { decl: di, elem },
+                stem: element_stem(&d.name, &[k]),
+                derived: false,
+                derived_key: String::new(),
+                pose_obj: robtarget_pose(rt)?,
+                conf: conf_of(rt)?,
+            });
+        }
+        Some(out)
+    }
+
+    /// True when the word `name` appears in more than one statement of the
+    /// module's routines (outside strings and comments, as a whole word).
+    fn named_elsewhere(&self, src: &str, name: &str) -> bool {
+        let mut seen = 0;
+        for p in &self.module.procs {
+            for s in &p.body {
+                let text = src.get(s.span()).unwrap_or("");
+                if text_names(text, name) {
+                    seen += 1;
+                    if seen > 1 {
+                        return true;
+                    }
+                }
+            }
+        }
+        false
+    }
+
     /// Why a move is left as written because its tool or work object is
     /// known at run time only, if it is: a `tooldata`/`wobjdata` that a
     /// statement of the program writes (`tActual := tGripper;`), a
@@ -1043,6 +1164,68 @@ fn param_names(text: &str) -> Vec<String> {
             Some(word.to_ascii_lowercase())
         })
         .collect()
+}
+
+/// The variable, start, end and step texts of a `FOR v FROM a TO b [STEP
+/// c] DO` line.
+fn for_bounds(text: &str) -> Option<(&str, &str, &str, Option<&str>)> {
+    let t = text.trim();
+    let t = t.get(3..)?.trim_start();
+    let word_at = |hay: &str, w: &str| -> Option<usize> {
+        let up = hay.to_ascii_uppercase();
+        let mut from = 0;
+        while let Some(k) = up.get(from..)?.find(w) {
+            let k = from + k;
+            let before = up[..k]
+                .chars()
+                .last()
+                .is_none_or(|c| !c.is_ascii_alphanumeric() && c != '_');
+            let after = up[k + w.len()..]
+                .chars()
+                .next()
+                .is_none_or(|c| !c.is_ascii_alphanumeric() && c != '_');
+            if before && after {
+                return Some(k);
+            }
+            from = k + w.len();
+        }
+        None
+    };
+    let f = word_at(t, "FROM")?;
+    let v = t.get(..f)?.trim();
+    let rest = t.get(f + 4..)?;
+    let to = word_at(rest, "TO")?;
+    let a = rest.get(..to)?.trim();
+    let rest = rest.get(to + 2..)?;
+    let d = word_at(rest, "DO")?;
+    let rest = rest.get(..d)?;
+    let (b, c) = match word_at(rest, "STEP") {
+        Some(k) => (rest.get(..k)?.trim(), Some(rest.get(k + 4..)?.trim())),
+        None => (rest.trim(), None),
+    };
+    Some((v, a, b, c))
+}
+
+/// True when `text` names `name` as a whole word anywhere outside strings
+/// (inside brackets, calls and comments too: a comment only makes the
+/// answer more careful).
+fn text_names(text: &str, name: &str) -> bool {
+    let mut quoted = false;
+    let mut word = String::new();
+    for c in text.chars().chain(std::iter::once(' ')) {
+        if c == '"' {
+            quoted = !quoted;
+        }
+        if !quoted && (c.is_ascii_alphanumeric() || c == '_') {
+            word.push(c);
+            continue;
+        }
+        if word.eq_ignore_ascii_case(name) {
+            return true;
+        }
+        word.clear();
+    }
+    false
 }
 
 /// `text` without its `!` comments (a parameter list written over several
