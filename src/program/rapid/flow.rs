@@ -60,6 +60,9 @@ pub const RUN_TIME: &str = "run-time target";
 pub const CROBT: &str = "CRobT";
 /// An offset or angle of `Offs`/`RelTool` known at run time only.
 pub const RUN_TIME_OFFSET: &str = "run-time offset";
+/// A robtarget whose value is an expression (`[[0,0,safeHeight],…]`): not
+/// evaluated.
+pub const EXPRESSION_VALUE: &str = "robtarget value is an expression";
 /// An array index known at run time only (a `FOR` variable).
 pub const RUN_TIME_INDEX: &str = "indexed by a run-time value";
 
@@ -957,6 +960,10 @@ impl<'m> Flow<'m> {
                 .err()
                 .unwrap_or_else(|| input_err(src, file, here, "undeclared")));
         };
+        let declared_rt = matches!(
+            &source,
+            Source::Module(_, d) | Source::Local(d) if d.data_type == DataType::RobTarget
+        );
         let (value, origin, stem) = match source {
             Source::RunTime(r) => return Ok(Err(r)),
             Source::Assigned(a, at2) => {
@@ -985,6 +992,15 @@ impl<'m> Flow<'m> {
             ),
         };
         let DataValue::RobTarget(rt) = value else {
+            // A robtarget whose value is an expression (a named constant
+            // inside its literal): known by evaluating it, which is not
+            // done; the move keeps it as written.
+            if declared_rt && matches!(value, DataValue::Other { .. }) {
+                if let Origin::Decl { .. } = origin {
+                    reads.push(origin);
+                }
+                return Ok(Err(EXPRESSION_VALUE.into()));
+            }
             return Err(input_err(src, file, here, "this move needs a robtarget"));
         };
         let u = CartUse {
