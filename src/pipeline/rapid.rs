@@ -1364,6 +1364,33 @@ pub(crate) struct Resolved<'m> {
     looped: bool,
 }
 
+/// The targets of one move: one, or those of the elements a `FOR` loop
+/// reaches (a move of the loop is resolved once per element).
+pub(crate) enum Uses<T> {
+    /// The move's own.
+    One(T),
+    /// One per element, in loop order.
+    Many(Vec<T>),
+}
+
+impl<T> Uses<T> {
+    fn map<U>(self, mut f: impl FnMut(T) -> U) -> Uses<U> {
+        match self {
+            Uses::One(t) => Uses::One(f(t)),
+            Uses::Many(v) => Uses::Many(v.into_iter().map(f).collect()),
+        }
+    }
+
+    /// Every target, in order (no allocation for one).
+    fn into_iter_all(self) -> impl Iterator<Item = T> {
+        let (one, many) = match self {
+            Uses::One(t) => (Some(t), Vec::new()),
+            Uses::Many(v) => (None, v),
+        };
+        one.into_iter().chain(many)
+    }
+}
+
 /// Why a module is not read a window at a time: a `FOR` loop's move goes
 /// to the elements of an array that no other statement may name.
 pub(crate) const LOOP_ELEMENTS: &str = "a FOR loop moves to the elements of an array";
@@ -1395,18 +1422,16 @@ impl Carry {
         };
         let all: Vec<(At, &'m Move)> = flow.moves().collect();
         let foreign_from = self.scope.as_ref().map_or(usize::MAX, |s| s.from);
-        type Found<'m, P> = Result<std::result::Result<Vec<(Resolved<'m>, P)>, Left>>;
+        type Found<'m, P> = Result<std::result::Result<Uses<(Resolved<'m>, P)>, Left>>;
         let found: Vec<Found<'m, P>> = all
             .par_iter()
             .map_init(ViewCache::new, |views, &(at, mv)| {
                 Ok(
                     resolve_move(&flow, src, file, at, mv, foreign_from)?.map(|rs| {
-                        rs.into_iter()
-                            .map(|r| {
-                                let p = plan(views, mv, &r);
-                                (r, p)
-                            })
-                            .collect()
+                        rs.map(|r| {
+                            let p = plan(views, mv, &r);
+                            (r, p)
+                        })
                     }),
                 )
             })
@@ -1418,14 +1443,14 @@ impl Carry {
             match f? {
                 Ok(rs) => {
                     if self.joints_reported && mv.kind == MoveKind::MoveAbsJ {
-                        self.note_as_written(mv, JOINT_TARGET, src, file);
+                        self.note_as_written(mv, JOINT_TARGET, src);
                     }
-                    if rs.iter().any(|(r, _)| r.looped) {
+                    if let Uses::Many(_) = rs {
                         // A window sees one routine: whether the loop's
                         // array is named elsewhere is the whole module's.
                         self.unsupported.get_or_insert(LOOP_ELEMENTS);
                     }
-                    for (r, p) in rs {
+                    for (r, p) in rs.into_iter_all() {
                         moves.push(*mv);
                         resolved.push(r);
                         plans.push(p);
@@ -1522,17 +1547,12 @@ impl Carry {
     }
 
     /// Counts a move that stays on the time line but is written as it was
-    /// (a reported `MoveAbsJ`), warned about as [`Carry::leave`] does.
-    fn note_as_written(&mut self, mv: &Move, reason: &str, src: &str, file: &str) {
+    /// (a reported `MoveAbsJ`: counted in the summary line, not warned
+    /// about one by one, as nearly every program has its homes).
+    fn note_as_written(&mut self, mv: &Move, reason: &str, src: &str) {
         if self.time_line.is_some() {
             return;
         }
-        tracing::warn!(
-            "{}:{}: {} left as written ({reason})",
-            crate::error::Escaped(file),
-            mv.line,
-            mv.name,
-        );
         self.as_written.push(AsWritten {
             line: mv.line,
             column: column_of(src, mv.span.start),
@@ -1562,7 +1582,7 @@ fn resolve_move<'m>(
     at: At,
     mv: &'m Move,
     foreign_from: usize,
-) -> Result<std::result::Result<Vec<Resolved<'m>>, Left>> {
+) -> Result<std::result::Result<Uses<Resolved<'m>>, Left>> {
     if let Some(mut left) = flow.load_left(at, mv) {
         // The targets it goes to keep their values as written.
         if mv.kind != MoveKind::MoveAbsJ {
@@ -1579,11 +1599,11 @@ fn resolve_move<'m>(
     if mv.kind == MoveKind::MoveAbsJ {
         return Ok(match flow.joint_left(at, &mv.target) {
             Some(left) => Err(left),
-            None => Ok(vec![Resolved {
+            None => Ok(Uses::One(Resolved {
                 target: None,
                 via: None,
                 looped: false,
-            }]),
+            })),
         });
     }
     let via = match &mv.via {
@@ -1594,11 +1614,11 @@ fn resolve_move<'m>(
         None => None,
     };
     Ok(match flow.cart(src, file, at, &mv.target)? {
-        Ok(u) => Ok(vec![Resolved {
+        Ok(u) => Ok(Uses::One(Resolved {
             target: Some(u),
             via,
             looped: false,
-        }]),
+        })),
         Err(left)
             if left.reason == crate::program::rapid::flow::RUN_TIME_INDEX && via.is_none() =>
         {
@@ -1607,14 +1627,15 @@ fn resolve_move<'m>(
                 us.iter()
                     .all(|u| matches!(u.origin, Origin::Decl { decl, .. } if decl < foreign_from))
             }) {
-                Some(us) => Ok(us
-                    .into_iter()
-                    .map(|u| Resolved {
-                        target: Some(u),
-                        via: None,
-                        looped: true,
-                    })
-                    .collect()),
+                Some(us) => Ok(Uses::Many(
+                    us.into_iter()
+                        .map(|u| Resolved {
+                            target: Some(u),
+                            via: None,
+                            looped: true,
+                        })
+                        .collect(),
+                )),
                 None => Err(left),
             }
         }

@@ -807,12 +807,33 @@ impl<'m> Flow<'m> {
                     Some(DataValue::ToolData(_)) | Some(DataValue::WobjData(_))
                 )
             };
-            let run_time = match self.source(name, at) {
-                // Undeclared: the move's resolution says so.
-                None => false,
-                Some(Source::Module(_, d)) => !literal(d),
-                Some(Source::Local(_) | Source::Assigned(..) | Source::RunTime(_)) => true,
+            // Lower case without an allocation per move (a RAPID name has
+            // at most 32 characters; a longer one is declared nowhere).
+            let mut buf = [0u8; 64];
+            let Some(b) = buf.get_mut(..name.len()) else {
+                continue;
             };
+            b.copy_from_slice(name.as_bytes());
+            b.make_ascii_lowercase();
+            let Ok(lower) = std::str::from_utf8(b) else {
+                continue;
+            };
+            // Assigned (whole, in part or in a compact IF) anywhere in the
+            // program; a tool passed to an instruction is read, not written.
+            let assigned = self
+                .writes
+                .get(lower)
+                .is_some_and(|ws| ws.iter().any(|w| !matches!(w.kind, Kind::Argument(_))));
+            let run_time =
+                if self.is_param(at.proc, lower) || self.local_decl(at.proc, name).is_some() {
+                    true
+                } else {
+                    match self.module_decl(name) {
+                        // Undeclared: the move's resolution says so.
+                        None => false,
+                        Some((_, d)) => assigned || !literal(d),
+                    }
+                };
             if run_time {
                 return Some(Left {
                     reason: format!("run-time {what} `{name}`"),
