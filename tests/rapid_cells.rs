@@ -231,28 +231,37 @@ ENDMODULE
 
 /// An arc-welding module whose seam routine takes its parameters over
 /// three lines (the last by reference): the module is read, the approach
-/// compensated, the seam's moves to its parameters left as written.
+/// compensated, and the seam's moves to its parameters compensated per
+/// call: the call passes compensated copies of `pSeamA` and `pSeamB`.
 #[test]
 fn arc_welding_with_parameter_lists_over_several_lines() {
     assert_identity(&[("ArcCell.mod", WELD)]);
     let dir = tempfile::tempdir().expect("tempdir");
     let (code, err, text) = compensate(dir.path(), &[("ArcCell.mod", WELD)], FX);
     assert_eq!(code, 0, "{err}");
-    assert_eq!(
-        counts(&err),
-        (1, "2 left as written (routine parameter)".into())
+    assert_eq!(counts(&err), (3, String::new()));
+    assert!(
+        text.contains("    weldSeam pSeamA_c2,\n      pSeamB_c2, nPasses;\n"),
+        "{text}"
     );
     let m_in = parse_module(WELD, "in").expect("input");
     let m_out = parse_module(&text, "out").expect("output");
-    let programmed = robtarget_pose(robtarget(&m_in, "pApproach", None));
     let flange = robot().with_tool(Isometry3::identity(), None, false);
-    assert_lands(
-        &flange,
-        robtarget(&m_out, "pApproach", None),
-        &programmed,
-        "pApproach",
-    );
-    // The seam's targets keep their values (its moves read them).
+    for (name, written) in [
+        ("pApproach", "pApproach"),
+        ("pSeamA", "pSeamA_c2"),
+        ("pSeamB", "pSeamB_c2"),
+    ] {
+        let programmed = robtarget_pose(robtarget(&m_in, name, None));
+        assert_lands(
+            &flange,
+            robtarget(&m_out, written, None),
+            &programmed,
+            written,
+        );
+    }
+    // The seam's targets keep their values (the procedure reads them
+    // through its parameters), and its moves are written as they were.
     for name in ["pSeamA", "pSeamB"] {
         assert_eq!(
             robtarget(&m_out, name, None)
@@ -265,6 +274,7 @@ fn arc_welding_with_parameter_lists_over_several_lines() {
                 .map(|n| n.value)
         );
     }
+    assert!(text.contains("    MoveL pEnd, v10, fine, tool0;"), "{text}");
 }
 
 const HOLES: &str = "MODULE Drill

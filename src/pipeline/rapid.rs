@@ -1362,6 +1362,9 @@ pub(crate) struct Resolved<'m> {
     /// One element of a `FOR` loop's array (the move is met once per
     /// element: compensated in place only, annotated once).
     looped: bool,
+    /// The argument of a call of the move's procedure that gives its
+    /// target (a parameter): where a compensated copy is passed.
+    call_arg: Option<Target>,
 }
 
 /// The targets of one move: one, or those of the elements a `FOR` loop
@@ -1603,6 +1606,7 @@ fn resolve_move<'m>(
                 target: None,
                 via: None,
                 looped: false,
+                call_arg: None,
             })),
         });
     }
@@ -1618,6 +1622,7 @@ fn resolve_move<'m>(
             target: Some(u),
             via,
             looped: false,
+            call_arg: None,
         })),
         Err(left)
             if left.reason == crate::program::rapid::flow::RUN_TIME_INDEX && via.is_none() =>
@@ -1633,6 +1638,30 @@ fn resolve_move<'m>(
                             target: Some(u),
                             via: None,
                             looped: true,
+                            call_arg: None,
+                        })
+                        .collect(),
+                )),
+                None => Err(left),
+            }
+        }
+        Err(left) if left.reason == crate::program::rapid::flow::PARAMETER && via.is_none() => {
+            match flow.call_uses(src, file, at, &mv.target).filter(|us| {
+                us.iter().all(
+                    |(u, _)| matches!(u.origin, Origin::Decl { decl, .. } if decl < foreign_from),
+                )
+            }) {
+                Some(us) => Ok(Uses::Many(
+                    us.into_iter()
+                        .map(|(u, span)| Resolved {
+                            call_arg: Some(Target::Named {
+                                name: u.stem.clone(),
+                                index: None,
+                                span,
+                            }),
+                            target: Some(u),
+                            via: None,
+                            looped: false,
                         })
                         .collect(),
                 )),
@@ -2246,7 +2275,7 @@ impl Rewriter<'_> {
             };
             self.cart(
                 mv,
-                (&mv.target, u, res.looped),
+                (res.call_arg.as_ref().unwrap_or(&mv.target), u, res.looped),
                 key,
                 &plan.tool,
                 &plan.wobj,

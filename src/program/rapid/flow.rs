@@ -765,6 +765,91 @@ impl<'m> Flow<'m> {
         Some(out)
     }
 
+    /// The targets a move to `param`, a parameter of its procedure passed
+    /// by value, goes to: the argument of each call of the procedure in
+    /// the module, in routine order, that is a module robtarget known
+    /// before run time, with the span of the argument in the call (where
+    /// a compensated copy is passed). `None` when the parameter is named
+    /// by another statement of the procedure, or no call gives a target.
+    pub(crate) fn call_uses(
+        &self,
+        src: &str,
+        file: &str,
+        at: At,
+        target: &'m Target,
+    ) -> Option<Vec<(CartUse<'m>, super::Span)>> {
+        let Target::Named {
+            name: param,
+            index: None,
+            ..
+        } = target
+        else {
+            return None;
+        };
+        let proc = self.module.procs.get(at.proc)?;
+        if proc.kind != RoutineKind::Proc {
+            return None;
+        }
+        let lower = param.to_ascii_lowercase();
+        let k = self.procedures.by_value_position(&proc.name, &lower)?;
+        let named = proc
+            .body
+            .iter()
+            .filter(|s| text_names(src.get(s.span()).unwrap_or(""), param))
+            .count();
+        if named != 1 {
+            return None;
+        }
+        let base = src.as_ptr() as usize;
+        let mut out = Vec::new();
+        for (pi, p) in self.module.procs.iter().enumerate() {
+            for (si, s) in p.body.iter().enumerate() {
+                let Stmt::Opaque { span, .. } = s else {
+                    continue;
+                };
+                let text = src.get(span.clone()).unwrap_or("");
+                if !opaque_writes(text).0.eq_ignore_ascii_case(&proc.name) {
+                    continue;
+                }
+                let Some(arg) = self
+                    .procedures
+                    .positional(&proc.name, text)
+                    .and_then(|a| a.get(k).copied())
+                else {
+                    continue;
+                };
+                let here = At { proc: pi, stmt: si };
+                let Some(Source::Module(di, d)) = self.source(arg, here) else {
+                    continue;
+                };
+                let Ok((DataValue::RobTarget(rt), None)) = element(src, file, span.start, d, None)
+                else {
+                    continue;
+                };
+                let (Some(pose_obj), Some(conf)) = (robtarget_pose(rt), conf_of(rt)) else {
+                    continue;
+                };
+                let from = arg.as_ptr() as usize - base;
+                out.push((
+                    CartUse {
+                        rt,
+                        origin: Origin::Decl {
+                            decl: di,
+                            elem: None,
+                        },
+                        stem: d.name.clone(),
+                        derived: false,
+                        derived_key: String::new(),
+                        pose_obj,
+                        conf,
+                    },
+                    from..from + arg.len(),
+                ));
+            }
+        }
+        (!out.is_empty()).then_some(out)
+    }
+
     /// True when the word `name` appears in more than one statement of the
     /// module's routines (outside strings and comments, as a whole word).
     fn named_elsewhere(&self, src: &str, name: &str) -> bool {
