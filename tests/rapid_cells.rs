@@ -510,3 +510,29 @@ ENDMODULE
         "pDown",
     );
 }
+
+/// An `ALIAS` of robtarget: a target declared with the alias type is a
+/// robtarget, compensated; the alias line is written as it was.
+#[test]
+fn an_alias_type_is_the_type_it_names() {
+    let module = "MODULE Aliased
+  LOCAL ALIAS robtarget target;
+  ALIAS target point;
+  CONST point pA := [[800,100,450],[0,0,1,0],[0,0,0,0],[9E9,9E9,9E9,9E9,9E9,9E9]];
+  PROC main()
+    MoveL pA, v100, fine, tool0;
+  ENDPROC
+ENDMODULE
+";
+    assert_identity(&[("Aliased.mod", module)]);
+    let dir = tempfile::tempdir().expect("tempdir");
+    let (code, err, text) = compensate(dir.path(), &[("Aliased.mod", module)], FX);
+    assert_eq!(code, 0, "{err}");
+    assert_eq!(counts(&err), (1, String::new()));
+    assert!(text.contains("  LOCAL ALIAS robtarget target;\n  ALIAS target point;\n"));
+    let m_in = parse_module(module, "in").expect("input");
+    let m_out = parse_module(&text, "out").expect("output");
+    let programmed = robtarget_pose(robtarget(&m_in, "pA", None));
+    let flange = robot().with_tool(Isometry3::identity(), None, false);
+    assert_lands(&flange, robtarget(&m_out, "pA", None), &programmed, "pA");
+}

@@ -411,6 +411,9 @@ pub(super) struct Parser<'a> {
     /// The argument texts met last (`v100`, `z1`, `tool1`: a module repeats
     /// a few of them), shared instead of allocated per move.
     texts: std::cell::RefCell<Vec<Arc<str>>>,
+    /// The module's `ALIAS` types met so far: (alias, the type it names),
+    /// lower case.
+    aliases: std::cell::RefCell<Vec<(String, String)>>,
 }
 
 /// Argument texts [`Parser::text`] keeps to share.
@@ -451,6 +454,7 @@ impl<'a> Parser<'a> {
             line_starts: line_starts.into(),
             depth: std::cell::Cell::new(0),
             texts: std::cell::RefCell::new(Vec::new()),
+            aliases: std::cell::RefCell::new(Vec::new()),
             ahead_min,
         }
     }
@@ -477,6 +481,7 @@ impl<'a> Parser<'a> {
             return Vec::new();
         }
         let (src, file, line_starts) = (self.src, self.file, &self.line_starts);
+        let aliases = self.aliases.borrow().clone();
         starts
             .par_iter()
             .map_init(
@@ -486,6 +491,7 @@ impl<'a> Parser<'a> {
                     line_starts: std::sync::Arc::clone(line_starts),
                     depth: std::cell::Cell::new(0),
                     texts: std::cell::RefCell::new(Vec::new()),
+                    aliases: std::cell::RefCell::new(aliases.clone()),
                     ahead_min: usize::MAX,
                 },
                 |p, &at| {
@@ -651,6 +657,8 @@ impl<'a> Parser<'a> {
                 let (rest, rec) = self.record(i, r, scope)?;
                 records.push(rec);
                 i = rest;
+            } else if let Some(r) = kw(r, "ALIAS") {
+                i = self.alias(r)?;
             } else if let Some((rest, span)) = self.alone_placeholder(i) {
                 placeholders.push(span);
                 i = rest;
@@ -683,6 +691,41 @@ impl<'a> Parser<'a> {
                 procs,
             },
         ))
+    }
+
+    /// The rest of an `ALIAS type name;` declaration after its keyword:
+    /// declarations of type `name` are then read as of `type` (RAPID's
+    /// alias of a data type).
+    fn alias(&self, r: &'a str) -> Result<&'a str, nom::Err<PErr<'a>>> {
+        let r = ws(r);
+        let Ok((r, base)) = ident(r) else {
+            return Err(self.err_found(self.pos(r), "expected a data type name after ALIAS"));
+        };
+        let r = ws(r);
+        let Ok((r, name)) = ident(r) else {
+            return Err(self.err_found(self.pos(r), "expected the alias name"));
+        };
+        let r = ws(r);
+        let Some(r) = r.strip_prefix(';') else {
+            return Err(self.err_after(self.pos(r), "expected `;` to end the ALIAS declaration"));
+        };
+        // An alias of an alias names the type the first one names.
+        let base = self.type_of(base);
+        self.aliases
+            .borrow_mut()
+            .push((name.to_ascii_lowercase(), base));
+        Ok(r)
+    }
+
+    /// The type a declared type name stands for: an alias's type, else
+    /// the name itself.
+    fn type_of(&self, type_name: &str) -> String {
+        let lower = type_name.to_ascii_lowercase();
+        self.aliases
+            .borrow()
+            .iter()
+            .find(|(a, _)| *a == lower)
+            .map_or(type_name.to_string(), |(_, b)| b.clone())
     }
 
     /// A placeholder that stands alone for a statement or declaration
@@ -861,7 +904,11 @@ impl<'a> Parser<'a> {
             }
             r = ws(r);
         }
-        let data_type = DataType::from_name(type_name);
+        let data_type = if self.aliases.borrow().is_empty() {
+            DataType::from_name(type_name)
+        } else {
+            DataType::from_name(&self.type_of(type_name))
+        };
         let mut value = None;
         if let Some(v) = r.strip_prefix(":=") {
             let (v, val) = self.val(v, b",;")?;
