@@ -1201,7 +1201,7 @@ pub(crate) const PICK_CELL: &str = "MODULE PickCell
       pStack{i} := Offs(pPlaceBase, 0, 0, i * 50);
       MoveL pStack{i}, v500, fine, tool0;
     ENDFOR
-    place pPlaceBase;
+    place Offs(pPlaceBase, 0, 0, 10);
   ENDPROC
 
   PROC place(robtarget pt)
