@@ -2447,7 +2447,13 @@ mod tests {
         };
         let a = compensate_module(src, "milling.mod", &robot, &with).expect("compensates");
         let b = compensate_module(src, "milling.mod", &robot, &without).expect("compensates");
-        assert_eq!(a.records.len(), a.moves);
+        // A record per compensated move and per reported MoveAbsJ.
+        let reported = a
+            .as_written
+            .iter()
+            .filter(|w| w.reason == JOINT_TARGET)
+            .count();
+        assert_eq!(a.records.len(), a.moves + reported);
         assert!(a.moves > 0 && b.records.is_empty());
         assert_eq!(
             RapidOutcome {
