@@ -472,18 +472,22 @@ ENDMODULE
     assert!(err.contains("[-245°, 65°]"), "{err}");
 }
 
-/// A robtarget whose literal holds a named constant is an expression the
-/// tool does not evaluate: the move to it is left as written, named, and
-/// the module is not refused.
+/// A named constant inside a robtarget literal is resolved (the move is
+/// compensated, the compensated numbers replace the name); an expression
+/// there is not evaluated: its move is left as written, named, and the
+/// module is not refused.
 #[test]
-fn a_named_constant_inside_a_literal_leaves_its_move_as_written() {
+fn named_constants_inside_literals() {
     let module = "MODULE Stack
   CONST num safeHeight := 450;
+  CONST num nRow := 100;
   CONST robtarget pAbove := [[800,0,safeHeight],[0,0,1,0],[0,0,0,0],[9E9,9E9,9E9,9E9,9E9,9E9]];
-  CONST robtarget pDown := [[800,100,300],[0,0,1,0],[0,0,0,0],[9E9,9E9,9E9,9E9,9E9,9E9]];
+  CONST robtarget pDown := [[800,nRow,300],[0,0,1,0],[0,0,0,0],[9E9,9E9,9E9,9E9,9E9,9E9]];
+  CONST robtarget pHigh := [[800,0,safeHeight+50],[0,0,1,0],[0,0,0,0],[9E9,9E9,9E9,9E9,9E9,9E9]];
   PROC main()
     MoveJ pAbove, v500, z10, tool0;
     MoveL pDown, v100, fine, tool0;
+    MoveL pHigh, v100, fine, tool0;
   ENDPROC
 ENDMODULE
 ";
@@ -494,21 +498,25 @@ ENDMODULE
     assert_eq!(
         counts(&err),
         (
-            1,
+            2,
             "1 left as written (robtarget value is an expression)".into()
         )
     );
-    assert!(text.contains("[[800,0,safeHeight]"), "{text}");
+    assert!(text.contains("[[800,0,safeHeight+50]"), "{text}");
     let m_in = parse_module(module, "in").expect("input");
-    let m_out = parse_module(&text, "out").expect("output");
-    let programmed = robtarget_pose(robtarget(&m_in, "pDown", None));
-    let flange = robot().with_tool(Isometry3::identity(), None, false);
-    assert_lands(
-        &flange,
-        robtarget(&m_out, "pDown", None),
-        &programmed,
-        "pDown",
+    assert_eq!(
+        robtarget(&m_in, "pAbove", None)
+            .trans
+            .each_ref()
+            .map(|n| n.value),
+        [800.0, 0.0, 450.0]
     );
+    let m_out = parse_module(&text, "out").expect("output");
+    let flange = robot().with_tool(Isometry3::identity(), None, false);
+    for name in ["pAbove", "pDown"] {
+        let programmed = robtarget_pose(robtarget(&m_in, name, None));
+        assert_lands(&flange, robtarget(&m_out, name, None), &programmed, name);
+    }
 }
 
 /// An `ALIAS` of robtarget: a target declared with the alias type is a

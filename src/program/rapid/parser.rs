@@ -414,6 +414,10 @@ pub(super) struct Parser<'a> {
     /// The module's `ALIAS` types met so far: (alias, the type it names),
     /// lower case.
     aliases: std::cell::RefCell<Vec<(String, String)>>,
+    /// The module's `CONST num` declarations with a literal value met so
+    /// far (name lower case, value): a number of a literal may be written
+    /// as one of them (`[[0,0,safeHeight],…]`).
+    pub(super) consts: std::cell::RefCell<Vec<(String, f64)>>,
 }
 
 /// Argument texts [`Parser::text`] keeps to share.
@@ -455,6 +459,7 @@ impl<'a> Parser<'a> {
             depth: std::cell::Cell::new(0),
             texts: std::cell::RefCell::new(Vec::new()),
             aliases: std::cell::RefCell::new(Vec::new()),
+            consts: std::cell::RefCell::new(Vec::new()),
             ahead_min,
         }
     }
@@ -482,6 +487,7 @@ impl<'a> Parser<'a> {
         }
         let (src, file, line_starts) = (self.src, self.file, &self.line_starts);
         let aliases = self.aliases.borrow().clone();
+        let consts = self.consts.borrow().clone();
         starts
             .par_iter()
             .map_init(
@@ -492,6 +498,7 @@ impl<'a> Parser<'a> {
                     depth: std::cell::Cell::new(0),
                     texts: std::cell::RefCell::new(Vec::new()),
                     aliases: std::cell::RefCell::new(aliases.clone()),
+                    consts: std::cell::RefCell::new(consts.clone()),
                     ahead_min: usize::MAX,
                 },
                 |p, &at| {
@@ -651,6 +658,11 @@ impl<'a> Parser<'a> {
             if storage_kw(r).is_some() {
                 let (rest, mut d) = self.decl(i)?;
                 self.evaluate_dims(&mut d, &decls)?;
+                if let (Storage::Const, Some(DataValue::Num(n))) = (d.storage, &d.value) {
+                    self.consts
+                        .borrow_mut()
+                        .push((d.name.to_ascii_lowercase(), n.value));
+                }
                 decls.push(d);
                 i = rest;
             } else if let Some(r) = kw(r, "RECORD") {
