@@ -35,6 +35,7 @@ mod peers;
 mod posts;
 mod provenance_cli;
 mod rapid;
+mod rapid_cells;
 mod rapid_cli;
 mod rapid_flow;
 mod rapid_programs;

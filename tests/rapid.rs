@@ -70,7 +70,8 @@ fn robtarget<'m>(m: &'m Module, name: &str) -> &'m RobTarget {
     }
 }
 
-/// Every number of a robtarget slices back to text that parses to its value.
+/// Every number of a robtarget slices back to text that parses to its
+/// value, or to the name of a `CONST num` of the module declared with it.
 fn check_spans(src: &str, rt: &RobTarget) {
     let all = rt
         .trans
@@ -80,7 +81,19 @@ fn check_spans(src: &str, rt: &RobTarget) {
         .chain(&rt.extax);
     for n in all {
         let text = &src[n.span.clone()];
-        let v: f64 = text.parse().expect("span is a number");
+        let v: f64 = match text.parse() {
+            Ok(v) => v,
+            Err(_) => {
+                // `CONST num NAME := VALUE;` in the same text.
+                let decl = format!("CONST num {text} := ");
+                let at = src.find(&decl).expect("span is a number or a constant") + decl.len();
+                let value = &src[at..];
+                value[..value.find(';').expect("value")]
+                    .trim()
+                    .parse()
+                    .expect("a literal")
+            }
+        };
         assert_abs_diff_eq!(v, n.value, epsilon = VALUE_TOL);
     }
     assert!(src[rt.span.clone()].starts_with("[["));

@@ -87,7 +87,14 @@ fn compensate(dir: &std::path::Path, name: &str, module: &str) -> (String, Strin
     assert_eq!(code, 0, "{err}");
     let got = without_header(&std::fs::read(&same).expect("output"));
     assert!(got == module.as_bytes(), "identity");
-    let args = ["--effects", "kinematic", "--annotate", "none"];
+    // MoveAbsJ too, in joint space (the copies of jointtargets).
+    let args = [
+        "--effects",
+        "kinematic",
+        "--annotate",
+        "none",
+        "--compensate-joint-targets",
+    ];
     let (code, err) = run(&[&["compensate", input, "-o", &out][..], &args[..]].concat());
     assert_eq!(code, 0, "{err}");
     let win = [

@@ -162,10 +162,12 @@ fn rapid_json_report_validates_with_the_robot_effects() {
     let first = &rows[0];
     assert_eq!(first["line"], 45);
     assert_eq!(first["motion"], "MoveAbsJ");
+    // (A MoveAbsJ is annotated when compensated as a Cartesian pose.)
     let compensated = run(&[
         "compensate",
         "--machine",
         "abb-irb1600",
+        "--compensate-joint-targets",
         "-o",
         "-",
         repo("samples/drilling.mod").to_str().unwrap(),

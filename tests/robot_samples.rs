@@ -148,7 +148,12 @@ fn both_robots_compensate_every_sample_within_the_tolerance() {
                 dir.path(),
                 sample,
                 &machine,
-                &["--effects", "kinematic,gravity"],
+                // The MoveAbsJ too, compensated in joint space.
+                &[
+                    "--effects",
+                    "kinematic,gravity",
+                    "--compensate-joint-targets",
+                ],
             );
             let m_in = parse_module(&src_in, "in").expect("input parses");
             let m_out = parse_module(&src_out, "out").expect("output parses");

@@ -682,6 +682,7 @@ pub fn run(a: &BatchArgs, quiet: bool) -> Result<i32> {
                 units: a.units,
                 rapid_window_lines: None,
                 strict: false,
+                compensate_joint_targets: false,
                 more: Vec::new(),
             };
             let setup = parse_setup(&program, Some(&tool))?;

@@ -184,6 +184,11 @@ pub struct ProgramArgs {
     /// Refused for G-code, where no block is left as written.
     #[arg(long)]
     pub strict: bool,
+    /// RAPID: compensate `MoveAbsJ` targets as Cartesian poses (their
+    /// joints moved so that the TCP reaches the nominal pose of the
+    /// programmed joints); by default each is reported and left as written.
+    #[arg(long)]
+    pub compensate_joint_targets: bool,
 }
 
 /// `postproc check`.

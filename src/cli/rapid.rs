@@ -359,6 +359,7 @@ fn check_options(strict: bool) -> RapidOptions {
         thermal_start: ThermalStart::Cold,
         records: false,
         strict,
+        joint_cartesian: false,
     }
 }
 
@@ -393,6 +394,7 @@ pub(super) fn rapid_options(
         thermal_start,
         records: true,
         strict: false,
+        joint_cartesian: false,
     })
 }
 
@@ -472,6 +474,7 @@ fn compensate_options(a: &CompensateArgs, robot: &Robot) -> Result<RapidOptions>
     Ok(RapidOptions {
         records: a.report.is_some(),
         strict: a.program.strict,
+        joint_cartesian: a.program.compensate_joint_targets,
         ..rapid_options(
             robot,
             &a.effects,
@@ -1055,6 +1058,7 @@ pub fn report(a: &ReportArgs, robot: Option<Result<(Robot, Loaded)>>) -> Result<
     let robot = robot_with_process(robot, &a.effects)?;
     let opts = RapidOptions {
         strict: a.program.strict,
+        joint_cartesian: a.program.compensate_joint_targets,
         ..rapid_options(&robot, &a.effects, false, None)?
     };
     let out = a.output.clone().unwrap_or_else(|| PathBuf::from("-"));

@@ -225,6 +225,28 @@ impl Robot {
         self.compensate_branch(programmed, sel, effects, growth, (q0, nominal_flange), None)
     }
 
+    /// The predicted deviation of the TCP at joints `q` (a `MoveAbsJ`'s
+    /// programmed joints, reported and not compensated): attained with
+    /// `effects` and `growth` against the nominal pose, split as a
+    /// compensation's ([`Deviation`]).
+    pub(crate) fn predict_at_joints(
+        &self,
+        q: &[f64; 6],
+        effects: Effects,
+        growth: &DhGrowth,
+    ) -> Deviation {
+        let (kin, model) = self.prediction_prepared(effects, growth);
+        let st = self.stages_from(&kin, &model, q, effects, None);
+        Deviation {
+            kinematic: PoseDelta::between(&st[1], &st[0]),
+            thermal: PoseDelta::between(&st[2], &st[1]),
+            gravity: PoseDelta::between(&st[3], &st[2]),
+            process: PoseDelta::between(&st[4], &st[3]),
+            total: PoseDelta::between(&st[4], &st[0]),
+            vibration_mm: self.vibration_mm(q, effects),
+        }
+    }
+
     /// [`Robot::compensate_seeded`]; with `fixed_branch`, the inverse
     /// kinematics of the iteration solves only one branch: the given one,
     /// else the branch of its first solution.

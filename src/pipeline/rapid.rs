@@ -66,7 +66,17 @@ pub struct RapidOptions {
     /// Refuse the module when a move is left as written
     /// ([`refuse_left_as_written`]).
     pub strict: bool,
+    /// Compensate `MoveAbsJ` targets as Cartesian poses (joints moved so
+    /// that the TCP reaches the nominal pose of the programmed joints);
+    /// otherwise each is reported (its predicted deviation) and left as
+    /// written ([`JOINT_TARGET`]).
+    pub joint_cartesian: bool,
 }
+
+/// Why a `MoveAbsJ` is left as written by default: its joints are what the
+/// controller goes to, not a pose it solves (`grammar/rapid.md`, "Joint
+/// targets").
+pub const JOINT_TARGET: &str = "joint target: reported, not compensated";
 
 impl Default for RapidOptions {
     /// All effects, annotated, default formatting, cold start, move records.
@@ -78,6 +88,7 @@ impl Default for RapidOptions {
             thermal_start: ThermalStart::Cold,
             records: true,
             strict: false,
+            joint_cartesian: false,
         }
     }
 }
@@ -170,6 +181,9 @@ struct Rewriter<'m> {
     last_tcp: [f64; 3],
     /// Declarations from this index on are another module's.
     foreign_from: usize,
+    /// Start of the move annotated last (a `FOR` loop's move is met once
+    /// per element and annotated once, with its first element).
+    last_annotated: Option<usize>,
 }
 
 /// One target to compensate: robot view, programmed TCP pose (world frame)
@@ -333,7 +347,7 @@ impl Rewriter<'_> {
     fn cart(
         &mut self,
         mv: &Move,
-        (target, u): (&Target, &CartUse),
+        (target, u, looped): (&Target, &CartUse, bool),
         key: &LoadKey,
         tool: &ToolView,
         wobj: &Isometry3<f64>,
@@ -404,6 +418,12 @@ impl Rewriter<'_> {
                     &fmt,
                 )?,
                 InPlace::Written => {}
+                InPlace::Copy if looped => {
+                    return Err(Error::Internal(format!(
+                        "the element `{}` of a FOR loop's move is owned by another move",
+                        u.stem
+                    )));
+                }
                 InPlace::Copy => {
                     let text = robtarget_text(self.src, u.rt, &new_obj, comp.conf, &fmt)?;
                     let name = self.copy_name(
@@ -524,6 +544,13 @@ impl Rewriter<'_> {
             .map_err(|e| self.locate(at, e, &what()))?;
         let goal = r.tcp_pose(Model::Nominal, &q);
         self.last_tcp = goal.translation.vector.into();
+        if !self.opts.joint_cartesian {
+            return Ok(Some(r.predict_at_joints(
+                &q,
+                self.opts.effects,
+                &self.growth(),
+            )));
+        }
         let Some(comp) = self.solve(view, goal, IkSelect::Near(q), Seed::default()) else {
             return Ok(None);
         };
@@ -620,9 +647,17 @@ struct Planned {
     /// Configuration of `q` where configuration monitoring is off for the
     /// move ([`free_configurations`]).
     free_conf: Option<ConfData>,
-    /// TCP speed, mm/s, when it can be resolved.
+    /// TCP speed, mm/s, when it can be resolved (or its fallback).
     v_tcp: Option<f64>,
+    /// `v_tcp` is [`FALLBACK_TCP_SPEED`]: the move's speed is known at run
+    /// time only.
+    speed_fallback: bool,
 }
+
+/// TCP speed a move whose speed is known at run time only is taken at on
+/// the time line, mm/s: that of the predefined `vmax`, which ABB defines as
+/// the robot's maximum (rated) TCP speed. Said in a warning.
+pub const FALLBACK_TCP_SPEED: f64 = 7000.0;
 
 /// Robot views with a tool mounted, made once per distinct key (a view is a
 /// copy of the robot: one per move would cost a copy per target).
@@ -695,6 +730,7 @@ fn plan_move<'m>(
         branch,
         free_conf: None,
         v_tcp: tcp_speed(module, mv),
+        speed_fallback: false,
     })
 }
 
@@ -775,8 +811,8 @@ fn move_wrench(
     };
     let speed = |what: &str| -> Result<Option<f64>> {
         match cur.v_tcp {
-            Some(v) => Ok(Some(v)),
-            None if need_speed => Err(input_err(
+            Some(v) if !cur.speed_fallback => Ok(Some(v)),
+            _ if need_speed => Err(input_err(
                 src,
                 file,
                 mv.speed.span.start,
@@ -785,7 +821,7 @@ fn move_wrench(
                     mv.speed.text
                 ),
             )),
-            None => Ok(None),
+            _ => Ok(None),
         }
     };
     match pf.model {
@@ -845,6 +881,11 @@ fn move_wrench(
             }
             let d = cur.pose.translation.vector - prev.pose.translation.vector;
             if plunge_direction(&d, &z, pf.axis_tolerance_rad) != Some(true) {
+                return Ok(None);
+            }
+            // A speed known at run time only is taken as the fallback's, a
+            // positioning speed: no thrust (said in the warning).
+            if cur.speed_fallback {
                 return Ok(None);
             }
             Ok(speed("drilling thrust")?.and_then(|v| pf.drilling_wrench(v, &(to_base * z))))
@@ -1076,6 +1117,8 @@ pub(crate) fn left_as_written_carried(
 /// error (exit code 2) that names the first one: `file:line:col: MoveL left
 /// as written (CRobT); --strict …`.
 pub fn refuse_left_as_written(left: &[AsWritten], file: &str, opts: &RapidOptions) -> Result<()> {
+    // A reported joint target is not one known at run time only.
+    let left: Vec<&AsWritten> = left.iter().filter(|a| a.reason != JOINT_TARGET).collect();
     match left.first() {
         Some(a) if opts.strict => Err(Error::Input(Located::new(
             file,
@@ -1151,6 +1194,11 @@ pub(crate) struct Carry {
     module_written: std::collections::HashSet<String>,
     /// Module data read by the moves of the windows so far.
     module_read: std::collections::HashSet<String>,
+    /// Speed names (lower case) taken as [`FALLBACK_TCP_SPEED`] so far.
+    speeds_fallen_back: HashSet<String>,
+    /// `MoveAbsJ` moves are reported and left as written
+    /// ([`RapidOptions::joint_cartesian`] off).
+    joints_reported: bool,
 }
 
 impl Carry {
@@ -1311,7 +1359,44 @@ pub(crate) struct ProgramScope {
 pub(crate) struct Resolved<'m> {
     target: Option<CartUse<'m>>,
     via: Option<CartUse<'m>>,
+    /// One element of a `FOR` loop's array (the move is met once per
+    /// element: compensated in place only, annotated once).
+    looped: bool,
+    /// The argument of a call of the move's procedure that gives its
+    /// target (a parameter): where a compensated copy is passed.
+    call_arg: Option<Target>,
 }
+
+/// The targets of one move: one, or those of the elements a `FOR` loop
+/// reaches (a move of the loop is resolved once per element).
+pub(crate) enum Uses<T> {
+    /// The move's own.
+    One(T),
+    /// One per element, in loop order.
+    Many(Vec<T>),
+}
+
+impl<T> Uses<T> {
+    fn map<U>(self, mut f: impl FnMut(T) -> U) -> Uses<U> {
+        match self {
+            Uses::One(t) => Uses::One(f(t)),
+            Uses::Many(v) => Uses::Many(v.into_iter().map(f).collect()),
+        }
+    }
+
+    /// Every target, in order (no allocation for one).
+    fn into_iter_all(self) -> impl Iterator<Item = T> {
+        let (one, many) = match self {
+            Uses::One(t) => (Some(t), Vec::new()),
+            Uses::Many(v) => (None, v),
+        };
+        one.into_iter().chain(many)
+    }
+}
+
+/// Why a module is not read a window at a time: a `FOR` loop's move goes
+/// to the elements of an array that no other statement may name.
+pub(crate) const LOOP_ELEMENTS: &str = "a FOR loop moves to the elements of an array";
 
 impl Carry {
     /// The moves of a window whose targets are known before run time, with
@@ -1339,13 +1424,19 @@ impl Carry {
             None => Flow::of(module, src),
         };
         let all: Vec<(At, &'m Move)> = flow.moves().collect();
-        let found: Vec<Result<std::result::Result<(Resolved<'m>, P), Left>>> = all
+        let foreign_from = self.scope.as_ref().map_or(usize::MAX, |s| s.from);
+        type Found<'m, P> = Result<std::result::Result<Uses<(Resolved<'m>, P)>, Left>>;
+        let found: Vec<Found<'m, P>> = all
             .par_iter()
             .map_init(ViewCache::new, |views, &(at, mv)| {
-                Ok(resolve_move(&flow, src, file, at, mv)?.map(|r| {
-                    let p = plan(views, mv, &r);
-                    (r, p)
-                }))
+                Ok(
+                    resolve_move(&flow, src, file, at, mv, foreign_from)?.map(|rs| {
+                        rs.map(|r| {
+                            let p = plan(views, mv, &r);
+                            (r, p)
+                        })
+                    }),
+                )
             })
             .collect();
         let mut moves = Vec::with_capacity(all.len());
@@ -1353,10 +1444,20 @@ impl Carry {
         let mut plans = Vec::with_capacity(all.len());
         for ((_, mv), f) in all.iter().zip(found) {
             match f? {
-                Ok((r, p)) => {
-                    moves.push(*mv);
-                    resolved.push(r);
-                    plans.push(p);
+                Ok(rs) => {
+                    if self.joints_reported && mv.kind == MoveKind::MoveAbsJ {
+                        self.note_as_written(mv, JOINT_TARGET, src);
+                    }
+                    if let Uses::Many(_) = rs {
+                        // A window sees one routine: whether the loop's
+                        // array is named elsewhere is the whole module's.
+                        self.unsupported.get_or_insert(LOOP_ELEMENTS);
+                    }
+                    for (r, p) in rs.into_iter_all() {
+                        moves.push(*mv);
+                        resolved.push(r);
+                        plans.push(p);
+                    }
                 }
                 Err(left) => self.leave(mv, left, src, file),
             }
@@ -1399,6 +1500,29 @@ impl Carry {
         }
     }
 
+    /// Gives each move of `plans` (one per move of `moves`) whose speed is
+    /// known at run time only [`FALLBACK_TCP_SPEED`], warning once per
+    /// speed name.
+    fn fall_back_speeds(&mut self, moves: &[&Move], plans: &mut [Planned], file: &str) {
+        for (mv, p) in moves.iter().zip(plans.iter_mut()) {
+            if p.v_tcp.is_some() {
+                continue;
+            }
+            p.v_tcp = Some(FALLBACK_TCP_SPEED);
+            p.speed_fallback = true;
+            let name = mv.speed.text.trim().to_ascii_lowercase();
+            if self.time_line.is_none() && self.speeds_fallen_back.insert(name) {
+                tracing::warn!(
+                    "{}:{}: speed `{}` of {} cannot be resolved offline; the time line takes it as vmax, the robot's rated TCP speed ({FALLBACK_TCP_SPEED} mm/s), and a drilling move with it has no thrust",
+                    crate::error::Escaped(file),
+                    mv.line,
+                    mv.speed.text.trim(),
+                    mv.name
+                );
+            }
+        }
+    }
+
     /// Leaves a move as written: warned about with its place and reason,
     /// listed in the outcome; the declarations its target reads keep their
     /// values as written (a compensated move to one of them gets a copy).
@@ -1424,6 +1548,21 @@ impl Carry {
             reason: left.reason,
         });
     }
+
+    /// Counts a move that stays on the time line but is written as it was
+    /// (a reported `MoveAbsJ`: counted in the summary line, not warned
+    /// about one by one, as nearly every program has its homes).
+    fn note_as_written(&mut self, mv: &Move, reason: &str, src: &str) {
+        if self.time_line.is_some() {
+            return;
+        }
+        self.as_written.push(AsWritten {
+            line: mv.line,
+            column: column_of(src, mv.span.start),
+            instruction: mv.name.to_string(),
+            reason: reason.to_string(),
+        });
+    }
 }
 
 /// The moves resolved, their targets and what was planned of each
@@ -1445,14 +1584,30 @@ fn resolve_move<'m>(
     file: &str,
     at: At,
     mv: &'m Move,
-) -> Result<std::result::Result<Resolved<'m>, Left>> {
+    foreign_from: usize,
+) -> Result<std::result::Result<Uses<Resolved<'m>>, Left>> {
+    if let Some(mut left) = flow.load_left(at, mv) {
+        // The targets it goes to keep their values as written.
+        if mv.kind != MoveKind::MoveAbsJ {
+            for t in mv.via.iter().map(|v| &**v).chain([&mv.target]) {
+                match flow.cart(src, file, at, t)? {
+                    Ok(u) if matches!(u.origin, Origin::Decl { .. }) => left.reads.push(u.origin),
+                    Ok(_) => {}
+                    Err(l) => left.reads.extend(l.reads),
+                }
+            }
+        }
+        return Ok(Err(left));
+    }
     if mv.kind == MoveKind::MoveAbsJ {
         return Ok(match flow.joint_left(at, &mv.target) {
             Some(left) => Err(left),
-            None => Ok(Resolved {
+            None => Ok(Uses::One(Resolved {
                 target: None,
                 via: None,
-            }),
+                looped: false,
+                call_arg: None,
+            })),
         });
     }
     let via = match &mv.via {
@@ -1463,10 +1618,56 @@ fn resolve_move<'m>(
         None => None,
     };
     Ok(match flow.cart(src, file, at, &mv.target)? {
-        Ok(u) => Ok(Resolved {
+        Ok(u) => Ok(Uses::One(Resolved {
             target: Some(u),
             via,
-        }),
+            looped: false,
+            call_arg: None,
+        })),
+        Err(left)
+            if left.reason == crate::program::rapid::flow::RUN_TIME_INDEX && via.is_none() =>
+        {
+            // Another module's declaration is never edited in place.
+            match flow.loop_elements(src, file, at, &mv.target).filter(|us| {
+                us.iter()
+                    .all(|u| matches!(u.origin, Origin::Decl { decl, .. } if decl < foreign_from))
+            }) {
+                Some(us) => Ok(Uses::Many(
+                    us.into_iter()
+                        .map(|u| Resolved {
+                            target: Some(u),
+                            via: None,
+                            looped: true,
+                            call_arg: None,
+                        })
+                        .collect(),
+                )),
+                None => Err(left),
+            }
+        }
+        Err(left) if left.reason == crate::program::rapid::flow::PARAMETER && via.is_none() => {
+            match flow.call_uses(src, file, at, &mv.target).filter(|us| {
+                us.iter().all(
+                    |(u, _)| matches!(u.origin, Origin::Decl { decl, .. } if decl < foreign_from),
+                )
+            }) {
+                Some(us) => Ok(Uses::Many(
+                    us.into_iter()
+                        .map(|(u, span)| Resolved {
+                            call_arg: Some(Target::Named {
+                                name: u.stem.clone(),
+                                index: None,
+                                span,
+                            }),
+                            target: Some(u),
+                            via: None,
+                            looped: false,
+                        })
+                        .collect(),
+                )),
+                None => Err(left),
+            }
+        }
         Err(left) => Err(left),
     })
 }
@@ -1496,6 +1697,7 @@ pub(crate) fn compensate_window(
     before: usize,
 ) -> Result<EditList> {
     let ModuleText { module, src, file } = text;
+    carry.joints_reported = !opts.joint_cartesian;
     let (moves, resolved, plans) = carry.resolve_with(text, |views, mv, res| {
         plan_move(module, src, file, robot, views, (mv, res))
     })?;
@@ -1568,6 +1770,9 @@ impl<'r> TimeLine<'r> {
         }
         let fx = opts.effects;
         let thermal = robot.thermal().filter(|_| fx.thermal != 0.0);
+        if fx.process != 0.0 || thermal.is_some() {
+            carry.fall_back_speeds(moves, &mut plans[o..], file);
+        }
         let directives = match directives {
             Some(d) => d,
             None => Directives::parse(src, file)?,
@@ -1800,6 +2005,7 @@ impl<'m> Rewriter<'m> {
             state: MoveState::default(),
             last_tcp: carry.last_tcp,
             foreign_from: carry.scope.as_ref().map_or(usize::MAX, |s| s.from),
+            last_annotated: None,
         }
     }
 
@@ -1919,6 +2125,11 @@ impl<'m> Rewriter<'m> {
                     };
                     self.state = state;
                     match self.walk((mv, resolved.get(i)), &key, plan) {
+                        Ok(Some(dev))
+                            if mv.kind == MoveKind::MoveAbsJ && !self.opts.joint_cartesian =>
+                        {
+                            self.record_reported(carry, mv, seg, &state, &dev)
+                        }
                         Ok(Some(dev)) => self.record(carry, mv, seg, &state, &dev),
                         Ok(None) => continue,
                         Err(e) => {
@@ -1942,6 +2153,32 @@ impl<'m> Rewriter<'m> {
         Ok(())
     }
 
+    /// Keeps the record of a move reported and left as written (a
+    /// `MoveAbsJ`): its report row, not counted as compensated, not
+    /// annotated.
+    fn record_reported(
+        &mut self,
+        carry: &mut Carry,
+        mv: &Move,
+        seg: &Segment,
+        state: &MoveState,
+        dev: &Deviation,
+    ) {
+        if !self.opts.records {
+            return;
+        }
+        carry.records.push(MoveRecord {
+            line: mv.line,
+            kind: mv.name,
+            programmed_mm: self.last_tcp,
+            deviation: *dev,
+            wrench: state.wrench,
+            duration_s: seg.duration_s,
+            power_w: seg.power_w,
+            thermal_power_w: state.power.unwrap_or([0.0; 6]),
+        });
+    }
+
     /// Counts a compensated move, annotates it and keeps its record.
     fn record(
         &mut self,
@@ -1957,7 +2194,8 @@ impl<'m> Rewriter<'m> {
             carry.max_deviation = (d, mv.line);
         }
         self.watch_resonance(carry, mv.line, state, dev);
-        if self.opts.annotate {
+        if self.opts.annotate && self.last_annotated != Some(mv.span.start) {
+            self.last_annotated = Some(mv.span.start);
             push_annotation(&mut self.edits, self.src, &mv.span, |out| {
                 write_dev_comment(out, dev)
             });
@@ -2017,7 +2255,14 @@ impl Rewriter<'_> {
                 return Err(Error::Internal("move target not resolved".into()));
             };
             if let (Some(via), Some(v)) = (&mv.via, &res.via) {
-                self.cart(mv, (via, v), key, &plan.tool, &plan.wobj, Seed::default())?;
+                self.cart(
+                    mv,
+                    (via, v, false),
+                    key,
+                    &plan.tool,
+                    &plan.wobj,
+                    Seed::default(),
+                )?;
             }
             // Planning solved the target's joints with the same pose,
             // confdata and TCP (`ik_conf`, limits checked), and the nominal
@@ -2028,7 +2273,14 @@ impl Rewriter<'_> {
                 nominal_flange: nominal_flange.copied(),
                 conf: plan.free_conf,
             };
-            self.cart(mv, (&mv.target, u), key, &plan.tool, &plan.wobj, seed)
+            self.cart(
+                mv,
+                (res.call_arg.as_ref().unwrap_or(&mv.target), u, res.looped),
+                key,
+                &plan.tool,
+                &plan.wobj,
+                seed,
+            )
         }
     }
 }
@@ -2195,7 +2447,13 @@ mod tests {
         };
         let a = compensate_module(src, "milling.mod", &robot, &with).expect("compensates");
         let b = compensate_module(src, "milling.mod", &robot, &without).expect("compensates");
-        assert_eq!(a.records.len(), a.moves);
+        // A record per compensated move and per reported MoveAbsJ.
+        let reported = a
+            .as_written
+            .iter()
+            .filter(|w| w.reason == JOINT_TARGET)
+            .count();
+        assert_eq!(a.records.len(), a.moves + reported);
         assert!(a.moves > 0 && b.records.is_empty());
         assert_eq!(
             RapidOutcome {

@@ -38,7 +38,8 @@ pub type Span = Range<usize>;
 pub struct Number {
     /// The value of the literal.
     pub value: f64,
-    /// Where its text is in the source (`&src[span]` is e.g. `-1.5e-3`).
+    /// Where its text is in the source (`&src[span]` is e.g. `-1.5e-3`, or
+    /// the name of the module's `CONST num` it was written as).
     pub span: Span,
 }
 

@@ -57,15 +57,21 @@ pub fn quadrant(q: f64) -> i32 {
 }
 
 /// Tolerance on the quadrant boundary when matching cf1/cf4/cf6, rad
-/// (0.00057°): a joint within it of a boundary lies in both quadrants. It
-/// covers the resolution of a written target, which moves the joints that
-/// solve it by a few µrad (7-decimal quaternions: 2e-7 rad; 3-decimal
-/// millimetres: 0.00087 mm, 2e-6 rad at 0.5 m from an axis), so a target
-/// written with a quadrant is solved in that quadrant again.
-pub const QUADRANT_TOL_RAD: f64 = 1e-5;
+/// (0.01°): a joint within it of a boundary lies in both quadrants. The
+/// quadrant is the controller's (ABB, RAPID reference manual, "Motion and
+/// I/O principles", robot configuration: the quarter revolution
+/// `int(angle / 90°)` of a positive joint angle, `int(angle / 90°) − 1` of
+/// a negative one), and a joint that close to a border is one a target
+/// taught or generated there reaches either side of it: joint positions
+/// are shown to 0.01° on the FlexPendant, and a written target's
+/// resolution (7-decimal quaternions, 3-decimal millimetres) moves the
+/// joints that solve it by a few µrad. So a target written with a quadrant
+/// at its border is solved in that quadrant (`grammar/rapid.md`,
+/// "Configurations").
+pub const QUADRANT_TOL_RAD: f64 = 0.01 * std::f64::consts::PI / 180.0;
 /// Band within which a joint keeps its programmed quadrant in the confdata
-/// written with a compensated target ([`confdata_written`]), rad: a tenth
-/// of [`QUADRANT_TOL_RAD`], the rest being the margin for the written
+/// written with a compensated target ([`confdata_written`]), rad: well
+/// inside [`QUADRANT_TOL_RAD`], the rest being the margin for the written
 /// target's resolution. It is larger than the rounding of a joint shown
 /// with four decimals of a degree (0.00005° = 8.7e-7 rad): a joint shown as
 /// −0.0000° keeps quadrant 0.

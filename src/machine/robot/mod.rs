@@ -139,6 +139,13 @@ pub enum IkSelect {
     Near([f64; 6]),
 }
 
+/// A limit in degrees rounded to nine decimals: the value the machine file
+/// wrote, without the noise of its conversion to radians and back.
+fn decimal_deg(x: f64) -> f64 {
+    let r = (x * 1e9).round() / 1e9;
+    if r.is_finite() { r } else { x }
+}
+
 /// Mass and centre of mass of a link (in the link's DH frame) or of the tool
 /// load (in the flange frame).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -729,8 +736,10 @@ impl Robot {
                 return Err(RobotError::JointLimit {
                     joint: i + 1,
                     value_deg: v.to_degrees(),
-                    min_deg: l[0].to_degrees(),
-                    max_deg: l[1].to_degrees(),
+                    // As the machine file gives them: degrees went to
+                    // radians and back (−245.00000000000003° is −245°).
+                    min_deg: decimal_deg(l[0].to_degrees()),
+                    max_deg: decimal_deg(l[1].to_degrees()),
                 });
             }
         }

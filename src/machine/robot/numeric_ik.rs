@@ -301,7 +301,7 @@ mod tests {
     /// Distance from a quadrant boundary of joints 1, 4, 6 below which a
     /// random joint vector is skipped, in quarter turns (0.09°): far
     /// enough that the solution's quadrant is the generating one's beyond
-    /// doubt ([`ik::QUADRANT_TOL_RAD`] is 100 times smaller).
+    /// doubt ([`ik::QUADRANT_TOL_RAD`] is 9 times smaller).
     const AWAY_FROM_BOUNDARY_QUARTERS: f64 = 1e-3;
     /// Joints 3 and 5 closer to 0 than this are skipped, rad (the elbow
     /// and wrist singularities, where the arm's conditioning spoils the

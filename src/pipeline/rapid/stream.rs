@@ -190,6 +190,7 @@ pub fn check_syntax_streamed<R: BufRead>(
         thermal_start: ThermalStart::Cold,
         records: false,
         strict: false,
+        joint_cartesian: false,
     };
     let mut carry = Carry::default();
     let (streamed, _) = pass(
@@ -626,7 +627,13 @@ ENDMODULE
             ..RapidOptions::for_robot(&robot)
         };
         let whole = super::super::compensate_module(RICH, "t.mod", &robot, &opts).unwrap();
-        assert_eq!(whole.records.len(), whole.moves);
+        // A record per compensated move and per reported MoveAbsJ.
+        let reported = whole
+            .as_written
+            .iter()
+            .filter(|a| a.reason == super::super::JOINT_TARGET)
+            .count();
+        assert_eq!(whole.records.len(), whole.moves + reported);
         for lines in [1, 4, 100] {
             let mut got = Vec::new();
             let mut sink = |r: &[MoveRecord]| -> Result<()> {

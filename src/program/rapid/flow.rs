@@ -60,6 +60,9 @@ pub const RUN_TIME: &str = "run-time target";
 pub const CROBT: &str = "CRobT";
 /// An offset or angle of `Offs`/`RelTool` known at run time only.
 pub const RUN_TIME_OFFSET: &str = "run-time offset";
+/// A robtarget whose value is an expression (`[[0,0,safeHeight],…]`): not
+/// evaluated.
+pub const EXPRESSION_VALUE: &str = "robtarget value is an expression";
 /// An array index known at run time only (a `FOR` variable).
 pub const RUN_TIME_INDEX: &str = "indexed by a run-time value";
 
@@ -659,6 +662,273 @@ impl<'m> Flow<'m> {
         }
     }
 
+    /// The targets a move to `holes{k}` goes to in a `FOR k FROM a TO b
+    /// [STEP c] DO` loop with bounds known before run time, one per
+    /// element the loop reaches in order, when they can be compensated in
+    /// place: `holes` is a module array that no statement writes and no
+    /// other statement names, the loop is the only one around the move and
+    /// its routine holds no label, and every element reached exists.
+    /// `None` otherwise (the move is left as written).
+    pub(crate) fn loop_elements(
+        &self,
+        src: &str,
+        file: &str,
+        at: At,
+        target: &'m Target,
+    ) -> Option<Vec<CartUse<'m>>> {
+        let Target::Named {
+            name,
+            index: Some(ix),
+            span,
+        } = target
+        else {
+            return None;
+        };
+        let parts = ix.parts();
+        let [var] = parts.as_slice() else {
+            return None;
+        };
+        let shape = self.shapes.get(at.proc)?;
+        let around: Vec<&(usize, usize)> = shape
+            .loops
+            .iter()
+            .filter(|&&(s, e)| s < at.stmt && at.stmt <= e)
+            .collect();
+        let (&[&(start, _)], false) = (around.as_slice(), shape.labels) else {
+            return None;
+        };
+        let body = &self.module.procs.get(at.proc)?.body;
+        let Stmt::Control {
+            keyword,
+            span: head,
+            ..
+        } = body.get(start)?
+        else {
+            return None;
+        };
+        if keyword != "FOR" {
+            return None;
+        }
+        let (v, from, to, step) = for_bounds(src.get(head.clone())?)?;
+        if !v.eq_ignore_ascii_case(var) {
+            return None;
+        }
+        let num = |t: &str| {
+            let x = self.number(
+                t,
+                At {
+                    proc: at.proc,
+                    stmt: start,
+                },
+                0,
+            )?;
+            (x.fract() == 0.0 && x.abs() < 1e6).then_some(x as i64)
+        };
+        let (from, to) = (num(from)?, num(to)?);
+        let step = match step {
+            Some(t) => num(t)?,
+            None => 1,
+        };
+        let Some(Source::Module(di, d)) = self.source(name, at) else {
+            return None;
+        };
+        if d.dims.len() > 1 || self.named_elsewhere(src, name) {
+            return None;
+        }
+        let count = if step > 0 && from <= to {
+            (to - from) / step + 1
+        } else if step < 0 && from >= to {
+            (from - to) / -step + 1
+        } else {
+            0
+        };
+        if !(1..=10_000).contains(&count) {
+            return None;
+        }
+        let mut out = Vec::with_capacity(count as usize);
+        for i in 0..count {
+            let k = usize::try_from(from + i * step).ok().filter(|&k| k >= 1)?;
+            let (v, elem) = element(src, file, span.start, d, Some(&[k])).ok()?;
+            let DataValue::RobTarget(rt) = v else {
+                return None;
+            };
+            out.push(CartUse {
+                rt,
+                origin: Origin::Decl { decl: di, elem },
+                stem: element_stem(&d.name, &[k]),
+                derived: false,
+                derived_key: String::new(),
+                pose_obj: robtarget_pose(rt)?,
+                conf: conf_of(rt)?,
+            });
+        }
+        Some(out)
+    }
+
+    /// The targets a move to `param`, a parameter of its procedure passed
+    /// by value, goes to: the argument of each call of the procedure in
+    /// the module, in routine order, that is a module robtarget known
+    /// before run time, with the span of the argument in the call (where
+    /// a compensated copy is passed). `None` when the parameter is named
+    /// by another statement of the procedure, or no call gives a target.
+    pub(crate) fn call_uses(
+        &self,
+        src: &str,
+        file: &str,
+        at: At,
+        target: &'m Target,
+    ) -> Option<Vec<(CartUse<'m>, super::Span)>> {
+        let Target::Named {
+            name: param,
+            index: None,
+            ..
+        } = target
+        else {
+            return None;
+        };
+        let proc = self.module.procs.get(at.proc)?;
+        if proc.kind != RoutineKind::Proc {
+            return None;
+        }
+        let lower = param.to_ascii_lowercase();
+        let k = self.procedures.by_value_position(&proc.name, &lower)?;
+        let named = proc
+            .body
+            .iter()
+            .filter(|s| text_names(src.get(s.span()).unwrap_or(""), param))
+            .count();
+        if named != 1 {
+            return None;
+        }
+        let base = src.as_ptr() as usize;
+        let mut out = Vec::new();
+        for (pi, p) in self.module.procs.iter().enumerate() {
+            for (si, s) in p.body.iter().enumerate() {
+                let Stmt::Opaque { span, .. } = s else {
+                    continue;
+                };
+                let text = src.get(span.clone()).unwrap_or("");
+                if !opaque_writes(text).0.eq_ignore_ascii_case(&proc.name) {
+                    continue;
+                }
+                let Some(arg) = self
+                    .procedures
+                    .positional(&proc.name, text)
+                    .and_then(|a| a.get(k).copied())
+                else {
+                    continue;
+                };
+                let here = At { proc: pi, stmt: si };
+                let Some(Source::Module(di, d)) = self.source(arg, here) else {
+                    continue;
+                };
+                let Ok((DataValue::RobTarget(rt), None)) = element(src, file, span.start, d, None)
+                else {
+                    continue;
+                };
+                let (Some(pose_obj), Some(conf)) = (robtarget_pose(rt), conf_of(rt)) else {
+                    continue;
+                };
+                let from = arg.as_ptr() as usize - base;
+                out.push((
+                    CartUse {
+                        rt,
+                        origin: Origin::Decl {
+                            decl: di,
+                            elem: None,
+                        },
+                        stem: d.name.clone(),
+                        derived: false,
+                        derived_key: String::new(),
+                        pose_obj,
+                        conf,
+                    },
+                    from..from + arg.len(),
+                ));
+            }
+        }
+        (!out.is_empty()).then_some(out)
+    }
+
+    /// True when the word `name` appears in more than one statement of the
+    /// module's routines (outside strings and comments, as a whole word).
+    fn named_elsewhere(&self, src: &str, name: &str) -> bool {
+        let mut seen = 0;
+        for p in &self.module.procs {
+            for s in &p.body {
+                let text = src.get(s.span()).unwrap_or("");
+                if text_names(text, name) {
+                    seen += 1;
+                    if seen > 1 {
+                        return true;
+                    }
+                }
+            }
+        }
+        false
+    }
+
+    /// Why a move is left as written because its tool or work object is
+    /// known at run time only, if it is: a `tooldata`/`wobjdata` that a
+    /// statement of the program writes (`tActual := tGripper;`), a
+    /// parameter, a routine-local one, or one declared without a literal
+    /// value. The reason names the data (`run-time tool `tActual``).
+    pub(crate) fn load_left(&self, at: At, mv: &Move) -> Option<Left> {
+        let wobj = mv.wobj.as_ref().map(|w| &*w.text);
+        let pairs = [
+            ("tool", Some(&*mv.tool.text), "tool0"),
+            ("work object", wobj, "wobj0"),
+        ];
+        for (what, name, none) in pairs {
+            let Some(name) = name.map(str::trim) else {
+                continue;
+            };
+            if name.eq_ignore_ascii_case(none) {
+                continue;
+            }
+            let literal = |d: &Decl| {
+                matches!(
+                    d.value,
+                    Some(DataValue::ToolData(_)) | Some(DataValue::WobjData(_))
+                )
+            };
+            // Lower case without an allocation per move (a RAPID name has
+            // at most 32 characters; a longer one is declared nowhere).
+            let mut buf = [0u8; 64];
+            let Some(b) = buf.get_mut(..name.len()) else {
+                continue;
+            };
+            b.copy_from_slice(name.as_bytes());
+            b.make_ascii_lowercase();
+            let Ok(lower) = std::str::from_utf8(b) else {
+                continue;
+            };
+            // Assigned (whole, in part or in a compact IF) anywhere in the
+            // program; a tool passed to an instruction is read, not written.
+            let assigned = self
+                .writes
+                .get(lower)
+                .is_some_and(|ws| ws.iter().any(|w| !matches!(w.kind, Kind::Argument(_))));
+            let run_time =
+                if self.is_param(at.proc, lower) || self.local_decl(at.proc, name).is_some() {
+                    true
+                } else {
+                    match self.module_decl(name) {
+                        // Undeclared: the move's resolution says so.
+                        None => false,
+                        Some((_, d)) => assigned || !literal(d),
+                    }
+                };
+            if run_time {
+                return Some(Left {
+                    reason: format!("run-time {what} `{name}`"),
+                    reads: Vec::new(),
+                });
+            }
+        }
+        None
+    }
+
     #[allow(clippy::too_many_arguments)]
     fn cart_at(
         &self,
@@ -796,6 +1066,10 @@ impl<'m> Flow<'m> {
                 .err()
                 .unwrap_or_else(|| input_err(src, file, here, "undeclared")));
         };
+        let declared_rt = matches!(
+            &source,
+            Source::Module(_, d) | Source::Local(d) if d.data_type == DataType::RobTarget
+        );
         let (value, origin, stem) = match source {
             Source::RunTime(r) => return Ok(Err(r)),
             Source::Assigned(a, at2) => {
@@ -824,6 +1098,15 @@ impl<'m> Flow<'m> {
             ),
         };
         let DataValue::RobTarget(rt) = value else {
+            // A robtarget whose value is an expression (a named constant
+            // inside its literal): known by evaluating it, which is not
+            // done; the move keeps it as written.
+            if declared_rt && matches!(value, DataValue::Other { .. }) {
+                if let Origin::Decl { .. } = origin {
+                    reads.push(origin);
+                }
+                return Ok(Err(EXPRESSION_VALUE.into()));
+            }
             return Err(input_err(src, file, here, "this move needs a robtarget"));
         };
         let u = CartUse {
@@ -993,7 +1276,8 @@ fn is_call(text: &str, name: &str) -> bool {
 /// The parameter names of a routine's parameter text (`robtarget pt,
 /// INOUT num n, \switch s | num t{*}`), lower case.
 fn param_names(text: &str) -> Vec<String> {
-    text.split([',', '|'])
+    without_comments(text)
+        .split([',', '|'])
         .filter_map(|p| {
             let p = p.split('{').next().unwrap_or("");
             let word = p
@@ -1002,6 +1286,77 @@ fn param_names(text: &str) -> Vec<String> {
             Some(word.to_ascii_lowercase())
         })
         .collect()
+}
+
+/// The variable, start, end and step texts of a `FOR v FROM a TO b [STEP
+/// c] DO` line.
+fn for_bounds(text: &str) -> Option<(&str, &str, &str, Option<&str>)> {
+    let t = text.trim();
+    let t = t.get(3..)?.trim_start();
+    let word_at = |hay: &str, w: &str| -> Option<usize> {
+        let up = hay.to_ascii_uppercase();
+        let mut from = 0;
+        while let Some(k) = up.get(from..)?.find(w) {
+            let k = from + k;
+            let before = up[..k]
+                .chars()
+                .last()
+                .is_none_or(|c| !c.is_ascii_alphanumeric() && c != '_');
+            let after = up[k + w.len()..]
+                .chars()
+                .next()
+                .is_none_or(|c| !c.is_ascii_alphanumeric() && c != '_');
+            if before && after {
+                return Some(k);
+            }
+            from = k + w.len();
+        }
+        None
+    };
+    let f = word_at(t, "FROM")?;
+    let v = t.get(..f)?.trim();
+    let rest = t.get(f + 4..)?;
+    let to = word_at(rest, "TO")?;
+    let a = rest.get(..to)?.trim();
+    let rest = rest.get(to + 2..)?;
+    let d = word_at(rest, "DO")?;
+    let rest = rest.get(..d)?;
+    let (b, c) = match word_at(rest, "STEP") {
+        Some(k) => (rest.get(..k)?.trim(), Some(rest.get(k + 4..)?.trim())),
+        None => (rest.trim(), None),
+    };
+    Some((v, a, b, c))
+}
+
+/// True when `text` names `name` as a whole word anywhere outside strings
+/// (inside brackets, calls and comments too: a comment only makes the
+/// answer more careful).
+fn text_names(text: &str, name: &str) -> bool {
+    let mut quoted = false;
+    let mut word = String::new();
+    for c in text.chars().chain(std::iter::once(' ')) {
+        if c == '"' {
+            quoted = !quoted;
+        }
+        if !quoted && (c.is_ascii_alphanumeric() || c == '_') {
+            word.push(c);
+            continue;
+        }
+        if word.eq_ignore_ascii_case(name) {
+            return true;
+        }
+        word.clear();
+    }
+    false
+}
+
+/// `text` without its `!` comments (a parameter list written over several
+/// lines may hold some; a parameter list holds no strings).
+pub(crate) fn without_comments(text: &str) -> String {
+    text.lines()
+        .map(|l| l.split('!').next().unwrap_or(""))
+        .collect::<Vec<_>>()
+        .join("\n")
 }
 
 /// Words that are never data names in a statement.

@@ -100,6 +100,10 @@ const STATEMENT_WORDS: &[&str] = &[
     "ENDRECORD",
 ];
 
+/// Words that may start a line of a parameter list written over several
+/// lines (`PROC weld(robtarget a,` / `VAR robtarget c)`).
+const PARAMETER_WORDS: &[&str] = &["VAR", "PERS", "INOUT"];
+
 /// The motion instruction whose name starts `i` (a whole word), and the
 /// text after the name.
 #[inline]
@@ -407,6 +411,13 @@ pub(super) struct Parser<'a> {
     /// The argument texts met last (`v100`, `z1`, `tool1`: a module repeats
     /// a few of them), shared instead of allocated per move.
     texts: std::cell::RefCell<Vec<Arc<str>>>,
+    /// The module's `ALIAS` types met so far: (alias, the type it names),
+    /// lower case.
+    aliases: std::cell::RefCell<Vec<(String, String)>>,
+    /// The module's `CONST num` declarations with a literal value met so
+    /// far (name lower case, value): a number of a literal may be written
+    /// as one of them (`[[0,0,safeHeight],…]`).
+    pub(super) consts: std::cell::RefCell<Vec<(String, f64)>>,
 }
 
 /// Argument texts [`Parser::text`] keeps to share.
@@ -447,6 +458,8 @@ impl<'a> Parser<'a> {
             line_starts: line_starts.into(),
             depth: std::cell::Cell::new(0),
             texts: std::cell::RefCell::new(Vec::new()),
+            aliases: std::cell::RefCell::new(Vec::new()),
+            consts: std::cell::RefCell::new(Vec::new()),
             ahead_min,
         }
     }
@@ -473,6 +486,8 @@ impl<'a> Parser<'a> {
             return Vec::new();
         }
         let (src, file, line_starts) = (self.src, self.file, &self.line_starts);
+        let aliases = self.aliases.borrow().clone();
+        let consts = self.consts.borrow().clone();
         starts
             .par_iter()
             .map_init(
@@ -482,6 +497,8 @@ impl<'a> Parser<'a> {
                     line_starts: std::sync::Arc::clone(line_starts),
                     depth: std::cell::Cell::new(0),
                     texts: std::cell::RefCell::new(Vec::new()),
+                    aliases: std::cell::RefCell::new(aliases.clone()),
+                    consts: std::cell::RefCell::new(consts.clone()),
                     ahead_min: usize::MAX,
                 },
                 |p, &at| {
@@ -641,12 +658,19 @@ impl<'a> Parser<'a> {
             if storage_kw(r).is_some() {
                 let (rest, mut d) = self.decl(i)?;
                 self.evaluate_dims(&mut d, &decls)?;
+                if let (Storage::Const, Some(DataValue::Num(n))) = (d.storage, &d.value) {
+                    self.consts
+                        .borrow_mut()
+                        .push((d.name.to_ascii_lowercase(), n.value));
+                }
                 decls.push(d);
                 i = rest;
             } else if let Some(r) = kw(r, "RECORD") {
                 let (rest, rec) = self.record(i, r, scope)?;
                 records.push(rec);
                 i = rest;
+            } else if let Some(r) = kw(r, "ALIAS") {
+                i = self.alias(r)?;
             } else if let Some((rest, span)) = self.alone_placeholder(i) {
                 placeholders.push(span);
                 i = rest;
@@ -679,6 +703,41 @@ impl<'a> Parser<'a> {
                 procs,
             },
         ))
+    }
+
+    /// The rest of an `ALIAS type name;` declaration after its keyword:
+    /// declarations of type `name` are then read as of `type` (RAPID's
+    /// alias of a data type).
+    fn alias(&self, r: &'a str) -> Result<&'a str, nom::Err<PErr<'a>>> {
+        let r = ws(r);
+        let Ok((r, base)) = ident(r) else {
+            return Err(self.err_found(self.pos(r), "expected a data type name after ALIAS"));
+        };
+        let r = ws(r);
+        let Ok((r, name)) = ident(r) else {
+            return Err(self.err_found(self.pos(r), "expected the alias name"));
+        };
+        let r = ws(r);
+        let Some(r) = r.strip_prefix(';') else {
+            return Err(self.err_after(self.pos(r), "expected `;` to end the ALIAS declaration"));
+        };
+        // An alias of an alias names the type the first one names.
+        let base = self.type_of(base);
+        self.aliases
+            .borrow_mut()
+            .push((name.to_ascii_lowercase(), base));
+        Ok(r)
+    }
+
+    /// The type a declared type name stands for: an alias's type, else
+    /// the name itself.
+    fn type_of(&self, type_name: &str) -> String {
+        let lower = type_name.to_ascii_lowercase();
+        self.aliases
+            .borrow()
+            .iter()
+            .find(|(a, _)| *a == lower)
+            .map_or(type_name.to_string(), |(_, b)| b.clone())
     }
 
     /// A placeholder that stands alone for a statement or declaration
@@ -857,7 +916,11 @@ impl<'a> Parser<'a> {
             }
             r = ws(r);
         }
-        let data_type = DataType::from_name(type_name);
+        let data_type = if self.aliases.borrow().is_empty() {
+            DataType::from_name(type_name)
+        } else {
+            DataType::from_name(&self.type_of(type_name))
+        };
         let mut value = None;
         if let Some(v) = r.strip_prefix(":=") {
             let (v, val) = self.val(v, b",;")?;
@@ -1093,6 +1156,19 @@ impl<'a> Parser<'a> {
         words: &[&str],
         colon: bool,
     ) -> Result<Scan, nom::Err<PErr<'a>>> {
+        self.scan_continued(i, stops, words, colon, &[])
+    }
+
+    /// [`Parser::scan`], where a new line may also start with one of the
+    /// words `continues` (a parameter list's `VAR`, `PERS`, `INOUT`).
+    fn scan_continued(
+        &self,
+        i: &'a str,
+        stops: &[u8],
+        words: &[&str],
+        colon: bool,
+        continues: &[&str],
+    ) -> Result<Scan, nom::Err<PErr<'a>>> {
         let b = i.as_bytes();
         let mut k = 0;
         let mut depth = 0usize;
@@ -1132,7 +1208,9 @@ impl<'a> Parser<'a> {
                 }
                 b'\n' => {
                     let next = ws_inline(i.get(k + 1..).unwrap_or(""));
-                    if STATEMENT_WORDS.iter().any(|w| kw(next, w).is_some()) {
+                    if STATEMENT_WORDS.iter().any(|w| kw(next, w).is_some())
+                        && !continues.iter().any(|w| kw(next, w).is_some())
+                    {
                         let pos = self.pos(i) + last;
                         return Err(self.err_after(pos, "missing `;` at the end of the statement"));
                     }
@@ -1194,7 +1272,7 @@ impl<'a> Parser<'a> {
         let mut r = ws(r1);
         let mut params = None;
         if let Some(p) = r.strip_prefix('(') {
-            let scan = self.scan(p, b")", &[], false)?;
+            let scan = self.scan_continued(p, b")", &[], false, PARAMETER_WORDS)?;
             let p0 = self.pos(p);
             let rest = p.get(scan.stop..).unwrap_or("");
             let Some(rest) = rest.strip_prefix(')') else {

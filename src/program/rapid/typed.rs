@@ -327,11 +327,22 @@ impl<'a> Parser<'a> {
         Ok(<[Number; N]>::try_from(out).ok())
     }
 
-    /// `v` must be a number; a name or expression gives `None`.
+    /// `v` must be a number; the name of a `CONST num` of the module
+    /// declared before gives its value (at the name's span); another name
+    /// or an expression gives `None`.
     fn num(&self, v: &Val, shape: &str) -> Result<Option<Number>, E<'a>> {
         match v {
             Val::Num(n) => Ok(Some(n.clone())),
-            Val::Word { .. } | Val::Expr { .. } => Ok(None),
+            Val::Word { text, span } => Ok(self
+                .consts
+                .borrow()
+                .iter()
+                .find(|(c, _)| c.eq_ignore_ascii_case(text))
+                .map(|&(_, value)| Number {
+                    value,
+                    span: span.clone(),
+                })),
+            Val::Expr { .. } => Ok(None),
             Val::List { .. } | Val::Str { .. } => {
                 Err(self.err_found(v.span().start, &format!("{shape}: expected a number here")))
             }

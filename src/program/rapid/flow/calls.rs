@@ -38,7 +38,7 @@ impl Procedures {
                 continue;
             }
             let text = p.params.as_ref().and_then(|s| src.get(s.clone()));
-            let mut ps = params(text.unwrap_or(""));
+            let mut ps = params(&super::without_comments(text.unwrap_or("")));
             if !ps.is_empty() {
                 // The routine's text after its parameter list.
                 let from = p.params.as_ref().map_or(p.span.start, |s| s.end);
@@ -99,6 +99,37 @@ impl Procedures {
                 .map(|(_, _, value)| value)
                 .collect(),
         )
+    }
+
+    /// The place of parameter `param` (lower case) of procedure `name`
+    /// among its positional parameters, when it is one passed by value.
+    pub fn by_value_position(&self, name: &str, param: &str) -> Option<usize> {
+        let (_, params) = self
+            .procs
+            .iter()
+            .find(|(n, _)| n.eq_ignore_ascii_case(name))?;
+        let k = params
+            .iter()
+            .filter(|p| !p.optional)
+            .position(|p| p.alternatives.iter().any(|a| a.0 == param))?;
+        let p = params.iter().filter(|p| !p.optional).nth(k)?;
+        (!p.alternatives.iter().any(|a| a.1)).then_some(k)
+    }
+
+    /// The positional arguments of the call statement `text` of procedure
+    /// `name`, in order, when they match its positional parameters.
+    pub fn positional<'t>(&self, name: &str, text: &'t str) -> Option<Vec<&'t str>> {
+        let (_, params) = self
+            .procs
+            .iter()
+            .find(|(n, _)| n.eq_ignore_ascii_case(name))?;
+        let rest = after_name(text, name)?;
+        let args: Vec<&str> = arguments(rest)
+            .into_iter()
+            .filter(|(optional, _)| !optional)
+            .map(|(_, a)| a)
+            .collect();
+        (args.len() == params.iter().filter(|p| !p.optional).count()).then_some(args)
     }
 
     /// Each argument of the call statement `text` of procedure `name`:
