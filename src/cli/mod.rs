@@ -11,6 +11,7 @@ mod machines;
 pub mod memory;
 mod output;
 mod rapid;
+mod verify;
 
 use std::path::PathBuf;
 
@@ -76,6 +77,10 @@ pub enum Command {
     Diagnose(DiagnoseArgs),
     /// List the machine files bundled in the binary, with their status.
     Machines,
+    /// Acceptance tests: ISO 230-2, ISO 230-4 and ISO 9283 figures from
+    /// measured (or predicted) data, held against limits.
+    #[command(after_help = verify::VERIFY_EXIT_HELP)]
+    Verify(verify::VerifyArgs),
 }
 
 /// Exit codes of `batch`, also listed in its `--help`.
@@ -363,6 +368,7 @@ pub fn run(cli: Cli) -> Result<i32> {
         Command::Calibrate(a) => calibrate::run_calibrate(&a),
         Command::Diagnose(a) => diagnose::run(&a),
         Command::Machines => machines::list(),
+        Command::Verify(a) => verify::run(&a),
     }?;
     machines::warn_example_used();
     Ok(code)

@@ -46,6 +46,9 @@ pub(crate) struct RawRobot {
     pub _status: Option<serde::de::IgnoredAny>,
     #[serde(default, rename = "calibrations")]
     pub _calibrations: Option<serde::de::IgnoredAny>,
+    /// Limits of the acceptance tests, read by `crate::verify::limits`.
+    #[serde(default, rename = "acceptance")]
+    pub _acceptance: Option<serde::de::IgnoredAny>,
 }
 
 /// `process_force:` — the predicted process force at the TCP.

@@ -41,6 +41,9 @@ pub(crate) struct RawMachineTool {
     pub _status: Option<serde::de::IgnoredAny>,
     #[serde(default, rename = "calibrations")]
     pub _calibrations: Option<serde::de::IgnoredAny>,
+    /// Limits of the acceptance tests, read by `crate::verify::limits`.
+    #[serde(default, rename = "acceptance")]
+    pub _acceptance: Option<serde::de::IgnoredAny>,
     /// Pose of the measuring instrument in the workpiece frame (written by
     /// calibration from instrument-frame observations; not part of the model).
     #[serde(default)]
