@@ -47,3 +47,4 @@ mod robot;
 mod robot_process;
 mod robot_samples;
 mod snapshots;
+mod verify_cli;

@@ -9,7 +9,8 @@
 //!   iso9283: { AP_mm: 0.5, RP_mm: 0.06 }
 //! ```
 //!
-//! A figure passes when its magnitude is at most its limit. A limit of the
+//! A figure passes when its magnitude, to the nanometre the reports give,
+//! is at most its limit. A limit of the
 //! command line replaces the machine file's for the same figure; a limit
 //! naming a group (an axis) replaces one that names none.
 
@@ -149,12 +150,19 @@ pub fn check(groups: &[Group], limits: &[Limit]) -> Vec<Check> {
                     value_mm: f.value_mm,
                     limit_mm: l.max_mm,
                     source: l.source,
-                    pass: f.value_mm.abs() <= l.max_mm,
+                    pass: reported(f.value_mm.abs()) <= l.max_mm,
                 });
             }
         }
     }
     out
+}
+
+/// A value as reports give it, to the nanometre: what a limit is held
+/// against, so that a figure shown equal to its limit passes whatever the
+/// rounding of the data it came from.
+fn reported(v: f64) -> f64 {
+    (v * 1e6).round() / 1e6
 }
 
 /// The `acceptance` key of a machine file.
