@@ -455,3 +455,31 @@ fn iso230_2_after_compensation_keeps_the_scatter_only() {
         ],
     );
 }
+
+/// The examples of docs/verify.md: each ```text block whose first line is
+/// `$ postproc verify …` shows that command's output (stdout and stderr),
+/// run in the repository.
+#[test]
+fn the_examples_of_docs_verify_md_show_real_output() {
+    let doc = std::fs::read_to_string(repo("docs/verify.md")).expect("docs/verify.md");
+    let mut examples = 0;
+    for block in doc.split("```text\n").skip(1) {
+        let body = block.split("```").next().unwrap_or_default();
+        let mut lines = body.lines();
+        let Some(cmd) = lines.next().and_then(|l| l.strip_prefix("$ postproc ")) else {
+            continue;
+        };
+        let shown: Vec<&str> = lines.map(str::trim_end).collect();
+        let out = postproc()
+            .current_dir(repo(""))
+            .args(cmd.split_whitespace())
+            .output()
+            .expect("run");
+        let mut got = String::from_utf8_lossy(&out.stdout).to_string();
+        got.push_str(&String::from_utf8_lossy(&out.stderr));
+        let got: Vec<&str> = got.lines().map(str::trim_end).collect();
+        assert_eq!(got, shown, "docs/verify.md: `{cmd}`");
+        examples += 1;
+    }
+    assert_eq!(examples, 4, "examples of docs/verify.md");
+}
