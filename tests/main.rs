@@ -47,4 +47,5 @@ mod robot;
 mod robot_process;
 mod robot_samples;
 mod snapshots;
+mod uncertainty_coverage;
 mod verify_cli;

@@ -198,9 +198,8 @@ pub fn read_runs(text: &str, file: &str, default_axis: &str) -> Result<Vec<AxisR
             ));
         }
     };
-    // Per axis: targets with, per direction, (run, deviation, line).
-    type Seen = Vec<(u32, f64)>;
-    let mut axes: Vec<(String, usize, Vec<(f64, usize, Seen, Seen)>)> = Vec::new();
+    // Per axis: its first line and its targets.
+    let mut axes: Vec<(String, usize, Vec<Gathered>)> = Vec::new();
     for row in &table.rows {
         let need = |name: &str| {
             row.number(&table, name)
@@ -226,18 +225,23 @@ pub fn read_runs(text: &str, file: &str, default_axis: &str) -> Result<Vec<AxisR
         let targets = &mut axes[a].2;
         let t = match targets
             .iter()
-            .position(|(p, ..)| (p - target).abs() <= SAME_TARGET_MM)
+            .position(|g| (g.target - target).abs() <= SAME_TARGET_MM)
         {
             Some(t) => t,
             None => {
-                targets.push((target, row.line, Vec::new(), Vec::new()));
+                targets.push(Gathered {
+                    target,
+                    line: row.line,
+                    up: Vec::new(),
+                    down: Vec::new(),
+                });
                 targets.len() - 1
             }
         };
         let side = if dir > 0.0 {
-            &mut targets[t].2
+            &mut targets[t].up
         } else {
-            &mut targets[t].3
+            &mut targets[t].down
         };
         if side.iter().any(|(r, _)| *r == run) {
             return Err(row.error(
@@ -254,13 +258,13 @@ pub fn read_runs(text: &str, file: &str, default_axis: &str) -> Result<Vec<AxisR
     axes.into_iter()
         .map(|(axis, line, mut targets)| {
             check_counts(file, &axis, line, &targets)?;
-            targets.sort_by(|a, b| a.0.total_cmp(&b.0));
+            targets.sort_by(|a, b| a.target.total_cmp(&b.target));
             let targets = targets
                 .into_iter()
-                .map(|(target_mm, _, up, down)| TargetRuns {
-                    target_mm,
-                    up: up.into_iter().map(|(_, d)| d).collect(),
-                    down: down.into_iter().map(|(_, d)| d).collect(),
+                .map(|g| TargetRuns {
+                    target_mm: g.target,
+                    up: g.up.into_iter().map(|(_, d)| d).collect(),
+                    down: g.down.into_iter().map(|(_, d)| d).collect(),
                 })
                 .collect();
             Ok(AxisRuns { axis, targets })
@@ -268,13 +272,17 @@ pub fn read_runs(text: &str, file: &str, default_axis: &str) -> Result<Vec<AxisR
         .collect()
 }
 
-/// At least [`MIN_TARGETS`] targets and [`MIN_RUNS`] runs per direction.
-fn check_counts(
-    file: &str,
-    axis: &str,
+/// The runs of one target as read: (run, deviation) per direction.
+struct Gathered {
+    target: f64,
+    /// Line of its first row.
     line: usize,
-    targets: &[(f64, usize, Vec<(u32, f64)>, Vec<(u32, f64)>)],
-) -> Result<()> {
+    up: Vec<(u32, f64)>,
+    down: Vec<(u32, f64)>,
+}
+
+/// At least [`MIN_TARGETS`] targets and [`MIN_RUNS`] runs per direction.
+fn check_counts(file: &str, axis: &str, line: usize, targets: &[Gathered]) -> Result<()> {
     if targets.len() < MIN_TARGETS {
         return Err(Error::Input(Located::new(
             file,
@@ -286,12 +294,13 @@ fn check_counts(
             ),
         )));
     }
-    for (target, tline, up, down) in targets {
-        for (n, sign) in [(up.len(), "+"), (down.len(), "-")] {
+    for g in targets {
+        let target = g.target;
+        for (n, sign) in [(g.up.len(), "+"), (g.down.len(), "-")] {
             if n < MIN_RUNS {
                 return Err(Error::Input(Located::new(
                     file,
-                    *tline,
+                    g.line,
                     1,
                     format!(
                         "axis {axis}, target {target} mm: {n} runs in the {sign} direction; ISO 230-2 asks for at least {MIN_RUNS}"
