@@ -483,3 +483,101 @@ fn the_examples_of_docs_verify_md_show_real_output() {
     }
     assert_eq!(examples, 4, "examples of docs/verify.md");
 }
+
+/// A machine whose only error is a scale error of X, EXX = 0.05 µm/mm,
+/// with a reversal of `reversal_um` in the reverse column.
+fn scale_machine(dir: &std::path::Path, reversal_um: f64) -> String {
+    let m = write(
+        dir,
+        &format!("scale{reversal_um}.yaml"),
+        &format!(
+            "kind: machine_tool
+name: X scale
+axes:
+  - name: X
+    type: linear
+    side: workpiece
+    travel_mm: [0, 400]
+    rapid_mm_per_min: 20000
+    component_errors:
+      EXX_um: {{ positions_mm: [0, 400], forward: [0, 20], reverse: [{reversal_um}, {}] }}
+  - name: Y
+    type: linear
+    side: workpiece
+    travel_mm: [0, 300]
+    rapid_mm_per_min: 20000
+  - name: Z
+    type: linear
+    side: tool
+    travel_mm: [0, 300]
+    rapid_mm_per_min: 20000
+",
+            20.0 + reversal_um
+        ),
+    );
+    m.to_str().unwrap().to_string()
+}
+
+#[test]
+fn iso230_4_predicted_from_a_model() {
+    let dir = tempfile::tempdir().unwrap();
+    // A scale error k = 5e-5 on a circle of R = 100 mm about X = 200:
+    // dr = k (200 + R cos θ) cos θ = k·200 cos θ + kR/2 + kR/2 cos 2θ;
+    // the least-squares circle takes the first two terms, the range of
+    // the third is kR = 0.005 mm in both directions, without hysteresis.
+    let m = scale_machine(dir.path(), 0.0);
+    let args = [
+        "iso230-4",
+        "--predict",
+        "--machine",
+        &m,
+        "--radius",
+        "100",
+        "--at",
+        "X=200,Y=150",
+    ];
+    let (code, r, err) = verify_json(&args);
+    assert_eq!(code, 0, "{err}");
+    assert_figures(
+        &r,
+        "circle",
+        &[
+            ("G_ccw", 0.005),
+            ("G_cw", 0.005),
+            ("G_b", 0.005),
+            ("H", 0.0),
+        ],
+    );
+    // A reversal of 2 µm: X moves in − on 0° < θ < 180° counter-clockwise
+    // and on 180° < θ < 360° clockwise, so at 1° (and 179°, 181°, 359°)
+    // one path holds 2 µm·cos 1° more than the other: H = 0.0019997 mm.
+    let m = scale_machine(dir.path(), 2.0);
+    let args = [
+        "iso230-4",
+        "--predict",
+        "--machine",
+        &m,
+        "--radius",
+        "100",
+        "--at",
+        "X=200,Y=150",
+    ];
+    let (code, r, err) = verify_json(&args);
+    assert_eq!(code, 0, "{err}");
+    assert_figures(&r, "circle", &[("H", 0.002 * 1f64.to_radians().cos())]);
+    let (code, _, err) = verify(&["iso230-4", "--predict", "--machine", &m, "--radius", "250"]);
+    assert_eq!(code, 2);
+    assert!(err.contains("the circle leaves the travel of X"), "{err}");
+    let (code, _, err) = verify(&[
+        "iso230-4",
+        "--predict",
+        "--machine",
+        &m,
+        "--radius",
+        "10",
+        "--plane",
+        "XX",
+    ]);
+    assert_eq!(code, 2);
+    assert!(err.contains("--plane XX"), "{err}");
+}

@@ -9,7 +9,9 @@ use clap::{Args, Subcommand, ValueEnum};
 use crate::error::{Error, Result};
 use crate::machine::{Machine, MachineFile, axis_slot};
 use crate::verify::iso230_2::{self, Iso230_2};
-use crate::verify::predicted::{AxisSetup, compensated, predicted_runs};
+use crate::verify::predicted::{
+    AxisSetup, CircleSetup, compensated, predicted_circle, predicted_runs,
+};
 use crate::verify::{
     Evaluation, Limit, Source, Standard, iso230_4, iso9283, limits, report_json, report_table,
 };
@@ -37,7 +39,8 @@ pub enum VerifyTest {
     #[command(name = "iso230-2", after_help = VERIFY_EXIT_HELP)]
     Iso230_2(Iso230_2Args),
     /// ISO 230-4: circular deviation G of each direction, bidirectional
-    /// G_b and hysteresis H from radial deviations of a circular test.
+    /// G_b and hysteresis H from radial deviations of a circular test, or
+    /// predicted by a machine model (--predict).
     #[command(name = "iso230-4", after_help = VERIFY_EXIT_HELP)]
     Iso230_4(Iso230_4Args),
     /// ISO 9283: pose accuracy AP and repeatability RP from repeated visits
@@ -111,8 +114,30 @@ pub struct Iso230_2Args {
 /// `postproc verify iso230-4`.
 #[derive(Debug, Args)]
 pub struct Iso230_4Args {
-    /// Circular-test file (docs/verify.md).
-    pub file: PathBuf,
+    /// Circular-test file (docs/verify.md); not with --predict.
+    #[arg(required_unless_present = "predict", conflicts_with = "predict")]
+    pub file: Option<PathBuf>,
+    /// Predict the test from the machine model (needs --machine and
+    /// --radius).
+    #[arg(long, requires_all = ["machine", "radius"])]
+    pub predict: bool,
+    /// Plane of a predicted circle: two linear axes, the first the angle's
+    /// zero (XY, YZ, ZX, …).
+    #[arg(long, default_value = "XY", requires = "predict")]
+    pub plane: String,
+    /// Radius of a predicted circle, mm.
+    #[arg(long, requires = "predict")]
+    pub radius: Option<f64>,
+    /// Centre of a predicted circle: X=200,Y=250,Z=100 (default: linear
+    /// axes mid-travel, rotary axes 0).
+    #[arg(long, value_name = "AXIS=VALUE,...", requires = "predict")]
+    pub at: Option<String>,
+    /// Points per direction of a predicted circle.
+    #[arg(long, default_value_t = 360, requires = "predict")]
+    pub points: usize,
+    /// Tool length of a prediction, mm.
+    #[arg(long, default_value_t = 0.0)]
+    pub tool_mm: f64,
     /// Limits, machine and output.
     #[command(flatten)]
     pub common: CommonArgs,
@@ -135,12 +160,7 @@ pub struct Iso9283Args {
 pub fn run(a: &VerifyArgs) -> Result<i32> {
     match &a.test {
         VerifyTest::Iso230_2(a) => run_230_2(a),
-        VerifyTest::Iso230_4(a) => {
-            let text = read_text(&a.file)?;
-            let circle = iso230_4::read_circle(&text, &shown(&a.file))?;
-            let eval = iso230_4::evaluate(&circle);
-            finish(&eval, &measured(&a.file), &a.common, &[a.file.as_path()])
-        }
+        VerifyTest::Iso230_4(a) => run_230_4(a),
         VerifyTest::Iso9283(a) => {
             let poses = iso9283::read_visits(&read_text(&a.file)?, &shown(&a.file), false)?;
             let path = match &a.path {
@@ -215,6 +235,79 @@ fn run_230_2(a: &Iso230_2Args) -> Result<i32> {
         axes: axes.iter().map(iso230_2::evaluate_axis).collect(),
     };
     finish(&eval, &source, &a.common, &[file])
+}
+
+fn run_230_4(a: &Iso230_4Args) -> Result<i32> {
+    if let (true, Some(m)) = (a.predict, &a.common.machine) {
+        let (machine, shown_m) = tool_machine(m)?;
+        let setup = circle_setup(&machine, a)?;
+        let eval = iso230_4::evaluate(&predicted_circle(&machine, &setup));
+        let source = Source::Predicted {
+            machine: shown_m,
+            note: format!(
+                "a circle of {} mm in {}, {} points per direction",
+                a.radius.unwrap_or_default(),
+                a.plane.to_ascii_uppercase(),
+                a.points
+            ),
+        };
+        return finish(&eval, &source, &a.common, &[]);
+    }
+    let file = a
+        .file
+        .as_deref()
+        .ok_or_else(|| usage("iso230-4: a circular-test file, or --predict"))?;
+    let circle = iso230_4::read_circle(&read_text(file)?, &shown(file))?;
+    finish(
+        &iso230_4::evaluate(&circle),
+        &measured(file),
+        &a.common,
+        &[file],
+    )
+}
+
+/// The circle of `verify iso230-4 --predict`.
+fn circle_setup(m: &crate::machine::tool::MachineTool, a: &Iso230_4Args) -> Result<CircleSetup> {
+    let slot = |c: u8| axis_slot(c.to_ascii_uppercase()).filter(|&s| s < 3 && m.has_axis(s));
+    let plane = match a.plane.as_bytes() {
+        [p, q] => slot(*p).zip(slot(*q)).filter(|(p, q)| p != q),
+        _ => None,
+    }
+    .ok_or_else(|| {
+        usage(format!(
+            "--plane {}: two different linear axes of the machine (XY, YZ, ZX, …)",
+            a.plane
+        ))
+    })?;
+    let radius_mm = a.radius.unwrap_or_default();
+    if !(radius_mm.is_finite() && radius_mm > 0.0) {
+        return Err(usage("--radius: a positive number of mm"));
+    }
+    if a.points < iso230_4::MIN_POINTS {
+        return Err(usage(format!(
+            "--points: at least {}",
+            iso230_4::MIN_POINTS
+        )));
+    }
+    let setup = AxisSetup::new(m, &a.plane[..1], &parse_at(a.at.as_deref())?, a.tool_mm)?;
+    for s in [plane.0, plane.1] {
+        if let Some((lo, hi)) = m.travel(s) {
+            let c = setup.at[s];
+            if c - radius_mm < lo || c + radius_mm > hi {
+                return Err(usage(format!(
+                    "the circle leaves the travel of {} ({lo} to {hi} mm) about {c} mm",
+                    ["X", "Y", "Z"][s]
+                )));
+            }
+        }
+    }
+    Ok(CircleSetup {
+        plane,
+        centre: setup.at,
+        radius_mm,
+        points: a.points,
+        tool_mm: a.tool_mm,
+    })
 }
 
 /// A machine-tool model and how errors name its file.

@@ -13,6 +13,11 @@
 //! the target, so a run measured before compensation would read its
 //! deviation minus the model's: [`compensated`] subtracts the prediction
 //! from each measured run and keeps the measured scatter.
+//!
+//! A circular test (ISO 230-4) of a model: [`predicted_circle`] gives the
+//! radial deviations on a nominal circle in the plane of two linear axes,
+//! each direction with the axes' directions of motion of its approach (a
+//! reversal error shows as hysteresis).
 
 use super::iso230_2::{AxisRuns, TargetRuns};
 use crate::error::{Error, Result};
@@ -143,5 +148,64 @@ pub fn compensated(machine: &MachineTool, setup: &AxisSetup, measured: &AxisRuns
                 }
             })
             .collect(),
+    }
+}
+
+/// A circular test of a machine model (ISO 230-4): a circle in the plane
+/// of two linear axes.
+#[derive(Debug, Clone, PartialEq)]
+pub struct CircleSetup {
+    /// The axes of the plane (slots; the first is the angle's zero).
+    pub plane: (usize, usize),
+    /// Every axis' position at the centre.
+    pub centre: AxisVec,
+    /// Radius, mm.
+    pub radius_mm: f64,
+    /// Points per direction, equally spaced from angle 0.
+    pub points: usize,
+    /// Tool length, mm.
+    pub tool_mm: f64,
+}
+
+/// The sign of a velocity component, +1 for zero.
+fn sign(v: f64) -> i8 {
+    if v < 0.0 { -1 } else { 1 }
+}
+
+/// Angle just before a point along a path, rad: the directions of motion
+/// are those of the approach.
+const APPROACH_RAD: f64 = 1e-9;
+
+/// The radial deviations a model predicts on a circle, both directions:
+/// at each point the component along the radius of the tip's predicted
+/// deviation, each axis' direction of motion that of the approach.
+pub fn predicted_circle(machine: &MachineTool, c: &CircleSetup) -> super::iso230_4::Circle {
+    let p = ToolPredictor::new(machine, EffectSet::default());
+    let (a, b) = c.plane;
+    let path = |ccw: bool| -> super::iso230_4::Path {
+        (0..c.points)
+            .map(|k| {
+                let t = std::f64::consts::TAU * k as f64 / c.points as f64;
+                let mut cmd = c.centre;
+                cmd[a] += c.radius_mm * t.cos();
+                cmd[b] += c.radius_mm * t.sin();
+                let mut dirs: DirVec = [1; 6];
+                if ccw {
+                    let u = t - APPROACH_RAD;
+                    dirs[a] = sign(-u.sin());
+                    dirs[b] = sign(u.cos());
+                } else {
+                    let u = t + APPROACH_RAD;
+                    dirs[a] = sign(u.sin());
+                    dirs[b] = sign(-u.cos());
+                }
+                let d = p.breakdown(&cmd, &dirs, c.tool_mm).total();
+                (t, d[a] * t.cos() + d[b] * t.sin())
+            })
+            .collect()
+    };
+    super::iso230_4::Circle {
+        ccw: path(true),
+        cw: path(false),
     }
 }
