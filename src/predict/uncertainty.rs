@@ -11,6 +11,26 @@
 //! models with each parameter moved by its step, built once
 //! ([`ToolSensitivity`], [`RobotSensitivity`]); each evaluation at a pose
 //! is then two predictions per parameter.
+//!
+//! A machine file carries the covariance of what a calibration identified
+//! in its top-level `covariance` list, one entry per calibrated section
+//! ([`CovarianceBlock`]: the key path of each parameter, its standard
+//! uncertainty in the key's unit, the correlations, and the data it came
+//! from); a file without the list carries no uncertainty and
+//! [`read_covariance`] says so with an empty list:
+//!
+//! ```yaml
+//! covariance:
+//!   - kind: geometry
+//!     observations: grid.csv
+//!     observations_sha256: 9f…
+//!     rows: 242
+//!     parameters: ["axes[Y].location_errors.EC0Y_urad", "axes[X].component_errors.EXX_um.forward[3]"]
+//!     u: [1.2, 0.8]
+//!     correlation:
+//!       - [1.0, 0.12]
+//!       - [0.12, 1.0]
+//! ```
 
 use nalgebra::{DMatrix, Matrix3, Matrix3xX, Vector3};
 
@@ -177,6 +197,176 @@ pub fn per_effect(
         .collect())
 }
 
+/// The covariance of one calibrated section as a machine file records it.
+#[derive(Debug, Clone, PartialEq, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CovarianceBlock {
+    /// What was identified (`geometry`, `kinematics`, `stiffness`,
+    /// `thermal`, `diagnose`).
+    pub kind: String,
+    /// File name of the observation file.
+    pub observations: String,
+    /// SHA-256 of the observation file's bytes, lower-case hex.
+    pub observations_sha256: String,
+    /// Rows of the observation file used.
+    pub rows: usize,
+    /// Key path of each parameter.
+    pub parameters: Vec<String>,
+    /// Standard uncertainty of each, in the unit of its key.
+    pub u: Vec<f64>,
+    /// Correlation matrix, one row per parameter.
+    pub correlation: Vec<Vec<f64>>,
+}
+
+/// Largest departure of a correlation from symmetry or of its diagonal
+/// from 1 accepted (the four decimals a file writes).
+pub const CORRELATION_TOL: f64 = 1e-4;
+
+impl CovarianceBlock {
+    /// The block of a fit: parameters, their covariance and the data.
+    pub fn from_fit(
+        kind: &str,
+        observations: &str,
+        observations_sha256: &str,
+        rows: usize,
+        parameters: Vec<String>,
+        cov: &DMatrix<f64>,
+    ) -> Self {
+        let u: Vec<f64> = cov.diagonal().iter().map(|v| v.max(0.0).sqrt()).collect();
+        let n = u.len();
+        let correlation = (0..n)
+            .map(|i| {
+                (0..n)
+                    .map(|j| {
+                        if i == j {
+                            1.0
+                        } else if u[i] > 0.0 && u[j] > 0.0 {
+                            (cov[(i, j)] / (u[i] * u[j])).clamp(-1.0, 1.0)
+                        } else {
+                            0.0
+                        }
+                    })
+                    .collect()
+            })
+            .collect();
+        CovarianceBlock {
+            kind: kind.to_string(),
+            observations: observations.to_string(),
+            observations_sha256: observations_sha256.to_string(),
+            rows,
+            parameters,
+            u,
+            correlation,
+        }
+    }
+
+    /// The effect the parameters of a calibration kind belong to.
+    pub fn effect(&self) -> &'static str {
+        match self.kind.as_str() {
+            "geometry" => "geometric",
+            "kinematics" => "kinematic",
+            "stiffness" => "static",
+            "thermal" => "thermal",
+            _ => "other",
+        }
+    }
+
+    /// Refuses a block whose sizes disagree, whose uncertainties are
+    /// negative or not finite, or whose correlation is not symmetric with
+    /// a unit diagonal and entries within ±1 (to [`CORRELATION_TOL`]).
+    pub fn validate(&self) -> std::result::Result<(), String> {
+        let n = self.parameters.len();
+        if self.u.len() != n || self.correlation.len() != n {
+            return Err(format!(
+                "{n} parameters but {} uncertainties and {} correlation rows",
+                self.u.len(),
+                self.correlation.len()
+            ));
+        }
+        if let Some(v) = self.u.iter().find(|v| !(v.is_finite() && **v >= 0.0)) {
+            return Err(format!("an uncertainty of {v}: not a number of at least 0"));
+        }
+        for (i, row) in self.correlation.iter().enumerate() {
+            if row.len() != n {
+                return Err(format!(
+                    "correlation row {i} has {} values, not {n}",
+                    row.len()
+                ));
+            }
+            for (j, r) in row.iter().enumerate() {
+                let bad = !r.is_finite()
+                    || r.abs() > 1.0 + CORRELATION_TOL
+                    || (i == j && (r - 1.0).abs() > CORRELATION_TOL)
+                    || (r - self.correlation[j][i]).abs() > CORRELATION_TOL;
+                if bad {
+                    return Err(format!("correlation ({i}, {j}) = {r} is not a correlation"));
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// The covariance matrix u_i ρ_ij u_j (symmetrised).
+    pub fn covariance(&self) -> Result<ParamCovariance> {
+        self.validate().map_err(Error::Data)?;
+        let n = self.u.len();
+        let c = DMatrix::from_fn(n, n, |i, j| {
+            let r = 0.5 * (self.correlation[i][j] + self.correlation[j][i]);
+            self.u[i] * r * self.u[j]
+        });
+        ParamCovariance::new(vec![self.effect(); n], c)
+    }
+
+    /// The block as an entry of the `covariance` list (two-space indent,
+    /// uncertainties in shortest round-trip form, correlations to four
+    /// decimals).
+    pub fn to_yaml_entry(&self) -> String {
+        let quoted: Vec<String> = self
+            .parameters
+            .iter()
+            .map(|p| serde_json::to_string(p).unwrap_or_default())
+            .collect();
+        let u: Vec<String> = self.u.iter().map(|v| format!("{v:?}")).collect();
+        let mut out = format!(
+            "  - kind: {}\n    observations: {}\n    observations_sha256: {}\n    rows: {}\n    parameters: [{}]\n    u: [{}]\n    correlation:\n",
+            self.kind,
+            serde_json::to_string(&self.observations).unwrap_or_default(),
+            self.observations_sha256,
+            self.rows,
+            quoted.join(", "),
+            u.join(", ")
+        );
+        for row in &self.correlation {
+            let r: Vec<String> = row
+                .iter()
+                .map(|v| {
+                    let s = format!("{v:.4}");
+                    if s == "-0.0000" { "0.0000".into() } else { s }
+                })
+                .collect();
+            out.push_str(&format!("      - [{}]\n", r.join(", ")));
+        }
+        out
+    }
+}
+
+/// The `covariance` list of a machine file (empty: the file carries no
+/// parameter uncertainty); `file` names it in errors.
+pub fn read_covariance(text: &str, file: &str) -> Result<Vec<CovarianceBlock>> {
+    #[derive(serde::Deserialize)]
+    struct Raw {
+        #[serde(default)]
+        covariance: Vec<CovarianceBlock>,
+    }
+    let raw: Raw = crate::machine::yaml::deserialize(text, file)?;
+    for (i, b) in raw.covariance.iter().enumerate() {
+        b.validate().map_err(|m| {
+            crate::machine::yaml::located(text, file, &format!("covariance[{i}]"), &m)
+        })?;
+    }
+    Ok(raw.covariance)
+}
+
 /// Sensitivities of a machine tool's predicted tip deviation (attained −
 /// nominal, geometric chain) to its parameters.
 #[derive(Debug, Clone)]
@@ -281,6 +471,34 @@ mod tests {
         assert_eq!(parts[0].0, "geometric");
         assert_abs_diff_eq!(parts[0].1.cov_mm2[(1, 1)], 4.0, epsilon = 1e-12);
         assert_abs_diff_eq!(parts[1].1.cov_mm2[(0, 0)], 9.0, epsilon = 1e-12);
+    }
+
+    #[test]
+    fn a_covariance_block_round_trips_through_its_yaml() {
+        // u = (2, 3), ρ = 0.5: covariance [[4, 3], [3, 9]].
+        let cov = DMatrix::from_row_slice(2, 2, &[4.0, 3.0, 3.0, 9.0]);
+        let params = vec![
+            "axes[Y].location_errors.EC0Y_urad".to_string(),
+            "axes[X].component_errors.EXX_um.forward[3]".to_string(),
+        ];
+        let b = CovarianceBlock::from_fit("geometry", "grid.csv", "9f00", 242, params, &cov);
+        let yaml = format!("kind: machine_tool\ncovariance:\n{}", b.to_yaml_entry());
+        assert!(yaml.contains("      - [1.0000, 0.5000]\n"), "{yaml}");
+        let back = read_covariance(&yaml, "m.yaml").unwrap();
+        assert_eq!(back, vec![b]);
+        let c = back[0].covariance().unwrap();
+        assert_abs_diff_eq!(c.matrix()[(0, 1)], 3.0, epsilon = 1e-12);
+        assert_abs_diff_eq!(c.matrix()[(1, 1)], 9.0, epsilon = 1e-12);
+        assert_eq!(c.effect_names(), vec!["geometric"]);
+        // A file without the list carries none.
+        assert!(
+            read_covariance("kind: robot\n", "r.yaml")
+                .unwrap()
+                .is_empty()
+        );
+        let bad = yaml.replace("[1.0000, 0.5000]", "[1.0000, 0.7000]");
+        let e = read_covariance(&bad, "m.yaml").unwrap_err().to_string();
+        assert!(e.contains("covariance[0]: correlation (0, 1)"), "{e}");
     }
 
     #[test]
