@@ -21,5 +21,6 @@ pub mod pipeline;
 pub mod predict;
 pub mod process;
 pub mod program;
+pub mod verify;
 
 pub use error::{Error, Result};

@@ -31,6 +31,8 @@ const LAYERS: &[&[&str]] = &[
     // Identification from measured data.
     &["calibrate"],
     &["diagnose"],
+    // Acceptance tests to the standards.
+    &["verify"],
     // Flags and commands.
     &["cli"],
 ];

@@ -50,3 +50,5 @@ mod robot_library;
 mod robot_process;
 mod robot_samples;
 mod snapshots;
+mod uncertainty_coverage;
+mod verify_cli;

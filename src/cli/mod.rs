@@ -11,6 +11,7 @@ mod machines;
 pub mod memory;
 mod output;
 mod rapid;
+mod verify;
 
 use std::path::PathBuf;
 
@@ -78,6 +79,10 @@ pub enum Command {
     /// reach and payload); `machines new NAME -o FILE` writes a robot cell
     /// file to start from.
     Machines(machines::MachinesArgs),
+    /// Acceptance tests: ISO 230-2, ISO 230-4 and ISO 9283 figures from
+    /// measured (or predicted) data, held against limits.
+    #[command(after_help = verify::VERIFY_EXIT_HELP)]
+    Verify(verify::VerifyArgs),
 }
 
 /// Exit codes of `batch`, also listed in its `--help`.
@@ -370,6 +375,7 @@ pub fn run(cli: Cli) -> Result<i32> {
         Command::Calibrate(a) => calibrate::run_calibrate(&a),
         Command::Diagnose(a) => diagnose::run(&a),
         Command::Machines(a) => machines::run(&a),
+        Command::Verify(a) => verify::run(&a),
     }?;
     machines::warn_example_used();
     Ok(code)

@@ -11,6 +11,8 @@
 //! and thermal state, spindle speed, vibration) is computed once per block in
 //! program order by the job and handed over as a [`BlockContext`].
 
+pub mod uncertainty;
+
 use nalgebra::Vector3;
 
 use crate::error::{Error, Result};

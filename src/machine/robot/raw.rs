@@ -52,6 +52,13 @@ pub(crate) struct RawRobot {
     /// applied ([`crate::machine::plausibility`]).
     #[serde(default)]
     pub plausibility: Option<crate::machine::plausibility::Overrides>,
+    /// Limits of the acceptance tests, read by `crate::verify::limits`.
+    #[serde(default, rename = "acceptance")]
+    pub _acceptance: Option<serde::de::IgnoredAny>,
+    /// Parameter covariance per calibrated section, read by
+    /// `crate::predict::uncertainty::read_covariance`.
+    #[serde(default, rename = "covariance")]
+    pub _covariance: Option<serde::de::IgnoredAny>,
 }
 
 /// `process_force:` — the predicted process force at the TCP.

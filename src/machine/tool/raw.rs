@@ -41,6 +41,13 @@ pub(crate) struct RawMachineTool {
     pub _status: Option<serde::de::IgnoredAny>,
     #[serde(default, rename = "calibrations")]
     pub _calibrations: Option<serde::de::IgnoredAny>,
+    /// Limits of the acceptance tests, read by `crate::verify::limits`.
+    #[serde(default, rename = "acceptance")]
+    pub _acceptance: Option<serde::de::IgnoredAny>,
+    /// Parameter covariance per calibrated section, read by
+    /// `crate::predict::uncertainty::read_covariance`.
+    #[serde(default, rename = "covariance")]
+    pub _covariance: Option<serde::de::IgnoredAny>,
     /// Pose of the measuring instrument in the workpiece frame (written by
     /// calibration from instrument-frame observations; not part of the model).
     #[serde(default)]
