@@ -441,6 +441,7 @@ pub(super) fn arc_block(
     let count = res.segments.len();
     res.center = res.arcs.last().filter(|p| p.to == count).map(|p| p.center);
     res.residual_mm = res.residual_mm.max(left);
+    res.miss_mm = res.miss_mm.max(left);
     for p in res.segments.iter() {
         check_travel(pred, p)?;
     }

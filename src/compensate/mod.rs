@@ -215,7 +215,8 @@ pub struct BlockResult {
     /// programmed path where the block holds one its proofs do not cover,
     /// mm: a canned-cycle hole drilled at one X and Y along its depth, a
     /// straight move whose pieces move an axis against the directions they
-    /// were solved with. 0 when none; the pipeline warns about the block
+    /// were solved with, the gap a move starts with where no takeup is
+    /// written (cutter radius compensation). 0 when none; the pipeline warns about the block
     /// and counts it when this exceeds the tolerance.
     pub miss_mm: f64,
     /// The directions of motion the block's end is solved with (its
@@ -1418,6 +1419,7 @@ fn straight<'m>(
             res.residual_mm = end_residual;
         }
         let c1 = res.end;
+        let mut left = 0.0;
         // The start is the previous block's end: where that block left
         // the machine (with whatever tool length it was solved for).
         let (c0, start_gap) = match carry_in {
@@ -1434,6 +1436,7 @@ fn straight<'m>(
                 )?;
                 res.takeup = st.takeup;
                 res.residual_mm = res.residual_mm.max(st.left_mm);
+                left = st.left_mm;
                 (st.c, st.gap)
             }
             _ => (
@@ -1462,13 +1465,15 @@ fn straight<'m>(
         };
         let (real, moved) = piece_dirs(&moved_in, &from, res, &d);
         result = (d, moved);
+        // A gap left at the start (no takeup under cutter radius
+        // compensation) is a miss of the first piece.
         match real {
             None => {
-                res.miss_mm = 0.0;
+                res.miss_mm = left;
                 break;
             }
             Some(r) => {
-                res.miss_mm = pieces_miss(pred, mv, (&from, &moved_in), res, tool);
+                res.miss_mm = pieces_miss(pred, mv, (&from, &moved_in), res, tool).max(left);
                 d = r;
             }
         }

@@ -817,7 +817,9 @@ impl<'j, 'm, 'o, 'r> WriteStage<'j, 'm, 'o, 'r> {
             summary.cutting.add(dev, line_no);
         }
         let tol = self.job.settings.tolerance_mm;
-        if r.miss_mm > tol {
+        // Only a written program states a tolerance (a report has none).
+        let written = self.out.is_some();
+        if r.miss_mm > tol && written {
             summary.beyond.add(r.miss_mm, line_no);
             let what = if matches!(plan.kind, PlanKind::Cycle { .. }) {
                 "the hole, drilled at one X and Y,"
@@ -837,7 +839,11 @@ impl<'j, 'm, 'o, 'r> WriteStage<'j, 'm, 'o, 'r> {
                 });
             }
         }
-        let left = r.residual_mm.max(r.miss_mm);
+        let left = if written {
+            r.residual_mm.max(r.miss_mm)
+        } else {
+            r.residual_mm
+        };
         if mv.motion != Motion::Rapid && left > summary.max_residual_mm {
             summary.max_residual_mm = left;
             summary.max_residual_line = line_no;
