@@ -460,13 +460,13 @@ fn every_case(effects: &str) {
 }
 
 #[test]
-#[ignore = "issue 41: pieces of arcs are checked at points, not proven; some helical pieces miss by a fraction of a micron"]
+#[ignore = "issue 41, open: three pieces miss unwarned (part.nc line 57 by 0.01 µm at 3 µm; effects.nc line 18 by 2.7 µm and block_delete.nc line 53 by 0.01 µm at 1 µm), the rest beyond are warned; run with --ignored"]
 fn every_written_piece_lands_within_the_tolerance_geometric() {
     every_case("geometric");
 }
 
 #[test]
-#[ignore = "issue 41: pieces of arcs are checked at points, not proven; some helical pieces miss by a fraction of a micron"]
+#[ignore = "issue 41, open: helical and arc pieces miss by up to 7 µm under process force (each written piece gets its own load when read back, the solve used the block's); run with --ignored"]
 fn every_written_piece_lands_within_the_tolerance_quasi_static() {
     every_case("geometric,static,thermal");
 }
