@@ -42,6 +42,7 @@ mod rapid_stream;
 mod readme;
 mod regression;
 mod report_cli;
+mod report_html;
 mod repredict;
 mod robot;
 mod robot_process;

@@ -387,6 +387,7 @@ fn report_path(output: &Path, format: Format) -> PathBuf {
         Format::Csv => "csv",
         Format::Json => "json",
         Format::Svg => "svg",
+        Format::Html => "html",
     };
     let mut name = output.as_os_str().to_owned();
     name.push(format!(".report.{ext}"));

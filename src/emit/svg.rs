@@ -81,19 +81,31 @@ fn mark_style(w: &Worst) -> (RGBColor, &'static str) {
 /// of largest deviation (the earlier one on ties); when the buffer is full,
 /// neighbouring buckets merge and the stride doubles. Deterministic.
 #[derive(Debug, Clone)]
-pub struct Decimator {
+pub struct Decimator<T = PlotPoint> {
     cap: usize,
     stride: usize,
     in_bucket: usize,
-    bucket: Option<PlotPoint>,
-    points: Vec<PlotPoint>,
+    bucket: Option<T>,
+    points: Vec<T>,
 }
 
-fn larger(a: PlotPoint, b: PlotPoint) -> PlotPoint {
-    if b.dev > a.dev { b } else { a }
+/// What a [`Decimator`] keeps of each bucket: the point of largest value.
+pub trait Peak {
+    /// The value compared (|deviation|, mm).
+    fn peak(&self) -> f64;
 }
 
-impl Decimator {
+impl Peak for PlotPoint {
+    fn peak(&self) -> f64 {
+        self.dev
+    }
+}
+
+fn larger<T: Peak>(a: T, b: T) -> T {
+    if b.peak() > a.peak() { b } else { a }
+}
+
+impl<T: Peak + Copy> Decimator<T> {
     /// A decimator keeping between `cap` and `2 × cap` points (cap ≥ 2).
     pub fn new(cap: usize) -> Self {
         let cap = cap.max(2);
@@ -107,7 +119,7 @@ impl Decimator {
     }
 
     /// Adds the next point.
-    pub fn push(&mut self, p: PlotPoint) {
+    pub fn push(&mut self, p: T) {
         self.bucket = Some(match self.bucket {
             Some(b) => larger(b, p),
             None => p,
@@ -119,7 +131,7 @@ impl Decimator {
             }
             self.in_bucket = 0;
             if self.points.len() >= 2 * self.cap {
-                let merged: Vec<PlotPoint> = self
+                let merged: Vec<T> = self
                     .points
                     .chunks(2)
                     .map(|c| c.iter().copied().reduce(larger).unwrap_or(c[0]))
@@ -131,7 +143,7 @@ impl Decimator {
     }
 
     /// The points kept, in program order.
-    pub fn finish(mut self) -> Vec<PlotPoint> {
+    pub fn finish(mut self) -> Vec<T> {
         if let Some(b) = self.bucket.take() {
             self.points.push(b);
         }

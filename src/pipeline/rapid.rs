@@ -1919,7 +1919,10 @@ impl<'m> Rewriter<'m> {
                     };
                     self.state = state;
                     match self.walk((mv, resolved.get(i)), &key, plan) {
-                        Ok(Some(dev)) => self.record(carry, mv, seg, &state, &dev),
+                        Ok(Some(dev)) => {
+                            let via = plan.0.via.map(|v| v.translation.vector.into());
+                            self.record(carry, (mv, via), seg, &state, &dev)
+                        }
                         Ok(None) => continue,
                         Err(e) => {
                             failed = Some(e);
@@ -1946,7 +1949,7 @@ impl<'m> Rewriter<'m> {
     fn record(
         &mut self,
         carry: &mut Carry,
-        mv: &Move,
+        (mv, via_mm): (&Move, Option<[f64; 3]>),
         seg: &Segment,
         state: &MoveState,
         dev: &Deviation,
@@ -1969,6 +1972,7 @@ impl<'m> Rewriter<'m> {
             line: mv.line,
             kind: mv.name,
             programmed_mm: self.last_tcp,
+            via_mm,
             deviation: *dev,
             wrench: state.wrench,
             duration_s: seg.duration_s,
