@@ -842,3 +842,33 @@ fn a_program_report_in_json_names_the_module_of_every_line() {
     let at = text.lines().nth(line - 1).expect("line").trim();
     assert_eq!(first["source"].as_str(), Some(at));
 }
+
+/// A controller backup in a batch with reports: the task folder's report
+/// lands beside the task's output folder (`out/RAPID/TASK1.report.csv`),
+/// whose parent the batch makes, in every report format.
+#[test]
+fn batch_of_a_backup_writes_the_task_report() {
+    for (format, ext) in [("csv", "csv"), ("svg", "svg"), ("html", "html")] {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let out = dir.path().join("out");
+        let a = postproc()
+            .args(["batch", "--machine", "abb-irb1600", "--out-dir"])
+            .arg(&out)
+            .arg(repo("samples/cell-backup"))
+            .args(["--report-format", format])
+            .assert();
+        let o = a.get_output();
+        assert_eq!(
+            o.status.code(),
+            Some(0),
+            "{format}: {}",
+            String::from_utf8_lossy(&o.stdout)
+        );
+        let report = out.join(format!("RAPID/TASK1.report.{ext}"));
+        let text = std::fs::read_to_string(&report).unwrap_or_else(|e| {
+            panic!("{format}: no report {} ({e})", report.display())
+        });
+        assert!(text.contains("MainModule.mod"), "{format}: {text:.200}");
+        assert!(out.join("RAPID/TASK1/PROGMOD/MainModule.mod").is_file());
+    }
+}

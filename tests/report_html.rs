@@ -447,5 +447,25 @@ fn a_long_program_is_kept_whole_up_to_ten_thousand_blocks_and_small() {
         .count()
         - 1;
     assert_eq!(rows, 10_000 + 4, "every move is kept");
-    assert!(html.len() < 900_000, "the page is {} bytes", html.len());
+    assert!(html.len() < 700_000, "the page is {} bytes", html.len());
+}
+
+#[test]
+fn compensate_writes_the_page_for_an_html_report_path() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let out = dir.path().join("part.out.nc");
+    let page = dir.path().join("part.html");
+    postproc()
+        .arg("compensate")
+        .arg(repo("samples/part.nc"))
+        .args(["--machine", "afm-r1000", "-o"])
+        .arg(&out)
+        .arg("--report")
+        .arg(&page)
+        .assert()
+        .success();
+    let html = std::fs::read_to_string(&page).expect("page");
+    assert!(html.starts_with("<!DOCTYPE html>"), "{}", &html[..40.min(html.len())]);
+    assert!(html.contains("id=\"report-data\""));
+    assert!(html.trim_end().ends_with("</html>"));
 }

@@ -351,13 +351,20 @@ fn data_json(doc: &Doc) -> String {
     let mut arcs = Vec::new();
     let mut src = Vec::with_capacity(doc.points.len());
     let mut prev_end: Option<[f64; 3]> = None;
+    // Lines and end points as differences from the previous row (integer
+    // µm, so that the sums are exact).
+    let (mut line0, mut end0) = (0i64, [0i64; 3]);
+    let files = doc.files.len() > 1;
     for (i, p) in doc.points.iter().enumerate() {
         if i > 0 {
             rows.push(',');
         }
-        let mut r = format!("[{},{},{}", p.line, p.file, p.motion);
-        for v in p.end {
-            r.push_str(&format!(",{}", int(v, POS_PER_MM)));
+        let mut r = format!("[{},{}", p.line as i64 - line0, p.motion);
+        line0 = p.line as i64;
+        for (v, v0) in p.end.iter().zip(end0.iter_mut()) {
+            let e = int(*v, POS_PER_MM);
+            r.push_str(&format!(",{}", e - *v0));
+            *v0 = e;
         }
         for v in p.dev {
             r.push_str(&format!(",{}", int(v, DEV_PER_MM)));
@@ -366,10 +373,14 @@ fn data_json(doc: &Doc) -> String {
             r.push_str(&format!(",{}", int(*v, DEV_PER_MM)));
         }
         r.push_str(&format!(
-            ",{},{}]",
+            ",{},{}",
             p.residual.map_or(-1, |v| int(v, RES_PER_MM).max(0)),
-            float(p.orient_urad, 1)
+            int(p.orient_urad, 1.0)
         ));
+        if files {
+            r.push_str(&format!(",{}", p.file));
+        }
+        r.push(']');
         rows.push_str(&r);
         let moved = prev_end.is_none_or(|e| {
             e.iter()

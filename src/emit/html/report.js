@@ -1,9 +1,11 @@
 "use strict";
 // The deviation report's viewer. Data: the JSON document of
-// #report-data. Each row is [line, file, motion, x, y, z, dx, dy, dz,
-// effect parts..., residual, orient_urad] with positions in units of
+// #report-data. Each row is [line, motion, x, y, z, dx, dy, dz, effect
+// parts..., residual, orient_urad (, file)]: the line and the end point
+// (x, y, z) as differences from the previous row's, positions in units of
 // 1/pos_per_mm mm, deviations and parts in 1/dev_per_mm mm, the residual
-// in 1/res_per_mm mm (-1: not predicted). `starts` gives a row's start when
+// in 1/res_per_mm mm (-1: not predicted); the file index only when the
+// report has several files. `starts` gives a row's start (absolute) when
 // it is not the previous row's end, `arcs` a row's arc as [cx, cy, cz,
 // nx, ny, nz, sweep_rad] (centre in position units).
 (function () {
@@ -24,25 +26,28 @@
   var pts = [];
   var prevEnd = null;
   var prevDev = null;
+  var line0 = 0, end0 = [0, 0, 0];
   for (var i = 0; i < D.rows.length; i++) {
     var r = D.rows[i];
-    var end = scaled([r[3], r[4], r[5]], U.pos_per_mm);
+    line0 += r[0];
+    end0 = [end0[0] + r[2], end0[1] + r[3], end0[2] + r[4]];
+    var end = scaled(end0, U.pos_per_mm);
     var given = D.starts[String(i)];
     var start = given ? scaled(given, U.pos_per_mm) : prevEnd || end;
-    var dev = scaled([r[6], r[7], r[8]], U.dev_per_mm);
+    var dev = scaled([r[5], r[6], r[7]], U.dev_per_mm);
     var eff = [];
     for (var k = 0; k < NE; k++) {
-      eff.push(r[9 + k] / U.dev_per_mm);
+      eff.push(r[8 + k] / U.dev_per_mm);
     }
-    var res = r[9 + NE];
+    var res = r[8 + NE];
     var a = D.arcs[String(i)];
     var p = {
       i: i,
-      line: r[0],
-      file: r[1],
-      motion: D.motions[r[2]],
-      rapid: D.positioning[r[2]],
-      hole: D.holes[r[2]],
+      line: line0,
+      file: r.length > 10 + NE ? r[10 + NE] : 0,
+      motion: D.motions[r[1]],
+      rapid: D.positioning[r[1]],
+      hole: D.holes[r[1]],
       start: start,
       end: end,
       dev: dev,
@@ -50,7 +55,7 @@
       d: norm3(dev),
       eff: eff,
       res: res < 0 ? null : res / U.res_per_mm,
-      orient: r[10 + NE],
+      orient: r[9 + NE],
       arc: a ? { c: scaled(a, U.pos_per_mm), n: [a[3], a[4], a[5]], w: a[6] } : null,
       src: D.src[i] || ""
     };
@@ -404,7 +409,7 @@
       h += "<tr><td>" + esc(D.effects[k]) + " part (mm)</td><td>" + f(p.eff[k], 5) + "</td></tr>";
     }
     h += "<tr><td>residual after compensation (mm)</td><td>" + (p.res === null ? "not predicted for robot programs" : f(p.res, 6)) + "</td></tr>";
-    h += "<tr><td>tool-axis error (&micro;rad)</td><td>" + f(p.orient, 1) + "</td></tr>";
+    h += "<tr><td>tool-axis error (&micro;rad)</td><td>" + f(p.orient, 0) + "</td></tr>";
     h += "</tbody></table>";
     if (p.hole) h += "<p>drilling cycle: hole bottom shown</p>";
     el.innerHTML = h;
