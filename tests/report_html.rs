@@ -465,7 +465,11 @@ fn compensate_writes_the_page_for_an_html_report_path() {
         .assert()
         .success();
     let html = std::fs::read_to_string(&page).expect("page");
-    assert!(html.starts_with("<!DOCTYPE html>"), "{}", &html[..40.min(html.len())]);
+    assert!(
+        html.starts_with("<!DOCTYPE html>"),
+        "{}",
+        &html[..40.min(html.len())]
+    );
     assert!(html.contains("id=\"report-data\""));
     assert!(html.trim_end().ends_with("</html>"));
 }

@@ -80,6 +80,44 @@ impl Shape {
         }
     }
 
+    /// Points along the move from `start` to `end`: both ends of a line,
+    /// an arc every 2° at most, a hole's position over it and its bottom.
+    pub fn samples(&self, start: [f64; 3], end: [f64; 3]) -> Vec<[f64; 3]> {
+        match *self {
+            Shape::Line => vec![start, end],
+            Shape::Hole => vec![start, [end[0], end[1], start[2]], end],
+            Shape::Arc {
+                center,
+                normal,
+                sweep_rad,
+            } => {
+                let v = |p: [f64; 3]| nalgebra::Vector3::new(p[0], p[1], p[2]);
+                let (c, n) = (v(center), v(normal));
+                let v0 = v(start) - c;
+                let ax0 = v0.dot(&n);
+                let vp = v0 - n * ax0;
+                let nxv = n.cross(&vp);
+                let axial = (v(end) - v(start)).dot(&n);
+                let steps = (sweep_rad.abs() / 2f64.to_radians()).ceil();
+                let steps = if steps.is_finite() {
+                    (steps as usize).clamp(4, 360)
+                } else {
+                    4
+                };
+                (0..=steps)
+                    .map(|j| {
+                        if j == steps {
+                            return end;
+                        }
+                        let s = j as f64 / steps as f64;
+                        let t = sweep_rad * s;
+                        (c + vp * t.cos() + nxv * t.sin() + n * (ax0 + axial * s)).into()
+                    })
+                    .collect()
+            }
+        }
+    }
+
     /// A G2/G3 arc of the interpreter.
     pub fn of_arc(arc: &crate::program::interp::ArcGeom) -> Shape {
         let (_, _, n) = arc.plane.axes();
@@ -626,6 +664,24 @@ mod tests {
             panic!("an arc");
         };
         assert_abs_diff_eq!(sweep_rad, 1.5 * std::f64::consts::PI, epsilon = TOL);
+    }
+
+    #[test]
+    fn arc_samples_follow_the_circle() {
+        // Half circle about the origin from (10, 0, 0) clockwise (about
+        // -Z) to (-10, 0, -2): through (0, -10, -1) halfway.
+        let s = Shape::Arc {
+            center: [0.0; 3],
+            normal: [0.0, 0.0, -1.0],
+            sweep_rad: std::f64::consts::PI,
+        };
+        let pts = s.samples([10.0, 0.0, 0.0], [-10.0, 0.0, -2.0]);
+        assert_eq!(pts.len(), 91);
+        let mid = pts[45];
+        assert_abs_diff_eq!(mid[0], 0.0, epsilon = TOL);
+        assert_abs_diff_eq!(mid[1], -10.0, epsilon = TOL);
+        assert_abs_diff_eq!(mid[2], -1.0, epsilon = TOL);
+        assert_eq!(pts[90], [-10.0, 0.0, -2.0]);
     }
 
     #[test]

@@ -237,6 +237,8 @@ pub struct ReportWriter<'w> {
     cutting: Stat,
     positioning: Stat,
     plot: Option<Decimator>,
+    /// The last position of the picture's moves.
+    plot_end: Option<[f64; 3]>,
     /// The moves of an HTML page.
     html: Option<crate::emit::html::Collector>,
     /// Largest deviation of all moves, and of the cutting moves.
@@ -462,6 +464,7 @@ impl<'w> ReportWriter<'w> {
             positioning: Stat::new(),
             plot: (format == Format::Svg).then(|| Decimator::new(PLOT_POINTS)),
             html: (format == Format::Html).then(Default::default),
+            plot_end: None,
             worst_point: None,
             worst_cut: None,
             worst_point_file: 0,
@@ -682,13 +685,25 @@ impl<'w> ReportWriter<'w> {
         match self.format {
             Format::Html => self.mark(r, dev, rapid),
             Format::Svg => {
+                let mut parts = [0.0; crate::emit::html::MAX_EFFECTS];
+                for (p, v) in parts.iter_mut().zip(r.effects_mm) {
+                    *p = *v;
+                }
+                let start = r.start_mm.or(self.plot_end);
                 let p = PlotPoint {
                     line: r.line,
                     pos: r.position_mm,
                     dev,
                     rapid,
                     residual: r.residual_mm,
+                    start,
+                    shape: match (r.via_mm, start) {
+                        (Some(via), Some(s)) => Shape::through(s, via, r.position_mm),
+                        _ => r.shape,
+                    },
+                    parts,
                 };
+                self.plot_end = Some(r.position_mm);
                 if let Some(plot) = self.plot.as_mut() {
                     plot.push(p);
                 }
@@ -1057,7 +1072,7 @@ impl<'w> ReportWriter<'w> {
                         marks.push(c);
                     }
                 }
-                let svg = crate::emit::svg::render(&points, &marks, &title)?;
+                let svg = crate::emit::svg::render(&points, &marks, &title, &self.layout.effects)?;
                 self.out.write_all(svg.as_bytes()).map_err(io)?;
             }
             Format::Html => {
