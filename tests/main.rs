@@ -16,6 +16,7 @@ mod effects;
 mod engine_flags;
 mod error_kinds;
 mod frames;
+mod first_hour;
 mod function_size;
 mod gcode_cli;
 mod gcode_grammar;

@@ -353,7 +353,7 @@ fn readme_installs_and_tests_with_the_commands_ci_runs() {
     }
     assert_eq!(
         cargo,
-        ["install --path .", "test"],
+        ["install --locked --path .", "test"],
         "the README's cargo commands"
     );
     // The README's test command is the last command of the CI script.

@@ -10,6 +10,7 @@ mod interrupt;
 mod machines;
 pub mod memory;
 mod output;
+pub use output::is_broken_pipe;
 mod rapid;
 
 use std::path::PathBuf;
@@ -323,7 +324,10 @@ pub fn init_logging(quiet: bool, verbose: u8) {
     let _ = tracing_subscriber::fmt()
         .with_env_filter(filter)
         .with_writer(std::io::stderr)
-        .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr()))
+        .with_ansi(output::colour(
+            std::io::IsTerminal::is_terminal(&std::io::stderr()),
+            std::env::var_os("NO_COLOR").as_deref(),
+        ))
         .with_target(false)
         .without_time()
         .try_init();
