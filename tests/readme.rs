@@ -328,7 +328,11 @@ fn every_command_shown_in_docs_is_run() {
     let mut unrun = Vec::new();
     for rel in documents() {
         let text = std::fs::read_to_string(repo(&rel)).unwrap();
-        unrun.extend(unrun_commands(&text).into_iter().map(|l| format!("{rel}:{l}")));
+        unrun.extend(
+            unrun_commands(&text)
+                .into_iter()
+                .map(|l| format!("{rel}:{l}")),
+        );
     }
     assert!(
         unrun.is_empty(),
@@ -337,7 +341,10 @@ fn every_command_shown_in_docs_is_run() {
     );
     // The check finds what it looks for.
     assert_eq!(
-        unrun_commands("```\npostproc check x\n```\n    postproc report y\n```bash\npostproc z\n```\n").len(),
+        unrun_commands(
+            "```\npostproc check x\n```\n    postproc report y\n```bash\npostproc z\n```\n"
+        )
+        .len(),
         2
     );
 }

@@ -301,9 +301,15 @@ mod first_hour_tests {
 
     #[test]
     fn a_closed_pipe_is_told_apart_from_other_write_errors() {
-        let pipe = Error::io("stdout", std::io::Error::from(std::io::ErrorKind::BrokenPipe));
+        let pipe = Error::io(
+            "stdout",
+            std::io::Error::from(std::io::ErrorKind::BrokenPipe),
+        );
         assert!(is_broken_pipe(&pipe));
-        let full = Error::io("out.nc", std::io::Error::from(std::io::ErrorKind::StorageFull));
+        let full = Error::io(
+            "out.nc",
+            std::io::Error::from(std::io::ErrorKind::StorageFull),
+        );
         assert!(!is_broken_pipe(&full));
         assert!(!is_broken_pipe(&Error::Usage("x".into())));
     }
