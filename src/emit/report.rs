@@ -342,6 +342,9 @@ fn csv_cell(s: &str) -> String {
     }
 }
 
+/// Mean, maximum and the (file, line) of the maximum of all moves.
+type Overall = (f64, f64, (usize, usize));
+
 /// Source texts of worst blocks by (file index, line).
 type Texts = std::collections::BTreeMap<(usize, usize), String>;
 /// Width of a position column of the table (3 decimals: `-1234.567`).
@@ -1119,7 +1122,7 @@ impl<'w> ReportWriter<'w> {
     fn html_page(
         &mut self,
         totals: Totals,
-        (rows, total, p95): (usize, (f64, f64, (usize, usize)), &[f64]),
+        (rows, total, p95): (usize, Overall, &[f64]),
     ) -> Result<String> {
         use crate::emit::html::{Doc, EffectRow, Mark};
         let (points, motions) = self.html.take().map(|c| c.finish()).unwrap_or_default();
