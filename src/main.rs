@@ -10,6 +10,8 @@ fn main() {
     let cli = postproc::cli::Cli::parse();
     match postproc::cli::run(cli) {
         Ok(code) => std::process::exit(code),
+        // `postproc … | head`: the reader closed the pipe; nothing to say.
+        Err(err) if postproc::cli::is_broken_pipe(&err) => std::process::exit(0),
         Err(err) => {
             let mut msg = format!("error: {err}");
             let mut src = std::error::Error::source(&err);

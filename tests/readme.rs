@@ -30,8 +30,19 @@ use std::process::Command;
 
 use crate::common::{postproc, repo};
 
-/// The documents whose examples are run.
-const DOCUMENTS: [&str; 3] = ["README.md", "docs/calibration.md", "docs/diagnose.md"];
+/// The documents whose examples are run: the README, then every
+/// Markdown file of `docs/` in name order.
+fn documents() -> Vec<String> {
+    let mut docs: Vec<String> = std::fs::read_dir(repo("docs"))
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .filter(|n| n.ends_with(".md"))
+        .map(|n| format!("docs/{n}"))
+        .collect();
+    docs.sort();
+    docs.insert(0, "README.md".into());
+    docs
+}
 
 /// The README stays a guide of a few hundred lines.
 const README_MAX_LINES: usize = 400;
@@ -264,7 +275,7 @@ fn check_document(rel: &str) -> Outcome {
 
 #[test]
 fn readme_examples_show_real_output() {
-    let outcome = check_document(DOCUMENTS[0]);
+    let outcome = check_document("README.md");
     assert!(outcome.ran >= 10, "{} README examples", outcome.ran);
     assert!(
         outcome.other_blocks.is_empty(),
@@ -275,10 +286,67 @@ fn readme_examples_show_real_output() {
 
 #[test]
 fn reference_examples_show_real_output() {
-    for rel in &DOCUMENTS[1..] {
-        let outcome = check_document(rel);
-        assert!(outcome.ran >= 1, "{rel}: no example ran");
+    let mut ran = 0;
+    for rel in &documents()[1..] {
+        ran += check_document(rel).ran;
     }
+    assert!(ran >= 15, "{ran} examples in docs/");
+}
+
+/// A command of the program shown in `docs/` that is not an example
+/// (`$ ` in a fenced block without a language): a `postproc` line of an
+/// untagged fenced block without its `$ `, or an indented one. Blocks
+/// tagged with a language (`bash`, `yaml`, `text`) are files and scripts,
+/// not transcripts.
+fn unrun_commands(text: &str) -> Vec<String> {
+    let mut found = Vec::new();
+    let mut fence: Option<&str> = None;
+    for (n, line) in text.lines().enumerate() {
+        if let Some(tag) = line.strip_prefix("```") {
+            fence = match fence {
+                Some(_) => None,
+                None => Some(tag.trim()),
+            };
+            continue;
+        }
+        let t = line.trim_start();
+        let command = t.starts_with("postproc ") || t.starts_with("$ postproc ");
+        let unrun = match fence {
+            Some("") => t.starts_with("postproc "),
+            Some(_) => false,
+            None => line.starts_with("    ") && command,
+        };
+        if unrun {
+            found.push(format!("{}: {}", n + 1, t));
+        }
+    }
+    found
+}
+
+#[test]
+fn every_command_shown_in_docs_is_run() {
+    let mut unrun = Vec::new();
+    for rel in documents() {
+        let text = std::fs::read_to_string(repo(&rel)).unwrap();
+        unrun.extend(
+            unrun_commands(&text)
+                .into_iter()
+                .map(|l| format!("{rel}:{l}")),
+        );
+    }
+    assert!(
+        unrun.is_empty(),
+        "commands shown but not run as `$ ` examples:\n{}",
+        unrun.join("\n")
+    );
+    // The check finds what it looks for.
+    assert_eq!(
+        unrun_commands(
+            "```\npostproc check x\n```\n    postproc report y\n```bash\npostproc z\n```\n"
+        )
+        .len(),
+        2
+    );
 }
 
 #[test]
@@ -292,7 +360,7 @@ fn readme_installs_and_tests_with_the_commands_ci_runs() {
     }
     assert_eq!(
         cargo,
-        ["install --path .", "test"],
+        ["install --locked --path .", "test"],
         "the README's cargo commands"
     );
     // The README's test command is the last command of the CI script.

@@ -409,6 +409,7 @@ fn report_path(output: &Path, format: Format) -> PathBuf {
         Format::Csv => "csv",
         Format::Json => "json",
         Format::Svg => "svg",
+        Format::Html => "html",
     };
     let mut name = output.as_os_str().to_owned();
     name.push(format!(".report.{ext}"));
@@ -557,6 +558,11 @@ fn compensate_program(
         recompensate: setting.recompensate,
     };
     let report_file = report.map(|f| (report_path(output, f), f));
+    // The report lands beside the program's folder (`out/RAPID/TASK1` and
+    // `out/RAPID/TASK1.report.csv`): its folder is made like the program's.
+    if let Some(dir) = report_file.as_ref().and_then(|(p, _)| p.parent()) {
+        std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
+    }
     let report_to = report_file.as_ref().map(|(p, f)| (p.as_path(), *f));
     let (_, _, total, worst) =
         super::rapid::compensate_program_to(&run, &[input.to_path_buf()], Some(output), report_to)?;

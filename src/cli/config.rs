@@ -118,6 +118,16 @@ fn rapid_program(program: &ProgramArgs) -> bool {
     crate::program::language::is_rapid(&program.file)
 }
 
+/// Whether the program is G-code: by its extension, or by its first
+/// block when the extension is neither language's.
+fn gcode_program(program: &ProgramArgs) -> bool {
+    use crate::program::language;
+    let path = &program.file;
+    !language::is_rapid(path)
+        && (language::gcode_extension(path)
+            || language::head(path).is_some_and(|h| language::gcode_text(&h)))
+}
+
 impl Engine {
     /// Loads the machine of `program` once and chooses the engine: RAPID
     /// for a module (by its extension or content) or a robot, G-code otherwise; then
@@ -128,6 +138,13 @@ impl Engine {
         let engine = match machine {
             None if rapid => Engine::Robot(None),
             None => Engine::Tool(None),
+            Some(Ok((Machine::Robot(_), loaded))) if gcode_program(program) => {
+                return Err(usage(format!(
+                    "{}: is a G-code program, and {} is a robot, which runs RAPID modules: give a machine tool's file (postproc machines)",
+                    program.file.display(),
+                    loaded.file.shown
+                )));
+            }
             Some(Ok((Machine::Robot(r), loaded))) => Engine::Robot(Some(Ok((r, loaded)))),
             Some(Ok((Machine::Tool(_), loaded))) if rapid => {
                 Engine::Robot(Some(Err(not_a_robot(&loaded))))

@@ -3,6 +3,7 @@
 
 mod batch;
 mod calibrate;
+mod completions;
 mod config;
 mod diagnose;
 mod gcode;
@@ -10,6 +11,7 @@ mod interrupt;
 mod machines;
 pub mod memory;
 mod output;
+pub use output::is_broken_pipe;
 mod rapid;
 mod verify;
 
@@ -52,14 +54,23 @@ pub enum Command {
     #[command(after_help = EXIT_HELP)]
     Check(CheckArgs),
     /// Write a compensated program whose targets land on the programmed ones.
-    #[command(after_help = EXIT_HELP)]
+    #[command(
+        after_help = EXIT_HELP,
+        override_usage = "postproc compensate --machine <MACHINE> [OPTIONS] <FILE> [MORE]..."
+    )]
     Compensate(CompensateArgs),
     /// Dry run: predicted deviation per block and summary per effect, as a
     /// table, CSV, JSON or SVG picture; nothing else is written.
-    #[command(after_help = EXIT_HELP)]
+    #[command(
+        after_help = EXIT_HELP,
+        override_usage = "postproc report --machine <MACHINE> [OPTIONS] <FILE> [MORE]..."
+    )]
     Report(ReportArgs),
     /// Compensate many programs (files or folders) in parallel into a folder.
-    #[command(after_help = BATCH_EXIT_HELP)]
+    #[command(
+        after_help = BATCH_EXIT_HELP,
+        override_usage = "postproc batch --machine <MACHINE> --out-dir <OUT_DIR> [OPTIONS] <INPUTS>...\n       postproc batch --merge-summaries --out-dir <OUT_DIR> <SUMMARIES>..."
+    )]
     Batch(BatchArgs),
     /// Fill the measured columns of a poses file from a machine file plus noise.
     #[command(after_help = EXIT_HELP)]
@@ -74,16 +85,38 @@ pub enum Command {
     #[command(after_help = EXIT_HELP)]
     Calibrate(calibrate::CalibrateArgs),
     /// Find where model and measurements disagree, name the missing effect, add it.
+    #[command(
+        after_help = DIAGNOSE_EXIT_HELP,
+        override_usage = "postproc diagnose --machine <MACHINE> --observations <OBSERVATIONS> [OPTIONS]\n       postproc diagnose --list-effects [--machine <MACHINE>] [--observations <OBSERVATIONS>]"
+    )]
     Diagnose(DiagnoseArgs),
     /// List the machine files bundled in the binary (status, a robot's
     /// reach and payload); `machines new NAME -o FILE` writes a robot cell
     /// file to start from.
+    #[command(after_help = PLAIN_EXIT_HELP)]
     Machines(machines::MachinesArgs),
     /// Acceptance tests: ISO 230-2, ISO 230-4 and ISO 9283 figures from
     /// measured (or predicted) data, held against limits.
     #[command(after_help = verify::VERIFY_EXIT_HELP)]
     Verify(verify::VerifyArgs),
+    /// Print a shell completion script (bash, zsh, fish, elvish, powershell).
+    ///
+    /// For example `postproc completions bash > ~/.local/share/bash-completion/completions/postproc`.
+    #[command(after_help = PLAIN_EXIT_HELP)]
+    Completions {
+        /// The shell.
+        shell: clap_complete::Shell,
+    },
+    /// Print the manual page (roff), e.g. `postproc man > postproc.1`.
+    #[command(after_help = PLAIN_EXIT_HELP)]
+    Man,
 }
+
+/// Exit codes of commands that read no program.
+pub const PLAIN_EXIT_HELP: &str = "Exit codes: 0 success; 2 bad usage or an output that cannot be written; 3 internal error (a bug in postproc).";
+
+/// Exit codes of `diagnose`.
+pub const DIAGNOSE_EXIT_HELP: &str = "Exit codes: 0 success; 2 bad input (machine file, observations) or usage; 3 internal error (a bug in postproc).";
 
 /// Exit codes of `batch`, also listed in its `--help`.
 pub const BATCH_EXIT_HELP: &str = "Exit codes: 0 every program compensated; 1 every program compensated, but some have blocks out of tolerance or limits; 2 a program failed (bad input; the others are still written) or bad usage.";
@@ -335,7 +368,10 @@ pub fn init_logging(quiet: bool, verbose: u8) {
     let _ = tracing_subscriber::fmt()
         .with_env_filter(filter)
         .with_writer(std::io::stderr)
-        .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr()))
+        .with_ansi(output::colour(
+            std::io::IsTerminal::is_terminal(&std::io::stderr()),
+            std::env::var_os("NO_COLOR").as_deref(),
+        ))
         .with_target(false)
         .without_time()
         .try_init();
@@ -376,6 +412,8 @@ pub fn run(cli: Cli) -> Result<i32> {
         Command::Diagnose(a) => diagnose::run(&a),
         Command::Machines(a) => machines::run(&a),
         Command::Verify(a) => verify::run(&a),
+        Command::Completions { shell } => completions::completions(shell),
+        Command::Man => completions::man(),
     }?;
     machines::warn_example_used();
     Ok(code)

@@ -268,3 +268,44 @@ pub(super) fn emit_to<T>(path: &Path, f: impl FnOnce(&mut dyn Write) -> Result<T
     out.finish()?.commit()?;
     Ok(value)
 }
+
+/// Whether `err` is a write to a closed pipe (`postproc … | head`): the
+/// reader has what it wanted, and the run ends quietly with exit 0.
+pub fn is_broken_pipe(err: &Error) -> bool {
+    matches!(err, Error::Io { cause, .. } if cause.kind() == std::io::ErrorKind::BrokenPipe)
+}
+
+/// Whether log lines are coloured: on a terminal, unless `NO_COLOR` is set
+/// to anything but the empty string (no-color.org).
+pub fn colour(terminal: bool, no_color: Option<&std::ffi::OsStr>) -> bool {
+    terminal && no_color.is_none_or(|v| v.is_empty())
+}
+
+#[cfg(test)]
+mod first_hour_tests {
+    use super::*;
+
+    #[test]
+    fn no_color_turns_colours_off_unless_empty() {
+        use std::ffi::OsStr;
+        assert!(colour(true, None));
+        assert!(!colour(true, Some(OsStr::new("1"))));
+        assert!(colour(true, Some(OsStr::new(""))));
+        assert!(!colour(false, None));
+    }
+
+    #[test]
+    fn a_closed_pipe_is_told_apart_from_other_write_errors() {
+        let pipe = Error::io(
+            "stdout",
+            std::io::Error::from(std::io::ErrorKind::BrokenPipe),
+        );
+        assert!(is_broken_pipe(&pipe));
+        let full = Error::io(
+            "out.nc",
+            std::io::Error::from(std::io::ErrorKind::StorageFull),
+        );
+        assert!(!is_broken_pipe(&full));
+        assert!(!is_broken_pipe(&Error::Usage("x".into())));
+    }
+}

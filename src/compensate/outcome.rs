@@ -166,8 +166,12 @@ pub struct Row {
     pub line: usize,
     /// Motion kind label.
     pub motion: &'static str,
+    /// Programmed start point, machine coordinates.
+    pub start: AxisVec,
     /// Programmed end point, machine coordinates.
     pub commanded: AxisVec,
+    /// Arc geometry of a G2/G3 move (for the report's picture).
+    pub arc: Option<crate::program::interp::ArcGeom>,
     /// Compensated end point, machine coordinates.
     pub compensated: AxisVec,
     /// Predicted deviation and breakdown.
@@ -183,6 +187,8 @@ pub struct MoveRecord {
     pub kind: &'static str,
     /// Programmed TCP position, world frame, mm.
     pub programmed_mm: [f64; 3],
+    /// Programmed circle point of a `MoveC`, world frame, mm.
+    pub via_mm: Option<[f64; 3]>,
     /// Predicted deviation of the uncompensated target, by effect.
     pub deviation: Deviation,
     /// Process wrench acting during the move, if any.

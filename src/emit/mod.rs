@@ -3,6 +3,7 @@
 pub(crate) mod fixed;
 pub mod gcode;
 pub mod header;
+pub mod html;
 mod inverse_time;
 pub mod rapid;
 pub mod report;

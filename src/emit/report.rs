@@ -1,8 +1,8 @@
 //! Deviation reports (`postproc report`, `compensate --report`): a row per
 //! motion block or robot move with its per-effect breakdown, and a summary
 //! per effect (mean, 95th percentile, maximum, worst blocks with their source
-//! line), as an aligned table, CSV, JSON (schema: `schemas/report.schema.json`)
-//! or an SVG picture.
+//! line), as an aligned table, CSV, JSON (schema: `schemas/report.schema.json`),
+//! an SVG picture or an interactive HTML page ([`crate::emit::html`]).
 //!
 //! Rows are streamed: the text formats write each row as it comes, the
 //! statistics use a fixed-size histogram, and the picture keeps a bounded,
@@ -12,6 +12,7 @@
 use std::io::Write;
 
 use crate::compensate::outcome::{DevStats, MoveRecord, Row};
+pub use crate::emit::html::Shape;
 use crate::emit::svg::{Decimator, PlotPoint, Worst as PlotWorst};
 use crate::error::{Error, Result};
 use crate::machine::AXIS_LETTERS;
@@ -32,11 +33,14 @@ pub enum Format {
     /// SVG picture: toolpath in plan and side view coloured by deviation,
     /// deviation along the program.
     Svg,
+    /// Self-contained HTML page: plan, side and 3-D views, the predicted
+    /// path magnified, each block's parts on hover.
+    Html,
 }
 
 impl Format {
     /// The format a report path asks for by its extension (`.csv`, `.json`,
-    /// `.svg`, `.txt`); CSV for any other.
+    /// `.svg`, `.html`, `.txt`); CSV for any other.
     pub fn from_path(path: &std::path::Path) -> Format {
         let ext = path
             .extension()
@@ -44,6 +48,7 @@ impl Format {
         match ext.as_deref() {
             Some("json") => Format::Json,
             Some("svg") => Format::Svg,
+            Some("html" | "htm") => Format::Html,
             Some("txt" | "text" | "table") => Format::Table,
             _ => Format::Csv,
         }
@@ -141,6 +146,12 @@ pub struct Entry<'a> {
     pub residual_mm: Option<f64>,
     /// Tool-axis direction error, µrad.
     pub orient_urad: f64,
+    /// Programmed start of the move (`None`: where the previous row ended).
+    pub start_mm: Option<[f64; 3]>,
+    /// How the move is drawn (HTML page).
+    pub shape: Shape,
+    /// Circle point of a `MoveC`: drawn as the arc through it.
+    pub via_mm: Option<[f64; 3]>,
 }
 
 /// Counts for the summary.
@@ -226,9 +237,16 @@ pub struct ReportWriter<'w> {
     cutting: Stat,
     positioning: Stat,
     plot: Option<Decimator>,
+    /// The last position of the picture's moves.
+    plot_end: Option<[f64; 3]>,
+    /// The moves of an HTML page.
+    html: Option<crate::emit::html::Collector>,
     /// Largest deviation of all moves, and of the cutting moves.
     worst_point: Option<PlotWorst>,
     worst_cut: Option<PlotWorst>,
+    /// The files of the two marks.
+    worst_point_file: usize,
+    worst_cut_file: usize,
     /// The program file, re-read at the end for the text of the worst blocks.
     source: Option<std::path::PathBuf>,
     /// With [`Layout::files`]: the files rows were written for (name, file
@@ -323,6 +341,9 @@ fn csv_cell(s: &str) -> String {
         s.to_string()
     }
 }
+
+/// Mean, maximum and the (file, line) of the maximum of all moves.
+type Overall = (f64, f64, (usize, usize));
 
 /// Source texts of worst blocks by (file index, line).
 type Texts = std::collections::BTreeMap<(usize, usize), String>;
@@ -445,8 +466,12 @@ impl<'w> ReportWriter<'w> {
             cutting: Stat::new(),
             positioning: Stat::new(),
             plot: (format == Format::Svg).then(|| Decimator::new(PLOT_POINTS)),
+            html: (format == Format::Html).then(Default::default),
+            plot_end: None,
             worst_point: None,
             worst_cut: None,
+            worst_point_file: 0,
+            worst_cut_file: 0,
             source: None,
             files: Vec::new(),
             provenance: None,
@@ -513,7 +538,7 @@ impl<'w> ReportWriter<'w> {
                 )
                 .map_err(io)?
             }
-            Format::Svg => {}
+            Format::Svg | Format::Html => {}
         }
         Ok(w)
     }
@@ -577,10 +602,18 @@ impl<'w> ReportWriter<'w> {
             *v = r.result.deviation.parts[*e as usize].norm();
         }
         let dev = r.result.deviation.total();
+        let shape = match (&r.arc, r.motion) {
+            (Some(arc), _) => Shape::of_arc(arc),
+            (None, "cycle") => Shape::Hole,
+            _ => Shape::Line,
+        };
         self.entry(&Entry {
             line: r.line,
             motion: r.motion,
             axes: &axes[..n],
+            start_mm: Some([r.start[0], r.start[1], r.start[2]]),
+            shape,
+            via_mm: None,
             position_mm: [r.commanded[0], r.commanded[1], r.commanded[2]],
             deviation_mm: [dev[0], dev[1], dev[2]],
             effects_mm: &effects,
@@ -599,6 +632,9 @@ impl<'w> ReportWriter<'w> {
             line: t.line,
             motion: t.kind,
             axes: &t.programmed_mm,
+            start_mm: None,
+            shape: Shape::Line,
+            via_mm: t.via_mm,
             position_mm: t.programmed_mm,
             deviation_mm: d.total.pos_mm.into(),
             effects_mm: &[
@@ -635,30 +671,46 @@ impl<'w> ReportWriter<'w> {
             Some((name, _)) if self.layout.files => Some(name.clone()),
             _ => None,
         };
+        if let Some(c) = self.html.as_mut() {
+            c.push(&crate::emit::html::Move {
+                at: (r.line, file),
+                motion: r.motion,
+                start: r.start_mm,
+                via: r.via_mm,
+                end: r.position_mm,
+                dev: r.deviation_mm,
+                effects: r.effects_mm,
+                residual: r.residual_mm,
+                orient_urad: r.orient_urad,
+                shape: r.shape,
+            });
+        }
         match self.format {
+            Format::Html => self.mark(r, dev, rapid),
             Format::Svg => {
+                let mut parts = [0.0; crate::emit::html::MAX_EFFECTS];
+                for (p, v) in parts.iter_mut().zip(r.effects_mm) {
+                    *p = *v;
+                }
+                let start = r.start_mm.or(self.plot_end);
                 let p = PlotPoint {
                     line: r.line,
                     pos: r.position_mm,
                     dev,
                     rapid,
                     residual: r.residual_mm,
+                    start,
+                    shape: match (r.via_mm, start) {
+                        (Some(via), Some(s)) => Shape::through(s, via, r.position_mm),
+                        _ => r.shape,
+                    },
+                    parts,
                 };
+                self.plot_end = Some(r.position_mm);
                 if let Some(plot) = self.plot.as_mut() {
                     plot.push(p);
                 }
-                let mark = PlotWorst {
-                    line: r.line,
-                    pos: r.position_mm,
-                    dev,
-                    cut: !rapid,
-                };
-                if self.worst_point.is_none_or(|w| dev > w.dev) {
-                    self.worst_point = Some(mark);
-                }
-                if !rapid && self.worst_cut.is_none_or(|w| dev > w.dev) {
-                    self.worst_cut = Some(mark);
-                }
+                self.mark(r, dev, rapid);
             }
             Format::Table => {
                 let mut vals: Vec<String> = vec![r.line.to_string(), r.motion.to_string()];
@@ -743,6 +795,25 @@ impl<'w> ReportWriter<'w> {
         }
         self.rows += 1;
         Ok(())
+    }
+
+    /// Keeps the row when it is the largest deviation so far (of all moves,
+    /// of the cutting moves), for the picture's marks.
+    fn mark(&mut self, r: &Entry, dev: f64, rapid: bool) {
+        let mark = PlotWorst {
+            line: r.line,
+            pos: r.position_mm,
+            dev,
+            cut: !rapid,
+        };
+        if self.worst_point.is_none_or(|w| dev > w.dev) {
+            self.worst_point = Some(mark);
+            self.worst_point_file = self.current();
+        }
+        if !rapid && self.worst_cut.is_none_or(|w| dev > w.dev) {
+            self.worst_cut = Some(mark);
+            self.worst_cut_file = self.current();
+        }
     }
 
     /// The headline: the cutting moves.
@@ -1004,11 +1075,160 @@ impl<'w> ReportWriter<'w> {
                         marks.push(c);
                     }
                 }
-                let svg = crate::emit::svg::render(&points, &marks, &title)?;
+                let svg = crate::emit::svg::render(&points, &marks, &title, &self.layout.effects)?;
                 self.out.write_all(svg.as_bytes()).map_err(io)?;
+            }
+            Format::Html => {
+                let page = self.html_page(totals, (rows, total, &p95))?;
+                self.out.write_all(page.as_bytes()).map_err(io)?;
             }
         }
         Ok(())
+    }
+
+    /// A worst block as a table of the page lists it.
+    fn listed(&self, w: &(f64, usize, String, usize), texts: &Texts) -> crate::emit::html::Listed {
+        crate::emit::html::Listed {
+            place: self.place((w.3, w.1)),
+            at: (w.3, w.1),
+            dev_mm: w.0,
+            motion: w.2.clone(),
+            text: texts.get(&(w.3, w.1)).cloned().unwrap_or_default(),
+        }
+    }
+
+    /// The source text of the given lines of each file.
+    fn texts_of(
+        &self,
+        wanted: &std::collections::BTreeMap<usize, std::collections::BTreeSet<usize>>,
+    ) -> Texts {
+        let mut out = Texts::new();
+        for (&file, lines) in wanted {
+            let path = if self.layout.files {
+                self.files.get(file).and_then(|f| f.1.clone())
+            } else {
+                self.source.clone()
+            };
+            if let Some(path) = path {
+                for (line, text) in source_lines(&path, lines) {
+                    out.insert((file, line), text);
+                }
+            }
+        }
+        out
+    }
+
+    /// The HTML page of the report.
+    fn html_page(
+        &mut self,
+        totals: Totals,
+        (rows, total, p95): (usize, Overall, &[f64]),
+    ) -> Result<String> {
+        use crate::emit::html::{Doc, EffectRow, Mark};
+        let (points, motions) = self.html.take().map(|c| c.finish()).unwrap_or_default();
+        let mut wanted = crate::emit::html::wanted_lines(&points);
+        for w in self
+            .stats
+            .iter()
+            .chain([&self.cutting, &self.positioning])
+            .flat_map(|s| s.worst.iter())
+        {
+            wanted.entry(w.3).or_default().insert(w.1);
+        }
+        let texts = self.texts_of(&wanted);
+        let mut headline = vec![self.cutting_line()];
+        headline.extend(self.positioning_line());
+        headline.push(format!(
+            "all moves ({rows}): |dev| mean {} mm, max {} mm (line {}), p95 {} mm",
+            num(total.0, 5),
+            num(total.1, 5),
+            self.place(total.2),
+            num(p95.first().copied().unwrap_or(0.0), 5)
+        ));
+        let effect_rows = self
+            .stats
+            .iter()
+            .enumerate()
+            .map(|(i, s)| EffectRow {
+                name: stat_name(&self.layout, i).to_string(),
+                mean_p95_max: [s.mean(), p95.get(i).copied().unwrap_or(0.0), s.max()],
+                worst: s.worst.iter().map(|w| self.listed(w, &texts)).collect(),
+            })
+            .collect();
+        let groups = vec![
+            (
+                "Worst cutting moves".to_string(),
+                self.cutting
+                    .worst
+                    .iter()
+                    .map(|w| self.listed(w, &texts))
+                    .collect(),
+            ),
+            (
+                "Worst rapids and machine-defined moves".to_string(),
+                self.positioning
+                    .worst
+                    .iter()
+                    .map(|w| self.listed(w, &texts))
+                    .collect(),
+            ),
+        ];
+        let mut marks: Vec<Mark> = Vec::new();
+        if let Some(w) = self.worst_point {
+            marks.push(Mark {
+                at: (self.worst_point_file, w.line),
+                pos: w.pos,
+                dev: w.dev,
+                cut: false,
+            });
+        }
+        if let Some(c) = self.worst_cut {
+            if self
+                .worst_point
+                .is_none_or(|w| w.line != c.line || self.worst_point_file != self.worst_cut_file)
+            {
+                marks.push(Mark {
+                    at: (self.worst_cut_file, c.line),
+                    pos: c.pos,
+                    dev: c.dev,
+                    cut: true,
+                });
+            }
+        }
+        let files = if self.layout.files {
+            self.files.iter().map(|f| f.0.clone()).collect()
+        } else {
+            vec![self.file.clone()]
+        };
+        let positioning = motions.iter().map(|m| is_positioning(m)).collect();
+        let doc = Doc {
+            title: format!(
+                "{}: predicted deviation, {rows} moves; max {} mm at line {}",
+                self.file,
+                num(total.1, 4),
+                self.place(total.2)
+            ),
+            kind: self.layout.kind,
+            positions: self.positions_label().to_string(),
+            effects: self.layout.effects.iter().map(|e| e.to_string()).collect(),
+            residual: self.layout.residual,
+            files,
+            points,
+            motions,
+            positioning,
+            texts,
+            headline,
+            effect_rows,
+            groups,
+            marks,
+            provenance: self
+                .provenance
+                .as_ref()
+                .map(|p| p.key_lines())
+                .unwrap_or_default(),
+            totals: (totals.blocks, totals.moves),
+        };
+        Ok(crate::emit::html::render(&doc))
     }
 }
 

@@ -17,6 +17,7 @@
 use plotters::coord::Shift;
 use plotters::prelude::*;
 
+use crate::emit::html::{MAX_EFFECTS, Shape};
 use crate::error::{Error, Result};
 
 /// Canvas size, pixels.
@@ -49,7 +50,42 @@ pub struct PlotPoint {
     /// Predicted position error left after compensation, mm (`None` when
     /// the report does not predict it: robot programs).
     pub residual: Option<f64>,
+    /// Programmed start (`None`: the previous point's position).
+    pub start: Option<[f64; 3]>,
+    /// How the move is drawn: arcs as arcs, holes ringed in plan view.
+    pub shape: Shape,
+    /// Length of each effect's part, mm, in the report's effect order.
+    pub parts: [f64; MAX_EFFECTS],
 }
+
+impl PlotPoint {
+    /// Points along the move (`prev`: the point before it).
+    fn path(&self, prev: Option<&PlotPoint>) -> Vec<[f64; 3]> {
+        let start = self.start.or(prev.map(|p| p.pos)).unwrap_or(self.pos);
+        self.shape.samples(start, self.pos)
+    }
+
+    /// A hole (drilling cycle) or a straight plunge on the spot: ringed in
+    /// plan view, where its line has no length.
+    fn hole(&self, prev: Option<&PlotPoint>) -> bool {
+        let start = self.start.or(prev.map(|p| p.pos)).unwrap_or(self.pos);
+        match self.shape {
+            Shape::Hole => true,
+            Shape::Line => {
+                !self.rapid
+                    && (self.pos[0] - start[0]).hypot(self.pos[1] - start[1]) < PLUNGE_XY_MM
+                    && start[2] - self.pos[2] > PLUNGE_Z_MM
+            }
+            Shape::Arc { .. } => false,
+        }
+    }
+}
+
+/// A straight cutting move counts as a plunge (a hole) when it moves less
+/// than this across and more than [`PLUNGE_Z_MM`] down, mm.
+pub const PLUNGE_XY_MM: f64 = 0.05;
+/// Depth of a plunge, mm.
+pub const PLUNGE_Z_MM: f64 = 0.5;
 
 /// A block marked in the picture: the largest deviation of all moves, and
 /// the largest of the cutting moves (where it lands on the part).
@@ -81,19 +117,31 @@ fn mark_style(w: &Worst) -> (RGBColor, &'static str) {
 /// of largest deviation (the earlier one on ties); when the buffer is full,
 /// neighbouring buckets merge and the stride doubles. Deterministic.
 #[derive(Debug, Clone)]
-pub struct Decimator {
+pub struct Decimator<T = PlotPoint> {
     cap: usize,
     stride: usize,
     in_bucket: usize,
-    bucket: Option<PlotPoint>,
-    points: Vec<PlotPoint>,
+    bucket: Option<T>,
+    points: Vec<T>,
 }
 
-fn larger(a: PlotPoint, b: PlotPoint) -> PlotPoint {
-    if b.dev > a.dev { b } else { a }
+/// What a [`Decimator`] keeps of each bucket: the point of largest value.
+pub trait Peak {
+    /// The value compared (|deviation|, mm).
+    fn peak(&self) -> f64;
 }
 
-impl Decimator {
+impl Peak for PlotPoint {
+    fn peak(&self) -> f64 {
+        self.dev
+    }
+}
+
+fn larger<T: Peak>(a: T, b: T) -> T {
+    if b.peak() > a.peak() { b } else { a }
+}
+
+impl<T: Peak + Copy> Decimator<T> {
     /// A decimator keeping between `cap` and `2 × cap` points (cap ≥ 2).
     pub fn new(cap: usize) -> Self {
         let cap = cap.max(2);
@@ -107,7 +155,7 @@ impl Decimator {
     }
 
     /// Adds the next point.
-    pub fn push(&mut self, p: PlotPoint) {
+    pub fn push(&mut self, p: T) {
         self.bucket = Some(match self.bucket {
             Some(b) => larger(b, p),
             None => p,
@@ -119,7 +167,7 @@ impl Decimator {
             }
             self.in_bucket = 0;
             if self.points.len() >= 2 * self.cap {
-                let merged: Vec<PlotPoint> = self
+                let merged: Vec<T> = self
                     .points
                     .chunks(2)
                     .map(|c| c.iter().copied().reduce(larger).unwrap_or(c[0]))
@@ -131,7 +179,7 @@ impl Decimator {
     }
 
     /// The points kept, in program order.
-    pub fn finish(mut self) -> Vec<PlotPoint> {
+    pub fn finish(mut self) -> Vec<T> {
         if let Some(b) = self.bucket.take() {
             self.points.push(b);
         }
@@ -295,6 +343,27 @@ fn line_label(v: f64) -> String {
     }
 }
 
+/// A chart of the toolpath views.
+type ViewChart<'a, 'b> = ChartContext<
+    'a,
+    SVGBackend<'b>,
+    Cartesian2d<plotters::coord::types::RangedCoordf64, plotters::coord::types::RangedCoordf64>,
+>;
+
+/// Draws the polyline `run` (when it has a segment) and empties it.
+fn flush(chart: &mut ViewChart, run: &mut Vec<(f64, f64)>, style: ShapeStyle) -> Result<()> {
+    if run.len() > 1 {
+        chart
+            .draw_series(std::iter::once(PathElement::new(
+                std::mem::take(run),
+                style,
+            )))
+            .map_err(plot_err)?;
+    }
+    run.clear();
+    Ok(())
+}
+
 /// One projection of the toolpath (axes `a`, `b` of the position).
 #[allow(clippy::too_many_arguments)]
 fn view(
@@ -349,15 +418,15 @@ fn view(
         .bold_line_style(RGBColor(215, 215, 215))
         .draw()
         .map_err(plot_err)?;
-    let at = |p: &PlotPoint| {
+    let at = |p: &[f64; 3]| {
         (
-            p.pos.get(a).copied().unwrap_or(0.0),
-            p.pos.get(b).copied().unwrap_or(0.0),
+            p.get(a).copied().unwrap_or(0.0),
+            p.get(b).copied().unwrap_or(0.0),
         )
     };
-    // Runs of segments with the same colour level and kind: one polyline
-    // each, cut at the view's edges (a rapid leaving the view is drawn up to
-    // its edge).
+    // Runs of moves with the same colour level and kind: one polyline
+    // each (arcs along their arc), cut at the view's edges (a rapid leaving
+    // the view is drawn up to its edge).
     let mut i = 1;
     while i < points.len() {
         let key = (level(points[i].dev, scale), points[i].rapid);
@@ -366,42 +435,43 @@ fn view(
         let mut j = i;
         while j < points.len() && (j == i || (level(points[j].dev, scale), points[j].rapid) == key)
         {
-            match clip(at(&points[j - 1]), at(&points[j]), rect) {
-                Some((p, q)) => {
-                    if run.last() != Some(&p) {
-                        if run.len() > 1 {
-                            chart
-                                .draw_series(std::iter::once(PathElement::new(
-                                    std::mem::take(&mut run),
-                                    style,
-                                )))
-                                .map_err(plot_err)?;
+            let path = points[j].path(points.get(j - 1));
+            for w in path.windows(2) {
+                match clip(at(&w[0]), at(&w[1]), rect) {
+                    Some((p, q)) => {
+                        if run.last() != Some(&p) {
+                            flush(&mut chart, &mut run, style)?;
+                            run.push(p);
                         }
-                        run.clear();
-                        run.push(p);
+                        run.push(q);
                     }
-                    run.push(q);
-                }
-                None => {
-                    if run.len() > 1 {
-                        chart
-                            .draw_series(std::iter::once(PathElement::new(
-                                std::mem::take(&mut run),
-                                style,
-                            )))
-                            .map_err(plot_err)?;
-                    }
-                    run.clear();
+                    None => flush(&mut chart, &mut run, style)?,
                 }
             }
             j += 1;
         }
-        if run.len() > 1 {
+        flush(&mut chart, &mut run, style)?;
+        i = j;
+    }
+    // Holes and plunges: a ring in plan view, where they have no length.
+    if (a, b) == (0, 1) {
+        for (k, p) in points.iter().enumerate() {
+            if !p.hole(k.checked_sub(1).and_then(|k| points.get(k))) {
+                continue;
+            }
+            let c = at(&p.pos);
+            if !(rect.0..=rect.1).contains(&c.0) || !(rect.2..=rect.3).contains(&c.1) {
+                continue;
+            }
+            let fill = level_colour(level(p.dev, scale));
             chart
-                .draw_series(std::iter::once(PathElement::new(run, style)))
+                .draw_series(std::iter::once(
+                    EmptyElement::at(c)
+                        + Circle::new((0, 0), 5, fill.filled())
+                        + Circle::new((0, 0), 5, RGBColor(34, 34, 34).stroke_width(1)),
+                ))
                 .map_err(plot_err)?;
         }
-        i = j;
     }
     // Circles on the marks; their meaning in a boxed legend in the upper
     // left corner, so labels never cover each other or the toolpath's ends.
@@ -594,81 +664,180 @@ fn series_group(id: &str, colour: RGBColor, pixels: &[(f64, f64)]) -> String {
     out
 }
 
+/// Smallest deviation the before/after panel's logarithmic axis shows,
+/// mm (1 nm): a residual below it, or zero, is drawn on the axis's floor.
+const LOG_FLOOR_MM: f64 = 1e-6;
+
+/// Colours of the effects' series of a robot's panel, in effect order.
+const PART_COLOURS: [RGBColor; MAX_EFFECTS] = [
+    RGBColor(230, 110, 0),
+    RGBColor(200, 30, 30),
+    RGBColor(33, 145, 140),
+    RGBColor(150, 60, 170),
+    RGBColor(120, 120, 120),
+];
+
+/// A tick label of a logarithmic deviation axis.
+fn log_label(v: f64) -> String {
+    if v >= 1e-3 {
+        tick_label(v, 3)
+    } else {
+        format!("{v:.0e}")
+    }
+}
+
+/// One series of the panel: its group id, colour, legend text and value
+/// at each cutting move.
+type Series = (String, RGBColor, String, Vec<f64>);
+
 /// The before/after panel: for each cutting move along the program, the
 /// predicted |deviation| without compensation and the predicted residual
-/// after it, on one deviation axis. Plotters draws the axes; the series
-/// and the legend come back as SVG markup to append to the document.
-fn before_after(area: &DrawingArea<SVGBackend, Shift>, points: &[PlotPoint]) -> Result<String> {
+/// after it, on a logarithmic deviation axis (the residual is orders of
+/// magnitude smaller). A robot report predicts no residual: the panel shows
+/// the deviation and each effect's part instead, on a linear axis.
+/// Plotters draws the axes; the series and the legend come back as SVG
+/// markup to append to the document.
+fn before_after(
+    area: &DrawingArea<SVGBackend, Shift>,
+    points: &[PlotPoint],
+    effects: &[&str],
+) -> Result<String> {
     let cuts: Vec<&PlotPoint> = points.iter().filter(|p| !p.rapid).collect();
-    let residuals = cuts.iter().all(|p| p.residual.is_some());
+    let residuals = !cuts.is_empty() && cuts.iter().all(|p| p.residual.is_some());
     let x = line_range(cuts.iter().copied());
     let (first, last) = (x.start, x.end);
-    let top = cuts
-        .iter()
-        .flat_map(|p| [p.dev, p.residual.unwrap_or(0.0)])
-        .filter(|d| d.is_finite())
-        .fold(0.0, f64::max);
-    // Headroom above the largest value for the legend.
-    let ymax = if top > 0.0 { top * 1.35 } else { 1e-3 };
-    let chart = line_chart(
-        area,
-        "Cutting moves: predicted deviation before and after compensation",
-        x,
-        ymax,
-        ("source line (cutting moves)", "deviation (mm)"),
-    )?;
-    let (xs, ys) = chart.plotting_area().get_pixel_range();
-    let px = (f64::from(xs.start), f64::from(xs.end - 1));
-    // Pixel rows grow downwards: 0 mm at the bottom.
-    let py = (f64::from(ys.end - 1), f64::from(ys.start));
-    let at = |line: usize, v: f64| {
-        (
-            to_pixel(line as f64, (first, last), px),
-            to_pixel(v, (0.0, ymax), py),
-        )
-    };
-    let before: Vec<(f64, f64)> = cuts.iter().map(|p| at(p.line, p.dev)).collect();
-    let after: Vec<(f64, f64)> = cuts
-        .iter()
-        .filter_map(|p| p.residual.map(|r| at(p.line, r)))
-        .collect();
-    let mut svg = String::from("<g id=\"before-after\">\n");
-    svg.push_str(&series_group("before-after-before", BEFORE, &before));
+    let mut series: Vec<Series> = vec![(
+        "before-after-before".into(),
+        BEFORE,
+        "before compensation: predicted |deviation| (dev_mm)".into(),
+        cuts.iter().map(|p| p.dev).collect(),
+    )];
     if residuals {
-        svg.push_str(&series_group("before-after-after", AFTER, &after));
-    }
-    // The legend, in the panel's upper right corner above the plot.
-    let after_label = if residuals {
-        "after compensation: predicted residual (residual_mm)"
+        series.push((
+            "before-after-after".into(),
+            AFTER,
+            "after compensation: predicted residual (residual_mm; ≤ 1 nm on the floor)".into(),
+            cuts.iter().map(|p| p.residual.unwrap_or(0.0)).collect(),
+        ));
     } else {
-        "after compensation: residual not reported for robot programs"
-    };
-    let (x0, y0) = (px.1 - 380.0, py.1 + 8.0);
-    svg.push_str("<g id=\"before-after-legend\" font-family=\"sans-serif\" font-size=\"12\">\n");
-    svg.push_str(&format!(
-        "<rect x=\"{:.1}\" y=\"{:.1}\" width=\"375\" height=\"44\" fill=\"#FFFFFF\" fill-opacity=\"0.85\" stroke=\"#999999\"/>\n",
-        x0 - 6.0,
-        y0 - 4.0
-    ));
-    for (k, (colour, label)) in [
-        (
-            BEFORE,
-            "before compensation: predicted |deviation| (dev_mm)",
-        ),
-        (AFTER, after_label),
-    ]
-    .into_iter()
-    .enumerate()
-    {
-        let RGBColor(r, g, b) = colour;
-        let y = y0 + 10.0 + 18.0 * k as f64;
-        // A line sample for each series drawn.
-        if k == 0 || residuals {
-            svg.push_str(&format!(
-                "<line x1=\"{x0:.1}\" y1=\"{y:.1}\" x2=\"{:.1}\" y2=\"{y:.1}\" stroke=\"#{r:02X}{g:02X}{b:02X}\" stroke-width=\"2\"/>\n",
-                x0 + 24.0
+        for (k, name) in effects.iter().enumerate().take(MAX_EFFECTS) {
+            series.push((
+                format!("before-after-part-{name}"),
+                PART_COLOURS[k],
+                format!("{name} part ({name}_mm)"),
+                cuts.iter().map(|p| p.parts[k]).collect(),
             ));
         }
+    }
+    let top = series
+        .iter()
+        .flat_map(|s| s.3.iter().copied())
+        .filter(|d| d.is_finite())
+        .fold(0.0, f64::max);
+    let caption = if residuals {
+        "Cutting moves: predicted deviation before and after compensation (log scale)"
+    } else {
+        "Cutting moves: predicted deviation and each effect's part (no residual is predicted for robots)"
+    };
+    let desc = ("source line (cutting moves)", "deviation (mm)");
+    // Pixel range of the plot and the map of a value onto its rows.
+    let (px, py, ylo, yhi, log) = if residuals {
+        let lo = series
+            .iter()
+            .flat_map(|s| s.3.iter().copied())
+            .filter(|d| d.is_finite() && *d >= LOG_FLOOR_MM)
+            .fold(f64::INFINITY, f64::min);
+        let lo = if lo.is_finite() { lo } else { LOG_FLOOR_MM };
+        // A value below the floor (a residual of zero) puts the floor on
+        // the axis, so the gap between before and after shows.
+        let below = series
+            .iter()
+            .flat_map(|s| s.3.iter())
+            .any(|d| !(d.is_finite() && *d >= LOG_FLOOR_MM));
+        let ylo = if below {
+            LOG_FLOOR_MM
+        } else {
+            10f64.powf(lo.log10().floor()).max(LOG_FLOOR_MM)
+        };
+        // Two decades of headroom for the legend.
+        let yhi = 10f64.powf(top.max(ylo * 10.0).log10().ceil() + 1.0);
+        let mut chart = ChartBuilder::on(area)
+            .caption(caption, ("sans-serif", 18))
+            .margin(15)
+            .x_label_area_size(45)
+            .y_label_area_size(70)
+            .build_cartesian_2d(x.clone(), (ylo..yhi).log_scale())
+            .map_err(plot_err)?;
+        chart
+            .configure_mesh()
+            .x_desc(desc.0)
+            .y_desc(desc.1)
+            .x_label_formatter(&|v| line_label(*v))
+            .y_label_formatter(&|v| log_label(*v))
+            .label_style(("sans-serif", 13))
+            .axis_desc_style(("sans-serif", 14))
+            .light_line_style(RGBColor(235, 235, 235))
+            .bold_line_style(RGBColor(215, 215, 215))
+            .draw()
+            .map_err(plot_err)?;
+        let (xs, ys) = chart.plotting_area().get_pixel_range();
+        (
+            (f64::from(xs.start), f64::from(xs.end - 1)),
+            (f64::from(ys.end - 1), f64::from(ys.start)),
+            ylo,
+            yhi,
+            true,
+        )
+    } else {
+        let rows = series.len() as f64;
+        let ymax = if top > 0.0 {
+            top * (1.2 + 0.1 * rows)
+        } else {
+            1e-3
+        };
+        let chart = line_chart(area, caption, x, ymax, desc)?;
+        let (xs, ys) = chart.plotting_area().get_pixel_range();
+        (
+            (f64::from(xs.start), f64::from(xs.end - 1)),
+            (f64::from(ys.end - 1), f64::from(ys.start)),
+            0.0,
+            ymax,
+            false,
+        )
+    };
+    let at = |line: usize, v: f64| {
+        let y = if log {
+            to_pixel(v.max(ylo).log10(), (ylo.log10(), yhi.log10()), py)
+        } else {
+            to_pixel(v, (ylo, yhi), py)
+        };
+        (to_pixel(line as f64, (first, last), px), y)
+    };
+    let mut svg = String::from("<g id=\"before-after\">\n");
+    for (id, colour, _, values) in &series {
+        let pixels: Vec<(f64, f64)> = cuts
+            .iter()
+            .zip(values)
+            .map(|(p, v)| at(p.line, *v))
+            .collect();
+        svg.push_str(&series_group(id, *colour, &pixels));
+    }
+    // The legend, in the panel's upper right corner above the plot.
+    let (x0, y0) = (px.1 - 470.0, py.1 + 8.0);
+    svg.push_str("<g id=\"before-after-legend\" font-family=\"sans-serif\" font-size=\"12\">\n");
+    svg.push_str(&format!(
+        "<rect x=\"{:.1}\" y=\"{:.1}\" width=\"465\" height=\"{:.1}\" fill=\"#FFFFFF\" fill-opacity=\"0.85\" stroke=\"#999999\"/>\n",
+        x0 - 6.0,
+        y0 - 4.0,
+        8.0 + 18.0 * series.len() as f64
+    ));
+    for (k, (_, colour, label, _)) in series.iter().enumerate() {
+        let RGBColor(r, g, b) = *colour;
+        let y = y0 + 10.0 + 18.0 * k as f64;
+        svg.push_str(&format!(
+            "<line x1=\"{x0:.1}\" y1=\"{y:.1}\" x2=\"{:.1}\" y2=\"{y:.1}\" stroke=\"#{r:02X}{g:02X}{b:02X}\" stroke-width=\"2\"/>\n",
+            x0 + 24.0
+        ));
         svg.push_str(&format!(
             "<text x=\"{:.1}\" y=\"{:.1}\" fill=\"#000000\">{label}</text>\n",
             x0 + 32.0,
@@ -681,7 +850,12 @@ fn before_after(area: &DrawingArea<SVGBackend, Shift>, points: &[PlotPoint]) -> 
 
 /// Renders the picture as an SVG document, with `marks` circled and
 /// labelled in every view.
-pub fn render(points: &[PlotPoint], marks: &[Worst], title: &str) -> Result<String> {
+pub fn render(
+    points: &[PlotPoint],
+    marks: &[Worst],
+    title: &str,
+    effects: &[&str],
+) -> Result<String> {
     let top = points
         .iter()
         .map(|p| p.dev)
@@ -727,7 +901,7 @@ pub fn render(points: &[PlotPoint], marks: &[Worst], title: &str) -> Result<Stri
         let (program, _) = along_row.split_horizontally(SIZE.0 - BAR_W);
         along(&program, points, marks, dmax, &scale)?;
         let (panel, _) = before_after_row.split_horizontally(SIZE.0 - BAR_W);
-        let series = before_after(&panel, points)?;
+        let series = before_after(&panel, points, effects)?;
         root.present().map_err(plot_err)?;
         series
     };
@@ -748,6 +922,9 @@ mod tests {
             dev,
             rapid: false,
             residual: Some(dev / 2.0),
+            start: None,
+            shape: Shape::Line,
+            parts: [dev, 0.0, 0.0, 0.0, 0.0],
         }
     }
 
@@ -811,7 +988,7 @@ mod tests {
                 ..pt(i, 0.01 * i as f64)
             })
             .collect();
-        let svg = render(&points, &[], "t").expect("renders");
+        let svg = render(&points, &[], "t", &["geometric"]).expect("renders");
         assert_eq!(group_points(&svg, "before-after-before"), Some(7));
         assert_eq!(group_points(&svg, "before-after-after"), Some(7));
         assert!(svg.trim_end().ends_with("</svg>"));
@@ -823,9 +1000,62 @@ mod tests {
                 ..*p
             })
             .collect();
-        let svg = render(&robot, &[], "t").expect("renders");
+        let svg = render(&robot, &[], "t", &["kinematic"]).expect("renders");
         assert_eq!(group_points(&svg, "before-after-before"), Some(7));
         assert_eq!(group_points(&svg, "before-after-after"), None);
+    }
+
+    /// The most points of one `<polyline>` of an SVG document.
+    fn longest_polyline(svg: &str) -> usize {
+        svg.split("<polyline")
+            .skip(1)
+            .filter_map(|p| p.split("points=\"").nth(1))
+            .map(|p| p.split('"').next().unwrap_or("").split_whitespace().count())
+            .max()
+            .unwrap_or(0)
+    }
+
+    #[test]
+    fn arcs_are_drawn_along_the_arc_and_holes_ringed() {
+        // A half circle from (10, 0) to (-10, 0) about the origin: one
+        // polyline of at least 90 points in each view (2° steps), not a
+        // chord of two.
+        let start = PlotPoint {
+            pos: [10.0, 0.0, 0.0],
+            ..pt(1, 0.01)
+        };
+        let arc = PlotPoint {
+            pos: [-10.0, 0.0, 0.0],
+            start: Some([10.0, 0.0, 0.0]),
+            shape: Shape::Arc {
+                center: [0.0; 3],
+                normal: [0.0, 0.0, -1.0],
+                sweep_rad: std::f64::consts::PI,
+            },
+            ..pt(2, 0.01)
+        };
+        let svg = render(&[start, arc], &[], "t", &["geometric"]).expect("renders");
+        assert!(longest_polyline(&svg) >= 90, "{}", longest_polyline(&svg));
+        let line = PlotPoint {
+            shape: Shape::Line,
+            ..arc
+        };
+        let svg = render(&[start, line], &[], "t", &["geometric"]).expect("renders");
+        assert!(longest_polyline(&svg) < 10);
+        // A hole: one ring (radius 5, outlined #222222) in plan view; a
+        // line with length across: none.
+        let hole = PlotPoint {
+            pos: [30.0, 0.0, -5.0],
+            start: Some([30.0, 0.0, 2.0]),
+            shape: Shape::Hole,
+            ..pt(3, 0.01)
+        };
+        let ring = |svg: &str| svg.matches("r=\"5\"").filter(|_| true).count();
+        let svg = render(&[start, arc, hole], &[], "t", &["geometric"]).expect("renders");
+        assert_eq!(ring(&svg), 2, "fill and outline of one ring");
+        assert!(svg.contains("#222222"));
+        let svg = render(&[start, arc], &[], "t", &["geometric"]).expect("renders");
+        assert_eq!(ring(&svg), 0);
     }
 
     #[test]

@@ -799,7 +799,9 @@ impl<'j, 'm, 'o, 'r> WriteStage<'j, 'm, 'o, 'r> {
             rows(Row {
                 line: line_no,
                 motion: motion_label(plan),
+                start: mv.start,
                 commanded: mv.end,
+                arc: mv.arc,
                 compensated: r.end,
                 result: r.clone(),
             });

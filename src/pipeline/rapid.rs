@@ -2130,7 +2130,10 @@ impl<'m> Rewriter<'m> {
                         {
                             self.record_reported(carry, mv, seg, &state, &dev)
                         }
-                        Ok(Some(dev)) => self.record(carry, mv, seg, &state, &dev),
+                        Ok(Some(dev)) => {
+                            let via = plan.0.via.map(|v| v.translation.vector.into());
+                            self.record(carry, (mv, via), seg, &state, &dev)
+                        }
                         Ok(None) => continue,
                         Err(e) => {
                             failed = Some(e);
@@ -2171,6 +2174,7 @@ impl<'m> Rewriter<'m> {
             line: mv.line,
             kind: mv.name,
             programmed_mm: self.last_tcp,
+            via_mm: None,
             deviation: *dev,
             wrench: state.wrench,
             duration_s: seg.duration_s,
@@ -2183,7 +2187,7 @@ impl<'m> Rewriter<'m> {
     fn record(
         &mut self,
         carry: &mut Carry,
-        mv: &Move,
+        (mv, via_mm): (&Move, Option<[f64; 3]>),
         seg: &Segment,
         state: &MoveState,
         dev: &Deviation,
@@ -2207,6 +2211,7 @@ impl<'m> Rewriter<'m> {
             line: mv.line,
             kind: mv.name,
             programmed_mm: self.last_tcp,
+            via_mm,
             deviation: *dev,
             wrench: state.wrench,
             duration_s: seg.duration_s,

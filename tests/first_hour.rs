@@ -1,0 +1,174 @@
+//! Rough edges a newcomer meets in the first hour, each pinned: a closed
+//! pipe ends a command quietly with exit 0, the release profile strips
+//! debug information while a profiling profile keeps line tables.
+
+use std::io::Read;
+use std::process::{Command, Stdio};
+
+use crate::common::{postproc, repo};
+
+/// `postproc calibrate … | head -1`: the reader closes the pipe before the
+/// report is written; the run ends with exit 0 and says nothing.
+#[test]
+fn a_closed_pipe_ends_the_run_quietly_with_exit_0() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let bin = postproc().get_program().to_owned();
+    let mut child = Command::new(bin)
+        .args(["calibrate", "stiffness", "--machine"])
+        .arg(repo("machines/abb-irb1600.yaml"))
+        .arg("--observations")
+        .arg(repo("samples/observations/irb1600-ldbb-measured.csv"))
+        .arg("-o")
+        .arg(dir.path().join("c.yaml"))
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("runs");
+    // Closed before the calibration (a fraction of a second) prints.
+    drop(child.stdout.take());
+    let mut err = String::new();
+    child
+        .stderr
+        .take()
+        .expect("stderr")
+        .read_to_string(&mut err)
+        .expect("stderr text");
+    let status = child.wait().expect("exits");
+    assert_eq!(status.code(), Some(0), "{err}");
+    assert!(!err.contains("error"), "{err}");
+    assert!(!err.contains("Broken pipe"), "{err}");
+}
+
+#[test]
+fn release_builds_strip_debug_information_and_profiling_keeps_it() {
+    let manifest: toml_like::Profiles =
+        toml_like::profiles(&std::fs::read_to_string(repo("Cargo.toml")).expect("Cargo.toml"));
+    let release = manifest.get("release").expect("a release profile");
+    assert_eq!(release.get("debug").map(String::as_str), Some("false"));
+    assert_eq!(
+        release.get("strip").map(String::as_str),
+        Some("\"debuginfo\"")
+    );
+    let profiling = manifest.get("profiling").expect("a profiling profile");
+    assert_eq!(
+        profiling.get("inherits").map(String::as_str),
+        Some("\"release\"")
+    );
+    assert_eq!(profiling.get("debug").map(String::as_str), Some("1"));
+}
+
+/// The `[profile.NAME]` tables of a Cargo manifest as key → raw value.
+mod toml_like {
+    use std::collections::BTreeMap;
+
+    pub type Profiles = BTreeMap<String, BTreeMap<String, String>>;
+
+    pub fn profiles(text: &str) -> Profiles {
+        let mut out = Profiles::new();
+        let mut current: Option<String> = None;
+        for line in text.lines().map(str::trim) {
+            if line.starts_with('[') {
+                current = line
+                    .strip_prefix("[profile.")
+                    .and_then(|l| l.strip_suffix(']'))
+                    .map(str::to_string);
+                continue;
+            }
+            if let (Some(p), Some((k, v))) = (&current, line.split_once('=')) {
+                if !line.starts_with('#') {
+                    out.entry(p.clone())
+                        .or_default()
+                        .insert(k.trim().to_string(), v.trim().to_string());
+                }
+            }
+        }
+        out
+    }
+}
+
+/// A G-code program given a robot's machine file is named as such, for
+/// every command that takes a program (the RAPID parser's "expected
+/// `MODULE name`" was the message).
+#[test]
+fn a_gcode_program_on_a_robot_is_named_as_a_language_mismatch() {
+    let part = repo("samples/part.nc");
+    for args in [
+        vec!["report", "--machine", "abb-irb1600"],
+        vec!["check", "--machine", "abb-irb1600"],
+        vec!["compensate", "--machine", "abb-irb1600", "-o", "never.nc"],
+    ] {
+        let a = postproc().args(&args).arg(&part).assert().code(2);
+        let err = String::from_utf8_lossy(&a.get_output().stderr).to_string();
+        assert!(
+            err.contains("part.nc: is a G-code program")
+                && err.contains("abb-irb1600.yaml (bundled) is a robot"),
+            "{args:?}: {err}"
+        );
+        assert!(!err.contains("MODULE"), "{err}");
+    }
+}
+
+/// Every subcommand's `--help` says how to call it with what it needs
+/// (`--machine` where the run needs one) and lists its exit codes.
+#[test]
+fn every_help_has_its_usage_and_exit_codes() {
+    let needs_machine = [
+        "compensate",
+        "report",
+        "batch",
+        "simulate",
+        "calibrate",
+        "diagnose",
+    ];
+    let all = [
+        "check",
+        "compensate",
+        "report",
+        "batch",
+        "simulate",
+        "calibrate",
+        "diagnose",
+        "machines",
+        "completions",
+        "man",
+    ];
+    for sub in all {
+        let a = postproc().args([sub, "--help"]).assert().success();
+        let help = String::from_utf8_lossy(&a.get_output().stdout).to_string();
+        let usage = help
+            .lines()
+            .find(|l| l.starts_with("Usage: "))
+            .unwrap_or_else(|| panic!("{sub}: no usage line in {help}"));
+        assert!(usage.contains(&format!("postproc {sub}")), "{usage}");
+        if needs_machine.contains(&sub) {
+            assert!(usage.contains("--machine <MACHINE>"), "{sub}: {usage}");
+        }
+        assert!(
+            help.contains("Exit codes: 0 "),
+            "{sub}: no exit codes in\n{help}"
+        );
+    }
+}
+
+/// `postproc completions SHELL` and `postproc man` print what the shells
+/// and `man` read, generated from the flags themselves.
+#[test]
+fn completions_and_man_page_are_generated_from_the_flags() {
+    let a = postproc().args(["completions", "bash"]).assert().success();
+    let bash = String::from_utf8_lossy(&a.get_output().stdout).to_string();
+    assert!(bash.contains("_postproc()"), "{bash:.200}");
+    for flag in ["--machine", "--report-format", "--merge-summaries"] {
+        assert!(bash.contains(flag), "bash completion lacks {flag}");
+    }
+    let a = postproc().args(["completions", "zsh"]).assert().success();
+    assert!(String::from_utf8_lossy(&a.get_output().stdout).starts_with("#compdef postproc"));
+    postproc().args(["completions", "tcsh"]).assert().code(2);
+    let a = postproc().arg("man").assert().success();
+    let man = String::from_utf8_lossy(&a.get_output().stdout).to_string();
+    assert!(man.contains(".TH postproc 1"), "{man:.200}");
+    assert!(
+        man.contains(".TH postproc-compensate 1"),
+        "a page per subcommand"
+    );
+    assert!(man.contains("\\-\\-machine"), "flags are listed");
+}
