@@ -25,6 +25,7 @@ mod golden;
 mod gperf;
 mod honesty_cli;
 mod hostile;
+mod languages;
 mod layers;
 mod machine_tool;
 mod mounts;

@@ -73,6 +73,15 @@ struct Item {
     problem: Option<String>,
     /// A RAPID program of several modules (a task folder, a `.pgf`).
     program: bool,
+    /// The message of a file in a language postproc does not read
+    /// ([`crate::program::language::unread`]).
+    unread: Option<String>,
+}
+
+/// The message of the file at `path` when it is in a language postproc
+/// does not read.
+fn unread(path: &Path) -> Option<String> {
+    crate::program::language::unread(path).map(|n| n.error(&path.display().to_string()).to_string())
 }
 
 /// Programs under a folder, recursively, in name order; hidden entries,
@@ -105,6 +114,7 @@ fn walk(
                 rel: dir.to_path_buf(),
                 problem: Some(format!("{}: {e}", dir.display())),
                 program: false,
+                unread: None,
             });
             return;
         }
@@ -150,12 +160,22 @@ fn walk(
                     rel,
                     problem: None,
                     program: true,
+                    unread: None,
                 });
                 continue;
             }
             walk((root, robot), &path, skip, seen, items, skipped);
         } else if name.contains(".comp.") {
             skip_as("a compensated program (*.comp.*)");
+        } else if let Some(message) = path.is_file().then(|| unread(&path)).flatten() {
+            let rel = path.strip_prefix(root).unwrap_or(&path).to_path_buf();
+            items.push(Item {
+                input: path,
+                rel,
+                problem: None,
+                program: false,
+                unread: Some(message),
+            });
         } else if !is_program(&path) && !sniffed(&path, robot) {
             skip_as("not a program (by its extension or its first block)");
         } else if !path.is_file() {
@@ -167,6 +187,7 @@ fn walk(
                 rel,
                 problem: None,
                 program: false,
+                unread: None,
             });
         }
     }
@@ -211,6 +232,7 @@ fn collect(inputs: &[PathBuf], out_dir: &Path, robot: bool) -> (Vec<Item>, Vec<S
                 rel: rel.unwrap_or_else(|| PathBuf::from("program")),
                 problem: None,
                 program: true,
+                unread: None,
             });
         } else if input.is_dir() {
             // Folders are followed once per input (links may lead back).
@@ -233,11 +255,13 @@ fn collect(inputs: &[PathBuf], out_dir: &Path, robot: bool) -> (Vec<Item>, Vec<S
                 Ok(_) => Some(format!("{}: not a regular file", input.display())),
                 Err(_) => Some(format!("{}: no such file", input.display())),
             };
+            let unread = problem.is_none().then(|| unread(input)).flatten();
             items.push(Item {
                 input: input.clone(),
                 rel,
                 problem,
                 program: false,
+                unread,
             });
         }
     }
@@ -252,7 +276,7 @@ fn collect(inputs: &[PathBuf], out_dir: &Path, robot: bool) -> (Vec<Item>, Vec<S
     });
     let mut owner: BTreeMap<PathBuf, PathBuf> = BTreeMap::new();
     for item in &mut items {
-        if item.problem.is_some() {
+        if item.problem.is_some() || item.unread.is_some() {
             continue;
         }
         match owner.get(&item.rel) {
@@ -300,7 +324,8 @@ struct FileResult {
     output: Option<String>,
     report: Option<String>,
     /// `ok`, `empty` (written, but it has no moves), `findings` (out of
-    /// tolerance) or `failed`.
+    /// tolerance), `failed`, or `unread` (in a language postproc does not
+    /// read, named in `error`).
     status: String,
     error: Option<String>,
     blocks: usize,
@@ -639,6 +664,22 @@ fn file_result(
     }
 }
 
+/// The summary line of a file in a language postproc does not read.
+fn unread_result(input: &Path, message: &str) -> FileResult {
+    FileResult {
+        input: input.display().to_string(),
+        output: None,
+        report: None,
+        status: "unread".into(),
+        error: Some(message.to_string()),
+        blocks: 0,
+        moves: 0,
+        max_deviation_mm: None,
+        max_deviation_line: None,
+        max_residual_mm: None,
+    }
+}
+
 /// `postproc batch`; `quiet` hides the progress bar.
 pub fn run(a: &BatchArgs, quiet: bool) -> Result<i32> {
     if a.merge_summaries {
@@ -752,6 +793,10 @@ pub fn run(a: &BatchArgs, quiet: bool) -> Result<i32> {
             .par_iter()
             .map(|item| {
                 let output = a.out_dir.join(&item.rel);
+                if let Some(message) = &item.unread {
+                    bar.inc(1);
+                    return unread_result(&item.input, message);
+                }
                 let done = match &item.problem {
                     Some(p) => Err(usage(p.clone())),
                     None if item.program => {
@@ -797,7 +842,7 @@ fn summarize(
         count("findings"),
         count("failed"),
     );
-    let exit_code = if failed > 0 {
+    let exit_code = if failed > 0 || count("unread") > 0 {
         2
     } else if findings > 0 {
         1
@@ -851,14 +896,26 @@ fn print_summary(summary: &BatchSummary, summary_path: &Path) -> Result<()> {
                 r.max_residual_mm.unwrap_or(0.0),
                 summary.tolerance_mm
             ))?,
+            "unread" => say(format!("unread    {}\n", r.error.as_deref().unwrap_or("")))?,
             _ => {}
         }
     }
     for sk in &summary.skipped {
         say(format!("skipped   {}: {}\n", sk.path, sk.reason))?;
     }
+    let unread = summary
+        .results
+        .iter()
+        .filter(|r| r.status == "unread")
+        .count();
+    // Files in a language postproc does not read: counted apart from the
+    // failures of programs it reads, and only when there are some.
+    let unread = match unread {
+        0 => String::new(),
+        n => format!(", {n} in a language not read"),
+    };
     say(format!(
-        "batch: {} programs: {} compensated ({} with findings, {} empty), {} failed; {} skipped; summary in {}\n",
+        "batch: {} programs: {} compensated ({} with findings, {} empty), {} failed{unread}; {} skipped; summary in {}\n",
         summary.programs,
         summary.ok + summary.findings + summary.empty,
         summary.findings,

@@ -131,8 +131,14 @@ fn gcode_program(program: &ProgramArgs) -> bool {
 impl Engine {
     /// Loads the machine of `program` once and chooses the engine: RAPID
     /// for a module (by its extension or content) or a robot, G-code otherwise; then
-    /// refuses the `given` flags that do not apply to it.
+    /// refuses the `given` flags that do not apply to it. A program in a
+    /// language postproc does not read is refused first, with its language
+    /// named ([`crate::program::language::unread`]).
     pub(super) fn choose(program: &ProgramArgs, given: Given) -> Result<Engine> {
+        // A language postproc does not read is named before any reader.
+        if let Some(named) = crate::program::language::unread(&program.file) {
+            return Err(named.error(&program.file.display().to_string()).into());
+        }
         let rapid = rapid_program(program);
         let machine = program.machine.as_deref().map(super::machines::open);
         let engine = match machine {

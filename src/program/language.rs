@@ -10,9 +10,19 @@
 //! takes a file without a program extension found in a folder only when
 //! its content is a program. A folder and a
 //! `.pgf` program file are RAPID programs of several modules.
+//!
+//! A file in a robot or control language that postproc does not read
+//! ([`Unread`]: KUKA KRL, FANUC TP, Yaskawa JBI, URScript, Stäubli VAL3,
+//! native Siemens 840D, Heidenhain conversational) is named by [`unread`]
+//! before any reader sees it, from its extension and its head: the first
+//! line that is not blank or a `;` comment, and for Siemens any line of
+//! the head. A KRL `DEF MAIN()` (a name and its parameter list) is KRL;
+//! a Siemens `DEF REAL X` (a type and a name) is Siemens.
 
 use std::io::Read;
 use std::path::Path;
+
+use crate::error::{Located, clip_to};
 
 /// Extensions of RAPID modules: program modules (`.mod`, `.modx`), system
 /// modules (`.sys`) and the older program files (`.prg`).
@@ -172,6 +182,293 @@ pub fn head(path: &Path) -> Option<Vec<u8>> {
         .map(|_| head)
 }
 
+/// A language postproc recognises in a file but does not read.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Unread {
+    /// KUKA Robot Language: `.src` programs and `.dat` data lists.
+    Krl,
+    /// FANUC Teach Pendant programs: `.ls` (ASCII) and `.tp` (binary).
+    FanucTp,
+    /// Yaskawa Motoman INFORM jobs: `.jbi`.
+    Jbi,
+    /// Universal Robots URScript: `.script`.
+    UrScript,
+    /// Stäubli VAL3: `.pgx` programs, `.dtx` data, `.pjx` projects.
+    Val3,
+    /// Native Siemens 840D (Sinumerik) part programs (`.mpf`) and
+    /// subprograms (`.spf`).
+    Siemens,
+    /// Heidenhain conversational (Klartext) programs: `.h`.
+    Heidenhain,
+}
+
+impl Unread {
+    /// The language's name, as messages give it.
+    pub fn name(self) -> &'static str {
+        match self {
+            Unread::Krl => "KUKA KRL",
+            Unread::FanucTp => "FANUC TP",
+            Unread::Jbi => "Yaskawa JBI (INFORM)",
+            Unread::UrScript => "Universal Robots URScript",
+            Unread::Val3 => "Stäubli VAL3",
+            Unread::Siemens => "Siemens 840D (Sinumerik)",
+            Unread::Heidenhain => "Heidenhain conversational (Klartext)",
+        }
+    }
+
+    /// The language an extension (lower case) alone names: only extensions
+    /// that no readable program and no common other file carries.
+    fn of_extension(ext: &str) -> Option<Unread> {
+        Some(match ext {
+            "src" => Unread::Krl,
+            "ls" | "tp" => Unread::FanucTp,
+            "jbi" => Unread::Jbi,
+            "script" => Unread::UrScript,
+            "pgx" | "dtx" | "pjx" => Unread::Val3,
+            _ => return None,
+        })
+    }
+}
+
+/// What told a file's [`Unread`] language: the language, and the line of
+/// the file that shows it, or none when the extension alone told.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Named {
+    /// The language.
+    pub language: Unread,
+    /// The telling line: its number (1-based) and text.
+    pub line: Option<(usize, String)>,
+    /// The file's extension, lower case.
+    pub extension: Option<String>,
+}
+
+impl Named {
+    /// The one message of the file `file` in this language:
+    /// ``file:line:1: KUKA KRL program (`&ACCESS RVP`): …``, or
+    /// `file: KUKA KRL program (a .src file): …` when the extension told.
+    pub fn error(&self, file: &str) -> Located {
+        let lang = self.language.name();
+        let rest = "a language postproc does not read (it reads ISO G-code and ABB RAPID)";
+        match &self.line {
+            Some((n, text)) => Located::new(
+                file,
+                *n,
+                1,
+                format!("{lang} program (`{}`): {rest}", clip_to(text, 40)),
+            ),
+            None => Located::whole_file(
+                file,
+                format!(
+                    "{lang} program (a .{} file): {rest}",
+                    self.extension.as_deref().unwrap_or_default()
+                ),
+            ),
+        }
+    }
+}
+
+/// The [`Unread`] language of the file at `path`, told by its extension
+/// and its head ([`unread_text`]); `None` for a file of a language
+/// postproc reads or of none it knows, for a RAPID module or program (by
+/// extension, a folder, a `.pgf`) and for standard input. A file that
+/// cannot be read, or is not a regular file, is told by its extension
+/// alone.
+pub fn unread(path: &Path) -> Option<Named> {
+    if path == Path::new("-")
+        || rapid_extension(path)
+        || path.is_dir()
+        || crate::program::rapid::program::is_pgf(path)
+    {
+        return None;
+    }
+    let ext = extension(path);
+    let head = head(path).unwrap_or_default();
+    unread_text(ext.as_deref(), &head)
+}
+
+/// The [`Unread`] language of a file with extension `ext` (lower case)
+/// whose first bytes are `head`:
+///
+/// * the first line that is not blank, a `%` tape mark or a `;` comment
+///   opens like one of those languages (see [`opening`]), whatever the
+///   extension, since no G-code block or RAPID module opens so;
+/// * else an extension only they use (`.src`, `.ls`, `.tp`, `.jbi`,
+///   `.script`, `.pgx`, `.dtx`, `.pjx`);
+/// * else, for `.mpf`, `.spf`, or a file of another extension whose first
+///   block is G-code ([`gcode_text`]), a line of the head that only native
+///   Siemens 840D writes (as the G-code reader names it); a `.mpf` in
+///   plain ISO G-code is G-code.
+pub fn unread_text(ext: Option<&str>, head: &[u8]) -> Option<Named> {
+    if ext.is_some_and(|e| RAPID_EXTENSIONS.contains(&e)) {
+        return None;
+    }
+    let named = |language, line| Named {
+        language,
+        line,
+        extension: ext.map(str::to_string),
+    };
+    let head = head.strip_prefix(b"\xef\xbb\xbf").unwrap_or(head);
+    let mut lines = head
+        .split(|&b| b == b'\n')
+        .enumerate()
+        .map(|(i, l)| (i + 1, trim_blanks(l)));
+    let first = lines
+        .by_ref()
+        .find(|(_, l)| !(l.is_empty() || *l == b"%" || l.starts_with(b";")));
+    if let Some((n, line)) = first {
+        if let Some(language) = opening(line, head) {
+            return Some(named(language, Some((n, shown(line)))));
+        }
+    }
+    if let Some(language) = ext.and_then(Unread::of_extension) {
+        return Some(named(language, None));
+    }
+    let siemens_ext = ext.is_some_and(|e| matches!(e, "mpf" | "spf"));
+    let other_ext = !ext.is_some_and(|e| GCODE_EXTENSIONS.contains(&e));
+    if siemens_ext || (other_ext && gcode_text(head)) {
+        let siemens = first.into_iter().chain(lines).find(|(_, l)| {
+            !krl_def(l)
+                && crate::program::gcode::dialect::dialect_of(l)
+                    .is_some_and(|d| d.contains("Siemens"))
+        });
+        if let Some((n, line)) = siemens {
+            return Some(named(Unread::Siemens, Some((n, shown(line)))));
+        }
+    }
+    None
+}
+
+/// A line of a file, as text for a message.
+fn shown(line: &[u8]) -> String {
+    String::from_utf8_lossy(line).into_owned()
+}
+
+/// The word that opens `line` (letters, digits, `_`, `$`; maybe empty)
+/// and what follows it, blanks skipped.
+fn word_at(line: &[u8]) -> (&[u8], &[u8]) {
+    let n = line
+        .iter()
+        .take_while(|b| b.is_ascii_alphanumeric() || **b == b'_' || **b == b'$')
+        .count();
+    let (w, rest) = line.split_at(n);
+    (w, rest.trim_ascii_start())
+}
+
+/// True when the word `w` is the keyword `k`, in any case.
+fn is_word(w: &[u8], k: &str) -> bool {
+    w.eq_ignore_ascii_case(k.as_bytes())
+}
+
+/// True when `line` opens a KRL routine or data list: `DEF name(`,
+/// `DEFFCT type name(`, `DEFDAT name`, each maybe after `GLOBAL`. A
+/// Siemens `DEF REAL X` (a type, then a name) does not, nor a URScript or
+/// Python `def name():` (ending with `:`).
+pub fn krl_def(line: &[u8]) -> bool {
+    let line = line.trim_ascii();
+    if line.ends_with(b":") {
+        return false;
+    }
+    let (mut w, mut rest) = word_at(line);
+    if is_word(w, "GLOBAL") {
+        (w, rest) = word_at(rest);
+    }
+    let named = |rest: &[u8]| {
+        let (name, after) = word_at(rest);
+        !name.is_empty() && after.starts_with(b"(")
+    };
+    if is_word(w, "DEF") {
+        named(rest)
+    } else if is_word(w, "DEFFCT") {
+        let (ty, after) = word_at(rest);
+        !ty.is_empty() && named(after)
+    } else if is_word(w, "DEFDAT") {
+        !word_at(rest).0.is_empty()
+    } else {
+        false
+    }
+}
+
+/// Types of Siemens 840D variable definitions (`DEF REAL X`).
+const SIEMENS_TYPES: [&str; 7] = ["REAL", "INT", "BOOL", "CHAR", "STRING", "AXIS", "FRAME"];
+
+/// Calls of URScript moves, one of which a URScript program's head shows.
+const UR_MOVES: [&[u8]; 6] = [
+    b"movel(", b"movej(", b"movep(", b"movec(", b"servoj(", b"speedl(",
+];
+
+/// The language whose files open with `line` (the first line that is not
+/// blank or a `;` comment), `head` being the first bytes of the file:
+/// KRL `&ACCESS`, `&REL`, `&PARAM` headers and [`krl_def`] openings; a
+/// FANUC `/PROG name`; a Yaskawa `/JOB`; a URScript `def name():` with a
+/// move in the head; a VAL3 XML document ([`val3`]); a Siemens `%_N_…`
+/// file header, `PROC name` or `DEF type name`; a Heidenhain
+/// `0 BEGIN PGM name MM`.
+fn opening(line: &[u8], head: &[u8]) -> Option<Unread> {
+    if line.first() == Some(&b'&') && line.get(1).is_some_and(u8::is_ascii_alphabetic) {
+        return Some(Unread::Krl);
+    }
+    if krl_def(line) {
+        return Some(Unread::Krl);
+    }
+    let section = |k: &[u8]| {
+        line.get(..k.len())
+            .is_some_and(|u| u.eq_ignore_ascii_case(k))
+            && line.get(k.len()).is_none_or(|b| !b.is_ascii_alphanumeric())
+    };
+    if section(b"/PROG") {
+        return Some(Unread::FanucTp);
+    }
+    if section(b"/JOB") {
+        return Some(Unread::Jbi);
+    }
+    if line.starts_with(b"<") {
+        return val3(head).then_some(Unread::Val3);
+    }
+    let (w, rest) = word_at(line);
+    if w == b"def" {
+        let (name, after) = word_at(rest);
+        let moves = UR_MOVES
+            .iter()
+            .any(|m| head.windows(m.len()).any(|x| x == *m));
+        if !name.is_empty() && after.starts_with(b"(") && line.ends_with(b":") && moves {
+            return Some(Unread::UrScript);
+        }
+    }
+    if line.starts_with(b"%_N_") || (is_word(w, "PROC") && !word_at(rest).0.is_empty()) {
+        return Some(Unread::Siemens);
+    }
+    if is_word(w, "DEF") && SIEMENS_TYPES.iter().any(|t| is_word(word_at(rest).0, t)) {
+        return Some(Unread::Siemens);
+    }
+    // `0 BEGIN PGM PART MM`: a block number, then the program's opening.
+    let numbered = !w.is_empty() && w.iter().all(u8::is_ascii_digit);
+    let (w, rest) = if numbered { word_at(rest) } else { (w, rest) };
+    if is_word(w, "BEGIN") && is_word(word_at(rest).0, "PGM") {
+        return Some(Unread::Heidenhain);
+    }
+    None
+}
+
+/// True when `head` is an XML document of Stäubli VAL3: its root element
+/// is `Programs`, or a `Database` or `Project` of Stäubli's namespace.
+fn val3(head: &[u8]) -> bool {
+    const NAMESPACE: &[u8] = b"staubli.com/robotics";
+    let mut rest = head;
+    // The first element that is not a declaration, instruction or comment.
+    while let Some(p) = rest.iter().position(|&b| b == b'<') {
+        rest = rest.get(p + 1..).unwrap_or_default();
+        if matches!(rest.first(), Some(b'?' | b'!')) {
+            continue;
+        }
+        let (root, _) = word_at(rest);
+        let staubli = head
+            .windows(NAMESPACE.len())
+            .any(|w| w.eq_ignore_ascii_case(NAMESPACE));
+        return root == b"Programs" || (staubli && matches!(root, b"Database" | b"Project"));
+    }
+    false
+}
+
 /// True when `path` holds a RAPID module: by its extension, or, when the
 /// extension is neither RAPID's nor G-code's, by the first token of a
 /// regular file ([`rapid_text`]). A file that cannot be read is not
@@ -211,6 +508,148 @@ mod tests {
         ] {
             assert_eq!(rapid_text(text), rapid, "{}", String::from_utf8_lossy(text));
         }
+    }
+
+    /// The language `unread_text` names, and the line that told it.
+    fn named(ext: Option<&str>, text: &str) -> Option<(Unread, usize)> {
+        unread_text(ext, text.as_bytes()).map(|n| (n.language, n.line.map_or(0, |l| l.0)))
+    }
+
+    #[test]
+    fn unread_languages_are_named_by_their_head() {
+        use Unread::*;
+        for (ext, text, want) in [
+            (
+                Some("src"),
+                "&ACCESS RVP\r\n&REL 3\r\nDEF PALLET( )\r\n",
+                (Krl, 1),
+            ),
+            (None, "&ACCESS RVP\nDEF PALLET( )\n", (Krl, 1)),
+            (
+                Some("txt"),
+                "\n; cell 4\nDEF MAIN()\n  PTP HOME\nEND\n",
+                (Krl, 3),
+            ),
+            (
+                Some("dat"),
+                "DEFDAT  PALLET\nDECL E6POS XP1={X 10.0}\nENDDAT\n",
+                (Krl, 1),
+            ),
+            (Some("sub"), "GLOBAL DEF SPS_LOOP ( )\n", (Krl, 1)),
+            (Some("src"), "DEFFCT REAL AREA(W:IN, H:IN)\n", (Krl, 1)),
+            (Some("mpf"), "DEF MAIN()\nEND\n", (Krl, 1)),
+            (Some("ls"), "/PROG  BIN_1_DROP\n/ATTR\n", (FanucTp, 1)),
+            (None, "/PROG PICK\t  Macro\n/MN\n", (FanucTp, 1)),
+            (Some("jbi"), "/JOB\r\n//NAME WELD01\r\n//POS\r\n", (Jbi, 1)),
+            (None, "/JOB\n//NAME WELD01\n", (Jbi, 1)),
+            (
+                Some("script"),
+                "def pick():\n  movel(p[0.4, 0.1, 0.2, 0, 3.14, 0], a=1.2, v=0.25)\nend\n",
+                (UrScript, 1),
+            ),
+            (
+                None,
+                "def Prog():\n  set_tcp(p[0,0,0.1,0,0,0])\n  movej([0,-1.57,1.57,0,0,0])\nend\n",
+                (UrScript, 1),
+            ),
+            (
+                Some("pgx"),
+                "<?xml version=\"1.0\" encoding=\"utf-8\"?>\n<Programs xmlns=\"http://www.staubli.com/robotics/VAL3/Program/2\">\n",
+                (Val3, 1),
+            ),
+            (
+                None,
+                "<?xml version=\"1.0\"?>\n<!-- data -->\n<Database xmlns=\"http://www.staubli.com/robotics/VAL3/Data/2\">\n",
+                (Val3, 1),
+            ),
+            (
+                Some("mpf"),
+                "%_N_POCKET_MPF\n;$PATH=/_N_MPF_DIR\nN10 G17 G90\n",
+                (Siemens, 1),
+            ),
+            (
+                Some("spf"),
+                "PROC CONTOUR(REAL DEPTH)\nN10 G1 X0\nRET\n",
+                (Siemens, 1),
+            ),
+            (None, "DEF REAL DEPTH=5\nG0 X0\n", (Siemens, 1)),
+            (
+                Some("mpf"),
+                "; roughing\nN10 G90 G54\nN20 G0 X0 Y0\nN30 CYCLE81(10,0,2,-5)\n",
+                (Siemens, 4),
+            ),
+            (None, "N10 G90 G54\nN20 R1=5\n", (Siemens, 2)),
+            (
+                Some("h"),
+                "0 BEGIN PGM PART MM\n1 BLK FORM 0.1 Z X+0 Y+0 Z-20\n",
+                (Heidenhain, 1),
+            ),
+            (None, "BEGIN PGM 12 INCH\n", (Heidenhain, 1)),
+        ] {
+            assert_eq!(named(ext, text), Some(want), "{ext:?} {text}");
+        }
+        // By the extension alone: a binary TP, an empty KRL program.
+        for (ext, want) in [("tp", FanucTp), ("src", Krl), ("jbi", Jbi), ("pjx", Val3)] {
+            assert_eq!(
+                named(Some(ext), "\u{1}\u{2}\u{0}"),
+                Some((want, 0)),
+                "{ext}"
+            );
+        }
+    }
+
+    #[test]
+    fn readable_programs_and_other_files_are_not_named() {
+        for (ext, text) in [
+            (Some("mod"), "&ACCESS RVP\n"),
+            (None, "MODULE M\nENDMODULE\n"),
+            (Some("nc"), "%\nO1001\nG0 X1\n"),
+            (Some("mpf"), "; plain ISO\nN10 G90 G54\nN20 G0 X0 Y0\nM30\n"),
+            (Some("nc"), "G0 X0\nN30 CYCLE81(10,0,2,-5)\n"),
+            (Some("txt"), "costs $5 and R1=3\n"),
+            (Some("py"), "def main():\n    print(1)\n"),
+            (Some("xml"), "<?xml version=\"1.0\"?>\n<svg>\n"),
+            (Some("h"), "#include <stdio.h>\n"),
+            (Some("dat"), "1.0 2.0 3.0\n"),
+            (None, ""),
+        ] {
+            assert_eq!(named(ext, text), None, "{ext:?} {text}");
+        }
+    }
+
+    #[test]
+    fn a_krl_def_is_never_a_siemens_definition() {
+        for l in [
+            "DEF MAIN()",
+            "def main ( )",
+            "GLOBAL DEF X(A:IN)",
+            "DEFDAT MAIN PUBLIC",
+        ] {
+            assert!(krl_def(l.as_bytes()), "{l}");
+        }
+        for l in [
+            "DEF REAL X",
+            "DEF INT N=3",
+            "DEF",
+            "DEFINE X AS G1",
+            "DEF X",
+        ] {
+            assert!(!krl_def(l.as_bytes()), "{l}");
+        }
+    }
+
+    #[test]
+    fn the_message_names_the_language_and_the_line() {
+        let n = unread_text(Some("src"), b"&ACCESS RVP\nDEF A()\n").unwrap();
+        assert_eq!(
+            n.error("a.src").to_string(),
+            "a.src:1:1: KUKA KRL program (`&ACCESS RVP`): a language postproc does not read (it reads ISO G-code and ABB RAPID)"
+        );
+        let n = unread_text(Some("tp"), b"").unwrap();
+        assert_eq!(
+            n.error("p.tp").to_string(),
+            "p.tp: FANUC TP program (a .tp file): a language postproc does not read (it reads ISO G-code and ABB RAPID)"
+        );
     }
 
     #[test]

@@ -130,6 +130,10 @@ pub fn dialect_of(text: &[u8]) -> Option<&'static str> {
         // Every block of a Heidenhain DIN/ISO program ends with `*`.
         return Some("Heidenhain DIN/ISO");
     }
+    if crate::program::language::krl_def(text) {
+        // `DEF MAIN()`: a KRL routine, not a Siemens definition.
+        return Some("KUKA KRL");
+    }
     if siemens(text) {
         return Some("native Siemens 840D (Sinumerik)");
     }
@@ -277,6 +281,17 @@ mod tests {
         ] {
             assert_eq!(of(l), Some("native Siemens 840D (Sinumerik)"), "{l}");
         }
+    }
+
+    #[test]
+    fn a_krl_def_is_not_siemens() {
+        for l in ["DEF MAIN()", "DEF Corte_JP ( )", "GLOBAL DEF PICK(P:IN)"] {
+            assert_eq!(of(l), Some("KUKA KRL"), "{l}");
+        }
+        assert_eq!(
+            of("DEF REAL DEPTH"),
+            Some("native Siemens 840D (Sinumerik)")
+        );
     }
 
     #[test]
