@@ -55,7 +55,6 @@ mod imp {
     /// handler can catch (SIGKILL and SIGSTOP cannot be; SIGSEGV, SIGBUS,
     /// SIGILL, SIGFPE and SIGTRAP are faults of the process itself, and
     /// SIGSEGV and SIGBUS carry Rust's stack-overflow report).
-    #[cfg(any(target_os = "linux", target_os = "android"))]
     const TERMINATING: &[libc::c_int] = &[
         libc::SIGINT,
         libc::SIGTERM,
@@ -71,27 +70,12 @@ mod imp {
         libc::SIGPIPE,
         libc::SIGABRT,
         libc::SIGSYS,
+        #[cfg(any(target_os = "linux", target_os = "android"))]
         libc::SIGPOLL,
+        #[cfg(any(target_os = "linux", target_os = "android"))]
         libc::SIGPWR,
+        #[cfg(any(target_os = "linux", target_os = "android"))]
         libc::SIGSTKFLT,
-    ];
-    /// See the Linux list.
-    #[cfg(not(any(target_os = "linux", target_os = "android")))]
-    const TERMINATING: &[libc::c_int] = &[
-        libc::SIGINT,
-        libc::SIGTERM,
-        libc::SIGHUP,
-        libc::SIGQUIT,
-        libc::SIGUSR1,
-        libc::SIGUSR2,
-        libc::SIGALRM,
-        libc::SIGXFSZ,
-        libc::SIGXCPU,
-        libc::SIGVTALRM,
-        libc::SIGPROF,
-        libc::SIGPIPE,
-        libc::SIGABRT,
-        libc::SIGSYS,
     ];
 
     extern "C" fn on_signal(sig: libc::c_int) {

@@ -2170,17 +2170,9 @@ impl<'m> Rewriter<'m> {
         if !self.opts.records {
             return;
         }
-        carry.records.push(MoveRecord {
-            line: mv.line,
-            kind: mv.name,
-            programmed_mm: self.last_tcp,
-            via_mm: None,
-            deviation: *dev,
-            wrench: state.wrench,
-            duration_s: seg.duration_s,
-            power_w: seg.power_w,
-            thermal_power_w: state.power.unwrap_or([0.0; 6]),
-        });
+        carry
+            .records
+            .push(self.move_record(mv, None, seg, state, dev));
     }
 
     /// Counts a compensated move, annotates it and keeps its record.
@@ -2207,7 +2199,24 @@ impl<'m> Rewriter<'m> {
         if !self.opts.records {
             return;
         }
-        carry.records.push(MoveRecord {
+        carry
+            .records
+            .push(self.move_record(mv, via_mm, seg, state, dev));
+    }
+}
+
+impl Rewriter<'_> {
+    /// The report record of a move: where it was programmed, its predicted
+    /// deviation and its place on the time line.
+    fn move_record(
+        &self,
+        mv: &Move,
+        via_mm: Option<[f64; 3]>,
+        seg: &Segment,
+        state: &MoveState,
+        dev: &Deviation,
+    ) -> MoveRecord {
+        MoveRecord {
             line: mv.line,
             kind: mv.name,
             programmed_mm: self.last_tcp,
@@ -2217,11 +2226,9 @@ impl<'m> Rewriter<'m> {
             duration_s: seg.duration_s,
             power_w: seg.power_w,
             thermal_power_w: state.power.unwrap_or([0.0; 6]),
-        });
+        }
     }
-}
 
-impl Rewriter<'_> {
     /// Hands a cutting move at a spindle speed to the resonance check
     /// (with the dynamic effect on): its tooth passing and its vibration
     /// amplitude before the effect's gain.
