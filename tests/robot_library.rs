@@ -1,13 +1,18 @@
-//! Integration tests: the bundled robot library (nominal ABB arms).
+//! Integration tests: the bundled robot library (nominal ABB, KUKA and
+//! FANUC arms).
 //!
 //! - Each model against its published dimensions: the flange position at
-//!   all joints zero (ABB's calibration position) from the distances
-//!   between the axes in ABB's dimension drawings, the tool0 orientation
-//!   there, and the reach (axis 1 to the wrist centre, the arm stretched
+//!   all joints zero (ABB's calibration position, KUKA's HOME, FANUC's
+//!   zero) from the distances
+//!   between the axes in the makers' dimension drawings, the flange
+//!   orientation there, and the reach (axis 1 to the wrist centre, the arm stretched
 //!   within its working ranges) from the technical data, all written here
 //!   as the datasheet gives them.
 //! - Forward kinematics of the spherical-wrist arms against
 //!   rs-opw-kinematics given the same published dimensions.
+//! - KUKA and FANUC arms in their controllers' joints (machines/README.md)
+//!   against the joint chains of their ROS-Industrial descriptions, written
+//!   here as published.
 //! - Inverse kinematics against forward kinematics on every arm (closed
 //!   form with confdata, or the numeric inverse of the GoFa's offset wrist).
 //! - `postproc machines` lists them with reach and payload; `machines new`
@@ -20,6 +25,8 @@
 //!   byte for byte without effects, and every compensated target, solved by
 //!   the controller's inverse kinematics, predicted onto its programmed
 //!   pose.
+
+use std::f64::consts::PI;
 
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 use postproc::machine::robot::pose::pose_error;
@@ -85,7 +92,7 @@ const fn arm(
 
 /// The library: [base height, shoulder, lower arm, elbow, forearm, wrist
 /// offset, flange] of each drawing, the reach and payload of its data.
-const ARMS: [Published; 13] = [
+const ARMS: [Published; 21] = [
     arm(
         "abb-irb120",
         [290.0, 0.0, 270.0, 70.0, 302.0, 0.0, 72.0],
@@ -172,6 +179,66 @@ const ARMS: [Published; 13] = [
         5.0,
         200.0,
     ),
+    // KUKA: axis 2 above the foot; the elbow offset of the KR 16-2 lies
+    // below the lower arm's line. KUKA gives the KR 6 R900 sixx's reach to
+    // 0.5 mm.
+    arm(
+        "kuka-kr6-r900-sixx",
+        [400.0, 25.0, 455.0, 35.0, 420.0, 0.0, 80.0],
+        901.5,
+        1.0,
+        6.0,
+    ),
+    arm(
+        "kuka-kr6-r900-2",
+        [400.0, 25.0, 455.0, 25.0, 420.0, 0.0, 90.0],
+        901.0,
+        1.0,
+        6.0,
+    ),
+    arm(
+        "kuka-kr16-2",
+        [675.0, 260.0, 680.0, -35.0, 670.0, 0.0, 158.0],
+        1611.0,
+        5.0,
+        16.0,
+    ),
+    arm(
+        "kuka-kr210-r2700-2",
+        [645.0, 330.0, 1150.0, 115.0, 1220.0, 0.0, 215.0],
+        2701.0,
+        5.0,
+        210.0,
+    ),
+    // FANUC: the world frame is at the height of axis 2 (base height 0).
+    arm(
+        "fanuc-lrmate200id",
+        [0.0, 50.0, 330.0, 35.0, 335.0, 0.0, 80.0],
+        717.0,
+        5.0,
+        7.0,
+    ),
+    arm(
+        "fanuc-lrmate200id-7l",
+        [0.0, 50.0, 440.0, 35.0, 420.0, 0.0, 80.0],
+        911.0,
+        5.0,
+        7.0,
+    ),
+    arm(
+        "fanuc-m20ia",
+        [0.0, 150.0, 790.0, 250.0, 835.0, 0.0, 100.0],
+        1811.0,
+        5.0,
+        20.0,
+    ),
+    arm(
+        "fanuc-r2000ic-165f",
+        [0.0, 312.0, 1075.0, 225.0, 1280.0, 0.0, 215.0],
+        2655.0,
+        5.0,
+        165.0,
+    ),
     // GoFa: axis 6 runs 80 mm above axis 4; the reach is given to the
     // point of axis 6 above axis 5.
     arm(
@@ -194,6 +261,21 @@ const ZERO_POSE_QUAT_TOL: f64 = 1e-7;
 /// controller shows it [q1, q2, q3, q4] (scalar first).
 #[allow(clippy::approx_constant)] // the 7 decimals the controller shows
 const TOOL0_AT_ZERO: [f64; 4] = [0.7071068, 0.0, 0.7071068, 0.0];
+/// FANUC's faceplate at all joints zero: z along base x, x up
+/// (W, P, R = 180°, −90°, 0°: the half turn about (x + z)/√2).
+#[allow(clippy::approx_constant)]
+const FACEPLATE_AT_ZERO: [f64; 4] = [0.0, 0.7071068, 0.0, 0.7071068];
+
+/// The flange orientation of a model at all joints zero: ABB's tool0 and
+/// KUKA's $FLANGE at HOME are the same; FANUC's faceplate differs by a
+/// half turn about the flange axis.
+fn flange_at_zero(machine: &str) -> [f64; 4] {
+    if machine.starts_with("fanuc-") {
+        FACEPLATE_AT_ZERO
+    } else {
+        TOOL0_AT_ZERO
+    }
+}
 
 fn robot(name: &str) -> Robot {
     let file = MachineFile::bundled(name).unwrap_or_else(|| panic!("{name} is bundled"));
@@ -250,8 +332,11 @@ fn every_arm_has_its_published_zero_pose_payload_and_status() {
         );
         let q = flange.rotation.coords; // (x, y, z, w)
         let got = [q[3], q[0], q[1], q[2]];
-        let sign = if got[0] < 0.0 { -1.0 } else { 1.0 };
-        for (g, w) in got.iter().zip(TOOL0_AT_ZERO) {
+        let want = flange_at_zero(a.machine);
+        // q and −q are one rotation: compare with the sign that agrees.
+        let dot: f64 = got.iter().zip(want).map(|(g, w)| g * w).sum();
+        let sign = if dot < 0.0 { -1.0 } else { 1.0 };
+        for (g, w) in got.iter().zip(want) {
             assert!(
                 (sign * g - w).abs() <= ZERO_POSE_QUAT_TOL,
                 "{}: tool0 {got:?}",
@@ -345,7 +430,12 @@ fn spherical_wrist_arms_agree_with_rs_opw_kinematics() {
         assert!(r.has_closed_form(), "{}", a.machine);
         for q in joints(&r, 100, 0x9e37_79b9_7f4a_7c15) {
             let ours = r.flange_pose(Model::Nominal, &q);
-            let other = theirs.forward(&q);
+            let mut other = theirs.forward(&q);
+            if a.machine.starts_with("fanuc-") {
+                // OPW's flange is ABB's tool0; FANUC's faceplate is it
+                // turned half a turn about its z axis.
+                other.rotation *= UnitQuaternion::from_axis_angle(&Vector3::z_axis(), PI);
+            }
             let dp = (ours.translation.vector - other.translation.vector * 1000.0).norm();
             assert!(dp <= FK_POS_TOL_MM * 10.0, "{} {q:?}: {dp} mm", a.machine);
             let (x, y) = (ours.rotation.coords, other.rotation.coords);
@@ -354,7 +444,176 @@ fn spherical_wrist_arms_agree_with_rs_opw_kinematics() {
             compared += 1;
         }
     }
-    assert_eq!(compared, 1200);
+    assert_eq!(compared, 2000);
+}
+
+/// A published ROS-Industrial arm description: the origin (mm) and axis of
+/// each joint's frame in its parent's with every joint at zero, the fixed
+/// flange offset, the `tool0` (KUKA $FLANGE, FANUC faceplate) rotation
+/// (URDF roll, pitch, yaw in degrees) and the height of the controller's
+/// base frame above `base_link`.
+struct Urdf {
+    machine: &'static str,
+    joints: [([f64; 3], [f64; 3]); 6],
+    flange: [f64; 3],
+    tool0_rpy_deg: [f64; 3],
+    base_mm: f64,
+}
+
+const X: [f64; 3] = [1.0, 0.0, 0.0];
+const NX: [f64; 3] = [-1.0, 0.0, 0.0];
+const Y: [f64; 3] = [0.0, 1.0, 0.0];
+const NY: [f64; 3] = [0.0, -1.0, 0.0];
+const Z: [f64; 3] = [0.0, 0.0, 1.0];
+const NZ: [f64; 3] = [0.0, 0.0, -1.0];
+
+/// kuka_experimental (kr6r900sixx, kr6r900_2, kr16_2 macros) and fanuc
+/// (lrmate200id, lrmate200id7l, m20ia macros), as published. KUKA's URDF
+/// joints are the controller's axes; FANUC's joint 3 is J3 + J2.
+const URDFS: [Urdf; 6] = [
+    Urdf {
+        machine: "kuka-kr6-r900-sixx",
+        joints: [
+            ([0.0, 0.0, 400.0], NZ),
+            ([25.0, 0.0, 0.0], Y),
+            ([455.0, 0.0, 0.0], Y),
+            ([0.0, 0.0, 35.0], NX),
+            ([420.0, 0.0, 0.0], Y),
+            ([80.0, 0.0, 0.0], NX),
+        ],
+        flange: [0.0; 3],
+        tool0_rpy_deg: [0.0, 90.0, 0.0],
+        base_mm: 0.0,
+    },
+    Urdf {
+        machine: "kuka-kr6-r900-2",
+        joints: [
+            ([0.0, 0.0, 400.0], NZ),
+            ([25.0, 0.0, 0.0], Y),
+            ([455.0, 0.0, 0.0], Y),
+            ([0.0, 0.0, 25.0], NX),
+            ([420.0, 0.0, 0.0], Y),
+            ([90.0, 0.0, 0.0], NX),
+        ],
+        flange: [0.0; 3],
+        tool0_rpy_deg: [0.0, 90.0, 0.0],
+        base_mm: 0.0,
+    },
+    Urdf {
+        machine: "kuka-kr16-2",
+        joints: [
+            ([0.0, 0.0, 675.0], NZ),
+            ([260.0, 0.0, 0.0], Y),
+            ([680.0, 0.0, 0.0], Y),
+            ([670.0, 0.0, -35.0], NX),
+            ([0.0, 0.0, 0.0], Y),
+            ([0.0, 0.0, 0.0], NX),
+        ],
+        flange: [158.0, 0.0, 0.0],
+        tool0_rpy_deg: [0.0, 90.0, 0.0],
+        base_mm: 0.0,
+    },
+    Urdf {
+        machine: "fanuc-lrmate200id",
+        joints: [
+            ([0.0, 0.0, 330.0], Z),
+            ([50.0, 0.0, 0.0], Y),
+            ([0.0, 0.0, 330.0], NY),
+            ([0.0, 0.0, 35.0], NX),
+            ([335.0, 0.0, 0.0], NY),
+            ([80.0, 0.0, 0.0], NX),
+        ],
+        flange: [0.0; 3],
+        tool0_rpy_deg: [180.0, -90.0, 0.0],
+        base_mm: 330.0,
+    },
+    Urdf {
+        machine: "fanuc-lrmate200id-7l",
+        joints: [
+            ([0.0, 0.0, 330.0], Z),
+            ([50.0, 0.0, 0.0], Y),
+            ([0.0, 0.0, 440.0], NY),
+            ([0.0, 0.0, 35.0], NX),
+            ([420.0, 0.0, 0.0], NY),
+            ([80.0, 0.0, 0.0], NX),
+        ],
+        flange: [0.0; 3],
+        tool0_rpy_deg: [180.0, -90.0, 0.0],
+        base_mm: 330.0,
+    },
+    Urdf {
+        machine: "fanuc-m20ia",
+        joints: [
+            ([0.0, 0.0, 525.0], Z),
+            ([150.0, 0.0, 0.0], Y),
+            ([0.0, 0.0, 790.0], NY),
+            ([0.0, 0.0, 250.0], NX),
+            ([835.0, 0.0, 0.0], NY),
+            ([100.0, 0.0, 0.0], NX),
+        ],
+        flange: [0.0; 3],
+        tool0_rpy_deg: [180.0, -90.0, 0.0],
+        base_mm: 525.0,
+    },
+];
+
+/// `tool0` of a URDF chain in the controller's base frame for the URDF's
+/// joint values (rad).
+fn urdf_tool0(u: &Urdf, q: &[f64; 6]) -> Isometry3<f64> {
+    let mut t = Isometry3::translation(0.0, 0.0, -u.base_mm);
+    for ((xyz, axis), v) in u.joints.iter().zip(q) {
+        let axis = nalgebra::Unit::new_normalize(Vector3::from(*axis));
+        t = t
+            * Isometry3::translation(xyz[0], xyz[1], xyz[2])
+            * UnitQuaternion::from_axis_angle(&axis, *v);
+    }
+    let [r, p, y] = u.tool0_rpy_deg.map(f64::to_radians);
+    t * Isometry3::translation(u.flange[0], u.flange[1], u.flange[2])
+        * UnitQuaternion::from_euler_angles(r, p, y)
+}
+
+/// The URDF joint values of the controller's joints (degrees).
+fn urdf_joints(machine: &str, controller_deg: &[f64; 6]) -> [f64; 6] {
+    let mut j = *controller_deg;
+    if machine.starts_with("fanuc-") {
+        j[2] += j[1]; // the ROS-I driver's J23 linkage: J3 + J2
+    }
+    j.map(f64::to_radians)
+}
+
+/// Every model's joints, turned into the controller's by the documented
+/// relation (machines/README.md), put the published URDF chain's tool0
+/// where the model puts its flange; KUKA's mechanical zero (all axes 0,
+/// the arm stretched forward) and HOME are where the drawing puts them.
+#[test]
+fn kuka_and_fanuc_joints_drive_the_published_chains_like_the_models() {
+    use postproc::program::{krl, tp};
+    for u in &URDFS {
+        let r = robot(u.machine);
+        for q in joints(&r, 100, 0x3c6e_f372_fe94_f82b) {
+            let controller = if u.machine.starts_with("kuka-") {
+                krl::config::model_to_axes(&q)
+            } else {
+                tp::config::model_to_joints(&q)
+            };
+            let theirs = urdf_tool0(u, &urdf_joints(u.machine, &controller));
+            let ours = r.flange_pose(Model::Nominal, &q);
+            let (dp, dr) = pose_error(&ours, &theirs);
+            assert!(dp.norm() <= 1e-9, "{} {q:?}: {} mm", u.machine, dp.norm());
+            assert!(dr.norm() <= 1e-12, "{} {q:?}: {} rad", u.machine, dr.norm());
+        }
+    }
+    // KR 6 R900 sixx at its mechanical zero: 25 + 455 + 420 + 80 = 980 mm
+    // forward, 400 + 35 = 435 mm up; at HOME 525 mm forward, 890 mm up.
+    let r = robot("kuka-kr6-r900-sixx");
+    for (axes, x, z) in [
+        ([0.0; 6], 980.0, 435.0),
+        ([0.0, -90.0, 90.0, 0.0, 0.0, 0.0], 525.0, 890.0),
+    ] {
+        let f = r.flange_pose(Model::Nominal, &krl::config::axes_to_model(&axes));
+        let want = Vector3::new(x, 0.0, z);
+        assert!((f.translation.vector - want).norm() <= ZERO_POSE_TOL_MM);
+    }
 }
 
 /// Joint agreement of an inverse solution with the joints it came from,
@@ -424,7 +683,7 @@ fn machines_lists_every_arm_with_reach_and_payload() {
             .lines()
             .find(|l| l.split_whitespace().next() == Some(a.machine))
             .unwrap_or_else(|| panic!("{} listed:\n{text}", a.machine));
-        let reach = format!("{} mm", a.reach);
+        let reach = format!("{:.0} mm", a.reach);
         let payload = format!("{} kg", a.payload);
         assert!(line.contains(" nominal "), "{line}");
         assert!(line.contains(&reach) && line.contains(&payload), "{line}");

@@ -122,8 +122,8 @@ impl Machine {
 
 /// The machine files bundled with postproc, compiled into the binary:
 /// (name, text), in name order. `--machine NAME` selects one by name. The
-/// robot library (nominal ABB arms) is described in machines/README.md.
-pub const BUNDLED: [(&str, &str); 18] = [
+/// robot library (nominal ABB, KUKA and FANUC arms) is described in machines/README.md.
+pub const BUNDLED: [(&str, &str); 26] = [
     (
         "abb-crb15000",
         include_str!("../../machines/abb-crb15000.yaml"),
@@ -176,12 +176,44 @@ pub const BUNDLED: [(&str, &str); 18] = [
     ),
     ("afm-r1000", include_str!("../../machines/afm-r1000.yaml")),
     (
+        "fanuc-lrmate200id",
+        include_str!("../../machines/fanuc-lrmate200id.yaml"),
+    ),
+    (
+        "fanuc-lrmate200id-7l",
+        include_str!("../../machines/fanuc-lrmate200id-7l.yaml"),
+    ),
+    (
+        "fanuc-m20ia",
+        include_str!("../../machines/fanuc-m20ia.yaml"),
+    ),
+    (
+        "fanuc-r2000ic-165f",
+        include_str!("../../machines/fanuc-r2000ic-165f.yaml"),
+    ),
+    (
         "five-axis-ac",
         include_str!("../../machines/five-axis-ac.yaml"),
     ),
     (
         "head-table-bc",
         include_str!("../../machines/head-table-bc.yaml"),
+    ),
+    (
+        "kuka-kr16-2",
+        include_str!("../../machines/kuka-kr16-2.yaml"),
+    ),
+    (
+        "kuka-kr210-r2700-2",
+        include_str!("../../machines/kuka-kr210-r2700-2.yaml"),
+    ),
+    (
+        "kuka-kr6-r900-2",
+        include_str!("../../machines/kuka-kr6-r900-2.yaml"),
+    ),
+    (
+        "kuka-kr6-r900-sixx",
+        include_str!("../../machines/kuka-kr6-r900-sixx.yaml"),
     ),
     (
         "staubli-tx200",

@@ -3,10 +3,13 @@
 
 pub mod charset;
 pub mod directive;
+pub mod euler;
 pub mod gcode;
 pub mod interp;
+pub mod krl;
 pub mod language;
 pub mod rapid;
+pub mod tp;
 
 /// The powers of ten that are exact in f64 (`1e0` to `1e22`): a decimal
 /// literal of at most 15 significant digits scaled by one of them is
