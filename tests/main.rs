@@ -25,6 +25,7 @@ mod golden;
 mod gperf;
 mod honesty_cli;
 mod hostile;
+mod krl;
 mod languages;
 mod layers;
 mod machine_tool;

@@ -46,9 +46,17 @@ pub fn matrix_to_zyx(m: &Rotation3<f64>) -> (f64, f64, f64) {
         )
     } else {
         // y = ±90°: r01 = −sin(z ∓ x)…; with x = 0, r11 = cos(z), r01 = −sin(z).
-        ((-r[(0, 1)]).atan2(r[(1, 1)]), sy.signum() * 90f64.to_radians(), 0.0)
+        (
+            (-r[(0, 1)]).atan2(r[(1, 1)]),
+            sy.signum() * 90f64.to_radians(),
+            0.0,
+        )
     };
-    (half_open(z.to_degrees()), y.to_degrees(), half_open(x.to_degrees()))
+    (
+        half_open(z.to_degrees()),
+        y.to_degrees(),
+        half_open(x.to_degrees()),
+    )
 }
 
 /// An angle in degrees brought into (−180°, 180°].
@@ -80,7 +88,11 @@ mod tests {
 
     #[test]
     fn the_rotation_is_z_then_y_then_x_of_the_reference_frame() {
-        for (z, y, x) in [(30.0, 45.0, 60.0), (-170.0, 10.0, 95.0), (0.0, -89.0, 180.0)] {
+        for (z, y, x) in [
+            (30.0, 45.0, 60.0),
+            (-170.0, 10.0, 95.0),
+            (0.0, -89.0, 180.0),
+        ] {
             let m = zyx_to_quaternion(z, y, x).to_rotation_matrix();
             let want = by_hand(z, y, x);
             for (i, row) in want.iter().enumerate() {
@@ -96,7 +108,11 @@ mod tests {
 
     #[test]
     fn angles_come_back_unique() {
-        for (z, y, x) in [(30.0, 45.0, 60.0), (-170.0, 10.0, 95.0), (180.0, 0.0, -179.5)] {
+        for (z, y, x) in [
+            (30.0, 45.0, 60.0),
+            (-170.0, 10.0, 95.0),
+            (180.0, 0.0, -179.5),
+        ] {
             let (a, b, c) = quaternion_to_zyx(&zyx_to_quaternion(z, y, x));
             assert!((a - z).abs() <= ANGLE_TOL_DEG, "{a} {z}");
             assert!((b - y).abs() <= ANGLE_TOL_DEG, "{b} {y}");

@@ -5,3 +5,6 @@
 //! grammar/krl.md documents the accepted subset.
 
 pub mod config;
+pub mod syntax;
+
+pub use syntax::{Aggregate, File, InlineForm, Kind, Line, Motion, Number, Target, Value, parse};

@@ -135,6 +135,12 @@ mod tests {
             turn: 0b010010,
         };
         assert!(t.admits(&q));
-        assert!(!StatusTurn { turn: 0b010011, ..t }.admits(&q));
+        assert!(
+            !StatusTurn {
+                turn: 0b010011,
+                ..t
+            }
+            .admits(&q)
+        );
     }
 }
