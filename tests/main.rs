@@ -54,5 +54,6 @@ mod robot_library;
 mod robot_process;
 mod robot_samples;
 mod snapshots;
+mod tp;
 mod uncertainty_coverage;
 mod verify_cli;

@@ -6,3 +6,6 @@
 //! grammar/tp.md documents the accepted subset.
 
 pub mod config;
+pub mod syntax;
+
+pub use syntax::{Group, Instruction, MnLine, Motion, Number, PosRef, Position, Program, parse};
