@@ -533,7 +533,7 @@ impl<'a> LineParser<'a> {
             return Ok(Value::Word(self.abs(s..self.pos)));
         }
         let n = r
-            .find(|c: char| c == ',' || c == '}')
+            .find([',', '}'])
             .ok_or_else(|| self.err("an aggregate without its closing `}`"))?;
         let end = s + r[..n].trim_end().len();
         self.pos = end;
