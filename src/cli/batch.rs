@@ -154,7 +154,7 @@ fn walk(
                 continue;
             }
             if robot && is_rapid_program(&path) {
-                let rel = path.strip_prefix(root).unwrap_or(&path).to_path_buf();
+                let rel = super::output::folder_name(&path, &[root]);
                 items.push(Item {
                     input: path,
                     rel,
@@ -165,10 +165,10 @@ fn walk(
                 continue;
             }
             walk((root, robot), &path, skip, seen, items, skipped);
-        } else if name.contains(".comp.") {
+        } else if super::output::is_compensated_name(&name) {
             skip_as("a compensated program (*.comp.*)");
         } else if let Some(message) = path.is_file().then(|| unread(&path)).flatten() {
-            let rel = path.strip_prefix(root).unwrap_or(&path).to_path_buf();
+            let rel = super::output::folder_name(&path, &[root]);
             items.push(Item {
                 input: path,
                 rel,
@@ -181,7 +181,7 @@ fn walk(
         } else if !path.is_file() {
             skip_as("not a regular file");
         } else {
-            let rel = path.strip_prefix(root).unwrap_or(&path).to_path_buf();
+            let rel = super::output::folder_name(&path, &[root]);
             items.push(Item {
                 input: path,
                 rel,
@@ -246,10 +246,7 @@ fn collect(inputs: &[PathBuf], out_dir: &Path, robot: bool) -> (Vec<Item>, Vec<S
                 &mut skipped,
             );
         } else {
-            let rel = input
-                .file_name()
-                .map(PathBuf::from)
-                .unwrap_or_else(|| PathBuf::from("program"));
+            let rel = super::output::folder_name::<&Path>(input, &[]);
             let problem = match std::fs::metadata(input) {
                 Ok(m) if m.is_file() => None,
                 Ok(_) => Some(format!("{}: not a regular file", input.display())),

@@ -5,7 +5,7 @@ use std::io::Write;
 use std::path::{Path, PathBuf};
 
 use super::machines::Loaded;
-use super::output::{Pending, Staged, default_output};
+use super::output::{Pending, Staged};
 use super::{Annotate, CheckArgs, CompensateArgs, EffectArgs, ReportArgs, usage};
 use crate::compensate::outcome::{MoveRecord, RapidOutcome};
 use crate::emit::header::{HeaderWriter, Provenance};
@@ -519,11 +519,7 @@ pub fn compensate(
     }
     let opts = compensate_options(a, &robot)?;
     let input = &a.program.file;
-    let out_path = match &a.output {
-        Some(p) => p.clone(),
-        None if input == Path::new("-") => PathBuf::from("-"),
-        None => default_output(input),
-    };
+    let out_path = super::output::output_path(input, a.output.as_deref(), None, &[])?;
     let inputs = super::gcode::input_files(&a.program, &loaded, &a.effects);
     super::output::refuse_overwrite(&out_path, &inputs)?;
     super::output::check_report_path(a.report.as_deref(), &inputs, &out_path)?;
@@ -749,7 +745,7 @@ pub(super) fn compensate_program_to(
             );
         }
         if outcome.text != m.text {
-            let out = program_output(&m.path, inputs, out_dir);
+            let out = super::output::output_path(&m.path, None, out_dir, inputs)?;
             super::output::refuse_overwrite(&out, &[&m.path])?;
             written.push((out, outcome, i));
         }
@@ -793,21 +789,6 @@ pub(super) fn compensate_program_to(
     }
     let written = written.into_iter().map(|(p, _, _)| p).collect();
     Ok((members, written, total, worst))
-}
-
-/// Where a changed module of a program goes: beside its input with the
-/// usual naming, or into `out_dir` (its path below a folder input kept).
-fn program_output(path: &Path, inputs: &[PathBuf], out_dir: Option<&Path>) -> PathBuf {
-    let Some(dir) = out_dir else {
-        return default_output(path);
-    };
-    let rel = inputs
-        .iter()
-        .filter(|i| i.is_dir())
-        .find_map(|i| path.strip_prefix(i).ok())
-        .map(Path::to_path_buf)
-        .unwrap_or_else(|| path.file_name().map(PathBuf::from).unwrap_or_default());
-    dir.join(rel)
 }
 
 /// `n one` or `n many`, with the count grouped.
