@@ -5,9 +5,7 @@ use std::io::{BufRead, BufReader, Read, Write};
 use std::path::{Path, PathBuf};
 
 use super::machines::Loaded;
-use super::output::{
-    Staged, check_report_path, emit_to, finish_both, refuse_overwrite,
-};
+use super::output::{Staged, check_report_path, emit_to, finish_both, refuse_overwrite};
 /// The output writing of `calibrate` and `simulate`.
 use super::{
     Annotate, CheckArgs, CompensateArgs, EffectArgs, Format, ProgramArgs, ReportArgs, usage,

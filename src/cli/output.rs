@@ -362,17 +362,17 @@ mod first_hour_tests {
             named(&module, None, Some(out), &roots),
             out.join("sub").join("Main.mod")
         );
-        assert_eq!(
-            named(&module, None, Some(out), &[]),
-            out.join("Main.mod")
-        );
+        assert_eq!(named(&module, None, Some(out), &[]), out.join("Main.mod"));
         assert_eq!(
             named(&module, Some(Path::new("x.mod")), Some(out), &roots),
             PathBuf::from("x.mod")
         );
         assert_eq!(named(Path::new("-"), None, None, &[]), PathBuf::from("-"));
         assert!(output_path(Path::new("-"), None, Some(out), &[]).is_err());
-        assert_eq!(default_output(Path::new("PART")), PathBuf::from("PART.comp"));
+        assert_eq!(
+            default_output(Path::new("PART")),
+            PathBuf::from("PART.comp")
+        );
         let beside = default_output(Path::new("d/p.nc"));
         let name = beside.file_name().and_then(|n| n.to_str()).expect("a name");
         assert_eq!(name, "p.comp.nc");

@@ -686,7 +686,7 @@ fn compensate_program(
                 format!(" ({})", names.join(", "))
             },
             plural(total.moves, "move", "moves"),
-            left_as_written(&total.as_written),
+            left_as_written(&total.warnings),
             plural(total.added, "target", "targets"),
             worst.0,
             if worst.1.is_empty() { "-" } else { &worst.1 }
@@ -737,7 +737,7 @@ pub(super) fn compensate_program_to(
     for ((i, m), outcome) in members.iter().enumerate().zip(outcomes.iter()) {
         total.moves += outcome.moves;
         total.added += outcome.added;
-        total.as_written.extend(outcome.as_written.iter().cloned());
+        total.warnings.extend(outcome.warnings.iter().cloned());
         if outcome.max_deviation_mm > worst.0 || worst.1.is_empty() && outcome.moves > 0 {
             worst = (
                 outcome.max_deviation_mm,
@@ -820,7 +820,7 @@ fn log_outcome(input: &str, out_path: &Path, outcome: &RapidOutcome, quiet: bool
     eprintln!(
         "{input} → {out}: {} compensated{}, {} added; largest predicted deviation {:.4} mm (line {})",
         plural(outcome.moves, "move", "moves"),
-        left_as_written(&outcome.as_written),
+        left_as_written(&outcome.warnings),
         plural(outcome.added, "target", "targets"),
         outcome.max_deviation_mm,
         outcome.max_deviation_line
@@ -829,16 +829,17 @@ fn log_outcome(input: &str, out_path: &Path, outcome: &RapidOutcome, quiet: bool
 
 /// `, N left as written (reasons)` of the summary line, or nothing when
 /// every move is compensated.
-fn left_as_written(left: &[crate::compensate::outcome::AsWritten]) -> String {
-    if left.is_empty() {
+fn left_as_written(warnings: &[crate::program::interp::Warning]) -> String {
+    let left = || warnings.iter().filter_map(|w| w.left.as_ref());
+    if left().next().is_none() {
         return String::new();
     }
-    let mut reasons: Vec<&str> = left.iter().map(|a| a.reason.as_str()).collect();
+    let mut reasons: Vec<&str> = left().map(|a| a.reason.as_str()).collect();
     reasons.sort_unstable();
     reasons.dedup();
     format!(
         ", {} left as written ({})",
-        super::gcode::grouped(left.len()),
+        super::gcode::grouped(left().count()),
         reasons.join("; ")
     )
 }

@@ -133,7 +133,9 @@ pub struct Summary {
     pub extents: Option<(AxisVec, AxisVec)>,
     /// Tools used (T numbers made active).
     pub tools: Vec<u32>,
-    /// Interpreter warnings.
+    /// What the run warns about, in order (the interpreter's, the job's:
+    /// clamped tables, resonances): the one diagnostics channel of every
+    /// pipeline.
     pub warnings: Vec<Warning>,
     /// Blocks whose text changed.
     pub changed: usize,
@@ -216,20 +218,9 @@ pub struct RapidOutcome {
     pub max_deviation_line: usize,
     /// One record per motion instruction, in source order.
     pub records: Vec<MoveRecord>,
-    /// Motion instructions left as written, each with its reason, in
-    /// source order (not counted in `moves`, no record).
-    pub as_written: Vec<AsWritten>,
-}
-
-/// A motion instruction the RAPID pipeline leaves as written, and why.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub struct AsWritten {
-    /// 1-based line of the instruction.
-    pub line: usize,
-    /// 1-based byte column of the instruction's name.
-    pub column: usize,
-    /// The instruction's name as written (`MoveL`, `SpotL`).
-    pub instruction: String,
-    /// Why it is not compensated.
-    pub reason: String,
+    /// What the run warns about, on the one diagnostics channel: the
+    /// motion instructions left as written, each with its reason, in
+    /// source order (not counted in `moves`, no record), then the
+    /// resonances.
+    pub warnings: Vec<Warning>,
 }

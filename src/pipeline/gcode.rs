@@ -637,6 +637,7 @@ impl<'j, 'm> InterpretStage<'j, 'm> {
                     line: line_no,
                     message,
                     count: 1,
+                    left: None,
                 });
             }
             self.clamped |= fresh;

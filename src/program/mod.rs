@@ -7,6 +7,7 @@ pub mod gcode;
 pub mod interp;
 pub mod language;
 pub mod rapid;
+pub mod robot_moves;
 
 /// The powers of ten that are exact in f64 (`1e0` to `1e22`): a decimal
 /// literal of at most 15 significant digits scaled by one of them is

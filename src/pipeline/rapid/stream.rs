@@ -162,7 +162,7 @@ pub fn compensate_streamed<R: BufRead>(
         body,
         records,
     )?;
-    super::refuse_left_as_written(&done.0.outcome.as_written, file, opts)?;
+    super::refuse_left_as_written(&done.0.outcome.warnings, file, opts)?;
     Ok(done)
 }
 
@@ -348,7 +348,7 @@ fn pass<R: BufRead>(
             max_deviation_mm: 0.0,
             max_deviation_line: 0,
             records: Vec::new(),
-            as_written: Vec::new(),
+            warnings: Vec::new(),
         },
     };
     let streamed = Streamed {
@@ -629,7 +629,7 @@ ENDMODULE
         let whole = super::super::compensate_module(RICH, "t.mod", &robot, &opts).unwrap();
         // A record per compensated move and per reported MoveAbsJ.
         let reported = whole
-            .as_written
+            .warnings
             .iter()
             .filter(|a| a.reason == super::super::JOINT_TARGET)
             .count();
