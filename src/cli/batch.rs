@@ -516,11 +516,11 @@ fn compensate_one(
             };
             let report_file = report.map(|f| (report_path(output, f), f));
             let report_to = report_file.as_ref().map(|(p, f)| (p.as_path(), *f));
-            let done = |o: &crate::compensate::outcome::RapidOutcome| Done {
+            let done = |o: &crate::compensate::outcome::Summary| Done {
                 blocks: o.moves,
                 moves: o.moves,
-                max_dev: o.max_deviation_mm,
-                max_line: Some(o.max_deviation_line),
+                max_dev: o.deviation.max,
+                max_line: Some(o.deviation.max_line),
                 residual: None,
             };
             // A large module is read a window at a time, as by `compensate`.
@@ -549,7 +549,7 @@ fn compensate_one(
             let outcome = compensate_module(&src, &name, robot, &opts)
                 .map_err(|e| crate::program::charset::file_columns(e, &src, charset))?;
             super::rapid::write_outcome(output, &outcome, &name, report_to, provenance, charset)?;
-            Ok(done(&outcome))
+            Ok(done(&outcome.summary))
         }
     }
 }

@@ -7,7 +7,7 @@ use std::path::{Path, PathBuf};
 use super::machines::Loaded;
 use super::output::{Pending, Staged};
 use super::{Annotate, CheckArgs, CompensateArgs, EffectArgs, ReportArgs, usage};
-use crate::compensate::outcome::{MoveRecord, RapidOutcome};
+use crate::compensate::outcome::{Compensated, Row, Summary};
 use crate::emit::header::{HeaderWriter, Provenance};
 use crate::emit::rapid::Format;
 use crate::error::{Error, Result};
@@ -553,7 +553,7 @@ pub fn compensate(
     let outcome = pool.install(|| compensate_module(&src, &name, &robot, &opts));
     let outcome = outcome.map_err(|e| file_columns(e, &src, charset))?;
     write_outcome(&out_path, &outcome, &name, report, &provenance, charset)?;
-    log_outcome(&input_name, &out_path, &outcome, quiet);
+    log_outcome(&input_name, &out_path, &outcome.summary, quiet);
     Ok(0)
 }
 
@@ -562,7 +562,7 @@ pub fn compensate(
 /// file is put in place unless both are written.
 pub(super) fn write_outcome(
     out_path: &Path,
-    outcome: &RapidOutcome,
+    outcome: &Compensated,
     name: &str,
     report: Option<(&Path, super::Format)>,
     provenance: &Provenance,
@@ -709,7 +709,7 @@ pub(super) struct ProgramRun<'r> {
 pub(super) type ProgramDone = (
     Vec<crate::program::rapid::program::Member>,
     Vec<PathBuf>,
-    RapidOutcome,
+    Summary,
     (f64, String),
 );
 
@@ -725,7 +725,7 @@ pub(super) fn compensate_program_to(
 ) -> Result<ProgramDone> {
     let members = load(&module_files(inputs)?)?;
     let mut written = Vec::new();
-    let mut total = RapidOutcome::default();
+    let mut total = Summary::default();
     let mut worst = (0.0, String::new());
     let mut outcomes = Vec::with_capacity(members.len());
     for (i, m) in members.iter().enumerate() {
@@ -735,13 +735,14 @@ pub(super) fn compensate_program_to(
         outcomes.push(outcome);
     }
     for ((i, m), outcome) in members.iter().enumerate().zip(outcomes.iter()) {
-        total.moves += outcome.moves;
-        total.added += outcome.added;
-        total.warnings.extend(outcome.warnings.iter().cloned());
-        if outcome.max_deviation_mm > worst.0 || worst.1.is_empty() && outcome.moves > 0 {
+        let s = &outcome.summary;
+        total.moves += s.moves;
+        total.added += s.added;
+        total.warnings.extend(s.warnings.iter().cloned());
+        if s.deviation.max > worst.0 || worst.1.is_empty() && s.moves > 0 {
             worst = (
-                outcome.max_deviation_mm,
-                format!("{}:{}", m.name, outcome.max_deviation_line),
+                s.deviation.max,
+                format!("{}:{}", m.name, s.deviation.max_line),
             );
         }
         if outcome.text != m.text {
@@ -801,7 +802,7 @@ fn plural(n: usize, one: &str, many: &str) -> String {
 }
 
 /// The summary line on standard error (unless `quiet`).
-fn log_outcome(input: &str, out_path: &Path, outcome: &RapidOutcome, quiet: bool) {
+fn log_outcome(input: &str, out_path: &Path, outcome: &Summary, quiet: bool) {
     if quiet {
         return;
     }
@@ -822,8 +823,8 @@ fn log_outcome(input: &str, out_path: &Path, outcome: &RapidOutcome, quiet: bool
         plural(outcome.moves, "move", "moves"),
         left_as_written(&outcome.warnings),
         plural(outcome.added, "target", "targets"),
-        outcome.max_deviation_mm,
-        outcome.max_deviation_line
+        outcome.deviation.max,
+        outcome.deviation.max_line
     );
 }
 
@@ -914,7 +915,7 @@ pub(super) fn compensate_streamed_to(
     out_path: Option<&Path>,
     report: Option<(&Path, super::Format)>,
     provenance: &Provenance,
-) -> Result<Option<RapidOutcome>> {
+) -> Result<Option<Summary>> {
     use crate::emit::report::{Layout, ReportWriter};
     let name = source.name();
     let spill = |p: &Path| spill_beside(p).map(|f| std::io::BufWriter::with_capacity(1 << 16, f));
@@ -940,7 +941,7 @@ pub(super) fn compensate_streamed_to(
         ),
         _ => None,
     };
-    let mut sink = |records: &[MoveRecord]| -> Result<()> {
+    let mut sink = |records: &[Row]| -> Result<()> {
         match writer.as_mut() {
             Some(rw) => write_records(rw, records),
             None => Ok(()),
@@ -966,8 +967,8 @@ pub(super) fn compensate_streamed_to(
     }
     if let (Some(rw), Some((p, _))) = (writer, report) {
         rw.finish(crate::emit::report::Totals {
-            blocks: streamed.outcome.moves,
-            moves: streamed.outcome.moves,
+            blocks: streamed.summary.moves,
+            moves: streamed.summary.moves,
         })?;
         if let Some(spill) = report_spill {
             pending.push(write_spilled(p, "report", "", spill, None)?);
@@ -977,12 +978,12 @@ pub(super) fn compensate_streamed_to(
     for p in pending {
         p.commit()?;
     }
-    Ok(Some(streamed.outcome))
+    Ok(Some(streamed.summary))
 }
 
 /// Writes the report rows of `records`.
-fn write_records(rw: &mut crate::emit::report::ReportWriter, records: &[MoveRecord]) -> Result<()> {
-    records.iter().try_for_each(|t| rw.record(t))
+fn write_records(rw: &mut crate::emit::report::ReportWriter, records: &[Row]) -> Result<()> {
+    records.iter().try_for_each(|t| rw.row(t))
 }
 
 /// Writes the deviation report of a compensated (or dry-run) RAPID module:
@@ -990,7 +991,7 @@ fn write_records(rw: &mut crate::emit::report::ReportWriter, records: &[MoveReco
 /// parts of its predicted deviation.
 pub(super) fn write_report(
     out: &mut dyn Write,
-    outcome: &RapidOutcome,
+    outcome: &Compensated,
     name: &str,
     format: super::Format,
     provenance: Option<&Provenance>,
@@ -1001,8 +1002,8 @@ pub(super) fn write_report(
         .with_provenance(provenance);
     write_records(&mut rw, &outcome.records)?;
     rw.finish(Totals {
-        blocks: outcome.moves,
-        moves: outcome.moves,
+        blocks: outcome.summary.moves,
+        moves: outcome.summary.moves,
     })
 }
 
@@ -1013,7 +1014,7 @@ pub(super) fn write_report(
 fn write_program_report(
     out: &mut dyn Write,
     members: &[crate::program::rapid::program::Member],
-    outcomes: &[RapidOutcome],
+    outcomes: &[Compensated],
     name: &str,
     format: super::Format,
     provenance: &Provenance,
@@ -1026,7 +1027,7 @@ fn write_program_report(
     for (m, outcome) in members.iter().zip(outcomes) {
         rw.file(&m.name, Some(&m.path));
         write_records(&mut rw, &outcome.records)?;
-        moves += outcome.moves;
+        moves += outcome.summary.moves;
     }
     rw.finish(Totals {
         blocks: moves,

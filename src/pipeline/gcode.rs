@@ -805,6 +805,7 @@ impl<'j, 'm, 'o, 'r> WriteStage<'j, 'm, 'o, 'r> {
                 arc: mv.arc,
                 compensated: r.end,
                 result: r.clone(),
+                robot: None,
             });
         }
     }

@@ -20,7 +20,7 @@ use rayon::prelude::*;
 
 use nalgebra::{Isometry3, Vector3};
 
-use crate::compensate::outcome::{MoveRecord, RapidOutcome};
+use crate::compensate::outcome::{Compensated, DevStats, RobotMove, Row, Summary};
 use crate::compensate::robot::{Compensation, Seed};
 use crate::emit::rapid::{
     EditList, Format, fresh_name, insert_after_decl, joint_text, push_annotation,
@@ -1050,7 +1050,7 @@ pub fn compensate_module(
     file: &str,
     robot: &Robot,
     opts: &RapidOptions,
-) -> Result<RapidOutcome> {
+) -> Result<Compensated> {
     compensate_parsed(parse_module(src, file)?, src, file, robot, opts)
 }
 
@@ -1062,7 +1062,7 @@ pub fn compensate_parsed(
     file: &str,
     robot: &Robot,
     opts: &RapidOptions,
-) -> Result<RapidOutcome> {
+) -> Result<Compensated> {
     compensate_carried(module, (src, file), robot, opts, Carry::default())
 }
 
@@ -1073,7 +1073,7 @@ pub(crate) fn compensate_carried(
     robot: &Robot,
     opts: &RapidOptions,
     mut carry: Carry,
-) -> Result<RapidOutcome> {
+) -> Result<Compensated> {
     let text = ModuleText {
         module: &module,
         src,
@@ -1089,7 +1089,7 @@ pub(crate) fn compensate_carried(
     drop(module);
     carry.push_inserts(src, &spans, &mut edits);
     let mut outcome = carry.outcome(robot, file);
-    refuse_left_as_written(&outcome.warnings, file, opts)?;
+    refuse_left_as_written(&outcome.summary.warnings, file, opts)?;
     outcome.text = edits.apply(src)?;
     Ok(outcome)
 }
@@ -1186,9 +1186,10 @@ pub(crate) struct Carry {
     added: usize,
     last_tcp: [f64; 3],
     moves: usize,
-    max_deviation: (f64, usize),
+    /// The predicted deviation of the moves compensated.
+    deviation: DevStats,
     resonance: ResonanceWatch,
-    records: Vec<MoveRecord>,
+    records: Vec<Row>,
     /// What the windows found to warn about: the moves left as written,
     /// with their reasons, in line order, then the resonances.
     warnings: Vec<Warning>,
@@ -1323,19 +1324,21 @@ impl Carry {
 
     /// The outcome of the windows compensated (without the text), after
     /// the resonance warnings of the whole module.
-    pub(crate) fn outcome(&mut self, robot: &Robot, file: &str) -> RapidOutcome {
+    pub(crate) fn outcome(&mut self, robot: &Robot, file: &str) -> Compensated {
         if let Some(modal) = robot.modal() {
             let resonances = self.resonance.warnings(modal, file);
             self.warnings.extend(resonances);
         }
-        RapidOutcome {
+        Compensated {
             text: String::new(),
-            moves: self.moves,
-            added: self.added,
-            max_deviation_mm: self.max_deviation.0,
-            max_deviation_line: self.max_deviation.1,
+            summary: Summary {
+                moves: self.moves,
+                added: self.added,
+                deviation: std::mem::take(&mut self.deviation),
+                warnings: std::mem::take(&mut self.warnings),
+                ..Summary::default()
+            },
             records: std::mem::take(&mut self.records),
-            warnings: std::mem::take(&mut self.warnings),
         }
     }
 }
@@ -2189,10 +2192,7 @@ impl<'m> Rewriter<'m> {
         dev: &Deviation,
     ) {
         carry.moves += 1;
-        let d = dev.total.pos_mm.norm();
-        if d > carry.max_deviation.0 {
-            carry.max_deviation = (d, mv.line);
-        }
+        carry.deviation.add(dev.total.pos_mm.norm(), mv.line);
         self.watch_resonance(carry, mv.line, state, dev);
         if self.opts.annotate && self.last_annotated != Some(mv.span.start) {
             self.last_annotated = Some(mv.span.start);
@@ -2210,7 +2210,7 @@ impl<'m> Rewriter<'m> {
 }
 
 impl Rewriter<'_> {
-    /// The report record of a move: where it was programmed, its predicted
+    /// The report row of a move: where it was programmed, its predicted
     /// deviation and its place on the time line.
     fn move_record(
         &self,
@@ -2219,17 +2219,24 @@ impl Rewriter<'_> {
         seg: &Segment,
         state: &MoveState,
         dev: &Deviation,
-    ) -> MoveRecord {
-        MoveRecord {
+    ) -> Row {
+        let [x, y, z] = self.last_tcp;
+        Row {
             line: mv.line,
-            kind: mv.name,
-            programmed_mm: self.last_tcp,
-            via_mm,
-            deviation: *dev,
-            wrench: state.wrench,
-            duration_s: seg.duration_s,
-            power_w: seg.power_w,
-            thermal_power_w: state.power.unwrap_or([0.0; 6]),
+            motion: mv.name,
+            start: [0.0; 6],
+            commanded: [x, y, z, 0.0, 0.0, 0.0],
+            arc: None,
+            compensated: [0.0; 6],
+            result: crate::compensate::BlockResult::default(),
+            robot: Some(RobotMove {
+                via_mm,
+                deviation: *dev,
+                wrench: state.wrench,
+                duration_s: seg.duration_s,
+                power_w: seg.power_w,
+                thermal_power_w: state.power.unwrap_or([0.0; 6]),
+            }),
         }
     }
 
@@ -2363,7 +2370,7 @@ mod tests {
         let src = format!("{head}{}\n{tail}", lines.join("\n"));
         let whole = compensate_module(&src, "m.mod", &robot, &opts).expect("compensates");
         let out: Vec<&str> = whole.text.lines().collect();
-        assert_eq!(whole.moves, n);
+        assert_eq!(whole.summary.moves, n);
         let first = head.lines().count();
         let mut checked = 0;
         for i in (0..n).filter(|i| {
@@ -2465,14 +2472,15 @@ mod tests {
         let b = compensate_module(src, "milling.mod", &robot, &without).expect("compensates");
         // A record per compensated move and per reported MoveAbsJ.
         let reported = a
+            .summary
             .warnings
             .iter()
-            .filter(|w| w.reason == JOINT_TARGET)
+            .filter(|w| w.left.as_ref().is_some_and(|l| l.reason == JOINT_TARGET))
             .count();
-        assert_eq!(a.records.len(), a.moves + reported);
-        assert!(a.moves > 0 && b.records.is_empty());
+        assert_eq!(a.records.len(), a.summary.moves + reported);
+        assert!(a.summary.moves > 0 && b.records.is_empty());
         assert_eq!(
-            RapidOutcome {
+            Compensated {
                 records: Vec::new(),
                 ..a
             },

@@ -7,7 +7,7 @@
 //! declaration (after its `MODULE` line when it has none).
 
 use super::{Carry, ProgramScope, RapidOptions, compensate_carried};
-use crate::compensate::outcome::RapidOutcome;
+use crate::compensate::outcome::Compensated;
 use crate::error::{Error, Result};
 use crate::machine::robot::Robot;
 use crate::program::interp::Warning;
@@ -56,7 +56,7 @@ pub fn compensate_member(
     i: usize,
     robot: &Robot,
     opts: &RapidOptions,
-) -> Result<RapidOutcome> {
+) -> Result<Compensated> {
     let own = members
         .get(i)
         .ok_or_else(|| Error::Internal("module index".into()))?;
