@@ -481,8 +481,9 @@ impl Rewriter<'_> {
         if let Some(n) = self.made.get(&k) {
             return Ok(n.clone());
         }
+        let module = self.module;
         let name = fresh_name(
-            self.module,
+            |n| crate::program::rapid::resolve::lookup(module, n).is_some(),
             &mut self.taken,
             &self.reserved,
             stem,
