@@ -61,7 +61,7 @@ pub struct RapidOptions {
     pub format: Format,
     /// Initial thermal state of the program's time line.
     pub thermal_start: ThermalStart,
-    /// Keep a [`MoveRecord`] per move in the outcome (for a report); without
+    /// Keep a report [`Row`] per move in the outcome (for a report); without
     /// a report they are not needed, and for a large module they are a good
     /// part of the memory.
     pub records: bool,
