@@ -213,7 +213,7 @@ fn rapid_compensation_allocates_a_bounded_number_of_times_per_target() {
             pool.install(|| compensate_module(&src, "bench.mod", &robot, &opts))
         });
         let r = r.expect("the module compensates");
-        assert_eq!(r.moves, n);
+        assert_eq!(r.summary.moves, n);
         allocations
     };
     count(200);

@@ -343,8 +343,9 @@ fn drilling_sample_thrust_only_on_the_twelve_plunges_and_targets_land() {
     // none on approach (v50: 1 mm/rev is positioning in air), on retract or
     // on joint moves.
     let mut drilled = 0;
-    for (rec, mv) in out.records.iter().zip(&moves_in) {
-        assert_eq!(rec.line, mv.line);
+    for (row, mv) in out.records.iter().zip(&moves_in) {
+        assert_eq!(row.line, mv.line);
+        let rec = row.robot.expect("a robot move's row");
         match (&rec.wrench, &*mv.speed.text) {
             (Some(w), "vDrill") => {
                 assert!(!w.in_tool_frame);
@@ -371,7 +372,8 @@ fn drilling_sample_thrust_only_on_the_twelve_plunges_and_targets_land() {
     // load and thermal state) are applied.
     let base = robot_with_drill();
     let mut checked = 0;
-    for ((a, b), rec) in moves_in.iter().zip(&moves_out).zip(&out.records) {
+    for ((a, b), row) in moves_in.iter().zip(&moves_out).zip(&out.records) {
+        let rec = row.robot.expect("a robot move's row");
         let view = base
             .with_process_wrench(rec.wrench)
             .with_thermal_power(&rec.thermal_power_w);
@@ -608,7 +610,8 @@ fn random_written_targets_meet_one_micrometre_and_microradian() {
     let m_in = parse_module(&src, "in").expect("parses");
     let m_out = parse_module(&out.text, "out").expect("re-parses");
     let mut checked = 0;
-    for ((a, b), rec) in m_in.moves().zip(m_out.moves()).zip(&out.records) {
+    for ((a, b), row) in m_in.moves().zip(m_out.moves()).zip(&out.records) {
+        let rec = row.robot.expect("a robot move's row");
         let (Target::Inline(rin), Target::Inline(rout)) = (&a.target, &b.target) else {
             panic!("inline targets")
         };
@@ -654,13 +657,18 @@ fn time_line_durations_and_workpiece_force_are_hand_derived() {
     );
     let opts = RapidOptions::for_robot(&robot);
     let out = compensate_module(&src, "t.mod", &robot, &opts).expect("compensates");
-    let d: Vec<f64> = out.records.iter().map(|r| r.duration_s).collect();
+    let robots: Vec<_> = out
+        .records
+        .iter()
+        .map(|r| r.robot.expect("a robot move's row"))
+        .collect();
+    let d: Vec<f64> = robots.iter().map(|r| r.duration_s).collect();
     assert_abs_diff_eq!(d[0], 0.0, epsilon = TIME_TOL_S);
     assert_abs_diff_eq!(d[1], 1.0, epsilon = TIME_TOL_S);
     assert_abs_diff_eq!(d[2], 2.0, epsilon = TIME_TOL_S);
     assert_abs_diff_eq!(d[3], 4.0, epsilon = TIME_TOL_S);
     assert_abs_diff_eq!(d[5], 0.2, epsilon = TIME_TOL_S);
-    for (i, r) in out.records.iter().enumerate() {
+    for (i, r) in robots.iter().enumerate() {
         match (i, &r.wrench) {
             (1..=3, Some(w)) => {
                 assert!(!w.in_tool_frame);

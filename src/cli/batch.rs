@@ -154,7 +154,7 @@ fn walk(
                 continue;
             }
             if robot && is_rapid_program(&path) {
-                let rel = path.strip_prefix(root).unwrap_or(&path).to_path_buf();
+                let rel = super::output::folder_name(&path, &[root]);
                 items.push(Item {
                     input: path,
                     rel,
@@ -165,10 +165,10 @@ fn walk(
                 continue;
             }
             walk((root, robot), &path, skip, seen, items, skipped);
-        } else if name.contains(".comp.") {
+        } else if super::output::is_compensated_name(&name) {
             skip_as("a compensated program (*.comp.*)");
         } else if let Some(message) = path.is_file().then(|| unread(&path)).flatten() {
-            let rel = path.strip_prefix(root).unwrap_or(&path).to_path_buf();
+            let rel = super::output::folder_name(&path, &[root]);
             items.push(Item {
                 input: path,
                 rel,
@@ -181,7 +181,7 @@ fn walk(
         } else if !path.is_file() {
             skip_as("not a regular file");
         } else {
-            let rel = path.strip_prefix(root).unwrap_or(&path).to_path_buf();
+            let rel = super::output::folder_name(&path, &[root]);
             items.push(Item {
                 input: path,
                 rel,
@@ -246,10 +246,7 @@ fn collect(inputs: &[PathBuf], out_dir: &Path, robot: bool) -> (Vec<Item>, Vec<S
                 &mut skipped,
             );
         } else {
-            let rel = input
-                .file_name()
-                .map(PathBuf::from)
-                .unwrap_or_else(|| PathBuf::from("program"));
+            let rel = super::output::folder_name::<&Path>(input, &[]);
             let problem = match std::fs::metadata(input) {
                 Ok(m) if m.is_file() => None,
                 Ok(_) => Some(format!("{}: not a regular file", input.display())),
@@ -519,11 +516,11 @@ fn compensate_one(
             };
             let report_file = report.map(|f| (report_path(output, f), f));
             let report_to = report_file.as_ref().map(|(p, f)| (p.as_path(), *f));
-            let done = |o: &crate::compensate::outcome::RapidOutcome| Done {
+            let done = |o: &crate::compensate::outcome::Summary| Done {
                 blocks: o.moves,
                 moves: o.moves,
-                max_dev: o.max_deviation_mm,
-                max_line: Some(o.max_deviation_line),
+                max_dev: o.deviation.max,
+                max_line: Some(o.deviation.max_line),
                 residual: None,
             };
             // A large module is read a window at a time, as by `compensate`.
@@ -552,7 +549,7 @@ fn compensate_one(
             let outcome = compensate_module(&src, &name, robot, &opts)
                 .map_err(|e| crate::program::charset::file_columns(e, &src, charset))?;
             super::rapid::write_outcome(output, &outcome, &name, report_to, provenance, charset)?;
-            Ok(done(&outcome))
+            Ok(done(&outcome.summary))
         }
     }
 }

@@ -5,9 +5,7 @@ use std::io::{BufRead, BufReader, Read, Write};
 use std::path::{Path, PathBuf};
 
 use super::machines::Loaded;
-use super::output::{
-    Staged, check_report_path, default_output, emit_to, finish_both, refuse_overwrite,
-};
+use super::output::{Staged, check_report_path, emit_to, finish_both, refuse_overwrite};
 /// The output writing of `calibrate` and `simulate`.
 use super::{
     Annotate, CheckArgs, CompensateArgs, EffectArgs, Format, ProgramArgs, ReportArgs, usage,
@@ -376,25 +374,6 @@ impl Prepared {
 }
 
 /// `postproc compensate`.
-/// Where `compensate` writes the program read from `input`: `-o`, else
-/// the program's file name in `--out-dir` (as for a RAPID module), else
-/// `<stem>.comp.<ext>` beside it (standard output for standard input,
-/// which has no name to take into a folder).
-fn output_path(input: &Path, output: Option<&Path>, out_dir: Option<&Path>) -> Result<PathBuf> {
-    let stdin = input == Path::new("-");
-    Ok(match (output, out_dir) {
-        (Some(p), _) => p.to_path_buf(),
-        (None, Some(_)) if stdin => {
-            return Err(usage(
-                "--out-dir needs a program file (standard input has no name): use -o",
-            ));
-        }
-        (None, Some(dir)) => dir.join(input.file_name().unwrap_or(input.as_os_str())),
-        (None, None) if stdin => PathBuf::from("-"),
-        (None, None) => default_output(input),
-    })
-}
-
 pub fn compensate(
     a: &CompensateArgs,
     machine: Option<(MachineTool, Loaded)>,
@@ -405,7 +384,8 @@ pub fn compensate(
     let annotate = a.annotate == Annotate::Comment;
     let job = run.job(tolerance, a.decimals, annotate)?;
     let input_path = &a.program.file;
-    let out_path = output_path(input_path, a.output.as_deref(), a.out_dir.as_deref())?;
+    let out_path =
+        super::output::output_path(input_path, a.output.as_deref(), a.out_dir.as_deref(), &[])?;
     let inputs = input_files(&a.program, &run.loaded, &a.effects);
     refuse_overwrite(&out_path, &inputs)?;
     if let Some(dir) = &a.out_dir {

@@ -11,6 +11,53 @@ use std::path::{Path, PathBuf};
 use super::usage;
 use crate::error::{Error, Result};
 
+/// The one rule naming a compensated program, for every language and
+/// command (`compensate`, a RAPID program of several modules, `batch`):
+/// `-o` when given; else, with an output folder, the program's path below
+/// the folder input it was found in ([`in_folder`]); else
+/// `<stem>.comp.<ext>` beside it ([`default_output`]). Standard input has
+/// no name: it goes to standard output, and into no folder.
+pub fn output_path(
+    input: &Path,
+    output: Option<&Path>,
+    out_dir: Option<&Path>,
+    roots: &[PathBuf],
+) -> Result<PathBuf> {
+    let stdin = input == Path::new("-");
+    Ok(match (output, out_dir) {
+        (Some(p), _) => p.to_path_buf(),
+        (None, Some(_)) if stdin => {
+            return Err(usage(
+                "--out-dir needs a program file (standard input has no name): use -o",
+            ));
+        }
+        (None, Some(dir)) => in_folder(dir, input, roots),
+        (None, None) if stdin => PathBuf::from("-"),
+        (None, None) => default_output(input),
+    })
+}
+
+/// Where a program goes in the output folder `dir`: its path below the
+/// first of the folder inputs `roots` that holds it, else its file name
+/// ([`folder_name`]).
+pub fn in_folder(dir: &Path, input: &Path, roots: &[PathBuf]) -> PathBuf {
+    dir.join(folder_name(input, roots))
+}
+
+/// A program's name in an output folder: its path below the first of the
+/// folders `roots` that holds it, else its file name (`program` for a path
+/// without one).
+pub fn folder_name<P: AsRef<Path>>(input: &Path, roots: &[P]) -> PathBuf {
+    roots
+        .iter()
+        .map(AsRef::as_ref)
+        .filter(|r| r.is_dir())
+        .find_map(|r| input.strip_prefix(r).ok())
+        .map(Path::to_path_buf)
+        .or_else(|| input.file_name().map(PathBuf::from))
+        .unwrap_or_else(|| PathBuf::from("program"))
+}
+
 /// Default output path: `<stem>.comp.<ext>` beside the input.
 pub fn default_output(input: &Path) -> PathBuf {
     let stem = input
@@ -18,10 +65,21 @@ pub fn default_output(input: &Path) -> PathBuf {
         .map(|s| s.to_string_lossy().to_string())
         .unwrap_or_else(|| "program".into());
     let name = match input.extension() {
-        Some(ext) => format!("{stem}.comp.{}", ext.to_string_lossy()),
-        None => format!("{stem}.comp"),
+        Some(ext) => format!("{stem}.{COMPENSATED}.{}", ext.to_string_lossy()),
+        None => format!("{stem}.{COMPENSATED}"),
     };
     input.with_file_name(name)
+}
+
+/// The word [`default_output`] puts between a program's stem and its
+/// extension.
+pub const COMPENSATED: &str = "comp";
+
+/// Whether a file name is that of a compensated program, as
+/// [`default_output`] names one (`part.comp.nc`): a batch over a folder
+/// leaves such files out.
+pub fn is_compensated_name(name: &str) -> bool {
+    name.contains(&format!(".{COMPENSATED}."))
 }
 
 /// Refuses an output path that is one of the command's input files (stdout
@@ -284,6 +342,43 @@ pub fn colour(terminal: bool, no_color: Option<&std::ffi::OsStr>) -> bool {
 #[cfg(test)]
 mod first_hour_tests {
     use super::*;
+
+    #[test]
+    fn one_naming_rule_for_beside_folder_and_standard_streams() {
+        let dir = tempfile::tempdir().expect("a temporary folder");
+        let root = dir.path().join("cell");
+        std::fs::create_dir_all(root.join("sub")).expect("folders");
+        let module = root.join("sub").join("Main.mod");
+        let roots = [root.clone()];
+        let out = Path::new("out");
+        let named = |input: &Path, o: Option<&Path>, d: Option<&Path>, r: &[PathBuf]| {
+            output_path(input, o, d, r).expect("a name")
+        };
+        assert_eq!(
+            named(&module, None, None, &roots),
+            root.join("sub").join("Main.comp.mod")
+        );
+        assert_eq!(
+            named(&module, None, Some(out), &roots),
+            out.join("sub").join("Main.mod")
+        );
+        assert_eq!(named(&module, None, Some(out), &[]), out.join("Main.mod"));
+        assert_eq!(
+            named(&module, Some(Path::new("x.mod")), Some(out), &roots),
+            PathBuf::from("x.mod")
+        );
+        assert_eq!(named(Path::new("-"), None, None, &[]), PathBuf::from("-"));
+        assert!(output_path(Path::new("-"), None, Some(out), &[]).is_err());
+        assert_eq!(
+            default_output(Path::new("PART")),
+            PathBuf::from("PART.comp")
+        );
+        let beside = default_output(Path::new("d/p.nc"));
+        let name = beside.file_name().and_then(|n| n.to_str()).expect("a name");
+        assert_eq!(name, "p.comp.nc");
+        assert!(is_compensated_name(name));
+        assert!(!is_compensated_name("compass.nc"));
+    }
 
     #[test]
     fn no_color_turns_colours_off_unless_empty() {

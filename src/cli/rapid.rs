@@ -5,9 +5,9 @@ use std::io::Write;
 use std::path::{Path, PathBuf};
 
 use super::machines::Loaded;
-use super::output::{Pending, Staged, default_output};
+use super::output::{Pending, Staged};
 use super::{Annotate, CheckArgs, CompensateArgs, EffectArgs, ReportArgs, usage};
-use crate::compensate::outcome::{MoveRecord, RapidOutcome};
+use crate::compensate::outcome::{Compensated, Row, Summary};
 use crate::emit::header::{HeaderWriter, Provenance};
 use crate::emit::rapid::Format;
 use crate::error::{Error, Result};
@@ -519,11 +519,7 @@ pub fn compensate(
     }
     let opts = compensate_options(a, &robot)?;
     let input = &a.program.file;
-    let out_path = match &a.output {
-        Some(p) => p.clone(),
-        None if input == Path::new("-") => PathBuf::from("-"),
-        None => default_output(input),
-    };
+    let out_path = super::output::output_path(input, a.output.as_deref(), None, &[])?;
     let inputs = super::gcode::input_files(&a.program, &loaded, &a.effects);
     super::output::refuse_overwrite(&out_path, &inputs)?;
     super::output::check_report_path(a.report.as_deref(), &inputs, &out_path)?;
@@ -557,7 +553,7 @@ pub fn compensate(
     let outcome = pool.install(|| compensate_module(&src, &name, &robot, &opts));
     let outcome = outcome.map_err(|e| file_columns(e, &src, charset))?;
     write_outcome(&out_path, &outcome, &name, report, &provenance, charset)?;
-    log_outcome(&input_name, &out_path, &outcome, quiet);
+    log_outcome(&input_name, &out_path, &outcome.summary, quiet);
     Ok(0)
 }
 
@@ -566,7 +562,7 @@ pub fn compensate(
 /// file is put in place unless both are written.
 pub(super) fn write_outcome(
     out_path: &Path,
-    outcome: &RapidOutcome,
+    outcome: &Compensated,
     name: &str,
     report: Option<(&Path, super::Format)>,
     provenance: &Provenance,
@@ -690,7 +686,7 @@ fn compensate_program(
                 format!(" ({})", names.join(", "))
             },
             plural(total.moves, "move", "moves"),
-            left_as_written(&total.as_written),
+            left_as_written(&total.warnings),
             plural(total.added, "target", "targets"),
             worst.0,
             if worst.1.is_empty() { "-" } else { &worst.1 }
@@ -713,7 +709,7 @@ pub(super) struct ProgramRun<'r> {
 pub(super) type ProgramDone = (
     Vec<crate::program::rapid::program::Member>,
     Vec<PathBuf>,
-    RapidOutcome,
+    Summary,
     (f64, String),
 );
 
@@ -729,7 +725,7 @@ pub(super) fn compensate_program_to(
 ) -> Result<ProgramDone> {
     let members = load(&module_files(inputs)?)?;
     let mut written = Vec::new();
-    let mut total = RapidOutcome::default();
+    let mut total = Summary::default();
     let mut worst = (0.0, String::new());
     let mut outcomes = Vec::with_capacity(members.len());
     for (i, m) in members.iter().enumerate() {
@@ -739,17 +735,18 @@ pub(super) fn compensate_program_to(
         outcomes.push(outcome);
     }
     for ((i, m), outcome) in members.iter().enumerate().zip(outcomes.iter()) {
-        total.moves += outcome.moves;
-        total.added += outcome.added;
-        total.as_written.extend(outcome.as_written.iter().cloned());
-        if outcome.max_deviation_mm > worst.0 || worst.1.is_empty() && outcome.moves > 0 {
+        let s = &outcome.summary;
+        total.moves += s.moves;
+        total.added += s.added;
+        total.warnings.extend(s.warnings.iter().cloned());
+        if s.deviation.max > worst.0 || worst.1.is_empty() && s.moves > 0 {
             worst = (
-                outcome.max_deviation_mm,
-                format!("{}:{}", m.name, outcome.max_deviation_line),
+                s.deviation.max,
+                format!("{}:{}", m.name, s.deviation.max_line),
             );
         }
         if outcome.text != m.text {
-            let out = program_output(&m.path, inputs, out_dir);
+            let out = super::output::output_path(&m.path, None, out_dir, inputs)?;
             super::output::refuse_overwrite(&out, &[&m.path])?;
             written.push((out, outcome, i));
         }
@@ -795,21 +792,6 @@ pub(super) fn compensate_program_to(
     Ok((members, written, total, worst))
 }
 
-/// Where a changed module of a program goes: beside its input with the
-/// usual naming, or into `out_dir` (its path below a folder input kept).
-fn program_output(path: &Path, inputs: &[PathBuf], out_dir: Option<&Path>) -> PathBuf {
-    let Some(dir) = out_dir else {
-        return default_output(path);
-    };
-    let rel = inputs
-        .iter()
-        .filter(|i| i.is_dir())
-        .find_map(|i| path.strip_prefix(i).ok())
-        .map(Path::to_path_buf)
-        .unwrap_or_else(|| path.file_name().map(PathBuf::from).unwrap_or_default());
-    dir.join(rel)
-}
-
 /// `n one` or `n many`, with the count grouped.
 fn plural(n: usize, one: &str, many: &str) -> String {
     format!(
@@ -820,7 +802,7 @@ fn plural(n: usize, one: &str, many: &str) -> String {
 }
 
 /// The summary line on standard error (unless `quiet`).
-fn log_outcome(input: &str, out_path: &Path, outcome: &RapidOutcome, quiet: bool) {
+fn log_outcome(input: &str, out_path: &Path, outcome: &Summary, quiet: bool) {
     if quiet {
         return;
     }
@@ -839,25 +821,26 @@ fn log_outcome(input: &str, out_path: &Path, outcome: &RapidOutcome, quiet: bool
     eprintln!(
         "{input} → {out}: {} compensated{}, {} added; largest predicted deviation {:.4} mm (line {})",
         plural(outcome.moves, "move", "moves"),
-        left_as_written(&outcome.as_written),
+        left_as_written(&outcome.warnings),
         plural(outcome.added, "target", "targets"),
-        outcome.max_deviation_mm,
-        outcome.max_deviation_line
+        outcome.deviation.max,
+        outcome.deviation.max_line
     );
 }
 
 /// `, N left as written (reasons)` of the summary line, or nothing when
 /// every move is compensated.
-fn left_as_written(left: &[crate::compensate::outcome::AsWritten]) -> String {
-    if left.is_empty() {
+fn left_as_written(warnings: &[crate::program::interp::Warning]) -> String {
+    let left = || warnings.iter().filter_map(|w| w.left.as_ref());
+    if left().next().is_none() {
         return String::new();
     }
-    let mut reasons: Vec<&str> = left.iter().map(|a| a.reason.as_str()).collect();
+    let mut reasons: Vec<&str> = left().map(|a| a.reason.as_str()).collect();
     reasons.sort_unstable();
     reasons.dedup();
     format!(
         ", {} left as written ({})",
-        super::gcode::grouped(left.len()),
+        super::gcode::grouped(left().count()),
         reasons.join("; ")
     )
 }
@@ -932,7 +915,7 @@ pub(super) fn compensate_streamed_to(
     out_path: Option<&Path>,
     report: Option<(&Path, super::Format)>,
     provenance: &Provenance,
-) -> Result<Option<RapidOutcome>> {
+) -> Result<Option<Summary>> {
     use crate::emit::report::{Layout, ReportWriter};
     let name = source.name();
     let spill = |p: &Path| spill_beside(p).map(|f| std::io::BufWriter::with_capacity(1 << 16, f));
@@ -958,7 +941,7 @@ pub(super) fn compensate_streamed_to(
         ),
         _ => None,
     };
-    let mut sink = |records: &[MoveRecord]| -> Result<()> {
+    let mut sink = |records: &[Row]| -> Result<()> {
         match writer.as_mut() {
             Some(rw) => write_records(rw, records),
             None => Ok(()),
@@ -984,8 +967,8 @@ pub(super) fn compensate_streamed_to(
     }
     if let (Some(rw), Some((p, _))) = (writer, report) {
         rw.finish(crate::emit::report::Totals {
-            blocks: streamed.outcome.moves,
-            moves: streamed.outcome.moves,
+            blocks: streamed.summary.moves,
+            moves: streamed.summary.moves,
         })?;
         if let Some(spill) = report_spill {
             pending.push(write_spilled(p, "report", "", spill, None)?);
@@ -995,12 +978,12 @@ pub(super) fn compensate_streamed_to(
     for p in pending {
         p.commit()?;
     }
-    Ok(Some(streamed.outcome))
+    Ok(Some(streamed.summary))
 }
 
 /// Writes the report rows of `records`.
-fn write_records(rw: &mut crate::emit::report::ReportWriter, records: &[MoveRecord]) -> Result<()> {
-    records.iter().try_for_each(|t| rw.record(t))
+fn write_records(rw: &mut crate::emit::report::ReportWriter, records: &[Row]) -> Result<()> {
+    records.iter().try_for_each(|t| rw.row(t))
 }
 
 /// Writes the deviation report of a compensated (or dry-run) RAPID module:
@@ -1008,7 +991,7 @@ fn write_records(rw: &mut crate::emit::report::ReportWriter, records: &[MoveReco
 /// parts of its predicted deviation.
 pub(super) fn write_report(
     out: &mut dyn Write,
-    outcome: &RapidOutcome,
+    outcome: &Compensated,
     name: &str,
     format: super::Format,
     provenance: Option<&Provenance>,
@@ -1019,8 +1002,8 @@ pub(super) fn write_report(
         .with_provenance(provenance);
     write_records(&mut rw, &outcome.records)?;
     rw.finish(Totals {
-        blocks: outcome.moves,
-        moves: outcome.moves,
+        blocks: outcome.summary.moves,
+        moves: outcome.summary.moves,
     })
 }
 
@@ -1031,7 +1014,7 @@ pub(super) fn write_report(
 fn write_program_report(
     out: &mut dyn Write,
     members: &[crate::program::rapid::program::Member],
-    outcomes: &[RapidOutcome],
+    outcomes: &[Compensated],
     name: &str,
     format: super::Format,
     provenance: &Provenance,
@@ -1044,7 +1027,7 @@ fn write_program_report(
     for (m, outcome) in members.iter().zip(outcomes) {
         rw.file(&m.name, Some(&m.path));
         write_records(&mut rw, &outcome.records)?;
-        moves += outcome.moves;
+        moves += outcome.summary.moves;
     }
     rw.finish(Totals {
         blocks: moves,

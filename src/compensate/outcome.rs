@@ -1,8 +1,9 @@
 //! What a compensation run found, per move and in total: the result types
 //! that the pipelines fill and the report and summary writers read.
 //!
-//! The G-code job fills a [`Summary`] and one [`Row`] per block; the RAPID
-//! job a [`RapidOutcome`] with one [`MoveRecord`] per motion instruction.
+//! Every pipeline fills one [`Summary`] and one [`Row`] per block or motion
+//! instruction (a robot move's own part in [`RobotMove`]); a robot module
+//! read whole comes back [`Compensated`]: its text, summary and rows.
 //! [`DevStats`] keeps the deviation statistics of both without per-block
 //! storage.
 
@@ -33,7 +34,7 @@ pub struct AddedLines {
 /// Deviation statistics over many blocks with a fixed-size histogram, so the
 /// percentile needs no per-block storage for values up to 2 mm; the rare
 /// larger values are kept exactly. Used by the job summary and the reports.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct DevStats {
     /// Number of values.
     pub count: u64,
@@ -112,8 +113,9 @@ impl DevStats {
     }
 }
 
-/// What a job did.
-#[derive(Debug, Clone, Default)]
+/// What a job did. A robot run fills `moves` (the motion instructions
+/// compensated), `added` (declarations added), `deviation` and `warnings`.
+#[derive(Debug, Clone, Default, PartialEq)]
 pub struct Summary {
     /// Lines read.
     pub lines: usize,
@@ -133,7 +135,9 @@ pub struct Summary {
     pub extents: Option<(AxisVec, AxisVec)>,
     /// Tools used (T numbers made active).
     pub tools: Vec<u32>,
-    /// Interpreter warnings.
+    /// What the run warns about, in order (the interpreter's, the job's:
+    /// clamped tables, resonances): the one diagnostics channel of every
+    /// pipeline.
     pub warnings: Vec<Warning>,
     /// Blocks whose text changed.
     pub changed: usize,
@@ -159,12 +163,15 @@ pub struct Summary {
     pub mean_power_w: Powers,
 }
 
-/// One per-block row for reports.
-#[derive(Debug, Clone)]
+/// One per-block row for reports: the one record of every pipeline. A
+/// robot move fills `line`, `motion` (its instruction), `commanded` (its
+/// programmed TCP position, world frame, mm) and `robot`; a G-code block
+/// everything but `robot`.
+#[derive(Debug, Clone, PartialEq)]
 pub struct Row {
     /// Source line.
     pub line: usize,
-    /// Motion kind label.
+    /// Motion kind label (a robot's instruction: `MoveL`, `MoveC`, …).
     pub motion: &'static str,
     /// Programmed start point, machine coordinates.
     pub start: AxisVec,
@@ -176,17 +183,14 @@ pub struct Row {
     pub compensated: AxisVec,
     /// Predicted deviation and breakdown.
     pub result: BlockResult,
+    /// A robot move's own part.
+    pub robot: Option<RobotMove>,
 }
 
-/// What the pipeline predicted for one motion instruction.
+/// What a robot run predicted for one motion instruction beyond what
+/// every [`Row`] holds: the robot's part of its report row.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct MoveRecord {
-    /// 1-based line of the instruction.
-    pub line: usize,
-    /// Instruction name (`MoveL`, `MoveJ`, `MoveC`, `MoveAbsJ`).
-    pub kind: &'static str,
-    /// Programmed TCP position, world frame, mm.
-    pub programmed_mm: [f64; 3],
+pub struct RobotMove {
     /// Programmed circle point of a `MoveC`, world frame, mm.
     pub via_mm: Option<[f64; 3]>,
     /// Predicted deviation of the uncompensated target, by effect.
@@ -201,35 +205,14 @@ pub struct MoveRecord {
     pub thermal_power_w: [f64; 6],
 }
 
-/// Result of compensating a module.
+/// A program compensated in memory (a robot module read whole): its
+/// text, what the run did, and its report rows when they were asked for.
 #[derive(Debug, Clone, Default, PartialEq)]
-pub struct RapidOutcome {
-    /// The rewritten module text.
+pub struct Compensated {
+    /// The rewritten program text.
     pub text: String,
-    /// Motion instructions compensated.
-    pub moves: usize,
-    /// Declarations added (`_cN` copies and `_oN` materialised targets).
-    pub added: usize,
-    /// Largest predicted deviation of an uncompensated target, mm.
-    pub max_deviation_mm: f64,
-    /// 1-based line of the move with the largest deviation.
-    pub max_deviation_line: usize,
-    /// One record per motion instruction, in source order.
-    pub records: Vec<MoveRecord>,
-    /// Motion instructions left as written, each with its reason, in
-    /// source order (not counted in `moves`, no record).
-    pub as_written: Vec<AsWritten>,
-}
-
-/// A motion instruction the RAPID pipeline leaves as written, and why.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub struct AsWritten {
-    /// 1-based line of the instruction.
-    pub line: usize,
-    /// 1-based byte column of the instruction's name.
-    pub column: usize,
-    /// The instruction's name as written (`MoveL`, `SpotL`).
-    pub instruction: String,
-    /// Why it is not compensated.
-    pub reason: String,
+    /// What the run did.
+    pub summary: Summary,
+    /// One row per motion instruction, in source order.
+    pub records: Vec<Row>,
 }

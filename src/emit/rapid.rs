@@ -18,8 +18,8 @@ use nalgebra::Isometry3;
 
 use crate::error::{Error, Located, Result};
 use crate::machine::robot::{ConfData, Deviation};
-use crate::program::rapid::resolve::{line_col, lookup};
-use crate::program::rapid::{Decl, JointTarget, Module, RobTarget};
+use crate::program::rapid::resolve::line_col;
+use crate::program::rapid::{Decl, JointTarget, RobTarget};
 
 /// One edit: replace `span` of the source with `text` (an empty span inserts).
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -755,13 +755,13 @@ pub(crate) fn joint_text(
     Ok(format!("[[{}],[{extax}]]", words.join(",")))
 }
 
-/// A name not yet declared in the module, nor already created, nor in
-/// `reserved` (lower case: the routines, record types and modules of the
-/// program), of at most [`MAX_IDENT_CHARS`] characters: `{stem}_{tag}{n}`
-/// for the first `n` from `from` on, the stem cut where the name would be
-/// too long.
+/// A name not `declared` (in the module: the caller looks it up), nor
+/// already created, nor in `reserved` (lower case: the routines, record
+/// types and modules of the program), of at most [`MAX_IDENT_CHARS`]
+/// characters: `{stem}_{tag}{n}` for the first `n` from `from` on, the stem
+/// cut where the name would be too long.
 pub(crate) fn fresh_name(
-    module: &Module,
+    declared: impl Fn(&str) -> bool,
     taken: &mut Vec<String>,
     reserved: &HashSet<String>,
     stem: &str,
@@ -774,7 +774,7 @@ pub(crate) fn fresh_name(
         let keep = MAX_IDENT_CHARS.saturating_sub(suffix.len());
         let end = stem.char_indices().nth(keep).map_or(stem.len(), |(i, _)| i);
         let name = format!("{}{suffix}", &stem[..end]);
-        if lookup(module, &name).is_none()
+        if !declared(&name)
             && !reserved.contains(&name.to_ascii_lowercase())
             && !taken.iter().any(|t| t.eq_ignore_ascii_case(&name))
         {

@@ -11,7 +11,7 @@
 
 use std::io::Write;
 
-use crate::compensate::outcome::{DevStats, MoveRecord, Row};
+use crate::compensate::outcome::{DevStats, RobotMove, Row};
 pub use crate::emit::html::Shape;
 use crate::emit::svg::{Decimator, PlotPoint, Worst as PlotWorst};
 use crate::error::{Error, Result};
@@ -589,8 +589,12 @@ impl<'w> ReportWriter<'w> {
         self
     }
 
-    /// Writes the row of a G-code motion block.
+    /// Writes the row of a motion block or instruction: a G-code block's
+    /// effects, or a robot move's ([`ReportWriter::robot_row`]).
     pub fn row(&mut self, r: &Row) -> Result<()> {
+        if let Some(robot) = &r.robot {
+            return self.robot_row(r, robot);
+        }
         let mut axes = [0.0; 6];
         let mut n = 0;
         for (x, &slot) in axes.iter_mut().zip(&self.layout.slots) {
@@ -623,19 +627,20 @@ impl<'w> ReportWriter<'w> {
         })
     }
 
-    /// Writes the row of a RAPID motion instruction: the kinematic,
-    /// thermal, gravity, process and dynamic (vibration) parts of its
-    /// predicted deviation ([`Layout::rapid`]).
-    pub fn record(&mut self, t: &MoveRecord) -> Result<()> {
+    /// The row of a robot move: the kinematic, thermal, gravity, process
+    /// and dynamic (vibration) parts of its predicted deviation
+    /// ([`Layout::rapid`]).
+    fn robot_row(&mut self, r: &Row, t: &RobotMove) -> Result<()> {
         let d = &t.deviation;
+        let programmed_mm = [r.commanded[0], r.commanded[1], r.commanded[2]];
         self.entry(&Entry {
-            line: t.line,
-            motion: t.kind,
-            axes: &t.programmed_mm,
+            line: r.line,
+            motion: r.motion,
+            axes: &programmed_mm,
             start_mm: None,
             shape: Shape::Line,
             via_mm: t.via_mm,
-            position_mm: t.programmed_mm,
+            position_mm: programmed_mm,
             deviation_mm: d.total.pos_mm.into(),
             effects_mm: &[
                 d.kinematic.pos_mm.norm(),

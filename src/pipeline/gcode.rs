@@ -637,6 +637,7 @@ impl<'j, 'm> InterpretStage<'j, 'm> {
                     line: line_no,
                     message,
                     count: 1,
+                    left: None,
                 });
             }
             self.clamped |= fresh;
@@ -804,6 +805,7 @@ impl<'j, 'm, 'o, 'r> WriteStage<'j, 'm, 'o, 'r> {
                 arc: mv.arc,
                 compensated: r.end,
                 result: r.clone(),
+                robot: None,
             });
         }
     }

@@ -20,7 +20,7 @@ use rayon::prelude::*;
 
 use nalgebra::{Isometry3, Vector3};
 
-use crate::compensate::outcome::{AsWritten, MoveRecord, RapidOutcome};
+use crate::compensate::outcome::{Compensated, DevStats, RobotMove, Row, Summary};
 use crate::compensate::robot::{Compensation, Seed};
 use crate::emit::rapid::{
     EditList, Format, fresh_name, insert_after_decl, joint_text, push_annotation,
@@ -39,6 +39,7 @@ use crate::machine::robot::{
 use crate::pipeline::resonance::ResonanceWatch;
 use crate::process::CutSettings;
 use crate::process::MillingCache;
+use crate::program::interp::Warning;
 use crate::program::rapid::directives::Directives;
 use crate::program::rapid::flow::{At, Flow, Left};
 use crate::program::rapid::instructions::motion_instruction;
@@ -47,6 +48,7 @@ use crate::program::rapid::resolve::{
     resolve_wobj, tcp_speed,
 };
 use crate::program::rapid::{DataValue, Module, Move, MoveKind, Target, column_of, parse_module};
+use crate::program::robot_moves::LeftAsWritten;
 
 /// Options of a RAPID compensation run.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -59,7 +61,7 @@ pub struct RapidOptions {
     pub format: Format,
     /// Initial thermal state of the program's time line.
     pub thermal_start: ThermalStart,
-    /// Keep a [`MoveRecord`] per move in the outcome (for a report); without
+    /// Keep a report [`Row`] per move in the outcome (for a report); without
     /// a report they are not needed, and for a large module they are a good
     /// part of the memory.
     pub records: bool,
@@ -479,8 +481,9 @@ impl Rewriter<'_> {
         if let Some(n) = self.made.get(&k) {
             return Ok(n.clone());
         }
+        let module = self.module;
         let name = fresh_name(
-            self.module,
+            |n| crate::program::rapid::resolve::lookup(module, n).is_some(),
             &mut self.taken,
             &self.reserved,
             stem,
@@ -1048,7 +1051,7 @@ pub fn compensate_module(
     file: &str,
     robot: &Robot,
     opts: &RapidOptions,
-) -> Result<RapidOutcome> {
+) -> Result<Compensated> {
     compensate_parsed(parse_module(src, file)?, src, file, robot, opts)
 }
 
@@ -1060,7 +1063,7 @@ pub fn compensate_parsed(
     file: &str,
     robot: &Robot,
     opts: &RapidOptions,
-) -> Result<RapidOutcome> {
+) -> Result<Compensated> {
     compensate_carried(module, (src, file), robot, opts, Carry::default())
 }
 
@@ -1071,7 +1074,7 @@ pub(crate) fn compensate_carried(
     robot: &Robot,
     opts: &RapidOptions,
     mut carry: Carry,
-) -> Result<RapidOutcome> {
+) -> Result<Compensated> {
     let text = ModuleText {
         module: &module,
         src,
@@ -1087,7 +1090,7 @@ pub(crate) fn compensate_carried(
     drop(module);
     carry.push_inserts(src, &spans, &mut edits);
     let mut outcome = carry.outcome(robot, file);
-    refuse_left_as_written(&outcome.as_written, file, opts)?;
+    refuse_left_as_written(&outcome.summary.warnings, file, opts)?;
     outcome.text = edits.apply(src)?;
     Ok(outcome)
 }
@@ -1095,7 +1098,7 @@ pub(crate) fn compensate_carried(
 /// The moves of `module` (parsed from `src`) that a compensation leaves as
 /// written, with their reasons, in line order (warned about as a
 /// compensation warns): no robot is needed to find them.
-pub fn left_as_written(module: &Module, src: &str, file: &str) -> Result<Vec<AsWritten>> {
+pub fn left_as_written(module: &Module, src: &str, file: &str) -> Result<Vec<Warning>> {
     left_as_written_carried(module, src, file, Carry::default())
 }
 
@@ -1106,23 +1109,27 @@ pub(crate) fn left_as_written_carried(
     src: &str,
     file: &str,
     mut carry: Carry,
-) -> Result<Vec<AsWritten>> {
+) -> Result<Vec<Warning>> {
     carry.resolve(ModuleText { module, src, file })?;
     carry.leave_unfinished(module, src, file);
     carry.leave_unknown(module, src, file);
-    Ok(std::mem::take(&mut carry.as_written))
+    Ok(std::mem::take(&mut carry.warnings))
 }
 
 /// With `opts.strict`, a module with a move left as written is an input
 /// error (exit code 2) that names the first one: `file:line:col: MoveL left
 /// as written (CRobT); --strict …`.
-pub fn refuse_left_as_written(left: &[AsWritten], file: &str, opts: &RapidOptions) -> Result<()> {
+pub fn refuse_left_as_written(warnings: &[Warning], file: &str, opts: &RapidOptions) -> Result<()> {
     // A reported joint target is not one known at run time only.
-    let left: Vec<&AsWritten> = left.iter().filter(|a| a.reason != JOINT_TARGET).collect();
+    let left: Vec<(usize, &LeftAsWritten)> = warnings
+        .iter()
+        .filter_map(|w| w.left.as_ref().map(|a| (w.line, a)))
+        .filter(|(_, a)| a.reason != JOINT_TARGET)
+        .collect();
     match left.first() {
-        Some(a) if opts.strict => Err(Error::Input(Located::new(
+        Some(&(line, a)) if opts.strict => Err(Error::Input(Located::new(
             file,
-            a.line,
+            line,
             a.column,
             format!(
                 "{} left as written ({}); --strict refuses a module with a move left as written ({} in all)",
@@ -1180,11 +1187,13 @@ pub(crate) struct Carry {
     added: usize,
     last_tcp: [f64; 3],
     moves: usize,
-    max_deviation: (f64, usize),
+    /// The predicted deviation of the moves compensated.
+    deviation: DevStats,
     resonance: ResonanceWatch,
-    records: Vec<MoveRecord>,
-    /// Moves left as written, with their reasons.
-    as_written: Vec<AsWritten>,
+    records: Vec<Row>,
+    /// What the windows found to warn about: the moves left as written,
+    /// with their reasons, in line order, then the resonances.
+    warnings: Vec<Warning>,
     /// Why the module cannot be read a window at a time, found while
     /// compensating a window.
     pub(crate) unsupported: Option<&'static str>,
@@ -1277,14 +1286,14 @@ impl Carry {
                 m.name,
                 UNFINISHED_ROUTINE
             );
-            self.as_written.push(AsWritten {
-                line: m.line,
-                column: column_of(src, m.span.start),
-                instruction: m.name.to_string(),
-                reason: UNFINISHED_ROUTINE.to_string(),
-            });
+            self.warnings.push(LeftAsWritten::warning(
+                m.line,
+                column_of(src, m.span.start),
+                m.name,
+                UNFINISHED_ROUTINE,
+            ));
         }
-        self.as_written.sort_by_key(|a| a.line);
+        self.warnings.sort_by_key(|a| a.line);
     }
 
     /// Names the statements that look like motion instructions to a
@@ -1308,30 +1317,29 @@ impl Carry {
                 crate::error::Escaped(&u.name),
                 reason
             );
-            self.as_written.push(AsWritten {
-                line: u.line,
-                column: u.column,
-                instruction: u.name,
-                reason: reason.to_string(),
-            });
+            self.warnings
+                .push(LeftAsWritten::warning(u.line, u.column, &u.name, reason));
         }
-        self.as_written.sort_by_key(|a| a.line);
+        self.warnings.sort_by_key(|a| a.line);
     }
 
     /// The outcome of the windows compensated (without the text), after
     /// the resonance warnings of the whole module.
-    pub(crate) fn outcome(&mut self, robot: &Robot, file: &str) -> RapidOutcome {
+    pub(crate) fn outcome(&mut self, robot: &Robot, file: &str) -> Compensated {
         if let Some(modal) = robot.modal() {
-            self.resonance.warnings(modal, file);
+            let resonances = self.resonance.warnings(modal, file);
+            self.warnings.extend(resonances);
         }
-        RapidOutcome {
+        Compensated {
             text: String::new(),
-            moves: self.moves,
-            added: self.added,
-            max_deviation_mm: self.max_deviation.0,
-            max_deviation_line: self.max_deviation.1,
+            summary: Summary {
+                moves: self.moves,
+                added: self.added,
+                deviation: std::mem::take(&mut self.deviation),
+                warnings: std::mem::take(&mut self.warnings),
+                ..Summary::default()
+            },
             records: std::mem::take(&mut self.records),
-            as_written: std::mem::take(&mut self.as_written),
         }
     }
 }
@@ -1463,7 +1471,7 @@ impl Carry {
             }
         }
         self.keep_read_by_other_statements(&flow, src);
-        self.as_written.sort_by_key(|a| a.line);
+        self.warnings.sort_by_key(|a| a.line);
         // A window sees one routine: data written in one window and read
         // in another would resolve otherwise read whole.
         self.module_written.extend(flow.module_data_written());
@@ -1541,12 +1549,12 @@ impl Carry {
             self.owner.insert(origin, LoadKey::as_written());
             self.unsupported.get_or_insert(AS_WRITTEN_READS);
         }
-        self.as_written.push(AsWritten {
-            line: mv.line,
-            column: column_of(src, mv.span.start),
-            instruction: mv.name.to_string(),
-            reason: left.reason,
-        });
+        self.warnings.push(LeftAsWritten::warning(
+            mv.line,
+            column_of(src, mv.span.start),
+            mv.name,
+            &left.reason,
+        ));
     }
 
     /// Counts a move that stays on the time line but is written as it was
@@ -1556,12 +1564,12 @@ impl Carry {
         if self.time_line.is_some() {
             return;
         }
-        self.as_written.push(AsWritten {
-            line: mv.line,
-            column: column_of(src, mv.span.start),
-            instruction: mv.name.to_string(),
-            reason: reason.to_string(),
-        });
+        self.warnings.push(LeftAsWritten::warning(
+            mv.line,
+            column_of(src, mv.span.start),
+            mv.name,
+            reason,
+        ));
     }
 }
 
@@ -2185,10 +2193,7 @@ impl<'m> Rewriter<'m> {
         dev: &Deviation,
     ) {
         carry.moves += 1;
-        let d = dev.total.pos_mm.norm();
-        if d > carry.max_deviation.0 {
-            carry.max_deviation = (d, mv.line);
-        }
+        carry.deviation.add(dev.total.pos_mm.norm(), mv.line);
         self.watch_resonance(carry, mv.line, state, dev);
         if self.opts.annotate && self.last_annotated != Some(mv.span.start) {
             self.last_annotated = Some(mv.span.start);
@@ -2206,7 +2211,7 @@ impl<'m> Rewriter<'m> {
 }
 
 impl Rewriter<'_> {
-    /// The report record of a move: where it was programmed, its predicted
+    /// The report row of a move: where it was programmed, its predicted
     /// deviation and its place on the time line.
     fn move_record(
         &self,
@@ -2215,17 +2220,24 @@ impl Rewriter<'_> {
         seg: &Segment,
         state: &MoveState,
         dev: &Deviation,
-    ) -> MoveRecord {
-        MoveRecord {
+    ) -> Row {
+        let [x, y, z] = self.last_tcp;
+        Row {
             line: mv.line,
-            kind: mv.name,
-            programmed_mm: self.last_tcp,
-            via_mm,
-            deviation: *dev,
-            wrench: state.wrench,
-            duration_s: seg.duration_s,
-            power_w: seg.power_w,
-            thermal_power_w: state.power.unwrap_or([0.0; 6]),
+            motion: mv.name,
+            start: [0.0; 6],
+            commanded: [x, y, z, 0.0, 0.0, 0.0],
+            arc: None,
+            compensated: [0.0; 6],
+            result: crate::compensate::BlockResult::default(),
+            robot: Some(RobotMove {
+                via_mm,
+                deviation: *dev,
+                wrench: state.wrench,
+                duration_s: seg.duration_s,
+                power_w: seg.power_w,
+                thermal_power_w: state.power.unwrap_or([0.0; 6]),
+            }),
         }
     }
 
@@ -2359,7 +2371,7 @@ mod tests {
         let src = format!("{head}{}\n{tail}", lines.join("\n"));
         let whole = compensate_module(&src, "m.mod", &robot, &opts).expect("compensates");
         let out: Vec<&str> = whole.text.lines().collect();
-        assert_eq!(whole.moves, n);
+        assert_eq!(whole.summary.moves, n);
         let first = head.lines().count();
         let mut checked = 0;
         for i in (0..n).filter(|i| {
@@ -2461,14 +2473,15 @@ mod tests {
         let b = compensate_module(src, "milling.mod", &robot, &without).expect("compensates");
         // A record per compensated move and per reported MoveAbsJ.
         let reported = a
-            .as_written
+            .summary
+            .warnings
             .iter()
-            .filter(|w| w.reason == JOINT_TARGET)
+            .filter(|w| w.left.as_ref().is_some_and(|l| l.reason == JOINT_TARGET))
             .count();
-        assert_eq!(a.records.len(), a.moves + reported);
-        assert!(a.moves > 0 && b.records.is_empty());
+        assert_eq!(a.records.len(), a.summary.moves + reported);
+        assert!(a.summary.moves > 0 && b.records.is_empty());
         assert_eq!(
-            RapidOutcome {
+            Compensated {
                 records: Vec::new(),
                 ..a
             },

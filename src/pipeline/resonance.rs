@@ -105,6 +105,7 @@ impl ResonanceWatch {
                 line: s.first_line,
                 message: message(modal, s),
                 count: s.moves,
+                left: None,
             })
             .collect();
         let (speeds, line, moves) = self.more;
@@ -115,6 +116,7 @@ impl ResonanceWatch {
                     "{speeds} more changes of spindle speed resonate besides the {MAX_SPEEDS} above ({moves} moves)"
                 ),
                 count: moves,
+                left: None,
             });
         }
         for w in &out {

@@ -430,6 +430,9 @@ pub struct Warning {
     pub message: String,
     /// How many blocks it applies to.
     pub count: usize,
+    /// A robot move left as written: which, where and why
+    /// ([`crate::program::robot_moves`]); `None` for every other warning.
+    pub left: Option<crate::program::robot_moves::LeftAsWritten>,
 }
 
 /// Modal state of the controller.
@@ -561,6 +564,7 @@ impl Interpreter {
                 line,
                 message,
                 count: 1,
+                left: None,
             });
         }
     }

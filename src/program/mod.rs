@@ -9,6 +9,7 @@ pub mod interp;
 pub mod krl;
 pub mod language;
 pub mod rapid;
+pub mod robot_moves;
 pub mod tp;
 
 /// The powers of ten that are exact in f64 (`1e0` to `1e22`): a decimal

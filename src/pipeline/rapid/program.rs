@@ -7,9 +7,10 @@
 //! declaration (after its `MODULE` line when it has none).
 
 use super::{Carry, ProgramScope, RapidOptions, compensate_carried};
-use crate::compensate::outcome::{AsWritten, RapidOutcome};
+use crate::compensate::outcome::Compensated;
 use crate::error::{Error, Result};
 use crate::machine::robot::Robot;
+use crate::program::interp::Warning;
 use crate::program::rapid::program::{
     Member, procedures_elsewhere, relocate, scoped, written_elsewhere,
 };
@@ -38,7 +39,7 @@ fn carry_of(members: &[Member], i: usize, own: &Member) -> Carry {
 /// The moves of module `i` of the program `members` that a compensation
 /// leaves as written, with their reasons: names resolved across the
 /// modules, no robot needed.
-pub fn left_as_written_member(members: &[Member], i: usize) -> Result<Vec<AsWritten>> {
+pub fn left_as_written_member(members: &[Member], i: usize) -> Result<Vec<Warning>> {
     let own = members
         .get(i)
         .ok_or_else(|| Error::Internal("module index".into()))?;
@@ -55,7 +56,7 @@ pub fn compensate_member(
     i: usize,
     robot: &Robot,
     opts: &RapidOptions,
-) -> Result<RapidOutcome> {
+) -> Result<Compensated> {
     let own = members
         .get(i)
         .ok_or_else(|| Error::Internal("module index".into()))?;

@@ -17,7 +17,7 @@
 use std::io::{BufRead, Write};
 
 use super::{Carry, ModuleText, RapidOptions, compensate_window};
-use crate::compensate::outcome::{MoveRecord, RapidOutcome};
+use crate::compensate::outcome::{Row, Summary};
 use crate::error::{Error, Result};
 use crate::machine::ThermalStart;
 use crate::machine::robot::thermal::TimeLineTotals;
@@ -49,9 +49,9 @@ const WINDOW_BYTES: usize = 4 << 20;
 /// A module compensated (or checked) a window at a time.
 #[derive(Debug)]
 pub struct Streamed {
-    /// Moves, extremes and records, as [`super::compensate_module`] gives
-    /// them (the text is empty: it went to the output as it was made).
-    pub outcome: RapidOutcome,
+    /// What the run did, as [`super::compensate_module`] gives it (the
+    /// text went to the output as it was made, the rows to the sink).
+    pub summary: Summary,
     /// The module's name.
     pub name: String,
     /// Module-level declarations.
@@ -64,7 +64,7 @@ pub struct Streamed {
 
 /// What takes the move records of each window (with `opts.records`), in
 /// move order: a report writer, row by row.
-pub type RecordSink<'s> = &'s mut dyn FnMut(&[MoveRecord]) -> Result<()>;
+pub type RecordSink<'s> = &'s mut dyn FnMut(&[Row]) -> Result<()>;
 
 /// Why a module was not read a window at a time.
 #[derive(Debug)]
@@ -162,7 +162,7 @@ pub fn compensate_streamed<R: BufRead>(
         body,
         records,
     )?;
-    super::refuse_left_as_written(&done.0.outcome.as_written, file, opts)?;
+    super::refuse_left_as_written(&done.0.summary.warnings, file, opts)?;
     Ok(done)
 }
 
@@ -339,20 +339,15 @@ fn pass<R: BufRead>(
     let mut edits = std::mem::take(&mut carry.before);
     carry.push_inserts(w.prologue(), &spans, &mut edits);
     let prologue = edits.apply(w.prologue())?;
-    let outcome = match robot {
-        Some(robot) => carry.outcome(robot, file),
-        None => RapidOutcome {
-            text: String::new(),
+    let summary = match robot {
+        Some(robot) => carry.outcome(robot, file).summary,
+        None => Summary {
             moves,
-            added: 0,
-            max_deviation_mm: 0.0,
-            max_deviation_line: 0,
-            records: Vec::new(),
-            as_written: Vec::new(),
+            ..Summary::default()
         },
     };
     let streamed = Streamed {
-        outcome,
+        summary,
         name,
         decls: spans.len(),
         routines: w.routines(),
@@ -479,10 +474,14 @@ ENDMODULE
                     };
                     let whole = super::super::compensate_module(src, "t.mod", robot, &opts)
                         .unwrap_or_else(|e| panic!("{name}: {e}"));
-                    assert!(whole.moves > 0 && whole.text != *src);
+                    assert!(whole.summary.moves > 0 && whole.text != *src);
                     if name.starts_with("rich") {
                         // p1/p2 copies under tB, three `Offs`, a `RelTool`.
-                        assert!(whole.added >= 5, "{name}: {} added", whole.added);
+                        assert!(
+                            whole.summary.added >= 5,
+                            "{name}: {} added",
+                            whole.summary.added
+                        );
                         assert!(whole.text.contains("p1_c2") && whole.text.contains("c2_o1"));
                     }
                     let lines = src.lines().count();
@@ -629,14 +628,16 @@ ENDMODULE
         let whole = super::super::compensate_module(RICH, "t.mod", &robot, &opts).unwrap();
         // A record per compensated move and per reported MoveAbsJ.
         let reported = whole
-            .as_written
+            .summary
+            .warnings
             .iter()
+            .filter_map(|w| w.left.as_ref())
             .filter(|a| a.reason == super::super::JOINT_TARGET)
             .count();
-        assert_eq!(whole.records.len(), whole.moves + reported);
+        assert_eq!(whole.records.len(), whole.summary.moves + reported);
         for lines in [1, 4, 100] {
             let mut got = Vec::new();
-            let mut sink = |r: &[MoveRecord]| -> Result<()> {
+            let mut sink = |r: &[Row]| -> Result<()> {
                 got.extend_from_slice(r);
                 Ok(())
             };
@@ -650,7 +651,7 @@ ENDMODULE
                 Some(&mut sink),
             )
             .unwrap();
-            assert!(s.outcome.records.is_empty());
+            assert_eq!(s.summary, whole.summary, "windows of {lines} lines");
             assert_eq!(got, whole.records, "windows of {lines} lines");
         }
     }
