@@ -13,7 +13,7 @@ use super::{
 };
 use crate::machine::{AxisVec, DirVec};
 use crate::predict::ToolPredictor;
-use crate::program::interp::{ArcGeom, Move};
+use crate::program::interp::{ArcGeom, DIRECTION_DEADBAND, Move};
 
 /// Deepest halving of one part of an arc between reversals (up to 2^3
 /// arcs) before it is written as chords.
@@ -365,12 +365,23 @@ pub(super) fn arc_block(
         .filter(|k| k.stands_at(&mv.start))
         .map(|k| (k.c, k.dirs));
     let mut left = 0.0f64;
-    let mut last_dirs = mv.dirs;
+    // An axis outside the arc's plane that the arc moves less than the
+    // deadband keeps the direction the written pieces before left it in.
+    let mut base = mv.dirs;
+    if let Some(k) = carry_in {
+        let (a, b, _) = arc.plane.axes();
+        for s in (0..6).filter(|&s| s != a && s != b) {
+            if (mv.end[s] - mv.start[s]).abs() <= DIRECTION_DEADBAND {
+                base[s] = k.moved[s];
+            }
+        }
+    }
+    let mut last_dirs = base;
     let mut end_residual = res.residual_mm;
     for i in 0..=n {
         let s0 = if i == 0 { 0.0 } else { ts[i - 1] };
         let s1 = if i == n { 1.0 } else { ts[i] };
-        let d = dirs_of(&arc.tangent(&job.s3, &job.e3, (s0 + s1) / 2.0), &mv.dirs);
+        let d = dirs_of(&arc.tangent(&job.s3, &job.e3, (s0 + s1) / 2.0), &base);
         let p0 = job.at(s0);
         let c1 = if i == n && d == mv.dirs {
             res.end
@@ -414,7 +425,7 @@ pub(super) fn arc_block(
                     center,
                     sweep,
                 });
-                last_dirs = mv.dirs;
+                last_dirs = base;
                 break;
             }
         }
@@ -430,6 +441,7 @@ pub(super) fn arc_block(
     let count = res.segments.len();
     res.center = res.arcs.last().filter(|p| p.to == count).map(|p| p.center);
     res.residual_mm = res.residual_mm.max(left);
+    res.miss_mm = res.miss_mm.max(left);
     for p in res.segments.iter() {
         check_travel(pred, p)?;
     }
