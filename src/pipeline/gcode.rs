@@ -826,11 +826,13 @@ impl<'j, 'm, 'o, 'r> WriteStage<'j, 'm, 'o, 'r> {
             } else {
                 "a written piece of this block"
             };
-            let message = format!(
-                "{what} is predicted {:.4} mm from the programmed path, beyond the tolerance {tol} mm",
-                r.miss_mm
-            );
+            // Worded only for the warnings kept: nothing allocates per
+            // block once they are full.
             if self.beyond.len() < MAX_BEYOND_WARNINGS {
+                let message = format!(
+                    "{what} is predicted {:.4} mm from the programmed path, beyond the tolerance {tol} mm",
+                    r.miss_mm
+                );
                 tracing::warn!("{}:{line_no}: {message}", self.file);
                 self.beyond.push(Warning {
                     line: line_no,
