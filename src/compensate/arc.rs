@@ -8,8 +8,8 @@
 use nalgebra::Vector3;
 
 use super::{
-    BlockResult, Carry, Failure, Lip, SKIP_MARGIN_MM, SOLVE_TOL_MM, TAKEUP_SHARE, check_travel,
-    dirs_of, lerp, solve, solve_near, split_line, start_from, with_xyz,
+    BlockResult, Carry, Failure, Lip, SKIP_MARGIN_MM, SOLVE_TOL_MM, check_travel, dirs_of, lerp,
+    solve, solve_near, split_line, start_from, with_xyz,
 };
 use crate::machine::{AxisVec, DirVec};
 use crate::predict::ToolPredictor;
@@ -382,6 +382,9 @@ pub(super) fn arc_block(
         let s0 = if i == 0 { 0.0 } else { ts[i - 1] };
         let s1 = if i == n { 1.0 } else { ts[i] };
         let d = dirs_of(&arc.tangent(&job.s3, &job.e3, (s0 + s1) / 2.0), &base);
+        if i == 0 {
+            res.start_dirs = d;
+        }
         let p0 = job.at(s0);
         let c1 = if i == n && d == mv.dirs {
             res.end
@@ -393,23 +396,9 @@ pub(super) fn arc_block(
         let (c0, gap) = match at {
             Some((c, pd)) if pd == d && i > 0 => (c, SOLVE_TOL_MM),
             Some((c, _)) => {
-                // The part from where the machine stands, the jump of the
-                // correction taken up along it, when it fits as one arc.
-                let g = super::start_gap(pred, &p0, &c, &d, tool);
-                let absorbed = (g > tol * TAKEUP_SHARE && g < tol)
-                    .then(|| job.fit((s0, s1), (&c, g), &c1, (&d, false)))
-                    .flatten();
-                if let Some((center, sweep)) = absorbed {
-                    res.segments.push(c1);
-                    res.arcs.push(ArcPiece {
-                        to: res.segments.len() - 1,
-                        center,
-                        sweep,
-                    });
-                    at = Some((c1, d));
-                    last_dirs = d;
-                    continue;
-                }
+                // From where the machine stands: a takeup point first where
+                // it would start the part more than the takeup share of the
+                // tolerance off the path (as a straight move does).
                 job.start((i, p0, c, d), takeups, &mut left, res)?
             }
             None => (solve(pred, &p0, &d, tool)?.0, SOLVE_TOL_MM),
