@@ -1744,12 +1744,26 @@ pub fn block_reusing(
     plan: &Plan,
     settings: &Settings,
     carry: &mut Option<Carry>,
-    mut segments: Vec<AxisVec>,
+    segments: Vec<AxisVec>,
+) -> Result<BlockResult, Failure> {
+    block_recycling(pred, plan, settings, carry, (segments, Vec::new()))
+}
+
+/// [`block_reusing`] with the storage of the result's takeup points inside
+/// a move ([`BlockResult::takeup_at`]) recycled too (both cleared first).
+pub fn block_recycling(
+    pred: &ToolPredictor,
+    plan: &Plan,
+    settings: &Settings,
+    carry: &mut Option<Carry>,
+    (mut segments, mut takeup_at): (Vec<AxisVec>, Vec<usize>),
 ) -> Result<BlockResult, Failure> {
     segments.clear();
+    takeup_at.clear();
     let Some(mv) = plan.mv else {
         return Ok(BlockResult {
             segments,
+            takeup_at,
             ..BlockResult::default()
         });
     };
@@ -1760,6 +1774,7 @@ pub fn block_reusing(
     let carry_in = prev.as_ref();
     let mut res = BlockResult {
         segments,
+        takeup_at,
         ..BlockResult::default()
     };
     let tool = mv.tool_len_mm;

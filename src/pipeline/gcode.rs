@@ -967,16 +967,16 @@ impl<'m> Job<'m> {
         carry: &mut Option<compensate::Carry>,
         r: &mut Solved,
     ) {
-        let segments = match r.take() {
-            Some(Ok(old)) => old.segments,
-            _ => Vec::new(),
+        let storage = match r.take() {
+            Some(Ok(old)) => (old.segments, old.takeup_at),
+            _ => (Vec::new(), Vec::new()),
         };
-        *r = Some(compensate::block_reusing(
+        *r = Some(compensate::block_recycling(
             &pred.with_context(*ctx),
             plan,
             &self.settings,
             carry,
-            segments,
+            storage,
         ));
     }
 
