@@ -60,12 +60,19 @@ fn compensate(program: &str, machine_file: &std::path::Path, extra: &[&str]) -> 
         .args(["-o", "-"])
         .output()
         .expect("runs");
-    assert_eq!(
-        out.status.code(),
-        Some(0),
-        "{program}: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    // Exit 1 only for holes warned about: a hole has one X and Y for its
+    // depth, which a tolerance of a fraction of a micron may not hold.
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    let beyond: Vec<&str> = stderr
+        .lines()
+        .filter(|l| l.contains("WARN") && l.contains("beyond the tolerance"))
+        .collect();
+    let holes_only = !beyond.is_empty()
+        && beyond
+            .iter()
+            .all(|l| l.contains("the hole, drilled at one X and Y"));
+    let want = if holes_only { Some(1) } else { Some(0) };
+    assert_eq!(out.status.code(), want, "{program}: {stderr}");
     // The provenance header is checked by its own tests.
     crate::common::without_header(&out.stdout)
 }
@@ -131,7 +138,9 @@ fn post_style_programs_compensate_to_their_programmed_points() {
             let best = got
                 .iter()
                 .map(|g| {
-                    let at = m.geometric(&g.end, &mv.dirs, mv.tool_len_mm);
+                    // With the directions the interpreter reads from the compensated
+                    // program (docs/compensation.md, *Directions of motion*).
+                    let at = m.geometric(&g.end, &g.dirs, mv.tool_len_mm);
                     (at.pos - tip.pos).norm()
                 })
                 .fold(f64::INFINITY, f64::min);
@@ -329,7 +338,7 @@ fn machine_axis_and_tcpm_twins_compensate_to_the_same_tips() {
                 let goal = m.nominal(&mv.end, mv.tool_len_mm).pos;
                 let best = got
                     .iter()
-                    .map(|g| m.geometric(&g.end, &mv.dirs, mv.tool_len_mm).pos)
+                    .map(|g| m.geometric(&g.end, &g.dirs, mv.tool_len_mm).pos)
                     .min_by(|a, b| (a - goal).norm().total_cmp(&(b - goal).norm()))
                     .expect("moves");
                 let tol = if tcpm { TCPM_WORD_TOL_MM } else { WORD_TOL_MM };

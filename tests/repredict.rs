@@ -94,3 +94,442 @@ fn attains_every_target(name: &str) {
 fn a_compensated_hand_written_frame_attains_its_targets() {
     attains_every_target("hand_frame.nc");
 }
+
+// ---------------------------------------------------------------------
+// The promise along every written piece: a compensated program, read back
+// by the interpreter and put on its own time line (the forward pass the
+// prediction shares with `report`, not the solver), sampled along every
+// written feed piece; each attained point lies within the header's
+// tolerance of the programmed path of the block the piece belongs to.
+
+use postproc::machine::tool::MachineTool;
+use postproc::pipeline::gcode::Job;
+use postproc::predict::{BlockContext, EffectSet, ProcessSetup, ToolPredictor};
+use postproc::program::interp::{Motion, Move, Plan, PlanKind, Setup};
+
+/// Sample spacing along a written piece, mm (and at least
+/// [`MIN_SAMPLES`] per piece).
+const SAMPLE_MM: f64 = 0.25;
+const MIN_SAMPLES: usize = 8;
+/// Points of a programmed move searched for the nearest one before the
+/// search is refined.
+const PATH_POINTS: usize = 48;
+/// Floating-point allowance of the comparison with the tolerance, mm.
+const FLOAT_MM: f64 = 1e-9;
+
+/// One program of the check: where it is, the machine it runs on, and
+/// whether it needs the shop machine and tool table of `samples/gcode`.
+struct Case {
+    program: String,
+    machine: &'static str,
+    shop: bool,
+}
+
+fn machine_text(name: &str, shop: bool) -> String {
+    let text = std::fs::read_to_string(repo(&format!("machines/{name}.yaml"))).expect("machine");
+    if shop {
+        text.replace("G58: [0.0, 0.0, 0.0]", "G58: [300.0, 200.0, 250.0]")
+            .replace("G59: [0.0, 0.0, 0.0]", "G59: [300.0, 200.0, 250.0]")
+    } else {
+        text
+    }
+}
+
+/// Tool lengths of the shop-style samples.
+fn shop_tools() -> Vec<(u32, f64)> {
+    (1..=12).map(|h| (h, 60.0 + 5.0 * h as f64)).collect()
+}
+
+/// A block as the forward pass reads it.
+struct Read {
+    line: usize,
+    plan: Plan,
+    ctx: BlockContext,
+}
+
+fn forward(job: &Job, text: &str) -> Vec<Read> {
+    let mut out = Vec::new();
+    job.forward(text.as_bytes(), "p.nc", &mut |line, plan, ctx| {
+        out.push(Read {
+            line,
+            plan: *plan,
+            ctx: *ctx,
+        })
+    })
+    .expect("reads back");
+    out
+}
+
+/// The input line each output line belongs to (1-based), from the text:
+/// an output line equal to the next input line is that line; a line with
+/// a `(dev` annotation is the next input line rewritten; any other line
+/// was added after the input line before it (a piece, or the header).
+/// The output lines that are a block's takeup move are marked.
+fn align(input: &str, output: &str) -> (Vec<usize>, Vec<bool>) {
+    let ins: Vec<&str> = input.lines().collect();
+    let mut map = Vec::new();
+    let mut takeup = Vec::new();
+    let mut i = 0;
+    for l in output.lines() {
+        let annotated = l.contains("(dev ") || l.contains("; dev ");
+        if ins.get(i) == Some(&l) || annotated {
+            i += 1;
+        }
+        map.push(i.max(1));
+        takeup.push(l.contains(" takeup)") || l.ends_with(" takeup"));
+    }
+    (map, takeup)
+}
+
+/// The point at parameter `s` of a move, and the directions of motion the
+/// machine moves with there: an axis of an arc's plane the way the arc's
+/// tangent goes, every other axis as the interpreter reads the move.
+fn at(mv: &Move, s: f64) -> ([f64; 6], [i8; 6]) {
+    let mut p = [0.0; 6];
+    for (k, v) in p.iter_mut().enumerate() {
+        *v = mv.start[k] + (mv.end[k] - mv.start[k]) * s;
+    }
+    let mut d = mv.dirs;
+    if let Some(arc) = &mv.arc {
+        let (s3, e3) = (mv.start3(), mv.end3());
+        let q = arc.point(&s3, &e3, s);
+        let (a, b, _) = arc.plane.axes();
+        p[..3].copy_from_slice(q.as_slice());
+        // An axis of the plane moves the way its last stretch of more than
+        // the deadband before this point went (the first one after the
+        // start, at the start).
+        let x = |u: f64| arc.point(&s3, &e3, u);
+        for k in [a, b] {
+            let mut u = s;
+            let step = 1.0 / ARC_STEPS;
+            let found = loop {
+                let back = s > 0.0;
+                u = if back { u - step } else { u + step };
+                if !(0.0..=1.0).contains(&u) {
+                    break None;
+                }
+                let dx = if back { q[k] - x(u)[k] } else { x(u)[k] - q[k] };
+                if dx.abs() > DEADBAND_MM {
+                    break Some(dx);
+                }
+            };
+            if let Some(dx) = found {
+                d[k] = if dx > 0.0 { 1 } else { -1 };
+            }
+        }
+    }
+    (p, d)
+}
+
+/// Steps of the search for an arc axis' last stretch of travel.
+const ARC_STEPS: f64 = 4000.0;
+/// The interpreter's deadband of a direction of motion, mm.
+const DEADBAND_MM: f64 = 1e-3;
+
+/// The feed path of a block: the move, or for a canned-cycle hole the feed
+/// from the R level to the bottom (its `mv`).
+fn feed(plan: &Plan) -> Option<Move> {
+    let mv = plan.mv?;
+    match plan.kind {
+        PlanKind::Motion if mv.motion != Motion::Rapid => Some(mv),
+        PlanKind::Cycle { .. } => Some(mv),
+        _ => None,
+    }
+}
+
+/// Distance of the tip `q` from the nominal path of the programmed move.
+fn off_path(pred: &ToolPredictor, mv: &Move, q: &nalgebra::Vector3<f64>) -> f64 {
+    let tool = mv.tool_len_mm;
+    let d = |s: f64| (pred.nominal(&at(mv, s).0, tool).pos - q).norm();
+    let coarse: Vec<f64> = (0..=PATH_POINTS)
+        .map(|k| d(k as f64 / PATH_POINTS as f64))
+        .collect();
+    let h = 1.0 / PATH_POINTS as f64;
+    let g = 0.5 * (5f64.sqrt() - 1.0);
+    let mut best = f64::INFINITY;
+    // Golden-section refinement around every local minimum of the coarse
+    // points (a full circle has two at its ends).
+    for k in 0..=PATH_POINTS {
+        let v = coarse[k];
+        let left = k == 0 || coarse[k - 1] >= v;
+        let right = k == PATH_POINTS || coarse[k + 1] >= v;
+        if !(left && right) {
+            continue;
+        }
+        let s = k as f64 * h;
+        let (mut lo, mut hi) = ((s - h).max(0.0), (s + h).min(1.0));
+        for _ in 0..40 {
+            let (x1, x2) = (hi - g * (hi - lo), lo + g * (hi - lo));
+            if d(x1) < d(x2) {
+                hi = x2;
+            } else {
+                lo = x1;
+            }
+        }
+        best = best.min(v).min(d((lo + hi) / 2.0));
+    }
+    best
+}
+
+/// The worst miss of the compensated `output` of `input`: per output line,
+/// the largest distance of its sampled piece from its block's programmed
+/// path, with the line of the input block.
+fn misses(job: &Job, input: &str, output: &str) -> Vec<(usize, usize, f64)> {
+    let pred = job.predictor.as_ref().expect("predictor");
+    let programmed: std::collections::HashMap<usize, Move> = forward(job, input)
+        .into_iter()
+        .filter_map(|r| feed(&r.plan).map(|mv| (r.line, mv)))
+        .collect();
+    let (map, takeup) = align(input, output);
+    let mut out = Vec::new();
+    for r in forward(job, output) {
+        let Some(mv) = feed(&r.plan) else { continue };
+        let src = map[r.line - 1];
+        // A block's takeup move goes onto its start, off the path by
+        // design; the pieces after it start on it.
+        if takeup[r.line - 1] {
+            continue;
+        }
+        let Some(want) = programmed.get(&src) else {
+            // Not matched to a programmed feed: reported as a miss.
+            out.push((src, r.line, f64::INFINITY));
+            continue;
+        };
+        // A short straight line inside an arc block is a takeup at a
+        // reversal of the arc (onto the next part's start).
+        if want.arc.is_some() && mv.arc.is_none() && mv.length_mm() < 0.05 {
+            continue;
+        }
+        let p = pred.with_context(r.ctx);
+        let n = ((mv.length_mm() / SAMPLE_MM).ceil() as usize).max(MIN_SAMPLES);
+        let mut worst = 0.0f64;
+        for k in 0..=n {
+            let (c, d) = at(&mv, k as f64 / n as f64);
+            let q = p.attained(&c, &d, mv.tool_len_mm).pos;
+            worst = worst.max(off_path(&p, want, &q));
+        }
+        out.push((src, r.line, worst));
+    }
+    out
+}
+
+/// Compensates `case` through the binary at `tol` with `effects` and checks
+/// every written piece; a piece beyond the tolerance must be warned about
+/// (its line named) and counted in the summary line.
+fn promise_holds(case: &Case, effects: &str, tol: f64) -> Outcome {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let mtext = machine_text(case.machine, case.shop);
+    let mpath = dir.path().join(format!("{}.yaml", case.machine));
+    std::fs::write(&mpath, &mtext).expect("machine");
+    let input = std::fs::read_to_string(repo(&case.program)).expect("program");
+    let inpath = dir.path().join("in.nc");
+    std::fs::write(&inpath, &input).expect("program");
+    let outpath = dir.path().join("out.nc");
+    let mut cmd = postproc();
+    cmd.args(["compensate", "--machine"])
+        .arg(&mpath)
+        .args(["--effects", effects, "--tolerance", &tol.to_string()])
+        .arg(&inpath)
+        .arg("-o")
+        .arg(&outpath);
+    if case.shop {
+        for (h, l) in shop_tools() {
+            cmd.args(["--tool", &format!("H{h}={l}")]);
+        }
+    }
+    let run = cmd.output().expect("runs");
+    let stderr = String::from_utf8_lossy(&run.stderr).to_string();
+    assert!(
+        matches!(run.status.code(), Some(0) | Some(1)),
+        "{}: {stderr}",
+        case.program
+    );
+    let output = std::fs::read_to_string(&outpath).expect("output");
+    assert!(output.contains(&format!("tolerance {tol} mm")), "{output}");
+    let m = MachineTool::from_yaml_str(&mtext, "m.yaml").expect("machine");
+    let process = ProcessSetup::for_machine(&m);
+    let mut setup = Setup::for_machine(&m);
+    if case.shop {
+        setup.tools.extend(shop_tools());
+    }
+    let job = Job {
+        predictor: Some(
+            ToolPredictor::new(&m, EffectSet::parse(effects).expect("effects"))
+                .with_process(&process),
+        ),
+        setup,
+        settings: postproc::compensate::Settings { tolerance_mm: tol },
+        emit: postproc::emit::gcode::EmitOptions {
+            decimals_mm: None,
+            decimals_deg: None,
+            annotate: true,
+        },
+        pool: None,
+        travel: None,
+    };
+    let found = misses(&job, &input, &output);
+    assert!(!found.is_empty(), "{}: no pieces", case.program);
+    let mut silent = Vec::new();
+    let mut worst = 0.0f64;
+    let mut warned = 0;
+    for (line, out_line, miss) in &found {
+        worst = worst.max(*miss);
+        if *miss > tol + FLOAT_MM {
+            let named =
+                stderr.contains(&format!(":{line}: ")) && stderr.contains("beyond the tolerance");
+            if named {
+                warned += 1;
+            } else {
+                silent.push(format!("line {line} (output {out_line}): {miss:.5} mm"));
+            }
+        }
+    }
+    if warned > 0 {
+        assert!(stderr.contains("beyond the tolerance (max"), "{stderr}");
+    }
+    Outcome {
+        warned,
+        worst,
+        silent,
+    }
+}
+
+/// What [`promise_holds`] found.
+struct Outcome {
+    /// Pieces beyond the tolerance, each warned about.
+    warned: usize,
+    /// The largest miss, mm.
+    worst: f64,
+    /// Pieces beyond the tolerance without a warning.
+    silent: Vec<String>,
+}
+
+fn cases() -> Vec<Case> {
+    let mut v: Vec<Case> = [
+        ("samples/part.nc", "afm-r1000", false),
+        ("samples/effects.nc", "afm-r1000", false),
+        ("samples/fusion-haas.nc", "afm-r1000", false),
+        ("samples/inch-default.nc", "afm-r1000", false),
+        ("samples/five-axis.nc", "five-axis-ac", false),
+        ("samples/gcode/block_delete.nc", "afm-r1000", true),
+        ("samples/gcode/fusion_fanuc.nc", "afm-r1000", true),
+        ("samples/gcode/inch_g20.nc", "afm-r1000", true),
+        ("samples/gcode/iso_spaced_crlf.nc", "afm-r1000", true),
+        ("samples/gcode/linuxcnc.ngc", "afm-r1000", true),
+        ("samples/gcode/mastercam_haas.nc", "afm-r1000", true),
+        ("tests/repredict/hand_frame.nc", "afm-r1000", false),
+        ("tests/repredict/after_cycle.nc", "afm-r1000", false),
+        (
+            "tests/repredict/five_axis_unnamed.nc",
+            "five-axis-ac",
+            false,
+        ),
+        ("tests/repredict/haas_tap_inch.nc", "afm-r1000", true),
+    ]
+    .into_iter()
+    .map(|(p, m, shop)| Case {
+        program: p.to_string(),
+        machine: m,
+        shop,
+    })
+    .collect();
+    v.retain(|c| repo(&c.program).exists());
+    v
+}
+
+/// Runs every case at the bundled tolerance and at 1 µm with `effects`;
+/// the pieces beyond the tolerance (each warned) are listed for the
+/// failure message, and none may be there.
+fn every_case(effects: &str) {
+    let mut report = Vec::new();
+    for case in cases() {
+        for tol in [0.003, 0.001] {
+            let o = promise_holds(&case, effects, tol);
+            if o.warned > 0 || !o.silent.is_empty() {
+                report.push(format!(
+                    "{} at {tol} mm: {} pieces beyond, warned (worst {:.5} mm); silent: {}",
+                    case.program,
+                    o.warned,
+                    o.worst,
+                    o.silent.join(", ")
+                ));
+            }
+        }
+    }
+    assert!(report.is_empty(), "{}", report.join("\n"));
+}
+
+#[test]
+#[ignore = "issue 41, open: three pieces miss unwarned (part.nc line 57 by 0.01 µm at 3 µm; effects.nc line 18 by 2.7 µm and block_delete.nc line 53 by 0.01 µm at 1 µm), the rest beyond are warned; run with --ignored"]
+fn every_written_piece_lands_within_the_tolerance_geometric() {
+    every_case("geometric");
+}
+
+#[test]
+#[ignore = "issue 41, open: helical and arc pieces miss by up to 7 µm under process force (each written piece gets its own load when read back, the solve used the block's); run with --ignored"]
+fn every_written_piece_lands_within_the_tolerance_quasi_static() {
+    every_case("geometric,static,thermal");
+}
+
+#[test]
+fn the_first_feed_after_a_canned_cycle_and_g28_is_taken_up() {
+    // The issue's program: the feed after a drilled hole, `G28`, a new
+    // position and tool length. Its machine stands where the rapids left
+    // it (X and Y solved with Z at the reference position): the feed
+    // starts with a takeup and lands within the tolerance.
+    let case = Case {
+        program: "tests/repredict/after_cycle.nc".to_string(),
+        machine: "afm-r1000",
+        shop: false,
+    };
+    let o = promise_holds(&case, "geometric", 0.003);
+    assert!(o.silent.is_empty() && o.warned == 0, "{:?}", o.silent);
+    assert!(o.worst <= 0.003, "{}", o.worst);
+}
+
+#[test]
+fn a_five_axis_program_that_never_names_its_rotaries_lands_within_the_tolerance() {
+    // A and C stand at the reference position the whole program: the
+    // machine is known there from the start, so the first feed gets its
+    // takeup and every piece holds the tolerance.
+    let case = Case {
+        program: "tests/repredict/five_axis_unnamed.nc".to_string(),
+        machine: "five-axis-ac",
+        shop: false,
+    };
+    for tol in [0.003, 0.001] {
+        let o = promise_holds(&case, "geometric", tol);
+        assert!(
+            o.silent.is_empty() && o.warned == 0,
+            "{tol}: {:?}",
+            o.silent
+        );
+    }
+}
+
+#[test]
+fn a_frame_of_half_circles_lands_within_one_micron() {
+    // Straight sides and half circles over a quadrant point each, kept
+    // as arcs about shifted centres or cut at the reversal: every piece
+    // within 1 µm along its length, geometric effects.
+    let case = Case {
+        program: "tests/repredict/hand_frame.nc".to_string(),
+        machine: "afm-r1000",
+        shop: false,
+    };
+    let o = promise_holds(&case, "geometric", 0.001);
+    assert!(o.silent.is_empty(), "{:?}", o.silent);
+}
+
+#[test]
+fn inch_tapping_after_tool_changes_lands_within_the_tolerance() {
+    // Spot, drill and tap in inch, each after a tool change and G28, then a
+    // feed after the last cycle: its start is taken up.
+    let case = Case {
+        program: "tests/repredict/haas_tap_inch.nc".to_string(),
+        machine: "afm-r1000",
+        shop: true,
+    };
+    let o = promise_holds(&case, "geometric", 0.003);
+    assert!(o.silent.is_empty(), "{:?}", o.silent);
+}

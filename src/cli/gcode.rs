@@ -539,6 +539,14 @@ pub(super) fn summary_line(input: &str, output: &Path, s: &Summary, tolerance: f
             s.cutting.max, s.cutting.max_line
         ));
     }
+    if s.beyond.count > 0 {
+        line.push_str(&format!(
+            "; {} beyond the tolerance (max {:.4} mm, line {})",
+            plural(s.beyond.count, "block", "blocks"),
+            s.beyond.max_mm,
+            s.beyond.max_line
+        ));
+    }
     let other = s.deviation.count - s.cutting.count;
     if other > 0 {
         // The largest of rapids and machine-defined moves, when larger.

@@ -8,12 +8,12 @@
 use nalgebra::Vector3;
 
 use super::{
-    BlockResult, Carry, Failure, Lip, SKIP_MARGIN_MM, SOLVE_TOL_MM, TAKEUP_SHARE, check_travel,
-    dirs_of, lerp, solve, solve_near, split_line, start_from, with_xyz,
+    BlockResult, Carry, Failure, Lip, SKIP_MARGIN_MM, SOLVE_TOL_MM, check_travel, dirs_of, lerp,
+    solve, solve_near, split_line, start_from, with_xyz,
 };
 use crate::machine::{AxisVec, DirVec};
 use crate::predict::ToolPredictor;
-use crate::program::interp::{ArcGeom, Move};
+use crate::program::interp::{ArcGeom, DIRECTION_DEADBAND, Move};
 
 /// Deepest halving of one part of an arc between reversals (up to 2^3
 /// arcs) before it is written as chords.
@@ -365,12 +365,26 @@ pub(super) fn arc_block(
         .filter(|k| k.stands_at(&mv.start))
         .map(|k| (k.c, k.dirs));
     let mut left = 0.0f64;
-    let mut last_dirs = mv.dirs;
+    // An axis outside the arc's plane that the arc moves less than the
+    // deadband keeps the direction the written pieces before left it in.
+    let mut base = mv.dirs;
+    if let Some(k) = carry_in {
+        let (a, b, _) = arc.plane.axes();
+        for s in (0..6).filter(|&s| s != a && s != b) {
+            if (mv.end[s] - mv.start[s]).abs() <= DIRECTION_DEADBAND {
+                base[s] = k.moved[s];
+            }
+        }
+    }
+    let mut last_dirs = base;
     let mut end_residual = res.residual_mm;
     for i in 0..=n {
         let s0 = if i == 0 { 0.0 } else { ts[i - 1] };
         let s1 = if i == n { 1.0 } else { ts[i] };
-        let d = dirs_of(&arc.tangent(&job.s3, &job.e3, (s0 + s1) / 2.0), &mv.dirs);
+        let d = dirs_of(&arc.tangent(&job.s3, &job.e3, (s0 + s1) / 2.0), &base);
+        if i == 0 {
+            res.start_dirs = d;
+        }
         let p0 = job.at(s0);
         let c1 = if i == n && d == mv.dirs {
             res.end
@@ -382,23 +396,9 @@ pub(super) fn arc_block(
         let (c0, gap) = match at {
             Some((c, pd)) if pd == d && i > 0 => (c, SOLVE_TOL_MM),
             Some((c, _)) => {
-                // The part from where the machine stands, the jump of the
-                // correction taken up along it, when it fits as one arc.
-                let g = super::start_gap(pred, &p0, &c, &d, tool);
-                let absorbed = (g > tol * TAKEUP_SHARE && g < tol)
-                    .then(|| job.fit((s0, s1), (&c, g), &c1, (&d, false)))
-                    .flatten();
-                if let Some((center, sweep)) = absorbed {
-                    res.segments.push(c1);
-                    res.arcs.push(ArcPiece {
-                        to: res.segments.len() - 1,
-                        center,
-                        sweep,
-                    });
-                    at = Some((c1, d));
-                    last_dirs = d;
-                    continue;
-                }
+                // From where the machine stands: a takeup point first where
+                // it would start the part more than the takeup share of the
+                // tolerance off the path (as a straight move does).
                 job.start((i, p0, c, d), takeups, &mut left, res)?
             }
             None => (solve(pred, &p0, &d, tool)?.0, SOLVE_TOL_MM),
@@ -414,7 +414,7 @@ pub(super) fn arc_block(
                     center,
                     sweep,
                 });
-                last_dirs = mv.dirs;
+                last_dirs = base;
                 break;
             }
         }
@@ -430,6 +430,7 @@ pub(super) fn arc_block(
     let count = res.segments.len();
     res.center = res.arcs.last().filter(|p| p.to == count).map(|p| p.center);
     res.residual_mm = res.residual_mm.max(left);
+    res.miss_mm = res.miss_mm.max(left);
     for p in res.segments.iter() {
         check_travel(pred, p)?;
     }

@@ -50,6 +50,29 @@ pub struct DevStats {
     large: Vec<f64>,
 }
 
+/// The blocks of a program with a written piece predicted beyond the
+/// tolerance from the programmed path.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct Beyond {
+    /// How many blocks.
+    pub count: usize,
+    /// The largest distance, mm.
+    pub max_mm: f64,
+    /// Line of the largest distance (0 when none).
+    pub max_line: usize,
+}
+
+impl Beyond {
+    /// Counts a block with a piece `miss_mm` from the path at `line`.
+    pub fn add(&mut self, miss_mm: f64, line: usize) {
+        self.count += 1;
+        if miss_mm > self.max_mm {
+            self.max_mm = miss_mm;
+            self.max_line = line;
+        }
+    }
+}
+
 /// Histogram resolution of [`DevStats`], mm.
 pub const DEV_BIN_MM: f64 = 1e-5;
 const DEV_BINS: usize = 200_000;
@@ -154,6 +177,10 @@ pub struct Summary {
     pub max_residual_mm: f64,
     /// Line of the largest position error left (0 when none).
     pub max_residual_line: usize,
+    /// Blocks with a written piece predicted beyond the tolerance from the
+    /// programmed path (each also warned about with its line), with the
+    /// largest such distance, mm.
+    pub beyond: Beyond,
     /// The program is in inches.
     pub inch: bool,
     /// Duration of the program on its time line, s (0 when no process

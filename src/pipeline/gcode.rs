@@ -379,9 +379,30 @@ struct Stage {
     results: Vec<Solved>,
     /// The last lines with a move before the chunk (plan and block context,
     /// in order; at most [`compensate::CARRY_LOOKBACK`] + 1): where the
-    /// chunk's first run of blocks starts from.
+    /// chunk's runs of blocks estimate their start from.
     before: Vec<(Plan, BlockContext)>,
+    /// Where the chunk before left the machine (its last carry): where
+    /// the chunk's first block starts from.
+    seed: Option<compensate::Carry>,
+    /// The carry after each line of the chunk.
+    carries: Vec<Option<compensate::Carry>>,
+    /// The carry each run of [`GROUP_BLOCKS`] blocks was started from.
+    seeds: Vec<Option<compensate::Carry>>,
 }
+
+impl Stage {
+    /// Where the stage's chunk left the machine.
+    fn last_carry(&self) -> Option<compensate::Carry> {
+        match self.carries.last() {
+            Some(k) => *k,
+            None => self.seed,
+        }
+    }
+}
+
+/// Blocks with a piece beyond the tolerance that are warned about one by
+/// one; the summary counts every one.
+const MAX_BEYOND_WARNINGS: usize = 100;
 
 /// Lines parsed in order by one task when a chunk is parsed in parallel.
 const PARSE_LINES: usize = 512;
@@ -673,6 +694,9 @@ struct WriteStage<'j, 'm, 'o, 'r> {
     out: Option<&'o mut dyn Write>,
     rows: Option<&'r mut dyn FnMut(Row)>,
     out_buf: Vec<u8>,
+    /// The warnings about blocks with a piece beyond the tolerance (at most
+    /// [`MAX_BEYOND_WARNINGS`]; the summary counts them all).
+    beyond: Vec<Warning>,
     /// Storage of a block under tool centre point control in tool tips.
     tip_plan: Plan,
     tip_res: BlockResult,
@@ -694,6 +718,7 @@ impl<'j, 'm, 'o, 'r> WriteStage<'j, 'm, 'o, 'r> {
             out,
             rows,
             out_buf: Vec::with_capacity(1 << 20),
+            beyond: Vec::new(),
             tip_plan: Plan::default(),
             tip_res: BlockResult::default(),
         }
@@ -792,8 +817,38 @@ impl<'j, 'm, 'o, 'r> WriteStage<'j, 'm, 'o, 'r> {
         if plan.kind != PlanKind::Fixed && mv.motion != Motion::Rapid {
             summary.cutting.add(dev, line_no);
         }
-        if mv.motion != Motion::Rapid && r.residual_mm > summary.max_residual_mm {
-            summary.max_residual_mm = r.residual_mm;
+        let tol = self.job.settings.tolerance_mm;
+        // Only a written program states a tolerance (a report has none).
+        let written = self.out.is_some();
+        if r.miss_mm > tol && written {
+            summary.beyond.add(r.miss_mm, line_no);
+            let what = if matches!(plan.kind, PlanKind::Cycle { .. }) {
+                "the hole, drilled at one X and Y,"
+            } else {
+                "a written piece of this block"
+            };
+            // Worded only for the warnings kept: nothing allocates per
+            // block once they are full.
+            if self.beyond.len() < MAX_BEYOND_WARNINGS {
+                let message = format!(
+                    "{what} is predicted {:.4} mm from the programmed path, beyond the tolerance {tol} mm",
+                    r.miss_mm
+                );
+                tracing::warn!("{}:{line_no}: {message}", self.file);
+                self.beyond.push(Warning {
+                    line: line_no,
+                    message,
+                    count: 1,
+                });
+            }
+        }
+        let left = if written {
+            r.residual_mm.max(r.miss_mm)
+        } else {
+            r.residual_mm
+        };
+        if mv.motion != Motion::Rapid && left > summary.max_residual_mm {
+            summary.max_residual_mm = left;
             summary.max_residual_line = line_no;
         }
         if let Some(rows) = self.rows.as_deref_mut() {
@@ -816,6 +871,7 @@ impl<'j, 'm, 'o, 'r> WriteStage<'j, 'm, 'o, 'r> {
         summary.changed = self.emitter.changed_blocks();
         summary.added = self.emitter.added_blocks();
         summary.added_by = self.emitter.added_by();
+        summary.warnings.extend(self.beyond);
     }
 }
 
@@ -838,14 +894,19 @@ impl<'m> Job<'m> {
 
     /// Compensates the blocks of a prepared stage (on the job's pool: the
     /// caller runs this inside a task of it). Runs of [`GROUP_BLOCKS`]
-    /// blocks go in order on one thread (a straight move starts where the
-    /// previous one left the machine); each run is seeded with the carry
-    /// of the moves before it ([`compensate::carry_before`]), so the
-    /// output depends neither on the number of threads nor on where the
-    /// runs begin.
+    /// blocks go in order on one thread (a move starts where the previous
+    /// one left the machine, with the directions its pieces last moved
+    /// in): the first from the carry the chunk before left
+    /// ([`Stage::seed`]), each other one from the carry of the moves before
+    /// it ([`compensate::carry_before`], an estimate). Then, in order, a
+    /// run whose estimate was not the carry the run before it really left
+    /// is solved again from that carry, block by block until a block
+    /// leaves the carry it left before: the output is that of one run over
+    /// the whole program, whatever the number of threads.
     fn compensate_stage(&self, st: &mut Stage, solving: bool) {
         let (true, Some(pred)) = (solving, &self.predictor) else {
             st.results.clear();
+            st.carries.clear();
             return;
         };
         let n = st.chunk.ranges.len();
@@ -854,44 +915,105 @@ impl<'m> Job<'m> {
         // large storage back).
         st.results.truncate(n);
         st.results.resize_with(n, || None);
+        st.carries.clear();
+        st.carries.resize(n, None);
+        st.seeds.clear();
+        st.seeds.resize(n.div_ceil(GROUP_BLOCKS), None);
         let plans = &st.plans[..n];
         let contexts = &st.contexts;
         let before = &st.before;
+        let seed = st.seed;
+        let home = self.setup.home;
         st.results
             .par_chunks_mut(GROUP_BLOCKS)
+            .zip(st.carries.par_chunks_mut(GROUP_BLOCKS))
+            .zip(st.seeds.par_iter_mut())
             .zip(plans.par_chunks(GROUP_BLOCKS))
             .zip(st.contexts.par_chunks(GROUP_BLOCKS))
             .enumerate()
             .for_each_init(
                 || Vec::with_capacity(compensate::CARRY_LOOKBACK + 1),
-                |last: &mut Vec<(ToolPredictor, Plan)>, (g, ((rs, ps), cs))| {
-                    // The run starts from the last move before it, as if it
-                    // had gone through the blocks before.
-                    let start = g * GROUP_BLOCKS;
-                    last.clear();
-                    last.extend(
-                        moves_back(plans.get(..start).unwrap_or(&[]), contexts, before)
-                            .map(|(p, c)| (pred.with_context(c), p)),
-                    );
-                    last.reverse();
-                    // Fewer moves than the lookback: all since the start.
-                    let from_start = last.len() <= compensate::CARRY_LOOKBACK;
-                    let mut carry = compensate::carry_before(last, &self.settings, from_start);
-                    for ((r, p), c) in rs.iter_mut().zip(ps).zip(cs) {
-                        let segments = match r.take() {
-                            Some(Ok(old)) => old.segments,
-                            _ => Vec::new(),
-                        };
-                        *r = Some(compensate::block_reusing(
-                            &pred.with_context(*c),
-                            p,
-                            &self.settings,
-                            &mut carry,
-                            segments,
-                        ));
+                |last: &mut Vec<(ToolPredictor, Plan)>, (g, ((((rs, ks), sd), ps), cs))| {
+                    let mut carry = if g == 0 {
+                        seed
+                    } else {
+                        // An estimate of where the run starts: the last
+                        // moves before it, as if it had gone through them.
+                        let start = g * GROUP_BLOCKS;
+                        last.clear();
+                        last.extend(
+                            moves_back(plans.get(..start).unwrap_or(&[]), contexts, before)
+                                .map(|(p, c)| (pred.with_context(c), p)),
+                        );
+                        last.reverse();
+                        // Fewer moves than the lookback: all since the start.
+                        let from_start = (last.len() <= compensate::CARRY_LOOKBACK).then_some(home);
+                        compensate::carry_before(last, &self.settings, from_start)
+                    };
+                    *sd = carry;
+                    for (((r, k), p), c) in rs.iter_mut().zip(ks.iter_mut()).zip(ps).zip(cs) {
+                        self.solve_block(pred, p, c, &mut carry, r);
+                        *k = carry;
                     }
                 },
             );
+        self.settle(pred, st);
+    }
+
+    /// Compensates one block into `r` (reusing its split-point storage).
+    fn solve_block(
+        &self,
+        pred: &ToolPredictor,
+        plan: &Plan,
+        ctx: &BlockContext,
+        carry: &mut Option<compensate::Carry>,
+        r: &mut Solved,
+    ) {
+        let storage = match r.take() {
+            Some(Ok(old)) => (old.segments, old.takeup_at),
+            _ => (Vec::new(), Vec::new()),
+        };
+        *r = Some(compensate::block_recycling(
+            &pred.with_context(*ctx),
+            plan,
+            &self.settings,
+            carry,
+            storage,
+        ));
+    }
+
+    /// The in-order pass of [`Self::compensate_stage`]: solves again, from
+    /// the carry the run before really left, each run seeded with another
+    /// estimate, until a block leaves the carry it left before.
+    fn settle(&self, pred: &ToolPredictor, st: &mut Stage) {
+        let n = st.carries.len();
+        let mut i = GROUP_BLOCKS;
+        let mut dirty = false;
+        while i < n {
+            if i % GROUP_BLOCKS == 0 && !dirty {
+                dirty = st.carries[i - 1] != st.seeds[i / GROUP_BLOCKS];
+                if !dirty {
+                    i += GROUP_BLOCKS;
+                    continue;
+                }
+            }
+            let mut carry = st.carries[i - 1];
+            let old = st.carries[i];
+            self.solve_block(
+                pred,
+                &st.plans[i],
+                &st.contexts[i],
+                &mut carry,
+                &mut st.results[i],
+            );
+            st.carries[i] = carry;
+            i += 1;
+            if carry == old {
+                // The rest of this run follows from the same carry.
+                dirty = false;
+                i = i.next_multiple_of(GROUP_BLOCKS);
+            }
+        }
     }
 
     /// Runs the job over `input`. With `out`, the (compensated) program is
@@ -958,6 +1080,13 @@ impl<'m> Job<'m> {
             let mut written = Ok(());
             let mut interpreted = Ok(());
             let scanning = failure.is_some();
+            // The chunk to compensate starts where the one before (solved
+            // in the round before) left the machine.
+            solve.seed = if has_done {
+                done.last_carry()
+            } else {
+                Some(compensate::Carry::program_start(self.setup.home))
+            };
             let (solve_ref, read_ref) = (&mut solve, &mut read.chunk);
             in_scope(self.pool, |s| {
                 if has_solve && !scanning {
@@ -997,6 +1126,41 @@ impl<'m> Job<'m> {
         interpret.finish(&mut summary);
         write.finish(&mut summary);
         Ok(summary)
+    }
+
+    /// The forward pass of a program without the solver: each block's line,
+    /// plan and the block context its time line gives it (the prediction
+    /// path `report` and `compensate` share), in program order. For
+    /// checks that predict a program independently of the compensation,
+    /// such as reading a compensated program back.
+    pub fn forward<R: BufRead>(
+        &self,
+        mut input: R,
+        file: &str,
+        each: &mut dyn FnMut(usize, &Plan, &BlockContext),
+    ) -> Result<()> {
+        let mut interp = Interpreter::new(self.setup.clone(), file);
+        let mut tracker = self.predictor.as_ref().map(|p| Tracker::new(p, false));
+        let (mut text, mut block, mut plan) = (Vec::new(), Block::default(), Plan::default());
+        let mut line_no = 0;
+        loop {
+            text.clear();
+            let n = input
+                .read_until(b'\n', &mut text)
+                .map_err(|e| Error::io(file, e))?;
+            if n == 0 {
+                return Ok(());
+            }
+            line_no += 1;
+            parse_line(&text, line_no, file, &mut block)?;
+            interp.whole_units(&mut block);
+            interp.step_into(&block, &text, &mut plan)?;
+            let ctx = match tracker.as_mut() {
+                Some(t) => t.advance(&plan, interp.spindle_rpm(), line_no),
+                None => BlockContext::default(),
+            };
+            each(line_no, &plan, &ctx);
+        }
     }
 
     /// A first pass over the program for the thermal start: the mean power
