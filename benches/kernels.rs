@@ -14,8 +14,9 @@ use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 use postproc::compensate::{Settings, block_after};
 use postproc::machine::Machine;
-use postproc::machine::robot::{ConfData, Effects, IkSelect, PointMass, Robot};
+use postproc::machine::robot::{ConfData, IkSelect, PointMass, Robot};
 use postproc::pipeline::rapid::{RapidOptions, compensate_module};
+use postproc::predict::robot::Effects;
 use postproc::predict::{EffectSet, ToolPredictor};
 use postproc::program::interp::{Motion, Move, Plan, PlanKind};
 
@@ -37,7 +38,6 @@ fn robot() -> Robot {
             mass_kg: 2.0,
             com_mm: Vector3::new(0.0, 0.0, 70.0),
         }),
-        true,
     )
 }
 
@@ -136,7 +136,14 @@ fn robot_kernels(c: &mut Criterion) {
         b.iter(|| r.ik_conf(black_box(&pose), black_box(conf)))
     });
     g.bench_function("compensate per target (irb1600, all effects)", |b| {
-        b.iter(|| r.compensate(black_box(&pose), black_box(&sel), Effects::ALL))
+        b.iter(|| {
+            r.compensate(
+                &r.file_context(),
+                black_box(&pose),
+                black_box(&sel),
+                Effects::ALL,
+            )
+        })
     });
     g.finish();
     let Machine::Robot(plain) = machine("abb-irb1600") else {

@@ -16,7 +16,7 @@ pub fn irb1600() -> Robot {
     let Ok(Machine::Robot(r)) = Machine::from_yaml_str(&text, &path) else {
         panic!("abb-irb1600 is not a robot")
     };
-    r.with_tool(Isometry3::identity(), None, true)
+    r.with_tool(Isometry3::identity(), None)
 }
 
 /// The IRB 1600's nominal geometry (machines/abb-irb1600.yaml) as OPW

@@ -6,7 +6,9 @@
 
 use nalgebra::{Isometry3, Vector3};
 use postproc::machine::robot::pose::{pose_error, rotation_to_abb};
-use postproc::machine::robot::{ConfData, Effects, Model, PointMass, Robot};
+use postproc::machine::robot::{ConfData, Model, PointMass, Robot};
+use postproc::predict::MoveContext;
+use postproc::predict::robot::Effects;
 use postproc::program::rapid::{DataValue, Module, RobTarget, Target, parse_module};
 
 use crate::common::{
@@ -47,7 +49,6 @@ fn with_spindle(r: Robot) -> Robot {
             mass_kg: 2.4,
             com_mm: Vector3::new(0.0, 0.0, 85.0),
         }),
-        false,
     )
 }
 
@@ -164,7 +165,10 @@ fn conf_off_solves_nearest_and_writes_its_confdata_on_both_robots() {
                 );
             }
             let programmed = pose(robtarget(&m_in, declared));
-            let (dp, dr) = pose_error(&robot.predict(&q, Effects::ALL), &programmed);
+            let (dp, dr) = pose_error(
+                &robot.predict(&MoveContext::default(), &q, Effects::ALL),
+                &programmed,
+            );
             assert!(
                 dp.norm() < POS_TOL_MM,
                 "{name} {declared}: {} mm",

@@ -10,7 +10,9 @@ use postproc::machine::robot::ik::{
     QUADRANT_KEEP_RAD, QUADRANT_TOL_RAD, confdata_written, in_quadrant, keeps_quadrant, quadrant,
 };
 use postproc::machine::robot::pose::pose_error;
-use postproc::machine::robot::{ConfData, Effects, IkSelect, Model, PointMass, Robot, RobotError};
+use postproc::machine::robot::{ConfData, IkSelect, Model, PointMass, Robot, RobotError};
+use postproc::predict::MoveContext;
+use postproc::predict::robot::Effects;
 
 use crate::common::repo;
 
@@ -38,7 +40,6 @@ fn robots() -> [(&'static str, Robot); 2] {
                 mass_kg: 2.4,
                 com_mm: Vector3::new(0.0, 0.0, 85.0),
             }),
-            false,
         )
     };
     [
@@ -169,7 +170,12 @@ fn compensation_keeps_the_branch_and_writes_the_controllers_confdata() {
                 .find(|c| r.ik_conf(&programmed, *c).is_ok())
                 .unwrap_or_else(|| panic!("{name} y {y}: reachable"));
             let c = r
-                .compensate(&programmed, &IkSelect::Conf(conf), Effects::ALL)
+                .compensate(
+                    &MoveContext::default(),
+                    &programmed,
+                    &IkSelect::Conf(conf),
+                    Effects::ALL,
+                )
                 .unwrap_or_else(|e| panic!("{name} y {y}: {e}"));
             assert_eq!(c.conf.cfx, conf.cfx, "{name} y {y}");
             for j in 0..6 {
@@ -204,7 +210,10 @@ fn compensation_keeps_the_branch_and_writes_the_controllers_confdata() {
                     c.q_compensated
                 );
             }
-            let (dp, dr) = pose_error(&r.predict(&q, Effects::ALL), &programmed);
+            let (dp, dr) = pose_error(
+                &r.predict(&MoveContext::default(), &q, Effects::ALL),
+                &programmed,
+            );
             assert!(
                 dp.norm() < IK_POS_TOL_MM && dr.norm() < IK_ROT_TOL_RAD,
                 "{name} y {y}"

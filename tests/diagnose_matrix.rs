@@ -133,11 +133,11 @@ fn robot_cases() -> Vec<Case> {
     // Joint 6 turns the TCP about its own axis (the TCP is on it): its
     // compliance moves nothing that is measured.
     for (j, name) in names.into_iter().enumerate() {
-        let k = *r.k_nmm_per_rad();
+        let k = r.k_nm_per_rad().map(|k| k * 1000.0);
         let dc = 0.25 / (k[j] / 1000.0) * 1e6;
         let mut k2 = k;
         k2[j] = 1.0 / (1.0 / k[j] + dc * 1e-9);
-        let t = Machine::Robot(r.with_stiffness(k2));
+        let t = Machine::Robot(r.with_stiffness(k2.map(|k| k / 1000.0)));
         out.push(case(
             "robot compliance",
             name,
@@ -247,7 +247,6 @@ fn robot_cases() -> Vec<Case> {
             mass_kg: load.mass_kg + 3.0,
             com_mm: load.com_mm,
         }),
-        true,
     );
     out.push(case(
         "robot payload",

@@ -601,7 +601,7 @@ fn robot_writes_in_every_layout() {
             "{name}: {s}"
         );
         let r = robot(&std::fs::read_to_string(&out).expect("written"));
-        k3.push(r.k_nmm_per_rad()[2]);
+        k3.push(r.k_nm_per_rad()[2] * 1000.0);
     }
     for k in &k3 {
         assert!((k - k3[0]).abs() < 1e-6, "{k3:?}");

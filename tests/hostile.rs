@@ -800,7 +800,8 @@ fn mutants_through_the_binary_exit_cleanly() {
 
 #[test]
 fn a_compensation_that_flips_the_wrist_near_the_singularity_is_refused() {
-    use postproc::machine::robot::{Effects, IkSelect, JOINT_JUMP_MAX_DEG, Model, RobotError};
+    use postproc::machine::robot::{IkSelect, JOINT_JUMP_MAX_DEG, Model, RobotError};
+    use postproc::predict::robot::Effects;
     let r = robot("machines/abb-irb1600.yaml");
     let allowing = r.clone().allowing_reconfiguration(true);
     let mut refused = 0;
@@ -810,9 +811,14 @@ fn a_compensation_that_flips_the_wrist_near_the_singularity_is_refused() {
         let q = [0.0, 0.5, 0.2, 1.0, q5, -0.3];
         let programmed = r.tcp_pose(Model::Nominal, &q);
         let sel = IkSelect::Conf(r.confdata(&q));
-        let Ok(free) = allowing.compensate(&programmed, &sel, Effects::ALL) else {
+        let Ok(free) =
+            allowing.compensate(&allowing.file_context(), &programmed, &sel, Effects::ALL)
+        else {
             // No solution at all this close to the singularity.
-            assert!(r.compensate(&programmed, &sel, Effects::ALL).is_err());
+            assert!(
+                r.compensate(&r.file_context(), &programmed, &sel, Effects::ALL)
+                    .is_err()
+            );
             continue;
         };
         let jump = free
@@ -821,7 +827,7 @@ fn a_compensation_that_flips_the_wrist_near_the_singularity_is_refused() {
             .zip(&free.q_programmed)
             .map(|(a, b)| (a - b).to_degrees().abs())
             .fold(0.0, f64::max);
-        match r.compensate(&programmed, &sel, Effects::ALL) {
+        match r.compensate(&r.file_context(), &programmed, &sel, Effects::ALL) {
             Err(e @ RobotError::Reconfiguration { .. }) => {
                 refused += 1;
                 assert!(
@@ -842,8 +848,13 @@ fn a_compensation_that_flips_the_wrist_near_the_singularity_is_refused() {
     // Farther from the singularity the same kind of target is compensated.
     let q = [0.0, 0.5, 0.2, 1.0, 0.02, -0.3];
     let programmed = r.tcp_pose(Model::Nominal, &q);
-    r.compensate(&programmed, &IkSelect::Conf(r.confdata(&q)), Effects::ALL)
-        .expect("regular target");
+    r.compensate(
+        &r.file_context(),
+        &programmed,
+        &IkSelect::Conf(r.confdata(&q)),
+        Effects::ALL,
+    )
+    .expect("regular target");
 }
 
 #[test]

@@ -11,7 +11,9 @@
 use approx::assert_abs_diff_eq;
 use nalgebra::{Isometry3, Vector3};
 use postproc::machine::robot::pose::pose_error;
-use postproc::machine::robot::{Effects, Model, PointMass, Robot};
+use postproc::machine::robot::{Model, PointMass, Robot};
+use postproc::predict::MoveContext;
+use postproc::predict::robot::Effects;
 use postproc::program::rapid::{DataValue, Module, RobTarget, parse_module};
 
 use crate::common::{postproc, repo, robtarget_conf, robtarget_pose, without_header, write};
@@ -107,7 +109,7 @@ fn assert_lands(tool: &Robot, written: &RobTarget, programmed: &Isometry3<f64>, 
         dynamic: 0.0,
         ..Effects::ALL
     };
-    let (dp, dr) = pose_error(&tool.predict(&q, fx), programmed);
+    let (dp, dr) = pose_error(&tool.predict(&MoveContext::default(), &q, fx), programmed);
     assert_abs_diff_eq!(dp.norm(), 0.0, epsilon = POS_TOL_MM);
     assert_abs_diff_eq!(dr.norm(), 0.0, epsilon = ROT_TOL_RAD);
 }
@@ -193,7 +195,6 @@ fn palletising_with_a_run_time_tool() {
             mass_kg: 3.5,
             com_mm: Vector3::new(0.0, 0.0, 70.0),
         }),
-        false,
     );
     for name in ["pHome", "pPlace"] {
         let programmed = robtarget_pose(robtarget(&m_in, name, None));
@@ -246,7 +247,7 @@ fn arc_welding_with_parameter_lists_over_several_lines() {
     );
     let m_in = parse_module(WELD, "in").expect("input");
     let m_out = parse_module(&text, "out").expect("output");
-    let flange = robot().with_tool(Isometry3::identity(), None, false);
+    let flange = robot().with_tool(Isometry3::identity(), None);
     for (name, written) in [
         ("pApproach", "pApproach"),
         ("pSeamA", "pSeamA_c2"),
@@ -312,7 +313,7 @@ fn a_for_loop_over_holes_and_a_move_abs_j_home() {
     );
     let m_in = parse_module(HOLES, "in").expect("input");
     let m_out = parse_module(&text, "out").expect("output");
-    let flange = robot().with_tool(Isometry3::identity(), None, false);
+    let flange = robot().with_tool(Isometry3::identity(), None);
     for i in 0..3 {
         let programmed = robtarget_pose(robtarget(&m_in, "holes", Some(i)));
         assert_lands(
@@ -396,7 +397,7 @@ fn a_speed_of_another_module_and_one_known_at_run_time() {
     assert_eq!(code, 0, "{err}");
     assert!(!err.contains("vTargetSpeed"), "{err}");
     let m_out = parse_module(&text, "out").expect("output");
-    let flange = robot().with_tool(Isometry3::identity(), None, false);
+    let flange = robot().with_tool(Isometry3::identity(), None);
     for name in ["pA", "pB"] {
         let programmed = robtarget_pose(robtarget(&m_in, name, None));
         assert_lands(&flange, robtarget(&m_out, name, None), &programmed, name);
@@ -423,7 +424,7 @@ fn target_at(r: &Robot, q_deg: [f64; 6], cf: [i32; 3]) -> String {
 /// configuration, compensated, and lands on its programmed pose.
 #[test]
 fn targets_at_quadrant_borders_are_solved_as_programmed() {
-    let flange = robot().with_tool(Isometry3::identity(), None, false);
+    let flange = robot().with_tool(Isometry3::identity(), None);
     let joints = [
         [0.008, 10.0, 15.0, 30.0, 50.0, 20.0],
         [-0.008, 10.0, 15.0, 30.0, 50.0, 20.0],
@@ -512,7 +513,7 @@ ENDMODULE
         [800.0, 0.0, 450.0]
     );
     let m_out = parse_module(&text, "out").expect("output");
-    let flange = robot().with_tool(Isometry3::identity(), None, false);
+    let flange = robot().with_tool(Isometry3::identity(), None);
     for name in ["pAbove", "pDown"] {
         let programmed = robtarget_pose(robtarget(&m_in, name, None));
         assert_lands(&flange, robtarget(&m_out, name, None), &programmed, name);
@@ -541,6 +542,6 @@ ENDMODULE
     let m_in = parse_module(module, "in").expect("input");
     let m_out = parse_module(&text, "out").expect("output");
     let programmed = robtarget_pose(robtarget(&m_in, "pA", None));
-    let flange = robot().with_tool(Isometry3::identity(), None, false);
+    let flange = robot().with_tool(Isometry3::identity(), None);
     assert_lands(&flange, robtarget(&m_out, "pA", None), &programmed, "pA");
 }

@@ -5,8 +5,10 @@ use approx::assert_abs_diff_eq;
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 use postproc::machine::ThermalStart;
 use postproc::machine::robot::pose::pose_error;
-use postproc::machine::robot::{Effects, Model, PointMass, Robot};
+use postproc::machine::robot::{Model, PointMass, Robot};
 use postproc::pipeline::rapid::{RapidOptions, compensate_module};
+use postproc::predict::MoveContext;
+use postproc::predict::robot::Effects;
 use postproc::program::rapid::{DataValue, Module, RobTarget, Target, parse_module};
 
 use crate::common::{
@@ -48,7 +50,6 @@ fn robot_with_drill() -> Robot {
             mass_kg: 2.4,
             com_mm: Vector3::new(0.0, 0.0, 85.0),
         }),
-        false,
     )
 }
 
@@ -134,7 +135,10 @@ fn rapid_compensated_targets_land_on_programmed_poses() {
                     panic!("jointtarget")
                 };
                 let q = jt.robax.each_ref().map(|n| n.value.to_radians());
-                let (dp, dr) = pose_error(&robot.predict(&q, Effects::ALL), &goal);
+                let (dp, dr) = pose_error(
+                    &robot.predict(&MoveContext::default(), &q, Effects::ALL),
+                    &goal,
+                );
                 assert_abs_diff_eq!(dp.norm(), 0.0, epsilon = JOINT_POS_TOL_MM);
                 assert_abs_diff_eq!(dr.norm(), 0.0, epsilon = JOINT_ROT_TOL_RAD);
             }
@@ -148,7 +152,10 @@ fn rapid_compensated_targets_land_on_programmed_poses() {
                 };
                 let rt = robtarget(&m_out, n2, None);
                 let q = robot.ik_conf(&pose(rt), conf(rt)).expect("controller IK");
-                let (dp, dr) = pose_error(&robot.predict(&q, Effects::ALL), &programmed);
+                let (dp, dr) = pose_error(
+                    &robot.predict(&MoveContext::default(), &q, Effects::ALL),
+                    &programmed,
+                );
                 assert_abs_diff_eq!(dp.norm(), 0.0, epsilon = POS_TOL_MM);
                 assert_abs_diff_eq!(dr.norm(), 0.0, epsilon = ROT_TOL_RAD);
             }
@@ -182,7 +189,10 @@ fn rapid_compensated_targets_land_on_programmed_poses() {
                 let q = robot
                     .ik_conf(&(w_plate() * pose(rt)), conf(rt))
                     .expect("controller IK");
-                let (dp, dr) = pose_error(&robot.predict(&q, Effects::ALL), &programmed);
+                let (dp, dr) = pose_error(
+                    &robot.predict(&MoveContext::default(), &q, Effects::ALL),
+                    &programmed,
+                );
                 assert_abs_diff_eq!(dp.norm(), 0.0, epsilon = POS_TOL_MM);
                 assert_abs_diff_eq!(dr.norm(), 0.0, epsilon = ROT_TOL_RAD);
             }
@@ -348,7 +358,7 @@ fn drilling_sample_thrust_only_on_the_twelve_plunges_and_targets_land() {
         let rec = row.robot.expect("a robot move's row");
         match (&rec.wrench, &*mv.speed.text) {
             (Some(w), "vDrill") => {
-                assert!(!w.in_tool_frame);
+                assert!(!w.in_tool_frame());
                 assert_abs_diff_eq!(w.force_n.norm(), DRILL_THRUST_N, epsilon = 1e-9);
                 drilled += 1;
             }
@@ -374,9 +384,10 @@ fn drilling_sample_thrust_only_on_the_twelve_plunges_and_targets_land() {
     let mut checked = 0;
     for ((a, b), row) in moves_in.iter().zip(&moves_out).zip(&out.records) {
         let rec = row.robot.expect("a robot move's row");
-        let view = base
-            .with_process_wrench(rec.wrench)
-            .with_thermal_power(&rec.thermal_power_w);
+        let view = &base;
+        let ctx = MoveContext::default()
+            .with_wrench(rec.wrench)
+            .with_joint_powers(rec.thermal_power_w);
         let (programmed, wobj) = match &a.target {
             Target::Named {
                 name, index: None, ..
@@ -417,7 +428,7 @@ fn drilling_sample_thrust_only_on_the_twelve_plunges_and_targets_land() {
         let q = view
             .ik_conf(&(wobj * pose(rt)), conf(rt))
             .expect("controller IK");
-        let (dp, dr) = pose_error(&view.predict(&q, Effects::ALL), &programmed);
+        let (dp, dr) = pose_error(&view.predict(&ctx, &q, Effects::ALL), &programmed);
         assert_abs_diff_eq!(dp.norm(), 0.0, epsilon = POS_TOL_MM);
         assert_abs_diff_eq!(dr.norm(), 0.0, epsilon = ROT_TOL_RAD);
         checked += 1;
@@ -568,7 +579,7 @@ fn random_written_targets_meet_one_micrometre_and_microradian() {
     let text = std::fs::read_to_string(repo("machines/abb-irb1600.yaml")).expect("machine");
     let robot = Robot::from_yaml_str(&text, "abb-irb1600.yaml").expect("valid");
     // tool0: the flange, no load (the file's default TCP is not used).
-    let tool0 = robot.with_tool(Isometry3::identity(), None, false);
+    let tool0 = robot.with_tool(Isometry3::identity(), None);
     let lim = robot.joint_limits_rad();
     let mut seed = 0x2545_f491_4f6c_dd1d_u64;
     let mut unit = || {
@@ -617,11 +628,12 @@ fn random_written_targets_meet_one_micrometre_and_microradian() {
         };
         // No constant process force and no plunges: no load.
         assert!(rec.wrench.is_none());
-        let view = tool0.with_thermal_power(&rec.thermal_power_w);
+        let view = &tool0;
+        let ctx = MoveContext::default().with_joint_powers(rec.thermal_power_w);
         let q = view
             .ik_conf(&pose(rout), conf(rout))
             .expect("controller IK");
-        let (dp, dr) = pose_error(&view.predict(&q, Effects::ALL), &pose(rin));
+        let (dp, dr) = pose_error(&view.predict(&ctx, &q, Effects::ALL), &pose(rin));
         assert_abs_diff_eq!(dp.norm(), 0.0, epsilon = POS_TOL_MM);
         assert_abs_diff_eq!(dr.norm(), 0.0, epsilon = ROT_TOL_RAD);
         checked += 1;
@@ -671,7 +683,7 @@ fn time_line_durations_and_workpiece_force_are_hand_derived() {
     for (i, r) in robots.iter().enumerate() {
         match (i, &r.wrench) {
             (1..=3, Some(w)) => {
-                assert!(!w.in_tool_frame);
+                assert!(!w.in_tool_frame());
                 assert_abs_diff_eq!(w.force_n, Vector3::new(0.0, 100.0, 0.0), epsilon = 1e-12);
             }
             (0 | 4 | 5, None) => {}
@@ -1156,7 +1168,10 @@ fn process_motion_instructions_are_compensated_and_nothing_else_changes() {
         let q = robot
             .ik_conf(&(w_plate() * pose(p_out)), conf(p_out))
             .expect("controller IK");
-        let (dp, dr) = pose_error(&robot.predict(&q, Effects::ALL), &programmed);
+        let (dp, dr) = pose_error(
+            &robot.predict(&MoveContext::default(), &q, Effects::ALL),
+            &programmed,
+        );
         assert_abs_diff_eq!(dp.norm(), 0.0, epsilon = POS_TOL_MM);
         assert_abs_diff_eq!(dr.norm(), 0.0, epsilon = ROT_TOL_RAD);
     }
@@ -1337,7 +1352,7 @@ fn straight_line_targets_are_compensated_where_the_robot_goes() {
     )
     .expect("valid robot")
     // tool0: the flange.
-    .with_tool(Isometry3::identity(), None, false);
+    .with_tool(Isometry3::identity(), None);
     let kinematic = Effects {
         kinematic: 1.0,
         ..Effects::NONE
@@ -1364,7 +1379,10 @@ fn straight_line_targets_are_compensated_where_the_robot_goes() {
         let q = robot
             .ik_numeric(Model::Nominal, &pose(rt), &q0)
             .expect("compensated joints");
-        let (dp, dr) = pose_error(&robot.predict(&q, kinematic), &programmed);
+        let (dp, dr) = pose_error(
+            &robot.predict(&MoveContext::default(), &q, kinematic),
+            &programmed,
+        );
         assert_abs_diff_eq!(dp.norm(), 0.0, epsilon = POS_TOL_MM);
         assert_abs_diff_eq!(dr.norm(), 0.0, epsilon = ROT_TOL_RAD);
         // Compensated indeed (not the programmed value written back).
@@ -1514,7 +1532,6 @@ fn a_backup_folder_is_one_program_and_only_changed_modules_are_written() {
             UnitQuaternion::identity(),
         ),
         None,
-        false,
     );
     let wobj = Isometry3::from_parts(
         Translation3::new(400.0, -300.0, 200.0),
@@ -1540,7 +1557,10 @@ fn a_backup_folder_is_one_program_and_only_changed_modules_are_written() {
         let q = robot
             .ik_numeric(Model::Nominal, &(wobj * pose(rt)), &q0)
             .expect("compensated joints");
-        let (dp, dr) = pose_error(&robot.predict(&q, kinematic), &programmed);
+        let (dp, dr) = pose_error(
+            &robot.predict(&MoveContext::default(), &q, kinematic),
+            &programmed,
+        );
         assert_abs_diff_eq!(dp.norm(), 0.0, epsilon = POS_TOL_MM);
         assert_abs_diff_eq!(dr.norm(), 0.0, epsilon = ROT_TOL_RAD);
     }

@@ -8,7 +8,9 @@
 use approx::assert_abs_diff_eq;
 use nalgebra::Isometry3;
 use postproc::machine::robot::pose::pose_error;
-use postproc::machine::robot::{Effects, Model, Robot};
+use postproc::machine::robot::{Model, Robot};
+use postproc::predict::MoveContext;
+use postproc::predict::robot::Effects;
 use postproc::program::rapid::{DataValue, JointTarget, Module, RobTarget, parse_module};
 
 use crate::common::{
@@ -47,7 +49,7 @@ fn irb1600() -> Robot {
     let text = std::fs::read_to_string(repo("machines/abb-irb1600.yaml")).expect("machine file");
     Robot::from_yaml_str(&text, "abb-irb1600.yaml")
         .expect("valid robot")
-        .with_tool(Isometry3::identity(), None, false)
+        .with_tool(Isometry3::identity(), None)
 }
 
 /// Runs `postproc ARGS…` with the IRB 1600: exit code, standard error.
@@ -151,7 +153,10 @@ fn jointtarget<'m>(m: &'m Module, name: &str, ks: &[usize]) -> &'m JointTarget {
 fn assert_lands(robot: &Robot, out: &RobTarget, programmed: &RobTarget) {
     assert_ne!(pose(out), pose(programmed), "compensated");
     let q = robot.ik_conf(&pose(out), conf(out)).expect("reachable");
-    let (dp, dr) = pose_error(&robot.predict(&q, KINEMATIC), &pose(programmed));
+    let (dp, dr) = pose_error(
+        &robot.predict(&MoveContext::default(), &q, KINEMATIC),
+        &pose(programmed),
+    );
     assert_abs_diff_eq!(dp.norm(), 0.0, epsilon = POS_TOL_MM);
     assert_abs_diff_eq!(dr.norm(), 0.0, epsilon = ROT_TOL_RAD);
 }
@@ -162,7 +167,10 @@ fn assert_joints_land(robot: &Robot, out: &JointTarget, programmed: &JointTarget
     let q = |jt: &JointTarget| jt.robax.each_ref().map(|n| n.value.to_radians());
     assert_ne!(q(out), q(programmed), "compensated");
     let goal = robot.tcp_pose(Model::Nominal, &q(programmed));
-    let (dp, dr) = pose_error(&robot.predict(&q(out), KINEMATIC), &goal);
+    let (dp, dr) = pose_error(
+        &robot.predict(&MoveContext::default(), &q(out), KINEMATIC),
+        &goal,
+    );
     assert_abs_diff_eq!(dp.norm(), 0.0, epsilon = JOINT_POS_TOL_MM);
     assert_abs_diff_eq!(dr.norm(), 0.0, epsilon = JOINT_ROT_TOL_RAD);
 }

@@ -11,7 +11,9 @@ use std::fmt::Write as _;
 use approx::assert_abs_diff_eq;
 use nalgebra::{Isometry3, Vector3};
 use postproc::machine::robot::pose::pose_error;
-use postproc::machine::robot::{Effects, PointMass, Robot};
+use postproc::machine::robot::{PointMass, Robot};
+use postproc::predict::MoveContext;
+use postproc::predict::robot::Effects;
 
 /// The effects the modules are compensated with (`--effects
 /// kinematic,gravity`), for the forward check.
@@ -47,7 +49,6 @@ fn irb1600_with(tcp_z_mm: f64, mass_kg: f64, com_z_mm: f64) -> Robot {
             mass_kg,
             com_mm: Vector3::new(0.0, 0.0, com_z_mm),
         }),
-        false,
     )
 }
 
@@ -94,7 +95,10 @@ fn assert_moves_land(robot: &Robot, wobj: &Isometry3<f64>, m_in: &Module, m_out:
         let q = robot
             .ik_conf(&(wobj * pose(p_out)), conf(p_out))
             .unwrap_or_else(|e| panic!("line {}: {e}", mo.line));
-        let (dp, dr) = pose_error(&robot.predict(&q, KINEMATIC_GRAVITY), &programmed);
+        let (dp, dr) = pose_error(
+            &robot.predict(&MoveContext::default(), &q, KINEMATIC_GRAVITY),
+            &programmed,
+        );
         assert_abs_diff_eq!(dp.norm(), 0.0, epsilon = POS_TOL_MM);
         assert_abs_diff_eq!(dr.norm(), 0.0, epsilon = ROT_TOL_RAD);
     }
@@ -268,7 +272,10 @@ fn an_arc_welding_module_has_every_seam_target_compensated() {
         let q = robot
             .ik_conf(&(wobj * pose(&p_out)), conf(&p_out))
             .unwrap_or_else(|e| panic!("{name}: {e}"));
-        let (dp, dr) = pose_error(&robot.predict(&q, KINEMATIC_GRAVITY), &programmed);
+        let (dp, dr) = pose_error(
+            &robot.predict(&MoveContext::default(), &q, KINEMATIC_GRAVITY),
+            &programmed,
+        );
         assert_abs_diff_eq!(dp.norm(), 0.0, epsilon = POS_TOL_MM);
         assert_abs_diff_eq!(dr.norm(), 0.0, epsilon = ROT_TOL_RAD);
     }
@@ -388,7 +395,10 @@ fn assert_target_lands(
     let q = robot
         .ik_conf(&(wobj * pose(&p_out)), conf(&p_out))
         .unwrap_or_else(|e| panic!("{name}: {e}"));
-    let (dp, dr) = pose_error(&robot.predict(&q, KINEMATIC_GRAVITY), &programmed);
+    let (dp, dr) = pose_error(
+        &robot.predict(&MoveContext::default(), &q, KINEMATIC_GRAVITY),
+        &programmed,
+    );
     assert_abs_diff_eq!(dp.norm(), 0.0, epsilon = POS_TOL_MM);
     assert_abs_diff_eq!(dr.norm(), 0.0, epsilon = ROT_TOL_RAD);
 }

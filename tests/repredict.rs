@@ -104,7 +104,7 @@ fn a_compensated_hand_written_frame_attains_its_targets() {
 
 use postproc::machine::tool::MachineTool;
 use postproc::pipeline::gcode::Job;
-use postproc::predict::{BlockContext, EffectSet, ProcessSetup, ToolPredictor};
+use postproc::predict::{MoveContext, EffectSet, ProcessSetup, ToolPredictor};
 use postproc::program::interp::{Motion, Move, Plan, PlanKind, Setup};
 
 /// Sample spacing along a written piece, mm (and at least
@@ -144,7 +144,7 @@ fn shop_tools() -> Vec<(u32, f64)> {
 struct Read {
     line: usize,
     plan: Plan,
-    ctx: BlockContext,
+    ctx: MoveContext,
 }
 
 fn forward(job: &Job, text: &str) -> Vec<Read> {

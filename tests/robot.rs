@@ -7,9 +7,9 @@ use std::f64::consts::{FRAC_PI_2, PI};
 use approx::assert_abs_diff_eq;
 use nalgebra::{Isometry3, Matrix6, Point3, UnitQuaternion, Vector3, Vector6};
 use postproc::machine::Machine;
-use postproc::machine::robot::{
-    ConfData, Effects, IkSelect, Model, Robot, RobotError, pose::pose_error,
-};
+use postproc::machine::robot::{ConfData, IkSelect, Model, Robot, RobotError, pose::pose_error};
+use postproc::predict::MoveContext;
+use postproc::predict::robot::Effects;
 
 /// Position tolerance of exact geometry, mm.
 const POS_TOL_MM: f64 = 1e-9;
@@ -475,13 +475,21 @@ fn compensation_reaches_the_programmed_pose() {
         let programmed = r.tcp_pose(Model::Nominal, &q);
         let conf = r.confdata(&q);
         let c = r
-            .compensate(&programmed, &IkSelect::Conf(conf), Effects::ALL)
+            .compensate(
+                &r.file_context(),
+                &programmed,
+                &IkSelect::Conf(conf),
+                Effects::ALL,
+            )
             .unwrap_or_else(|e| panic!("{e} at {:?}", q.map(f64::to_degrees)));
         // Independent check: the controller's IK of the compensated pose,
         // then the prediction, lands on the programmed pose.
         let qc = r.ik_conf(&c.pose, c.conf).expect("reachable");
         assert_eq!(c.conf.cfx, conf.cfx);
-        let (dp, dr) = pose_error(&r.predict(&qc, Effects::ALL), &programmed);
+        let (dp, dr) = pose_error(
+            &r.predict(&r.file_context(), &qc, Effects::ALL),
+            &programmed,
+        );
         assert_abs_diff_eq!(dp.norm(), 0.0, epsilon = COMP_POS_TOL_MM);
         assert_abs_diff_eq!(dr.norm(), 0.0, epsilon = COMP_ROT_TOL_RAD);
         // The breakdown telescopes to the total, and each cause shows up.
@@ -501,7 +509,12 @@ fn compensation_with_everything_off_is_identity() {
         let q = g.joints(&r, 0.2);
         let programmed = r.tcp_pose(Model::Nominal, &q);
         let c = r
-            .compensate(&programmed, &IkSelect::Conf(r.confdata(&q)), Effects::NONE)
+            .compensate(
+                &r.file_context(),
+                &programmed,
+                &IkSelect::Conf(r.confdata(&q)),
+                Effects::NONE,
+            )
             .expect("trivial");
         assert_eq!(c.pose, programmed);
         assert_eq!(c.iterations, 0);
@@ -520,12 +533,20 @@ fn tx200_compensation_with_seed() {
         }
         let programmed = r.tcp_pose(Model::Nominal, &q);
         let c = r
-            .compensate(&programmed, &IkSelect::Near(q), Effects::ALL)
+            .compensate(
+                &r.file_context(),
+                &programmed,
+                &IkSelect::Near(q),
+                Effects::ALL,
+            )
             .expect("converges");
         let qc = r
             .ik_numeric(Model::Nominal, &c.pose, &q)
             .expect("reachable");
-        let (dp, dr) = pose_error(&r.predict(&qc, Effects::ALL), &programmed);
+        let (dp, dr) = pose_error(
+            &r.predict(&r.file_context(), &qc, Effects::ALL),
+            &programmed,
+        );
         assert_abs_diff_eq!(dp.norm(), 0.0, epsilon = COMP_POS_TOL_MM);
         assert_abs_diff_eq!(dr.norm(), 0.0, epsilon = COMP_ROT_TOL_RAD);
         done += 1;
@@ -639,8 +660,7 @@ fn paper_b_a2_range_golden() {
             assert!((149.95..=150.15).contains(&v), "a2 {v} at {p1} W, {p2} W");
         }
     }
-    // Cold (no power): the calibrated value; d4 and a3 grow too; the
-    // thermal stage of the prediction is untouched by at_joint_power.
+    // Cold (no power): the calibrated value; d4 and a3 grow too.
     assert_abs_diff_eq!(a2(0.0, 0.0, 0.0), 149.95, epsilon = THERMAL_TOL_MM);
     let hot = r.at_joint_power(&[126.0, 112.0, 38.0, 0.0, 0.0, 0.0]);
     // d4 <- J1 0.04 (ts .015), J2 0.05 (.02), J3 0.03 (.05):
@@ -651,7 +671,6 @@ fn paper_b_a2_range_golden() {
         600.26 + 0.1041471,
         epsilon = THERMAL_TOL_MM
     );
-    assert_eq!(hot.current_thermal_growth_mm(), &[[0.0; 2]; 6]);
 }
 
 #[test]
@@ -736,15 +755,14 @@ fn drilling_thrust_deflection_is_hand_derived() {
     // Δp = Δq2 · (ŷ × r) = Δq2 · (700, 0, −847.5):
     //   Δx = −700·122.4·700 / 4.3004e8   = −0.1394661 mm
     //   Δz = +700·122.4·847.5 / 4.3004e8 = +0.1688536 mm.
-    let view = r
-        .with_tool(Isometry3::translation(0.0, 0.0, 182.5), None, false)
-        .with_process_wrench(pf.drilling_wrench(4.0, &Vector3::x()));
+    let view = r.with_tool(Isometry3::translation(0.0, 0.0, 182.5), None);
+    let ctx = MoveContext::default().with_wrench(pf.drilling_wrench(4.0, &Vector3::x()));
     let only_process = Effects {
         process: 1.0,
         ..Effects::NONE
     };
     let q = [0.0; 6];
-    let d = view.predict(&q, only_process).translation.vector
+    let d = view.predict(&ctx, &q, only_process).translation.vector
         - view.tcp_pose(Model::Nominal, &q).translation.vector;
     assert_abs_diff_eq!(d.x, -0.1394661, epsilon = DEFLECTION_TOL_MM);
     assert_abs_diff_eq!(d.y, 0.0, epsilon = DEFLECTION_TOL_MM);
@@ -799,14 +817,22 @@ fn toggling_an_effect_removes_its_share_and_gains_scale_it() {
     let r = load("abb-irb1600");
     let pf = *r.process_force().expect("drilling");
     let q = [0.3, 0.4, -0.2, 0.5, 0.9, -0.4];
-    let tool = r.with_tool(Isometry3::translation(0.0, 0.0, 182.5), None, false);
+    let tool = r.with_tool(Isometry3::translation(0.0, 0.0, 182.5), None);
     let z_tool = tool.tcp_pose(Model::Nominal, &q).rotation * Vector3::z();
-    let view = tool
-        .with_process_wrench(pf.drilling_wrench(4.0, &z_tool))
-        .with_thermal_power(&[126.0, 112.0, 38.0, 0.0, 0.0, 0.0]);
+    let view = tool;
+    let ctx = MoveContext {
+        tooth_hz: pf.excitation_hz().unwrap_or(0.0),
+        ..MoveContext::default()
+    }
+    .with_wrench(pf.drilling_wrench(4.0, &z_tool))
+    .with_joint_powers([126.0, 112.0, 38.0, 0.0, 0.0, 0.0]);
     let programmed = view.tcp_pose(Model::Nominal, &q);
     let sel = IkSelect::Conf(view.confdata(&q));
-    let dev = |e: Effects| view.compensate(&programmed, &sel, e).expect("ok").deviation;
+    let dev = |e: Effects| {
+        view.compensate(&ctx, &programmed, &sel, e)
+            .expect("ok")
+            .deviation
+    };
     let all = dev(Effects::ALL);
     assert!(all.thermal.pos_mm.norm() > 0.05, "{:?}", all.thermal);
     for (name, off) in [

@@ -30,8 +30,10 @@ use std::f64::consts::PI;
 
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 use postproc::machine::robot::pose::pose_error;
-use postproc::machine::robot::{Effects, Model, PointMass, Robot};
+use postproc::machine::robot::{Model, PointMass, Robot};
 use postproc::machine::{Machine, MachineFile, Status};
+use postproc::predict::MoveContext;
+use postproc::predict::robot::Effects;
 use postproc::program::rapid::{DataValue, Module, RobTarget, Target, parse_module};
 use rs_opw_kinematics::kinematic_traits::Kinematics;
 use rs_opw_kinematics::kinematics_impl::OPWKinematics;
@@ -1072,7 +1074,6 @@ fn robotstudio_paths_compensate_onto_their_programmed_poses() {
                 mass_kg: load_kg,
                 com_mm: Vector3::from(cog),
             }),
-            false,
         );
         let wobj = Isometry3::from_parts(
             Translation3::new(cell.wobj_mm[0], cell.wobj_mm[1], cell.wobj_mm[2]),
@@ -1097,7 +1098,7 @@ fn robotstudio_paths_compensate_onto_their_programmed_poses() {
                 .ik_conf(&(wobj * pose(rt_out)), conf(rt_out))
                 .unwrap_or_else(|e| panic!("{} line {}: {e}", cell.module, mi.line));
             let goal = wobj * pose(rt_in);
-            let (dp, dr) = pose_error(&r.predict(&q, Effects::ALL), &goal);
+            let (dp, dr) = pose_error(&r.predict(&MoveContext::default(), &q, Effects::ALL), &goal);
             assert!(
                 dp.norm() < POS_TOL_MM,
                 "{} line {}: {} mm",

@@ -69,7 +69,7 @@ fn literal(r: &Robot, pose: &Isometry3<f64>, q: &[f64; 6]) -> String {
 /// behind the simple pose (along −X) to the simple pose
 /// q = (0, 0, 0, 0, 90°, 0). `directive` is a line before the moves.
 fn slot_program(r: &Robot, directive: &str) -> String {
-    let view = r.with_tool(spindle(), None, false);
+    let view = r.with_tool(spindle(), None);
     let q1 = [0.0, 0.0, 0.0, 0.0, FRAC_PI_2, 0.0];
     let p1 = view.tcp_pose(Model::Nominal, &q1);
     let p0 = Isometry3::from_parts(
@@ -133,7 +133,7 @@ fn milling_slot_force_and_deflection_are_hand_derived() {
     // centre (150 + 600, 0, 486.5 + 700) = (750, 0, 1186.5); axis 5 turns
     // the flange (65 mm) and tool (182.5 mm) to point straight down:
     // TCP P = (750, 0, 1186.5 − 247.5) = (750, 0, 939), tool z = −Z.
-    let view = r.with_tool(spindle(), None, false);
+    let view = r.with_tool(spindle(), None);
     let q1 = [0.0, 0.0, 0.0, 0.0, FRAC_PI_2, 0.0];
     let p1 = view.tcp_pose(Model::Nominal, &q1);
     assert_abs_diff_eq!(

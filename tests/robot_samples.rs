@@ -14,7 +14,9 @@
 
 use nalgebra::{Isometry3, Translation3, Vector3};
 use postproc::machine::robot::pose::pose_error;
-use postproc::machine::robot::{Effects, Model, PointMass, Robot};
+use postproc::machine::robot::{Model, PointMass, Robot};
+use postproc::predict::MoveContext;
+use postproc::predict::robot::Effects;
 use postproc::program::rapid::{DataValue, Module, RobTarget, Target, parse_module};
 
 use crate::common::{
@@ -52,7 +54,6 @@ fn with_spindle(r: Robot) -> Robot {
             mass_kg: 2.4,
             com_mm: Vector3::new(0.0, 0.0, 85.0),
         }),
-        false,
     )
 }
 
@@ -178,7 +179,10 @@ fn both_robots_compensate_every_sample_within_the_tolerance() {
                             &j_in.robax.each_ref().map(|n| n.value.to_radians()),
                         );
                         let q = jt.robax.each_ref().map(|n| n.value.to_radians());
-                        let (dp, dr) = pose_error(&robot.predict(&q, Effects::ALL), &goal);
+                        let (dp, dr) = pose_error(
+                            &robot.predict(&MoveContext::default(), &q, Effects::ALL),
+                            &goal,
+                        );
                         (dp, dr, (JOINT_POS_TOL_MM, JOINT_ROT_TOL_RAD))
                     }
                     DataValue::RobTarget(rt) => {
@@ -191,7 +195,7 @@ fn both_robots_compensate_every_sample_within_the_tolerance() {
                             .ik_conf(&(frame * pose(rt)), conf(rt))
                             .unwrap_or_else(|e| panic!("{what}: controller IK: {e}"));
                         let (dp, dr) = pose_error(
-                            &robot.predict(&q, Effects::ALL),
+                            &robot.predict(&MoveContext::default(), &q, Effects::ALL),
                             &programmed(&m_in, &mi.target),
                         );
                         (dp, dr, (POS_TOL_MM, ROT_TOL_RAD))
@@ -266,7 +270,6 @@ fn with_gripper(r: Robot) -> Robot {
             mass_kg: 2.0,
             com_mm: Vector3::new(0.0, 0.0, 60.0),
         }),
-        false,
     )
 }
 
@@ -442,7 +445,7 @@ fn bundled_tx200_compensates_the_controller_backup_within_the_tolerance() {
             .ik_conf(&(frame * pose(rt)), conf(rt))
             .unwrap_or_else(|e| panic!("line {}: controller IK: {e}", mi.line));
         let (dp, dr) = pose_error(
-            &view.predict(&q, effects),
+            &view.predict(&MoveContext::default(), &q, effects),
             &(frame * programmed(&mi.target)),
         );
         assert!(dp.norm() < POS_TOL_MM, "line {}: {} mm", mi.line, dp.norm());

@@ -45,7 +45,9 @@ use crate::machine::Machine;
 use crate::machine::robot::{DhGrowth, Model, Robot};
 use crate::machine::tool::thermal::Powers;
 use crate::machine::tool::{MachineTool, ThermalState};
-use crate::predict::{BlockContext, Effect, EffectSet, ToolPredictor};
+use crate::predict::{
+    Effect, EffectSet, MoveContext, ThermalInput, ToolPredictor, Wrench, WrenchFrame,
+};
 
 use super::observations::{
     MeasuredKind, ObsKind, Observation, Observations, Pose, RobotPose, ToolPose,
@@ -300,10 +302,10 @@ fn predict_tool(tool: &MachineTool, row: &Observation, tp: &ToolPose, sw: Switch
         (Some(t), Some(p)) => t.warm_up(&p, f64::INFINITY),
         _ => ThermalState::default(),
     };
-    let ctx = BlockContext {
-        force_n: row.force_n,
-        thermal,
-        ..BlockContext::default()
+    let ctx = MoveContext {
+        wrench: Some(Wrench::force(row.force_n, WrenchFrame::Workpiece)),
+        thermal: ThermalInput::Tool(thermal),
+        ..MoveContext::default()
     };
     let predictor = ToolPredictor::new(tool, effects).with_context(ctx);
     let (_, attained, nominal) = predictor.evaluate(&tp.axes(), &tp.dirs(), tool_length(tool, tp));

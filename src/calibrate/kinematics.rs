@@ -176,7 +176,7 @@ impl Layout {
                 ),
                 t0.rotation,
             );
-            r.with_tool(t, self.base.tool_load().copied(), true)
+            r.with_tool(t, self.base.tool_load().copied())
         } else {
             r
         }

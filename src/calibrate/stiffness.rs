@@ -222,8 +222,9 @@ fn center(a: &mut DMatrix<f64>, y: &mut DVector<f64>, start: usize, end: usize) 
     }
 }
 
+/// Joint stiffnesses, N·m/rad, of the compliances `c` (in [`C_UNIT`]).
 fn stiffness_from(c: &DVector<f64>) -> [f64; 6] {
-    std::array::from_fn(|i| 1.0 / (c[i] * C_UNIT))
+    std::array::from_fn(|i| 1.0 / (c[i] * C_UNIT) / 1000.0)
 }
 
 /// The part of the exact model the linear design misses, per row (given
@@ -595,16 +596,16 @@ fn stiffness_estimates(
             u
         )));
     }
-    let k_nmm = stiffness_from(&c);
+    let k_nm = stiffness_from(&c);
     let uc = sol.std_uncertainty().map(|u| u * dof_factor);
     let mut params = Vec::with_capacity(6);
     for i in 0..6 {
-        let k = k_nmm[i] / 1000.0;
+        let k = k_nm[i];
         let u = uc.as_ref().map(|u| u[i] / (c[i] * c[i] * C_UNIT) / 1000.0);
         params.push(Estimate {
             name: format!("k{}", i + 1),
             unit: "N·m/rad",
-            start: robot.k_nmm_per_rad()[i] / 1000.0,
+            start: robot.k_nm_per_rad()[i],
             value: k,
             u,
             fixed: false,
@@ -680,7 +681,7 @@ pub fn calibrate_stiffness(
         Some(p) => p.value,
         None => 0.0,
     });
-    let calibrated = Machine::Robot(robot.with_stiffness(written.map(|k| k * 1000.0)));
+    let calibrated = Machine::Robot(robot.with_stiffness(written));
     let fixed: Vec<usize> = (0..6).filter(|&i| withheld.get(i) == Some(&true)).collect();
     let f_rot = match f_rot {
         Some(f) if !fixed.is_empty() => Some(refit_rotation(
@@ -807,7 +808,7 @@ mod tests {
         });
         let r = r0
             .with_links(weightless)
-            .with_tool(*r0.flange_to_tool(), None, true);
+            .with_tool(*r0.flange_to_tool(), None);
         let obs_row = row(Vector3::new(120.0, -200.0, -250.0));
         let a = design_block(&r, &obs_row);
         let c0 = [1e-4; 6];
@@ -817,7 +818,7 @@ mod tests {
                 let mut c = c0;
                 c[i] += dc;
                 let k: [f64; 6] = std::array::from_fn(|j| 1.0 / (c[j] * C_UNIT));
-                let m = Machine::Robot(r.with_stiffness(k));
+                let m = Machine::Robot(r.with_stiffness(k.map(|v| v / 1000.0)));
                 model_deflection(&m, &obs_row, "t").unwrap()
             };
             let fd = (at(h) - at(-h)) / (2.0 * h);

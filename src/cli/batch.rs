@@ -512,7 +512,7 @@ fn compensate_one(
             // Move records only feed the report.
             let opts = crate::pipeline::rapid::RapidOptions {
                 records: report.is_some(),
-                ..*opts
+                ..opts.clone()
             };
             let report_file = report.map(|f| (report_path(output, f), f));
             let report_to = report_file.as_ref().map(|(p, f)| (p.as_path(), *f));
@@ -571,7 +571,7 @@ fn compensate_program(
     };
     let opts = RapidOptions {
         records: report.is_some(),
-        ..*opts
+        ..opts.clone()
     };
     let run = super::rapid::ProgramRun {
         robot,

@@ -105,7 +105,9 @@ fn parse_instrument(s: &str) -> Result<nalgebra::Isometry3<f64>> {
 
 /// `--effects` of `simulate`: the effects of the forward model.
 fn parse_switches(spec: &str) -> Result<Switches> {
-    let set = crate::predict::EffectSet::parse(spec)?;
+    let spec_value: crate::machine::effects::EffectSpec =
+        spec.parse().map_err(|e| usage(format!("--effects: {e}")))?;
+    let set = crate::predict::EffectSet::from_flags(&spec_value, &[])?;
     use crate::predict::Effect;
     if spec.split(',').any(|s| s.trim() == "dynamic") {
         return Err(usage(

@@ -88,7 +88,7 @@ pub(super) fn tool_effects(set: &EffectSet) -> Vec<EffectGain> {
 }
 
 /// The effects and gains of a robot run.
-pub(super) fn robot_effects(e: &crate::machine::robot::Effects) -> Vec<EffectGain> {
+pub(super) fn robot_effects(e: &crate::predict::robot::Effects) -> Vec<EffectGain> {
     let g = |effect, gain, reported_only| EffectGain {
         effect,
         gain,

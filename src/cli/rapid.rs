@@ -12,9 +12,10 @@ use crate::emit::header::{HeaderWriter, Provenance};
 use crate::emit::rapid::Format;
 use crate::error::{Error, Result};
 use crate::machine::ThermalStart;
-use crate::machine::robot::{Effects, Robot};
+use crate::machine::robot::Robot;
 use crate::pipeline::rapid::program::{compensate_member, left_as_written_member};
 use crate::pipeline::rapid::{RapidOptions, compensate_module, compensate_parsed, stream};
+use crate::predict::robot::Effects;
 use crate::program::charset::{Charset, Latin1Writer, file_columns};
 use crate::program::rapid::program::{is_program, load, module_files};
 
@@ -360,6 +361,7 @@ fn check_options(strict: bool) -> RapidOptions {
         records: false,
         strict,
         joint_cartesian: false,
+        force_table: None,
     }
 }
 
@@ -387,6 +389,10 @@ pub(super) fn rapid_options(
         format.position_decimals = d;
     }
     let thermal_start = effects.thermal_start;
+    let force_table = match &effects.force_table {
+        Some(path) => Some(std::sync::Arc::new(crate::process::ForceTable::load(path)?)),
+        None => None,
+    };
     Ok(RapidOptions {
         effects: Effects::from_flags(&effects.effects, &effects.gains)?,
         annotate,
@@ -395,6 +401,7 @@ pub(super) fn rapid_options(
         records: true,
         strict: false,
         joint_cartesian: false,
+        force_table,
     })
 }
 
@@ -434,8 +441,8 @@ pub(super) fn robot_with_process(robot: Robot, e: &EffectArgs) -> Result<Robot> 
         };
         robot = robot.with_process_force(pf);
     }
-    if let Some(path) = &e.force_table {
-        robot = robot.with_force_table(crate::process::ForceTable::load(path)?);
+    if e.force_table.is_some() {
+        robot = robot.with_process_force(Some(ProcessForce::table(robot.process_force())));
     }
     if e.milling_depth.is_none() && e.milling_width.is_none() {
         return Ok(robot);
@@ -952,7 +959,7 @@ pub(super) fn compensate_streamed_to(
         robot,
         &RapidOptions {
             records: report.is_some(),
-            ..*opts
+            ..opts.clone()
         },
         lines,
         body.as_mut().map(|b| b as &mut dyn Write),

@@ -14,7 +14,7 @@ use nalgebra::{SMatrix, SVector, Vector3};
 
 use crate::machine::tool::MachineTool;
 use crate::machine::{AxisVec, DirVec, TipPose};
-use crate::predict::{BlockContext, Breakdown, LipschitzBound, ToolPredictor};
+use crate::predict::{Breakdown, LipschitzBound, MoveContext, ToolPredictor};
 use crate::program::interp::{Motion, Move, Plan, PlanKind, directions};
 
 pub use crate::limits::{MIN_TOLERANCE_MM, SOLVE_TOL_MM};
@@ -1030,7 +1030,7 @@ pub struct Carry {
     /// Tool length, mm.
     tool: f64,
     /// Block context it was solved with.
-    ctx: BlockContext,
+    ctx: MoveContext,
     /// Where the block left the machine: the compensated command.
     c: AxisVec,
     /// `c` is the solution of `target` (false after a positioning move that
@@ -1070,7 +1070,7 @@ impl Carry {
             target: home,
             dirs: [1; 6],
             tool: 0.0,
-            ctx: BlockContext::default(),
+            ctx: MoveContext::default(),
             c: home,
             solved: false,
             positioned: 0,
@@ -1089,7 +1089,7 @@ impl Carry {
         self.complete() && self.target == *p
     }
 
-    fn matches(&self, target: &AxisVec, dirs: &DirVec, tool: f64, ctx: &BlockContext) -> bool {
+    fn matches(&self, target: &AxisVec, dirs: &DirVec, tool: f64, ctx: &MoveContext) -> bool {
         self.complete()
             && self.solved
             && self.target == *target
@@ -1318,7 +1318,7 @@ fn cycle_hole(
     let mut at_r = mv.end;
     at_r[2] = r_level;
     // No process force at the R level: the drill is not cutting yet.
-    let free = pred.with_context(crate::predict::BlockContext {
+    let free = pred.with_context(crate::predict::MoveContext {
         force_n: Vector3::zeros(),
         ..pred.ctx
     });
@@ -2450,19 +2450,22 @@ mod tests {
             // Tables on a 5 mm pitch: the crossings are taken in order.
             testing::load(&testing::fine_tables(&text, 5.0), "afm-fine.yaml"),
         ];
-        let hot = crate::predict::BlockContext {
-            force_n: Vector3::new(1500.0, -1200.0, 900.0),
-            thermal: ThermalState {
+        let hot = MoveContext {
+            wrench: Some(crate::predict::Wrench::force(
+                Vector3::new(1500.0, -1200.0, 900.0),
+                crate::predict::WrenchFrame::Workpiece,
+            )),
+            thermal: crate::predict::ThermalInput::Tool(ThermalState {
                 growth_um: 80.0,
                 scale_ppm: [10.0, -6.0, 4.0],
-            },
-            ..crate::predict::BlockContext::default()
+            }),
+            ..MoveContext::default()
         };
         let tool = 140.0;
         for m in &machines {
             let mut split = 0;
             let mut worst = 0.0f64;
-            for ctx in [crate::predict::BlockContext::default(), hot] {
+            for ctx in [MoveContext::default(), hot] {
                 let pred = ToolPredictor::new(m, EffectSet::default()).with_context(ctx);
                 for tol in [1e-3, 3e-4] {
                     for (p0, p1, dirs, c0, c1) in random_moves(&pred, tool, 30, 999) {

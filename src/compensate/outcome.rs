@@ -9,8 +9,9 @@
 
 use crate::compensate::BlockResult;
 use crate::machine::AxisVec;
-use crate::machine::robot::{Deviation, ProcessWrench};
 use crate::machine::tool::thermal::Powers;
+use crate::predict::Wrench;
+use crate::predict::robot::Deviation;
 use crate::program::interp::Warning;
 
 /// The lines a compensated program has beyond its input's, by why they
@@ -223,7 +224,7 @@ pub struct RobotMove {
     /// Predicted deviation of the uncompensated target, by effect.
     pub deviation: Deviation,
     /// Process wrench acting during the move, if any.
-    pub wrench: Option<ProcessWrench>,
+    pub wrench: Option<Wrench>,
     /// Estimated duration of the move, s (0 when unknown).
     pub duration_s: f64,
     /// Mean motor power per joint during the move, W.

@@ -2,7 +2,7 @@
 //! ([`crate::compensate`]).
 //!
 //! Compensation searches the commanded pose `C` whose predicted attained pose
-//! ([`Robot::predict`]) equals the programmed pose `P`, by the fixed-point
+//! ([`Robot::predict`] in the move's [`MoveContext`]) equals the programmed pose `P`, by the fixed-point
 //! iteration `C ← C + (P − attained(C))` (position added, rotation vector
 //! applied on the left). It converges quickly because the deviation changes
 //! little over the size of the correction; near the wrist singularity it
@@ -12,9 +12,9 @@ use nalgebra::{Isometry3, Matrix6, Translation3, UnitQuaternion, Vector6};
 
 use crate::machine::robot::kinematics::Prepared;
 use crate::machine::robot::pose::pose_error;
-use crate::machine::robot::{
-    ConfData, Deviation, DhGrowth, Effects, IkSelect, Model, PoseDelta, Robot, RobotError,
-};
+use crate::machine::robot::{ConfData, IkSelect, Model, Robot, RobotError};
+use crate::predict::context::{MoveContext, Wrench};
+use crate::predict::robot::{Deviation, Effects, PoseDelta};
 
 /// Position tolerance of the compensation iteration, mm (0.1 nm).
 pub const COMP_POS_TOL_MM: f64 = 1e-7;
@@ -127,6 +127,7 @@ impl Robot {
         sel: &IkSelect,
         model: &Prepared,
         effects: Effects,
+        wrench: Option<&Wrench>,
         branch: &mut BranchMemo,
     ) -> Result<Matrix6<f64>, RobotError> {
         const H: [f64; 2] = [1e-4, 1e-7];
@@ -136,7 +137,7 @@ impl Robot {
             let mut d = Vector6::zeros();
             d[k] = h;
             let qk = self.controller_joints(&perturb(cmd, &d), q, sel, branch)?;
-            let (dp, dr) = pose_error(&self.predict_with(model, &qk, effects), attained);
+            let (dp, dr) = pose_error(&self.predict_with(model, &qk, effects, wrench), attained);
             for r in 0..3 {
                 m[(r, k)] = dp[r] / h;
                 m[(r + 3, k)] = dr[r] / h;
@@ -145,34 +146,22 @@ impl Robot {
         Ok(m)
     }
 
-    /// Compensates one programmed TCP pose (world frame): returns the pose to
-    /// program so that the predicted attained pose equals `programmed`
-    /// within `COMP_POS_TOL_MM` / `COMP_ROT_TOL_RAD`.
+    /// Compensates one programmed TCP pose (world frame) in the move context
+    /// `ctx`: returns the pose to program so that the predicted attained
+    /// pose equals `programmed` within `COMP_POS_TOL_MM` /
+    /// `COMP_ROT_TOL_RAD`.
     pub fn compensate(
         &self,
+        ctx: &MoveContext,
         programmed: &Isometry3<f64>,
         sel: &IkSelect,
         effects: Effects,
     ) -> Result<Compensation, RobotError> {
-        self.compensate_with_growth(programmed, sel, effects, self.current_thermal_growth_mm())
-    }
-
-    /// [`Robot::compensate`] with the thermal prediction stage using the DH
-    /// growth `growth` (mm) instead of the robot's current one: the same
-    /// result as `with_thermal_power(p).compensate(…)` for the growth of the
-    /// powers `p`, without a copy of the robot per target.
-    pub fn compensate_with_growth(
-        &self,
-        programmed: &Isometry3<f64>,
-        sel: &IkSelect,
-        effects: Effects,
-        growth: &DhGrowth,
-    ) -> Result<Compensation, RobotError> {
-        self.compensate_seeded(programmed, sel, effects, growth, &Seed::default())
+        self.compensate_seeded(ctx, programmed, sel, effects, &Seed::default())
             .map_err(|e| self.with_reaching_configurations(programmed, e))
     }
 
-    /// [`Robot::compensate_with_growth`] with what planning the move already
+    /// [`Robot::compensate`] with what planning the move already
     /// found ([`Seed`]): saves one inverse kinematics (and the nominal
     /// forward kinematics of the deviation breakdown, when given). A
     /// refusal by the numeric inverse does not list the configurations that
@@ -180,10 +169,10 @@ impl Robot {
     /// ([`Robot::with_reaching_configurations`]).
     pub(crate) fn compensate_seeded(
         &self,
+        ctx: &MoveContext,
         programmed: &Isometry3<f64>,
         sel: &IkSelect,
         effects: Effects,
-        growth: &DhGrowth,
         seed: &Seed,
     ) -> Result<Compensation, RobotError> {
         let Seed {
@@ -210,10 +199,10 @@ impl Robot {
         if let IkSelect::Conf(c) = sel {
             let seed = q_programmed.and(branch);
             if let Ok(r) = self.compensate_branch(
+                ctx,
                 programmed,
                 sel,
                 effects,
-                growth,
                 (q0, nominal_flange),
                 Some(seed),
             ) {
@@ -222,28 +211,28 @@ impl Robot {
                 }
             }
         }
-        self.compensate_branch(programmed, sel, effects, growth, (q0, nominal_flange), None)
+        self.compensate_branch(ctx, programmed, sel, effects, (q0, nominal_flange), None)
     }
 
     /// The predicted deviation of the TCP at joints `q` (a `MoveAbsJ`'s
     /// programmed joints, reported and not compensated): attained with
-    /// `effects` and `growth` against the nominal pose, split as a
-    /// compensation's ([`Deviation`]).
+    /// `effects` in the move context `ctx` against the nominal pose, split
+    /// as a compensation's ([`Deviation`]).
     pub(crate) fn predict_at_joints(
         &self,
+        ctx: &MoveContext,
         q: &[f64; 6],
         effects: Effects,
-        growth: &DhGrowth,
     ) -> Deviation {
-        let (kin, model) = self.prediction_prepared(effects, growth);
-        let st = self.stages_from(&kin, &model, q, effects, None);
+        let (kin, model) = self.prediction_prepared(effects, &self.growth_of(ctx));
+        let st = self.stages_from(&kin, &model, q, effects, ctx.wrench.as_ref(), None);
         Deviation {
             kinematic: PoseDelta::between(&st[1], &st[0]),
             thermal: PoseDelta::between(&st[2], &st[1]),
             gravity: PoseDelta::between(&st[3], &st[2]),
             process: PoseDelta::between(&st[4], &st[3]),
             total: PoseDelta::between(&st[4], &st[0]),
-            vibration_mm: self.vibration_mm(q, effects),
+            vibration_mm: self.vibration_mm(ctx, q, effects),
         }
     }
 
@@ -252,10 +241,10 @@ impl Robot {
     /// else the branch of its first solution.
     fn compensate_branch(
         &self,
+        ctx: &MoveContext,
         programmed: &Isometry3<f64>,
         sel: &IkSelect,
         effects: Effects,
-        growth: &DhGrowth,
         (q0, nominal_flange): ([f64; 6], Option<Isometry3<f64>>),
         fixed_branch: Option<Option<usize>>,
     ) -> Result<Compensation, RobotError> {
@@ -263,15 +252,16 @@ impl Robot {
             fixed: fixed_branch.is_some(),
             k: fixed_branch.flatten(),
         };
-        let (kin, model) = self.prediction_prepared(effects, growth);
-        let st = self.stages_from(&kin, &model, &q0, effects, nominal_flange);
+        let wrench = ctx.wrench.as_ref();
+        let (kin, model) = self.prediction_prepared(effects, &self.growth_of(ctx));
+        let st = self.stages_from(&kin, &model, &q0, effects, wrench, nominal_flange);
         let deviation = Deviation {
             kinematic: PoseDelta::between(&st[1], &st[0]),
             thermal: PoseDelta::between(&st[2], &st[1]),
             gravity: PoseDelta::between(&st[3], &st[2]),
             process: PoseDelta::between(&st[4], &st[3]),
             total: PoseDelta::between(&st[4], programmed),
-            vibration_mm: self.vibration_mm(&q0, effects),
+            vibration_mm: self.vibration_mm(ctx, &q0, effects),
         };
         let mut cmd = *programmed;
         let mut q = q0;
@@ -319,6 +309,7 @@ impl Robot {
                     sel,
                     &model,
                     effects,
+                    wrench,
                     &mut branch,
                 )?;
                 m.lu().solve(&e).unwrap_or(e)
@@ -327,7 +318,7 @@ impl Robot {
             };
             cmd = perturb(&cmd, &step);
             q = self.controller_joints(&cmd, &q, sel, &mut branch)?;
-            attained = self.predict_with(&model, &q, effects);
+            attained = self.predict_with(&model, &q, effects, wrench);
         }
         Err(RobotError::NoConvergence {
             what: "target compensation",
@@ -345,15 +336,12 @@ mod tests {
     use approx::assert_abs_diff_eq;
     use nalgebra::Vector3;
 
-    /// Both paths run the same arithmetic: equal to the last bit.
-    const SAME: f64 = 0.0;
-
     /// A seed with the nominal flange taken from the planning's frames
     /// gives the compensation computed without it, bit for bit.
     #[test]
     fn nominal_flange_seed_equals_the_unseeded_compensation() {
         let r = crate::machine::robot::test_irb1600();
-        let growth = r.thermal_growth_mm(&[30.0, 90.0, 40.0, 0.0, 0.0, 0.0]);
+        let ctx = MoveContext::default().with_joint_powers([30.0, 90.0, 40.0, 0.0, 0.0, 0.0]);
         let mut checked = 0;
         for (x, y, z) in [
             (650.0, 50.0, 300.0),
@@ -373,7 +361,7 @@ mod tests {
                     continue;
                 };
                 let sel = IkSelect::Conf(conf);
-                let (_, flange) = r.nominal_load_torques_and_flange(&q);
+                let (_, flange) = r.nominal_load_torques_and_flange(&q, None);
                 let plain = Seed {
                     q: Some(q),
                     branch: Some(branch),
@@ -384,8 +372,8 @@ mod tests {
                     nominal_flange: Some(flange),
                     ..plain
                 };
-                let a = r.compensate_seeded(&pose, &sel, Effects::ALL, &growth, &plain);
-                let b = r.compensate_seeded(&pose, &sel, Effects::ALL, &growth, &seeded);
+                let a = r.compensate_seeded(&ctx, &pose, &sel, Effects::ALL, &plain);
+                let b = r.compensate_seeded(&ctx, &pose, &sel, Effects::ALL, &seeded);
                 assert_eq!(a, b);
                 checked += 1;
             }
@@ -393,14 +381,16 @@ mod tests {
         assert!(checked >= 3);
     }
 
+    /// The thermal stage at the joint powers of the move context moves the
+    /// arm as the same robot with its actual DH lengths grown for those
+    /// powers ([`Robot::at_joint_power`]) and the thermal stage off.
     #[test]
-    fn growth_override_equals_a_robot_at_that_power() {
+    fn joint_powers_of_the_context_equal_a_robot_at_that_power() {
         let r = crate::machine::robot::test_irb1600();
         // Warm joints 2 and 3 (W): the thermal section grows row 2's a.
         let p = [0.0, 150.0, 80.0, 0.0, 0.0, 0.0];
-        let warm = r.with_thermal_power(&p);
-        let growth = r.thermal_growth_mm(&p);
-        assert!(growth.iter().flatten().any(|g| *g != 0.0));
+        let warm = MoveContext::default().with_joint_powers(p);
+        assert!(r.growth_of(&warm).iter().flatten().any(|g| *g != 0.0));
         let pose = Isometry3::from_parts(
             Translation3::new(750.0, 150.0, 400.0),
             UnitQuaternion::from_axis_angle(&Vector3::y_axis(), std::f64::consts::PI),
@@ -411,22 +401,30 @@ mod tests {
             cf6: 0,
             cfx: 0,
         });
-        let a = warm
-            .compensate(&pose, &sel, Effects::ALL)
+        let a = r
+            .compensate(&warm, &pose, &sel, Effects::ALL)
             .expect("reachable");
+        let no_thermal = Effects {
+            thermal: 0.0,
+            ..Effects::ALL
+        };
         let b = r
-            .compensate_with_growth(&pose, &sel, Effects::ALL, &growth)
+            .at_joint_power(&p)
+            .compensate(&MoveContext::default(), &pose, &sel, no_thermal)
             .expect("reachable");
+        // The same lengths, prepared in two ways: rounding only.
+        const PREPARED_MM: f64 = 1e-9;
         assert_abs_diff_eq!(
             a.pose.translation.vector,
             b.pose.translation.vector,
-            epsilon = SAME
+            epsilon = PREPARED_MM
         );
         assert_abs_diff_eq!(
-            a.deviation.thermal.pos_mm,
-            b.deviation.thermal.pos_mm,
-            epsilon = SAME
+            a.deviation.total.pos_mm,
+            b.deviation.total.pos_mm,
+            epsilon = PREPARED_MM
         );
-        assert!(a.deviation.thermal.pos_mm.norm() > 0.0);
+        assert!(a.deviation.thermal.pos_mm.norm() > 1e-4);
+        assert_eq!(b.deviation.thermal.pos_mm, Vector3::zeros());
     }
 }

@@ -1131,7 +1131,7 @@ mod tests {
             let tcp = r.flange_to_tool().translation.vector;
             let tau = r.gravity_torques(Model::Actual, &q)
                 + r.wrench_torques(Model::Actual, &q, &tcp, &forward::row_wrench(&row));
-            let k = r.k_nmm_per_rad()[j];
+            let k = r.k_nm_per_rad()[j] * 1000.0;
             let mut t = Vector6::zeros();
             t[j] = k * tau[j] * 1e-9;
             let want = r.point_deflection(Model::Actual, &q, &tcp, &t);

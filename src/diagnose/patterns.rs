@@ -130,7 +130,7 @@ fn robot_patterns(machine: &Machine, rows: &[Observation], pats: &mut Vec<Cols>)
             ]
         })
         .collect();
-    let k = *r.k_nmm_per_rad();
+    let k = r.k_nm_per_rad().map(|k| k * 1000.0);
     for (i, row) in rows.iter().enumerate() {
         let Pose::Robot(rp) = &row.pose else { continue };
         let q = forward::joints_rad(rp);

@@ -430,7 +430,7 @@ mod tests {
         let Machine::Robot(r) = Machine::from_yaml_str(&w.text, "w").unwrap() else {
             panic!("robot")
         };
-        assert_abs_diff_eq!(r.k_nmm_per_rad()[2] / 1000.0, 123529.721, epsilon = K_TOL);
+        assert_abs_diff_eq!(r.k_nm_per_rad()[2], 123529.721, epsilon = K_TOL);
         assert_abs_diff_eq!(
             r.flange_to_tool().translation.vector.x,
             0.4,

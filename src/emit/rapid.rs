@@ -17,7 +17,8 @@ use std::ops::Range;
 use nalgebra::Isometry3;
 
 use crate::error::{Error, Located, Result};
-use crate::machine::robot::{ConfData, Deviation};
+use crate::machine::robot::ConfData;
+use crate::predict::robot::Deviation;
 use crate::program::rapid::resolve::line_col;
 use crate::program::rapid::{Decl, JointTarget, RobTarget};
 
@@ -792,7 +793,7 @@ pub const MAX_IDENT_CHARS: usize = 32;
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::machine::robot::PoseDelta;
+    use crate::predict::robot::PoseDelta;
     use crate::program::rapid::Target;
     use crate::program::rapid::resolve::conf_of;
     use nalgebra::Vector3;

@@ -24,7 +24,7 @@ use crate::machine::ThermalStart;
 use crate::machine::tool::thermal::Powers;
 use crate::machine::tool::{MachineTool, Modal, Thermal, ThermalState};
 use crate::pipeline::resonance::ResonanceWatch;
-use crate::predict::{BlockContext, Effect, ToolPredictor};
+use crate::predict::{Effect, MoveContext, ThermalInput, ToolPredictor, Wrench, WrenchFrame};
 use crate::process::modal::harmonic_amplitude;
 use crate::process::{CutState, ForceModel, MillingCache};
 use crate::program::gcode::{Block, parse_line};
@@ -56,7 +56,7 @@ pub struct Job<'m> {
 
 /// The in-order pass of the process effects: puts the program on a time
 /// line, predicts the process force, integrates the thermal state and the
-/// vibration amplitude, and hands each block its [`BlockContext`].
+/// vibration amplitude, and hands each block its [`MoveContext`].
 struct Tracker<'a> {
     machine: &'a MachineTool,
     force: Option<&'a ForceModel>,
@@ -155,19 +155,19 @@ impl<'a> Tracker<'a> {
         self.energy_j.map(|e| e / self.time_s)
     }
 
-    fn context(&self) -> BlockContext {
-        BlockContext {
+    fn context(&self) -> MoveContext {
+        MoveContext {
             time_s: self.time_s,
-            thermal: self.state,
+            thermal: ThermalInput::Tool(self.state),
             spindle_rpm: self.rpm,
-            ..BlockContext::default()
+            ..MoveContext::default()
         }
     }
 
     /// Advances over one block and returns its context.
-    fn advance(&mut self, plan: &Plan, spindle_rpm: f64, line: usize) -> BlockContext {
+    fn advance(&mut self, plan: &Plan, spindle_rpm: f64, line: usize) -> MoveContext {
         if !self.active {
-            return BlockContext::default();
+            return MoveContext::default();
         }
         self.rpm = spindle_rpm;
         let Some(mv) = plan.mv else {
@@ -279,8 +279,8 @@ impl<'a> Tracker<'a> {
         if plan.dwell_s > 0.0 {
             self.phase(plan.dwell_s, &Vector3::zeros(), 0.0, &Vector3::zeros());
         }
-        BlockContext {
-            force_n: ctx_force,
+        MoveContext {
+            wrench: Some(Wrench::force(ctx_force, WrenchFrame::Workpiece)),
             tooth_hz,
             vibration_mm: vibration,
             ..self.context()
@@ -353,9 +353,9 @@ type Solved = Option<std::result::Result<BlockResult, Failure>>;
 /// [`compensate::carry_before`] looks at.
 fn moves_back<'a>(
     plans: &'a [Plan],
-    contexts: &'a [BlockContext],
-    before: &'a [(Plan, BlockContext)],
-) -> impl Iterator<Item = (Plan, BlockContext)> + 'a {
+    contexts: &'a [MoveContext],
+    before: &'a [(Plan, MoveContext)],
+) -> impl Iterator<Item = (Plan, MoveContext)> + 'a {
     plans
         .iter()
         .zip(contexts)
@@ -374,13 +374,13 @@ struct Stage {
     /// chunks so that they are reused).
     plans: Vec<Plan>,
     /// The block context of each line (with process effects).
-    contexts: Vec<BlockContext>,
+    contexts: Vec<MoveContext>,
     /// The compensation of each line.
     results: Vec<Solved>,
     /// The last lines with a move before the chunk (plan and block context,
     /// in order; at most [`compensate::CARRY_LOOKBACK`] + 1): where the
     /// chunk's runs of blocks estimate their start from.
-    before: Vec<(Plan, BlockContext)>,
+    before: Vec<(Plan, MoveContext)>,
     /// Where the chunk before left the machine (its last carry): where
     /// the chunk's first block starts from.
     seed: Option<compensate::Carry>,
@@ -538,7 +538,7 @@ struct InterpretStage<'j, 'm> {
     extra_warnings: Vec<Warning>,
     tracker: Option<Tracker<'m>>,
     /// The last lines with a move so far (plan and context, in order).
-    last_moves: Vec<(Plan, BlockContext)>,
+    last_moves: Vec<(Plan, MoveContext)>,
     /// The first position beyond the travel (`travel` runs): reported
     /// after the input errors, like a compensation failure.
     travel_failure: Option<Error>,
@@ -591,7 +591,7 @@ impl<'j, 'm> InterpretStage<'j, 'm> {
         }
         summary.lines = chunk.first_line + chunk.ranges.len();
         // The chunk's last moves, after those before it.
-        let last: Vec<(Plan, BlockContext)> =
+        let last: Vec<(Plan, MoveContext)> =
             moves_back(&st.plans[..n], &st.contexts, &self.last_moves).collect();
         self.last_moves.clear();
         self.last_moves.extend(last.into_iter().rev());
@@ -965,7 +965,7 @@ impl<'m> Job<'m> {
         &self,
         pred: &ToolPredictor,
         plan: &Plan,
-        ctx: &BlockContext,
+        ctx: &MoveContext,
         carry: &mut Option<compensate::Carry>,
         r: &mut Solved,
     ) {
@@ -1137,7 +1137,7 @@ impl<'m> Job<'m> {
         &self,
         mut input: R,
         file: &str,
-        each: &mut dyn FnMut(usize, &Plan, &BlockContext),
+        each: &mut dyn FnMut(usize, &Plan, &MoveContext),
     ) -> Result<()> {
         let mut interp = Interpreter::new(self.setup.clone(), file);
         let mut tracker = self.predictor.as_ref().map(|p| Tracker::new(p, false));
@@ -1157,7 +1157,7 @@ impl<'m> Job<'m> {
             interp.step_into(&block, &text, &mut plan)?;
             let ctx = match tracker.as_mut() {
                 Some(t) => t.advance(&plan, interp.spindle_rpm(), line_no),
-                None => BlockContext::default(),
+                None => MoveContext::default(),
             };
             each(line_no, &plan, &ctx);
         }

@@ -33,10 +33,11 @@ use crate::machine::robot::thermal::{
     Segment, TimeLineTotals, effective_power, effective_power_from,
 };
 use crate::machine::robot::{
-    ConfData, Deviation, DhGrowth, Effects, ForceFrame, ForceModel, IkSelect, Model, ProcessWrench,
-    Robot, RobotError, Thermal,
+    ConfData, ForceFrame, ForceModel, IkSelect, Model, Robot, RobotError, Thermal,
 };
 use crate::pipeline::resonance::ResonanceWatch;
+use crate::predict::robot::{Deviation, Effects};
+use crate::predict::{MoveContext, ThermalInput, Wrench, WrenchFrame};
 use crate::process::CutSettings;
 use crate::process::MillingCache;
 use crate::program::interp::Warning;
@@ -51,7 +52,7 @@ use crate::program::rapid::{DataValue, Module, Move, MoveKind, Target, column_of
 use crate::program::robot_moves::LeftAsWritten;
 
 /// Options of a RAPID compensation run.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct RapidOptions {
     /// Effects to predict and compensate.
     pub effects: Effects,
@@ -73,6 +74,9 @@ pub struct RapidOptions {
     /// otherwise each is reported (its predicted deviation) and left as
     /// written ([`JOINT_TARGET`]).
     pub joint_cartesian: bool,
+    /// Per-move forces by line of a `table` process force
+    /// (`--force-table`, work-object frame).
+    pub force_table: Option<Arc<crate::process::ForceTable>>,
 }
 
 /// Why a `MoveAbsJ` is left as written by default: its joints are what the
@@ -91,6 +95,7 @@ impl Default for RapidOptions {
             records: true,
             strict: false,
             joint_cartesian: false,
+            force_table: None,
         }
     }
 }
@@ -139,14 +144,12 @@ impl LoadKey {
     }
 }
 
-/// Tool, work object and process wrench of a move: moves with equal keys
-/// share a robot view.
+/// Tool and work object of a move: moves with equal keys share a robot
+/// view (what else a move adds goes with its job, in its context).
 #[derive(Debug, Clone, PartialEq, Eq, Hash)]
 struct ViewKey {
     tool: Rc<str>,
     wobj: Rc<str>,
-    wrench: Option<WrenchBits>,
-    rpm: Option<u64>,
 }
 
 /// Mutable state of one run: edits, new declarations, caches.
@@ -162,8 +165,8 @@ struct Rewriter<'m> {
     taken: Vec<String>,
     /// Names new data may not take (lower case): [`Carry::reserved`].
     reserved: HashSet<String>,
-    /// Robot views (one per tool, work object and process wrench; the
-    /// thermal state of a move goes with its job) and the index of each.
+    /// Robot views (one per tool and work object; the process wrench and
+    /// the thermal state of a move go with its job) and the index of each.
     views: Arc<Vec<Robot>>,
     view_of: HashMap<ViewKey, usize>,
     /// The view used last, with its key.
@@ -194,8 +197,8 @@ struct Job {
     view: usize,
     pose: Isometry3<f64>,
     sel: IkSelect,
-    /// DH growth of the thermal stage at this move, mm.
-    growth: DhGrowth,
+    /// The move's context: process wrench, joint powers, tooth frequency.
+    ctx: MoveContext,
     /// What planning found about the programmed pose (its controller
     /// joints, their branch and nominal flange), when it did.
     seed: Seed,
@@ -227,7 +230,7 @@ const JOB_CHUNK: usize = 4096;
 fn solve_chunk(views: &[Robot], jobs: &[Job], fx: Effects) -> Vec<Solved> {
     jobs.par_iter()
         .map(|j| match views.get(j.view) {
-            Some(r) => r.compensate_seeded(&j.pose, &j.sel, fx, &j.growth, &j.seed),
+            Some(r) => r.compensate_seeded(&j.ctx, &j.pose, &j.sel, fx, &j.seed),
             None => Err(RobotError::Unreachable("no robot view".into())),
         })
         .collect()
@@ -236,7 +239,7 @@ fn solve_chunk(views: &[Robot], jobs: &[Job], fx: Effects) -> Vec<Solved> {
 /// Per-move load state applied to the robot view.
 #[derive(Debug, Clone, Copy, Default)]
 struct MoveState {
-    wrench: Option<ProcessWrench>,
+    wrench: Option<Wrench>,
     power: Option<[f64; 6]>,
     /// Spindle speed of a `! POSTPROC MILLING RPM=` directive, 1/min.
     rpm: Option<f64>,
@@ -251,28 +254,18 @@ impl Rewriter<'_> {
     fn view(&mut self, key: &LoadKey, tool: &ToolView) -> usize {
         // Consecutive moves mostly share their load: compare before hashing.
         if let Some((k, i)) = &self.last_view {
-            if k.tool == key.tool
-                && k.wobj == key.wobj
-                && k.wrench == key.wrench
-                && k.rpm == key.rpm
-            {
+            if k.tool == key.tool && k.wobj == key.wobj {
                 return *i;
             }
         }
         let vk = ViewKey {
             tool: key.tool.clone(),
             wobj: key.wobj.clone(),
-            wrench: key.wrench,
-            rpm: key.rpm,
         };
         let i = match self.view_of.get(&vk) {
             Some(&i) => i,
             None => {
-                let r = self
-                    .robot
-                    .with_tool(tool.tframe, tool.load, false)
-                    .with_process_wrench(self.state.wrench)
-                    .with_spindle_rpm(self.state.rpm);
+                let r = self.robot.with_tool(tool.tframe, tool.load);
                 // Walk 1 makes the views while no chunk is being solved
                 // (the list is not shared then, so nothing is copied);
                 // walk 2 meets only the keys walk 1 saw.
@@ -287,12 +280,23 @@ impl Rewriter<'_> {
         i
     }
 
-    /// DH growth of the thermal stage for the move being rewritten: that of
-    /// its effective joint powers, else the robot's current one.
-    fn growth(&self) -> DhGrowth {
-        match self.state.power {
-            Some(p) => self.robot.thermal_growth_mm(&p),
-            None => *self.robot.current_thermal_growth_mm(),
+    /// The context of the move being rewritten: its process wrench, its
+    /// effective joint powers (cold without), the spindle speed and tooth
+    /// frequency of the robot's process force at its speed directive.
+    fn context(&self) -> MoveContext {
+        let pf = self
+            .robot
+            .process_force()
+            .map(|p| p.with_rpm(self.state.rpm));
+        MoveContext {
+            wrench: self.state.wrench,
+            thermal: self
+                .state
+                .power
+                .map_or(ThermalInput::Cold, ThermalInput::JointPowers),
+            spindle_rpm: pf.and_then(|p| p.spindle_rpm).unwrap_or(0.0),
+            tooth_hz: pf.and_then(|p| p.excitation_hz()).unwrap_or(0.0),
+            ..MoveContext::default()
         }
     }
 
@@ -305,14 +309,14 @@ impl Rewriter<'_> {
         sel: IkSelect,
         seed: Seed,
     ) -> Option<Solved> {
-        let growth = self.growth();
+        let ctx = self.context();
         match &mut self.phase {
             Phase::Collect(jobs) => {
                 jobs.push(Job {
                     view,
                     pose,
                     sel,
-                    growth,
+                    ctx,
                     seed,
                 });
                 None
@@ -326,7 +330,7 @@ impl Rewriter<'_> {
                         .next()
                         .unwrap_or_else(|| match self.views.get(view) {
                             Some(r) => {
-                                r.compensate_seeded(&pose, &sel, self.opts.effects, &growth, &seed)
+                                r.compensate_seeded(&ctx, &pose, &sel, self.opts.effects, &seed)
                             }
                             None => Err(RobotError::Unreachable("no robot view".into())),
                         }),
@@ -549,9 +553,9 @@ impl Rewriter<'_> {
         self.last_tcp = goal.translation.vector.into();
         if !self.opts.joint_cartesian {
             return Ok(Some(r.predict_at_joints(
+                &self.context(),
                 &q,
                 self.opts.effects,
-                &self.growth(),
             )));
         }
         let Some(comp) = self.solve(view, goal, IkSelect::Near(q), Seed::default()) else {
@@ -691,9 +695,7 @@ fn plan_move<'m>(
     let tool = resolve_tool(module, src, file, mv)?;
     let wobj = resolve_wobj(module, src, file, mv)?;
     // The tool is resolved from its name alone: equal names, equal views.
-    let view = cache.get(&*mv.tool.text, || {
-        robot.with_tool(tool.tframe, tool.load, false)
-    });
+    let view = cache.get(&*mv.tool.text, || robot.with_tool(tool.tframe, tool.load));
     let (pose, q, branch) = if mv.kind == MoveKind::MoveAbsJ {
         let jt = match &mv.target {
             Target::InlineJoint(jt) => Some(jt),
@@ -761,7 +763,7 @@ fn free_configurations(
             continue;
         };
         let view = views.get(&*mv.tool.text, || {
-            robot.with_tool(plan.tool.tframe, plan.tool.load, false)
+            robot.with_tool(plan.tool.tframe, plan.tool.load)
         });
         if let Ok((q, k)) = view.ik_nearest(&plan.pose, &prev) {
             plan.free_conf = Some(view.confdata(&q));
@@ -787,7 +789,8 @@ fn move_wrench(
     need_speed: bool,
     set: &CutSettings,
     cache: &mut MillingCache,
-) -> Result<Option<ProcessWrench>> {
+    table: Option<&crate::process::ForceTable>,
+) -> Result<Option<Wrench>> {
     let (Some(pf), Some(cur)) = (robot.process_force(), plans.get(i)) else {
         return Ok(None);
     };
@@ -807,10 +810,10 @@ fn move_wrench(
         })
     };
     let to_base = robot.base().rotation.inverse();
-    let in_base = |force_n: Vector3<f64>, moment_nmm: Vector3<f64>| ProcessWrench {
+    let in_base = |force_n: Vector3<f64>, moment_nmm: Vector3<f64>| Wrench {
         force_n: to_base * force_n,
         moment_nmm: to_base * moment_nmm,
-        in_tool_frame: false,
+        frame: WrenchFrame::Base,
     };
     let speed = |what: &str| -> Result<Option<f64>> {
         match cur.v_tcp {
@@ -837,17 +840,21 @@ fn move_wrench(
                 return Ok(None);
             }
             Ok(Some(match frame {
-                ForceFrame::Tool | ForceFrame::Base => ProcessWrench {
+                ForceFrame::Tool | ForceFrame::Base => Wrench {
                     force_n,
                     moment_nmm,
-                    in_tool_frame: frame == ForceFrame::Tool,
+                    frame: if frame == ForceFrame::Tool {
+                        WrenchFrame::Tool
+                    } else {
+                        WrenchFrame::Base
+                    },
                 },
                 ForceFrame::Workpiece => {
                     let r = robot.base().rotation.inverse() * cur.wobj.rotation;
-                    ProcessWrench {
+                    Wrench {
                         force_n: r * force_n,
                         moment_nmm: r * moment_nmm,
-                        in_tool_frame: false,
+                        frame: WrenchFrame::Base,
                     }
                 }
                 ForceFrame::Feed => {
@@ -893,8 +900,7 @@ fn move_wrench(
             }
             Ok(speed("drilling thrust")?.and_then(|v| pf.drilling_wrench(v, &(to_base * z))))
         }
-        ForceModel::Table => Ok(robot
-            .force_table()
+        ForceModel::Table => Ok(table
             .and_then(|t| t.get(mv.line))
             .map(|f| in_base(cur.wobj.rotation * f, Vector3::zeros()))),
     }
@@ -937,11 +943,11 @@ fn move_duration(robot: &Robot, plans: &[Planned], i: usize, mv: &Move) -> Optio
 #[allow(clippy::too_many_arguments)]
 fn move_power<'m>(
     robot: &Robot,
-    cache: &mut ViewCache<(&'m str, Option<WrenchBits>)>,
+    cache: &mut ViewCache<&'m str>,
     last: &mut EndTorques<'m>,
     plans: &[Planned],
     i: usize,
-    wrench: Option<ProcessWrench>,
+    wrench: Option<Wrench>,
     tool: &'m str,
     duration_s: f64,
     tau_b: nalgebra::Vector6<f64>,
@@ -964,7 +970,7 @@ fn move_power<'m>(
     let qa_bits = qa.map(f64::to_bits);
     let tau_a = match last {
         Some(((k, b), q, t)) if k == tool && *b == bits && *q == qa_bits => *t,
-        _ => load_view(robot, cache, cur, wrench, tool).nominal_load_torques(&qa),
+        _ => load_view(robot, cache, cur, tool).nominal_load_torques(&qa, wrench.as_ref()),
     };
     *last = Some((
         (std::borrow::Cow::Borrowed(tool), bits),
@@ -975,20 +981,15 @@ fn move_power<'m>(
     std::array::from_fn(|j| (t[j] * (qb[j] - qa[j]) / duration_s).abs())
 }
 
-/// The robot view of move `cur` for the power: its tool and process wrench
-/// (the tool is resolved from its name alone: equal names, equal views).
+/// The robot view of move `cur` for the power: its tool (resolved from its
+/// name alone: equal names, equal views).
 fn load_view<'c, 'm>(
     robot: &Robot,
-    cache: &'c mut ViewCache<(&'m str, Option<WrenchBits>)>,
+    cache: &'c mut ViewCache<&'m str>,
     cur: &Planned,
-    wrench: Option<ProcessWrench>,
     tool: &'m str,
 ) -> &'c Robot {
-    cache.get((tool, wrench.as_ref().map(wrench_bits)), || {
-        robot
-            .with_tool(cur.tool.tframe, cur.tool.load, false)
-            .with_process_wrench(wrench)
-    })
+    cache.get(tool, || robot.with_tool(cur.tool.tframe, cur.tool.load))
 }
 
 /// The nominal load torques and flange at the end of move `i` (its
@@ -997,10 +998,10 @@ fn load_view<'c, 'm>(
 /// stage of the move's deviation breakdown (the seed of its compensation).
 fn end_load<'m>(
     robot: &Robot,
-    cache: &mut ViewCache<(&'m str, Option<WrenchBits>)>,
+    cache: &mut ViewCache<&'m str>,
     plans: &[Planned],
     i: usize,
-    wrench: Option<ProcessWrench>,
+    wrench: Option<Wrench>,
     tool: &'m str,
     duration_s: f64,
 ) -> Option<EndLoad> {
@@ -1010,7 +1011,7 @@ fn end_load<'m>(
     if duration_s <= 0.0 {
         return None;
     }
-    Some(load_view(robot, cache, cur, wrench, tool).nominal_load_torques_and_flange(&qb))
+    Some(load_view(robot, cache, cur, tool).nominal_load_torques_and_flange(&qb, wrench.as_ref()))
 }
 
 /// Nominal load torques and flange at a move's end ([`end_load`]).
@@ -1027,7 +1028,7 @@ type EndTorques<'m> = Option<(
 /// A process wrench as bit patterns (a hashable key).
 type WrenchBits = ([u64; 6], bool);
 
-fn wrench_bits(w: &ProcessWrench) -> WrenchBits {
+fn wrench_bits(w: &Wrench) -> WrenchBits {
     (
         [
             w.force_n.x,
@@ -1038,7 +1039,7 @@ fn wrench_bits(w: &ProcessWrench) -> WrenchBits {
             w.moment_nmm.z,
         ]
         .map(f64::to_bits),
-        w.in_tool_frame,
+        w.in_tool_frame(),
     )
 }
 
@@ -1747,7 +1748,7 @@ struct TimeLine<'r> {
     thermal: Option<&'r Thermal>,
     /// The program's `! POSTPROC MILLING` settings.
     directives: Directives,
-    wrenches: Vec<Option<ProcessWrench>>,
+    wrenches: Vec<Option<Wrench>>,
     segments: Vec<Segment>,
     /// Nominal flange at each move's end (only for a compensation, where
     /// the deviation breakdown uses it).
@@ -1798,6 +1799,7 @@ impl<'r> TimeLine<'r> {
                 fx.process != 0.0 || thermal.is_some(),
                 &directives.at(mv.line),
                 &mut cache,
+                opts.force_table.as_deref(),
             )?);
         }
         let mut durations = Vec::with_capacity(moves.len());
@@ -1997,7 +1999,7 @@ impl<'m> Rewriter<'m> {
             src: text.src,
             file: text.file,
             robot,
-            opts: *opts,
+            opts: opts.clone(),
             edits: EditList::new(),
             inserts: std::mem::take(&mut carry.inserts),
             taken: std::mem::take(&mut carry.taken),
@@ -2467,7 +2469,7 @@ mod tests {
         let with = RapidOptions::for_robot(&robot);
         let without = RapidOptions {
             records: false,
-            ..with
+            ..with.clone()
         };
         let a = compensate_module(src, "milling.mod", &robot, &with).expect("compensates");
         let b = compensate_module(src, "milling.mod", &robot, &without).expect("compensates");

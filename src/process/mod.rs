@@ -28,6 +28,7 @@ mod force_spec;
 pub mod limits;
 pub mod modal;
 mod table;
+mod wrench;
 
 /// Cutting settings a program sets from a position on, by a
 /// `POSTPROC MILLING` comment in its text; `None` keeps the machine
@@ -44,6 +45,7 @@ pub struct CutSettings {
 
 pub use force_spec::{ForceSpec, MAX_FORCE_N};
 pub use table::ForceTable;
+pub use wrench::{Wrench, WrenchFrame};
 
 use std::f64::consts::PI;
 

@@ -16,10 +16,12 @@ impl Robot {
         r
     }
 
-    /// The same robot with other joint stiffnesses, N·mm/rad.
-    pub fn with_stiffness(&self, k_nmm_per_rad: [f64; 6]) -> Robot {
+    /// The same robot with other joint stiffnesses, N·m/rad (the unit of
+    /// the file's `k_nm_per_rad`).
+    pub fn with_stiffness(&self, k_nm_per_rad: [f64; 6]) -> Robot {
         let mut r = self.clone();
-        r.d.k_nmm_per_rad = k_nmm_per_rad;
+        r.d.k_nm_per_rad = k_nm_per_rad;
+        r.d.k_nmm_per_rad = k_nm_per_rad.map(|k| k * 1000.0);
         r
     }
 

@@ -432,6 +432,40 @@ pub fn nearest_turn(q: f64, reference: f64) -> f64 {
     q + 2.0 * PI * ((reference - q) / (2.0 * PI)).round()
 }
 
+/// Largest change of any joint between the programmed and the compensated
+/// target, degrees. A correction of a millimetre moves the joints by
+/// hundredths of a degree; a larger change is the arm flipping its wrist
+/// near a singularity.
+pub const JOINT_JUMP_MAX_DEG: f64 = 5.0;
+
+impl super::Robot {
+    /// Refuses a compensated solution `q` that moves a joint by more than
+    /// [`JOINT_JUMP_MAX_DEG`] from the programmed `q0` or changes the
+    /// configuration, unless the robot allows it.
+    pub(crate) fn check_reconfiguration(
+        &self,
+        q0: &[f64; 6],
+        q: &[f64; 6],
+    ) -> Result<(), RobotError> {
+        if self.d.allow_reconfiguration {
+            return Ok(());
+        }
+        let deltas: [f64; 6] = std::array::from_fn(|j| (q[j] - q0[j]).to_degrees());
+        let jump = deltas.iter().any(|d| d.abs() > JOINT_JUMP_MAX_DEG);
+        let (from, to) = (self.confdata(q0), self.confdata(q));
+        if !jump && from.cfx == to.cfx {
+            return Ok(());
+        }
+        let shown: Vec<String> = deltas.iter().map(|d| format!("{d:.3}")).collect();
+        Err(RobotError::Reconfiguration {
+            deltas: format!("[{}]°", shown.join(", ")),
+            limit: JOINT_JUMP_MAX_DEG,
+            from,
+            to,
+        })
+    }
+}
+
 #[cfg(test)]
 thread_local! {
     /// Calls of [`solve_numeric`] on this thread (the cost of a search,

@@ -21,7 +21,6 @@ pub(crate) mod numeric_ik;
 mod params;
 pub mod plausible;
 pub mod pose;
-mod predict;
 pub mod process;
 mod raw;
 mod statics;
@@ -31,9 +30,9 @@ mod with_tool;
 pub use dh::{Convention, DhJoint, DhParams};
 pub use dynamics::{Modal, Mode, Resonance};
 pub use ik::ConfData;
+pub use ik::JOINT_JUMP_MAX_DEG;
 pub use kinematics::Frames;
 pub use params::{DhField, RobotParam, ThermalField};
-pub use predict::{Deviation, Effects, JOINT_JUMP_MAX_DEG, PoseDelta};
 pub use process::{ForceFrame, ForceModel, ProcessForce};
 pub use thermal::{DhGrowth, Thermal, ThermalTerm};
 
@@ -156,18 +155,6 @@ pub struct PointMass {
     pub com_mm: Vector3<f64>,
 }
 
-/// A constant process wrench acting at the TCP.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct ProcessWrench {
-    /// Force, N.
-    pub force_n: Vector3<f64>,
-    /// Moment, N·mm.
-    pub moment_nmm: Vector3<f64>,
-    /// True when force and moment are given in the tool (TCP) frame, false
-    /// for the robot base frame.
-    pub in_tool_frame: bool,
-}
-
 /// The maker's published figures of an arm (`datasheet:`): what `postproc
 /// machines` lists. No prediction uses them.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -210,14 +197,13 @@ struct RobotData {
     gravity_m_per_s2: Vector3<f64>,
     links: [PointMass; 6],
     tool_load: Option<PointMass>,
+    /// Joint stiffness, N·m/rad (`k_nm_per_rad`).
+    k_nm_per_rad: [f64; 6],
+    /// The same in N·mm/rad, the unit of the torques the deflection divides
+    /// (`k_nm_per_rad · 1000`, set with it).
     k_nmm_per_rad: [f64; 6],
-    process_wrench: Option<ProcessWrench>,
     process_force: Option<ProcessForce>,
-    /// Per-line forces of a `table` process force (set per job).
-    force_table: Option<std::sync::Arc<crate::process::ForceTable>>,
     thermal: Option<Thermal>,
-    /// DH growth of the thermal prediction stage (cold unless set).
-    thermal_growth: DhGrowth,
     modal: Option<Modal>,
     output: OutputDecimals,
     /// `datasheet`: published payload, reach and mass.
@@ -439,19 +425,17 @@ fn tool_load(l: &raw::RawLoad) -> std::result::Result<PointMass, Invalid> {
     })
 }
 
-/// `k_nm_per_rad`: six positive joint stiffnesses, as N·mm/rad.
+/// `k_nm_per_rad`: six positive joint stiffnesses, N·m/rad.
 fn joint_stiffness(raw: &[f64]) -> std::result::Result<[f64; 6], Invalid> {
     let k = six("k_nm_per_rad", raw)?;
-    let mut k_nmm_per_rad = [0.0; 6];
     for (i, v) in k.iter().enumerate() {
         let p = format!("k_nm_per_rad[{i}]");
         finite(&p, &[*v])?;
         if *v <= 0.0 {
             return Err(Invalid::new(p, format!("stiffness {v} must be positive")));
         }
-        k_nmm_per_rad[i] = v * 1000.0;
     }
-    Ok(k_nmm_per_rad)
+    Ok(k)
 }
 
 /// `datasheet`: published payload, reach and mass, each positive.
@@ -549,7 +533,7 @@ impl Robot {
         finite("gravity_m_per_s2", &raw.gravity_m_per_s2)?;
         let links = link_masses(&raw.links)?;
         let tool_load = raw.tool_load.as_ref().map(tool_load).transpose()?;
-        let k_nmm_per_rad = joint_stiffness(&raw.k_nm_per_rad)?;
+        let k_nm_per_rad = joint_stiffness(&raw.k_nm_per_rad)?;
         let process_force = match (&raw.process_wrench, &raw.process_force) {
             (Some(_), Some(_)) => {
                 return Err(Invalid::new(
@@ -561,9 +545,6 @@ impl Robot {
             (None, Some(f)) => Some(ProcessForce::from_raw(f)?),
             (None, None) => None,
         };
-        // The wrench the process stage applies by default: a constant force
-        // in the tool or base frame (the RAPID pipeline sets it per move).
-        let process_wrench = process::default_wrench(process_force.as_ref());
         let thermal = raw.thermal.as_ref().map(Thermal::from_raw).transpose()?;
         let modal = raw
             .modal
@@ -573,9 +554,6 @@ impl Robot {
         let output = output_decimals(raw.output.as_ref())?;
         let datasheet = raw.datasheet.as_ref().map(datasheet).transpose()?;
         plausible::check(&raw)?;
-        let thermal_growth = thermal
-            .as_ref()
-            .map_or([[0.0; 2]; 6], |t| t.growth_mm(&[0.0; 6]));
         let closed_form = ik::ClosedForm::new(&nominal);
         Ok(Robot {
             d: Box::new(RobotData {
@@ -593,12 +571,10 @@ impl Robot {
                 gravity_m_per_s2: Vector3::from(raw.gravity_m_per_s2),
                 links,
                 tool_load,
-                k_nmm_per_rad,
-                process_wrench,
+                k_nm_per_rad,
+                k_nmm_per_rad: k_nm_per_rad.map(|k| k * 1000.0),
                 process_force,
-                force_table: None,
                 thermal,
-                thermal_growth,
                 modal,
                 output,
                 datasheet,
@@ -663,9 +639,9 @@ impl Robot {
     pub fn tool_load(&self) -> Option<&PointMass> {
         self.d.tool_load.as_ref()
     }
-    /// Joint stiffness, N·mm/rad (the file gives N·m/rad).
-    pub fn k_nmm_per_rad(&self) -> &[f64; 6] {
-        &self.d.k_nmm_per_rad
+    /// Joint stiffness, N·m/rad (the unit of the file's `k_nm_per_rad`).
+    pub fn k_nm_per_rad(&self) -> &[f64; 6] {
+        &self.d.k_nm_per_rad
     }
     /// Decimals of rewritten targets (`output:`; defaults
     /// [`DEFAULT_POSITION_DECIMALS`], [`DEFAULT_QUATERNION_DECIMALS`]).
@@ -676,9 +652,11 @@ impl Robot {
     pub fn datasheet(&self) -> Option<&Datasheet> {
         self.d.datasheet.as_ref()
     }
-    /// Process wrench for prediction, if any.
-    pub fn process_wrench(&self) -> Option<&ProcessWrench> {
-        self.d.process_wrench.as_ref()
+    /// The process wrench the file gives for every feed move: a constant
+    /// force in the tool or base frame (`None` for the other models and
+    /// frames, which depend on the move).
+    pub fn file_wrench(&self) -> Option<crate::process::Wrench> {
+        process::default_wrench(self.process_force())
     }
 
     /// All joint frames of a model in the robot base frame (from the
@@ -1087,9 +1065,9 @@ mod tests {
         let tcp = frame(700.0, 2.9);
         let views = [
             r.clone(),
-            r.with_tool(frame(12.0, 0.3), None, false),
+            r.with_tool(frame(12.0, 0.3), None),
             r.with_base(frame(-150.0, 0.1)),
-            r.with_tool(frame(3.0, -1.2), None, true)
+            r.with_tool(frame(3.0, -1.2), None)
                 .with_base(frame(40.0, 2.0)),
         ];
         for v in &views {

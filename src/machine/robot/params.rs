@@ -115,9 +115,8 @@ impl Robot {
     ///
     /// The other values are the file's: quantities replaced with
     /// [`Robot::with_actual`], [`Robot::with_stiffness`],
-    /// [`Robot::with_base`] or [`Robot::with_links`] are not carried over,
-    /// and the thermal state is the file's cold one. A force table and the
-    /// reconfiguration setting are kept.
+    /// [`Robot::with_base`] or [`Robot::with_links`] are not carried over.
+    /// The reconfiguration setting is kept.
     pub fn with_params(&self, edits: &[(RobotParam, f64)]) -> Result<Self> {
         let mut raw = (*self.d.raw).clone();
         for &(p, v) in edits {
@@ -125,7 +124,6 @@ impl Robot {
         }
         let mut r =
             Robot::validate(raw).map_err(|inv| self.param_error(&inv.path, &inv.message))?;
-        r.d.force_table.clone_from(&self.d.force_table);
         r.d.allow_reconfiguration = self.d.allow_reconfiguration;
         Ok(r)
     }

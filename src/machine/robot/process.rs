@@ -9,7 +9,7 @@
 //! * `drilling` — the thrust of [`crate::process::Drilling`] along the tool
 //!   axis from the feed per revolution `f_rev = v_tcp · 60 / rpm`;
 //! * `table` — per-move forces from a CSV keyed by line
-//!   ([`crate::process::ForceTable`], set per job).
+//!   ([`crate::process::ForceTable`], given per run).
 //!
 //! Which moves cut or drill is decided per move with [`plunge_direction`],
 //! [`travel_direction`] and the methods of [`ProcessForce`]; depth, width
@@ -17,15 +17,13 @@
 //! `! POSTPROC MILLING …` comment line in it, which arrives here as a
 //! [`CutSettings`].
 
-use std::sync::Arc;
-
 use nalgebra::Vector3;
 
+use super::Robot;
 use super::raw::{RawForceFrame, RawForceModel, RawProcessForce, RawWrench, RawWrenchFrame};
-use super::{ProcessWrench, Robot};
 use crate::error::{Invalid, Result};
 use crate::process::CutSettings;
-use crate::process::{self, CutState, Drilling, ForceTable, Frame, Milling, MillingCache};
+use crate::process::{self, CutState, Drilling, Frame, Milling, MillingCache, Wrench, WrenchFrame};
 
 /// Default largest feed per revolution still taken as drilling, mm/rev: a
 /// faster move along the tool axis is positioning in air.
@@ -73,8 +71,8 @@ pub enum ForceModel {
         /// Largest feed per revolution taken as drilling, mm/rev.
         max_feed_mm_per_rev: f64,
     },
-    /// Per-move forces from the robot's force table
-    /// ([`Robot::force_table`], work-object frame).
+    /// Per-move forces from the run's force table
+    /// ([`crate::process::ForceTable`], work-object frame).
     Table,
 }
 
@@ -122,17 +120,9 @@ impl ProcessForce {
     /// robot base frame (the hole is drilled along the programmed axis; the
     /// arm's own small orientation error does not turn the thrust). The
     /// wrench is in the base frame.
-    pub fn drilling_wrench(
-        &self,
-        v_tcp_mm_per_s: f64,
-        z_tool: &Vector3<f64>,
-    ) -> Option<ProcessWrench> {
+    pub fn drilling_wrench(&self, v_tcp_mm_per_s: f64, z_tool: &Vector3<f64>) -> Option<Wrench> {
         self.drilling_thrust_n(v_tcp_mm_per_s)
-            .map(|f| ProcessWrench {
-                force_n: -f * z_tool,
-                moment_nmm: Vector3::zeros(),
-                in_tool_frame: false,
-            })
+            .map(|f| Wrench::force(-f * z_tool, WrenchFrame::Base))
     }
 
     /// Mean milling force on the tool (N, in the frame of `travel` and
@@ -385,16 +375,20 @@ fn drilling_model(r: &RawProcessForce, model_name: &str) -> Result<ForceModel, I
 
 /// The wrench the process stage applies without a per-move one: a constant
 /// force in the tool or base frame; none for the other models and frames.
-pub(crate) fn default_wrench(pf: Option<&ProcessForce>) -> Option<ProcessWrench> {
+pub(crate) fn default_wrench(pf: Option<&ProcessForce>) -> Option<Wrench> {
     match pf.map(|f| f.model) {
         Some(ForceModel::Constant {
             force_n,
             moment_nmm,
             frame: frame @ (ForceFrame::Tool | ForceFrame::Base),
-        }) => Some(ProcessWrench {
+        }) => Some(Wrench {
             force_n,
             moment_nmm,
-            in_tool_frame: frame == ForceFrame::Tool,
+            frame: if frame == ForceFrame::Tool {
+                WrenchFrame::Tool
+            } else {
+                WrenchFrame::Base
+            },
         }),
         _ => None,
     }
@@ -486,53 +480,26 @@ impl Robot {
         self.d.process_force.as_ref()
     }
 
-    /// The same robot with `wrench` as the wrench the process stage applies
-    /// (`None`: no process load).
-    pub fn with_process_wrench(&self, wrench: Option<ProcessWrench>) -> Robot {
-        let mut r = self.clone();
-        r.d.process_wrench = wrench;
-        r
-    }
-
     /// The same robot with another process-force model (`None`: no process
-    /// force), as the command line's `--force` sets it; drops a force table.
+    /// force), as the command line's `--force` sets it.
     pub fn with_process_force(&self, pf: Option<ProcessForce>) -> Robot {
         let mut r = self.clone();
-        r.d.process_wrench = default_wrench(pf.as_ref());
         r.d.process_force = pf;
-        r.d.force_table = None;
         r
     }
+}
 
-    /// The same robot with per-move forces from `table` (model `table`,
-    /// work-object frame), keeping the file's spindle speed and flutes for
-    /// the vibration report.
-    pub fn with_force_table(&self, table: ForceTable) -> Robot {
-        let old = self.process_force();
-        let pf = ProcessForce {
+impl ProcessForce {
+    /// The model `table` (per-move forces of a run's force table,
+    /// work-object frame), keeping the spindle speed and flutes of `old`
+    /// (the file's model) for the vibration report.
+    pub fn table(old: Option<&ProcessForce>) -> ProcessForce {
+        ProcessForce {
             model: ForceModel::Table,
             spindle_rpm: old.and_then(|p| p.spindle_rpm),
             flutes: old.map_or(DEFAULT_FLUTES, |p| p.flutes),
             axis_tolerance_rad: DEFAULT_AXIS_TOLERANCE_DEG.to_radians(),
-        };
-        let mut r = self.with_process_force(Some(pf));
-        r.d.force_table = Some(Arc::new(table));
-        r
-    }
-
-    /// The force table of a `table` process force.
-    pub fn force_table(&self) -> Option<&ForceTable> {
-        self.d.force_table.as_deref()
-    }
-
-    /// The same robot with spindle speed `rpm` (a program directive) for
-    /// the process force and its excitation frequency; unchanged for `None`
-    /// or without a process force. Takes the robot by value (no copy).
-    pub fn with_spindle_rpm(mut self, rpm: Option<f64>) -> Robot {
-        if let (Some(pf), Some(_)) = (self.d.process_force.as_mut(), rpm) {
-            *pf = pf.with_rpm(rpm);
         }
-        self
     }
 }
 
@@ -693,8 +660,7 @@ mod tests {
         // The actual arm's tool axis differs (the test means something).
         assert!((tool(Model::Actual) - z_prog).norm() > 1e-5);
         let w = pf.drilling_wrench(4.0, &z_prog).expect("drills");
-        let loaded = r.with_process_wrench(Some(w));
-        let base = loaded.process_wrench_base(Model::Actual, &q);
+        let base = r.process_wrench_base(Model::Actual, &q, Some(&w));
         let want = -122.4 * z_prog;
         for c in 0..3 {
             assert_abs_diff_eq!(base[c], want[c], epsilon = FORCE_TOL_N);

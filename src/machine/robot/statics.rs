@@ -9,6 +9,7 @@ use nalgebra::{Isometry3, Vector3, Vector6};
 use super::dh::DhParams;
 use super::kinematics::{Frames, flange, frames, jacobian};
 use super::{Model, Robot};
+use crate::process::Wrench;
 
 impl Robot {
     /// Joint torques (N·mm) of a wrench `[F (N); M (N·mm)]`, robot base
@@ -90,25 +91,39 @@ impl Robot {
     }
 
     /// Process wrench at the TCP in the robot base frame, `[F (N); M (N·mm)]`;
-    /// zero when the file has none.
-    pub fn process_wrench_base(&self, model: Model, q: &[f64; 6]) -> Vector6<f64> {
-        self.process_wrench_base_of(self.params(model), q)
+    /// zero without one.
+    pub fn process_wrench_base(
+        &self,
+        model: Model,
+        q: &[f64; 6],
+        wrench: Option<&Wrench>,
+    ) -> Vector6<f64> {
+        self.process_wrench_base_of(self.params(model), q, wrench)
     }
 
     /// [`Robot::process_wrench_base`] for any parameter set.
-    pub fn process_wrench_base_of(&self, params: &DhParams, q: &[f64; 6]) -> Vector6<f64> {
-        if self.process_wrench().is_none() {
+    pub fn process_wrench_base_of(
+        &self,
+        params: &DhParams,
+        q: &[f64; 6],
+        wrench: Option<&Wrench>,
+    ) -> Vector6<f64> {
+        if wrench.is_none() {
             return Vector6::zeros();
         }
-        self.process_wrench_base_at(&flange(params, q))
+        self.process_wrench_base_at(&flange(params, q), wrench)
     }
 
     /// [`Robot::process_wrench_base`] for a flange pose already computed.
-    fn process_wrench_base_at(&self, flange: &Isometry3<f64>) -> Vector6<f64> {
-        let Some(w) = self.process_wrench() else {
+    fn process_wrench_base_at(
+        &self,
+        flange: &Isometry3<f64>,
+        wrench: Option<&Wrench>,
+    ) -> Vector6<f64> {
+        let Some(w) = wrench else {
             return Vector6::zeros();
         };
-        let (f, m) = if w.in_tool_frame {
+        let (f, m) = if w.in_tool_frame() {
             let r = (flange * self.flange_to_tool()).rotation;
             (r * w.force_n, r * w.moment_nmm)
         } else {
@@ -121,25 +136,39 @@ impl Robot {
     }
 
     /// Joint torques (N·mm) of the process wrench acting at the TCP.
-    pub fn process_torques(&self, model: Model, q: &[f64; 6]) -> Vector6<f64> {
-        self.process_torques_of(self.params(model), q)
+    pub fn process_torques(
+        &self,
+        model: Model,
+        q: &[f64; 6],
+        wrench: Option<&Wrench>,
+    ) -> Vector6<f64> {
+        self.process_torques_of(self.params(model), q, wrench)
     }
 
     /// [`Robot::process_torques`] for any parameter set.
-    pub fn process_torques_of(&self, params: &DhParams, q: &[f64; 6]) -> Vector6<f64> {
-        self.process_torques_at(&frames(params, q))
+    pub fn process_torques_of(
+        &self,
+        params: &DhParams,
+        q: &[f64; 6],
+        wrench: Option<&Wrench>,
+    ) -> Vector6<f64> {
+        self.process_torques_at(&frames(params, q), wrench)
     }
 
     /// [`Robot::process_torques`] from joint frames already computed.
-    pub(crate) fn process_torques_at(&self, f: &Frames) -> Vector6<f64> {
-        let w = self.process_wrench_base_at(&f.flange());
+    pub(crate) fn process_torques_at(&self, f: &Frames, wrench: Option<&Wrench>) -> Vector6<f64> {
+        let w = self.process_wrench_base_at(&f.flange(), wrench);
         jacobian(f, &self.flange_to_tool().translation.vector).transpose() * w
     }
 
     /// [`Robot::gravity_torques`] plus [`Robot::process_torques`] of the
     /// nominal model, from one set of joint frames.
-    pub(crate) fn nominal_load_torques(&self, q: &[f64; 6]) -> Vector6<f64> {
-        self.nominal_load_torques_and_flange(q).0
+    pub(crate) fn nominal_load_torques(
+        &self,
+        q: &[f64; 6],
+        wrench: Option<&Wrench>,
+    ) -> Vector6<f64> {
+        self.nominal_load_torques_and_flange(q, wrench).0
     }
 
     /// [`Robot::nominal_load_torques`] and the nominal flange pose at `q`
@@ -147,13 +176,14 @@ impl Robot {
     pub(crate) fn nominal_load_torques_and_flange(
         &self,
         q: &[f64; 6],
+        wrench: Option<&Wrench>,
     ) -> (Vector6<f64>, Isometry3<f64>) {
         let f = super::kinematics::frames_prepared(self.nominal_prepared(), q, 6);
         let tau_g = self.gravity_torques_at(&f);
-        let tau = if self.process_torques_vanish(&tau_g, 1.0) {
+        let tau = if Self::process_torques_vanish(&tau_g, 1.0, wrench) {
             tau_g
         } else {
-            tau_g + self.process_torques_at(&f)
+            tau_g + self.process_torques_at(&f, wrench)
         };
         (tau, f.flange())
     }
@@ -165,8 +195,12 @@ impl Robot {
     /// frames), times a finite gain still signed zeros, and a signed zero
     /// added to a finite non-zero number or to `+0` leaves it unchanged
     /// (only `−0 + +0 = +0` would change a bit).
-    pub(crate) fn process_torques_vanish(&self, tau_g: &Vector6<f64>, gain: f64) -> bool {
-        self.process_wrench().is_none()
+    pub(crate) fn process_torques_vanish(
+        tau_g: &Vector6<f64>,
+        gain: f64,
+        wrench: Option<&Wrench>,
+    ) -> bool {
+        wrench.is_none()
             && gain.is_finite()
             && tau_g
                 .iter()
@@ -175,7 +209,7 @@ impl Robot {
 
     /// Joint deflection `Δθ = Kθ⁻¹ τ` (rad) for torques in N·mm.
     pub fn joint_deflection(&self, tau: &Vector6<f64>) -> [f64; 6] {
-        let k = self.k_nmm_per_rad();
+        let k = &self.d.k_nmm_per_rad;
         std::array::from_fn(|i| tau[i] / k[i])
     }
 
@@ -252,10 +286,7 @@ mod tests {
         let mut sequence = crate::machine::robot::test_sequence(0x2545_f491_4f6c_dd1d);
         let mut next = || sequence() * std::f64::consts::PI;
         for r in &robots {
-            for view in [
-                r.clone(),
-                r.with_tool(*r.flange_to_tool(), Some(load), false),
-            ] {
+            for view in [r.clone(), r.with_tool(*r.flange_to_tool(), Some(load))] {
                 for _ in 0..200 {
                     let q: [f64; 6] = std::array::from_fn(|_| next());
                     for model in [Model::Nominal, Model::Actual] {

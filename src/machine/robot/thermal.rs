@@ -287,20 +287,6 @@ impl Robot {
         ));
         r
     }
-
-    /// The robot whose thermal prediction stage (effect `thermal`) uses the
-    /// effective joint powers `p_w` (W). A freshly loaded robot is cold
-    /// (powers zero).
-    pub fn with_thermal_power(&self, p_w: &[f64; 6]) -> Robot {
-        let mut r = self.clone();
-        r.d.thermal_growth = self.thermal_growth_mm(p_w);
-        r
-    }
-
-    /// The DH growth used by the thermal prediction stage, mm.
-    pub fn current_thermal_growth_mm(&self) -> &DhGrowth {
-        &self.d.thermal_growth
-    }
 }
 
 #[cfg(test)]

@@ -1,7 +1,6 @@
-//! A copy of a [`Robot`] with another tool mounted: the TCP, the tool load
-//! and whether the process wrench acts are properties of the move (RAPID
-//! `tooldata` and the process phase), not of the robot file, so the RAPID
-//! pipeline builds one such view per distinct tool and phase.
+//! A copy of a [`Robot`] with another tool mounted: the TCP and the tool
+//! load are properties of the move (RAPID `tooldata`), not of the robot
+//! file, so the RAPID pipeline builds one such view per distinct tool.
 
 use nalgebra::Isometry3;
 
@@ -9,22 +8,14 @@ use super::{PointMass, Robot};
 
 impl Robot {
     /// The same robot with the TCP `flange_to_tool` (tool frame in the flange
-    /// frame), the tool load `load` (centre of gravity in the flange frame;
-    /// `None` = no load) and, when `process` is false, no process wrench.
-    /// Kinematics, stiffness, links, limits and base are unchanged.
-    pub fn with_tool(
-        &self,
-        flange_to_tool: Isometry3<f64>,
-        load: Option<PointMass>,
-        process: bool,
-    ) -> Robot {
+    /// frame) and the tool load `load` (centre of gravity in the flange
+    /// frame; `None` = no load). Kinematics, stiffness, links, limits and
+    /// base are unchanged.
+    pub fn with_tool(&self, flange_to_tool: Isometry3<f64>, load: Option<PointMass>) -> Robot {
         let mut r = self.clone();
         r.d.tool = flange_to_tool;
         r.d.tool_inv = flange_to_tool.inverse();
         r.d.tool_load = load;
-        if !process {
-            r.d.process_wrench = None;
-        }
         r
     }
 }

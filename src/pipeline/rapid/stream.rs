@@ -20,8 +20,9 @@ use super::{Carry, ModuleText, RapidOptions, compensate_window};
 use crate::compensate::outcome::{Row, Summary};
 use crate::error::{Error, Result};
 use crate::machine::ThermalStart;
+use crate::machine::robot::Robot;
 use crate::machine::robot::thermal::TimeLineTotals;
-use crate::machine::robot::{Effects, Robot};
+use crate::predict::robot::Effects;
 use crate::process::CutSettings;
 use crate::program::rapid::directives::Directives;
 use crate::program::rapid::windows::{Piece, Unsupported, Windows};
@@ -135,7 +136,7 @@ pub fn compensate_streamed<R: BufRead>(
                 dynamic: 0.0,
                 ..opts.effects
             },
-            ..*opts
+            ..opts.clone()
         };
         let reader = open().map_err(|e| Error::io(file, e))?;
         pass(
@@ -184,13 +185,14 @@ pub fn check_syntax_streamed<R: BufRead>(
     window_lines: usize,
 ) -> std::result::Result<Streamed, Fallback> {
     let opts = RapidOptions {
-        effects: crate::machine::robot::Effects::NONE,
+        effects: crate::predict::robot::Effects::NONE,
         annotate: false,
         format: crate::emit::rapid::Format::default(),
         thermal_start: ThermalStart::Cold,
         records: false,
         strict: false,
         joint_cartesian: false,
+        force_table: None,
     };
     let mut carry = Carry::default();
     let (streamed, _) = pass(
@@ -359,7 +361,7 @@ fn pass<R: BufRead>(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::machine::robot::Effects;
+    use crate::predict::robot::Effects;
     use crate::program::rapid::windows;
 
     fn robot() -> Robot {

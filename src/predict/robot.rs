@@ -9,17 +9,23 @@
 //! `q` of the actual model, not at the deflected ones (second-order effect).
 //! The inverse (the commanded pose whose prediction is the programmed one)
 //! is solved in the compensation layer (`src/compensate/robot.rs`).
+//!
+//! The robot model is immutable: the process wrench, the joint powers of
+//! the thermal stage and the tooth frequency of the vibration report come
+//! per move in a [`MoveContext`] ([`Robot::file_context`] for a move that
+//! only has the file's own).
 
 use nalgebra::{Isometry3, Vector3, Vector6};
 
-use super::dh::DhParams;
-use super::kinematics::{
+use super::context::{MoveContext, Wrench};
+use crate::machine::robot::dh::DhParams;
+use crate::machine::robot::kinematics::{
     Frames, HalfAngles, Prepared, flange_deflected, flange_prepared, frames_and_twin_flange,
     frames_with_half_angles,
 };
-use super::pose::pose_error;
-use super::thermal::{DhGrowth, grown};
-use super::{Model, Robot, RobotError};
+use crate::machine::robot::pose::pose_error;
+use crate::machine::robot::thermal::{DhGrowth, grown};
+use crate::machine::robot::{Model, Robot};
 
 /// Parameters `gain` of the way from `nominal` to `actual` (exactly one of
 /// them for a gain of 0 or 1).
@@ -43,12 +49,6 @@ fn blend(nominal: &DhParams, actual: &DhParams, gain: f64) -> DhParams {
     }
     out
 }
-
-/// Largest change of any joint between the programmed and the compensated
-/// target, degrees. A correction of a millimetre moves the joints by
-/// hundredths of a degree; a larger change is the arm flipping its wrist
-/// near a singularity.
-pub const JOINT_JUMP_MAX_DEG: f64 = 5.0;
 
 /// Which effects the prediction includes, as gains: 0 = off, 1 = as
 /// modelled; other values scale the effect linearly (kinematic: the DH
@@ -170,6 +170,24 @@ fn same_bits(a: &Vector6<f64>, b: &Vector6<f64>) -> bool {
 }
 
 impl Robot {
+    /// The context of a move with only what the robot file gives: its
+    /// constant process wrench in the tool or base frame, if any, the
+    /// tooth frequency of its spindle speed, cold joints.
+    pub fn file_context(&self) -> MoveContext {
+        let pf = self.process_force();
+        MoveContext {
+            wrench: self.file_wrench(),
+            spindle_rpm: pf.and_then(|p| p.spindle_rpm).unwrap_or(0.0),
+            tooth_hz: pf.and_then(|p| p.excitation_hz()).unwrap_or(0.0),
+            ..MoveContext::default()
+        }
+    }
+
+    /// DH growth of the thermal stage for the joint powers of `ctx`, mm.
+    pub fn growth_of(&self, ctx: &MoveContext) -> DhGrowth {
+        self.thermal_growth_mm(&ctx.joint_powers_w())
+    }
+
     /// The kinematic (calibrated, blended) and the full (kinematic plus
     /// thermal growth) parameter sets of a prediction. Resolved once per
     /// target: every iteration reuses them.
@@ -216,17 +234,22 @@ impl Robot {
     /// its gain, zero when off) from the joint frames of the full model.
     /// The process torques are not computed where they cannot change the
     /// sum ([`Robot::process_torques_vanish`]).
-    fn load_torques(&self, f: &Frames, effects: Effects) -> (Vector6<f64>, Vector6<f64>) {
+    fn load_torques(
+        &self,
+        f: &Frames,
+        effects: Effects,
+        wrench: Option<&Wrench>,
+    ) -> (Vector6<f64>, Vector6<f64>) {
         let tau_g = if effects.gravity != 0.0 {
             self.gravity_torques_at(f) * effects.gravity
         } else {
             Vector6::zeros()
         };
         let tau = if effects.process != 0.0 {
-            if self.process_torques_vanish(&tau_g, effects.process) {
+            if Robot::process_torques_vanish(&tau_g, effects.process, wrench) {
                 tau_g
             } else {
-                tau_g + self.process_torques_at(f) * effects.process
+                tau_g + self.process_torques_at(f, wrench) * effects.process
             }
         } else {
             tau_g
@@ -256,9 +279,10 @@ impl Robot {
         model: &Prepared,
         q: &[f64; 6],
         effects: Effects,
+        wrench: Option<&Wrench>,
     ) -> Isometry3<f64> {
         let (f, half) = frames_with_half_angles(model, q);
-        let (tau_g, tau) = self.load_torques(&f, effects);
+        let (tau_g, tau) = self.load_torques(&f, effects, wrench);
         if effects.process != 0.0 {
             self.deflected_tcp(model, q, &half, &tau)
         } else if effects.gravity != 0.0 {
@@ -268,26 +292,22 @@ impl Robot {
         }
     }
 
-    /// Predicted attained TCP pose (world frame) for controller joints `q`,
-    /// with the intermediate poses `[nominal, +kinematic, +thermal,
-    /// +gravity, +process]` in that order (the last is the attained pose).
-    pub fn predict_stages(&self, q: &[f64; 6], effects: Effects) -> [Isometry3<f64>; 5] {
-        let (kin, model) = self.prediction_prepared(effects, self.current_thermal_growth_mm());
-        self.stages_with(&kin, &model, q, effects)
-    }
-
-    /// [`Robot::predict_stages`] with the parameter sets resolved.
-    fn stages_with(
+    /// Predicted attained TCP pose (world frame) for controller joints `q`
+    /// in the move context `ctx`, with the intermediate poses `[nominal,
+    /// +kinematic, +thermal, +gravity, +process]` in that order (the last
+    /// is the attained pose).
+    pub fn predict_stages(
         &self,
-        kin: &Prepared,
-        model: &Prepared,
+        ctx: &MoveContext,
         q: &[f64; 6],
         effects: Effects,
     ) -> [Isometry3<f64>; 5] {
-        self.stages_from(kin, model, q, effects, None)
+        let (kin, model) = self.prediction_prepared(effects, &self.growth_of(ctx));
+        self.stages_from(&kin, &model, q, effects, ctx.wrench.as_ref(), None)
     }
 
-    /// [`Robot::stages_with`] with the nominal flange pose at `q`, when
+    /// [`Robot::predict_stages`] with the parameter sets resolved, the
+    /// process wrench `wrench` and the nominal flange pose at `q`, when
     /// already known (the flange of `frames_prepared(nominal, q, 6)`, the
     /// same bits as [`flange_prepared`]).
     pub(crate) fn stages_from(
@@ -296,6 +316,7 @@ impl Robot {
         model: &Prepared,
         q: &[f64; 6],
         effects: Effects,
+        wrench: Option<&Wrench>,
         nominal_flange: Option<Isometry3<f64>>,
     ) -> [Isometry3<f64>; 5] {
         let nominal_flange =
@@ -313,7 +334,7 @@ impl Robot {
         };
         let p1 = self.tcp_of(&kin_flange);
         let p2 = self.tcp_of(&f.flange());
-        let (tau_g, tau) = self.load_torques(&f, effects);
+        let (tau_g, tau) = self.load_torques(&f, effects, wrench);
         let p3 = if effects.gravity != 0.0 {
             self.deflected_tcp(model, q, &half, &tau_g)
         } else {
@@ -334,80 +355,58 @@ impl Robot {
     }
 
     /// Predicted vibration amplitude per direction (robot base frame, mm)
-    /// at controller joints `q`: the process force taken as a harmonic
-    /// force at the tooth-passing frequency, through the modal model.
-    /// Zero without a modal model, a spindle speed or a process wrench.
-    pub fn vibration_mm(&self, q: &[f64; 6], effects: Effects) -> Vector3<f64> {
-        let (Some(modal), Some(f_hz)) = (
-            self.modal(),
-            self.process_force().and_then(|p| p.excitation_hz()),
-        ) else {
+    /// at controller joints `q`: the process force of `ctx` taken as a
+    /// harmonic force at its tooth-passing frequency, through the modal
+    /// model. Zero without a modal model, a tooth frequency or a process
+    /// wrench.
+    pub fn vibration_mm(&self, ctx: &MoveContext, q: &[f64; 6], effects: Effects) -> Vector3<f64> {
+        let (Some(modal), true) = (self.modal(), ctx.tooth_hz > 0.0) else {
             return Vector3::zeros();
         };
-        if effects.dynamic == 0.0 || self.process_wrench().is_none() {
+        let Some(wrench) = ctx.wrench.as_ref().filter(|_| effects.dynamic != 0.0) else {
             return Vector3::zeros();
-        }
-        let w = self.process_wrench_base(Model::Nominal, q);
+        };
+        let w = self.process_wrench_base(Model::Nominal, q, Some(wrench));
         let f_base = Vector3::new(w[0], w[1], w[2]);
-        modal.amplitude_mm(&f_base, f_hz) * effects.dynamic
+        modal.amplitude_mm(&f_base, ctx.tooth_hz) * effects.dynamic
     }
 
-    /// Predicted attained TCP pose (world frame) for controller joints `q`.
-    pub fn predict(&self, q: &[f64; 6], effects: Effects) -> Isometry3<f64> {
-        let (_, model) = self.prediction_prepared(effects, self.current_thermal_growth_mm());
-        self.predict_with(&model, q, effects)
-    }
-}
-
-impl Robot {
-    /// Refuses a compensated solution `q` that moves a joint by more than
-    /// [`JOINT_JUMP_MAX_DEG`] from the programmed `q0` or changes the
-    /// configuration, unless the robot allows it.
-    pub(crate) fn check_reconfiguration(
-        &self,
-        q0: &[f64; 6],
-        q: &[f64; 6],
-    ) -> Result<(), RobotError> {
-        if self.d.allow_reconfiguration {
-            return Ok(());
-        }
-        let deltas: [f64; 6] = std::array::from_fn(|j| (q[j] - q0[j]).to_degrees());
-        let jump = deltas.iter().any(|d| d.abs() > JOINT_JUMP_MAX_DEG);
-        let (from, to) = (self.confdata(q0), self.confdata(q));
-        if !jump && from.cfx == to.cfx {
-            return Ok(());
-        }
-        let shown: Vec<String> = deltas.iter().map(|d| format!("{d:.3}")).collect();
-        Err(RobotError::Reconfiguration {
-            deltas: format!("[{}]°", shown.join(", ")),
-            limit: JOINT_JUMP_MAX_DEG,
-            from,
-            to,
-        })
+    /// Predicted attained TCP pose (world frame) for controller joints `q`
+    /// in the move context `ctx`.
+    pub fn predict(&self, ctx: &MoveContext, q: &[f64; 6], effects: Effects) -> Isometry3<f64> {
+        let (_, model) = self.prediction_prepared(effects, &self.growth_of(ctx));
+        self.predict_with(&model, q, effects, ctx.wrench.as_ref())
     }
 }
 
 #[cfg(test)]
 mod tests {
-    use super::super::kinematics::frames_prepared;
     use super::*;
+    use crate::machine::robot::kinematics::frames_prepared;
+    use crate::predict::context::WrenchFrame;
     use approx::assert_abs_diff_eq;
 
     /// Both paths run the same arithmetic: equal to the last bit.
     const SAME: f64 = 0.0;
 
-    /// [`Robot::stages_with`] without its shortcuts (shared kinematic and
+    /// [`Robot::stages_from`] without its shortcuts (shared kinematic and
     /// full chains, the process stage reused without process torques,
     /// process torques skipped without a process wrench): every stage from
     /// its own forward kinematics and the full load torques.
-    fn stages_reference(r: &Robot, q: &[f64; 6], effects: Effects) -> [Isometry3<f64>; 5] {
-        let (kin, model) = r.prediction_prepared(effects, r.current_thermal_growth_mm());
+    fn stages_reference(
+        r: &Robot,
+        ctx: &MoveContext,
+        q: &[f64; 6],
+        effects: Effects,
+    ) -> [Isometry3<f64>; 5] {
+        let (kin, model) = r.prediction_prepared(effects, &r.growth_of(ctx));
+        let wrench = ctx.wrench.as_ref();
         let p0 = r.tcp_of(&flange_prepared(r.nominal_prepared(), q));
         let p1 = r.tcp_of(&flange_prepared(&kin, q));
         let f = frames_prepared(&model, q, 6);
         let p2 = r.tcp_of(&f.flange());
         let tau_g = r.gravity_torques_at(&f) * effects.gravity;
-        let tau_w = r.process_torques_at(&f) * effects.process;
+        let tau_w = r.process_torques_at(&f, wrench) * effects.process;
         let deflected = |tau: &Vector6<f64>| {
             let dq = r.joint_deflection(tau);
             let qd: [f64; 6] = std::array::from_fn(|i| q[i] + dq[i]);
@@ -426,22 +425,22 @@ mod tests {
 
     #[test]
     fn stages_and_prediction_equal_the_stage_by_stage_reference() {
-        use crate::machine::robot::ProcessWrench;
-        let r = crate::machine::robot::test_irb1600();
-        let warm = r.with_thermal_power(&[20.0, 150.0, 80.0, 0.0, 0.0, 0.0]);
-        let loaded = warm.with_process_wrench(Some(ProcessWrench {
+        let view = crate::machine::robot::test_irb1600();
+        let warm = MoveContext::default().with_joint_powers([20.0, 150.0, 80.0, 0.0, 0.0, 0.0]);
+        let loaded = warm.with_wrench(Some(Wrench {
             force_n: Vector3::new(10.0, -40.0, -120.0),
             moment_nmm: Vector3::new(0.0, 500.0, 0.0),
-            in_tool_frame: true,
+            frame: WrenchFrame::Tool,
         }));
-        let unloaded = warm.with_process_wrench(None);
+        let unloaded = warm.with_wrench(None);
         let mut next = crate::machine::robot::test_sequence(0x2545_f491_4f6c_dd1d);
-        for view in [&r, &loaded, &unloaded] {
+        for ctx in [view.file_context(), loaded, unloaded] {
+            let wrench = ctx.wrench.as_ref();
             for _ in 0..100 {
                 let q: [f64; 6] = std::array::from_fn(|_| next());
-                let fast = view.predict_stages(&q, Effects::ALL);
-                let slow = stages_reference(view, &q, Effects::ALL);
-                let attained = view.predict(&q, Effects::ALL);
+                let fast = view.predict_stages(&ctx, &q, Effects::ALL);
+                let slow = stages_reference(&view, &ctx, &q, Effects::ALL);
+                let attained = view.predict(&ctx, &q, Effects::ALL);
                 assert_abs_diff_eq!(
                     attained.translation.vector,
                     fast[4].translation.vector,
@@ -454,8 +453,8 @@ mod tests {
                 );
                 let f = frames_prepared(view.nominal_prepared(), &q, 6);
                 assert_abs_diff_eq!(
-                    view.nominal_load_torques(&q),
-                    view.gravity_torques_at(&f) + view.process_torques_at(&f),
+                    view.nominal_load_torques(&q, wrench),
+                    view.gravity_torques_at(&f) + view.process_torques_at(&f, wrench),
                     epsilon = SAME
                 );
                 for (k, (a, b)) in fast.iter().zip(&slow).enumerate() {
@@ -469,7 +468,7 @@ mod tests {
                 }
                 // Without process torques the process stage is the gravity
                 // stage itself.
-                if view.process_wrench().is_none() {
+                if wrench.is_none() {
                     assert_eq!(fast[4], fast[3]);
                 }
             }
