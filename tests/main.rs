@@ -52,6 +52,7 @@ mod robot;
 mod robot_library;
 mod robot_process;
 mod robot_samples;
+mod shop;
 mod snapshots;
 mod uncertainty_coverage;
 mod verify_cli;
