@@ -257,7 +257,7 @@ fn compensated_subprograms_attain_every_target_when_predicted_again() {
             );
             checked += 1;
         }
-        assert!(checked >= 8, "{name}: {checked} targets");
+        assert!(checked >= 6, "{name}: {checked} targets");
     }
 }
 
