@@ -207,28 +207,23 @@ fn malformed_programs_exit_2_located_with_no_output() {
         (
             "G1 X#1",
             3,
-            5,
-            "`#` parameters cannot be compensated offline",
+            1,
+            "local variable `#1` is read before it is set",
         ),
+        ("#3000=2.", 3, 1, "`#3000` is a system variable"),
         (
-            "#100=2.",
+            "G1 X[1+#5021]",
             3,
             1,
-            "`#` parameters cannot be compensated offline",
+            "`#5021` is a system variable, known only on the control",
         ),
-        (
-            "G1 X[1+2]",
-            3,
-            5,
-            "`[ ]` expressions cannot be compensated offline",
-        ),
-        ("o100 sub", 3, 1, "O-word subroutines and loops"),
-        ("O200 WHILE [1 LT 2]", 3, 1, "O-word subroutines and loops"),
+        ("o100 sub", 3, 1, "O-word subroutine o100 has no `endsub`"),
+        ("O200 WHILE [1 LT 2]", 3, 1, "O-word `while`"),
         (
             "M98 P100",
             3,
             1,
-            "subprogram calls cannot be compensated offline",
+            "M98 calls O100, which is not in this file",
         ),
         // M99 after `G0 X0 `: byte 6, column 7.
         (

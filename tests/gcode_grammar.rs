@@ -40,9 +40,26 @@ fn run_program(
     let mut interp = Interpreter::new(setup, "doc.nc");
     let mut block = Block::default();
     let mut plans = Vec::new();
-    for (i, line) in program.split_inclusive('\n').enumerate() {
-        parse_line(line.as_bytes(), i + 1, "doc.nc", &mut block)?;
-        plans.push(interp.step(&block, line.as_bytes())?);
+    // Subprograms followed as the control runs them.
+    let text = program.as_bytes();
+    // Lathe programs are named by their content first, as `check` does.
+    if let Some(e) = postproc::program::gcode::dialect::lathe_program(text, "doc.nc") {
+        return Err(e);
+    }
+    let lines: Vec<(usize, Vec<u8>)> =
+        match postproc::program::gcode::subprograms::expand(text, "doc.nc")? {
+            Some(exp) => (0..exp.trace.len())
+                .map(|k| (exp.trace[k].0, exp.input(text, k).into_owned()))
+                .collect(),
+            None => program
+                .split_inclusive('\n')
+                .map(|l| l.as_bytes().to_vec())
+                .enumerate()
+                .collect(),
+        };
+    for (i, line) in lines {
+        parse_line(&line, i + 1, "doc.nc", &mut block)?;
+        plans.push(interp.step(&block, &line)?);
     }
     Ok(plans)
 }

@@ -53,6 +53,7 @@ mod robot;
 mod robot_library;
 mod robot_process;
 mod robot_samples;
+mod shop;
 mod snapshots;
 mod tp;
 mod uncertainty_coverage;

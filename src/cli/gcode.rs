@@ -15,6 +15,7 @@ use crate::compensate::outcome::Summary;
 use crate::emit::gcode::EmitOptions;
 use crate::emit::header::{HeaderWriter, Provenance};
 use crate::emit::report::ReportWriter;
+use crate::emit::subprograms::Written;
 use crate::error::{Error, Result};
 use crate::machine::tool::MachineTool;
 use crate::pipeline::gcode::Job;
@@ -180,7 +181,7 @@ pub fn check(a: &CheckArgs, machine: Option<(MachineTool, Loaded)>) -> Result<i3
         // travel, as `compensate` requires.
         travel: machine.as_ref(),
     };
-    let s = job.run(input, &name, None, None)?;
+    let (s, _) = crate::pipeline::shop::run(&job, input, &name, None, None)?;
     let mut out = std::io::stdout().lock();
     let w = |out: &mut dyn Write, t: String| {
         out.write_all(t.as_bytes())
@@ -300,11 +301,25 @@ pub(super) fn run_reporting(
     format: Format,
     provenance: Option<&Provenance>,
 ) -> Result<Summary> {
+    run_reporting_shop(job, input, file, out, report, format, provenance).map(|r| r.0)
+}
+
+/// [`run_reporting`] with what was made of the program's subprograms.
+fn run_reporting_shop(
+    job: &Job,
+    input: Box<dyn BufRead>,
+    file: &str,
+    out: Option<&mut dyn Write>,
+    report: &mut dyn Write,
+    format: Format,
+    provenance: Option<&Provenance>,
+) -> Result<(Summary, Option<Written>)> {
     let mut rw = ReportWriter::new(report, &job.setup, format, file)?
         .with_source(Path::new(file))
         .with_provenance(provenance);
     let mut err = None;
-    let summary = job.run(
+    let (summary, written) = crate::pipeline::shop::run(
+        job,
         input,
         file,
         out,
@@ -321,7 +336,7 @@ pub(super) fn run_reporting(
         blocks: summary.blocks,
         moves: summary.moves,
     })?;
-    Ok(summary)
+    Ok((summary, written))
 }
 
 /// What `compensate` and `report` set up before running a job: the machine
@@ -401,7 +416,7 @@ pub fn compensate(
         Some(tolerance),
         annotate,
     );
-    let summary: Summary = match &a.report {
+    let (summary, written): (Summary, Option<Written>) = match &a.report {
         Some(report_path) => {
             let format = a
                 .report_format
@@ -410,7 +425,7 @@ pub fn compensate(
             let mut rep = Staged::open(report_path)?;
             let mut out = Staged::open(&out_path)?;
             let mut hw = HeaderWriter::new(out.writer(), provenance.clone(), false);
-            let summary = run_reporting(
+            let summary = run_reporting_shop(
                 &job,
                 input,
                 &file,
@@ -425,13 +440,17 @@ pub fn compensate(
         }
         None => emit_to(&out_path, |w| {
             let mut hw = HeaderWriter::new(w, provenance.clone(), false);
-            let s = job.run(input, &file, Some(&mut hw), None)?;
+            let s = crate::pipeline::shop::run(&job, input, &file, Some(&mut hw), None)?;
             hw.finish().map_err(|e| Error::io(&out_path, e))?;
             Ok(s)
         })?,
     };
     if !quiet {
-        eprintln!("{}", summary_line(&file, &out_path, &summary, tolerance));
+        let mut line = summary_line(&file, &out_path, &summary, tolerance);
+        if let Some(w) = written {
+            line.push_str(&subprogram_note(w));
+        }
+        eprintln!("{line}");
     }
     if summary.duration_s > 0.0 {
         tracing::info!(
@@ -454,6 +473,23 @@ pub fn compensate(
     } else {
         0
     })
+}
+
+/// What the summary line says of a program's subprograms: `; 2
+/// subprograms, 3 copies for calls with different corrections`.
+fn subprogram_note(w: Written) -> String {
+    if let Some(lines) = w.flattened {
+        return format!(
+            "; macro program written out as it runs ({lines} lines: loops and macro calls run through, values known offline written as numbers)"
+        );
+    }
+    let plural =
+        |n: usize, one: &str, many: &str| format!("{n} {}", if n == 1 { one } else { many });
+    format!(
+        "; {}, {} for calls with different corrections",
+        plural(w.subprograms, "subprogram", "subprograms"),
+        plural(w.copies, "copy", "copies")
+    )
 }
 
 /// The tolerance of a run: `--tolerance`, else the machine file's

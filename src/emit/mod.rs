@@ -7,4 +7,5 @@ pub mod html;
 mod inverse_time;
 pub mod rapid;
 pub mod report;
+pub mod subprograms;
 pub mod svg;

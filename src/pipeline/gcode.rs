@@ -483,7 +483,7 @@ impl Chunk {
 
     /// Parses every line of the chunk, in parallel runs of [`PARSE_LINES`]
     /// lines (the syntax is per line); stops at the first error in line order.
-    fn parse(&mut self, file: &str) {
+    fn parse(&mut self, file: &str, numbers: Option<&[usize]>) {
         let n = self.ranges.len();
         if self.blocks.len() < n {
             self.blocks.resize_with(n, Block::default);
@@ -497,7 +497,10 @@ impl Chunk {
             .filter_map(|(k, (blocks, ranges))| {
                 for (j, (block, &(s, e))) in blocks.iter_mut().zip(ranges).enumerate() {
                     let i = k * PARSE_LINES + j;
-                    if let Err(err) = parse_line(&buf[s..e], first + i + 1, file, block) {
+                    let no = numbers
+                        .and_then(|n| n.get(first + i).copied())
+                        .unwrap_or(first + i + 1);
+                    if let Err(err) = parse_line(&buf[s..e], no, file, block) {
                         return Some((i, err));
                     }
                 }
@@ -697,6 +700,10 @@ struct WriteStage<'j, 'm, 'o, 'r> {
     /// The warnings about blocks with a piece beyond the tolerance (at most
     /// [`MAX_BEYOND_WARNINGS`]; the summary counts them all).
     beyond: Vec<Warning>,
+    /// Bytes written before the chunk being written.
+    written: usize,
+    /// Where each line's output ends (bytes written so far), when asked.
+    marks: Option<Vec<usize>>,
     /// Storage of a block under tool centre point control in tool tips.
     tip_plan: Plan,
     tip_res: BlockResult,
@@ -719,6 +726,8 @@ impl<'j, 'm, 'o, 'r> WriteStage<'j, 'm, 'o, 'r> {
             rows,
             out_buf: Vec::with_capacity(1 << 20),
             beyond: Vec::new(),
+            written: 0,
+            marks: None,
             tip_plan: Plan::default(),
             tip_res: BlockResult::default(),
         }
@@ -734,6 +743,11 @@ impl<'j, 'm, 'o, 'r> WriteStage<'j, 'm, 'o, 'r> {
                 out.write_all(&chunk.buf)
                     .map_err(|e| Error::io("output", e))?;
             }
+            if let Some(marks) = self.marks.as_mut() {
+                let base = self.written;
+                marks.extend(chunk.ranges.iter().map(|&(_, e)| base + e));
+            }
+            self.written += chunk.buf.len();
             return Ok(());
         }
         self.out_buf.clear();
@@ -787,7 +801,11 @@ impl<'j, 'm, 'o, 'r> WriteStage<'j, 'm, 'o, 'r> {
                         .write(chunk.line(i), block, plan, res, &mut self.out_buf),
                 }
             }
+            if let Some(marks) = self.marks.as_mut() {
+                marks.push(self.written + self.out_buf.len());
+            }
         }
+        self.written += self.out_buf.len();
         if let Some(out) = self.out.as_deref_mut() {
             out.write_all(&self.out_buf)
                 .map_err(|e| Error::io("output", e))?;
@@ -1028,10 +1046,25 @@ impl<'m> Job<'m> {
     /// rest of the program is still read and interpreted.
     pub fn run<R: BufRead>(
         &self,
+        input: R,
+        file: &str,
+        out: Option<&mut dyn Write>,
+        rows: Option<&mut dyn FnMut(Row)>,
+    ) -> Result<Summary> {
+        self.run_traced(input, file, out, rows, None)
+    }
+
+    /// [`Job::run`] over lines that are not the program's in order (its
+    /// subprograms followed, `crate::pipeline::shop`): `numbers` gives
+    /// each input line's line number in the program, and `marks` receives
+    /// where each line's output ends.
+    pub fn run_traced<R: BufRead>(
+        &self,
         mut input: R,
         file: &str,
         out: Option<&mut dyn Write>,
         rows: Option<&mut dyn FnMut(Row)>,
+        traced: Option<(&[usize], &mut Vec<usize>)>,
     ) -> Result<Summary> {
         // With every effect off the output is the input; a report still
         // wants its rows (of zero deviation).
@@ -1042,6 +1075,8 @@ impl<'m> Job<'m> {
         let mut summary = Summary::default();
         let mut interpret = InterpretStage::new(self, file);
         let mut write = WriteStage::new(self, file, solving, out, rows);
+        let (numbers, marks_out) = traced.unzip();
+        write.marks = marks_out.as_ref().map(|_| Vec::new());
 
         // The four chunks in flight, oldest first: `done` is compensated
         // (to be written), `solve` is interpreted (to be compensated),
@@ -1052,7 +1087,7 @@ impl<'m> Job<'m> {
         let mut read = Stage::default();
         let (mut has_done, mut has_solve) = (false, false);
         parsed.chunk.read(&mut input, file, 0)?;
-        self.install(|| parsed.chunk.parse(file));
+        self.install(|| parsed.chunk.parse(file, numbers));
         let mut has_parsed = true;
         let mut next_line = parsed.chunk.ranges.len();
         let mut input_done = parsed.chunk.eof;
@@ -1093,7 +1128,7 @@ impl<'m> Job<'m> {
                     s.spawn(move |_| self.compensate_stage(solve_ref, solving));
                 }
                 if has_read {
-                    s.spawn(move |_| read_ref.parse(file));
+                    s.spawn(move |_| read_ref.parse(file, numbers));
                 }
                 if has_done && !scanning {
                     written = write.chunk(&mut done, &mut summary);
@@ -1124,6 +1159,9 @@ impl<'m> Job<'m> {
             return Err(e);
         }
         interpret.finish(&mut summary);
+        if let (Some(dst), Some(marks)) = (marks_out, write.marks.take()) {
+            *dst = marks;
+        }
         write.finish(&mut summary);
         Ok(summary)
     }
@@ -1177,7 +1215,7 @@ impl<'m> Job<'m> {
         let mut first_line = 0;
         loop {
             chunk.read(&mut input, file, first_line)?;
-            self.install(|| chunk.parse(file));
+            self.install(|| chunk.parse(file, None));
             for i in 0..chunk.ranges.len() {
                 chunk.block(i)?;
                 let block = &chunk.blocks[i];

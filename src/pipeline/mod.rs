@@ -9,3 +9,4 @@
 pub mod gcode;
 pub mod rapid;
 mod resonance;
+pub mod shop;

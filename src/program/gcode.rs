@@ -101,6 +101,9 @@ pub struct Block {
     pub lower_case: bool,
     /// Words are separated by spaces.
     pub spaced: bool,
+    /// The line is a LinuxCNC O-word line (`o<name> sub`, `o100 repeat
+    /// [4]`): its parts; it has no words then.
+    pub oword: Option<oword::OWord>,
 }
 
 impl Block {
@@ -114,6 +117,7 @@ impl Block {
         self.text_len = 0;
         self.lower_case = false;
         self.spaced = false;
+        self.oword = None;
     }
 
     /// The first word with this (upper-case) letter.
@@ -123,7 +127,7 @@ impl Block {
 
     /// True when the block has no words (blank, comment-only or `%`).
     pub fn is_empty(&self) -> bool {
-        self.words.is_empty()
+        self.words.is_empty() && self.oword.is_none()
     }
 }
 
@@ -330,6 +334,9 @@ fn scan_line(line: &[u8], line_no: usize, file: &str, out: &mut Block) -> Result
             pos += 1;
         }
         pos = skip_ws(text, pos);
+    }
+    if oword::scan(text, pos, file, line_no, out)? {
+        return Ok(());
     }
     let mut saw_space = false;
     let mut lower = 0usize;
@@ -584,8 +591,13 @@ fn skip_ws(text: &[u8], mut pos: usize) -> usize {
 }
 
 pub mod dialect;
+pub mod expr;
+pub mod macros;
+mod macros_run;
+pub mod oword;
 #[cfg(test)]
 mod reference;
+pub mod subprograms;
 
 #[cfg(test)]
 mod tests {
@@ -608,6 +620,7 @@ mod tests {
         if a.is_ok() {
             prop_assert_eq!(&fast.words, &slow.words);
             prop_assert_eq!(&fast.comments, &slow.comments);
+            prop_assert_eq!(&fast.oword, &slow.oword);
             prop_assert_eq!(
                 (
                     fast.block_delete,
@@ -799,8 +812,9 @@ mod tests {
         assert!(e.message.contains("unknown word letter"));
         let e = parse("G1 X#1").unwrap_err();
         assert!(e.message.contains("parameters"));
-        let e = parse("o100 sub").unwrap_err();
-        assert!(e.message.contains("subroutines"));
+        let b = parse("o100 sub").unwrap();
+        assert_eq!(b.oword.map(|o| o.keyword), Some(oword::Keyword::Sub));
+        assert!(b.words.is_empty());
         let e = parse("G1 X[1+2]").unwrap_err();
         assert!(e.message.contains("expressions"));
         let e = parse("G1 (open").unwrap_err();

@@ -741,6 +741,20 @@ impl Interpreter {
             milling_mm: self.milling_mm,
             ..Plan::default()
         };
+        if let Some(o) = &block.oword {
+            // The resolution pass (`program::gcode::subprograms`) takes
+            // these lines out of the block stream it hands over.
+            return Err(Located::new(
+                &self.file,
+                block.line_no,
+                1,
+                format!(
+                    "O-word `{}` lines are read by the subprogram pass, not block by block: `{}`",
+                    o.keyword.as_str(),
+                    crate::error::clip_to(String::from_utf8_lossy(text).trim(), LINE_QUOTE_MAX)
+                ),
+            ));
+        }
         if block.is_empty() || block.block_delete && block.words.is_empty() {
             if !block.block_delete {
                 self.directives(block, text)?;
@@ -2095,6 +2109,8 @@ fn refused_g(code: i64) -> &'static str {
         920 | 921 => "G92 (coordinate system shift)",
         1410 => "G141 (3D cutter compensation)",
         1500 => "G150 (pocket milling)",
+        2340 => "G234 (Haas tool centre point control, TCPC; G43.4 is read for it)",
+        2540 | 2550 => "G254/G255 (Haas dynamic work offset, DWO)",
         _ => "this G code",
     }
 }

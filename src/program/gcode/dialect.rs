@@ -332,3 +332,80 @@ mod tests {
         }
     }
 }
+
+/// A turning (lathe) program, recognised by its content: `G18` (the XZ
+/// plane of a lathe) together with `G96` (constant surface speed), `G50 S…`
+/// (the lathe's spindle speed clamp; a mill's `G50` cancels scaling and
+/// has no `S`) or `G99` without drilling cycles (feed per revolution; a
+/// mill's `G99` is the R-plane return of its cycles). Its X words would be
+/// diameters and its F words feeds per revolution: read as a milling
+/// program it would be misread in silence, so it is refused by name at the
+/// line that shows it.
+pub fn lathe_program(text: &[u8], file: &str) -> Option<Located> {
+    let has = |n: &[u8]| memchr::memmem::find(text, n).is_some();
+    if !(has(b"G18") || has(b"g18")) {
+        return None;
+    }
+    let mut block = super::Block::default();
+    let mut g18 = None;
+    let mut sign: Option<(usize, &str)> = None;
+    let mut per_rev = None;
+    let mut cycles = false;
+    for (i, line) in text.split_inclusive(|&c| c == b'\n').enumerate() {
+        if super::parse_line(line, i + 1, file, &mut block).is_err() {
+            continue;
+        }
+        for w in block.words.iter().filter(|w| w.letter == b'G') {
+            match w.code10() {
+                180 => {
+                    g18.get_or_insert(i + 1);
+                }
+                960 => {
+                    sign.get_or_insert((i + 1, "`G96` constant surface speed"));
+                }
+                500 if block.word(b'S').is_some() => {
+                    sign.get_or_insert((i + 1, "`G50 S…` spindle speed clamp"));
+                }
+                990 => {
+                    per_rev.get_or_insert(i + 1);
+                }
+                730 | 740 | 760 | 810..=890 => cycles = true,
+                _ => {}
+            }
+        }
+    }
+    let g18 = g18?;
+    let per_rev = per_rev
+        .filter(|_| !cycles)
+        .map(|l| (l, "`G99` feed per revolution"));
+    let (line, what) = sign.or(per_rev)?;
+    Some(Located::new(
+        file,
+        line,
+        1,
+        format!(
+            "lathe (turning) program: {what} with `G18` (line {g18}); its X words are diameters and its feeds per revolution, and postproc reads milling programs only"
+        ),
+    ))
+}
+
+#[cfg(test)]
+mod lathe_tests {
+    use super::lathe_program;
+
+    #[test]
+    fn lathe_programs_are_named_and_mills_are_not() {
+        let lathe = b"G18 G21\nG50 S3000\nG96 S180 M3\nG99 G1 X20. F0.2\n";
+        let e = lathe_program(lathe, "t.nc").expect("a lathe program");
+        assert_eq!(e.line, 2, "{}", e.message);
+        assert!(
+            e.message.contains("lathe (turning) program"),
+            "{}",
+            e.message
+        );
+        // A mill: G18 for arcs, G99 with a drilling cycle, G50 cancels scaling.
+        let mill = b"G18 G2 X10 Z0 I5\nG50\nG99 G81 X0 Y0 Z-3 R1 F100\n";
+        assert!(lathe_program(mill, "t.nc").is_none());
+        assert!(lathe_program(b"G96 S100\n", "t.nc").is_none());
+    }
+}

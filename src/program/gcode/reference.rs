@@ -96,6 +96,9 @@ fn scan_line(line: &[u8], line_no: usize, file: &str, out: &mut Block) -> Result
         let level = text.get(pos + 1).is_some_and(|c| matches!(c, b'1'..=b'9'));
         pos = skip_ws(text, pos + 1 + usize::from(level));
     }
+    if super::oword::scan(text, pos, file, line_no, out)? {
+        return Ok(());
+    }
     let mut saw_space = false;
     let mut lower = 0usize;
     let mut upper = 0usize;

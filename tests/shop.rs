@@ -1,0 +1,371 @@
+//! Shop G-code: subprograms (`M98`/`M99` in the same file, LinuxCNC
+//! `o<name> sub`/`call` and `o100 repeat`) followed through `check`,
+//! `report` and `compensate` on programs written for this project in the
+//! style of each control (tests/shop/): identity byte for byte, the
+//! structure of the compensated output, every target attained again when
+//! the output is predicted anew, and refusals by name.
+
+use std::path::{Path, PathBuf};
+
+use crate::common::{postproc, repo, without_header, write};
+
+/// Tolerance of the compensation in these runs, mm (the machine file's).
+const TOLERANCE_MM: f64 = 0.003;
+
+/// The bundled three-axis machine with a work offset and tool length that
+/// keep every program inside its travel.
+const MACHINE: [&str; 6] = [
+    "--machine",
+    "afm-r1000",
+    "--work-offset",
+    "G54=100,50,200",
+    "--tool",
+    "H1=100",
+];
+
+fn program(name: &str) -> PathBuf {
+    repo(&format!("tests/shop/{name}"))
+}
+
+/// `compensate` of `input` into `dir`: the output's bytes and stderr.
+fn compensate(input: &Path, dir: &Path, extra: &[&str]) -> (Vec<u8>, String) {
+    let out = dir.join("out.nc");
+    let a = postproc()
+        .arg("compensate")
+        .args(MACHINE)
+        .args(extra)
+        .arg(input)
+        .arg("-o")
+        .arg(&out)
+        .assert()
+        .success();
+    let stderr = String::from_utf8_lossy(&a.get_output().stderr).to_string();
+    (std::fs::read(&out).expect("output written"), stderr)
+}
+
+#[test]
+fn shop_programs_are_written_back_byte_for_byte_with_no_effects() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    for name in [
+        "haas_sub_four.nc",
+        "haas_sub_repeat.nc",
+        "linuxcnc_pocket.ngc",
+        "fanuc_bolt_circle.nc",
+    ] {
+        let input = program(name);
+        let (out, stderr) = compensate(
+            &input,
+            dir.path(),
+            &["--effects", "none", "--annotate", "none"],
+        );
+        let original = std::fs::read(&input).expect("read");
+        assert!(
+            without_header(&out) == original,
+            "{name}: identity differs:\n{}",
+            String::from_utf8_lossy(&out)
+        );
+        assert!(
+            stderr.contains("0 copies") && !stderr.contains("written out"),
+            "{name}: {stderr}"
+        );
+    }
+}
+
+#[test]
+fn check_follows_every_call() {
+    // Main program: 5 rapids and moves before and between the calls, 4
+    // calls of 8 moves each.
+    let a = postproc()
+        .arg("check")
+        .args(MACHINE)
+        .arg(program("haas_sub_four.nc"))
+        .assert()
+        .success();
+    let stdout = String::from_utf8_lossy(&a.get_output().stdout).to_string();
+    assert!(
+        stdout.contains("31 lines, 46 blocks, 36 moves (16 rapid, 20 feed"),
+        "{stdout}"
+    );
+    // Extents: the fourth pocket ends at X100+40 work, +100 offset.
+    assert!(stdout.contains("max X440.000 Y370.000"), "{stdout}");
+}
+
+/// The subprogram called at four positions needs a different correction
+/// at each: four copies, each call pointing at its own.
+#[test]
+fn calls_with_different_corrections_get_their_own_copies() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let (out, stderr) = compensate(&program("haas_sub_four.nc"), dir.path(), &[]);
+    let text = String::from_utf8(out).expect("utf-8");
+    assert!(
+        stderr.contains("1 subprogram, 3 copies for calls with different corrections"),
+        "{stderr}"
+    );
+    let calls: Vec<&str> = text.lines().filter(|l| l.starts_with("M98")).collect();
+    assert_eq!(calls, ["M98 P2000", "M98 P2001", "M98 P2002", "M98 P2003"]);
+    for head in [
+        "O02000 (POCKET",
+        "O02001 (POCKET",
+        "O02002 (POCKET",
+        "O02003 (POCKET",
+    ] {
+        assert_eq!(
+            text.lines().filter(|l| l.starts_with(head)).count(),
+            1,
+            "{head}:\n{text}"
+        );
+    }
+    assert_eq!(text.lines().filter(|l| *l == "M99").count(), 4);
+    assert!(text.ends_with("M99\n%\n"), "{text}");
+}
+
+/// `M98 P2200 L4` whose four runs differ becomes four calls of four
+/// copies; the coolant subprogram moves nothing and stays one.
+#[test]
+fn a_repeated_call_is_split_into_runs_of_one_copy() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let (out, stderr) = compensate(
+        &program("haas_sub_repeat.nc"),
+        dir.path(),
+        &["--annotate", "none"],
+    );
+    let text = String::from_utf8(out).expect("utf-8");
+    assert!(stderr.contains("2 subprograms, 3 copies"), "{stderr}");
+    let calls: Vec<&str> = text.lines().filter(|l| l.starts_with("M98")).collect();
+    assert_eq!(
+        calls,
+        [
+            "M98 P2200 L1",
+            "M98 P2201 L1",
+            "M98 P2202 L1",
+            "M98 P2203 L1",
+            "M98 P2300"
+        ]
+    );
+    assert_eq!(
+        text.lines().filter(|l| l.starts_with("O02300")).count(),
+        1,
+        "{text}"
+    );
+}
+
+#[test]
+fn linuxcnc_subroutines_and_loops_are_renamed_per_copy() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let (out, stderr) = compensate(
+        &program("linuxcnc_pocket.ngc"),
+        dir.path(),
+        &["--annotate", "none"],
+    );
+    let text = String::from_utf8(out).expect("utf-8");
+    assert!(stderr.contains("2 subprograms, 4 copies"), "{stderr}");
+    for line in [
+        "o<pocket> sub",
+        "o<pocket_1> sub",
+        "o<pocket_2> endsub",
+        "o100 repeat [1]",
+        "o101 repeat [1]",
+        "o102 endrepeat",
+        "  o<pocket_2> call",
+    ] {
+        assert!(text.lines().any(|l| l == line), "{line}:\n{text}");
+    }
+}
+
+/// One row of `report --format csv`: motion, programmed point, attained
+/// point (programmed + predicted deviation) and residual.
+struct Row {
+    line: String,
+    motion: String,
+    programmed: [f64; 3],
+    attained: [f64; 3],
+    residual_mm: f64,
+}
+
+fn report(path: &Path) -> Vec<Row> {
+    let out = postproc()
+        .arg("report")
+        .args(MACHINE)
+        .args(["--format", "csv"])
+        .arg(path)
+        .output()
+        .expect("runs");
+    assert!(
+        out.status.success() || out.status.code() == Some(1),
+        "{out:?}"
+    );
+    let text = String::from_utf8(out.stdout).expect("utf-8");
+    let mut lines = text.lines().filter(|l| !l.starts_with('#'));
+    let head: Vec<&str> = lines.next().expect("header").split(',').collect();
+    let col = |name: &str| head.iter().position(|h| *h == name).expect(name);
+    let num = |cells: &[&str], name: &str| -> f64 { cells[col(name)].parse().expect(name) };
+    lines
+        .map(|l| {
+            let c: Vec<&str> = l.split(',').collect();
+            let p = [num(&c, "X_mm"), num(&c, "Y_mm"), num(&c, "Z_mm")];
+            let d = [num(&c, "dx_mm"), num(&c, "dy_mm"), num(&c, "dz_mm")];
+            Row {
+                line: c[col("line")].to_string(),
+                motion: c[col("motion")].to_string(),
+                programmed: p,
+                attained: [p[0] + d[0], p[1] + d[1], p[2] + d[2]],
+                residual_mm: num(&c, "residual_mm"),
+            }
+        })
+        .collect()
+}
+
+fn dist(a: &[f64; 3], b: &[f64; 3]) -> f64 {
+    (0..3).map(|i| (a[i] - b[i]).powi(2)).sum::<f64>().sqrt()
+}
+
+/// The compensated program, with its subprogram copies, predicted again:
+/// every cutting target of the input (each call's) is attained within the
+/// tolerance.
+#[test]
+fn compensated_subprograms_attain_every_target_when_predicted_again() {
+    for name in [
+        "haas_sub_four.nc",
+        "haas_sub_repeat.nc",
+        "linuxcnc_pocket.ngc",
+        "fanuc_bolt_circle.nc",
+    ] {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let input = program(name);
+        let (out, _) = compensate(&input, dir.path(), &[]);
+        let output = write(
+            dir.path(),
+            "landed.nc",
+            &String::from_utf8(out).expect("utf-8"),
+        );
+        let landed = report(&output);
+        let targets = report(&input);
+        let mut checked = 0;
+        for t in targets
+            .iter()
+            .filter(|t| t.motion != "rapid" && t.motion != "fixed")
+        {
+            let off = landed
+                .iter()
+                .map(|l| dist(&l.attained, &t.programmed))
+                .fold(f64::INFINITY, f64::min);
+            assert!(
+                off <= TOLERANCE_MM + t.residual_mm,
+                "{name}:{} ({}): attained {off:.6} mm from its target",
+                t.line,
+                t.motion
+            );
+            checked += 1;
+        }
+        assert!(checked >= 6, "{name}: {checked} targets");
+    }
+}
+
+/// The Fanuc Macro B bolt circle: six holes from a `WHILE` loop, written
+/// out as it runs with the values as numbers.
+#[test]
+fn a_macro_bolt_circle_is_written_out_with_its_values() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let (out, stderr) = compensate(
+        &program("fanuc_bolt_circle.nc"),
+        dir.path(),
+        &["--annotate", "none"],
+    );
+    let text = String::from_utf8(out).expect("utf-8");
+    assert!(
+        stderr.contains("macro program written out as it runs"),
+        "{stderr}"
+    );
+    assert!(!text.contains('#') && !text.contains("WHILE"), "{text}");
+    // Six holes: six feeds down to Z-5 (each near Z-5 after compensation).
+    let downs = text
+        .lines()
+        .filter(|l| l.contains(" Z-4.99") || l.contains(" Z-5."))
+        .count();
+    assert_eq!(downs, 6, "{text}");
+    // The first hole at the centre (200, 150) plus the radius 60 along X.
+    assert!(text.contains("G0 X259.9"), "{text}");
+}
+
+/// What a subprogram structure cannot hold is refused by name, at its
+/// line, with exit code 2.
+#[test]
+fn subprogram_refusals_are_named_and_located() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let cases: &[(&str, &str, &str)] = &[
+        (
+            "G90 G0 X0 Y0\nM98 P3000\nM30\n",
+            ":2:1:",
+            "M98 calls O3000, which is not in this file",
+        ),
+        (
+            "G90 G0 X0 Y0\nM98 P3000\nM30\nO3000\nG1 X1 F100\n",
+            ":4:1:",
+            "subprogram O3000 has no M99",
+        ),
+        (
+            "G90\nG0 X1 M98 P3000\nM30\nO3000\nG1 X1 F100\nM99\n",
+            ":2:1:",
+            "a subprogram call shares its line with `G0`",
+        ),
+        (
+            "G90\nM98 P3000\nM30\nO3000\nM98 P3000\nM99\n",
+            ":5:1:",
+            "calls nested deeper than 16 levels",
+        ),
+        (
+            "G90 G0 X0 Y0\no101 while [1 LT 2]\no101 endwhile\nM2\n",
+            ":2:1:",
+            "O-word `while` (conditions and loops on values) is not followed offline",
+        ),
+        (
+            "o<a> sub\nG1 X1 F100\no<a> endsub\no<a> call [2]\nM2\n",
+            ":4:1:",
+            "o<a> call with arguments",
+        ),
+        (
+            "G0 X0\no<a> call\nM2\n",
+            ":2:1:",
+            "o<a> call: the subroutine is not defined",
+        ),
+        (
+            "G90 G0 X0 Y0\n#1 = #5021 + 2.\nG1 X#1 F100\nM30\n",
+            ":2:1:",
+            "`#5021` is a system variable, known only on the control at run time",
+        ),
+        (
+            "#1 = 0\nWHILE [#1 LT 3] DO1\nG91 G1 X1 F100\nEND1\nM30\n",
+            ":4:1:",
+            "the macro statements do not end within",
+        ),
+        (
+            "o100 repeat [#5021]\nG0 X1\no100 endrepeat\nM2\n",
+            ":1:1:",
+            "`#5021` is not known before the program runs",
+        ),
+    ];
+    for (body, at, phrase) in cases {
+        let p = write(dir.path(), "p.nc", body);
+        let a = postproc().arg("check").arg(&p).assert().code(2);
+        let stderr = String::from_utf8_lossy(&a.get_output().stderr).to_string();
+        assert!(stderr.contains(phrase), "{body:?}: {stderr}");
+        assert!(stderr.contains(&format!("p.nc{at}")), "{body:?}: {stderr}");
+    }
+}
+
+/// A Fusion-style Haas lathe program is named as a lathe program by
+/// `check`, with exit code 2, at the line that shows it.
+#[test]
+fn check_of_a_lathe_program_exits_2_naming_it() {
+    let a = postproc()
+        .arg("check")
+        .args(MACHINE)
+        .arg(program("haas_lathe.nc"))
+        .assert()
+        .code(2);
+    let stderr = String::from_utf8_lossy(&a.get_output().stderr).to_string();
+    assert!(
+        stderr.contains("haas_lathe.nc:6:1: lathe (turning) program: `G50 S…` spindle speed clamp with `G18` (line 4)"),
+        "{stderr}"
+    );
+}
