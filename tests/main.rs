@@ -2,6 +2,7 @@
 //! goldens, property tests and regressions.
 
 mod alloc;
+mod architecture;
 mod bad_corpus;
 mod batch_cli;
 mod calibrate_cli;

@@ -97,7 +97,16 @@ impl Machine {
     }
 
     /// Parses and validates machine YAML text; `file` names it in errors.
+    /// A file whose layout `calibrate` and `diagnose --write-model` could
+    /// not write back is refused here, with its key path
+    /// ([`yaml_write::check_writable`]).
     pub fn from_yaml_str(text: &str, file: &str) -> Result<Machine> {
+        let machine = Self::from_yaml_kind(text, file)?;
+        yaml_write::check_writable(text, file)?;
+        Ok(machine)
+    }
+
+    fn from_yaml_kind(text: &str, file: &str) -> Result<Machine> {
         let kind: KindOnly = yaml::deserialize(text, file)?;
         match kind.kind.as_deref() {
             Some("machine_tool") => {
