@@ -28,6 +28,7 @@ mod honesty_cli;
 mod hostile;
 mod languages;
 mod layers;
+mod machine_layouts;
 mod machine_tool;
 mod mounts;
 mod new_names;

@@ -69,6 +69,13 @@ impl Status {
     /// YAML `text` (`file` names it in errors). Other keys are left to the
     /// machine's own loader.
     pub fn from_yaml_str(text: &str, file: &str) -> Result<Status> {
+        Self::from_source(&yaml::Source::read(text, file)?)
+    }
+
+    /// The `status` and `calibrations` keys of a machine file read by
+    /// [`yaml::Source::read`].
+    pub fn from_source(src: &yaml::Source) -> Result<Status> {
+        let (text, file) = (src.text(), src.file());
         // Only the two keys are read (the struct ignores the others, which
         // the strict loader of the file's kind checks), whatever the layout.
         let empty = text
@@ -80,7 +87,7 @@ impl Status {
                 calibrations: None,
             }
         } else {
-            yaml::deserialize(text, file)?
+            src.deserialize()?
         };
         let bad = |path: &str, msg: &str| yaml::located(text, file, path, msg);
         let status = match (raw.status.as_deref(), raw.calibrations) {

@@ -25,7 +25,8 @@
 //! edited on the file's lossless syntax tree ([`tree`]), with every comment
 //! kept as well. Every edited model value is read back from the result.
 //! The few layouts the tree editor does not write (aliases, tags) are
-//! refused when the file is loaded ([`check_writable`]), never after a fit.
+//! refused when the file is loaded ([`super::yaml::Source::read`]), never
+//! after a fit.
 
 use serde_yaml::Value;
 
@@ -126,8 +127,6 @@ pub struct ThermalTermText {
 }
 
 mod tree;
-
-pub use tree::check_writable;
 
 /// Applies `edits` in order to the machine file `text` (named `file` in
 /// errors). `by` names the program in the comment above a section it adds

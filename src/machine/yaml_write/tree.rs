@@ -16,91 +16,23 @@
 //! parent, and after the file's leading comments in a flow one (a comment
 //! cannot stand inside a flow collection on one line).
 //!
-//! What the tree editor cannot write is refused when the file is loaded
-//! ([`check_writable`]): an alias (`*name`, editing the anchored value would
-//! change every alias of it) and an explicit tag (`!!float 1`).
+//! The tree is the one the loader reads ([`crate::machine::yaml`]); what
+//! this editor cannot write is refused there, when the file is loaded: an
+//! alias (`*name`, editing the anchored value would change every alias of
+//! it) and an explicit tag (`!!float 1`).
 
-use yaml_edit::{YamlFile, YamlNode};
+use yaml_edit::YamlNode;
 
 use super::{Edit, LETTERS, edit_err, number, round_to};
-use crate::error::{Error, Located, Result};
+use crate::error::Result;
+use crate::machine::yaml::{self, Seg, child, key_text, range, segs};
 use crate::machine::robot::RobotParam;
 use crate::machine::status::{self, Calibration, Status};
 use crate::machine::tool::ToolParam;
 
-/// One step of a key path.
-#[derive(Debug, Clone, PartialEq)]
-enum Seg {
-    /// A mapping key.
-    Key(String),
-    /// A sequence item by position.
-    Index(usize),
-    /// The sequence item whose `name` is this (`axes[X]`).
-    Name(String),
-}
-
-/// Splits `a.b[2].c` / `axes[X].e` into steps.
-fn segs(path: &str) -> Vec<Seg> {
-    let mut out = Vec::new();
-    for part in path.split('.').filter(|p| !p.is_empty()) {
-        let (key, mut rest) = part.split_at(part.find('[').unwrap_or(part.len()));
-        if !key.is_empty() {
-            out.push(Seg::Key(key.to_string()));
-        }
-        while let Some(s) = rest.strip_prefix('[') {
-            let end = s.find(']').unwrap_or(s.len());
-            let inner = &s[..end];
-            out.push(match inner.parse::<usize>() {
-                Ok(n) => Seg::Index(n),
-                Err(_) => Seg::Name(inner.to_string()),
-            });
-            rest = s.get(end + 1..).unwrap_or("");
-        }
-    }
-    out
-}
-
-/// The root node of `text` (a single document).
+/// The root mapping of `text`.
 fn root(text: &str, file: &str) -> Result<YamlNode> {
-    let parsed = YamlFile::parse(text);
-    if let Some(e) = parsed.positioned_errors().first() {
-        return Err(edit_err(
-            file,
-            format!("the file does not read as a YAML tree: {}", e.message),
-        ));
-    }
-    let mut docs = parsed.tree().documents();
-    let doc = docs
-        .next()
-        .ok_or_else(|| edit_err(file, "the file has no document"))?;
-    if docs.next().is_some() {
-        return Err(edit_err(file, "the file has more than one document"));
-    }
-    if let Some(m) = doc.as_mapping() {
-        return Ok(YamlNode::Mapping(m));
-    }
-    Err(edit_err(file, "the document is not a mapping"))
-}
-
-fn key_text(k: &YamlNode) -> Option<String> {
-    k.as_scalar().map(|s| s.as_string())
-}
-
-fn child(n: &YamlNode, seg: &Seg) -> Option<YamlNode> {
-    match seg {
-        Seg::Key(k) => n
-            .as_mapping()?
-            .entries()
-            .find(|e| e.key_node().as_ref().and_then(key_text).as_deref() == Some(k))?
-            .value_node(),
-        Seg::Index(i) => n.as_sequence()?.get(*i),
-        Seg::Name(name) => n.as_sequence()?.values().find(|item| {
-            item.get("name")
-                .as_ref()
-                .and_then(key_text)
-                .is_some_and(|s| s == *name)
-        }),
-    }
+    yaml::tree_root(text).map_err(|e| edit_err(file, e))
 }
 
 fn find(text: &str, file: &str, path: &[Seg]) -> Result<Option<YamlNode>> {
@@ -112,11 +44,6 @@ fn find(text: &str, file: &str, path: &[Seg]) -> Result<Option<YamlNode>> {
         }
     }
     Ok(Some(n))
-}
-
-fn range(n: &YamlNode) -> (usize, usize) {
-    let r = n.byte_range();
-    (r.start as usize, r.end as usize)
 }
 
 fn is_block(n: &YamlNode) -> bool {
@@ -625,72 +552,6 @@ pub(super) fn apply(text: &str, file: &str, by: &str, edits: &[Edit]) -> Result<
     Ok(t)
 }
 
-/// Refuses, with its key path and line, a value of machine YAML `text`
-/// (named `file`) that the tree editor cannot write back: an alias or a
-/// tagged value; and a text that does not parse as one YAML tree.
-pub fn check_writable(text: &str, file: &str) -> Result<()> {
-    let parsed = YamlFile::parse(text);
-    let at = |offset: usize, msg: String| {
-        let line = text[..offset].matches('\n').count() + 1;
-        let column = text[line_start(text, offset)..offset].chars().count() + 1;
-        Error::Machine(Located::new(file, line, column, msg))
-    };
-    if let Some(e) = parsed.positioned_errors().first() {
-        return Err(at(
-            (e.range.start as usize).min(text.len()),
-            format!(
-                "the writer cannot read this layout ({}); write it in plain block or flow style",
-                e.message
-            ),
-        ));
-    }
-    let Some(doc) = parsed.tree().documents().next() else {
-        return Ok(());
-    };
-    let Some(m) = doc.as_mapping() else {
-        return Ok(());
-    };
-    let mut stack = vec![(String::new(), YamlNode::Mapping(m))];
-    while let Some((path, n)) = stack.pop() {
-        let what = match &n {
-            YamlNode::Alias(_) => Some("an alias (`*name`): writing the anchored value would change every alias of it"),
-            YamlNode::TaggedNode(_) => Some("a tagged value (`!tag`)"),
-            _ => None,
-        };
-        if let Some(what) = what {
-            let shown = if path.is_empty() { "." } else { &path };
-            return Err(at(
-                range(&n).0.min(text.len()),
-                format!(
-                    "{shown}: {what}, which cannot be written back by `calibrate` or `diagnose --write-model`; write the value out"
-                ),
-            ));
-        }
-        match &n {
-            YamlNode::Mapping(m) => {
-                for e in m.entries() {
-                    let k = e.key_node().as_ref().and_then(key_text).unwrap_or_default();
-                    let p = if path.is_empty() {
-                        k
-                    } else {
-                        format!("{path}.{k}")
-                    };
-                    if let Some(v) = e.value_node() {
-                        stack.push((p, v));
-                    }
-                }
-            }
-            YamlNode::Sequence(s) => {
-                for (i, v) in s.values().enumerate() {
-                    stack.push((format!("{path}[{i}]"), v));
-                }
-            }
-            _ => {}
-        }
-    }
-    Ok(())
-}
-
 #[cfg(test)]
 mod tests {
     use super::super::{Edit, ThermalTermText, apply};
@@ -943,10 +804,9 @@ mod tests {
                     continue;
                 }
                 let text = std::fs::read_to_string(&p).expect("text");
-                let Ok(m) = Machine::from_yaml_kind(&text, "f") else {
+                let Ok(m) = Machine::from_yaml_str(&text, "f") else {
                     continue;
                 };
-                check_writable(&text, "f").expect("writable");
                 seen += 1;
                 if let Machine::Robot(r) = m {
                     let p = RobotParam::JointStiffness { joint: 1 };
