@@ -230,7 +230,10 @@ fn block_layout_diagnose_write_model() {
         std::fs::read_to_string(out).expect("written")
     };
     let b = write(dir.path(), "block.yaml", &block);
-    let want = run(&repo("samples/diagnose/model.yaml"), &dir.path().join("a.yaml"));
+    let want = run(
+        &repo("samples/diagnose/model.yaml"),
+        &dir.path().join("a.yaml"),
+    );
     let got = run(&b, &dir.path().join("b.yaml"));
     assert_comments_kept(&block, &got, "diagnose");
     assert_ne!(model(&got), model(&block), "values written");

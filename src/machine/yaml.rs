@@ -159,7 +159,8 @@ fn check_tree(text: &str, file: &str, root: &YamlNode) -> Result<(), Error> {
                     let k = key.as_ref().and_then(key_text).unwrap_or_default();
                     if !seen.insert(k.clone()) {
                         let off = key.as_ref().map_or(range(&n).0, |k| range(k).0);
-                        let msg = format!("duplicate key `{k}`: a key may appear once in a mapping");
+                        let msg =
+                            format!("duplicate key `{k}`: a key may appear once in a mapping");
                         let msg = if path.is_empty() {
                             msg
                         } else {
@@ -230,7 +231,10 @@ pub(crate) fn segs(path: &str) -> Vec<Seg> {
 pub(crate) fn tree_root(text: &str) -> Result<YamlNode, String> {
     let parsed = YamlFile::parse(text);
     if let Some(e) = parsed.positioned_errors().first() {
-        return Err(format!("the file does not read as a YAML tree: {}", e.message));
+        return Err(format!(
+            "the file does not read as a YAML tree: {}",
+            e.message
+        ));
     }
     let mut docs = parsed.tree().documents();
     let doc = docs.next().ok_or("the file has no document")?;

@@ -145,28 +145,39 @@ pub fn apply(text: &str, file: &str, by: &str, edits: &[Edit]) -> Result<String>
         Ok::<_, Error>(t)
     })();
     let check = |t: &str| reads_back(t, edits);
-    match in_place {
-        Ok(t) if check(&t) == ReadBack::Values => Ok(t),
-        Ok(t) => match tree::apply(text, file, by, edits) {
-            Ok(v) if check(&v) == ReadBack::Values => Ok(v),
-            _ if check(&t) == ReadBack::Invalid => Ok(t),
-            _ => Err(edit_err(
-                file,
-                "an edited value does not read back as written; the layout of its key cannot be edited",
-            )),
-        },
-        Err(e) => match tree::apply(text, file, by, edits) {
-            Ok(v) if check(&v) != ReadBack::Wrong => Ok(v),
-            Ok(_) => Err(edit_err(
-                file,
-                "an edited value does not read back as written; the layout of its key cannot be edited",
-            )),
-            Err(tree_err) => {
-                tracing::debug!("line editor: {e}; tree editor: {tree_err}");
-                Err(tree_err)
-            }
-        },
+    let line_ok = matches!(&in_place, Ok(t) if check(t) == ReadBack::Values);
+    if line_ok && in_place.as_ref().is_ok_and(|t| comments_kept(text, t)) {
+        return in_place;
     }
+    let on_tree = tree::apply(text, file, by, edits);
+    let not_back = || {
+        edit_err(
+            file,
+            "an edited value does not read back as written; the layout of its key cannot be edited",
+        )
+    };
+    match (in_place, on_tree) {
+        (_, Ok(v)) if check(&v) == ReadBack::Values => Ok(v),
+        (Ok(t), _) if line_ok || check(&t) == ReadBack::Invalid => Ok(t),
+        (Ok(_), _) => Err(not_back()),
+        (Err(_), Ok(v)) if check(&v) == ReadBack::Invalid => Ok(v),
+        (Err(_), Ok(_)) => Err(not_back()),
+        (Err(e), Err(tree_err)) => {
+            tracing::debug!("line editor: {e}; tree editor: {tree_err}");
+            Err(tree_err)
+        }
+    }
+}
+
+/// Whether every comment line of `before` is still in `after` (a table
+/// replaced whole by the line editor drops the comments inside it).
+fn comments_kept(before: &str, after: &str) -> bool {
+    let kept: std::collections::BTreeSet<&str> = after.lines().map(str::trim).collect();
+    before
+        .lines()
+        .map(str::trim)
+        .filter(|l| l.starts_with('#'))
+        .all(|l| kept.contains(l))
 }
 
 /// What an edited text reads back as.

@@ -25,10 +25,10 @@ use yaml_edit::YamlNode;
 
 use super::{Edit, LETTERS, edit_err, number, round_to};
 use crate::error::Result;
-use crate::machine::yaml::{self, Seg, child, key_text, range, segs};
 use crate::machine::robot::RobotParam;
 use crate::machine::status::{self, Calibration, Status};
 use crate::machine::tool::ToolParam;
+use crate::machine::yaml::{self, Seg, child, key_text, range, segs};
 
 /// The root mapping of `text`.
 fn root(text: &str, file: &str) -> Result<YamlNode> {
@@ -58,13 +58,12 @@ fn is_block(n: &YamlNode) -> bool {
 /// runs on over the comments and blank lines after it).
 fn content_end(n: &YamlNode) -> usize {
     let last = match n {
-        YamlNode::Mapping(m) if !m.is_flow_style() => m
-            .entries()
-            .last()
-            .and_then(|e| match e.value_node() {
+        YamlNode::Mapping(m) if !m.is_flow_style() => {
+            m.entries().last().and_then(|e| match e.value_node() {
                 Some(v) if range(&v).1 > range(&v).0 => Some(content_end(&v)),
                 _ => e.key_node().map(|k| range(&k).1),
-            }),
+            })
+        }
         YamlNode::Sequence(s) if !s.is_flow_style() => s.values().last().map(|v| content_end(&v)),
         _ => None,
     };
@@ -150,7 +149,11 @@ fn insert(
             New::Rows(r) => format!("{key}: [{}]", r.join(", ")),
         };
         // The comment line, when added, comes before the mapping.
-        let shift = if comment.is_empty() { 0 } else { comment.len() + 3 };
+        let shift = if comment.is_empty() {
+            0
+        } else {
+            comment.len() + 3
+        };
         let (start, end) = range(&n);
         let (start, end) = (start + shift, end + shift);
         return Ok(match (entries.first(), at) {
@@ -186,7 +189,9 @@ fn insert(
         }
     }
     let block = lines.join("\n");
-    let own_line = text[line_start(text, first_key)..first_key].trim().is_empty();
+    let own_line = text[line_start(text, first_key)..first_key]
+        .trim()
+        .is_empty();
     let target = match at {
         At::First if own_line && !entries.is_empty() => None,
         At::First => entries.first(),
@@ -404,6 +409,37 @@ fn list(v: &[f64]) -> String {
     format!("[{}]", items.join(", "))
 }
 
+/// Whether the table at `path` has exactly the lists `columns` name, each
+/// of their length (so that it can be written number by number, the
+/// comments between the numbers kept).
+fn same_shape(text: &str, file: &str, path: &str, columns: &[(&str, &[f64]); 3]) -> Result<bool> {
+    let Some(n) = find(text, file, &segs(path))? else {
+        return Ok(false);
+    };
+    let Some(m) = n.as_mapping() else {
+        return Ok(false);
+    };
+    if m.entries().count() != columns.len() {
+        return Ok(false);
+    }
+    Ok(columns.iter().all(|(key, values)| {
+        child(&n, &Seg::Key((*key).into()))
+            .and_then(|l| l.as_sequence().map(|s| s.len()))
+            .is_some_and(|len| len == values.len())
+    }))
+}
+
+/// Writes the lists of the table at `path` number by number.
+fn set_lists(text: &str, file: &str, path: &str, columns: &[(&str, &[f64]); 3]) -> Result<String> {
+    let mut t = text.to_string();
+    for (key, values) in columns {
+        for (i, v) in values.iter().enumerate() {
+            t = set(&t, file, &format!("{path}.{key}[{i}]"), &number(*v))?;
+        }
+    }
+    Ok(t)
+}
+
 /// Applies one edit to `text`.
 fn one(text: &str, file: &str, by: &str, edit: &Edit) -> Result<String> {
     match edit {
@@ -435,7 +471,15 @@ fn one(text: &str, file: &str, by: &str, edit: &Edit) -> Result<String> {
                 list(forward),
                 list(reverse)
             );
-            set_or_add(text, file, &path, &table, At::First)
+            let columns = [
+                (pos, positions.as_slice()),
+                ("forward", forward),
+                ("reverse", reverse),
+            ];
+            match same_shape(text, file, &path, &columns)? {
+                true => set_lists(text, file, &path, &columns),
+                false => set_or_add(text, file, &path, &table, At::First),
+            }
         }
         Edit::ThermalTerm {
             term,
@@ -794,7 +838,12 @@ mod tests {
     fn every_machine_file_of_the_repository_is_writable() {
         let root = env!("CARGO_MANIFEST_DIR");
         let mut seen = 0;
-        for dir in ["machines", "samples", "samples/diagnose", "samples/observations"] {
+        for dir in [
+            "machines",
+            "samples",
+            "samples/diagnose",
+            "samples/observations",
+        ] {
             let Ok(entries) = std::fs::read_dir(format!("{root}/{dir}")) else {
                 continue;
             };
