@@ -37,8 +37,9 @@ impl<'a> Source<'a> {
         check_depth(text, file)?;
         let parsed = YamlFile::parse(text);
         if let Some(e) = parsed.positioned_errors().first() {
-            // Text the typed reader refuses too is reported in its words.
-            typed::<serde::de::IgnoredAny>(text, file)?;
+            // Text the typed reader refuses too is reported in its words
+            // (with the key path of the mapping it fails in).
+            typed::<serde_yaml::Mapping>(text, file)?;
             return Err(at(
                 text,
                 file,
