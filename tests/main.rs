@@ -2,6 +2,7 @@
 //! goldens, property tests and regressions.
 
 mod alloc;
+mod architecture;
 mod bad_corpus;
 mod batch_cli;
 mod calibrate_cli;
@@ -28,6 +29,7 @@ mod hostile;
 mod krl;
 mod languages;
 mod layers;
+mod machine_layouts;
 mod machine_tool;
 mod mounts;
 mod new_names;

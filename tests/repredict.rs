@@ -354,7 +354,7 @@ fn promise_holds(case: &Case, effects: &str, tol: f64) -> Outcome {
     }
     let job = Job {
         predictor: Some(
-            ToolPredictor::new(&m, EffectSet::parse(effects).expect("effects"))
+            ToolPredictor::new(&m, EffectSet::from_flags(&effects.parse().expect("effects"), &[]).expect("effects"))
                 .with_process(&process),
         ),
         setup,

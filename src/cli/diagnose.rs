@@ -264,13 +264,8 @@ impl WrittenModel<'_> {
                 .map_err(|e| Error::io(path, e))
         })?;
         let mut out = format!(
-            "\nwrote {} ({}): {}\n",
+            "\nwrote {} (values edited in place, comments kept): {}\n",
             path.display(),
-            if w.in_place {
-                "values edited in place, comments kept"
-            } else {
-                "document rewritten, inner comments not kept"
-            },
             if w.written.is_empty() {
                 "no effect added (the model is unchanged)".to_string()
             } else {

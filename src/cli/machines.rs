@@ -23,8 +23,7 @@ pub(super) struct Loaded {
 /// the file), warning when the file holds example values.
 pub(super) fn open(name: &str) -> Result<(Machine, Loaded)> {
     let file = MachineFile::open(name)?;
-    let machine = file.load()?;
-    let status = file.status()?;
+    let (machine, status) = file.read()?;
     warn_example(&file, &status);
     Ok((machine, Loaded { file, status }))
 }

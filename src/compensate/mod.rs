@@ -1318,8 +1318,8 @@ fn cycle_hole(
     let mut at_r = mv.end;
     at_r[2] = r_level;
     // No process force at the R level: the drill is not cutting yet.
-    let free = pred.with_context(crate::predict::MoveContext {
-        force_n: Vector3::zeros(),
+    let free = pred.with_context(MoveContext {
+        wrench: None,
         ..pred.ctx
     });
     // The R level is reached with the directions before the feed:

@@ -179,10 +179,6 @@ pub struct Written {
     pub written: Vec<String>,
     /// Effects not written, with the reason.
     pub not_written: Vec<(String, String)>,
-    /// True when the text was edited in place (comments kept); false when
-    /// the writer rewrote a layout it cannot edit in place
-    /// ([`yaml_write::apply_reporting`]).
-    pub in_place: bool,
 }
 
 /// The edits of the robot file that add the fitted values `p` (display
@@ -298,15 +294,13 @@ pub fn write_model_for(
         }
     }
     edits.extend(thermal);
-    let (text, in_place) =
-        yaml_write::apply_reporting(machine_text, "(machine file)", "postproc diagnose", &edits)?;
+    let text = yaml_write::apply(machine_text, "(machine file)", "postproc diagnose", &edits)?;
     // The written file must load.
     Machine::from_yaml_str(&text, "(model that was to be written)")?;
     Ok(Written {
         text,
         written,
         not_written,
-        in_place,
     })
 }
 
@@ -437,7 +431,13 @@ mod tests {
             epsilon = LEN_TOL
         );
         assert_eq!(w.written, vec!["joint3_compliance", "tcp_offset"]);
-        assert!(w.in_place);
+        assert!(
+            text.lines()
+                .filter(|l| l.trim_start().starts_with('#'))
+                .all(|l| w.text.contains(l)),
+            "comments kept: {}",
+            w.text
+        );
         assert!(w.text.contains("# Paper C Table 6"), "comments kept");
         assert!(
             w.text
@@ -476,7 +476,13 @@ mod tests {
             power: 1,
         };
         let w = write_model(&m, &text, &[effect(&m, "thermal_joint3_a_p2", a, 0.3)]).unwrap();
-        assert!(w.in_place);
+        assert!(
+            text.lines()
+                .filter(|l| l.trim_start().starts_with('#'))
+                .all(|l| w.text.contains(l)),
+            "comments kept: {}",
+            w.text
+        );
         assert_eq!(w.written, vec!["thermal_joint3_a_p2"]);
         assert!(
             w.text.contains(
@@ -532,7 +538,13 @@ mod tests {
         };
         let y = t.axis(1).expect("Y axis");
         assert_abs_diff_eq!(y.location.angles_rad.z, 75e-6, epsilon = ANGLE_TOL);
-        assert!(w.in_place);
+        assert!(
+            text.lines()
+                .filter(|l| l.trim_start().starts_with('#'))
+                .all(|l| w.text.contains(l)),
+            "comments kept: {}",
+            w.text
+        );
         assert!(w.text.contains("      EC0Y_urad: 75.0\n"));
         assert!(w.text.contains("# Structure: X is carried by Y"));
         // A backlash edits the X positioning table's columns in place.
@@ -543,7 +555,13 @@ mod tests {
             key: "EXX_um".into(),
         };
         let w = write_model(&m, &text, &[f]).unwrap();
-        assert!(w.in_place, "{}", w.text);
+        assert!(
+            text.lines()
+                .filter(|l| l.trim_start().starts_with('#'))
+                .all(|l| w.text.contains(l)),
+            "comments kept: {}",
+            w.text
+        );
         assert!(w.text.contains("reverse: [11.0, "), "{}", w.text);
     }
 }

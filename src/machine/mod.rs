@@ -57,9 +57,12 @@ pub enum Machine {
     Robot(robot::Robot),
 }
 
-/// The machine kinds a file can declare with its top-level `kind` key.
+/// The machine kinds a file can declare with its top-level `kind` key:
+/// read only for the typed reader's words on a document that is not a
+/// mapping.
 #[derive(Debug, serde::Deserialize)]
 struct KindOnly {
+    #[allow(dead_code)]
     kind: Option<String>,
 }
 
@@ -97,13 +100,23 @@ impl Machine {
     }
 
     /// Parses and validates machine YAML text; `file` names it in errors.
+    /// The text is read once ([`yaml::Source::read`]: one syntax tree,
+    /// duplicate keys and layouts `calibrate` could not write back refused
+    /// with their key path) and validated by the strict loader of its kind.
     pub fn from_yaml_str(text: &str, file: &str) -> Result<Machine> {
-        let kind: KindOnly = yaml::deserialize(text, file)?;
-        match kind.kind.as_deref() {
-            Some("machine_tool") => {
-                Ok(Machine::Tool(tool::MachineTool::from_yaml_str(text, file)?))
-            }
-            Some("robot") => Ok(Machine::Robot(robot::Robot::from_yaml_str(text, file)?)),
+        Self::from_source(&yaml::Source::read(text, file)?)
+    }
+
+    /// Validates a machine file read by [`yaml::Source::read`].
+    pub fn from_source(src: &yaml::Source) -> Result<Machine> {
+        let (text, file) = (src.text(), src.file());
+        if !src.is_mapping() {
+            // The typed reader says what the document is instead.
+            src.deserialize::<KindOnly>()?;
+        }
+        match src.kind() {
+            Some("machine_tool") => Ok(Machine::Tool(tool::MachineTool::from_source(src)?)),
+            Some("robot") => Ok(Machine::Robot(robot::Robot::from_source(src)?)),
             Some(other) => Err(yaml::located(
                 text,
                 file,
@@ -290,6 +303,13 @@ impl MachineFile {
     /// Parses and validates the machine.
     pub fn load(&self) -> Result<Machine> {
         Machine::from_yaml_str(&self.text, &self.shown)
+    }
+
+    /// The validated machine and the file's `status`, from one reading of
+    /// the text.
+    pub fn read(&self) -> Result<(Machine, Status)> {
+        let src = yaml::Source::read(&self.text, &self.shown)?;
+        Ok((Machine::from_source(&src)?, Status::from_source(&src)?))
     }
 
     /// The file's `status` and `calibrations`.

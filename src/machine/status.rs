@@ -9,9 +9,10 @@
 //!   - { date: 2026-11-25, kind: geometry, observations: grid.csv, observations_sha256: 9f…, rows: 242, fit_rms_mm: 0.0012 }
 //! ```
 //!
-//! The keys are read here, apart from the strict raw structs of each machine
-//! kind (which only accept them), and written into a file as text so that
-//! every comment and the layout of the file are kept.
+//! The keys are read here from the whole document (other keys ignored),
+//! apart from the strict raw structs of each machine kind (which only accept
+//! them), and written into a file as text so that every comment and the
+//! layout of the file are kept.
 
 use serde::Deserialize;
 
@@ -68,16 +69,25 @@ impl Status {
     /// YAML `text` (`file` names it in errors). Other keys are left to the
     /// machine's own loader.
     pub fn from_yaml_str(text: &str, file: &str) -> Result<Status> {
-        // Only the two keys are of interest; the rest of the document is
-        // checked by the strict loader of its kind.
-        let keys = only_status_keys(text);
-        let raw: RawStatus = if keys.trim().is_empty() {
+        Self::from_source(&yaml::Source::read(text, file)?)
+    }
+
+    /// The `status` and `calibrations` keys of a machine file read by
+    /// [`yaml::Source::read`].
+    pub fn from_source(src: &yaml::Source) -> Result<Status> {
+        let (text, file) = (src.text(), src.file());
+        // Only the two keys are read (the struct ignores the others, which
+        // the strict loader of the file's kind checks), whatever the layout.
+        let empty = text
+            .lines()
+            .all(|l| l.trim().is_empty() || l.trim_start().starts_with('#'));
+        let raw: RawStatus = if empty {
             RawStatus {
                 status: None,
                 calibrations: None,
             }
         } else {
-            yaml::deserialize(&keys, file)?
+            src.deserialize()?
         };
         let bad = |path: &str, msg: &str| yaml::located(text, file, path, msg);
         let status = match (raw.status.as_deref(), raw.calibrations) {
@@ -162,25 +172,6 @@ impl Status {
             _ => None,
         }
     }
-}
-
-/// The top-level `status` and `calibrations` entries of `text` (with the
-/// lines of their blocks) and blank lines in place of every other line, so
-/// that line numbers stay those of the file.
-fn only_status_keys(text: &str) -> String {
-    let mut out = String::with_capacity(text.len() / 4);
-    let mut keep = false;
-    for line in text.lines() {
-        let top = !line.starts_with([' ', '\t', '#', '-']) && !line.trim().is_empty();
-        if top {
-            keep = line.starts_with("status:") || line.starts_with("calibrations:");
-        }
-        if keep {
-            out.push_str(line);
-        }
-        out.push('\n');
-    }
-    out
 }
 
 fn check_calibration(c: &Calibration) -> std::result::Result<(), (&'static str, String)> {
@@ -275,15 +266,7 @@ fn civil_date(days: i64) -> String {
 pub fn set_calibrated(text: &str, file: &str, calibration: &Calibration) -> Result<String> {
     let eol = if text.contains("\r\n") { "\r\n" } else { "\n" };
     let mut lines: Vec<String> = text.lines().map(str::to_string).collect();
-    let entry = format!(
-        "  - {{ date: {}, kind: {}, observations: {}, observations_sha256: {}, rows: {}, fit_rms_mm: {} }}",
-        calibration.date,
-        yaml_scalar(&calibration.kind),
-        yaml_scalar(&calibration.observations),
-        calibration.observations_sha256,
-        calibration.rows,
-        fmt_rms(calibration.fit_rms_mm)
-    );
+    let entry = format!("  - {}", calibration_flow(calibration));
     let top =
         |lines: &[String], key: &str| lines.iter().position(|l| l.starts_with(&format!("{key}:")));
     let status_at = match top(&lines, "status") {
@@ -329,18 +312,34 @@ pub fn set_calibrated(text: &str, file: &str, calibration: &Calibration) -> Resu
     }
     // The edited file must read back with the new entry (its RMS as
     // written).
-    let want = Calibration {
-        fit_rms_mm: fmt_rms(calibration.fit_rms_mm)
-            .parse()
-            .unwrap_or(calibration.fit_rms_mm),
-        ..calibration.clone()
-    };
     match Status::from_yaml_str(&out, file)? {
-        Status::Calibrated(list) if list.last() == Some(&want) => Ok(out),
+        Status::Calibrated(list) if list.last() == Some(&as_written(calibration)) => Ok(out),
         _ => Err(Error::Machine(Located::whole_file(
             file,
             "cannot record the calibration: the edited `status`/`calibrations` keys do not read back",
         ))),
+    }
+}
+
+/// One `calibrations` entry as a one-line flow map.
+pub(crate) fn calibration_flow(c: &Calibration) -> String {
+    format!(
+        "{{ date: {}, kind: {}, observations: {}, observations_sha256: {}, rows: {}, fit_rms_mm: {} }}",
+        c.date,
+        yaml_scalar(&c.kind),
+        yaml_scalar(&c.observations),
+        c.observations_sha256,
+        c.rows,
+        fmt_rms(c.fit_rms_mm)
+    )
+}
+
+/// The calibration as it reads back from [`calibration_flow`] (its RMS
+/// rounded as written).
+pub(crate) fn as_written(c: &Calibration) -> Calibration {
+    Calibration {
+        fit_rms_mm: fmt_rms(c.fit_rms_mm).parse().unwrap_or(c.fit_rms_mm),
+        ..c.clone()
     }
 }
 

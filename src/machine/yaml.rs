@@ -1,27 +1,283 @@
-//! YAML helpers shared by every machine-file loader: strict deserialization
-//! with the key path and line of the first error, and locating a key path in
-//! the text for errors found during validation.
-//!
-//! Before any typed deserialization the text is checked for its nesting
-//! depth (at most [`limits::YAML_MAX_DEPTH`] levels, counted without parsing,
-//! because the YAML parser's time grows with the square of the depth) and
-//! for duplicate keys in every mapping at every level (YAML forbids them;
-//! the parser would silently keep the last one).
+//! Reading a machine file, once: the text is checked for its nesting depth
+//! (at most [`limits::YAML_MAX_DEPTH`] levels, counted without parsing,
+//! because a YAML parser's time grows with the square of the depth), then
+//! parsed into a lossless syntax tree (the `yaml-edit` crate: every byte and
+//! comment is a token of the tree, so the writer, [`super::yaml_write`],
+//! edits the same tree). One walk of the tree refuses duplicate keys in
+//! every mapping at every level (YAML forbids them; a typed reader would
+//! silently keep the last one) and the few layouts the writer cannot write
+//! back (an alias, a tag), each with its key path and line, and reads the
+//! file's `kind`. The checked text then goes through the strict typed pass
+//! of its kind ([`Source::deserialize`]: serde raw structs that deny
+//! unknown keys, with the key path and line of the first error), and key
+//! paths of validation errors are located on the tree ([`locate`]).
 
 use std::collections::BTreeSet;
-use std::fmt;
 
-use serde::de::{self, DeserializeOwned, MapAccess, SeqAccess, Visitor};
+use serde::de::DeserializeOwned;
+use yaml_edit::{YamlFile, YamlNode};
 
 use crate::error::{Error, Invalid, Located};
 use crate::limits;
 
-/// Deserializes `text` into `T`, reporting `file:line:column: key.path: message`
-/// on failure (unknown keys, wrong types, missing keys, duplicate keys,
-/// nesting deeper than [`limits::YAML_MAX_DEPTH`]).
+/// A machine file read and checked once (see the module comment): the text
+/// with its `kind`, ready for the typed pass of its kind.
+#[derive(Debug, Clone)]
+pub struct Source<'a> {
+    text: &'a str,
+    file: &'a str,
+    kind: Option<String>,
+    mapping: bool,
+}
+
+impl<'a> Source<'a> {
+    /// Reads machine YAML `text` (named `file` in errors): nesting depth,
+    /// one syntax tree, no duplicate key, nothing the writer cannot write.
+    pub fn read(text: &'a str, file: &'a str) -> Result<Source<'a>, Error> {
+        check_depth(text, file)?;
+        let parsed = YamlFile::parse(text);
+        if let Some(e) = parsed.positioned_errors().first() {
+            // Text the typed reader refuses too is reported in its words
+            // (with the key path of the mapping it fails in).
+            typed::<serde_yaml::Mapping>(text, file)?;
+            return Err(at(
+                text,
+                file,
+                e.range.start as usize,
+                format!(
+                    "the machine-file writer cannot read this layout ({}); write it in plain block or flow style",
+                    e.message
+                ),
+            ));
+        }
+        let mut docs = parsed.tree().documents();
+        let doc = docs.next();
+        if docs.next().is_some() {
+            return Err(Error::Machine(Located::new(
+                file,
+                1,
+                1,
+                "more than one YAML document (`---`): a machine file is one document",
+            )));
+        }
+        let root = doc.and_then(|d| d.as_mapping()).map(YamlNode::Mapping);
+        let kind = root
+            .as_ref()
+            .and_then(|r| child(r, &Seg::Key("kind".into())))
+            .as_ref()
+            .and_then(key_text);
+        if let Some(r) = &root {
+            check_tree(text, file, r)?;
+        }
+        Ok(Source {
+            text,
+            file,
+            kind,
+            mapping: root.is_some(),
+        })
+    }
+
+    /// The text.
+    pub fn text(&self) -> &'a str {
+        self.text
+    }
+
+    /// How errors name the file.
+    pub fn file(&self) -> &'a str {
+        self.file
+    }
+
+    /// The top-level `kind` as written, when the document is a mapping
+    /// that has one.
+    pub fn kind(&self) -> Option<&str> {
+        self.kind.as_deref()
+    }
+
+    /// Whether the document is a mapping.
+    pub fn is_mapping(&self) -> bool {
+        self.mapping
+    }
+
+    /// The typed pass: deserializes the text into `T`, reporting
+    /// `file:line:column: key.path: message` on failure (unknown keys,
+    /// wrong types, missing keys).
+    pub fn deserialize<T: DeserializeOwned>(&self) -> Result<T, Error> {
+        typed(self.text, self.file)
+    }
+}
+
+/// Reads `text` ([`Source::read`]) and deserializes it into `T`, reporting
+/// `file:line:column: key.path: message` on failure (unknown keys, wrong
+/// types, missing keys, duplicate keys, nesting deeper than
+/// [`limits::YAML_MAX_DEPTH`]).
 pub fn deserialize<T: DeserializeOwned>(text: &str, file: &str) -> Result<T, Error> {
-    check_depth(text, file)?;
-    check_unique_keys(text, file)?;
+    Source::read(text, file)?.deserialize()
+}
+
+/// A located machine-file error at byte `offset` of `text`.
+fn at(text: &str, file: &str, offset: usize, message: String) -> Error {
+    let (line, column) = line_col(text, offset);
+    Error::Machine(Located::new(file, line, column, message))
+}
+
+/// 1-based line and column (in characters) of byte `offset`.
+fn line_col(text: &str, offset: usize) -> (usize, usize) {
+    let mut offset = offset.min(text.len());
+    while !text.is_char_boundary(offset) {
+        offset -= 1;
+    }
+    let start = text[..offset].rfind('\n').map_or(0, |i| i + 1);
+    (
+        text[..offset].matches('\n').count() + 1,
+        text[start..offset].chars().count() + 1,
+    )
+}
+
+/// One walk of the tree: a key twice in one mapping, an alias or a tag is
+/// refused with its key path.
+fn check_tree(text: &str, file: &str, root: &YamlNode) -> Result<(), Error> {
+    let mut stack = vec![(String::new(), root.clone())];
+    while let Some((path, n)) = stack.pop() {
+        let what = match &n {
+            YamlNode::Alias(_) => Some(
+                "an alias (`*name`), which `calibrate` and `diagnose --write-model` could not write back (the anchored value would change with it); write the value out",
+            ),
+            YamlNode::TaggedNode(_) => Some(
+                "a tagged value (`!tag`), which `calibrate` and `diagnose --write-model` could not write back; write the plain value",
+            ),
+            _ => None,
+        };
+        if let Some(what) = what {
+            let shown = if path.is_empty() { "." } else { &path };
+            return Err(at(text, file, range(&n).0, format!("{shown}: {what}")));
+        }
+        match &n {
+            YamlNode::Mapping(m) => {
+                let mut seen = BTreeSet::new();
+                let mut children = Vec::new();
+                for e in m.entries() {
+                    let key = e.key_node();
+                    let k = key.as_ref().and_then(key_text).unwrap_or_default();
+                    if !seen.insert(k.clone()) {
+                        let off = key.as_ref().map_or(range(&n).0, |k| range(k).0);
+                        let msg =
+                            format!("duplicate key `{k}`: a key may appear once in a mapping");
+                        let msg = if path.is_empty() {
+                            msg
+                        } else {
+                            format!("{path}: {msg}")
+                        };
+                        return Err(at(text, file, off, msg));
+                    }
+                    let p = if path.is_empty() {
+                        k
+                    } else {
+                        format!("{path}.{k}")
+                    };
+                    if let Some(v) = e.value_node() {
+                        children.push((p, v));
+                    }
+                }
+                // Depth first in file order: the first problem is reported.
+                stack.extend(children.into_iter().rev());
+            }
+            YamlNode::Sequence(s) => {
+                let items: Vec<_> = s
+                    .values()
+                    .enumerate()
+                    .map(|(i, v)| (format!("{path}[{i}]"), v))
+                    .collect();
+                stack.extend(items.into_iter().rev());
+            }
+            _ => {}
+        }
+    }
+    Ok(())
+}
+
+/// One step of a key path.
+#[derive(Debug, Clone, PartialEq)]
+pub(crate) enum Seg {
+    /// A mapping key.
+    Key(String),
+    /// A sequence item by position.
+    Index(usize),
+    /// The sequence item whose `name` is this (`axes[X]`).
+    Name(String),
+}
+
+/// Splits `a.b[2].c` / `axes[X].e` into steps.
+pub(crate) fn segs(path: &str) -> Vec<Seg> {
+    let mut out = Vec::new();
+    for part in path.split('.').filter(|p| !p.is_empty()) {
+        let (key, mut rest) = part.split_at(part.find('[').unwrap_or(part.len()));
+        if !key.is_empty() {
+            out.push(Seg::Key(key.to_string()));
+        }
+        while let Some(s) = rest.strip_prefix('[') {
+            let end = s.find(']').unwrap_or(s.len());
+            let inner = &s[..end];
+            out.push(match inner.parse::<usize>() {
+                Ok(n) => Seg::Index(n),
+                Err(_) => Seg::Name(inner.to_string()),
+            });
+            rest = s.get(end + 1..).unwrap_or("");
+        }
+    }
+    out
+}
+
+/// The root mapping of `text`, when it parses as one YAML tree whose
+/// document is a mapping; else the reason.
+pub(crate) fn tree_root(text: &str) -> Result<YamlNode, String> {
+    let parsed = YamlFile::parse(text);
+    if let Some(e) = parsed.positioned_errors().first() {
+        return Err(format!(
+            "the file does not read as a YAML tree: {}",
+            e.message
+        ));
+    }
+    let mut docs = parsed.tree().documents();
+    let doc = docs.next().ok_or("the file has no document")?;
+    if docs.next().is_some() {
+        return Err("the file has more than one document".into());
+    }
+    doc.as_mapping()
+        .map(YamlNode::Mapping)
+        .ok_or_else(|| "the document is not a mapping".into())
+}
+
+/// The text of a scalar key or value, unquoted.
+pub(crate) fn key_text(k: &YamlNode) -> Option<String> {
+    k.as_scalar().map(|s| s.as_string())
+}
+
+/// The child of `n` that `seg` names.
+pub(crate) fn child(n: &YamlNode, seg: &Seg) -> Option<YamlNode> {
+    match seg {
+        Seg::Key(k) => n
+            .as_mapping()?
+            .entries()
+            .find(|e| e.key_node().as_ref().and_then(key_text).as_deref() == Some(k))?
+            .value_node(),
+        Seg::Index(i) => n.as_sequence()?.get(*i),
+        Seg::Name(name) => n.as_sequence()?.values().find(|item| {
+            item.get("name")
+                .as_ref()
+                .and_then(key_text)
+                .is_some_and(|s| s == *name)
+        }),
+    }
+}
+
+/// Byte range of a node in its text.
+pub(crate) fn range(n: &YamlNode) -> (usize, usize) {
+    let r = n.byte_range();
+    (r.start as usize, r.end as usize)
+}
+
+/// The typed pass of [`Source::deserialize`].
+fn typed<T: DeserializeOwned>(text: &str, file: &str) -> Result<T, Error> {
     let de = serde_yaml::Deserializer::from_str(text);
     match serde_path_to_error::deserialize::<_, T>(de) {
         Ok(v) => Ok(v),
@@ -133,193 +389,6 @@ fn too_deep(depth: usize, line: usize, col: usize, file: &str) -> Result<(), Err
     Ok(())
 }
 
-/// Refuses a mapping that has the same key twice, at any level, naming the
-/// key path of the mapping, the key and the line of its second occurrence.
-pub fn check_unique_keys(text: &str, file: &str) -> Result<(), Error> {
-    let de = serde_yaml::Deserializer::from_str(text);
-    let Err(err) = serde_path_to_error::deserialize::<_, Unique>(de) else {
-        return Ok(());
-    };
-    let path = err.path().to_string();
-    let inner = err.into_inner();
-    let msg = inner.to_string();
-    let Some(key) = msg
-        .find(DUPLICATE)
-        .and_then(|at| msg[at + DUPLICATE.len()..].split(DUPLICATE_END).next())
-    else {
-        // Not a duplicate: the typed pass reports it with its own words.
-        return Ok(());
-    };
-    let mark = inner.location().map(|l| (l.line(), l.column()));
-    let (line, column) = mark
-        .and_then(|(l, c)| second_key_line(text, l, c, key))
-        .or(mark)
-        .unwrap_or((1, 1));
-    let message = if path.is_empty() || path == "." {
-        format!("duplicate key `{key}`: a key may appear once in a mapping")
-    } else {
-        format!("{path}: duplicate key `{key}`: a key may appear once in a mapping")
-    };
-    Err(Error::Machine(Located::new(file, line, column, message)))
-}
-
-const DUPLICATE: &str = "duplicate key \u{1}";
-const DUPLICATE_END: &str = "\u{1}";
-
-/// The line and column of the second block-style line with key `key` among
-/// the keys of the mapping that starts at (`line`, `column`).
-fn second_key_line(text: &str, line: usize, column: usize, key: &str) -> Option<(usize, usize)> {
-    let indent = column.checked_sub(1)?;
-    let mut seen = 0;
-    for (i, l) in text.lines().enumerate().skip(line.checked_sub(1)?) {
-        let trimmed = l.trim_start();
-        if trimmed.is_empty() || trimmed.starts_with('#') {
-            continue;
-        }
-        let ind = l.len() - trimmed.len();
-        // The first key of a mapping inside a `- ` item sits after the dash.
-        let (ind, body) = if i + 1 == line && ind < indent {
-            (indent, l.get(indent..).unwrap_or(""))
-        } else {
-            (ind, trimmed)
-        };
-        if ind < indent {
-            break;
-        }
-        if ind > indent {
-            continue;
-        }
-        let k = body.split(':').next().unwrap_or("").trim();
-        let k = k.trim_matches('"').trim_matches('\'');
-        if k == key && body.contains(':') {
-            seen += 1;
-            if seen == 2 {
-                return Some((i + 1, ind + 1));
-            }
-        }
-    }
-    None
-}
-
-/// Any YAML value, checked for duplicate mapping keys and then dropped.
-struct Unique;
-
-impl<'de> de::Deserialize<'de> for Unique {
-    fn deserialize<D: de::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
-        d.deserialize_any(UniqueVisitor)
-    }
-}
-
-/// A mapping key as text (scalars only; a complex key is not compared).
-struct KeyText(Option<String>);
-
-impl<'de> de::Deserialize<'de> for KeyText {
-    fn deserialize<D: de::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
-        struct V;
-        impl<'de> Visitor<'de> for V {
-            type Value = KeyText;
-            fn expecting(&self, f: &mut fmt::Formatter) -> fmt::Result {
-                f.write_str("a mapping key")
-            }
-            fn visit_bool<E>(self, v: bool) -> Result<KeyText, E> {
-                Ok(KeyText(Some(v.to_string())))
-            }
-            fn visit_i64<E>(self, v: i64) -> Result<KeyText, E> {
-                Ok(KeyText(Some(v.to_string())))
-            }
-            fn visit_u64<E>(self, v: u64) -> Result<KeyText, E> {
-                Ok(KeyText(Some(v.to_string())))
-            }
-            fn visit_f64<E>(self, v: f64) -> Result<KeyText, E> {
-                Ok(KeyText(Some(v.to_string())))
-            }
-            fn visit_str<E>(self, v: &str) -> Result<KeyText, E> {
-                Ok(KeyText(Some(v.to_string())))
-            }
-            fn visit_unit<E>(self) -> Result<KeyText, E> {
-                Ok(KeyText(Some("~".into())))
-            }
-            fn visit_seq<A: SeqAccess<'de>>(self, seq: A) -> Result<KeyText, A::Error> {
-                UniqueVisitor.visit_seq(seq).map(|_| KeyText(None))
-            }
-            fn visit_map<A: MapAccess<'de>>(self, map: A) -> Result<KeyText, A::Error> {
-                UniqueVisitor.visit_map(map).map(|_| KeyText(None))
-            }
-            fn visit_enum<A: de::EnumAccess<'de>>(self, e: A) -> Result<KeyText, A::Error> {
-                UniqueVisitor.visit_enum(e).map(|_| KeyText(None))
-            }
-        }
-        d.deserialize_any(V)
-    }
-}
-
-struct UniqueVisitor;
-
-impl<'de> Visitor<'de> for UniqueVisitor {
-    type Value = Unique;
-    fn expecting(&self, f: &mut fmt::Formatter) -> fmt::Result {
-        f.write_str("any YAML value")
-    }
-    fn visit_bool<E>(self, _: bool) -> Result<Unique, E> {
-        Ok(Unique)
-    }
-    fn visit_i64<E>(self, _: i64) -> Result<Unique, E> {
-        Ok(Unique)
-    }
-    fn visit_u64<E>(self, _: u64) -> Result<Unique, E> {
-        Ok(Unique)
-    }
-    fn visit_i128<E>(self, _: i128) -> Result<Unique, E> {
-        Ok(Unique)
-    }
-    fn visit_u128<E>(self, _: u128) -> Result<Unique, E> {
-        Ok(Unique)
-    }
-    fn visit_f64<E>(self, _: f64) -> Result<Unique, E> {
-        Ok(Unique)
-    }
-    fn visit_str<E>(self, _: &str) -> Result<Unique, E> {
-        Ok(Unique)
-    }
-    fn visit_bytes<E>(self, _: &[u8]) -> Result<Unique, E> {
-        Ok(Unique)
-    }
-    fn visit_unit<E>(self) -> Result<Unique, E> {
-        Ok(Unique)
-    }
-    fn visit_none<E>(self) -> Result<Unique, E> {
-        Ok(Unique)
-    }
-    fn visit_some<D: de::Deserializer<'de>>(self, d: D) -> Result<Unique, D::Error> {
-        d.deserialize_any(UniqueVisitor)
-    }
-    fn visit_newtype_struct<D: de::Deserializer<'de>>(self, d: D) -> Result<Unique, D::Error> {
-        d.deserialize_any(UniqueVisitor)
-    }
-    fn visit_seq<A: SeqAccess<'de>>(self, mut seq: A) -> Result<Unique, A::Error> {
-        while seq.next_element::<Unique>()?.is_some() {}
-        Ok(Unique)
-    }
-    fn visit_map<A: MapAccess<'de>>(self, mut map: A) -> Result<Unique, A::Error> {
-        let mut seen = BTreeSet::new();
-        while let Some(KeyText(key)) = map.next_key::<KeyText>()? {
-            if let Some(k) = key {
-                if !seen.insert(k.clone()) {
-                    return Err(de::Error::custom(format!("{DUPLICATE}{k}{DUPLICATE_END}")));
-                }
-            }
-            map.next_value::<Unique>()?;
-        }
-        Ok(Unique)
-    }
-    fn visit_enum<A: de::EnumAccess<'de>>(self, e: A) -> Result<Unique, A::Error> {
-        use de::VariantAccess;
-        let (_, variant) = e.variant::<KeyText>()?;
-        variant.newtype_variant::<Unique>()?;
-        Ok(Unique)
-    }
-}
-
 /// Turns a validation failure into a located machine-file error.
 pub fn invalid(text: &str, file: &str, inv: Invalid) -> Error {
     located(text, file, &inv.path, &inv.message)
@@ -338,118 +407,42 @@ pub fn located(text: &str, file: &str, path: &str, message: &str) -> Error {
 }
 
 /// Finds the 1-based line and column of a key path such as
-/// `axes[1].component_errors.EXX` in block-style YAML text. Returns the
-/// deepest part of the path that could be found.
+/// `axes[1].component_errors.EXX` in machine YAML text, on its syntax tree:
+/// the key of a mapping entry, the dash of a block-list item (the item
+/// itself in a flow list). Returns the deepest part of the path that could
+/// be found; `None` when not even its first step is there (or the text is
+/// not one YAML tree).
 pub fn locate(text: &str, path: &str) -> Option<(usize, usize)> {
-    let lines: Vec<&str> = text.lines().collect();
-    let mut range = (0usize, lines.len());
-    let mut min_indent: isize = -1;
-    let mut found: Option<(usize, usize)> = None;
-    for seg in split_path(path) {
-        let (key, index) = seg;
-        if !key.is_empty() {
-            let mut hit = None;
-            for (i, line) in lines.iter().enumerate().take(range.1).skip(range.0) {
-                let trimmed = line.trim_start();
-                let indent = (line.len() - trimmed.len()) as isize;
-                let body = trimmed.strip_prefix("- ").unwrap_or(trimmed);
-                let indent = if body.len() != trimmed.len() {
-                    indent + 2
+    let mut n = tree_root(text).ok()?;
+    let mut found = None;
+    for seg in segs(path) {
+        let at = match &seg {
+            Seg::Key(k) => n.as_mapping().and_then(|m| {
+                m.entries()
+                    .find(|e| e.key_node().as_ref().and_then(key_text).as_deref() == Some(k))
+                    .and_then(|e| e.key_node())
+                    .map(|k| range(&k).0)
+            }),
+            _ => child(&n, &seg).map(|item| {
+                let start = range(&item).0;
+                let before = text[..start].trim_end_matches(' ');
+                if before.ends_with('-') {
+                    before.len() - 1
                 } else {
-                    indent
-                };
-                if indent <= min_indent {
-                    continue;
+                    start
                 }
-                let k = body
-                    .split(':')
-                    .next()
-                    .unwrap_or("")
-                    .trim()
-                    .trim_matches('"')
-                    .trim_matches('\'');
-                if k == key && body.contains(':') {
-                    hit = Some((i, indent));
-                    break;
-                }
-            }
-            let (i, indent) = hit?;
-            found = Some((i + 1, indent as usize + 1));
-            min_indent = indent;
-            range = (i, block_end(&lines, i, indent));
-            if index.is_none() {
-                range.0 = i + 1;
-                continue;
-            }
-        }
-        if let Some(n) = index {
-            // Find the n-th sequence item `- ` below the key.
-            let mut count = 0usize;
-            let mut item_indent: Option<isize> = None;
-            let mut hit = None;
-            for (i, line) in lines.iter().enumerate().take(range.1).skip(range.0 + 1) {
-                let trimmed = line.trim_start();
-                let indent = (line.len() - trimmed.len()) as isize;
-                if trimmed.starts_with("- ") || trimmed == "-" {
-                    if item_indent.is_none() {
-                        item_indent = Some(indent);
-                    }
-                    if Some(indent) == item_indent {
-                        if count == n {
-                            hit = Some((i, indent));
-                            break;
-                        }
-                        count += 1;
-                    }
-                }
-            }
-            let (i, indent) = hit?;
-            found = Some((i + 1, indent as usize + 1));
-            min_indent = indent;
-            range = (i, block_end(&lines, i, indent + 1));
+            }),
+        };
+        let Some(at) = at else {
+            break;
+        };
+        found = Some(line_col(text, at));
+        match child(&n, &seg) {
+            Some(next) => n = next,
+            None => break,
         }
     }
     found
-}
-
-fn block_end(lines: &[&str], start: usize, indent: isize) -> usize {
-    for (i, line) in lines.iter().enumerate().skip(start + 1) {
-        let trimmed = line.trim_start();
-        if trimmed.is_empty() || trimmed.starts_with('#') {
-            continue;
-        }
-        let ind = (line.len() - trimmed.len()) as isize;
-        if ind < indent || (ind == indent && !trimmed.starts_with("- ")) {
-            return i;
-        }
-    }
-    lines.len()
-}
-
-/// Splits `a.b[2].c` into `[("a", None), ("b", Some(2)), ("c", None)]`.
-fn split_path(path: &str) -> Vec<(&str, Option<usize>)> {
-    let mut out = Vec::new();
-    for part in path.split('.') {
-        if part.is_empty() {
-            continue;
-        }
-        match part.find('[') {
-            Some(b) => {
-                let key = &part[..b];
-                let mut rest = &part[b..];
-                let mut first = true;
-                while let Some(stripped) = rest.strip_prefix('[') {
-                    let end = stripped.find(']').unwrap_or(stripped.len());
-                    let idx = stripped[..end].parse().ok();
-                    out.push((if first { key } else { "" }, idx));
-                    first = false;
-                    rest = stripped.get(end + 1..).unwrap_or("");
-                }
-            }
-            None => out.push((part, None)),
-        }
-    }
-    out
 }
 
 #[cfg(test)]

@@ -12,17 +12,21 @@
 //! resolution a value is written with is the caller's choice: it rounds the
 //! value first ([`round_to`], [`round_sig`]).
 //!
-//! The layouts edited in place are the ones of the bundled machine files:
-//! top-level flow lists (`k_nm_per_rad: [1, 2, 3]`), one-line flow maps
-//! (`flange_to_tool: { x_mm: 0, … }`, `spindle: { … }`, thermal terms), DH
-//! sections written as block lists of one-line flow maps (`actual:` followed
-//! by `  - { a_mm: …, … }` rows) and machine-tool axis entries in block
-//! style (`- name: X` with `component_errors:` / `location_errors:` maps).
-//! Every edited model value is read back from the result; any other layout
-//! the loader reads (or an edit that does not read back) is written by key
-//! path on the document's values instead ([`value`]: the comments above
-//! the first key kept, inner comments not), and [`apply_reporting`] says
-//! which of the two happened.
+//! Two editors share the work. The line editor of this file edits the
+//! layouts of the bundled machine files: top-level flow lists
+//! (`k_nm_per_rad: [1, 2, 3]`), one-line flow maps (`flange_to_tool: { x_mm:
+//! 0, … }`, `spindle: { … }`, thermal terms), DH sections written as block
+//! lists of one-line flow maps (`actual:` followed by `  - { a_mm: …, … }`
+//! rows) and machine-tool axis entries in block style (`- name: X` with
+//! `component_errors:` / `location_errors:` maps); its output on those files
+//! is what the snapshots and the tests below fix byte for byte. Every other
+//! layout the loader reads — block lists of numbers, block maps, sequence
+//! items level with their key, everything in flow style, quoted keys — is
+//! edited on the file's lossless syntax tree ([`tree`]), with every comment
+//! kept as well. Every edited model value is read back from the result.
+//! The few layouts the tree editor does not write (aliases, tags) are
+//! refused when the file is loaded ([`super::yaml::Source::read`]), never
+//! after a fit.
 
 use serde_yaml::Value;
 
@@ -122,26 +126,17 @@ pub struct ThermalTermText {
     pub ts_per_w: f64,
 }
 
-mod value;
-
-pub use value::REWRITTEN;
+mod tree;
 
 /// Applies `edits` in order to the machine file `text` (named `file` in
 /// errors). `by` names the program in the comment above a section it adds
-/// (`# Identified by `…`.`). The caller reads the result back as the
-/// machine it writes ([`apply_reporting`] says whether it was edited in
-/// place).
+/// (`# Identified by `…`.`). Every comment and every byte the edits do not
+/// touch are kept: the layouts of the bundled files are edited by the
+/// line editor of this module (whose output the snapshots fix), any other
+/// layout the loader reads — or an edit whose result does not read back as
+/// the value it wrote — on the file's syntax tree ([`tree`]). The caller
+/// reads the result back as the machine it writes.
 pub fn apply(text: &str, file: &str, by: &str, edits: &[Edit]) -> Result<String> {
-    apply_reporting(text, file, by, edits).map(|(t, _)| t)
-}
-
-/// [`apply`], and whether the text was edited in place (`true`: every
-/// comment and byte the edits do not touch kept) or — for a layout the
-/// in-place editor does not edit, or an edit that does not read back as
-/// the value it wrote — the document was read as values, edited by key
-/// path and written again (`false`: the comments above the first key kept,
-/// the inner ones not; [`value`]).
-pub fn apply_reporting(text: &str, file: &str, by: &str, edits: &[Edit]) -> Result<(String, bool)> {
     let in_place = (|| {
         let mut t = text.to_string();
         for e in edits {
@@ -150,21 +145,39 @@ pub fn apply_reporting(text: &str, file: &str, by: &str, edits: &[Edit]) -> Resu
         Ok::<_, Error>(t)
     })();
     let check = |t: &str| reads_back(t, edits);
-    match in_place {
-        Ok(t) if check(&t) == ReadBack::Values => Ok((t, true)),
-        Ok(t) => match value::apply(text, file, edits) {
-            Ok(v) if check(&v) == ReadBack::Values => Ok((v, false)),
-            _ if check(&t) == ReadBack::Invalid => Ok((t, true)),
-            _ => Err(edit_err(
-                file,
-                "an edited value does not read back as written; the layout of its key cannot be edited",
-            )),
-        },
-        Err(e) => match value::apply(text, file, edits) {
-            Ok(v) if check(&v) != ReadBack::Wrong => Ok((v, false)),
-            _ => Err(e),
-        },
+    let line_ok = matches!(&in_place, Ok(t) if check(t) == ReadBack::Values);
+    if line_ok && in_place.as_ref().is_ok_and(|t| comments_kept(text, t)) {
+        return in_place;
     }
+    let on_tree = tree::apply(text, file, by, edits);
+    let not_back = || {
+        edit_err(
+            file,
+            "an edited value does not read back as written; the layout of its key cannot be edited",
+        )
+    };
+    match (in_place, on_tree) {
+        (_, Ok(v)) if check(&v) == ReadBack::Values => Ok(v),
+        (Ok(t), _) if line_ok || check(&t) == ReadBack::Invalid => Ok(t),
+        (Ok(_), _) => Err(not_back()),
+        (Err(_), Ok(v)) if check(&v) == ReadBack::Invalid => Ok(v),
+        (Err(_), Ok(_)) => Err(not_back()),
+        (Err(e), Err(tree_err)) => {
+            tracing::debug!("line editor: {e}; tree editor: {tree_err}");
+            Err(tree_err)
+        }
+    }
+}
+
+/// Whether every comment line of `before` is still in `after` (a table
+/// replaced whole by the line editor drops the comments inside it).
+fn comments_kept(before: &str, after: &str) -> bool {
+    let kept: std::collections::BTreeSet<&str> = after.lines().map(str::trim).collect();
+    before
+        .lines()
+        .map(str::trim)
+        .filter(|l| l.starts_with('#'))
+        .all(|l| kept.contains(l))
 }
 
 /// What an edited text reads back as.

@@ -857,6 +857,7 @@ impl<'j, 'm, 'o, 'r> WriteStage<'j, 'm, 'o, 'r> {
                     line: line_no,
                     message,
                     count: 1,
+                    left: None,
                 });
             }
         }

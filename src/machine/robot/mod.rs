@@ -491,7 +491,13 @@ fn output_decimals(raw: Option<&raw::RawOutput>) -> std::result::Result<OutputDe
 impl Robot {
     /// Parses and validates robot YAML; `file` names it in errors.
     pub fn from_yaml_str(text: &str, file: &str) -> Result<Self> {
-        let raw: RawRobot = yaml::deserialize(text, file)?;
+        Self::from_source(&yaml::Source::read(text, file)?)
+    }
+
+    /// Validates a robot file read by [`yaml::Source::read`].
+    pub fn from_source(src: &yaml::Source) -> Result<Self> {
+        let (text, file) = (src.text(), src.file());
+        let raw: RawRobot = src.deserialize()?;
         let r = Self::validate(raw).map_err(|inv| locate_invalid(text, file, inv))?;
         // The values accepted through `plausibility:` overrides.
         for w in plausible::check(&r.d.raw).unwrap_or_default() {

@@ -32,9 +32,10 @@ type V<T> = std::result::Result<T, Invalid>;
 /// A magnitude check of one value in internal units.
 type Check = fn(&str, f64) -> V<f64>;
 
-/// Parses and validates machine-tool YAML.
-pub(crate) fn load(text: &str, file: &str) -> Result<MachineTool> {
-    let raw: RawMachineTool = yaml::deserialize(text, file)?;
+/// Validates a machine-tool file read by [`yaml::Source::read`].
+pub(crate) fn load(src: &yaml::Source) -> Result<MachineTool> {
+    let (text, file) = (src.text(), src.file());
+    let raw: RawMachineTool = src.deserialize()?;
     let m = validate(raw).map_err(|inv| locate_invalid(text, file, inv))?;
     // The values accepted through `plausibility:` overrides.
     for w in super::plausible::check(&m.raw).unwrap_or_default() {

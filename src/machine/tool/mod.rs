@@ -193,7 +193,13 @@ struct Chain {
 impl MachineTool {
     /// Parses and validates machine-tool YAML; `file` names it in errors.
     pub fn from_yaml_str(text: &str, file: &str) -> Result<Self> {
-        load::load(text, file)
+        load::load(&crate::machine::yaml::Source::read(text, file)?)
+    }
+
+    /// Validates a machine-tool file read by
+    /// [`crate::machine::yaml::Source::read`].
+    pub fn from_source(src: &crate::machine::yaml::Source) -> Result<Self> {
+        load::load(src)
     }
 
     /// Display name of the machine.
