@@ -516,7 +516,7 @@ fn malformed_files_give_located_errors() {
         (
             24,
             "  1: { length_mm: -5 }",
-            "f.yaml:24:3: tools.1.length_mm: tool length `-5` is negative",
+            "f.yaml:24:8: tools.1.length_mm: tool length `-5` is negative",
         ),
         (
             14,

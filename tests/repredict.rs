@@ -104,7 +104,7 @@ fn a_compensated_hand_written_frame_attains_its_targets() {
 
 use postproc::machine::tool::MachineTool;
 use postproc::pipeline::gcode::Job;
-use postproc::predict::{MoveContext, EffectSet, ProcessSetup, ToolPredictor};
+use postproc::predict::{EffectSet, MoveContext, ProcessSetup, ToolPredictor};
 use postproc::program::interp::{Motion, Move, Plan, PlanKind, Setup};
 
 /// Sample spacing along a written piece, mm (and at least
@@ -354,8 +354,11 @@ fn promise_holds(case: &Case, effects: &str, tol: f64) -> Outcome {
     }
     let job = Job {
         predictor: Some(
-            ToolPredictor::new(&m, EffectSet::from_flags(&effects.parse().expect("effects"), &[]).expect("effects"))
-                .with_process(&process),
+            ToolPredictor::new(
+                &m,
+                EffectSet::from_flags(&effects.parse().expect("effects"), &[]).expect("effects"),
+            )
+            .with_process(&process),
         ),
         setup,
         settings: postproc::compensate::Settings { tolerance_mm: tol },
