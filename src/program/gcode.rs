@@ -553,6 +553,12 @@ fn offline_only(c: u8, from: &[u8]) -> Option<String> {
             "`[ ]` expressions cannot be compensated offline (expand them in CAM): `{shown}`"
         ),
         b'=' => format!("assignments cannot be compensated offline: `{shown}`"),
+        b',' if matches!(from.get(1), Some(b'C' | b'c')) => format!(
+            "a chamfer word `,C` is not read: the control inserts the chamfer between this move and the next; write the corner as moves: `{shown}`"
+        ),
+        b',' if matches!(from.get(1), Some(b'R' | b'r')) => format!(
+            "a corner-radius word `,R` is not read: the control inserts the rounding between this move and the next; write the corner as an arc: `{shown}`"
+        ),
         _ => return None,
     })
 }

@@ -1779,6 +1779,17 @@ impl Interpreter {
                 let sgn = if left { 1.0 } else { -1.0 };
                 (ma + sgn * h * na, mb + sgn * h * nb)
             }
+            (None, None, None) => {
+                let g = if ccw { "G3" } else { "G2" };
+                return Err(self.err(
+                    line,
+                    first_word,
+                    format!(
+                        "{g} without a centre: an arc needs its centre offset `{}`/`{}` or a radius `R`",
+                        la as char, lb as char
+                    ),
+                ));
+            }
             (ia, ib, None) => {
                 let off = |w: Option<&Word>, slot: usize| -> f64 {
                     match w {
