@@ -1780,15 +1780,7 @@ impl Interpreter {
                 (ma + sgn * h * na, mb + sgn * h * nb)
             }
             (None, None, None) => {
-                let g = if ccw { "G3" } else { "G2" };
-                return Err(self.err(
-                    line,
-                    first_word,
-                    format!(
-                        "{g} without a centre: an arc needs its centre offset `{}`/`{}` or a radius `R`",
-                        la as char, lb as char
-                    ),
-                ));
+                return Err(self.err(line, first_word, no_centre(ccw, la, lb)));
             }
             (ia, ib, None) => {
                 let off = |w: Option<&Word>, slot: usize| -> f64 {
@@ -2163,6 +2155,16 @@ fn programmed_axes(axis: &[Option<&Word>; 6]) -> u8 {
         .enumerate()
         .filter(|(_, a)| a.is_some())
         .fold(0u8, |m, (i, _)| m | (1 << i))
+}
+
+/// The message for an arc with neither a centre offset nor `R`, naming its
+/// code and the plane's centre letters `la`, `lb`.
+fn no_centre(ccw: bool, la: u8, lb: u8) -> String {
+    let g = if ccw { "G3" } else { "G2" };
+    format!(
+        "{g} without a centre: an arc needs its centre offset `{}`/`{}` or a radius `R`",
+        la as char, lb as char
+    )
 }
 
 #[cfg(test)]
