@@ -14,6 +14,28 @@ pub fn text(rel: &str) -> String {
     std::fs::read_to_string(repo(rel)).expect("file in the repository")
 }
 
+/// The fenced blocks of the Markdown `md` whose info string is exactly
+/// `lang`, each with its lines and their line ends.
+pub fn fenced_blocks(md: &str, lang: &str) -> Vec<String> {
+    let open = format!("```{lang}");
+    let (mut out, mut cur): (Vec<String>, Option<String>) = (Vec::new(), None);
+    for line in md.lines() {
+        match &mut cur {
+            None if line.trim_end() == open => cur = Some(String::new()),
+            None => {}
+            Some(b) if line.trim_end() == "```" => {
+                out.push(std::mem::take(b));
+                cur = None;
+            }
+            Some(b) => {
+                b.push_str(line);
+                b.push('\n');
+            }
+        }
+    }
+    out
+}
+
 /// Writes `body` to `dir/name` and gives the path.
 pub fn write(dir: &std::path::Path, name: &str, body: &str) -> PathBuf {
     let p = dir.join(name);

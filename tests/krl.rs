@@ -10,31 +10,7 @@ use postproc::program::euler;
 use postproc::program::krl::config::{StatusTurn, axes_to_model, model_to_axes};
 use postproc::program::krl::{Aggregate, File, Kind, Motion, Target, Value, parse};
 
-use crate::common::repo;
-
-fn read(path: &str) -> String {
-    std::fs::read_to_string(repo(path)).unwrap_or_else(|e| panic!("{path}: {e}"))
-}
-
-/// The fenced blocks of `md` whose info string is exactly `lang`.
-fn blocks(md: &str, lang: &str) -> Vec<String> {
-    let (mut out, mut cur): (Vec<String>, Option<String>) = (Vec::new(), None);
-    for line in md.lines() {
-        match &mut cur {
-            None if line.trim_end() == format!("```{lang}") => cur = Some(String::new()),
-            None => {}
-            Some(b) if line.trim_end() == "```" => {
-                out.push(std::mem::take(b));
-                cur = None;
-            }
-            Some(b) => {
-                b.push_str(line);
-                b.push('\n');
-            }
-        }
-    }
-    out
-}
+use crate::common::{fenced_blocks, text};
 
 /// Every number of an aggregate (nested ones too) spans exactly its text.
 fn numbers_span_their_text(src: &str, a: &Aggregate) -> usize {
@@ -67,8 +43,8 @@ fn aggregates(f: &File) -> impl Iterator<Item = &Aggregate> {
 
 #[test]
 fn every_grammar_example_parses_and_every_construct_is_shown() {
-    let md = read("grammar/krl.md");
-    let examples = blocks(&md, "krl");
+    let md = text("grammar/krl.md");
+    let examples = fenced_blocks(&md, "krl");
     assert!(examples.len() >= 7, "{} examples", examples.len());
     let mut seen = std::collections::BTreeSet::new();
     for (i, ex) in examples.iter().enumerate() {
@@ -175,7 +151,7 @@ fn inline_forms_read_their_points_speed_data_tool_and_base() {
 
 #[test]
 fn the_palletising_pair_parses_with_its_folds_inline_forms_and_data() {
-    let src = read("tests/krl/palletise.src");
+    let src = text("tests/krl/palletise.src");
     let f = parse(&src, "palletise.src").expect("the .src parses");
     // CRLF: spans leave the line ends out.
     assert!(f.lines.iter().all(|l| !src[l.span.clone()].ends_with('\r')));
@@ -240,7 +216,7 @@ fn the_palletising_pair_parses_with_its_folds_inline_forms_and_data() {
         assert!(assigns.contains(&want), "{want} in {assigns:?}");
     }
 
-    let dat = read("tests/krl/palletise.dat");
+    let dat = text("tests/krl/palletise.dat");
     let d = parse(&dat, "palletise.dat").expect("the .dat parses");
     let decl = |name: &str| {
         d.lines
@@ -279,7 +255,7 @@ fn the_palletising_pair_parses_with_its_folds_inline_forms_and_data() {
 
 #[test]
 fn config_dat_holds_tool_and_base_frames() {
-    let src = read("tests/krl/$config.dat");
+    let src = text("tests/krl/$config.dat");
     let f = parse(&src, "$config.dat").expect("parses");
     let frames: Vec<(String, f64)> = f
         .lines
@@ -302,7 +278,7 @@ fn config_dat_holds_tool_and_base_frames() {
 
 #[test]
 fn the_cam_program_has_ten_thousand_lins_with_their_numbers() {
-    let src = read("tests/krl/pocket_mill.src");
+    let src = text("tests/krl/pocket_mill.src");
     let f = parse(&src, "pocket_mill.src").expect("parses");
     let mut lins = 0;
     for l in &f.lines {
@@ -426,7 +402,7 @@ fn the_flange_at_home_reads_b_90() {
 #[test]
 fn cut_files_never_panic() {
     for path in ["tests/krl/palletise.src", "tests/krl/palletise.dat"] {
-        let src = read(path);
+        let src = text(path);
         for end in (0..=src.len()).filter(|e| src.is_char_boundary(*e)) {
             let _ = parse(&src[..end], path);
         }

@@ -1,7 +1,7 @@
 //! Integration tests: the RAPID front end (grammar examples, spans, errors)
 //! and the byte-faithful rewriter.
 
-use crate::common::repo;
+use crate::common::{fenced_blocks, repo};
 use approx::assert_abs_diff_eq;
 use postproc::emit::rapid::{
     Edit, Format, annotate, apply_edits, decl_copy, format_fixed, format_quaternion,
@@ -22,31 +22,6 @@ fn grammar() -> String {
 
 fn sample() -> String {
     std::fs::read_to_string(repo("samples/drilling.mod")).expect("samples/drilling.mod readable")
-}
-
-/// The fenced blocks of `md` whose info string is exactly `lang`.
-fn blocks(md: &str, lang: &str) -> Vec<String> {
-    let mut out = Vec::new();
-    let mut cur: Option<String> = None;
-    for line in md.lines() {
-        match &mut cur {
-            None => {
-                if line.trim_end() == format!("```{lang}") {
-                    cur = Some(String::new());
-                }
-            }
-            Some(b) => {
-                if line.trim_end() == "```" {
-                    out.push(std::mem::take(b));
-                    cur = None;
-                } else {
-                    b.push_str(line);
-                    b.push('\n');
-                }
-            }
-        }
-    }
-    out
 }
 
 fn parse(src: &str) -> Module {
@@ -125,8 +100,8 @@ fn all_robtargets(m: &Module) -> Vec<&RobTarget> {
 #[test]
 fn grammar_examples_parse_and_rejects_fail() {
     let md = grammar();
-    let good = blocks(&md, "rapid");
-    let bad = blocks(&md, "rapid-reject");
+    let good = fenced_blocks(&md, "rapid");
+    let bad = fenced_blocks(&md, "rapid-reject");
     assert!(good.len() >= 3, "grammar has {} rapid examples", good.len());
     assert!(bad.len() >= 3, "grammar has {} reject examples", bad.len());
     for src in &good {
@@ -841,7 +816,7 @@ fn error_lists_and_compact_ifs_are_read() {
 #[test]
 fn editor_placeholders_mark_their_routine() {
     let md = grammar();
-    let src = blocks(&md, "rapid")
+    let src = fenced_blocks(&md, "rapid")
         .into_iter()
         .find(|b| b.contains("MODULE Unfinished"))
         .expect("the placeholder example");
@@ -1058,7 +1033,7 @@ fn grammar_motion_table_is_the_parsers() {
         let want = format!("| `{}` | {kind} | `{}` |", instr.name, instr.signature());
         assert_eq!(*row, want);
     }
-    let example = blocks(&md, "rapid")
+    let example = fenced_blocks(&md, "rapid")
         .into_iter()
         .find(|b| b.contains("MODULE Process"))
         .expect("the process example");
@@ -1097,7 +1072,7 @@ fn grammar_motion_table_is_the_parsers() {
 #[test]
 fn grammar_spot_example_is_the_parsers() {
     let md = grammar();
-    let example = blocks(&md, "rapid")
+    let example = fenced_blocks(&md, "rapid")
         .into_iter()
         .find(|b| b.contains("MODULE Spot"))
         .expect("the spot example");

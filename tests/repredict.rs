@@ -12,17 +12,25 @@ const TOLERANCE_MM: f64 = 0.003;
 
 /// One row of a `report --format csv`: line, motion, the programmed point
 /// and the attained point (programmed + predicted deviation), residual.
-struct Row {
-    line: String,
-    motion: String,
-    programmed: [f64; 3],
-    attained: [f64; 3],
-    residual_mm: f64,
+pub(crate) struct Row {
+    pub(crate) line: String,
+    pub(crate) motion: String,
+    pub(crate) programmed: [f64; 3],
+    pub(crate) attained: [f64; 3],
+    pub(crate) residual_mm: f64,
 }
 
 fn report(path: &std::path::Path) -> Vec<Row> {
+    report_with(&["--machine", "afm-r1000"], path)
+}
+
+/// `report --format csv` of `path` with the machine flags `machine`, read
+/// into rows.
+pub(crate) fn report_with(machine: &[&str], path: &std::path::Path) -> Vec<Row> {
     let out = postproc()
-        .args(["report", "--machine", "afm-r1000", "--format", "csv"])
+        .arg("report")
+        .args(machine)
+        .args(["--format", "csv"])
         .arg(path)
         .output()
         .expect("runs");
@@ -51,7 +59,7 @@ fn report(path: &std::path::Path) -> Vec<Row> {
         .collect()
 }
 
-fn dist(a: &[f64; 3], b: &[f64; 3]) -> f64 {
+pub(crate) fn dist(a: &[f64; 3], b: &[f64; 3]) -> f64 {
     (0..3).map(|i| (a[i] - b[i]).powi(2)).sum::<f64>().sqrt()
 }
 

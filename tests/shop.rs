@@ -8,6 +8,7 @@
 use std::path::{Path, PathBuf};
 
 use crate::common::{postproc, repo, without_header, write};
+use crate::repredict::{Row, dist, report_with};
 
 /// Tolerance of the compensation in these runs, mm (the machine file's).
 const TOLERANCE_MM: f64 = 0.003;
@@ -172,51 +173,8 @@ fn linuxcnc_subroutines_and_loops_are_renamed_per_copy() {
     }
 }
 
-/// One row of `report --format csv`: motion, programmed point, attained
-/// point (programmed + predicted deviation) and residual.
-struct Row {
-    line: String,
-    motion: String,
-    programmed: [f64; 3],
-    attained: [f64; 3],
-    residual_mm: f64,
-}
-
 fn report(path: &Path) -> Vec<Row> {
-    let out = postproc()
-        .arg("report")
-        .args(MACHINE)
-        .args(["--format", "csv"])
-        .arg(path)
-        .output()
-        .expect("runs");
-    assert!(
-        out.status.success() || out.status.code() == Some(1),
-        "{out:?}"
-    );
-    let text = String::from_utf8(out.stdout).expect("utf-8");
-    let mut lines = text.lines().filter(|l| !l.starts_with('#'));
-    let head: Vec<&str> = lines.next().expect("header").split(',').collect();
-    let col = |name: &str| head.iter().position(|h| *h == name).expect(name);
-    let num = |cells: &[&str], name: &str| -> f64 { cells[col(name)].parse().expect(name) };
-    lines
-        .map(|l| {
-            let c: Vec<&str> = l.split(',').collect();
-            let p = [num(&c, "X_mm"), num(&c, "Y_mm"), num(&c, "Z_mm")];
-            let d = [num(&c, "dx_mm"), num(&c, "dy_mm"), num(&c, "dz_mm")];
-            Row {
-                line: c[col("line")].to_string(),
-                motion: c[col("motion")].to_string(),
-                programmed: p,
-                attained: [p[0] + d[0], p[1] + d[1], p[2] + d[2]],
-                residual_mm: num(&c, "residual_mm"),
-            }
-        })
-        .collect()
-}
-
-fn dist(a: &[f64; 3], b: &[f64; 3]) -> f64 {
-    (0..3).map(|i| (a[i] - b[i]).powi(2)).sum::<f64>().sqrt()
+    report_with(&MACHINE, path)
 }
 
 /// The compensated program, with its subprogram copies, predicted again:

@@ -9,30 +9,7 @@ use postproc::program::euler;
 use postproc::program::tp::config::{Config, joints_to_model};
 use postproc::program::tp::{Instruction, Motion, Program, parse};
 
-use crate::common::repo;
-
-fn read(path: &str) -> String {
-    std::fs::read_to_string(repo(path)).unwrap_or_else(|e| panic!("{path}: {e}"))
-}
-
-fn blocks(md: &str, lang: &str) -> Vec<String> {
-    let (mut out, mut cur): (Vec<String>, Option<String>) = (Vec::new(), None);
-    for line in md.lines() {
-        match &mut cur {
-            None if line.trim_end() == format!("```{lang}") => cur = Some(String::new()),
-            None => {}
-            Some(b) if line.trim_end() == "```" => {
-                out.push(std::mem::take(b));
-                cur = None;
-            }
-            Some(b) => {
-                b.push_str(line);
-                b.push('\n');
-            }
-        }
-    }
-    out
-}
+use crate::common::{fenced_blocks, text};
 
 /// Every number of every position spans exactly its text.
 fn numbers_span_their_text(src: &str, p: &Program) -> usize {
@@ -56,8 +33,8 @@ fn numbers_span_their_text(src: &str, p: &Program) -> usize {
 
 #[test]
 fn every_grammar_example_parses() {
-    let md = read("grammar/tp.md");
-    let examples = blocks(&md, "ls");
+    let md = text("grammar/tp.md");
+    let examples = fenced_blocks(&md, "ls");
     assert_eq!(examples.len(), 3);
     let mut kinds = std::collections::BTreeSet::new();
     for (i, ex) in examples.iter().enumerate() {
@@ -110,7 +87,7 @@ fn every_grammar_example_parses() {
 
 #[test]
 fn the_pick_and_place_reads_frames_registers_and_positions() {
-    let src = read("tests/tp/pick_place.ls");
+    let src = text("tests/tp/pick_place.ls");
     let p = parse(&src, "pick_place.ls").expect("parses");
     assert_eq!(p.name, "PICK_PLACE");
     let (count, span) = p.line_count.clone().expect("LINE_COUNT");
@@ -156,7 +133,7 @@ fn the_pick_and_place_reads_frames_registers_and_positions() {
 
 #[test]
 fn the_weld_path_pairs_each_circle_with_its_via_and_end_points() {
-    let src = read("tests/tp/weld_seam.ls");
+    let src = text("tests/tp/weld_seam.ls");
     let p = parse(&src, "weld_seam.ls").expect("parses");
     assert_eq!(
         p.line_count.as_ref().map(|l| l.0 as usize),
@@ -202,7 +179,7 @@ fn malformed_programs_are_located_errors() {
         assert_eq!((e.line, e.column), (line, col), "{src}: {e}");
     }
     for path in ["tests/tp/pick_place.ls", "tests/tp/weld_seam.ls"] {
-        let src = read(path);
+        let src = text(path);
         for end in (0..=src.len()).filter(|e| src.is_char_boundary(*e)) {
             let _ = parse(&src[..end], path);
         }
