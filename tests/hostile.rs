@@ -1691,3 +1691,118 @@ fn value_tokens_are_the_numbers_that_are_values() {
         text.replace("-6e2", "-0.6")
     );
 }
+
+// ---------------------------------------------------------------------------
+// G-code words that are not moves, and feed modes (issue 43, second round)
+// ---------------------------------------------------------------------------
+
+/// Writes `text` to a scratch file and runs `postproc compensate` on it;
+/// (exit code, written program, stderr).
+fn compensate_program(name: &str, text: &[u8], machine: &str) -> (i32, Vec<u8>, String) {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join(name);
+    let out_path = dir.path().join(format!("out-{name}"));
+    std::fs::write(&path, text).unwrap();
+    let out = crate::common::postproc()
+        .args(["compensate", "-q", "--machine", machine])
+        .arg(&path)
+        .arg("-o")
+        .arg(&out_path)
+        .output()
+        .unwrap();
+    let written = std::fs::read(&out_path).unwrap_or_default();
+    (
+        out.status.code().unwrap_or(-1),
+        written,
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+/// The program lines of a compensated G-code program (no header comments,
+/// no annotations).
+fn program_lines(written: &[u8]) -> Vec<String> {
+    String::from_utf8_lossy(written)
+        .lines()
+        .filter(|l| !l.starts_with('('))
+        .map(|l| l.split(" (").next().unwrap_or("").to_string())
+        .collect()
+}
+
+/// `G50.1 X0. Y0.` (mirror cancel) names the axes whose mirror it cancels:
+/// not a move, written back as it came; the next move starts at Y100.
+#[test]
+fn a_mirror_cancel_with_axis_words_is_not_a_move() {
+    let prog = "G21 G90 G94 G17\nT1 M6\nG43 H1 G0 X0. Y0. Z20.\nS1000 M3\nG1 X0. Y100. F500.\nG50.1 X0. Y0.\nG50\nG1 X50. Y100.\nM30\n";
+    let (code, err) = check_program("mirror.nc", prog.as_bytes(), "afm-r1000", &["-q"]);
+    assert_eq!(code, 0, "{err}");
+    let (code, written, err) = compensate_program("mirror.nc", prog.as_bytes(), "afm-r1000");
+    assert_eq!(code, 0, "{err}");
+    let lines = program_lines(&written);
+    let at = lines
+        .iter()
+        .position(|l| l == "G50.1 X0. Y0.")
+        .unwrap_or_else(|| panic!("mirror cancel rewritten: {lines:?}"));
+    // Every move line after it stays near Y100 (no traverse to Y0).
+    for l in &lines[at + 1..] {
+        if let Some(y) = l.split(' ').find_map(|w| w.strip_prefix('Y')) {
+            let y: f64 = y.parse().unwrap();
+            assert!((y - 100.0).abs() < 0.1, "{l} in {lines:?}");
+        }
+    }
+}
+
+#[test]
+fn scaling_and_mirroring_words_are_refused_by_name() {
+    let head = "G21 G90 G94 G17\nT1 M6\nG43 H1 G0 X0. Y0. Z20.\nS1000 M3\n";
+    for (line, want) in [
+        ("G50 X0. Z0.", "g.nc:5:1: G50 with axis words"),
+        (
+            "G1 G50.1 X0. Y0. F100.",
+            "g.nc:5:4: G50.1 (mirror cancel) names axes, and cannot share a block with the motion code `G1`",
+        ),
+        (
+            "G51.1 X0.",
+            "g.nc:5:1: G51.1 (programmable mirror image) cannot be compensated offline",
+        ),
+        (
+            "G51 X0. Y0. P2",
+            "g.nc:5:1: G51 (scaling/mirroring) cannot be compensated offline",
+        ),
+    ] {
+        let prog = format!("{head}{line}\nG1 X10. F100.\nM30\n");
+        let (code, err) = check_program("g.nc", prog.as_bytes(), "afm-r1000", &["-q"]);
+        assert_eq!(code, 2, "{line}: {err}");
+        assert!(err.contains(want), "{line}: {err}");
+    }
+}
+
+/// An F given under G93 (1/min) does not carry into G94 as mm/min, nor a
+/// G94 F into G95 as mm/rev: the feed move after the switch needs its F.
+#[test]
+fn a_feed_does_not_carry_across_a_change_of_feed_mode() {
+    let head = "G21 G90 G94 G17\nT1 M6\nG43 H1 G0 X0. Y0. Z20.\nS1000 M3\n";
+    for (body, want, feed) in [
+        (
+            "G93\nG1 X10. F2.\nG94\nG1 X60.\n",
+            "f.nc:8:1: feed move without a new F after the change of feed mode to G94 (per minute): the F in force was given under G93 (inverse time)",
+            "F300.",
+        ),
+        (
+            "G1 X10. F200.\nG95\nG1 X60.\n",
+            "f.nc:7:1: feed move without a new F after the change of feed mode to G95 (per revolution): the F in force was given under G94 (per minute)",
+            "F0.1",
+        ),
+    ] {
+        let prog = format!("{head}{body}M30\n");
+        let (code, err) = check_program("f.nc", prog.as_bytes(), "afm-r1000", &["-q"]);
+        assert_eq!(code, 2, "{body}: {err}");
+        assert!(err.contains(want), "{body}: {err}");
+        // With its own F (on the switch or the move) the program is read.
+        let fixed = prog.replace("G1 X60.", &format!("G1 X60. {feed}"));
+        let (code, err) = check_program("f.nc", fixed.as_bytes(), "afm-r1000", &["-q"]);
+        assert_eq!(code, 0, "{fixed}: {err}");
+    }
+    let prog = format!("{head}G93\nG1 X10. F2.\nG94 F400.\nG1 X60.\nM30\n");
+    let (code, err) = check_program("f.nc", prog.as_bytes(), "afm-r1000", &["-q"]);
+    assert_eq!(code, 0, "{err}");
+}

@@ -464,6 +464,9 @@ pub struct Interpreter {
     cycle_z: Option<f64>,
     cycle_initial: f64,
     feed: f64,
+    /// The feed mode (G93, G94 or G95, × 10) whose F no longer holds: the
+    /// mode changed since the last F word.
+    feed_dropped: Option<i64>,
     per_rev: bool,
     spindle: f64,
     spindle_on: bool,
@@ -518,6 +521,7 @@ impl Interpreter {
             cycle_z: None,
             cycle_initial: 0.0,
             feed: 0.0,
+            feed_dropped: None,
             per_rev: false,
             spindle: 0.0,
             spindle_on: false,
@@ -781,6 +785,11 @@ impl Interpreter {
         plan.absolute = self.absolute;
         plan.arc_absolute = self.arc_absolute;
         plan.offset = self.offset();
+        if words.axis_naming.is_some() && words.axis.iter().any(Option::is_some) {
+            // G50.1 X0 Y0: the axis words name the axes whose mirroring is
+            // cancelled; nothing moves.
+            return Ok(());
+        }
         plan.programmed = programmed_axes(&words.axis);
         if let Some(w) = words.non_modal {
             if let Some(done) = self.non_modal(block, &words, w, plan, text)? {
@@ -1009,6 +1018,9 @@ impl Interpreter {
         if matches!(code, 430 | 434 | 435) {
             g.tool_length = Some(w);
         }
+        if matches!(code, 500 | 501) {
+            g.axis_naming = Some(w);
+        }
         Ok(())
     }
 
@@ -1041,6 +1053,43 @@ impl Interpreter {
                 ));
             }
         }
+        self.check_axis_naming(line, g, text)
+    }
+
+    /// G50.1 with axis words cancels mirroring on the axes it names (a
+    /// mirror that is never on here: G51.1 is refused), so its words are
+    /// not a move and a motion code beside them is refused. G50 with axis
+    /// words is the lathe's coordinate-system setting (or a Fanuc
+    /// scaling cancel written with words it does not take): refused.
+    fn check_axis_naming(&self, line: usize, g: &Words, text: &[u8]) -> Result<(), Located> {
+        let Some(w) = g.axis_naming else {
+            return Ok(());
+        };
+        let Some(first) = g.axis.iter().flatten().next().copied() else {
+            return Ok(());
+        };
+        let refuse = |what: &str| {
+            Err(self.err(
+                line,
+                Some(w),
+                format!(
+                    "{what}: `{}` (`{}` is not a move)",
+                    quote_word(text, w),
+                    quote_word(text, first)
+                ),
+            ))
+        };
+        if w.code10() == 500 {
+            return refuse(
+                "G50 with axis words (lathe coordinate-system setting; on mills G50 cancels scaling and takes no axis words) cannot be compensated offline",
+            );
+        }
+        if let Some(m) = g.motion {
+            return refuse(&format!(
+                "G50.1 (mirror cancel) names axes, and cannot share a block with the motion code `{}`",
+                quote_word(text, m)
+            ));
+        }
         Ok(())
     }
 
@@ -1048,6 +1097,7 @@ impl Interpreter {
     fn modal(&mut self, block: &Block, g: &Words) -> Result<(), Located> {
         if let Some(f) = g.f {
             self.feed = f.value;
+            self.feed_dropped = None;
         }
         if let Some(s) = g.s {
             self.spindle = s.value;
@@ -1136,18 +1186,7 @@ impl Interpreter {
             }
             980 => self.retract_initial = true,
             990 => self.retract_initial = false,
-            930 => {
-                self.inverse_time = true;
-                self.per_rev = false;
-            }
-            940 => {
-                self.inverse_time = false;
-                self.per_rev = false;
-            }
-            950 => {
-                self.inverse_time = false;
-                self.per_rev = true;
-            }
+            930 | 940 | 950 => self.feed_mode(g, code),
             _ => {}
         }
         Ok(())
@@ -1581,6 +1620,25 @@ impl Interpreter {
         self.cycle = None;
     }
 
+    /// G93, G94 or G95. A change of feed mode leaves no feed rate in force
+    /// unless its block gives one: an F of one mode (1/min, mm/min, mm/rev)
+    /// means something else in the next, and the controls want a new F.
+    fn feed_mode(&mut self, g: &Words, code: i64) {
+        let before = if self.inverse_time {
+            930
+        } else if self.per_rev {
+            950
+        } else {
+            940
+        };
+        self.inverse_time = code == 930;
+        self.per_rev = code == 950;
+        if before != code && g.f.is_none() && self.feed > 0.0 {
+            self.feed = 0.0;
+            self.feed_dropped = Some(before);
+        }
+    }
+
     fn feed_mm_min(&self) -> f64 {
         let f = self.feed * self.scale();
         if self.per_rev { f * self.spindle } else { f }
@@ -1591,6 +1649,29 @@ impl Interpreter {
     fn require_feed(&self, line: usize, f_word: Option<&Word>) -> Result<(), Located> {
         if self.feed > 0.0 && (!self.per_rev || self.spindle > 0.0) {
             return Ok(());
+        }
+        if let (Some(before), None) = (self.feed_dropped, f_word) {
+            let name = |c: i64| match c {
+                930 => "G93 (inverse time)",
+                950 => "G95 (per revolution)",
+                _ => "G94 (per minute)",
+            };
+            let now = if self.inverse_time {
+                930
+            } else if self.per_rev {
+                950
+            } else {
+                940
+            };
+            return Err(self.err(
+                line,
+                None,
+                format!(
+                    "feed move without a new F after the change of feed mode to {}: the F in force was given under {} and does not carry over",
+                    name(now),
+                    name(before)
+                ),
+            ));
         }
         let what = if self.per_rev && self.feed > 0.0 {
             "feed per revolution (G95) with the spindle speed S at 0"
@@ -2100,7 +2181,8 @@ fn refused_g(code: i64) -> &'static str {
         320 | 330 | 340 | 350 => "G32–G35 (thread cutting)",
         470 => "G47 (engraving)",
         520 => "G52 (local coordinate system)",
-        510 | 511 => "G51 (scaling/mirroring)",
+        510 => "G51 (scaling/mirroring)",
+        511 => "G51.1 (programmable mirror image)",
         531 => "G53.1 (tool axis direction control)",
         600 => "G60 (single-direction positioning)",
         650 | 660 | 661 => "G65/G66 (macro calls)",
@@ -2140,6 +2222,9 @@ struct Words<'b> {
     tool_length: Option<&'b Word>,
     /// G5, G5.1, G5.2, G5.3 or G6.2.
     spline: Option<&'b Word>,
+    /// G50 (scaling cancel) or G50.1 (mirror cancel): their axis words
+    /// name axes, they are not a move.
+    axis_naming: Option<&'b Word>,
     groups: [Option<&'b Word>; MODAL_GROUPS],
     spindle_m: Option<&'b Word>,
 }
