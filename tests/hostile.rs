@@ -1806,3 +1806,105 @@ fn a_feed_does_not_carry_across_a_change_of_feed_mode() {
     let (code, err) = check_program("f.nc", prog.as_bytes(), "afm-r1000", &["-q"]);
     assert_eq!(code, 0, "{err}");
 }
+
+// ---------------------------------------------------------------------------
+// Line ends (issue 43, second round)
+// ---------------------------------------------------------------------------
+
+/// `compensate --effects none` of `text`: the written bytes after the
+/// header comment lines (a byte-order mark kept in front), which must be
+/// the input's bytes.
+fn identity_bytes(name: &str, text: &[u8]) -> Vec<u8> {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join(name);
+    let out_path = dir.path().join("out.nc");
+    std::fs::write(&path, text).unwrap();
+    let out = crate::common::postproc()
+        .args(["compensate", "-q", "--effects", "none", "--machine", "afm-r1000"])
+        .arg(&path)
+        .arg("-o")
+        .arg(&out_path)
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(0), "{name}: {stderr}");
+    let written = std::fs::read(&out_path).unwrap();
+    let bom: &[u8] = b"\xEF\xBB\xBF";
+    let (lead, mut rest) = match written.strip_prefix(bom) {
+        Some(r) => (bom, r),
+        None => (&b""[..], &written[..]),
+    };
+    while rest.starts_with(b"(") {
+        let nl = rest.iter().position(|&b| b == b'\n').unwrap();
+        rest = &rest[nl + 1..];
+    }
+    [lead, rest].concat()
+}
+
+#[test]
+fn mixed_line_ends_a_missing_final_newline_a_bom_and_long_lines_are_written_as_they_came() {
+    let long = format!("({})", "C".repeat(600_000));
+    let cases: Vec<(&str, Vec<u8>)> = vec![
+        (
+            "mixed.nc",
+            b"G21 G90 G94 G17\r\nT1 M6\r\nG0 X0. Y0. Z20.\nG1 X10. F100.\r\nG1 X20.\nM30".to_vec(),
+        ),
+        (
+            "bom.nc",
+            b"\xEF\xBB\xBFG21 G90 G94 G17\r\nG0 X0. Y0. Z20.\r\nG1 X10. F100.\r\nM30\r\n".to_vec(),
+        ),
+        (
+            "long.nc",
+            format!("G21 G90 G94 G17\n{long}\nG0 X0. Y0. Z20.\nG1 X10. F100. {long}\nM30\n")
+                .into_bytes(),
+        ),
+    ];
+    for (name, text) in cases {
+        let (code, err) = check_program(name, &text, "afm-r1000", &["-q"]);
+        assert_eq!(code, 0, "{name}: {err}");
+        assert!(identity_bytes(name, &text) == text, "{name}: bytes differ");
+    }
+}
+
+/// A carriage return without its line feed (CR-only files, or one such
+/// line end among CR LF ones) is refused at its byte: read as a line end
+/// it was not, a `%` or a comment would swallow the lines after it.
+#[test]
+fn a_carriage_return_alone_is_refused_at_its_byte() {
+    let cr_only = b"%\rG21 G90 G94 G17\rG0 X0. Y0. Z20.\rG1 X10. F100.\rM30\r%\r";
+    let last_cr = b"G21 G90 G94 G17\r\nG0 X0. Y0. Z20.\r\nG1 X10. F100.\r";
+    let mid_cr = b"G21 G90 G94 G17\r\nG0 X0. Y0. Z20.\r\nG1 X10. F100.\rM30\r\n";
+    for (text, at) in [
+        (&cr_only[..], "p.nc:1:2:"),
+        (&last_cr[..], "p.nc:3:14:"),
+        (&mid_cr[..], "p.nc:3:14:"),
+    ] {
+        let (code, err) = check_program("p.nc", text, "afm-r1000", &["-q"]);
+        assert_eq!(code, 2, "{err}");
+        assert!(
+            err.contains(&format!(
+                "{at} carriage return (CR) without a line feed: lines end in LF or CR LF"
+            )),
+            "{err}"
+        );
+    }
+    let module = std::fs::read_to_string(repo("samples/drilling.mod")).unwrap();
+    let cr_module = module.replace('\n', "\r");
+    let (code, err) = check_program("m.mod", cr_module.as_bytes(), "abb-irb1600", &["-q"]);
+    assert_eq!(code, 2, "{err}");
+    assert!(
+        err.contains("m.mod:1:4: carriage return (CR) without a line feed"),
+        "{err}"
+    );
+    let crlf_module = module.replace('\n', "\r\n");
+    let (code, err) = check_program("m.mod", crlf_module.as_bytes(), "abb-irb1600", &["-q"]);
+    assert_eq!(code, 0, "{err}");
+}
+
+#[test]
+fn a_nul_byte_is_refused_at_its_byte() {
+    let text = b"G21 G90 G94 G17\nG0 X0. Y0. Z20.\nG1 X10.\0 F100.\nM30\n";
+    let (code, err) = check_program("n.nc", text, "afm-r1000", &["-q"]);
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("n.nc:3:8: unexpected character byte 0x00"), "{err}");
+}

@@ -306,12 +306,29 @@ impl At<'_> {
     }
 }
 
+/// Refuses a carriage return (CR) that is not the first byte of a CR LF
+/// line end: lines end in LF or CR LF, and a CR alone (a file with
+/// CR-only line ends, or one such line end among others) would join lines
+/// the control reads apart.
+fn lone_cr(line: &[u8], at: At) -> Result<(), Located> {
+    for p in memchr::memchr_iter(b'\r', line) {
+        if line.get(p + 1) != Some(&b'\n') {
+            return Err(at.err(
+                p,
+                "carriage return (CR) without a line feed: lines end in LF or CR LF (a file with CR-only line ends must be converted)".into(),
+            ));
+        }
+    }
+    Ok(())
+}
+
 fn scan_line(line: &[u8], line_no: usize, file: &str, out: &mut Block) -> Result<(), Located> {
     out.clear();
     out.line_no = line_no;
     let text = strip_eol(line);
     out.text_len = text.len() as u32;
     let at = At { file, line_no };
+    lone_cr(line, at)?;
 
     // A UTF-8 byte-order mark (an editor's) opens the file: blank.
     let start = if line_no == 1 && text.starts_with(b"\xEF\xBB\xBF") {

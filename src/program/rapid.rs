@@ -995,12 +995,34 @@ pub fn comment_start(line: &str) -> Option<usize> {
 ///
 /// Errors read `file:line:column: what, found `text``; no input panics.
 pub fn parse_module(src: &str, file: &str) -> Result<Module, Located> {
+    lone_cr(src, file, 0)?;
     parser::Parser::new(src, file).parse()
+}
+
+/// Refuses a carriage return (CR) from byte `start` on that does not begin
+/// a CR LF line end: lines end in LF or CR LF, and with CR alone a comment
+/// would run on over the lines after it.
+fn lone_cr(src: &str, file: &str, start: usize) -> Result<(), Located> {
+    let bytes = src.as_bytes();
+    let tail = bytes.get(start..).unwrap_or(b"");
+    for p in memchr::memchr_iter(b'\r', tail).map(|p| p + start) {
+        if bytes.get(p + 1) != Some(&b'\n') {
+            let (line, column) = resolve::line_col(src, p);
+            return Err(Located::new(
+                file,
+                line,
+                column,
+                "carriage return (CR) without a line feed: lines end in LF or CR LF (a file with CR-only line ends must be converted)".to_string(),
+            ));
+        }
+    }
+    Ok(())
 }
 
 /// Parses the RAPID module that starts at byte `start` of `src` (and ends
 /// it), with spans into the whole of `src`.
 pub fn parse_module_at(src: &str, file: &str, start: usize) -> Result<Module, Located> {
+    lone_cr(src, file, start)?;
     parser::Parser::new(src, file).parse_from(start)
 }
 
