@@ -78,6 +78,17 @@ fn scan_line(line: &[u8], line_no: usize, file: &str, out: &mut Block) -> Result
     let text = strip_eol(line);
     out.text_len = text.len() as u32;
     let place = Place { file, line_no };
+    // A CR is only ever the first byte of a CR LF line end.
+    let lone = line
+        .windows(2)
+        .position(|w| w[0] == b'\r' && w[1] != b'\n')
+        .or_else(|| (line.last() == Some(&b'\r')).then(|| line.len() - 1));
+    if let Some(p) = lone {
+        return Err(place.err(
+            p,
+            "carriage return (CR) without a line feed: lines end in LF or CR LF (a file with CR-only line ends must be converted)".into(),
+        ));
+    }
 
     let bom: &[u8] = b"\xEF\xBB\xBF";
     let start = if line_no == 1 && text.starts_with(bom) {
