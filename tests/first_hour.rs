@@ -1,6 +1,7 @@
 //! Rough edges a newcomer meets in the first hour, each pinned: a closed
 //! pipe ends a command quietly with exit 0, the release profile strips
-//! debug information while a profiling profile keeps line tables.
+//! debug information while a profiling profile keeps line tables, the
+//! travel is checked with any effects, and the others below.
 
 use std::io::Read;
 use std::process::{Command, Stdio};
@@ -171,4 +172,33 @@ fn completions_and_man_page_are_generated_from_the_flags() {
         "a page per subcommand"
     );
     assert!(man.contains("\\-\\-machine"), "flags are listed");
+}
+
+/// `--effects none` still checks every programmed position against the
+/// travel (nothing is solved, so the solver's check does not run): X1150
+/// on a 0–1000 axis is refused with exit 2 and no output file.
+#[test]
+fn the_travel_is_checked_with_every_effect_off() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let program = crate::common::write(
+        dir.path(),
+        "far.nc",
+        "G21 G90 G54\nG0 X0. Y0. Z50.\nG1 X1150. F1000.\nM30\n",
+    );
+    for effects in ["none", "all", "thermal"] {
+        let out = dir.path().join(format!("far-{effects}.nc"));
+        let a = postproc()
+            .args(["compensate", "--machine", "afm-r1000", "--effects", effects])
+            .arg(&program)
+            .arg("-o")
+            .arg(&out)
+            .assert()
+            .code(2);
+        let err = String::from_utf8_lossy(&a.get_output().stderr).to_string();
+        assert!(
+            err.contains("far.nc:3:1:") && err.contains("is outside the travel [0, 1000]"),
+            "--effects {effects}: {err}"
+        );
+        assert!(!out.exists(), "--effects {effects}: output written");
+    }
 }

@@ -274,7 +274,9 @@ pub(super) fn build_job<'m>(
             annotate,
         },
         pool: Some(pool),
-        travel: None,
+        // With every effect off nothing is solved, so nothing meets the
+        // travel on the way: every programmed position is checked instead.
+        travel: effects.is_none().then_some(machine),
     })
 }
 
