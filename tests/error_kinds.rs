@@ -103,7 +103,11 @@ fn a_malformed_input_file_is_an_input_error_at_its_cell() {
 #[test]
 fn flag_values_and_machine_names_are_usage_errors() {
     let spec: postproc::machine::effects::EffectSpec = "geometric,gravity".parse().expect("names");
-    let (k, e) = kind(EffectSet::from_flags(&spec, &[]));
+    let (k, e) = kind(EffectSet::from_flags(
+        &spec,
+        &[],
+        postproc::predict::MachineKind::Tool,
+    ));
     assert_eq!(k, ErrorKind::Usage, "{e}");
     let (k, e) = kind(MachineFile::open("no-such-machine-anywhere"));
     assert_eq!(k, ErrorKind::Usage, "{e}");

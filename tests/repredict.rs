@@ -364,7 +364,12 @@ fn promise_holds(case: &Case, effects: &str, tol: f64) -> Outcome {
         predictor: Some(
             ToolPredictor::new(
                 &m,
-                EffectSet::from_flags(&effects.parse().expect("effects"), &[]).expect("effects"),
+                EffectSet::from_flags(
+                    &effects.parse().expect("effects"),
+                    &[],
+                    postproc::predict::MachineKind::Tool,
+                )
+                .expect("effects"),
             )
             .with_process(&process),
         ),

@@ -107,7 +107,8 @@ fn parse_instrument(s: &str) -> Result<nalgebra::Isometry3<f64>> {
 fn parse_switches(spec: &str) -> Result<Switches> {
     let spec_value: crate::machine::effects::EffectSpec =
         spec.parse().map_err(|e| usage(format!("--effects: {e}")))?;
-    let set = crate::predict::EffectSet::from_flags(&spec_value, &[])?;
+    let set =
+        crate::predict::EffectSet::from_flags(&spec_value, &[], crate::predict::MachineKind::Tool)?;
     use crate::predict::Effect;
     if spec.split(',').any(|s| s.trim() == "dynamic") {
         return Err(usage(

@@ -68,7 +68,11 @@ fn open_input(path: &Path) -> Result<(Box<dyn BufRead>, String)> {
 
 /// The machine-tool effects of `--effects` and `--gain`.
 pub(super) fn effects(args: &EffectArgs) -> Result<EffectSet> {
-    EffectSet::from_flags(&args.effects, &args.gains)
+    EffectSet::from_flags(
+        &args.effects,
+        &args.gains,
+        crate::predict::MachineKind::Tool,
+    )
 }
 
 /// The job's process settings from the machine file and the flags.

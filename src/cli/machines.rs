@@ -76,7 +76,7 @@ pub(super) fn provenance(
 
 /// The effects and gains of a machine-tool run.
 pub(super) fn tool_effects(set: &EffectSet) -> Vec<EffectGain> {
-    Effect::ALL
+    Effect::TOOL
         .iter()
         .map(|&e| EffectGain {
             effect: e.name(),
@@ -87,19 +87,15 @@ pub(super) fn tool_effects(set: &EffectSet) -> Vec<EffectGain> {
 }
 
 /// The effects and gains of a robot run.
-pub(super) fn robot_effects(e: &crate::predict::robot::Effects) -> Vec<EffectGain> {
-    let g = |effect, gain, reported_only| EffectGain {
-        effect,
-        gain,
-        reported_only,
-    };
-    vec![
-        g("kinematic", e.kinematic, false),
-        g("gravity", e.gravity, false),
-        g("process", e.process, false),
-        g("thermal", e.thermal, false),
-        g("dynamic", e.dynamic, true),
-    ]
+pub(super) fn robot_effects(set: &crate::predict::EffectSet) -> Vec<EffectGain> {
+    Effect::ROBOT
+        .iter()
+        .map(|&e| EffectGain {
+            effect: e.robot_name(),
+            gain: set.gain(e),
+            reported_only: !e.compensated(),
+        })
+        .collect()
 }
 
 /// The refusal of a program that carries a postproc header at `line`.

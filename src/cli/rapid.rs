@@ -394,7 +394,11 @@ pub(super) fn rapid_options(
         None => None,
     };
     Ok(RapidOptions {
-        effects: Effects::from_flags(&effects.effects, &effects.gains)?,
+        effects: Effects::from_flags(
+            &effects.effects,
+            &effects.gains,
+            crate::predict::MachineKind::Robot,
+        )?,
         annotate,
         format,
         thermal_start,

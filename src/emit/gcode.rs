@@ -892,7 +892,7 @@ impl Emitter {
             // Every part that is non-zero at the printed precision; the
             // dynamic one is a vibration amplitude (not in `dev`, not
             // compensated).
-            for e in Effect::ALL {
+            for e in Effect::TOOL {
                 let part = res.deviation.part(e).norm() / scale;
                 if rounds_to_zero(part, dd) {
                     continue;

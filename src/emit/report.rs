@@ -81,7 +81,7 @@ pub struct Layout {
 }
 
 impl Layout {
-    /// A G-code report: the machine's axes and [`Effect::ALL`].
+    /// A G-code report: the machine's axes and [`Effect::TOOL`].
     pub fn gcode(setup: &Setup) -> Self {
         Layout {
             kind: "gcode",
@@ -94,7 +94,7 @@ impl Layout {
                     )
                 })
                 .collect(),
-            effects: Effect::ALL.iter().map(|e| e.name()).collect(),
+            effects: Effect::TOOL.iter().map(|e| e.name()).collect(),
             residual: true,
             slots: (0..6)
                 .filter(|&s| setup.axes.get(s).copied().unwrap_or(false))
@@ -601,9 +601,9 @@ impl<'w> ReportWriter<'w> {
             *x = r.commanded.get(slot).copied().unwrap_or(0.0);
             n += 1;
         }
-        let mut effects = [0.0; Effect::ALL.len()];
-        for (e, v) in Effect::ALL.iter().zip(effects.iter_mut()) {
-            *v = r.result.deviation.parts[*e as usize].norm();
+        let mut effects = [0.0; Effect::TOOL.len()];
+        for (e, v) in Effect::TOOL.iter().zip(effects.iter_mut()) {
+            *v = r.result.deviation.part(*e).norm();
         }
         let dev = r.result.deviation.total();
         let shape = match (&r.arc, r.motion) {
@@ -623,7 +623,7 @@ impl<'w> ReportWriter<'w> {
             effects_mm: &effects,
             residual_mm: Some(r.result.residual_mm),
             // Tool-axis direction error: a three-axis machine cannot correct it.
-            orient_urad: r.result.deviation.orientation.norm() * 1e6,
+            orient_urad: r.result.deviation.total.rot_rad.norm() * 1e6,
         })
     }
 

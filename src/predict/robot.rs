@@ -18,12 +18,12 @@
 use nalgebra::{Isometry3, Vector3, Vector6};
 
 use super::context::{MoveContext, Wrench};
+pub use super::effect::{Breakdown, EffectSet, PoseDelta};
 use crate::machine::robot::dh::DhParams;
 use crate::machine::robot::kinematics::{
     Frames, HalfAngles, Prepared, flange_deflected, flange_prepared, frames_and_twin_flange,
     frames_with_half_angles,
 };
-use crate::machine::robot::pose::pose_error;
 use crate::machine::robot::thermal::{DhGrowth, grown};
 use crate::machine::robot::{Model, Robot};
 
@@ -50,116 +50,11 @@ fn blend(nominal: &DhParams, actual: &DhParams, gain: f64) -> DhParams {
     out
 }
 
-/// Which effects the prediction includes, as gains: 0 = off, 1 = as
-/// modelled; other values scale the effect linearly (kinematic: the DH
-/// parameters move `gain` of the way from nominal to actual; thermal: the DH
-/// growth times `gain`; gravity and process: the torques times `gain`;
-/// dynamic: the reported amplitude times `gain`).
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Effects {
-    /// Actual (calibrated) instead of nominal DH parameters.
-    pub kinematic: f64,
-    /// Joint deflection from gravity (links and tool load).
-    pub gravity: f64,
-    /// Joint deflection from the process wrench.
-    pub process: f64,
-    /// Thermal growth of the DH lengths (Paper B).
-    pub thermal: f64,
-    /// Vibration amplitude (reported, never compensated).
-    pub dynamic: f64,
-}
+/// The robot's name of the one [`EffectSet`] of both machine kinds.
+pub type Effects = EffectSet;
 
-impl Effects {
-    /// Every effect on.
-    pub const ALL: Effects = Effects {
-        kinematic: 1.0,
-        gravity: 1.0,
-        process: 1.0,
-        thermal: 1.0,
-        dynamic: 1.0,
-    };
-    /// Every effect off (prediction = controller's nominal model).
-    pub const NONE: Effects = Effects {
-        kinematic: 0.0,
-        gravity: 0.0,
-        process: 0.0,
-        thermal: 0.0,
-        dynamic: 0.0,
-    };
-    /// The effects `--effects` turns on, scaled by `--gain`; names that do
-    /// not apply to a robot (`static`) are refused.
-    pub fn from_flags(
-        spec: &crate::machine::effects::EffectSpec,
-        gains: &[crate::machine::effects::Gain],
-    ) -> crate::error::Result<Effects> {
-        use crate::machine::effects::EffectName as N;
-        let slot = |name| match name {
-            N::Kinematic | N::Geometric => Some(0),
-            N::Gravity => Some(1),
-            N::Process | N::Load => Some(2),
-            N::Thermal => Some(3),
-            N::Dynamic | N::Vibration => Some(4),
-            N::Static => None,
-        };
-        let [kinematic, gravity, process, thermal, dynamic] = crate::machine::effects::gains_for(
-            spec,
-            gains,
-            slot,
-            "a robot",
-            "kinematic, gravity, process, thermal, dynamic",
-        )?;
-        Ok(Effects {
-            kinematic,
-            gravity,
-            process,
-            thermal,
-            dynamic,
-        })
-    }
-
-    /// True when some quasi-static effect (one that changes targets) is on.
-    pub fn compensates(&self) -> bool {
-        self.kinematic != 0.0 || self.gravity != 0.0 || self.process != 0.0 || self.thermal != 0.0
-    }
-}
-
-/// A small pose difference: attained − reference.
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
-pub struct PoseDelta {
-    /// Position difference, mm (world frame).
-    pub pos_mm: Vector3<f64>,
-    /// Rotation vector of `R_attained · R_referenceᵀ`, rad (world frame).
-    pub rot_rad: Vector3<f64>,
-}
-
-impl PoseDelta {
-    pub(crate) fn between(attained: &Isometry3<f64>, reference: &Isometry3<f64>) -> Self {
-        let (p, r) = pose_error(attained, reference);
-        PoseDelta {
-            pos_mm: p,
-            rot_rad: r,
-        }
-    }
-}
-
-/// Predicted deviation of an uncompensated target, split by cause. The
-/// parts are successive differences, so their positions sum to `total`.
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
-pub struct Deviation {
-    /// Actual vs nominal parameters at the commanded joints.
-    pub kinematic: PoseDelta,
-    /// Added by the thermal growth of the DH lengths.
-    pub thermal: PoseDelta,
-    /// Added by gravity deflection.
-    pub gravity: PoseDelta,
-    /// Added by the process wrench deflection.
-    pub process: PoseDelta,
-    /// Attained − programmed.
-    pub total: PoseDelta,
-    /// Predicted vibration amplitude per direction of the robot base frame,
-    /// mm (reported, not part of `total`).
-    pub vibration_mm: Vector3<f64>,
-}
+/// The robot's name of the one [`Breakdown`] of both machine kinds.
+pub type Deviation = Breakdown;
 
 /// True when two vectors are equal bit for bit (a computation from them
 /// gives the same bits).

@@ -14,160 +14,9 @@
 use nalgebra::Vector3;
 
 use super::context::MoveContext;
-use crate::error::Result;
-use crate::machine::effects::{EffectName, EffectSpec, Gain};
+pub use super::effect::{Breakdown, Effect, EffectSet};
 use crate::machine::tool::MachineTool;
 use crate::machine::{AxisVec, DirVec, TipPose};
-
-/// The physical effects a prediction can include.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Effect {
-    /// Geometric errors of the axes (location and component errors).
-    Geometric,
-    /// Static deflection under the process force (stiffness map).
-    Static,
-    /// Thermal drift (spindle growth, axis scale) over the program's time line.
-    Thermal,
-    /// Vibration amplitude at the tooth-passing frequency (reported only).
-    Dynamic,
-}
-
-impl Effect {
-    /// Every effect, in breakdown order.
-    pub const ALL: [Effect; 4] = [
-        Effect::Geometric,
-        Effect::Static,
-        Effect::Thermal,
-        Effect::Dynamic,
-    ];
-
-    /// Name used on the command line and in reports.
-    pub fn name(self) -> &'static str {
-        match self {
-            Effect::Geometric => "geometric",
-            Effect::Static => "static",
-            Effect::Thermal => "thermal",
-            Effect::Dynamic => "dynamic",
-        }
-    }
-
-    /// Short label used in annotations.
-    pub fn short(self) -> &'static str {
-        match self {
-            Effect::Geometric => "geo",
-            Effect::Static => "stat",
-            Effect::Thermal => "therm",
-            Effect::Dynamic => "vib",
-        }
-    }
-
-    /// The [`EffectSet`] slot of the effect a command-line name means
-    /// (`None`: a robot effect).
-    pub fn slot_for(name: EffectName) -> Option<usize> {
-        let e = match name {
-            EffectName::Geometric => Effect::Geometric,
-            EffectName::Static => Effect::Static,
-            EffectName::Thermal => Effect::Thermal,
-            EffectName::Dynamic => Effect::Dynamic,
-            _ => return None,
-        };
-        Some(e as usize)
-    }
-
-    /// True for the effects that shift the tool tip and are compensated.
-    pub fn compensated(self) -> bool {
-        self != Effect::Dynamic
-    }
-}
-
-/// Which effects are on and their gains.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct EffectSet {
-    gains: [f64; Effect::ALL.len()],
-}
-
-impl Default for EffectSet {
-    fn default() -> Self {
-        EffectSet {
-            gains: [1.0; Effect::ALL.len()],
-        }
-    }
-}
-
-impl EffectSet {
-    /// No effect on: prediction equals the nominal pose.
-    pub fn none() -> Self {
-        EffectSet {
-            gains: [0.0; Effect::ALL.len()],
-        }
-    }
-
-    /// The effects `--effects` turns on, scaled by `--gain`; names that do
-    /// not apply to a machine tool (`gravity`, `process`, …) are refused.
-    pub fn from_flags(spec: &EffectSpec, gains: &[Gain]) -> Result<Self> {
-        let gains = crate::machine::effects::gains_for(
-            spec,
-            gains,
-            Effect::slot_for,
-            "a machine tool",
-            &names(),
-        )?;
-        Ok(EffectSet { gains })
-    }
-
-    /// The same set with effect `e` at gain `g` (0: off).
-    pub fn with_gain(mut self, e: Effect, g: f64) -> Self {
-        self.gains[e as usize] = g;
-        self
-    }
-
-    /// Gain of an effect (0 when off).
-    pub fn gain(&self, e: Effect) -> f64 {
-        self.gains[e as usize]
-    }
-
-    /// True when no effect is on.
-    pub fn is_none(&self) -> bool {
-        self.gains.iter().all(|&g| g == 0.0)
-    }
-}
-
-fn names() -> String {
-    Effect::ALL
-        .iter()
-        .map(|e| e.name())
-        .collect::<Vec<_>>()
-        .join(", ")
-}
-
-/// Predicted deviation of the tool tip, split by effect, mm.
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
-pub struct Breakdown {
-    /// Deviation vector of each effect, in [`Effect::ALL`] order.
-    pub parts: [Vector3<f64>; Effect::ALL.len()],
-    /// Tool-axis direction error (rad, small-angle vector).
-    pub orientation: Vector3<f64>,
-}
-
-impl Breakdown {
-    /// Total deviation vector of the compensated (quasi-static) effects;
-    /// the dynamic part is an amplitude and is not added.
-    pub fn total(&self) -> Vector3<f64> {
-        Effect::ALL
-            .iter()
-            .zip(&self.parts)
-            .filter(|(e, _)| e.compensated())
-            .fold(Vector3::zeros(), |a, (_, b)| a + b)
-    }
-
-    /// The part of one effect, mm.
-    pub fn part(&self, e: Effect) -> Vector3<f64> {
-        self.parts
-            .get(e as usize)
-            .copied()
-            .unwrap_or_else(Vector3::zeros)
-    }
-}
 
 /// The Lipschitz bound of [`ToolPredictor::lipschitz`] for one block and
 /// tool length, valid on segments whose ends lie in the machine's box.
@@ -493,8 +342,8 @@ impl<'m> ToolPredictor<'m> {
         let mut pose = nom;
         if g != 0.0 {
             let geo = self.machine.geometric(cmd, dirs, tool_mm);
-            b.parts[Effect::Geometric as usize] = (geo.pos - nom.pos) * g;
-            b.orientation = nom.dir.cross(&geo.dir) * g;
+            b.kinematic.pos_mm = (geo.pos - nom.pos) * g;
+            b.total.rot_rad = nom.dir.cross(&geo.dir) * g;
             pose = if g == 1.0 {
                 geo
             } else {
@@ -508,13 +357,13 @@ impl<'m> ToolPredictor<'m> {
         let gs = self.effects.gain(Effect::Static);
         if gs != 0.0 {
             let part = self.static_part(cmd) * gs;
-            b.parts[Effect::Static as usize] = part;
+            b.process.pos_mm = part;
             pose.pos += part;
         }
         if self.thermal_active() {
             let gt = self.effects.gain(Effect::Thermal);
             let part = self.thermal_part(cmd, &nom.dir) * gt;
-            b.parts[Effect::Thermal as usize] = part;
+            b.thermal.pos_mm = part;
             // `attained` takes the attained tool axis when the geometric
             // gain is one (see there); the same here.
             pose.pos += if g == 1.0 {
@@ -523,8 +372,9 @@ impl<'m> ToolPredictor<'m> {
                 part
             };
         }
-        b.parts[Effect::Dynamic as usize] =
-            self.ctx.vibration_mm * self.effects.gain(Effect::Dynamic);
+        b.vibration_mm = self.ctx.vibration_mm * self.effects.gain(Effect::Dynamic);
+        b.total.pos_mm =
+            Vector3::zeros() + b.kinematic.pos_mm + b.process.pos_mm + b.thermal.pos_mm;
         (b, pose, nom)
     }
 }
@@ -532,8 +382,11 @@ impl<'m> ToolPredictor<'m> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::error::Result;
+    use crate::machine::effects::{EffectSpec, Gain};
     use crate::machine::tool::ThermalState;
     use crate::predict::context::{ThermalInput, Wrench, WrenchFrame};
+    use crate::predict::effect::MachineKind;
     use approx::assert_abs_diff_eq;
 
     const POS_TOL_MM: f64 = 1e-12;
@@ -608,13 +461,14 @@ thermal:
     /// The effects of an `--effects` value.
     fn parse(spec: &str) -> Result<EffectSet> {
         let spec: EffectSpec = spec.parse().unwrap_or_else(|e| panic!("{spec}: {e}"));
-        EffectSet::from_flags(&spec, &[])
+        EffectSet::from_flags(&spec, &[], MachineKind::Tool)
     }
 
     /// Every effect, with the one `--gain` `gain`.
     fn with_gain(gain: &str) -> EffectSet {
         let g: Gain = gain.parse().unwrap_or_else(|e| panic!("{gain}: {e}"));
-        EffectSet::from_flags(&EffectSpec::All, &[g]).unwrap_or_else(|e| panic!("{gain}: {e}"))
+        EffectSet::from_flags(&EffectSpec::All, &[g], MachineKind::Tool)
+            .unwrap_or_else(|e| panic!("{gain}: {e}"))
     }
 
     #[test]
@@ -624,8 +478,8 @@ thermal:
         let full = ToolPredictor::new(&m, EffectSet::default())
             .with_context(ctx())
             .breakdown(&cmd, &[1; 6], 0.0);
-        for e in Effect::ALL {
-            let on: Vec<&str> = Effect::ALL
+        for e in Effect::TOOL {
+            let on: Vec<&str> = Effect::TOOL
                 .iter()
                 .filter(|&&x| x != e)
                 .map(|x| x.name())
@@ -638,7 +492,7 @@ thermal:
             let g = ToolPredictor::new(&m, set)
                 .with_context(ctx())
                 .breakdown(&cmd, &[1; 6], 0.0);
-            for x in Effect::ALL {
+            for x in Effect::TOOL {
                 let want = if x == e {
                     Vector3::zeros()
                 } else {
