@@ -57,6 +57,7 @@ mod robot_process;
 mod robot_samples;
 mod shop;
 mod snapshots;
+mod spiral;
 mod tp;
 mod uncertainty_coverage;
 mod verify_cli;

@@ -107,8 +107,8 @@ impl ArcJob<'_, '_> {
 
     /// How far the attained tip `got`, reached near parameter `s`, is from
     /// the programmed arc, mm: with a translating nominal chain, from the
-    /// programmed helix (radially and along its axis at the same angle),
-    /// else from the programmed point at `s`.
+    /// programmed helix or spiral (radially and along its axis at the same
+    /// angle), else from the programmed point at `s`.
     fn gap(&self, got: &Vector3<f64>, s: f64) -> f64 {
         let Some(off) = self.offset else {
             let want = self.pred.nominal(&self.at(s), self.lip.tool_mm).pos;
@@ -125,7 +125,8 @@ impl ArcJob<'_, '_> {
         let d_phi = (phi - expected + std::f64::consts::PI).rem_euclid(tau) - std::f64::consts::PI;
         let s_at = (s + d_phi / arc.sweep).clamp(0.0, 1.0);
         let z = self.s3[n] + (self.e3[n] - self.s3[n]) * s_at;
-        let radial = (q[a] - c[a]).hypot(q[b] - c[b]) - arc.radius;
+        // The programmed radius there (a spiral's changes with the angle).
+        let radial = (q[a] - c[a]).hypot(q[b] - c[b]) - arc.radius_at(&self.s3, &self.e3, s_at);
         radial.hypot(q[n] - z)
     }
 
@@ -168,6 +169,9 @@ impl ArcJob<'_, '_> {
         }
         cc[n] = ca[n];
         let r = (ca[a] - cc[a]).hypot(ca[b] - cc[b]);
+        // The control moves the written piece as a spiral where its ends
+        // are not on one circle about the centre (grammar/gcode.md, "Arcs").
+        let dr = (cb[a] - cc[a]).hypot(cb[b] - cc[b]) - r;
         let start = (ca[b] - cc[b]).atan2(ca[a] - cc[a]);
         let want = self.arc.sweep * (s1 - s0);
         let mut sweep = (cb[b] - cc[b]).atan2(cb[a] - cc[a]) - start;
@@ -196,8 +200,8 @@ impl ArcJob<'_, '_> {
             let f = j as f64 / k as f64;
             let ang = start + sweep * f;
             let mut cmd = lerp(ca, cb, f);
-            cmd[a] = cc[a] + r * ang.cos();
-            cmd[b] = cc[b] + r * ang.sin();
+            cmd[a] = cc[a] + (r + dr * f) * ang.cos();
+            cmd[b] = cc[b] + (r + dr * f) * ang.sin();
             let s = s0 + (s1 - s0) * f;
             let dirs = if local {
                 dirs_of(&self.arc.tangent(&self.s3, &self.e3, s), d)

@@ -175,6 +175,13 @@ impl Plane {
 }
 
 /// Arc geometry of a G2/G3 move, machine coordinates.
+///
+/// An arc whose end lies off the circle of its start (within the limit of
+/// [`ARC_RADIUS_TOL_MM`]) is the spiral Fanuc and LinuxCNC move: the
+/// radius about the centre changes linearly with the swept angle, from the
+/// start's radius `r0` to the end's `r1`, so the point at parameter `s` is
+/// the centre plus `(r0 + (r1 − r0)·s)` in the direction `θ0 + sweep·s`
+/// ([`ArcGeom::point`]). Start and end on one circle make the circle.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ArcGeom {
     /// The plane of the arc.
@@ -183,20 +190,36 @@ pub struct ArcGeom {
     pub center: Vector3<f64>,
     /// Signed swept angle, rad (positive counter-clockwise about the normal).
     pub sweep: f64,
-    /// Radius, mm.
+    /// Radius, mm: the mean of the start's and the end's (equal on a
+    /// circle; a spiral's radius at a point is [`ArcGeom::radius_at`]).
     pub radius: f64,
 }
 
 impl ArcGeom {
-    /// Point on the arc (helix) at parameter `s` in [0, 1] from `start` to `end`.
+    /// The in-plane distance of `p` from the centre, mm.
+    fn radius_of(&self, p: &Vector3<f64>) -> f64 {
+        let (a, b, _) = self.plane.axes();
+        (p[a] - self.center[a]).hypot(p[b] - self.center[b])
+    }
+
+    /// Radius of the arc (spiral) from `start` to `end` at parameter `s`:
+    /// linear in the swept angle from the start's radius to the end's.
+    pub fn radius_at(&self, start: &Vector3<f64>, end: &Vector3<f64>, s: f64) -> f64 {
+        let r0 = self.radius_of(start);
+        r0 + (self.radius_of(end) - r0) * s
+    }
+
+    /// Point on the arc (helix; spiral when the end's radius differs from
+    /// the start's) at parameter `s` in [0, 1] from `start` to `end`.
     pub fn point(&self, start: &Vector3<f64>, end: &Vector3<f64>, s: f64) -> Vector3<f64> {
         let (a, b, n) = self.plane.axes();
         let a0 = start[a] - self.center[a];
         let b0 = start[b] - self.center[b];
         let ang = b0.atan2(a0) + self.sweep * s;
+        let r = self.radius_at(start, end, s);
         let mut p = Vector3::zeros();
-        p[a] = self.center[a] + self.radius * ang.cos();
-        p[b] = self.center[b] + self.radius * ang.sin();
+        p[a] = self.center[a] + r * ang.cos();
+        p[b] = self.center[b] + r * ang.sin();
         p[n] = start[n] + (end[n] - start[n]) * s;
         if s >= 1.0 {
             p[a] = end[a];
@@ -209,18 +232,27 @@ impl ArcGeom {
     pub fn tangent(&self, start: &Vector3<f64>, end: &Vector3<f64>, s: f64) -> Vector3<f64> {
         let (a, b, n) = self.plane.axes();
         let ang = (start[b] - self.center[b]).atan2(start[a] - self.center[a]) + self.sweep * s;
+        let r = self.radius_at(start, end, s);
+        // d/ds of the radius along a spiral (0 on a circle).
+        let dr = self.radius_of(end) - self.radius_of(start);
         let mut t = Vector3::zeros();
-        t[a] = -ang.sin() * self.radius * self.sweep;
-        t[b] = ang.cos() * self.radius * self.sweep;
+        t[a] = dr * ang.cos() - ang.sin() * r * self.sweep;
+        t[b] = dr * ang.sin() + ang.cos() * r * self.sweep;
         t[n] = end[n] - start[n];
         let norm = t.norm();
         if norm > 0.0 { t / norm } else { t }
     }
 
-    /// Path length of the arc (helix), mm.
+    /// Path length of the arc (helix), mm. In its plane a spiral is taken
+    /// as `√((r̄·sweep)² + Δr²)` (r̄ the mean radius, Δr its change), a
+    /// lower bound of its length within `Δr²/(2·r_min·|sweep|)`; a circle
+    /// exactly.
     pub fn length(&self, start: &Vector3<f64>, end: &Vector3<f64>) -> f64 {
         let (_, _, n) = self.plane.axes();
-        (self.radius * self.sweep).hypot(end[n] - start[n])
+        let dr = self.radius_of(end) - self.radius_of(start);
+        (self.radius * self.sweep)
+            .hypot(dr)
+            .hypot(end[n] - start[n])
     }
 }
 
@@ -2287,6 +2319,45 @@ mod tests {
         assert_eq!(&m1.end[..3], &[115.0, 70.0, -195.0]);
         assert_eq!(m1.dirs[0], 1);
         assert_eq!(m1.feed_mm_min, 100.0);
+    }
+
+    #[test]
+    fn an_arc_off_its_circle_is_read_as_the_spiral_of_fanuc_and_linuxcnc() {
+        // A quarter turn CCW about the program origin (machine (100, 50))
+        // from radius 10 at 0° to radius 10.005 at 90°: at parameter s the
+        // radius is 10 + 0.005·s and the angle 90°·s. By hand:
+        // s = 1/4: 10.00125·(cos 22.5°, sin 22.5°) = (9.23995017, 3.82731268);
+        // s = 1/2: 10.0025·(cos 45°, sin 45°) = (7.07283558, 7.07283558);
+        // s = 3/4: 10.00375·(cos 67.5°, sin 67.5°) = (3.82826939, 9.24225987).
+        let p = run(&["G90 G54 G0 X10 Y0", "G3 X0 Y10.005 I-10 J0 F100"]).unwrap();
+        let mv = p[1].mv.unwrap();
+        let arc = mv.arc.unwrap();
+        let (s3, e3) = (mv.start3(), mv.end3());
+        for (s, x, y) in [
+            (0.25, 9.239950174528508, 3.827312677941354),
+            (0.5, 7.072835578818442, 7.072835578818441),
+            (0.75, 3.8282693865222677, 9.242259873359785),
+        ] {
+            let q = arc.point(&s3, &e3, s);
+            assert_abs_diff_eq!(q[0], 100.0 + x, epsilon = TOL);
+            assert_abs_diff_eq!(q[1], 50.0 + y, epsilon = TOL);
+            assert_abs_diff_eq!(arc.radius_at(&s3, &e3, s), 10.0 + 0.005 * s, epsilon = TOL);
+        }
+        // The ends are the programmed points.
+        assert_abs_diff_eq!(arc.point(&s3, &e3, 0.0)[0], 110.0, epsilon = TOL);
+        let end = arc.point(&s3, &e3, 1.0);
+        assert_eq!((end[0], end[1]), (100.0, 60.005));
+        // Tangent at the start: d/ds of the point is (Δr, r0·sweep) =
+        // (0.005, 10·π/2), normalised: (0.000318310, 0.999999949).
+        let t = arc.tangent(&s3, &e3, 0.0);
+        assert_abs_diff_eq!(t[0], 0.00031830987005802467, epsilon = TOL);
+        assert_abs_diff_eq!(t[1], 0.9999999493394119, epsilon = TOL);
+        // Length: √((r̄·π/2)² + Δr²) = √((10.0025·π/2)² + 0.005²).
+        assert_abs_diff_eq!(mv.length_mm(), 15.711891054341752, epsilon = TOL);
+        // Beyond the mismatch limit (0.01 mm + 0.1 % of the radius) the
+        // block is refused as before.
+        let e = run(&["G90 G54 G0 X10 Y0", "G3 X0 Y10.021 I-10 J0 F100"]).unwrap_err();
+        assert!(e.to_string().contains("not on the circle"), "{e}");
     }
 
     #[test]
