@@ -5,6 +5,7 @@
 //! grammar/krl.md documents the accepted subset.
 
 pub mod config;
+pub mod resolve;
 pub mod syntax;
 
 pub use syntax::{Aggregate, File, InlineForm, Kind, Line, Motion, Number, Target, Value, parse};
