@@ -1,8 +1,9 @@
 //! Integration tests: files in robot and control languages postproc does
-//! not read (KUKA KRL, FANUC TP, Yaskawa JBI, URScript, Stäubli VAL3,
-//! native Siemens 840D, Heidenhain conversational) get one message naming
-//! their language at `check`, `compensate`, `report` and `batch`, exit 2;
-//! a KRL `DEF MAIN()` is never taken for Siemens 840D. The programs are
+//! not read (FANUC TP, Yaskawa JBI, URScript, Stäubli VAL3, native Siemens
+//! 840D, Heidenhain conversational; KUKA KRL other than a `.src`) get one
+//! message naming their language at `check`, `compensate`, `report` and
+//! `batch`, exit 2; a KRL `DEF MAIN()` is never taken for Siemens 840D, and
+//! a KRL `.src` is read. The programs are
 //! written here in the style of each language's real files.
 
 use std::path::Path;
@@ -13,22 +14,10 @@ use crate::common::{postproc, write};
 /// names, and the line it quotes (`None`: told by the extension).
 const PROGRAMS: &[(&str, &str, &str, Option<&str>)] = &[
     (
-        "pallet.src",
-        "&ACCESS RVP\r\n&REL 12\r\n&PARAM TEMPLATE = C:\\KRC\\Roboter\\Template\\vorgabe\r\nDEF pallet( )\r\n;FOLD INI\r\n  BAS (#INITMOV,0 )\r\n;ENDFOLD (INI)\r\n;FOLD PTP HOME  Vel= 100 % DEFAULT\r\n$BWDSTART = FALSE\r\n;ENDFOLD\r\nLIN XP1 C_DIS\r\nEND\r\n",
-        "KUKA KRL",
-        Some("&ACCESS RVP"),
-    ),
-    (
         "pallet.dat",
         "&ACCESS RVP\r\n&REL 12\r\nDEFDAT  pallet\r\nDECL E6POS XP1={X 812.5,Y -140.0,Z 655.0,A 180.0,B 0.0,C 180.0,S 2,T 35,E1 0.0}\r\nENDDAT\r\n",
         "KUKA KRL",
         Some("&ACCESS RVP"),
-    ),
-    (
-        "main.src",
-        "DEF MAIN()\n  PTP {A1 0,A2 -90,A3 90,A4 0,A5 0,A6 0}\n  LIN {X 600,Y 0,Z 800,A 0,B 90,C 0}\nEND\n",
-        "KUKA KRL",
-        Some("DEF MAIN()"),
     ),
     (
         "bin_drop.ls",
@@ -94,10 +83,12 @@ fn assert_named(err: &str, path: &Path, lang: &str, line: Option<&str>, what: &s
     let msg = lines[0];
     assert!(msg.contains(&path.display().to_string()), "{what}: {msg}");
     assert!(msg.contains(lang), "{what}: names {lang}: {msg}");
-    assert!(
-        msg.contains("a language postproc does not read"),
-        "{what}: {msg}"
-    );
+    let told = if lang == "KUKA KRL" {
+        "postproc reads a KRL program from its .src"
+    } else {
+        "a language postproc does not read"
+    };
+    assert!(msg.contains(told), "{what}: {msg}");
     match line {
         Some(l) => assert!(
             msg.contains(&format!("(`{l}`)")),
@@ -143,7 +134,13 @@ fn check_compensate_and_report_name_each_unread_language() {
 fn a_krl_def_main_is_never_taken_for_siemens() {
     let dir = tempfile::tempdir().unwrap();
     let krl = "DEF MAIN()\n  INI\n  PTP HOME Vel=100 % DEFAULT\nEND\n";
-    for name in ["main.src", "MAIN", "main.txt", "main.nc", "main.mpf"] {
+    // A `.src` is read as KRL.
+    let path = write(dir.path(), "main.src", krl);
+    let (code, out, err) = run(&["check", path.to_str().unwrap()]);
+    assert_eq!(code, 0, "{err}");
+    assert!(out.contains("KRL program, 1 motion (0 targets, 0 joint targets, 1 left as written)"), "{out}");
+    assert!(!err.contains("Siemens"), "{err}");
+    for name in ["MAIN", "main.txt", "main.nc", "main.mpf"] {
         let path = write(dir.path(), name, krl);
         let (code, _, err) = run(&["check", path.to_str().unwrap(), "--machine", "afm-r1000"]);
         assert_eq!(code, 2, "{name}: {err}");

@@ -27,6 +27,7 @@ mod gperf;
 mod honesty_cli;
 mod hostile;
 mod krl;
+mod krl_compensate;
 mod languages;
 mod layers;
 mod machine_layouts;

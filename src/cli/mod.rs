@@ -8,6 +8,7 @@ mod config;
 mod diagnose;
 mod gcode;
 mod interrupt;
+mod krl;
 mod machines;
 pub mod memory;
 mod output;
@@ -383,6 +384,9 @@ pub fn run(cli: Cli) -> Result<i32> {
     init_logging(cli.quiet, cli.verbose);
     let quiet = cli.quiet;
     let code = match cli.command {
+        Command::Check(a) if krl::is_krl(&a.program.file) => krl::check(&a),
+        Command::Compensate(a) if krl::is_krl(&a.program.file) => krl::compensate(&a, quiet),
+        Command::Report(a) if krl::is_krl(&a.program.file) => krl::report(&a),
         Command::Check(a) => match Engine::choose(&a.program, config::Given::check(&a))? {
             Engine::Robot(robot) => rapid::check(&a, robot),
             Engine::Tool(machine) => {

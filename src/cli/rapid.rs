@@ -813,7 +813,7 @@ fn plural(n: usize, one: &str, many: &str) -> String {
 }
 
 /// The summary line on standard error (unless `quiet`).
-fn log_outcome(input: &str, out_path: &Path, outcome: &Summary, quiet: bool) {
+pub(super) fn log_outcome(input: &str, out_path: &Path, outcome: &Summary, quiet: bool) {
     if quiet {
         return;
     }

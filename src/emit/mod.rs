@@ -4,6 +4,7 @@ pub(crate) mod fixed;
 pub mod gcode;
 pub mod header;
 pub mod html;
+pub mod krl;
 mod inverse_time;
 pub mod rapid;
 pub mod report;

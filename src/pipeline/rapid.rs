@@ -81,8 +81,8 @@ pub struct RapidOptions {
 
 /// Why a `MoveAbsJ` is left as written by default: its joints are what the
 /// controller goes to, not a pose it solves (`grammar/rapid.md`, "Joint
-/// targets").
-pub const JOINT_TARGET: &str = "joint target: reported, not compensated";
+/// targets"); the same reason for every robot language.
+pub use crate::program::robot_moves::JOINT_TARGET;
 
 impl Default for RapidOptions {
     /// All effects, annotated, default formatting, cold start, move records.

@@ -248,7 +248,14 @@ impl Named {
     /// `file: KUKA KRL program (a .src file): …` when the extension told.
     pub fn error(&self, file: &str) -> Located {
         let lang = self.language.name();
-        let rest = "a language postproc does not read (it reads ISO G-code and ABB RAPID)";
+        let rest = match self.language {
+            // Only `batch` meets a `.src`: check, compensate and report read it.
+            Unread::Krl if self.extension.as_deref() == Some("src") => {
+                "batch does not read KRL programs yet: run postproc compensate on the .src"
+            }
+            Unread::Krl => "postproc reads a KRL program from its .src (with the .dat beside it): give the .src",
+            _ => "a language postproc does not read (it reads ISO G-code, ABB RAPID and KUKA KRL)",
+        };
         match &self.line {
             Some((n, text)) => Located::new(
                 file,
@@ -640,15 +647,15 @@ mod tests {
 
     #[test]
     fn the_message_names_the_language_and_the_line() {
-        let n = unread_text(Some("src"), b"&ACCESS RVP\nDEF A()\n").unwrap();
+        let n = unread_text(Some("dat"), b"&ACCESS RVP\nDEFDAT A\n").unwrap();
         assert_eq!(
-            n.error("a.src").to_string(),
-            "a.src:1:1: KUKA KRL program (`&ACCESS RVP`): a language postproc does not read (it reads ISO G-code and ABB RAPID)"
+            n.error("a.dat").to_string(),
+            "a.dat:1:1: KUKA KRL program (`&ACCESS RVP`): postproc reads a KRL program from its .src (with the .dat beside it): give the .src"
         );
         let n = unread_text(Some("tp"), b"").unwrap();
         assert_eq!(
             n.error("p.tp").to_string(),
-            "p.tp: FANUC TP program (a .tp file): a language postproc does not read (it reads ISO G-code and ABB RAPID)"
+            "p.tp: FANUC TP program (a .tp file): a language postproc does not read (it reads ISO G-code, ABB RAPID and KUKA KRL)"
         );
     }
 

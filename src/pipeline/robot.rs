@@ -1,0 +1,372 @@
+//! The robot pipeline over the language-neutral move stream
+//! ([`crate::program::robot_moves`]): every [`RobotTarget`] is put in the
+//! world frame (work object · target, with its tool), its programmed
+//! joints chosen by its language's configuration rule, and compensated with
+//! [`Robot::compensate`]; every joint target is reported; what is left as
+//! written is counted on the warnings. The outcome is one result per step
+//! (for the language's writer), the [`Summary`] and the report [`Row`]s.
+//!
+//! The moves are planned in order (a configuration may follow the move
+//! before), then solved on the thread pool, each independent of the
+//! others: the results do not depend on the thread count.
+//!
+//! Each move is predicted in its own cold context: there is no time line
+//! over this stream yet, so a robot with a thermal model or a process force
+//! is warned that those effects are not predicted for it.
+
+use std::collections::HashMap;
+
+use nalgebra::Isometry3;
+use rayon::prelude::*;
+
+use crate::compensate::outcome::{DevStats, RobotMove, Row, Summary};
+use crate::compensate::robot::{Compensation, Seed};
+use crate::error::{Error, Located, Result};
+use crate::machine::robot::{IkSelect, Model, Robot, RobotError};
+use crate::pipeline::rapid::RapidOptions;
+use crate::predict::MoveContext;
+use crate::predict::robot::Deviation;
+use crate::program::interp::Warning;
+use crate::program::robot_moves::{
+    Configuration, JOINT_TARGET, JointMove, LeftAsWritten, RobotStep, RobotTarget, ToolUse,
+};
+
+/// What the pipeline found for one step of the stream.
+#[derive(Debug, Clone, PartialEq)]
+pub enum StepResult {
+    /// A compensated target: its compensation and that of its auxiliary
+    /// point (world frame poses; `pose` is what to program).
+    Compensated {
+        /// The target's.
+        target: Compensation,
+        /// The auxiliary point's, for a circular move.
+        via: Option<Compensation>,
+    },
+    /// A joint target's predicted deviation (left as written).
+    Reported(Deviation),
+    /// Nothing (a move left as written).
+    None,
+}
+
+/// The outcome of a run over a stream.
+#[derive(Debug, Clone, Default)]
+pub struct RobotRun {
+    /// One result per step, in stream order.
+    pub results: Vec<StepResult>,
+    /// What the run did.
+    pub summary: Summary,
+    /// One report row per compensated or reported move.
+    pub records: Vec<Row>,
+}
+
+/// A planned compensation: the robot view, the programmed pose (world),
+/// the selection and the programmed joints.
+struct Job {
+    view: usize,
+    pose: Isometry3<f64>,
+    q: [f64; 6],
+}
+
+/// What planning gave a step.
+enum Plan {
+    /// Jobs of the target and of its auxiliary point.
+    Target(Job, Option<Job>),
+    /// A joint target: its view and joints.
+    Joints(usize, [f64; 6]),
+    /// Nothing to do.
+    Left,
+}
+
+/// Robot views by tool key.
+#[derive(Default)]
+struct Views {
+    robots: Vec<Robot>,
+    of: HashMap<String, usize>,
+}
+
+impl Views {
+    fn get(&mut self, robot: &Robot, tool: &ToolUse) -> usize {
+        if let Some(&i) = self.of.get(&tool.key) {
+            return i;
+        }
+        self.robots
+            .push(robot.with_tool(tool.flange_to_tcp, tool.load));
+        self.of.insert(tool.key.clone(), self.robots.len() - 1);
+        self.robots.len() - 1
+    }
+}
+
+/// The programmed joints of `pose` (world) on `view` by `rule`, after the
+/// joints `prev` of the target before.
+fn programmed_joints(
+    view: &Robot,
+    pose: &Isometry3<f64>,
+    rule: &Configuration,
+    prev: Option<&[f64; 6]>,
+) -> std::result::Result<[f64; 6], RobotError> {
+    match rule {
+        Configuration::Conf(c) => view.ik_conf(pose, *c),
+        Configuration::Previous => match prev {
+            Some(p) => view.ik_nearest(pose, p).map(|(q, _)| q),
+            None => Err(RobotError::Unreachable(
+                "no target before gives its configuration (it is the robot's at run time)".into(),
+            )),
+        },
+        Configuration::Admits(admits, text) => {
+            let mut best: Option<(f64, [f64; 6])> = None;
+            let turns = [0.0, -std::f64::consts::TAU, std::f64::consts::TAU];
+            for q in view.ik_all(pose)?.into_iter().flatten() {
+                for t1 in turns {
+                    for t4 in turns {
+                        for t6 in turns {
+                            let mut c = q;
+                            c[0] += t1;
+                            c[3] += t4;
+                            c[5] += t6;
+                            if !admits(view, &c) || view.check_limits(&c).is_err() {
+                                continue;
+                            }
+                            let d = prev.map_or(0.0, |p| {
+                                c.iter().zip(p).map(|(a, b)| (a - b).abs()).sum()
+                            });
+                            if best.is_none_or(|(b, _)| d < b) {
+                                best = Some((d, c));
+                            }
+                        }
+                    }
+                }
+            }
+            best.map(|(_, q)| q).ok_or_else(|| {
+                RobotError::Unreachable(format!("no joint solution within the limits has {text}"))
+            })
+        }
+    }
+}
+
+/// A target's refusal at its line and column.
+fn refused(file: &str, line: usize, column: usize, what: &str, e: RobotError) -> Error {
+    Error::Unachievable(Located::new(file, line, column, format!("{what}: {e}")))
+}
+
+/// Plans the steps in order: views, programmed poses and joints.
+fn plan(
+    robot: &Robot,
+    steps: &[RobotStep],
+    views: &mut Views,
+    file: &str,
+) -> Result<(Vec<Plan>, Vec<Warning>)> {
+    let mut plans = Vec::with_capacity(steps.len());
+    let mut warnings = Vec::new();
+    let mut prev: Option<[f64; 6]> = None;
+    for step in steps {
+        match step {
+            RobotStep::Target(t) => {
+                let view = views.get(robot, &t.tool);
+                let r = &views.robots[view];
+                let pose = t.work * t.pose;
+                let what = format!("target of {} at line {}", t.instruction, t.line);
+                let q = programmed_joints(r, &pose, &t.configuration, prev.as_ref());
+                let q = match q {
+                    Ok(q) => q,
+                    Err(e) if matches!(t.configuration, Configuration::Previous) && prev.is_none() => {
+                        warnings.push(LeftAsWritten::warning(
+                            t.line,
+                            t.column,
+                            t.instruction,
+                            &e.to_string(),
+                        ));
+                        plans.push(Plan::Left);
+                        continue;
+                    }
+                    Err(e) => return Err(refused(file, t.line, t.column, &what, e)),
+                };
+                let via = match &t.via {
+                    Some((v, _)) => {
+                        let vpose = t.work * v;
+                        let qv = r
+                            .ik_nearest(&vpose, &q)
+                            .map_err(|e| refused(file, t.line, t.column, &what, e))?
+                            .0;
+                        Some(Job {
+                            view,
+                            pose: vpose,
+                            q: qv,
+                        })
+                    }
+                    None => None,
+                };
+                prev = Some(q);
+                plans.push(Plan::Target(Job { view, pose, q }, via));
+            }
+            RobotStep::Joints(j) => match &j.tool {
+                Some(tool) => {
+                    let view = views.get(robot, tool);
+                    views.robots[view].check_limits(&j.q).map_err(|e| {
+                        refused(file, j.line, j.column, "joint target", e)
+                    })?;
+                    prev = Some(j.q);
+                    warnings.push(LeftAsWritten::warning(
+                        j.line,
+                        j.column,
+                        j.instruction,
+                        JOINT_TARGET,
+                    ));
+                    plans.push(Plan::Joints(view, j.q));
+                }
+                None => {
+                    prev = Some(j.q);
+                    warnings.push(LeftAsWritten::warning(
+                        j.line,
+                        j.column,
+                        j.instruction,
+                        "joint target before any tool is set: not predicted",
+                    ));
+                    plans.push(Plan::Left);
+                }
+            },
+            RobotStep::Left(w) => {
+                warnings.push(w.clone());
+                plans.push(Plan::Left);
+            }
+        }
+    }
+    Ok((plans, warnings))
+}
+
+/// The warning of a robot whose thermal model or process force this
+/// stream does not predict (no time line over it yet).
+fn untimed_warning(robot: &Robot, opts: &RapidOptions) -> Option<Warning> {
+    let fx = opts.effects;
+    let thermal = robot.thermal().is_some() && fx.thermal != 0.0;
+    let process = robot.process_force().is_some() && fx.process != 0.0;
+    let what = match (thermal, process) {
+        (true, true) => "thermal drift and process force",
+        (true, false) => "thermal drift",
+        (false, true) => "process force",
+        (false, false) => return None,
+    };
+    Some(Warning {
+        line: 0,
+        message: format!(
+            "{what} not predicted for this language (no time line over its moves): each move is predicted cold, without a process wrench"
+        ),
+        count: 1,
+        left: None,
+    })
+}
+
+/// Runs the pipeline over `steps` on `robot` (`file` names the program in
+/// messages). Errors: [`Error::Unachievable`] at the first target that
+/// cannot be reached in its configuration or compensated.
+pub fn run(robot: &Robot, steps: &[RobotStep], opts: &RapidOptions, file: &str) -> Result<RobotRun> {
+    let mut views = Views::default();
+    let (plans, mut warnings) = plan(robot, steps, &mut views, file)?;
+    let fx = opts.effects;
+    let ctx = MoveContext::default();
+    let solve = |j: &Job| -> std::result::Result<Compensation, RobotError> {
+        let r = &views.robots[j.view];
+        let seed = Seed {
+            q: Some(j.q),
+            ..Seed::default()
+        };
+        r.compensate_seeded(&ctx, &j.pose, &IkSelect::Conf(r.confdata(&j.q)), fx, &seed)
+    };
+    let solved: Vec<std::result::Result<StepResult, RobotError>> = plans
+        .par_iter()
+        .map(|p| match p {
+            Plan::Target(t, v) => Ok(StepResult::Compensated {
+                target: solve(t)?,
+                via: v.as_ref().map(solve).transpose()?,
+            }),
+            Plan::Joints(view, q) => Ok(StepResult::Reported(
+                views.robots[*view].predict_at_joints(&ctx, q, fx),
+            )),
+            Plan::Left => Ok(StepResult::None),
+        })
+        .collect();
+    let mut out = RobotRun::default();
+    let mut deviation = DevStats::default();
+    let mut moves = 0;
+    for (step, r) in steps.iter().zip(solved) {
+        let r = r.map_err(|e| match step {
+            RobotStep::Target(t) => refused(
+                file,
+                t.line,
+                t.column,
+                &format!("target of {} at line {}", t.instruction, t.line),
+                e,
+            ),
+            _ => Error::Internal(format!("{e}")),
+        })?;
+        match (&r, step) {
+            (StepResult::Compensated { target, .. }, RobotStep::Target(t)) => {
+                moves += 1;
+                deviation.add(target.deviation.total.pos_mm.norm(), t.line);
+                if opts.records {
+                    out.records.push(row(t, target));
+                }
+            }
+            (StepResult::Reported(dev), RobotStep::Joints(j)) if opts.records => {
+                out.records.push(joint_row(robot, j, dev));
+            }
+            _ => {}
+        }
+        out.results.push(r);
+    }
+    warnings.extend(untimed_warning(robot, opts));
+    out.summary = Summary {
+        moves,
+        deviation,
+        warnings,
+        ..Summary::default()
+    };
+    Ok(out)
+}
+
+/// The report row of a compensated target.
+fn row(t: &RobotTarget, c: &Compensation) -> Row {
+    let p = (t.work * t.pose).translation.vector;
+    Row {
+        line: t.line,
+        motion: t.instruction,
+        start: [0.0; 6],
+        commanded: [p.x, p.y, p.z, 0.0, 0.0, 0.0],
+        arc: None,
+        compensated: [0.0; 6],
+        result: crate::compensate::BlockResult::default(),
+        robot: Some(RobotMove {
+            via_mm: t.via.as_ref().map(|(v, _)| (t.work * v).translation.vector.into()),
+            deviation: c.deviation,
+            wrench: None,
+            duration_s: 0.0,
+            power_w: [0.0; 6],
+            thermal_power_w: [0.0; 6],
+        }),
+    }
+}
+
+/// The report row of a reported joint target.
+fn joint_row(robot: &Robot, j: &JointMove, dev: &Deviation) -> Row {
+    let view = match &j.tool {
+        Some(t) => robot.with_tool(t.flange_to_tcp, t.load),
+        None => robot.clone(),
+    };
+    let p = view.tcp_pose(Model::Nominal, &j.q).translation.vector;
+    Row {
+        line: j.line,
+        motion: j.instruction,
+        start: [0.0; 6],
+        commanded: [p.x, p.y, p.z, 0.0, 0.0, 0.0],
+        arc: None,
+        compensated: [0.0; 6],
+        result: crate::compensate::BlockResult::default(),
+        robot: Some(RobotMove {
+            via_mm: None,
+            deviation: *dev,
+            wrench: None,
+            duration_s: 0.0,
+            power_w: [0.0; 6],
+            thermal_power_w: [0.0; 6],
+        }),
+    }
+}
