@@ -24,7 +24,12 @@ const FLOAT_MM: f64 = 1e-9;
 
 /// The forward pass of `machine` (bundled name) with `effects` at `tol`.
 pub(crate) fn job<'a>(machine: &'a MachineTool, effects: &str, tol: f64) -> Job<'a> {
-    let effects = EffectSet::from_flags(&effects.parse().expect("effects"), &[]).expect("effects");
+    let effects = EffectSet::from_flags(
+        &effects.parse().expect("effects"),
+        &[],
+        postproc::predict::MachineKind::Tool,
+    )
+    .expect("effects");
     Job {
         predictor: Some(ToolPredictor::new(machine, effects)),
         setup: Setup::for_machine(machine),
