@@ -52,6 +52,8 @@ fn shop_programs_are_written_back_byte_for_byte_with_no_effects() {
         "haas_sub_repeat.nc",
         "linuxcnc_pocket.ngc",
         "fanuc_bolt_circle.nc",
+        "plasma_no_z.nc",
+        "inch_without_g20.nc",
     ] {
         let input = program(name);
         let (out, stderr) = compensate(
@@ -65,8 +67,9 @@ fn shop_programs_are_written_back_byte_for_byte_with_no_effects() {
             "{name}: identity differs:\n{}",
             String::from_utf8_lossy(&out)
         );
+        let subprograms = !matches!(name, "plasma_no_z.nc" | "inch_without_g20.nc");
         assert!(
-            stderr.contains("0 copies") && !stderr.contains("written out"),
+            stderr.contains("0 copies") == subprograms && !stderr.contains("written out"),
             "{name}: {stderr}"
         );
     }
@@ -187,6 +190,7 @@ fn compensated_subprograms_attain_every_target_when_predicted_again() {
         "haas_sub_repeat.nc",
         "linuxcnc_pocket.ngc",
         "fanuc_bolt_circle.nc",
+        "inch_without_g20.nc",
     ] {
         let dir = tempfile::tempdir().expect("tempdir");
         let input = program(name);
@@ -326,4 +330,112 @@ fn check_of_a_lathe_program_exits_2_naming_it() {
         stderr.contains("haas_lathe.nc:6:1: lathe (turning) program: `G50 S…` spindle speed clamp with `G18` (line 4)"),
         "{stderr}"
     );
+}
+
+/// An inch program without `G20` on a machine file whose control reads
+/// mm: read in mm, and the first block that relies on the machine file's
+/// `units_default` says so, once, at its line.
+#[test]
+fn an_inch_program_without_g20_is_told_its_units_come_from_the_machine_file() {
+    let input = program("inch_without_g20.nc");
+    let a = postproc()
+        .arg("check")
+        .args(MACHINE)
+        .arg(&input)
+        .assert()
+        .success();
+    let stdout = String::from_utf8_lossy(&a.get_output().stdout).to_string();
+    let stderr = String::from_utf8_lossy(&a.get_output().stderr).to_string();
+    let said = "the program sets no units (G20 inch or G21 mm) before `X0.5`: read in mm, the machine file's `units_default: mm` (or --units)";
+    assert!(stdout.contains("units: mm"), "{stdout}");
+    assert!(
+        stdout.contains(&format!("  line 6: {said} (1 block)")),
+        "{stdout}"
+    );
+    assert_eq!(stderr.matches(said).count(), 1, "{stderr}");
+    assert!(stderr.contains("inch_without_g20.nc:6: "), "{stderr}");
+    // `compensate` says it too, once.
+    let dir = tempfile::tempdir().expect("tempdir");
+    let (_, stderr) = compensate(&input, dir.path(), &[]);
+    assert_eq!(stderr.matches("`units_default: mm`").count(), 1, "{stderr}");
+}
+
+/// A plasma program never programs Z: the torch stays at the reference
+/// position at the end of Z's travel, and the correction of each cut
+/// would take Z a few µm past it. At a cutting tolerance larger than
+/// that crossing the point is held at the end with one warning, and every
+/// cut still attains its target within the tolerance; at a tolerance
+/// smaller than the crossing the block is refused, naming the travel.
+#[test]
+fn a_plasma_program_without_z_is_held_at_the_end_of_travel() {
+    let tolerance = 0.02;
+    let input = program("plasma_no_z.nc");
+    let dir = tempfile::tempdir().expect("tempdir");
+    let (out, stderr) = compensate(&input, dir.path(), &["--tolerance", "0.02"]);
+    let held = "the correction of Z would take it 0.0089 mm past the end of its travel (500), less than the tolerance 0.02 mm: held at the end";
+    assert_eq!(stderr.matches(held).count(), 1, "{stderr}");
+    assert!(stderr.contains("plasma_no_z.nc:8: "), "{stderr}");
+    let text = String::from_utf8(out).expect("utf-8");
+    assert!(!text.contains(" Z"), "no Z word is written:\n{text}");
+    let output = write(dir.path(), "landed.nc", &text);
+    let landed = report(&output);
+    let mut checked = 0;
+    for t in report(&input)
+        .iter()
+        .filter(|t| t.motion != "rapid" && t.motion != "fixed")
+    {
+        let off = landed
+            .iter()
+            .map(|l| dist(&l.attained, &t.programmed))
+            .fold(f64::INFINITY, f64::min);
+        assert!(
+            off <= tolerance + t.residual_mm,
+            "line {}: attained {off:.6} mm from its target",
+            t.line
+        );
+        checked += 1;
+    }
+    assert!(checked >= 6, "{checked} targets");
+    // The machine file's tolerance, 3 µm, is less than the crossing.
+    let a = postproc()
+        .arg("compensate")
+        .args(MACHINE)
+        .arg(&input)
+        .arg("-o")
+        .arg(dir.path().join("refused.nc"))
+        .assert()
+        .code(2);
+    let stderr = String::from_utf8_lossy(&a.get_output().stderr).to_string();
+    assert!(
+        stderr.contains(
+            "plasma_no_z.nc:8:1: compensated Z = 500.0089 is outside the travel [0, 500]"
+        ),
+        "{stderr}"
+    );
+    assert!(!dir.path().join("refused.nc").exists());
+}
+
+/// Parentheses inside a comment nest: a message text in parentheses is a
+/// comment, not a dialect this reader does not take, and is written back
+/// as it is.
+#[test]
+fn nested_comments_are_read_and_kept() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let body = "G21 G90 G17 ($MESSAGE(\"CHANGE TOOL\") )\nG0 X10. Y10. Z5. (OUTER (INNER) STILL COMMENT)\nG1 Z-1. F100.\nM30\n";
+    let p = write(dir.path(), "nested.nc", body);
+    let a = postproc()
+        .arg("check")
+        .args(MACHINE)
+        .arg(&p)
+        .assert()
+        .success();
+    let stderr = String::from_utf8_lossy(&a.get_output().stderr).to_string();
+    assert!(!stderr.contains("Siemens"), "{stderr}");
+    let (out, _) = compensate(&p, dir.path(), &["--annotate", "none"]);
+    let text = String::from_utf8(out).expect("utf-8");
+    assert!(
+        text.contains("G21 G90 G17 ($MESSAGE(\"CHANGE TOOL\") )\n"),
+        "{text}"
+    );
+    assert!(text.contains(" (OUTER (INNER) STILL COMMENT)\n"), "{text}");
 }

@@ -8,8 +8,8 @@
 use nalgebra::Vector3;
 
 use super::{
-    BlockResult, Carry, Failure, Lip, SKIP_MARGIN_MM, SOLVE_TOL_MM, check_travel, dirs_of, lerp,
-    solve, solve_near, split_line, start_from, with_xyz,
+    BlockResult, Carry, Failure, Lip, SKIP_MARGIN_MM, SOLVE_TOL_MM, check_travel_within, dirs_of,
+    lerp, solve, solve_near, split_line, start_from, with_xyz,
 };
 use crate::machine::{AxisVec, DirVec};
 use crate::predict::ToolPredictor;
@@ -436,7 +436,7 @@ pub(super) fn arc_block(
     res.residual_mm = res.residual_mm.max(left);
     res.miss_mm = res.miss_mm.max(left);
     for p in res.segments.iter() {
-        check_travel(pred, p)?;
+        check_travel_within(pred, p, tol)?;
     }
     Ok(last_dirs)
 }

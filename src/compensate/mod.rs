@@ -228,6 +228,23 @@ pub struct BlockResult {
     /// block does not drive reversed by the correction's drift) or an
     /// arc's axes reverse inside it.
     pub start_dirs: DirVec,
+    /// The end of travel a written point of the block is held at, where
+    /// the correction would cross it by less than the tolerance (the
+    /// largest such crossing of the block); `None` when none is.
+    pub held: Option<HeldAtTravel>,
+}
+
+/// A compensated point held at an end of travel: the correction would
+/// have taken the axis past it by less than the tolerance (a 2D program
+/// whose tool stays at the reference position at the top of Z, say).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct HeldAtTravel {
+    /// Axis letter.
+    pub axis: char,
+    /// The end of travel it is held at, mm or deg.
+    pub end: f64,
+    /// How far the correction would have crossed it, mm or deg.
+    pub by: f64,
 }
 
 /// Solves for the command whose predicted attained pose equals the nominal
@@ -447,11 +464,22 @@ fn check_travel(pred: &ToolPredictor, c: &AxisVec) -> Result<(), Failure> {
     travel(pred.machine, c)
 }
 
+/// Every axis of `c` within the travel, or beyond an end by at most
+/// `hold` (the tolerance: [`hold_at_travel`] holds it at the end).
+fn check_travel_within(pred: &ToolPredictor, c: &AxisVec, hold: f64) -> Result<(), Failure> {
+    travel_within(pred.machine, c, hold.max(TRAVEL_SLACK))
+}
+
 /// Every axis of `c` within the travel of `m`.
 fn travel(m: &MachineTool, c: &AxisVec) -> Result<(), Failure> {
+    travel_within(m, c, TRAVEL_SLACK)
+}
+
+/// Every axis of `c` within the travel of `m`, give or take `slack`.
+fn travel_within(m: &MachineTool, c: &AxisVec, slack: f64) -> Result<(), Failure> {
     for (s, &letter) in crate::machine::AXIS_LETTERS.iter().enumerate() {
         if let Some((lo, hi)) = m.travel(s) {
-            if c[s] < lo - TRAVEL_SLACK || c[s] > hi + TRAVEL_SLACK {
+            if c[s] < lo - slack || c[s] > hi + slack {
                 return Err(Failure::OutOfTravel {
                     axis: letter as char,
                     value: c[s],
@@ -461,6 +489,41 @@ fn travel(m: &MachineTool, c: &AxisVec) -> Result<(), Failure> {
         }
     }
     Ok(())
+}
+
+/// The written points of `res` (its split points and end) within the
+/// travel: a point the correction takes past an end by less than `tol` is
+/// held at the end (the largest such crossing named in
+/// [`BlockResult::held`]); one farther is refused. Returns whether a point
+/// was held.
+fn hold_at_travel(pred: &ToolPredictor, res: &mut BlockResult, tol: f64) -> Result<bool, Failure> {
+    let m = pred.machine;
+    check_travel_within(pred, &res.end, tol)?;
+    for p in &res.segments {
+        check_travel_within(pred, p, tol)?;
+    }
+    let mut held: Option<HeldAtTravel> = None;
+    for p in res.segments.iter_mut().chain(std::iter::once(&mut res.end)) {
+        for (s, &letter) in crate::machine::AXIS_LETTERS.iter().enumerate() {
+            let Some((lo, hi)) = m.travel(s) else {
+                continue;
+            };
+            let end = p[s].clamp(lo, hi);
+            let by = (p[s] - end).abs();
+            if by > TRAVEL_SLACK {
+                p[s] = end;
+                if held.is_none_or(|h| by > h.by) {
+                    held = Some(HeldAtTravel {
+                        axis: letter as char,
+                        end,
+                        by,
+                    });
+                }
+            }
+        }
+    }
+    res.held = held;
+    Ok(held.is_some())
 }
 
 /// Largest number of model breakpoints considered inside one move; a move
@@ -1490,7 +1553,7 @@ fn straight<'m>(
         (runs, n_runs) = (next, n_next.unwrap_or(0));
     }
     for p in &res.segments {
-        check_travel(pred, p)?;
+        check_travel_within(pred, p, tol)?;
     }
     Ok(result)
 }
@@ -1838,7 +1901,20 @@ pub fn block_recycling(
         }
         (_, None) => {}
     }
-    check_travel(pred, &res.end)?;
+    if hold_at_travel(pred, &mut res, tol)? {
+        // Held at an end of travel: the machine stands there, and the
+        // point attains its target only as far as the hold lets it.
+        if let Some(k) = carry_out.as_mut() {
+            for s in 0..6 {
+                if let Some((lo, hi)) = pred.machine.travel(s) {
+                    k.c[s] = k.c[s].clamp(lo, hi);
+                }
+            }
+        }
+        res.residual_mm = (pred.attained(&res.end, &res.dirs, tool).pos - nom_end.pos).norm();
+        let by = res.held.map_or(0.0, |h| h.by);
+        res.miss_mm = res.miss_mm.max(res.residual_mm).max(by);
+    }
     *carry = carry_out;
     Ok(res)
 }

@@ -700,6 +700,9 @@ struct WriteStage<'j, 'm, 'o, 'r> {
     /// The warnings about blocks with a piece beyond the tolerance (at most
     /// [`MAX_BEYOND_WARNINGS`]; the summary counts them all).
     beyond: Vec<Warning>,
+    /// The warning about points held at an end of travel (the first
+    /// block's, counting every block).
+    held: Option<Warning>,
     /// Bytes written before the chunk being written.
     written: usize,
     /// Where each line's output ends (bytes written so far), when asked.
@@ -726,6 +729,7 @@ impl<'j, 'm, 'o, 'r> WriteStage<'j, 'm, 'o, 'r> {
             rows,
             out_buf: Vec::with_capacity(1 << 20),
             beyond: Vec::new(),
+            held: None,
             written: 0,
             marks: None,
             tip_plan: Plan::default(),
@@ -820,6 +824,34 @@ impl<'j, 'm, 'o, 'r> WriteStage<'j, 'm, 'o, 'r> {
         Ok(())
     }
 
+    /// Says that a block's point is held at an end of travel: worded at
+    /// the first such block, counted at the others.
+    fn held_at_travel(&mut self, h: compensate::HeldAtTravel, line_no: usize) {
+        if let Some(w) = self.held.as_mut() {
+            w.count += 1;
+            return;
+        }
+        let tol = self.job.settings.tolerance_mm;
+        let unit = if matches!(h.axis, 'A' | 'B' | 'C') {
+            "deg"
+        } else {
+            "mm"
+        };
+        let message = format!(
+            "the correction of {axis} would take it {by:.4} {unit} past the end of its travel ({end}), less than the tolerance {tol} mm: held at the end, where the point misses its target by as much",
+            axis = h.axis,
+            by = h.by,
+            end = h.end,
+        );
+        tracing::warn!("{}:{line_no}: {message}", self.file);
+        self.held = Some(Warning {
+            line: line_no,
+            message,
+            count: 1,
+            left: None,
+        });
+    }
+
     /// Adds a compensated move's deviation to the summary and hands over
     /// its report row.
     fn record(
@@ -830,6 +862,9 @@ impl<'j, 'm, 'o, 'r> WriteStage<'j, 'm, 'o, 'r> {
         line_no: usize,
         summary: &mut Summary,
     ) {
+        if let Some(h) = r.held {
+            self.held_at_travel(h, line_no);
+        }
         let dev = r.deviation.total().norm();
         summary.deviation.add(dev, line_no);
         if plan.kind != PlanKind::Fixed && mv.motion != Motion::Rapid {
@@ -891,6 +926,7 @@ impl<'j, 'm, 'o, 'r> WriteStage<'j, 'm, 'o, 'r> {
         summary.added = self.emitter.added_blocks();
         summary.added_by = self.emitter.added_by();
         summary.warnings.extend(self.beyond);
+        summary.warnings.extend(self.held);
     }
 }
 

@@ -399,7 +399,7 @@ fn scan_line(line: &[u8], line_no: usize, file: &str, out: &mut Block) -> Result
 /// after its `)`.
 #[inline]
 fn paren_comment(text: &[u8], pos: usize, out: &mut Block, at: At) -> Result<usize, Located> {
-    let Some(off) = text[pos..].iter().position(|&c| c == b')') else {
+    let Some(off) = comment_close(text, pos).map(|close| close - pos) else {
         return Err(at.err(
             pos,
             format!(
@@ -414,6 +414,35 @@ fn paren_comment(text: &[u8], pos: usize, out: &mut Block, at: At) -> Result<usi
         semicolon: false,
     });
     Ok(pos + off + 1)
+}
+
+/// The index of the `)` that closes the comment opened by the `(` at
+/// `open`: the first `)`, unless the comment holds parentheses of its own
+/// (`(outer (inner) still comment)`, `($MESSAGE("DONE") )`); then the one
+/// that balances them, or, where they do not balance, the last `)` of the
+/// line. `None` when no `)` follows.
+pub fn comment_close(text: &[u8], open: usize) -> Option<usize> {
+    let inside = text.get(open + 1..)?;
+    let first = open + 1 + inside.iter().position(|&c| c == b')')?;
+    if !text[open + 1..first].contains(&b'(') {
+        return Some(first);
+    }
+    let mut depth = 0usize;
+    let mut last = first;
+    for (i, &c) in text.iter().enumerate().skip(open) {
+        match c {
+            b'(' => depth += 1,
+            b')' => {
+                depth -= 1;
+                last = i;
+                if depth == 0 {
+                    return Some(i);
+                }
+            }
+            _ => {}
+        }
+    }
+    Some(last)
 }
 
 /// The word whose letter is at `pos`: pushed to `out`; the position after
@@ -844,5 +873,37 @@ mod tests {
         assert!(e.message.contains("unterminated"));
         let e = parse("G1 12").unwrap_err();
         assert!(e.message.contains("without a letter"));
+    }
+
+    /// Parentheses inside a comment nest; an unbalanced one inside ends
+    /// the comment at the line's last `)`.
+    #[test]
+    fn nested_comments_are_one_comment() {
+        let spans = |line: &str| -> Vec<String> {
+            let b = parse(line).unwrap_or_else(|e| panic!("{line}: {e}"));
+            b.comments
+                .iter()
+                .map(|c| line[c.start as usize..c.end as usize].to_string())
+                .collect()
+        };
+        assert_eq!(
+            spans("(outer (inner) still comment)"),
+            ["(outer (inner) still comment)"]
+        );
+        assert_eq!(
+            spans("G0 X1. ($MESSAGE(\"DONE\") ) Y2."),
+            ["($MESSAGE(\"DONE\") )"]
+        );
+        let b = parse("G0 X1. ($MESSAGE(\"DONE\") ) Y2.").unwrap();
+        assert_eq!(b.word(b'Y').unwrap().value, 2.0);
+        assert_eq!(
+            spans("(USE 1/2 (12.7 MM CUTTER)"),
+            ["(USE 1/2 (12.7 MM CUTTER)"]
+        );
+        assert_eq!(spans("(A) G1 (B)"), ["(A)", "(B)"]);
+        let e = parse("G1 (a (b) c").unwrap_err();
+        assert!(e.message.contains("letter `c` with no number"), "{e}");
+        let e = parse("G1 (a (b c").unwrap_err();
+        assert!(e.message.contains("unterminated"), "{e}");
     }
 }

@@ -514,6 +514,9 @@ pub struct Interpreter {
     scaled: Block,
     /// A word without a decimal point was warned about.
     integer_warned: bool,
+    /// The program set its units (G20/G21), or a length read in the
+    /// machine file's `units_default` was warned about.
+    units_said: bool,
     /// A G53 move down in Z was warned about.
     g53_down_warned: bool,
     comp_warned: bool,
@@ -565,6 +568,7 @@ impl Interpreter {
             warnings: Vec::new(),
             scaled: Block::default(),
             integer_warned: false,
+            units_said: false,
             g53_down_warned: false,
             comp_warned: false,
             cutter_comp: false,
@@ -678,7 +682,26 @@ impl Interpreter {
             return false;
         };
         match self.setup.integer_words {
-            Some(IntegerWords::Increments) => true,
+            Some(IntegerWords::Increments) => {
+                if !self.integer_warned {
+                    self.integer_warned = true;
+                    let step = if (b'A'..=b'C').contains(&w.letter) {
+                        "0.001°"
+                    } else if self.block_inch(block) {
+                        "0.0001 inch"
+                    } else {
+                        "0.001 mm"
+                    };
+                    self.warn(
+                        block.line_no,
+                        format!(
+                            "`{}{}` has no decimal point: read as {} increments of {step}, the machine file's `integer_words: increments`",
+                            w.letter as char, w.value, w.value
+                        ),
+                    );
+                }
+                true
+            }
             Some(IntegerWords::Units) => false,
             None => {
                 if !self.integer_warned {
@@ -724,14 +747,7 @@ impl Interpreter {
     /// into whole units (0.001 mm or 0.0001 inch for lengths — the block's
     /// own G20/G21 first — and 0.001° for angles).
     fn to_increments(&self, block: &mut Block) {
-        let inch = block
-            .words
-            .iter()
-            .rev()
-            .find(|w| {
-                w.letter == b'G' && matches!(w.value as i64, 20 | 21) && w.value.fract() == 0.0
-            })
-            .map_or(self.inch(), |w| w.value as i64 == 20);
+        let inch = self.block_inch(block);
         let length = if inch { 1e-4 } else { 1e-3 };
         for i in 0..block.words.len() {
             let w = block.words[i];
@@ -745,6 +761,19 @@ impl Interpreter {
                 block.words[i].decimals = Some(0);
             }
         }
+    }
+
+    /// Whether the lengths of `block` are in inches: its own G20/G21, else
+    /// the modal units.
+    fn block_inch(&self, block: &Block) -> bool {
+        block
+            .words
+            .iter()
+            .rev()
+            .find(|w| {
+                w.letter == b'G' && matches!(w.value as i64, 20 | 21) && w.value.fract() == 0.0
+            })
+            .map_or(self.inch(), |w| w.value as i64 == 20)
     }
 
     /// [`Interpreter::step_into`] of a block whose words are in whole units.
@@ -1181,8 +1210,14 @@ impl Interpreter {
             170 => self.plane = Plane::XY,
             180 => self.plane = Plane::ZX,
             190 => self.plane = Plane::YZ,
-            200 => self.inch = Some(true),
-            210 => self.inch = Some(false),
+            200 => {
+                self.inch = Some(true);
+                self.units_said = true;
+            }
+            210 => {
+                self.inch = Some(false);
+                self.units_said = true;
+            }
             900 => self.absolute = true,
             910 => self.absolute = false,
             901 => self.arc_absolute = true,
@@ -1285,9 +1320,10 @@ impl Interpreter {
     }
 
     /// A block with a length in program units needs to know the units:
-    /// set by G20/G21, or the control's default from the setup.
-    fn check_units(&self, block: &Block, g: &Words) -> Result<(), Located> {
-        if self.inch.is_some() {
+    /// set by G20/G21, or the control's default from the setup, which the
+    /// first block that relies on it names once.
+    fn check_units(&mut self, block: &Block, g: &Words) -> Result<(), Located> {
+        if self.units_said {
             return Ok(());
         }
         let dwell = g.non_modal.is_some_and(|w| w.code10() == 40);
@@ -1298,9 +1334,23 @@ impl Interpreter {
             b'F' => !inverse_time,
             _ => false,
         });
-        match first {
-            None => Ok(()),
-            Some(w) => Err(self.err(
+        let Some(w) = first else {
+            return Ok(());
+        };
+        match self.inch {
+            Some(inch) => {
+                self.units_said = true;
+                let unit = if inch { "inch" } else { "mm" };
+                self.warn(
+                    block.line_no,
+                    format!(
+                        "the program sets no units (G20 inch or G21 mm) before `{}{}`: read in {unit}, the machine file's `units_default: {unit}` (or --units)",
+                        w.letter as char, w.value
+                    ),
+                );
+                Ok(())
+            }
+            None => Err(self.err(
                 block.line_no,
                 Some(w),
                 format!(
@@ -2467,7 +2517,14 @@ mod tests {
             "G21 G81 X0 Y0 Z-2000 R1000 K3 F100",
         ];
         let (p, warnings) = run_integer(Some(IntegerWords::Increments), &lines);
-        assert!(warnings.is_empty(), "{warnings:?}");
+        // The first word read in increments names the machine file's key,
+        // once.
+        assert_eq!(warnings.len(), 1, "{warnings:?}");
+        assert_eq!(warnings[0].line, 1);
+        assert_eq!(
+            warnings[0].message,
+            "`X100` has no decimal point: read as 100 increments of 0.001 mm, the machine file's `integer_words: increments`"
+        );
         let end = |i: usize| p[i].mv.expect("a move").end;
         // 100 µm, 50.5 mm as written with its point, 5 µm down.
         assert_abs_diff_eq!(end(0)[0], 0.1, epsilon = TOL);
@@ -2512,9 +2569,14 @@ mod tests {
         setup.home = [0.0, 0.0, 500.0, 0.0, 0.0, 0.0];
         let mut it = Interpreter::new(setup, "t.nc");
         let mut b = Block::default();
-        for (i, l) in ["G53 G0 Z400.", "G53 G0 Z0.", "G53 G0 Z450.", "G53 G0 Z0."]
-            .iter()
-            .enumerate()
+        for (i, l) in [
+            "G21 G53 G0 Z400.",
+            "G53 G0 Z0.",
+            "G53 G0 Z450.",
+            "G53 G0 Z0.",
+        ]
+        .iter()
+        .enumerate()
         {
             parse_line(l.as_bytes(), i + 1, "t.nc", &mut b).expect("syntax");
             it.step(&b, l.as_bytes()).expect("read");
@@ -2699,6 +2761,38 @@ mod tests {
         let p = run_setup(inch, &["G0 X1", "G21 G0 X1"]).expect("default inch");
         assert_abs_diff_eq!(p[0].mv.unwrap().end[0], 25.4, epsilon = TOL);
         assert_abs_diff_eq!(p[1].mv.unwrap().end[0], 1.0, epsilon = TOL);
+    }
+
+    /// An inch program without G20 on a control whose default is mm: the
+    /// first length read in the default names the machine file's key and
+    /// the line, once; a program that sets its units hears nothing.
+    #[test]
+    fn lengths_read_in_the_default_unit_say_so_once() {
+        let mm = Setup {
+            axes: [true, true, true, false, false, false],
+            units_default: Some(Units::Mm),
+            ..Setup::default()
+        };
+        let lines = ["G90 G17", "G0 X1.5 Y0.75", "G1 Z-0.1 F20.", "G0 Z0.5"];
+        let mut it = Interpreter::new(mm.clone(), "t.nc");
+        let mut b = Block::default();
+        for (i, l) in lines.iter().enumerate() {
+            parse_line(l.as_bytes(), i + 1, "t.nc", &mut b).expect("syntax");
+            it.step(&b, l.as_bytes()).expect("read");
+        }
+        let w = it.warnings();
+        assert_eq!(w.len(), 1, "{w:?}");
+        assert_eq!(w[0].line, 2);
+        assert_eq!(
+            w[0].message,
+            "the program sets no units (G20 inch or G21 mm) before `X1.5`: read in mm, the machine file's `units_default: mm` (or --units)"
+        );
+        let mut it = Interpreter::new(mm, "t.nc");
+        for (i, l) in ["G20 G90", "G0 X1.5"].iter().enumerate() {
+            parse_line(l.as_bytes(), i + 1, "t.nc", &mut b).expect("syntax");
+            it.step(&b, l.as_bytes()).expect("read");
+        }
+        assert!(it.warnings().is_empty(), "{:?}", it.warnings());
     }
 
     #[test]

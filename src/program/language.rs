@@ -130,7 +130,7 @@ fn gcode_line(line: &[u8]) -> Option<bool> {
         match b {
             b' ' | b'\t' => i += 1,
             b';' => break,
-            b'(' => i += line.get(i..)?.iter().position(|&c| c == b')')? + 1,
+            b'(' => i = crate::program::gcode::comment_close(line, i)? + 1,
             _ => {
                 let letter = b.to_ascii_uppercase();
                 let first = words == 0;

@@ -143,7 +143,8 @@ pub fn dialect_of(text: &[u8]) -> Option<&'static str> {
     None
 }
 
-/// The alphabetic runs of `text` outside `( )` comments, each with the byte
+/// The alphabetic runs of `text` outside `( )` comments (nested ones
+/// read as the scanner reads them), each with the byte
 /// after it.
 fn runs(text: &[u8]) -> impl Iterator<Item = (&[u8], Option<u8>)> {
     let mut i = 0;
@@ -151,11 +152,7 @@ fn runs(text: &[u8]) -> impl Iterator<Item = (&[u8], Option<u8>)> {
         while i < text.len() {
             let c = text[i];
             if c == b'(' {
-                i += text[i..]
-                    .iter()
-                    .position(|&c| c == b')')
-                    .unwrap_or(text.len() - i);
-                i += 1;
+                i = super::comment_close(text, i).unwrap_or(text.len()) + 1;
                 continue;
             }
             if c.is_ascii_alphabetic() {

@@ -202,10 +202,7 @@ pub fn substitute(
         let c = text[i];
         match c {
             b'(' => {
-                let close = text[i..]
-                    .iter()
-                    .position(|&b| b == b')')
-                    .map_or(text.len(), |p| i + p + 1);
+                let close = super::comment_close(text, i).map_or(text.len(), |p| p + 1);
                 out.extend_from_slice(&text[i..close]);
                 i = close;
                 continue;

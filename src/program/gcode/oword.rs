@@ -203,7 +203,7 @@ fn args_and_comments(text: &[u8], pos: usize, out: &mut Block) -> Result<usize, 
             }
             b']' if depth > 0 => depth -= 1,
             b'(' if depth == 0 => {
-                let close = text[i..].iter().position(|&c| c == b')').ok_or(i)?;
+                let close = super::comment_close(text, i).ok_or(i)? - i;
                 args_end = args_end.min(i);
                 out.comments.push(Comment {
                     start: i as u32,

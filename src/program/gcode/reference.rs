@@ -144,7 +144,7 @@ fn comment(text: &[u8], pos: usize, out: &mut Block, place: Place) -> Result<usi
     let (end, semicolon) = if text[pos] == b';' {
         (text.len(), true)
     } else {
-        match text[pos..].iter().position(|&c| c == b')') {
+        match closing(&text[pos..]) {
             Some(off) => (pos + off + 1, false),
             None => {
                 return Err(place.err(
@@ -163,6 +163,23 @@ fn comment(text: &[u8], pos: usize, out: &mut Block, place: Place) -> Result<usi
         semicolon,
     });
     Ok(end)
+}
+
+/// The offset in `from` (which opens with `(`) of the `)` that ends the
+/// comment: where the parentheses balance, else the last `)`; the first
+/// `)` when no `(` comes before it.
+fn closing(from: &[u8]) -> Option<usize> {
+    let closes: Vec<usize> = (0..from.len()).filter(|&i| from[i] == b')').collect();
+    let first = *closes.first()?;
+    if from[1..first].iter().all(|&c| c != b'(') {
+        return Some(first);
+    }
+    let balanced = closes.iter().copied().find(|&c| {
+        let opens = from[..=c].iter().filter(|&&b| b == b'(').count();
+        let shut = from[..=c].iter().filter(|&&b| b == b')').count();
+        opens == shut
+    });
+    balanced.or(closes.last().copied())
 }
 
 /// The word whose letter is at `pos`, pushed to `out`; the position after
@@ -278,6 +295,14 @@ fn not_a_word(text: &[u8], pos: usize, place: Place) -> Located {
         b'#' => parameters(from),
         b'[' | b']' => expressions(from),
         b'=' => assignments(from),
+        b',' if from.len() > 1 && from[1].eq_ignore_ascii_case(&b'C') => format!(
+            "a chamfer word `,C` is not read: the control inserts the chamfer between this move and the next; write the corner as moves: `{}`",
+            show(from)
+        ),
+        b',' if from.len() > 1 && from[1].eq_ignore_ascii_case(&b'R') => format!(
+            "a corner-radius word `,R` is not read: the control inserts the rounding between this move and the next; write the corner as an arc: `{}`",
+            show(from)
+        ),
         _ if b.is_ascii_digit() || b == b'.' || b == b'-' || b == b'+' => {
             format!("number without a letter: `{}`", show(from))
         }
