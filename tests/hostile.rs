@@ -621,6 +621,17 @@ fn mutation_run(
     kind: &str,
     seeds: &[Vec<u8>],
     count: usize,
+    check: impl FnMut(&[u8]) -> Result<bool, String>,
+) -> (usize, Vec<String>) {
+    generated_run(kind, seeds, count, mutate, check)
+}
+
+/// [`mutation_run`] with mutants made by `make` from a seed.
+fn generated_run(
+    kind: &str,
+    seeds: &[Vec<u8>],
+    count: usize,
+    mut make: impl FnMut(&mut Rng, &[u8]) -> Vec<u8>,
     mut check: impl FnMut(&[u8]) -> Result<bool, String>,
 ) -> (usize, Vec<String>) {
     let mut rng = Rng(0x5EED ^ (kind.len() as u64 * 7919));
@@ -631,7 +642,7 @@ fn mutation_run(
     }
     for i in 0..count {
         let seed = &seeds[i % seeds.len()];
-        let m = mutate(&mut rng, seed);
+        let m = make(&mut rng, seed);
         let r = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| check(&m)));
         let problem = match r {
             Ok(Ok(ok)) => {
@@ -1820,7 +1831,14 @@ fn identity_bytes(name: &str, text: &[u8]) -> Vec<u8> {
     let out_path = dir.path().join("out.nc");
     std::fs::write(&path, text).unwrap();
     let out = crate::common::postproc()
-        .args(["compensate", "-q", "--effects", "none", "--machine", "afm-r1000"])
+        .args([
+            "compensate",
+            "-q",
+            "--effects",
+            "none",
+            "--machine",
+            "afm-r1000",
+        ])
         .arg(&path)
         .arg("-o")
         .arg(&out_path)
@@ -1906,5 +1924,206 @@ fn a_nul_byte_is_refused_at_its_byte() {
     let text = b"G21 G90 G94 G17\nG0 X0. Y0. Z20.\nG1 X10.\0 F100.\nM30\n";
     let (code, err) = check_program("n.nc", text, "afm-r1000", &["-q"]);
     assert_eq!(code, 2, "{err}");
-    assert!(err.contains("n.nc:3:8: unexpected character byte 0x00"), "{err}");
+    assert!(
+        err.contains("n.nc:3:8: unexpected character byte 0x00"),
+        "{err}"
+    );
+}
+
+// ---------------------------------------------------------------------------
+// RAPID resolution time (issue 43, second round)
+// ---------------------------------------------------------------------------
+
+/// A module of `n` moves going back and forth between two named targets
+/// (each compensated move of a named target gets a copy of its own).
+fn back_and_forth_module(n: usize) -> String {
+    let conf = "[-1,0,-1,0],[9E9,9E9,9E9,9E9,9E9,9E9]";
+    let mut m = format!(
+        "MODULE Big\n  PERS tooldata tSp := [TRUE,[[0,0,150],[1,0,0,0]],[2,[0,0,60],[1,0,0,0],0,0,0]];\n  CONST robtarget pA := [[800,-100,600],[0,0,1,0],{conf}];\n  CONST robtarget pB := [[850,-50,600],[0,0,1,0],{conf}];\n  PROC main()\n"
+    );
+    for i in 0..n {
+        m.push_str(if i % 2 == 0 {
+            "    MoveL pA, v100, z1, tSp;\n"
+        } else {
+            "    MoveL pB, v100, z1, tSp;\n"
+        });
+    }
+    m.push_str("  ENDPROC\nENDMODULE\n");
+    m
+}
+
+/// Seconds `compensate` takes on `module`, or `None` when it runs past
+/// `limit` seconds (it is then ended).
+fn compensate_seconds(dir: &std::path::Path, name: &str, module: &str, limit: f64) -> Option<f64> {
+    let path = dir.join(name);
+    std::fs::write(&path, module).unwrap();
+    let start = Instant::now();
+    let mut child = std::process::Command::new(assert_cmd::cargo::cargo_bin("postproc"))
+        .args(["compensate", "-q", "--machine", "abb-irb1600", "-o"])
+        .arg(dir.join(format!("out-{name}")))
+        .arg(&path)
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    loop {
+        if let Some(status) = child.try_wait().unwrap() {
+            assert!(status.success(), "{name}: {status}");
+            return Some(start.elapsed().as_secs_f64());
+        }
+        if start.elapsed().as_secs_f64() > limit {
+            child.kill().unwrap();
+            child.wait().unwrap();
+            return None;
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
+/// Ten times the moves between two named targets take less than ten
+/// times as long (the copies' names were found by trying every number
+/// against every name made so far, and each move's routine-local data by
+/// a walk over the whole routine: the time grew with the cube). The
+/// growth order is checked, with retries; the absolute time is in
+/// scripts/bench.
+#[test]
+fn resolution_time_grows_linearly_with_the_moves() {
+    let dir = tempfile::tempdir().unwrap();
+    let small = back_and_forth_module(1_000);
+    let large = back_and_forth_module(10_000);
+    let mut ratios = Vec::new();
+    for _ in 0..3 {
+        let t_small = compensate_seconds(dir.path(), "small.mod", &small, 600.0).unwrap();
+        // Past 20 times the small run's time the ratio is lost: stop there.
+        let limit = 20.0 * t_small + 5.0;
+        let t_large = compensate_seconds(dir.path(), "large.mod", &large, limit);
+        let ratio = t_large.map_or(f64::INFINITY, |t| t / t_small);
+        if ratio < 10.0 {
+            return;
+        }
+        ratios.push(ratio);
+    }
+    panic!("10 000 moves take more than 10× the time of 1 000: ratios {ratios:?}");
+}
+
+// ---------------------------------------------------------------------------
+// Generated G-code: line ends, non-motion codes, feed modes, incremental
+// cycles (issue 43, second round)
+// ---------------------------------------------------------------------------
+
+/// Lines the generator inserts: codes whose axis words are not moves,
+/// feed-mode switches with and without F, incremental canned cycles.
+const MODAL_LINES: &[&str] = &[
+    "G50.1 X0. Y0.",
+    "G50",
+    "G50 X0. Z0.",
+    "G51.1 X0.",
+    "G1 G50.1 X0. F100.",
+    "G93",
+    "G94",
+    "G95",
+    "G94 F500.",
+    "G95 F0.1",
+    "G93 G1 X10. F2.",
+    "G1 X5. F0.2",
+    "G91",
+    "G90",
+    "G98",
+    "G99",
+    "G91 G99 G81 X10. Y0. Z-20. R-5. F100.",
+    "G91 G98 G81 X5. Z-3. R-2. F80.",
+    "G91 G98 G83 X-5. Z-10. R-400. Q2. F80.",
+    "X10.",
+    "G80",
+    "G0 X10.",
+    "G1 Z-1. F200.",
+];
+
+/// One generated program from `seed`: its lines with one line-end mix
+/// (LF, CR LF, the two mixed, or any of LF, CR LF and CR alone), maybe a
+/// byte-order mark and no final line end, and lines of [`MODAL_LINES`]
+/// inserted here and there.
+fn line_end_mutant(rng: &mut Rng, seed: &[u8]) -> Vec<u8> {
+    let text = String::from_utf8_lossy(seed);
+    let lines: Vec<&str> = text.lines().collect();
+    let mut out = Vec::with_capacity(seed.len() + 256);
+    if rng.below(8) == 0 {
+        out.extend_from_slice(b"\xEF\xBB\xBF");
+    }
+    let mix = rng.below(4);
+    let rate = 2 + rng.below(30);
+    let mut eol = |rng: &mut Rng| -> &'static [u8] {
+        match (mix, rng.below(3)) {
+            (0, _) => b"\n",
+            (1, _) => b"\r\n",
+            (2, 0) => b"\n",
+            (2, _) => b"\r\n",
+            (_, 0) => b"\n",
+            (_, 1) => b"\r\n",
+            _ => b"\r",
+        }
+    };
+    for (i, l) in lines.iter().enumerate() {
+        if i > 0 && rng.below(rate) == 0 {
+            out.extend_from_slice(MODAL_LINES[rng.below(MODAL_LINES.len())].as_bytes());
+            let e = eol(rng);
+            out.extend_from_slice(e);
+        }
+        out.extend_from_slice(l.as_bytes());
+        if i + 1 < lines.len() || rng.below(4) != 0 {
+            let e = eol(rng);
+            out.extend_from_slice(e);
+        }
+    }
+    out
+}
+
+/// [`gcode_props`], and a program written is read back by the reader of
+/// `check` (its line ends and words are ones the reader takes).
+fn line_end_props(
+    machine: &postproc::machine::tool::MachineTool,
+    input: &[u8],
+    pools: &Pools,
+) -> Result<bool, String> {
+    if !gcode_props(machine, input, pools)? {
+        return Ok(false);
+    }
+    let out = gcode_run(machine, input, &pools.one)?;
+    let job = postproc::pipeline::gcode::Job {
+        predictor: None,
+        setup: postproc::program::interp::Setup::for_machine(machine),
+        settings: postproc::compensate::Settings {
+            tolerance_mm: 0.001,
+        },
+        emit: postproc::emit::gcode::EmitOptions {
+            decimals_mm: None,
+            decimals_deg: None,
+            annotate: true,
+        },
+        pool: Some(&pools.one),
+        travel: None,
+    };
+    job.forward(
+        std::io::BufReader::new(&out[..]),
+        "out.nc",
+        &mut |_, _, _| {},
+    )
+    .map_err(|e| format!("the written program is refused by its reader: {e}"))?;
+    Ok(true)
+}
+
+#[test]
+fn mutants_of_line_ends_and_modal_codes_are_processed_or_refused_cleanly() {
+    let count = env_count("HOSTILE_MUTANTS", CI_MUTANTS);
+    let m = tool("afm-r1000");
+    let pools = pools();
+    let seeds = [
+        read("samples/effects.nc"),
+        read("samples/part.nc"),
+        read("samples/gcode/mastercam_haas.nc"),
+    ];
+    let start = Instant::now();
+    let run = generated_run("line-ends", &seeds, count, line_end_mutant, |b| {
+        line_end_props(&m, b, &pools)
+    });
+    report("line-ends", count, start, &run);
 }

@@ -11,7 +11,7 @@
 //! robtarget and jointtarget literals, the `! dev …` comment of a
 //! compensated move and the names of new declarations.
 
-use std::collections::HashSet;
+use std::collections::{HashMap, HashSet};
 use std::ops::Range;
 
 use nalgebra::Isometry3;
@@ -756,6 +756,17 @@ pub(crate) fn joint_text(
     Ok(format!("[[{}],[{extax}]]", words.join(",")))
 }
 
+/// The names created so far in one run (lower case), and for each stem and
+/// tag the run of numbers known to be unavailable, so that a stem copied
+/// many times costs the same for each copy.
+#[derive(Debug, Default, Clone)]
+pub struct TakenNames {
+    names: HashSet<String>,
+    /// (stem, tag) → (lo, next): every number in `lo..next` gives a name
+    /// that is declared, reserved or taken.
+    runs: HashMap<(String, String), (usize, usize)>,
+}
+
 /// A name not `declared` (in the module: the caller looks it up), nor
 /// already created, nor in `reserved` (lower case: the routines, record
 /// types and modules of the program), of at most [`MAX_IDENT_CHARS`]
@@ -763,23 +774,30 @@ pub(crate) fn joint_text(
 /// cut where the name would be too long.
 pub(crate) fn fresh_name(
     declared: impl Fn(&str) -> bool,
-    taken: &mut Vec<String>,
+    taken: &mut TakenNames,
     reserved: &HashSet<String>,
     stem: &str,
     tag: &str,
     from: usize,
 ) -> String {
-    let mut n = from;
+    let key = (stem.to_string(), tag.to_string());
+    // Numbers from `from` on known to be unavailable are skipped: names
+    // only ever become unavailable within a run.
+    let run = taken
+        .runs
+        .get(&key)
+        .copied()
+        .filter(|&(lo, next)| (lo..=next).contains(&from));
+    let (lo, mut n) = run.unwrap_or((from, from));
     loop {
         let suffix = format!("_{tag}{n}");
         let keep = MAX_IDENT_CHARS.saturating_sub(suffix.len());
         let end = stem.char_indices().nth(keep).map_or(stem.len(), |(i, _)| i);
         let name = format!("{}{suffix}", &stem[..end]);
-        if !declared(&name)
-            && !reserved.contains(&name.to_ascii_lowercase())
-            && !taken.iter().any(|t| t.eq_ignore_ascii_case(&name))
-        {
-            taken.push(name.clone());
+        let lower = name.to_ascii_lowercase();
+        if !declared(&name) && !reserved.contains(&lower) && !taken.names.contains(&lower) {
+            taken.names.insert(lower);
+            taken.runs.insert(key, (lo, n + 1));
             return name;
         }
         n += 1;

@@ -23,7 +23,7 @@ use nalgebra::{Isometry3, Vector3};
 use crate::compensate::outcome::{Compensated, DevStats, RobotMove, Row, Summary};
 use crate::compensate::robot::{Compensation, Seed};
 use crate::emit::rapid::{
-    EditList, Format, fresh_name, insert_after_decl, joint_text, push_annotation,
+    EditList, Format, TakenNames, fresh_name, insert_after_decl, joint_text, push_annotation,
     robtarget_in_place, robtarget_text, write_dev_comment,
 };
 use crate::error::{Error, Located, Result};
@@ -162,7 +162,7 @@ struct Rewriter<'m> {
     edits: EditList,
     /// New declaration lines per module declaration index.
     inserts: Vec<(usize, String)>,
-    taken: Vec<String>,
+    taken: TakenNames,
     /// Names new data may not take (lower case): [`Carry::reserved`].
     reserved: HashSet<String>,
     /// Robot views (one per tool and work object; the process wrench and
@@ -1177,7 +1177,7 @@ pub(crate) struct Carry {
     /// declarations), for a module read a window at a time.
     pub(crate) before: EditList,
     inserts: Vec<(usize, String)>,
-    taken: Vec<String>,
+    taken: TakenNames,
     /// Names new data may not take, lower case: the routines, record types
     /// and module names of the module (of the whole program, for a module
     /// of several): a data object may not share its name with them.

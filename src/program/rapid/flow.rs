@@ -127,6 +127,8 @@ struct Shape {
     /// Statements that call a routine: (statement, callee lower case;
     /// `%` for a late-bound call).
     calls: Vec<(usize, String)>,
+    /// Statements that declare routine data, in order.
+    locals: Vec<usize>,
 }
 
 /// The data flow of a module (or of the window of one).
@@ -197,6 +199,9 @@ impl<'m> Flow<'m> {
             };
             shape.walk(&proc.body);
             for (k, s) in proc.body.iter().enumerate() {
+                if matches!(s, Stmt::Decl(_)) {
+                    shape.locals.push(k);
+                }
                 let at = At { proc: p, stmt: k };
                 let mut add = |name: &str, kind: Kind| {
                     writes
@@ -430,13 +435,13 @@ impl<'m> Flow<'m> {
     }
 
     fn local_decl(&self, proc: usize, name: &str) -> Option<&'m Decl> {
-        self.module
-            .procs
+        let body = &self.module.procs.get(proc)?.body;
+        self.shapes
             .get(proc)?
-            .body
+            .locals
             .iter()
-            .find_map(|s| match s {
-                Stmt::Decl(d) if d.name.eq_ignore_ascii_case(name) => Some(d.as_ref()),
+            .find_map(|&k| match body.get(k) {
+                Some(Stmt::Decl(d)) if d.name.eq_ignore_ascii_case(name) => Some(d.as_ref()),
                 _ => None,
             })
     }
