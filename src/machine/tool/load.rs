@@ -451,10 +451,7 @@ fn validate_force(r: &RawProcessForce) -> V<ForceModel> {
                     )
                 })?,
             };
-            ForceModel::Constant {
-                force_n: Vector3::new(f[0], f[1], f[2]),
-                frame,
-            }
+            ForceModel::constant(Vector3::new(f[0], f[1], f[2]), frame)
         }
         "milling" => {
             let d = need("tool_diameter_mm", r.tool_diameter_mm, 0.01, 1000.0)?;
@@ -480,7 +477,7 @@ fn validate_force(r: &RawProcessForce) -> V<ForceModel> {
                 radial_width_mm: need("radial_width_mm", r.radial_width_mm, 0.0, d)?,
             })
         }
-        _ => ForceModel::Drilling(Drilling {
+        _ => ForceModel::drilling(Drilling {
             thrust_coefficient_n_per_mm2: need(
                 "thrust_coefficient_n_per_mm2",
                 r.thrust_coefficient_n_per_mm2,
