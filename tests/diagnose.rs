@@ -519,7 +519,7 @@ fn robot_payload_error() {
 
 /// Backlash of joint 2, 200 µrad: the joint stops b/2 short of the side it
 /// came from (the machine-tool reversal, reverse = forward + b),
-/// θ2 − dir2·100 µrad (truth per row through `Robot::with_actual`); the fit
+/// θ2 − dir2·100 µrad (truth per row through `Robot::trial_with_params`); the fit
 /// is +200 µrad within its uncertainty.
 #[test]
 fn robot_joint_backlash() {
@@ -536,7 +536,8 @@ fn robot_joint_backlash() {
             let dir = f64::from(rp.dir[1].expect("dir2"));
             let mut dh = *r.params(postproc::machine::robot::Model::Actual);
             dh.joints[1].theta_offset_rad -= dir * 100e-6;
-            let truth = Machine::Robot(r.with_actual(dh));
+            let truth =
+                Machine::Robot(r.trial_with_params(&[postproc::machine::robot::Trial::Actual(dh)]));
             let p = forward::predict(&truth, row, "truth")
                 .expect("row")
                 .attained_mm;
@@ -957,7 +958,7 @@ fn orientation_rows_find_a_wrist_zero_offset() {
     let truth_deg: f64 = 0.05;
     let mut p = *r.params(postproc::machine::robot::Model::Actual);
     p.joints[5].theta_offset_rad += truth_deg.to_radians();
-    let truth = Machine::Robot(r.with_actual(p));
+    let truth = Machine::Robot(r.trial_with_params(&[postproc::machine::robot::Trial::Actual(p)]));
     let obs = measure_oriented(&truth, robot_rows(60, 71), 72);
     let with = run(&model_text, &obs, 3);
     let report = diagnose::report::render_table(&with);

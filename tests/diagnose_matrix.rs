@@ -25,7 +25,7 @@ use postproc::calibrate::observations::{MeasuredKind, Observation, Observations,
 use postproc::calibrate::stats::SplitMix64;
 use postproc::diagnose::{Diagnosis, Outcome};
 use postproc::machine::Machine;
-use postproc::machine::robot::{Model, PointMass, Robot};
+use postproc::machine::robot::{Model, PointMass, Robot, Trial};
 
 use crate::diagnose::{columns, machine, measure, noise_sd_mm, robot_rows, run, text, tool_rows};
 
@@ -85,7 +85,7 @@ fn robot(m: &Machine) -> Robot {
 fn dh(r: &Robot, j: usize, f: impl Fn(&mut postproc::machine::robot::DhJoint)) -> Machine {
     let mut p = *r.params(Model::Actual);
     f(&mut p.joints[j]);
-    Machine::Robot(r.with_actual(p))
+    Machine::Robot(r.trial_with_params(&[Trial::Actual(p)]))
 }
 
 fn fixed(m: Machine) -> Truth {
@@ -137,7 +137,8 @@ fn robot_cases() -> Vec<Case> {
         let dc = 0.25 / (k[j] / 1000.0) * 1e6;
         let mut k2 = k;
         k2[j] = 1.0 / (1.0 / k[j] + dc * 1e-9);
-        let t = Machine::Robot(r.with_stiffness(k2.map(|k| k / 1000.0)));
+        let t =
+            Machine::Robot(r.trial_with_params(&[Trial::JointStiffness(k2.map(|k| k / 1000.0))]));
         out.push(case(
             "robot compliance",
             name,

@@ -42,7 +42,7 @@ use nalgebra::{Point3, UnitQuaternion, Vector3, Vector6};
 
 use crate::error::{Error, Located, Result};
 use crate::machine::Machine;
-use crate::machine::robot::{DhGrowth, Model, Robot};
+use crate::machine::robot::{DhGrowth, Model, Robot, Trial};
 use crate::machine::tool::thermal::Powers;
 use crate::machine::tool::{MachineTool, ThermalState};
 use crate::predict::{
@@ -144,7 +144,7 @@ pub fn predict_with(
             let r = if sw.geometric {
                 r.clone()
             } else {
-                r.with_actual(*r.params(Model::Nominal))
+                r.trial_with_params(&[Trial::Actual(*r.params(Model::Nominal))])
             };
             let p = predict_robot(&r, row, rp, sw.static_);
             if sw.thermal {
@@ -232,7 +232,7 @@ pub fn predict_robot_with_growth(
         j.a_mm += g[0];
         j.d_mm += g[1];
     }
-    let grown = robot.with_actual(p);
+    let grown = robot.trial_with_params(&[Trial::Actual(p)]);
     let out = predict_robot_at(&grown, row, rp, true);
     if out
         .attained_mm

@@ -35,7 +35,7 @@
 //! Identification: the tip deviation is linear in these values to first
 //! order; the design matrix is the finite difference (1 µm or 1 µrad) of the
 //! exact forward model ([`super::forward::predict`]) of the model with the
-//! values set ([`MachineTool::with_params`] on the file's model with the
+//! values set ([`MachineTool::trial_with_params`] on the file's model with the
 //! tables on the target grids, each value at the resolution the file is
 //! written with), solved by linear least squares with one Gauss–Newton
 //! refinement; the values found are written into the file once
@@ -771,7 +771,7 @@ pub fn calibrate_geometry(
     let x0 = prob.start(tool);
     let on_grid = prob.on_grid(text, machine_file, &x0)?;
     let eval = |x: &[f64], rows: &[usize]| -> Result<DVector<f64>> {
-        let trial = Machine::Tool(on_grid.with_params(&prob.edits(x))?);
+        let trial = Machine::Tool(on_grid.trial_with_params(&prob.edits(x))?);
         deviations(&trial, obs, rows, obs_file)
     };
     let f0 = if instrument {

@@ -52,7 +52,7 @@ use crate::calibrate::lsq::{
 };
 use crate::error::{Error, Result};
 use crate::machine::Machine;
-use crate::machine::robot::{DhParams, Model, Robot};
+use crate::machine::robot::{DhParams, Model, Robot, Trial};
 
 use super::forward::{check_kind, predict};
 use super::frame::{
@@ -166,7 +166,9 @@ impl Layout {
     }
 
     fn robot(&self, x: &[f64]) -> Robot {
-        let r = self.base.with_actual(self.dh_with(x));
+        let r = self
+            .base
+            .trial_with_params(&[Trial::Actual(self.dh_with(x))]);
         if self.tool {
             let t0 = self.base.flange_to_tool();
             let v = |o: usize| x.get(24 + o).copied().unwrap_or(0.0);

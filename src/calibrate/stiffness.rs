@@ -43,7 +43,7 @@ use crate::calibrate::lsq::{LsqOptions, Solution, data_error, solve_for};
 use crate::error::{Error, Result};
 use crate::machine::Machine;
 use crate::machine::robot::kinematics::jacobian;
-use crate::machine::robot::{Model, Robot};
+use crate::machine::robot::{Model, Robot, Trial};
 
 use super::forward::{check_kind, joints_rad, measured_point, predict, row_wrench, wrench_point};
 use super::frame::{
@@ -400,7 +400,8 @@ fn solve_compliances(
         if c.iter().any(|&c| c <= 0.0) {
             break;
         }
-        let trial = Machine::Robot(robot.with_stiffness(stiffness_from(&c)));
+        let trial =
+            Machine::Robot(robot.trial_with_params(&[Trial::JointStiffness(stiffness_from(&c))]));
         let second = |row: &Observation, blk: &SMatrix<f64, 6, 6>| -> Result<Vector6<f64>> {
             Ok(model_deflection(&trial, row, obs_file)?
                 - blk * Vector6::from_column_slice(c.as_slice()))
@@ -681,7 +682,7 @@ pub fn calibrate_stiffness(
         Some(p) => p.value,
         None => 0.0,
     });
-    let calibrated = Machine::Robot(robot.with_stiffness(written));
+    let calibrated = Machine::Robot(robot.trial_with_params(&[Trial::JointStiffness(written)]));
     let fixed: Vec<usize> = (0..6).filter(|&i| withheld.get(i) == Some(&true)).collect();
     let f_rot = match f_rot {
         Some(f) if !fixed.is_empty() => Some(refit_rotation(
@@ -807,7 +808,7 @@ mod tests {
             com_mm: Vector3::zeros(),
         });
         let r = r0
-            .with_links(weightless)
+            .trial_with_params(&[Trial::Links(weightless)])
             .with_tool(*r0.flange_to_tool(), None);
         let obs_row = row(Vector3::new(120.0, -200.0, -250.0));
         let a = design_block(&r, &obs_row);
@@ -818,7 +819,9 @@ mod tests {
                 let mut c = c0;
                 c[i] += dc;
                 let k: [f64; 6] = std::array::from_fn(|j| 1.0 / (c[j] * C_UNIT));
-                let m = Machine::Robot(r.with_stiffness(k.map(|v| v / 1000.0)));
+                let m = Machine::Robot(
+                    r.trial_with_params(&[Trial::JointStiffness(k.map(|v| v / 1000.0))]),
+                );
                 model_deflection(&m, &obs_row, "t").unwrap()
             };
             let fd = (at(h) - at(-h)) / (2.0 * h);

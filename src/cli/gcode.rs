@@ -82,7 +82,8 @@ pub(super) fn process_setup(args: &EffectArgs, machine: &MachineTool) -> Result<
         p.force = spec.model();
     }
     if let Some(path) = &args.force_table {
-        p.force = Some(ForceModel::Table(ForceTable::load(path)?));
+        p.force = Some(ForceModel::Table);
+        p.force_table = Some(ForceTable::load(path)?);
     }
     for (flag, v) in [
         ("--milling-depth", args.milling_depth),

@@ -418,7 +418,7 @@ pub(super) fn rapid_options(
 /// model (the program's `! POSTPROC MILLING` directives still override
 /// them). Milling flags without a milling model are refused.
 pub(super) fn robot_with_process(robot: Robot, e: &EffectArgs) -> Result<Robot> {
-    use crate::machine::robot::{ForceFrame, ForceModel, ProcessForce};
+    use crate::machine::robot::{ForceModel, ProcessForce};
     let mut robot = robot.allowing_reconfiguration(e.allow_reconfiguration);
     if let Some(spec) = e.force {
         let pf = match spec {
@@ -428,11 +428,7 @@ pub(super) fn robot_with_process(robot: Robot, e: &EffectArgs) -> Result<Robot> 
                     model: ForceModel::Constant {
                         force_n,
                         moment_nmm: nalgebra::Vector3::zeros(),
-                        frame: match frame {
-                            crate::process::Frame::Workpiece => ForceFrame::Workpiece,
-                            crate::process::Frame::Tool => ForceFrame::Tool,
-                            crate::process::Frame::Feed => ForceFrame::Feed,
-                        },
+                        frame,
                     },
                     spindle_rpm: old.and_then(|p| p.spindle_rpm),
                     flutes: old

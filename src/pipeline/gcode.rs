@@ -60,6 +60,7 @@ pub struct Job<'m> {
 struct Tracker<'a> {
     machine: &'a MachineTool,
     force: Option<&'a ForceModel>,
+    table: Option<&'a crate::process::ForceTable>,
     thermal: Option<&'a Thermal>,
     modal: Option<&'a Modal>,
     depth_mm: Option<f64>,
@@ -116,6 +117,7 @@ impl<'a> Tracker<'a> {
         Tracker {
             machine: m,
             force,
+            table: pred.process.and_then(|p| p.force_table.as_ref()),
             thermal,
             modal: m.modal(),
             depth_mm: pred.process.and_then(|p| p.milling_depth_mm),
@@ -219,7 +221,7 @@ impl<'a> Tracker<'a> {
                     depth_mm: plan.milling_mm[0].or(self.depth_mm),
                     width_mm: plan.milling_mm[1].or(self.width_mm),
                 };
-                load = f.load(&state, &mut self.cache);
+                load = f.load(&state, &mut self.cache, self.table);
             }
             let len = mv.length_mm();
             let len = if len > 1e-9 {

@@ -58,6 +58,8 @@ pub struct ToolPredictor<'m> {
 pub struct ProcessSetup {
     /// The process-force model of the job (`None`: no force).
     pub force: Option<crate::process::ForceModel>,
+    /// The per-line forces of [`crate::process::ForceModel::Table`].
+    pub force_table: Option<crate::process::ForceTable>,
     /// Axial depth of cut for milling until a program directive sets one, mm.
     pub milling_depth_mm: Option<f64>,
     /// Radial width of cut for milling until a program directive sets one, mm.

@@ -28,7 +28,7 @@ impl ForceSpec {
     pub fn model(self) -> Option<ForceModel> {
         match self {
             ForceSpec::None => None,
-            ForceSpec::Constant { force_n, frame } => Some(ForceModel::Constant { force_n, frame }),
+            ForceSpec::Constant { force_n, frame } => Some(ForceModel::constant(force_n, frame)),
         }
     }
 }
@@ -89,10 +89,7 @@ mod tests {
                 .unwrap_or_else(|e| panic!("{text}: {e}"));
             assert_eq!(
                 spec.model(),
-                Some(ForceModel::Constant {
-                    force_n: Vector3::new(0.0, 0.0, -200.0),
-                    frame
-                })
+                Some(ForceModel::constant(Vector3::new(0.0, 0.0, -200.0), frame))
             );
         }
         assert_eq!(ForceSpec::None.model(), None);

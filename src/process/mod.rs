@@ -65,6 +65,9 @@ pub enum Frame {
     Tool,
     /// Feed frame: tangential, normal, axial (see the module doc).
     Feed,
+    /// The robot base frame (robots only: a machine tool's file and flags
+    /// do not take it; its workpiece axes are the machine's).
+    Base,
 }
 
 impl Frame {
@@ -210,22 +213,52 @@ impl Drilling {
     }
 }
 
-/// A process-force model.
-#[derive(Debug, Clone, PartialEq)]
+/// A process-force model, of either machine kind.
+#[derive(Debug, Clone, Copy, PartialEq)]
 pub enum ForceModel {
-    /// A fixed force on the tool, on feed moves only.
+    /// A fixed force (and moment) on the tool, on feed moves only. A
+    /// machine tool takes the force at the tool tip and no moment.
     Constant {
         /// Force components in `frame`, N.
         force_n: Vector3<f64>,
+        /// Moment components in `frame`, N·mm (zero on machine tools).
+        moment_nmm: Vector3<f64>,
         /// Frame of the components.
         frame: Frame,
     },
     /// Mechanistic milling forces.
     Milling(Milling),
-    /// Drilling thrust.
-    Drilling(Drilling),
-    /// Per-line forces from a CSV table (workpiece frame).
-    Table(ForceTable),
+    /// Drilling thrust along the tool axis on drilling moves.
+    Drilling {
+        /// Thrust model `F = K · (D/2) · f_rev`.
+        drill: Drilling,
+        /// Largest feed per revolution taken as drilling, mm/rev (machine
+        /// tools: unbounded, a drilling move is a cycle feed or a feed along
+        /// the tool axis).
+        max_feed_mm_per_rev: f64,
+    },
+    /// Per-line forces from the run's force table ([`ForceTable`],
+    /// workpiece frame), given per run with `--force-table FILE`.
+    Table,
+}
+
+impl ForceModel {
+    /// A constant force without moment.
+    pub fn constant(force_n: Vector3<f64>, frame: Frame) -> Self {
+        ForceModel::Constant {
+            force_n,
+            moment_nmm: Vector3::zeros(),
+            frame,
+        }
+    }
+
+    /// Drilling with no feed-per-revolution limit (machine tools).
+    pub fn drilling(drill: Drilling) -> Self {
+        ForceModel::Drilling {
+            drill,
+            max_feed_mm_per_rev: f64::INFINITY,
+        }
+    }
 }
 
 /// The cutting state of one block, as the force models need it.
@@ -299,16 +332,22 @@ fn to_workpiece(b: &[Vector3<f64>; 3], v: &Vector3<f64>) -> Vector3<f64> {
 }
 
 impl ForceModel {
-    /// Predicted load of one block. Zero on rapids and without motion.
-    pub fn load(&self, s: &CutState, cache: &mut MillingCache) -> ProcessLoad {
+    /// Predicted load of one block, with the run's force table `table`
+    /// for [`ForceModel::Table`]. Zero on rapids and without motion.
+    pub fn load(
+        &self,
+        s: &CutState,
+        cache: &mut MillingCache,
+        table: Option<&ForceTable>,
+    ) -> ProcessLoad {
         let mut out = ProcessLoad::default();
         match self {
-            ForceModel::Constant { force_n, frame } => {
+            ForceModel::Constant { force_n, frame, .. } => {
                 if !s.cutting {
                     return out;
                 }
                 out.force_n = match frame {
-                    Frame::Workpiece => *force_n,
+                    Frame::Workpiece | Frame::Base => *force_n,
                     Frame::Tool => match basis(&s.tool_axis, &Vector3::x(), &Vector3::y()) {
                         Some(b) => to_workpiece(&b, force_n),
                         None => Vector3::zeros(),
@@ -345,17 +384,23 @@ impl ForceModel {
                 out.cutting_power_w = f.tangential_n * vc_m_s;
                 out.tooth_hz = s.spindle_rpm * n / 60.0;
             }
-            ForceModel::Drilling(d) => {
+            ForceModel::Drilling {
+                drill,
+                max_feed_mm_per_rev,
+            } => {
                 if !s.drilling || s.spindle_rpm <= EPS {
                     return out;
                 }
                 let f_rev = s.feed_mm_min / s.spindle_rpm;
+                if f_rev > *max_feed_mm_per_rev {
+                    return out;
+                }
                 if let Some(z) = s.tool_axis.try_normalize(EPS) {
-                    out.force_n = z * d.thrust_n(f_rev);
+                    out.force_n = z * drill.thrust_n(f_rev);
                 }
             }
-            ForceModel::Table(t) => {
-                if let Some(f) = t.get(s.line) {
+            ForceModel::Table => {
+                if let Some(f) = table.and_then(|t| t.get(s.line)) {
                     out.force_n = f;
                 }
             }
@@ -475,7 +520,7 @@ mod tests {
         let mut s = state();
         s.feed_dir = -Vector3::y();
         let mut cache = MillingCache::default();
-        let l = m.load(&s, &mut cache);
+        let l = m.load(&s, &mut cache, None);
         assert_abs_diff_eq!(l.force_n[0], 400.0 + 80.0 / PI, epsilon = FORCE_TOL_N);
         assert_abs_diff_eq!(l.force_n[1], 160.0 + 40.0 / PI, epsilon = FORCE_TOL_N);
         // Tooth passing: 1000 rpm · 2 / 60.
@@ -489,7 +534,7 @@ mod tests {
         );
         // Rapids and stopped spindles cut nothing.
         s.cutting = false;
-        assert_eq!(m.load(&s, &mut cache), ProcessLoad::default());
+        assert_eq!(m.load(&s, &mut cache, None), ProcessLoad::default());
     }
 
     #[test]
@@ -498,19 +543,17 @@ mod tests {
         let mut cache = MillingCache::default();
         let mut s = state();
         s.feed_dir = Vector3::y();
-        let wp = ForceModel::Constant {
-            force_n: f,
-            frame: Frame::Workpiece,
-        };
-        assert_abs_diff_eq!(wp.load(&s, &mut cache).force_n, f, epsilon = FORCE_TOL_N);
+        let wp = ForceModel::constant(f, Frame::Workpiece);
+        assert_abs_diff_eq!(
+            wp.load(&s, &mut cache, None).force_n,
+            f,
+            epsilon = FORCE_TOL_N
+        );
         // Feed frame, travel along +Y, tool along +Z: tangential = +Y,
         // normal = z × y = −X, axial = +Z → (−20, 10, 30).
-        let feed = ForceModel::Constant {
-            force_n: f,
-            frame: Frame::Feed,
-        };
+        let feed = ForceModel::constant(f, Frame::Feed);
         assert_abs_diff_eq!(
-            feed.load(&s, &mut cache).force_n,
+            feed.load(&s, &mut cache, None).force_n,
             Vector3::new(-20.0, 10.0, 30.0),
             epsilon = FORCE_TOL_N
         );
@@ -518,24 +561,21 @@ mod tests {
         // x = workpiece Y (X is along the tool), y = z × x = X × Y = +Z →
         // (30, 10, 20).
         s.tool_axis = Vector3::x();
-        let tool = ForceModel::Constant {
-            force_n: f,
-            frame: Frame::Tool,
-        };
+        let tool = ForceModel::constant(f, Frame::Tool);
         assert_abs_diff_eq!(
-            tool.load(&s, &mut cache).force_n,
+            tool.load(&s, &mut cache, None).force_n,
             Vector3::new(30.0, 10.0, 20.0),
             epsilon = FORCE_TOL_N
         );
         s.cutting = false;
-        assert_eq!(wp.load(&s, &mut cache).force_n, Vector3::zeros());
+        assert_eq!(wp.load(&s, &mut cache, None).force_n, Vector3::zeros());
     }
 
     #[test]
     fn drilling_thrust() {
         // K = 1500 N/mm², D = 8 mm, f_rev = 200/1000 = 0.2 mm:
         // F = 1500 · 4 · 0.2 = 1200 N along +Z (pushing the drill back).
-        let m = ForceModel::Drilling(Drilling {
+        let m = ForceModel::drilling(Drilling {
             thrust_coefficient_n_per_mm2: 1500.0,
             drill_diameter_mm: 8.0,
         });
@@ -544,12 +584,21 @@ mod tests {
         s.drilling = true;
         let mut cache = MillingCache::default();
         assert_abs_diff_eq!(
-            m.load(&s, &mut cache).force_n,
+            m.load(&s, &mut cache, None).force_n,
             Vector3::new(0.0, 0.0, 1200.0),
             epsilon = FORCE_TOL_N
         );
+        // Above a feed-per-revolution limit the move is not drilling.
+        let limited = ForceModel::Drilling {
+            drill: Drilling {
+                thrust_coefficient_n_per_mm2: 1500.0,
+                drill_diameter_mm: 8.0,
+            },
+            max_feed_mm_per_rev: 0.1,
+        };
+        assert_eq!(limited.load(&s, &mut cache, None).force_n, Vector3::zeros());
         s.drilling = false;
-        assert_eq!(m.load(&s, &mut cache).force_n, Vector3::zeros());
+        assert_eq!(m.load(&s, &mut cache, None).force_n, Vector3::zeros());
     }
 
     #[test]

@@ -27,6 +27,7 @@ mod statics;
 pub mod thermal;
 mod with_tool;
 
+pub use calib::Trial;
 pub use dh::{Convention, DhJoint, DhParams};
 pub use dynamics::{Modal, Mode, Resonance};
 pub use ik::ConfData;
@@ -1072,9 +1073,9 @@ mod tests {
         let views = [
             r.clone(),
             r.with_tool(frame(12.0, 0.3), None),
-            r.with_base(frame(-150.0, 0.1)),
+            r.trial_with_params(&[Trial::Base(frame(-150.0, 0.1))]),
             r.with_tool(frame(3.0, -1.2), None)
-                .with_base(frame(40.0, 2.0)),
+                .trial_with_params(&[Trial::Base(frame(40.0, 2.0))]),
         ];
         for v in &views {
             let fresh = v.base().inverse() * tcp * v.flange_to_tool().inverse();

@@ -2,7 +2,9 @@
 //! identifies or a study varies (the actual DH parameters, the joint
 //! stiffnesses, the thermal terms, the tool centre point), and [`Robot::with_params`], which gives
 //! the robot with some of them set and validated again exactly as if the
-//! file had held those values.
+//! file had held those values. A fit's inner loop sets its trial values
+//! through [`Robot::trial_with_params`] instead (`calib.rs`), checked once
+//! at the edge.
 //!
 //! Values are in the unit of their key in the robot file (mm, degrees,
 //! N·m/rad, 1/W, min); `machines/README.md` documents the keys.
@@ -113,9 +115,8 @@ impl Robot {
     /// thermal term or section it lacks, a row past the sixth) is an error
     /// too.
     ///
-    /// The other values are the file's: quantities replaced with
-    /// [`Robot::with_actual`], [`Robot::with_stiffness`],
-    /// [`Robot::with_base`] or [`Robot::with_links`] are not carried over.
+    /// The other values are the file's: trial values set with
+    /// [`Robot::trial_with_params`] are not carried over.
     /// The reconfiguration setting is kept.
     pub fn with_params(&self, edits: &[(RobotParam, f64)]) -> Result<Self> {
         let mut raw = (*self.d.raw).clone();

@@ -34,47 +34,11 @@ pub const DEFAULT_AXIS_TOLERANCE_DEG: f64 = 3.0;
 /// Default number of flutes (a twist drill has two).
 pub const DEFAULT_FLUTES: u32 = 2;
 
-/// Frame a constant force is given in.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum ForceFrame {
-    /// The tool (TCP) frame.
-    Tool,
-    /// The work object frame of each move.
-    Workpiece,
-    /// The robot base frame.
-    Base,
-    /// The feed frame of [`crate::process`]: x tangential (direction of
-    /// travel), z axial (the tool axis from the tip towards the flange, i.e.
-    /// −z of the TCP frame), y = z × x; on a plunge along the tool axis x
-    /// is the work object's x made normal to the tool axis.
-    Feed,
-}
+/// Frame a constant force is given in: the one [`crate::process::Frame`]
+/// of both machine kinds.
+pub type ForceFrame = process::Frame;
 
-/// Which force model.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub enum ForceModel {
-    /// A constant wrench on every feed move (MoveL, MoveC).
-    Constant {
-        /// Force, N.
-        force_n: Vector3<f64>,
-        /// Moment, N·mm.
-        moment_nmm: Vector3<f64>,
-        /// Frame of force and moment.
-        frame: ForceFrame,
-    },
-    /// Mechanistic milling forces on feed moves (MoveL, MoveC).
-    Milling(Milling),
-    /// Drilling thrust along the tool axis on plunge moves.
-    Drilling {
-        /// Thrust model `F = K · (D/2) · f_rev`.
-        drill: Drilling,
-        /// Largest feed per revolution taken as drilling, mm/rev.
-        max_feed_mm_per_rev: f64,
-    },
-    /// Per-move forces from the run's force table
-    /// ([`crate::process::ForceTable`], work-object frame).
-    Table,
-}
+pub use crate::process::ForceModel;
 
 /// The validated `process_force:` section.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -154,7 +118,7 @@ impl ProcessForce {
             depth_mm: set.depth_mm,
             width_mm: set.width_mm,
         };
-        let load = process::ForceModel::Milling(m).load(&state, cache);
+        let load = ForceModel::Milling(m).load(&state, cache, None);
         (load.tooth_hz > 0.0).then_some(load)
     }
 
@@ -413,12 +377,9 @@ pub fn feed_frame_vector(
         depth_mm: None,
         width_mm: None,
     };
-    process::ForceModel::Constant {
-        force_n: *v,
-        frame: Frame::Feed,
-    }
-    .load(&state, &mut MillingCache::default())
-    .force_n
+    ForceModel::constant(*v, Frame::Feed)
+        .load(&state, &mut MillingCache::default(), None)
+        .force_n
 }
 
 /// Direction of travel at the end `p1` of a move from `p0`: along the line

@@ -104,6 +104,22 @@ fn plausible(path: &str, v: f64) -> V<f64> {
 }
 
 pub(super) fn validate(raw: RawMachineTool) -> V<MachineTool> {
+    validate_with(raw, Plausibility::Checked)
+}
+
+/// Whether [`validate_with`] checks the plausibility of the values
+/// (`plausible.rs`): a file and a parameter set by key are checked, a fit's
+/// trial step is not (its result is, once, at the edge).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(super) enum Plausibility {
+    /// Checked.
+    Checked,
+    /// Not checked.
+    Unchecked,
+}
+
+/// [`validate`], with the plausibility check as `plausibility` says.
+pub(super) fn validate_with(raw: RawMachineTool, plausibility: Plausibility) -> V<MachineTool> {
     if raw.kind != "machine_tool" {
         return Err(Invalid::new(
             "kind",
@@ -162,7 +178,9 @@ pub(super) fn validate(raw: RawMachineTool) -> V<MachineTool> {
         && axes
             .iter()
             .all(|a| a.location.is_zero() && a.components.is_zero());
-    super::plausible::check(&raw)?;
+    if plausibility == Plausibility::Checked {
+        super::plausible::check(&raw)?;
+    }
     super::set_breakpoints(&mut axes, stiffness.as_ref());
     let pre = Box::new(super::fast::Precomputed::new(&axes, spindle));
     Ok(MachineTool {
@@ -451,10 +469,7 @@ fn validate_force(r: &RawProcessForce) -> V<ForceModel> {
                     )
                 })?,
             };
-            ForceModel::Constant {
-                force_n: Vector3::new(f[0], f[1], f[2]),
-                frame,
-            }
+            ForceModel::constant(Vector3::new(f[0], f[1], f[2]), frame)
         }
         "milling" => {
             let d = need("tool_diameter_mm", r.tool_diameter_mm, 0.01, 1000.0)?;
@@ -480,7 +495,7 @@ fn validate_force(r: &RawProcessForce) -> V<ForceModel> {
                 radial_width_mm: need("radial_width_mm", r.radial_width_mm, 0.0, d)?,
             })
         }
-        _ => ForceModel::Drilling(Drilling {
+        _ => ForceModel::drilling(Drilling {
             thrust_coefficient_n_per_mm2: need(
                 "thrust_coefficient_n_per_mm2",
                 r.thrust_coefficient_n_per_mm2,

@@ -167,6 +167,20 @@ impl MachineTool {
         super::load::validate(raw).map_err(|inv| self.param_error(&inv.path, &inv.message))
     }
 
+    /// [`MachineTool::with_params`] without the plausibility check, for the
+    /// trial steps of a fit, whose intermediate values may leave the
+    /// plausible range on the way to the answer: the fit's result is
+    /// checked once, at the edge (the calibrated file read back). Ranges,
+    /// order and presence are still checked.
+    pub fn trial_with_params(&self, edits: &[(ToolParam, f64)]) -> Result<Self> {
+        let mut raw = (*self.raw).clone();
+        for &(p, v) in edits {
+            set(&mut raw, p, v).map_err(|m| self.param_error(&p.path(), &m))?;
+        }
+        super::load::validate_with(raw, super::load::Plausibility::Unchecked)
+            .map_err(|inv| self.param_error(&inv.path, &inv.message))
+    }
+
     /// The value of a parameter as the file gives it (in the unit of its
     /// key): a location error the file does not write is 0; `None` for a
     /// value the file does not have (a missing table, section or node).
@@ -585,6 +599,27 @@ thermal:
             .replace("time_constant_min: 30", "time_constant_min: 45");
         let f = MachineTool::from_yaml_str(&t, "t.yaml").expect("valid");
         assert_eq!(model_text(&m), model_text(&f));
+    }
+
+    #[test]
+    fn a_trial_step_skips_only_the_plausibility_check() {
+        let m = base();
+        // 500 µm/kW is beyond the plausible ±200 µm/kW, not a hard limit.
+        let edit = [(ToolParam::SpindleGrowth, 500.0)];
+        let e = m.with_params(&edit).expect_err("implausible");
+        assert!(e.to_string().contains("growth_um_per_kw"), "{e}");
+        let t = m.trial_with_params(&edit).expect("a trial step");
+        assert_eq!(t.param_value(ToolParam::SpindleGrowth), Some(500.0));
+        let big = ToolParam::Component {
+            axis: 0,
+            error: 0,
+            node: 0,
+            forward: true,
+        };
+        let e = m
+            .trial_with_params(&[(big, 5000.0)])
+            .expect_err("beyond 1 mm");
+        assert!(e.to_string().contains("EXX_um"), "{e}");
     }
 
     #[test]
