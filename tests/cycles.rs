@@ -90,7 +90,8 @@ fn with_expand_cycles_a_deep_hole_is_written_as_its_moves_within_the_tolerance()
     assert!(lines[first].contains("F100."), "{output}");
     assert!(!lines[first].contains('Z'), "{output}");
     let feeds = lines.iter().filter(|l| l.starts_with("G1 ")).count();
-    assert!(feeds >= 9 + 9 + 4 + 1, "{feeds} feeds:\n{output}");
+    // Nine feeds in each 87 mm hole, five in the G73 hole, one in G82.
+    assert!(feeds >= 24, "{feeds} feeds:\n{output}");
     // The shallow hole states its cycle again (the control has none after
     // the moves): G code, Z, R and the peck depth.
     let shallow = lines

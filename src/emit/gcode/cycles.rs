@@ -87,8 +87,8 @@ impl Emitter {
             }
             edits.push(start, w.end as usize, |_| {});
         }
-        for slot in 0..2 {
-            let w = block.word(AXIS_LETTERS[slot]);
+        for (slot, &letter) in AXIS_LETTERS.iter().enumerate().take(2) {
+            let w = block.word(letter);
             let d = self.decimals(w, scale, false);
             let v = round_to(
                 to_program(plan, slot, first.to[slot], self.emitted[slot]),
@@ -97,7 +97,7 @@ impl Emitter {
             match w {
                 Some(w) => edits.number(w, v, d),
                 None => {
-                    let l = letter_case(AXIS_LETTERS[slot], lower);
+                    let l = letter_case(letter, lower);
                     let at = super::axis_slot_for(block, slot);
                     edits.insert_at(at, sep, l, v, d);
                 }
@@ -155,8 +155,8 @@ impl Emitter {
             return;
         }
         let mut any = false;
-        for slot in 0..3 {
-            let w = block.word(AXIS_LETTERS[slot]);
+        for (slot, &letter) in AXIS_LETTERS.iter().enumerate().take(3) {
+            let w = block.word(letter);
             let d = self.decimals(w, plan.scale, false);
             let now = round_to(
                 to_program(plan, slot, self.emitted[slot], self.emitted[slot]),
@@ -165,7 +165,7 @@ impl Emitter {
             let want = round_to(to_program(plan, slot, step.to[slot], self.emitted[slot]), d);
             if want != now || (slot == 2 && !any) {
                 out.extend_from_slice(sep);
-                out.push(letter_case(AXIS_LETTERS[slot], lower));
+                out.push(letter_case(letter, lower));
                 write_number(out, want, d, true);
                 self.emitted[slot] = to_machine(plan, slot, want, self.emitted[slot]);
                 any = true;
