@@ -11,6 +11,7 @@ mod compact;
 mod compensate_props;
 mod conf_off;
 mod configurations;
+mod cycles;
 mod diagnose;
 mod diagnose_matrix;
 mod diagnose_write;

@@ -727,6 +727,7 @@ pub fn run(a: &BatchArgs, quiet: bool) -> Result<i32> {
                 rapid_window_lines: None,
                 strict: false,
                 compensate_joint_targets: false,
+                expand_cycles: false,
                 more: Vec::new(),
             };
             let setup = parse_setup(&program, Some(&tool))?;

@@ -4,6 +4,7 @@
 //! more than the tolerance.
 
 mod arc;
+pub mod cycles;
 pub mod outcome;
 pub mod robot;
 pub mod tcpm;
@@ -232,6 +233,9 @@ pub struct BlockResult {
     /// the correction would cross it by less than the tolerance (the
     /// largest such crossing of the block); `None` when none is.
     pub held: Option<HeldAtTravel>,
+    /// A canned-cycle hole written as moves ([`cycles::expand`]): its
+    /// lines in order; empty for every other block.
+    pub expansion: Vec<cycles::Step>,
 }
 
 /// A compensated point held at an end of travel: the correction would
@@ -1855,7 +1859,12 @@ pub fn block_recycling(
             r_level, retract, ..
         } => {
             res.deviation = pred.breakdown(&mv.end, &mv.dirs, tool);
-            let cycle = cycle_hole(pred, &mv, (r_level, retract), carry_in, &mut res)?;
+            let mut cycle = cycle_hole(pred, &mv, (r_level, retract), carry_in, &mut res)?;
+            // Written as moves when one X and Y cannot hold the hole.
+            if plan.cycle.expandable && res.miss_mm > tol {
+                let hole = (&mv, &plan.cycle);
+                cycles::expand(pred, hole, (r_level, retract), tol, &mut cycle, &mut res)?;
+            }
             *carry = Some(cycle);
             return Ok(res);
         }

@@ -8,6 +8,8 @@
 //! (case, spacing, line ending). An annotation comment with the predicted
 //! deviation is appended in the program's comment style.
 
+mod cycles;
+
 use super::fixed::{FIXED_MAX, exact_fixed, fixed_digits, pow10, round_half_away};
 use super::inverse_time::{PieceFeeds, decimals};
 use nalgebra::Vector3;
@@ -67,6 +69,9 @@ pub struct Emitter {
     /// Emitted canned-cycle Z and R (program units), modal.
     cycle_z: Option<f64>,
     cycle_r: Option<f64>,
+    /// A hole was written as moves: the control has no cycle in force
+    /// until the program ends it (see `cycles`).
+    cycle_broken: bool,
     /// The program writes `;` comments rather than `( )`.
     semicolon_comments: Option<bool>,
     /// The program separates its words by spaces (from its last block of
@@ -378,6 +383,7 @@ impl Emitter {
             motion_pending: None,
             cycle_z: None,
             cycle_r: None,
+            cycle_broken: false,
             semicolon_comments: None,
             spaced: true,
             changed: 0,
@@ -464,6 +470,7 @@ impl Emitter {
         if block.words.len() > 1 {
             self.spaced = block.spaced;
         }
+        self.track_cycle(block);
         let (Some(mv), Some(res)) = (plan.mv, res) else {
             out.extend_from_slice(line);
             self.track_unchanged(block, plan);
@@ -480,7 +487,19 @@ impl Emitter {
         }
         let mut edits = std::mem::take(&mut self.edits);
         edits.clear();
-        self.write_edited(line, block, plan, mv, res, &mut edits, out);
+        if res.expansion.is_empty() {
+            // A hole after one written as moves states its cycle again;
+            // a modal motion to restore waits for the cycle's end.
+            let is_cycle = matches!(plan.kind, PlanKind::Cycle { .. });
+            let pending = self.motion_pending.filter(|_| is_cycle);
+            self.restate_cycle(block, plan, &mut edits);
+            self.write_edited(line, block, plan, mv, res, &mut edits, out);
+            if pending.is_some() {
+                self.motion_pending = pending;
+            }
+        } else {
+            self.write_expansion(line, block, plan, res, &mut edits, out);
+        }
         self.edits = edits;
     }
 

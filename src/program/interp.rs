@@ -376,6 +376,30 @@ pub struct Plan {
     /// positions come from programmed tool tips, and its words are written
     /// back as the tool tips of the compensated axis positions.
     pub tcpm: bool,
+    /// A canned-cycle hole: what the cycle does along the hole, for
+    /// writing it as moves (default otherwise).
+    pub cycle: CycleSpec,
+}
+
+/// What a canned cycle does along its hole besides the feed to the bottom
+/// (grammar/gcode.md, "Canned cycles").
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct CycleSpec {
+    /// The cycle's G code × 10 (830 for G83); 0 for no cycle.
+    pub code10: i64,
+    /// Peck depth of G73/G83 (`Q`, modal), mm; 0 for one feed.
+    pub peck_mm: f64,
+    /// Dwell at the bottom of G82/G89 (`P`, modal) as written, and its
+    /// decimals (`None`: written without a point).
+    pub dwell_p: Option<(f64, Option<u8>)>,
+    /// The modal motion (G0–G3) the cycle leaves in force when it ends.
+    pub motion_before: Option<Motion>,
+    /// The hole may be written as moves: the setup allows it, the block is
+    /// absolute (G90), drills once (no `K`/`L` repeat), and the cycle is
+    /// one a sequence of `G0`/`G1`/`G4` moves does the same as (G73,
+    /// G81, G82, G83, G85, G89; not tapping, boring with a spindle stop or
+    /// back boring).
+    pub expandable: bool,
 }
 
 /// Tool table and work offsets the interpreter uses.
@@ -405,6 +429,10 @@ pub struct Setup {
     /// The machine's nominal kinematics, for tool centre point control
     /// (G43.4/G43.5); `None` refuses it.
     pub kinematics: Option<std::sync::Arc<crate::machine::tool::MachineTool>>,
+    /// Canned-cycle holes whose one X and Y would miss the tolerance may
+    /// be written as the `G0`/`G1` moves of the cycle (`--expand-cycles`;
+    /// see [`CycleSpec::expandable`]).
+    pub expand_cycles: bool,
 }
 
 impl Setup {
@@ -495,6 +523,9 @@ pub struct Interpreter {
     cycle_r: Option<f64>,
     cycle_z: Option<f64>,
     cycle_initial: f64,
+    /// The cycle's modal peck depth `Q` and dwell `P` (value, decimals).
+    cycle_q: Option<f64>,
+    cycle_p: Option<(f64, Option<u8>)>,
     feed: f64,
     /// The feed mode (G93, G94 or G95, × 10) whose F no longer holds: the
     /// mode changed since the last F word.
@@ -555,6 +586,8 @@ impl Interpreter {
             cycle_r: None,
             cycle_z: None,
             cycle_initial: 0.0,
+            cycle_q: None,
+            cycle_p: None,
             feed: 0.0,
             feed_dropped: None,
             per_rev: false,
@@ -1203,6 +1236,8 @@ impl Interpreter {
                 self.cycle = None;
                 self.cycle_r = None;
                 self.cycle_z = None;
+                self.cycle_q = None;
+                self.cycle_p = None;
                 if self.motion.is_none() {
                     self.motion = Some(Motion::Rapid);
                 }
@@ -1525,6 +1560,12 @@ impl Interpreter {
             }
             if let Some(z) = g.axis[2] {
                 self.cycle_z = Some(z.value);
+            }
+            if let Some(q) = g.q {
+                self.cycle_q = Some(q.value);
+            }
+            if let Some(p) = g.p {
+                self.cycle_p = Some((p.value, p.decimals));
             }
             if any_axis {
                 if self.tcpm {
@@ -2108,7 +2149,29 @@ impl Interpreter {
             retract,
         };
         plan.mv = Some(feed);
+        plan.cycle = self.cycle_spec(plan);
         Ok(())
+    }
+
+    /// What the cycle of the hole `plan` does along it ([`CycleSpec`]).
+    fn cycle_spec(&self, plan: &Plan) -> CycleSpec {
+        let code10 = self.cycle.unwrap_or(0);
+        let pecks = matches!(code10, 730 | 830);
+        let dwells = matches!(code10, 820 | 890);
+        CycleSpec {
+            code10,
+            peck_mm: if pecks {
+                self.cycle_q.map_or(0.0, |q| q.abs() * plan.scale)
+            } else {
+                0.0
+            },
+            dwell_p: self.cycle_p.filter(|_| dwells),
+            motion_before: self.motion,
+            expandable: self.setup.expand_cycles
+                && plan.absolute
+                && plan.extra_repeats == 0
+                && matches!(code10, 730 | 810 | 820 | 830 | 850 | 890),
+        }
     }
 
     /// The holes a cycle block drills after the first (`K`, or Haas `L`):
