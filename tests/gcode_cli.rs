@@ -528,7 +528,14 @@ fn integer_words_in_increments_are_read_and_written_as_the_control_does() {
         .assert()
         .success();
     let stderr = String::from_utf8_lossy(&out.get_output().stderr).to_string();
-    assert!(!stderr.contains("no decimal point"), "{stderr}");
+    // The first word read in increments names the machine file's key, once.
+    assert_eq!(
+        stderr
+            .matches("nodec.nc:3: `X100` has no decimal point: read as 100 increments of 0.001 mm, the machine file's `integer_words: increments`")
+            .count(),
+        1,
+        "{stderr}"
+    );
     let text = String::from_utf8(out.get_output().stdout.clone()).expect("utf-8");
     let body = text_without_header(&text);
     // X150 is 0.150 mm: its compensated word is within microns of it.

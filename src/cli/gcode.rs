@@ -607,7 +607,9 @@ pub(super) fn summary_line(input: &str, output: &Path, s: &Summary, tolerance: f
 /// `postproc report` (dry run).
 pub fn report(a: &ReportArgs, machine: Option<(MachineTool, Loaded)>) -> Result<i32> {
     let run = Prepared::new(&a.program, &a.effects, machine, "report")?;
-    let job = run.job(0.001, None, false)?;
+    // The machine file's tolerance: a point held at an end of travel in a
+    // compensated program is held in its report too.
+    let job = run.job(tolerance_of(None, Some(&run.machine)), None, false)?;
     let (input, file) = open_input(&a.program.file)?;
     let out = a.output.clone().unwrap_or_else(|| PathBuf::from("-"));
     refuse_overwrite(&out, &input_files(&a.program, &run.loaded, &a.effects))?;
