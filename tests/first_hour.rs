@@ -202,3 +202,64 @@ fn the_travel_is_checked_with_every_effect_off() {
         assert!(!out.exists(), "--effects {effects}: output written");
     }
 }
+
+/// `calibrate geometry` on an example machine marks the geometry section
+/// calibrated and no other: the file's `status` names each section, the
+/// name and the header comment it owns say what changed, and every run
+/// with the file still warns of the stiffness, thermal and process-force
+/// example values.
+#[test]
+fn one_calibration_marks_its_section_and_the_warning_names_the_others() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let cal = dir.path().join("cal.yaml");
+    postproc()
+        .env("SOURCE_DATE_EPOCH", "1764028800") // 2025-11-25
+        .args([
+            "calibrate",
+            "geometry",
+            "--machine",
+            "afm-r1000",
+            "--observations",
+        ])
+        .arg(repo("samples/observations/afm-r1000-grid-measured.csv"))
+        .arg("-o")
+        .arg(&cal)
+        .assert()
+        .code(0);
+    let text = std::fs::read_to_string(&cal).expect("written");
+    assert!(
+        text.contains(
+            "\nstatus: { geometry: calibrated, stiffness: example, thermal: example, process_force: example }"
+        ),
+        "{text}"
+    );
+    assert!(
+        text.contains("\nname: AFM R-1000 (example values in stiffness, thermal, process force)\n"),
+        "{text}"
+    );
+    assert!(
+        text.starts_with("# AFM R-1000")
+            && text.contains(
+                "\n# GEOMETRY CALIBRATED 2025-11-25 FROM afm-r1000-grid-measured.csv (the notes below describe the example values it replaced)."
+            ),
+        "{text}"
+    );
+    // The process-force comment stays: that section is still an example.
+    assert!(
+        text.contains("\n# Process effects — EXAMPLE CALIBRATION, NOT MEASURED DATA"),
+        "{text}"
+    );
+    let a = postproc()
+        .args(["check", "--machine"])
+        .arg(&cal)
+        .arg(repo("samples/part.nc"))
+        .assert()
+        .code(0);
+    let err = String::from_utf8_lossy(&a.get_output().stderr).to_string();
+    assert!(
+        err.contains(
+            "cal.yaml: stiffness, thermal, process force still example values, not measured data (geometry calibrated 2025-11-25 from afm-r1000-grid-measured.csv)"
+        ),
+        "{err}"
+    );
+}
