@@ -263,3 +263,223 @@ fn one_calibration_marks_its_section_and_the_warning_names_the_others() {
         "{err}"
     );
 }
+
+/// The `postproc` binary's folder, for scripts that call `postproc`.
+fn path_with_postproc() -> String {
+    let bin = postproc().get_program().to_owned();
+    let dir = std::path::Path::new(&bin)
+        .parent()
+        .expect("bin dir")
+        .to_owned();
+    format!(
+        "{}:{}",
+        dir.display(),
+        std::env::var("PATH").unwrap_or_default()
+    )
+}
+
+/// A shared folder as docs/batch.md's cluster examples expect it:
+/// `machines/mill-7.yaml` and three programs in `programs/`.
+fn cluster_folder() -> tempfile::TempDir {
+    let dir = tempfile::tempdir().expect("temp dir");
+    std::fs::create_dir_all(dir.path().join("machines")).expect("machines");
+    std::fs::create_dir_all(dir.path().join("programs")).expect("programs");
+    std::fs::copy(
+        repo("machines/afm-r1000.yaml"),
+        dir.path().join("machines/mill-7.yaml"),
+    )
+    .expect("machine");
+    for p in [
+        "samples/part.nc",
+        "samples/gcode/fusion_fanuc.nc",
+        "samples/gcode/linuxcnc.ngc",
+    ] {
+        let name = std::path::Path::new(p).file_name().expect("name");
+        std::fs::copy(repo(p), dir.path().join("programs").join(name)).expect("program");
+    }
+    dir
+}
+
+/// Merges the shards' summaries in `dir` as docs/batch.md does and checks
+/// that every program was compensated in exactly one shard.
+fn merged_covers_every_program(dir: &std::path::Path, merge: &str) {
+    let run = Command::new("bash")
+        .arg("-c")
+        .arg(merge)
+        .current_dir(dir)
+        .env("PATH", path_with_postproc())
+        .output()
+        .expect("merge runs");
+    let out =
+        String::from_utf8_lossy(&run.stdout).to_string() + &String::from_utf8_lossy(&run.stderr);
+    assert_eq!(run.status.code(), Some(0), "{merge}: {out}");
+    assert!(
+        out.contains("batch: 3 programs: 3 compensated (0 with findings, 0 empty), 0 failed"),
+        "{out}"
+    );
+    for name in ["part.nc", "fusion_fanuc.nc", "linuxcnc.ngc"] {
+        let shards = (1..=8)
+            .filter(|k| dir.join(format!("out/shard-{k}/{name}")).exists())
+            .count();
+        assert_eq!(shards, 1, "{name} in {shards} shards");
+    }
+}
+
+/// docs/batch.md's Slurm array script, run as each of its 8 tasks with
+/// the variables Slurm sets (`--array=1-8`), then the merge of its
+/// dependent job: `--shard auto` shares the programs out once.
+#[test]
+fn the_slurm_array_script_of_the_docs_shards_from_the_array_variables() {
+    let md = crate::common::text("docs/batch.md");
+    let blocks = crate::common::fenced_blocks(&md, "bash");
+    let script = blocks
+        .iter()
+        .find(|b| b.contains("#SBATCH --array=1-8") && b.contains("--shard auto"))
+        .expect("the Slurm script in docs/batch.md");
+    let submit = blocks
+        .iter()
+        .find(|b| b.contains("sbatch --dependency"))
+        .expect("the submission in docs/batch.md");
+    let merge = submit.split('\'').nth(1).expect("the merge command");
+    let dir = cluster_folder();
+    std::fs::write(dir.path().join("postproc-array.sh"), script).expect("script");
+    for k in 1..=8 {
+        let run = Command::new("bash")
+            .arg("postproc-array.sh")
+            .current_dir(dir.path())
+            .env("PATH", path_with_postproc())
+            .env("SLURM_ARRAY_TASK_ID", k.to_string())
+            .env("SLURM_ARRAY_TASK_COUNT", "8")
+            .env("SLURM_ARRAY_TASK_MIN", "1")
+            .env("SLURM_ARRAY_TASK_MAX", "8")
+            .env("SLURM_CPUS_PER_TASK", "1")
+            .env_remove("JOB_COMPLETION_INDEX")
+            .output()
+            .expect("task runs");
+        assert_eq!(
+            run.status.code(),
+            Some(0),
+            "task {k}: {}",
+            String::from_utf8_lossy(&run.stderr)
+        );
+    }
+    merged_covers_every_program(dir.path(), merge);
+}
+
+/// docs/batch.md's Kubernetes indexed Job: the container's command of the
+/// manifest, run in its working folder for every index of its
+/// `completions`, then the merge.
+#[test]
+fn the_kubernetes_indexed_job_of_the_docs_shards_from_the_completion_index() {
+    let md = crate::common::text("docs/batch.md");
+    let manifest = crate::common::fenced_blocks(&md, "yaml")
+        .into_iter()
+        .find(|b| b.contains("completionMode: Indexed"))
+        .expect("the Job in docs/batch.md");
+    let job: serde_yaml::Value = serde_yaml::from_str(&manifest).expect("the manifest reads");
+    let completions = job["spec"]["completions"].as_u64().expect("completions");
+    let container = &job["spec"]["template"]["spec"]["containers"][0];
+    assert_eq!(container["workingDir"].as_str(), Some("/data"));
+    let command: Vec<&str> = container["command"]
+        .as_sequence()
+        .expect("command")
+        .iter()
+        .filter_map(|v| v.as_str())
+        .collect();
+    assert_eq!(command, ["/bin/sh", "-c"]);
+    let args = container["args"][0].as_str().expect("args");
+    assert!(
+        args.contains(&format!("--shard auto/{completions}")),
+        "{args}"
+    );
+    let dir = cluster_folder();
+    for i in 0..completions {
+        let run = Command::new(command[0])
+            .arg(command[1])
+            .arg(args)
+            .current_dir(dir.path())
+            .env("PATH", path_with_postproc())
+            .env("JOB_COMPLETION_INDEX", i.to_string())
+            .env_remove("SLURM_ARRAY_TASK_ID")
+            .output()
+            .expect("pod runs");
+        assert_eq!(
+            run.status.code(),
+            Some(0),
+            "index {i}: {}",
+            String::from_utf8_lossy(&run.stderr)
+        );
+    }
+    merged_covers_every_program(
+        dir.path(),
+        "postproc batch --merge-summaries --out-dir out/merged out/shard-*/batch-summary.json",
+    );
+}
+
+/// A batch over a folder of both languages compensates the programs of
+/// the machine's language and skips each of the others with one line
+/// (they were failures, each naming its path twice); a program of the
+/// other language named on its own still fails, its path said once.
+#[test]
+fn a_batch_over_a_mixed_folder_skips_the_other_language_with_one_line() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let mixed = dir.path().join("cell");
+    std::fs::create_dir_all(&mixed).expect("folder");
+    for p in [
+        "samples/drilling.mod",
+        "samples/part.nc",
+        "samples/gcode/linuxcnc.ngc",
+    ] {
+        let name = std::path::Path::new(p).file_name().expect("name");
+        std::fs::copy(repo(p), mixed.join(name)).expect("copy");
+    }
+    let cases = [
+        (
+            "abb-irb1600",
+            "a G-code program, and the machine is a robot",
+            ["linuxcnc.ngc", "part.nc"].as_slice(),
+            "batch: 1 programs: 1 compensated",
+        ),
+        (
+            "afm-r1000",
+            "a RAPID module, and the machine is a machine tool",
+            ["drilling.mod"].as_slice(),
+            "batch: 2 programs: 2 compensated",
+        ),
+    ];
+    for (machine, reason, others, totals) in cases {
+        let out = dir.path().join(format!("out-{machine}"));
+        let a = postproc()
+            .args(["batch", "--machine", machine, "--out-dir"])
+            .arg(&out)
+            .arg(&mixed)
+            .assert()
+            .code(0);
+        let stdout = String::from_utf8_lossy(&a.get_output().stdout).to_string();
+        for name in others {
+            let line = format!("skipped   {}: {reason}\n", mixed.join(name).display());
+            assert_eq!(stdout.matches(&line).count(), 1, "{stdout}");
+        }
+        assert!(!stdout.contains("failed "), "{stdout}");
+        assert!(
+            stdout.contains(&format!(
+                "{totals} (0 with findings, 0 empty), 0 failed; {} skipped",
+                others.len()
+            )),
+            "{stdout}"
+        );
+    }
+    let part = mixed.join("part.nc");
+    let a = postproc()
+        .args(["batch", "--machine", "abb-irb1600", "--out-dir"])
+        .arg(dir.path().join("out-named"))
+        .arg(&part)
+        .assert()
+        .code(2);
+    let stdout = String::from_utf8_lossy(&a.get_output().stdout).to_string();
+    assert_eq!(
+        stdout.matches(&part.display().to_string()).count(),
+        1,
+        "{stdout}"
+    );
+}
