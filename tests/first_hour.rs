@@ -416,6 +416,75 @@ fn the_kubernetes_indexed_job_of_the_docs_shards_from_the_completion_index() {
     );
 }
 
+/// The robot report's headline is on the process moves: in
+/// `samples/drilling.mod` the moves under drilling thrust, not the
+/// `MoveL` approaches and retracts in air (the approach to 2 mm above
+/// hole 9 was its "max cutting"); the moves in air join the positioning
+/// moves. Without the process effect the linear moves are the headline.
+#[test]
+fn the_robot_headline_is_on_the_process_moves() {
+    let run = postproc()
+        .args(["report", "-m", "abb-irb1600", "--format", "json"])
+        .arg(repo("samples/drilling.mod"))
+        .output()
+        .expect("runs");
+    let v: serde_json::Value = serde_json::from_slice(&run.stdout).expect("json");
+    let rows = v["rows"].as_array().expect("rows");
+    let positioning = |m: &str| matches!(m, "MoveJ" | "MoveAbsJ");
+    let process = |r: &serde_json::Value| {
+        !positioning(r["motion"].as_str().expect("motion"))
+            && r["effects_mm"]["process"].as_f64().expect("process part") > 0.0
+    };
+    let group_max = |under_force: bool| {
+        rows.iter()
+            .filter(|r| process(r) == under_force)
+            .map(|r| {
+                (
+                    r["dev_mm"].as_f64().expect("dev"),
+                    r["line"].as_u64().expect("line"),
+                )
+            })
+            .fold((0.0, 0), |a, b| if b.0 > a.0 { b } else { a })
+    };
+    let processed = rows.iter().filter(|r| process(r)).count();
+    assert!(processed >= 12, "{processed} process moves");
+    let (cut_max, cut_line) = group_max(true);
+    let (air_max, air_line) = group_max(false);
+    let s = &v["summary"];
+    assert_eq!(s["cutting"]["max_line"].as_u64(), Some(cut_line));
+    assert_eq!(s["cutting"]["max_mm"].as_f64(), Some(cut_max));
+    assert_eq!(s["positioning"]["max_line"].as_u64(), Some(air_line));
+    assert_eq!(s["positioning"]["max_mm"].as_f64(), Some(air_max));
+    let table = postproc()
+        .args(["report", "-m", "abb-irb1600"])
+        .arg(repo("samples/drilling.mod"))
+        .output()
+        .expect("runs");
+    let text = String::from_utf8_lossy(&table.stdout);
+    assert!(
+        text.contains(&format!("\nprocess moves ({processed}): "))
+            && text.contains(&format!(
+                "\npositioning moves and moves in air ({}): ",
+                rows.len() - processed
+            ))
+            && text.contains("\nworst process blocks:\n"),
+        "{text}"
+    );
+    let no_process = postproc()
+        .args([
+            "report",
+            "-m",
+            "abb-irb1600",
+            "--effects",
+            "kinematic,gravity",
+        ])
+        .arg(repo("samples/drilling.mod"))
+        .output()
+        .expect("runs");
+    let text = String::from_utf8_lossy(&no_process.stdout);
+    assert!(text.contains("\ncutting moves ("), "{text}");
+}
+
 /// A batch over a folder of both languages compensates the programs of
 /// the machine's language and skips each of the others with one line
 /// (they were failures, each naming its path twice); a program of the
@@ -482,4 +551,43 @@ fn a_batch_over_a_mixed_folder_skips_the_other_language_with_one_line() {
         1,
         "{stdout}"
     );
+}
+
+/// A compensated robot target written with another confdata than the
+/// programmed one is noted with its target and line: the module of
+/// tests/conf_off.rs, whose targets under `ConfL \Off` carry a wrong
+/// confdata (joints 4 and 6 half a turn off), gets one warning per such
+/// target; the last move (`\On`, true confdata) none.
+#[test]
+fn a_changed_confdata_is_noted_with_its_target_and_line() {
+    use postproc::machine::robot::Robot;
+    let dir = tempfile::tempdir().expect("temp dir");
+    let (name, text) = crate::conf_off::robots()[0].clone();
+    let machine = crate::common::write(dir.path(), &format!("{name}.yaml"), &text);
+    let robot = crate::conf_off::with_spindle(Robot::from_yaml_str(&text, name).expect("valid"));
+    let (src, [ca, cb]) = crate::conf_off::module(&robot, true);
+    let input = crate::common::write(dir.path(), "free.mod", &src);
+    let a = postproc()
+        .args(["compensate", "--effects", "kinematic,gravity", "--machine"])
+        .arg(&machine)
+        .arg(&input)
+        .arg("-o")
+        .arg(dir.path().join("free.out.mod"))
+        .assert()
+        .code(0);
+    let err = String::from_utf8_lossy(&a.get_output().stderr).to_string();
+    let line_of = |needle: &str| src.lines().position(|l| l.contains(needle)).expect("move") + 1;
+    for (target, mv, right) in [("pA", "MoveJ", ca), ("pB", "MoveL", cb)] {
+        let at = line_of(&format!("{mv} {target},"));
+        let wrong = postproc::machine::robot::ConfData {
+            cf4: right.cf4 + 2,
+            cf6: right.cf6 - 2,
+            ..right
+        };
+        let want = format!(
+            "free.mod:{at}:5: target `{target}` of {mv}: written with confdata {right}, programmed {wrong} (configuration monitoring off"
+        );
+        assert!(err.contains(&want), "{want}\n{err}");
+    }
+    assert!(!err.contains("target `pA2`"), "{err}");
 }
