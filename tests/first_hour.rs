@@ -591,3 +591,97 @@ fn a_changed_confdata_is_noted_with_its_target_and_line() {
     }
     assert!(!err.contains("target `pA2`"), "{err}");
 }
+
+/// `--decimals` sets the decimals of the rewritten rotary words too (the
+/// machine file's `decimals_deg: 6` of the five-axis sample was kept
+/// whatever was asked).
+#[test]
+fn decimals_sets_the_rotary_words_too() {
+    let decimals_of = |args: &[&str]| {
+        let a = postproc()
+            .args([
+                "compensate",
+                "--machine",
+                "five-axis-ac",
+                "--annotate",
+                "none",
+                "-o",
+                "-",
+            ])
+            .args(args)
+            .arg(repo("samples/five-axis.nc"))
+            .assert()
+            .code(0);
+        let out = String::from_utf8_lossy(&a.get_output().stdout).to_string();
+        let mut most = [0usize; 2];
+        for line in out.lines().filter(|l| !l.starts_with('(')) {
+            for word in line.split_whitespace() {
+                let Some(letter) = word.chars().next() else {
+                    continue;
+                };
+                let Some((_, frac)) = word.split_once('.') else {
+                    continue;
+                };
+                let slot = match letter {
+                    'X' | 'Y' | 'Z' => 0,
+                    'A' | 'C' => 1,
+                    _ => continue,
+                };
+                most[slot] = most[slot].max(frac.len());
+            }
+        }
+        most
+    };
+    assert_eq!(decimals_of(&[]), [4, 6]);
+    assert_eq!(decimals_of(&["--decimals", "4"]), [4, 4]);
+}
+
+/// `check` lists every error of a program as a compiler does (each bad
+/// line is read as blank and the checking goes on), up to a limit, then
+/// the warnings; exit 2 when there is any error.
+#[test]
+fn check_lists_every_error_then_the_warnings() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let program = crate::common::write(
+        dir.path(),
+        "three.nc",
+        "G21 G90 G54\nG0 X0. Y0. Z50.\nG1 Z40. F1000.\nG1 X1150.\nG1 X10. ,C2.\nG2 X20. Y10.\nG1 X30. Y5\nM30\n",
+    );
+    let a = postproc()
+        .args(["check", "--machine", "afm-r1000"])
+        .arg(&program)
+        .assert()
+        .code(2);
+    let err = String::from_utf8_lossy(&a.get_output().stderr).to_string();
+    let out = String::from_utf8_lossy(&a.get_output().stdout).to_string();
+    let errors: Vec<&str> = err.lines().filter(|l| l.starts_with("error: ")).collect();
+    assert_eq!(errors.len(), 3, "{err}");
+    for (e, line) in errors.iter().zip([4, 5, 6]) {
+        assert!(
+            e.starts_with(&format!("error: {}:{line}:", program.display())),
+            "{err}"
+        );
+    }
+    assert!(errors[0].contains("outside the travel"), "{err}");
+    assert!(out.contains("\nerrors: 3\n"), "{out}");
+    let warnings = out.split("\nwarnings: ").nth(1).expect("warnings");
+    assert!(warnings.contains("line 7: "), "{out}");
+    // More than the limit: the first 20, and the rest not checked.
+    let many: String = (0..25).map(|_| "G1 X10. ,C2.\n").collect();
+    let program = crate::common::write(dir.path(), "many.nc", &format!("G21 G90 G54\n{many}M30\n"));
+    let a = postproc()
+        .args(["check", "--machine", "afm-r1000"])
+        .arg(&program)
+        .assert()
+        .code(2);
+    let err = String::from_utf8_lossy(&a.get_output().stderr).to_string();
+    assert_eq!(
+        err.lines().filter(|l| l.contains(",C")).count(),
+        20,
+        "{err}"
+    );
+    assert!(
+        err.contains("20 errors shown; the rest of the program is not checked"),
+        "{err}"
+    );
+}
