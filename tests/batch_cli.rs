@@ -406,7 +406,7 @@ fn shards_cover_every_program_once_and_merge_into_the_whole_batch_summary() {
         inp,
     ]);
     assert_eq!(code, 2);
-    assert!(err.contains("for '--shard <K/N>': `4/3`"), "{err}");
+    assert!(err.contains("for '--shard <K/N|auto[/N]>': `4/3`"), "{err}");
 }
 
 #[test]

@@ -33,7 +33,7 @@ const B_DEG: [f64; 6] = [18.0, 0.0, 18.0, 44.0, 66.0, -55.0];
 
 /// (name, machine text): the bundled IRB 1600 and TX200 (the TX200 file
 /// mounted for the samples' cell: tests/robot_samples.rs).
-fn robots() -> [(&'static str, String); 2] {
+pub(crate) fn robots() -> [(&'static str, String); 2] {
     let text =
         |n: &str| std::fs::read_to_string(repo(&format!("machines/{n}.yaml"))).expect("file");
     [
@@ -42,7 +42,7 @@ fn robots() -> [(&'static str, String); 2] {
     ]
 }
 
-fn with_spindle(r: Robot) -> Robot {
+pub(crate) fn with_spindle(r: Robot) -> Robot {
     r.with_tool(
         Isometry3::translation(0.0, 0.0, 182.5),
         Some(PointMass {
@@ -65,7 +65,7 @@ fn robtarget_text(p: &Isometry3<f64>, c: ConfData) -> String {
 /// MoveL to targets whose confdata is wrong (joints 4 and 6 half a turn
 /// off), then ConfL on and a MoveL back to A with its true confdata.
 /// `off`: whether the `ConfX \Off` lines are there.
-fn module(r: &Robot, off: bool) -> (String, [ConfData; 2]) {
+pub(crate) fn module(r: &Robot, off: bool) -> (String, [ConfData; 2]) {
     let rad = |d: [f64; 6]| d.map(f64::to_radians);
     let (qa, qb) = (rad(A_DEG), rad(B_DEG));
     let (ca, cb) = (r.confdata(&qa), r.confdata(&qb));

@@ -384,7 +384,11 @@ fn calibrate_records_a_calibrated_status_that_programs_then_carry() {
         String::from_utf8_lossy(&run.stderr)
     );
     let text = std::fs::read_to_string(&out).unwrap();
-    assert!(text.contains("\nstatus: calibrated\n"), "{text}");
+    // Geometry only: the other sections stay example values.
+    assert!(
+        text.contains("\nstatus: { geometry: calibrated, stiffness: example, thermal: example, process_force: example }"),
+        "{text}"
+    );
     let rows = std::fs::read_to_string(&obs)
         .unwrap()
         .lines()
@@ -401,7 +405,8 @@ fn calibrate_records_a_calibrated_status_that_programs_then_carry() {
             && entry.contains("observations: afm-r1000-grid-measured.csv"),
         "{entry}"
     );
-    // A program compensated with it says so; no example warning.
+    // A program compensated with it says so; the warning names the
+    // sections still at example values, no longer the whole file.
     let run = compensate(&[
         repo("samples/part.nc").to_str().unwrap(),
         "-m",
@@ -420,7 +425,12 @@ fn calibrate_records_a_calibrated_status_that_programs_then_carry() {
         program.contains("(machine status calibrated 2025-11-25 - geometry, "),
         "{program}"
     );
-    assert!(!String::from_utf8_lossy(&run.stderr).contains("example values"));
+    let err = String::from_utf8_lossy(&run.stderr);
+    assert!(
+        err.contains("stiffness, thermal, process force still example values")
+            && !err.contains("`status: example`"),
+        "{err}"
+    );
 }
 
 #[test]

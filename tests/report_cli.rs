@@ -284,10 +284,10 @@ fn table_and_csv_reports_for_gcode_and_rapid() {
     for row in &data {
         assert_eq!(row.split(',').count(), 15, "{row}");
     }
-    // The cutting-move headline, the summary and the provenance comment
-    // lines.
+    // The process-move headline (a drilling program: the moves under
+    // thrust), the summary and the provenance comment lines.
     let tail: Vec<&str> = csv.lines().rev().take(3).collect();
-    assert!(tail[2].starts_with("# cutting moves ("), "{csv}");
+    assert!(tail[2].starts_with("# process moves ("), "{csv}");
     assert!(tail[1].starts_with("# summary:"), "{csv}");
     assert!(
         tail[0].starts_with("# provenance: postproc ") && tail[0].contains("abb-irb1600.yaml"),

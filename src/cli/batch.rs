@@ -176,6 +176,14 @@ fn walk(
                 program: false,
                 unread: Some(message),
             });
+        } else if is_program(&path) && is_rapid(&path) != robot {
+            // A folder of both languages: the programs of the other one are
+            // for another machine.
+            skip_as(if robot {
+                "a G-code program, and the machine is a robot"
+            } else {
+                "a RAPID module, and the machine is a machine tool"
+            });
         } else if !is_program(&path) && !sniffed(&path, robot) {
             skip_as("not a program (by its extension or its first block)");
         } else if !path.is_file() {
@@ -358,6 +366,135 @@ impl std::str::FromStr for Shard {
         }
         Ok(Shard { index, count })
     }
+}
+
+/// The `--shard` value: `K/N`, or `auto` (`auto/N`) for the scheduler's
+/// index and count ([`ShardSpec::resolve`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ShardSpec {
+    /// `K/N` as given.
+    Given(Shard),
+    /// `auto` or `auto/N`: K (and N) from the environment.
+    Auto(Option<usize>),
+}
+
+impl std::str::FromStr for ShardSpec {
+    type Err = String;
+    fn from_str(text: &str) -> std::result::Result<Self, String> {
+        let t = text.trim();
+        if t == "auto" {
+            return Ok(ShardSpec::Auto(None));
+        }
+        if let Some(n) = t.strip_prefix("auto/") {
+            return match n.trim().parse::<usize>() {
+                Ok(n) if n >= 1 => Ok(ShardSpec::Auto(Some(n))),
+                _ => Err(format!("`{text}`: expected auto/N with N >= 1")),
+            };
+        }
+        text.parse::<Shard>()
+            .map(ShardSpec::Given)
+            .map_err(|e| format!("{e}, auto or auto/N"))
+    }
+}
+
+impl ShardSpec {
+    /// The shard of this run: `K/N` as given; for `auto`, from the
+    /// scheduler's variables `var` reads: a Slurm job array's
+    /// `SLURM_ARRAY_TASK_ID` counted from `SLURM_ARRAY_TASK_MIN` (by
+    /// `SLURM_ARRAY_TASK_STEP`), of `SLURM_ARRAY_TASK_COUNT` tasks (else
+    /// `MAX`, `MIN` and `STEP` say how many), or a Kubernetes indexed
+    /// Job's `JOB_COMPLETION_INDEX` (from 0), whose count `auto/N` gives.
+    /// An N given with `auto/N` must agree with Slurm's count. Returns the
+    /// shard and where it came from.
+    pub fn resolve(
+        self,
+        var: impl Fn(&str) -> Option<String>,
+    ) -> std::result::Result<(Shard, String), String> {
+        let n = match self {
+            ShardSpec::Given(s) => return Ok((s, format!("{}/{}", s.index, s.count))),
+            ShardSpec::Auto(n) => n,
+        };
+        let num = |name: &str| -> std::result::Result<Option<usize>, String> {
+            match var(name) {
+                None => Ok(None),
+                Some(v) if v.trim().is_empty() => Ok(None),
+                Some(v) => v.trim().parse::<usize>().map(Some).map_err(|_| {
+                    format!(
+                        "--shard auto: {name}=`{}` is not a whole number",
+                        crate::error::clip(&v)
+                    )
+                }),
+            }
+        };
+        let slurm = num("SLURM_ARRAY_TASK_ID")?;
+        let k8s = num("JOB_COMPLETION_INDEX")?;
+        let (index, count, from) = match (slurm, k8s) {
+            (Some(_), Some(_)) => {
+                return Err(
+                    "--shard auto: both SLURM_ARRAY_TASK_ID and JOB_COMPLETION_INDEX are set; give --shard K/N"
+                        .into(),
+                );
+            }
+            (Some(id), None) => {
+                let min = num("SLURM_ARRAY_TASK_MIN")?.unwrap_or(1);
+                let step = num("SLURM_ARRAY_TASK_STEP")?.unwrap_or(1).max(1);
+                if id < min || (id - min) % step != 0 {
+                    return Err(format!(
+                        "--shard auto: SLURM_ARRAY_TASK_ID={id} is not a task of an array from {min} by {step}"
+                    ));
+                }
+                let counted = match (num("SLURM_ARRAY_TASK_COUNT")?, num("SLURM_ARRAY_TASK_MAX")?) {
+                    (Some(c), _) => Some(c),
+                    (None, Some(max)) if max >= min => Some((max - min) / step + 1),
+                    _ => None,
+                };
+                let count = match (counted, n) {
+                    (Some(c), Some(n)) if c != n => {
+                        return Err(format!("--shard auto/{n}: the Slurm array has {c} tasks"));
+                    }
+                    (Some(c), _) | (None, Some(c)) => c,
+                    (None, None) => {
+                        return Err(
+                            "--shard auto: SLURM_ARRAY_TASK_ID without SLURM_ARRAY_TASK_COUNT or SLURM_ARRAY_TASK_MAX; give --shard auto/N"
+                                .into(),
+                        );
+                    }
+                };
+                (
+                    (id - min) / step + 1,
+                    count,
+                    format!("SLURM_ARRAY_TASK_ID={id}"),
+                )
+            }
+            (None, Some(i)) => {
+                let count = n.ok_or(
+                    "--shard auto: JOB_COMPLETION_INDEX does not say how many pods there are; give --shard auto/N (the Job's completions)",
+                )?;
+                (i + 1, count, format!("JOB_COMPLETION_INDEX={i}"))
+            }
+            (None, None) => {
+                return Err(
+                    "--shard auto: no scheduler index in the environment (SLURM_ARRAY_TASK_ID of a Slurm job array, JOB_COMPLETION_INDEX of a Kubernetes indexed Job)"
+                        .into(),
+                );
+            }
+        };
+        if index == 0 || index > count {
+            return Err(format!(
+                "--shard auto: {from} gives shard {index} of {count}, outside 1..={count}"
+            ));
+        }
+        Ok((Shard { index, count }, from))
+    }
+}
+
+/// The shard of this run from `--shard` and the environment, logged.
+fn shard_of_run(spec: ShardSpec) -> Result<Shard> {
+    let (shard, from) = spec
+        .resolve(|name| std::env::var(name).ok())
+        .map_err(usage)?;
+    tracing::info!("shard {}/{} ({from})", shard.index, shard.count);
+    Ok(shard)
 }
 
 /// The summary file.
@@ -704,7 +841,7 @@ pub fn run(a: &BatchArgs, quiet: bool) -> Result<i32> {
     let mut files: Vec<PathBuf> = loaded.file.path.iter().cloned().collect();
     files.extend(a.effects.force_table.clone());
     let (items, skipped) = collect(&a.inputs, &a.out_dir, matches!(machine, Machine::Robot(_)));
-    let shard = a.shard;
+    let shard = a.shard.map(shard_of_run).transpose()?;
     if items.is_empty() {
         return Err(usage(format!(
             "no programs found (extensions: {}, {})",
@@ -883,11 +1020,13 @@ fn print_summary(summary: &BatchSummary, summary_path: &Path) -> Result<()> {
     for r in &summary.results {
         match r.status.as_str() {
             "empty" => say(format!("empty     {}: no moves\n", r.input))?,
-            "failed" => say(format!(
-                "failed    {}: {}\n",
-                r.input,
-                r.error.as_deref().unwrap_or("")
-            ))?,
+            "failed" => {
+                // An error that names the program first names it once.
+                let error = r.error.as_deref().unwrap_or("");
+                let prefix = format!("{}: ", r.input);
+                let error = error.strip_prefix(&prefix).unwrap_or(error);
+                say(format!("failed    {}: {error}\n", r.input))?
+            }
             "findings" => say(format!(
                 "findings  {}: residual {} mm > tolerance {} mm\n",
                 r.input,
@@ -1017,6 +1156,62 @@ fn merge(a: &BatchArgs) -> Result<i32> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn shard_auto_reads_the_schedulers_index_and_count() {
+        let env = |pairs: &'static [(&'static str, &'static str)]| {
+            move |name: &str| {
+                pairs
+                    .iter()
+                    .find(|(k, _)| *k == name)
+                    .map(|(_, v)| v.to_string())
+            }
+        };
+        let auto: ShardSpec = "auto".parse().unwrap();
+        let auto8: ShardSpec = "auto/8".parse().unwrap();
+        let got =
+            |spec: ShardSpec, pairs| spec.resolve(env(pairs)).map(|(s, _)| (s.index, s.count));
+        // Slurm `--array=1-8`: tasks 1..8.
+        let slurm = &[
+            ("SLURM_ARRAY_TASK_ID", "3"),
+            ("SLURM_ARRAY_TASK_COUNT", "8"),
+            ("SLURM_ARRAY_TASK_MIN", "1"),
+            ("SLURM_ARRAY_TASK_MAX", "8"),
+        ];
+        assert_eq!(got(auto, slurm), Ok((3, 8)));
+        assert_eq!(got(auto8, slurm), Ok((3, 8)));
+        assert!(
+            got("auto/4".parse().unwrap(), slurm)
+                .unwrap_err()
+                .contains("has 8 tasks")
+        );
+        // `--array=0-15:5` (0, 5, 10, 15): task 10 is the third of four,
+        // counted from MIN and MAX when COUNT is absent.
+        let stepped = &[
+            ("SLURM_ARRAY_TASK_ID", "10"),
+            ("SLURM_ARRAY_TASK_MIN", "0"),
+            ("SLURM_ARRAY_TASK_MAX", "15"),
+            ("SLURM_ARRAY_TASK_STEP", "5"),
+        ];
+        assert_eq!(got(auto, stepped), Ok((3, 4)));
+        // Kubernetes: index from 0, the count given.
+        let k8s = &[("JOB_COMPLETION_INDEX", "7")];
+        assert_eq!(got(auto8, k8s), Ok((8, 8)));
+        assert!(got(auto, k8s).unwrap_err().contains("give --shard auto/N"));
+        assert!(
+            got("auto/7".parse().unwrap(), k8s)
+                .unwrap_err()
+                .contains("outside 1..=7")
+        );
+        assert!(got(auto, &[]).unwrap_err().contains("no scheduler index"));
+        assert!(
+            got(auto, &[("SLURM_ARRAY_TASK_ID", "x")])
+                .unwrap_err()
+                .contains("not a whole number")
+        );
+        assert_eq!(got("2/3".parse().unwrap(), &[]), Ok((2, 3)));
+        assert!("auto/0".parse::<ShardSpec>().is_err());
+    }
 
     #[test]
     fn shards_parse_k_of_n_and_refuse_the_rest() {

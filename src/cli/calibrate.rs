@@ -449,15 +449,12 @@ pub fn run_calibrate(a: &CalibrateArgs) -> Result<i32> {
     }
     let cal = run(&obs)?;
 
-    let record = calibration_record(
-        &format!("{:?}", a.kind).to_ascii_lowercase(),
-        &a.observations,
-        obs.rows.len(),
-        cal.rms_fit_mm,
-    )?;
+    let kind = format!("{:?}", a.kind).to_ascii_lowercase();
+    let record = calibration_record(&kind, &a.observations, obs.rows.len(), cal.rms_fit_mm)?;
     let status = crate::machine::yaml_write::Edit::Calibrated(record);
     let yaml =
         crate::machine::yaml_write::apply(&cal.yaml, &file, "postproc calibrate", &[status])?;
+    let yaml = crate::machine::status::mark_calibrated(&cal.yaml, &yaml, &file, &kind)?;
     super::output::refuse_overwrite(&a.output, &read_files(&a.observations, &a.machine)?)?;
     // The summary first: standard output that fails (closed, full) fails
     // the run before the model is written.

@@ -252,7 +252,8 @@ impl WrittenModel<'_> {
                 d.gap.after.rms_um * 1e-3,
             )?;
             let status = Edit::Calibrated(record);
-            w.text = yaml_write::apply(&w.text, &shown, "postproc diagnose", &[status])?;
+            let edited = yaml_write::apply(&w.text, &shown, "postproc diagnose", &[status])?;
+            w.text = crate::machine::status::mark_calibrated(&w.text, &edited, &shown, "diagnose")?;
         }
         let mut inputs = vec![o.to_path_buf()];
         if let Some(m) = &a.machine {

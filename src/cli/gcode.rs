@@ -168,6 +168,110 @@ fn fmt_axes(v: &[f64; 6], setup: &Setup) -> String {
     s
 }
 
+/// Most errors `check` lists (then it stops, as a compiler does).
+pub const CHECK_MAX_ERRORS: usize = 20;
+
+/// The line of the program `name` an error is located at.
+fn error_line(e: &Error, name: &str) -> Option<usize> {
+    match e {
+        Error::Input(l) | Error::Unachievable(l) if l.file == name => Some(l.line),
+        _ => None,
+    }
+}
+
+/// Checks the whole program as a compiler does: at an error located on a
+/// line of the program, the error is kept, that line is read as blank
+/// and the program checked again (the passes after the first say no
+/// warning: the summary lists those of the last), up to
+/// [`CHECK_MAX_ERRORS`] errors. Gives the summary of the last pass (the
+/// program without its bad lines) and the errors in line order; an error
+/// of no line of the program is returned as it is when it is the first.
+fn check_all(job: &Job, mut input: Box<dyn BufRead>, name: &str) -> Result<(Summary, Vec<Error>)> {
+    let mut text = Vec::new();
+    input
+        .read_to_end(&mut text)
+        .map_err(|e| Error::io(name, e))?;
+    let mut errors: Vec<Error> = Vec::new();
+    loop {
+        let pass = |text: &[u8]| {
+            let input: Box<dyn BufRead> = Box::new(std::io::Cursor::new(text.to_vec()));
+            crate::pipeline::shop::run(job, input, name, None, None)
+        };
+        let result = if errors.is_empty() {
+            pass(&text)
+        } else {
+            tracing::subscriber::with_default(tracing::subscriber::NoSubscriber::default(), || {
+                pass(&text)
+            })
+        };
+        let e = match result {
+            Ok((s, _)) => {
+                errors.sort_by_key(|k| error_line(k, name));
+                return Ok((s, errors));
+            }
+            Err(e) => e,
+        };
+        let line = error_line(&e, name);
+        let again = line.is_some_and(|l| errors.iter().any(|k| error_line(k, name) == Some(l)));
+        match line {
+            Some(l) if !again && errors.len() < CHECK_MAX_ERRORS => {
+                errors.push(e);
+                blank_line(&mut text, l);
+            }
+            _ if errors.is_empty() => return Err(e),
+            _ => {
+                // Past the limit, or an error the blanking does not clear:
+                // the errors so far, and the summary up to the last.
+                if !again && errors.len() < CHECK_MAX_ERRORS {
+                    errors.push(e);
+                }
+                errors.sort_by_key(|k| error_line(k, name));
+                let summary = tracing::subscriber::with_default(
+                    tracing::subscriber::NoSubscriber::default(),
+                    || stop_before(job, &text, name, &errors),
+                );
+                return Ok((summary, errors));
+            }
+        }
+    }
+}
+
+/// The summary of the program up to the line of the last error (a pass
+/// that failed has none).
+fn stop_before(job: &Job, text: &[u8], name: &str, errors: &[Error]) -> Summary {
+    let last = errors
+        .iter()
+        .filter_map(|e| error_line(e, name))
+        .max()
+        .unwrap_or(1);
+    let head: Vec<u8> = text
+        .split_inclusive(|b| *b == b'\n')
+        .take(last.saturating_sub(1))
+        .flatten()
+        .copied()
+        .collect();
+    let input: Box<dyn BufRead> = Box::new(std::io::Cursor::new(head));
+    crate::pipeline::shop::run(job, input, name, None, None)
+        .map_or_else(|_| Summary::default(), |(s, _)| s)
+}
+
+/// Empties line `line` (1-based) of `text`, keeping its line end, so the
+/// lines after it keep their numbers.
+fn blank_line(text: &mut Vec<u8>, line: usize) {
+    let mut start = 0;
+    for _ in 1..line {
+        match text[start..].iter().position(|b| *b == b'\n') {
+            Some(i) => start += i + 1,
+            None => return,
+        }
+    }
+    let end = text[start..]
+        .iter()
+        .position(|b| *b == b'\n' || *b == b'\r')
+        .map_or(text.len(), |i| start + i);
+    text.drain(start..end);
+}
+
 /// `postproc check`.
 pub fn check(a: &CheckArgs, machine: Option<(MachineTool, Loaded)>) -> Result<i32> {
     let machine = machine.map(|(m, _)| m);
@@ -187,7 +291,15 @@ pub fn check(a: &CheckArgs, machine: Option<(MachineTool, Loaded)>) -> Result<i3
         // travel, as `compensate` requires.
         travel: machine.as_ref(),
     };
-    let (s, _) = crate::pipeline::shop::run(&job, input, &name, None, None)?;
+    let (s, errors) = check_all(&job, input, &name)?;
+    for e in &errors {
+        eprintln!("error: {e}");
+    }
+    if errors.len() >= CHECK_MAX_ERRORS {
+        eprintln!(
+            "error: {name}: {CHECK_MAX_ERRORS} errors shown; the rest of the program is not checked"
+        );
+    }
     let mut out = std::io::stdout().lock();
     let w = |out: &mut dyn Write, t: String| {
         out.write_all(t.as_bytes())
@@ -226,6 +338,9 @@ pub fn check(a: &CheckArgs, machine: Option<(MachineTool, Loaded)>) -> Result<i3
             }
         ),
     )?;
+    if !errors.is_empty() {
+        w(&mut out, format!("errors: {}\n", errors.len()))?;
+    }
     w(&mut out, format!("warnings: {}\n", s.warnings.len()))?;
     for warn in &s.warnings {
         w(
@@ -239,7 +354,7 @@ pub fn check(a: &CheckArgs, machine: Option<(MachineTool, Loaded)>) -> Result<i3
             ),
         )?;
     }
-    Ok(0)
+    Ok(if errors.is_empty() { 0 } else { 2 })
 }
 
 #[allow(clippy::too_many_arguments)]
@@ -276,7 +391,7 @@ pub(super) fn build_job<'m>(
         },
         emit: EmitOptions {
             decimals_mm: decimals.or(machine.output_decimals()),
-            decimals_deg: machine.output_decimals_deg(),
+            decimals_deg: decimals.or(machine.output_decimals_deg()),
             annotate,
         },
         pool: Some(pool),

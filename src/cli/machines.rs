@@ -9,6 +9,7 @@ use std::path::{Path, PathBuf};
 
 use crate::emit::header::{self, EffectGain, Provenance};
 use crate::error::{Error, Located, Result, show_number};
+use crate::machine::status::SectionStatus;
 use crate::machine::{BUNDLED, Machine, MachineFile, Status};
 use crate::predict::{Effect, EffectSet};
 
@@ -28,27 +29,65 @@ pub(super) fn open(name: &str) -> Result<(Machine, Loaded)> {
     Ok((machine, Loaded { file, status }))
 }
 
-/// The machine file of `status: example` or `nominal` a run used, if any,
-/// with its status.
-static UNMEASURED_USED: std::sync::OnceLock<(String, Status)> = std::sync::OnceLock::new();
+/// The machine file of `status: example` or `nominal`, or with model
+/// sections still at such values, a run used: its name, its status and
+/// its sections.
+type Unmeasured = (String, Status, Vec<SectionStatus>);
 
-/// Notes a run with a machine file of `status: example` or `nominal`,
-/// warned about by [`warn_example_used`] once the command is done.
+/// The machine file with unmeasured values a run used, if any.
+static UNMEASURED_USED: std::sync::OnceLock<Unmeasured> = std::sync::OnceLock::new();
+
+/// Notes a run with a machine file of `status: example` or `nominal`, or
+/// one whose `status` map leaves sections at such values, warned about by
+/// [`warn_example_used`] once the command is done.
 pub(super) fn warn_example(file: &MachineFile, status: &Status) {
-    if matches!(status, Status::Example | Status::Nominal) {
-        let _ = UNMEASURED_USED.set((file.shown.clone(), status.clone()));
+    let sections = crate::machine::yaml::Source::read(&file.text, &file.shown)
+        .and_then(|src| crate::machine::status::sections(&src))
+        .unwrap_or_default();
+    let partly = sections.iter().any(SectionStatus::unmeasured);
+    if matches!(status, Status::Example | Status::Nominal) || partly {
+        let _ = UNMEASURED_USED.set((file.shown.clone(), status.clone(), sections));
     }
 }
 
 /// The warning of every run that used a machine file of `status:
-/// example` or `nominal`: once, after the command (whatever path it took
-/// through the program), so that the run's own messages come first.
+/// example` or `nominal`, or with sections still at example or nominal
+/// values (named): once, after the command (whatever path it took through
+/// the program), so that the run's own messages come first.
 pub(super) fn warn_example_used() {
     match UNMEASURED_USED.get() {
-        Some((shown, Status::Nominal)) => tracing::warn!(
+        Some((shown, Status::Nominal, _)) => tracing::warn!(
             "{shown}: nominal model, not measured data (`status: nominal`): the published kinematics predict no kinematic error, and the gravity sag comes from estimated masses and joint stiffness; calibrate the robot (`postproc calibrate kinematics`) before compensating real parts"
         ),
-        Some((shown, _)) => tracing::warn!(
+        Some((shown, Status::Calibrated(_), sections)) => {
+            let left = |word: &str| {
+                sections
+                    .iter()
+                    .filter(|s| s.word == word)
+                    .map(|s| s.section.label())
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            };
+            let done: Vec<String> = sections
+                .iter()
+                .filter(|s| s.calibration.is_some())
+                .map(SectionStatus::describe)
+                .collect();
+            let (example, nominal) = (left("example"), left("nominal"));
+            let mut still = Vec::new();
+            if !example.is_empty() {
+                still.push(format!("{example} still example values"));
+            }
+            if !nominal.is_empty() {
+                still.push(format!("{nominal} still nominal values"));
+            }
+            tracing::warn!(
+                "{shown}: {}, not measured data ({}): calibrate them before compensating real parts",
+                still.join("; "),
+                done.join("; ")
+            )
+        }
+        Some((shown, _, _)) => tracing::warn!(
             "{shown}: example values, not measured data (`status: example`): calibrate the machine before compensating real parts"
         ),
         None => {}

@@ -27,7 +27,7 @@ use crate::machine::tool::{ToolLength, WorkOffset};
 use crate::process::ForceSpec;
 
 pub use crate::emit::report::Format;
-pub use batch::Shard;
+pub use batch::{Shard, ShardSpec};
 pub use diagnose::{DiagnoseArgs, DiagnoseFormat};
 
 /// Exit codes, also listed in `--help`.
@@ -136,9 +136,11 @@ pub struct BatchArgs {
     /// Compensate only the K-th of N shares of the programs (1 <= K <= N):
     /// program i of the sorted list belongs to share i mod N + 1, so N runs
     /// with K = 1..N cover every program once (a Slurm job array, a
-    /// Kubernetes indexed Job; docs/batch.md).
-    #[arg(long, value_name = "K/N", conflicts_with = "merge_summaries")]
-    pub shard: Option<Shard>,
+    /// Kubernetes indexed Job; docs/batch.md). `auto` reads K and N from
+    /// a Slurm job array's variables, `auto/N` K from a Kubernetes indexed
+    /// Job's JOB_COMPLETION_INDEX.
+    #[arg(long, value_name = "K/N|auto[/N]", conflicts_with = "merge_summaries")]
+    pub shard: Option<ShardSpec>,
     /// Merge the batch-summary.json files of shards (the inputs) into one
     /// in --out-dir; nothing is compensated.
     #[arg(long)]
@@ -326,7 +328,7 @@ pub struct CompensateArgs {
     /// Annotate compensated blocks with their predicted deviation.
     #[arg(long, value_enum, default_value_t = Annotate::Comment)]
     pub annotate: Annotate,
-    /// Decimals of rewritten mm coordinates (default: the machine file's, else the program's, at least 3); half a unit of the last one must stay within the tolerance (RAPID: at least 3).
+    /// Decimals of rewritten mm coordinates and rotary degrees (default: the machine file's, else the program's, at least 3); half a unit of the last one must stay within the tolerance (RAPID: at least 3).
     #[arg(long)]
     pub decimals: Option<usize>,
     /// Also write the deviation report to this path (format from the

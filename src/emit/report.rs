@@ -236,6 +236,16 @@ pub struct ReportWriter<'w> {
     /// machine-defined places (G28, G53; RAPID MoveJ, MoveAbsJ).
     cutting: Stat,
     positioning: Stat,
+    /// Robot programs with a process effect: the linear and circular moves
+    /// under process force, and the positioning moves with the linear ones
+    /// in air (approach, retract). When the program has process moves,
+    /// they are the headline's group ([`Self::process_split`]).
+    process: Stat,
+    positioning_and_air: Stat,
+    /// The `process` effect's index in the rows' effects (robot reports).
+    process_effect: Option<usize>,
+    /// The headline is on the process moves (set when the report ends).
+    process_split: bool,
     plot: Option<Decimator>,
     /// The last position of the picture's moves.
     plot_end: Option<[f64; 3]>,
@@ -456,6 +466,9 @@ impl<'w> ReportWriter<'w> {
         file: &str,
     ) -> Result<Self> {
         let stats = (0..=layout.effects.len()).map(|_| Stat::new()).collect();
+        let process_effect = (layout.kind == "rapid")
+            .then(|| layout.effects.iter().position(|e| *e == "process"))
+            .flatten();
         let mut w = ReportWriter {
             out,
             format,
@@ -465,6 +478,10 @@ impl<'w> ReportWriter<'w> {
             stats,
             cutting: Stat::new(),
             positioning: Stat::new(),
+            process: Stat::new(),
+            positioning_and_air: Stat::new(),
+            process_effect,
+            process_split: false,
             plot: (format == Format::Svg).then(|| Decimator::new(PLOT_POINTS)),
             html: (format == Format::Html).then(Default::default),
             plot_end: None,
@@ -672,6 +689,7 @@ impl<'w> ReportWriter<'w> {
         } else {
             self.cutting.add(dev, at, r.motion);
         }
+        self.add_process(r, dev, at, rapid);
         let file_cell = match self.files.get(file) {
             Some((name, _)) if self.layout.files => Some(name.clone()),
             _ => None,
@@ -821,11 +839,37 @@ impl<'w> ReportWriter<'w> {
         }
     }
 
-    /// The headline: the cutting moves.
+    /// Counts a robot row as a process move (linear or circular, under
+    /// process force) or with the positioning moves and moves in air.
+    fn add_process(&mut self, r: &Entry, dev: f64, at: (usize, usize), rapid: bool) {
+        if let Some(i) = self.process_effect {
+            let under_force = r.effects_mm.get(i).is_some_and(|v| *v > 0.0);
+            if !rapid && under_force {
+                self.process.add(dev, at, r.motion);
+            } else {
+                self.positioning_and_air.add(dev, at, r.motion);
+            }
+        }
+    }
+
+    /// The names of the two groups of moves in the summary: the
+    /// headline's and the others'.
+    fn group_names(&self) -> (&'static str, &'static str) {
+        if self.process_split {
+            ("process moves", "positioning moves and moves in air")
+        } else {
+            ("cutting moves", "rapids and machine-defined moves")
+        }
+    }
+
+    /// The headline: the cutting moves (robot programs with process
+    /// moves: those under process force, not the approach and retract
+    /// moves in air).
     fn cutting_line(&self) -> String {
         let c = &self.cutting;
         format!(
-            "cutting moves ({}): |dev| mean {} mm, max {} mm (line {}), p95 {} mm",
+            "{} ({}): |dev| mean {} mm, max {} mm (line {}), p95 {} mm",
+            self.group_names().0,
             c.hist.count,
             num(c.mean(), 5),
             num(c.max(), 5),
@@ -840,7 +884,8 @@ impl<'w> ReportWriter<'w> {
         let p = &self.positioning;
         (p.hist.count > 0).then(|| {
             format!(
-                "rapids and machine-defined moves ({}): max {} mm (line {})",
+                "{} ({}): max {} mm (line {})",
+                self.group_names().1,
                 p.hist.count,
                 num(p.max(), 5),
                 self.place(p.max_at())
@@ -913,15 +958,16 @@ impl<'w> ReportWriter<'w> {
             }
             lines.push(line.trim_end().to_string());
         }
+        let (cut, other) = self.group_names();
         let groups = [
-            ("worst cutting blocks:", &self.cutting),
-            ("worst rapids and machine-defined moves:", &self.positioning),
+            (cut.replace(" moves", " blocks"), &self.cutting),
+            (other.to_string(), &self.positioning),
         ];
         for (title, s) in groups {
             if s.worst.is_empty() {
                 continue;
             }
-            lines.push(title.to_string());
+            lines.push(format!("worst {title}:"));
             for (v, line, motion, file) in &s.worst {
                 let text = texts.get(&(*file, *line)).map_or("", String::as_str);
                 let line = self.place((*file, *line));
@@ -970,6 +1016,11 @@ impl<'w> ReportWriter<'w> {
 
     /// Writes the summary (and, for SVG, the picture) and ends the report.
     pub fn finish(mut self, totals: Totals) -> Result<()> {
+        if self.process_effect.is_some() && self.process.hist.count > 0 {
+            self.cutting = std::mem::replace(&mut self.process, Stat::new());
+            self.positioning = std::mem::replace(&mut self.positioning_and_air, Stat::new());
+            self.process_split = true;
+        }
         let p95: Vec<f64> = self.stats.iter().map(|s| s.percentile(95.0)).collect();
         let rows = self.rows;
         let total = self

@@ -55,13 +55,227 @@ pub enum Status {
     Unstated,
 }
 
-/// The two keys as written.
+/// The two keys as written (`status` a word or a map of sections).
 #[derive(Debug, Deserialize)]
 struct RawStatus {
     #[serde(default)]
-    status: Option<String>,
+    kind: Option<serde_yaml::Value>,
+    #[serde(default)]
+    status: Option<serde_yaml::Value>,
     #[serde(default)]
     calibrations: Option<Vec<Calibration>>,
+    #[serde(flatten)]
+    rest: serde_yaml::Mapping,
+}
+
+/// A model section of a machine file, calibrated on its own.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
+pub enum Section {
+    /// Machine tool: the axes' component errors and squareness.
+    Geometry,
+    /// Robot: the DH parameters (`nominal`, `actual`) and the TCP.
+    Kinematics,
+    /// Stiffness (machine tool `stiffness`, robot `k_nm_per_rad`).
+    Stiffness,
+    /// Thermal drift (`thermal`).
+    Thermal,
+    /// Predicted process force (`process_force`).
+    ProcessForce,
+}
+
+impl Section {
+    /// The key of the section in a `status` map.
+    pub fn key(self) -> &'static str {
+        match self {
+            Section::Geometry => "geometry",
+            Section::Kinematics => "kinematics",
+            Section::Stiffness => "stiffness",
+            Section::Thermal => "thermal",
+            Section::ProcessForce => "process_force",
+        }
+    }
+
+    /// The section's name for people.
+    pub fn label(self) -> &'static str {
+        match self {
+            Section::ProcessForce => "process force",
+            s => s.key(),
+        }
+    }
+
+    /// The top-level keys of a machine file that hold the section.
+    fn keys(self) -> &'static [&'static str] {
+        match self {
+            Section::Geometry => &["axes"],
+            Section::Kinematics => &["nominal", "actual"],
+            Section::Stiffness => &["stiffness", "k_nm_per_rad"],
+            Section::Thermal => &["thermal"],
+            Section::ProcessForce => &["process_force"],
+        }
+    }
+
+    /// The section a calibration of `kind` (as recorded) identifies, in a
+    /// robot file or a machine tool's: `geometry`, `kinematics` and
+    /// `diagnose` the geometric one.
+    pub fn of_calibration(kind: &str, robot: bool) -> Option<Section> {
+        match kind {
+            "geometry" | "kinematics" | "diagnose" if robot => Some(Section::Kinematics),
+            "geometry" | "kinematics" | "diagnose" => Some(Section::Geometry),
+            "stiffness" => Some(Section::Stiffness),
+            "thermal" => Some(Section::Thermal),
+            _ => None,
+        }
+    }
+
+    fn all(robot: bool) -> [Section; 4] {
+        [
+            if robot {
+                Section::Kinematics
+            } else {
+                Section::Geometry
+            },
+            Section::Stiffness,
+            Section::Thermal,
+            Section::ProcessForce,
+        ]
+    }
+}
+
+/// Where the values of one model section come from.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SectionStatus {
+    /// The section.
+    pub section: Section,
+    /// `example`, `nominal`, `calibrated` or `unstated`.
+    pub word: &'static str,
+    /// The latest calibration that identified it (`calibrated`), with its
+    /// date and observation file.
+    pub calibration: Option<Calibration>,
+}
+
+impl SectionStatus {
+    /// Still illustrative or published values: `example` or `nominal`.
+    pub fn unmeasured(&self) -> bool {
+        matches!(self.word, "example" | "nominal")
+    }
+
+    /// One phrase for people: `geometry calibrated 2026-11-25 from
+    /// grid.csv`, `stiffness example`.
+    pub fn describe(&self) -> String {
+        match &self.calibration {
+            Some(c) => format!(
+                "{} calibrated {} from {}",
+                self.section.label(),
+                c.date,
+                c.observations
+            ),
+            None => format!("{} {}", self.section.label(), self.word),
+        }
+    }
+}
+
+/// The words of a `status` key.
+const WORDS: [&str; 3] = ["example", "nominal", "calibrated"];
+
+fn word_of(w: &str) -> Option<&'static str> {
+    WORDS.iter().copied().find(|x| *x == w)
+}
+
+/// What a machine file says of each of its model sections (those it
+/// holds: the geometric one always, the others when their key is there),
+/// from its `status` key — a word for the whole file or a map of
+/// sections — and its `calibrations` list.
+pub fn sections(src: &yaml::Source) -> Result<Vec<SectionStatus>> {
+    let raw = raw_status(src)?;
+    sections_of(&raw, src)
+}
+
+fn raw_status(src: &yaml::Source) -> Result<RawStatus> {
+    let empty = src
+        .text()
+        .lines()
+        .all(|l| l.trim().is_empty() || l.trim_start().starts_with('#'));
+    if empty {
+        return Ok(RawStatus {
+            kind: None,
+            status: None,
+            calibrations: None,
+            rest: serde_yaml::Mapping::new(),
+        });
+    }
+    src.deserialize()
+}
+
+fn sections_of(raw: &RawStatus, src: &yaml::Source) -> Result<Vec<SectionStatus>> {
+    let robot = matches!(&raw.kind, Some(serde_yaml::Value::String(k)) if k == "robot");
+    let bad = |path: &str, msg: &str| yaml::located(src.text(), src.file(), path, msg);
+    let held = |s: Section| {
+        matches!(s, Section::Geometry | Section::Kinematics)
+            || s.keys().iter().any(|k| raw.rest.contains_key(*k))
+    };
+    let list = raw.calibrations.as_deref().unwrap_or(&[]);
+    let latest = |s: Section| {
+        list.iter()
+            .rev()
+            .find(|c| Section::of_calibration(&c.kind, robot) == Some(s))
+            .cloned()
+    };
+    let mut map = std::collections::BTreeMap::new();
+    match &raw.status {
+        None => {}
+        Some(serde_yaml::Value::String(_)) => {}
+        Some(serde_yaml::Value::Mapping(m)) => {
+            for (k, v) in m {
+                let key = k.as_str().unwrap_or("");
+                let Some(section) = Section::all(robot).into_iter().find(|s| s.key() == key) else {
+                    let names: Vec<&str> = Section::all(robot).iter().map(|s| s.key()).collect();
+                    return Err(bad(
+                        &format!("status.{}", crate::error::clip(key)),
+                        &format!("unknown model section (expected {})", names.join(", ")),
+                    ));
+                };
+                let Some(word) = v.as_str().and_then(word_of) else {
+                    return Err(bad(
+                        &format!("status.{key}"),
+                        "expected `example`, `nominal` or `calibrated`",
+                    ));
+                };
+                if word == "calibrated" && latest(section).is_none() {
+                    return Err(bad(
+                        &format!("status.{key}"),
+                        &format!(
+                            "`calibrated`, but no entry of `calibrations` identified the {} section",
+                            section.label()
+                        ),
+                    ));
+                }
+                map.insert(section, word);
+            }
+        }
+        Some(_) => {
+            return Err(bad(
+                "status",
+                "expected a word (`example`, `nominal`, `calibrated`) or a map of model sections",
+            ));
+        }
+    }
+    let whole = match &raw.status {
+        Some(serde_yaml::Value::String(w)) => word_of(w).unwrap_or("unstated"),
+        _ => "unstated",
+    };
+    Ok(Section::all(robot)
+        .into_iter()
+        .filter(|s| held(*s) || map.contains_key(s))
+        .map(|section| {
+            let word = map.get(&section).copied().unwrap_or(whole);
+            let calibration = (word == "calibrated").then(|| latest(section)).flatten();
+            SectionStatus {
+                section,
+                word,
+                calibration,
+            }
+        })
+        .collect())
 }
 
 impl Status {
@@ -78,19 +292,26 @@ impl Status {
         let (text, file) = (src.text(), src.file());
         // Only the two keys are read (the struct ignores the others, which
         // the strict loader of the file's kind checks), whatever the layout.
-        let empty = text
-            .lines()
-            .all(|l| l.trim().is_empty() || l.trim_start().starts_with('#'));
-        let raw: RawStatus = if empty {
-            RawStatus {
-                status: None,
-                calibrations: None,
-            }
-        } else {
-            src.deserialize()?
-        };
+        let raw = raw_status(src)?;
         let bad = |path: &str, msg: &str| yaml::located(text, file, path, msg);
-        let status = match (raw.status.as_deref(), raw.calibrations) {
+        // A map of sections stands for the word of the whole file: calibrated
+        // when one section is, else nominal when one is, else example.
+        let word = match &raw.status {
+            None => None,
+            Some(serde_yaml::Value::String(w)) => Some(w.clone()),
+            Some(serde_yaml::Value::Mapping(_)) => {
+                let words: Vec<&str> = sections_of(&raw, src)?.iter().map(|s| s.word).collect();
+                ["calibrated", "nominal", "example"]
+                    .into_iter()
+                    .find(|w| words.contains(w))
+                    .map(str::to_string)
+            }
+            Some(_) => {
+                sections_of(&raw, src)?;
+                None
+            }
+        };
+        let status = match (word.as_deref(), raw.calibrations) {
             (None, None) => Status::Unstated,
             (None, Some(_)) => {
                 return Err(bad("calibrations", "needs `status: calibrated` beside it"));
@@ -321,6 +542,168 @@ pub fn set_calibrated(text: &str, file: &str, calibration: &Calibration) -> Resu
     }
 }
 
+/// Words of the sections after a calibration of `kind`: the one it
+/// identified `calibrated`, the others as `before` said them. `None` when
+/// the whole file's word stays right (`status: calibrated`): the file was
+/// calibrated or unstated as a whole, or no section is left unmeasured.
+fn words_after(before: &[SectionStatus], kind: &str) -> Option<Vec<(Section, &'static str)>> {
+    let robot = before.first()?.section == Section::Kinematics;
+    let section = Section::of_calibration(kind, robot)?;
+    let words: Vec<(Section, &'static str)> = before
+        .iter()
+        .filter(|s| s.word != "unstated")
+        .map(|s| {
+            let w = if s.section == section {
+                "calibrated"
+            } else {
+                s.word
+            };
+            (s.section, w)
+        })
+        .collect();
+    let unmeasured = words.iter().any(|(_, w)| *w != "calibrated");
+    (before.iter().any(SectionStatus::unmeasured) && unmeasured).then_some(words)
+}
+
+/// The phrase of an example file's comments that `calibrate` rewrites
+/// in the comments of the section it identified.
+pub const EXAMPLE_PHRASE: &str = "EXAMPLE CALIBRATION, NOT MEASURED DATA";
+
+/// The suffix of an example file's `name` that `calibrate` rewrites.
+const EXAMPLE_NAME: &str = "(example calibration)";
+
+/// After a calibration of `kind` was recorded in `after` (the edited
+/// `before`, by [`set_calibrated`] or the tree editor, which write
+/// `status: calibrated`), says per model section what is calibrated: when
+/// sections are left at example or nominal values, `status` becomes a map
+/// of sections (`{ geometry: calibrated, stiffness: example, … }`); the
+/// `(example calibration)` of the `name` names the sections still at
+/// example values (or goes when none is); and the
+/// [`EXAMPLE_PHRASE`] of the comments above the identified section's keys
+/// (and of the file's leading comments, for the geometric section) says
+/// when and from what it was calibrated. Read back before it is returned.
+pub fn mark_calibrated(before: &str, after: &str, file: &str, kind: &str) -> Result<String> {
+    let secs = sections(&yaml::Source::read(before, file)?)?;
+    let Some(words) = words_after(&secs, kind) else {
+        return Ok(after.to_string());
+    };
+    let status = Status::from_yaml_str(after, file)?;
+    let Some(cal) = status.latest().cloned() else {
+        return Ok(after.to_string());
+    };
+    let eol = if after.contains("\r\n") { "\r\n" } else { "\n" };
+    let mut lines: Vec<String> = after.lines().map(str::to_string).collect();
+    let map: Vec<String> = words
+        .iter()
+        .map(|(s, w)| format!("{}: {w}", s.key()))
+        .collect();
+    let Some(at) = lines.iter().position(|l| l.starts_with("status:")) else {
+        // A layout without a `status:` line of its own (a file in flow
+        // style): the whole file's word stays.
+        tracing::warn!(
+            "{file}: `status` is not on a line of its own: the file says `calibrated` as a whole, not per section"
+        );
+        return Ok(after.to_string());
+    };
+    lines[at] = format!(
+        "status: {{ {} }}   # per model section: example, nominal or calibrated",
+        map.join(", ")
+    );
+    let left: Vec<&str> = words
+        .iter()
+        .filter(|(_, w)| *w == "example")
+        .map(|(s, _)| s.label())
+        .collect();
+    rename(&mut lines, &left);
+    let section = Section::of_calibration(kind, words[0].0 == Section::Kinematics);
+    if let Some(section) = section {
+        let note = format!(
+            "{} CALIBRATED {} FROM {} (the notes below describe the example values it replaced)",
+            section.label().to_uppercase(),
+            cal.date,
+            cal.observations
+        );
+        for i in owned_comments(&lines, section) {
+            lines[i] = lines[i].replace(EXAMPLE_PHRASE, &note);
+        }
+    }
+    let mut out = lines.join(eol);
+    if after.ends_with('\n') {
+        out.push_str(eol);
+    }
+    let back: Vec<(Section, &'static str)> = sections(&yaml::Source::read(&out, file)?)?
+        .iter()
+        .map(|s| (s.section, s.word))
+        .collect();
+    if back != words {
+        return Err(Error::Machine(Located::whole_file(
+            file,
+            "cannot record the calibrated section: the edited `status` does not read back",
+        )));
+    }
+    Ok(out)
+}
+
+/// The `name` line's example suffix, naming the sections `left` at
+/// example values (none: the suffix goes).
+fn rename(lines: &mut [String], left: &[&str]) {
+    let Some(l) = lines.iter_mut().find(|l| l.starts_with("name:")) else {
+        return;
+    };
+    let start = l
+        .find(EXAMPLE_NAME)
+        .or_else(|| l.find("(example values in "));
+    let Some(start) = start else {
+        return;
+    };
+    let Some(len) = l[start..].find(')').map(|e| e + 1) else {
+        return;
+    };
+    let new = if left.is_empty() {
+        String::new()
+    } else {
+        format!("(example values in {})", left.join(", "))
+    };
+    let (from, to) = if new.is_empty() && l[..start].ends_with(' ') {
+        (start - 1, start + len)
+    } else {
+        (start, start + len)
+    };
+    l.replace_range(from..to, &new);
+}
+
+/// The comment lines that belong to `section`: the comment block right
+/// above each of its top-level keys, and for the geometric section the
+/// file's leading comments.
+fn owned_comments(lines: &[String], section: Section) -> Vec<usize> {
+    let mut owned = Vec::new();
+    let comment = |l: &String| l.starts_with('#');
+    if matches!(section, Section::Geometry | Section::Kinematics) {
+        owned.extend(
+            lines
+                .iter()
+                .take_while(|l| comment(l) || l.trim().is_empty())
+                .enumerate()
+                .filter(|(_, l)| comment(l))
+                .map(|(i, _)| i),
+        );
+    }
+    for (i, l) in lines.iter().enumerate() {
+        if section
+            .keys()
+            .iter()
+            .any(|k| l.starts_with(&format!("{k}:")))
+        {
+            let mut j = i;
+            while j > 0 && comment(&lines[j - 1]) {
+                j -= 1;
+                owned.push(j);
+            }
+        }
+    }
+    owned
+}
+
 /// One `calibrations` entry as a one-line flow map.
 pub(crate) fn calibration_flow(c: &Calibration) -> String {
     format!(
@@ -464,5 +847,64 @@ mod tests {
         // A file without the key gets it after `name:`.
         let bare = set_calibrated("kind: robot\nname: R\nnominal: []\n", "r.yaml", &cal()).unwrap();
         assert!(bare.starts_with("kind: robot\nname: R\nstatus: calibrated\ncalibrations:\n"));
+    }
+
+    #[test]
+    fn one_section_calibrated_leaves_the_others_named() {
+        let before = "# EXAMPLE CALIBRATION, NOT MEASURED DATA. Header.\nkind: machine_tool\nname: Mill (example calibration)\nstatus: example # was\naxes: []\n# Forces - EXAMPLE CALIBRATION, NOT MEASURED DATA.\nprocess_force: { model: constant }\nthermal: {}\n";
+        let after = set_calibrated(before, "m.yaml", &cal()).unwrap();
+        let marked = mark_calibrated(before, &after, "m.yaml", "geometry").unwrap();
+        let src = yaml::Source::read(&marked, "m.yaml").unwrap();
+        let got: Vec<(&str, &str)> = sections(&src)
+            .unwrap()
+            .iter()
+            .map(|s| (s.section.key(), s.word))
+            .collect();
+        // No stiffness key in the file: no stiffness section.
+        assert_eq!(
+            got,
+            [
+                ("geometry", "calibrated"),
+                ("thermal", "example"),
+                ("process_force", "example")
+            ]
+        );
+        assert!(
+            marked.starts_with(
+                "# GEOMETRY CALIBRATED 2026-11-25 FROM grid measured.csv (the notes below describe the example values it replaced). Header.\n"
+            ),
+            "{marked}"
+        );
+        assert!(marked.contains("\nname: Mill (example values in thermal, process force)\n"));
+        assert!(marked.contains("# Forces - EXAMPLE CALIBRATION, NOT MEASURED DATA.\n"));
+        assert!(matches!(
+            Status::from_source(&src).unwrap(),
+            Status::Calibrated(_)
+        ));
+        // A file calibrated as a whole stays so.
+        let whole = set_calibrated("kind: robot\nname: R\n", "r.yaml", &cal()).unwrap();
+        let again = set_calibrated(&whole, "r.yaml", &cal()).unwrap();
+        assert_eq!(
+            mark_calibrated(&whole, &again, "r.yaml", "stiffness").unwrap(),
+            again
+        );
+        // A calibrated section needs a calibration of its kind.
+        let err = Status::from_yaml_str(
+            "kind: machine_tool\nstatus: { geometry: example, thermal: calibrated }\nthermal: {}\n",
+            "m.yaml",
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(
+            err.contains("status.thermal: `calibrated`, but no entry"),
+            "{err}"
+        );
+        let err = Status::from_yaml_str("kind: robot\nstatus: { geometry: example }\n", "r.yaml")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.contains("status.geometry: unknown model section (expected kinematics"),
+            "{err}"
+        );
     }
 }

@@ -344,6 +344,35 @@ impl Rewriter<'_> {
         Error::Unachievable(Located::new(self.file, l, c, format!("{what}: {e}")))
     }
 
+    /// Notes a compensated target written with another confdata than the
+    /// programmed one: a warning under configuration monitoring off (the
+    /// joints nearest the previous move's, another configuration than the
+    /// programmed one), else (a joint moved across a quadrant boundary by
+    /// the compensation, the same arm posture) with `-v`.
+    fn note_confdata(
+        &self,
+        mv: &Move,
+        target: &Target,
+        programmed: ConfData,
+        written: ConfData,
+        free: bool,
+    ) {
+        let (ml, mc) = line_col(self.src, mv.span.start);
+        let what = format!(
+            "{}:{ml}:{mc}: target `{}` of {}: written with confdata {written}, programmed {programmed}",
+            self.file,
+            self.src.get(target.span()).unwrap_or("?"),
+            mv.name,
+        );
+        if free {
+            tracing::warn!(
+                "{what} (configuration monitoring off: the joints nearest the previous move's)"
+            );
+        } else {
+            tracing::info!("{what} (the compensation moves a joint across a quadrant boundary)");
+        }
+    }
+
     fn decl_text(&self, name: &str, kind: &str, value: &str) -> String {
         format!("LOCAL CONST {kind} {name} := {value};")
     }
@@ -394,6 +423,9 @@ impl Rewriter<'_> {
         })?;
         if !self.active() {
             return Ok(Some(comp.deviation));
+        }
+        if comp.conf != u.conf {
+            self.note_confdata(mv, target, u.conf, comp.conf, seed.conf.is_some());
         }
         let new_obj = wobj.inverse() * comp.pose;
         let fmt = self.opts.format;
