@@ -2051,7 +2051,7 @@ fn line_end_mutant(rng: &mut Rng, seed: &[u8]) -> Vec<u8> {
     }
     let mix = rng.below(4);
     let rate = 2 + rng.below(30);
-    let mut eol = |rng: &mut Rng| -> &'static [u8] {
+    let eol = |rng: &mut Rng| -> &'static [u8] {
         match (mix, rng.below(3)) {
             (0, _) => b"\n",
             (1, _) => b"\r\n",
