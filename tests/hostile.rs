@@ -2051,7 +2051,7 @@ fn line_end_mutant(rng: &mut Rng, seed: &[u8]) -> Vec<u8> {
     }
     let mix = rng.below(4);
     let rate = 2 + rng.below(30);
-    let mut eol = |rng: &mut Rng| -> &'static [u8] {
+    let eol = |rng: &mut Rng| -> &'static [u8] {
         match (mix, rng.below(3)) {
             (0, _) => b"\n",
             (1, _) => b"\r\n",
@@ -2126,4 +2126,23 @@ fn mutants_of_line_ends_and_modal_codes_are_processed_or_refused_cleanly() {
         line_end_props(&m, b, &pools)
     });
     report("line-ends", count, start, &run);
+}
+
+/// An arc whose ends are within the travel but whose bulge leaves it (Y
+/// 30 mm beyond) is refused by `check` as by `compensate`, at its line.
+#[test]
+fn an_arc_whose_bulge_leaves_the_travel_is_refused() {
+    let prog = "G21 G90 G94 G17\nT1 M6\nG43 H1 G0 X0. Y300. Z20.\nS1000 M3\nG1 Z10. F200.\nG2 X160. Y300. I80. J0.\nM30\n";
+    let (code, err) = check_program("arc.nc", prog.as_bytes(), "afm-r1000", &["-q"]);
+    assert_eq!(code, 2, "{err}");
+    assert!(
+        err.contains("arc.nc:6:1: machine Y = 530.0000 (work Y380.0000 + offsets 150.0000 mm) is outside the travel [0, 500] on the arc"),
+        "{err}"
+    );
+    let (code, _, err) = compensate_program("arc.nc", prog.as_bytes(), "afm-r1000");
+    assert_eq!(code, 2, "{err}");
+    // The same arc the other way round bulges to Y220, within the travel.
+    let inside = prog.replace("G2 X160.", "G3 X160.");
+    let (code, err) = check_program("arc.nc", inside.as_bytes(), "afm-r1000", &["-q"]);
+    assert_eq!(code, 0, "{err}");
 }

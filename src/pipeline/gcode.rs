@@ -402,6 +402,33 @@ impl Stage {
     }
 }
 
+/// The points of an arc move where one of its in-plane axes turns (the
+/// quadrant points its sweep passes between its ends), which reach
+/// further than its ends; none for other moves.
+fn arc_extremes(mv: &crate::program::interp::Move) -> [Option<crate::machine::AxisVec>; 4] {
+    let mut out = [None; 4];
+    let Some(arc) = mv.arc else { return out };
+    let (a, b, _) = arc.plane.axes();
+    let (start, end) = (mv.start3(), mv.end3());
+    let ang0 = (start[b] - arc.center[b]).atan2(start[a] - arc.center[a]);
+    let turn = std::f64::consts::TAU;
+    for (k, slot) in out.iter_mut().enumerate() {
+        let quadrant = k as f64 * std::f64::consts::FRAC_PI_2;
+        let d = if arc.sweep >= 0.0 {
+            (quadrant - ang0).rem_euclid(turn)
+        } else {
+            -(ang0 - quadrant).rem_euclid(turn)
+        };
+        if d != 0.0 && d.abs() < arc.sweep.abs() {
+            let p = arc.point(&start, &end, d / arc.sweep);
+            let mut q = mv.end;
+            q[..3].copy_from_slice(p.as_slice());
+            *slot = Some(q);
+        }
+    }
+    out
+}
+
 /// Blocks with a piece beyond the tolerance that are warned about one by
 /// one; the summary counts every one.
 const MAX_BEYOND_WARNINGS: usize = 100;
@@ -614,18 +641,28 @@ impl<'j, 'm> InterpretStage<'j, 'm> {
         summary: &mut Summary,
     ) {
         let file = self.file;
-        if let Some(m) = self.job.travel {
-            if let (Err(f), None) = (
-                crate::compensate::programmed_travel(m, &mv.end),
-                &self.travel_failure,
-            ) {
+        if let (Some(m), None) = (self.job.travel, &self.travel_failure) {
+            // The end, then the points of an arc's bulge between its ends.
+            let failed = std::iter::once((&mv.end, ""))
+                .chain(
+                    arc_extremes(mv)
+                        .iter()
+                        .flatten()
+                        .map(|p| (p, " on the arc")),
+                )
+                .find_map(|(p, at)| {
+                    crate::compensate::programmed_travel(m, p)
+                        .err()
+                        .map(|f| (f, at))
+                });
+            if let Some((f, at)) = failed {
                 let text = crate::program::gcode::strip_eol(line);
                 self.travel_failure = Some(Error::Unachievable(Located::new(
                     file,
                     line_no,
                     1,
                     format!(
-                        "{}: `{}`",
+                        "{}{at}: `{}`",
                         failure_text(&f, plan),
                         String::from_utf8_lossy(text).trim()
                     ),
