@@ -1684,4 +1684,199 @@ thermal:
         };
         assert!(apply(text, "f", "t", &[Edit::Tool(node, 1.0)]).is_err());
     }
+
+    /// The edits a calibration or a diagnosis writes, one at a time, on a
+    /// machine file of either kind: every value the file has, moved a
+    /// little, and each structural edit.
+    fn writes_of(m: &Machine) -> Vec<Edit> {
+        let mut out = Vec::new();
+        match m {
+            Machine::Robot(r) => {
+                let fields = [DhField::A, DhField::Alpha, DhField::D, DhField::ThetaOffset];
+                let mut params: Vec<RobotParam> = (0..6)
+                    .flat_map(|joint| fields.map(|field| RobotParam::Dh { joint, field }))
+                    .collect();
+                params.extend((0..6).map(|joint| RobotParam::JointStiffness { joint }));
+                params.extend((0..3).map(|axis| RobotParam::ToolOffset { axis }));
+                for term in 0..3 {
+                    for field in [ThermalField::Lb, ThermalField::Ub, ThermalField::Ts] {
+                        params.push(RobotParam::Thermal { term, field });
+                    }
+                }
+                params.extend([RobotParam::ThermalTimeConstant, RobotParam::PayloadMass]);
+                for p in params {
+                    if let Some(v) = r.param_value(p) {
+                        out.push(Edit::Robot(p, round_sig(v * 1.001 + 0.0625)));
+                    }
+                }
+                out.push(Edit::ThermalTerm {
+                    term: ThermalTermText {
+                        parameter: "a2".into(),
+                        joint: 2,
+                        lb_mm: 0.01,
+                        ub_mm: 0.25,
+                        ts_per_w: 0.002,
+                    },
+                    time_constant_min: 45.0,
+                    comment: "Identified by `postproc calibrate thermal`.".into(),
+                });
+                if r.param_value(RobotParam::ThermalTimeConstant).is_some() {
+                    out.push(Edit::RatedPower {
+                        watts: 812.5,
+                        comment: "Highest mean motor power of a joint.".into(),
+                    });
+                }
+            }
+            Machine::Tool(t) => {
+                let mut params = Vec::new();
+                for axis in 0..6 {
+                    for error in 0..6 {
+                        for node in 0..3 {
+                            for forward in [true, false] {
+                                params.push(ToolParam::Component {
+                                    axis,
+                                    error,
+                                    node,
+                                    forward,
+                                });
+                            }
+                        }
+                    }
+                    for k in 0..3 {
+                        params.extend([
+                            ToolParam::Location {
+                                axis,
+                                error: LocationParam::Offset(k),
+                            },
+                            ToolParam::Location {
+                                axis,
+                                error: LocationParam::Angle(k),
+                            },
+                        ]);
+                    }
+                    params.extend([
+                        ToolParam::AxisScale { axis },
+                        ToolParam::AxisTimeConstant { axis },
+                    ]);
+                }
+                for k in 0..3 {
+                    params.extend([
+                        ToolParam::SpindleLocation {
+                            error: LocationParam::Offset(k),
+                        },
+                        ToolParam::SpindleLocation {
+                            error: LocationParam::Angle(k),
+                        },
+                    ]);
+                }
+                for dir in 0..3 {
+                    for positive in [true, false] {
+                        params.push(ToolParam::Stiffness {
+                            dir,
+                            positive,
+                            cell: None,
+                        });
+                    }
+                }
+                params.extend([ToolParam::SpindleGrowth, ToolParam::SpindleTimeConstant]);
+                for p in params {
+                    if let Some(v) = t.param_value(p) {
+                        out.push(Edit::Tool(p, round_sig(v * 1.001 + 0.0625)));
+                    }
+                }
+                out.push(Edit::ComponentTable {
+                    axis: 0,
+                    error: 1,
+                    positions: vec![-100.0, 0.0, 100.0],
+                    forward: vec![-1.5, 0.0, 2.25],
+                    reverse: vec![-1.0, 0.5, 2.0],
+                });
+                out.push(Edit::Spindle {
+                    growth_um_per_kw: 7.5,
+                    time_constant_min: 30.0,
+                    comment: "Identified by `postproc calibrate thermal`.".into(),
+                });
+            }
+        }
+        out.push(Edit::MeasurementFrame {
+            xyz_mm: [1.25, -2.5, 0.125],
+            rpy_deg: [0.01, -0.02, 0.5],
+        });
+        out.push(Edit::Calibrated(Calibration {
+            date: "2026-01-02".into(),
+            kind: "geometry".into(),
+            observations: "obs.csv".into(),
+            observations_sha256: "0".repeat(64),
+            rows: 12,
+            fit_rms_mm: 0.0125,
+        }));
+        out.push(Edit::HeaderComment("Calibrated by a test.".into()));
+        out
+    }
+
+    /// On every bundled machine file, each edit a calibration or a
+    /// diagnosis writes is written by the tree editor byte for byte as the
+    /// line editor writes it, wherever the line editor's text is the one
+    /// [`apply`] keeps (it succeeds, keeps every comment and reads back).
+    ///
+    /// Ignored: it fails on 84 of the 966 edits, all of them new sections
+    /// or keys, which the tree editor writes in flow style on one line
+    /// where the line editor writes block lines (a new `thermal:` section
+    /// with its term or spindle entry, a component table added to an axis,
+    /// the `measurement_frame` section and its wrapped comment), puts a new
+    /// `location_errors` map first in its axis entry, and keeps the comment
+    /// after `status: nominal` when it writes `status: calibrated`. The
+    /// line editor can go once this test passes (`cargo test --lib
+    /// the_tree_editor -- --ignored`).
+    #[test]
+    #[ignore = "the tree editor writes new sections in flow style: 84 of 966 bundled-file edits differ"]
+    fn the_tree_editor_writes_the_bundled_files_as_the_line_editor() {
+        let dir = concat!(env!("CARGO_MANIFEST_DIR"), "/machines");
+        let mut names: Vec<String> = std::fs::read_dir(dir)
+            .expect("machines/")
+            .filter_map(|e| e.ok()?.file_name().into_string().ok())
+            .filter(|n| n.ends_with(".yaml"))
+            .collect();
+        names.sort();
+        assert!(names.len() > 20, "{names:?}");
+        let (mut compared, mut differ) = (0, Vec::new());
+        for name in &names {
+            let text = bundled(name);
+            let m = Machine::from_yaml_str(&text, name).expect("bundled file loads");
+            for edit in writes_of(&m) {
+                let edits = std::slice::from_ref(&edit);
+                let Ok(line) = apply_one(&text, name, "postproc test", &edit) else {
+                    continue;
+                };
+                if reads_back(&line, edits) != ReadBack::Values || !comments_kept(&text, &line) {
+                    continue;
+                }
+                compared += 1;
+                match tree::apply(&text, name, "postproc test", edits) {
+                    Ok(t) if t == line => {}
+                    Ok(t) => {
+                        let at = line
+                            .lines()
+                            .zip(t.lines())
+                            .position(|(a, b)| a != b)
+                            .unwrap_or(0);
+                        differ.push(format!(
+                            "{name} {edit:?}: line {}: {:?} / {:?}",
+                            at + 1,
+                            line.lines().nth(at),
+                            t.lines().nth(at)
+                        ));
+                    }
+                    Err(e) => differ.push(format!("{name} {edit:?}: tree: {e}")),
+                }
+            }
+        }
+        assert!(compared > 500, "{compared} edits compared");
+        assert!(
+            differ.is_empty(),
+            "{} of {compared} differ:\n{}",
+            differ.len(),
+            differ.join("\n")
+        );
+    }
 }
