@@ -8,8 +8,8 @@
 use std::path::{Path, PathBuf};
 
 use nalgebra::Isometry3;
-use postproc::machine::robot::pose::pose_error;
 use postproc::machine::robot::Robot;
+use postproc::machine::robot::pose::pose_error;
 use postproc::machine::{Machine, MachineFile};
 use postproc::predict::MoveContext;
 use postproc::predict::robot::Effects;
@@ -31,7 +31,11 @@ const POS_TOL_MM: f64 = 1e-3;
 const ROT_TOL_RAD: f64 = 5e-6;
 
 fn arm() -> Robot {
-    match MachineFile::bundled(ARM).expect("bundled").load().expect("loads") {
+    match MachineFile::bundled(ARM)
+        .expect("bundled")
+        .load()
+        .expect("loads")
+    {
         Machine::Robot(r) => r,
         Machine::Tool(_) => panic!("{ARM} is a robot"),
     }
@@ -53,7 +57,11 @@ fn read(p: &Path) -> String {
 
 /// Runs `postproc args…` in `dir`: exit code, stdout, stderr.
 fn run(dir: &Path, args: &[&str]) -> (i32, String, String) {
-    let out = postproc().current_dir(dir).args(args).output().expect("runs");
+    let out = postproc()
+        .current_dir(dir)
+        .args(args)
+        .output()
+        .expect("runs");
     (
         out.status.code().unwrap_or(-1),
         String::from_utf8_lossy(&out.stdout).into_owned(),
@@ -63,7 +71,12 @@ fn run(dir: &Path, args: &[&str]) -> (i32, String, String) {
 
 #[test]
 fn identity_runs_give_the_src_and_dat_back_after_the_header() {
-    let (_d, dir) = scratch(&["palletise.src", "palletise.dat", "$config.dat", "pocket_mill.src"]);
+    let (_d, dir) = scratch(&[
+        "palletise.src",
+        "palletise.dat",
+        "$config.dat",
+        "pocket_mill.src",
+    ]);
     for stem in ["palletise", "pocket_mill"] {
         let args = [
             "compensate",
@@ -155,7 +168,10 @@ fn palletise_targets_land_where_programmed_in_their_status_and_turn() {
     assert_eq!(code, 0, "{err}");
     assert!(err.contains("2 moves compensated"), "{err}");
     assert!(err.contains("4 left as written"), "{err}");
-    let (src_in, dat_in) = (read(&dir.join("palletise.src")), read(&dir.join("palletise.dat")));
+    let (src_in, dat_in) = (
+        read(&dir.join("palletise.src")),
+        read(&dir.join("palletise.dat")),
+    );
     let src_out = text_without_header(&read(&dir.join("palletise.comp.src")));
     let dat_out = text_without_header(&read(&dir.join("palletise.comp.dat")));
     assert_eq!(skeleton(&src_out), skeleton(&src_in));
@@ -184,7 +200,10 @@ fn palletise_targets_land_where_programmed_in_their_status_and_turn() {
     for name in ["XPICK_ABOVE", "XPICK"] {
         let a_in = &din.iter().find(|(n, _)| n == name).expect(name).1;
         let a_out = &dout.iter().find(|(n, _)| n == name).expect(name).1;
-        let (p_in, p_out) = (frame_of(a_in).expect("pose"), frame_of(a_out).expect("pose"));
+        let (p_in, p_out) = (
+            frame_of(a_in).expect("pose"),
+            frame_of(a_out).expect("pose"),
+        );
         assert_ne!(p_in, p_out, "{name} compensated");
         let written = StatusTurn {
             status: a_out.bits("S").expect("S"),
@@ -201,12 +220,17 @@ fn palletise_targets_land_where_programmed_in_their_status_and_turn() {
             Some(p) => *cands
                 .iter()
                 .min_by(|a, b| {
-                    let d = |q: &[f64; 6]| q.iter().zip(&p).map(|(x, y)| (x - y).abs()).sum::<f64>();
+                    let d =
+                        |q: &[f64; 6]| q.iter().zip(&p).map(|(x, y)| (x - y).abs()).sum::<f64>();
                     d(a).total_cmp(&d(b))
                 })
                 .expect("a solution"),
         };
-        assert_eq!(StatusTurn::of_joints(&r, &q), written, "{name}: S and T of its joints");
+        assert_eq!(
+            StatusTurn::of_joints(&r, &q),
+            written,
+            "{name}: S and T of its joints"
+        );
         let (dp, dr) = pose_error(
             &r.predict(&MoveContext::default(), &q, Effects::ALL),
             &(base * p_in),
@@ -261,7 +285,8 @@ fn pocket_mill_every_lin_lands_where_programmed() {
     let (a, b) = (cart(&fin), cart(&fout));
     assert_eq!(a.len(), b.len());
     // The PTP before the first LIN: A1 10, A2 -80, A3 95, A4 0, A5 75, A6 -10.
-    let mut prev = postproc::program::krl::config::axes_to_model(&[10.0, -80.0, 95.0, 0.0, 75.0, -10.0]);
+    let mut prev =
+        postproc::program::krl::config::axes_to_model(&[10.0, -80.0, 95.0, 0.0, 75.0, -10.0]);
     let mut checked = 0;
     for ((line, p_in), (_, p_out)) in a.iter().zip(&b) {
         let (Some(p_in), Some(p_out)) = (p_in, p_out) else {
@@ -296,7 +321,10 @@ fn check_counts_the_motions_and_strict_names_the_first_left_as_written() {
     );
     let (code, _, err) = run(&dir, &["check", "palletise.src", "--machine", ARM]);
     assert_eq!(code, 0, "{err}");
-    let (code, _, err) = run(&dir, &["check", "palletise.src", "--machine", ARM, "--strict"]);
+    let (code, _, err) = run(
+        &dir,
+        &["check", "palletise.src", "--machine", ARM, "--strict"],
+    );
     assert_eq!(code, 2, "{err}");
     assert!(
         err.contains("palletise.src:43:5: PTP left as written (`place` has no value in the .dat"),
@@ -310,10 +338,18 @@ fn a_target_out_of_reach_is_refused_at_its_line() {
     let (_d, dir) = scratch(&["palletise.src", "palletise.dat", "$config.dat"]);
     let (code, _, err) = run(
         &dir,
-        &["compensate", "palletise.src", "--machine", "kuka-kr6-r900-sixx"],
+        &[
+            "compensate",
+            "palletise.src",
+            "--machine",
+            "kuka-kr6-r900-sixx",
+        ],
     );
     assert_eq!(code, 2, "{err}");
-    assert!(err.contains("palletise.src:28:1: target of PTP at line 28"), "{err}");
+    assert!(
+        err.contains("palletise.src:28:1: target of PTP at line 28"),
+        "{err}"
+    );
     assert!(!dir.join("palletise.comp.src").exists());
 }
 
@@ -322,11 +358,67 @@ fn report_has_a_row_per_compensated_and_joint_target() {
     let (_d, dir) = scratch(&["palletise.src", "palletise.dat", "$config.dat"]);
     let (code, out, err) = run(
         &dir,
-        &["report", "palletise.src", "--machine", ARM, "--format", "csv"],
+        &[
+            "report",
+            "palletise.src",
+            "--machine",
+            ARM,
+            "--format",
+            "csv",
+        ],
     );
     assert_eq!(code, 0, "{err}");
-    let rows: Vec<&str> = out.lines().filter(|l| !l.starts_with('#')).skip(1).collect();
-    let lines: Vec<&str> = rows.iter().map(|r| r.split(',').next().unwrap_or("")).collect();
+    let rows: Vec<&str> = out
+        .lines()
+        .filter(|l| !l.starts_with('#'))
+        .skip(1)
+        .collect();
+    let lines: Vec<&str> = rows
+        .iter()
+        .map(|r| r.split(',').next().unwrap_or(""))
+        .collect();
     assert_eq!(lines, ["18", "28", "35", "48"], "{out}");
-    assert!(rows[1].starts_with("28,PTP,1635.0000,212.5000,730.0000,"), "{out}");
+    assert!(
+        rows[1].starts_with("28,PTP,1635.0000,212.5000,730.0000,"),
+        "{out}"
+    );
+}
+
+#[test]
+fn a_batch_over_a_kuka_folder_compensates_each_src_with_its_dat() {
+    let (_d, dir) = scratch(&[
+        "palletise.src",
+        "palletise.dat",
+        "$config.dat",
+        "pocket_mill.src",
+    ]);
+    let out = dir.join("out");
+    let (code, stdout, err) = run(
+        &dir,
+        &[
+            "batch",
+            "--machine",
+            ARM,
+            "--effects",
+            "none",
+            "--annotate",
+            "none",
+            "--out-dir",
+            out.to_str().expect("utf-8"),
+            dir.to_str().expect("utf-8"),
+        ],
+    );
+    assert_eq!(code, 0, "{stdout}{err}");
+    assert!(
+        stdout.contains("batch: 2 programs: 2 compensated"),
+        "{stdout}"
+    );
+    assert!(
+        stdout.contains("palletise.dat: a KRL data list (read with its .src)"),
+        "{stdout}"
+    );
+    for name in ["palletise.src", "palletise.dat", "pocket_mill.src"] {
+        let got = text_without_header(&read(&out.join(name)));
+        assert_eq!(got, read(&dir.join(name)), "{name}: identity");
+    }
 }

@@ -138,7 +138,10 @@ fn a_krl_def_main_is_never_taken_for_siemens() {
     let path = write(dir.path(), "main.src", krl);
     let (code, out, err) = run(&["check", path.to_str().unwrap()]);
     assert_eq!(code, 0, "{err}");
-    assert!(out.contains("KRL program, 1 motion (0 targets, 0 joint targets, 1 left as written)"), "{out}");
+    assert!(
+        out.contains("KRL program, 1 motion (0 targets, 0 joint targets, 1 left as written)"),
+        "{out}"
+    );
     assert!(!err.contains("Siemens"), "{err}");
     for name in ["MAIN", "main.txt", "main.nc", "main.mpf"] {
         let path = write(dir.path(), name, krl);

@@ -167,6 +167,17 @@ fn walk(
             walk((root, robot), &path, skip, seen, items, skipped);
         } else if super::output::is_compensated_name(&name) {
             skip_as("a compensated program (*.comp.*)");
+        } else if robot && super::krl::is_krl(&path) && path.is_file() {
+            let rel = super::output::folder_name(&path, &[root]);
+            items.push(Item {
+                input: path,
+                rel,
+                problem: None,
+                program: false,
+                unread: None,
+            });
+        } else if robot && super::krl::is_krl_data(&path) {
+            skip_as("a KRL data list (read with its .src)");
         } else if let Some(message) = path.is_file().then(|| unread(&path)).flatten() {
             let rel = super::output::folder_name(&path, &[root]);
             items.push(Item {
@@ -260,7 +271,8 @@ fn collect(inputs: &[PathBuf], out_dir: &Path, robot: bool) -> (Vec<Item>, Vec<S
                 Ok(_) => Some(format!("{}: not a regular file", input.display())),
                 Err(_) => Some(format!("{}: no such file", input.display())),
             };
-            let unread = problem.is_none().then(|| unread(input)).flatten();
+            let krl = robot && super::krl::is_krl(input);
+            let unread = (problem.is_none() && !krl).then(|| unread(input)).flatten();
             items.push(Item {
                 input: input.clone(),
                 rel,
@@ -597,6 +609,11 @@ fn compensate_one(
     let provenance = &setting.provenance;
     match &setting.engine {
         Engine::Tool(job) => {
+            if super::krl::is_krl(input) {
+                return Err(usage(format!(
+                    "{name}: a KRL program needs a robot machine file"
+                )));
+            }
             if is_rapid(input) {
                 return Err(usage(format!(
                     "{name}: a RAPID module needs a robot machine file"
@@ -638,6 +655,28 @@ fn compensate_one(
                 max_dev: s.deviation.max,
                 max_line: Some(s.deviation.max_line),
                 residual: Some(s.max_residual_mm),
+            })
+        }
+        Engine::Robot(robot, opts, _) if super::krl::is_krl(input) => {
+            let opts = crate::pipeline::rapid::RapidOptions {
+                records: report.is_some(),
+                ..opts.clone()
+            };
+            let job = super::krl::Job {
+                robot,
+                opts: &opts,
+                provenance,
+                recompensate: setting.recompensate,
+            };
+            let report_file = report.map(|f| (report_path(output, f), f));
+            let report_to = report_file.as_ref().map(|(p, f)| (p.as_path(), *f));
+            let s = super::krl::compensate_to(&job, (input, &[]), output, report_to)?;
+            Ok(Done {
+                blocks: s.moves,
+                moves: s.moves,
+                max_dev: s.deviation.max,
+                max_line: Some(s.deviation.max_line),
+                residual: None,
             })
         }
         Engine::Robot(robot, opts, forced_window) => {

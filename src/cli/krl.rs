@@ -33,6 +33,22 @@ pub fn is_krl(path: &Path) -> bool {
         .is_some_and(|e| e.eq_ignore_ascii_case("src"))
 }
 
+/// Whether `path` is a KRL data list read with a `.src`: a `$config.dat`,
+/// or a `.dat` with a `.src` of its name beside it.
+pub fn is_krl_data(path: &Path) -> bool {
+    let Some(name) = path.file_name().map(|n| n.to_string_lossy().to_string()) else {
+        return false;
+    };
+    if name.eq_ignore_ascii_case("$config.dat") {
+        return true;
+    }
+    let dat = path
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("dat"));
+    let stem = path.file_stem().map(|s| s.to_string_lossy().to_string());
+    dat && stem.is_some_and(|s| beside(path, &format!("{s}.src")).is_some())
+}
+
 /// One file of the program: its path, name in messages, text, character
 /// set and parsed lines.
 struct Text {
@@ -128,7 +144,11 @@ fn robot_of(
 }
 
 /// Runs the pipeline over the program's stream.
-fn run(texts: &[Option<Text>], robot: &Robot, opts: &RapidOptions) -> Result<(Vec<RobotStep>, RobotRun)> {
+fn run(
+    texts: &[Option<Text>],
+    robot: &Robot,
+    opts: &RapidOptions,
+) -> Result<(Vec<RobotStep>, RobotRun)> {
     let steps = steps_of(texts);
     let name = texts
         .first()
@@ -222,11 +242,6 @@ fn stage(path: &Path, text: &str, charset: Charset) -> Result<super::output::Pen
 /// `postproc compensate` of a KRL program.
 pub fn compensate(a: &CompensateArgs, quiet: bool) -> Result<i32> {
     let (robot, loaded) = robot_of(a.program.machine.as_deref(), "compensate", Some(&a.effects))?;
-    let texts = read_program(&a.program.file, &a.program.more)?;
-    let Some(src) = texts.first().and_then(Option::as_ref) else {
-        return Err(Error::Internal("no .src".into()));
-    };
-    super::machines::refuse_compensated(src.text.as_bytes(), &src.name, a.recompensate)?;
     let opts = RapidOptions {
         records: a.report.is_some(),
         strict: a.program.strict,
@@ -237,8 +252,62 @@ pub fn compensate(a: &CompensateArgs, quiet: bool) -> Result<i32> {
             a.decimals,
         )?
     };
-    let (steps, mut run) = run(&texts, &robot, &opts)?;
-    let present: Vec<&Text> = texts.iter().flatten().collect();
+    let provenance = super::machines::provenance(
+        &loaded,
+        super::machines::robot_effects(&opts.effects),
+        None,
+        opts.annotate,
+    );
+    let src = &a.program.file;
+    let out_src = super::output::output_path(src, a.output.as_deref(), None, &[])?;
+    let report = a.report.as_deref().map(|path| {
+        let format = a
+            .report_format
+            .unwrap_or_else(|| super::Format::from_path(path));
+        (path, format)
+    });
+    let job = Job {
+        robot: &robot,
+        opts: &opts,
+        provenance: &provenance,
+        recompensate: a.recompensate,
+    };
+    let summary = compensate_to(&job, (src, &a.program.more), &out_src, report)?;
+    for w in summary.warnings.iter().filter(|w| w.left.is_none()) {
+        tracing::warn!("{}: {}", src.display(), w.message);
+    }
+    super::rapid::log_outcome(&src.display().to_string(), &out_src, &summary, quiet);
+    Ok(0)
+}
+
+/// What a compensation of KRL programs runs with.
+pub(super) struct Job<'a> {
+    /// The robot, with the run's process force.
+    pub(super) robot: &'a Robot,
+    /// The run's options.
+    pub(super) opts: &'a RapidOptions,
+    /// The header of the outputs.
+    pub(super) provenance: &'a Provenance,
+    /// `--recompensate`.
+    pub(super) recompensate: bool,
+}
+
+/// Compensates the KRL program `src` (with `more`: a `$config.dat`) into
+/// `out_src` and the `.dat` beside it, with its report; no file is put in
+/// place unless all are written.
+pub(super) fn compensate_to(
+    job: &Job,
+    (src, more): (&Path, &[PathBuf]),
+    out_src: &Path,
+    report: Option<(&Path, super::Format)>,
+) -> Result<crate::compensate::outcome::Summary> {
+    let (robot, opts, provenance) = (job.robot, job.opts, job.provenance);
+    let texts = read_program(src, more)?;
+    let Some(first) = texts.first().and_then(Option::as_ref) else {
+        return Err(Error::Internal("no .src".into()));
+    };
+    super::machines::refuse_compensated(first.text.as_bytes(), &first.name, job.recompensate)?;
+    let (steps, mut run) = run(&texts, robot, opts)?;
     let strs: Vec<&str> = texts
         .iter()
         .map(|t| t.as_ref().map_or("", |t| t.text.as_str()))
@@ -253,43 +322,34 @@ pub fn compensate(a: &CompensateArgs, quiet: bool) -> Result<i32> {
         annotate: opts.annotate,
         compensate: opts.effects.compensates(),
     };
-    let (out_texts, warnings) = rewrite(&strs, &files, &steps, &run, &robot, how)?;
+    let (out_texts, warnings) = rewrite(&strs, &files, &steps, &run, robot, how)?;
     run.summary.warnings.extend(warnings);
-    let provenance = super::machines::provenance(
-        &loaded,
-        super::machines::robot_effects(&opts.effects),
-        None,
-        opts.annotate,
-    );
-    let out_src = super::output::output_path(&src.path, a.output.as_deref(), None, &[])?;
-    let inputs: Vec<&Path> = present.iter().map(|t| t.path.as_path()).collect();
+    let inputs: Vec<&Path> = texts.iter().flatten().map(|t| t.path.as_path()).collect();
     let mut pending = Vec::new();
     for (i, t) in texts.iter().enumerate().take(2) {
         let Some(t) = t else { continue };
         let out = if i == 0 {
-            out_src.clone()
+            out_src.to_path_buf()
         } else {
             out_src.with_extension("dat")
         };
         super::output::refuse_overwrite(&out, &inputs)?;
-        pending.push(stage(&out, &with_header(&out_texts[i], &provenance), t.charset)?);
+        pending.push(stage(
+            &out,
+            &with_header(&out_texts[i], provenance),
+            t.charset,
+        )?);
     }
-    if let Some(path) = a.report.as_deref() {
-        let format = a
-            .report_format
-            .unwrap_or_else(|| super::Format::from_path(path));
+    if let Some((path, format)) = report {
+        super::output::refuse_overwrite(path, &inputs)?;
         let mut rep = Staged::open(path)?;
-        write_report(rep.writer(), run.clone(), &src.name, format, &provenance)?;
+        write_report(rep.writer(), run.clone(), &first.name, format, provenance)?;
         pending.push(rep.finish()?);
     }
     for p in pending {
         p.commit()?;
     }
-    for w in run.summary.warnings.iter().filter(|w| w.left.is_none()) {
-        tracing::warn!("{}: {}", src.name, w.message);
-    }
-    super::rapid::log_outcome(&src.name, &out_src, &run.summary, quiet);
-    Ok(0)
+    Ok(run.summary)
 }
 
 /// Writes the deviation report of a run.

@@ -72,7 +72,9 @@ fn fixed(v: f64, decimals: usize) -> Result<String> {
     if push_fixed(&mut s, v, decimals) {
         Ok(s)
     } else {
-        Err(Error::Internal(format!("a compensated value is not finite: {v}")))
+        Err(Error::Internal(format!(
+            "a compensated value is not finite: {v}"
+        )))
     }
 }
 
@@ -152,10 +154,17 @@ pub fn rewrite(
             continue;
         };
         if how.compensate {
-            let places = std::iter::once((&t.place, target, true))
-                .chain(t.via.as_ref().zip(via.as_ref()).map(|((_, p), c)| (p, c, false)));
+            let places = std::iter::once((&t.place, target, true)).chain(
+                t.via
+                    .as_ref()
+                    .zip(via.as_ref())
+                    .map(|((_, p), c)| (p, c, false)),
+            );
             for (place, comp, is_target) in places {
-                let Some(a) = found.get(place.source).and_then(|m| m.get(&place.span.start)) else {
+                let Some(a) = found
+                    .get(place.source)
+                    .and_then(|m| m.get(&place.span.start))
+                else {
                     return Err(Error::Internal("a target's aggregate was not found".into()));
                 };
                 let pose = t.work.inverse() * comp.pose;
@@ -166,7 +175,11 @@ pub fn rewrite(
                 };
                 let mut mine = Vec::new();
                 aggregate_edits(a, &pose, st, how.position_decimals, &mut mine)?;
-                let key: String = mine.iter().map(|(_, s)| s.as_str()).collect::<Vec<_>>().join(",");
+                let key: String = mine
+                    .iter()
+                    .map(|(_, s)| s.as_str())
+                    .collect::<Vec<_>>()
+                    .join(",");
                 match owner.get(place) {
                     None => {
                         owner.insert(place.clone(), (t.line, key));

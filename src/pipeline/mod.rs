@@ -8,6 +8,6 @@
 
 pub mod gcode;
 pub mod rapid;
-pub mod robot;
 mod resonance;
+pub mod robot;
 pub mod shop;

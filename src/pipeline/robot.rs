@@ -38,12 +38,12 @@ pub enum StepResult {
     /// point (world frame poses; `pose` is what to program).
     Compensated {
         /// The target's.
-        target: Compensation,
+        target: Box<Compensation>,
         /// The auxiliary point's, for a circular move.
-        via: Option<Compensation>,
+        via: Option<Box<Compensation>>,
     },
     /// A joint target's predicted deviation (left as written).
-    Reported(Deviation),
+    Reported(Box<Deviation>),
     /// Nothing (a move left as written).
     None,
 }
@@ -126,9 +126,8 @@ fn programmed_joints(
                             if !admits(view, &c) || view.check_limits(&c).is_err() {
                                 continue;
                             }
-                            let d = prev.map_or(0.0, |p| {
-                                c.iter().zip(p).map(|(a, b)| (a - b).abs()).sum()
-                            });
+                            let d = prev
+                                .map_or(0.0, |p| c.iter().zip(p).map(|(a, b)| (a - b).abs()).sum());
                             if best.is_none_or(|(b, _)| d < b) {
                                 best = Some((d, c));
                             }
@@ -168,7 +167,9 @@ fn plan(
                 let q = programmed_joints(r, &pose, &t.configuration, prev.as_ref());
                 let q = match q {
                     Ok(q) => q,
-                    Err(e) if matches!(t.configuration, Configuration::Previous) && prev.is_none() => {
+                    Err(e)
+                        if matches!(t.configuration, Configuration::Previous) && prev.is_none() =>
+                    {
                         warnings.push(LeftAsWritten::warning(
                             t.line,
                             t.column,
@@ -201,9 +202,9 @@ fn plan(
             RobotStep::Joints(j) => match &j.tool {
                 Some(tool) => {
                     let view = views.get(robot, tool);
-                    views.robots[view].check_limits(&j.q).map_err(|e| {
-                        refused(file, j.line, j.column, "joint target", e)
-                    })?;
+                    views.robots[view]
+                        .check_limits(&j.q)
+                        .map_err(|e| refused(file, j.line, j.column, "joint target", e))?;
                     prev = Some(j.q);
                     warnings.push(LeftAsWritten::warning(
                         j.line,
@@ -258,7 +259,12 @@ fn untimed_warning(robot: &Robot, opts: &RapidOptions) -> Option<Warning> {
 /// Runs the pipeline over `steps` on `robot` (`file` names the program in
 /// messages). Errors: [`Error::Unachievable`] at the first target that
 /// cannot be reached in its configuration or compensated.
-pub fn run(robot: &Robot, steps: &[RobotStep], opts: &RapidOptions, file: &str) -> Result<RobotRun> {
+pub fn run(
+    robot: &Robot,
+    steps: &[RobotStep],
+    opts: &RapidOptions,
+    file: &str,
+) -> Result<RobotRun> {
     let mut views = Views::default();
     let (plans, mut warnings) = plan(robot, steps, &mut views, file)?;
     let fx = opts.effects;
@@ -275,12 +281,12 @@ pub fn run(robot: &Robot, steps: &[RobotStep], opts: &RapidOptions, file: &str) 
         .par_iter()
         .map(|p| match p {
             Plan::Target(t, v) => Ok(StepResult::Compensated {
-                target: solve(t)?,
-                via: v.as_ref().map(solve).transpose()?,
+                target: Box::new(solve(t)?),
+                via: v.as_ref().map(solve).transpose()?.map(Box::new),
             }),
-            Plan::Joints(view, q) => Ok(StepResult::Reported(
+            Plan::Joints(view, q) => Ok(StepResult::Reported(Box::new(
                 views.robots[*view].predict_at_joints(&ctx, q, fx),
-            )),
+            ))),
             Plan::Left => Ok(StepResult::None),
         })
         .collect();
@@ -335,7 +341,10 @@ fn row(t: &RobotTarget, c: &Compensation) -> Row {
         compensated: [0.0; 6],
         result: crate::compensate::BlockResult::default(),
         robot: Some(RobotMove {
-            via_mm: t.via.as_ref().map(|(v, _)| (t.work * v).translation.vector.into()),
+            via_mm: t
+                .via
+                .as_ref()
+                .map(|(v, _)| (t.work * v).translation.vector.into()),
             deviation: c.deviation,
             wrench: None,
             duration_s: 0.0,

@@ -253,7 +253,9 @@ impl Named {
             Unread::Krl if self.extension.as_deref() == Some("src") => {
                 "batch does not read KRL programs yet: run postproc compensate on the .src"
             }
-            Unread::Krl => "postproc reads a KRL program from its .src (with the .dat beside it): give the .src",
+            Unread::Krl => {
+                "postproc reads a KRL program from its .src (with the .dat beside it): give the .src"
+            }
             _ => "a language postproc does not read (it reads ISO G-code, ABB RAPID and KUKA KRL)",
         };
         match &self.line {

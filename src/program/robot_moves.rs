@@ -88,6 +88,9 @@ pub struct ToolUse {
     pub load: Option<PointMass>,
 }
 
+/// The test of a maker's configuration rule on a joint solution.
+pub type Admits = Arc<dyn Fn(&Robot, &[f64; 6]) -> bool + Send + Sync>;
+
 /// A language's rule that tells which joint solution of a pose is the
 /// programmed one.
 #[derive(Clone)]
@@ -100,7 +103,7 @@ pub enum Configuration {
     Previous,
     /// The solution whose joints the rule admits (KUKA Status and Turn,
     /// FANUC `CONFIG`), with the rule as written for messages.
-    Admits(Arc<dyn Fn(&Robot, &[f64; 6]) -> bool + Send + Sync>, String),
+    Admits(Admits, String),
 }
 
 impl std::fmt::Debug for Configuration {
@@ -174,7 +177,7 @@ pub struct JointMove {
 #[derive(Debug, Clone)]
 pub enum RobotStep {
     /// A Cartesian target to compensate.
-    Target(RobotTarget),
+    Target(Box<RobotTarget>),
     /// A joint target, reported and left as written.
     Joints(JointMove),
     /// A move left as written: its warning (with [`LeftAsWritten`]).

@@ -132,13 +132,11 @@ impl<'a> Data<'a> {
                         name,
                         value,
                     } => {
-                        d.decls
-                            .entry(name.to_ascii_uppercase())
-                            .or_insert(Datum {
-                                type_name,
-                                value: value.as_ref(),
-                                source,
-                            });
+                        d.decls.entry(name.to_ascii_uppercase()).or_insert(Datum {
+                            type_name,
+                            value: value.as_ref(),
+                            source,
+                        });
                     }
                     Kind::Assign(lhs, Some(a), _) => {
                         let Some(frame) = frame_of(a) else { continue };
@@ -229,9 +227,8 @@ pub fn resolve(program: &Program, text: &str) -> Vec<RobotStep> {
                     let d = data.decls.get(&format!("F{}", p.to_ascii_uppercase()))?;
                     d.value.filter(|_| d.type_name == "FDAT")
                 });
-                let number = |n: Option<u32>, key: &str| {
-                    n.or_else(|| fdat.and_then(|a| a.bits(key)))
-                };
+                let number =
+                    |n: Option<u32>, key: &str| n.or_else(|| fdat.and_then(|a| a.bits(key)));
                 if let Some(n) = number(form.tool, "TOOL_NO") {
                     st.tool = data.tool(n);
                 }
@@ -330,7 +327,8 @@ fn motion_step(
     let name = motion_name(motion);
     let line_text = text.get(l.span.clone()).unwrap_or("");
     let column = line_text.len() - line_text.trim_start().len() + 1;
-    let left = |reason: &str| RobotStep::Left(LeftAsWritten::warning(l.number, column, name, reason));
+    let left =
+        |reason: &str| RobotStep::Left(LeftAsWritten::warning(l.number, column, name, reason));
     if rest.trim_start().starts_with(':') {
         return left("geometric operator `:` with a frame known at run time only");
     }
@@ -384,7 +382,7 @@ fn motion_step(
         Motion::Circ | Motion::Scirc => (PathKind::Circular, st.form_vel.or(st.vel_cp)),
     };
     let blended = rest.to_ascii_uppercase().contains("C_DIS");
-    RobotStep::Target(RobotTarget {
+    RobotStep::Target(Box::new(RobotTarget {
         line: l.number,
         column,
         instruction: name,
@@ -400,7 +398,7 @@ fn motion_step(
             source,
             span: agg.span.clone(),
         },
-    })
+    }))
 }
 
 /// The configuration rule of a target ([`resolve`]'s module documentation).
