@@ -16,7 +16,7 @@ use nalgebra::{SMatrix, SVector, Vector3};
 use crate::machine::tool::MachineTool;
 use crate::machine::{AxisVec, DirVec, TipPose};
 use crate::predict::{Breakdown, LipschitzBound, MoveContext, ToolPredictor};
-use crate::program::interp::{Motion, Move, Plan, PlanKind, directions};
+use crate::program::interp::{DIRECTION_DEADBAND, Motion, Move, Plan, PlanKind, directions};
 
 pub use crate::limits::{MIN_TOLERANCE_MM, SOLVE_TOL_MM};
 /// Convergence of the inverse solve on the tool direction, rad.
@@ -999,6 +999,13 @@ fn with_xyz(base: &AxisVec, p: &Vector3<f64>) -> AxisVec {
 /// previous block left the machine; beyond it a takeup move comes first.
 pub const TAKEUP_SHARE: f64 = 0.5;
 
+/// Share of the tolerance up to which a move that may not start with a
+/// takeup point (cutter radius compensation) is proven from where the
+/// machine stands, the gap there counted: its pieces are split until they
+/// fit. Beyond it the split could not end (the first piece keeps the gap
+/// however short it gets), and the gap is left over and warned about.
+pub const NO_TAKEUP_SHARE: f64 = 0.9;
+
 /// How far from the programmed start `p0` the machine is when it stands at
 /// the command `at` and moves off with the directions of motion `dirs`, mm.
 fn start_gap(pred: &ToolPredictor, p0: &AxisVec, at: &AxisVec, dirs: &DirVec, tool: f64) -> f64 {
@@ -1015,9 +1022,10 @@ fn start_gap(pred: &ToolPredictor, p0: &AxisVec, at: &AxisVec, dirs: &DirVec, to
 /// move is pushed to `out` as a takeup point — the machine first moves
 /// there, as a controller's reversal compensation would, so that the move
 /// itself leaves from the programmed point. Without `takeups` (cutter
-/// radius compensation active, see [`BlockResult::takeup`]), or when the
-/// takeup point lies beyond an end of travel, the move starts from `at`
-/// whatever the gap; a gap beyond the share cannot be proven away and is
+/// radius compensation active, see [`BlockResult::takeup`]), the move
+/// starts from `at` and its pieces are proven with the gap up to
+/// [`NO_TAKEUP_SHARE`] of the tolerance; a larger gap, or one where the
+/// takeup point lies beyond an end of travel, cannot be proven away and is
 /// returned as left over.
 fn start_from<'m>(
     pred: &ToolPredictor<'m>,
@@ -1033,6 +1041,16 @@ fn start_from<'m>(
         return Ok(Start {
             c: *at,
             gap: gap.max(SOLVE_TOL_MM),
+            takeup: false,
+            left_mm: 0.0,
+        });
+    }
+    if !takeups && gap <= tol * NO_TAKEUP_SHARE {
+        // No takeup may be written: the move leaves from where the machine
+        // stands, and its pieces are proven with that gap.
+        return Ok(Start {
+            c: *at,
+            gap,
             takeup: false,
             left_mm: 0.0,
         });
@@ -1491,7 +1509,7 @@ fn straight<'m>(
     mv: &Move,
     carry_in: Option<&Carry>,
     lip: &Lip<'m>,
-    tol: f64,
+    (tol, rounding): (f64, f64),
     nom_end: &TipPose,
     res: &mut BlockResult,
 ) -> Result<(DirVec, DirVec), Failure> {
@@ -1541,12 +1559,23 @@ fn straight<'m>(
         let (agree, n_next, moved) = piece_runs(mv, (&moved_in, &from), res, runs_now, &mut next);
         result = (d_end, moved);
         // A gap left at the start (no takeup under cutter radius
-        // compensation) is a miss of the first piece.
+        // compensation) is a miss of the pieces from there; so is a piece
+        // whose travel in an axis is within the rounding of the written
+        // words of the deadband (read back, it may take either direction).
+        // (On a machine with rotary axes the nominal path of a piece is
+        // no straight line: only a gap left is measured.)
+        let affine = !(3..6).any(|s| pred.machine.has_axis(s));
+        let grid = Grid::of(plan, rounding);
+        let measure = left > 0.0 || (affine && any_ambiguous(res, &from, &grid));
         if agree {
-            res.miss_mm = left;
+            res.miss_mm = if measure {
+                pieces_miss(pred, mv, (&from, &moved_in), res, (tool, tol, &grid)).max(left)
+            } else {
+                0.0
+            };
             break;
         }
-        res.miss_mm = pieces_miss(pred, mv, (&from, &moved_in), res, tool).max(left);
+        res.miss_mm = pieces_miss(pred, mv, (&from, &moved_in), res, (tool, tol, &grid)).max(left);
         if rewrite {
             break;
         }
@@ -1755,20 +1784,164 @@ fn piece_runs(
     (agree, n, w)
 }
 
-/// Points measured along each piece by [`pieces_miss`].
-const PIECE_SAMPLES: usize = 8;
+/// Whether a written piece of `res` (from `from`) travels, in some axis,
+/// within the rounding of its written words (`rounding` bounds the move of
+/// each end, so a travel by half of it) of the deadband of a direction of
+/// motion: read back, the axis may keep its direction or take the
+/// piece's.
+fn any_ambiguous(res: &BlockResult, from: &AxisVec, grid: &Grid) -> bool {
+    let mut a = from;
+    for b in res.segments.iter().chain(std::iter::once(&res.end)) {
+        if (0..3).any(|s| grid.ambiguous(s, a[s], b[s])) {
+            return true;
+        }
+        a = b;
+    }
+    false
+}
+
+/// Distance from the deadband within which a written travel may be read
+/// on either side of it, mm.
+const DEADBAND_EDGE_MM: f64 = 1e-9;
+
+/// The grid the written words of a block fall on: in absolute mode
+/// (`G90`) a written machine coordinate is `offset + k · unit`, `unit`
+/// the last decimal (half of `rounding`, see `emit::gcode::rounding_mm`).
+struct Grid {
+    rounding: f64,
+    offset: Option<[f64; 3]>,
+}
+
+impl Grid {
+    fn of(plan: &Plan, rounding: f64) -> Self {
+        Grid {
+            rounding,
+            offset: plan
+                .absolute
+                .then(|| [plan.offset[0], plan.offset[1], plan.offset[2]]),
+        }
+    }
+
+    /// Whether the travel of axis `s` from `a` to `b` may be read back on
+    /// the other side of the deadband of a direction of motion than
+    /// solved: in absolute mode, where the written (rounded) ends put it
+    /// there; otherwise where it is within the rounding of the deadband.
+    fn ambiguous(&self, s: usize, a: f64, b: f64) -> bool {
+        if self.rounding <= 0.0 {
+            return false;
+        }
+        let d = b - a;
+        match self.offset {
+            Some(o) => {
+                let unit = self.rounding / 2.0;
+                let at = |x: f64| ((x - o[s]) / unit).round();
+                let read = (at(b) - at(a)) * unit;
+                // (a written travel of the deadband itself is read either
+                // way by the floating-point sum of its words and offsets)
+                (read.abs() > DIRECTION_DEADBAND) != (d.abs() > DIRECTION_DEADBAND)
+                    || (read.abs() - DIRECTION_DEADBAND).abs() <= DEADBAND_EDGE_MM
+            }
+            None => (d.abs() - DIRECTION_DEADBAND).abs() <= self.rounding / 2.0,
+        }
+    }
+}
+
+/// The directions `w` a piece from `a` to `b` takes after `prev`, with
+/// each axis whose travel is [`Grid::ambiguous`] given the other reading:
+/// the previous direction where the travel passes the deadband, the
+/// travel's where it does not.
+fn other_reading(prev: &DirVec, w: &DirVec, a: &AxisVec, b: &AxisVec, grid: &Grid) -> DirVec {
+    let mut o = *w;
+    for s in 0..3 {
+        let d = b[s] - a[s];
+        if grid.ambiguous(s, a[s], b[s]) {
+            o[s] = if d.abs() > DIRECTION_DEADBAND {
+                prev[s]
+            } else if d > 0.0 {
+                1
+            } else {
+                -1
+            };
+        }
+    }
+    o
+}
+
+/// Most intervals [`piece_bound`] cuts one piece into.
+const MAX_BOUND_INTERVALS: usize = 4096;
+/// Share of the tolerance the part of [`piece_bound`] between its points
+/// is brought under where the piece is long enough to need it.
+const BOUND_SHARE: f64 = 0.01;
+/// Spacing of the points of [`piece_bound`] along a piece of a machine
+/// without a Lipschitz bound (rotary axes), mm, and fewest points.
+const UNBOUNDED_SAMPLE_MM: f64 = 0.25;
+const MIN_PIECE_SAMPLES: usize = 8;
+
+/// An upper bound of `dist(attained(c))`, mm, along the straight piece of
+/// commands `a → b` under the directions `d`, where `dist` is a distance
+/// to a convex set (the programmed line) in space. On a machine whose
+/// nominal chain is a translation, the attained point is the affine
+/// nominal point plus the error `e`, so between two points of the piece
+/// `dist` is at most the larger of its values there plus the departure of
+/// `e` from its chord, which the model's Lipschitz constant `L` bounds by
+/// `L` times the length between them: the piece is evaluated at `n + 1`
+/// points with `L · len / n` within [`BOUND_SHARE`] of the tolerance
+/// (at most [`MAX_BOUND_INTERVALS`] intervals), and the bound is the
+/// largest value plus `L · len / n`. Without a Lipschitz bound (rotary
+/// axes) it is the largest of points every [`UNBOUNDED_SAMPLE_MM`].
+fn piece_bound(
+    pred: &ToolPredictor,
+    (a, b): (&AxisVec, &AxisVec),
+    d: &DirVec,
+    (tool, tol): (f64, f64),
+    dist: &dyn Fn(Vector3<f64>) -> f64,
+) -> f64 {
+    let len = (0..3).map(|s| (b[s] - a[s]).powi(2)).sum::<f64>().sqrt();
+    let affine = !(3..6).any(|s| pred.machine.has_axis(s));
+    let l = if affine {
+        pred.lipschitz(a, b, tool)
+    } else {
+        None
+    };
+    let (n, between) = match l {
+        Some(l) => {
+            let n = ((l * len / (tol * BOUND_SHARE)).ceil() as usize).clamp(1, MAX_BOUND_INTERVALS);
+            (n, l * len / n as f64)
+        }
+        None => {
+            let n = ((len / UNBOUNDED_SAMPLE_MM).ceil() as usize)
+                .clamp(MIN_PIECE_SAMPLES, MAX_BOUND_INTERVALS);
+            (n, 0.0)
+        }
+    };
+    let mut worst = 0.0f64;
+    for k in 0..=n {
+        let q = pred.attained(&lerp(a, b, k as f64 / n as f64), d, tool).pos;
+        // (NaN counts as infinitely far)
+        let v = dist(q);
+        worst = if v.is_nan() {
+            f64::INFINITY
+        } else {
+            worst.max(v)
+        };
+    }
+    worst + between
+}
 
 /// The largest distance, mm, of the attained points of the written pieces
 /// of a straight move, each under the directions the interpreter gives it,
-/// from the programmed line (sampled: only where no pass of
-/// [`straight`] agrees with the pieces' directions). Takeup moves are not
-/// on the line; their ends are the starts of the pieces after them.
+/// from the programmed line, bounded along each piece ([`piece_bound`];
+/// a piece whose travel is [`ambiguous`] under both readings): where no
+/// pass of [`straight`] agrees with the pieces' directions, where the move
+/// leaves a gap at its start, or where a travel is ambiguous. Takeup moves
+/// are not on the line; their ends are the starts of the pieces after
+/// them.
 fn pieces_miss(
     pred: &ToolPredictor,
     mv: &Move,
     (from, moved): (&AxisVec, &DirVec),
     res: &BlockResult,
-    tool: f64,
+    (tool, tol, grid): (f64, f64, &Grid),
 ) -> f64 {
     let (p0, p1) = (
         pred.nominal(&mv.start, tool).pos,
@@ -1791,11 +1964,12 @@ fn pieces_miss(
         .chain(std::iter::once(&res.end))
         .enumerate()
     {
+        let prev = w;
         w = directions(&w, &a, b, None);
         if !is_takeup(res, j) {
-            for k in 0..=PIECE_SAMPLES {
-                let q = pred.attained(&lerp(&a, b, k as f64 / PIECE_SAMPLES as f64), &w, tool);
-                worst = worst.max(off_line(q.pos));
+            let alt = other_reading(&prev, &w, &a, b, grid);
+            for d in [w, alt].iter().take(if alt == w { 1 } else { 2 }) {
+                worst = worst.max(piece_bound(pred, (&a, b), d, (tool, tol), &off_line));
             }
         }
         a = *b;
@@ -1813,17 +1987,23 @@ pub fn block_reusing(
     carry: &mut Option<Carry>,
     segments: Vec<AxisVec>,
 ) -> Result<BlockResult, Failure> {
-    block_recycling(pred, plan, settings, carry, (segments, Vec::new()))
+    block_recycling(pred, plan, settings, carry, (segments, Vec::new()), 0.0)
 }
 
 /// [`block_reusing`] with the storage of the result's takeup points inside
-/// a move ([`BlockResult::takeup_at`]) recycled too (both cleared first).
+/// a move ([`BlockResult::takeup_at`]) recycled too (both cleared first),
+/// for a program written with words whose rounding moves a written piece
+/// by up to `rounding_mm` (`emit::gcode::rounding_mm`; 0 for none): a
+/// straight piece whose travel in an axis is that close to the deadband of
+/// a direction of motion is measured under both readings into
+/// [`BlockResult::miss_mm`].
 pub fn block_recycling(
     pred: &ToolPredictor,
     plan: &Plan,
     settings: &Settings,
     carry: &mut Option<Carry>,
     (mut segments, mut takeup_at): (Vec<AxisVec>, Vec<usize>),
+    rounding_mm: f64,
 ) -> Result<BlockResult, Failure> {
     segments.clear();
     takeup_at.clear();
@@ -1890,7 +2070,16 @@ pub fn block_recycling(
             res.residual_mm = (pred.attained(&res.end, &mv.dirs, tool).pos - nom_end.pos).norm();
         }
         (Motion::Linear, _) => {
-            let (d, moved) = straight(pred, plan, &mv, carry_in, &lip, tol, &nom_end, &mut res)?;
+            let (d, moved) = straight(
+                pred,
+                plan,
+                &mv,
+                carry_in,
+                &lip,
+                (tol, rounding_mm),
+                &nom_end,
+                &mut res,
+            )?;
             res.dirs = d;
             if let Some(k) = carry_out.as_mut() {
                 k.c = res.end;

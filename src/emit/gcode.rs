@@ -50,6 +50,36 @@ pub const KEPT_WORD_SHARE: f64 = 0.25;
 /// Most decimals a written coordinate gets.
 const MAX_DECIMALS: usize = 8;
 
+/// How far (mm) the rounding of the written words can move a written
+/// piece off the one that was solved, with the decimals a compensation at
+/// `tolerance_mm` writes linear words with ([`Emitter::with_tolerance`]),
+/// in a program of units `scale` mm (1 for mm, 25.4 for inch): half a
+/// unit of the last decimal per word, for the three coordinates of each
+/// end and the two centre words of an arc read from the rounded start
+/// (four half units bound both). The compensation solves within the
+/// tolerance less this, so that the written program keeps the tolerance it
+/// states.
+pub fn rounding_mm(opts: &EmitOptions, tolerance_mm: f64, scale: f64) -> f64 {
+    4.0 * half_unit_mm(opts, tolerance_mm, scale)
+}
+
+/// Half a unit of the last decimal of a rewritten linear word without
+/// decimals of its own, mm, in program units of `scale` mm.
+fn half_unit_mm(opts: &EmitOptions, tolerance_mm: f64, scale: f64) -> f64 {
+    let d = opts.decimals_mm.unwrap_or(DEFAULT_DECIMALS_MM);
+    let d = if scale != 1.0 { d + 1 } else { d };
+    let d = d.max(tolerance_decimals(tolerance_mm, scale));
+    0.5 * scale / pow10(d)
+}
+
+/// The fewest decimals of a linear word (in program units of `scale` mm)
+/// whose rounding stays within [`ROUNDING_SHARE`] of `tol`.
+fn tolerance_decimals(tol: f64, scale: f64) -> usize {
+    (0..MAX_DECIMALS)
+        .find(|&d| 0.5 * scale / pow10(d) <= tol * ROUNDING_SHARE)
+        .unwrap_or(MAX_DECIMALS)
+}
+
 /// What an added line is (see [`AddedLines`]).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum AddedKind {
@@ -448,9 +478,7 @@ impl Emitter {
         let Some(tol) = self.tolerance_mm else {
             return 0;
         };
-        (0..MAX_DECIMALS)
-            .find(|&d| 0.5 * scale / pow10(d) <= tol * ROUNDING_SHARE)
-            .unwrap_or(MAX_DECIMALS)
+        tolerance_decimals(tol, scale)
     }
 
     /// Writes one line (`line` includes its end-of-line bytes).

@@ -15,7 +15,7 @@ use rayon::prelude::*;
 
 use crate::compensate::outcome::{Row, Summary};
 use crate::compensate::{self, BlockResult, Failure, Settings};
-use crate::emit::gcode::{EmitOptions, Emitter};
+use crate::emit::gcode::{EmitOptions, Emitter, rounding_mm};
 use crate::error::{Error, Located, Result};
 use nalgebra::Vector3;
 
@@ -912,8 +912,11 @@ impl<'j, 'm, 'o, 'r> WriteStage<'j, 'm, 'o, 'r> {
         let tol = self.job.settings.tolerance_mm;
         // Only a written program states a tolerance (a report has none).
         let written = self.out.is_some();
-        if r.miss_mm > tol && written {
-            summary.beyond.add(r.miss_mm, line_no);
+        // The miss of the solved pieces, and of the written ones at most
+        // the rounding of their words more.
+        let miss = r.miss_mm + self.job.rounding(plan.scale);
+        if r.miss_mm > self.job.solve_settings(plan.scale).tolerance_mm && written {
+            summary.beyond.add(miss, line_no);
             let what = if matches!(plan.kind, PlanKind::Cycle { .. }) {
                 "the hole, drilled at one X and Y,"
             } else {
@@ -923,8 +926,7 @@ impl<'j, 'm, 'o, 'r> WriteStage<'j, 'm, 'o, 'r> {
             // block once they are full.
             if self.beyond.len() < MAX_BEYOND_WARNINGS {
                 let message = format!(
-                    "{what} is predicted {:.4} mm from the programmed path, beyond the tolerance {tol} mm",
-                    r.miss_mm
+                    "{what} is predicted {miss:.4} mm from the programmed path, beyond the tolerance {tol} mm"
                 );
                 tracing::warn!("{}:{line_no}: {message}", self.file);
                 self.beyond.push(Warning {
@@ -979,6 +981,23 @@ fn in_scope<'s, R>(pool: Option<&rayon::ThreadPool>, op: impl FnOnce(&rayon::Sco
 }
 
 impl<'m> Job<'m> {
+    /// How far the rounding of the written words can move a written piece
+    /// of a block in units of `scale` mm ([`rounding_mm`]), mm.
+    fn rounding(&self, scale: f64) -> f64 {
+        rounding_mm(&self.emit, self.settings.tolerance_mm, scale)
+    }
+
+    /// The settings a block in units of `scale` mm is solved with: the
+    /// tolerance less the rounding of its written words (at least half of
+    /// it), so that the program as written keeps the tolerance its header
+    /// states.
+    fn solve_settings(&self, scale: f64) -> Settings {
+        let tol = self.settings.tolerance_mm;
+        Settings {
+            tolerance_mm: (tol - self.rounding(scale)).max(tol / 2.0),
+        }
+    }
+
     fn install<R: Send>(&self, op: impl FnOnce() -> R + Send) -> R {
         match self.pool {
             Some(pool) => pool.install(op),
@@ -1018,6 +1037,8 @@ impl<'m> Job<'m> {
         let before = &st.before;
         let seed = st.seed;
         let home = self.setup.home;
+        // (the estimates of where runs start: at the millimetre rounding)
+        let settings = self.solve_settings(1.0);
         st.results
             .par_chunks_mut(GROUP_BLOCKS)
             .zip(st.carries.par_chunks_mut(GROUP_BLOCKS))
@@ -1042,7 +1063,7 @@ impl<'m> Job<'m> {
                         last.reverse();
                         // Fewer moves than the lookback: all since the start.
                         let from_start = (last.len() <= compensate::CARRY_LOOKBACK).then_some(home);
-                        compensate::carry_before(last, &self.settings, from_start)
+                        compensate::carry_before(last, &settings, from_start)
                     };
                     *sd = carry;
                     for (((r, k), p), c) in rs.iter_mut().zip(ks.iter_mut()).zip(ps).zip(cs) {
@@ -1070,9 +1091,10 @@ impl<'m> Job<'m> {
         *r = Some(compensate::block_recycling(
             &pred.with_context(*ctx),
             plan,
-            &self.settings,
+            &self.solve_settings(plan.scale),
             carry,
             storage,
+            self.rounding(plan.scale),
         ));
     }
 
