@@ -322,7 +322,17 @@ pub(super) fn compensate_to(
         annotate: opts.annotate,
         compensate: opts.effects.compensates(),
     };
-    let (out_texts, warnings) = rewrite(&strs, &files, &steps, &run, robot, how)?;
+    let solved: Vec<crate::emit::krl::Solved> = run
+        .results
+        .iter()
+        .map(|r| match r {
+            crate::pipeline::robot::StepResult::Compensated { target, via } => {
+                Some((&**target, via.as_deref()))
+            }
+            _ => None,
+        })
+        .collect();
+    let (out_texts, warnings) = rewrite(&strs, &files, &steps, &solved, robot, how)?;
     run.summary.warnings.extend(warnings);
     let inputs: Vec<&Path> = texts.iter().flatten().map(|t| t.path.as_path()).collect();
     let mut pending = Vec::new();

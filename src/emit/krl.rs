@@ -22,7 +22,6 @@ use crate::compensate::robot::Compensation;
 use crate::emit::rapid::{EditList, push_fixed, write_dev_comment};
 use crate::error::{Error, Result};
 use crate::machine::robot::Robot;
-use crate::pipeline::robot::{RobotRun, StepResult};
 use crate::program::euler::quaternion_to_zyx;
 use crate::program::interp::Warning;
 use crate::program::krl::config::StatusTurn;
@@ -132,14 +131,19 @@ fn new_status_turn(robot: &Robot, a: &Aggregate, c: &Compensation) -> Option<Sta
     })
 }
 
+/// The compensation of one step of a run: its target's and its
+/// auxiliary point's (`None` for a step not compensated).
+pub type Solved<'a> = Option<(&'a Compensation, Option<&'a Compensation>)>;
+
 /// Writes a run back: the new texts of `texts` (the `.src`, then the data
-/// files, as [`Place::source`] counts them), with the warnings of moves
-/// whose point another move compensated differently.
+/// files, as [`Place::source`] counts them) from the compensation of each
+/// step, with the warnings of moves whose point another move compensated
+/// differently.
 pub fn rewrite(
     texts: &[&str],
     files: &[&File],
     steps: &[RobotStep],
-    run: &RobotRun,
+    solved: &[Solved],
     robot: &Robot,
     how: KrlWrite,
 ) -> Result<(Vec<String>, Vec<Warning>)> {
@@ -149,8 +153,8 @@ pub fn rewrite(
     let mut annotations = EditList::new();
     let mut warnings = Vec::new();
     let mut last_annotated = None;
-    for (step, result) in steps.iter().zip(&run.results) {
-        let (RobotStep::Target(t), StepResult::Compensated { target, via }) = (step, result) else {
+    for (step, result) in steps.iter().zip(solved) {
+        let (RobotStep::Target(t), Some((target, via))) = (step, result) else {
             continue;
         };
         if how.compensate {
