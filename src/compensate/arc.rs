@@ -8,8 +8,9 @@
 use nalgebra::Vector3;
 
 use super::{
-    BlockResult, Carry, Failure, Lip, SKIP_MARGIN_MM, SOLVE_TOL_MM, TAKEUP_SHARE, check_travel_within,
-    dirs_of, lerp, solve, solve_near, split_line, start_from, start_gap, with_xyz,
+    BlockResult, Carry, Failure, Lip, SKIP_MARGIN_MM, SOLVE_TOL_MM, TAKEUP_SHARE,
+    check_travel_within, dirs_of, lerp, solve, solve_near, split_line, start_from, start_gap,
+    with_xyz,
 };
 use crate::machine::{AxisVec, DirVec};
 use crate::predict::{ToolPredictor, Wrench, WrenchFrame};

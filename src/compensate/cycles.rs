@@ -228,8 +228,12 @@ mod tests {
         ))
         .expect("machine");
         let m = MachineTool::from_yaml_str(&text, "m.yaml").expect("machine");
-        let effects =
-            EffectSet::from_flags(&"geometric".parse().expect("effects"), &[]).expect("effects");
+        let effects = EffectSet::from_flags(
+            &"geometric".parse().expect("effects"),
+            &[],
+            crate::predict::MachineKind::Tool,
+        )
+        .expect("effects");
         let pred = ToolPredictor::new(&m, effects);
         let setup = crate::program::interp::Setup {
             expand_cycles: true,
@@ -266,6 +270,7 @@ mod tests {
             &settings,
             &mut carry,
             (Vec::new(), Vec::new()),
+            0.0,
         )
         .expect("compensates");
         let steps = &res.expansion;
