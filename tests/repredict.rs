@@ -490,6 +490,27 @@ fn every_written_piece_lands_within_the_tolerance_quasi_static() {
     every_case("geometric,static,thermal");
 }
 
+/// A 400 mm straight pass and its return on afm-r1000: every written
+/// piece within the tolerance, or warned.
+#[test]
+#[ignore = "issue 41, open: a 400 mm X pass is written as one piece that misses by 3.95 µm at 3 µm (warned) and by 2.1 µm at 1 µm unwarned: the piece certificate passes it; run with --ignored"]
+fn a_long_straight_pass_lands_within_the_tolerance() {
+    let case = Case {
+        program: "tests/repredict/long_pass.nc".to_string(),
+        machine: "afm-r1000",
+        shop: false,
+    };
+    for tol in [0.003, 0.001] {
+        let o = promise_holds(&case, "geometric", tol);
+        assert!(o.silent.is_empty(), "at {tol} mm: {}", o.silent.join(", "));
+        assert!(
+            o.worst <= tol + FLOAT_MM,
+            "at {tol} mm: worst {:.5} mm",
+            o.worst
+        );
+    }
+}
+
 #[test]
 fn the_first_feed_after_a_canned_cycle_and_g28_is_taken_up() {
     // The issue's program: the feed after a drilled hole, `G28`, a new

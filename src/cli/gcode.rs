@@ -188,9 +188,19 @@ fn error_line(e: &Error, name: &str) -> Option<usize> {
 /// of no line of the program is returned as it is when it is the first.
 fn check_all(job: &Job, mut input: Box<dyn BufRead>, name: &str) -> Result<(Summary, Vec<Error>)> {
     let mut text = Vec::new();
-    input
+    (&mut input)
+        .take(crate::pipeline::shop::WHOLE_MAX_BYTES + 1)
         .read_to_end(&mut text)
         .map_err(|e| Error::io(name, e))?;
+    if text.len() as u64 > crate::pipeline::shop::WHOLE_MAX_BYTES {
+        // Too long to hold for passes again (or endless, as /dev/zero):
+        // one streaming pass, which stops at the first error.
+        let input: Box<dyn BufRead> = Box::new(std::io::BufReader::new(
+            std::io::Cursor::new(text).chain(input),
+        ));
+        let (s, _) = crate::pipeline::shop::run(job, input, name, None, None)?;
+        return Ok((s, Vec::new()));
+    }
     let mut errors: Vec<Error> = Vec::new();
     loop {
         let pass = |text: &[u8]| {

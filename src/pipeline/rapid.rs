@@ -357,6 +357,15 @@ impl Rewriter<'_> {
         written: ConfData,
         free: bool,
     ) {
+        // Formatted only when it is shown: no allocation per target otherwise.
+        let shown = if free {
+            tracing::enabled!(tracing::Level::WARN)
+        } else {
+            tracing::enabled!(tracing::Level::INFO)
+        };
+        if !shown {
+            return;
+        }
         let (ml, mc) = line_col(self.src, mv.span.start);
         let what = format!(
             "{}:{ml}:{mc}: target `{}` of {}: written with confdata {written}, programmed {programmed}",
