@@ -149,13 +149,14 @@ fn shop_tools() -> Vec<(u32, f64)> {
 }
 
 /// A block as the forward pass reads it.
-struct Read {
-    line: usize,
-    plan: Plan,
-    ctx: MoveContext,
+pub(crate) struct Read {
+    pub(crate) line: usize,
+    pub(crate) plan: Plan,
+    pub(crate) ctx: MoveContext,
 }
 
-fn forward(job: &Job, text: &str) -> Vec<Read> {
+/// Every block of `text` as the forward pass of `job` reads it.
+pub(crate) fn forward(job: &Job, text: &str) -> Vec<Read> {
     let mut out = Vec::new();
     job.forward(text.as_bytes(), "p.nc", &mut |line, plan, ctx| {
         out.push(Read {
@@ -282,7 +283,7 @@ fn off_path(pred: &ToolPredictor, mv: &Move, q: &nalgebra::Vector3<f64>) -> f64 
 /// The worst miss of the compensated `output` of `input`: per output line,
 /// the largest distance of its sampled piece from its block's programmed
 /// path, with the line of the input block.
-fn misses(job: &Job, input: &str, output: &str) -> Vec<(usize, usize, f64)> {
+pub(crate) fn misses(job: &Job, input: &str, output: &str) -> Vec<(usize, usize, f64)> {
     let pred = job.predictor.as_ref().expect("predictor");
     let programmed: std::collections::HashMap<usize, Move> = forward(job, input)
         .into_iter()
@@ -319,6 +320,29 @@ fn misses(job: &Job, input: &str, output: &str) -> Vec<(usize, usize, f64)> {
         out.push((src, r.line, worst));
     }
     out
+}
+
+/// The forward pass of `machine` with `effects` at `tol` (no process
+/// load, the machine's own setup).
+pub(crate) fn job<'a>(machine: &'a MachineTool, effects: &str, tol: f64) -> Job<'a> {
+    let effects = EffectSet::from_flags(
+        &effects.parse().expect("effects"),
+        &[],
+        postproc::predict::MachineKind::Tool,
+    )
+    .expect("effects");
+    Job {
+        predictor: Some(ToolPredictor::new(machine, effects)),
+        setup: Setup::for_machine(machine),
+        settings: postproc::compensate::Settings { tolerance_mm: tol },
+        emit: postproc::emit::gcode::EmitOptions {
+            decimals_mm: None,
+            decimals_deg: None,
+            annotate: true,
+        },
+        pool: None,
+        travel: None,
+    }
 }
 
 /// Compensates `case` through the binary at `tol` with `effects` and checks
@@ -360,29 +384,9 @@ fn promise_holds(case: &Case, effects: &str, tol: f64) -> Outcome {
     if case.shop {
         setup.tools.extend(shop_tools());
     }
-    let job = Job {
-        predictor: Some(
-            ToolPredictor::new(
-                &m,
-                EffectSet::from_flags(
-                    &effects.parse().expect("effects"),
-                    &[],
-                    postproc::predict::MachineKind::Tool,
-                )
-                .expect("effects"),
-            )
-            .with_process(&process),
-        ),
-        setup,
-        settings: postproc::compensate::Settings { tolerance_mm: tol },
-        emit: postproc::emit::gcode::EmitOptions {
-            decimals_mm: None,
-            decimals_deg: None,
-            annotate: true,
-        },
-        pool: None,
-        travel: None,
-    };
+    let mut job = job(&m, effects, tol);
+    job.predictor = job.predictor.map(|p| p.with_process(&process));
+    job.setup = setup;
     let found = misses(&job, &input, &output);
     assert!(!found.is_empty(), "{}: no pieces", case.program);
     let mut silent = Vec::new();

@@ -3,46 +3,17 @@
 //! the binary, then read back and predicted again along every written
 //! piece by the forward pass (the interpreter and the predictor, not the
 //! solver); each attained point lies within the tolerance of the
-//! programmed spiral. The sampler here is shared with tests/cycles.rs.
+//! programmed spiral. The re-prediction is tests/repredict.rs's, shared with tests/cycles.rs.
 
 use crate::common::{postproc, write};
+pub(crate) use crate::repredict::job;
 use postproc::machine::tool::MachineTool;
 use postproc::pipeline::gcode::Job;
-use postproc::predict::{EffectSet, MoveContext, ToolPredictor};
-use postproc::program::interp::{Motion, Move, Plan, PlanKind, Setup};
+use postproc::predict::MoveContext;
+use postproc::program::interp::{Motion, Move, Plan, PlanKind};
 
-/// Sample spacing along a written piece, mm.
-const SAMPLE_MM: f64 = 0.1;
-/// Fewest samples of one written piece.
-const MIN_SAMPLES: usize = 16;
-/// Points of the programmed path searched before the search is refined.
-const COARSE_POINTS: usize = 400;
-/// Halvings of the bracket around the nearest coarse point.
-const REFINE_STEPS: usize = 60;
 /// Floating-point allowance of the comparison with the tolerance, mm.
 const FLOAT_MM: f64 = 1e-9;
-
-/// The forward pass of `machine` (bundled name) with `effects` at `tol`.
-pub(crate) fn job<'a>(machine: &'a MachineTool, effects: &str, tol: f64) -> Job<'a> {
-    let effects = EffectSet::from_flags(
-        &effects.parse().expect("effects"),
-        &[],
-        postproc::predict::MachineKind::Tool,
-    )
-    .expect("effects");
-    Job {
-        predictor: Some(ToolPredictor::new(machine, effects)),
-        setup: Setup::for_machine(machine),
-        settings: postproc::compensate::Settings { tolerance_mm: tol },
-        emit: postproc::emit::gcode::EmitOptions {
-            decimals_mm: None,
-            decimals_deg: None,
-            annotate: true,
-        },
-        pool: None,
-        travel: None,
-    }
-}
 
 /// A bundled machine, read from its file.
 pub(crate) fn machine(name: &str) -> MachineTool {
@@ -52,102 +23,29 @@ pub(crate) fn machine(name: &str) -> MachineTool {
 
 /// Every block of `text` as the forward pass reads it: line, plan, context.
 pub(crate) fn read(job: &Job, text: &str) -> Vec<(usize, Plan, MoveContext)> {
-    let mut out = Vec::new();
-    job.forward(text.as_bytes(), "p.nc", &mut |line, plan, ctx| {
-        out.push((line, *plan, *ctx))
-    })
-    .expect("reads");
-    out
-}
-
-/// The point of a move at parameter `s` (an arc's on its helix or spiral).
-pub(crate) fn point(mv: &Move, s: f64) -> [f64; 6] {
-    let mut p = [0.0; 6];
-    for (k, v) in p.iter_mut().enumerate() {
-        *v = mv.start[k] + (mv.end[k] - mv.start[k]) * s;
-    }
-    if let Some(arc) = &mv.arc {
-        let q = arc.point(&mv.start3(), &mv.end3(), s);
-        p[..3].copy_from_slice(q.as_slice());
-    }
-    p
-}
-
-/// Distance of the tip `q` from the nominal tip path of the move `mv`:
-/// the nearest of [`COARSE_POINTS`] points, refined by bisection of the
-/// bracket around it.
-pub(crate) fn off_path(pred: &ToolPredictor, mv: &Move, q: &nalgebra::Vector3<f64>) -> f64 {
-    let d = |s: f64| (pred.nominal(&point(mv, s), mv.tool_len_mm).pos - q).norm();
-    let h = 1.0 / COARSE_POINTS as f64;
-    let k = (0..=COARSE_POINTS)
-        .min_by(|&i, &j| d(i as f64 * h).total_cmp(&d(j as f64 * h)))
-        .unwrap_or(0);
-    let (mut lo, mut hi) = (
-        ((k as f64) - 1.0).max(0.0) * h,
-        ((k + 1) as f64 * h).min(1.0),
-    );
-    for _ in 0..REFINE_STEPS {
-        let (m1, m2) = (lo + (hi - lo) / 3.0, hi - (hi - lo) / 3.0);
-        if d(m1) < d(m2) {
-            hi = m2;
-        } else {
-            lo = m1;
-        }
-    }
-    d(k as f64 * h).min(d((lo + hi) / 2.0))
-}
-
-/// The input line each output line of a compensated program belongs to
-/// (1-based): a line equal to the next input line, or annotated with its
-/// deviation, is that input line; any other line was added after the input
-/// line before it. Whether each output line is a takeup move.
-pub(crate) fn align(input: &str, output: &str) -> Vec<(usize, bool)> {
-    let ins: Vec<&str> = input.lines().collect();
-    let mut i = 0;
-    output
-        .lines()
-        .map(|l| {
-            if ins.get(i) == Some(&l) || l.contains("(dev ") {
-                i += 1;
-            }
-            (i.max(1), l.contains(" takeup)"))
-        })
+    crate::repredict::forward(job, text)
+        .into_iter()
+        .map(|r| (r.line, r.plan, r.ctx))
         .collect()
 }
 
-/// The worst distance, over every written feed piece of `output` (takeup
-/// moves left out: they go onto a block's start by design) sampled along
-/// its length, of the attained tip from the programmed path of its input
-/// block `want` gives (`None`: not checked), with the input line.
+/// The worst miss of the written feed pieces of `output` from their
+/// programmed paths ([`crate::repredict::misses`]), over the input lines
+/// `want` gives a programmed move for, with that line and the number of
+/// pieces checked.
 pub(crate) fn worst_miss(
     job: &Job,
     input: &str,
     output: &str,
     want: &dyn Fn(usize) -> Option<Move>,
 ) -> (f64, usize, usize) {
-    let pred = job.predictor.as_ref().expect("predictor");
-    let map = align(input, output);
     let (mut worst, mut at, mut pieces) = (0.0f64, 0, 0);
-    for (line, plan, ctx) in read(job, output) {
-        let Some(mv) = plan.mv else { continue };
-        let feeding = match plan.kind {
-            PlanKind::Motion => mv.motion != Motion::Rapid,
-            PlanKind::Cycle { .. } => true,
-            _ => false,
-        };
-        let (src, takeup) = map[line - 1];
-        let Some(prog) = want(src).filter(|_| feeding && !takeup) else {
+    for (src, _, miss) in crate::repredict::misses(job, input, output) {
+        if want(src).is_none() {
             continue;
-        };
-        let p = pred.with_context(ctx);
-        let n = ((mv.length_mm() / SAMPLE_MM).ceil() as usize).max(MIN_SAMPLES);
-        for k in 0..=n {
-            let c = point(&mv, k as f64 / n as f64);
-            let q = p.attained(&c, &mv.dirs, mv.tool_len_mm).pos;
-            let miss = off_path(&p, &prog, &q);
-            if miss > worst {
-                (worst, at) = (miss, src);
-            }
+        }
+        if miss > worst {
+            (worst, at) = (miss, src);
         }
         pieces += 1;
     }
