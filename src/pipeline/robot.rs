@@ -332,46 +332,45 @@ pub fn run(
 /// The report row of a compensated target.
 fn row(t: &RobotTarget, c: &Compensation) -> Row {
     let p = (t.work * t.pose).translation.vector;
-    Row {
-        line: t.line,
-        motion: t.instruction,
-        start: [0.0; 6],
-        commanded: [p.x, p.y, p.z, 0.0, 0.0, 0.0],
-        arc: None,
-        compensated: [0.0; 6],
-        result: crate::compensate::BlockResult::default(),
-        robot: Some(RobotMove {
-            via_mm: t
-                .via
-                .as_ref()
-                .map(|(v, _)| (t.work * v).translation.vector.into()),
-            deviation: c.deviation,
-            wrench: None,
-            duration_s: 0.0,
-            power_w: [0.0; 6],
-            thermal_power_w: [0.0; 6],
-        }),
-    }
+    let via = t
+        .via
+        .as_ref()
+        .map(|(v, _)| (t.work * v).translation.vector.into());
+    robot_row((t.line, t.instruction), p.into(), via, c.deviation)
 }
 
 /// The report row of a reported joint target.
 fn joint_row(robot: &Robot, j: &JointMove, dev: &Deviation) -> Row {
-    let view = match &j.tool {
-        Some(t) => robot.with_tool(t.flange_to_tcp, t.load),
-        None => robot.clone(),
+    // The model is copied only for a move with its own tool.
+    let pose = match &j.tool {
+        Some(t) => robot
+            .with_tool(t.flange_to_tcp, t.load)
+            .tcp_pose(Model::Nominal, &j.q),
+        None => robot.tcp_pose(Model::Nominal, &j.q),
     };
-    let p = view.tcp_pose(Model::Nominal, &j.q).translation.vector;
+    let p = pose.translation.vector;
+    robot_row((j.line, j.instruction), p.into(), None, *dev)
+}
+
+/// A robot move's report row: its line and instruction, the programmed
+/// TCP position, the circle point of a circular move, and the deviation.
+fn robot_row(
+    (line, motion): (usize, &'static str),
+    p: [f64; 3],
+    via_mm: Option<[f64; 3]>,
+    deviation: Deviation,
+) -> Row {
     Row {
-        line: j.line,
-        motion: j.instruction,
+        line,
+        motion,
         start: [0.0; 6],
-        commanded: [p.x, p.y, p.z, 0.0, 0.0, 0.0],
+        commanded: [p[0], p[1], p[2], 0.0, 0.0, 0.0],
         arc: None,
         compensated: [0.0; 6],
         result: crate::compensate::BlockResult::default(),
         robot: Some(RobotMove {
-            via_mm: None,
-            deviation: *dev,
+            via_mm,
+            deviation,
             wrench: None,
             duration_s: 0.0,
             power_w: [0.0; 6],
