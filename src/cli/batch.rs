@@ -78,6 +78,21 @@ struct Item {
     unread: Option<String>,
 }
 
+impl Item {
+    /// One program file under `root` (its name in the output folder kept
+    /// relative to it), or one in a language not read (`unread`).
+    fn file(input: PathBuf, root: &Path, unread: Option<String>) -> Item {
+        let rel = super::output::folder_name(&input, &[root]);
+        Item {
+            input,
+            rel,
+            problem: None,
+            program: false,
+            unread,
+        }
+    }
+}
+
 /// The message of the file at `path` when it is in a language postproc
 /// does not read.
 fn unread(path: &Path) -> Option<String> {
@@ -168,25 +183,11 @@ fn walk(
         } else if super::output::is_compensated_name(&name) {
             skip_as("a compensated program (*.comp.*)");
         } else if robot && super::krl::is_krl(&path) && path.is_file() {
-            let rel = super::output::folder_name(&path, &[root]);
-            items.push(Item {
-                input: path,
-                rel,
-                problem: None,
-                program: false,
-                unread: None,
-            });
+            items.push(Item::file(path, root, None));
         } else if robot && super::krl::is_krl_data(&path) {
             skip_as("a KRL data list (read with its .src)");
         } else if let Some(message) = path.is_file().then(|| unread(&path)).flatten() {
-            let rel = super::output::folder_name(&path, &[root]);
-            items.push(Item {
-                input: path,
-                rel,
-                problem: None,
-                program: false,
-                unread: Some(message),
-            });
+            items.push(Item::file(path, root, Some(message)));
         } else if is_program(&path) && is_rapid(&path) != robot {
             // A folder of both languages: the programs of the other one are
             // for another machine.
@@ -200,14 +201,7 @@ fn walk(
         } else if !path.is_file() {
             skip_as("not a regular file");
         } else {
-            let rel = super::output::folder_name(&path, &[root]);
-            items.push(Item {
-                input: path,
-                rel,
-                problem: None,
-                program: false,
-                unread: None,
-            });
+            items.push(Item::file(path, root, None));
         }
     }
 }
