@@ -391,12 +391,7 @@ impl<'m> ArcJob<'_, 'm> {
         res: &mut BlockResult,
     ) -> Result<bool, Failure> {
         if let Some((center, sweep)) = self.fit((s0, s1), (ca, ga), cb, (d, false)) {
-            res.segments.push(*cb);
-            res.arcs.push(ArcPiece {
-                to: res.segments.len() - 1,
-                center,
-                sweep,
-            });
+            push_arc(res, *cb, (center, sweep));
             return Ok(false);
         }
         // A part one chord can follow within the tolerance is not halved.
@@ -518,12 +513,7 @@ impl<'m> ArcJob<'_, 'm> {
         let (c0, ga) = job.start((res.segments.len(), p0, *ca, *d), takeups, left, res)?;
         let (cb, _) = solve_near(&pp, &job.at(s1), &c0, &p0, d, &lip)?;
         if let Some((center, sweep)) = job.fit((s0, s1), (&c0, ga), &cb, (d, false)) {
-            res.segments.push(cb);
-            res.arcs.push(ArcPiece {
-                to: res.segments.len() - 1,
-                center,
-                sweep,
-            });
+            push_arc(res, cb, (center, sweep));
             return Ok(false);
         }
         // Halved as an arc without a turning load is, each half with its
@@ -678,12 +668,7 @@ pub(super) fn arc_block(
             // there stay within the tolerance.
             let fits = job.fit((0.0, 1.0), (&c0, gap), &res.end, (&d, true));
             if let Some((center, sweep)) = fits {
-                res.segments.push(res.end);
-                res.arcs.push(ArcPiece {
-                    to: res.segments.len() - 1,
-                    center,
-                    sweep,
-                });
+                push_arc(res, res.end, (center, sweep));
                 last_dirs = base;
                 break;
             }
@@ -714,6 +699,17 @@ pub(super) fn arc_block(
         check_travel_within(pred, p, tol)?;
     }
     Ok(last_dirs)
+}
+
+/// Writes an arc piece ending at `end` (its segment and its centre and
+/// sweep) into `res`.
+fn push_arc(res: &mut BlockResult, end: AxisVec, (center, sweep): (Vector3<f64>, f64)) {
+    res.segments.push(end);
+    res.arcs.push(ArcPiece {
+        to: res.segments.len() - 1,
+        center,
+        sweep,
+    });
 }
 
 #[cfg(test)]
