@@ -1,6 +1,7 @@
 //! Integration tests: the FANUC TP syntax layer (grammar/tp.md), its
 //! fixtures (tests/tp/: a pick-and-place with UF/UT and PR[] and a weld
-//! path with C moves), and CONFIG and W, P, R on the bundled FANUC arms.
+//! path with C moves), CONFIG and W, P, R on the bundled FANUC arms, and
+//! the programs through the binary ([`compensate`]).
 
 use nalgebra::Vector3;
 use postproc::machine::robot::{Model, Robot};
@@ -10,6 +11,8 @@ use postproc::program::tp::config::{Config, joints_to_model};
 use postproc::program::tp::{Instruction, Motion, Program, parse};
 
 use crate::common::{fenced_blocks, text};
+
+mod compensate;
 
 /// Every number of every position spans exactly its text.
 fn numbers_span_their_text(src: &str, p: &Program) -> usize {
@@ -35,7 +38,7 @@ fn numbers_span_their_text(src: &str, p: &Program) -> usize {
 fn every_grammar_example_parses() {
     let md = text("grammar/tp.md");
     let examples = fenced_blocks(&md, "ls");
-    assert_eq!(examples.len(), 3);
+    assert_eq!(examples.len(), 4);
     let mut kinds = std::collections::BTreeSet::new();
     for (i, ex) in examples.iter().enumerate() {
         let p = parse(ex, "grammar/tp.md").unwrap_or_else(|e| panic!("example {}: {e}", i + 1));
@@ -47,6 +50,8 @@ fn every_grammar_example_parses() {
                 }
                 Instruction::UframeNum(_) => "UFRAME_NUM".into(),
                 Instruction::UtoolNum(_) => "UTOOL_NUM".into(),
+                Instruction::FrameNumAtRunTime { .. } => "frame number at run time".into(),
+                Instruction::SetFrame { .. } => "frame set".into(),
                 Instruction::Other => "other".into(),
             });
         }
@@ -74,6 +79,8 @@ fn every_grammar_example_parses() {
         "J PR",
         "UFRAME_NUM",
         "UTOOL_NUM",
+        "frame number at run time",
+        "frame set",
         "joint form",
         "cartesian form",
         "other",
@@ -102,7 +109,7 @@ fn the_pick_and_place_reads_frames_registers_and_positions() {
                     if target.register { "PR" } else { "P" },
                     target.index
                 )),
-                Instruction::Other => None,
+                _ => None,
             })
             .collect();
     assert_eq!(

@@ -184,6 +184,8 @@ fn walk(
             skip_as("a compensated program (*.comp.*)");
         } else if robot && super::krl::is_krl(&path) && path.is_file() {
             items.push(Item::file(path, root, None));
+        } else if robot && super::tp::is_tp(&path) && path.is_file() {
+            items.push(Item::file(path, root, None));
         } else if robot && super::krl::is_krl_data(&path) {
             skip_as("a KRL data list (read with its .src)");
         } else if let Some(message) = path.is_file().then(|| unread(&path)).flatten() {
@@ -265,7 +267,7 @@ fn collect(inputs: &[PathBuf], out_dir: &Path, robot: bool) -> (Vec<Item>, Vec<S
                 Ok(_) => Some(format!("{}: not a regular file", input.display())),
                 Err(_) => Some(format!("{}: no such file", input.display())),
             };
-            let krl = robot && super::krl::is_krl(input);
+            let krl = robot && (super::krl::is_krl(input) || super::tp::is_tp(input));
             let unread = (problem.is_none() && !krl).then(|| unread(input)).flatten();
             items.push(Item {
                 input: input.clone(),
@@ -608,6 +610,11 @@ fn compensate_one(
                     "{name}: a KRL program needs a robot machine file"
                 )));
             }
+            if super::tp::is_tp(input) {
+                return Err(usage(format!(
+                    "{name}: a TP program needs a robot machine file"
+                )));
+            }
             if is_rapid(input) {
                 return Err(usage(format!(
                     "{name}: a RAPID module needs a robot machine file"
@@ -665,6 +672,28 @@ fn compensate_one(
             let report_file = report.map(|f| (report_path(output, f), f));
             let report_to = report_file.as_ref().map(|(p, f)| (p.as_path(), *f));
             let s = super::krl::compensate_to(&job, (input, &[]), output, report_to)?;
+            Ok(Done {
+                blocks: s.moves,
+                moves: s.moves,
+                max_dev: s.deviation.max,
+                max_line: Some(s.deviation.max_line),
+                residual: None,
+            })
+        }
+        Engine::Robot(robot, opts, _) if super::tp::is_tp(input) => {
+            let opts = crate::pipeline::rapid::RapidOptions {
+                records: report.is_some(),
+                ..opts.clone()
+            };
+            let job = super::tp::Job {
+                robot,
+                opts: &opts,
+                provenance,
+                recompensate: setting.recompensate,
+            };
+            let report_file = report.map(|f| (report_path(output, f), f));
+            let report_to = report_file.as_ref().map(|(p, f)| (p.as_path(), *f));
+            let s = super::tp::compensate_to(&job, (input, &[]), output, report_to)?;
             Ok(Done {
                 blocks: s.moves,
                 moves: s.moves,

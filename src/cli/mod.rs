@@ -14,6 +14,7 @@ pub mod memory;
 mod output;
 pub use output::is_broken_pipe;
 mod rapid;
+mod tp;
 mod verify;
 
 use std::path::PathBuf;
@@ -395,6 +396,9 @@ pub fn run(cli: Cli) -> Result<i32> {
         Command::Check(a) if krl::is_krl(&a.program.file) => krl::check(&a),
         Command::Compensate(a) if krl::is_krl(&a.program.file) => krl::compensate(&a, quiet),
         Command::Report(a) if krl::is_krl(&a.program.file) => krl::report(&a),
+        Command::Check(a) if tp::is_tp(&a.program.file) => tp::check(&a),
+        Command::Compensate(a) if tp::is_tp(&a.program.file) => tp::compensate(&a, quiet),
+        Command::Report(a) if tp::is_tp(&a.program.file) => tp::report(&a),
         Command::Check(a) => match Engine::choose(&a.program, config::Given::check(&a))? {
             Engine::Robot(robot) => rapid::check(&a, robot),
             Engine::Tool(machine) => {

@@ -10,3 +10,4 @@ pub mod rapid;
 pub mod report;
 pub mod subprograms;
 pub mod svg;
+pub mod tp;

@@ -12,7 +12,8 @@
 //! `.pgf` program file are RAPID programs of several modules.
 //!
 //! A file in a robot or control language that postproc does not read
-//! ([`Unread`]: KUKA KRL, FANUC TP, Yaskawa JBI, URScript, Stäubli VAL3,
+//! here ([`Unread`]: KUKA KRL and FANUC TP outside their `.src` and `.ls`
+//! files, which their own front ends read first, Yaskawa JBI, URScript, Stäubli VAL3,
 //! native Siemens 840D, Heidenhain conversational) is named by [`unread`]
 //! before any reader sees it, from its extension and its head: the first
 //! line that is not blank or a `;` comment, and for Siemens any line of
@@ -256,7 +257,12 @@ impl Named {
             Unread::Krl => {
                 "postproc reads a KRL program from its .src (with the .dat beside it): give the .src"
             }
-            _ => "a language postproc does not read (it reads ISO G-code, ABB RAPID and KUKA KRL)",
+            Unread::FanucTp => {
+                "postproc reads a TP program in its ASCII form, a .ls file (with a robot machine file)"
+            }
+            _ => {
+                "a language postproc does not read (it reads ISO G-code, ABB RAPID, KUKA KRL and FANUC TP .ls)"
+            }
         };
         match &self.line {
             Some((n, text)) => Located::new(
@@ -657,7 +663,7 @@ mod tests {
         let n = unread_text(Some("tp"), b"").unwrap();
         assert_eq!(
             n.error("p.tp").to_string(),
-            "p.tp: FANUC TP program (a .tp file): a language postproc does not read (it reads ISO G-code, ABB RAPID and KUKA KRL)"
+            "p.tp: FANUC TP program (a .tp file): postproc reads a TP program in its ASCII form, a .ls file (with a robot machine file)"
         );
     }
 

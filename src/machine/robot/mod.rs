@@ -14,6 +14,7 @@
 mod calib;
 pub mod dh;
 pub mod dynamics;
+pub mod fanuc;
 pub mod ik;
 pub mod kinematics;
 mod nearest;
@@ -212,6 +213,8 @@ struct RobotData {
     /// Compensated targets may change configuration or move a joint by
     /// more than [`JOINT_JUMP_MAX_DEG`] (off unless set).
     allow_reconfiguration: bool,
+    /// `fanuc:`: the controller's user and tool frames.
+    fanuc: fanuc::FanucFrames,
     /// The file's values as read, from which [`Robot::with_params`]
     /// validates a robot with some of them changed.
     raw: std::sync::Arc<raw::RawRobot>,
@@ -560,6 +563,7 @@ impl Robot {
             .transpose()?;
         let output = output_decimals(raw.output.as_ref())?;
         let datasheet = raw.datasheet.as_ref().map(datasheet).transpose()?;
+        let fanuc = fanuc::FanucFrames::try_from(raw.fanuc.as_ref())?;
         plausible::check(&raw)?;
         let closed_form = ik::ClosedForm::new(&nominal);
         Ok(Robot {
@@ -586,6 +590,7 @@ impl Robot {
                 output,
                 datasheet,
                 allow_reconfiguration: false,
+                fanuc,
                 raw: std::sync::Arc::new(raw),
             }),
         })
@@ -596,6 +601,12 @@ impl Robot {
     pub fn allowing_reconfiguration(mut self, allow: bool) -> Robot {
         self.d.allow_reconfiguration = allow;
         self
+    }
+
+    /// The FANUC user and tool frames of the file (`fanuc:`; empty without
+    /// it).
+    pub fn fanuc_frames(&self) -> &fanuc::FanucFrames {
+        &self.d.fanuc
     }
 
     /// Display name.

@@ -43,6 +43,9 @@ pub(crate) struct RawRobot {
     pub output: Option<RawOutput>,
     #[serde(default)]
     pub datasheet: Option<RawDatasheet>,
+    /// `fanuc:` — the controller's user and tool frames.
+    #[serde(default)]
+    pub fanuc: Option<super::fanuc::RawFanuc>,
     /// `status` and `calibrations`, read by [`crate::machine::status`].
     #[serde(default, rename = "status")]
     pub _status: Option<serde::de::IgnoredAny>,

@@ -64,6 +64,20 @@ pub enum Instruction {
     UframeNum(u32),
     /// `UTOOL_NUM=n`.
     UtoolNum(u32),
+    /// `UFRAME_NUM=R[i]` (`user`) or `UTOOL_NUM=R[i]`: a frame number
+    /// known at run time only.
+    FrameNumAtRunTime {
+        /// The user frame (`UFRAME_NUM`) rather than the tool frame.
+        user: bool,
+    },
+    /// `UFRAME[i]=…` (`user`) or `UTOOL[i]=…`: the program sets frame `i`
+    /// (from a position register: at run time).
+    SetFrame {
+        /// A user frame rather than a tool frame.
+        user: bool,
+        /// The frame's number.
+        index: u32,
+    },
     /// Anything else (`!comment`, `WAIT`, `CALL`, `PR[1]=…`, …).
     Other,
 }
@@ -279,13 +293,21 @@ fn mn_line(
             rest: as_ + n..(body_at + code_end).max(as_ + n),
         }
     } else if let Some(v) = upper.strip_prefix("UFRAME_NUM") {
-        Instruction::UframeNum(
-            frame_number(v).ok_or_else(|| error(src, file, ts, "UFRAME_NUM needs a number"))?,
-        )
+        match frame_number(v) {
+            Some(n) => Instruction::UframeNum(n),
+            None if is_register(v) => Instruction::FrameNumAtRunTime { user: true },
+            None => return Err(error(src, file, ts, "UFRAME_NUM needs a number")),
+        }
     } else if let Some(v) = upper.strip_prefix("UTOOL_NUM") {
-        Instruction::UtoolNum(
-            frame_number(v).ok_or_else(|| error(src, file, ts, "UTOOL_NUM needs a number"))?,
-        )
+        match frame_number(v) {
+            Some(n) => Instruction::UtoolNum(n),
+            None if is_register(v) => Instruction::FrameNumAtRunTime { user: false },
+            None => return Err(error(src, file, ts, "UTOOL_NUM needs a number")),
+        }
+    } else if let Some(index) = set_frame(&upper, "UFRAME[") {
+        Instruction::SetFrame { user: true, index }
+    } else if let Some(index) = set_frame(&upper, "UTOOL[") {
+        Instruction::SetFrame { user: false, index }
     } else {
         Instruction::Other
     };
@@ -313,6 +335,21 @@ fn motion_of(t: &str) -> Option<Motion> {
 fn frame_number(v: &str) -> Option<u32> {
     let v = v.trim_start().strip_prefix('=')?.trim();
     v.trim_end_matches(';').trim().parse().ok()
+}
+
+/// Whether `=…` of `UFRAME_NUM=…` names a register (`=R[1]`, `=AR[1]`).
+fn is_register(v: &str) -> bool {
+    v.trim_start()
+        .strip_prefix('=')
+        .is_some_and(|r| r.trim_start().starts_with(['R', 'A']))
+}
+
+/// `i` of `UFRAME[i]=…` (upper-case `t`, `head` is `UFRAME[` or `UTOOL[`).
+fn set_frame(t: &str, head: &str) -> Option<u32> {
+    let r = t.strip_prefix(head)?;
+    let (i, after) = r.split_once(']')?;
+    after.trim_start().starts_with('=').then_some(())?;
+    i.trim().parse().ok()
 }
 
 /// `P[n]`, `P[n:comment]`, `PR[n]` at the start of `t` (which starts at

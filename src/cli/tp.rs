@@ -1,0 +1,292 @@
+//! `postproc check`, `compensate` and `report` of a FANUC TP program in
+//! its ASCII form (`.ls`). The program is resolved into the robot move
+//! stream ([`crate::program::tp::resolve`]) with the user and tool frames
+//! of the robot file (`fanuc:`), run through the robot pipeline
+//! ([`crate::pipeline::robot`]) and written back by the TP writer
+//! ([`crate::emit::tp`]) to `<stem>.comp.ls` (the one output-naming rule),
+//! with the provenance header as `!` lines after the `/PROG` line.
+
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+use super::output::Staged;
+use super::{CheckArgs, CompensateArgs, ReportArgs};
+use crate::compensate::outcome::Compensated;
+use crate::emit::header::{Provenance, Syntax};
+use crate::emit::tp::{Solved, TpWrite, rewrite};
+use crate::error::{Error, Result};
+use crate::machine::Machine;
+use crate::machine::robot::Robot;
+use crate::pipeline::rapid::{RapidOptions, refuse_left_as_written};
+use crate::pipeline::robot::{RobotRun, StepResult};
+use crate::predict::robot::Effects;
+use crate::program::charset::{Charset, Latin1Writer};
+use crate::program::robot_moves::RobotStep;
+use crate::program::tp::resolve::resolve;
+use crate::program::tp::{Program, parse};
+
+/// Whether `path` is a TP program postproc reads: a `.ls` file.
+pub fn is_tp(path: &Path) -> bool {
+    path.extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("ls"))
+}
+
+/// The program: its path, name in messages, text, character set and
+/// parsed form.
+struct Text {
+    path: PathBuf,
+    name: String,
+    text: String,
+    charset: Charset,
+    program: Program,
+}
+
+fn read(path: &Path, more: &[PathBuf]) -> Result<Text> {
+    if let Some(m) = more.first() {
+        return Err(super::usage(format!(
+            "{}: a TP program is one .ls file; its frames are in the robot file",
+            m.display()
+        )));
+    }
+    let name = path.display().to_string();
+    let bytes = crate::limits::read_file_bounded(path, u64::MAX)?;
+    let (text, charset) = crate::program::charset::decode(bytes);
+    let program = parse(&text, &name)?;
+    Ok(Text {
+        path: path.to_path_buf(),
+        name,
+        text,
+        charset,
+        program,
+    })
+}
+
+/// The robot of `--machine` (a robot), with the process-force flags.
+fn robot_of(
+    machine: Option<&str>,
+    command: &str,
+    effects: Option<&super::EffectArgs>,
+) -> Result<(Robot, super::machines::Loaded)> {
+    let name = super::config::needed(machine, command)?;
+    let (m, loaded) = super::machines::open(name)?;
+    let Machine::Robot(r) = m else {
+        return Err(super::config::not_a_robot(&loaded));
+    };
+    match effects {
+        Some(e) => Ok((super::rapid::robot_with_process(r, e)?, loaded)),
+        None => Ok((r, loaded)),
+    }
+}
+
+/// Runs the pipeline over the program's stream.
+fn run(t: &Text, robot: &Robot, opts: &RapidOptions) -> Result<(Vec<RobotStep>, RobotRun)> {
+    let steps = resolve(&t.program, &t.text, robot.fanuc_frames());
+    let run = crate::pipeline::robot::run(robot, &steps, opts, &t.name)?;
+    refuse_left_as_written(&run.summary.warnings, &t.name, opts)?;
+    Ok((steps, run))
+}
+
+/// `postproc check` of a TP program: its syntax and resolution (with the
+/// frames of `--machine`, and then every target reached in its
+/// configuration).
+pub fn check(a: &CheckArgs) -> Result<i32> {
+    let t = read(&a.program.file, &a.program.more)?;
+    let steps = match a.program.machine.as_deref() {
+        Some(m) => {
+            let (robot, _) = robot_of(Some(m), "check", None)?;
+            let opts = RapidOptions {
+                effects: Effects::NONE,
+                records: false,
+                strict: a.program.strict,
+                ..RapidOptions::default()
+            };
+            run(&t, &robot, &opts)?.0
+        }
+        None => resolve(&t.program, &t.text, &Default::default()),
+    };
+    let count = |f: fn(&RobotStep) -> bool| steps.iter().filter(|s| f(s)).count();
+    let targets = count(|s| matches!(s, RobotStep::Target(_)));
+    let joints = count(|s| matches!(s, RobotStep::Joints(_)));
+    let left = count(|s| matches!(s, RobotStep::Left(_)));
+    let mut out = std::io::stdout().lock();
+    writeln!(
+        out,
+        "{}: FANUC TP program {}, {} ({targets} targets, {joints} joint targets, {left} left as written)",
+        a.program.file.display(),
+        t.program.name,
+        if steps.len() == 1 {
+            "1 motion".to_string()
+        } else {
+            format!("{} motions", steps.len())
+        }
+    )
+    .map_err(|e| Error::io("stdout", e))?;
+    Ok(0)
+}
+
+/// `text` with the provenance header as `!` lines after its `/PROG` line
+/// (at the start when it has none), in the file's line ending.
+fn with_header(text: &str, provenance: &Provenance) -> String {
+    let eol = if text.contains("\r\n") { "\r\n" } else { "\n" };
+    let mut at = 0;
+    for l in text.split_inclusive('\n') {
+        at += l.len();
+        if l.trim_start().starts_with("/PROG") {
+            break;
+        }
+        if !l.trim().is_empty() {
+            at = 0;
+            break;
+        }
+    }
+    let header = provenance.render(Syntax::Rapid, eol.as_bytes());
+    let mut out = String::with_capacity(text.len() + header.len() + 2);
+    out.push_str(&text[..at]);
+    if at > 0 && !text[..at].ends_with('\n') {
+        out.push_str(eol);
+    }
+    out.push_str(&String::from_utf8_lossy(&header));
+    out.push_str(&text[at..]);
+    out
+}
+
+/// `postproc compensate` of a TP program.
+pub fn compensate(a: &CompensateArgs, quiet: bool) -> Result<i32> {
+    let (robot, loaded) = robot_of(a.program.machine.as_deref(), "compensate", Some(&a.effects))?;
+    let opts = RapidOptions {
+        records: a.report.is_some(),
+        strict: a.program.strict,
+        ..super::rapid::rapid_options(&robot, &a.effects, false, a.decimals)?
+    };
+    let provenance = super::machines::provenance(
+        &loaded,
+        super::machines::robot_effects(&opts.effects),
+        None,
+        false,
+    );
+    let src = &a.program.file;
+    let out = super::output::output_path(src, a.output.as_deref(), None, &[])?;
+    let report = a.report.as_deref().map(|path| {
+        let format = a
+            .report_format
+            .unwrap_or_else(|| super::Format::from_path(path));
+        (path, format)
+    });
+    let job = Job {
+        robot: &robot,
+        opts: &opts,
+        provenance: &provenance,
+        recompensate: a.recompensate,
+    };
+    let summary = compensate_to(&job, (src, &a.program.more), &out, report)?;
+    for w in summary.warnings.iter().filter(|w| w.left.is_none()) {
+        tracing::warn!("{}: {}", src.display(), w.message);
+    }
+    super::rapid::log_outcome(&src.display().to_string(), &out, &summary, quiet);
+    Ok(0)
+}
+
+/// What a compensation of TP programs runs with.
+pub(super) struct Job<'a> {
+    /// The robot, with the run's process force.
+    pub(super) robot: &'a Robot,
+    /// The run's options.
+    pub(super) opts: &'a RapidOptions,
+    /// The header of the outputs.
+    pub(super) provenance: &'a Provenance,
+    /// `--recompensate`.
+    pub(super) recompensate: bool,
+}
+
+/// Compensates the TP program `src` into `out`, with its report; no file
+/// is put in place unless all are written.
+pub(super) fn compensate_to(
+    job: &Job,
+    (src, more): (&Path, &[PathBuf]),
+    out: &Path,
+    report: Option<(&Path, super::Format)>,
+) -> Result<crate::compensate::outcome::Summary> {
+    let t = read(src, more)?;
+    super::machines::refuse_compensated(t.text.as_bytes(), &t.name, job.recompensate)?;
+    let (steps, mut run) = run(&t, job.robot, job.opts)?;
+    let solved: Vec<Solved> = run
+        .results
+        .iter()
+        .map(|r| match r {
+            StepResult::Compensated { target, via } => Some((&**target, via.as_deref())),
+            _ => None,
+        })
+        .collect();
+    let how = TpWrite {
+        decimals: job.opts.format.position_decimals,
+        compensate: job.opts.effects.compensates(),
+    };
+    let (text, warnings) = rewrite(&t.text, &t.program, &steps, &solved, job.robot, how)?;
+    run.summary.warnings.extend(warnings);
+    let inputs = [t.path.as_path()];
+    super::output::refuse_overwrite(out, &inputs)?;
+    let mut pending = vec![stage(out, &with_header(&text, job.provenance), t.charset)?];
+    if let Some((path, format)) = report {
+        super::output::refuse_overwrite(path, &inputs)?;
+        let mut rep = Staged::open(path)?;
+        write_report(rep.writer(), run.clone(), &t.name, format, job.provenance)?;
+        pending.push(rep.finish()?);
+    }
+    for p in pending {
+        p.commit()?;
+    }
+    Ok(run.summary)
+}
+
+/// Writes `text` to a staged file in `charset`.
+fn stage(path: &Path, text: &str, charset: Charset) -> Result<super::output::Pending> {
+    let mut out = Staged::open(path)?;
+    let written = match charset {
+        Charset::Utf8 => out.writer().write_all(text.as_bytes()),
+        Charset::Latin1 => {
+            let mut w = Latin1Writer::new(out.writer());
+            w.write_all(text.as_bytes()).and_then(|()| w.flush())
+        }
+    };
+    written.map_err(|e| Error::io(path, e))?;
+    out.finish()
+}
+
+/// Writes the deviation report of a run.
+fn write_report(
+    out: &mut dyn Write,
+    run: RobotRun,
+    name: &str,
+    format: super::Format,
+    provenance: &Provenance,
+) -> Result<()> {
+    let outcome = Compensated {
+        text: String::new(),
+        summary: run.summary,
+        records: run.records,
+    };
+    super::rapid::write_report(out, &outcome, name, format, Some(provenance))
+}
+
+/// `postproc report` of a TP program (a dry run against a robot).
+pub fn report(a: &ReportArgs) -> Result<i32> {
+    let (robot, loaded) = robot_of(a.program.machine.as_deref(), "report", Some(&a.effects))?;
+    let t = read(&a.program.file, &a.program.more)?;
+    let opts = RapidOptions {
+        strict: a.program.strict,
+        ..super::rapid::rapid_options(&robot, &a.effects, false, None)?
+    };
+    let (_, run) = run(&t, &robot, &opts)?;
+    let provenance = super::machines::provenance(
+        &loaded,
+        super::machines::robot_effects(&opts.effects),
+        None,
+        false,
+    );
+    let out = a.output.clone().unwrap_or_else(|| PathBuf::from("-"));
+    super::output::refuse_overwrite(&out, &[t.path.as_path()])?;
+    super::output::emit_to(&out, |w| {
+        write_report(w, run, &t.name, a.format, &provenance)
+    })?;
+    Ok(0)
+}

@@ -1,0 +1,187 @@
+//! The byte-faithful TP writer: a compensated run over a `.ls` program's
+//! move stream ([`crate::pipeline::robot`]) written back into its `/POS`.
+//! Only the numbers of the compensated positions change — `X`, `Y`, `Z`,
+//! `W`, `P`, `R` of group `GP1`, in place, right-aligned in the width the
+//! number and the blanks before it had (the controller's columns), and its
+//! `CONFIG` when the compensated joint solution has other turn numbers.
+//! `/MN` is the input's bytes (so `/ATTR`'s `LINE_COUNT` stays right), and
+//! so is everything else: TP has no comment that could end a motion line,
+//! so the predicted deviation goes to the report only.
+//!
+//! Positions and angles get the robot's position decimals (the controller
+//! writes three); `W` and `R` are turned by whole turns to the written
+//! values nearest (the same rotation). A position that two moves
+//! compensate differently (another tool or configuration) keeps the first
+//! one's numbers; the second move is warned about as left as written.
+
+use std::collections::HashMap;
+use std::ops::Range;
+
+use crate::compensate::robot::Compensation;
+use crate::emit::rapid::{EditList, push_fixed};
+use crate::error::{Error, Result};
+use crate::machine::robot::Robot;
+use crate::program::euler::quaternion_to_zyx;
+use crate::program::interp::Warning;
+use crate::program::robot_moves::{LeftAsWritten, Place, RobotStep};
+use crate::program::tp::config::Config;
+use crate::program::tp::{Group, Number, Position, Program};
+
+/// How the writer formats.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct TpWrite {
+    /// Decimals of positions (mm) and angles (degrees).
+    pub decimals: usize,
+    /// Write the compensated numbers (false: a run that predicts only).
+    pub compensate: bool,
+}
+
+/// The compensation of one step of a run: its target's and its via
+/// point's (`None` for a step not compensated).
+pub type Solved<'a> = Option<(&'a Compensation, Option<&'a Compensation>)>;
+
+/// `v` turned by whole turns to the value nearest `written`, degrees.
+fn nearest_turn(v: f64, written: f64) -> f64 {
+    v + 360.0 * ((written - v) / 360.0).round()
+}
+
+/// The edit of number `n` to `v`: the number and the blanks before it
+/// replaced by `v` right-aligned in their width (at least one blank kept
+/// when there was one).
+fn number_edit(text: &str, n: &Number, v: f64, decimals: usize) -> Result<(Range<usize>, String)> {
+    let mut s = String::new();
+    if !push_fixed(&mut s, v, decimals) {
+        return Err(Error::Internal(format!(
+            "a compensated value is not finite: {v}"
+        )));
+    }
+    let before = text.get(..n.span.start).unwrap_or("");
+    let blanks = before.len() - before.trim_end_matches(' ').len();
+    let width = blanks + n.span.len();
+    let min = s.len() + usize::from(blanks > 0);
+    let field = format!("{s:>w$}", w = width.max(min));
+    Ok((n.span.start - blanks..n.span.end, field))
+}
+
+/// The edits of a group given its new pose (in its user frame) and, when
+/// it changed, its new configuration.
+fn group_edits(
+    text: &str,
+    g: &Group,
+    pose: &nalgebra::Isometry3<f64>,
+    config: Option<Config>,
+    decimals: usize,
+) -> Result<Vec<(Range<usize>, String)>> {
+    let t = pose.translation.vector;
+    let (r, p, w) = quaternion_to_zyx(&pose.rotation);
+    let written = |k: &str| g.value(k).map_or(0.0, |n| n.value);
+    let values = [
+        ("X", t.x),
+        ("Y", t.y),
+        ("Z", t.z),
+        ("W", nearest_turn(w, written("W"))),
+        ("P", p),
+        ("R", nearest_turn(r, written("R"))),
+    ];
+    let mut out = Vec::with_capacity(7);
+    for (k, v) in values {
+        let n = g
+            .value(k)
+            .ok_or_else(|| Error::Internal(format!("position without {k}")))?;
+        out.push(number_edit(text, n, v, decimals)?);
+    }
+    if let (Some(c), Some((_, span))) = (config, &g.config) {
+        out.push((span.clone(), c.to_string()));
+    }
+    Ok(out)
+}
+
+/// Writes a run back: the new text of `text` from the compensation of each
+/// step, with the warnings of moves whose position another move
+/// compensated differently.
+pub fn rewrite(
+    text: &str,
+    program: &Program,
+    steps: &[RobotStep],
+    solved: &[Solved],
+    robot: &Robot,
+    how: TpWrite,
+) -> Result<(String, Vec<Warning>)> {
+    let positions: HashMap<usize, &Position> = program
+        .positions
+        .iter()
+        .map(|p| (p.span.start, p))
+        .collect();
+    let mut edits = EditList::new();
+    let mut owner: HashMap<Place, (usize, String)> = HashMap::new();
+    let mut warnings = Vec::new();
+    for (step, result) in steps.iter().zip(solved) {
+        let (RobotStep::Target(t), Some((target, via))) = (step, result) else {
+            continue;
+        };
+        if !how.compensate {
+            continue;
+        }
+        let places = std::iter::once((&t.place, target, true)).chain(
+            t.via
+                .as_ref()
+                .zip(via.as_ref())
+                .map(|((_, p), c)| (p, c, false)),
+        );
+        for (place, comp, is_target) in places {
+            let group = positions
+                .get(&place.span.start)
+                .and_then(|p| p.groups.iter().find(|g| g.name == "GP1"))
+                .ok_or_else(|| Error::Internal("a target's position was not found".into()))?;
+            let pose = t.work.inverse() * comp.pose;
+            let before = Config::of_joints(robot, &comp.q_programmed);
+            let after = Config::of_joints(robot, &comp.q_compensated);
+            let config = (is_target && before != after).then_some(after);
+            let mine = group_edits(text, group, &pose, config, how.decimals)?;
+            let key: String = mine
+                .iter()
+                .map(|(_, s)| s.trim())
+                .collect::<Vec<_>>()
+                .join(",");
+            match owner.get(place) {
+                None => {
+                    owner.insert(place.clone(), (t.line, key));
+                    for (span, s) in &mine {
+                        edits.push_str(span.clone(), s);
+                    }
+                }
+                Some((_, k)) if *k == key => {}
+                Some((line, _)) => warnings.push(LeftAsWritten::warning(
+                    t.line,
+                    t.column,
+                    t.instruction,
+                    &format!(
+                        "its position is compensated for the move at line {line}, with another tool or configuration"
+                    ),
+                )),
+            }
+        }
+    }
+    Ok((edits.apply(text)?, warnings))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn numbers_keep_their_columns() {
+        let text = "X =   420.500  mm";
+        let n = Number {
+            value: 420.5,
+            span: 6..13,
+        };
+        let (span, s) = number_edit(text, &n, 421.25, 3).expect("finite");
+        assert_eq!((span, s.as_str()), (3..13, "   421.250"));
+        let (_, s) = number_edit(text, &n, -1234.5, 3).expect("finite");
+        assert_eq!(s, " -1234.500");
+        let (_, s) = number_edit(text, &n, -123456.5, 3).expect("finite");
+        assert_eq!(s, " -123456.500");
+        assert!(number_edit(text, &n, f64::NAN, 3).is_err());
+    }
+}
