@@ -1,6 +1,7 @@
 //! Integration tests: files in robot and control languages postproc does
-//! not read (FANUC TP, Yaskawa JBI, URScript, Stäubli VAL3, native Siemens
-//! 840D, Heidenhain conversational; KUKA KRL other than a `.src`) get one
+//! not read (FANUC TP other than a `.ls`, Yaskawa JBI, URScript, Stäubli
+//! VAL3, native Siemens 840D, Heidenhain conversational; KUKA KRL other
+//! than a `.src`) get one
 //! message naming their language at `check`, `compensate`, `report` and
 //! `batch`, exit 2; a KRL `DEF MAIN()` is never taken for Siemens 840D, and
 //! a KRL `.src` is read. The programs are
@@ -18,12 +19,6 @@ const PROGRAMS: &[(&str, &str, &str, Option<&str>)] = &[
         "&ACCESS RVP\r\n&REL 12\r\nDEFDAT  pallet\r\nDECL E6POS XP1={X 812.5,Y -140.0,Z 655.0,A 180.0,B 0.0,C 180.0,S 2,T 35,E1 0.0}\r\nENDDAT\r\n",
         "KUKA KRL",
         Some("&ACCESS RVP"),
-    ),
-    (
-        "bin_drop.ls",
-        "/PROG  BIN_1_DROP\n/ATTR\nOWNER\t\t= MNEDITOR;\nCOMMENT\t\t= \"drop at bin 1\";\nLINE_COUNT\t= 3;\nDEFAULT_GROUP\t= 1,*,*,*,*;\n/MN\n   1:  UFRAME_NUM=1 ;\n   2:  UTOOL_NUM=2 ;\n   3:J P[1] 100% FINE    ;\n/POS\nP[1]{\n   GP1:\n\tUF : 1, UT : 2,\t\tCONFIG : 'N U T, 0, 0, 0',\n\tX =   450.000  mm,\tY =     0.000  mm,\tZ =   300.000  mm,\n\tW =   180.000 deg,\tP =     0.000 deg,\tR =     0.000 deg\n};\n/END\n",
-        "FANUC TP",
-        Some("/PROG  BIN_1_DROP"),
     ),
     (
         "WELD01.JBI",
@@ -85,6 +80,8 @@ fn assert_named(err: &str, path: &Path, lang: &str, line: Option<&str>, what: &s
     assert!(msg.contains(lang), "{what}: names {lang}: {msg}");
     let told = if lang == "KUKA KRL" {
         "postproc reads a KRL program from its .src"
+    } else if lang == "FANUC TP" {
+        "postproc reads a TP program in its ASCII form, a .ls file"
     } else {
         "a language postproc does not read"
     };
@@ -237,7 +234,7 @@ fn batch_names_each_unread_file_on_one_line() {
     assert_eq!(unread.len(), n);
     assert!(unread.iter().all(|r| r["output"].is_null()));
     // A file given by name is told the same way.
-    let ls = input.join("bin_drop.ls");
+    let ls = input.join("WELD01.JBI");
     let (code, stdout, _) = run(&[
         "batch",
         "--machine",
@@ -250,7 +247,7 @@ fn batch_names_each_unread_file_on_one_line() {
     assert!(
         stdout
             .lines()
-            .any(|l| l.starts_with("unread    ") && l.contains("FANUC TP")),
+            .any(|l| l.starts_with("unread    ") && l.contains("Yaskawa JBI")),
         "{stdout}"
     );
     assert!(

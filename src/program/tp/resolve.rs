@@ -154,18 +154,22 @@ struct Move<'a> {
     rest: &'a str,
 }
 
+/// A position, its group `GP1`, its user frame and its tool (each known
+/// offline or not).
+type Found<'a> = (
+    &'a Position,
+    &'a Group,
+    Known<Isometry3<f64>>,
+    Known<ToolUse>,
+);
+
 /// A position's group `GP1`, its user frame and its tool, or why not.
 fn located<'a>(
     st: &State,
     frames: &FanucFrames,
     positions: &HashMap<u32, &'a Position>,
     r: &PosRef,
-) -> Known<(
-    &'a Position,
-    &'a Group,
-    Known<Isometry3<f64>>,
-    Known<ToolUse>,
-)> {
+) -> Known<Found<'a>> {
     if r.register {
         return Err(format!(
             "PR[{}] is a position register: its value is in the controller, set at run time",
