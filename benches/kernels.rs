@@ -16,7 +16,6 @@ use postproc::compensate::{Settings, block_after};
 use postproc::machine::Machine;
 use postproc::machine::robot::{ConfData, IkSelect, PointMass, Robot};
 use postproc::pipeline::rapid::{RapidOptions, compensate_module};
-use postproc::predict::robot::Effects;
 use postproc::predict::{EffectSet, ToolPredictor};
 use postproc::program::interp::{Motion, Move, Plan, PlanKind};
 
@@ -141,7 +140,7 @@ fn robot_kernels(c: &mut Criterion) {
                 &r.file_context(),
                 black_box(&pose),
                 black_box(&sel),
-                Effects::ALL,
+                EffectSet::ALL,
             )
         })
     });

@@ -7,8 +7,8 @@
 use nalgebra::{Isometry3, Vector3};
 use postproc::machine::robot::pose::{pose_error, rotation_to_abb};
 use postproc::machine::robot::{ConfData, Model, PointMass, Robot};
+use postproc::predict::EffectSet;
 use postproc::predict::MoveContext;
-use postproc::predict::robot::Effects;
 use postproc::program::rapid::{DataValue, Module, RobTarget, Target, parse_module};
 
 use crate::common::{
@@ -166,7 +166,7 @@ fn conf_off_solves_nearest_and_writes_its_confdata_on_both_robots() {
             }
             let programmed = pose(robtarget(&m_in, declared));
             let (dp, dr) = pose_error(
-                &robot.predict(&MoveContext::default(), &q, Effects::ALL),
+                &robot.predict(&MoveContext::default(), &q, EffectSet::ALL),
                 &programmed,
             );
             assert!(

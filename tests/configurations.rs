@@ -11,8 +11,8 @@ use postproc::machine::robot::ik::{
 };
 use postproc::machine::robot::pose::pose_error;
 use postproc::machine::robot::{ConfData, IkSelect, Model, PointMass, Robot, RobotError};
+use postproc::predict::EffectSet;
 use postproc::predict::MoveContext;
-use postproc::predict::robot::Effects;
 
 use crate::common::repo;
 
@@ -174,7 +174,7 @@ fn compensation_keeps_the_branch_and_writes_the_controllers_confdata() {
                     &MoveContext::default(),
                     &programmed,
                     &IkSelect::Conf(conf),
-                    Effects::ALL,
+                    EffectSet::ALL,
                 )
                 .unwrap_or_else(|e| panic!("{name} y {y}: {e}"));
             assert_eq!(c.conf.cfx, conf.cfx, "{name} y {y}");
@@ -211,7 +211,7 @@ fn compensation_keeps_the_branch_and_writes_the_controllers_confdata() {
                 );
             }
             let (dp, dr) = pose_error(
-                &r.predict(&MoveContext::default(), &q, Effects::ALL),
+                &r.predict(&MoveContext::default(), &q, EffectSet::ALL),
                 &programmed,
             );
             assert!(

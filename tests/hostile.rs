@@ -812,7 +812,7 @@ fn mutants_through_the_binary_exit_cleanly() {
 #[test]
 fn a_compensation_that_flips_the_wrist_near_the_singularity_is_refused() {
     use postproc::machine::robot::{IkSelect, JOINT_JUMP_MAX_DEG, Model, RobotError};
-    use postproc::predict::robot::Effects;
+    use postproc::predict::EffectSet;
     let r = robot("machines/abb-irb1600.yaml");
     let allowing = r.clone().allowing_reconfiguration(true);
     let mut refused = 0;
@@ -823,11 +823,11 @@ fn a_compensation_that_flips_the_wrist_near_the_singularity_is_refused() {
         let programmed = r.tcp_pose(Model::Nominal, &q);
         let sel = IkSelect::Conf(r.confdata(&q));
         let Ok(free) =
-            allowing.compensate(&allowing.file_context(), &programmed, &sel, Effects::ALL)
+            allowing.compensate(&allowing.file_context(), &programmed, &sel, EffectSet::ALL)
         else {
             // No solution at all this close to the singularity.
             assert!(
-                r.compensate(&r.file_context(), &programmed, &sel, Effects::ALL)
+                r.compensate(&r.file_context(), &programmed, &sel, EffectSet::ALL)
                     .is_err()
             );
             continue;
@@ -838,7 +838,7 @@ fn a_compensation_that_flips_the_wrist_near_the_singularity_is_refused() {
             .zip(&free.q_programmed)
             .map(|(a, b)| (a - b).to_degrees().abs())
             .fold(0.0, f64::max);
-        match r.compensate(&r.file_context(), &programmed, &sel, Effects::ALL) {
+        match r.compensate(&r.file_context(), &programmed, &sel, EffectSet::ALL) {
             Err(e @ RobotError::Reconfiguration { .. }) => {
                 refused += 1;
                 assert!(
@@ -863,7 +863,7 @@ fn a_compensation_that_flips_the_wrist_near_the_singularity_is_refused() {
         &r.file_context(),
         &programmed,
         &IkSelect::Conf(r.confdata(&q)),
-        Effects::ALL,
+        EffectSet::ALL,
     )
     .expect("regular target");
 }

@@ -12,8 +12,8 @@ use approx::assert_abs_diff_eq;
 use nalgebra::{Isometry3, Vector3};
 use postproc::machine::robot::pose::pose_error;
 use postproc::machine::robot::{Model, PointMass, Robot};
+use postproc::predict::EffectSet;
 use postproc::predict::MoveContext;
-use postproc::predict::robot::Effects;
 use postproc::program::rapid::{DataValue, Module, RobTarget, parse_module};
 
 use crate::common::{postproc, repo, robtarget_conf, robtarget_pose, without_header, write};
@@ -103,11 +103,11 @@ fn assert_lands(tool: &Robot, written: &RobTarget, programmed: &Isometry3<f64>, 
     let q = tool
         .ik_conf(&robtarget_pose(written), robtarget_conf(written))
         .unwrap_or_else(|e| panic!("{what}: {e}"));
-    let fx = Effects {
+    let fx = EffectSet {
         thermal: 0.0,
         process: 0.0,
         dynamic: 0.0,
-        ..Effects::ALL
+        ..EffectSet::ALL
     };
     let (dp, dr) = pose_error(&tool.predict(&MoveContext::default(), &q, fx), programmed);
     assert_abs_diff_eq!(dp.norm(), 0.0, epsilon = POS_TOL_MM);

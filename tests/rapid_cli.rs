@@ -7,8 +7,8 @@ use postproc::machine::ThermalStart;
 use postproc::machine::robot::pose::pose_error;
 use postproc::machine::robot::{Model, PointMass, Robot};
 use postproc::pipeline::rapid::{RapidOptions, compensate_module};
+use postproc::predict::EffectSet;
 use postproc::predict::MoveContext;
-use postproc::predict::robot::Effects;
 use postproc::program::rapid::{DataValue, Module, RobTarget, Target, parse_module};
 
 use crate::common::{
@@ -136,7 +136,7 @@ fn rapid_compensated_targets_land_on_programmed_poses() {
                 };
                 let q = jt.robax.each_ref().map(|n| n.value.to_radians());
                 let (dp, dr) = pose_error(
-                    &robot.predict(&MoveContext::default(), &q, Effects::ALL),
+                    &robot.predict(&MoveContext::default(), &q, EffectSet::ALL),
                     &goal,
                 );
                 assert_abs_diff_eq!(dp.norm(), 0.0, epsilon = JOINT_POS_TOL_MM);
@@ -153,7 +153,7 @@ fn rapid_compensated_targets_land_on_programmed_poses() {
                 let rt = robtarget(&m_out, n2, None);
                 let q = robot.ik_conf(&pose(rt), conf(rt)).expect("controller IK");
                 let (dp, dr) = pose_error(
-                    &robot.predict(&MoveContext::default(), &q, Effects::ALL),
+                    &robot.predict(&MoveContext::default(), &q, EffectSet::ALL),
                     &programmed,
                 );
                 assert_abs_diff_eq!(dp.norm(), 0.0, epsilon = POS_TOL_MM);
@@ -190,7 +190,7 @@ fn rapid_compensated_targets_land_on_programmed_poses() {
                     .ik_conf(&(w_plate() * pose(rt)), conf(rt))
                     .expect("controller IK");
                 let (dp, dr) = pose_error(
-                    &robot.predict(&MoveContext::default(), &q, Effects::ALL),
+                    &robot.predict(&MoveContext::default(), &q, EffectSet::ALL),
                     &programmed,
                 );
                 assert_abs_diff_eq!(dp.norm(), 0.0, epsilon = POS_TOL_MM);
@@ -428,7 +428,7 @@ fn drilling_sample_thrust_only_on_the_twelve_plunges_and_targets_land() {
         let q = view
             .ik_conf(&(wobj * pose(rt)), conf(rt))
             .expect("controller IK");
-        let (dp, dr) = pose_error(&view.predict(&ctx, &q, Effects::ALL), &programmed);
+        let (dp, dr) = pose_error(&view.predict(&ctx, &q, EffectSet::ALL), &programmed);
         assert_abs_diff_eq!(dp.norm(), 0.0, epsilon = POS_TOL_MM);
         assert_abs_diff_eq!(dr.norm(), 0.0, epsilon = ROT_TOL_RAD);
         checked += 1;
@@ -633,7 +633,7 @@ fn random_written_targets_meet_one_micrometre_and_microradian() {
         let q = view
             .ik_conf(&pose(rout), conf(rout))
             .expect("controller IK");
-        let (dp, dr) = pose_error(&view.predict(&ctx, &q, Effects::ALL), &pose(rin));
+        let (dp, dr) = pose_error(&view.predict(&ctx, &q, EffectSet::ALL), &pose(rin));
         assert_abs_diff_eq!(dp.norm(), 0.0, epsilon = POS_TOL_MM);
         assert_abs_diff_eq!(dr.norm(), 0.0, epsilon = ROT_TOL_RAD);
         checked += 1;
@@ -1169,7 +1169,7 @@ fn process_motion_instructions_are_compensated_and_nothing_else_changes() {
             .ik_conf(&(w_plate() * pose(p_out)), conf(p_out))
             .expect("controller IK");
         let (dp, dr) = pose_error(
-            &robot.predict(&MoveContext::default(), &q, Effects::ALL),
+            &robot.predict(&MoveContext::default(), &q, EffectSet::ALL),
             &programmed,
         );
         assert_abs_diff_eq!(dp.norm(), 0.0, epsilon = POS_TOL_MM);
@@ -1353,9 +1353,9 @@ fn straight_line_targets_are_compensated_where_the_robot_goes() {
     .expect("valid robot")
     // tool0: the flange.
     .with_tool(Isometry3::identity(), None);
-    let kinematic = Effects {
+    let kinematic = EffectSet {
         kinematic: 1.0,
-        ..Effects::NONE
+        ..EffectSet::NONE
     };
     // The second to fourth moves: `MoveJ pApproach` (an assignment of an
     // `Offs` of a constant offset), `MoveL Offs(pPickBase, …)` and `MoveL
@@ -1537,9 +1537,9 @@ fn a_backup_folder_is_one_program_and_only_changed_modules_are_written() {
         Translation3::new(400.0, -300.0, 200.0),
         UnitQuaternion::identity(),
     );
-    let kinematic = Effects {
+    let kinematic = EffectSet {
         kinematic: 1.0,
-        ..Effects::NONE
+        ..EffectSet::NONE
     };
     let moves: Vec<_> = main.moves().collect();
     for (k, base, dz) in [(0, "pPick", 100.0), (1, "pPick", 0.0), (2, "pPlace", 0.0)] {

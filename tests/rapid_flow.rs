@@ -9,8 +9,8 @@ use approx::assert_abs_diff_eq;
 use nalgebra::Isometry3;
 use postproc::machine::robot::pose::pose_error;
 use postproc::machine::robot::{Model, Robot};
+use postproc::predict::EffectSet;
 use postproc::predict::MoveContext;
-use postproc::predict::robot::Effects;
 use postproc::program::rapid::{DataValue, JointTarget, Module, RobTarget, parse_module};
 
 use crate::common::{
@@ -34,9 +34,9 @@ const JOINT_POS_TOL_MM: f64 = 1e-3;
 const JOINT_ROT_TOL_RAD: f64 = 1e-6;
 
 /// The effects the modules are compensated with (`--effects kinematic`).
-const KINEMATIC: Effects = Effects {
+const KINEMATIC: EffectSet = EffectSet {
     kinematic: 1.0,
-    ..Effects::NONE
+    ..EffectSet::NONE
 };
 
 /// A robtarget literal at (x, y, z), tool pointing down.

@@ -12,12 +12,12 @@ use approx::assert_abs_diff_eq;
 use nalgebra::{Isometry3, Vector3};
 use postproc::machine::robot::pose::pose_error;
 use postproc::machine::robot::{PointMass, Robot};
+use postproc::predict::EffectSet;
 use postproc::predict::MoveContext;
-use postproc::predict::robot::Effects;
 
 /// The effects the modules are compensated with (`--effects
 /// kinematic,gravity`), for the forward check.
-const KINEMATIC_GRAVITY: Effects = Effects {
+const KINEMATIC_GRAVITY: EffectSet = EffectSet {
     kinematic: 1.0,
     gravity: 1.0,
     process: 0.0,

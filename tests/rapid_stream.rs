@@ -1029,3 +1029,110 @@ fn moves_left_as_written_give_the_bytes_of_the_whole_module() {
         }
     }
 }
+
+/// Issue 43: a window that continues a routine carries its configuration
+/// monitoring. With `ConfJ \Off` / `ConfL \Off` in force from the first
+/// lines of the routine, windows of every size give the bytes of the
+/// module read whole (before, a window after the switch solved its moves
+/// by their confdata and the run refused them or wrote other targets).
+#[test]
+fn windows_carry_configuration_monitoring_off() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    for (name, text) in crate::conf_off::robots() {
+        let machine = dir.path().join(format!("{name}.yaml"));
+        std::fs::write(&machine, &text).expect("write");
+        let robot = crate::conf_off::with_spindle(
+            postproc::machine::robot::Robot::from_yaml_str(&text, name).expect("valid"),
+        );
+        let (src, _) = crate::conf_off::module(&robot, true);
+        let input = dir.path().join(format!("{name}.mod"));
+        std::fs::write(&input, &src).expect("write");
+        let (m, p) = (machine.to_str().unwrap(), input.to_str().unwrap());
+        let rest = [
+            "--machine",
+            m,
+            "--effects",
+            "kinematic,gravity",
+            p,
+            "-o",
+            "-",
+        ];
+        let mut whole_args = vec!["compensate"];
+        whole_args.extend(rest);
+        let (code, whole, err) = run(&whole_args);
+        assert_eq!(code, 0, "{name} whole: {err}");
+        for lines in ["1", "2", "3", "5"] {
+            let (code, windowed, err) = run_windowed("compensate", lines, &rest);
+            assert_eq!(code, 0, "{name}, windows of {lines} lines: {err}");
+            assert!(
+                err.contains("read a window of"),
+                "{name}, {lines}: read a window at a time: {err}"
+            );
+            assert_eq!(
+                String::from_utf8_lossy(&windowed),
+                String::from_utf8_lossy(&whole),
+                "{name}, windows of {lines} lines"
+            );
+        }
+    }
+}
+
+/// Issue 43: a module of over a megabyte (read a window of 8 192 lines at
+/// a time by default) with `ConfJ \Off` / `ConfL \Off` at the top of its
+/// routine solves the moves after line 8 192 in the configuration of the
+/// moves before them, as one window over the whole routine does.
+#[test]
+fn a_big_module_keeps_configuration_monitoring_off_past_its_first_window() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let (name, text) = crate::conf_off::robots()
+        .into_iter()
+        .next()
+        .expect("a robot");
+    let machine = dir.path().join(format!("{name}.yaml"));
+    std::fs::write(&machine, &text).expect("write");
+    let robot = crate::conf_off::with_spindle(
+        postproc::machine::robot::Robot::from_yaml_str(&text, name).expect("valid"),
+    );
+    let (small, _) = crate::conf_off::module(&robot, true);
+    // The small module's declarations and switches, then moves between its
+    // two targets of wrong confdata, each after a long comment line, to
+    // over a megabyte and past line 8 192.
+    let head = &small[..small.find("    MoveJ pA").expect("MoveJ")];
+    let mut src = String::from(head);
+    let comment = format!("    ! {}\n", "-".repeat(200));
+    let mut k = 0;
+    while src.len() < (1 << 20) + 4096 {
+        src.push_str(&comment);
+        src.push_str(if k % 2 == 0 {
+            "    MoveL pB, v100, z1, tSpindle;\n"
+        } else {
+            "    MoveL pA, v100, z1, tSpindle;\n"
+        });
+        k += 1;
+    }
+    src.push_str("  ENDPROC\nENDMODULE\n");
+    assert!(src.lines().count() > 8192 + 100);
+    let input = dir.path().join("big.mod");
+    std::fs::write(&input, &src).expect("write");
+    let (m, p) = (machine.to_str().unwrap(), input.to_str().unwrap());
+    let rest = [
+        "--machine",
+        m,
+        "--effects",
+        "kinematic,gravity",
+        p,
+        "-o",
+        "-",
+    ];
+    let mut default_args = vec!["-v", "compensate"];
+    default_args.extend(rest);
+    let (code, by_default, err) = run(&default_args);
+    assert_eq!(code, 0, "read a window at a time by default: {err}");
+    assert!(err.contains("read a window of 8192 lines"), "{err}");
+    let (code, one_window, err) = run_windowed("compensate", "1000000", &rest);
+    assert_eq!(code, 0, "one window: {err}");
+    assert!(
+        by_default == one_window,
+        "the windows of 8192 lines give other bytes than one window"
+    );
+}

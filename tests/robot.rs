@@ -8,8 +8,8 @@ use approx::assert_abs_diff_eq;
 use nalgebra::{Isometry3, Matrix6, Point3, UnitQuaternion, Vector3, Vector6};
 use postproc::machine::Machine;
 use postproc::machine::robot::{ConfData, IkSelect, Model, Robot, RobotError, pose::pose_error};
+use postproc::predict::EffectSet;
 use postproc::predict::MoveContext;
-use postproc::predict::robot::Effects;
 
 /// Position tolerance of exact geometry, mm.
 const POS_TOL_MM: f64 = 1e-9;
@@ -479,7 +479,7 @@ fn compensation_reaches_the_programmed_pose() {
                 &r.file_context(),
                 &programmed,
                 &IkSelect::Conf(conf),
-                Effects::ALL,
+                EffectSet::ALL,
             )
             .unwrap_or_else(|e| panic!("{e} at {:?}", q.map(f64::to_degrees)));
         // Independent check: the controller's IK of the compensated pose,
@@ -487,7 +487,7 @@ fn compensation_reaches_the_programmed_pose() {
         let qc = r.ik_conf(&c.pose, c.conf).expect("reachable");
         assert_eq!(c.conf.cfx, conf.cfx);
         let (dp, dr) = pose_error(
-            &r.predict(&r.file_context(), &qc, Effects::ALL),
+            &r.predict(&r.file_context(), &qc, EffectSet::ALL),
             &programmed,
         );
         assert_abs_diff_eq!(dp.norm(), 0.0, epsilon = COMP_POS_TOL_MM);
@@ -513,7 +513,7 @@ fn compensation_with_everything_off_is_identity() {
                 &r.file_context(),
                 &programmed,
                 &IkSelect::Conf(r.confdata(&q)),
-                Effects::NONE,
+                EffectSet::NONE,
             )
             .expect("trivial");
         assert_eq!(c.pose, programmed);
@@ -537,14 +537,14 @@ fn tx200_compensation_with_seed() {
                 &r.file_context(),
                 &programmed,
                 &IkSelect::Near(q),
-                Effects::ALL,
+                EffectSet::ALL,
             )
             .expect("converges");
         let qc = r
             .ik_numeric(Model::Nominal, &c.pose, &q)
             .expect("reachable");
         let (dp, dr) = pose_error(
-            &r.predict(&r.file_context(), &qc, Effects::ALL),
+            &r.predict(&r.file_context(), &qc, EffectSet::ALL),
             &programmed,
         );
         assert_abs_diff_eq!(dp.norm(), 0.0, epsilon = COMP_POS_TOL_MM);
@@ -757,9 +757,9 @@ fn drilling_thrust_deflection_is_hand_derived() {
     //   Δz = +700·122.4·847.5 / 4.3004e8 = +0.1688536 mm.
     let view = r.with_tool(Isometry3::translation(0.0, 0.0, 182.5), None);
     let ctx = MoveContext::default().with_wrench(pf.drilling_wrench(4.0, &Vector3::x()));
-    let only_process = Effects {
+    let only_process = EffectSet {
         process: 1.0,
-        ..Effects::NONE
+        ..EffectSet::NONE
     };
     let q = [0.0; 6];
     let d = view.predict(&ctx, &q, only_process).translation.vector
@@ -828,40 +828,40 @@ fn toggling_an_effect_removes_its_share_and_gains_scale_it() {
     .with_joint_powers([126.0, 112.0, 38.0, 0.0, 0.0, 0.0]);
     let programmed = view.tcp_pose(Model::Nominal, &q);
     let sel = IkSelect::Conf(view.confdata(&q));
-    let dev = |e: Effects| {
+    let dev = |e: EffectSet| {
         view.compensate(&ctx, &programmed, &sel, e)
             .expect("ok")
             .deviation
     };
-    let all = dev(Effects::ALL);
+    let all = dev(EffectSet::ALL);
     assert!(all.thermal.pos_mm.norm() > 0.05, "{:?}", all.thermal);
     for (name, off) in [
         (
             "kinematic",
-            Effects {
+            EffectSet {
                 kinematic: 0.0,
-                ..Effects::ALL
+                ..EffectSet::ALL
             },
         ),
         (
             "thermal",
-            Effects {
+            EffectSet {
                 thermal: 0.0,
-                ..Effects::ALL
+                ..EffectSet::ALL
             },
         ),
         (
             "gravity",
-            Effects {
+            EffectSet {
                 gravity: 0.0,
-                ..Effects::ALL
+                ..EffectSet::ALL
             },
         ),
         (
             "process",
-            Effects {
+            EffectSet {
                 process: 0.0,
-                ..Effects::ALL
+                ..EffectSet::ALL
             },
         ),
     ] {
@@ -879,10 +879,10 @@ fn toggling_an_effect_removes_its_share_and_gains_scale_it() {
         );
     }
     // Gains: half the gravity and thermal gain, half the share.
-    let half = dev(Effects {
+    let half = dev(EffectSet {
         gravity: 0.5,
         thermal: 0.5,
-        ..Effects::ALL
+        ..EffectSet::ALL
     });
     assert_abs_diff_eq!(
         half.gravity.pos_mm,
@@ -896,9 +896,9 @@ fn toggling_an_effect_removes_its_share_and_gains_scale_it() {
     );
     // Dynamic: reported only, scales with its gain, no effect on targets.
     assert!(all.vibration_mm.norm() > 0.0);
-    let no_vib = dev(Effects {
+    let no_vib = dev(EffectSet {
         dynamic: 0.0,
-        ..Effects::ALL
+        ..EffectSet::ALL
     });
     assert_eq!(no_vib.total, all.total);
     assert_eq!(no_vib.vibration_mm, Vector3::zeros());

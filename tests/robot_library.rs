@@ -32,8 +32,8 @@ use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 use postproc::machine::robot::pose::pose_error;
 use postproc::machine::robot::{Model, PointMass, Robot};
 use postproc::machine::{Machine, MachineFile, Status};
+use postproc::predict::EffectSet;
 use postproc::predict::MoveContext;
-use postproc::predict::robot::Effects;
 use postproc::program::rapid::{DataValue, Module, RobTarget, Target, parse_module};
 use rs_opw_kinematics::kinematic_traits::Kinematics;
 use rs_opw_kinematics::kinematics_impl::OPWKinematics;
@@ -1098,7 +1098,10 @@ fn robotstudio_paths_compensate_onto_their_programmed_poses() {
                 .ik_conf(&(wobj * pose(rt_out)), conf(rt_out))
                 .unwrap_or_else(|e| panic!("{} line {}: {e}", cell.module, mi.line));
             let goal = wobj * pose(rt_in);
-            let (dp, dr) = pose_error(&r.predict(&MoveContext::default(), &q, Effects::ALL), &goal);
+            let (dp, dr) = pose_error(
+                &r.predict(&MoveContext::default(), &q, EffectSet::ALL),
+                &goal,
+            );
             assert!(
                 dp.norm() < POS_TOL_MM,
                 "{} line {}: {} mm",

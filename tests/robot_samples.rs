@@ -15,8 +15,8 @@
 use nalgebra::{Isometry3, Translation3, Vector3};
 use postproc::machine::robot::pose::pose_error;
 use postproc::machine::robot::{Model, PointMass, Robot};
+use postproc::predict::EffectSet;
 use postproc::predict::MoveContext;
-use postproc::predict::robot::Effects;
 use postproc::program::rapid::{DataValue, Module, RobTarget, Target, parse_module};
 
 use crate::common::{
@@ -180,7 +180,7 @@ fn both_robots_compensate_every_sample_within_the_tolerance() {
                         );
                         let q = jt.robax.each_ref().map(|n| n.value.to_radians());
                         let (dp, dr) = pose_error(
-                            &robot.predict(&MoveContext::default(), &q, Effects::ALL),
+                            &robot.predict(&MoveContext::default(), &q, EffectSet::ALL),
                             &goal,
                         );
                         (dp, dr, (JOINT_POS_TOL_MM, JOINT_ROT_TOL_RAD))
@@ -195,7 +195,7 @@ fn both_robots_compensate_every_sample_within_the_tolerance() {
                             .ik_conf(&(frame * pose(rt)), conf(rt))
                             .unwrap_or_else(|e| panic!("{what}: controller IK: {e}"));
                         let (dp, dr) = pose_error(
-                            &robot.predict(&MoveContext::default(), &q, Effects::ALL),
+                            &robot.predict(&MoveContext::default(), &q, EffectSet::ALL),
                             &programmed(&m_in, &mi.target),
                         );
                         (dp, dr, (POS_TOL_MM, ROT_TOL_RAD))
@@ -421,10 +421,10 @@ fn bundled_tx200_compensates_the_controller_backup_within_the_tolerance() {
         t => panic!("unexpected target {t:?}"),
     };
     let robot = Robot::from_yaml_str(&text("machines/staubli-tx200.yaml"), "tx200").expect("valid");
-    let effects = Effects {
+    let effects = EffectSet {
         kinematic: 1.0,
         gravity: 1.0,
-        ..Effects::NONE
+        ..EffectSet::NONE
     };
     let (a, b): (Vec<_>, Vec<_>) = (m_in.moves().collect(), m_out.moves().collect());
     assert_eq!(a.len(), b.len());

@@ -21,7 +21,7 @@ use crate::machine::Machine;
 use crate::machine::robot::Robot;
 use crate::pipeline::rapid::{RapidOptions, refuse_left_as_written};
 use crate::pipeline::robot::RobotRun;
-use crate::predict::robot::Effects;
+use crate::predict::EffectSet;
 use crate::program::charset::{Charset, Latin1Writer};
 use crate::program::krl::resolve::{Program, resolve};
 use crate::program::krl::syntax::{File, parse};
@@ -167,7 +167,7 @@ pub fn check(a: &CheckArgs) -> Result<i32> {
     if a.program.machine.is_some() {
         let (robot, _) = robot_of(a.program.machine.as_deref(), "check", None)?;
         let opts = RapidOptions {
-            effects: Effects::NONE,
+            effects: EffectSet::NONE,
             records: false,
             strict: a.program.strict,
             ..RapidOptions::default()

@@ -15,7 +15,7 @@ use crate::machine::ThermalStart;
 use crate::machine::robot::Robot;
 use crate::pipeline::rapid::program::{compensate_member, left_as_written_member};
 use crate::pipeline::rapid::{RapidOptions, compensate_module, compensate_parsed, stream};
-use crate::predict::robot::Effects;
+use crate::predict::EffectSet;
 use crate::program::charset::{Charset, Latin1Writer, file_columns};
 use crate::program::rapid::program::{is_program, load, module_files};
 
@@ -354,7 +354,7 @@ fn check_streamed(
 /// nothing (`strict`: refuse a move left as written).
 fn check_options(strict: bool) -> RapidOptions {
     RapidOptions {
-        effects: Effects::NONE,
+        effects: EffectSet::NONE,
         annotate: false,
         format: Format::default(),
         thermal_start: ThermalStart::Cold,
@@ -394,7 +394,7 @@ pub(super) fn rapid_options(
         None => None,
     };
     Ok(RapidOptions {
-        effects: Effects::from_flags(
+        effects: EffectSet::from_flags(
             &effects.effects,
             &effects.gains,
             crate::predict::MachineKind::Robot,

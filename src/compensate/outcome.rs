@@ -10,8 +10,8 @@
 use crate::compensate::BlockResult;
 use crate::machine::AxisVec;
 use crate::machine::tool::thermal::Powers;
+use crate::predict::Breakdown;
 use crate::predict::Wrench;
-use crate::predict::robot::Deviation;
 use crate::program::interp::Warning;
 
 /// The lines a compensated program has beyond its input's, by why they
@@ -222,7 +222,7 @@ pub struct RobotMove {
     /// Programmed circle point of a `MoveC`, world frame, mm.
     pub via_mm: Option<[f64; 3]>,
     /// Predicted deviation of the uncompensated target, by effect.
-    pub deviation: Deviation,
+    pub deviation: Breakdown,
     /// Process wrench acting during the move, if any.
     pub wrench: Option<Wrench>,
     /// Estimated duration of the move, s (0 when unknown).

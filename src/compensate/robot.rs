@@ -14,7 +14,7 @@ use crate::machine::robot::kinematics::Prepared;
 use crate::machine::robot::pose::pose_error;
 use crate::machine::robot::{ConfData, IkSelect, Model, Robot, RobotError};
 use crate::predict::context::{MoveContext, Wrench};
-use crate::predict::robot::{Deviation, Effects, PoseDelta};
+use crate::predict::robot::{Breakdown, EffectSet, PoseDelta};
 
 /// Position tolerance of the compensation iteration, mm (0.1 nm).
 pub const COMP_POS_TOL_MM: f64 = 1e-7;
@@ -40,7 +40,7 @@ pub struct Compensation {
     /// refused as a reconfiguration).
     pub conf: ConfData,
     /// Predicted deviation of the uncompensated target.
-    pub deviation: Deviation,
+    pub deviation: Breakdown,
     /// Remaining predicted error of the compensated target.
     pub residual: PoseDelta,
     /// Iterations used.
@@ -126,7 +126,7 @@ impl Robot {
         attained: &Isometry3<f64>,
         sel: &IkSelect,
         model: &Prepared,
-        effects: Effects,
+        effects: EffectSet,
         wrench: Option<&Wrench>,
         branch: &mut BranchMemo,
     ) -> Result<Matrix6<f64>, RobotError> {
@@ -155,7 +155,7 @@ impl Robot {
         ctx: &MoveContext,
         programmed: &Isometry3<f64>,
         sel: &IkSelect,
-        effects: Effects,
+        effects: EffectSet,
     ) -> Result<Compensation, RobotError> {
         self.compensate_seeded(ctx, programmed, sel, effects, &Seed::default())
             .map_err(|e| self.with_reaching_configurations(programmed, e))
@@ -172,7 +172,7 @@ impl Robot {
         ctx: &MoveContext,
         programmed: &Isometry3<f64>,
         sel: &IkSelect,
-        effects: Effects,
+        effects: EffectSet,
         seed: &Seed,
     ) -> Result<Compensation, RobotError> {
         let Seed {
@@ -217,16 +217,16 @@ impl Robot {
     /// The predicted deviation of the TCP at joints `q` (a `MoveAbsJ`'s
     /// programmed joints, reported and not compensated): attained with
     /// `effects` in the move context `ctx` against the nominal pose, split
-    /// as a compensation's ([`Deviation`]).
+    /// as a compensation's ([`Breakdown`]).
     pub(crate) fn predict_at_joints(
         &self,
         ctx: &MoveContext,
         q: &[f64; 6],
-        effects: Effects,
-    ) -> Deviation {
+        effects: EffectSet,
+    ) -> Breakdown {
         let (kin, model) = self.prediction_prepared(effects, &self.growth_of(ctx));
         let st = self.stages_from(&kin, &model, q, effects, ctx.wrench.as_ref(), None);
-        Deviation {
+        Breakdown {
             kinematic: PoseDelta::between(&st[1], &st[0]),
             thermal: PoseDelta::between(&st[2], &st[1]),
             gravity: PoseDelta::between(&st[3], &st[2]),
@@ -244,7 +244,7 @@ impl Robot {
         ctx: &MoveContext,
         programmed: &Isometry3<f64>,
         sel: &IkSelect,
-        effects: Effects,
+        effects: EffectSet,
         (q0, nominal_flange): ([f64; 6], Option<Isometry3<f64>>),
         fixed_branch: Option<Option<usize>>,
     ) -> Result<Compensation, RobotError> {
@@ -255,7 +255,7 @@ impl Robot {
         let wrench = ctx.wrench.as_ref();
         let (kin, model) = self.prediction_prepared(effects, &self.growth_of(ctx));
         let st = self.stages_from(&kin, &model, &q0, effects, wrench, nominal_flange);
-        let deviation = Deviation {
+        let deviation = Breakdown {
             kinematic: PoseDelta::between(&st[1], &st[0]),
             thermal: PoseDelta::between(&st[2], &st[1]),
             gravity: PoseDelta::between(&st[3], &st[2]),
@@ -372,8 +372,8 @@ mod tests {
                     nominal_flange: Some(flange),
                     ..plain
                 };
-                let a = r.compensate_seeded(&ctx, &pose, &sel, Effects::ALL, &plain);
-                let b = r.compensate_seeded(&ctx, &pose, &sel, Effects::ALL, &seeded);
+                let a = r.compensate_seeded(&ctx, &pose, &sel, EffectSet::ALL, &plain);
+                let b = r.compensate_seeded(&ctx, &pose, &sel, EffectSet::ALL, &seeded);
                 assert_eq!(a, b);
                 checked += 1;
             }
@@ -402,11 +402,11 @@ mod tests {
             cfx: 0,
         });
         let a = r
-            .compensate(&warm, &pose, &sel, Effects::ALL)
+            .compensate(&warm, &pose, &sel, EffectSet::ALL)
             .expect("reachable");
-        let no_thermal = Effects {
+        let no_thermal = EffectSet {
             thermal: 0.0,
-            ..Effects::ALL
+            ..EffectSet::ALL
         };
         let b = r
             .at_joint_power(&p)

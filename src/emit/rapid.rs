@@ -18,7 +18,7 @@ use nalgebra::Isometry3;
 
 use crate::error::{Error, Located, Result};
 use crate::machine::robot::ConfData;
-use crate::predict::robot::Deviation;
+use crate::predict::Breakdown;
 use crate::program::rapid::resolve::line_col;
 use crate::program::rapid::{Decl, JointTarget, RobTarget};
 
@@ -624,7 +624,7 @@ pub(crate) fn joint_word(v: f64, src: &str, file: &str, at: usize) -> Result<Str
 /// (mm, reported only).
 /// Writes [`dev_comment`] into `out` (fast fixed-decimal numbers, the
 /// same text).
-pub(crate) fn write_dev_comment(out: &mut String, d: &Deviation) {
+pub(crate) fn write_dev_comment(out: &mut String, d: &Breakdown) {
     let num = |out: &mut String, v: f64, decimals: usize| {
         if !push_fixed(out, v, decimals) {
             use std::fmt::Write;
@@ -647,7 +647,7 @@ pub(crate) fn write_dev_comment(out: &mut String, d: &Deviation) {
 }
 
 #[cfg(test)]
-pub(crate) fn dev_comment(d: &Deviation) -> String {
+pub(crate) fn dev_comment(d: &Breakdown) -> String {
     format!(
         "dev {:.3} mm (kin {:.3} therm {:.3} grav {:.3} proc {:.3} vib {:.4})",
         d.total.pos_mm.norm(),
@@ -1072,10 +1072,10 @@ mod tests {
             pos_mm: Vector3::new(next(), next(), next()) * k,
             rot_rad: Vector3::zeros(),
         };
-        let mut cases = vec![Deviation::default()];
+        let mut cases = vec![Breakdown::default()];
         for k in [1.0, 0.5, 1e-3, 2.0] {
             let (a, b, c, d, e) = (delta(k), delta(k), delta(k), delta(k), delta(k));
-            cases.push(Deviation {
+            cases.push(Breakdown {
                 kinematic: a,
                 thermal: b,
                 gravity: c,
@@ -1084,13 +1084,13 @@ mod tests {
                 vibration_mm: Vector3::new(0.00005, 0.0, 0.0) * k,
             });
         }
-        let mut odd = Deviation::default();
+        let mut odd = Breakdown::default();
         odd.total.pos_mm = Vector3::new(f64::NAN, 0.0, 0.0);
         odd.process.pos_mm = Vector3::new(f64::INFINITY, 0.0, 0.0);
         cases.push(odd);
         for _ in 0..2000 {
             let (a, b, c, d, e) = (delta(1.0), delta(1.0), delta(1.0), delta(1.0), delta(1.0));
-            cases.push(Deviation {
+            cases.push(Breakdown {
                 kinematic: a,
                 thermal: b,
                 gravity: c,

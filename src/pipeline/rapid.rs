@@ -18,7 +18,7 @@ use std::sync::Arc;
 
 use rayon::prelude::*;
 
-use nalgebra::{Isometry3, Vector3};
+use nalgebra::Isometry3;
 
 use crate::compensate::outcome::{Compensated, DevStats, RobotMove, Row, Summary};
 use crate::compensate::robot::{Compensation, Seed};
@@ -28,16 +28,16 @@ use crate::emit::rapid::{
 };
 use crate::error::{Error, Located, Result};
 use crate::machine::ThermalStart;
-use crate::machine::robot::process::{feed_frame_vector, plunge_direction, travel_direction};
 use crate::machine::robot::thermal::{
     Segment, TimeLineTotals, effective_power, effective_power_from,
 };
-use crate::machine::robot::{
-    ConfData, ForceFrame, ForceModel, IkSelect, Model, Robot, RobotError, Thermal,
-};
+use crate::machine::robot::{ConfData, IkSelect, Model, Robot, RobotError, Thermal};
 use crate::pipeline::resonance::ResonanceWatch;
-use crate::predict::robot::{Deviation, Effects};
-use crate::predict::{MoveContext, ThermalInput, Wrench, WrenchFrame};
+use crate::pipeline::robot::time_line::{
+    self, FALLBACK_TCP_SPEED, MoveEnd, WrenchMove, mean_power, process_wrench,
+};
+use crate::predict::robot::{Breakdown, EffectSet};
+use crate::predict::{MoveContext, ThermalInput, Wrench};
 use crate::process::CutSettings;
 use crate::process::MillingCache;
 use crate::program::interp::Warning;
@@ -48,14 +48,16 @@ use crate::program::rapid::resolve::{
     CartUse, Origin, ToolView, input_err, line_col, named_value, resolve_cart, resolve_tool,
     resolve_wobj, tcp_speed,
 };
-use crate::program::rapid::{DataValue, Module, Move, MoveKind, Target, column_of, parse_module};
+use crate::program::rapid::{
+    ConfMonitoring, DataValue, Module, Move, MoveKind, Target, column_of, parse_module,
+};
 use crate::program::robot_moves::LeftAsWritten;
 
 /// Options of a RAPID compensation run.
 #[derive(Debug, Clone, PartialEq)]
 pub struct RapidOptions {
     /// Effects to predict and compensate.
-    pub effects: Effects,
+    pub effects: EffectSet,
     /// Append a `! dev …` comment to every compensated move.
     pub annotate: bool,
     /// Number formatting of rewritten robtargets.
@@ -88,7 +90,7 @@ impl Default for RapidOptions {
     /// All effects, annotated, default formatting, cold start, move records.
     fn default() -> Self {
         RapidOptions {
-            effects: Effects::ALL,
+            effects: EffectSet::ALL,
             annotate: true,
             format: Format::default(),
             thermal_start: ThermalStart::Cold,
@@ -227,7 +229,7 @@ const JOB_CHUNK: usize = 4096;
 /// Solves one chunk of jobs in parallel (rayon keeps the input order in
 /// `collect`; every job is independent, so the results do not depend on
 /// the threads).
-fn solve_chunk(views: &[Robot], jobs: &[Job], fx: Effects) -> Vec<Solved> {
+fn solve_chunk(views: &[Robot], jobs: &[Job], fx: EffectSet) -> Vec<Solved> {
     jobs.par_iter()
         .map(|j| match views.get(j.view) {
             Some(r) => r.compensate_seeded(&j.ctx, &j.pose, &j.sel, fx, &j.seed),
@@ -396,7 +398,7 @@ impl Rewriter<'_> {
         tool: &ToolView,
         wobj: &Isometry3<f64>,
         seed: Seed,
-    ) -> Result<Option<Deviation>> {
+    ) -> Result<Option<Breakdown>> {
         let view = self.view(key, tool);
         let programmed = wobj * u.pose_obj;
         self.last_tcp = programmed.translation.vector.into();
@@ -546,7 +548,7 @@ impl Rewriter<'_> {
     }
 
     /// Compensates a MoveAbsJ in joint space.
-    fn joint(&mut self, mv: &Move, key: &LoadKey, tool: &ToolView) -> Result<Option<Deviation>> {
+    fn joint(&mut self, mv: &Move, key: &LoadKey, tool: &ToolView) -> Result<Option<Breakdown>> {
         let target = &mv.target;
         let (jt, origin, stem) = match target {
             Target::InlineJoint(jt) => (jt, Origin::Inline, String::new()),
@@ -702,11 +704,6 @@ struct Planned {
     speed_fallback: bool,
 }
 
-/// TCP speed a move whose speed is known at run time only is taken at on
-/// the time line, mm/s: that of the predefined `vmax`, which ABB defines as
-/// the robot's maximum (rated) TCP speed. Said in a warning.
-pub const FALLBACK_TCP_SPEED: f64 = 7000.0;
-
 /// Robot views with a tool mounted, made once per distinct key (a view is a
 /// copy of the robot: one per move would cost a copy per target).
 struct ViewCache<K> {
@@ -832,119 +829,33 @@ fn move_wrench(
     cache: &mut MillingCache,
     table: Option<&crate::process::ForceTable>,
 ) -> Result<Option<Wrench>> {
-    let (Some(pf), Some(cur)) = (robot.process_force(), plans.get(i)) else {
+    let Some(cur) = plans.get(i) else {
         return Ok(None);
     };
-    let pf = pf.with_rpm(set.spindle_rpm);
     let prev = i.checked_sub(1).and_then(|k| plans.get(k));
-    let feed_move = matches!(mv.kind, MoveKind::MoveL | MoveKind::MoveC);
-    let z = cur.pose.rotation * Vector3::z();
-    // Direction of travel at the target (world frame); zero for the first
-    // move.
-    let travel = || {
-        prev.map_or_else(Vector3::zeros, |p| {
-            travel_direction(
-                &p.pose.translation.vector,
-                cur.via.as_ref().map(|v| &v.translation.vector),
-                &cur.pose.translation.vector,
-            )
-        })
+    let m = WrenchMove {
+        feed: matches!(mv.kind, MoveKind::MoveL | MoveKind::MoveC),
+        linear: mv.kind == MoveKind::MoveL,
+        prev: prev.map(|p| &p.pose.translation.vector),
+        pose: &cur.pose,
+        via: cur.via.as_ref().map(|v| &v.translation.vector),
+        wobj: &cur.wobj,
+        v_tcp: cur.v_tcp,
+        fallback: cur.speed_fallback,
+        need_speed,
+        table: table.map(|t| (t, mv.line)),
     };
-    let to_base = robot.base().rotation.inverse();
-    let in_base = |force_n: Vector3<f64>, moment_nmm: Vector3<f64>| Wrench {
-        force_n: to_base * force_n,
-        moment_nmm: to_base * moment_nmm,
-        frame: WrenchFrame::Base,
-    };
-    let speed = |what: &str| -> Result<Option<f64>> {
-        match cur.v_tcp {
-            Some(v) if !cur.speed_fallback => Ok(Some(v)),
-            _ if need_speed => Err(input_err(
-                src,
-                file,
-                mv.speed.span.start,
-                format!(
-                    "speed `{}` cannot be resolved offline; the {what} needs the TCP speed",
-                    mv.speed.text
-                ),
-            )),
-            _ => Ok(None),
-        }
-    };
-    match pf.model {
-        ForceModel::Constant {
-            force_n,
-            moment_nmm,
-            frame,
-        } => {
-            if !feed_move {
-                return Ok(None);
-            }
-            Ok(Some(match frame {
-                ForceFrame::Tool | ForceFrame::Base => Wrench {
-                    force_n,
-                    moment_nmm,
-                    frame: if frame == ForceFrame::Tool {
-                        WrenchFrame::Tool
-                    } else {
-                        WrenchFrame::Base
-                    },
-                },
-                ForceFrame::Workpiece => {
-                    let r = robot.base().rotation.inverse() * cur.wobj.rotation;
-                    Wrench {
-                        force_n: r * force_n,
-                        moment_nmm: r * moment_nmm,
-                        frame: WrenchFrame::Base,
-                    }
-                }
-                ForceFrame::Feed => {
-                    // In the work object's frame, as on a machine tool: a
-                    // plunge along the tool axis (no tangential direction)
-                    // takes the work object's x, which moves with the cell,
-                    // not the world's.
-                    let w = cur.wobj.rotation;
-                    let (t, z) = (w.inverse() * travel(), w.inverse() * z);
-                    in_base(
-                        w * feed_frame_vector(&force_n, &t, &z),
-                        w * feed_frame_vector(&moment_nmm, &t, &z),
-                    )
-                }
-            }))
-        }
-        ForceModel::Milling(_) => {
-            if !feed_move || prev.is_none() {
-                return Ok(None);
-            }
-            let Some(v) = speed("milling force")? else {
-                return Ok(None);
-            };
-            Ok(pf
-                .milling_force(&travel(), &z, v, set, cache)
-                .map(|l| in_base(l.force_n, Vector3::zeros())))
-        }
-        ForceModel::Drilling { .. } => {
-            let Some(prev) = prev else {
-                return Ok(None);
-            };
-            if mv.kind != MoveKind::MoveL {
-                return Ok(None);
-            }
-            let d = cur.pose.translation.vector - prev.pose.translation.vector;
-            if plunge_direction(&d, &z, pf.axis_tolerance_rad) != Some(true) {
-                return Ok(None);
-            }
-            // A speed known at run time only is taken as the fallback's, a
-            // positioning speed: no thrust (said in the warning).
-            if cur.speed_fallback {
-                return Ok(None);
-            }
-            Ok(speed("drilling thrust")?.and_then(|v| pf.drilling_wrench(v, &(to_base * z))))
-        }
-        ForceModel::Table => Ok(table
-            .and_then(|t| t.get(mv.line))
-            .map(|f| in_base(cur.wobj.rotation * f, Vector3::zeros()))),
-    }
+    process_wrench(robot, &m, set, cache).map_err(|what| {
+        input_err(
+            src,
+            file,
+            mv.speed.span.start,
+            format!(
+                "speed `{}` cannot be resolved offline; the {what} needs the TCP speed",
+                mv.speed.text
+            ),
+        )
+    })
 }
 
 /// Estimated duration of move `i`, s: straight moves at their TCP speed
@@ -953,29 +864,22 @@ fn move_wrench(
 /// slowest joint needs at its maximum speed. The first move (no known start)
 /// takes 0 s.
 fn move_duration(robot: &Robot, plans: &[Planned], i: usize, mv: &Move) -> Option<f64> {
-    let (Some(prev), Some(cur)) = (i.checked_sub(1).and_then(|k| plans.get(k)), plans.get(i))
-    else {
+    let prev = i.checked_sub(1).and_then(|k| plans.get(k));
+    let (Some(prev), Some(cur)) = (prev, plans.get(i)) else {
         return Some(0.0);
     };
-    let p0 = prev.pose.translation.vector;
-    let p1 = cur.pose.translation.vector;
-    let dist = match &cur.via {
-        Some(v) => (v.translation.vector - p0).norm() + (p1 - v.translation.vector).norm(),
-        None => (p1 - p0).norm(),
+    let joint = matches!(mv.kind, MoveKind::MoveJ | MoveKind::MoveAbsJ);
+    let start = MoveEnd {
+        at: &prev.pose.translation.vector,
+        via: None,
+        q: prev.q.as_ref(),
     };
-    let t_tcp = cur.v_tcp.map(|v| dist / v);
-    match mv.kind {
-        MoveKind::MoveL | MoveKind::MoveC => t_tcp,
-        MoveKind::MoveJ | MoveKind::MoveAbsJ => {
-            let t_joint = match (prev.q, cur.q) {
-                (Some(a), Some(b)) => (0..6)
-                    .map(|j| (b[j] - a[j]).abs() / robot.joint_speed_rad_per_s()[j])
-                    .fold(0.0, f64::max),
-                _ => 0.0,
-            };
-            Some(t_tcp.unwrap_or(0.0).max(t_joint))
-        }
-    }
+    let end = MoveEnd {
+        at: &cur.pose.translation.vector,
+        via: cur.via.as_ref().map(|v| &v.translation.vector),
+        q: cur.q.as_ref(),
+    };
+    time_line::move_duration(robot, Some(start), end, joint, cur.v_tcp)
 }
 
 /// Mean motor power per joint during move `i`, W: `|τ·q̇|` with `τ` the
@@ -1018,8 +922,7 @@ fn move_power<'m>(
         qb.map(f64::to_bits),
         tau_b,
     ));
-    let t = (tau_a + tau_b) * 0.5e-3;
-    std::array::from_fn(|j| (t[j] * (qb[j] - qa[j]) / duration_s).abs())
+    mean_power((tau_a, tau_b), &qa, &qb, duration_s)
 }
 
 /// The robot view of move `cur` for the power: its tool (resolved from its
@@ -1250,6 +1153,12 @@ pub(crate) struct Carry {
     /// `MoveAbsJ` moves are reported and left as written
     /// ([`RapidOptions::joint_cartesian`] off).
     joints_reported: bool,
+    /// Configuration monitoring at the start of the next window, when it
+    /// continues the routine of the window before ([`stream`] sets it; a
+    /// window that starts a routine starts with monitoring on).
+    pub(crate) conf_continued: Option<ConfMonitoring>,
+    /// Configuration monitoring at the end of the last window.
+    pub(crate) conf_end: ConfMonitoring,
 }
 
 impl Carry {
@@ -1814,7 +1723,9 @@ impl<'r> TimeLine<'r> {
         let mut plans = Vec::with_capacity(window_plans.len() + o);
         plans.extend(carry.prev_plan.take());
         plans.extend(window_plans);
-        let free = module.configuration_free_moves(src);
+        let start = carry.conf_continued.take().unwrap_or_default();
+        let (free, end) = module.configuration_free_moves_from(src, start);
+        carry.conf_end = end;
         if !free.is_empty() {
             free_configurations(robot, moves, &mut plans, o, &free);
         }
@@ -2216,7 +2127,7 @@ impl<'m> Rewriter<'m> {
         mv: &Move,
         seg: &Segment,
         state: &MoveState,
-        dev: &Deviation,
+        dev: &Breakdown,
     ) {
         if !self.opts.records {
             return;
@@ -2233,7 +2144,7 @@ impl<'m> Rewriter<'m> {
         (mv, via_mm): (&Move, Option<[f64; 3]>),
         seg: &Segment,
         state: &MoveState,
-        dev: &Deviation,
+        dev: &Breakdown,
     ) {
         carry.moves += 1;
         carry.deviation.add(dev.total.pos_mm.norm(), mv.line);
@@ -2262,7 +2173,7 @@ impl Rewriter<'_> {
         via_mm: Option<[f64; 3]>,
         seg: &Segment,
         state: &MoveState,
-        dev: &Deviation,
+        dev: &Breakdown,
     ) -> Row {
         let [x, y, z] = self.last_tcp;
         Row {
@@ -2287,7 +2198,7 @@ impl Rewriter<'_> {
     /// Hands a cutting move at a spindle speed to the resonance check
     /// (with the dynamic effect on): its tooth passing and its vibration
     /// amplitude before the effect's gain.
-    fn watch_resonance(&self, carry: &mut Carry, line: usize, state: &MoveState, dev: &Deviation) {
+    fn watch_resonance(&self, carry: &mut Carry, line: usize, state: &MoveState, dev: &Breakdown) {
         let gain = self.opts.effects.dynamic;
         let (Some(pf), Some(modal), true) = (
             self.robot.process_force(),
@@ -2314,7 +2225,7 @@ impl Rewriter<'_> {
         (mv, res): (&Move, Option<&Resolved>),
         key: &LoadKey,
         (plan, nominal_flange): (&Planned, Option<&Isometry3<f64>>),
-    ) -> Result<Option<Deviation>> {
+    ) -> Result<Option<Breakdown>> {
         if mv.kind == MoveKind::MoveAbsJ {
             self.joint(mv, key, &plan.tool)
         } else {
@@ -2405,9 +2316,9 @@ mod tests {
             });
         }
         let opts = RapidOptions {
-            effects: Effects {
+            effects: EffectSet {
                 thermal: 0.0,
-                ..Effects::ALL
+                ..EffectSet::ALL
             },
             ..RapidOptions::for_robot(&robot)
         };

@@ -10,9 +10,11 @@
 //! before), then solved on the thread pool, each independent of the
 //! others: the results do not depend on the thread count.
 //!
-//! Each move is predicted in its own cold context: there is no time line
-//! over this stream yet, so a robot with a thermal model or a process force
-//! is warned that those effects are not predicted for it.
+//! Between planning and solving, the planned moves are put on the robot
+//! time line ([`time_line`]), the one of every robot language: each move is
+//! predicted with its process wrench and the thermal power at its end.
+
+pub mod time_line;
 
 use std::collections::HashMap;
 
@@ -24,12 +26,14 @@ use crate::compensate::robot::{Compensation, Seed};
 use crate::error::{Error, Located, Result};
 use crate::machine::robot::{IkSelect, Model, Robot, RobotError};
 use crate::pipeline::rapid::RapidOptions;
+use crate::predict::Breakdown;
 use crate::predict::MoveContext;
-use crate::predict::robot::Deviation;
 use crate::program::interp::Warning;
 use crate::program::robot_moves::{
-    Configuration, JOINT_TARGET, JointMove, LeftAsWritten, RobotStep, RobotTarget, ToolUse,
+    Configuration, JOINT_TARGET, JointMove, LeftAsWritten, PathKind, RobotStep, RobotTarget,
+    ToolUse,
 };
+use time_line::{Asked, FALLBACK_TCP_SPEED, StreamMove, Timed};
 
 /// What the pipeline found for one step of the stream.
 #[derive(Debug, Clone, PartialEq)]
@@ -43,7 +47,7 @@ pub enum StepResult {
         via: Option<Box<Compensation>>,
     },
     /// A joint target's predicted deviation (left as written).
-    Reported(Box<Deviation>),
+    Reported(Box<Breakdown>),
     /// Nothing (a move left as written).
     None,
 }
@@ -234,31 +238,102 @@ fn plan(
     Ok((plans, warnings))
 }
 
-/// The warning of a robot whose thermal model or process force this
-/// stream does not predict (no time line over it yet).
-fn untimed_warning(robot: &Robot, opts: &RapidOptions) -> Option<Warning> {
+/// The time line of the planned steps ([`time_line::of_stream`]): one
+/// entry per step (the default, a cold context, for a step left as
+/// written), or all defaults for a robot with neither a thermal model nor a
+/// process force.
+fn timed_steps(
+    robot: &Robot,
+    steps: &[RobotStep],
+    plans: &[Plan],
+    views: &Views,
+    opts: &RapidOptions,
+    file: &str,
+) -> Result<Vec<Timed>> {
+    let mut out = vec![Timed::default(); steps.len()];
+    if robot.thermal().is_none() && robot.process_force().is_none() {
+        return Ok(out);
+    }
+    let mut moves = Vec::with_capacity(steps.len());
+    let mut index = Vec::with_capacity(steps.len());
+    for (i, (step, plan)) in steps.iter().zip(plans).enumerate() {
+        let m = match (step, plan) {
+            (RobotStep::Target(t), Plan::Target(j, via)) => StreamMove {
+                view: &views.robots[j.view],
+                pose: j.pose,
+                via: via.as_ref().map(|v| v.pose.translation.vector),
+                q: j.q,
+                wobj: t.work,
+                feed: t.path != PathKind::Joint,
+                linear: t.path == PathKind::Linear,
+                v_tcp: t.speed_mm_s,
+                line: t.line,
+            },
+            (RobotStep::Joints(jm), Plan::Joints(view, q)) => {
+                let view = &views.robots[*view];
+                StreamMove {
+                    view,
+                    pose: view.tcp_pose(Model::Nominal, q),
+                    via: None,
+                    q: *q,
+                    wobj: Isometry3::identity(),
+                    feed: false,
+                    linear: false,
+                    v_tcp: None,
+                    line: jm.line,
+                }
+            }
+            _ => continue,
+        };
+        moves.push(m);
+        index.push(i);
+    }
     let fx = opts.effects;
-    let thermal = robot.thermal().is_some() && fx.thermal != 0.0;
-    let process = robot.process_force().is_some() && fx.process != 0.0;
-    let what = match (thermal, process) {
-        (true, true) => "thermal drift and process force",
-        (true, false) => "thermal drift",
-        (false, true) => "process force",
-        (false, false) => return None,
+    let asked = Asked {
+        process: fx.process != 0.0,
+        thermal: fx.thermal != 0.0,
+        start: opts.thermal_start,
+        table: opts.force_table.as_deref(),
     };
-    Some(Warning {
-        line: 0,
-        message: format!(
-            "{what} not predicted for this language (no time line over its moves): each move is predicted cold, without a process wrench"
-        ),
-        count: 1,
-        left: None,
-    })
+    let at = |k: usize| match index.get(k).and_then(|&i| steps.get(i)) {
+        Some(RobotStep::Target(t)) => (t.line, t.column, t.instruction),
+        Some(RobotStep::Joints(j)) => (j.line, j.column, j.instruction),
+        _ => (0, 0, "move"),
+    };
+    let mut fallen_back = Vec::new();
+    let timed =
+        time_line::of_stream(robot, &moves, &asked, &mut fallen_back).map_err(|(k, what)| {
+            let (line, column, instruction) = at(k);
+            Error::Input(Located::new(
+                file,
+                line,
+                column,
+                format!(
+                    "the TCP speed of {instruction} cannot be resolved offline; the {what} needs it"
+                ),
+            ))
+        })?;
+    if let Some(&k) = fallen_back.first() {
+        let (line, _, instruction) = at(k);
+        tracing::warn!(
+            "{}:{line}: the TCP speed of {instruction} (and of {} straight or circular move(s) in all) cannot be resolved offline; the time line takes it as {FALLBACK_TCP_SPEED} mm/s, and a drilling move with it has no thrust",
+            crate::error::Escaped(file),
+            fallen_back.len()
+        );
+    }
+    for (i, t) in index.into_iter().zip(timed) {
+        out[i] = t;
+    }
+    Ok(out)
 }
 
 /// Runs the pipeline over `steps` on `robot` (`file` names the program in
-/// messages). Errors: [`Error::Unachievable`] at the first target that
-/// cannot be reached in its configuration or compensated.
+/// messages): plans the steps in order, puts them on the robot time line
+/// (process wrench and thermal drift of every move, [`time_line`]) and
+/// solves them on the pool. Errors: [`Error::Unachievable`] at the first
+/// target that cannot be reached in its configuration or compensated;
+/// [`Error::Input`] at a move whose process force needs a TCP speed known
+/// at run time only.
 pub fn run(
     robot: &Robot,
     steps: &[RobotStep],
@@ -266,26 +341,31 @@ pub fn run(
     file: &str,
 ) -> Result<RobotRun> {
     let mut views = Views::default();
-    let (plans, mut warnings) = plan(robot, steps, &mut views, file)?;
+    let (plans, warnings) = plan(robot, steps, &mut views, file)?;
+    let timed = timed_steps(robot, steps, &plans, &views, opts, file)?;
     let fx = opts.effects;
-    let ctx = MoveContext::default();
-    let solve = |j: &Job| -> std::result::Result<Compensation, RobotError> {
+    let solve = |j: &Job, ctx: &MoveContext| -> std::result::Result<Compensation, RobotError> {
         let r = &views.robots[j.view];
         let seed = Seed {
             q: Some(j.q),
             ..Seed::default()
         };
-        r.compensate_seeded(&ctx, &j.pose, &IkSelect::Conf(r.confdata(&j.q)), fx, &seed)
+        r.compensate_seeded(ctx, &j.pose, &IkSelect::Conf(r.confdata(&j.q)), fx, &seed)
     };
     let solved: Vec<std::result::Result<StepResult, RobotError>> = plans
         .par_iter()
-        .map(|p| match p {
-            Plan::Target(t, v) => Ok(StepResult::Compensated {
-                target: Box::new(solve(t)?),
-                via: v.as_ref().map(solve).transpose()?.map(Box::new),
+        .zip(timed.par_iter())
+        .map(|(p, t)| match p {
+            Plan::Target(j, v) => Ok(StepResult::Compensated {
+                target: Box::new(solve(j, &t.ctx)?),
+                via: v
+                    .as_ref()
+                    .map(|v| solve(v, &t.ctx))
+                    .transpose()?
+                    .map(Box::new),
             }),
             Plan::Joints(view, q) => Ok(StepResult::Reported(Box::new(
-                views.robots[*view].predict_at_joints(&ctx, q, fx),
+                views.robots[*view].predict_at_joints(&t.ctx, q, fx),
             ))),
             Plan::Left => Ok(StepResult::None),
         })
@@ -293,7 +373,7 @@ pub fn run(
     let mut out = RobotRun::default();
     let mut deviation = DevStats::default();
     let mut moves = 0;
-    for (step, r) in steps.iter().zip(solved) {
+    for ((step, r), t) in steps.iter().zip(solved).zip(&timed) {
         let r = r.map_err(|e| match step {
             RobotStep::Target(t) => refused(
                 file,
@@ -305,21 +385,20 @@ pub fn run(
             _ => Error::Internal(format!("{e}")),
         })?;
         match (&r, step) {
-            (StepResult::Compensated { target, .. }, RobotStep::Target(t)) => {
+            (StepResult::Compensated { target, .. }, RobotStep::Target(s)) => {
                 moves += 1;
-                deviation.add(target.deviation.total.pos_mm.norm(), t.line);
+                deviation.add(target.deviation.total.pos_mm.norm(), s.line);
                 if opts.records {
-                    out.records.push(row(t, target));
+                    out.records.push(with_time(row(s, target), t));
                 }
             }
             (StepResult::Reported(dev), RobotStep::Joints(j)) if opts.records => {
-                out.records.push(joint_row(robot, j, dev));
+                out.records.push(with_time(joint_row(robot, j, dev), t));
             }
             _ => {}
         }
         out.results.push(r);
     }
-    warnings.extend(untimed_warning(robot, opts));
     out.summary = Summary {
         moves,
         deviation,
@@ -327,6 +406,17 @@ pub fn run(
         ..Summary::default()
     };
     Ok(out)
+}
+
+/// A row with its move's time line: wrench, duration and powers.
+fn with_time(mut row: Row, t: &Timed) -> Row {
+    if let Some(r) = row.robot.as_mut() {
+        r.wrench = t.ctx.wrench;
+        r.duration_s = t.duration_s;
+        r.power_w = t.power_w;
+        r.thermal_power_w = t.ctx.joint_powers_w();
+    }
+    row
 }
 
 /// The report row of a compensated target.
@@ -340,7 +430,7 @@ fn row(t: &RobotTarget, c: &Compensation) -> Row {
 }
 
 /// The report row of a reported joint target.
-fn joint_row(robot: &Robot, j: &JointMove, dev: &Deviation) -> Row {
+fn joint_row(robot: &Robot, j: &JointMove, dev: &Breakdown) -> Row {
     // The model is copied only for a move with its own tool.
     let pose = match &j.tool {
         Some(t) => robot
@@ -358,7 +448,7 @@ fn robot_row(
     (line, motion): (usize, &'static str),
     p: [f64; 3],
     via_mm: Option<[f64; 3]>,
-    deviation: Deviation,
+    deviation: Breakdown,
 ) -> Row {
     Row {
         line,

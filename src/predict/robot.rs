@@ -50,12 +50,6 @@ fn blend(nominal: &DhParams, actual: &DhParams, gain: f64) -> DhParams {
     out
 }
 
-/// The robot's name of the one [`EffectSet`] of both machine kinds.
-pub type Effects = EffectSet;
-
-/// The robot's name of the one [`Breakdown`] of both machine kinds.
-pub type Deviation = Breakdown;
-
 /// True when two vectors are equal bit for bit (a computation from them
 /// gives the same bits).
 fn same_bits(a: &Vector6<f64>, b: &Vector6<f64>) -> bool {
@@ -86,7 +80,7 @@ impl Robot {
     /// The kinematic (calibrated, blended) and the full (kinematic plus
     /// thermal growth) parameter sets of a prediction. Resolved once per
     /// target: every iteration reuses them.
-    fn prediction_params(&self, effects: Effects, growth: &DhGrowth) -> (DhParams, DhParams) {
+    fn prediction_params(&self, effects: EffectSet, growth: &DhGrowth) -> (DhParams, DhParams) {
         let kin = blend(
             self.params(Model::Nominal),
             self.params(Model::Actual),
@@ -105,7 +99,7 @@ impl Robot {
     /// set, which differs from it by lengths only and shares its twists.
     pub(crate) fn prediction_prepared(
         &self,
-        effects: Effects,
+        effects: EffectSet,
         growth: &DhGrowth,
     ) -> (Prepared, Prepared) {
         let (kin, model) = self.prediction_params(effects, growth);
@@ -132,7 +126,7 @@ impl Robot {
     fn load_torques(
         &self,
         f: &Frames,
-        effects: Effects,
+        effects: EffectSet,
         wrench: Option<&Wrench>,
     ) -> (Vector6<f64>, Vector6<f64>) {
         let tau_g = if effects.gravity != 0.0 {
@@ -173,7 +167,7 @@ impl Robot {
         &self,
         model: &Prepared,
         q: &[f64; 6],
-        effects: Effects,
+        effects: EffectSet,
         wrench: Option<&Wrench>,
     ) -> Isometry3<f64> {
         let (f, half) = frames_with_half_angles(model, q);
@@ -195,7 +189,7 @@ impl Robot {
         &self,
         ctx: &MoveContext,
         q: &[f64; 6],
-        effects: Effects,
+        effects: EffectSet,
     ) -> [Isometry3<f64>; 5] {
         let (kin, model) = self.prediction_prepared(effects, &self.growth_of(ctx));
         self.stages_from(&kin, &model, q, effects, ctx.wrench.as_ref(), None)
@@ -210,7 +204,7 @@ impl Robot {
         kin: &Prepared,
         model: &Prepared,
         q: &[f64; 6],
-        effects: Effects,
+        effects: EffectSet,
         wrench: Option<&Wrench>,
         nominal_flange: Option<Isometry3<f64>>,
     ) -> [Isometry3<f64>; 5] {
@@ -254,7 +248,12 @@ impl Robot {
     /// harmonic force at its tooth-passing frequency, through the modal
     /// model. Zero without a modal model, a tooth frequency or a process
     /// wrench.
-    pub fn vibration_mm(&self, ctx: &MoveContext, q: &[f64; 6], effects: Effects) -> Vector3<f64> {
+    pub fn vibration_mm(
+        &self,
+        ctx: &MoveContext,
+        q: &[f64; 6],
+        effects: EffectSet,
+    ) -> Vector3<f64> {
         let (Some(modal), true) = (self.modal(), ctx.tooth_hz > 0.0) else {
             return Vector3::zeros();
         };
@@ -268,7 +267,7 @@ impl Robot {
 
     /// Predicted attained TCP pose (world frame) for controller joints `q`
     /// in the move context `ctx`.
-    pub fn predict(&self, ctx: &MoveContext, q: &[f64; 6], effects: Effects) -> Isometry3<f64> {
+    pub fn predict(&self, ctx: &MoveContext, q: &[f64; 6], effects: EffectSet) -> Isometry3<f64> {
         let (_, model) = self.prediction_prepared(effects, &self.growth_of(ctx));
         self.predict_with(&model, q, effects, ctx.wrench.as_ref())
     }
@@ -292,7 +291,7 @@ mod tests {
         r: &Robot,
         ctx: &MoveContext,
         q: &[f64; 6],
-        effects: Effects,
+        effects: EffectSet,
     ) -> [Isometry3<f64>; 5] {
         let (kin, model) = r.prediction_prepared(effects, &r.growth_of(ctx));
         let wrench = ctx.wrench.as_ref();
@@ -333,9 +332,9 @@ mod tests {
             let wrench = ctx.wrench.as_ref();
             for _ in 0..100 {
                 let q: [f64; 6] = std::array::from_fn(|_| next());
-                let fast = view.predict_stages(&ctx, &q, Effects::ALL);
-                let slow = stages_reference(&view, &ctx, &q, Effects::ALL);
-                let attained = view.predict(&ctx, &q, Effects::ALL);
+                let fast = view.predict_stages(&ctx, &q, EffectSet::ALL);
+                let slow = stages_reference(&view, &ctx, &q, EffectSet::ALL);
+                let attained = view.predict(&ctx, &q, EffectSet::ALL);
                 assert_abs_diff_eq!(
                     attained.translation.vector,
                     fast[4].translation.vector,

@@ -714,6 +714,16 @@ fn conf_switch(text: &str) -> Option<(bool, bool)> {
     }
 }
 
+/// Configuration monitoring at a point of a routine: whether `ConfL \Off`
+/// or `ConfJ \Off` is in force (both on at the start of a routine).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct ConfMonitoring {
+    /// `ConfL \Off` in force (linear and circular moves).
+    pub linear_off: bool,
+    /// `ConfJ \Off` in force (joint moves).
+    pub joint_off: bool,
+}
+
 /// Routine kind.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum RoutineKind {
@@ -819,22 +829,40 @@ impl Module {
     /// routine in source order and starts on (the controller's state at
     /// program start) in every routine. `MoveAbsJ` has no configuration.
     pub fn configuration_free_moves(&self, src: &str) -> Vec<usize> {
+        self.configuration_free_moves_from(src, ConfMonitoring::default())
+            .0
+    }
+
+    /// [`Module::configuration_free_moves`] with the first routine's state
+    /// starting at `start` (a window of a routine continues the state the
+    /// windows before it left); also gives the state at the end of the last
+    /// routine.
+    pub fn configuration_free_moves_from(
+        &self,
+        src: &str,
+        start: ConfMonitoring,
+    ) -> (Vec<usize>, ConfMonitoring) {
         let mut out = Vec::new();
-        for p in self.procs.iter().filter(|p| !p.placeholder) {
-            let (mut linear_off, mut joint_off) = (false, false);
+        let mut state = start;
+        for (i, p) in self.procs.iter().filter(|p| !p.placeholder).enumerate() {
+            state = if i == 0 {
+                start
+            } else {
+                ConfMonitoring::default()
+            };
             for s in &p.body {
                 match s {
                     Stmt::Opaque { span, .. } => {
                         match src.get(span.clone()).and_then(conf_switch) {
-                            Some((true, off)) => linear_off = off,
-                            Some((false, off)) => joint_off = off,
+                            Some((true, off)) => state.linear_off = off,
+                            Some((false, off)) => state.joint_off = off,
                             None => {}
                         }
                     }
                     Stmt::Move(m) => {
                         let off = match m.kind {
-                            MoveKind::MoveL | MoveKind::MoveC => linear_off,
-                            MoveKind::MoveJ => joint_off,
+                            MoveKind::MoveL | MoveKind::MoveC => state.linear_off,
+                            MoveKind::MoveJ => state.joint_off,
                             MoveKind::MoveAbsJ => false,
                         };
                         if off {
@@ -845,7 +873,7 @@ impl Module {
                 }
             }
         }
-        out
+        (out, state)
     }
 
     /// The motion instructions of routines that hold an editor placeholder

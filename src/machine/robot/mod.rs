@@ -35,7 +35,7 @@ pub use ik::ConfData;
 pub use ik::JOINT_JUMP_MAX_DEG;
 pub use kinematics::Frames;
 pub use params::{DhField, RobotParam, ThermalField};
-pub use process::{ForceFrame, ForceModel, ProcessForce};
+pub use process::{ForceModel, ProcessForce};
 pub use thermal::{DhGrowth, Thermal, ThermalTerm};
 
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};

@@ -34,10 +34,6 @@ pub const DEFAULT_AXIS_TOLERANCE_DEG: f64 = 3.0;
 /// Default number of flutes (a twist drill has two).
 pub const DEFAULT_FLUTES: u32 = 2;
 
-/// Frame a constant force is given in: the one [`crate::process::Frame`]
-/// of both machine kinds.
-pub type ForceFrame = process::Frame;
-
 pub use crate::process::ForceModel;
 
 /// The validated `process_force:` section.
@@ -177,8 +173,8 @@ impl ProcessForce {
                 force_n: Vector3::from(w.force_n),
                 moment_nmm: Vector3::from(w.moment_nm) * 1000.0,
                 frame: match w.frame {
-                    RawWrenchFrame::Tool => ForceFrame::Tool,
-                    RawWrenchFrame::Base => ForceFrame::Base,
+                    RawWrenchFrame::Tool => Frame::Tool,
+                    RawWrenchFrame::Base => Frame::Base,
                 },
             },
             spindle_rpm: None,
@@ -291,10 +287,10 @@ fn constant_model(r: &RawProcessForce) -> Result<ForceModel, Invalid> {
         force_n: Vector3::from(f),
         moment_nmm: Vector3::from(m) * 1000.0,
         frame: match r.frame.unwrap_or(RawForceFrame::Tool) {
-            RawForceFrame::Tool => ForceFrame::Tool,
-            RawForceFrame::Workpiece => ForceFrame::Workpiece,
-            RawForceFrame::Base => ForceFrame::Base,
-            RawForceFrame::Feed => ForceFrame::Feed,
+            RawForceFrame::Tool => Frame::Tool,
+            RawForceFrame::Workpiece => Frame::Workpiece,
+            RawForceFrame::Base => Frame::Base,
+            RawForceFrame::Feed => Frame::Feed,
         },
     })
 }
@@ -344,11 +340,11 @@ pub(crate) fn default_wrench(pf: Option<&ProcessForce>) -> Option<Wrench> {
         Some(ForceModel::Constant {
             force_n,
             moment_nmm,
-            frame: frame @ (ForceFrame::Tool | ForceFrame::Base),
+            frame: frame @ (Frame::Tool | Frame::Base),
         }) => Some(Wrench {
             force_n,
             moment_nmm,
-            frame: if frame == ForceFrame::Tool {
+            frame: if frame == Frame::Tool {
                 WrenchFrame::Tool
             } else {
                 WrenchFrame::Base
@@ -359,7 +355,7 @@ pub(crate) fn default_wrench(pf: Option<&ProcessForce>) -> Option<Wrench> {
 }
 
 /// A constant force (or moment) `v` given in the feed frame, turned into the
-/// frame of `travel` and `z_tool` (see [`ForceFrame::Feed`]); one definition
+/// frame of `travel` and `z_tool` (see [`Frame::Feed`]); one definition
 /// with the machine-tool side ([`crate::process::ForceModel::Constant`]).
 pub fn feed_frame_vector(
     v: &Vector3<f64>,

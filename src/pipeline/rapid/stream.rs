@@ -22,7 +22,7 @@ use crate::error::{Error, Result};
 use crate::machine::ThermalStart;
 use crate::machine::robot::Robot;
 use crate::machine::robot::thermal::TimeLineTotals;
-use crate::predict::robot::Effects;
+use crate::predict::EffectSet;
 use crate::process::CutSettings;
 use crate::program::rapid::directives::Directives;
 use crate::program::rapid::windows::{Piece, Unsupported, Windows};
@@ -132,7 +132,7 @@ pub fn compensate_streamed<R: BufRead>(
         let first_opts = RapidOptions {
             records: false,
             annotate: false,
-            effects: Effects {
+            effects: EffectSet {
                 dynamic: 0.0,
                 ..opts.effects
             },
@@ -185,7 +185,7 @@ pub fn check_syntax_streamed<R: BufRead>(
     window_lines: usize,
 ) -> std::result::Result<Streamed, Fallback> {
     let opts = RapidOptions {
-        effects: crate::predict::robot::Effects::NONE,
+        effects: crate::predict::EffectSet::NONE,
         annotate: false,
         format: crate::emit::rapid::Format::default(),
         thermal_start: ThermalStart::Cold,
@@ -231,6 +231,7 @@ fn pass<R: BufRead>(
     let mut decls: Option<(String, Vec<Span>)> = None;
     let mut moves = 0;
     let (mut reparsed, mut routine_bytes) = (0usize, 0usize);
+    let mut routine: Option<std::rc::Rc<str>> = None;
     let mut write = |text: &str| -> Result<()> {
         match body.as_deref_mut() {
             Some(out) => out
@@ -319,6 +320,7 @@ fn pass<R: BufRead>(
                 let directives = Directives::parse_lines(&lines, file, line, cut)?;
                 cut = directives.last();
                 let start = prologue_len + header.len();
+                continue_routine(carry, &mut routine, &header);
                 let window = ModuleText {
                     module: &module,
                     src: &text,
@@ -358,10 +360,25 @@ fn pass<R: BufRead>(
     Ok((streamed, prologue))
 }
 
+/// Before the window of routine `header`: a window of the routine of the
+/// window before (`routine`) continues its configuration monitoring, the
+/// first window of a routine starts with it on.
+fn continue_routine(
+    carry: &mut Carry,
+    routine: &mut Option<std::rc::Rc<str>>,
+    header: &std::rc::Rc<str>,
+) {
+    let same = routine
+        .as_ref()
+        .is_some_and(|r| std::rc::Rc::ptr_eq(r, header));
+    carry.conf_continued = same.then_some(carry.conf_end);
+    *routine = Some(std::rc::Rc::clone(header));
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::predict::robot::Effects;
+    use crate::predict::EffectSet;
     use crate::program::rapid::windows;
 
     fn robot() -> Robot {
@@ -468,7 +485,7 @@ ENDMODULE
                     (true, ThermalStart::WarmUpMin(15.0)),
                 ] {
                     let opts = RapidOptions {
-                        effects: Effects::ALL,
+                        effects: EffectSet::ALL,
                         annotate,
                         records: false,
                         thermal_start,
@@ -601,7 +618,7 @@ ENDMODULE
         assert!(src.len() - prologue > windows::PROLOGUE_WINDOWS * prologue);
         let robot = robot();
         let opts = RapidOptions {
-            effects: Effects::NONE,
+            effects: EffectSet::NONE,
             ..RapidOptions::for_robot(&robot)
         };
         let (s, _) = compensate_streamed(
@@ -623,7 +640,7 @@ ENDMODULE
     fn records_go_out_window_by_window_as_whole() {
         let robot = robot_file("samples/irb1600-milling.yaml");
         let opts = RapidOptions {
-            effects: Effects::ALL,
+            effects: EffectSet::ALL,
             records: true,
             ..RapidOptions::for_robot(&robot)
         };
