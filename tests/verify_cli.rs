@@ -278,6 +278,80 @@ fn iso9283_reproduces_the_hand_derived_figures() {
 }
 
 #[test]
+fn iso9283_orientation_reproduces_the_hand_derived_figures() {
+    // samples/verify/iso9283-orientation.csv: 10 cycles of P1 … P5; at
+    // each pose every angle is its command + an offset + (−s five times,
+    // +s five times), so the mean difference is the offset and
+    // S = s·sqrt(10/9) = 1.0540926 s, RP = 3 S = 3.1622777 s. Offsets and
+    // s (deg): P1 (0.01, −0.02, 0.005), (0.002, 0.001, 0.003); P2 (−0.03,
+    // 0.01, 0), (0.001, 0.004, 0.001); P3 (0, 0, 0.02), (0.003, 0.002,
+    // 0.002) with c commanded at 179.99° and attained across ±180°; P4
+    // (0.015, 0.025, −0.01), (0.002, 0.002, 0.005); P5 (0.005, −0.005, 0),
+    // (0.001, 0.001, 0.001). Largest magnitudes: APa = −0.03 (P2),
+    // APb = 0.025 (P4), APc = 0.02 (P3); RPa = 3.1622777·0.003 = 0.009487
+    // (P3), RPb = 3.1622777·0.004 = 0.012649 (P2), RPc = 3.1622777·0.005
+    // = 0.015811 (P4).
+    let want = [
+        ("APa", -0.03),
+        ("APb", 0.025),
+        ("APc", 0.02),
+        ("RPa", 0.009_487),
+        ("RPb", 0.012_649),
+        ("RPc", 0.015_811),
+    ];
+    let (code, r, _) = verify_json(&["iso9283", "samples/verify/iso9283-orientation.csv"]);
+    assert_eq!(code, 0);
+    let group = r["groups"]
+        .as_array()
+        .expect("groups")
+        .iter()
+        .find(|g| g["name"] == "orientation")
+        .expect("an orientation group")
+        .clone();
+    for (name, w) in want {
+        let got = group["figures"][format!("{name}_deg")]
+            .as_f64()
+            .unwrap_or_else(|| panic!("{name}_deg"));
+        // 1e-6 of rounding in the report, and the sample's six decimals.
+        assert!((got - w).abs() <= 1.5e-6, "{name}: {got} vs {w}");
+    }
+    let p3 = &r["detail"]["poses"][2];
+    assert!((p3["ap_c_deg"].as_f64().unwrap() - 0.02).abs() <= 1.5e-6);
+    // Position: every visit 0.1 mm off in x, no scatter.
+    assert_figures(&r, "poses", &[("AP", 0.1), ("RP", 0.0)]);
+    let (code, out, _) = verify(&[
+        "iso9283",
+        "samples/verify/iso9283-orientation.csv",
+        "--limit",
+        "RPc=0.015",
+        "--limit",
+        "APa=0.05",
+    ]);
+    assert_eq!(code, 1, "{out}");
+    assert!(
+        out.contains("RPc         0.0158 >      0.0150  FAIL"),
+        "{out}"
+    );
+    assert!(
+        out.contains("APa        -0.0300 <=     0.0500  pass"),
+        "{out}"
+    );
+    assert!(out.contains("(mm; APa … RPc: deg)"), "{out}");
+    // A row with part of an orientation is refused at its line.
+    let dir = tempfile::tempdir().expect("tempdir");
+    let text = std::fs::read_to_string(repo("samples/verify/iso9283-orientation.csv")).unwrap();
+    let mut lines: Vec<String> = text.lines().map(String::from).collect();
+    lines[4] = lines[4].rsplit_once(',').unwrap().0.to_string() + ",";
+    let bad = write(dir.path(), "bad.csv", &(lines.join("\n") + "\n"));
+    let (code, _, err) = verify(&["iso9283", bad.to_str().unwrap()]);
+    assert_eq!(code, 2);
+    assert!(
+        err.contains("bad.csv:5:") && err.contains("`c_deg` not given"),
+        "{err}"
+    );
+}
+
+#[test]
 fn bad_input_exits_2_with_a_located_error_and_writes_nothing() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("r.json");

@@ -55,7 +55,7 @@ use super::frame::{
     frame_with, refit, screen_model, start_frame,
 };
 use super::observations::{MeasurementFrame, Observations, Pose};
-use super::report::{CONDITION_LIMIT, Calibration, Estimate, validations};
+use super::report::{CONDITION_LIMIT, Calibration, Estimate, FitCovariance, validations};
 use super::screen::{
     describe_outliers, distinct_poses, dominating_rows, drop_copies, grouped_split, implausible,
 };
@@ -219,6 +219,43 @@ const POSITION_DECIMALS: usize = 3;
 /// model read from the written file holds.
 pub fn as_written(v: f64) -> f64 {
     round_to(v, ERROR_DECIMALS)
+}
+
+/// The covariance of the identified values written (neither fixed nor
+/// withheld), by their key paths (table nodes in µm, squareness in µrad:
+/// the keys' units).
+fn written_covariance(
+    prob: &Problem,
+    sol: &Solution,
+    params: &[Estimate],
+    withheld: &[bool],
+) -> Option<FitCovariance> {
+    let cols: Vec<(usize, String, f64)> = prob
+        .params
+        .iter()
+        .enumerate()
+        .filter(|(k, _)| {
+            params.get(*k).is_some_and(|e| !e.fixed) && withheld.get(*k) != Some(&true)
+        })
+        .map(|(k, p)| {
+            let key = match *p {
+                Param::Table {
+                    axis,
+                    err,
+                    node,
+                    forward,
+                } => ToolParam::Component {
+                    axis,
+                    error: err,
+                    node,
+                    forward,
+                },
+                Param::Square { axis, key } => square(axis, key),
+            };
+            (k, key.path(), 1.0)
+        })
+        .collect();
+    FitCovariance::select(sol.covariance.as_ref(), &cols)
 }
 
 /// The squareness parameter of `axis` named by `key`.
@@ -831,6 +868,7 @@ pub fn calibrate_geometry(
             &(measured_at(obs, rows, f) - deviations(m, obs, rows, obs_file)?),
         ))
     })?;
+    let covariance = written_covariance(&prob, &sol, &params, &withheld);
     let mut notes = fixed_notes(prob.square);
     notes.append(&mut early_notes);
     let (yaml, frame_est) = finish_if_any(
@@ -858,6 +896,7 @@ pub fn calibrate_geometry(
         honesty: opts.honesty,
         notes: std::mem::take(&mut notes),
         yaml,
+        covariance,
     }
     .finished(id))
 }

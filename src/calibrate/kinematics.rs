@@ -61,7 +61,9 @@ use super::frame::{
 };
 use super::honesty::zero_withheld;
 use super::observations::{MeasuredKind, MeasurementFrame, Observation, Observations, Pose};
-use super::report::{CONDITION_LIMIT, Calibration, Estimate, FrameEstimate, validations};
+use super::report::{
+    CONDITION_LIMIT, Calibration, Estimate, FitCovariance, FrameEstimate, validations,
+};
 use super::screen::{
     describe_outliers, distinct_poses, dominating_rows, drop_copies, grouped_split, implausible,
 };
@@ -683,6 +685,37 @@ fn estimates(
     params
 }
 
+/// The covariance of the model parameters fitted (`free`, columns of
+/// `sol` in that order) and written (not `withheld`), by their key paths
+/// in the keys' units (angles in degrees).
+fn written_covariance(
+    layout: &Layout,
+    sol: &Solution,
+    free: &[usize],
+    withheld: &[bool],
+) -> Option<FitCovariance> {
+    const DH: [DhField; 4] = [DhField::A, DhField::Alpha, DhField::D, DhField::ThetaOffset];
+    let cols: Vec<(usize, String, f64)> = free
+        .iter()
+        .enumerate()
+        .filter(|&(_, &k)| k < layout.n_model() && withheld.get(k) != Some(&true))
+        .map(|(col, &k)| {
+            let (key, unit) = if k < 24 {
+                let field = DH[k % 4];
+                let p = RobotParam::Dh {
+                    joint: k / 4,
+                    field,
+                };
+                (p.path(), layout.name(k).1)
+            } else {
+                (RobotParam::ToolOffset { axis: (k - 24) % 3 }.path(), "mm")
+            };
+            (col, key, if unit == "deg" { DEG_PER_UNIT } else { 1.0 })
+        })
+        .collect();
+    FitCovariance::select(sol.covariance.as_ref(), &cols)
+}
+
 /// Identifies the actual DH parameters (and the TCP translation; and the
 /// instrument frame for `# frame: instrument` data) from `obs`.
 pub fn calibrate_kinematics(
@@ -780,6 +813,7 @@ pub fn calibrate_kinematics(
     notes.push(frame_note(&machine, &layout, read_frame));
     notes.extend(obs.orientation_note(layout.w_rot, None));
     let (_, m) = offsets(&layout, obs, &fit);
+    let covariance = written_covariance(&layout, sol, &free, &withheld);
     Ok(Calibration {
         kind: "kinematics",
         n_fit: fit.len(),
@@ -796,6 +830,7 @@ pub fn calibrate_kinematics(
         honesty: opts.honesty,
         notes,
         yaml,
+        covariance,
     }
     .finished(id))
 }

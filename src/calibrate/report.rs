@@ -111,6 +111,47 @@ pub struct Calibration {
     pub notes: Vec<String>,
     /// The calibrated machine file (original text with edited values).
     pub yaml: String,
+    /// The covariance of the written, identified values (`None`: the
+    /// calibration kind records none, or the fit has no covariance).
+    pub covariance: Option<FitCovariance>,
+}
+
+/// The covariance of the values a calibration identified and wrote, by the
+/// key path of each in the machine file and in the units of those keys.
+#[derive(Debug, Clone, PartialEq)]
+pub struct FitCovariance {
+    /// Key path of each value (`axes[X].component_errors.EXX_um.forward[3]`).
+    pub parameters: Vec<String>,
+    /// Their covariance, in the units of their keys.
+    pub matrix: nalgebra::DMatrix<f64>,
+}
+
+impl FitCovariance {
+    /// The covariance of the columns `cols` of a fit's covariance `cov`:
+    /// each `(column, key path, factor)` with `factor` the key's units per
+    /// unit of the column. `None` without a covariance or columns, or with
+    /// a column outside `cov`.
+    pub fn select(
+        cov: Option<&nalgebra::DMatrix<f64>>,
+        cols: &[(usize, String, f64)],
+    ) -> Option<FitCovariance> {
+        let cov = cov?;
+        let n = cols.len();
+        if n == 0
+            || cols
+                .iter()
+                .any(|c| c.0 >= cov.nrows() || c.0 >= cov.ncols())
+        {
+            return None;
+        }
+        let matrix = nalgebra::DMatrix::from_fn(n, n, |i, j| {
+            cols[i].2 * cols[j].2 * cov[(cols[i].0, cols[j].0)]
+        });
+        Some(FitCovariance {
+            parameters: cols.iter().map(|c| c.1.clone()).collect(),
+            matrix,
+        })
+    }
 }
 
 /// The identified transform of an instrument frame: the pose of the

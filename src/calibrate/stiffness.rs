@@ -754,6 +754,7 @@ pub fn calibrate_stiffness(
         honesty: opts.honesty,
         notes,
         yaml,
+        covariance: None,
     }
     .finished(&id))
 }

@@ -667,6 +667,7 @@ pub fn calibrate_thermal(
         honesty: opts.honesty,
         notes,
         yaml,
+        covariance: None,
     }
     .finished(id))
 }
@@ -1055,6 +1056,7 @@ pub fn calibrate_tool_thermal(
         honesty: opts.honesty,
         notes,
         yaml,
+        covariance: None,
     }
     .finished(id))
 }

@@ -886,13 +886,14 @@ pub fn run(a: &BatchArgs, quiet: bool) -> Result<i32> {
         .clone()
         .ok_or_else(|| usage("batch needs --machine"))?;
     let pool = thread_pool(a.effects.threads)?;
-    let (machine, loaded) = super::machines::open(&machine_name)?;
+    let (machine, mut loaded) = super::machines::open(&machine_name)?;
     Given {
         tools_or_offsets: !a.tools.is_empty() || !a.work_offsets.is_empty(),
         units: a.units.is_some(),
         tolerance: a.tolerance.is_some(),
         allow_reconfiguration: a.effects.allow_reconfiguration,
         rapid_window_lines: a.rapid_window_lines.is_some(),
+        gain_auto: a.effects.gain_auto,
     }
     .refuse_for(match machine {
         Machine::Tool(_) => Kind::Tool,
@@ -936,7 +937,8 @@ pub fn run(a: &BatchArgs, quiet: bool) -> Result<i32> {
                     "batch starts every program cold (--thermal-start cold); a steady or warm-up start needs each program's mean power, so compensate those one by one",
                 ));
             }
-            let set = effects(&a.effects)?;
+            let set =
+                super::machines::auto_gain(effects(&a.effects)?, a.effects.gain_auto, &mut loaded)?;
             let mut job = build_job(
                 &tool, &process, &pool, setup, set, tolerance, None, annotate,
             )?;

@@ -451,10 +451,24 @@ pub fn run_calibrate(a: &CalibrateArgs) -> Result<i32> {
 
     let kind = format!("{:?}", a.kind).to_ascii_lowercase();
     let record = calibration_record(&kind, &a.observations, obs.rows.len(), cal.rms_fit_mm)?;
+    let block = cal.covariance.as_ref().map(|c| {
+        crate::predict::uncertainty::CovarianceBlock::from_fit(
+            &kind,
+            &record.observations,
+            &record.observations_sha256,
+            record.rows,
+            c.parameters.clone(),
+            &c.matrix,
+        )
+    });
     let status = crate::machine::yaml_write::Edit::Calibrated(record);
     let yaml =
         crate::machine::yaml_write::apply(&cal.yaml, &file, "postproc calibrate", &[status])?;
     let yaml = crate::machine::status::mark_calibrated(&cal.yaml, &yaml, &file, &kind)?;
+    let yaml = match &block {
+        Some(b) => crate::predict::uncertainty::put_covariance(&yaml, &file, b)?,
+        None => yaml,
+    };
     super::output::refuse_overwrite(&a.output, &read_files(&a.observations, &a.machine)?)?;
     // The summary first: standard output that fails (closed, full) fails
     // the run before the model is written.

@@ -7,6 +7,7 @@
 //! |---|---|---|
 //! | `--tool`, `--work-offset`, `--units` | yes | refused |
 //! | `--tolerance` | yes | refused |
+//! | `--gain-auto` | yes | refused |
 //! | `--allow-reconfiguration` | refused | yes |
 //! | `--rapid-window-lines` | refused | yes |
 //! | every other flag | yes | yes |
@@ -53,6 +54,8 @@ pub(super) struct Given {
     pub allow_reconfiguration: bool,
     /// `--rapid-window-lines`.
     pub rapid_window_lines: bool,
+    /// `--gain-auto`.
+    pub gain_auto: bool,
 }
 
 impl Given {
@@ -76,6 +79,7 @@ impl Given {
         Given {
             tolerance: a.tolerance.is_some(),
             allow_reconfiguration: a.effects.allow_reconfiguration,
+            gain_auto: a.effects.gain_auto,
             ..Given::program(&a.program)
         }
     }
@@ -84,6 +88,7 @@ impl Given {
     pub(super) fn report(a: &ReportArgs) -> Self {
         Given {
             allow_reconfiguration: a.effects.allow_reconfiguration,
+            gain_auto: a.effects.gain_auto,
             ..Given::program(&a.program)
         }
     }
@@ -99,6 +104,9 @@ impl Given {
             }
             Kind::Robot if self.tolerance => {
                 "--tolerance is a G-code option (the largest gap along a move between compensated blocks); a robot's targets are each solved to the solver's convergence, and the path between them is the controller's"
+            }
+            Kind::Robot if self.gain_auto => {
+                "--gain-auto is a G-code option: a robot's gains are given with --gain"
             }
             Kind::Tool if self.allow_reconfiguration => {
                 "--allow-reconfiguration is a robot option; a machine tool has no joint configuration"
@@ -231,6 +239,14 @@ mod tests {
                 },
                 Kind::Tool,
                 "--rapid-window-lines is a RAPID option",
+            ),
+            (
+                Given {
+                    gain_auto: true,
+                    ..Given::default()
+                },
+                Kind::Robot,
+                "--gain-auto is a G-code option",
             ),
         ];
         for (given, kind, want) in cases {

@@ -491,10 +491,10 @@ impl Prepared {
         machine: Option<(MachineTool, Loaded)>,
         command: &str,
     ) -> Result<Self> {
-        let (machine, loaded) = super::config::needed(machine, command)?;
+        let (machine, mut loaded) = super::config::needed(machine, command)?;
         let setup = parse_setup(program, Some(&machine))?;
         let pool = thread_pool(args.threads)?;
-        let effects = effects(args)?;
+        let effects = super::machines::auto_gain(effects(args)?, args.gain_auto, &mut loaded)?;
         let mut process = process_setup(args, &machine)?;
         add_mean_power(&mut process, &machine, &setup, effects, &program.file)?;
         Ok(Prepared {

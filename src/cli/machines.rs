@@ -18,6 +18,11 @@ use crate::predict::{Effect, EffectSet};
 pub(super) struct Loaded {
     pub file: MachineFile,
     pub status: Status,
+    /// The uncertainty of the model's predictions from the file's
+    /// `covariance` list (`None`: it carries none).
+    pub uncertainty: Option<std::sync::Arc<crate::predict::uncertainty::BlockUncertainty>>,
+    /// The gains `--gain-auto` gave the effects, if asked for.
+    pub auto_gains: Vec<(&'static str, f64)>,
 }
 
 /// Reads `--machine NAME` for a run on programs (its validated model and
@@ -26,7 +31,22 @@ pub(super) fn open(name: &str) -> Result<(Machine, Loaded)> {
     let file = MachineFile::open(name)?;
     let (machine, status) = file.read()?;
     warn_example(&file, &status);
-    Ok((machine, Loaded { file, status }))
+    let blocks = crate::predict::uncertainty::read_covariance(&file.text, &file.shown)?;
+    // Robot runs do not state U per target yet: the covariance is read
+    // (and refused when bad) but not carried.
+    let uncertainty =
+        crate::predict::uncertainty::BlockUncertainty::of_machine(&machine, &blocks, &file.shown)?
+            .filter(crate::predict::uncertainty::BlockUncertainty::is_tool)
+            .map(std::sync::Arc::new);
+    Ok((
+        machine,
+        Loaded {
+            file,
+            status,
+            uncertainty,
+            auto_gains: Vec::new(),
+        },
+    ))
 }
 
 /// The machine file of `status: example` or `nominal`, or with model
@@ -110,7 +130,36 @@ pub(super) fn provenance(
         effects,
         tolerance_mm,
         annotated,
+        uncertainty: loaded.uncertainty.clone(),
+        auto_gains: loaded.auto_gains.clone(),
     }
+}
+
+/// `--gain-auto`: each effect's gain in `set` times the gain the machine
+/// file's parameter covariance gives it
+/// ([`crate::predict::uncertainty::BlockUncertainty::auto_gains`]),
+/// recorded in `loaded` for the provenance. Refused for a file without a
+/// covariance.
+pub(super) fn auto_gain(set: EffectSet, on: bool, loaded: &mut Loaded) -> Result<EffectSet> {
+    if !on {
+        return Ok(set);
+    }
+    let Some(u) = &loaded.uncertainty else {
+        return Err(super::usage(format!(
+            "--gain-auto: {} carries no parameter covariance of its geometry (`postproc calibrate geometry` writes one)",
+            loaded.file.shown
+        )));
+    };
+    let mut set = set;
+    loaded.auto_gains.clear();
+    for (name, g) in u.auto_gains() {
+        if let Some(&e) = Effect::TOOL.iter().find(|e| e.name() == name) {
+            let gain = set.gain(e) * g;
+            set = set.with_gain(e, gain);
+            loaded.auto_gains.push((name, g));
+        }
+    }
+    Ok(set)
 }
 
 /// The effects and gains of a machine-tool run.

@@ -276,6 +276,9 @@ pub struct EffectArgs {
     /// Scale an effect: --gain geometric=0.5, --gain thermal=0.8 (0..10).
     #[arg(long = "gain", value_name = "EFFECT=GAIN")]
     pub gains: Vec<Gain>,
+    /// Machine tools: scale each effect's correction by how well its parameters are known (the machine file's parameter covariance, which `calibrate` writes; docs/verify.md), times its --gain.
+    #[arg(long)]
+    pub gain_auto: bool,
     /// Process force instead of the machine file's `process_force`: none, or `constant:FX,FY,FZ[@workpiece|tool|feed]` (N, force on the tool).
     #[arg(long, value_name = "SPEC")]
     pub force: Option<ForceSpec>,

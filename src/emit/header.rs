@@ -72,6 +72,12 @@ pub struct Provenance {
     pub tolerance_mm: Option<f64>,
     /// Compensated blocks carry `dev` annotations.
     pub annotated: bool,
+    /// The uncertainty of the predictions, from the machine file's
+    /// parameter covariance (`None`: the file carries none).
+    pub uncertainty: Option<std::sync::Arc<crate::predict::uncertainty::BlockUncertainty>>,
+    /// `--gain-auto`: the factor each effect's gain was scaled by (empty:
+    /// not asked for).
+    pub auto_gains: Vec<(&'static str, f64)>,
 }
 
 /// One effect of a run.
@@ -122,10 +128,22 @@ impl Provenance {
         if let Some(t) = self.tolerance_mm {
             lines.push(format!("tolerance {} mm", fmt_mm(t)));
         }
+        if let Some(u) = &self.uncertainty {
+            lines.push(format!(
+                "uncertainty U(k=2) from the parameter covariance of {}",
+                ascii(&u.sources.join(", "))
+            ));
+        }
+        if !self.auto_gains.is_empty() {
+            lines.push(format!("gain auto {}", self.auto_gains_text()));
+        }
         if self.annotated {
             lines.push(
                 "note: dev = deviation predicted without compensation, mm, then per effect".into(),
             );
+            if self.uncertainty.is_some() {
+                lines.push("note: U = expanded uncertainty (k=2) of dev, mm".into());
+            }
             lines.push(
                 "note: takeup = block first moves onto its start, solved for its new motion".into(),
             );
@@ -140,7 +158,7 @@ impl Provenance {
             Status::Calibrated(list) => serde_json::to_value(list).unwrap_or_default(),
             _ => serde_json::Value::Array(Vec::new()),
         };
-        serde_json::json!({
+        let mut o = serde_json::json!({
             "postproc": self.version,
             "machine": {
                 "file": self.machine_file,
@@ -151,7 +169,33 @@ impl Provenance {
             },
             "effects": self.effects,
             "tolerance_mm": self.tolerance_mm,
-        })
+        });
+        if let (Some(u), Some(map)) = (&self.uncertainty, o.as_object_mut()) {
+            map.insert(
+                "uncertainty".into(),
+                serde_json::json!({ "k": crate::predict::uncertainty::COVERAGE_K, "covariance_of": u.sources }),
+            );
+        }
+        if let (false, Some(map)) = (self.auto_gains.is_empty(), o.as_object_mut()) {
+            let g: serde_json::Map<String, serde_json::Value> = self
+                .auto_gains
+                .iter()
+                .map(|(e, g)| ((*e).to_string(), serde_json::json!(g)))
+                .collect();
+            map.insert("gain_auto".into(), serde_json::Value::Object(g));
+        }
+        o
+    }
+
+    /// `geometric x0.93`: the factors of `--gain-auto`, by how well the
+    /// parameter covariance knows each effect.
+    pub fn auto_gains_text(&self) -> String {
+        let parts: Vec<String> = self
+            .auto_gains
+            .iter()
+            .map(|(e, g)| format!("{e} x{}", fmt_gain(*g)))
+            .collect();
+        format!("{} (by the parameter covariance)", parts.join(", "))
     }
 
     /// The provenance on one line (the comment line of CSV and table
@@ -172,6 +216,12 @@ impl Provenance {
         );
         if let Some(t) = self.tolerance_mm {
             line.push_str(&format!("; tolerance {} mm", fmt_mm(t)));
+        }
+        if let Some(u) = &self.uncertainty {
+            line.push_str(&format!("; uncertainty U(k=2) of {}", u.sources.join(", ")));
+        }
+        if !self.auto_gains.is_empty() {
+            line.push_str(&format!("; gain auto {}", self.auto_gains_text()));
         }
         line
     }
@@ -197,6 +247,12 @@ impl Provenance {
         ];
         if let Some(t) = self.tolerance_mm {
             lines.push(format!("tolerance: {} mm", fmt_mm(t)));
+        }
+        if let Some(u) = &self.uncertainty {
+            lines.push(format!("uncertainty U(k=2): {}", u.sources.join(", ")));
+        }
+        if !self.auto_gains.is_empty() {
+            lines.push(format!("gain auto: {}", self.auto_gains_text()));
         }
         lines
     }
@@ -505,6 +561,8 @@ mod tests {
             machine_file: "mill (A);1.yaml".into(),
             machine_bundled: false,
             machine_sha256: "0".repeat(64),
+            uncertainty: None,
+            auto_gains: Vec::new(),
             status: Status::Example,
             effects: vec![
                 EffectGain {

@@ -266,6 +266,16 @@ pub struct ReportWriter<'w> {
     provenance: Option<crate::emit::header::Provenance>,
     /// Widths of the table's columns.
     widths: Vec<usize>,
+    /// The header is still to be written (at the first row or the end, so
+    /// that the provenance decides the uncertainty columns).
+    header_due: bool,
+    /// The uncertainty of the rows (G-code reports of a machine file with
+    /// a parameter covariance; from the provenance).
+    uncertainty: Option<std::sync::Arc<crate::predict::uncertainty::BlockUncertainty>>,
+    /// The uncertainty of the row being written.
+    row_u: Option<crate::predict::uncertainty::BlockU>,
+    /// Largest U of the cutting moves: U, (line, file).
+    worst_u: Option<(f64, (usize, usize))>,
 }
 
 /// Longest source text quoted for a worst block, characters.
@@ -453,12 +463,14 @@ fn max_file_json(w: &ReportWriter, s: &Stat) -> String {
 pub const PLOT_POINTS: usize = 4000;
 
 impl<'w> ReportWriter<'w> {
-    /// Starts a report for a G-code program (writes the header).
+    /// Starts a report for a G-code program (its header is written with
+    /// the first row).
     pub fn new(out: &'w mut dyn Write, setup: &Setup, format: Format, file: &str) -> Result<Self> {
         Self::with_layout(out, Layout::gcode(setup), format, file)
     }
 
-    /// Starts a report with the given columns (writes the header).
+    /// Starts a report with the given columns (its header is written with
+    /// the first row, or at the end).
     pub fn with_layout(
         out: &'w mut dyn Write,
         layout: Layout,
@@ -469,7 +481,7 @@ impl<'w> ReportWriter<'w> {
         let process_effect = (layout.kind == "rapid")
             .then(|| layout.effects.iter().position(|e| *e == "process"))
             .flatten();
-        let mut w = ReportWriter {
+        let w = ReportWriter {
             out,
             format,
             layout,
@@ -493,7 +505,30 @@ impl<'w> ReportWriter<'w> {
             files: Vec::new(),
             provenance: None,
             widths: Vec::new(),
+            header_due: true,
+            uncertainty: None,
+            row_u: None,
+            worst_u: None,
         };
+        Ok(w)
+    }
+
+    /// The effects the rows state an uncertainty for (empty: no U columns).
+    fn u_effects(&self) -> Vec<&'static str> {
+        match &self.uncertainty {
+            Some(u) if self.layout.kind == "gcode" => u.effects(),
+            _ => Vec::new(),
+        }
+    }
+
+    /// Writes the header of the table, CSV or JSON report once.
+    fn write_header(&mut self) -> Result<()> {
+        if !std::mem::replace(&mut self.header_due, false) {
+            return Ok(());
+        }
+        let w = self;
+        let u_effects = w.u_effects();
+        let format = w.format;
         // The table keeps the columns a reader scans (where, how far off,
         // which effect); the components, the residual and the tool-axis
         // error are in CSV and JSON.
@@ -509,6 +544,10 @@ impl<'w> ReportWriter<'w> {
         }
         table.push("dev_mm".into());
         w.widths.push(DEV_W);
+        if !u_effects.is_empty() {
+            table.push("U_mm".into());
+            w.widths.push(DEV_W);
+        }
         for e in &w.layout.effects {
             let name = format!("{e}_mm");
             w.widths.push(name.len().max(DEV_W));
@@ -524,9 +563,13 @@ impl<'w> ReportWriter<'w> {
         for c in ["dx_mm", "dy_mm", "dz_mm", "dev_mm"] {
             cols.push(c.into());
         }
+        if !u_effects.is_empty() {
+            cols.push("u_mm".into());
+        }
         for e in &w.layout.effects {
             cols.push(format!("{e}_mm"));
         }
+        cols.extend(u_effects.iter().map(|e| format!("u_{e}_mm")));
         if w.layout.residual {
             cols.push("residual_mm".into());
         }
@@ -557,7 +600,7 @@ impl<'w> ReportWriter<'w> {
             }
             Format::Svg | Format::Html => {}
         }
-        Ok(w)
+        Ok(())
     }
 
     /// Quotes the source text of the worst blocks from this file (re-read at
@@ -603,6 +646,7 @@ impl<'w> ReportWriter<'w> {
     /// line at the end; JSON: `provenance`).
     pub fn with_provenance(mut self, provenance: Option<&crate::emit::header::Provenance>) -> Self {
         self.provenance = provenance.cloned();
+        self.uncertainty = provenance.and_then(|p| p.uncertainty.clone());
         self
     }
 
@@ -623,6 +667,13 @@ impl<'w> ReportWriter<'w> {
             *v = r.result.deviation.part(*e).norm();
         }
         let dev = r.result.deviation.total();
+        // The tip's U at the spindle nose: the identified values are
+        // translations and axis orientations, which the tool's length does
+        // not lever.
+        self.row_u = self
+            .uncertainty
+            .as_ref()
+            .and_then(|u| u.tool(&r.commanded, &r.result.dirs, 0.0, &dev));
         let shape = match (&r.arc, r.motion) {
             (Some(arc), _) => Shape::of_arc(arc),
             (None, "cycle") => Shape::Hole,
@@ -673,10 +724,17 @@ impl<'w> ReportWriter<'w> {
 
     /// Writes one row.
     pub fn entry(&mut self, r: &Entry) -> Result<()> {
+        self.write_header()?;
         let [dx, dy, dz] = r.deviation_mm;
         let dev = (dx * dx + dy * dy + dz * dz).sqrt();
         let file = self.current();
         let at = (r.line, file);
+        let u = self.row_u.take().filter(|_| !self.u_effects().is_empty());
+        if let (Some(u), false) = (&u, is_positioning(r.motion)) {
+            if self.worst_u.is_none_or(|w| u.total_mm > w.0) {
+                self.worst_u = Some((u.total_mm, at));
+            }
+        }
         if let Some(s) = self.stats.first_mut() {
             s.add(dev, at, r.motion);
         }
@@ -735,15 +793,40 @@ impl<'w> ReportWriter<'w> {
                 }
                 self.mark(r, dev, rapid);
             }
+            Format::Table | Format::Csv | Format::Json => {
+                self.text_row(r, dev, file_cell.as_deref(), u.as_ref())?;
+            }
+        }
+        self.rows += 1;
+        Ok(())
+    }
+
+    /// A row of the table, CSV or JSON report, with its U (`u`; the U
+    /// columns empty without one when the report has them).
+    fn text_row(
+        &mut self,
+        r: &Entry,
+        dev: f64,
+        file_cell: Option<&str>,
+        u: Option<&crate::predict::uncertainty::BlockU>,
+    ) -> Result<()> {
+        let [dx, dy, dz] = r.deviation_mm;
+        let u_cols = !self.u_effects().is_empty();
+        match self.format {
             Format::Table => {
                 let mut vals: Vec<String> = vec![r.line.to_string(), r.motion.to_string()];
-                if let Some(f) = &file_cell {
-                    vals.insert(0, f.clone());
+                if let Some(f) = file_cell {
+                    vals.insert(0, f.to_string());
                 }
                 for &v in r.axes {
                     vals.push(num(v, TABLE_AXIS_DECIMALS));
                 }
                 vals.push(num(dev, 5));
+                match u {
+                    Some(u) => vals.push(num(u.total_mm, 5)),
+                    None if u_cols => vals.push("-".into()),
+                    None => {}
+                }
                 for &v in r.effects_mm {
                     vals.push(num(v, 5));
                 }
@@ -756,7 +839,7 @@ impl<'w> ReportWriter<'w> {
             }
             Format::Csv => {
                 let mut vals: Vec<String> = vec![r.line.to_string(), r.motion.to_string()];
-                if let Some(f) = &file_cell {
+                if let Some(f) = file_cell {
                     vals.insert(0, csv_cell(f));
                 }
                 for &v in r.axes {
@@ -765,8 +848,18 @@ impl<'w> ReportWriter<'w> {
                 for v in [dx, dy, dz, dev] {
                     vals.push(num(v, 5));
                 }
+                match u {
+                    Some(u) => vals.push(num(u.total_mm, 5)),
+                    None if u_cols => vals.push(String::new()),
+                    None => {}
+                }
                 for &v in r.effects_mm {
                     vals.push(num(v, 5));
+                }
+                match u {
+                    Some(u) => vals.extend(u.effects_mm.iter().map(|v| num(*v, 5))),
+                    None if u_cols => vals.extend(self.u_effects().iter().map(|_| String::new())),
+                    None => {}
                 }
                 if let Some(res) = r.residual_mm {
                     vals.push(num(res, 6));
@@ -779,7 +872,6 @@ impl<'w> ReportWriter<'w> {
                     "{}{{{}\"line\":{},\"motion\":{},\"commanded\":{{",
                     if self.rows > 0 { "," } else { "" },
                     file_cell
-                        .as_deref()
                         .map(|f| format!("\"file\":{},", json_str(f)))
                         .unwrap_or_default(),
                     r.line,
@@ -809,15 +901,72 @@ impl<'w> ReportWriter<'w> {
                     .collect();
                 o.push_str(&parts.join(","));
                 o.push('}');
+                if let Some(u) = u {
+                    o.push_str(&self.u_json(u));
+                }
                 if let Some(res) = r.residual_mm {
                     o.push_str(&format!(",\"residual_mm\":{}", jnum(res, 6)));
                 }
                 o.push_str(&format!(",\"orient_urad\":{}}}", jnum(r.orient_urad, 2)));
                 self.out.write_all(o.as_bytes()).map_err(io)?;
             }
+            Format::Svg | Format::Html => {}
         }
-        self.rows += 1;
         Ok(())
+    }
+
+    /// `,"u_mm":…,"u_effects_mm":{…}` of a JSON row.
+    fn u_json(&self, u: &crate::predict::uncertainty::BlockU) -> String {
+        let parts: Vec<String> = self
+            .u_effects()
+            .iter()
+            .zip(&u.effects_mm)
+            .map(|(e, v)| format!("{}:{}", json_str(e), jnum(*v, 5)))
+            .collect();
+        format!(
+            ",\"u_mm\":{},\"u_effects_mm\":{{{}}}",
+            jnum(u.total_mm, 5),
+            parts.join(",")
+        )
+    }
+
+    /// The summary's line of the cutting moves' largest U (`None`: the
+    /// report states no uncertainty).
+    fn u_line(&self) -> Option<String> {
+        if self.u_effects().is_empty() {
+            return None;
+        }
+        Some(match self.worst_u {
+            Some((u, at)) => format!(
+                "uncertainty U(k=2) of {}: max {} mm (line {})",
+                self.group_names().0,
+                num(u, 5),
+                self.place(at)
+            ),
+            None => format!("uncertainty U(k=2) of {}: none", self.group_names().0),
+        })
+    }
+
+    /// `,"uncertainty":{…}` of the JSON summary (empty: none stated).
+    fn u_summary_json(&self) -> String {
+        if self.u_effects().is_empty() {
+            return String::new();
+        }
+        let effects: Vec<String> = self.u_effects().iter().map(|e| json_str(e)).collect();
+        match self.worst_u {
+            Some((u, (line, file))) => format!(
+                ",\"uncertainty\":{{\"k\":{},\"effects\":[{}],\"cutting_max_u_mm\":{},\"cutting_max_u_line\":{line}{}}}",
+                jnum(crate::predict::uncertainty::COVERAGE_K, 1),
+                effects.join(","),
+                jnum(u, 5),
+                self.json_file(file)
+            ),
+            None => format!(
+                ",\"uncertainty\":{{\"k\":{},\"effects\":[{}]}}",
+                jnum(crate::predict::uncertainty::COVERAGE_K, 1),
+                effects.join(",")
+            ),
+        }
     }
 
     /// Keeps the row when it is the largest deviation so far (of all moves,
@@ -925,6 +1074,7 @@ impl<'w> ReportWriter<'w> {
         let max_line = self.place(max_at);
         let mut lines = vec![self.cutting_line()];
         lines.extend(self.positioning_line());
+        lines.extend(self.u_line());
         lines.push(format!(
             "summary: {rows} rows; |dev| mean {} mm, max {} mm (line {max_line}), p95 {} mm",
             num(mean, 5),
@@ -1016,6 +1166,7 @@ impl<'w> ReportWriter<'w> {
 
     /// Writes the summary (and, for SVG, the picture) and ends the report.
     pub fn finish(mut self, totals: Totals) -> Result<()> {
+        self.write_header()?;
         if self.process_effect.is_some() && self.process.hist.count > 0 {
             self.cutting = std::mem::replace(&mut self.process, Stat::new());
             self.positioning = std::mem::replace(&mut self.positioning_and_air, Stat::new());
@@ -1060,7 +1211,7 @@ impl<'w> ReportWriter<'w> {
                 let positioning = group_json(&self, &self.positioning, &texts);
                 writeln!(
                     self.out,
-                    "],\"summary\":{{\"blocks\":{},\"moves\":{},\"rows\":{},\"mean_mm\":{},\"max_mm\":{},\"max_line\":{}{},\"p95_mm\":{},\"cutting\":{},\"positioning\":{},\"effects\":[{}]}}{provenance}}}",
+                    "],\"summary\":{{\"blocks\":{},\"moves\":{},\"rows\":{},\"mean_mm\":{},\"max_mm\":{},\"max_line\":{}{},\"p95_mm\":{},\"cutting\":{},\"positioning\":{},\"effects\":[{}]{}}}{provenance}}}",
                     totals.blocks,
                     totals.moves,
                     rows,
@@ -1071,7 +1222,8 @@ impl<'w> ReportWriter<'w> {
                     jnum(p95_total, 5),
                     cutting,
                     positioning,
-                    effects.join(",")
+                    effects.join(","),
+                    self.u_summary_json()
                 )
                 .map_err(io)?;
             }
@@ -1105,6 +1257,9 @@ impl<'w> ReportWriter<'w> {
                 let mut groups = self.cutting_line();
                 if let Some(p) = self.positioning_line() {
                     groups.push_str(&format!("; {p}"));
+                }
+                if let Some(u) = self.u_line() {
+                    groups.push_str(&format!("; {u}"));
                 }
                 writeln!(self.out, "# positions: {}", self.positions_label()).map_err(io)?;
                 writeln!(self.out, "# {groups}").map_err(io)?;

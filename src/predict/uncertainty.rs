@@ -35,8 +35,8 @@
 use nalgebra::{DMatrix, Matrix3, Matrix3xX, Vector3};
 
 use crate::error::{Error, Result};
-use crate::machine::robot::{Model, Robot, RobotParam};
-use crate::machine::tool::{MachineTool, ToolParam};
+use crate::machine::robot::{DhField, Model, Robot, RobotParam, ThermalField};
+use crate::machine::tool::{LocationParam, MachineTool, ToolParam};
 use crate::machine::{AxisVec, DirVec};
 
 /// Coverage factor of an expanded uncertainty (about 95 % for a normal
@@ -367,6 +367,59 @@ pub fn read_covariance(text: &str, file: &str) -> Result<Vec<CovarianceBlock>> {
     Ok(raw.covariance)
 }
 
+/// The machine file `text` with `block` in its `covariance` list: the
+/// block of the same kind replaced, or added (with the list when the file
+/// has none, at its end). The list is written whole in block style where
+/// the file had it; every other line is kept as it is.
+pub fn put_covariance(text: &str, file: &str, block: &CovarianceBlock) -> Result<String> {
+    let mut blocks = read_covariance(text, file)?;
+    blocks.retain(|b| b.kind != block.kind);
+    blocks.push(block.clone());
+    let mut list = String::from("covariance:\n");
+    for b in &blocks {
+        list.push_str(&b.to_yaml_entry());
+    }
+    let lines: Vec<&str> = text.split_inclusive('\n').collect();
+    let start = lines.iter().position(|l| {
+        l.strip_prefix("covariance:")
+            .is_some_and(|r| r.trim().is_empty() || r.starts_with([' ', '\t']))
+    });
+    let Some(start) = start else {
+        let mut out = text.to_string();
+        if !out.is_empty() && !out.ends_with('\n') {
+            out.push('\n');
+        }
+        out.push_str(COVERAGE_COMMENT);
+        out.push_str(&list);
+        return Ok(out);
+    };
+    // The section runs to the next line at column 0 that is not a list
+    // item of it (blank lines and comments before that line stay after it).
+    let mut end = start + 1;
+    let mut last = start + 1;
+    while let Some(l) = lines.get(end) {
+        let t = l.trim_end();
+        if t.is_empty() || t.starts_with('#') {
+            end += 1;
+            continue;
+        }
+        if t.starts_with([' ', '\t', '-']) {
+            end += 1;
+            last = end;
+            continue;
+        }
+        break;
+    }
+    let mut out: String = lines[..start].concat();
+    out.push_str(&list);
+    out.push_str(&lines[last..].concat());
+    Ok(out)
+}
+
+/// The comment line above a new `covariance` list.
+const COVERAGE_COMMENT: &str =
+    "# parameter uncertainty of the calibrated values (postproc calibrate; docs/verify.md)\n";
+
 /// Sensitivities of a machine tool's predicted tip deviation (attained −
 /// nominal, geometric chain) to its parameters.
 #[derive(Debug, Clone)]
@@ -437,6 +490,313 @@ impl RobotSensitivity {
             j.set_column(c, &(d / (2.0 * step)));
         }
         j
+    }
+}
+
+/// Every parameter of a machine tool's model with a value in its file, by
+/// key path (stiffness and thermal grids by their one-value keys only).
+fn tool_params(machine: &MachineTool) -> Vec<ToolParam> {
+    let mut all = Vec::new();
+    let locations = || {
+        (0..3)
+            .map(LocationParam::Offset)
+            .chain((0..3).map(LocationParam::Angle))
+            .chain([LocationParam::Zero])
+    };
+    for axis in 0..6 {
+        for error in 0..6 {
+            for forward in [true, false] {
+                let mut node = 0;
+                while machine
+                    .param_value(ToolParam::Component {
+                        axis,
+                        error,
+                        node,
+                        forward,
+                    })
+                    .is_some()
+                {
+                    all.push(ToolParam::Component {
+                        axis,
+                        error,
+                        node,
+                        forward,
+                    });
+                    node += 1;
+                }
+            }
+        }
+        all.extend(locations().map(|error| ToolParam::Location { axis, error }));
+        all.push(ToolParam::AxisScale { axis });
+        all.push(ToolParam::AxisTimeConstant { axis });
+    }
+    all.extend(locations().map(|error| ToolParam::SpindleLocation { error }));
+    all.extend([ToolParam::SpindleGrowth, ToolParam::SpindleTimeConstant]);
+    all
+}
+
+/// The correction a robot parameter makes: its value less the nominal
+/// model's for a DH value (angles in degrees), the value itself otherwise.
+fn robot_correction(r: &Robot, p: RobotParam) -> f64 {
+    let v = r.param_value(p).unwrap_or(0.0);
+    match p {
+        RobotParam::Dh { joint, field } => {
+            let Some(j) = r.params(Model::Nominal).joints.get(joint) else {
+                return v;
+            };
+            v - match field {
+                DhField::A => j.a_mm,
+                DhField::Alpha => j.alpha_rad.to_degrees(),
+                DhField::D => j.d_mm,
+                DhField::ThetaOffset => j.theta_offset_rad.to_degrees(),
+            }
+        }
+        _ => v,
+    }
+}
+
+/// Every parameter of a robot's model, by key path.
+fn robot_params(robot: &Robot) -> Vec<RobotParam> {
+    let mut all = Vec::new();
+    for joint in 0..6 {
+        for field in [DhField::A, DhField::Alpha, DhField::D, DhField::ThetaOffset] {
+            all.push(RobotParam::Dh { joint, field });
+        }
+        all.push(RobotParam::JointStiffness { joint });
+    }
+    all.extend((0..3).map(|axis| RobotParam::ToolOffset { axis }));
+    let mut term = 0;
+    while robot
+        .param_value(RobotParam::Thermal {
+            term,
+            field: ThermalField::Lb,
+        })
+        .is_some()
+    {
+        for field in [ThermalField::Lb, ThermalField::Ub, ThermalField::Ts] {
+            all.push(RobotParam::Thermal { term, field });
+        }
+        term += 1;
+    }
+    all.extend([RobotParam::ThermalTimeConstant, RobotParam::PayloadMass]);
+    all
+}
+
+/// The parameter of each key path in `paths` among `all` (named by
+/// `key`), with its step; the first path that names none is the error.
+fn by_path<P: Copy>(
+    all: &[P],
+    key: fn(&P) -> String,
+    paths: &[String],
+    steps: &[f64],
+) -> std::result::Result<Vec<(P, f64)>, String> {
+    let keys: Vec<String> = all.iter().map(key).collect();
+    paths
+        .iter()
+        .zip(steps)
+        .map(|(p, s)| {
+            keys.iter()
+                .position(|k| k == p)
+                .and_then(|i| all.get(i))
+                .map(|q| (*q, *s))
+                .ok_or_else(|| p.clone())
+        })
+        .collect()
+}
+
+/// The expanded uncertainty (k = [`COVERAGE_K`]) of one predicted
+/// deviation: of its length, and of the part of each effect.
+#[derive(Debug, Clone, PartialEq)]
+pub struct BlockU {
+    /// U of the deviation's length (along the deviation; of its largest
+    /// coordinate when the deviation is 0), mm.
+    pub total_mm: f64,
+    /// U of the deviation's length from each effect's parameters alone,
+    /// in [`BlockUncertainty::effects`] order, mm.
+    pub effects_mm: Vec<f64>,
+}
+
+/// How the sensitivities are taken.
+#[derive(Debug, Clone)]
+enum Sensitivity {
+    Tool(ToolSensitivity),
+    Robot(RobotSensitivity),
+}
+
+/// The uncertainty of every predicted deviation of a model whose machine
+/// file carries a `covariance` list: the parameters of its geometric
+/// (machine tool) or kinematic (robot) blocks with their covariance (the
+/// blocks independent of one another) and the model's sensitivities to
+/// them. Blocks of other kinds (stiffness, thermal, diagnose) are not
+/// propagated: their effects' predictions are not the tip deviation's
+/// geometric chain these sensitivities differentiate.
+#[derive(Debug, Clone)]
+pub struct BlockUncertainty {
+    sens: Sensitivity,
+    cov: ParamCovariance,
+    /// (correction / u)² of each parameter (`None`: u = 0).
+    z2: Vec<Option<f64>>,
+    /// `kind (observations)` of each block propagated.
+    pub sources: Vec<String>,
+}
+
+impl BlockUncertainty {
+    /// The uncertainty of `machine`'s predictions from `blocks` (its file's
+    /// `covariance` list; `file` names it in errors); `None` when no block
+    /// is of the model's geometric or kinematic kind. A parameter that is
+    /// not a value of the file is refused by its key path.
+    pub fn of_machine(
+        machine: &crate::machine::Machine,
+        blocks: &[CovarianceBlock],
+        file: &str,
+    ) -> Result<Option<Self>> {
+        use crate::machine::Machine;
+        let want = match machine {
+            Machine::Tool(_) => "geometry",
+            Machine::Robot(_) => "kinematics",
+        };
+        let used: Vec<&CovarianceBlock> = blocks.iter().filter(|b| b.kind == want).collect();
+        if used.is_empty() {
+            return Ok(None);
+        }
+        let n: usize = used.iter().map(|b| b.parameters.len()).sum();
+        let mut big = DMatrix::zeros(n, n);
+        let mut steps = Vec::with_capacity(n);
+        let mut paths = Vec::with_capacity(n);
+        let mut at = 0;
+        for b in &used {
+            let c = b.covariance()?;
+            let m = c.len();
+            big.view_mut((at, at), (m, m)).copy_from(c.matrix());
+            steps.extend(b.u.iter().map(|u| if *u > 0.0 { *u } else { 1.0 }));
+            paths.extend(b.parameters.iter().cloned());
+            at += m;
+        }
+        let unknown = |p: &str| {
+            Error::Data(format!(
+                "{file}: covariance: `{p}` is not a value of this machine file"
+            ))
+        };
+        let u: Vec<f64> = used.iter().flat_map(|b| b.u.iter().copied()).collect();
+        let (sens, corrections): (Sensitivity, Vec<f64>) = match machine {
+            Machine::Tool(t) => {
+                let params = by_path(&tool_params(t), ToolParam::path, &paths, &steps)
+                    .map_err(|p| unknown(&p))?;
+                // A machine tool's error parameters are their corrections.
+                let c = params
+                    .iter()
+                    .map(|(p, _)| t.param_value(*p).unwrap_or(0.0))
+                    .collect();
+                (Sensitivity::Tool(ToolSensitivity::new(t, &params)?), c)
+            }
+            Machine::Robot(r) => {
+                let params = by_path(&robot_params(r), RobotParam::path, &paths, &steps)
+                    .map_err(|p| unknown(&p))?;
+                let c = params
+                    .iter()
+                    .map(|(p, _)| robot_correction(r, *p))
+                    .collect();
+                (Sensitivity::Robot(RobotSensitivity::new(r, &params)?), c)
+            }
+        };
+        let z2 = corrections
+            .iter()
+            .zip(&u)
+            .map(|(c, u)| (*u > 0.0).then(|| (c / u).powi(2)))
+            .collect();
+        let effect = if want == "geometry" {
+            "geometric"
+        } else {
+            "kinematic"
+        };
+        Ok(Some(BlockUncertainty {
+            sens,
+            cov: ParamCovariance::new(vec![effect; n], big)?,
+            z2,
+            sources: used
+                .iter()
+                .map(|b| format!("{} ({})", b.kind, b.observations))
+                .collect(),
+        }))
+    }
+
+    /// The gain of each effect's correction by how well the calibration
+    /// knows it: the positive-part James–Stein factor
+    /// g = max(0, 1 − n / Σ (c_i/u_i)²) of its n parameters with
+    /// corrections c_i (the identified value's departure from the nominal
+    /// model) and standard uncertainties u_i — about 1 for corrections
+    /// many times their uncertainty, 0 for corrections at the noise
+    /// level (parameters with u = 0 are exactly known and not counted; an
+    /// effect with none left keeps gain 1).
+    pub fn auto_gains(&self) -> Vec<(&'static str, f64)> {
+        self.effects()
+            .into_iter()
+            .map(|e| {
+                let z: Vec<f64> = self
+                    .cov
+                    .effects
+                    .iter()
+                    .zip(&self.z2)
+                    .filter(|(f, _)| **f == e)
+                    .filter_map(|(_, z)| *z)
+                    .collect();
+                let sum: f64 = z.iter().sum();
+                let g = if z.is_empty() {
+                    1.0
+                } else if sum > 0.0 {
+                    (1.0 - z.len() as f64 / sum).max(0.0)
+                } else {
+                    0.0
+                };
+                (e, g)
+            })
+            .collect()
+    }
+
+    /// The model is a machine tool's.
+    pub fn is_tool(&self) -> bool {
+        matches!(self.sens, Sensitivity::Tool(_))
+    }
+
+    /// The effects the uncertainty is stated for.
+    pub fn effects(&self) -> Vec<&'static str> {
+        self.cov.effect_names()
+    }
+
+    /// U of a machine tool's predicted deviation `dev` at a command
+    /// (`None` for a robot model).
+    pub fn tool(
+        &self,
+        cmd: &AxisVec,
+        dirs: &DirVec,
+        tool_mm: f64,
+        dev: &Vector3<f64>,
+    ) -> Option<BlockU> {
+        let Sensitivity::Tool(s) = &self.sens else {
+            return None;
+        };
+        self.of_jacobian(&s.jacobian(cmd, dirs, tool_mm), dev)
+    }
+
+    /// U of a robot's predicted deviation `dev` at joint angles `q` (rad;
+    /// `None` for a machine-tool model).
+    pub fn robot(&self, q: &[f64; 6], dev: &Vector3<f64>) -> Option<BlockU> {
+        let Sensitivity::Robot(s) = &self.sens else {
+            return None;
+        };
+        self.of_jacobian(&s.jacobian(q), dev)
+    }
+
+    fn of_jacobian(&self, j: &Matrix3xX<f64>, dev: &Vector3<f64>) -> Option<BlockU> {
+        let total = propagate(j, &self.cov).ok()?;
+        let effects = per_effect(j, &self.cov).ok()?;
+        Some(BlockU {
+            total_mm: total.expanded_length_mm(dev, COVERAGE_K),
+            effects_mm: effects
+                .iter()
+                .map(|(_, u)| u.expanded_length_mm(dev, COVERAGE_K))
+                .collect(),
+        })
     }
 }
 
@@ -561,5 +921,35 @@ axes:
             0.0,
         );
         assert_abs_diff_eq!(j[(0, 2)], 0.00025, epsilon = 1e-12);
+    }
+
+    fn block(kind: &str, u: f64) -> CovarianceBlock {
+        CovarianceBlock {
+            kind: kind.into(),
+            observations: "a.csv".into(),
+            observations_sha256: "ab".into(),
+            rows: 3,
+            parameters: vec!["k_nm_per_rad[0]".into()],
+            u: vec![u],
+            correlation: vec![vec![1.0]],
+        }
+    }
+
+    #[test]
+    fn a_covariance_list_is_added_at_the_end_and_a_kind_replaced() {
+        let text = "kind: robot\nname: r";
+        let one = put_covariance(text, "m.yaml", &block("kinematics", 0.5)).unwrap();
+        assert!(one.starts_with("kind: robot\nname: r\n# parameter uncertainty"));
+        assert!(one.ends_with("covariance:\n  - kind: kinematics\n    observations: \"a.csv\"\n    observations_sha256: ab\n    rows: 3\n    parameters: [\"k_nm_per_rad[0]\"]\n    u: [0.5]\n    correlation:\n      - [1.0000]\n"), "{one}");
+        // Another kind is added to the list; the same kind replaces its block,
+        // and the key after the list is kept.
+        let with_next = format!("{one}\n# next\nacceptance: {{}}\n");
+        let two = put_covariance(&with_next, "m.yaml", &block("stiffness", 0.25)).unwrap();
+        let three = put_covariance(&two, "m.yaml", &block("kinematics", 2.0)).unwrap();
+        let b = read_covariance(&three, "m.yaml").unwrap();
+        let kinds: Vec<(&str, f64)> = b.iter().map(|b| (b.kind.as_str(), b.u[0])).collect();
+        assert_eq!(kinds, [("stiffness", 0.25), ("kinematics", 2.0)]);
+        assert!(three.ends_with("\n# next\nacceptance: {}\n"), "{three}");
+        assert_eq!(three.matches("covariance:").count(), 1);
     }
 }

@@ -11,6 +11,13 @@
 //! point's normal plane): path accuracy AT_P = max over points of
 //! |x̄_i − x_ci|, path repeatability RT_P = max over points of
 //! l̄_i + 3 S_li. The robot's AP and RP are the largest of its poses'.
+//!
+//! Where a pose file gives orientations (angles a, b, c about x, y, z,
+//! commanded and attained, degrees), the orientation characteristics of
+//! each pose: with d_j = a_j − a_c (taken within ±180°),
+//! APa = mean_j d_j and RPa = 3 S_a, S_a = sqrt(Σ_j (d_j − APa)² / (n − 1))
+//! (b and c alike); the robot's APa … RPc are those of largest magnitude
+//! over its poses (group `orientation`, degrees).
 
 use nalgebra::Vector3;
 use serde_json::json;
@@ -20,7 +27,16 @@ use super::{Evaluation, Figure, Group, Standard, fmt_mm, json_mm};
 use crate::error::{Error, Located, Result};
 
 /// The figures, in report order.
-pub const FIGURES: [&str; 4] = ["AP", "RP", "AT", "RT"];
+pub const FIGURES: [&str; 10] = [
+    "AP", "RP", "AT", "RT", "APa", "APb", "APc", "RPa", "RPb", "RPc",
+];
+
+/// The orientation figures (degrees), in report order.
+pub const ORIENTATION_FIGURES: [&str; 6] = ["APa", "APb", "APc", "RPa", "RPb", "RPc"];
+
+/// The orientation columns of a pose file: commanded, then attained.
+pub const ORIENTATION_COLUMNS: [&str; 6] =
+    ["ac_deg", "bc_deg", "cc_deg", "a_deg", "b_deg", "c_deg"];
 
 /// Fewest poses of a pose test.
 pub const MIN_POSES: usize = 5;
@@ -45,6 +61,12 @@ pub const POSE_COLUMNS: &[Column] = &[
     Column::required("x_mm", Kind::Number),
     Column::required("y_mm", Kind::Number),
     Column::required("z_mm", Kind::Number),
+    Column::optional("ac_deg", Kind::Number),
+    Column::optional("bc_deg", Kind::Number),
+    Column::optional("cc_deg", Kind::Number),
+    Column::optional("a_deg", Kind::Number),
+    Column::optional("b_deg", Kind::Number),
+    Column::optional("c_deg", Kind::Number),
     Column::optional("t_s", Kind::Number),
 ];
 
@@ -71,6 +93,46 @@ pub struct Visits {
     pub commanded: Vector3<f64>,
     /// Attained positions, mm.
     pub attained: Vec<Vector3<f64>>,
+    /// Commanded and attained orientations (a, b, c about x, y, z,
+    /// degrees), when the file gives them.
+    pub orientation: Option<(Vector3<f64>, Vec<Vector3<f64>>)>,
+}
+
+/// The orientation characteristics of one pose, degrees.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct OrientationStats {
+    /// APa, APb, APc: mean attained − commanded angle.
+    pub ap_abc: Vector3<f64>,
+    /// S_a, S_b, S_c.
+    pub s_abc: Vector3<f64>,
+    /// RPa, RPb, RPc = 3 S.
+    pub rp_abc: Vector3<f64>,
+}
+
+/// An angle difference within ±180°.
+fn wrapped_deg(d: f64) -> f64 {
+    let r = d.rem_euclid(360.0);
+    if r > 180.0 { r - 360.0 } else { r }
+}
+
+/// The orientation characteristics of the visits of a pose.
+pub fn orientation_stats(commanded: &Vector3<f64>, attained: &[Vector3<f64>]) -> OrientationStats {
+    let mut ap = Vector3::zeros();
+    let mut sd = Vector3::zeros();
+    for i in 0..3 {
+        let d: Vec<f64> = attained
+            .iter()
+            .map(|x| wrapped_deg(x[i] - commanded[i]))
+            .collect();
+        let (m, s) = super::iso230_2::mean_s(&d);
+        ap[i] = m;
+        sd[i] = s;
+    }
+    OrientationStats {
+        ap_abc: ap,
+        s_abc: sd,
+        rp_abc: sd * 3.0,
+    }
 }
 
 /// The statistics of one pose (or path point), mm.
@@ -90,6 +152,8 @@ pub struct PoseStats {
     pub s_l: f64,
     /// l̄ + 3 S_l.
     pub rp: f64,
+    /// The orientation characteristics, when the visits give orientations.
+    pub orientation: Option<OrientationStats>,
 }
 
 /// The statistics of one pose.
@@ -107,6 +171,7 @@ pub fn pose_stats(v: &Visits) -> PoseStats {
         l_mean,
         s_l,
         rp: l_mean + 3.0 * s_l,
+        orientation: v.orientation.as_ref().map(|(c, a)| orientation_stats(c, a)),
     }
 }
 
@@ -126,8 +191,25 @@ pub fn read_visits(text: &str, file: &str, path: bool) -> Result<Vec<Visits>> {
             .ok_or_else(|| row.error(&table, label_col, format!("empty `{label_col}`")))?;
         let cmd = triple(row, &table, ["xc_mm", "yc_mm", "zc_mm"])?;
         let att = triple(row, &table, ["x_mm", "y_mm", "z_mm"])?;
+        let orient = orientation_of(row, &table)?;
         match out.iter_mut().find(|(v, _)| v.label == label) {
             Some((v, _)) => {
+                match (&mut v.orientation, orient) {
+                    (Some((c, a)), Some((oc, oa))) => {
+                        if (*c - oc).amax() > SAME_COMMAND_DEG {
+                            return Err(row.error(
+                                &table,
+                                "ac_deg",
+                                format!(
+                                    "{label_col} `{label}` commanded at another orientation than on its first row"
+                                ),
+                            ));
+                        }
+                        a.push(oa);
+                    }
+                    (None, None) => {}
+                    _ => return Err(orientation_mismatch(row, &table)),
+                }
                 if (v.commanded - cmd).amax() > SAME_COMMAND_MM {
                     return Err(row.error(
                         &table,
@@ -144,6 +226,7 @@ pub fn read_visits(text: &str, file: &str, path: bool) -> Result<Vec<Visits>> {
                     label: label.to_string(),
                     commanded: cmd,
                     attained: vec![att],
+                    orientation: orient.map(|(c, a)| (c, vec![a])),
                 },
                 row.line,
             )),
@@ -174,7 +257,52 @@ pub fn read_visits(text: &str, file: &str, path: bool) -> Result<Vec<Visits>> {
             )));
         }
     }
+    if out.iter().any(|(v, _)| v.orientation.is_some())
+        && out.iter().any(|(v, _)| v.orientation.is_none())
+    {
+        return Err(table.header_error("orientations given for some poses and not for others"));
+    }
     Ok(out.into_iter().map(|(v, _)| v).collect())
+}
+
+/// Commanded orientations of one pose further apart than this are an
+/// error, degrees.
+pub const SAME_COMMAND_DEG: f64 = 1e-6;
+
+/// The commanded and attained orientation of a row: all six orientation
+/// cells or none.
+fn orientation_of(row: &Row, table: &Table) -> Result<Option<(Vector3<f64>, Vector3<f64>)>> {
+    let cells: Vec<Option<f64>> = ORIENTATION_COLUMNS
+        .iter()
+        .map(|n| row.number(table, n))
+        .collect();
+    if cells.iter().all(Option::is_none) {
+        return Ok(None);
+    }
+    if let Some(i) = cells.iter().position(Option::is_none) {
+        let n = ORIENTATION_COLUMNS[i];
+        return Err(row.error(
+            table,
+            if table.has(n) { n } else { "pose" },
+            format!(
+                "`{n}` not given: an orientation needs all of {}",
+                ORIENTATION_COLUMNS.join(", ")
+            ),
+        ));
+    }
+    let v = |i: usize| cells[i].unwrap_or(0.0);
+    Ok(Some((
+        Vector3::new(v(0), v(1), v(2)),
+        Vector3::new(v(3), v(4), v(5)),
+    )))
+}
+
+fn orientation_mismatch(row: &Row, table: &Table) -> Error {
+    row.error(
+        table,
+        "pose",
+        "orientation given on some visits of this pose and not on others",
+    )
 }
 
 fn triple(row: &Row, table: &Table, names: [&str; 3]) -> Result<Vector3<f64>> {
@@ -208,6 +336,36 @@ fn worst(s: &[PoseStats], f: impl Fn(&PoseStats) -> f64) -> f64 {
     s.iter().map(f).fold(0.0, f64::max)
 }
 
+/// The value of largest magnitude (signed; 0 for none).
+fn worst_signed(v: impl Iterator<Item = f64>) -> f64 {
+    v.fold(0.0, |w, x| if x.abs() > w.abs() { x } else { w })
+}
+
+/// The `orientation` group of poses that all give orientations.
+fn orientation_group(poses: &[PoseStats]) -> Option<Group> {
+    let o: Vec<OrientationStats> = poses.iter().map(|p| p.orientation).collect::<Option<_>>()?;
+    if o.is_empty() {
+        return None;
+    }
+    let mut figures = Vec::with_capacity(6);
+    for (k, name) in ORIENTATION_FIGURES.iter().enumerate() {
+        let i = k % 3;
+        let value = if k < 3 {
+            worst_signed(o.iter().map(|s| s.ap_abc[i]))
+        } else {
+            o.iter().map(|s| s.rp_abc[i]).fold(0.0, f64::max)
+        };
+        figures.push(Figure {
+            name,
+            value_mm: value,
+        });
+    }
+    Some(Group {
+        name: "orientation".into(),
+        figures,
+    })
+}
+
 impl Evaluation for Iso9283 {
     fn standard(&self) -> Standard {
         Standard::Iso9283
@@ -227,6 +385,7 @@ impl Evaluation for Iso9283 {
                 },
             ],
         }];
+        g.extend(orientation_group(&self.poses));
         if !self.path.is_empty() {
             g.push(Group {
                 name: "path".into(),
@@ -249,7 +408,7 @@ impl Evaluation for Iso9283 {
         let rows = |s: &[PoseStats]| -> Vec<serde_json::Value> {
             s.iter()
                 .map(|p| {
-                    json!({
+                    let mut o = json!({
                         "label": p.label,
                         "visits": p.visits,
                         "ap_x_mm": json_mm(p.ap_xyz[0]),
@@ -259,7 +418,15 @@ impl Evaluation for Iso9283 {
                         "l_mean_mm": json_mm(p.l_mean),
                         "s_l_mm": json_mm(p.s_l),
                         "rp_mm": json_mm(p.rp),
-                    })
+                    });
+                    if let (Some(s), Some(map)) = (p.orientation, o.as_object_mut()) {
+                        for (i, c) in ["a", "b", "c"].iter().enumerate() {
+                            map.insert(format!("ap_{c}_deg"), json_mm(s.ap_abc[i]));
+                            map.insert(format!("s_{c}_deg"), json_mm(s.s_abc[i]));
+                            map.insert(format!("rp_{c}_deg"), json_mm(s.rp_abc[i]));
+                        }
+                    }
+                    o
                 })
                 .collect()
         };
@@ -290,6 +457,26 @@ impl Evaluation for Iso9283 {
                 ));
             }
         }
+        if self.poses.iter().all(|p| p.orientation.is_some()) && !self.poses.is_empty() {
+            out.push_str(&format!(
+                "{:<8} {:>6} {:>9} {:>9} {:>9} {:>9} {:>9} {:>9}   (deg)\n",
+                "pose", "visits", "APa", "APb", "APc", "RPa", "RPb", "RPc"
+            ));
+            for p in &self.poses {
+                let Some(s) = p.orientation else { continue };
+                out.push_str(&format!(
+                    "{:<8} {:>6} {:>9} {:>9} {:>9} {:>9} {:>9} {:>9}\n",
+                    p.label,
+                    p.visits,
+                    fmt_mm(s.ap_abc[0]),
+                    fmt_mm(s.ap_abc[1]),
+                    fmt_mm(s.ap_abc[2]),
+                    fmt_mm(s.rp_abc[0]),
+                    fmt_mm(s.rp_abc[1]),
+                    fmt_mm(s.rp_abc[2])
+                ));
+            }
+        }
     }
 }
 
@@ -317,6 +504,7 @@ mod tests {
                 b + Vector3::new(0.0, -0.05, 0.0),
                 b,
             ],
+            orientation: None,
         };
         let s = pose_stats(&v);
         assert_abs_diff_eq!(s.ap, 0.5, epsilon = NM);

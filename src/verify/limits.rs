@@ -210,13 +210,14 @@ pub fn from_machine_file(text: &str, file: &str, standard: Standard) -> Result<V
                 None => format!("acceptance.{}.{key}", standard.key()),
             };
             let figure = key
-                .strip_suffix("_mm")
-                .filter(|f| standard.figures().contains(f))
+                .rsplit_once('_')
+                .filter(|(f, unit)| standard.figures().contains(f) && super::unit_of(f) == *unit)
+                .map(|(f, _)| f)
                 .ok_or_else(|| {
                     let keys: Vec<String> = standard
                         .figures()
                         .iter()
-                        .map(|f| format!("{f}_mm"))
+                        .map(|f| format!("{f}_{}", super::unit_of(f)))
                         .collect();
                     yaml::located(
                         text,

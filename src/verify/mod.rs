@@ -57,7 +57,18 @@ impl Standard {
     }
 }
 
-/// One figure of a group, mm.
+/// The unit of a figure: `deg` for ISO 9283's orientation figures, `mm`
+/// for every other.
+pub fn unit_of(figure: &str) -> &'static str {
+    if iso9283::ORIENTATION_FIGURES.contains(&figure) {
+        "deg"
+    } else {
+        "mm"
+    }
+}
+
+/// One figure of a group, mm (degrees for an orientation figure:
+/// [`unit_of`]).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Figure {
     /// Its name (`A`, `R_up`, `RP`).
@@ -139,7 +150,12 @@ pub fn report_json(eval: &dyn Evaluation, source: &Source, checks: &[Check]) -> 
             let figures: serde_json::Map<String, serde_json::Value> = g
                 .figures
                 .iter()
-                .map(|f| (format!("{}_mm", f.name), json_mm(f.value_mm)))
+                .map(|f| {
+                    (
+                        format!("{}_{}", f.name, unit_of(f.name)),
+                        json_mm(f.value_mm),
+                    )
+                })
                 .collect();
             json!({ "name": g.name, "figures": figures })
         })
@@ -153,11 +169,12 @@ pub fn report_json(eval: &dyn Evaluation, source: &Source, checks: &[Check]) -> 
     let rows: Vec<serde_json::Value> = checks
         .iter()
         .map(|c| {
+            let unit = unit_of(c.figure);
             json!({
                 "group": c.group,
                 "figure": c.figure,
-                "value_mm": json_mm(c.value_mm),
-                "limit_mm": json_mm(c.limit_mm),
+                format!("value_{unit}"): json_mm(c.value_mm),
+                format!("limit_{unit}"): json_mm(c.limit_mm),
                 "source": c.source.name(),
                 "pass": c.pass,
             })
@@ -191,7 +208,14 @@ pub fn report_table(eval: &dyn Evaluation, source: &Source, checks: &[Check]) ->
     for g in &groups {
         out.push_str(&format!(" {:>12}", g.name));
     }
-    out.push_str("   (mm)\n");
+    if groups
+        .iter()
+        .any(|g| g.figures.iter().any(|f| unit_of(f.name) == "deg"))
+    {
+        out.push_str("   (mm; APa … RPc: deg)\n");
+    } else {
+        out.push_str("   (mm)\n");
+    }
     let names: Vec<&str> = groups
         .iter()
         .flat_map(|g| g.figures.iter().map(|f| f.name))
