@@ -291,7 +291,8 @@ pub(crate) fn misses(job: &Job, input: &str, output: &str) -> Vec<(usize, usize,
         .collect();
     let (map, takeup) = align(input, output);
     let mut out = Vec::new();
-    for r in forward(job, output) {
+    let reads = forward(job, output);
+    for (i, r) in reads.iter().enumerate() {
         let Some(mv) = feed(&r.plan) else { continue };
         let src = map[r.line - 1];
         // A block's takeup move goes onto its start, off the path by
@@ -308,6 +309,18 @@ pub(crate) fn misses(job: &Job, input: &str, output: &str) -> Vec<(usize, usize,
         // reversal of the arc (onto the next part's start).
         if want.arc.is_some() && mv.arc.is_none() && mv.length_mm() < 0.05 {
             continue;
+        }
+        // So is a short straight line inside a straight block after which
+        // the block's next piece moves an axis the other way (a takeup
+        // point where the correction's drift reverses an axis).
+        if want.arc.is_none() && mv.arc.is_none() && mv.length_mm() < 0.05 {
+            let next = reads.get(i + 1).and_then(|n| {
+                let same = n.line >= 1 && map[n.line - 1] == src && !takeup[n.line - 1];
+                feed(&n.plan).filter(|_| same)
+            });
+            if next.is_some_and(|n| n.arc.is_none() && n.dirs != mv.dirs) {
+                continue;
+            }
         }
         let p = pred.with_context(r.ctx);
         let n = ((mv.length_mm() / SAMPLE_MM).ceil() as usize).max(MIN_SAMPLES);
@@ -495,9 +508,12 @@ fn every_written_piece_lands_within_the_tolerance_quasi_static() {
 }
 
 /// A 400 mm straight pass and its return on afm-r1000: every written
-/// piece within the tolerance, or warned.
+/// piece within the tolerance (none warned beyond it). The correction
+/// moves Z, which the block does not drive, by about the deadband of a
+/// direction of motion along the pass: a piece read back with Z moving
+/// would take the Z reversal error the solve did not (regression: 3.95
+/// µm at 3 µm, and a takeup point inside the pass taken for a miss).
 #[test]
-#[ignore = "issue 41, open: a 400 mm X pass is written as one piece that misses by 3.95 µm at 3 µm (warned) and by 2.1 µm at 1 µm unwarned: the piece certificate passes it; run with --ignored"]
 fn a_long_straight_pass_lands_within_the_tolerance() {
     let case = Case {
         program: "tests/repredict/long_pass.nc".to_string(),

@@ -563,7 +563,7 @@ impl<'m> ArcJob<'_, 'm> {
                 gap,
                 d,
                 self.lip,
-                self.tol - sag,
+                (self.tol - sag, None),
                 true,
                 &mut res.segments,
             )?;

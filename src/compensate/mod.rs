@@ -566,7 +566,7 @@ fn split_line<'m>(
     start_gap: f64,
     dirs: &DirVec,
     lip: &Lip<'m>,
-    tol: f64,
+    (tol, grid): (f64, Option<&Grid>),
     keep_end: bool,
     out: &mut Vec<AxisVec>,
 ) -> Result<(), Failure> {
@@ -587,6 +587,7 @@ fn split_line<'m>(
         dirs,
         lip,
         tol,
+        grid,
         keep_end,
     };
     piece.split(0.0, 1.0, c0, c1, start_gap, 0, out)
@@ -640,6 +641,9 @@ struct Piece<'a, 'p> {
     ts: &'a [f64],
     dirs: &'a DirVec,
     tol: f64,
+    /// The grid of the written words (a piece whose travel it reads on
+    /// either side of the deadband of a direction of motion is halved).
+    grid: Option<&'a Grid>,
     keep_end: bool,
 }
 
@@ -695,7 +699,17 @@ impl Piece<'_, '_> {
             Some(pass) => pass,
             None => self.sampled(ta, tb, ca, cb),
         };
-        if pass {
+        // A piece whose written travel in an axis may be read on either
+        // side of the deadband is halved (each half travels half of it,
+        // well inside the deadband): read back, it keeps the directions it
+        // was solved with. At the deepest split it stays, and its miss is
+        // measured under both readings.
+        let ambiguous = pass
+            && depth < MAX_SPLIT_DEPTH
+            && self
+                .grid
+                .is_some_and(|g| (0..3).any(|s| g.ambiguous(s, ca[s], cb[s])));
+        if pass && !ambiguous {
             // `tb` is exactly 1 only for the last piece of the move.
             if tb < 1.0 || self.keep_end {
                 out.push(*cb);
@@ -705,14 +719,15 @@ impl Piece<'_, '_> {
         if depth >= MAX_SPLIT_DEPTH {
             return Err(Failure::TooManySegments);
         }
-        // The crossing nearest the middle of the part, or the middle.
+        // The crossing nearest the middle of the part, or the middle (an
+        // ambiguous piece: the middle).
         let mid = (ta + tb) / 2.0;
         let margin = (tb - ta) * BREAK_MARGIN;
         let tm = self
             .ts
             .iter()
             .copied()
-            .filter(|&t| t > ta + margin && t < tb - margin)
+            .filter(|&t| !ambiguous && t > ta + margin && t < tb - margin)
             .min_by(|x, y| (x - mid).abs().total_cmp(&(y - mid).abs()))
             .unwrap_or(mid);
         let pa = lerp(self.p0, self.p1, ta);
@@ -862,24 +877,22 @@ impl Piece<'_, '_> {
         }
     }
 
-    /// The gap at the quarter points of the piece within the tolerance (the
-    /// check where [`Self::certify`] does not apply).
+    /// Whether the gap along the piece, bounded by [`piece_bound`], is
+    /// within the tolerance (the check where [`Self::certify`] does not
+    /// apply): the gap is the distance of the attained point from the
+    /// nominal point at the same share of the programmed part.
     fn sampled(&self, ta: f64, tb: f64, ca: &AxisVec, cb: &AxisVec) -> bool {
         #[cfg(test)]
         tests::SAMPLED.with(|n| n.set(n.get() + 1));
-        let mut worst = 0.0f64;
-        for f in [0.25, 0.5, 0.75] {
-            let got = self
-                .pred
-                .attained(&lerp(ca, cb, f), self.dirs, self.lip.tool_mm)
-                .pos;
-            let want = self.nominal(ta + (tb - ta) * f);
-            worst = worst.max((got - want).norm());
-            if worst > self.tol {
-                break;
-            }
-        }
-        worst <= self.tol
+        let gap = |f: f64, q: Vector3<f64>| (q - self.nominal(ta + (tb - ta) * f)).norm();
+        let tool = self.lip.tool_mm;
+        piece_bound(
+            self.pred,
+            (ca, cb),
+            self.dirs,
+            (tool, self.tol, self.tol),
+            &gap,
+        ) <= self.tol
     }
 }
 
@@ -1527,6 +1540,7 @@ fn straight<'m>(
     // runs, and whether the last pass solved was it.
     let mut best: Option<(f64, [Run; MAX_RUNS], usize)> = None;
     let mut last_best = false;
+    let grid = Grid::of(plan, rounding);
     for pass in 0..=DIR_PASSES {
         let rewrite = pass == DIR_PASSES || n_runs == 0;
         if rewrite {
@@ -1544,7 +1558,7 @@ fn straight<'m>(
             carry_in,
             lip,
             (tol, nom_end, end_residual, pass == 0),
-            runs_now,
+            (runs_now, &grid),
             res,
         )?;
         // The pieces as the interpreter reads them: from where the machine
@@ -1565,7 +1579,6 @@ fn straight<'m>(
         // (On a machine with rotary axes the nominal path of a piece is
         // no straight line: only a gap left is measured.)
         let affine = !(3..6).any(|s| pred.machine.has_axis(s));
-        let grid = Grid::of(plan, rounding);
         let measure = left > 0.0 || (affine && any_ambiguous(res, &from, &grid));
         if agree {
             res.miss_mm = if measure {
@@ -1605,7 +1618,7 @@ fn solve_runs<'m>(
     carry_in: Option<&Carry>,
     lip: &Lip<'m>,
     (tol, nom_end, end_residual, first): (f64, &TipPose, f64, bool),
-    runs: &[Run],
+    (runs, grid): (&[Run], &Grid),
     res: &mut BlockResult,
 ) -> Result<(f64, AxisVec), Failure> {
     let tool = lip.tool_mm;
@@ -1683,7 +1696,7 @@ fn solve_runs<'m>(
             gap,
             d,
             lip,
-            tol,
+            (tol, Some(grid)),
             !last_run,
             &mut res.segments,
         )?;
@@ -1877,9 +1890,11 @@ const BOUND_SHARE: f64 = 0.01;
 const UNBOUNDED_SAMPLE_MM: f64 = 0.25;
 const MIN_PIECE_SAMPLES: usize = 8;
 
-/// An upper bound of `dist(attained(c))`, mm, along the straight piece of
-/// commands `a → b` under the directions `d`, where `dist` is a distance
-/// to a convex set (the programmed line) in space. On a machine whose
+/// An upper bound of `dist(f, attained(c(f)))`, mm, along the straight
+/// piece of commands `c(f) = a + f·(b − a)` under the directions `d`,
+/// where `dist` is a distance to a convex set (the programmed line) in
+/// space, or to a point moving affinely with `f` (the nominal point of
+/// the programmed part: the gap). On a machine whose
 /// nominal chain is a translation, the attained point is the affine
 /// nominal point plus the error `e`, so between two points of the piece
 /// `dist` is at most the larger of its values there plus the departure of
@@ -1888,13 +1903,14 @@ const MIN_PIECE_SAMPLES: usize = 8;
 /// points with `L · len / n` within [`BOUND_SHARE`] of the tolerance
 /// (at most [`MAX_BOUND_INTERVALS`] intervals), and the bound is the
 /// largest value plus `L · len / n`. Without a Lipschitz bound (rotary
-/// axes) it is the largest of points every [`UNBOUNDED_SAMPLE_MM`].
+/// axes) it is the largest of points every [`UNBOUNDED_SAMPLE_MM`]. The
+/// points stop at the first beyond `stop` (the bound is then above it).
 fn piece_bound(
     pred: &ToolPredictor,
     (a, b): (&AxisVec, &AxisVec),
     d: &DirVec,
-    (tool, tol): (f64, f64),
-    dist: &dyn Fn(Vector3<f64>) -> f64,
+    (tool, tol, stop): (f64, f64, f64),
+    dist: &dyn Fn(f64, Vector3<f64>) -> f64,
 ) -> f64 {
     let len = (0..3).map(|s| (b[s] - a[s]).powi(2)).sum::<f64>().sqrt();
     let affine = !(3..6).any(|s| pred.machine.has_axis(s));
@@ -1916,14 +1932,18 @@ fn piece_bound(
     };
     let mut worst = 0.0f64;
     for k in 0..=n {
-        let q = pred.attained(&lerp(a, b, k as f64 / n as f64), d, tool).pos;
+        let f = k as f64 / n as f64;
+        let q = pred.attained(&lerp(a, b, f), d, tool).pos;
         // (NaN counts as infinitely far)
-        let v = dist(q);
+        let v = dist(f, q);
         worst = if v.is_nan() {
             f64::INFINITY
         } else {
             worst.max(v)
         };
+        if worst > stop {
+            break;
+        }
     }
     worst + between
 }
@@ -1949,7 +1969,7 @@ fn pieces_miss(
     );
     let line = p1 - p0;
     let len2 = line.norm_squared();
-    let off_line = |q: Vector3<f64>| -> f64 {
+    let off_line = |_: f64, q: Vector3<f64>| -> f64 {
         let t = if len2 > 0.0 {
             ((q - p0).dot(&line) / len2).clamp(0.0, 1.0)
         } else {
@@ -1969,7 +1989,13 @@ fn pieces_miss(
         if !is_takeup(res, j) {
             let alt = other_reading(&prev, &w, &a, b, grid);
             for d in [w, alt].iter().take(if alt == w { 1 } else { 2 }) {
-                worst = worst.max(piece_bound(pred, (&a, b), d, (tool, tol), &off_line));
+                worst = worst.max(piece_bound(
+                    pred,
+                    (&a, b),
+                    d,
+                    (tool, tol, f64::INFINITY),
+                    &off_line,
+                ));
             }
         }
         a = *b;
@@ -2754,7 +2780,7 @@ mod tests {
                             SOLVE_TOL_MM,
                             &dirs,
                             &lip,
-                            tol,
+                            (tol, None),
                             true,
                             &mut pts,
                         ) {
@@ -2832,7 +2858,7 @@ mod tests {
                         SOLVE_TOL_MM,
                         &dirs,
                         &Lip::new(tool),
-                        tol,
+                        (tol, None),
                         true,
                         &mut pts,
                     ) {
@@ -2868,6 +2894,7 @@ mod tests {
                     dirs: &dirs,
                     lip: &lip,
                     tol,
+                    grid: None,
                     keep_end: true,
                 };
                 let (inner, total) = piece.inside(&c0, &c1);
@@ -2933,7 +2960,7 @@ mod tests {
                         SOLVE_TOL_MM,
                         &dirs,
                         &Lip::new(tool),
-                        tol,
+                        (tol, None),
                         true,
                         &mut pts,
                     ) {
