@@ -19,7 +19,7 @@ use crate::machine::Machine;
 use crate::machine::robot::Robot;
 use crate::pipeline::rapid::{RapidOptions, refuse_left_as_written};
 use crate::pipeline::robot::{RobotRun, StepResult};
-use crate::predict::robot::Effects;
+use crate::predict::EffectSet;
 use crate::program::charset::{Charset, Latin1Writer};
 use crate::program::robot_moves::RobotStep;
 use crate::program::tp::resolve::resolve;
@@ -95,7 +95,7 @@ pub fn check(a: &CheckArgs) -> Result<i32> {
         Some(m) => {
             let (robot, _) = robot_of(Some(m), "check", None)?;
             let opts = RapidOptions {
-                effects: Effects::NONE,
+                effects: EffectSet::NONE,
                 records: false,
                 strict: a.program.strict,
                 ..RapidOptions::default()
