@@ -12,6 +12,7 @@ mod compensate_props;
 mod conf_off;
 mod configurations;
 mod cycles;
+mod cycles_generated;
 mod diagnose;
 mod diagnose_matrix;
 mod diagnose_write;
