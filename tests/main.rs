@@ -13,6 +13,7 @@ mod conf_off;
 mod configurations;
 mod covariance_file;
 mod cycles;
+mod cycles_generated;
 mod diagnose;
 mod diagnose_matrix;
 mod diagnose_write;

@@ -31,7 +31,7 @@ pub(super) fn parse_setup(args: &ProgramArgs, machine: Option<&MachineTool>) -> 
             ..Setup::default()
         },
     };
-    setup.expand_cycles = args.expand_cycles;
+    setup.expand_cycles |= args.expand_cycles;
     for t in &args.tools {
         setup.tools.insert(t.h, t.length_mm);
     }

@@ -232,9 +232,10 @@ pub struct ProgramArgs {
     #[arg(long)]
     pub compensate_joint_targets: bool,
     /// G-code: write a canned-cycle hole (G73, G81, G82, G83, G85, G89,
-    /// absolute, drilled once) whose one X and Y would miss the tolerance
-    /// along its depth as the cycle's G0/G1/G4 moves, corrected along the
-    /// depth; without it such a hole is warned about.
+    /// drilled once) whose one X and Y would miss the tolerance along its
+    /// depth as the cycle's G0/G1/G4 moves, corrected along the depth;
+    /// without it (or the machine file's
+    /// `output.expand_deep_holes_to_moves`) such a hole is warned about.
     #[arg(long)]
     pub expand_cycles: bool,
 }

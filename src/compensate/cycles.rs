@@ -12,7 +12,42 @@ use super::{
 };
 use crate::machine::{AxisVec, DirVec};
 use crate::predict::ToolPredictor;
-use crate::program::interp::{CycleSpec, DIRECTION_DEADBAND, Move};
+use crate::program::interp::{CycleSpec, DIRECTION_DEADBAND, Move, Plan, PlanKind};
+
+/// What a warning of a block beyond the tolerance names (the words before
+/// "is predicted …"): a hole written as a cycle is drilled at one X and Y,
+/// and a cycle that is never written as moves says why — a tap's feed is
+/// synchronised to the spindle (G74, G84), the boring cycles stop, orient
+/// or hand the spindle to the operator at the bottom (G76, G86, G87, G88).
+pub fn miss_words(plan: &Plan, res: &BlockResult) -> &'static str {
+    if !matches!(plan.kind, PlanKind::Cycle { .. }) {
+        return "a written piece of this block";
+    }
+    if !res.expansion.is_empty() {
+        return "a written piece of this hole";
+    }
+    match plan.cycle.code10 {
+        840 => {
+            "the G84 tapping hole, drilled at one X and Y (a tap's feed follows the spindle: never written as moves),"
+        }
+        740 => {
+            "the G74 tapping hole, drilled at one X and Y (a tap's feed follows the spindle: never written as moves),"
+        }
+        760 => {
+            "the G76 boring hole, drilled at one X and Y (the spindle orients and the tool shifts at the bottom: never written as moves),"
+        }
+        860 => {
+            "the G86 boring hole, drilled at one X and Y (the spindle stops at the bottom: never written as moves),"
+        }
+        870 => {
+            "the G87 back-boring hole, drilled at one X and Y (the spindle orients and shifts: never written as moves),"
+        }
+        880 => {
+            "the G88 boring hole, drilled at one X and Y (the operator jogs out at the bottom: never written as moves),"
+        }
+        _ => "the hole, drilled at one X and Y,",
+    }
+}
 
 /// What one written line of an expanded hole does.
 #[derive(Debug, Clone, Copy, PartialEq)]

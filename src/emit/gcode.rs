@@ -102,6 +102,12 @@ pub struct Emitter {
     /// A hole was written as moves: the control has no cycle in force
     /// until the program ends it (see `cycles`).
     cycle_broken: bool,
+    /// Machine Z of the initial level of the cycle in force in the written
+    /// program (where the tool stood when it began); `None` without one.
+    cycle_initial: Option<f64>,
+    /// The initial level of the cycle a hole written as moves ended, to
+    /// return to before the cycle is stated again.
+    broken_initial: Option<f64>,
     /// The program writes `;` comments rather than `( )`.
     semicolon_comments: Option<bool>,
     /// The program separates its words by spaces (from its last block of
@@ -414,6 +420,8 @@ impl Emitter {
             cycle_z: None,
             cycle_r: None,
             cycle_broken: false,
+            cycle_initial: None,
+            broken_initial: None,
             semicolon_comments: None,
             spaced: true,
             changed: 0,
@@ -520,6 +528,7 @@ impl Emitter {
             // a modal motion to restore waits for the cycle's end.
             let is_cycle = matches!(plan.kind, PlanKind::Cycle { .. });
             let pending = self.motion_pending.filter(|_| is_cycle);
+            self.restore_initial(line, block, plan, out);
             self.restate_cycle(block, plan, &mut edits);
             self.write_edited(line, block, plan, mv, res, &mut edits, out);
             if pending.is_some() {
@@ -546,10 +555,6 @@ impl Emitter {
         let text = strip_eol(line);
         let eol = &line[text.len()..];
         let scale = plan.scale;
-        let lower = block.lower_case;
-        // Words added to a block of one word follow the program's style.
-        let spaced = self.spaced;
-        let sep = if spaced { " " } else { "" };
         let is_cycle = matches!(plan.kind, PlanKind::Cycle { .. });
         let first_target = if let Some(first) = res.segments.first() {
             *first
@@ -570,17 +575,8 @@ impl Emitter {
         let (mut new_emitted, last_axis_end) =
             self.axis_edits(block, plan, &mv, &first_target, edits);
         if let PlanKind::Cycle { .. } = plan.kind {
-            self.cycle_words(block, plan, res, edits, sep, lower);
-            // G99 leaves the tool at the (compensated) R level; G98 returns
-            // it to the initial level it came from.
-            if let PlanKind::Cycle {
-                r_level, retract, ..
-            } = plan.kind
-            {
-                if retract == r_level && plan.absolute {
-                    new_emitted[2] = res.r_level;
-                }
-            }
+            // Where the written hole leaves the tool (see `cycles`).
+            new_emitted[2] = self.cycle_words(block, plan, res, edits);
         }
         // Arc centre words.
         if let (Some(piece), Some(arc)) = (own_piece, mv.arc) {
@@ -1188,59 +1184,6 @@ impl Emitter {
         (self.emitted[slot] - target).abs() > 1e-9
     }
 
-    #[allow(clippy::too_many_arguments)]
-    fn cycle_words(
-        &mut self,
-        block: &Block,
-        plan: &Plan,
-        res: &BlockResult,
-        edits: &mut Edits,
-        sep: &str,
-        lower: bool,
-    ) {
-        let scale = plan.scale;
-        if !plan.absolute {
-            // Incremental cycles: only the hole position is rewritten.
-            return;
-        }
-        let kept_word_mm = self.kept_word_mm();
-        // Z with the axis words, R after it (or where Z is inserted).
-        let z_slot = axis_slot_for(block, 2);
-        for (letter, value) in [(b'Z', res.end[2]), (b'R', res.r_level)] {
-            let w = block.word(letter);
-            let d = self.decimals(w, scale, false);
-            let v = round_to((value - plan.offset[2]) / scale, d);
-            let modal = if letter == b'Z' {
-                &mut self.cycle_z
-            } else {
-                &mut self.cycle_r
-            };
-            match w {
-                Some(w) => {
-                    if v != round_to(w.value, d) {
-                        edits.number(w, v, d);
-                        *modal = Some(v);
-                    } else {
-                        *modal = Some(w.value);
-                    }
-                }
-                None => {
-                    let cur = modal.map(|m| round_to(m, d));
-                    let keep = cur.is_some_and(|c| (c - v).abs() * scale <= kept_word_mm);
-                    if cur != Some(v) && !keep {
-                        let l = letter_case(letter, lower);
-                        let at = match block.word(b'Z') {
-                            Some(z) if letter == b'R' => Slot::After(z.end as usize),
-                            _ => z_slot,
-                        };
-                        edits.insert_at(at, sep, l, v, d);
-                        *modal = Some(v);
-                    }
-                }
-            }
-        }
-    }
-
     /// Keeps the emitted position in step for blocks written unchanged.
     fn track_unchanged(&mut self, block: &Block, plan: &Plan) {
         if let Some(mv) = plan.mv {
@@ -1254,7 +1197,9 @@ impl Emitter {
                     }
                 }
             } else {
+                let before = self.emitted[2];
                 self.emitted = mv.end;
+                self.cycle_unchanged(plan, before);
             }
             if block
                 .words

@@ -917,11 +917,7 @@ impl<'j, 'm, 'o, 'r> WriteStage<'j, 'm, 'o, 'r> {
         let miss = r.miss_mm + self.job.rounding(plan.scale);
         if r.miss_mm > self.job.solve_settings(plan.scale).tolerance_mm && written {
             summary.beyond.add(miss, line_no);
-            let what = if matches!(plan.kind, PlanKind::Cycle { .. }) {
-                "the hole, drilled at one X and Y,"
-            } else {
-                "a written piece of this block"
-            };
+            let what = crate::compensate::cycles::miss_words(plan, r);
             // Worded only for the warnings kept: nothing allocates per
             // block once they are full.
             if self.beyond.len() < MAX_BEYOND_WARNINGS {

@@ -394,8 +394,8 @@ pub struct CycleSpec {
     pub dwell_p: Option<(f64, Option<u8>)>,
     /// The modal motion (G0–G3) the cycle leaves in force when it ends.
     pub motion_before: Option<Motion>,
-    /// The hole may be written as moves: the setup allows it, the block is
-    /// absolute (G90), drills once (no `K`/`L` repeat), and the cycle is
+    /// The hole may be written as moves: the setup allows it, the block
+    /// drills once (no `K`/`L` repeat; G90 or G91), and the cycle is
     /// one a sequence of `G0`/`G1`/`G4` moves does the same as (G73,
     /// G81, G82, G83, G85, G89; not tapping, boring with a spindle stop or
     /// back boring).
@@ -460,6 +460,7 @@ impl Setup {
             .extend(m.reference_points().map(|(k, v)| (k.clone(), *v)));
         setup.units_default = m.units_default();
         setup.integer_words = m.integer_words();
+        setup.expand_cycles = m.expand_deep_holes_to_moves();
         if (3..6).any(|s| m.has_axis(s)) {
             setup.kinematics = Some(std::sync::Arc::new(m.clone()));
         }
@@ -2168,7 +2169,6 @@ impl Interpreter {
             dwell_p: self.cycle_p.filter(|_| dwells),
             motion_before: self.motion,
             expandable: self.setup.expand_cycles
-                && plan.absolute
                 && plan.extra_repeats == 0
                 && matches!(code10, 730 | 810 | 820 | 830 | 850 | 890),
         }

@@ -6,10 +6,16 @@
 //! states it again (its G code, Z, R, Q, P), and the modal motion the
 //! cycle left in force is written again on the next block that relies on
 //! it.
+//!
+//! A hole written as a cycle gets its corrected Z and R words
+//! ([`Emitter::cycle_words`]): under `G90` the levels themselves, under
+//! `G91` R from the initial level of the cycle in force in the written
+//! program and Z from the R level in force, so that each hole of an
+//! incremental pattern is corrected on its own.
 
 use super::{
-    Edits, Emitter, added_line_start, insert_point_for_motion, letter_case, round_to, to_machine,
-    to_program, write_number,
+    Edits, Emitter, Slot, added_line_start, axis_slot_for, insert_point_for_motion, letter_case,
+    round_to, to_machine, to_program, write_number,
 };
 use crate::compensate::BlockResult;
 use crate::compensate::cycles::StepKind;
@@ -34,6 +40,29 @@ fn cycle_word(block: &Block) -> Option<&Word> {
     })
 }
 
+/// The written value of a cycle's modal word (`Z` or `R`, program units)
+/// for the corrected value `v` (rounded to `d` decimals): the word the
+/// block has, or the modal one in force while it stays within `kept_mm`
+/// (scaled by `scale`) of `v`. Returns the value in force after the block
+/// and whether the block's word must be written (changed or inserted).
+fn modal_word(
+    w: Option<&Word>,
+    modal: Option<f64>,
+    (v, d): (f64, usize),
+    (scale, kept_mm): (f64, f64),
+) -> (f64, bool) {
+    match w {
+        Some(w) if v != round_to(w.value, d) => (v, true),
+        Some(w) => (w.value, false),
+        None => match modal {
+            Some(m) if round_to(m, d) == v || (round_to(m, d) - v).abs() * scale <= kept_mm => {
+                (m, false)
+            }
+            _ => (v, true),
+        },
+    }
+}
+
 impl Emitter {
     /// Follows whether the cycle is in force on the control: a `G80` or a
     /// `G0`–`G3` ends it in the program as well.
@@ -44,6 +73,85 @@ impl Emitter {
             .any(|w| w.letter == b'G' && matches!(w.code10(), 0 | 10 | 20 | 30 | 800))
         {
             self.cycle_broken = false;
+            self.cycle_initial = None;
+            self.broken_initial = None;
+        }
+    }
+
+    /// A hole block written unchanged (`before`: the machine Z before it):
+    /// the cycle's initial level if it begins here, and the tool left at
+    /// the hole's retract level rather than at its bottom.
+    pub(super) fn cycle_unchanged(&mut self, plan: &Plan, before: f64) {
+        if let PlanKind::Cycle { retract, .. } = plan.kind {
+            self.cycle_initial.get_or_insert(before);
+            self.emitted[2] = retract;
+        }
+    }
+
+    /// The edits of the Z and R words of a hole written as a cycle, and
+    /// the machine Z the written hole leaves the tool at: the R level in
+    /// force under `G99`, the higher of the initial and R levels under
+    /// `G98`. Under `G90` the words are the corrected levels; under `G91`
+    /// R is written from the initial level of the cycle in force in the
+    /// written program (where the tool stood when it began) and Z from the
+    /// R level in force, so each hole of an incremental pattern gets its
+    /// own correction. A word the block lacks is added only when the modal
+    /// value misses the corrected one by more than the kept-word share of
+    /// the tolerance.
+    pub(super) fn cycle_words(
+        &mut self,
+        block: &Block,
+        plan: &Plan,
+        res: &BlockResult,
+        edits: &mut Edits,
+    ) -> f64 {
+        let scale = plan.scale;
+        let kept = (scale, self.kept_word_mm());
+        let initial = *self.cycle_initial.get_or_insert(self.emitted[2]);
+        // The program's levels are measured from here (G90: the work zero).
+        let base_r = if plan.absolute {
+            plan.offset[2]
+        } else {
+            initial
+        };
+        let (wr, wz) = (block.word(b'R'), block.word(b'Z'));
+        let dr = self.decimals(wr, scale, false);
+        let vr = round_to((res.r_level - base_r) / scale, dr);
+        let (r, write_r) = modal_word(wr, self.cycle_r, (vr, dr), kept);
+        let r_machine = base_r + r * scale;
+        let base_z = if plan.absolute {
+            plan.offset[2]
+        } else {
+            r_machine
+        };
+        let dz = self.decimals(wz, scale, false);
+        let vz = round_to((res.end[2] - base_z) / scale, dz);
+        let (z, write_z) = modal_word(wz, self.cycle_z, (vz, dz), kept);
+        self.cycle_r = Some(r);
+        self.cycle_z = Some(z);
+        let lower = block.lower_case;
+        let sep = if self.spaced { " " } else { "" };
+        // Z with the axis words, R after it (or where Z is inserted).
+        let z_slot = axis_slot_for(block, 2);
+        for (letter, w, write, v, d) in [(b'Z', wz, write_z, z, dz), (b'R', wr, write_r, r, dr)] {
+            match w {
+                Some(w) if write => edits.number(w, v, d),
+                Some(_) => {}
+                None if write => {
+                    let at = match wz {
+                        Some(z) if letter == b'R' => Slot::After(z.end as usize),
+                        _ => z_slot,
+                    };
+                    edits.insert_at(at, sep, letter_case(letter, lower), v, d);
+                }
+                None => {}
+            }
+        }
+        match plan.kind {
+            PlanKind::Cycle {
+                r_level, retract, ..
+            } if retract > r_level => initial.max(r_machine),
+            _ => r_machine,
         }
     }
 
@@ -62,6 +170,7 @@ impl Emitter {
         let lower = block.lower_case;
         let sep = if self.spaced { " " } else { "" };
         let scale = plan.scale;
+        let before = self.emitted[2];
         let mut steps = res.expansion.iter();
         let Some(first) = steps.next() else {
             return;
@@ -116,8 +225,11 @@ impl Emitter {
             out.extend_from_slice(eol);
             self.added += 1;
         }
-        // The control has no cycle, nor its Z and R, any more.
+        // The control has no cycle, nor its Z and R, any more; the
+        // cycle stated again starts from its initial level.
         self.cycle_broken = true;
+        let initial = self.cycle_initial.take().or(self.broken_initial);
+        self.broken_initial = Some(initial.unwrap_or(before));
         self.cycle_z = None;
         self.cycle_r = None;
         self.motion_pending = plan.cycle.motion_before;
@@ -171,6 +283,50 @@ impl Emitter {
                 any = true;
             }
         }
+    }
+
+    /// Before a hole block that states the cycle again: where the holes
+    /// written as moves left the tool below the cycle's initial level (a
+    /// G99 hole ends at its R level), a `G0` back up to that level, so the
+    /// cycle stated again has the program's initial level (a G98 hole
+    /// returns there). Written as a line of its own before the block's.
+    pub(super) fn restore_initial(
+        &mut self,
+        line: &[u8],
+        block: &Block,
+        plan: &Plan,
+        out: &mut Vec<u8>,
+    ) {
+        if !self.cycle_broken || !matches!(plan.kind, PlanKind::Cycle { .. }) {
+            return;
+        }
+        let Some(initial) = self.broken_initial.take() else {
+            return;
+        };
+        let w = block.word(b'Z');
+        let d = self.decimals(w, plan.scale, false);
+        let want = round_to(to_program(plan, 2, initial, self.emitted[2]), d);
+        let now = round_to(to_program(plan, 2, self.emitted[2], self.emitted[2]), d);
+        if want == now || initial <= self.emitted[2] {
+            return;
+        }
+        let text = strip_eol(line);
+        let eol: &[u8] = match &line[text.len()..] {
+            [] => b"\n",
+            e => e,
+        };
+        let lower = block.lower_case;
+        let sep: &[u8] = if self.spaced { b" " } else { b"" };
+        if block.block_delete {
+            out.push(b'/');
+        }
+        out.extend_from_slice(if lower { b"g0" } else { b"G0" });
+        out.extend_from_slice(sep);
+        out.push(letter_case(b'Z', lower));
+        write_number(out, want, d, true);
+        out.extend_from_slice(eol);
+        self.emitted[2] = to_machine(plan, 2, want, self.emitted[2]);
+        self.added += 1;
     }
 
     /// The edits that state the cycle again on a hole block written as a

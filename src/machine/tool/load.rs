@@ -196,6 +196,11 @@ pub(super) fn validate_with(raw: RawMachineTool, plausibility: Plausibility) -> 
             units_default,
             integer_words,
             tolerance_mm,
+            expand_deep_holes: raw
+                .output
+                .as_ref()
+                .and_then(|o| o.expand_deep_holes_to_moves)
+                .unwrap_or(false),
         }),
         decimals,
         decimals_deg,

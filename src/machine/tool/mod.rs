@@ -168,6 +168,9 @@ pub(crate) struct ControlDefaults {
     /// `compensation.tolerance_mm`: the default tolerance of compensated
     /// programs, mm.
     pub(crate) tolerance_mm: Option<f64>,
+    /// `output.expand_deep_holes_to_moves`: deep canned-cycle holes may be
+    /// written as moves (as `--expand-cycles`).
+    pub(crate) expand_deep_holes: bool,
 }
 
 /// The optional process sections of a machine file.
@@ -283,6 +286,13 @@ impl MachineTool {
     /// point (`integer_words`; `None` when the file does not say).
     pub fn integer_words(&self) -> Option<IntegerWords> {
         self.control.integer_words
+    }
+
+    /// Whether canned-cycle holes whose one X and Y would miss the
+    /// tolerance may be written as the cycle's moves
+    /// (`output.expand_deep_holes_to_moves`, as `--expand-cycles`).
+    pub fn expand_deep_holes_to_moves(&self) -> bool {
+        self.control.expand_deep_holes
     }
 
     /// Output decimals for mm programs, if the machine file fixes them.

@@ -164,6 +164,9 @@ pub(crate) struct RawOutput {
     pub decimals_mm: Option<usize>,
     #[serde(default)]
     pub decimals_deg: Option<usize>,
+    /// `output.expand_deep_holes_to_moves`: as `--expand-cycles`.
+    #[serde(default)]
+    pub expand_deep_holes_to_moves: Option<bool>,
 }
 
 /// `compensation:` block.

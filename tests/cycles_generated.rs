@@ -1,0 +1,209 @@
+//! Generated incremental canned-cycle programs (issue 43): rows of holes
+//! under G91, G98 and G99, each cycle the writer knows, deep and
+//! shallow, compensated in process with and without writing holes as
+//! moves. Each program is processed or refused cleanly; read back by the
+//! forward pass (the interpreter and the predictor, not the solver), its
+//! output ends where its input does, and every written hole feed lies
+//! within the tolerance of its programmed hole unless the run counted a
+//! block beyond it. `HOSTILE_MUTANTS` sets the count (`scripts/hostile`).
+
+use crate::spiral::machine;
+use postproc::pipeline::gcode::Job;
+use postproc::program::interp::PlanKind;
+
+/// Programs per run in the test suite (`HOSTILE_MUTANTS` overrides).
+const CI_PROGRAMS: usize = 60;
+
+/// Tolerance of the runs, mm.
+const TOL_MM: f64 = 0.003;
+
+/// Floating-point allowance of the comparison with the tolerance, mm.
+const FLOAT_MM: f64 = 1e-9;
+
+/// How far the written program's end may be from the programmed one
+/// (commanded machine positions: the compensation itself), mm.
+const END_MM: f64 = 0.05;
+
+/// A small deterministic generator (SplitMix64).
+struct Rng(u64);
+
+impl Rng {
+    fn next(&mut self) -> u64 {
+        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        z ^ (z >> 31)
+    }
+    fn below(&mut self, n: usize) -> usize {
+        (self.next() % n.max(1) as u64) as usize
+    }
+    /// A whole number of mm in `lo..=hi`.
+    fn mm(&mut self, lo: i64, hi: i64) -> i64 {
+        lo + self.below((hi - lo + 1) as usize) as i64
+    }
+}
+
+/// The cycles generated, with the words each needs besides R and Z.
+const CYCLES: &[(&str, &str)] = &[
+    ("G81", ""),
+    ("G82", " P300"),
+    ("G83", " Q7."),
+    ("G73", " Q9."),
+    ("G85", ""),
+    ("G89", " P200"),
+    ("G84", ""),
+    ("G86", ""),
+];
+
+/// One generated program: the part's zero at G54 (work Z0 = machine Z150
+/// + tool), an initial level 40–250 mm above it, a row of 1–6 holes of
+/// one or two cycles with incremental or absolute levels, then `G80` and
+/// incremental moves that count from where the cycle left the tool.
+fn program(rng: &mut Rng) -> String {
+    let mut p = String::from("%\nG21 G17 G90 G94 G40 G49 G80\nT1 M6\nS1000 M3\n");
+    let (x0, y0) = (rng.mm(50, 200), rng.mm(50, 200));
+    let initial = rng.mm(40, 250);
+    p += &format!("G0 G54 X{x0}. Y{y0}.\nG43 Z{initial}. H1\n");
+    let incremental = true;
+    let holes = 1 + rng.below(6);
+    let (mut x, mut y) = (x0, y0);
+    for i in 0..holes {
+        let (dx, dy) = (rng.mm(-30, 30), rng.mm(-30, 30));
+        let (nx, ny) = (x + dx, y + dy);
+        if !(10..=500).contains(&nx) || !(10..=300).contains(&ny) {
+            continue;
+        }
+        let xy = if incremental {
+            format!("X{dx}. Y{dy}.")
+        } else {
+            format!("X{nx}. Y{ny}.")
+        };
+        (x, y) = (nx, ny);
+        let retract = if rng.below(2) == 0 { "G98" } else { "G99" };
+        let first = i == 0 || rng.below(4) == 0;
+        if first {
+            let (code, extra) = CYCLES[rng.below(CYCLES.len())];
+            let r = rng.mm(1, 5);
+            let depth = rng.mm(2, 90);
+            let levels = if incremental {
+                format!("Z-{depth}. R-{}.", initial - r)
+            } else {
+                format!("Z{}. R{r}.", r - depth)
+            };
+            let mode = if incremental { "G91 " } else { "G90 " };
+            p += &format!("{mode}{retract} {code} {xy} {levels}{extra} F100.\n");
+        } else if rng.below(3) == 0 {
+            let depth = rng.mm(2, 90);
+            p += &format!("{retract} {xy} Z-{depth}.\n");
+        } else {
+            p += &format!("{xy}\n");
+        }
+    }
+    p += "G80\n";
+    if incremental {
+        p += &format!("G91 G0 X{}.\nG1 Z-{}. F200.\n", rng.mm(-5, 5), rng.mm(1, 5));
+    }
+    p += &format!("G90 G0 Z{initial}.\nM30\n%\n");
+    p
+}
+
+/// The job of the runs: geometric effects, holes written as moves or not.
+fn job(m: &postproc::machine::tool::MachineTool, expand: bool) -> Job<'_> {
+    let mut job = crate::repredict::job(m, "geometric", TOL_MM);
+    job.setup.expand_cycles = expand;
+    job
+}
+
+/// Checks one program; `Ok(false)` when it is refused (cleanly).
+fn check(
+    m: &postproc::machine::tool::MachineTool,
+    text: &str,
+    expand: bool,
+) -> Result<bool, String> {
+    let job = job(m, expand);
+    let mut out = Vec::new();
+    let summary = match job.run(text.as_bytes(), "g.nc", Some(&mut out), None) {
+        Ok(s) => s,
+        Err(e) => {
+            let msg = e.to_string();
+            return if msg.contains("g.nc:") {
+                Ok(false)
+            } else {
+                Err(format!("refused without a place: {msg}"))
+            };
+        }
+    };
+    let output = String::from_utf8(out).map_err(|_| "output not UTF-8".to_string())?;
+    let mut back = Vec::new();
+    job.forward(output.as_bytes(), "out.nc", &mut |_, plan, _| {
+        back.push(*plan)
+    })
+    .map_err(|e| format!("the output is refused by its reader: {e}"))?;
+    let mut input = Vec::new();
+    job.forward(text.as_bytes(), "g.nc", &mut |line, plan, _| {
+        input.push((line, *plan))
+    })
+    .map_err(|e| format!("input read: {e}"))?;
+    let end = |plans: &mut dyn Iterator<Item = &postproc::program::interp::Plan>| {
+        plans.filter_map(|p| p.mv).last().map(|mv| mv.end)
+    };
+    let (a, b) = (
+        end(&mut input.iter().map(|(_, p)| p)).ok_or("no move")?,
+        end(&mut back.iter()).ok_or("no move written")?,
+    );
+    if (0..3).any(|k| (a[k] - b[k]).abs() > END_MM) {
+        return Err(format!("the output ends at {b:?}, the input at {a:?}"));
+    }
+    let holes: std::collections::HashSet<usize> = input
+        .iter()
+        .filter(|(_, p)| matches!(p.kind, PlanKind::Cycle { .. }))
+        .map(|(l, _)| *l)
+        .collect();
+    for (src, _, miss) in crate::repredict::misses(&job, text, &output) {
+        if holes.contains(&src) && miss > TOL_MM + FLOAT_MM && summary.beyond.count == 0 {
+            return Err(format!(
+                "line {src}: a hole feed misses by {miss:.6} mm, unwarned"
+            ));
+        }
+    }
+    Ok(true)
+}
+
+#[test]
+fn generated_incremental_cycle_programs_land_within_the_tolerance_or_are_warned() {
+    let count = std::env::var("HOSTILE_MUTANTS")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(CI_PROGRAMS);
+    let m = machine("afm-r1000");
+    let mut rng = Rng(0xC1C1E5);
+    let start = std::time::Instant::now();
+    let (mut accepted, mut findings) = (0, Vec::new());
+    for i in 0..count {
+        let text = program(&mut rng);
+        let expand = i % 2 == 1;
+        let r = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| check(&m, &text, expand)));
+        match r {
+            Ok(Ok(ok)) => accepted += usize::from(ok),
+            Ok(Err(e)) => findings.push(format!("{e} (expand {expand})\n{text}")),
+            Err(_) => findings.push(format!("panic (expand {expand})\n{text}")),
+        }
+    }
+    eprintln!(
+        "\nhostile incremental-cycles: {count} programs ({accepted} accepted) in {:.1} s, {} findings",
+        start.elapsed().as_secs_f64(),
+        findings.len()
+    );
+    assert!(accepted * 2 >= count, "{accepted} of {count} accepted");
+    assert!(
+        findings.is_empty(),
+        "{}",
+        findings
+            .iter()
+            .take(3)
+            .cloned()
+            .collect::<Vec<_>>()
+            .join("\n")
+    );
+}
