@@ -182,9 +182,8 @@ fn walk(
             walk((root, robot), &path, skip, seen, items, skipped);
         } else if super::output::is_compensated_name(&name) {
             skip_as("a compensated program (*.comp.*)");
-        } else if robot && super::krl::is_krl(&path) && path.is_file() {
-            items.push(Item::file(path, root, None));
-        } else if robot && super::tp::is_tp(&path) && path.is_file() {
+        } else if robot && (super::krl::is_krl(&path) || super::tp::is_tp(&path)) && path.is_file()
+        {
             items.push(Item::file(path, root, None));
         } else if robot && super::krl::is_krl_data(&path) {
             skip_as("a KRL data list (read with its .src)");
