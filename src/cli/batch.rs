@@ -609,11 +609,6 @@ fn compensate_one(
                     "{name}: a KRL program needs a robot machine file"
                 )));
             }
-            if super::tp::is_tp(input) {
-                return Err(usage(format!(
-                    "{name}: a TP program needs a robot machine file"
-                )));
-            }
             if is_rapid(input) {
                 return Err(usage(format!(
                     "{name}: a RAPID module needs a robot machine file"
@@ -655,6 +650,32 @@ fn compensate_one(
                 max_dev: s.deviation.max,
                 max_line: Some(s.deviation.max_line),
                 residual: Some(s.max_residual_mm),
+            })
+        }
+        Engine::Robot(robot, opts, _) if super::krl::is_krl(input) || super::tp::is_tp(input) => {
+            let opts = crate::pipeline::rapid::RapidOptions {
+                records: report.is_some(),
+                ..opts.clone()
+            };
+            let job = super::krl::Job {
+                robot,
+                opts: &opts,
+                provenance,
+                recompensate: setting.recompensate,
+            };
+            let report_file = report.map(|f| (report_path(output, f), f));
+            let report_to = report_file.as_ref().map(|(p, f)| (p.as_path(), *f));
+            let s = if super::tp::is_tp(input) {
+                super::tp::compensate_to(&job, (input, &[]), output, report_to)?
+            } else {
+                super::krl::compensate_to(&job, (input, &[]), output, report_to)?
+            };
+            Ok(Done {
+                blocks: s.moves,
+                moves: s.moves,
+                max_dev: s.deviation.max,
+                max_line: Some(s.deviation.max_line),
+                residual: None,
             })
         }
         Engine::Robot(robot, opts, _) if super::krl::is_krl(input) => {
