@@ -678,50 +678,6 @@ fn compensate_one(
                 residual: None,
             })
         }
-        Engine::Robot(robot, opts, _) if super::krl::is_krl(input) => {
-            let opts = crate::pipeline::rapid::RapidOptions {
-                records: report.is_some(),
-                ..opts.clone()
-            };
-            let job = super::krl::Job {
-                robot,
-                opts: &opts,
-                provenance,
-                recompensate: setting.recompensate,
-            };
-            let report_file = report.map(|f| (report_path(output, f), f));
-            let report_to = report_file.as_ref().map(|(p, f)| (p.as_path(), *f));
-            let s = super::krl::compensate_to(&job, (input, &[]), output, report_to)?;
-            Ok(Done {
-                blocks: s.moves,
-                moves: s.moves,
-                max_dev: s.deviation.max,
-                max_line: Some(s.deviation.max_line),
-                residual: None,
-            })
-        }
-        Engine::Robot(robot, opts, _) if super::tp::is_tp(input) => {
-            let opts = crate::pipeline::rapid::RapidOptions {
-                records: report.is_some(),
-                ..opts.clone()
-            };
-            let job = super::tp::Job {
-                robot,
-                opts: &opts,
-                provenance,
-                recompensate: setting.recompensate,
-            };
-            let report_file = report.map(|f| (report_path(output, f), f));
-            let report_to = report_file.as_ref().map(|(p, f)| (p.as_path(), *f));
-            let s = super::tp::compensate_to(&job, (input, &[]), output, report_to)?;
-            Ok(Done {
-                blocks: s.moves,
-                moves: s.moves,
-                max_dev: s.deviation.max,
-                max_line: Some(s.deviation.max_line),
-                residual: None,
-            })
-        }
         Engine::Robot(robot, opts, forced_window) => {
             if !is_rapid(input) {
                 return Err(usage(format!(
