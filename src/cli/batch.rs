@@ -182,9 +182,8 @@ fn walk(
             walk((root, robot), &path, skip, seen, items, skipped);
         } else if super::output::is_compensated_name(&name) {
             skip_as("a compensated program (*.comp.*)");
-        } else if robot && super::krl::is_krl(&path) && path.is_file() {
-            items.push(Item::file(path, root, None));
-        } else if robot && super::tp::is_tp(&path) && path.is_file() {
+        } else if robot && (super::krl::is_krl(&path) || super::tp::is_tp(&path)) && path.is_file()
+        {
             items.push(Item::file(path, root, None));
         } else if robot && super::krl::is_krl_data(&path) {
             skip_as("a KRL data list (read with its .src)");
@@ -610,11 +609,6 @@ fn compensate_one(
                     "{name}: a KRL program needs a robot machine file"
                 )));
             }
-            if super::tp::is_tp(input) {
-                return Err(usage(format!(
-                    "{name}: a TP program needs a robot machine file"
-                )));
-            }
             if is_rapid(input) {
                 return Err(usage(format!(
                     "{name}: a RAPID module needs a robot machine file"
@@ -658,7 +652,7 @@ fn compensate_one(
                 residual: Some(s.max_residual_mm),
             })
         }
-        Engine::Robot(robot, opts, _) if super::krl::is_krl(input) => {
+        Engine::Robot(robot, opts, _) if super::krl::is_krl(input) || super::tp::is_tp(input) => {
             let opts = crate::pipeline::rapid::RapidOptions {
                 records: report.is_some(),
                 ..opts.clone()
@@ -671,29 +665,11 @@ fn compensate_one(
             };
             let report_file = report.map(|f| (report_path(output, f), f));
             let report_to = report_file.as_ref().map(|(p, f)| (p.as_path(), *f));
-            let s = super::krl::compensate_to(&job, (input, &[]), output, report_to)?;
-            Ok(Done {
-                blocks: s.moves,
-                moves: s.moves,
-                max_dev: s.deviation.max,
-                max_line: Some(s.deviation.max_line),
-                residual: None,
-            })
-        }
-        Engine::Robot(robot, opts, _) if super::tp::is_tp(input) => {
-            let opts = crate::pipeline::rapid::RapidOptions {
-                records: report.is_some(),
-                ..opts.clone()
+            let s = if super::tp::is_tp(input) {
+                super::tp::compensate_to(&job, (input, &[]), output, report_to)?
+            } else {
+                super::krl::compensate_to(&job, (input, &[]), output, report_to)?
             };
-            let job = super::tp::Job {
-                robot,
-                opts: &opts,
-                provenance,
-                recompensate: setting.recompensate,
-            };
-            let report_file = report.map(|f| (report_path(output, f), f));
-            let report_to = report_file.as_ref().map(|(p, f)| (p.as_path(), *f));
-            let s = super::tp::compensate_to(&job, (input, &[]), output, report_to)?;
             Ok(Done {
                 blocks: s.moves,
                 moves: s.moves,

@@ -186,17 +186,8 @@ pub fn compensate(a: &CompensateArgs, quiet: bool) -> Result<i32> {
     Ok(0)
 }
 
-/// What a compensation of TP programs runs with.
-pub(super) struct Job<'a> {
-    /// The robot, with the run's process force.
-    pub(super) robot: &'a Robot,
-    /// The run's options.
-    pub(super) opts: &'a RapidOptions,
-    /// The header of the outputs.
-    pub(super) provenance: &'a Provenance,
-    /// `--recompensate`.
-    pub(super) recompensate: bool,
-}
+/// What a compensation of TP programs runs with: that of KRL programs.
+pub(super) use super::krl::Job;
 
 /// Compensates the TP program `src` into `out`, with its report; no file
 /// is put in place unless all are written.
