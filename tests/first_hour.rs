@@ -592,48 +592,97 @@ fn a_changed_confdata_is_noted_with_its_target_and_line() {
     assert!(!err.contains("target `pA2`"), "{err}");
 }
 
-/// `--decimals` sets the decimals of the rewritten rotary words too (the
-/// machine file's `decimals_deg: 6` of the five-axis sample was kept
-/// whatever was asked).
+/// The most decimals of the rewritten linear (X Y Z) and rotary (A C)
+/// words of `program` compensated on the five-axis sample machine with
+/// `args`, and the compensated text.
+fn five_axis_decimals(program: &[u8], args: &[&str]) -> ([usize; 2], String) {
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("rot.nc");
+    std::fs::write(&input, program).unwrap();
+    let a = postproc()
+        .args([
+            "compensate",
+            "--machine",
+            "five-axis-ac",
+            "--annotate",
+            "none",
+            "-o",
+            "-",
+        ])
+        .args(args)
+        .arg(&input)
+        .assert()
+        .code(0);
+    let out = String::from_utf8_lossy(&a.get_output().stdout).to_string();
+    let mut most = [0usize; 2];
+    for line in out.lines().filter(|l| !l.starts_with('(')) {
+        for word in line.split_whitespace() {
+            let Some(letter) = word.chars().next() else {
+                continue;
+            };
+            let Some((_, frac)) = word.split_once('.') else {
+                continue;
+            };
+            let slot = match letter {
+                'X' | 'Y' | 'Z' => 0,
+                'A' | 'C' => 1,
+                _ => continue,
+            };
+            most[slot] = most[slot].max(frac.len());
+        }
+    }
+    (most, out)
+}
+
+/// `--decimals` sets the decimals of the rewritten rotary words too; the
+/// sample's own rotary words (`A15.`, `C30.`) are rewritten with the
+/// fewest decimals whose rounding (half a unit, at a 500 mm lever arm)
+/// stays within a quarter of the tolerance: 0.00005° is 0.44 µm ≤ 0.75 µm
+/// at 0.003 mm, 0.0005° would be 4.4 µm; at 0.001 mm (0.25 µm) 4 decimals
+/// round by 0.44 µm, 5 by 0.044 µm.
 #[test]
 fn decimals_sets_the_rotary_words_too() {
-    let decimals_of = |args: &[&str]| {
-        let a = postproc()
-            .args([
-                "compensate",
-                "--machine",
-                "five-axis-ac",
-                "--annotate",
-                "none",
-                "-o",
-                "-",
-            ])
-            .args(args)
-            .arg(repo("samples/five-axis.nc"))
-            .assert()
-            .code(0);
-        let out = String::from_utf8_lossy(&a.get_output().stdout).to_string();
-        let mut most = [0usize; 2];
-        for line in out.lines().filter(|l| !l.starts_with('(')) {
-            for word in line.split_whitespace() {
-                let Some(letter) = word.chars().next() else {
-                    continue;
-                };
-                let Some((_, frac)) = word.split_once('.') else {
-                    continue;
-                };
-                let slot = match letter {
-                    'X' | 'Y' | 'Z' => 0,
-                    'A' | 'C' => 1,
-                    _ => continue,
-                };
-                most[slot] = most[slot].max(frac.len());
-            }
-        }
-        most
-    };
-    assert_eq!(decimals_of(&[]), [4, 6]);
-    assert_eq!(decimals_of(&["--decimals", "4"]), [4, 4]);
+    let sample = std::fs::read(repo("samples/five-axis.nc")).unwrap();
+    assert_eq!(five_axis_decimals(&sample, &[]).0, [4, 4]);
+    assert_eq!(five_axis_decimals(&sample, &["--decimals", "5"]).0, [5, 5]);
+    assert_eq!(five_axis_decimals(&sample, &["--decimals", "4"]).0, [4, 4]);
+    assert_eq!(
+        five_axis_decimals(&sample, &["--tolerance", "0.001"]).0[1],
+        5
+    );
+}
+
+/// Rotary words follow the program's own decimal style: a program
+/// writing `A12.5` and `C-90.` gets its corrected rotary words with the
+/// trailing zeros dropped and no more decimals than the tolerance needs
+/// (not the six of a fixed count), and one writing five decimals keeps
+/// its five.
+#[test]
+fn rotary_words_follow_the_program_s_decimals() {
+    let short = b"G21 G90 G17 G94\nG54 G0 X0. Y0. Z100. A0. C0.\nG1 X-40. Y-20. Z40. A12.5 C-90. F1500.\nX40. Y20. A20. C-45.\nM30\n";
+    let (most, out) = five_axis_decimals(short, &[]);
+    assert_eq!(most[1], 4, "{out}");
+    let rotary: Vec<&str> = out
+        .lines()
+        .filter(|l| !l.starts_with('('))
+        .flat_map(|l| l.split_whitespace())
+        .filter(|w| w.starts_with('A') || w.starts_with('C'))
+        .collect();
+    assert!(rotary.len() >= 4, "{out}");
+    for w in &rotary {
+        // Trailing zeros are dropped (the program's style), never `A12.5000`.
+        assert!(!w.ends_with('0') || !w.contains('.'), "{w} in\n{out}");
+    }
+    // A word the correction moves is rewritten (its value changes).
+    assert!(
+        !out.contains(" A12.5 ") && !out.contains(" C-90. "),
+        "{out}"
+    );
+    let long = String::from_utf8_lossy(short)
+        .replace("A12.5 C-90.", "A12.50000 C-90.00000")
+        .into_bytes();
+    let (most, out) = five_axis_decimals(&long, &[]);
+    assert_eq!(most[1], 5, "{out}");
 }
 
 /// `check` lists every error of a program as a compiler does (each bad

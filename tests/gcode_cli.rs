@@ -218,7 +218,12 @@ fn malformed_programs_exit_2_located_with_no_output() {
             "`#5021` is a system variable, known only on the control",
         ),
         ("o100 sub", 3, 1, "O-word subroutine o100 has no `endsub`"),
-        ("O200 WHILE [1 LT 2]", 3, 1, "O-word `while`"),
+        (
+            "O200 WHILE [1 LT 2]",
+            3,
+            1,
+            "o200 while has no `o200 endwhile`",
+        ),
         (
             "M98 P100",
             3,

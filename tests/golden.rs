@@ -408,10 +408,11 @@ fn tool_orientation_error_is_reported() {
 fn five_axis_sample_is_compensated_to_its_word_resolution() {
     // The AC trunnion example: every feed end point of the compensated
     // program, re-interpreted, reaches the programmed tool tip within
-    // 0.0001 mm. The machine file writes X Y Z at 4 decimals (each
-    // word rounded by at most 0.05 µm, so at most 0.087 µm together) and A/C
-    // at 6 decimals (0.0000005° = 8.7 nrad, at most 0.003 µm per axis at a
-    // 300 mm lever arm); the solve itself converges to far below that.
+    // 0.0001 mm. Written with `--decimals 6` (X Y Z each word rounded by
+    // at most 0.0005 µm; A/C by 0.0000005° = 8.7 nrad, at most 0.003 µm
+    // per axis at a 300 mm lever arm; without it A/C keep the program's
+    // decimals and as many more as the tolerance needs, which rounds by
+    // more than this bound); the solve itself converges to far below that.
     const FIVE_AXIS_TOL_MM: f64 = 0.0001;
     let text = std::fs::read_to_string(repo("machines/five-axis-ac.yaml")).unwrap();
     let Machine::Tool(machine) = Machine::from_yaml_str(&text, "ac").unwrap() else {
@@ -419,7 +420,16 @@ fn five_axis_sample_is_compensated_to_its_word_resolution() {
     };
     let program = std::fs::read_to_string(repo("samples/five-axis.nc")).unwrap();
     let out = postproc()
-        .args(["compensate", "--annotate", "none", "-o", "-", "--machine"])
+        .args([
+            "compensate",
+            "--annotate",
+            "none",
+            "--decimals",
+            "6",
+            "-o",
+            "-",
+        ])
+        .arg("--machine")
         .arg(repo("machines/five-axis-ac.yaml"))
         .arg(repo("samples/five-axis.nc"))
         .output()

@@ -2146,3 +2146,100 @@ fn an_arc_whose_bulge_leaves_the_travel_is_refused() {
     let (code, err) = check_program("arc.nc", inside.as_bytes(), "afm-r1000", &["-q"]);
     assert_eq!(code, 0, "{err}");
 }
+
+/// `compensate` then `check` of the output with the same machine options
+/// (`args`): (compensate's exit code and stderr, check's exit code and
+/// stderr, the output).
+fn compensate_then_check(
+    name: &str,
+    text: &str,
+    args: &[&str],
+    tolerance: &str,
+) -> ((i32, String), (i32, String), String) {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join(name);
+    let out_path = dir.path().join(format!("out-{name}"));
+    std::fs::write(&path, text).unwrap();
+    let run = |cmd: &[&str], file: &std::path::Path| {
+        let out = crate::common::postproc()
+            .args(cmd)
+            .args(args)
+            .arg(file)
+            .output()
+            .unwrap();
+        (
+            out.status.code().unwrap_or(-1),
+            String::from_utf8_lossy(&out.stderr).into_owned(),
+        )
+    };
+    let o = out_path.to_str().unwrap();
+    let compensated = run(
+        &[
+            "compensate",
+            "-q",
+            "--annotate",
+            "none",
+            "--tolerance",
+            tolerance,
+            "-o",
+            o,
+        ],
+        &path,
+    );
+    let written = std::fs::read_to_string(&out_path).unwrap_or_default();
+    let checked = run(&["check", "-q"], &out_path);
+    (compensated, checked, written)
+}
+
+/// A TCPM rapid to the top of Z (machine Z0 of the five-axis machine) at
+/// A10: the correction would cross the end by less than the tolerance
+/// and is held there. Under TCPM a tip word moves the other machine axes,
+/// so the rapid gets every tip word its correction needs (the corrected Y
+/// left out moved machine Z 4 µm past its end), and the compensated
+/// program passes its own `check`.
+#[test]
+fn a_tcpm_rapid_at_the_top_of_z_is_written_within_the_travel() {
+    let prog = "G21 G90 G17 G94\nG54 G0 X0. Y0. A0. C0.\nG43.4 H1 G0 Z100.\nG0 X50. Y20. A10. C30.\nG0 Z200.485\nG0 Z100.\nG49\nM30\n";
+    let args = ["--machine", "five-axis-ac"];
+    let ((code, err), (check, check_err), out) =
+        compensate_then_check("top.nc", prog, &args, "0.02");
+    assert_eq!(code, 0, "{err}");
+    assert_eq!(check, 0, "{check_err}\n{out}");
+    // The rapid to the top writes the corrected X and Y too.
+    let top = out
+        .lines()
+        .find(|l| l.starts_with("G0 ") && l.contains(" Z200.4"))
+        .unwrap_or("");
+    assert!(top.contains('X') && top.contains('Y'), "{out}");
+}
+
+/// A point held at the top of Z with a work offset of more decimals than
+/// the written words (G54 Z200.00003: the end is work Z299.99997) is
+/// written one unit inside (`Z299.9999`), not rounded past the end
+/// (`Z300.`, machine Z500.00003, which `check` refuses).
+#[test]
+fn a_point_held_at_a_travel_end_is_rounded_inside_it() {
+    let bundled = std::fs::read_to_string(crate::common::repo("machines/afm-r1000.yaml")).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let table = dir.path().join("table.yaml");
+    std::fs::write(
+        &table,
+        bundled.replace("tolerance_mm: 0.003", "tolerance_mm: 0.02"),
+    )
+    .unwrap();
+    let prog = std::fs::read_to_string(crate::common::repo("tests/shop/plasma_no_z.nc")).unwrap();
+    let args = [
+        "--machine",
+        table.to_str().unwrap(),
+        "--work-offset",
+        "G54=100,50,200.00003",
+    ];
+    let ((code, err), (check, check_err), out) =
+        compensate_then_check("plasma.nc", &prog, &args, "0.02");
+    assert_eq!(code, 0, "{err}");
+    assert_eq!(check, 0, "{check_err}\n{out}");
+    assert!(
+        out.contains(" Z299.9999") && !out.contains(" Z300."),
+        "{out}"
+    );
+}

@@ -319,7 +319,18 @@ fn machine_axis_and_tcpm_twins_compensate_to_the_same_tips() {
                 .arg(&input)
                 .arg("--machine")
                 .arg(repo(file))
-                .args(["--effects", "geometric", "--annotate", "none", "-o", "-"])
+                // Rotary words at 6 decimals, the word resolution the
+                // tolerances above are for.
+                .args([
+                    "--effects",
+                    "geometric",
+                    "--annotate",
+                    "none",
+                    "--decimals",
+                    "6",
+                    "-o",
+                    "-",
+                ])
                 .output()
                 .expect("runs");
             assert_eq!(

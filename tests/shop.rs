@@ -54,6 +54,7 @@ fn shop_programs_are_written_back_byte_for_byte_with_no_effects() {
         "fanuc_bolt_circle.nc",
         "plasma_no_z.nc",
         "inch_without_g20.nc",
+        "linuxcnc_while_pocket.ngc",
     ] {
         let input = program(name);
         let (out, stderr) = compensate(
@@ -191,6 +192,7 @@ fn compensated_subprograms_attain_every_target_when_predicted_again() {
         "linuxcnc_pocket.ngc",
         "fanuc_bolt_circle.nc",
         "inch_without_g20.nc",
+        "linuxcnc_while_pocket.ngc",
     ] {
         let dir = tempfile::tempdir().expect("tempdir");
         let input = program(name);
@@ -249,6 +251,50 @@ fn a_macro_bolt_circle_is_written_out_with_its_values() {
     assert!(text.contains("G0 X259.9"), "{text}");
 }
 
+/// The LinuxCNC pocket of three step-downs by an O-word `while` loop, an
+/// `if` … `else` on the pass number: run offline and written out as it
+/// runs, the loop and condition lines left out, each pass's depth a
+/// number (1.5, 3 and 4.5 mm down), the spring pass (F600.) once, on the
+/// last pass, and the diagonal of the `else` on the two others.
+#[test]
+fn a_linuxcnc_while_pocket_is_written_out_as_it_runs() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let (out, stderr) = compensate(
+        &program("linuxcnc_while_pocket.ngc"),
+        dir.path(),
+        &["--annotate", "none"],
+    );
+    let text = String::from_utf8(out).expect("utf-8");
+    assert!(
+        stderr.contains("macro program written out as it runs"),
+        "{stderr}"
+    );
+    assert!(
+        !text.contains("o101") && !text.contains("o102") && !text.contains('#'),
+        "{text}"
+    );
+    // The depth words, as numbers near the programmed ones, never deeper
+    // than the last pass.
+    let zs: Vec<f64> = text
+        .lines()
+        .filter(|l| !l.starts_with('('))
+        .flat_map(|l| l.split_whitespace())
+        .filter_map(|w| w.strip_prefix('Z')?.parse::<f64>().ok())
+        .collect();
+    for z in [-1.5, -3.0, -4.5] {
+        assert!(zs.iter().any(|v| (v - z).abs() < 0.01), "Z{z}: {text}");
+    }
+    assert!(zs.iter().all(|&v| v > -4.51), "{text}");
+    // The spring pass once; the diagonal of the `else` (to Y127.5 and
+    // its takeup back) on the two other passes.
+    assert_eq!(text.matches("F600.").count(), 1, "{text}");
+    assert_eq!(
+        text.lines().filter(|l| l.contains(" Y127.4")).count(),
+        4,
+        "{text}"
+    );
+}
+
 /// What a subprogram structure cannot hold is refused by name, at its
 /// line, with exit code 2.
 #[test]
@@ -276,9 +322,19 @@ fn subprogram_refusals_are_named_and_located() {
             "calls nested deeper than 16 levels",
         ),
         (
-            "G90 G0 X0 Y0\no101 while [1 LT 2]\no101 endwhile\nM2\n",
+            "G21 G90 G0 X0 Y0\nG38.2 Z-10. F50.\no101 while [#5070 EQ 0]\nG1 X1 F100\no101 endwhile\nM2\n",
+            ":3:1:",
+            "`#5070` is a system variable, known only on the control at run time",
+        ),
+        (
+            "G21 G90 G0 X0 Y0\n#1 = 5\no101 while [#1 LT 2]\nG1 X1 F100\nM2\n",
+            ":3:1:",
+            "o101 while has no `o101 endwhile`",
+        ),
+        (
+            "G21 G90 G0 X0 Y0\no102 if [#7 GT 0]\nG1 X1 F100\no102 endif\nM2\n",
             ":2:1:",
-            "O-word `while` (conditions and loops on values) is not followed offline",
+            "local variable `#7` is read before it is set",
         ),
         (
             "o<a> sub\nG1 X1 F100\no<a> endsub\no<a> call [2]\nM2\n",

@@ -28,7 +28,8 @@ pub struct EmitOptions {
     /// the program's own, with at least 3 (mm) or 4 (inch).
     pub decimals_mm: Option<usize>,
     /// Decimals of rewritten rotary-axis words (degrees); `None` keeps the
-    /// program's own, with at least 3.
+    /// program's own, with at least the fewest whose rounding keeps to
+    /// [`ROUNDING_SHARE`] of the tolerance at [`ROTARY_LEVER_MM`].
     pub decimals_deg: Option<usize>,
     /// Append `(dev … mm geo …)` comments to compensated blocks.
     pub annotate: bool,
@@ -49,6 +50,36 @@ pub const KEPT_WORD_SHARE: f64 = 0.25;
 
 /// Most decimals a written coordinate gets.
 const MAX_DECIMALS: usize = 8;
+
+/// Rounding allowance of the travel limits, mm or deg (the one the
+/// compensation and `check` keep to).
+const LIMIT_SLACK: f64 = 1e-9;
+
+/// The distance of the tool tip from a rotary axis at which the rounding
+/// of a rotary word is judged, mm: half a metre bounds it on the machine
+/// tools this writes for (a table of 500 mm or a head with a tool of
+/// 200 mm and a pivot of 300 mm).
+pub const ROTARY_LEVER_MM: f64 = 500.0;
+
+/// The fewest decimals of a rotary word (degrees) whose rounding (half a
+/// unit of its last decimal) moves the tip by at most [`ROUNDING_SHARE`]
+/// of `tol` at [`ROTARY_LEVER_MM`].
+fn rotary_tolerance_decimals(tol: f64) -> usize {
+    (0..MAX_DECIMALS)
+        .find(|&d| (0.5 / pow10(d)).to_radians() * ROTARY_LEVER_MM <= tol * ROUNDING_SHARE)
+        .unwrap_or(MAX_DECIMALS)
+}
+
+/// How far (mm) the rounding of the two rotary words of a written point
+/// can move its tip at [`ROTARY_LEVER_MM`], with the decimals a
+/// compensation at `tolerance_mm` writes rotary words without decimals of
+/// their own with: added to [`rounding_mm`] on machines with rotary axes.
+pub fn rotary_rounding_mm(opts: &EmitOptions, tolerance_mm: f64) -> f64 {
+    let d = opts
+        .decimals_deg
+        .unwrap_or_else(|| rotary_tolerance_decimals(tolerance_mm));
+    2.0 * (0.5 / pow10(d)).to_radians() * ROTARY_LEVER_MM
+}
 
 /// How far (mm) the rounding of the written words can move a written
 /// piece off the one that was solved, with the decimals a compensation at
@@ -123,6 +154,13 @@ pub struct Emitter {
     edits: Edits,
     /// Tolerance of the compensation, mm (see [`Emitter::with_tolerance`]).
     tolerance_mm: Option<f64>,
+    /// The travel of each axis in the coordinates of the plans written
+    /// ([`Emitter::set_limits`]): a rounded word that would leave it is
+    /// rounded the other way.
+    limits: [Option<(f64, f64)>; 6],
+    /// Where each line written for the last compensated block leaves the
+    /// machine, in the coordinates of its plan ([`Emitter::written`]).
+    written: Vec<AxisVec>,
 }
 
 /// Formats `v` with `d` decimals, never in exponent notation and never as
@@ -429,6 +467,8 @@ impl Emitter {
             added_by: AddedLines::default(),
             edits: Edits::default(),
             tolerance_mm: None,
+            limits: [None; 6],
+            written: Vec::new(),
         }
     }
 
@@ -466,11 +506,53 @@ impl Emitter {
         self.added_by
     }
 
+    /// Sets the travel of each axis (mm or deg, `None` for an axis without
+    /// one) in the coordinates of the plans written next (machine
+    /// coordinates; tool tips under TCPM): a written word whose rounding
+    /// would leave it is rounded the other way, one unit of its last
+    /// decimal nearer the inside.
+    pub fn set_limits(&mut self, limits: [Option<(f64, f64)>; 6]) {
+        self.limits = limits;
+    }
+
+    /// Where each line written for the last compensated block (its own and
+    /// the added ones) leaves the machine, in the coordinates of its plan,
+    /// as the written words command it.
+    pub fn written(&self) -> &[AxisVec] {
+        &self.written
+    }
+
+    /// `v` (a program value of axis `slot` rounded to `d` decimals, with
+    /// `now` where the machine stands) one unit of its last decimal nearer
+    /// the inside when the machine coordinate it commands is beyond the
+    /// limits of [`Emitter::set_limits`] (a point solved at the end of the
+    /// travel rounds past it by up to half a unit).
+    fn inside(&self, plan: &Plan, slot: usize, v: f64, d: usize, now: f64) -> f64 {
+        let Some((lo, hi)) = self.limits[slot] else {
+            return v;
+        };
+        let m = to_machine(plan, slot, v, now);
+        let unit = 1.0 / pow10(d);
+        if m > hi + LIMIT_SLACK {
+            round_to(v - unit, d)
+        } else if m < lo - LIMIT_SLACK {
+            round_to(v + unit, d)
+        } else {
+            v
+        }
+    }
+
     fn decimals(&self, w: Option<&Word>, scale: f64, rotary: bool) -> usize {
         let own = w.and_then(|w| w.decimals).unwrap_or(0) as usize;
         let own = own.min(crate::limits::EMIT_MAX_DECIMALS);
         let base = if rotary {
-            self.opts.decimals_deg.unwrap_or(DEFAULT_DECIMALS_MM)
+            // The program's own decimals, as many more as the tolerance
+            // needs (or exactly what `--decimals` or the machine file ask
+            // for, at least the program's).
+            self.opts.decimals_deg.unwrap_or_else(|| {
+                self.tolerance_mm
+                    .map_or(DEFAULT_DECIMALS_MM, rotary_tolerance_decimals)
+            })
         } else {
             let d = self.opts.decimals_mm.unwrap_or(DEFAULT_DECIMALS_MM);
             let d = if scale != 1.0 { d + 1 } else { d };
@@ -498,6 +580,7 @@ impl Emitter {
         res: Option<&BlockResult>,
         out: &mut Vec<u8>,
     ) {
+        self.written.clear();
         if self.semicolon_comments.is_none() {
             if let Some(c) = block.comments.first() {
                 self.semicolon_comments = Some(c.semicolon);
@@ -607,6 +690,7 @@ impl Emitter {
         self.write_own(line, eol, edits, out);
         let own_end = out.len();
         self.emitted = new_emitted;
+        self.written.push(new_emitted);
         // Added lines end with the block's line end; after a last line
         // without one, each starts with a newline instead (the file still
         // ends without one).
@@ -793,7 +877,9 @@ impl Emitter {
             }
             match w {
                 Some(w) => {
-                    let rounded = round_to(to_program(plan, slot, target, self.emitted[slot]), d);
+                    let now = self.emitted[slot];
+                    let rounded = round_to(to_program(plan, slot, target, now), d);
+                    let rounded = self.inside(plan, slot, rounded, d, now);
                     let orig = round_to(w.value, d);
                     if rounded != orig || w.decimals.unwrap_or(0) as usize > d {
                         edits.number(w, rounded, d);
@@ -813,9 +899,14 @@ impl Emitter {
                         d,
                     );
                     let want = round_to(to_program(plan, slot, target, self.emitted[slot]), d);
-                    // Rapids position only the axes they program.
-                    let positioning =
-                        mv.motion == Motion::Rapid && plan.programmed & (1 << slot) == 0;
+                    let want = self.inside(plan, slot, want, d, self.emitted[slot]);
+                    // Rapids position only the axes they program (under
+                    // TCPM every tip word moves the other axes: a rapid
+                    // gets each word its correction needs, so that the
+                    // machine goes where it was solved, travel ends too).
+                    let positioning = mv.motion == Motion::Rapid
+                        && !plan.tcpm
+                        && plan.programmed & (1 << slot) == 0;
                     // A hole of a canned cycle keeps the modal value
                     // while it is close enough to the corrected one.
                     let kept =
@@ -1012,6 +1103,7 @@ impl Emitter {
                 }
                 motion = mv.motion;
                 self.count_added(takeup, AddedKind::Arc);
+                self.written.push(self.emitted);
                 continue;
             }
             let mark = out.len();
@@ -1036,6 +1128,7 @@ impl Emitter {
                 *from = *p;
             }
             out.extend_from_slice(eol);
+            self.written.push(self.emitted);
             motion = Motion::Linear;
             let kind = if mv.arc.is_some() {
                 AddedKind::Chord
@@ -1083,6 +1176,7 @@ impl Emitter {
                 self.decimals(w, plan.scale, slot >= 3)
             });
             let v = round_to(to_program(plan, slot, p[slot], now), d);
+            let v = self.inside(plan, slot, v, d, now);
             let cur = round_to(to_program(plan, slot, now, now), d);
             if v != cur {
                 if out.len() > words && self.spaced {

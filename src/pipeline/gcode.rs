@@ -15,7 +15,7 @@ use rayon::prelude::*;
 
 use crate::compensate::outcome::{Row, Summary};
 use crate::compensate::{self, BlockResult, Failure, Settings};
-use crate::emit::gcode::{EmitOptions, Emitter, rounding_mm};
+use crate::emit::gcode::{EmitOptions, Emitter, rotary_rounding_mm, rounding_mm};
 use crate::error::{Error, Located, Result};
 use nalgebra::Vector3;
 
@@ -831,6 +831,11 @@ impl<'j, 'm, 'o, 'r> WriteStage<'j, 'm, 'o, 'r> {
                             &mut self.tip_plan,
                             &mut self.tip_res,
                         );
+                        self.emitter.set_limits(tip_limits(
+                            pred.machine,
+                            &r.end,
+                            &self.tip_res.end,
+                        ));
                         self.emitter.write(
                             chunk.line(i),
                             block,
@@ -839,9 +844,22 @@ impl<'j, 'm, 'o, 'r> WriteStage<'j, 'm, 'o, 'r> {
                             &mut self.out_buf,
                         );
                     }
-                    _ => self
-                        .emitter
-                        .write(chunk.line(i), block, plan, res, &mut self.out_buf),
+                    (_, _, pred) => {
+                        if let Some(p) = pred {
+                            self.emitter.set_limits(machine_limits(p.machine));
+                        }
+                        self.emitter
+                            .write(chunk.line(i), block, plan, res, &mut self.out_buf)
+                    }
+                }
+                if let (Some(pred), Some(mv)) = (&self.job.predictor, plan.mv) {
+                    self.written_travel(
+                        pred.machine,
+                        plan,
+                        mv.tool_len_mm,
+                        block.line_no,
+                        chunk.line(i),
+                    )?;
                 }
             }
             if let Some(marks) = self.marks.as_mut() {
@@ -858,6 +876,44 @@ impl<'j, 'm, 'o, 'r> WriteStage<'j, 'm, 'o, 'r> {
         for r in st.results.iter_mut().flatten().flatten() {
             if r.segments.capacity() > REUSE_SEGMENTS {
                 r.segments = Vec::new();
+            }
+        }
+        Ok(())
+    }
+
+    /// Every point the lines just written for a block command (as the
+    /// control reads their words: through the tool tip under TCPM) within
+    /// the travel of `m`, or the block refused naming the axis: the
+    /// compensated program never holds a move its own `check` refuses.
+    fn written_travel(
+        &self,
+        m: &MachineTool,
+        plan: &Plan,
+        tool_mm: f64,
+        line_no: usize,
+        line: &[u8],
+    ) -> Result<()> {
+        for p in self.emitter.written() {
+            let machine = if plan.tcpm {
+                match m.axes_for_tip(p, tool_mm) {
+                    Some(a) => a,
+                    None => continue,
+                }
+            } else {
+                *p
+            };
+            if let Err(f) = compensate::programmed_travel(m, &machine) {
+                let shown = String::from_utf8_lossy(crate::program::gcode::strip_eol(line));
+                return Err(Error::Unachievable(Located::new(
+                    self.file,
+                    line_no,
+                    1,
+                    format!(
+                        "the compensated words of this block, as written, would command {}: `{}`",
+                        written_failure_text(&f),
+                        shown.trim()
+                    ),
+                )));
             }
         }
         Ok(())
@@ -976,11 +1032,61 @@ fn in_scope<'s, R>(pool: Option<&rayon::ThreadPool>, op: impl FnOnce(&rayon::Sco
     }
 }
 
+/// The travel of each axis of `m` (machine coordinates).
+fn machine_limits(m: &MachineTool) -> [Option<(f64, f64)>; 6] {
+    std::array::from_fn(|s| m.travel(s))
+}
+
+/// The travel of each axis of `m` in tool-tip coordinates about a point
+/// whose machine coordinates are `machine` and tool tip `tip`: each
+/// linear axis' travel shifted by the offset of the tip from the machine
+/// point there (the rotary axes are the same in both).
+fn tip_limits(m: &MachineTool, machine: &AxisVec, tip: &AxisVec) -> [Option<(f64, f64)>; 6] {
+    std::array::from_fn(|s| {
+        m.travel(s).map(|(lo, hi)| {
+            let shift = if s < 3 { tip[s] - machine[s] } else { 0.0 };
+            (lo + shift, hi + shift)
+        })
+    })
+}
+
+/// What a written point beyond the travel commands, for
+/// [`WriteStage::written_travel`].
+fn written_failure_text(f: &compensate::Failure) -> String {
+    match f {
+        compensate::Failure::ProgrammedOutOfTravel {
+            axis,
+            value,
+            limits,
+        }
+        | compensate::Failure::OutOfTravel {
+            axis,
+            value,
+            limits,
+        } => format!(
+            "machine {axis} = {value:.4}, outside the travel [{}, {}]",
+            limits.0, limits.1
+        ),
+        other => format!("{other:?}"),
+    }
+}
+
 impl<'m> Job<'m> {
     /// How far the rounding of the written words can move a written piece
-    /// of a block in units of `scale` mm ([`rounding_mm`]), mm.
+    /// of a block in units of `scale` mm ([`rounding_mm`], with the rotary
+    /// words' [`rotary_rounding_mm`] on a machine with rotary axes), mm.
     fn rounding(&self, scale: f64) -> f64 {
-        rounding_mm(&self.emit, self.settings.tolerance_mm, scale)
+        let tol = self.settings.tolerance_mm;
+        let rotary = self
+            .predictor
+            .as_ref()
+            .is_some_and(|p| (3..6).any(|s| p.machine.has_axis(s)));
+        rounding_mm(&self.emit, tol, scale)
+            + if rotary {
+                rotary_rounding_mm(&self.emit, tol)
+            } else {
+                0.0
+            }
     }
 
     /// The settings a block in units of `scale` mm is solved with: the

@@ -647,6 +647,7 @@ pub mod expr;
 pub mod macros;
 mod macros_run;
 pub mod oword;
+mod oword_run;
 #[cfg(test)]
 mod reference;
 pub mod subprograms;

@@ -123,13 +123,7 @@ impl Resolver<'_> {
         depth: usize,
     ) -> Result<usize, Located> {
         self.exp.flat = true;
-        self.macros.steps += 1;
-        if self.macros.steps > MAX_STEPS {
-            return Err(self.err(
-                i,
-                format!("the macro statements do not end within {MAX_STEPS} steps"),
-            ));
-        }
+        self.tick(i)?;
         let line = strip_eol(self.exp.line(self.text, i)).to_vec();
         let span = |r: (u32, u32)| &line[r.0 as usize..r.1 as usize];
         match st {
@@ -190,7 +184,22 @@ impl Resolver<'_> {
         }
     }
 
-    fn truth(&self, i: usize, cond: &[u8]) -> Result<bool, Located> {
+    /// Counts one statement run at line `i`, refusing a program that runs
+    /// more than [`MAX_STEPS`] (a loop that does not end).
+    pub(super) fn tick(&mut self, i: usize) -> Result<(), Located> {
+        self.macros.steps += 1;
+        if self.macros.steps > MAX_STEPS {
+            return Err(self.err(
+                i,
+                format!("the macro statements do not end within {MAX_STEPS} steps"),
+            ));
+        }
+        Ok(())
+    }
+
+    /// The condition `cond` of line `i`, evaluated with the program's
+    /// variables (non-zero is true).
+    pub(super) fn truth(&self, i: usize, cond: &[u8]) -> Result<bool, Located> {
         self.macros
             .value(cond)
             .map(|v| v != 0.0)

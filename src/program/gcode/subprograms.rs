@@ -666,12 +666,25 @@ impl Resolver<'_> {
         match o.keyword {
             Keyword::Call => {
                 let Some(&def) = self.by_key.get(&key) else {
-                    return Err(self.err(i, format!("o{key} call: the subroutine is not defined in this file")));
+                    return Err(self.err(
+                        i,
+                        format!("o{key} call: the subroutine is not defined in this file"),
+                    ));
                 };
                 if !o.args_text(line).is_empty() {
                     return Err(self.err(i, format!("o{key} call with arguments: arguments set the subroutine's `#1`… parameters, which this reader does not evaluate")));
                 }
-                self.exp.sites.insert(i, Site { def, name: o.name, count: None, times: 1, packed: false, after_name: o.name.1 });
+                self.exp.sites.insert(
+                    i,
+                    Site {
+                        def,
+                        name: o.name,
+                        count: None,
+                        times: 1,
+                        packed: false,
+                        after_name: o.name.1,
+                    },
+                );
                 self.call(def, i, 1, call, depth)?;
                 Ok(i + 1)
             }
@@ -681,22 +694,36 @@ impl Resolver<'_> {
                 let def = match self.repeats.get(&i) {
                     Some(&d) => d,
                     None => {
-                        let Kind::OWord(e) = self.kinds[end] else { unreachable!("an O-word line") };
+                        let Kind::OWord(e) = self.kinds[end] else {
+                            unreachable!("an O-word line")
+                        };
                         let d = self.define(DefKind::Repeat, i, end, o.name, Some(e.name));
                         self.repeats.insert(i, d);
                         d
                     }
                 };
-                self.exp.sites.insert(i, Site { def, name: o.name, count: Some(o.args), times, packed: false, after_name: o.name.1 });
+                self.exp.sites.insert(
+                    i,
+                    Site {
+                        def,
+                        name: o.name,
+                        count: Some(o.args),
+                        times,
+                        packed: false,
+                        after_name: o.name.1,
+                    },
+                );
                 self.call(def, i, times, call, depth)?;
                 Ok(end + 1)
             }
-            Keyword::Endrepeat => Err(self.err(i, format!("o{key} endrepeat without its `repeat`"))),
-            Keyword::Endsub | Keyword::Return | Keyword::Sub => Err(self.err(i, format!("o{key} {} outside a subroutine", o.keyword.as_str()))),
-            k => Err(self.err(
+            Keyword::Endrepeat => {
+                Err(self.err(i, format!("o{key} endrepeat without its `repeat`")))
+            }
+            Keyword::Endsub | Keyword::Return | Keyword::Sub => Err(self.err(
                 i,
-                format!("O-word `{}` (conditions and loops on values) is not followed offline; O-word `sub`, `call` and `repeat` are", k.as_str()),
+                format!("o{key} {} outside a subroutine", o.keyword.as_str()),
             )),
+            _ => self.oword_flow(i, o, &key, to),
         }
     }
 
