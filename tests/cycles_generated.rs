@@ -56,8 +56,8 @@ const CYCLES: &[(&str, &str)] = &[
     ("G86", ""),
 ];
 
-/// One generated program: the part's zero at G54 (work Z0 = machine Z150
-/// + tool), an initial level 40–250 mm above it, a row of 1–6 holes of
+/// One generated program: the part's zero at G54 (work Z0 = machine
+/// Z150 plus the tool), an initial level 40–250 mm above it, a row of 1–6 holes of
 /// one or two cycles with incremental or absolute levels, then `G80` and
 /// incremental moves that count from where the cycle left the tool.
 fn program(rng: &mut Rng) -> String {

@@ -13,8 +13,8 @@ use nalgebra::{Isometry3, Translation3, UnitQuaternion};
 use postproc::machine::robot::pose::pose_error;
 use postproc::machine::robot::{Model, Robot};
 use postproc::machine::{Machine, MachineFile};
-use postproc::predict::MoveContext;
 use postproc::predict::EffectSet;
+use postproc::predict::MoveContext;
 use postproc::program::tp::config::Config;
 use postproc::program::tp::{Group, Program, parse};
 
@@ -199,7 +199,10 @@ fn lands(input: &Program, output: &Program, index: u32) {
         fp.norm() <= POS_TOL_MM && fr.norm() <= ROT_TOL_RAD,
         "P[{index}] FK"
     );
-    let (dp, dr) = pose_error(&r.predict(&MoveContext::default(), &q, EffectSet::ALL), &p_in);
+    let (dp, dr) = pose_error(
+        &r.predict(&MoveContext::default(), &q, EffectSet::ALL),
+        &p_in,
+    );
     assert!(dp.norm() <= POS_TOL_MM, "P[{index}]: {dp}");
     assert!(dr.norm() <= ROT_TOL_RAD, "P[{index}]: {dr}");
 }
