@@ -19,11 +19,10 @@
 
 use std::collections::BTreeMap;
 
-use nalgebra::{Isometry3, Translation3};
+use nalgebra::{Isometry3, Translation3, UnitQuaternion};
 use serde::Deserialize;
 
 use crate::error::Invalid;
-use crate::program::euler::zyx_to_quaternion;
 
 /// The highest frame number read (FANUC's extended user and tool frames
 /// go up to 61).
@@ -78,9 +77,13 @@ impl FanucFrames {
     }
 }
 
-/// The pose of `X, Y, Z, W, P, R`.
+/// The pose of `X, Y, Z, W, P, R`: `R = Rz(R)·Ry(P)·Rx(W)` in degrees, the
+/// convention `program::euler` documents for the programs (nalgebra's
+/// roll-pitch-yaw is that product; the machine layer does not use the
+/// program layer).
 pub fn xyzwpr(x: f64, y: f64, z: f64, w: f64, p: f64, r: f64) -> Isometry3<f64> {
-    Isometry3::from_parts(Translation3::new(x, y, z), zyx_to_quaternion(r, p, w))
+    let q = UnitQuaternion::from_euler_angles(w.to_radians(), p.to_radians(), r.to_radians());
+    Isometry3::from_parts(Translation3::new(x, y, z), q)
 }
 
 fn frames(
