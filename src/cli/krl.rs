@@ -127,7 +127,7 @@ fn steps_of(texts: &[Option<Text>]) -> Vec<RobotStep> {
 }
 
 /// The robot of `--machine` (a robot), with the process-force flags.
-fn robot_of(
+pub(super) fn robot_of(
     machine: Option<&str>,
     command: &str,
     effects: Option<&super::EffectArgs>,
@@ -226,7 +226,7 @@ fn with_header(text: &str, provenance: &Provenance) -> String {
 }
 
 /// Writes `text` to a staged file in `charset`.
-fn stage(path: &Path, text: &str, charset: Charset) -> Result<super::output::Pending> {
+pub(super) fn stage(path: &Path, text: &str, charset: Charset) -> Result<super::output::Pending> {
     let mut out = Staged::open(path)?;
     let written = match charset {
         Charset::Utf8 => out.writer().write_all(text.as_bytes()),
@@ -322,16 +322,7 @@ pub(super) fn compensate_to(
         annotate: opts.annotate,
         compensate: opts.effects.compensates(),
     };
-    let solved: Vec<crate::emit::krl::Solved> = run
-        .results
-        .iter()
-        .map(|r| match r {
-            crate::pipeline::robot::StepResult::Compensated { target, via } => {
-                Some((&**target, via.as_deref()))
-            }
-            _ => None,
-        })
-        .collect();
+    let solved = run.solved();
     let (out_texts, warnings) = rewrite(&strs, &files, &steps, &solved, robot, how)?;
     run.summary.warnings.extend(warnings);
     let inputs: Vec<&Path> = texts.iter().flatten().map(|t| t.path.as_path()).collect();
@@ -363,7 +354,7 @@ pub(super) fn compensate_to(
 }
 
 /// Writes the deviation report of a run.
-fn write_report(
+pub(super) fn write_report(
     out: &mut dyn Write,
     run: RobotRun,
     name: &str,

@@ -9,18 +9,17 @@
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
+use super::krl::{robot_of, stage, write_report};
 use super::output::Staged;
 use super::{CheckArgs, CompensateArgs, ReportArgs};
-use crate::compensate::outcome::Compensated;
 use crate::emit::header::{Provenance, Syntax};
-use crate::emit::tp::{Solved, TpWrite, rewrite};
+use crate::emit::tp::{TpWrite, rewrite};
 use crate::error::{Error, Result};
-use crate::machine::Machine;
 use crate::machine::robot::Robot;
 use crate::pipeline::rapid::{RapidOptions, refuse_left_as_written};
-use crate::pipeline::robot::{RobotRun, StepResult};
+use crate::pipeline::robot::RobotRun;
 use crate::predict::EffectSet;
-use crate::program::charset::{Charset, Latin1Writer};
+use crate::program::charset::Charset;
 use crate::program::robot_moves::RobotStep;
 use crate::program::tp::resolve::resolve;
 use crate::program::tp::{Program, parse};
@@ -59,23 +58,6 @@ fn read(path: &Path, more: &[PathBuf]) -> Result<Text> {
         charset,
         program,
     })
-}
-
-/// The robot of `--machine` (a robot), with the process-force flags.
-fn robot_of(
-    machine: Option<&str>,
-    command: &str,
-    effects: Option<&super::EffectArgs>,
-) -> Result<(Robot, super::machines::Loaded)> {
-    let name = super::config::needed(machine, command)?;
-    let (m, loaded) = super::machines::open(name)?;
-    let Machine::Robot(r) = m else {
-        return Err(super::config::not_a_robot(&loaded));
-    };
-    match effects {
-        Some(e) => Ok((super::rapid::robot_with_process(r, e)?, loaded)),
-        None => Ok((r, loaded)),
-    }
 }
 
 /// Runs the pipeline over the program's stream.
@@ -200,14 +182,7 @@ pub(super) fn compensate_to(
     let t = read(src, more)?;
     super::machines::refuse_compensated(t.text.as_bytes(), &t.name, job.recompensate)?;
     let (steps, mut run) = run(&t, job.robot, job.opts)?;
-    let solved: Vec<Solved> = run
-        .results
-        .iter()
-        .map(|r| match r {
-            StepResult::Compensated { target, via } => Some((&**target, via.as_deref())),
-            _ => None,
-        })
-        .collect();
+    let solved = run.solved();
     let how = TpWrite {
         decimals: job.opts.format.position_decimals,
         compensate: job.opts.effects.compensates(),
@@ -227,36 +202,6 @@ pub(super) fn compensate_to(
         p.commit()?;
     }
     Ok(run.summary)
-}
-
-/// Writes `text` to a staged file in `charset`.
-fn stage(path: &Path, text: &str, charset: Charset) -> Result<super::output::Pending> {
-    let mut out = Staged::open(path)?;
-    let written = match charset {
-        Charset::Utf8 => out.writer().write_all(text.as_bytes()),
-        Charset::Latin1 => {
-            let mut w = Latin1Writer::new(out.writer());
-            w.write_all(text.as_bytes()).and_then(|()| w.flush())
-        }
-    };
-    written.map_err(|e| Error::io(path, e))?;
-    out.finish()
-}
-
-/// Writes the deviation report of a run.
-fn write_report(
-    out: &mut dyn Write,
-    run: RobotRun,
-    name: &str,
-    format: super::Format,
-    provenance: &Provenance,
-) -> Result<()> {
-    let outcome = Compensated {
-        text: String::new(),
-        summary: run.summary,
-        records: run.records,
-    };
-    super::rapid::write_report(out, &outcome, name, format, Some(provenance))
 }
 
 /// `postproc report` of a TP program (a dry run against a robot).

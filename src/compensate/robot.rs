@@ -16,6 +16,11 @@ use crate::machine::robot::{ConfData, IkSelect, Model, Robot, RobotError};
 use crate::predict::context::{MoveContext, Wrench};
 use crate::predict::robot::{Breakdown, EffectSet, PoseDelta};
 
+/// The compensation of one step of a robot run, as the writers take it:
+/// its target's and its auxiliary (via) point's (`None` for a step not
+/// compensated).
+pub type Solved<'a> = Option<(&'a Compensation, Option<&'a Compensation>)>;
+
 /// Position tolerance of the compensation iteration, mm (0.1 nm).
 pub const COMP_POS_TOL_MM: f64 = 1e-7;
 /// Orientation tolerance of the compensation iteration, rad.

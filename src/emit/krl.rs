@@ -131,9 +131,7 @@ fn new_status_turn(robot: &Robot, a: &Aggregate, c: &Compensation) -> Option<Sta
     })
 }
 
-/// The compensation of one step of a run: its target's and its
-/// auxiliary point's (`None` for a step not compensated).
-pub type Solved<'a> = Option<(&'a Compensation, Option<&'a Compensation>)>;
+pub use crate::compensate::robot::Solved;
 
 /// Writes a run back: the new texts of `texts` (the `.src`, then the data
 /// files, as [`Place::source`] counts them) from the compensation of each

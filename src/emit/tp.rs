@@ -17,7 +17,6 @@
 use std::collections::HashMap;
 use std::ops::Range;
 
-use crate::compensate::robot::Compensation;
 use crate::emit::rapid::{EditList, push_fixed};
 use crate::error::{Error, Result};
 use crate::machine::robot::Robot;
@@ -36,9 +35,7 @@ pub struct TpWrite {
     pub compensate: bool,
 }
 
-/// The compensation of one step of a run: its target's and its via
-/// point's (`None` for a step not compensated).
-pub type Solved<'a> = Option<(&'a Compensation, Option<&'a Compensation>)>;
+pub use crate::compensate::robot::Solved;
 
 /// `v` turned by whole turns to the value nearest `written`, degrees.
 fn nearest_turn(v: f64, written: f64) -> f64 {

@@ -63,6 +63,19 @@ pub struct RobotRun {
     pub records: Vec<Row>,
 }
 
+impl RobotRun {
+    /// Each step's compensation as the writers take it, in stream order.
+    pub fn solved(&self) -> Vec<crate::compensate::robot::Solved<'_>> {
+        self.results
+            .iter()
+            .map(|r| match r {
+                StepResult::Compensated { target, via } => Some((&**target, via.as_deref())),
+                _ => None,
+            })
+            .collect()
+    }
+}
+
 /// A planned compensation: the robot view, the programmed pose (world),
 /// the selection and the programmed joints.
 struct Job {
