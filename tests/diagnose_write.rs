@@ -759,3 +759,35 @@ fn positions_in_another_unit_are_refused() {
         assert!(!s.contains("VERDICT"), "{s}");
     }
 }
+
+/// Regression: in a one-line flow file the name's example suffix, once a
+/// calibration leaves other sections at example values, reads
+/// `(example values in stiffness, thermal, process force)`; written as a
+/// plain scalar its commas ended the name and `thermal` became a second
+/// top-level key, so the written file was refused (nothing written). The
+/// name is written double-quoted there and the file reads back.
+#[test]
+fn a_flow_file_s_name_with_sections_left_is_quoted() {
+    let v: Value = serde_yaml::from_str(&text("machines/afm-r1000.yaml")).expect("yaml");
+    let dir = tempfile::tempdir().expect("tmp");
+    let m = write(dir.path(), "flow.yaml", &format!("{}\n", flow(&v)));
+    let out = dir.path().join("out.yaml");
+    postproc()
+        .args(["calibrate", "geometry", "--machine"])
+        .arg(&m)
+        .arg("--observations")
+        .arg(repo("samples/observations/afm-r1000-grid-measured.csv"))
+        .arg("-o")
+        .arg(&out)
+        .assert()
+        .success();
+    let got = std::fs::read_to_string(&out).expect("written");
+    assert_eq!(got.lines().count(), 1, "{got}");
+    let back: Value = serde_yaml::from_str(&got).expect("reads back");
+    assert_eq!(
+        back["name"].as_str(),
+        Some("AFM R-1000 (example values in stiffness, thermal, process force)"),
+        "{got}"
+    );
+    assert!(Machine::load(&out).is_ok(), "{got}");
+}

@@ -262,3 +262,70 @@ fn block_layout_diagnose_write_model() {
     assert_ne!(model(&got), model(&block), "values written");
     assert_eq!(model(&got), model(&want), "same values written");
 }
+
+/// The robot in block layout, calibrated for stiffness through the binary,
+/// is written back in its own layout: `k_nm_per_rad` stays a block list
+/// (one number a line, the comment after its first item kept there), the
+/// TCP a block map, and the keys the calibration adds (`calibrations`) are
+/// block lines as in the bundled files.
+#[test]
+fn block_lists_stay_block_lists_when_written_back() {
+    let (block, _) = block_layout(&text("machines/abb-irb1600.yaml"));
+    let dir = tempfile::tempdir().expect("tmp");
+    let b = write(dir.path(), "block.yaml", &block);
+    let got = calibrate(
+        "stiffness",
+        &b,
+        "samples/observations/irb1600-ldbb-measured.csv",
+        &dir.path().join("out.yaml"),
+    );
+    assert_comments_kept(&block, &got, "stiffness");
+    let k_at = got.find("\nk_nm_per_rad:\n").expect("k_nm_per_rad key") + 1;
+    let k: Vec<&str> = got[k_at..].lines().skip(1).take(7).collect();
+    assert!(k[0].starts_with("  - "), "{k:?}");
+    assert!(k[1].starts_with("  # layout "), "{k:?}");
+    assert!(k[2..].iter().all(|l| l.starts_with("  - ")), "{k:?}");
+    let written: Vec<f64> = k
+        .iter()
+        .filter_map(|l| l.strip_prefix("  - "))
+        .map(|v| v.trim().parse().expect("a number a line"))
+        .collect();
+    let Machine::Robot(r) = Machine::from_yaml_str(&got, "out.yaml").expect("loads") else {
+        panic!("a robot")
+    };
+    let read: Vec<f64> = (0..6)
+        .map(|joint| {
+            r.param_value(postproc::machine::robot::RobotParam::JointStiffness { joint })
+                .expect("joint stiffness")
+        })
+        .collect();
+    assert_eq!(written, read);
+    assert!(got.contains("\nflange_to_tool:\n  x_mm: "), "{got}");
+    assert!(got.contains("\ncalibrations:\n  - { date: "), "{got}");
+}
+
+/// The same robot in flow style (one JSON line, which the loader reads as
+/// YAML): the calibration writes it back in flow style, with the same
+/// model as from the bundled layout.
+#[test]
+fn flow_style_file_calibrates_in_flow_style() {
+    let bundled = text("machines/abb-irb1600.yaml");
+    let v: serde_yaml::Value = serde_yaml::from_str(&bundled).expect("yaml");
+    let flow = format!("{}\n", serde_json::to_string(&v).expect("json"));
+    let dir = tempfile::tempdir().expect("tmp");
+    let f = write(dir.path(), "flow.yaml", &flow);
+    let obs = "samples/observations/irb1600-ldbb-measured.csv";
+    let got = calibrate("stiffness", &f, obs, &dir.path().join("b.yaml"));
+    let want = calibrate(
+        "stiffness",
+        &repo("machines/abb-irb1600.yaml"),
+        obs,
+        &dir.path().join("a.yaml"),
+    );
+    assert_eq!(got.lines().count(), 1, "{got}");
+    assert!(
+        got.contains("\"calibrations\"") || got.contains("calibrations: ["),
+        "{got}"
+    );
+    assert_eq!(model(&got), model(&want));
+}

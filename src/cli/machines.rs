@@ -266,7 +266,8 @@ fn list() -> Result<i32> {
     let mut rows = Vec::with_capacity(BUNDLED.len());
     for (name, _) in BUNDLED {
         let file = MachineFile::bundled(name).expect("a bundled machine");
-        let (kind, title, sheet) = match file.load()? {
+        let (machine, status) = file.read()?;
+        let (kind, title, sheet) = match machine {
             Machine::Tool(m) => ("machine tool", m.name().to_string(), None),
             Machine::Robot(r) => ("robot", r.name().to_string(), r.datasheet().copied()),
         };
@@ -280,7 +281,7 @@ fn list() -> Result<i32> {
         rows.push([
             name.to_string(),
             kind.to_string(),
-            file.status()?.word().to_string(),
+            status.word().to_string(),
             reach,
             payload,
             title,

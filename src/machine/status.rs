@@ -18,7 +18,7 @@ use serde::Deserialize;
 
 use crate::error::{Error, Located, Result};
 
-use super::yaml;
+use super::{yaml, yaml_write};
 
 /// One calibration recorded in a machine file.
 #[derive(Debug, Clone, PartialEq, Deserialize, serde::Serialize)]
@@ -477,71 +477,6 @@ fn civil_date(days: i64) -> String {
     format!("{year:04}-{month:02}-{day:02}")
 }
 
-/// Sets `status: calibrated` in machine YAML `text` and appends
-/// `calibration` to its `calibrations` list, editing the text so that
-/// every comment and the layout are kept: an existing top-level `status:`
-/// line is replaced (else the key is added after the `name:` or `kind:`
-/// line), and the entry is added as a one-line flow map after the last
-/// entry of an existing block list (else a list is started after the
-/// `status:` line).
-pub fn set_calibrated(text: &str, file: &str, calibration: &Calibration) -> Result<String> {
-    let eol = if text.contains("\r\n") { "\r\n" } else { "\n" };
-    let mut lines: Vec<String> = text.lines().map(str::to_string).collect();
-    let entry = format!("  - {}", calibration_flow(calibration));
-    let top =
-        |lines: &[String], key: &str| lines.iter().position(|l| l.starts_with(&format!("{key}:")));
-    let status_at = match top(&lines, "status") {
-        Some(i) => {
-            lines[i] = "status: calibrated".into();
-            i
-        }
-        None => {
-            let after = top(&lines, "name")
-                .or_else(|| top(&lines, "kind"))
-                .ok_or_else(|| {
-                    Error::Machine(Located::whole_file(
-                        file,
-                        "cannot record the calibration: no top-level `kind:` line",
-                    ))
-                })?;
-            lines.insert(after + 1, "status: calibrated".into());
-            after + 1
-        }
-    };
-    match top(&lines, "calibrations") {
-        Some(i) => {
-            if lines[i].trim_end() != "calibrations:" {
-                return Err(Error::Machine(Located::whole_file(
-                    file,
-                    "cannot record the calibration: `calibrations` must be a block list (one `  - { … }` line per calibration)",
-                )));
-            }
-            let mut end = i + 1;
-            while end < lines.len() && lines[end].starts_with("  - ") {
-                end += 1;
-            }
-            lines.insert(end, entry);
-        }
-        None => {
-            lines.insert(status_at + 1, "calibrations:".into());
-            lines.insert(status_at + 2, entry);
-        }
-    }
-    let mut out = lines.join(eol);
-    if text.ends_with('\n') || !text.is_empty() {
-        out.push_str(eol);
-    }
-    // The edited file must read back with the new entry (its RMS as
-    // written).
-    match Status::from_yaml_str(&out, file)? {
-        Status::Calibrated(list) if list.last() == Some(&as_written(calibration)) => Ok(out),
-        _ => Err(Error::Machine(Located::whole_file(
-            file,
-            "cannot record the calibration: the edited `status`/`calibrations` keys do not read back",
-        ))),
-    }
-}
-
 /// Words of the sections after a calibration of `kind`: the one it
 /// identified `calibrated`, the others as `before` said them. `None` when
 /// the whole file's word stays right (`status: calibrated`): the file was
@@ -573,8 +508,9 @@ pub const EXAMPLE_PHRASE: &str = "EXAMPLE CALIBRATION, NOT MEASURED DATA";
 const EXAMPLE_NAME: &str = "(example calibration)";
 
 /// After a calibration of `kind` was recorded in `after` (the edited
-/// `before`, by [`set_calibrated`] or the tree editor, which write
-/// `status: calibrated`), says per model section what is calibrated: when
+/// `before`, by the writer's
+/// [`Edit::Calibrated`](crate::machine::yaml_write::Edit::Calibrated),
+/// which writes `status: calibrated`), says per model section what is calibrated: when
 /// sections are left at example or nominal values, `status` becomes a map
 /// of sections (`{ geometry: calibrated, stiffness: example, … }`); the
 /// `(example calibration)` of the `name` names the sections still at
@@ -591,30 +527,24 @@ pub fn mark_calibrated(before: &str, after: &str, file: &str, kind: &str) -> Res
     let Some(cal) = status.latest().cloned() else {
         return Ok(after.to_string());
     };
-    let eol = if after.contains("\r\n") { "\r\n" } else { "\n" };
-    let mut lines: Vec<String> = after.lines().map(str::to_string).collect();
     let map: Vec<String> = words
         .iter()
         .map(|(s, w)| format!("{}: {w}", s.key()))
         .collect();
-    let Some(at) = lines.iter().position(|l| l.starts_with("status:")) else {
-        // A layout without a `status:` line of its own (a file in flow
-        // style): the whole file's word stays.
-        tracing::warn!(
-            "{file}: `status` is not on a line of its own: the file says `calibrated` as a whole, not per section"
-        );
-        return Ok(after.to_string());
-    };
-    lines[at] = format!(
-        "status: {{ {} }}   # per model section: example, nominal or calibrated",
-        map.join(", ")
-    );
+    let out = yaml_write::set_status(
+        after,
+        file,
+        &format!("{{ {} }}", map.join(", ")),
+        "   # per model section: example, nominal or calibrated",
+    )?;
     let left: Vec<&str> = words
         .iter()
         .filter(|(_, w)| *w == "example")
         .map(|(s, _)| s.label())
         .collect();
-    rename(&mut lines, &left);
+    let out = rename(&out, &left);
+    let eol = if out.contains("\r\n") { "\r\n" } else { "\n" };
+    let mut lines: Vec<String> = out.lines().map(str::to_string).collect();
     let section = Section::of_calibration(kind, words[0].0 == Section::Kinematics);
     if let Some(section) = section {
         let note = format!(
@@ -644,20 +574,29 @@ pub fn mark_calibrated(before: &str, after: &str, file: &str, kind: &str) -> Res
     Ok(out)
 }
 
-/// The `name` line's example suffix, naming the sections `left` at
-/// example values (none: the suffix goes).
-fn rename(lines: &mut [String], left: &[&str]) {
-    let Some(l) = lines.iter_mut().find(|l| l.starts_with("name:")) else {
-        return;
+/// `text` with the example suffix of its top-level `name` naming the
+/// sections `left` at example values (none: the suffix goes); the name's
+/// scalar found on the syntax tree, every other byte kept.
+fn rename(text: &str, left: &[&str]) -> String {
+    let root = yaml::tree_root(text).ok();
+    let flow = root
+        .as_ref()
+        .and_then(|r| r.as_mapping())
+        .is_some_and(|m| m.is_flow_style());
+    let name = root.and_then(|r| yaml::child(&r, &yaml::Seg::Key("name".into())));
+    let Some(name) = name else {
+        return text.to_string();
     };
+    let (a, b) = yaml::range(&name);
+    let l = &text[a..b];
     let start = l
         .find(EXAMPLE_NAME)
         .or_else(|| l.find("(example values in "));
     let Some(start) = start else {
-        return;
+        return text.to_string();
     };
     let Some(len) = l[start..].find(')').map(|e| e + 1) else {
-        return;
+        return text.to_string();
     };
     let new = if left.is_empty() {
         String::new()
@@ -669,7 +608,16 @@ fn rename(lines: &mut [String], left: &[&str]) {
     } else {
         (start, start + len)
     };
-    l.replace_range(from..to, &new);
+    let value = format!("{}{new}{}", &l[..from], &l[to..]);
+    // In a flow mapping a plain scalar ends at its first `,`: the new name
+    // (`… in stiffness, thermal`) is written double-quoted there.
+    let plain = !l.starts_with(['"', '\'']);
+    let value = if flow && plain && value.contains([',', '[', ']', '{', '}']) {
+        format!("\"{}\"", value.replace('\\', "\\\\").replace('"', "\\\""))
+    } else {
+        value
+    };
+    format!("{}{value}{}", &text[..a], &text[b..])
 }
 
 /// The comment lines that belong to `section`: the comment block right
@@ -759,6 +707,12 @@ fn fmt_rms(v: f64) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// `text` with `calibration` recorded by the machine-file writer.
+    fn set_calibrated(text: &str, file: &str, calibration: &Calibration) -> Result<String> {
+        let edit = yaml_write::Edit::Calibrated(calibration.clone());
+        yaml_write::apply(text, file, "test", &[edit])
+    }
 
     fn cal() -> Calibration {
         Calibration {

@@ -321,32 +321,58 @@ impl CovarianceBlock {
     /// uncertainties in shortest round-trip form, correlations to four
     /// decimals).
     pub fn to_yaml_entry(&self) -> String {
+        let (parameters, u, rows) = self.texts();
+        let mut out = format!(
+            "  - kind: {}\n    observations: {}\n    observations_sha256: {}\n    rows: {}\n    parameters: [{parameters}]\n    u: [{u}]\n    correlation:\n",
+            self.kind,
+            serde_json::to_string(&self.observations).unwrap_or_default(),
+            self.observations_sha256,
+            self.rows,
+        );
+        for r in rows {
+            out.push_str(&format!("      - [{r}]\n"));
+        }
+        out
+    }
+
+    /// The block as one flow mapping, for a machine file in flow style.
+    pub fn to_flow_entry(&self) -> String {
+        let (parameters, u, rows) = self.texts();
+        let rows: Vec<String> = rows.iter().map(|r| format!("[{r}]")).collect();
+        format!(
+            "{{ kind: {}, observations: {}, observations_sha256: {}, rows: {}, parameters: [{parameters}], u: [{u}], correlation: [{}] }}",
+            self.kind,
+            serde_json::to_string(&self.observations).unwrap_or_default(),
+            self.observations_sha256,
+            self.rows,
+            rows.join(", ")
+        )
+    }
+
+    /// The parameter list, the u list and each correlation row, as the
+    /// text inside their brackets.
+    fn texts(&self) -> (String, String, Vec<String>) {
         let quoted: Vec<String> = self
             .parameters
             .iter()
             .map(|p| serde_json::to_string(p).unwrap_or_default())
             .collect();
         let u: Vec<String> = self.u.iter().map(|v| format!("{v:?}")).collect();
-        let mut out = format!(
-            "  - kind: {}\n    observations: {}\n    observations_sha256: {}\n    rows: {}\n    parameters: [{}]\n    u: [{}]\n    correlation:\n",
-            self.kind,
-            serde_json::to_string(&self.observations).unwrap_or_default(),
-            self.observations_sha256,
-            self.rows,
-            quoted.join(", "),
-            u.join(", ")
-        );
-        for row in &self.correlation {
-            let r: Vec<String> = row
-                .iter()
-                .map(|v| {
-                    let s = format!("{v:.4}");
-                    if s == "-0.0000" { "0.0000".into() } else { s }
-                })
-                .collect();
-            out.push_str(&format!("      - [{}]\n", r.join(", ")));
-        }
-        out
+        let rows = self
+            .correlation
+            .iter()
+            .map(|row| {
+                let r: Vec<String> = row
+                    .iter()
+                    .map(|v| {
+                        let s = format!("{v:.4}");
+                        if s == "-0.0000" { "0.0000".into() } else { s }
+                    })
+                    .collect();
+                r.join(", ")
+            })
+            .collect();
+        (quoted.join(", "), u.join(", "), rows)
     }
 }
 
@@ -375,6 +401,20 @@ pub fn put_covariance(text: &str, file: &str, block: &CovarianceBlock) -> Result
     let mut blocks = read_covariance(text, file)?;
     blocks.retain(|b| b.kind != block.kind);
     blocks.push(block.clone());
+    let flow = crate::machine::yaml::tree_root(text)
+        .ok()
+        .and_then(|r| r.as_mapping().map(|m| m.is_flow_style()))
+        .unwrap_or(false);
+    if flow {
+        // A file in flow style gets the list in flow style, on the tree.
+        let rows = blocks.iter().map(CovarianceBlock::to_flow_entry).collect();
+        let edit = crate::machine::yaml_write::Edit::Section {
+            path: "covariance".into(),
+            value: crate::machine::yaml_write::NewValue::Rows(rows),
+            comment: String::new(),
+        };
+        return crate::machine::yaml_write::apply(text, file, "calibrate", &[edit]);
+    }
     let mut list = String::from("covariance:\n");
     for b in &blocks {
         list.push_str(&b.to_yaml_entry());

@@ -8,13 +8,19 @@
 //! block maps, sequence items level with their key, quoted keys, comments
 //! between items.
 //!
-//! New values are written in flow style (`{ a_mm: 0.0, … }`, `[1.0, 2.0]`),
-//! which reads the same in a block and in a flow parent; a new entry of a
-//! block mapping or sequence gets a line of its own at the indentation of
-//! its siblings, and a new list of rows under a block mapping is a block
-//! list. A comment that comes with a new entry goes above it in a block
-//! parent, and after the file's leading comments in a flow one (a comment
-//! cannot stand inside a flow collection on one line).
+//! A new value is written in the style of the mapping it goes into
+//! ([`NewValue`]): under a block mapping, block lines at the indentation of
+//! its siblings (`key:` with its entries one level deeper, a list of rows
+//! as `- row` lines: the layout of the bundled files), the numbers of a
+//! table and a row one-line flow lists and maps as there; in a flow
+//! mapping, flow text. A comment that comes with a new entry goes above it
+//! in a block parent, and after the file's leading comments in a flow one
+//! (a comment cannot stand inside a flow collection on one line). A new
+//! key of an existing mapping goes first in it (a location error, a
+//! component table), after a named sibling or last; a mapping added on the
+//! way to it (`component_errors` of an axis, a `thermal` section) after
+//! the last key of its parent. An existing block collection written whole
+//! is replaced by the block lines of the new value.
 //!
 //! The tree is the one the loader reads ([`crate::machine::yaml`]); what
 //! this editor cannot write is refused there, when the file is loaded: an
@@ -23,7 +29,7 @@
 
 use yaml_edit::YamlNode;
 
-use super::{Edit, LETTERS, edit_err, number, round_to};
+use super::{Edit, LETTERS, NewValue, edit_err, number, round_to};
 use crate::error::Result;
 use crate::machine::robot::RobotParam;
 use crate::machine::status::{self, Calibration, Status};
@@ -75,8 +81,14 @@ fn line_start(text: &str, at: usize) -> usize {
     text[..at].rfind('\n').map_or(0, |i| i + 1)
 }
 
+/// The end of the line of `at`, before its `\n` (or `\r\n`).
 fn line_end(text: &str, at: usize) -> usize {
-    text[at..].find('\n').map_or(text.len(), |i| at + i)
+    let end = text[at..].find('\n').map_or(text.len(), |i| at + i);
+    if end > at && text.as_bytes()[end - 1] == b'\r' {
+        end - 1
+    } else {
+        end
+    }
 }
 
 fn splice(text: &str, from: usize, to: usize, new: &str) -> String {
@@ -103,15 +115,6 @@ fn set(text: &str, file: &str, path: &str, new: &str) -> Result<String> {
     }
 }
 
-/// A value added to a mapping.
-enum New {
-    /// Flow text.
-    Flow(String),
-    /// A list of flow rows: a block list under a block mapping, a flow list
-    /// in a flow one.
-    Rows(Vec<String>),
-}
-
 /// Where a new key goes among its siblings.
 #[derive(Clone, Copy)]
 enum At<'a> {
@@ -121,14 +124,15 @@ enum At<'a> {
 }
 
 /// Adds `key: new` to the mapping at `path` (`comment`, when not empty,
-/// above it), before or after its siblings as `at` says (the last one when
-/// the key `at` names is not there).
+/// on comment lines above it), before or after its siblings as `at` says
+/// (the last one when the key `at` names is not there). `new` is written
+/// in the style of the mapping ([`NewValue`]).
 fn insert(
     text: &str,
     file: &str,
     path: &str,
     key: &str,
-    new: &New,
+    new: &NewValue,
     at: At,
     comment: &str,
 ) -> Result<String> {
@@ -142,33 +146,28 @@ fn insert(
         Some(v) if range(&v).1 > range(&v).0 => content_end(&v),
         _ => e.key_node().map_or(range(&n).0, |k| range(&k).1),
     };
+    let named = |k: &str| {
+        entries
+            .iter()
+            .find(|e| e.key_node().as_ref().and_then(key_text).as_deref() == Some(k))
+    };
     if m.is_flow_style() {
-        let text = with_header_comment(text, comment);
-        let body = match new {
-            New::Flow(f) => format!("{key}: {f}"),
-            New::Rows(r) => format!("{key}: [{}]", r.join(", ")),
-        };
-        // The comment line, when added, comes before the mapping.
-        let shift = if comment.is_empty() {
-            0
-        } else {
-            comment.len() + 3
-        };
+        let edited = with_header_comment(text, comment);
+        // The comment lines, when added, come before the mapping.
+        let shift = edited.len() - text.len();
+        let body = format!("{key}: {}", new.flow());
         let (start, end) = range(&n);
         let (start, end) = (start + shift, end + shift);
-        return Ok(match (entries.first(), at) {
-            (None, _) => splice(&text, start, end, &format!("{{ {body} }}")),
-            (Some(_), At::First) => splice(&text, start + 1, start + 1, &format!(" {body},")),
-            (Some(_), _) => {
+        return Ok(match (entries.last(), at) {
+            (None, _) => splice(&edited, start, end, &format!("{{ {body} }}")),
+            (Some(_), At::First) => splice(&edited, start + 1, start + 1, &format!(" {body},")),
+            (Some(last), _) => {
                 let e = match at {
-                    At::After(k) => entries
-                        .iter()
-                        .find(|e| e.key_node().as_ref().and_then(key_text).as_deref() == Some(k))
-                        .unwrap_or_else(|| entries.last().expect("not empty")),
-                    _ => entries.last().expect("not empty"),
+                    At::After(k) => named(k).unwrap_or(last),
+                    _ => last,
                 };
                 let p = after_entry(e) + shift;
-                splice(&text, p, p, &format!(", {body}"))
+                splice(&edited, p, p, &format!(", {body}"))
             }
         });
     }
@@ -177,57 +176,70 @@ fn insert(
         .and_then(|e| e.key_node())
         .map_or(range(&n).0, |k| range(&k).0);
     let indent = " ".repeat(first_key - line_start(text, first_key));
-    let mut lines = Vec::new();
-    if !comment.is_empty() {
-        lines.push(format!("{indent}# {comment}"));
-    }
-    match new {
-        New::Flow(f) => lines.push(format!("{indent}{key}: {f}")),
-        New::Rows(rows) => {
-            lines.push(format!("{indent}{key}:"));
-            lines.extend(rows.iter().map(|r| format!("{indent}  - {r}")));
-        }
-    }
-    let block = lines.join("\n");
+    let mut lines = comment_lines(comment, &indent);
+    new.block(key, &indent, &mut lines);
+    let eol = eol_of(text);
+    let block = lines.join(eol);
     let own_line = text[line_start(text, first_key)..first_key]
         .trim()
         .is_empty();
     let target = match at {
         At::First if own_line && !entries.is_empty() => None,
         At::First => entries.first(),
-        At::After(k) => entries
-            .iter()
-            .find(|e| e.key_node().as_ref().and_then(key_text).as_deref() == Some(k))
-            .or(entries.last()),
+        At::After(k) => named(k).or(entries.last()),
         At::Last => entries.last(),
     };
     Ok(match target {
         None => {
             let p = line_start(text, first_key);
-            splice(text, p, p, &format!("{block}\n"))
+            splice(text, p, p, &format!("{block}{eol}"))
         }
         Some(e) => {
             let p = line_end(text, after_entry(e));
-            splice(text, p, p, &format!("\n{block}"))
+            splice(text, p, p, &format!("{eol}{block}"))
         }
     })
 }
 
-/// `text` with `# comment` after its leading comment lines.
+/// `comment` as comment lines (`# …`, one per line of it) at `indent`.
+fn comment_lines(comment: &str, indent: &str) -> Vec<String> {
+    comment
+        .lines()
+        .map(|l| match l.trim_end() {
+            "" => format!("{indent}#"),
+            l => format!("{indent}# {l}"),
+        })
+        .collect()
+}
+
+/// The line ending of `text`: `\r\n` when it has one, else `\n`.
+fn eol_of(text: &str) -> &'static str {
+    if text.contains("\r\n") { "\r\n" } else { "\n" }
+}
+
+/// `text` with the lines of `comment` (`# …`) after its leading comment
+/// lines.
 fn with_header_comment(text: &str, comment: &str) -> String {
-    if comment.is_empty() {
+    let lines = comment_lines(comment, "");
+    if lines.is_empty() {
         return text.to_string();
     }
+    let eol = eol_of(text);
+    let at = header_end(text);
+    splice(text, at, at, &format!("{}{eol}", lines.join(eol)))
+}
+
+/// The byte offset after the file's leading comment and blank lines.
+fn header_end(text: &str) -> usize {
     let mut at = 0;
     for line in text.split_inclusive('\n') {
-        let t = line.trim();
-        if t.starts_with('#') || t.is_empty() {
+        if line.starts_with('#') || line.trim().is_empty() {
             at += line.len();
         } else {
             break;
         }
     }
-    splice(text, at, at, &format!("# {comment}\n"))
+    at
 }
 
 /// Appends `item` (flow text) to the sequence at `path`.
@@ -253,12 +265,53 @@ fn push(text: &str, file: &str, path: &str, item: &str) -> Result<String> {
     })
 }
 
-/// Sets the value at `path`, adding the missing mapping keys on the way
-/// (each new key with its part of the path in flow style).
-fn set_or_add(text: &str, file: &str, path: &str, new: &str, at: At) -> Result<String> {
+/// Replaces the value at `path` by `new`: a block collection under a key
+/// of a block mapping by the block lines of `new` (from the key's line to
+/// the last line of the old value), anything else by `new`'s flow text.
+fn replace(text: &str, file: &str, path: &str, new: &NewValue) -> Result<String> {
+    let all = segs(path);
+    let n =
+        find(text, file, &all)?.ok_or_else(|| edit_err(file, format!("no value at `{path}`")))?;
+    let (Some(Seg::Key(k)), true, false) =
+        (all.last(), is_block(&n), matches!(new, NewValue::Text(_)))
+    else {
+        return set(text, file, path, &new.flow());
+    };
+    let parent = find(text, file, &all[..all.len() - 1])?;
+    let key = parent.as_ref().and_then(|p| p.as_mapping()).and_then(|m| {
+        m.entries()
+            .find(|e| e.key_node().as_ref().and_then(key_text).as_deref() == Some(k))
+            .and_then(|e| e.key_node())
+    });
+    let Some(key) = key else {
+        return set(text, file, path, &new.flow());
+    };
+    let (ks, ke) = range(&key);
+    let ls = line_start(text, ks);
+    if !text[ls..ks].trim().is_empty() {
+        return set(text, file, path, &new.flow());
+    }
+    let mut lines = Vec::new();
+    new.block(&text[ks..ke], &text[ls..ks], &mut lines);
+    let end = line_end(text, content_end(&n));
+    Ok(splice(text, ls, end, &lines.join(eol_of(text))))
+}
+
+/// Sets the value at `path` to `new`, adding the missing mapping keys on
+/// the way: the key that holds `new` goes where `leaf` says among its
+/// siblings, a new mapping on the way after the last key of its parent;
+/// `comment` goes above the first key added.
+fn set_or_add(
+    text: &str,
+    file: &str,
+    path: &str,
+    new: &NewValue,
+    leaf: At,
+    comment: &str,
+) -> Result<String> {
     let all = segs(path);
     if find(text, file, &all)?.is_some() {
-        return set(text, file, path, new);
+        return replace(text, file, path, new);
     }
     let mut have = all.len();
     while have > 0 && find(text, file, &all[..have])?.is_none() {
@@ -272,12 +325,13 @@ fn set_or_add(text: &str, file: &str, path: &str, new: &str, at: At) -> Result<S
             _ => Err(edit_err(file, format!("no list item for `{path}`"))),
         })
         .collect::<Result<_>>()?;
-    let mut value = new.to_string();
+    let mut value = new.clone();
     for k in keys[1..].iter().rev() {
-        value = format!("{{ {k}: {value} }}");
+        value = NewValue::Map(vec![((*k).to_string(), value)]);
     }
+    let at = if keys.len() == 1 { leaf } else { At::Last };
     let parent = path_text(&all[..have]);
-    insert(text, file, &parent, keys[0], &New::Flow(value), at, "")
+    insert(text, file, &parent, keys[0], &value, at, comment)
 }
 
 fn path_text(segs: &[Seg]) -> String {
@@ -355,18 +409,18 @@ fn robot(text: &str, file: &str, by: &str, p: RobotParam, v: f64) -> Result<Stri
                 file,
                 "",
                 "actual",
-                &New::Rows(rows),
+                &NewValue::Rows(rows),
                 At::After("nominal"),
                 &comment,
             )?;
         }
         RobotParam::ToolOffset { .. } if !has(&t, file, "flange_to_tool")? => {
-            let new = New::Flow("{ x_mm: 0.0, y_mm: 0.0, z_mm: 0.0 }".into());
+            let new = NewValue::Text("{ x_mm: 0.0, y_mm: 0.0, z_mm: 0.0 }".into());
             t = insert(&t, file, "", "flange_to_tool", &new, At::Last, "")?;
         }
         RobotParam::PayloadMass if !has(&t, file, "tool_load")? => {
             let c = |k: &str| number_text(&t, file, &format!("flange_to_tool.{k}"));
-            let new = New::Flow(format!(
+            let new = NewValue::Text(format!(
                 "{{ mass_kg: 0.0, cog_mm: [{}, {}, {}] }}",
                 c("x_mm")?,
                 c("y_mm")?,
@@ -398,7 +452,8 @@ fn tool(text: &str, file: &str, p: ToolParam, v: f64) -> Result<String> {
             &number(v),
         ),
         ToolParam::Location { .. } | ToolParam::SpindleLocation { .. } => {
-            set_or_add(text, file, &p.path(), &number(v), At::First)
+            let new = NewValue::Text(number(v));
+            set_or_add(text, file, &p.path(), &new, At::First, "")
         }
         _ => set(text, file, &p.path(), &number(v)),
     }
@@ -440,6 +495,48 @@ fn set_lists(text: &str, file: &str, path: &str, columns: &[(&str, &[f64]); 3]) 
     Ok(t)
 }
 
+/// Writes a component table of axis slot `axis`, error direction `error`
+/// (`columns`: positions, forward, reverse): number by number when the
+/// file's table has the same shape, else whole (added first in the axis's
+/// `component_errors`, or with that mapping after the axis's last key).
+fn component_table(
+    text: &str,
+    file: &str,
+    axis: usize,
+    error: usize,
+    columns: [&[f64]; 3],
+) -> Result<String> {
+    let l = |s: usize| LETTERS.get(s).copied().unwrap_or('?');
+    let unit = if error < 3 { "um" } else { "urad" };
+    let path = format!(
+        "axes[{}].component_errors.E{}{}_{unit}",
+        l(axis),
+        l(error),
+        l(axis)
+    );
+    // Rotary axes (A, B, C) give their positions in degrees.
+    let pos = if axis < 3 {
+        "positions_mm"
+    } else {
+        "positions_deg"
+    };
+    let columns = [
+        (pos, columns[0]),
+        ("forward", columns[1]),
+        ("reverse", columns[2]),
+    ];
+    if same_shape(text, file, &path, &columns)? {
+        return set_lists(text, file, &path, &columns);
+    }
+    let table = NewValue::Map(
+        columns
+            .iter()
+            .map(|(k, v)| ((*k).to_string(), NewValue::Text(list(v))))
+            .collect(),
+    );
+    set_or_add(text, file, &path, &table, At::First, "")
+}
+
 /// Applies one edit to `text`.
 fn one(text: &str, file: &str, by: &str, edit: &Edit) -> Result<String> {
     match edit {
@@ -451,36 +548,7 @@ fn one(text: &str, file: &str, by: &str, edit: &Edit) -> Result<String> {
             positions,
             forward,
             reverse,
-        } => {
-            let l = |s: usize| LETTERS.get(s).copied().unwrap_or('?');
-            let unit = if *error < 3 { "um" } else { "urad" };
-            let path = format!(
-                "axes[{}].component_errors.E{}{}_{unit}",
-                l(*axis),
-                l(*error),
-                l(*axis)
-            );
-            let pos = if *axis < 3 {
-                "positions_mm"
-            } else {
-                "positions_deg"
-            };
-            let table = format!(
-                "{{ {pos}: {}, forward: {}, reverse: {} }}",
-                list(positions),
-                list(forward),
-                list(reverse)
-            );
-            let columns = [
-                (pos, positions.as_slice()),
-                ("forward", forward),
-                ("reverse", reverse),
-            ];
-            match same_shape(text, file, &path, &columns)? {
-                true => set_lists(text, file, &path, &columns),
-                false => set_or_add(text, file, &path, &table, At::First),
-            }
-        }
+        } => component_table(text, file, *axis, *error, [positions, forward, reverse]),
         Edit::ThermalTerm {
             term,
             time_constant_min,
@@ -490,13 +558,16 @@ fn one(text: &str, file: &str, by: &str, edit: &Edit) -> Result<String> {
             if has(text, file, "thermal.terms")? {
                 push(text, file, "thermal.terms", &item)
             } else if has(text, file, "thermal")? {
-                let new = New::Rows(vec![item]);
+                let new = NewValue::Rows(vec![item]);
                 insert(text, file, "thermal", "terms", &new, At::Last, "")
             } else {
-                let new = New::Flow(format!(
-                    "{{ time_constant_min: {}, terms: [{item}] }}",
-                    number(*time_constant_min)
-                ));
+                let new = NewValue::Map(vec![
+                    (
+                        "time_constant_min".into(),
+                        NewValue::Text(number(*time_constant_min)),
+                    ),
+                    ("terms".into(), NewValue::Rows(vec![item])),
+                ]);
                 insert(text, file, "", "thermal", &new, At::Last, comment)
             }
         }
@@ -507,7 +578,7 @@ fn one(text: &str, file: &str, by: &str, edit: &Edit) -> Result<String> {
             if has(text, file, "thermal.rated_power_w")? {
                 return set(text, file, "thermal.rated_power_w", &number(*watts));
             }
-            let new = New::Flow(number(*watts));
+            let new = NewValue::Text(number(*watts));
             let at = At::After("time_constant_min");
             insert(text, file, "thermal", "rated_power_w", &new, at, comment)
         }
@@ -525,10 +596,10 @@ fn one(text: &str, file: &str, by: &str, edit: &Edit) -> Result<String> {
                 number(*time_constant_min)
             );
             if has(text, file, "thermal")? {
-                let new = New::Flow(spindle);
+                let new = NewValue::Text(spindle);
                 insert(text, file, "thermal", "spindle", &new, At::First, comment)
             } else {
-                let new = New::Flow(format!("{{ spindle: {spindle} }}"));
+                let new = NewValue::Map(vec![("spindle".into(), NewValue::Text(spindle))]);
                 insert(text, file, "", "thermal", &new, At::Last, comment)
             }
         }
@@ -545,36 +616,67 @@ fn one(text: &str, file: &str, by: &str, edit: &Edit) -> Result<String> {
             if has(text, file, "measurement_frame")? {
                 return set(text, file, "measurement_frame", &frame);
             }
-            let comment = "Pose of the measuring instrument in the machine's reference frame, \
-                           identified by `postproc calibrate` or `diagnose` (docs/frames.md). \
-                           Not part of the model.";
-            let new = New::Flow(frame);
+            let comment = "Pose of the measuring instrument in the machine's reference frame,\n\
+                           identified by `postproc calibrate` or `diagnose` from `# frame: instrument`\n\
+                           observations (docs/frames.md). Not part of the model.";
+            let new = NewValue::Text(frame);
             insert(text, file, "", "measurement_frame", &new, At::Last, comment)
         }
         Edit::Calibrated(c) => calibrated(text, file, c),
-        Edit::HeaderComment(_) => super::apply_one(text, file, by, edit),
+        Edit::HeaderComment(c) => {
+            let at = header_end(text);
+            let eol = eol_of(text);
+            let text = if at == text.len() && !text.is_empty() && !text.ends_with('\n') {
+                format!("{text}{eol}")
+            } else {
+                text.to_string()
+            };
+            Ok(splice(&text, at, at, &format!("# {c}{eol}")))
+        }
+        Edit::Section {
+            path,
+            value,
+            comment,
+        } => set_or_add(text, file, path, value, At::Last, comment),
     }
+}
+
+/// Sets the top-level `status` to `value` (flow text). An existing value
+/// is replaced with the comment after it on its line (it is about the old
+/// word), by `note` when the mapping is in block style (`note` is the text
+/// after the value: `   # …`); a new key goes after `name` (`kind` when
+/// the file has no `name`).
+pub(crate) fn set_status(text: &str, file: &str, value: &str, note: &str) -> Result<String> {
+    let root = root(text, file)?;
+    let flow = root.as_mapping().is_some_and(|m| m.is_flow_style());
+    let note = if flow { "" } else { note };
+    if let Some(n) = child(&root, &Seg::Key("status".into())) {
+        let (start, end) = range(&n);
+        let eol = line_end(text, end);
+        let rest = text[end..eol].trim_start();
+        if !is_block(&n) && (rest.is_empty() || rest.starts_with('#')) {
+            return Ok(splice(text, start, eol, &format!("{value}{note}")));
+        }
+        return set(text, file, "status", value);
+    }
+    let after = if has(text, file, "name")? {
+        "name"
+    } else {
+        "kind"
+    };
+    let new = NewValue::Text(format!("{value}{note}"));
+    insert(text, file, "", "status", &new, At::After(after), "")
 }
 
 /// `status: calibrated` and one more `calibrations` entry, checked by
 /// reading the status back.
 fn calibrated(text: &str, file: &str, c: &Calibration) -> Result<String> {
-    let mut t = if has(text, file, "status")? {
-        set(text, file, "status", "calibrated")?
-    } else {
-        let after = if has(text, file, "name")? {
-            "name"
-        } else {
-            "kind"
-        };
-        let new = New::Flow("calibrated".into());
-        insert(text, file, "", "status", &new, At::After(after), "")?
-    };
+    let mut t = set_status(text, file, "calibrated", "")?;
     let entry = status::calibration_flow(c);
     t = if has(&t, file, "calibrations")? {
         push(&t, file, "calibrations", &entry)?
     } else {
-        let new = New::Rows(vec![entry]);
+        let new = NewValue::Rows(vec![entry]);
         insert(&t, file, "", "calibrations", &new, At::After("status"), "")?
     };
     match Status::from_yaml_str(&t, file)? {
