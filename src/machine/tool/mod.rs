@@ -47,7 +47,6 @@ pub use dynamics::{Modal, Mode};
 pub(crate) use fast::SecondGeo;
 pub use location::{LocationErrors, SpindleErrors};
 pub use offsets::{MAX_TOOL_LENGTH_MM, MAX_WORK_OFFSET_MM, ToolLength, WorkOffset};
-pub(crate) use params::spindle_key;
 pub use params::{LocationParam, ToolParam};
 pub use stiffness::Stiffness;
 pub use table::{ErrorTable, Lookup};
