@@ -496,3 +496,82 @@ fn powers(
         t.power_w = mean_power((tau_a, tau_b), &qa, &qb, t.duration_s);
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::machine::robot::Model;
+
+    /// Straight moves at 100 mm/s through joint positions of the IRB 1600
+    /// (thermal model and process force of its file).
+    fn path(robot: &Robot) -> Vec<StreamMove<'_>> {
+        (0..6)
+            .map(|i| {
+                let t = f64::from(i) * 0.05;
+                let q = [t, -0.2 + t, 0.3 - t, 0.1, 0.4 + t, -t];
+                StreamMove {
+                    view: robot,
+                    key: "tool0",
+                    pose: robot.tcp_pose(Model::Nominal, &q),
+                    via: None,
+                    q: Some(q),
+                    wobj: Isometry3::identity(),
+                    feed: true,
+                    linear: true,
+                    v_tcp: Some(100.0),
+                    fallback: false,
+                    line: i as usize + 1,
+                    set: CutSettings::default(),
+                }
+            })
+            .collect()
+    }
+
+    fn asked(x0: Option<[f64; 6]>) -> Asked<'static> {
+        Asked {
+            process: true,
+            thermal: true,
+            start: ThermalStart::Cold,
+            x0,
+            effective: true,
+            power: true,
+            flanges: true,
+            table: None,
+        }
+    }
+
+    /// A time line put in two parts (the second continuing from the last
+    /// move, the thermal state and the end torques of the first) gives
+    /// every move the same bits as the whole put at once: a module read a
+    /// window at a time is timed as if whole.
+    #[test]
+    fn a_time_line_put_in_parts_is_the_whole_one() {
+        let robot = Robot::from_yaml_str(
+            include_str!("../../../machines/abb-irb1600.yaml"),
+            "abb-irb1600.yaml",
+        )
+        .unwrap();
+        let moves = path(&robot);
+        let whole = put(&robot, &moves, 0, &asked(None), &mut None).unwrap();
+        let mut last = None;
+        let mut parts = put(&robot, &moves[..3], 0, &asked(None), &mut last).unwrap();
+        let x0 = match parts.last().map(|t| t.ctx.thermal) {
+            Some(ThermalInput::JointPowers(p)) => Some(p),
+            _ => None,
+        };
+        assert!(x0.is_some(), "the thermal model gives joint powers");
+        parts.extend(put(&robot, &moves[2..], 1, &asked(x0), &mut last).unwrap());
+        assert_eq!(parts.len(), whole.len());
+        assert!(
+            whole[1..]
+                .iter()
+                .all(|t| t.power_w.iter().any(|p| *p > 0.0))
+        );
+        for (a, b) in whole.iter().zip(&parts) {
+            assert_eq!(a.duration_s.to_bits(), b.duration_s.to_bits());
+            assert_eq!(a.power_w.map(f64::to_bits), b.power_w.map(f64::to_bits));
+            assert_eq!(a.ctx, b.ctx);
+            assert_eq!(a.flange, b.flange);
+        }
+    }
+}
