@@ -28,18 +28,15 @@ use crate::emit::rapid::{
 };
 use crate::error::{Error, Located, Result};
 use crate::machine::ThermalStart;
-use crate::machine::robot::thermal::{
-    Segment, TimeLineTotals, effective_power, effective_power_from,
-};
-use crate::machine::robot::{ConfData, IkSelect, Model, Robot, RobotError, Thermal};
+use crate::machine::robot::thermal::{Segment, ThermalTotals};
+use crate::machine::robot::{ConfData, IkSelect, Model, Robot, RobotError};
 use crate::pipeline::resonance::ResonanceWatch;
 use crate::pipeline::robot::time_line::{
-    self, FALLBACK_TCP_SPEED, MoveEnd, WrenchMove, mean_power, process_wrench,
+    self, Asked, FALLBACK_TCP_SPEED, LastEnd, Refusal, StreamMove, Timed, WrenchBits, wrench_bits,
 };
 use crate::predict::robot::{Breakdown, EffectSet};
 use crate::predict::{MoveContext, ThermalInput, Wrench};
 use crate::process::CutSettings;
-use crate::process::MillingCache;
 use crate::program::interp::Warning;
 use crate::program::rapid::directives::Directives;
 use crate::program::rapid::flow::{At, Flow, Left};
@@ -811,182 +808,6 @@ fn free_configurations(
     }
 }
 
-/// The process wrench of move `i` (see `grammar/rapid.md`, "Process
-/// force"): a constant force or a milling force on MoveL/MoveC; a drilling
-/// thrust on MoveL plunges (along +tool z) at a drilling feed; a table force
-/// on the moves whose line has a row; none otherwise. `set`: the program's
-/// `! POSTPROC MILLING` settings in force at the move.
-#[allow(clippy::too_many_arguments)]
-fn move_wrench(
-    robot: &Robot,
-    plans: &[Planned],
-    i: usize,
-    mv: &Move,
-    src: &str,
-    file: &str,
-    need_speed: bool,
-    set: &CutSettings,
-    cache: &mut MillingCache,
-    table: Option<&crate::process::ForceTable>,
-) -> Result<Option<Wrench>> {
-    let Some(cur) = plans.get(i) else {
-        return Ok(None);
-    };
-    let prev = i.checked_sub(1).and_then(|k| plans.get(k));
-    let m = WrenchMove {
-        feed: matches!(mv.kind, MoveKind::MoveL | MoveKind::MoveC),
-        linear: mv.kind == MoveKind::MoveL,
-        prev: prev.map(|p| &p.pose.translation.vector),
-        pose: &cur.pose,
-        via: cur.via.as_ref().map(|v| &v.translation.vector),
-        wobj: &cur.wobj,
-        v_tcp: cur.v_tcp,
-        fallback: cur.speed_fallback,
-        need_speed,
-        table: table.map(|t| (t, mv.line)),
-    };
-    process_wrench(robot, &m, set, cache).map_err(|what| {
-        input_err(
-            src,
-            file,
-            mv.speed.span.start,
-            format!(
-                "speed `{}` cannot be resolved offline; the {what} needs the TCP speed",
-                mv.speed.text
-            ),
-        )
-    })
-}
-
-/// Estimated duration of move `i`, s: straight moves at their TCP speed
-/// (MoveC along the two chords through the circle point); joint moves
-/// (MoveJ, MoveAbsJ) at the larger of the TCP-speed time and the time the
-/// slowest joint needs at its maximum speed. The first move (no known start)
-/// takes 0 s.
-fn move_duration(robot: &Robot, plans: &[Planned], i: usize, mv: &Move) -> Option<f64> {
-    let prev = i.checked_sub(1).and_then(|k| plans.get(k));
-    let (Some(prev), Some(cur)) = (prev, plans.get(i)) else {
-        return Some(0.0);
-    };
-    let joint = matches!(mv.kind, MoveKind::MoveJ | MoveKind::MoveAbsJ);
-    let start = MoveEnd {
-        at: &prev.pose.translation.vector,
-        via: None,
-        q: prev.q.as_ref(),
-    };
-    let end = MoveEnd {
-        at: &cur.pose.translation.vector,
-        via: cur.via.as_ref().map(|v| &v.translation.vector),
-        q: cur.q.as_ref(),
-    };
-    time_line::move_duration(robot, Some(start), end, joint, cur.v_tcp)
-}
-
-/// Mean motor power per joint during move `i`, W: `|τ·q̇|` with `τ` the
-/// gravity and process torques averaged over the move's two ends (N·m) and
-/// `q̇` the joint change over the duration.
-#[allow(clippy::too_many_arguments)]
-fn move_power<'m>(
-    robot: &Robot,
-    cache: &mut ViewCache<&'m str>,
-    last: &mut EndTorques<'m>,
-    plans: &[Planned],
-    i: usize,
-    wrench: Option<Wrench>,
-    tool: &'m str,
-    duration_s: f64,
-    tau_b: nalgebra::Vector6<f64>,
-) -> [f64; 6] {
-    // [`end_load`] gave the torques at the end: both ends are solved and
-    // the duration is positive.
-    let prev_q = i
-        .checked_sub(1)
-        .and_then(|k| plans.get(k))
-        .and_then(|p| p.q);
-    let (Some(qa), Some(cur)) = (prev_q, plans.get(i)) else {
-        return [0.0; 6];
-    };
-    let Some(qb) = cur.q else {
-        return [0.0; 6];
-    };
-    let bits = wrench.as_ref().map(wrench_bits);
-    // A move starts where the previous one ended: with the same view, the
-    // torques there are those computed for the previous move's end.
-    let qa_bits = qa.map(f64::to_bits);
-    let tau_a = match last {
-        Some(((k, b), q, t)) if k == tool && *b == bits && *q == qa_bits => *t,
-        _ => load_view(robot, cache, cur, tool).nominal_load_torques(&qa, wrench.as_ref()),
-    };
-    *last = Some((
-        (std::borrow::Cow::Borrowed(tool), bits),
-        qb.map(f64::to_bits),
-        tau_b,
-    ));
-    mean_power((tau_a, tau_b), &qa, &qb, duration_s)
-}
-
-/// The robot view of move `cur` for the power: its tool (resolved from its
-/// name alone: equal names, equal views).
-fn load_view<'c, 'm>(
-    robot: &Robot,
-    cache: &'c mut ViewCache<&'m str>,
-    cur: &Planned,
-    tool: &'m str,
-) -> &'c Robot {
-    cache.get(tool, || robot.with_tool(cur.tool.tframe, cur.tool.load))
-}
-
-/// The nominal load torques and flange at the end of move `i` (its
-/// programmed joints), when [`move_power`] needs them: both ends of the
-/// move solved and a positive duration. The flange also gives the first
-/// stage of the move's deviation breakdown (the seed of its compensation).
-fn end_load<'m>(
-    robot: &Robot,
-    cache: &mut ViewCache<&'m str>,
-    plans: &[Planned],
-    i: usize,
-    wrench: Option<Wrench>,
-    tool: &'m str,
-    duration_s: f64,
-) -> Option<EndLoad> {
-    plans.get(i.checked_sub(1)?)?.q?;
-    let cur = plans.get(i)?;
-    let qb = cur.q?;
-    if duration_s <= 0.0 {
-        return None;
-    }
-    Some(load_view(robot, cache, cur, tool).nominal_load_torques_and_flange(&qb, wrench.as_ref()))
-}
-
-/// Nominal load torques and flange at a move's end ([`end_load`]).
-type EndLoad = (nalgebra::Vector6<f64>, Isometry3<f64>);
-
-/// The view key, joints (bits) and nominal load torques of the end of the
-/// last move whose power was computed ([`move_power`]).
-type EndTorques<'m> = Option<(
-    (std::borrow::Cow<'m, str>, Option<WrenchBits>),
-    [u64; 6],
-    nalgebra::Vector6<f64>,
-)>;
-
-/// A process wrench as bit patterns (a hashable key).
-type WrenchBits = ([u64; 6], bool);
-
-fn wrench_bits(w: &Wrench) -> WrenchBits {
-    (
-        [
-            w.force_n.x,
-            w.force_n.y,
-            w.force_n.z,
-            w.moment_nmm.x,
-            w.moment_nmm.y,
-            w.moment_nmm.z,
-        ]
-        .map(f64::to_bits),
-        w.in_tool_frame(),
-    )
-}
-
 /// Parses and compensates a RAPID module. Moves are processed in source
 /// order, routine by routine. Errors: [`Error::Input`] for what cannot be
 /// resolved offline, [`Error::Unachievable`] (`file:line:col` of the target)
@@ -1108,15 +929,15 @@ pub(crate) struct Carry {
     /// Plan of the last move of the windows before (the one before the
     /// next window's first move).
     prev_plan: Option<Planned>,
-    /// Load torques at the end of that move ([`move_power`]).
-    end_torques: EndTorques<'static>,
+    /// Load torques at the end of that move ([`time_line::put`]).
+    last_end: LastEnd,
     /// Effective thermal power at the end of the windows before (the
     /// start asked for when none).
     pub(crate) thermal_x: Option<[f64; 6]>,
     /// A first pass over the module that only adds up its thermal time
     /// line (a start from the program's own mean power needs the whole of
     /// it before the first move): nothing is compensated or written.
-    pub(crate) time_line: Option<TimeLineTotals>,
+    pub(crate) time_line: Option<ThermalTotals>,
     /// Edits of the text before the window's part (the module's
     /// declarations), for a module read a window at a time.
     pub(crate) before: EditList,
@@ -1662,22 +1483,18 @@ pub(crate) fn compensate_window(
     })?;
     // The first error in move order is the error, as in order.
     let plans = plans.into_iter().collect::<Result<Vec<Planned>>>()?;
-    let mut line = TimeLine::of_window((&moves, plans), text, robot, opts, carry, directives)?;
-    if let Some(totals) = carry.time_line.as_mut() {
-        if let Some(t) = line.thermal {
-            totals.add(&line.segments, t.time_constant_s);
-        }
+    let mut line = Window::of_window((&moves, plans), text, robot, opts, carry, directives)?;
+    if carry.time_line.is_some() {
         carry.prev_plan = line.plans.pop();
         return Ok(EditList::new());
     }
-    line.start_thermal(carry, opts.thermal_start);
     let mut rw = Rewriter::resume(text, robot, opts, carry);
     if opts.records {
         carry.records.reserve(moves.len());
     }
     rw.walks((&moves, &resolved), &line, carry)?;
     let edits = rw.suspend(carry);
-    drop(line.nominal_flanges);
+    drop(std::mem::take(&mut line.timed));
     carry.prev_plan = line.plans.pop();
     if before == 0 {
         return Ok(edits);
@@ -1687,33 +1504,28 @@ pub(crate) fn compensate_window(
     Ok(rest)
 }
 
-/// The time line of a window's moves, before any target is compensated:
-/// each move's plan, process wrench, duration, joint powers and thermal
-/// power, and the nominal flange at its end.
-struct TimeLine<'r> {
+/// A window's moves planned and put on the robot time line
+/// ([`time_line::put`]), before any target is compensated: each move's
+/// plan, process wrench, duration, joint powers and thermal power, and the
+/// nominal flange at its end.
+struct Window {
     /// `plans[i + o]` is the plan of move `i`, `plans[i + o - 1]` that of
     /// the move before (the last of the windows before for the first).
     plans: Vec<Planned>,
     o: usize,
-    thermal: Option<&'r Thermal>,
     /// The program's `! POSTPROC MILLING` settings.
     directives: Directives,
-    wrenches: Vec<Option<Wrench>>,
-    segments: Vec<Segment>,
-    /// Nominal flange at each move's end (only for a compensation, where
-    /// the deviation breakdown uses it).
-    nominal_flanges: Vec<Option<Isometry3<f64>>>,
-    /// Effective thermal power per joint at each move's end.
-    thermal_power: Option<Vec<[f64; 6]>>,
+    /// Move `i` on the time line.
+    timed: Vec<Timed>,
 }
 
-impl<'r> TimeLine<'r> {
+impl Window {
     /// Plans the moves of a window (continuing the windows before from
     /// `carry`) and puts them on the time line.
     fn of_window(
         (moves, window_plans): (&[&Move], Vec<Planned>),
         text: ModuleText,
-        robot: &'r Robot,
+        robot: &Robot,
         opts: &RapidOptions,
         carry: &mut Carry,
         directives: Option<Directives>,
@@ -1738,139 +1550,99 @@ impl<'r> TimeLine<'r> {
             Some(d) => d,
             None => Directives::parse(src, file)?,
         };
-        let mut cache = MillingCache::default();
-        let mut wrenches = Vec::with_capacity(moves.len());
-        for (i, mv) in moves.iter().enumerate() {
-            wrenches.push(move_wrench(
-                robot,
-                &plans,
-                i + o,
-                mv,
-                src,
-                file,
-                fx.process != 0.0 || thermal.is_some(),
-                &directives.at(mv.line),
-                &mut cache,
-                opts.force_table.as_deref(),
-            )?);
+        let timed = Self::put(robot, (moves, &plans, o), &directives, opts, carry).map_err(
+            |(i, why)| {
+                let Some(mv) = moves.get(i) else {
+                    return Error::Internal("time line move out of range".into());
+                };
+                let what = match why {
+                    Refusal::NeedsSpeed(what) => what,
+                    Refusal::NoDuration => "thermal time line",
+                };
+                input_err(
+                    src,
+                    file,
+                    mv.speed.span.start,
+                    format!(
+                        "speed `{}` cannot be resolved offline; the {what} needs the TCP speed",
+                        mv.speed.text
+                    ),
+                )
+            },
+        )?;
+        if let Some(totals) = carry.time_line.as_mut() {
+            if let Some(t) = thermal {
+                let segments: Vec<Segment> = timed.iter().map(Timed::segment).collect();
+                totals.add(&segments, t.time_constant_s);
+            }
+        } else if let Some(ThermalInput::JointPowers(p)) = timed.last().map(|t| t.ctx.thermal) {
+            carry.thermal_x = Some(p);
         }
-        let mut durations = Vec::with_capacity(moves.len());
-        for (i, mv) in moves.iter().enumerate() {
-            durations.push(match move_duration(robot, &plans, i + o, mv) {
-                Some(t) => t,
-                None if thermal.is_some() => {
-                    return Err(input_err(
-                        src,
-                        file,
-                        mv.speed.span.start,
-                        format!(
-                            "speed `{}` cannot be resolved offline; the thermal time line needs the TCP speed",
-                            mv.speed.text
-                        ),
-                    ));
-                }
-                None => 0.0,
-            });
-        }
-        let mut line = TimeLine {
+        Ok(Window {
             plans,
             o,
-            thermal,
             directives,
-            wrenches,
-            segments: Vec::with_capacity(moves.len()),
-            nominal_flanges: Vec::new(),
-            thermal_power: None,
-        };
-        line.powers(moves, robot, opts, carry, &durations);
-        Ok(line)
+            timed,
+        })
     }
 
-    /// The joint powers of the moves (`segments`) and, for a compensation,
-    /// the nominal flange at each move's end.
-    fn powers(
-        &mut self,
-        moves: &[&Move],
+    /// The moves on the time line, each on the view of its tool (resolved
+    /// from its name alone: equal names, equal views), continuing the
+    /// windows before: a window after the first continues the thermal time
+    /// line from the state they left (the first window of a module read a
+    /// window at a time starts from the state its first pass found); a
+    /// module compensated whole starts it as asked.
+    fn put<'m>(
         robot: &Robot,
+        (moves, plans, o): (&[&'m Move], &[Planned], usize),
+        directives: &Directives,
         opts: &RapidOptions,
         carry: &mut Carry,
-        durations: &[f64],
-    ) {
-        let fx = opts.effects;
-        let (plans, o, wrenches) = (&self.plans, self.o, &self.wrenches);
-        // The load torques and nominal flange at each move's end (the costly
-        // part of its power), in parallel, each rayon task with its own views; the power
-        // itself chains the moves (a move starts where the one before ended).
-        // The power feeds the thermal time line and the report's rows, the
-        // flange a compensation's breakdown: without them (a `check`) neither
-        // is computed.
-        let power_needed = self.thermal.is_some() || opts.records;
-        let ends: Vec<Option<EndLoad>> = if power_needed || fx.compensates() {
-            (0..moves.len())
-                .into_par_iter()
-                .map_init(ViewCache::new, |views, i| {
-                    let (mv, duration_s) = (moves.get(i)?, *durations.get(i)?);
-                    end_load(
-                        robot,
-                        views,
-                        plans,
-                        i + o,
-                        wrenches[i],
-                        &mv.tool.text,
-                        duration_s,
-                    )
-                })
-                .collect()
-        } else {
-            Vec::new()
-        };
-        let mut power_views = ViewCache::new();
-        let mut end_torques: EndTorques = carry.end_torques.take();
-        for (i, mv) in moves.iter().enumerate() {
-            let duration_s = durations[i];
-            let end = ends.get(i).copied().flatten();
-            let power_w = match end {
-                Some((tau_b, _)) if power_needed => move_power(
-                    robot,
-                    &mut power_views,
-                    &mut end_torques,
-                    plans,
-                    i + o,
-                    wrenches[i],
-                    &mv.tool.text,
-                    duration_s,
-                    tau_b,
-                ),
-                _ => [0.0; 6],
-            };
-            // Kept only for a compensation (where the deviation breakdown uses
-            // it), one per move.
-            if fx.compensates() {
-                self.nominal_flanges.push(end.map(|(_, flange)| flange));
+    ) -> std::result::Result<Vec<Timed>, (usize, Refusal)> {
+        let mut views: HashMap<&'m str, Robot> = HashMap::new();
+        for (mv, plan) in moves.iter().zip(&plans[o..]) {
+            views
+                .entry(&*mv.tool.text)
+                .or_insert_with(|| robot.with_tool(plan.tool.tframe, plan.tool.load));
+        }
+        let stream = |plan: &Planned, mv: Option<&'m Move>| -> StreamMove<'_> {
+            let kind = mv.map(|m| m.kind);
+            let key: &str = mv.map_or("", |m| &*m.tool.text);
+            StreamMove {
+                view: views.get(key).unwrap_or(robot),
+                key,
+                pose: plan.pose,
+                via: plan.via.map(|v| v.translation.vector),
+                q: plan.q,
+                wobj: plan.wobj,
+                feed: matches!(kind, Some(MoveKind::MoveL | MoveKind::MoveC)),
+                linear: kind == Some(MoveKind::MoveL),
+                v_tcp: plan.v_tcp,
+                fallback: plan.speed_fallback,
+                line: mv.map_or(0, |m| m.line),
+                set: mv.map_or_else(CutSettings::default, |m| directives.at(m.line)),
             }
-            self.segments.push(Segment {
-                duration_s,
-                power_w,
-            });
-        }
-        drop(ends);
-        carry.end_torques = end_torques
-            .map(|((tool, bits), q, t)| ((std::borrow::Cow::Owned(tool.into_owned()), bits), q, t));
-    }
-
-    /// The thermal power along the window. A window after the first
-    /// continues the time line from the state the windows before left (the
-    /// first window of a module read a window at a time starts from the
-    /// state its first pass found); a module compensated whole starts it
-    /// as asked.
-    fn start_thermal(&mut self, carry: &mut Carry, start: ThermalStart) {
-        self.thermal_power = self.thermal.map(|t| match carry.thermal_x {
-            Some(x0) => effective_power_from(&self.segments, t.time_constant_s, x0),
-            None => effective_power(&self.segments, t.time_constant_s, start),
-        });
-        if let Some(last) = self.thermal_power.as_ref().and_then(|p| p.last()) {
-            carry.thermal_x = Some(*last);
-        }
+        };
+        let mut stream_moves = Vec::with_capacity(plans.len());
+        stream_moves.extend(plans[..o].iter().map(|p| stream(p, None)));
+        stream_moves.extend(
+            moves
+                .iter()
+                .zip(&plans[o..])
+                .map(|(mv, p)| stream(p, Some(*mv))),
+        );
+        let fx = opts.effects;
+        let asked = Asked {
+            process: fx.process != 0.0,
+            thermal: fx.thermal != 0.0,
+            start: opts.thermal_start,
+            x0: carry.thermal_x,
+            effective: carry.time_line.is_none(),
+            power: opts.records,
+            flanges: fx.compensates(),
+            table: opts.force_table.as_deref(),
+        };
+        time_line::put(robot, &stream_moves, o, &asked, &mut carry.last_end)
     }
 
     /// Load key and state of move `i`, made when a walk reaches it (not
@@ -1885,9 +1657,13 @@ impl<'r> TimeLine<'r> {
     ) -> Option<Keyed<'a>> {
         let mv: &Move = moves.get(i)?;
         let plan = self.plans.get(i + self.o)?;
-        let seg = self.segments.get(i)?;
-        let power = self.thermal_power.as_ref().and_then(|p| p.get(i).copied());
-        let wrench = self.wrenches.get(i).copied().flatten();
+        let timed = self.timed.get(i)?;
+        let seg = timed.segment();
+        let power = match timed.ctx.thermal {
+            ThermalInput::JointPowers(p) => Some(p),
+            _ => None,
+        };
+        let wrench = timed.ctx.wrench;
         let rpm = self.directives.at(mv.line).spindle_rpm;
         let wobj_text = mv.wobj.as_ref().map_or("wobj0", |w| &*w.text);
         let tool_text: &'a str = &mv.tool.text;
@@ -1913,7 +1689,7 @@ impl<'r> TimeLine<'r> {
             power: power.map(|p| p.map(f64::to_bits)),
             rpm: rpm.map(f64::to_bits),
         };
-        let flange = self.nominal_flanges.get(i).and_then(Option::as_ref);
+        let flange = timed.flange.as_ref();
         Some((
             mv,
             (plan, flange),
@@ -1925,7 +1701,7 @@ impl<'r> TimeLine<'r> {
 }
 
 /// The tool and work object texts of the move a walk met last, as
-/// written, with their lower-case names ([`TimeLine::keyed`]).
+/// written, with their lower-case names ([`Window::keyed`]).
 type LastNames<'a> = Option<((&'a str, &'a str), (Rc<str>, Rc<str>))>;
 
 /// A move on the time line with what its rewriting needs: the move, its
@@ -1933,7 +1709,7 @@ type LastNames<'a> = Option<((&'a str, &'a str), (Rc<str>, Rc<str>))>;
 type Keyed<'a> = (
     &'a Move,
     (&'a Planned, Option<&'a Isometry3<f64>>),
-    &'a Segment,
+    Segment,
     MoveState,
     LoadKey,
 );
@@ -1993,7 +1769,7 @@ impl<'m> Rewriter<'m> {
     fn collect<'a>(
         &mut self,
         (moves, resolved): (&[&'a Move], &[Resolved]),
-        line: &'a TimeLine,
+        line: &'a Window,
         collected: &mut usize,
         collecting: &mut bool,
         names: &mut LastNames<'a>,
@@ -2033,7 +1809,7 @@ impl<'m> Rewriter<'m> {
     fn walks(
         &mut self,
         (moves, resolved): (&[&Move], &[Resolved]),
-        line: &TimeLine,
+        line: &Window,
         carry: &mut Carry,
     ) -> Result<()> {
         let fx = self.opts.effects;
@@ -2090,11 +1866,11 @@ impl<'m> Rewriter<'m> {
                         Ok(Some(dev))
                             if mv.kind == MoveKind::MoveAbsJ && !self.opts.joint_cartesian =>
                         {
-                            self.record_reported(carry, mv, seg, &state, &dev)
+                            self.record_reported(carry, mv, &seg, &state, &dev)
                         }
                         Ok(Some(dev)) => {
                             let via = plan.0.via.map(|v| v.translation.vector.into());
-                            self.record(carry, (mv, via), seg, &state, &dev)
+                            self.record(carry, (mv, via), &seg, &state, &dev)
                         }
                         Ok(None) => continue,
                         Err(e) => {

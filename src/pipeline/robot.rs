@@ -28,12 +28,13 @@ use crate::machine::robot::{IkSelect, Model, Robot, RobotError};
 use crate::pipeline::rapid::RapidOptions;
 use crate::predict::Breakdown;
 use crate::predict::MoveContext;
+use crate::process::CutSettings;
 use crate::program::interp::Warning;
 use crate::program::robot_moves::{
     Configuration, JOINT_TARGET, JointMove, LeftAsWritten, PathKind, RobotStep, RobotTarget,
     ToolUse,
 };
-use time_line::{Asked, FALLBACK_TCP_SPEED, StreamMove, Timed};
+use time_line::{Asked, FALLBACK_TCP_SPEED, Refusal, StreamMove, Timed};
 
 /// What the pipeline found for one step of the stream.
 #[derive(Debug, Clone, PartialEq)]
@@ -251,7 +252,7 @@ fn plan(
     Ok((plans, warnings))
 }
 
-/// The time line of the planned steps ([`time_line::of_stream`]): one
+/// The time line of the planned steps ([`time_line::put`]): one
 /// entry per step (the default, a cold context, for a step left as
 /// written), or all defaults for a robot with neither a thermal model nor a
 /// process force.
@@ -267,33 +268,56 @@ fn timed_steps(
     if robot.thermal().is_none() && robot.process_force().is_none() {
         return Ok(out);
     }
+    let fx = opts.effects;
+    let need = fx.process != 0.0 || robot.thermal().is_some_and(|_| fx.thermal != 0.0);
     let mut moves = Vec::with_capacity(steps.len());
     let mut index = Vec::with_capacity(steps.len());
+    let mut fallen_back = Vec::new();
     for (i, (step, plan)) in steps.iter().zip(plans).enumerate() {
         let m = match (step, plan) {
-            (RobotStep::Target(t), Plan::Target(j, via)) => StreamMove {
-                view: &views.robots[j.view],
-                pose: j.pose,
-                via: via.as_ref().map(|v| v.pose.translation.vector),
-                q: j.q,
-                wobj: t.work,
-                feed: t.path != PathKind::Joint,
-                linear: t.path == PathKind::Linear,
-                v_tcp: t.speed_mm_s,
-                line: t.line,
-            },
+            (RobotStep::Target(t), Plan::Target(j, via)) => {
+                let feed = t.path != PathKind::Joint;
+                // A straight or circular move without a speed is taken at
+                // the fallback speed (said in a warning).
+                let fallback = need && feed && t.speed_mm_s.is_none();
+                if fallback {
+                    fallen_back.push(moves.len());
+                }
+                StreamMove {
+                    view: &views.robots[j.view],
+                    key: &t.tool.key,
+                    pose: j.pose,
+                    via: via.as_ref().map(|v| v.pose.translation.vector),
+                    q: Some(j.q),
+                    wobj: t.work,
+                    feed,
+                    linear: t.path == PathKind::Linear,
+                    v_tcp: if fallback {
+                        Some(FALLBACK_TCP_SPEED)
+                    } else {
+                        t.speed_mm_s
+                    },
+                    fallback,
+                    line: t.line,
+                    set: CutSettings::default(),
+                }
+            }
             (RobotStep::Joints(jm), Plan::Joints(view, q)) => {
+                let key = jm.tool.as_ref().map_or("", |t| t.key.as_str());
                 let view = &views.robots[*view];
                 StreamMove {
                     view,
+                    key,
                     pose: view.tcp_pose(Model::Nominal, q),
                     via: None,
-                    q: *q,
+                    q: Some(*q),
                     wobj: Isometry3::identity(),
                     feed: false,
                     linear: false,
                     v_tcp: None,
+                    fallback: false,
                     line: jm.line,
+                    set: CutSettings::default(),
                 }
             }
             _ => continue,
@@ -301,11 +325,14 @@ fn timed_steps(
         moves.push(m);
         index.push(i);
     }
-    let fx = opts.effects;
     let asked = Asked {
         process: fx.process != 0.0,
         thermal: fx.thermal != 0.0,
         start: opts.thermal_start,
+        x0: None,
+        effective: true,
+        power: need,
+        flanges: false,
         table: opts.force_table.as_deref(),
     };
     let at = |k: usize| match index.get(k).and_then(|&i| steps.get(i)) {
@@ -313,19 +340,21 @@ fn timed_steps(
         Some(RobotStep::Joints(j)) => (j.line, j.column, j.instruction),
         _ => (0, 0, "move"),
     };
-    let mut fallen_back = Vec::new();
-    let timed =
-        time_line::of_stream(robot, &moves, &asked, &mut fallen_back).map_err(|(k, what)| {
-            let (line, column, instruction) = at(k);
-            Error::Input(Located::new(
-                file,
-                line,
-                column,
-                format!(
-                    "the TCP speed of {instruction} cannot be resolved offline; the {what} needs it"
-                ),
-            ))
-        })?;
+    let timed = time_line::put(robot, &moves, 0, &asked, &mut None).map_err(|(k, why)| {
+        let (line, column, instruction) = at(k);
+        let what = match why {
+            Refusal::NeedsSpeed(what) => what,
+            Refusal::NoDuration => "thermal time line",
+        };
+        Error::Input(Located::new(
+            file,
+            line,
+            column,
+            format!(
+                "the TCP speed of {instruction} cannot be resolved offline; the {what} needs it"
+            ),
+        ))
+    })?;
     if let Some(&k) = fallen_back.first() {
         let (line, _, instruction) = at(k);
         tracing::warn!(

@@ -194,7 +194,7 @@ pub fn mean_power(segments: &[Segment]) -> [f64; 6] {
 pub fn effective_power(segments: &[Segment], tau_s: f64, start: ThermalStart) -> Vec<[f64; 6]> {
     // The start state of a warm start (steady: the periodic state, where
     // end(x0) = x0·e^(−T/τ) + end(0) equals x0) follows from the totals.
-    let mut totals = TimeLineTotals::default();
+    let mut totals = ThermalTotals::default();
     if start != ThermalStart::Cold {
         totals.add(segments, tau_s);
     }
@@ -203,16 +203,16 @@ pub fn effective_power(segments: &[Segment], tau_s: f64, start: ThermalStart) ->
 
 /// The totals of a time line met a piece at a time (a module read a window
 /// at a time): its duration, energy per joint and end state from cold, from
-/// which [`TimeLineTotals::start_state`] gives the start state of
+/// which [`ThermalTotals::start_state`] gives the start state of
 /// [`effective_power`] with the same bits.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
-pub struct TimeLineTotals {
+pub struct ThermalTotals {
     total_s: f64,
     energy_j: [f64; 6],
     end_cold: [f64; 6],
 }
 
-impl TimeLineTotals {
+impl ThermalTotals {
     /// Adds the next segments of the time line.
     pub fn add(&mut self, segments: &[Segment], tau_s: f64) {
         for s in segments {
@@ -314,7 +314,7 @@ mod tests {
         ] {
             let whole = effective_power(&segments, tau, start);
             for piece in [1, 5, 57] {
-                let mut totals = TimeLineTotals::default();
+                let mut totals = ThermalTotals::default();
                 for chunk in segments.chunks(piece) {
                     totals.add(chunk, tau);
                 }
@@ -345,7 +345,7 @@ mod tests {
             effective_power(&segments, tau, ThermalStart::Steady)[0],
             effective_power(&segments, tau, ThermalStart::Cold)[0]
         );
-        let empty = TimeLineTotals::default();
+        let empty = ThermalTotals::default();
         assert_eq!(empty.start_state(ThermalStart::Steady, tau), [0.0; 6]);
         assert_eq!(
             empty.start_state(ThermalStart::WarmUpMin(5.0), tau),

@@ -21,7 +21,7 @@ use crate::compensate::outcome::{Row, Summary};
 use crate::error::{Error, Result};
 use crate::machine::ThermalStart;
 use crate::machine::robot::Robot;
-use crate::machine::robot::thermal::TimeLineTotals;
+use crate::machine::robot::thermal::ThermalTotals;
 use crate::predict::EffectSet;
 use crate::process::CutSettings;
 use crate::program::rapid::directives::Directives;
@@ -123,7 +123,7 @@ pub fn compensate_streamed<R: BufRead>(
         .extend(names.iter().map(|n| n.to_ascii_lowercase()));
     if let Some(t) = robot.thermal().filter(|_| first_pass(robot, opts)) {
         let mut first = Carry {
-            time_line: Some(TimeLineTotals::default()),
+            time_line: Some(ThermalTotals::default()),
             ..Carry::default()
         };
         // The first pass only adds up the joint powers: no records, no

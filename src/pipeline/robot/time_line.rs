@@ -6,16 +6,17 @@
 //! move's travel and speed, or a force table's row), the mean motor power
 //! of each joint (gravity and process torques over the joint motion) and
 //! the effective thermal power at its end (first order, from the start the
-//! run asks for). RAPID ([`crate::pipeline::rapid`]) computes its moves'
-//! wrenches, durations and powers with the functions here; the move stream
-//! pipeline ([`super`], KUKA KRL) puts its whole stream on it with
-//! [`of_stream`].
+//! run asks for). Every robot language puts its moves on it with [`put`]:
+//! the move stream pipeline ([`super`], KUKA KRL and FANUC TP) its whole
+//! stream, RAPID ([`crate::pipeline::rapid`]) each window of its module,
+//! continuing the windows before.
 
 use nalgebra::{Isometry3, Vector3, Vector6};
+use rayon::prelude::*;
 
 use crate::machine::ThermalStart;
 use crate::machine::robot::process::{feed_frame_vector, plunge_direction, travel_direction};
-use crate::machine::robot::thermal::{Segment, effective_power};
+use crate::machine::robot::thermal::{Segment, effective_power, effective_power_from};
 use crate::machine::robot::{ForceModel, Robot};
 use crate::predict::{MoveContext, ThermalInput, Wrench, WrenchFrame};
 use crate::process::{CutSettings, ForceTable, Frame, MillingCache};
@@ -221,31 +222,37 @@ pub(crate) fn mean_power(
     std::array::from_fn(|j| (t[j] * (qb[j] - qa[j]) / duration_s).abs())
 }
 
-/// One move of a stream put on the time line ([`of_stream`]), in the
-/// world frame, on its robot view (tool mounted).
+/// One move put on the time line ([`put`]), in the world frame, on its
+/// robot view (tool mounted).
 pub(crate) struct StreamMove<'a> {
     /// The robot view of the move.
     pub(crate) view: &'a Robot,
+    /// What names the view (moves with equal keys share it).
+    pub(crate) key: &'a str,
     /// Programmed TCP pose.
     pub(crate) pose: Isometry3<f64>,
     /// Programmed circle point of a circular move.
     pub(crate) via: Option<Vector3<f64>>,
-    /// Programmed (controller) joints.
-    pub(crate) q: [f64; 6],
+    /// Programmed (controller) joints, when the target is reachable.
+    pub(crate) q: Option<[f64; 6]>,
     /// The work object in the world frame.
     pub(crate) wobj: Isometry3<f64>,
     /// Straight or circular (a feed move), and straight.
     pub(crate) feed: bool,
     /// A straight move.
     pub(crate) linear: bool,
-    /// TCP speed, mm/s, when known offline.
+    /// TCP speed, mm/s, when known offline (or its fallback).
     pub(crate) v_tcp: Option<f64>,
+    /// `v_tcp` is [`FALLBACK_TCP_SPEED`]: known at run time only.
+    pub(crate) fallback: bool,
     /// 1-based line (the force table's key).
     pub(crate) line: usize,
+    /// The program's cut settings in force at the move.
+    pub(crate) set: CutSettings,
 }
 
-/// What the time line gives each move of a stream: its prediction
-/// context, duration and mean joint power.
+/// What the time line gives each move: its prediction context, duration,
+/// mean joint power and, when asked, the nominal flange at its end.
 #[derive(Debug, Clone, Copy, Default)]
 pub(crate) struct Timed {
     /// The move's prediction context (process wrench, effective thermal
@@ -255,6 +262,19 @@ pub(crate) struct Timed {
     pub(crate) duration_s: f64,
     /// Mean motor power per joint, W.
     pub(crate) power_w: [f64; 6],
+    /// Nominal flange at the move's end (its programmed joints), when both
+    /// ends are solved, the duration is positive and [`Asked::flanges`].
+    pub(crate) flange: Option<Isometry3<f64>>,
+}
+
+impl Timed {
+    /// The move's segment of the thermal time line.
+    pub(crate) fn segment(&self) -> Segment {
+        Segment {
+            duration_s: self.duration_s,
+            power_w: self.power_w,
+        }
+    }
 }
 
 /// What the run asks of the time line.
@@ -265,42 +285,78 @@ pub(crate) struct Asked<'a> {
     pub(crate) thermal: bool,
     /// The thermal state at the first move.
     pub(crate) start: ThermalStart,
+    /// The effective thermal power at the start of the first move, when
+    /// the time line continues one before (`start` otherwise).
+    pub(crate) x0: Option<[f64; 6]>,
+    /// The effective thermal power of each move is wanted (a first pass
+    /// that only adds up the segments does without).
+    pub(crate) effective: bool,
+    /// The joint powers are wanted even without a thermal drift (for the
+    /// report's rows).
+    pub(crate) power: bool,
+    /// The nominal flange at each move's end is wanted (the first stage of
+    /// a compensation's breakdown).
+    pub(crate) flanges: bool,
     /// The run's force table.
     pub(crate) table: Option<&'a ForceTable>,
 }
 
-/// Why a stream move is refused by the time line: its index and the force
-/// that needs its speed.
-pub(crate) type NeedsSpeed = (usize, &'static str);
+/// Why a move is refused by the time line.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum Refusal {
+    /// The force named needs the move's TCP speed, known at run time only.
+    NeedsSpeed(&'static str),
+    /// The thermal time line needs the speed of a straight move without
+    /// one.
+    NoDuration,
+}
 
-/// Puts the moves of a stream on the time line, in order. A straight or
-/// circular move without a speed is taken at [`FALLBACK_TCP_SPEED`] (the
-/// indices of those moves are pushed to `fallen_back`); a milling force or
-/// a drilling thrust on it refuses the move ([`NeedsSpeed`]).
-pub(crate) fn of_stream(
+/// The view key, joints (bits), wrench (bits) and nominal load torques at
+/// the end of the last move whose power was computed: the start of the
+/// next move when it continues on the same view with the same wrench.
+pub(crate) type LastEnd = Option<(String, Option<WrenchBits>, [u64; 6], Vector6<f64>)>;
+
+/// A process wrench as bit patterns (a hashable key).
+pub(crate) type WrenchBits = ([u64; 6], bool);
+
+/// The bit patterns of a wrench.
+pub(crate) fn wrench_bits(w: &Wrench) -> WrenchBits {
+    (
+        [
+            w.force_n.x,
+            w.force_n.y,
+            w.force_n.z,
+            w.moment_nmm.x,
+            w.moment_nmm.y,
+            w.moment_nmm.z,
+        ]
+        .map(f64::to_bits),
+        w.in_tool_frame(),
+    )
+}
+
+/// Puts `moves[o..]` on the time line, in order, after `moves[..o]` (the
+/// last move of a part of the program put on it before, or none): one
+/// [`Timed`] per move of `moves[o..]`. `last` carries the torques at the
+/// end of the last move across calls. `Err((i, why))`: move `o + i` is
+/// refused.
+pub(crate) fn put(
     robot: &Robot,
     moves: &[StreamMove],
+    o: usize,
     asked: &Asked,
-    fallen_back: &mut Vec<usize>,
-) -> std::result::Result<Vec<Timed>, NeedsSpeed> {
+    last: &mut LastEnd,
+) -> std::result::Result<Vec<Timed>, (usize, Refusal)> {
     let thermal = robot.thermal().filter(|_| asked.thermal);
     let need = asked.process || thermal.is_some();
-    let pf = robot.process_force().map(|p| p.with_rpm(None));
-    let set = CutSettings::default();
+    let n = moves.len().saturating_sub(o);
     let mut cache = MillingCache::default();
-    let mut out: Vec<Timed> = Vec::with_capacity(moves.len());
-    let mut segments = Vec::with_capacity(if thermal.is_some() { moves.len() } else { 0 });
-    for (i, m) in moves.iter().enumerate() {
+    let mut out: Vec<Timed> = Vec::with_capacity(n);
+    // The wrenches first, then the durations: the first refusal of each
+    // kind in move order.
+    for i in o..moves.len() {
+        let m = &moves[i];
         let prev = i.checked_sub(1).and_then(|k| moves.get(k));
-        let fallback = need && m.feed && m.v_tcp.is_none();
-        if fallback {
-            fallen_back.push(i);
-        }
-        let v_tcp = if fallback {
-            Some(FALLBACK_TCP_SPEED)
-        } else {
-            m.v_tcp
-        };
         let wrench = process_wrench(
             robot,
             &WrenchMove {
@@ -310,40 +366,16 @@ pub(crate) fn of_stream(
                 pose: &m.pose,
                 via: m.via.as_ref(),
                 wobj: &m.wobj,
-                v_tcp,
-                fallback,
+                v_tcp: m.v_tcp,
+                fallback: m.fallback,
                 need_speed: need,
                 table: asked.table.map(|t| (t, m.line)),
             },
-            &set,
+            &m.set,
             &mut cache,
         )
-        .map_err(|what| (i, what))?;
-        let start = prev.map(|p| MoveEnd {
-            at: &p.pose.translation.vector,
-            via: None,
-            q: Some(&p.q),
-        });
-        let cur = MoveEnd {
-            at: &m.pose.translation.vector,
-            via: m.via.as_ref(),
-            q: Some(&m.q),
-        };
-        let duration_s = move_duration(robot, start, cur, !m.feed, v_tcp).unwrap_or(0.0);
-        let power_w = match prev {
-            Some(p) if need && duration_s > 0.0 => {
-                let tau_a = m.view.nominal_load_torques(&p.q, wrench.as_ref());
-                let tau_b = m.view.nominal_load_torques(&m.q, wrench.as_ref());
-                mean_power((tau_a, tau_b), &p.q, &m.q, duration_s)
-            }
-            _ => [0.0; 6],
-        };
-        if thermal.is_some() {
-            segments.push(Segment {
-                duration_s,
-                power_w,
-            });
-        }
+        .map_err(|what| (i - o, Refusal::NeedsSpeed(what)))?;
+        let pf = robot.process_force().map(|p| p.with_rpm(m.set.spindle_rpm));
         out.push(Timed {
             ctx: MoveContext {
                 wrench,
@@ -351,15 +383,195 @@ pub(crate) fn of_stream(
                 tooth_hz: pf.and_then(|p| p.excitation_hz()).unwrap_or(0.0),
                 ..MoveContext::default()
             },
-            duration_s,
-            power_w,
+            ..Timed::default()
         });
     }
-    if let Some(t) = thermal {
-        let powers = effective_power(&segments, t.time_constant_s, asked.start);
+    for (i, t) in out.iter_mut().enumerate() {
+        let (prev, m) = (
+            (i + o).checked_sub(1).and_then(|k| moves.get(k)),
+            &moves[i + o],
+        );
+        let start = prev.map(|p| MoveEnd {
+            at: &p.pose.translation.vector,
+            via: None,
+            q: p.q.as_ref(),
+        });
+        let cur = MoveEnd {
+            at: &m.pose.translation.vector,
+            via: m.via.as_ref(),
+            q: m.q.as_ref(),
+        };
+        t.duration_s = match move_duration(robot, start, cur, !m.feed, m.v_tcp) {
+            Some(d) => d,
+            None if thermal.is_some() => return Err((i, Refusal::NoDuration)),
+            None => 0.0,
+        };
+    }
+    powers(
+        moves,
+        o,
+        asked.power || thermal.is_some(),
+        asked.flanges,
+        &mut out,
+        last,
+    );
+    if let Some(t) = thermal.filter(|_| asked.effective) {
+        let segments: Vec<Segment> = out.iter().map(Timed::segment).collect();
+        let powers = match asked.x0 {
+            Some(x0) => effective_power_from(&segments, t.time_constant_s, x0),
+            None => effective_power(&segments, t.time_constant_s, asked.start),
+        };
         for (timed, p) in out.iter_mut().zip(powers) {
             timed.ctx.thermal = ThermalInput::JointPowers(p);
         }
     }
     Ok(out)
+}
+
+/// The joint powers of the moves `out` (of `moves[o..]`, with `power`)
+/// and the nominal flange at each move's end (with `flanges`). The load
+/// torques and flange at each end (the costly part) are computed in
+/// parallel; the power chains the moves (a move starts where the one
+/// before ended, with the torques computed there when its view and wrench
+/// are the same).
+fn powers(
+    moves: &[StreamMove],
+    o: usize,
+    power: bool,
+    flanges: bool,
+    out: &mut [Timed],
+    last: &mut LastEnd,
+) {
+    if !power && !flanges {
+        return;
+    }
+    let ends: Vec<Option<(Vector6<f64>, Isometry3<f64>)>> = (0..out.len())
+        .into_par_iter()
+        .map(|i| {
+            let t = out.get(i)?;
+            moves.get((i + o).checked_sub(1)?)?.q?;
+            let m = moves.get(i + o)?;
+            let qb = m.q?;
+            if t.duration_s <= 0.0 {
+                return None;
+            }
+            Some(
+                m.view
+                    .nominal_load_torques_and_flange(&qb, t.ctx.wrench.as_ref()),
+            )
+        })
+        .collect();
+    for (i, (t, end)) in out.iter_mut().zip(ends).enumerate() {
+        let Some((tau_b, flange)) = end else {
+            continue;
+        };
+        if flanges {
+            t.flange = Some(flange);
+        }
+        if !power {
+            continue;
+        }
+        // `end` is Some: both ends are solved.
+        let (Some(qa), Some(m)) = (
+            (i + o).checked_sub(1).and_then(|k| moves.get(k)?.q),
+            moves.get(i + o),
+        ) else {
+            continue;
+        };
+        let Some(qb) = m.q else {
+            continue;
+        };
+        let bits = t.ctx.wrench.as_ref().map(wrench_bits);
+        let qa_bits = qa.map(f64::to_bits);
+        let tau_a = match last {
+            Some((k, b, q, tau)) if k == m.key && *b == bits && *q == qa_bits => *tau,
+            _ => m.view.nominal_load_torques(&qa, t.ctx.wrench.as_ref()),
+        };
+        match last {
+            Some((k, b, q, tau)) if k == m.key => {
+                (*b, *q, *tau) = (bits, qb.map(f64::to_bits), tau_b);
+            }
+            _ => *last = Some((m.key.to_string(), bits, qb.map(f64::to_bits), tau_b)),
+        }
+        t.power_w = mean_power((tau_a, tau_b), &qa, &qb, t.duration_s);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::machine::robot::Model;
+
+    /// Straight moves at 100 mm/s through joint positions of the IRB 1600
+    /// (thermal model and process force of its file).
+    fn path(robot: &Robot) -> Vec<StreamMove<'_>> {
+        (0..6)
+            .map(|i| {
+                let t = f64::from(i) * 0.05;
+                let q = [t, -0.2 + t, 0.3 - t, 0.1, 0.4 + t, -t];
+                StreamMove {
+                    view: robot,
+                    key: "tool0",
+                    pose: robot.tcp_pose(Model::Nominal, &q),
+                    via: None,
+                    q: Some(q),
+                    wobj: Isometry3::identity(),
+                    feed: true,
+                    linear: true,
+                    v_tcp: Some(100.0),
+                    fallback: false,
+                    line: i as usize + 1,
+                    set: CutSettings::default(),
+                }
+            })
+            .collect()
+    }
+
+    fn asked(x0: Option<[f64; 6]>) -> Asked<'static> {
+        Asked {
+            process: true,
+            thermal: true,
+            start: ThermalStart::Cold,
+            x0,
+            effective: true,
+            power: true,
+            flanges: true,
+            table: None,
+        }
+    }
+
+    /// A time line put in two parts (the second continuing from the last
+    /// move, the thermal state and the end torques of the first) gives
+    /// every move the same bits as the whole put at once: a module read a
+    /// window at a time is timed as if whole.
+    #[test]
+    fn a_time_line_put_in_parts_is_the_whole_one() {
+        let robot = Robot::from_yaml_str(
+            include_str!("../../../machines/abb-irb1600.yaml"),
+            "abb-irb1600.yaml",
+        )
+        .unwrap();
+        let moves = path(&robot);
+        let whole = put(&robot, &moves, 0, &asked(None), &mut None).unwrap();
+        let mut last = None;
+        let mut parts = put(&robot, &moves[..3], 0, &asked(None), &mut last).unwrap();
+        let x0 = match parts.last().map(|t| t.ctx.thermal) {
+            Some(ThermalInput::JointPowers(p)) => Some(p),
+            _ => None,
+        };
+        assert!(x0.is_some(), "the thermal model gives joint powers");
+        parts.extend(put(&robot, &moves[2..], 1, &asked(x0), &mut last).unwrap());
+        assert_eq!(parts.len(), whole.len());
+        assert!(
+            whole[1..]
+                .iter()
+                .all(|t| t.power_w.iter().any(|p| *p > 0.0))
+        );
+        for (a, b) in whole.iter().zip(&parts) {
+            assert_eq!(a.duration_s.to_bits(), b.duration_s.to_bits());
+            assert_eq!(a.power_w.map(f64::to_bits), b.power_w.map(f64::to_bits));
+            assert_eq!(a.ctx, b.ctx);
+            assert_eq!(a.flange, b.flange);
+        }
+    }
 }
