@@ -439,7 +439,13 @@ fn row(t: &RobotTarget, c: &Compensation) -> Row {
         .via
         .as_ref()
         .map(|(v, _)| (t.work * v).translation.vector.into());
-    robot_row((t.line, t.instruction), p.into(), via, c.deviation)
+    robot_row(
+        (t.line, t.instruction),
+        p.into(),
+        via,
+        c.deviation,
+        c.q_programmed,
+    )
 }
 
 /// The report row of a reported joint target.
@@ -452,7 +458,7 @@ fn joint_row(robot: &Robot, j: &JointMove, dev: &Breakdown) -> Row {
         None => robot.tcp_pose(Model::Nominal, &j.q),
     };
     let p = pose.translation.vector;
-    robot_row((j.line, j.instruction), p.into(), None, *dev)
+    robot_row((j.line, j.instruction), p.into(), None, *dev, j.q)
 }
 
 /// A robot move's report row: its line and instruction, the programmed
@@ -462,6 +468,7 @@ fn robot_row(
     p: [f64; 3],
     via_mm: Option<[f64; 3]>,
     deviation: Breakdown,
+    q: [f64; 6],
 ) -> Row {
     Row {
         line,
@@ -478,6 +485,7 @@ fn robot_row(
             duration_s: 0.0,
             power_w: [0.0; 6],
             thermal_power_w: [0.0; 6],
+            q_rad: Some(q),
         }),
     }
 }
