@@ -65,4 +65,5 @@ mod snapshots;
 mod spiral;
 mod tp;
 mod uncertainty_coverage;
+mod uncertainty_robot;
 mod verify_cli;

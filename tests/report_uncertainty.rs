@@ -169,3 +169,76 @@ fn gain_auto_scales_the_correction_by_how_well_it_is_known() {
     let err = String::from_utf8_lossy(&a.get_output().stderr);
     assert!(err.contains("carries no parameter covariance"), "{err}");
 }
+
+/// The compensated program of `machine` (annotated, the default).
+fn compensated(machine: &std::path::Path, program: &std::path::Path) -> String {
+    let out = program.with_extension("comp.nc");
+    postproc()
+        .arg("compensate")
+        .arg(program)
+        .arg("--machine")
+        .arg(machine)
+        .args(["--effects", "geometric", "-o"])
+        .arg(&out)
+        .assert()
+        .success();
+    std::fs::read_to_string(&out).expect("written")
+}
+
+/// The number after `word ` in a block's annotation.
+fn annotated(line: &str, word: &str) -> Option<f64> {
+    let note = &line[line.find("(dev ")?..];
+    let mut it = note.trim_end_matches(')').split(' ');
+    it.find(|w| *w == word)?;
+    it.next()?.parse().ok()
+}
+
+/// Annotations print U with 4 decimals (mm).
+const ANNOTATION_U_TOL_MM: f64 = 0.6e-4;
+
+#[test]
+fn compensated_blocks_carry_their_u_from_the_covariance() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let machine = machine_with_covariance(dir.path());
+    let program = write(dir.path(), "p.nc", PROGRAM);
+    let json: serde_json::Value =
+        serde_json::from_str(&report(&machine, &program, "json")).expect("JSON");
+    let written = compensated(&machine, &program);
+    let moves = [(300.0, true), (350.0, true), (370.0, true), (270.0, false)];
+    let feeds: Vec<&serde_json::Value> = json["rows"]
+        .as_array()
+        .expect("rows")
+        .iter()
+        .filter(|r| r["motion"] == "feed")
+        .collect();
+    // The annotated feed blocks, in order (the program's four G1 blocks).
+    let blocks: Vec<&str> = written
+        .lines()
+        .filter(|l| l.starts_with("G1") && l.contains("(dev "))
+        .collect();
+    assert_eq!(blocks.len(), feeds.len(), "{written}");
+    let mut seen = 0;
+    for ((r, (x, plus)), text) in feeds.iter().zip(moves).zip(blocks) {
+        let dx = r["deviation_mm"][0].as_f64().expect("dx");
+        let dev = r["dev_mm"].as_f64().expect("dev");
+        let want = expected_u(x, plus, dx, dev);
+        let u = annotated(text, "U").unwrap_or_else(|| panic!("no U in {text}"));
+        assert!(
+            (u - want).abs() <= ANNOTATION_U_TOL_MM,
+            "{text}: U {u} but {want} by hand"
+        );
+        // U follows the deviation, before the parts.
+        assert!(text.contains(" mm U "), "{text}");
+        seen += usize::from(want > ANNOTATION_U_TOL_MM);
+    }
+    assert!(seen >= 3, "the test exercises U");
+}
+
+#[test]
+fn without_a_covariance_annotations_state_no_u() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let program = write(dir.path(), "p.nc", PROGRAM);
+    let written = compensated(&repo("machines/afm-r1000.yaml"), &program);
+    assert!(written.contains("(dev "), "{written}");
+    assert!(!written.contains(" U "), "{written}");
+}

@@ -530,7 +530,11 @@ pub fn compensate(
     let run = Prepared::new(&a.program, &a.effects, machine, "compensate")?;
     let tolerance = tolerance_of(a.tolerance, Some(&run.machine));
     let annotate = a.annotate == Annotate::Comment;
-    let job = run.job(tolerance, a.decimals, annotate)?;
+    let mut job = run.job(tolerance, a.decimals, annotate)?;
+    // The annotations state U where the machine file carries a covariance.
+    job.predictor = job
+        .predictor
+        .map(|p| p.with_uncertainty(run.loaded.uncertainty.as_ref()));
     let input_path = &a.program.file;
     let out_path =
         super::output::output_path(input_path, a.output.as_deref(), a.out_dir.as_deref(), &[])?;

@@ -132,6 +132,11 @@ pub(super) fn robot_of(
     command: &str,
     effects: Option<&super::EffectArgs>,
 ) -> Result<(Robot, super::machines::Loaded)> {
+    if effects.is_some_and(|e| e.gain_auto) {
+        return Err(super::usage(
+            "--gain-auto is a G-code option: a robot's gains are given with --gain",
+        ));
+    }
     let name = super::config::needed(machine, command)?;
     let (m, loaded) = super::machines::open(name)?;
     let Machine::Robot(r) = m else {
@@ -323,7 +328,8 @@ pub(super) fn compensate_to(
         compensate: opts.effects.compensates(),
     };
     let solved = run.solved();
-    let (out_texts, warnings) = rewrite(&strs, &files, &steps, &solved, robot, how)?;
+    let u = provenance.uncertainty.as_deref();
+    let (out_texts, warnings) = rewrite(&strs, &files, &steps, &solved, (robot, u), how)?;
     run.summary.warnings.extend(warnings);
     let inputs: Vec<&Path> = texts.iter().flatten().map(|t| t.path.as_path()).collect();
     let mut pending = Vec::new();

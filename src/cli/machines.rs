@@ -32,11 +32,8 @@ pub(super) fn open(name: &str) -> Result<(Machine, Loaded)> {
     let (machine, status) = file.read()?;
     warn_example(&file, &status);
     let blocks = crate::predict::uncertainty::read_covariance(&file.text, &file.shown)?;
-    // Robot runs do not state U per target yet: the covariance is read
-    // (and refused when bad) but not carried.
     let uncertainty =
         crate::predict::uncertainty::BlockUncertainty::of_machine(&machine, &blocks, &file.shown)?
-            .filter(crate::predict::uncertainty::BlockUncertainty::is_tool)
             .map(std::sync::Arc::new);
     Ok((
         machine,

@@ -231,6 +231,9 @@ pub struct RobotMove {
     pub power_w: [f64; 6],
     /// Effective (thermal) power per joint at the end of the move, W.
     pub thermal_power_w: [f64; 6],
+    /// Joints of the programmed target, rad, where the run has them (the
+    /// report's U of the move is taken there).
+    pub q_rad: Option<[f64; 6]>,
 }
 
 /// A program compensated in memory (a robot module read whole): its

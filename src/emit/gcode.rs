@@ -161,6 +161,8 @@ pub struct Emitter {
     /// Where each line written for the last compensated block leaves the
     /// machine, in the coordinates of its plan ([`Emitter::written`]).
     written: Vec<AxisVec>,
+    /// The uncertainty the annotations state ([`Emitter::with_uncertainty`]).
+    uncertainty: Option<std::sync::Arc<crate::predict::uncertainty::BlockUncertainty>>,
 }
 
 /// Formats `v` with `d` decimals, never in exponent notation and never as
@@ -469,7 +471,19 @@ impl Emitter {
             tolerance_mm: None,
             limits: [None; 6],
             written: Vec::new(),
+            uncertainty: None,
         }
+    }
+
+    /// The emitter stating in each annotation the expanded uncertainty
+    /// `U` (k=2) of the block's predicted deviation, from the machine
+    /// file's parameter covariance (`None`: annotations without it).
+    pub fn with_uncertainty(
+        mut self,
+        u: Option<std::sync::Arc<crate::predict::uncertainty::BlockUncertainty>>,
+    ) -> Self {
+        self.uncertainty = u;
+        self
     }
 
     /// The emitter for a compensation at `tolerance_mm`: words are written
@@ -677,7 +691,7 @@ impl Emitter {
                 (feeds, decimals(f), first_target)
             });
         if self.opts.annotate {
-            self.annotation(block, text, res, scale, edits);
+            self.annotation(block, text, (&mv.end, res), scale, edits);
         }
         // Words that act where the block's motion ends go to its last piece.
         let moved = !res.segments.is_empty() && block.words.iter().any(acts_at_block_end);
@@ -993,18 +1007,25 @@ impl Emitter {
         }
     }
 
-    /// The annotation of a compensated block: `(dev … mm geo …)` with the
-    /// predicted deviation and its parts, and `takeup` where the block's own
-    /// line goes to a takeup point.
+    /// The annotation of a compensated block (at command `cmd`):
+    /// `(dev … mm geo …)` with the predicted deviation and its parts,
+    /// `U …` after the deviation where the machine file carries a
+    /// covariance (its expanded uncertainty, k=2, at the spindle nose as
+    /// the report states it), and `takeup` where the block's own line goes
+    /// to a takeup point.
     fn annotation(
         &self,
         block: &Block,
         text: &[u8],
-        res: &BlockResult,
+        (cmd, res): (&AxisVec, &BlockResult),
         scale: f64,
         edits: &mut Edits,
     ) {
         let dev = res.deviation.total().norm() / scale;
+        let u = self.uncertainty.as_ref().and_then(|u| {
+            u.tool(cmd, &res.dirs, 0.0, &res.deviation.total())
+                .map(|b| b.total_mm / scale)
+        });
         let unit: &[u8] = if scale != 1.0 { b"in" } else { b"mm" };
         let dd = if scale != 1.0 { 5 } else { 4 };
         let semicolon = self.semicolon_comments == Some(true);
@@ -1023,6 +1044,10 @@ impl Emitter {
             write_number(t, dev, dd, false);
             t.push(b' ');
             t.extend_from_slice(unit);
+            if let Some(u) = u {
+                t.extend_from_slice(b" U ");
+                write_number(t, u, dd, false);
+            }
             // Every part that is non-zero at the printed precision; the
             // dynamic one is a vibration amplitude (not in `dev`, not
             // compensated).

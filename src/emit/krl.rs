@@ -142,7 +142,10 @@ pub fn rewrite(
     files: &[&File],
     steps: &[RobotStep],
     solved: &[Solved],
-    robot: &Robot,
+    (robot, u): (
+        &Robot,
+        Option<&crate::predict::uncertainty::BlockUncertainty>,
+    ),
     how: KrlWrite,
 ) -> Result<(Vec<String>, Vec<Warning>)> {
     let found: Vec<_> = files.iter().map(|f| aggregates(f)).collect();
@@ -207,6 +210,12 @@ pub fn rewrite(
                 .map_or(0, |l| l.span.end);
             let mut c = String::from(" ; ");
             write_dev_comment(&mut c, &target.deviation);
+            use crate::predict::robot_uncertainty::{push_u, target_u_mm};
+            let dev = target.deviation.total.pos_mm;
+            push_u(
+                &mut c,
+                u.and_then(|u| target_u_mm(u, &target.q_programmed, &dev)),
+            );
             annotations.push_str(end..end, &c);
         }
     }

@@ -516,7 +516,7 @@ impl<'w> ReportWriter<'w> {
     /// The effects the rows state an uncertainty for (empty: no U columns).
     fn u_effects(&self) -> Vec<&'static str> {
         match &self.uncertainty {
-            Some(u) if self.layout.kind == "gcode" => u.effects(),
+            Some(u) => u.effects(),
             _ => Vec::new(),
         }
     }
@@ -701,6 +701,11 @@ impl<'w> ReportWriter<'w> {
     fn robot_row(&mut self, r: &Row, t: &RobotMove) -> Result<()> {
         let d = &t.deviation;
         let programmed_mm = [r.commanded[0], r.commanded[1], r.commanded[2]];
+        self.row_u = self
+            .uncertainty
+            .as_ref()
+            .zip(t.q_rad)
+            .and_then(|(u, q)| u.robot(&q, &d.total.pos_mm));
         self.entry(&Entry {
             line: r.line,
             motion: r.motion,

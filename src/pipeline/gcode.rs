@@ -763,7 +763,9 @@ impl<'j, 'm, 'o, 'r> WriteStage<'j, 'm, 'o, 'r> {
             job,
             file,
             solving,
-            emitter: Emitter::new(job.emit).with_tolerance(job.settings.tolerance_mm),
+            emitter: Emitter::new(job.emit)
+                .with_tolerance(job.settings.tolerance_mm)
+                .with_uncertainty(job.predictor.and_then(|p| p.uncertainty).cloned()),
             out,
             rows,
             out_buf: Vec::with_capacity(1 << 20),

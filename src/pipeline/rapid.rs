@@ -1967,6 +1967,7 @@ impl Rewriter<'_> {
                 duration_s: seg.duration_s,
                 power_w: seg.power_w,
                 thermal_power_w: state.power.unwrap_or([0.0; 6]),
+                q_rad: None,
             }),
         }
     }

@@ -468,7 +468,13 @@ fn row(t: &RobotTarget, c: &Compensation) -> Row {
         .via
         .as_ref()
         .map(|(v, _)| (t.work * v).translation.vector.into());
-    robot_row((t.line, t.instruction), p.into(), via, c.deviation)
+    robot_row(
+        (t.line, t.instruction),
+        p.into(),
+        via,
+        c.deviation,
+        c.q_programmed,
+    )
 }
 
 /// The report row of a reported joint target.
@@ -481,7 +487,7 @@ fn joint_row(robot: &Robot, j: &JointMove, dev: &Breakdown) -> Row {
         None => robot.tcp_pose(Model::Nominal, &j.q),
     };
     let p = pose.translation.vector;
-    robot_row((j.line, j.instruction), p.into(), None, *dev)
+    robot_row((j.line, j.instruction), p.into(), None, *dev, j.q)
 }
 
 /// A robot move's report row: its line and instruction, the programmed
@@ -491,6 +497,7 @@ fn robot_row(
     p: [f64; 3],
     via_mm: Option<[f64; 3]>,
     deviation: Breakdown,
+    q: [f64; 6],
 ) -> Row {
     Row {
         line,
@@ -507,6 +514,7 @@ fn robot_row(
             duration_s: 0.0,
             power_w: [0.0; 6],
             thermal_power_w: [0.0; 6],
+            q_rad: Some(q),
         }),
     }
 }

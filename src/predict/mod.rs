@@ -15,6 +15,7 @@
 pub mod context;
 pub mod effect;
 pub mod robot;
+pub mod robot_uncertainty;
 pub mod tool;
 pub mod uncertainty;
 

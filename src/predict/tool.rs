@@ -50,6 +50,10 @@ pub struct ToolPredictor<'m> {
     /// Job-level process settings (`None`: the machine file's force model,
     /// cold start).
     pub process: Option<&'m ProcessSetup>,
+    /// The uncertainty of the predictions from the machine file's
+    /// parameter covariance (`None`: the file carries none, or the run
+    /// does not state it).
+    pub uncertainty: Option<&'m std::sync::Arc<crate::predict::uncertainty::BlockUncertainty>>,
 }
 
 /// Job-level settings of the process effects (force model, milling
@@ -89,6 +93,18 @@ impl<'m> ToolPredictor<'m> {
             effects,
             ctx: MoveContext::default(),
             process: None,
+            uncertainty: None,
+        }
+    }
+
+    /// The same predictor stating the uncertainty `u` of its predictions.
+    pub fn with_uncertainty(
+        self,
+        u: Option<&'m std::sync::Arc<crate::predict::uncertainty::BlockUncertainty>>,
+    ) -> Self {
+        ToolPredictor {
+            uncertainty: u,
+            ..self
         }
     }
 

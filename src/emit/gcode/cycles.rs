@@ -214,7 +214,8 @@ impl Emitter {
             self.emitted[slot] = to_machine(plan, slot, v, self.emitted[slot]);
         }
         if self.opts.annotate {
-            self.annotation(block, text, res, scale, edits);
+            let cmd = plan.mv.map_or(res.end, |m| m.end);
+            self.annotation(block, text, (&cmd, res), scale, edits);
         }
         self.changed += 1;
         edits.apply(text, out);
