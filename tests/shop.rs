@@ -55,6 +55,7 @@ fn shop_programs_are_written_back_byte_for_byte_with_no_effects() {
         "plasma_no_z.nc",
         "inch_without_g20.nc",
         "linuxcnc_while_pocket.ngc",
+        "macro_words_kept.nc",
     ] {
         let input = program(name);
         let (out, stderr) = compensate(
@@ -193,6 +194,7 @@ fn compensated_subprograms_attain_every_target_when_predicted_again() {
         "fanuc_bolt_circle.nc",
         "inch_without_g20.nc",
         "linuxcnc_while_pocket.ngc",
+        "macro_words_kept.nc",
     ] {
         let dir = tempfile::tempdir().expect("tempdir");
         let input = program(name);
@@ -226,7 +228,7 @@ fn compensated_subprograms_attain_every_target_when_predicted_again() {
 }
 
 /// The Fanuc Macro B bolt circle: six holes from a `WHILE` loop, written
-/// out as it runs with the values as numbers.
+/// out as it runs with the moved values as numbers.
 #[test]
 fn a_macro_bolt_circle_is_written_out_with_its_values() {
     let dir = tempfile::tempdir().expect("tempdir");
@@ -240,7 +242,20 @@ fn a_macro_bolt_circle_is_written_out_with_its_values() {
         stderr.contains("macro program written out as it runs"),
         "{stderr}"
     );
-    assert!(!text.contains('#') && !text.contains("WHILE"), "{text}");
+    // The loop run through; its assignment lines written as they ran
+    // (the values the kept expressions read), six times in the loop.
+    assert!(!text.contains("WHILE") && !text.contains("END1"), "{text}");
+    for (line, times) in [
+        ("#1 = #1 + 1", 6),
+        ("#2 = #1 * 360. / #103", 6),
+        ("#1 = 0", 1),
+    ] {
+        assert_eq!(
+            text.lines().filter(|l| *l == line).count(),
+            times,
+            "{line}:\n{text}"
+        );
+    }
     // Six holes: six feeds down to Z-5 (each near Z-5 after compensation).
     let downs = text
         .lines()
@@ -249,6 +264,69 @@ fn a_macro_bolt_circle_is_written_out_with_its_values() {
     assert_eq!(downs, 6, "{text}");
     // The first hole at the centre (200, 150) plus the radius 60 along X.
     assert!(text.contains("G0 X259.9"), "{text}");
+}
+
+/// A macro program written out as it runs keeps every word the program
+/// wrote as an expression where the compensation does not move it, and
+/// the assignment lines that give the expressions their values (run in
+/// order, the loop statements left out); a number replaces an expression
+/// only where the word moves. The values by hand (tests/shop/
+/// macro_words_kept.nc, `#1` = 0, 1, 2): X 100/150/200 and 120/170/220,
+/// Y 50, Z 5 and -2, F 300 and 600; no literal word of the program has
+/// one of these values under its letter.
+#[test]
+fn macro_words_not_moved_keep_their_expressions() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    // The static effect moves some words and not others on this machine.
+    let (out, _) = compensate(
+        &program("macro_words_kept.nc"),
+        dir.path(),
+        &["--effects", "static", "--annotate", "none"],
+    );
+    let text = String::from_utf8(out).expect("utf-8");
+    let body: Vec<&str> = text.lines().filter(|l| !l.starts_with('(')).collect();
+    assert!(!text.contains("WHILE") && !text.contains("END1"), "{text}");
+    for line in ["#100 = 5. (CLEARANCE)", "#101 = 300. (FEED)", "#1 = 0"] {
+        assert_eq!(
+            body.iter().filter(|l| **l == line).count(),
+            1,
+            "{line}:\n{text}"
+        );
+    }
+    assert_eq!(
+        body.iter().filter(|l| **l == "#1 = #1 + 1").count(),
+        3,
+        "{text}"
+    );
+    let by_hand: [(char, &[f64]); 4] = [
+        ('X', &[100.0, 150.0, 200.0, 120.0, 170.0, 220.0]),
+        ('Y', &[50.0]),
+        ('Z', &[5.0, -2.0]),
+        ('F', &[300.0, 600.0]),
+    ];
+    let mut numbers = 0;
+    for w in body.iter().flat_map(|l| l.split_whitespace()) {
+        let Some((letter, values)) = by_hand.iter().find(|(c, _)| w.starts_with(*c)) else {
+            continue;
+        };
+        let Ok(v) = w[1..].parse::<f64>() else {
+            continue;
+        };
+        numbers += 1;
+        assert!(
+            !values.contains(&v),
+            "{letter}{v}: an expression not moved written as its number:\n{text}"
+        );
+    }
+    // Feeds never move: every F as the program wrote it.
+    assert_eq!(text.matches(" F#101").count(), 3, "{text}");
+    assert_eq!(text.matches(" F[#101 * 2]").count(), 3, "{text}");
+    // Both: axis expressions kept, and moved words written as numbers.
+    assert!(
+        text.contains(" Z#100") && text.contains("X[100. + #1 * 50.]"),
+        "{text}"
+    );
+    assert!(numbers >= 6, "{numbers} moved words:\n{text}");
 }
 
 /// The LinuxCNC pocket of three step-downs by an O-word `while` loop, an
@@ -269,8 +347,11 @@ fn a_linuxcnc_while_pocket_is_written_out_as_it_runs() {
         stderr.contains("macro program written out as it runs"),
         "{stderr}"
     );
-    assert!(
-        !text.contains("o101") && !text.contains("o102") && !text.contains('#'),
+    assert!(!text.contains("o101") && !text.contains("o102"), "{text}");
+    // The pass counter's assignment written each time it ran.
+    assert_eq!(
+        text.lines().filter(|l| l.trim() == "#1 = [#1 + 1]").count(),
+        3,
         "{text}"
     );
     // The depth words, as numbers near the programmed ones, never deeper

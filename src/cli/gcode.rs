@@ -617,7 +617,7 @@ pub fn compensate(
 fn subprogram_note(w: Written) -> String {
     if let Some(lines) = w.flattened {
         return format!(
-            "; macro program written out as it runs ({lines} lines: loops and macro calls run through, values known offline written as numbers)"
+            "; macro program written out as it runs ({lines} lines: loops and macro calls run through, values known offline written as numbers where the compensation moves them)"
         );
     }
     let plural =

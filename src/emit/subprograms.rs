@@ -16,8 +16,8 @@
 
 use std::collections::HashMap;
 
-use crate::program::gcode::strip_eol;
-use crate::program::gcode::subprograms::{DefKind, Expansion};
+use crate::program::gcode::subprograms::{DefKind, Expansion, Kept};
+use crate::program::gcode::{Block, parse_line, strip_eol};
 
 /// The output of each run line: `bytes`, cut at `marks` (where the output
 /// of trace entry `k` ends).
@@ -359,10 +359,28 @@ fn flat(exp: &Expansion, text: &[u8], out: Outputs) -> (Vec<u8>, Written) {
     }
     let mut buf = Vec::with_capacity(out.bytes.len() + text.len() / 4);
     let mut lines = 0;
-    for k in 0..exp.trace.len() {
+    let mut statements = exp.statements.iter().peekable();
+    for k in 0..=exp.trace.len() {
+        // The assignment lines that ran before this block.
+        while let Some(&(_, i)) = statements.next_if(|s| s.0 <= k) {
+            let line = exp.line(text, i);
+            buf.extend_from_slice(line);
+            if !line.ends_with(b"\n") {
+                buf.push(b'\n');
+            }
+            lines += 1;
+        }
+        if k == exp.trace.len() {
+            break;
+        }
         let e = out.entry(k);
+        let e = match (exp.kept.get(&k), exp.synth.get(&k)) {
+            (Some(kept), Some(synth)) => with_expressions(e, synth, kept)
+                .map_or(std::borrow::Cow::Borrowed(e), std::borrow::Cow::Owned),
+            _ => std::borrow::Cow::Borrowed(e),
+        };
         lines += e.iter().filter(|&&c| c == b'\n').count();
-        buf.extend_from_slice(e);
+        buf.extend_from_slice(&e);
     }
     if let Some(end) = exp.main_end {
         for i in end + 1..exp.lines.len() {
@@ -382,6 +400,64 @@ fn flat(exp: &Expansion, text: &[u8], out: Outputs) -> (Vec<u8>, Written) {
             ..Written::default()
         },
     )
+}
+
+/// The output `e` of a block the program wrote with expressions, run as
+/// `synth` (its values as numbers): the expressions of `kept` written
+/// back on the block's own line (the first of `e` with every word letter
+/// of the block, as often) where its number is still the one `synth`
+/// wrote, that is where the compensation does not move the word (the
+/// `n`-th word of a letter in `synth` is the `n`-th of the line). `None`
+/// when no line of `e` is the block's own.
+fn with_expressions(e: &[u8], synth: &[u8], kept: &[Kept]) -> Option<Vec<u8>> {
+    let synth = strip_eol(synth);
+    let mut written = Block::default();
+    parse_line(synth, 1, "", &mut written).ok()?;
+    // The `n`-th word of its letter: (letter, n).
+    let nth = |b: &Block| {
+        let mut seen = [0u32; 256];
+        b.words
+            .iter()
+            .map(|w| {
+                seen[w.letter as usize] += 1;
+                (w.letter, seen[w.letter as usize])
+            })
+            .collect::<Vec<_>>()
+    };
+    let want = nth(&written);
+    let mut start = 0;
+    for line in e.split_inclusive(|&c| c == b'\n') {
+        let own = strip_eol(line);
+        let mut block = Block::default();
+        let words = if parse_line(own, 1, "", &mut block).is_ok() {
+            nth(&block)
+        } else {
+            Vec::new()
+        };
+        if want.iter().all(|k| words.contains(k)) {
+            let mut out = e[..start].to_vec();
+            let mut at = 0;
+            for (w, key) in written.words.iter().zip(&want) {
+                let expr = kept.iter().find(|(r, _)| *r == (w.num_start, w.end));
+                let Some((_, expr)) = expr else { continue };
+                let Some(o) = words.iter().position(|k| k == key).map(|p| &block.words[p]) else {
+                    continue;
+                };
+                // Words in their order: one written before the last
+                // written back stays as it is.
+                if w.number_text(synth) == o.number_text(own) && o.num_start as usize >= at {
+                    out.extend_from_slice(&own[at..o.num_start as usize]);
+                    out.extend_from_slice(expr);
+                    at = o.end as usize;
+                }
+            }
+            out.extend_from_slice(&line[at..]);
+            out.extend_from_slice(&e[start + line.len()..]);
+            return Some(out);
+        }
+        start += line.len();
+    }
+    None
 }
 
 /// A nested call in a compared body: its definition, key and count.

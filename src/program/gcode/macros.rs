@@ -188,13 +188,27 @@ fn digit(t: &[u8], i: usize) -> Option<u32> {
     (c.is_ascii_digit() && !next.is_some_and(u8::is_ascii_digit)).then(|| u32::from(c - b'0'))
 }
 
+/// One expression word value replaced by [`substitute`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Value {
+    /// Byte range of the number written in the output.
+    pub out: (u32, u32),
+    /// Byte range of the expression in the input, its sign included
+    /// (`-#1`).
+    pub expr: (u32, u32),
+    /// Its value.
+    pub value: f64,
+}
+
 /// `text` with every expression word value (`#24`, `-#1`, `[#1 + 2]`,
 /// `#[#1 + 1]`) replaced by its value from `eval`, written as a number the
-/// word syntax reads; comments and everything else left as they are.
+/// word syntax reads; comments and everything else left as they are. With
+/// it, where each value was and where its number is.
 pub fn substitute(
     text: &[u8],
     eval: &dyn Fn(&[u8]) -> Result<f64, String>,
-) -> Result<Vec<u8>, String> {
+) -> Result<(Vec<u8>, Vec<Value>), String> {
+    let mut values = Vec::new();
     let mut out = Vec::with_capacity(text.len() + 8);
     let mut i = 0;
     let mut letter = b' ';
@@ -232,10 +246,16 @@ pub fn substitute(
         if c == b'-' {
             v = -v;
         }
+        let at = out.len() as u32;
         out.extend_from_slice(number(letter, v).as_bytes());
+        values.push(Value {
+            out: (at, out.len() as u32),
+            expr: (i as u32, (start + len) as u32),
+            value: v,
+        });
         i = start + len;
     }
-    Ok(out)
+    Ok((out, values))
 }
 
 /// Length of the value at the start of `t`: `#digits`, `#[…]` or `[…]`.
@@ -313,9 +333,28 @@ mod tests {
                 }
             })
         };
-        let got = substitute(b"G1 X#1 Y-#1 Z[#1 * 2] F100. (AT #1)", &vars).unwrap();
+        let text = b"G1 X#1 Y-#1 Z[#1 * 2] F100. (AT #1)";
+        let (got, values) = substitute(text, &vars).unwrap();
         assert_eq!(got, b"G1 X2.5 Y-2.5 Z5. F100. (AT #1)");
-        let got = substitute(b"G[#1 - 1.5]", &vars).unwrap();
+        let spans: Vec<(&[u8], &[u8], f64)> = values
+            .iter()
+            .map(|v| {
+                (
+                    &got[v.out.0 as usize..v.out.1 as usize],
+                    &text[v.expr.0 as usize..v.expr.1 as usize],
+                    v.value,
+                )
+            })
+            .collect();
+        assert_eq!(
+            spans,
+            [
+                (&b"2.5"[..], &b"#1"[..], 2.5),
+                (b"-2.5", b"-#1", -2.5),
+                (b"5.", b"[#1 * 2]", 5.0)
+            ]
+        );
+        let (got, _) = substitute(b"G[#1 - 1.5]", &vars).unwrap();
         assert_eq!(got, b"G1");
         assert_eq!(substitute(b"X#7", &vars).unwrap_err(), "#7");
         assert_eq!(number(b'X', 1.0 / 3.0), "0.3333");

@@ -60,6 +60,39 @@ impl State {
     fn value(&self, text: &[u8]) -> Result<f64, String> {
         super::expr::eval(text, &|n| self.lookup(n))
     }
+
+    /// The value of a word's expression with its sign (`-#1`).
+    fn signed(&self, text: &[u8]) -> Result<f64, String> {
+        match text.first() {
+            Some(b'-') => self.value(&text[1..]).map(|v| -v),
+            Some(b'+') => self.value(&text[1..]),
+            _ => self.value(text),
+        }
+    }
+
+    /// Sets variable `n` (as evaluated) to `v`, or says why it cannot be
+    /// set.
+    fn set(&mut self, n: f64, v: f64) -> Result<(), String> {
+        if n.fract() != 0.0 || !(0.0..1e6).contains(&n) {
+            return Err(format!("`#{n}` is no variable"));
+        }
+        let n = n as u32;
+        match n {
+            1..=33 => {
+                if let Some(f) = self.frames.last_mut() {
+                    f[n as usize] = Some(v);
+                }
+                Ok(())
+            }
+            100..=199 | 500..=999 => {
+                self.commons.insert(n, v);
+                Ok(())
+            }
+            _ => Err(format!(
+                "`#{n}` is a system variable: setting it acts on the control at run time"
+            )),
+        }
+    }
 }
 
 /// The local variable each `G65` argument letter sets (Fanuc argument
@@ -128,12 +161,23 @@ impl Resolver<'_> {
         let span = |r: (u32, u32)| &line[r.0 as usize..r.1 as usize];
         match st {
             Statement::Assign { var, value } => {
-                self.assign(i, span(var), span(value))?;
+                let (n, v) = self.assign(i, span(var), span(value))?;
+                if self.control_assigns((span(var), span(value)), n, v) {
+                    self.write_statement(i);
+                }
                 Ok(i + 1)
             }
             Statement::IfThen { cond, var, value } => {
+                let on_control = self.control.value(span(cond)).map(|c| c != 0.0);
                 if self.truth(i, span(cond))? {
-                    self.assign(i, span(var), span(value))?;
+                    let (n, v) = self.assign(i, span(var), span(value))?;
+                    if on_control == Ok(true)
+                        && self.control_assigns((span(var), span(value)), n, v)
+                    {
+                        self.write_statement(i);
+                    }
+                } else if on_control == Ok(false) {
+                    self.write_statement(i);
                 }
                 Ok(i + 1)
             }
@@ -154,7 +198,7 @@ impl Resolver<'_> {
             }
             Statement::End { id } => self.find_loop(i, id, false),
             Statement::Words => {
-                let text =
+                let (text, values) =
                     substitute(&line, &|e| self.macros.value(e)).map_err(|m| self.err(i, m))?;
                 let mut block = Block::default();
                 parse_line(&text, i + 1, self.file, &mut block)?;
@@ -178,6 +222,19 @@ impl Resolver<'_> {
                     let k = self.exp.trace.len();
                     self.push(i, call)?;
                     self.exp.synth.insert(k, text);
+                    // Expressions the control evaluates to the same value
+                    // in the program written out as it runs.
+                    let kept: Vec<_> = values
+                        .iter()
+                        .filter_map(|v| {
+                            let expr = &line[v.expr.0 as usize..v.expr.1 as usize];
+                            let same = self.control.signed(expr).is_ok_and(|c| c == v.value);
+                            same.then(|| (v.out, expr.to_vec()))
+                        })
+                        .collect();
+                    if !kept.is_empty() {
+                        self.exp.kept.insert(k, kept);
+                    }
                 }
                 Ok(i + 1)
             }
@@ -206,32 +263,27 @@ impl Resolver<'_> {
             .map_err(|m| self.err(i, m))
     }
 
-    fn assign(&mut self, i: usize, var: &[u8], value: &[u8]) -> Result<(), Located> {
+    /// Runs `#var = value` of line `i`: the variable and its value.
+    fn assign(&mut self, i: usize, var: &[u8], value: &[u8]) -> Result<(f64, f64), Located> {
         let n = self.macros.value(var).map_err(|m| self.err(i, m))?;
         let v = self.macros.value(value).map_err(|m| self.err(i, m))?;
-        if n.fract() != 0.0 || !(0.0..1e6).contains(&n) {
-            return Err(self.err(i, format!("`#{n}` is no variable")));
-        }
-        let n = n as u32;
-        match n {
-            1..=33 => {
-                if let Some(f) = self.macros.frames.last_mut() {
-                    f[n as usize] = Some(v);
-                }
-            }
-            100..=199 | 500..=999 => {
-                self.macros.commons.insert(n, v);
-            }
-            _ => {
-                return Err(self.err(
-                    i,
-                    format!(
-                        "`#{n}` is a system variable: setting it acts on the control at run time"
-                    ),
-                ));
-            }
-        }
-        Ok(())
+        self.macros.set(n, v).map_err(|m| self.err(i, m))?;
+        Ok((n, v))
+    }
+
+    /// Whether the control, running the program written out as it runs,
+    /// finds `#n = v` in the words `#var = value` (its variables those
+    /// the written assignment lines set); when it does, it sets it.
+    fn control_assigns(&mut self, (var, value): (&[u8], &[u8]), n: f64, v: f64) -> bool {
+        self.control.value(var).is_ok_and(|c| c == n)
+            && self.control.value(value).is_ok_and(|c| c == v)
+            && self.control.set(n, v).is_ok()
+    }
+
+    /// An assignment line `i` written out with the program as it runs,
+    /// before the next block.
+    fn write_statement(&mut self, i: usize) {
+        self.exp.statements.push((self.exp.trace.len(), i));
     }
 
     /// The line of block number `target` in the range being run.

@@ -30,6 +30,10 @@ pub const MAX_DEPTH: usize = 16;
 /// Most lines a program may run once expanded.
 pub const MAX_TRACE: usize = 20_000_000;
 
+/// An expression kept as written: the byte range of its number in a
+/// synthesised block and the expression's text.
+pub type Kept = ((u32, u32), Vec<u8>);
+
 /// What a definition is.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum DefKind {
@@ -110,6 +114,14 @@ pub struct Expansion {
     /// The text a trace entry runs as, when it is not its line's: a block
     /// with macro values, each written as its number.
     pub synth: HashMap<usize, Vec<u8>>,
+    /// Where a trace entry of [`Expansion::synth`] may keep an expression
+    /// as the program wrote it: the number's byte range in the synthesised
+    /// text and the expression (the control, running the program written
+    /// out, finds the same value there).
+    pub kept: HashMap<usize, Vec<Kept>>,
+    /// Assignment lines written out with the program as it runs: (trace
+    /// entry they come before, line).
+    pub statements: Vec<(usize, usize)>,
     /// Macro statements ran: a compensated program is written out as it
     /// runs.
     pub flat: bool,
@@ -346,6 +358,7 @@ pub fn expand(text: &[u8], file: &str) -> Result<Option<Expansion>, Located> {
         repeats: HashMap::new(),
         stop: false,
         macros: super::macros_run::State::default(),
+        control: super::macros_run::State::default(),
     };
     r.definitions()?;
     r.exp.calls.push(Call {
@@ -374,6 +387,9 @@ pub(super) struct Resolver<'t> {
     pub(super) stop: bool,
     /// Macro variables and the ranges being run.
     pub(super) macros: super::macros_run::State,
+    /// The variables as the control has them running the program written
+    /// out as it runs (its assignment lines, at one call level).
+    pub(super) control: super::macros_run::State,
 }
 
 impl Resolver<'_> {
