@@ -173,6 +173,47 @@ fn group_edits(
     Ok(out)
 }
 
+/// A warning for each motion left as written whose position `P[n]`
+/// another motion compensated: the motion runs to the compensated numbers
+/// (a position is one set of numbers), which its own warning does not say.
+fn shared_position_notes(
+    program: &Program,
+    steps: &[RobotStep],
+    owner: &HashMap<Place, (usize, String)>,
+    warnings: &mut Vec<Warning>,
+) {
+    let by_line: HashMap<usize, &crate::program::tp::MnLine> =
+        program.mn.iter().map(|l| (l.line, l)).collect();
+    for step in steps {
+        let RobotStep::Left(w) = step else { continue };
+        let Some(crate::program::tp::Instruction::Move { via, target, .. }) =
+            by_line.get(&w.line).map(|l| &l.instruction)
+        else {
+            continue;
+        };
+        for r in via.iter().chain([target]).filter(|r| !r.register) {
+            let Some(p) = program.position(r.index) else {
+                continue;
+            };
+            let place = Place {
+                source: 0,
+                span: p.span.clone(),
+            };
+            if let Some((line, _)) = owner.get(&place) {
+                warnings.push(Warning {
+                    line: w.line,
+                    message: format!(
+                        "line {}: the motion is left as written but its position P[{}] is compensated for the move at line {line}: it runs to the compensated numbers",
+                        w.line, r.index
+                    ),
+                    count: 1,
+                    left: None,
+                });
+            }
+        }
+    }
+}
+
 /// Writes a run back: the new text of `text` from the compensation of each
 /// step, with the warnings of moves whose position another move
 /// compensated differently.
@@ -255,6 +296,7 @@ pub fn rewrite(
             }
         }
     }
+    shared_position_notes(program, steps, &owner, &mut warnings);
     remarks.sort_by_key(|(i, _)| *i);
     remarks.dedup_by_key(|(i, _)| *i);
     remark_edits(text, program, &remarks, &mut edits);

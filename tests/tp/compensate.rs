@@ -451,6 +451,11 @@ fn the_grammar_example_of_moves_left_as_written_names_each_reason() {
     ] {
         assert!(err.contains(reason), "{reason}: {err}");
     }
+    // Line 8 (file line 10) shares P[1] with the compensated line 4.
+    assert!(
+        err.contains("line 10: the motion is left as written but its position P[1] is compensated for the move at line 6"),
+        "{err}"
+    );
     let written = text_without_header(&read(&dir.join("left.comp.ls")));
     let (pin, pout) = (
         parse(&example, "in").expect("parses"),
