@@ -38,11 +38,14 @@ fn numbers_span_their_text(src: &str, p: &Program) -> usize {
 fn every_grammar_example_parses() {
     let md = text("grammar/tp.md");
     let examples = fenced_blocks(&md, "ls");
-    assert_eq!(examples.len(), 4);
+    assert_eq!(examples.len(), 5);
     let mut kinds = std::collections::BTreeSet::new();
     for (i, ex) in examples.iter().enumerate() {
         let p = parse(ex, "grammar/tp.md").unwrap_or_else(|e| panic!("example {}: {e}", i + 1));
         numbers_span_their_text(ex, &p);
+        if let Some((count, _)) = &p.line_count {
+            assert_eq!(*count as usize, p.mn.len(), "example {}", i + 1);
+        }
         for l in &p.mn {
             kinds.insert(match &l.instruction {
                 Instruction::Move { motion, target, .. } => {
@@ -52,6 +55,7 @@ fn every_grammar_example_parses() {
                 Instruction::UtoolNum(_) => "UTOOL_NUM".into(),
                 Instruction::FrameNumAtRunTime { .. } => "frame number at run time".into(),
                 Instruction::SetFrame { .. } => "frame set".into(),
+                Instruction::Label => "label".into(),
                 Instruction::Other => "other".into(),
             });
         }
@@ -81,6 +85,7 @@ fn every_grammar_example_parses() {
         "UTOOL_NUM",
         "frame number at run time",
         "frame set",
+        "label",
         "joint form",
         "cartesian form",
         "other",

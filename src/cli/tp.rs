@@ -138,13 +138,18 @@ pub fn compensate(a: &CompensateArgs, quiet: bool) -> Result<i32> {
     let opts = RapidOptions {
         records: a.report.is_some(),
         strict: a.program.strict,
-        ..super::rapid::rapid_options(&robot, &a.effects, false, a.decimals)?
+        ..super::rapid::rapid_options(
+            &robot,
+            &a.effects,
+            a.annotate == super::Annotate::Comment,
+            a.decimals,
+        )?
     };
     let provenance = super::machines::provenance(
         &loaded,
         super::machines::robot_effects(&opts.effects),
         None,
-        false,
+        opts.annotate,
     );
     let src = &a.program.file;
     let out = super::output::output_path(src, a.output.as_deref(), None, &[])?;
@@ -186,6 +191,7 @@ pub(super) fn compensate_to(
     let how = TpWrite {
         decimals: job.opts.format.position_decimals,
         compensate: job.opts.effects.compensates(),
+        annotate: job.opts.annotate,
     };
     let (text, warnings) = rewrite(&t.text, &t.program, &steps, &solved, job.robot, how)?;
     run.summary.warnings.extend(warnings);

@@ -4,9 +4,12 @@
 //! `W`, `P`, `R` of group `GP1`, in place, right-aligned in the width the
 //! number and the blanks before it had (the controller's columns), and its
 //! `CONFIG` when the compensated joint solution has other turn numbers.
-//! `/MN` is the input's bytes (so `/ATTR`'s `LINE_COUNT` stays right), and
-//! so is everything else: TP has no comment that could end a motion line,
-//! so the predicted deviation goes to the report only.
+//! Everything else is the input's bytes, but when annotated: TP has no
+//! comment that could end a motion line, so each compensated motion is
+//! followed by `!` remark lines (at most [`REMARK_CHARS`] characters each,
+//! as the controller keeps them) with its predicted deviation, the `/MN`
+//! lines after it renumbered and `/ATTR`'s `LINE_COUNT` raised by the
+//! lines added. Without annotation `/MN` is the input's bytes.
 //!
 //! Positions and angles get the robot's position decimals (the controller
 //! writes three); `W` and `R` are turned by whole turns to the written
@@ -17,7 +20,7 @@
 use std::collections::HashMap;
 use std::ops::Range;
 
-use crate::emit::rapid::{EditList, push_fixed};
+use crate::emit::rapid::{EditList, push_fixed, write_dev_comment};
 use crate::error::{Error, Result};
 use crate::machine::robot::Robot;
 use crate::program::euler::quaternion_to_zyx;
@@ -33,6 +36,83 @@ pub struct TpWrite {
     pub decimals: usize,
     /// Write the compensated numbers (false: a run that predicts only).
     pub compensate: bool,
+    /// Follow each compensated motion with `!` remark lines giving its
+    /// predicted deviation (the `/MN` lines after it renumbered and
+    /// `LINE_COUNT` counting them).
+    pub annotate: bool,
+}
+
+/// The most characters of a remark (`! …`) a FANUC controller keeps.
+pub const REMARK_CHARS: usize = 32;
+
+/// `text` cut at blanks into pieces of at most [`REMARK_CHARS`]
+/// characters, never before a number (a value stays with its name); a
+/// word longer than that is a piece of its own.
+pub fn remark_pieces(text: &str) -> Vec<String> {
+    let number = |w: &str| w.starts_with(|c: char| c.is_ascii_digit() || c == '-' || c == '+');
+    // A name and the numbers after it are one item.
+    let mut items: Vec<String> = Vec::new();
+    for w in text.split(' ').filter(|w| !w.is_empty()) {
+        match items.last_mut() {
+            Some(last) if number(w) => {
+                last.push(' ');
+                last.push_str(w);
+            }
+            _ => items.push(w.to_string()),
+        }
+    }
+    let mut out: Vec<String> = Vec::new();
+    let mut line = String::new();
+    for item in items {
+        let fits = line.chars().count() + 1 + item.chars().count() <= REMARK_CHARS;
+        if !line.is_empty() && !fits {
+            out.push(std::mem::take(&mut line));
+        }
+        if !line.is_empty() {
+            line.push(' ');
+        }
+        line.push_str(&item);
+    }
+    if !line.is_empty() {
+        out.push(line);
+    }
+    out
+}
+
+/// The remark lines after `/MN` instructions and the renumbering they
+/// need: `after` holds, in source order, the instruction (its index in
+/// `program.mn`) each group of remarks follows and the remarks.
+fn remark_edits(
+    text: &str,
+    program: &Program,
+    after: &[(usize, Vec<String>)],
+    edits: &mut EditList,
+) {
+    let eol = crate::emit::rapid::line_ending(text);
+    let mut inserted = 0u32;
+    let mut next = after.iter().peekable();
+    for (i, l) in program.mn.iter().enumerate() {
+        let n = l.number.saturating_add(inserted);
+        if inserted > 0 {
+            let width = l.number_span.len();
+            edits.push_str(l.number_span.clone(), &format!("{n:>width$}"));
+        }
+        while let Some((_, remarks)) = next.next_if(|(k, _)| *k == i) {
+            let mut s = String::new();
+            if !text[..l.end].ends_with('\n') {
+                s.push_str(eol);
+            }
+            for (k, r) in remarks.iter().enumerate() {
+                let m = n.saturating_add(u32::try_from(k + 1).unwrap_or(u32::MAX));
+                s.push_str(&format!("{m:>4}:  ! {r} ;{eol}"));
+            }
+            inserted = inserted.saturating_add(u32::try_from(remarks.len()).unwrap_or(u32::MAX));
+            edits.push_str(l.end..l.end, &s);
+        }
+    }
+    if let (Some((count, span)), true) = (&program.line_count, inserted > 0) {
+        edits.push_str(span.clone(), &count.saturating_add(inserted).to_string());
+    }
 }
 
 pub use crate::compensate::robot::Solved;
@@ -93,6 +173,47 @@ fn group_edits(
     Ok(out)
 }
 
+/// A warning for each motion left as written whose position `P[n]`
+/// another motion compensated: the motion runs to the compensated numbers
+/// (a position is one set of numbers), which its own warning does not say.
+fn shared_position_notes(
+    program: &Program,
+    steps: &[RobotStep],
+    owner: &HashMap<Place, (usize, String)>,
+    warnings: &mut Vec<Warning>,
+) {
+    let by_line: HashMap<usize, &crate::program::tp::MnLine> =
+        program.mn.iter().map(|l| (l.line, l)).collect();
+    for step in steps {
+        let RobotStep::Left(w) = step else { continue };
+        let Some(crate::program::tp::Instruction::Move { via, target, .. }) =
+            by_line.get(&w.line).map(|l| &l.instruction)
+        else {
+            continue;
+        };
+        for r in via.iter().chain([target]).filter(|r| !r.register) {
+            let Some(p) = program.position(r.index) else {
+                continue;
+            };
+            let place = Place {
+                source: 0,
+                span: p.span.clone(),
+            };
+            if let Some((line, _)) = owner.get(&place) {
+                warnings.push(Warning {
+                    line: w.line,
+                    message: format!(
+                        "line {}: the motion is left as written but its position P[{}] is compensated for the move at line {line}: it runs to the compensated numbers",
+                        w.line, r.index
+                    ),
+                    count: 1,
+                    left: None,
+                });
+            }
+        }
+    }
+}
+
 /// Writes a run back: the new text of `text` from the compensation of each
 /// step, with the warnings of moves whose position another move
 /// compensated differently.
@@ -112,10 +233,26 @@ pub fn rewrite(
     let mut edits = EditList::new();
     let mut owner: HashMap<Place, (usize, String)> = HashMap::new();
     let mut warnings = Vec::new();
+    let by_line: HashMap<usize, usize> = program
+        .mn
+        .iter()
+        .enumerate()
+        .map(|(i, l)| (l.line, i))
+        .collect();
+    let mut remarks: Vec<(usize, Vec<String>)> = Vec::new();
     for (step, result) in steps.iter().zip(solved) {
         let (RobotStep::Target(t), Some((target, via))) = (step, result) else {
             continue;
         };
+        if how.annotate {
+            let mut c = String::new();
+            write_dev_comment(&mut c, &target.deviation);
+            if let Some(&i) = by_line.get(&t.line) {
+                if remarks.last().is_none_or(|(k, _)| *k != i) {
+                    remarks.push((i, remark_pieces(&c)));
+                }
+            }
+        }
         if !how.compensate {
             continue;
         }
@@ -159,6 +296,10 @@ pub fn rewrite(
             }
         }
     }
+    shared_position_notes(program, steps, &owner, &mut warnings);
+    remarks.sort_by_key(|(i, _)| *i);
+    remarks.dedup_by_key(|(i, _)| *i);
+    remark_edits(text, program, &remarks, &mut edits);
     Ok((edits.apply(text)?, warnings))
 }
 
@@ -180,5 +321,27 @@ mod tests {
         let (_, s) = number_edit(text, &n, -123456.5, 3).expect("finite");
         assert_eq!(s, " -123456.500");
         assert!(number_edit(text, &n, f64::NAN, 3).is_err());
+    }
+
+    #[test]
+    fn remarks_are_cut_at_names_within_the_controllers_length() {
+        let dev = "dev 1.140 mm (kin 0.000 therm 0.000 grav 1.140 proc 0.000 vib 0.0000)";
+        let pieces = remark_pieces(dev);
+        assert_eq!(
+            pieces,
+            [
+                "dev 1.140 mm (kin 0.000",
+                "therm 0.000 grav 1.140",
+                "proc 0.000 vib 0.0000)"
+            ]
+        );
+        assert_eq!(pieces.join(" "), dev);
+        // A piece longer than a remark stays whole rather than split a word.
+        let long = "x".repeat(REMARK_CHARS + 3);
+        assert_eq!(
+            remark_pieces(&format!("a {long} b")),
+            ["a", long.as_str(), "b"]
+        );
+        assert!(remark_pieces("").is_empty());
     }
 }

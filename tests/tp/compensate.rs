@@ -240,7 +240,14 @@ fn pick_and_place_compensates_every_position_known_offline() {
     let (_d, dir) = scratch(&["pick_place.ls"], FRAMES);
     let (code, _, err) = run(
         &dir,
-        &["compensate", "pick_place.ls", "--machine", "cell.yaml"],
+        &[
+            "compensate",
+            "pick_place.ls",
+            "--machine",
+            "cell.yaml",
+            "--annotate",
+            "none",
+        ],
     );
     assert_eq!(code, 0, "{err}");
     // L P[2] and J P[2] are one position; J P[1] twice a joint target; PR[5]
@@ -271,7 +278,14 @@ fn the_weld_path_compensates_its_circles_via_and_end_points() {
     let (_d, dir) = scratch(&["weld_seam.ls"], FRAMES);
     let (code, _, err) = run(
         &dir,
-        &["compensate", "weld_seam.ls", "--machine", "cell.yaml"],
+        &[
+            "compensate",
+            "weld_seam.ls",
+            "--machine",
+            "cell.yaml",
+            "--annotate",
+            "none",
+        ],
     );
     assert_eq!(code, 0, "{err}");
     let src_in = read(&dir.join("weld_seam.ls"));
@@ -395,6 +409,8 @@ fn report_and_batch_read_tp_programs() {
             "cell.yaml",
             "--out-dir",
             "out",
+            "--annotate",
+            "none",
         ],
     );
     assert_eq!(code, 0, "{err}");
@@ -420,23 +436,238 @@ fn the_grammar_example_of_moves_left_as_written_names_each_reason() {
     assert_eq!(code, 0, "{err}");
     assert_eq!(
         out.trim(),
-        "left.ls: FANUC TP program LEFT, 4 motions (1 targets, 0 joint targets, 3 left as written)"
+        "left.ls: FANUC TP program LEFT, 5 motions (1 targets, 0 joint targets, 4 left as written)"
     );
     let (code, _, err) = run(&dir, &["compensate", "left.ls", "--machine", "cell.yaml"]);
     assert_eq!(code, 0, "{err}");
+    // Each reason of a motion left as written is named, with the line
+    // of the file (`/MN` line n is file line n + 2) that sets or selects
+    // the frame.
     for reason in [
-        "UFRAME[2] is set at line 4 at run time",
+        "UFRAME[2] is set by the program at line 3, at run time",
         "`TOOL_OFFSET` displaces the position at run time",
         "P[9] is not in /POS",
+        "UFRAME_NUM is set from a register at line 14: the user frame of the motion is known at run time only",
     ] {
         assert!(err.contains(reason), "{reason}: {err}");
     }
+    // Line 8 (file line 10) shares P[1] with the compensated line 4.
+    assert!(
+        err.contains("line 10: the motion is left as written but its position P[1] is compensated for the move at line 6"),
+        "{err}"
+    );
     let written = text_without_header(&read(&dir.join("left.comp.ls")));
     let (pin, pout) = (
         parse(&example, "in").expect("parses"),
         parse(&written, "out").expect("parses"),
     );
     lands(&pin, &pout, 1);
-    let p2 = |p: &Program, s: &str| s[p.position(2).expect("P[2]").span.clone()].to_string();
-    assert_eq!(p2(&pin, &example), p2(&pout, &written));
+    for index in [2, 3] {
+        let p = |p: &Program, s: &str| s[p.position(index).expect("P").span.clone()].to_string();
+        assert_eq!(p(&pin, &example), p(&pout, &written), "P[{index}]");
+    }
 }
+
+/// A program of `mn` (the `/MN` lines) and the positions of the LEFT
+/// example of grammar/tp.md (P[1], P[3] in UF 1, P[2] in UF 2).
+fn with_positions(mn: &str) -> String {
+    let md = text("grammar/tp.md");
+    let left = fenced_blocks(&md, "ls")
+        .into_iter()
+        .find(|b| b.starts_with("/PROG  LEFT"))
+        .expect("the LEFT example");
+    let pos = &left[left.find("/POS").expect("/POS")..];
+    format!("/PROG  FRAMES\n/MN\n{mn}{pos}")
+}
+
+#[test]
+fn frames_the_program_sets_or_selects_by_register_leave_their_motions() {
+    // (the /MN lines, the motions compensated, the reasons named).
+    let cases: [(&str, usize, &[&str]); 5] = [
+        // A frame set after the motion: the value outlives the program.
+        (
+            "   1:  UTOOL_NUM=2 ;\n   2:  UFRAME_NUM=1 ;\n   3:L P[1] 250mm/sec FINE    ;\n   4:  UFRAME[1]=PR[3] ;\n",
+            0,
+            &["UFRAME[1] is set by the program at line 6, at run time"],
+        ),
+        // A tool frame set: every motion with UT 2.
+        (
+            "   1:  UTOOL[2]=PR[1] ;\n   2:  UFRAME_NUM=1 ;\n   3:L P[1] 250mm/sec FINE    ;\n   4:L P[3] 250mm/sec FINE    ;\n",
+            0,
+            &["UTOOL[2] is set by the program at line 3, at run time"],
+        ),
+        // A register selection after a motion in a program without
+        // labels and with UFRAME_NUM=1 before it: only the motion after.
+        (
+            "   1:  UTOOL_NUM=2 ;\n   2:  UFRAME_NUM=1 ;\n   3:L P[1] 250mm/sec FINE    ;\n   4:  UFRAME_NUM=R[2] ;\n   5:L P[3] 250mm/sec FINE    ;\n",
+            1,
+            &["UFRAME_NUM is set from a register at line 6"],
+        ),
+        // Before the first UFRAME_NUM=n, the register's frame may be in
+        // force (the program ran before).
+        (
+            "   1:  UTOOL_NUM=2 ;\n   2:L P[1] 250mm/sec FINE    ;\n   3:  UFRAME_NUM=R[2] ;\n   4:  UFRAME_NUM=1 ;\n   5:L P[3] 250mm/sec FINE    ;\n",
+            1,
+            &["UFRAME_NUM is set from a register at line 5"],
+        ),
+        // A tool number from a register.
+        (
+            "   1:  UTOOL_NUM=R[7] ;\n   2:  UFRAME_NUM=1 ;\n   3:L P[1] 250mm/sec FINE    ;\n",
+            0,
+            &[
+                "UTOOL_NUM is set from a register at line 3: the tool frame of the motion is known at run time only",
+            ],
+        ),
+    ];
+    for (mn, compensated, reasons) in cases {
+        let (_d, dir) = scratch(&[], FRAMES);
+        std::fs::write(dir.join("f.ls"), with_positions(mn)).expect("write");
+        let (code, _, err) = run(&dir, &["compensate", "f.ls", "--machine", "cell.yaml"]);
+        assert_eq!(code, 0, "{mn}: {err}");
+        let moves = if compensated == 1 { "move" } else { "moves" };
+        assert!(
+            err.contains(&format!("{compensated} {moves} compensated")),
+            "{mn}: {err}"
+        );
+        for r in reasons {
+            assert!(err.contains(r), "{mn}: {r}: {err}");
+        }
+        let (code, _, err) = run(
+            &dir,
+            &["check", "f.ls", "--machine", "cell.yaml", "--strict"],
+        );
+        assert_eq!(code, 2, "{mn}: --strict refuses: {err}");
+    }
+}
+
+/// The remark lines `! …` of `/MN` that are not in `input`, in order.
+fn remarks(mn: &str) -> Vec<(u32, String)> {
+    mn.lines()
+        .filter_map(|l| {
+            let (n, rest) = l.split_once(':')?;
+            let r = rest.trim().strip_prefix("! ")?.strip_suffix(" ;")?;
+            Some((n.trim().parse().ok()?, r.to_string()))
+        })
+        .collect()
+}
+
+#[test]
+fn annotations_are_remark_lines_numbered_and_counted() {
+    let (_d, dir) = scratch(&["pick_place.ls", "weld_seam.ls"], FRAMES);
+    for (stem, motions) in [("pick_place", 4), ("weld_seam", 9)] {
+        let (code, _, err) = run(
+            &dir,
+            &[
+                "compensate",
+                &format!("{stem}.ls"),
+                "--machine",
+                "cell.yaml",
+            ],
+        );
+        assert_eq!(code, 0, "{err}");
+        let src_in = read(&dir.join(format!("{stem}.ls")));
+        let src_out = text_without_header(&read(&dir.join(format!("{stem}.comp.ls"))));
+        let (pin, pout) = (
+            parse(&src_in, "in").expect("parses"),
+            parse(&src_out, "out").expect("parses"),
+        );
+        // LINE_COUNT counts the lines, numbered 1, 2, … in order.
+        let (count, _) = pout.line_count.clone().expect("LINE_COUNT");
+        assert_eq!(count as usize, pout.mn.len(), "{stem}");
+        let numbers: Vec<u32> = pout.mn.iter().map(|l| l.number).collect();
+        assert_eq!(numbers, (1..=count).collect::<Vec<_>>(), "{stem}");
+        // The remarks added: three per compensated motion, each at most 32
+        // characters, together the words of a RAPID annotation.
+        let before: Vec<String> = remarks(mn(&src_in)).into_iter().map(|(_, r)| r).collect();
+        let added: Vec<(u32, String)> = remarks(mn(&src_out))
+            .into_iter()
+            .filter(|(_, r)| !before.contains(r))
+            .collect();
+        assert_eq!(added.len(), 3 * motions, "{stem}: {added:?}");
+        assert_eq!(count as usize, pin.mn.len() + added.len(), "{stem}");
+        for chunk in added.chunks(3) {
+            for (_, r) in chunk {
+                assert!(r.chars().count() <= 32, "{stem}: {r}");
+            }
+            let text: Vec<&str> = chunk.iter().map(|(_, r)| r.as_str()).collect();
+            let joined = text.join(" ");
+            let shape: Vec<&str> = joined
+                .split(' ')
+                .filter(|w| !w.starts_with(|c: char| c.is_ascii_digit()))
+                .collect();
+            assert_eq!(
+                shape,
+                ["dev", "mm", "(kin", "therm", "grav", "proc", "vib"],
+                "{stem}: {joined}"
+            );
+            let value = |w: &str| -> String {
+                let at = joined.find(w).expect(w) + w.len() + 1;
+                joined[at..]
+                    .split(' ')
+                    .next()
+                    .unwrap_or("")
+                    .trim_end_matches(')')
+                    .to_string()
+            };
+            assert_eq!(value("dev").split('.').nth(1).map(str::len), Some(3));
+            assert_eq!(value("vib").split('.').nth(1).map(str::len), Some(4));
+        }
+        // Without the remarks and their numbers the /MN is the input's.
+        let strip = |s: &str| -> Vec<String> {
+            s.lines()
+                .filter(|l| remarks(l).first().is_none_or(|(_, r)| before.contains(r)))
+                .map(|l| l.split_once(':').map_or(l, |(_, r)| r).to_string())
+                .collect()
+        };
+        assert_eq!(strip(mn(&src_out)), strip(mn(&src_in)), "{stem}");
+        // The remarks follow the motion they annotate: the line before a
+        // first remark ends a motion (for a circle, its end point line).
+        let lines: Vec<&str> = mn(&src_out).lines().collect();
+        for (i, l) in lines.iter().enumerate() {
+            let first = remarks(l)
+                .first()
+                .is_some_and(|(_, r)| r.starts_with("dev "));
+            if first {
+                let prev = lines[i - 1];
+                assert!(
+                    prev.contains("P[") && prev.trim_end().ends_with(';'),
+                    "{stem}: {prev}"
+                );
+            }
+        }
+    }
+}
+
+#[test]
+fn annotations_give_the_reports_deviation() {
+    let (_d, dir) = scratch(&["weld_seam.ls"], FRAMES);
+    let (code, _, err) = run(
+        &dir,
+        &[
+            "compensate",
+            "weld_seam.ls",
+            "--machine",
+            "cell.yaml",
+            "--report",
+            "r.json",
+        ],
+    );
+    assert_eq!(code, 0, "{err}");
+    let out = read(&dir.join("weld_seam.comp.ls"));
+    let devs: Vec<f64> = remarks(mn(&out))
+        .iter()
+        .filter_map(|(_, r)| r.strip_prefix("dev ")?.split(' ').next()?.parse().ok())
+        .collect();
+    assert_eq!(devs.len(), 9);
+    let report: serde_json::Value = serde_json::from_str(&read(&dir.join("r.json"))).expect("json");
+    let max = report
+        .pointer("/summary/max_mm")
+        .and_then(serde_json::Value::as_f64)
+        .expect("the report's largest deviation");
+    let largest = devs.iter().copied().fold(0.0, f64::max);
+    // The report rounds to 5 decimals, the remark to 3.
+    assert!((largest - max).abs() <= ROUNDING_MM, "{largest} vs {max}");
+}
+
+/// Half a unit of the remark's third decimal plus the report's rounding.
+const ROUNDING_MM: f64 = 0.0005 + 0.000005;

@@ -11,7 +11,9 @@
 //! (its value is in the controller), a motion with `Offset`, `Tool_Offset`,
 //! `VOFFSET` or `INC` (a displacement known at run time), a position not
 //! in `/POS`, a frame the robot file does not give or the program sets
-//! (`UFRAME[i]=…`), a position whose `UF`/`UT` differs from the
+//! anywhere (`UFRAME[i]=…`, `UTOOL[i]=…`), a frame number in force that a
+//! register gave (`UFRAME_NUM=R[i]`: after it, before the first
+//! `UFRAME_NUM=n` and after a label `LBL[i]`), a position whose `UF`/`UT` differs from the
 //! `UFRAME_NUM`/`UTOOL_NUM` the program selected before it (the controller
 //! stops with a frame mismatch), extended axes (`E1`…).
 //!
@@ -44,15 +46,33 @@ pub fn motion_name(m: Motion) -> &'static str {
     }
 }
 
+/// A frame selection in force: a number, or one read from a register at
+/// a line (known at run time only).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Selected {
+    /// `UFRAME_NUM=n`.
+    Number(u32),
+    /// `UFRAME_NUM=R[i]` at this line.
+    Register(usize),
+}
+
 /// What the instructions before a motion set.
 #[derive(Default)]
 struct State {
-    /// `UFRAME_NUM` selected (`Some(None)`: from a register).
-    uframe: Option<Option<u32>>,
-    /// `UTOOL_NUM` selected.
-    utool: Option<Option<u32>>,
-    /// Frames the program set (`UFRAME[i]=…`): (user, index) → line.
+    /// `UFRAME_NUM` in force (`None`: the frame the program starts in).
+    uframe: Option<Selected>,
+    /// `UTOOL_NUM` in force.
+    utool: Option<Selected>,
+    /// Frames the program sets anywhere (`UFRAME[i]=…`): (user, index) →
+    /// the first line. A frame's value outlives the program, and a jump
+    /// may come back to a motion before the line, so every motion in the
+    /// frame is concerned.
     set: HashMap<(bool, u32), usize>,
+    /// The first register selection of the user frame and of the tool
+    /// frame anywhere in the program: in force at its start (the program
+    /// may have run before) and after every label (a jump may come from
+    /// after it).
+    register: [Option<usize>; 2],
 }
 
 /// The pose of a Cartesian group, `None` without all of `X … R`.
@@ -116,16 +136,36 @@ pub fn resolve(program: &Program, text: &str, frames: &FanucFrames) -> Vec<Robot
     let positions: HashMap<u32, &Position> =
         program.positions.iter().map(|p| (p.index, p)).collect();
     let mut st = State::default();
-    let mut steps = Vec::new();
     for l in &program.mn {
         match &l.instruction {
-            Instruction::UframeNum(n) => st.uframe = Some(Some(*n)),
-            Instruction::UtoolNum(n) => st.utool = Some(Some(*n)),
-            Instruction::FrameNumAtRunTime { user: true } => st.uframe = Some(None),
-            Instruction::FrameNumAtRunTime { user: false } => st.utool = Some(None),
             Instruction::SetFrame { user, index } => {
                 st.set.entry((*user, *index)).or_insert(l.line);
             }
+            Instruction::FrameNumAtRunTime { user } => {
+                st.register[usize::from(!*user)].get_or_insert(l.line);
+            }
+            _ => {}
+        }
+    }
+    let at_register = |k: usize| st.register[k].map(Selected::Register);
+    st.uframe = at_register(0);
+    st.utool = at_register(1);
+    let mut steps = Vec::new();
+    for l in &program.mn {
+        match &l.instruction {
+            Instruction::UframeNum(n) => st.uframe = Some(Selected::Number(*n)),
+            Instruction::UtoolNum(n) => st.utool = Some(Selected::Number(*n)),
+            Instruction::FrameNumAtRunTime { user: true } => {
+                st.uframe = Some(Selected::Register(l.line));
+            }
+            Instruction::FrameNumAtRunTime { user: false } => {
+                st.utool = Some(Selected::Register(l.line));
+            }
+            Instruction::Label => {
+                st.uframe = at_register(0).or(st.uframe);
+                st.utool = at_register(1).or(st.utool);
+            }
+            Instruction::SetFrame { .. } | Instruction::Other => {}
             Instruction::Move {
                 motion,
                 via,
@@ -140,7 +180,6 @@ pub fn resolve(program: &Program, text: &str, frames: &FanucFrames) -> Vec<Robot
                 };
                 steps.push(step(&st, frames, &positions, &m, via.as_ref(), target));
             }
-            Instruction::Other => {}
         }
     }
     steps
@@ -201,16 +240,30 @@ fn located<'a>(
         let n = frame_no(if user { g.uf.as_ref() } else { g.ut.as_ref() })
             .ok_or_else(|| format!("P[{}] has no {key} number", r.index))?;
         let what = if user { "UFRAME_NUM" } else { "UTOOL_NUM" };
-        // A joint position has no frame to mismatch; its UT is its tool.
-        if let Some(Some(s)) = selected.filter(|s| *s != Some(n) && !joint) {
-            return Err(format!(
-                "P[{}] is taught in {key} {n} but {what}={s} is selected: the controller stops with a frame mismatch",
-                r.index
-            ));
+        match selected {
+            // A joint position has no frame to mismatch; its UT is its tool.
+            Some(Selected::Number(s)) if s != n && !joint => {
+                return Err(format!(
+                    "P[{}] is taught in {key} {n} but {what}={s} is selected: the controller stops with a frame mismatch",
+                    r.index
+                ));
+            }
+            // A frame number from a register: the program runs its
+            // positions in other frames (the controller's frame check
+            // off), so the frame is known at run time only.
+            Some(Selected::Register(line)) if !joint || !user => {
+                return Err(format!(
+                    "{what} is set from a register at line {line}: the {} frame of the motion is known at run time only",
+                    if user { "user" } else { "tool" }
+                ));
+            }
+            _ => {}
         }
         if let Some(line) = st.set.get(&(user, n)) {
             let name = if user { "UFRAME" } else { "UTOOL" };
-            return Err(format!("{name}[{n}] is set at line {line} at run time"));
+            return Err(format!(
+                "{name}[{n}] is set by the program at line {line}, at run time"
+            ));
         }
         Ok(n)
     };

@@ -78,6 +78,8 @@ pub enum Instruction {
         /// The frame's number.
         index: u32,
     },
+    /// `LBL[i]`: a jump may arrive here with any frame selected.
+    Label,
     /// Anything else (`!comment`, `WAIT`, `CALL`, `PR[1]=…`, …).
     Other,
 }
@@ -87,8 +89,13 @@ pub enum Instruction {
 pub struct MnLine {
     /// The line number written before `:`.
     pub number: u32,
+    /// The line number and the blanks before it (from the line's start).
+    pub number_span: Span,
     /// The source line (1-based) it starts on.
     pub line: usize,
+    /// The byte after its last line (after the line end: where a line
+    /// inserted after it starts).
+    pub end: usize,
     /// What it is.
     pub instruction: Instruction,
 }
@@ -216,7 +223,7 @@ pub fn parse(src: &str, file: &str) -> Result<Program, Located> {
                     prog.line_count = Some((n, s..s + digits));
                 }
             }
-            "MN" => mn_line(src, file, at, text, i + 1, &mut prog.mn)?,
+            "MN" => mn_line(src, file, (at, raw.len()), text, i + 1, &mut prog.mn)?,
             _ => {}
         }
     }
@@ -240,7 +247,7 @@ pub fn parse(src: &str, file: &str) -> Result<Program, Located> {
 fn mn_line(
     src: &str,
     file: &str,
-    at: usize,
+    (at, raw_len): (usize, usize),
     text: &str,
     line: usize,
     out: &mut Vec<MnLine>,
@@ -271,6 +278,9 @@ fn mn_line(
                 .ok_or_else(|| error(src, file, ts, "expected the end point of the circle"))?;
             *via = Some(std::mem::replace(target, r));
             *rest = ts + n..body_at + code_end;
+        }
+        if let Some(last) = out.last_mut() {
+            last.end = at + raw_len;
         }
         return Ok(());
     }
@@ -304,6 +314,8 @@ fn mn_line(
             None if is_register(v) => Instruction::FrameNumAtRunTime { user: false },
             None => return Err(error(src, file, ts, "UTOOL_NUM needs a number")),
         }
+    } else if upper.starts_with("LBL[") {
+        Instruction::Label
     } else if let Some(index) = set_frame(&upper, "UFRAME[") {
         Instruction::SetFrame { user: true, index }
     } else if let Some(index) = set_frame(&upper, "UTOOL[") {
@@ -313,7 +325,9 @@ fn mn_line(
     };
     out.push(MnLine {
         number,
+        number_span: at..at + colon,
         line,
+        end: at + raw_len,
         instruction,
     });
     Ok(())
