@@ -1,5 +1,5 @@
-//! Generated incremental canned-cycle programs (issue 43): rows of holes
-//! under G91, G98 and G99, each cycle the writer knows, deep and
+//! Generated canned-cycle programs (issue 43): rows of holes under G91
+//! (incremental) and G90 (absolute), G98 and G99, each cycle the writer knows, deep and
 //! shallow, compensated in process with and without writing holes as
 //! moves. Each program is processed or refused cleanly; read back by the
 //! forward pass (the interpreter and the predictor, not the solver), its
@@ -60,12 +60,11 @@ const CYCLES: &[(&str, &str)] = &[
 /// Z150 plus the tool), an initial level 40–250 mm above it, a row of 1–6 holes of
 /// one or two cycles with incremental or absolute levels, then `G80` and
 /// incremental moves that count from where the cycle left the tool.
-fn program(rng: &mut Rng) -> String {
+fn program(rng: &mut Rng, incremental: bool) -> String {
     let mut p = String::from("%\nG21 G17 G90 G94 G40 G49 G80\nT1 M6\nS1000 M3\n");
     let (x0, y0) = (rng.mm(50, 200), rng.mm(50, 200));
     let initial = rng.mm(40, 250);
     p += &format!("G0 G54 X{x0}. Y{y0}.\nG43 Z{initial}. H1\n");
-    let incremental = true;
     let holes = 1 + rng.below(6);
     let (mut x, mut y) = (x0, y0);
     for i in 0..holes {
@@ -170,18 +169,19 @@ fn check(
     Ok(true)
 }
 
-#[test]
-fn generated_incremental_cycle_programs_land_within_the_tolerance_or_are_warned() {
+/// Runs `HOSTILE_MUTANTS` (or [`CI_PROGRAMS`]) generated programs with
+/// incremental (G91) or absolute (G90) hole positions and levels.
+fn run(incremental: bool, seed: u64) {
     let count = std::env::var("HOSTILE_MUTANTS")
         .ok()
         .and_then(|v| v.parse().ok())
         .unwrap_or(CI_PROGRAMS);
     let m = machine("afm-r1000");
-    let mut rng = Rng(0xC1C1E5);
+    let mut rng = Rng(seed);
     let start = std::time::Instant::now();
     let (mut accepted, mut findings) = (0, Vec::new());
     for i in 0..count {
-        let text = program(&mut rng);
+        let text = program(&mut rng, incremental);
         let expand = i % 2 == 1;
         let r = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| check(&m, &text, expand)));
         match r {
@@ -190,8 +190,13 @@ fn generated_incremental_cycle_programs_land_within_the_tolerance_or_are_warned(
             Err(_) => findings.push(format!("panic (expand {expand})\n{text}")),
         }
     }
+    let kind = if incremental {
+        "incremental"
+    } else {
+        "absolute"
+    };
     eprintln!(
-        "\nhostile incremental-cycles: {count} programs ({accepted} accepted) in {:.1} s, {} findings",
+        "\nhostile {kind}-cycles: {count} programs ({accepted} accepted) in {:.1} s, {} findings",
         start.elapsed().as_secs_f64(),
         findings.len()
     );
@@ -206,4 +211,76 @@ fn generated_incremental_cycle_programs_land_within_the_tolerance_or_are_warned(
             .collect::<Vec<_>>()
             .join("\n")
     );
+}
+
+#[test]
+fn generated_incremental_cycle_programs_land_within_the_tolerance_or_are_warned() {
+    run(true, 0xC1C1E5);
+}
+
+#[test]
+fn generated_absolute_cycle_programs_land_within_the_tolerance_or_are_warned() {
+    run(false, 0xA6C1E5);
+}
+
+/// Machine Z where the last move before the `G80` line of `text` ends
+/// (read by the forward pass).
+fn z_before_g80(job: &Job, text: &str) -> f64 {
+    let g80 = 1 + text
+        .lines()
+        .position(|l| l.starts_with("G80"))
+        .expect("G80");
+    let mut z = f64::NAN;
+    job.forward(text.as_bytes(), "t.nc", &mut |line, plan, _| {
+        if let (true, Some(mv)) = (line < g80, plan.mv) {
+            z = match plan.kind {
+                PlanKind::Cycle { retract, .. } => retract,
+                _ => mv.end[2],
+            };
+        }
+    })
+    .expect("forward");
+    z
+}
+
+/// A G98 hole right after a G99 hole returns to the cycle's initial level
+/// (Fanuc, Haas), not to the R level the G99 hole left the tool at: where
+/// the written holes leave the tool before `G80` is where the programmed
+/// ones do, holes written as moves or as the cycle. Deep G85 holes, so
+/// that they are written as moves when allowed (their way out written).
+#[test]
+fn a_g98_hole_after_a_g99_hole_returns_to_the_initial_level() {
+    let m = machine("afm-r1000");
+    let text = "%\nG21 G17 G90 G94 G40 G49 G80\nT1 M6\nS1000 M3\n\
+                G0 G54 X100. Y100.\nG43 Z150. H1\n\
+                G99 G85 X110. Y100. Z-80. R2. F100.\n\
+                G98 X130. Y100. Z-80.\nG80\nG91 G1 X5. F200.\nM30\n%\n";
+    for expand in [true, false] {
+        assert_eq!(check(&m, text, expand), Ok(true), "expand {expand}");
+        let job = job(&m, expand);
+        let mut out = Vec::new();
+        job.run(text.as_bytes(), "t.nc", Some(&mut out), None)
+            .expect("compensates");
+        let out = String::from_utf8(out).expect("UTF-8");
+        let (want, got) = (z_before_g80(&job, text), z_before_g80(&job, &out));
+        assert!(
+            (want - got).abs() <= END_MM,
+            "expand {expand}: the written holes leave Z{got}, the programmed Z{want}\n{out}"
+        );
+    }
+}
+
+/// A G89 hole written as moves whose words, rounded to three decimals,
+/// move X and Y by a whole direction deadband against the directions the
+/// feed is solved with (the generator's G90 finding: the forward pass
+/// reads a reversal there, 5.3 µm off the hole, unwarned): such a feed is
+/// measured under both readings, so it is within the tolerance or counted.
+#[test]
+fn a_g89_hole_written_as_moves_is_within_the_tolerance_or_counted() {
+    let m = machine("afm-r1000");
+    let text = "%\nG21 G17 G90 G94 G40 G49 G80\nT1 M6\nS1000 M3\n\
+                G0 G54 X128. Y81.\nG43 Z172. H1\n\
+                G90 G99 G89 X111. Y79. Z-59. R2. P200 F100.\nG80\n\
+                G90 G0 Z172.\nM30\n%\n";
+    assert_eq!(check(&m, text, true), Ok(true));
 }

@@ -92,6 +92,9 @@ struct Hole<'a, 'm> {
     pred: &'a ToolPredictor<'m>,
     mv: &'a Move,
     tol: f64,
+    /// Twice how far the written words' rounding may move one end of a
+    /// piece (`emit::gcode::rounding_mm`), mm.
+    rounding: f64,
     steps: Vec<Step>,
     /// The largest distance of a feed's attained path across the
     /// programmed hole, mm.
@@ -163,7 +166,22 @@ impl Hole<'_, '_> {
             self.pieces((ca, za), (&cm, zm), d, depth + 1)?;
             return self.pieces((&cm, zm), (cb, zb), d, depth + 1);
         }
-        self.miss = self.miss.max(miss);
+        // A piece whose travel in X or Y against its direction is that
+        // close to the deadband may be written (its words rounded) as a
+        // reversal of that axis: measured under that reading too.
+        let mut read = miss;
+        for k in 0..2 {
+            let step = cb[k] - ca[k];
+            if step != 0.0
+                && step.signum() != f64::from(d[k])
+                && step.abs() + self.rounding / 2.0 >= DIRECTION_DEADBAND
+            {
+                let mut r = *d;
+                r[k] = -r[k];
+                read = read.max(self.across((ca, cb), (za, zb), &r));
+            }
+        }
+        self.miss = self.miss.max(read);
         self.push(StepKind::Feed, *cb);
         Ok(())
     }
@@ -177,12 +195,14 @@ impl Hole<'_, '_> {
 /// retract level) as moves into `res` ([`BlockResult::expansion`]), with
 /// the directions of motion `d` its feed is solved with; `carry` (where
 /// the hole leaves the machine) is moved to where the last move ends.
-/// [`BlockResult::miss_mm`] becomes the largest miss of its feeds.
+/// [`BlockResult::miss_mm`] becomes the largest miss of its feeds (with
+/// words rounded by up to `rounding` mm: a feed that may be read as a
+/// reversal of X or Y measured under both readings).
 pub(super) fn expand(
     pred: &ToolPredictor,
     (mv, spec): (&Move, &CycleSpec),
     (r_level, retract): (f64, f64),
-    tol: f64,
+    (tol, rounding): (f64, f64),
     carry: &mut Carry,
     res: &mut BlockResult,
 ) -> Result<(), Failure> {
@@ -191,6 +211,7 @@ pub(super) fn expand(
         pred,
         mv,
         tol,
+        rounding,
         steps: Vec::new(),
         miss: 0.0,
     };

@@ -1149,6 +1149,11 @@ pub struct Carry {
     /// ([`directions`] of each piece, the deadband included): the state
     /// the next block's pieces start from.
     moved: DirVec,
+    /// After a canned-cycle hole: the initial level of the cycle in force,
+    /// programmed (machine Z) and as commanded in the written program
+    /// (where the tool stood when the cycle began), the level a G98 hole
+    /// returns to also after G99 holes (Fanuc, Haas).
+    initial: Option<(f64, f64)>,
 }
 
 /// Every axis known (see [`Carry::known`]).
@@ -1174,6 +1179,7 @@ impl Carry {
             positioned: 0,
             known: ALL_AXES,
             moved: [1; 6],
+            initial: None,
         }
     }
 
@@ -1248,6 +1254,7 @@ impl Carry {
             positioned: 0,
             known: ALL_AXES,
             moved: mv.dirs,
+            initial: None,
         };
         if needs_carry(pred, plan) {
             let before = before?;
@@ -1430,9 +1437,18 @@ fn cycle_hole(
     let mut top = c;
     top[2] = cr[2];
     res.miss_mm = hole_miss(pred, mv, (&top, &c), &d, r_level);
+    // The cycle's initial level: kept from the hole before, or where the
+    // machine stands when the cycle begins.
+    let initial = carry_in.map_or((retract, retract), |k| {
+        k.initial.unwrap_or((k.target[2], k.c[2]))
+    });
     let mut up = c;
     up[2] = if retract > r_level {
-        carry_in.map_or(retract, |k| k.c[2])
+        if initial.0 == retract {
+            initial.1
+        } else {
+            carry_in.map_or(retract, |k| k.c[2])
+        }
     } else {
         cr[2]
     };
@@ -1452,6 +1468,7 @@ fn cycle_hole(
         positioned: 0,
         known: carry_in.map_or(ALL_AXES, |k| k.known) | 0b111,
         moved: moved_out,
+        initial: Some(initial),
     })
 }
 
@@ -2069,7 +2086,8 @@ pub fn block_recycling(
             // Written as moves when one X and Y cannot hold the hole.
             if plan.cycle.expandable && res.miss_mm > tol {
                 let hole = (&mv, &plan.cycle);
-                cycles::expand(pred, hole, (r_level, retract), tol, &mut cycle, &mut res)?;
+                let tols = (tol, rounding_mm);
+                cycles::expand(pred, hole, (r_level, retract), tols, &mut cycle, &mut res)?;
             }
             *carry = Some(cycle);
             return Ok(res);
