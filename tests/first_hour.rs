@@ -734,3 +734,46 @@ fn check_lists_every_error_then_the_warnings() {
         "{err}"
     );
 }
+
+/// The log lines of a run on a terminal (util-linux `script` gives it one),
+/// with `NO_COLOR` set to `no_color` or unset.
+fn terminal_log(no_color: Option<&str>) -> String {
+    let dir = tempfile::tempdir().unwrap();
+    let bin = postproc().get_program().to_owned();
+    let command = format!(
+        "'{}' compensate '{}' --machine afm-r1000 -o '{}'",
+        std::path::Path::new(&bin).display(),
+        repo("samples/part.nc").display(),
+        dir.path().join("part.comp.nc").display()
+    );
+    let mut run = Command::new("script");
+    run.args(["-qec", &command, "/dev/null"])
+        .current_dir(dir.path())
+        .env_remove("RUST_LOG")
+        .env_remove("NO_COLOR");
+    if let Some(v) = no_color {
+        run.env("NO_COLOR", v);
+    }
+    let out = run
+        .output()
+        .expect("util-linux `script` runs the program on a terminal");
+    String::from_utf8_lossy(&out.stdout).into_owned()
+}
+
+#[test]
+fn no_color_turns_the_terminal_s_colours_off() {
+    // On a terminal the bundled file's example-values warning is coloured…
+    let coloured = terminal_log(None);
+    assert!(
+        coloured.contains("WARN") && coloured.contains('\u{1b}'),
+        "a terminal run colours its warning:\n{coloured}"
+    );
+    // …and with NO_COLOR set (to anything but empty) it is plain.
+    let plain = terminal_log(Some("1"));
+    assert!(
+        plain.contains("WARN") && !plain.contains('\u{1b}'),
+        "NO_COLOR=1 leaves no escape sequence:\n{plain}"
+    );
+    // An empty NO_COLOR does not count, as no-color.org defines it.
+    assert!(terminal_log(Some("")).contains('\u{1b}'));
+}
