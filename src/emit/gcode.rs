@@ -1023,8 +1023,8 @@ impl Emitter {
     ) {
         let dev = res.deviation.total().norm() / scale;
         let u = self.uncertainty.as_ref().and_then(|u| {
-            u.tool(cmd, &res.dirs, 0.0, &res.deviation.total())
-                .map(|b| b.total_mm / scale)
+            u.tool_total_mm(cmd, &res.dirs, 0.0, &res.deviation.total())
+                .map(|t| t / scale)
         });
         let unit: &[u8] = if scale != 1.0 { b"in" } else { b"mm" };
         let dd = if scale != 1.0 { 5 } else { 4 };

@@ -18,7 +18,7 @@ use crate::predict::uncertainty::BlockUncertainty;
 /// U (k = 2) of the deviation `dev` (mm) predicted at the programmed
 /// joints `q` (rad), mm; `None` when `u` is a machine tool's.
 pub fn target_u_mm(u: &BlockUncertainty, q: &[f64; 6], dev: &Vector3<f64>) -> Option<f64> {
-    u.robot(q, dev).map(|b| b.total_mm)
+    u.robot_total_mm(q, dev)
 }
 
 /// Decimals of U in a robot annotation (those of the deviation).

@@ -827,6 +827,36 @@ impl BlockUncertainty {
         self.of_jacobian(&s.jacobian(q), dev)
     }
 
+    /// U (k=2) of a machine tool's predicted deviation alone, mm: what an
+    /// annotation states ([`BlockUncertainty::tool`] without the split by
+    /// effect).
+    pub fn tool_total_mm(
+        &self,
+        cmd: &AxisVec,
+        dirs: &DirVec,
+        tool_mm: f64,
+        dev: &Vector3<f64>,
+    ) -> Option<f64> {
+        let Sensitivity::Tool(s) = &self.sens else {
+            return None;
+        };
+        self.total_of_jacobian(&s.jacobian(cmd, dirs, tool_mm), dev)
+    }
+
+    /// U (k=2) of a robot's predicted deviation alone, mm
+    /// ([`BlockUncertainty::robot`] without the split by effect).
+    pub fn robot_total_mm(&self, q: &[f64; 6], dev: &Vector3<f64>) -> Option<f64> {
+        let Sensitivity::Robot(s) = &self.sens else {
+            return None;
+        };
+        self.total_of_jacobian(&s.jacobian(q), dev)
+    }
+
+    fn total_of_jacobian(&self, j: &Matrix3xX<f64>, dev: &Vector3<f64>) -> Option<f64> {
+        let total = propagate(j, &self.cov).ok()?;
+        Some(total.expanded_length_mm(dev, COVERAGE_K))
+    }
+
     fn of_jacobian(&self, j: &Matrix3xX<f64>, dev: &Vector3<f64>) -> Option<BlockU> {
         let total = propagate(j, &self.cov).ok()?;
         let effects = per_effect(j, &self.cov).ok()?;
