@@ -175,3 +175,17 @@ pub fn tx200_at_the_origin_text() -> String {
     assert_eq!(found, 1, "one `base:` line in the bundled TX200 file");
     out.join("\n") + "\n"
 }
+
+/// Runs `postproc args…` in `dir`: exit code, stdout, stderr.
+pub fn run_in(dir: &std::path::Path, args: &[&str]) -> (i32, String, String) {
+    let out = postproc()
+        .current_dir(dir)
+        .args(args)
+        .output()
+        .expect("runs");
+    (
+        out.status.code().unwrap_or(-1),
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}

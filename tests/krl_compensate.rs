@@ -17,7 +17,8 @@ use postproc::program::krl::config::StatusTurn;
 use postproc::program::krl::resolve::frame_of;
 use postproc::program::krl::{Aggregate, File, Kind, Target, parse};
 
-use crate::common::{postproc, repo, text_without_header};
+use crate::common::run_in as run;
+use crate::common::{repo, text_without_header};
 
 /// The arm the fixtures are written for (their targets are within its
 /// reach).
@@ -53,20 +54,6 @@ fn scratch(names: &[&str]) -> (tempfile::TempDir, PathBuf) {
 
 fn read(p: &Path) -> String {
     std::fs::read_to_string(p).unwrap_or_else(|e| panic!("{}: {e}", p.display()))
-}
-
-/// Runs `postproc args…` in `dir`: exit code, stdout, stderr.
-fn run(dir: &Path, args: &[&str]) -> (i32, String, String) {
-    let out = postproc()
-        .current_dir(dir)
-        .args(args)
-        .output()
-        .expect("runs");
-    (
-        out.status.code().unwrap_or(-1),
-        String::from_utf8_lossy(&out.stdout).into_owned(),
-        String::from_utf8_lossy(&out.stderr).into_owned(),
-    )
 }
 
 #[test]

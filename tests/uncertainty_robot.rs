@@ -7,9 +7,10 @@
 //! 2 u |dz| / |dev|, derived here from the deviation the report gives.
 //! The KRL annotations carry the same U; `--gain-auto` is refused by name.
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
-use crate::common::{postproc, repo, text};
+use crate::common::run_in as run;
+use crate::common::{repo, text};
 
 const U_D1_MM: f64 = 0.05;
 /// The report writes U with 5 decimals.
@@ -32,19 +33,6 @@ fn scratch() -> (tempfile::TempDir, PathBuf) {
     std::fs::write(dir.path().join("arm.yaml"), m).expect("write");
     let p = dir.path().to_path_buf();
     (dir, p)
-}
-
-fn run(dir: &Path, args: &[&str]) -> (i32, String, String) {
-    let out = postproc()
-        .current_dir(dir)
-        .args(args)
-        .output()
-        .expect("runs");
-    (
-        out.status.code().unwrap_or(-1),
-        String::from_utf8_lossy(&out.stdout).into_owned(),
-        String::from_utf8_lossy(&out.stderr).into_owned(),
-    )
 }
 
 #[test]

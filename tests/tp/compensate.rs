@@ -18,7 +18,8 @@ use postproc::predict::MoveContext;
 use postproc::program::tp::config::Config;
 use postproc::program::tp::{Group, Program, parse};
 
-use crate::common::{fenced_blocks, postproc, repo, text, text_without_header};
+use crate::common::run_in as run;
+use crate::common::{fenced_blocks, repo, text, text_without_header};
 
 /// The arm the fixtures are written for.
 const ARM: &str = "fanuc-m20ia";
@@ -97,20 +98,6 @@ fn scratch(names: &[&str], frames: &str) -> (tempfile::TempDir, PathBuf) {
 
 fn read(p: &Path) -> String {
     std::fs::read_to_string(p).unwrap_or_else(|e| panic!("{}: {e}", p.display()))
-}
-
-/// Runs `postproc args…` in `dir`: exit code, stdout, stderr.
-fn run(dir: &Path, args: &[&str]) -> (i32, String, String) {
-    let out = postproc()
-        .current_dir(dir)
-        .args(args)
-        .output()
-        .expect("runs");
-    (
-        out.status.code().unwrap_or(-1),
-        String::from_utf8_lossy(&out.stdout).into_owned(),
-        String::from_utf8_lossy(&out.stderr).into_owned(),
-    )
 }
 
 /// `s` with every number (its sign included) and the blanks before it
