@@ -9,6 +9,8 @@ use postproc::machine::Machine;
 
 use crate::common::repo;
 
+mod data;
+
 fn machine_text(name: &str) -> String {
     std::fs::read_to_string(repo(&format!("machines/{name}.yaml"))).unwrap()
 }
