@@ -472,3 +472,196 @@ fn mutants_of_rapid_modules_read_in_windows_give_the_bytes_read_whole() {
     });
     report("rapid-windows", count, start, &run);
 }
+
+/// Incremental canned cycles and what surrounds them: levels, repeats,
+/// cancels and the moves after a cycle.
+const CYCLE_LINES: &[&str] = &[
+    "G91",
+    "G90",
+    "G98",
+    "G99",
+    "G91 G99 G81 X10. Y0. Z-20. R-5. F100.",
+    "G91 G98 G81 X5. Z-3. R-2. F80.",
+    "G91 G98 G83 X-5. Z-10. R-400. Q2. F80.",
+    "G91 G99 G73 X6. Z-12. R-3. Q3. F120.",
+    "G91 G98 G82 X-8. Z-4. R-1. P200 F90.",
+    "G91 G81 X10. Z-5. R-2. K3 F100.",
+    "G91 G81 X-10. Z-5. R-2. L2 F100.",
+    "G90 G98 G81 X20. Y20. Z-2. R2. F100.",
+    "X10.",
+    "Y-5.",
+    "G80",
+    "G0 X10.",
+    "G1 Z-1. F200.",
+];
+
+/// Codes whose axis words are not moves, and codes without motion: none
+/// of them, where the program is taken, may add or change a move.
+const NON_MOTION_LINES: &[&str] = &[
+    "G50.1 X0. Y0.",
+    "G50.1 X0.",
+    "G50",
+    "G50 X0. Z0.",
+    "G4 X1.",
+    "G4 X0.5",
+    "G4 P500",
+    "G04 P1.",
+    "M5",
+    "M9",
+    "G15",
+    "G69",
+];
+
+/// Feed-mode switches, with and without F, and moves right after them.
+const FEED_MODE_LINES: &[&str] = &[
+    "G93",
+    "G94",
+    "G95",
+    "G94 F500.",
+    "G95 F0.1",
+    "G93 G1 X10. F2.",
+    "G93 G2 X10. Y0. I5. J0. F4.",
+    "G1 X5. F0.2",
+    "G1 X-5.",
+    "F300.",
+];
+
+/// `seed`'s lines with one to eight lines of `inserted` put among them
+/// (LF line ends; what the line-end generator of [`super`] varies is
+/// left alone here, so each kind attacks one thing).
+fn inserted_mutant(rng: &mut Rng, seed: &[u8], inserted: &[&str]) -> Vec<u8> {
+    let text = String::from_utf8_lossy(seed);
+    let mut lines: Vec<&str> = text.lines().collect();
+    for _ in 0..1 + rng.below(8) {
+        // Not before the first line (a `%` or the program number).
+        let at = 1 + rng.below(lines.len().max(1));
+        lines.insert(at.min(lines.len()), inserted[rng.below(inserted.len())]);
+    }
+    let mut out = lines.join("\n");
+    out.push('\n');
+    out.into_bytes()
+}
+
+/// The end point of every move of length of a program, in order, as its
+/// reader (the forward pass of `report` and `compensate`) sees them.
+fn move_ends(
+    machine: &postproc::machine::tool::MachineTool,
+    program: &[u8],
+    pools: &super::Pools,
+) -> Result<Vec<[f64; 6]>, String> {
+    let job = postproc::pipeline::gcode::Job {
+        predictor: None,
+        setup: postproc::program::interp::Setup::for_machine(machine),
+        settings: postproc::compensate::Settings {
+            tolerance_mm: 0.001,
+        },
+        emit: postproc::emit::gcode::EmitOptions {
+            decimals_mm: None,
+            decimals_deg: None,
+            annotate: true,
+        },
+        pool: Some(&pools.one),
+        travel: None,
+    };
+    let mut ends = Vec::new();
+    job.forward(
+        std::io::BufReader::new(program),
+        "m.nc",
+        &mut |_, plan, _| {
+            if let Some(mv) = &plan.mv {
+                let (s, e) = (mv.start, mv.end);
+                if (0..6).any(|i| s[i] != e[i]) {
+                    ends.push([0, 1, 2, 3, 4, 5].map(|i| e[i]));
+                }
+            }
+        },
+    )
+    .map_err(|e| e.to_string())?;
+    Ok(ends)
+}
+
+/// The properties of [`super::line_end_props`] (no panic, the same
+/// bytes or error for 1 and 2 threads, nothing non-finite written, the
+/// written program read back by its reader), and for non-motion lines: a
+/// program taken with them has the moves of the program without them.
+fn inserted_props(
+    machine: &postproc::machine::tool::MachineTool,
+    input: &[u8],
+    pools: &super::Pools,
+    no_moves: Option<&[&str]>,
+) -> Result<bool, String> {
+    let one = super::gcode_run(machine, input, &pools.one);
+    if one != super::gcode_run(machine, input, &pools.two) {
+        return Err("1 and 2 threads differ".into());
+    }
+    let out = match one {
+        Ok(out) => out,
+        Err(m) if m.starts_with("error: ") => return Ok(false),
+        Err(m) => return Err(m),
+    };
+    if super::non_finite_words(&out) > super::non_finite_words(input) {
+        return Err("non-finite number in the output".into());
+    }
+    move_ends(machine, &out, pools)
+        .map_err(|e| format!("the written program is refused by its reader: {e}"))?;
+    let Some(codes) = no_moves else {
+        return Ok(true);
+    };
+    let text = String::from_utf8_lossy(input);
+    let mut without: String = text
+        .lines()
+        .filter(|l| !codes.contains(l))
+        .collect::<Vec<_>>()
+        .join("\n");
+    without.push('\n');
+    let (a, b) = (
+        move_ends(machine, input, pools)?,
+        move_ends(machine, without.as_bytes(), pools)?,
+    );
+    if a != b {
+        let at = a.iter().zip(&b).position(|(x, y)| x != y);
+        return Err(format!(
+            "non-motion lines change the moves: {} moves against {} without them, first \
+             difference at move {at:?}",
+            a.len(),
+            b.len()
+        ));
+    }
+    Ok(true)
+}
+
+/// One generated G-code kind: `inserted` lines among the sample programs'.
+fn inserted_run(kind: &str, inserted: &[&str], no_moves: bool) {
+    let count = env_count("HOSTILE_MUTANTS", CI_MUTANTS / 10);
+    let m = super::tool("afm-r1000");
+    let pools = super::pools();
+    let seeds = [
+        read("samples/effects.nc"),
+        read("samples/part.nc"),
+        read("samples/gcode/mastercam_haas.nc"),
+    ];
+    let start = Instant::now();
+    let run = generated_run(
+        kind,
+        &seeds,
+        count,
+        |rng, seed| inserted_mutant(rng, seed, inserted),
+        |b| inserted_props(&m, b, &pools, no_moves.then_some(inserted)),
+    );
+    report(kind, count, start, &run);
+}
+
+#[test]
+fn mutants_with_incremental_cycles_are_processed_or_refused_cleanly() {
+    inserted_run("incremental-cycles", CYCLE_LINES, false);
+}
+
+#[test]
+fn mutants_with_non_motion_codes_keep_the_moves_of_the_program() {
+    inserted_run("non-motion-codes", NON_MOTION_LINES, true);
+}
+
+#[test]
+fn mutants_with_feed_mode_switches_are_processed_or_refused_cleanly() {
+    inserted_run("feed-modes", FEED_MODE_LINES, false);
+}
