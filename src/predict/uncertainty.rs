@@ -906,6 +906,35 @@ impl BlockUncertainty {
         self.total_of_jacobian(&s.jacobian(q), dev)
     }
 
+    /// The covariance (mm²) of a machine tool's predicted deviations along
+    /// the coordinate `axis` (0..3: x, y, z) at the commands `points`
+    /// (each with its directions of motion; tool of `tool_mm`): G Σ Gᵀ,
+    /// G the rows `axis` of the points' sensitivities, so the points'
+    /// correlations through shared parameters are kept (`None` for a robot
+    /// model or an axis past z).
+    pub fn tool_covariance_along(
+        &self,
+        points: &[(AxisVec, DirVec)],
+        tool_mm: f64,
+        axis: usize,
+    ) -> Option<DMatrix<f64>> {
+        let Sensitivity::Tool(s) = &self.sens else {
+            return None;
+        };
+        if axis >= 3 {
+            return None;
+        }
+        let n = self.cov.len();
+        let mut g = DMatrix::zeros(points.len(), n);
+        for (k, (cmd, dirs)) in points.iter().enumerate() {
+            let j = s.jacobian(cmd, dirs, tool_mm);
+            for c in 0..n {
+                g[(k, c)] = j[(axis, c)];
+            }
+        }
+        Some(&g * self.cov.matrix() * g.transpose())
+    }
+
     fn total_of_jacobian(&self, j: &Matrix3xX<f64>, dev: &Vector3<f64>) -> Option<f64> {
         let total = propagate(j, &self.cov).ok()?;
         Some(total.expanded_length_mm(dev, COVERAGE_K))
