@@ -29,7 +29,8 @@ pub(crate) fn machine_with_covariance(dir: &std::path::Path) -> std::path::PathB
     write(dir, "mill.yaml", &m)
 }
 
-pub(crate) const PROGRAM: &str = "G90 G54 G0 X-200 Y0 Z50\nG1 X50 F1000\nG1 X100\nG1 X120\nG1 X20\nM30\n";
+pub(crate) const PROGRAM: &str =
+    "G90 G54 G0 X-200 Y0 Z50\nG1 X50 F1000\nG1 X100\nG1 X120\nG1 X20\nM30\n";
 
 /// The hand-derived U of a block at machine X `x` moving in `dir_plus`
 /// with deviation (dx, |dev|).
@@ -196,14 +197,11 @@ fn annotated(line: &str, word: &str) -> Option<f64> {
 /// Annotations print U with 4 decimals (mm).
 const ANNOTATION_U_TOL_MM: f64 = 0.6e-4;
 
-#[test]
-fn compensated_blocks_carry_their_u_from_the_covariance() {
-    let dir = tempfile::tempdir().expect("tempdir");
-    let machine = machine_with_covariance(dir.path());
-    let program = write(dir.path(), "p.nc", PROGRAM);
+/// Checks the U of each annotated feed block of `written` (a compensated
+/// PROGRAM) against the hand-derived U of the report's row.
+fn assert_annotated_u(machine: &std::path::Path, program: &std::path::Path, written: &str) {
     let json: serde_json::Value =
-        serde_json::from_str(&report(&machine, &program, "json")).expect("JSON");
-    let written = compensated(&machine, &program);
+        serde_json::from_str(&report(machine, program, "json")).expect("JSON");
     let moves = [(300.0, true), (350.0, true), (370.0, true), (270.0, false)];
     let feeds: Vec<&serde_json::Value> = json["rows"]
         .as_array()
@@ -232,6 +230,37 @@ fn compensated_blocks_carry_their_u_from_the_covariance() {
         seen += usize::from(want > ANNOTATION_U_TOL_MM);
     }
     assert!(seen >= 3, "the test exercises U");
+}
+
+#[test]
+fn compensated_blocks_carry_their_u_from_the_covariance() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let machine = machine_with_covariance(dir.path());
+    let program = write(dir.path(), "p.nc", PROGRAM);
+    let written = compensated(&machine, &program);
+    assert_annotated_u(&machine, &program, &written);
+}
+
+/// `batch` writes the same annotations, U included, as `compensate`.
+#[test]
+fn batch_annotations_carry_their_u_from_the_covariance() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let machine = machine_with_covariance(dir.path());
+    let input = dir.path().join("in");
+    std::fs::create_dir_all(&input).expect("input folder");
+    let program = write(&input, "p.nc", PROGRAM);
+    let out = dir.path().join("out");
+    postproc()
+        .arg("batch")
+        .arg("--machine")
+        .arg(&machine)
+        .args(["--effects", "geometric", "--out-dir"])
+        .arg(&out)
+        .arg(&input)
+        .assert()
+        .success();
+    let written = std::fs::read_to_string(out.join("p.nc")).expect("batch output p.nc");
+    assert_annotated_u(&machine, &program, &written);
 }
 
 #[test]
