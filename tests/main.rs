@@ -15,6 +15,7 @@ mod covariance_file;
 mod cycles;
 mod cycles_generated;
 mod diagnose;
+mod diagnose_covariance;
 mod diagnose_matrix;
 mod diagnose_write;
 mod effects;

@@ -473,3 +473,46 @@ fn compensate_writes_the_page_for_an_html_report_path() {
     assert!(html.contains("id=\"report-data\""));
     assert!(html.trim_end().ends_with("</html>"));
 }
+
+/// The block panel states U (k=2) where the machine file carries a
+/// covariance: the page, with a script that clicks the first worst-block
+/// link (what a reader does to keep a block), shows that block's U as the
+/// JSON report gives it.
+#[test]
+fn the_block_panel_shows_u_from_the_covariance() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let machine = crate::report_uncertainty::machine_with_covariance(dir.path());
+    let program = write(dir.path(), "p.nc", crate::report_uncertainty::PROGRAM);
+    let page = html_report(dir.path(), &program, &machine.display().to_string());
+    let Some(chrome) = chromium() else {
+        return;
+    };
+    let html = std::fs::read_to_string(&page).expect("page");
+    let click = "<script>document.querySelector(\"a.block\").click();</script></body>";
+    let clicked = dir.path().join("clicked.html");
+    std::fs::write(&clicked, html.replacen("</body>", click, 1)).expect("write");
+    let dom = loaded_dom(&chrome, &clicked);
+    let line: u64 = attr(&dom, "<a href=\"#\" class=\"block\"", "data-line")
+        .and_then(|l| l.parse().ok())
+        .expect("a worst-block link");
+    let label = "U (k=2) of |deviation| (mm)</td><td>";
+    let shown: f64 = dom
+        .split(label)
+        .nth(1)
+        .and_then(|s| s.split('<').next())
+        .and_then(|s| s.parse().ok())
+        .unwrap_or_else(|| panic!("no U in the block panel"));
+    let (json, _) = json_rows(&program, &machine.display().to_string());
+    let want = json["rows"]
+        .as_array()
+        .expect("rows")
+        .iter()
+        .find(|r| r["line"].as_u64() == Some(line))
+        .and_then(|r| r["u_mm"].as_f64())
+        .expect("the block's U");
+    // The panel shows five decimals of a value kept to 0.1 µm.
+    assert!(
+        (shown - want).abs() <= 0.6e-4,
+        "panel U {shown}, report {want}"
+    );
+}

@@ -18,7 +18,7 @@ const U3: f64 = 5.0;
 const U4: f64 = 4.0;
 const RHO: f64 = 0.5;
 
-fn machine_with_covariance(dir: &std::path::Path) -> std::path::PathBuf {
+pub(crate) fn machine_with_covariance(dir: &std::path::Path) -> std::path::PathBuf {
     let mut m = text("machines/afm-r1000.yaml");
     if !m.ends_with('\n') {
         m.push('\n');
@@ -29,7 +29,8 @@ fn machine_with_covariance(dir: &std::path::Path) -> std::path::PathBuf {
     write(dir, "mill.yaml", &m)
 }
 
-const PROGRAM: &str = "G90 G54 G0 X-200 Y0 Z50\nG1 X50 F1000\nG1 X100\nG1 X120\nG1 X20\nM30\n";
+pub(crate) const PROGRAM: &str =
+    "G90 G54 G0 X-200 Y0 Z50\nG1 X50 F1000\nG1 X100\nG1 X120\nG1 X20\nM30\n";
 
 /// The hand-derived U of a block at machine X `x` moving in `dir_plus`
 /// with deviation (dx, |dev|).
@@ -196,14 +197,11 @@ fn annotated(line: &str, word: &str) -> Option<f64> {
 /// Annotations print U with 4 decimals (mm).
 const ANNOTATION_U_TOL_MM: f64 = 0.6e-4;
 
-#[test]
-fn compensated_blocks_carry_their_u_from_the_covariance() {
-    let dir = tempfile::tempdir().expect("tempdir");
-    let machine = machine_with_covariance(dir.path());
-    let program = write(dir.path(), "p.nc", PROGRAM);
+/// Checks the U of each annotated feed block of `written` (a compensated
+/// PROGRAM) against the hand-derived U of the report's row.
+fn assert_annotated_u(machine: &std::path::Path, program: &std::path::Path, written: &str) {
     let json: serde_json::Value =
-        serde_json::from_str(&report(&machine, &program, "json")).expect("JSON");
-    let written = compensated(&machine, &program);
+        serde_json::from_str(&report(machine, program, "json")).expect("JSON");
     let moves = [(300.0, true), (350.0, true), (370.0, true), (270.0, false)];
     let feeds: Vec<&serde_json::Value> = json["rows"]
         .as_array()
@@ -235,10 +233,112 @@ fn compensated_blocks_carry_their_u_from_the_covariance() {
 }
 
 #[test]
+fn compensated_blocks_carry_their_u_from_the_covariance() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let machine = machine_with_covariance(dir.path());
+    let program = write(dir.path(), "p.nc", PROGRAM);
+    let written = compensated(&machine, &program);
+    assert_annotated_u(&machine, &program, &written);
+}
+
+/// `batch` writes the same annotations, U included, as `compensate`.
+#[test]
+fn batch_annotations_carry_their_u_from_the_covariance() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let machine = machine_with_covariance(dir.path());
+    let input = dir.path().join("in");
+    std::fs::create_dir_all(&input).expect("input folder");
+    let program = write(&input, "p.nc", PROGRAM);
+    let out = dir.path().join("out");
+    postproc()
+        .arg("batch")
+        .arg("--machine")
+        .arg(&machine)
+        .args(["--effects", "geometric", "--out-dir"])
+        .arg(&out)
+        .arg(&input)
+        .assert()
+        .success();
+    let written = std::fs::read_to_string(out.join("p.nc")).expect("batch output p.nc");
+    assert_annotated_u(&machine, &program, &written);
+}
+
+#[test]
 fn without_a_covariance_annotations_state_no_u() {
     let dir = tempfile::tempdir().expect("tempdir");
     let program = write(dir.path(), "p.nc", PROGRAM);
     let written = compensated(&repo("machines/afm-r1000.yaml"), &program);
     assert!(written.contains("(dev "), "{written}");
     assert!(!written.contains(" U "), "{written}");
+}
+
+/// The SVG picture and the HTML page state U where the machine file
+/// carries a covariance: the page's data hold each drawn row's U (in
+/// 0.1 µm, as its deviations) equal to the JSON report's, and the marks
+/// of the SVG picture are labelled with theirs; without a covariance
+/// neither does.
+#[test]
+fn pictures_carry_u_from_the_covariance() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let machine = machine_with_covariance(dir.path());
+    let program = write(dir.path(), "p.nc", PROGRAM);
+    let json: serde_json::Value =
+        serde_json::from_str(&report(&machine, &program, "json")).expect("JSON");
+    let rows = json["rows"].as_array().expect("rows");
+    let html = report(&machine, &program, "html");
+    let data = html
+        .split("id=\"report-data\">")
+        .nth(1)
+        .and_then(|s| s.split("</script>").next())
+        .expect("the page's data");
+    let data: serde_json::Value = serde_json::from_str(data).expect("data JSON");
+    let per_mm = data["units"]["dev_per_mm"].as_f64().expect("units");
+    let u = data["u"].as_object().expect("U of the rows");
+    assert_eq!(data["rows"].as_array().map(Vec::len), Some(rows.len()));
+    let mut stated = 0;
+    for (i, r) in rows.iter().enumerate() {
+        let want = r["u_mm"].as_f64().expect("u_mm");
+        let got = u
+            .get(&i.to_string())
+            .and_then(serde_json::Value::as_f64)
+            .map(|v| v / per_mm);
+        let got = got.unwrap_or_else(|| panic!("row {i} has no U in the page"));
+        assert!(
+            (got - want).abs() <= 0.51 / per_mm,
+            "row {i}: {got} vs {want}"
+        );
+        stated += usize::from(want > 0.0);
+    }
+    assert!(stated >= 3, "the test exercises U");
+    let marks = data["marks"].as_array().expect("marks");
+    assert!(!marks.is_empty());
+    for m in marks {
+        let line = m["line"].as_u64().expect("line");
+        let row = rows
+            .iter()
+            .find(|r| r["line"].as_u64() == Some(line))
+            .expect("the mark's row");
+        let want = row["u_mm"].as_f64().expect("u_mm");
+        let got = m["u"].as_f64().expect("the mark's U");
+        assert!(
+            (got - want).abs() <= 1e-6,
+            "mark line {line}: {got} vs {want}"
+        );
+    }
+
+    let svg = report(&machine, &program, "svg");
+    for m in marks {
+        let label = format!(
+            "line {} ({:.4} mm, U {:.4})",
+            m["line"],
+            m["dev"].as_f64().expect("dev"),
+            m["u"].as_f64().expect("u")
+        );
+        assert!(svg.contains(&label), "no `{label}` in the SVG picture");
+    }
+
+    let plain = report(&repo("machines/afm-r1000.yaml"), &program, "html");
+    assert!(!plain.contains(",\"u\":"), "no U without a covariance");
+    let plain = report(&repo("machines/afm-r1000.yaml"), &program, "svg");
+    assert!(!plain.contains(" mm, U "));
 }

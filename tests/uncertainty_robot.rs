@@ -135,3 +135,112 @@ fn gain_auto_is_refused_by_name_for_krl_and_tp() {
         }
     }
 }
+
+/// The cell frames of tests/tp/compensate.rs: UF 2 (the weld fixture)
+/// and UT 1 (a torch) of `weld_seam.ls`.
+const TP_FRAMES: &str = "
+fanuc:
+  user_frames:
+    2: {x_mm: 0, y_mm: 0, z_mm: -300, w_deg: 0, p_deg: 0, r_deg: 0}
+  tool_frames:
+    1: {x_mm: 0, y_mm: 30, z_mm: 350, w_deg: 0, p_deg: 22, r_deg: 0}
+";
+
+/// The numbers after ` U ` in `text` (U of a remark; ` U =` of a note and
+/// `'N U T'` of a configuration are not numbers).
+fn numbers_after_u(text: &str) -> Vec<f64> {
+    text.split(" U ")
+        .skip(1)
+        .filter_map(|s| {
+            let n: String = s
+                .chars()
+                .take_while(|c| c.is_ascii_digit() || *c == '.')
+                .collect();
+            n.parse().ok()
+        })
+        .collect()
+}
+
+/// FANUC TP: the report's U of each target derived by hand as for KRL
+/// (joint 1's height d moves the TCP along z one to one), and the `!`
+/// remark lines of the compensated program carry the same U; without the
+/// covariance they carry none.
+#[test]
+fn tp_remarks_carry_u_from_the_kinematics_covariance() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let dir = tmp.path();
+    std::fs::copy(repo("tests/tp/weld_seam.ls"), dir.join("w.ls")).expect("copy");
+    let mut m = text("machines/fanuc-m20ia.yaml");
+    if !m.ends_with('\n') {
+        m.push('\n');
+    }
+    m.push_str(TP_FRAMES);
+    std::fs::write(dir.join("plain.yaml"), &m).expect("write");
+    m.push_str(&format!(
+        "covariance:\n  - kind: kinematics\n    observations: \"hand.csv\"\n    observations_sha256: 00\n    rows: 30\n    parameters: [\"actual[0].d_mm\"]\n    u: [{U_D1_MM}]\n    correlation:\n      - [1.0]\n"
+    ));
+    std::fs::write(dir.join("arm.yaml"), m).expect("write");
+    let (code, out, err) = run(
+        dir,
+        &[
+            "report",
+            "w.ls",
+            "--machine",
+            "arm.yaml",
+            "--format",
+            "json",
+        ],
+    );
+    assert_eq!(code, 0, "{err}");
+    let json: serde_json::Value = serde_json::from_str(&out).expect("JSON");
+    let mut hand = Vec::new();
+    for r in json["rows"]
+        .as_array()
+        .expect("rows")
+        .iter()
+        .filter(|r| r.get("u_mm").is_some())
+    {
+        let dz = r["deviation_mm"][2].as_f64().expect("dz");
+        let dev = r["dev_mm"].as_f64().expect("dev");
+        let want = 2.0 * U_D1_MM * dz.abs() / dev;
+        let u = r["u_mm"].as_f64().expect("u");
+        assert!(
+            (u - want).abs() <= REPORT_U_TOL_MM,
+            "line {}: U {u} but {want} by hand",
+            r["line"]
+        );
+        hand.push(want);
+    }
+    assert!(
+        hand.iter().filter(|u| **u > ANNOTATION_U_TOL_MM).count() >= 2,
+        "the test exercises U: {hand:?}"
+    );
+    let (code, _, err) = run(dir, &["compensate", "w.ls", "--machine", "arm.yaml"]);
+    assert_eq!(code, 0, "{err}");
+    let ls = std::fs::read_to_string(dir.join("w.comp.ls")).expect("written");
+    let remarks: Vec<&str> = ls.lines().filter(|l| l.contains('!')).collect();
+    let us = numbers_after_u(&remarks.join(" "));
+    assert!(us.len() >= 2, "{ls}");
+    for u in &us {
+        assert!(
+            hand.iter().any(|h| (h - u).abs() <= ANNOTATION_U_TOL_MM),
+            "remark U {u} is none of the report's {hand:?}"
+        );
+    }
+    let (code, _, err) = run(
+        dir,
+        &[
+            "compensate",
+            "w.ls",
+            "--machine",
+            "plain.yaml",
+            "-o",
+            "p.ls",
+        ],
+    );
+    assert_eq!(code, 0, "{err}");
+    let plain = std::fs::read_to_string(dir.join("p.ls")).expect("written");
+    let remarks: Vec<&str> = plain.lines().filter(|l| l.contains('!')).collect();
+    assert!(remarks.iter().any(|l| l.contains("! dev ")), "{plain}");
+    assert!(numbers_after_u(&remarks.join(" ")).is_empty(), "{plain}");
+}

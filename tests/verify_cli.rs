@@ -655,3 +655,155 @@ fn iso230_4_predicted_from_a_model() {
     assert_eq!(code, 2);
     assert!(err.contains("--plane XX"), "{err}");
 }
+
+/// The EXX-only machine of [`exx_machine`] with the tables `forward` and
+/// `reverse` (µm) and a covariance of two of its values: forward[4] (400
+/// mm, u = [`U_F4_UM`]) and reverse[0] (0 mm, u = [`U_R0_UM`]),
+/// correlated by [`RHO`].
+fn exx_machine_with_covariance(dir: &std::path::Path, forward: &str, reverse: &str) -> String {
+    let text = std::fs::read_to_string(exx_machine(dir)).expect("machine");
+    let text = text
+        .replace("forward: [0, 3, 5, 4, 6]", &format!("forward: {forward}"))
+        .replace("reverse: [-2, 1, 2, 0, 3]", &format!("reverse: {reverse}"));
+    let m = write(
+        dir,
+        "exx-cov.yaml",
+        &format!(
+            "{text}covariance:\n  - kind: geometry\n    observations: \"hand.csv\"\n    observations_sha256: 00\n    rows: 10\n    parameters: [\"axes[X].component_errors.EXX_um.forward[4]\", \"axes[X].component_errors.EXX_um.reverse[0]\"]\n    u: [{U_F4_UM}, {U_R0_UM}]\n    correlation:\n      - [1.0, {RHO}]\n      - [{RHO}, 1.0]\n"
+        ),
+    );
+    m.to_str().unwrap().to_string()
+}
+
+const U_F4_UM: f64 = 2.0;
+const U_R0_UM: f64 = 1.0;
+const RHO: f64 = 0.5;
+
+/// The U (k=2) of figure `name` of group `group`, mm.
+fn figure_u(r: &Value, group: &str, name: &str) -> f64 {
+    let g = r["groups"]
+        .as_array()
+        .expect("groups")
+        .iter()
+        .find(|g| g["name"] == group)
+        .unwrap_or_else(|| panic!("group {group}"));
+    assert_eq!(g["uncertainty"]["k"], 2.0);
+    g["uncertainty"]["figures"][format!("{name}_mm")]
+        .as_f64()
+        .unwrap_or_else(|| panic!("U of {name}"))
+}
+
+/// Each ISO 230-2 figure's U (k=2) from the model's covariance, derived
+/// by hand. The model's X deviation at 400 mm approached in + is
+/// forward[4] (1e-3 mm per µm; a = u of it) and at 0 mm approached in −
+/// is reverse[0] (b); no other prediction is uncertain, and cov(400↑, 0↓)
+/// = ρ a b. A figure moves with the means of the targets that attain its
+/// extremes (after compensation each mean is the measured one less the
+/// prediction; predicted, the prediction itself), so with
+/// w = 1e-3 √(a² + b² − 2ρab) (E's two ends move against each other):
+/// - after compensation of the sample (model 0: the figures are the
+///   sample's): E = x̄↑(400) − x̄↓(0) → U = 2w; E↑ = x̄↑(400) − x̄↑(0)
+///   → 2·1e-3 a; E↓ = x̄↓(400) − x̄↓(0) → 2·1e-3 b; M = x̄(400) − x̄(0),
+///   each half a direction → w; A↑ = 9 (200↑) − (−2) (0↑) → 0;
+///   A↓ = 7 (400↓) − (−4) (0↓) → 2·1e-3 b; A = 9 (200↑) − (−4) (0↓) →
+///   2·1e-3 b; R↑, R↓ are scatter → 0; B = |B(300)| → 0;
+///   B̄ = mean B_i, B(400) with −x̄↑(400), B(0) with +x̄↓(0) → 2w/5;
+///   R = 9 at 200 and at 400 (2 s↑ + 2 s↓ + |B(400)| = 2 + 4 + 3), a
+///   tie: R(400) grows as the prediction at 400↑ falls, so the larger
+///   one-sided U is 2·1e-3 a;
+/// - predicted by the model with the sample's means as tables (s = 0):
+///   E, A → 2w, E↑, A↑ → 2·1e-3 a, E↓, A↓ → 2·1e-3 b, M → w, B̄ → 2w/5,
+///   R = B = |B(300)| → 0, R↑ = R↓ = 0 → 0.
+#[test]
+fn iso230_2_figures_carry_u_from_the_covariance() {
+    let (a, b) = (U_F4_UM, U_R0_UM);
+    let w = 1e-3 * (a * a + b * b - 2.0 * RHO * a * b).sqrt();
+    let ua = 2e-3 * a;
+    let ub = 2e-3 * b;
+    let dir = tempfile::tempdir().unwrap();
+    let zero = exx_machine_with_covariance(dir.path(), "[0, 0, 0, 0, 0]", "[0, 0, 0, 0, 0]");
+    let (code, r, err) = verify_json(&[
+        "iso230-2",
+        "samples/verify/iso230-2-x.csv",
+        "--compensated",
+        "--machine",
+        &zero,
+    ]);
+    assert_eq!(code, 0, "{err}");
+    assert_figures(&r, "X", &X_AXIS);
+    let after = [
+        ("E_up", ua),
+        ("E_down", ub),
+        ("E", 2.0 * w),
+        ("M", w),
+        ("A_up", 0.0),
+        ("A_down", ub),
+        ("A", ub),
+        ("R_up", 0.0),
+        ("R_down", 0.0),
+        ("R", ua),
+        ("B", 0.0),
+        ("B_mean", 2.0 * w / 5.0),
+    ];
+    for (name, want) in after {
+        let got = figure_u(&r, "X", name);
+        assert!(
+            (got - want).abs() <= NM,
+            "after: U of {name} {got}, by hand {want}"
+        );
+    }
+    assert!(
+        r["source"]["note"].as_str().is_some_and(
+            |n| n.contains("U (k=2) from the parameter covariance of geometry (hand.csv)")
+        ),
+        "{}",
+        r["source"]
+    );
+
+    let means = exx_machine_with_covariance(dir.path(), "[0, 3, 5, 4, 6]", "[-2, 1, 2, 0, 3]");
+    let (code, r, err) = verify_json(&[
+        "iso230-2",
+        "--predict",
+        "--machine",
+        &means,
+        "--targets",
+        "0,100,200,300,400",
+    ]);
+    assert_eq!(code, 0, "{err}");
+    let predicted = [
+        ("E_up", ua),
+        ("E_down", ub),
+        ("E", 2.0 * w),
+        ("M", w),
+        ("A_up", ua),
+        ("A_down", ub),
+        ("A", 2.0 * w),
+        ("R_up", 0.0),
+        ("R_down", 0.0),
+        ("R", 0.0),
+        ("B", 0.0),
+        ("B_mean", 2.0 * w / 5.0),
+    ];
+    for (name, want) in predicted {
+        let got = figure_u(&r, "X", name);
+        assert!(
+            (got - want).abs() <= NM,
+            "predicted: U of {name} {got}, by hand {want}"
+        );
+    }
+    // The table shows value ± U.
+    let (code, table, _) = verify(&[
+        "iso230-2",
+        "--predict",
+        "--machine",
+        &means,
+        "--targets",
+        "0,100,200,300,400",
+    ]);
+    assert_eq!(code, 0);
+    assert!(table.contains("(mm; value ± U, k=2)"), "{table}");
+    assert!(
+        table.contains(&format!("0.0080 ± {:.4}", 2.0 * w)),
+        "{table}"
+    );
+}

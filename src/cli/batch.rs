@@ -920,6 +920,11 @@ pub fn run(a: &BatchArgs, quiet: bool) -> Result<i32> {
             )?;
             // The programs already run on the pool's threads.
             job.pool = None;
+            // The annotations state U where the machine file carries a
+            // covariance, as `compensate`'s do.
+            job.predictor = job
+                .predictor
+                .map(|p| p.with_uncertainty(loaded.uncertainty.as_ref()));
             (
                 Engine::Tool(Box::new(job)),
                 super::machines::tool_effects(&set),

@@ -251,9 +251,33 @@ impl WrittenModel<'_> {
                 self.obs.rows.len(),
                 d.gap.after.rms_um * 1e-3,
             )?;
+            let block = match &d.covariance {
+                Some(cov) => write::written_covariance(
+                    self.machine,
+                    &model,
+                    &d.found,
+                    &found,
+                    &w.written,
+                    cov,
+                )?
+                .map(|c| {
+                    crate::predict::uncertainty::CovarianceBlock::from_fit(
+                        "diagnose",
+                        &record.observations,
+                        &record.observations_sha256,
+                        d.train_rows,
+                        c.parameters,
+                        &c.matrix,
+                    )
+                }),
+                None => None,
+            };
             let status = Edit::Calibrated(record);
             let edited = yaml_write::apply(&w.text, &shown, "postproc diagnose", &[status])?;
             w.text = crate::machine::status::mark_calibrated(&w.text, &edited, &shown, "diagnose")?;
+            if let Some(b) = &block {
+                w.text = crate::predict::uncertainty::put_covariance(&w.text, &shown, b)?;
+            }
         }
         let mut inputs = vec![o.to_path_buf()];
         if let Some(m) = &a.machine {

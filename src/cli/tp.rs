@@ -193,7 +193,8 @@ pub(super) fn compensate_to(
         compensate: job.opts.effects.compensates(),
         annotate: job.opts.annotate,
     };
-    let (text, warnings) = rewrite(&t.text, &t.program, &steps, &solved, job.robot, how)?;
+    let u = job.provenance.uncertainty.as_deref();
+    let (text, warnings) = rewrite(&t.text, &t.program, &steps, &solved, (job.robot, u), how)?;
     run.summary.warnings.extend(warnings);
     let inputs = [t.path.as_path()];
     super::output::refuse_overwrite(out, &inputs)?;

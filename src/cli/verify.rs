@@ -8,9 +8,12 @@ use clap::{Args, Subcommand, ValueEnum};
 
 use crate::error::{Error, Result};
 use crate::machine::{Machine, MachineFile, axis_slot};
+use crate::predict::uncertainty::BlockUncertainty;
+use crate::verify::iso230_2::AxisRuns;
 use crate::verify::iso230_2::{self, Iso230_2};
 use crate::verify::predicted::{
-    AxisSetup, CircleSetup, compensated, predicted_circle, predicted_runs,
+    AxisSetup, CircleSetup, compensated, figure_uncertainty, predicted_circle, predicted_runs,
+    prediction_covariance,
 };
 use crate::verify::{
     Evaluation, Limit, Source, Standard, iso230_4, iso9283, limits, report_json, report_table,
@@ -189,6 +192,25 @@ fn run_230_2(a: &Iso230_2Args) -> Result<i32> {
         )?),
         None => None,
     };
+    let uncertainty = match &a.common.machine {
+        Some(name) if a.predict || a.compensated => model_uncertainty(name)?,
+        _ => None,
+    };
+    // Each figure's U, and the provenance sentence of the note.
+    let with_u = |runs: &AxisRuns, sign: f64, r: &mut iso230_2::AxisResult| -> String {
+        let (Some(u), Some(setup)) = (&uncertainty, &setup) else {
+            return String::new();
+        };
+        r.u_mm =
+            prediction_covariance(u, setup, runs).and_then(|c| figure_uncertainty(runs, sign, &c));
+        match r.u_mm {
+            Some(_) => format!(
+                "; ± U (k=2) from the parameter covariance of {}",
+                u.sources.join(", ")
+            ),
+            None => String::new(),
+        }
+    };
     if let (true, Some((m, shown_m)), Some(setup)) = (a.predict, &machine, &setup) {
         if a.targets.len() < iso230_2::MIN_TARGETS {
             return Err(usage(format!(
@@ -198,12 +220,12 @@ fn run_230_2(a: &Iso230_2Args) -> Result<i32> {
             )));
         }
         let runs = predicted_runs(m, setup, &a.axis.to_ascii_uppercase(), &a.targets)?;
-        let eval = Iso230_2 {
-            axes: vec![iso230_2::evaluate_axis(&runs)],
-        };
+        let mut axis = iso230_2::evaluate_axis(&runs);
+        let said = with_u(&runs, 1.0, &mut axis);
+        let eval = Iso230_2 { axes: vec![axis] };
         let source = Source::Predicted {
             machine: shown_m.clone(),
-            note: "the model's systematic deviations, one run per direction (s = 0)".into(),
+            note: format!("the model's systematic deviations, one run per direction (s = 0){said}"),
         };
         return finish(&eval, &source, &a.common, &[]);
     }
@@ -222,14 +244,18 @@ fn run_230_2(a: &Iso230_2Args) -> Result<i32> {
             )));
         };
         *runs = compensated(m, setup, runs);
-        axes.retain(|r| r.axis.eq_ignore_ascii_case(&name));
+        let runs = runs.clone();
+        let mut axis = iso230_2::evaluate_axis(&runs);
+        let said = with_u(&runs, -1.0, &mut axis);
         source = Source::Predicted {
             machine: shown_m.clone(),
             note: format!(
-                "after compensation: the runs of {} minus the model's deviations",
+                "after compensation: the runs of {} minus the model's deviations{said}",
                 file.display()
             ),
         };
+        let eval = Iso230_2 { axes: vec![axis] };
+        return finish(&eval, &source, &a.common, &[file]);
     }
     let eval = Iso230_2 {
         axes: axes.iter().map(iso230_2::evaluate_axis).collect(),
@@ -320,6 +346,17 @@ fn tool_machine(name: &str) -> Result<(crate::machine::tool::MachineTool, String
             file.shown
         ))),
     }
+}
+
+/// The uncertainty of a machine tool's predictions from its file's
+/// parameter covariance (`None`: the file carries none).
+fn model_uncertainty(name: &str) -> Result<Option<BlockUncertainty>> {
+    let file = MachineFile::open(name)?;
+    let blocks = crate::predict::uncertainty::read_covariance(&file.text, &file.shown)?;
+    if blocks.is_empty() {
+        return Ok(None);
+    }
+    BlockUncertainty::of_machine(&file.load()?, &blocks, &file.shown)
 }
 
 /// `--at Y=250,Z=100`.

@@ -894,7 +894,7 @@ fn table_edit(
 }
 
 /// Slot of an axis letter, error direction of a table key (`EXX_um` → 0).
-fn slot_of(c: char) -> Result<usize> {
+pub(super) fn slot_of(c: char) -> Result<usize> {
     LETTERS
         .iter()
         .position(|l| *l == c)
@@ -903,7 +903,7 @@ fn slot_of(c: char) -> Result<usize> {
 
 /// The parameter of a location-error key (`EC0Y_urad`, `EX0B_mm`,
 /// `EB0B_urad`) of the axis `axis` (`None`: the spindle).
-fn location_param(axis: Option<char>, key: &str) -> Result<ToolParam> {
+pub(super) fn location_param(axis: Option<char>, key: &str) -> Result<ToolParam> {
     let r = key
         .chars()
         .nth(1)

@@ -223,6 +223,12 @@ pub struct Diagnosis {
     /// Gross outliers left out of every fit, test and held-out figure
     /// ([`outliers`]).
     pub outliers: outliers::Outliers,
+    /// The covariance of the fitted parameters of `found` (the columns in
+    /// their order, each effect's parameters in turn; display units), of
+    /// the final fit on the training rows; `None` without accepted effects
+    /// or without redundancy.
+    #[serde(skip)]
+    pub covariance: Option<DMatrix<f64>>,
 }
 
 pub use screen::{Group, SCREEN_COS};
@@ -274,10 +280,13 @@ fn sensitivities(
 
 /// The accepted effects with their fitted parameters, and the fitted
 /// coefficients.
-fn found_effects(sel: &select::Selection, kept: &[Effect]) -> (Vec<Found>, DVector<f64>) {
+fn found_effects(
+    sel: &select::Selection,
+    kept: &[Effect],
+) -> (Vec<Found>, DVector<f64>, Option<DMatrix<f64>>) {
     let mut found = Vec::new();
     let Some(fit) = &sel.fit else {
-        return (found, DVector::zeros(0));
+        return (found, DVector::zeros(0), None);
     };
     let u = fit
         .std_uncertainty()
@@ -309,7 +318,7 @@ fn found_effects(sel: &select::Selection, kept: &[Effect]) -> (Vec<Found>, DVect
             bootstrap,
         });
     }
-    (found, fit.params.clone())
+    (found, fit.params.clone(), fit.covariance.clone())
 }
 
 /// The residual with the accepted effects' correction removed (µm, on the
@@ -491,7 +500,7 @@ pub fn diagnose(
         bootstrap: opts.bootstrap,
         seed: opts.seed,
     });
-    let (found, beta) = found_effects(&sel, &kept);
+    let (found, beta, covariance) = found_effects(&sel, &kept);
     let gap = held_out_gap(&sel, &sens, &r, &eq, &beta, &train, &hold);
     let verdict = verdict(&sel.steps, &found);
     Ok(Diagnosis {
@@ -515,6 +524,7 @@ pub fn diagnose(
         gap,
         verdict,
         outliers,
+        covariance,
     })
 }
 

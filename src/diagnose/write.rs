@@ -49,7 +49,7 @@ use super::effects::{Action, DhField, dh_param, round9, tool_edits};
 use crate::calibrate::honesty::{Rule, relative_uncertainty};
 use crate::calibrate::lsq::COVERAGE_K;
 use crate::calibrate::observations::{Observation, Pose};
-use crate::calibrate::report::Estimate;
+use crate::calibrate::report::{Estimate, FitCovariance};
 use crate::error::{Error, Result};
 use crate::machine::Machine;
 use crate::machine::robot::{Robot, RobotParam};
@@ -304,6 +304,201 @@ pub fn write_model_for(
     })
 }
 
+/// A value of the written file that an effect's fitted parameter moved.
+#[derive(Debug, Clone, PartialEq)]
+pub struct WrittenKey {
+    /// Index of the parameter in the effect's list.
+    pub param: usize,
+    /// Key path of the value (`axes[Y].location_errors.EC0Y_urad`).
+    pub path: String,
+    /// Change of the value per unit of the parameter (the key's unit per
+    /// display unit): the slope of the written map, at the written value
+    /// where it is not linear (a stiffness from a compliance).
+    pub per_unit: f64,
+}
+
+/// The values `written` (the model read from the written file) holds for
+/// the written effect `f`, fitted on `machine` (the model it was written
+/// from), with their slopes ([`WrittenKey`]). `thermal_term` is the index
+/// of the robot thermal term a thermal effect appended. Values no key path
+/// names alone (the cells of a stiffness grid) are not listed.
+fn written_keys(
+    machine: &Machine,
+    written: &Machine,
+    f: &Found,
+    thermal_term: usize,
+) -> Result<Vec<WrittenKey>> {
+    use super::effects::{location_param, slot_of};
+    let key = |param: usize, p: String, per_unit: f64| WrittenKey {
+        param,
+        path: p,
+        per_unit,
+    };
+    let mut out = Vec::new();
+    match (&f.effect.action, machine, written) {
+        (Action::Dh(j, field), _, _) => {
+            let (p, per) = dh_param(*j, *field, 1.0);
+            out.push(key(0, p.path(), per));
+        }
+        (Action::Compliance(j), _, Machine::Robot(w)) => {
+            // k' = 1/(1/k + c·10⁻⁶): dk'/dc = −k'²·10⁻⁶.
+            let p = RobotParam::JointStiffness { joint: *j };
+            let k = w.param_value(p).unwrap_or(0.0);
+            out.push(key(0, p.path(), -k * k * 1e-6));
+        }
+        (Action::Tcp, _, _) => {
+            for axis in 0..3 {
+                out.push(key(axis, RobotParam::ToolOffset { axis }.path(), 1e-3));
+            }
+        }
+        (Action::Payload, _, _) => out.push(key(0, RobotParam::PayloadMass.path(), 1.0)),
+        (Action::Thermal { .. }, _, Machine::Robot(w)) => {
+            // lb = ub = g·10⁻³/ts with ts fixed by the rows' powers.
+            let ts = RobotParam::Thermal {
+                term: thermal_term,
+                field: crate::machine::robot::ThermalField::Ts,
+            };
+            let ts = w.param_value(ts).filter(|t| *t > 0.0);
+            if let Some(ts) = ts {
+                for field in [
+                    crate::machine::robot::ThermalField::Lb,
+                    crate::machine::robot::ThermalField::Ub,
+                ] {
+                    let p = RobotParam::Thermal {
+                        term: thermal_term,
+                        field,
+                    };
+                    out.push(key(0, p.path(), 1e-3 / ts));
+                }
+            }
+        }
+        (Action::SpindlePower, _, _) => out.push(key(0, ToolParam::SpindleGrowth.path(), 1.0)),
+        (Action::Location { axis, key: k }, _, _) => {
+            let per = if k.ends_with("_mm") { 1e-3 } else { 1.0 };
+            out.push(key(0, location_param(*axis, k)?.path(), per));
+        }
+        (
+            Action::Component {
+                axis,
+                key: k,
+                power,
+            },
+            Machine::Tool(t),
+            Machine::Tool(w),
+        ) => {
+            let slot = slot_of(*axis)?;
+            let error = slot_of(k.chars().nth(1).unwrap_or('?'))?;
+            let (lo, hi) = t.axis(slot).map_or((0.0, 0.0), |a| a.travel);
+            let mid = 0.5 * (lo + hi);
+            let half = 0.5 * (hi - lo);
+            let [pos, _, _] = w.component_table(slot, error).unwrap_or_default();
+            for forward in [true, false] {
+                for (node, q) in pos.iter().enumerate() {
+                    let p = ToolParam::Component {
+                        axis: slot,
+                        error,
+                        node,
+                        forward,
+                    };
+                    let per = if half > 0.0 {
+                        ((q - mid) / half).powi(*power)
+                    } else {
+                        0.0
+                    };
+                    out.push(key(0, p.path(), per));
+                }
+            }
+        }
+        (Action::AxisBacklash { axis, key: k }, _, Machine::Tool(w)) => {
+            let slot = slot_of(*axis)?;
+            let error = slot_of(k.chars().nth(1).unwrap_or('?'))?;
+            let [pos, _, _] = w.component_table(slot, error).unwrap_or_default();
+            for node in 0..pos.len() {
+                let p = ToolParam::Component {
+                    axis: slot,
+                    error,
+                    node,
+                    forward: false,
+                };
+                out.push(key(0, p.path(), 1.0));
+            }
+        }
+        (Action::AxisStiffness(slot), _, Machine::Tool(w)) => {
+            // k' = 1/(1/k + c): dk'/dc = −k'²; a grid's cells share a path.
+            for positive in [true, false] {
+                for p in w.stiffness_params(*slot, positive) {
+                    if let (ToolParam::Stiffness { cell: None, .. }, Some(k)) =
+                        (p, w.param_value(p))
+                    {
+                        out.push(key(0, p.path(), -k * k));
+                    }
+                }
+            }
+        }
+        _ => {}
+    }
+    Ok(out)
+}
+
+/// The covariance of the values written for the effects `kept` (as
+/// [`withhold_uncertain`] left them; those named in `written` were
+/// written) from the covariance `cov` of the fitted parameters of `all`
+/// (the diagnosis's effects, their parameters in turn): each value's
+/// change is its [`WrittenKey::per_unit`] slope times its parameter's, so
+/// the block is `S cov Sᵀ` on the values' key paths, in their keys' units.
+/// Parameters withheld as uncertain and values no parameter moves are not
+/// in it. `machine` is the model written from, `model` the model read
+/// from the written file. `None` when nothing written is in it.
+pub fn written_covariance(
+    machine: &Machine,
+    model: &Machine,
+    all: &[Found],
+    kept: &[Found],
+    written: &[String],
+    cov: &nalgebra::DMatrix<f64>,
+) -> Result<Option<FitCovariance>> {
+    let mut thermal_term = match machine {
+        Machine::Robot(r) => (0..)
+            .take_while(|&term| {
+                r.param_value(RobotParam::Thermal {
+                    term,
+                    field: crate::machine::robot::ThermalField::Lb,
+                })
+                .is_some()
+            })
+            .count(),
+        Machine::Tool(_) => 0,
+    };
+    let mut cols = Vec::new();
+    for f in kept.iter().filter(|f| written.contains(&f.effect.name)) {
+        let Some(at) = all.iter().position(|a| a.effect.name == f.effect.name) else {
+            continue;
+        };
+        let offset: usize = all.iter().take(at).map(|a| a.params.len()).sum();
+        let keys = written_keys(machine, model, f, thermal_term)?;
+        if matches!(
+            (&f.effect.action, machine),
+            (Action::Thermal { .. }, Machine::Robot(_))
+        ) {
+            thermal_term += 1;
+        }
+        for k in keys {
+            let withheld = f
+                .params
+                .get(k.param)
+                .is_none_or(|p| p.name.ends_with(WITHHELD));
+            if !withheld && k.per_unit != 0.0 && k.per_unit.is_finite() {
+                cols.push((offset + k.param, k.path, k.per_unit));
+            }
+        }
+    }
+    Ok(FitCovariance::select(Some(cov), &cols))
+}
+
+/// The suffix [`withhold_uncertain`] gives the name of a parameter it
+/// withheld.
+const WITHHELD: &str = "(uncertain, not added)";
+
 /// The unit of a fitted parameter's name (`dx [µm]` → `µm`), for the
 /// length floor of [`honesty`]; empty when it is not a length.
 fn length_unit(name: &str) -> &'static str {
@@ -357,14 +552,11 @@ pub fn withhold_uncertain(
                     ),
                 ));
                 p.value = 0.0;
-                p.name = format!("{} (uncertain, not added)", p.name);
+                p.name = format!("{} {WITHHELD}", p.name);
             }
         }
         // Thermal and machine-tool effects write their first parameter only.
-        let first_withheld = f
-            .params
-            .first()
-            .is_some_and(|p| p.name.ends_with("(uncertain, not added)"));
+        let first_withheld = f.params.first().is_some_and(|p| p.name.ends_with(WITHHELD));
         let first_only = is_thermal(&f.effect.action) || matches!(machine, Machine::Tool(_));
         if n_uncertain < f.params.len() && !(first_withheld && first_only) {
             kept.push(f);

@@ -154,6 +154,9 @@ pub struct Point {
     pub orient_urad: f64,
     /// How the move is drawn.
     pub shape: Shape,
+    /// Expanded uncertainty U (k=2) of |deviation|, mm (`None`: the
+    /// machine file carries no parameter covariance).
+    pub u: Option<f64>,
 }
 
 impl Peak for Point {
@@ -205,6 +208,8 @@ pub struct Move<'a> {
     pub orient_urad: f64,
     /// Shape.
     pub shape: Shape,
+    /// Expanded uncertainty U (k=2) of |deviation|, mm.
+    pub u: Option<f64>,
 }
 
 impl Collector {
@@ -238,6 +243,7 @@ impl Collector {
             residual: m.residual,
             orient_urad: m.orient_urad,
             shape,
+            u: m.u,
         });
     }
 
@@ -284,6 +290,8 @@ pub struct Mark {
     pub dev: f64,
     /// The worst of the cutting moves (the overall worst: `false`).
     pub cut: bool,
+    /// Expanded uncertainty U (k=2) of its |deviation|, mm.
+    pub u: Option<f64>,
 }
 
 /// Everything a page shows.
@@ -389,6 +397,9 @@ fn data_json(doc: &Doc) -> String {
     let mut arcs = Vec::new();
     let mut src = Vec::with_capacity(doc.points.len());
     let mut prev_end: Option<[f64; 3]> = None;
+    // U (k=2) of the rows that have one, in deviation units (the key
+    // only when the report states U).
+    let mut us = Vec::new();
     // Lines and end points as differences from the previous row (integer
     // µm, so that the sums are exact).
     let (mut line0, mut end0) = (0i64, [0i64; 3]);
@@ -434,6 +445,9 @@ fn data_json(doc: &Doc) -> String {
             starts.push(format!("\"{i}\":[{}]", s.join(",")));
         }
         prev_end = Some(p.end);
+        if let Some(u) = p.u {
+            us.push(format!("\"{i}\":{}", int(u, DEV_PER_MM)));
+        }
         match p.shape {
             Shape::Arc {
                 center,
@@ -463,14 +477,15 @@ fn data_json(doc: &Doc) -> String {
         .iter()
         .map(|m| {
             format!(
-                "{{\"line\":{},\"file\":{},\"pos\":[{},{},{}],\"dev\":{},\"cut\":{}}}",
+                "{{\"line\":{},\"file\":{},\"pos\":[{},{},{}],\"dev\":{},\"cut\":{}{}}}",
                 m.at.1,
                 m.at.0,
                 float(m.pos[0], 4),
                 float(m.pos[1], 4),
                 float(m.pos[2], 4),
                 float(m.dev, 6),
-                m.cut
+                m.cut,
+                m.u.map_or(String::new(), |u| format!(",\"u\":{}", float(u, 6)))
             )
         })
         .collect();
@@ -482,7 +497,7 @@ fn data_json(doc: &Doc) -> String {
         .collect();
     let positioning: Vec<String> = doc.positioning.iter().map(|b| b.to_string()).collect();
     format!(
-        "{{\"kind\":{},\"effects\":[{}],\"residual\":{},\"files\":[{}],\"motions\":[{}],\"positioning\":[{}],\"holes\":[{}],\"units\":{{\"pos_per_mm\":{},\"dev_per_mm\":{},\"res_per_mm\":{}}},\"rows\":[{rows}],\"starts\":{{{}}},\"arcs\":{{{}}},\"src\":[{}],\"marks\":[{}]}}",
+        "{{\"kind\":{},\"effects\":[{}],\"residual\":{},\"files\":[{}],\"motions\":[{}],\"positioning\":[{}],\"holes\":[{}],\"units\":{{\"pos_per_mm\":{},\"dev_per_mm\":{},\"res_per_mm\":{}}},\"rows\":[{rows}],\"starts\":{{{}}},\"arcs\":{{{}}},\"src\":[{}],\"marks\":[{}]{}}}",
         jstr(doc.kind),
         strs(&doc.effects),
         doc.residual,
@@ -496,7 +511,12 @@ fn data_json(doc: &Doc) -> String {
         starts.join(","),
         arcs.join(","),
         src.join(","),
-        marks.join(",")
+        marks.join(","),
+        if us.is_empty() {
+            String::new()
+        } else {
+            format!(",\"u\":{{{}}}", us.join(","))
+        }
     )
 }
 

@@ -757,6 +757,7 @@ impl<'w> ReportWriter<'w> {
             Some((name, _)) if self.layout.files => Some(name.clone()),
             _ => None,
         };
+        let u_total = u.as_ref().map(|u| u.total_mm);
         if let Some(c) = self.html.as_mut() {
             c.push(&crate::emit::html::Move {
                 at: (r.line, file),
@@ -769,10 +770,11 @@ impl<'w> ReportWriter<'w> {
                 residual: r.residual_mm,
                 orient_urad: r.orient_urad,
                 shape: r.shape,
+                u: u_total,
             });
         }
         match self.format {
-            Format::Html => self.mark(r, dev, rapid),
+            Format::Html => self.mark(r, dev, rapid, u_total),
             Format::Svg => {
                 let mut parts = [0.0; crate::emit::html::MAX_EFFECTS];
                 for (p, v) in parts.iter_mut().zip(r.effects_mm) {
@@ -796,7 +798,7 @@ impl<'w> ReportWriter<'w> {
                 if let Some(plot) = self.plot.as_mut() {
                     plot.push(p);
                 }
-                self.mark(r, dev, rapid);
+                self.mark(r, dev, rapid, u_total);
             }
             Format::Table | Format::Csv | Format::Json => {
                 self.text_row(r, dev, file_cell.as_deref(), u.as_ref())?;
@@ -976,12 +978,14 @@ impl<'w> ReportWriter<'w> {
 
     /// Keeps the row when it is the largest deviation so far (of all moves,
     /// of the cutting moves), for the picture's marks.
-    fn mark(&mut self, r: &Entry, dev: f64, rapid: bool) {
+    /// `u`: its U (k=2), mm, when the report states one.
+    fn mark(&mut self, r: &Entry, dev: f64, rapid: bool, u: Option<f64>) {
         let mark = PlotWorst {
             line: r.line,
             pos: r.position_mm,
             dev,
             cut: !rapid,
+            u,
         };
         if self.worst_point.is_none_or(|w| dev > w.dev) {
             self.worst_point = Some(mark);
@@ -1396,6 +1400,7 @@ impl<'w> ReportWriter<'w> {
                 pos: w.pos,
                 dev: w.dev,
                 cut: false,
+                u: w.u,
             });
         }
         if let Some(c) = self.worst_cut {
@@ -1408,6 +1413,7 @@ impl<'w> ReportWriter<'w> {
                     pos: c.pos,
                     dev: c.dev,
                     cut: true,
+                    u: c.u,
                 });
             }
         }

@@ -99,6 +99,9 @@ pub struct Worst {
     pub dev: f64,
     /// A cutting move (feed, arc, cycle, MoveL/MoveC): labelled "cut".
     pub cut: bool,
+    /// Expanded uncertainty U (k=2) of its |deviation|, mm (`None`: the
+    /// machine file carries no parameter covariance).
+    pub u: Option<f64>,
 }
 
 const MARK_ALL: RGBColor = RGBColor(220, 30, 30);
@@ -491,7 +494,10 @@ fn view(
                 EmptyElement::at(c) + Circle::new((0, 0), 9, colour.stroke_width(3)),
             ))
             .map_err(plot_err)?
-            .label(format!("{label}, line {} ({:.4} mm)", wp.line, wp.dev))
+            .label(match wp.u {
+                Some(u) => format!("{label}, line {} ({:.4} mm, U {u:.4})", wp.line, wp.dev),
+                None => format!("{label}, line {} ({:.4} mm)", wp.line, wp.dev),
+            })
             .legend(move |(x, y)| Circle::new((x + 8, y), 6, colour.stroke_width(3)));
     }
     if !marks.is_empty() {

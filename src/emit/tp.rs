@@ -7,7 +7,9 @@
 //! Everything else is the input's bytes, but when annotated: TP has no
 //! comment that could end a motion line, so each compensated motion is
 //! followed by `!` remark lines (at most [`REMARK_CHARS`] characters each,
-//! as the controller keeps them) with its predicted deviation, the `/MN`
+//! as the controller keeps them) with its predicted deviation (and its
+//! expanded uncertainty ` U …`, k = 2, when the robot file carries a
+//! kinematics covariance, as the KRL annotations state it), the `/MN`
 //! lines after it renumbered and `/ATTR`'s `LINE_COUNT` raised by the
 //! lines added. Without annotation `/MN` is the input's bytes.
 //!
@@ -222,7 +224,10 @@ pub fn rewrite(
     program: &Program,
     steps: &[RobotStep],
     solved: &[Solved],
-    robot: &Robot,
+    (robot, u): (
+        &Robot,
+        Option<&crate::predict::uncertainty::BlockUncertainty>,
+    ),
     how: TpWrite,
 ) -> Result<(String, Vec<Warning>)> {
     let positions: HashMap<usize, &Position> = program
@@ -247,6 +252,12 @@ pub fn rewrite(
         if how.annotate {
             let mut c = String::new();
             write_dev_comment(&mut c, &target.deviation);
+            use crate::predict::robot_uncertainty::{push_u, target_u_mm};
+            let dev = target.deviation.total.pos_mm;
+            push_u(
+                &mut c,
+                u.and_then(|u| target_u_mm(u, &target.q_programmed, &dev)),
+            );
             if let Some(&i) = by_line.get(&t.line) {
                 if remarks.last().is_none_or(|(k, _)| *k != i) {
                     remarks.push((i, remark_pieces(&c)));

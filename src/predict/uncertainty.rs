@@ -575,6 +575,33 @@ fn tool_params(machine: &MachineTool) -> Vec<ToolParam> {
     all
 }
 
+/// The key paths of the parameters of a model's geometric chain (a
+/// machine tool's component tables and location errors, a robot's DH
+/// values and tool offset): those of a diagnosis's block that the
+/// sensitivities propagate.
+fn chain_paths(machine: &crate::machine::Machine) -> Vec<String> {
+    use crate::machine::Machine;
+    match machine {
+        Machine::Tool(t) => tool_params(t)
+            .into_iter()
+            .filter(|p| {
+                matches!(
+                    p,
+                    ToolParam::Component { .. }
+                        | ToolParam::Location { .. }
+                        | ToolParam::SpindleLocation { .. }
+                )
+            })
+            .map(|p| p.path())
+            .collect(),
+        Machine::Robot(r) => robot_params(r)
+            .into_iter()
+            .filter(|p| matches!(p, RobotParam::Dh { .. } | RobotParam::ToolOffset { .. }))
+            .map(|p| p.path())
+            .collect(),
+    }
+}
+
 /// The correction a robot parameter makes: its value less the nominal
 /// model's for a DH value (angles in degrees), the value itself otherwise.
 fn robot_correction(r: &Robot, p: RobotParam) -> f64 {
@@ -667,9 +694,12 @@ enum Sensitivity {
 /// file carries a `covariance` list: the parameters of its geometric
 /// (machine tool) or kinematic (robot) blocks with their covariance (the
 /// blocks independent of one another) and the model's sensitivities to
-/// them. Blocks of other kinds (stiffness, thermal, diagnose) are not
-/// propagated: their effects' predictions are not the tip deviation's
-/// geometric chain these sensitivities differentiate.
+/// them, and the parameters of a diagnosis's block (`diagnose
+/// --write-model`) that are in that chain (component tables, location
+/// errors; DH values, tool offset). Blocks of other kinds (stiffness,
+/// thermal) and a diagnosis's other parameters (compliance, thermal
+/// growth, payload) are not propagated: their effects' predictions are not
+/// the tip deviation's geometric chain these sensitivities differentiate.
 #[derive(Debug, Clone)]
 pub struct BlockUncertainty {
     sens: Sensitivity,
@@ -683,8 +713,9 @@ pub struct BlockUncertainty {
 impl BlockUncertainty {
     /// The uncertainty of `machine`'s predictions from `blocks` (its file's
     /// `covariance` list; `file` names it in errors); `None` when no block
-    /// is of the model's geometric or kinematic kind. A parameter that is
-    /// not a value of the file is refused by its key path.
+    /// is of the model's geometric or kinematic kind and no diagnosis's
+    /// block holds a parameter of that chain. A parameter that is not a
+    /// value of the file is refused by its key path.
     pub fn of_machine(
         machine: &crate::machine::Machine,
         blocks: &[CovarianceBlock],
@@ -695,21 +726,45 @@ impl BlockUncertainty {
             Machine::Tool(_) => "geometry",
             Machine::Robot(_) => "kinematics",
         };
-        let used: Vec<&CovarianceBlock> = blocks.iter().filter(|b| b.kind == want).collect();
+        let chain = chain_paths(machine);
+        // Each block with the parameters propagated: all of a block of the
+        // model's kind, those of the geometric chain of a diagnosis.
+        let mut used: Vec<(&CovarianceBlock, Vec<usize>)> = Vec::new();
+        for b in blocks {
+            let keep: Vec<usize> = match b.kind.as_str() {
+                k if k == want => (0..b.parameters.len()).collect(),
+                "diagnose" => (0..b.parameters.len())
+                    .filter(|&i| b.parameters.get(i).is_some_and(|p| chain.contains(p)))
+                    .collect(),
+                _ => Vec::new(),
+            };
+            if !keep.is_empty() {
+                used.push((b, keep));
+            }
+        }
         if used.is_empty() {
             return Ok(None);
         }
-        let n: usize = used.iter().map(|b| b.parameters.len()).sum();
+        let n: usize = used.iter().map(|(_, k)| k.len()).sum();
         let mut big = DMatrix::zeros(n, n);
         let mut steps = Vec::with_capacity(n);
         let mut paths = Vec::with_capacity(n);
+        let mut u = Vec::with_capacity(n);
         let mut at = 0;
-        for b in &used {
+        for (b, keep) in &used {
             let c = b.covariance()?;
-            let m = c.len();
-            big.view_mut((at, at), (m, m)).copy_from(c.matrix());
-            steps.extend(b.u.iter().map(|u| if *u > 0.0 { *u } else { 1.0 }));
-            paths.extend(b.parameters.iter().cloned());
+            let m = keep.len();
+            let sub = c
+                .matrix()
+                .select_rows(keep.iter())
+                .select_columns(keep.iter());
+            big.view_mut((at, at), (m, m)).copy_from(&sub);
+            for &i in keep {
+                let ui = b.u.get(i).copied().unwrap_or(0.0);
+                u.push(ui);
+                steps.push(if ui > 0.0 { ui } else { 1.0 });
+                paths.push(b.parameters.get(i).cloned().unwrap_or_default());
+            }
             at += m;
         }
         let unknown = |p: &str| {
@@ -717,7 +772,6 @@ impl BlockUncertainty {
                 "{file}: covariance: `{p}` is not a value of this machine file"
             ))
         };
-        let u: Vec<f64> = used.iter().flat_map(|b| b.u.iter().copied()).collect();
         let (sens, corrections): (Sensitivity, Vec<f64>) = match machine {
             Machine::Tool(t) => {
                 let params = by_path(&tool_params(t), ToolParam::path, &paths, &steps)
@@ -755,7 +809,7 @@ impl BlockUncertainty {
             z2,
             sources: used
                 .iter()
-                .map(|b| format!("{} ({})", b.kind, b.observations))
+                .map(|(b, _)| format!("{} ({})", b.kind, b.observations))
                 .collect(),
         }))
     }
@@ -850,6 +904,35 @@ impl BlockUncertainty {
             return None;
         };
         self.total_of_jacobian(&s.jacobian(q), dev)
+    }
+
+    /// The covariance (mm²) of a machine tool's predicted deviations along
+    /// the coordinate `axis` (0..3: x, y, z) at the commands `points`
+    /// (each with its directions of motion; tool of `tool_mm`): G Σ Gᵀ,
+    /// G the rows `axis` of the points' sensitivities, so the points'
+    /// correlations through shared parameters are kept (`None` for a robot
+    /// model or an axis past z).
+    pub fn tool_covariance_along(
+        &self,
+        points: &[(AxisVec, DirVec)],
+        tool_mm: f64,
+        axis: usize,
+    ) -> Option<DMatrix<f64>> {
+        let Sensitivity::Tool(s) = &self.sens else {
+            return None;
+        };
+        if axis >= 3 {
+            return None;
+        }
+        let n = self.cov.len();
+        let mut g = DMatrix::zeros(points.len(), n);
+        for (k, (cmd, dirs)) in points.iter().enumerate() {
+            let j = s.jacobian(cmd, dirs, tool_mm);
+            for c in 0..n {
+                g[(k, c)] = j[(axis, c)];
+            }
+        }
+        Some(&g * self.cov.matrix() * g.transpose())
     }
 
     fn total_of_jacobian(&self, j: &Matrix3xX<f64>, dev: &Vector3<f64>) -> Option<f64> {

@@ -98,6 +98,9 @@ pub struct AxisResult {
     pub targets: Vec<TargetStats>,
     /// The axis figures in the order of [`FIGURES`], mm.
     pub figures: [f64; 12],
+    /// Their expanded uncertainties U (k=2) from a model's parameter
+    /// covariance, mm (`None`: not stated).
+    pub u_mm: Option<[f64; 12]>,
 }
 
 /// Mean and estimator of the standard deviation (n − 1; 0 for one value).
@@ -176,6 +179,7 @@ pub fn evaluate_axis(runs: &AxisRuns) -> AxisResult {
         axis: runs.axis.clone(),
         targets,
         figures,
+        u_mm: None,
     }
 }
 
@@ -332,7 +336,12 @@ impl Evaluation for Iso230_2 {
                 figures: FIGURES
                     .iter()
                     .zip(a.figures)
-                    .map(|(&name, value_mm)| Figure { name, value_mm })
+                    .zip(a.u_mm.map_or([None; 12], |u| u.map(Some)))
+                    .map(|((&name, value_mm), u_mm)| Figure {
+                        name,
+                        value_mm,
+                        u_mm,
+                    })
                     .collect(),
             })
             .collect()

@@ -209,7 +209,11 @@ impl Evaluation for Iso230_4 {
             figures: FIGURES
                 .iter()
                 .zip(self.figures)
-                .map(|(&name, value_mm)| Figure { name, value_mm })
+                .map(|(&name, value_mm)| Figure {
+                    name,
+                    value_mm,
+                    u_mm: None,
+                })
                 .collect(),
         }]
     }

@@ -358,6 +358,7 @@ fn orientation_group(poses: &[PoseStats]) -> Option<Group> {
         figures.push(Figure {
             name,
             value_mm: value,
+            u_mm: None,
         });
     }
     Some(Group {
@@ -378,10 +379,12 @@ impl Evaluation for Iso9283 {
                 Figure {
                     name: "AP",
                     value_mm: worst(&self.poses, |p| p.ap),
+                    u_mm: None,
                 },
                 Figure {
                     name: "RP",
                     value_mm: worst(&self.poses, |p| p.rp),
+                    u_mm: None,
                 },
             ],
         }];
@@ -393,10 +396,12 @@ impl Evaluation for Iso9283 {
                     Figure {
                         name: "AT",
                         value_mm: worst(&self.path, |p| p.ap),
+                        u_mm: None,
                     },
                     Figure {
                         name: "RT",
                         value_mm: worst(&self.path, |p| p.rp),
+                        u_mm: None,
                     },
                 ],
             });

@@ -272,10 +272,12 @@ mod tests {
                 Figure {
                     name: "A",
                     value_mm: 0.010,
+                    u_mm: None,
                 },
                 Figure {
                     name: "B_mean",
                     value_mm: -0.003,
+                    u_mm: None,
                 },
             ],
         }];

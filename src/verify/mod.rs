@@ -75,6 +75,10 @@ pub struct Figure {
     pub name: &'static str,
     /// Its value, mm.
     pub value_mm: f64,
+    /// Its expanded uncertainty U (k=2) from the model's parameter
+    /// covariance, mm (`None`: not stated — measured data, or a model
+    /// without a covariance).
+    pub u_mm: Option<f64>,
 }
 
 /// The figures of one thing evaluated: an axis, the circle, the robot's
@@ -157,7 +161,26 @@ pub fn report_json(eval: &dyn Evaluation, source: &Source, checks: &[Check]) -> 
                     )
                 })
                 .collect();
-            json!({ "name": g.name, "figures": figures })
+            let u: serde_json::Map<String, serde_json::Value> = g
+                .figures
+                .iter()
+                .filter_map(|f| {
+                    f.u_mm
+                        .map(|u| (format!("{}_{}", f.name, unit_of(f.name)), json_mm(u)))
+                })
+                .collect();
+            if u.is_empty() {
+                json!({ "name": g.name, "figures": figures })
+            } else {
+                json!({
+                    "name": g.name,
+                    "figures": figures,
+                    "uncertainty": {
+                        "k": crate::predict::uncertainty::COVERAGE_K,
+                        "figures": u,
+                    },
+                })
+            }
         })
         .collect();
     let source = match source {
@@ -204,11 +227,17 @@ pub fn report_table(eval: &dyn Evaluation, source: &Source, checks: &[Check]) ->
     eval.detail_table(&mut out);
     out.push('\n');
     let groups = eval.groups();
+    let with_u = groups
+        .iter()
+        .any(|g| g.figures.iter().any(|f| f.u_mm.is_some()));
+    let width = if with_u { 21 } else { 12 };
     out.push_str(&format!("{:<8}", "figure"));
     for g in &groups {
-        out.push_str(&format!(" {:>12}", g.name));
+        out.push_str(&format!(" {:>width$}", g.name));
     }
-    if groups
+    if with_u {
+        out.push_str("   (mm; value ± U, k=2)\n");
+    } else if groups
         .iter()
         .any(|g| g.figures.iter().any(|f| unit_of(f.name) == "deg"))
     {
@@ -228,12 +257,14 @@ pub fn report_table(eval: &dyn Evaluation, source: &Source, checks: &[Check]) ->
     for name in names {
         out.push_str(&format!("{name:<8}"));
         for g in &groups {
-            let cell = g
-                .figures
-                .iter()
-                .find(|f| f.name == name)
-                .map_or_else(|| "-".to_string(), |f| fmt_mm(f.value_mm));
-            out.push_str(&format!(" {cell:>12}"));
+            let cell = g.figures.iter().find(|f| f.name == name).map_or_else(
+                || "-".to_string(),
+                |f| match f.u_mm {
+                    Some(u) => format!("{} ± {}", fmt_mm(f.value_mm), fmt_mm(u)),
+                    None => fmt_mm(f.value_mm),
+                },
+            );
+            out.push_str(&format!(" {cell:>width$}"));
         }
         out.push('\n');
     }

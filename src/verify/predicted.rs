@@ -14,15 +14,25 @@
 //! deviation minus the model's: [`compensated`] subtracts the prediction
 //! from each measured run and keeps the measured scatter.
 //!
+//! When the machine file carries a parameter covariance, each figure of
+//! a prediction or of runs after compensation gets its expanded
+//! uncertainty U (k=2) ([`figure_uncertainty`]): the covariance of the
+//! model's predicted deviations at the targets ([`prediction_covariance`],
+//! correlated through the parameters they share) carried through the
+//! figure's sensitivity to each of them, to first order.
+//!
 //! A circular test (ISO 230-4) of a model: [`predicted_circle`] gives the
 //! radial deviations on a nominal circle in the plane of two linear axes,
 //! each direction with the axes' directions of motion of its approach (a
 //! reversal error shows as hysteresis).
 
-use super::iso230_2::{AxisRuns, TargetRuns};
+use nalgebra::DMatrix;
+
+use super::iso230_2::{AxisRuns, TargetRuns, evaluate_axis};
 use crate::error::{Error, Result};
 use crate::machine::tool::MachineTool;
 use crate::machine::{AxisVec, DirVec, axis_slot};
+use crate::predict::uncertainty::{BlockUncertainty, COVERAGE_K};
 use crate::predict::{EffectSet, ToolPredictor};
 
 /// Where the predicted axis is measured.
@@ -149,6 +159,79 @@ pub fn compensated(machine: &MachineTool, setup: &AxisSetup, measured: &AxisRuns
             })
             .collect(),
     }
+}
+
+/// The covariance (mm²) of the model's predicted positional deviations
+/// at the targets of `runs` (in their order), up then down at each:
+/// entry `2i` is target i approached in +, `2i + 1` in −. `None` for a
+/// model `u` cannot differentiate (a robot's).
+pub fn prediction_covariance(
+    u: &BlockUncertainty,
+    setup: &AxisSetup,
+    runs: &AxisRuns,
+) -> Option<DMatrix<f64>> {
+    let points: Vec<(AxisVec, DirVec)> = runs
+        .targets
+        .iter()
+        .flat_map(|t| {
+            [1i8, -1].map(|dir| {
+                let mut cmd = setup.at;
+                cmd[setup.slot] = t.target_mm;
+                let mut dirs: DirVec = [1; 6];
+                dirs[setup.slot] = dir;
+                (cmd, dirs)
+            })
+        })
+        .collect();
+    u.tool_covariance_along(&points, setup.tool_mm, setup.slot)
+}
+
+/// Step of the figures' one-sided differences, mm: far below the gap
+/// between two targets' values that the four decimals of a report can
+/// tell apart, far above the rounding of a deviation.
+pub const FIGURE_STEP_MM: f64 = 1e-7;
+
+/// The expanded uncertainty U (k = 2) of each ISO 230-2 figure of `runs`
+/// (in the order of [`super::iso230_2::FIGURES`], mm) when each run holds
+/// `sign` times the model's predicted deviation at its target and
+/// direction (+1: the prediction, `--predict`; −1: measured runs less the
+/// prediction, `--compensated`) and those predictions have the
+/// covariance `cov` ([`prediction_covariance`]). A figure is a maximum or
+/// minimum of the targets' means, so to first order it moves with the
+/// targets that attain them: its sensitivity g to each prediction is the
+/// figure's one-sided difference quotient with all runs of that target
+/// and direction moved by [`FIGURE_STEP_MM`], and U = 2 √(gᵀ C g). Where
+/// two targets attain the extreme together the two sides differ; the
+/// larger U of the two is given. A `cov` of the wrong size gives `None`.
+pub fn figure_uncertainty(runs: &AxisRuns, sign: f64, cov: &DMatrix<f64>) -> Option<[f64; 12]> {
+    let n = 2 * runs.targets.len();
+    if cov.nrows() != n || cov.ncols() != n {
+        return None;
+    }
+    let f0 = evaluate_axis(runs).figures;
+    let moved = |k: usize, h: f64| {
+        let mut r = runs.clone();
+        if let Some(t) = r.targets.get_mut(k / 2) {
+            let side = if k % 2 == 0 { &mut t.up } else { &mut t.down };
+            for v in side.iter_mut() {
+                *v += sign * h;
+            }
+        }
+        evaluate_axis(&r).figures
+    };
+    let mut up = DMatrix::zeros(12, n);
+    let mut down = DMatrix::zeros(12, n);
+    for k in 0..n {
+        let (fp, fm) = (moved(k, FIGURE_STEP_MM), moved(k, -FIGURE_STEP_MM));
+        for f in 0..12 {
+            up[(f, k)] = (fp[f] - f0[f]) / FIGURE_STEP_MM;
+            down[(f, k)] = (f0[f] - fm[f]) / FIGURE_STEP_MM;
+        }
+    }
+    let (cu, cd) = (&up * cov * up.transpose(), &down * cov * down.transpose());
+    Some(std::array::from_fn(|f| {
+        COVERAGE_K * cu[(f, f)].max(cd[(f, f)]).max(0.0).sqrt()
+    }))
 }
 
 /// A circular test of a machine model (ISO 230-4): a circle in the plane

@@ -7,7 +7,9 @@
 // in 1/res_per_mm mm (-1: not predicted); the file index only when the
 // report has several files. `starts` gives a row's start (absolute) when
 // it is not the previous row's end, `arcs` a row's arc as [cx, cy, cz,
-// nx, ny, nz, sweep_rad] (centre in position units).
+// nx, ny, nz, sweep_rad] (centre in position units); `u`, only when the
+// machine file carries a parameter covariance, a row's expanded
+// uncertainty U (k=2) of |deviation| in deviation units.
 (function () {
   var D = JSON.parse(document.getElementById("report-data").textContent);
   var NE = D.effects.length;
@@ -57,7 +59,8 @@
       res: res < 0 ? null : res / U.res_per_mm,
       orient: r[9 + NE],
       arc: a ? { c: scaled(a, U.pos_per_mm), n: [a[3], a[4], a[5]], w: a[6] } : null,
-      src: D.src[i] || ""
+      src: D.src[i] || "",
+      u: D.u && D.u[String(i)] !== undefined ? D.u[String(i)] / U.dev_per_mm : null
     };
     p.plunge =
       !p.rapid && !p.arc && !p.hole &&
@@ -330,7 +333,8 @@
     D.marks.forEach(function (m) {
       if (self.ring(m.pos, 9, m.cut ? "#ff8c00" : "#ff0000", 3, null)) {
         var xy = self.px(m.pos);
-        var label = (m.cut ? "max cutting " : "max ") + m.dev.toFixed(4) + " mm, " +
+        var label = (m.cut ? "max cutting " : "max ") + m.dev.toFixed(4) + " mm" +
+          (m.u !== undefined ? " (U " + m.u.toFixed(4) + ")" : "") + ", " +
           (D.files.length > 1 ? D.files[m.file] + ":" : "line ") + m.line;
         ctx.fillStyle = "#222";
         ctx.font = "12px sans-serif";
@@ -404,6 +408,7 @@
     h += "<table><tbody>";
     h += "<tr><td>programmed end (mm)</td><td>" + p.end.map(function (v) { return f(v, 3); }).join(", ") + "</td></tr>";
     h += "<tr><td>|deviation| (mm)</td><td><b>" + f(p.d, 5) + "</b></td></tr>";
+    if (p.u !== null) h += "<tr><td>U (k=2) of |deviation| (mm)</td><td>" + f(p.u, 5) + "</td></tr>";
     h += "<tr><td>dx, dy, dz (mm)</td><td>" + p.dev.map(function (v) { return f(v, 5); }).join(", ") + "</td></tr>";
     for (var k = 0; k < NE; k++) {
       h += "<tr><td>" + esc(D.effects[k]) + " part (mm)</td><td>" + f(p.eff[k], 5) + "</td></tr>";

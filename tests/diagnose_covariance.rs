@@ -1,0 +1,232 @@
+//! `diagnose --write-model` writes the covariance of what it identified,
+//! and `report` on the written model gives each block its U from it.
+//!
+//! The case is built so that the fit's covariance is derived by hand
+//! whatever rows the hold-out split keeps: the "measured" positions are
+//! afm-r1000's own predictions plus an X positioning error linear over
+//! the travel, p·u with u = (X − 500)/500 mm and p = 20 µm, and ±δ along
+//! z alone (the sign alternating row by row). Every row is at one end of
+//! X (X = 0 or 1000 mm, u = ∓1), so the candidate `EXX_lin` has
+//! sensitivity (±1, 0, 0) µm per µm at every row: on the m fitted rows its
+//! estimate is exactly ±p, the fit's residual is the ±δ in z of each row,
+//! RSS = m δ² with 3m − 1 degrees of freedom, and its variance is
+//! σ² / Σ s² = δ² / (3m − 1) µm². The written table value at position q
+//! moves by ((q − 500)/500) p, so the file holds u_p |q − 500|/500 µm for
+//! it, correlated ±1 with the others; and a block of the report at
+//! machine X = x whose deviation along x is dx of |dev| has
+//! U = 2 · 10⁻³ u_p |x − 500|/500 · |dx| / |dev| (the tables interpolate
+//! a linear function exactly).
+
+use std::path::Path;
+
+use postproc::calibrate::forward;
+use postproc::calibrate::observations::Pose;
+
+use crate::common::{postproc, text, write};
+use crate::diagnose::{machine, tool_rows};
+
+/// The ±z "noise" of every row, µm.
+const DELTA_UM: f64 = 5.0;
+/// The X positioning error at the + end of travel, µm.
+const P_UM: f64 = 20.0;
+/// Middle and half length of X's travel, mm.
+const MID_MM: f64 = 500.0;
+/// Relative agreement of u with the hand value. The fit's u comes out
+/// 3.7e-6 of itself above δ/√(3m − 1) (its RSS about 7e-6 above m δ²,
+/// some 10 nm of residual per row that this derivation does not model —
+/// not the 9-decimal rounding of the positions, which is far smaller);
+/// 1e-5 holds that and still tells any other m, δ or dof apart.
+const U_RTOL: f64 = 1e-5;
+/// Fitted value within this of the truth, µm (noise-free in x).
+const VALUE_TOL_UM: f64 = 1e-4;
+/// U is printed with 5 decimals in the report's JSON.
+const REPORT_U_TOL_MM: f64 = 0.6e-5;
+
+/// The observation file: commanded machine positions (X at an end of
+/// travel), directions and the model's attained positions plus the linear
+/// X error and ±δ in z.
+fn observations(model_text: &str) -> String {
+    let model = machine(model_text);
+    let mut s = String::from("id,t_s,X_mm,Y_mm,Z_mm,dirX,dirY,dirZ,x_mm,y_mm,z_mm\n");
+    for (i, mut row) in tool_rows(120, 7).into_iter().enumerate() {
+        let Pose::Tool(tp) = &mut row.pose else {
+            panic!("tool rows")
+        };
+        tp.xyz_mm[0] = if (i / 2) % 2 == 0 { 0.0 } else { 2.0 * MID_MM };
+        let u = (tp.xyz_mm[0] - MID_MM) / MID_MM;
+        let xyz = tp.xyz_mm;
+        let d: Vec<i8> = tp.dir.iter().take(3).map(|d| d.unwrap_or(1)).collect();
+        let p = forward::predict(&model, &row, "model")
+            .expect("prediction")
+            .attained_mm;
+        let z = if i % 2 == 0 { DELTA_UM } else { -DELTA_UM } * 1e-3;
+        s.push_str(&format!(
+            "{},{},{:.6},{:.6},{:.6},{},{},{},{:.9},{:.9},{:.9}\n",
+            row.id,
+            row.t_s.unwrap_or(0.0),
+            xyz[0],
+            xyz[1],
+            xyz[2],
+            d[0],
+            d[1],
+            d[2],
+            p[0] + P_UM * 1e-3 * u,
+            p[1],
+            p[2] + z
+        ));
+    }
+    s
+}
+
+fn covariance_list(model: &Path) -> Vec<serde_yaml::Value> {
+    let v: serde_yaml::Value =
+        serde_yaml::from_str(&std::fs::read_to_string(model).expect("written")).expect("YAML");
+    v["covariance"].as_sequence().cloned().unwrap_or_default()
+}
+
+/// The factor of the written table value at `q` mm: (q − 500)/500.
+fn factor(q: f64) -> f64 {
+    (q - MID_MM) / MID_MM
+}
+
+#[test]
+fn diagnose_writes_the_fit_covariance_and_report_gives_u_from_it() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let model_text = text("machines/afm-r1000.yaml");
+    let model = write(dir.path(), "model.yaml", &model_text);
+    let obs = write(dir.path(), "obs.csv", &observations(&model_text));
+    let out = dir.path().join("fixed.yaml");
+    let a = postproc()
+        .arg("diagnose")
+        .arg("--machine")
+        .arg(&model)
+        .arg("--observations")
+        .arg(&obs)
+        .arg("--write-model")
+        .arg(&out)
+        .args(["--format", "json"])
+        .assert()
+        .success();
+    let d: serde_json::Value =
+        serde_json::from_slice(&a.get_output().stdout).expect("diagnosis JSON");
+    let found = d["found"].as_array().expect("found");
+    assert_eq!(found.len(), 1, "{d}");
+    assert_eq!(found[0]["effect"]["name"], "EXX_lin");
+    assert_eq!(d["outliers"]["rows"].as_array().map(Vec::len), Some(0));
+    let m = d["train_rows"].as_u64().expect("train_rows") as f64;
+    let p = &found[0]["params"][0];
+    let value = p["value"].as_f64().expect("value");
+    assert!((value.abs() - P_UM).abs() <= VALUE_TOL_UM, "{value}");
+    // By hand: u² = δ² / (3m − 1) µm².
+    let u_p = DELTA_UM / (3.0 * m - 1.0).sqrt();
+    let u_fit = p["u"].as_f64().expect("u");
+    assert!(
+        (u_fit - u_p).abs() <= U_RTOL * u_p,
+        "fit u {u_fit} µm, by hand {u_p}"
+    );
+
+    // The written block: the data it came from, every table value the
+    // effect moved with u_p |q − 500|/500 and correlations ±1.
+    let written: serde_yaml::Value =
+        serde_yaml::from_str(&std::fs::read_to_string(&out).expect("written")).expect("YAML");
+    let positions: Vec<f64> = written["axes"]
+        .as_sequence()
+        .expect("axes")
+        .iter()
+        .find(|a| a["name"] == "X")
+        .expect("X")["component_errors"]["EXX_um"]["positions_mm"]
+        .as_sequence()
+        .expect("positions")
+        .iter()
+        .filter_map(serde_yaml::Value::as_f64)
+        .collect();
+    let blocks = covariance_list(&out);
+    assert_eq!(blocks.len(), 1, "{blocks:?}");
+    let b = &blocks[0];
+    assert_eq!(b["kind"], "diagnose");
+    assert_eq!(b["observations"], "obs.csv");
+    assert_eq!(b["rows"].as_u64(), Some(m as u64));
+    assert_eq!(b["observations_sha256"].as_str().map(str::len), Some(64));
+    let params: Vec<String> = b["parameters"]
+        .as_sequence()
+        .expect("parameters")
+        .iter()
+        .filter_map(|v| v.as_str().map(String::from))
+        .collect();
+    // The node of each parameter, by hand from its key path.
+    let node = |path: &str| -> (bool, f64) {
+        let rest = path
+            .strip_prefix("axes[X].component_errors.EXX_um.")
+            .unwrap_or_else(|| panic!("{path}"));
+        let (column, k) = rest.split_once('[').expect("index");
+        let k: usize = k.trim_end_matches(']').parse().expect("node");
+        (column == "forward", positions[k])
+    };
+    let nonzero = positions.iter().filter(|q| factor(**q) != 0.0).count();
+    assert_eq!(params.len(), 2 * nonzero, "{params:?}");
+    let us: Vec<f64> = b["u"]
+        .as_sequence()
+        .expect("u")
+        .iter()
+        .filter_map(serde_yaml::Value::as_f64)
+        .collect();
+    for (i, path) in params.iter().enumerate() {
+        let (_, q) = node(path);
+        let want = u_p * factor(q).abs();
+        assert!(
+            (us[i] - want).abs() <= U_RTOL * u_p,
+            "{path}: u {} by hand {want}",
+            us[i]
+        );
+        for (j, other) in params.iter().enumerate() {
+            let (_, r) = node(other);
+            let rho = b["correlation"][i][j].as_f64().expect("correlation");
+            assert_eq!(rho, (factor(q) * factor(r)).signum(), "{path} {other}");
+        }
+    }
+
+    // report on the written model: U = 2 · 1e-3 u_p |x − 500|/500 · |dx|/|dev|.
+    let program = write(
+        dir.path(),
+        "p.nc",
+        "G90 G54 G0 X-200 Y0 Z50\nG1 X350 F1000\nG1 Y300\nG1 X-100 Y150\nG1 X650\nM30\n",
+    );
+    let a = postproc()
+        .arg("report")
+        .arg(&program)
+        .arg("--machine")
+        .arg(&out)
+        .args(["--effects", "geometric", "--format", "json"])
+        .assert()
+        .success();
+    let r: serde_json::Value = serde_json::from_slice(&a.get_output().stdout).expect("JSON");
+    let mut checked = 0;
+    for row in r["rows"].as_array().expect("rows") {
+        let (Some(x), Some(dx), Some(dev), Some(u)) = (
+            row["commanded"]["X"].as_f64(),
+            row["deviation_mm"][0].as_f64(),
+            row["dev_mm"].as_f64(),
+            row["u_mm"].as_f64(),
+        ) else {
+            continue;
+        };
+        let want = if dev > 0.0 {
+            2.0 * 1e-3 * u_p * factor(x).abs() * dx.abs() / dev
+        } else {
+            0.0
+        };
+        assert!(
+            (u - want).abs() <= REPORT_U_TOL_MM,
+            "line {}: U {u}, by hand {want}",
+            row["line"]
+        );
+        if want > REPORT_U_TOL_MM {
+            checked += 1;
+        }
+    }
+    assert!(checked >= 3, "{r}");
+    assert_eq!(
+        r["provenance"]["uncertainty"]["covariance_of"][0],
+        "diagnose (obs.csv)"
+    );
+}
