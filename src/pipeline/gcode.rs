@@ -464,6 +464,7 @@ impl Chunk {
 
     /// Reads the next lines (up to [`CHUNK_LINES`]) from `input`, with large
     /// reads and no copy other than into the chunk's buffer.
+    #[inline(never)]
     fn read<R: BufRead>(&mut self, input: &mut R, file: &str, first_line: usize) -> Result<()> {
         self.buf.clear();
         self.ranges.clear();
@@ -529,7 +530,7 @@ impl Chunk {
                     let no = numbers
                         .and_then(|n| n.get(first + i).copied())
                         .unwrap_or(first + i + 1);
-                    if let Err(err) = parse_line(&buf[s..e], no, file, block) {
+                    if let Err(err) = parse_one(&buf[s..e], no, file, block) {
                         return Some((i, err));
                     }
                 }
@@ -554,6 +555,18 @@ impl Chunk {
         }
         Ok(&self.blocks[i])
     }
+}
+
+/// [`parse_line`], kept out of line: profiles show the parsing on its own
+/// (`scripts/bench-stages`).
+#[inline(never)]
+fn parse_one(
+    line: &[u8],
+    line_no: usize,
+    file: &str,
+    out: &mut Block,
+) -> std::result::Result<(), Located> {
+    parse_line(line, line_no, file, out)
 }
 
 /// The interpretation stage of a [`Job::run`]: runs in program order over
@@ -593,6 +606,7 @@ impl<'j, 'm> InterpretStage<'j, 'm> {
     }
 
     /// Interprets one parsed chunk: its plans and block contexts.
+    #[inline(never)]
     fn chunk(&mut self, st: &mut Stage, summary: &mut Summary) -> Result<()> {
         let chunk = &mut st.chunk;
         let n = chunk.ranges.len();
@@ -779,6 +793,7 @@ impl<'j, 'm, 'o, 'r> WriteStage<'j, 'm, 'o, 'r> {
     }
 
     /// Writes one compensated chunk (and hands over its rows).
+    #[inline(never)]
     fn chunk(&mut self, st: &mut Stage, summary: &mut Summary) -> Result<()> {
         let chunk = &st.chunk;
         let plans = &st.plans[..chunk.ranges.len()];
@@ -1025,6 +1040,17 @@ impl<'j, 'm, 'o, 'r> WriteStage<'j, 'm, 'o, 'r> {
     }
 }
 
+/// [`compensate::carry_before`], kept out of line: profiles show the
+/// estimates of where runs start on their own (`scripts/bench-stages`).
+#[inline(never)]
+fn estimate_carry(
+    before: &[(ToolPredictor, Plan)],
+    settings: &Settings,
+    from_start: Option<AxisVec>,
+) -> Option<compensate::Carry> {
+    compensate::carry_before(before, settings, from_start)
+}
+
 /// Runs `op` in a fork-join scope of the job's pool (rayon's global pool
 /// when `None`), on the calling thread.
 fn in_scope<'s, R>(pool: Option<&rayon::ThreadPool>, op: impl FnOnce(&rayon::Scope<'s>) -> R) -> R {
@@ -1167,7 +1193,7 @@ impl<'m> Job<'m> {
                         last.reverse();
                         // Fewer moves than the lookback: all since the start.
                         let from_start = (last.len() <= compensate::CARRY_LOOKBACK).then_some(home);
-                        compensate::carry_before(last, &settings, from_start)
+                        estimate_carry(last, &settings, from_start)
                     };
                     *sd = carry;
                     for (((r, k), p), c) in rs.iter_mut().zip(ks.iter_mut()).zip(ps).zip(cs) {
@@ -1179,7 +1205,9 @@ impl<'m> Job<'m> {
         self.settle(pred, st);
     }
 
-    /// Compensates one block into `r` (reusing its split-point storage).
+    /// Compensates one block into `r` (reusing its split-point storage);
+    /// out of line, so that profiles show the solves on their own.
+    #[inline(never)]
     fn solve_block(
         &self,
         pred: &ToolPredictor,
@@ -1205,6 +1233,7 @@ impl<'m> Job<'m> {
     /// The in-order pass of [`Self::compensate_stage`]: solves again, from
     /// the carry the run before really left, each run seeded with another
     /// estimate, until a block leaves the carry it left before.
+    #[inline(never)]
     fn settle(&self, pred: &ToolPredictor, st: &mut Stage) {
         let n = st.carries.len();
         let mut i = GROUP_BLOCKS;
@@ -1406,6 +1435,7 @@ impl<'m> Job<'m> {
     /// A first pass over the program for the thermal start: the mean power
     /// of each heat source (spindle, X, Y, Z drives), W, over the program's
     /// time line from a cold start. Parses and interprets only.
+    #[inline(never)]
     pub fn mean_power<R: BufRead>(&self, mut input: R, file: &str) -> Result<Powers> {
         let Some(pred) = &self.predictor else {
             return Ok([0.0; 4]);
