@@ -1,13 +1,15 @@
 //! The G-code pipeline: streams a program through parse → interpret →
 //! predict/compensate → emit in bounded chunks.
 //!
-//! Lines are read in chunks of [`CHUNK_LINES`]; parsing and the modal
-//! interpretation run in program order, the per-block prediction and inverse
-//! solve run in parallel with rayon (order kept; runs of [`GROUP_BLOCKS`]
-//! blocks in order per task, cut at fixed blocks so that the output is the
-//! same for any thread count), and the emitter writes the chunk before the
-//! next one is read. Memory is bounded by the chunk size,
-//! whatever the length of the program.
+//! Lines are read in chunks of [`CHUNK_LINES`]; parsing runs on the rayon
+//! pool, the modal interpretation in program order on the calling thread,
+//! the per-block prediction and inverse solve in parallel on the pool
+//! (order kept; runs of [`GROUP_BLOCKS`] blocks in order per task, cut at
+//! fixed blocks so that the output is the same for any thread count), and
+//! the emitter formats a chunk on the pool (one task per chunk, in order)
+//! while the calling thread interprets a later one, then writes its bytes
+//! out. Memory is bounded by the chunk size, whatever the length of the
+//! program.
 
 use std::io::{BufRead, Write};
 
@@ -464,6 +466,7 @@ impl Chunk {
 
     /// Reads the next lines (up to [`CHUNK_LINES`]) from `input`, with large
     /// reads and no copy other than into the chunk's buffer.
+    #[inline(never)]
     fn read<R: BufRead>(&mut self, input: &mut R, file: &str, first_line: usize) -> Result<()> {
         self.buf.clear();
         self.ranges.clear();
@@ -529,7 +532,7 @@ impl Chunk {
                     let no = numbers
                         .and_then(|n| n.get(first + i).copied())
                         .unwrap_or(first + i + 1);
-                    if let Err(err) = parse_line(&buf[s..e], no, file, block) {
+                    if let Err(err) = parse_one(&buf[s..e], no, file, block) {
                         return Some((i, err));
                     }
                 }
@@ -554,6 +557,18 @@ impl Chunk {
         }
         Ok(&self.blocks[i])
     }
+}
+
+/// [`parse_line`], kept out of line: profiles show the parsing on its own
+/// (`scripts/bench-stages`).
+#[inline(never)]
+fn parse_one(
+    line: &[u8],
+    line_no: usize,
+    file: &str,
+    out: &mut Block,
+) -> std::result::Result<(), Located> {
+    parse_line(line, line_no, file, out)
 }
 
 /// The interpretation stage of a [`Job::run`]: runs in program order over
@@ -593,6 +608,7 @@ impl<'j, 'm> InterpretStage<'j, 'm> {
     }
 
     /// Interprets one parsed chunk: its plans and block contexts.
+    #[inline(never)]
     fn chunk(&mut self, st: &mut Stage, summary: &mut Summary) -> Result<()> {
         let chunk = &mut st.chunk;
         let n = chunk.ranges.len();
@@ -726,16 +742,23 @@ impl<'j, 'm> InterpretStage<'j, 'm> {
     }
 }
 
-/// The writing stage of a [`Job::run`]: hands over each compensated
-/// chunk's deviations (summary and report rows) and writes its lines.
-struct WriteStage<'j, 'm, 'o, 'r> {
+/// The writing stage of a [`Job::run`]: formats each compensated chunk
+/// into its buffer and records its deviations (summary and report rows).
+/// It holds nothing of the caller's (the output and the rows are handed
+/// to it), so that it runs on a worker thread while the calling thread
+/// interprets the next chunk.
+struct WriteStage<'j, 'm> {
     job: &'j Job<'m>,
     file: &'j str,
     solving: bool,
+    /// The program is written (not only reported on).
+    writing: bool,
     emitter: Emitter,
-    out: Option<&'o mut dyn Write>,
-    rows: Option<&'r mut dyn FnMut(Row)>,
+    /// The lines formatted for the last chunk (when `solving`).
     out_buf: Vec<u8>,
+    /// The deviation fields of the summary (deviation, cutting moves,
+    /// beyond the tolerance, largest residual), merged by [`Self::finish`].
+    summary: Summary,
     /// The warnings about blocks with a piece beyond the tolerance (at most
     /// [`MAX_BEYOND_WARNINGS`]; the summary counts them all).
     beyond: Vec<Warning>,
@@ -751,24 +774,22 @@ struct WriteStage<'j, 'm, 'o, 'r> {
     tip_res: BlockResult,
 }
 
-impl<'j, 'm, 'o, 'r> WriteStage<'j, 'm, 'o, 'r> {
-    fn new(
-        job: &'j Job<'m>,
-        file: &'j str,
-        solving: bool,
-        out: Option<&'o mut dyn Write>,
-        rows: Option<&'r mut dyn FnMut(Row)>,
-    ) -> Self {
+impl<'j, 'm> WriteStage<'j, 'm> {
+    fn new(job: &'j Job<'m>, file: &'j str, solving: bool, writing: bool) -> Self {
         WriteStage {
             job,
             file,
             solving,
+            writing,
             emitter: Emitter::new(job.emit)
                 .with_tolerance(job.settings.tolerance_mm)
                 .with_uncertainty(job.predictor.and_then(|p| p.uncertainty).cloned()),
-            out,
-            rows,
-            out_buf: Vec::with_capacity(1 << 20),
+            out_buf: if solving && writing {
+                Vec::with_capacity(1 << 20)
+            } else {
+                Vec::new()
+            },
+            summary: Summary::default(),
             beyond: Vec::new(),
             held: None,
             written: 0,
@@ -778,16 +799,14 @@ impl<'j, 'm, 'o, 'r> WriteStage<'j, 'm, 'o, 'r> {
         }
     }
 
-    /// Writes one compensated chunk (and hands over its rows).
-    fn chunk(&mut self, st: &mut Stage, summary: &mut Summary) -> Result<()> {
+    /// Formats one compensated chunk into [`Self::out_buf`] (nothing to
+    /// format when nothing is solved: [`Self::sink`] writes the lines as
+    /// they are) and hands over its rows.
+    #[inline(never)]
+    fn chunk(&mut self, st: &mut Stage, mut rows: Option<&mut dyn FnMut(Row)>) -> Result<()> {
         let chunk = &st.chunk;
         let plans = &st.plans[..chunk.ranges.len()];
         if !self.solving {
-            // Nothing is solved: every line is written as it is.
-            if let Some(out) = self.out.as_deref_mut() {
-                out.write_all(&chunk.buf)
-                    .map_err(|e| Error::io("output", e))?;
-            }
             if let Some(marks) = self.marks.as_mut() {
                 let base = self.written;
                 marks.extend(chunk.ranges.iter().map(|&(_, e)| base + e));
@@ -819,10 +838,10 @@ impl<'j, 'm, 'o, 'r> WriteStage<'j, 'm, 'o, 'r> {
             };
             if let (Some(r), Some(mv)) = (res, plan.mv) {
                 if plan.kind != PlanKind::Pass {
-                    self.record(plan, &mv, r, block.line_no, summary);
+                    self.record(plan, &mv, r, block.line_no, rows.as_deref_mut());
                 }
             }
-            if self.out.is_some() {
+            if self.writing {
                 match (plan.tcpm, res, &self.job.predictor) {
                     // Tool centre point control: written as tool tips.
                     (true, Some(r), Some(pred)) => {
@@ -869,10 +888,6 @@ impl<'j, 'm, 'o, 'r> WriteStage<'j, 'm, 'o, 'r> {
             }
         }
         self.written += self.out_buf.len();
-        if let Some(out) = self.out.as_deref_mut() {
-            out.write_all(&self.out_buf)
-                .map_err(|e| Error::io("output", e))?;
-        }
         // The stage waits for its next chunk: large split-point storage
         // is given back now rather than when it is compensated again.
         for r in st.results.iter_mut().flatten().flatten() {
@@ -881,6 +896,17 @@ impl<'j, 'm, 'o, 'r> WriteStage<'j, 'm, 'o, 'r> {
             }
         }
         Ok(())
+    }
+
+    /// Writes the chunk [`Self::chunk`] formatted (`st` the same stage) to
+    /// `out`: its lines as they are when nothing is solved.
+    fn sink(&self, st: &Stage, out: &mut dyn Write) -> Result<()> {
+        let bytes = if self.solving {
+            &self.out_buf
+        } else {
+            &st.chunk.buf
+        };
+        out.write_all(bytes).map_err(|e| Error::io("output", e))
     }
 
     /// Every point the lines just written for a block command (as the
@@ -957,11 +983,12 @@ impl<'j, 'm, 'o, 'r> WriteStage<'j, 'm, 'o, 'r> {
         mv: &crate::program::interp::Move,
         r: &BlockResult,
         line_no: usize,
-        summary: &mut Summary,
+        rows: Option<&mut (dyn FnMut(Row) + '_)>,
     ) {
         if let Some(h) = r.held {
             self.held_at_travel(h, line_no);
         }
+        let summary = &mut self.summary;
         let dev = r.deviation.total().norm();
         summary.deviation.add(dev, line_no);
         if plan.kind != PlanKind::Fixed && mv.motion != Motion::Rapid {
@@ -969,7 +996,7 @@ impl<'j, 'm, 'o, 'r> WriteStage<'j, 'm, 'o, 'r> {
         }
         let tol = self.job.settings.tolerance_mm;
         // Only a written program states a tolerance (a report has none).
-        let written = self.out.is_some();
+        let written = self.writing;
         // The miss of the solved pieces, and of the written ones at most
         // the rounding of their words more.
         let miss = r.miss_mm + self.job.rounding(plan.scale);
@@ -1000,7 +1027,7 @@ impl<'j, 'm, 'o, 'r> WriteStage<'j, 'm, 'o, 'r> {
             summary.max_residual_mm = left;
             summary.max_residual_line = line_no;
         }
-        if let Some(rows) = self.rows.as_deref_mut() {
+        if let Some(rows) = rows {
             rows(Row {
                 line: line_no,
                 motion: motion_label(plan),
@@ -1014,15 +1041,31 @@ impl<'j, 'm, 'o, 'r> WriteStage<'j, 'm, 'o, 'r> {
         }
     }
 
-    /// Completes the summary after the last chunk: the lines changed and
-    /// added.
+    /// Completes the summary after the last chunk: the deviations, the
+    /// lines changed and added.
     fn finish(self, summary: &mut Summary) {
+        summary.deviation = self.summary.deviation;
+        summary.cutting = self.summary.cutting;
+        summary.beyond = self.summary.beyond;
+        summary.max_residual_mm = self.summary.max_residual_mm;
+        summary.max_residual_line = self.summary.max_residual_line;
         summary.changed = self.emitter.changed_blocks();
         summary.added = self.emitter.added_blocks();
         summary.added_by = self.emitter.added_by();
         summary.warnings.extend(self.beyond);
         summary.warnings.extend(self.held);
     }
+}
+
+/// [`compensate::carry_before`], kept out of line: profiles show the
+/// estimates of where runs start on their own (`scripts/bench-stages`).
+#[inline(never)]
+fn estimate_carry(
+    before: &[(ToolPredictor, Plan)],
+    settings: &Settings,
+    from_start: Option<AxisVec>,
+) -> Option<compensate::Carry> {
+    compensate::carry_before(before, settings, from_start)
 }
 
 /// Runs `op` in a fork-join scope of the job's pool (rayon's global pool
@@ -1167,7 +1210,7 @@ impl<'m> Job<'m> {
                         last.reverse();
                         // Fewer moves than the lookback: all since the start.
                         let from_start = (last.len() <= compensate::CARRY_LOOKBACK).then_some(home);
-                        compensate::carry_before(last, &settings, from_start)
+                        estimate_carry(last, &settings, from_start)
                     };
                     *sd = carry;
                     for (((r, k), p), c) in rs.iter_mut().zip(ks.iter_mut()).zip(ps).zip(cs) {
@@ -1179,7 +1222,9 @@ impl<'m> Job<'m> {
         self.settle(pred, st);
     }
 
-    /// Compensates one block into `r` (reusing its split-point storage).
+    /// Compensates one block into `r` (reusing its split-point storage);
+    /// out of line, so that profiles show the solves on their own.
+    #[inline(never)]
     fn solve_block(
         &self,
         pred: &ToolPredictor,
@@ -1205,6 +1250,7 @@ impl<'m> Job<'m> {
     /// The in-order pass of [`Self::compensate_stage`]: solves again, from
     /// the carry the run before really left, each run seeded with another
     /// estimate, until a block leaves the carry it left before.
+    #[inline(never)]
     fn settle(&self, pred: &ToolPredictor, st: &mut Stage) {
         let n = st.carries.len();
         let mut i = GROUP_BLOCKS;
@@ -1240,9 +1286,9 @@ impl<'m> Job<'m> {
     /// written; with `rows`, a row per motion block is handed over in order.
     ///
     /// The program streams through in chunks of [`CHUNK_LINES`] lines, four
-    /// chunks in flight: while the pool compensates one chunk and parses
-    /// the chunk after next, the calling thread writes the chunk before and
-    /// interprets the next one. Errors of the input (syntax, interpretation,
+    /// chunks in flight: while the pool compensates one chunk, parses the
+    /// chunk after next and formats the chunk before, the calling thread
+    /// interprets the next one (then writes the formatted bytes out). Errors of the input (syntax, interpretation,
     /// reading) come before compensation failures wherever they are in the
     /// program, each kind in line order: after a compensation failure the
     /// rest of the program is still read and interpreted.
@@ -1264,8 +1310,8 @@ impl<'m> Job<'m> {
         &self,
         mut input: R,
         file: &str,
-        out: Option<&mut dyn Write>,
-        rows: Option<&mut dyn FnMut(Row)>,
+        mut out: Option<&mut dyn Write>,
+        mut rows: Option<&mut dyn FnMut(Row)>,
         traced: Option<(&[usize], &mut Vec<usize>)>,
     ) -> Result<Summary> {
         // With every effect off the output is the input; a report still
@@ -1276,7 +1322,7 @@ impl<'m> Job<'m> {
             .is_some_and(|p| !p.effects.is_none() || rows.is_some());
         let mut summary = Summary::default();
         let mut interpret = InterpretStage::new(self, file);
-        let mut write = WriteStage::new(self, file, solving, out, rows);
+        let mut write = WriteStage::new(self, file, solving, out.is_some());
         let (numbers, marks_out) = traced.unzip();
         write.marks = marks_out.as_ref().map(|_| Vec::new());
 
@@ -1325,6 +1371,12 @@ impl<'m> Job<'m> {
                 Some(compensate::Carry::program_start(self.setup.home))
             };
             let (solve_ref, read_ref) = (&mut solve, &mut read.chunk);
+            let (done_ref, write_ref, written_ref) = (&mut done, &mut write, &mut written);
+            let rows_now = rows.as_deref_mut();
+            // The calling thread interprets (in program order, the one
+            // stage that cannot be split); the pool compensates, parses and
+            // formats (a report's rows, handed to the caller's closure, are
+            // made on this thread).
             in_scope(self.pool, |s| {
                 if has_solve && !scanning {
                     s.spawn(move |_| self.compensate_stage(solve_ref, solving));
@@ -1333,7 +1385,10 @@ impl<'m> Job<'m> {
                     s.spawn(move |_| read_ref.parse(file, numbers));
                 }
                 if has_done && !scanning {
-                    written = write.chunk(&mut done, &mut summary);
+                    match rows_now {
+                        Some(rows) => *written_ref = write_ref.chunk(done_ref, Some(rows)),
+                        None => s.spawn(move |_| *written_ref = write_ref.chunk(done_ref, None)),
+                    }
                 }
                 if has_parsed {
                     interpreted = interpret.chunk(&mut parsed, &mut summary);
@@ -1348,6 +1403,11 @@ impl<'m> Job<'m> {
             match written {
                 Err(e @ Error::Unachievable(_)) => failure = Some(e),
                 other => other?,
+            }
+            if let (true, false, None, Some(out)) =
+                (has_done, scanning, &failure, out.as_deref_mut())
+            {
+                write.sink(&done, out)?;
             }
             // Shift the stages: each chunk moves one stage on.
             std::mem::swap(&mut done, &mut solve);
@@ -1406,6 +1466,7 @@ impl<'m> Job<'m> {
     /// A first pass over the program for the thermal start: the mean power
     /// of each heat source (spindle, X, Y, Z drives), W, over the program's
     /// time line from a cold start. Parses and interprets only.
+    #[inline(never)]
     pub fn mean_power<R: BufRead>(&self, mut input: R, file: &str) -> Result<Powers> {
         let Some(pred) = &self.predictor else {
             return Ok([0.0; 4]);
