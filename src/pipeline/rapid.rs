@@ -21,7 +21,7 @@ use rayon::prelude::*;
 use nalgebra::Isometry3;
 
 use crate::compensate::outcome::{Compensated, DevStats, RobotMove, Row, Summary};
-use crate::compensate::robot::{Compensation, Seed};
+use crate::compensate::robot::Seed;
 use crate::emit::rapid::{
     EditList, Format, TakenNames, fresh_name, insert_after_decl, joint_text, push_annotation,
     robtarget_in_place, robtarget_text, write_dev_comment,
@@ -34,6 +34,7 @@ use crate::pipeline::resonance::ResonanceWatch;
 use crate::pipeline::robot::time_line::{
     self, Asked, FALLBACK_TCP_SPEED, LastEnd, Refusal, StreamMove, Timed, WrenchBits, wrench_bits,
 };
+use crate::pipeline::robot::{Solution, SolveJob, Views, solve_jobs};
 use crate::predict::robot::{Breakdown, EffectSet};
 use crate::predict::{MoveContext, ThermalInput, Wrench};
 use crate::process::CutSettings;
@@ -143,14 +144,6 @@ impl LoadKey {
     }
 }
 
-/// Tool and work object of a move: moves with equal keys share a robot
-/// view (what else a move adds goes with its job, in its context).
-#[derive(Debug, Clone, PartialEq, Eq, Hash)]
-struct ViewKey {
-    tool: Rc<str>,
-    wobj: Rc<str>,
-}
-
 /// Mutable state of one run: edits, new declarations, caches.
 struct Rewriter<'m> {
     module: &'m Module,
@@ -164,12 +157,9 @@ struct Rewriter<'m> {
     taken: TakenNames,
     /// Names new data may not take (lower case): [`Carry::reserved`].
     reserved: HashSet<String>,
-    /// Robot views (one per tool and work object; the process wrench and
-    /// the thermal state of a move go with its job) and the index of each.
-    views: Arc<Vec<Robot>>,
-    view_of: HashMap<ViewKey, usize>,
-    /// The view used last, with its key.
-    last_view: Option<(ViewKey, usize)>,
+    /// Robot views (one per tool; the process wrench and the thermal
+    /// state of a move go with its job).
+    views: Views,
     /// Collecting the compensation jobs, or applying their results.
     phase: Phase,
     /// Load key that owns the in-place value of a target origin.
@@ -190,50 +180,22 @@ struct Rewriter<'m> {
     last_annotated: Option<usize>,
 }
 
-/// One target to compensate: robot view, programmed TCP pose (world frame)
-/// and the inverse-kinematics selection.
-struct Job {
-    view: usize,
-    pose: Isometry3<f64>,
-    sel: IkSelect,
-    /// The move's context: process wrench, joint powers, tooth frequency.
-    ctx: MoveContext,
-    /// What planning found about the programmed pose (its controller
-    /// joints, their branch and nominal flange), when it did.
-    seed: Seed,
-}
-
 /// The two walks over the moves, interleaved a chunk at a time: the first
-/// collects the compensations of the chunk's moves as [`Job`]s; they are
+/// collects the compensations of the chunk's moves as [`SolveJob`]s; they are
 /// solved on the pool (each job independent of the others and of the
 /// thread count) while the second walk writes back the results of the chunk
 /// before, in source order.
 enum Phase {
     /// Collecting the jobs of a chunk.
-    Collect(Vec<Job>),
+    Collect(Vec<SolveJob>),
     /// The results of the chunk being written back, in job order.
-    Apply(std::vec::IntoIter<Solved>),
+    Apply(std::vec::IntoIter<Solution>),
 }
-
-/// The solved compensation of one job.
-type Solved = std::result::Result<Compensation, RobotError>;
 
 /// Jobs per chunk (a chunk ends at the move that reaches it): the jobs and
 /// results of two chunks at a time live while the move records grow, never
 /// those of all the moves.
 const JOB_CHUNK: usize = 4096;
-
-/// Solves one chunk of jobs in parallel (rayon keeps the input order in
-/// `collect`; every job is independent, so the results do not depend on
-/// the threads).
-fn solve_chunk(views: &[Robot], jobs: &[Job], fx: EffectSet) -> Vec<Solved> {
-    jobs.par_iter()
-        .map(|j| match views.get(j.view) {
-            Some(r) => r.compensate_seeded(&j.ctx, &j.pose, &j.sel, fx, &j.seed),
-            None => Err(RobotError::Unreachable("no robot view".into())),
-        })
-        .collect()
-}
 
 /// Per-move load state applied to the robot view.
 #[derive(Debug, Clone, Copy, Default)]
@@ -251,32 +213,12 @@ impl Rewriter<'_> {
 
     /// Index of the robot view of a load key (made on first use).
     fn view(&mut self, key: &LoadKey, tool: &ToolView) -> usize {
-        // Consecutive moves mostly share their load: compare before hashing.
-        if let Some((k, i)) = &self.last_view {
-            if k.tool == key.tool && k.wobj == key.wobj {
-                return *i;
-            }
-        }
-        let vk = ViewKey {
-            tool: key.tool.clone(),
-            wobj: key.wobj.clone(),
-        };
-        let i = match self.view_of.get(&vk) {
-            Some(&i) => i,
-            None => {
-                let r = self.robot.with_tool(tool.tframe, tool.load);
-                // Walk 1 makes the views while no chunk is being solved
-                // (the list is not shared then, so nothing is copied);
-                // walk 2 meets only the keys walk 1 saw.
-                let views = Arc::make_mut(&mut self.views);
-                views.push(r);
-                let i = views.len() - 1;
-                self.view_of.insert(vk.clone(), i);
-                i
-            }
-        };
-        self.last_view = Some((vk, i));
-        i
+        let robot = self.robot;
+        // Walk 1 makes the views while no chunk is being solved (the list
+        // is not shared then, so nothing is copied); walk 2 meets only the
+        // keys walk 1 saw.
+        self.views
+            .index(&key.tool, || robot.with_tool(tool.tframe, tool.load))
     }
 
     /// The context of the move being rewritten: its process wrench, its
@@ -307,11 +249,11 @@ impl Rewriter<'_> {
         pose: Isometry3<f64>,
         sel: IkSelect,
         seed: Seed,
-    ) -> Option<Solved> {
+    ) -> Option<Solution> {
         let ctx = self.context();
         match &mut self.phase {
             Phase::Collect(jobs) => {
-                jobs.push(Job {
+                jobs.push(SolveJob {
                     view,
                     pose,
                     sel,
@@ -327,7 +269,7 @@ impl Rewriter<'_> {
                 Some(
                     results
                         .next()
-                        .unwrap_or_else(|| match self.views.get(view) {
+                        .unwrap_or_else(|| match self.views.robots.get(view) {
                             Some(r) => {
                                 r.compensate_seeded(&ctx, &pose, &sel, self.opts.effects, &seed)
                             }
@@ -423,7 +365,7 @@ impl Rewriter<'_> {
         // its target (a search per configuration on a robot solved
         // numerically; the module is refused at its first).
         let comp = comp.map_err(|e| {
-            let e = match self.views.get(view) {
+            let e = match self.views.robots.get(view) {
                 Some(r) => r.with_reaching_configurations(&programmed, e),
                 None => e,
             };
@@ -584,7 +526,7 @@ impl Rewriter<'_> {
                 self.src.get(target.span()).unwrap_or("?")
             )
         };
-        let Some(r) = self.views.get(view) else {
+        let Some(r) = self.views.robots.get(view) else {
             return Err(Error::Internal("robot view missing".into()));
         };
         r.check_limits(&q)
@@ -1732,9 +1674,7 @@ impl<'m> Rewriter<'m> {
             inserts: std::mem::take(&mut carry.inserts),
             taken: std::mem::take(&mut carry.taken),
             reserved: std::mem::take(&mut carry.reserved),
-            views: Arc::new(Vec::new()),
-            view_of: HashMap::new(),
-            last_view: None,
+            views: Views::default(),
             phase: Phase::Collect(Vec::new()),
             owner: std::mem::take(&mut carry.owner),
             made: std::mem::take(&mut carry.made),
@@ -1773,7 +1713,7 @@ impl<'m> Rewriter<'m> {
         collected: &mut usize,
         collecting: &mut bool,
         names: &mut LastNames<'a>,
-    ) -> (Vec<Job>, usize) {
+    ) -> (Vec<SolveJob>, usize) {
         // A chunk holds a job per move (two for a MoveC) and ends at the
         // move that reaches JOB_CHUNK: room for that many from the start.
         let room = moves.len().saturating_sub(*collected).min(JOB_CHUNK) + 1;
@@ -1825,7 +1765,7 @@ impl<'m> Rewriter<'m> {
             &mut collecting,
             &mut names_1,
         );
-        let mut results = solve_chunk(&self.views, &jobs, fx);
+        let mut results = solve_jobs(&self.views.robots, &jobs, fx);
         drop(jobs);
         let mut walked = 0;
         loop {
@@ -1851,9 +1791,12 @@ impl<'m> Rewriter<'m> {
             rayon::in_place_scope(|s| {
                 if !next_jobs.is_empty() {
                     // The solve shares the views (walk 2 makes none).
-                    let (views, jobs, slot) =
-                        (Arc::clone(&self.views), &next_jobs, &mut next_results);
-                    s.spawn(move |_| *slot = solve_chunk(&views, jobs, fx));
+                    let (views, jobs, slot) = (
+                        Arc::clone(&self.views.robots),
+                        &next_jobs,
+                        &mut next_results,
+                    );
+                    s.spawn(move |_| *slot = solve_jobs(&views, jobs, fx));
                 }
                 // Walk 2: write the chunk's results back in source order.
                 for i in walked..end {
