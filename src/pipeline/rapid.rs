@@ -20,7 +20,7 @@ use rayon::prelude::*;
 
 use nalgebra::Isometry3;
 
-use crate::compensate::outcome::{Compensated, DevStats, RobotMove, Row, Summary};
+use crate::compensate::outcome::{Compensated, DevStats, Row, Summary};
 use crate::compensate::robot::Seed;
 use crate::emit::rapid::{
     EditList, Format, TakenNames, fresh_name, insert_after_decl, joint_text, push_annotation,
@@ -34,7 +34,7 @@ use crate::pipeline::resonance::ResonanceWatch;
 use crate::pipeline::robot::time_line::{
     self, Asked, FALLBACK_TCP_SPEED, LastEnd, Refusal, StreamMove, Timed, WrenchBits, wrench_bits,
 };
-use crate::pipeline::robot::{Solution, SolveJob, Views, solve_jobs};
+use crate::pipeline::robot::{Solution, SolveJob, Views, programmed_joints, robot_row, solve_jobs};
 use crate::predict::robot::{Breakdown, EffectSet};
 use crate::predict::{MoveContext, ThermalInput, Wrench};
 use crate::process::CutSettings;
@@ -49,7 +49,7 @@ use crate::program::rapid::resolve::{
 use crate::program::rapid::{
     ConfMonitoring, DataValue, Module, Move, MoveKind, Target, column_of, parse_module,
 };
-use crate::program::robot_moves::LeftAsWritten;
+use crate::program::robot_moves::{Configuration, LeftAsWritten};
 
 /// Options of a RAPID compensation run.
 #[derive(Debug, Clone, PartialEq)]
@@ -643,36 +643,24 @@ struct Planned {
     speed_fallback: bool,
 }
 
-/// Robot views with a tool mounted, made once per distinct key (a view is a
-/// copy of the robot: one per move would cost a copy per target).
-struct ViewCache<K> {
-    views: HashMap<K, Robot>,
-}
-
-impl<K: std::hash::Hash + Eq> ViewCache<K> {
-    fn new() -> Self {
-        ViewCache {
-            views: HashMap::new(),
-        }
-    }
-
-    fn get(&mut self, key: K, make: impl FnOnce() -> Robot) -> &Robot {
-        self.views.entry(key).or_insert_with(make)
-    }
-}
-
-fn plan_move<'m>(
+/// Plans one move: its tool and work object, its programmed pose and, by
+/// the configuration rule of its confdata ([`programmed_joints`]), its
+/// programmed joints and their branch when the pose is reachable.
+fn plan_move(
     module: &Module,
     src: &str,
     file: &str,
     robot: &Robot,
-    cache: &mut ViewCache<&'m str>,
-    (mv, res): (&'m Move, &Resolved),
+    views: &mut Views,
+    (mv, res): (&Move, &Resolved),
 ) -> Result<Planned> {
     let tool = resolve_tool(module, src, file, mv)?;
     let wobj = resolve_wobj(module, src, file, mv)?;
     // The tool is resolved from its name alone: equal names, equal views.
-    let view = cache.get(&*mv.tool.text, || robot.with_tool(tool.tframe, tool.load));
+    let i = views.index(&mv.tool.text, || robot.with_tool(tool.tframe, tool.load));
+    let Some(view) = views.robots.get(i) else {
+        return Err(Error::Internal("robot view missing".into()));
+    };
     let (pose, q, branch) = if mv.kind == MoveKind::MoveAbsJ {
         let jt = match &mv.target {
             Target::InlineJoint(jt) => Some(jt),
@@ -697,8 +685,8 @@ fn plan_move<'m>(
             return Err(Error::Internal("move target not resolved".into()));
         };
         let pose = wobj * u.pose_obj;
-        match view.ik_conf_indexed(&pose, u.conf) {
-            Ok((q, k)) => (pose, Some(q), Some(k)),
+        match programmed_joints(view, &pose, &Configuration::Conf(u.conf), None) {
+            Ok((q, k)) => (pose, Some(q), k),
             Err(_) => (pose, None, None),
         }
     };
@@ -728,7 +716,7 @@ fn free_configurations(
     o: usize,
     free: &[usize],
 ) {
-    let mut views = ViewCache::new();
+    let mut views = Views::default();
     for (i, mv) in moves.iter().enumerate() {
         if free.binary_search(&mv.span.start).is_err() {
             continue;
@@ -739,13 +727,17 @@ fn free_configurations(
         let Some(plan) = plans.get_mut(i + o) else {
             continue;
         };
-        let view = views.get(&*mv.tool.text, || {
+        let v = views.index(&mv.tool.text, || {
             robot.with_tool(plan.tool.tframe, plan.tool.load)
         });
-        if let Ok((q, k)) = view.ik_nearest(&plan.pose, &prev) {
+        let Some(view) = views.robots.get(v) else {
+            continue;
+        };
+        let rule = Configuration::Previous;
+        if let Ok((q, k)) = programmed_joints(view, &plan.pose, &rule, Some(&prev)) {
             plan.free_conf = Some(view.confdata(&q));
             plan.q = Some(q);
-            plan.branch = Some(k);
+            plan.branch = k;
         }
     }
 }
@@ -1137,7 +1129,7 @@ impl Carry {
     fn resolve_with<'m, P: Send>(
         &mut self,
         text: ModuleText<'m>,
-        plan: impl Fn(&mut ViewCache<&'m str>, &'m Move, &Resolved<'m>) -> P + Sync,
+        plan: impl Fn(&mut Views, &'m Move, &Resolved<'m>) -> P + Sync,
     ) -> Result<Resolved3<'m, P>> {
         let ModuleText { module, src, file } = text;
         let flow = match &self.scope {
@@ -1150,7 +1142,7 @@ impl Carry {
         type Found<'m, P> = Result<std::result::Result<Uses<(Resolved<'m>, P)>, Left>>;
         let found: Vec<Found<'m, P>> = all
             .par_iter()
-            .map_init(ViewCache::new, |views, &(at, mv)| {
+            .map_init(Views::default, |views, &(at, mv)| {
                 Ok(
                     resolve_move(&flow, src, file, at, mv, foreign_from)?.map(|rs| {
                         rs.map(|r| {
@@ -1541,17 +1533,18 @@ impl Window {
         opts: &RapidOptions,
         carry: &mut Carry,
     ) -> std::result::Result<Vec<Timed>, (usize, Refusal)> {
-        let mut views: HashMap<&'m str, Robot> = HashMap::new();
+        let mut views = Views::default();
+        let mut of = Vec::with_capacity(moves.len());
         for (mv, plan) in moves.iter().zip(&plans[o..]) {
-            views
-                .entry(&*mv.tool.text)
-                .or_insert_with(|| robot.with_tool(plan.tool.tframe, plan.tool.load));
+            of.push(views.index(&mv.tool.text, || {
+                robot.with_tool(plan.tool.tframe, plan.tool.load)
+            }));
         }
-        let stream = |plan: &Planned, mv: Option<&'m Move>| -> StreamMove<'_> {
-            let kind = mv.map(|m| m.kind);
-            let key: &str = mv.map_or("", |m| &*m.tool.text);
+        let stream = |plan: &Planned, mv: Option<(&'m Move, usize)>| -> StreamMove<'_> {
+            let kind = mv.map(|(m, _)| m.kind);
+            let key: &str = mv.map_or("", |(m, _)| &*m.tool.text);
             StreamMove {
-                view: views.get(key).unwrap_or(robot),
+                view: mv.and_then(|(_, v)| views.robots.get(v)).unwrap_or(robot),
                 key,
                 pose: plan.pose,
                 via: plan.via.map(|v| v.translation.vector),
@@ -1561,8 +1554,8 @@ impl Window {
                 linear: kind == Some(MoveKind::MoveL),
                 v_tcp: plan.v_tcp,
                 fallback: plan.speed_fallback,
-                line: mv.map_or(0, |m| m.line),
-                set: mv.map_or_else(CutSettings::default, |m| directives.at(m.line)),
+                line: mv.map_or(0, |(m, _)| m.line),
+                set: mv.map_or_else(CutSettings::default, |(m, _)| directives.at(m.line)),
             }
         };
         let mut stream_moves = Vec::with_capacity(plans.len());
@@ -1571,7 +1564,8 @@ impl Window {
             moves
                 .iter()
                 .zip(&plans[o..])
-                .map(|(mv, p)| stream(p, Some(*mv))),
+                .zip(of)
+                .map(|((mv, p), v)| stream(p, Some((*mv, v)))),
         );
         let fx = opts.effects;
         let asked = Asked {
@@ -1894,25 +1888,14 @@ impl Rewriter<'_> {
         state: &MoveState,
         dev: &Breakdown,
     ) -> Row {
-        let [x, y, z] = self.last_tcp;
-        Row {
-            line: mv.line,
-            motion: mv.name,
-            start: [0.0; 6],
-            commanded: [x, y, z, 0.0, 0.0, 0.0],
-            arc: None,
-            compensated: [0.0; 6],
-            result: crate::compensate::BlockResult::default(),
-            robot: Some(RobotMove {
-                via_mm,
-                deviation: *dev,
-                wrench: state.wrench,
-                duration_s: seg.duration_s,
-                power_w: seg.power_w,
-                thermal_power_w: state.power.unwrap_or([0.0; 6]),
-                q_rad: None,
-            }),
+        let mut row = robot_row((mv.line, mv.name), self.last_tcp, via_mm, *dev, None);
+        if let Some(r) = row.robot.as_mut() {
+            r.wrench = state.wrench;
+            r.duration_s = seg.duration_s;
+            r.power_w = seg.power_w;
+            r.thermal_power_w = state.power.unwrap_or([0.0; 6]);
         }
+        row
     }
 
     /// Hands a cutting move at a spindle speed to the resonance check

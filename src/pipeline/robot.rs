@@ -176,17 +176,21 @@ impl Views {
 }
 
 /// The programmed joints of `pose` (world) on `view` by `rule`, after the
-/// joints `prev` of the target before.
-fn programmed_joints(
+/// joints `prev` of the target before, with the closed-form branch of the
+/// solution when the rule gives one (a seed of the compensation). A
+/// refusal of [`Configuration::Conf`] does not list the configurations
+/// that reach the pose ([`Robot::with_reaching_configurations`], a search
+/// the caller makes for the refusal it reports).
+pub(crate) fn programmed_joints(
     view: &Robot,
     pose: &Isometry3<f64>,
     rule: &Configuration,
     prev: Option<&[f64; 6]>,
-) -> std::result::Result<[f64; 6], RobotError> {
+) -> std::result::Result<([f64; 6], Option<usize>), RobotError> {
     match rule {
-        Configuration::Conf(c) => view.ik_conf(pose, *c),
+        Configuration::Conf(c) => view.ik_conf_indexed(pose, *c).map(|(q, k)| (q, Some(k))),
         Configuration::Previous => match prev {
-            Some(p) => view.ik_nearest(pose, p).map(|(q, _)| q),
+            Some(p) => view.ik_nearest(pose, p).map(|(q, k)| (q, Some(k))),
             None => Err(RobotError::Unreachable(
                 "no target before gives its configuration (it is the robot's at run time)".into(),
             )),
@@ -214,7 +218,7 @@ fn programmed_joints(
                     }
                 }
             }
-            best.map(|(_, q)| q).ok_or_else(|| {
+            best.map(|(_, q)| (q, None)).ok_or_else(|| {
                 RobotError::Unreachable(format!("no joint solution within the limits has {text}"))
             })
         }
@@ -242,10 +246,11 @@ fn plan(
                 let view = views.get(robot, &t.tool);
                 let r = &views.robots[view];
                 let pose = t.work * t.pose;
-                let what = format!("target of {} at line {}", t.instruction, t.line);
+                // The message is made only for a refusal.
+                let what = || format!("target of {} at line {}", t.instruction, t.line);
                 let q = programmed_joints(r, &pose, &t.configuration, prev.as_ref());
                 let q = match q {
-                    Ok(q) => q,
+                    Ok((q, _)) => q,
                     Err(e)
                         if matches!(t.configuration, Configuration::Previous) && prev.is_none() =>
                     {
@@ -258,14 +263,20 @@ fn plan(
                         plans.push(Plan::Left);
                         continue;
                     }
-                    Err(e) => return Err(refused(file, t.line, t.column, &what, e)),
+                    Err(e) => {
+                        let e = match t.configuration {
+                            Configuration::Conf(_) => r.with_reaching_configurations(&pose, e),
+                            _ => e,
+                        };
+                        return Err(refused(file, t.line, t.column, &what(), e));
+                    }
                 };
                 let via = match &t.via {
                     Some((v, _)) => {
                         let vpose = t.work * v;
                         let qv = r
                             .ik_nearest(&vpose, &q)
-                            .map_err(|e| refused(file, t.line, t.column, &what, e))?
+                            .map_err(|e| refused(file, t.line, t.column, &what(), e))?
                             .0;
                         Some(Job {
                             view,
@@ -561,7 +572,7 @@ fn row(t: &RobotTarget, c: &Compensation) -> Row {
         p.into(),
         via,
         c.deviation,
-        c.q_programmed,
+        Some(c.q_programmed),
     )
 }
 
@@ -575,17 +586,19 @@ fn joint_row(robot: &Robot, j: &JointMove, dev: &Breakdown) -> Row {
         None => robot.tcp_pose(Model::Nominal, &j.q),
     };
     let p = pose.translation.vector;
-    robot_row((j.line, j.instruction), p.into(), None, *dev, j.q)
+    robot_row((j.line, j.instruction), p.into(), None, *dev, Some(j.q))
 }
 
-/// A robot move's report row: its line and instruction, the programmed
-/// TCP position, the circle point of a circular move, and the deviation.
-fn robot_row(
+/// A robot move's report row, the one of every robot language: its line
+/// and instruction, the programmed TCP position, the circle point of a
+/// circular move, the deviation and the programmed joints when the
+/// language reports them (its place on the time line is added after).
+pub(crate) fn robot_row(
     (line, motion): (usize, &'static str),
     p: [f64; 3],
     via_mm: Option<[f64; 3]>,
     deviation: Breakdown,
-    q: [f64; 6],
+    q: Option<[f64; 6]>,
 ) -> Row {
     Row {
         line,
@@ -602,7 +615,7 @@ fn robot_row(
             duration_s: 0.0,
             power_w: [0.0; 6],
             thermal_power_w: [0.0; 6],
-            q_rad: Some(q),
+            q_rad: q,
         }),
     }
 }
