@@ -20,8 +20,8 @@ use rayon::prelude::*;
 
 use nalgebra::Isometry3;
 
-use crate::compensate::outcome::{Compensated, DevStats, RobotMove, Row, Summary};
-use crate::compensate::robot::{Compensation, Seed};
+use crate::compensate::outcome::{Compensated, DevStats, Row, Summary};
+use crate::compensate::robot::Seed;
 use crate::emit::rapid::{
     EditList, Format, TakenNames, fresh_name, insert_after_decl, joint_text, push_annotation,
     robtarget_in_place, robtarget_text, write_dev_comment,
@@ -34,6 +34,7 @@ use crate::pipeline::resonance::ResonanceWatch;
 use crate::pipeline::robot::time_line::{
     self, Asked, FALLBACK_TCP_SPEED, LastEnd, Refusal, StreamMove, Timed, WrenchBits, wrench_bits,
 };
+use crate::pipeline::robot::{Solution, SolveJob, Views, programmed_joints, robot_row, solve_jobs};
 use crate::predict::robot::{Breakdown, EffectSet};
 use crate::predict::{MoveContext, ThermalInput, Wrench};
 use crate::process::CutSettings;
@@ -48,7 +49,7 @@ use crate::program::rapid::resolve::{
 use crate::program::rapid::{
     ConfMonitoring, DataValue, Module, Move, MoveKind, Target, column_of, parse_module,
 };
-use crate::program::robot_moves::LeftAsWritten;
+use crate::program::robot_moves::{Configuration, LeftAsWritten};
 
 /// Options of a RAPID compensation run.
 #[derive(Debug, Clone, PartialEq)]
@@ -143,14 +144,6 @@ impl LoadKey {
     }
 }
 
-/// Tool and work object of a move: moves with equal keys share a robot
-/// view (what else a move adds goes with its job, in its context).
-#[derive(Debug, Clone, PartialEq, Eq, Hash)]
-struct ViewKey {
-    tool: Rc<str>,
-    wobj: Rc<str>,
-}
-
 /// Mutable state of one run: edits, new declarations, caches.
 struct Rewriter<'m> {
     module: &'m Module,
@@ -164,12 +157,9 @@ struct Rewriter<'m> {
     taken: TakenNames,
     /// Names new data may not take (lower case): [`Carry::reserved`].
     reserved: HashSet<String>,
-    /// Robot views (one per tool and work object; the process wrench and
-    /// the thermal state of a move go with its job) and the index of each.
-    views: Arc<Vec<Robot>>,
-    view_of: HashMap<ViewKey, usize>,
-    /// The view used last, with its key.
-    last_view: Option<(ViewKey, usize)>,
+    /// Robot views (one per tool; the process wrench and the thermal
+    /// state of a move go with its job).
+    views: Views,
     /// Collecting the compensation jobs, or applying their results.
     phase: Phase,
     /// Load key that owns the in-place value of a target origin.
@@ -190,50 +180,22 @@ struct Rewriter<'m> {
     last_annotated: Option<usize>,
 }
 
-/// One target to compensate: robot view, programmed TCP pose (world frame)
-/// and the inverse-kinematics selection.
-struct Job {
-    view: usize,
-    pose: Isometry3<f64>,
-    sel: IkSelect,
-    /// The move's context: process wrench, joint powers, tooth frequency.
-    ctx: MoveContext,
-    /// What planning found about the programmed pose (its controller
-    /// joints, their branch and nominal flange), when it did.
-    seed: Seed,
-}
-
 /// The two walks over the moves, interleaved a chunk at a time: the first
-/// collects the compensations of the chunk's moves as [`Job`]s; they are
+/// collects the compensations of the chunk's moves as [`SolveJob`]s; they are
 /// solved on the pool (each job independent of the others and of the
 /// thread count) while the second walk writes back the results of the chunk
 /// before, in source order.
 enum Phase {
     /// Collecting the jobs of a chunk.
-    Collect(Vec<Job>),
+    Collect(Vec<SolveJob>),
     /// The results of the chunk being written back, in job order.
-    Apply(std::vec::IntoIter<Solved>),
+    Apply(std::vec::IntoIter<Solution>),
 }
-
-/// The solved compensation of one job.
-type Solved = std::result::Result<Compensation, RobotError>;
 
 /// Jobs per chunk (a chunk ends at the move that reaches it): the jobs and
 /// results of two chunks at a time live while the move records grow, never
 /// those of all the moves.
 const JOB_CHUNK: usize = 4096;
-
-/// Solves one chunk of jobs in parallel (rayon keeps the input order in
-/// `collect`; every job is independent, so the results do not depend on
-/// the threads).
-fn solve_chunk(views: &[Robot], jobs: &[Job], fx: EffectSet) -> Vec<Solved> {
-    jobs.par_iter()
-        .map(|j| match views.get(j.view) {
-            Some(r) => r.compensate_seeded(&j.ctx, &j.pose, &j.sel, fx, &j.seed),
-            None => Err(RobotError::Unreachable("no robot view".into())),
-        })
-        .collect()
-}
 
 /// Per-move load state applied to the robot view.
 #[derive(Debug, Clone, Copy, Default)]
@@ -251,32 +213,12 @@ impl Rewriter<'_> {
 
     /// Index of the robot view of a load key (made on first use).
     fn view(&mut self, key: &LoadKey, tool: &ToolView) -> usize {
-        // Consecutive moves mostly share their load: compare before hashing.
-        if let Some((k, i)) = &self.last_view {
-            if k.tool == key.tool && k.wobj == key.wobj {
-                return *i;
-            }
-        }
-        let vk = ViewKey {
-            tool: key.tool.clone(),
-            wobj: key.wobj.clone(),
-        };
-        let i = match self.view_of.get(&vk) {
-            Some(&i) => i,
-            None => {
-                let r = self.robot.with_tool(tool.tframe, tool.load);
-                // Walk 1 makes the views while no chunk is being solved
-                // (the list is not shared then, so nothing is copied);
-                // walk 2 meets only the keys walk 1 saw.
-                let views = Arc::make_mut(&mut self.views);
-                views.push(r);
-                let i = views.len() - 1;
-                self.view_of.insert(vk.clone(), i);
-                i
-            }
-        };
-        self.last_view = Some((vk, i));
-        i
+        let robot = self.robot;
+        // Walk 1 makes the views while no chunk is being solved (the list
+        // is not shared then, so nothing is copied); walk 2 meets only the
+        // keys walk 1 saw.
+        self.views
+            .index(&key.tool, || robot.with_tool(tool.tframe, tool.load))
     }
 
     /// The context of the move being rewritten: its process wrench, its
@@ -307,11 +249,11 @@ impl Rewriter<'_> {
         pose: Isometry3<f64>,
         sel: IkSelect,
         seed: Seed,
-    ) -> Option<Solved> {
+    ) -> Option<Solution> {
         let ctx = self.context();
         match &mut self.phase {
             Phase::Collect(jobs) => {
-                jobs.push(Job {
+                jobs.push(SolveJob {
                     view,
                     pose,
                     sel,
@@ -327,7 +269,7 @@ impl Rewriter<'_> {
                 Some(
                     results
                         .next()
-                        .unwrap_or_else(|| match self.views.get(view) {
+                        .unwrap_or_else(|| match self.views.robots.get(view) {
                             Some(r) => {
                                 r.compensate_seeded(&ctx, &pose, &sel, self.opts.effects, &seed)
                             }
@@ -423,7 +365,7 @@ impl Rewriter<'_> {
         // its target (a search per configuration on a robot solved
         // numerically; the module is refused at its first).
         let comp = comp.map_err(|e| {
-            let e = match self.views.get(view) {
+            let e = match self.views.robots.get(view) {
                 Some(r) => r.with_reaching_configurations(&programmed, e),
                 None => e,
             };
@@ -584,7 +526,7 @@ impl Rewriter<'_> {
                 self.src.get(target.span()).unwrap_or("?")
             )
         };
-        let Some(r) = self.views.get(view) else {
+        let Some(r) = self.views.robots.get(view) else {
             return Err(Error::Internal("robot view missing".into()));
         };
         r.check_limits(&q)
@@ -701,36 +643,24 @@ struct Planned {
     speed_fallback: bool,
 }
 
-/// Robot views with a tool mounted, made once per distinct key (a view is a
-/// copy of the robot: one per move would cost a copy per target).
-struct ViewCache<K> {
-    views: HashMap<K, Robot>,
-}
-
-impl<K: std::hash::Hash + Eq> ViewCache<K> {
-    fn new() -> Self {
-        ViewCache {
-            views: HashMap::new(),
-        }
-    }
-
-    fn get(&mut self, key: K, make: impl FnOnce() -> Robot) -> &Robot {
-        self.views.entry(key).or_insert_with(make)
-    }
-}
-
-fn plan_move<'m>(
+/// Plans one move: its tool and work object, its programmed pose and, by
+/// the configuration rule of its confdata ([`programmed_joints`]), its
+/// programmed joints and their branch when the pose is reachable.
+fn plan_move(
     module: &Module,
     src: &str,
     file: &str,
     robot: &Robot,
-    cache: &mut ViewCache<&'m str>,
-    (mv, res): (&'m Move, &Resolved),
+    views: &mut Views,
+    (mv, res): (&Move, &Resolved),
 ) -> Result<Planned> {
     let tool = resolve_tool(module, src, file, mv)?;
     let wobj = resolve_wobj(module, src, file, mv)?;
     // The tool is resolved from its name alone: equal names, equal views.
-    let view = cache.get(&*mv.tool.text, || robot.with_tool(tool.tframe, tool.load));
+    let i = views.index(&mv.tool.text, || robot.with_tool(tool.tframe, tool.load));
+    let Some(view) = views.robots.get(i) else {
+        return Err(Error::Internal("robot view missing".into()));
+    };
     let (pose, q, branch) = if mv.kind == MoveKind::MoveAbsJ {
         let jt = match &mv.target {
             Target::InlineJoint(jt) => Some(jt),
@@ -755,8 +685,8 @@ fn plan_move<'m>(
             return Err(Error::Internal("move target not resolved".into()));
         };
         let pose = wobj * u.pose_obj;
-        match view.ik_conf_indexed(&pose, u.conf) {
-            Ok((q, k)) => (pose, Some(q), Some(k)),
+        match programmed_joints(view, &pose, &Configuration::Conf(u.conf), None) {
+            Ok((q, k)) => (pose, Some(q), k),
             Err(_) => (pose, None, None),
         }
     };
@@ -786,7 +716,7 @@ fn free_configurations(
     o: usize,
     free: &[usize],
 ) {
-    let mut views = ViewCache::new();
+    let mut views = Views::default();
     for (i, mv) in moves.iter().enumerate() {
         if free.binary_search(&mv.span.start).is_err() {
             continue;
@@ -797,13 +727,17 @@ fn free_configurations(
         let Some(plan) = plans.get_mut(i + o) else {
             continue;
         };
-        let view = views.get(&*mv.tool.text, || {
+        let v = views.index(&mv.tool.text, || {
             robot.with_tool(plan.tool.tframe, plan.tool.load)
         });
-        if let Ok((q, k)) = view.ik_nearest(&plan.pose, &prev) {
+        let Some(view) = views.robots.get(v) else {
+            continue;
+        };
+        let rule = Configuration::Previous;
+        if let Ok((q, k)) = programmed_joints(view, &plan.pose, &rule, Some(&prev)) {
             plan.free_conf = Some(view.confdata(&q));
             plan.q = Some(q);
-            plan.branch = Some(k);
+            plan.branch = k;
         }
     }
 }
@@ -1195,7 +1129,7 @@ impl Carry {
     fn resolve_with<'m, P: Send>(
         &mut self,
         text: ModuleText<'m>,
-        plan: impl Fn(&mut ViewCache<&'m str>, &'m Move, &Resolved<'m>) -> P + Sync,
+        plan: impl Fn(&mut Views, &'m Move, &Resolved<'m>) -> P + Sync,
     ) -> Result<Resolved3<'m, P>> {
         let ModuleText { module, src, file } = text;
         let flow = match &self.scope {
@@ -1208,7 +1142,7 @@ impl Carry {
         type Found<'m, P> = Result<std::result::Result<Uses<(Resolved<'m>, P)>, Left>>;
         let found: Vec<Found<'m, P>> = all
             .par_iter()
-            .map_init(ViewCache::new, |views, &(at, mv)| {
+            .map_init(Views::default, |views, &(at, mv)| {
                 Ok(
                     resolve_move(&flow, src, file, at, mv, foreign_from)?.map(|rs| {
                         rs.map(|r| {
@@ -1599,17 +1533,18 @@ impl Window {
         opts: &RapidOptions,
         carry: &mut Carry,
     ) -> std::result::Result<Vec<Timed>, (usize, Refusal)> {
-        let mut views: HashMap<&'m str, Robot> = HashMap::new();
+        let mut views = Views::default();
+        let mut of = Vec::with_capacity(moves.len());
         for (mv, plan) in moves.iter().zip(&plans[o..]) {
-            views
-                .entry(&*mv.tool.text)
-                .or_insert_with(|| robot.with_tool(plan.tool.tframe, plan.tool.load));
+            of.push(views.index(&mv.tool.text, || {
+                robot.with_tool(plan.tool.tframe, plan.tool.load)
+            }));
         }
-        let stream = |plan: &Planned, mv: Option<&'m Move>| -> StreamMove<'_> {
-            let kind = mv.map(|m| m.kind);
-            let key: &str = mv.map_or("", |m| &*m.tool.text);
+        let stream = |plan: &Planned, mv: Option<(&'m Move, usize)>| -> StreamMove<'_> {
+            let kind = mv.map(|(m, _)| m.kind);
+            let key: &str = mv.map_or("", |(m, _)| &*m.tool.text);
             StreamMove {
-                view: views.get(key).unwrap_or(robot),
+                view: mv.and_then(|(_, v)| views.robots.get(v)).unwrap_or(robot),
                 key,
                 pose: plan.pose,
                 via: plan.via.map(|v| v.translation.vector),
@@ -1619,8 +1554,8 @@ impl Window {
                 linear: kind == Some(MoveKind::MoveL),
                 v_tcp: plan.v_tcp,
                 fallback: plan.speed_fallback,
-                line: mv.map_or(0, |m| m.line),
-                set: mv.map_or_else(CutSettings::default, |m| directives.at(m.line)),
+                line: mv.map_or(0, |(m, _)| m.line),
+                set: mv.map_or_else(CutSettings::default, |(m, _)| directives.at(m.line)),
             }
         };
         let mut stream_moves = Vec::with_capacity(plans.len());
@@ -1629,7 +1564,8 @@ impl Window {
             moves
                 .iter()
                 .zip(&plans[o..])
-                .map(|(mv, p)| stream(p, Some(*mv))),
+                .zip(of)
+                .map(|((mv, p), v)| stream(p, Some((*mv, v)))),
         );
         let fx = opts.effects;
         let asked = Asked {
@@ -1732,9 +1668,7 @@ impl<'m> Rewriter<'m> {
             inserts: std::mem::take(&mut carry.inserts),
             taken: std::mem::take(&mut carry.taken),
             reserved: std::mem::take(&mut carry.reserved),
-            views: Arc::new(Vec::new()),
-            view_of: HashMap::new(),
-            last_view: None,
+            views: Views::default(),
             phase: Phase::Collect(Vec::new()),
             owner: std::mem::take(&mut carry.owner),
             made: std::mem::take(&mut carry.made),
@@ -1773,7 +1707,7 @@ impl<'m> Rewriter<'m> {
         collected: &mut usize,
         collecting: &mut bool,
         names: &mut LastNames<'a>,
-    ) -> (Vec<Job>, usize) {
+    ) -> (Vec<SolveJob>, usize) {
         // A chunk holds a job per move (two for a MoveC) and ends at the
         // move that reaches JOB_CHUNK: room for that many from the start.
         let room = moves.len().saturating_sub(*collected).min(JOB_CHUNK) + 1;
@@ -1825,7 +1759,7 @@ impl<'m> Rewriter<'m> {
             &mut collecting,
             &mut names_1,
         );
-        let mut results = solve_chunk(&self.views, &jobs, fx);
+        let mut results = solve_jobs(&self.views.robots, &jobs, fx);
         drop(jobs);
         let mut walked = 0;
         loop {
@@ -1851,9 +1785,12 @@ impl<'m> Rewriter<'m> {
             rayon::in_place_scope(|s| {
                 if !next_jobs.is_empty() {
                     // The solve shares the views (walk 2 makes none).
-                    let (views, jobs, slot) =
-                        (Arc::clone(&self.views), &next_jobs, &mut next_results);
-                    s.spawn(move |_| *slot = solve_chunk(&views, jobs, fx));
+                    let (views, jobs, slot) = (
+                        Arc::clone(&self.views.robots),
+                        &next_jobs,
+                        &mut next_results,
+                    );
+                    s.spawn(move |_| *slot = solve_jobs(&views, jobs, fx));
                 }
                 // Walk 2: write the chunk's results back in source order.
                 for i in walked..end {
@@ -1951,25 +1888,14 @@ impl Rewriter<'_> {
         state: &MoveState,
         dev: &Breakdown,
     ) -> Row {
-        let [x, y, z] = self.last_tcp;
-        Row {
-            line: mv.line,
-            motion: mv.name,
-            start: [0.0; 6],
-            commanded: [x, y, z, 0.0, 0.0, 0.0],
-            arc: None,
-            compensated: [0.0; 6],
-            result: crate::compensate::BlockResult::default(),
-            robot: Some(RobotMove {
-                via_mm,
-                deviation: *dev,
-                wrench: state.wrench,
-                duration_s: seg.duration_s,
-                power_w: seg.power_w,
-                thermal_power_w: state.power.unwrap_or([0.0; 6]),
-                q_rad: None,
-            }),
+        let mut row = robot_row((mv.line, mv.name), self.last_tcp, via_mm, *dev, None);
+        if let Some(r) = row.robot.as_mut() {
+            r.wrench = state.wrench;
+            r.duration_s = seg.duration_s;
+            r.power_w = seg.power_w;
+            r.thermal_power_w = state.power.unwrap_or([0.0; 6]);
         }
+        row
     }
 
     /// Hands a cutting move at a spindle speed to the resonance check

@@ -26,8 +26,8 @@ use crate::compensate::robot::{Compensation, Seed};
 use crate::error::{Error, Located, Result};
 use crate::machine::robot::{IkSelect, Model, Robot, RobotError};
 use crate::pipeline::rapid::RapidOptions;
-use crate::predict::Breakdown;
 use crate::predict::MoveContext;
+use crate::predict::{Breakdown, EffectSet};
 use crate::process::CutSettings;
 use crate::program::interp::Warning;
 use crate::program::robot_moves::{
@@ -85,6 +85,39 @@ struct Job {
     q: [f64; 6],
 }
 
+/// One compensation to solve, the unit of the solve stage of every robot
+/// language ([`solve_jobs`]): the robot view (an index into the run's
+/// views), the programmed TCP pose (world frame), the inverse-kinematics
+/// selection, the move's context and what planning found of its
+/// programmed joints.
+pub(crate) struct SolveJob {
+    /// Index of the robot view (tool mounted).
+    pub(crate) view: usize,
+    /// Programmed TCP pose, world frame.
+    pub(crate) pose: Isometry3<f64>,
+    /// Which joint solution is programmed.
+    pub(crate) sel: IkSelect,
+    /// The move's context (process wrench, joint powers, tooth frequency).
+    pub(crate) ctx: MoveContext,
+    /// What planning found of the programmed pose.
+    pub(crate) seed: Seed,
+}
+
+/// The solved compensation of one [`SolveJob`].
+pub(crate) type Solution = std::result::Result<Compensation, RobotError>;
+
+/// Solves `jobs` on the pool (rayon keeps the input order in `collect`;
+/// every job is independent of the others, so the results do not depend on
+/// the thread count).
+pub(crate) fn solve_jobs(views: &[Robot], jobs: &[SolveJob], fx: EffectSet) -> Vec<Solution> {
+    jobs.par_iter()
+        .map(|j| match views.get(j.view) {
+            Some(r) => r.compensate_seeded(&j.ctx, &j.pose, &j.sel, fx, &j.seed),
+            None => Err(RobotError::Unreachable("no robot view".into())),
+        })
+        .collect()
+}
+
 /// What planning gave a step.
 enum Plan {
     /// Jobs of the target and of its auxiliary point.
@@ -95,37 +128,69 @@ enum Plan {
     Left,
 }
 
-/// Robot views by tool key.
+/// The robot views of a run: a copy of the robot per tool, with the tool
+/// mounted, made on a tool's first use and shared by every move that names
+/// it (a view per move would cost a copy of the robot per target). The
+/// views are shared with the solve stage ([`solve_jobs`]) behind an `Arc`:
+/// a view made while no solve holds them copies nothing.
 #[derive(Default)]
-struct Views {
-    robots: Vec<Robot>,
+pub(crate) struct Views {
+    /// The views, by index.
+    pub(crate) robots: std::sync::Arc<Vec<Robot>>,
+    /// The key of each view (what names its tool).
+    keys: Vec<String>,
     of: HashMap<String, usize>,
+    /// The view used last: consecutive moves mostly share their tool, and
+    /// a comparison is cheaper than a hash.
+    last: Option<usize>,
 }
 
 impl Views {
-    fn get(&mut self, robot: &Robot, tool: &ToolUse) -> usize {
-        if let Some(&i) = self.of.get(&tool.key) {
+    /// The index of the view of the tool named `key`, made by `make` on
+    /// the key's first use.
+    pub(crate) fn index(&mut self, key: &str, make: impl FnOnce() -> Robot) -> usize {
+        if let Some(i) = self
+            .last
+            .filter(|&i| self.keys.get(i).is_some_and(|k| k == key))
+        {
             return i;
         }
-        self.robots
-            .push(robot.with_tool(tool.flange_to_tcp, tool.load));
-        self.of.insert(tool.key.clone(), self.robots.len() - 1);
-        self.robots.len() - 1
+        let i = match self.of.get(key) {
+            Some(&i) => i,
+            None => {
+                let robots = std::sync::Arc::make_mut(&mut self.robots);
+                robots.push(make());
+                let i = robots.len() - 1;
+                self.keys.push(key.to_string());
+                self.of.insert(key.to_string(), i);
+                i
+            }
+        };
+        self.last = Some(i);
+        i
+    }
+
+    fn get(&mut self, robot: &Robot, tool: &ToolUse) -> usize {
+        self.index(&tool.key, || robot.with_tool(tool.flange_to_tcp, tool.load))
     }
 }
 
 /// The programmed joints of `pose` (world) on `view` by `rule`, after the
-/// joints `prev` of the target before.
-fn programmed_joints(
+/// joints `prev` of the target before, with the closed-form branch of the
+/// solution when the rule gives one (a seed of the compensation). A
+/// refusal of [`Configuration::Conf`] does not list the configurations
+/// that reach the pose ([`Robot::with_reaching_configurations`], a search
+/// the caller makes for the refusal it reports).
+pub(crate) fn programmed_joints(
     view: &Robot,
     pose: &Isometry3<f64>,
     rule: &Configuration,
     prev: Option<&[f64; 6]>,
-) -> std::result::Result<[f64; 6], RobotError> {
+) -> std::result::Result<([f64; 6], Option<usize>), RobotError> {
     match rule {
-        Configuration::Conf(c) => view.ik_conf(pose, *c),
+        Configuration::Conf(c) => view.ik_conf_indexed(pose, *c).map(|(q, k)| (q, Some(k))),
         Configuration::Previous => match prev {
-            Some(p) => view.ik_nearest(pose, p).map(|(q, _)| q),
+            Some(p) => view.ik_nearest(pose, p).map(|(q, k)| (q, Some(k))),
             None => Err(RobotError::Unreachable(
                 "no target before gives its configuration (it is the robot's at run time)".into(),
             )),
@@ -153,7 +218,7 @@ fn programmed_joints(
                     }
                 }
             }
-            best.map(|(_, q)| q).ok_or_else(|| {
+            best.map(|(_, q)| (q, None)).ok_or_else(|| {
                 RobotError::Unreachable(format!("no joint solution within the limits has {text}"))
             })
         }
@@ -181,10 +246,11 @@ fn plan(
                 let view = views.get(robot, &t.tool);
                 let r = &views.robots[view];
                 let pose = t.work * t.pose;
-                let what = format!("target of {} at line {}", t.instruction, t.line);
+                // The message is made only for a refusal.
+                let what = || format!("target of {} at line {}", t.instruction, t.line);
                 let q = programmed_joints(r, &pose, &t.configuration, prev.as_ref());
                 let q = match q {
-                    Ok(q) => q,
+                    Ok((q, _)) => q,
                     Err(e)
                         if matches!(t.configuration, Configuration::Previous) && prev.is_none() =>
                     {
@@ -197,14 +263,20 @@ fn plan(
                         plans.push(Plan::Left);
                         continue;
                     }
-                    Err(e) => return Err(refused(file, t.line, t.column, &what, e)),
+                    Err(e) => {
+                        let e = match t.configuration {
+                            Configuration::Conf(_) => r.with_reaching_configurations(&pose, e),
+                            _ => e,
+                        };
+                        return Err(refused(file, t.line, t.column, &what(), e));
+                    }
                 };
                 let via = match &t.via {
                     Some((v, _)) => {
                         let vpose = t.work * v;
                         let qv = r
                             .ik_nearest(&vpose, &q)
-                            .map_err(|e| refused(file, t.line, t.column, &what, e))?
+                            .map_err(|e| refused(file, t.line, t.column, &what(), e))?
                             .0;
                         Some(Job {
                             view,
@@ -386,30 +458,57 @@ pub fn run(
     let (plans, warnings) = plan(robot, steps, &mut views, file)?;
     let timed = timed_steps(robot, steps, &plans, &views, opts, file)?;
     let fx = opts.effects;
-    let solve = |j: &Job, ctx: &MoveContext| -> std::result::Result<Compensation, RobotError> {
+    // The targets' and circle points' compensations, solved together;
+    // the joint targets' predictions beside them.
+    let job = |j: &Job, ctx: &MoveContext| {
         let r = &views.robots[j.view];
-        let seed = Seed {
-            q: Some(j.q),
-            ..Seed::default()
-        };
-        r.compensate_seeded(ctx, &j.pose, &IkSelect::Conf(r.confdata(&j.q)), fx, &seed)
+        SolveJob {
+            view: j.view,
+            pose: j.pose,
+            sel: IkSelect::Conf(r.confdata(&j.q)),
+            ctx: *ctx,
+            seed: Seed {
+                q: Some(j.q),
+                ..Seed::default()
+            },
+        }
     };
-    let solved: Vec<std::result::Result<StepResult, RobotError>> = plans
+    let mut jobs = Vec::with_capacity(plans.len());
+    for (p, t) in plans.iter().zip(&timed) {
+        if let Plan::Target(j, v) = p {
+            jobs.push(job(j, &t.ctx));
+            jobs.extend(v.as_ref().map(|v| job(v, &t.ctx)));
+        }
+    }
+    let mut solutions = solve_jobs(&views.robots, &jobs, fx).into_iter();
+    drop(jobs);
+    let reported: Vec<Option<Breakdown>> = plans
         .par_iter()
         .zip(timed.par_iter())
         .map(|(p, t)| match p {
-            Plan::Target(j, v) => Ok(StepResult::Compensated {
-                target: Box::new(solve(j, &t.ctx)?),
-                via: v
-                    .as_ref()
-                    .map(|v| solve(v, &t.ctx))
-                    .transpose()?
-                    .map(Box::new),
-            }),
-            Plan::Joints(view, q) => Ok(StepResult::Reported(Box::new(
-                views.robots[*view].predict_at_joints(&t.ctx, q, fx),
-            ))),
-            Plan::Left => Ok(StepResult::None),
+            Plan::Joints(view, q) => Some(views.robots[*view].predict_at_joints(&t.ctx, q, fx)),
+            _ => None,
+        })
+        .collect();
+    let mut next = || {
+        solutions
+            .next()
+            .unwrap_or_else(|| Err(RobotError::Unreachable("no solution".into())))
+    };
+    let solved: Vec<std::result::Result<StepResult, RobotError>> = plans
+        .iter()
+        .zip(reported)
+        .map(|(p, dev)| match (p, dev) {
+            (Plan::Target(_, v), _) => {
+                let target = next();
+                let via = v.as_ref().map(|_| next());
+                Ok(StepResult::Compensated {
+                    target: Box::new(target?),
+                    via: via.transpose()?.map(Box::new),
+                })
+            }
+            (Plan::Joints(..), Some(dev)) => Ok(StepResult::Reported(Box::new(dev))),
+            _ => Ok(StepResult::None),
         })
         .collect();
     let mut out = RobotRun::default();
@@ -473,7 +572,7 @@ fn row(t: &RobotTarget, c: &Compensation) -> Row {
         p.into(),
         via,
         c.deviation,
-        c.q_programmed,
+        Some(c.q_programmed),
     )
 }
 
@@ -487,17 +586,19 @@ fn joint_row(robot: &Robot, j: &JointMove, dev: &Breakdown) -> Row {
         None => robot.tcp_pose(Model::Nominal, &j.q),
     };
     let p = pose.translation.vector;
-    robot_row((j.line, j.instruction), p.into(), None, *dev, j.q)
+    robot_row((j.line, j.instruction), p.into(), None, *dev, Some(j.q))
 }
 
-/// A robot move's report row: its line and instruction, the programmed
-/// TCP position, the circle point of a circular move, and the deviation.
-fn robot_row(
+/// A robot move's report row, the one of every robot language: its line
+/// and instruction, the programmed TCP position, the circle point of a
+/// circular move, the deviation and the programmed joints when the
+/// language reports them (its place on the time line is added after).
+pub(crate) fn robot_row(
     (line, motion): (usize, &'static str),
     p: [f64; 3],
     via_mm: Option<[f64; 3]>,
     deviation: Breakdown,
-    q: [f64; 6],
+    q: Option<[f64; 6]>,
 ) -> Row {
     Row {
         line,
@@ -514,7 +615,7 @@ fn robot_row(
             duration_s: 0.0,
             power_w: [0.0; 6],
             thermal_power_w: [0.0; 6],
-            q_rad: Some(q),
+            q_rad: q,
         }),
     }
 }
