@@ -920,11 +920,9 @@ pub fn run(a: &BatchArgs, quiet: bool) -> Result<i32> {
             )?;
             // The programs already run on the pool's threads.
             job.pool = None;
-            // The annotations state U where the machine file carries a
-            // covariance, as `compensate`'s do.
-            job.predictor = job
-                .predictor
-                .map(|p| p.with_uncertainty(loaded.uncertainty.as_ref()));
+            // Annotations state U from the file's covariance, as `compensate`'s.
+            let u = loaded.uncertainty.as_ref();
+            job.predictor = job.predictor.map(|p| p.with_uncertainty(u));
             (
                 Engine::Tool(Box::new(job)),
                 super::machines::tool_effects(&set),
