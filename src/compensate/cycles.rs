@@ -81,6 +81,39 @@ pub const PECK_CLEARANCE_MM: f64 = 0.254;
 /// against its direction on one piece (the rest is the words' rounding).
 const DEADBAND_SHARE: f64 = 0.8;
 
+/// Largest unit of the last decimal of the X and Y words of a hole
+/// written as moves, as a share of the direction deadband. The Z
+/// squareness moves X and Y by a fraction of a micron on each feed piece;
+/// written with a unit of the deadband itself (three decimals in mm) such
+/// a piece steps by a whole unit against the direction the hole is solved
+/// with, which the interpreter may read as a reversal of the axis.
+const HOLE_UNIT_SHARE: f64 = 0.3;
+
+/// Margin of a feed piece's written travel below the direction deadband,
+/// as a share of it.
+const DEADBAND_MARGIN: f64 = 0.05;
+
+/// The fewest decimals of the X and Y words of a hole written as moves
+/// (in program units of `scale` mm) whose unit is at most
+/// [`HOLE_UNIT_SHARE`] of the direction deadband: 4 in mm, 5 in inch.
+/// With them a feed piece whose travel against the direction it is solved
+/// with stays below the deadband less the unit (the solve halves it until
+/// it does) is written below the deadband too, and read with the
+/// direction it was solved with.
+pub fn hole_decimals(scale: f64) -> usize {
+    let max = crate::limits::EMIT_MAX_DECIMALS;
+    (0..max)
+        .find(|&d| scale / 10f64.powi(d as i32) <= HOLE_UNIT_SHARE * DIRECTION_DEADBAND)
+        .unwrap_or(max)
+}
+
+/// The unit of the last decimal of an expanded hole's X and Y words, mm,
+/// at most: those of [`hole_decimals`] (finer where the program's or the
+/// machine file's decimals are).
+fn hole_unit_mm(scale: f64) -> f64 {
+    scale / 10f64.powi(hole_decimals(scale) as i32)
+}
+
 /// Most halvings of one feed of an expanded hole.
 const MAX_HALVINGS: u32 = 16;
 
@@ -92,9 +125,12 @@ struct Hole<'a, 'm> {
     pred: &'a ToolPredictor<'m>,
     mv: &'a Move,
     tol: f64,
-    /// Twice how far the written words' rounding may move one end of a
-    /// piece (`emit::gcode::rounding_mm`), mm.
-    rounding: f64,
+    /// How far the written words' rounding may move the travel of a piece
+    /// in X or Y (the unit of their last decimal, [`hole_unit_mm`]), mm.
+    unit: f64,
+    /// Share of the deadband a piece may travel in X or Y against the
+    /// direction it is solved with, its words' rounding left below it.
+    share: f64,
     steps: Vec<Step>,
     /// The largest distance of a feed's attained path across the
     /// programmed hole, mm.
@@ -158,7 +194,7 @@ impl Hole<'_, '_> {
         // with by more than the deadband would reverse that axis.
         let against = (0..2).any(|k| {
             let step = cb[k] - ca[k];
-            step.abs() > DEADBAND_SHARE * DIRECTION_DEADBAND && step.signum() != f64::from(d[k])
+            step.abs() > self.share * DIRECTION_DEADBAND && step.signum() != f64::from(d[k])
         });
         if (miss > self.tol - SKIP_MARGIN_MM || against) && depth < MAX_HALVINGS {
             let zm = (za + zb) / 2.0;
@@ -174,7 +210,7 @@ impl Hole<'_, '_> {
             let step = cb[k] - ca[k];
             if step != 0.0
                 && step.signum() != f64::from(d[k])
-                && step.abs() + self.rounding / 2.0 >= DIRECTION_DEADBAND
+                && step.abs() + self.unit >= DIRECTION_DEADBAND
             {
                 let mut r = *d;
                 r[k] = -r[k];
@@ -191,32 +227,131 @@ impl Hole<'_, '_> {
     }
 }
 
+/// How far before the hole's X or Y the approach point of
+/// [`approach`] lies, against the direction the hole is solved with, as a
+/// multiple of the direction deadband.
+const APPROACH_DEADBANDS: f64 = 5.0;
+
+/// The point the positioning of an expanded hole goes to first, where the
+/// positioning from where the machine stands (`from`, last moved with
+/// `moved`) straight to the hole's command `c` would leave X or Y moving
+/// otherwise than the hole is solved with (`d`), or might be read either
+/// way (its travel within `band` mm of the deadband: the rounding of the
+/// words at both ends): the hole's X and Y with each such axis
+/// [`APPROACH_DEADBANDS`] deadbands before it, so that the move on from
+/// there leaves the axis moving as solved. The hole's solve and the
+/// directions its positioning gives need not agree (a correction that
+/// reverses an axis with one direction and, with the other, moves it less
+/// than the deadband): approached from one side, they do. `None` where the
+/// positioning gives the directions it is solved with.
+fn approach(
+    (from, moved): (&AxisVec, &DirVec),
+    c: &AxisVec,
+    d: &DirVec,
+    band: f64,
+) -> Option<AxisVec> {
+    let mut pre = *c;
+    let mut any = false;
+    for k in 0..2 {
+        if positioning_reads((from, moved), c, k, band) != Some(d[k]) {
+            pre[k] = c[k] - f64::from(d[k]) * APPROACH_DEADBANDS * DIRECTION_DEADBAND;
+            any = true;
+        }
+    }
+    any.then_some(pre)
+}
+
+/// The direction of axis `k` (X or Y) after the positioning from `from`
+/// (last moved with `moved`) to `c`, as the interpreter reads the written
+/// words whose rounding moves the travel by up to `band` mm: the
+/// travel's where it is certainly beyond the direction deadband, the one
+/// before where it is certainly within it, `None` where it may be read
+/// either way.
+pub(super) fn positioning_reads(
+    (from, moved): (&AxisVec, &DirVec),
+    c: &AxisVec,
+    k: usize,
+    band: f64,
+) -> Option<i8> {
+    let travel = c[k] - from[k];
+    if travel.abs() > DIRECTION_DEADBAND + band {
+        Some(if travel > 0.0 { 1 } else { -1 })
+    } else if travel.abs() < DIRECTION_DEADBAND - band {
+        Some(moved[k])
+    } else {
+        None
+    }
+}
+
+/// Every reading of the directions of a hole drilled at one X and Y
+/// after the positioning from `from` (last moved with `moved`) to `c`
+/// ([`positioning_reads`], its words' rounding moving the travel by up to
+/// `band` mm), Z moving down: one, or two or four where X or Y may be
+/// read either way.
+pub(super) fn hole_readings(
+    (from, moved): (&AxisVec, &DirVec),
+    c: &AxisVec,
+    band: f64,
+) -> impl Iterator<Item = DirVec> {
+    let options = |k: usize| -> [i8; 2] {
+        match positioning_reads((from, moved), c, k, band) {
+            Some(v) => [v, v],
+            None => [moved[k], if c[k] > from[k] { 1 } else { -1 }],
+        }
+    };
+    let (xs, ys) = (options(0), options(1));
+    let base = *moved;
+    (0..4).map(move |i| {
+        let mut d = base;
+        d[0] = xs[i & 1];
+        d[1] = ys[i >> 1];
+        d[2] = -1;
+        d
+    })
+}
+
 /// Writes the hole of the cycle block `mv` (`spec`; programmed R level and
 /// retract level) as moves into `res` ([`BlockResult::expansion`]), with
-/// the directions of motion `d` its feed is solved with; `carry` (where
-/// the hole leaves the machine) is moved to where the last move ends.
-/// [`BlockResult::miss_mm`] becomes the largest miss of its feeds (with
-/// words rounded by up to `rounding` mm: a feed that may be read as a
-/// reversal of X or Y measured under both readings).
+/// the directions of motion `d` its feed is solved with; `before` is
+/// where the machine stands before it and the directions it last moved
+/// in (its positioning approaches the hole from one side where they would
+/// not give `d`, [`approach`]); `carry` (where the hole leaves the
+/// machine) is moved to where the last move ends.
+/// [`BlockResult::miss_mm`] becomes the largest miss of its feeds. The
+/// other words of the program are rounded by up to `rounding` mm (twice
+/// the unit of their last decimal, see `emit::gcode::rounding_mm`); the
+/// hole's X and Y words (in program units of `scale` mm) are written with
+/// [`hole_decimals`] at least, and each feed piece travels in X and Y
+/// against the direction it is solved with by less than the deadband less
+/// their unit, so that it is read back with that direction (a piece that
+/// might still be read as a reversal is measured under both readings).
 pub(super) fn expand(
     pred: &ToolPredictor,
     (mv, spec): (&Move, &CycleSpec),
     (r_level, retract): (f64, f64),
-    (tol, rounding): (f64, f64),
+    (tol, rounding, scale): (f64, f64, f64),
+    before: (&AxisVec, &DirVec),
     carry: &mut Carry,
     res: &mut BlockResult,
 ) -> Result<(), Failure> {
     let d = res.dirs;
+    let unit = hole_unit_mm(scale);
+    let share = DEADBAND_SHARE.min(1.0 - unit / DIRECTION_DEADBAND - DEADBAND_MARGIN);
     let mut hole = Hole {
         pred,
         mv,
         tol,
-        rounding,
+        unit,
+        share,
         steps: Vec::new(),
         miss: 0.0,
     };
     let bottom = mv.end[2];
     let c_r = hole.solve(r_level, &d)?;
+    if let Some(pre) = approach(before, &c_r, &d, rounding / 2.0 + unit) {
+        check_travel(pred, &pre)?;
+        hole.push(StepKind::Position, pre);
+    }
     hole.push(StepKind::Position, c_r);
     hole.push(StepKind::Rapid, c_r);
     let mut from = (c_r, r_level);
@@ -273,6 +408,22 @@ mod tests {
     use crate::machine::tool::MachineTool;
     use crate::predict::EffectSet;
     use crate::program::interp::{Motion, PlanKind};
+
+    /// The unit of an expanded hole's X and Y words is at most 0.3 µm:
+    /// 0.0001 mm (0.1 µm) in mm, 0.00001 inch (0.254 µm) in inch; one
+    /// decimal fewer would be 1 µm and 2.54 µm.
+    #[test]
+    fn hole_words_have_a_unit_well_below_the_deadband() {
+        assert_eq!(hole_decimals(1.0), 4);
+        assert_eq!(hole_decimals(25.4), 5);
+        // A piece travelling 0.8 µm against its direction (mm), or 0.696
+        // µm (inch: the share left by its unit), is written below 1 µm.
+        for scale in [1.0, 25.4] {
+            let unit = hole_unit_mm(scale);
+            let share = DEADBAND_SHARE.min(1.0 - unit / DIRECTION_DEADBAND - DEADBAND_MARGIN);
+            assert!(share * DIRECTION_DEADBAND + unit < 0.96 * DIRECTION_DEADBAND);
+        }
+    }
 
     /// A deep G83 hole on the bundled afm-r1000 (geometric effects): its
     /// steps peck as the cycle does and every feed holds the tolerance.

@@ -1396,11 +1396,13 @@ fn hole_dirs(moved: &DirVec, from: &AxisVec, c: &AxisVec) -> DirVec {
 /// hole's compensated X and Y at the retract level (the compensated R
 /// level under G99, the commanded initial level under G98), Z last moved
 /// up. The hole is solved with the directions its positioning really
-/// takes from where the machine stands.
+/// takes from where the machine stands; its miss is measured under every
+/// reading of the written positioning (its words' rounding moving its
+/// travel by up to `band` mm).
 fn cycle_hole(
     pred: &ToolPredictor,
     mv: &Move,
-    (r_level, retract): (f64, f64),
+    (r_level, retract, band): (f64, f64, f64),
     carry_in: Option<&Carry>,
     res: &mut BlockResult,
 ) -> Result<Carry, Failure> {
@@ -1420,6 +1422,7 @@ fn cycle_hole(
     res.end = c;
     res.residual_mm = r;
     res.dirs = d;
+
     let mut at_r = mv.end;
     at_r[2] = r_level;
     // No process force at the R level: the drill is not cutting yet.
@@ -1437,6 +1440,18 @@ fn cycle_hole(
     let mut top = c;
     top[2] = cr[2];
     res.miss_mm = hole_miss(pred, mv, (&top, &c), &d, r_level);
+    // Where the solve and the directions its positioning gives do not
+    // agree (with one direction the correction reverses an axis, with the
+    // other it moves it less than the deadband), or the written
+    // positioning may be read either way, the hole is read back otherwise
+    // than solved: measured under every reading.
+    for real in cycles::hole_readings((&from, &moved), &c, band) {
+        if real != d {
+            res.miss_mm = res
+                .miss_mm
+                .max(hole_miss(pred, mv, (&top, &c), &real, r_level));
+        }
+    }
     // The cycle's initial level: kept from the hole before, or where the
     // machine stands when the cycle begins.
     let initial = carry_in.map_or((retract, retract), |k| {
@@ -2082,12 +2097,15 @@ pub fn block_recycling(
             r_level, retract, ..
         } => {
             res.deviation = pred.breakdown(&mv.end, &mv.dirs, tool);
-            let mut cycle = cycle_hole(pred, &mv, (r_level, retract), carry_in, &mut res)?;
+            let levels = (r_level, retract, rounding_mm / 2.0);
+            let mut cycle = cycle_hole(pred, &mv, levels, carry_in, &mut res)?;
             // Written as moves when one X and Y cannot hold the hole.
             if plan.cycle.expandable && res.miss_mm > tol {
                 let hole = (&mv, &plan.cycle);
-                let tols = (tol, rounding_mm);
-                cycles::expand(pred, hole, (r_level, retract), tols, &mut cycle, &mut res)?;
+                let tols = (tol, rounding_mm, plan.scale);
+                let before = carry_in.map_or((&mv.start, &mv.prev_dirs), |k| (&k.c, &k.moved));
+                let levels = (r_level, retract);
+                cycles::expand(pred, hole, levels, tols, before, &mut cycle, &mut res)?;
             }
             *carry = Some(cycle);
             return Ok(res);

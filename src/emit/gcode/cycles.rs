@@ -18,7 +18,7 @@ use super::{
     round_to, to_machine, to_program, write_number,
 };
 use crate::compensate::BlockResult;
-use crate::compensate::cycles::StepKind;
+use crate::compensate::cycles::{self, StepKind};
 use crate::machine::AXIS_LETTERS;
 use crate::program::gcode::{Block, Word, strip_eol};
 use crate::program::interp::{Plan, PlanKind};
@@ -198,7 +198,7 @@ impl Emitter {
         }
         for (slot, &letter) in AXIS_LETTERS.iter().enumerate().take(2) {
             let w = block.word(letter);
-            let d = self.decimals(w, scale, false);
+            let d = self.hole_decimals(w, slot, scale);
             let v = round_to(
                 to_program(plan, slot, first.to[slot], self.emitted[slot]),
                 d,
@@ -236,6 +236,19 @@ impl Emitter {
         self.motion_pending = plan.cycle.motion_before;
     }
 
+    /// The decimals of the word `w` of axis `slot` of a hole written as
+    /// moves: X and Y at least [`cycles::hole_decimals`], so that the
+    /// squareness's drift of a feed piece is not written as a step of a
+    /// whole direction deadband.
+    fn hole_decimals(&self, w: Option<&Word>, slot: usize, scale: f64) -> usize {
+        let d = self.decimals(w, scale, false);
+        if slot < 2 {
+            d.max(cycles::hole_decimals(scale))
+        } else {
+            d
+        }
+    }
+
     /// One added line of an expanded hole: `G0`/`G1` with the axis words
     /// whose written value changes, or `G4` with the cycle's dwell.
     fn step_line(
@@ -268,9 +281,16 @@ impl Emitter {
             return;
         }
         let mut any = false;
-        for (slot, &letter) in AXIS_LETTERS.iter().enumerate().take(3) {
+        // A positioning moves X and Y only (an approach point before the
+        // hole, [`crate::compensate::cycles`]).
+        let axes = if step.kind == StepKind::Position {
+            2
+        } else {
+            3
+        };
+        for (slot, &letter) in AXIS_LETTERS.iter().enumerate().take(axes) {
             let w = block.word(letter);
-            let d = self.decimals(w, plan.scale, false);
+            let d = self.hole_decimals(w, slot, plan.scale);
             let now = round_to(
                 to_program(plan, slot, self.emitted[slot], self.emitted[slot]),
                 d,
