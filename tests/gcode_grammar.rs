@@ -73,6 +73,9 @@ struct Example {
     /// The control's default unit, when an `<!-- units_default: … -->`
     /// comment before the block changes the document's (mm).
     units: Option<Option<Units>>,
+    /// An `<!-- corner_words: comma -->` comment before the block: the
+    /// control reads the corner words.
+    corners: bool,
     text: String,
 }
 
@@ -83,6 +86,9 @@ impl Example {
         if let Some(u) = self.units {
             setup.units_default = u;
         }
+        if self.corners {
+            setup.corner_words = Some(postproc::program::interp::CornerWords::Comma);
+        }
         setup
     }
 }
@@ -92,6 +98,7 @@ fn doc_examples() -> Vec<Example> {
     let mut out = Vec::new();
     let mut expect: Option<String> = None;
     let mut units: Option<Option<Units>> = None;
+    let mut corners = false;
     let mut current: Option<Example> = None;
     for (i, line) in doc.lines().enumerate() {
         let trimmed = line.trim_end();
@@ -104,7 +111,9 @@ fn doc_examples() -> Vec<Example> {
             }
             continue;
         }
-        if let Some(rest) = trimmed.strip_prefix("<!-- units_default:") {
+        if trimmed == "<!-- corner_words: comma -->" {
+            corners = true;
+        } else if let Some(rest) = trimmed.strip_prefix("<!-- units_default:") {
             units = Some(match rest.trim_end_matches("-->").trim() {
                 "none" => None,
                 "inch" => Some(Units::Inch),
@@ -124,6 +133,7 @@ fn doc_examples() -> Vec<Example> {
                 doc_line: i + 1,
                 reject: None,
                 units: units.take(),
+                corners: std::mem::take(&mut corners),
                 text: String::new(),
             });
         } else if trimmed == "```gcode-reject" {
@@ -137,6 +147,7 @@ fn doc_examples() -> Vec<Example> {
                 doc_line: i + 1,
                 reject: Some(phrase),
                 units: units.take(),
+                corners: std::mem::take(&mut corners),
                 text: String::new(),
             });
         }

@@ -603,3 +603,242 @@ fn nested_comments_are_read_and_kept() {
     );
     assert!(text.contains(" (OUTER (INNER) STILL COMMENT)\n"), "{text}");
 }
+
+/// The bundled three-axis machine whose control reads the corner words
+/// `,C` and `,R` (`corner_words: comma`), written into `dir`.
+fn corner_machine(dir: &Path) -> PathBuf {
+    let text = std::fs::read_to_string(repo("machines/afm-r1000.yaml")).expect("machine");
+    write(
+        dir,
+        "afm-corners.yaml",
+        &format!("{text}corner_words: comma\n"),
+    )
+}
+
+/// The flags of [`MACHINE`] with the corner machine in place of the
+/// bundled one.
+fn corner_flags(machine: &Path) -> Vec<String> {
+    let mut flags: Vec<String> = MACHINE.iter().map(|s| s.to_string()).collect();
+    flags[1] = machine.display().to_string();
+    flags
+}
+
+/// Without `corner_words` in the machine file the corner words are
+/// refused by name, each at its comma.
+#[test]
+fn corner_words_are_refused_by_name_without_the_key() {
+    let a = postproc()
+        .arg("check")
+        .args(MACHINE)
+        .arg(program("haas_corners.nc"))
+        .assert()
+        .code(2);
+    let err = String::from_utf8_lossy(&a.get_output().stderr).to_string();
+    // Line 9 `G01 X40. Y10. ,C3.`: the comma is the 15th character.
+    assert!(
+        err.contains("haas_corners.nc:9:15: a chamfer word `,C` is not read"),
+        "{err}"
+    );
+    assert!(
+        err.contains("haas_corners.nc:10:11: a corner-radius word `,R` is not read"),
+        "{err}"
+    );
+    assert!(err.contains("`corner_words: comma`"), "{err}");
+}
+
+/// With the key, the program is read as the control moves it and written
+/// back byte for byte when nothing is compensated.
+#[test]
+fn a_corner_program_is_written_back_byte_for_byte() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let machine = corner_machine(dir.path());
+    let input = program("haas_corners.nc");
+    let out = dir.path().join("out.nc");
+    postproc()
+        .arg("compensate")
+        .args(corner_flags(&machine))
+        .args(["--effects", "none", "--annotate", "none"])
+        .arg(&input)
+        .arg("-o")
+        .arg(&out)
+        .assert()
+        .success();
+    let written = std::fs::read(&out).expect("output");
+    assert!(
+        without_header(&written) == std::fs::read(&input).expect("read"),
+        "{}",
+        String::from_utf8_lossy(&written)
+    );
+}
+
+/// The corner pieces a Fanuc or Haas control makes between the line from
+/// `a` to the corner `v` and the line from `v` to `b` (computed here on
+/// their own, from the manuals' definitions: `,C` the distance of both
+/// tangent points from the corner along its lines, `,R` the radius of the
+/// arc tangent to both): points along the first line from `a` to the
+/// first tangent point, along the chamfer or arc, and along the next line
+/// to `b`.
+fn control_path(a: [f64; 3], v: [f64; 3], b: [f64; 3], chamfer: bool, size: f64) -> Vec<[f64; 3]> {
+    let sub = |p: [f64; 3], q: [f64; 3]| [p[0] - q[0], p[1] - q[1], p[2] - q[2]];
+    let len = |p: [f64; 3]| (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt();
+    let unit = |p: [f64; 3]| {
+        let l = len(p);
+        [p[0] / l, p[1] / l, p[2] / l]
+    };
+    let along =
+        |p: [f64; 3], u: [f64; 3], t: f64| [p[0] + u[0] * t, p[1] + u[1] * t, p[2] + u[2] * t];
+    let (u1, u2) = (unit(sub(v, a)), unit(sub(b, v)));
+    let cos: f64 = (0..3).map(|i| u1[i] * u2[i]).sum();
+    let turn = cos.clamp(-1.0, 1.0).acos();
+    let d = if chamfer {
+        size
+    } else {
+        size * (turn / 2.0).tan()
+    };
+    let (t1, t2) = (along(v, u1, -d), along(v, u2, d));
+    let n = 200;
+    let mut pts = Vec::new();
+    for i in 0..=n {
+        let s = i as f64 / n as f64;
+        pts.push(along(a, u1, (len(sub(v, a)) - d) * s));
+    }
+    if chamfer {
+        for i in 0..=n {
+            let s = i as f64 / n as f64;
+            pts.push(along(t1, sub(t2, t1), s));
+        }
+    } else {
+        // The centre lies on the bisector, r / cos(turn/2) from the corner.
+        let w = unit(sub(u2, u1));
+        let c = along(v, w, size / (turn / 2.0).cos());
+        let (e1, e2) = (unit(sub(t1, c)), unit(sub(t2, c)));
+        for i in 0..=n {
+            let s = i as f64 / n as f64;
+            let (p, q) = (((1.0 - s) * turn).sin(), (s * turn).sin());
+            let k = size / turn.sin();
+            pts.push([
+                c[0] + (e1[0] * p + e2[0] * q) * k,
+                c[1] + (e1[1] * p + e2[1] * q) * k,
+                c[2] + (e1[2] * p + e2[2] * q) * k,
+            ]);
+        }
+    }
+    for i in 0..=n {
+        let s = i as f64 / n as f64;
+        pts.push(along(t2, u2, (len(sub(b, v)) - d) * s));
+    }
+    pts
+}
+
+/// The compensated corner program, read again by the forward pass of the
+/// library and moved as the control moves it: every point of each corner
+/// the control makes from the compensated lines (the lines, the chamfer or
+/// arc) is predicted within the tolerance of the corner it makes from the
+/// programmed lines.
+#[test]
+fn compensated_corners_are_within_the_tolerance_as_the_control_moves_them() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let machine_path = corner_machine(dir.path());
+    let input = program("haas_corners.nc");
+    let out = dir.path().join("out.nc");
+    let a = postproc()
+        .arg("compensate")
+        .args(corner_flags(&machine_path))
+        .args(["--effects", "geometric", "--annotate", "none"])
+        .arg(&input)
+        .arg("-o")
+        .arg(&out)
+        .assert()
+        .success();
+    let stderr = String::from_utf8_lossy(&a.get_output().stderr).to_string();
+    assert!(!stderr.contains("misses its programmed path"), "{stderr}");
+    let output = std::fs::read_to_string(&out).expect("output");
+    // The words are kept, each on the line that ends at its corner.
+    for w in [",C3.", ",R5.", ",C2.5", ",R8."] {
+        assert_eq!(output.matches(w).count(), 1, "{w}:\n{output}");
+    }
+    let text = std::fs::read_to_string(&machine_path).expect("machine");
+    let m = postproc::machine::tool::MachineTool::from_yaml_str(&text, "m.yaml").expect("loads");
+    let mut job = crate::repredict::job(&m, "geometric", TOLERANCE_MM);
+    job.setup.work_offsets[0] = Some([100.0, 50.0, 200.0]);
+    job.setup.tools.insert(1, 100.0);
+    // The corner blocks' moves and the move after each, in order.
+    let corners = |text: &str| {
+        let reads = crate::repredict::forward(&job, text);
+        let moves: Vec<_> = reads.iter().filter(|r| r.plan.mv.is_some()).collect();
+        let mut out = Vec::new();
+        for (k, r) in moves.iter().enumerate() {
+            if let Some(c) = r.plan.corner {
+                let next = moves.get(k + 1).expect("a move after the corner");
+                out.push((c, r.plan.mv.expect("move"), next.plan.mv.expect("move")));
+            }
+        }
+        out
+    };
+    let programmed = corners(&std::fs::read_to_string(&input).expect("input"));
+    let written = corners(&output);
+    assert_eq!(programmed.len(), 4);
+    assert_eq!(written.len(), 4);
+    let pred = job.predictor.as_ref().expect("predictor");
+    for ((c, first, next), (cw, wfirst, wnext)) in programmed.iter().zip(&written) {
+        assert_eq!(c, cw);
+        let chamfer = c.kind == postproc::program::interp::CornerKind::Chamfer;
+        let xyz = |p: [f64; 6]| [p[0], p[1], p[2]];
+        let want = control_path(
+            xyz(first.start),
+            xyz(first.end),
+            xyz(next.end),
+            chamfer,
+            c.size_mm,
+        );
+        let got = control_path(
+            xyz(wfirst.start),
+            xyz(wfirst.end),
+            xyz(wnext.end),
+            chamfer,
+            c.size_mm,
+        );
+        // Each axis moves the way the commanded path goes at the point.
+        let mut dirs = wfirst.dirs;
+        let mut worst: f64 = 0.0;
+        for (i, q) in got.iter().enumerate() {
+            if let Some(p) = got.get(i + 1) {
+                for s in 0..3 {
+                    if (p[s] - q[s]).abs() > 1e-9 {
+                        dirs[s] = if p[s] > q[s] { 1 } else { -1 };
+                    }
+                }
+            }
+            let mut cmd = wfirst.end;
+            cmd[..3].copy_from_slice(q);
+            let tip = pred.attained(&cmd, &dirs, wfirst.tool_len_mm).pos;
+            let off = want
+                .windows(2)
+                .map(|w| to_segment(&[tip.x, tip.y, tip.z], &w[0], &w[1]))
+                .fold(f64::INFINITY, f64::min);
+            worst = worst.max(off);
+        }
+        assert!(
+            worst <= TOLERANCE_MM + SAMPLING_MM,
+            "{c:?}: the control's corner is predicted {worst:.5} mm from the programmed one"
+        );
+    }
+}
+
+/// How far the chords between the points [`control_path`] samples an arc
+/// at may lie inside it, mm: the sagitta `r·(1 − cos(θ/2n))` ≤ `r·θ²/8n²`
+/// of the largest radius of tests/shop/haas_corners.nc (8 mm) at a turn
+/// below π in n = 200 steps: 8·π²/(8·200²) = 0.00025 mm.
+const SAMPLING_MM: f64 = 0.00025;
+
+/// Distance of `p` from the segment from `a` to `b`.
+fn to_segment(p: &[f64; 3], a: &[f64; 3], b: &[f64; 3]) -> f64 {
+    let d = [b[0] - a[0], b[1] - a[1], b[2] - a[2]];
+    let dd: f64 = d.iter().map(|x| x * x).sum();
+    let t = if dd > 0.0 {
+        ((0..3).map(|i| (p[i] - a[i]) * d[i]).sum::<f64>() / dd).clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    crate::repredict::dist(p, &[a[0] + d[0] * t, a[1] + d[1] * t, a[2] + d[2] * t])
+}

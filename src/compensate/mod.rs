@@ -1654,7 +1654,7 @@ fn solve_runs<'m>(
     res: &mut BlockResult,
 ) -> Result<(f64, AxisVec), Failure> {
     let tool = lip.tool_mm;
-    let takeups = !plan.cutter_comp;
+    let takeups = plan.takeups_allowed();
     res.segments.clear();
     res.takeup_at.clear();
     res.takeup = false;
@@ -2150,7 +2150,7 @@ pub fn block_recycling(
             }
         }
         (_, Some(arc)) => {
-            let takeups = !plan.cutter_comp;
+            let takeups = plan.takeups_allowed();
             let d = arc::arc_block(pred, &mv, &arc, (tool, tol, takeups), carry_in, &mut res)?;
             res.dirs = d;
             if let Some(k) = carry_out.as_mut() {

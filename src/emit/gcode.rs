@@ -259,7 +259,8 @@ pub const M_BEFORE_MOTION: [i64; 6] = [3, 4, 7, 8, 13, 14];
 /// True for a word that acts at or after the end of its block's motion:
 /// every M code but those of [`M_BEFORE_MOTION`] (program stop and end,
 /// spindle and coolant off, tool change, orientation, machine-builder
-/// codes) and the one-shot exact stop `G9`. When a block is written as
+/// codes), the one-shot exact stop `G9` and the corner words `,C`/`,R`.
+/// When a block is written as
 /// several pieces (a takeup point, a split move, an arc cut at its
 /// reversals) these words go to the last piece, so that they act where
 /// the block's motion ends; every other word (N, modal G codes, F, S, T,
@@ -271,6 +272,8 @@ pub fn acts_at_block_end(w: &Word) -> bool {
             .exact_code10()
             .is_some_and(|c| c % 10 == 0 && M_BEFORE_MOTION.contains(&(c / 10))),
         b'G' => w.exact_code10() == Some(90),
+        // The control makes the corner where the block's line ends.
+        crate::program::gcode::CHAMFER | crate::program::gcode::CORNER_RADIUS => true,
         _ => false,
     }
 }

@@ -14,7 +14,8 @@ use crate::error::Located;
 /// One word: a letter and its number, e.g. `X-12.5`.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Word {
-    /// Upper-case letter.
+    /// Upper-case letter; [`CHAMFER`] or [`CORNER_RADIUS`] for the corner
+    /// words `,C` and `,R` (`start` is then the comma's offset).
     pub letter: u8,
     /// The value parsed from the original text.
     pub value: f64,
@@ -133,6 +134,16 @@ impl Block {
 
 /// Most decimal digits a G or M code may be written with (`G54.100`).
 const MAX_CODE_DECIMALS: i32 = 6;
+
+/// The letter of a chamfer word `,C` in [`Word::letter`] (lower case, so
+/// that no word address compares equal to it): Fanuc's and Haas' corner
+/// chamfer, read where the machine file's `corner_words` says the control
+/// reads it (grammar/gcode.md, "Chamfer and corner-radius words").
+pub const CHAMFER: u8 = b'c';
+
+/// The letter of a corner-radius word `,R` in [`Word::letter`] (see
+/// [`CHAMFER`]).
+pub const CORNER_RADIUS: u8 = b'r';
 
 /// Letters this dialect accepts as word addresses.
 pub const LETTERS: &[u8] = b"ABCDEFGHIJKLMNOPQRSTXYZ";
@@ -387,6 +398,7 @@ fn scan_line(line: &[u8], line_no: usize, file: &str, out: &mut Block) -> Result
                 }
                 pos = word(text, pos, out, at)?;
             }
+            b',' => pos = corner_word(text, pos, out, at)?,
             _ => return Err(stray(text, pos, at)),
         }
     }
@@ -501,6 +513,50 @@ fn word(text: &[u8], pos: usize, out: &mut Block, at: At) -> Result<usize, Locat
         num_start: after_letter as u32,
         end: num_end as u32,
         decimals,
+    });
+    Ok(num_end)
+}
+
+/// The corner word (`,C2.`, `,R5.`) whose comma is at `pos`: pushed to
+/// `out` with the letter [`CHAMFER`] or [`CORNER_RADIUS`]; the position
+/// after its number. A comma that opens no such word is refused.
+fn corner_word(text: &[u8], pos: usize, out: &mut Block, at: At) -> Result<usize, Located> {
+    let letter = match text.get(pos + 1) {
+        Some(b'C' | b'c') => CHAMFER,
+        Some(b'R' | b'r') => CORNER_RADIUS,
+        _ => return Err(stray(text, pos, at)),
+    };
+    let after_letter = skip_ws(text, pos + 2);
+    let rest = text.get(after_letter..).unwrap_or(b"");
+    let Some((len, fast)) = scan_number(rest) else {
+        return Err(stray(text, pos, at));
+    };
+    let num = &rest[..len];
+    let num_end = after_letter + len;
+    let Some(value) = fast.or_else(|| decimal(num)) else {
+        return Err(bad_number(num, after_letter, "malformed", at));
+    };
+    if !value.is_finite() || value.abs() > 1e9 {
+        return Err(bad_number(num, after_letter, "absurd", at));
+    }
+    if let Some(&next) = text.get(num_end) {
+        if next == b'.' || next.is_ascii_digit() || next == b'-' || next == b'+' {
+            return Err(at.err(
+                num_end,
+                format!("two numbers in one word: `{}`", show(&text[pos..])),
+            ));
+        }
+    }
+    out.words.push(Word {
+        letter,
+        value,
+        start: pos as u32,
+        num_start: after_letter as u32,
+        end: num_end as u32,
+        decimals: num
+            .iter()
+            .position(|&c| c == b'.')
+            .map(|d| (num.len() - d - 1).min(255) as u8),
     });
     Ok(num_end)
 }

@@ -15,9 +15,10 @@ use std::f64::consts::{FRAC_PI_2, PI};
 use nalgebra::Vector3;
 
 use crate::error::Located;
-pub use crate::machine::tool::{IntegerWords, Units};
+pub use crate::machine::tool::{CornerWords, IntegerWords, Units};
 use crate::machine::{AxisVec, DirVec, axis_slot};
 use crate::program::gcode::{Block, Word};
+use crate::program::gcode::{CHAMFER, CORNER_RADIUS};
 
 /// Millimetres per inch.
 pub const MM_PER_INCH: f64 = 25.4;
@@ -379,6 +380,93 @@ pub struct Plan {
     /// A canned-cycle hole: what the cycle does along the hole, for
     /// writing it as moves (default otherwise).
     pub cycle: CycleSpec,
+    /// The corner the control makes between this G1 move and the next
+    /// (`,C`/`,R`, where the machine file's `corner_words` reads them).
+    pub corner: Option<Corner>,
+    /// The G1 move after a corner: the control's corner joins it to the
+    /// line before, so no takeup point may start it.
+    pub after_corner: bool,
+}
+
+impl Plan {
+    /// Whether the compensation may start this block's move with a takeup
+    /// point: not while cutter radius compensation may be active (a short
+    /// move against the direction of travel would upset the controller's
+    /// offset path) nor on the move after a corner (the corner would be
+    /// made with the takeup move).
+    pub fn takeups_allowed(&self) -> bool {
+        !self.cutter_comp && !self.after_corner
+    }
+}
+
+/// A corner the control inserts between a G1 move and the next G1 move
+/// (Fanuc and Haas chamfering and corner rounding): it moves along the
+/// first line to the first tangent point, along the chamfer line or the
+/// round arc to the second, and on along the next line.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Corner {
+    /// A chamfer (`,C`) or a round (`,R`).
+    pub kind: CornerKind,
+    /// `,C`: the distance of each tangent point from the corner along its
+    /// line; `,R`: the radius of the arc tangent to both lines; mm.
+    pub size_mm: f64,
+}
+
+/// What a corner word asks for.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum CornerKind {
+    /// `,C`: a straight line between the two tangent points.
+    Chamfer,
+    /// `,R`: an arc tangent to both lines.
+    Round,
+}
+
+impl Corner {
+    /// Distance of the tangent points from the corner along each line, mm,
+    /// for lines of unit directions `u1` (into the corner) and `u2` (out of
+    /// it); `None` when the lines run on in one straight line or turn
+    /// back on themselves (no corner to chamfer or round).
+    pub fn tangent_distance(&self, u1: &Vector3<f64>, u2: &Vector3<f64>) -> Option<f64> {
+        let cos = u1.dot(u2).clamp(-1.0, 1.0);
+        let turn = cos.acos();
+        if !(CORNER_MIN_TURN_RAD..=std::f64::consts::PI - CORNER_MIN_TURN_RAD).contains(&turn) {
+            return None;
+        }
+        Some(match self.kind {
+            CornerKind::Chamfer => self.size_mm,
+            CornerKind::Round => self.size_mm * (turn / 2.0).tan(),
+        })
+    }
+}
+
+/// The smallest turn between two lines (and the smallest turn short of a
+/// reversal) at which a corner word makes a corner, rad (0.01°).
+pub const CORNER_MIN_TURN_RAD: f64 = 1.745_329_251_994_33e-4;
+
+/// How far a corner's line may move along the plane normal (or a rotary
+/// axis) and still lie in the plane, mm (deg); and the shortest line.
+const CORNER_PLANE_MM: f64 = 1e-9;
+
+/// How far a corner's line may move along the plane normal, mm: the
+/// corrections a compensation writes into the lines of a corner, not a
+/// ramp (the corner is then the one of the two lines in space, the
+/// chamfer or arc joining them in their own plane).
+pub const CORNER_NORMAL_MM: f64 = 0.05;
+
+/// Distance of the linear axes of two positions, mm.
+fn dist3(a: &AxisVec, b: &AxisVec) -> f64 {
+    Vector3::new(b[0] - a[0], b[1] - a[1], b[2] - a[2]).norm()
+}
+
+/// A corner word's block, waiting for the move after it.
+#[derive(Debug, Clone, Copy)]
+struct PendingCorner {
+    line: usize,
+    /// Offset of the corner word's comma.
+    col: u32,
+    corner: Corner,
+    start: AxisVec,
+    end: AxisVec,
 }
 
 /// What a canned cycle does along its hole besides the feed to the bottom
@@ -426,6 +514,9 @@ pub struct Setup {
     /// How length and angle words without a decimal point are read
     /// (`None`: in whole units, with a warning at the first one).
     pub integer_words: Option<IntegerWords>,
+    /// The corner words (`,C`, `,R`) the control reads (`None`: refused
+    /// by name).
+    pub corner_words: Option<CornerWords>,
     /// The machine's nominal kinematics, for tool centre point control
     /// (G43.4/G43.5); `None` refuses it.
     pub kinematics: Option<std::sync::Arc<crate::machine::tool::MachineTool>>,
@@ -460,6 +551,7 @@ impl Setup {
             .extend(m.reference_points().map(|(k, v)| (k.clone(), *v)));
         setup.units_default = m.units_default();
         setup.integer_words = m.integer_words();
+        setup.corner_words = m.corner_words();
         setup.expand_cycles = m.expand_deep_holes_to_moves();
         if (3..6).any(|s| m.has_axis(s)) {
             setup.kinematics = Some(std::sync::Arc::new(m.clone()));
@@ -556,6 +648,8 @@ pub struct Interpreter {
     /// position: set by G41/G42 on any line, cleared by G40 on a line
     /// without `/`.
     cutter_comp: bool,
+    /// The corner of the last corner word, until the move after it.
+    corner: Option<PendingCorner>,
 }
 
 const MAX_WARNINGS: usize = 64;
@@ -606,6 +700,7 @@ impl Interpreter {
             g53_down_warned: false,
             comp_warned: false,
             cutter_comp: false,
+            corner: None,
         }
     }
 
@@ -767,6 +862,7 @@ impl Interpreter {
     fn incremental_letter(&self, block: &Block, letter: u8) -> bool {
         match letter {
             b'X' | b'Y' | b'Z' | b'A' | b'B' | b'C' | b'I' | b'J' | b'R' | b'Q' => true,
+            CHAMFER | CORNER_RADIUS => true,
             b'K' => {
                 self.cycle.is_none()
                     && !block.words.iter().any(|w| {
@@ -813,7 +909,9 @@ impl Interpreter {
     /// [`Interpreter::step_into`] of a block whose words are in whole units.
     fn step_scaled(&mut self, block: &Block, text: &[u8], plan: &mut Plan) -> Result<(), Located> {
         let before = self.cutter_comp;
-        let done = self.step_block(block, text, plan);
+        let done = self
+            .step_block(block, text, plan)
+            .and_then(|()| self.corner_words(block, text, plan));
         plan.cutter_comp = before || self.cutter_comp;
         done.map_err(|mut e| {
             if !e.message.contains('`') {
@@ -982,6 +1080,9 @@ impl Interpreter {
                 }
                 b'M' => self.gather_m(line, w, &mut g, text)?,
                 b'G' => self.gather_g(line, w, &mut g, text)?,
+                CHAMFER | CORNER_RADIUS if self.setup.corner_words.is_none() => {
+                    return Err(self.err(line, Some(w), corner_refused(w, text)));
+                }
                 _ => {}
             }
         }
@@ -1649,6 +1750,113 @@ impl Interpreter {
         plan.kind = PlanKind::Motion;
         plan.mv = Some(mv);
         Ok(())
+    }
+
+    /// The corner words of `block` once its move is known: a corner word
+    /// waiting for this move checks that it is a G1 line in the corner's
+    /// plane long enough for the corner; a corner word of this block
+    /// (where the machine file reads them) must stand on such a line and
+    /// waits for the next move.
+    fn corner_words(&mut self, block: &Block, text: &[u8], plan: &mut Plan) -> Result<(), Located> {
+        let word = block
+            .words
+            .iter()
+            .find(|w| matches!(w.letter, CHAMFER | CORNER_RADIUS));
+        if let (Some(p), Some(mv)) = (self.corner, plan.mv.as_ref()) {
+            self.corner = None;
+            let next = (plan.kind == PlanKind::Motion && mv.motion == Motion::Linear)
+                .then(|| self.in_plane(&mv.start, &mv.end))
+                .flatten();
+            let at = |msg: String| Located::new(&self.file, p.line, p.col as usize + 1, msg);
+            let (Some(u2), Some(u1)) = (next, self.in_plane(&p.start, &p.end)) else {
+                return Err(at(format!(
+                    "the corner of line {} needs a G1 move in the {} plane after it, and line {} is not one: `{}`",
+                    p.line,
+                    self.plane_name(),
+                    block.line_no,
+                    crate::error::clip_to(String::from_utf8_lossy(text).trim(), LINE_QUOTE_MAX)
+                )));
+            };
+            let d = p.corner.tangent_distance(&u1, &u2).ok_or_else(|| {
+                at("the lines of the corner run on in one straight line or turn back on themselves: no corner to chamfer or round".into())
+            })?;
+            let shortest = dist3(&p.start, &p.end).min(dist3(&mv.start, &mv.end));
+            if d > shortest {
+                return Err(at(format!(
+                    "the corner needs {d:.4} mm of each line and the shorter line is {shortest:.4} mm long"
+                )));
+            }
+            plan.after_corner = true;
+        }
+        let Some(w) = word else {
+            return Ok(());
+        };
+        let line = block.line_no;
+        let on_line = plan
+            .mv
+            .as_ref()
+            .filter(|mv| plan.kind == PlanKind::Motion && mv.motion == Motion::Linear)
+            .filter(|mv| self.in_plane(&mv.start, &mv.end).is_some());
+        let Some(mv) = on_line else {
+            return Err(self.err(
+                line,
+                Some(w),
+                format!(
+                    "a corner word stands on a G1 move in the {} plane (the control makes the corner between it and the next one): `{}`",
+                    self.plane_name(),
+                    quote_word(text, w)
+                ),
+            ));
+        };
+        if w.value <= 0.0 {
+            return Err(self.err(
+                line,
+                Some(w),
+                format!(
+                    "a corner word needs a size above 0: `{}`",
+                    quote_word(text, w)
+                ),
+            ));
+        }
+        let corner = Corner {
+            kind: if w.letter == CHAMFER {
+                CornerKind::Chamfer
+            } else {
+                CornerKind::Round
+            },
+            size_mm: w.value * plan.scale,
+        };
+        plan.corner = Some(corner);
+        self.corner = Some(PendingCorner {
+            line,
+            col: w.start,
+            corner,
+            start: mv.start,
+            end: mv.end,
+        });
+        Ok(())
+    }
+
+    /// The unit direction of a line from `a` to `b` when it lies in the
+    /// active plane (no motion of a rotary axis, none along the plane's
+    /// normal beyond [`CORNER_NORMAL_MM`]).
+    fn in_plane(&self, a: &AxisVec, b: &AxisVec) -> Option<Vector3<f64>> {
+        let (_, _, n) = self.plane.axes();
+        let still = |s: usize| (b[s] - a[s]).abs() <= CORNER_PLANE_MM;
+        if (b[n] - a[n]).abs() > CORNER_NORMAL_MM || !(3..6).all(still) {
+            return None;
+        }
+        let d = Vector3::new(b[0] - a[0], b[1] - a[1], b[2] - a[2]);
+        let len = d.norm();
+        (len > CORNER_PLANE_MM).then(|| d / len)
+    }
+
+    fn plane_name(&self) -> &'static str {
+        match self.plane {
+            Plane::XY => "G17",
+            Plane::ZX => "G18",
+            Plane::YZ => "G19",
+        }
     }
 
     /// Repeats of a move after the first (`L`): accepted when every repeat
@@ -2385,6 +2593,26 @@ fn programmed_axes(axis: &[Option<&Word>; 6]) -> u8 {
         .enumerate()
         .filter(|(_, a)| a.is_some())
         .fold(0u8, |m, (i, _)| m | (1 << i))
+}
+
+/// The refusal of corner word `w` on a control the machine file does not
+/// say reads it.
+fn corner_refused(w: &Word, text: &[u8]) -> String {
+    let shown = String::from_utf8_lossy(text.get(w.start as usize..).unwrap_or(b""));
+    let shown: String = shown.trim_end().chars().take(40).collect();
+    let (word, what, how) = if w.letter == CHAMFER {
+        (",C", "chamfer", "moves")
+    } else {
+        (",R", "rounding", "an arc")
+    };
+    let kind = if w.letter == CHAMFER {
+        "a chamfer word"
+    } else {
+        "a corner-radius word"
+    };
+    format!(
+        "{kind} `{word}` is not read: the control inserts the {what} between this move and the next; write the corner as {how}, or say `corner_words: comma` in the machine file if the control reads it: `{shown}`"
+    )
 }
 
 /// The message for an arc with neither a centre offset nor `R`, naming its

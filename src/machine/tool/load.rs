@@ -11,8 +11,8 @@ use super::location::{
     LocationErrors, LocationKey, SpindleErrors, component_key, location_key, spindle_key,
 };
 use super::raw::{
-    RawAxis, RawAxisType, RawIntegerWords, RawMachineTool, RawMeasurementFrame, RawOutput,
-    RawProcessForce, RawSide, RawSpindle, RawTable, RawTool, RawUnits,
+    RawAxis, RawAxisType, RawCornerWords, RawIntegerWords, RawMachineTool, RawMeasurementFrame,
+    RawOutput, RawProcessForce, RawSide, RawSpindle, RawTable, RawTool, RawUnits,
 };
 use super::table::ErrorTable;
 use super::{Axis, AxisKind, ControlDefaults, MachineTool, Side};
@@ -143,6 +143,9 @@ pub(super) fn validate_with(raw: RawMachineTool, plausibility: Plausibility) -> 
         RawIntegerWords::Units => super::IntegerWords::Units,
         RawIntegerWords::Increments => super::IntegerWords::Increments,
     });
+    let corner_words = raw.corner_words.map(|w| match w {
+        RawCornerWords::Comma => super::CornerWords::Comma,
+    });
     let (decimals, decimals_deg) = validate_decimals(raw.output.as_ref())?;
 
     let tolerance_mm = raw
@@ -195,6 +198,7 @@ pub(super) fn validate_with(raw: RawMachineTool, plausibility: Plausibility) -> 
             reference_points,
             units_default,
             integer_words,
+            corner_words,
             tolerance_mm,
             expand_deep_holes: raw
                 .output

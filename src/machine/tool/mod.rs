@@ -90,6 +90,16 @@ pub enum IntegerWords {
     Increments,
 }
 
+/// The corner words the control reads on a linear move (`G1 X50. ,C2.`):
+/// the machine file's `corner_words`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum CornerWords {
+    /// `,C` (chamfer: the distance from the corner along each line) and
+    /// `,R` (corner radius: the radius of the arc tangent to both lines),
+    /// as Fanuc (chamfering and corner R) and Haas read them.
+    Comma,
+}
+
 /// Which side of the machine structure carries an axis.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Side {
@@ -164,6 +174,8 @@ pub(crate) struct ControlDefaults {
     pub(crate) units_default: Option<Units>,
     /// `integer_words`: how words without a decimal point are read.
     pub(crate) integer_words: Option<IntegerWords>,
+    /// `corner_words`: the corner words the control reads.
+    pub(crate) corner_words: Option<CornerWords>,
     /// `compensation.tolerance_mm`: the default tolerance of compensated
     /// programs, mm.
     pub(crate) tolerance_mm: Option<f64>,
@@ -285,6 +297,13 @@ impl MachineTool {
     /// point (`integer_words`; `None` when the file does not say).
     pub fn integer_words(&self) -> Option<IntegerWords> {
         self.control.integer_words
+    }
+
+    /// The chamfer and corner-radius words the control reads
+    /// (`corner_words`; `None`: the file does not say, and they are
+    /// refused).
+    pub fn corner_words(&self) -> Option<CornerWords> {
+        self.control.corner_words
     }
 
     /// Whether canned-cycle holes whose one X and Y would miss the

@@ -25,6 +25,8 @@ pub(crate) struct RawMachineTool {
     #[serde(default)]
     pub integer_words: Option<RawIntegerWords>,
     #[serde(default)]
+    pub corner_words: Option<RawCornerWords>,
+    #[serde(default)]
     pub output: Option<RawOutput>,
     #[serde(default)]
     pub compensation: Option<RawCompensation>,
@@ -86,6 +88,13 @@ pub(crate) enum RawUnits {
 pub(crate) enum RawIntegerWords {
     Units,
     Increments,
+}
+
+/// `corner_words`: `comma` (the control reads `,C`/`,R`).
+#[derive(Debug, Deserialize, Clone, Copy, PartialEq, Eq)]
+#[serde(rename_all = "lowercase")]
+pub(crate) enum RawCornerWords {
+    Comma,
 }
 
 /// Linear or rotary axis.

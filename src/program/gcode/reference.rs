@@ -129,6 +129,8 @@ fn scan_line(line: &[u8], line_no: usize, file: &str, out: &mut Block) -> Result
                 upper += 1;
             }
             pos = word(text, pos, out, place)?;
+        } else if b == b',' && corner(text, pos).is_some() {
+            pos = corner_word(text, pos, out, place)?;
         } else {
             return Err(not_a_word(text, pos, place));
         }
@@ -260,6 +262,60 @@ fn word(text: &[u8], pos: usize, out: &mut Block, place: Place) -> Result<usize,
         num_start: num_start as u32,
         end: num_end as u32,
         decimals,
+    });
+    Ok(num_end)
+}
+
+/// The letter of the corner word whose comma is at `pos` (`,C2.`, `,R5.`)
+/// and the offset of its number, when one is written there.
+fn corner(text: &[u8], pos: usize) -> Option<(u8, usize, &[u8])> {
+    let letter = match text.get(pos + 1)?.to_ascii_uppercase() {
+        b'C' => super::CHAMFER,
+        b'R' => super::CORNER_RADIUS,
+        _ => return None,
+    };
+    let at = skip_ws(text, pos + 2);
+    let (_, num) = number(text.get(at..)?).ok()?;
+    Some((letter, at, num))
+}
+
+/// The corner word at `pos`, pushed to `out`; the position after it.
+fn corner_word(text: &[u8], pos: usize, out: &mut Block, place: Place) -> Result<usize, Located> {
+    let Some((letter, num_start, num)) = corner(text, pos) else {
+        return Err(not_a_word(text, pos, place));
+    };
+    let num_end = num_start + num.len();
+    let num_str = std::str::from_utf8(num).unwrap_or("");
+    let value: f64 = num_str.parse().map_err(|_| {
+        place.err(
+            num_start,
+            format!("malformed number `{}`", crate::error::clip(num_str)),
+        )
+    })?;
+    if !value.is_finite() || value.abs() > 1e9 {
+        return Err(place.err(
+            num_start,
+            format!("absurd number `{}`", crate::error::clip(num_str)),
+        ));
+    }
+    if let Some(&next) = text.get(num_end) {
+        if next == b'.' || next.is_ascii_digit() || next == b'-' || next == b'+' {
+            return Err(place.err(
+                num_end,
+                format!("two numbers in one word: `{}`", show(&text[pos..])),
+            ));
+        }
+    }
+    out.words.push(Word {
+        letter,
+        value,
+        start: pos as u32,
+        num_start: num_start as u32,
+        end: num_end as u32,
+        decimals: num
+            .iter()
+            .position(|&c| c == b'.')
+            .map(|d| (num.len() - d - 1).min(255) as u8),
     });
     Ok(num_end)
 }
