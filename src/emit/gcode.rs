@@ -154,6 +154,9 @@ pub struct Emitter {
     edits: Edits,
     /// Tolerance of the compensation, mm (see [`Emitter::with_tolerance`]).
     tolerance_mm: Option<f64>,
+    /// [`tolerance_decimals`] of the tolerance in millimetres, worked out
+    /// once (every word of a millimetre program asks for it).
+    tolerance_decimals_mm: usize,
     /// The travel of each axis in the coordinates of the plans written
     /// ([`Emitter::set_limits`]): a rounded word that would leave it is
     /// rounded the other way.
@@ -472,6 +475,7 @@ impl Emitter {
             added_by: AddedLines::default(),
             edits: Edits::default(),
             tolerance_mm: None,
+            tolerance_decimals_mm: 0,
             limits: [None; 6],
             written: Vec::new(),
             uncertainty: None,
@@ -498,6 +502,7 @@ impl Emitter {
     /// corrected one.
     pub fn with_tolerance(mut self, tolerance_mm: f64) -> Self {
         self.tolerance_mm = Some(tolerance_mm);
+        self.tolerance_decimals_mm = tolerance_decimals(tolerance_mm, 1.0);
         self
     }
 
@@ -585,6 +590,9 @@ impl Emitter {
         let Some(tol) = self.tolerance_mm else {
             return 0;
         };
+        if scale == 1.0 {
+            return self.tolerance_decimals_mm;
+        }
         tolerance_decimals(tol, scale)
     }
 

@@ -772,6 +772,8 @@ struct WriteStage<'j, 'm> {
     /// Storage of a block under tool centre point control in tool tips.
     tip_plan: Plan,
     tip_res: BlockResult,
+    /// [`Job::solve_rule`] of millimetre blocks.
+    mm_rule: (f64, Settings),
 }
 
 impl<'j, 'm> WriteStage<'j, 'm> {
@@ -796,6 +798,7 @@ impl<'j, 'm> WriteStage<'j, 'm> {
             marks: None,
             tip_plan: Plan::default(),
             tip_res: BlockResult::default(),
+            mm_rule: job.mm_rule(),
         }
     }
 
@@ -999,8 +1002,9 @@ impl<'j, 'm> WriteStage<'j, 'm> {
         let written = self.writing;
         // The miss of the solved pieces, and of the written ones at most
         // the rounding of their words more.
-        let miss = r.miss_mm + self.job.rounding(plan.scale);
-        if r.miss_mm > self.job.solve_settings(plan.scale).tolerance_mm && written {
+        let (rounding, settings) = self.job.solve_rule(plan.scale, &self.mm_rule);
+        let miss = r.miss_mm + rounding;
+        if r.miss_mm > settings.tolerance_mm && written {
             summary.beyond.add(miss, line_no);
             let what = crate::compensate::cycles::miss_words(plan, r);
             // Worded only for the warnings kept: nothing allocates per
@@ -1145,6 +1149,23 @@ impl<'m> Job<'m> {
         }
     }
 
+    /// The rounding of the written words of a block in units of `scale` mm
+    /// and the settings it is solved with ([`Self::rounding`],
+    /// [`Self::solve_settings`]); `mm` is that of millimetre blocks,
+    /// worked out once.
+    fn solve_rule(&self, scale: f64, mm: &(f64, Settings)) -> (f64, Settings) {
+        if scale == 1.0 {
+            *mm
+        } else {
+            (self.rounding(scale), self.solve_settings(scale))
+        }
+    }
+
+    /// [`Self::solve_rule`] of millimetre blocks.
+    fn mm_rule(&self) -> (f64, Settings) {
+        (self.rounding(1.0), self.solve_settings(1.0))
+    }
+
     fn install<R: Send>(&self, op: impl FnOnce() -> R + Send) -> R {
         match self.pool {
             Some(pool) => pool.install(op),
@@ -1186,6 +1207,7 @@ impl<'m> Job<'m> {
         let home = self.setup.home;
         // (the estimates of where runs start: at the millimetre rounding)
         let settings = self.solve_settings(1.0);
+        let mm = self.mm_rule();
         st.results
             .par_chunks_mut(GROUP_BLOCKS)
             .zip(st.carries.par_chunks_mut(GROUP_BLOCKS))
@@ -1214,12 +1236,12 @@ impl<'m> Job<'m> {
                     };
                     *sd = carry;
                     for (((r, k), p), c) in rs.iter_mut().zip(ks.iter_mut()).zip(ps).zip(cs) {
-                        self.solve_block(pred, p, c, &mut carry, r);
+                        self.solve_block(pred, (p, c, &mm), &mut carry, r);
                         *k = carry;
                     }
                 },
             );
-        self.settle(pred, st);
+        self.settle(pred, st, &mm);
     }
 
     /// Compensates one block into `r` (reusing its split-point storage);
@@ -1228,8 +1250,7 @@ impl<'m> Job<'m> {
     fn solve_block(
         &self,
         pred: &ToolPredictor,
-        plan: &Plan,
-        ctx: &MoveContext,
+        (plan, ctx, mm): (&Plan, &MoveContext, &(f64, Settings)),
         carry: &mut Option<compensate::Carry>,
         r: &mut Solved,
     ) {
@@ -1237,13 +1258,14 @@ impl<'m> Job<'m> {
             Some(Ok(old)) => (old.segments, old.takeup_at),
             _ => (Vec::new(), Vec::new()),
         };
+        let (rounding, settings) = self.solve_rule(plan.scale, mm);
         *r = Some(compensate::block_recycling(
             &pred.with_context(*ctx),
             plan,
-            &self.solve_settings(plan.scale),
+            &settings,
             carry,
             storage,
-            self.rounding(plan.scale),
+            rounding,
         ));
     }
 
@@ -1251,7 +1273,7 @@ impl<'m> Job<'m> {
     /// the carry the run before really left, each run seeded with another
     /// estimate, until a block leaves the carry it left before.
     #[inline(never)]
-    fn settle(&self, pred: &ToolPredictor, st: &mut Stage) {
+    fn settle(&self, pred: &ToolPredictor, st: &mut Stage, mm: &(f64, Settings)) {
         let n = st.carries.len();
         let mut i = GROUP_BLOCKS;
         let mut dirty = false;
@@ -1267,8 +1289,7 @@ impl<'m> Job<'m> {
             let old = st.carries[i];
             self.solve_block(
                 pred,
-                &st.plans[i],
-                &st.contexts[i],
+                (&st.plans[i], &st.contexts[i], mm),
                 &mut carry,
                 &mut st.results[i],
             );
