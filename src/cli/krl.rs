@@ -19,8 +19,8 @@ use crate::emit::krl::{KrlWrite, rewrite};
 use crate::error::{Error, Result};
 use crate::machine::Machine;
 use crate::machine::robot::Robot;
-use crate::pipeline::rapid::{RapidOptions, refuse_left_as_written};
 use crate::pipeline::robot::RobotRun;
+use crate::pipeline::robot::{RobotOptions, refuse_left_as_written};
 use crate::predict::EffectSet;
 use crate::program::charset::{Charset, Latin1Writer};
 use crate::program::krl::resolve::{Program, resolve};
@@ -152,7 +152,7 @@ pub(super) fn robot_of(
 fn run(
     texts: &[Option<Text>],
     robot: &Robot,
-    opts: &RapidOptions,
+    opts: &RobotOptions,
 ) -> Result<(Vec<RobotStep>, RobotRun)> {
     let steps = steps_of(texts);
     let name = texts
@@ -171,11 +171,11 @@ pub fn check(a: &CheckArgs) -> Result<i32> {
     let steps = steps_of(&texts);
     if a.program.machine.is_some() {
         let (robot, _) = robot_of(a.program.machine.as_deref(), "check", None)?;
-        let opts = RapidOptions {
+        let opts = RobotOptions {
             effects: EffectSet::NONE,
             records: false,
             strict: a.program.strict,
-            ..RapidOptions::default()
+            ..RobotOptions::default()
         };
         run(&texts, &robot, &opts)?;
     }
@@ -247,7 +247,7 @@ pub(super) fn stage(path: &Path, text: &str, charset: Charset) -> Result<super::
 /// `postproc compensate` of a KRL program.
 pub fn compensate(a: &CompensateArgs, quiet: bool) -> Result<i32> {
     let (robot, loaded) = robot_of(a.program.machine.as_deref(), "compensate", Some(&a.effects))?;
-    let opts = RapidOptions {
+    let opts = RobotOptions {
         records: a.report.is_some(),
         strict: a.program.strict,
         ..super::rapid::rapid_options(
@@ -290,7 +290,7 @@ pub(super) struct Job<'a> {
     /// The robot, with the run's process force.
     pub(super) robot: &'a Robot,
     /// The run's options.
-    pub(super) opts: &'a RapidOptions,
+    pub(super) opts: &'a RobotOptions,
     /// The header of the outputs.
     pub(super) provenance: &'a Provenance,
     /// `--recompensate`.
@@ -379,7 +379,7 @@ pub(super) fn write_report(
 pub fn report(a: &ReportArgs) -> Result<i32> {
     let (robot, loaded) = robot_of(a.program.machine.as_deref(), "report", Some(&a.effects))?;
     let texts = read_program(&a.program.file, &a.program.more)?;
-    let opts = RapidOptions {
+    let opts = RobotOptions {
         strict: a.program.strict,
         ..super::rapid::rapid_options(&robot, &a.effects, false, None)?
     };

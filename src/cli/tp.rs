@@ -16,8 +16,8 @@ use crate::emit::header::{Provenance, Syntax};
 use crate::emit::tp::{TpWrite, rewrite};
 use crate::error::{Error, Result};
 use crate::machine::robot::Robot;
-use crate::pipeline::rapid::{RapidOptions, refuse_left_as_written};
 use crate::pipeline::robot::RobotRun;
+use crate::pipeline::robot::{RobotOptions, refuse_left_as_written};
 use crate::predict::EffectSet;
 use crate::program::charset::Charset;
 use crate::program::robot_moves::RobotStep;
@@ -61,7 +61,7 @@ fn read(path: &Path, more: &[PathBuf]) -> Result<Text> {
 }
 
 /// Runs the pipeline over the program's stream.
-fn run(t: &Text, robot: &Robot, opts: &RapidOptions) -> Result<(Vec<RobotStep>, RobotRun)> {
+fn run(t: &Text, robot: &Robot, opts: &RobotOptions) -> Result<(Vec<RobotStep>, RobotRun)> {
     let steps = resolve(&t.program, &t.text, robot.fanuc_frames());
     let run = crate::pipeline::robot::run(robot, &steps, opts, &t.name)?;
     refuse_left_as_written(&run.summary.warnings, &t.name, opts)?;
@@ -76,11 +76,11 @@ pub fn check(a: &CheckArgs) -> Result<i32> {
     let steps = match a.program.machine.as_deref() {
         Some(m) => {
             let (robot, _) = robot_of(Some(m), "check", None)?;
-            let opts = RapidOptions {
+            let opts = RobotOptions {
                 effects: EffectSet::NONE,
                 records: false,
                 strict: a.program.strict,
-                ..RapidOptions::default()
+                ..RobotOptions::default()
             };
             run(&t, &robot, &opts)?.0
         }
@@ -135,7 +135,7 @@ fn with_header(text: &str, provenance: &Provenance) -> String {
 /// `postproc compensate` of a TP program.
 pub fn compensate(a: &CompensateArgs, quiet: bool) -> Result<i32> {
     let (robot, loaded) = robot_of(a.program.machine.as_deref(), "compensate", Some(&a.effects))?;
-    let opts = RapidOptions {
+    let opts = RobotOptions {
         records: a.report.is_some(),
         strict: a.program.strict,
         ..super::rapid::rapid_options(
@@ -215,7 +215,7 @@ pub(super) fn compensate_to(
 pub fn report(a: &ReportArgs) -> Result<i32> {
     let (robot, loaded) = robot_of(a.program.machine.as_deref(), "report", Some(&a.effects))?;
     let t = read(&a.program.file, &a.program.more)?;
-    let opts = RapidOptions {
+    let opts = RobotOptions {
         strict: a.program.strict,
         ..super::rapid::rapid_options(&robot, &a.effects, false, None)?
     };

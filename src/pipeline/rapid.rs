@@ -23,11 +23,10 @@ use nalgebra::Isometry3;
 use crate::compensate::outcome::{Compensated, DevStats, Row, Summary};
 use crate::compensate::robot::Seed;
 use crate::emit::rapid::{
-    EditList, Format, TakenNames, fresh_name, insert_after_decl, joint_text, push_annotation,
+    EditList, TakenNames, fresh_name, insert_after_decl, joint_text, push_annotation,
     robtarget_in_place, robtarget_text, write_dev_comment,
 };
 use crate::error::{Error, Located, Result};
-use crate::machine::ThermalStart;
 use crate::machine::robot::thermal::{Segment, ThermalTotals};
 use crate::machine::robot::{ConfData, IkSelect, Model, Robot, RobotError};
 use crate::pipeline::resonance::ResonanceWatch;
@@ -35,7 +34,7 @@ use crate::pipeline::robot::time_line::{
     self, Asked, FALLBACK_TCP_SPEED, LastEnd, Refusal, StreamMove, Timed, WrenchBits, wrench_bits,
 };
 use crate::pipeline::robot::{Solution, SolveJob, Views, programmed_joints, robot_row, solve_jobs};
-use crate::predict::robot::{Breakdown, EffectSet};
+use crate::predict::robot::Breakdown;
 use crate::predict::{MoveContext, ThermalInput, Wrench};
 use crate::process::CutSettings;
 use crate::program::interp::Warning;
@@ -51,70 +50,17 @@ use crate::program::rapid::{
 };
 use crate::program::robot_moves::{Configuration, LeftAsWritten};
 
-/// Options of a RAPID compensation run.
-#[derive(Debug, Clone, PartialEq)]
-pub struct RapidOptions {
-    /// Effects to predict and compensate.
-    pub effects: EffectSet,
-    /// Append a `! dev …` comment to every compensated move.
-    pub annotate: bool,
-    /// Number formatting of rewritten robtargets.
-    pub format: Format,
-    /// Initial thermal state of the program's time line.
-    pub thermal_start: ThermalStart,
-    /// Keep a report [`Row`] per move in the outcome (for a report); without
-    /// a report they are not needed, and for a large module they are a good
-    /// part of the memory.
-    pub records: bool,
-    /// Refuse the module when a move is left as written
-    /// ([`refuse_left_as_written`]).
-    pub strict: bool,
-    /// Compensate `MoveAbsJ` targets as Cartesian poses (joints moved so
-    /// that the TCP reaches the nominal pose of the programmed joints);
-    /// otherwise each is reported (its predicted deviation) and left as
-    /// written ([`JOINT_TARGET`]).
-    pub joint_cartesian: bool,
-    /// Per-move forces by line of a `table` process force
-    /// (`--force-table`, work-object frame).
-    pub force_table: Option<Arc<crate::process::ForceTable>>,
-}
+/// The options of a RAPID run: those of the robot pipeline, the one of
+/// every robot language.
+pub use crate::pipeline::robot::RobotOptions as RapidOptions;
 
 /// Why a `MoveAbsJ` is left as written by default: its joints are what the
 /// controller goes to, not a pose it solves (`grammar/rapid.md`, "Joint
 /// targets"); the same reason for every robot language.
 pub use crate::program::robot_moves::JOINT_TARGET;
 
-impl Default for RapidOptions {
-    /// All effects, annotated, default formatting, cold start, move records.
-    fn default() -> Self {
-        RapidOptions {
-            effects: EffectSet::ALL,
-            annotate: true,
-            format: Format::default(),
-            thermal_start: ThermalStart::Cold,
-            records: true,
-            strict: false,
-            joint_cartesian: false,
-            force_table: None,
-        }
-    }
-}
-
-impl RapidOptions {
-    /// The defaults with the number formatting of the robot file's
-    /// `output:` section (quaternions with 7 decimals unless it says
-    /// otherwise).
-    pub fn for_robot(robot: &Robot) -> Self {
-        let d = robot.output_decimals();
-        RapidOptions {
-            format: Format {
-                position_decimals: d.mm,
-                quaternion_decimals: d.quaternion,
-            },
-            ..RapidOptions::default()
-        }
-    }
-}
+/// The `--strict` rule of every robot language.
+pub use crate::pipeline::robot::refuse_left_as_written;
 
 /// Tool and work object of one move, its process wrench and its thermal
 /// state (as bit patterns): moves with equal keys share a robot view and a
@@ -814,32 +760,6 @@ pub(crate) fn left_as_written_carried(
     carry.leave_unfinished(module, src, file);
     carry.leave_unknown(module, src, file);
     Ok(std::mem::take(&mut carry.warnings))
-}
-
-/// With `opts.strict`, a module with a move left as written is an input
-/// error (exit code 2) that names the first one: `file:line:col: MoveL left
-/// as written (CRobT); --strict …`.
-pub fn refuse_left_as_written(warnings: &[Warning], file: &str, opts: &RapidOptions) -> Result<()> {
-    // A reported joint target is not one known at run time only.
-    let left: Vec<(usize, &LeftAsWritten)> = warnings
-        .iter()
-        .filter_map(|w| w.left.as_ref().map(|a| (w.line, a)))
-        .filter(|(_, a)| a.reason != JOINT_TARGET)
-        .collect();
-    match left.first() {
-        Some(&(line, a)) if opts.strict => Err(Error::Input(Located::new(
-            file,
-            line,
-            a.column,
-            format!(
-                "{} left as written ({}); --strict refuses a module with a move left as written ({} in all)",
-                a.instruction,
-                a.reason,
-                left.len()
-            ),
-        ))),
-        _ => Ok(()),
-    }
 }
 
 /// Why a move of a routine holding an editor placeholder is left as written.
@@ -1969,6 +1889,7 @@ impl Rewriter<'_> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::predict::EffectSet;
 
     /// Predefined speeds in either case, `vmax`, a declared speeddata and
     /// `\V:=` give the TCP speed; an unknown name gives none.

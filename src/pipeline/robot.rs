@@ -25,7 +25,6 @@ use crate::compensate::outcome::{DevStats, RobotMove, Row, Summary};
 use crate::compensate::robot::{Compensation, Seed};
 use crate::error::{Error, Located, Result};
 use crate::machine::robot::{IkSelect, Model, Robot, RobotError};
-use crate::pipeline::rapid::RapidOptions;
 use crate::predict::MoveContext;
 use crate::predict::{Breakdown, EffectSet};
 use crate::process::CutSettings;
@@ -35,6 +34,92 @@ use crate::program::robot_moves::{
     ToolUse,
 };
 use time_line::{Asked, FALLBACK_TCP_SPEED, Refusal, StreamMove, Timed};
+
+/// Options of a robot compensation run, for every robot language.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RobotOptions {
+    /// Effects to predict and compensate.
+    pub effects: EffectSet,
+    /// Append a `! dev …` comment to every compensated move.
+    pub annotate: bool,
+    /// Number formatting of rewritten robtargets.
+    pub format: crate::emit::rapid::Format,
+    /// Initial thermal state of the program's time line.
+    pub thermal_start: crate::machine::ThermalStart,
+    /// Keep a report [`Row`] per move in the outcome (for a report); without
+    /// a report they are not needed, and for a large module they are a good
+    /// part of the memory.
+    pub records: bool,
+    /// Refuse the module when a move is left as written
+    /// ([`refuse_left_as_written`]).
+    pub strict: bool,
+    /// Compensate `MoveAbsJ` targets as Cartesian poses (joints moved so
+    /// that the TCP reaches the nominal pose of the programmed joints);
+    /// otherwise each is reported (its predicted deviation) and left as
+    /// written ([`JOINT_TARGET`]).
+    pub joint_cartesian: bool,
+    /// Per-move forces by line of a `table` process force
+    /// (`--force-table`, work-object frame).
+    pub force_table: Option<std::sync::Arc<crate::process::ForceTable>>,
+}
+
+impl Default for RobotOptions {
+    /// All effects, annotated, default formatting, cold start, move records.
+    fn default() -> Self {
+        RobotOptions {
+            effects: EffectSet::ALL,
+            annotate: true,
+            format: crate::emit::rapid::Format::default(),
+            thermal_start: crate::machine::ThermalStart::Cold,
+            records: true,
+            strict: false,
+            joint_cartesian: false,
+            force_table: None,
+        }
+    }
+}
+
+impl RobotOptions {
+    /// The defaults with the number formatting of the robot file's
+    /// `output:` section (quaternions with 7 decimals unless it says
+    /// otherwise).
+    pub fn for_robot(robot: &Robot) -> Self {
+        let d = robot.output_decimals();
+        RobotOptions {
+            format: crate::emit::rapid::Format {
+                position_decimals: d.mm,
+                quaternion_decimals: d.quaternion,
+            },
+            ..RobotOptions::default()
+        }
+    }
+}
+
+/// With `opts.strict`, a program with a move left as written is an input
+/// error (exit code 2) that names the first one: `file:line:col: MoveL left
+/// as written (CRobT); --strict …`.
+pub fn refuse_left_as_written(warnings: &[Warning], file: &str, opts: &RobotOptions) -> Result<()> {
+    // A reported joint target is not one known at run time only.
+    let left: Vec<(usize, &LeftAsWritten)> = warnings
+        .iter()
+        .filter_map(|w| w.left.as_ref().map(|a| (w.line, a)))
+        .filter(|(_, a)| a.reason != JOINT_TARGET)
+        .collect();
+    match left.first() {
+        Some(&(line, a)) if opts.strict => Err(Error::Input(Located::new(
+            file,
+            line,
+            a.column,
+            format!(
+                "{} left as written ({}); --strict refuses a module with a move left as written ({} in all)",
+                a.instruction,
+                a.reason,
+                left.len()
+            ),
+        ))),
+        _ => Ok(()),
+    }
+}
 
 /// What the pipeline found for one step of the stream.
 #[derive(Debug, Clone, PartialEq)]
@@ -333,7 +418,7 @@ fn timed_steps(
     steps: &[RobotStep],
     plans: &[Plan],
     views: &Views,
-    opts: &RapidOptions,
+    opts: &RobotOptions,
     file: &str,
 ) -> Result<Vec<Timed>> {
     let mut out = vec![Timed::default(); steps.len()];
@@ -451,7 +536,7 @@ fn timed_steps(
 pub fn run(
     robot: &Robot,
     steps: &[RobotStep],
-    opts: &RapidOptions,
+    opts: &RobotOptions,
     file: &str,
 ) -> Result<RobotRun> {
     let mut views = Views::default();
