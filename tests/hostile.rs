@@ -2079,18 +2079,13 @@ fn line_end_mutant(rng: &mut Rng, seed: &[u8]) -> Vec<u8> {
     out
 }
 
-/// [`gcode_props`], and a program written is read back by the reader of
-/// `check` (its line ends and words are ones the reader takes).
-fn line_end_props(
+/// The reader of `check` for `machine` (no predictor, one thread): the
+/// forward pass that reads a written program back.
+fn reader_job<'a>(
     machine: &postproc::machine::tool::MachineTool,
-    input: &[u8],
-    pools: &Pools,
-) -> Result<bool, String> {
-    if !gcode_props(machine, input, pools)? {
-        return Ok(false);
-    }
-    let out = gcode_run(machine, input, &pools.one)?;
-    let job = postproc::pipeline::gcode::Job {
+    pools: &'a Pools,
+) -> postproc::pipeline::gcode::Job<'a> {
+    postproc::pipeline::gcode::Job {
         predictor: None,
         setup: postproc::program::interp::Setup::for_machine(machine),
         settings: postproc::compensate::Settings {
@@ -2103,7 +2098,21 @@ fn line_end_props(
         },
         pool: Some(&pools.one),
         travel: None,
-    };
+    }
+}
+
+/// [`gcode_props`], and a program written is read back by the reader of
+/// `check` (its line ends and words are ones the reader takes).
+fn line_end_props(
+    machine: &postproc::machine::tool::MachineTool,
+    input: &[u8],
+    pools: &Pools,
+) -> Result<bool, String> {
+    if !gcode_props(machine, input, pools)? {
+        return Ok(false);
+    }
+    let out = gcode_run(machine, input, &pools.one)?;
+    let job = reader_job(machine, pools);
     job.forward(
         std::io::BufReader::new(&out[..]),
         "out.nc",

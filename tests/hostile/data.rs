@@ -549,20 +549,7 @@ fn move_ends(
     program: &[u8],
     pools: &super::Pools,
 ) -> Result<Vec<[f64; 6]>, String> {
-    let job = postproc::pipeline::gcode::Job {
-        predictor: None,
-        setup: postproc::program::interp::Setup::for_machine(machine),
-        settings: postproc::compensate::Settings {
-            tolerance_mm: 0.001,
-        },
-        emit: postproc::emit::gcode::EmitOptions {
-            decimals_mm: None,
-            decimals_deg: None,
-            annotate: true,
-        },
-        pool: Some(&pools.one),
-        travel: None,
-    };
+    let job = super::reader_job(machine, pools);
     let mut ends = Vec::new();
     job.forward(
         std::io::BufReader::new(program),
