@@ -593,3 +593,26 @@ fn inch_tapping_after_tool_changes_lands_within_the_tolerance() {
     let o = promise_holds(&case, "geometric", 0.003);
     assert!(o.silent.is_empty(), "{:?}", o.silent);
 }
+
+#[test]
+fn a_tcpm_feed_from_a_point_at_the_top_of_z_lands_within_the_tolerance() {
+    // Issue 43: under G43.4 a rapid that names only Z moves every linear
+    // axis, and ends where the correction of the feed after it would take
+    // Z past the top of its travel by about 2 µm (the reversal error of Z).
+    // The feed starts from the rapid's solved command on every axis and
+    // its takeup point is held at the end of travel; its pieces are
+    // proven from there (regression: "more than 65536 segments"). At
+    // 1 µm the takeup point would lie farther past the end than the
+    // tolerance: the feed leaves from the rapid's end, and its miss there
+    // is warned about, never silent.
+    let case = Case {
+        program: "tests/repredict/tcpm_held_top.nc".to_string(),
+        machine: "five-axis-ac",
+        shop: false,
+    };
+    let o = promise_holds(&case, "geometric", 0.003);
+    assert!(o.silent.is_empty(), "{}", o.silent.join(", "));
+    assert!(o.worst <= 0.003 + FLOAT_MM, "worst {:.5} mm", o.worst);
+    let o = promise_holds(&case, "geometric", 0.001);
+    assert!(o.silent.is_empty(), "at 1 µm: {}", o.silent.join(", "));
+}

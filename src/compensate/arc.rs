@@ -439,11 +439,12 @@ impl<'m> ArcJob<'_, 'm> {
         }
         if st.left_mm > 0.0 {
             // The part is fitted from its solved start `c0`, but leaves from
-            // `c`: the written arc (its centre words relative to `c`) is off
-            // the fitted one by up to their distance, so its miss is at most
-            // the gap at `c` or the tolerance plus that distance (a bound,
-            // beyond the tolerance: warned).
-            let c0 = solve_near(pred, &p0, &c, &p0, &d, lip)?.0;
+            // `c` (where the machine stands, or its takeup point held at an
+            // end of travel): the written arc (its centre words relative to
+            // `c`) is off the fitted one by up to their distance, so its
+            // miss is at most the gap at `c` or the tolerance plus that
+            // distance (a bound, beyond the tolerance: warned).
+            let (c, c0) = (st.c, st.fit);
             let apart = (0..3).map(|s| (c[s] - c0[s]).powi(2)).sum::<f64>().sqrt();
             let l = lip.on(pred, &c, &c0).unwrap_or(1.0);
             left.0 = left.0.max(st.left_mm);

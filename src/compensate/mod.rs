@@ -1034,12 +1034,16 @@ fn start_gap(pred: &ToolPredictor, p0: &AxisVec, at: &AxisVec, dirs: &DirVec, to
 /// direction-dependent error changes at once) the start solved for this
 /// move is pushed to `out` as a takeup point — the machine first moves
 /// there, as a controller's reversal compensation would, so that the move
-/// itself leaves from the programmed point. Without `takeups` (cutter
-/// radius compensation active, see [`BlockResult::takeup`]), the move
-/// starts from `at` and its pieces are proven with the gap up to
-/// [`NO_TAKEUP_SHARE`] of the tolerance; a larger gap, or one where the
-/// takeup point lies beyond an end of travel, cannot be proven away and is
-/// returned as left over.
+/// itself leaves from the programmed point. A takeup point the correction
+/// takes past an end of travel by less than the tolerance is held at the
+/// end, as the written points are ([`hold_at_travel`]), and the move's
+/// pieces are proven with the gap it leaves there. Without `takeups`
+/// (cutter radius compensation active, see [`BlockResult::takeup`]), the
+/// move starts from `at` and its pieces are proven with the gap up to
+/// [`NO_TAKEUP_SHARE`] of the tolerance. A larger gap, or one where the
+/// takeup point lies farther beyond an end of travel, cannot be proven
+/// away: it is returned as left over, and the pieces are fitted from the
+/// start solved for this move ([`Start::fit`]), where the split can end.
 fn start_from<'m>(
     pred: &ToolPredictor<'m>,
     p0: &AxisVec,
@@ -1050,26 +1054,23 @@ fn start_from<'m>(
     out: &mut Vec<AxisVec>,
 ) -> Result<Start, Failure> {
     let gap = start_gap(pred, p0, at, dirs, lip.tool_mm);
-    if gap <= tol * TAKEUP_SHARE {
-        return Ok(Start {
-            c: *at,
-            gap: gap.max(SOLVE_TOL_MM),
-            takeup: false,
-            left_mm: 0.0,
-        });
+    let from_at = |gap: f64| Start {
+        c: *at,
+        fit: *at,
+        gap: gap.max(SOLVE_TOL_MM),
+        takeup: false,
+        left_mm: 0.0,
+    };
+    if gap <= tol * TAKEUP_SHARE || (!takeups && gap <= tol * NO_TAKEUP_SHARE) {
+        // Within the share, or no takeup may be written and the gap can
+        // be proven: the move leaves from where the machine stands, and
+        // its pieces are proven with that gap.
+        return Ok(from_at(gap));
     }
-    if !takeups && gap <= tol * NO_TAKEUP_SHARE {
-        // No takeup may be written: the move leaves from where the machine
-        // stands, and its pieces are proven with that gap.
-        return Ok(Start {
-            c: *at,
-            gap,
-            takeup: false,
-            left_mm: 0.0,
-        });
-    }
+    let (c0, _) = solve_near(pred, p0, at, p0, dirs, lip)?;
     let left = Start {
         c: *at,
+        fit: c0,
         gap: SOLVE_TOL_MM,
         takeup: false,
         left_mm: gap,
@@ -1077,34 +1078,75 @@ fn start_from<'m>(
     if !takeups {
         return Ok(left);
     }
-    let (c0, _) = solve_near(pred, p0, at, p0, dirs, lip)?;
-    if check_travel(pred, &c0).is_err() {
+    let held = match check_travel(pred, &c0) {
+        Ok(()) => None,
         // The start solved for this move lies beyond an end of travel
-        // (a move straight out of the reference position at the end of
-        // Z, say): the machine cannot stand there, so the move starts
+        // (a move straight out of a point at the end of Z, say): by less
+        // than the tolerance it is held at the end.
+        Err(_) if check_travel_within(pred, &c0, tol).is_ok() => {
+            let mut h = c0;
+            for (s, v) in h.iter_mut().enumerate() {
+                if let Some((lo, hi)) = pred.machine.travel(s) {
+                    *v = v.clamp(lo, hi);
+                }
+            }
+            Some(h)
+        }
+        // Farther: the machine cannot stand there, so the move starts
         // where it stands and the gap is left over.
+        Err(_) => return Ok(left),
+    };
+    let Some(h) = held else {
+        out.push(c0);
+        return Ok(Start {
+            c: c0,
+            fit: c0,
+            gap: SOLVE_TOL_MM,
+            takeup: true,
+            left_mm: 0.0,
+        });
+    };
+    let g = start_gap(pred, p0, &h, dirs, lip.tool_mm);
+    if g >= gap {
+        // Held, the takeup point would bring the start no closer.
         return Ok(left);
     }
-    out.push(c0);
-    Ok(Start {
-        c: c0,
-        gap: SOLVE_TOL_MM,
-        takeup: true,
-        left_mm: 0.0,
+    out.push(h);
+    Ok(if g <= tol * NO_TAKEUP_SHARE {
+        Start {
+            c: h,
+            fit: h,
+            gap: g.max(SOLVE_TOL_MM),
+            takeup: true,
+            left_mm: 0.0,
+        }
+    } else {
+        Start {
+            c: h,
+            fit: c0,
+            gap: SOLVE_TOL_MM,
+            takeup: true,
+            left_mm: g,
+        }
     })
 }
 
 /// Where a move starts ([`start_from`]).
 struct Start {
-    /// The start command.
+    /// The start command: where the machine stands when the move leaves.
     c: AxisVec,
+    /// The command the proof of the first piece starts from: `c`, or
+    /// where a gap is left over, the start solved for the move (the piece
+    /// leaves from `c`, and the gap left is its miss there).
+    fit: AxisVec,
     /// The start's gap that the proof of the first piece counts, mm (at
     /// least [`SOLVE_TOL_MM`]).
     gap: f64,
     /// A takeup point was pushed.
     takeup: bool,
     /// The gap left at the start, beyond what the proof counts, mm (0
-    /// unless takeup points are not allowed).
+    /// unless takeup points are not allowed or the start is held at an end
+    /// of travel).
     left_mm: f64,
 }
 
@@ -1259,7 +1301,7 @@ impl Carry {
         if needs_carry(pred, plan) {
             let before = before?;
             for (s, v) in carry.c.iter_mut().enumerate() {
-                if plan.programmed & (1 << s) == 0 && pred.machine.has_axis(s) {
+                if positioned(plan) & (1 << s) == 0 && pred.machine.has_axis(s) {
                     *v = *before.c.get(s)?;
                     if before.known & (1 << s) == 0 {
                         carry.known &= !(1 << s);
@@ -1343,7 +1385,17 @@ fn needs_carry(pred: &ToolPredictor, plan: &Plan) -> bool {
         PlanKind::Fixed => plan.mv.is_some(),
         PlanKind::Pass | PlanKind::Cycle { .. } => false,
     };
-    positioning && (0..6).any(|s| plan.programmed & (1 << s) == 0 && pred.machine.has_axis(s))
+    positioning && (0..6).any(|s| positioned(plan) & (1 << s) == 0 && pred.machine.has_axis(s))
+}
+
+/// The axes (bit `s` for axis `s`) a positioning block moves to where it
+/// is solved: those it programs, or under tool centre point control every
+/// axis — its words are the tool tip of the compensated axis positions,
+/// each tip word moves every linear axis, and the block is written with
+/// each word its correction needs, so the machine goes to the solved
+/// command on every axis (the one the next move starts from).
+fn positioned(plan: &Plan) -> u8 {
+    if plan.tcpm { ALL_AXES } else { plan.programmed }
 }
 
 /// The carry after `plan` given the one before it, as [`block_after`]
@@ -1681,21 +1733,23 @@ fn solve_runs<'m>(
             let p1 = lerp(&mv.start, &mv.end, run.t1);
             (p1, solve_near(pred, &p1, &res.end, &mv.end, d, lip)?.0)
         };
-        let (c0, gap) = match prev {
+        // The proof of the run's first piece starts from `fit` (the start
+        // `c0` unless a gap is left over there, see [`Start::fit`]).
+        let (fit, gap) = match prev {
             Some(c) => {
                 let st = start_from(pred, &p0, &c, d, lip, (tol, takeups), &mut res.segments)?;
                 if st.takeup {
                     res.takeup_at.push(res.segments.len() - 1);
                 }
                 left = f64::max(left, st.left_mm);
-                (st.c, st.gap)
+                (st.fit, st.gap)
             }
             None => {
                 // The start is the previous block's end: where that block
                 // left the machine (with whatever tool length it was
                 // solved for).
-                let (c0, gap) = match carry_in {
-                    Some(k) if k.matches(&mv.start, d, tool, &pred.ctx) => (k.c, SOLVE_TOL_MM),
+                let (c0, fit, gap) = match carry_in {
+                    Some(k) if k.matches(&mv.start, d, tool, &pred.ctx) => (k.c, k.c, SOLVE_TOL_MM),
                     Some(k) if k.stands_at(&mv.start) => {
                         let st = start_from(
                             pred,
@@ -1708,22 +1762,22 @@ fn solve_runs<'m>(
                         )?;
                         res.takeup = st.takeup;
                         left = st.left_mm;
-                        (st.c, st.gap)
+                        (st.c, st.fit, st.gap)
                     }
-                    _ => (
-                        solve_near(pred, &mv.start, &c1, &p1, d, lip)?.0,
-                        SOLVE_TOL_MM,
-                    ),
+                    _ => {
+                        let c0 = solve_near(pred, &mv.start, &c1, &p1, d, lip)?.0;
+                        (c0, c0, SOLVE_TOL_MM)
+                    }
                 };
                 start = c0;
-                (c0, gap)
+                (fit, gap)
             }
         };
         split_line(
             pred,
             &p0,
             &p1,
-            &c0,
+            &fit,
             &c1,
             gap,
             d,
@@ -2122,10 +2176,10 @@ pub fn block_recycling(
     let mut carry_out = Carry::after(pred, plan, &mv, c1, carry_in);
     match (mv.motion, mv.arc) {
         (Motion::Rapid, _) => {
-            // Positioning: only the axes the block programs are corrected;
-            // the others stay where they are.
+            // Positioning: only the axes the block moves ([`positioned`])
+            // are corrected; the others stay where they are.
             for s in 0..6 {
-                if plan.programmed & (1 << s) == 0 {
+                if positioned(plan) & (1 << s) == 0 {
                     res.end[s] = mv.end[s];
                 }
             }
