@@ -278,6 +278,8 @@ pub(crate) struct RawAxisThermal {
     pub time_constant_min: f64,
     #[serde(default)]
     pub friction_n: f64,
+    #[serde(default)]
+    pub scale_origin_mm: f64,
 }
 
 /// `thermal:` block.

@@ -14,7 +14,10 @@
 //! * spindle growth `g` (µm), gain `growth_um_per_kw`: the spindle lengthens
 //!   towards the workpiece, the tip moves by `−g` along the tool axis;
 //! * axis positioning scale `s_i` (ppm), gain `scale_ppm_per_kw`: the axis
-//!   overshoots its machine coordinate by `s_i · 10⁻⁶ · q_i`.
+//!   overshoots its machine coordinate by `s_i · 10⁻⁶ · (q_i − o_i)`, with
+//!   `o_i` the axis' scale origin (`scale_origin_mm`, default 0): the
+//!   machine coordinate of the point the scale grows from (where the screw
+//!   is held, or where the axis was at the reference measurement).
 //!
 //! Powers: spindle `P_s = idle_w_per_rpm · n + P_cut` (cutting power from
 //! the process model); feed drive of axis i `P_i = (|F_i| + friction_n) · |v_i|`
@@ -73,6 +76,9 @@ pub struct Thermal {
     pub axes: [Option<Source>; 3],
     /// Friction force of each feed drive, N.
     pub friction_n: [f64; 3],
+    /// Machine coordinate (mm) of X, Y, Z from which each axis' scale
+    /// error grows (`scale_origin_mm`, default 0).
+    pub scale_origin_mm: [f64; 3],
 }
 
 impl Thermal {
@@ -140,7 +146,7 @@ impl Thermal {
     ) -> Vector3<f64> {
         let mut d = -dir * (s.growth_um * 1e-3);
         for i in 0..3 {
-            d[i] += s.scale_ppm[i] * 1e-6 * q[i];
+            d[i] += s.scale_ppm[i] * 1e-6 * (q[i] - self.scale_origin_mm[i]);
         }
         d
     }
@@ -213,6 +219,14 @@ impl Thermal {
                 ));
             }
             t.friction_n[slot] = friction;
+            let origin = a.scale_origin_mm;
+            if !origin.is_finite() || origin.abs() > 1e5 {
+                return Err(Invalid::new(
+                    format!("{p}.scale_origin_mm"),
+                    format!("`{origin}` mm is outside ±100000"),
+                ));
+            }
+            t.scale_origin_mm[slot] = origin;
             t.axes[slot] = Some(Source {
                 gain_per_kw: gain(&format!("{p}.scale_ppm_per_kw"), a.scale_ppm_per_kw, 1e4)?,
                 time_constant_s: tau(&format!("{p}.time_constant_min"), a.time_constant_min)?,
@@ -245,6 +259,7 @@ mod tests {
                 None,
             ],
             friction_n: [100.0, 0.0, 0.0],
+            scale_origin_mm: [0.0; 3],
         }
     }
 
@@ -296,6 +311,23 @@ mod tests {
         };
         let d = t.deviation_mm(&s, &Vector3::new(500.0, 0.0, 0.0), &Vector3::z());
         assert_abs_diff_eq!(d, Vector3::new(0.010, 0.0, -0.005), epsilon = UM_TOL);
+    }
+
+    /// The scale grows from `scale_origin_mm`: 20 ppm on X with the origin
+    /// at X = −300 gives 20e-6 · (500 − (−300)) = 16 µm at X = 500, and
+    /// nothing at the origin itself.
+    #[test]
+    fn the_scale_grows_from_its_origin() {
+        let mut t = model();
+        t.scale_origin_mm = [-300.0, 0.0, 0.0];
+        let s = ThermalState {
+            growth_um: 0.0,
+            scale_ppm: [20.0, 0.0, 0.0],
+        };
+        let d = t.deviation_mm(&s, &Vector3::new(500.0, 0.0, 0.0), &Vector3::z());
+        assert_abs_diff_eq!(d, Vector3::new(0.016, 0.0, 0.0), epsilon = UM_TOL);
+        let at = t.deviation_mm(&s, &Vector3::new(-300.0, 0.0, 0.0), &Vector3::z());
+        assert_abs_diff_eq!(at, Vector3::zeros(), epsilon = UM_TOL);
     }
 
     #[test]
