@@ -31,12 +31,14 @@ const DELTA_UM: f64 = 5.0;
 const P_UM: f64 = 20.0;
 /// Middle and half length of X's travel, mm.
 const MID_MM: f64 = 500.0;
-/// Relative agreement of u with the hand value. The fit's u comes out
-/// 3.7e-6 of itself above δ/√(3m − 1) (its RSS about 7e-6 above m δ²,
-/// some 10 nm of residual per row that this derivation does not model —
-/// not the 9-decimal rounding of the positions, which is far smaller);
-/// 1e-5 holds that and still tells any other m, δ or dof apart.
-const U_RTOL: f64 = 1e-5;
+/// Relative agreement of u with the hand value: what the file's rounding
+/// of the positions to 9 decimals (e ≤ 5e-10 mm = 5e-7 µm per coordinate)
+/// explains. The commands are predicted as written, so the rounding is the
+/// only residual besides ±δ; in z it moves each row's residual to ±δ + e,
+/// the RSS by at most Σ 2δ|e| = 2mδe over m δ² to first order (e² terms
+/// are 1e-14 of it, the difference quotient's 1e-12 in Σ s² less), and
+/// u = √(RSS / (3m − 1) / Σ s²) by half that: |Δu/u| ≤ e/δ = 1e-7.
+const U_RTOL: f64 = 1e-7;
 /// Fitted value within this of the truth, µm (noise-free in x).
 const VALUE_TOL_UM: f64 = 1e-4;
 /// U is printed with 5 decimals in the report's JSON.
@@ -53,6 +55,12 @@ fn observations(model_text: &str) -> String {
             panic!("tool rows")
         };
         tp.xyz_mm[0] = if (i / 2) % 2 == 0 { 0.0 } else { 2.0 * MID_MM };
+        // The file holds the commands to 6 decimals: predict at those, so
+        // the diagnosis predicts at the very commands the positions came
+        // from.
+        for v in tp.xyz_mm.iter_mut() {
+            *v = as_written(*v);
+        }
         let u = (tp.xyz_mm[0] - MID_MM) / MID_MM;
         let xyz = tp.xyz_mm;
         let d: Vec<i8> = tp.dir.iter().take(3).map(|d| d.unwrap_or(1)).collect();
@@ -76,6 +84,11 @@ fn observations(model_text: &str) -> String {
         ));
     }
     s
+}
+
+/// `v` as the file writes it, 6 decimals, read back.
+fn as_written(v: f64) -> f64 {
+    format!("{v:.6}").parse().unwrap_or(v)
 }
 
 fn covariance_list(model: &Path) -> Vec<serde_yaml::Value> {
