@@ -241,6 +241,20 @@ fn malformed_programs_exit_2_located_with_no_output() {
         ("G92 X0 Y0", 3, 1, "G92 (coordinate system shift)"),
         ("G68 X0 Y0 R45.", 3, 1, "G68 (coordinate rotation)"),
         ("G51 X0 Y0 P2", 3, 1, "G51 (scaling/mirroring)"),
+        // Corner words without their comma (issue 37): `R5.` starts at
+        // byte 8 of `G1 X50. R5. F500`, `C2.` likewise.
+        (
+            "G1 X50. R5. F500",
+            3,
+            9,
+            "`R` on a G1 line is not read: outside a canned cycle it is a corner radius",
+        ),
+        (
+            "G1 X50. C2. F500",
+            3,
+            9,
+            "the machine has no C axis; a chamfer is written `,C`",
+        ),
         // The circle about (1,0) through (0,0) has radius 1; (5,0) is at 4:
         // located at the G2 word, byte 4 after `N40 `.
         (

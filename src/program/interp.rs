@@ -1011,11 +1011,18 @@ impl Interpreter {
                         ));
                     }
                     if !self.setup.axes[slot] {
+                        // A `C` on a machine without a C axis is most often
+                        // a chamfer written without its comma.
+                        let hint = if w.letter == b'C' {
+                            "; a chamfer is written `,C` (read where the machine file says `corner_words: comma`)"
+                        } else {
+                            ""
+                        };
                         return Err(self.err(
                             line,
                             Some(w),
                             format!(
-                                "the machine has no {} axis: `{}`",
+                                "the machine has no {} axis{hint}: `{}`",
                                 w.letter as char,
                                 quote(w)
                             ),
@@ -1715,7 +1722,18 @@ impl Interpreter {
             Motion::ArcCw | Motion::ArcCcw => {
                 Some(self.arc(block, &start, &end, &g.center, g.r, g.p, motion, line, text)?)
             }
-            _ => None,
+            // Outside a canned cycle an `R` on a G1 line is a corner
+            // radius in the dialects that write it without the comma
+            // (Fanuc with its comma-less corner words, Haas lathes); read
+            // as nothing it would be a corner the control rounds and the
+            // prediction does not.
+            Motion::Linear => {
+                if let Some(r) = g.r {
+                    return Err(self.err(line, Some(r), plain_radius_refused(r, text)));
+                }
+                None
+            }
+            Motion::Rapid => None,
         };
         for (slot, a) in g.axis.iter().enumerate() {
             if let Some(w) = a {
@@ -2612,6 +2630,16 @@ fn corner_refused(w: &Word, text: &[u8]) -> String {
     };
     format!(
         "{kind} `{word}` is not read: the control inserts the {what} between this move and the next; write the corner as {how}, or say `corner_words: comma` in the machine file if the control reads it: `{shown}`"
+    )
+}
+
+/// The message for an `R` word on a G1 line outside a canned cycle: a
+/// corner radius written without its comma.
+fn plain_radius_refused(w: &Word, text: &[u8]) -> String {
+    let shown = String::from_utf8_lossy(text.get(w.start as usize..).unwrap_or(b""));
+    let shown: String = shown.trim_end().chars().take(40).collect();
+    format!(
+        "`R` on a G1 line is not read: outside a canned cycle it is a corner radius written without the comma, which the control rounds between this move and the next; write the corner as an arc, or as `,R` with `corner_words: comma` in the machine file if the control reads it: `{shown}`"
     )
 }
 
