@@ -62,6 +62,7 @@ mod robot_library;
 mod robot_process;
 mod robot_samples;
 mod shop;
+mod shop_machine_z;
 mod snapshots;
 mod spiral;
 mod tp;
