@@ -246,6 +246,23 @@ pub(super) fn stage(path: &Path, text: &str, charset: Charset) -> Result<super::
 
 /// `postproc compensate` of a KRL program.
 pub fn compensate(a: &CompensateArgs, quiet: bool) -> Result<i32> {
+    compensate_with(a, quiet, compensate_to)
+}
+
+/// How one robot language compensates its program `src` (with the files
+/// given with it) into `out`, with its report.
+pub(super) type CompensateTo = fn(
+    &Job,
+    (&Path, &[PathBuf]),
+    &Path,
+    Option<(&Path, super::Format)>,
+) -> Result<crate::compensate::outcome::Summary>;
+
+/// `postproc compensate` of a program of a robot language other than
+/// RAPID: the robot with the run's process force, the options, the
+/// provenance and the output name the same for each, the program written
+/// by the language's `compensate_to`.
+pub(super) fn compensate_with(a: &CompensateArgs, quiet: bool, write: CompensateTo) -> Result<i32> {
     let (robot, loaded) = robot_of(a.program.machine.as_deref(), "compensate", Some(&a.effects))?;
     let opts = RobotOptions {
         records: a.report.is_some(),
@@ -264,7 +281,7 @@ pub fn compensate(a: &CompensateArgs, quiet: bool) -> Result<i32> {
         opts.annotate,
     );
     let src = &a.program.file;
-    let out_src = super::output::output_path(src, a.output.as_deref(), None, &[])?;
+    let out = super::output::output_path(src, a.output.as_deref(), None, &[])?;
     let report = a.report.as_deref().map(|path| {
         let format = a
             .report_format
@@ -277,11 +294,11 @@ pub fn compensate(a: &CompensateArgs, quiet: bool) -> Result<i32> {
         provenance: &provenance,
         recompensate: a.recompensate,
     };
-    let summary = compensate_to(&job, (src, &a.program.more), &out_src, report)?;
+    let summary = write(&job, (src, &a.program.more), &out, report)?;
     for w in summary.warnings.iter().filter(|w| w.left.is_none()) {
         tracing::warn!("{}: {}", src.display(), w.message);
     }
-    super::rapid::log_outcome(&src.display().to_string(), &out_src, &summary, quiet);
+    super::rapid::log_outcome(&src.display().to_string(), &out, &summary, quiet);
     Ok(0)
 }
 

@@ -134,43 +134,7 @@ fn with_header(text: &str, provenance: &Provenance) -> String {
 
 /// `postproc compensate` of a TP program.
 pub fn compensate(a: &CompensateArgs, quiet: bool) -> Result<i32> {
-    let (robot, loaded) = robot_of(a.program.machine.as_deref(), "compensate", Some(&a.effects))?;
-    let opts = RobotOptions {
-        records: a.report.is_some(),
-        strict: a.program.strict,
-        ..super::rapid::rapid_options(
-            &robot,
-            &a.effects,
-            a.annotate == super::Annotate::Comment,
-            a.decimals,
-        )?
-    };
-    let provenance = super::machines::provenance(
-        &loaded,
-        super::machines::robot_effects(&opts.effects),
-        None,
-        opts.annotate,
-    );
-    let src = &a.program.file;
-    let out = super::output::output_path(src, a.output.as_deref(), None, &[])?;
-    let report = a.report.as_deref().map(|path| {
-        let format = a
-            .report_format
-            .unwrap_or_else(|| super::Format::from_path(path));
-        (path, format)
-    });
-    let job = Job {
-        robot: &robot,
-        opts: &opts,
-        provenance: &provenance,
-        recompensate: a.recompensate,
-    };
-    let summary = compensate_to(&job, (src, &a.program.more), &out, report)?;
-    for w in summary.warnings.iter().filter(|w| w.left.is_none()) {
-        tracing::warn!("{}: {}", src.display(), w.message);
-    }
-    super::rapid::log_outcome(&src.display().to_string(), &out, &summary, quiet);
-    Ok(0)
+    super::krl::compensate_with(a, quiet, compensate_to)
 }
 
 /// What a compensation of TP programs runs with: that of KRL programs.
