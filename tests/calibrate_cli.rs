@@ -1167,3 +1167,42 @@ fn near_copies_count_as_one_pose() {
     let held = d["holdout_rows"].as_u64().expect("held out");
     assert!(held > 0 && held % 12 == 0, "{held} held-out rows");
 }
+
+/// `calibrate geometry` writes the machine file back with the keys it does
+/// not identify as they were: a thermal scale origin
+/// (`thermal.axes.<axis>.scale_origin_mm`) stays, and the written file
+/// loads with it.
+#[test]
+fn calibrate_geometry_keeps_the_thermal_scale_origin() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let base = text("tests/shop/zbottom/afm-r1000-zbottom.yaml");
+    let line = "    X: { scale_ppm_per_kw: 60.0, time_constant_min: 40.0, friction_n: 300.0 }";
+    assert!(base.contains(line), "fixture line changed");
+    let with_origin = base.replace(
+        line,
+        "    X: { scale_ppm_per_kw: 60.0, time_constant_min: 40.0, friction_n: 300.0, scale_origin_mm: 12.5 }",
+    );
+    let m = write(dir.path(), "m.yaml", &with_origin);
+    let out = dir.path().join("cal.yaml");
+    postproc()
+        .args(["calibrate", "geometry", "--machine"])
+        .arg(&m)
+        .arg("--observations")
+        .arg(repo("samples/observations/afm-r1000-grid-measured.csv"))
+        .arg("--output")
+        .arg(&out)
+        .assert()
+        .success();
+    let written = std::fs::read_to_string(&out).expect("written file");
+    assert!(
+        written.contains("friction_n: 300.0, scale_origin_mm: 12.5 }"),
+        "scale origin lost: {}",
+        written
+            .lines()
+            .filter(|l| l.contains("X: { scale"))
+            .collect::<Vec<_>>()
+            .join("\n")
+    );
+    let loaded = Machine::load(&out).expect("the written file loads");
+    assert!(matches!(loaded, Machine::Tool(_)), "a machine tool");
+}

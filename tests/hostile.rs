@@ -2254,3 +2254,31 @@ fn a_point_held_at_a_travel_end_is_rounded_inside_it() {
         "{out}"
     );
 }
+
+/// A thermal scale origin far outside its axis' travel is a coordinate of
+/// another convention (machine zero at the other end, another unit): it is
+/// refused at its key with the plausible range; one within the travel
+/// widened by its length is read. The fixture is the AFM R-1000 counted
+/// from the bottom (X travel 0..1000 mm: plausible −1000..2000 mm).
+#[test]
+fn a_scale_origin_far_outside_the_travel_is_refused() {
+    let base = crate::common::text("tests/shop/zbottom/afm-r1000-zbottom.yaml");
+    let line = "    X: { scale_ppm_per_kw: 60.0, time_constant_min: 40.0, friction_n: 300.0 }";
+    let with = |origin: &str| {
+        edited(
+            &base,
+            line,
+            &format!(
+                "    X: {{ scale_ppm_per_kw: 60.0, time_constant_min: 40.0, friction_n: 300.0, scale_origin_mm: {origin} }}"
+            ),
+        )
+    };
+    refused_at(
+        &with("2500.0"),
+        "samples/part.nc",
+        "    X: { scale_ppm_per_kw",
+        "thermal.axes.X.scale_origin_mm: 2500 mm is outside -1000..2000 mm, the plausible range of a scale origin (the X travel 0..1000 mm widened by its length on each side",
+    );
+    let (code, err) = check_with_machine(&with("1500.0"), "samples/part.nc");
+    assert!(code == 0 || code == 1, "{err}");
+}

@@ -241,7 +241,38 @@ fn thermal(p: &mut Pass, raw: &RawMachineTool) {
             TIME_CONSTANT_MIN,
         );
         p.range(&format!("{k}.friction_n"), a.friction_n, FRICTION_N);
+        if let Some(origin) = a.scale_origin_mm {
+            scale_origin(p, raw, name, &k, origin);
+        }
     }
+}
+
+/// The scale origin of axis `name` lies within its travel widened by one
+/// travel length on each side: a ball screw grows from its fixed bearing,
+/// at a travel end or near it; an origin farther out is most often a
+/// coordinate of another convention (machine zero at the other end, or
+/// another unit).
+fn scale_origin(p: &mut Pass, raw: &RawMachineTool, name: &str, key: &str, origin: f64) {
+    let travel = raw
+        .axes
+        .iter()
+        .find(|a| a.name == name)
+        .and_then(|a| a.travel_mm)
+        .filter(|[lo, hi]| lo.is_finite() && hi.is_finite() && hi > lo);
+    let Some([lo, hi]) = travel else { return };
+    let span = hi - lo;
+    let (from, to) = (lo - span, hi + span);
+    let problem = (origin.is_finite() && !(from..=to).contains(&origin)).then(|| {
+        format!(
+            "{} mm is outside {}..{} mm, the plausible range of a scale origin (the {name} travel {}..{} mm widened by its length on each side; check the machine-zero convention and the unit)",
+            show_number(origin),
+            show_number(from),
+            show_number(to),
+            show_number(lo),
+            show_number(hi),
+        )
+    });
+    p.custom(&format!("{key}.scale_origin_mm"), problem);
 }
 
 fn force_keys(f: &RawProcessForce) -> ForceKeys {

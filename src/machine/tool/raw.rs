@@ -278,8 +278,9 @@ pub(crate) struct RawAxisThermal {
     pub time_constant_min: f64,
     #[serde(default)]
     pub friction_n: f64,
+    /// Absent: the scale grows from machine zero.
     #[serde(default)]
-    pub scale_origin_mm: f64,
+    pub scale_origin_mm: Option<f64>,
 }
 
 /// `thermal:` block.

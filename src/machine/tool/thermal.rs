@@ -219,7 +219,7 @@ impl Thermal {
                 ));
             }
             t.friction_n[slot] = friction;
-            let origin = a.scale_origin_mm;
+            let origin = a.scale_origin_mm.unwrap_or(0.0);
             if !origin.is_finite() || origin.abs() > 1e5 {
                 return Err(Invalid::new(
                     format!("{p}.scale_origin_mm"),
