@@ -50,6 +50,7 @@ mod rapid_cli;
 mod rapid_flow;
 mod rapid_programs;
 mod rapid_stream;
+mod rapid_uncertainty;
 #[cfg(unix)] // links the inputs into a scratch folder, runs bash
 mod readme;
 mod regression;

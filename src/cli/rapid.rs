@@ -362,6 +362,7 @@ fn check_options(strict: bool) -> RapidOptions {
         strict,
         joint_cartesian: false,
         force_table: None,
+        uncertainty: None,
     }
 }
 
@@ -406,6 +407,7 @@ pub(super) fn rapid_options(
         strict: false,
         joint_cartesian: false,
         force_table,
+        uncertainty: None,
     })
 }
 
@@ -476,12 +478,14 @@ pub(super) fn robot_with_process(robot: Robot, e: &EffectArgs) -> Result<Robot> 
 }
 
 /// `postproc compensate` of a RAPID module.
-/// The options of a `compensate` of a module or a program.
-fn compensate_options(a: &CompensateArgs, robot: &Robot) -> Result<RapidOptions> {
+/// The options of a `compensate` of a module or a program: the
+/// annotations carry U (k = 2) when the robot file has a covariance.
+fn compensate_options(a: &CompensateArgs, robot: &Robot, loaded: &Loaded) -> Result<RapidOptions> {
     Ok(RapidOptions {
         records: a.report.is_some(),
         strict: a.program.strict,
         joint_cartesian: a.program.compensate_joint_targets,
+        uncertainty: loaded.uncertainty.clone(),
         ..rapid_options(
             robot,
             &a.effects,
@@ -524,7 +528,7 @@ pub fn compensate(
     if is_program(&inputs) || a.out_dir.is_some() {
         return compensate_program(a, (robot, loaded), &inputs, quiet);
     }
-    let opts = compensate_options(a, &robot)?;
+    let opts = compensate_options(a, &robot, &loaded)?;
     let input = &a.program.file;
     let out_path = super::output::output_path(input, a.output.as_deref(), None, &[])?;
     let inputs = super::gcode::input_files(&a.program, &loaded, &a.effects);
@@ -670,7 +674,7 @@ fn compensate_program(
             "-o names one file: a program of several modules is written beside its inputs or into --out-dir",
         ));
     }
-    let opts = compensate_options(a, &robot)?;
+    let opts = compensate_options(a, &robot, &loaded)?;
     let pool = super::gcode::thread_pool(a.effects.threads)?;
     let (provenance, report) = provenance_and_report(a, &loaded, &opts);
     let run = ProgramRun {

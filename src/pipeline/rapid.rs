@@ -35,6 +35,7 @@ use crate::pipeline::robot::time_line::{
 };
 use crate::pipeline::robot::{Solution, SolveJob, Views, programmed_joints, robot_row, solve_jobs};
 use crate::predict::robot::Breakdown;
+use crate::predict::robot_uncertainty::{push_u, target_u_mm};
 use crate::predict::{MoveContext, ThermalInput, Wrench};
 use crate::process::CutSettings;
 use crate::program::interp::Warning;
@@ -119,6 +120,9 @@ struct Rewriter<'m> {
     state: MoveState,
     /// Programmed TCP position (world, mm) of the last target compensated.
     last_tcp: [f64; 3],
+    /// Programmed joints (rad) of the last target compensated: where its
+    /// annotation's U is propagated.
+    last_q: [f64; 6],
     /// Declarations from this index on are another module's.
     foreign_from: usize,
     /// Start of the move annotated last (a `FOR` loop's move is met once
@@ -317,6 +321,7 @@ impl Rewriter<'_> {
             };
             self.locate(at, e, &what())
         })?;
+        self.last_q = comp.q_programmed;
         if !self.active() {
             return Ok(Some(comp.deviation));
         }
@@ -490,6 +495,7 @@ impl Rewriter<'_> {
             return Ok(None);
         };
         let comp = comp.map_err(|e| self.locate(at, e, &what()))?;
+        self.last_q = comp.q_programmed;
         if !self.active() {
             return Ok(Some(comp.deviation));
         }
@@ -1596,6 +1602,7 @@ impl<'m> Rewriter<'m> {
             added: carry.added,
             state: MoveState::default(),
             last_tcp: carry.last_tcp,
+            last_q: [0.0; 6],
             foreign_from: carry.scope.as_ref().map_or(usize::MAX, |s| s.from),
             last_annotated: None,
         }
@@ -1784,8 +1791,11 @@ impl<'m> Rewriter<'m> {
         self.watch_resonance(carry, mv.line, state, dev);
         if self.opts.annotate && self.last_annotated != Some(mv.span.start) {
             self.last_annotated = Some(mv.span.start);
+            let u = self.opts.uncertainty.as_deref();
+            let q = self.last_q;
             push_annotation(&mut self.edits, self.src, &mv.span, |out| {
-                write_dev_comment(out, dev)
+                write_dev_comment(out, dev);
+                push_u(out, u.and_then(|u| target_u_mm(u, &q, &dev.total.pos_mm)));
             });
         }
         if !self.opts.records {

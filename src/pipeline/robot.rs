@@ -36,7 +36,7 @@ use crate::program::robot_moves::{
 use time_line::{Asked, FALLBACK_TCP_SPEED, Refusal, StreamMove, Timed};
 
 /// Options of a robot compensation run, for every robot language.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone)]
 pub struct RobotOptions {
     /// Effects to predict and compensate.
     pub effects: EffectSet,
@@ -61,6 +61,11 @@ pub struct RobotOptions {
     /// Per-move forces by line of a `table` process force
     /// (`--force-table`, work-object frame).
     pub force_table: Option<std::sync::Arc<crate::process::ForceTable>>,
+    /// The parameter covariance of the robot file
+    /// ([`crate::predict::uncertainty::BlockUncertainty`]): the annotation
+    /// of each compensated target of a language written by the pipeline
+    /// (RAPID) carries its U (k = 2); `None` for a file without one.
+    pub uncertainty: Option<std::sync::Arc<crate::predict::uncertainty::BlockUncertainty>>,
 }
 
 impl Default for RobotOptions {
@@ -75,6 +80,7 @@ impl Default for RobotOptions {
             strict: false,
             joint_cartesian: false,
             force_table: None,
+            uncertainty: None,
         }
     }
 }

@@ -193,6 +193,7 @@ pub fn check_syntax_streamed<R: BufRead>(
         strict: false,
         joint_cartesian: false,
         force_table: None,
+        uncertainty: None,
     };
     let mut carry = Carry::default();
     let (streamed, _) = pass(
