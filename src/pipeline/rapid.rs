@@ -1774,7 +1774,7 @@ impl<'m> Rewriter<'m> {
         }
         carry
             .records
-            .push(self.move_record(mv, None, seg, state, dev));
+            .push(self.move_record((mv, None), seg, state, dev, None));
     }
 
     /// Counts a compensated move, annotates it and keeps its record.
@@ -1803,22 +1803,24 @@ impl<'m> Rewriter<'m> {
         }
         carry
             .records
-            .push(self.move_record(mv, via_mm, seg, state, dev));
+            .push(self.move_record((mv, via_mm), seg, state, dev, Some(self.last_q)));
     }
 }
 
 impl Rewriter<'_> {
     /// The report row of a move: where it was programmed, its predicted
-    /// deviation and its place on the time line.
+    /// deviation, its place on the time line and the programmed joints of
+    /// its target (where the report's U is taken; `None` for a move left
+    /// as written).
     fn move_record(
         &self,
-        mv: &Move,
-        via_mm: Option<[f64; 3]>,
+        (mv, via_mm): (&Move, Option<[f64; 3]>),
         seg: &Segment,
         state: &MoveState,
         dev: &Breakdown,
+        q: Option<[f64; 6]>,
     ) -> Row {
-        let mut row = robot_row((mv.line, mv.name), self.last_tcp, via_mm, *dev, None);
+        let mut row = robot_row((mv.line, mv.name), self.last_tcp, via_mm, *dev, q);
         if let Some(r) = row.robot.as_mut() {
             r.wrench = state.wrench;
             r.duration_s = seg.duration_s;
