@@ -243,3 +243,150 @@ fn diagnose_writes_the_fit_covariance_and_report_gives_u_from_it() {
         "diagnose (obs.csv)"
     );
 }
+
+/// `calibrate geometry` writes a geometry block on the nodes of the tables
+/// it identified; `diagnose --write-model` then adds a linear X error on
+/// a regular grid merged with those nodes (EXX re-gridded), so the
+/// geometry block's `EXX_um.forward[k]` would name another position: the
+/// written file drops that block with a warning naming it and why, keeps
+/// the diagnosis's own block, loads, and `report` gives U from what is
+/// left.
+#[test]
+fn a_regridded_table_drops_the_stale_geometry_block() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let calibrated = dir.path().join("calibrated.yaml");
+    postproc()
+        .args(["calibrate", "geometry", "--machine"])
+        .arg(crate::common::repo("machines/afm-r1000.yaml"))
+        .arg("--observations")
+        .arg(crate::common::repo(
+            "samples/observations/afm-r1000-grid-measured.csv",
+        ))
+        .arg("-o")
+        .arg(&calibrated)
+        .assert()
+        .success();
+    let before = covariance_list(&calibrated);
+    let geometry: Vec<&serde_yaml::Value> =
+        before.iter().filter(|b| b["kind"] == "geometry").collect();
+    assert_eq!(geometry.len(), 1, "{before:?}");
+    let names_exx = |b: &serde_yaml::Value| {
+        b["parameters"].as_sequence().is_some_and(|ps| {
+            ps.iter().any(|p| {
+                p.as_str()
+                    .is_some_and(|p| p.starts_with("axes[X].component_errors.EXX_um."))
+            })
+        })
+    };
+    assert!(names_exx(geometry[0]), "{:?}", geometry[0]);
+    let cal_text = std::fs::read_to_string(&calibrated).expect("calibrated");
+    let obs = write(dir.path(), "obs.csv", &observations(&cal_text));
+    let out = dir.path().join("fixed.yaml");
+    let a = postproc()
+        .arg("diagnose")
+        .arg("--machine")
+        .arg(&calibrated)
+        .arg("--observations")
+        .arg(&obs)
+        .arg("--write-model")
+        .arg(&out)
+        .assert()
+        .success();
+    let o = a.get_output();
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert!(stdout.contains("added EXX_lin"), "{stdout}\n{stderr}");
+    assert!(
+        stderr.contains("covariance[0] (kind geometry, from ")
+            && stderr
+                .contains("dropped: the table `axes[X].component_errors.EXX_um` was re-gridded"),
+        "{stderr}"
+    );
+    let after = covariance_list(&out);
+    assert!(
+        after.iter().all(|b| b["kind"] != "geometry"),
+        "stale geometry block kept: {after:?}"
+    );
+    assert!(
+        after
+            .iter()
+            .any(|b| b["kind"] == "diagnose" && names_exx(b)),
+        "{after:?}"
+    );
+    assert!(postproc::machine::Machine::load(&out).is_ok());
+    let program = write(
+        dir.path(),
+        "p.nc",
+        "G90 G54 G0 X-200 Y0 Z50\nG1 X350 F1000\nG1 Y300\nM30\n",
+    );
+    let r = postproc()
+        .arg("report")
+        .arg(&program)
+        .arg("--machine")
+        .arg(&out)
+        .args(["--effects", "geometric", "--format", "json"])
+        .assert()
+        .success();
+    let r: serde_json::Value = serde_json::from_slice(&r.get_output().stdout).expect("JSON");
+    let rows = r["rows"].as_array().expect("rows");
+    assert!(rows.iter().any(|row| row["u_mm"].as_f64().is_some()), "{r}");
+}
+
+/// A covariance block naming a value the machine file does not have (here
+/// a table the file never had, as a hand edit or an older file would
+/// leave it) is an error of `report` naming the block and the parameter's
+/// place in it, never a silent skip.
+#[test]
+fn a_block_naming_an_unknown_value_is_an_error_with_its_key_path() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let calibrated = dir.path().join("calibrated.yaml");
+    postproc()
+        .args(["calibrate", "geometry", "--machine"])
+        .arg(crate::common::repo("machines/afm-r1000.yaml"))
+        .arg("--observations")
+        .arg(crate::common::repo(
+            "samples/observations/afm-r1000-grid-measured.csv",
+        ))
+        .arg("-o")
+        .arg(&calibrated)
+        .assert()
+        .success();
+    let list = covariance_list(&calibrated);
+    let geometry = list
+        .iter()
+        .position(|b| b["kind"] == "geometry")
+        .expect("geometry block");
+    let first = list[geometry]["parameters"][0]
+        .as_str()
+        .expect("a parameter")
+        .to_string();
+    let bogus = "axes[X].component_errors.EQQ_um.forward[0]";
+    let cal_text = std::fs::read_to_string(&calibrated).expect("calibrated");
+    assert!(!cal_text.contains("EQQ_um"), "{cal_text}");
+    // The writer quotes each parameter (`parameters: ["axes[X]…", …]`).
+    let edited = cal_text.replacen(
+        &format!("parameters: [\"{first}\""),
+        &format!("parameters: [\"{bogus}\""),
+        1,
+    );
+    assert_ne!(edited, cal_text, "parameter list not found as written");
+    let model = write(dir.path(), "edited.yaml", &edited);
+    let program = write(
+        dir.path(),
+        "p.nc",
+        "G90 G54 G0 X-200 Y0 Z50\nG1 X350 F1000\nG1 Y300\nM30\n",
+    );
+    let r = postproc()
+        .arg("report")
+        .arg(&program)
+        .arg("--machine")
+        .arg(&model)
+        .args(["--effects", "geometric", "--format", "json"])
+        .assert()
+        .failure();
+    let stderr = String::from_utf8_lossy(&r.get_output().stderr);
+    assert!(
+        stderr.contains(&format!("covariance[{geometry}].parameters[0]: `{bogus}`")),
+        "{stderr}"
+    );
+}

@@ -469,6 +469,20 @@ pub fn run_calibrate(a: &CalibrateArgs) -> Result<i32> {
         Some(b) => crate::predict::uncertainty::put_covariance(&yaml, &file, b)?,
         None => yaml,
     };
+    // Older blocks of the covariance list that the calibration's edits
+    // made stale (a table re-gridded) are dropped, with a warning.
+    let yaml = match crate::machine::Machine::from_yaml_str(&text, &file) {
+        Ok(before) => {
+            let fresh = block.as_ref().map(|b| b.kind.as_str());
+            let (kept, stale) =
+                crate::predict::uncertainty::drop_stale_covariance(&before, &yaml, &file, fresh)?;
+            for line in stale {
+                tracing::warn!("{line}");
+            }
+            kept
+        }
+        Err(_) => yaml,
+    };
     super::output::refuse_overwrite(&a.output, &read_files(&a.observations, &a.machine)?)?;
     // The summary first: standard output that fails (closed, full) fails
     // the run before the model is written.

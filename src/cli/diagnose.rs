@@ -278,6 +278,19 @@ impl WrittenModel<'_> {
             if let Some(b) = &block {
                 w.text = crate::predict::uncertainty::put_covariance(&w.text, &shown, b)?;
             }
+            // Older blocks of the covariance list that the edits made stale
+            // (a table re-gridded) are dropped, with a warning.
+            let fresh = block.as_ref().map(|b| b.kind.as_str());
+            let (kept, stale) = crate::predict::uncertainty::drop_stale_covariance(
+                self.machine,
+                &w.text,
+                &shown,
+                fresh,
+            )?;
+            w.text = kept;
+            for line in stale {
+                tracing::warn!("{line}");
+            }
         }
         let mut inputs = vec![o.to_path_buf()];
         if let Some(m) = &a.machine {

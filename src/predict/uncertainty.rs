@@ -401,6 +401,120 @@ pub fn put_covariance(text: &str, file: &str, block: &CovarianceBlock) -> Result
     let mut blocks = read_covariance(text, file)?;
     blocks.retain(|b| b.kind != block.kind);
     blocks.push(block.clone());
+    write_covariance_list(text, file, &blocks)
+}
+
+/// Why the parameters of `block`, written for the model `before`, no
+/// longer name the same values of the model `after` (`None`: they do): a
+/// key path `before` has and `after` does not, or a node of a component
+/// table whose node positions changed (the table re-gridded: node `i` of
+/// the new table is another position, and the table interpolates
+/// between other nodes). Paths neither model resolves are not judged.
+pub fn stale_reason(
+    before: &crate::machine::Machine,
+    after: &crate::machine::Machine,
+    block: &CovarianceBlock,
+) -> Option<String> {
+    let (b, a) = (path_meanings(before), path_meanings(after));
+    for p in &block.parameters {
+        match (b.get(p), a.get(p)) {
+            (Some(_), None) => {
+                return Some(format!("`{p}` is not a value of the written model"));
+            }
+            (Some(x), Some(y)) if x != y => {
+                let table = p.rsplit_once('.').map_or(p.as_str(), |(t, _)| t);
+                return Some(format!(
+                    "the table `{table}` was re-gridded ({} nodes at {} → {} nodes at {}), so `{p}` names another value",
+                    x.len(),
+                    positions_text(x),
+                    y.len(),
+                    positions_text(y)
+                ));
+            }
+            _ => {}
+        }
+    }
+    None
+}
+
+/// The node positions of a table as a short text (`0, 250, …, 1000`).
+fn positions_text(p: &[f64]) -> String {
+    let all: Vec<String> = p.iter().map(|v| format!("{v}")).collect();
+    if all.len() <= 4 {
+        all.join(", ")
+    } else {
+        format!("{}, {}, …, {}", all[0], all[1], all[all.len() - 1])
+    }
+}
+
+/// Each parameter key path of a model with what fixes its meaning beyond
+/// the path: the node positions of its component table (empty for every
+/// other value).
+fn path_meanings(machine: &crate::machine::Machine) -> std::collections::HashMap<String, Vec<f64>> {
+    use crate::machine::Machine;
+    match machine {
+        Machine::Tool(t) => tool_params(t)
+            .into_iter()
+            .map(|p| {
+                let at = match p {
+                    ToolParam::Component { axis, error, .. } => t
+                        .component_table(axis, error)
+                        .map(|[pos, _, _]| pos)
+                        .unwrap_or_default(),
+                    _ => Vec::new(),
+                };
+                (p.path(), at)
+            })
+            .collect(),
+        Machine::Robot(r) => robot_params(r)
+            .into_iter()
+            .map(|p| (p.path(), Vec::new()))
+            .collect(),
+    }
+}
+
+/// The machine file `text` (of the model written from `before`) without
+/// the blocks of its `covariance` list whose parameters no longer match
+/// its model ([`stale_reason`]), with one warning per block dropped
+/// (naming it and why). The block of kind `fresh`, just written for the
+/// file's model, is not judged. A file with every block dropped keeps an
+/// empty list; a file with none dropped is returned as it is.
+pub fn drop_stale_covariance(
+    before: &crate::machine::Machine,
+    text: &str,
+    file: &str,
+    fresh: Option<&str>,
+) -> Result<(String, Vec<String>)> {
+    let blocks = read_covariance(text, file)?;
+    if blocks.is_empty() {
+        return Ok((text.to_string(), Vec::new()));
+    }
+    let after = crate::machine::Machine::from_yaml_str(text, file)?;
+    let mut keep = Vec::with_capacity(blocks.len());
+    let mut warnings = Vec::new();
+    for (i, b) in blocks.into_iter().enumerate() {
+        let why = match fresh {
+            Some(k) if k == b.kind => None,
+            _ => stale_reason(before, &after, &b),
+        };
+        match why {
+            Some(why) => warnings.push(format!(
+                "{file}: covariance[{i}] (kind {}, from {}) dropped: {why}; its parameters no longer match the model (recalibrate to get their uncertainty back)",
+                b.kind, b.observations
+            )),
+            None => keep.push(b),
+        }
+    }
+    if warnings.is_empty() {
+        return Ok((text.to_string(), warnings));
+    }
+    Ok((write_covariance_list(text, file, &keep)?, warnings))
+}
+
+/// The machine file `text` with its `covariance` list made `blocks`
+/// (written whole in block style where the file had it, added at its end
+/// when the file has none); every other line is kept as it is.
+fn write_covariance_list(text: &str, file: &str, blocks: &[CovarianceBlock]) -> Result<String> {
     let flow = crate::machine::yaml::tree_root(text)
         .ok()
         .and_then(|r| r.as_mapping().map(|m| m.is_flow_style()))
@@ -415,8 +529,12 @@ pub fn put_covariance(text: &str, file: &str, block: &CovarianceBlock) -> Result
         };
         return crate::machine::yaml_write::apply(text, file, "calibrate", &[edit]);
     }
-    let mut list = String::from("covariance:\n");
-    for b in &blocks {
+    let mut list = String::from(if blocks.is_empty() {
+        "covariance: []\n"
+    } else {
+        "covariance:\n"
+    });
+    for b in blocks {
         list.push_str(&b.to_yaml_entry());
     }
     let lines: Vec<&str> = text.split_inclusive('\n').collect();
@@ -768,8 +886,16 @@ impl BlockUncertainty {
             at += m;
         }
         let unknown = |p: &str| {
+            let at = blocks.iter().enumerate().find_map(|(i, b)| {
+                b.parameters
+                    .iter()
+                    .position(|q| q == p)
+                    .map(|k| format!("covariance[{i}].parameters[{k}]"))
+            });
             Error::Data(format!(
-                "{file}: covariance: `{p}` is not a value of this machine file"
+                "{file}: {}: `{p}` is not a value of this machine file (the block was written for \
+                 another version of the model: delete it or recalibrate)",
+                at.unwrap_or_else(|| "covariance".into())
             ))
         };
         let (sens, corrections): (Sensitivity, Vec<f64>) = match machine {
@@ -1104,5 +1230,90 @@ axes:
         assert_eq!(kinds, [("stiffness", 0.25), ("kinematics", 2.0)]);
         assert!(three.ends_with("\n# next\nacceptance: {}\n"), "{three}");
         assert_eq!(three.matches("covariance:").count(), 1);
+    }
+
+    /// A 3-axis file whose X table has the node positions `positions`
+    /// (zero values), with `covariance` after it.
+    fn mill(positions: &[f64], covariance: &str) -> String {
+        let list = |v: &[String]| v.join(", ");
+        let pos: Vec<String> = positions.iter().map(|p| format!("{p:?}")).collect();
+        let zero: Vec<String> = positions.iter().map(|_| "0.0".to_string()).collect();
+        let axis = |n: &str| {
+            format!(
+                "  - name: {n}\n    type: linear\n    side: workpiece\n    travel_mm: [0.0, 1000.0]\n    rapid_mm_per_min: 30000.0\n"
+            )
+        };
+        format!(
+            "kind: machine_tool\nname: mill\naxes:\n{}    location_errors: {{ EC0X_urad: 0.0 }}\n    component_errors:\n      EXX_um: {{ positions_mm: [{}], forward: [{}] }}\n{}{}{covariance}",
+            axis("X"),
+            list(&pos),
+            list(&zero),
+            axis("Y"),
+            axis("Z"),
+        )
+    }
+
+    #[test]
+    fn a_block_on_a_regridded_table_is_stale_and_dropped() {
+        let node = "axes[X].component_errors.EXX_um.forward[1]";
+        let loc = "axes[X].location_errors.EC0X_urad";
+        let block = |p: &str| {
+            CovarianceBlock::from_fit(
+                "geometry",
+                "grid.csv",
+                "9f00",
+                10,
+                vec![p.to_string()],
+                &DMatrix::from_element(1, 1, 4.0),
+            )
+        };
+        let load = |t: &str| crate::machine::Machine::from_yaml_str(t, "m.yaml").unwrap();
+        let before = load(&mill(&[0.0, 500.0, 1000.0], ""));
+        let same = load(&mill(&[0.0, 500.0, 1000.0], ""));
+        let regridded = load(&mill(&[0.0, 250.0, 500.0, 750.0, 1000.0], ""));
+        let shorter = load(&mill(&[0.0, 1000.0], ""));
+        assert_eq!(stale_reason(&before, &same, &block(node)), None);
+        assert_eq!(stale_reason(&before, &regridded, &block(loc)), None);
+        let why = stale_reason(&before, &regridded, &block(node)).expect("stale");
+        assert!(
+            why.contains("`axes[X].component_errors.EXX_um` was re-gridded (3 nodes"),
+            "{why}"
+        );
+        let gone = stale_reason(&before, &shorter, &block(node)).expect("stale");
+        assert!(gone.contains("re-gridded"), "{gone}");
+        // The file: the node's block dropped with a warning naming it, the
+        // location error's kept; a block of the fresh kind is not judged.
+        let list = format!(
+            "covariance:\n{}{}",
+            block(node).to_yaml_entry(),
+            CovarianceBlock {
+                kind: "diagnose".into(),
+                ..block(loc)
+            }
+            .to_yaml_entry()
+        );
+        let text = mill(&[0.0, 250.0, 500.0, 750.0, 1000.0], &list);
+        let (kept, warnings) = drop_stale_covariance(&before, &text, "m.yaml", None).unwrap();
+        assert_eq!(warnings.len(), 1, "{warnings:?}");
+        assert!(
+            warnings[0].starts_with("m.yaml: covariance[0] (kind geometry, from grid.csv) dropped"),
+            "{warnings:?}"
+        );
+        let left = read_covariance(&kept, "m.yaml").unwrap();
+        assert_eq!(left.len(), 1);
+        assert_eq!(left[0].parameters, [loc]);
+        assert!(matches!(load(&kept), crate::machine::Machine::Tool(_)));
+        let (same_text, none) =
+            drop_stale_covariance(&before, &text, "m.yaml", Some("geometry")).unwrap();
+        assert!(none.is_empty(), "{none:?}");
+        assert_eq!(same_text, text);
+        // Every block dropped: an empty list, which reads as none.
+        let only = mill(
+            &[0.0, 250.0, 500.0, 750.0, 1000.0],
+            &format!("covariance:\n{}", block(node).to_yaml_entry()),
+        );
+        let (empty, _) = drop_stale_covariance(&before, &only, "m.yaml", None).unwrap();
+        assert!(empty.ends_with("covariance: []\n"), "{empty}");
+        assert!(read_covariance(&empty, "m.yaml").unwrap().is_empty());
     }
 }
