@@ -105,7 +105,7 @@ fn rapid_annotations_carry_u_from_the_kinematics_covariance_whole_and_windowed()
             "--machine",
             "arm.yaml",
             "--rapid-window-lines",
-            "5",
+            "1",
             "-o",
             "w.mod",
         ],
