@@ -149,3 +149,23 @@ fn the_comparison_sees_a_change_of_one_table_value_by_a_ten_thousandth_of_a_micr
         "a change of 1e-4 µm went unseen: {pos:e} mm"
     );
 }
+
+#[test]
+fn converted_truth_of_the_observation_samples_is_the_same_machine() {
+    // samples/observations/afm-r1000-truth.yaml made the simulated
+    // measurements; its conversion by ztop.py must predict what it does.
+    let old_file = "samples/observations/afm-r1000-truth.yaml";
+    let new_file = "tests/shop/zbottom/afm-r1000-truth-ztop.yaml";
+    let old = load(&read(old_file), old_file);
+    let new = load(&read(new_file), new_file);
+    assert_eq!(new.travel(2), Some((-500.0, 0.0)));
+    let (pos, dir, n) = largest_difference(&old, &new);
+    assert!(
+        pos <= SAME_MACHINE_TOL_MM,
+        "largest deviation difference {pos:e} mm over {n} cases"
+    );
+    assert!(
+        dir <= SAME_DIR_TOL,
+        "largest tool direction difference {dir:e}"
+    );
+}

@@ -143,7 +143,13 @@ def convert_csv(text, columns, H=500.0):
             out.append(line)
             continue
         for i in idx:
-            cells[i] = repr(float(cells[i]) - H)
+            cell = cells[i].strip()
+            v = float(cell) - H
+            decimals = len(cell.split(".")[1]) if "." in cell else 0
+            if "e" in cell.lower() or decimals > 6:
+                cells[i] = repr(v)  # shortest text that reads back as v
+            else:
+                cells[i] = f"{v:.{decimals}f}"
         out.append(",".join(cells))
     return "\n".join(out) + "\n"
 
