@@ -165,6 +165,9 @@ fn afm() -> MachineTool {
     m
 }
 
+/// The start, middle and end points (x, y) of an arc.
+type ArcPoints = [[f64; 2]; 3];
+
 /// What a program reads back to.
 struct ReadBack {
     /// End point of every move.
@@ -172,8 +175,9 @@ struct ReadBack {
     /// Per annotated line (one per compensated input move): the end of the
     /// last move before the next annotated line.
     block_ends: Vec<[f64; 6]>,
-    /// Arcs: clockwise, centre (x, y), radius.
-    arcs: Vec<(bool, [f64; 2], f64)>,
+    /// Arcs: clockwise, centre (x, y), radius, and the start, middle and
+    /// end points (x, y) of the arc.
+    arcs: Vec<(bool, [f64; 2], f64, ArcPoints)>,
     /// Lines with a takeup point while cutter radius compensation may be
     /// active (from the G41/G42 block through the G40 block; a `/G40` does
     /// not end it).
@@ -220,8 +224,12 @@ fn read_back(machine: &MachineTool, text: &str) -> ReadBack {
             }
             if let Some(arc) = mv.arc {
                 let cw = arc.sweep < 0.0;
-                r.arcs
-                    .push((cw, [arc.center[0], arc.center[1]], arc.radius));
+                let c = [arc.center[0], arc.center[1]];
+                let a0 = (mv.start[1] - c[1]).atan2(mv.start[0] - c[0]);
+                let am = a0 + arc.sweep / 2.0;
+                let mid = [c[0] + arc.radius * am.cos(), c[1] + arc.radius * am.sin()];
+                let points = [[mv.start[0], mv.start[1]], mid, [mv.end[0], mv.end[1]]];
+                r.arcs.push((cw, c, arc.radius, points));
             }
         }
     }
@@ -272,12 +280,21 @@ proptest! {
             prop_assert!(dist(a, b) < END_TOL_MM, "move {}: {} mm\n{}", k, dist(a, b), out);
         }
         prop_assert_eq!(summary.added, after.ends.len() - before.ends.len(), "{}", out);
-        // Arcs that stay arcs (whole or in pieces) keep their direction,
-        // centre and radius (within the corrections), in order.
+        // Arcs that stay arcs (whole or in pieces) keep their direction and
+        // radius (within the corrections), in order, and lie on the
+        // programmed circle: their centre is the programmed one, or, for a
+        // piece short enough that corrections of its ends swing its
+        // centre (a chord of a few tenths of a millimetre), its start,
+        // middle and end points lie on the programmed circle.
         let mut from = 0;
-        for (cw, c, r) in &after.arcs {
-            let found = before.arcs.get(from..).unwrap_or(&[]).iter().position(|(pcw, pc, pr)| {
-                pcw == cw && (pc[0] - c[0]).hypot(pc[1] - c[1]) < END_TOL_MM && (pr - r).abs() < END_TOL_MM
+        for (cw, c, r, points) in &after.arcs {
+            let found = before.arcs.get(from..).unwrap_or(&[]).iter().position(|(pcw, pc, pr, _)| {
+                let on_circle = points
+                    .iter()
+                    .all(|p| ((p[0] - pc[0]).hypot(p[1] - pc[1]) - pr).abs() < END_TOL_MM);
+                pcw == cw
+                    && (pr - r).abs() < END_TOL_MM
+                    && ((pc[0] - c[0]).hypot(pc[1] - c[1]) < END_TOL_MM || on_circle)
             });
             prop_assert!(found.is_some(), "arc cw={} c={:?} r={} not programmed\n{}", cw, c, r, out);
             from += found.unwrap_or(0);

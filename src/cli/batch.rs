@@ -930,7 +930,6 @@ pub fn run(a: &BatchArgs, quiet: bool) -> Result<i32> {
         }
         Machine::Robot(robot) => {
             let robot = super::rapid::robot_with_process(robot, &a.effects)?;
-            // Annotations state U from the file's covariance, as `compensate`'s.
             let opts = crate::pipeline::rapid::RapidOptions {
                 strict: a.strict,
                 uncertainty: loaded.uncertainty.clone(),
