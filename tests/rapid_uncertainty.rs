@@ -64,23 +64,21 @@ fn hand_u(json: &serde_json::Value) -> Vec<f64> {
         .collect()
 }
 
+/// The JSON report of `m.mod` in `dir` against `machine`.
+fn report_json(dir: &std::path::Path, machine: &str) -> serde_json::Value {
+    let (code, out, err) = run(
+        dir,
+        &["report", "m.mod", "--machine", machine, "--format", "json"],
+    );
+    assert_eq!(code, 0, "{err}");
+    serde_json::from_str(&out).expect("JSON")
+}
+
 #[test]
 fn rapid_annotations_carry_u_from_the_kinematics_covariance_whole_and_windowed() {
     let tmp = fixture();
     let dir = tmp.path();
-    let (code, out, err) = run(
-        dir,
-        &[
-            "report",
-            "m.mod",
-            "--machine",
-            "arm.yaml",
-            "--format",
-            "json",
-        ],
-    );
-    assert_eq!(code, 0, "{err}");
-    let json: serde_json::Value = serde_json::from_str(&out).expect("JSON");
+    let json = report_json(dir, "arm.yaml");
     let hand = hand_u(&json);
 
     let (code, _, err) = run(dir, &["compensate", "m.mod", "--machine", "arm.yaml"]);
@@ -152,22 +150,10 @@ fn rapid_annotations_carry_u_from_the_kinematics_covariance_whole_and_windowed()
 fn rapid_report_rows_and_batch_carry_u() {
     let tmp = fixture();
     let dir = tmp.path();
-    let (code, out, err) = run(
-        dir,
-        &[
-            "report",
-            "m.mod",
-            "--machine",
-            "arm.yaml",
-            "--format",
-            "json",
-        ],
-    );
-    assert_eq!(code, 0, "{err}");
-    let json: serde_json::Value = serde_json::from_str(&out).expect("JSON");
+    let json = report_json(dir, "arm.yaml");
     let hand = hand_u(&json);
     let rows = json["rows"].as_array().expect("rows");
-    assert!(rows.len() >= 10, "{out}");
+    assert!(rows.len() >= 10, "{json}");
     // A `MoveAbsJ` is reported as written, without U.
     for (r, h) in rows
         .iter()
@@ -196,26 +182,14 @@ fn rapid_report_rows_and_batch_carry_u() {
         json["summary"]
     );
     // Without the covariance the rows state none.
-    let (code, out, err) = run(
-        dir,
-        &[
-            "report",
-            "m.mod",
-            "--machine",
-            "plain.yaml",
-            "--format",
-            "json",
-        ],
-    );
-    assert_eq!(code, 0, "{err}");
-    let plain: serde_json::Value = serde_json::from_str(&out).expect("JSON");
+    let plain = report_json(dir, "plain.yaml");
     assert!(
         plain["rows"]
             .as_array()
             .expect("rows")
             .iter()
             .all(|r| r["u_mm"].is_null()),
-        "{out}"
+        "{plain}"
     );
 
     let (code, _, err) = run(dir, &["compensate", "m.mod", "--machine", "arm.yaml"]);
